@@ -1,0 +1,1 @@
+"""Fieldbus masters behind one Drive interface, and the CiA-402 protocol tables."""

@@ -1,0 +1,129 @@
+"""The one small interface every fieldbus drive implements, and its typed errors.
+
+A controller needs exactly this from a drive: connect, enable in a mode, read the cyclic
+inputs of a cycle, write the cyclic outputs of that cycle, disable, fault reset, close.
+Cyclic values travel in the drive's own integer units (0x606C velocity units, 0x6064
+increments, 0x6071 per mille of rated torque); :class:`DriveScaling` converts them to SI
+once, at the drive edge.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass
+
+from drives.cia402 import OperationMode
+
+
+class DriveError(Exception):
+    """Base class of drive errors; ``node`` names the drive (node id or unit id)."""
+
+    def __init__(self, node: str, message: str) -> None:
+        self.node = node
+        super().__init__(f"{node}: {message}")
+
+
+class DriveTimeout(DriveError):
+    """The drive did not answer within its timeout (silent node, wrong node id, lost link)."""
+
+
+class DriveFault(DriveError):
+    """The drive reported a fault (EMCY, fault bit, heartbeat loss); ``code`` is the error code."""
+
+    def __init__(self, node: str, message: str, code: int | None = None) -> None:
+        self.code = code
+        super().__init__(node, message)
+
+
+class DriveProtocolError(DriveError):
+    """The drive answered with something the protocol forbids (SDO abort, bad frame, exception)."""
+
+
+@dataclass(frozen=True, slots=True)
+class CyclicInputs:
+    """What the drive reports each cycle, in its own integer units.
+
+    ``position`` is None when the cyclic mapping does not carry 0x6064.
+    """
+
+    statusword: int
+    velocity: int
+    position: int | None = None
+
+
+@dataclass(frozen=True)
+class DriveScaling:
+    """Conversion between drive units and SI at the handle.
+
+    ``velocity_per_count``: handle velocity in m/s of one 0x606C unit.
+    ``position_per_count``: handle position in m of one 0x6064 increment.
+    ``rated_torque``: 0x6076 in N m.  ``force_per_torque``: handle force in N per N m of
+    motor torque (the transmission, 1/m).  ``max_torque_permille``: 0x6072.
+    """
+
+    velocity_per_count: float
+    position_per_count: float
+    rated_torque: float
+    force_per_torque: float
+    max_torque_permille: int = 1000
+
+    @property
+    def newton_per_permille(self) -> float:
+        """Handle force in N of one per-mille unit of 0x6071."""
+        return self.rated_torque * self.force_per_torque / 1000.0
+
+    @property
+    def max_force(self) -> float:
+        """The handle force in N that 0x6072 allows."""
+        return self.max_torque_permille * self.newton_per_permille
+
+    def torque_permille(self, force: float) -> int:
+        """The 0x6071 value (per mille, rounded, saturated at +-0x6072) for a handle force in N."""
+        limit = self.max_torque_permille
+        permille = round(force / self.newton_per_permille)
+        return limit if permille > limit else -limit if permille < -limit else permille
+
+
+class Drive(abc.ABC):
+    """A servo drive reached over a fieldbus, seen from the controller.
+
+    The cycle is ``read_inputs()`` then ``write_outputs()``: on CANopen ``read_inputs``
+    produces the SYNC and waits for the drive's TPDO, on Modbus it is one read request.
+    """
+
+    name: str
+    scaling: DriveScaling
+
+    @abc.abstractmethod
+    def connect(self) -> None:
+        """Reach the drive and configure it (cyclic mapping, cycle period); raise DriveTimeout."""
+
+    @abc.abstractmethod
+    def enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
+        """Set ``mode`` (checked against 0x6502 and 0x6061) and walk to OPERATION ENABLED."""
+
+    @abc.abstractmethod
+    def read_inputs(self) -> CyclicInputs:
+        """Start a cycle and return the drive's inputs of this cycle; raise on timeout or fault."""
+
+    @abc.abstractmethod
+    def write_outputs(self, target_torque: int) -> None:
+        """Send this cycle's target torque (0x6071, per mille of rated torque)."""
+
+    @abc.abstractmethod
+    def disable(self) -> None:
+        """Zero the torque and bring the drive to a safe state (SWITCH ON DISABLED)."""
+
+    @abc.abstractmethod
+    def fault_reset(self) -> None:
+        """Clear a drive fault (rising edge of controlword bit 7)."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Release the bus; the drive object is unusable afterwards."""
+
+    def __enter__(self) -> "Drive":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

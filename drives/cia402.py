@@ -1,0 +1,260 @@
+"""CiA-402 (IEC 61800-7-201) protocol tables shared by masters and simulated drives.
+
+Object indices and types, the eight states decoded from the statusword, the controlword
+commands, and the full transition table of the drive state machine.  Pure data and pure
+functions: no bus code here.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+
+class DataType(enum.Enum):
+    """CANopen basic data types used by the CiA-402 objects (code, struct format)."""
+
+    INTEGER8 = (0x0002, "b")
+    INTEGER16 = (0x0003, "h")
+    INTEGER32 = (0x0004, "i")
+    UNSIGNED8 = (0x0005, "B")
+    UNSIGNED16 = (0x0006, "H")
+    UNSIGNED32 = (0x0007, "I")
+
+    @property
+    def code(self) -> int:
+        """The CANopen data type index (0x0002..0x0007)."""
+        return self.value[0]
+
+    @property
+    def struct_format(self) -> str:
+        """The little-endian ``struct`` format character of one value."""
+        return self.value[1]
+
+    @property
+    def size(self) -> int:
+        """Size in bytes."""
+        return {"b": 1, "B": 1, "h": 2, "H": 2, "i": 4, "I": 4}[self.struct_format]
+
+    @property
+    def range(self) -> tuple[int, int]:
+        """Smallest and largest representable value."""
+        bits = 8 * self.size
+        if self.struct_format.islower():
+            return -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+        return 0, (1 << bits) - 1
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """One CiA-402 object: index, subindex, type, access, name, unit."""
+
+    index: int
+    name: str
+    data_type: DataType
+    access: str
+    unit: str = ""
+    subindex: int = 0
+
+
+CONTROLWORD = ObjectSpec(0x6040, "Controlword", DataType.UNSIGNED16, "rw")
+STATUSWORD = ObjectSpec(0x6041, "Statusword", DataType.UNSIGNED16, "ro")
+QUICK_STOP_OPTION_CODE = ObjectSpec(0x605A, "Quick stop option code", DataType.INTEGER16, "rw")
+MODES_OF_OPERATION = ObjectSpec(0x6060, "Modes of operation", DataType.INTEGER8, "rw")
+MODES_OF_OPERATION_DISPLAY = ObjectSpec(0x6061, "Modes of operation display", DataType.INTEGER8, "ro")
+POSITION_ACTUAL = ObjectSpec(0x6064, "Position actual value", DataType.INTEGER32, "ro", "increments")
+VELOCITY_ACTUAL = ObjectSpec(0x606C, "Velocity actual value", DataType.INTEGER32, "ro", "velocity units")
+TARGET_TORQUE = ObjectSpec(0x6071, "Target torque", DataType.INTEGER16, "rw", "per mille of rated torque")
+MAX_TORQUE = ObjectSpec(0x6072, "Max torque", DataType.UNSIGNED16, "rw", "per mille of rated torque")
+MOTOR_RATED_TORQUE = ObjectSpec(0x6076, "Motor rated torque", DataType.UNSIGNED32, "rw", "mN m")
+TORQUE_ACTUAL = ObjectSpec(0x6077, "Torque actual value", DataType.INTEGER16, "ro", "per mille of rated torque")
+SUPPORTED_DRIVE_MODES = ObjectSpec(0x6502, "Supported drive modes", DataType.UNSIGNED32, "ro")
+
+OBJECTS: dict[int, ObjectSpec] = {
+    spec.index: spec
+    for spec in (
+        CONTROLWORD,
+        STATUSWORD,
+        QUICK_STOP_OPTION_CODE,
+        MODES_OF_OPERATION,
+        MODES_OF_OPERATION_DISPLAY,
+        POSITION_ACTUAL,
+        VELOCITY_ACTUAL,
+        TARGET_TORQUE,
+        MAX_TORQUE,
+        MOTOR_RATED_TORQUE,
+        TORQUE_ACTUAL,
+        SUPPORTED_DRIVE_MODES,
+    )
+}
+
+
+class OperationMode(enum.IntEnum):
+    """Values of 0x6060/0x6061."""
+
+    PROFILE_POSITION = 1
+    VELOCITY = 2
+    PROFILE_VELOCITY = 3
+    PROFILE_TORQUE = 4
+    HOMING = 6
+    INTERPOLATED_POSITION = 7
+    CYCLIC_SYNCHRONOUS_POSITION = 8
+    CYCLIC_SYNCHRONOUS_VELOCITY = 9
+    CYCLIC_SYNCHRONOUS_TORQUE = 10
+
+    @property
+    def supported_bit(self) -> int:
+        """The bit of 0x6502 that announces support of this mode."""
+        return {1: 0, 2: 1, 3: 2, 4: 3, 6: 5, 7: 6, 8: 7, 9: 8, 10: 9}[int(self)]
+
+
+def supports(supported_drive_modes: int, mode: OperationMode) -> bool:
+    """True if the 0x6502 bit field announces ``mode``."""
+    return bool(supported_drive_modes >> mode.supported_bit & 1)
+
+
+class State(enum.Enum):
+    """The eight states of the CiA-402 power drive system."""
+
+    NOT_READY_TO_SWITCH_ON = "NOT READY TO SWITCH ON"
+    SWITCH_ON_DISABLED = "SWITCH ON DISABLED"
+    READY_TO_SWITCH_ON = "READY TO SWITCH ON"
+    SWITCHED_ON = "SWITCHED ON"
+    OPERATION_ENABLED = "OPERATION ENABLED"
+    QUICK_STOP_ACTIVE = "QUICK STOP ACTIVE"
+    FAULT_REACTION_ACTIVE = "FAULT REACTION ACTIVE"
+    FAULT = "FAULT"
+
+
+# (mask, value, state) per CiA-402 table 30; the first match wins.
+_STATUS_PATTERNS: tuple[tuple[int, int, State], ...] = (
+    (0x4F, 0x00, State.NOT_READY_TO_SWITCH_ON),
+    (0x4F, 0x40, State.SWITCH_ON_DISABLED),
+    (0x6F, 0x21, State.READY_TO_SWITCH_ON),
+    (0x6F, 0x23, State.SWITCHED_ON),
+    (0x6F, 0x27, State.OPERATION_ENABLED),
+    (0x6F, 0x07, State.QUICK_STOP_ACTIVE),
+    (0x4F, 0x0F, State.FAULT_REACTION_ACTIVE),
+    (0x4F, 0x08, State.FAULT),
+)
+
+# The statusword bits 0-6 each state shows (bit 5 "quick stop" is 1 where not active).
+STATE_STATUS_BITS: dict[State, int] = {
+    State.NOT_READY_TO_SWITCH_ON: 0x00,
+    State.SWITCH_ON_DISABLED: 0x40,
+    State.READY_TO_SWITCH_ON: 0x21,
+    State.SWITCHED_ON: 0x23,
+    State.OPERATION_ENABLED: 0x27,
+    State.QUICK_STOP_ACTIVE: 0x07,
+    State.FAULT_REACTION_ACTIVE: 0x0F,
+    State.FAULT: 0x08,
+}
+
+SW_VOLTAGE_ENABLED = 1 << 4
+SW_WARNING = 1 << 7
+SW_REMOTE = 1 << 9
+SW_TARGET_REACHED = 1 << 10
+SW_STATE_MASK = 0x6F
+
+
+def decode_statusword(statusword: int) -> State | None:
+    """The state a statusword shows, or None for a pattern the standard does not define."""
+    for mask, value, state in _STATUS_PATTERNS:
+        if statusword & mask == value:
+            return state
+    return None
+
+
+class Command(enum.Enum):
+    """Device control commands of the controlword: (mask, value) of bits 0-3 and 7."""
+
+    SHUTDOWN = (0x87, 0x06)
+    SWITCH_ON = (0x8F, 0x07)
+    DISABLE_VOLTAGE = (0x82, 0x00)
+    QUICK_STOP = (0x86, 0x02)
+    DISABLE_OPERATION = (0x8F, 0x07)
+    ENABLE_OPERATION = (0x8F, 0x0F)
+    FAULT_RESET = (0x80, 0x80)
+
+    @property
+    def word(self) -> int:
+        """The controlword a master writes for this command."""
+        return self.value[1]
+
+    def matches(self, controlword: int) -> bool:
+        """True if ``controlword`` carries this command."""
+        mask, value = self.value
+        return controlword & mask == value
+
+
+CW_FAULT_RESET = 1 << 7
+CW_HALT = 1 << 8
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One numbered transition of the CiA-402 state machine."""
+
+    number: int
+    source: State
+    target: State
+    commands: tuple[Command, ...]
+
+
+# Transitions driven by the controlword (CiA-402 figure 14).  0, 1 and 14 are internal
+# (power-up and fault reaction completion); 13 is "a fault occurred", from any state.
+TRANSITIONS: tuple[Transition, ...] = (
+    Transition(2, State.SWITCH_ON_DISABLED, State.READY_TO_SWITCH_ON, (Command.SHUTDOWN,)),
+    Transition(3, State.READY_TO_SWITCH_ON, State.SWITCHED_ON, (Command.SWITCH_ON,)),
+    Transition(4, State.SWITCHED_ON, State.OPERATION_ENABLED, (Command.ENABLE_OPERATION,)),
+    Transition(5, State.OPERATION_ENABLED, State.SWITCHED_ON, (Command.DISABLE_OPERATION,)),
+    Transition(6, State.SWITCHED_ON, State.READY_TO_SWITCH_ON, (Command.SHUTDOWN,)),
+    Transition(7, State.READY_TO_SWITCH_ON, State.SWITCH_ON_DISABLED, (Command.QUICK_STOP, Command.DISABLE_VOLTAGE)),
+    Transition(8, State.OPERATION_ENABLED, State.READY_TO_SWITCH_ON, (Command.SHUTDOWN,)),
+    Transition(9, State.OPERATION_ENABLED, State.SWITCH_ON_DISABLED, (Command.DISABLE_VOLTAGE,)),
+    Transition(10, State.SWITCHED_ON, State.SWITCH_ON_DISABLED, (Command.DISABLE_VOLTAGE, Command.QUICK_STOP)),
+    Transition(11, State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, (Command.QUICK_STOP,)),
+    Transition(12, State.QUICK_STOP_ACTIVE, State.SWITCH_ON_DISABLED, (Command.DISABLE_VOLTAGE,)),
+    Transition(16, State.QUICK_STOP_ACTIVE, State.OPERATION_ENABLED, (Command.ENABLE_OPERATION,)),
+)
+
+TRANSITION_FAULT = 13
+TRANSITION_FAULT_REACTION_DONE = 14
+TRANSITION_FAULT_RESET = 15
+
+
+def next_state(
+    state: State, controlword: int, previous_controlword: int, *, quick_stop_option_code: int = 2
+) -> tuple[State, int | None]:
+    """Apply one controlword write to ``state``; return the new state and the transition number.
+
+    Fault reset (15) acts on the rising edge of bit 7 only.  Transition 16 (quick stop back
+    to operation enabled) exists only for quick stop option codes 5..8, as the standard says.
+    A command that has no transition from ``state`` leaves it unchanged (number None).
+    """
+    if state is State.FAULT:
+        rising = controlword & CW_FAULT_RESET and not previous_controlword & CW_FAULT_RESET
+        return (State.SWITCH_ON_DISABLED, TRANSITION_FAULT_RESET) if rising else (state, None)
+    if controlword & CW_FAULT_RESET:
+        return state, None  # bit 7 high outside FAULT masks the other commands
+    for transition in TRANSITIONS:
+        if transition.source is not state:
+            continue
+        if transition.number == 16 and not 5 <= quick_stop_option_code <= 8:
+            continue
+        if any(command.matches(controlword) for command in transition.commands):
+            return transition.target, transition.number
+    return state, None
+
+
+def path_to_operation_enabled(state: State) -> tuple[Command, ...]:
+    """The commands a master sends, in order, to walk from ``state`` to OPERATION ENABLED."""
+    paths = {
+        State.FAULT: (Command.FAULT_RESET, Command.SHUTDOWN, Command.SWITCH_ON, Command.ENABLE_OPERATION),
+        State.SWITCH_ON_DISABLED: (Command.SHUTDOWN, Command.SWITCH_ON, Command.ENABLE_OPERATION),
+        State.READY_TO_SWITCH_ON: (Command.SWITCH_ON, Command.ENABLE_OPERATION),
+        State.SWITCHED_ON: (Command.ENABLE_OPERATION,),
+        State.QUICK_STOP_ACTIVE: (Command.DISABLE_VOLTAGE, Command.SHUTDOWN, Command.SWITCH_ON, Command.ENABLE_OPERATION),
+        State.OPERATION_ENABLED: (),
+    }
+    return paths.get(state, ())

@@ -1,0 +1,1 @@
+"""Operator parameter profiles shipped with haptic_bus (TOML files in this folder)."""

@@ -1,0 +1,1 @@
+"""Simulated servo drives whose hardware is the exact m/b handle plant."""
