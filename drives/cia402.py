@@ -57,6 +57,7 @@ class ObjectSpec:
     subindex: int = 0
 
 
+ERROR_CODE = ObjectSpec(0x603F, "Error code", DataType.UNSIGNED16, "ro")
 CONTROLWORD = ObjectSpec(0x6040, "Controlword", DataType.UNSIGNED16, "rw")
 STATUSWORD = ObjectSpec(0x6041, "Statusword", DataType.UNSIGNED16, "ro")
 QUICK_STOP_OPTION_CODE = ObjectSpec(0x605A, "Quick stop option code", DataType.INTEGER16, "rw")
@@ -73,6 +74,7 @@ SUPPORTED_DRIVE_MODES = ObjectSpec(0x6502, "Supported drive modes", DataType.UNS
 OBJECTS: dict[int, ObjectSpec] = {
     spec.index: spec
     for spec in (
+        ERROR_CODE,
         CONTROLWORD,
         STATUSWORD,
         QUICK_STOP_OPTION_CODE,
