@@ -34,11 +34,12 @@ from haptic_bus.poles import closed_loop_poles, is_stable
 
 _UNIFORM_POINTS = 192
 _FAN = np.array([-16.0, -8.0, -4.0, -2.0, -1.0, -0.5, -0.25, 0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0])
-_LOG_FAN = np.logspace(-9, 0, 19)
+_LOWEST_THETA = 1e-6
+_LOG_FAN = np.logspace(math.log10(_LOWEST_THETA), math.log10(math.pi / _UNIFORM_POINTS), 12)
 _REFINED_MINIMA = 3
 _ZOOM_POINTS = 11
 _ZOOM_ROUNDS = 5
-_SIGN_TOLERANCE = 1e-12  # relative to |Z| at the minimum: Re Z is accurate to ~1e-15 |Z|
+_SIGN_TOLERANCE = 1e-14  # relative to |Z| at the minimum: Re Z is accurate to ~1e-15 |Z|
 
 EXACT = "exact: closed-loop stability and Re T_fund >= 0 on (0, pi]"
 SEED = "seed: Re T_zw >= 0 on (0, pi] (eq. 11)"
@@ -63,7 +64,7 @@ class Verdict:
 
 def _theta_grid(loop: WallLoop, poles: np.ndarray) -> np.ndarray:
     uniform = np.linspace(math.pi / _UNIFORM_POINTS, math.pi, _UNIFORM_POINTS)
-    pieces = [uniform, _LOG_FAN * (math.pi / _UNIFORM_POINTS)]
+    pieces = [uniform, _LOG_FAN]
     for pole in poles:
         radius, angle = abs(pole), abs(np.angle(pole))
         width = max(abs(1.0 - radius), 1e-9)
@@ -71,7 +72,7 @@ def _theta_grid(loop: WallLoop, poles: np.ndarray) -> np.ndarray:
     if loop.c < math.pi:
         pieces.append(loop.c * np.abs(_FAN[_FAN > 0]) / 4.0)
     grid = np.concatenate(pieces)
-    grid = grid[(grid > 0) & (grid <= math.pi)]
+    grid = grid[(grid >= _LOWEST_THETA) & (grid <= math.pi)]
     return np.unique(np.append(grid, math.pi))
 
 

@@ -76,12 +76,13 @@ def is_stable(loop: WallLoop) -> bool:
     if loop.delay:
         return spectral_radius(loop) < 1.0
     c = loop.c
-    a = math.exp(-c)
+    decay = -math.expm1(-c)  # 1 - a, exact where a rounds to 1
     k1_scaled = phi1(c)
     stiffness = k1_scaled * loop.K * loop.T * loop.T / loop.m
     damping = k1_scaled * loop.B * loop.T / loop.m
-    constant = a - damping
+    # |a - k1 B| < 1  <=>  k1 B + (1 - a) > 0  and  k1 B < 2 - (1 - a)
+    constant_inside = damping + decay > 0 and damping < 2.0 - decay
     if loop.K == 0:
-        return abs(constant) < 1.0
-    flip = 2.0 * (1.0 + a) - stiffness - 2.0 * damping
-    return stiffness > 0 and flip > 0 and abs(constant) < 1.0
+        return constant_inside
+    flip = 2.0 * (2.0 - decay) - stiffness - 2.0 * damping
+    return stiffness > 0 and flip > 0 and constant_inside
