@@ -1,0 +1,145 @@
+"""Object dictionaries for the CANopen master: load the drive's EDS, or build a minimal one.
+
+The master needs an object dictionary for names in error messages, for checking that the
+objects a caller wants in a PDO exist and are mappable, and for canopen's generic PDO path
+(used by the benchmark).  Without an EDS, :func:`minimal_cia402_od` builds the CiA-301
+communication objects the master touches plus the CiA-402 objects of :mod:`drives.cia402`.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+from pathlib import Path
+
+import canopen
+from canopen import objectdictionary as od
+
+from drives.cia402 import OBJECTS, DataType
+
+SIM_EDS_FILENAME = "haptic_sim_drive.eds"
+
+# CiA-301 communication objects the master reads or writes (index, subindex) -> name.
+COMMUNICATION_OBJECT_NAMES: dict[int, str] = {
+    0x1000: "Device type",
+    0x1001: "Error register",
+    0x1005: "COB-ID SYNC message",
+    0x1006: "Communication cycle period",
+    0x1014: "COB-ID EMCY",
+    0x1016: "Consumer heartbeat time",
+    0x1017: "Producer heartbeat time",
+    0x1018: "Identity object",
+    0x1400: "RPDO1 communication parameter",
+    0x1401: "RPDO2 communication parameter",
+    0x1402: "RPDO3 communication parameter",
+    0x1403: "RPDO4 communication parameter",
+    0x1600: "RPDO1 mapping parameter",
+    0x1601: "RPDO2 mapping parameter",
+    0x1602: "RPDO3 mapping parameter",
+    0x1603: "RPDO4 mapping parameter",
+    0x1800: "TPDO1 communication parameter",
+    0x1801: "TPDO2 communication parameter",
+    0x1802: "TPDO3 communication parameter",
+    0x1803: "TPDO4 communication parameter",
+    0x1A00: "TPDO1 mapping parameter",
+    0x1A01: "TPDO2 mapping parameter",
+    0x1A02: "TPDO3 mapping parameter",
+    0x1A03: "TPDO4 mapping parameter",
+    0x603F: "Error code",
+}
+
+_CANOPEN_TYPE = {
+    DataType.INTEGER8: od.INTEGER8,
+    DataType.INTEGER16: od.INTEGER16,
+    DataType.INTEGER32: od.INTEGER32,
+    DataType.UNSIGNED8: od.UNSIGNED8,
+    DataType.UNSIGNED16: od.UNSIGNED16,
+    DataType.UNSIGNED32: od.UNSIGNED32,
+}
+
+
+def default_eds_path() -> Path | None:
+    """The simulated drive's shipped EDS if the ``sim_drive`` package is installed, else None.
+
+    Found without importing ``sim_drive`` (drives must not depend on it).
+    """
+    try:
+        spec = importlib.util.find_spec("sim_drive")
+    except (ImportError, ValueError):
+        return None
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    for location in spec.submodule_search_locations:
+        candidate = Path(location) / SIM_EDS_FILENAME
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def load_object_dictionary(eds: str | os.PathLike | od.ObjectDictionary | None, node_id: int) -> od.ObjectDictionary:
+    """The drive's object dictionary: from ``eds`` (path or OD), else the minimal CiA-402 one."""
+    if isinstance(eds, od.ObjectDictionary):
+        return eds
+    if eds is None:
+        return minimal_cia402_od()
+    return canopen.import_od(os.fspath(eds), node_id)
+
+
+def _variable(name: str, index: int, subindex: int, data_type: int, access: str, mappable: bool = False,
+              default: int | None = None) -> od.ODVariable:
+    var = od.ODVariable(name, index, subindex)
+    var.data_type = data_type
+    var.access_type = access
+    var.pdo_mappable = mappable
+    var.default = default
+    return var
+
+
+def _pdo_records(dictionary: od.ObjectDictionary, com_base: int, map_base: int, kind: str) -> None:
+    for n in range(4):
+        com = od.ODRecord(f"{kind}{n + 1} communication parameter", com_base + n)
+        com.add_member(_variable("Highest sub-index supported", com_base + n, 0, od.UNSIGNED8, "const", default=5))
+        com.add_member(_variable("COB-ID", com_base + n, 1, od.UNSIGNED32, "rw"))
+        com.add_member(_variable("Transmission type", com_base + n, 2, od.UNSIGNED8, "rw"))
+        com.add_member(_variable("Inhibit time", com_base + n, 3, od.UNSIGNED16, "rw"))
+        com.add_member(_variable("Event timer", com_base + n, 5, od.UNSIGNED16, "rw"))
+        dictionary.add_object(com)
+        mapping = od.ODRecord(f"{kind}{n + 1} mapping parameter", map_base + n)
+        mapping.add_member(_variable("Number of mapped objects", map_base + n, 0, od.UNSIGNED8, "rw"))
+        for sub in range(1, 9):
+            mapping.add_member(_variable(f"Mapped object {sub}", map_base + n, sub, od.UNSIGNED32, "rw"))
+        dictionary.add_object(mapping)
+
+
+def minimal_cia402_od() -> od.ObjectDictionary:
+    """A minimal object dictionary: CiA-301 communication objects plus drives.cia402.OBJECTS."""
+    dictionary = od.ObjectDictionary()
+    dictionary.add_object(_variable("Device type", 0x1000, 0, od.UNSIGNED32, "ro"))
+    dictionary.add_object(_variable("Error register", 0x1001, 0, od.UNSIGNED8, "ro"))
+    dictionary.add_object(_variable("Communication cycle period", 0x1006, 0, od.UNSIGNED32, "rw"))
+    dictionary.add_object(_variable("Producer heartbeat time", 0x1017, 0, od.UNSIGNED16, "rw"))
+    dictionary.add_object(_variable("Error code", 0x603F, 0, od.UNSIGNED16, "ro", mappable=True))
+    _pdo_records(dictionary, 0x1400, 0x1600, "RPDO")
+    _pdo_records(dictionary, 0x1800, 0x1A00, "TPDO")
+    for spec in OBJECTS.values():
+        dictionary.add_object(
+            _variable(spec.name, spec.index, spec.subindex, _CANOPEN_TYPE[spec.data_type], spec.access, mappable=True)
+        )
+    return dictionary
+
+
+def object_name(dictionary: od.ObjectDictionary | None, index: int, subindex: int = 0) -> str:
+    """A readable name of ``index:subindex`` from the OD, the CiA-402 tables, or CiA-301."""
+    if dictionary is not None:
+        try:
+            var = dictionary.get_variable(index, subindex)
+        except Exception:  # a malformed EDS must not hide the real error
+            var = None
+        if var is not None:
+            parent = getattr(var, "parent", None)
+            if isinstance(parent, (od.ODRecord, od.ODArray)):
+                return f"{parent.name}.{var.name}"
+            return var.name
+    if index in OBJECTS:
+        return OBJECTS[index].name
+    return COMMUNICATION_OBJECT_NAMES.get(index, "unknown object")

@@ -1,0 +1,108 @@
+"""Precompiled ``struct`` codecs for one PDO mapping (CiA-301 byte-aligned, little endian).
+
+A :class:`PdoCodec` is built once from the ordered list of mapped objects and then packs or
+unpacks a whole frame in one ``struct`` call: atomic per frame (every value of a decoded
+tuple comes from the same CAN frame) and allocation-light.  A frame whose length differs
+from the mapping is never decoded (:class:`PdoLengthError`).
+
+Values travel in the objects' own integer units; nothing here knows SI.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterable, Sequence
+
+from drives.cia402 import OBJECTS, ObjectSpec
+
+MAX_PDO_BYTES = 8  # classical CAN
+
+
+class PdoLengthError(ValueError):
+    """A frame's data length does not match the PDO mapping (the frame must be dropped)."""
+
+    def __init__(self, name: str, expected: int, got: int) -> None:
+        self.expected = expected
+        self.got = got
+        super().__init__(f"{name}: frame of {got} bytes, mapping needs exactly {expected}")
+
+
+def object_spec(obj: ObjectSpec | int) -> ObjectSpec:
+    """The :class:`ObjectSpec` of ``obj`` (an ObjectSpec, or an index known to drives.cia402)."""
+    if isinstance(obj, ObjectSpec):
+        return obj
+    try:
+        return OBJECTS[int(obj)]
+    except KeyError:
+        known = ", ".join(f"0x{i:04X}" for i in sorted(OBJECTS))
+        raise ValueError(f"object 0x{int(obj):04X} has no ObjectSpec; pass one, or use one of {known}") from None
+
+
+class PdoCodec:
+    """Pack/unpack one PDO frame mapped to ``entries`` (in mapping order).
+
+    ``mapping_words`` are the 0x16xx/0x1Axx sub-entries (index << 16 | subindex << 8 | bits).
+    """
+
+    __slots__ = ("name", "entries", "struct", "size", "mapping_words", "_ranges")
+
+    def __init__(self, entries: Iterable[ObjectSpec | int], name: str = "PDO") -> None:
+        self.name = name
+        self.entries: tuple[ObjectSpec, ...] = tuple(object_spec(e) for e in entries)
+        if not self.entries:
+            raise ValueError(f"{name}: a PDO mapping needs at least one object")
+        fmt = "<" + "".join(e.data_type.struct_format for e in self.entries)
+        self.struct = struct.Struct(fmt)
+        self.size: int = self.struct.size
+        if self.size > MAX_PDO_BYTES:
+            names = ", ".join(f"0x{e.index:04X}" for e in self.entries)
+            raise ValueError(f"{name}: mapping {names} needs {self.size} bytes; a CAN PDO holds at most {MAX_PDO_BYTES}")
+        self.mapping_words: tuple[int, ...] = tuple(
+            e.index << 16 | e.subindex << 8 | 8 * e.data_type.size for e in self.entries
+        )
+        self._ranges = tuple(e.data_type.range for e in self.entries)
+
+    def __repr__(self) -> str:
+        names = ", ".join(f"0x{e.index:04X}:{e.subindex:02X}" for e in self.entries)
+        return f"PdoCodec({self.name}: {names}; {self.struct.format!r}, {self.size} bytes)"
+
+    def index_of(self, index: int, subindex: int = 0) -> int:
+        """Position of object ``index:subindex`` in the decoded tuple; ValueError if unmapped."""
+        for position, entry in enumerate(self.entries):
+            if entry.index == index and entry.subindex == subindex:
+                return position
+        raise ValueError(f"{self.name}: object 0x{index:04X}:{subindex:02X} is not mapped")
+
+    def decode(self, data: bytes | bytearray | memoryview) -> tuple[int, ...]:
+        """Values of one frame, in mapping order; PdoLengthError if the length does not match."""
+        if len(data) != self.size:
+            raise PdoLengthError(self.name, self.size, len(data))
+        return self.struct.unpack(data)
+
+    def encode(self, *values: int) -> bytes:
+        """One frame's data from ``values`` (mapping order); ValueError naming the object if out of range."""
+        self.check(values)
+        return self.struct.pack(*values)
+
+    def encode_into(self, buffer: bytearray, *values: int) -> None:
+        """Pack ``values`` into ``buffer`` (exactly ``size`` bytes long) without allocating."""
+        if len(buffer) != self.size:
+            raise PdoLengthError(self.name, self.size, len(buffer))
+        self.check(values)
+        self.struct.pack_into(buffer, 0, *values)
+
+    def check(self, values: Sequence[int]) -> None:
+        """Raise ValueError naming the object if a value does not fit its data type."""
+        if len(values) != len(self.entries):
+            raise ValueError(f"{self.name}: {len(values)} values for {len(self.entries)} mapped objects")
+        for value, (low, high), entry in zip(values, self._ranges, self.entries):
+            if not low <= value <= high:
+                raise ValueError(
+                    f"{self.name}: 0x{entry.index:04X} ({entry.name}) = {value} outside "
+                    f"{entry.data_type.name} range [{low}, {high}]"
+                )
+
+
+def saturate(value: int, low: int, high: int) -> int:
+    """``value`` clamped to ``[low, high]`` (saturate, never wrap)."""
+    return low if value < low else high if value > high else value

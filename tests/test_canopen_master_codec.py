@@ -1,0 +1,193 @@
+"""Unit tests of the master's building blocks: PDO codecs, EMCY decoding, bus configuration."""
+
+from __future__ import annotations
+
+import struct
+
+import pytest
+
+from drives.bus_config import BusConfigError, resolve_bus_config
+from drives.canopen_drive import split_into_frames
+from drives.cia402 import (
+    CONTROLWORD,
+    MODES_OF_OPERATION,
+    POSITION_ACTUAL,
+    STATUSWORD,
+    TARGET_TORQUE,
+    TORQUE_ACTUAL,
+    VELOCITY_ACTUAL,
+    DataType,
+    ObjectSpec,
+)
+from drives.emcy import decode_emcy, describe_emcy_code
+from drives.pdo_codec import PdoCodec, PdoLengthError, saturate
+
+
+def test_default_tpdo_layout_and_mapping_words():
+    codec = PdoCodec([STATUSWORD, VELOCITY_ACTUAL], name="TPDO1")
+    assert codec.size == 6
+    assert codec.struct.format == "<Hi"
+    assert codec.mapping_words == (0x60410010, 0x606C0020)
+
+
+def test_rpdo_layout_and_mapping_words_from_indices():
+    codec = PdoCodec([0x6040, 0x6071])  # indices known to drives.cia402 work too
+    assert codec.entries == (CONTROLWORD, TARGET_TORQUE)
+    assert codec.size == 4
+    assert codec.mapping_words == (0x60400010, 0x60710010)
+
+
+@pytest.mark.parametrize(
+    "values",
+    [(0x0237, -(1 << 31)), (0xFFFF, (1 << 31) - 1), (0, 0), (0x0027, -1)],
+)
+def test_tpdo_round_trip_at_type_limits(values):
+    codec = PdoCodec([STATUSWORD, VELOCITY_ACTUAL])
+    frame = codec.encode(*values)
+    assert len(frame) == 6
+    assert codec.decode(frame) == values
+    assert codec.decode(bytearray(frame)) == values
+    assert codec.decode(memoryview(frame)) == values
+
+
+@pytest.mark.parametrize("torque", [-32768, -1, 0, 1, 32767])
+def test_rpdo_signed_torque_round_trip_and_wire_bytes(torque):
+    codec = PdoCodec([CONTROLWORD, TARGET_TORQUE])
+    frame = codec.encode(0x000F, torque)
+    assert frame[:2] == b"\x0f\x00"  # little endian controlword
+    assert int.from_bytes(frame[2:], "little", signed=True) == torque
+    assert codec.decode(frame) == (0x000F, torque)
+
+
+def test_signed_and_unsigned_views_of_the_same_bytes_differ():
+    unsigned = PdoCodec([STATUSWORD])
+    signed = PdoCodec([ObjectSpec(0x6077, "Torque actual value", DataType.INTEGER16, "ro")])
+    assert unsigned.decode(b"\xff\xff") == (0xFFFF,)
+    assert signed.decode(b"\xff\xff") == (-1,)
+    int8 = PdoCodec([MODES_OF_OPERATION])
+    assert int8.decode(b"\xf6") == (-10,)
+    assert int8.encode(10) == b"\x0a"
+
+
+def test_encode_into_reuses_the_buffer():
+    codec = PdoCodec([CONTROLWORD, TARGET_TORQUE])
+    buffer = bytearray(4)
+    codec.encode_into(buffer, 0x0006, -300)
+    assert bytes(buffer) == struct.pack("<Hh", 6, -300)
+    with pytest.raises(PdoLengthError):
+        codec.encode_into(bytearray(5), 0, 0)
+
+
+@pytest.mark.parametrize("length", [0, 1, 5, 7, 8])
+def test_wrong_length_is_rejected_not_decoded(length):
+    codec = PdoCodec([STATUSWORD, VELOCITY_ACTUAL], name="TPDO1 of node 5")
+    with pytest.raises(PdoLengthError) as info:
+        codec.decode(bytes(length))
+    assert info.value.expected == 6 and info.value.got == length
+    assert "TPDO1 of node 5" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("values", "match"),
+    [((0x10000, 0), "0x6040"), ((-1, 0), "0x6040"), ((0, 32768), "0x6071"), ((0, -32769), "0x6071")],
+)
+def test_out_of_range_values_name_the_object(values, match):
+    codec = PdoCodec([CONTROLWORD, TARGET_TORQUE])
+    with pytest.raises(ValueError, match=match):
+        codec.encode(*values)
+
+
+def test_mapping_longer_than_a_can_frame_is_refused():
+    with pytest.raises(ValueError, match="at most 8"):
+        PdoCodec([STATUSWORD, VELOCITY_ACTUAL, POSITION_ACTUAL])
+
+
+def test_unknown_index_needs_an_object_spec():
+    with pytest.raises(ValueError, match="0x2345"):
+        PdoCodec([0x2345])
+
+
+def test_index_of():
+    codec = PdoCodec([STATUSWORD, VELOCITY_ACTUAL])
+    assert codec.index_of(0x606C) == 1
+    with pytest.raises(ValueError, match="0x6064"):
+        codec.index_of(0x6064)
+
+
+def test_objects_are_split_into_can_frames_in_order():
+    assert split_into_frames([STATUSWORD, VELOCITY_ACTUAL]) == [(STATUSWORD, VELOCITY_ACTUAL)]
+    assert split_into_frames([STATUSWORD, VELOCITY_ACTUAL, POSITION_ACTUAL]) == [
+        (STATUSWORD, VELOCITY_ACTUAL),
+        (POSITION_ACTUAL,),
+    ]
+    assert split_into_frames([STATUSWORD, VELOCITY_ACTUAL, TORQUE_ACTUAL]) == [
+        (STATUSWORD, VELOCITY_ACTUAL, TORQUE_ACTUAL)
+    ]
+
+
+def test_saturate_never_wraps():
+    assert saturate(40000, -3000, 3000) == 3000
+    assert saturate(-40000, -3000, 3000) == -3000
+    assert saturate(12, -3000, 3000) == 12
+
+
+@pytest.mark.parametrize(
+    ("code", "text"),
+    [
+        (0x8130, "heartbeat"),
+        (0x8240, "SYNC data length"),
+        (0x2310, "over-current"),
+        (0x3210, "over-voltage"),
+        (0x4310, "temperature"),
+        (0x5530, "memory"),
+        (0xFF00, "manufacturer"),
+        (0xFF42, "code 0x42"),
+        (0x8111, "CAN overrun"),  # unknown leaf falls back to the 0xFFF0 class
+        (0x2399, "output side"),  # ... then to the 0xFF00 class
+        (0x4999, "Temperature"),  # ... then to the 0xF000 class
+    ],
+)
+def test_emcy_codes_are_decoded(code, text):
+    assert text.lower() in describe_emcy_code(code).lower()
+
+
+def test_emcy_frame_decoding():
+    emcy = decode_emcy(bytes([0x10, 0x23, 0x02, 1, 2, 3, 4, 5]), 1.5)
+    assert (emcy.code, emcy.register, emcy.data, emcy.received_at) == (0x2310, 0x02, b"\x01\x02\x03\x04\x05", 1.5)
+    assert "0x2310" in str(emcy) and "over-current" in str(emcy)
+    assert not emcy.is_reset
+    assert decode_emcy(bytes(8)).is_reset
+    assert decode_emcy(b"\x10\x23") is None  # too short: not decoded
+
+
+def test_bus_config_explicit_arguments(monkeypatch):
+    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(name, raising=False)
+    config = resolve_bus_config("virtual", "ch", 500000, config_file="/nonexistent/can.conf")
+    assert (config["interface"], config["channel"], config["bitrate"]) == ("virtual", "ch", 500000)
+
+
+def test_bus_config_from_environment(monkeypatch):
+    monkeypatch.setenv("CAN_INTERFACE", "virtual")
+    monkeypatch.setenv("CAN_CHANNEL", "from-env")
+    config = resolve_bus_config(config_file="/nonexistent/can.conf")
+    assert (config["interface"], config["channel"]) == ("virtual", "from-env")
+
+
+def test_bus_config_from_file(monkeypatch, tmp_path):
+    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(name, raising=False)
+    path = tmp_path / "can.conf"
+    path.write_text("[default]\ninterface = virtual\nchannel = from-file\nbitrate = 250000\n")
+    config = resolve_bus_config(config_file=str(path))
+    assert (config["interface"], config["channel"], config["bitrate"]) == ("virtual", "from-file", 250000)
+
+
+def test_bus_config_missing_or_unknown_interface_is_a_readable_error(monkeypatch):
+    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr("can.rc", {})
+    with pytest.raises(BusConfigError, match="no CAN interface selected"):
+        resolve_bus_config(config_file="/nonexistent/can.conf")
+    with pytest.raises(BusConfigError, match="nonesuch"):
+        resolve_bus_config("nonesuch", config_file="/nonexistent/can.conf")
