@@ -118,7 +118,6 @@ def minimal_cia402_od() -> od.ObjectDictionary:
     dictionary.add_object(_variable("Error register", 0x1001, 0, od.UNSIGNED8, "ro"))
     dictionary.add_object(_variable("Communication cycle period", 0x1006, 0, od.UNSIGNED32, "rw"))
     dictionary.add_object(_variable("Producer heartbeat time", 0x1017, 0, od.UNSIGNED16, "rw"))
-    dictionary.add_object(_variable("Error code", 0x603F, 0, od.UNSIGNED16, "ro", mappable=True))
     _pdo_records(dictionary, 0x1400, 0x1600, "RPDO")
     _pdo_records(dictionary, 0x1800, 0x1A00, "TPDO")
     for spec in OBJECTS.values():
@@ -143,3 +142,35 @@ def object_name(dictionary: od.ObjectDictionary | None, index: int, subindex: in
     if index in OBJECTS:
         return OBJECTS[index].name
     return COMMUNICATION_OBJECT_NAMES.get(index, "unknown object")
+
+
+# Manufacturer scaling objects recognised by name (REAL32/REAL64, SI units at the handle).
+SCALING_OBJECT_NAMES: dict[str, str] = {
+    "velocity per count": "velocity_per_count",
+    "position per count": "position_per_count",
+    "force per torque": "force_per_torque",
+}
+_REAL_FORMATS = {od.REAL32: "<f", od.REAL64: "<d"}
+
+
+def find_scaling_objects(dictionary: od.ObjectDictionary | None) -> dict[str, tuple[int, int, str]]:
+    """Manufacturer objects (0x2000-0x5FFF) whose names announce a DriveScaling field.
+
+    Returns ``{field: (index, subindex, struct format)}`` for REAL32/REAL64 variables named
+    "Velocity per count ...", "Position per count ...", "Force per torque ..." (case-insensitive).
+    """
+    found: dict[str, tuple[int, int, str]] = {}
+    if dictionary is None:
+        return found
+    for index in sorted(i for i in dictionary if isinstance(i, int) and 0x2000 <= i <= 0x5FFF):
+        obj = dictionary[index]
+        members = obj.values() if isinstance(obj, (od.ODRecord, od.ODArray)) else [obj]
+        for var in members:
+            fmt = _REAL_FORMATS.get(getattr(var, "data_type", None))
+            if fmt is None:
+                continue
+            name = var.name.strip().lower()
+            for prefix, field in SCALING_OBJECT_NAMES.items():
+                if name.startswith(prefix) and field not in found:
+                    found[field] = (var.index, var.subindex, fmt)
+    return found
