@@ -1,0 +1,327 @@
+"""Bus-independent core of the simulated CiA-402 torque drive around the exact plant.
+
+Any bus front end (CANopen slave, Modbus server) writes the drive's objects with
+:meth:`SimulatedDrive.write_object`, reads them with :meth:`SimulatedDrive.read_object`, and
+calls :meth:`SimulatedDrive.sync` once per SYNC.  Nothing here touches a bus.
+
+Physics: the handle obeys ``m dv/dt + b v = w(t) + F`` with ``w`` the operator's force and
+``F`` the motor force at the handle.  ``F = torque_permille * rated_torque / 1000 *
+force_per_torque`` N, held over a whole SYNC interval; in the seed's convention the wall
+force is ``u = -F``.  Each SYNC advances the plant by exactly ``T`` (virtual time), in
+``substeps`` exact ZOH steps with the operator force re-evaluated at the start of each.
+
+Timing (see :class:`~sim_drive.parameters.Timing`): the first SYNC (number 0, t = 0) only
+samples.  At SYNC k >= 1 the plant first advances over [t_{k-1}, t_k) with the torque that
+applies to that interval, then velocity/position are sampled.  ``CIA402`` applies the torque
+latched at SYNC k-1 (written during cycle k-2); ``IDEAL`` applies the target present at SYNC k
+(written during cycle k-1, i.e. in answer to sample k-1).
+
+Torque is applied only in OPERATION ENABLED with mode CST (0x6061 = 10) and halt (controlword
+bit 8) clear; otherwise 0.  State changes take effect per interval: an interval closed by a
+SYNC at which the drive is not enabled carries no torque.  0x6071 saturates at +-0x6072.
+
+Quick stop (transition 11) removes the torque; with quick stop option code 0..4 the stop
+completes at the next SYNC (transition 12 to SWITCH ON DISABLED), with 5..8 the drive stays
+in QUICK STOP ACTIVE and transition 16 is allowed.  Faults pass FAULT REACTION ACTIVE at once
+(torque removal is the whole reaction) and land in FAULT.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Callable
+
+from drives.cia402 import (
+    CW_HALT,
+    OBJECTS,
+    STATE_STATUS_BITS,
+    SW_REMOTE,
+    SW_VOLTAGE_ENABLED,
+    TRANSITION_FAULT,
+    TRANSITION_FAULT_REACTION_DONE,
+    OperationMode,
+    State,
+    next_state,
+    supports,
+)
+from haptic_bus.errors import HapticBusError
+from haptic_bus.plant import ExactPlant
+from sim_drive.operator import NoOperator, OperatorModel
+from sim_drive.parameters import DeviceParameters, Timing
+
+logger = logging.getLogger(__name__)
+
+INT32_RANGE = (-(1 << 31), (1 << 31) - 1)
+SUPPORTED_DRIVE_MODES = 1 << OperationMode.CYCLIC_SYNCHRONOUS_TORQUE.supported_bit
+SW_OPERATION_MODE_SPECIFIC_12 = 1 << 12  # CST: "drive follows the command value"
+TRANSITION_QUICK_STOP_DONE = 12
+_OPERATION_ENABLED = State.OPERATION_ENABLED  # module constants: enum member lookups are slow
+_QUICK_STOP_ACTIVE = State.QUICK_STOP_ACTIVE
+_CST = int(OperationMode.CYCLIC_SYNCHRONOUS_TORQUE)
+_RANGES = {index: spec.data_type.range for index, spec in OBJECTS.items()}
+_VOLTAGE_STATES = frozenset(
+    {State.READY_TO_SWITCH_ON, State.SWITCHED_ON, State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE}
+)
+
+StateListener = Callable[[State, State, "int | None"], None]
+
+
+class ObjectAccessError(HapticBusError):
+    """A read or write of a drive object the drive refuses.
+
+    ``reason`` is one of ``"unknown"`` (no such object), ``"read-only"``, ``"range"``
+    (value outside the object's data type or allowed values).
+    """
+
+    def __init__(self, index: int, reason: str, detail: str = "") -> None:
+        self.index = index
+        self.reason = reason
+        super().__init__(f"object 0x{index:04X}: {reason}" + (f" ({detail})" if detail else ""))
+
+
+def saturate(value: int, low: int, high: int) -> int:
+    """``value`` clipped to ``[low, high]`` (saturate, never wrap)."""
+    return low if value < low else high if value > high else value
+
+
+class SimulatedDrive:
+    """A CiA-402 cyclic-synchronous-torque drive whose hardware is the exact ``m``/``b`` handle.
+
+    ``parameters``: plant and scaling (:class:`DeviceParameters`); ``timing``: when a written
+    torque acts; ``operator``: the hand on the handle; ``name`` prefixes log lines.
+    """
+
+    def __init__(
+        self,
+        parameters: DeviceParameters | None = None,
+        timing: Timing | str = Timing.CIA402,
+        operator: OperatorModel | None = None,
+        *,
+        name: str = "sim drive",
+    ) -> None:
+        self.name = name
+        self.timing = Timing(timing)
+        self.operator: OperatorModel = operator if operator is not None else NoOperator()
+        self.parameters = parameters if parameters is not None else DeviceParameters()
+        self.state = State.SWITCH_ON_DISABLED
+        self.state_listeners: list[StateListener] = []
+        self.controlword = 0
+        self.mode = 0
+        self.mode_display = 0
+        self.target_torque = 0
+        self.quick_stop_option_code = 2
+        self.error_code = 0
+        self.sync_count = 0
+        self.time = 0.0
+        self.velocity_counts = 0
+        self.position_counts = 0
+        self.operator_energy = 0.0
+        self.wall_energy = 0.0
+        self._latched = 0
+        self._plant = ExactPlant(self.parameters.m, self.parameters.b, self.parameters.period / self.parameters.substeps)
+        self._apply_parameters()
+        self._readers: dict[int, Callable[[], int]] = {
+            0x603F: lambda: self.error_code,
+            0x6040: lambda: self.controlword,
+            0x6041: lambda: self.statusword,
+            0x605A: lambda: self.quick_stop_option_code,
+            0x6060: lambda: self.mode,
+            0x6061: lambda: self.mode_display,
+            0x6064: lambda: self.position_counts,
+            0x606C: lambda: self.velocity_counts,
+            0x6071: lambda: self.target_torque,
+            0x6072: lambda: self.parameters.max_torque_permille,
+            0x6076: lambda: self.parameters.rated_torque_mnm,
+            0x6077: lambda: self.torque_actual,
+            0x6502: lambda: SUPPORTED_DRIVE_MODES,
+        }
+        self._writers: dict[int, Callable[[int], None]] = {
+            0x6040: self.write_controlword,
+            0x605A: self._write_quick_stop_option_code,
+            0x6060: self._write_mode,
+            0x6071: self._write_target_torque,
+            0x6072: lambda v: self.reconfigure(max_torque_permille=v),
+            0x6076: lambda v: self.reconfigure(rated_torque=v / 1000.0),
+        }
+
+    # ----------------------------------------------------------------- the handle
+    @property
+    def timing(self) -> Timing:
+        """When a written torque acts (see :class:`Timing`); may be changed between SYNCs."""
+        return Timing.IDEAL if self._ideal else Timing.CIA402
+
+    @timing.setter
+    def timing(self, timing: Timing | str) -> None:
+        self._ideal = Timing(timing) is Timing.IDEAL
+
+    @property
+    def velocity(self) -> float:
+        """The handle's true velocity in m/s (not quantised)."""
+        return self._plant.velocity
+
+    @property
+    def position(self) -> float:
+        """The handle's true position in m (not quantised)."""
+        return self._plant.position
+
+    def set_operator(self, operator: OperatorModel) -> None:
+        """Replace the operator model from the next plant sub-step on."""
+        self.operator = operator
+
+    def reconfigure(self, **changes: object) -> None:
+        """Change :class:`DeviceParameters` fields (validated first; nothing half-applied).
+
+        The handle keeps its velocity and position; a new ``period`` acts from the next SYNC.
+        """
+        self.parameters = dataclasses.replace(self.parameters, **changes)
+        self._apply_parameters()
+
+    def _apply_parameters(self) -> None:
+        p = self.parameters
+        self._plant = ExactPlant(p.m, p.b, p.period / p.substeps, self._plant.velocity, self._plant.position)
+        self._newton_per_permille = p.rated_torque_mnm / 1e6 * p.force_per_torque
+        self._inv_velocity_per_count = 1.0 / p.velocity_per_count
+        self._inv_position_per_count = 1.0 / p.position_per_count
+
+    # ----------------------------------------------------------------- objects
+    def read_object(self, index: int) -> int:
+        """The value of CiA-402 object ``index`` (sub-index 0) in its drive units."""
+        return self.reader(index)()
+
+    def reader(self, index: int) -> Callable[[], int]:
+        """A callable returning object ``index`` (for precompiled cyclic encoders)."""
+        reader = self._readers.get(index)
+        if reader is None:
+            raise ObjectAccessError(index, "unknown")
+        return reader
+
+    def write_object(self, index: int, value: int) -> None:
+        """Write CiA-402 object ``index`` (sub-index 0); raise :class:`ObjectAccessError` if refused."""
+        writer = self._writers.get(index)
+        if writer is None:
+            raise ObjectAccessError(index, "unknown" if index not in self._readers else "read-only")
+        low, high = _RANGES[index]
+        if not low <= value <= high:
+            raise ObjectAccessError(index, "range", f"{value} not in [{low}, {high}]")
+        try:
+            writer(value)
+        except HapticBusError as exc:
+            raise ObjectAccessError(index, "range", str(exc)) from exc
+
+    def readable_objects(self) -> frozenset[int]:
+        """Indices :meth:`read_object` serves."""
+        return frozenset(self._readers)
+
+    def writable_objects(self) -> frozenset[int]:
+        """Indices :meth:`write_object` accepts."""
+        return frozenset(self._writers)
+
+    @property
+    def statusword(self) -> int:
+        """0x6041: the state bits, voltage enabled, remote, and bit 12 while following in CST."""
+        word = STATE_STATUS_BITS[self.state] | SW_REMOTE
+        if self.state in _VOLTAGE_STATES:
+            word |= SW_VOLTAGE_ENABLED
+        if self._torque_enabled():
+            word |= SW_OPERATION_MODE_SPECIFIC_12
+        return word
+
+    @property
+    def torque_actual(self) -> int:
+        """0x6077 in per mille of rated torque: the torque acting from the latest SYNC on."""
+        if self._ideal:
+            return self._effective_target()
+        return self._latched if self._torque_enabled() else 0
+
+    def write_controlword(self, word: int) -> None:
+        """0x6040: run the state machine on ``word`` (fault reset on the rising edge of bit 7)."""
+        new, number = next_state(self.state, word, self.controlword, quick_stop_option_code=self.quick_stop_option_code)
+        self.controlword = word
+        if number is not None:
+            self._enter(new, number)
+
+    def _write_mode(self, mode: int) -> None:
+        self.mode = mode
+        try:
+            known = OperationMode(mode)
+        except ValueError:
+            return
+        if supports(SUPPORTED_DRIVE_MODES, known):
+            self.mode_display = mode
+
+    def _write_target_torque(self, permille: int) -> None:
+        self.target_torque = permille
+
+    def _write_quick_stop_option_code(self, code: int) -> None:
+        if not 0 <= code <= 8:
+            raise ObjectAccessError(0x605A, "range", f"{code} not in [0, 8]")
+        self.quick_stop_option_code = code
+
+    # ----------------------------------------------------------------- state machine
+    def reset_application(self) -> None:
+        """NMT reset node: the drive's power-on values (the handle itself keeps moving)."""
+        if self.state is not State.SWITCH_ON_DISABLED:
+            self._enter(State.SWITCH_ON_DISABLED, None)
+        self.controlword = self.mode = self.mode_display = self.target_torque = 0
+        self.quick_stop_option_code = 2
+        self.error_code = 0
+        self._latched = 0
+
+    def fault(self, code: int) -> None:
+        """A fault with CiA error ``code`` (0x603F): transitions 13 and 14, torque off at once."""
+        self.error_code = code
+        if self.state is not State.FAULT:
+            self._enter(State.FAULT_REACTION_ACTIVE, TRANSITION_FAULT)
+            self._enter(State.FAULT, TRANSITION_FAULT_REACTION_DONE)
+
+    def _enter(self, new: State, number: int | None) -> None:
+        old = self.state
+        self.state = new
+        if old is _OPERATION_ENABLED:
+            self._latched = 0
+        if old is State.FAULT:
+            self.error_code = 0
+        logger.info("%s: %s -> %s (transition %s)", self.name, old.value, new.value, number)
+        for listener in self.state_listeners:
+            listener(old, new, number)
+
+    def _torque_enabled(self) -> bool:
+        return self.state is _OPERATION_ENABLED and self.mode_display == _CST and not self.controlword & CW_HALT
+
+    def _effective_target(self) -> int:
+        if not self._torque_enabled():
+            return 0
+        limit = self.parameters.max_torque_permille
+        return saturate(self.target_torque, -limit, limit)
+
+    # ----------------------------------------------------------------- the cycle
+    def sync(self) -> None:
+        """One SYNC: advance the plant over the closing interval (if any), then sample."""
+        if self.sync_count:
+            if self._ideal:
+                permille = self._effective_target()
+            else:
+                permille = self._latched if self._torque_enabled() else 0
+            self._advance(permille * self._newton_per_permille)
+        if self.state is _QUICK_STOP_ACTIVE and not 5 <= self.quick_stop_option_code <= 8:
+            self._enter(State.SWITCH_ON_DISABLED, TRANSITION_QUICK_STOP_DONE)
+        if not self._ideal:
+            self._latched = self._effective_target()
+        plant = self._plant
+        low, high = INT32_RANGE
+        self.velocity_counts = saturate(round(plant.velocity * self._inv_velocity_per_count), low, high)
+        self.position_counts = saturate(round(plant.position * self._inv_position_per_count), low, high)
+        self.sync_count += 1
+
+    def _advance(self, motor_force: float) -> None:
+        plant = self._plant
+        operator = self.operator
+        step = plant.step
+        t0 = self.time
+        for j in range(self.parameters.substeps):
+            w = operator.force(t0 + j * step, plant.position, plant.velocity)
+            dx = plant.advance(w + motor_force)
+            self.operator_energy += w * dx
+            self.wall_energy -= motor_force * dx
+        self.time = t0 + self.parameters.period

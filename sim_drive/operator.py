@@ -1,0 +1,302 @@
+"""Operator-force models: what the hand on the simulated handle pushes with.
+
+Every model answers ``force(t, position, velocity)`` in N, given the virtual time ``t`` in s
+since the drive's first SYNC, the handle position in m and its velocity in m/s.  The drive
+holds the answer constant over one plant sub-step (zero-order hold), so the operator's work
+``force * displacement`` over a sub-step is exact.
+
+Models are frozen dataclasses whose fields are validated on construction
+(:class:`haptic_bus.errors.ParameterError` names the field, its value and the allowed range).
+The field order is the parameter order ``p1..p6`` of the manufacturer object 0x2010 (see
+:data:`OPERATOR_CODES`).
+"""
+
+from __future__ import annotations
+
+import abc
+import bisect
+import csv
+import dataclasses
+import math
+import pathlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from haptic_bus.errors import ParameterError
+from haptic_bus.validation import real_in_range
+
+FORCE_LIMIT = 1e6  # N: far beyond any haptic handle, keeps every product finite
+FREQUENCY_LIMIT = 1e6  # Hz
+TIME_LIMIT = 1e9  # s
+STIFFNESS_LIMIT = 1e12  # N/m
+DAMPING_LIMIT = 1e12  # N s/m
+POSITION_LIMIT = 1e6  # m
+SPEED_LIMIT = 1e6  # m/s
+
+
+class OperatorModel(abc.ABC):
+    """A hand on the handle: the force it applies, in N."""
+
+    @abc.abstractmethod
+    def force(self, t: float, position: float, velocity: float) -> float:
+        """Force in N at virtual time ``t`` s, handle ``position`` m, ``velocity`` m/s."""
+
+    def parameters(self) -> tuple[float, ...]:
+        """The model's numeric parameters in field order (the ``p1..`` of object 0x2010)."""
+        return tuple(float(getattr(self, f.name)) for f in dataclasses.fields(self))
+
+
+def _check(cls_name: str, name: str, value: object, low: float, high: float, unit: str, *, low_inclusive: bool = True) -> float:
+    return real_in_range(name, value, low, high, low_inclusive=low_inclusive, unit=unit, context=f"operator {cls_name}")
+
+
+@dataclass(frozen=True)
+class NoOperator(OperatorModel):
+    """Nobody holds the handle: 0 N."""
+
+    def force(self, t: float, position: float, velocity: float) -> float:
+        """Always 0 N."""
+        return 0.0
+
+
+@dataclass(frozen=True)
+class ConstantPush(OperatorModel):
+    """A constant push of ``level`` N from t = 0 on."""
+
+    level: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "level", _check("constant", "level", self.level, -FORCE_LIMIT, FORCE_LIMIT, "N"))
+
+    def force(self, t: float, position: float, velocity: float) -> float:
+        """``level`` N."""
+        return self.level
+
+
+@dataclass(frozen=True)
+class StepPush(OperatorModel):
+    """0 N before ``start`` s, ``level`` N from ``start`` on."""
+
+    level: float
+    start: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "level", _check("step", "level", self.level, -FORCE_LIMIT, FORCE_LIMIT, "N"))
+        object.__setattr__(self, "start", _check("step", "start", self.start, 0.0, TIME_LIMIT, "s"))
+
+    def force(self, t: float, position: float, velocity: float) -> float:
+        """``level`` N once ``t >= start``, else 0 N."""
+        return self.level if t >= self.start else 0.0
+
+
+@dataclass(frozen=True)
+class Sinusoid(OperatorModel):
+    """``offset + amplitude sin(2 pi frequency t + phase)`` N (phase in rad)."""
+
+    amplitude: float
+    frequency: float
+    phase: float = 0.0
+    offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "amplitude", _check("sinusoid", "amplitude", self.amplitude, 0.0, FORCE_LIMIT, "N"))
+        set_(self, "frequency", _check("sinusoid", "frequency", self.frequency, 0.0, FREQUENCY_LIMIT, "Hz"))
+        set_(self, "phase", _check("sinusoid", "phase", self.phase, -2 * math.pi, 2 * math.pi, "rad"))
+        set_(self, "offset", _check("sinusoid", "offset", self.offset, -FORCE_LIMIT, FORCE_LIMIT, "N"))
+
+    def force(self, t: float, position: float, velocity: float) -> float:
+        """The sinusoid's value in N at ``t``."""
+        return self.offset + self.amplitude * math.sin(2 * math.pi * self.frequency * t + self.phase)
+
+
+@dataclass(frozen=True)
+class Chirp(OperatorModel):
+    """Linear chirp ``amplitude sin(2 pi (f0 t + (f1 - f0) t^2 / (2 duration)))`` N on [0, duration], 0 N after."""
+
+    amplitude: float
+    f0: float
+    f1: float
+    duration: float
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "amplitude", _check("chirp", "amplitude", self.amplitude, 0.0, FORCE_LIMIT, "N"))
+        set_(self, "f0", _check("chirp", "f0", self.f0, 0.0, FREQUENCY_LIMIT, "Hz"))
+        set_(self, "f1", _check("chirp", "f1", self.f1, 0.0, FREQUENCY_LIMIT, "Hz"))
+        set_(self, "duration", _check("chirp", "duration", self.duration, 0.0, TIME_LIMIT, "s", low_inclusive=False))
+
+    def force(self, t: float, position: float, velocity: float) -> float:
+        """The chirp's value in N at ``t`` (0 N outside [0, duration])."""
+        if not 0.0 <= t <= self.duration:
+            return 0.0
+        cycles = self.f0 * t + (self.f1 - self.f0) * t * t / (2.0 * self.duration)
+        return self.amplitude * math.sin(2 * math.pi * cycles)
+
+
+@dataclass(frozen=True)
+class HandModel(OperatorModel):
+    """A hand coupled to the handle by a spring ``stiffness`` N/m and damper ``damping`` N s/m.
+
+    The hand's set-point moves as ``x_s(t) = start + speed t + amplitude sin(2 pi frequency t)``
+    (m); the force is ``stiffness (x_s - x) + damping (dx_s/dt - v)`` N.
+    """
+
+    stiffness: float
+    damping: float
+    start: float = 0.0
+    speed: float = 0.0
+    amplitude: float = 0.0
+    frequency: float = 0.0
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "stiffness", _check("hand", "stiffness", self.stiffness, 0.0, STIFFNESS_LIMIT, "N/m"))
+        set_(self, "damping", _check("hand", "damping", self.damping, 0.0, DAMPING_LIMIT, "N s/m"))
+        set_(self, "start", _check("hand", "start", self.start, -POSITION_LIMIT, POSITION_LIMIT, "m"))
+        set_(self, "speed", _check("hand", "speed", self.speed, -SPEED_LIMIT, SPEED_LIMIT, "m/s"))
+        set_(self, "amplitude", _check("hand", "amplitude", self.amplitude, 0.0, POSITION_LIMIT, "m"))
+        set_(self, "frequency", _check("hand", "frequency", self.frequency, 0.0, FREQUENCY_LIMIT, "Hz"))
+
+    def force(self, t: float, position: float, velocity: float) -> float:
+        """Spring-damper force in N between the moving set-point and the handle."""
+        omega = 2 * math.pi * self.frequency
+        setpoint = self.start + self.speed * t + self.amplitude * math.sin(omega * t)
+        setpoint_speed = self.speed + self.amplitude * omega * math.cos(omega * t)
+        return self.stiffness * (setpoint - position) + self.damping * (setpoint_speed - velocity)
+
+
+INTERPOLATIONS = ("hold", "linear")
+
+
+@dataclass(frozen=True)
+class RecordedForce(OperatorModel):
+    """A recorded force track: samples ``forces`` (N) at strictly increasing ``times`` (s).
+
+    ``interpolation="hold"`` holds each sample until the next one (zero-order hold);
+    ``"linear"`` interpolates linearly between samples.  Before the first sample the force
+    is 0 N; after the last sample the last value is held.
+    """
+
+    times: tuple[float, ...]
+    forces: tuple[float, ...]
+    interpolation: str = "hold"
+
+    def __post_init__(self) -> None:
+        name = "operator recorded"
+        if len(self.times) != len(self.forces) or not self.times:
+            raise ParameterError("times/forces", (len(self.times), len(self.forces)), "two non-empty columns of equal length", name)
+        times = tuple(real_in_range("time", t, 0.0, TIME_LIMIT, unit="s", context=name) for t in self.times)
+        forces = tuple(real_in_range("force", f, -FORCE_LIMIT, FORCE_LIMIT, unit="N", context=name) for f in self.forces)
+        for i in range(1, len(times)):
+            if times[i] <= times[i - 1]:
+                raise ParameterError(f"time[{i}]", times[i], f"strictly greater than time[{i - 1}] = {times[i - 1]!r}", name)
+        if self.interpolation not in INTERPOLATIONS:
+            raise ParameterError("interpolation", self.interpolation, " or ".join(INTERPOLATIONS), name)
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "forces", forces)
+
+    @classmethod
+    def from_csv(cls, path: str | pathlib.Path, interpolation: str = "hold") -> "RecordedForce":
+        """Load a CSV with columns ``time`` (s) and ``force`` (N); a header row is optional."""
+        times: list[float] = []
+        forces: list[float] = []
+        try:
+            with open(path, newline="") as handle:
+                rows = [row for row in csv.reader(handle) if row and any(cell.strip() for cell in row)]
+        except OSError as exc:
+            raise ParameterError("path", str(path), f"a readable CSV file ({exc.strerror})", "operator recorded") from exc
+        if rows and [cell.strip().lower() for cell in rows[0]] == ["time", "force"]:
+            rows = rows[1:]
+        for line, row in enumerate(rows, start=1):
+            try:
+                t, f = (float(cell) for cell in row)
+            except ValueError as exc:
+                raise ParameterError(f"{path} row {line}", row, "two numbers: time (s), force (N)", "operator recorded") from exc
+            times.append(t)
+            forces.append(f)
+        return cls(tuple(times), tuple(forces), interpolation)
+
+    def parameters(self) -> tuple[float, ...]:
+        """A recording has no scalar parameters."""
+        return ()
+
+    def force(self, t: float, position: float, velocity: float) -> float:
+        """The recorded force in N at ``t`` (held or interpolated, see the class docstring)."""
+        i = bisect.bisect_right(self.times, t) - 1
+        if i < 0:
+            return 0.0
+        if i == len(self.times) - 1 or self.interpolation == "hold":
+            return self.forces[i]
+        t0, t1 = self.times[i], self.times[i + 1]
+        return self.forces[i] + (self.forces[i + 1] - self.forces[i]) * (t - t0) / (t1 - t0)
+
+
+# Codes of the manufacturer object 0x2010 sub 1 ("operator model"), and the profile names.
+OPERATOR_CODES: dict[int, type[OperatorModel]] = {
+    0: NoOperator,
+    1: ConstantPush,
+    2: StepPush,
+    3: Sinusoid,
+    4: Chirp,
+    5: HandModel,
+    6: RecordedForce,
+}
+OPERATOR_NAMES: dict[str, type[OperatorModel]] = {
+    "none": NoOperator,
+    "constant": ConstantPush,
+    "step": StepPush,
+    "sinusoid": Sinusoid,
+    "chirp": Chirp,
+    "hand": HandModel,
+    "recorded": RecordedForce,
+}
+MAX_OD_PARAMETERS = 6
+
+
+def operator_code(model: OperatorModel) -> int:
+    """The 0x2010 sub 1 code of ``model``'s class."""
+    for code, cls in OPERATOR_CODES.items():
+        if type(model) is cls:
+            return code
+    raise ParameterError("operator", type(model).__name__, "one of the built-in operator models")
+
+
+def operator_from_code(code: int, parameters: Sequence[float]) -> OperatorModel:
+    """Build the model with 0x2010 ``code`` from ``parameters`` p1..p6 (extra ones ignored)."""
+    cls = OPERATOR_CODES.get(code)
+    if cls is None or cls is RecordedForce:
+        allowed = ", ".join(f"{c} ({k.__name__})" for c, k in OPERATOR_CODES.items() if k is not RecordedForce)
+        raise ParameterError("operator model code", code, allowed + "; a recording is loaded from a profile only")
+    count = len(dataclasses.fields(cls))
+    return cls(*parameters[:count])
+
+
+def operator_from_table(table: Mapping[str, Any], base: pathlib.Path | None = None) -> OperatorModel:
+    """Build a model from a profile's ``[operator]`` table: ``model = "<name>"`` plus its fields.
+
+    ``recorded`` takes ``path`` (relative to ``base``) and ``interpolation``.
+    """
+    params = dict(table)
+    name = params.pop("model", "none")
+    cls = OPERATOR_NAMES.get(name) if isinstance(name, str) else None
+    if cls is None:
+        raise ParameterError("operator.model", name, ", ".join(OPERATOR_NAMES), "profile")
+    if cls is RecordedForce:
+        path = params.pop("path", None)
+        if not isinstance(path, str):
+            raise ParameterError("operator.path", path, "a CSV file path (string)", "profile")
+        interpolation = params.pop("interpolation", "hold")
+        if params:
+            raise ParameterError("operator", sorted(params), "only model, path, interpolation for a recording", "profile")
+        resolved = pathlib.Path(path) if base is None else base / path
+        return RecordedForce.from_csv(resolved, interpolation)
+    fields = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(params) - fields)
+    if unknown:
+        raise ParameterError("operator", unknown, f"fields of {name}: {sorted(fields) or 'none'}", "profile")
+    try:
+        return cls(**params)
+    except TypeError as exc:
+        raise ParameterError("operator", sorted(params), f"all required fields of {name}: {sorted(fields)}", "profile") from exc

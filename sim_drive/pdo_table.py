@@ -1,0 +1,183 @@
+"""The slave's live PDO configuration, following SDO writes to 0x1400.., 0x1600.., 0x1800.., 0x1A00...
+
+canopen's ``LocalNode`` stores what a master writes to the PDO objects but never links its
+``PdoMap`` objects to them, so its PDOs would keep their initial layout.  :class:`PdoTable`
+closes that gap: it validates each write as CiA 301 asks (raising
+:class:`canopen.SdoAbortedError`, which the SDO server turns into an abort) and recompiles a
+``struct`` codec for the PDO whose configuration changed, so encoding and decoding on the
+hot path is one ``pack``/``unpack`` call.
+
+Rules enforced (CiA 301 7.5.2.35-7.5.2.38):
+
+- the COB-ID (sub 1) of a valid PDO may only change its valid bit (31); 29-bit ids are refused;
+- transmission type (sub 2): TPDO 0..240, 254, 255; RPDO 0..240, 254, 255 (no RTR-only types);
+- mapping entries (sub 1..8) are writable only while the PDO is invalid and sub 0 is 0;
+- sub 0 may be set only while the PDO is invalid; the entries it enables must name
+  PDO-mappable objects of the right direction with their full bit length, 64 bits at most.
+
+Abort codes: 0x06090030 value range, 0x06010000 unsupported access (PDO valid / mapping
+enabled), 0x06040041 object cannot be mapped, 0x06040042 mapping exceeds the PDO length.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from canopen import ObjectDictionary, SdoAbortedError
+from canopen.objectdictionary import ODArray, ODRecord, ODVariable
+
+PDO_NOT_VALID = 1 << 31
+FRAME_29_BIT = 1 << 29
+COB_ID_MASK = 0x7FF
+MAX_ENTRIES = 8
+MAX_BITS = 64
+ABORT_RANGE = 0x06090030
+ABORT_ACCESS = 0x06010000
+ABORT_NOT_MAPPABLE = 0x06040041
+ABORT_TOO_LONG = 0x06040042
+VALID_TRANS_TYPES = frozenset(range(0, 241)) | {254, 255}
+RX_COM, RX_MAP, TX_COM, TX_MAP = 0x1400, 0x1600, 0x1800, 0x1A00
+CHANNELS = 4
+
+
+@dataclass
+class PdoChannel:
+    """One PDO: its communication words and mapping entries, and the codec compiled from them.
+
+    ``indices`` are the mapped object indices in frame order; ``codec`` packs/unpacks them.
+    """
+
+    number: int
+    transmit: bool
+    cob_word: int
+    trans_type: int
+    entries: list[int] = field(default_factory=lambda: [0] * MAX_ENTRIES)
+    count: int = 0
+    indices: tuple[int, ...] = ()
+    codec: struct.Struct = field(default_factory=lambda: struct.Struct("<"))
+
+    @property
+    def valid(self) -> bool:
+        """True when the PDO exists (COB-ID bit 31 clear) and maps at least one object."""
+        return not self.cob_word & PDO_NOT_VALID and self.count > 0
+
+    @property
+    def cob_id(self) -> int:
+        """The 11-bit CAN identifier."""
+        return self.cob_word & COB_ID_MASK
+
+    @property
+    def synchronous(self) -> bool:
+        """Transmission types 0..240 are tied to the SYNC."""
+        return self.trans_type <= 240
+
+
+class PdoTable:
+    """The four RPDOs and four TPDOs of a slave, initialised from the object dictionary.
+
+    ``object_dictionary`` must be imported for the slave's node id (so ``$NODEID`` COB-IDs
+    are resolved).  ``can_read`` / ``can_write`` tell which object indices the device serves
+    for TPDOs / RPDOs.  ``on_change`` is called with the channel after each accepted write.
+    """
+
+    def __init__(
+        self,
+        object_dictionary: ObjectDictionary,
+        can_read: frozenset[int],
+        can_write: frozenset[int],
+        on_change: Callable[[PdoChannel], None],
+    ) -> None:
+        self._od = object_dictionary
+        self._can_read = can_read
+        self._can_write = can_write
+        self._on_change = on_change
+        self.rx: list[PdoChannel] = []
+        self.tx: list[PdoChannel] = []
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the object dictionary's defaults (communication reset)."""
+        self.rx = [self._channel_from_od(n, transmit=False) for n in range(1, CHANNELS + 1)]
+        self.tx = [self._channel_from_od(n, transmit=True) for n in range(1, CHANNELS + 1)]
+
+    def _channel_from_od(self, number: int, transmit: bool) -> PdoChannel:
+        com = self._od[(TX_COM if transmit else RX_COM) + number - 1]
+        mapping = self._od[(TX_MAP if transmit else RX_MAP) + number - 1]
+        channel = PdoChannel(number, transmit, int(com[1].default), int(com[2].default))
+        channel.entries = [int(mapping[k].default) for k in range(1, MAX_ENTRIES + 1)]
+        channel.count = int(mapping[0].default)
+        self._compile(channel)
+        return channel
+
+    def owns(self, index: int) -> bool:
+        """True if ``index`` is a PDO communication or mapping object this table handles."""
+        return any(base <= index < base + CHANNELS for base in (RX_COM, RX_MAP, TX_COM, TX_MAP))
+
+    def write(self, index: int, subindex: int, value: int) -> None:
+        """Validate and apply one SDO write; raise SdoAbortedError to refuse it."""
+        transmit = index >= TX_COM
+        channel = (self.tx if transmit else self.rx)[index & 0xFF]
+        if index & 0x0200:
+            self._write_map(channel, subindex, value)
+        else:
+            self._write_com(channel, subindex, value)
+        self._on_change(channel)
+
+    def _write_com(self, channel: PdoChannel, subindex: int, value: int) -> None:
+        if subindex == 1:
+            if value & FRAME_29_BIT or not value & COB_ID_MASK:
+                raise SdoAbortedError(ABORT_RANGE)
+            exists = not channel.cob_word & PDO_NOT_VALID
+            if exists and not value & PDO_NOT_VALID and value & COB_ID_MASK != channel.cob_id:
+                raise SdoAbortedError(ABORT_RANGE)
+            if not value & PDO_NOT_VALID:
+                self._check_mapping(channel, channel.count)
+            channel.cob_word = value
+        elif subindex == 2:
+            if value not in VALID_TRANS_TYPES:
+                raise SdoAbortedError(ABORT_RANGE)
+            channel.trans_type = value
+
+    def _write_map(self, channel: PdoChannel, subindex: int, value: int) -> None:
+        if not channel.cob_word & PDO_NOT_VALID:
+            raise SdoAbortedError(ABORT_ACCESS)
+        if subindex == 0:
+            if value > MAX_ENTRIES:
+                raise SdoAbortedError(ABORT_TOO_LONG)
+            self._check_mapping(channel, value)
+            channel.count = value
+            self._compile(channel)
+        else:
+            if channel.count:
+                raise SdoAbortedError(ABORT_ACCESS)
+            channel.entries[subindex - 1] = value
+
+    def _mapped_variable(self, channel: PdoChannel, entry: int) -> ODVariable:
+        index, subindex, bits = entry >> 16, entry >> 8 & 0xFF, entry & 0xFF
+        served = self._can_read if channel.transmit else self._can_write
+        obj = self._od.get(index)
+        if isinstance(obj, (ODRecord, ODArray)):
+            obj = obj.get(subindex) if subindex in obj else None
+        elif subindex:
+            obj = None
+        if (
+            not isinstance(obj, ODVariable)
+            or not obj.pdo_mappable
+            or index not in served
+            or bits != len(obj)
+            or not (obj.readable if channel.transmit else obj.writable)
+        ):
+            raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+        return obj
+
+    def _check_mapping(self, channel: PdoChannel, count: int) -> None:
+        total = sum(len(self._mapped_variable(channel, e)) for e in channel.entries[:count])
+        if total > MAX_BITS:
+            raise SdoAbortedError(ABORT_TOO_LONG)
+
+    def _compile(self, channel: PdoChannel) -> None:
+        variables = [self._mapped_variable(channel, e) for e in channel.entries[: channel.count]]
+        channel.indices = tuple(v.index for v in variables)
+        channel.codec = struct.Struct("<" + "".join(v.STRUCT_TYPES[v.data_type].format[-1] for v in variables))
