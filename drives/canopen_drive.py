@@ -615,19 +615,26 @@ class CanopenDrive(Drive):
             slots = self._tpdo_slots
             msg = recv(0.0)
             while msg is not None:  # late TPDOs, heartbeats, EMCYs, SDO answers, own echoes
-                if msg.arbitration_id in slots:
-                    self.stats.stale_tpdos += 1
-                else:
+                slot = slots.get(msg.arbitration_id)
+                if slot is None:
                     self._dispatch(msg)
+                elif len(msg.data) != slot[1]:
+                    self.stats.dropped_frames += 1
+                else:
+                    self.stats.stale_tpdos += 1
                 msg = recv(0.0)
             return
         rxq = self._rx_queue
+        slots = self._tpdo_slots
         while not rxq.empty():
             try:
-                rxq.get_nowait()
+                can_id, data = rxq.get_nowait()
             except queue.Empty:
                 break
-            self.stats.stale_tpdos += 1
+            if len(data) != slots[can_id][1]:
+                self.stats.dropped_frames += 1
+            else:
+                self.stats.stale_tpdos += 1
 
     def _exchange_sync(self) -> tuple[int, ...] | None:
         """Send SYNC and wait for this cycle's TPDO(s); the decoded values in mapping order, or None on timeout."""
