@@ -282,7 +282,7 @@ class SimulatedDrive:
             self._latched = 0
         if old is State.FAULT:
             self.error_code = 0
-        logger.info("%s: %s -> %s (transition %s)", self.name, old.value, new.value, number)
+        logger.info("%s: %s -> %s (transition %s) at t = %.6f s", self.name, old.value, new.value, number, self.time)
         for listener in self.state_listeners:
             listener(old, new, number)
 
