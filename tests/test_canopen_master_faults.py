@@ -1,0 +1,331 @@
+"""The CANopen master's reactions to faults, with the simulated drive in process on ``virtual``.
+
+Each fault must end in a typed error naming the node, after the master has sent zero torque
+with the safe controlword (checked on the wire by a sniffer on the same virtual channel).
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+
+import can
+import canopen
+import pytest
+
+from drives.base import DriveFault, DriveProtocolError, DriveTimeout
+from drives.bus_config import BusConfigError
+from drives.canopen_drive import SAFE_CONTROLWORD, CanopenDrive, DriveStateError, UnsupportedModeError
+from drives.cia402 import CONTROLWORD, STATUSWORD, SUPPORTED_DRIVE_MODES, OperationMode, State, decode_statusword
+from tests.canopen_master_rig import NODE_ID, new_bus_spec, rig
+
+RPDO1 = 0x200 + NODE_ID
+TPDO1 = 0x180 + NODE_ID
+
+
+class Sniffer:
+    """Records every frame on a virtual channel (its own queue: nothing is taken from others)."""
+
+    def __init__(self, channel: str) -> None:
+        self.bus = can.Bus(interface="virtual", channel=channel)
+
+    def frames(self, can_id: int) -> list[bytes]:
+        """All frames with ``can_id`` received so far (bounded: the queue is drained once)."""
+        out = []
+        msg = self.bus.recv(0.0)
+        while msg is not None:
+            if msg.arbitration_id == can_id:
+                out.append(bytes(msg.data))
+            msg = self.bus.recv(0.0)
+        return out
+
+    def close(self) -> None:
+        self.bus.shutdown()
+
+
+def run_cycles(drive, count: int, torque: int = 200) -> int:
+    """``count`` cycles; the number completed before an exception propagates."""
+    for done in range(count):
+        drive.read_inputs()
+        drive.write_outputs(torque)
+    return count
+
+
+def enabled_rig(**kwargs):
+    return rig("virtual", "ideal", **kwargs)
+
+
+def assert_safe_frame_last(sniffer: Sniffer) -> None:
+    rpdos = sniffer.frames(RPDO1)
+    assert rpdos, "the master sent no RPDO at all"
+    assert struct.unpack("<Hh", rpdos[-1]) == (SAFE_CONTROLWORD, 0)
+
+
+def test_connect_configures_the_drive_over_sdo():
+    with enabled_rig(heartbeat_producer_ms=50) as r:
+        drive = r.drive
+        u32 = lambda index, sub: struct.unpack("<I", drive.sdo_read(index, sub))[0]  # noqa: E731
+        assert u32(0x1006, 0) == 1000  # us
+        assert struct.unpack("<H", drive.sdo_read(0x1017, 0))[0] == 50
+        assert drive.sdo_read(0x1A00, 0)[0] == 2
+        assert [u32(0x1A00, 1), u32(0x1A00, 2)] == [0x60410010, 0x606C0020]
+        assert drive.sdo_read(0x1600, 0)[0] == 2
+        assert [u32(0x1600, 1), u32(0x1600, 2)] == [0x60400010, 0x60710010]
+        assert drive.sdo_read(0x1800, 2)[0] == 1 and drive.sdo_read(0x1400, 2)[0] == 1
+        assert u32(0x1800, 1) == TPDO1 and u32(0x1400, 1) & 0x7FF == RPDO1
+        for com in (0x1801, 0x1802, 0x1803, 0x1401, 0x1402, 0x1403):
+            assert u32(com, 1) & (1 << 31), f"0x{com:04X} should be invalid"
+        assert r.sim.nmt_state == "OPERATIONAL"
+        assert drive.scaling == r.sim.drive.parameters.scaling
+        assert drive.scaling_sources["rated_torque"] == "0x6076"
+        assert drive.scaling_sources["velocity_per_count"] == "0x2001:01"
+
+
+def test_enable_disable_and_close():
+    with enabled_rig() as r:
+        drive, sim = r.drive, r.sim
+        drive.enable()
+        assert sim.drive.state is State.OPERATION_ENABLED
+        assert sim.drive.mode_display == OperationMode.CYCLIC_SYNCHRONOUS_TORQUE
+        run_cycles(drive, 10)
+        drive.disable()
+        assert sim.drive.state is State.SWITCH_ON_DISABLED
+        assert decode_statusword(drive.last_inputs.statusword) is State.SWITCH_ON_DISABLED
+        assert sim.drive.target_torque == 0
+        drive.close()
+        deadline = time.monotonic() + 2.0
+        while sim.nmt_state != "PRE-OPERATIONAL" and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert sim.nmt_state == "PRE-OPERATIONAL"
+
+
+def test_silent_drive_is_detected_within_the_configured_cycles():
+    with enabled_rig(tpdo_timeout=0.02, max_missed_tpdos=3) as r:
+        drive = r.drive
+        drive.enable()
+        sniffer = Sniffer(r.spec.channel)
+        try:
+            run_cycles(drive, 20)
+            r.sim.go_silent()
+            calls = 0
+            with pytest.raises(DriveTimeout) as info:
+                for calls in range(1, 10):
+                    drive.read_inputs()
+                    drive.write_outputs(200)
+            assert calls == 3
+            assert info.value.node == "CANopen node 5" and "node 5" in str(info.value)
+            assert "3 consecutive cycles" in str(info.value)
+            assert drive.stats.missed_tpdos == 3
+            assert_safe_frame_last(sniffer)
+            drive.write_outputs(500)  # tripped: the caller's torque is replaced by the safe frame
+            assert_safe_frame_last(sniffer)
+            assert drive.stats.suppressed_outputs == 1
+        finally:
+            sniffer.close()
+
+
+def test_emcy_raises_drive_fault_with_the_decoded_code_on_the_next_cycle():
+    with enabled_rig() as r:
+        drive = r.drive
+        drive.enable()
+        run_cycles(drive, 5)
+        sniffer = Sniffer(r.spec.channel)
+        try:
+            r.sim.send_emcy(0x2310)
+            with pytest.raises(DriveFault) as info:
+                drive.read_inputs()
+            assert info.value.code == 0x2310
+            assert "0x2310" in str(info.value) and "over-current" in str(info.value)
+            assert "node 5" in str(info.value)
+            assert drive.stats.emcy_count == 1
+            assert_safe_frame_last(sniffer)
+        finally:
+            sniffer.close()
+
+
+def test_fault_bit_raises_and_fault_reset_recovers_to_operation_enabled():
+    with enabled_rig() as r:
+        drive, sim = r.drive, r.sim
+        drive.enable()
+        run_cycles(drive, 5)
+        sim.enter_fault(0x4310)
+        with pytest.raises(DriveFault) as info:
+            run_cycles(drive, 5)
+        assert info.value.code == 0x4310 and "temperature" in str(info.value).lower()
+        assert sim.drive.state is State.FAULT
+        with pytest.raises(DriveStateError, match="call fault_reset"):
+            drive.enable()
+        drive.fault_reset()
+        assert sim.drive.state is State.SWITCH_ON_DISABLED
+        assert drive.state() is State.SWITCH_ON_DISABLED  # one more SYNC applies the last RPDO ...
+        assert sim.drive.controlword & 0x80 == 0  # ... whose bit 7 is back to 0 after the edge
+        drive.enable()
+        assert sim.drive.state is State.OPERATION_ENABLED
+        assert run_cycles(drive, 20, torque=300) == 20
+        assert sim.drive.target_torque == 300
+
+
+def test_heartbeat_loss_raises_naming_the_node():
+    with enabled_rig(heartbeat_producer_ms=20, heartbeat_consumer_ms=60) as r:
+        drive = r.drive
+        drive.enable()
+        run_cycles(drive, 5)
+        r.sim.stop_heartbeat()
+        deadline = time.monotonic() + 2.0
+        with pytest.raises(DriveTimeout, match="heartbeat lost") as info:
+            while time.monotonic() < deadline:
+                run_cycles(drive, 1)
+        assert "node 5" in str(info.value) and "60 ms" in str(info.value)
+
+
+def test_wrong_length_tpdo_is_dropped_and_counted_never_decoded():
+    with enabled_rig(tpdo_timeout=0.02) as r:
+        drive = r.drive
+        drive.enable()
+        run_cycles(drive, 10, torque=500)
+        before = drive.last_inputs
+        r.sim.short_next_tpdo(1, missing_bytes=1)
+        held = drive.read_inputs()
+        assert held is before  # the cycle's only TPDO was 5 bytes: dropped, last inputs held
+        assert drive.stats.dropped_frames == 1 and drive.stats.missed_tpdos == 1
+        drive.write_outputs(500)
+        fresh = drive.read_inputs()
+        assert fresh.velocity != before.velocity and drive.stats.missed_tpdos == 1
+
+
+def test_long_tpdo_injected_on_the_bus_is_dropped_and_counted():
+    with enabled_rig() as r:
+        drive = r.drive
+        drive.enable()
+        run_cycles(drive, 3)
+        with can.Bus(interface="virtual", channel=r.spec.channel) as injector:
+            injector.send(can.Message(arbitration_id=TPDO1, data=bytes(8), is_extended_id=False))
+        run_cycles(drive, 3)
+        assert drive.stats.dropped_frames == 1
+        assert drive.last_inputs.statusword != 0  # never decoded from the zero frame
+
+
+def test_wrong_node_id_fails_within_its_timeout_naming_the_node():
+    with rig("virtual", "ideal", node_id=NODE_ID, connect=False) as r:
+        wrong = CanopenDrive(6, interface="virtual", channel=r.spec.channel, boot_timeout=0.3)
+        start = time.monotonic()
+        with pytest.raises(DriveTimeout) as info:
+            wrong.connect()
+        elapsed = time.monotonic() - start
+        wrong.close()
+    assert elapsed < 2 * 0.3 + 0.5  # boot-up wait + SDO probe, each bounded by boot_timeout
+    assert info.value.node == "CANopen node 6" and "node id 6" in str(info.value)
+    assert "nodes seen on the bus: 5" in str(info.value)
+
+
+def test_sdo_aborts_map_to_readable_protocol_errors():
+    with enabled_rig() as r:
+        drive = r.drive
+        with pytest.raises(DriveProtocolError) as info:
+            drive.write_object(STATUSWORD, 0)
+        text = str(info.value)
+        assert "0x6041:00" in text and "Statusword" in text
+        assert "0x06010002" in text and "read only" in text
+        assert info.value.abort_code == 0x06010002
+        with pytest.raises(DriveProtocolError, match=r"0x2000:01 .*0x06090030 Value range of parameter exceeded"):
+            drive.sdo_write(0x2000, 1, struct.pack("<d", -1.0))  # a negative mass
+        with pytest.raises(DriveProtocolError, match=r"0x2FFF:00 \(unknown object\).*Object does not exist"):
+            drive.sdo_read(0x2FFF, 0)
+
+
+def test_unsupported_mode_is_refused_naming_0x6502(monkeypatch):
+    with enabled_rig() as r:
+        drive = r.drive
+        real_read = drive.read_object
+        monkeypatch.setattr(drive, "read_object", lambda spec: 0 if spec is SUPPORTED_DRIVE_MODES else real_read(spec))
+        with pytest.raises(UnsupportedModeError, match="0x6502.*CYCLIC_SYNCHRONOUS_TORQUE"):
+            drive.enable()
+        with pytest.raises(UnsupportedModeError, match="PROFILE_TORQUE"):
+            drive.enable(OperationMode.PROFILE_TORQUE)
+        assert r.sim.drive.state is State.SWITCH_ON_DISABLED  # nothing half-applied
+
+
+def test_state_machine_stall_names_the_state(monkeypatch):
+    with enabled_rig(state_timeout=0.1) as r:
+        drive, sim = r.drive, r.sim
+        real_write = sim.drive.write_object
+
+        def ignore_controlword(index, value):  # a drive that ignores every command
+            if index != CONTROLWORD.index:
+                real_write(index, value)
+
+        monkeypatch.setattr(sim.drive, "write_object", ignore_controlword)
+        with pytest.raises(DriveStateError) as info:
+            drive.enable()
+        assert info.value.state is State.SWITCH_ON_DISABLED
+        assert "stuck in SWITCH ON DISABLED" in str(info.value) and "SHUTDOWN" in str(info.value)
+
+
+def test_torque_saturates_at_0x6072_never_wraps():
+    with enabled_rig() as r:
+        drive = r.drive
+        drive.enable()
+        drive.read_inputs()
+        drive.write_outputs(40000)
+        drive.read_inputs()
+        assert r.sim.drive.target_torque == 3000
+        drive.write_outputs(-40000)
+        drive.read_inputs()
+        assert r.sim.drive.target_torque == -3000
+        assert drive.stats.saturated_outputs == 2
+
+
+def test_bus_from_python_can_environment(monkeypatch):
+    spec = new_bus_spec("virtual")
+    from sim_drive.canopen_slave import CanopenSimDrive
+
+    monkeypatch.setenv("CAN_INTERFACE", "virtual")
+    monkeypatch.setenv("CAN_CHANNEL", spec.channel)
+    with CanopenSimDrive({"interface": "virtual", "channel": spec.channel}, NODE_ID):
+        with CanopenDrive(NODE_ID) as drive:
+            drive.connect()
+            assert drive.read_object(STATUSWORD) & 0x4F == 0x40
+
+
+def test_given_bus_and_network_are_not_shut_down():
+    spec = new_bus_spec("virtual")
+    from sim_drive.canopen_slave import CanopenSimDrive
+
+    with CanopenSimDrive({"interface": "virtual", "channel": spec.channel}, NODE_ID):
+        with spec.open() as bus:
+            drive = CanopenDrive(NODE_ID, bus=bus)
+            drive.connect()
+            drive.enable()
+            run_cycles(drive, 3)
+            drive.close()
+            bus.send(can.Message(arbitration_id=0x7FF, data=b"", is_extended_id=False))  # still open
+        network = canopen.Network()
+        network.connect(interface="virtual", channel=spec.channel)
+        try:
+            drive = CanopenDrive(NODE_ID, network=network)
+            drive.connect()
+            drive.enable()
+            run_cycles(drive, 3)
+            drive.close()
+            assert network.bus is not None and network.notifier is not None and not network.notifier.stopped
+            assert NODE_ID not in network
+        finally:
+            network.disconnect()
+
+
+def test_missing_bus_configuration_is_a_readable_error(monkeypatch):
+    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr("can.rc", {})
+    monkeypatch.setattr("can.util.CONFIG_FILES", [])
+    drive = CanopenDrive(NODE_ID)
+    with pytest.raises(BusConfigError, match="no CAN interface selected"):
+        drive.connect()
+
+
+def test_controlword_never_leaves_fault_reset_high_after_disable():
+    with enabled_rig() as r:
+        drive = r.drive
+        drive.enable()
+        drive.disable()
+        assert drive.read_object(CONTROLWORD) == SAFE_CONTROLWORD
