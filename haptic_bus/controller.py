@@ -107,6 +107,11 @@ class WallController:
         """The scene the loop renders now."""
         return self._scene
 
+    @property
+    def latest_scene(self) -> CompiledScene:
+        """The scene of the last accepted upload (staged for the next cycle) or the running one."""
+        return self._pending or self._scene
+
     def upload_scene(self, scene: CompiledScene) -> GateDecision:
         """Gate ``scene`` and stage it for the next cycle boundary; raise GateRefusal if refused."""
         with self._upload_lock:
@@ -116,12 +121,17 @@ class WallController:
 
     def set_wall(self, name: str, stiffness: float, damping: float) -> GateDecision:
         """Change one object's ``K`` (N/m) and ``B`` (N s/m) together, through the gate."""
+        return self.set_walls({name: (stiffness, damping)})
+
+    def set_walls(self, changes: dict[str, tuple[float, float]]) -> GateDecision:
+        """Change several objects' ``(K, B)`` as one upload: all pass the gate, or none applies."""
         with self._upload_lock:
             base = self._pending or self._scene
             objects = base.by_name()
-            if name not in objects:
-                raise ParameterError("object", name, f"one of {sorted(objects)}", "scene")
-            changed = [obj.with_parameters(stiffness, damping) if obj.name == name else obj for obj in base.objects]
+            unknown = sorted(set(changes) - set(objects))
+            if unknown:
+                raise ParameterError("object", unknown[0], f"one of {sorted(objects)}", "scene")
+            changed = [obj.with_parameters(*changes[obj.name]) if obj.name in changes else obj for obj in base.objects]
             scene = compile_scene(changed)
             decision = self.gate.admit(scene)
             self._pending = scene
