@@ -1,0 +1,112 @@
+"""Scenes compile to the same force as summing every object, and the gate judges what acts at once."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from haptic_bus.errors import ParameterError
+from haptic_bus.gate import DeviceLoop, GatePolicy, GateRefusal, PassivityGate
+from haptic_bus.scene import Detent, Slot, Wall, compile_scene
+
+SEED_IDEAL = DeviceLoop(m=0.5, b=0.1, T=1e-3, delay=0)
+SEED_CIA402 = DeviceLoop(m=0.5, b=0.1, T=1e-3, delay=1)
+
+
+def brute_force(objects, x: float, v: float) -> float:
+    """The wall force by visiting every object (what the compiled scene must equal)."""
+    total = 0.0
+    for obj in objects:
+        for start, end, K, anchor, B in obj.pieces():
+            if start <= x < end:
+                total += K * (x - anchor) + B * v
+    return total
+
+
+positions = st.floats(-0.1, 0.1)
+objects = st.lists(
+    st.one_of(
+        st.builds(Wall, name=st.just(""), position=positions, normal=st.sampled_from([-1, 1]),
+                  stiffness=st.floats(0, 5e3), damping=st.floats(0, 50)),
+        st.builds(Detent, name=st.just(""), center=positions, reach=st.floats(1e-4, 0.05),
+                  stiffness=st.floats(0, 5e3), damping=st.floats(0, 50)),
+        st.builds(lambda lo, w, K, B: Slot("", lo, lo + w, K, B), positions, st.floats(1e-3, 0.1),
+                  st.floats(0, 5e3), st.floats(0, 50)),
+    ),
+    min_size=1, max_size=12,
+).map(lambda objs: [type(o)(**{**o.__dict__, "name": f"o{i}"}) for i, o in enumerate(objs)])
+
+
+@settings(max_examples=150, deadline=None)
+@given(objs=objects, x=st.floats(-0.2, 0.2), v=st.floats(-1, 1))
+def test_compiled_force_equals_the_sum_over_every_object(objs, x: float, v: float) -> None:
+    scene = compile_scene(objs)
+    expected = brute_force(objs, x, v)
+    # fsum per interval vs a running sum here: both within a few ulps of the largest term
+    scale = sum(abs(o.stiffness) * 0.3 + abs(o.damping) for o in objs)
+    assert scene.force(x, v) == pytest.approx(expected, abs=1e-12 * max(scale, 1.0))
+
+
+def test_wall_acts_only_while_penetrating() -> None:
+    floor = compile_scene([Wall("floor", 0.01, -1, 200.0, 100.0)])
+    assert floor.force(0.0099, 0.5) == 0.0
+    assert floor.force(0.011, 0.0) == pytest.approx(200.0 * 0.001)
+    assert floor.force(0.011, -0.2) == pytest.approx(0.2 - 20.0)
+    ceiling = compile_scene([Wall("ceiling", 0.0, 1, 300.0, 0.0)])
+    assert ceiling.force(-0.002, 0.0) == pytest.approx(-0.6) and ceiling.force(0.001, 0.0) == 0.0
+
+
+def test_far_objects_cost_nothing_per_cycle() -> None:
+    many = compile_scene([Detent(f"d{i}", i * 0.01, 0.004, 300.0, 1.0) for i in range(1000)])
+    # one bisect over the break points: 2 per detent, log2(2000) < 11 comparisons
+    assert len(many.breaks) == 2000
+    assert many.force(3.0021, 0.0) == pytest.approx(300.0 * 0.0021)
+    assert many.force(3.005, 1.0) == 0.0
+
+
+def test_overlapping_objects_add_and_the_gate_judges_the_sum() -> None:
+    scene = compile_scene([Wall("a", 0.0, -1, 150.0, 60.0), Wall("b", 0.001, -1, 150.0, 60.0)])
+    contacts = scene.contacts()
+    assert contacts[(300.0, 120.0)] == ("a", "b")
+    gate = PassivityGate(SEED_IDEAL)
+    decision = gate.judge(scene)
+    assert decision.accepted and {(w.K, w.B) for w in decision.walls} == {(150.0, 60.0), (300.0, 120.0)}
+
+
+def test_gate_refuses_the_seed_wall_with_one_sample_of_delay_and_says_why() -> None:
+    scene = compile_scene([Wall("floor", 0.0, -1, 200.0, 100.0)])
+    assert PassivityGate(SEED_IDEAL).admit(scene).accepted
+    with pytest.raises(GateRefusal) as info:
+        PassivityGate(SEED_CIA402).admit(scene)
+    message = str(info.value)
+    assert "floor" in message and "delay = 1" in message and "margin -84.09 N s/m" in message
+    assert "allowed: margin >= 0" in message
+
+
+def test_safety_margin_and_strict_bandwidth_policy() -> None:
+    scene = compile_scene([Wall("floor", 0.0, -1, 200.0, 100.0)])
+    margin = PassivityGate(SEED_IDEAL).judge(scene).worst_margin
+    assert margin == pytest.approx(0.0998139, rel=1e-5)
+    assert not PassivityGate(SEED_IDEAL, GatePolicy(safety_margin=0.2)).judge(scene).accepted
+    soft = compile_scene([Wall("soft", 0.0, -1, 200.0, 1.0)])  # alpha = 5 < 6
+    assert PassivityGate(SEED_IDEAL).judge(soft).warnings
+    assert not PassivityGate(SEED_IDEAL, GatePolicy(bandwidth="strict")).judge(soft).accepted
+
+
+@pytest.mark.parametrize("build,field", [
+    (lambda: Wall("w", 0.0, 0, 1.0, 1.0), "normal"),
+    (lambda: Wall("w", math.nan, -1, 1.0, 1.0), "position"),
+    (lambda: Wall("w", 0.0, -1, -1.0, 1.0), "stiffness"),
+    (lambda: Slot("s", 0.1, 0.0, 1.0, 1.0), "high"),
+    (lambda: Detent("d", 0.0, 0.0, 1.0, 1.0), "reach"),
+    (lambda: compile_scene([Wall("w", 0, -1, 1, 1), Wall("w", 1, -1, 1, 1)]), "name"),
+    (lambda: GatePolicy(safety_margin=-1.0), "safety_margin"),
+    (lambda: GatePolicy(bandwidth="sometimes"), "bandwidth"),
+])
+def test_bad_scene_input_names_the_field(build, field: str) -> None:
+    with pytest.raises(ParameterError) as info:
+        build()
+    assert info.value.name == field and "allowed" in str(info.value)
