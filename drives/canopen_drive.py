@@ -177,8 +177,10 @@ class CanopenDrive(Drive):
     invalidated.  ``rx_mode``: see the module docstring.  Timeouts in s; ``max_missed_tpdos``
     consecutive cycles without TPDO raise DriveTimeout; heartbeat times in ms (consumer
     default 3x producer; 0 disables).
-    ``scaling``: the caller's :class:`DriveScaling`; ``rated_torque`` and
-    ``max_torque_permille`` are replaced by 0x6076/0x6072 when the drive has them.
+    ``scaling``: the caller's :class:`DriveScaling`; connect() replaces ``rated_torque`` and
+    ``max_torque_permille`` by 0x6076/0x6072, and the other fields by manufacturer scaling
+    objects the EDS names (:func:`drives.canopen_od.find_scaling_objects`); a field neither
+    the drive nor the caller gives makes connect() fail naming it.
     """
 
     def __init__(
@@ -218,6 +220,8 @@ class CanopenDrive(Drive):
             raise ValueError(f"tpdo_timeout = {tpdo_timeout!r} s is invalid; allowed: > 0")
         if not 0 <= heartbeat_producer_ms <= 0xFFFF:
             raise ValueError(f"heartbeat_producer_ms = {heartbeat_producer_ms!r} is invalid; allowed: 0..65535")
+        if heartbeat_consumer_ms is not None and heartbeat_consumer_ms < 0:
+            raise ValueError(f"heartbeat_consumer_ms = {heartbeat_consumer_ms!r} is invalid; allowed: >= 0 (0 disables)")
         self.node_id = node_id
         self.name = f"CANopen node {node_id}"
         self.period = period
@@ -252,7 +256,8 @@ class CanopenDrive(Drive):
         if eds is _USE_DEFAULT_EDS:
             eds = default_eds_path()
         self.eds = eds
-        self.scaling = scaling if scaling is not None else DriveScaling(1.0, 1.0, 1.0, 1.0)
+        self._given_scaling = scaling
+        self.scaling = scaling  # complete after connect(); see _read_scaling
 
         self._given_network = network
         self._given_bus = bus
@@ -282,6 +287,7 @@ class CanopenDrive(Drive):
         self._torque_limit = 0x7FFF
         self._controlword = SAFE_CONTROLWORD
 
+        self._send_lock = threading.Lock()
         self._rx_queue: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
         self._cycling = False  # direct mode: notifier paused, we read the bus
         self._connected = False
@@ -295,7 +301,6 @@ class CanopenDrive(Drive):
         self._heartbeat_limit = heartbeat_consumer_ms / 1000.0
         self._booted = threading.Event()
         self._heartbeat_seen = threading.Event()
-        self._lock = threading.Lock()
 
     # ------------------------------------------------------------------ connection
 
@@ -332,6 +337,7 @@ class CanopenDrive(Drive):
             network.connect()
         self.network = network
         self._bus = network.bus
+        self._send_lock = network.send_lock  # shared with canopen's own sends (SDO, NMT)
         node = canopen.RemoteNode(self.node_id, dictionary)
         node.sdo.RESPONSE_TIMEOUT = self.sdo_timeout
         network.add_node(node)
@@ -460,14 +466,9 @@ class CanopenDrive(Drive):
 
         What the drive does not have stays as the caller gave it.
         """
-        given = self.scaling
-        values = {
-            "velocity_per_count": given.velocity_per_count,
-            "position_per_count": given.position_per_count,
-            "rated_torque": given.rated_torque,
-            "force_per_torque": given.force_per_torque,
-            "max_torque_permille": given.max_torque_permille,
-        }
+        given = self._given_scaling
+        names = ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque", "max_torque_permille")
+        values: dict[str, Any] = {name: getattr(given, name) for name in names} if given is not None else {}
         self.scaling_sources = dict.fromkeys(values, "caller")
         try:
             values["rated_torque"] = self.read_object(MOTOR_RATED_TORQUE) / 1000.0  # mN m -> N m
@@ -487,7 +488,14 @@ class CanopenDrive(Drive):
                 )
             values[field_name] = struct.unpack(fmt, data)[0]
             self.scaling_sources[field_name] = f"0x{index:04X}:{subindex:02X}"
-        for field_name in ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque"):
+        missing = [name for name in names if name not in values]
+        if missing:
+            raise DriveProtocolError(
+                self.name,
+                f"scaling unknown for {', '.join(missing)}: the drive has no such objects "
+                f"(0x6076, 0x6072, manufacturer scaling in the EDS); pass scaling=DriveScaling(...)",
+            )
+        for field_name in names[:4]:
             value = values[field_name]
             if not value > 0 or value == float("inf"):
                 raise DriveProtocolError(
@@ -646,7 +654,8 @@ class CanopenDrive(Drive):
             recv = bus.recv
             tpdo_cob = self._tpdo_cob
             size = self._tpdo_size
-            bus.send(self._sync_msg)
+            with self._send_lock:
+                bus.send(self._sync_msg)
             self.stats.syncs_sent += 1
             deadline = perf() + self.tpdo_timeout
             while True:
@@ -665,7 +674,7 @@ class CanopenDrive(Drive):
                 self._dispatch(msg)
         rxq = self._rx_queue
         size = self._tpdo_size
-        with self.network.send_lock:
+        with self._send_lock:
             self._bus.send(self._sync_msg)
         self.stats.syncs_sent += 1
         deadline = perf() + self.tpdo_timeout
@@ -688,11 +697,8 @@ class CanopenDrive(Drive):
         slots = self._tpdo_slots
         parts: list[tuple[int, ...] | None] = [None] * len(slots)
         missing = len(slots)
-        if self._cycling:
+        with self._send_lock:
             self._bus.send(self._sync_msg)
-        else:
-            with self.network.send_lock:
-                self._bus.send(self._sync_msg)
         self.stats.syncs_sent += 1
         deadline = perf() + self.tpdo_timeout
         while missing:
@@ -734,11 +740,8 @@ class CanopenDrive(Drive):
     def _send_rpdo(self, controlword: int, torque: int) -> None:
         msg = self._rpdo_msg
         self._rpdo_pack_into(msg.data, 0, controlword, torque)
-        if self._cycling:
+        with self._send_lock:
             self._bus.send(msg)
-        else:
-            with self.network.send_lock:
-                self._bus.send(msg)
         self.stats.rpdos_sent += 1
 
     def _safe_stop(self) -> None:
@@ -747,10 +750,11 @@ class CanopenDrive(Drive):
         self._armed = False
         self.stats.safe_stops += 1
         try:
-            self._bus.send(self._safe_msg)
-            self.stats.rpdos_sent += 1
-            self._bus.send(self._sync_msg)
-            self.stats.syncs_sent += 1
+            with self._send_lock:
+                self._bus.send(self._safe_msg)
+                self.stats.rpdos_sent += 1
+                self._bus.send(self._sync_msg)
+                self.stats.syncs_sent += 1
         except (can.CanError, OSError) as exc:  # the error being raised matters more
             logger.error("%s: could not send the safe stop frame: %s", self.name, exc)
 
@@ -826,6 +830,8 @@ class CanopenDrive(Drive):
 
     def write_outputs(self, target_torque: int) -> None:
         """Send RPDO1: the held controlword and ``target_torque`` (per mille, saturated at +-0x6072)."""
+        if not self._connected:
+            raise DriveError(self.name, "not connected; call connect() first")
         if self._tripped is not None:
             self.stats.suppressed_outputs += 1
             self._send_rpdo(SAFE_CONTROLWORD, 0)
@@ -855,10 +861,10 @@ class CanopenDrive(Drive):
         return statusword
 
     def state(self) -> State | None:
-        """The drive's current CiA-402 state (one SYNC/TPDO exchange with zero torque, or SDO when idle)."""
-        if self._cycling or self.rx_mode == "listener":
-            return decode_statusword(self._cycle_raw(self._controlword if self._tripped is None else SAFE_CONTROLWORD))
-        return decode_statusword(self.read_object(STATUSWORD))
+        """The drive's CiA-402 state: one SYNC/TPDO exchange, answered with the held controlword and zero torque."""
+        if not self._connected:
+            raise DriveError(self.name, "not connected; call connect() first")
+        return decode_statusword(self._cycle_raw(self._hold_word()))
 
     def _walk(self, goal: State, accept: tuple[State, ...] = ()) -> State:
         """Drive the state machine to ``goal`` with cyclic exchanges; DriveStateError if a step stalls."""
@@ -985,7 +991,8 @@ class CanopenDrive(Drive):
             if reachable and self._bus is not None:
                 try:
                     self._send_rpdo(SAFE_CONTROLWORD, 0)
-                    self._bus.send(self._sync_msg)
+                    with self._send_lock:
+                        self._bus.send(self._sync_msg)
                     self.node.nmt.send_command(NMT_PRE_OPERATIONAL)
                 except (can.CanError, OSError, RuntimeError) as exc:
                     logger.warning("%s: could not send the closing frames: %s", self.name, exc)

@@ -13,7 +13,7 @@ import can
 import canopen
 import pytest
 
-from drives.base import DriveFault, DriveProtocolError, DriveTimeout
+from drives.base import DriveFault, DriveProtocolError, DriveScaling, DriveTimeout
 from drives.bus_config import BusConfigError
 from drives.canopen_drive import SAFE_CONTROLWORD, CanopenDrive, DriveStateError, UnsupportedModeError
 from drives.cia402 import CONTROLWORD, STATUSWORD, SUPPORTED_DRIVE_MODES, OperationMode, State, decode_statusword
@@ -329,3 +329,18 @@ def test_controlword_never_leaves_fault_reset_high_after_disable():
         drive.enable()
         drive.disable()
         assert drive.read_object(CONTROLWORD) == SAFE_CONTROLWORD
+
+
+def test_without_an_eds_scaling_comes_from_the_caller_and_the_drive():
+    """eds=None: the minimal CiA-402 dictionary; no manufacturer scaling objects are known."""
+    with rig("virtual", "ideal", connect=False, eds=None) as r:
+        with pytest.raises(DriveProtocolError, match="scaling unknown for velocity_per_count.*pass scaling="):
+            r.drive.connect()
+    given = DriveScaling(velocity_per_count=2e-6, position_per_count=1e-7, rated_torque=9.0, force_per_torque=50.0)
+    with rig("virtual", "ideal", eds=None, scaling=given) as r:
+        drive = r.drive
+        assert drive.scaling.velocity_per_count == 2e-6  # the caller's
+        assert drive.scaling.rated_torque == 0.2 and drive.scaling.max_torque_permille == 3000  # the drive's
+        assert drive.scaling_sources["velocity_per_count"] == "caller"
+        drive.enable()
+        assert run_cycles(drive, 5) == 5
