@@ -158,10 +158,11 @@ def test_seed_wall_step_response_matches_the_analytic_closed_loop(interface):
     assert abs(expected[-1] - w) < 0.01 * w  # the wall force has settled on the operator's push
 
 
-def test_position_in_a_second_tpdo_matches_the_exact_plant():
+@pytest.mark.parametrize("rx_mode", ["direct", "listener"])
+def test_position_in_a_second_tpdo_matches_the_exact_plant(rx_mode):
     """Mapping 0x6041 + 0x606C + 0x6064 needs 10 bytes: TPDO1 and TPDO2, both of each SYNC."""
     torque, cycles = 300, 200
-    with rig("virtual", "ideal", tpdo_objects=DEFAULT_TPDO_WITH_POSITION) as r:
+    with rig("virtual", "ideal", tpdo_objects=DEFAULT_TPDO_WITH_POSITION, rx_mode=rx_mode) as r:
         drive = r.drive
         assert [c.size for c in drive.tpdo_codecs] == [6, 4]
         assert drive.sdo_read(0x1A01, 1) == struct.pack("<I", 0x60640020)
