@@ -28,7 +28,6 @@ raise.  Until :meth:`CanopenDrive.fault_reset` or :meth:`CanopenDrive.enable`, e
 from __future__ import annotations
 
 import logging
-import os
 import queue
 import struct
 import threading
@@ -168,7 +167,9 @@ class CanopenDrive(Drive):
     Bus, one of: ``network`` (a :class:`canopen.Network`, connected or not), ``bus`` (a
     :class:`can.BusABC`), or ``interface``/``channel``/``bitrate``/``bus_kwargs`` with
     python-can's configuration chain filling the gaps (env ``CAN_INTERFACE`` ..., ``~/.canrc``).
-    The drive shuts down only a bus it opened itself.
+    The drive shuts down only a bus it opened itself.  With ``rx_mode="direct"`` on a shared
+    ``network``, the network's notifier is paused while this drive cycles (other nodes' frames
+    are still dispatched, from the cycling thread) and restarted for SDO and on close().
 
     ``period`` (s) is the cycle time written to 0x1006.  ``tpdo_objects`` are the objects the
     drive sends each cycle, in order, packed into TPDO1.. (8 bytes each; must hold 0x6041 and
