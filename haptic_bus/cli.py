@@ -7,7 +7,9 @@ import json
 import sys
 from typing import Callable, Sequence
 
+from drives.base import DriveError
 from haptic_bus.errors import HapticBusError
+from haptic_bus.gate import GateRefusal
 from haptic_bus.check_report import check_report, format_check
 from haptic_bus.loop import WallLoop
 
@@ -28,6 +30,24 @@ def _add_device_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--delay", type=float, default=0, help="loop delay d in whole samples (0: ideal, 1: CiA-402 sync)")
 
 
+def _bus_option(text: str) -> tuple[str, object]:
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE")
+    try:
+        return key, int(value, 0)
+    except ValueError:
+        return key, value
+
+
+def _add_bus_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--interface", help="python-can interface (socketcan, virtual, udp_multicast, ...)")
+    parser.add_argument("--channel", help="python-can channel (can0, vcan0, a multicast group, ...)")
+    parser.add_argument("--bitrate", type=int, help="bit/s")
+    parser.add_argument("--bus-option", type=_bus_option, action="append", default=[], metavar="KEY=VALUE",
+                        help="extra python-can bus argument, e.g. port=43113 (repeatable)")
+
+
 def _check(args: argparse.Namespace) -> int:
     loop = WallLoop(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay)
     report = check_report(loop)
@@ -41,6 +61,70 @@ def _region(args: argparse.Namespace) -> int:
     loop = WallLoop(args.mass, args.friction, args.period, 0.0, 0.0, args.delay)
     plot_region(args.png, loop.m, loop.b, loop.T, delay=loop.delay)
     print(f"wrote {args.png}")
+    return EXIT_OK
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from haptic_bus.demo import format_demo, run_demo
+    from haptic_bus.profiles import load_profile
+
+    profile = load_profile(args.profile) if args.profile else None
+    result = run_demo(args.out, profile, seconds=args.duration)
+    print(format_demo(result))
+    return EXIT_NO if result.summary.error else EXIT_OK
+
+
+def _bus_arguments(args: argparse.Namespace) -> dict:
+    bus = dict(args.bus_option)
+    for key in ("interface", "channel", "bitrate"):
+        if getattr(args, key) is not None:
+            bus[key] = getattr(args, key)
+    return bus
+
+
+def _run(args: argparse.Namespace) -> int:
+    import threading
+
+    from haptic_bus.profiles import load_profile
+    from haptic_bus.runner import install_stop_signals, run_profile
+
+    profile = load_profile(args.profile)
+    stop = threading.Event()
+    install_stop_signals(stop)
+    summary, _ = run_profile(profile, _bus_arguments(args), args.node_id, duration=args.duration,
+                             realtime=not args.virtual_time, controller_node_id=args.controller_node_id,
+                             out_dir=args.out, stop=stop)
+    p, late = summary.compute_percentiles, summary.lateness_percentiles
+    print(f"cycles {summary.cycles}; peak force {summary.peak_force:.4g} N; saturated {summary.saturated_cycles}; "
+          f"observer energy {summary.observer_energy:.4g} J (active cycles {summary.observer_active_cycles})")
+    if p:
+        print(f"compute p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us; clock: {summary.clock}")
+    if late:
+        print(f"start lateness p50 {late['p50'] * 1e6:.1f} us, p99 {late['p99'] * 1e6:.1f} us, "
+              f"max {late['max'] * 1e6:.1f} us; overruns {summary.overruns}")
+    if summary.error:
+        print(f"haptic-bus run: error: {summary.error}", file=sys.stderr)
+        return EXIT_NO
+    return EXIT_OK
+
+
+def _upload(args: argparse.Namespace) -> int:
+    from canopen import SdoAbortedError, SdoCommunicationError
+
+    from haptic_bus.controller_node import upload_walls
+    from haptic_bus.validation import real_in_range, whole_in_range
+
+    index = whole_in_range("object", args.object, 0, 255, context="upload")
+    K = real_in_range("stiffness", args.stiffness, 0.0, 1e15, unit="N/m", context="upload")
+    B = real_in_range("damping", args.damping, 0.0, 1e15, unit="N s/m", context="upload")
+    try:
+        print(upload_walls(_bus_arguments(args), args.node_id, {index: (K, B)}, timeout=args.timeout))
+    except SdoAbortedError as error:
+        print(f"haptic-bus upload: {getattr(error, 'reason', error)}", file=sys.stderr)
+        return EXIT_NO
+    except SdoCommunicationError as error:
+        print(f"haptic-bus upload: controller node {args.node_id} did not answer: {error}", file=sys.stderr)
+        return EXIT_NO
     return EXIT_OK
 
 
@@ -67,6 +151,31 @@ def build_parser() -> argparse.ArgumentParser:
     region.add_argument("--png", required=True, help="output PNG file")
     region.set_defaults(handler=_region)
 
+    demo = sub.add_parser("demo", help="simulated drive + controller on a virtual CAN bus, in virtual time")
+    demo.add_argument("--out", default="haptic-bus-demo", help="output directory for PNGs and the CSV record")
+    demo.add_argument("--profile", help="profile name or TOML path (default: the shipped default)")
+    demo.add_argument("--duration", type=float, default=2.0, help="virtual seconds to run")
+    demo.set_defaults(handler=_demo)
+
+    run = sub.add_parser("run", help="run a profile's controller against a drive on a CAN bus")
+    run.add_argument("profile", help="profile name or TOML path")
+    _add_bus_arguments(run)
+    run.add_argument("--node-id", type=int, required=True, help="the drive's CANopen node id")
+    run.add_argument("--duration", type=float, default=10.0, help="seconds to run")
+    run.add_argument("--controller-node-id", type=int, help="serve gated wall uploads as this CANopen node")
+    run.add_argument("--virtual-time", action="store_true", help="lock-step with a simulated drive (no pacing)")
+    run.add_argument("--out", help="directory for the CSV record")
+    run.set_defaults(handler=_run)
+
+    upload = sub.add_parser("upload", help="change a running controller's wall K and B over the bus (gated)")
+    _add_bus_arguments(upload)
+    upload.add_argument("--node-id", type=int, required=True, help="the controller's CANopen node id")
+    upload.add_argument("--object", type=int, required=True, help="scene object index (0x2100 + index)")
+    upload.add_argument("--stiffness", type=float, required=True, help="K, N/m")
+    upload.add_argument("--damping", type=float, required=True, help="B, N s/m")
+    upload.add_argument("--timeout", type=float, default=1.0, help="SDO timeout, s")
+    upload.set_defaults(handler=_upload)
+
     sub.add_parser("sim", help="run the simulated CiA-402 drive (see: haptic-bus sim --help)", add_help=False)
     return parser
 
@@ -84,7 +193,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return args.handler(args)
     except HapticBusError as error:
         print(f"haptic-bus {args.command}: error: {error}", file=sys.stderr)
-        return EXIT_INVALID
+        return EXIT_NO if isinstance(error, GateRefusal) else EXIT_INVALID
+    except DriveError as error:
+        print(f"haptic-bus {args.command}: drive error: {error}", file=sys.stderr)
+        return EXIT_NO
 
 
 if __name__ == "__main__":

@@ -106,12 +106,16 @@ def test_zoh_limit_without_friction_is_the_pure_mass() -> None:
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(loop=loops, theta=st.sampled_from([1e-12, 1e-7, 1e-3, 0.7, 2.0, math.pi - 1e-12, math.pi]))
 def test_responses_match_mpmath_and_never_flip_sign(loop: WallLoop, theta: float) -> None:
+    # A backward-stable evaluation is exact for parameters a few ulps away; near a closed-loop
+    # pole p at distance delta from z = e^{j theta} that moves T by about ulps / delta.
+    delta = float(np.min(np.abs(np.exp(1j * theta) - closed_loop_poles(loop))))
+    tolerance = 1e-13 + 64 * np.finfo(float).eps / max(delta, 1e-300)
     for ours, reference in ((t_fund(loop, theta)[0], t_fund_mp(loop, theta)), (seed_t_zw(loop, theta)[0], t_zw_mp(loop, theta))):
         ref = complex(reference)
         assert np.isfinite(ours)
-        # Re is accurate to a few ulps of |T|; below that the sign is not a property of the loop
-        assert abs(ours.real - ref.real) <= 1e-13 * abs(ref)
-        if abs(ref.real) > 1e-13 * abs(ref):
+        # Re is accurate to the tolerance times |T|; below that the sign is not a property of the loop
+        assert abs(ours.real - ref.real) <= tolerance * abs(ref)
+        if abs(ref.real) > tolerance * abs(ref):
             assert math.copysign(1, ours.real) == math.copysign(1, ref.real)
 
 
