@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.polynomial import polynomial as P
 
 from haptic_bus.loop import WallLoop
 from haptic_bus.plant import phi1
@@ -21,49 +22,54 @@ from haptic_bus.plant import phi1
 
 def characteristic_polynomial(loop: WallLoop) -> np.ndarray:
     """Coefficients (highest power first, dimensionless) of the closed-loop polynomial in z."""
+    shifted = np.poly1d(_shifted_polynomial(loop))
+    return np.asarray(shifted(np.poly1d([1.0, -1.0])).coeffs)  # substitute w = z - 1
+
+
+def _shifted_polynomial(loop: WallLoop) -> np.ndarray:
+    """The characteristic polynomial in ``w = z - 1`` (coefficients, highest power first).
+
+    Poles near ``z = 1`` (slow plants, soft walls) are ill-conditioned as roots in ``z`` (a
+    double root moves by ``sqrt(eps)``) but small, well-conditioned roots in ``w``; every
+    coefficient here is formed from ``1 - a = -expm1(-c)`` without cancellation.
+    """
     c = loop.c
-    decay = -math.expm1(-c)  # 1 - a, exact for tiny c
-    a = 1.0 - decay
-    k1_scaled = phi1(c)  # k1 m / T
+    decay = -math.expm1(-c)
+    k1_scaled = phi1(c)
     stiffness = k1_scaled * loop.K * loop.T * loop.T / loop.m  # k1 K T
     damping = k1_scaled * loop.B * loop.T / loop.m  # k1 B
-    d = loop.delay
+    delay_factor = P.polypow([1.0, 1.0], loop.delay)  # (1 + w)^d, lowest power first
     if loop.K > 0:
-        poly = np.zeros(d + 3)
-        poly[0], poly[1], poly[2] = 1.0, -(2.0 - decay), a
-        poly[-2] += stiffness + damping
-        poly[-1] -= damping
+        # (w + 1 - a) w (1 + w)^d + k1 K T (1 + w) + k1 B w
+        poly = P.polymul(P.polymul([decay, 1.0], [0.0, 1.0]), delay_factor)
+        poly = P.polyadd(poly, [stiffness, stiffness + damping])
     else:
-        poly = np.zeros(d + 2)
-        poly[0], poly[1] = 1.0, -a
-        poly[-1] += damping
-    return poly
+        # (w + 1 - a)(1 + w)^d + k1 B
+        poly = P.polyadd(P.polymul([decay, 1.0], delay_factor), [damping])
+    return np.asarray(poly)[::-1]
+
+
+def shifted_poles(loop: WallLoop) -> np.ndarray:
+    """Closed-loop poles minus one, ``w = z - 1`` (complex), accurate near ``z = 1``."""
+    return np.roots(_shifted_polynomial(loop))
+
+
+def radius_excess(w: np.ndarray) -> np.ndarray:
+    """``|1 + w| - 1`` without cancellation: ``(2 Re w + |w|^2) / (|1 + w| + 1)``."""
+    w = np.asarray(w, dtype=complex)
+    return (2.0 * w.real + np.abs(w) ** 2) / (np.abs(1.0 + w) + 1.0)
 
 
 def closed_loop_poles(loop: WallLoop) -> np.ndarray:
     """The closed-loop poles in the z-plane (complex, sorted by decreasing magnitude)."""
-    roots = np.roots(characteristic_polynomial(loop))
-    return roots[np.argsort(-np.abs(roots))]
+    w = shifted_poles(loop)
+    order = np.argsort(-radius_excess(w))
+    return 1.0 + w[order]
 
 
 def spectral_radius(loop: WallLoop) -> float:
     """Largest closed-loop pole magnitude (dimensionless); < 1 means stable."""
-    if loop.delay == 0:
-        return float(np.max(np.abs(_quadratic_roots(characteristic_polynomial(loop)))))
-    return float(np.abs(closed_loop_poles(loop)[0]))
-
-
-def _quadratic_roots(poly: np.ndarray) -> np.ndarray:
-    """Roots of a monic polynomial of degree 1 or 2, without cancellation."""
-    if poly.size == 2:
-        return np.array([-poly[1]])
-    _, p1, p0 = poly
-    disc = p1 * p1 - 4.0 * p0
-    if disc >= 0:
-        big = -0.5 * (p1 + math.copysign(math.sqrt(disc), p1))
-        return np.array([big, p0 / big if big != 0 else 0.0])
-    root = complex(-0.5 * p1, 0.5 * math.sqrt(-disc))
-    return np.array([root, root.conjugate()])
+    return 1.0 + float(np.max(radius_excess(shifted_poles(loop))))
 
 
 def is_stable(loop: WallLoop) -> bool:
@@ -74,7 +80,7 @@ def is_stable(loop: WallLoop) -> bool:
     ``|a - k1 B| < 1``.  For ``d >= 1`` the pole magnitudes decide.
     """
     if loop.delay:
-        return spectral_radius(loop) < 1.0
+        return bool(np.all(radius_excess(shifted_poles(loop)) < 0.0))
     c = loop.c
     decay = -math.expm1(-c)  # 1 - a, exact where a rounds to 1
     k1_scaled = phi1(c)
