@@ -61,6 +61,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``haptic-bus sim``; return the exit status."""
+    args_list = list(sys.argv[1:] if argv is None else argv)
+    if any(a == "--modbus" or a.startswith("--modbus=") for a in args_list):  # the Modbus TCP server
+        from sim_drive.modbus_server import main as modbus_main
+
+        return modbus_main(args_list)
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.eds_path:
