@@ -16,8 +16,8 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
+import socket
 import sys
-import threading
 from collections.abc import Sequence
 from typing import Any
 
@@ -41,6 +41,43 @@ def _bus_option(text: str) -> tuple[str, Any]:
         return key, int(value, 0)
     except ValueError:
         return key, value
+
+
+class _StopSignals:
+    """Records SIGINT/SIGTERM from ``__enter__`` to ``__exit__``; :meth:`wait` blocks for the first.
+
+    The handler only appends to a list (a handler that took a lock could deadlock on one the
+    interrupted main thread holds), and Python's C-level handler writes a byte to the wake-up
+    socket, so the blocking ``recv`` returns even for a signal that came just before it.
+    Signal masks are no help: numpy's BLAS threads, started at import time, would take a
+    masked signal with its default action.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __enter__(self) -> "_StopSignals":
+        self.received: list[signal.Signals] = []
+        self._reader, self._writer = socket.socketpair()
+        self._writer.setblocking(False)
+        self._previous_fd = signal.set_wakeup_fd(self._writer.fileno(), warn_on_full_buffer=False)
+        self._previous = {sig: signal.signal(sig, self._record) for sig in self.SIGNALS}
+        return self
+
+    def _record(self, number: int, frame: object) -> None:
+        self.received.append(signal.Signals(number))
+
+    def wait(self) -> signal.Signals:
+        """The first stop signal received (blocks until there is one)."""
+        while not self.received:
+            self._reader.recv(64)
+        return self.received[0]
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        signal.set_wakeup_fd(self._previous_fd)
+        self._reader.close()
+        self._writer.close()
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -67,7 +104,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         return modbus_main(args_list)
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a usage error (2): report, do not exit
+        return int(exc.code or 0)
     if args.eds_path:
         print(eds_path())
         return 0
@@ -89,20 +129,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"haptic-bus sim: error: {exc}", file=sys.stderr)
         return 2
-    stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        sim.start()
-    except (can.CanError, OSError, ValueError) as exc:
-        print(f"haptic-bus sim: error: cannot open the bus: {exc}", file=sys.stderr)
-        return 1
-    try:
-        logger.info("node %d: serving on %s %s (timing %s); EDS %s", args.node_id, args.interface, args.channel, args.timing, eds_path())
-        stop.wait()
-    finally:
-        sim.stop()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    with _StopSignals() as stop_signals:  # from before the boot-up: an early signal still stops cleanly
+        try:
+            sim.start()
+        except (can.CanError, OSError, ValueError) as exc:
+            print(f"haptic-bus sim: error: cannot open the bus: {exc}", file=sys.stderr)
+            return 1
+        try:
+            logger.info("node %d: serving on %s %s (timing %s); EDS %s", args.node_id, args.interface, args.channel, args.timing, eds_path())
+            received = stop_signals.wait()
+            logger.info("node %d: %s received, stopping", args.node_id, received.name)
+        finally:
+            sim.stop()
     drive = sim.drive
     logger.info("node %d: stopped after %d SYNCs, virtual time %.6f s, operator energy %.6g J, wall energy %.6g J",
                 args.node_id, drive.sync_count, drive.time, drive.operator_energy, drive.wall_energy)

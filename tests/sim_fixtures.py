@@ -114,15 +114,15 @@ class SimProcess:
             [sys.executable, "-m", "sim_drive", *args], cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=self._log, text=True
         )
 
-    def stop(self, timeout: float = 10.0) -> tuple[int, str]:
-        """SIGTERM, bounded wait; the exit status and the log.  A hang fails the test."""
+    def stop(self, sig: signal.Signals = signal.SIGTERM, timeout: float = 10.0) -> tuple[int, str]:
+        """Send ``sig``, bounded wait; the exit status and the log.  A hang fails the test."""
         if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
+            self.process.send_signal(sig)
         try:
             self.process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
             self.process.kill()
             self.process.wait(timeout=timeout)
-            pytest.fail(f"simulated drive did not stop on SIGTERM within {timeout} s")
+            pytest.fail(f"simulated drive did not stop on {sig.name} within {timeout} s")
         self._log.seek(0)
         return self.process.returncode, self._log.read()

@@ -1,0 +1,87 @@
+"""``haptic-bus sim`` / ``python -m sim_drive``: arguments, profiles, clean stop on signals."""
+
+from __future__ import annotations
+
+import pathlib
+import re
+import signal
+import struct
+
+import can
+import pytest
+
+from drives.cia402 import Command
+from haptic_bus.errors import ParameterError
+from sim_drive.cli import main
+from sim_drive.eds import eds_path
+from sim_drive.operator import HandModel
+from sim_drive.profile import load_profile
+from tests.sim_fixtures import SimProcess, recv_id, send, unique_multicast
+
+NODE = 11
+BOOT_WAIT = 20.0  # s: the subprocess imports numpy, canopen, python-can first
+
+
+def test_eds_path(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--eds-path"]) == 0
+    assert capsys.readouterr().out.strip() == str(eds_path())
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--interface", "virtual", "--channel", "x"], "missing --node-id"),
+        (["--interface", "virtual", "--channel", "x", "--node-id", "0"], "node_id = 0"),
+        (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--timing", "late"], "invalid choice"),
+        (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--bus-option", "port"], "KEY=VALUE"),
+        (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--profile", "/nonexistent.toml"], "readable TOML"),
+    ],
+)
+def test_bad_arguments_exit_2(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_profile_tables(tmp_path: pathlib.Path) -> None:
+    path = tmp_path / "p.toml"
+    path.write_text(
+        "[device]\nm = 0.8\nb = 2.0\nrated_torque = 0.5\nmax_torque_permille = 1500\n"
+        '[operator]\nmodel = "hand"\nstiffness = 250.0\ndamping = 3.0\n[scene]\nK = 1.0\n'
+    )
+    parameters, operator = load_profile(path)
+    assert (parameters.m, parameters.b, parameters.rated_torque_mnm, parameters.max_torque_permille) == (0.8, 2.0, 500, 1500)
+    assert operator == HandModel(250.0, 3.0)
+    path.write_text("[device]\nmass = 1.0\n")
+    with pytest.raises(ParameterError, match="mass"):
+        load_profile(path)
+    path.write_text("[device\n")
+    with pytest.raises(ParameterError, match="valid TOML"):
+        load_profile(path)
+
+
+@pytest.mark.parametrize(
+    "sig, twice", [(signal.SIGTERM, False), (signal.SIGINT, False), (signal.SIGTERM, True)], ids=["SIGTERM", "SIGINT", "SIGTERM-twice"]
+)
+def test_signal_stops_cleanly_and_state_changes_are_logged(sig: signal.Signals, twice: bool) -> None:
+    group, port = unique_multicast()
+    with can.Bus(interface="udp_multicast", channel=group, port=port) as master:
+        process = SimProcess("--interface", "udp_multicast", "--channel", group, "--node-id", str(NODE),
+                             "--bus-option", f"port={port}", "--realtime", "--bitrate", "1000000")
+        try:
+            assert recv_id(master, 0x700 + NODE, timeout=BOOT_WAIT) is not None, "no boot-up/heartbeat"
+            send(master, 0x000, [0x01, NODE])
+            for command in (Command.SHUTDOWN, Command.SWITCH_ON):
+                send(master, 0x600 + NODE, struct.pack("<BHBH2x", 0x2B, 0x6040, 0, command.word))
+                assert recv_id(master, 0x580 + NODE) is not None
+            for _ in range(2):  # the second SYNC closes a cycle for the bus-load report
+                send(master, 0x080)
+                assert recv_id(master, 0x180 + NODE) is not None
+        finally:
+            if twice:
+                process.process.send_signal(sig)
+            status, log = process.stop(sig)
+    assert status == 0, log
+    transitions = re.findall(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3} node 11: (.+) \(transition (\d+)\) at t = ", log, re.M)
+    assert transitions == [("SWITCH ON DISABLED -> READY TO SWITCH ON", "2"), ("READY TO SWITCH ON -> SWITCHED ON", "3")], log
+    assert "stopped after 2 SYNCs" in log
+    assert re.search(r"bus load \d+\.\d % at 1000000 bit/s, worst cycle \d+\.\d us", log), log
