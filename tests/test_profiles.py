@@ -1,0 +1,344 @@
+"""Operator parameter profiles: shipped files load and pass the gate, bad files are named precisely."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import pathlib
+
+import pytest
+
+from haptic_bus.check_report import BANDWIDTH_ALPHA, check_report
+from haptic_bus.gate import GateRefusal
+from haptic_bus.loop import WallLoop
+from haptic_bus.profiles import (DEFAULT_PROFILE, Profile, ProfileError, ProfileRefusal, default_profile,
+                                 load_profile, read_profile, shipped_profiles)
+from haptic_bus.profiles_cli import add_profiles_parser, cmd_check, cmd_list, cmd_show
+from haptic_bus.scene import Detent, Slot, Wall
+
+SHIPPED = shipped_profiles()
+
+# A small valid profile; tests break it one field at a time.
+BASE = """\
+[profile]
+name = "t"
+operator = "tester"
+task = "test"
+description = "a test profile"
+
+[device]
+mass = 1.0
+friction = 20.0
+friction_source = "test bench"
+velocity_per_count = 1e-6
+position_per_count = 1e-7
+rated_torque = 0.2
+force_per_torque = 50.0
+max_torque_permille = 1000
+
+[loop]
+period = 0.001
+timing = "cia402"
+
+[limits]
+force_limit = 10.0
+
+[gate]
+safety_margin = 0.0
+bandwidth = "warn"
+
+[[scene.objects]]
+kind = "wall"
+name = "a"
+position = 0.0
+normal = -1
+stiffness = 1000.0
+damping = 8.0
+
+[[scene.objects]]
+kind = "detent"
+name = "b"
+center = 0.01
+reach = 0.002
+stiffness = 100.0
+damping = 1.0
+
+[[scene.objects]]
+kind = "slot"
+name = "c"
+low = -0.05
+high = 0.05
+stiffness = 500.0
+damping = 4.0
+
+[operator_model]
+model = "constant"
+level = 2.0
+"""
+
+
+def write(tmp_path: pathlib.Path, text: str, name: str = "p.toml") -> pathlib.Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_base_profile_loads(tmp_path):
+    profile = load_profile(write(tmp_path, BASE))
+    assert isinstance(profile, Profile)
+    assert [type(o) for o in profile.scene] == [Wall, Detent, Slot]
+    assert profile.loop.delay == 1 and profile.device.max_force == pytest.approx(10.0)
+    assert profile.scaling().max_force == pytest.approx(10.0)
+    assert profile.device_loop().delay == 1
+    assert dict(profile.operator_model) == {"model": "constant", "level": 2.0}
+
+
+# ---------------------------------------------------------------- shipped profiles
+
+def test_shipped_set_and_default():
+    assert {"seed-ideal", "cia402-handle", "stiff-wall", "multi-object"} <= set(SHIPPED)
+    assert DEFAULT_PROFILE == "cia402-handle" and DEFAULT_PROFILE in SHIPPED
+    assert default_profile().name == DEFAULT_PROFILE
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED))
+def test_shipped_profile_loads_and_gate_agrees_with_check(name):
+    """The gate's verdict on every summed contact wall is what ``haptic-bus check`` says."""
+    profile = load_profile(name)
+    assert profile.name == name and profile.path == SHIPPED[name]
+    assert 0 < profile.force_limit <= profile.device.max_force * (1 + 1e-12)
+    decision = profile.gate().judge(profile.compiled_scene())
+    assert decision.accepted and decision.walls
+    d, loop = profile.device, profile.loop
+    for wall in decision.walls:
+        report = check_report(WallLoop(d.mass, d.friction, loop.period, wall.K, wall.B, loop.delay))
+        assert report["passive"] is True
+        assert report["passive"] == wall.verdict.passive
+        assert report["margin"] == wall.verdict.margin  # the same criterion, the same number
+        assert wall.verdict.margin >= profile.gate_policy.safety_margin
+        if profile.gate_policy.bandwidth == "warn" and report["bandwidth_rule"]["holds"] is False:
+            assert any(f"K = {wall.K:g} N/m" in w for w in decision.warnings)
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED))
+def test_shipped_profile_builds_the_simulated_drive(name):
+    """operator_model and sim_device_parameters() are what sim_drive takes."""
+    from sim_drive.operator import OPERATOR_NAMES, operator_from_table
+    from sim_drive.parameters import DeviceParameters
+
+    profile = load_profile(name)
+    model = operator_from_table(profile.operator_model, base=profile.path.parent)
+    assert type(model) is OPERATOR_NAMES[profile.operator_model["model"]]
+    params = DeviceParameters(**profile.sim_device_parameters())
+    assert params.scaling == profile.scaling()
+
+
+def test_seed_ideal_numbers():
+    profile = load_profile("seed-ideal")
+    assert (profile.device.mass, profile.device.friction, profile.loop.period) == (0.5, 0.1, 1e-3)
+    assert profile.loop.timing == "ideal" and profile.loop.delay == 0
+    assert [(o.stiffness, o.damping) for o in profile.scene] == [(200.0, 100.0)]
+    (wall,) = profile.gate().judge(profile.compiled_scene()).walls
+    # At theta = pi the seed's margin is b minus a term of order (B + KT/2) tanh(c/2) ~ 1e-4
+    assert wall.verdict.margin == pytest.approx(0.0998, abs=1e-4)
+
+
+def test_seed_profile_with_cia402_timing_is_refused(tmp_path):
+    text = SHIPPED["seed-ideal"].read_text().replace('timing = "ideal"', 'timing = "cia402"')
+    path = write(tmp_path, text, "seed-cia402.toml")
+    with pytest.raises(GateRefusal) as caught:
+        load_profile(path)
+    assert isinstance(caught.value, ProfileRefusal) and caught.value.path == str(path)
+    assert str(path) in str(caught.value)
+    (wall,) = caught.value.decision.walls
+    assert wall.verdict.margin == pytest.approx(-84.09, abs=0.01)  # haptic-bus check --delay 1
+    assert wall.verdict.critical_theta == pytest.approx(1.97, abs=0.01)
+    assert read_profile(path).loop.delay == 1  # valid, just not passive
+
+
+def test_default_profile_is_a_realistic_cia402_handle():
+    profile = load_profile(DEFAULT_PROFILE)
+    assert profile.loop.timing == "cia402" and profile.loop.period == 1e-3
+    assert 0.2 <= profile.device.mass <= 2.0
+    assert profile.device.friction_source.strip()
+    decision = profile.gate().judge(profile.compiled_scene())
+    assert not decision.warnings and profile.gate_policy.bandwidth == "strict"
+    for wall in decision.walls:
+        loop = WallLoop(profile.device.mass, profile.device.friction, 1e-3, wall.K, wall.B, 1)
+        assert loop.alpha > BANDWIDTH_ALPHA
+        assert wall.K <= 0.5 * check_report(loop)["max_stiffness"]  # well inside the region
+        assert wall.B <= 0.5 * check_report(loop)["max_damping"]
+    push = profile.operator_model
+    assert push["model"] == "constant" and 0 < push["level"] < 10
+    (wall,) = profile.scene
+    assert wall.normal == -1 and 0.001 <= wall.position <= 0.01  # a few mm ahead of x = 0
+
+
+def test_multi_object_has_overlaps():
+    profile = load_profile("multi-object")
+    kinds = {type(o) for o in profile.scene}
+    assert kinds == {Wall, Slot, Detent}
+    contacts = profile.compiled_scene().contacts()
+    assert any(len(names) > 1 for names in contacts.values())  # summed objects are judged
+
+
+# ---------------------------------------------------------------- malformed profiles
+
+def broken(tmp_path, old: str, new: str) -> ProfileError:
+    assert old in BASE
+    path = write(tmp_path, BASE.replace(old, new, 1))
+    with pytest.raises(ProfileError) as caught:
+        load_profile(path)
+    error = caught.value
+    assert error.path == str(path) and str(path) in str(error)
+    assert error.field in str(error) and error.allowed in str(error)
+    return error
+
+
+def test_missing_field(tmp_path):
+    error = broken(tmp_path, "mass = 1.0\n", "")
+    assert error.field == "device.mass" and "required" in error.allowed and "kg" in error.allowed
+
+
+def test_wrong_type(tmp_path):
+    error = broken(tmp_path, "mass = 1.0", 'mass = "1.0"')
+    assert error.field == "device.mass" and error.value == "1.0" and "finite real" in error.allowed
+
+
+def test_nan(tmp_path):
+    error = broken(tmp_path, "friction = 20.0", "friction = nan")
+    assert error.field == "device.friction" and math.isnan(error.value)
+    assert "N s/m" in error.allowed and "nan" in str(error)
+
+
+def test_negative_mass(tmp_path):
+    error = broken(tmp_path, "mass = 1.0", "mass = -0.5")
+    assert (error.field, error.value) == ("device.mass", -0.5)
+    assert "[1e-09, 1e+09] kg" in error.allowed
+
+
+def test_negative_stiffness_names_the_object(tmp_path):
+    error = broken(tmp_path, "stiffness = 500.0", "stiffness = -500.0")
+    assert (error.field, error.value) == ("scene.objects[2].stiffness", -500.0)
+    assert "N/m" in error.allowed
+
+
+def test_unknown_object_kind(tmp_path):
+    error = broken(tmp_path, 'kind = "detent"', 'kind = "cylinder"')
+    assert (error.field, error.value) == ("scene.objects[1].kind", "cylinder")
+    assert all(k in error.allowed for k in ("wall", "slot", "detent"))
+
+
+def test_unknown_key_is_a_typo(tmp_path):
+    error = broken(tmp_path, "damping = 8.0", "damping = 8.0\ndampng = 9.0")
+    assert (error.field, error.value) == ("scene.objects[0].dampng", 9.0)
+    assert "no such key" in error.allowed and "damping" in error.allowed
+
+
+def test_unknown_table(tmp_path):
+    error = broken(tmp_path, "[limits]", "[limit]\nx = 1\n\n[limits]")
+    assert error.field == "limit"
+
+
+def test_duplicate_object_names(tmp_path):
+    error = broken(tmp_path, 'name = "c"', 'name = "a"')
+    assert (error.field, error.value) == ("scene.objects[2].name", "a")
+    assert "scene.objects[0]" in error.allowed
+
+
+def test_force_limit_above_0x6072(tmp_path):
+    error = broken(tmp_path, "force_limit = 10.0", "force_limit = 10.5")
+    assert (error.field, error.value) == ("limits.force_limit", 10.5)
+    assert "(0, 10] N" in error.allowed and "0x6072" in error.allowed
+
+
+def test_bad_timing_and_permille_type(tmp_path):
+    assert broken(tmp_path, 'timing = "cia402"', 'timing = "ethercat"').field == "loop.timing"
+    assert broken(tmp_path, "max_torque_permille = 1000", "max_torque_permille = 1000.0").field == \
+        "device.max_torque_permille"
+
+
+def test_bad_operator_model(tmp_path):
+    error = broken(tmp_path, "level = 2.0", "levle = 2.0")
+    assert error.field == "operator_model.level" and "required" in error.allowed
+    error = broken(tmp_path, 'model = "constant"', 'model = "jitter"')
+    assert error.field == "operator_model.model" and "'hand'" in error.allowed
+
+
+def test_csv_operator_resolves_beside_the_profile(tmp_path):
+    from sim_drive.operator import RecordedForce, operator_from_table
+
+    (tmp_path / "push.csv").write_text("time,force\n0,0\n0.1,2\n")
+    text = BASE.replace('model = "constant"\nlevel = 2.0', 'model = "csv"\npath = "push.csv"')
+    profile = load_profile(write(tmp_path, text))
+    assert profile.operator_model["model"] == "recorded"
+    model = operator_from_table(profile.operator_model)
+    assert isinstance(model, RecordedForce) and model.force(0.2, 0.0, 0.0) == 2.0
+    missing = BASE.replace('model = "constant"\nlevel = 2.0', 'model = "csv"\npath = "gone.csv"')
+    with pytest.raises(ProfileError) as caught:
+        load_profile(write(tmp_path, missing, "q.toml"))
+    assert caught.value.field == "operator_model.path"
+
+
+def test_toml_syntax_and_unknown_name(tmp_path):
+    with pytest.raises(ProfileError) as caught:
+        load_profile(write(tmp_path, BASE + "\n[device\n"))
+    assert caught.value.field == "(TOML syntax)"
+    with pytest.raises(ProfileError) as caught:
+        load_profile("no-such-profile")
+    assert "cia402-handle" in caught.value.allowed
+
+
+# ---------------------------------------------------------------- CLI functions
+
+def ns(**kw) -> argparse.Namespace:
+    return argparse.Namespace(**{"json": False, "profile": DEFAULT_PROFILE} | kw)
+
+
+def test_cli_list(capsys):
+    assert cmd_list(ns(json=True)) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert {r["name"] for r in rows} == set(SHIPPED) and all(r["status"] == "ok" for r in rows)
+
+
+def test_cli_show(capsys):
+    assert cmd_show(ns(profile="multi-object", json=True)) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["profile"]["name"] == "multi-object" and shown["gate_decision"]["accepted"]
+    assert cmd_show(ns()) == 0 and "cia402-handle" in capsys.readouterr().out
+
+
+def test_cli_check_matches_check_report(capsys):
+    assert cmd_check(ns(profile="stiff-wall", json=True)) == 0
+    out = json.loads(capsys.readouterr().out)
+    (wall,) = out["walls"]
+    expected = check_report(WallLoop(1.0, 20.0, 1e-3, 22500.0, 5.0, 1))
+    assert wall["report"]["passive"] is expected["passive"] is True
+    assert wall["report"]["margin"] == expected["margin"]
+    assert cmd_check(ns(profile="seed-ideal")) == 0
+    text = capsys.readouterr().out
+    assert "verdict: passive" in text and "delay=0" in text
+
+
+def test_cli_exit_codes(tmp_path, capsys):
+    refused = write(tmp_path, SHIPPED["seed-ideal"].read_text().replace('"ideal"', '"cia402"'), "s.toml")
+    assert cmd_check(ns(profile=str(refused))) == 1
+    assert "verdict: NOT passive" in capsys.readouterr().out
+    assert cmd_show(ns(profile=str(refused))) == 1
+    assert "margin -84.09" in capsys.readouterr().err
+    invalid = write(tmp_path, BASE.replace("mass = 1.0", "mass = -1.0"), "bad.toml")
+    for command in (cmd_show, cmd_check):
+        assert command(ns(profile=str(invalid))) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "device.mass" in err and str(invalid) in err
+
+
+def test_add_profiles_parser():
+    parser = argparse.ArgumentParser()
+    add_profiles_parser(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["profiles", "check", "stiff-wall", "--json"])
+    assert args.handler is cmd_check and args.profile == "stiff-wall" and args.json
+    args = parser.parse_args(["profiles", "show"])
+    assert args.handler is cmd_show and args.profile == DEFAULT_PROFILE
+    assert parser.parse_args(["profiles", "list"]).handler is cmd_list
