@@ -24,6 +24,7 @@ on it (SYNC, TPDOs, RPDOs, anything else seen) to report bus load and the cycle'
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from haptic_bus.errors import ParameterError
@@ -44,7 +45,7 @@ def frame_time(data_bytes: int, bitrate: float) -> float:
     return frame_bits(data_bytes) / _bitrate(bitrate)
 
 
-def cycle_bits(data_lengths: list[int] | tuple[int, ...]) -> int:
+def cycle_bits(data_lengths: Sequence[int]) -> int:
     """Bit times of a cycle made of frames with these data lengths (sent back to back)."""
     return sum(frame_bits(n) for n in data_lengths)
 

@@ -101,7 +101,7 @@ class SimulatedDrive:
         name: str = "sim drive",
     ) -> None:
         self.name = name
-        self.timing = Timing(timing)
+        self.timing = timing
         self.operator: OperatorModel = operator if operator is not None else NoOperator()
         self.parameters = parameters if parameters is not None else DeviceParameters()
         self.state = State.SWITCH_ON_DISABLED
@@ -119,7 +119,7 @@ class SimulatedDrive:
         self.operator_energy = 0.0
         self.wall_energy = 0.0
         self._latched = 0
-        self._plant = ExactPlant(self.parameters.m, self.parameters.b, self.parameters.period / self.parameters.substeps)
+        self._plant = ExactPlant(self.parameters.m, self.parameters.b, 1.0)  # at rest; step set next
         self._apply_parameters()
         self._readers: dict[int, Callable[[], int]] = {
             0x603F: lambda: self.error_code,

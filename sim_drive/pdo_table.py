@@ -87,7 +87,7 @@ class PdoTable:
         object_dictionary: ObjectDictionary,
         can_read: frozenset[int],
         can_write: frozenset[int],
-        on_change: Callable[[PdoChannel], None],
+        on_change: Callable[[PdoChannel | None], None],
     ) -> None:
         self._od = object_dictionary
         self._can_read = can_read
