@@ -47,7 +47,8 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, second
         summary = controller.run(cycles)
         operator_energy = sim.drive.operator_energy
     record = controller.record
-    push = profile.operator_model.get("force")
+    model = profile.operator_model
+    push = model.get("level") if model.get("model") == "constant" else None
     surfaces = [obj.position for obj in profile.scene if hasattr(obj, "position")]
     penetration = expected = None
     contact = _contact_stiffness(controller, record)

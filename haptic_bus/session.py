@@ -20,21 +20,6 @@ from sim_drive.parameters import DeviceParameters
 from haptic_bus.profiles import Profile
 
 
-def device_parameters(profile: Profile) -> DeviceParameters:
-    """The simulated drive's parameters for a profile's device and loop."""
-    device = profile.device
-    return DeviceParameters(
-        m=device.mass,
-        b=device.friction,
-        period=profile.loop.period,
-        velocity_per_count=device.velocity_per_count,
-        position_per_count=device.position_per_count,
-        rated_torque=device.rated_torque,
-        force_per_torque=device.force_per_torque,
-        max_torque_permille=device.max_torque_permille,
-    )
-
-
 def profile_operator(profile: Profile) -> OperatorModel:
     """The simulated operator the profile describes."""
     return operator_from_table(profile.operator_model, base=profile.path.parent if profile.path else None)
@@ -42,15 +27,23 @@ def profile_operator(profile: Profile) -> OperatorModel:
 
 @contextmanager
 def simulated_canopen(
-    profile: Profile, *, node_id: int = 1, operator: OperatorModel | None = None, channel: str | None = None
+    profile: Profile,
+    *,
+    node_id: int = 1,
+    operator: OperatorModel | None = None,
+    channel: str | None = None,
+    substeps: int = 1,
 ) -> Iterator[tuple[CanopenSimDrive, CanopenDrive]]:
-    """Start the simulated drive and connect the master, enabled in CST; stop both on exit."""
+    """Start the simulated drive and connect the master, enabled in CST; stop both on exit.
+
+    ``substeps``: plant sub-steps per period with the operator force re-evaluated on each.
+    """
     channel = channel or f"haptic-bus-{uuid.uuid4().hex[:12]}"
     sim = CanopenSimDrive(
         {"interface": "virtual", "channel": channel},
         node_id,
         timing=profile.loop.timing,
-        parameters=device_parameters(profile),
+        parameters=DeviceParameters(**profile.sim_device_parameters(), substeps=substeps),
         operator=operator if operator is not None else profile_operator(profile),
     )
     sim.start()
