@@ -12,6 +12,7 @@ from haptic_bus.errors import HapticBusError
 from haptic_bus.gate import GateRefusal
 from haptic_bus.check_report import check_report, format_check
 from haptic_bus.loop import WallLoop
+from haptic_bus.profiles_cli import add_profiles_parser
 
 EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
 
@@ -96,7 +97,8 @@ def _run(args: argparse.Namespace) -> int:
                              out_dir=args.out, stop=stop)
     p, late = summary.compute_percentiles, summary.lateness_percentiles
     print(f"cycles {summary.cycles}; peak force {summary.peak_force:.4g} N; saturated {summary.saturated_cycles}; "
-          f"observer energy {summary.observer_energy:.4g} J (active cycles {summary.observer_active_cycles})")
+          f"observer: interface energy {summary.interface_energy:.4g} J (below zero in {summary.observer_active_cycles} "
+          f"cycles), wall {summary.wall_energy:.4g} J")
     if p:
         print(f"compute p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us; clock: {summary.clock}")
     if late:
@@ -125,6 +127,15 @@ def _upload(args: argparse.Namespace) -> int:
     except SdoCommunicationError as error:
         print(f"haptic-bus upload: controller node {args.node_id} did not answer: {error}", file=sys.stderr)
         return EXIT_NO
+    return EXIT_OK
+
+
+def _report(args: argparse.Namespace) -> int:
+    from haptic_bus.profiles import load_profile
+    from haptic_bus.profile_report import write_report
+
+    for path in write_report(load_profile(args.profile), args.out):
+        print(f"wrote {path}")
     return EXIT_OK
 
 
@@ -175,6 +186,13 @@ def build_parser() -> argparse.ArgumentParser:
     upload.add_argument("--damping", type=float, required=True, help="B, N s/m")
     upload.add_argument("--timeout", type=float, default=1.0, help="SDO timeout, s")
     upload.set_defaults(handler=_upload)
+
+    add_profiles_parser(sub)
+
+    report = sub.add_parser("report", help="the seed's Figs. 4-6 for a profile, as PNGs, plus a markdown summary")
+    report.add_argument("profile", help="profile name or TOML path")
+    report.add_argument("--out", required=True, help="output directory")
+    report.set_defaults(handler=_report)
 
     sub.add_parser("sim", help="run the simulated CiA-402 drive (see: haptic-bus sim --help)", add_help=False)
     return parser

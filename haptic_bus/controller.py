@@ -53,7 +53,8 @@ class RunSummary:
     cycles: int
     saturated_cycles: int
     peak_force: float
-    observer_energy: float
+    wall_energy: float
+    interface_energy: float
     observer_active_cycles: int
     observer_flagged: bool
     compute_percentiles: dict[str, float]
@@ -93,7 +94,8 @@ class WallController:
         self._upload_lock = threading.Lock()
         scaling = drive.scaling
         self.integrator = PositionIntegrator(self.period, scaling.velocity_per_count, origin)
-        self.observer = PassivityObserver(self.period, gate.device.delay)
+        device = gate.device
+        self.observer = PassivityObserver(self.period, device.delay, device.m, device.b)
         self.record = RunRecord(record_capacity)
         self.cycles = 0
         self.saturated_cycles = 0
@@ -198,7 +200,8 @@ class WallController:
             cycles=self.cycles,
             saturated_cycles=self.saturated_cycles,
             peak_force=self.peak_force,
-            observer_energy=self.observer.energy,
+            wall_energy=self.observer.wall_energy,
+            interface_energy=self.observer.interface_energy,
             observer_active_cycles=self.observer.active_cycles,
             observer_flagged=self.observer.flagged,
             compute_percentiles=_percentiles(compute),

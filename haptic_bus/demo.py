@@ -93,8 +93,9 @@ def format_demo(result: DemoResult) -> str:
     if result.penetration is not None:
         error = (result.penetration - result.expected_penetration) / result.expected_penetration
         lines.append(f"steady penetration: {result.penetration * 1e3:.4f} mm vs F/K = {result.expected_penetration * 1e3:.4f} mm ({error:+.2%})")
-    lines.append(f"energy: wall absorbed {s.observer_energy * 1e3:.4g} mJ (observer; active in {s.observer_active_cycles} cycles), "
-                 f"operator put in {result.operator_energy * 1e3:.4g} mJ (exact, simulated drive)")
+    lines.append(f"energy: operator put in {result.operator_energy * 1e3:.4g} mJ (exact, simulated drive); observer: "
+                 f"interface {s.interface_energy * 1e3:.4g} mJ (wall + b v^2 + kinetic; below zero in "
+                 f"{s.observer_active_cycles} cycles), wall alone {s.wall_energy * 1e3:.4g} mJ")
     p = s.compute_percentiles
     lines.append(f"cycle compute: p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us, max {p['max'] * 1e6:.1f} us")
     if s.error:

@@ -1,10 +1,17 @@
-"""A passivity observer beside the loop: the energy the wall has exchanged with the operator.
+"""A passivity observer beside the loop: the energy exchanged with the operator, at run time.
 
 The wall force ``u`` (N) computed at cycle ``k`` acts on the handle during the interval that
 the loop delay ``d`` puts it in; the observer pairs it with the displacement over that
-interval, estimated from the velocity samples at both ends (trapezoid, m).  Its sum is the
-energy the wall has absorbed (J); a negative sum means the wall has given out more than it
-took -- the run-time check of what the gate promised.  Counted, flagged, never hidden.
+interval, estimated from the velocity samples at both ends (trapezoid, m).  Two sums, in J:
+
+* ``wall_energy`` -- what the wall has absorbed, ``sum u v T``.  With a loop delay a passive
+  interface may well have a wall that gives energy back (the handle's friction takes it), so
+  this one is reported, not alarmed on.
+* ``interface_energy`` -- what the operator has put into the interface as the gate models
+  it: the wall's energy plus the configured friction's ``b sum v^2 T`` plus the handle's
+  kinetic energy ``m v^2 / 2``.  The gate promises it never goes negative; when it does the
+  observer counts the cycle and raises its flag.  It trusts the configured ``m`` and ``b``:
+  a wrong effective ``b`` is invisible to it (it only sees sampled velocity).
 """
 
 from __future__ import annotations
@@ -13,31 +20,39 @@ from collections import deque
 
 
 class PassivityObserver:
-    """``energy`` (J) absorbed by the wall so far; ``active_cycles`` counts cycles it was < 0."""
+    """Energies in J; ``active_cycles`` counts cycles with ``interface_energy < -tolerance``."""
 
-    def __init__(self, period: float, delay: int, tolerance: float = 0.0) -> None:
+    def __init__(self, period: float, delay: int, mass: float, friction: float, tolerance: float = 0.0) -> None:
         self.period = period
+        self.mass = mass
+        self.friction = friction
         self.tolerance = tolerance
         self._forces: deque[float] = deque([0.0] * (delay + 1), maxlen=delay + 1)
         self._last_velocity: float | None = None
-        self.energy = 0.0
+        self.wall_energy = 0.0
+        self.dissipated = 0.0
+        self.interface_energy = 0.0
+        self.least_interface_energy = 0.0
         self.active_cycles = 0
-        self.least_energy = 0.0
 
     @property
     def flagged(self) -> bool:
-        """True once the wall has given out more energy than it took (beyond ``tolerance`` J)."""
-        return self.least_energy < -self.tolerance
+        """True once the interface has given the operator more energy than it took."""
+        return self.least_interface_energy < -self.tolerance
 
     def update(self, velocity: float, force: float) -> float:
-        """Account one cycle: the new velocity sample (m/s) and the force (N) just computed."""
-        if self._last_velocity is not None:
-            applied = self._forces[0]  # the force acting over the interval that just ended
-            self.energy += applied * 0.5 * (self._last_velocity + velocity) * self.period
-            if self.energy < self.least_energy:
-                self.least_energy = self.energy
-            if self.energy < -self.tolerance:
+        """Account one cycle: the new velocity sample (m/s) and the force (N) just computed;
+        returns the interface energy (J)."""
+        last = self._last_velocity
+        if last is not None:
+            T = self.period
+            self.wall_energy += self._forces[0] * 0.5 * (last + velocity) * T  # force over the interval just ended
+            self.dissipated += self.friction * 0.5 * (last * last + velocity * velocity) * T
+            self.interface_energy = self.wall_energy + self.dissipated + 0.5 * self.mass * velocity * velocity
+            if self.interface_energy < self.least_interface_energy:
+                self.least_interface_energy = self.interface_energy
+            if self.interface_energy < -self.tolerance:
                 self.active_cycles += 1
         self._last_velocity = velocity
         self._forces.append(force)
-        return self.energy
+        return self.interface_energy

@@ -13,7 +13,7 @@ from haptic_bus.record import RunRecord  # noqa: E402
 
 
 def plot_run(path: str | pathlib.Path, record: RunRecord, title: str, walls_at: list[float] | None = None) -> pathlib.Path:
-    """Position (mm), wall force (N) and observer energy (mJ) over time (s), as one PNG."""
+    """Position (mm), wall force (N) and the observer's interface energy (mJ) over time (s), one PNG."""
     data = record.array()
     t = data[:, 0]
     fig, (ax_x, ax_f, ax_e) = plt.subplots(3, 1, sharex=True, figsize=(8, 7.5))
@@ -25,7 +25,7 @@ def plot_run(path: str | pathlib.Path, record: RunRecord, title: str, walls_at: 
     ax_f.plot(t, data[:, 3], color="tab:red", label="wall force u")
     ax_f.set_ylabel("force (N)")
     ax_f.legend(loc="best")
-    ax_e.plot(t, data[:, 5] * 1e3, color="tab:green", label="energy absorbed by the wall (observer)")
+    ax_e.plot(t, data[:, 5] * 1e3, color="tab:green", label="energy the operator put in (observer: wall + b v² + kinetic)")
     ax_e.axhline(0.0, color="black", linewidth=0.8)
     ax_e.set_ylabel("energy (mJ)")
     ax_e.set_xlabel("time (s)")
