@@ -88,8 +88,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--channel", help="python-can channel (e.g. vcan0, a multicast group)")
     parser.add_argument("--node-id", type=int, help="CANopen node id 1..127")
     parser.add_argument("--bitrate", type=int, help="bit/s; also enables the bus-load report")
-    parser.add_argument("--timing", choices=[t.value for t in Timing], default=Timing.CIA402.value)
-    parser.add_argument("--profile", help="TOML profile with [device] and [operator] tables")
+    parser.add_argument("--timing", choices=[t.value for t in Timing],
+                        help="cia402 (default) or ideal; default: the profile's [loop] timing")
+    parser.add_argument("--profile", help="operator profile (name or TOML path): [device], [loop], [operator_model]")
     parser.add_argument("--bus-option", type=_bus_option, action="append", default=[], metavar="KEY=VALUE",
                         help="extra python-can bus argument, e.g. port=43113 (repeatable)")
     parser.add_argument("--realtime", action="store_true", help="timestamp log lines with the wall clock")
@@ -120,7 +121,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format=fmt, stream=sys.stderr, force=True)
     logging.getLogger("canopen").setLevel(logging.WARNING)
     try:
-        parameters, operator = load_profile(args.profile) if args.profile else (DeviceParameters(), None)
+        profile = load_profile(args.profile) if args.profile else None
+        parameters = profile.parameters if profile else DeviceParameters()
+        operator = profile.operator if profile else None
+        args.timing = args.timing or (profile.timing.value if profile and profile.timing else Timing.CIA402.value)
         meter = BusLoadMeter(args.bitrate, parameters.period) if args.bitrate else None
         config: dict[str, Any] = {"interface": args.interface, "channel": args.channel, **dict(args.bus_option)}
         if args.bitrate:

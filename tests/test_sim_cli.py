@@ -15,6 +15,7 @@ from haptic_bus.errors import ParameterError
 from sim_drive.cli import main
 from sim_drive.eds import eds_path
 from sim_drive.operator import HandModel
+from sim_drive.parameters import Timing
 from sim_drive.profile import load_profile
 from tests.sim_fixtures import SimProcess, recv_id, send, unique_multicast
 
@@ -45,18 +46,27 @@ def test_bad_arguments_exit_2(argv: list[str], message: str, capsys: pytest.Capt
 def test_profile_tables(tmp_path: pathlib.Path) -> None:
     path = tmp_path / "p.toml"
     path.write_text(
-        "[device]\nm = 0.8\nb = 2.0\nrated_torque = 0.5\nmax_torque_permille = 1500\n"
-        '[operator]\nmodel = "hand"\nstiffness = 250.0\ndamping = 3.0\n[scene]\nK = 1.0\n'
+        '[device]\nmass = 0.8\nfriction = 2.0\nfriction_source = "guide"\nrated_torque = 0.5\nmax_torque_permille = 1500\n'
+        '[loop]\nperiod = 0.002\ntiming = "ideal"\n'
+        '[operator_model]\nmodel = "hand"\nstiffness = 250.0\ndamping = 3.0\n[[scene.objects]]\nkind = "wall"\n'
     )
-    parameters, operator = load_profile(path)
+    profile = load_profile(path)
+    parameters = profile.parameters
     assert (parameters.m, parameters.b, parameters.rated_torque_mnm, parameters.max_torque_permille) == (0.8, 2.0, 500, 1500)
-    assert operator == HandModel(250.0, 3.0)
-    path.write_text("[device]\nmass = 1.0\n")
-    with pytest.raises(ParameterError, match="mass"):
+    assert parameters.period == 0.002 and profile.timing is Timing.IDEAL
+    assert profile.operator == HandModel(250.0, 3.0)
+    path.write_text("[device]\nm = 1.0\n")
+    with pytest.raises(ParameterError, match="device.m"):
         load_profile(path)
     path.write_text("[device\n")
     with pytest.raises(ParameterError, match="valid TOML"):
         load_profile(path)
+
+
+def test_every_shipped_profile_reads_as_a_drive() -> None:
+    for name in ("seed-ideal", "cia402-handle", "multi-object"):
+        profile = load_profile(name)
+        assert profile.parameters.period == 1e-3 and profile.timing is not None
 
 
 @pytest.mark.parametrize(
