@@ -368,7 +368,7 @@ class ModbusDrive(Drive):
         if response.function_code & 0x80:
             self.stats.exceptions += 1
             code = getattr(response, "exception_code", 0)
-            error = DriveProtocolError(self.name, f"exception {exception_name(code)} while {what}")
+            error = DriveProtocolError(self.name, f"{what}: exception {exception_name(code)}")
             error.exception_code = code
             raise error
         return response

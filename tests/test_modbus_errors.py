@@ -1,0 +1,204 @@
+"""ModbusDrive's typed errors against the simulated server (loopback, one process): exception
+responses (illegal address, illegal value, server busy), timeouts, a dropped connection, a
+wrong unit id or word order, a drive fault; each names the unit, the registers and CiA-402
+objects and the exception, and the torque is zeroed wherever the link still answers."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from drives.base import DriveError, DriveFault, DriveProtocolError, DriveTimeout
+from drives.cia402 import QUICK_STOP_OPTION_CODE, State
+from drives.modbus_drive import ModbusDrive, ModbusLinkLost
+from sim_drive.modbus_server import LINK_LOST_ERROR_CODE, ModbusSimServer
+
+UNIT = 7
+
+
+@pytest.fixture(params=["split", "fc23"])
+def running(request):
+    """(server, drive) in OPERATION ENABLED after a few cycles with torque on."""
+    server = ModbusSimServer(unit_id=UNIT, timing="ideal").start()
+    drive = ModbusDrive("127.0.0.1", server.port, unit_id=UNIT, cycle=request.param, timeout=0.2)
+    try:
+        drive.connect()
+        drive.enable()
+        for _ in range(3):
+            drive.read_inputs()
+            drive.write_outputs(500)
+        assert server.drive.target_torque == 500
+        yield server, drive
+    finally:
+        drive.close()
+        server.stop()
+
+
+def unit_named(error: DriveError, port: int) -> None:
+    assert f"Modbus unit {UNIT} at tcp://127.0.0.1:{port}" in str(error)
+
+
+def test_illegal_address_acyclic_names_register_object_and_exception(running) -> None:
+    server, drive = running
+    with pytest.raises(DriveProtocolError) as caught:
+        drive.read_registers(0x0001, 1)  # half of the velocity
+    unit_named(caught.value, server.port)
+    assert "register 0x0001: 0x0001 (0x606C Velocity actual value)" in str(caught.value)
+    assert "exception 0x02 ILLEGAL DATA ADDRESS" in str(caught.value)
+    assert caught.value.exception_code == 0x02
+    with pytest.raises(DriveProtocolError, match=r"register 0x0007: 0x0007 \(unmapped\).*0x02 ILLEGAL DATA ADDRESS"):
+        drive.read_registers(0x0007, 1)
+    assert drive.tripped is None and server.drive.state is State.OPERATION_ENABLED  # acyclic: no trip
+
+
+def test_illegal_value_names_register_object_and_exception(running) -> None:
+    server, drive = running
+    with pytest.raises(DriveProtocolError) as caught:
+        drive.write_object(QUICK_STOP_OPTION_CODE, 9)
+    unit_named(caught.value, server.port)
+    assert "0x0029 (0x605A Quick stop option code)" in str(caught.value)
+    assert "exception 0x03 ILLEGAL DATA VALUE" in str(caught.value)
+    with pytest.raises(DriveProtocolError, match=r"0x0020 \(0x6060 Modes of operation\).*0x03 ILLEGAL DATA VALUE"):
+        drive.write_registers(0x0020, [0x1234])
+    assert server.drive.quick_stop_option_code == 2 and server.drive.mode == 10  # nothing applied
+
+
+@pytest.mark.parametrize("code, name", [(0x06, "SERVER DEVICE BUSY"), (0x02, "ILLEGAL DATA ADDRESS"), (0x03, "ILLEGAL DATA VALUE")])
+def test_exception_in_the_cycle_trips_and_writes_zero_torque(running, code: int, name: str) -> None:
+    server, drive = running
+    if drive.cycle == "fc23":
+        drive.read_inputs()  # the cached inputs; the FC23 of write_outputs meets the fault
+        server.faults.exception(code)
+        with pytest.raises(DriveProtocolError) as caught:
+            drive.write_outputs(800)
+        assert "0x0010 (0x6040 Controlword), 0x0011 (0x6071 Target torque)" in str(caught.value)
+        assert "0x0000 (0x6041 Statusword), 0x0001 (0x606C Velocity actual value)" in str(caught.value)
+    else:
+        server.faults.exception(code)
+        with pytest.raises(DriveProtocolError) as caught:
+            drive.read_inputs()
+        assert "registers 0x0000..0x0002: 0x0000 (0x6041 Statusword), 0x0001 (0x606C Velocity actual value)" in str(caught.value)
+    unit_named(caught.value, server.port)
+    assert f"exception 0x{code:02X} {name}" in str(caught.value)
+    # one zero-torque write with DISABLE VOLTAGE reached the drive
+    assert server.drive.target_torque == 0 and server.drive.state is State.SWITCH_ON_DISABLED
+    assert drive.tripped is caught.value and drive.stats.safe_stops == 1
+    # until fault_reset/enable, write_outputs sends the safe block, not the caller's torque
+    drive.read_inputs()
+    drive.write_outputs(900)
+    assert server.drive.target_torque == 0 and drive.stats.suppressed_outputs == 1
+    drive.enable()
+    drive.read_inputs()
+    drive.write_outputs(300)
+    assert server.drive.target_torque == 300 and server.drive.state is State.OPERATION_ENABLED
+
+
+def test_busy_during_enable_is_a_protocol_error_naming_the_object() -> None:
+    with ModbusSimServer(unit_id=UNIT) as server, ModbusDrive("127.0.0.1", server.port, unit_id=UNIT, timeout=0.2) as drive:
+        drive.connect()
+        server.faults.busy()
+        with pytest.raises(DriveProtocolError, match=r"0x0026 \(0x6502 Supported drive modes\).*0x06 SERVER DEVICE BUSY"):
+            drive.enable()
+        drive.enable()  # the next try passes
+        assert server.drive.state is State.OPERATION_ENABLED
+
+
+def test_timeout_names_the_unit_zeroes_torque_and_closes_the_link(running) -> None:
+    server, drive = running
+    server.faults.delay(0.5)
+    started = time.monotonic()
+    with pytest.raises(DriveTimeout) as caught:
+        drive.read_inputs()
+        drive.write_outputs(100)
+    assert time.monotonic() - started < 3.0
+    unit_named(caught.value, server.port)
+    assert "no answer within 200 ms" in str(caught.value) and "call reconnect()" in str(caught.value)
+    assert isinstance(caught.value, ModbusLinkLost) and not drive.link_up
+    # zero torque reached the drive: either the safe write (after the late answer) or, when the
+    # link closed, the server's watchdog fault; either way no torque is applied
+    deadline = time.monotonic() + 2.0
+    while server.drive.state is State.OPERATION_ENABLED and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert server.drive.state in (State.SWITCH_ON_DISABLED, State.FAULT)
+    assert server.drive.torque_actual == 0
+    # no silent reconnect: the hot path refuses until reconnect()
+    with pytest.raises(ModbusLinkLost, match="call reconnect"):
+        drive.write_outputs(100)
+    drive.reconnect()
+    if server.drive.state is State.FAULT:
+        drive.fault_reset()
+    drive.enable()
+    drive.read_inputs()
+    drive.write_outputs(100)
+    assert server.drive.target_torque == 100
+
+
+def test_dropped_connection_is_link_lost_and_the_drive_faults(running) -> None:
+    server, drive = running
+    closed_before = server.connections_closed
+    server.faults.drop()
+    with pytest.raises(ModbusLinkLost) as caught:
+        drive.read_inputs()
+        drive.write_outputs(100)
+    assert isinstance(caught.value, DriveTimeout)
+    unit_named(caught.value, server.port)
+    assert "connection lost" in str(caught.value) and "call reconnect()" in str(caught.value)
+    deadline = time.monotonic() + 2.0
+    while server.connections_closed == closed_before and time.monotonic() < deadline:
+        time.sleep(0.01)
+    # the link is gone, so the master could not write zero torque; the drive's watchdog did
+    assert server.drive.state is State.FAULT and server.drive.error_code == LINK_LOST_ERROR_CODE
+    assert server.drive.torque_actual == 0
+    with pytest.raises(ModbusLinkLost):
+        drive.read_inputs()
+    assert server.connections_closed == closed_before + 1  # and no new connection was opened
+    drive.reconnect()
+    with pytest.raises(DriveError, match="FAULT"):
+        drive.enable()
+    drive.fault_reset()
+    drive.enable()
+    assert server.drive.state is State.OPERATION_ENABLED
+
+
+def test_fault_bit_raises_drive_fault_with_the_error_code(running) -> None:
+    server, drive = running
+    drive.read_inputs()
+    drive.write_outputs(100)
+    server.drive.fault(0x2310)  # overcurrent, injected between cycles
+    with pytest.raises(DriveFault) as caught:
+        drive.read_inputs()  # split: this read samples the fault
+        drive.write_outputs(100)  # fc23: the inputs above were sampled before it; this brings it
+        drive.read_inputs()
+    assert caught.value.code == 0x2310 and "error code 0x2310" in str(caught.value)
+    unit_named(caught.value, server.port)
+    assert server.drive.target_torque == 0
+
+
+def test_wrong_unit_and_wrong_word_order_are_refused_at_connect() -> None:
+    with ModbusSimServer(unit_id=UNIT) as server:
+        with ModbusDrive("127.0.0.1", server.port, unit_id=UNIT + 1, timeout=0.2) as drive:
+            with pytest.raises(DriveProtocolError, match=r"Modbus unit 8 .*0x0B GATEWAY TARGET DEVICE FAILED TO RESPOND"):
+                drive.connect()
+        with ModbusDrive("127.0.0.1", server.port, unit_id=UNIT, word_order="little", timeout=0.2) as drive:
+            with pytest.raises(DriveProtocolError, match="other word order"):
+                drive.connect()
+
+
+def test_nobody_listening_is_a_timeout_and_rtu_constructs() -> None:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]  # bound, not listening: connection refused
+        drive = ModbusDrive("127.0.0.1", port, unit_id=3, timeout=0.2)
+        with pytest.raises(DriveTimeout, match=f"Modbus unit 3 at tcp://127.0.0.1:{port}: cannot connect"):
+            drive.connect()
+    rtu = ModbusDrive.from_url("rtu:/dev/ttyUSB0", unit_id=5, baudrate=57600)
+    assert rtu.serial and rtu.port == "/dev/ttyUSB0" and rtu.name == "Modbus unit 5 at rtu:/dev/ttyUSB0"
+    with pytest.raises(DriveError):  # no pyserial here, or no such port
+        rtu.connect()
+    with pytest.raises(ValueError, match="unit_id"):
+        ModbusDrive("127.0.0.1", 502, unit_id=300)
+    with pytest.raises(ValueError, match="cycle"):
+        ModbusDrive("127.0.0.1", 502, cycle="fast")
