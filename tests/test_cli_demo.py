@@ -1,0 +1,52 @@
+"""The main job and the profile commands, run the way a user runs them."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from PIL import Image
+
+from haptic_bus.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _is_real_png(path: Path, min_colours: int = 8) -> bool:
+    with Image.open(path) as image:
+        image.verify()
+    with Image.open(path) as image:
+        colours = image.convert("RGB").getcolors(maxcolors=1 << 20)
+    return path.stat().st_size > 10_000 and (colours is None or len(colours) >= min_colours)
+
+
+def test_demo_runs_as_a_command_and_writes_real_plots(tmp_path: Path) -> None:
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    done = subprocess.run([sys.executable, "-m", "haptic_bus.cli", "demo", "--out", str(tmp_path)],
+                          cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    out = done.stdout
+    assert "gate: passed" in out and "cycles: 2000" in out
+    assert "steady penetration: 2.0000 mm vs F/K = 2.0000 mm" in out
+    for name in ("position_force.png", "region.png"):
+        assert _is_real_png(tmp_path / name), name
+    rows = (tmp_path / "record.csv").read_text().splitlines()
+    assert rows[0].startswith("time_s,velocity_m_per_s,position_m,force_n") and len(rows) == 2001
+
+
+def test_report_writes_the_seed_figures(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["report", "seed-ideal", "--out", str(tmp_path)]) == 0
+    for name in ("fig4_region.png", "fig5_nyquist.png", "fig6_step.png"):
+        assert _is_real_png(tmp_path / name), name
+    summary = (tmp_path / "report.md").read_text()
+    assert "verdict: passive" in summary and "margin +0.0998139 N s/m" in summary
+
+
+def test_profiles_check_matches_check(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["profiles", "check", "seed-ideal"]) == 0
+    assert "margin +0.0998139 N s/m" in capsys.readouterr().out
+    assert main(["check", "--mass", "0.5", "--friction", "0.1", "--period", "0.001", "--stiffness", "200",
+                 "--damping", "100", "--delay", "1"]) == 1
