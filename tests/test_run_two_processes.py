@@ -1,0 +1,58 @@
+"""``haptic-bus run`` against ``haptic-bus sim`` in two processes on udp_multicast (loopback),
+with gated wall uploads from a third party over the same bus while the loop runs."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from canopen import SdoAbortedError, SdoCommunicationError
+
+from haptic_bus.controller_node import upload_walls
+from tests.sim_fixtures import NODE, REPO, SimProcess, unique_multicast
+
+CONTROLLER_NODE = 42
+START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen before they answer
+
+
+def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive() -> None:
+    group, port = unique_multicast()
+    bus = {"interface": "udp_multicast", "channel": group, "port": port}
+    sim = SimProcess("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
+                     "--node-id", str(NODE), "--profile", "seed-ideal")
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    run = subprocess.Popen(
+        [sys.executable, "-m", "haptic_bus.cli", "run", "seed-ideal", "--interface", "udp_multicast", "--channel", group,
+         "--bus-option", f"port={port}", "--node-id", str(NODE), "--virtual-time", "--duration", "600",
+         "--controller-node-id", str(CONTROLLER_NODE)],
+        cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        deadline = time.monotonic() + START_WAIT
+        answer = None
+        while answer is None and time.monotonic() < deadline and run.poll() is None:
+            try:  # the same wall again: accepted once the controller node answers
+                answer = upload_walls(bus, CONTROLLER_NODE, {0: (200.0, 100.0)}, timeout=0.5)
+            except SdoCommunicationError:
+                time.sleep(0.2)
+        assert answer is not None and answer.startswith("accepted"), run.stderr.read() if run.poll() is not None else answer
+        with pytest.raises(SdoAbortedError) as refused:
+            upload_walls(bus, CONTROLLER_NODE, {0: (2.0e6, 100.0)})
+        assert refused.value.code == 0x06090030 and "largest passive K at this B: 1.8e+06" in refused.value.reason
+        assert upload_walls(bus, CONTROLLER_NODE, {0: (300.0, 150.0)}).startswith("accepted")
+        assert run.poll() is None, "the run must go on through the uploads"
+    finally:
+        run.send_signal(signal.SIGTERM)
+        try:
+            out, err = run.communicate(timeout=20)
+        except subprocess.TimeoutExpired:
+            run.kill()
+            out, err = run.communicate(timeout=10)
+        code, log = sim.stop()
+    assert run.returncode == 0, err
+    assert "cycles" in out and "compute p50" in out
+    assert code == 0, log
