@@ -209,6 +209,9 @@ class ModbusDrive(Drive):
         )
         self._read_what = describe_range(INPUT_BLOCK, self._in_count)
         self._write_what = describe_range(OUTPUT_BLOCK, OUTPUT_BLOCK_COUNT)
+        self._read_label = f"reading {self._read_what}"  # built once: no formatting per cycle
+        self._write_label = f"writing {self._write_what}"
+        self._rw_label = f"writing {self._write_what} and reading {self._read_what} (FC23)"
         self._cached: list[int] | None = None  # fc23: inputs read by the last output write
         self._controlword = SAFE_CONTROLWORD
         self._torque_limit = 0x7FFF
@@ -466,7 +469,7 @@ class ModbusDrive(Drive):
         registers = self._cached
         if registers is None:
             self.stats.cyclic_requests += 1
-            registers = self._cyclic(self._read_req, f"reading {self._read_what}").registers
+            registers = self._cyclic(self._read_req, self._read_label).registers
         else:
             self._cached = None
         if len(registers) != self._in_count:
@@ -509,10 +512,9 @@ class ModbusDrive(Drive):
             regs[1] = target_torque & 0xFFFF
         self.stats.cyclic_requests += 1
         if self.cycle == "fc23":
-            registers = self._cyclic(self._rw_req, f"writing {self._write_what} and reading {self._read_what} (FC23)").registers
-            self._cached = registers
+            self._cached = self._cyclic(self._rw_req, self._rw_label).registers
         else:
-            self._cyclic(self._write_req, f"writing {self._write_what}")
+            self._cyclic(self._write_req, self._write_label)
 
     # ------------------------------------------------------------------ state machine
 
