@@ -214,3 +214,45 @@ def test_a_storm_of_concurrent_uploads_never_tears_k_from_b() -> None:
             t.join(timeout=10)
     assert refusals and accepted
     assert seen <= set(passive), f"a torn or refused wall ran: {seen - set(passive)}"
+
+
+@pytest.mark.parametrize("fault", ["silent", "fault", "emcy"])
+def test_a_drive_fault_ends_the_run_safely_and_keeps_the_record(fault: str, tmp_path) -> None:
+    profile = seed_at_the_wall()
+    with simulated_canopen(profile, operator=ConstantPush(1.0)) as (sim, drive):
+        controller = controller_for(profile, drive)
+
+        def inject(c: WallController) -> None:
+            if c.cycles == 100:
+                {"silent": sim.go_silent, "fault": lambda: sim.enter_fault(0x2310),
+                 "emcy": lambda: sim.send_emcy(0x4310)}[fault]()
+
+        summary = controller.run(1000, on_cycle=inject)
+        last_torque = sim.drive.target_torque if fault != "silent" else None
+    assert summary.error is not None and "node 1" in summary.error
+    assert 100 <= summary.cycles <= 110  # detected within a few cycles (max_missed_tpdos = 3)
+    assert controller.record.total == summary.cycles
+    path = controller.record.write_csv(tmp_path / "fault.csv")
+    assert len(path.read_text().splitlines()) == summary.cycles + 1
+    if last_torque is not None:
+        assert last_torque == 0  # the master's safe stop: zero torque, DISABLE VOLTAGE
+
+
+def test_force_is_saturated_at_the_profile_limit_and_counted() -> None:
+    profile = dataclasses.replace(seed_at_the_wall(), force_limit=0.5)
+    with simulated_canopen(profile, operator=ConstantPush(2.0)) as (sim, drive):
+        controller = controller_for(profile, drive)
+        summary = controller.run(400)
+    assert summary.saturated_cycles > 0
+    assert summary.peak_force == 0.5
+    assert np.max(np.abs(controller.record.column("force_n"))) == 0.5
+
+
+def test_a_frame_with_the_wrong_length_is_dropped_counted_and_the_run_goes_on() -> None:
+    profile = seed_at_the_wall()
+    with simulated_canopen(profile, operator=ConstantPush(1.0)) as (sim, drive):
+        controller = controller_for(profile, drive)
+        summary = controller.run(300, on_cycle=lambda c: sim.short_next_tpdo() if c.cycles == 100 else None)
+        dropped, missed = drive.stats.dropped_frames, drive.stats.missed_tpdos
+    assert summary.error is None and summary.cycles == 300
+    assert dropped == 1 and missed == 1  # never decoded; that cycle held the last velocity
