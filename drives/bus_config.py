@@ -10,6 +10,7 @@ python-can interface works: ``virtual``, ``udp_multicast``, ``socketcan`` (``vca
 
 from __future__ import annotations
 
+import argparse
 from typing import Any
 
 import can
@@ -77,3 +78,14 @@ def open_bus(
 def describe_bus(bus: can.BusABC) -> str:
     """A short human-readable name of an open bus (interface and channel)."""
     return f"{type(bus).__name__}({getattr(bus, 'channel_info', '?')})"
+
+
+def parse_bus_option(text: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` from a command line into a python-can bus argument (ints where they parse)."""
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE")
+    try:
+        return key, int(value, 0)
+    except ValueError:
+        return key, value

@@ -8,6 +8,7 @@ import sys
 from typing import Callable, Sequence
 
 from drives.base import DriveError
+from drives.bus_config import parse_bus_option
 from haptic_bus.errors import HapticBusError
 from haptic_bus.gate import GateRefusal
 from haptic_bus.check_report import check_report, format_check
@@ -31,21 +32,11 @@ def _add_device_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--delay", type=float, default=0, help="loop delay d in whole samples (0: ideal, 1: CiA-402 sync)")
 
 
-def _bus_option(text: str) -> tuple[str, object]:
-    key, sep, value = text.partition("=")
-    if not sep or not key:
-        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE")
-    try:
-        return key, int(value, 0)
-    except ValueError:
-        return key, value
-
-
 def _add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--interface", help="python-can interface (socketcan, virtual, udp_multicast, ...)")
     parser.add_argument("--channel", help="python-can channel (can0, vcan0, a multicast group, ...)")
     parser.add_argument("--bitrate", type=int, help="bit/s")
-    parser.add_argument("--bus-option", type=_bus_option, action="append", default=[], metavar="KEY=VALUE",
+    parser.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
                         help="extra python-can bus argument, e.g. port=43113 (repeatable)")
 
 

@@ -23,6 +23,7 @@ from typing import Any
 
 import can
 
+from drives.bus_config import parse_bus_option
 from haptic_bus.errors import ParameterError
 from sim_drive.bus_timing import BusLoadMeter
 from sim_drive.canopen_slave import CanopenSimDrive
@@ -31,16 +32,6 @@ from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import load_profile
 
 logger = logging.getLogger("sim_drive")
-
-
-def _bus_option(text: str) -> tuple[str, Any]:
-    key, sep, value = text.partition("=")
-    if not sep or not key:
-        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE")
-    try:
-        return key, int(value, 0)
-    except ValueError:
-        return key, value
 
 
 class _StopSignals:
@@ -91,7 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--timing", choices=[t.value for t in Timing],
                         help="cia402 (default) or ideal; default: the profile's [loop] timing")
     parser.add_argument("--profile", help="operator profile (name or TOML path): [device], [loop], [operator_model]")
-    parser.add_argument("--bus-option", type=_bus_option, action="append", default=[], metavar="KEY=VALUE",
+    parser.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
                         help="extra python-can bus argument, e.g. port=43113 (repeatable)")
     parser.add_argument("--realtime", action="store_true", help="timestamp log lines with the wall clock")
     return parser
