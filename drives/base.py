@@ -12,7 +12,7 @@ from __future__ import annotations
 import abc
 from dataclasses import dataclass
 
-from drives.cia402 import OperationMode
+from drives.cia402 import ObjectSpec, OperationMode
 
 
 class DriveError(Exception):
@@ -101,6 +101,10 @@ class Drive(abc.ABC):
     @abc.abstractmethod
     def enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
         """Set ``mode`` (checked against 0x6502 and 0x6061) and walk to OPERATION ENABLED."""
+
+    @abc.abstractmethod
+    def read_object(self, spec: ObjectSpec | int) -> int:
+        """Read one object acyclically (SDO upload, register read) in drive units."""
 
     @abc.abstractmethod
     def read_inputs(self) -> CyclicInputs:

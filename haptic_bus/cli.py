@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import pathlib
 import sys
 from typing import Callable, Sequence
 
 from drives.base import DriveError
 from drives.bus_config import parse_bus_option
-from haptic_bus.errors import HapticBusError
+from haptic_bus.errors import HapticBusError, ParameterError
 from haptic_bus.gate import GateRefusal
 from haptic_bus.check_report import check_report, format_check
 from haptic_bus.loop import WallLoop
@@ -75,17 +76,19 @@ def _bus_arguments(args: argparse.Namespace) -> dict:
 
 
 def _run(args: argparse.Namespace) -> int:
-    import threading
-
     from haptic_bus.profiles import load_profile
-    from haptic_bus.runner import install_stop_signals, run_profile
+    from haptic_bus.runner import RunOptions, install_stop_signals, run_canopen, run_modbus
 
     profile = load_profile(args.profile)
-    stop = threading.Event()
-    install_stop_signals(stop)
-    summary, _ = run_profile(profile, _bus_arguments(args), args.node_id, duration=args.duration,
-                             realtime=not args.virtual_time, controller_node_id=args.controller_node_id,
-                             out_dir=args.out, stop=stop)
+    options = RunOptions(args.duration, realtime=not args.virtual_time,
+                         out_dir=None if args.out is None else pathlib.Path(args.out))
+    install_stop_signals(options.stop)
+    if args.modbus:
+        summary, _ = run_modbus(profile, args.modbus, args.unit_id, options)
+    elif args.node_id is None:
+        raise ParameterError("--node-id", None, "the drive's CANopen node id 1..127 (or give --modbus URL)", "run")
+    else:
+        summary, _ = run_canopen(profile, _bus_arguments(args), args.node_id, options, args.controller_node_id)
     p, late = summary.compute_percentiles, summary.lateness_percentiles
     print(f"cycles {summary.cycles}; peak force {summary.peak_force:.4g} N; saturated {summary.saturated_cycles}; "
           f"observer: interface energy {summary.interface_energy:.4g} J (below zero in {summary.observer_active_cycles} "
@@ -162,7 +165,9 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run a profile's controller against a drive on a CAN bus")
     run.add_argument("profile", help="profile name or TOML path")
     _add_bus_arguments(run)
-    run.add_argument("--node-id", type=int, required=True, help="the drive's CANopen node id")
+    run.add_argument("--node-id", type=int, help="the drive's CANopen node id")
+    run.add_argument("--modbus", metavar="URL", help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
+    run.add_argument("--unit-id", type=int, default=1, help="Modbus unit id")
     run.add_argument("--duration", type=float, default=10.0, help="seconds to run")
     run.add_argument("--controller-node-id", type=int, help="serve gated wall uploads as this CANopen node")
     run.add_argument("--virtual-time", action="store_true", help="lock-step with a simulated drive (no pacing)")

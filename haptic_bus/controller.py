@@ -20,6 +20,7 @@ from typing import Callable
 import numpy as np
 
 from drives.base import Drive, DriveError
+from drives.cia402 import POSITION_ACTUAL
 from haptic_bus.clock import VirtualClock
 from haptic_bus.gate import GateDecision, PassivityGate
 from haptic_bus.observer import PassivityObserver
@@ -28,6 +29,11 @@ from haptic_bus.scene import CompiledScene, compile_scene
 from haptic_bus.errors import ParameterError
 
 logger = logging.getLogger(__name__)
+
+
+def encoder_origin(drive: Drive) -> float:
+    """The handle's absolute position (m) from 0x6064, read once, acyclically, before cycling."""
+    return drive.read_object(POSITION_ACTUAL) * drive.scaling.position_per_count
 
 
 class PositionIntegrator:

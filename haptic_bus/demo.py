@@ -13,11 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptic_bus.controller import RunSummary, WallController
+from haptic_bus.controller import RunSummary, WallController, encoder_origin
 from haptic_bus.gate import GateDecision
 from haptic_bus.profiles import Profile, default_profile
 from haptic_bus.run_plots import plot_run
-from haptic_bus.session import encoder_origin, simulated_canopen
+from haptic_bus.session import simulated_canopen
 
 
 @dataclass

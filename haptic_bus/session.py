@@ -12,7 +12,6 @@ from contextlib import contextmanager
 from typing import Iterator
 
 from drives.canopen_drive import CanopenDrive
-from drives.cia402 import POSITION_ACTUAL
 from sim_drive.canopen_slave import CanopenSimDrive
 from sim_drive.operator import OperatorModel, operator_from_table
 from sim_drive.parameters import DeviceParameters
@@ -56,8 +55,3 @@ def simulated_canopen(
     finally:
         drive.close()
         sim.stop()
-
-
-def encoder_origin(drive: CanopenDrive) -> float:
-    """The handle's absolute position (m) from 0x6064, read once over SDO before cycling."""
-    return drive.read_object(POSITION_ACTUAL) * drive.scaling.position_per_count

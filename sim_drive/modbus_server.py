@@ -472,8 +472,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--modbus", required=True, metavar="tcp://HOST:PORT", help="address to serve on (PORT 0: any free port)")
     parser.add_argument("--unit-id", type=int, default=1, help="Modbus unit id (default 1)")
     parser.add_argument("--word-order", choices=["big", "little"], default="big", help="32-bit word order (big: high word first)")
-    parser.add_argument("--timing", choices=[t.value for t in Timing], default=Timing.CIA402.value)
-    parser.add_argument("--profile", help="TOML profile with [device] and [operator] tables")
+    parser.add_argument("--timing", choices=[t.value for t in Timing],
+                        help="cia402 (default) or ideal; default: the profile's [loop] timing")
+    parser.add_argument("--profile", help="operator profile (name or TOML path): [device], [loop], [operator_model]")
     parser.add_argument("--realtime", action="store_true", help="timestamp log lines with the wall clock")
     return parser
 
@@ -491,7 +492,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from sim_drive.profile import load_profile
 
         host, port = parse_modbus_url(args.modbus)
-        parameters, operator = load_profile(args.profile) if args.profile else (DeviceParameters(), None)
+        profile = load_profile(args.profile) if args.profile else None
+        parameters = profile.parameters if profile else DeviceParameters()
+        operator = profile.operator if profile else None
+        args.timing = args.timing or (profile.timing.value if profile and profile.timing else Timing.CIA402.value)
         sim = ModbusSimServer(host, port, unit_id=args.unit_id, timing=args.timing, parameters=parameters,
                               operator=operator, word_order=args.word_order)
     except ParameterError as exc:

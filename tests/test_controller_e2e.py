@@ -15,7 +15,7 @@ import pytest
 from canopen import SdoAbortedError
 
 from haptic_bus.cli import main
-from haptic_bus.controller import WallController
+from haptic_bus.controller import WallController, encoder_origin
 from haptic_bus.controller_node import ABORT_INVALID_VALUE, ControllerNode, upload_walls
 from haptic_bus.criterion import exact_verdict
 from haptic_bus.design import force_step_response
@@ -25,7 +25,7 @@ from haptic_bus.gate import DeviceLoop, GateRefusal, PassivityGate
 from haptic_bus.loop import WallLoop
 from haptic_bus.profiles import load_profile
 from haptic_bus.scene import Wall, compile_scene
-from haptic_bus.session import encoder_origin, simulated_canopen
+from haptic_bus.session import simulated_canopen
 from sim_drive.operator import ConstantPush, Sinusoid, StepPush
 
 
