@@ -28,11 +28,14 @@ _DAMPING_PROBES = (0.0, 0.5, 0.25, 0.125, 0.75, 1 / 16, 1 / 64, 1 / 256)
 
 
 def flip_damping_budget(loop: WallLoop) -> float:
-    """``b / tanh(c/2)`` in N s/m: the ``KT/2 + B`` eq. (23) allows (``2m/T`` as b -> 0)."""
-    c = loop.c
-    if c == 0.0:
-        return 2.0 * loop.m / loop.T
-    return loop.b / math.tanh(0.5 * c)
+    """``b / tanh(c/2)`` in N s/m: the ``KT/2 + B`` eq. (23) allows (``2m/T`` as b -> 0).
+
+    Formed as ``(2m/T) x / tanh(x)`` with ``x = c/2``, so a tiny or subnormal ``b`` (where
+    ``tanh(x)`` rounds to 0) gives the limit instead of a division by zero.
+    """
+    x = 0.5 * loop.c
+    ratio = 1.0 if x < 1e-8 else x / math.tanh(x)  # x/tanh(x) = 1 + x^2/3 + ...
+    return 2.0 * loop.m / loop.T * ratio
 
 
 def max_stiffness(loop: WallLoop) -> float | None:

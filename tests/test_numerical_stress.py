@@ -1,0 +1,74 @@
+"""Numerical stress: any float in, a typed error or a finite answer out; long-run sums."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from haptic_bus.criterion import exact_verdict
+from haptic_bus.errors import ParameterError
+from haptic_bus.frequency import t_fund, z_fund
+from haptic_bus.limits import max_damping, max_stiffness
+from haptic_bus.loop import WallLoop
+from haptic_bus.observer import PassivityObserver
+
+any_float = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True),
+    st.floats(width=32, allow_nan=True, allow_infinity=True).map(np.float32),
+    st.sampled_from([5e-324, 1e-310, -0.0, 1e308, 3.4e38, 1e-45]),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(m=any_float, b=any_float, T=any_float, K=any_float, B=any_float)
+def test_any_float_gives_a_typed_error_or_a_finite_verdict(m, b, T, K, B) -> None:
+    try:
+        loop = WallLoop(m, b, T, K, B)
+    except ParameterError as error:
+        assert error.name in {"m", "b", "T", "K", "B"} and "allowed" in str(error)
+        return
+    verdict = exact_verdict(loop)
+    assert math.isfinite(verdict.margin) and (verdict.margin >= 0) == verdict.passive
+    for limit in (max_stiffness(loop), max_damping(loop)):
+        assert limit is None or (math.isfinite(limit) and limit >= 0)
+
+
+def test_float32_theta_and_parameters_give_the_double_answer() -> None:
+    loop32 = WallLoop(np.float32(0.5), np.float32(0.1), np.float32(1e-3), np.float32(200), np.float32(100))
+    theta32 = np.linspace(1e-3, np.pi, 50, dtype=np.float32)
+    values = t_fund(loop32, theta32)
+    assert values.dtype == np.complex128 and np.all(np.isfinite(values))
+    assert exact_verdict(loop32).passive
+
+
+def test_extreme_but_valid_corners_stay_finite() -> None:
+    corners = [WallLoop(1e-9, 0.0, 1e-9, 0.0, 0.0), WallLoop(1e9, 1e12, 10.0, 1e15, 1e15),
+               WallLoop(1e-9, 1e12, 10.0, 1e15, 0.0), WallLoop(1e9, 0.0, 1e-9, 1e15, 1e15, delay=3)]
+    theta = np.array([1e-12, 1e-6, 1.0, np.pi - 1e-12, np.pi])
+    for loop in corners:
+        assert np.all(np.isfinite(t_fund(loop, theta))) and np.all(np.isfinite(z_fund(loop, theta[1:])))
+        assert math.isfinite(exact_verdict(loop).margin)
+
+
+def test_observer_sum_over_ten_million_cycles_stays_within_its_rounding_bound() -> None:
+    """The observer adds one product a cycle; after N cycles plain summation is within
+    N eps sum|terms| of the exact sum (here far inside it).  Reference: math.fsum of the same
+    terms, correctly rounded."""
+    n = 10_000_000
+    k = np.arange(n)
+    velocity = 0.05 * np.sin(2 * np.pi * k / 997.0)
+    force = 3.0 + 2.0 * np.cos(2 * np.pi * k / 997.0 + 0.3)
+    T = 1e-3
+    observer = PassivityObserver(T, 0, 0.0, 0.0)
+    update = observer.update
+    for v, f in zip(velocity.tolist(), force.tolist()):
+        update(v, f)
+    terms = force[:-1] * 0.5 * (velocity[:-1] + velocity[1:]) * T
+    exact = math.fsum(terms.tolist())
+    bound = n * np.finfo(float).eps * float(np.sum(np.abs(terms)))
+    assert abs(observer.wall_energy - exact) <= bound
+    assert abs(observer.wall_energy - exact) <= 1e-9 * float(np.sum(np.abs(terms)))  # what it really is
