@@ -1,0 +1,145 @@
+"""``haptic-bus bench [--quick] [--out DIR]``: run time against error, the bus against its limit.
+
+One module per comparison (issue 6), each measured side by side in one run and quoted as a
+ratio (absolute times are printed, never asserted):
+
+1. :mod:`~haptic_bus.bench.passivity` -- passivity check: closed form, exact criterion, fixed
+   theta grids 10^2..10^6, python-control; time per check vs error of the boundary against
+   mpmath (:mod:`~haptic_bus.bench.mp_boundary`).
+2. :mod:`~haptic_bus.bench.plant_sim` -- plant simulation in the closed loop: exact ZOH, Euler,
+   RK4, solve_ivp; time per simulated second vs trajectory error against mpmath.
+3. :mod:`~haptic_bus.bench.scene_cost` -- controller compute per cycle for 1..10 000 objects,
+   compiled scene vs per-object loop.
+4. :mod:`~haptic_bus.bench.loop_rate` -- closed-loop cycles/s in virtual time (virtual bus,
+   udp_multicast, Modbus TCP) and the hot path vs canopen's generic PDO path.
+5. :mod:`~haptic_bus.bench.bus_limit` -- bits per cycle per axis, bus load, axes that fit.
+6. :mod:`~haptic_bus.bench.realtime` -- ``T = 1 ms`` with the real clock: period error, overruns.
+
+Writes ``DIR/bench.json`` (every figure, the machine, versions, date), ``DIR/bench.md`` (the
+tables, also printed) and PNG plots.  ``--quick`` (what CI runs) keeps to about a minute on a
+2-core machine; the full run takes minutes and shows a progress bar on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+import traceback
+from pathlib import Path
+from typing import Callable, Sequence
+
+from haptic_bus.bench.timing import machine
+
+SECTIONS = ("passivity", "plant", "scene", "loop", "bus", "realtime")
+# progress ticks each section makes (quick, full): for the bar's total
+_TICKS = {"passivity": (4, 16), "plant": (15, 17), "scene": (5, 5), "loop": (4, 4), "bus": (2, 2), "realtime": (1, 1)}
+
+
+class Progress:
+    """A one-line progress bar on stderr (or nothing when disabled)."""
+
+    def __init__(self, total: int, enabled: bool, width: int = 30) -> None:
+        self.total, self.enabled, self.width = max(total, 1), enabled, width
+        self.done = 0
+        self.started = time.monotonic()
+
+    def tick(self, label: str) -> None:
+        """One step done; redraw."""
+        self.done = min(self.done + 1, self.total)
+        if not self.enabled:
+            return
+        filled = round(self.width * self.done / self.total)
+        bar = "#" * filled + "-" * (self.width - filled)
+        elapsed = time.monotonic() - self.started
+        sys.stderr.write(f"\r[{bar}] {self.done}/{self.total} {elapsed:5.0f} s  {label[:50]:<50}")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        """End the bar's line."""
+        if self.enabled:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def _runner(name: str) -> Callable[..., dict]:
+    from importlib import import_module
+
+    module = {"passivity": "passivity", "plant": "plant_sim", "scene": "scene_cost", "loop": "loop_rate",
+              "bus": "bus_limit", "realtime": "realtime"}[name]
+    return import_module(f"haptic_bus.bench.{module}").run
+
+
+def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
+              sections: Sequence[str] = SECTIONS) -> dict:
+    """Run the benchmark sections; write ``bench.json``, ``bench.md`` and PNGs into ``out_dir``.
+
+    Returns the result dictionary (the content of ``bench.json``).  A section that cannot
+    run (a missing optional package, a link that fails) is recorded with
+    ``available: False`` and its reason, and the other sections still run.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    bar = Progress(sum(_TICKS[s][0 if quick else 1] for s in sections), progress)
+    started = time.perf_counter()
+    result: dict = {"command": "haptic-bus bench" + (" --quick" if quick else ""), "quick": quick,
+                    "machine": machine(), "sections": {}}
+    try:
+        for name in sections:
+            t0 = time.perf_counter()
+            try:
+                section = _runner(name)(quick, bar.tick)
+                section.setdefault("available", True)
+            except Exception as exc:  # noqa: BLE001 - reported in the output, the run goes on
+                section = {"available": False, "reason": f"{type(exc).__name__}: {exc}",
+                           "traceback": traceback.format_exc(limit=6)}
+            section["section_seconds"] = time.perf_counter() - t0
+            result["sections"][name] = section
+    finally:
+        bar.close()
+    result["total_seconds"] = time.perf_counter() - started
+    from haptic_bus.bench.report import markdown, plots
+
+    (out / "bench.json").write_text(json.dumps(result, indent=1, default=_json_default, allow_nan=True) + "\n")
+    (out / "bench.md").write_text(markdown(result))
+    result["plots"] = [str(p) for p in plots(result, out)]
+    return result
+
+
+def _json_default(value):
+    if hasattr(value, "item"):  # numpy scalars
+        return value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return str(value)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``haptic-bus bench``."""
+    parser = argparse.ArgumentParser(prog="haptic-bus bench", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="the short run CI uses (about a minute)")
+    parser.add_argument("--out", default="bench-out", help="output folder (default: ./bench-out)")
+    parser.add_argument("--only", action="append", choices=SECTIONS, help="run only this section (repeatable)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``haptic-bus bench``; print the tables; exit 0 (2 for bad arguments)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    result = run_bench(args.out, quick=args.quick, progress=not args.no_progress,
+                       sections=args.only or SECTIONS)
+    print((Path(args.out) / "bench.md").read_text())
+    print(f"wrote {Path(args.out) / 'bench.json'}, {Path(args.out) / 'bench.md'}"
+          + "".join(f", {p}" for p in result["plots"]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,7 @@
+"""``python -m haptic_bus.bench [--quick] [--out DIR]``: the same as ``haptic-bus bench``."""
+
+import sys
+
+from haptic_bus.bench import main
+
+sys.exit(main())
