@@ -35,7 +35,7 @@ from haptic_bus.bench.timing import machine
 
 SECTIONS = ("passivity", "plant", "scene", "loop", "bus", "realtime")
 # progress ticks each section makes (quick, full): for the bar's total
-_TICKS = {"passivity": (4, 16), "plant": (15, 17), "scene": (5, 5), "loop": (4, 4), "bus": (2, 2), "realtime": (1, 1)}
+_TICKS = {"passivity": (6, 16), "plant": (15, 17), "scene": (5, 5), "loop": (4, 4), "bus": (2, 2), "realtime": (1, 1)}
 
 
 class Progress:

@@ -6,15 +6,18 @@ feels is ``Z = 1/T_fund``, ``T_fund = G11 [1 - (H/T) K_d' G11 / (1 + G11d K_d')]
 at a given ``K``) is where ``min_theta Re Z`` touches zero:
 
 1. scan ``Re Z`` at the double-precision estimate on 240 uniform points of ``(0, pi]`` plus a
-   logarithmic fan from ``1e-6`` and refine every local minimum by golden section (to
-   ``1e-15`` rad);
+   logarithmic fan from ``1e-12`` (standing in for ``theta -> 0``: ``Re Z`` is even in
+   ``theta``, so it is off by ``O(1e-24)``) and refine every interior local minimum by golden
+   section (to ``1e-15`` rad);
 2. the global minimum at ``theta = pi`` (an end point): the boundary is the root of
-   ``Re Z(X, pi) = 0`` (the flip boundary); in the interior: the root of the tangency
-   ``Re Z = 0, d Re Z/d theta = 0`` in ``(X, theta)`` (``mp.findroot``, Newton in two
-   unknowns);
-3. verified: at ``X (1 - 1e-9)`` the scan's minimum is ``>= 0`` and every closed-loop pole
+   ``Re Z(X, pi) = 0`` (the flip boundary); at ``theta -> 0``: the root of
+   ``Re Z(X, 1e-12) = 0`` (a low-frequency boundary); in the interior: the tangency, the root in ``X``
+   of the envelope ``min_theta Re Z(X, theta)`` with the minimum located by golden section
+   (to ``1e-19`` rad, so the envelope is exact to ~1e-38 relative) inside the scan's bracket;
+   both roots bracketed and solved by Anderson-Bjorck (``mp.findroot``);
+3. verified: at ``X (1 - 1e-14)`` the scan's minimum is ``>= 0`` and every closed-loop pole
    (``mp.polyroots`` of the characteristic polynomial) is inside the unit circle; at
-   ``X (1 + 1e-9)`` the minimum is negative or a pole is outside.
+   ``X (1 + 1e-14)`` the minimum is negative or a pole is outside.
 """
 
 from __future__ import annotations
@@ -27,9 +30,12 @@ from haptic_bus.loop import WallLoop
 
 DIGITS = 40
 _UNIFORM = 240
-_FAN = 16
+_FAN = 24
+_FLAT_BELOW = mp.mpf("1e-6")
+THETA_LOW = mp.mpf("1e-12")  # stands in for theta -> 0: Re Z is even, so it errs by O(theta^2)
 _GOLDEN_TOL = mp.mpf("1e-15")
-_VERIFY = mp.mpf("1e-9")
+_VERIFY = mp.mpf("1e-14")
+_TANGENCY_TOL = mp.mpf("1e-19")
 
 
 @dataclass(frozen=True)
@@ -84,28 +90,28 @@ class _Loop:
         roots = mp.polyroots(coeffs, maxsteps=200, extraprec=2 * DIGITS)
         return max(abs(r) for r in roots)
 
-    def minimum(self, x) -> tuple[mp.mpf, mp.mpf]:
-        """(min Re Z over (0, pi], theta there): dense scan, then golden section at each local minimum."""
+    def minimum(self, x) -> tuple[mp.mpf, mp.mpf, tuple]:
+        """(min Re Z over (0, pi], theta there, bracket): dense scan, then golden section at each local minimum."""
         thetas = [mp.pi * i / _UNIFORM for i in range(1, _UNIFORM + 1)]
-        fan = [mp.mpf(10) ** (-6 + (mp.log10(mp.pi / _UNIFORM) + 6) * i / _FAN) for i in range(_FAN)]
+        low = -mp.log10(THETA_LOW)
+        fan = [mp.mpf(10) ** (-low + (mp.log10(mp.pi / _UNIFORM) + low) * i / _FAN) for i in range(_FAN)]
         grid = sorted(fan + thetas)
         values = [self.re_z(x, t) for t in grid]
-        best = (values[-1], grid[-1])
+        best = (values[-1], grid[-1], (grid[-1], grid[-1]))
+        if values[0] < best[0]:  # the low end: Re Z is even in theta
+            best = (values[0], grid[0], (grid[0], grid[0]))
         for i in range(1, len(grid) - 1):
             if values[i] <= values[i - 1] and values[i] <= values[i + 1]:
-                cand = self._golden(x, grid[i - 1], grid[i + 1])
-                if cand[0] < best[0]:
-                    best = cand
-        for i in range(len(grid)):
-            if values[i] < best[0]:
-                best = (values[i], grid[i])
+                value, theta = self._golden(x, grid[i - 1], grid[i + 1], _GOLDEN_TOL)
+                if value < best[0]:
+                    best = (value, theta, (grid[i - 1], grid[i + 1]))
         return best
 
-    def _golden(self, x, lo, hi):
+    def _golden(self, x, lo, hi, tol):
         ratio = (mp.sqrt(5) - 1) / 2
         c, d = hi - ratio * (hi - lo), lo + ratio * (hi - lo)
         fc, fd = self.re_z(x, c), self.re_z(x, d)
-        while hi - lo > _GOLDEN_TOL * max(1, abs(hi)):
+        while hi - lo > tol * max(1, abs(hi)):
             if fc < fd:
                 hi, d, fd = d, c, fc
                 c = hi - ratio * (hi - lo)
@@ -126,7 +132,7 @@ def _bracketed_root(f, x0):
     while True:
         lo, hi = x0 * (1 - width), x0 * (1 + width)
         if f(lo) >= 0 > f(hi):
-            return mp.findroot(f, (lo, hi), solver="anderson")
+            return mp.findroot(f, (lo, hi), solver="anderson", verify=False)
         width *= 8
         if width > mp.mpf("0.5"):
             raise ArithmeticError(f"no sign change of Re Z(pi) within 50 % of {mp.nstr(x0, 15)}")
@@ -141,15 +147,15 @@ def reference_boundary(loop: WallLoop, which: str, estimate: float) -> Reference
     with mp.workdps(DIGITS):
         ref = _Loop(loop, which)
         x0 = mp.mpf(estimate)
-        _, theta0 = ref.minimum(x0)
+        _, theta0, bracket = ref.minimum(x0)
         if theta0 == mp.pi:
             x = _bracketed_root(lambda v: ref.re_z(v, mp.pi), x0)
             theta, kind = mp.pi, "flip (theta = pi)"
-        else:
-            def equations(v, th):
-                return [ref.re_z(v, th), mp.diff(lambda t: ref.re_z(v, t), th)]
-
-            x, theta = mp.findroot(equations, (x0, theta0))
-            kind = "tangency"
+        elif theta0 < _FLAT_BELOW:  # Re Z = Re Z(0) + O(theta^2): the minimum is the theta -> 0 limit
+            x = _bracketed_root(lambda v: ref.re_z(v, THETA_LOW), x0)
+            theta, kind = THETA_LOW, "low frequency (theta -> 0)"
+        else:  # the root of the envelope min_theta Re Z(x, theta), the minimum by golden section
+            x = _bracketed_root(lambda v: ref._golden(v, bracket[0], bracket[1], _TANGENCY_TOL)[0], x0)
+            theta, kind = ref._golden(x, bracket[0], bracket[1], _TANGENCY_TOL)[1], "tangency"
         verified = bool(ref.passive(x * (1 - _VERIFY)) and not ref.passive(x * (1 + _VERIFY)))
         return ReferenceBoundary(float(x), float(theta), kind, verified)

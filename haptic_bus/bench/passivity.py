@@ -3,7 +3,8 @@
 Parameter points: a seeded set of realistic loops, ``T = 1 ms``, ``m`` log-uniform in
 0.02..2 kg, ``c = bT/m`` log-uniform in 1e-4..1, delay ``d`` alternating 0 and 1, ``B`` a
 random fraction (5-50 %) of the largest passive ``B`` without a spring and ``K`` a random
-fraction of the largest passive ``K`` at that ``B``.  At each point two boundaries: the largest
+fraction of the largest passive ``K`` at that ``B``; 8 points (``--quick``: 3 of them, a flip,
+an interior tangency and a low-frequency boundary).  At each point two boundaries: the largest
 passive ``K`` at the point's ``B`` and the largest passive ``B`` at its ``K``, each against the
 40-digit reference of :mod:`haptic_bus.bench.mp_boundary`.
 
@@ -54,6 +55,8 @@ SEED = 20240606
 PERIOD = 1e-3
 GRID_SIZES_FULL = (100, 1_000, 10_000, 100_000, 1_000_000)
 CONTROL_GRID = 10_000
+FULL_POINTS = 8
+QUICK_POINTS = (0, 1, 5)  # of the full set: a flip (d = 0), an interior tangency and a theta -> 0 boundary (d = 1)
 ERROR_FLOOR = 1e-17  # plotted instead of an error of exactly 0
 _SLOPE_STEP = 1e-6
 
@@ -197,7 +200,9 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
         with_control, control_note = True, None
     except ImportError as exc:
         with_control, control_note = False, f"python-control not installed ({exc}); pip install 'haptic_bus[bench]'"
-    points = parameter_points(2 if quick else 8)
+    points = parameter_points(FULL_POINTS)
+    if quick:
+        points = [points[i] for i in QUICK_POINTS]
     grid_sizes = GRID_SIZES_FULL
     methods = _methods(grid_sizes, with_control)
     per_point = []
