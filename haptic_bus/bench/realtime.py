@@ -5,7 +5,8 @@ sleep to 200 us before the deadline, then spin) runs the ``cia402-handle`` profi
 :func:`haptic_bus.session.simulated_canopen` for 10 s (2 s with ``--quick``).  Reported:
 lateness of each cycle start after its deadline, the period error (the difference of
 consecutive starts minus ``T``), both as percentiles p50/p99/p99.9/max, the overrun count
-(a start later than deadline + ``T``), the scheduler (the clock's name, the OS scheduling
+(a start later than deadline + ``T``) -- and the same for the bare clock (no drive, no
+controller: what the OS and the machine give a sleeping Python thread), the scheduler (the clock's name, the OS scheduling
 policy) and the kernel's timer slack where readable.
 """
 
@@ -69,6 +70,10 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
                                     clock=clock)
         summary = controller.run(cycles)
     tick("real time")
+    bare = RealClock(period, capacity=cycles + 10)  # the same clock with no drive and no controller
+    for k in range(cycles):
+        bare.wait_next(k)
+    bare_late = bare.lateness()
     late = clock.lateness()
     period_error = np.diff(late)  # start_k - start_{k-1} - T
     return {
@@ -81,4 +86,6 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
         "overruns": summary.overruns,
         "compute_s": summary.compute_percentiles,
         "late_over_100us": int(np.sum(late > 100e-6)),
+        "bare_clock": {"lateness_s": _percentiles(bare_late), "overruns": bare.overruns,
+                       "late_over_100us": int(np.sum(bare_late > 100e-6))},
     }

@@ -150,10 +150,13 @@ def markdown(result: dict) -> str:
         lat, per = s["lateness_s"], s["period_error_abs_s"]
         out.append(_table(["", "p50", "p99", "p99.9", "max"], [
             ["start lateness", _t(lat.get("p50")), _t(lat.get("p99")), _t(lat.get("p99.9")), _t(lat.get("max"))],
-            ["period error (abs)", _t(per.get("p50")), _t(per.get("p99")), _t(per.get("p99.9")), _t(per.get("max"))]]))
+            ["period error (abs)", _t(per.get("p50")), _t(per.get("p99")), _t(per.get("p99.9")), _t(per.get("max"))],
+            ["bare clock lateness", *(_t(s["bare_clock"]["lateness_s"].get(k)) for k in ("p50", "p99", "p99.9", "max"))]]))
         sch = s["scheduler"]
         out += ["", f"T = {s['period_s'] * 1e3:g} ms for {s['duration_s']:g} s ({s['cycles']} cycles): {s['overruns']} "
-                    f"overruns (start later than deadline + T), {s['late_over_100us']} starts > 100 us late. Clock: "
+                    f"overruns (start later than deadline + T), {s['late_over_100us']} starts > 100 us late; the bare clock "
+                    f"(no drive, no controller, same duration): {s['bare_clock']['overruns']} overruns, "
+                    f"{s['bare_clock']['late_over_100us']} starts > 100 us late. Clock: "
                     f"{s['clock']}; OS policy {sch.get('policy')}, nice {sch.get('nice')}, CPUs {sch.get('affinity')}, "
                     f"timer slack {sch.get('timer_slack_ns')} ns."]
     else:
