@@ -155,6 +155,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
     velocities = canned_velocities(cycles)
     xs = [float(x) for x in np.linspace(-0.021, 0.003, 257)]
     rows = []
+    controller_compute(compile_scene(scene_objects(1)), velocities, min(cycles, 2_000))  # warm-up, discarded
     for n in SIZES:
         compiled = compile_scene(scene_objects(n))
         naive = NaiveScene(compiled)
