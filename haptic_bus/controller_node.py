@@ -26,7 +26,6 @@ import logging
 import struct
 from typing import Any, Mapping
 
-import can
 import canopen
 from canopen import LocalNode, SdoAbortedError
 from canopen.objectdictionary import ODRecord, ODVariable, ObjectDictionary, datatypes
