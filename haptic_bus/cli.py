@@ -133,6 +133,12 @@ def _report(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _bench(argv: Sequence[str]) -> int:
+    from haptic_bus.bench import main as bench_main
+
+    return bench_main(list(argv))
+
+
 def _sim(argv: Sequence[str]) -> int:
     from sim_drive.cli import main as sim_main
 
@@ -190,11 +196,13 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--out", required=True, help="output directory")
     report.set_defaults(handler=_report)
 
+    sub.add_parser("bench", help="run time against error, the bus against its limit (see: haptic-bus bench --help)",
+                   add_help=False)
     sub.add_parser("sim", help="run the simulated CiA-402 drive (see: haptic-bus sim --help)", add_help=False)
     return parser
 
 
-_PASS_THROUGH: dict[str, Callable[[Sequence[str]], int]] = {"sim": _sim}
+_PASS_THROUGH: dict[str, Callable[[Sequence[str]], int]] = {"sim": _sim, "bench": _bench}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

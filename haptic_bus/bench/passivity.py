@@ -35,6 +35,7 @@ the accumulated correction.
 
 from __future__ import annotations
 
+import importlib
 import math
 import warnings
 from dataclasses import dataclass
@@ -43,7 +44,7 @@ from typing import Callable
 import numpy as np
 
 from haptic_bus.bench.timing import time_per_call, timed_once
-from haptic_bus.closed_form import velocity_sampling_factor, velocity_sampling_slack
+from haptic_bus.closed_form import region_map, velocity_sampling_factor, velocity_sampling_slack
 from haptic_bus.criterion import exact_verdict
 from haptic_bus.frequency import z_fund
 from haptic_bus.limits import max_damping, max_stiffness
@@ -190,13 +191,18 @@ def _methods(grid_sizes: tuple[int, ...], with_control: bool) -> list[_Method]:
     return methods
 
 
+def _region_map_time(loop: WallLoop) -> float:
+    """Seconds for one eq. (24) passive-region map over 10^6 (alpha, beta) points."""
+    alpha, beta = np.meshgrid(np.logspace(-2, 3, 1000), np.logspace(-3, 2, 1000))
+    return time_per_call(lambda: region_map(alpha, beta, loop.c), repeats=3)
+
+
 def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 1; returns its section of ``bench.json``."""
     from haptic_bus.bench.mp_boundary import reference_boundary
 
     try:
-        import control  # noqa: F401
-
+        importlib.import_module("control")
         with_control, control_note = True, None
     except ImportError as exc:
         with_control, control_note = False, f"python-control not installed ({exc}); pip install 'haptic_bus[bench]'"
@@ -240,6 +246,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
                 times[method.key].append(time_per_call(lambda: method.check(loop), repeats=5))
         per_point.append(record)
     exact_time = float(np.median(times["exact"]))
+    region = _region_map_time(points[0])
     summary = []
     for method in methods:
         errs = errors[method.key]["K"] + errors[method.key]["B"]
@@ -265,5 +272,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
             "(continuous and discrete systems cannot be interconnected in python-control)"),
         "grid_note": "uniform theta = pi i/N, i = 1..N, pi included; boundary by Newton on the method's own margin "
                      "from the reference, slope of the exact margin",
+        "region_map_1e6_s": region,
+        "region_map_note": "closed_form.region_map on a 1000 x 1000 (alpha, beta) mesh (eq. 24 at the point's c)",
         "all_references_verified": all(e["reference_verified"] for p in per_point for e in p["boundaries"].values()),
     }

@@ -22,7 +22,6 @@ the largest excursion), whichever is larger.  Time: per simulated second (median
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Callable
 

@@ -64,6 +64,7 @@ def markdown(result: dict) -> str:
         out += ["", f"Relative error of the largest passive K (at the point's B) and B (at its K) against a "
                     f"40-digit mpmath reference (all references verified: {s['all_references_verified']}). "
                     f"Exact criterion's boundary search: {_t(s['boundary_time_s'].get('exact'))} per boundary. "
+                    f"Eq. (24) region map over 10^6 (alpha, beta) points: {_t(s.get('region_map_1e6_s'))}. "
                     f"python-control: {s['control_note']}."]
     else:
         out.append(_unavailable(s or {"available": False, "reason": "not run"}))
