@@ -97,7 +97,8 @@ def format_demo(result: DemoResult) -> str:
                  f"interface {s.interface_energy * 1e3:.4g} mJ (wall + b v^2 + kinetic; below zero in "
                  f"{s.observer_active_cycles} cycles), wall alone {s.wall_energy * 1e3:.4g} mJ")
     p = s.compute_percentiles
-    lines.append(f"cycle compute: p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us, max {p['max'] * 1e6:.1f} us")
+    lines.append(f"cycle compute, TPDO in to RPDO sent (position, scene, conversion, encode, send): "
+                 f"p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us, max {p['max'] * 1e6:.1f} us")
     if s.error:
         lines.append(f"run ended early: {s.error}")
     lines.append("wrote: " + ", ".join(str(f) for f in result.files))

@@ -13,6 +13,9 @@ COLUMNS = ("time_s", "velocity_m_per_s", "position_m", "force_n", "torque_permil
 class RunRecord:
     """A ring buffer of per-cycle rows (columns: :data:`COLUMNS`, SI units).
 
+    ``compute_s`` runs from the drive's inputs in hand to the outputs handed to the drive
+    (position, scene, saturation, conversion, and the drive's encode and send).
+
     Memory is fixed at start (``capacity`` rows of 7 floats); once full, the oldest rows give
     way, so a fault after an hour still leaves the last ``capacity`` cycles to look at.
     """
