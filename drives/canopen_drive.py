@@ -40,19 +40,15 @@ import can
 import canopen
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
-from drives.base import CyclicInputs, Drive, DriveError, DriveFault, DriveProtocolError, DriveScaling, DriveTimeout
+from drives.base import CyclicInputs, DriveError, DriveFault, DriveProtocolError, DriveScaling, DriveTimeout
 from drives.bus_config import open_bus
 from drives.canopen_od import default_eds_path, find_scaling_objects, load_object_dictionary, object_name
 from drives.cia402 import (
     CONTROLWORD,
-    CW_FAULT_RESET,
     MAX_TORQUE,
-    MODES_OF_OPERATION,
-    MODES_OF_OPERATION_DISPLAY,
     MOTOR_RATED_TORQUE,
     POSITION_ACTUAL,
     STATUSWORD,
-    SUPPORTED_DRIVE_MODES,
     TARGET_TORQUE,
     VELOCITY_ACTUAL,
     Command,
@@ -61,9 +57,8 @@ from drives.cia402 import (
     OperationMode,
     State,
     decode_statusword,
-    path_to_operation_enabled,
-    supports,
 )
+from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master, DriveStateError, UnsupportedModeError, state_name
 from drives.emcy import EmcyMessage, decode_emcy
 from drives.pdo_codec import MAX_PDO_BYTES, PdoCodec, object_spec
 
@@ -85,7 +80,6 @@ DEFAULT_TPDO: tuple[ObjectSpec, ...] = (STATUSWORD, VELOCITY_ACTUAL)
 DEFAULT_TPDO_WITH_POSITION: tuple[ObjectSpec, ...] = (STATUSWORD, VELOCITY_ACTUAL, POSITION_ACTUAL)
 DEFAULT_RPDO: tuple[ObjectSpec, ...] = (CONTROLWORD, TARGET_TORQUE)
 
-SAFE_CONTROLWORD = Command.DISABLE_VOLTAGE.word  # -> SWITCH ON DISABLED: no torque, handle free
 
 SYNC_COB_ID = 0x080
 NMT_START, NMT_PRE_OPERATIONAL, NMT_RESET_COMMUNICATION = 0x01, 0x80, 0x82
@@ -104,18 +98,6 @@ _EXPECTED_AFTER: dict[Command, State] = {
     Command.DISABLE_VOLTAGE: State.SWITCH_ON_DISABLED,
     Command.FAULT_RESET: State.SWITCH_ON_DISABLED,
 }
-
-
-class UnsupportedModeError(DriveError):
-    """The drive does not announce the requested mode of operation in 0x6502."""
-
-
-class DriveStateError(DriveTimeout):
-    """The CiA-402 state machine did not reach the expected state in time; ``state`` is where it stuck."""
-
-    def __init__(self, node: str, message: str, state: State | None) -> None:
-        self.state = state
-        super().__init__(node, message)
 
 
 @dataclass(slots=True)
@@ -157,11 +139,7 @@ def _pack(spec_type: DataType, value: int) -> bytes:
     return struct.pack("<" + spec_type.struct_format, value)
 
 
-def _state_name(state: State | None) -> str:
-    return state.value if state is not None else "an undefined state"
-
-
-class CanopenDrive(Drive):
+class CanopenDrive(Cia402Master):
     """A CiA-402 servo drive on CANopen, driven in cyclic synchronous torque mode.
 
     Bus, one of: ``network`` (a :class:`canopen.Network`, connected or not), ``bus`` (a
@@ -230,6 +208,7 @@ class CanopenDrive(Drive):
         self.sdo_timeout = sdo_timeout
         self.boot_timeout = boot_timeout
         self.state_timeout = state_timeout
+        self.max_commands_per_step = max(100, int(4 * state_timeout / max(period, 1e-4)))
         self.tpdo_timeout = tpdo_timeout
         self.max_missed_tpdos = max_missed_tpdos
         self.heartbeat_producer_ms = heartbeat_producer_ms
@@ -802,7 +781,7 @@ class CanopenDrive(Drive):
             raise self._trip(
                 DriveFault(
                     self.name,
-                    f"fault bit set in statusword 0x{statusword:04X} ({_state_name(decode_statusword(statusword))}){detail}",
+                    f"fault bit set in statusword 0x{statusword:04X} ({state_name(decode_statusword(statusword))}){detail}",
                     code=emcy.code if emcy is not None else None,
                 )
             )
@@ -867,40 +846,8 @@ class CanopenDrive(Drive):
             raise DriveError(self.name, "not connected; call connect() first")
         return decode_statusword(self._cycle_raw(self._hold_word()))
 
-    def _walk(self, goal: State, accept: tuple[State, ...] = ()) -> State:
-        """Drive the state machine to ``goal`` with cyclic exchanges; DriveStateError if a step stalls."""
-        statusword = self._cycle_raw(SAFE_CONTROLWORD if goal is State.SWITCH_ON_DISABLED else self._hold_word())
-        state = decode_statusword(statusword)
-        step_started = time.monotonic()
-        previous_word = SAFE_CONTROLWORD
-        exchanges = 0
-        limit = max(100, int(4 * self.state_timeout / max(self.period, 1e-4)))
-        while state is not goal and state not in accept:
-            if goal is State.SWITCH_ON_DISABLED:
-                command = Command.DISABLE_VOLTAGE
-            elif state is State.FAULT:
-                raise DriveStateError(self.name, f"drive is in FAULT (statusword 0x{statusword:04X}); call fault_reset() first", state)
-            else:
-                path = path_to_operation_enabled(state) if state is not None else ()
-                command = path[0] if path else None
-            word = command.word if command is not None else previous_word & ~CW_FAULT_RESET
-            if time.monotonic() - step_started > self.state_timeout or exchanges > limit:
-                sent = f"{command.name} (controlword 0x{word:04X})" if command is not None else f"controlword 0x{word:04X}"
-                raise DriveStateError(
-                    self.name,
-                    f"state machine stuck in {_state_name(state)} (statusword 0x{statusword:04X}) for "
-                    f"{self.state_timeout:.3g} s while sending {sent} towards {goal.value}",
-                    state,
-                )
-            statusword = self._cycle_raw(word)
-            exchanges += 1
-            previous_word = word
-            new_state = decode_statusword(statusword)
-            if new_state is not state:
-                state = new_state
-                step_started = time.monotonic()
-                exchanges = 0
-        return state
+    def _command(self, controlword: int) -> int:
+        return self._cycle_raw(controlword)
 
     def _hold_word(self) -> int:
         return self._controlword if self._tripped is None else SAFE_CONTROLWORD
@@ -909,35 +856,12 @@ class CanopenDrive(Drive):
         """Check 0x6502, write 0x6060, await 0x6061, walk to OPERATION ENABLED (timeouts per step)."""
         if not self._connected:
             raise DriveError(self.name, "not connected; call connect() first")
-        mode = OperationMode(mode)
-        if mode is not OperationMode.CYCLIC_SYNCHRONOUS_TORQUE:
-            raise UnsupportedModeError(
-                self.name, f"this master drives only CYCLIC_SYNCHRONOUS_TORQUE (10); {mode.name} ({int(mode)}) was asked"
-            )
-        supported = self.read_object(SUPPORTED_DRIVE_MODES)
-        if not supports(supported, mode):
-            raise UnsupportedModeError(
-                self.name,
-                f"0x6502 supported drive modes = 0x{supported:08X} lacks {mode.name} (bit {mode.supported_bit})",
-            )
-        self.write_object(MODES_OF_OPERATION, int(mode))
-        deadline = time.monotonic() + self.state_timeout
-        while True:
-            shown = self.read_object(MODES_OF_OPERATION_DISPLAY)
-            if shown == int(mode):
-                break
-            if time.monotonic() > deadline:
-                raise DriveStateError(
-                    self.name,
-                    f"0x6061 modes of operation display = {shown}, still not {int(mode)} ({mode.name}) "
-                    f"{self.state_timeout:.3g} s after writing 0x6060",
-                    None,
-                )
+        self._select_mode(mode)
         self._tripped = None
         self._pending_emcy = None
         self._pending_nmt = None
         self._missed_in_row = 0
-        self._walk(State.OPERATION_ENABLED)
+        self._walk(State.OPERATION_ENABLED, self._hold_word())
         self._controlword = Command.ENABLE_OPERATION.word
         self._armed = True
 
@@ -947,7 +871,7 @@ class CanopenDrive(Drive):
             return
         self._armed = False
         self._controlword = SAFE_CONTROLWORD
-        self._walk(State.SWITCH_ON_DISABLED, accept=(State.FAULT,))
+        self._walk(State.SWITCH_ON_DISABLED, SAFE_CONTROLWORD, accept=(State.FAULT,))
 
     def fault_reset(self) -> None:
         """Rising edge of controlword bit 7, then back to 0; check the drive leaves FAULT."""
@@ -957,20 +881,7 @@ class CanopenDrive(Drive):
         self._pending_emcy = None
         self._pending_nmt = None
         self._missed_in_row = 0
-        statusword = self._cycle_raw(SAFE_CONTROLWORD)  # bit 7 low: the edge needs a low phase
-        state = decode_statusword(statusword)
-        deadline = time.monotonic() + self.state_timeout
-        while state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
-            if time.monotonic() > deadline:
-                raise DriveStateError(
-                    self.name,
-                    f"still in {_state_name(state)} (statusword 0x{statusword:04X}) {self.state_timeout:.3g} s "
-                    f"after the fault reset edge",
-                    state,
-                )
-            statusword = self._cycle_raw(CW_FAULT_RESET if state is State.FAULT else SAFE_CONTROLWORD)
-            state = decode_statusword(statusword)
-        self._cycle_raw(SAFE_CONTROLWORD)  # bit 7 back to 0
+        self._reset_fault()
         self._controlword = SAFE_CONTROLWORD
         self._tripped = None
 

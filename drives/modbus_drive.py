@@ -49,26 +49,21 @@ from pymodbus.pdu.register_message import (
     WriteMultipleRegistersRequest,
 )
 
-from drives.base import CyclicInputs, Drive, DriveError, DriveFault, DriveProtocolError, DriveScaling, DriveTimeout
+from drives.base import CyclicInputs, DriveError, DriveFault, DriveProtocolError, DriveScaling, DriveTimeout
 from drives.cia402 import (
     CONTROLWORD,
-    CW_FAULT_RESET,
     ERROR_CODE,
     MAX_TORQUE,
-    MODES_OF_OPERATION,
-    MODES_OF_OPERATION_DISPLAY,
     MOTOR_RATED_TORQUE,
     STATUSWORD,
-    SUPPORTED_DRIVE_MODES,
     TARGET_TORQUE,
     Command,
     ObjectSpec,
     OperationMode,
     State,
     decode_statusword,
-    path_to_operation_enabled,
-    supports,
 )
+from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master, DriveStateError, UnsupportedModeError, state_name
 from drives.modbus_map import (
     INPUT_BLOCK,
     MAP_IDENTITY,
@@ -89,7 +84,6 @@ logger = logging.getLogger(__name__)
 __all__ = ["ModbusDrive", "ModbusStats", "ModbusLinkLost", "UnsupportedModeError", "DriveStateError", "CYCLE_MODES", "SAFE_CONTROLWORD"]
 
 CYCLE_MODES = ("split", "fc23")
-SAFE_CONTROLWORD = Command.DISABLE_VOLTAGE.word  # -> SWITCH ON DISABLED: no torque, handle free
 SW_FAULT = 1 << 3
 _TIMING_NAMES = {0: "cia402", 1: "ideal"}
 _CONTROLWORD_REG = register_for_object(CONTROLWORD)
@@ -99,18 +93,6 @@ _STATUSWORD_REG = register_for_object(STATUSWORD)
 
 class ModbusLinkLost(DriveTimeout):
     """The link to the drive is gone (dropped connection, or closed after a timeout); call reconnect()."""
-
-
-class UnsupportedModeError(DriveError):
-    """The drive does not announce the requested mode of operation in 0x6502."""
-
-
-class DriveStateError(DriveTimeout):
-    """The CiA-402 state machine did not reach the expected state in time; ``state`` is where it stuck."""
-
-    def __init__(self, node: str, message: str, state: State | None) -> None:
-        self.state = state
-        super().__init__(node, message)
 
 
 @dataclass(slots=True)
@@ -131,11 +113,7 @@ class ModbusStats:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
-def _state_name(state: State | None) -> str:
-    return state.value if state is not None else "an undefined state"
-
-
-class ModbusDrive(Drive):
+class ModbusDrive(Cia402Master):
     """A CiA-402 drive reached over Modbus TCP (``host``, ``port``) or RTU (``port`` = serial path).
 
     ``unit_id``: the Modbus unit (device id) 0..247; ``timeout`` (s): answer timeout of every
@@ -184,6 +162,7 @@ class ModbusDrive(Drive):
         self.cycle = cycle
         self.with_position = with_position
         self.state_timeout = state_timeout
+        self.max_commands_per_step = 10_000
         self.check_identity = check_identity
         self.serial_options = {"baudrate": baudrate, "parity": parity, "stopbits": stopbits, "bytesize": bytesize}
         self.address = f"rtu:{port}" if self.serial else f"tcp://{host}:{port}"
@@ -486,7 +465,7 @@ class ModbusDrive(Drive):
                 pass
             detail = f", error code 0x{code:04X}" if code is not None else ""
             raise self._trip(DriveFault(
-                self.name, f"fault bit set in statusword 0x{statusword:04X} ({_state_name(decode_statusword(statusword))}){detail}; torque set to zero",
+                self.name, f"fault bit set in statusword 0x{statusword:04X} ({state_name(decode_statusword(statusword))}){detail}; torque set to zero",
                 code=code,
             ))
         return inputs
@@ -529,60 +508,17 @@ class ModbusDrive(Drive):
     def _write_controlword(self, word: int) -> None:
         self.write_registers(_CONTROLWORD_REG.address, [word])
 
-    def _walk(self, goal: State, accept: tuple[State, ...] = ()) -> State:
-        """Controlword writes and statusword reads until ``goal``; DriveStateError if a step stalls."""
-        import time
-
-        statusword = self.statusword()
-        state = decode_statusword(statusword)
-        step_started = time.monotonic()
-        steps = 0
-        while state is not goal and state not in accept:
-            if goal is State.SWITCH_ON_DISABLED:
-                command: Command | None = Command.DISABLE_VOLTAGE
-            elif state is State.FAULT:
-                raise DriveStateError(self.name, f"drive is in FAULT (statusword 0x{statusword:04X}); call fault_reset() first", state)
-            else:
-                path = path_to_operation_enabled(state) if state is not None else ()
-                command = path[0] if path else None
-            word = command.word if command is not None else SAFE_CONTROLWORD
-            if time.monotonic() - step_started > self.state_timeout or steps > 10_000:
-                raise DriveStateError(
-                    self.name,
-                    f"state machine stuck in {_state_name(state)} (statusword 0x{statusword:04X}) for "
-                    f"{self.state_timeout:.3g} s while writing controlword 0x{word:04X} towards {goal.value}",
-                    state,
-                )
-            self._write_controlword(word)
-            statusword = self.statusword()
-            steps += 1
-            new_state = decode_statusword(statusword)
-            if new_state is not state:
-                state = new_state
-                step_started = time.monotonic()
-                steps = 0
-        return state
+    def _command(self, controlword: int) -> int:
+        self._write_controlword(controlword)
+        return self.statusword()
 
     def enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
         """Check 0x6502, write 0x6060, await 0x6061, zero 0x6071, walk to OPERATION ENABLED."""
-        import time
-
         self._require_connected()
-        mode = OperationMode(mode)
-        if mode is not OperationMode.CYCLIC_SYNCHRONOUS_TORQUE:
-            raise UnsupportedModeError(self.name, f"this master drives only CYCLIC_SYNCHRONOUS_TORQUE (10); {mode.name} ({int(mode)}) was asked")
-        supported = self.read_object(SUPPORTED_DRIVE_MODES)
-        if not supports(supported, mode):
-            raise UnsupportedModeError(self.name, f"0x6502 supported drive modes = 0x{supported:08X} lacks {mode.name} (bit {mode.supported_bit})")
-        self.write_object(MODES_OF_OPERATION, int(mode))
-        deadline = time.monotonic() + self.state_timeout
-        while (shown := self.read_object(MODES_OF_OPERATION_DISPLAY)) != int(mode):
-            if time.monotonic() > deadline:
-                raise DriveStateError(self.name, f"0x6061 modes of operation display = {shown}, still not {int(mode)} ({mode.name}) "
-                                                 f"{self.state_timeout:.3g} s after writing 0x6060", None)
+        self._select_mode(mode)
         self.write_object(TARGET_TORQUE, 0)  # no stale torque at the enable edge
         self._tripped = None
-        self._walk(State.OPERATION_ENABLED)
+        self._walk(State.OPERATION_ENABLED, self._controlword)
         self._controlword = Command.ENABLE_OPERATION.word
         self._cached = None
         self._armed = True
@@ -594,26 +530,13 @@ class ModbusDrive(Drive):
         self._armed = False
         self._controlword = SAFE_CONTROLWORD
         self.write_object(TARGET_TORQUE, 0)
-        self._walk(State.SWITCH_ON_DISABLED, accept=(State.FAULT,))
+        self._walk(State.SWITCH_ON_DISABLED, SAFE_CONTROLWORD, accept=(State.FAULT,))
 
     def fault_reset(self) -> None:
         """Rising edge of controlword bit 7 (low, high, low); check the drive leaves FAULT."""
-        import time
-
         self._require_connected()
         self._armed = False
-        self._write_controlword(SAFE_CONTROLWORD)  # the edge needs a low phase
-        deadline = time.monotonic() + self.state_timeout
-        statusword = self.statusword()
-        state = decode_statusword(statusword)
-        while state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
-            if time.monotonic() > deadline:
-                raise DriveStateError(self.name, f"still in {_state_name(state)} (statusword 0x{statusword:04X}) "
-                                                 f"{self.state_timeout:.3g} s after the fault reset edge", state)
-            self._write_controlword(CW_FAULT_RESET if state is State.FAULT else SAFE_CONTROLWORD)
-            statusword = self.statusword()
-            state = decode_statusword(statusword)
-        self._write_controlword(SAFE_CONTROLWORD)
+        self._reset_fault()
         self._controlword = SAFE_CONTROLWORD
         self._tripped = None
 
