@@ -257,6 +257,9 @@ class ModbusDrive(Cia402Master):
             raise DriveError(self.name, "the drive object is closed; create a new one")
         if self._connected:
             return
+        self._establish()
+
+    def _establish(self) -> None:
         self._open()
         try:
             self._configure()
@@ -275,13 +278,7 @@ class ModbusDrive(Cia402Master):
         self._drop_link()
         self._connected = False
         self._armed = False
-        self._open()
-        try:
-            self._configure()
-        except BaseException:
-            self._drop_link()
-            raise
-        self._connected = True
+        self._establish()
 
     def _configure(self) -> None:
         if self.check_identity:
