@@ -148,12 +148,12 @@ class CompiledScene:
 
     def contacts(self) -> dict[tuple[float, float], tuple[str, ...]]:
         """Every distinct summed ``(K, B)`` that can act on the handle at once, with the names
-        of the objects that make it up (overlapping objects add)."""
-        found: dict[tuple[float, float], tuple[str, ...]] = {}
+        of every object that makes it up somewhere (overlapping objects add)."""
+        found: dict[tuple[float, float], set[str]] = {}
         for k, b, names in zip(self.stiffness, self.damping, self.contributors):
             if k > 0 or b > 0:
-                found.setdefault((k, b), names)
-        return found
+                found.setdefault((k, b), set()).update(names)
+        return {wall: tuple(sorted(names)) for wall, names in found.items()}
 
     def by_name(self) -> dict[str, SceneObject]:
         return {obj.name: obj for obj in self.objects}

@@ -110,3 +110,8 @@ def test_bad_scene_input_names_the_field(build, field: str) -> None:
     with pytest.raises(ParameterError) as info:
         build()
     assert info.value.name == field and "allowed" in str(info.value)
+
+
+def test_a_contact_wall_names_every_object_that_makes_it() -> None:
+    detents = [Detent(name, center, 0.002, 300.0, 2.0) for name, center in (("left", -0.01), ("home", 0.0), ("right", 0.01))]
+    assert compile_scene(detents).contacts() == {(300.0, 2.0): ("home", "left", "right")}
