@@ -54,8 +54,9 @@ class Wall:
     damping: float
 
     def __post_init__(self) -> None:
-        if self.normal not in (-1, 1):
+        if isinstance(self.normal, bool) or self.normal not in (-1, 1):
             raise ParameterError("normal", self.normal, "-1 (solid above position) or +1 (solid below)", f"wall {self.name!r}")
+        object.__setattr__(self, "normal", int(self.normal))
         K, B = _validated(self.name, self.stiffness, self.damping, "wall")
         object.__setattr__(self, "stiffness", K)
         object.__setattr__(self, "damping", B)

@@ -98,6 +98,7 @@ def test_safety_margin_and_strict_bandwidth_policy() -> None:
 
 @pytest.mark.parametrize("build,field", [
     (lambda: Wall("w", 0.0, 0, 1.0, 1.0), "normal"),
+    (lambda: Wall("w", 0.0, True, 1.0, 1.0), "normal"),
     (lambda: Wall("w", math.nan, -1, 1.0, 1.0), "position"),
     (lambda: Wall("w", 0.0, -1, -1.0, 1.0), "stiffness"),
     (lambda: Slot("s", 0.1, 0.0, 1.0, 1.0), "high"),
