@@ -256,3 +256,22 @@ def test_a_frame_with_the_wrong_length_is_dropped_counted_and_the_run_goes_on() 
         dropped, missed = drive.stats.dropped_frames, drive.stats.missed_tpdos
     assert summary.error is None and summary.cycles == 300
     assert dropped == 1 and missed == 1  # never decoded; that cycle held the last velocity
+
+
+def test_real_clock_paces_the_loop_and_reports_every_late_start() -> None:
+    """The deadline scheduler at T = 1 ms for 100 cycles: every start's lateness is kept and
+    summarised, overruns counted (no threshold asserted: this machine is shared)."""
+    from haptic_bus.clock import RealClock
+
+    profile = seed_at_the_wall()
+    with simulated_canopen(profile) as (sim, drive):
+        controller = controller_for(profile, drive, clock=RealClock(1e-3))
+        started = time.perf_counter()
+        summary = controller.run(100)
+        elapsed = time.perf_counter() - started
+    assert summary.error is None and summary.cycles == 100
+    assert elapsed >= 0.099  # paced: the 100th start is due 99 ms after the first
+    late = controller.clock.lateness()
+    assert late.size == 100 and np.all(late >= 0)
+    assert set(summary.lateness_percentiles) == {"p50", "p99", "p99.9", "max"}
+    assert summary.overruns == int(np.sum(late > 1e-3)) and summary.clock.startswith("real")
