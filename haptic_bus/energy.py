@@ -40,7 +40,7 @@ from scipy.signal import lfilter
 from haptic_bus.errors import ParameterError
 from haptic_bus.frequency import seed_t_zw, t_fund
 from haptic_bus.loop import WallLoop
-from haptic_bus.plant import ExactPlant, phi1_array, zoh_coefficients
+from haptic_bus.plant import ExactPlant, phi1_array, phi2_array, zoh_coefficients
 from haptic_bus.poles import characteristic_polynomial, spectral_radius
 from haptic_bus.validation import real_in_range, whole_in_range
 
@@ -197,25 +197,11 @@ class EnergyRecord:
         tau = when - index * h
         c = self.loop.b * tau / self.loop.m
         p_v = tau * phi1_array(c)
-        p_f = tau * tau / self.loop.m * _phi2_array(c)
+        p_f = tau * tau / self.loop.m * phi2_array(c)
         k = index // self.substeps
         w = self.operator_force[index]
         displacement = p_v * self.velocity[index] + p_f * (w - self.wall_force[k])
         return self.energy[index] + w * displacement
-
-
-def _phi2_array(c: np.ndarray) -> np.ndarray:
-    """``(c - 1 + e^-c)/c^2`` for real ``c >= 0`` (series below 0.1, limit 1/2)."""
-    c = np.asarray(c, dtype=float)
-    small = c < 0.1
-    series = np.zeros_like(c)
-    term = np.full_like(c, 0.5)
-    series += term
-    for n in range(1, 9):
-        term = term * (-c) / (n + 2)
-        series += term
-    safe = np.where(small, 1.0, c)
-    return np.where(small, series, (safe + np.expm1(-safe)) / (safe * safe))
 
 
 def _check_run(n_samples: int, substeps: int) -> tuple[int, int]:

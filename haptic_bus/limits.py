@@ -1,7 +1,9 @@
 """The largest passive wall: ``K`` for a given ``B``, and ``B`` for a given ``K``.
 
-Eq. (23)'s flip boundary ``P(-1) = 0`` bounds every passive wall from above (beyond it a
-closed-loop pole leaves the unit circle through ``z = -1``):
+Eq. (23)'s flip boundary ``P(-1) = 0`` bounds every passive wall from above for ``d = 0``
+(beyond it a closed-loop pole leaves the unit circle through ``z = -1``); for ``d >= 1`` it is
+used as the upper end of the search, an assumption (no passive wall beyond the ``d = 0`` flip
+value, and the passive set starting at 0) that grid maps agree with but that is not proven:
 
     K_flip = 2 (b / tanh(c/2) - B) / T,     B_flip = b / tanh(c/2) - K T / 2,     c = bT/m.
 

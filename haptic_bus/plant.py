@@ -51,6 +51,19 @@ def phi1_array(c: ArrayLike) -> np.ndarray:
     return np.where(c == 0.0, 1.0, -np.expm1(-safe) / safe)
 
 
+def phi2_array(c: ArrayLike) -> np.ndarray:
+    """Vectorised :func:`phi2` over an array of ``c >= 0`` (same series below 0.1)."""
+    c = np.asarray(c, dtype=float)
+    small = c < _PHI2_SERIES_BELOW
+    term = np.full_like(c, 0.5)
+    series = term.copy()
+    for n in range(1, _PHI2_TERMS):
+        term = term * (-c) / (n + 2)
+        series += term
+    safe = np.where(small, 1.0, c)
+    return np.where(small, series, (safe + np.expm1(-safe)) / (safe * safe))
+
+
 @dataclass(frozen=True)
 class ZohCoefficients:
     """Exact ZOH step of the plant over ``h`` seconds.
