@@ -96,7 +96,7 @@ class WallController:
         self.clock = clock if clock is not None else VirtualClock(self.period)
         self.decision = gate.admit(scene)
         self._scene = scene
-        self._pending: CompiledScene | None = None
+        self._latest = scene  # the last accepted upload; the loop adopts it at a cycle boundary
         self._upload_lock = threading.Lock()
         scaling = drive.scaling
         self.integrator = PositionIntegrator(self.period, scaling.velocity_per_count, origin)
@@ -117,14 +117,14 @@ class WallController:
 
     @property
     def latest_scene(self) -> CompiledScene:
-        """The scene of the last accepted upload (staged for the next cycle) or the running one."""
-        return self._pending or self._scene
+        """The scene of the last accepted upload (running, or staged for the next cycle)."""
+        return self._latest
 
     def upload_scene(self, scene: CompiledScene) -> GateDecision:
         """Gate ``scene`` and stage it for the next cycle boundary; raise GateRefusal if refused."""
         with self._upload_lock:
             decision = self.gate.admit(scene)
-            self._pending = scene
+            self._latest = scene
             return decision
 
     def set_wall(self, name: str, stiffness: float, damping: float) -> GateDecision:
@@ -134,7 +134,7 @@ class WallController:
     def set_walls(self, changes: dict[str, tuple[float, float]]) -> GateDecision:
         """Change several objects' ``(K, B)`` as one upload: all pass the gate, or none applies."""
         with self._upload_lock:
-            base = self._pending or self._scene
+            base = self._latest
             objects = base.by_name()
             unknown = sorted(set(changes) - set(objects))
             if unknown:
@@ -142,17 +142,16 @@ class WallController:
             changed = [obj.with_parameters(*changes[obj.name]) if obj.name in changes else obj for obj in base.objects]
             scene = compile_scene(changed)
             decision = self.gate.admit(scene)
-            self._pending = scene
+            self._latest = scene
             return decision
 
     # ------------------------------------------------------------------ the cycle
 
     def step(self) -> None:
         """One cycle: inputs, position, force, saturation, torque out, observer, record."""
-        pending = self._pending
-        if pending is not None:  # the cycle boundary: the whole staged scene, or nothing
-            self._pending = None
-            self._scene = pending
+        latest = self._latest  # one read: the whole accepted scene, never half of one
+        if latest is not self._scene:  # nothing is cleared, so no upload can be lost
+            self._scene = latest
             self.applied_scenes += 1
         inputs = self.drive.read_inputs()
         started = time.perf_counter()
