@@ -25,16 +25,12 @@ import can
 import pytest
 
 from drives.canopen_drive import CanopenDrive
+from tests.sim_fixtures import VCAN0_MISSING
 
 REPO = Path(__file__).resolve().parents[1]
 NODE_ID = 5
 UDP_GROUP = "239.74.163.2"
 HEARTBEAT_WAIT = 15.0  # s: the simulator subprocess imports numpy/scipy/canopen first
-
-
-def has_vcan0() -> bool:
-    """True if the kernel offers the SocketCAN interface vcan0."""
-    return Path("/sys/class/net/vcan0").exists()
 
 
 INTERFACE_PARAMS = [
@@ -43,11 +39,7 @@ INTERFACE_PARAMS = [
     pytest.param(
         "socketcan",
         id="vcan0-2-processes",
-        marks=pytest.mark.skipif(
-            not has_vcan0(),
-            reason="SocketCAN vcan0 is not available on this kernel (create it with: "
-            "modprobe vcan; ip link add dev vcan0 type vcan; ip link set up vcan0)",
-        ),
+        marks=VCAN0_MISSING,
     ),
 ]
 

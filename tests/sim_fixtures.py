@@ -126,3 +126,10 @@ class SimProcess:
             pytest.fail(f"simulated drive did not stop on {sig.name} within {timeout} s")
         self._log.seek(0)
         return self.process.returncode, self._log.read()
+
+
+VCAN0_MISSING = pytest.mark.skipif(
+    not pathlib.Path("/sys/class/net/vcan0").exists(),
+    reason="SocketCAN vcan0 does not exist on this kernel "
+    "(create it with: modprobe vcan; ip link add dev vcan0 type vcan; ip link set up vcan0)",
+)

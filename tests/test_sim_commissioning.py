@@ -24,7 +24,6 @@ canopen 2.4.1 quirks worked around here (the drive is not bent to them):
 from __future__ import annotations
 
 import contextlib
-import pathlib
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -34,12 +33,11 @@ import pytest
 
 from sim_drive.canopen_slave import CanopenSimDrive
 from sim_drive.eds import eds_path
-from tests.sim_fixtures import SimProcess, unique_multicast, unique_name
+from tests.sim_fixtures import VCAN0_MISSING, SimProcess, unique_multicast, unique_name
 
 NODE = 7
 BOOT_WAIT = 20.0  # s: a subprocess imports numpy, canopen, python-can before it boots
 SYNC_PERIOD = 0.002  # s
-VCAN = pathlib.Path("/sys/class/net/vcan0")
 
 INTERFACES = [
     pytest.param("virtual", id="virtual-in-process"),
@@ -47,10 +45,7 @@ INTERFACES = [
     pytest.param(
         "socketcan",
         id="vcan0-subprocess",
-        marks=pytest.mark.skipif(
-            not VCAN.exists(),
-            reason="SocketCAN vcan0 does not exist on this kernel (modprobe vcan; ip link add dev vcan0 type vcan; ip link set up vcan0)",
-        ),
+        marks=VCAN0_MISSING,
     ),
 ]
 
