@@ -26,7 +26,7 @@ import can
 from drives.bus_config import parse_bus_option
 from haptic_bus.errors import ParameterError
 from sim_drive.bus_timing import BusLoadMeter
-from sim_drive.canopen_slave import CanopenSimDrive
+from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.eds import eds_path
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import load_profile

@@ -46,7 +46,7 @@ from drives.cia402 import (
     supports,
 )
 from haptic_bus.errors import HapticBusError
-from haptic_bus.plant import ExactPlant
+from haptic_bus.analysis.plant import ExactPlant
 from sim_drive.operator import NoOperator, OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
 

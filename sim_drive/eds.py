@@ -1,7 +1,7 @@
 """Where the simulated drive's EDS (electronic data sheet) is shipped.
 
 ``haptic_sim_drive.eds`` describes the CANopen object dictionary of
-:class:`sim_drive.canopen_slave.CanopenSimDrive`: communication objects (0x1000-0x1A03),
+:class:`sim_drive.canopen.slave.CanopenSimDrive`: communication objects (0x1000-0x1A03),
 the CiA-402 objects it implements, and the manufacturer area (REAL64 values in SI units):
 
 ========  ===  =========================================================

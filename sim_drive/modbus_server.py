@@ -1,4 +1,4 @@
-"""The simulated CiA-402 drive as a real pymodbus TCP server (register map: :mod:`drives.modbus_map`).
+"""The simulated CiA-402 drive as a real pymodbus TCP server (register map: :mod:`drives.modbus.register_map`).
 
     haptic-bus sim --modbus tcp://127.0.0.1:PORT [--timing cia402|ideal] [--profile P]
                    [--unit-id N] [--word-order big|little] [--realtime]
@@ -51,7 +51,7 @@ from pymodbus.server import ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
 
 from drives.cia402 import State
-from drives.modbus_map import (
+from drives.modbus.register_map import (
     INPUT_BLOCK,
     INPUT_BLOCK_COUNT,
     MAP_IDENTITY,

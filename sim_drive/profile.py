@@ -1,6 +1,6 @@
 """What the simulated drive reads from an operator profile (``--profile NAME_OR_PATH``).
 
-The same TOML files the controller loads (``profiles/*.toml``, see ``haptic_bus.profiles``):
+The same TOML files the controller loads (``profiles/*.toml``, see ``haptic_bus.app.profiles``):
 from ``[device]`` the plant and scaling (``mass`` kg, ``friction`` N s/m, ``velocity_per_count``,
 ``position_per_count``, ``rated_torque`` N m, ``force_per_torque``, ``max_torque_permille``),
 from ``[loop]`` the ``period`` (s) and ``timing``, and ``[operator_model]`` (see

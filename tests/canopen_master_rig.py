@@ -24,7 +24,7 @@ from typing import Any, Iterator
 import can
 import pytest
 
-from drives.canopen_drive import CanopenDrive
+from drives.canopen.drive import CanopenDrive
 from tests.sim_fixtures import VCAN0_MISSING
 
 REPO = Path(__file__).resolve().parents[1]
@@ -121,7 +121,7 @@ class Rig:
 
     drive: CanopenDrive
     spec: BusSpec
-    sim: Any = None  # sim_drive.canopen_slave.CanopenSimDrive when in process
+    sim: Any = None  # sim_drive.canopen.slave.CanopenSimDrive when in process
     process: SimProcess | None = None
 
 
@@ -133,7 +133,7 @@ def rig(
     spec = new_bus_spec(interface)
     sim = process = None
     if interface == "virtual":
-        from sim_drive.canopen_slave import CanopenSimDrive
+        from sim_drive.canopen.slave import CanopenSimDrive
 
         sim = CanopenSimDrive({"interface": "virtual", "channel": spec.channel}, node_id, timing=timing).start()
     else:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import mpmath as mp
 
-from haptic_bus.loop import WallLoop
+from haptic_bus.analysis.loop import WallLoop
 
 mp.mp.dps = 60
 

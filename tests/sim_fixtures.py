@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import can
 import pytest
 
-from sim_drive.canopen_slave import CanopenSimDrive
+from sim_drive.canopen.slave import CanopenSimDrive
 from drives.cia402 import Command
 
 REPO = pathlib.Path(__file__).resolve().parents[1]

@@ -7,7 +7,7 @@ import struct
 import pytest
 
 from drives.bus_config import BusConfigError, resolve_bus_config
-from drives.canopen_drive import split_into_frames
+from drives.canopen.drive import split_into_frames
 from drives.cia402 import (
     CONTROLWORD,
     MODES_OF_OPERATION,
@@ -20,7 +20,7 @@ from drives.cia402 import (
     ObjectSpec,
 )
 from drives.emcy import decode_emcy, describe_emcy_code
-from drives.pdo_codec import PdoCodec, PdoLengthError, saturate
+from drives.canopen.pdo_codec import PdoCodec, PdoLengthError, saturate
 
 
 def test_default_tpdo_layout_and_mapping_words():

@@ -15,7 +15,7 @@ import pytest
 
 from drives.base import DriveFault, DriveProtocolError, DriveScaling, DriveTimeout
 from drives.bus_config import BusConfigError
-from drives.canopen_drive import SAFE_CONTROLWORD, CanopenDrive, DriveStateError, UnsupportedModeError
+from drives.canopen.drive import SAFE_CONTROLWORD, CanopenDrive, DriveStateError, UnsupportedModeError
 from drives.cia402 import CONTROLWORD, STATUSWORD, SUPPORTED_DRIVE_MODES, OperationMode, State, decode_statusword
 from tests.canopen_master_rig import NODE_ID, new_bus_spec, rig
 
@@ -277,7 +277,7 @@ def test_torque_saturates_at_0x6072_never_wraps():
 
 def test_bus_from_python_can_environment(monkeypatch):
     spec = new_bus_spec("virtual")
-    from sim_drive.canopen_slave import CanopenSimDrive
+    from sim_drive.canopen.slave import CanopenSimDrive
 
     monkeypatch.setenv("CAN_INTERFACE", "virtual")
     monkeypatch.setenv("CAN_CHANNEL", spec.channel)
@@ -289,7 +289,7 @@ def test_bus_from_python_can_environment(monkeypatch):
 
 def test_given_bus_and_network_are_not_shut_down():
     spec = new_bus_spec("virtual")
-    from sim_drive.canopen_slave import CanopenSimDrive
+    from sim_drive.canopen.slave import CanopenSimDrive
 
     with CanopenSimDrive({"interface": "virtual", "channel": spec.channel}, NODE_ID):
         with spec.open() as bus:

@@ -5,7 +5,7 @@ objects 0x2000.. carry its plant and operator model), so it runs unchanged on py
 ``virtual`` bus in one process, on ``udp_multicast`` with the simulator in a second process
 (``python -m sim_drive``, stopped with SIGTERM), and on SocketCAN ``vcan0`` where it exists.
 
-Numbers are checked against the exact discrete responses (:mod:`haptic_bus.plant`), with
+Numbers are checked against the exact discrete responses (:mod:`haptic_bus.analysis.plant`), with
 tolerances that follow from the quantisation of the drive's units:
 
 * velocity: 0x606C rounds to whole counts, so ``|v_measured - v_exact| <= q_v / 2`` (plus
@@ -26,9 +26,9 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from drives.canopen_drive import DEFAULT_TPDO_WITH_POSITION
+from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
 from drives.cia402 import State, decode_statusword
-from haptic_bus.plant import ExactPlant, zoh_coefficients
+from haptic_bus.analysis.plant import ExactPlant, zoh_coefficients
 from tests.canopen_master_rig import INTERFACE_PARAMS, rig
 
 # The seed's device and wall.

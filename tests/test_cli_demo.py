@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from PIL import Image
 
-from haptic_bus.cli import main
+from haptic_bus.app.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -25,7 +25,7 @@ def _is_real_png(path: Path, min_colours: int = 8) -> bool:
 
 def test_demo_runs_as_a_command_and_writes_real_plots(tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    done = subprocess.run([sys.executable, "-m", "haptic_bus.cli", "demo", "--out", str(tmp_path)],
+    done = subprocess.run([sys.executable, "-m", "haptic_bus.app.cli", "demo", "--out", str(tmp_path)],
                           cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     out = done.stdout

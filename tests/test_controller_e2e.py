@@ -14,18 +14,18 @@ import numpy as np
 import pytest
 from canopen import SdoAbortedError
 
-from haptic_bus.cli import main
-from haptic_bus.controller import WallController, encoder_origin
-from haptic_bus.controller_node import ABORT_INVALID_VALUE, ControllerNode, upload_walls
-from haptic_bus.criterion import exact_verdict
-from haptic_bus.design import force_step_response
-from haptic_bus.energy import commensurate_theta
-from haptic_bus.frequency import t_fund
-from haptic_bus.gate import DeviceLoop, GateRefusal, PassivityGate
-from haptic_bus.loop import WallLoop
-from haptic_bus.profiles import load_profile
-from haptic_bus.scene import Wall, compile_scene
-from haptic_bus.session import simulated_canopen
+from haptic_bus.app.cli import main
+from haptic_bus.control.controller import WallController, encoder_origin
+from haptic_bus.control.node import ABORT_INVALID_VALUE, ControllerNode, upload_walls
+from haptic_bus.analysis.criterion import exact_verdict
+from haptic_bus.analysis.design import force_step_response
+from haptic_bus.analysis.energy import commensurate_theta
+from haptic_bus.analysis.frequency import t_fund
+from haptic_bus.control.gate import DeviceLoop, GateRefusal, PassivityGate
+from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.app.profiles import load_profile
+from haptic_bus.control.scene import Wall, compile_scene
+from haptic_bus.app.rig import simulated_canopen
 from sim_drive.operator import ConstantPush, Sinusoid, StepPush
 
 
@@ -264,7 +264,7 @@ def test_a_frame_with_the_wrong_length_is_dropped_counted_and_the_run_goes_on() 
 def test_real_clock_paces_the_loop_and_reports_every_late_start() -> None:
     """The deadline scheduler at T = 1 ms for 100 cycles: every start's lateness is kept and
     summarised, overruns counted (no threshold asserted: this machine is shared)."""
-    from haptic_bus.clock import RealClock
+    from haptic_bus.control.clock import RealClock
 
     profile = seed_at_the_wall()
     with simulated_canopen(profile) as (sim, drive):

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from haptic_bus.controller import PositionIntegrator
-from haptic_bus.observer import PassivityObserver
-from haptic_bus.record import COLUMNS, RunRecord
+from haptic_bus.control.controller import PositionIntegrator
+from haptic_bus.control.observer import PassivityObserver
+from haptic_bus.control.record import COLUMNS, RunRecord
 
 
 def test_ten_million_cycles_add_no_rounding_drift() -> None:

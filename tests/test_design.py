@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy.signal import residuez
 
-from haptic_bus.closed_form import velocity_sampling_slack
-from haptic_bus.criterion import exact_verdict
-from haptic_bus.design import (
+from haptic_bus.analysis.closed_form import velocity_sampling_slack
+from haptic_bus.analysis.criterion import exact_verdict
+from haptic_bus.analysis.design import (
     BANDWIDTH_ALPHA,
     SEED_PERIODS,
     bandwidth_rule,
@@ -21,8 +21,8 @@ from haptic_bus.design import (
     passive_region_curves,
     step_transfer_function,
 )
-from haptic_bus.energy import simulate
-from haptic_bus.loop import WallLoop
+from haptic_bus.analysis.energy import simulate
+from haptic_bus.analysis.loop import WallLoop
 
 M, B_FRICTION, T = 0.5, 0.1, 1e-3
 SEED = WallLoop(M, B_FRICTION, T, 200.0, 100.0, 0)
@@ -128,7 +128,7 @@ def test_nyquist_with_one_sample_delay_crosses_into_the_left_half_plane():
 
 def test_seed_t_zw_gap_to_t_fund_at_nyquist_is_two_percent():
     """DESIGN 3.2's "about 2 % near pi": it is 1.93 % at theta = pi itself (but see test_energy)."""
-    from haptic_bus.frequency import seed_t_zw, t_fund
+    from haptic_bus.analysis.frequency import seed_t_zw, t_fund
 
     gap = seed_t_zw(SEED, math.pi)[0].real / t_fund(SEED, math.pi)[0].real - 1
     assert gap == pytest.approx(0.0193, abs=5e-4)

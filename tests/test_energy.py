@@ -18,9 +18,9 @@ import mpmath
 import numpy as np
 import pytest
 
-from haptic_bus.closed_form import velocity_sampling_slack
-from haptic_bus.criterion import exact_verdict, seed_verdict
-from haptic_bus.energy import (
+from haptic_bus.analysis.closed_form import velocity_sampling_slack
+from haptic_bus.analysis.criterion import exact_verdict, seed_verdict
+from haptic_bus.analysis.energy import (
     Chirp,
     RandomSinusoids,
     Sinusoid,
@@ -30,8 +30,8 @@ from haptic_bus.energy import (
     simulate_reference,
 )
 from haptic_bus.errors import ParameterError
-from haptic_bus.frequency import t_fund
-from haptic_bus.loop import WallLoop
+from haptic_bus.analysis.frequency import t_fund
+from haptic_bus.analysis.loop import WallLoop
 
 SEED = WallLoop(0.5, 0.1, 1e-3, 200.0, 100.0, 0)
 SEED_D1 = WallLoop(0.5, 0.1, 1e-3, 200.0, 100.0, 1)

@@ -1,4 +1,4 @@
-"""The controller (haptic_bus.controller.WallController) closed through Modbus TCP on loopback:
+"""The controller (haptic_bus.control.controller.WallController) closed through Modbus TCP on loopback:
 ModbusDrive -> pymodbus -> the simulated drive's server (in a thread of this process), virtual time.
 
 Numbers come from the exact discrete loop of the seed's device (m = 0.5 kg, b = 0.1 N s/m,
@@ -21,11 +21,11 @@ import pytest
 from scipy.signal import lfilter
 
 from drives.cia402 import POSITION_ACTUAL
-from drives.modbus_drive import ModbusDrive
-from drives.modbus_timing import loop_delay, measure_poll
-from haptic_bus.controller import WallController
-from haptic_bus.gate import DeviceLoop, PassivityGate
-from haptic_bus.scene import Wall, compile_scene
+from drives.modbus.drive import ModbusDrive
+from drives.modbus.timing import loop_delay, measure_poll
+from haptic_bus.control.controller import WallController
+from haptic_bus.control.gate import DeviceLoop, PassivityGate
+from haptic_bus.control.scene import Wall, compile_scene
 from sim_drive.modbus_server import ModbusSimServer
 from sim_drive.operator import ConstantPush, StepPush
 from sim_drive.parameters import DeviceParameters
@@ -111,7 +111,7 @@ def test_force_step_response_is_the_analytic_discrete_loop(seed_rig) -> None:
     assert force[0] == 0.0 and analytic[0] == 0.0
     assert np.max(np.abs(force - analytic)) <= bound
     # real poles, no oscillation; the zero at B/(KT + B) = 0.998004, just above the slow pole,
-    # gives the exact loop a 0.84 % peak at k = 43 (haptic_bus.design.force_step_response agrees)
+    # gives the exact loop a 0.84 % peak at k = 43 (haptic_bus.analysis.design.force_step_response agrees)
     assert int(np.argmax(analytic)) == 43 and analytic.max() == pytest.approx(level * 1.0083897, rel=1e-6)
     assert force.max() == pytest.approx(analytic.max(), abs=bound)
     requests = drive.stats.cyclic_requests / drive.stats.cycles

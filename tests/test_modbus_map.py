@@ -8,7 +8,7 @@ import math
 import pytest
 
 from drives.cia402 import CONTROLWORD, POSITION_ACTUAL, TARGET_TORQUE, VELOCITY_ACTUAL
-from drives.modbus_map import (
+from drives.modbus.register_map import (
     INPUT_BLOCK,
     INPUT_BLOCK_COUNT,
     MAP_IDENTITY,
@@ -23,7 +23,7 @@ from drives.modbus_map import (
     register_at,
     register_for_object,
 )
-from drives.modbus_timing import assumed_delay
+from drives.modbus.timing import assumed_delay
 from sim_drive.device import SimulatedDrive
 from sim_drive.modbus_server import RegisterBank
 

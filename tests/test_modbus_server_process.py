@@ -16,7 +16,7 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 
 from drives.cia402 import State, decode_statusword
-from drives.modbus_map import MAP_IDENTITY, REGISTER_BY_NAME, decode_value, encode_value
+from drives.modbus.register_map import MAP_IDENTITY, REGISTER_BY_NAME, decode_value, encode_value
 
 ROOT = Path(__file__).resolve().parents[1]
 UNIT = 1

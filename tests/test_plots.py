@@ -6,8 +6,8 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from haptic_bus.loop import WallLoop
-from haptic_bus.plots import plot_nyquist, plot_region, plot_step
+from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.app.plots import plot_nyquist, plot_region, plot_step
 
 SEED = WallLoop(0.5, 0.1, 1e-3, 200.0, 100.0, 0)
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

@@ -9,13 +9,13 @@ import pathlib
 
 import pytest
 
-from haptic_bus.check_report import BANDWIDTH_ALPHA, check_report
-from haptic_bus.gate import GateRefusal
-from haptic_bus.loop import WallLoop
-from haptic_bus.profiles import (DEFAULT_PROFILE, Profile, ProfileError, ProfileRefusal, default_profile,
+from haptic_bus.analysis.check import BANDWIDTH_ALPHA, check_report
+from haptic_bus.control.gate import GateRefusal
+from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.app.profiles import (DEFAULT_PROFILE, Profile, ProfileError, ProfileRefusal, default_profile,
                                  load_profile, read_profile, shipped_profiles)
-from haptic_bus.profiles_cli import add_profiles_parser, cmd_check, cmd_list, cmd_show
-from haptic_bus.scene import Detent, Slot, Wall
+from haptic_bus.app.profiles_cli import add_profiles_parser, cmd_check, cmd_list, cmd_show
+from haptic_bus.control.scene import Detent, Slot, Wall
 
 SHIPPED = shipped_profiles()
 

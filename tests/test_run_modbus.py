@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from haptic_bus.profiles import load_profile
+from haptic_bus.app.profiles import load_profile
 from tests.test_modbus_server_process import free_port, wait_for_line
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,7 +27,7 @@ def test_run_over_modbus_settles_at_f_over_k(profile_name: str, tmp_path: Path) 
                               cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         wait_for_line(server, f"serving Modbus TCP on {url}", 15.0)
-        run = subprocess.run([sys.executable, "-m", "haptic_bus.cli", "run", profile_name, "--modbus", url,
+        run = subprocess.run([sys.executable, "-m", "haptic_bus.app.cli", "run", profile_name, "--modbus", url,
                               "--virtual-time", "--duration", "1.5", "--out", str(tmp_path)],
                              cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     finally:

@@ -12,7 +12,7 @@ import time
 import pytest
 from canopen import SdoAbortedError, SdoCommunicationError
 
-from haptic_bus.controller_node import upload_walls
+from haptic_bus.control.node import upload_walls
 from tests.sim_fixtures import NODE, REPO, SimProcess, unique_multicast
 
 CONTROLLER_NODE = 42
@@ -26,7 +26,7 @@ def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive() -> None:
                      "--node-id", str(NODE), "--profile", "seed-ideal")
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     run = subprocess.Popen(
-        [sys.executable, "-m", "haptic_bus.cli", "run", "seed-ideal", "--interface", "udp_multicast", "--channel", group,
+        [sys.executable, "-m", "haptic_bus.app.cli", "run", "seed-ideal", "--interface", "udp_multicast", "--channel", group,
          "--bus-option", f"port={port}", "--node-id", str(NODE), "--virtual-time", "--duration", "600",
          "--controller-node-id", str(CONTROLLER_NODE)],
         cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

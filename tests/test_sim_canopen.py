@@ -15,7 +15,7 @@ import pytest
 
 from drives.cia402 import Command, State, decode_statusword
 from sim_drive.bus_timing import BusLoadMeter
-from sim_drive.canopen_slave import CanopenSimDrive
+from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.eds import eds_path
 from sim_drive.operator import ConstantPush
 from tests.sim_fixtures import (

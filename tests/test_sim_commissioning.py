@@ -31,7 +31,7 @@ from typing import Any
 import canopen
 import pytest
 
-from sim_drive.canopen_slave import CanopenSimDrive
+from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.eds import eds_path
 from tests.sim_fixtures import VCAN0_MISSING, SimProcess, unique_multicast, unique_name
 

@@ -2,7 +2,7 @@
 
 Bits per cycle come from :mod:`sim_drive.bus_timing` (``55 + 10 n`` bit times for a standard
 frame with ``n`` data bytes, worst-case stuffing and inter-frame space included); objects are
-packed into frames by the master's own :func:`drives.canopen_drive.split_into_frames`.
+packed into frames by the master's own :func:`drives.canopen.drive.split_into_frames`.
 
 * **minimal mapping** (what the controller configures): TPDO = statusword 0x6041 + velocity
   actual 0x606C (6 bytes), RPDO = controlword 0x6040 + target torque 0x6071 (4 bytes);
@@ -26,7 +26,7 @@ from typing import Callable
 
 import numpy as np
 
-from drives.canopen_drive import split_into_frames
+from drives.canopen.drive import split_into_frames
 from drives.cia402 import (CONTROLWORD, ERROR_CODE, MAX_TORQUE, MODES_OF_OPERATION, MODES_OF_OPERATION_DISPLAY,
                            POSITION_ACTUAL, STATUSWORD, TARGET_TORQUE, TORQUE_ACTUAL, VELOCITY_ACTUAL)
 from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits
@@ -68,9 +68,9 @@ def axes_that_fit(per_axis: int, bitrate: float, period: float = PERIOD, ceiling
 
 def measured_bits_per_cycle(tpdo_objects, cycles: int = 200) -> float:
     """Median bits per SYNC cycle the BusLoadMeter counts on the virtual bus (in-process run)."""
-    from drives.canopen_drive import CanopenDrive
-    from drives.hot_path_bench import bench_closed_loop
-    from sim_drive.canopen_slave import CanopenSimDrive
+    from drives.canopen.drive import CanopenDrive
+    from haptic_bus.bench.hot_path import bench_closed_loop
+    from sim_drive.canopen.slave import CanopenSimDrive
 
     channel = f"bench-bus-{uuid.uuid4().hex[:12]}"
     meter = BusLoadMeter(1_000_000, PERIOD)
@@ -106,7 +106,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
     tick("bus: model")
     measured = {}
     try:
-        from drives.canopen_drive import DEFAULT_TPDO, DEFAULT_TPDO_WITH_POSITION
+        from drives.canopen.drive import DEFAULT_TPDO, DEFAULT_TPDO_WITH_POSITION
 
         for label, objects in (("minimal (0x6041 + 0x606C)", DEFAULT_TPDO),
                                ("with position (0x6041 + 0x606C + 0x6064)", DEFAULT_TPDO_WITH_POSITION)):

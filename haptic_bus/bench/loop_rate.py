@@ -1,21 +1,21 @@
 """Benchmark 4: closed-loop cycles per second in virtual time, and the hot path's PDO codec.
 
-Every run is the product's controller (:class:`haptic_bus.controller.WallController`, the
-``cia402-handle`` profile's scene and gate, :class:`haptic_bus.clock.VirtualClock`) against the
+Every run is the product's controller (:class:`haptic_bus.control.controller.WallController`, the
+``cia402-handle`` profile's scene and gate, :class:`haptic_bus.control.clock.VirtualClock`) against the
 simulated drive, whose plant advances exactly ``T`` per cycle, so the rate is what the CPU and
 the link allow:
 
-* **virtual bus, 1 process** -- :func:`haptic_bus.session.simulated_canopen` (the simulated
+* **virtual bus, 1 process** -- :func:`haptic_bus.app.rig.simulated_canopen` (the simulated
   CANopen slave and the master on python-can's ``virtual`` bus, in one process);
 * **udp_multicast, 2 processes** -- ``python -m sim_drive`` as a subprocess on a unique
   loopback multicast port, the master here;
-* **Modbus TCP loopback, 2 processes** -- ``drives.modbus_bench``'s simulator subprocess and
-  :class:`drives.modbus_drive.ModbusDrive` (``split``: one read + one write request per
+* **Modbus TCP loopback, 2 processes** -- ``haptic_bus.bench.modbus_poll``'s simulator subprocess and
+  :class:`drives.modbus.drive.ModbusDrive` (``split``: one read + one write request per
   cycle), plus that module's own ``bench_cycle`` in both cycle modes.
 
-Beside each, :func:`drives.hot_path_bench.bench_closed_loop` (the bare read/write cycle
+Beside each, :func:`haptic_bus.bench.hot_path.bench_closed_loop` (the bare read/write cycle
 with a damper law, no scene, no observer, no record) on the same link.  Finally
-:func:`drives.hot_path_bench.bench_pdo_codecs`: the master's hot path against canopen's
+:func:`haptic_bus.bench.hot_path.bench_pdo_codecs`: the master's hot path against canopen's
 generic PDO path on the same frames (ratio).
 """
 
@@ -30,9 +30,9 @@ from pathlib import Path
 from typing import Callable
 
 from haptic_bus.bench.timing import timed_once
-from haptic_bus.clock import VirtualClock
-from haptic_bus.controller import WallController
-from haptic_bus.profiles import Profile, load_profile
+from haptic_bus.control.clock import VirtualClock
+from haptic_bus.control.controller import WallController
+from haptic_bus.app.profiles import Profile, load_profile
 
 PROFILE = "cia402-handle"
 NODE_ID = 5
@@ -42,7 +42,7 @@ _REPO = Path(__file__).resolve().parents[2]
 
 def _controller_rate(profile: Profile, drive, gate, cycles: int) -> dict:
     """Cycles/s of the WallController on an enabled ``drive``, and of the bare read/write loop."""
-    from drives.hot_path_bench import bench_closed_loop
+    from haptic_bus.bench.hot_path import bench_closed_loop
 
     controller = WallController(drive, gate, profile.compiled_scene(), force_limit=profile.force_limit,
                                 clock=VirtualClock(profile.loop.period))
@@ -58,7 +58,7 @@ def _controller_rate(profile: Profile, drive, gate, cycles: int) -> dict:
 
 def virtual_bus(profile: Profile, cycles: int) -> dict:
     """In-process: simulated slave + master on python-can's virtual bus."""
-    from haptic_bus.session import simulated_canopen
+    from haptic_bus.app.rig import simulated_canopen
 
     with simulated_canopen(profile) as (_, drive):
         return _controller_rate(profile, drive, profile.gate(), cycles)
@@ -89,7 +89,7 @@ def _stop(process: subprocess.Popen) -> int:
 
 def udp_multicast(profile: Profile, cycles: int) -> dict:
     """Two processes: ``python -m sim_drive`` on udp_multicast (unique port) and the master here."""
-    from drives.canopen_drive import CanopenDrive
+    from drives.canopen.drive import CanopenDrive
 
     group = f"239.74.{160 + os.getpid() % 64}.{1 + os.getpid() % 250}"
     port = random.randint(45000, 55000)
@@ -117,13 +117,13 @@ def udp_multicast(profile: Profile, cycles: int) -> dict:
 
 
 def modbus_tcp(profile: Profile, cycles: int) -> dict:
-    """Two processes over Modbus TCP loopback: drives.modbus_bench's simulator and ModbusDrive."""
+    """Two processes over Modbus TCP loopback: haptic_bus.bench.modbus_poll's simulator and ModbusDrive."""
     import dataclasses
 
-    from drives.modbus_bench import bench_cycle, start_simulator, stop_simulator
-    from drives.modbus_drive import CYCLE_MODES, ModbusDrive
-    from drives.modbus_timing import loop_delay
-    from haptic_bus.gate import PassivityGate
+    from haptic_bus.bench.modbus_poll import bench_cycle, start_simulator, stop_simulator
+    from drives.modbus.drive import CYCLE_MODES, ModbusDrive
+    from drives.modbus.timing import loop_delay
+    from haptic_bus.control.gate import PassivityGate
 
     process, url = start_simulator("ideal")
     try:
@@ -152,7 +152,7 @@ def modbus_tcp(profile: Profile, cycles: int) -> dict:
 
 def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 4; returns its section of ``bench.json`` (a failing link is reported, not raised)."""
-    from drives.hot_path_bench import bench_pdo_codecs
+    from haptic_bus.bench.hot_path import bench_pdo_codecs
 
     cycles = 2_000 if quick else 20_000
     profile = load_profile(PROFILE)

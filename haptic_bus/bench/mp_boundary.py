@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import mpmath as mp
 
-from haptic_bus.loop import WallLoop
+from haptic_bus.analysis.loop import WallLoop
 
 DIGITS = 40
 _UNIFORM = 240

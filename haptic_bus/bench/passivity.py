@@ -10,11 +10,11 @@ passive ``K`` at the point's ``B`` and the largest passive ``B`` at its ``K``, e
 
 Methods (a *check* is one verdict on one loop, its time the median of repeats):
 
-* **closed form** -- eq. 23's slack (:func:`haptic_bus.closed_form.velocity_sampling_slack`);
+* **closed form** -- eq. 23's slack (:func:`haptic_bus.analysis.closed_form.velocity_sampling_slack`);
   its boundary is linear in ``K`` and ``B`` and solved exactly.  ``d = 0`` only.
-* **exact criterion** -- :func:`haptic_bus.criterion.exact_verdict`; its boundaries are what
-  the product reports, :func:`haptic_bus.limits.max_stiffness` / ``max_damping``.
-* **grid N** -- :func:`haptic_bus.poles.is_stable` and the minimum of ``Re z_fund`` on the
+* **exact criterion** -- :func:`haptic_bus.analysis.criterion.exact_verdict`; its boundaries are what
+  the product reports, :func:`haptic_bus.analysis.limits.max_stiffness` / ``max_damping``.
+* **grid N** -- :func:`haptic_bus.analysis.poles.is_stable` and the minimum of ``Re z_fund`` on the
   fixed uniform grid ``theta = pi i/N``, ``i = 1..N`` (vectorised, ``pi`` included).
 * **python-control** -- the same loop built from ``control.TransferFunction`` blocks: the
   continuous ``G11 = 1/(m s + b)``, the discrete ``G11d = k1/(z - a)`` and
@@ -44,13 +44,13 @@ from typing import Callable
 import numpy as np
 
 from haptic_bus.bench.timing import time_per_call, timed_once
-from haptic_bus.closed_form import region_map, velocity_sampling_factor, velocity_sampling_slack
-from haptic_bus.criterion import exact_verdict
-from haptic_bus.frequency import z_fund
-from haptic_bus.limits import max_damping, max_stiffness
-from haptic_bus.loop import WallLoop
-from haptic_bus.plant import phi1
-from haptic_bus.poles import is_stable
+from haptic_bus.analysis.closed_form import region_map, velocity_sampling_factor, velocity_sampling_slack
+from haptic_bus.analysis.criterion import exact_verdict
+from haptic_bus.analysis.frequency import z_fund
+from haptic_bus.analysis.limits import max_damping, max_stiffness
+from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.analysis.plant import phi1
+from haptic_bus.analysis.poles import is_stable
 
 SEED = 20240606
 PERIOD = 1e-3

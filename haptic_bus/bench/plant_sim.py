@@ -7,7 +7,7 @@ at ``t = 250 ms`` (a sample instant); the run ends at ``400 ms``.  Each period t
 samples ``v_k``, integrates ``x_k = x_{k-1} + T v_k`` and computes
 ``u_k = K (x_k - 1 mm) + B v_k`` while ``x_k > 1 mm`` (else 0); the drive holds ``u_{k-1}``.
 Between samples every force is constant, so the plant ``m dv/dt + b v = w - u`` has an exact
-solution there: the exact ZOH step (:class:`haptic_bus.plant.ExactPlant`) has no truncation
+solution there: the exact ZOH step (:class:`haptic_bus.analysis.plant.ExactPlant`) has no truncation
 error at all.  (A smoothly varying operator force would give every method, ZOH included, an
 ``O(h^2)`` hold error; not measured here.)
 
@@ -28,7 +28,7 @@ from typing import Callable
 import numpy as np
 
 from haptic_bus.bench.timing import time_per_call
-from haptic_bus.plant import ExactPlant
+from haptic_bus.analysis.plant import ExactPlant
 
 M, B_FRICTION, T = 0.032, 3.62, 1e-3
 K_WALL, B_WALL, WALL_AT, DELAY = 400.0, 1.0, 1e-3, 1

@@ -1,8 +1,8 @@
 """Benchmark 6: real time, ``T = 1 ms`` against the in-process simulated drive.
 
-The product's controller with :class:`haptic_bus.clock.RealClock` (a deadline scheduler:
+The product's controller with :class:`haptic_bus.control.clock.RealClock` (a deadline scheduler:
 sleep to 200 us before the deadline, then spin) runs the ``cia402-handle`` profile against
-:func:`haptic_bus.session.simulated_canopen` for 10 s (2 s with ``--quick``).  Reported:
+:func:`haptic_bus.app.rig.simulated_canopen` for 10 s (2 s with ``--quick``).  Reported:
 lateness of each cycle start after its deadline, the period error (the difference of
 consecutive starts minus ``T``), both as percentiles p50/p99/p99.9/max, the overrun count
 (a start later than deadline + ``T``) -- and the same for the bare clock (no drive, no
@@ -18,9 +18,9 @@ from typing import Callable
 
 import numpy as np
 
-from haptic_bus.clock import RealClock
-from haptic_bus.controller import WallController
-from haptic_bus.profiles import load_profile
+from haptic_bus.control.clock import RealClock
+from haptic_bus.control.controller import WallController
+from haptic_bus.app.profiles import load_profile
 
 PROFILE = "cia402-handle"
 _POLICIES = {getattr(os, n): n for n in ("SCHED_OTHER", "SCHED_FIFO", "SCHED_RR", "SCHED_BATCH", "SCHED_IDLE")
@@ -58,7 +58,7 @@ def scheduler_info() -> dict:
 
 def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 6; returns its section of ``bench.json``."""
-    from haptic_bus.session import simulated_canopen
+    from haptic_bus.app.rig import simulated_canopen
 
     duration = 2.0 if quick else 10.0
     profile = load_profile(PROFILE)

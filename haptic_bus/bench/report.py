@@ -111,7 +111,7 @@ def markdown(result: dict) -> str:
                            "controller compute p50"], rows))
         modbus = s["links"].get("modbus_tcp", {})
         if modbus.get("bench_cycle"):
-            out += ["", "drives.modbus_bench.bench_cycle: " + "; ".join(
+            out += ["", "haptic_bus.bench.modbus_poll.bench_cycle: " + "; ".join(
                 f"{mode} {b['cycles_per_s']:.0f} cycles/s ({b['requests_per_cycle']:.2f} requests/cycle, round trip "
                 f"p50 {_t(b['round_trip_p50_s'])})" for mode, b in modbus["bench_cycle"].items()) + "."]
         c = s["pdo_codec"]

@@ -3,7 +3,7 @@
 No bus: :class:`CannedDrive` is an in-memory :class:`drives.base.Drive` whose ``read_inputs``
 returns precomputed samples and whose ``write_outputs`` does what the CANopen master's does
 short of the bus (saturate at the torque limit, ``struct.pack_into`` the RPDO).  The
-controller (:class:`haptic_bus.controller.WallController`, the product's) times its own
+controller (:class:`haptic_bus.control.controller.WallController`, the product's) times its own
 cycle from after ``read_inputs`` to after ``write_outputs`` (position, scene force,
 saturation, per-mille conversion, encode) with ``time.perf_counter``; the median of those is
 the compute per cycle.
@@ -11,7 +11,7 @@ the compute per cycle.
 Scenes for N objects: one wall ahead of the handle plus ``N - 1`` non-overlapping detents
 spread over 20 mm behind it (all ``K = 1500 N/m``, ``B = 10 N s/m``: the contact walls the gate
 judges are the same, so the gate runs once).  The canned velocities sweep the handle across
-the whole scene.  Compared: the compiled scene (:class:`haptic_bus.scene.CompiledScene`, one
+the whole scene.  Compared: the compiled scene (:class:`haptic_bus.control.scene.CompiledScene`, one
 ``bisect`` and one affine law) against :class:`NaiveScene`, the same objects evaluated one by
 one each cycle ("without culling"); both give the same force (checked before timing).
 """
@@ -24,14 +24,14 @@ from typing import Callable
 import numpy as np
 
 from drives.base import CyclicInputs, Drive, DriveScaling
-from drives.canopen_drive import DEFAULT_RPDO
+from drives.canopen.drive import DEFAULT_RPDO
 from drives.cia402 import OperationMode
-from drives.pdo_codec import PdoCodec
+from drives.canopen.pdo_codec import PdoCodec
 from haptic_bus.bench.timing import time_per_call
-from haptic_bus.clock import VirtualClock
-from haptic_bus.controller import WallController
-from haptic_bus.gate import DeviceLoop, GatePolicy, PassivityGate
-from haptic_bus.scene import CompiledScene, Detent, Wall, compile_scene
+from haptic_bus.control.clock import VirtualClock
+from haptic_bus.control.controller import WallController
+from haptic_bus.control.gate import DeviceLoop, GatePolicy, PassivityGate
+from haptic_bus.control.scene import CompiledScene, Detent, Wall, compile_scene
 
 SIZES = (1, 10, 100, 1_000, 10_000)
 STIFFNESS, DAMPING = 1500.0, 10.0

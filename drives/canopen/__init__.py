@@ -1,0 +1,1 @@
+"""The CiA-402 master over CANopen (canopen + python-can)."""

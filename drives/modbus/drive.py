@@ -1,0 +1,569 @@
+"""CiA-402 master over Modbus (TCP, or RTU on a serial port): one servo drive in CST mode.
+
+Built on pymodbus' synchronous clients; the register map is :mod:`drives.modbus.register_map`.  One
+cycle is one read of the input block (statusword, velocity[, position]) plus one write of the
+output block (controlword, target torque).  Two ways to put that on the wire (``cycle=``):
+
+``"split"`` (default)
+    ``read_inputs`` = FC03 read of the input block, ``write_outputs`` = FC16 write of the
+    output block: two requests per cycle; the torque leaves as soon as it is computed, so in
+    real time the sample-to-torque latency is one read plus one write round trip.
+``"fc23"``
+    ``write_outputs`` = one FC23 read/write request: it writes this cycle's outputs and (Modbus
+    order: write first) reads the inputs of the next cycle, which the next ``read_inputs``
+    returns without a request (the very first ``read_inputs``, and the first after any
+    acyclic access, is an FC03).  One request per cycle.  In virtual time (the simulated
+    drive only advances on the output write) this is exactly equivalent to ``"split"``; in real
+    time a loop paced at ``T`` uses inputs sampled up to one period earlier, one more sample of
+    loop delay (see :mod:`drives.modbus.timing`).
+
+The hot path reuses its pymodbus request objects (the output registers are updated in place)
+and precompiled ``struct`` codecs; requests go out with ``retries=0``.  There is no silent
+retry or reconnect: a timeout, a dropped connection, a Modbus exception response or a fault
+bit makes the master attempt one zero-torque write (controlword DISABLE VOLTAGE) where the link
+still answers, close the link where it cannot be trusted (timeouts, drops), and raise:
+
+- exception response (0x02 illegal address, 0x03 illegal value, 0x06 busy, ...) ->
+  :class:`DriveProtocolError` naming the unit, the registers and CiA-402 objects, the exception;
+- no answer within ``timeout`` -> :class:`DriveTimeout` (:class:`ModbusLinkLost` once the link
+  is closed); a dropped connection -> :class:`ModbusLinkLost` (a DriveTimeout).
+
+After that, ``write_outputs`` writes the safe output block instead of the caller's torque
+(while the link is up), until :meth:`ModbusDrive.fault_reset` or :meth:`ModbusDrive.enable`;
+a closed link needs an explicit :meth:`ModbusDrive.reconnect`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import urllib.parse
+from dataclasses import dataclass, fields
+from typing import Any
+
+from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+from pymodbus.pdu import ModbusPDU
+from pymodbus.pdu.register_message import (
+    ReadHoldingRegistersRequest,
+    ReadWriteMultipleRegistersRequest,
+    WriteMultipleRegistersRequest,
+)
+
+from drives.base import CyclicInputs, DriveError, DriveFault, DriveProtocolError, DriveScaling, DriveTimeout
+from drives.cia402 import (
+    CONTROLWORD,
+    ERROR_CODE,
+    MAX_TORQUE,
+    MOTOR_RATED_TORQUE,
+    STATUSWORD,
+    TARGET_TORQUE,
+    Command,
+    ObjectSpec,
+    OperationMode,
+    State,
+    decode_statusword,
+)
+from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master, DriveStateError, UnsupportedModeError, state_name
+from drives.modbus.register_map import (
+    INPUT_BLOCK,
+    MAP_IDENTITY,
+    OUTPUT_BLOCK,
+    OUTPUT_BLOCK_COUNT,
+    REGISTER_BY_NAME,
+    InputBlockCodec,
+    RegisterSpec,
+    decode_value,
+    describe_range,
+    encode_value,
+    exception_name,
+    register_for_object,
+)
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["ModbusDrive", "ModbusStats", "ModbusLinkLost", "UnsupportedModeError", "DriveStateError", "CYCLE_MODES", "SAFE_CONTROLWORD"]
+
+CYCLE_MODES = ("split", "fc23")
+SW_FAULT = 1 << 3
+_TIMING_NAMES = {0: "cia402", 1: "ideal"}
+_CONTROLWORD_REG = register_for_object(CONTROLWORD)
+_TORQUE_REG = register_for_object(TARGET_TORQUE)
+_STATUSWORD_REG = register_for_object(STATUSWORD)
+
+
+class ModbusLinkLost(DriveTimeout):
+    """The link to the drive is gone (dropped connection, or closed after a timeout); call reconnect()."""
+
+
+@dataclass(slots=True)
+class ModbusStats:
+    """Counters since construction."""
+
+    cycles: int = 0  # read_inputs calls that returned
+    requests: int = 0  # Modbus requests sent (cyclic and acyclic)
+    cyclic_requests: int = 0
+    exceptions: int = 0  # exception responses
+    timeouts: int = 0
+    saturated_outputs: int = 0
+    suppressed_outputs: int = 0  # write_outputs replaced by the safe block while tripped
+    safe_stops: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        """The counters as a plain dict."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+class ModbusDrive(Cia402Master):
+    """A CiA-402 drive reached over Modbus TCP (``host``, ``port``) or RTU (``port`` = serial path).
+
+    ``unit_id``: the Modbus unit (device id) 0..247; ``timeout`` (s): answer timeout of every
+    request (also the TCP connect timeout); ``word_order``: of 32/64-bit values ("big" = high
+    word first); ``cycle``: "split" or "fc23" (module docstring); ``with_position``: read
+    0x6064 each cycle; ``scaling``: the caller's :class:`DriveScaling`, whose fields are
+    replaced by 0x6076/0x6072 and the manufacturer scaling registers where the drive has them;
+    ``state_timeout`` (s): per state-machine step; ``check_identity``: verify the map identity
+    register (catches a word-order mismatch).  RTU: ``baudrate``, ``parity``, ``stopbits``,
+    ``bytesize`` (needs pyserial at connect time).
+    """
+
+    def __init__(
+        self,
+        host: str | None = "127.0.0.1",
+        port: int | str = 502,
+        *,
+        unit_id: int = 1,
+        timeout: float = 0.1,
+        word_order: str = "big",
+        cycle: str = "split",
+        with_position: bool = False,
+        scaling: DriveScaling | None = None,
+        state_timeout: float = 1.0,
+        check_identity: bool = True,
+        baudrate: int = 115200,
+        parity: str = "N",
+        stopbits: int = 1,
+        bytesize: int = 8,
+    ) -> None:
+        if not 0 <= unit_id <= 247:
+            raise ValueError(f"unit_id = {unit_id!r} is invalid; allowed: 0..247")
+        if not (timeout > 0 and math.isfinite(timeout)):
+            raise ValueError(f"timeout = {timeout!r} s is invalid; allowed: > 0")
+        if cycle not in CYCLE_MODES:
+            raise ValueError(f"cycle = {cycle!r} is invalid; allowed: {', '.join(map(repr, CYCLE_MODES))}")
+        self.serial = isinstance(port, str)
+        if not self.serial and not (isinstance(port, int) and 0 < port <= 65535):
+            raise ValueError(f"port = {port!r} is invalid; allowed: a TCP port 1..65535 or a serial device path")
+        if not self.serial and not host:
+            raise ValueError("host is required for Modbus TCP")
+        self.host = host
+        self.port = port
+        self.unit_id = unit_id
+        self.timeout = timeout
+        self.cycle = cycle
+        self.with_position = with_position
+        self.state_timeout = state_timeout
+        self.max_commands_per_step = 10_000
+        self.check_identity = check_identity
+        self.serial_options = {"baudrate": baudrate, "parity": parity, "stopbits": stopbits, "bytesize": bytesize}
+        self.address = f"rtu:{port}" if self.serial else f"tcp://{host}:{port}"
+        self.name = f"Modbus unit {unit_id} at {self.address}"
+        self.scaling = scaling if scaling is not None else DriveScaling(1.0, 1.0, 1.0, 1.0)
+        self.scaling_sources: dict[str, str] = {}
+        self.simulated_timing: str | None = None  # "ideal"/"cia402" when the server is sim_drive
+        self.stats = ModbusStats()
+        self.last_inputs: CyclicInputs | None = None
+        self.client: Any = None
+
+        self._inputs = InputBlockCodec(word_order, with_position)
+        self.word_order = word_order
+        self._decode_inputs = self._inputs.decode
+        self._in_count = self._inputs.count
+        self._read_req = ReadHoldingRegistersRequest(address=INPUT_BLOCK, count=self._in_count, dev_id=unit_id)
+        self._out_regs = [SAFE_CONTROLWORD, 0]
+        self._write_req = WriteMultipleRegistersRequest(address=OUTPUT_BLOCK, registers=self._out_regs, dev_id=unit_id)
+        self._write_req.count = OUTPUT_BLOCK_COUNT
+        self._rw_req = ReadWriteMultipleRegistersRequest(
+            read_address=INPUT_BLOCK, read_count=self._in_count, write_address=OUTPUT_BLOCK,
+            write_registers=self._out_regs, dev_id=unit_id,
+        )
+        self._read_what = describe_range(INPUT_BLOCK, self._in_count)
+        self._write_what = describe_range(OUTPUT_BLOCK, OUTPUT_BLOCK_COUNT)
+        self._read_label = f"reading {self._read_what}"  # built once: no formatting per cycle
+        self._write_label = f"writing {self._write_what}"
+        self._rw_label = f"writing {self._write_what} and reading {self._read_what} (FC23)"
+        self._cached: list[int] | None = None  # fc23: inputs read by the last output write
+        self._controlword = SAFE_CONTROLWORD
+        self._torque_limit = 0x7FFF
+        self._connected = False
+        self._link_up = False
+        self._closed = False
+        self._armed = False
+        self._tripped: DriveError | None = None
+
+    @classmethod
+    def from_url(cls, url: str, **options: Any) -> "ModbusDrive":
+        """``tcp://HOST:PORT`` or ``rtu:/dev/ttyUSB0`` -> a ModbusDrive (``options`` as the constructor)."""
+        parsed = urllib.parse.urlsplit(url)
+        if parsed.scheme == "tcp":
+            try:
+                port = parsed.port
+            except ValueError:
+                port = None
+            if not parsed.hostname or port is None:
+                raise ValueError(f"Modbus address {url!r} is invalid; expected tcp://HOST:PORT")
+            return cls(parsed.hostname, port, **options)
+        if parsed.scheme == "rtu" and (parsed.path or parsed.netloc):
+            return cls(None, parsed.netloc + parsed.path, **options)
+        raise ValueError(f"Modbus address {url!r} is invalid; expected tcp://HOST:PORT or rtu:/dev/SERIAL")
+
+    # ------------------------------------------------------------------ link
+
+    def _make_client(self) -> Any:
+        if self.serial:
+            from pymodbus import FramerType
+            from pymodbus.client import ModbusSerialClient
+
+            try:
+                return ModbusSerialClient(self.port, framer=FramerType.RTU, timeout=self.timeout, retries=0,
+                                          reconnect_delay=0, **self.serial_options)
+            except RuntimeError as exc:  # pymodbus: "Serial client requires pyserial"
+                raise DriveError(self.name, f"cannot open the RTU client: {exc}") from exc
+        from pymodbus.client import ModbusTcpClient
+
+        return ModbusTcpClient(self.host, port=self.port, timeout=self.timeout, retries=0, reconnect_delay=0)
+
+    def _open(self) -> None:
+        client = self._make_client()
+        if not client.connect():
+            client.close()
+            raise DriveTimeout(self.name, f"cannot connect within {self.timeout:.3g} s (is the drive/server up, the address right?)")
+        self.client = client
+        self._execute = client.execute
+        self._link_up = True
+        self._cached = None
+
+    def _drop_link(self) -> None:
+        self._link_up = False
+        self._cached = None
+        if self.client is not None:
+            try:
+                self.client.close()
+            except (OSError, ModbusException):
+                pass
+
+    def connect(self) -> None:
+        """Open the link, check the map identity, read scaling (0x6076, 0x6072, 0x0040..); raise DriveTimeout."""
+        if self._closed:
+            raise DriveError(self.name, "the drive object is closed; create a new one")
+        if self._connected:
+            return
+        self._establish()
+
+    def _establish(self) -> None:
+        self._open()
+        try:
+            self._configure()
+        except BaseException:
+            self._drop_link()
+            raise
+        self._connected = True
+
+    def reconnect(self) -> None:
+        """Close and reopen the link (explicit; never done silently), re-check identity and scaling.
+
+        The trip state stays: call :meth:`fault_reset` or :meth:`enable` afterwards.
+        """
+        if self._closed:
+            raise DriveError(self.name, "the drive object is closed; create a new one")
+        self._drop_link()
+        self._connected = False
+        self._armed = False
+        self._establish()
+
+    def _configure(self) -> None:
+        if self.check_identity:
+            identity = self._read_spec(REGISTER_BY_NAME["map_identity"])
+            if identity != MAP_IDENTITY:
+                swapped = (identity & 0xFFFF) << 16 | identity >> 16
+                hint = (f"; the server uses the other word order than word_order={self.word_order!r}"
+                        if swapped == MAP_IDENTITY else "; not the haptic_bus register map")
+                raise DriveProtocolError(self.name, f"map identity register 0x0030 reads 0x{identity:08X}, expected 0x{MAP_IDENTITY:08X}{hint}")
+        self._read_scaling()
+        try:
+            self.simulated_timing = _TIMING_NAMES.get(int(self._read_spec(REGISTER_BY_NAME["sim_timing"])))
+        except DriveProtocolError:
+            self.simulated_timing = None
+
+    def _read_scaling(self) -> None:
+        given = self.scaling
+        values: dict[str, Any] = {
+            "velocity_per_count": given.velocity_per_count,
+            "position_per_count": given.position_per_count,
+            "rated_torque": given.rated_torque,
+            "force_per_torque": given.force_per_torque,
+            "max_torque_permille": given.max_torque_permille,
+        }
+        self.scaling_sources = dict.fromkeys(values, "caller")
+        sources: list[tuple[str, RegisterSpec, float]] = [
+            ("rated_torque", register_for_object(MOTOR_RATED_TORQUE), 1e-3),  # mN m -> N m
+            ("max_torque_permille", register_for_object(MAX_TORQUE), 1),
+            ("velocity_per_count", REGISTER_BY_NAME["velocity_per_count"], 1.0),
+            ("position_per_count", REGISTER_BY_NAME["position_per_count"], 1.0),
+            ("force_per_torque", REGISTER_BY_NAME["force_per_torque"], 1.0),
+        ]
+        for field_name, spec, factor in sources:
+            try:
+                raw = self._read_spec(spec)
+            except DriveProtocolError as exc:
+                logger.info("%s: keeping the given %s (%s)", self.name, field_name, exc)
+                continue
+            values[field_name] = raw if factor == 1 and isinstance(raw, int) else raw * factor
+            self.scaling_sources[field_name] = f"register 0x{spec.address:04X}"
+        for field_name in ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque"):
+            value = values[field_name]
+            if not (value > 0 and math.isfinite(value)):
+                raise DriveProtocolError(self.name, f"scaling {field_name} = {value!r} (from {self.scaling_sources[field_name]}); must be finite and > 0")
+        self.scaling = DriveScaling(**values)
+        self._torque_limit = min(int(values["max_torque_permille"]), 0x7FFF)
+
+    # ------------------------------------------------------------------ requests
+
+    def _send(self, request: ModbusPDU, what: str, cyclic: bool) -> ModbusPDU:
+        """One request with error translation; raises ModbusLinkLost/DriveTimeout/DriveProtocolError."""
+        if not self._link_up:
+            raise ModbusLinkLost(self.name, f"link is down ({what} not sent); call reconnect()")
+        self.stats.requests += 1
+        try:
+            response = self._execute(False, request)
+        except ConnectionException as exc:
+            self._drop_link()
+            raise ModbusLinkLost(self.name, f"connection lost while {what}: {exc}; call reconnect()") from exc
+        except ModbusIOException as exc:
+            self.stats.timeouts += 1
+            raise DriveTimeout(self.name, f"no answer within {self.timeout * 1e3:.3g} ms while {what} ({exc})") from exc
+        except (ModbusException, OSError) as exc:
+            self._drop_link()
+            raise DriveProtocolError(self.name, f"bad answer while {what}: {exc}") from exc
+        if response.function_code & 0x80:
+            self.stats.exceptions += 1
+            code = getattr(response, "exception_code", 0)
+            error = DriveProtocolError(self.name, f"{what}: exception {exception_name(code)}")
+            error.exception_code = code
+            raise error
+        return response
+
+    def _checked_registers(self, response: ModbusPDU, count: int, what: str) -> list[int]:
+        registers = response.registers
+        if len(registers) != count:
+            raise DriveProtocolError(self.name, f"{len(registers)} registers answered while {what}, expected {count}")
+        return registers
+
+    def read_registers(self, address: int, count: int) -> list[int]:
+        """Raw FC03 read of ``count`` holding registers from ``address`` (acyclic)."""
+        self._require_connected()
+        self._cached = None
+        what = f"reading {describe_range(address, count)}"
+        response = self._send(ReadHoldingRegistersRequest(address=address, count=count, dev_id=self.unit_id), what, False)
+        return list(self._checked_registers(response, count, what))
+
+    def write_registers(self, address: int, values: list[int]) -> None:
+        """Raw write of holding registers from ``address`` (FC06 for one, FC16 for more; acyclic)."""
+        self._require_connected()
+        self._cached = None
+        what = f"writing {describe_range(address, len(values))}"
+        if len(values) == 1:
+            from pymodbus.pdu.register_message import WriteSingleRegisterRequest
+
+            request: ModbusPDU = WriteSingleRegisterRequest(address=address, registers=list(values), dev_id=self.unit_id)
+        else:
+            request = WriteMultipleRegistersRequest(address=address, registers=list(values), dev_id=self.unit_id)
+            request.count = len(values)
+        self._send(request, what, False)
+
+    def _read_spec(self, spec: RegisterSpec) -> int | float:
+        return decode_value(spec, self.read_registers(spec.address, spec.count), self.word_order)
+
+    def read_object(self, spec: ObjectSpec | int) -> int:
+        """Read a CiA-402 object of the register map, in drive units."""
+        return int(self._read_spec(register_for_object(spec)))
+
+    def write_object(self, spec: ObjectSpec | int, value: int) -> None:
+        """Write a CiA-402 object of the register map, in drive units (ValueError if out of range)."""
+        reg = register_for_object(spec)
+        if reg.access != "rw":
+            raise ValueError(f"{reg.label} is read-only")
+        self.write_registers(reg.address, encode_value(reg, value, self.word_order))
+
+    def _require_connected(self) -> None:
+        if self.client is None:
+            raise DriveError(self.name, "not connected; call connect() first")
+
+    # ------------------------------------------------------------------ safety
+
+    def _safe_stop(self) -> None:
+        """One attempt to write zero torque with DISABLE VOLTAGE, if the link is up; never raises."""
+        self.stats.safe_stops += 1
+        self._armed = False
+        self._controlword = SAFE_CONTROLWORD
+        if not self._link_up:
+            return
+        regs = self._out_regs
+        regs[0] = SAFE_CONTROLWORD
+        regs[1] = 0
+        try:
+            self._send(self._write_req, f"writing the safe outputs to {self._write_what}", True)
+        except DriveError as exc:
+            logger.error("%s: could not write zero torque: %s", self.name, exc)
+
+    def _trip(self, error: DriveError, link_trusted: bool = True) -> DriveError:
+        if link_trusted:
+            self._safe_stop()
+        else:  # a timeout: the stream may still carry the late answer
+            self._safe_stop()
+            self._drop_link()
+            error = ModbusLinkLost(error.node, str(error).split(": ", 1)[-1] + "; link closed (a late answer could not be told from the next), call reconnect()")
+        self._tripped = error
+        self._cached = None
+        return error
+
+    def _cyclic(self, request: ModbusPDU, what: str) -> ModbusPDU:
+        try:
+            return self._send(request, what, True)
+        except ModbusLinkLost as exc:
+            raise self._trip(exc) from exc.__cause__
+        except DriveTimeout as exc:
+            raise self._trip(exc, link_trusted=False) from exc.__cause__
+        except DriveProtocolError as exc:
+            raise self._trip(exc) from exc.__cause__
+
+    # ------------------------------------------------------------------ cyclic hot path
+
+    def read_inputs(self) -> CyclicInputs:
+        """This cycle's statusword, velocity[, position]: FC03, or the inputs the last FC23 brought."""
+        if not self._connected:
+            raise DriveError(self.name, "not connected; call connect() first")
+        registers = self._cached
+        if registers is None:
+            self.stats.cyclic_requests += 1
+            registers = self._cyclic(self._read_req, self._read_label).registers
+        else:
+            self._cached = None
+        if len(registers) != self._in_count:
+            raise self._trip(DriveProtocolError(self.name, f"{len(registers)} registers answered for {self._read_what}, expected {self._in_count}"))
+        statusword, velocity, position = self._decode_inputs(registers)
+        inputs = CyclicInputs(statusword, velocity, position)
+        self.last_inputs = inputs
+        self.stats.cycles += 1
+        if statusword & SW_FAULT and self._armed:
+            code = None
+            try:
+                code = self.read_object(ERROR_CODE)
+            except DriveError:
+                pass
+            detail = f", error code 0x{code:04X}" if code is not None else ""
+            raise self._trip(DriveFault(
+                self.name, f"fault bit set in statusword 0x{statusword:04X} ({state_name(decode_statusword(statusword))}){detail}; torque set to zero",
+                code=code,
+            ))
+        return inputs
+
+    def write_outputs(self, target_torque: int) -> None:
+        """Write the held controlword and ``target_torque`` (per mille, saturated at +-0x6072)."""
+        regs = self._out_regs
+        if self._tripped is not None:
+            self.stats.suppressed_outputs += 1
+            if not self._link_up:
+                raise ModbusLinkLost(self.name, f"link is down after: {self._tripped}; call reconnect()")
+            regs[0] = SAFE_CONTROLWORD
+            regs[1] = 0
+        else:
+            limit = self._torque_limit
+            if target_torque > limit:
+                target_torque = limit
+                self.stats.saturated_outputs += 1
+            elif target_torque < -limit:
+                target_torque = -limit
+                self.stats.saturated_outputs += 1
+            regs[0] = self._controlword
+            regs[1] = target_torque & 0xFFFF
+        self.stats.cyclic_requests += 1
+        if self.cycle == "fc23":
+            self._cached = self._cyclic(self._rw_req, self._rw_label).registers
+        else:
+            self._cyclic(self._write_req, self._write_label)
+
+    # ------------------------------------------------------------------ state machine
+
+    def statusword(self) -> int:
+        """0x6041 read acyclically."""
+        return int(self._read_spec(_STATUSWORD_REG))
+
+    def state(self) -> State | None:
+        """The drive's current CiA-402 state (one acyclic read)."""
+        return decode_statusword(self.statusword())
+
+    def _write_controlword(self, word: int) -> None:
+        self.write_registers(_CONTROLWORD_REG.address, [word])
+
+    def _command(self, controlword: int) -> int:
+        self._write_controlword(controlword)
+        return self.statusword()
+
+    def enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
+        """Check 0x6502, write 0x6060, await 0x6061, zero 0x6071, walk to OPERATION ENABLED."""
+        self._require_connected()
+        self._select_mode(mode)
+        self.write_object(TARGET_TORQUE, 0)  # no stale torque at the enable edge
+        self._tripped = None
+        self._walk(State.OPERATION_ENABLED, self._controlword)
+        self._controlword = Command.ENABLE_OPERATION.word
+        self._cached = None
+        self._armed = True
+
+    def disable(self) -> None:
+        """Zero torque, DISABLE VOLTAGE, and check the drive reaches SWITCH ON DISABLED (or sits in FAULT)."""
+        if not self._connected:
+            return
+        self._armed = False
+        self._controlword = SAFE_CONTROLWORD
+        self.write_object(TARGET_TORQUE, 0)
+        self._walk(State.SWITCH_ON_DISABLED, SAFE_CONTROLWORD, accept=(State.FAULT,))
+
+    def fault_reset(self) -> None:
+        """Rising edge of controlword bit 7 (low, high, low); check the drive leaves FAULT."""
+        self._require_connected()
+        self._armed = False
+        self._reset_fault()
+        self._controlword = SAFE_CONTROLWORD
+        self._tripped = None
+
+    @property
+    def tripped(self) -> DriveError | None:
+        """The error that made the master write the safe outputs, or None."""
+        return self._tripped
+
+    @property
+    def link_up(self) -> bool:
+        """True while the link is open and trusted."""
+        return self._link_up
+
+    # ------------------------------------------------------------------ shutdown
+
+    def close(self) -> None:
+        """Write the safe outputs if the link is up (one attempt), then close the link."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._connected and self._link_up:
+            self._armed = False
+            try:
+                self.write_registers(_TORQUE_REG.address, [0])
+                self._write_controlword(SAFE_CONTROLWORD)
+            except DriveError as exc:
+                logger.warning("%s: could not write the safe outputs on close: %s", self.name, exc)
+        self._drop_link()
+        self._connected = False
+        self.client = None
+
+    def __repr__(self) -> str:
+        return f"ModbusDrive({self.address!r}, unit_id={self.unit_id}, cycle={self.cycle!r}, word_order={self.word_order!r})"

@@ -1,0 +1,145 @@
+"""Loop timing of a Modbus poll, and the loop delay in whole samples the passivity gate assumes.
+
+A Modbus poll is not a CANopen SYNC.  On CANopen every drive samples at the SYNC and applies
+the torque at the next one: one whole sample, by construction.  A Modbus drive samples when
+the read request reaches it and applies the torque when the write lands; nothing lines the two
+up with the controller's period ``T``.
+
+**Reasoning.**  The seed's loop (``d = 0``) has the force computed from the sample ``v_k`` act
+over ``[t_k, t_k + T)``, starting at the very instant of the sample.  On a real poll the
+sample is taken at ``s_k`` (the read arrives), the torque lands at ``s_k + D`` (the write
+arrives), with ``0 < D <= round trip`` (read answer back, compute, write out; ``D`` is less
+than the full cycle round trip measured at the controller), and it is held until the next write
+lands.  The plant has advanced for ``D`` seconds with the previous torque: the force answering
+``v_k`` acts over ``[s_k + D, s_k + D + T)``, a delay of ``D / T`` samples.  The gate's
+criteria take whole samples, and a delay that lands after the plant has advanced is judged at
+the next whole sample: ``d = ceil(D / T)``, with the cycle round trip (its p99) standing in for
+``D``.  Any real poll therefore has ``d >= 1``; ``d = 0`` is only the simulated drive in
+virtual time with ``ideal`` timing, whose plant waits for the write.
+
+Two refinements:
+
+- ``cycle="fc23"`` (one read/write request per cycle) reads the next cycle's inputs together
+  with this cycle's write.  In a loop paced at ``T`` those inputs are up to ``T`` old when
+  they are used: ``D <= T + round trip``, one more sample (:func:`loop_delay` adds it).
+- The simulated drive (``sim_drive.modbus_server``) runs in virtual time whatever the wall
+  clock does: its plant advances only when the output block is written, so its loop delay is
+  its timing's, 0 (``ideal``) or 1 (``cia402``), read from its register 0x0050.
+
+Cycles whose round trip exceeds ``d T`` break the assumption; :class:`PollTiming` counts them
+(``over_budget``), and a real-time run should report them like deadline overruns.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from drives.modbus.drive import ModbusDrive
+
+__all__ = ["PollTiming", "assumed_delay", "measure_poll", "loop_delay", "SIM_TIMING_DELAY"]
+
+SIM_TIMING_DELAY = {"ideal": 0, "cia402": 1}
+_ROUNDING = 1e-9  # relative: a round trip of exactly k periods, up to float error, is k samples
+
+
+def assumed_delay(round_trip_p99: float, T: float) -> int:
+    """The loop delay in whole samples for a poll with this round trip (s) at period ``T`` (s).
+
+    ``ceil(round_trip / T)``: 0 only for a zero round trip; a round trip of exactly k periods
+    (to float rounding) is k samples.  ValueError for a negative or non-finite round trip or a
+    non-positive period.
+    """
+    if not (T > 0 and math.isfinite(T)):
+        raise ValueError(f"T = {T!r} s is invalid; allowed: a finite period > 0")
+    if not (round_trip_p99 >= 0 and math.isfinite(round_trip_p99)):
+        raise ValueError(f"round_trip_p99 = {round_trip_p99!r} s is invalid; allowed: finite, >= 0")
+    ratio = round_trip_p99 / T
+    return max(0, math.ceil(ratio - _ROUNDING * max(1.0, ratio)))
+
+
+@dataclass(frozen=True)
+class PollTiming:
+    """Round trips (s) of ``cycles`` polls (read_inputs + write_outputs) and requests per cycle."""
+
+    cycles: int
+    cycle_mode: str
+    requests_per_cycle: float
+    p50: float
+    p99: float
+    max: float
+    mean: float
+    wall_time: float  # s for all cycles
+
+    @property
+    def cycles_per_second(self) -> float:
+        """Polls per second of wall time (virtual time: as fast as the link allows)."""
+        return self.cycles / self.wall_time if self.wall_time > 0 else math.inf
+
+    def assumed_delay(self, T: float) -> int:
+        """The real-time loop delay at period ``T`` s: p99 round trip, plus ``T`` for fc23 (module docstring)."""
+        return assumed_delay(self.p99 + (T if self.cycle_mode == "fc23" else 0.0), T)
+
+    def summary(self) -> str:
+        """One line: cycles/s, requests/cycle, round-trip percentiles in microseconds."""
+        return (f"{self.cycle_mode}: {self.cycles} cycles, {self.cycles_per_second:.0f} cycles/s, "
+                f"{self.requests_per_cycle:.2f} requests/cycle, round trip p50 {self.p50 * 1e6:.0f} us, "
+                f"p99 {self.p99 * 1e6:.0f} us, max {self.max * 1e6:.0f} us")
+
+
+def measure_poll(drive: ModbusDrive, cycles: int = 1000, *, torque: int = 0, time_limit: float = 10.0) -> PollTiming:
+    """Poll ``drive`` ``cycles`` times back to back (bounded by ``time_limit`` s); the round trips.
+
+    Each cycle is ``read_inputs()`` then ``write_outputs(torque)``, timed from before the read
+    to after the write.  Call it before :meth:`ModbusDrive.enable`: it then writes the safe
+    outputs (DISABLE VOLTAGE, zero torque), and against the simulated drive each cycle advances
+    its virtual time by one period.
+    """
+    if cycles < 1:
+        raise ValueError(f"cycles = {cycles!r} is invalid; allowed: >= 1")
+    samples = np.empty(cycles)
+    clock = time.perf_counter
+    read, write = drive.read_inputs, drive.write_outputs
+    requests_before = drive.stats.cyclic_requests
+    started = clock()
+    deadline = started + time_limit
+    done = 0
+    for i in range(cycles):
+        t0 = clock()
+        read()
+        write(torque)
+        t1 = clock()
+        samples[i] = t1 - t0
+        done = i + 1
+        if t1 > deadline:
+            break
+    wall = clock() - started
+    used = samples[:done]
+    p50, p99 = np.percentile(used, [50, 99])
+    return PollTiming(
+        cycles=done,
+        cycle_mode=drive.cycle,
+        requests_per_cycle=(drive.stats.cyclic_requests - requests_before) / done,
+        p50=float(p50),
+        p99=float(p99),
+        max=float(used.max()),
+        mean=float(used.mean()),
+        wall_time=wall,
+    )
+
+
+def loop_delay(drive: ModbusDrive, T: float, poll: PollTiming | None = None) -> int:
+    """The loop delay in whole samples the gate must assume for ``drive`` at period ``T`` s.
+
+    The simulated drive (it announces its timing in register 0x0050): its timing's delay, 0 or
+    1, whatever the wall clock.  A real drive: ``assumed_delay`` of the measured p99 round trip
+    (``poll``, from :func:`measure_poll`; required), plus one period with ``cycle="fc23"``.
+    """
+    if drive.simulated_timing is not None:
+        return SIM_TIMING_DELAY[drive.simulated_timing]
+    if poll is None:
+        raise ValueError(f"{drive.name} is not the simulated drive: measure its poll first (measure_poll) and pass it")
+    return poll.assumed_delay(T)

@@ -1,0 +1,1 @@
+"""The application: command line, profiles, demo rig, runner, reports and plots."""

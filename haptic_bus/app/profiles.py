@@ -1,0 +1,410 @@
+"""Operator parameter profiles: one TOML file = device, loop timing, scene, limits, gate policy.
+
+A profile says who uses it for what (``[profile]``), the handle and its drive (``[device]``,
+SI units, effective friction with its source), the loop (``[loop]``: period in s and timing
+``"ideal"`` = no delay or ``"cia402"`` = one sample of delay), the force limit
+(``[limits]``, N, at most what 0x6072 allows), the gate policy (``[gate]``), the virtual
+objects (``[[scene.objects]]`` with ``kind`` = wall | slot | detent) and, for demos, the
+simulated operator (``[operator_model]``, the table :func:`sim_drive.operator.operator_from_table`
+takes: ``model`` = none | constant | step | sinusoid | chirp | hand | recorded (alias ``csv``)
+plus that model's fields).
+
+:func:`load_profile` validates the whole file (unknown keys, types, ranges, names) and then
+puts the compiled scene through the passivity gate, so a profile that loads is one the gate
+admits.  Errors name the file, the dotted field (``scene.objects[2].stiffness``, 0-based
+index), the value and the allowed range.
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+import math
+import pathlib
+import re
+import tomllib
+import types
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+from drives.base import DriveScaling
+from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, TARGET_TORQUE
+from haptic_bus.errors import ParameterError
+from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
+from haptic_bus.analysis.loop import DAMPING_RANGE, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE, STIFFNESS_RANGE
+from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene
+from haptic_bus.validation import real_in_range, whole_in_range
+
+DEFAULT_PROFILE = "cia402-handle"
+TIMINGS = {"ideal": 0, "cia402": 1}  # timing name -> loop delay in samples
+SCALE_RANGE = (0.0, 1e6)  # exclusive low: m/s per count, m per count, N per N m
+POSITION_RANGE = (-1e6, 1e6)  # m, as haptic_bus.control.scene
+FORCE_RANGE = (0.0, 1e6)  # N, exclusive low
+# 0x6072 is UNSIGNED16, but a torque beyond the INTEGER16 0x6071 can never be commanded.
+PERMILLE_RANGE = (1, min(MAX_TORQUE.data_type.range[1], TARGET_TORQUE.data_type.range[1]))
+RATED_TORQUE_RANGE = (1e-3, MOTOR_RATED_TORQUE.data_type.range[1] / 1000.0)  # N m (0x6076 in mN m)
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+
+# Operator models, aligned with sim_drive.operator (field -> (low, high, unit, default or
+# _REQUIRED)); haptic_bus does not import sim_drive (dependencies point the other way).
+_REQUIRED = object()
+_F, _HZ, _T = (-1e6, 1e6, "N"), (0.0, 1e6, "Hz"), (0.0, 1e9, "s")
+OPERATOR_FIELDS: dict[str, dict[str, tuple]] = {
+    "none": {},
+    "constant": {"level": (*_F, _REQUIRED)},
+    "step": {"level": (*_F, _REQUIRED), "start": (*_T, _REQUIRED)},
+    "sinusoid": {"amplitude": (0.0, 1e6, "N", _REQUIRED), "frequency": (*_HZ, _REQUIRED),
+                 "phase": (-2 * math.pi, 2 * math.pi, "rad", 0.0), "offset": (*_F, 0.0)},
+    "chirp": {"amplitude": (0.0, 1e6, "N", _REQUIRED), "f0": (*_HZ, _REQUIRED), "f1": (*_HZ, _REQUIRED),
+              "duration": (0.0, 1e9, "s", _REQUIRED)},
+    "hand": {"stiffness": (0.0, 1e12, "N/m", _REQUIRED), "damping": (0.0, 1e12, "N s/m", _REQUIRED),
+             "start": (-1e6, 1e6, "m", 0.0), "speed": (-1e6, 1e6, "m/s", 0.0),
+             "amplitude": (0.0, 1e6, "m", 0.0), "frequency": (*_HZ, 0.0)},
+    "recorded": {},  # path (CSV: time s, force N) and interpolation, checked apart
+}
+OPERATOR_ALIASES = {"csv": "recorded"}
+INTERPOLATIONS = ("hold", "linear")
+
+
+class ProfileError(ParameterError):
+    """A profile file is invalid: ``path`` (the file), ``field`` (dotted, e.g.
+    ``scene.objects[2].stiffness``), ``value`` and ``allowed``."""
+
+    def __init__(self, path: pathlib.Path | str, field: str, value: object, allowed: str) -> None:
+        self.path = str(path)
+        self.field = field
+        super().__init__(field, value, allowed, context=f"profile {self.path}")
+
+
+class ProfileRefusal(GateRefusal):
+    """The passivity gate refused a profile's scene; ``path`` names the file."""
+
+    def __init__(self, path: pathlib.Path | str, decision: GateDecision) -> None:
+        super().__init__(decision)
+        self.path = str(path)
+        self.args = (f"profile {self.path}: {self.args[0]}",)
+
+
+@dataclass(frozen=True)
+class DeviceProfile:
+    """The handle and its drive: ``mass`` kg, effective ``friction`` b N s/m (and where it
+    comes from), drive scaling (0x606C, 0x6064, 0x6076 N m, transmission N/(N m), 0x6072)."""
+
+    mass: float
+    friction: float
+    friction_source: str
+    velocity_per_count: float
+    position_per_count: float
+    rated_torque: float
+    force_per_torque: float
+    max_torque_permille: int
+
+    @property
+    def max_force(self) -> float:
+        """Handle force in N that 0x6072 allows: permille * rated torque * transmission / 1000."""
+        return self.max_torque_permille * self.rated_torque * self.force_per_torque / 1000.0
+
+
+@dataclass(frozen=True)
+class LoopProfile:
+    """The control loop: ``period`` T in s and ``timing`` ("ideal" or "cia402")."""
+
+    period: float
+    timing: str
+
+    @property
+    def delay(self) -> int:
+        """Loop delay in whole samples: 0 for "ideal" (the seed), 1 for "cia402" (synchronous cycle)."""
+        return TIMINGS[self.timing]
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A validated, gate-admitted operator parameter profile (SI units)."""
+
+    name: str
+    operator: str
+    task: str
+    description: str
+    device: DeviceProfile
+    loop: LoopProfile
+    scene: tuple[SceneObject, ...]
+    force_limit: float
+    gate_policy: GatePolicy
+    operator_model: Mapping[str, Any] = field(hash=False, compare=True)
+    path: pathlib.Path | None = None
+
+    def device_loop(self) -> DeviceLoop:
+        """The loop the gate judges: m kg, effective b N s/m, T s, delay samples."""
+        return DeviceLoop(self.device.mass, self.device.friction, self.loop.period, self.loop.delay)
+
+    def scaling(self) -> DriveScaling:
+        """The drive-unit conversion of :mod:`drives.base`."""
+        d = self.device
+        return DriveScaling(d.velocity_per_count, d.position_per_count, d.rated_torque, d.force_per_torque,
+                            d.max_torque_permille)
+
+    def compiled_scene(self) -> CompiledScene:
+        """The scene as the piecewise-affine law the controller evaluates."""
+        return compile_scene(self.scene)
+
+    def gate(self) -> PassivityGate:
+        """A passivity gate for this profile's loop and policy."""
+        return PassivityGate(self.device_loop(), self.gate_policy)
+
+    def sim_device_parameters(self) -> dict[str, float | int]:
+        """Keyword arguments of ``sim_drive.parameters.DeviceParameters`` for this device and loop."""
+        d = self.device
+        return {"m": d.mass, "b": d.friction, "period": self.loop.period,
+                "velocity_per_count": d.velocity_per_count, "position_per_count": d.position_per_count,
+                "rated_torque": d.rated_torque, "force_per_torque": d.force_per_torque,
+                "max_torque_permille": d.max_torque_permille}
+
+
+# --------------------------------------------------------------------------- finding files
+
+def _profiles_folder() -> pathlib.Path:
+    return pathlib.Path(str(importlib.resources.files("profiles")))
+
+
+def shipped_profiles() -> dict[str, pathlib.Path]:
+    """The profiles shipped in the ``profiles`` package: name (file stem) -> path, sorted."""
+    return {p.stem: p for p in sorted(_profiles_folder().glob("*.toml"))}
+
+
+def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:
+    """The file of a shipped profile name, or ``path_or_name`` as a path if it is one."""
+    candidate = pathlib.Path(path_or_name)
+    if candidate.is_file():
+        return candidate
+    shipped = shipped_profiles()
+    if isinstance(path_or_name, str) and path_or_name in shipped:
+        return shipped[path_or_name]
+    raise ProfileError(path_or_name, "profile", str(path_or_name),
+                       f"an existing TOML file or a shipped profile name: {', '.join(shipped) or 'none'}")
+
+
+# --------------------------------------------------------------------------- validation
+
+class _Reader:
+    """Reads one table of the document, tracking which keys were used (typo protection)."""
+
+    def __init__(self, path: pathlib.Path, prefix: str, table: object) -> None:
+        self.path, self.prefix = path, prefix
+        if not isinstance(table, dict):
+            raise ProfileError(path, prefix, table, "a TOML table")
+        self.table = table
+        self.used: set[str] = set()
+
+    def field(self, key: str) -> str:
+        return f"{self.prefix}.{key}" if self.prefix else key
+
+    def raw(self, key: str, allowed: str, default: object = _REQUIRED) -> object:
+        self.used.add(key)
+        if key not in self.table:
+            if default is _REQUIRED:
+                raise ProfileError(self.path, self.field(key), "<missing>", f"required: {allowed}")
+            return default
+        return self.table[key]
+
+    def _wrap(self, key: str, check: Callable[[object], Any], value: object) -> Any:
+        try:
+            return check(value)
+        except ParameterError as error:
+            raise ProfileError(self.path, self.field(key), value, error.allowed) from None
+
+    def real(self, key: str, low: float, high: float, unit: str, *, low_inclusive: bool = True,
+             default: object = _REQUIRED) -> float:
+        allowed = f"a finite real in {'[' if low_inclusive else '('}{low:g}, {high:g}] {unit}"
+        value = self.raw(key, allowed, default)
+        return self._wrap(key, lambda v: real_in_range(key, v, low, high, low_inclusive=low_inclusive, unit=unit), value)
+
+    def whole(self, key: str, low: int, high: int) -> int:
+        value = self.raw(key, f"an integer in [{low}, {high}]")
+        if isinstance(value, float):  # TOML distinguishes 3000 from 3000.0; a count is an integer
+            raise ProfileError(self.path, self.field(key), value, f"an integer in [{low}, {high}]")
+        return self._wrap(key, lambda v: whole_in_range(key, v, low, high), value)
+
+    def text(self, key: str, *, pattern: re.Pattern | None = None, choices: tuple[str, ...] = (),
+             default: object = _REQUIRED) -> str:
+        allowed = (" or ".join(repr(c) for c in choices) if choices
+                   else "a name of letters, digits, '.', '_', '-'" if pattern else "a non-empty string")
+        value = self.raw(key, allowed, default)
+        ok = isinstance(value, str) and value.strip() != ""
+        ok = ok and (not choices or value in choices) and (pattern is None or bool(pattern.match(value)))
+        if not ok:
+            raise ProfileError(self.path, self.field(key), value, allowed)
+        return value
+
+    def done(self) -> None:
+        unknown = [k for k in self.table if k not in self.used]
+        if unknown:
+            raise ProfileError(self.path, self.field(unknown[0]), self.table[unknown[0]],
+                               f"no such key; keys of [{self.prefix or 'top level'}]: {', '.join(sorted(self.used))}")
+
+
+def _read_device(path: pathlib.Path, table: object) -> DeviceProfile:
+    r = _Reader(path, "device", table)
+    mass = r.real("mass", *MASS_RANGE, "kg")
+    friction = r.real("friction", *FRICTION_RANGE, "N s/m")
+    source = r.text("friction_source")
+    velocity = r.real("velocity_per_count", *SCALE_RANGE, "m/s per 0x606C unit", low_inclusive=False)
+    position = r.real("position_per_count", *SCALE_RANGE, "m per 0x6064 increment", low_inclusive=False)
+    rated = r.real("rated_torque", *RATED_TORQUE_RANGE, "N m (0x6076)")
+    if not math.isclose(rated * 1000.0, round(rated * 1000.0), rel_tol=1e-12, abs_tol=1e-9):
+        raise ProfileError(path, "device.rated_torque", rated, "a whole number of mN m (0x6076 is UNSIGNED32 in mN m)")
+    transmission = r.real("force_per_torque", *SCALE_RANGE, "N/(N m)", low_inclusive=False)
+    permille = r.whole("max_torque_permille", *PERMILLE_RANGE)
+    r.done()
+    return DeviceProfile(mass, friction, source, velocity, position, rated, transmission, permille)
+
+
+def _read_loop(path: pathlib.Path, table: object) -> LoopProfile:
+    r = _Reader(path, "loop", table)
+    period = r.real("period", *PERIOD_RANGE, "s")
+    timing = r.text("timing", choices=tuple(TIMINGS))
+    r.done()
+    return LoopProfile(period, timing)
+
+
+def _read_gate(path: pathlib.Path, table: object) -> GatePolicy:
+    r = _Reader(path, "gate", table)
+    margin = r.real("safety_margin", 0.0, 1e12, "N s/m")
+    bandwidth = r.text("bandwidth", choices=BANDWIDTH_POLICIES)
+    r.done()
+    return GatePolicy(margin, bandwidth)
+
+
+def _read_object(path: pathlib.Path, index: int, table: object) -> SceneObject:
+    r = _Reader(path, f"scene.objects[{index}]", table)
+    kind = r.text("kind", choices=("wall", "slot", "detent"))
+    name = r.text("name", pattern=_NAME)
+    stiffness = r.real("stiffness", *STIFFNESS_RANGE, "N/m")
+    damping = r.real("damping", *DAMPING_RANGE, "N s/m")
+    if kind == "wall":
+        position = r.real("position", *POSITION_RANGE, "m")
+        normal = r.raw("normal", "-1 (solid above position, pushed into in +x) or +1 (solid below)")
+        if isinstance(normal, bool) or normal not in (-1, 1):
+            raise ProfileError(path, r.field("normal"), normal, "-1 (solid above position) or +1 (solid below)")
+        r.done()
+        return Wall(name, position, int(normal), stiffness, damping)
+    if kind == "slot":
+        low = r.real("low", *POSITION_RANGE, "m")
+        high = r.real("high", *POSITION_RANGE, "m")
+        if not high > low:
+            raise ProfileError(path, r.field("high"), high, f"greater than low = {low:g} m")
+        r.done()
+        return Slot(name, low, high, stiffness, damping)
+    center = r.real("center", *POSITION_RANGE, "m")
+    reach = r.real("reach", 0.0, 1e6, "m", low_inclusive=False)
+    r.done()
+    return Detent(name, center, reach, stiffness, damping)
+
+
+def _read_scene(path: pathlib.Path, table: object) -> tuple[SceneObject, ...]:
+    r = _Reader(path, "scene", table)
+    objects = r.raw("objects", "an array of tables [[scene.objects]] (may be empty)", default=[])
+    if not isinstance(objects, list):
+        raise ProfileError(path, "scene.objects", objects, "an array of tables [[scene.objects]]")
+    r.done()
+    scene = tuple(_read_object(path, i, obj) for i, obj in enumerate(objects))
+    seen: dict[str, int] = {}
+    for i, obj in enumerate(scene):
+        if obj.name in seen:
+            raise ProfileError(path, f"scene.objects[{i}].name", obj.name,
+                               f"a name no other object uses (scene.objects[{seen[obj.name]}] has it)")
+        seen[obj.name] = i
+    return scene
+
+
+def _read_operator_model(path: pathlib.Path, table: object) -> Mapping[str, Any]:
+    if table is None:
+        return types.MappingProxyType({"model": "none"})
+    r = _Reader(path, "operator_model", table)
+    names = tuple(OPERATOR_FIELDS) + tuple(OPERATOR_ALIASES)
+    model = OPERATOR_ALIASES.get(name := r.text("model", choices=names), name)
+    out: dict[str, Any] = {"model": model}
+    if model == "recorded":
+        given = r.text("path")
+        csv = (path.parent / given).resolve()
+        if not csv.is_file():
+            raise ProfileError(path, "operator_model.path", given,
+                               f"a CSV file (time s, force N), relative to {path.parent}")
+        out["path"] = str(csv)
+        out["interpolation"] = r.text("interpolation", choices=INTERPOLATIONS, default="hold")
+    for key, (low, high, unit, default) in OPERATOR_FIELDS[model].items():
+        low_inclusive = not (model == "chirp" and key == "duration")
+        out[key] = r.real(key, low, high, unit, low_inclusive=low_inclusive, default=default)
+    r.done()
+    return types.MappingProxyType(out)
+
+
+def read_profile(path_or_name: str | pathlib.Path) -> Profile:
+    """Parse and validate a profile file (or shipped name) without judging it; raise ProfileError."""
+    path = resolve_profile(path_or_name)
+    try:
+        with open(path, "rb") as handle:
+            document = tomllib.load(handle)
+    except OSError as error:
+        raise ProfileError(path, "profile", str(path), f"a readable file ({error.strerror})") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ProfileError(path, "(TOML syntax)", str(error), "valid TOML 1.0") from None
+    top = _Reader(path, "", document)
+    meta = _Reader(path, "profile", top.raw("profile", "a [profile] table"))
+    name = meta.text("name", pattern=_NAME)
+    operator = meta.text("operator")
+    task = meta.text("task")
+    description = meta.text("description")
+    meta.done()
+    device = _read_device(path, top.raw("device", "a [device] table"))
+    loop = _read_loop(path, top.raw("loop", "a [loop] table"))
+    limits = _Reader(path, "limits", top.raw("limits", "a [limits] table"))
+    allowed_force = device.max_force
+    force_limit = limits.real("force_limit", *FORCE_RANGE, "N", low_inclusive=False)
+    limits.done()
+    if force_limit > allowed_force * (1 + 1e-12):
+        raise ProfileError(
+            path, "limits.force_limit", force_limit,
+            f"(0, {allowed_force:g}] N, the force 0x6072 allows: max_torque_permille {device.max_torque_permille}"
+            f" * rated_torque {device.rated_torque:g} N m * force_per_torque {device.force_per_torque:g} N/(N m) / 1000")
+    policy = _read_gate(path, top.raw("gate", "a [gate] table"))
+    scene = _read_scene(path, top.raw("scene", "a [scene] table with [[scene.objects]]"))
+    operator_model = _read_operator_model(path, top.raw("operator_model", "", default=None))
+    top.done()
+    return Profile(name, operator, task, description, device, loop, scene, force_limit, policy,
+                   operator_model, path)
+
+
+def load_profile(path_or_name: str | pathlib.Path) -> Profile:
+    """Read, validate and gate a profile; raise ProfileError (invalid) or ProfileRefusal (not passive)."""
+    profile = read_profile(path_or_name)
+    decision = profile.gate().judge(profile.compiled_scene())
+    if not decision.accepted:
+        raise ProfileRefusal(profile.path or profile.name, decision)
+    return profile
+
+
+def default_profile() -> Profile:
+    """The shipped :data:`DEFAULT_PROFILE` (the one ``haptic-bus demo`` runs)."""
+    return load_profile(DEFAULT_PROFILE)
+
+
+def object_to_dict(obj: SceneObject) -> dict[str, Any]:
+    """A scene object as its TOML table (``kind`` plus fields)."""
+    kind = {Wall: "wall", Slot: "slot", Detent: "detent"}[type(obj)]
+    return {"kind": kind, **{k: getattr(obj, k) for k in obj.__dataclass_fields__}}
+
+
+def profile_to_dict(profile: Profile) -> dict[str, Any]:
+    """A JSON-ready view of a profile (SI units, as in the TOML)."""
+    d = profile.device
+    return {
+        "profile": {"name": profile.name, "operator": profile.operator, "task": profile.task,
+                    "description": profile.description},
+        "path": None if profile.path is None else str(profile.path),
+        "device": {k: getattr(d, k) for k in d.__dataclass_fields__} | {"max_force": d.max_force},
+        "loop": {"period": profile.loop.period, "timing": profile.loop.timing, "delay": profile.loop.delay},
+        "limits": {"force_limit": profile.force_limit},
+        "gate": {"safety_margin": profile.gate_policy.safety_margin, "bandwidth": profile.gate_policy.bandwidth},
+        "scene": {"objects": [object_to_dict(o) for o in profile.scene]},
+        "operator_model": dict(profile.operator_model),
+    }

@@ -1,0 +1,171 @@
+"""``haptic-bus profiles list|show|check [NAME_OR_PATH] [--json]``: operator parameter profiles.
+
+Exit status: 0 ok (passive), 1 the gate refuses (not passive, or below the profile's safety
+margin, or the strict bandwidth rule fails), 2 invalid input (one line on stderr).
+``check`` prints, for every summed wall the scene can put on the handle, the very report
+``haptic-bus check`` prints for those numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from haptic_bus.analysis.check import check_report, format_check
+from haptic_bus.errors import HapticBusError
+from haptic_bus.control.gate import GateDecision, GateRefusal
+from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.app.profiles import (DEFAULT_PROFILE, Profile, ProfileError, load_profile, object_to_dict,
+                                 profile_to_dict, read_profile, shipped_profiles)
+
+EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
+
+
+def _fail(command: str, error: Exception) -> int:
+    print(f"haptic-bus profiles {command}: error: {error}", file=sys.stderr)
+    return EXIT_INVALID
+
+
+def _refused(command: str, refusal: GateRefusal) -> int:
+    print(f"haptic-bus profiles {command}: {refusal}", file=sys.stderr)
+    return EXIT_NO
+
+
+def _decision_dict(decision: GateDecision) -> dict[str, Any]:
+    return {"accepted": decision.accepted, "worst_margin": decision.worst_margin,
+            "reasons": list(decision.reasons), "warnings": list(decision.warnings)}
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    """List the shipped profiles with their loop and gate verdict; 0 if all load, else 1 or 2."""
+    rows, status = [], EXIT_OK
+    for name, path in shipped_profiles().items():
+        row: dict[str, Any] = {"name": name, "path": str(path), "default": name == DEFAULT_PROFILE}
+        try:
+            profile = load_profile(path)
+            decision = profile.gate().judge(profile.compiled_scene())
+            row.update(status="ok", timing=profile.loop.timing, mass=profile.device.mass,
+                       friction=profile.device.friction, period=profile.loop.period,
+                       objects=len(profile.scene), worst_margin=decision.worst_margin,
+                       warnings=len(decision.warnings), task=profile.task)
+        except ProfileError as error:
+            row.update(status="invalid", error=str(error))
+            status = EXIT_INVALID
+        except GateRefusal as refusal:
+            row.update(status="refused", error=str(refusal))
+            status = max(status, EXIT_NO)
+        rows.append(row)
+    if args.json:
+        print(json.dumps(rows))
+        return status
+    for row in rows:
+        mark = "*" if row["default"] else " "
+        if row["status"] != "ok":
+            print(f"{mark} {row['name']:<18} {row['status'].upper()}: {row['error']}")
+            continue
+        margin = "-" if row["worst_margin"] is None else f"{row['worst_margin']:+.4g} N s/m"
+        warn = f", {row['warnings']} warning(s)" if row["warnings"] else ""
+        print(f"{mark} {row['name']:<18} {row['timing']:<6} m={row['mass']:g} kg b={row['friction']:g} N s/m "
+              f"T={row['period']:g} s  {row['objects']} object(s), worst margin {margin}{warn}  -- {row['task']}")
+    print("(* = default profile)")
+    return status
+
+
+def _format_show(profile: Profile, decision: GateDecision) -> str:
+    d, loop, gate = profile.device, profile.loop, profile.gate_policy
+    lines = [
+        f"profile {profile.name}  ({profile.path})",
+        f"  operator: {profile.operator}",
+        f"  task: {profile.task}",
+        f"  description: {profile.description}",
+        f"device: m={d.mass:g} kg  b={d.friction:g} N s/m (effective)",
+        f"  friction source: {d.friction_source}",
+        f"  scaling: {d.velocity_per_count:g} m/s per 0x606C unit, {d.position_per_count:g} m per 0x6064 increment,"
+        f" 0x6076 = {d.rated_torque:g} N m, {d.force_per_torque:g} N/(N m), 0x6072 = {d.max_torque_permille}"
+        f" per mille -> {d.max_force:g} N",
+        f"loop: T={loop.period:g} s  timing {loop.timing} (delay {loop.delay} samples)",
+        f"force limit: {profile.force_limit:g} N",
+        f"gate: safety margin {gate.safety_margin:g} N s/m, bandwidth rule {gate.bandwidth}",
+        "scene:",
+    ]
+    for obj in profile.scene:
+        fields = object_to_dict(obj)
+        kind, name = fields.pop("kind"), fields.pop("name")
+        lines.append(f"  {kind} {name}: " + ", ".join(f"{k}={v:g}" for k, v in fields.items()))
+    lines.append("operator model: " + ", ".join(f"{k}={v}" for k, v in profile.operator_model.items()))
+    lines.append(f"gate: {'accepted' if decision.accepted else 'REFUSED'}")
+    for wall in decision.walls:
+        lines.append(f"  {'+'.join(wall.objects)}: K={wall.K:g} N/m B={wall.B:g} N s/m margin "
+                     f"{wall.verdict.margin:+.4g} N s/m at theta={wall.verdict.critical_theta:.3g} rad, alpha={wall.alpha:.3g}")
+    lines += [f"  warning: {w}" for w in decision.warnings] + [f"  refused: {r}" for r in decision.reasons]
+    return "\n".join(lines)
+
+
+def cmd_show(args: argparse.Namespace) -> int:
+    """Print one profile (default: the default profile) and the gate's decision on it."""
+    try:
+        profile = load_profile(args.profile)
+    except ProfileError as error:
+        return _fail("show", error)
+    except GateRefusal as refusal:
+        return _refused("show", refusal)
+    decision = profile.gate().judge(profile.compiled_scene())
+    if args.json:
+        print(json.dumps(profile_to_dict(profile) | {"gate_decision": _decision_dict(decision)}))
+    else:
+        print(_format_show(profile, decision))
+    return EXIT_OK
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    """``haptic-bus check`` on every contact wall of a profile; 0 passive (gate admits), 1 not, 2 invalid."""
+    try:
+        profile = read_profile(args.profile)
+        decision = profile.gate().judge(profile.compiled_scene())
+        d, loop = profile.device, profile.loop
+        walls = []
+        for (K, B), names in sorted(profile.compiled_scene().contacts().items()):
+            report = check_report(WallLoop(d.mass, d.friction, loop.period, K, B, loop.delay))
+            walls.append({"objects": list(names), "K": K, "B": B, "report": report})
+    except HapticBusError as error:
+        return _fail("check", error)
+    passive = all(w["report"]["passive"] for w in walls)
+    status = EXIT_OK if passive and decision.accepted else EXIT_NO
+    if args.json:
+        print(json.dumps({"profile": profile.name, "path": str(profile.path), "passive": passive,
+                          "gate": _decision_dict(decision) | {"safety_margin": profile.gate_policy.safety_margin,
+                                                               "bandwidth": profile.gate_policy.bandwidth},
+                          "walls": walls}))
+        return status
+    print(f"profile {profile.name} ({profile.path}): {len(walls)} contact wall(s),"
+          f" timing {loop.timing} (delay {loop.delay})")
+    for wall in walls:
+        print(f"--- {'+'.join(wall['objects'])} (summed K, B)")
+        print(format_check(wall["report"]))
+    verdict = "passive" if passive else "NOT passive"
+    print(f"profile verdict: {verdict}; gate {'accepts' if decision.accepted else 'REFUSES'}"
+          f" (safety margin {profile.gate_policy.safety_margin:g} N s/m, bandwidth {profile.gate_policy.bandwidth})")
+    for reason in decision.reasons:
+        print(f"  refused: {reason}")
+    for warning in decision.warnings:
+        print(f"  warning: {warning}")
+    return status
+
+
+def add_profiles_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register ``profiles list|show|check`` on ``subparsers``; each leaf sets ``handler``."""
+    parser = subparsers.add_parser("profiles", help="operator parameter profiles: list, show, check")
+    sub = parser.add_subparsers(dest="profiles_command", required=True)
+    listing = sub.add_parser("list", help="the shipped profiles and their gate verdicts")
+    listing.add_argument("--json", action="store_true", help="one JSON array on stdout")
+    listing.set_defaults(handler=cmd_list)
+    for name, handler, text in (("show", cmd_show, "print a profile and the gate's decision"),
+                                ("check", cmd_check, "haptic-bus check on every contact wall of a profile")):
+        leaf = sub.add_parser(name, help=text)
+        leaf.add_argument("profile", nargs="?", default=DEFAULT_PROFILE,
+                          help=f"shipped profile name or TOML path (default {DEFAULT_PROFILE})")
+        leaf.add_argument("--json", action="store_true", help="one JSON object on stdout")
+        leaf.set_defaults(handler=handler)
+    return parser

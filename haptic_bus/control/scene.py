@@ -1,0 +1,201 @@
+"""Scenes: the virtual objects the handle can touch, compiled once into a piecewise-affine law.
+
+One axis, SI units: positions in m, stiffness in N/m, damping in N s/m.  Every object acts
+on an interval of handle positions (its *support*) with a linear spring-damper law there; the
+wall force that opposes the handle (the seed's ``u``, N) is
+
+    u(x, v) = sum over objects whose support contains x of  K_i (x - anchor_i) + B_i v.
+
+:func:`compile_scene` sweeps the support end points once and stores, for every interval
+between consecutive end points, the summed ``(K, K * anchor, B)``.  A cycle then costs one
+``bisect`` (C code, ``log2 N`` comparisons) and one affine evaluation, whatever the number of
+objects: a 1 000-object scene costs what a one-object scene costs.  Overlapping objects add,
+and the summed ``(K, B)`` of every interval is what the passivity gate judges.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+from typing import Iterable, Union
+
+from haptic_bus.errors import ParameterError
+from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
+from haptic_bus.validation import real_in_range
+
+_POSITION_RANGE = (-1e6, 1e6)  # m
+
+
+def _validated(name: str, K: float, B: float, context: str) -> tuple[float, float]:
+    return (
+        real_in_range("stiffness", K, *STIFFNESS_RANGE, unit="N/m", context=f"{context} {name!r}"),
+        real_in_range("damping", B, *DAMPING_RANGE, unit="N s/m", context=f"{context} {name!r}"),
+    )
+
+
+def _position(field: str, value: float, context: str) -> float:
+    return real_in_range(field, value, *_POSITION_RANGE, unit="m", context=context)
+
+
+@dataclass(frozen=True)
+class Wall:
+    """A unilateral wall at ``position``: solid on the side ``normal`` points away from.
+
+    ``normal = -1``: solid for ``x > position`` (the operator pushes in +x into it);
+    ``normal = +1``: solid for ``x < position``.  Acts only while penetrating, with
+    ``u = K (x - position) + B v``.
+    """
+
+    name: str
+    position: float
+    normal: int
+    stiffness: float
+    damping: float
+
+    def __post_init__(self) -> None:
+        if isinstance(self.normal, bool) or self.normal not in (-1, 1):
+            raise ParameterError("normal", self.normal, "-1 (solid above position) or +1 (solid below)", f"wall {self.name!r}")
+        object.__setattr__(self, "normal", int(self.normal))
+        K, B = _validated(self.name, self.stiffness, self.damping, "wall")
+        object.__setattr__(self, "stiffness", K)
+        object.__setattr__(self, "damping", B)
+        object.__setattr__(self, "position", _position("position", self.position, f"wall {self.name!r}"))
+
+    def pieces(self) -> list[tuple[float, float, float, float, float]]:
+        """(start m, end m, K N/m, anchor m, B N s/m) of each support interval."""
+        if self.normal == -1:
+            return [(self.position, math.inf, self.stiffness, self.position, self.damping)]
+        return [(-math.inf, self.position, self.stiffness, self.position, self.damping)]
+
+    def with_parameters(self, stiffness: float, damping: float) -> "Wall":
+        return Wall(self.name, self.position, self.normal, stiffness, damping)
+
+
+@dataclass(frozen=True)
+class Slot:
+    """A box the handle is held inside: walls at ``low`` and ``high`` facing each other (m)."""
+
+    name: str
+    low: float
+    high: float
+    stiffness: float
+    damping: float
+
+    def __post_init__(self) -> None:
+        K, B = _validated(self.name, self.stiffness, self.damping, "slot")
+        object.__setattr__(self, "stiffness", K)
+        object.__setattr__(self, "damping", B)
+        low = _position("low", self.low, f"slot {self.name!r}")
+        high = _position("high", self.high, f"slot {self.name!r}")
+        if not high > low:
+            raise ParameterError("high", self.high, f"greater than low = {low:g} m", f"slot {self.name!r}")
+        object.__setattr__(self, "low", low)
+        object.__setattr__(self, "high", high)
+
+    def pieces(self) -> list[tuple[float, float, float, float, float]]:
+        K, B = self.stiffness, self.damping
+        return [(-math.inf, self.low, K, self.low, B), (self.high, math.inf, K, self.high, B)]
+
+    def with_parameters(self, stiffness: float, damping: float) -> "Slot":
+        return Slot(self.name, self.low, self.high, stiffness, damping)
+
+
+@dataclass(frozen=True)
+class Detent:
+    """A bilateral spring-damper pulling to ``center`` within ``reach`` m of it (a detent)."""
+
+    name: str
+    center: float
+    reach: float
+    stiffness: float
+    damping: float
+
+    def __post_init__(self) -> None:
+        K, B = _validated(self.name, self.stiffness, self.damping, "detent")
+        object.__setattr__(self, "stiffness", K)
+        object.__setattr__(self, "damping", B)
+        object.__setattr__(self, "center", _position("center", self.center, f"detent {self.name!r}"))
+        object.__setattr__(self, "reach", real_in_range("reach", self.reach, 0.0, 1e6, low_inclusive=False, unit="m",
+                                                        context=f"detent {self.name!r}"))
+
+    def pieces(self) -> list[tuple[float, float, float, float, float]]:
+        return [(self.center - self.reach, self.center + self.reach, self.stiffness, self.center, self.damping)]
+
+    def with_parameters(self, stiffness: float, damping: float) -> "Detent":
+        return Detent(self.name, self.center, self.reach, stiffness, damping)
+
+
+SceneObject = Union[Wall, Slot, Detent]
+
+
+@dataclass(frozen=True)
+class CompiledScene:
+    """The scene as a piecewise-affine law: ``breaks`` (m, sorted) split the axis into
+    ``len(breaks) + 1`` intervals; interval ``i`` has ``u = k[i] x - k_anchor[i] + damping[i] v``.
+    """
+
+    objects: tuple[SceneObject, ...]
+    breaks: tuple[float, ...]
+    stiffness: tuple[float, ...]
+    stiffness_anchor: tuple[float, ...]
+    damping: tuple[float, ...]
+    contributors: tuple[tuple[str, ...], ...]
+
+    def force(self, x: float, v: float) -> float:
+        """The wall force ``u`` (N, opposing the handle) at position ``x`` m and velocity ``v`` m/s."""
+        i = bisect.bisect_right(self.breaks, x)
+        return self.stiffness[i] * x - self.stiffness_anchor[i] + self.damping[i] * v
+
+    def contacts(self) -> dict[tuple[float, float], tuple[str, ...]]:
+        """Every distinct summed ``(K, B)`` that can act on the handle at once, with the names
+        of every object that makes it up somewhere (overlapping objects add)."""
+        found: dict[tuple[float, float], set[str]] = {}
+        for k, b, names in zip(self.stiffness, self.damping, self.contributors):
+            if k > 0 or b > 0:
+                found.setdefault((k, b), set()).update(names)
+        return {wall: tuple(sorted(names)) for wall, names in found.items()}
+
+    def by_name(self) -> dict[str, SceneObject]:
+        return {obj.name: obj for obj in self.objects}
+
+
+def compile_scene(objects: Iterable[SceneObject]) -> CompiledScene:
+    """Sweep the objects' support intervals once into a :class:`CompiledScene`.
+
+    Each interval's sums are formed afresh with ``math.fsum`` over the pieces active there
+    (not by adding and subtracting running totals), so an interval where nothing acts has
+    exactly zero force and no round-off carries from one interval to the next.
+    """
+    objects = tuple(objects)
+    names = [obj.name for obj in objects]
+    duplicates = sorted({n for n in names if names.count(n) > 1})
+    if duplicates:
+        raise ParameterError("name", duplicates[0], "a name used by one scene object only", "scene")
+    pieces = [piece for obj in objects for piece in obj.pieces()]
+    owners = [obj.name for obj in objects for _ in obj.pieces()]
+    starts: dict[float, list[int]] = {}
+    ends: dict[float, list[int]] = {}
+    active: set[int] = set()
+    for i, (start, end, _, _, _) in enumerate(pieces):
+        if start == -math.inf:
+            active.add(i)
+        else:
+            starts.setdefault(start, []).append(i)
+        if end != math.inf:
+            ends.setdefault(end, []).append(i)
+    breaks = sorted(set(starts) | set(ends))
+    ks, kas, bs, who = [], [], [], []
+
+    def close_interval() -> None:
+        who.append(tuple(sorted({owners[i] for i in active})))
+        ks.append(math.fsum(pieces[i][2] for i in active))
+        kas.append(math.fsum(pieces[i][2] * pieces[i][3] for i in active))
+        bs.append(math.fsum(pieces[i][4] for i in active))
+
+    close_interval()
+    for at in breaks:
+        active.difference_update(ends.get(at, ()))
+        active.update(starts.get(at, ()))
+        close_interval()
+    return CompiledScene(objects, tuple(breaks), tuple(ks), tuple(kas), tuple(bs), tuple(who))
