@@ -1,4 +1,4 @@
-"""The one small interface every fieldbus drive implements, and its typed errors.
+"""The one small interface every fieldbus drive implements, and the drive-unit scaling.
 
 A controller needs exactly this from a drive: connect, enable in a mode, read the cyclic
 inputs of a cycle, write the cyclic outputs of that cycle, disable, fault reset, close.
@@ -13,30 +13,7 @@ import abc
 from dataclasses import dataclass
 
 from drives.cia402 import ObjectSpec, OperationMode
-
-
-class DriveError(Exception):
-    """Base class of drive errors; ``node`` names the drive (node id or unit id)."""
-
-    def __init__(self, node: str, message: str) -> None:
-        self.node = node
-        super().__init__(f"{node}: {message}")
-
-
-class DriveTimeout(DriveError):
-    """The drive did not answer within its timeout (silent node, wrong node id, lost link)."""
-
-
-class DriveFault(DriveError):
-    """The drive reported a fault (EMCY, fault bit, heartbeat loss); ``code`` is the error code."""
-
-    def __init__(self, node: str, message: str, code: int | None = None) -> None:
-        self.code = code
-        super().__init__(node, message)
-
-
-class DriveProtocolError(DriveError):
-    """The drive answered with something the protocol forbids (SDO abort, bad frame, exception)."""
+from drives.errors import ParameterError
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,6 +43,15 @@ class DriveScaling:
     rated_torque: float
     force_per_torque: float
     max_torque_permille: int = 1000
+
+    def __post_init__(self) -> None:
+        for name in ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
+                raise ParameterError(name, value, "a finite real > 0", "drive scaling")
+        permille = self.max_torque_permille
+        if isinstance(permille, bool) or not isinstance(permille, int) or not 1 <= permille <= 0xFFFF:
+            raise ParameterError("max_torque_permille", permille, "an integer in [1, 65535] (0x6072)", "drive scaling")
 
     @property
     def newton_per_permille(self) -> float:

@@ -15,12 +15,7 @@ from typing import Any
 
 import can
 
-from drives.base import DriveError
-
-
-class BusConfigError(DriveError):
-    """No usable CAN bus configuration (no interface selected, unknown interface, open failed)."""
-
+from drives.errors import BusConfigError
 
 _NO_INTERFACE = (
     "no CAN interface selected: pass interface=... (e.g. 'socketcan', 'virtual', 'udp_multicast'), "
@@ -73,11 +68,6 @@ def open_bus(
         return can.Bus(**config)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
         raise BusConfigError(where, f"cannot open the CAN bus: {exc}") from exc
-
-
-def describe_bus(bus: can.BusABC) -> str:
-    """A short human-readable name of an open bus (interface and channel)."""
-    return f"{type(bus).__name__}({getattr(bus, 'channel_info', '?')})"
 
 
 def parse_bus_option(text: str) -> tuple[str, Any]:

@@ -1,43 +1,48 @@
-"""What every CiA-402 master does the same way, whatever the fieldbus: select the mode of
-operation, walk the state machine, reset a fault.
+"""What every CiA-402 master does the same way, whatever the fieldbus.
 
-A fieldbus master subclasses :class:`Cia402Master` and provides one primitive,
-:meth:`Cia402Master._command`: send a controlword and return the statusword that answers it
-(on CANopen one SYNC/RPDO/TPDO exchange, on Modbus a register write and read).
+Mode selection, the state-machine walk and the fault reset, and the cyclic safety state both
+masters keep: the trip (after which every output is the safe one), the torque clamp at
+0x6072, the fault-bit check, the merge of the drive's scaling with the caller's, and the
+counters.  A fieldbus master subclasses :class:`Cia402Master` and provides the primitives:
+
+- :meth:`~Cia402Master._command`: send a controlword (zero torque) and return the statusword
+  that answers it (CANopen: one SYNC/RPDO/TPDO exchange; Modbus: a register write and read);
+- :meth:`~Cia402Master._send_outputs`: put one cycle's controlword and torque on the wire;
+- :meth:`~Cia402Master._send_safe_outputs`: one attempt to put zero torque with DISABLE
+  VOLTAGE on the wire, never raising (the error being raised matters more);
+- :meth:`~Cia402Master.read_object` / :meth:`~Cia402Master.write_object`: acyclic access.
 """
 
 from __future__ import annotations
 
 import abc
+import logging
+import math
 import time
+from dataclasses import dataclass, fields
+from typing import Any
 
-from drives.base import Drive, DriveError, DriveTimeout
+from drives.base import CyclicInputs, Drive, DriveScaling
 from drives.cia402 import (
     CW_FAULT_RESET,
     MODES_OF_OPERATION,
     MODES_OF_OPERATION_DISPLAY,
     SUPPORTED_DRIVE_MODES,
+    SW_FAULT,
     Command,
+    ObjectSpec,
     OperationMode,
     State,
     decode_statusword,
     path_to_operation_enabled,
     supports,
 )
+from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveStateError, UnsupportedModeError
+
+logger = logging.getLogger(__name__)
 
 SAFE_CONTROLWORD = Command.DISABLE_VOLTAGE.word  # -> SWITCH ON DISABLED: no torque, handle free
-
-
-class UnsupportedModeError(DriveError):
-    """The drive does not announce the requested mode of operation in 0x6502."""
-
-
-class DriveStateError(DriveTimeout):
-    """The CiA-402 state machine did not reach the expected state in time; ``state`` is where it stuck."""
-
-    def __init__(self, node: str, message: str, state: State | None) -> None:
-        self.state = state
-        super().__init__(node, message)
+SCALING_FIELDS = ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque", "max_torque_permille")
 
 
 def state_name(state: State | None) -> str:
@@ -45,23 +50,181 @@ def state_name(state: State | None) -> str:
     return state.value if state is not None else "an undefined state"
 
 
-class Cia402Master(Drive):
-    """Mode selection, state-machine walks and fault reset on top of :meth:`_command`.
+@dataclass(slots=True)
+class CyclicStats:
+    """Counters every master keeps (since construction)."""
 
-    Subclasses set ``name``, ``state_timeout`` (s, per state-machine step) and
-    ``max_commands_per_step`` (a bound on the exchanges one step may take besides the time).
+    cycles: int = 0  # read_inputs calls that returned inputs
+    saturated_outputs: int = 0  # torques clamped to +-0x6072
+    suppressed_outputs: int = 0  # write_outputs replaced by the safe outputs while tripped
+    safe_stops: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        """The counters as a plain dict."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def merge_scaling(
+    node: str, given: DriveScaling | None, found: dict[str, tuple[float | int, str]]
+) -> tuple[DriveScaling, dict[str, str]]:
+    """The drive's scaling: ``found`` (field -> (value, where it was read)) over ``given``.
+
+    Returns the scaling and, per field, where its value came from ("caller" or the object /
+    register).  :class:`DriveProtocolError` names a field neither side gives, or a value the
+    drive reports that cannot be a scaling factor.
+    """
+    values: dict[str, Any] = {name: getattr(given, name) for name in SCALING_FIELDS} if given is not None else {}
+    sources = dict.fromkeys(values, "caller")
+    for name, (value, source) in found.items():
+        values[name] = value
+        sources[name] = source
+    missing = [name for name in SCALING_FIELDS if name not in values]
+    if missing:
+        raise DriveProtocolError(
+            node, f"scaling unknown for {', '.join(missing)}: the drive has no objects for them; pass scaling=DriveScaling(...)"
+        )
+    for name in SCALING_FIELDS[:4]:
+        value = values[name]
+        if not (value > 0 and math.isfinite(value)):
+            raise DriveProtocolError(node, f"scaling {name} = {value!r} (from {sources[name]}); must be finite and > 0")
+    return DriveScaling(**values), sources
+
+
+class Cia402Master(Drive):
+    """Mode selection, state-machine walks, fault reset, and the cyclic safety state.
+
+    Subclasses call :meth:`_init_master` from their constructor and set ``state_timeout``
+    (s, per state-machine step) and ``max_commands_per_step`` (a bound on the exchanges one
+    step may take besides the time).
     """
 
     state_timeout: float
     max_commands_per_step: int
+    stats: CyclicStats
+
+    def _init_master(self, name: str, scaling: DriveScaling | None) -> None:
+        self.name = name
+        self._given_scaling = scaling
+        self.scaling = scaling  # type: ignore[assignment]  # complete after connect()
+        self.scaling_sources: dict[str, str] = {}
+        self.last_inputs: CyclicInputs | None = None
+        self._controlword = SAFE_CONTROLWORD
+        self._torque_limit = 0x7FFF
+        self._armed = False  # OPERATION ENABLED reached: the fault bit raises
+        self._tripped: DriveError | None = None
+
+    # ------------------------------------------------------------------ primitives
 
     @abc.abstractmethod
-    def write_object(self, spec, value: int) -> None:
+    def write_object(self, spec: ObjectSpec | int, value: int) -> None:
         """Write one object acyclically (SDO download, register write) in drive units."""
 
     @abc.abstractmethod
     def _command(self, controlword: int) -> int:
         """Send ``controlword`` (with zero torque) and return the statusword that answers it."""
+
+    @abc.abstractmethod
+    def _send_outputs(self, controlword: int, target_torque: int) -> None:
+        """Put one cycle's controlword and target torque on the wire."""
+
+    @abc.abstractmethod
+    def _send_safe_outputs(self) -> None:
+        """One attempt to put zero torque with DISABLE VOLTAGE on the wire; never raises."""
+
+    def _require_connected(self) -> None:
+        """Raise DriveError if the link is not up (subclasses know how to tell)."""
+
+    def _clear_events(self) -> None:
+        """Forget events seen before an enable or a fault reset (subclass hook)."""
+
+    def _before_enable(self) -> None:
+        """Bus-specific preparation after the mode is set and before the walk (subclass hook)."""
+
+    # ------------------------------------------------------------------ safety state
+
+    @property
+    def tripped(self) -> DriveError | None:
+        """The error that made the master send the safe outputs, or None."""
+        return self._tripped
+
+    def _adopt_scaling(self, found: dict[str, tuple[float | int, str]]) -> None:
+        self.scaling, self.scaling_sources = merge_scaling(self.name, self._given_scaling, found)
+        self._torque_limit = min(int(self.scaling.max_torque_permille), 0x7FFF)
+
+    def _trip(self, error: DriveError) -> DriveError:
+        """Safe outputs now, every later output safe too; returns ``error`` for ``raise``."""
+        self._controlword = SAFE_CONTROLWORD
+        self._armed = False
+        self.stats.safe_stops += 1
+        self._send_safe_outputs()
+        self._tripped = error
+        return error
+
+    def _accept_inputs(self, inputs: CyclicInputs) -> CyclicInputs:
+        """Count a cycle's inputs; trip on the fault bit once the drive was enabled."""
+        self.last_inputs = inputs
+        self.stats.cycles += 1
+        statusword = inputs.statusword
+        if statusword & SW_FAULT and self._armed:
+            detail, code = self._fault_detail()
+            raise self._trip(DriveFault(
+                self.name,
+                f"fault bit set in statusword 0x{statusword:04X} ({state_name(decode_statusword(statusword))})"
+                f"{detail}; torque set to zero",
+                code=code,
+            ))
+        return inputs
+
+    def _fault_detail(self) -> tuple[str, int | None]:
+        """Text to append to a fault-bit message and the drive's error code, where known (hook)."""
+        return "", None
+
+    def write_outputs(self, target_torque: int) -> None:
+        """Send the held controlword and ``target_torque`` (per mille, saturated at +-0x6072);
+        the safe outputs instead while tripped."""
+        if self._tripped is not None:
+            self.stats.suppressed_outputs += 1
+            self._send_outputs(SAFE_CONTROLWORD, 0)
+            return
+        limit = self._torque_limit
+        if target_torque > limit:
+            target_torque = limit
+            self.stats.saturated_outputs += 1
+        elif target_torque < -limit:
+            target_torque = -limit
+            self.stats.saturated_outputs += 1
+        self._send_outputs(self._controlword, target_torque)
+
+    # ------------------------------------------------------------------ state machine
+
+    def enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
+        """Check 0x6502, write 0x6060, await 0x6061, walk to OPERATION ENABLED (timeouts per step)."""
+        self._require_connected()
+        self._select_mode(mode)
+        self._before_enable()
+        self._tripped = None
+        self._clear_events()
+        self._walk(State.OPERATION_ENABLED, self._hold_word())
+        self._controlword = Command.ENABLE_OPERATION.word
+        self._armed = True
+
+    def disable(self) -> None:
+        """Zero torque, DISABLE VOLTAGE, and check the drive reaches SWITCH ON DISABLED (or sits in FAULT)."""
+        self._armed = False
+        self._controlword = SAFE_CONTROLWORD
+        self._walk(State.SWITCH_ON_DISABLED, SAFE_CONTROLWORD, accept=(State.FAULT,))
+
+    def fault_reset(self) -> None:
+        """Rising edge of controlword bit 7, then back to 0; check the drive leaves FAULT."""
+        self._require_connected()
+        self._armed = False
+        self._clear_events()
+        self._reset_fault()
+        self._controlword = SAFE_CONTROLWORD
+        self._tripped = None
+
+    def _hold_word(self) -> int:
+        return self._controlword if self._tripped is None else SAFE_CONTROLWORD
 
     def _select_mode(self, mode: OperationMode) -> None:
         """Check 0x6502 announces ``mode`` (CST only, the one this master drives), write 0x6060
@@ -96,8 +259,9 @@ class Cia402Master(Drive):
         previous_word = first_word
         commands = 0
         while state is not goal and state not in accept:
+            command: Command | None
             if goal is State.SWITCH_ON_DISABLED:
-                command: Command | None = Command.DISABLE_VOLTAGE
+                command = Command.DISABLE_VOLTAGE
             elif state is State.FAULT:
                 raise DriveStateError(self.name, f"drive is in FAULT (statusword 0x{statusword:04X}); call fault_reset() first", state)
             else:

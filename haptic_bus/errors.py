@@ -1,23 +1,38 @@
-"""Typed errors of haptic_bus: each names what was wrong and what is allowed."""
+"""haptic_bus' errors: the distribution's error tree (drawn in :mod:`drives.errors`), re-exported.
 
-from __future__ import annotations
+``from haptic_bus.errors import DriveError, ParameterError, ...`` works for every class of the
+tree; :class:`~haptic_bus.control.gate.GateRefusal` (exit 1) and
+:class:`~haptic_bus.control.supervisor.AssumptionBroken` (exit 3) live beside the code that raises them.
+"""
 
+from drives.errors import (
+    BusConfigError,
+    DriveError,
+    DriveFault,
+    DriveProtocolError,
+    DriveStateError,
+    DriveTimeout,
+    HapticBusError,
+    ModbusExceptionError,
+    ModbusLinkLost,
+    ParameterError,
+    PdoLengthError,
+    SdoAbortError,
+    UnsupportedModeError,
+)
 
-class HapticBusError(Exception):
-    """Base class of every error haptic_bus raises on purpose."""
-
-
-class ParameterError(HapticBusError, ValueError):
-    """A parameter is outside its allowed range (or not a number at all).
-
-    Attributes name the parameter, the offending value and the allowed range, so a
-    commissioning engineer can act on the message without reading code.
-    """
-
-    def __init__(self, name: str, value: object, allowed: str, context: str = "") -> None:
-        self.name = name
-        self.value = value
-        self.allowed = allowed
-        self.context = context
-        where = f"{context}: " if context else ""
-        super().__init__(f"{where}{name} = {value!r} is invalid; allowed: {allowed}")
+__all__ = [
+    "BusConfigError",
+    "DriveError",
+    "DriveFault",
+    "DriveProtocolError",
+    "DriveStateError",
+    "DriveTimeout",
+    "HapticBusError",
+    "ModbusExceptionError",
+    "ModbusLinkLost",
+    "ParameterError",
+    "PdoLengthError",
+    "SdoAbortError",
+    "UnsupportedModeError",
+]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import numbers
 
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 
 
 def real_in_range(

@@ -27,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from haptic_bus.validation import real_in_range, whole_in_range
 
 MAX_DATA_BYTES = 8

@@ -24,7 +24,7 @@ from typing import Any
 import can
 
 from drives.bus_config import parse_bus_option
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from sim_drive.bus_timing import BusLoadMeter
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.eds import eds_path

@@ -45,7 +45,7 @@ from drives.cia402 import (
     next_state,
     supports,
 )
-from haptic_bus.errors import HapticBusError
+from drives.errors import HapticBusError
 from haptic_bus.analysis.plant import ExactPlant
 from sim_drive.operator import NoOperator, OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing

@@ -65,7 +65,7 @@ from drives.modbus.register_map import (
     encode_value,
     register_at,
 )
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from sim_drive.device import ObjectAccessError, SimulatedDrive
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing

@@ -17,7 +17,7 @@ import pathlib
 import tomllib
 from dataclasses import dataclass
 
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from sim_drive.operator import NoOperator, OperatorModel, operator_from_table
 from sim_drive.parameters import DeviceParameters, Timing
 

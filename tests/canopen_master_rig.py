@@ -25,6 +25,7 @@ import can
 import pytest
 
 from drives.canopen.drive import CanopenDrive
+from sim_drive.eds import eds_path
 from tests.sim_fixtures import VCAN0_MISSING
 
 REPO = Path(__file__).resolve().parents[1]
@@ -139,6 +140,7 @@ def rig(
     else:
         process = SimProcess(spec, node_id, timing)
         wait_for_heartbeat(spec, node_id, HEARTBEAT_WAIT, process)
+    drive_kwargs.setdefault("eds", eds_path())
     drive = CanopenDrive(node_id, **spec.drive_kwargs(), **drive_kwargs)
     status = None
     try:

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from haptic_bus.app.cli import main
 from haptic_bus.analysis.closed_form import velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict, seed_verdict
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from haptic_bus.analysis.frequency import seed_t_zw, t_fund, z_fund
 from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, max_damping, max_stiffness
 from haptic_bus.analysis.loop import WallLoop

@@ -6,7 +6,8 @@ import struct
 
 import pytest
 
-from drives.bus_config import BusConfigError, resolve_bus_config
+from drives.bus_config import resolve_bus_config
+from drives.errors import BusConfigError
 from drives.canopen.drive import split_into_frames
 from drives.cia402 import (
     CONTROLWORD,
@@ -19,8 +20,12 @@ from drives.cia402 import (
     DataType,
     ObjectSpec,
 )
-from drives.emcy import decode_emcy, describe_emcy_code
-from drives.canopen.pdo_codec import PdoCodec, PdoLengthError, saturate
+from canopen.emcy import EmcyError
+
+from drives.canopen.events import describe_emcy
+from drives.canopen.pdo_codec import PdoCodec
+from drives.cia301 import describe_emcy_code, is_restricted_cob_id
+from drives.errors import PdoLengthError
 
 
 def test_default_tpdo_layout_and_mapping_words():
@@ -125,12 +130,6 @@ def test_objects_are_split_into_can_frames_in_order():
     ]
 
 
-def test_saturate_never_wraps():
-    assert saturate(40000, -3000, 3000) == 3000
-    assert saturate(-40000, -3000, 3000) == -3000
-    assert saturate(12, -3000, 3000) == 12
-
-
 @pytest.mark.parametrize(
     ("code", "text"),
     [
@@ -151,13 +150,18 @@ def test_emcy_codes_are_decoded(code, text):
     assert text.lower() in describe_emcy_code(code).lower()
 
 
-def test_emcy_frame_decoding():
-    emcy = decode_emcy(bytes([0x10, 0x23, 0x02, 1, 2, 3, 4, 5]), 1.5)
-    assert (emcy.code, emcy.register, emcy.data, emcy.received_at) == (0x2310, 0x02, b"\x01\x02\x03\x04\x05", 1.5)
-    assert "0x2310" in str(emcy) and "over-current" in str(emcy)
-    assert not emcy.is_reset
-    assert decode_emcy(bytes(8)).is_reset
-    assert decode_emcy(b"\x10\x23") is None  # too short: not decoded
+def test_emcy_text_names_code_description_and_register():
+    text = describe_emcy(EmcyError(0x2310, 0x02, b"\x01\x02\x03\x04\x05", 1.5))
+    assert text == "EMCY 0x2310 (Continuous over-current), error register 0x02"
+
+
+@pytest.mark.parametrize(("cob_id", "restricted"), [
+    (0x000, True), (0x07F, True), (0x080, False), (0x085, False), (0x100, False), (0x101, True), (0x180, True),
+    (0x181, False), (0x57F, False), (0x585, True), (0x605, True), (0x680, False), (0x6E0, True), (0x705, True),
+    (0x780, True), (0x7FF, True),
+])
+def test_restricted_cob_ids_of_cia301(cob_id, restricted):
+    assert is_restricted_cob_id(cob_id) is restricted
 
 
 def test_bus_config_explicit_arguments(monkeypatch):

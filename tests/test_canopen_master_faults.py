@@ -13,9 +13,13 @@ import can
 import canopen
 import pytest
 
-from drives.base import DriveFault, DriveProtocolError, DriveScaling, DriveTimeout
-from drives.bus_config import BusConfigError
-from drives.canopen.drive import SAFE_CONTROLWORD, CanopenDrive, DriveStateError, UnsupportedModeError
+from drives.base import DriveScaling
+from drives.errors import DriveFault, DriveProtocolError, DriveTimeout
+from drives.errors import BusConfigError
+from drives.canopen.drive import CanopenDrive
+from drives.cia402_master import SAFE_CONTROLWORD
+from sim_drive.eds import eds_path
+from drives.errors import DriveStateError, UnsupportedModeError
 from drives.cia402 import CONTROLWORD, STATUSWORD, SUPPORTED_DRIVE_MODES, OperationMode, State, decode_statusword
 from tests.canopen_master_rig import NODE_ID, new_bus_spec, rig
 
@@ -207,7 +211,7 @@ def test_long_tpdo_injected_on_the_bus_is_dropped_and_counted():
 
 def test_wrong_node_id_fails_within_its_timeout_naming_the_node():
     with rig("virtual", "ideal", node_id=NODE_ID, connect=False) as r:
-        wrong = CanopenDrive(6, interface="virtual", channel=r.spec.channel, boot_timeout=0.3)
+        wrong = CanopenDrive(6, interface="virtual", channel=r.spec.channel, boot_timeout=0.3, eds=eds_path())
         start = time.monotonic()
         with pytest.raises(DriveTimeout) as info:
             wrong.connect()
@@ -227,7 +231,7 @@ def test_sdo_aborts_map_to_readable_protocol_errors():
         assert "0x6041:00" in text and "Statusword" in text
         assert "0x06010002" in text and "read only" in text
         assert info.value.abort_code == 0x06010002
-        with pytest.raises(DriveProtocolError, match=r"0x2000:01 .*0x06090030 Value range of parameter exceeded"):
+        with pytest.raises(DriveProtocolError, match=r"0x2000:01 .*0x06090030 Invalid value for parameter"):
             drive.sdo_write(0x2000, 1, struct.pack("<d", -1.0))  # a negative mass
         with pytest.raises(DriveProtocolError, match=r"0x2FFF:00 \(unknown object\).*Object does not exist"):
             drive.sdo_read(0x2FFF, 0)
@@ -282,7 +286,7 @@ def test_bus_from_python_can_environment(monkeypatch):
     monkeypatch.setenv("CAN_INTERFACE", "virtual")
     monkeypatch.setenv("CAN_CHANNEL", spec.channel)
     with CanopenSimDrive({"interface": "virtual", "channel": spec.channel}, NODE_ID):
-        with CanopenDrive(NODE_ID) as drive:
+        with CanopenDrive(NODE_ID, eds=eds_path()) as drive:
             drive.connect()
             assert drive.read_object(STATUSWORD) & 0x4F == 0x40
 
@@ -293,7 +297,7 @@ def test_given_bus_and_network_are_not_shut_down():
 
     with CanopenSimDrive({"interface": "virtual", "channel": spec.channel}, NODE_ID):
         with spec.open() as bus:
-            drive = CanopenDrive(NODE_ID, bus=bus)
+            drive = CanopenDrive(NODE_ID, bus=bus, eds=eds_path())
             drive.connect()
             drive.enable()
             run_cycles(drive, 3)
@@ -302,7 +306,7 @@ def test_given_bus_and_network_are_not_shut_down():
         network = canopen.Network()
         network.connect(interface="virtual", channel=spec.channel)
         try:
-            drive = CanopenDrive(NODE_ID, network=network)
+            drive = CanopenDrive(NODE_ID, network=network, eds=eds_path())
             drive.connect()
             drive.enable()
             run_cycles(drive, 3)

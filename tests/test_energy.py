@@ -29,7 +29,7 @@ from haptic_bus.analysis.energy import (
     simulate,
     simulate_reference,
 )
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from haptic_bus.analysis.frequency import t_fund
 from haptic_bus.analysis.loop import WallLoop
 

@@ -9,9 +9,10 @@ import time
 
 import pytest
 
-from drives.base import DriveError, DriveFault, DriveProtocolError, DriveTimeout
+from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout
 from drives.cia402 import QUICK_STOP_OPTION_CODE, State
-from drives.modbus.drive import ModbusDrive, ModbusLinkLost
+from drives.modbus.drive import ModbusDrive
+from drives.errors import ModbusLinkLost
 from sim_drive.modbus_server import LINK_LOST_ERROR_CODE, ModbusSimServer
 
 UNIT = 7

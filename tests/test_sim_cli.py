@@ -11,7 +11,7 @@ import can
 import pytest
 
 from drives.cia402 import Command
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from sim_drive.cli import main
 from sim_drive.eds import eds_path
 from sim_drive.operator import HandModel

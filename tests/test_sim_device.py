@@ -7,7 +7,7 @@ import math
 import pytest
 
 from drives.cia402 import Command, State, decode_statusword
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from haptic_bus.analysis.plant import zoh_coefficients
 from sim_drive.device import ObjectAccessError, SimulatedDrive
 from sim_drive.operator import ConstantPush, Sinusoid
@@ -236,3 +236,11 @@ def test_timing_can_be_changed_between_syncs() -> None:
     assert drive.timing is Timing.IDEAL
     drive.timing = "cia402"
     assert drive.timing is Timing.CIA402 and Timing.CIA402.delay == 1
+
+
+def test_saturate_never_wraps():
+    from sim_drive.device import saturate
+
+    assert saturate(40000, -3000, 3000) == 3000
+    assert saturate(-40000, -3000, 3000) == -3000
+    assert saturate(12, -3000, 3000) == 12

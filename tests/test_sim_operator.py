@@ -7,7 +7,7 @@ import pathlib
 
 import pytest
 
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from sim_drive.operator import (
     OPERATOR_CODES,
     Chirp,

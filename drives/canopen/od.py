@@ -1,52 +1,21 @@
-"""Object dictionaries for the CANopen master: load the drive's EDS, or build a minimal one.
+"""Object dictionaries for the CANopen master: the drive's EDS, or the standard one.
 
-The master needs an object dictionary for names in error messages, for checking that the
-objects a caller wants in a PDO exist and are mappable, and for canopen's generic PDO path
-(used by the benchmark).  Without an EDS, :func:`minimal_cia402_od` builds the CiA-301
-communication objects the master touches plus the CiA-402 objects of :mod:`drives.cia402`.
+The master needs an object dictionary for names in error messages, for canopen's PDO
+configuration (:meth:`canopen.pdo.PdoMap.save`) and for canopen's generic PDO path (used by
+the benchmark).  Without an EDS, :func:`minimal_cia402_od` builds the CiA-301 communication
+objects the master touches plus the standard CiA-402 objects of :mod:`drives.cia402`: a real
+drive is met with the standard dictionary, never with ours.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import os
-from pathlib import Path
 
 import canopen
 from canopen import objectdictionary as od
 
+from drives.cia301 import COMMUNICATION_OBJECT_NAMES
 from drives.cia402 import OBJECTS, DataType
-
-SIM_EDS_FILENAME = "haptic_sim_drive.eds"
-
-# CiA-301 communication objects the master reads or writes (index, subindex) -> name.
-COMMUNICATION_OBJECT_NAMES: dict[int, str] = {
-    0x1000: "Device type",
-    0x1001: "Error register",
-    0x1005: "COB-ID SYNC message",
-    0x1006: "Communication cycle period",
-    0x1014: "COB-ID EMCY",
-    0x1016: "Consumer heartbeat time",
-    0x1017: "Producer heartbeat time",
-    0x1018: "Identity object",
-    0x1400: "RPDO1 communication parameter",
-    0x1401: "RPDO2 communication parameter",
-    0x1402: "RPDO3 communication parameter",
-    0x1403: "RPDO4 communication parameter",
-    0x1600: "RPDO1 mapping parameter",
-    0x1601: "RPDO2 mapping parameter",
-    0x1602: "RPDO3 mapping parameter",
-    0x1603: "RPDO4 mapping parameter",
-    0x1800: "TPDO1 communication parameter",
-    0x1801: "TPDO2 communication parameter",
-    0x1802: "TPDO3 communication parameter",
-    0x1803: "TPDO4 communication parameter",
-    0x1A00: "TPDO1 mapping parameter",
-    0x1A01: "TPDO2 mapping parameter",
-    0x1A02: "TPDO3 mapping parameter",
-    0x1A03: "TPDO4 mapping parameter",
-    0x603F: "Error code",
-}
 
 _CANOPEN_TYPE = {
     DataType.INTEGER8: od.INTEGER8,
@@ -56,24 +25,6 @@ _CANOPEN_TYPE = {
     DataType.UNSIGNED16: od.UNSIGNED16,
     DataType.UNSIGNED32: od.UNSIGNED32,
 }
-
-
-def default_eds_path() -> Path | None:
-    """The simulated drive's shipped EDS if the ``sim_drive`` package is installed, else None.
-
-    Found without importing ``sim_drive`` (drives must not depend on it).
-    """
-    try:
-        spec = importlib.util.find_spec("sim_drive")
-    except (ImportError, ValueError):
-        return None
-    if spec is None or not spec.submodule_search_locations:
-        return None
-    for location in spec.submodule_search_locations:
-        candidate = Path(location) / SIM_EDS_FILENAME
-        if candidate.is_file():
-            return candidate
-    return None
 
 
 def load_object_dictionary(eds: str | os.PathLike | od.ObjectDictionary | None, node_id: int) -> od.ObjectDictionary:

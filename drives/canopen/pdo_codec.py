@@ -14,17 +14,9 @@ import struct
 from collections.abc import Iterable, Sequence
 
 from drives.cia402 import OBJECTS, ObjectSpec
+from drives.errors import ParameterError, PdoLengthError
 
 MAX_PDO_BYTES = 8  # classical CAN
-
-
-class PdoLengthError(ValueError):
-    """A frame's data length does not match the PDO mapping (the frame must be dropped)."""
-
-    def __init__(self, name: str, expected: int, got: int) -> None:
-        self.expected = expected
-        self.got = got
-        super().__init__(f"{name}: frame of {got} bytes, mapping needs exactly {expected}")
 
 
 def object_spec(obj: ObjectSpec | int) -> ObjectSpec:
@@ -35,7 +27,7 @@ def object_spec(obj: ObjectSpec | int) -> ObjectSpec:
         return OBJECTS[int(obj)]
     except KeyError:
         known = ", ".join(f"0x{i:04X}" for i in sorted(OBJECTS))
-        raise ValueError(f"object 0x{int(obj):04X} has no ObjectSpec; pass one, or use one of {known}") from None
+        raise ParameterError("object", f"0x{int(obj):04X}", f"an ObjectSpec, or one of {known}", "PDO mapping") from None
 
 
 class PdoCodec:
@@ -50,13 +42,13 @@ class PdoCodec:
         self.name = name
         self.entries: tuple[ObjectSpec, ...] = tuple(object_spec(e) for e in entries)
         if not self.entries:
-            raise ValueError(f"{name}: a PDO mapping needs at least one object")
+            raise ParameterError("entries", "()", "at least one mapped object", name)
         fmt = "<" + "".join(e.data_type.struct_format for e in self.entries)
         self.struct = struct.Struct(fmt)
         self.size: int = self.struct.size
         if self.size > MAX_PDO_BYTES:
             names = ", ".join(f"0x{e.index:04X}" for e in self.entries)
-            raise ValueError(f"{name}: mapping {names} needs {self.size} bytes; a CAN PDO holds at most {MAX_PDO_BYTES}")
+            raise ParameterError("entries", names, f"objects of at most {MAX_PDO_BYTES} bytes in all (these need {self.size})", name)
         self.mapping_words: tuple[int, ...] = tuple(
             e.index << 16 | e.subindex << 8 | 8 * e.data_type.size for e in self.entries
         )
@@ -71,7 +63,7 @@ class PdoCodec:
         for position, entry in enumerate(self.entries):
             if entry.index == index and entry.subindex == subindex:
                 return position
-        raise ValueError(f"{self.name}: object 0x{index:04X}:{subindex:02X} is not mapped")
+        raise ParameterError("object", f"0x{index:04X}:{subindex:02X}", "a mapped object", self.name)
 
     def decode(self, data: bytes | bytearray | memoryview) -> tuple[int, ...]:
         """Values of one frame, in mapping order; PdoLengthError if the length does not match."""
@@ -94,15 +86,8 @@ class PdoCodec:
     def check(self, values: Sequence[int]) -> None:
         """Raise ValueError naming the object if a value does not fit its data type."""
         if len(values) != len(self.entries):
-            raise ValueError(f"{self.name}: {len(values)} values for {len(self.entries)} mapped objects")
+            raise ParameterError("values", len(values), f"exactly {len(self.entries)} values", self.name)
         for value, (low, high), entry in zip(values, self._ranges, self.entries):
             if not low <= value <= high:
-                raise ValueError(
-                    f"{self.name}: 0x{entry.index:04X} ({entry.name}) = {value} outside "
-                    f"{entry.data_type.name} range [{low}, {high}]"
-                )
-
-
-def saturate(value: int, low: int, high: int) -> int:
-    """``value`` clamped to ``[low, high]`` (saturate, never wrap)."""
-    return low if value < low else high if value > high else value
+                raise ParameterError(f"0x{entry.index:04X} ({entry.name})", value,
+                                     f"{entry.data_type.name} range [{low}, {high}]", self.name)

@@ -38,7 +38,7 @@ from __future__ import annotations
 import logging
 import math
 import urllib.parse
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
@@ -47,9 +47,10 @@ from pymodbus.pdu.register_message import (
     ReadHoldingRegistersRequest,
     ReadWriteMultipleRegistersRequest,
     WriteMultipleRegistersRequest,
+    WriteSingleRegisterRequest,
 )
 
-from drives.base import CyclicInputs, DriveError, DriveFault, DriveProtocolError, DriveScaling, DriveTimeout
+from drives.base import CyclicInputs, DriveScaling
 from drives.cia402 import (
     CONTROLWORD,
     ERROR_CODE,
@@ -57,13 +58,19 @@ from drives.cia402 import (
     MOTOR_RATED_TORQUE,
     STATUSWORD,
     TARGET_TORQUE,
-    Command,
     ObjectSpec,
-    OperationMode,
     State,
     decode_statusword,
 )
-from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master, DriveStateError, UnsupportedModeError, state_name
+from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master, CyclicStats
+from drives.errors import (
+    DriveError,
+    DriveProtocolError,
+    DriveTimeout,
+    ModbusExceptionError,
+    ModbusLinkLost,
+    ParameterError,
+)
 from drives.modbus.register_map import (
     INPUT_BLOCK,
     MAP_IDENTITY,
@@ -81,36 +88,28 @@ from drives.modbus.register_map import (
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ModbusDrive", "ModbusStats", "ModbusLinkLost", "UnsupportedModeError", "DriveStateError", "CYCLE_MODES", "SAFE_CONTROLWORD"]
+__all__ = ["ModbusDrive", "ModbusStats", "CYCLE_MODES"]
 
 CYCLE_MODES = ("split", "fc23")
-SW_FAULT = 1 << 3
 _TIMING_NAMES = {0: "cia402", 1: "ideal"}
 _CONTROLWORD_REG = register_for_object(CONTROLWORD)
 _TORQUE_REG = register_for_object(TARGET_TORQUE)
 _STATUSWORD_REG = register_for_object(STATUSWORD)
 
 
-class ModbusLinkLost(DriveTimeout):
-    """The link to the drive is gone (dropped connection, or closed after a timeout); call reconnect()."""
-
-
 @dataclass(slots=True)
-class ModbusStats:
-    """Counters since construction."""
+class ModbusStats(CyclicStats):
+    """Counters of the Modbus exchange (since construction)."""
 
-    cycles: int = 0  # read_inputs calls that returned
     requests: int = 0  # Modbus requests sent (cyclic and acyclic)
     cyclic_requests: int = 0
     exceptions: int = 0  # exception responses
     timeouts: int = 0
-    saturated_outputs: int = 0
-    suppressed_outputs: int = 0  # write_outputs replaced by the safe block while tripped
-    safe_stops: int = 0
 
-    def as_dict(self) -> dict[str, int]:
-        """The counters as a plain dict."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+def _check(name: str, ok: bool, value: object, allowed: str) -> None:
+    if not ok:
+        raise ParameterError(name, value, allowed, "Modbus drive")
 
 
 class ModbusDrive(Cia402Master):
@@ -144,61 +143,43 @@ class ModbusDrive(Cia402Master):
         stopbits: int = 1,
         bytesize: int = 8,
     ) -> None:
-        if not 0 <= unit_id <= 247:
-            raise ValueError(f"unit_id = {unit_id!r} is invalid; allowed: 0..247")
-        if not (timeout > 0 and math.isfinite(timeout)):
-            raise ValueError(f"timeout = {timeout!r} s is invalid; allowed: > 0")
-        if cycle not in CYCLE_MODES:
-            raise ValueError(f"cycle = {cycle!r} is invalid; allowed: {', '.join(map(repr, CYCLE_MODES))}")
+        _check("unit_id", isinstance(unit_id, int) and 0 <= unit_id <= 247, unit_id, "0..247")
+        _check("timeout", isinstance(timeout, (int, float)) and timeout > 0 and math.isfinite(timeout), timeout, "> 0 s")
+        _check("cycle", cycle in CYCLE_MODES, cycle, " or ".join(map(repr, CYCLE_MODES)))
         self.serial = isinstance(port, str)
-        if not self.serial and not (isinstance(port, int) and 0 < port <= 65535):
-            raise ValueError(f"port = {port!r} is invalid; allowed: a TCP port 1..65535 or a serial device path")
-        if not self.serial and not host:
-            raise ValueError("host is required for Modbus TCP")
+        _check("port", self.serial or (isinstance(port, int) and 0 < port <= 65535), port,
+               "a TCP port 1..65535 or a serial device path")
+        _check("host", self.serial or bool(host), host, "a host name or address (Modbus TCP)")
+        self.address = f"rtu:{port}" if self.serial else f"tcp://{host}:{port}"
+        self._init_master(f"Modbus unit {unit_id} at {self.address}", scaling)
         self.host = host
         self.port = port
         self.unit_id = unit_id
         self.timeout = timeout
         self.cycle = cycle
-        self.with_position = with_position
         self.state_timeout = state_timeout
         self.max_commands_per_step = 10_000
         self.check_identity = check_identity
         self.serial_options = {"baudrate": baudrate, "parity": parity, "stopbits": stopbits, "bytesize": bytesize}
-        self.address = f"rtu:{port}" if self.serial else f"tcp://{host}:{port}"
-        self.name = f"Modbus unit {unit_id} at {self.address}"
-        self.scaling = scaling if scaling is not None else DriveScaling(1.0, 1.0, 1.0, 1.0)
-        self.scaling_sources: dict[str, str] = {}
         self.simulated_timing: str | None = None  # "ideal"/"cia402" when the server is sim_drive
         self.stats = ModbusStats()
-        self.last_inputs: CyclicInputs | None = None
         self.client: Any = None
-
-        self._inputs = InputBlockCodec(word_order, with_position)
-        self.word_order = word_order
-        self._decode_inputs = self._inputs.decode
-        self._in_count = self._inputs.count
-        self._read_req = ReadHoldingRegistersRequest(address=INPUT_BLOCK, count=self._in_count, dev_id=unit_id)
-        self._out_regs = [SAFE_CONTROLWORD, 0]
-        self._write_req = WriteMultipleRegistersRequest(address=OUTPUT_BLOCK, registers=self._out_regs, dev_id=unit_id)
-        self._write_req.count = OUTPUT_BLOCK_COUNT
-        self._rw_req = ReadWriteMultipleRegistersRequest(
-            read_address=INPUT_BLOCK, read_count=self._in_count, write_address=OUTPUT_BLOCK,
-            write_registers=self._out_regs, dev_id=unit_id,
-        )
-        self._read_what = describe_range(INPUT_BLOCK, self._in_count)
-        self._write_what = describe_range(OUTPUT_BLOCK, OUTPUT_BLOCK_COUNT)
-        self._read_label = f"reading {self._read_what}"  # built once: no formatting per cycle
-        self._write_label = f"writing {self._write_what}"
-        self._rw_label = f"writing {self._write_what} and reading {self._read_what} (FC23)"
+        self._codec = InputBlockCodec(word_order, with_position)
+        self._requests = _CyclicRequests(unit_id, self._codec.count)
         self._cached: list[int] | None = None  # fc23: inputs read by the last output write
-        self._controlword = SAFE_CONTROLWORD
-        self._torque_limit = 0x7FFF
         self._connected = False
         self._link_up = False
         self._closed = False
-        self._armed = False
-        self._tripped: DriveError | None = None
+
+    @property
+    def word_order(self) -> str:
+        """Order of the 16-bit words of 32/64-bit values: "big" (high word first) or "little"."""
+        return self._codec.word_order
+
+    @property
+    def with_position(self) -> bool:
+        """True when each cycle reads 0x6064 too."""
+        return self._codec.with_position
 
     @classmethod
     def from_url(cls, url: str, **options: Any) -> "ModbusDrive":
@@ -210,11 +191,11 @@ class ModbusDrive(Cia402Master):
             except ValueError:
                 port = None
             if not parsed.hostname or port is None:
-                raise ValueError(f"Modbus address {url!r} is invalid; expected tcp://HOST:PORT")
+                raise ParameterError("url", url, "tcp://HOST:PORT with a port 1..65535", "Modbus drive")
             return cls(parsed.hostname, port, **options)
         if parsed.scheme == "rtu" and (parsed.path or parsed.netloc):
             return cls(None, parsed.netloc + parsed.path, **options)
-        raise ValueError(f"Modbus address {url!r} is invalid; expected tcp://HOST:PORT or rtu:/dev/SERIAL")
+        raise ParameterError("url", url, "tcp://HOST:PORT or rtu:/dev/SERIAL", "Modbus drive")
 
     # ------------------------------------------------------------------ link
 
@@ -295,15 +276,6 @@ class ModbusDrive(Cia402Master):
             self.simulated_timing = None
 
     def _read_scaling(self) -> None:
-        given = self.scaling
-        values: dict[str, Any] = {
-            "velocity_per_count": given.velocity_per_count,
-            "position_per_count": given.position_per_count,
-            "rated_torque": given.rated_torque,
-            "force_per_torque": given.force_per_torque,
-            "max_torque_permille": given.max_torque_permille,
-        }
-        self.scaling_sources = dict.fromkeys(values, "caller")
         sources: list[tuple[str, RegisterSpec, float]] = [
             ("rated_torque", register_for_object(MOTOR_RATED_TORQUE), 1e-3),  # mN m -> N m
             ("max_torque_permille", register_for_object(MAX_TORQUE), 1),
@@ -311,24 +283,20 @@ class ModbusDrive(Cia402Master):
             ("position_per_count", REGISTER_BY_NAME["position_per_count"], 1.0),
             ("force_per_torque", REGISTER_BY_NAME["force_per_torque"], 1.0),
         ]
+        found: dict[str, tuple[float | int, str]] = {}
         for field_name, spec, factor in sources:
             try:
                 raw = self._read_spec(spec)
             except DriveProtocolError as exc:
                 logger.info("%s: keeping the given %s (%s)", self.name, field_name, exc)
                 continue
-            values[field_name] = raw if factor == 1 and isinstance(raw, int) else raw * factor
-            self.scaling_sources[field_name] = f"register 0x{spec.address:04X}"
-        for field_name in ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque"):
-            value = values[field_name]
-            if not (value > 0 and math.isfinite(value)):
-                raise DriveProtocolError(self.name, f"scaling {field_name} = {value!r} (from {self.scaling_sources[field_name]}); must be finite and > 0")
-        self.scaling = DriveScaling(**values)
-        self._torque_limit = min(int(values["max_torque_permille"]), 0x7FFF)
+            found[field_name] = (raw if factor == 1 and isinstance(raw, int) else raw * factor,
+                                 f"register 0x{spec.address:04X}")
+        self._adopt_scaling(found)
 
     # ------------------------------------------------------------------ requests
 
-    def _send(self, request: ModbusPDU, what: str, cyclic: bool) -> ModbusPDU:
+    def _send(self, request: ModbusPDU, what: str) -> ModbusPDU:
         """One request with error translation; raises ModbusLinkLost/DriveTimeout/DriveProtocolError."""
         if not self._link_up:
             raise ModbusLinkLost(self.name, f"link is down ({what} not sent); call reconnect()")
@@ -346,39 +314,36 @@ class ModbusDrive(Cia402Master):
             raise DriveProtocolError(self.name, f"bad answer while {what}: {exc}") from exc
         if response.function_code & 0x80:
             self.stats.exceptions += 1
-            code = getattr(response, "exception_code", 0)
-            error = DriveProtocolError(self.name, f"{what}: exception {exception_name(code)}")
-            error.exception_code = code
-            raise error
+            code = int(getattr(response, "exception_code", 0))
+            raise ModbusExceptionError(self.name, f"{what}: exception {exception_name(code)}", code)
         return response
 
     def _checked_registers(self, response: ModbusPDU, count: int, what: str) -> list[int]:
         registers = response.registers
         if len(registers) != count:
             raise DriveProtocolError(self.name, f"{len(registers)} registers answered while {what}, expected {count}")
-        return registers
+        return list(registers)
 
     def read_registers(self, address: int, count: int) -> list[int]:
         """Raw FC03 read of ``count`` holding registers from ``address`` (acyclic)."""
-        self._require_connected()
+        self._require_link()
         self._cached = None
         what = f"reading {describe_range(address, count)}"
-        response = self._send(ReadHoldingRegistersRequest(address=address, count=count, dev_id=self.unit_id), what, False)
-        return list(self._checked_registers(response, count, what))
+        response = self._send(ReadHoldingRegistersRequest(address=address, count=count, dev_id=self.unit_id), what)
+        return self._checked_registers(response, count, what)
 
     def write_registers(self, address: int, values: list[int]) -> None:
         """Raw write of holding registers from ``address`` (FC06 for one, FC16 for more; acyclic)."""
-        self._require_connected()
+        self._require_link()
         self._cached = None
         what = f"writing {describe_range(address, len(values))}"
+        request: ModbusPDU
         if len(values) == 1:
-            from pymodbus.pdu.register_message import WriteSingleRegisterRequest
-
-            request: ModbusPDU = WriteSingleRegisterRequest(address=address, registers=list(values), dev_id=self.unit_id)
+            request = WriteSingleRegisterRequest(address=address, registers=list(values), dev_id=self.unit_id)
         else:
             request = WriteMultipleRegistersRequest(address=address, registers=list(values), dev_id=self.unit_id)
             request.count = len(values)
-        self._send(request, what, False)
+        self._send(request, what)
 
     def _read_spec(self, spec: RegisterSpec) -> int | float:
         return decode_value(spec, self.read_registers(spec.address, spec.count), self.word_order)
@@ -388,109 +353,87 @@ class ModbusDrive(Cia402Master):
         return int(self._read_spec(register_for_object(spec)))
 
     def write_object(self, spec: ObjectSpec | int, value: int) -> None:
-        """Write a CiA-402 object of the register map, in drive units (ValueError if out of range)."""
+        """Write a CiA-402 object of the register map, in drive units (ParameterError if out of range)."""
         reg = register_for_object(spec)
         if reg.access != "rw":
-            raise ValueError(f"{reg.label} is read-only")
+            raise ParameterError("register", reg.label, "a writable register (this one is read-only)", self.name)
         self.write_registers(reg.address, encode_value(reg, value, self.word_order))
 
-    def _require_connected(self) -> None:
+    def _require_link(self) -> None:
         if self.client is None:
+            raise DriveError(self.name, "not connected; call connect() first")
+
+    def _require_connected(self) -> None:
+        if not self._connected:
             raise DriveError(self.name, "not connected; call connect() first")
 
     # ------------------------------------------------------------------ safety
 
-    def _safe_stop(self) -> None:
+    def _send_safe_outputs(self) -> None:
         """One attempt to write zero torque with DISABLE VOLTAGE, if the link is up; never raises."""
-        self.stats.safe_stops += 1
-        self._armed = False
-        self._controlword = SAFE_CONTROLWORD
+        self._cached = None
         if not self._link_up:
             return
-        regs = self._out_regs
-        regs[0] = SAFE_CONTROLWORD
-        regs[1] = 0
+        requests = self._requests
+        requests.outputs[0] = SAFE_CONTROLWORD
+        requests.outputs[1] = 0
         try:
-            self._send(self._write_req, f"writing the safe outputs to {self._write_what}", True)
+            self._send(requests.write, f"writing the safe outputs to {requests.write_what}")
         except DriveError as exc:
             logger.error("%s: could not write zero torque: %s", self.name, exc)
 
-    def _trip(self, error: DriveError, link_trusted: bool = True) -> DriveError:
-        if link_trusted:
-            self._safe_stop()
-        else:  # a timeout: the stream may still carry the late answer
-            self._safe_stop()
-            self._drop_link()
-            error = ModbusLinkLost(error.node, str(error).split(": ", 1)[-1] + "; link closed (a late answer could not be told from the next), call reconnect()")
-        self._tripped = error
-        self._cached = None
-        return error
-
     def _cyclic(self, request: ModbusPDU, what: str) -> ModbusPDU:
+        """A cyclic request; any failure trips (a timeout also closes the link: a late answer
+        could not be told from the next one)."""
         try:
-            return self._send(request, what, True)
+            return self._send(request, what)
         except ModbusLinkLost as exc:
             raise self._trip(exc) from exc.__cause__
         except DriveTimeout as exc:
-            raise self._trip(exc, link_trusted=False) from exc.__cause__
+            self._send_safe_outputs()
+            self._drop_link()
+            lost = ModbusLinkLost(self.name, f"{exc.message}; link closed (a late answer could not be told from "
+                                             f"the next), call reconnect()")
+            raise self._trip(lost) from exc.__cause__
         except DriveProtocolError as exc:
             raise self._trip(exc) from exc.__cause__
+
+    def _fault_detail(self) -> tuple[str, int | None]:
+        try:
+            code = self.read_object(ERROR_CODE)
+        except DriveError:
+            return "", None
+        return f", error code 0x{code:04X}", code
 
     # ------------------------------------------------------------------ cyclic hot path
 
     def read_inputs(self) -> CyclicInputs:
         """This cycle's statusword, velocity[, position]: FC03, or the inputs the last FC23 brought."""
-        if not self._connected:
-            raise DriveError(self.name, "not connected; call connect() first")
+        self._require_connected()
         registers = self._cached
+        requests = self._requests
         if registers is None:
             self.stats.cyclic_requests += 1
-            registers = self._cyclic(self._read_req, self._read_label).registers
+            registers = self._cyclic(requests.read, requests.read_label).registers
         else:
             self._cached = None
-        if len(registers) != self._in_count:
-            raise self._trip(DriveProtocolError(self.name, f"{len(registers)} registers answered for {self._read_what}, expected {self._in_count}"))
-        statusword, velocity, position = self._decode_inputs(registers)
-        inputs = CyclicInputs(statusword, velocity, position)
-        self.last_inputs = inputs
-        self.stats.cycles += 1
-        if statusword & SW_FAULT and self._armed:
-            code = None
-            try:
-                code = self.read_object(ERROR_CODE)
-            except DriveError:
-                pass
-            detail = f", error code 0x{code:04X}" if code is not None else ""
-            raise self._trip(DriveFault(
-                self.name, f"fault bit set in statusword 0x{statusword:04X} ({state_name(decode_statusword(statusword))}){detail}; torque set to zero",
-                code=code,
-            ))
-        return inputs
+        if len(registers) != self._codec.count:
+            raise self._trip(DriveProtocolError(
+                self.name, f"{len(registers)} registers answered for {requests.read_what}, expected {self._codec.count}"))
+        statusword, velocity, position = self._codec.decode(registers)
+        return self._accept_inputs(CyclicInputs(statusword, velocity, position))
 
-    def write_outputs(self, target_torque: int) -> None:
-        """Write the held controlword and ``target_torque`` (per mille, saturated at +-0x6072)."""
-        regs = self._out_regs
-        if self._tripped is not None:
-            self.stats.suppressed_outputs += 1
-            if not self._link_up:
-                raise ModbusLinkLost(self.name, f"link is down after: {self._tripped}; call reconnect()")
-            regs[0] = SAFE_CONTROLWORD
-            regs[1] = 0
-        else:
-            limit = self._torque_limit
-            if target_torque > limit:
-                target_torque = limit
-                self.stats.saturated_outputs += 1
-            elif target_torque < -limit:
-                target_torque = -limit
-                self.stats.saturated_outputs += 1
-            regs[0] = self._controlword
-            regs[1] = target_torque & 0xFFFF
+    def _send_outputs(self, controlword: int, target_torque: int) -> None:
+        if not self._link_up:
+            raise ModbusLinkLost(self.name, f"link is down after: {self._tripped}; call reconnect()")
+        requests = self._requests
+        requests.outputs[0] = controlword
+        requests.outputs[1] = target_torque & 0xFFFF
         self.stats.cyclic_requests += 1
         if self.cycle == "fc23":
-            self._cached = self._cyclic(self._rw_req, self._rw_label).registers
+            self._cached = self._cyclic(requests.read_write, requests.read_write_label).registers
         else:
-            self._cyclic(self._write_req, self._write_label)
+            self._cyclic(requests.write, requests.write_label)
 
     # ------------------------------------------------------------------ state machine
 
@@ -502,45 +445,20 @@ class ModbusDrive(Cia402Master):
         """The drive's current CiA-402 state (one acyclic read)."""
         return decode_statusword(self.statusword())
 
-    def _write_controlword(self, word: int) -> None:
-        self.write_registers(_CONTROLWORD_REG.address, [word])
-
     def _command(self, controlword: int) -> int:
-        self._write_controlword(controlword)
+        self.write_registers(_CONTROLWORD_REG.address, [controlword])
         return self.statusword()
 
-    def enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
-        """Check 0x6502, write 0x6060, await 0x6061, zero 0x6071, walk to OPERATION ENABLED."""
-        self._require_connected()
-        self._select_mode(mode)
+    def _before_enable(self) -> None:
         self.write_object(TARGET_TORQUE, 0)  # no stale torque at the enable edge
-        self._tripped = None
-        self._walk(State.OPERATION_ENABLED, self._controlword)
-        self._controlword = Command.ENABLE_OPERATION.word
-        self._cached = None
-        self._armed = True
 
     def disable(self) -> None:
         """Zero torque, DISABLE VOLTAGE, and check the drive reaches SWITCH ON DISABLED (or sits in FAULT)."""
         if not self._connected:
             return
         self._armed = False
-        self._controlword = SAFE_CONTROLWORD
         self.write_object(TARGET_TORQUE, 0)
-        self._walk(State.SWITCH_ON_DISABLED, SAFE_CONTROLWORD, accept=(State.FAULT,))
-
-    def fault_reset(self) -> None:
-        """Rising edge of controlword bit 7 (low, high, low); check the drive leaves FAULT."""
-        self._require_connected()
-        self._armed = False
-        self._reset_fault()
-        self._controlword = SAFE_CONTROLWORD
-        self._tripped = None
-
-    @property
-    def tripped(self) -> DriveError | None:
-        """The error that made the master write the safe outputs, or None."""
-        return self._tripped
+        super().disable()
 
     @property
     def link_up(self) -> bool:
@@ -558,7 +476,7 @@ class ModbusDrive(Cia402Master):
             self._armed = False
             try:
                 self.write_registers(_TORQUE_REG.address, [0])
-                self._write_controlword(SAFE_CONTROLWORD)
+                self._command(SAFE_CONTROLWORD)
             except DriveError as exc:
                 logger.warning("%s: could not write the safe outputs on close: %s", self.name, exc)
         self._drop_link()
@@ -567,3 +485,23 @@ class ModbusDrive(Cia402Master):
 
     def __repr__(self) -> str:
         return f"ModbusDrive({self.address!r}, unit_id={self.unit_id}, cycle={self.cycle!r}, word_order={self.word_order!r})"
+
+
+class _CyclicRequests:
+    """The cyclic pymodbus requests of one drive, built once (the output registers are updated
+    in place), and their labels (no string formatting per cycle)."""
+
+    def __init__(self, unit_id: int, input_count: int) -> None:
+        self.outputs = [SAFE_CONTROLWORD, 0]
+        self.read = ReadHoldingRegistersRequest(address=INPUT_BLOCK, count=input_count, dev_id=unit_id)
+        self.write = WriteMultipleRegistersRequest(address=OUTPUT_BLOCK, registers=self.outputs, dev_id=unit_id)
+        self.write.count = OUTPUT_BLOCK_COUNT
+        self.read_write = ReadWriteMultipleRegistersRequest(
+            read_address=INPUT_BLOCK, read_count=input_count, write_address=OUTPUT_BLOCK,
+            write_registers=self.outputs, dev_id=unit_id,
+        )
+        self.read_what = describe_range(INPUT_BLOCK, input_count)
+        self.write_what = describe_range(OUTPUT_BLOCK, OUTPUT_BLOCK_COUNT)
+        self.read_label = f"reading {self.read_what}"
+        self.write_label = f"writing {self.write_what}"
+        self.read_write_label = f"writing {self.write_what} and reading {self.read_what} (FC23)"

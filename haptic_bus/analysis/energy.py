@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.signal import lfilter
 
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from haptic_bus.analysis.frequency import seed_t_zw, t_fund
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import ExactPlant, phi1_array, phi2_array, zoh_coefficients

@@ -8,9 +8,9 @@ import pathlib
 import sys
 from typing import Callable, Sequence
 
-from drives.base import DriveError
+from drives.errors import DriveError
 from drives.bus_config import parse_bus_option
-from haptic_bus.errors import HapticBusError, ParameterError
+from drives.errors import HapticBusError, ParameterError
 from haptic_bus.control.gate import GateRefusal
 from haptic_bus.analysis.check import check_report, format_check
 from haptic_bus.analysis.loop import WallLoop

@@ -28,7 +28,7 @@ from typing import Any, Callable, Mapping
 
 from drives.base import DriveScaling
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, TARGET_TORQUE
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.analysis.loop import DAMPING_RANGE, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE, STIFFNESS_RANGE
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene

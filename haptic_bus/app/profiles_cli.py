@@ -14,7 +14,7 @@ import sys
 from typing import Any
 
 from haptic_bus.analysis.check import check_report, format_check
-from haptic_bus.errors import HapticBusError
+from drives.errors import HapticBusError
 from haptic_bus.control.gate import GateDecision, GateRefusal
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.app.profiles import (DEFAULT_PROFILE, Profile, ProfileError, load_profile, object_to_dict,

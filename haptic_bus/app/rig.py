@@ -13,6 +13,7 @@ from typing import Iterator
 
 from drives.canopen.drive import CanopenDrive
 from sim_drive.canopen.slave import CanopenSimDrive
+from sim_drive.eds import eds_path
 from sim_drive.operator import OperatorModel, operator_from_table
 from sim_drive.parameters import DeviceParameters
 
@@ -47,7 +48,7 @@ def simulated_canopen(
     )
     sim.start()
     drive = CanopenDrive(node_id, interface="virtual", channel=channel, period=profile.loop.period,
-                         scaling=profile.scaling())
+                         scaling=profile.scaling(), eds=eds_path())
     try:
         drive.connect()
         drive.enable()

@@ -71,11 +71,12 @@ def measured_bits_per_cycle(tpdo_objects, cycles: int = 200) -> float:
     from drives.canopen.drive import CanopenDrive
     from haptic_bus.bench.hot_path import bench_closed_loop
     from sim_drive.canopen.slave import CanopenSimDrive
+    from sim_drive.eds import eds_path
 
     channel = f"bench-bus-{uuid.uuid4().hex[:12]}"
     meter = BusLoadMeter(1_000_000, PERIOD)
     sim = CanopenSimDrive({"interface": "virtual", "channel": channel}, 5, bus_meter=meter).start()
-    drive = CanopenDrive(5, interface="virtual", channel=channel, period=PERIOD, tpdo_objects=tpdo_objects)
+    drive = CanopenDrive(5, interface="virtual", channel=channel, period=PERIOD, tpdo_objects=tpdo_objects, eds=eds_path())
     try:
         drive.connect()
         drive.enable()

@@ -19,14 +19,15 @@ from typing import Callable
 
 import numpy as np
 
-from drives.base import Drive, DriveError
+from drives.base import Drive
+from drives.errors import DriveError
 from drives.cia402 import POSITION_ACTUAL
 from haptic_bus.control.clock import VirtualClock
 from haptic_bus.control.gate import GateDecision, PassivityGate
 from haptic_bus.control.observer import PassivityObserver
 from haptic_bus.control.record import RunRecord
 from haptic_bus.control.scene import CompiledScene, compile_scene
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 
 logger = logging.getLogger(__name__)
 

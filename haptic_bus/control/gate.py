@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 from haptic_bus.analysis.check import BANDWIDTH_ALPHA
 from haptic_bus.analysis.criterion import Verdict, exact_verdict
-from haptic_bus.errors import HapticBusError, ParameterError
+from drives.errors import HapticBusError, ParameterError
 from haptic_bus.analysis.limits import max_damping, max_stiffness
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.control.scene import CompiledScene

@@ -31,7 +31,7 @@ from canopen import LocalNode, SdoAbortedError
 from canopen.objectdictionary import ODRecord, ODVariable, ObjectDictionary, datatypes
 
 from haptic_bus.control.controller import WallController
-from haptic_bus.errors import HapticBusError
+from drives.errors import HapticBusError
 
 logger = logging.getLogger(__name__)
 

@@ -20,7 +20,7 @@ import math
 from dataclasses import dataclass
 from typing import Iterable, Union
 
-from haptic_bus.errors import ParameterError
+from drives.errors import ParameterError
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
 from haptic_bus.validation import real_in_range
 

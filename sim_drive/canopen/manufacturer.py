@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 from canopen import SdoAbortedError
 
-from haptic_bus.errors import HapticBusError
+from drives.errors import HapticBusError
 from sim_drive.device import SimulatedDrive
 from sim_drive.operator import MAX_OD_PARAMETERS, operator_code, operator_from_code
 from sim_drive.parameters import Timing

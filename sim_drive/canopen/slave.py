@@ -42,7 +42,7 @@ from canopen import LocalNode, SdoAbortedError
 from canopen.objectdictionary import import_od
 
 from drives.cia402 import State
-from haptic_bus.errors import HapticBusError
+from drives.errors import HapticBusError
 from haptic_bus.validation import whole_in_range
 from sim_drive.bus_timing import BusLoadMeter
 from sim_drive.device import ObjectAccessError, SimulatedDrive

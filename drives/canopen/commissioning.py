@@ -1,0 +1,207 @@
+"""Bringing a CANopen CiA-402 drive up for the cyclic exchange, over SDO and NMT.
+
+In order: reach the node (NMT reset communication and its boot-up, or an SDO answer), check
+0x1000 is a CiA-402 device, write the cycle period 0x1006, map the TPDOs and RPDO1 through
+canopen's :meth:`~canopen.pdo.PdoMap.save` (which copes with drives whose mapping count is
+fixed), invalidate the PDOs the cycle does not use, read the scaling the drive has, set its
+heartbeat 0x1017, NMT start, and wait until its heartbeat shows OPERATIONAL.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import canopen
+from canopen.pdo.base import PdoMap
+
+from drives.canopen.events import DriveEvents
+from drives.canopen.od import find_scaling_objects
+from drives.canopen.pdo_codec import PdoCodec
+from drives.canopen.sdo import SdoAccess
+from drives.cia301 import (
+    COB_ID_INVALID,
+    COB_ID_MASK,
+    COB_ID_NO_RTR,
+    COMMUNICATION_CYCLE_PERIOD,
+    DEVICE_PROFILE_402,
+    DEVICE_TYPE,
+    PDO_COB_ID,
+    PRODUCER_HEARTBEAT_TIME,
+    RPDO_BASES,
+    RPDO_COMMUNICATION,
+    TPDO_BASES,
+    TPDO_COMMUNICATION,
+    TRANSMISSION_SYNCHRONOUS_EVERY_SYNC,
+    NmtCommand,
+    NmtState,
+    SdoAbort,
+)
+from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, DataType
+from drives.errors import DriveProtocolError, DriveTimeout, SdoAbortError
+
+logger = logging.getLogger(__name__)
+
+PDO_CHANNELS = 4
+
+
+@dataclass(frozen=True)
+class CommissioningSettings:
+    """How to bring the drive up: ``period`` (s, written to 0x1006), ``boot_timeout`` and
+    ``sdo_timeout`` (s), whether to reset communication first and check 0x1000, the drive's
+    heartbeat producer time 0x1017 and how long the master tolerates its silence (ms, 0 = off)."""
+
+    period: float
+    boot_timeout: float
+    sdo_timeout: float
+    reset_communication: bool
+    check_device_type: bool
+    heartbeat_producer_ms: int
+    heartbeat_consumer_ms: int
+
+
+@dataclass(frozen=True)
+class Commissioned:
+    """What commissioning found: 0x1000, the PDO COB-IDs, and scaling values with their sources."""
+
+    device_type: int | None
+    tpdo_cobs: tuple[int, ...]
+    rpdo_cob: int
+    scaling: dict[str, tuple[float | int, str]]
+
+
+class Commissioning:
+    """One commissioning run against ``node`` (see the module docstring)."""
+
+    def __init__(self, name: str, node: canopen.RemoteNode, sdo: SdoAccess, events: DriveEvents,
+                 settings: CommissioningSettings) -> None:
+        self.name = name
+        self.node = node
+        self.sdo = sdo
+        self.events = events
+        self.settings = settings
+
+    def run(self, tpdo_codecs: tuple[PdoCodec, ...], rpdo_codec: PdoCodec) -> Commissioned:
+        """Commission the drive for ``tpdo_codecs`` (TPDO1..) and ``rpdo_codec`` (RPDO1)."""
+        self._reach()
+        device_type = self._check_device_type() if self.settings.check_device_type else None
+        self.sdo.write_int(COMMUNICATION_CYCLE_PERIOD, 0, DataType.UNSIGNED32, round(self.settings.period * 1e6))
+        tpdo_cobs = tuple(self._remap(self.node.tpdo[n + 1], codec, TPDO_BASES[n] + self.node.id)
+                          for n, codec in enumerate(tpdo_codecs))
+        rpdo_cob = self._remap(self.node.rpdo[1], rpdo_codec, RPDO_BASES[0] + self.node.id)
+        for n in range(len(tpdo_codecs), PDO_CHANNELS):
+            self._invalidate(TPDO_COMMUNICATION + n)
+        for n in range(1, PDO_CHANNELS):
+            self._invalidate(RPDO_COMMUNICATION + n)
+        scaling = self._read_scaling()
+        self._start()
+        return Commissioned(device_type, tpdo_cobs, rpdo_cob, scaling)
+
+    def _reach(self) -> None:
+        """Reset communication and wait for the boot-up message, or for an SDO answer."""
+        timeout = self.settings.boot_timeout
+        how = "NMT reset communication"
+        self.events.forget_state()
+        if self.settings.reset_communication:
+            self.node.nmt.send_command(NmtCommand.RESET_COMMUNICATION)
+            if self.events.wait_for_state(NmtState.BOOT_UP, timeout):
+                return
+        else:
+            how = "NMT pre-operational"
+            self.node.nmt.send_command(NmtCommand.ENTER_PRE_OPERATIONAL)
+        # No boot-up (a drive may not reset communication on command): does it answer SDO?
+        sdo = self.node.sdo
+        saved = sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES
+        sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES = timeout, 1
+        try:
+            self.sdo.upload(DEVICE_TYPE, 0)
+            return
+        except SdoAbortError:
+            return  # it answered
+        except DriveTimeout:
+            pass
+        finally:
+            sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES = saved
+        seen = sorted(n for n in self.node.network.scanner.nodes if n != self.node.id)
+        hint = f"; nodes seen on the bus: {', '.join(map(str, seen))}" if seen else "; no other node seen on the bus"
+        raise DriveTimeout(
+            self.name,
+            f"no boot-up after {how} and no SDO answer within {timeout:.3g} s "
+            f"(check node id {self.node.id}, bitrate, wiring{hint})",
+        )
+
+    def _check_device_type(self) -> int:
+        device_type = self.sdo.read_int(DEVICE_TYPE, 0, DataType.UNSIGNED32)
+        if device_type & 0xFFFF != DEVICE_PROFILE_402:
+            raise DriveProtocolError(
+                self.name,
+                f"0x1000 device type = 0x{device_type:08X} is not a CiA-402 drive "
+                f"(profile {device_type & 0xFFFF}, expected {DEVICE_PROFILE_402})",
+            )
+        return device_type
+
+    def _remap(self, pdo: PdoMap, codec: PdoCodec, predefined: int) -> int:
+        """Map ``codec``'s objects into ``pdo``, synchronous (every SYNC), valid; its COB-ID."""
+        com = pdo.com_record.od.index
+        current = self.sdo.read_int(com, PDO_COB_ID, DataType.UNSIGNED32)
+        cob_id = current & COB_ID_MASK or predefined
+        if cob_id != predefined:
+            logger.info("%s: 0x%04X uses COB-ID 0x%X, not the predefined 0x%X", self.name, com, cob_id, predefined)
+        pdo.clear()
+        for entry in codec.entries:
+            pdo.add_variable(entry.index, entry.subindex)
+        if len(pdo.map) != len(codec.entries):
+            raise DriveProtocolError(self.name, f"cannot map {codec}: the object dictionary lacks one of its objects")
+        pdo.cob_id = cob_id
+        pdo.trans_type = TRANSMISSION_SYNCHRONOUS_EVERY_SYNC
+        pdo.rtr_allowed = not current & COB_ID_NO_RTR  # keep what the drive had: some refuse RTR
+        pdo.enabled = True
+        with self.sdo.translated("mapping", com, PDO_COB_ID):
+            pdo.save()
+        self.node.network.unsubscribe(cob_id, pdo.on_message)  # the cyclic path decodes its own frames
+        mapping = pdo.map_array.od.index
+        count = self.sdo.read_int(mapping, 0, DataType.UNSIGNED8)
+        if count != len(codec.entries):
+            raise DriveProtocolError(
+                self.name, f"0x{mapping:04X}:00 reads back {count} mapped objects after writing {len(codec.entries)}"
+            )
+        return cob_id
+
+    def _invalidate(self, com: int) -> None:
+        """Invalidate an unused PDO so that only the configured frames travel (absent PDOs are fine)."""
+        try:
+            current = self.sdo.read_int(com, PDO_COB_ID, DataType.UNSIGNED32)
+            if not current & COB_ID_INVALID:
+                self.sdo.write_int(com, PDO_COB_ID, DataType.UNSIGNED32, current | COB_ID_INVALID)
+        except SdoAbortError as exc:
+            if exc.abort_code not in (SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX):
+                raise
+
+    def _read_scaling(self) -> dict[str, tuple[float | int, str]]:
+        """Scaling the drive has: 0x6076, 0x6072, and manufacturer scaling objects the EDS names."""
+        found: dict[str, tuple[float | int, str]] = {}
+        for name, spec, factor in (("rated_torque", MOTOR_RATED_TORQUE, 1e-3), ("max_torque_permille", MAX_TORQUE, 1)):
+            try:
+                raw = self.sdo.read_int(spec.index, spec.subindex, spec.data_type)
+            except SdoAbortError as exc:
+                logger.info("%s: no %s from the drive (%s)", self.name, name, exc)
+                continue
+            found[name] = (raw * factor if factor != 1 else raw, f"0x{spec.index:04X}")
+        for name, (index, subindex, fmt) in find_scaling_objects(self.node.object_dictionary).items():
+            found[name] = (self.sdo.read_real(index, subindex, fmt), f"0x{index:04X}:{subindex:02X}")
+        return found
+
+    def _start(self) -> None:
+        """Heartbeat 0x1017, NMT start, and its heartbeat showing OPERATIONAL."""
+        producer_ms = self.settings.heartbeat_producer_ms
+        self.sdo.write_int(PRODUCER_HEARTBEAT_TIME, 0, DataType.UNSIGNED16, producer_ms)
+        self.events.forget_state()
+        self.node.nmt.send_command(NmtCommand.START)
+        if not producer_ms:
+            return
+        limit = max(self.settings.boot_timeout, 3 * producer_ms / 1000.0)
+        if not self.events.wait_for_state(NmtState.OPERATIONAL, limit):
+            raise DriveTimeout(
+                self.name,
+                f"no heartbeat showing OPERATIONAL within {limit:.3g} s after NMT start (0x1017 = {producer_ms} ms)",
+            )

@@ -1,0 +1,240 @@
+"""One SYNC/TPDO/RPDO cycle on the wire, with one receive loop over the TPDO slots.
+
+The cyclic path does not use canopen's generic PDO objects (they update variables one by one
+from a shared buffer, are not atomic per frame, and accept frames of any length).  It packs
+and unpacks whole frames with precompiled ``struct`` codecs (:mod:`drives.canopen.pdo_codec`),
+reuses its outgoing ``can.Message`` objects, and never sleeps.  Frames reach the loop from
+one of two sources:
+
+``direct`` (default)
+    the calling thread reads the bus itself (canopen's notifier is paused); frames that are
+    not this drive's TPDOs are handed to canopen's dispatcher, so SDO, heartbeat and EMCY
+    consumers keep working.  No thread hand-off per cycle.
+``listener``
+    canopen's notifier thread keeps reading; the TPDOs come through a queue.
+
+Whatever goes wrong on the receive path becomes a typed error: a bus that cannot be read is
+a :class:`~drives.errors.DriveError`; a TPDO of the wrong length is dropped and counted; a
+frame that canopen's dispatcher cannot handle is counted as malformed and dropped (canopen's
+own notifier does the same), and the drive's own EMCY and heartbeat are length-checked before
+canopen sees them (:mod:`drives.canopen.events`).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import time
+from dataclasses import dataclass
+
+import can
+
+from drives.base import CyclicInputs
+from drives.canopen.link import NetworkLink
+from drives.canopen.pdo_codec import PdoCodec
+from drives.cia301 import SYNC_COB_ID
+from drives.cia402 import POSITION_ACTUAL, STATUSWORD, VELOCITY_ACTUAL
+from drives.cia402_master import SAFE_CONTROLWORD, CyclicStats
+from drives.errors import DriveError
+
+logger = logging.getLogger(__name__)
+
+RX_MODES = ("direct", "listener")
+
+
+@dataclass(slots=True)
+class CanopenStats(CyclicStats):
+    """Counters of the CANopen exchange (all since construction)."""
+
+    syncs_sent: int = 0
+    rpdos_sent: int = 0
+    dropped_frames: int = 0  # TPDO frames of the wrong length, never decoded
+    malformed_frames: int = 0  # other frames canopen's dispatcher could not handle
+    missed_tpdos: int = 0  # cycles whose TPDO did not arrive in tpdo_timeout
+    stale_tpdos: int = 0  # TPDOs that arrived after their cycle had timed out
+    emcy_count: int = 0
+    heartbeats: int = 0
+
+
+class CanopenExchange:
+    """SYNC out, this cycle's TPDOs in, RPDO out, for one drive on ``link``.
+
+    ``tpdo_codecs`` in TPDO order (together holding 0x6041, 0x606C and optionally 0x6064);
+    ``rpdo_codec`` packs (controlword, target torque);
+    ``timeout`` (s) is how long one cycle waits for all its TPDOs.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        link: NetworkLink,
+        tpdo_codecs: tuple[PdoCodec, ...],
+        rpdo_codec: PdoCodec,
+        rx_mode: str,
+        timeout: float,
+        stats: CanopenStats,
+    ) -> None:
+        self.name = name
+        self.link = link
+        self.tpdo_codecs = tpdo_codecs
+        self.rpdo_codec = rpdo_codec
+        self.rx_mode = rx_mode
+        self.timeout = timeout
+        self.stats = stats
+        flat = [(spec.index, spec.subindex) for codec in tpdo_codecs for spec in codec.entries]
+        position = (POSITION_ACTUAL.index, 0)
+        self._at = (flat.index((STATUSWORD.index, 0)), flat.index((VELOCITY_ACTUAL.index, 0)),
+                    flat.index(position) if position in flat else None)
+        self.tpdo_cobs: tuple[int, ...] = ()
+        self._slots: dict[int, tuple[int, int, object]] = {}
+        self._queue: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
+        self._subscribed = False
+        self._rpdo_pack_into = rpdo_codec.struct.pack_into
+        self._sync = can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False)
+        self._rpdo = can.Message(arbitration_id=0, data=bytes(rpdo_codec.size), is_extended_id=False)
+        self._safe = can.Message(arbitration_id=0, data=rpdo_codec.encode(SAFE_CONTROLWORD, 0), is_extended_id=False)
+
+    def configure(self, tpdo_cobs: tuple[int, ...], rpdo_cob: int) -> None:
+        """The COB-IDs commissioning gave the TPDOs (in order) and the RPDO."""
+        self.end()
+        self.tpdo_cobs = tpdo_cobs
+        self._slots = {cob: (slot, codec.size, codec.struct.unpack)
+                       for slot, (cob, codec) in enumerate(zip(tpdo_cobs, self.tpdo_codecs))}
+        self._rpdo.arbitration_id = self._safe.arbitration_id = rpdo_cob
+
+    # ------------------------------------------------------------------ phases
+
+    def begin(self) -> None:
+        """Enter the cyclic phase (direct: pause canopen's notifier; listener: subscribe the TPDOs)."""
+        if self.rx_mode == "direct":
+            self.link.read_directly()
+        elif not self._subscribed and self.link.network is not None:
+            for cob in self.tpdo_cobs:
+                self.link.network.subscribe(cob, self._on_tpdo)
+            self._subscribed = True
+
+    def end(self) -> None:
+        """Leave the cyclic phase (canopen's notifier reads the bus again, for SDO)."""
+        if self.rx_mode == "direct":
+            self.link.read_by_notifier()
+        elif self._subscribed and self.link.network is not None:
+            for cob in self.tpdo_cobs:
+                self.link.network.unsubscribe(cob, self._on_tpdo)
+            self._subscribed = False
+
+    def _on_tpdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        self._queue.put((can_id, bytes(data)))
+
+    # ------------------------------------------------------------------ receive
+
+    def _receive(self, deadline: float) -> tuple[int, bytes] | None:
+        """The next frame on one of the TPDO COB-IDs before ``deadline`` (perf_counter s), or None."""
+        if self.link.direct:
+            bus = self.link.bus
+            slots = self._slots
+            while True:
+                remaining = deadline - time.perf_counter()
+                try:
+                    msg = bus.recv(remaining if remaining > 0.0 else 0.0)
+                except Exception as exc:  # any interface's failure: the receive path is gone
+                    raise DriveError(self.name, f"CAN receive failed: {exc!r}") from exc
+                if msg is None:
+                    return None
+                if msg.is_error_frame or msg.is_remote_frame:
+                    continue
+                can_id = msg.arbitration_id
+                if can_id in slots and not msg.is_extended_id:
+                    return can_id, msg.data
+                self._dispatch(msg)
+        failure = self.link.receive_failure()
+        if failure is not None:
+            raise DriveError(self.name, f"CAN receive failed: {failure!r}")
+        remaining = deadline - time.perf_counter()
+        try:
+            return self._queue.get(remaining > 0.0, remaining if remaining > 0.0 else None)
+        except queue.Empty:
+            return None
+
+    def _dispatch(self, msg: can.Message) -> None:
+        """Direct mode: a frame that is not ours goes to canopen's subscribers (SDO, heartbeat, EMCY)."""
+        network = self.link.network
+        try:
+            network.notify(msg.arbitration_id, msg.data, msg.timestamp)
+        except Exception as exc:  # canopen's notifier logs and drops such a frame; so do we, counted
+            self.stats.malformed_frames += 1
+            logger.debug("%s: frame 0x%03X %s dropped: %r", self.name, msg.arbitration_id, bytes(msg.data).hex(), exc)
+
+    def drain(self) -> None:
+        """Before a SYNC: consume what arrived since the last cycle (late TPDOs are counted, not used)."""
+        now = time.perf_counter()
+        slots = self._slots
+        while (frame := self._receive(now)) is not None:
+            if len(frame[1]) != slots[frame[0]][1]:
+                self.stats.dropped_frames += 1
+            else:
+                self.stats.stale_tpdos += 1
+
+    def exchange(self) -> CyclicInputs | None:
+        """SYNC out, then this cycle's inputs from every TPDO of the cycle; None on timeout."""
+        self.send(self._sync)
+        self.stats.syncs_sent += 1
+        slots = self._slots
+        count = len(slots)
+        parts: list[tuple[int, ...] | None] = [None] * count
+        missing = count
+        deadline = time.perf_counter() + self.timeout
+        while missing:
+            frame = self._receive(deadline)
+            if frame is None:
+                return None
+            slot, size, unpack = slots[frame[0]]
+            data = frame[1]
+            if len(data) != size:
+                self.stats.dropped_frames += 1
+                continue
+            if parts[slot] is None:
+                missing -= 1
+            else:
+                self.stats.stale_tpdos += 1
+            parts[slot] = unpack(data)  # type: ignore[operator]
+        if count == 1:
+            values = parts[0]
+        else:
+            values = ()
+            for part in parts:
+                values += part  # type: ignore[operator]
+        sw, vel, pos = self._at
+        return CyclicInputs(values[sw], values[vel], None if pos is None else values[pos])  # type: ignore[index]
+
+    # ------------------------------------------------------------------ send
+
+    def send(self, msg: can.Message) -> None:
+        """Send one frame under the network's send lock (shared with canopen's SDO and NMT)."""
+        network = self.link.network
+        if network is None:
+            raise DriveError(self.name, "the bus is closed")
+        try:
+            with network.send_lock:
+                network.bus.send(msg)
+        except (can.CanError, OSError) as exc:
+            raise DriveError(self.name, f"CAN send failed: {exc!r}") from exc
+
+    def send_rpdo(self, controlword: int, torque: int) -> None:
+        """RPDO1: ``controlword`` and ``torque`` (per mille), packed in place."""
+        msg = self._rpdo
+        self._rpdo_pack_into(msg.data, 0, controlword, torque)
+        self.send(msg)
+        self.stats.rpdos_sent += 1
+
+    def send_safe(self) -> None:
+        """Zero torque with DISABLE VOLTAGE, and one SYNC so that a synchronous drive applies it.
+
+        Never raises: it runs while another error is being raised, which matters more.
+        """
+        try:
+            self.send(self._safe)
+            self.stats.rpdos_sent += 1
+            self.send(self._sync)
+            self.stats.syncs_sent += 1
+        except DriveError as exc:
+            logger.error("%s: could not send the safe stop frame: %s", self.name, exc)

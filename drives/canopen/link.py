@@ -1,0 +1,115 @@
+"""The canopen Network the master talks through: who owns it, and who reads the bus.
+
+Three ways a master gets its network, and what closing gives back:
+
+- it opened the bus itself (``interface``/``channel``/... or python-can's configuration
+  chain): closing stops the notifier and shuts the bus down;
+- the caller gave a :class:`can.BusABC`: the master builds a Network on it; closing stops the
+  notifier it started and leaves the bus open;
+- the caller gave a :class:`canopen.Network`: closing leaves it as it was found (its notifier
+  running again if the master paused it).
+
+While the master cycles in ``direct`` receive mode it reads the bus itself in the calling
+thread, so canopen's notifier thread is paused (:meth:`NetworkLink.read_directly`) and
+restarted for SDO (:meth:`NetworkLink.read_by_notifier`).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import can
+import canopen
+
+from drives.bus_config import open_bus
+from drives.errors import DriveError
+
+logger = logging.getLogger(__name__)
+
+NOTIFIER_CYCLE = 0.02  # s: how long canopen's notifier blocks in recv, so pausing it is quick
+
+
+class NetworkLink:
+    """The master's canopen Network (see the module docstring for ownership)."""
+
+    def __init__(
+        self,
+        name: str,
+        *,
+        network: canopen.Network | None = None,
+        bus: can.BusABC | None = None,
+        bus_args: tuple[str | None, Any, int | None, dict[str, Any]] = (None, None, None, {}),
+    ) -> None:
+        self.name = name
+        self._given_network = network
+        self._given_bus = bus
+        self._bus_args = bus_args
+        self.network: canopen.Network | None = None
+        self.bus: can.BusABC | None = None
+        self.direct = False  # True while the master reads the bus itself
+
+    def open(self) -> canopen.Network:
+        """The network, connected and with its notifier reading the bus."""
+        if self._given_network is not None:
+            network = self._given_network
+        else:
+            bus = self._given_bus
+            if bus is None:
+                interface, channel, bitrate, kwargs = self._bus_args
+                bus = open_bus(interface, channel, bitrate, **kwargs)
+            network = canopen.Network(bus)
+        network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
+        if network.notifier is None or network.notifier.stopped:
+            network.connect()
+        self.network = network
+        self.bus = network.bus
+        return network
+
+    def read_directly(self) -> None:
+        """Pause canopen's notifier: from now on the caller reads the bus itself."""
+        if self.direct or self.network is None:
+            return
+        notifier = self.network.notifier
+        if notifier is not None and not notifier.stopped:
+            notifier.stop(timeout=5.0)
+            if notifier.exception is not None:
+                raise DriveError(self.name, f"CAN receive failed: {notifier.exception!r}")
+        self.direct = True
+
+    def read_by_notifier(self) -> None:
+        """Give the bus back to a fresh canopen notifier (SDO needs it)."""
+        if not self.direct or self.network is None:
+            return
+        self.direct = False
+        self.network.notifier = can.Notifier(self.bus, self.network.listeners, self.network.NOTIFIER_CYCLE)
+
+    def receive_failure(self) -> BaseException | None:
+        """The exception that stopped the notifier thread, if one did."""
+        notifier = self.network.notifier if self.network is not None else None
+        return None if notifier is None else notifier.exception
+
+    def close(self) -> None:
+        """Release what this link took (see the module docstring); never raises."""
+        network = self.network
+        if network is None:
+            return
+        self.network = None
+        try:
+            if self._given_network is not None:
+                if self.direct:
+                    self.direct = False
+                    network.notifier = can.Notifier(network.bus, network.listeners, network.NOTIFIER_CYCLE)
+                return
+            notifier = network.notifier
+            if notifier is not None and not notifier.stopped:
+                notifier.stop(timeout=5.0)
+            network.notifier = None
+            if self._given_bus is None and network.bus is not None:
+                network.bus.shutdown()
+            network.bus = None
+        except (can.CanError, OSError) as exc:
+            logger.warning("%s: closing the bus: %s", self.name, exc)
+        finally:
+            self.bus = None
+            self.direct = False

@@ -1,0 +1,119 @@
+"""The error tree of the whole distribution, rooted here because ``drives`` is its bottom layer.
+
+Every error raised on purpose carries its data from construction; the command line maps the
+branch to an exit status (``haptic_bus.app.cli``)::
+
+    HapticBusError                       anything raised on purpose
+     +-- ParameterError (ValueError)     invalid input: .name, .value, .allowed      exit 2
+     +-- DriveError                      a drive or bus failed: .node                 exit 1
+     |    +-- BusConfigError             no usable CAN bus configuration
+     |    +-- DriveTimeout               silence: no answer in time
+     |    |    +-- DriveStateError       the CiA-402 state machine stalled: .state
+     |    |    +-- ModbusLinkLost        the Modbus link is gone: call reconnect()
+     |    +-- DriveFault                 the drive reported a fault: .code
+     |    +-- DriveProtocolError         an answer or frame the protocol forbids
+     |    |    +-- SdoAbortError         SDO abort: .abort_code, .index, .subindex
+     |    |    +-- ModbusExceptionError  exception response: .exception_code
+     |    |    +-- PdoLengthError        PDO frame of the wrong length: .expected, .got
+     |    +-- UnsupportedModeError       0x6502 lacks the requested mode
+     +-- GateRefusal                     (haptic_bus) the passivity gate said no      exit 1
+     +-- AssumptionBroken                (haptic_bus) the gate's assumption failed    exit 3
+
+``haptic_bus.errors`` re-exports all of them beside the ones it adds.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class HapticBusError(Exception):
+    """Base class of every error the distribution raises on purpose."""
+
+
+class ParameterError(HapticBusError, ValueError):
+    """A parameter is outside its allowed range (or not a number at all).
+
+    ``name``, ``value`` and ``allowed`` are given at construction, so a commissioning engineer
+    can act on the message without reading code; ``context`` says where it was read.
+    """
+
+    def __init__(self, name: str, value: object, allowed: str, context: str = "") -> None:
+        self.name = name
+        self.value = value
+        self.allowed = allowed
+        self.context = context
+        where = f"{context}: " if context else ""
+        super().__init__(f"{where}{name} = {value!r} is invalid; allowed: {allowed}")
+
+
+class DriveError(HapticBusError):
+    """A drive or its bus failed; ``node`` names the drive (node id or unit id)."""
+
+    def __init__(self, node: str, message: str) -> None:
+        self.node = node
+        self.message = message
+        super().__init__(f"{node}: {message}")
+
+
+class BusConfigError(DriveError):
+    """No usable CAN bus configuration (no interface selected, unknown interface, open failed)."""
+
+
+class DriveTimeout(DriveError):
+    """The drive did not answer within its timeout (silent node, wrong node id, lost link)."""
+
+
+class DriveStateError(DriveTimeout):
+    """The CiA-402 state machine did not reach the expected state in time; ``state`` is where it stuck."""
+
+    def __init__(self, node: str, message: str, state: Any) -> None:
+        self.state = state
+        super().__init__(node, message)
+
+
+class ModbusLinkLost(DriveTimeout):
+    """The link to the drive is gone (dropped connection, or closed after a timeout); call reconnect()."""
+
+
+class DriveFault(DriveError):
+    """The drive reported a fault (EMCY, fault bit, heartbeat loss); ``code`` is its error code."""
+
+    def __init__(self, node: str, message: str, code: int | None = None) -> None:
+        self.code = code
+        super().__init__(node, message)
+
+
+class DriveProtocolError(DriveError):
+    """The drive answered with something the protocol forbids, or a frame could not be used."""
+
+
+class SdoAbortError(DriveProtocolError):
+    """The drive aborted an SDO transfer of ``index:subindex`` with ``abort_code`` (CiA 301)."""
+
+    def __init__(self, node: str, message: str, abort_code: int, index: int, subindex: int) -> None:
+        self.abort_code = abort_code
+        self.index = index
+        self.subindex = subindex
+        super().__init__(node, message)
+
+
+class ModbusExceptionError(DriveProtocolError):
+    """The drive answered a Modbus request with exception ``exception_code`` (0x01..0x0B)."""
+
+    def __init__(self, node: str, message: str, exception_code: int) -> None:
+        self.exception_code = exception_code
+        super().__init__(node, message)
+
+
+class PdoLengthError(DriveProtocolError):
+    """A PDO frame's data length does not match its mapping (the frame must be dropped)."""
+
+    def __init__(self, name: str, expected: int, got: int) -> None:
+        self.expected = expected
+        self.got = got
+        super().__init__(name, f"frame of {got} bytes, mapping needs exactly {expected}")
+
+
+class UnsupportedModeError(DriveError):
+    """The drive does not announce the requested mode of operation in 0x6502."""
