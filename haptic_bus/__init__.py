@@ -1,6 +1,100 @@
 """haptic_bus: passive virtual walls rendered through a servo drive on a fieldbus.
 
-SI units everywhere inside this package: kg, N, m, s, N/m, N s/m.
+SI units everywhere inside this package: kg, N, m, s, N/m, N s/m.  The public API, so that
+users write ``haptic_bus.check_passivity(...)``, never a module path::
+
+    import haptic_bus as hb
+
+    report = hb.check_passivity(mass=0.5, friction=0.1, period=1e-3, stiffness=200, damping=100, delay=1)
+    report.passive, report.margin, report.max_stiffness, report.to_dict()
+
+    profile = hb.load_profile("cia402-handle")            # validated and gated
+    summary, controller = hb.run_canopen(profile, {"interface": "udp_multicast", "channel": ...},
+                                         node_id=5, options=hb.RunOptions(duration=10.0, realtime=True))
+
+Names load on first use (PEP 562), so ``import haptic_bus`` is cheap and the analysis never
+loads python-can, canopen or pymodbus; only :func:`run_canopen` and :func:`run_modbus` do.
 """
 
-__version__ = "0.1.0"
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+__version__ = "0.2.0"
+
+_HOMES = {
+    "check_passivity": "haptic_bus.analysis.check",
+    "CheckReport": "haptic_bus.analysis.check",
+    "format_check": "haptic_bus.analysis.check",
+    "WallLoop": "haptic_bus.analysis.loop",
+    "Wall": "haptic_bus.control.scene",
+    "Slot": "haptic_bus.control.scene",
+    "Detent": "haptic_bus.control.scene",
+    "compile_scene": "haptic_bus.control.scene",
+    "PassivityGate": "haptic_bus.control.gate",
+    "GatePolicy": "haptic_bus.control.gate",
+    "GateDecision": "haptic_bus.control.gate",
+    "GateRefusal": "haptic_bus.control.gate",
+    "DeviceLoop": "haptic_bus.control.gate",
+    "WallController": "haptic_bus.control.controller",
+    "RunSummary": "haptic_bus.control.controller",
+    "Profile": "haptic_bus.app.profiles",
+    "load_profile": "haptic_bus.app.profiles",
+    "RunOptions": "haptic_bus.app.runner",
+    "run_canopen": "haptic_bus.app.runner",
+    "run_modbus": "haptic_bus.app.runner",
+    "HapticBusError": "drives.errors",
+    "ParameterError": "drives.errors",
+    "DriveError": "drives.errors",
+}
+
+__all__ = [
+    "CheckReport",
+    "Detent",
+    "DeviceLoop",
+    "DriveError",
+    "GateDecision",
+    "GatePolicy",
+    "GateRefusal",
+    "HapticBusError",
+    "ParameterError",
+    "PassivityGate",
+    "Profile",
+    "RunOptions",
+    "RunSummary",
+    "Slot",
+    "Wall",
+    "WallController",
+    "WallLoop",
+    "check_passivity",
+    "compile_scene",
+    "format_check",
+    "load_profile",
+    "run_canopen",
+    "run_modbus",
+]
+
+
+def __getattr__(name: str) -> Any:
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module 'haptic_bus' has no attribute {name!r}")
+    value = getattr(importlib.import_module(home), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+if TYPE_CHECKING:
+    from drives.errors import DriveError, HapticBusError, ParameterError
+    from haptic_bus.analysis.check import CheckReport, check_passivity, format_check
+    from haptic_bus.analysis.loop import WallLoop
+    from haptic_bus.app.profiles import Profile, load_profile
+    from haptic_bus.app.runner import RunOptions, run_canopen, run_modbus
+    from haptic_bus.control.controller import RunSummary, WallController
+    from haptic_bus.control.gate import DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
+    from haptic_bus.control.scene import Detent, Slot, Wall, compile_scene

@@ -9,7 +9,8 @@ import pathlib
 
 import pytest
 
-from haptic_bus.analysis.check import BANDWIDTH_ALPHA, check_report
+from haptic_bus.analysis.check import check_loop
+from haptic_bus.analysis.loop import BANDWIDTH_ALPHA
 from haptic_bus.control.gate import GateRefusal
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.app.profiles import (DEFAULT_PROFILE, Profile, ProfileError, ProfileRefusal, default_profile,
@@ -112,12 +113,12 @@ def test_shipped_profile_loads_and_gate_agrees_with_check(name):
     assert decision.accepted and decision.walls
     d, loop = profile.device, profile.loop
     for wall in decision.walls:
-        report = check_report(WallLoop(d.mass, d.friction, loop.period, wall.K, wall.B, loop.delay))
-        assert report["passive"] is True
-        assert report["passive"] == wall.verdict.passive
-        assert report["margin"] == wall.verdict.margin  # the same criterion, the same number
+        report = check_loop(WallLoop(d.mass, d.friction, loop.period, wall.K, wall.B, loop.delay))
+        assert report.passive is True
+        assert report.passive == wall.verdict.passive
+        assert report.margin == wall.verdict.margin  # the same criterion, the same number
         assert wall.verdict.margin >= profile.gate_policy.safety_margin
-        if profile.gate_policy.bandwidth == "warn" and report["bandwidth_rule"]["holds"] is False:
+        if profile.gate_policy.bandwidth == "warn" and report.bandwidth_rule_holds is False:
             assert any(f"K = {wall.K:g} N/m" in w for w in decision.warnings)
 
 
@@ -167,8 +168,8 @@ def test_default_profile_is_a_realistic_cia402_handle():
     for wall in decision.walls:
         loop = WallLoop(profile.device.mass, profile.device.friction, 1e-3, wall.K, wall.B, 1)
         assert loop.alpha > BANDWIDTH_ALPHA
-        assert wall.K <= 0.5 * check_report(loop)["max_stiffness"]  # well inside the region
-        assert wall.B <= 0.5 * check_report(loop)["max_damping"]
+        assert wall.K <= 0.5 * check_loop(loop).max_stiffness  # well inside the region
+        assert wall.B <= 0.5 * check_loop(loop).max_damping
     push = profile.operator_model
     assert push["model"] == "constant" and 0 < push["level"] < 10
     (wall,) = profile.scene
@@ -313,7 +314,7 @@ def test_cli_check_matches_check_report(capsys):
     assert cmd_check(ns(profile="stiff-wall", json=True)) == 0
     out = json.loads(capsys.readouterr().out)
     (wall,) = out["walls"]
-    expected = check_report(WallLoop(1.0, 20.0, 1e-3, 22500.0, 5.0, 1))
+    expected = check_loop(WallLoop(1.0, 20.0, 1e-3, 22500.0, 5.0, 1)).to_dict()
     assert wall["report"]["passive"] is expected["passive"] is True
     assert wall["report"]["margin"] == expected["margin"]
     assert cmd_check(ns(profile="seed-ideal")) == 0

@@ -34,13 +34,10 @@ from scipy.signal import lfilter
 from haptic_bus.analysis.closed_form import colgate_beta, liu2011_beta, velocity_sampling_beta
 from haptic_bus.analysis.frequency import seed_t_zw, t_fund
 from haptic_bus.analysis.limits import max_damping, max_stiffness
-from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
 from haptic_bus.analysis.plant import phi1
 from haptic_bus.analysis.poles import characteristic_polynomial, closed_loop_poles, spectral_radius
 from haptic_bus.validation import real_in_range, whole_in_range
-
-BANDWIDTH_ALPHA = 6.0
-"""Eq. (25): ``alpha = B/(KT)`` must exceed this (crossover below 0.1 Nyquist, corner at half of it)."""
 
 SEED_PERIODS = (1e-3, 5e-3, 1e-2)
 """Sampling periods (s) of the three velocity-sampling curves of Fig. 4 (the seed does not list them)."""

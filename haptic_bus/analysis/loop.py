@@ -22,6 +22,9 @@ STIFFNESS_RANGE = (0.0, 1e15)  # N/m
 DAMPING_RANGE = (0.0, 1e15)  # N s/m
 DELAY_RANGE = (0, 64)  # samples
 
+BANDWIDTH_ALPHA = 6.0
+"""Eq. (25): ``alpha = B/(KT)`` must exceed this (crossover below 0.1 Nyquist, corner at half of it)."""
+
 
 class Discretisation(enum.Enum):
     """How the continuous wall ``K/s + B`` becomes ``K_d(z)``."""

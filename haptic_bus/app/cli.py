@@ -12,7 +12,7 @@ from drives.errors import DriveError
 from drives.bus_config import parse_bus_option
 from drives.errors import HapticBusError, ParameterError
 from haptic_bus.control.gate import GateRefusal
-from haptic_bus.analysis.check import check_report, format_check
+from haptic_bus.analysis.check import check_loop, format_check
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.app.profiles_cli import add_profiles_parser
 
@@ -43,9 +43,9 @@ def _add_bus_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _check(args: argparse.Namespace) -> int:
     loop = WallLoop(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay)
-    report = check_report(loop)
-    print(json.dumps(report) if args.json else format_check(report))
-    return EXIT_OK if report["passive"] else EXIT_NO
+    report = check_loop(loop)
+    print(json.dumps(report.to_dict()) if args.json else format_check(report))
+    return EXIT_OK if report.passive else EXIT_NO
 
 
 def _region(args: argparse.Namespace) -> int:
@@ -140,7 +140,7 @@ def _bench(argv: Sequence[str]) -> int:
 
 
 def _sim(argv: Sequence[str]) -> int:
-    from sim_drive.cli import main as sim_main
+    from haptic_bus.app.rig import sim_main
 
     return sim_main(list(argv))
 

@@ -13,7 +13,7 @@ import json
 import sys
 from typing import Any
 
-from haptic_bus.analysis.check import check_report, format_check
+from haptic_bus.analysis.check import check_loop, format_check
 from drives.errors import HapticBusError
 from haptic_bus.control.gate import GateDecision, GateRefusal
 from haptic_bus.analysis.loop import WallLoop
@@ -127,23 +127,24 @@ def cmd_check(args: argparse.Namespace) -> int:
         d, loop = profile.device, profile.loop
         walls = []
         for (K, B), names in sorted(profile.compiled_scene().contacts().items()):
-            report = check_report(WallLoop(d.mass, d.friction, loop.period, K, B, loop.delay))
-            walls.append({"objects": list(names), "K": K, "B": B, "report": report})
+            report = check_loop(WallLoop(d.mass, d.friction, loop.period, K, B, loop.delay))
+            walls.append((names, K, B, report))
     except HapticBusError as error:
         return _fail("check", error)
-    passive = all(w["report"]["passive"] for w in walls)
+    passive = all(report.passive for *_, report in walls)
     status = EXIT_OK if passive and decision.accepted else EXIT_NO
     if args.json:
         print(json.dumps({"profile": profile.name, "path": str(profile.path), "passive": passive,
                           "gate": _decision_dict(decision) | {"safety_margin": profile.gate_policy.safety_margin,
                                                                "bandwidth": profile.gate_policy.bandwidth},
-                          "walls": walls}))
+                          "walls": [{"objects": list(names), "K": K, "B": B, "report": report.to_dict()}
+                                    for names, K, B, report in walls]}))
         return status
     print(f"profile {profile.name} ({profile.path}): {len(walls)} contact wall(s),"
           f" timing {loop.timing} (delay {loop.delay})")
-    for wall in walls:
-        print(f"--- {'+'.join(wall['objects'])} (summed K, B)")
-        print(format_check(wall["report"]))
+    for names, _, _, report in walls:
+        print(f"--- {'+'.join(names)} (summed K, B)")
+        print(format_check(report))
     verdict = "passive" if passive else "NOT passive"
     print(f"profile verdict: {verdict}; gate {'accepts' if decision.accepted else 'REFUSES'}"
           f" (safety margin {profile.gate_policy.safety_margin:g} N s/m, bandwidth {profile.gate_policy.bandwidth})")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pathlib
 
-from haptic_bus.analysis.check import check_report, format_check
+from haptic_bus.analysis.check import check_loop, format_check
 from haptic_bus.app.plots import plot_nyquist, plot_region, plot_step
 from haptic_bus.app.profiles import Profile
 
@@ -41,7 +41,7 @@ def write_report(profile: Profile, out_dir: str | pathlib.Path) -> list[pathlib.
         step = plot_step(out / f"fig6_step{suffix}.png", loop)
         written += [nyquist, step]
         lines += ["", f"## {' + '.join(wall.objects)}: K = {wall.K:g} N/m, B = {wall.B:g} N s/m", "", "```",
-                  format_check(check_report(loop)), "```", "", f"![Fig. 5]({nyquist.name})", "", f"![Fig. 6]({step.name})"]
+                  format_check(check_loop(loop)), "```", "", f"![Fig. 5]({nyquist.name})", "", f"![Fig. 6]({step.name})"]
     for warning in decision.warnings:
         lines += ["", f"> warning: {warning}"]
     summary = out / "report.md"

@@ -1,23 +1,52 @@
-"""A profile's loop against the simulated drive in this process, on python-can's virtual bus.
+"""The one place haptic_bus reaches the simulated drive: the demo rig, ``haptic-bus sim``, the bench.
 
-Used by ``haptic-bus demo`` and by the end-to-end tests: the simulated drive is a real
-CANopen slave (:class:`sim_drive.canopen.slave.CanopenSimDrive`) and the controller reaches
-it through the real master (:class:`drives.canopen.drive.CanopenDrive`), frames and all.
+:func:`simulated_canopen` runs a profile's loop against the simulated drive in this process on
+python-can's virtual bus (``haptic-bus demo``, the end-to-end tests, the bench): the simulated
+drive is a real CANopen slave (:class:`sim_drive.canopen.slave.CanopenSimDrive`) and the
+controller reaches it through the real master (:class:`drives.canopen.drive.CanopenDrive`),
+frames and all.  :func:`simulator_command` is how a second process starts it.
 """
 
 from __future__ import annotations
 
+import sys
 import uuid
+from collections.abc import Sequence
 from contextlib import contextmanager
 from typing import Iterator
 
 from drives.canopen.drive import CanopenDrive
+from haptic_bus.app.profiles import Profile
+from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.eds import eds_path
 from sim_drive.operator import OperatorModel, operator_from_table
 from sim_drive.parameters import DeviceParameters
 
-from haptic_bus.app.profiles import Profile
+__all__ = [
+    "BusLoadMeter",
+    "CanopenSimDrive",
+    "DeviceParameters",
+    "cycle_bits",
+    "eds_path",
+    "frame_bits",
+    "profile_operator",
+    "sim_main",
+    "simulated_canopen",
+    "simulator_command",
+]
+
+
+def simulator_command(*arguments: str) -> list[str]:
+    """The command line that starts the simulated drive in another process (``python -m sim_drive``)."""
+    return [sys.executable, "-m", "sim_drive", *arguments]
+
+
+def sim_main(argv: Sequence[str]) -> int:
+    """``haptic-bus sim ...``: the simulated drive's own command line, in this process."""
+    from sim_drive.cli import main
+
+    return main(list(argv))
 
 
 def profile_operator(profile: Profile) -> OperatorModel:

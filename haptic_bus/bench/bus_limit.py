@@ -29,7 +29,7 @@ import numpy as np
 from drives.canopen.drive import split_into_frames
 from drives.cia402 import (CONTROLWORD, ERROR_CODE, MAX_TORQUE, MODES_OF_OPERATION, MODES_OF_OPERATION_DISPLAY,
                            POSITION_ACTUAL, STATUSWORD, TARGET_TORQUE, TORQUE_ACTUAL, VELOCITY_ACTUAL)
-from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits
+from haptic_bus.app.rig import BusLoadMeter, cycle_bits, frame_bits
 
 BITRATES = (125_000, 500_000, 1_000_000)
 PERIOD = 1e-3
@@ -70,8 +70,7 @@ def measured_bits_per_cycle(tpdo_objects, cycles: int = 200) -> float:
     """Median bits per SYNC cycle the BusLoadMeter counts on the virtual bus (in-process run)."""
     from drives.canopen.drive import CanopenDrive
     from haptic_bus.bench.hot_path import bench_closed_loop
-    from sim_drive.canopen.slave import CanopenSimDrive
-    from sim_drive.eds import eds_path
+    from haptic_bus.app.rig import CanopenSimDrive, eds_path
 
     channel = f"bench-bus-{uuid.uuid4().hex[:12]}"
     meter = BusLoadMeter(1_000_000, PERIOD)

@@ -24,11 +24,11 @@ from __future__ import annotations
 import os
 import random
 import subprocess
-import sys
 import time
 from pathlib import Path
 from typing import Callable
 
+from haptic_bus.app.rig import simulator_command
 from haptic_bus.bench.timing import timed_once
 from haptic_bus.control.clock import VirtualClock
 from haptic_bus.control.controller import WallController
@@ -95,8 +95,8 @@ def udp_multicast(profile: Profile, cycles: int) -> dict:
     port = random.randint(45000, 55000)
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_REPO), env.get("PYTHONPATH")]))
-    args = [sys.executable, "-m", "sim_drive", "--interface", "udp_multicast", "--channel", group,
-            "--bus-option", f"port={port}", "--node-id", str(NODE_ID), "--profile", PROFILE]
+    args = simulator_command("--interface", "udp_multicast", "--channel", group,
+                             "--bus-option", f"port={port}", "--node-id", str(NODE_ID), "--profile", PROFILE)
     process = subprocess.Popen(args, cwd=_REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         _wait_heartbeat({"interface": "udp_multicast", "channel": group, "port": port}, NODE_ID, process, _START_WAIT)

@@ -25,6 +25,7 @@ import numpy as np
 
 from drives.modbus.drive import CYCLE_MODES, ModbusDrive
 from drives.modbus.timing import PollTiming
+from haptic_bus.app.rig import simulator_command
 
 _BOUND = re.compile(r"serving Modbus TCP on (tcp://\S+)")
 
@@ -32,7 +33,7 @@ _BOUND = re.compile(r"serving Modbus TCP on (tcp://\S+)")
 def start_simulator(timing: str = "ideal", timeout: float = 10.0) -> tuple[subprocess.Popen, str]:
     """Start ``python -m sim_drive --modbus tcp://127.0.0.1:0``; return the process and its URL."""
     process = subprocess.Popen(
-        [sys.executable, "-m", "sim_drive", "--modbus", "tcp://127.0.0.1:0", "--timing", timing],
+        simulator_command("--modbus", "tcp://127.0.0.1:0", "--timing", timing),
         stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
     )
     deadline = time.monotonic() + timeout

@@ -13,11 +13,10 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass, field
 
-from haptic_bus.analysis.check import BANDWIDTH_ALPHA
 from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from drives.errors import HapticBusError, ParameterError
 from haptic_bus.analysis.limits import max_damping, max_stiffness
-from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.validation import real_in_range
 
