@@ -196,7 +196,7 @@ def test_nobody_listening_is_a_timeout_and_rtu_constructs() -> None:
         with pytest.raises(DriveTimeout, match=f"Modbus unit 3 at tcp://127.0.0.1:{port}: cannot connect"):
             drive.connect()
     rtu = ModbusDrive.from_url("rtu:/dev/ttyUSB0", unit_id=5, baudrate=57600)
-    assert rtu.serial and rtu.port == "/dev/ttyUSB0" and rtu.name == "Modbus unit 5 at rtu:/dev/ttyUSB0"
+    assert rtu.link.address.serial and rtu.link.address.port == "/dev/ttyUSB0" and rtu.name == "Modbus unit 5 at rtu:/dev/ttyUSB0"
     with pytest.raises(DriveError):  # no pyserial here, or no such port
         rtu.connect()
     with pytest.raises(ValueError, match="unit_id"):

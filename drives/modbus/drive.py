@@ -18,30 +18,21 @@ output block (controlword, target torque).  Two ways to put that on the wire (``
     loop delay (see :mod:`drives.modbus.timing`).
 
 The hot path reuses its pymodbus request objects (the output registers are updated in place)
-and precompiled ``struct`` codecs; requests go out with ``retries=0``.  There is no silent
-retry or reconnect: a timeout, a dropped connection, a Modbus exception response or a fault
-bit makes the master attempt one zero-torque write (controlword DISABLE VOLTAGE) where the link
-still answers, close the link where it cannot be trusted (timeouts, drops), and raise:
-
-- exception response (0x02 illegal address, 0x03 illegal value, 0x06 busy, ...) ->
-  :class:`DriveProtocolError` naming the unit, the registers and CiA-402 objects, the exception;
-- no answer within ``timeout`` -> :class:`DriveTimeout` (:class:`ModbusLinkLost` once the link
-  is closed); a dropped connection -> :class:`ModbusLinkLost` (a DriveTimeout).
-
-After that, ``write_outputs`` writes the safe output block instead of the caller's torque
-(while the link is up), until :meth:`ModbusDrive.fault_reset` or :meth:`ModbusDrive.enable`;
-a closed link needs an explicit :meth:`ModbusDrive.reconnect`.
+and precompiled ``struct`` codecs.  Requests and their typed errors are :mod:`drives.modbus.link`'s:
+no silent retry or reconnect.  A timeout, a dropped connection, a Modbus exception response
+or a fault bit makes the master attempt one zero-torque write (controlword DISABLE VOLTAGE)
+where the link still answers, close the link where it cannot be trusted (timeouts, drops:
+:class:`~drives.errors.ModbusLinkLost`), and raise.  After that, ``write_outputs`` writes the
+safe output block instead of the caller's torque (while the link is up), until
+:meth:`ModbusDrive.fault_reset` or :meth:`ModbusDrive.enable`; a closed link needs an
+explicit :meth:`ModbusDrive.reconnect`.
 """
 
 from __future__ import annotations
 
 import logging
-import math
-import urllib.parse
-from dataclasses import dataclass
 from typing import Any
 
-from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.pdu import ModbusPDU
 from pymodbus.pdu.register_message import (
     ReadHoldingRegistersRequest,
@@ -62,15 +53,9 @@ from drives.cia402 import (
     State,
     decode_statusword,
 )
-from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master, CyclicStats
-from drives.errors import (
-    DriveError,
-    DriveProtocolError,
-    DriveTimeout,
-    ModbusExceptionError,
-    ModbusLinkLost,
-    ParameterError,
-)
+from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
+from drives.errors import DriveError, DriveProtocolError, DriveTimeout, ModbusLinkLost, ParameterError
+from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import (
     INPUT_BLOCK,
     MAP_IDENTITY,
@@ -82,7 +67,6 @@ from drives.modbus.register_map import (
     decode_value,
     describe_range,
     encode_value,
-    exception_name,
     register_for_object,
 )
 
@@ -95,21 +79,6 @@ _TIMING_NAMES = {0: "cia402", 1: "ideal"}
 _CONTROLWORD_REG = register_for_object(CONTROLWORD)
 _TORQUE_REG = register_for_object(TARGET_TORQUE)
 _STATUSWORD_REG = register_for_object(STATUSWORD)
-
-
-@dataclass(slots=True)
-class ModbusStats(CyclicStats):
-    """Counters of the Modbus exchange (since construction)."""
-
-    requests: int = 0  # Modbus requests sent (cyclic and acyclic)
-    cyclic_requests: int = 0
-    exceptions: int = 0  # exception responses
-    timeouts: int = 0
-
-
-def _check(name: str, ok: bool, value: object, allowed: str) -> None:
-    if not ok:
-        raise ParameterError(name, value, allowed, "Modbus drive")
 
 
 class ModbusDrive(Cia402Master):
@@ -143,33 +112,40 @@ class ModbusDrive(Cia402Master):
         stopbits: int = 1,
         bytesize: int = 8,
     ) -> None:
-        _check("unit_id", isinstance(unit_id, int) and 0 <= unit_id <= 247, unit_id, "0..247")
-        _check("timeout", isinstance(timeout, (int, float)) and timeout > 0 and math.isfinite(timeout), timeout, "> 0 s")
-        _check("cycle", cycle in CYCLE_MODES, cycle, " or ".join(map(repr, CYCLE_MODES)))
-        self.serial = isinstance(port, str)
-        _check("port", self.serial or (isinstance(port, int) and 0 < port <= 65535), port,
-               "a TCP port 1..65535 or a serial device path")
-        _check("host", self.serial or bool(host), host, "a host name or address (Modbus TCP)")
-        self.address = f"rtu:{port}" if self.serial else f"tcp://{host}:{port}"
-        self._init_master(f"Modbus unit {unit_id} at {self.address}", scaling)
-        self.host = host
-        self.port = port
+        self._setup(ModbusAddress(host, port, timeout, baudrate, parity, stopbits, bytesize), unit_id, word_order,
+                    cycle, with_position, scaling, state_timeout, check_identity)
+
+    def _setup(self, address: ModbusAddress, unit_id: int, word_order: str, cycle: str, with_position: bool,
+               scaling: DriveScaling | None, state_timeout: float, check_identity: bool) -> None:
+        if isinstance(unit_id, bool) or not isinstance(unit_id, int) or not 0 <= unit_id <= 247:
+            raise ParameterError("unit_id", unit_id, "0..247", "Modbus drive")
+        if cycle not in CYCLE_MODES:
+            raise ParameterError("cycle", cycle, " or ".join(map(repr, CYCLE_MODES)), "Modbus drive")
+        self._init_master(f"Modbus unit {unit_id} at {address.url}", scaling)
         self.unit_id = unit_id
-        self.timeout = timeout
         self.cycle = cycle
         self.state_timeout = state_timeout
         self.max_commands_per_step = 10_000
         self.check_identity = check_identity
-        self.serial_options = {"baudrate": baudrate, "parity": parity, "stopbits": stopbits, "bytesize": bytesize}
         self.simulated_timing: str | None = None  # "ideal"/"cia402" when the server is sim_drive
         self.stats = ModbusStats()
-        self.client: Any = None
+        self.link = ModbusLink(self.name, address, self.stats)
         self._codec = InputBlockCodec(word_order, with_position)
         self._requests = _CyclicRequests(unit_id, self._codec.count)
         self._cached: list[int] | None = None  # fc23: inputs read by the last output write
         self._connected = False
-        self._link_up = False
         self._closed = False
+
+    @classmethod
+    def from_url(cls, url: str, *, timeout: float = 0.1, **options: Any) -> "ModbusDrive":
+        """``tcp://HOST:PORT`` or ``rtu:/dev/ttyUSB0`` -> a ModbusDrive (``options`` as the constructor)."""
+        address = ModbusAddress.from_url(url, timeout)
+        return cls(address.host, address.port, timeout=timeout, **options)
+
+    @property
+    def address(self) -> str:
+        """``tcp://HOST:PORT`` or ``rtu:/dev/...``."""
+        return self.link.address.url
 
     @property
     def word_order(self) -> str:
@@ -181,56 +157,16 @@ class ModbusDrive(Cia402Master):
         """True when each cycle reads 0x6064 too."""
         return self._codec.with_position
 
-    @classmethod
-    def from_url(cls, url: str, **options: Any) -> "ModbusDrive":
-        """``tcp://HOST:PORT`` or ``rtu:/dev/ttyUSB0`` -> a ModbusDrive (``options`` as the constructor)."""
-        parsed = urllib.parse.urlsplit(url)
-        if parsed.scheme == "tcp":
-            try:
-                port = parsed.port
-            except ValueError:
-                port = None
-            if not parsed.hostname or port is None:
-                raise ParameterError("url", url, "tcp://HOST:PORT with a port 1..65535", "Modbus drive")
-            return cls(parsed.hostname, port, **options)
-        if parsed.scheme == "rtu" and (parsed.path or parsed.netloc):
-            return cls(None, parsed.netloc + parsed.path, **options)
-        raise ParameterError("url", url, "tcp://HOST:PORT or rtu:/dev/SERIAL", "Modbus drive")
+    @property
+    def link_up(self) -> bool:
+        """True while the link is open and trusted."""
+        return self.link.up
 
     # ------------------------------------------------------------------ link
 
-    def _make_client(self) -> Any:
-        if self.serial:
-            from pymodbus import FramerType
-            from pymodbus.client import ModbusSerialClient
-
-            try:
-                return ModbusSerialClient(self.port, framer=FramerType.RTU, timeout=self.timeout, retries=0,
-                                          reconnect_delay=0, **self.serial_options)
-            except RuntimeError as exc:  # pymodbus: "Serial client requires pyserial"
-                raise DriveError(self.name, f"cannot open the RTU client: {exc}") from exc
-        from pymodbus.client import ModbusTcpClient
-
-        return ModbusTcpClient(self.host, port=self.port, timeout=self.timeout, retries=0, reconnect_delay=0)
-
-    def _open(self) -> None:
-        client = self._make_client()
-        if not client.connect():
-            client.close()
-            raise DriveTimeout(self.name, f"cannot connect within {self.timeout:.3g} s (is the drive/server up, the address right?)")
-        self.client = client
-        self._execute = client.execute
-        self._link_up = True
-        self._cached = None
-
     def _drop_link(self) -> None:
-        self._link_up = False
         self._cached = None
-        if self.client is not None:
-            try:
-                self.client.close()
-            except (OSError, ModbusException):
-                pass
+        self.link.drop()
 
     def connect(self) -> None:
         """Open the link, check the map identity, read scaling (0x6076, 0x6072, 0x0040..); raise DriveTimeout."""
@@ -241,7 +177,8 @@ class ModbusDrive(Cia402Master):
         self._establish()
 
     def _establish(self) -> None:
-        self._open()
+        self.link.open()
+        self._cached = None
         try:
             self._configure()
         except BaseException:
@@ -296,28 +233,6 @@ class ModbusDrive(Cia402Master):
 
     # ------------------------------------------------------------------ requests
 
-    def _send(self, request: ModbusPDU, what: str) -> ModbusPDU:
-        """One request with error translation; raises ModbusLinkLost/DriveTimeout/DriveProtocolError."""
-        if not self._link_up:
-            raise ModbusLinkLost(self.name, f"link is down ({what} not sent); call reconnect()")
-        self.stats.requests += 1
-        try:
-            response = self._execute(False, request)
-        except ConnectionException as exc:
-            self._drop_link()
-            raise ModbusLinkLost(self.name, f"connection lost while {what}: {exc}; call reconnect()") from exc
-        except ModbusIOException as exc:
-            self.stats.timeouts += 1
-            raise DriveTimeout(self.name, f"no answer within {self.timeout * 1e3:.3g} ms while {what} ({exc})") from exc
-        except (ModbusException, OSError) as exc:
-            self._drop_link()
-            raise DriveProtocolError(self.name, f"bad answer while {what}: {exc}") from exc
-        if response.function_code & 0x80:
-            self.stats.exceptions += 1
-            code = int(getattr(response, "exception_code", 0))
-            raise ModbusExceptionError(self.name, f"{what}: exception {exception_name(code)}", code)
-        return response
-
     def _checked_registers(self, response: ModbusPDU, count: int, what: str) -> list[int]:
         registers = response.registers
         if len(registers) != count:
@@ -329,7 +244,7 @@ class ModbusDrive(Cia402Master):
         self._require_link()
         self._cached = None
         what = f"reading {describe_range(address, count)}"
-        response = self._send(ReadHoldingRegistersRequest(address=address, count=count, dev_id=self.unit_id), what)
+        response = self.link.send(ReadHoldingRegistersRequest(address=address, count=count, dev_id=self.unit_id), what)
         return self._checked_registers(response, count, what)
 
     def write_registers(self, address: int, values: list[int]) -> None:
@@ -343,7 +258,7 @@ class ModbusDrive(Cia402Master):
         else:
             request = WriteMultipleRegistersRequest(address=address, registers=list(values), dev_id=self.unit_id)
             request.count = len(values)
-        self._send(request, what)
+        self.link.send(request, what)
 
     def _read_spec(self, spec: RegisterSpec) -> int | float:
         return decode_value(spec, self.read_registers(spec.address, spec.count), self.word_order)
@@ -360,7 +275,7 @@ class ModbusDrive(Cia402Master):
         self.write_registers(reg.address, encode_value(reg, value, self.word_order))
 
     def _require_link(self) -> None:
-        if self.client is None:
+        if self.link.client is None:
             raise DriveError(self.name, "not connected; call connect() first")
 
     def _require_connected(self) -> None:
@@ -372,13 +287,13 @@ class ModbusDrive(Cia402Master):
     def _send_safe_outputs(self) -> None:
         """One attempt to write zero torque with DISABLE VOLTAGE, if the link is up; never raises."""
         self._cached = None
-        if not self._link_up:
+        if not self.link.up:
             return
         requests = self._requests
         requests.outputs[0] = SAFE_CONTROLWORD
         requests.outputs[1] = 0
         try:
-            self._send(requests.write, f"writing the safe outputs to {requests.write_what}")
+            self.link.send(requests.write, f"writing the safe outputs to {requests.write_what}")
         except DriveError as exc:
             logger.error("%s: could not write zero torque: %s", self.name, exc)
 
@@ -386,7 +301,7 @@ class ModbusDrive(Cia402Master):
         """A cyclic request; any failure trips (a timeout also closes the link: a late answer
         could not be told from the next one)."""
         try:
-            return self._send(request, what)
+            return self.link.send(request, what)
         except ModbusLinkLost as exc:
             raise self._trip(exc) from exc.__cause__
         except DriveTimeout as exc:
@@ -424,7 +339,7 @@ class ModbusDrive(Cia402Master):
         return self._accept_inputs(CyclicInputs(statusword, velocity, position))
 
     def _send_outputs(self, controlword: int, target_torque: int) -> None:
-        if not self._link_up:
+        if not self.link.up:
             raise ModbusLinkLost(self.name, f"link is down after: {self._tripped}; call reconnect()")
         requests = self._requests
         requests.outputs[0] = controlword
@@ -460,11 +375,6 @@ class ModbusDrive(Cia402Master):
         self.write_object(TARGET_TORQUE, 0)
         super().disable()
 
-    @property
-    def link_up(self) -> bool:
-        """True while the link is open and trusted."""
-        return self._link_up
-
     # ------------------------------------------------------------------ shutdown
 
     def close(self) -> None:
@@ -472,7 +382,7 @@ class ModbusDrive(Cia402Master):
         if self._closed:
             return
         self._closed = True
-        if self._connected and self._link_up:
+        if self._connected and self.link.up:
             self._armed = False
             try:
                 self.write_registers(_TORQUE_REG.address, [0])
@@ -481,7 +391,7 @@ class ModbusDrive(Cia402Master):
                 logger.warning("%s: could not write the safe outputs on close: %s", self.name, exc)
         self._drop_link()
         self._connected = False
-        self.client = None
+        self.link.client = None
 
     def __repr__(self) -> str:
         return f"ModbusDrive({self.address!r}, unit_id={self.unit_id}, cycle={self.cycle!r}, word_order={self.word_order!r})"

@@ -27,7 +27,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptic_bus.analysis.closed_form import velocity_sampling_slack
 from haptic_bus.analysis.frequency import seed_t_zw, z_fund
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.poles import closed_loop_poles, is_stable
@@ -149,8 +148,3 @@ def exact_verdict(loop: WallLoop) -> Verdict:
 def seed_verdict(loop: WallLoop) -> Verdict:
     """The seed's frequency test ``Re T_zw >= 0`` alone (no stability test, as in the seed)."""
     return _verdict(loop, _scaled_seed_impedance, SEED, require_stability=False)
-
-
-def closed_form_verdict(loop: WallLoop) -> bool:
-    """Eq. (23) holds (velocity sampling, zero delay only: the seed's closed form)."""
-    return velocity_sampling_slack(loop) >= 0

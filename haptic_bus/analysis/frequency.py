@@ -142,9 +142,3 @@ def z_fund(loop: WallLoop, theta: ArrayLike) -> np.ndarray:
 
 def _fund_bracket(t: _LoopTerms) -> np.ndarray:
     return t.z_minus_a * t.e - t.wall * t.s * _alias_kernel(t.c, t.theta)
-
-
-def hold_over_period(theta: ArrayLike) -> np.ndarray:
-    """The zero-order hold's ``H(j omega)/T`` at ``theta = omega T`` (dimensionless)."""
-    th = _theta_array(theta)
-    return np.exp(-0.5j * th) * np.sinc(th / (2 * np.pi))

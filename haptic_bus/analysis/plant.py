@@ -107,13 +107,7 @@ class ExactPlant:
 
         The work ``force * displacement`` (J) done on the handle over the step is exact.
         """
-        return self._apply(self._co, force)
-
-    def advance_by(self, force: float, duration: float) -> float:
-        """Advance ``duration`` s (any length) with ``force`` (N) held; return the displacement (m)."""
-        return self._apply(zoh_coefficients(self.m, self.b, duration), force)
-
-    def _apply(self, co: ZohCoefficients, force: float) -> float:
+        co = self._co
         v0 = self.velocity
         displacement = co.p_v * v0 + co.p_f * force
         self.velocity = co.a * v0 + co.k1 * force
