@@ -57,6 +57,7 @@ class ObjectSpec:
     subindex: int = 0
 
 
+ABORT_CONNECTION_OPTION_CODE = ObjectSpec(0x6007, "Abort connection option code", DataType.INTEGER16, "rw")
 ERROR_CODE = ObjectSpec(0x603F, "Error code", DataType.UNSIGNED16, "ro")
 CONTROLWORD = ObjectSpec(0x6040, "Controlword", DataType.UNSIGNED16, "rw")
 STATUSWORD = ObjectSpec(0x6041, "Statusword", DataType.UNSIGNED16, "ro")
@@ -74,6 +75,7 @@ SUPPORTED_DRIVE_MODES = ObjectSpec(0x6502, "Supported drive modes", DataType.UNS
 OBJECTS: dict[int, ObjectSpec] = {
     spec.index: spec
     for spec in (
+        ABORT_CONNECTION_OPTION_CODE,
         ERROR_CODE,
         CONTROLWORD,
         STATUSWORD,
@@ -191,6 +193,16 @@ class Command(enum.Enum):
         return controlword & mask == value
 
 
+class AbortConnectionOption(enum.IntEnum):
+    """Values of 0x6007: what the drive does when the connection to its master aborts
+    (heartbeat or RPDO deadline lost, NMT out of OPERATIONAL while the power stage is on)."""
+
+    NO_ACTION = 0
+    FAULT = 1
+    DISABLE_VOLTAGE = 2
+    QUICK_STOP = 3
+
+
 CW_FAULT_RESET = 1 << 7
 CW_HALT = 1 << 8
 
@@ -227,28 +239,32 @@ TRANSITION_FAULT_REACTION_DONE = 14
 TRANSITION_FAULT_RESET = 15
 
 
-def next_state(
+def transitions(
     state: State, controlword: int, previous_controlword: int, *, quick_stop_option_code: int = 2
-) -> tuple[State, int | None]:
-    """Apply one controlword write to ``state``; return the new state and the transition number.
+) -> tuple[tuple[State, int], ...]:
+    """The transitions one controlword write takes from ``state``: ``(new state, number)`` in order.
 
     Fault reset (15) acts on the rising edge of bit 7 only.  Transition 16 (quick stop back
     to operation enabled) exists only for quick stop option codes 5..8, as the standard says.
-    A command that has no transition from ``state`` leaves it unchanged (number None).
+    ENABLE OPERATION in READY TO SWITCH ON takes transitions 3 and 4 (the standard's
+    "automatic" transition through SWITCHED ON).  A command that has no transition from
+    ``state`` takes none (an empty tuple).
     """
     if state is State.FAULT:
         rising = controlword & CW_FAULT_RESET and not previous_controlword & CW_FAULT_RESET
-        return (State.SWITCH_ON_DISABLED, TRANSITION_FAULT_RESET) if rising else (state, None)
+        return ((State.SWITCH_ON_DISABLED, TRANSITION_FAULT_RESET),) if rising else ()
     if controlword & CW_FAULT_RESET:
-        return state, None  # bit 7 high outside FAULT masks the other commands
+        return ()  # bit 7 high outside FAULT masks the other commands
+    if state is State.READY_TO_SWITCH_ON and Command.ENABLE_OPERATION.matches(controlword):
+        return (State.SWITCHED_ON, 3), (State.OPERATION_ENABLED, 4)
     for transition in TRANSITIONS:
         if transition.source is not state:
             continue
         if transition.number == 16 and not 5 <= quick_stop_option_code <= 8:
             continue
         if any(command.matches(controlword) for command in transition.commands):
-            return transition.target, transition.number
-    return state, None
+            return ((transition.target, transition.number),)
+    return ()
 
 
 def path_to_operation_enabled(state: State) -> tuple[Command, ...]:

@@ -4,11 +4,11 @@ Any bus front end (CANopen slave, Modbus server) writes the drive's objects with
 :meth:`SimulatedDrive.write_object`, reads them with :meth:`SimulatedDrive.read_object`, and
 calls :meth:`SimulatedDrive.sync` once per SYNC.  Nothing here touches a bus.
 
-Physics: the handle obeys ``m dv/dt + b v = w(t) + F`` with ``w`` the operator's force and
-``F`` the motor force at the handle.  ``F = torque_permille * rated_torque / 1000 *
-force_per_torque`` N, held over a whole SYNC interval; in the seed's convention the wall
-force is ``u = -F``.  Each SYNC advances the plant by exactly ``T`` (virtual time), in
-``substeps`` exact ZOH steps with the operator force re-evaluated at the start of each.
+Physics (:mod:`sim_drive.handle`): the handle obeys ``m dv/dt + b v = w(t) + F`` with ``w`` the
+operator's force and ``F`` the motor force at the handle, ``F = torque_permille *
+rated_torque / 1000 * force_per_torque`` N, held over a whole SYNC interval; in the seed's
+convention the wall force is ``u = -F``.  Each SYNC advances the plant by exactly ``T``
+(virtual time).  The sensor (:mod:`sim_drive.sensor`) quantises velocity and position then.
 
 Timing (see :class:`~sim_drive.parameters.Timing`): the first SYNC (number 0, t = 0) only
 samples.  At SYNC k >= 1 the plant first advances over [t_{k-1}, t_k) with the torque that
@@ -18,12 +18,15 @@ latched at SYNC k-1 (written during cycle k-2); ``IDEAL`` applies the target pre
 
 Torque is applied only in OPERATION ENABLED with mode CST (0x6061 = 10) and halt (controlword
 bit 8) clear; otherwise 0.  State changes take effect per interval: an interval closed by a
-SYNC at which the drive is not enabled carries no torque.  0x6071 saturates at +-0x6072.
+SYNC at which the drive is not enabled carries no torque.  0x6071 saturates at +-0x6072, and
+statusword bit 11 (internal limit active) shows it.  0x6060 accepts only 0 and the modes
+0x6502 announces.
 
 Quick stop (transition 11) removes the torque; with quick stop option code 0..4 the stop
 completes at the next SYNC (transition 12 to SWITCH ON DISABLED), with 5..8 the drive stays
 in QUICK STOP ACTIVE and transition 16 is allowed.  Faults pass FAULT REACTION ACTIVE at once
-(torque removal is the whole reaction) and land in FAULT.
+(torque removal is the whole reaction) and land in FAULT.  A lost connection
+(:meth:`SimulatedDrive.connection_lost`) with the power stage on does what 0x6007 says.
 """
 
 from __future__ import annotations
@@ -36,23 +39,26 @@ from drives.cia402 import (
     CW_HALT,
     OBJECTS,
     STATE_STATUS_BITS,
+    SW_INTERNAL_LIMIT_ACTIVE,
     SW_REMOTE,
     SW_VOLTAGE_ENABLED,
     TRANSITION_FAULT,
     TRANSITION_FAULT_REACTION_DONE,
+    AbortConnectionOption,
+    Command,
     OperationMode,
     State,
-    next_state,
     supports,
+    transitions,
 )
 from drives.errors import HapticBusError
-from haptic_bus.analysis.plant import ExactPlant
-from sim_drive.operator import NoOperator, OperatorModel
+from sim_drive.handle import Handle
+from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
+from sim_drive.sensor import Sensor, saturate
 
 logger = logging.getLogger(__name__)
 
-INT32_RANGE = (-(1 << 31), (1 << 31) - 1)
 SUPPORTED_DRIVE_MODES = 1 << OperationMode.CYCLIC_SYNCHRONOUS_TORQUE.supported_bit
 SW_OPERATION_MODE_SPECIFIC_12 = 1 << 12  # CST: "drive follows the command value"
 TRANSITION_QUICK_STOP_DONE = 12
@@ -63,8 +69,15 @@ _RANGES = {index: spec.data_type.range for index, spec in OBJECTS.items()}
 _VOLTAGE_STATES = frozenset(
     {State.READY_TO_SWITCH_ON, State.SWITCHED_ON, State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE}
 )
+POWER_STAGE_ON = frozenset({State.SWITCHED_ON, State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE})
+_REACTION_WORDS = {
+    AbortConnectionOption.DISABLE_VOLTAGE: Command.DISABLE_VOLTAGE.word,
+    AbortConnectionOption.QUICK_STOP: Command.QUICK_STOP.word,
+}
 
 StateListener = Callable[[State, State, "int | None"], None]
+
+__all__ = ["ObjectAccessError", "SimulatedDrive", "saturate"]
 
 
 class ObjectAccessError(HapticBusError):
@@ -80,16 +93,12 @@ class ObjectAccessError(HapticBusError):
         super().__init__(f"object 0x{index:04X}: {reason}" + (f" ({detail})" if detail else ""))
 
 
-def saturate(value: int, low: int, high: int) -> int:
-    """``value`` clipped to ``[low, high]`` (saturate, never wrap)."""
-    return low if value < low else high if value > high else value
-
-
 class SimulatedDrive:
     """A CiA-402 cyclic-synchronous-torque drive whose hardware is the exact ``m``/``b`` handle.
 
-    ``parameters``: plant and scaling (:class:`DeviceParameters`); ``timing``: when a written
-    torque acts; ``operator``: the hand on the handle; ``name`` prefixes log lines.
+    ``parameters``: plant and scaling (:class:`DeviceParameters`, also the power-on values a
+    reset restores); ``timing``: when a written torque acts; ``operator``: the hand on the
+    handle; ``name`` prefixes log lines.
     """
 
     def __init__(
@@ -102,8 +111,10 @@ class SimulatedDrive:
     ) -> None:
         self.name = name
         self.timing = timing
-        self.operator: OperatorModel = operator if operator is not None else NoOperator()
         self.parameters = parameters if parameters is not None else DeviceParameters()
+        self.power_on_parameters = self.parameters
+        self.handle = Handle(self.parameters, operator)
+        self.sensor = Sensor(self.parameters)
         self.state = State.SWITCH_ON_DISABLED
         self.state_listeners: list[StateListener] = []
         self.controlword = 0
@@ -111,25 +122,21 @@ class SimulatedDrive:
         self.mode_display = 0
         self.target_torque = 0
         self.quick_stop_option_code = 2
+        self.abort_connection_option_code = int(AbortConnectionOption.FAULT)
         self.error_code = 0
         self.sync_count = 0
-        self.time = 0.0
-        self.velocity_counts = 0
-        self.position_counts = 0
-        self.operator_energy = 0.0
-        self.wall_energy = 0.0
         self._latched = 0
-        self._plant = ExactPlant(self.parameters.m, self.parameters.b, 1.0)  # at rest; step set next
-        self._apply_parameters()
+        self._newton_per_permille = self.parameters.rated_torque_mnm / 1e6 * self.parameters.force_per_torque
         self._readers: dict[int, Callable[[], int]] = {
+            0x6007: lambda: self.abort_connection_option_code,
             0x603F: lambda: self.error_code,
             0x6040: lambda: self.controlword,
             0x6041: lambda: self.statusword,
             0x605A: lambda: self.quick_stop_option_code,
             0x6060: lambda: self.mode,
             0x6061: lambda: self.mode_display,
-            0x6064: lambda: self.position_counts,
-            0x606C: lambda: self.velocity_counts,
+            0x6064: lambda: self.sensor.position_counts,
+            0x606C: lambda: self.sensor.velocity_counts,
             0x6071: lambda: self.target_torque,
             0x6072: lambda: self.parameters.max_torque_permille,
             0x6076: lambda: self.parameters.rated_torque_mnm,
@@ -137,6 +144,7 @@ class SimulatedDrive:
             0x6502: lambda: SUPPORTED_DRIVE_MODES,
         }
         self._writers: dict[int, Callable[[int], None]] = {
+            0x6007: self._write_abort_connection_option_code,
             0x6040: self.write_controlword,
             0x605A: self._write_quick_stop_option_code,
             0x6060: self._write_mode,
@@ -156,33 +164,61 @@ class SimulatedDrive:
         self._ideal = Timing(timing) is Timing.IDEAL
 
     @property
+    def operator(self) -> OperatorModel:
+        """The hand on the handle."""
+        return self.handle.operator
+
+    def set_operator(self, operator: OperatorModel) -> None:
+        """Replace the operator model from the next plant sub-step on."""
+        self.handle.operator = operator
+
+    @property
     def velocity(self) -> float:
         """The handle's true velocity in m/s (not quantised)."""
-        return self._plant.velocity
+        return self.handle.velocity
 
     @property
     def position(self) -> float:
         """The handle's true position in m (not quantised)."""
-        return self._plant.position
+        return self.handle.position
 
-    def set_operator(self, operator: OperatorModel) -> None:
-        """Replace the operator model from the next plant sub-step on."""
-        self.operator = operator
+    @property
+    def time(self) -> float:
+        """Virtual time in s since the first SYNC."""
+        return self.handle.time
+
+    @property
+    def operator_energy(self) -> float:
+        """Work the operator has done on the handle, J (exact)."""
+        return self.handle.operator_energy
+
+    @property
+    def wall_energy(self) -> float:
+        """Work the motor has taken out of the handle, J (exact)."""
+        return self.handle.wall_energy
+
+    @property
+    def velocity_counts(self) -> int:
+        """0x606C as sampled at the last SYNC."""
+        return self.sensor.velocity_counts
+
+    @property
+    def position_counts(self) -> int:
+        """0x6064 as sampled at the last SYNC."""
+        return self.sensor.position_counts
 
     def reconfigure(self, **changes: object) -> None:
         """Change :class:`DeviceParameters` fields (validated first; nothing half-applied).
 
         The handle keeps its velocity and position; a new ``period`` acts from the next SYNC.
         """
-        self.parameters = dataclasses.replace(self.parameters, **changes)
-        self._apply_parameters()
+        self._configure(dataclasses.replace(self.parameters, **changes))  # type: ignore[arg-type]
 
-    def _apply_parameters(self) -> None:
-        p = self.parameters
-        self._plant = ExactPlant(p.m, p.b, p.period / p.substeps, self._plant.velocity, self._plant.position)
-        self._newton_per_permille = p.rated_torque_mnm / 1e6 * p.force_per_torque
-        self._inv_velocity_per_count = 1.0 / p.velocity_per_count
-        self._inv_position_per_count = 1.0 / p.position_per_count
+    def _configure(self, parameters: DeviceParameters) -> None:
+        self.parameters = parameters
+        self.handle.configure(parameters)
+        self.sensor.configure(parameters)
+        self._newton_per_permille = parameters.rated_torque_mnm / 1e6 * parameters.force_per_torque
 
     # ----------------------------------------------------------------- objects
     def read_object(self, index: int) -> int:
@@ -206,6 +242,8 @@ class SimulatedDrive:
             raise ObjectAccessError(index, "range", f"{value} not in [{low}, {high}]")
         try:
             writer(value)
+        except ObjectAccessError:
+            raise
         except HapticBusError as exc:
             raise ObjectAccessError(index, "range", str(exc)) from exc
 
@@ -219,12 +257,15 @@ class SimulatedDrive:
 
     @property
     def statusword(self) -> int:
-        """0x6041: the state bits, voltage enabled, remote, and bit 12 while following in CST."""
+        """0x6041: the state bits, voltage enabled, remote, bit 11 while the torque is clamped
+        at 0x6072, and bit 12 while following in CST."""
         word = STATE_STATUS_BITS[self.state] | SW_REMOTE
         if self.state in _VOLTAGE_STATES:
             word |= SW_VOLTAGE_ENABLED
         if self._torque_enabled():
             word |= SW_OPERATION_MODE_SPECIFIC_12
+            if abs(self.target_torque) > self.parameters.max_torque_permille:
+                word |= SW_INTERNAL_LIMIT_ACTIVE
         return word
 
     @property
@@ -236,19 +277,20 @@ class SimulatedDrive:
 
     def write_controlword(self, word: int) -> None:
         """0x6040: run the state machine on ``word`` (fault reset on the rising edge of bit 7)."""
-        new, number = next_state(self.state, word, self.controlword, quick_stop_option_code=self.quick_stop_option_code)
+        steps = transitions(self.state, word, self.controlword, quick_stop_option_code=self.quick_stop_option_code)
         self.controlword = word
-        if number is not None:
+        for new, number in steps:
             self._enter(new, number)
 
     def _write_mode(self, mode: int) -> None:
-        self.mode = mode
-        try:
-            known = OperationMode(mode)
-        except ValueError:
-            return
-        if supports(SUPPORTED_DRIVE_MODES, known):
-            self.mode_display = mode
+        if mode != 0:
+            try:
+                known = OperationMode(mode)
+            except ValueError:
+                raise ObjectAccessError(0x6060, "range", f"{mode} is no CiA-402 mode") from None
+            if not supports(SUPPORTED_DRIVE_MODES, known):
+                raise ObjectAccessError(0x6060, "range", f"{known.name} ({mode}) not in 0x6502")
+        self.mode = self.mode_display = mode
 
     def _write_target_torque(self, permille: int) -> None:
         self.target_torque = permille
@@ -258,6 +300,11 @@ class SimulatedDrive:
             raise ObjectAccessError(0x605A, "range", f"{code} not in [0, 8]")
         self.quick_stop_option_code = code
 
+    def _write_abort_connection_option_code(self, code: int) -> None:
+        if code not in {int(option) for option in AbortConnectionOption}:
+            raise ObjectAccessError(0x6007, "range", f"{code} not in [0, 3]")
+        self.abort_connection_option_code = code
+
     # ----------------------------------------------------------------- state machine
     def reset_application(self) -> None:
         """NMT reset node: the drive's power-on values (the handle itself keeps moving)."""
@@ -265,15 +312,32 @@ class SimulatedDrive:
             self._enter(State.SWITCH_ON_DISABLED, None)
         self.controlword = self.mode = self.mode_display = self.target_torque = 0
         self.quick_stop_option_code = 2
+        self.abort_connection_option_code = int(AbortConnectionOption.FAULT)
         self.error_code = 0
         self._latched = 0
+        self._configure(self.power_on_parameters)
 
     def fault(self, code: int) -> None:
         """A fault with CiA error ``code`` (0x603F): transitions 13 and 14, torque off at once."""
-        self.error_code = code
         if self.state is not State.FAULT:
+            self.error_code = code
             self._enter(State.FAULT_REACTION_ACTIVE, TRANSITION_FAULT)
             self._enter(State.FAULT, TRANSITION_FAULT_REACTION_DONE)
+
+    def connection_lost(self, code: int) -> bool:
+        """The master is gone (heartbeat, RPDO deadline, NMT): 0x6007's reaction if the power
+        stage is on; True if the drive faulted with ``code``, False if it did anything else."""
+        if self.state not in POWER_STAGE_ON:
+            return False
+        option = self.abort_connection_option_code
+        logger.warning("%s: connection lost (0x%04X) in %s, 0x6007 = %d", self.name, code, self.state.value, option)
+        if option == AbortConnectionOption.FAULT:
+            self.fault(code)
+            return True
+        word = _REACTION_WORDS.get(AbortConnectionOption(option))
+        if word is not None:
+            self.write_controlword(word)
+        return False
 
     def _enter(self, new: State, number: int | None) -> None:
         old = self.state
@@ -303,25 +367,10 @@ class SimulatedDrive:
                 permille = self._effective_target()
             else:
                 permille = self._latched if self._torque_enabled() else 0
-            self._advance(permille * self._newton_per_permille)
+            self.handle.advance(permille * self._newton_per_permille)
         if self.state is _QUICK_STOP_ACTIVE and not 5 <= self.quick_stop_option_code <= 8:
             self._enter(State.SWITCH_ON_DISABLED, TRANSITION_QUICK_STOP_DONE)
         if not self._ideal:
             self._latched = self._effective_target()
-        plant = self._plant
-        low, high = INT32_RANGE
-        self.velocity_counts = saturate(round(plant.velocity * self._inv_velocity_per_count), low, high)
-        self.position_counts = saturate(round(plant.position * self._inv_position_per_count), low, high)
+        self.sensor.sample(self.handle)
         self.sync_count += 1
-
-    def _advance(self, motor_force: float) -> None:
-        plant = self._plant
-        operator = self.operator
-        step = plant.step
-        t0 = self.time
-        for j in range(self.parameters.substeps):
-            w = operator.force(t0 + j * step, plant.position, plant.velocity)
-            dx = plant.advance(w + motor_force)
-            self.operator_energy += w * dx
-            self.wall_energy -= motor_force * dx
-        self.time = t0 + self.parameters.period

@@ -266,20 +266,46 @@ def test_short_tpdo(sim: CanopenSimDrive, master: can.BusABC) -> None:
     assert [len(sync_and_read(master).data) for _ in range(2)] == [5, 6]
 
 
+def next_error_emcy(master: can.BusABC) -> can.Message | None:
+    """The next EMCY that is not an error reset (0x0000), within the usual wait."""
+    deadline = time.monotonic() + WAIT
+    while (message := recv_id(master, EMCY, timeout=max(deadline - time.monotonic(), 0.0))) is not None:
+        if emcy_code(message):
+            return message
+    return None
+
+
 def test_late_and_short_rpdos(sim: CanopenSimDrive, master: can.BusABC) -> None:
     nmt_start(master)
     enable_cst(master)
+    assert sdo_write(master, 0x1400, 2, 1, 1)[0] == 0x60  # RPDO1 synchronous: the window applies to it
     assert sdo_write(master, 0x1007, 0, 500, 4)[0] == 0x60  # 500 us window
     sync_and_read(master)
     time.sleep(0.005)  # the RPDO leaves 5 ms after the SYNC: outside the window
     send(master, RPDO1, struct.pack("<Hh", 0x0F, 300))
-    message = recv_id(master, EMCY)
+    message = next_error_emcy(master)
     assert message is not None and emcy_code(message) == 0x8250 and message.data[2] & 0x10
+    reset = recv_id(master, EMCY)  # a one-off communication error: the error reset follows
+    assert reset is not None and emcy_code(reset) == 0 and reset.data[2] == 0
+    sync_and_read(master)
     assert sim.counters.late_rpdos == 1 and sim.drive.target_torque == 0  # discarded
     sync_and_read(master)
     send(master, RPDO1, b"\x0f\x00\x2c")  # 3 of 4 bytes, in time
-    message = recv_id(master, EMCY)
-    assert emcy_code(message) == 0x8210 and sim.counters.rpdo_length_errors == 1
+    message = next_error_emcy(master)
+    assert message is not None and emcy_code(message) == 0x8210 and sim.counters.rpdo_length_errors == 1
+
+
+def test_the_sync_window_leaves_asynchronous_rpdos_alone(sim: CanopenSimDrive, master: can.BusABC) -> None:
+    nmt_start(master)
+    enable_cst(master)
+    assert sdo_write(master, 0x1007, 0, 500, 4)[0] == 0x60  # RPDO1 keeps its default type 255
+    sync_and_read(master)
+    time.sleep(0.005)
+    send(master, RPDO1, struct.pack("<Hh", 0x0F, 300))
+    deadline = time.monotonic() + WAIT
+    while sim.drive.target_torque != 300 and time.monotonic() < deadline:
+        time.sleep(0.001)
+    assert sim.drive.target_torque == 300 and sim.counters.late_rpdos == 0
 
 
 def test_heartbeat_consumer_loss_faults_the_drive(sim: CanopenSimDrive, master: can.BusABC) -> None:

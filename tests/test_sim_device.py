@@ -97,8 +97,11 @@ def test_quick_stop(option: int, final: State) -> None:
 )
 def test_torque_is_zero_unless_operation_enabled_and_cst(setup: str) -> None:
     drive = SimulatedDrive()
-    if setup != "mode 0 (no mode)":
-        drive.write_object(0x6060, 9 if setup == "unsupported mode 9" else 10)
+    if setup == "unsupported mode 9":
+        with pytest.raises(ObjectAccessError, match="range"):
+            drive.write_object(0x6060, 9)  # refused (abort 0x06090030 on the bus): the mode stays 0
+    elif setup != "mode 0 (no mode)":
+        drive.write_object(0x6060, 10)
     walk(drive, Command.SHUTDOWN, Command.SWITCH_ON)
     if setup != "SWITCHED ON":
         drive.write_controlword(Command.ENABLE_OPERATION.word | (0x100 if setup == "halt bit" else 0))
@@ -109,15 +112,17 @@ def test_torque_is_zero_unless_operation_enabled_and_cst(setup: str) -> None:
     assert not drive.statusword & 1 << 12
 
 
-def test_mode_display_follows_only_supported_modes() -> None:
+@pytest.mark.parametrize("mode", [1, 8, 9, -3, 5])
+def test_unsupported_modes_are_refused_and_change_nothing(mode: int) -> None:
+    """CiA 402: 0x6060 takes the modes 0x6502 announces (and 0); anything else is a range error."""
     drive = SimulatedDrive()
     assert drive.read_object(0x6502) == 1 << 9
-    drive.write_object(0x6060, 9)
-    assert (drive.read_object(0x6060), drive.read_object(0x6061)) == (9, 0)
     drive.write_object(0x6060, 10)
-    assert drive.read_object(0x6061) == 10
-    drive.write_object(0x6060, -3)  # manufacturer mode: not supported, display unchanged
-    assert drive.read_object(0x6061) == 10
+    with pytest.raises(ObjectAccessError, match="range"):
+        drive.write_object(0x6060, mode)
+    assert (drive.read_object(0x6060), drive.read_object(0x6061)) == (10, 10)
+    drive.write_object(0x6060, 0)
+    assert (drive.read_object(0x6060), drive.read_object(0x6061)) == (0, 0)
 
 
 @pytest.mark.parametrize("timing", list(Timing))
@@ -244,3 +249,69 @@ def test_saturate_never_wraps():
     assert saturate(40000, -3000, 3000) == 3000
     assert saturate(-40000, -3000, 3000) == -3000
     assert saturate(12, -3000, 3000) == 12
+
+
+def test_enable_operation_in_ready_to_switch_on_takes_transitions_3_and_4() -> None:
+    drive = SimulatedDrive()
+    seen: list[tuple[State, State, int | None]] = []
+    drive.state_listeners.append(lambda old, new, number: seen.append((old, new, number)))
+    drive.write_object(0x6060, 10)
+    walk(drive, Command.SHUTDOWN, Command.ENABLE_OPERATION)  # 0x0006, then 0x000F
+    assert drive.state is State.OPERATION_ENABLED
+    assert seen == [(State.SWITCH_ON_DISABLED, State.READY_TO_SWITCH_ON, 2),
+                    (State.READY_TO_SWITCH_ON, State.SWITCHED_ON, 3),
+                    (State.SWITCHED_ON, State.OPERATION_ENABLED, 4)]
+
+
+def test_statusword_bit_11_shows_the_torque_clamped_at_0x6072() -> None:
+    drive = enabled()
+    drive.write_object(0x6071, 3000)  # exactly the limit: not clamped
+    assert not drive.statusword & 1 << 11
+    drive.write_object(0x6071, -3001)
+    assert drive.statusword & 1 << 11
+    drive.sync()
+    assert drive.torque_actual == -3000
+    drive.write_object(0x6071, 12)
+    assert not drive.statusword & 1 << 11
+
+
+@pytest.mark.parametrize(("option", "state", "faulted"), [
+    (0, State.OPERATION_ENABLED, False),
+    (1, State.FAULT, True),
+    (2, State.SWITCH_ON_DISABLED, False),
+    (3, State.QUICK_STOP_ACTIVE, False),
+])
+def test_abort_connection_option_code_decides_the_reaction(option: int, state: State, faulted: bool) -> None:
+    drive = enabled()
+    drive.write_object(0x6007, option)
+    drive.write_object(0x6071, 500)
+    drive.sync()
+    assert drive.connection_lost(0x8130) is faulted
+    assert drive.state is state
+    assert drive.read_object(0x603F) == (0x8130 if faulted else 0)
+    assert drive.torque_actual == (500 if option == 0 else 0)  # the same cycle: no torque after the reaction
+
+
+def test_connection_lost_does_nothing_without_the_power_stage() -> None:
+    drive = SimulatedDrive()
+    assert drive.connection_lost(0x8130) is False and drive.state is State.SWITCH_ON_DISABLED
+
+
+@pytest.mark.parametrize("value", [-1, 4, 100])
+def test_abort_connection_option_code_range(value: int) -> None:
+    drive = SimulatedDrive()
+    with pytest.raises(ObjectAccessError, match="range"):
+        drive.write_object(0x6007, value)
+    assert drive.read_object(0x6007) == 1  # the default: fault
+
+
+def test_reset_application_restores_every_power_on_value() -> None:
+    drive = enabled()
+    drive.write_object(0x6072, 1200)
+    drive.write_object(0x6076, 450)
+    drive.write_object(0x6007, 3)
+    drive.reconfigure(velocity_per_count=2e-6, m=0.7)
+    drive.reset_application()
+    assert (drive.read_object(0x6072), drive.read_object(0x6076), drive.read_object(0x6007)) == (3000, 200, 1)
+    assert drive.parameters == DeviceParameters()
+    assert drive.state is State.SWITCH_ON_DISABLED and drive.read_object(0x6060) == 0

@@ -17,11 +17,10 @@ A rejected value aborts the SDO transfer with 0x06090030 (value range exceeded).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from canopen import SdoAbortedError
 
 from drives.errors import HapticBusError
+from sim_drive.canopen.pdo_engine import SlaveCounters
 from sim_drive.device import SimulatedDrive
 from sim_drive.operator import MAX_OD_PARAMETERS, operator_code, operator_from_code
 from sim_drive.parameters import Timing
@@ -37,14 +36,6 @@ _PARAMETER_FIELDS = {
     (SCALING, 3): "force_per_torque",
 }
 _TIMING_CODES = {Timing.CIA402: 0, Timing.IDEAL: 1}
-
-
-@dataclass
-class SlaveCounters:
-    """Communication errors the slave counted: late RPDOs, RPDOs of the wrong length."""
-
-    late_rpdos: int = 0
-    rpdo_length_errors: int = 0
 
 
 class ManufacturerObjects:

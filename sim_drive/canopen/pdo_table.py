@@ -9,8 +9,11 @@ hot path is one ``pack``/``unpack`` call.
 
 Rules enforced (CiA 301 7.5.2.35-7.5.2.38):
 
-- the COB-ID (sub 1) of a valid PDO may only change its valid bit (31); 29-bit ids are refused;
+- the COB-ID (sub 1) of a valid PDO may only change its valid bit (31); 29-bit ids and the
+  restricted CAN-IDs of CiA 301 table 3 (NMT, SDO, heartbeat, reserved) are refused;
 - transmission type (sub 2): TPDO 0..240, 254, 255; RPDO 0..240, 254, 255 (no RTR-only types);
+- inhibit time (sub 3, 100 us) and event timer (sub 5, ms; for an RPDO the receive deadline)
+  are kept per PDO;
 - mapping entries (sub 1..8) are writable only while the PDO is invalid and sub 0 is 0;
 - sub 0 may be set only while the PDO is invalid; the entries it enables must name
   PDO-mappable objects of the right direction with their full bit length, 64 bits at most.
@@ -28,9 +31,8 @@ from dataclasses import dataclass, field
 from canopen import ObjectDictionary, SdoAbortedError
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 
-PDO_NOT_VALID = 1 << 31
-FRAME_29_BIT = 1 << 29
-COB_ID_MASK = 0x7FF
+from drives.cia301 import COB_ID_29_BIT, COB_ID_INVALID, COB_ID_MASK, is_restricted_cob_id
+
 MAX_ENTRIES = 8
 MAX_BITS = 64
 ABORT_RANGE = 0x06090030
@@ -53,6 +55,8 @@ class PdoChannel:
     transmit: bool
     cob_word: int
     trans_type: int
+    inhibit_time: int = 0  # 100 us
+    event_timer: int = 0  # ms; an RPDO's receive deadline
     entries: list[int] = field(default_factory=lambda: [0] * MAX_ENTRIES)
     count: int = 0
     indices: tuple[int, ...] = ()
@@ -61,7 +65,7 @@ class PdoChannel:
     @property
     def valid(self) -> bool:
         """True when the PDO exists (COB-ID bit 31 clear) and maps at least one object."""
-        return not self.cob_word & PDO_NOT_VALID and self.count > 0
+        return not self.cob_word & COB_ID_INVALID and self.count > 0
 
     @property
     def cob_id(self) -> int:
@@ -105,7 +109,8 @@ class PdoTable:
     def _channel_from_od(self, number: int, transmit: bool) -> PdoChannel:
         com = self._od[(TX_COM if transmit else RX_COM) + number - 1]
         mapping = self._od[(TX_MAP if transmit else RX_MAP) + number - 1]
-        channel = PdoChannel(number, transmit, int(com[1].default), int(com[2].default))
+        channel = PdoChannel(number, transmit, int(com[1].default), int(com[2].default),
+                             *(int(com[sub].default) if sub in com else 0 for sub in (3, 5)))
         channel.entries = [int(mapping[k].default) for k in range(1, MAX_ENTRIES + 1)]
         channel.count = int(mapping[0].default)
         self._compile(channel)
@@ -127,21 +132,25 @@ class PdoTable:
 
     def _write_com(self, channel: PdoChannel, subindex: int, value: int) -> None:
         if subindex == 1:
-            if value & FRAME_29_BIT or not value & COB_ID_MASK:
+            if value & COB_ID_29_BIT or is_restricted_cob_id(value & COB_ID_MASK):
                 raise SdoAbortedError(ABORT_RANGE)
-            exists = not channel.cob_word & PDO_NOT_VALID
-            if exists and not value & PDO_NOT_VALID and value & COB_ID_MASK != channel.cob_id:
+            exists = not channel.cob_word & COB_ID_INVALID
+            if exists and not value & COB_ID_INVALID and value & COB_ID_MASK != channel.cob_id:
                 raise SdoAbortedError(ABORT_RANGE)
-            if not value & PDO_NOT_VALID:
+            if not value & COB_ID_INVALID:
                 self._check_mapping(channel, channel.count)
             channel.cob_word = value
         elif subindex == 2:
             if value not in VALID_TRANS_TYPES:
                 raise SdoAbortedError(ABORT_RANGE)
             channel.trans_type = value
+        elif subindex == 3:
+            channel.inhibit_time = value
+        elif subindex == 5:
+            channel.event_timer = value
 
     def _write_map(self, channel: PdoChannel, subindex: int, value: int) -> None:
-        if not channel.cob_word & PDO_NOT_VALID:
+        if not channel.cob_word & COB_ID_INVALID:
             raise SdoAbortedError(ABORT_ACCESS)
         if subindex == 0:
             if value > MAX_ENTRIES:

@@ -1,86 +1,111 @@
 """The simulated drive as a real CANopen slave on a python-can bus.
 
 :class:`CanopenSimDrive` wraps a :class:`~sim_drive.device.SimulatedDrive` in canopen's
-``LocalNode`` (object dictionary from the shipped EDS, SDO server, NMT slave, EMCY producer)
-and adds what ``LocalNode`` lacks: PDOs that follow SDO remapping (:mod:`sim_drive.canopen.pdo_table`),
-SYNC handling with precompiled ``struct`` codecs, an NMT reset that boots again, a heartbeat
-consumer, and fault injection.
+``LocalNode`` (object dictionary from the shipped EDS, SDO server, EMCY producer) and adds
+what ``LocalNode`` lacks: PDOs that follow SDO remapping (:mod:`~sim_drive.canopen.pdo_table`,
+:mod:`~sim_drive.canopen.pdo_engine`), SYNC handling, NMT that boots again after a reset, the
+heartbeat producer, consumer and RPDO deadlines (:mod:`~sim_drive.canopen.timers`), EMCY and
+the error register (:mod:`~sim_drive.canopen.emergency`), and fault injection.
 
-One receive thread owns the bus: it blocks in ``bus.recv`` and handles SYNC and RPDOs
-directly (the hot path), everything else through canopen's dispatcher.  Behaviour:
+One receive thread owns the bus and every timer: it blocks in ``bus.recv`` until the next
+frame or due time, handles SYNC and RPDOs directly (the hot path) and everything else
+through canopen's dispatcher.  No frame can stop it: a frame that cannot be used is counted
+and dropped, a receive error is counted, and if the bus keeps failing the node stops its
+heartbeat and faults the drive, so it never says it is alive while it cannot serve.
 
-- NMT: boot-up message then PRE-OPERATIONAL on :meth:`start`; heartbeat every 0x1017 ms;
-  SDO in PRE-OPERATIONAL and OPERATIONAL; PDOs only in OPERATIONAL; nothing but NMT in
-  STOPPED; reset node / reset communication restore the EDS values and boot again.
-- SYNC (COB-ID 0x1005) in PRE-OPERATIONAL and OPERATIONAL: apply buffered synchronous RPDOs,
-  one :meth:`SimulatedDrive.sync` (the plant advances exactly ``T``), then TPDOs by
-  transmission type: 1..240 every n-th SYNC, 0 on a SYNC when the data changed, 254/255
-  whenever the data changed (checked after every SYNC, RPDO and SDO write).
-- RPDOs with type 0..240 are applied at the next SYNC, 254/255 on reception.  With a sync
-  window 0x1007 > 0, an RPDO arriving later than the window after the last SYNC (message
-  timestamps) is discarded, counted and answered with EMCY 0x8250 (CiA 301 "RPDO timeout":
-  it missed its cycle).  A short RPDO is discarded with EMCY 0x8210, a long one is used and
-  reported with EMCY 0x8220.
-- Heartbeat consumer (0x1016 sub 1): once the watched node's first heartbeat arrived, a gap
-  longer than the consumer time raises EMCY 0x8130 and a drive FAULT (error code 0x8130).
-- Not implemented: TPDO inhibit time, event timer and SYNC start value (the EDS does not
-  offer them), RTR, SYNC counter checks, LSS, 0x1010/0x1011 store/restore.
+- NMT: boot-up message then PRE-OPERATIONAL on :meth:`start`; the boot-up counts as the first
+  heartbeat, then one every 0x1017 ms; SDO in PRE-OPERATIONAL and OPERATIONAL; PDOs only in
+  OPERATIONAL; nothing but NMT (and the heartbeat) in STOPPED, no EMCY either; reset node
+  restores the drive's power-on values and the manufacturer area, reset communication the
+  EDS values of 0x1000..0x1FFF, and both boot again.
+- SYNC (COB-ID 0x1005, 0 data bytes) in PRE-OPERATIONAL and OPERATIONAL: one drive SYNC (the
+  plant advances exactly ``T``); a SYNC of another length is not used (EMCY 0x8240).
+- Abort connection (0x6007 applied by the drive, CiA 402): the master's heartbeat lost
+  (0x1016, EMCY 0x8130), an RPDO deadline missed (0x1400+n sub 5, EMCY 0x8250), or NMT taking
+  the node out of OPERATIONAL while the power stage is on (0x8100).
+- Not implemented: TPDO inhibit time and event timer, SYNC start value, RTR, SYNC counter,
+  LSS, 0x1010/0x1011 store/restore.
 """
 
 from __future__ import annotations
 
 import logging
-import struct
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 import can
 import canopen
 from canopen import LocalNode, SdoAbortedError
-from canopen.objectdictionary import import_od
+from canopen.objectdictionary import ObjectDictionary, import_od
 
-from drives.cia402 import State
-from drives.errors import HapticBusError
-from haptic_bus.validation import whole_in_range
+from drives.canopen.local_node import refuse_subindex_on_variables
+from drives.cia301 import (
+    ERROR_REGISTER,
+    HEARTBEAT_BASE,
+    NMT_COB_ID,
+    EmcyCode,
+    NmtCommand,
+    NmtState,
+    SdoAbort,
+)
 from sim_drive.bus_timing import BusLoadMeter
-from sim_drive.device import ObjectAccessError, SimulatedDrive
+from sim_drive.canopen.communication import CommunicationObjects
+from sim_drive.canopen.emergency import Emergency
+from sim_drive.canopen.manufacturer import ManufacturerObjects
+from sim_drive.canopen.pdo_engine import PdoEngine, SlaveCounters
+from sim_drive.canopen.pdo_table import PdoChannel, PdoTable
+from sim_drive.canopen.timers import NodeTimers, Watchdog
+from haptic_bus.validation import whole_in_range
+from sim_drive.device import POWER_STAGE_ON, ObjectAccessError, SimulatedDrive
 from sim_drive.eds import eds_path
-from sim_drive.canopen.manufacturer import ManufacturerObjects, SlaveCounters
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
-from sim_drive.canopen.pdo_table import COB_ID_MASK, FRAME_29_BIT, PDO_NOT_VALID, PdoChannel, PdoTable
 
 logger = logging.getLogger(__name__)
 
-EMCY_HEARTBEAT = 0x8130
-EMCY_RPDO_LENGTH = 0x8210
-EMCY_RPDO_TOO_LONG = 0x8220
-EMCY_RPDO_LATE = 0x8250
 FAULT_GENERIC = 0x1000
-ERROR_REGISTER_GENERIC = 0x01
-ERROR_REGISTER_COMMUNICATION = 0x10
-SYNC_GENERATOR_BIT = 1 << 30
-NMT_RESET_NODE, NMT_RESET_COMMUNICATION = 0x81, 0x82
 RECV_TIMEOUT = 0.05  # s: longest the receive thread blocks before looking at its stop flag
-_ABORTS = {"unknown": 0x06020000, "read-only": 0x06010002, "range": 0x06090030}
-_EMCY = struct.Struct("<HB5s")
+MAX_RECEIVE_ERRORS_IN_ROW = 100  # a bus that fails this often in a row is gone
+SDO_FRAME_LENGTH = 8
+_ABORTS = {"unknown": SdoAbort.NO_OBJECT, "read-only": SdoAbort.READ_ONLY, "range": SdoAbort.VALUE_RANGE}
+_NMT_STATES = {
+    NmtCommand.START: NmtState.OPERATIONAL,
+    NmtCommand.STOP: NmtState.STOPPED,
+    NmtCommand.ENTER_PRE_OPERATIONAL: NmtState.PRE_OPERATIONAL,
+}
+_SERVING = (NmtState.PRE_OPERATIONAL, NmtState.OPERATIONAL)
+
+
+class _NoPeriodicTask:
+    """What canopen's NmtSlave gets for its periodic heartbeat: nothing (the slave produces its own)."""
+
+    def stop(self) -> None:
+        """Nothing runs."""
+
+    def update(self, data: object) -> None:
+        """Nothing runs."""
 
 
 class _SlaveNetwork(canopen.Network):
-    """canopen's Network whose sends honour the slave's silence and feed its bus meter."""
+    """canopen's Network adapted to the slave: sends honour its silence and feed its bus meter,
+    and canopen's own periodic heartbeat task is never started (the receive thread sends it)."""
 
-    def __init__(self, bus: can.BusABC, slave: "CanopenSimDrive") -> None:
+    def __init__(self, bus: can.BusABC, slave: CanopenSimDrive) -> None:
         super().__init__(bus)
         self._slave = slave
 
-    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
+    def send_message(self, can_id: int, data: bytes | bytearray | list[int], remote: bool = False) -> None:
         """Send unless the slave is silent."""
         if self._slave.silent:
             return
         self._slave._meter_frame(len(data))
         super().send_message(can_id, data, remote)
+
+    def send_periodic(self, can_id: int, data: Any, period: float, remote: bool = False) -> Any:
+        """canopen's NmtSlave asks for a periodic heartbeat on a 0x1017 write: the slave's own thread does it."""
+        return _NoPeriodicTask()
 
 
 class CanopenSimDrive:
@@ -90,6 +115,7 @@ class CanopenSimDrive:
     ``can.Bus`` (``{"interface": "virtual", "channel": "x"}``; opened by :meth:`start`, shut
     down by :meth:`stop`).  ``timing``, ``parameters``, ``operator``: see
     :class:`~sim_drive.device.SimulatedDrive`.  ``bus_meter``: optional bit-time accounting.
+    ``dictionary``: the object dictionary (default: the shipped EDS).
     """
 
     def __init__(
@@ -101,6 +127,7 @@ class CanopenSimDrive:
         parameters: DeviceParameters | None = None,
         operator: OperatorModel | None = None,
         bus_meter: BusLoadMeter | None = None,
+        dictionary: ObjectDictionary | None = None,
     ) -> None:
         self.node_id = whole_in_range("node_id", node_id, 1, 127, context="CANopen slave")
         self._bus: can.BusABC | None = bus if isinstance(bus, can.BusABC) else None
@@ -109,58 +136,56 @@ class CanopenSimDrive:
         self.counters = SlaveCounters()
         self.bus_meter = bus_meter
         self.silent = False
-        self._power_on_period = self.drive.parameters.period
+        self.nmt = NmtState.BOOT_UP
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._network: _SlaveNetwork | None = None
-        self._od = import_od(str(eds_path()), self.node_id)
-        self._node = LocalNode(self.node_id, self._od)
+        od = dictionary if dictionary is not None else import_od(str(eds_path()), self.node_id)
+        self._node = LocalNode(self.node_id, od)
+        refuse_subindex_on_variables(self._node)
         self._node.add_read_callback(self._on_sdo_read)
         self._node.add_write_callback(self._on_sdo_write)
+        self.timers = NodeTimers()
+        self.emergency = Emergency(self._node.emcy, self.drive, self._may_send_emcy)
+        self._comm = CommunicationObjects(od, self.drive, self.timers, self.emergency)
         self._manufacturer = ManufacturerObjects(self.drive, self.counters)
-        self._pdos = PdoTable(self._od, self.drive.readable_objects(), self.drive.writable_objects(), self._on_pdo_change)
-        self._nmt_state = "INITIALISING"
-        self._short_next: dict[int, int] = {}
-        self._pending_sync_rpdos: list[tuple[PdoChannel, bytes]] = []
-        self._sync_timestamp: float | None = None
+        self._pdos = PdoTable(od, self.drive.readable_objects(), self.drive.writable_objects(), self._on_pdo_change)
+        self._engine = PdoEngine(self._pdos, self.drive, self._send, self.emergency, self.counters)
         self._reset_communication()
 
     # ----------------------------------------------------------------- lifecycle
-    def start(self) -> "CanopenSimDrive":
+    def start(self) -> CanopenSimDrive:
         """Open the bus (if given as a config), boot (boot-up message, PRE-OPERATIONAL), serve."""
         if self._thread is not None:
             raise RuntimeError(f"node {self.node_id}: already started")
         if self._bus is None:
-            self._bus = can.Bus(**self._bus_config)
+            self._bus = can.Bus(**(self._bus_config or {}))
         self._network = _SlaveNetwork(self._bus, self)
         self._network.add_node(self._node)
-        self._network.unsubscribe(0, self._node.nmt.on_command)
-        self._network.subscribe(0, self._on_nmt)
+        self._network.unsubscribe(NMT_COB_ID, self._node.nmt.on_command)
         self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name=f"sim-drive-{self.node_id}", daemon=True)
-        self._thread.start()
         with self._lock:
             self._boot()
+        self._thread = threading.Thread(target=self._run, name=f"sim-drive-{self.node_id}", daemon=True)
+        self._thread.start()
         return self
 
     def stop(self) -> None:
-        """Stop serving, stop the heartbeat, release the bus if this object opened it."""
+        """Stop serving (and so the heartbeat), release the bus if this object opened it."""
         if self._thread is None:
             return
         self._stop.set()
         self._thread.join(timeout=5 * RECV_TIMEOUT + 1.0)
         self._thread = None
-        self._node.nmt.stop_heartbeat()
-        self._network.unsubscribe(0, self._on_nmt)
-        self._network.subscribe(0, self._node.nmt.on_command)
+        self._network.subscribe(NMT_COB_ID, self._node.nmt.on_command)  # type: ignore[union-attr]
         self._node.remove_network()
         if self._bus_config is not None and self._bus is not None:
             self._bus.shutdown()
             self._bus = None
         self._network = None
 
-    def __enter__(self) -> "CanopenSimDrive":
+    def __enter__(self) -> CanopenSimDrive:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -169,14 +194,18 @@ class CanopenSimDrive:
     @property
     def nmt_state(self) -> str:
         """The NMT state: INITIALISING, PRE-OPERATIONAL, OPERATIONAL or STOPPED."""
-        return self._nmt_state
+        return "INITIALISING" if self.nmt is NmtState.BOOT_UP else self.nmt.label
+
+    @property
+    def serving(self) -> bool:
+        """True while the receive thread runs."""
+        return self._thread is not None and self._thread.is_alive()
 
     # ----------------------------------------------------------------- fault injection
     def go_silent(self) -> None:
         """Disconnect: send nothing (no heartbeat either) and ignore every frame until :meth:`resume`."""
         with self._lock:
             self.silent = True
-            self._node.nmt.stop_heartbeat()
 
     def resume(self) -> None:
         """Undo :meth:`go_silent` (and :meth:`stop_heartbeat`)."""
@@ -186,18 +215,18 @@ class CanopenSimDrive:
 
     def stop_heartbeat(self) -> None:
         """Heartbeat loss only: everything else keeps working."""
-        self._node.nmt.stop_heartbeat()
-
-    def send_emcy(self, code: int, register: int | None = None, data: bytes = b"") -> None:
-        """Send one EMCY with ``code``; ``register`` defaults to the current 0x1001."""
         with self._lock:
-            self._emcy(code, self._error_register() if register is None else register, data)
+            self.timers.stop_producer()
+
+    def send_emcy(self, code: int, data: bytes = b"") -> None:
+        """Send one EMCY with ``code`` and the current 0x1001."""
+        with self._lock:
+            self.emergency.send(code, data)
 
     def enter_fault(self, code: int = FAULT_GENERIC) -> None:
         """Drive fault with error ``code``: FAULT state, EMCY, event TPDOs."""
         with self._lock:
             self.drive.fault(code)
-            self._emcy(code, self._error_register())
             self._send_event_tpdos()
 
     def short_next_tpdo(self, number: int = 1, missing_bytes: int = 1) -> None:
@@ -205,83 +234,80 @@ class CanopenSimDrive:
         number = whole_in_range("number", number, 1, 4, context="short TPDO")
         missing = whole_in_range("missing_bytes", missing_bytes, 1, 8, context="short TPDO")
         with self._lock:
-            self._short_next[number] = missing
+            self._engine.short_next(number, missing)
 
     # ----------------------------------------------------------------- NMT and boot
     def _boot(self) -> None:
-        nmt = self._node.nmt
-        nmt.send_command(NMT_RESET_NODE)  # sends the boot-up message
-        nmt.send_command(0x80)  # PRE-OPERATIONAL; starts the heartbeat from 0x1017
-        self._nmt_state = nmt.state
-        logger.info("node %d: boot-up, %s", self.node_id, self._nmt_state)
+        """Boot-up message (the first heartbeat), then PRE-OPERATIONAL."""
+        self.nmt = NmtState.BOOT_UP
+        self._send(HEARTBEAT_BASE + self.node_id, b"\x00")
+        self.nmt = NmtState.PRE_OPERATIONAL
+        self._start_heartbeat()
+        logger.info("node %d: boot-up, %s", self.node_id, self.nmt_state)
 
     def _start_heartbeat(self) -> None:
-        self._node.nmt.start_heartbeat(self._node.sdo[0x1017].raw)
+        self.timers.start_producer(self._node.sdo[0x1017].raw / 1000.0, time.monotonic())
 
-    def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        if len(data) < 2 or data[1] not in (0, self.node_id):
+    def _on_nmt(self, data: bytearray) -> None:
+        if len(data) != 2:
+            self.counters.malformed_frames += 1
             return
-        if data[0] in (NMT_RESET_NODE, NMT_RESET_COMMUNICATION):
-            if data[0] == NMT_RESET_NODE:
+        command, node = data[0], data[1]
+        if node not in (0, self.node_id):
+            return
+        if command in (NmtCommand.RESET_NODE, NmtCommand.RESET_COMMUNICATION):
+            self._abort_connection()
+            if command == NmtCommand.RESET_NODE:
                 self.drive.reset_application()
+                self._node.data_store.clear()  # the manufacturer area too
             self._reset_communication()
             self._boot()
             return
-        old = self._nmt_state
-        self._node.nmt.on_command(can_id, data, timestamp)
-        self._nmt_state = self._node.nmt.state
-        if self._nmt_state != old:
-            logger.info("node %d: NMT %s -> %s", self.node_id, old, self._nmt_state)
-        if self._nmt_state == "OPERATIONAL" and old != "OPERATIONAL":
-            self._last_tpdo.clear()
+        new = _NMT_STATES.get(command)  # type: ignore[call-overload]
+        if new is None or new is self.nmt:
+            return
+        if self.nmt is NmtState.OPERATIONAL:
+            self.timers.stop_rpdo_monitoring()
+            self._abort_connection()  # while still OPERATIONAL: its EMCY may go out
+        old, self.nmt = self.nmt, new
+        logger.info("node %d: NMT %s -> %s", self.node_id, old.label, new.label)
+        if new is NmtState.OPERATIONAL:
+            self._engine.forget_sent()
             self._send_event_tpdos()
 
     def _reset_communication(self) -> None:
         self._node.data_store = {i: subs for i, subs in self._node.data_store.items() if i >= 0x2000}
         self._pdos.reset()
         self._on_pdo_change(None)
-        od = self._od
-        self._sync_cob = od[0x1005].default & COB_ID_MASK
-        self._sync_window_us = od[0x1007].default
-        self._node.emcy.cob_id = od[0x1014].default & COB_ID_MASK
-        self._emcy_enabled = True
-        self._consumer_node: int | None = None
-        self._consumer_period = 0.0
-        self._consumer_deadline: float | None = None
-        self.drive.reconfigure(period=self._power_on_period)
+        self._comm.reset()
+        self.emergency.active.clear()
+        self.drive.reconfigure(period=self.drive.power_on_parameters.period)
+
+    def _abort_connection(self) -> None:
+        """NMT takes the node out of OPERATIONAL (or resets it) with the power stage on: 0x6007's
+        reaction, and its EMCY 0x8100 (through the fault, or as a one-off event)."""
+        if self.drive.state in POWER_STAGE_ON and not self.drive.connection_lost(EmcyCode.COMMUNICATION):
+            self.emergency.communication_event(EmcyCode.COMMUNICATION)
 
     # ----------------------------------------------------------------- PDO plans
     def _on_pdo_change(self, channel: PdoChannel | None) -> None:
-        drive = self.drive
-        self._rx_by_cob = {ch.cob_id: ch for ch in self._pdos.rx if ch.valid}
-        self._tx_plan = [(ch, tuple(drive.reader(i) for i in ch.indices)) for ch in self._pdos.tx if ch.valid]
-        self._tx_sync_counts = {ch.number: 0 for ch, _ in self._tx_plan}
-        self._last_tpdo: dict[int, bytes] = {}
-        self._own_ids = {ch.cob_id for ch in self._pdos.tx} | {0x580 + self.node_id, 0x700 + self.node_id}
-
-    def _encode(self, channel: PdoChannel, readers: tuple[Callable[[], int], ...]) -> bytes:
-        return channel.codec.pack(*[read() for read in readers])
-
-    def _send_tpdo(self, channel: PdoChannel, data: bytes) -> None:
-        self._last_tpdo[channel.number] = data
-        missing = self._short_next.pop(channel.number, 0)
-        self._send(channel.cob_id, data[: max(len(data) - missing, 0)] if missing else data)
+        self._engine.rebuild()
+        for rpdo in self._pdos.rx:
+            self.timers.configure_rpdo(rpdo.number, rpdo.event_timer / 1000.0 if rpdo.valid else 0.0)
 
     def _send_event_tpdos(self) -> None:
-        if self._nmt_state != "OPERATIONAL":
-            return
-        for channel, readers in self._tx_plan:
-            if channel.trans_type >= 254:
-                data = self._encode(channel, readers)
-                if self._last_tpdo.get(channel.number) != data:
-                    self._send_tpdo(channel, data)
+        if self.nmt is NmtState.OPERATIONAL:
+            self._engine.send_event_tpdos()
+
+    def _may_send_emcy(self) -> bool:
+        return self.nmt in _SERVING and not self.silent
 
     def _send(self, cob_id: int, data: bytes) -> None:
-        if self.silent:
+        if self.silent or self._network is None:
             return
         message = can.Message(arbitration_id=cob_id, data=data, is_extended_id=False)
         with self._network.send_lock:
-            self._bus.send(message)
+            self._bus.send(message)  # type: ignore[union-attr]
         self._meter_frame(len(data))
 
     def _meter_frame(self, data_bytes: int) -> None:
@@ -290,115 +316,98 @@ class CanopenSimDrive:
 
     # ----------------------------------------------------------------- receive thread
     def _run(self) -> None:
+        """Frames and timers until :meth:`stop`; if the bus is gone, stop saying alive and fault."""
         bus = self._bus
-        while not self._stop.is_set():
-            timeout = RECV_TIMEOUT
-            deadline = self._consumer_deadline
-            if deadline is not None:
-                timeout = min(timeout, max(deadline - time.monotonic(), 0.0))
-            try:
-                message = bus.recv(timeout)
-            except can.CanError as exc:
-                logger.error("node %d: bus receive failed, slave stops: %s", self.node_id, exc)
-                return
+        errors_in_row = 0
+        try:
+            while not self._stop.is_set():
+                due = self.timers.next_due()
+                timeout = RECV_TIMEOUT if due is None else min(RECV_TIMEOUT, max(due - time.monotonic(), 0.0))
+                try:
+                    message = bus.recv(timeout)  # type: ignore[union-attr]
+                    errors_in_row = 0
+                except Exception as exc:  # any interface's receive failure
+                    self.counters.receive_errors += 1
+                    errors_in_row += 1
+                    logger.warning("node %d: bus receive failed (%d in a row): %r", self.node_id, errors_in_row, exc)
+                    if errors_in_row >= MAX_RECEIVE_ERRORS_IN_ROW:
+                        raise
+                    continue
+                with self._lock:
+                    self._tick(time.monotonic())
+                    if message is None or self.silent or message.is_error_frame or message.is_remote_frame:
+                        continue
+                    if not message.is_extended_id:
+                        self._guarded_dispatch(message)
+        except Exception as exc:
+            logger.error("node %d: cannot serve any more, heartbeat stopped and drive faulted: %r", self.node_id, exc)
             with self._lock:
-                if self._consumer_deadline is not None and time.monotonic() > self._consumer_deadline:
-                    self._heartbeat_lost()
-                if message is None or self.silent or message.is_error_frame or message.is_remote_frame:
-                    continue
-                if message.is_extended_id:
-                    continue
-                self._dispatch(message)
+                self.timers.stop_producer()
+                self.drive.fault(EmcyCode.COMMUNICATION)
+
+    def _tick(self, now: float) -> None:
+        """Heartbeat out if due; the consumer and the RPDO deadlines."""
+        if self.timers.heartbeat_due(now):
+            self._send(HEARTBEAT_BASE + self.node_id, bytes([self.nmt]))
+        for expiry in self.timers.expired(now):
+            if expiry.watchdog is Watchdog.HEARTBEAT:
+                logger.warning("node %d: heartbeat of node %s lost", self.node_id, self.timers.consumer_node)
+                self._watchdog(EmcyCode.HEARTBEAT)
+            elif self.nmt is NmtState.OPERATIONAL:
+                logger.warning("node %d: RPDO%d missed its deadline", self.node_id, expiry.rpdo)
+                self._watchdog(EmcyCode.RPDO_TIMEOUT)
+
+    def _watchdog(self, code: int) -> None:
+        self.emergency.communication_error(code, announce=False)
+        if not self.drive.connection_lost(code):
+            self.emergency.send(code)
+        self._send_event_tpdos()
+
+    def _guarded_dispatch(self, message: can.Message) -> None:
+        try:
+            self._dispatch(message)
+        except Exception as exc:  # a frame canopen's handlers cannot take: drop it, keep serving
+            self.counters.malformed_frames += 1
+            logger.debug("node %d: frame 0x%03X %s dropped: %r", self.node_id, message.arbitration_id,
+                         bytes(message.data).hex(), exc)
 
     def _dispatch(self, message: can.Message) -> None:
         cob_id = message.arbitration_id
-        if cob_id == self._sync_cob:
+        nmt = self.nmt
+        if cob_id == NMT_COB_ID:
+            self._on_nmt(message.data)
+            return
+        if cob_id == self._comm.sync_cob:
             if self.bus_meter is not None:
                 self.bus_meter.sync(min(len(message.data), 8))
-            if self._nmt_state in ("PRE-OPERATIONAL", "OPERATIONAL"):
-                self._on_sync(message)
+            if nmt in _SERVING:
+                if message.data:
+                    self.counters.malformed_frames += 1
+                    self.emergency.communication_event(EmcyCode.SYNC_LENGTH)
+                else:
+                    self._engine.on_sync(message.timestamp, nmt is NmtState.OPERATIONAL)
             return
-        if self.bus_meter is not None and cob_id not in self._own_ids and cob_id != self._node.emcy.cob_id:
+        engine = self._engine
+        if self.bus_meter is not None and cob_id not in engine.tx_cobs and cob_id != self._node.emcy.cob_id:
             self.bus_meter.frame(len(message.data))
-        channel = self._rx_by_cob.get(cob_id)
+        channel = engine.rx_by_cob.get(cob_id)
         if channel is not None:
-            if self._nmt_state == "OPERATIONAL":
-                self._on_rpdo(channel, message)
+            if nmt is NmtState.OPERATIONAL and engine.on_rpdo(channel, message, self._comm.sync_window_us):
+                self.timers.rpdo_seen(channel.number, time.monotonic())
+                if EmcyCode.RPDO_TIMEOUT in self.emergency.active:
+                    self.emergency.communication_recovered(EmcyCode.RPDO_TIMEOUT)
             return
-        if self._consumer_node is not None and cob_id == 0x700 + self._consumer_node:
-            self._consumer_deadline = time.monotonic() + self._consumer_period
+        if HEARTBEAT_BASE < cob_id <= HEARTBEAT_BASE + 127:
+            if self.timers.heartbeat_seen(cob_id - HEARTBEAT_BASE, time.monotonic()):
+                self.emergency.communication_recovered(EmcyCode.HEARTBEAT)
             return
-        if cob_id != 0 and self._nmt_state == "STOPPED":
+        if nmt not in _SERVING:
+            return  # STOPPED: nothing but NMT
+        if cob_id == self._node.sdo.rx_cobid and len(message.data) != SDO_FRAME_LENGTH:
+            self.counters.malformed_frames += 1  # CiA 301: every SDO frame carries 8 bytes
             return
-        self._network.notify(cob_id, message.data, message.timestamp)
+        self._network.notify(cob_id, message.data, message.timestamp)  # type: ignore[union-attr]
         self._send_event_tpdos()
-
-    def _on_sync(self, message: can.Message) -> None:
-        self._sync_timestamp = message.timestamp
-        for channel, data in self._pending_sync_rpdos:
-            self._apply_rpdo(channel, data)
-        self._pending_sync_rpdos.clear()
-        self.drive.sync()
-        if self._nmt_state != "OPERATIONAL":
-            return
-        counts = self._tx_sync_counts
-        for channel, readers in self._tx_plan:
-            trans_type = channel.trans_type
-            if trans_type >= 254:
-                continue
-            if trans_type == 0:
-                data = self._encode(channel, readers)
-                if self._last_tpdo.get(channel.number) != data:
-                    self._send_tpdo(channel, data)
-                continue
-            count = counts[channel.number]
-            counts[channel.number] = count + 1
-            if count % trans_type == 0:
-                self._send_tpdo(channel, self._encode(channel, readers))
-        self._send_event_tpdos()
-
-    def _on_rpdo(self, channel: PdoChannel, message: can.Message) -> None:
-        window = self._sync_window_us
-        if window and self._sync_timestamp is not None and (message.timestamp - self._sync_timestamp) * 1e6 > window:
-            self.counters.late_rpdos += 1
-            self._emcy(EMCY_RPDO_LATE, self._error_register() | ERROR_REGISTER_COMMUNICATION)
-            return
-        data = bytes(message.data)
-        size = channel.codec.size
-        if len(data) < size:
-            self.counters.rpdo_length_errors += 1
-            self._emcy(EMCY_RPDO_LENGTH, self._error_register() | ERROR_REGISTER_COMMUNICATION)
-            return
-        if len(data) > size:
-            self._emcy(EMCY_RPDO_TOO_LONG, self._error_register() | ERROR_REGISTER_COMMUNICATION)
-            data = data[:size]
-        if channel.synchronous:
-            self._pending_sync_rpdos.append((channel, data))
-        else:
-            self._apply_rpdo(channel, data)
-            self._send_event_tpdos()
-
-    def _apply_rpdo(self, channel: PdoChannel, data: bytes) -> None:
-        for index, value in zip(channel.indices, channel.codec.unpack(data)):
-            try:
-                self.drive.write_object(index, value)
-            except ObjectAccessError as exc:
-                logger.warning("node %d: RPDO%d value refused: %s", self.node_id, channel.number, exc)
-
-    def _heartbeat_lost(self) -> None:
-        self._consumer_deadline = None
-        logger.warning("node %d: heartbeat of node %s lost", self.node_id, self._consumer_node)
-        self.drive.fault(EMCY_HEARTBEAT)
-        self._emcy(EMCY_HEARTBEAT, self._error_register() | ERROR_REGISTER_COMMUNICATION)
-        self._send_event_tpdos()
-
-    # ----------------------------------------------------------------- EMCY
-    def _error_register(self) -> int:
-        return ERROR_REGISTER_GENERIC if self.drive.state is State.FAULT else 0
-
-    def _emcy(self, code: int, register: int, data: bytes = b"") -> None:
-        if self._emcy_enabled and self._network is not None:
-            self._network.send_message(self._node.emcy.cob_id, _EMCY.pack(code, register, data))
 
     # ----------------------------------------------------------------- SDO bridge
     def _on_sdo_read(self, index: int, subindex: int, od: Any) -> int | float | None:
@@ -406,10 +415,8 @@ class CanopenSimDrive:
             return self.drive.read_object(index)
         if subindex and self._manufacturer.owns(index):
             return self._manufacturer.read(index, subindex)
-        if index == 0x1001:
-            return self._error_register()
-        if index == 0x1006:
-            return self.drive.parameters.cycle_period_us
+        if index == ERROR_REGISTER:
+            return self.emergency.register
         return None
 
     def _on_sdo_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
@@ -423,27 +430,5 @@ class CanopenSimDrive:
             self._manufacturer.write(index, subindex, value)
         elif self._pdos.owns(index):
             self._pdos.write(index, subindex, value)
-        else:
-            self._write_communication(index, subindex, value)
-
-    def _write_communication(self, index: int, subindex: int, value: int) -> None:
-        if index == 0x1005:
-            if value & (SYNC_GENERATOR_BIT | FRAME_29_BIT):
-                raise SdoAbortedError(_ABORTS["range"])
-            self._sync_cob = value & COB_ID_MASK
-        elif index == 0x1006 and value:
-            try:
-                self.drive.reconfigure(period=value * 1e-6)
-            except HapticBusError as exc:
-                raise SdoAbortedError(_ABORTS["range"]) from exc
-        elif index == 0x1007:
-            self._sync_window_us = value
-        elif index == 0x1014:
-            self._emcy_enabled = not value & PDO_NOT_VALID
-            self._node.emcy.cob_id = value & COB_ID_MASK
-        elif index == 0x1016 and subindex == 1:
-            node, period_ms = value >> 16 & 0x7F, value & 0xFFFF
-            active = node and period_ms
-            self._consumer_node = node if active else None
-            self._consumer_period = period_ms / 1000.0
-            self._consumer_deadline = None
+        elif self._comm.owns(index):
+            self._comm.write(index, subindex, value)
