@@ -1,37 +1,58 @@
-"""``haptic-bus sim``: run the simulated drive as a CANopen slave until SIGINT/SIGTERM.
+"""``haptic-bus sim``: run the simulated drive as a CANopen slave or a Modbus TCP server until SIGINT/SIGTERM.
 
-    haptic-bus sim --interface I --channel C --node-id N [--bitrate R] [--timing cia402|ideal]
-                   [--profile P] [--bus-option KEY=VALUE ...] [--realtime]
+    haptic-bus sim --interface I --channel C --node-id N [--bitrate R] [--bus-option KEY=VALUE ...]
+                   [--timing cia402|ideal] [--profile P] [--realtime]
+    haptic-bus sim --modbus tcp://HOST:PORT [--unit-id N] [--word-order big|little]
+                   [--timing cia402|ideal] [--profile P] [--realtime]
     haptic-bus sim --eds-path
+    python -m sim_drive ...   (the same)
 
-Logs one line per CiA-402 state change (and NMT change) through ``logging``; each line
-carries the drive's virtual time.  ``--realtime`` paces nothing (the SYNC producer sets the
-pace) but prefixes every line with the wall-clock time it was seen.  With ``--bitrate`` the
-run ends with the bus load and worst cycle latency of the worst-case bit-time model.
-Exit status: 0 after a clean stop, 2 for bad arguments or parameters, 1 if the bus fails.
+One parser: ``--modbus`` selects the Modbus server (:mod:`sim_drive.modbus`), otherwise the
+CANopen slave runs; the options of the other server are refused.  Logs one line per CiA-402
+state change through ``logging``, each with the drive's virtual time.  ``--realtime`` paces
+nothing (the SYNC producer, or the Modbus client, sets the pace) but prefixes every line with
+the wall-clock time it was seen.  With ``--bitrate`` the CANopen run ends with the bus load and
+worst cycle latency of the worst-case bit-time model.
+Exit status: 0 after a clean stop (or help), 2 for bad arguments or parameters (one line on
+stderr), 1 if the bus or the socket fails.
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
 import logging
 import signal
 import socket
 import sys
+import time
 from collections.abc import Sequence
-from typing import Any
-
-import can
+from typing import Any, NoReturn
 
 from drives.bus_config import parse_bus_option
 from drives.errors import ParameterError
-from sim_drive.bus_timing import BusLoadMeter
-from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.eds import eds_path
+from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import load_profile
 
 logger = logging.getLogger("sim_drive")
+
+_PROG = "haptic-bus sim"
+_CANOPEN_ONLY = ("eds_path", "interface", "channel", "node_id", "bitrate", "bus_option")
+_MODBUS_ONLY = ("unit_id", "word_order")
+_HELP = frozenset({"-h", "--help"})
+
+
+class _UsageError(Exception):
+    """A command line the parser refuses; the message is one line."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors raise :class:`_UsageError` (one line) instead of printing usage."""
+
+    def error(self, message: str) -> NoReturn:
+        raise _UsageError(message)
 
 
 class _StopSignals:
@@ -46,7 +67,7 @@ class _StopSignals:
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-    def __enter__(self) -> "_StopSignals":
+    def __enter__(self) -> _StopSignals:
         self.received: list[signal.Signals] = []
         self._reader, self._writer = socket.socketpair()
         self._writer.setblocking(False)
@@ -72,66 +93,112 @@ class _StopSignals:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``haptic-bus sim``."""
-    parser = argparse.ArgumentParser(prog="haptic-bus sim", description="Simulated CiA-402 drive on a CAN bus.")
-    parser.add_argument("--eds-path", action="store_true", help="print the path of the shipped EDS and exit")
-    parser.add_argument("--interface", help="python-can interface (virtual, udp_multicast, socketcan, ...)")
-    parser.add_argument("--channel", help="python-can channel (e.g. vcan0, a multicast group)")
-    parser.add_argument("--node-id", type=int, help="CANopen node id 1..127")
-    parser.add_argument("--bitrate", type=int, help="bit/s; also enables the bus-load report")
-    parser.add_argument("--timing", choices=[t.value for t in Timing],
-                        help="cia402 (default) or ideal; default: the profile's [loop] timing")
-    parser.add_argument("--profile", help="operator profile (name or TOML path): [device], [loop], [operator_model]")
-    parser.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
-                        help="extra python-can bus argument, e.g. port=43113 (repeatable)")
-    parser.add_argument("--realtime", action="store_true", help="timestamp log lines with the wall clock")
+    """The argument parser of ``haptic-bus sim`` (CANopen slave, or Modbus server with ``--modbus``)."""
+    parser = _Parser(prog=_PROG, description="Simulated CiA-402 drive: a CANopen slave, or a Modbus TCP server with --modbus.")
+    both = parser.add_argument_group("either server")
+    both.add_argument("--timing", choices=[t.value for t in Timing],
+                      help="cia402 (default) or ideal; default: the profile's [loop] timing")
+    both.add_argument("--profile", help="operator profile (name or TOML path): [device], [loop], [operator_model]")
+    both.add_argument("--realtime", action="store_true", help="timestamp log lines with the wall clock")
+    canopen = parser.add_argument_group("CANopen slave (the default)")
+    canopen.add_argument("--interface", help="python-can interface (virtual, udp_multicast, socketcan, ...)")
+    canopen.add_argument("--channel", help="python-can channel (e.g. vcan0, a multicast group)")
+    canopen.add_argument("--node-id", type=int, help="CANopen node id 1..127")
+    canopen.add_argument("--bitrate", type=int, help="bit/s; also enables the bus-load report")
+    canopen.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
+                         help="extra python-can bus argument, e.g. port=43113 (repeatable)")
+    canopen.add_argument("--eds-path", action="store_true", help="print the path of the shipped EDS and exit")
+    modbus = parser.add_argument_group("Modbus TCP server")
+    modbus.add_argument("--modbus", metavar="tcp://HOST:PORT", help="serve Modbus TCP on this address (PORT 0: any free port)")
+    modbus.add_argument("--unit-id", type=int, help="Modbus unit id 0..255 (default 1)")
+    modbus.add_argument("--word-order", choices=["big", "little"], help="32-bit word order (default big: high word first)")
     return parser
+
+
+def _flags(args: argparse.Namespace, parser: argparse.ArgumentParser, dests: Sequence[str]) -> str:
+    """The options among ``dests`` given on the command line, as ``--flag, --flag``."""
+    return ", ".join("--" + d.replace("_", "-") for d in dests if getattr(args, d) != parser.get_default(d))
+
+
+def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
+    """The arguments, or :class:`_UsageError` if they are malformed or mix the two servers' options."""
+    args = parser.parse_args(argv)
+    if args.modbus is not None and (given := _flags(args, parser, _CANOPEN_ONLY)):
+        raise _UsageError(f"CANopen options cannot be combined with --modbus: {given}")
+    if args.modbus is None and (given := _flags(args, parser, _MODBUS_ONLY)):
+        raise _UsageError(f"Modbus options need --modbus: {given}")
+    return args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``haptic-bus sim``; return the exit status."""
     args_list = list(sys.argv[1:] if argv is None else argv)
-    if any(a == "--modbus" or a.startswith("--modbus=") for a in args_list):  # the Modbus TCP server
-        from sim_drive.modbus_server import main as modbus_main
-
-        return modbus_main(args_list)
     parser = build_parser()
+    if _HELP.intersection(args_list):  # help wins wherever it stands, even after a bare --modbus
+        parser.print_help()
+        return 0
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # --help (0) or a usage error (2): report, do not exit
+        args = _parse(parser, args_list)
+    except _UsageError as exc:
+        print(f"{_PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    except SystemExit as exc:  # argparse's help through an abbreviation (--he): report, do not exit
         return int(exc.code or 0)
+    if args.modbus is not None:
+        return _run_modbus(args)
+    return _run_canopen(args)
+
+
+def _configure_logging(realtime: bool, library: str, level: int) -> None:
+    """Log lines on stderr (wall-clock stamped with ``realtime``); the bus ``library`` only from ``level``."""
+    fmt = "%(asctime)s %(message)s" if realtime else "%(message)s"
+    logging.basicConfig(level=logging.INFO, format=fmt, stream=sys.stderr, force=True)
+    logging.getLogger(library).setLevel(level)
+
+
+def _drive_setup(args: argparse.Namespace) -> tuple[DeviceParameters, OperatorModel | None, str]:
+    """Device parameters, operator model and timing from ``--profile``/``--timing``; ParameterError if invalid."""
+    profile = load_profile(args.profile) if args.profile else None
+    parameters = profile.parameters if profile else DeviceParameters()
+    operator = profile.operator if profile else None
+    timing = args.timing or (profile.timing.value if profile and profile.timing else Timing.CIA402.value)
+    return parameters, operator, timing
+
+
+def _run_canopen(args: argparse.Namespace) -> int:
+    """The CANopen slave until SIGINT/SIGTERM."""
+    import can  # the bus libraries of one server only: the other's are not imported
+
+    from sim_drive.bus_timing import BusLoadMeter
+    from sim_drive.canopen.slave import CanopenSimDrive
+
     if args.eds_path:
         print(eds_path())
         return 0
     missing = [name for name in ("interface", "channel", "node_id") if getattr(args, name) is None]
     if missing:
-        parser.print_usage(sys.stderr)
-        print(f"haptic-bus sim: error: missing --{', --'.join(m.replace('_', '-') for m in missing)}", file=sys.stderr)
+        print(f"{_PROG}: error: missing --{', --'.join(m.replace('_', '-') for m in missing)}", file=sys.stderr)
         return 2
-    fmt = "%(asctime)s %(message)s" if args.realtime else "%(message)s"
-    logging.basicConfig(level=logging.INFO, format=fmt, stream=sys.stderr, force=True)
-    logging.getLogger("canopen").setLevel(logging.WARNING)
+    _configure_logging(args.realtime, "canopen", logging.WARNING)
     try:
-        profile = load_profile(args.profile) if args.profile else None
-        parameters = profile.parameters if profile else DeviceParameters()
-        operator = profile.operator if profile else None
-        args.timing = args.timing or (profile.timing.value if profile and profile.timing else Timing.CIA402.value)
+        parameters, operator, timing = _drive_setup(args)
         meter = BusLoadMeter(args.bitrate, parameters.period) if args.bitrate else None
         config: dict[str, Any] = {"interface": args.interface, "channel": args.channel, **dict(args.bus_option)}
         if args.bitrate:
             config["bitrate"] = args.bitrate
-        sim = CanopenSimDrive(config, args.node_id, timing=args.timing, parameters=parameters, operator=operator, bus_meter=meter)
+        sim = CanopenSimDrive(config, args.node_id, timing=timing, parameters=parameters, operator=operator, bus_meter=meter)
     except ParameterError as exc:
-        print(f"haptic-bus sim: error: {exc}", file=sys.stderr)
+        print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
     with _StopSignals() as stop_signals:  # from before the boot-up: an early signal still stops cleanly
         try:
             sim.start()
         except (can.CanError, OSError, ValueError) as exc:
-            print(f"haptic-bus sim: error: cannot open the bus: {exc}", file=sys.stderr)
+            print(f"{_PROG}: error: cannot open the bus: {exc}", file=sys.stderr)
             return 1
         try:
-            logger.info("node %d: serving on %s %s (timing %s); EDS %s", args.node_id, args.interface, args.channel, args.timing, eds_path())
+            logger.info("node %d: serving on %s %s (timing %s); EDS %s",
+                        args.node_id, args.interface, args.channel, timing, eds_path())
             received = stop_signals.wait()
             logger.info("node %d: %s received, stopping", args.node_id, received.name)
         finally:
@@ -140,5 +207,44 @@ def main(argv: Sequence[str] | None = None) -> int:
     logger.info("node %d: stopped after %d SYNCs, virtual time %.6f s, operator energy %.6g J, wall energy %.6g J",
                 args.node_id, drive.sync_count, drive.time, drive.operator_energy, drive.wall_energy)
     if meter is not None and meter.cycle_bit_counts:
-        logger.info("node %d: bus load %.1f %% at %d bit/s, worst cycle %.1f us", args.node_id, 100 * meter.load(), args.bitrate, 1e6 * meter.worst_latency())
+        logger.info("node %d: bus load %.1f %% at %d bit/s, worst cycle %.1f us",
+                    args.node_id, 100 * meter.load(), args.bitrate, 1e6 * meter.worst_latency())
+    return 0
+
+
+def _run_modbus(args: argparse.Namespace) -> int:
+    """The Modbus TCP server until SIGINT/SIGTERM."""
+    from sim_drive.modbus import ModbusSimServer, parse_modbus_url
+
+    _configure_logging(args.realtime, "pymodbus", logging.CRITICAL)
+    unit_id = 1 if args.unit_id is None else args.unit_id
+    word_order = args.word_order or "big"
+    try:
+        host, port = parse_modbus_url(args.modbus)
+        parameters, operator, timing = _drive_setup(args)
+        sim = ModbusSimServer(host, port, unit_id=unit_id, timing=timing, parameters=parameters, operator=operator,
+                              word_order=word_order)
+    except ParameterError as exc:
+        print(f"{_PROG}: error: {exc}", file=sys.stderr)
+        return 2
+
+    def bound() -> None:
+        logger.info("unit %d: serving Modbus TCP on %s (timing %s, word order %s, started %.3f)",
+                    unit_id, sim.url, timing, word_order, time.time())
+
+    async def run() -> None:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        await sim.serve(stop, on_bound=bound)
+
+    try:
+        asyncio.run(run())
+    except (OSError, RuntimeError) as exc:
+        print(f"{_PROG}: error: cannot serve on {args.modbus}: {exc}", file=sys.stderr)
+        return 1
+    drive = sim.drive
+    logger.info("unit %d: stopped after %d cycles, virtual time %.6f s, operator energy %.6g J, wall energy %.6g J",
+                unit_id, sim.bank.cycles, drive.time, drive.operator_energy, drive.wall_energy)
     return 0

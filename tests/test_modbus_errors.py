@@ -1,19 +1,23 @@
 """ModbusDrive's typed errors against the simulated server (loopback, one process): exception
 responses (illegal address, illegal value, server busy), timeouts, a dropped connection, a
 wrong unit id or word order, a drive fault; each names the unit, the registers and CiA-402
-objects and the exception, and the torque is zeroed wherever the link still answers."""
+objects and the exception, and the torque is zeroed wherever the link still answers.  Then the
+server's own protocol edges, seen by pymodbus' plain client: one injected fault per request (so
+one per FC23), foreign unit ids and functions, a dropped request closing only its connection."""
 
 from __future__ import annotations
 
 import time
 
 import pytest
+from pymodbus.client import ModbusTcpClient
+from pymodbus.exceptions import ModbusException
 
 from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout
 from drives.cia402 import QUICK_STOP_OPTION_CODE, State
 from drives.modbus.drive import ModbusDrive
-from drives.errors import ModbusLinkLost
-from sim_drive.modbus_server import LINK_LOST_ERROR_CODE, ModbusSimServer
+from drives.errors import ModbusLinkLost, ParameterError
+from sim_drive.modbus import LINK_LOST_ERROR_CODE, FaultInjector, ModbusSimServer
 
 UNIT = 7
 
@@ -203,3 +207,84 @@ def test_nobody_listening_is_a_timeout_and_rtu_constructs() -> None:
         ModbusDrive("127.0.0.1", 502, unit_id=300)
     with pytest.raises(ValueError, match="cycle"):
         ModbusDrive("127.0.0.1", 502, cycle="fast")
+
+
+def plain_client(server: ModbusSimServer) -> ModbusTcpClient:
+    """pymodbus' own synchronous client, connected to ``server`` on loopback."""
+    client = ModbusTcpClient("127.0.0.1", port=server.port, timeout=1.0, retries=0)
+    assert client.connect()
+    return client
+
+
+def wait_until(condition, timeout: float = 2.0) -> bool:
+    """Poll ``condition`` every 10 ms for at most ``timeout`` s; its last value."""
+    deadline = time.monotonic() + timeout
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return condition()
+
+
+def test_an_injected_fault_is_met_once_per_request_and_once_per_fc23() -> None:
+    with ModbusSimServer(unit_id=UNIT, timing="ideal") as server:
+        client = plain_client(server)
+        try:
+            def fc23():
+                return client.readwrite_registers(read_address=0, read_count=5, write_address=0x10, values=[0, 0], device_id=UNIT)
+
+            cycles = server.bank.cycles
+            server.faults.busy(2)
+            assert fc23().exception_code == 0x06 and fc23().exception_code == 0x06
+            assert server.bank.cycles == cycles and server.faults.injected == 2  # nothing applied
+            response = fc23()  # the two faults are spent: write (closes a cycle), then read
+            assert not response.isError() and len(response.registers) == 5
+            assert server.bank.cycles == cycles + 1 and server.faults.injected == 2
+            server.faults.delay(0.05)  # met by the FC23's write; its read meets nothing
+            started = time.monotonic()
+            assert not fc23().isError()
+            assert time.monotonic() - started >= 0.05
+            assert server.bank.cycles == cycles + 2 and server.faults.injected == 3
+            server.faults.delay(0.05, count=2)  # FC06 writes, then reads back: still one request
+            assert not client.write_register(0x10, 0, device_id=UNIT).isError()
+            assert server.faults.injected == 4
+        finally:
+            client.close()
+
+
+def test_foreign_units_and_functions_are_refused_before_any_fault() -> None:
+    with ModbusSimServer(unit_id=0) as server:  # unit 0 too answers for itself only
+        client = plain_client(server)
+        try:
+            server.faults.busy()
+            assert client.read_holding_registers(0x30, count=2, device_id=1).exception_code == 0x0B
+            assert client.write_register(0x10, 6, device_id=255).exception_code == 0x0B
+            assert client.read_coils(0, count=1, device_id=0).exception_code == 0x01
+            assert client.read_input_registers(0, count=1, device_id=0).exception_code == 0x01
+            assert server.faults.injected == 0 and server.drive.state is State.SWITCH_ON_DISABLED
+            assert client.read_holding_registers(0x30, count=2, device_id=0).exception_code == 0x06
+            assert client.read_holding_registers(0x30, count=2, device_id=0).registers == [0x4842, 0x0402]
+        finally:
+            client.close()
+    with pytest.raises(ParameterError, match="code = 66"):
+        FaultInjector().exception(0x42)
+
+
+def test_a_dropped_request_closes_its_own_connection_only() -> None:
+    with ModbusSimServer(unit_id=UNIT, timing="ideal") as server:
+        commander, other = plain_client(server), plain_client(server)
+        try:
+            for controlword in (0x06, 0x07, 0x0F):
+                assert not commander.write_register(0x10, controlword, device_id=UNIT).isError()
+            assert server.drive.state is State.OPERATION_ENABLED
+            server.faults.drop()
+            with pytest.raises(ModbusException):
+                other.read_holding_registers(0, count=5, device_id=UNIT)
+            assert wait_until(lambda: server.connections_closed == 1)
+            # the commanding connection is still up: no watchdog fault, and it is still answered
+            assert server.drive.state is State.OPERATION_ENABLED
+            assert not commander.read_holding_registers(0, count=5, device_id=UNIT).isError()
+            commander.close()
+            assert wait_until(lambda: server.connections_closed == 2)
+            assert server.drive.state is State.FAULT and server.drive.error_code == LINK_LOST_ERROR_CODE
+        finally:
+            commander.close()
+            other.close()

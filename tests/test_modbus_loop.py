@@ -26,7 +26,7 @@ from drives.modbus.timing import loop_delay, measure_poll
 from haptic_bus.control.controller import WallController
 from haptic_bus.control.gate import DeviceLoop, PassivityGate
 from haptic_bus.control.scene import Wall, compile_scene
-from sim_drive.modbus_server import ModbusSimServer
+from sim_drive.modbus import ModbusSimServer
 from sim_drive.operator import ConstantPush, StepPush
 from sim_drive.parameters import DeviceParameters
 

@@ -16,7 +16,6 @@ from drives.modbus.register_map import (
     REGISTER_BY_NAME,
     REGISTERS,
     InputBlockCodec,
-    OutputBlockCodec,
     decode_value,
     describe_range,
     encode_value,
@@ -25,7 +24,7 @@ from drives.modbus.register_map import (
 )
 from drives.modbus.timing import assumed_delay
 from sim_drive.device import SimulatedDrive
-from sim_drive.modbus_server import RegisterBank
+from sim_drive.modbus import RegisterBank
 
 VELOCITY = register_for_object(VELOCITY_ACTUAL)
 
@@ -102,13 +101,7 @@ def test_input_block_codec(order: str, with_position: bool) -> None:
     assert codec.decode(registers) == (sw, vel, pos if with_position else None)
 
 
-def test_output_block_codec_and_layout() -> None:
-    codec = OutputBlockCodec()
-    assert codec.encode(0x000F, -3000) == [0x000F, (-3000) & 0xFFFF]
-    assert codec.decode([0x000F, 0xF448]) == (0x000F, -3000)
-    regs = [0, 0]
-    codec.encode_into(regs, 0x0F, -1)
-    assert regs == [0x0F, 0xFFFF]
+def test_block_layout() -> None:
     # one contiguous block each: inputs 0x0000..0x0004, outputs 0x0010..0x0011
     assert [register_at(a).obj for a in range(INPUT_BLOCK, INPUT_BLOCK + INPUT_BLOCK_COUNT)] == [
         register_at(0).obj, VELOCITY_ACTUAL, VELOCITY_ACTUAL, POSITION_ACTUAL, POSITION_ACTUAL]

@@ -1,11 +1,15 @@
-"""``haptic-bus sim`` / ``python -m sim_drive``: arguments, profiles, clean stop on signals."""
+"""``haptic-bus sim`` / ``python -m sim_drive``: arguments (one parser for the CANopen slave and the
+Modbus server), profiles, clean stop on signals."""
 
 from __future__ import annotations
 
 import pathlib
 import re
 import signal
+import socket
 import struct
+import subprocess
+import sys
 
 import can
 import pytest
@@ -21,6 +25,15 @@ from tests.sim_fixtures import SimProcess, recv_id, send, unique_multicast
 
 NODE = 11
 BOOT_WAIT = 20.0  # s: the subprocess imports numpy, canopen, python-can first
+MODBUS_URL = "tcp://127.0.0.1:0"
+REPO = pathlib.Path(__file__).resolve().parents[1]
+
+
+def one_error_line(err: str) -> str:
+    """The single ``haptic-bus sim: error: ...`` line a usage error writes (and nothing else)."""
+    assert err.startswith("haptic-bus sim: error: ") and err.count("\n") == 1, err
+    assert "Traceback" not in err
+    return err
 
 
 def test_eds_path(capsys: pytest.CaptureFixture[str]) -> None:
@@ -40,7 +53,64 @@ def test_eds_path(capsys: pytest.CaptureFixture[str]) -> None:
 )
 def test_bad_arguments_exit_2(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(argv) == 2
-    assert message in capsys.readouterr().err
+    assert message in one_error_line(capsys.readouterr().err)
+
+
+@pytest.mark.parametrize(
+    "argv", [["--help"], ["-h"], ["--modbus", MODBUS_URL, "--help"], ["--modbus", "--help"], ["--node-id", "x", "--help"]]
+)
+def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("usage: haptic-bus sim") and err == ""
+    for option in ("--interface", "--node-id", "--eds-path", "--modbus", "--unit-id", "--word-order", "--timing", "--profile"):
+        assert option in out
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--modbus", MODBUS_URL, "--node-id", "3"], "CANopen options cannot be combined with --modbus: --node-id"),
+        (["--modbus", MODBUS_URL, "--interface", "virtual", "--channel", "x", "--bitrate", "500000"],
+         "--modbus: --interface, --channel, --bitrate"),
+        (["--modbus", MODBUS_URL, "--bus-option", "port=1"], "--modbus: --bus-option"),
+        (["--eds-path", "--modbus", MODBUS_URL], "--modbus: --eds-path"),
+        (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--unit-id", "2"],
+         "Modbus options need --modbus: --unit-id"),
+        (["--eds-path", "--word-order", "little", "--unit-id", "1"], "Modbus options need --modbus: --unit-id, --word-order"),
+        (["--modbus"], "expected one argument"),
+        (["--modbus", "udp://127.0.0.1:502"], "tcp://HOST:PORT"),
+        (["--modbus", "tcp://127.0.0.1:99999"], "tcp://HOST:PORT"),
+        (["--modbus", MODBUS_URL, "--unit-id", "256"], "unit_id = 256"),
+        (["--modbus", MODBUS_URL, "--unit-id", "one"], "invalid int value"),
+        (["--modbus", MODBUS_URL, "--word-order", "middle"], "invalid choice"),
+        (["--modbus", MODBUS_URL, "--profile", "/nonexistent.toml"], "readable TOML"),
+        (["--frobnicate"], "unrecognized arguments: --frobnicate"),
+    ],
+)
+def test_modbus_usage_errors_exit_2_with_one_line(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(argv) == 2
+    assert message in one_error_line(capsys.readouterr().err)
+
+
+def test_modbus_address_in_use_exits_1_with_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        url = f"tcp://127.0.0.1:{taken.getsockname()[1]}"
+        assert main(["--modbus", url]) == 1
+    assert f"cannot serve on {url}" in one_error_line(capsys.readouterr().err)
+
+
+def test_python_m_sim_drive_refuses_mixed_options_without_traceback() -> None:
+    def run(*argv: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "sim_drive", *argv], cwd=REPO, capture_output=True, text=True, timeout=60)
+
+    refused = run("--modbus", MODBUS_URL, "--node-id", "3")
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert "--modbus: --node-id" in one_error_line(refused.stderr)
+    shown = run("--modbus", "--help")
+    assert shown.returncode == 0 and "--unit-id" in shown.stdout and shown.stderr == ""
 
 
 def test_profile_tables(tmp_path: pathlib.Path) -> None:

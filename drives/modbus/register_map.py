@@ -1,7 +1,7 @@
 """The Modbus register map of the CiA-402 torque drive, and its pure encode/decode functions.
 
 Shared by the master (:mod:`drives.modbus.drive`) and the simulated server
-(:mod:`sim_drive.modbus_server`).  Every object lives in the **holding registers** (function
+(:mod:`sim_drive.modbus`).  Every object lives in the **holding registers** (function
 codes 03 read, 06/16 write, 23 read/write), addressed from 0 (protocol addresses; a "4xxxx"
 register number is address + 40001).  Within a register the bytes are big-endian, as Modbus
 says; a 32-bit value occupies two consecutive registers whose order is the map's
@@ -88,7 +88,6 @@ __all__ = [
     "encode_value",
     "decode_value",
     "InputBlockCodec",
-    "OutputBlockCodec",
     "EXCEPTION_NAMES",
     "exception_name",
 ]
@@ -296,27 +295,6 @@ class InputBlockCodec:
                 r = unpack(pack(statusword, velocity))
                 return list(r) if big else [r[0], r[2], r[1]]
         return encode
-
-
-class OutputBlockCodec:
-    """Precompiled codec of the cyclic output block: controlword (U16), target torque (I16)."""
-
-    count = OUTPUT_BLOCK_COUNT
-    _struct = struct.Struct(">Hh")
-    _words = struct.Struct(">2H")
-
-    def encode(self, controlword: int, target_torque: int) -> list[int]:
-        """The two registers of ``controlword`` and ``target_torque`` (struct.error if out of range)."""
-        return list(self._words.unpack(self._struct.pack(controlword, target_torque)))
-
-    def encode_into(self, registers: list[int], controlword: int, target_torque: int) -> None:
-        """Fill an existing two-element list in place (no allocation on the hot path)."""
-        registers[0] = controlword
-        registers[1] = target_torque & 0xFFFF
-
-    def decode(self, registers: list[int] | tuple[int, ...]) -> tuple[int, int]:
-        """``(controlword, target_torque)`` from the two registers."""
-        return self._struct.unpack(self._words.pack(*registers))
 
 
 EXCEPTION_NAMES = {

@@ -22,7 +22,7 @@ Two refinements:
 - ``cycle="fc23"`` (one read/write request per cycle) reads the next cycle's inputs together
   with this cycle's write.  In a loop paced at ``T`` those inputs are up to ``T`` old when
   they are used: ``D <= T + round trip``, one more sample (:func:`loop_delay` adds it).
-- The simulated drive (``sim_drive.modbus_server``) runs in virtual time whatever the wall
+- The simulated drive (``sim_drive.modbus``) runs in virtual time whatever the wall
   clock does: its plant advances only when the output block is written, so its loop delay is
   its timing's, 0 (``ideal``) or 1 (``cia402``), read from its register 0x0050.
 

@@ -1,0 +1,146 @@
+"""Holding-register reads and writes against a :class:`~sim_drive.device.SimulatedDrive` (no network).
+
+The register map is :mod:`drives.modbus.register_map`; values are encoded and decoded with its
+``encode_value``/``decode_value``, so the server and the master share one codec.
+
+Virtual time.  Modbus has no SYNC; the controller's write of the output block stands for it.
+A write that covers the whole output block 0x0010..0x0011 (FC16 of the block, or the write
+half of an FC23) applies its registers in address order (controlword, then target torque) and
+then runs one :meth:`SimulatedDrive.sync`: the plant advances by exactly ``T`` and the inputs
+are sampled.  So the write of cycle k is SYNC k+1 of the CANopen simulator with the RPDO of
+cycle k applied just before it: with ``ideal`` timing the torque written in answer to sample k
+acts during [t_k, t_k+1); with ``cia402`` it is latched at that SYNC and acts one period later.
+Reads never advance time; a write of the controlword or the target torque alone (FC06) acts at
+once without advancing the plant (acyclic commissioning: the state machine walk).
+
+Exceptions: 0x02 for unmapped or read-only registers and for partial access to a multi-register
+value, 0x03 for a value outside the object's range (nothing of the request is applied).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+
+from pymodbus.constants import ExcCodes
+
+from drives.cia402 import QUICK_STOP_OPTION_CODE
+from drives.modbus.register_map import (
+    INPUT_BLOCK,
+    INPUT_BLOCK_COUNT,
+    MAP_IDENTITY,
+    OUTPUT_BLOCK,
+    OUTPUT_BLOCK_COUNT,
+    REGISTER_BY_NAME,
+    REGISTERS,
+    SIM_TIMING_CODES,
+    InputBlockCodec,
+    RegisterSpec,
+    decode_value,
+    encode_value,
+    register_at,
+)
+from sim_drive.device import ObjectAccessError, SimulatedDrive
+
+logger = logging.getLogger("sim_drive.modbus")
+
+__all__ = ["RegisterBank", "writes_command"]
+
+_COMMAND_REGISTERS = (REGISTER_BY_NAME["controlword"].address, REGISTER_BY_NAME["target_torque"].address)
+_QUICK_STOP_OPTIONS = range(9)  # the 0x605A values this drive implements: 0..8
+
+
+def writes_command(address: int, count: int) -> bool:
+    """True if registers ``address .. address+count-1`` include the controlword or the target torque."""
+    return any(address <= register < address + count for register in _COMMAND_REGISTERS)
+
+
+class RegisterBank:
+    """Register reads and writes against a :class:`SimulatedDrive` (no network here).
+
+    ``read(address, count)`` returns the registers or an exception code (int);
+    ``write(address, values)`` returns 0 or an exception code.  ``word_order`` is ``"big"``
+    (high word first) or ``"little"``.  See the module docstring for when a write closes a cycle.
+    """
+
+    def __init__(self, drive: SimulatedDrive, word_order: str = "big") -> None:
+        self.drive = drive
+        self.word_order = word_order
+        self.cycles = 0  # writes that closed a cycle
+        self._inputs = InputBlockCodec(word_order, with_position=True)
+        self._sources: dict[RegisterSpec, Callable[[], int | float]] = {
+            spec: drive.reader(spec.obj.index) for spec in REGISTERS if spec.obj is not None
+        }
+        extras: dict[str, Callable[[], int | float]] = {
+            "map_identity": lambda: MAP_IDENTITY,
+            "velocity_per_count": lambda: drive.parameters.velocity_per_count,
+            "position_per_count": lambda: drive.parameters.position_per_count,
+            "force_per_torque": lambda: drive.parameters.force_per_torque,
+            "sim_timing": lambda: SIM_TIMING_CODES[drive.timing.value],
+            "sim_cycle_count": lambda: drive.sync_count & 0xFFFFFFFF,
+            "sim_time": lambda: drive.time,
+            "sim_operator_energy": lambda: drive.operator_energy,
+            "sim_wall_energy": lambda: drive.wall_energy,
+        }
+        self._sources.update({REGISTER_BY_NAME[name]: source for name, source in extras.items()})
+        writable = drive.writable_objects()
+        self._writable: dict[RegisterSpec, int] = {  # register -> the index of its object
+            spec: spec.obj.index for spec in REGISTERS
+            if spec.obj is not None and spec.access == "rw" and spec.obj.index in writable
+        }
+
+    def read(self, address: int, count: int) -> list[int] | int:
+        """``count`` registers from ``address``, or 0x02 if any is unmapped or a value is cut."""
+        drive = self.drive
+        if address == INPUT_BLOCK and 1 <= count <= INPUT_BLOCK_COUNT and count != 2 and count != 4:
+            return self._inputs.encode(drive.statusword, drive.velocity_counts, drive.position_counts)[:count]
+        out: list[int] = []
+        end = address + count
+        a = address
+        while a < end:
+            spec = register_at(a)
+            if spec is None or spec.address != a or spec.end > end:
+                return ExcCodes.ILLEGAL_ADDRESS
+            out += encode_value(spec, self._sources[spec](), self.word_order)
+            a = spec.end
+        return out
+
+    def write(self, address: int, values: Sequence[int]) -> int:
+        """Write ``values`` (each 0..0xFFFF) from ``address``; 0, or 0x02/0x03 with nothing applied."""
+        decoded = self._decode(address, values)
+        if isinstance(decoded, int):
+            return decoded
+        drive = self.drive
+        for spec, value in decoded:
+            try:
+                drive.write_object(self._writable[spec], value)
+            except ObjectAccessError as exc:
+                logger.warning("%s: write of %s refused: %s", drive.name, spec.label, exc)
+                return ExcCodes.ILLEGAL_VALUE if exc.reason == "range" else ExcCodes.ILLEGAL_ADDRESS
+        if address <= OUTPUT_BLOCK and address + len(values) >= OUTPUT_BLOCK + OUTPUT_BLOCK_COUNT:
+            drive.sync()
+            self.cycles += 1
+        return 0
+
+    def _decode(self, address: int, values: Sequence[int]) -> list[tuple[RegisterSpec, int]] | int:
+        """The (register, value) pairs ``values`` write, or the exception code refusing all of them."""
+        end = address + len(values)
+        decoded: list[tuple[RegisterSpec, int]] = []
+        a = address
+        while a < end:
+            spec = register_at(a)
+            if spec is None or spec.address != a or spec.end > end or spec not in self._writable:
+                return ExcCodes.ILLEGAL_ADDRESS
+            words = list(values[a - address : spec.end - address])
+            if any(not 0 <= w <= 0xFFFF for w in words):
+                return ExcCodes.ILLEGAL_VALUE
+            try:
+                value = int(decode_value(spec, words, self.word_order))  # writable registers are integers
+            except ValueError:  # an INTEGER8 register that is not sign-extended
+                return ExcCodes.ILLEGAL_VALUE
+            decoded.append((spec, value))
+            a = spec.end
+        for spec, value in decoded:  # the drive refuses these too, but only after the registers before them
+            if self._writable[spec] == QUICK_STOP_OPTION_CODE.index and value not in _QUICK_STOP_OPTIONS:
+                return ExcCodes.ILLEGAL_VALUE
+        return decoded
