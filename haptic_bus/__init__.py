@@ -21,7 +21,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-__version__ = "0.2.0"
+from haptic_bus._version import __version__
 
 _HOMES = {
     "check_passivity": "haptic_bus.analysis.check",

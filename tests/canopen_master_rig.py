@@ -25,6 +25,7 @@ import can
 import pytest
 
 from drives.canopen.drive import CanopenDrive
+from drives.safety import SafetySettings
 from sim_drive.eds import eds_path
 from tests.sim_fixtures import VCAN0_MISSING
 
@@ -141,6 +142,9 @@ def rig(
         process = SimProcess(spec, node_id, timing)
         wait_for_heartbeat(spec, node_id, HEARTBEAT_WAIT, process)
     drive_kwargs.setdefault("eds", eds_path())
+    # A test paces nothing: a loaded machine may pause it for tens of ms, which the drive's
+    # RPDO deadline would rightly call a dead master.  Tests of the deadline set their own.
+    drive_kwargs.setdefault("safety", SafetySettings().for_virtual_time(drive_kwargs.get("period", 1e-3)))
     drive = CanopenDrive(node_id, **spec.drive_kwargs(), **drive_kwargs)
     status = None
     try:

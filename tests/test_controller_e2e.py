@@ -12,11 +12,10 @@ import uuid
 
 import numpy as np
 import pytest
-from canopen import SdoAbortedError
 
 from haptic_bus.app.cli import main
 from haptic_bus.control.controller import WallController, encoder_origin
-from haptic_bus.control.node import ABORT_INVALID_VALUE, ControllerNode, upload_walls
+from haptic_bus.control.node import ABORT_INVALID_VALUE, ControllerNode, UploadRefused, upload_walls
 from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.design import force_step_response
 from haptic_bus.analysis.energy import commensurate_theta
@@ -156,9 +155,9 @@ def test_refused_upload_over_the_bus_is_an_sdo_abort_and_changes_nothing() -> No
     with simulated_canopen(profile, channel=channel) as (sim, drive):
         controller = controller_for(profile, drive)
         with ControllerNode(controller, 42, bus):
-            with pytest.raises(SdoAbortedError) as info:
+            with pytest.raises(UploadRefused) as info:
                 upload_walls(bus, 42, {0: (2.0e6, 100.0)})
-            assert info.value.code == ABORT_INVALID_VALUE
+            assert info.value.abort_code == ABORT_INVALID_VALUE
             assert info.value.reason.startswith("refused: passivity gate refused") and "K = 2e+06" in info.value.reason
             controller.run(5)
             assert controller.scene.by_name()["wall"].stiffness == 200.0

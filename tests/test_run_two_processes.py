@@ -10,9 +10,8 @@ import sys
 import time
 
 import pytest
-from canopen import SdoAbortedError, SdoCommunicationError
-
-from haptic_bus.control.node import upload_walls
+from drives.errors import DriveTimeout
+from haptic_bus.control.node import UploadRefused, upload_walls
 from tests.sim_fixtures import NODE, REPO, SimProcess, unique_multicast
 
 CONTROLLER_NODE = 42
@@ -37,12 +36,12 @@ def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive() -> None:
         while answer is None and time.monotonic() < deadline and run.poll() is None:
             try:  # the same wall again: accepted once the controller node answers
                 answer = upload_walls(bus, CONTROLLER_NODE, {0: (200.0, 100.0)}, timeout=0.5)
-            except SdoCommunicationError:
+            except DriveTimeout:
                 time.sleep(0.2)
         assert answer is not None and answer.startswith("accepted"), run.stderr.read() if run.poll() is not None else answer
-        with pytest.raises(SdoAbortedError) as refused:
+        with pytest.raises(UploadRefused) as refused:
             upload_walls(bus, CONTROLLER_NODE, {0: (2.0e6, 100.0)})
-        assert refused.value.code == 0x06090030 and "largest passive K at this B: 1.8e+06" in refused.value.reason
+        assert refused.value.abort_code == 0x06090030 and "largest passive K at this B: 1.8e+06" in refused.value.reason
         assert upload_walls(bus, CONTROLLER_NODE, {0: (300.0, 150.0)}).startswith("accepted")
         assert run.poll() is None, "the run must go on through the uploads"
     finally:

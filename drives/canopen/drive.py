@@ -30,26 +30,29 @@ import canopen
 from canopen import objectdictionary as od
 
 from drives.base import CyclicInputs
-from drives.canopen.commissioning import Commissioning, CommissioningSettings
+from drives.canopen.commissioning import Commissioned, Commissioning, CommissioningSettings
 from drives.canopen.events import DriveEvents
 from drives.canopen.exchange import RX_MODES, CanopenExchange, CanopenStats
+from drives.canopen.heartbeat import HeartbeatProducer
 from drives.canopen.link import NetworkLink
 from drives.canopen.od import load_object_dictionary
 from drives.canopen.pdo_codec import MAX_PDO_BYTES, PdoCodec, object_spec
 from drives.canopen.sdo import SdoAccess
-from drives.cia301 import NODE_ID_RANGE, NmtCommand
+from drives.cia301 import CONSUMER_HEARTBEAT_TIME, NODE_ID_RANGE, NmtCommand
 from drives.cia402 import (
     CONTROLWORD,
     POSITION_ACTUAL,
     STATUSWORD,
     TARGET_TORQUE,
     VELOCITY_ACTUAL,
+    DataType,
     ObjectSpec,
     State,
     decode_statusword,
 )
 from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
 from drives.errors import DriveError, DriveProtocolError, DriveTimeout, ParameterError
+from drives.safety import SafetySettings
 
 logger = logging.getLogger(__name__)
 
@@ -124,6 +127,7 @@ class CanopenDrive(Cia402Master):
         heartbeat_consumer_ms: int | None = None,
         reset_communication: bool = True,
         check_device_type: bool = True,
+        safety: SafetySettings = SafetySettings(),
     ) -> None:
         low, high = NODE_ID_RANGE
         _check("node_id", isinstance(node_id, int) and low <= node_id <= high, node_id, f"{low}..{high}")
@@ -141,6 +145,8 @@ class CanopenDrive(Cia402Master):
         for required in (STATUSWORD, VELOCITY_ACTUAL):
             _check("tpdo_objects", (required.index, 0) in flat, [f"0x{i:04X}" for i, _ in flat],
                    f"a mapping that holds 0x{required.index:04X} ({required.name})")
+        _check("master_node_id", safety.master_node_id != node_id, safety.master_node_id,
+               f"a node id other than the drive's ({node_id})")
 
         self._init_master(f"CANopen node {node_id}", scaling)
         self.node_id = node_id
@@ -150,6 +156,10 @@ class CanopenDrive(Cia402Master):
         self.max_missed_tpdos = max_missed_tpdos
         self.settings = CommissioningSettings(period, boot_timeout, sdo_timeout, reset_communication,
                                               check_device_type, heartbeat_producer_ms, heartbeat_consumer_ms)
+        self.safety = safety
+        self.commissioned: Commissioned | None = None
+        self.heartbeat = HeartbeatProducer(safety.master_node_id or 0, safety.heartbeat_ms / 1000.0
+                                           if safety.master_node_id is not None else 0.0)
         self.link = NetworkLink(self.name, network=network, bus=bus,
                                 bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})))
         self.stats = CanopenStats()
@@ -160,7 +170,6 @@ class CanopenDrive(Cia402Master):
         self.node: canopen.RemoteNode | None = None
         self.events: DriveEvents | None = None
         self.sdo: SdoAccess | None = None
-        self.device_type: int | None = None
         self._missed_in_row = 0
         self._connected = False
         self._closed = False
@@ -186,6 +195,16 @@ class CanopenDrive(Cia402Master):
         return self.events.nmt_state if self.events is not None else None
 
     @property
+    def device_type(self) -> int | None:
+        """0x1000 as commissioning read it (None before connect, or with the check off)."""
+        return self.commissioned.device_type if self.commissioned is not None else None
+
+    @property
+    def safety_warnings(self) -> tuple[str, ...]:
+        """What commissioning found missing in the drive's safety chain (empty when complete)."""
+        return self.commissioned.safety_warnings if self.commissioned is not None else ()
+
+    @property
     def last_emcy(self) -> canopen.emcy.EmcyError | None:
         """The newest EMCY other than an error reset."""
         return self.events.last_emcy if self.events is not None else None
@@ -209,9 +228,11 @@ class CanopenDrive(Cia402Master):
             self.node = node
             self.events = DriveEvents(self.name, node, network, self.stats)
             self.sdo = SdoAccess(self.name, node, self.settings.sdo_timeout, self.exchange.end)
-            found = Commissioning(self.name, node, self.sdo, self.events, self.settings).run(
-                self.exchange.tpdo_codecs, self.exchange.rpdo_codec)
-            self.device_type = found.device_type
+            commissioning = Commissioning(self.name, node, self.sdo, self.events, self.settings, self.safety)
+            commissioning.refuse_another_master()
+            self.heartbeat.start(network.bus, network.send_lock)  # boot-up first, before the drive is touched
+            found = commissioning.run(self.exchange.tpdo_codecs, self.exchange.rpdo_codec)
+            self.commissioned = found
             self.exchange.configure(found.tpdo_cobs, found.rpdo_cob)
             self._adopt_scaling(found.scaling)
             self.events.heartbeat_limit = self.settings.heartbeat_consumer_ms / 1000.0
@@ -353,8 +374,11 @@ class CanopenDrive(Cia402Master):
                     self.exchange.send_rpdo(SAFE_CONTROLWORD, 0)
                     self.exchange.send_safe()
                     self.node.nmt.send_command(NmtCommand.ENTER_PRE_OPERATIONAL)
+                    if self.safety.master_node_id is not None and self.sdo is not None:
+                        self.sdo.write_int(CONSUMER_HEARTBEAT_TIME, 1, DataType.UNSIGNED32, 0)  # a clean goodbye
                 except (DriveError, can.CanError, OSError, RuntimeError) as exc:
                     logger.warning("%s: could not send the closing frames: %s", self.name, exc)
+            self.heartbeat.stop()
             self.exchange.end()
             if self.events is not None:
                 self.events.release()

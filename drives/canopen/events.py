@@ -11,6 +11,7 @@ stops the drive), never an exception inside a receive thread.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -21,6 +22,8 @@ from canopen.emcy import EmcyError
 from drives.canopen.exchange import CanopenStats
 from drives.cia301 import EMCY_BASE, EMCY_LENGTH, HEARTBEAT_BASE, NmtState, describe_emcy_code, nmt_state_name
 from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout
+
+logger = logging.getLogger(__name__)
 
 Handler = Callable[[int, bytearray, float], None]
 
@@ -33,8 +36,9 @@ def describe_emcy(emcy: EmcyError) -> str:
 class DriveEvents:
     """The drive's EMCY, heartbeat and NMT state as the master sees them.
 
-    ``armed`` (set by the master) decides whether an NMT state other than OPERATIONAL is an
-    error; ``heartbeat_limit`` (s, 0 = off) how long the heartbeat may be silent while armed.
+    ``armed`` (set by the master while the drive is enabled) decides whether an EMCY or an NMT
+    state other than OPERATIONAL is an error; ``heartbeat_limit`` (s, 0 = off) how long the
+    heartbeat may be silent while armed.
     """
 
     def __init__(self, name: str, node: canopen.RemoteNode, network: canopen.Network, stats: CanopenStats) -> None:
@@ -83,9 +87,13 @@ class DriveEvents:
 
     def _on_emcy(self, emcy: EmcyError) -> None:
         self.stats.emcy_count += 1
-        if emcy.code & 0xFF00:  # not an error reset
-            self.last_emcy = emcy
+        if not emcy.code & 0xFF00:  # an error reset
+            return
+        self.last_emcy = emcy
+        if self.armed:  # while disabled an EMCY is news (e.g. the RPDO deadline during SDO work), not a trip
             self._pending = self._pending or DriveFault(self.name, describe_emcy(emcy), code=emcy.code)
+        else:
+            logger.info("%s: %s while not enabled", self.name, describe_emcy(emcy))
 
     def _on_heartbeat(self, state: int) -> None:
         self.stats.heartbeats += 1

@@ -8,13 +8,12 @@ import pathlib
 import sys
 from typing import Callable, Sequence
 
-from drives.errors import DriveError
 from drives.bus_config import parse_bus_option
-from drives.errors import HapticBusError, ParameterError
-from haptic_bus.control.gate import GateRefusal
+from drives.errors import DriveError, HapticBusError, ParameterError
 from haptic_bus.analysis.check import check_loop, format_check
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.app.profiles_cli import add_profiles_parser
+from haptic_bus.control.gate import GateRefusal
 
 EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
 
@@ -105,9 +104,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _upload(args: argparse.Namespace) -> int:
-    from canopen import SdoAbortedError, SdoCommunicationError
-
-    from haptic_bus.control.node import upload_walls
+    from haptic_bus.control.node import UploadRefused, upload_walls
     from haptic_bus.validation import real_in_range, whole_in_range
 
     index = whole_in_range("object", args.object, 0, 255, context="upload")
@@ -115,11 +112,8 @@ def _upload(args: argparse.Namespace) -> int:
     B = real_in_range("damping", args.damping, 0.0, 1e15, unit="N s/m", context="upload")
     try:
         print(upload_walls(_bus_arguments(args), args.node_id, {index: (K, B)}, timeout=args.timeout))
-    except SdoAbortedError as error:
-        print(f"haptic-bus upload: {getattr(error, 'reason', error)}", file=sys.stderr)
-        return EXIT_NO
-    except SdoCommunicationError as error:
-        print(f"haptic-bus upload: controller node {args.node_id} did not answer: {error}", file=sys.stderr)
+    except UploadRefused as error:
+        print(f"haptic-bus upload: {error.reason}", file=sys.stderr)
         return EXIT_NO
     return EXIT_OK
 
@@ -175,7 +169,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--modbus", metavar="URL", help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
     run.add_argument("--unit-id", type=int, default=1, help="Modbus unit id")
     run.add_argument("--duration", type=float, default=10.0, help="seconds to run")
-    run.add_argument("--controller-node-id", type=int, help="serve gated wall uploads as this CANopen node")
+    run.add_argument("--controller-node-id", type=int, default=127,
+                     help="this controller's CANopen node id: its heartbeat, which the drive watches, and gated wall uploads")
     run.add_argument("--virtual-time", action="store_true", help="lock-step with a simulated drive (no pacing)")
     run.add_argument("--out", help="directory for the CSV record")
     run.set_defaults(handler=_run)

@@ -13,11 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haptic_bus.app.profiles import Profile, default_profile
+from haptic_bus.app.rig import simulated_canopen
+from haptic_bus.app.run_plots import plot_run
 from haptic_bus.control.controller import RunSummary, WallController, encoder_origin
 from haptic_bus.control.gate import GateDecision
-from haptic_bus.app.profiles import Profile, default_profile
-from haptic_bus.app.run_plots import plot_run
-from haptic_bus.app.rig import simulated_canopen
 
 
 @dataclass

@@ -29,8 +29,9 @@ from typing import Any, Callable, Mapping
 from drives.base import DriveScaling
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, TARGET_TORQUE
 from drives.errors import ParameterError
-from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
+from drives.safety import ABORT_OPTIONS, SafetySettings
 from haptic_bus.analysis.loop import DAMPING_RANGE, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE, STIFFNESS_RANGE
+from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene
 from haptic_bus.validation import real_in_range, whole_in_range
 
@@ -132,6 +133,7 @@ class Profile:
     gate_policy: GatePolicy
     operator_model: Mapping[str, Any] = field(hash=False, compare=True)
     path: pathlib.Path | None = None
+    safety: SafetySettings = SafetySettings()
 
     def device_loop(self) -> DeviceLoop:
         """The loop the gate judges: m kg, effective b N s/m, T s, delay samples."""
@@ -218,11 +220,17 @@ class _Reader:
         value = self.raw(key, allowed, default)
         return self._wrap(key, lambda v: real_in_range(key, v, low, high, low_inclusive=low_inclusive, unit=unit), value)
 
-    def whole(self, key: str, low: int, high: int) -> int:
-        value = self.raw(key, f"an integer in [{low}, {high}]")
+    def whole(self, key: str, low: int, high: int, default: object = _REQUIRED) -> int:
+        value = self.raw(key, f"an integer in [{low}, {high}]", default)
         if isinstance(value, float):  # TOML distinguishes 3000 from 3000.0; a count is an integer
             raise ProfileError(self.path, self.field(key), value, f"an integer in [{low}, {high}]")
         return self._wrap(key, lambda v: whole_in_range(key, v, low, high), value)
+
+    def flag(self, key: str, default: object = _REQUIRED) -> bool:
+        value = self.raw(key, "true or false", default)
+        if not isinstance(value, bool):
+            raise ProfileError(self.path, self.field(key), value, "true or false")
+        return value
 
     def text(self, key: str, *, pattern: re.Pattern | None = None, choices: tuple[str, ...] = (),
              default: object = _REQUIRED) -> str:
@@ -272,6 +280,23 @@ def _read_gate(path: pathlib.Path, table: object) -> GatePolicy:
     bandwidth = r.text("bandwidth", choices=BANDWIDTH_POLICIES)
     r.done()
     return GatePolicy(margin, bandwidth)
+
+
+def _read_safety(path: pathlib.Path, table: object) -> SafetySettings:
+    """``[safety]`` (optional): heartbeat_ms, consumer_ms, rpdo_deadline_periods, abort_option
+    ("fault", "disable-voltage", "quick-stop", "none"), strict, modbus_watchdog_ms (DESIGN 4.1)."""
+    defaults = SafetySettings()
+    if table is None:
+        return defaults
+    r = _Reader(path, "safety", table)
+    heartbeat = r.whole("heartbeat_ms", 1, 0xFFFF, default=defaults.heartbeat_ms)
+    consumer = r.whole("consumer_ms", heartbeat + 1, 0xFFFF, default=max(defaults.consumer_ms, 3 * heartbeat))
+    deadline = r.whole("rpdo_deadline_periods", 0, 10_000, default=defaults.rpdo_deadline_periods)
+    option = r.text("abort_option", choices=tuple(ABORT_OPTIONS), default="fault")
+    strict = r.flag("strict", default=defaults.strict)
+    watchdog = r.whole("modbus_watchdog_ms", 0, 0xFFFF, default=defaults.modbus_watchdog_ms)
+    r.done()
+    return SafetySettings(defaults.master_node_id, heartbeat, consumer, deadline, ABORT_OPTIONS[option], strict, watchdog)
 
 
 def _read_object(path: pathlib.Path, index: int, table: object) -> SceneObject:
@@ -369,9 +394,10 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
     policy = _read_gate(path, top.raw("gate", "a [gate] table"))
     scene = _read_scene(path, top.raw("scene", "a [scene] table with [[scene.objects]]"))
     operator_model = _read_operator_model(path, top.raw("operator_model", "", default=None))
+    safety = _read_safety(path, top.raw("safety", "a [safety] table", default=None))
     top.done()
     return Profile(name, operator, task, description, device, loop, scene, force_limit, policy,
-                   operator_model, path)
+                   operator_model, path, safety)
 
 
 def load_profile(path_or_name: str | pathlib.Path) -> Profile:
@@ -407,4 +433,5 @@ def profile_to_dict(profile: Profile) -> dict[str, Any]:
         "gate": {"safety_margin": profile.gate_policy.safety_margin, "bandwidth": profile.gate_policy.bandwidth},
         "scene": {"objects": [object_to_dict(o) for o in profile.scene]},
         "operator_model": dict(profile.operator_model),
+        "safety": {k: getattr(profile.safety, k) for k in profile.safety.__dataclass_fields__ if k != "master_node_id"},
     }

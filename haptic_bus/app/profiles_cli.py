@@ -13,12 +13,20 @@ import json
 import sys
 from typing import Any
 
-from haptic_bus.analysis.check import check_loop, format_check
 from drives.errors import HapticBusError
-from haptic_bus.control.gate import GateDecision, GateRefusal
+from haptic_bus.analysis.check import check_loop, format_check
 from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.app.profiles import (DEFAULT_PROFILE, Profile, ProfileError, load_profile, object_to_dict,
-                                 profile_to_dict, read_profile, shipped_profiles)
+from haptic_bus.app.profiles import (
+    DEFAULT_PROFILE,
+    Profile,
+    ProfileError,
+    load_profile,
+    object_to_dict,
+    profile_to_dict,
+    read_profile,
+    shipped_profiles,
+)
+from haptic_bus.control.gate import GateDecision, GateRefusal
 
 EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
 

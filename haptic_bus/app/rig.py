@@ -16,6 +16,7 @@ from contextlib import contextmanager
 from typing import Iterator
 
 from drives.canopen.drive import CanopenDrive
+from drives.safety import SafetySettings
 from haptic_bus.app.profiles import Profile
 from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits
 from sim_drive.canopen.slave import CanopenSimDrive
@@ -77,7 +78,8 @@ def simulated_canopen(
     )
     sim.start()
     drive = CanopenDrive(node_id, interface="virtual", channel=channel, period=profile.loop.period,
-                         scaling=profile.scaling(), eds=eds_path())
+                         scaling=profile.scaling(), eds=eds_path(),
+                         safety=SafetySettings().for_virtual_time(profile.loop.period))
     try:
         drive.connect()
         drive.enable()

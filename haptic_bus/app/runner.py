@@ -22,11 +22,11 @@ from typing import Any, Mapping
 from drives.base import Drive
 from drives.bus_config import resolve_bus_config
 from drives.canopen.drive import CanopenDrive
+from haptic_bus.app.profiles import Profile
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import RunSummary, WallController, encoder_origin
-from haptic_bus.control.node import ControllerNode
 from haptic_bus.control.gate import PassivityGate
-from haptic_bus.app.profiles import Profile
+from haptic_bus.control.node import ControllerNode
 
 logger = logging.getLogger(__name__)
 
@@ -41,19 +41,30 @@ class RunOptions:
     stop: threading.Event = dataclasses.field(default_factory=threading.Event)
 
 
+DEFAULT_CONTROLLER_NODE_ID = 127
+
+
 def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options: RunOptions,
-                controller_node_id: int | None = None) -> tuple[RunSummary, WallController]:
-    """Run against CANopen drive ``node_id`` on ``bus`` (python-can keyword arguments)."""
+                controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID) -> tuple[RunSummary, WallController]:
+    """Run against CANopen drive ``node_id`` on ``bus`` (python-can keyword arguments).
+
+    The controller is CANopen node ``controller_node_id``: its heartbeat (the profile's
+    ``[safety]``) is what the drive watches, and it serves gated wall uploads over SDO.
+    """
     config = resolve_bus_config(**bus)  # python-can's config chain fills what ``bus`` leaves out
     extra = {k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")}
+    period = profile.loop.period
+    safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
     drive = CanopenDrive(node_id, interface=config["interface"], channel=config.get("channel"),
-                         bitrate=config.get("bitrate"), bus_kwargs=extra, period=profile.loop.period,
-                         scaling=profile.scaling())
+                         bitrate=config.get("bitrate"), bus_kwargs=extra, period=period,
+                         scaling=profile.scaling(), safety=safety if options.realtime else safety.for_virtual_time(period))
     with ExitStack() as stack:
         drive.connect()
         stack.callback(drive.close)
-        serve = None if controller_node_id is None else (
-            lambda controller: stack.enter_context(ControllerNode(controller, controller_node_id, config)))
+
+        def serve(controller: WallController) -> None:
+            stack.enter_context(ControllerNode(controller, controller_node_id, config, safety.heartbeat_ms))
+
         return _run(profile, drive, profile.gate(), options, serve)
 
 

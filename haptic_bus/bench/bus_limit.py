@@ -27,8 +27,18 @@ from typing import Callable
 import numpy as np
 
 from drives.canopen.drive import split_into_frames
-from drives.cia402 import (CONTROLWORD, ERROR_CODE, MAX_TORQUE, MODES_OF_OPERATION, MODES_OF_OPERATION_DISPLAY,
-                           POSITION_ACTUAL, STATUSWORD, TARGET_TORQUE, TORQUE_ACTUAL, VELOCITY_ACTUAL)
+from drives.cia402 import (
+    CONTROLWORD,
+    ERROR_CODE,
+    MAX_TORQUE,
+    MODES_OF_OPERATION,
+    MODES_OF_OPERATION_DISPLAY,
+    POSITION_ACTUAL,
+    STATUSWORD,
+    TARGET_TORQUE,
+    TORQUE_ACTUAL,
+    VELOCITY_ACTUAL,
+)
 from haptic_bus.app.rig import BusLoadMeter, cycle_bits, frame_bits
 
 BITRATES = (125_000, 500_000, 1_000_000)
@@ -69,13 +79,15 @@ def axes_that_fit(per_axis: int, bitrate: float, period: float = PERIOD, ceiling
 def measured_bits_per_cycle(tpdo_objects, cycles: int = 200) -> float:
     """Median bits per SYNC cycle the BusLoadMeter counts on the virtual bus (in-process run)."""
     from drives.canopen.drive import CanopenDrive
-    from haptic_bus.bench.hot_path import bench_closed_loop
+    from drives.safety import SafetySettings
     from haptic_bus.app.rig import CanopenSimDrive, eds_path
+    from haptic_bus.bench.hot_path import bench_closed_loop
 
     channel = f"bench-bus-{uuid.uuid4().hex[:12]}"
     meter = BusLoadMeter(1_000_000, PERIOD)
     sim = CanopenSimDrive({"interface": "virtual", "channel": channel}, 5, bus_meter=meter).start()
-    drive = CanopenDrive(5, interface="virtual", channel=channel, period=PERIOD, tpdo_objects=tpdo_objects, eds=eds_path())
+    drive = CanopenDrive(5, interface="virtual", channel=channel, period=PERIOD, tpdo_objects=tpdo_objects, eds=eds_path(),
+                         safety=SafetySettings().for_virtual_time(PERIOD))
     try:
         drive.connect()
         drive.enable()

@@ -31,8 +31,8 @@ import canopen
 
 from drives.base import Drive
 from drives.canopen.od import minimal_cia402_od
-from drives.cia402 import CONTROLWORD, STATUSWORD, TARGET_TORQUE, VELOCITY_ACTUAL, ObjectSpec
 from drives.canopen.pdo_codec import PdoCodec, object_spec
+from drives.cia402 import CONTROLWORD, STATUSWORD, TARGET_TORQUE, VELOCITY_ACTUAL, ObjectSpec
 
 
 @dataclass(frozen=True)

@@ -28,11 +28,11 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from haptic_bus.app.profiles import Profile, load_profile
 from haptic_bus.app.rig import simulator_command
 from haptic_bus.bench.timing import timed_once
 from haptic_bus.control.clock import VirtualClock
 from haptic_bus.control.controller import WallController
-from haptic_bus.app.profiles import Profile, load_profile
 
 PROFILE = "cia402-handle"
 NODE_ID = 5
@@ -90,6 +90,7 @@ def _stop(process: subprocess.Popen) -> int:
 def udp_multicast(profile: Profile, cycles: int) -> dict:
     """Two processes: ``python -m sim_drive`` on udp_multicast (unique port) and the master here."""
     from drives.canopen.drive import CanopenDrive
+    from drives.safety import SafetySettings
 
     group = f"239.74.{160 + os.getpid() % 64}.{1 + os.getpid() % 250}"
     port = random.randint(45000, 55000)
@@ -101,7 +102,8 @@ def udp_multicast(profile: Profile, cycles: int) -> dict:
     try:
         _wait_heartbeat({"interface": "udp_multicast", "channel": group, "port": port}, NODE_ID, process, _START_WAIT)
         drive = CanopenDrive(NODE_ID, interface="udp_multicast", channel=group, bus_kwargs={"port": port},
-                             period=profile.loop.period, scaling=profile.scaling())
+                             period=profile.loop.period, scaling=profile.scaling(),
+                             safety=SafetySettings().for_virtual_time(profile.loop.period))
         try:
             drive.connect()
             drive.enable()
@@ -120,9 +122,9 @@ def modbus_tcp(profile: Profile, cycles: int) -> dict:
     """Two processes over Modbus TCP loopback: haptic_bus.bench.modbus_poll's simulator and ModbusDrive."""
     import dataclasses
 
-    from haptic_bus.bench.modbus_poll import bench_cycle, start_simulator, stop_simulator
     from drives.modbus.drive import CYCLE_MODES, ModbusDrive
     from drives.modbus.timing import loop_delay
+    from haptic_bus.bench.modbus_poll import bench_cycle, start_simulator, stop_simulator
     from haptic_bus.control.gate import PassivityGate
 
     process, url = start_simulator("ideal")

@@ -43,7 +43,6 @@ from typing import Callable
 
 import numpy as np
 
-from haptic_bus.bench.timing import time_per_call, timed_once
 from haptic_bus.analysis.closed_form import region_map, velocity_sampling_factor, velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.frequency import z_fund
@@ -51,6 +50,7 @@ from haptic_bus.analysis.limits import max_damping, max_stiffness
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import phi1
 from haptic_bus.analysis.poles import is_stable
+from haptic_bus.bench.timing import time_per_call, timed_once
 
 SEED = 20240606
 PERIOD = 1e-3

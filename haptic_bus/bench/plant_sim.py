@@ -27,8 +27,8 @@ from typing import Callable
 
 import numpy as np
 
-from haptic_bus.bench.timing import time_per_call
 from haptic_bus.analysis.plant import ExactPlant
+from haptic_bus.bench.timing import time_per_call
 
 M, B_FRICTION, T = 0.032, 3.62, 1e-3
 K_WALL, B_WALL, WALL_AT, DELAY = 400.0, 1.0, 1e-3, 1

@@ -18,9 +18,9 @@ from typing import Callable
 
 import numpy as np
 
+from haptic_bus.app.profiles import load_profile
 from haptic_bus.control.clock import RealClock
 from haptic_bus.control.controller import WallController
-from haptic_bus.app.profiles import load_profile
 
 PROFILE = "cia402-handle"
 _POLICIES = {getattr(os, n): n for n in ("SCHED_OTHER", "SCHED_FIFO", "SCHED_RR", "SCHED_BATCH", "SCHED_IDLE")

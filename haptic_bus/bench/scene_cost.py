@@ -25,8 +25,8 @@ import numpy as np
 
 from drives.base import CyclicInputs, Drive, DriveScaling
 from drives.canopen.drive import DEFAULT_RPDO
-from drives.cia402 import OperationMode
 from drives.canopen.pdo_codec import PdoCodec
+from drives.cia402 import OperationMode
 from haptic_bus.bench.timing import time_per_call
 from haptic_bus.control.clock import VirtualClock
 from haptic_bus.control.controller import WallController

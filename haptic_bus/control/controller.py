@@ -20,14 +20,13 @@ from typing import Callable
 import numpy as np
 
 from drives.base import Drive
-from drives.errors import DriveError
 from drives.cia402 import POSITION_ACTUAL
+from drives.errors import DriveError, ParameterError
 from haptic_bus.control.clock import VirtualClock
 from haptic_bus.control.gate import GateDecision, PassivityGate
 from haptic_bus.control.observer import PassivityObserver
 from haptic_bus.control.record import RunRecord
 from haptic_bus.control.scene import CompiledScene, compile_scene
-from drives.errors import ParameterError
 
 logger = logging.getLogger(__name__)
 
@@ -108,6 +107,7 @@ class WallController:
         self.saturated_cycles = 0
         self.peak_force = 0.0
         self.applied_scenes = 0
+        self.stopped_on_error = False
 
     # ------------------------------------------------------------------ gated changes
 
@@ -188,6 +188,7 @@ class WallController:
                     on_cycle(self)
         except DriveError as exc:
             error = str(exc)
+            self.stopped_on_error = True
             logger.error("run stopped: %s", exc)
             self._make_safe()
         return self.summary(error)

@@ -13,8 +13,8 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass, field
 
-from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from drives.errors import HapticBusError, ParameterError
+from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from haptic_bus.analysis.limits import max_damping, max_stiffness
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
 from haptic_bus.control.scene import CompiledScene

@@ -1,10 +1,14 @@
 """The controller as a CANopen node: gated wall uploads over SDO.
 
-Object dictionary (manufacturer area), generated from the running scene:
+Object dictionary, generated from the running scene:
 
 =========  ===  =============  ====  =============================================
 index      sub  type           acc.  meaning
 =========  ===  =============  ====  =============================================
+0x1000     0    UNSIGNED32     ro    device type: 0 (no device profile)
+0x1001     0    UNSIGNED8      ro    error register: bit 0 once the run stopped on an error
+0x1017     0    UNSIGNED16     ro    producer heartbeat time, ms (the master's, set by the profile)
+0x1018     1-4  UNSIGNED32     ro    identity: vendor 0, product "HBUS", revision, serial 0
 0x2000     0    UNSIGNED8      ro    number of scene objects ``n``
 0x2001     0    UNSIGNED8      wo    commit: write 1 to pass the staged K/B through the gate
 0x2002     0    VISIBLE_STRING ro    the last commit's outcome ("accepted ..." or the reason)
@@ -17,7 +21,11 @@ Writes to sub 1/2 only stage values; a commit judges the whole staged set with t
 either stages it for the controller's next cycle boundary or answers with SDO abort
 0x06090030 (invalid value), logs the reason, keeps it at 0x2002, and drops the staged
 values: a refused commit leaves the running scene exactly as it was.  The node has its own
-bus handle and network, so SDO traffic and the gate run outside the control thread.
+bus handle and network, so SDO traffic and the gate run outside the control thread.  Its
+boot-up and heartbeat come from the CANopen master of the same process
+(:class:`drives.canopen.heartbeat.HeartbeatProducer`, node id ``SafetySettings.master_node_id``),
+which is the same node seen from the bus; a sub-index on a single-value object is refused
+with abort 0x06090011.
 """
 
 from __future__ import annotations
@@ -28,10 +36,14 @@ from typing import Any, Mapping
 
 import canopen
 from canopen import LocalNode, SdoAbortedError
-from canopen.objectdictionary import ODRecord, ODVariable, ObjectDictionary, datatypes
+from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable, datatypes
 
+from drives.canopen.local_node import refuse_subindex_on_variables
+from drives.canopen.sdo import SdoAccess
+from drives.errors import HapticBusError, SdoAbortError
+from haptic_bus._version import __version__
 from haptic_bus.control.controller import WallController
-from drives.errors import HapticBusError
+from haptic_bus.validation import whole_in_range
 
 logger = logging.getLogger(__name__)
 
@@ -51,12 +63,27 @@ def _variable(name: str, index: int, subindex: int, data_type: int, access: str)
     return var
 
 
-def controller_dictionary(names: list[str]) -> ObjectDictionary:
+PRODUCT_CODE = 0x48425553  # "HBUS"
+
+
+def _constant(name: str, index: int, subindex: int, data_type: int, value: int) -> ODVariable:
+    var = _variable(name, index, subindex, data_type, "ro")
+    var.default = value
+    return var
+
+
+def controller_dictionary(names: list[str], heartbeat_ms: int = 0) -> ObjectDictionary:
     """The controller node's object dictionary for scene objects ``names`` (in order)."""
     od = ObjectDictionary()
-    device_type = _variable("Device type", 0x1000, 0, datatypes.UNSIGNED32, "ro")
-    device_type.default = 0
-    od.add_object(device_type)
+    od.add_object(_constant("Device type", 0x1000, 0, datatypes.UNSIGNED32, 0))
+    od.add_object(_constant("Error register", 0x1001, 0, datatypes.UNSIGNED8, 0))
+    od.add_object(_constant("Producer heartbeat time", 0x1017, 0, datatypes.UNSIGNED16, heartbeat_ms))
+    identity = ODRecord("Identity object", 0x1018)
+    major, minor, *_ = (int(part) for part in __version__.split(".") + ["0", "0"])
+    for sub, name, value in ((0, "Highest sub-index supported", 4), (1, "Vendor-ID", 0), (2, "Product code", PRODUCT_CODE),
+                             (3, "Revision number", major << 16 | minor), (4, "Serial number", 0)):
+        identity.add_member(_constant(name, 0x1018, sub, datatypes.UNSIGNED8 if sub == 0 else datatypes.UNSIGNED32, value))
+    od.add_object(identity)
     od.add_object(_variable("Number of scene objects", OBJECT_COUNT, 0, datatypes.UNSIGNED8, "ro"))
     od.add_object(_variable("Commit wall parameters", COMMIT, 0, datatypes.UNSIGNED8, "wo"))
     od.add_object(_variable("Last commit result", LAST_RESULT, 0, datatypes.VISIBLE_STRING, "ro"))
@@ -78,11 +105,9 @@ class ControllerNode:
     ``bus``: python-can keyword arguments (``{"interface": ..., "channel": ...}``), opened here.
     """
 
-    def __init__(self, controller: WallController, node_id: int, bus: Mapping[str, Any]) -> None:
-        if not 1 <= node_id <= 127:
-            raise HapticBusError(f"controller node id {node_id!r} is invalid; allowed: 1..127")
+    def __init__(self, controller: WallController, node_id: int, bus: Mapping[str, Any], heartbeat_ms: int = 0) -> None:
         self.controller = controller
-        self.node_id = node_id
+        self.node_id = whole_in_range("controller node id", node_id, 1, 127)
         self._names = [obj.name for obj in controller.scene.objects]
         self._staged: dict[int, list[float | None]] = {}
         self.last_result = "no commit yet"
@@ -90,7 +115,8 @@ class ControllerNode:
         self.refused = 0
         self._bus_config = dict(bus)
         self._network = canopen.Network()
-        self._node = LocalNode(node_id, controller_dictionary(self._names))
+        self._node = LocalNode(node_id, controller_dictionary(self._names, heartbeat_ms))
+        refuse_subindex_on_variables(self._node)
         self._node.add_read_callback(self._on_read)
         self._node.add_write_callback(self._on_write)
 
@@ -112,6 +138,8 @@ class ControllerNode:
         self.stop()
 
     def _on_read(self, index: int, subindex: int, od: ODVariable) -> Any:
+        if index == 0x1001:
+            return 0x01 if self.controller.stopped_on_error else 0
         if index == OBJECT_COUNT:
             return len(self._names)
         if index == LAST_RESULT:
@@ -152,27 +180,37 @@ class ControllerNode:
         logger.info("node %d: commit %s", self.node_id, self.last_result)
 
 
+class UploadRefused(HapticBusError):
+    """A running controller refused an upload (SDO abort ``abort_code``); ``reason`` is its 0x2002 text."""
+
+    def __init__(self, node_id: int, abort_code: int, reason: str) -> None:
+        self.node_id = node_id
+        self.abort_code = abort_code
+        self.reason = reason
+        super().__init__(f"controller node {node_id} refused the upload (abort 0x{abort_code:08X}): {reason}")
+
+
 def upload_walls(
     bus: Mapping[str, Any], node_id: int, changes: Mapping[int, tuple[float, float]], timeout: float = 1.0
 ) -> str:
     """Write ``{object index: (K, B)}`` to a running controller and commit; return its verdict.
 
-    Raises :class:`canopen.SdoAbortedError` (0x06090030) when the gate refuses; the message is
-    then at 0x2002, which this function reads and attaches as ``error.reason``.
+    Raises :class:`UploadRefused` when the controller aborts a write or the commit (the gate
+    refused: 0x06090030, with the reason read from 0x2002), :class:`~drives.errors.DriveTimeout`
+    when node ``node_id`` does not answer within ``timeout`` s.
     """
     network = canopen.Network()
     network.connect(**dict(bus))
     try:
         node = network.add_node(canopen.RemoteNode(node_id, controller_dictionary([])))
-        node.sdo.RESPONSE_TIMEOUT = timeout
-        for i, (K, B) in changes.items():
-            node.sdo.download(WALL_BASE + i, SUB_STIFFNESS, _REAL64.pack(K))
-            node.sdo.download(WALL_BASE + i, SUB_DAMPING, _REAL64.pack(B))
+        sdo = SdoAccess(f"controller node {node_id}", node, timeout, lambda: None)
         try:
-            node.sdo.download(COMMIT, 0, b"\x01")
-        except SdoAbortedError as error:
-            error.reason = node.sdo.upload(LAST_RESULT, 0).decode(errors="replace")
-            raise
-        return node.sdo.upload(LAST_RESULT, 0).decode(errors="replace")
+            for i, (K, B) in changes.items():
+                sdo.download(WALL_BASE + i, SUB_STIFFNESS, _REAL64.pack(K))
+                sdo.download(WALL_BASE + i, SUB_DAMPING, _REAL64.pack(B))
+            sdo.download(COMMIT, 0, b"\x01")
+        except SdoAbortError as error:
+            raise UploadRefused(node_id, error.abort_code, sdo.upload(LAST_RESULT, 0).decode(errors="replace")) from None
+        return sdo.upload(LAST_RESULT, 0).decode(errors="replace")
     finally:
         network.disconnect()

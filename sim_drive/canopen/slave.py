@@ -68,6 +68,7 @@ logger = logging.getLogger(__name__)
 FAULT_GENERIC = 0x1000
 RECV_TIMEOUT = 0.05  # s: longest the receive thread blocks before looking at its stop flag
 MAX_RECEIVE_ERRORS_IN_ROW = 100  # a bus that fails this often in a row is gone
+MAX_FRAMES_PER_WAKE = 256  # frames handled before the timers are looked at (a flood cannot starve them)
 SDO_FRAME_LENGTH = 8
 _ABORTS = {"unknown": SdoAbort.NO_OBJECT, "read-only": SdoAbort.READ_ONLY, "range": SdoAbort.VALUE_RANGE}
 _NMT_STATES = {
@@ -137,6 +138,7 @@ class CanopenSimDrive:
         self.bus_meter = bus_meter
         self.silent = False
         self.nmt = NmtState.BOOT_UP
+        self._errors_in_row = 0
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -317,33 +319,38 @@ class CanopenSimDrive:
     # ----------------------------------------------------------------- receive thread
     def _run(self) -> None:
         """Frames and timers until :meth:`stop`; if the bus is gone, stop saying alive and fault."""
-        bus = self._bus
-        errors_in_row = 0
         try:
             while not self._stop.is_set():
                 due = self.timers.next_due()
-                timeout = RECV_TIMEOUT if due is None else min(RECV_TIMEOUT, max(due - time.monotonic(), 0.0))
-                try:
-                    message = bus.recv(timeout)  # type: ignore[union-attr]
-                    errors_in_row = 0
-                except Exception as exc:  # any interface's receive failure
-                    self.counters.receive_errors += 1
-                    errors_in_row += 1
-                    logger.warning("node %d: bus receive failed (%d in a row): %r", self.node_id, errors_in_row, exc)
-                    if errors_in_row >= MAX_RECEIVE_ERRORS_IN_ROW:
-                        raise
-                    continue
+                message = self._receive(RECV_TIMEOUT if due is None else min(RECV_TIMEOUT, max(due - time.monotonic(), 0.0)))
                 with self._lock:
+                    for _ in range(MAX_FRAMES_PER_WAKE):  # everything that arrived, then the timers
+                        if message is None:
+                            break
+                        if not (self.silent or message.is_error_frame or message.is_remote_frame or message.is_extended_id):
+                            self._guarded_dispatch(message)
+                        message = self._receive(0.0)
                     self._tick(time.monotonic())
-                    if message is None or self.silent or message.is_error_frame or message.is_remote_frame:
-                        continue
-                    if not message.is_extended_id:
-                        self._guarded_dispatch(message)
         except Exception as exc:
             logger.error("node %d: cannot serve any more, heartbeat stopped and drive faulted: %r", self.node_id, exc)
             with self._lock:
                 self.timers.stop_producer()
                 self.drive.fault(EmcyCode.COMMUNICATION)
+
+    def _receive(self, timeout: float) -> can.Message | None:
+        """The next frame within ``timeout`` s, or None; a receive error is counted and dropped,
+        and re-raised only when the bus has failed :data:`MAX_RECEIVE_ERRORS_IN_ROW` times in a row."""
+        try:
+            message = self._bus.recv(timeout)  # type: ignore[union-attr]
+        except Exception as exc:  # any interface's receive failure
+            self.counters.receive_errors += 1
+            self._errors_in_row += 1
+            logger.warning("node %d: bus receive failed (%d in a row): %r", self.node_id, self._errors_in_row, exc)
+            if self._errors_in_row >= MAX_RECEIVE_ERRORS_IN_ROW:
+                raise
+            return None
+        self._errors_in_row = 0
+        return message
 
     def _tick(self, now: float) -> None:
         """Heartbeat out if due; the consumer and the RPDO deadlines."""

@@ -1,0 +1,73 @@
+"""What a master sets up so that the drive stops on its own when the master is gone (DESIGN 4.1).
+
+Bus-neutral data: the CANopen master writes it to the drive at commissioning
+(:mod:`drives.canopen.commissioning`), the Modbus master to its watchdog register.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+from drives.cia402 import AbortConnectionOption
+from drives.errors import ParameterError
+
+VIRTUAL_TIME_DEADLINE = 1.0  # s: the RPDO deadline's floor when nothing paces the loop
+ABORT_OPTIONS = {"none": 0, "fault": 1, "disable-voltage": 2, "quick-stop": 3}  # 0x6007 by name
+
+
+@dataclass(frozen=True)
+class SafetySettings:
+    """What makes the drive stop on its own when the master is gone (DESIGN 4.1).
+
+    ``master_node_id``: the node id whose heartbeat the master produces every ``heartbeat_ms``
+    (boot-up first) and the drive consumes with consumer time ``consumer_ms`` (0x1016 sub 1);
+    None: neither.  ``rpdo_deadline_periods``: the RPDO event timer 0x1400:05 as a receive
+    deadline, in cycle periods (0: none).  ``abort_option``: 0x6007 (0 nothing, 1 fault,
+    2 disable voltage, 3 quick stop).  ``strict``: refuse a drive that lacks one of these
+    objects (otherwise a warning names what is missing).
+    """
+
+    master_node_id: int | None = 127
+    heartbeat_ms: int = 20
+    consumer_ms: int = 60
+    rpdo_deadline_periods: int = 20
+    abort_option: int = int(AbortConnectionOption.FAULT)
+    strict: bool = False
+    modbus_watchdog_ms: int = 50
+
+    def __post_init__(self) -> None:
+        def check(name: str, ok: bool, allowed: str) -> None:
+            if not ok:
+                raise ParameterError(name, getattr(self, name), allowed, "CANopen safety settings")
+
+        def whole(value: object) -> bool:
+            return isinstance(value, int) and not isinstance(value, bool)
+
+        node = self.master_node_id
+        check("master_node_id", node is None or (whole(node) and 1 <= node <= 127), "1..127, or None (no heartbeat)")
+        check("heartbeat_ms", whole(self.heartbeat_ms) and 1 <= self.heartbeat_ms <= 0xFFFF, "1..65535 ms")
+        check("consumer_ms", whole(self.consumer_ms) and self.heartbeat_ms < self.consumer_ms <= 0xFFFF,
+              f"{self.heartbeat_ms + 1}..65535 ms (longer than the heartbeat period {self.heartbeat_ms} ms)")
+        check("rpdo_deadline_periods", whole(self.rpdo_deadline_periods) and 0 <= self.rpdo_deadline_periods <= 10_000,
+              "0 (none) .. 10000 cycle periods")
+        check("abort_option", whole(self.abort_option) and 0 <= self.abort_option <= 3,
+              "0 (nothing), 1 (fault), 2 (disable voltage), 3 (quick stop)")
+        check("modbus_watchdog_ms", whole(self.modbus_watchdog_ms) and 0 <= self.modbus_watchdog_ms <= 0xFFFF,
+              "0 (off) .. 65535 ms")
+
+    def for_virtual_time(self, period: float) -> SafetySettings:
+        """These settings for a loop nothing paces (virtual time, cycle period ``period`` s): the
+        RPDO deadline of at least :data:`VIRTUAL_TIME_DEADLINE` s of wall clock, so that it guards
+        against a dead master, not a busy machine that paused a lock-step run."""
+        if not self.rpdo_deadline_periods:
+            return self
+        periods = min(10_000, max(self.rpdo_deadline_periods, math.ceil(VIRTUAL_TIME_DEADLINE / period)))
+        return dataclasses.replace(self, rpdo_deadline_periods=periods)
+
+    def rpdo_deadline_ms(self, period: float) -> int:
+        """The RPDO event timer for cycle period ``period`` s, ms (0: none; at least 1 otherwise)."""
+        if not self.rpdo_deadline_periods:
+            return 0
+        return min(0xFFFF, max(1, round(self.rpdo_deadline_periods * period * 1000.0)))
