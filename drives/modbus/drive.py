@@ -43,6 +43,7 @@ from pymodbus.pdu.register_message import (
 
 from drives.base import CyclicInputs, DriveScaling
 from drives.cia402 import (
+    ABORT_CONNECTION_OPTION_CODE,
     CONTROLWORD,
     ERROR_CODE,
     MAX_TORQUE,
@@ -54,7 +55,7 @@ from drives.cia402 import (
     decode_statusword,
 )
 from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
-from drives.errors import DriveError, DriveProtocolError, DriveTimeout, ModbusLinkLost, ParameterError
+from drives.errors import DriveError, DriveProtocolError, DriveTimeout, ModbusExceptionError, ModbusLinkLost, ParameterError
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import (
     INPUT_BLOCK,
@@ -69,6 +70,7 @@ from drives.modbus.register_map import (
     encode_value,
     register_for_object,
 )
+from drives.safety import SafetySettings
 
 logger = logging.getLogger(__name__)
 
@@ -111,12 +113,13 @@ class ModbusDrive(Cia402Master):
         parity: str = "N",
         stopbits: int = 1,
         bytesize: int = 8,
+        safety: SafetySettings = SafetySettings(),
     ) -> None:
         self._setup(ModbusAddress(host, port, timeout, baudrate, parity, stopbits, bytesize), unit_id, word_order,
-                    cycle, with_position, scaling, state_timeout, check_identity)
+                    cycle, with_position, scaling, state_timeout, check_identity, safety)
 
     def _setup(self, address: ModbusAddress, unit_id: int, word_order: str, cycle: str, with_position: bool,
-               scaling: DriveScaling | None, state_timeout: float, check_identity: bool) -> None:
+               scaling: DriveScaling | None, state_timeout: float, check_identity: bool, safety: SafetySettings) -> None:
         if isinstance(unit_id, bool) or not isinstance(unit_id, int) or not 0 <= unit_id <= 247:
             raise ParameterError("unit_id", unit_id, "0..247", "Modbus drive")
         if cycle not in CYCLE_MODES:
@@ -127,6 +130,8 @@ class ModbusDrive(Cia402Master):
         self.state_timeout = state_timeout
         self.max_commands_per_step = 10_000
         self.check_identity = check_identity
+        self.safety = safety
+        self.safety_warnings: tuple[str, ...] = ()
         self.simulated_timing: str | None = None  # "ideal"/"cia402" when the server is sim_drive
         self.stats = ModbusStats()
         self.link = ModbusLink(self.name, address, self.stats)
@@ -366,6 +371,36 @@ class ModbusDrive(Cia402Master):
 
     def _before_enable(self) -> None:
         self.write_object(TARGET_TORQUE, 0)  # no stale torque at the enable edge
+        self._set_up_safety()
+
+    def _set_up_safety(self) -> None:
+        """The drive's 0x6007 and communication watchdog (register 0x002A), each read back; a drive
+        without them gets a warning naming what is missing, or a refusal when ``safety.strict``."""
+        safety = self.safety
+        missing = []
+        for spec, value, what in ((register_for_object(ABORT_CONNECTION_OPTION_CODE), safety.abort_option,
+                                   "0x6007 abort connection option code (register 0x002B)"),
+                                  (REGISTER_BY_NAME["comm_watchdog_ms"], safety.modbus_watchdog_ms,
+                                   "the communication watchdog (register 0x002A)")):
+            try:
+                self.write_registers(spec.address, encode_value(spec, value, self.word_order))
+                got = self._read_spec(spec)
+            except ModbusExceptionError as exc:
+                if exc.exception_code != 0x02:  # anything but "no such register"
+                    raise
+                missing.append(what)
+                continue
+            if got != value:
+                raise DriveProtocolError(self.name, f"{what} reads back {got} after writing {value}")
+        if not missing:
+            self.safety_warnings = ()
+            return
+        text = (f"the drive lacks {', '.join(missing)}: it will not stop on its own if this master dies; "
+                "a drive watchdog (or an emergency stop) must cover it")
+        if safety.strict:
+            raise DriveProtocolError(self.name, f"refused under the strict safety policy: {text}")
+        logger.warning("%s: %s", self.name, text)
+        self.safety_warnings = (text,)
 
     def disable(self) -> None:
         """Zero torque, DISABLE VOLTAGE, and check the drive reaches SWITCH ON DISABLED (or sits in FAULT)."""

@@ -27,6 +27,9 @@ address   regs   object  type    acc.   meaning
 0x0026    2      0x6502  U32     ro     supported drive modes
 0x0028    1      0x603F  U16     ro     error code
 0x0029    1      0x605A  I16     rw     quick stop option code
+0x002A    1      --      U16     rw     communication watchdog, ms (0 = off): no valid request for
+                                        that long with the power stage on -> 0x6007's reaction
+0x002B    1      0x6007  I16     rw     abort connection option code (1 fault, 2 disable voltage, ...)
 0x0030    2      --      U32     ro     map identity 0x48420402 ("HB", 402): checks the word order
 **manufacturer scaling** (REAL64, SI units)
 0x0040    4      --      F64     ro     velocity per count (m/s per 0x606C unit)
@@ -55,6 +58,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from drives.cia402 import (
+    ABORT_CONNECTION_OPTION_CODE,
     CONTROLWORD,
     ERROR_CODE,
     MAX_TORQUE,
@@ -170,6 +174,8 @@ REGISTERS: tuple[RegisterSpec, ...] = (
     _spec(0x0026, SUPPORTED_DRIVE_MODES, "u32"),
     _spec(0x0028, ERROR_CODE, "u16"),
     _spec(0x0029, QUICK_STOP_OPTION_CODE, "i16"),
+    RegisterSpec(0x002A, "comm_watchdog_ms", "u16", "rw", unit="ms"),
+    _spec(0x002B, ABORT_CONNECTION_OPTION_CODE, "i16"),
     RegisterSpec(0x0030, "map_identity", "u32", "ro"),
     RegisterSpec(0x0040, "velocity_per_count", "f64", "ro", unit="m/s"),
     RegisterSpec(0x0044, "position_per_count", "f64", "ro", unit="m"),

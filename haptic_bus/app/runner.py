@@ -73,7 +73,8 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     from drives.modbus.drive import ModbusDrive
     from drives.modbus.timing import loop_delay, measure_poll
 
-    drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling())
+    safety = profile.safety if options.realtime else profile.safety.for_virtual_time(profile.loop.period)
+    drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety)
     with ExitStack() as stack:
         drive.connect()
         stack.callback(drive.close)

@@ -15,11 +15,17 @@ once without advancing the plant (acyclic commissioning: the state machine walk)
 
 Exceptions: 0x02 for unmapped or read-only registers and for partial access to a multi-register
 value, 0x03 for a value outside the object's range (nothing of the request is applied).
+
+Communication watchdog (register 0x002A, ms, 0 = off): :meth:`RegisterBank.watchdog_expired`
+is true once no valid request has come for that long while the power stage is on; the
+server then applies the drive's 0x6007 reaction (:meth:`SimulatedDrive.connection_lost`,
+error code 0x8130).  Every answered request re-arms it.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Sequence
 
 from pymodbus.constants import ExcCodes
@@ -40,7 +46,7 @@ from drives.modbus.register_map import (
     encode_value,
     register_at,
 )
-from sim_drive.device import ObjectAccessError, SimulatedDrive
+from sim_drive.device import POWER_STAGE_ON, ObjectAccessError, SimulatedDrive
 
 logger = logging.getLogger("sim_drive.modbus")
 
@@ -48,6 +54,7 @@ __all__ = ["RegisterBank", "writes_command"]
 
 _COMMAND_REGISTERS = (REGISTER_BY_NAME["controlword"].address, REGISTER_BY_NAME["target_torque"].address)
 _QUICK_STOP_OPTIONS = range(9)  # the 0x605A values this drive implements: 0..8
+_WATCHDOG = REGISTER_BY_NAME["comm_watchdog_ms"]
 
 
 def writes_command(address: int, count: int) -> bool:
@@ -67,6 +74,9 @@ class RegisterBank:
         self.drive = drive
         self.word_order = word_order
         self.cycles = 0  # writes that closed a cycle
+        self.watchdog_ms = 0
+        self._last_request = time.monotonic()
+        self._watchdog_fired = False
         self._inputs = InputBlockCodec(word_order, with_position=True)
         self._sources: dict[RegisterSpec, Callable[[], int | float]] = {
             spec: drive.reader(spec.obj.index) for spec in REGISTERS if spec.obj is not None
@@ -81,13 +91,28 @@ class RegisterBank:
             "sim_time": lambda: drive.time,
             "sim_operator_energy": lambda: drive.operator_energy,
             "sim_wall_energy": lambda: drive.wall_energy,
+            "comm_watchdog_ms": lambda: self.watchdog_ms,
         }
         self._sources.update({REGISTER_BY_NAME[name]: source for name, source in extras.items()})
         writable = drive.writable_objects()
-        self._writable: dict[RegisterSpec, int] = {  # register -> the index of its object
+        self._writable: dict[RegisterSpec, int] = {  # register -> the index of its object (0: the bank's own)
             spec: spec.obj.index for spec in REGISTERS
             if spec.obj is not None and spec.access == "rw" and spec.obj.index in writable
         }
+        self._writable[_WATCHDOG] = 0
+
+    def request_served(self, now: float) -> None:
+        """A valid request was answered at ``now`` (monotonic s): the watchdog starts over."""
+        self._last_request = now
+        self._watchdog_fired = False
+
+    def watchdog_expired(self, now: float) -> bool:
+        """True once (until the next valid request) when the watchdog ran out with the power stage on."""
+        if (not self.watchdog_ms or self._watchdog_fired or self.drive.state not in POWER_STAGE_ON
+                or now - self._last_request <= self.watchdog_ms / 1000.0):
+            return False
+        self._watchdog_fired = True
+        return True
 
     def read(self, address: int, count: int) -> list[int] | int:
         """``count`` registers from ``address``, or 0x02 if any is unmapped or a value is cut."""
@@ -112,6 +137,9 @@ class RegisterBank:
             return decoded
         drive = self.drive
         for spec, value in decoded:
+            if spec is _WATCHDOG:
+                self.watchdog_ms = value
+                continue
             try:
                 drive.write_object(self._writable[spec], value)
             except ObjectAccessError as exc:

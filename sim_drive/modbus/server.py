@@ -9,10 +9,11 @@ of the request, if any.  The register semantics and the virtual time are the ban
 Around the bank, per request: a unit id other than the server's answers 0x0B; a function other
 than the holding-register ones (03, 06, 16, 22, 23) answers 0x01; one armed fault of the
 :class:`~sim_drive.modbus.faults.FaultInjector` is met (once per request, so once per FC23,
-whose write comes before its read).  When the connection that last commanded the drive (wrote
-its controlword or target torque) closes while the drive is in OPERATION ENABLED, the drive
-faults with error code 0x8100 (communication) and removes the torque, as a drive's
-communication watchdog does.
+whose write comes before its read).  Two watchdogs stop the drive when its master is gone,
+each by the drive's 0x6007 reaction (default: fault, torque zero) while the power stage is on:
+the connection that last commanded the drive (wrote its controlword or target torque) closes
+(error code 0x8100), or no valid request comes for the watchdog time of register 0x002A
+(error code 0x8130, checked every :data:`WATCHDOG_TICK` s).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import asyncio
 import contextvars
 import logging
 import threading
+import time
 import urllib.parse
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -30,9 +32,8 @@ from pymodbus.server import ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from drives.cia402 import State
 from drives.errors import ParameterError
-from sim_drive.device import SimulatedDrive
+from sim_drive.device import POWER_STAGE_ON, SimulatedDrive
 from sim_drive.modbus.bank import RegisterBank, writes_command
 from sim_drive.modbus.faults import FaultInjector
 from sim_drive.operator import OperatorModel
@@ -43,6 +44,8 @@ logger = logging.getLogger("sim_drive.modbus")
 __all__ = ["LINK_LOST_ERROR_CODE", "ModbusSimServer", "parse_modbus_url"]
 
 LINK_LOST_ERROR_CODE = 0x8100  # CiA 301 "communication, generic"
+WATCHDOG_ERROR_CODE = 0x8130  # CiA 301 "life guard error or heartbeat error"
+WATCHDOG_TICK = 0.002  # s
 _HOLDING = frozenset({3, 6, 16, 22, 23})  # function codes on holding registers
 _ADDRESS_SPACE = 0x10000  # registers 0x0000..0xFFFF: every address reaches the action
 
@@ -174,13 +177,17 @@ class ModbusSimServer:
         if values is None:
             with self.lock:
                 result = self.bank.read(address, count)
+                if not isinstance(result, int):
+                    self.bank.request_served(time.monotonic())
             if isinstance(result, int):
                 return ExcCodes(result)
             offset = address - start_address
             registers[offset : offset + count] = result
             return None
         with self.lock:
-            rc = self.bank.write(address, values)
+            rc = self.bank.write(address, values)  # type: ignore[arg-type]
+            if not rc:
+                self.bank.request_served(time.monotonic())
         if rc:
             return ExcCodes(rc)
         if writes_command(address, len(values)):
@@ -211,10 +218,20 @@ class ModbusSimServer:
             return
         self.controller = None
         with self.lock:
-            if self.drive.state is State.OPERATION_ENABLED:
-                logger.warning("%s: the commanding connection closed in OPERATION ENABLED: fault 0x%04X, torque off",
+            if self.drive.state in POWER_STAGE_ON:
+                logger.warning("%s: the commanding connection closed with the power stage on (0x%04X)",
                                self.drive.name, LINK_LOST_ERROR_CODE)
-                self.drive.fault(LINK_LOST_ERROR_CODE)
+                self.drive.connection_lost(LINK_LOST_ERROR_CODE)
+
+    async def _watch(self) -> None:
+        """The register 0x002A watchdog, every :data:`WATCHDOG_TICK` s."""
+        while True:
+            await asyncio.sleep(WATCHDOG_TICK)
+            with self.lock:
+                if self.bank.watchdog_expired(time.monotonic()):
+                    logger.warning("%s: no valid request for %d ms with the power stage on (0x%04X)",
+                                   self.drive.name, self.bank.watchdog_ms, WATCHDOG_ERROR_CODE)
+                    self.drive.connection_lost(WATCHDOG_ERROR_CODE)
 
     # ------------------------------------------------------------------ event-loop mode
     async def serve(self, stop: asyncio.Event | None = None, on_bound: Callable[[], None] | None = None) -> None:
@@ -227,6 +244,7 @@ class ModbusSimServer:
         self._stopped = stop or asyncio.Event()
         server = _TcpServer(self, self._device(), (self.host, self.requested_port))
         await server.serve_forever(background=True)
+        watchdog = asyncio.create_task(self._watch())
         try:
             sockets = getattr(server.transport, "sockets", None) or []
             self.port = sockets[0].getsockname()[1] if sockets else self.requested_port
@@ -235,6 +253,7 @@ class ModbusSimServer:
                 on_bound()
             await self._stopped.wait()
         finally:
+            watchdog.cancel()
             await server.shutdown()
 
     # ------------------------------------------------------------------ thread mode
