@@ -50,6 +50,7 @@ from drives.cia301 import (
     NmtState,
     SdoAbort,
 )
+from haptic_bus.validation import whole_in_range
 from sim_drive.bus_timing import BusLoadMeter
 from sim_drive.canopen.communication import CommunicationObjects
 from sim_drive.canopen.emergency import Emergency
@@ -57,7 +58,6 @@ from sim_drive.canopen.manufacturer import ManufacturerObjects
 from sim_drive.canopen.pdo_engine import PdoEngine, SlaveCounters
 from sim_drive.canopen.pdo_table import PdoChannel, PdoTable
 from sim_drive.canopen.timers import NodeTimers, Watchdog
-from haptic_bus.validation import whole_in_range
 from sim_drive.device import POWER_STAGE_ON, ObjectAccessError, SimulatedDrive
 from sim_drive.eds import eds_path
 from sim_drive.operator import OperatorModel
