@@ -21,7 +21,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from haptic_bus._version import __version__
+from haptic_bus._version import __version__ as __version__
 
 _HOMES = {
     "check_passivity": "haptic_bus.analysis.check",

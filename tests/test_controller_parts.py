@@ -70,10 +70,13 @@ def test_observer_flags_energy_the_interface_gave_out() -> None:
 def test_record_is_bounded_and_keeps_the_latest_rows(tmp_path) -> None:
     record = RunRecord(capacity=5)
     for k in range(12):
-        record.append(k * 1e-3, 0.1, 0.2, float(k), k, 0.0, 1e-6)
+        record.append(k * 1e-3, 0.1, 0.2, float(k), k, 0.0, 3, 0.5, k % 2 == 1, 1e-6)
     data = record.array()
     assert data.shape == (5, len(COLUMNS)) and record.total == 12
     assert list(data[:, 3]) == [7.0, 8.0, 9.0, 10.0, 11.0]
     path = record.write_csv(tmp_path / "run.csv")
     lines = path.read_text().splitlines()
     assert lines[0] == ",".join(COLUMNS) and len(lines) == 6
+    first = dict(zip(COLUMNS, lines[1].split(",")))
+    assert (first["torque_permille"], first["scene_id"], first["late"], first["scale"]) == ("7", "3", "1", "0.5")
+    assert float(first["time_s"]) == 7e-3  # repr: every float written to the last bit

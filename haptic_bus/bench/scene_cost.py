@@ -100,6 +100,7 @@ class NaiveScene:
     def __init__(self, compiled: CompiledScene) -> None:
         self.compiled = compiled
         self.contacts = compiled.contacts
+        self.stored_energy = compiled.stored_energy
         self.objects = compiled.objects
         self.pieces = [piece for obj in compiled.objects for piece in obj.pieces()]
 

@@ -22,8 +22,9 @@ class VirtualClock:
         self.period = period
         self.overruns = 0
 
-    def wait_next(self, cycle: int) -> None:
-        """Return at once: the drive's plant advances exactly ``T`` per SYNC."""
+    def wait_next(self, cycle: int) -> float:
+        """Return at once (lateness 0 s): the drive's plant advances exactly ``T`` per SYNC."""
+        return 0.0
 
     def lateness(self) -> np.ndarray:
         """Virtual time is never late."""
@@ -44,8 +45,8 @@ class RealClock:
         self._count = 0
         self.overruns = 0
 
-    def wait_next(self, cycle: int) -> None:
-        """Block until cycle ``cycle``'s deadline; record how late it started (s)."""
+    def wait_next(self, cycle: int) -> float:
+        """Block until cycle ``cycle``'s deadline; return (and record) how late it started, s."""
         now = time.perf_counter_ns()
         if self._start is None:
             self._start = now
@@ -58,9 +59,11 @@ class RealClock:
         late = now - deadline
         if late > self._period_ns:
             self.overruns += 1
+        lateness = late / 1e9
         if self._count < self._late.size:
-            self._late[self._count] = late / 1e9
+            self._late[self._count] = lateness
             self._count += 1
+        return lateness
 
     def lateness(self) -> np.ndarray:
         """How late each cycle started after its deadline, in s."""

@@ -3,32 +3,46 @@
 Each cycle: ``read_inputs`` (on CANopen: SYNC out, the drive's TPDO back) -> integrate the
 position exactly as the seed's backward difference does, ``x_k = x_{k-1} + T v_k``, but in
 the drive's integer velocity units (an exact integer sum, so ten million cycles add no
-rounding) -> the compiled scene's force -> saturate at the profile's limit (counted) ->
-torque target in per mille -> ``write_outputs``.  A passivity observer and a bounded record
-run beside it.  Wall changes pass the gate first, in the caller's thread, and take effect
-whole at the next cycle boundary; a refused change leaves the running scene untouched.
+rounding) -> the scene's force, times the start ramp's scale -> saturate at the profile's
+limit (counted) -> torque target in per mille -> ``write_outputs``.  Beside it: the passivity
+observer, the supervisor (lateness and the observer against the gate's assumptions,
+:mod:`~haptic_bus.control.supervisor`), a bounded record and the run's events.  Wall changes
+pass the gate first, in the caller's thread, and take effect whole at the next cycle boundary
+(:mod:`~haptic_bus.control.scenes`); a refused change leaves the running scene untouched.
+
+A run ends with torque zero and the drive disabled whatever ends it: the cycles done, the stop
+flag, a drive error, an assumption broken, Ctrl-C; the summary says which (``exit_reason``).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
 from drives.base import Drive
 from drives.cia402 import POSITION_ACTUAL
 from drives.errors import DriveError, ParameterError
-from haptic_bus.control.clock import VirtualClock
+from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.gate import GateDecision, PassivityGate
 from haptic_bus.control.observer import PassivityObserver
-from haptic_bus.control.record import RunRecord
-from haptic_bus.control.scene import CompiledScene, compile_scene
+from haptic_bus.control.record import EventLog, RunRecord
+from haptic_bus.control.scene import CompiledScene
+from haptic_bus.control.scenes import SceneEntry, SceneSlot
+from haptic_bus.control.supervisor import Action, Alarm, AssumptionBroken, Supervisor, SupervisorPolicy
 
 logger = logging.getLogger(__name__)
+
+Derate = Callable[[CompiledScene, float], "tuple[PassivityGate, CompiledScene, GateDecision] | None"]
+"""Given the running scene and the observed loop delay (samples): a gate for that loop, the scene
+scaled down so that it passes it, and the decision; None if no scale passes."""
+
+EXIT_REASONS = ("completed", "stopped", "interrupted", "drive error", "assumption broken")
 
 
 def encoder_origin(drive: Drive) -> float:
@@ -39,7 +53,7 @@ def encoder_origin(drive: Drive) -> float:
 class PositionIntegrator:
     """``x_k = x_0 + T * velocity_per_count * sum(v_counts)``: an exact integer sum, one rounding."""
 
-    __slots__ = ("step", "origin", "counts")
+    __slots__ = ("counts", "origin", "step")
 
     def __init__(self, period: float, velocity_per_count: float, origin: float = 0.0) -> None:
         self.step = period * velocity_per_count  # m per (count * cycle)
@@ -54,28 +68,42 @@ class PositionIntegrator:
 
 @dataclass
 class RunSummary:
-    """What a run did: counts, peaks, energy (J), compute time percentiles (s), and its end."""
+    """What a run did: counts, peaks, energy (J), compute and lateness percentiles (s), and its end.
+
+    ``exit_reason`` is one of :data:`EXIT_REASONS`; ``error`` the message that ended it early.
+    """
 
     cycles: int
     saturated_cycles: int
     peak_force: float
     wall_energy: float
     interface_energy: float
+    least_interface_energy: float
     observer_active_cycles: int
-    observer_flagged: bool
     compute_percentiles: dict[str, float]
     clock: str
     overruns: int
     lateness_percentiles: dict[str, float]
+    late_cycles: int
+    alarms: int
+    exit_reason: str = "completed"
     error: str | None = None
     warnings: list[str] = field(default_factory=list)
+
+    @property
+    def observer_flagged(self) -> bool:
+        """True once the interface gave the operator more energy than it held."""
+        return self.observer_active_cycles > 0
 
 
 class WallController:
     """Renders a gated scene on ``drive`` every ``period`` s.
 
-    ``force_limit`` (N) saturates the wall force; ``clock`` is a :class:`VirtualClock` or
-    :class:`RealClock`; ``record_capacity`` bounds the record.
+    ``force_limit`` (N) saturates the wall force; ``clock`` is a :class:`VirtualClock` (default)
+    or :class:`RealClock`; ``record_capacity`` bounds the record; ``origin`` (m) is the handle's
+    position at the first cycle; ``supervisor`` the policy (None: no supervision);
+    ``ramp_time`` (s) scales the force from 0 to 1 over the first seconds (0: none; the caller
+    proves every scaled wall passive); ``derate`` is what a "derate" alarm calls.
     """
 
     def __init__(
@@ -85,142 +113,190 @@ class WallController:
         scene: CompiledScene,
         *,
         force_limit: float,
-        clock=None,
+        clock: VirtualClock | RealClock | None = None,
         record_capacity: int = 200_000,
         origin: float = 0.0,
+        supervisor: SupervisorPolicy | None = None,
+        ramp_time: float = 0.0,
+        derate: Derate | None = None,
     ) -> None:
+        if not (isinstance(ramp_time, (int, float)) and 0.0 <= ramp_time < math.inf):
+            raise ParameterError("ramp_time", ramp_time, "a finite time >= 0 s", "controller")
         self.drive = drive
-        self.gate = gate
         self.period = gate.device.T
         self.force_limit = force_limit
         self.clock = clock if clock is not None else VirtualClock(self.period)
-        self.decision = gate.admit(scene)
-        self._scene = scene
-        self._latest = scene  # the last accepted upload; the loop adopts it at a cycle boundary
-        self._upload_lock = threading.Lock()
-        scaling = drive.scaling
-        self.integrator = PositionIntegrator(self.period, scaling.velocity_per_count, origin)
+        self.events = EventLog()
+        self.scenes = SceneSlot(gate, scene, self.events, self.now)
+        self.integrator = PositionIntegrator(self.period, drive.scaling.velocity_per_count, origin)
         device = gate.device
-        self.observer = PassivityObserver(self.period, device.delay, device.m, device.b)
+        tolerance = supervisor.observer_limit if supervisor is not None else 0.0
+        self.observer = PassivityObserver(self.period, math.ceil(device.delay), device.m, device.b, tolerance,
+                                          initial_energy=scene.stored_energy(origin))
+        self.supervisor = Supervisor(supervisor, self.period, device.delay) if supervisor is not None else None
         self.record = RunRecord(record_capacity)
+        self.ramp_cycles = round(ramp_time / self.period)
+        self._derate = derate
         self.cycles = 0
         self.saturated_cycles = 0
         self.peak_force = 0.0
-        self.applied_scenes = 0
         self.stopped_on_error = False
 
     # ------------------------------------------------------------------ gated changes
 
+    def now(self) -> float:
+        """The run's clock: virtual time of the current cycle, s."""
+        return self.cycles * self.period
+
+    @property
+    def gate(self) -> PassivityGate:
+        """The gate every change passes (a derate's, after a derate)."""
+        return self.scenes.gate
+
+    @property
+    def decision(self) -> GateDecision:
+        """The gate's decision on the scene running now."""
+        return self.scenes.running.decision
+
     @property
     def scene(self) -> CompiledScene:
         """The scene the loop renders now."""
-        return self._scene
+        return self.scenes.running.scene
 
     @property
     def latest_scene(self) -> CompiledScene:
         """The scene of the last accepted upload (running, or staged for the next cycle)."""
-        return self._latest
+        return self.scenes.latest.scene
+
+    @property
+    def applied_scenes(self) -> int:
+        """Scenes adopted after the first."""
+        return self.scenes.applied
 
     def upload_scene(self, scene: CompiledScene) -> GateDecision:
         """Gate ``scene`` and stage it for the next cycle boundary; raise GateRefusal if refused."""
-        with self._upload_lock:
-            decision = self.gate.admit(scene)
-            self._latest = scene
-            return decision
+        return self.scenes.upload(scene)
 
     def set_wall(self, name: str, stiffness: float, damping: float) -> GateDecision:
         """Change one object's ``K`` (N/m) and ``B`` (N s/m) together, through the gate."""
-        return self.set_walls({name: (stiffness, damping)})
+        return self.scenes.set_walls({name: (stiffness, damping)})
 
     def set_walls(self, changes: dict[str, tuple[float, float]]) -> GateDecision:
         """Change several objects' ``(K, B)`` as one upload: all pass the gate, or none applies."""
-        with self._upload_lock:
-            base = self._latest
-            objects = base.by_name()
-            unknown = sorted(set(changes) - set(objects))
-            if unknown:
-                raise ParameterError("object", unknown[0], f"one of {sorted(objects)}", "scene")
-            changed = [obj.with_parameters(*changes[obj.name]) if obj.name in changes else obj for obj in base.objects]
-            scene = compile_scene(changed)
-            decision = self.gate.admit(scene)
-            self._latest = scene
-            return decision
+        return self.scenes.set_walls(changes)
 
     # ------------------------------------------------------------------ the cycle
 
-    def step(self) -> None:
-        """One cycle: inputs, position, force, saturation, torque out, observer, record."""
-        latest = self._latest  # one read: the whole accepted scene, never half of one
-        if latest is not self._scene:  # nothing is cleared, so no upload can be lost
-            self._scene = latest
-            self.applied_scenes += 1
-        inputs = self.drive.read_inputs()
+    def step(self, lateness: float = 0.0) -> None:
+        """One cycle: inputs, position, force, saturation, torque out, observer, supervisor, record.
+
+        ``lateness`` (s) is how late the cycle started (the clock's); an alarm the supervisor
+        raises acts after the cycle is recorded.
+        """
+        entry: SceneEntry = self.scenes.adopt()  # one read: the whole accepted scene, never half of one
+        drive = self.drive
+        inputs = drive.read_inputs()
         started = time.perf_counter()
-        scaling = self.drive.scaling
+        scaling = drive.scaling
         v = inputs.velocity * scaling.velocity_per_count
         x = self.integrator.add(inputs.velocity)
-        force = self._scene.force(x, v)
+        force = entry.scene.force(x, v)
+        scale = 1.0 if self.cycles >= self.ramp_cycles else (self.cycles + 1) / self.ramp_cycles
+        force *= scale
         limit = self.force_limit
         if force > limit or force < -limit:
             force = limit if force > 0 else -limit
             self.saturated_cycles += 1
         torque = scaling.torque_permille(-force)  # the motor pushes against the wall force
-        self.drive.write_outputs(torque)
+        drive.write_outputs(torque)
         compute = time.perf_counter() - started
         energy = self.observer.update(v, force)
+        late, alarm = self.supervisor.cycle(lateness, energy) if self.supervisor is not None else (False, None)
         if abs(force) > self.peak_force:
             self.peak_force = abs(force)
-        self.record.append(self.cycles * self.period, v, x, force, torque, energy, compute)
+        self.record.append(self.cycles * self.period, x, v, force, torque, energy, entry.scene_id, scale, late, compute)
         self.cycles += 1
+        if alarm is not None:
+            self._act(alarm)
+
+    def _act(self, alarm: Alarm) -> None:
+        self.events.add(self.now(), "alarm", alarm.message, kind=alarm.kind, action=alarm.action.value)
+        if alarm.action is Action.WARN:
+            logger.warning("supervisor: %s", alarm.message)
+            return
+        assumed = self.supervisor.assumed_delay if self.supervisor is not None else 0.0
+        if alarm.action is Action.DERATE and alarm.observed_delay is not None and self._derate is not None:
+            derated = self._derate(self.scene, alarm.observed_delay)
+            if derated is not None:
+                gate, scene, decision = derated
+                entry = self.scenes.replace(gate, scene, decision, f"derate to a loop delay of {alarm.observed_delay:.3g} samples")
+                self.events.add(self.now(), "derate", f"scene {entry.scene_id}: {entry.origin}",
+                                scene_id=entry.scene_id, worst_margin=decision.worst_margin)
+                logger.warning("supervisor: %s; derated (scene %d)", alarm.message, entry.scene_id)
+                return
+        raise alarm.broken(assumed)
 
     def run(self, cycles: int, stop: threading.Event | None = None,
-            on_cycle: Callable[["WallController"], None] | None = None) -> RunSummary:
-        """Run up to ``cycles`` cycles (or until ``stop`` is set); a drive error ends the run
-        with torque zero and the drive disabled, the record kept, and the error in the summary."""
-        error = None
+            on_cycle: Callable[[WallController], None] | None = None) -> RunSummary:
+        """Run up to ``cycles`` cycles (or until ``stop`` is set).  Whatever ends the run leaves
+        torque zero and the drive disabled, the record kept, and the end in the summary."""
+        reason, error = "completed", None
         try:
             for _ in range(cycles):
                 if stop is not None and stop.is_set():
+                    reason = "stopped"
                     break
-                self.clock.wait_next(self.cycles)
-                self.step()
+                self.step(self.clock.wait_next(self.cycles))
                 if on_cycle is not None:
                     on_cycle(self)
         except DriveError as exc:
-            error = str(exc)
+            reason, error = "drive error", str(exc)
             self.stopped_on_error = True
-            logger.error("run stopped: %s", exc)
-            self._make_safe()
-        return self.summary(error)
+            self._end(exc, "fault")
+        except AssumptionBroken as exc:
+            reason, error = "assumption broken", str(exc)
+            self._end(exc, "stop")
+        except KeyboardInterrupt as exc:
+            reason, error = "interrupted", "interrupted (Ctrl-C)"
+            self._end(exc, "stop")
+        except BaseException as exc:  # a bug: still leave the drive safe, then let it surface
+            self._end(exc, "fault")
+            raise
+        return self.summary(reason, error)
 
-    def _make_safe(self) -> None:
+    def _end(self, exc: BaseException, kind: str) -> None:
+        logger.error("run stopped: %s", exc or type(exc).__name__)
+        self.events.add(self.now(), kind, str(exc) or type(exc).__name__)
         try:
             self.drive.disable()
-        except DriveError as exc:  # the drive may be gone; its own trip already zeroed torque
-            logger.error("could not disable the drive: %s", exc)
+        except DriveError as failure:  # the drive may be gone; its own trip already zeroed torque
+            logger.error("could not disable the drive: %s", failure)
 
-    def summary(self, error: str | None = None) -> RunSummary:
+    def summary(self, exit_reason: str = "completed", error: str | None = None) -> RunSummary:
         """The summary of everything run so far."""
-        compute = self.record.column("compute_s")
-        late = self.clock.lateness()
+        supervisor = self.supervisor
         return RunSummary(
             cycles=self.cycles,
             saturated_cycles=self.saturated_cycles,
             peak_force=self.peak_force,
             wall_energy=self.observer.wall_energy,
             interface_energy=self.observer.interface_energy,
+            least_interface_energy=self.observer.least_interface_energy,
             observer_active_cycles=self.observer.active_cycles,
-            observer_flagged=self.observer.flagged,
-            compute_percentiles=_percentiles(compute),
+            compute_percentiles=percentiles(self.record.column("compute_s")),
             clock=self.clock.name,
             overruns=self.clock.overruns,
-            lateness_percentiles=_percentiles(late),
+            lateness_percentiles=percentiles(self.clock.lateness()),
+            late_cycles=supervisor.late_cycles if supervisor is not None else 0,
+            alarms=supervisor.alarms if supervisor is not None else 0,
+            exit_reason=exit_reason,
             error=error,
-            warnings=list(self.decision.warnings),
+            warnings=list(self.scenes.history[0].decision.warnings),
         )
 
 
-def _percentiles(values: np.ndarray) -> dict[str, float]:
+def percentiles(values: np.ndarray) -> dict[str, float]:
+    """p50, p99, p99.9 and max of ``values`` (empty dict for none)."""
     if values.size == 0:
         return {}
     p50, p99, p999 = np.percentile(values, [50, 99, 99.9])

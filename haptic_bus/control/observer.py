@@ -8,10 +8,13 @@ interval, estimated from the velocity samples at both ends (trapezoid, m).  Two 
   interface may well have a wall that gives energy back (the handle's friction takes it), so
   this one is reported, not alarmed on.
 * ``interface_energy`` -- what the operator has put into the interface as the gate models
-  it: the wall's energy plus the configured friction's ``b sum v^2 T`` plus the handle's
-  kinetic energy ``m v^2 / 2``.  The gate promises it never goes negative; when it does the
-  observer counts the cycle and raises its flag.  It trusts the configured ``m`` and ``b``:
-  a wrong effective ``b`` is invisible to it (it only sees sampled velocity).
+  it, plus what the interface held at the start: the wall's energy plus the configured
+  friction's ``b sum v^2 T`` plus the handle's kinetic energy ``m v^2 / 2`` plus
+  ``initial_energy`` (the springs the run starts in contact with, ``sum K (x0 - a)^2 / 2``).
+  Passivity says the operator can never take out more than that: the sum never goes
+  negative.  When it does, the observer counts the cycle and keeps the lowest value.  It
+  trusts the configured ``m`` and ``b``: a wrong effective ``b`` is invisible to it (it only
+  sees sampled velocity).
 """
 
 from __future__ import annotations
@@ -22,17 +25,19 @@ from collections import deque
 class PassivityObserver:
     """Energies in J; ``active_cycles`` counts cycles with ``interface_energy < -tolerance``."""
 
-    def __init__(self, period: float, delay: int, mass: float, friction: float, tolerance: float = 0.0) -> None:
+    def __init__(self, period: float, delay: int, mass: float, friction: float, tolerance: float = 0.0,
+                 initial_energy: float = 0.0) -> None:
         self.period = period
         self.mass = mass
         self.friction = friction
         self.tolerance = tolerance
+        self.initial_energy = initial_energy
         self._forces: deque[float] = deque([0.0] * (delay + 1), maxlen=delay + 1)
         self._last_velocity: float | None = None
         self.wall_energy = 0.0
         self.dissipated = 0.0
-        self.interface_energy = 0.0
-        self.least_interface_energy = 0.0
+        self.interface_energy = initial_energy
+        self.least_interface_energy = initial_energy
         self.active_cycles = 0
 
     @property
@@ -48,7 +53,8 @@ class PassivityObserver:
             T = self.period
             self.wall_energy += self._forces[0] * 0.5 * (last + velocity) * T  # force over the interval just ended
             self.dissipated += self.friction * 0.5 * (last * last + velocity * velocity) * T
-            self.interface_energy = self.wall_energy + self.dissipated + 0.5 * self.mass * velocity * velocity
+            kinetic = 0.5 * self.mass * velocity * velocity
+            self.interface_energy = self.initial_energy + self.wall_energy + self.dissipated + kinetic
             if self.interface_energy < self.least_interface_energy:
                 self.least_interface_energy = self.interface_energy
             if self.interface_energy < -self.tolerance:

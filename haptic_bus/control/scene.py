@@ -157,7 +157,24 @@ class CompiledScene:
         return {wall: tuple(sorted(names)) for wall, names in found.items()}
 
     def by_name(self) -> dict[str, SceneObject]:
+        """The scene's objects by name."""
         return {obj.name: obj for obj in self.objects}
+
+    def contact(self, x: float) -> tuple[tuple[str, ...], float, float]:
+        """At position ``x`` (m): the objects acting, the force they exert at rest (N, opposing the
+        handle) and their summed stiffness (N/m); a handle at rest inside a wall feels that force."""
+        i = bisect.bisect_right(self.breaks, x)
+        return self.contributors[i], self.stiffness[i] * x - self.stiffness_anchor[i], self.stiffness[i]
+
+    def stored_energy(self, x: float) -> float:
+        """The energy (J) the springs acting at ``x`` (m) hold: ``sum K (x - anchor)^2 / 2``."""
+        return math.fsum(0.5 * K * (x - anchor) ** 2
+                         for obj in self.objects
+                         for start, end, K, anchor, _ in obj.pieces() if start <= x < end)
+
+    def scaled(self, factor: float) -> CompiledScene:
+        """The same objects with every ``K`` and ``B`` times ``factor`` (dimensionless, >= 0)."""
+        return compile_scene(obj.with_parameters(factor * obj.stiffness, factor * obj.damping) for obj in self.objects)
 
 
 def compile_scene(objects: Iterable[SceneObject]) -> CompiledScene:

@@ -1,0 +1,115 @@
+"""The scene a running controller renders, and every change to it, each through the gate.
+
+Uploads (the Python API, SDO writes to the controller node) are judged in the caller's thread
+and staged; the control loop adopts the last accepted one at a cycle boundary, whole, by
+reference (nothing is ever cleared, so no upload can be lost between a read and a clear).
+Every scene that is ever in effect gets an id; the history keeps its objects and the gate's
+decision (what ``run.json`` reports).  A derate (the supervisor's) is adopted at once by the
+control thread itself.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from drives.errors import ParameterError
+from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
+from haptic_bus.control.record import EventLog
+from haptic_bus.control.scene import CompiledScene, compile_scene
+
+
+@dataclass(frozen=True)
+class SceneEntry:
+    """A scene that was in effect (or staged): its id, where it came from, the gate's decision."""
+
+    scene_id: int
+    origin: str
+    scene: CompiledScene
+    decision: GateDecision
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: every object's K and B, and the gate's margin for each contact wall."""
+        return {
+            "scene_id": self.scene_id,
+            "origin": self.origin,
+            "objects": [{"name": o.name, "kind": type(o).__name__.lower(), "stiffness": o.stiffness, "damping": o.damping}
+                        for o in self.scene.objects],
+            "walls": [{"objects": list(w.objects), "K": w.K, "B": w.B, "margin": w.verdict.margin,
+                       "critical_theta": w.verdict.critical_theta} for w in self.decision.walls],
+            "worst_margin": self.decision.worst_margin,
+            "warnings": list(self.decision.warnings),
+        }
+
+
+class SceneSlot:
+    """The running scene, the last accepted one, and their history (module docstring).
+
+    ``now`` gives the run's clock (s) for events; ``events`` receives "upload" and "refused".
+    """
+
+    def __init__(self, gate: PassivityGate, scene: CompiledScene, events: EventLog, now: Callable[[], float]) -> None:
+        self.gate = gate
+        self.events = events
+        self._now = now
+        self._lock = threading.Lock()
+        first = SceneEntry(0, "profile", scene, gate.admit(scene))
+        self.history: list[SceneEntry] = [first]
+        self.running = first
+        self._latest = first
+        self.applied = 0  # scenes adopted after the first
+
+    @property
+    def latest(self) -> SceneEntry:
+        """The last accepted scene (running, or staged for the next cycle boundary)."""
+        return self._latest
+
+    def upload(self, scene: CompiledScene, origin: str = "upload") -> GateDecision:
+        """Gate ``scene`` and stage it for the next cycle boundary; GateRefusal (logged) if refused."""
+        with self._lock:
+            return self._admit(scene, origin)
+
+    def set_walls(self, changes: dict[str, tuple[float, float]], origin: str = "upload") -> GateDecision:
+        """Change several objects' ``(K, B)`` (N/m, N s/m) as one upload: all pass the gate, or none applies."""
+        with self._lock:
+            base = self._latest.scene
+            objects = base.by_name()
+            unknown = sorted(set(changes) - set(objects))
+            if unknown:
+                raise ParameterError("object", unknown[0], f"one of {sorted(objects)}", "scene")
+            changed = [obj.with_parameters(*changes[obj.name]) if obj.name in changes else obj for obj in base.objects]
+            return self._admit(compile_scene(changed), origin)
+
+    def _admit(self, scene: CompiledScene, origin: str) -> GateDecision:
+        try:
+            decision = self.gate.admit(scene)
+        except GateRefusal as refusal:
+            self.events.add(self._now(), "refused", f"{origin} refused by the gate", reasons=list(refusal.decision.reasons))
+            raise
+        entry = SceneEntry(len(self.history), origin, scene, decision)
+        self.history.append(entry)
+        self._latest = entry
+        self.events.add(self._now(), "upload", f"{origin} accepted as scene {entry.scene_id}",
+                        scene_id=entry.scene_id, worst_margin=decision.worst_margin)
+        return decision
+
+    def adopt(self) -> SceneEntry:
+        """At a cycle boundary: the last accepted scene becomes the running one (one read, whole)."""
+        latest = self._latest
+        if latest is not self.running:
+            self.running = latest
+            self.applied += 1
+        return latest
+
+    def replace(self, gate: PassivityGate, scene: CompiledScene, decision: GateDecision, origin: str) -> SceneEntry:
+        """From the control thread: ``scene``, judged by ``gate``, runs from now on and stays the
+        latest; later uploads are judged by ``gate`` (a derate's: the loop as observed)."""
+        with self._lock:
+            self.gate = gate
+            entry = SceneEntry(len(self.history), origin, scene, decision)
+            self.history.append(entry)
+            self._latest = self.running = entry
+            self.applied += 1
+            return entry

@@ -1,0 +1,155 @@
+"""The run supervisor: every cycle it measures what the gate assumed, and a policy acts on it.
+
+The gate's verdict holds for the loop it judged: the period ``T`` and the loop delay it
+assumed, the configured ``m`` and ``b``.  At run time two things can break that, and this
+module watches both (DESIGN 4.1):
+
+- **lateness**: a cycle that starts later than ``late_tolerance * T`` after its deadline held
+  the previous torque that much longer, a loop delay beyond the assumed one.  More than
+  ``late_limit`` late cycles among the last ``late_window`` is an alarm;
+- **the observer**: the interface energy (:mod:`~haptic_bus.control.observer`, which starts
+  from the energy stored in the walls the run begins in contact with) more than
+  ``observer_limit`` J below zero is an alarm.
+
+What an alarm does is the policy's (``[supervisor]`` in a profile): ``warn`` (an event, the run
+goes on), ``derate`` (the scene scaled down to what the gate proves passive at the observed
+delay; a stop if none is), ``stop`` (torque zero, drive disabled, summary, exit 3: an
+assumption of the gate broken at run time).  Every alarm is an event of the run's record.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from drives.errors import HapticBusError, ParameterError
+
+
+class Action(enum.Enum):
+    """What an alarm does."""
+
+    WARN = "warn"
+    DERATE = "derate"
+    STOP = "stop"
+
+
+class AssumptionBroken(HapticBusError):
+    """An assumption of the gate's verdict failed at run time (exit 3): ``assumption`` says which,
+    ``observed`` what was measured, ``allowed`` what the gate assumed."""
+
+    def __init__(self, assumption: str, observed: str, allowed: str) -> None:
+        self.assumption = assumption
+        self.observed = observed
+        self.allowed = allowed
+        super().__init__(f"assumption broken: {assumption}: {observed}; the gate assumed {allowed}")
+
+
+@dataclass(frozen=True)
+class SupervisorPolicy:
+    """``on_late``/``on_observer``: "warn", "derate" or "stop"; ``late_tolerance`` (fraction of
+    ``T``), ``late_window`` (cycles), ``late_limit`` (late cycles tolerated in a window),
+    ``observer_limit`` (J below zero)."""
+
+    on_late: str = Action.STOP.value
+    late_tolerance: float = 0.25
+    late_window: int = 200
+    late_limit: int = 5
+    on_observer: str = Action.STOP.value
+    observer_limit: float = 1e-3
+
+    def __post_init__(self) -> None:
+        actions = tuple(a.value for a in Action)
+        for name in ("on_late", "on_observer"):
+            if getattr(self, name) not in actions:
+                raise ParameterError(name, getattr(self, name), " or ".join(map(repr, actions)), "supervisor")
+        checks = (
+            ("late_tolerance", isinstance(self.late_tolerance, (int, float)) and 0 < self.late_tolerance <= 100,
+             "a fraction of the period in (0, 100]"),
+            ("late_window", isinstance(self.late_window, int) and 1 <= self.late_window <= 1_000_000, "1..1000000 cycles"),
+            ("late_limit", isinstance(self.late_limit, int) and 0 <= self.late_limit < self.late_window,
+             f"0..{self.late_window - 1} late cycles (fewer than the window)"),
+            ("observer_limit", isinstance(self.observer_limit, (int, float)) and 0 <= self.observer_limit < float("inf"),
+             "a finite energy >= 0 J"),
+        )
+        for name, ok, allowed in checks:
+            if not ok or isinstance(getattr(self, name), bool):
+                raise ParameterError(name, getattr(self, name), allowed, "supervisor")
+
+
+@dataclass(frozen=True)
+class Alarm:
+    """One alarm: ``kind`` ("late" or "observer"), what the policy says to do, a one-line
+    ``message``, and for lateness the loop delay observed (samples, a high quantile of the window)."""
+
+    kind: str
+    action: Action
+    message: str
+    observed_delay: float | None = None
+
+    def broken(self, assumed_delay: float) -> AssumptionBroken:
+        """The exit-3 error this alarm stands for."""
+        if self.kind == "late":
+            return AssumptionBroken("the loop delay", self.message, f"a loop delay of {assumed_delay:g} sample(s)")
+        return AssumptionBroken("the passivity observer", self.message, "an interface that never gives back more energy than it held")
+
+
+class Supervisor:
+    """Counts late cycles in a sliding window and watches the observer's energy (module docstring).
+
+    ``period`` (s) and ``assumed_delay`` (samples) are what the gate judged.  :meth:`cycle` runs
+    every cycle and costs a few comparisons; it returns whether the cycle was late and at most
+    one alarm (each kind alarms once per window, so a warning does not flood the record).
+    """
+
+    QUANTILE = 0.95  # of the window's lateness: the observed delay a derate is judged at
+
+    def __init__(self, policy: SupervisorPolicy, period: float, assumed_delay: float) -> None:
+        self.policy = policy
+        self.period = period
+        self.assumed_delay = assumed_delay
+        self.late_cycles = 0
+        self.alarms = 0
+        self._tolerance = policy.late_tolerance * period
+        self._lateness = np.zeros(policy.late_window)
+        self._late = np.zeros(policy.late_window, dtype=bool)
+        self._late_in_window = 0
+        self._slot = 0
+        self._quiet_until = {"late": 0, "observer": 0}
+        self._cycle = 0
+
+    def cycle(self, lateness: float, energy: float) -> tuple[bool, Alarm | None]:
+        """Account one cycle: its start ``lateness`` (s) and the observer's ``energy`` (J)."""
+        policy = self.policy
+        slot = self._slot
+        late = lateness > self._tolerance
+        self._late_in_window += late - bool(self._late[slot])
+        self._late[slot] = late
+        self._lateness[slot] = lateness
+        self._slot = slot + 1 if slot + 1 < policy.late_window else 0
+        self._cycle += 1
+        if late:
+            self.late_cycles += 1
+            if self._late_in_window > policy.late_limit and self._cycle >= self._quiet_until["late"]:
+                return late, self._raise("late", Action(policy.on_late), self._late_message())
+        if energy < -policy.observer_limit and self._cycle >= self._quiet_until["observer"]:
+            message = (f"the observer's interface energy is {energy * 1e3:.4g} mJ, below the -{policy.observer_limit * 1e3:.4g} mJ "
+                       "allowed: the interface gave back more energy than it held (is b or m smaller than configured?)")
+            return late, self._raise("observer", Action(policy.on_observer), message)
+        return late, None
+
+    def observed_delay(self) -> float:
+        """The loop delay (samples) the window shows: the assumed one plus a high quantile of lateness."""
+        return self.assumed_delay + float(np.quantile(self._lateness, self.QUANTILE)) / self.period
+
+    def _late_message(self) -> str:
+        worst = float(self._lateness.max())
+        return (f"{self._late_in_window} of the last {self.policy.late_window} cycles started more than "
+                f"{self.policy.late_tolerance:g} T late (worst {worst * 1e3:.3g} ms at T = {self.period * 1e3:g} ms): "
+                f"a loop delay of about {self.observed_delay():.3g} samples")
+
+    def _raise(self, kind: str, action: Action, message: str) -> Alarm:
+        self.alarms += 1
+        self._quiet_until[kind] = self._cycle + self.policy.late_window
+        return Alarm(kind, action, message, self.observed_delay() if kind == "late" else None)
