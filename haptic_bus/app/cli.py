@@ -1,21 +1,27 @@
-"""The ``haptic-bus`` command line: one subcommand per job, exit 0 ok / 1 verdict "no" / 2 bad input."""
+"""The ``haptic-bus`` command line: one subcommand per job.
+
+Exit status, everywhere: 0 ok (passive, accepted, completed); 1 a drive or bus error, or "no"
+(not passive, refused); 2 invalid input, checked before any bus or file is touched; 3 an
+assumption of the gate broken at run time; 130 interrupted (Ctrl-C).  Every failure a user
+can cause is one line on stderr, no traceback.  ``-v``/``-q`` set how much the libraries'
+logging says (``-q`` also turns the live view of ``run`` off).
+"""
 
 from __future__ import annotations
 
 import argparse
-import json
+import logging
+import math
+import os
 import pathlib
 import sys
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
-from drives.bus_config import parse_bus_option
-from drives.errors import DriveError, HapticBusError, ParameterError
-from haptic_bus.analysis.check import check_loop, format_check
-from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.app.profiles_cli import add_profiles_parser
-from haptic_bus.control.gate import GateRefusal
-
-EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
+EXIT_OK, EXIT_NO, EXIT_INVALID, EXIT_ASSUMPTION, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+NODE_IDS = (1, 127)
+UNIT_IDS = (1, 247)
+_NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
 
 
 class _OneLineParser(argparse.ArgumentParser):
@@ -25,34 +31,118 @@ class _OneLineParser(argparse.ArgumentParser):
         self.exit(EXIT_INVALID, f"{self.prog}: error: {message}\n")
 
 
+class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Help that shows every default."""
+
+
+# --------------------------------------------------------------------------- argument types
+
+def _number(text: str, name: str, low: float, high: float, low_open: bool, unit: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{name} = {text!r} is not a number") from None
+    below = value <= low if low_open else value < low
+    if not math.isfinite(value) or below or value > high:
+        bracket = "(" if low_open else "["
+        raise argparse.ArgumentTypeError(f"{name} = {text} is invalid; allowed: a finite number in {bracket}{low:g}, {high:g}] {unit}")
+    return value
+
+
+def seconds(text: str) -> float:
+    """A duration: finite, > 0, s."""
+    return _number(text, "duration", 0.0, 1e7, True, "s")
+
+
+def timeout(text: str) -> float:
+    """A timeout: finite, > 0, s."""
+    return _number(text, "timeout", 0.0, 3600.0, True, "s")
+
+
+def _whole(text: str, name: str, low: int, high: int) -> int:
+    try:
+        value = int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{name} = {text!r} is not an integer") from None
+    if not low <= value <= high:
+        raise argparse.ArgumentTypeError(f"{name} = {value} is invalid; allowed: {low}..{high}")
+    return value
+
+
+def node_id(text: str) -> int:
+    """A CANopen node id, 1..127."""
+    return _whole(text, "node id", *NODE_IDS)
+
+
+def unit_id(text: str) -> int:
+    """A Modbus unit id, 1..247 (0 is broadcast: no answer)."""
+    return _whole(text, "unit id", *UNIT_IDS)
+
+
+def modbus_url(text: str) -> str:
+    """``tcp://HOST:PORT`` (port 1..65535) or ``rtu:/dev/...``."""
+    from drives.errors import ParameterError
+    from drives.modbus.link import ModbusAddress
+
+    try:
+        ModbusAddress.from_url(text)
+    except ParameterError as exc:
+        raise argparse.ArgumentTypeError(f"--modbus {text!r} is invalid; allowed: {exc.allowed}") from None
+    return text
+
+
+def bus_option(text: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` for python-can (ints where they parse)."""
+    from drives.bus_config import parse_bus_option
+
+    return parse_bus_option(text)
+
+
 def _add_device_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mass", type=float, required=True, help="handle mass m, kg")
     parser.add_argument("--friction", type=float, required=True, help="viscous friction b, N s/m")
     parser.add_argument("--period", type=float, required=True, help="sampling period T, s")
-    parser.add_argument("--delay", type=float, default=0, help="loop delay d in whole samples (0: ideal, 1: CiA-402 sync)")
+    parser.add_argument("--delay", type=float, default=0, help="loop delay d in samples (0: ideal, 1: CiA-402 sync)")
 
 
 def _add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--interface", help="python-can interface (socketcan, virtual, udp_multicast, ...)")
     parser.add_argument("--channel", help="python-can channel (can0, vcan0, a multicast group, ...)")
     parser.add_argument("--bitrate", type=int, help="bit/s")
-    parser.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
+    parser.add_argument("--bus-option", type=bus_option, action="append", default=[], metavar="KEY=VALUE",
                         help="extra python-can bus argument, e.g. port=43113 (repeatable)")
 
 
+def _bus_arguments(args: argparse.Namespace) -> dict[str, Any]:
+    bus = dict(args.bus_option)
+    for key in ("interface", "channel", "bitrate"):
+        if getattr(args, key) is not None:
+            bus[key] = getattr(args, key)
+    return bus
+
+
+# --------------------------------------------------------------------------- handlers
+
 def _check(args: argparse.Namespace) -> int:
-    loop = WallLoop(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay)
-    report = check_loop(loop)
+    import json
+
+    from haptic_bus.analysis.check import check_loop, format_check
+    from haptic_bus.analysis.loop import WallLoop
+
+    report = check_loop(WallLoop(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay))
     print(json.dumps(report.to_dict()) if args.json else format_check(report))
     return EXIT_OK if report.passive else EXIT_NO
 
 
 def _region(args: argparse.Namespace) -> int:
+    from haptic_bus.analysis.loop import WallLoop
     from haptic_bus.app.plots import plot_region
 
     loop = WallLoop(args.mass, args.friction, args.period, 0.0, 0.0, args.delay)
-    plot_region(args.png, loop.m, loop.b, loop.T, delay=loop.delay)
-    print(f"wrote {args.png}")
+    path = pathlib.Path(args.png)
+    if path.suffix.lower() != ".png":
+        path = path.with_name(path.name + ".png")
+    print(f"wrote {plot_region(path, loop.m, loop.b, loop.T, delay=loop.delay)}")
     return EXIT_OK
 
 
@@ -63,44 +153,68 @@ def _demo(args: argparse.Namespace) -> int:
     profile = load_profile(args.profile) if args.profile else None
     result = run_demo(args.out, profile, seconds=args.duration)
     print(format_demo(result))
-    return EXIT_NO if result.summary.error else EXIT_OK
+    return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(
+        result.summary.exit_reason, EXIT_NO)
 
 
-def _bus_arguments(args: argparse.Namespace) -> dict:
-    bus = dict(args.bus_option)
-    for key in ("interface", "channel", "bitrate"):
-        if getattr(args, key) is not None:
-            bus[key] = getattr(args, key)
-    return bus
+def _validate_run(args: argparse.Namespace) -> None:
+    """Refuse conflicting or ignored options before anything is touched."""
+    from drives.errors import ParameterError
+
+    if args.modbus:
+        given = [flag for flag, value in (("--interface", args.interface), ("--channel", args.channel),
+                                          ("--bitrate", args.bitrate), ("--bus-option", args.bus_option),
+                                          ("--node-id", args.node_id), ("--controller-node-id", args.controller_node_id))
+                 if value]
+        if given:
+            raise ParameterError(given[0], "given with --modbus", "only Modbus options (--unit-id) with --modbus", "run")
+        return
+    if args.unit_id is not None:
+        raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL", "run")
+    if args.node_id is None:
+        raise ParameterError("--node-id", None, "the drive's CANopen node id 1..127 (or --modbus URL)", "run")
+    if args.controller_node_id is not None and args.controller_node_id == args.node_id:
+        raise ParameterError("--controller-node-id", args.controller_node_id,
+                             f"a node id other than the drive's ({args.node_id})", "run")
 
 
 def _run(args: argparse.Namespace) -> int:
     from haptic_bus.app.profiles import load_profile
-    from haptic_bus.app.runner import RunOptions, install_stop_signals, run_canopen, run_modbus
+    from haptic_bus.app.runner import (
+        DEFAULT_CONTROLLER_NODE_ID,
+        RunOptions,
+        StopRequest,
+        exit_status,
+        run_canopen,
+        run_modbus,
+    )
 
+    _validate_run(args)
     profile = load_profile(args.profile)
-    options = RunOptions(args.duration, realtime=not args.virtual_time,
-                         out_dir=None if args.out is None else pathlib.Path(args.out))
-    install_stop_signals(options.stop)
+    stop = StopRequest()
+    options = RunOptions(args.duration, realtime=not args.virtual_time, out_dir=None if args.out is None else pathlib.Path(args.out),
+                         start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop)
+    stop.install()
     if args.modbus:
-        summary, _ = run_modbus(profile, args.modbus, args.unit_id, options)
-    elif args.node_id is None:
-        raise ParameterError("--node-id", None, "the drive's CANopen node id 1..127 (or give --modbus URL)", "run")
+        result = run_modbus(profile, args.modbus, args.unit_id or 1, options)
     else:
-        summary, _ = run_canopen(profile, _bus_arguments(args), args.node_id, options, args.controller_node_id)
-    p, late = summary.compute_percentiles, summary.lateness_percentiles
-    print(f"cycles {summary.cycles}; peak force {summary.peak_force:.4g} N; saturated {summary.saturated_cycles}; "
-          f"observer: interface energy {summary.interface_energy:.4g} J (below zero in {summary.observer_active_cycles} "
-          f"cycles), wall {summary.wall_energy:.4g} J")
-    if p:
-        print(f"compute p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us; clock: {summary.clock}")
-    if late:
-        print(f"start lateness p50 {late['p50'] * 1e6:.1f} us, p99 {late['p99'] * 1e6:.1f} us, "
-              f"max {late['max'] * 1e6:.1f} us; overruns {summary.overruns}")
-    if summary.error:
-        print(f"haptic-bus run: error: {summary.error}", file=sys.stderr)
-        return EXIT_NO
-    return EXIT_OK
+        result = run_canopen(profile, _bus_arguments(args), args.node_id, options,
+                             args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
+    summary = result.summary
+    if summary is not None:
+        p, late = summary.compute_percentiles, summary.lateness_percentiles
+        print(f"cycles {summary.cycles}; peak force {summary.peak_force:.4g} N; saturated {summary.saturated_cycles}; "
+              f"observer: interface energy {summary.interface_energy:.4g} J (least {summary.least_interface_energy:.4g} J, "
+              f"below zero in {summary.observer_active_cycles} cycles), wall {summary.wall_energy:.4g} J")
+        if p:
+            print(f"compute p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us; clock: {summary.clock}")
+        if late:
+            print(f"start lateness p50 {late['p50'] * 1e6:.1f} us, p99 {late['p99'] * 1e6:.1f} us, "
+                  f"max {late['max'] * 1e6:.1f} us; overruns {summary.overruns}; late cycles {summary.late_cycles}")
+    print(f"ended: {result.exit_reason}; wrote {', '.join(str(f) for f in result.files)}")
+    if result.error:
+        print(f"haptic-bus run: {result.exit_reason}: {result.error}", file=sys.stderr)
+    return exit_status(result.exit_reason)
 
 
 def _upload(args: argparse.Namespace) -> int:
@@ -139,57 +253,71 @@ def _sim(argv: Sequence[str]) -> int:
     return sim_main(list(argv))
 
 
+# --------------------------------------------------------------------------- parser
+
+def _add_verbosity(parser: argparse.ArgumentParser, default: object) -> None:
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("-v", "--verbose", action="count", default=default, help="more log output (-vv: debug)")
+    group.add_argument("-q", "--quiet", action="store_true", default=default, help="errors only, no live view")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand that haptic_bus itself parses."""
-    parser = _OneLineParser(prog="haptic-bus", description=__doc__)
+    parser = _OneLineParser(prog="haptic-bus", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    _add_verbosity(parser, None)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser)
 
-    check = sub.add_parser("check", help="judge one wall loop's passivity")
+    def command(name: str, help_text: str, handler: Callable[[argparse.Namespace], int]) -> argparse.ArgumentParser:
+        p = sub.add_parser(name, help=help_text, description=help_text, formatter_class=_Formatter)
+        _add_verbosity(p, argparse.SUPPRESS)
+        p.set_defaults(handler=handler)
+        return p
+
+    check = command("check", "judge one wall loop's passivity", _check)
     _add_device_arguments(check)
     check.add_argument("--stiffness", type=float, required=True, help="wall stiffness K, N/m")
     check.add_argument("--damping", type=float, required=True, help="wall damping B, N s/m")
     check.add_argument("--json", action="store_true", help="one JSON object on stdout")
-    check.set_defaults(handler=_check)
 
-    region = sub.add_parser("region", help="write the seed's Fig. 4 (alpha-beta passive regions) as PNG")
+    region = command("region", "write the seed's Fig. 4 (alpha-beta passive regions) as PNG", _region)
     _add_device_arguments(region)
-    region.add_argument("--png", required=True, help="output PNG file")
-    region.set_defaults(handler=_region)
+    region.add_argument("--png", required=True, help="output PNG file (.png is added if missing)")
 
-    demo = sub.add_parser("demo", help="simulated drive + controller on a virtual CAN bus, in virtual time")
-    demo.add_argument("--out", default="haptic-bus-demo", help="output directory for PNGs and the CSV record")
+    demo = command("demo", "simulated drive + controller on a virtual CAN bus, in virtual time", _demo)
+    demo.add_argument("--out", default="haptic-bus-demo", help="output directory for PNGs, the CSV record and run.json")
     demo.add_argument("--profile", help="profile name or TOML path (default: the shipped default)")
-    demo.add_argument("--duration", type=float, default=2.0, help="virtual seconds to run")
-    demo.set_defaults(handler=_demo)
+    demo.add_argument("--duration", type=seconds, default=2.0, help="virtual seconds to run")
 
-    run = sub.add_parser("run", help="run a profile's controller against a drive on a CAN bus")
+    run = command("run", "run a profile's controller against a drive on a CAN bus or over Modbus", _run)
     run.add_argument("profile", help="profile name or TOML path")
     _add_bus_arguments(run)
-    run.add_argument("--node-id", type=int, help="the drive's CANopen node id")
-    run.add_argument("--modbus", metavar="URL", help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
-    run.add_argument("--unit-id", type=int, default=1, help="Modbus unit id")
-    run.add_argument("--duration", type=float, default=10.0, help="seconds to run")
-    run.add_argument("--controller-node-id", type=int, default=127,
-                     help="this controller's CANopen node id: its heartbeat, which the drive watches, and gated wall uploads")
+    run.add_argument("--node-id", type=node_id, help="the drive's CANopen node id 1..127")
+    run.add_argument("--controller-node-id", type=node_id,
+                     help="this controller's CANopen node id: its heartbeat, which the drive watches, and gated wall "
+                          "uploads (default 127)")
+    run.add_argument("--modbus", type=modbus_url, metavar="URL", help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
+    run.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1; only with --modbus)")
+    run.add_argument("--duration", type=seconds, default=10.0, help="seconds to run")
     run.add_argument("--virtual-time", action="store_true", help="lock-step with a simulated drive (no pacing)")
-    run.add_argument("--out", help="directory for the CSV record")
-    run.set_defaults(handler=_run)
+    run.add_argument("--start-in-contact", choices=("refuse", "ramp"),
+                     help="a start inside an object: refuse, or ramp the force in (default: the profile's [start])")
+    run.add_argument("--out", help="folder for record.csv, run.json and plots (default: runs/<UTC time>-<profile>)")
 
-    upload = sub.add_parser("upload", help="change a running controller's wall K and B over the bus (gated)")
+    upload = command("upload", "change a running controller's wall K and B over the bus (gated)", _upload)
     _add_bus_arguments(upload)
-    upload.add_argument("--node-id", type=int, required=True, help="the controller's CANopen node id")
+    upload.add_argument("--node-id", type=node_id, required=True, help="the controller's CANopen node id")
     upload.add_argument("--object", type=int, required=True, help="scene object index (0x2100 + index)")
     upload.add_argument("--stiffness", type=float, required=True, help="K, N/m")
     upload.add_argument("--damping", type=float, required=True, help="B, N s/m")
-    upload.add_argument("--timeout", type=float, default=1.0, help="SDO timeout, s")
-    upload.set_defaults(handler=_upload)
+    upload.add_argument("--timeout", type=timeout, default=1.0, help="SDO timeout, s")
+
+    from haptic_bus.app.profiles_cli import add_profiles_parser
 
     add_profiles_parser(sub)
 
-    report = sub.add_parser("report", help="the seed's Figs. 4-6 for a profile, as PNGs, plus a markdown summary")
+    report = command("report", "the seed's Figs. 4-6 for a profile, as PNGs, plus a markdown summary", _report)
     report.add_argument("profile", help="profile name or TOML path")
     report.add_argument("--out", required=True, help="output directory")
-    report.set_defaults(handler=_report)
 
     sub.add_parser("bench", help="run time against error, the bus against its limit (see: haptic-bus bench --help)",
                    add_help=False)
@@ -200,19 +328,50 @@ def build_parser() -> argparse.ArgumentParser:
 _PASS_THROUGH: dict[str, Callable[[Sequence[str]], int]] = {"sim": _sim, "bench": _bench}
 
 
+def _configure_logging(verbose: int | None, quiet: bool | None) -> None:
+    level = logging.ERROR if quiet else {None: logging.WARNING, 0: logging.WARNING, 1: logging.INFO}.get(verbose, logging.DEBUG)
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr, force=True)
+    library_level = logging.DEBUG if (verbose or 0) >= 2 else max(level, logging.ERROR)
+    for name in _NOISY_LIBRARIES:  # their chatter ("Transfer aborted ...", "... not properly shut down") only on -vv
+        logging.getLogger(name).setLevel(library_level)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``haptic-bus``; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] in _PASS_THROUGH:
-        return _PASS_THROUGH[argv[0]](argv[1:])
-    args = build_parser().parse_args(argv)
     try:
-        return args.handler(args)
-    except HapticBusError as error:
+        if argv and argv[0] in _PASS_THROUGH:
+            return _PASS_THROUGH[argv[0]](argv[1:])
+        args = build_parser().parse_args(argv)
+        _configure_logging(args.verbose, args.quiet)
+        return _dispatch(args)
+    except KeyboardInterrupt:
+        print("haptic-bus: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:  # a reader that stopped reading (| head): nothing failed here
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_OK
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    from drives.errors import DriveError, HapticBusError, ParameterError
+    from haptic_bus.control.gate import GateRefusal
+    from haptic_bus.control.supervisor import AssumptionBroken
+
+    try:
+        return int(args.handler(args))
+    except ParameterError as error:
         print(f"haptic-bus {args.command}: error: {error}", file=sys.stderr)
-        return EXIT_NO if isinstance(error, GateRefusal) else EXIT_INVALID
+        return EXIT_INVALID
     except DriveError as error:
         print(f"haptic-bus {args.command}: drive error: {error}", file=sys.stderr)
+        return EXIT_NO
+    except AssumptionBroken as error:
+        print(f"haptic-bus {args.command}: {error}", file=sys.stderr)
+        return EXIT_ASSUMPTION
+    except (GateRefusal, HapticBusError) as error:
+        print(f"haptic-bus {args.command}: {error}", file=sys.stderr)
         return EXIT_NO
 
 

@@ -8,6 +8,7 @@ the run's PNG plots and CSV record to an output directory.
 from __future__ import annotations
 
 import bisect
+import datetime as dt
 import pathlib
 from dataclasses import dataclass
 
@@ -15,7 +16,7 @@ import numpy as np
 
 from haptic_bus.app.profiles import Profile, default_profile
 from haptic_bus.app.rig import simulated_canopen
-from haptic_bus.app.run_plots import plot_run
+from haptic_bus.app.run_folder import prepare_run_folder, run_document, write_run
 from haptic_bus.control.controller import RunSummary, WallController, encoder_origin
 from haptic_bus.control.gate import GateDecision
 
@@ -34,16 +35,15 @@ class DemoResult:
 
 
 def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, seconds: float = 2.0) -> DemoResult:
-    """Run ``profile`` (default: the shipped default) for ``seconds`` of virtual time."""
-    from haptic_bus.app.plots import plot_region
-
+    """Run ``profile`` (default: the shipped default) for ``seconds`` of virtual time; write
+    ``record.csv``, ``run.json`` and the plots to ``out_dir``, whatever ends the run (Ctrl-C too)."""
+    started = dt.datetime.now(dt.timezone.utc)
     profile = profile or default_profile()
-    out = pathlib.Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = prepare_run_folder(out_dir, profile.name)
     cycles = max(1, round(seconds / profile.loop.period))
     with simulated_canopen(profile) as (sim, drive):
-        controller = WallController(drive, profile.gate(), profile.compiled_scene(),
-                                    force_limit=profile.force_limit, origin=encoder_origin(drive))
+        controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
+                                    origin=encoder_origin(drive), supervisor=profile.supervisor)
         summary = controller.run(cycles)
         operator_energy = sim.drive.operator_energy
     record = controller.record
@@ -51,23 +51,15 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, second
     push = model.get("level") if model.get("model") == "constant" else None
     surfaces = [obj.position for obj in profile.scene if hasattr(obj, "position")]
     penetration = expected = None
-    contact = _contact_stiffness(controller, record)
+    contact = _contact_stiffness(controller, record) if record.total else None
     if isinstance(push, (int, float)) and contact is not None and surfaces:
         final_x = float(np.mean(record.column("position_m")[-max(1, cycles // 20):]))
         surface = min(surfaces, key=lambda s: abs(s - final_x))
         penetration, expected = abs(final_x - surface), abs(push) / contact
-    files = [
-        record.write_csv(out / "record.csv"),
-        plot_run(out / "position_force.png", record, f"{profile.name}: {profile.loop.timing} timing, "
-                 f"T = {profile.loop.period * 1e3:g} ms", surfaces),
-    ]
-    loop = profile.device_loop()
-    main_wall = max(controller.decision.walls, key=lambda w: w.K, default=None)
-    point = None if main_wall is None or main_wall.K == 0 or main_wall.B == 0 else (
-        main_wall.B / (main_wall.K * loop.T), loop.b / main_wall.B)
-    region = out / "region.png"
-    plot_region(region, loop.m, loop.b, loop.T, delay=loop.delay, point=point)
-    files.append(region)
+    link = {"kind": "canopen", "bus": {"interface": "virtual"}, "simulated": True}
+    extra = {"exit_reason": summary.exit_reason, "error": summary.error, "operator_energy_exact": operator_energy,
+             "loop": {"period": profile.loop.period, "timing": profile.loop.timing, "delay_assumed": profile.loop.delay}}
+    files = write_run(out, profile, controller, run_document(profile, controller, summary, link, extra, started))
     return DemoResult(profile, controller.decision, summary, penetration, expected, operator_energy, files)
 
 
@@ -97,9 +89,10 @@ def format_demo(result: DemoResult) -> str:
                  f"interface {s.interface_energy * 1e3:.4g} mJ (wall + b v^2 + kinetic; below zero in "
                  f"{s.observer_active_cycles} cycles), wall alone {s.wall_energy * 1e3:.4g} mJ")
     p = s.compute_percentiles
-    lines.append(f"cycle compute, TPDO in to RPDO sent (position, scene, conversion, encode, send): "
-                 f"p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us, max {p['max'] * 1e6:.1f} us")
+    if p:
+        lines.append(f"cycle compute, TPDO in to RPDO sent (position, scene, conversion, encode, send): "
+                     f"p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us, max {p['max'] * 1e6:.1f} us")
     if s.error:
-        lines.append(f"run ended early: {s.error}")
+        lines.append(f"run ended early ({s.exit_reason}): {s.error}")
     lines.append("wrote: " + ", ".join(str(f) for f in result.files))
     return "\n".join(lines)

@@ -33,6 +33,7 @@ from drives.safety import ABORT_OPTIONS, SafetySettings
 from haptic_bus.analysis.loop import DAMPING_RANGE, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE, STIFFNESS_RANGE
 from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene
+from haptic_bus.control.supervisor import Action, SupervisorPolicy
 from haptic_bus.validation import real_in_range, whole_in_range
 
 DEFAULT_PROFILE = "cia402-handle"
@@ -118,6 +119,19 @@ class LoopProfile:
         return TIMINGS[self.timing]
 
 
+START_POLICIES = ("refuse", "ramp")
+
+
+@dataclass(frozen=True)
+class StartPolicy:
+    """``[start]``: what a run does when the handle starts inside an object.  ``in_contact``:
+    "refuse" (default: the drive is never enabled) or "ramp" (the scene's force from 0 to 1 over
+    ``ramp_time`` s, every scaled wall on the way proven passive)."""
+
+    in_contact: str = "refuse"
+    ramp_time: float = 0.5
+
+
 @dataclass(frozen=True)
 class Profile:
     """A validated, gate-admitted operator parameter profile (SI units)."""
@@ -134,6 +148,8 @@ class Profile:
     operator_model: Mapping[str, Any] = field(hash=False, compare=True)
     path: pathlib.Path | None = None
     safety: SafetySettings = SafetySettings()
+    supervisor: SupervisorPolicy = SupervisorPolicy()
+    start: StartPolicy = StartPolicy()
 
     def device_loop(self) -> DeviceLoop:
         """The loop the gate judges: m kg, effective b N s/m, T s, delay samples."""
@@ -299,6 +315,36 @@ def _read_safety(path: pathlib.Path, table: object) -> SafetySettings:
     return SafetySettings(defaults.master_node_id, heartbeat, consumer, deadline, ABORT_OPTIONS[option], strict, watchdog)
 
 
+def _read_supervisor(path: pathlib.Path, table: object) -> SupervisorPolicy:
+    """``[supervisor]`` (optional): on_late, on_observer ("warn", "derate", "stop"), late_tolerance
+    (fraction of T), late_window (cycles), late_limit (cycles), observer_limit (J)."""
+    defaults = SupervisorPolicy()
+    if table is None:
+        return defaults
+    r = _Reader(path, "supervisor", table)
+    actions = tuple(a.value for a in Action)
+    on_late = r.text("on_late", choices=actions, default=defaults.on_late)
+    tolerance = r.real("late_tolerance", 0.0, 100.0, "of the period T", low_inclusive=False, default=defaults.late_tolerance)
+    window = r.whole("late_window", 1, 1_000_000, default=defaults.late_window)
+    limit = r.whole("late_limit", 0, window - 1, default=min(defaults.late_limit, window - 1))
+    on_observer = r.text("on_observer", choices=actions, default=defaults.on_observer)
+    observer_limit = r.real("observer_limit", 0.0, 1e6, "J", default=defaults.observer_limit)
+    r.done()
+    return SupervisorPolicy(on_late, tolerance, window, limit, on_observer, observer_limit)
+
+
+def _read_start(path: pathlib.Path, table: object) -> StartPolicy:
+    """``[start]`` (optional): in_contact ("refuse" or "ramp"), ramp_time (s)."""
+    defaults = StartPolicy()
+    if table is None:
+        return defaults
+    r = _Reader(path, "start", table)
+    policy = StartPolicy(r.text("in_contact", choices=START_POLICIES, default=defaults.in_contact),
+                         r.real("ramp_time", 0.0, 3600.0, "s", low_inclusive=False, default=defaults.ramp_time))
+    r.done()
+    return policy
+
+
 def _read_object(path: pathlib.Path, index: int, table: object) -> SceneObject:
     r = _Reader(path, f"scene.objects[{index}]", table)
     kind = r.text("kind", choices=("wall", "slot", "detent"))
@@ -395,9 +441,11 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
     scene = _read_scene(path, top.raw("scene", "a [scene] table with [[scene.objects]]"))
     operator_model = _read_operator_model(path, top.raw("operator_model", "", default=None))
     safety = _read_safety(path, top.raw("safety", "a [safety] table", default=None))
+    supervisor = _read_supervisor(path, top.raw("supervisor", "a [supervisor] table", default=None))
+    start = _read_start(path, top.raw("start", "a [start] table", default=None))
     top.done()
     return Profile(name, operator, task, description, device, loop, scene, force_limit, policy,
-                   operator_model, path, safety)
+                   operator_model, path, safety, supervisor, start)
 
 
 def load_profile(path_or_name: str | pathlib.Path) -> Profile:
@@ -434,4 +482,6 @@ def profile_to_dict(profile: Profile) -> dict[str, Any]:
         "scene": {"objects": [object_to_dict(o) for o in profile.scene]},
         "operator_model": dict(profile.operator_model),
         "safety": {k: getattr(profile.safety, k) for k in profile.safety.__dataclass_fields__ if k != "master_node_id"},
+        "supervisor": {k: getattr(profile.supervisor, k) for k in profile.supervisor.__dataclass_fields__},
+        "start": {k: getattr(profile.start, k) for k in profile.start.__dataclass_fields__},
     }

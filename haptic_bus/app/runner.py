@@ -1,108 +1,273 @@
 """``haptic-bus run``: a profile's controller against a drive on a CAN bus or over Modbus.
 
 The drive may be the simulated one in another process (``udp_multicast``, ``vcan0``, Modbus
-TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  On CANopen the
-controller also serves its wall parameters as a CANopen node
-(:mod:`haptic_bus.control.node`) so that ``haptic-bus upload`` can change them, gated,
-while it runs.  Over Modbus the gate judges the profile with the loop delay the poll
-actually has (:func:`drives.modbus.timing.loop_delay`), not the profile's CiA-402 timing.
-SIGINT/SIGTERM end the run cleanly: torque zero, drive disabled, record kept.
+TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, in order:
+
+1. the run's folder is created and shown writable (:mod:`~haptic_bus.app.run_folder`) before
+   any bus is touched;
+2. the drive is reached and commissioned (CANopen: the safety chain of ``[safety]``; Modbus: the
+   gate judges with the loop delay the poll measured, :func:`drives.modbus.timing.loop_delay`);
+3. **safe start**: the handle's position is read before enabling; inside an object the run is
+   refused (:class:`StartRefused`, the drive never enabled), or with ``in_contact = "ramp"`` the
+   force rises from 0 over ``ramp_time`` once the gate has proven every scaled wall passive;
+4. the drive is enabled and the controller cycles under the supervisor (``[supervisor]``),
+   serving gated wall uploads as a CANopen node, with a live view once a second;
+5. whatever ends it (the time, SIGTERM, Ctrl-C, a drive error, an assumption broken), the drive
+   is left disabled and ``record.csv``, ``run.json`` and the plots are written.
+
+:func:`exit_status` maps how a run ended to the command's exit status.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import datetime as dt
 import logging
+import math
 import pathlib
 import signal
 import threading
-from contextlib import ExitStack
-from typing import Any, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import ExitStack, contextmanager
+from typing import Any
 
 from drives.base import Drive
 from drives.bus_config import resolve_bus_config
-from drives.canopen.drive import CanopenDrive
+from drives.errors import DriveError, HapticBusError
+from haptic_bus.app.live import LiveView
 from haptic_bus.app.profiles import Profile
+from haptic_bus.app.run_folder import prepare_run_folder, run_document, write_run
 from haptic_bus.control.clock import RealClock, VirtualClock
-from haptic_bus.control.controller import RunSummary, WallController, encoder_origin
-from haptic_bus.control.gate import PassivityGate
-from haptic_bus.control.node import ControllerNode
+from haptic_bus.control.controller import Derate, RunSummary, WallController, encoder_origin
+from haptic_bus.control.gate import GateDecision, PassivityGate
+from haptic_bus.control.scene import CompiledScene
+from haptic_bus.control.supervisor import Action
 
 logger = logging.getLogger(__name__)
+
+DEFAULT_CONTROLLER_NODE_ID = 127
+DERATE_SCALE_STEPS = 40  # bisection steps of the derate's scale search: 2^-40 relative
+DERATE_EXTRA_SAMPLES = 3  # derated scenes are prepared for up to this many samples of extra delay
+EXIT_STATUS = {"completed": 0, "stopped": 0, "refused": 1, "drive error": 1, "assumption broken": 3, "interrupted": 130}
+
+
+class StartRefused(HapticBusError):
+    """The handle starts inside an object and the start policy is "refuse" (exit 1)."""
+
+
+class StopRequest:
+    """How a run is asked to end: SIGTERM stops it (exit 0), SIGINT interrupts it (exit 130)."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.interrupted = False
+
+    def install(self) -> None:
+        """SIGINT and SIGTERM set the event (the loop ends at the next cycle boundary)."""
+        def on_signal(signum: int, frame: object) -> None:
+            self.interrupted = self.interrupted or signum == signal.SIGINT
+            self.event.set()
+
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, on_signal)
 
 
 @dataclasses.dataclass(frozen=True)
 class RunOptions:
-    """How long (s), which clock, where the record goes, and the stop flag of one run."""
+    """One run: ``duration`` (s), real time or virtual time, the output folder (None: ``runs/...``),
+    the start-in-contact policy (None: the profile's), the live view, and the stop request."""
 
     duration: float
     realtime: bool
     out_dir: pathlib.Path | None = None
-    stop: threading.Event = dataclasses.field(default_factory=threading.Event)
+    start_in_contact: str | None = None
+    live: bool = True
+    stop: StopRequest = dataclasses.field(default_factory=StopRequest)
 
 
-DEFAULT_CONTROLLER_NODE_ID = 127
+@dataclasses.dataclass
+class RunResult:
+    """How a run ended (``exit_reason``, ``error``), what it did, and where it wrote."""
 
+    exit_reason: str
+    error: str | None
+    summary: RunSummary | None
+    controller: WallController | None
+    folder: pathlib.Path
+    files: list[pathlib.Path]
+
+
+def exit_status(reason: str) -> int:
+    """0 completed or stopped, 1 refused or a drive error, 3 an assumption broken, 130 interrupted."""
+    return EXIT_STATUS[reason]
+
+
+# --------------------------------------------------------------------------- the two links
 
 def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options: RunOptions,
-                controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID) -> tuple[RunSummary, WallController]:
+                controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID) -> RunResult:
     """Run against CANopen drive ``node_id`` on ``bus`` (python-can keyword arguments).
 
-    The controller is CANopen node ``controller_node_id``: its heartbeat (the profile's
-    ``[safety]``) is what the drive watches, and it serves gated wall uploads over SDO.
+    The controller is CANopen node ``controller_node_id``: its heartbeat (``[safety]``) is what
+    the drive watches, and it serves gated wall uploads over SDO.
     """
+    from drives.canopen.drive import CanopenDrive
+    from haptic_bus.control.node import ControllerNode
+
+    folder = prepare_run_folder(options.out_dir, profile.name)
     config = resolve_bus_config(**bus)  # python-can's config chain fills what ``bus`` leaves out
     extra = {k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")}
     period = profile.loop.period
     safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
-    drive = CanopenDrive(node_id, interface=config["interface"], channel=config.get("channel"),
-                         bitrate=config.get("bitrate"), bus_kwargs=extra, period=period,
-                         scaling=profile.scaling(), safety=safety if options.realtime else safety.for_virtual_time(period))
-    with ExitStack() as stack:
-        drive.connect()
+    link = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_id": node_id,
+            "controller_node_id": controller_node_id}
+
+    def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
+        drive = CanopenDrive(node_id, interface=config["interface"], channel=config.get("channel"),
+                             bitrate=config.get("bitrate"), bus_kwargs=extra, period=period, scaling=profile.scaling(),
+                             safety=safety if options.realtime else safety.for_virtual_time(period))
         stack.callback(drive.close)
+        drive.connect()
+        link["safety_warnings"] = list(drive.safety_warnings)
 
         def serve(controller: WallController) -> None:
             stack.enter_context(ControllerNode(controller, controller_node_id, config, safety.heartbeat_ms))
 
-        return _run(profile, drive, profile.gate(), options, serve)
+        return drive, profile.gate(), serve
+
+    return _session(profile, options, folder, link, open_drive)
 
 
-def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) -> tuple[RunSummary, WallController]:
+def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) -> RunResult:
     """Run against the Modbus drive at ``url`` (``tcp://HOST:PORT`` or ``rtu:/dev/...``)."""
     from drives.modbus.drive import ModbusDrive
     from drives.modbus.timing import loop_delay, measure_poll
 
-    safety = profile.safety if options.realtime else profile.safety.for_virtual_time(profile.loop.period)
-    drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety)
-    with ExitStack() as stack:
-        drive.connect()
-        stack.callback(drive.close)
-        poll = None if drive.simulated_timing is not None else measure_poll(drive, 500)
-        delay = loop_delay(drive, profile.loop.period, poll)
-        logger.info("Modbus poll: the gate assumes a loop delay of %d sample(s)", delay)
-        device = dataclasses.replace(profile.device_loop(), delay=delay)
-        return _run(profile, drive, PassivityGate(device, profile.gate_policy), options, None)
-
-
-def _run(profile: Profile, drive: Drive, gate: PassivityGate, options: RunOptions, serve) -> tuple[RunSummary, WallController]:
-    drive.enable()
+    folder = prepare_run_folder(options.out_dir, profile.name)
     period = profile.loop.period
-    clock = RealClock(period) if options.realtime else VirtualClock(period)
+    safety = profile.safety if options.realtime else profile.safety.for_virtual_time(period)
+    link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
+
+    def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
+        drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety)
+        stack.callback(drive.close)
+        drive.connect()
+        poll = None if drive.simulated_timing is not None else measure_poll(drive, 500)
+        delay = loop_delay(drive, period, poll)
+        link["poll"] = None if poll is None else dataclasses.asdict(poll)
+        logger.info("Modbus poll: the gate assumes a loop delay of %d sample(s)", delay)
+        gate = PassivityGate(dataclasses.replace(profile.device_loop(), delay=delay), profile.gate_policy)
+        gate.admit(profile.compiled_scene())  # the profile was judged at its own timing's delay
+        return drive, gate, lambda controller: None
+
+    return _session(profile, options, folder, link, open_drive)
+
+
+# --------------------------------------------------------------------------- one session
+
+OpenDrive = Callable[[ExitStack], "tuple[Drive, PassivityGate, Callable[[WallController], None]]"]
+
+
+def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: dict[str, Any],
+             open_drive: OpenDrive) -> RunResult:
+    started = dt.datetime.now(dt.timezone.utc)
+    controller: WallController | None = None
+    summary: RunSummary | None = None
+    extra: dict[str, Any] = {"loop": {"period": profile.loop.period, "timing": profile.loop.timing}}
+    reason, error = "completed", None
+    try:
+        with ExitStack() as stack:
+            drive, gate, serve = open_drive(stack)
+            extra["loop"]["delay_assumed"] = gate.device.delay
+            scene = profile.compiled_scene()
+            origin, ramp_time = _safe_start(profile, drive, gate, scene, options)
+            extra["start"] = {"position_m": origin, "ramp_time_s": ramp_time}
+            drive.enable()
+            period = profile.loop.period
+            clock = RealClock(period) if options.realtime else VirtualClock(period)
+            derate = prepare_derate(gate, scene) if Action.DERATE.value in (profile.supervisor.on_late,
+                                                                            profile.supervisor.on_observer) else None
+            controller = WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
+                                        supervisor=profile.supervisor, ramp_time=ramp_time, derate=derate)
+            serve(controller)
+            with _live(controller, profile, options):
+                summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
+            reason, error = summary.exit_reason, summary.error
+            if reason == "stopped" and options.stop.interrupted:
+                reason = "interrupted"
+            if reason in ("completed", "stopped", "interrupted"):
+                drive.disable()
+    except StartRefused as exc:
+        reason, error = "refused", str(exc)
+    except DriveError as exc:
+        reason, error = "drive error", str(exc)
+    except KeyboardInterrupt:
+        reason, error = "interrupted", "interrupted (Ctrl-C)"
+    finally:
+        extra["exit_reason"], extra["error"] = reason, error
+        document = run_document(profile, controller, summary, link, extra, started)
+        files = write_run(folder, profile, controller, document)
+    return RunResult(reason, error, summary, controller, folder, files)
+
+
+@contextmanager
+def _live(controller: WallController, profile: Profile, options: RunOptions) -> Iterator[None]:
+    if not options.live:
+        yield
+        return
+    with LiveView(controller, f"haptic-bus run {profile.name}"):
+        yield
+
+
+def _safe_start(profile: Profile, drive: Drive, gate: PassivityGate, scene: CompiledScene,
+                options: RunOptions) -> tuple[float, float]:
+    """The handle's position (m) before enabling, and the start ramp's time (s, 0 = none).
+
+    Inside an object: :class:`StartRefused` under "refuse"; under "ramp" the ramp time, once the
+    gate has proven every wall scaled by a factor in (0, 1] passive.
+    """
     origin = encoder_origin(drive)
-    controller = WallController(drive, gate, profile.compiled_scene(), force_limit=profile.force_limit,
-                                clock=clock, origin=origin)
-    if serve is not None:
-        serve(controller)
-    summary = controller.run(max(1, round(options.duration / period)), options.stop)
-    if summary.error is None:
-        drive.disable()
-    if options.out_dir is not None:
-        controller.record.write_csv(pathlib.Path(options.out_dir) / "record.csv")
-    return summary, controller
+    names, force, stiffness = scene.contact(origin)
+    if force == 0.0:
+        return origin, 0.0
+    depth = abs(force) / stiffness if stiffness > 0 else math.nan
+    where = f"handle is {depth * 1e3:.1f} mm inside {'+'.join(names)} (at rest it would feel {abs(force):.3g} N)"
+    policy = options.start_in_contact or profile.start.in_contact
+    if policy != "ramp":
+        raise StartRefused(f"{where}; move it out or use --start-in-contact ramp")
+    proof = gate.proves_ramp(scene)
+    if not proof.accepted:
+        raise StartRefused(f"{where}; and the start ramp is refused: " + "; ".join(proof.reasons))
+    logger.info("%s: ramping the force in over %g s", where, profile.start.ramp_time)
+    return origin, profile.start.ramp_time
 
 
-def install_stop_signals(stop: threading.Event) -> None:
-    """SIGINT and SIGTERM set ``stop`` (the loop ends at the next cycle boundary)."""
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
+def prepare_derate(gate: PassivityGate, scene: CompiledScene) -> Derate:
+    """The supervisor's derate, prepared before the run (the control loop never waits for the gate):
+    for each loop delay up to :data:`DERATE_EXTRA_SAMPLES` beyond the assumed one, the largest
+    scale of ``scene`` the gate passes at that delay (bisection, :data:`DERATE_SCALE_STEPS` steps),
+    judged again whole.  An observed delay beyond the table gets None (the supervisor stops)."""
+    table: dict[int, tuple[PassivityGate, CompiledScene, GateDecision] | None] = {}
+    assumed = math.ceil(gate.device.delay)
+    for delay in range(assumed + 1, assumed + DERATE_EXTRA_SAMPLES + 1):
+        judge = PassivityGate(dataclasses.replace(gate.device, delay=delay), gate.policy)
+        table[delay] = _largest_passing_scale(judge, scene)
+
+    def derate(running: CompiledScene, observed_delay: float) -> tuple[PassivityGate, CompiledScene, GateDecision] | None:
+        return table.get(max(assumed + 1, math.ceil(observed_delay)))
+
+    return derate
+
+
+def _largest_passing_scale(gate: PassivityGate, scene: CompiledScene) -> tuple[PassivityGate, CompiledScene, GateDecision] | None:
+    if gate.passes(scene):
+        return gate, scene, gate.admit(scene)
+    low, high = 0.0, 1.0  # an empty wall set passes: scale 0 always does
+    for _ in range(DERATE_SCALE_STEPS):
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if gate.passes(scene.scaled(middle)) else (low, middle)
+    if low == 0.0:
+        return None
+    scaled = scene.scaled(low)
+    decision = gate.judge(scaled)
+    return (gate, scaled, decision) if decision.accepted else None

@@ -26,7 +26,7 @@ class VirtualClock:
         """Return at once (lateness 0 s): the drive's plant advances exactly ``T`` per SYNC."""
         return 0.0
 
-    def lateness(self) -> np.ndarray:
+    def lateness(self, last: int | None = None) -> np.ndarray:
         """Virtual time is never late."""
         return np.zeros(0)
 
@@ -65,6 +65,7 @@ class RealClock:
             self._count += 1
         return lateness
 
-    def lateness(self) -> np.ndarray:
-        """How late each cycle started after its deadline, in s."""
-        return self._late[: self._count].copy()
+    def lateness(self, last: int | None = None) -> np.ndarray:
+        """How late each cycle started after its deadline, in s (the ``last`` ones only, if given)."""
+        start = 0 if last is None else max(0, self._count - last)
+        return self._late[start : self._count].copy()

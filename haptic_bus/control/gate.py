@@ -113,6 +113,16 @@ class PassivityGate:
                 (reasons if self.policy.bandwidth == "strict" else warnings).append(rule)
         return GateDecision(not reasons, tuple(walls), tuple(reasons), tuple(warnings))
 
+    def passes(self, scene: CompiledScene) -> bool:
+        """Whether :meth:`judge` would accept ``scene``, without the explanations of a refusal
+        (cheap enough for a search over scaled scenes)."""
+        strict = self.policy.bandwidth == "strict"
+        for K, B in scene.contacts():
+            loop = self.device.wall(K, B)
+            if _judge_wall(loop).margin < self.policy.safety_margin or (strict and K > 0 and not loop.alpha > BANDWIDTH_ALPHA):
+                return False
+        return True
+
     def admit(self, scene: CompiledScene) -> GateDecision:
         """The decision on ``scene``; raises :class:`GateRefusal` if it is refused."""
         decision = self.judge(scene)

@@ -48,6 +48,12 @@ class RunRecord:
             return self._rows[: self.total].copy()
         return np.roll(self._rows, -self._next, axis=0)
 
+    def latest(self) -> dict[str, float] | None:
+        """The newest row by column name (a copy), or None before the first cycle."""
+        if not self.total:
+            return None
+        return dict(zip(COLUMNS, self._rows[self._next - 1].tolist()))
+
     def column(self, name: str) -> np.ndarray:
         """One column by its :data:`COLUMNS` name, oldest first."""
         return self.array()[:, COLUMNS.index(name)]
