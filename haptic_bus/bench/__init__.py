@@ -92,6 +92,9 @@ def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
             try:
                 section = _runner(name)(quick, bar.tick)
                 section.setdefault("available", True)
+            except KeyboardInterrupt:  # Ctrl-C: what ran so far is still written
+                result["interrupted"] = name
+                break
             except Exception as exc:  # noqa: BLE001 - reported in the output, the run goes on
                 section = {"available": False, "reason": f"{type(exc).__name__}: {exc}",
                            "traceback": traceback.format_exc(limit=6)}
@@ -138,6 +141,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print((Path(args.out) / "bench.md").read_text())
     print(f"wrote {Path(args.out) / 'bench.json'}, {Path(args.out) / 'bench.md'}"
           + "".join(f", {p}" for p in result["plots"]))
+    if "interrupted" in result:
+        print(f"haptic-bus bench: interrupted in section {result['interrupted']}", file=sys.stderr)
+        return 130
     return 0
 
 

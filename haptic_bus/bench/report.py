@@ -51,6 +51,8 @@ def markdown(result: dict) -> str:
            f"{m['date']}; {m['platform']}; {m['cpu']} ({m['cpu_count']} CPUs); Python {m['python']}; "
            + ", ".join(f"{k} {val}" for k, val in v.items() if val) + f". Total {result['total_seconds']:.1f} s.",
            "Times are medians of repeats in this run; ratios compare figures measured side by side."]
+    if "interrupted" in result:
+        out += ["", f"**Interrupted (Ctrl-C) in section {result['interrupted']}: only the sections before it ran.**"]
     sections = result["sections"]
 
     s = sections.get("passivity")
