@@ -20,6 +20,7 @@ def quick_run(tmp_path_factory: pytest.TempPathFactory):
     return out, run_bench(out, quick=True, progress=False)
 
 
+@pytest.mark.slow
 def test_quick_bench_writes_every_file(quick_run) -> None:
     out, result = quick_run
     for name in ("bench.json", "bench.md", "passivity_time_vs_error.png", "plant_time_vs_error.png", "scene_cost.png"):
@@ -29,6 +30,7 @@ def test_quick_bench_writes_every_file(quick_run) -> None:
         assert heading in text
 
 
+@pytest.mark.slow
 def test_quick_bench_json_has_every_section_and_the_machine(quick_run) -> None:
     out, _ = quick_run
     data = json.loads((out / "bench.json").read_text())
@@ -42,6 +44,7 @@ def test_quick_bench_json_has_every_section_and_the_machine(quick_run) -> None:
         assert data["sections"][name]["available"], data["sections"][name].get("reason")
 
 
+@pytest.mark.slow
 def test_quick_bench_ratios_are_finite_and_positive(quick_run) -> None:
     _, result = quick_run
     s = result["sections"]

@@ -21,8 +21,8 @@ from drives.cia402_master import SAFE_CONTROLWORD
 from sim_drive.eds import eds_path
 from drives.errors import DriveStateError, UnsupportedModeError
 from drives.cia402 import CONTROLWORD, STATUSWORD, SUPPORTED_DRIVE_MODES, OperationMode, State, decode_statusword
-from tests.canopen_master_rig import NODE_ID, new_bus_spec, rig
 
+NODE_ID = 5  # canopen_rig's default node (the messages checked below name node 5)
 RPDO1 = 0x200 + NODE_ID
 TPDO1 = 0x180 + NODE_ID
 
@@ -55,18 +55,14 @@ def run_cycles(drive, count: int, torque: int = 200) -> int:
     return count
 
 
-def enabled_rig(**kwargs):
-    return rig("virtual", "ideal", **kwargs)
-
-
 def assert_safe_frame_last(sniffer: Sniffer) -> None:
     rpdos = sniffer.frames(RPDO1)
     assert rpdos, "the master sent no RPDO at all"
     assert struct.unpack("<Hh", rpdos[-1]) == (SAFE_CONTROLWORD, 0)
 
 
-def test_connect_configures_the_drive_over_sdo():
-    with enabled_rig(heartbeat_producer_ms=50) as r:
+def test_connect_configures_the_drive_over_sdo(canopen_rig):
+    with canopen_rig("virtual", "ideal", heartbeat_producer_ms=50) as r:
         drive = r.drive
         u32 = lambda index, sub: struct.unpack("<I", drive.sdo_read(index, sub))[0]  # noqa: E731
         assert u32(0x1006, 0) == 1000  # us
@@ -85,8 +81,8 @@ def test_connect_configures_the_drive_over_sdo():
         assert drive.scaling_sources["velocity_per_count"] == "0x2001:01"
 
 
-def test_enable_disable_and_close():
-    with enabled_rig() as r:
+def test_enable_disable_and_close(canopen_rig):
+    with canopen_rig("virtual", "ideal") as r:
         drive, sim = r.drive, r.sim
         drive.enable()
         assert sim.drive.state is State.OPERATION_ENABLED
@@ -103,8 +99,8 @@ def test_enable_disable_and_close():
         assert sim.nmt_state == "PRE-OPERATIONAL"
 
 
-def test_silent_drive_is_detected_within_the_configured_cycles():
-    with enabled_rig(tpdo_timeout=0.02, max_missed_tpdos=3) as r:
+def test_silent_drive_is_detected_within_the_configured_cycles(canopen_rig):
+    with canopen_rig("virtual", "ideal", tpdo_timeout=0.02, max_missed_tpdos=3) as r:
         drive = r.drive
         drive.enable()
         sniffer = Sniffer(r.spec.channel)
@@ -128,8 +124,8 @@ def test_silent_drive_is_detected_within_the_configured_cycles():
             sniffer.close()
 
 
-def test_emcy_raises_drive_fault_with_the_decoded_code_on_the_next_cycle():
-    with enabled_rig() as r:
+def test_emcy_raises_drive_fault_with_the_decoded_code_on_the_next_cycle(canopen_rig):
+    with canopen_rig("virtual", "ideal") as r:
         drive = r.drive
         drive.enable()
         run_cycles(drive, 5)
@@ -147,8 +143,8 @@ def test_emcy_raises_drive_fault_with_the_decoded_code_on_the_next_cycle():
             sniffer.close()
 
 
-def test_fault_bit_raises_and_fault_reset_recovers_to_operation_enabled():
-    with enabled_rig() as r:
+def test_fault_bit_raises_and_fault_reset_recovers_to_operation_enabled(canopen_rig):
+    with canopen_rig("virtual", "ideal") as r:
         drive, sim = r.drive, r.sim
         drive.enable()
         run_cycles(drive, 5)
@@ -169,8 +165,8 @@ def test_fault_bit_raises_and_fault_reset_recovers_to_operation_enabled():
         assert sim.drive.target_torque == 300
 
 
-def test_heartbeat_loss_raises_naming_the_node():
-    with enabled_rig(heartbeat_producer_ms=20, heartbeat_consumer_ms=200) as r:
+def test_heartbeat_loss_raises_naming_the_node(canopen_rig):
+    with canopen_rig("virtual", "ideal", heartbeat_producer_ms=20, heartbeat_consumer_ms=200) as r:
         drive = r.drive
         drive.enable()
         run_cycles(drive, 5)
@@ -182,8 +178,8 @@ def test_heartbeat_loss_raises_naming_the_node():
         assert "node 5" in str(info.value) and "consumer time 200 ms" in str(info.value)
 
 
-def test_wrong_length_tpdo_is_dropped_and_counted_never_decoded():
-    with enabled_rig(tpdo_timeout=0.02) as r:
+def test_wrong_length_tpdo_is_dropped_and_counted_never_decoded(canopen_rig):
+    with canopen_rig("virtual", "ideal", tpdo_timeout=0.02) as r:
         drive = r.drive
         drive.enable()
         run_cycles(drive, 10, torque=500)
@@ -197,8 +193,8 @@ def test_wrong_length_tpdo_is_dropped_and_counted_never_decoded():
         assert fresh.velocity != before.velocity and drive.stats.missed_tpdos == 1
 
 
-def test_long_tpdo_injected_on_the_bus_is_dropped_and_counted():
-    with enabled_rig() as r:
+def test_long_tpdo_injected_on_the_bus_is_dropped_and_counted(canopen_rig):
+    with canopen_rig("virtual", "ideal") as r:
         drive = r.drive
         drive.enable()
         run_cycles(drive, 3)
@@ -209,8 +205,8 @@ def test_long_tpdo_injected_on_the_bus_is_dropped_and_counted():
         assert drive.last_inputs.statusword != 0  # never decoded from the zero frame
 
 
-def test_wrong_node_id_fails_within_its_timeout_naming_the_node():
-    with rig("virtual", "ideal", node_id=NODE_ID, connect=False) as r:
+def test_wrong_node_id_fails_within_its_timeout_naming_the_node(canopen_rig):
+    with canopen_rig("virtual", "ideal", node_id=NODE_ID, connect=False) as r:
         wrong = CanopenDrive(6, interface="virtual", channel=r.spec.channel, boot_timeout=0.3, eds=eds_path())
         start = time.monotonic()
         with pytest.raises(DriveTimeout) as info:
@@ -225,8 +221,8 @@ def test_wrong_node_id_fails_within_its_timeout_naming_the_node():
     assert "nodes seen on the bus: 5" in str(info.value)
 
 
-def test_sdo_aborts_map_to_readable_protocol_errors():
-    with enabled_rig() as r:
+def test_sdo_aborts_map_to_readable_protocol_errors(canopen_rig):
+    with canopen_rig("virtual", "ideal") as r:
         drive = r.drive
         with pytest.raises(DriveProtocolError) as info:
             drive.write_object(STATUSWORD, 0)
@@ -240,8 +236,8 @@ def test_sdo_aborts_map_to_readable_protocol_errors():
             drive.sdo_read(0x2FFF, 0)
 
 
-def test_unsupported_mode_is_refused_naming_0x6502(monkeypatch):
-    with enabled_rig() as r:
+def test_unsupported_mode_is_refused_naming_0x6502(monkeypatch, canopen_rig):
+    with canopen_rig("virtual", "ideal") as r:
         drive = r.drive
         real_read = drive.read_object
         monkeypatch.setattr(drive, "read_object", lambda spec: 0 if spec is SUPPORTED_DRIVE_MODES else real_read(spec))
@@ -252,8 +248,8 @@ def test_unsupported_mode_is_refused_naming_0x6502(monkeypatch):
         assert r.sim.drive.state is State.SWITCH_ON_DISABLED  # nothing half-applied
 
 
-def test_state_machine_stall_names_the_state(monkeypatch):
-    with enabled_rig(state_timeout=0.1) as r:
+def test_state_machine_stall_names_the_state(monkeypatch, canopen_rig):
+    with canopen_rig("virtual", "ideal", state_timeout=0.1) as r:
         drive, sim = r.drive, r.sim
         real_write = sim.drive.write_object
 
@@ -268,8 +264,8 @@ def test_state_machine_stall_names_the_state(monkeypatch):
         assert "stuck in SWITCH ON DISABLED" in str(info.value) and "SHUTDOWN" in str(info.value)
 
 
-def test_torque_saturates_at_0x6072_never_wraps():
-    with enabled_rig() as r:
+def test_torque_saturates_at_0x6072_never_wraps(canopen_rig):
+    with canopen_rig("virtual", "ideal") as r:
         drive = r.drive
         drive.enable()
         drive.read_inputs()
@@ -282,8 +278,8 @@ def test_torque_saturates_at_0x6072_never_wraps():
         assert drive.stats.saturated_outputs == 2
 
 
-def test_bus_from_python_can_environment(monkeypatch):
-    spec = new_bus_spec("virtual")
+def test_bus_from_python_can_environment(monkeypatch, bus_spec):
+    spec = bus_spec("virtual")
     from sim_drive.canopen.slave import CanopenSimDrive
 
     monkeypatch.setenv("CAN_INTERFACE", "virtual")
@@ -294,8 +290,8 @@ def test_bus_from_python_can_environment(monkeypatch):
             assert drive.read_object(STATUSWORD) & 0x4F == 0x40
 
 
-def test_given_bus_and_network_are_not_shut_down():
-    spec = new_bus_spec("virtual")
+def test_given_bus_and_network_are_not_shut_down(bus_spec):
+    spec = bus_spec("virtual")
     from sim_drive.canopen.slave import CanopenSimDrive
 
     with CanopenSimDrive({"interface": "virtual", "channel": spec.channel}, NODE_ID):
@@ -330,21 +326,21 @@ def test_missing_bus_configuration_is_a_readable_error(monkeypatch):
         drive.connect()
 
 
-def test_controlword_never_leaves_fault_reset_high_after_disable():
-    with enabled_rig() as r:
+def test_controlword_never_leaves_fault_reset_high_after_disable(canopen_rig):
+    with canopen_rig("virtual", "ideal") as r:
         drive = r.drive
         drive.enable()
         drive.disable()
         assert drive.read_object(CONTROLWORD) == SAFE_CONTROLWORD
 
 
-def test_without_an_eds_scaling_comes_from_the_caller_and_the_drive():
+def test_without_an_eds_scaling_comes_from_the_caller_and_the_drive(canopen_rig):
     """eds=None: the minimal CiA-402 dictionary; no manufacturer scaling objects are known."""
-    with rig("virtual", "ideal", connect=False, eds=None) as r:
+    with canopen_rig("virtual", "ideal", connect=False, eds=None) as r:
         with pytest.raises(DriveProtocolError, match="scaling unknown for velocity_per_count.*pass scaling="):
             r.drive.connect()
     given = DriveScaling(velocity_per_count=2e-6, position_per_count=1e-7, rated_torque=9.0, force_per_torque=50.0)
-    with rig("virtual", "ideal", eds=None, scaling=given) as r:
+    with canopen_rig("virtual", "ideal", eds=None, scaling=given) as r:
         drive = r.drive
         assert drive.scaling.velocity_per_count == 2e-6  # the caller's
         assert drive.scaling.rated_torque == 0.2 and drive.scaling.max_torque_permille == 3000  # the drive's

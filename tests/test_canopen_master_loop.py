@@ -29,7 +29,12 @@ from scipy.signal import lfilter
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
 from drives.cia402 import State, decode_statusword
 from haptic_bus.analysis.plant import ExactPlant, zoh_coefficients
-from tests.canopen_master_rig import INTERFACE_PARAMS, rig
+
+INTERFACE_PARAMS = [
+    pytest.param("virtual", id="virtual-1-process"),
+    pytest.param("udp_multicast", id="udp_multicast-2-processes"),
+    pytest.param("socketcan", id="vcan0-2-processes", marks=pytest.mark.vcan0),
+]
 
 # The seed's device and wall.
 M, B_FRICTION, T = 0.5, 0.1, 1e-3
@@ -100,9 +105,9 @@ def test_seed_wall_closed_loop_poles():
 
 @pytest.mark.parametrize("interface", INTERFACE_PARAMS)
 @pytest.mark.parametrize(("timing", "delay"), [("ideal", 0), ("cia402", 1)])
-def test_constant_torque_gives_the_exact_first_order_velocity(interface, timing, delay):
+def test_constant_torque_gives_the_exact_first_order_velocity(interface, timing, delay, canopen_rig):
     torque, cycles = 500, 300
-    with rig(interface, timing) as r:
+    with canopen_rig(interface, timing) as r:
         drive = r.drive
         check_simulator_is_the_seed_device(drive, timing)
         drive.enable()
@@ -126,10 +131,10 @@ def test_constant_torque_gives_the_exact_first_order_velocity(interface, timing,
 
 
 @pytest.mark.parametrize("interface", INTERFACE_PARAMS)
-def test_seed_wall_step_response_matches_the_analytic_closed_loop(interface):
+def test_seed_wall_step_response_matches_the_analytic_closed_loop(interface, canopen_rig):
     """u_k = K x_k + B v_k, x_k = x_{k-1} + T v_k; operator step 10 N; ideal timing (delay 0)."""
     w, cycles = 10.0, 400
-    with rig(interface, "ideal") as r:
+    with canopen_rig(interface, "ideal") as r:
         drive = r.drive
         check_simulator_is_the_seed_device(drive, "ideal")
         drive.enable()
@@ -159,10 +164,10 @@ def test_seed_wall_step_response_matches_the_analytic_closed_loop(interface):
 
 
 @pytest.mark.parametrize("rx_mode", ["direct", "listener"])
-def test_position_in_a_second_tpdo_matches_the_exact_plant(rx_mode):
+def test_position_in_a_second_tpdo_matches_the_exact_plant(rx_mode, canopen_rig):
     """Mapping 0x6041 + 0x606C + 0x6064 needs 10 bytes: TPDO1 and TPDO2, both of each SYNC."""
     torque, cycles = 300, 200
-    with rig("virtual", "ideal", tpdo_objects=DEFAULT_TPDO_WITH_POSITION, rx_mode=rx_mode) as r:
+    with canopen_rig("virtual", "ideal", tpdo_objects=DEFAULT_TPDO_WITH_POSITION, rx_mode=rx_mode) as r:
         drive = r.drive
         assert [c.size for c in drive.tpdo_codecs] == [6, 4]
         assert drive.sdo_read(0x1A01, 1) == struct.pack("<I", 0x60640020)
@@ -185,8 +190,8 @@ def test_position_in_a_second_tpdo_matches_the_exact_plant(rx_mode):
 
 
 @pytest.mark.parametrize("rx_mode", ["direct", "listener"])
-def test_both_receive_modes_give_the_same_cycle(rx_mode):
-    with rig("virtual", "ideal", rx_mode=rx_mode) as r:
+def test_both_receive_modes_give_the_same_cycle(rx_mode, canopen_rig):
+    with canopen_rig("virtual", "ideal", rx_mode=rx_mode) as r:
         drive = r.drive
         drive.enable()
         velocities = []

@@ -4,13 +4,9 @@ OPERATION ENABLED, a few cycles, and a clean SIGTERM stop (exit status 0)."""
 
 from __future__ import annotations
 
-import os
 import signal
-import socket
-import subprocess
-import sys
-import time
-from pathlib import Path
+from collections.abc import Callable
+from typing import Any
 
 import pytest
 from pymodbus.client import ModbusTcpClient
@@ -18,46 +14,15 @@ from pymodbus.client import ModbusTcpClient
 from drives.cia402 import State, decode_statusword
 from drives.modbus.register_map import MAP_IDENTITY, REGISTER_BY_NAME, decode_value, encode_value
 
-ROOT = Path(__file__).resolve().parents[1]
 UNIT = 1
 
 
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-def wait_for_line(process: subprocess.Popen, text: str, timeout: float) -> list[str]:
-    """stderr lines up to the first that contains ``text`` (bounded by ``timeout`` s)."""
-    lines: list[str] = []
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        line = process.stderr.readline()
-        if not line:
-            break
-        lines.append(line)
-        if text in line:
-            return lines
-    raise AssertionError(f"no {text!r} from the simulator within {timeout} s: {''.join(lines)}")
-
-
 @pytest.fixture
-def server_process():
-    port = free_port()
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    process = subprocess.Popen(
-        [sys.executable, "-m", "sim_drive", "--modbus", f"tcp://127.0.0.1:{port}", "--timing", "ideal"],
-        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-    )
-    try:
-        wait_for_line(process, f"serving Modbus TCP on tcp://127.0.0.1:{port}", 15.0)
-        yield process, port
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.wait(5)
-        process.stderr.close()
+def server_process(sim_process: Callable[..., Any], free_port: int) -> tuple[Any, int]:
+    """``python -m sim_drive --modbus`` serving on ``free_port`` (stopped by the test, else by ``sim_process``)."""
+    process = sim_process("--modbus", f"tcp://127.0.0.1:{free_port}", "--timing", "ideal")
+    process.wait_for_line(f"serving Modbus TCP on tcp://127.0.0.1:{free_port}", 15.0)
+    return process, free_port
 
 
 def read(client: ModbusTcpClient, name: str):
@@ -120,7 +85,6 @@ def test_independent_client_walks_to_operation_enabled_and_sigterm_stops_cleanly
     finally:
         client.close()
 
-    process.send_signal(signal.SIGTERM)
-    assert process.wait(10) == 0
-    rest = process.stderr.read()
-    assert "stopped after 4 cycles, virtual time 0.004000 s" in rest  # three FC16 + one FC23
+    status, log = process.stop(signal.SIGTERM, timeout=10)
+    assert status == 0
+    assert "stopped after 4 cycles, virtual time 0.004000 s" in log  # three FC16 + one FC23

@@ -5,35 +5,34 @@ from __future__ import annotations
 
 import csv
 import os
-import signal
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from haptic_bus.app.profiles import load_profile
-from tests.test_modbus_server_process import free_port, wait_for_line
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize("profile_name", ["cia402-handle"])
-def test_run_over_modbus_settles_at_f_over_k(profile_name: str, tmp_path: Path) -> None:
-    port = free_port()
+def test_run_over_modbus_settles_at_f_over_k(
+    profile_name: str, tmp_path: Path, free_port: int, sim_process: Callable[..., Any]
+) -> None:
+    port = free_port
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     url = f"tcp://127.0.0.1:{port}"
-    server = subprocess.Popen([sys.executable, "-m", "sim_drive", "--modbus", url, "--profile", profile_name],
-                              cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    server = sim_process("--modbus", url, "--profile", profile_name)
     try:
-        wait_for_line(server, f"serving Modbus TCP on {url}", 15.0)
+        server.wait_for_line(f"serving Modbus TCP on {url}", 15.0)
         run = subprocess.run([sys.executable, "-m", "haptic_bus.app.cli", "run", profile_name, "--modbus", url,
                               "--virtual-time", "--duration", "1.5", "--out", str(tmp_path)],
                              cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     finally:
-        server.send_signal(signal.SIGTERM)
-        server.wait(10)
-        server.stderr.close()
+        server_status, server_log = server.stop()  # SIGTERM, at most 10 s
     assert run.returncode == 0, run.stderr
     assert "cycles 1500" in run.stdout
     profile = load_profile(profile_name)
@@ -44,4 +43,4 @@ def test_run_over_modbus_settles_at_f_over_k(profile_name: str, tmp_path: Path) 
     push = profile.operator_model["level"]
     lsb = profile.scaling().newton_per_permille / wall.stiffness  # one torque count of penetration
     assert position - wall.position == pytest.approx(push / wall.stiffness, abs=lsb)
-    assert server.returncode == 0
+    assert server_status == 0, server_log

@@ -8,21 +8,24 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
+
 from drives.errors import DriveTimeout
 from haptic_bus.control.node import UploadRefused, upload_walls
-from tests.sim_fixtures import NODE, REPO, SimProcess, unique_multicast
 
+REPO = Path(__file__).resolve().parents[1]
+NODE = 5
 CONTROLLER_NODE = 42
 START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen before they answer
 
 
-def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive() -> None:
-    group, port = unique_multicast()
+def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast: tuple[str, int], sim_process) -> None:
+    group, port = multicast
     bus = {"interface": "udp_multicast", "channel": group, "port": port}
-    sim = SimProcess("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
-                     "--node-id", str(NODE), "--profile", "seed-ideal")
+    sim = sim_process("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
+                      "--node-id", str(NODE), "--profile", "seed-ideal")
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     run = subprocess.Popen(
         [sys.executable, "-m", "haptic_bus.app.cli", "run", "seed-ideal", "--interface", "udp_multicast", "--channel", group,

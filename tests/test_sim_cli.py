@@ -21,7 +21,6 @@ from sim_drive.eds import eds_path
 from sim_drive.operator import HandModel
 from sim_drive.parameters import Timing
 from sim_drive.profile import load_profile
-from tests.sim_fixtures import SimProcess, recv_id, send, unique_multicast
 
 NODE = 11
 BOOT_WAIT = 20.0  # s: the subprocess imports numpy, canopen, python-can first
@@ -142,20 +141,22 @@ def test_every_shipped_profile_reads_as_a_drive() -> None:
 @pytest.mark.parametrize(
     "sig, twice", [(signal.SIGTERM, False), (signal.SIGINT, False), (signal.SIGTERM, True)], ids=["SIGTERM", "SIGINT", "SIGTERM-twice"]
 )
-def test_signal_stops_cleanly_and_state_changes_are_logged(sig: signal.Signals, twice: bool) -> None:
-    group, port = unique_multicast()
+def test_signal_stops_cleanly_and_state_changes_are_logged(
+    sig: signal.Signals, twice: bool, multicast: tuple[str, int], sim_process, frames
+) -> None:
+    group, port = multicast
     with can.Bus(interface="udp_multicast", channel=group, port=port) as master:
-        process = SimProcess("--interface", "udp_multicast", "--channel", group, "--node-id", str(NODE),
-                             "--bus-option", f"port={port}", "--realtime", "--bitrate", "1000000")
+        process = sim_process("--interface", "udp_multicast", "--channel", group, "--node-id", str(NODE),
+                              "--bus-option", f"port={port}", "--realtime", "--bitrate", "1000000")
         try:
-            assert recv_id(master, 0x700 + NODE, timeout=BOOT_WAIT) is not None, "no boot-up/heartbeat"
-            send(master, 0x000, [0x01, NODE])
+            assert frames.recv_id(master, 0x700 + NODE, timeout=BOOT_WAIT) is not None, "no boot-up/heartbeat"
+            frames.send(master, 0x000, [0x01, NODE])
             for command in (Command.SHUTDOWN, Command.SWITCH_ON):
-                send(master, 0x600 + NODE, struct.pack("<BHBH2x", 0x2B, 0x6040, 0, command.word))
-                assert recv_id(master, 0x580 + NODE) is not None
+                frames.send(master, 0x600 + NODE, struct.pack("<BHBH2x", 0x2B, 0x6040, 0, command.word))
+                assert frames.recv_id(master, 0x580 + NODE) is not None
             for _ in range(2):  # the second SYNC closes a cycle for the bus-load report
-                send(master, 0x080)
-                assert recv_id(master, 0x180 + NODE) is not None
+                frames.send(master, 0x080)
+                assert frames.recv_id(master, 0x180 + NODE) is not None
         finally:
             if twice:
                 process.process.send_signal(sig)

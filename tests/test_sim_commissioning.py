@@ -33,7 +33,6 @@ import pytest
 
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.eds import eds_path
-from tests.sim_fixtures import VCAN0_MISSING, SimProcess, unique_multicast, unique_name
 
 NODE = 7
 BOOT_WAIT = 20.0  # s: a subprocess imports numpy, canopen, python-can before it boots
@@ -45,38 +44,45 @@ INTERFACES = [
     pytest.param(
         "socketcan",
         id="vcan0-subprocess",
-        marks=VCAN0_MISSING,
+        marks=pytest.mark.vcan0,
     ),
 ]
 
 
 @contextlib.contextmanager
-def simulated_drive(interface: str) -> Iterator[tuple[dict[str, Any], list[str], Callable[[], object]]]:
-    """Yield the master's bus kwargs, a list filled with the drive's log lines on exit, and its start."""
+def simulated_drive(
+    interface: str, channel: str, multicast: tuple[str, int], sim_process: Callable[..., Any]
+) -> Iterator[tuple[dict[str, Any], list[str], Callable[[], object]]]:
+    """Yield the master's bus kwargs, a list filled with the drive's log lines on exit, and its start.
+
+    ``channel``, ``multicast`` and ``sim_process`` are the fixtures of conftest.py."""
     log: list[str] = []
     if interface == "virtual":
-        config = {"interface": "virtual", "channel": unique_name("commission")}
+        config = {"interface": "virtual", "channel": channel}
         drive = CanopenSimDrive(config, NODE)
         yield config, log, drive.start
         drive.stop()
         return
     if interface == "udp_multicast":
-        group, port = unique_multicast()
+        group, port = multicast
         config = {"interface": "udp_multicast", "channel": group, "port": port}
         extra = ["--bus-option", f"port={port}"]
     else:
         config = {"interface": "socketcan", "channel": "vcan0"}
         extra = []
-    process: list[SimProcess] = []
-    yield config, log, lambda: process.append(SimProcess("--interface", interface, "--channel", config["channel"], "--node-id", str(NODE), *extra))
+    process: list[Any] = []
+    args = ["--interface", interface, "--channel", config["channel"], "--node-id", str(NODE), *extra]
+    yield config, log, lambda: process.append(sim_process(*args))
     status, text = process[0].stop()
     assert status == 0, text
     log.extend(text.splitlines())
 
 
 @pytest.mark.parametrize("interface", INTERFACES)
-def test_base_node_402_commissions_the_simulated_drive(interface: str) -> None:
-    with simulated_drive(interface) as (config, log_lines, start):
+def test_base_node_402_commissions_the_simulated_drive(
+    interface: str, channel: str, multicast: tuple[str, int], sim_process: Callable[..., Any]
+) -> None:
+    with simulated_drive(interface, channel, multicast, sim_process) as (config, log_lines, start):
         network = canopen.Network()
         node = canopen.BaseNode402(NODE, str(eds_path()))
         network.add_node(node)
