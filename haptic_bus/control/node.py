@@ -35,10 +35,10 @@ import struct
 from typing import Any, Mapping
 
 import canopen
-from canopen import LocalNode, SdoAbortedError
+from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable, datatypes
 
-from drives.canopen.local_node import refuse_subindex_on_variables
+from drives.canopen.local_node import StrictLocalNode
 from drives.canopen.sdo import SdoAccess
 from drives.errors import HapticBusError, SdoAbortError
 from haptic_bus._version import __version__
@@ -115,8 +115,7 @@ class ControllerNode:
         self.refused = 0
         self._bus_config = dict(bus)
         self._network = canopen.Network()
-        self._node = LocalNode(node_id, controller_dictionary(self._names, heartbeat_ms))
-        refuse_subindex_on_variables(self._node)
+        self._node = StrictLocalNode(node_id, controller_dictionary(self._names, heartbeat_ms))
         self._node.add_read_callback(self._on_read)
         self._node.add_write_callback(self._on_write)
 

@@ -37,10 +37,10 @@ from typing import Any
 
 import can
 import canopen
-from canopen import LocalNode, SdoAbortedError
+from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary, import_od
 
-from drives.canopen.local_node import refuse_subindex_on_variables
+from drives.canopen.local_node import StrictLocalNode
 from drives.cia301 import (
     ERROR_REGISTER,
     HEARTBEAT_BASE,
@@ -144,8 +144,7 @@ class CanopenSimDrive:
         self._thread: threading.Thread | None = None
         self._network: _SlaveNetwork | None = None
         od = dictionary if dictionary is not None else import_od(str(eds_path()), self.node_id)
-        self._node = LocalNode(self.node_id, od)
-        refuse_subindex_on_variables(self._node)
+        self._node = StrictLocalNode(self.node_id, od)
         self._node.add_read_callback(self._on_sdo_read)
         self._node.add_write_callback(self._on_sdo_write)
         self.timers = NodeTimers()
