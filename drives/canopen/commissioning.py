@@ -105,7 +105,6 @@ class Commissioning:
     def run(self, tpdo_codecs: tuple[PdoCodec, ...], rpdo_codec: PdoCodec) -> Commissioned:
         """Commission the drive for ``tpdo_codecs`` (TPDO1..) and ``rpdo_codec`` (RPDO1)."""
         self._reach()
-        self._refuse_an_enabled_drive()
         device_type = self._check_device_type() if self.settings.check_device_type else None
         self.sdo.write_int(COMMUNICATION_CYCLE_PERIOD, 0, DataType.UNSIGNED32, round(self.settings.period * 1e6))
         tpdo_cobs = tuple(self._remap(self.node.tpdo[n + 1], codec, TPDO_BASES[n] + self.node.id)
@@ -144,11 +143,21 @@ class Commissioning:
                 f"another SYNC producer is on the bus ({len(seen)} SYNC frames in {window * 1e3:.0f} ms): another master "
                 "is running; stop it before starting this one",
             )
+        self._refuse_an_enabled_drive()
 
     def _refuse_an_enabled_drive(self) -> None:
         """A drive already in OPERATION ENABLED is driven by someone else (this master always
-        leaves it disabled, and the drive's own watchdog disables it when a master dies)."""
-        state = decode_statusword(self.sdo.read_int(STATUSWORD.index, 0, DataType.UNSIGNED16))
+        leaves it disabled, and the drive's own watchdog stops it when a master dies).  Asked
+        before the NMT reset, which would itself abort that connection."""
+        sdo = self.node.sdo
+        saved = sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES
+        sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES = self.settings.boot_timeout, 1
+        try:
+            state = decode_statusword(self.sdo.read_int(STATUSWORD.index, 0, DataType.UNSIGNED16))
+        except DriveError:
+            return  # no answer (yet): reaching the node says why
+        finally:
+            sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES = saved
         if state is State.OPERATION_ENABLED:
             raise DriveError(
                 self.name,

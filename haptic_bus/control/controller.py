@@ -220,7 +220,7 @@ class WallController:
             self._act(alarm)
 
     def _act(self, alarm: Alarm) -> None:
-        self.events.add(self.now(), "alarm", alarm.message, kind=alarm.kind, action=alarm.action.value)
+        self.events.add(self.now(), "alarm", alarm.message, alarm=alarm.kind, action=alarm.action.value)
         if alarm.action is Action.WARN:
             logger.warning("supervisor: %s", alarm.message)
             return

@@ -53,9 +53,9 @@ class SupervisorPolicy:
     ``observer_limit`` (J below zero)."""
 
     on_late: str = Action.STOP.value
-    late_tolerance: float = 0.25
-    late_window: int = 200
-    late_limit: int = 5
+    late_tolerance: float = 0.5
+    late_window: int = 1000
+    late_limit: int = 10
     on_observer: str = Action.STOP.value
     observer_limit: float = 1e-3
 

@@ -67,9 +67,9 @@ class CommunicationObjects:
         """Back to the object dictionary's values (communication reset); the producer is not started."""
         od = self._od
         self.sync_cob = od[COB_ID_SYNC].default & COB_ID_MASK
-        self.sync_window_us = od[SYNCHRONOUS_WINDOW_LENGTH].default
+        self.sync_window_us = od[SYNCHRONOUS_WINDOW_LENGTH].default if SYNCHRONOUS_WINDOW_LENGTH in od else 0
         self._set_emcy(od[COB_ID_EMCY_OBJECT].default)
-        self._consumer(od[CONSUMER_HEARTBEAT_TIME][1].default)
+        self._consumer(od[CONSUMER_HEARTBEAT_TIME][1].default if CONSUMER_HEARTBEAT_TIME in od else 0)
 
     @property
     def producer_ms(self) -> int:

@@ -12,8 +12,8 @@ than the holding-register ones (03, 06, 16, 22, 23) answers 0x01; one armed faul
 whose write comes before its read).  Two watchdogs stop the drive when its master is gone,
 each by the drive's 0x6007 reaction (default: fault, torque zero) while the power stage is on:
 the connection that last commanded the drive (wrote its controlword or target torque) closes
-(error code 0x8100), or no valid request comes for the watchdog time of register 0x002A
-(error code 0x8130, checked every :data:`WATCHDOG_TICK` s).
+(error code 0x8100), or no valid request comes from it for the watchdog time of register
+0x002A (error code 0x8130, checked every :data:`WATCHDOG_TICK` s).
 """
 
 from __future__ import annotations
@@ -178,7 +178,7 @@ class ModbusSimServer:
             with self.lock:
                 result = self.bank.read(address, count)
                 if not isinstance(result, int):
-                    self.bank.request_served(time.monotonic())
+                    self._served(request)
             if isinstance(result, int):
                 return ExcCodes(result)
             offset = address - start_address
@@ -187,12 +187,18 @@ class ModbusSimServer:
         with self.lock:
             rc = self.bank.write(address, values)  # type: ignore[arg-type]
             if not rc:
-                self.bank.request_served(time.monotonic())
+                if writes_command(address, len(values)):
+                    self.controller = request.handler
+                self._served(request)
         if rc:
             return ExcCodes(rc)
-        if writes_command(address, len(values)):
-            self.controller = request.handler
         return None
+
+    def _served(self, request: _Request) -> None:
+        """A valid request was answered: the watchdog starts over if it came from the commanding
+        connection (a monitoring client's reads must not keep a drive alive whose master is gone)."""
+        if self.controller is None or request.handler is self.controller:
+            self.bank.request_served(time.monotonic())
 
     async def _fault(self, request: _Request, func_code: int) -> ExcCodes | None:
         """Meet the next armed fault, if any: its exception code, after its delay, or the dropped link."""

@@ -1,0 +1,223 @@
+"""The master's side of the safety chain, and the whole chain against a killed or stopped controller.
+
+- Commissioning writes the drive's heartbeat consumer 0x1016, 0x6007 and the RPDO deadline
+  0x1400:05 and reads them back; a drive without them gets a warning naming them, or a refusal
+  under the strict policy.  The controller node announces itself (boot-up) and beats.
+- Another master on the bus (its SYNC, or a drive someone else enabled) is refused.
+- SIGKILL and SIGSTOP of ``haptic-bus run`` (real time, two processes on udp_multicast, and over
+  Modbus TCP) put the simulated drive in FAULT with torque 0 within 100 ms at default settings,
+  and the drive says which watchdog fired.  The RPDO deadline is 20 ms and the Modbus watchdog
+  50 ms by default, so the bound leaves about five and two times the margin.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+import can
+import pytest
+
+from drives.canopen.drive import CanopenDrive
+from drives.cia402 import State
+from drives.errors import DriveError, DriveProtocolError
+from drives.safety import SafetySettings
+from sim_drive.eds import eds_path
+
+NODE = 5
+MASTER = 127
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+START_WAIT = 40.0  # s: both processes import numpy/scipy/canopen before they cycle
+STOP_BOUND = 0.1  # s: the issue's bound for SIGKILL/SIGSTOP -> FAULT
+
+
+def test_commissioning_writes_and_reads_back_the_drive_watchdogs(canopen_rig) -> None:
+    with canopen_rig(safety=SafetySettings()) as r:
+        drive, sim = r.drive, r.sim
+        assert drive.sdo.read_int(0x1016, 1, drive_type("U32")) == MASTER << 16 | 60
+        assert sim.drive.read_object(0x6007) == 1
+        assert drive.sdo.read_int(0x1400, 5, drive_type("U16")) == 20  # 20 periods of 1 ms
+        assert drive.safety_warnings == ()
+
+
+def drive_type(name: str):
+    from drives.cia402 import DataType
+
+    return {"U16": DataType.UNSIGNED16, "U32": DataType.UNSIGNED32}[name]
+
+
+def test_the_controller_node_boots_then_beats(channel, master, frames) -> None:
+    from sim_drive.canopen.slave import CanopenSimDrive
+
+    with CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE):
+        drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path(),
+                             safety=SafetySettings(heartbeat_ms=10, consumer_ms=40))
+        try:
+            drive.connect()
+            boot = frames.recv_id(master, 0x700 + MASTER)
+            beat = frames.recv_id(master, 0x700 + MASTER)
+        finally:
+            drive.close()
+    assert boot is not None and bytes(boot.data) == b"\x00"
+    assert beat is not None and bytes(beat.data) == b"\x05"
+
+
+def _dictionary_without(*indices: int):
+    from canopen.objectdictionary import import_od
+
+    od = import_od(str(eds_path()), NODE)
+    for index in indices:
+        obj = od.indices.pop(index)
+        od.names.pop(obj.name, None)
+    return od
+
+
+@pytest.mark.parametrize("strict", [False, True])
+def test_a_drive_without_the_watchdog_objects_is_warned_about_or_refused(channel, strict) -> None:
+    from sim_drive.canopen.slave import CanopenSimDrive
+
+    with CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, dictionary=_dictionary_without(0x1016, 0x6007)):
+        drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path(), safety=SafetySettings(strict=strict))
+        try:
+            if strict:
+                with pytest.raises(DriveProtocolError, match="strict safety policy.*0x6007.*0x1016:01"):
+                    drive.connect()
+            else:
+                drive.connect()
+                (warning,) = drive.safety_warnings
+                assert "0x6007 abort connection option code" in warning and "0x1016:01 consumer heartbeat time" in warning
+                assert "0x1400:05" not in warning  # the RPDO deadline is there
+        finally:
+            drive.close()
+
+
+def test_another_sync_producer_is_refused_before_the_drive_is_touched(channel, sim, master) -> None:
+    stop = threading.Event()
+
+    def other_master() -> None:
+        with can.Bus(interface="virtual", channel=channel) as bus:
+            while not stop.wait(0.002):
+                bus.send(can.Message(arbitration_id=0x80, data=b"", is_extended_id=False))
+
+    thread = threading.Thread(target=other_master, daemon=True)
+    thread.start()
+    try:
+        time.sleep(0.02)
+        drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path())
+        with pytest.raises(DriveError, match="another SYNC producer is on the bus"):
+            drive.connect()
+        drive.close()
+    finally:
+        stop.set()
+        thread.join(timeout=1.0)
+    assert sim.nmt_state == "PRE-OPERATIONAL"  # never reset nor started
+
+
+def test_a_drive_someone_else_enabled_is_refused(channel, sim, master, frames) -> None:
+    frames.nmt_start(master)
+    frames.enable_cst(master)  # another master, over SDO, no SYNC
+    drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path())
+    with pytest.raises(DriveError, match="in OPERATION ENABLED before this master enabled it"):
+        drive.connect()
+    drive.close()
+    assert sim.drive.state is State.OPERATION_ENABLED
+
+
+# ----------------------------------------------------------------------------- the killed controller
+
+def _profile_that_warns_when_late(folder) -> str:
+    """cia402-handle with ``on_late = "warn"``: these tests are about the safety chain, and this
+    machine's scheduler would stop a real-time run for lateness first (exit 3, tested elsewhere)."""
+    from haptic_bus.app.profiles import resolve_profile
+
+    path = folder / "warn-when-late.toml"
+    path.write_text(resolve_profile("cia402-handle").read_text() + '\n[supervisor]\non_late = "warn"\n')
+    return str(path)
+
+
+def _run_command(*args: str) -> subprocess.Popen:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [REPO, env.get("PYTHONPATH")]))
+    return subprocess.Popen([sys.executable, "-m", "haptic_bus.app.cli", *args], cwd=REPO, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def _end(process: subprocess.Popen) -> None:
+    if process.poll() is None:
+        process.kill()
+    process.wait(timeout=10)
+    if process.stderr is not None:
+        process.stderr.close()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP])
+def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(multicast, sim_process, tmp_path, sig) -> None:
+    group, port = multicast
+    bus_args = ["--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}"]
+    sim = sim_process(*bus_args, "--node-id", str(NODE), "--profile", "cia402-handle")
+    run = _run_command("run", _profile_that_warns_when_late(tmp_path), *bus_args, "--node-id", str(NODE), "--duration", "60",
+                       "-q", "--out", str(tmp_path / "run"))
+    sniffer = can.Bus(interface="udp_multicast", channel=group, port=port)
+    try:
+        deadline, tpdos = time.monotonic() + START_WAIT, 0
+        while tpdos < 300 and time.monotonic() < deadline and run.poll() is None:
+            message = sniffer.recv(0.2)
+            tpdos += message is not None and message.arbitration_id == 0x180 + NODE
+        assert tpdos >= 300, f"the run did not cycle: {run.stderr.read() if run.poll() is not None else sim.log()[-2000:]}"
+        signalled = time.monotonic()
+        run.send_signal(sig)
+        fault = None
+        while fault is None and time.monotonic() < signalled + 2.0:
+            message = sniffer.recv(0.05)
+            if message is not None and message.arbitration_id == 0x80 + NODE and len(message.data) == 8:
+                code = struct.unpack_from("<H", message.data)[0]
+                fault = (code, message.data[2], time.monotonic() - signalled) if code else None
+        assert fault is not None, f"no EMCY from the drive after {sig.name}: {sim.log()[-2000:]}"
+        code, register, elapsed = fault
+        assert code in (0x8250, 0x8130) and register == 0x11  # RPDO deadline or heartbeat: the drive says which
+        assert elapsed < STOP_BOUND, f"{sig.name}: the drive faulted {elapsed * 1e3:.1f} ms after the signal"
+        log = sim.log()
+        assert "OPERATION ENABLED -> FAULT REACTION ACTIVE" in log and f"connection lost (0x{code:04X})" in log
+    finally:
+        sniffer.shutdown()
+        if sig is signal.SIGSTOP:
+            run.send_signal(signal.SIGCONT)
+        _end(run)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP])
+def test_a_killed_or_stopped_modbus_controller_faults_the_drive(sim_process, tmp_path, sig) -> None:
+    from drives.modbus.drive import ModbusDrive
+
+    sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--profile", "cia402-handle")
+    log = sim.wait_for_line("serving Modbus TCP on", START_WAIT)
+    url = log.split("serving Modbus TCP on ", 1)[1].split()[0]
+    run = _run_command("run", _profile_that_warns_when_late(tmp_path), "--modbus", url, "--duration", "60", "-q",
+                       "--out", str(tmp_path / "run"))
+    probe = ModbusDrive.from_url(url, timeout=0.5)
+    try:
+        probe.connect()
+        deadline = time.monotonic() + START_WAIT
+        while probe.state() is not State.OPERATION_ENABLED and time.monotonic() < deadline and run.poll() is None:
+            time.sleep(0.05)
+        assert probe.state() is State.OPERATION_ENABLED, run.stderr.read() if run.poll() is not None else sim.log()[-2000:]
+        time.sleep(0.2)  # cycling
+        signalled = time.monotonic()
+        run.send_signal(sig)
+        while probe.state() is not State.FAULT and time.monotonic() < signalled + 2.0:
+            time.sleep(0.002)
+        elapsed = time.monotonic() - signalled
+        assert probe.state() is State.FAULT
+        expected = 0x8100 if sig is signal.SIGKILL else 0x8130  # the connection closed / the watchdog ran out
+        assert probe.read_object(0x603F) == expected and probe.read_object(0x6077) == 0
+        assert elapsed < STOP_BOUND, f"{sig.name}: the drive faulted {elapsed * 1e3:.1f} ms after the signal"
+    finally:
+        probe.close()
+        if sig is signal.SIGSTOP:
+            run.send_signal(signal.SIGCONT)
+        _end(run)
