@@ -376,8 +376,8 @@ class CanopenDrive(Cia402Master):
                     self.node.nmt.send_command(NmtCommand.ENTER_PRE_OPERATIONAL)
                     if self.safety.master_node_id is not None and self.sdo is not None:
                         self.sdo.write_int(CONSUMER_HEARTBEAT_TIME, 1, DataType.UNSIGNED32, 0)  # a clean goodbye
-                except (DriveError, can.CanError, OSError, RuntimeError) as exc:
-                    logger.warning("%s: could not send the closing frames: %s", self.name, exc)
+                except Exception as exc:  # a best-effort goodbye: whatever fails here, the bus is released below
+                    logger.warning("%s: could not send the closing frames: %r", self.name, exc)
             self.heartbeat.stop()
             self.exchange.end()
             if self.events is not None:

@@ -26,6 +26,7 @@ from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeo
 logger = logging.getLogger(__name__)
 
 Handler = Callable[[int, bytearray, float], None]
+_NMT_STATES = frozenset(int(state) for state in NmtState)
 
 
 def describe_emcy(emcy: EmcyError) -> str:
@@ -54,8 +55,8 @@ class DriveEvents:
         self._pending: DriveError | None = None
         self._state_seen = threading.Condition()
         self._guards: list[tuple[int, Handler, Handler]] = [
-            (EMCY_BASE + node.id, node.emcy.on_emcy, self._guard(node.emcy.on_emcy, EMCY_LENGTH, EMCY_LENGTH, "EMCY")),
-            (HEARTBEAT_BASE + node.id, node.nmt.on_heartbeat, self._guard(node.nmt.on_heartbeat, 1, 1, "heartbeat")),
+            (EMCY_BASE + node.id, node.emcy.on_emcy, self._guard(node.emcy.on_emcy, EMCY_LENGTH, "EMCY")),
+            (HEARTBEAT_BASE + node.id, node.nmt.on_heartbeat, self._guard(node.nmt.on_heartbeat, 1, "heartbeat", _NMT_STATES)),
         ]
         for can_id, original, guard in self._guards:
             network.unsubscribe(can_id, original)
@@ -73,13 +74,16 @@ class DriveEvents:
             self.network.subscribe(can_id, original)
         self._guards = []
 
-    def _guard(self, handler: Handler, shortest: int, longest: int, what: str) -> Handler:
+    def _guard(self, handler: Handler, length: int, what: str, first_bytes: frozenset[int] | None = None) -> Handler:
+        """``handler`` behind a check: exactly ``length`` bytes, and a first byte in ``first_bytes``
+        (masked to 7 bits) where given; anything else is a protocol violation, never handed on."""
         def guarded(can_id: int, data: bytearray, timestamp: float) -> None:
-            if not shortest <= len(data) <= longest:
+            if len(data) != length or (first_bytes is not None and data[0] & 0x7F not in first_bytes):
                 self.stats.malformed_frames += 1
                 self._pending = self._pending or DriveProtocolError(
                     self.name, f"malformed {what} frame 0x{can_id:03X} of {len(data)} bytes ({bytes(data).hex() or 'empty'}); "
-                    f"CiA 301 wants {shortest} byte{'s' if shortest > 1 else ''}",
+                    f"CiA 301 wants {length} byte{'s' if length > 1 else ''}"
+                    + ("" if first_bytes is None else f" holding an NMT state ({', '.join(f'0x{s:02X}' for s in sorted(first_bytes))})"),
                 )
                 return
             handler(can_id, data, timestamp)

@@ -30,6 +30,43 @@ logger = logging.getLogger(__name__)
 NOTIFIER_CYCLE = 0.02  # s: how long canopen's notifier blocks in recv, so pausing it is quick
 
 
+class ReceiveErrors(can.Listener):
+    """Keeps the first exception a canopen notifier's receive raised, and counts them all, so that
+    the notifier thread lives on (python-can ends it, with a traceback on stderr, when no listener
+    handles the error).  The master turns the error into a :class:`~drives.errors.DriveError` at
+    its next exchange; a node that only serves SDO logs it and goes on."""
+
+    def __init__(self, name: str = "") -> None:
+        self.name = name
+        self.error: BaseException | None = None
+        self.count = 0
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """Frames are canopen's business."""
+
+    def on_error(self, exc: Exception) -> None:
+        """Keep the first receive error, count every one."""
+        self.count += 1
+        if self.error is None:
+            self.error = exc
+        logger.warning("%s: CAN receive failed: %r", self.name or "notifier", exc)
+
+
+def shut_down(network: canopen.Network, name: str) -> None:
+    """Stop ``network``'s notifier and shut its bus down, never raising (canopen's own
+    ``disconnect()`` re-raises a receive error its notifier once met, long after it was handled)."""
+    try:
+        if network.notifier is not None:
+            network.notifier.stop(timeout=5.0)
+        if network.bus is not None:
+            network.bus.shutdown()
+    except (can.CanError, OSError) as exc:
+        logger.warning("%s: closing the bus: %s", name, exc)
+    finally:
+        network.notifier = None
+        network.bus = None
+
+
 class NetworkLink:
     """The master's canopen Network (see the module docstring for ownership)."""
 
@@ -48,6 +85,7 @@ class NetworkLink:
         self.network: canopen.Network | None = None
         self.bus: can.BusABC | None = None
         self.direct = False  # True while the master reads the bus itself
+        self._errors = ReceiveErrors(name)
 
     def open(self) -> canopen.Network:
         """The network, connected and with its notifier reading the bus."""
@@ -60,6 +98,8 @@ class NetworkLink:
                 bus = open_bus(interface, channel, bitrate, **kwargs)
             network = canopen.Network(bus)
         network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
+        if self._errors not in network.listeners:
+            network.listeners.append(self._errors)
         if network.notifier is None or network.notifier.stopped:
             network.connect()
         self.network = network
@@ -73,8 +113,9 @@ class NetworkLink:
         notifier = self.network.notifier
         if notifier is not None and not notifier.stopped:
             notifier.stop(timeout=5.0)
-            if notifier.exception is not None:
-                raise DriveError(self.name, f"CAN receive failed: {notifier.exception!r}")
+        failure = self.receive_failure()
+        if failure is not None:
+            raise DriveError(self.name, f"CAN receive failed: {failure!r}")
         self.direct = True
 
     def read_by_notifier(self) -> None:
@@ -85,9 +126,9 @@ class NetworkLink:
         self.network.notifier = can.Notifier(self.bus, self.network.listeners, self.network.NOTIFIER_CYCLE)
 
     def receive_failure(self) -> BaseException | None:
-        """The exception that stopped the notifier thread, if one did."""
+        """The first exception the notifier's receive raised, if one did."""
         notifier = self.network.notifier if self.network is not None else None
-        return None if notifier is None else notifier.exception
+        return self._errors.error or (None if notifier is None else notifier.exception)
 
     def close(self) -> None:
         """Release what this link took (see the module docstring); never raises."""
@@ -95,6 +136,8 @@ class NetworkLink:
         if network is None:
             return
         self.network = None
+        if self._errors in network.listeners:
+            network.listeners.remove(self._errors)
         try:
             if self._given_network is not None:
                 if self.direct:

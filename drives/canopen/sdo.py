@@ -53,6 +53,11 @@ class SdoAccess:
             raise DriveTimeout(
                 self.name, f"no SDO answer {what} 0x{index:04X}:{subindex:02X} ({name}) within {self.timeout:.3g} s: {exc}"
             ) from exc
+        except (struct.error, ValueError, TypeError, IndexError, KeyError) as exc:  # canopen met an answer it cannot parse
+            name = object_name(self.node.object_dictionary, index, subindex)
+            raise DriveProtocolError(
+                self.name, f"malformed SDO answer {what} 0x{index:04X}:{subindex:02X} ({name}): {exc}"
+            ) from exc
 
     def upload(self, index: int, subindex: int = 0) -> bytes:
         """Read ``index:subindex`` as raw bytes."""

@@ -265,7 +265,7 @@ class WallController:
         return self.summary(reason, error)
 
     def _end(self, exc: BaseException, kind: str) -> None:
-        logger.error("run stopped: %s", exc or type(exc).__name__)
+        logger.info("run stopped: %s", exc or type(exc).__name__)  # the summary and the command report it
         self.events.add(self.now(), kind, str(exc) or type(exc).__name__)
         try:
             self.drive.disable()

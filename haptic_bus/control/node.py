@@ -38,6 +38,7 @@ import canopen
 from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable, datatypes
 
+from drives.canopen.link import ReceiveErrors, shut_down
 from drives.canopen.local_node import StrictLocalNode
 from drives.canopen.sdo import SdoAccess
 from drives.errors import HapticBusError, SdoAbortError
@@ -120,14 +121,17 @@ class ControllerNode:
         self._node.add_write_callback(self._on_write)
 
     def start(self) -> None:
-        """Open the bus and answer SDO requests (in canopen's notifier thread)."""
+        """Open the bus and answer SDO requests (in canopen's notifier thread, which a receive
+        error does not end: it is counted and logged)."""
+        self._network.listeners.append(ReceiveErrors(f"controller node {self.node_id}"))
         self._network.connect(**self._bus_config)
         self._network.add_node(self._node)
         self._node.nmt.state = "OPERATIONAL"
 
     def stop(self) -> None:
         """Stop answering and close the bus handle."""
-        self._network.disconnect()
+        self._node.remove_network()
+        shut_down(self._network, f"controller node {self.node_id}")
 
     def __enter__(self) -> "ControllerNode":
         self.start()
@@ -199,6 +203,7 @@ def upload_walls(
     when node ``node_id`` does not answer within ``timeout`` s.
     """
     network = canopen.Network()
+    network.listeners.append(ReceiveErrors("upload"))
     network.connect(**dict(bus))
     try:
         node = network.add_node(canopen.RemoteNode(node_id, controller_dictionary([])))
@@ -212,4 +217,4 @@ def upload_walls(
             raise UploadRefused(node_id, error.abort_code, sdo.upload(LAST_RESULT, 0).decode(errors="replace")) from None
         return sdo.upload(LAST_RESULT, 0).decode(errors="replace")
     finally:
-        network.disconnect()
+        shut_down(network, "upload")
