@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from scipy.signal import residuez
+from scipy.signal import lfilter
 
 from haptic_bus.analysis.closed_form import velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict
@@ -19,10 +19,10 @@ from haptic_bus.analysis.design import (
     force_step_response,
     nyquist_data,
     passive_region_curves,
-    step_transfer_function,
 )
-from haptic_bus.analysis.energy import simulate
+from haptic_bus.analysis.energy import Constant, simulate
 from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.analysis.plant import phi1
 
 M, B_FRICTION, T = 0.5, 0.1, 1e-3
 SEED = WallLoop(M, B_FRICTION, T, 200.0, 100.0, 0)
@@ -83,17 +83,24 @@ def test_seed_step_response_creeps_just_over_the_final_value():
     assert 0.0 < zero - slow < 2e-5
 
 
-def test_step_response_equals_modal_sum_and_the_sampled_data_simulation():
+def _seed_transfer_function(loop: WallLoop) -> tuple[np.ndarray, np.ndarray]:
+    """The seed's loop (point velocity, whole delay d) as ``U/W`` in powers of ``z^-1``, written out:
+    ``v_{k+1} = a v_k - k1 u_{k-d} + k1 w``, ``u = (KTz/(z - 1) + B) v``, so
+    ``U/W = k1 (K T z + B (z - 1)) z^d / P(z)``, ``P = (z - a)(z - 1) z^d + k1 (K T z + B (z - 1))``."""
+    d, a = int(loop.delay), math.exp(-loop.c)
+    k1 = loop.T / loop.m * phi1(loop.c)
+    den = np.polyadd(np.polymul([1.0, -(1.0 + a), a], np.eye(d + 1)[0]), k1 * np.array([loop.K * loop.T + loop.B, -loop.B]))
+    return k1 * np.array([0.0, loop.K * loop.T + loop.B, -loop.B]), den
+
+
+def test_step_response_equals_the_seed_recursion_and_the_sampled_data_simulation():
     for loop in (SEED, SEED_D1, SEED.with_wall(0.0, 100.0), WallLoop(0.04, 0.8, 1e-3, 1000.0, 2.0, 2)):
         step = force_step_response(loop, 400)
-        num, den = step_transfer_function(loop)
-        # independent: partial fractions of U(z) = H(z) / (1 - z^-1)
-        r, p, _ = residuez(num, np.polymul(den, [1.0, -1.0]))
-        k = np.arange(400)
-        modal = np.real(np.sum(r[:, None] * p[:, None] ** k, axis=0))
-        np.testing.assert_allclose(step.force, modal, atol=1e-9)
-        # independent: the exact continuous plant under a constant 1 N push, wall force as applied
-        record = simulate(loop, lambda t: np.ones_like(t), 400, 4)
+        # independent: the seed's closed-loop recursion (valid for point velocity, whole delays)
+        num, den = _seed_transfer_function(loop)
+        np.testing.assert_allclose(step.force, lfilter(num, den, np.ones(400)), atol=1e-9)
+        # and the exact energy simulation under a constant 1 N push, wall force as applied
+        record = simulate(loop, Constant(1.0), 400, 4)
         np.testing.assert_allclose(record.wall_force, step.applied, rtol=0, atol=1e-12)
 
 

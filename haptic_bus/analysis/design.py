@@ -2,7 +2,8 @@
 
 * :func:`bandwidth_rule` -- the servo-design rule ``alpha > 6`` (eq. 25).
 * :func:`force_step_response` -- the wall force ``u_k`` after a unit step of operator force
-  (Fig. 6), from the discrete closed loop (delay included), with overshoot and settling.
+  (Fig. 6), from the exact sampled loop (velocity model and delay included), with overshoot
+  and settling.
 * :func:`nyquist_data` -- the seed's ``T_zw`` on ``[0, pi]`` (Fig. 5) and the exact ``T_fund``.
 * :func:`passive_region_curves` -- the ``alpha``-``beta`` boundaries of Fig. 4, and
   :func:`exact_region_boundary`, the exact criterion's boundary in the same plane.
@@ -24,19 +25,20 @@ seed's text says).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.signal import lfilter
 
 from haptic_bus.analysis.closed_form import colgate_beta, liu2011_beta, velocity_sampling_beta
+from haptic_bus.analysis.energy import Constant, wall_forces
 from haptic_bus.analysis.frequency import seed_t_zw, t_fund
 from haptic_bus.analysis.limits import max_damping, max_stiffness
-from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
+from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE, WallLoop
 from haptic_bus.analysis.plant import phi1
-from haptic_bus.analysis.poles import characteristic_polynomial, closed_loop_poles, spectral_radius
+from haptic_bus.analysis.poles import closed_loop_poles, spectral_radius
+from haptic_bus.analysis.velocity import POINT, VelocityModel
 from haptic_bus.validation import real_in_range, whole_in_range
 
 SEED_PERIODS = (1e-3, 5e-3, 1e-2)
@@ -84,8 +86,8 @@ class StepResponse:
     """Wall force after a unit operator-force step at ``t = 0``.
 
     ``time`` (s) the sample instants ``kT``; ``force`` (N) the wall force ``u_k`` the controller
-    computes from ``v_k`` at ``kT``; ``applied`` (N) the force the drive holds over
-    ``[kT, (k+1)T)``, i.e. ``u_{k-d}`` (equal to ``force`` when ``d = 0``).
+    computes from ``y_k`` at ``kT``; ``applied`` (N) the force the drive holds from ``kT + delta T``
+    to ``(k+1)T``, i.e. ``u_{k-d}`` (equal to ``force`` when ``D = 0``).
     """
 
     time: np.ndarray
@@ -94,27 +96,9 @@ class StepResponse:
     report: StepReport
 
 
-def step_transfer_function(loop: WallLoop) -> tuple[np.ndarray, np.ndarray]:
-    """``(num, den)`` in powers of ``z^-1`` of operator force (N) -> wall force ``u_k`` (N).
-
-    With the constant operator force held exactly by the plant, the velocity obeys
-    ``v_{k+1} = a v_k - k1 u_{k-d} + k1 w`` and ``u = K_d(z) v``, so
-
-        U/W = k1 (K T z + B (z - 1)) z^d / P(z)  =  k1 [(KT + B) z^-1 - B z^-2] / (P(z) z^-(d+2))
-
-    with ``P`` the closed-loop characteristic polynomial (``K = 0``: ``U/W = k1 B z^d / P``).
-    """
-    k1 = loop.T / loop.m * phi1(loop.c)
-    den = characteristic_polynomial(loop)
-    if loop.K > 0:
-        num = k1 * np.array([0.0, loop.K * loop.T + loop.B, -loop.B])
-    else:
-        num = k1 * np.array([0.0, loop.B])
-    return num, den
-
-
 def _dc_gain(loop: WallLoop) -> float:
-    """Exact ``U/W`` at ``z = 1`` (N/N), formed without cancellation."""
+    """Exact ``U/W`` at ``z = 1`` (N/N), formed without cancellation (every velocity model reads the
+    steady velocity exactly: ``M(0) = 1``)."""
     if loop.K > 0:
         return 1.0  # k1 K T / P(1) and P(1) = k1 K T exactly
     k1_b = phi1(loop.c) * loop.B * loop.T / loop.m
@@ -128,23 +112,19 @@ def _default_step_samples(loop: WallLoop) -> int:
         return 200
     if rho == 0.0:
         return 20
-    return int(min(max(math.ceil(math.log(1e-6) / math.log(rho)), 20), 200_000)) + loop.delay
+    return int(min(max(math.ceil(math.log(1e-6) / math.log(rho)), 20), 200_000)) + math.ceil(loop.delay)
 
 
 def force_step_response(loop: WallLoop, n_samples: int | None = None) -> StepResponse:
     """Wall force ``u_k`` (N) for a unit step of operator force (N), at ``t_k = kT`` (s).
 
-    The seed's Fig. 6.  The plant holds the constant push exactly (ZOH), so the discrete
-    transfer function of :func:`step_transfer_function` is exact at the samples; the loop
-    delay ``d`` sits in ``P``.  In the steady state ``v = 0``, ``x = W/K`` and the wall force
-    equals the operator push (final value 1 N per N).  ``n_samples`` defaults to the time the
-    slowest closed-loop mode needs to decay to 1e-6.
+    The seed's Fig. 6, from the exact sampled loop (:func:`haptic_bus.analysis.energy.wall_forces`:
+    velocity model and delay included).  In the steady state ``v = 0``, ``x = W/K`` and the wall
+    force equals the operator push (final value 1 N per N).  ``n_samples`` defaults to the time
+    the slowest closed-loop mode needs to decay to 1e-6.
     """
     n = _default_step_samples(loop) if n_samples is None else whole_in_range("n_samples", n_samples, 2, _MAX_STEP_SAMPLES)
-    num, den = step_transfer_function(loop)
-    force = lfilter(num, den, np.ones(n))
-    d = loop.delay
-    applied = np.concatenate([np.zeros(min(d, n)), force[: n - d]]) if d else force.copy()
+    force, applied = wall_forces(loop, Constant(1.0), n)
     time = np.arange(n) * loop.T
     final = _dc_gain(loop)
     peak_i = int(np.argmax(force))
@@ -181,7 +161,8 @@ def nyquist_data(loop: WallLoop, n: int = 2000) -> NyquistData:
     the wall's integrator pins ``v`` at DC), half uniform, ``pi`` included.
     """
     n = whole_in_range("n", n, 4, 10_000_000)
-    theta = np.unique(np.concatenate([np.geomspace(1e-5 * math.pi, math.pi, n // 2), np.linspace(math.pi / n, math.pi, n - n // 2)]))
+    theta = np.unique(np.concatenate([np.geomspace(1e-5 * math.pi, math.pi, n // 2),
+                                      np.linspace(math.pi / n, math.pi, n - n // 2)]))
     return NyquistData(theta, seed_t_zw(loop, theta), t_fund(loop, theta))
 
 
@@ -213,36 +194,39 @@ def passive_region_curves(
     Vectorised over ``alpha`` and ``periods``; see the module docstring for the convention
     (device fixed, ``B = b/beta``, ``K = B/(alpha T)``).
     """
-    m = real_in_range("m", m, 1e-9, 1e9, low_inclusive=False, unit="kg")
-    b = real_in_range("b", b, 0.0, 1e12, unit="N s/m")
+    m = real_in_range("m", m, *MASS_RANGE, unit="kg")
+    b = real_in_range("b", b, *FRICTION_RANGE, unit="N s/m")
     alpha = np.asarray(alpha, dtype=float)
-    periods = np.asarray([real_in_range("T", T, 1e-9, 10.0, unit="s") for T in periods])
-    c = b * periods / m
+    checked = np.asarray([real_in_range("T", T, *PERIOD_RANGE, unit="s") for T in periods])
+    c = b * checked / m
     velocity = velocity_sampling_beta(alpha[None, ...], c.reshape((-1,) + (1,) * alpha.ndim))
-    return RegionCurves(alpha, periods, velocity, colgate_beta(alpha), liu2011_beta(alpha), m, b)
+    return RegionCurves(alpha, checked, velocity, colgate_beta(alpha), liu2011_beta(alpha), m, b)
 
 
-def exact_region_floor(m: float, b: float, T: float, delay: int) -> float | None:
+def exact_region_floor(m: float, b: float, T: float, delay: float, velocity: VelocityModel | str = POINT) -> float | None:
     """Least passive ``beta`` as ``alpha -> inf`` (no spring, ``K = 0``): ``b / B_max(K = 0)``.
 
     The exact criterion's boundary approaches this ``beta`` asymptotically; None if no
     ``B > 0`` is passive without a spring (then the boundary has no such asymptote).
+    ``delay`` in samples (real), ``velocity`` the drive's velocity model.
     """
-    b_max = max_damping(WallLoop(m, b, T, 0.0, 0.0, delay))
+    b_max = max_damping(WallLoop(m, b, T, 0.0, 0.0, delay, VelocityModel.parse(velocity)))
     if b_max is None or not b_max > 0:
         return None
     return b / b_max
 
 
-def exact_region_boundary(m: float, b: float, T: float, delay: int, beta: ArrayLike) -> np.ndarray:
+def exact_region_boundary(m: float, b: float, T: float, delay: float, beta: ArrayLike,
+                          velocity: VelocityModel | str = POINT) -> np.ndarray:
     """The exact criterion's boundary in Fig. 4's plane: least passive ``alpha`` for each ``beta``.
 
     For each ``beta`` the wall damping is ``B = b/beta`` and :func:`haptic_bus.analysis.limits.max_stiffness`
-    gives the largest passive ``K`` (the exact criterion, delay included); ``alpha = B/(K T)``.
-    NaN where no wall with that ``B`` is passive (not even ``K = 0``); inf where only ``K = 0`` is.
+    gives the largest passive ``K`` (the exact criterion: velocity model and real delay
+    included); ``alpha = B/(K T)``.  NaN where no wall with that ``B`` is passive (not even
+    ``K = 0``); inf where only ``K = 0`` is.
     """
     beta = np.atleast_1d(np.asarray(beta, dtype=float))
-    base = WallLoop(m, b, T, 0.0, 0.0, delay)
+    base = WallLoop(m, b, T, 0.0, 0.0, delay, VelocityModel.parse(velocity))
     out = np.full(beta.shape, np.nan)
     for i, value in enumerate(beta.flat):
         if not value > 0:

@@ -1,144 +1,178 @@
-"""Frequency responses of the velocity-sampled wall loop on ``theta = omega T`` in (0, pi].
+"""Frequency responses of the sampled wall loop on ``theta = omega T`` in (0, pi], every velocity model and delay.
 
 Two responses, both admittances from operator force to handle velocity in m/(N s):
 
-* :func:`seed_t_zw` -- the seed's ``T_zw = G11 / (1 - G22d K_d)`` (eq. 10), a continuous
-  ``G11`` mixed with the discrete loop; it reproduces the seed's Fig. 5.
-* :func:`t_fund` -- the exact fundamental-harmonic response of the sampled-data loop
-  (DESIGN 3.2), ``G11 [1 - (H/T) K_d' G11 / (1 + G11d K_d')]``, whose real part is the exact
-  mean power a sinusoidal operator force below Nyquist puts in.
+* :func:`seed_t_zw` -- the seed's ``T_zw = G11 / (1 + G_md K_d)`` (eq. 10, with the loop's
+  sampled map ``G_md`` from force to measured velocity); it reproduces the seed's Fig. 5.
+* :func:`t_fund` -- the exact fundamental-harmonic response of the sampled-data loop (DESIGN 3.5),
 
-Everything is evaluated in the dimensionless variables ``c = bT/m``, ``p = j theta``,
-``s = c + p``, ``kappa = K T^2/m``, ``q = B T/m`` and then scaled by ``T/m``, in a form with no
-catastrophic cancellation (DESIGN 3.1):
+      T_fund = G11 [1 - (H/T) e^{-j omega D T} K_d M G11 / (1 + G_md K_d)],
 
-* ``z - 1 = 2j sin(theta/2) e^{j theta/2}`` and ``z - a = (z - 1) - expm1(-c)``;
-* the wall's pole is cleared, ``(z - 1) K_d T/m = kappa z + q (z - 1)``;
-* the alias sum ``G11d - (H/T) G11``, which is a difference of two nearly equal terms as
-  ``theta, c -> 0``, is carried as ``-p s R(p, s) / (z - a)`` where
-  ``R = int_0^1 int_0^1 e^{p t} e^{-s tau} min(t, tau) (1 - max(t, tau)) dt dtau`` is smooth
-  (``R(0, 0) = 1/12``): a double Taylor series where ``|p|, c < 1``, the closed form elsewhere.
+  whose real part is the exact mean power a sinusoidal operator force below Nyquist puts in
+  (per ``|W|^2 / 2``).  ``M`` is the velocity model's continuous response
+  (:func:`~haptic_bus.analysis.sampled_loop.measurement_response`), ``H = (1 - e^{-j omega T})/(j omega)``
+  the hold, ``D = d + delta`` the delay, ``G_md = z^{-d} G`` with ``G`` the exact pulse transfer
+  function of the period map (:mod:`haptic_bus.analysis.sampled_loop`).
 
-With ``P(z) = (z - a)(z - 1) + phi1(c) (kappa z + q (z - 1)) z^{-d}`` (the closed-loop
-characteristic polynomial over ``z^d``) and ``E = (z - 1)/p``:
+**The form evaluated.**  Split ``G_md`` into the fundamental path ``(H/T) e^{-j omega D T} M G11``
+and its aliases ``z^{-d} (1 - z^{-1}) g(theta)`` (:mod:`haptic_bus.analysis.alias`).  Then the
+impedance the operator feels, ``Z = 1/T_fund``, is exactly the handle plus the wall as the
+sampled loop presents it,
 
-    T_zw  (T/m)^-1 = (z - a)(z - 1) / (s P)
-    T_fund (T/m)^-1 = p [(z - a) E - W s R] / (s P),     W = (kappa z + q (z - 1)) z^{-d}
+    Z T/m = s + L E / (j theta U),   s = c + j theta,  L = kappa + q (1 - z^{-1}),
+                                     E = e^{-j theta D} M(j theta),  U = 1 + L P,  P = z^{-d} g(theta),
 
-The relative error of ``Re`` of either is about ``eps / theta`` (the imaginary part grows as
-``1/theta`` near 0 while the real part stays finite), i.e. 1e-4 at ``theta = 1e-12``.
+(scaled units: ``c = bT/m``, ``kappa = K T^2/m``, ``q = B T/m``).  Its real part is
+``c + Im(L E conj(U)) / (theta |U|^2)``: carried as ``(Re, Im/theta)``
+(:class:`~haptic_bus.analysis.theta_complex.ThetaComplex`), every factor known in closed form
+or by a series, it has no ``1/theta`` loss at all: ``Re Z`` is accurate to a few ulps of the
+terms that make it (returned as ``scale``), even where ``|Z|`` is ``1e20`` times larger.
+``Re T_fund = Re Z / |Z|^2`` inherits that.
+
+Because ``L`` is affine in ``K`` and in ``B``, ``|U|^2 Re Z`` is a real quadratic in either at
+each ``theta`` (:func:`impedance_quadratic`): the passivity limits come from its roots.
 """
 
 from __future__ import annotations
 
-import math
-from fractions import Fraction
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from haptic_bus.analysis.alias import alias_function
 from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.analysis.plant import phi1
-
-_SERIES_TERMS = 16
-_SERIES_BELOW = 1.0
-
-
-def _alias_moment_coefficients(terms: int) -> np.ndarray:
-    """Coefficients ``M_kn / (k! n!)`` of the double series of R (exact rationals, as floats)."""
-    table = np.empty((terms, terms))
-    for k in range(terms):
-        for n in range(terms):
-            moment = (Fraction(1, n + 2) + Fraction(1, k + 2)) / ((k + n + 3) * (k + n + 4))
-            table[k, n] = float(moment / (math.factorial(k) * math.factorial(n)))
-    return table
+from haptic_bus.analysis.sampled_loop import period_map, pulse_transfer, window_fraction
+from haptic_bus.analysis.theta_complex import ThetaComplex
+from haptic_bus.analysis.trig import cospi, sincpi, sinpi, unit_point
 
 
-_R_COEFFICIENTS = _alias_moment_coefficients(_SERIES_TERMS)
+@dataclass(frozen=True)
+class LoopTerms:
+    """The wall-independent factors of ``Z`` on a ``theta`` array (rad): device, velocity model, delay.
+
+    ``hold = 1 - z^{-1}``, ``P = z^{-d} g(theta)``, ``E = e^{-j theta D} M(j theta)``; ``c = bT/m``;
+    ``scale = m/T`` (N s/m per scaled impedance unit).
+    """
+
+    theta: np.ndarray
+    c: float
+    scale: float
+    hold: ThetaComplex
+    P: ThetaComplex
+    E: ThetaComplex
 
 
-# phi2(x) = sum_n (-x)^n / (n + 2)!, highest power first for np.polyval; error < 1/18! at |x| < 1
-_PHI2_SERIES = np.array([(-1.0) ** n / math.factorial(n + 2) for n in range(_SERIES_TERMS)][::-1])
+def _rotation(theta: np.ndarray, delay: float) -> ThetaComplex:
+    """``e^{-j theta delay}``: ``Re = cos``, ``Im/theta = -delay sinc``."""
+    x = theta * (delay / np.pi)
+    return ThetaComplex.exact(theta, cospi(x), -delay * sincpi(x))
 
 
-def _phi2_complex(x: np.ndarray) -> np.ndarray:
-    """``(x - 1 + e^{-x}) / x^2`` for complex ``x``: its Taylor series where ``|x| < 1``."""
-    small = np.abs(x) < 1.0
-    if not small.any():
-        return (x + np.expm1(-x)) / (x * x)
-    out = np.polyval(_PHI2_SERIES, x)
-    if not small.all():
-        xl = x[~small]
-        out[~small] = (xl + np.expm1(-xl)) / (xl * xl)
-    return out
+def _measurement(loop: WallLoop, theta: np.ndarray) -> ThetaComplex:
+    """``M(j theta)`` as ``(Re, Im/theta)`` in closed form (exact at ``theta -> 0``)."""
+    kind = loop.velocity.kind
+    if kind == "point":
+        return ThetaComplex.exact(theta, 1.0, 0.0)
+    if kind == "lowpass":
+        tau = loop.velocity.time / loop.T
+        den = 1.0 + (theta * tau) ** 2
+        return ThetaComplex.exact(theta, 1.0 / den, -tau / den)
+    half = 0.5 * window_fraction(loop)
+    envelope = sincpi(theta * (half / np.pi))  # (1 - e^{-j theta w})/(j theta w) = e^{-j theta w/2} sinc
+    return _rotation(theta, half) * ThetaComplex.exact(theta, envelope, 0.0)
 
 
-def _alias_kernel(c: float, theta: np.ndarray) -> np.ndarray:
-    """``R(p, s)`` with ``p = j theta``, ``s = c + p`` (dimensionless, R(0, 0) = 1/12)."""
-    p = 1j * theta
-    s = c + p
-    out = np.empty(theta.shape, dtype=complex)
-    near = (theta < _SERIES_BELOW) & (c < _SERIES_BELOW)
-    if near.any():
-        powers = np.arange(_SERIES_TERMS)
-        p_pow = p[near, None] ** powers
-        s_pow = (-s[near, None]) ** powers
-        out[near] = np.einsum("ik,kn,in->i", p_pow, _R_COEFFICIENTS, s_pow)
-    far = ~near
-    if far.any():
-        pf, sf = p[far], s[far]
-        # Q = phi1(c) - phi2(-p) - e^{-c} phi2(p) = -s^2 R; direct where |p| >= 1 or c >= 1.
-        q = phi1(c) - _phi2_complex(-pf) - math.exp(-c) * _phi2_complex(pf)
-        out[far] = -q / (sf * sf)
-    return out
+def loop_terms(loop: WallLoop, theta: ArrayLike) -> LoopTerms:
+    """:class:`LoopTerms` of ``loop`` (its wall ignored) at ``theta`` (rad, > 0)."""
+    theta = np.atleast_1d(np.asarray(theta, dtype=float))
+    hold = ThetaComplex.exact(theta, 2.0 * sinpi(0.5 * theta / np.pi) ** 2, sincpi(theta / np.pi))
+    P = _rotation(theta, loop.whole_delay) * alias_function(loop, theta)
+    E = _rotation(theta, loop.delay) * _measurement(loop, theta)
+    return LoopTerms(theta, loop.c, loop.m / loop.T, hold, P, E)
 
 
-class _LoopTerms:
-    """The stable building blocks shared by both responses at one ``theta`` array."""
+@dataclass(frozen=True)
+class ScaledImpedance:
+    """``Z T/m`` on ``theta``: ``re`` (accurate to ``~eps * scale``), ``im``, and ``scale``, the
+    magnitude of the terms ``re`` is summed from (the yardstick of its sign)."""
 
-    def __init__(self, loop: WallLoop, theta: np.ndarray) -> None:
-        c = loop.c
-        half = 0.5 * theta
-        rotor = np.exp(1j * half)
-        self.p = 1j * theta
-        self.s = c + self.p
-        self.z_minus_1 = 2j * np.sin(half) * rotor
-        self.z_minus_a = self.z_minus_1 - math.expm1(-c)
-        self.e = rotor * np.sinc(theta / (2 * np.pi))  # (z - 1)/p, = 1 at theta = 0
-        z = np.exp(1j * theta)
-        kappa = loop.K * loop.T * loop.T / loop.m
-        q = loop.B * loop.T / loop.m
-        wall = kappa * z + q * self.z_minus_1
-        if loop.delay:
-            wall = wall * np.exp(-1j * loop.delay * theta)
-        self.wall = wall
-        self.char = self.z_minus_a * self.z_minus_1 + phi1(c) * wall
-        self.c = c
-        self.theta = theta
-        self.scale = loop.T / loop.m
+    re: np.ndarray
+    im: np.ndarray
+    scale: np.ndarray
+
+
+def _wall(terms: LoopTerms, kappa: float, q: float) -> ThetaComplex:
+    """``L = kappa + q (1 - z^{-1})``."""
+    return terms.hold * q + kappa
+
+
+def scaled_impedance(terms: LoopTerms, kappa: float, q: float) -> ScaledImpedance:
+    """``Z T/m = s + L E/(j theta U)`` for the scaled wall ``kappa``, ``q`` (see the module docstring)."""
+    L = _wall(terms, kappa, q)
+    U = L * terms.P + 1.0
+    Y = L * terms.E * U.conj()
+    size = U.abs2()
+    wall_re = Y.im / size
+    u_spread = (U.mag_re**2 + (terms.theta * U.mag_im) ** 2) / size
+    scale = terms.c + Y.mag_im / size + np.abs(wall_re) * u_spread
+    return ScaledImpedance(terms.c + wall_re, terms.theta - Y.re / (terms.theta * size), scale)
+
+
+def impedance_quadratic(terms: LoopTerms, base: ThetaComplex | float, slope: ThetaComplex | float
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """``|U|^2 Re(Z T/m)`` as a quadratic in ``x`` where ``L = base + x slope``: coefficients and magnitudes.
+
+    Returns ``(coefficients, magnitudes)``, each of shape ``(3, n)``, highest power first:
+    ``Q(x) = Q2 x^2 + Q1 x + Q0`` and the same with every term's magnitude (the yardstick of
+    ``Q``'s sign).  With ``U = 1 + base P`` and ``V = slope P``:
+    ``Q2 = c|V|^2 + Im(slope E conj V)/theta``, ``Q1 = 2c Re(U conj V) + Im(slope E conj U + base E conj V)/theta``,
+    ``Q0 = c|U|^2 + Im(base E conj U)/theta``.
+    """
+    c = terms.c
+    t2 = terms.theta * terms.theta
+    U = terms.P * base + 1.0
+    V = terms.P * slope
+    slope_e = terms.E * slope
+    base_e = terms.E * base
+    uv = U * V.conj()
+    q2 = slope_e * V.conj()
+    q1 = slope_e * U.conj() + base_e * V.conj()
+    q0 = base_e * U.conj()
+    coefficients = np.stack([c * V.abs2() + q2.im, 2.0 * c * uv.re + q1.im, c * U.abs2() + q0.im])
+    magnitudes = np.stack([
+        c * (V.mag_re**2 + t2 * V.mag_im**2) + q2.mag_im,
+        2.0 * c * uv.mag_re + q1.mag_im,
+        c * (U.mag_re**2 + t2 * U.mag_im**2) + q0.mag_im,
+    ])
+    return coefficients, magnitudes
 
 
 def _theta_array(theta: ArrayLike) -> np.ndarray:
     return np.atleast_1d(np.asarray(theta, dtype=float))
 
 
-def seed_t_zw(loop: WallLoop, theta: ArrayLike) -> np.ndarray:
-    """The seed's ``T_zw(theta)`` (eq. 10, with the loop delay in ``K_d``), in m/(N s)."""
-    t = _LoopTerms(loop, _theta_array(theta))
-    return t.scale * t.z_minus_a * t.z_minus_1 / (t.s * t.char)
+def z_fund(loop: WallLoop, theta: ArrayLike) -> np.ndarray:
+    """``1 / T_fund``: the impedance the operator feels at ``theta``, in N s/m (real part exact to ulps)."""
+    terms = loop_terms(loop, _theta_array(theta))
+    z = scaled_impedance(terms, loop.kappa, loop.q)
+    return terms.scale * (z.re + 1j * z.im)
 
 
 def t_fund(loop: WallLoop, theta: ArrayLike) -> np.ndarray:
     """Exact fundamental-harmonic admittance ``T_fund(theta)`` of the sampled loop, m/(N s)."""
-    t = _LoopTerms(loop, _theta_array(theta))
-    return t.scale * t.p * _fund_bracket(t) / (t.s * t.char)
+    terms = loop_terms(loop, _theta_array(theta))
+    z = scaled_impedance(terms, loop.kappa, loop.q)
+    size = z.re * z.re + z.im * z.im
+    return (z.re - 1j * z.im) / (size * terms.scale)
 
 
-def z_fund(loop: WallLoop, theta: ArrayLike) -> np.ndarray:
-    """``1 / T_fund``: the impedance the operator feels at ``theta``, in N s/m."""
-    t = _LoopTerms(loop, _theta_array(theta))
-    return t.s * t.char / (t.scale * t.p * _fund_bracket(t))
-
-
-def _fund_bracket(t: _LoopTerms) -> np.ndarray:
-    return t.z_minus_a * t.e - t.wall * t.s * _alias_kernel(t.c, t.theta)
+def seed_t_zw(loop: WallLoop, theta: ArrayLike) -> np.ndarray:
+    """The seed's ``T_zw = G11 / (1 + G_md K_d)`` (eq. 10, with the loop's sampled map and delay), m/(N s)."""
+    theta = _theta_array(theta)
+    z, z_minus_1 = unit_point(theta)
+    sampled = pulse_transfer(period_map(loop), z, z_minus_1) * (cospi(theta * (loop.whole_delay / np.pi))
+                                                                 - 1j * sinpi(theta * (loop.whole_delay / np.pi)))
+    wall = loop.kappa * z / z_minus_1 + loop.q  # K_d T/m
+    s = loop.c + 1j * theta
+    return (loop.T / loop.m) / (s * (1.0 + sampled * wall))

@@ -1,17 +1,22 @@
 """The linear, in-contact model of the haptic loop that the passivity analysis judges.
 
 A handle (mass ``m`` kg, viscous friction ``b`` N s/m) sampled every ``T`` s, a virtual
-wall (stiffness ``K`` N/m, damping ``B`` N s/m) discretised by ``discretisation``, and a loop
-delay of ``delay`` whole samples between the velocity sample and the force it produces
-(0: the seed's ideal loop, 1: a CiA-402 synchronous cycle).
+wall (stiffness ``K`` N/m, damping ``B`` N s/m) discretised by ``discretisation``, the
+velocity the drive reports (``velocity``, :mod:`haptic_bus.analysis.velocity`), and a loop
+delay of ``delay = D = d + delta`` samples (real, ``d`` whole, ``0 <= delta < 1``) between
+the velocity sample at ``kT`` and the moment ``(k + D) T`` the force it produces is applied
+(0: the seed's ideal loop, 1: a CiA-402 synchronous cycle, 0.3: a drive that applies the RPDO
+on reception after 0.3 T of bus and compute time).
 """
 
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 
-from haptic_bus.validation import real_in_range, whole_in_range
+from haptic_bus.analysis.velocity import POINT, VelocityModel
+from haptic_bus.validation import real_in_range
 
 # Physically meaningful bounds, wide enough for any real device, narrow enough that every
 # derived quantity (b T / m, K T^2 / m, ...) stays finite in double precision.
@@ -20,7 +25,7 @@ FRICTION_RANGE = (0.0, 1e12)  # N s/m
 PERIOD_RANGE = (1e-9, 10.0)  # s
 STIFFNESS_RANGE = (0.0, 1e15)  # N/m
 DAMPING_RANGE = (0.0, 1e15)  # N s/m
-DELAY_RANGE = (0, 64)  # samples
+DELAY_RANGE = (0, 1000)  # samples (real)
 
 BANDWIDTH_ALPHA = 6.0
 """Eq. (25): ``alpha = B/(KT)`` must exceed this (crossover below 0.1 Nyquist, corner at half of it)."""
@@ -41,14 +46,19 @@ class Sampling(enum.Enum):
 
 @dataclass(frozen=True)
 class WallLoop:
-    """Validated parameters of one linear wall loop (SI units, delay in samples)."""
+    """Validated parameters of one linear wall loop (SI units, delay in samples).
+
+    ``delay`` is kept an ``int`` when it is whole (``1``, not ``1.0``); ``velocity`` accepts a
+    :class:`VelocityModel` or its profile string (``"average"``, ``"lowpass:0.002"``, ...).
+    """
 
     m: float
     b: float
     T: float
     K: float
     B: float
-    delay: int = 0
+    delay: float = 0
+    velocity: VelocityModel = POINT
     discretisation: Discretisation = Discretisation.BACKWARD_DIFFERENCE
 
     def __post_init__(self) -> None:
@@ -58,7 +68,11 @@ class WallLoop:
         set_(self, "T", real_in_range("T", self.T, *PERIOD_RANGE, unit="s"))
         set_(self, "K", real_in_range("K", self.K, *STIFFNESS_RANGE, unit="N/m"))
         set_(self, "B", real_in_range("B", self.B, *DAMPING_RANGE, unit="N s/m"))
-        set_(self, "delay", whole_in_range("delay", self.delay, *DELAY_RANGE))
+        delay = real_in_range("delay", self.delay, *DELAY_RANGE, unit="samples")
+        set_(self, "delay", int(delay) if delay.is_integer() else delay)
+        velocity = VelocityModel.parse(self.velocity)
+        velocity.check_period(self.T)
+        set_(self, "velocity", velocity)
         if not isinstance(self.discretisation, Discretisation):
             set_(self, "discretisation", Discretisation(self.discretisation))
 
@@ -66,6 +80,31 @@ class WallLoop:
     def c(self) -> float:
         """``b T / m``: the plant's decay over one sample (dimensionless)."""
         return self.b * self.T / self.m
+
+    @property
+    def kappa(self) -> float:
+        """``K T^2 / m``: the wall's stiffness in the loop's own units (dimensionless)."""
+        return self.K * self.T * self.T / self.m
+
+    @property
+    def q(self) -> float:
+        """``B T / m``: the wall's damping in the loop's own units (dimensionless)."""
+        return self.B * self.T / self.m
+
+    @property
+    def whole_delay(self) -> int:
+        """``d``: the whole samples of the delay ``D = d + delta``."""
+        return math.floor(self.delay)
+
+    @property
+    def fractional_delay(self) -> float:
+        """``delta`` in [0, 1): the fraction of a sample of the delay ``D = d + delta``."""
+        return float(self.delay - math.floor(self.delay))
+
+    @property
+    def lossless(self) -> bool:
+        """A free frictionless mass (``b = K = B = 0``): no dissipation and no wall at all."""
+        return self.b == 0.0 and self.K == 0.0 and self.B == 0.0
 
     @property
     def alpha(self) -> float:
@@ -77,6 +116,10 @@ class WallLoop:
         """The seed's ``beta = b / B`` (inf when B = 0)."""
         return self.b / self.B if self.B > 0 else float("inf")
 
-    def with_wall(self, K: float, B: float) -> "WallLoop":
-        """The same device and loop with another wall."""
-        return WallLoop(self.m, self.b, self.T, K, B, self.delay, self.discretisation)
+    def with_wall(self, K: float, B: float) -> WallLoop:
+        """The same device, velocity model and delay with another wall."""
+        return WallLoop(self.m, self.b, self.T, K, B, self.delay, self.velocity, self.discretisation)
+
+    def with_delay(self, delay: float) -> WallLoop:
+        """The same device, velocity model and wall with another delay (samples)."""
+        return WallLoop(self.m, self.b, self.T, self.K, self.B, delay, self.velocity, self.discretisation)

@@ -11,6 +11,8 @@ With ``c = b h / m``:
     x(h) = x0 + h phi1(c) v0 + (h^2/m) phi2(c) f
 
 where ``phi1(c) = (1 - e^-c)/c`` and ``phi2(c) = (c - 1 + e^-c)/c^2`` (limits 1 and 1/2).
+A first-order filter on the velocity (the low-pass velocity model) adds divided differences of
+``exp`` at the plant's and the filter's rates (:func:`exp_divided_difference`).
 """
 
 from __future__ import annotations
@@ -18,15 +20,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-from numpy.typing import ArrayLike
-
 _PHI2_SERIES_BELOW = 0.1
 _PHI2_TERMS = 9
+_DIVIDED_TERMS = 22  # (n + 1) beta^n / (n + 2)! < 1e-20 for beta < 1
 
 
 def phi1(c: float) -> float:
-    """``(1 - exp(-c)) / c`` for ``c >= 0`` (dimensionless), exact limit 1 at ``c = 0``."""
+    """``(1 - exp(-c)) / c`` (dimensionless), exact limit 1 at ``c = 0``; any real ``c`` that does not overflow."""
     if c == 0.0:
         return 1.0
     return -math.expm1(-c) / c
@@ -44,24 +44,34 @@ def phi2(c: float) -> float:
     return (c + math.expm1(-c)) / (c * c)
 
 
-def phi1_array(c: ArrayLike) -> np.ndarray:
-    """Vectorised :func:`phi1` over an array of ``c >= 0``."""
-    c = np.asarray(c, dtype=float)
-    safe = np.where(c == 0.0, 1.0, c)
-    return np.where(c == 0.0, 1.0, -np.expm1(-safe) / safe)
+def exp_divided_difference(*nodes: float) -> float:
+    """The divided difference ``exp[x0, ..., xn]`` of ``exp`` at 1 to 3 real nodes (dimensionless).
 
-
-def phi2_array(c: ArrayLike) -> np.ndarray:
-    """Vectorised :func:`phi2` over an array of ``c >= 0`` (same series below 0.1)."""
-    c = np.asarray(c, dtype=float)
-    small = c < _PHI2_SERIES_BELOW
-    term = np.full_like(c, 0.5)
-    series = term.copy()
-    for n in range(1, _PHI2_TERMS):
-        term = term * (-c) / (n + 2)
-        series += term
-    safe = np.where(small, 1.0, c)
-    return np.where(small, series, (safe + np.expm1(-safe)) / (safe * safe))
+    ``exp[x] = e^x``, ``exp[x, y] = (e^x - e^y)/(x - y)``, ``exp[x, y, z] = (exp[x, y] - exp[y, z])/(x - z)``,
+    with their confluent limits; ``exp[x0, .., xn] = int over the simplex of e^{sum t_i x_i}``, so
+    it is positive and never cancels.  Evaluated from the largest node ``x0`` down, as
+    ``e^{x0} exp[0, x1 - x0, ...]``: no overflow for nodes far below 0 and none of the
+    differences of nearly equal exponentials (series where the nodes lie within 1 of each other).
+    """
+    top, *rest = sorted(nodes, reverse=True)
+    shifted = [top - x for x in rest]  # alpha <= beta, both >= 0
+    if not shifted:
+        return math.exp(top)
+    if len(shifted) == 1:
+        return math.exp(top) * phi1(shifted[0])
+    if len(shifted) != 2:
+        raise ValueError(f"{len(nodes)} nodes; allowed: 1 to 3")
+    alpha, beta = shifted
+    if beta < 1.0:
+        # sum_n h_n(-alpha, -beta) / (n + 2)!, h_n the complete homogeneous polynomial of degree n
+        total, h, y_power, factorial = 0.5, 1.0, 1.0, 2.0
+        for n in range(1, _DIVIDED_TERMS):
+            y_power *= -alpha
+            h = -beta * h + y_power
+            factorial *= n + 2
+            total += h / factorial
+        return math.exp(top) * total
+    return math.exp(top) * (phi1(alpha) - math.exp(-alpha) * phi1(beta - alpha)) / beta
 
 
 @dataclass(frozen=True)
@@ -92,7 +102,7 @@ def zoh_coefficients(m: float, b: float, h: float) -> ZohCoefficients:
 class ExactPlant:
     """The handle's state (velocity m/s, position m) advanced exactly under held forces."""
 
-    __slots__ = ("m", "b", "step", "velocity", "position", "_co")
+    __slots__ = ("_co", "b", "m", "position", "step", "velocity")
 
     def __init__(self, m: float, b: float, step: float, velocity: float = 0.0, position: float = 0.0) -> None:
         self.m = m

@@ -329,7 +329,7 @@ _PASS_THROUGH: dict[str, Callable[[Sequence[str]], int]] = {"sim": _sim, "bench"
 
 
 def _configure_logging(verbose: int | None, quiet: bool | None) -> None:
-    level = logging.ERROR if quiet else {None: logging.WARNING, 0: logging.WARNING, 1: logging.INFO}.get(verbose, logging.DEBUG)
+    level = logging.CRITICAL if quiet else {None: logging.WARNING, 0: logging.WARNING, 1: logging.INFO}.get(verbose, logging.DEBUG)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr, force=True)
     library_level = {None: logging.CRITICAL, 0: logging.CRITICAL, 1: logging.WARNING}.get(verbose, logging.DEBUG)
     for name in _NOISY_LIBRARIES:  # their chatter ("Transfer aborted ...", "... not properly shut down") only on -v

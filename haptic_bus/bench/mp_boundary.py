@@ -1,9 +1,15 @@
-"""High-precision reference of the passive boundary (mpmath, 40 digits), for the benchmark.
+"""High-precision reference of the passive boundary (mpmath, 40 digits), for the benchmark and the tests.
 
-Straight from the definitions (DESIGN 3.2), with no reformulation: the impedance the operator
-feels is ``Z = 1/T_fund``, ``T_fund = G11 [1 - (H/T) K_d' G11 / (1 + G11d K_d')]`` at
-``z = e^{j theta}``, ``s = j theta/T``.  The largest passive ``K`` at a given ``B`` (or ``B``
-at a given ``K``) is where ``min_theta Re Z`` touches zero:
+Straight from the definitions (DESIGN 3.5), with no reformulation, for every velocity model and
+real delay ``D = d + delta``.  The sampled map from wall force to measured velocity is built
+from matrix exponentials (``mp.expm``) of the physical plant ``m dv/dt = -b v + f`` with the
+measurement's state (position for a differencing window, the filter state for a low-pass),
+piece by piece over the period (force switch at ``delta T``, window start at ``T - TW``):
+``G_md = z^{-d} C (zI - Phi)^{-1} (g_now + g_before/z)``.  The impedance the operator feels is
+``Z = 1/T_fund``, ``T_fund = G11 [1 - (H/T) e^{-j omega D T} K_d M G11 / (1 + G_md K_d)]`` at
+``z = e^{j theta}``, ``s = j theta/T``.  Stability: the eigenvalues (``mp.eig``) of the closed-loop
+matrix on ``[plant states, x_{k-1}, u_{k-1}, ..]``.  The largest passive ``K`` at a given ``B``
+(or ``B`` at a given ``K``) is where ``min_theta Re Z`` touches zero:
 
 1. scan ``Re Z`` at the double-precision estimate on 240 uniform points of ``(0, pi]`` plus a
    logarithmic fan from ``1e-12`` (standing in for ``theta -> 0``: ``Re Z`` is even in
@@ -15,13 +21,16 @@ at a given ``K``) is where ``min_theta Re Z`` touches zero:
    of the envelope ``min_theta Re Z(X, theta)`` with the minimum located by golden section
    (to ``1e-19`` rad, so the envelope is exact to ~1e-38 relative) inside the scan's bracket;
    both roots bracketed and solved by Anderson-Bjorck (``mp.findroot``);
-3. verified: at ``X (1 - 1e-14)`` the scan's minimum is ``>= 0`` and every closed-loop pole
-   (``mp.polyroots`` of the characteristic polynomial) is inside the unit circle; at
-   ``X (1 + 1e-14)`` the minimum is negative or a pole is outside.
+3. verified: at ``X (1 - 1e-14)`` the scan's minimum is ``>= 0`` and every closed-loop pole is
+   inside the unit circle; at ``X (1 + 1e-14)`` the minimum is negative or a pole is outside.
+
+The same works for a *lower* end of a passive interval (``lower=True``: passive above, active below).
 """
 
 from __future__ import annotations
 
+import functools
+import itertools
 from dataclasses import dataclass
 
 import mpmath as mp
@@ -48,24 +57,139 @@ class ReferenceBoundary:
     verified: bool
 
 
-def _impedance(m, b, T, K, B, d: int, theta):
-    """``1/T_fund`` in N s/m at ``theta`` (all mpf), from the definition."""
+def _model(loop: WallLoop):
+    """Physical (A, b, C, reset) of the plant with its measurement; reset = (state, time in s) or None."""
+    m, b, T = (mp.mpf(x) for x in (loop.m, loop.b, loop.T))
+    kind = loop.velocity.kind
+    if kind == "point":
+        return mp.matrix([[-b / m]]), mp.matrix([1 / m]), mp.matrix([[1]]), None
+    if kind == "lowpass":
+        tau = mp.mpf(loop.velocity.time)
+        return mp.matrix([[-b / m, 0], [1 / tau, -1 / tau]]), mp.matrix([1 / m, 0]), mp.matrix([[0, 1]]), None
+    width = T if kind == "average" else mp.mpf(loop.velocity.time)
+    return mp.matrix([[-b / m, 0], [1, 0]]), mp.matrix([1 / m, 0]), mp.matrix([[0, 1 / width]]), (1, T - width)
+
+
+def sampled_map(loop: WallLoop):
+    """(Phi, g_now, g_before, C) of one period, physical units, from matrix exponentials (cached per precision)."""
+    return _sampled_map(loop.m, loop.b, loop.T, loop.delay, loop.velocity, mp.mp.dps)
+
+
+@functools.lru_cache(maxsize=64)
+def _sampled_map(m_, b_, T_, delay, velocity, dps):
+    loop = WallLoop(m_, b_, T_, 0.0, 0.0, delay, velocity)
+    A, bu, C, reset = _model(loop)
+    n = A.rows
+    T = mp.mpf(loop.T)
+    delta = mp.mpf(loop.delay) - int(mp.floor(mp.mpf(loop.delay)))
+    times = sorted({mp.mpf(0), T, delta * T} | ({reset[1]} if reset else set()))
+    phi = mp.eye(n)
+    g = {"now": mp.zeros(n, 1), "before": mp.zeros(n, 1)}
+    for start, stop in itertools.pairwise(times):
+        if reset and start == reset[1]:
+            for j in range(n):
+                phi[reset[0], j] = 0
+            for key in g:
+                g[key][reset[0]] = 0
+        aug = mp.zeros(n + 1, n + 1)
+        for i in range(n):
+            aug[i, n] = bu[i]
+            for j in range(n):
+                aug[i, j] = A[i, j]
+        e = mp.expm(aug * (stop - start))
+        trans = mp.matrix([[e[i, j] for j in range(n)] for i in range(n)])
+        col = mp.matrix([e[i, n] for i in range(n)])
+        phi = trans * phi
+        g = {k: trans * v for k, v in g.items()}
+        key = "before" if stop <= delta * T else "now"
+        g[key] = g[key] + col
+    return phi, g["now"], g["before"], C
+
+
+def measurement(loop: WallLoop, s):
+    """``M(s)`` of the velocity model (dimensionless) at the Laplace variable ``s`` (1/s)."""
+    kind = loop.velocity.kind
+    if kind == "point":
+        return mp.mpf(1)
+    if kind == "lowpass":
+        return 1 / (1 + s * mp.mpf(loop.velocity.time))
+    width = mp.mpf(loop.T) if kind == "average" else mp.mpf(loop.velocity.time)
+    return (1 - mp.exp(-s * width)) / (s * width)
+
+
+def response_terms(loop: WallLoop, theta, K=None, B=None):
+    """(G11, G_md, K_d, (H/T) e^{-s D T} M(s)) at theta (mpf), the wall K, B overriding the loop's."""
+    m, b, T = (mp.mpf(x) for x in (loop.m, loop.b, loop.T))
+    K = mp.mpf(loop.K if K is None else K)
+    B = mp.mpf(loop.B if B is None else B)
+    theta = mp.mpf(theta)
     omega = theta / T
-    z = mp.expj(theta)
-    g11 = 1 / (m * 1j * omega + b)
-    k1 = -mp.expm1(-b * T / m) / b if b > 0 else T / m
-    g11d = k1 / (z - mp.exp(-b * T / m))
-    wall = (K * T * z / (z - 1) + B) * z ** (-d)
-    hold = (1 - mp.expj(-theta)) / (1j * omega) / T
-    return 1 / (g11 * (1 - hold * wall * g11 / (1 + g11d * wall)))
+    s = 1j * omega
+    z = mp.exp(1j * theta)
+    D = mp.mpf(loop.delay)
+    d = int(mp.floor(D))
+    phi, g_now, g_before, C = sampled_map(loop)
+    n = phi.rows
+    resolvent = mp.inverse(z * mp.eye(n) - phi)
+    g_md = (C * resolvent * (g_now + g_before / z))[0] * z ** (-d)
+    g11 = 1 / (m * s + b)
+    wall = K * T * z / (z - 1) + B
+    hold = (1 - mp.exp(-s * T)) / (s * T)
+    return g11, g_md, wall, hold * mp.exp(-s * D * T) * measurement(loop, s)
+
+
+def impedance(loop: WallLoop, K, B, theta):
+    """``1/T_fund`` in N s/m at ``theta`` for the wall ``K``, ``B`` (all mpf), from the definition."""
+    g11, g_md, wall, path = response_terms(loop, theta, K, B)
+    return 1 / (g11 * (1 - path * wall * g11 / (1 + g_md * wall)))
+
+
+def closed_loop_matrix(loop: WallLoop, K, B):
+    """``M`` of ``xi_{k+1} = M xi_k``, ``xi = [s, x_{k-1}, u_{k-1}, .., u_{k-L}]`` (physical units, mpf)."""
+    phi, g_now, g_before, C = sampled_map(loop)
+    T = mp.mpf(loop.T)
+    D = mp.mpf(loop.delay)
+    d = int(mp.floor(D))
+    slots = d + (1 if d < D else 0)
+    n = phi.rows
+    integ = 1 if K > 0 else 0
+    size = n + integ + slots
+    M = mp.zeros(size, size)
+    u_row = [((K * T + B) if integ else B) * C[0, j] for j in range(n)] + ([K] if integ else []) + [0] * slots
+
+    def held(lag):
+        if lag == 0:
+            return u_row
+        row = [0] * size
+        row[n + integ + lag - 1] = 1
+        return row
+
+    for i in range(n):
+        for j in range(n):
+            M[i, j] = phi[i, j]
+        for j, value in enumerate(held(d)):
+            M[i, j] -= g_now[i] * value
+        if d < D:
+            for j, value in enumerate(held(d + 1)):
+                M[i, j] -= g_before[i] * value
+    if integ:
+        for j in range(n):
+            M[n, j] = T * C[0, j]
+        M[n, n] = 1
+    if slots:
+        for j, value in enumerate(u_row):
+            M[n + integ, j] = value
+        for j in range(1, slots):
+            M[n + integ + j, n + integ + j - 1] = 1
+    return M
 
 
 class _Loop:
     def __init__(self, loop: WallLoop, which: str) -> None:
         if which not in ("K", "B"):
             raise ValueError(f"which = {which!r}; allowed: 'K' or 'B'")
-        self.m, self.b, self.T, self.K, self.B = (mp.mpf(x) for x in (loop.m, loop.b, loop.T, loop.K, loop.B))
-        self.d = loop.delay
+        self.loop = loop
+        self.K, self.B = mp.mpf(loop.K), mp.mpf(loop.B)
         self.which = which
 
     def wall(self, x):
@@ -73,22 +197,11 @@ class _Loop:
 
     def re_z(self, x, theta):
         K, B = self.wall(x)
-        return mp.re(_impedance(self.m, self.b, self.T, K, B, self.d, theta))
+        return mp.re(impedance(self.loop, K, B, theta))
 
     def spectral_radius(self, x):
         K, B = self.wall(x)
-        m, b, T, d = self.m, self.b, self.T, self.d
-        a = mp.exp(-b * T / m)
-        k1 = -mp.expm1(-b * T / m) / b if b > 0 else T / m
-        if K > 0:  # (z - a)(z - 1) z^d + k1 (K T z + B (z - 1))
-            coeffs = [mp.mpf(1), -(1 + a), a] + [mp.mpf(0)] * d
-            coeffs[-2] += k1 * (K * T + B)
-            coeffs[-1] -= k1 * B
-        else:  # (z - a) z^d + k1 B
-            coeffs = [mp.mpf(1), -a] + [mp.mpf(0)] * d
-            coeffs[-1] += k1 * B
-        roots = mp.polyroots(coeffs, maxsteps=200, extraprec=2 * DIGITS)
-        return max(abs(r) for r in roots)
+        return max(abs(e) for e in mp.eig(closed_loop_matrix(self.loop, K, B), left=False, right=False))
 
     def minimum(self, x) -> tuple[mp.mpf, mp.mpf, tuple]:
         """(min Re Z over (0, pi], theta there, bracket): dense scan, then golden section at each local minimum."""
@@ -126,36 +239,40 @@ class _Loop:
         return self.spectral_radius(x) < 1 and self.minimum(x)[0] >= 0
 
 
-def _bracketed_root(f, x0):
-    """Root of ``f`` (positive below, negative above) near ``x0``: bracket, then Anderson-Bjorck."""
+def _bracketed_root(f, x0, lower: bool = False):
+    """Root of ``f`` (positive below and negative above, or the reverse if ``lower``) near ``x0``:
+    bracket, then Anderson-Bjorck."""
     width = mp.mpf("1e-6")
+    sign = -1 if lower else 1
     while True:
         lo, hi = x0 * (1 - width), x0 * (1 + width)
-        if f(lo) >= 0 > f(hi):
+        if sign * f(lo) >= 0 > sign * f(hi):
             return mp.findroot(f, (lo, hi), solver="anderson", verify=False)
         width *= 8
         if width > mp.mpf("0.5"):
             raise ArithmeticError(f"no sign change of Re Z(pi) within 50 % of {mp.nstr(x0, 15)}")
 
 
-def reference_boundary(loop: WallLoop, which: str, estimate: float) -> ReferenceBoundary:
+def reference_boundary(loop: WallLoop, which: str, estimate: float, lower: bool = False) -> ReferenceBoundary:
     """The largest passive ``K`` (``which = "K"``, at the loop's ``B``) or ``B`` (at its ``K``), 40 digits.
 
     ``estimate``: a double-precision value near the boundary (where the scan looks for the
-    critical frequency; the result does not depend on it beyond that).
+    critical frequency; the result does not depend on it beyond that).  ``lower``: the lower
+    end of a passive interval instead (active below it, passive above).
     """
     with mp.workdps(DIGITS):
         ref = _Loop(loop, which)
         x0 = mp.mpf(estimate)
         _, theta0, bracket = ref.minimum(x0)
         if theta0 == mp.pi:
-            x = _bracketed_root(lambda v: ref.re_z(v, mp.pi), x0)
+            x = _bracketed_root(lambda v: ref.re_z(v, mp.pi), x0, lower)
             theta, kind = mp.pi, "flip (theta = pi)"
         elif theta0 < _FLAT_BELOW:  # Re Z = Re Z(0) + O(theta^2): the minimum is the theta -> 0 limit
-            x = _bracketed_root(lambda v: ref.re_z(v, THETA_LOW), x0)
+            x = _bracketed_root(lambda v: ref.re_z(v, THETA_LOW), x0, lower)
             theta, kind = THETA_LOW, "low frequency (theta -> 0)"
         else:  # the root of the envelope min_theta Re Z(x, theta), the minimum by golden section
-            x = _bracketed_root(lambda v: ref._golden(v, bracket[0], bracket[1], _TANGENCY_TOL)[0], x0)
+            x = _bracketed_root(lambda v: ref._golden(v, bracket[0], bracket[1], _TANGENCY_TOL)[0], x0, lower)
             theta, kind = ref._golden(x, bracket[0], bracket[1], _TANGENCY_TOL)[1], "tangency"
-        verified = bool(ref.passive(x * (1 - _VERIFY)) and not ref.passive(x * (1 + _VERIFY)))
+        inside, outside = (x * (1 + _VERIFY), x * (1 - _VERIFY)) if lower else (x * (1 - _VERIFY), x * (1 + _VERIFY))
+        verified = bool(ref.passive(inside) and not ref.passive(outside))
         return ReferenceBoundary(float(x), float(theta), kind, verified)

@@ -1,0 +1,115 @@
+"""The alias function ``g(theta)``: what sampling adds to the continuous loop, free of cancellation.
+
+With ``G(z)`` the pulse transfer function from the held, ``delta``-shifted wall force to the
+measured velocity (:func:`haptic_bus.analysis.sampled_loop.pulse_transfer`, scaled units) and
+``F(theta) = M(j theta) e^{-j theta delta} / (j theta (c + j theta))`` the continuous path
+divided by the hold's ``1 - z^{-1}``, Poisson's formula gives
+
+    G(z) = (1 - z^{-1}) sum_k F(theta + 2 pi k),       z = e^{j theta},
+
+so the aliases alone are ``(1 - z^{-1}) g(theta)`` with
+
+    g(theta) = sum_{k != 0} F(theta + 2 pi k) = G(z) / (1 - z^{-1}) - F(theta).
+
+``g`` is analytic for ``|theta| < 2 pi`` (``F``'s poles, ``theta = 0``, ``j c`` and ``j T/TAU``,
+are excluded with ``k = 0``), but the difference on the right cancels as ``theta -> 0`` (both
+terms grow like ``1/theta^2``).  So: for ``theta >= 0.5`` the difference itself (it loses at
+most ``log10(12/theta^2)`` ~ 2 digits there); below, the Taylor series of ``g`` at 0, whose
+coefficients come from the same difference on a circle ``|theta| = rho`` (``rho`` in 1..2.5,
+chosen at least 0.25 away from ``j c`` and ``j T/TAU``, where nothing cancels) by a 64-point FFT:
+the Cauchy integral, exact to ``(rho/2 pi)^64`` plus round-off ``~ eps max|terms|``.  Since
+``g(-theta) = conj g(theta)``, ``g = sum_n gamma_n (j theta)^n`` with real ``gamma_n``, and the
+series gives ``Re g`` and ``Im g/theta`` directly (:class:`~haptic_bus.analysis.theta_complex.ThetaComplex`).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.analysis.sampled_loop import measurement_response, period_map, pulse_transfer
+from haptic_bus.analysis.theta_complex import ThetaComplex
+from haptic_bus.analysis.trig import cospi, sinpi, unit_point
+
+SERIES_BELOW = 0.5  # rad: below, g from its Taylor series
+_CIRCLE_POINTS = 64
+_SERIES_TERMS = 32  # (0.5/2 pi)^32 < 1e-35
+_RADII = (1.0, 1.5, 2.0, 2.5)
+_POLE_CLEARANCE = 0.25
+
+
+def device_key(loop: WallLoop) -> WallLoop:
+    """The part of ``loop`` that ``g`` depends on: device, velocity model and ``delta`` (no wall, no ``d``)."""
+    return WallLoop(loop.m, loop.b, loop.T, 0.0, 0.0, loop.fractional_delay, loop.velocity)
+
+
+def alias_direct(key: WallLoop, theta: np.ndarray) -> np.ndarray:
+    """``g(theta) = G(z)/(1 - z^{-1}) - F(theta)`` at real or complex ``theta`` (dimensionless, scaled units)."""
+    sampled, continuous = _alias_terms(key, theta)
+    return sampled - continuous
+
+
+def _alias_terms(key: WallLoop, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two terms of :func:`alias_direct`, ``G(z)/(1 - z^{-1})`` and ``F(theta)``."""
+    z, z_minus_1 = unit_point(theta)
+    sampled = pulse_transfer(period_map(key), z, z_minus_1) * z / z_minus_1
+    if np.iscomplexobj(theta):
+        shift = np.exp(-1j * theta * key.fractional_delay)
+    else:
+        x = theta * (key.fractional_delay / np.pi)
+        shift = cospi(x) - 1j * sinpi(x)
+    continuous = measurement_response(key, theta) * shift / (1j * theta * (key.c + 1j * theta))
+    return sampled, continuous
+
+
+def _circle_radius(key: WallLoop) -> float:
+    poles = [key.c] + ([key.T / key.velocity.time] if key.velocity.kind == "lowpass" else [])
+    for radius in _RADII:
+        if all(abs(radius - p) >= _POLE_CLEARANCE for p in poles):
+            return radius
+    raise AssertionError("two poles cannot exclude four radii 0.5 apart")  # pragma: no cover
+
+
+@functools.lru_cache(maxsize=256)
+def taylor_coefficients(key: WallLoop) -> tuple[np.ndarray, float]:
+    """Real ``gamma_n`` with ``g(theta) = sum_n gamma_n (j theta)^n``, ``n < 32`` (Cauchy integral by
+    FFT), and the magnitude of the terms cancelled on the circle (their round-off bounds the series')."""
+    radius = _circle_radius(key)
+    nodes = radius * np.exp(2j * np.pi * np.arange(_CIRCLE_POINTS) / _CIRCLE_POINTS)
+    sampled, continuous = _alias_terms(key, nodes)
+    coefficients = np.fft.fft(sampled - continuous) / _CIRCLE_POINTS
+    n = np.arange(_SERIES_TERMS)
+    gamma = (coefficients[:_SERIES_TERMS] / (radius**n * 1j**n)).real
+    gamma.setflags(write=False)
+    # coefficient n errs by ~eps max|terms| / radius^n: summed at theta <= radius/2, twice that
+    return gamma, 2.0 * float(np.max(np.maximum(np.abs(sampled), np.abs(continuous))))
+
+
+def alias_function(loop: WallLoop, theta: np.ndarray) -> ThetaComplex:
+    """``g(theta)`` on real ``theta >= 0`` (rad) as ``(Re g, Im g/theta)``, scaled units."""
+    key = device_key(loop)
+    theta = np.asarray(theta, dtype=float)
+    re, im = np.empty(theta.shape), np.empty(theta.shape)
+    mag_re, mag_im = np.empty(theta.shape), np.empty(theta.shape)
+    small = theta < SERIES_BELOW
+    if small.any():
+        gamma, cancelled = taylor_coefficients(key)
+        signs = (-1.0) ** np.arange(_SERIES_TERMS // 2)
+        even, odd = (gamma[0::2] * signs)[::-1], (gamma[1::2] * signs)[::-1]
+        t2 = theta[small] ** 2
+        re[small], im[small] = np.polyval(even, t2), np.polyval(odd, t2)
+        mag_re[small] = np.maximum(np.polyval(np.abs(even), t2), cancelled)
+        mag_im[small] = np.maximum(np.polyval(np.abs(odd), t2), cancelled / _RADII[0])
+    if not small.all():
+        big = theta[~small]
+        sampled, continuous = _alias_terms(key, big)
+        value = sampled - continuous
+        re[~small], im[~small] = value.real, value.imag / big
+        # each part errs by ~eps times the terms that cancel; at z = -1 the sampled term is real
+        # and the imaginary part is the continuous term's own, exact to its ulps
+        size = np.maximum(np.abs(sampled), np.abs(continuous))
+        mag_re[~small] = np.maximum(np.abs(re[~small]), size)
+        mag_im[~small] = np.maximum(np.abs(im[~small]), np.where(big == np.pi, 0.0, size / big))
+    return ThetaComplex(theta, re, im, mag_re, mag_im)
