@@ -3,6 +3,7 @@ with gated wall uploads from a third party over the same bus while the loop runs
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -21,7 +22,7 @@ CONTROLLER_NODE = 42
 START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen before they answer
 
 
-def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast: tuple[str, int], sim_process) -> None:
+def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast: tuple[str, int], sim_process, tmp_path) -> None:
     group, port = multicast
     bus = {"interface": "udp_multicast", "channel": group, "port": port}
     sim = sim_process("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
@@ -30,7 +31,7 @@ def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast:
     run = subprocess.Popen(
         [sys.executable, "-m", "haptic_bus.app.cli", "run", "seed-ideal", "--interface", "udp_multicast", "--channel", group,
          "--bus-option", f"port={port}", "--node-id", str(NODE), "--virtual-time", "--duration", "600",
-         "--controller-node-id", str(CONTROLLER_NODE)],
+         "--controller-node-id", str(CONTROLLER_NODE), "--out", str(tmp_path)],
         cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     try:
@@ -56,5 +57,11 @@ def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast:
             out, err = run.communicate(timeout=10)
         code, log = sim.stop()
     assert run.returncode == 0, err
-    assert "cycles" in out and "compute p50" in out
+    assert "cycles" in out and "compute p50" in out and "ended: stopped" in out
+    document = json.loads((tmp_path / "run.json").read_text())
+    assert document["exit_reason"] == "stopped" and document["summary"]["exit_reason"] == "stopped"
+    kinds = [event["kind"] for event in document["events"]]
+    assert kinds.count("upload") == 2 and kinds.count("refused") == 1  # every upload, accepted or refused, is logged
+    assert [scene["objects"][0]["stiffness"] for scene in document["scenes"]] == [200.0, 200.0, 300.0]
+    assert (tmp_path / "record.csv").is_file() and (tmp_path / "position_force.png").is_file()
     assert code == 0, log
