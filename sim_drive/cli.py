@@ -1,9 +1,9 @@
 """``haptic-bus sim``: run the simulated drive as a CANopen slave or a Modbus TCP server until SIGINT/SIGTERM.
 
     haptic-bus sim --interface I --channel C --node-id N [--bitrate R] [--bus-option KEY=VALUE ...]
-                   [--timing cia402|ideal] [--profile P] [--realtime]
+                   [--timing cia402|ideal|reception] [--profile P] [--realtime]
     haptic-bus sim --modbus tcp://HOST:PORT [--unit-id N] [--word-order big|little]
-                   [--timing cia402|ideal] [--profile P] [--realtime]
+                   [--timing cia402|ideal|reception] [--profile P] [--realtime]
     haptic-bus sim --eds-path
     python -m sim_drive ...   (the same)
 
@@ -97,7 +97,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=_PROG, description="Simulated CiA-402 drive: a CANopen slave, or a Modbus TCP server with --modbus.")
     both = parser.add_argument_group("either server")
     both.add_argument("--timing", choices=[t.value for t in Timing],
-                      help="cia402 (default) or ideal; default: the profile's [loop] timing")
+                      help="cia402 (default), ideal or reception (a target acts the profile's [loop] delay, "
+                           "default 0.25, of a period after the SYNC); default: the profile's [loop] timing")
     both.add_argument("--profile", help="operator profile (name or TOML path): [device], [loop], [operator_model]")
     both.add_argument("--realtime", action="store_true", help="timestamp log lines with the wall clock")
     canopen = parser.add_argument_group("CANopen slave (the default)")

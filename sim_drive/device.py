@@ -4,17 +4,22 @@ Any bus front end (CANopen slave, Modbus server) writes the drive's objects with
 :meth:`SimulatedDrive.write_object`, reads them with :meth:`SimulatedDrive.read_object`, and
 calls :meth:`SimulatedDrive.sync` once per SYNC.  Nothing here touches a bus.
 
-Physics (:mod:`sim_drive.handle`): the handle obeys ``m dv/dt + b v = w(t) + F`` with ``w`` the
-operator's force and ``F`` the motor force at the handle, ``F = torque_permille *
-rated_torque / 1000 * force_per_torque`` N, held over a whole SYNC interval; in the seed's
-convention the wall force is ``u = -F``.  Each SYNC advances the plant by exactly ``T``
-(virtual time).  The sensor (:mod:`sim_drive.sensor`) quantises velocity and position then.
+Physics (:mod:`sim_drive.handle`): the handle obeys ``m dv/dt + b v = w(t) + F - Fc sgn(v)``
+with ``w`` the operator's force, ``F`` the motor force at the handle, ``F = torque_permille *
+rated_torque / 1000 * force_per_torque`` N, and ``Fc`` the hidden Coulomb friction; in the
+seed's convention the wall force is ``u = -F``.  Each SYNC advances the plant by exactly ``T``
+(virtual time).  The sensor (:mod:`sim_drive.sensor`) then samples 0x606C by the drive's
+velocity model (point, average, window, lowpass), adds its hidden noise, and quantises
+velocity and position.
 
 Timing (see :class:`~sim_drive.parameters.Timing`): the first SYNC (number 0, t = 0) only
 samples.  At SYNC k >= 1 the plant first advances over [t_{k-1}, t_k) with the torque that
 applies to that interval, then velocity/position are sampled.  ``CIA402`` applies the torque
 latched at SYNC k-1 (written during cycle k-2); ``IDEAL`` applies the target present at SYNC k
-(written during cycle k-1, i.e. in answer to sample k-1).
+(written during cycle k-1, i.e. in answer to sample k-1); ``RECEPTION`` holds the target that
+acted before for the first ``reception_delay`` of the interval and the target present at SYNC
+k after it (the target written in answer to sample k-1 counts as received ``reception_delay
+* T`` after SYNC k-1).
 
 Torque is applied only in OPERATION ENABLED with mode CST (0x6061 = 10) and halt (controlword
 bit 8) clear; otherwise 0.  State changes take effect per interval: an interval closed by a
@@ -110,11 +115,8 @@ class SimulatedDrive:
         name: str = "sim drive",
     ) -> None:
         self.name = name
-        self.timing = timing
         self.parameters = parameters if parameters is not None else DeviceParameters()
         self.power_on_parameters = self.parameters
-        self.handle = Handle(self.parameters, operator)
-        self.sensor = Sensor(self.parameters)
         self.state = State.SWITCH_ON_DISABLED
         self.state_listeners: list[StateListener] = []
         self.controlword = 0
@@ -125,8 +127,12 @@ class SimulatedDrive:
         self.abort_connection_option_code = int(AbortConnectionOption.FAULT)
         self.error_code = 0
         self.sync_count = 0
-        self._latched = 0
+        self._latched = 0  # per mille: cia402, latched at the last SYNC; reception, acting since the last switch
         self._newton_per_permille = self.parameters.rated_torque_mnm / 1e6 * self.parameters.force_per_torque
+        self.sensor = Sensor(self.parameters)
+        self.handle = Handle(self.parameters, operator)
+        self._timing = Timing.CIA402
+        self._apply_timing(Timing(timing))  # configures the sensor and the handle for the timing
         self._readers: dict[int, Callable[[], int]] = {
             0x6007: lambda: self.abort_connection_option_code,
             0x603F: lambda: self.error_code,
@@ -156,12 +162,34 @@ class SimulatedDrive:
     # ----------------------------------------------------------------- the handle
     @property
     def timing(self) -> Timing:
-        """When a written torque acts (see :class:`Timing`); may be changed between SYNCs."""
-        return Timing.IDEAL if self._ideal else Timing.CIA402
+        """When a written torque acts (see :class:`Timing`); may be changed between SYNCs.
+
+        The torque acting at the change becomes the latched one: ``cia402`` applies it over one
+        more interval, ``reception`` until the next target's reception.
+        """
+        return self._timing
 
     @timing.setter
     def timing(self, timing: Timing | str) -> None:
-        self._ideal = Timing(timing) is Timing.IDEAL
+        new = Timing(timing)
+        self._latched = self.torque_actual
+        self._apply_timing(new)
+
+    def _apply_timing(self, timing: Timing) -> None:
+        """Select the per-timing interval step and the handle's force switch (no state carried)."""
+        self._timing = timing
+        self._close_interval = {
+            Timing.CIA402: self._close_cia402,
+            Timing.IDEAL: self._close_ideal,
+            Timing.RECEPTION: self._close_reception,
+        }[timing]
+        self._latch_at_sync = timing is Timing.CIA402
+        self._configure(self.parameters)
+
+    @property
+    def loop_delay(self) -> float:
+        """The loop delay ``D`` in samples this drive closes: 1, 0, or its ``reception_delay``."""
+        return self._timing.loop_delay(self.parameters.reception_delay)
 
     @property
     def operator(self) -> OperatorModel:
@@ -198,6 +226,16 @@ class SimulatedDrive:
         return self.handle.wall_energy
 
     @property
+    def friction_energy(self) -> float:
+        """Energy the Coulomb friction has dissipated, J (exact)."""
+        return self.handle.friction_energy
+
+    @property
+    def viscous_energy(self) -> float:
+        """Energy the viscous friction ``b`` has dissipated, J (exact)."""
+        return self.handle.viscous_energy
+
+    @property
     def velocity_counts(self) -> int:
         """0x606C as sampled at the last SYNC."""
         return self.sensor.velocity_counts
@@ -210,14 +248,16 @@ class SimulatedDrive:
     def reconfigure(self, **changes: object) -> None:
         """Change :class:`DeviceParameters` fields (validated first; nothing half-applied).
 
-        The handle keeps its velocity and position; a new ``period`` acts from the next SYNC.
+        The handle keeps its velocity and position, a low-pass velocity filter its state; a new
+        ``period`` acts from the next SYNC.
         """
         self._configure(dataclasses.replace(self.parameters, **changes))  # type: ignore[arg-type]
 
     def _configure(self, parameters: DeviceParameters) -> None:
         self.parameters = parameters
-        self.handle.configure(parameters)
-        self.sensor.configure(parameters)
+        self.sensor.configure(parameters, self.handle.velocity)
+        switch = parameters.reception_delay if self._timing is Timing.RECEPTION else 0.0
+        self.handle.configure(parameters, self.sensor.meter, switch)
         self._newton_per_permille = parameters.rated_torque_mnm / 1e6 * parameters.force_per_torque
 
     # ----------------------------------------------------------------- objects
@@ -270,10 +310,11 @@ class SimulatedDrive:
 
     @property
     def torque_actual(self) -> int:
-        """0x6077 in per mille of rated torque: the torque acting from the latest SYNC on."""
-        if self._ideal:
-            return self._effective_target()
-        return self._latched if self._torque_enabled() else 0
+        """0x6077 in per mille of rated torque: the torque acting from the latest SYNC on (with
+        ``reception`` timing: from the latest target's reception on)."""
+        if self._latch_at_sync:
+            return self._latched if self._torque_enabled() else 0
+        return self._effective_target()
 
     def write_controlword(self, word: int) -> None:
         """0x6040: run the state machine on ``word`` (fault reset on the rising edge of bit 7)."""
@@ -354,23 +395,36 @@ class SimulatedDrive:
         return self.state is _OPERATION_ENABLED and self.mode_display == _CST and not self.controlword & CW_HALT
 
     def _effective_target(self) -> int:
+        """0x6071 saturated at +-0x6072 while torque is enabled, else 0 (per mille)."""
         if not self._torque_enabled():
             return 0
-        limit = self.parameters.max_torque_permille
-        return saturate(self.target_torque, -limit, limit)
+        target, limit = self.target_torque, self.parameters.max_torque_permille
+        return target if -limit <= target <= limit else saturate(target, -limit, limit)
 
     # ----------------------------------------------------------------- the cycle
     def sync(self) -> None:
         """One SYNC: advance the plant over the closing interval (if any), then sample."""
         if self.sync_count:
-            if self._ideal:
-                permille = self._effective_target()
-            else:
-                permille = self._latched if self._torque_enabled() else 0
-            self.handle.advance(permille * self._newton_per_permille)
+            self._close_interval()
         if self.state is _QUICK_STOP_ACTIVE and not 5 <= self.quick_stop_option_code <= 8:
             self._enter(State.SWITCH_ON_DISABLED, TRANSITION_QUICK_STOP_DONE)
-        if not self._ideal:
+        if self._latch_at_sync:
             self._latched = self._effective_target()
         self.sensor.sample(self.handle)
         self.sync_count += 1
+
+    def _close_cia402(self) -> None:
+        """The closing interval under the torque latched at the SYNC before."""
+        force = (self._latched if self._torque_enabled() else 0) * self._newton_per_permille
+        self.handle.advance(force, force)
+
+    def _close_ideal(self) -> None:
+        """The closing interval under the target present now."""
+        force = self._effective_target() * self._newton_per_permille
+        self.handle.advance(force, force)
+
+    def _close_reception(self) -> None:
+        """The closing interval: the torque acting before for ``reception_delay``, the target present now after."""
+        before = self._latched if self._torque_enabled() else 0
+        self._latched = self._effective_target()
+        self.handle.advance(before * self._newton_per_permille, self._latched * self._newton_per_permille)

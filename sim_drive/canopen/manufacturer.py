@@ -5,8 +5,9 @@ Layout (all REAL64 values are IEEE 754 doubles in SI units; see also ``sim_drive
 - 0x2000 plant: sub 1 ``m`` kg, sub 2 ``b`` N s/m, sub 3 plant sub-steps per SYNC (UNSIGNED16)
 - 0x2001 scaling: sub 1 velocity per count m/s, sub 2 position per count m, sub 3 force per
   torque N/(N m)
-- 0x2002 timing: sub 1 loop timing (0 cia402, 1 ideal), sub 2 SYNC count, sub 3 virtual time s,
-  sub 4 late RPDO count, sub 5 RPDO length error count (2-5 read-only)
+- 0x2002 timing: sub 1 loop timing (0 cia402, 1 ideal, 2 reception), sub 2 SYNC count, sub 3
+  virtual time s, sub 4 late RPDO count, sub 5 RPDO length error count (2-5 read-only), sub 6
+  reception delay (samples in [0, 1): when ``reception`` timing applies a target after the SYNC)
 - 0x2003 energy: sub 1 operator energy J, sub 2 wall energy J (read-only)
 - 0x2010 operator: sub 1 model code (``sim_drive.operator.OPERATOR_CODES``), sub 2..7
   parameters p1..p6.  Write the parameters first, then the code: writing the code builds the
@@ -34,8 +35,9 @@ _PARAMETER_FIELDS = {
     (SCALING, 1): "velocity_per_count",
     (SCALING, 2): "position_per_count",
     (SCALING, 3): "force_per_torque",
+    (TIMING, 6): "reception_delay",
 }
-_TIMING_CODES = {Timing.CIA402: 0, Timing.IDEAL: 1}
+_TIMING_CODES = {Timing.CIA402: 0, Timing.IDEAL: 1, Timing.RECEPTION: 2}
 
 
 class ManufacturerObjects:
