@@ -13,11 +13,14 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
-from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout
 from drives.cia402 import QUICK_STOP_OPTION_CODE, State
+from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout, ModbusLinkLost, ParameterError
 from drives.modbus.drive import ModbusDrive
-from drives.errors import ModbusLinkLost, ParameterError
+from drives.safety import SafetySettings
 from sim_drive.modbus import LINK_LOST_ERROR_CODE, FaultInjector, ModbusSimServer
+
+# the loop runs in virtual time: the drive's watchdog guards a dead master, not a busy machine
+VIRTUAL_TIME_SAFETY = SafetySettings().for_virtual_time(1e-3)
 
 UNIT = 7
 
@@ -26,7 +29,8 @@ UNIT = 7
 def running(request):
     """(server, drive) in OPERATION ENABLED after a few cycles with torque on."""
     server = ModbusSimServer(unit_id=UNIT, timing="ideal").start()
-    drive = ModbusDrive("127.0.0.1", server.port, unit_id=UNIT, cycle=request.param, timeout=0.2)
+    drive = ModbusDrive("127.0.0.1", server.port, unit_id=UNIT, cycle=request.param, timeout=0.2,
+                         safety=VIRTUAL_TIME_SAFETY)
     try:
         drive.connect()
         drive.enable()

@@ -22,7 +22,8 @@ from scipy.signal import lfilter
 
 from drives.cia402 import POSITION_ACTUAL
 from drives.modbus.drive import ModbusDrive
-from drives.modbus.timing import loop_delay, measure_poll
+from drives.modbus.timing import SAFETY_FACTOR, loop_delay, measure_poll
+from drives.safety import SafetySettings
 from haptic_bus.control.controller import WallController
 from haptic_bus.control.gate import DeviceLoop, PassivityGate
 from haptic_bus.control.scene import Wall, compile_scene
@@ -32,6 +33,8 @@ from sim_drive.parameters import DeviceParameters
 
 M, B_FRICTION, T = 0.5, 0.1, 1e-3
 K_WALL, B_WALL = 200.0, 100.0
+# the loop runs in virtual time: the drive's watchdog guards a dead master, not a busy machine
+VIRTUAL_TIME_SAFETY = SafetySettings().for_virtual_time(T)
 A = np.exp(-B_FRICTION * T / M)
 K1 = -np.expm1(-B_FRICTION * T / M) / B_FRICTION
 DEN = np.array([1.0, -(1.0 + A) + K1 * (K_WALL * T + B_WALL), A - K1 * B_WALL])  # D(z)
@@ -58,7 +61,8 @@ def seed_rig(request):
     def make(operator, timing="ideal"):
         server = ModbusSimServer(timing=timing, operator=operator, parameters=DeviceParameters(m=M, b=B_FRICTION, period=T))
         server.start()
-        drive = ModbusDrive("127.0.0.1", server.port, cycle=request.param, timeout=2.0)
+        drive = ModbusDrive("127.0.0.1", server.port, cycle=request.param, timeout=2.0,
+                            safety=VIRTUAL_TIME_SAFETY)
         rigs.append((server, drive))
         drive.connect()
         delay = loop_delay(drive, T)
@@ -124,7 +128,7 @@ def test_torque_acts_when_the_canopen_simulator_would(timing: str, first_moving_
     """A 1000 per mille (10 N) pulse written in cycle 0: ``ideal`` shows it in sample 1, ``cia402``
     (latched at the next SYNC, like a synchronous drive) in sample 2, as on CANopen."""
     with ModbusSimServer(timing=timing, parameters=DeviceParameters(m=M, b=B_FRICTION, period=T)) as server:
-        with ModbusDrive("127.0.0.1", server.port, cycle=cycle, timeout=2.0) as drive:
+        with ModbusDrive("127.0.0.1", server.port, cycle=cycle, timeout=2.0, safety=VIRTUAL_TIME_SAFETY) as drive:
             drive.connect()
             assert loop_delay(drive, T) == {"ideal": 0, "cia402": 1}[timing]
             drive.enable()
@@ -138,13 +142,22 @@ def test_torque_acts_when_the_canopen_simulator_would(timing: str, first_moving_
     assert velocities[first_moving_sample + 1] == round(A * K1 * 10.0 / 1e-6)
 
 
-def test_poll_timing_on_loopback_gives_a_whole_sample_delay() -> None:
+def test_poll_timing_on_loopback_gives_the_fractional_delay_of_its_round_trip() -> None:
     with ModbusSimServer(timing="ideal") as server:
         with ModbusDrive("127.0.0.1", server.port, cycle="split", timeout=2.0) as drive:
             drive.connect()
             poll = measure_poll(drive, 300)
     assert poll.cycles == 300 and poll.requests_per_cycle == 2.0
     assert 0 < poll.p50 <= poll.p99 <= poll.max
-    # any real round trip lands after the plant advanced: at least one sample, ceil(rtt/T)
-    assert poll.assumed_delay(T) == max(1, int(np.ceil(poll.p99 / T - 1e-9)))
+    # the force lands at most one round trip after the sample: D = 1.5 p99 / T samples, real
+    assert poll.assumed_delay(T) == pytest.approx(SAFETY_FACTOR * poll.p99 / T, rel=1e-15)
     assert server.drive.state.value == "SWITCH ON DISABLED"  # measuring wrote the safe outputs only
+
+
+def test_a_simulated_drive_with_reception_timing_announces_its_fractional_delay() -> None:
+    """Registers 0x0050 (timing 2) and 0x0060 (delta): the gate judges with D = 0.3 samples."""
+    parameters = DeviceParameters(m=M, b=B_FRICTION, period=T, reception_delay=0.3)
+    with ModbusSimServer(timing="reception", parameters=parameters) as server, \
+            ModbusDrive("127.0.0.1", server.port, timeout=2.0, safety=VIRTUAL_TIME_SAFETY) as drive:
+        drive.connect()
+        assert drive.simulated_timing == "reception" and loop_delay(drive, T) == 0.3

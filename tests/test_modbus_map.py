@@ -22,7 +22,8 @@ from drives.modbus.register_map import (
     register_at,
     register_for_object,
 )
-from drives.modbus.timing import assumed_delay
+from drives.errors import ParameterError
+from drives.modbus.timing import SAFETY_FACTOR, assumed_delay
 from sim_drive.device import SimulatedDrive
 from sim_drive.modbus import RegisterBank
 
@@ -132,17 +133,15 @@ def test_register_bank_reads_writes_and_refuses(order: str) -> None:
     assert decode_value(REGISTER_BY_NAME["sim_time"], bank.read(0x54, 4), order) == pytest.approx(1e-3)
 
 
-def test_assumed_delay_is_the_next_whole_sample() -> None:
+def test_assumed_delay_is_the_p99_round_trip_over_the_period_with_its_safety_factor() -> None:
     T = 1e-3
-    assert assumed_delay(0.0, T) == 0
-    assert assumed_delay(1e-9, T) == 1
-    assert assumed_delay(250e-6, T) == 1
-    assert assumed_delay(1e-3, T) == 1  # exactly one period
-    assert assumed_delay(3 * 0.1, 0.1) == 3  # 0.30000000000000004 / 0.1: float rounding is not a sample
-    assert assumed_delay(1.0001e-3, T) == 2
-    assert assumed_delay(2.5e-3, T) == 3
+    assert SAFETY_FACTOR == 1.5
+    assert assumed_delay(0.0, T) == 0.0
+    assert assumed_delay(250e-6, T) == pytest.approx(0.375, rel=1e-15)  # a quarter sample, not rounded up to 1
+    assert assumed_delay(1e-3, T) == pytest.approx(1.5, rel=1e-15)
+    assert assumed_delay(2.5e-3, T) == pytest.approx(3.75, rel=1e-15)
     for bad in (-1e-6, math.nan, math.inf):
-        with pytest.raises(ValueError, match="round_trip_p99"):
+        with pytest.raises(ParameterError, match="round_trip_p99"):
             assumed_delay(bad, T)
-    with pytest.raises(ValueError, match="T = 0"):
+    with pytest.raises(ParameterError, match="T = 0"):
         assumed_delay(1e-4, 0)

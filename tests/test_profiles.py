@@ -13,7 +13,7 @@ from haptic_bus.analysis.check import check_loop
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA
 from haptic_bus.control.gate import GateRefusal
 from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.app.profiles import (DEFAULT_PROFILE, Profile, ProfileError, ProfileRefusal, default_profile,
+from haptic_bus.app.profiles import (DEFAULT_PROFILE, Profile, ProfileError, ProfileRefusal, default_profile, profile_to_dict,
                                  load_profile, read_profile, shipped_profiles)
 from haptic_bus.app.profiles_cli import add_profiles_parser, cmd_check, cmd_list, cmd_show
 from haptic_bus.control.scene import Detent, Slot, Wall
@@ -37,6 +37,7 @@ position_per_count = 1e-7
 rated_torque = 0.2
 force_per_torque = 50.0
 max_torque_permille = 1000
+velocity = "average"
 
 [loop]
 period = 0.001
@@ -113,7 +114,7 @@ def test_shipped_profile_loads_and_gate_agrees_with_check(name):
     assert decision.accepted and decision.walls
     d, loop = profile.device, profile.loop
     for wall in decision.walls:
-        report = check_loop(WallLoop(d.mass, d.friction, loop.period, wall.K, wall.B, loop.delay))
+        report = check_loop(WallLoop(d.mass, d.friction, loop.period, wall.K, wall.B, loop.delay, d.velocity))
         assert report.passive is True
         assert report.passive == wall.verdict.passive
         assert report.margin == wall.verdict.margin  # the same criterion, the same number
@@ -314,7 +315,7 @@ def test_cli_check_matches_check_report(capsys):
     assert cmd_check(ns(profile="stiff-wall", json=True)) == 0
     out = json.loads(capsys.readouterr().out)
     (wall,) = out["walls"]
-    expected = check_loop(WallLoop(1.0, 20.0, 1e-3, 22500.0, 5.0, 1)).to_dict()
+    expected = check_loop(WallLoop(1.0, 20.0, 1e-3, 16500.0, 7.0, 1, "average")).to_dict()
     assert wall["report"]["passive"] is expected["passive"] is True
     assert wall["report"]["margin"] == expected["margin"]
     assert cmd_check(ns(profile="seed-ideal")) == 0
@@ -343,3 +344,86 @@ def test_add_profiles_parser():
     args = parser.parse_args(["profiles", "show"])
     assert args.handler is cmd_show and args.profile == DEFAULT_PROFILE
     assert parser.parse_args(["profiles", "list"]).handler is cmd_list
+
+
+# --------------------------------------------------------------------------- the measured loop
+
+IDENTIFIED = """
+[identification]
+date = "2026-11-30T22:50:00Z"
+mass = 1.0
+mass_stderr = 0.01
+friction = 21.0
+friction_stderr = 0.2
+coulomb_friction = 0.3
+coulomb_friction_stderr = 0.01
+delay = 1.0
+delay_stderr = 0.0
+velocity = "average"
+excitation_s = 20.0
+residual_rms = 1e-7
+"""
+
+
+def test_the_velocity_model_is_required_and_named_with_its_choices(tmp_path):
+    error = broken(tmp_path, 'velocity = "average"\n', "")
+    assert error.field == "device.velocity" and "'average'" in error.allowed and "encoder difference" in error.allowed
+    error = broken(tmp_path, 'velocity = "average"\n', 'velocity = "tacho"\n')
+    assert error.field == "device.velocity" and "lowpass:SECONDS" in error.allowed
+    error = broken(tmp_path, 'velocity = "average"\n', 'velocity = "window:0.002"\n')  # longer than T = 1 ms
+    assert error.field == "device.velocity" and "(0, T]" in error.allowed
+
+
+def test_the_profile_velocity_model_reaches_the_gate_and_the_simulated_drive(tmp_path):
+    profile = load_profile(write(tmp_path, BASE.replace('velocity = "average"', 'velocity = "lowpass:0.0005"')))
+    assert str(profile.device_loop().wall(0.0, 0.0).velocity) == "lowpass:0.0005"
+    assert str(profile.sim_device_parameters()["velocity"]) == "lowpass:0.0005"
+
+
+@pytest.mark.parametrize("timing, given, expected", [
+    ("ideal", None, 0), ("cia402", None, 1), ("cia402", "1.25", 1.25), ("ideal", "0.3", 0.3), ("reception", "0.3", 0.3),
+])
+def test_the_loop_delay_is_real_and_defaults_to_the_timing(tmp_path, timing, given, expected):
+    text = BASE.replace('timing = "cia402"', f'timing = "{timing}"' + ("" if given is None else f"\ndelay = {given}"))
+    profile = read_profile(write(tmp_path, text))
+    assert profile.loop.delay == expected and profile.device_loop().delay == expected
+    if timing == "reception":
+        assert profile.sim_device_parameters()["reception_delay"] == expected
+
+
+def test_a_delay_below_the_timing_or_missing_for_reception_is_refused(tmp_path):
+    error = broken(tmp_path, 'timing = "cia402"', 'timing = "cia402"\ndelay = 0.5')
+    assert error.field == "loop.delay" and "[1, 1000]" in error.allowed and "cia402" in error.allowed
+    error = broken(tmp_path, 'timing = "cia402"', 'timing = "reception"')
+    assert error.field == "loop.delay" and "required" in error.allowed
+    error = broken(tmp_path, 'timing = "cia402"', 'timing = "ideal"\ndelay = nan')
+    assert error.field == "loop.delay"
+
+
+def test_the_hidden_truth_keys_go_to_the_simulated_drive_only(tmp_path):
+    text = BASE.replace('velocity = "average"\n', 'velocity = "average"\ncoulomb_friction = 0.2\n'
+                        'velocity_noise = 1000.0\nnoise_seed = 7\n')
+    profile = load_profile(write(tmp_path, text))
+    parameters = profile.sim_device_parameters()
+    assert (parameters["coulomb_friction"], parameters["velocity_noise"], parameters["noise_seed"]) == (0.2, 1000.0, 7)
+    assert profile.device_loop() == load_profile(write(tmp_path, BASE)).device_loop()  # the gate never sees them
+    assert broken(tmp_path, 'velocity = "average"\n', 'velocity = "average"\nnoise_seed = -1\n').field == "device.noise_seed"
+
+
+def test_a_profile_as_pessimistic_as_its_identification_loads(tmp_path):
+    text = BASE.replace("friction = 20.0", "friction = 20.4") + IDENTIFIED  # 21.0 - 3 * 0.2 = 20.4
+    profile = load_profile(write(tmp_path, text))
+    assert profile.identification is not None and profile.identification.lowest_credible_friction == pytest.approx(20.4)
+    assert profile_to_dict(profile)["identification"]["velocity"] == "average"
+
+
+@pytest.mark.parametrize("old, new, field, needle", [
+    ('velocity = "average"\n', 'velocity = "point"\n', "device.velocity", "average"),
+    ("friction = 20.0", "friction = 20.5", "device.friction", "at most 20.4"),
+    ('timing = "cia402"', 'timing = "ideal"', "loop.delay", "at least 1"),
+])
+def test_a_profile_more_optimistic_than_its_identification_is_refused(tmp_path, old, new, field, needle):
+    path = write(tmp_path, BASE.replace(old, new, 1) + IDENTIFIED)
+    with pytest.raises(ProfileError) as caught:
+        load_profile(path)
+    assert caught.value.field == field and needle in caught.value.allowed and "2026-11-30" in caught.value.allowed

@@ -82,8 +82,10 @@ def test_gate_refuses_the_seed_wall_with_one_sample_of_delay_and_says_why() -> N
     with pytest.raises(GateRefusal) as info:
         PassivityGate(SEED_CIA402).admit(scene)
     message = str(info.value)
-    assert "floor" in message and "delay = 1" in message and "margin -84.09 N s/m" in message
+    assert "floor" in message and "delay D = 1 samples, velocity point" in message and "margin -84.09 N s/m" in message
     assert "allowed: margin >= 0" in message
+    # the passive intervals, not only the largest value: at K = 200 no B is passive with one sample
+    assert "passive B at this K: none" in message and "passive K at this B: none" in message
 
 
 def test_safety_margin_and_strict_bandwidth_policy() -> None:
@@ -116,3 +118,69 @@ def test_bad_scene_input_names_the_field(build, field: str) -> None:
 def test_a_contact_wall_names_every_object_that_makes_it() -> None:
     detents = [Detent(name, center, 0.002, 300.0, 2.0) for name, center in (("left", -0.01), ("home", 0.0), ("right", 0.01))]
     assert compile_scene(detents).contacts() == {(300.0, 2.0): ("home", "left", "right")}
+
+
+# --------------------------------------------------------------------------- start ramp and derate
+
+def _scales_by_sampling(device: DeviceLoop, K: float, B: float, n: int = 401) -> list[bool]:
+    from haptic_bus.analysis.criterion import exact_verdict
+
+    return [exact_verdict(device.wall(s * K, s * B)).passive for s in (i / (n - 1) for i in range(n))]
+
+
+@pytest.mark.parametrize("device, K, B", [
+    (SEED_IDEAL, 200.0, 100.0),
+    (DeviceLoop(0.5, 0.1, 1e-3, 2), 56.23, 0.03),
+    (DeviceLoop(0.5, 2.0, 1e-3, 1), 3000.0, 1.0),
+    (DeviceLoop(0.5, 2.0, 1e-3, 1, "average"), 3000.0, 1.0),
+    (DeviceLoop(0.5, 0.1, 1e-3, 0.3), 100.0, 0.05),
+    (DeviceLoop(0.37, 2.9, 1e-3, 1, "lowpass:0.0005"), 2000.0, 1.5),
+])
+def test_the_passive_scales_of_a_wall_agree_with_the_verdict_at_every_sampled_scale(device, K, B):
+    """The exact scale intervals against the exact verdict at 401 scales: no sampled scale
+    disagrees (1e-9 slack at the interval ends, far below the 1/400 spacing)."""
+    scene = compile_scene([Wall("w", 0.0, -1, K, B)])
+    intervals = PassivityGate(device).passive_scales(scene)
+    sampled = _scales_by_sampling(device, K, B)
+    inside = [any(lo - 1e-9 <= i / 400 <= hi + 1e-9 for lo, hi in intervals) for i in range(401)]
+    assert inside == sampled
+
+
+def test_a_ramp_is_proven_only_when_every_scaled_wall_is_passive() -> None:
+    assert PassivityGate(SEED_IDEAL).proves_ramp(compile_scene([Wall("floor", 0.0, -1, 200.0, 100.0)])).proven
+    device = DeviceLoop(0.5, 2.0, 1e-3, 1)
+    scene = compile_scene([Wall("stop", 0.0, -1, 3000.0, 1.0)])
+    proof = PassivityGate(device).proves_ramp(scene)
+    # the end point is active too here, but even a passive end point would not do: what counts
+    # is the whole way, and the reason names the passive part of it
+    assert not proof.proven and "stop scaled by s is passive only for s in [0, 0.7759]" in proof.reason
+
+
+def test_the_scales_of_overlapping_walls_intersect() -> None:
+    device = DeviceLoop(0.5, 2.0, 1e-3, 1)
+    scene = compile_scene([Wall("a", 0.0, -1, 2000.0, 1.0), Slot("b", -0.01, 0.01, 1000.0, 0.0)])
+    gate = PassivityGate(device)
+    common = gate.passive_scales(scene)
+    each = [gate.passive_scales(compile_scene([Wall("w", 0.0, -1, K, B)])) for K, B in scene.contacts()]
+    for s in (i / 200 for i in range(201)):
+        expected = all(any(lo <= s <= hi for lo, hi in intervals) for intervals in each)
+        assert any(lo <= s <= hi for lo, hi in common) == expected
+
+
+def test_derate_serves_an_observed_fractional_delay_with_the_next_prepared_one() -> None:
+    from haptic_bus.app.runner import DERATE_EXTRA_DELAYS, prepare_derate
+
+    device = DeviceLoop(1.0, 20.0, 1e-3, 1, "average")
+    scene = compile_scene([Wall("stop", 0.0, -1, 16500.0, 7.0)])
+    gate = PassivityGate(device, GatePolicy(safety_margin=1.0))
+    gate.admit(scene)
+    derate = prepare_derate(gate, scene)
+    served = derate(scene, 1.3)  # between the prepared 1.25 and 1.5: served by 1.5
+    assert served is not None
+    judge, scaled, decision = served
+    assert judge.device.delay == 1.5 and decision.accepted and decision.worst_margin >= 1.0
+    (K, B), = scaled.contacts()
+    assert 0 < K / 16500.0 < 1.0 and K / 16500.0 == pytest.approx(B / 7.0, rel=1e-12)
+    # the largest such scale: a little more and the gate at D = 1.5 refuses it
+    assert not judge.passes(scene.scaled(K / 16500.0 * (1 + 1e-6)))
+    assert derate(scene, 1.0 + max(DERATE_EXTRA_DELAYS) + 0.01) is None

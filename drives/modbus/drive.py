@@ -68,6 +68,7 @@ from drives.modbus.register_map import (
     decode_value,
     describe_range,
     encode_value,
+    SIM_TIMING_CODES,
     register_for_object,
 )
 from drives.safety import SafetySettings
@@ -77,7 +78,8 @@ logger = logging.getLogger(__name__)
 __all__ = ["ModbusDrive", "ModbusStats", "CYCLE_MODES"]
 
 CYCLE_MODES = ("split", "fc23")
-_TIMING_NAMES = {0: "cia402", 1: "ideal"}
+_TIMING_NAMES = {code: name for name, code in SIM_TIMING_CODES.items()}
+_TIMING_DELAYS = {"ideal": 0, "cia402": 1}  # samples; "reception" reads its delay from 0x0060
 _CONTROLWORD_REG = register_for_object(CONTROLWORD)
 _TORQUE_REG = register_for_object(TARGET_TORQUE)
 _STATUSWORD_REG = register_for_object(STATUSWORD)
@@ -132,7 +134,8 @@ class ModbusDrive(Cia402Master):
         self.check_identity = check_identity
         self.safety = safety
         self.safety_warnings: tuple[str, ...] = ()
-        self.simulated_timing: str | None = None  # "ideal"/"cia402" when the server is sim_drive
+        self.simulated_timing: str | None = None  # "ideal"/"cia402"/"reception" when the server is sim_drive
+        self.simulated_delay: float | None = None  # that simulated drive's loop delay, samples
         self.stats = ModbusStats()
         self.link = ModbusLink(self.name, address, self.stats)
         self._codec = InputBlockCodec(word_order, with_position)
@@ -216,6 +219,10 @@ class ModbusDrive(Cia402Master):
             self.simulated_timing = _TIMING_NAMES.get(int(self._read_spec(REGISTER_BY_NAME["sim_timing"])))
         except DriveProtocolError:
             self.simulated_timing = None
+        if self.simulated_timing == "reception":
+            self.simulated_delay = float(self._read_spec(REGISTER_BY_NAME["sim_reception_delay"]))
+        elif self.simulated_timing is not None:
+            self.simulated_delay = float(_TIMING_DELAYS[self.simulated_timing])
 
     def _read_scaling(self) -> None:
         sources: list[tuple[str, RegisterSpec, float]] = [

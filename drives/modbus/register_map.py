@@ -36,11 +36,12 @@ address   regs   object  type    acc.   meaning
 0x0044    4      --      F64     ro     position per count (m per 0x6064 increment)
 0x0048    4      --      F64     ro     force per torque (N at the handle per N m)
 **simulated drive only** (a real drive answers "illegal address" here)
-0x0050    1      --      U16     ro     loop timing (0 cia402, 1 ideal)
+0x0050    1      --      U16     ro     loop timing (0 cia402, 1 ideal, 2 reception)
 0x0051    2      --      U32     ro     cycle count (closed cycles + 1, like the SYNC count)
 0x0054    4      --      F64     ro     virtual time (s)
 0x0058    4      --      F64     ro     operator energy (J)
 0x005C    4      --      F64     ro     wall energy (J)
+0x0060    4      --      F64     ro     reception delay delta (samples, in [0, 1): reception timing)
 ========  =====  ======  ======  =====  ================================================
 
 Any other address is unmapped (exception 0x02, illegal data address), and so is an access
@@ -185,12 +186,13 @@ REGISTERS: tuple[RegisterSpec, ...] = (
     RegisterSpec(0x0054, "sim_time", "f64", "ro", unit="s"),
     RegisterSpec(0x0058, "sim_operator_energy", "f64", "ro", unit="J"),
     RegisterSpec(0x005C, "sim_wall_energy", "f64", "ro", unit="J"),
+    RegisterSpec(0x0060, "sim_reception_delay", "f64", "ro", unit="samples"),
 )
 REGISTER_BY_NAME: dict[str, RegisterSpec] = {spec.name: spec for spec in REGISTERS}
 _BY_OBJECT: dict[int, RegisterSpec] = {spec.obj.index: spec for spec in REGISTERS if spec.obj is not None}
 _BY_ADDRESS: dict[int, RegisterSpec] = {a: spec for spec in REGISTERS for a in range(spec.address, spec.end)}
 
-SIM_TIMING_CODES = {"cia402": 0, "ideal": 1}
+SIM_TIMING_CODES = {"cia402": 0, "ideal": 1, "reception": 2}
 
 
 def register_for_object(obj: ObjectSpec | int) -> RegisterSpec:

@@ -1,33 +1,35 @@
-"""Loop timing of a Modbus poll, and the loop delay in whole samples the passivity gate assumes.
+"""Loop timing of a Modbus poll, and the loop delay (samples, real) the passivity gate assumes.
 
 A Modbus poll is not a CANopen SYNC.  On CANopen every drive samples at the SYNC and applies
 the torque at the next one: one whole sample, by construction.  A Modbus drive samples when
 the read request reaches it and applies the torque when the write lands; nothing lines the two
 up with the controller's period ``T``.
 
-**Reasoning.**  The seed's loop (``d = 0``) has the force computed from the sample ``v_k`` act
+**Reasoning.**  The seed's loop (``D = 0``) has the force computed from the sample ``v_k`` act
 over ``[t_k, t_k + T)``, starting at the very instant of the sample.  On a real poll the
-sample is taken at ``s_k`` (the read arrives), the torque lands at ``s_k + D`` (the write
-arrives), with ``0 < D <= round trip`` (read answer back, compute, write out; ``D`` is less
-than the full cycle round trip measured at the controller), and it is held until the next write
-lands.  The plant has advanced for ``D`` seconds with the previous torque: the force answering
-``v_k`` acts over ``[s_k + D, s_k + D + T)``, a delay of ``D / T`` samples.  The gate's
-criteria take whole samples, and a delay that lands after the plant has advanced is judged at
-the next whole sample: ``d = ceil(D / T)``, with the cycle round trip (its p99) standing in for
-``D``.  Any real poll therefore has ``d >= 1``; ``d = 0`` is only the simulated drive in
-virtual time with ``ideal`` timing, whose plant waits for the write.
+sample is taken at ``s_k`` (the read arrives), the torque lands at ``s_k + R`` (the write
+arrives), with ``0 < R <= round trip`` (read answer back, compute, write out: ``R`` is less
+than the whole cycle's round trip measured at the controller), and it is held until the next
+write lands.  The force answering ``v_k`` acts over ``[s_k + R, s_k + R + T)``: a loop delay
+of ``D = R / T`` samples, a real number (the analysis takes ``D = d + delta`` exactly, see
+:mod:`haptic_bus.analysis.sampled_loop`; rounding it up to whole samples would refuse walls
+that are passive).  The gate assumes
+
+    ``D = SAFETY_FACTOR * p99(round trip) / T``
+
+with :data:`SAFETY_FACTOR` = 1.5: the round trip already bounds ``R`` from above, the p99 of a
+few hundred polls leaves 1 % of cycles slower, and the factor covers that tail and the drift
+between commissioning and the run.  The run's supervisor watches the lateness it then meets.
 
 Two refinements:
 
 - ``cycle="fc23"`` (one read/write request per cycle) reads the next cycle's inputs together
   with this cycle's write.  In a loop paced at ``T`` those inputs are up to ``T`` old when
-  they are used: ``D <= T + round trip``, one more sample (:func:`loop_delay` adds it).
+  they are used: one more sample (:meth:`PollTiming.assumed_delay` adds it).
 - The simulated drive (``sim_drive.modbus``) runs in virtual time whatever the wall
   clock does: its plant advances only when the output block is written, so its loop delay is
-  its timing's, 0 (``ideal``) or 1 (``cia402``), read from its register 0x0050.
-
-Cycles whose round trip exceeds ``d T`` break the assumption; :class:`PollTiming` counts them
-(``over_budget``), and a real-time run should report them like deadline overruns.
+  its timing's, 0 (``ideal``), 1 (``cia402``) or its reception delay ``delta`` (``reception``),
+  read from its registers 0x0050 and 0x0060 (:attr:`ModbusDrive.simulated_delay`).
 """
 
 from __future__ import annotations
@@ -38,27 +40,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drives.errors import ParameterError
 from drives.modbus.drive import ModbusDrive
 
-__all__ = ["PollTiming", "assumed_delay", "measure_poll", "loop_delay", "SIM_TIMING_DELAY"]
+__all__ = ["PollTiming", "SAFETY_FACTOR", "assumed_delay", "measure_poll", "loop_delay"]
 
-SIM_TIMING_DELAY = {"ideal": 0, "cia402": 1}
-_ROUNDING = 1e-9  # relative: a round trip of exactly k periods, up to float error, is k samples
+SAFETY_FACTOR = 1.5
+"""The gate's loop delay is this many times the p99 round trip (module docstring)."""
 
 
-def assumed_delay(round_trip_p99: float, T: float) -> int:
-    """The loop delay in whole samples for a poll with this round trip (s) at period ``T`` (s).
-
-    ``ceil(round_trip / T)``: 0 only for a zero round trip; a round trip of exactly k periods
-    (to float rounding) is k samples.  ValueError for a negative or non-finite round trip or a
-    non-positive period.
-    """
+def assumed_delay(round_trip_p99: float, T: float) -> float:
+    """The loop delay in samples (real) for a poll with this p99 round trip (s) at period ``T`` (s):
+    ``SAFETY_FACTOR * round_trip_p99 / T``.  ParameterError for a negative or non-finite round
+    trip or a non-positive period."""
     if not (T > 0 and math.isfinite(T)):
-        raise ValueError(f"T = {T!r} s is invalid; allowed: a finite period > 0")
+        raise ParameterError("T", T, "a finite period > 0 s", "Modbus loop delay")
     if not (round_trip_p99 >= 0 and math.isfinite(round_trip_p99)):
-        raise ValueError(f"round_trip_p99 = {round_trip_p99!r} s is invalid; allowed: finite, >= 0")
-    ratio = round_trip_p99 / T
-    return max(0, math.ceil(ratio - _ROUNDING * max(1.0, ratio)))
+        raise ParameterError("round_trip_p99", round_trip_p99, "a finite round trip >= 0 s", "Modbus loop delay")
+    return SAFETY_FACTOR * round_trip_p99 / T
 
 
 @dataclass(frozen=True)
@@ -79,8 +78,9 @@ class PollTiming:
         """Polls per second of wall time (virtual time: as fast as the link allows)."""
         return self.cycles / self.wall_time if self.wall_time > 0 else math.inf
 
-    def assumed_delay(self, T: float) -> int:
-        """The real-time loop delay at period ``T`` s: p99 round trip, plus ``T`` for fc23 (module docstring)."""
+    def assumed_delay(self, T: float) -> float:
+        """The real-time loop delay in samples at period ``T`` s: from the p99 round trip, plus
+        one sample for fc23 (module docstring)."""
         return assumed_delay(self.p99 + (T if self.cycle_mode == "fc23" else 0.0), T)
 
     def summary(self) -> str:
@@ -131,15 +131,15 @@ def measure_poll(drive: ModbusDrive, cycles: int = 1000, *, torque: int = 0, tim
     )
 
 
-def loop_delay(drive: ModbusDrive, T: float, poll: PollTiming | None = None) -> int:
-    """The loop delay in whole samples the gate must assume for ``drive`` at period ``T`` s.
+def loop_delay(drive: ModbusDrive, T: float, poll: PollTiming | None = None) -> float:
+    """The loop delay in samples (real) the gate must assume for ``drive`` at period ``T`` s.
 
-    The simulated drive (it announces its timing in register 0x0050): its timing's delay, 0 or
-    1, whatever the wall clock.  A real drive: ``assumed_delay`` of the measured p99 round trip
-    (``poll``, from :func:`measure_poll`; required), plus one period with ``cycle="fc23"``.
+    The simulated drive (it announces its timing in register 0x0050): its timing's delay, 0, 1
+    or its reception delay, whatever the wall clock.  A real drive: :meth:`PollTiming.assumed_delay`
+    of the measured poll (``poll``, from :func:`measure_poll`; required).
     """
-    if drive.simulated_timing is not None:
-        return SIM_TIMING_DELAY[drive.simulated_timing]
+    if drive.simulated_delay is not None:
+        return drive.simulated_delay
     if poll is None:
         raise ValueError(f"{drive.name} is not the simulated drive: measure its poll first (measure_poll) and pass it")
     return poll.assumed_delay(T)

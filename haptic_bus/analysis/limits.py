@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drives.errors import ParameterError
 from haptic_bus.analysis.criterion import SIGN_TOLERANCE
 from haptic_bus.analysis.frequency import LoopTerms, impedance_quadratic, loop_terms
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE, WallLoop
@@ -66,8 +67,13 @@ class PassiveSet:
         return {"lowest": self.lowest, "largest": self.largest, "intervals": [list(i) for i in self.intervals]}
 
 
+FAMILIES = ("K", "B", "scale")
+"""The one-parameter families of walls: ``K`` at the loop's ``B``, ``B`` at its ``K``, and the
+whole wall scaled, ``(s K, s B)`` for ``s`` in ``[0, 1]`` (a start ramp)."""
+
+
 class _Family:
-    """The loops ``loop.with_wall`` along one parameter, in scaled units ``x``."""
+    """The loops along one parameter (``K``, ``B`` or the ``scale`` s), in scaled units ``x``."""
 
     def __init__(self, loop: WallLoop, which: str) -> None:
         self.loop = loop
@@ -75,23 +81,31 @@ class _Family:
         if which == "K":
             self.unit = loop.T * loop.T / loop.m  # kappa per N/m
             self.ceiling = STIFFNESS_RANGE[1]
-        else:
+        elif which == "B":
             self.unit = loop.T / loop.m  # q per N s/m
             self.ceiling = DAMPING_RANGE[1]
+        else:
+            self.unit, self.ceiling = 1.0, 1.0  # x = s itself
 
     def lines(self, terms: LoopTerms) -> tuple[ThetaComplex | float, ThetaComplex | float]:
         """``L = base + x slope`` on ``terms``' grid."""
         if self.which == "K":
             return terms.hold * self.loop.q, 1.0
-        return self.loop.kappa, terms.hold
+        if self.which == "B":
+            return self.loop.kappa, terms.hold
+        return 0.0, terms.hold * self.loop.q + self.loop.kappa
 
     def value(self, x: float) -> float:
-        """The physical parameter (N/m or N s/m) at scaled ``x``, clipped to its range."""
+        """The physical parameter (N/m, N s/m or the scale) at scaled ``x``, clipped to its range."""
         return min(max(x / self.unit, 0.0), self.ceiling)
 
     def at(self, x: float) -> WallLoop:
-        value = self.value(x)
-        return self.loop.with_wall(value, self.loop.B) if self.which == "K" else self.loop.with_wall(self.loop.K, value)
+        value, loop = self.value(x), self.loop
+        if self.which == "K":
+            return loop.with_wall(value, loop.B)
+        if self.which == "B":
+            return loop.with_wall(loop.K, value)
+        return loop.with_wall(value * loop.K, value * loop.B)
 
     def quadratic(self, terms: LoopTerms) -> tuple[np.ndarray, np.ndarray]:
         """Coefficients ``(3, n)`` of ``Q_theta(x)``, and the same with the sign tolerance added.
@@ -173,16 +187,26 @@ def _envelope(family: _Family, grid: np.ndarray, q: np.ndarray, inside: float, u
     return best if upper else -best
 
 
+def _scale_grid(loop: WallLoop) -> np.ndarray:
+    """The search grid for the scaled walls: the union of the grids of five walls along the way,
+    so every lightly damped pole the ramp passes near has its fan of points."""
+    grids = [theta_grid(scaled, closed_loop_poles(scaled))
+             for scaled in (loop.with_wall(s * loop.K, s * loop.B) for s in (0.0, 0.25, 0.5, 0.75, 1.0))]
+    return np.unique(np.concatenate(grids))
+
+
 def passive_set(loop: WallLoop, which: str, terms: LoopTerms | None = None) -> PassiveSet:
-    """The passive ``K`` (``which = "K"``, at the loop's ``B``) or ``B`` (at its ``K``): closed intervals.
+    """The passive ``K`` (``which = "K"``, at the loop's ``B``), ``B`` (at its ``K``) or scales
+    ``s`` of the whole wall (``which = "scale"``: ``(s K, s B)``, ``s`` in ``[0, 1]``): closed intervals.
 
     ``terms``: the wall-independent terms on the search grid, if already evaluated.
     """
-    if which not in ("K", "B"):
-        raise ValueError(f"which = {which!r}; allowed: 'K' or 'B'")
+    if which not in FAMILIES:
+        raise ParameterError("which", which, " or ".join(repr(f) for f in FAMILIES), "passive set")
     family = _Family(loop, which)
     if terms is None:
-        terms = loop_terms(loop, theta_grid(loop, closed_loop_poles(loop)))
+        grid = _scale_grid(loop) if which == "scale" else theta_grid(loop, closed_loop_poles(loop))
+        terms = loop_terms(loop, grid)
     top = family.ceiling * family.unit
     q, tolerant = family.quadratic(terms)
     intervals: list[tuple[float, float]] = []
@@ -197,6 +221,12 @@ def passive_set(loop: WallLoop, which: str, terms: LoopTerms | None = None) -> P
     if family.at(0.0).lossless and not (intervals and intervals[0][0] == 0.0):
         intervals.insert(0, (0.0, 0.0))  # the free mass itself: lossless, so passive
     return PassiveSet(which, tuple(intervals))
+
+
+def passive_scales(loop: WallLoop) -> PassiveSet:
+    """The scales ``s`` in ``[0, 1]`` at which the wall ``(s K, s B)`` is passive: a start ramp
+    from no wall to the loop's wall is passive all the way iff this is the one interval ``[0, 1]``."""
+    return passive_set(loop, "scale")
 
 
 def passive_limits(loop: WallLoop) -> tuple[PassiveSet, PassiveSet]:

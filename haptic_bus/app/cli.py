@@ -102,7 +102,13 @@ def _add_device_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mass", type=float, required=True, help="handle mass m, kg")
     parser.add_argument("--friction", type=float, required=True, help="viscous friction b, N s/m")
     parser.add_argument("--period", type=float, required=True, help="sampling period T, s")
-    parser.add_argument("--delay", type=float, default=0, help="loop delay d in samples (0: ideal, 1: CiA-402 sync)")
+    parser.add_argument("--delay", type=float, default=0,
+                        help="loop delay D in samples, real in [0, 1000] (0: the seed's ideal loop, 1: a CiA-402 "
+                             "synchronous cycle, 0.3: torque applied on reception 0.3 T after SYNC)")
+    parser.add_argument("--velocity", default="point", metavar="MODEL",
+                        help="what the drive's velocity is: point (v at SYNC, the seed's assumption), average "
+                             "(encoder difference over T, most drives), window:SECONDS (difference over a shorter "
+                             "window), lowpass:SECONDS (first-order filter)")
 
 
 def _add_bus_arguments(parser: argparse.ArgumentParser) -> None:
@@ -128,21 +134,24 @@ def _check(args: argparse.Namespace) -> int:
 
     from haptic_bus.analysis.check import check_loop, format_check
     from haptic_bus.analysis.loop import WallLoop
+    from haptic_bus.analysis.velocity import VelocityModel
 
-    report = check_loop(WallLoop(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay))
+    report = check_loop(WallLoop(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay,
+                                 VelocityModel.parse(args.velocity)))
     print(json.dumps(report.to_dict()) if args.json else format_check(report))
     return EXIT_OK if report.passive else EXIT_NO
 
 
 def _region(args: argparse.Namespace) -> int:
     from haptic_bus.analysis.loop import WallLoop
+    from haptic_bus.analysis.velocity import VelocityModel
     from haptic_bus.app.plots import plot_region
 
-    loop = WallLoop(args.mass, args.friction, args.period, 0.0, 0.0, args.delay)
+    loop = WallLoop(args.mass, args.friction, args.period, 0.0, 0.0, args.delay, VelocityModel.parse(args.velocity))
     path = pathlib.Path(args.png)
     if path.suffix.lower() != ".png":
         path = path.with_name(path.name + ".png")
-    print(f"wrote {plot_region(path, loop.m, loop.b, loop.T, delay=loop.delay)}")
+    print(f"wrote {plot_region(path, loop.m, loop.b, loop.T, delay=loop.delay, velocity=loop.velocity)}")
     return EXIT_OK
 
 

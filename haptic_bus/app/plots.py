@@ -31,9 +31,11 @@ from haptic_bus.analysis.design import (  # noqa: E402
     passive_region_curves,
 )
 from haptic_bus.analysis.loop import WallLoop  # noqa: E402
+from haptic_bus.analysis.velocity import POINT, VelocityModel  # noqa: E402
 
 _DPI = 110
 _BOUNDARY_POINTS = 120
+_TITLE_POLES = 4  # the step figure's title names the poles of largest magnitude, at most this many
 
 
 def _save(fig, path) -> Path:
@@ -53,13 +55,16 @@ def _point_coordinates(point, m: float, b: float, T: float) -> tuple[float, floa
     return float(alpha), float(beta)
 
 
-def plot_region(path, m: float, b: float, T: float, delay: int = 0, point=None) -> Path:
-    """Fig. 4 for the device (``m`` kg, ``b`` N s/m) at period ``T`` s and loop delay ``delay``.
+def plot_region(path, m: float, b: float, T: float, delay: float = 0, point=None,
+                velocity: VelocityModel | str = POINT) -> Path:
+    """Fig. 4 for the device (``m`` kg, ``b`` N s/m) at period ``T`` s, loop delay ``delay``
+    (samples, real) and the drive's ``velocity`` model (the exact boundary's; the seed's
+    closed forms are for a point velocity).
 
     ``point`` (optional) is a :class:`WallLoop` or an ``(alpha, beta)`` pair to mark.  Axes are
     ``alpha = B/(KT)`` and ``beta = b/B`` (log-log); above a boundary is passive by it.
     """
-    loop = WallLoop(m, b, T, 0.0, 0.0, delay)  # validates the device
+    loop = WallLoop(m, b, T, 0.0, 0.0, delay, VelocityModel.parse(velocity))  # validates the device
     marked = _point_coordinates(point, m, b, T)
     periods = (T, 5 * T, 10 * T)
     lo_a, hi_a = 1e-2, 1e3
@@ -83,18 +88,18 @@ def plot_region(path, m: float, b: float, T: float, delay: int = 0, point=None) 
     ax.plot(alpha, curves.liu2011, ":", color="k", lw=1.8, label="position sampling, Liu 2011, eq. 5")
 
     beta_grid = np.geomspace(lo_b, hi_b, _BOUNDARY_POINTS)
-    floor = exact_region_floor(loop.m, loop.b, loop.T, delay)
+    floor = exact_region_floor(loop.m, loop.b, loop.T, loop.delay, loop.velocity)
     if floor is not None:  # resolve the approach to the asymptote beta -> floor as alpha -> inf
         beta_grid = np.union1d(beta_grid, floor * (1.0 + np.geomspace(1e-7, 1.0, 40)))
-    exact_alpha = exact_region_boundary(loop.m, loop.b, loop.T, delay, beta_grid)
+    exact_alpha = exact_region_boundary(loop.m, loop.b, loop.T, loop.delay, beta_grid, loop.velocity)
     shown = np.isfinite(exact_alpha)
-    label = f"exact criterion, T = {T * 1e3:g} ms, delay d = {delay}: boundary, passive shaded"
+    label = f"exact criterion, T = {T * 1e3:g} ms, D = {loop.delay:g}, {loop.velocity} velocity: boundary, passive shaded"
     if shown.any():
         ea, eb = exact_alpha[shown], beta_grid[shown]
         ax.fill_betweenx(eb, np.minimum(ea, hi_a), hi_a, color="tab:green", alpha=0.13, lw=0, zorder=0)
         ax.plot(ea, eb, color="tab:green", lw=5, alpha=0.45, zorder=1, label=label)
     else:
-        ax.plot([], [], color="tab:green", lw=5, alpha=0.45, label=f"exact criterion, d = {delay}: no passive wall in view")
+        ax.plot([], [], color="tab:green", lw=5, alpha=0.45, label=f"exact criterion, D = {loop.delay:g}, {loop.velocity} velocity: no passive wall in view")
 
     if marked is not None:
         verdict = exact_verdict(point) if isinstance(point, WallLoop) else None
@@ -154,7 +159,7 @@ def plot_nyquist(path, loop: WallLoop) -> Path:
     _nyquist_inset(ax, data)
     state = "passive" if verdict.passive else "NOT passive"
     fig.suptitle(f"m = {loop.m:g} kg, b = {loop.b:g} N s/m, T = {loop.T * 1e3:g} ms, K = {loop.K:g} N/m, "
-                 f"B = {loop.B:g} N s/m, d = {loop.delay}: exact criterion {state}, margin {verdict.margin:.3g} N s/m",
+                 f"B = {loop.B:g} N s/m, D = {loop.delay:g}, {loop.velocity} velocity: exact criterion {state}, margin {verdict.margin:.3g} N s/m",
                  fontsize=10)
     fig.tight_layout()
     return _save(fig, path)
@@ -208,7 +213,9 @@ def plot_step(path, loop: WallLoop) -> Path:
     ax2.set_title("whole run, zoomed on the final value", fontsize=10)
     ax2.grid(True, color="0.9")
     ax2.legend(fontsize=8, loc="lower right")
+    poles = sorted(rep.poles, key=abs, reverse=True)
+    shown = ", ".join(f"{p:.4g}" for p in poles[:_TITLE_POLES]) + (f" and {len(poles) - _TITLE_POLES} more" if len(poles) > _TITLE_POLES else "")
     fig.suptitle(f"Unit step of operator force: overshoot {rep.overshoot:.3g} %, 2 % settling {rep.settling_time * 1e3:.3g} ms, "
-                 f"poles {', '.join(f'{p:.4g}' for p in rep.poles)}  (d = {loop.delay})", fontsize=10)
+                 f"poles {shown}  (D = {loop.delay:g}, {loop.velocity} velocity)", fontsize=10)
     fig.tight_layout()
     return _save(fig, path)

@@ -1,13 +1,17 @@
 """Operator parameter profiles: one TOML file = device, loop timing, scene, limits, gate policy.
 
 A profile says who uses it for what (``[profile]``), the handle and its drive (``[device]``,
-SI units, effective friction with its source), the loop (``[loop]``: period in s and timing
-``"ideal"`` = no delay or ``"cia402"`` = one sample of delay), the force limit
+SI units, effective friction with its source, the ``velocity`` model of the drive's 0x606C),
+the loop (``[loop]``: period in s, timing ``"ideal"`` = no delay, ``"cia402"`` = torque applied
+at the next SYNC, ``"reception"`` = applied on arrival, and the loop ``delay`` in samples, real:
+default 0 and 1 for the first two, required for the third), the force limit
 (``[limits]``, N, at most what 0x6072 allows), the gate policy (``[gate]``), the virtual
 objects (``[[scene.objects]]`` with ``kind`` = wall | slot | detent) and, for demos, the
 simulated operator (``[operator_model]``, the table :func:`sim_drive.operator.operator_from_table`
 takes: ``model`` = none | constant | step | sinusoid | chirp | hand | recorded (alias ``csv``)
-plus that model's fields).
+plus that model's fields).  ``[identification]`` (optional) is what ``haptic-bus identify``
+measured; a profile whose ``[device]`` or ``[loop]`` is more optimistic than its measurement
+(velocity model, friction above the lowest credible value, delay below the largest) is refused.
 
 :func:`load_profile` validates the whole file (unknown keys, types, ranges, names) and then
 puts the compiled scene through the passivity gate, so a profile that loads is one the gate
@@ -30,14 +34,27 @@ from drives.base import DriveScaling
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, TARGET_TORQUE
 from drives.errors import ParameterError
 from drives.safety import ABORT_OPTIONS, SafetySettings
-from haptic_bus.analysis.loop import DAMPING_RANGE, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE, STIFFNESS_RANGE
+from haptic_bus.analysis.loop import (
+    DAMPING_RANGE,
+    DELAY_RANGE,
+    FRICTION_RANGE,
+    MASS_RANGE,
+    PERIOD_RANGE,
+    STIFFNESS_RANGE,
+)
+from haptic_bus.analysis.velocity import ALLOWED as VELOCITY_MODELS
+from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
 from haptic_bus.validation import real_in_range, whole_in_range
 
 DEFAULT_PROFILE = "cia402-handle"
-TIMINGS = {"ideal": 0, "cia402": 1}  # timing name -> loop delay in samples
+TIMINGS: dict[str, float | None] = {"ideal": 0, "cia402": 1, "reception": None}
+"""Timing name -> its least loop delay in samples, the default of ``[loop] delay`` (None: required)."""
+CREDIBLE_SIGMAS = 3.0
+"""Identified values: the gate judges at the estimate -/+ this many standard errors."""
+NOISE_SEED_RANGE = (0, 2**64 - 1)
 SCALE_RANGE = (0.0, 1e6)  # exclusive low: m/s per count, m per count, N per N m
 POSITION_RANGE = (-1e6, 1e6)  # m, as haptic_bus.control.scene
 FORCE_RANGE = (0.0, 1e6)  # N, exclusive low
@@ -89,7 +106,9 @@ class ProfileRefusal(GateRefusal):
 @dataclass(frozen=True)
 class DeviceProfile:
     """The handle and its drive: ``mass`` kg, effective ``friction`` b N s/m (and where it
-    comes from), drive scaling (0x606C, 0x6064, 0x6076 N m, transmission N/(N m), 0x6072)."""
+    comes from), drive scaling (0x606C, 0x6064, 0x6076 N m, transmission N/(N m), 0x6072), the
+    ``velocity`` model of 0x606C.  ``coulomb_friction`` (N), ``velocity_noise`` (0x606C counts
+    rms) and ``noise_seed`` are a simulated drive's hidden truth: the controller never uses them."""
 
     mass: float
     friction: float
@@ -99,6 +118,10 @@ class DeviceProfile:
     rated_torque: float
     force_per_torque: float
     max_torque_permille: int
+    velocity: VelocityModel
+    coulomb_friction: float = 0.0
+    velocity_noise: float = 0.0
+    noise_seed: int | None = None
 
     @property
     def max_force(self) -> float:
@@ -108,15 +131,43 @@ class DeviceProfile:
 
 @dataclass(frozen=True)
 class LoopProfile:
-    """The control loop: ``period`` T in s and ``timing`` ("ideal" or "cia402")."""
+    """The control loop: ``period`` T in s, ``timing`` ("ideal", "cia402" or "reception") and the
+    loop ``delay`` D in samples (real; an int when whole) that the gate judges with."""
 
     period: float
     timing: str
+    delay: float
+
+
+@dataclass(frozen=True)
+class Identification:
+    """``[identification]``: what ``haptic-bus identify`` measured on ``date`` (ISO 8601 text).
+    Estimates with standard errors: ``mass`` kg, ``friction`` N s/m, ``coulomb_friction`` N,
+    ``delay`` samples; ``velocity`` the model 0x606C matched; ``excitation_s`` s;
+    ``residual_rms`` the fit's residual (m, position)."""
+
+    date: str
+    mass: float
+    mass_stderr: float
+    friction: float
+    friction_stderr: float
+    coulomb_friction: float
+    coulomb_friction_stderr: float
+    delay: float
+    delay_stderr: float
+    velocity: VelocityModel
+    excitation_s: float
+    residual_rms: float
 
     @property
-    def delay(self) -> int:
-        """Loop delay in whole samples: 0 for "ideal" (the seed), 1 for "cia402" (synchronous cycle)."""
-        return TIMINGS[self.timing]
+    def lowest_credible_friction(self) -> float:
+        """``max(0, b - 3 stderr)`` N s/m: the friction the gate may judge with, at most."""
+        return max(0.0, self.friction - CREDIBLE_SIGMAS * self.friction_stderr)
+
+    @property
+    def largest_credible_delay(self) -> float:
+        """``D + 3 stderr`` samples: the loop delay the gate must judge with, at least."""
+        return self.delay + CREDIBLE_SIGMAS * self.delay_stderr
 
 
 START_POLICIES = ("refuse", "ramp")
@@ -150,10 +201,12 @@ class Profile:
     safety: SafetySettings = SafetySettings()
     supervisor: SupervisorPolicy = SupervisorPolicy()
     start: StartPolicy = StartPolicy()
+    identification: Identification | None = None
 
     def device_loop(self) -> DeviceLoop:
-        """The loop the gate judges: m kg, effective b N s/m, T s, delay samples."""
-        return DeviceLoop(self.device.mass, self.device.friction, self.loop.period, self.loop.delay)
+        """The loop the gate judges: m kg, effective b N s/m, T s, delay samples, velocity model."""
+        d = self.device
+        return DeviceLoop(d.mass, d.friction, self.loop.period, self.loop.delay, d.velocity)
 
     def scaling(self) -> DriveScaling:
         """The drive-unit conversion of :mod:`drives.base`."""
@@ -169,13 +222,19 @@ class Profile:
         """A passivity gate for this profile's loop and policy."""
         return PassivityGate(self.device_loop(), self.gate_policy)
 
-    def sim_device_parameters(self) -> dict[str, float | int]:
-        """Keyword arguments of ``sim_drive.parameters.DeviceParameters`` for this device and loop."""
+    def sim_device_parameters(self) -> dict[str, object]:
+        """Keyword arguments of ``sim_drive.parameters.DeviceParameters`` for this device and loop
+        (with the hidden truth: Coulomb friction, velocity noise and its seed)."""
         d = self.device
-        return {"m": d.mass, "b": d.friction, "period": self.loop.period,
-                "velocity_per_count": d.velocity_per_count, "position_per_count": d.position_per_count,
-                "rated_torque": d.rated_torque, "force_per_torque": d.force_per_torque,
-                "max_torque_permille": d.max_torque_permille}
+        parameters: dict[str, object] = {
+            "m": d.mass, "b": d.friction, "period": self.loop.period,
+            "velocity_per_count": d.velocity_per_count, "position_per_count": d.position_per_count,
+            "rated_torque": d.rated_torque, "force_per_torque": d.force_per_torque,
+            "max_torque_permille": d.max_torque_permille, "velocity": d.velocity,
+            "coulomb_friction": d.coulomb_friction, "velocity_noise": d.velocity_noise, "noise_seed": d.noise_seed}
+        if self.loop.timing == "reception":
+            parameters["reception_delay"] = self.loop.delay
+        return parameters
 
 
 # --------------------------------------------------------------------------- finding files
@@ -257,7 +316,14 @@ class _Reader:
         ok = ok and (not choices or value in choices) and (pattern is None or bool(pattern.match(value)))
         if not ok:
             raise ProfileError(self.path, self.field(key), value, allowed)
-        return value
+        return value  # type: ignore[return-value]  # checked: a str
+
+    def velocity_model(self, key: str) -> VelocityModel:
+        """A velocity model string (``"point"``, ``"average"``, ``"window:S"``, ``"lowpass:S"``); required."""
+        value = self.raw(key, f"the model of the drive's 0x606C: {VELOCITY_MODELS}; most drives report "
+                              "'average' (an encoder difference over the cycle); 'point' only for a drive "
+                              "documented to sample its velocity at SYNC")
+        return self._wrap(key, VelocityModel.parse, value)
 
     def done(self) -> None:
         unknown = [k for k in self.table if k not in self.used]
@@ -278,16 +344,62 @@ def _read_device(path: pathlib.Path, table: object) -> DeviceProfile:
         raise ProfileError(path, "device.rated_torque", rated, "a whole number of mN m (0x6076 is UNSIGNED32 in mN m)")
     transmission = r.real("force_per_torque", *SCALE_RANGE, "N/(N m)", low_inclusive=False)
     permille = r.whole("max_torque_permille", *PERMILLE_RANGE)
+    model = r.velocity_model("velocity")
+    coulomb = r.real("coulomb_friction", 0.0, 1e6, "N (a simulated drive's truth)", default=0.0)
+    noise = r.real("velocity_noise", 0.0, 2.0**31, "0x606C counts rms (a simulated drive's truth)", default=0.0)
+    seed = r.whole("noise_seed", *NOISE_SEED_RANGE, default=None) if "noise_seed" in r.table else None
+    r.used.add("noise_seed")
     r.done()
-    return DeviceProfile(mass, friction, source, velocity, position, rated, transmission, permille)
+    return DeviceProfile(mass, friction, source, velocity, position, rated, transmission, permille, model,
+                         coulomb, noise, seed)
 
 
 def _read_loop(path: pathlib.Path, table: object) -> LoopProfile:
     r = _Reader(path, "loop", table)
     period = r.real("period", *PERIOD_RANGE, "s")
     timing = r.text("timing", choices=tuple(TIMINGS))
+    least = TIMINGS[timing]
+    low = 0.0 if least is None else least
+    delay = r.real("delay", low, DELAY_RANGE[1], f"samples (timing {timing!r})", default=_REQUIRED if least is None else least)
     r.done()
-    return LoopProfile(period, timing)
+    return LoopProfile(period, timing, int(delay) if float(delay).is_integer() else delay)
+
+
+def _read_identification(path: pathlib.Path, table: object) -> Identification | None:
+    """``[identification]`` (optional): what ``haptic-bus identify`` measured (see :class:`Identification`)."""
+    if table is None:
+        return None
+    r = _Reader(path, "identification", table)
+    date = r.text("date")
+    values = {key: r.real(key, 0.0, high, unit) for key, high, unit in (
+        ("mass", MASS_RANGE[1], "kg"), ("mass_stderr", MASS_RANGE[1], "kg"),
+        ("friction", FRICTION_RANGE[1], "N s/m"), ("friction_stderr", FRICTION_RANGE[1], "N s/m"),
+        ("coulomb_friction", 1e6, "N"), ("coulomb_friction_stderr", 1e6, "N"),
+        ("delay", DELAY_RANGE[1], "samples"), ("delay_stderr", DELAY_RANGE[1], "samples"))}
+    model = r.velocity_model("velocity")
+    excitation = r.real("excitation_s", 0.0, 1e7, "s")
+    residual = r.real("residual_rms", 0.0, 1e6, "m")
+    r.done()
+    return Identification(date, velocity=model, excitation_s=excitation, residual_rms=residual, **values)
+
+
+def _check_against_identification(path: pathlib.Path, device: DeviceProfile, loop: LoopProfile,
+                                  measured: Identification) -> None:
+    """Refuse a ``[device]``/``[loop]`` more optimistic than what was measured: another velocity
+    model (or a shorter window or filter), friction above the lowest credible, delay below the
+    largest credible (:data:`CREDIBLE_SIGMAS` standard errors)."""
+    declared, found = device.velocity, measured.velocity
+    if declared.kind != found.kind or declared.time < found.time * (1.0 - 1e-9):
+        raise ProfileError(path, "device.velocity", str(declared),
+                           f"the model identification measured on {measured.date}: {found} (or a longer window or filter)")
+    if device.friction > measured.lowest_credible_friction * (1.0 + 1e-9):
+        raise ProfileError(path, "device.friction", device.friction,
+                           f"at most {measured.lowest_credible_friction:.6g} N s/m, the lowest credible value measured on "
+                           f"{measured.date} (b = {measured.friction:.6g} ± {measured.friction_stderr:.2g} N s/m)")
+    if loop.delay < measured.largest_credible_delay - 1e-9:
+        raise ProfileError(path, "loop.delay", loop.delay,
+                           f"at least {measured.largest_credible_delay:.6g} samples, the largest credible delay measured "
+                           f"on {measured.date} (D = {measured.delay:.6g} ± {measured.delay_stderr:.2g} samples)")
 
 
 def _read_gate(path: pathlib.Path, table: object) -> GatePolicy:
@@ -443,9 +555,16 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
     safety = _read_safety(path, top.raw("safety", "a [safety] table", default=None))
     supervisor = _read_supervisor(path, top.raw("supervisor", "a [supervisor] table", default=None))
     start = _read_start(path, top.raw("start", "a [start] table", default=None))
+    identification = _read_identification(path, top.raw("identification", "an [identification] table", default=None))
     top.done()
+    if identification is not None:
+        _check_against_identification(path, device, loop, identification)
+    try:  # the model against the period: a velocity window longer than T is no model of this loop
+        device.velocity.check_period(loop.period)
+    except ParameterError as error:
+        raise ProfileError(path, "device.velocity", error.value, error.allowed) from None
     return Profile(name, operator, task, description, device, loop, scene, force_limit, policy,
-                   operator_model, path, safety, supervisor, start)
+                   operator_model, path, safety, supervisor, start, identification)
 
 
 def load_profile(path_or_name: str | pathlib.Path) -> Profile:
@@ -475,8 +594,10 @@ def profile_to_dict(profile: Profile) -> dict[str, Any]:
         "profile": {"name": profile.name, "operator": profile.operator, "task": profile.task,
                     "description": profile.description},
         "path": None if profile.path is None else str(profile.path),
-        "device": {k: getattr(d, k) for k in d.__dataclass_fields__} | {"max_force": d.max_force},
+        "device": {k: str(v) if isinstance(v, VelocityModel) else v for k, v in vars(d).items()} | {"max_force": d.max_force},
         "loop": {"period": profile.loop.period, "timing": profile.loop.timing, "delay": profile.loop.delay},
+        "identification": None if profile.identification is None else {
+            k: str(v) if isinstance(v, VelocityModel) else v for k, v in vars(profile.identification).items()},
         "limits": {"force_limit": profile.force_limit},
         "gate": {"safety_margin": profile.gate_policy.safety_margin, "bandwidth": profile.gate_policy.bandwidth},
         "scene": {"objects": [object_to_dict(o) for o in profile.scene]},

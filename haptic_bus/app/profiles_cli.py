@@ -15,7 +15,6 @@ from typing import Any
 
 from drives.errors import HapticBusError
 from haptic_bus.analysis.check import check_loop, format_check
-from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.app.profiles import (
     DEFAULT_PROFILE,
     Profile,
@@ -54,7 +53,8 @@ def cmd_list(args: argparse.Namespace) -> int:
         try:
             profile = load_profile(path)
             decision = profile.gate().judge(profile.compiled_scene())
-            row.update(status="ok", timing=profile.loop.timing, mass=profile.device.mass,
+            row.update(status="ok", timing=profile.loop.timing, delay=profile.loop.delay,
+                       velocity=str(profile.device.velocity), mass=profile.device.mass,
                        friction=profile.device.friction, period=profile.loop.period,
                        objects=len(profile.scene), worst_margin=decision.worst_margin,
                        warnings=len(decision.warnings), task=profile.task)
@@ -93,7 +93,7 @@ def _format_show(profile: Profile, decision: GateDecision) -> str:
         f"  scaling: {d.velocity_per_count:g} m/s per 0x606C unit, {d.position_per_count:g} m per 0x6064 increment,"
         f" 0x6076 = {d.rated_torque:g} N m, {d.force_per_torque:g} N/(N m), 0x6072 = {d.max_torque_permille}"
         f" per mille -> {d.max_force:g} N",
-        f"loop: T={loop.period:g} s  timing {loop.timing} (delay {loop.delay} samples)",
+        f"loop: T={loop.period:g} s  timing {loop.timing} (delay {loop.delay:g} samples)  velocity {d.velocity}",
         f"force limit: {profile.force_limit:g} N",
         f"gate: safety margin {gate.safety_margin:g} N s/m, bandwidth rule {gate.bandwidth}",
         "scene:",
@@ -132,10 +132,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     try:
         profile = read_profile(args.profile)
         decision = profile.gate().judge(profile.compiled_scene())
-        d, loop = profile.device, profile.loop
+        loop, device_loop = profile.loop, profile.device_loop()
         walls = []
         for (K, B), names in sorted(profile.compiled_scene().contacts().items()):
-            report = check_loop(WallLoop(d.mass, d.friction, loop.period, K, B, loop.delay))
+            report = check_loop(device_loop.wall(K, B))
             walls.append((names, K, B, report))
     except HapticBusError as error:
         return _fail("check", error)
@@ -149,7 +149,7 @@ def cmd_check(args: argparse.Namespace) -> int:
                                     for names, K, B, report in walls]}))
         return status
     print(f"profile {profile.name} ({profile.path}): {len(walls)} contact wall(s),"
-          f" timing {loop.timing} (delay {loop.delay})")
+          f" timing {loop.timing} (delay {loop.delay:g} samples), velocity {profile.device.velocity}")
     for names, _, _, report in walls:
         print(f"--- {'+'.join(names)} (summed K, B)")
         print(format_check(report))

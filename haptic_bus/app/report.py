@@ -19,7 +19,8 @@ def write_report(profile: Profile, out_dir: str | pathlib.Path) -> list[pathlib.
     walls = sorted(decision.walls, key=lambda w: (-w.K, -w.B))
     written: list[pathlib.Path] = []
     main = device.wall(walls[0].K, walls[0].B) if walls else None
-    written.append(plot_region(out / "fig4_region.png", device.m, device.b, device.T, delay=device.delay, point=main))
+    written.append(plot_region(out / "fig4_region.png", device.m, device.b, device.T, delay=device.delay, point=main,
+                               velocity=device.velocity))
     lines = [
         f"# {profile.name}",
         "",
@@ -28,7 +29,8 @@ def write_report(profile: Profile, out_dir: str | pathlib.Path) -> list[pathlib.
         f"- operator: {profile.operator}",
         f"- task: {profile.task}",
         f"- device: m = {device.m:g} kg, effective b = {device.b:g} N s/m ({profile.device.friction_source})",
-        f"- loop: T = {device.T:g} s, {profile.loop.timing} timing (delay {device.delay} sample)",
+        f"- loop: T = {device.T:g} s, {profile.loop.timing} timing, delay D = {device.delay:g} samples; "
+        f"velocity: {profile.device.velocity}",
         f"- gate: {'accepted' if decision.accepted else 'REFUSED'} with safety margin "
         f"{profile.gate_policy.safety_margin:g} N s/m, bandwidth rule {profile.gate_policy.bandwidth}",
         "",

@@ -46,8 +46,8 @@ from haptic_bus.control.supervisor import Action
 logger = logging.getLogger(__name__)
 
 DEFAULT_CONTROLLER_NODE_ID = 127
-DERATE_SCALE_STEPS = 40  # bisection steps of the derate's scale search: 2^-40 relative
-DERATE_EXTRA_SAMPLES = 3  # derated scenes are prepared for up to this many samples of extra delay
+DERATE_SCALE_STEPS = 40  # bisection steps of the derate's margin search inside a passive interval: 2^-40
+DERATE_EXTRA_DELAYS = (0.25, 0.5, 1.0, 2.0, 3.0)  # samples beyond the assumed delay a derated scene is prepared for
 EXIT_STATUS = {"completed": 0, "stopped": 0, "refused": 1, "drive error": 1, "assumption broken": 3, "interrupted": 130}
 
 
@@ -152,10 +152,10 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
         drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety)
         stack.callback(drive.close)
         drive.connect()
-        poll = None if drive.simulated_timing is not None else measure_poll(drive, 500)
+        poll = None if drive.simulated_delay is not None else measure_poll(drive, 500)
         delay = loop_delay(drive, period, poll)
         link["poll"] = None if poll is None else dataclasses.asdict(poll)
-        logger.info("Modbus poll: the gate assumes a loop delay of %d sample(s)", delay)
+        logger.info("Modbus poll: the gate assumes a loop delay of %.4g sample(s)", delay)
         gate = PassivityGate(dataclasses.replace(profile.device_loop(), delay=delay), profile.gate_policy)
         gate.admit(profile.compiled_scene())  # the profile was judged at its own timing's delay
         return drive, gate, lambda controller: None
@@ -236,38 +236,46 @@ def _safe_start(profile: Profile, drive: Drive, gate: PassivityGate, scene: Comp
     if policy != "ramp":
         raise StartRefused(f"{where}; move it out or use --start-in-contact ramp")
     proof = gate.proves_ramp(scene)
-    if not proof.accepted:
-        raise StartRefused(f"{where}; and the start ramp is refused: " + "; ".join(proof.reasons))
+    if not proof.proven:
+        raise StartRefused(f"{where}; and the start ramp is refused: {proof.reason}")
     logger.info("%s: ramping the force in over %g s", where, profile.start.ramp_time)
     return origin, profile.start.ramp_time
 
 
 def prepare_derate(gate: PassivityGate, scene: CompiledScene) -> Derate:
     """The supervisor's derate, prepared before the run (the control loop never waits for the gate):
-    for each loop delay up to :data:`DERATE_EXTRA_SAMPLES` beyond the assumed one, the largest
-    scale of ``scene`` the gate passes at that delay (bisection, :data:`DERATE_SCALE_STEPS` steps),
-    judged again whole.  An observed delay beyond the table gets None (the supervisor stops)."""
-    table: dict[int, tuple[PassivityGate, CompiledScene, GateDecision] | None] = {}
-    assumed = math.ceil(gate.device.delay)
-    for delay in range(assumed + 1, assumed + DERATE_EXTRA_SAMPLES + 1):
-        judge = PassivityGate(dataclasses.replace(gate.device, delay=delay), gate.policy)
-        table[delay] = _largest_passing_scale(judge, scene)
+    for each loop delay :data:`DERATE_EXTRA_DELAYS` beyond the assumed one, the largest scale of
+    ``scene`` the gate passes at that delay, judged again whole.  An observed delay is served by
+    the first prepared delay at or above it; beyond the table it gets None (the supervisor stops)."""
+    assumed = gate.device.delay
+    table = [(assumed + extra, _largest_passing_scale(
+        PassivityGate(dataclasses.replace(gate.device, delay=assumed + extra), gate.policy), scene))
+        for extra in DERATE_EXTRA_DELAYS]
 
     def derate(running: CompiledScene, observed_delay: float) -> tuple[PassivityGate, CompiledScene, GateDecision] | None:
-        return table.get(max(assumed + 1, math.ceil(observed_delay)))
+        return next((entry for delay, entry in table if delay >= observed_delay), None)
 
     return derate
 
 
 def _largest_passing_scale(gate: PassivityGate, scene: CompiledScene) -> tuple[PassivityGate, CompiledScene, GateDecision] | None:
+    """The scene scaled by the largest ``s`` in (0, 1] that ``gate`` accepts, or None.
+
+    The passive scales are exact intervals (:meth:`PassivityGate.passive_scales`); inside the
+    highest one whose lower end the gate accepts, a bisection finds where the policy's safety
+    margin is last met.
+    """
     if gate.passes(scene):
         return gate, scene, gate.admit(scene)
-    low, high = 0.0, 1.0  # an empty wall set passes: scale 0 always does
-    for _ in range(DERATE_SCALE_STEPS):
-        middle = 0.5 * (low + high)
-        low, high = (middle, high) if gate.passes(scene.scaled(middle)) else (low, middle)
-    if low == 0.0:
-        return None
-    scaled = scene.scaled(low)
-    decision = gate.judge(scaled)
-    return (gate, scaled, decision) if decision.accepted else None
+    for low, high in reversed(gate.passive_scales(scene)):
+        low = max(low, 2.0 ** -DERATE_SCALE_STEPS)  # scale 0 is no wall at all: not a derate
+        if low > high or not gate.passes(scene.scaled(low)):
+            continue
+        for _ in range(DERATE_SCALE_STEPS):
+            middle = 0.5 * (low + high)
+            low, high = (middle, high) if gate.passes(scene.scaled(middle)) else (low, middle)
+        scaled = scene.scaled(low)
+        decision = gate.judge(scaled)
+        if decision.accepted:
+            return gate, scaled, decision
+    return None

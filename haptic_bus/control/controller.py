@@ -29,6 +29,7 @@ from drives.base import Drive
 from drives.cia402 import POSITION_ACTUAL
 from drives.errors import DriveError, ParameterError
 from haptic_bus.control.clock import RealClock, VirtualClock
+from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.control.gate import GateDecision, PassivityGate
 from haptic_bus.control.observer import PassivityObserver
 from haptic_bus.control.record import EventLog, RunRecord
@@ -132,7 +133,8 @@ class WallController:
         device = gate.device
         tolerance = supervisor.observer_limit if supervisor is not None else 0.0
         self.observer = PassivityObserver(self.period, math.ceil(device.delay), device.m, device.b, tolerance,
-                                          initial_energy=scene.stored_energy(origin))
+                                          initial_energy=scene.stored_energy(origin),
+                                          average_velocity=VelocityModel.parse(device.velocity).kind == "average")
         self.supervisor = Supervisor(supervisor, self.period, device.delay) if supervisor is not None else None
         self.record = RunRecord(record_capacity)
         self.ramp_cycles = round(ramp_time / self.period)

@@ -1,11 +1,13 @@
 """The passivity gate: every change of wall parameters passes here first, whatever its path.
 
 The gate judges the loop *as configured* -- device mass ``m`` (kg), effective friction ``b``
-(N s/m), period ``T`` (s), loop delay ``d`` (samples, from the drive's timing) -- with the
+(N s/m), period ``T`` (s), loop delay ``D`` (samples, real: from the drive's timing, or
+measured), the velocity the drive reports (:mod:`haptic_bus.analysis.velocity`) -- with the
 exact criterion of :mod:`haptic_bus.analysis.criterion`, for every summed ``(K, B)`` that can act on
 the handle at once (overlapping objects add).  A scene passes when every such wall has
 ``margin >= safety_margin`` (N s/m).  The seed's bandwidth rule ``alpha = B/(K T) > 6`` is a
-warning by default and a refusal under ``bandwidth = "strict"``.
+warning by default and a refusal under ``bandwidth = "strict"``.  A start ramp (the scene's
+walls scaled from 0 to 1) is proven passive on the whole way by :meth:`PassivityGate.proves_ramp`.
 """
 
 from __future__ import annotations
@@ -15,8 +17,9 @@ from dataclasses import dataclass, field
 
 from drives.errors import HapticBusError, ParameterError
 from haptic_bus.analysis.criterion import Verdict, exact_verdict
-from haptic_bus.analysis.limits import max_damping, max_stiffness
+from haptic_bus.analysis.limits import PassiveSet, passive_limits, passive_scales
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
+from haptic_bus.analysis.velocity import POINT, VelocityModel
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.validation import real_in_range
 
@@ -39,15 +42,41 @@ class GatePolicy:
 
 @dataclass(frozen=True)
 class DeviceLoop:
-    """The loop the walls run in: ``m`` kg, effective ``b`` N s/m, ``T`` s, ``delay`` samples."""
+    """The loop the walls run in: ``m`` kg, effective ``b`` N s/m, ``T`` s, ``delay`` samples
+    (real), and the ``velocity`` model of the drive's 0x606C (a model or its profile string)."""
 
     m: float
     b: float
     T: float
-    delay: int
+    delay: float
+    velocity: VelocityModel | str = POINT
 
     def wall(self, K: float, B: float) -> WallLoop:
-        return WallLoop(self.m, self.b, self.T, K, B, self.delay)
+        """The linear loop with the wall ``K`` N/m, ``B`` N s/m (validated)."""
+        return WallLoop(self.m, self.b, self.T, K, B, self.delay, VelocityModel.parse(self.velocity))
+
+    def describe(self) -> str:
+        """``m = .. kg, b = .. N s/m, T = .. s, delay D = .. samples, velocity ..`` for messages."""
+        return (f"m = {self.m:g} kg, b = {self.b:g} N s/m, T = {self.T:g} s, delay D = {self.delay:g} samples, "
+                f"velocity {VelocityModel.parse(self.velocity)}")
+
+
+@dataclass(frozen=True)
+class RampProof:
+    """Whether a start ramp of a scene (every wall scaled by ``s`` from 0 to 1) is passive all the
+    way: ``proven``, and for each contact wall its passive scales (``s`` in [0, 1])."""
+
+    proven: bool
+    walls: tuple[tuple[tuple[str, ...], PassiveSet], ...]
+
+    @property
+    def reason(self) -> str:
+        """Why the ramp is not proven ('' when it is): the first wall whose scales leave a gap."""
+        for names, scales in self.walls:
+            if scales.intervals[:1] != ((0.0, 1.0),):
+                gaps = ", ".join(f"[{lo:.4g}, {hi:.4g}]" for lo, hi in scales.intervals) or "none"
+                return f"{'+'.join(names)} scaled by s is passive only for s in {gaps}, not all of [0, 1]"
+        return ""
 
 
 @dataclass(frozen=True)
@@ -123,6 +152,26 @@ class PassivityGate:
                 return False
         return True
 
+    def proves_ramp(self, scene: CompiledScene) -> RampProof:
+        """Whether every contact wall of ``scene``, scaled by every ``s`` in [0, 1], is passive:
+        the proof a start ramp needs (the end point alone is not enough: with a delay, part
+        of the way can be active).  Exact over the continuum of ``s``
+        (:func:`~haptic_bus.analysis.limits.passive_scales`), margin >= 0; the end point meets
+        the policy's safety margin through :meth:`admit`."""
+        walls = tuple((names, passive_scales(self.device.wall(K, B)))
+                      for (K, B), names in sorted(scene.contacts().items()))
+        proven = all(scales.intervals[:1] == ((0.0, 1.0),) for _, scales in walls)
+        return RampProof(proven, walls)
+
+    def passive_scales(self, scene: CompiledScene) -> tuple[tuple[float, float], ...]:
+        """The scales ``s`` in [0, 1] at which every contact wall of ``scene``, scaled to
+        ``(s K, s B)``, is passive (margin >= 0): disjoint closed intervals, ascending."""
+        common: list[tuple[float, float]] = [(0.0, 1.0)]
+        for K, B in scene.contacts():
+            intervals = passive_scales(self.device.wall(K, B)).intervals
+            common = [(max(lo, a), min(hi, b)) for lo, hi in common for a, b in intervals if max(lo, a) <= min(hi, b)]
+        return tuple(common)
+
     def admit(self, scene: CompiledScene) -> GateDecision:
         """The decision on ``scene``; raises :class:`GateRefusal` if it is refused."""
         decision = self.judge(scene)
@@ -131,11 +180,16 @@ class PassivityGate:
         return decision
 
     def _explain(self, label: str, loop: WallLoop, verdict: Verdict) -> str:
-        d = self.device
-        k_max, b_max = max_stiffness(loop), max_damping(loop)
-        limits = (f"largest passive K at this B: {'none' if k_max is None else f'{k_max:.6g} N/m'}, "
-                  f"largest passive B at this K: {'none' if b_max is None else f'{b_max:.6g} N s/m'}")
+        stiffness, damping = passive_limits(loop)
+        limits = f"passive K at this B: {_intervals(stiffness, 'N/m')}; passive B at this K: {_intervals(damping, 'N s/m')}"
         state = "passive" if verdict.passive else ("not passive" if verdict.stable else "unstable")
-        return (f"{label} is {state} with m = {d.m:g} kg, b = {d.b:g} N s/m, T = {d.T:g} s, delay = {d.delay}: "
-                f"margin {verdict.margin:.4g} N s/m at theta = {verdict.critical_theta:.3g} rad, allowed: margin >= "
-                f"{self.policy.safety_margin:g} N s/m; {limits}")
+        return (f"{label} is {state} with {self.device.describe()}: margin {verdict.margin:.4g} N s/m at "
+                f"theta = {verdict.critical_theta:.3g} rad, allowed: margin >= {self.policy.safety_margin:g} N s/m; "
+                f"{limits}")
+
+
+def _intervals(passive: PassiveSet, unit: str) -> str:
+    """``[lo, hi] unit`` for each passive interval, or ``none``."""
+    if not passive.intervals:
+        return "none"
+    return " or ".join(f"[{lo:.6g}, {hi:.6g}]" for lo, hi in passive.intervals) + f" {unit}"

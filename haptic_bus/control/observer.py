@@ -2,7 +2,9 @@
 
 The wall force ``u`` (N) computed at cycle ``k`` acts on the handle during the interval that
 the loop delay ``d`` puts it in; the observer pairs it with the displacement over that
-interval, estimated from the velocity samples at both ends (trapezoid, m).  Two sums, in J:
+interval: estimated from the velocity samples at both ends (trapezoid, m), or, when the drive's
+velocity is the encoder difference over the cycle (``average_velocity``), exactly ``T y_k``.
+Two sums, in J:
 
 * ``wall_energy`` -- what the wall has absorbed, ``sum u v T``.  With a loop delay a passive
   interface may well have a wall that gives energy back (the handle's friction takes it), so
@@ -26,8 +28,9 @@ class PassivityObserver:
     """Energies in J; ``active_cycles`` counts cycles with ``interface_energy < -tolerance``."""
 
     def __init__(self, period: float, delay: int, mass: float, friction: float, tolerance: float = 0.0,
-                 initial_energy: float = 0.0) -> None:
+                 initial_energy: float = 0.0, average_velocity: bool = False) -> None:
         self.period = period
+        self.average_velocity = average_velocity
         self.mass = mass
         self.friction = friction
         self.tolerance = tolerance
@@ -51,7 +54,8 @@ class PassivityObserver:
         last = self._last_velocity
         if last is not None:
             T = self.period
-            self.wall_energy += self._forces[0] * 0.5 * (last + velocity) * T  # force over the interval just ended
+            travelled = velocity * T if self.average_velocity else 0.5 * (last + velocity) * T
+            self.wall_energy += self._forces[0] * travelled  # the force held over the interval just ended
             self.dissipated += self.friction * 0.5 * (last * last + velocity * velocity) * T
             kinetic = 0.5 * self.mass * velocity * velocity
             self.interface_energy = self.initial_energy + self.wall_energy + self.dissipated + kinetic

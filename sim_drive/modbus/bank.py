@@ -91,6 +91,7 @@ class RegisterBank:
             "sim_time": lambda: drive.time,
             "sim_operator_energy": lambda: drive.operator_energy,
             "sim_wall_energy": lambda: drive.wall_energy,
+            "sim_reception_delay": lambda: drive.parameters.reception_delay,
             "comm_watchdog_ms": lambda: self.watchdog_ms,
         }
         self._sources.update({REGISTER_BY_NAME[name]: source for name, source in extras.items()})
