@@ -103,8 +103,6 @@ class Supervisor:
     one alarm (each kind alarms once per window, so a warning does not flood the record).
     """
 
-    QUANTILE = 0.95  # of the window's lateness: the observed delay a derate is judged at
-
     def __init__(self, policy: SupervisorPolicy, period: float, assumed_delay: float) -> None:
         self.policy = policy
         self.period = period
@@ -140,8 +138,11 @@ class Supervisor:
         return late, None
 
     def observed_delay(self) -> float:
-        """The loop delay (samples) the window shows: the assumed one plus a high quantile of lateness."""
-        return self.assumed_delay + float(np.quantile(self._lateness, self.QUANTILE)) / self.period
+        """The loop delay (samples) the window shows: the assumed one plus the lateness that more
+        than ``late_limit`` of its cycles reached (its ``late_limit + 1``-th largest), the same
+        count the alarm is raised on -- so an alarm's delay is always beyond the tolerance."""
+        rank = min(self.policy.late_limit + 1, self._lateness.size)
+        return self.assumed_delay + float(np.partition(self._lateness, -rank)[-rank]) / self.period
 
     def _late_message(self) -> str:
         worst = float(self._lateness.max())
