@@ -8,14 +8,14 @@ import math
 import mpmath as mp
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from haptic_bus.app.cli import main
 from haptic_bus.analysis.closed_form import velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict, seed_verdict
 from drives.errors import ParameterError
-from haptic_bus.analysis.frequency import seed_t_zw, t_fund, z_fund
+from haptic_bus.analysis.frequency import seed_t_zw, seed_z_zw, t_fund, z_fund
 from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, max_damping, max_stiffness
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import ExactPlant, phi1, phi2, zoh_coefficients
@@ -121,10 +121,15 @@ def test_responses_match_mpmath_and_never_flip_sign(loop: WallLoop, theta: float
 
 @settings(max_examples=200, deadline=None)
 @given(loop=loops)
+@example(loop=WallLoop(0.001, 1.0, 0.1, 0.0, 1.0, 0))  # a pole on the unit circle to double precision
 def test_everything_is_finite_over_the_whole_range(loop: WallLoop) -> None:
     theta = np.array([1e-12, 1e-6, 0.5, 3.0, math.pi - 1e-12, math.pi])
     assert np.all(np.isfinite(t_fund(loop, theta)))
-    assert np.all(np.isfinite(seed_t_zw(loop, theta)))
+    impedance = seed_z_zw(loop, theta)
+    assert np.all(np.isfinite(impedance))
+    # T_zw is finite except where its impedance is exactly zero: a closed-loop pole on the unit
+    # circle to double precision (e.g. m 1e-3, b 1, T 0.1, B 1: the pole -1 + 4e-44 at theta = pi)
+    assert np.all(np.isfinite(seed_t_zw(loop, theta)) | (impedance == 0))
     verdict = exact_verdict(loop)
     assert math.isfinite(verdict.margin) and 0 < verdict.critical_theta <= math.pi
     assert (verdict.margin >= 0) == verdict.passive

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptic_bus.analysis.frequency import loop_terms, scaled_impedance, seed_t_zw
+from haptic_bus.analysis.frequency import loop_terms, scaled_impedance, seed_z_zw
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.poles import closed_loop_poles, radius_excess, shifted_poles
 from haptic_bus.analysis.theta_search import refine_minima, theta_grid
@@ -130,7 +130,7 @@ def seed_verdict(loop: WallLoop) -> Verdict:
     """The seed's frequency test ``Re T_zw >= 0`` alone (no stability test, as in the seed)."""
 
     def real_parts(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        z = (loop.T / loop.m) / seed_t_zw(loop, theta)
+        z = (loop.T / loop.m) * seed_z_zw(loop, theta)
         return z.real, SEED_TOLERANCE * np.abs(z)
 
     return _verdict(loop, real_parts, SEED, require_stability=False)

@@ -35,6 +35,8 @@ each ``theta`` (:func:`impedance_quadratic`): the passivity limits come from its
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -167,12 +169,23 @@ def t_fund(loop: WallLoop, theta: ArrayLike) -> np.ndarray:
     return (z.re - 1j * z.im) / (size * terms.scale)
 
 
-def seed_t_zw(loop: WallLoop, theta: ArrayLike) -> np.ndarray:
-    """The seed's ``T_zw = G11 / (1 + G_md K_d)`` (eq. 10, with the loop's sampled map and delay), m/(N s)."""
+def seed_z_zw(loop: WallLoop, theta: ArrayLike) -> np.ndarray:
+    """``1 / T_zw`` in N s/m: the impedance of the seed's test, finite at every ``theta`` (zero
+    where a closed-loop pole sits on the unit circle, where ``T_zw`` itself is infinite)."""
     theta = _theta_array(theta)
     z, z_minus_1 = unit_point(theta)
     sampled = pulse_transfer(period_map(loop), z, z_minus_1) * (cospi(theta * (loop.whole_delay / np.pi))
                                                                  - 1j * sinpi(theta * (loop.whole_delay / np.pi)))
     wall = loop.kappa * z / z_minus_1 + loop.q  # K_d T/m
     s = loop.c + 1j * theta
-    return (loop.T / loop.m) / (s * (1.0 + sampled * wall))
+    return (loop.m / loop.T) * (s * (1.0 + sampled * wall))
+
+
+def seed_t_zw(loop: WallLoop, theta: ArrayLike) -> np.ndarray:
+    """The seed's ``T_zw = G11 / (1 + G_md K_d)`` (eq. 10, with the loop's sampled map and delay),
+    m/(N s); complex infinity where :func:`seed_z_zw` is zero (a pole on the unit circle)."""
+    impedance = seed_z_zw(loop, theta)
+    zero = impedance == 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        admittance = 1.0 / np.where(zero, 1.0, impedance)
+    return np.where(zero, complex(math.inf, 0.0), admittance)
