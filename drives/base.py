@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass
+from typing import Any
 
 from drives.cia402 import ObjectSpec, OperationMode
 from drives.errors import ParameterError
@@ -70,6 +71,78 @@ class DriveScaling:
         return limit if permille > limit else -limit if permille < -limit else permille
 
 
+SCALING_FIELDS = ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque", "max_torque_permille")
+SCALING_UNITS = {"velocity_per_count": "m/s", "position_per_count": "m", "rated_torque": "N m",
+                 "force_per_torque": "N/(N m)", "max_torque_permille": "per mille"}
+
+
+@dataclass(frozen=True)
+class ScalingReading:
+    """One value of a :class:`DriveScaling` field and where it was read.
+
+    ``source``: the object or chain of objects ("0x6076", "0x6091/0x6092/0x60A8", "0x2001:01"),
+    or the caller's label ("caller", "profile [device]").  ``tolerance``: the relative rounding
+    the source's integer objects allow (0: exact).  ``detail``: how the value was derived.
+    """
+
+    value: float | int
+    source: str
+    tolerance: float = 0.0
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class ScalingFactor:
+    """One field of the scaling in use: the reading ``used`` and the other readings that ``agreed`` with it."""
+
+    name: str
+    used: ScalingReading
+    agreed: tuple[ScalingReading, ...] = ()
+
+    def line(self) -> str:
+        """``name = value unit from source (detail); agrees with ...``: one line for a log or a terminal."""
+        used = self.used
+        text = f"{self.name} = {used.value!r} {SCALING_UNITS.get(self.name, '')} from {used.source}"
+        if used.detail:
+            text += f" ({used.detail})"
+        if self.agreed:
+            text += "; agrees with " + ", ".join(f"{r.source} ({r.value!r})" for r in self.agreed)
+        return text
+
+
+@dataclass(frozen=True)
+class ScalingReport:
+    """Where every factor of a drive's :class:`DriveScaling` came from, after ``connect()``.
+
+    ``factors`` in :data:`SCALING_FIELDS` order; ``notes``: why the drive could not give a factor
+    (an object it lacks, a unit with no SI length), each a sentence.
+    """
+
+    factors: tuple[ScalingFactor, ...]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def sources(self) -> dict[str, str]:
+        """Field -> the source of the value in use."""
+        return {f.name: f.used.source for f in self.factors}
+
+    def lines(self) -> list[str]:
+        """One line per factor, then the notes: what a run prints."""
+        return [f.line() for f in self.factors] + [f"note: {note}" for note in self.notes]
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict: per field its value, unit, source, detail, tolerance and agreeing sources; the notes."""
+        return {
+            "factors": {
+                f.name: {"value": f.used.value, "unit": SCALING_UNITS.get(f.name, ""), "source": f.used.source,
+                         "detail": f.used.detail, "tolerance": f.used.tolerance,
+                         "agreed": [{"source": r.source, "value": r.value} for r in f.agreed]}
+                for f in self.factors
+            },
+            "notes": list(self.notes),
+        }
+
+
 class Drive(abc.ABC):
     """A servo drive reached over a fieldbus, seen from the controller.
 
@@ -112,7 +185,7 @@ class Drive(abc.ABC):
     def close(self) -> None:
         """Release the bus; the drive object is unusable afterwards."""
 
-    def __enter__(self) -> "Drive":
+    def __enter__(self) -> Drive:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -93,6 +93,31 @@ OBJECTS: dict[int, ObjectSpec] = {
 }
 
 
+@dataclass(frozen=True)
+class RatioSpec:
+    """A factor-group ARRAY of CiA-402: sub 1 ``numerator`` / sub 2 ``denominator``, both UNSIGNED32 > 0."""
+
+    index: int
+    name: str
+    numerator: str
+    denominator: str
+    data_type: DataType = DataType.UNSIGNED32
+
+
+# The factor group (CiA-402 / IEC 61800-7-201) and the SI unit objects: how the drive's position
+# and velocity units relate to its encoder, its gearbox and the feed of its mechanics.
+# :mod:`drives.factor_group` turns them into SI; none of them is in OBJECTS (not every drive has them).
+POSITION_ENCODER_RESOLUTION = RatioSpec(0x608F, "Position encoder resolution", "Encoder increments", "Motor revolutions")
+VELOCITY_ENCODER_RESOLUTION = RatioSpec(0x6090, "Velocity encoder resolution", "Encoder increments per second",
+                                        "Motor revolutions per second")
+GEAR_RATIO = RatioSpec(0x6091, "Gear ratio", "Motor revolutions", "Shaft revolutions")
+FEED_CONSTANT = RatioSpec(0x6092, "Feed constant", "Feed", "Shaft revolutions")
+RATIO_OBJECTS: tuple[RatioSpec, ...] = (POSITION_ENCODER_RESOLUTION, VELOCITY_ENCODER_RESOLUTION, GEAR_RATIO, FEED_CONSTANT)
+SI_UNIT_POSITION = ObjectSpec(0x60A8, "SI unit position", DataType.UNSIGNED32, "rw")
+SI_UNIT_VELOCITY = ObjectSpec(0x60A9, "SI unit velocity", DataType.UNSIGNED32, "rw")
+UNIT_OBJECTS: tuple[ObjectSpec, ...] = (SI_UNIT_POSITION, SI_UNIT_VELOCITY)
+
+
 class OperationMode(enum.IntEnum):
     """Values of 0x6060/0x6061."""
 

@@ -19,10 +19,19 @@ import abc
 import logging
 import math
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
-from typing import Any
 
-from drives.base import CyclicInputs, Drive, DriveScaling
+from drives.base import (
+    SCALING_FIELDS,
+    SCALING_UNITS,
+    CyclicInputs,
+    Drive,
+    DriveScaling,
+    ScalingFactor,
+    ScalingReading,
+    ScalingReport,
+)
 from drives.cia402 import (
     CW_FAULT_RESET,
     MODES_OF_OPERATION,
@@ -37,12 +46,11 @@ from drives.cia402 import (
     path_to_operation_enabled,
     supports,
 )
-from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveStateError, UnsupportedModeError
+from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveStateError, ScalingConflict, UnsupportedModeError
 
 logger = logging.getLogger(__name__)
 
 SAFE_CONTROLWORD = Command.DISABLE_VOLTAGE.word  # -> SWITCH ON DISABLED: no torque, handle free
-SCALING_FIELDS = ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque", "max_torque_permille")
 
 
 def state_name(state: State | None) -> str:
@@ -64,30 +72,74 @@ class CyclicStats:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
-def merge_scaling(
-    node: str, given: DriveScaling | None, found: dict[str, tuple[float | int, str]]
-) -> tuple[DriveScaling, dict[str, str]]:
-    """The drive's scaling: ``found`` (field -> (value, where it was read)) over ``given``.
+Found = tuple[float | int, str] | Sequence[ScalingReading]
+REL_FLOOR = 1e-9  # relative: what any two exact sources may differ by (decimal profile values, float derivations)
+REAL32_ROUNDING = 2.0**-24  # relative: a REAL32 object's rounding
 
-    Returns the scaling and, per field, where its value came from ("caller" or the object /
-    register).  :class:`DriveProtocolError` names a field neither side gives, or a value the
-    drive reports that cannot be a scaling factor.
+
+def _readings(item: Found) -> tuple[ScalingReading, ...]:
+    """A drive's readings of one field: a ``(value, source)`` pair (exact) or readings as they are."""
+    if isinstance(item, tuple) and len(item) == 2 and isinstance(item[1], str):
+        return (ScalingReading(item[0], item[1]),)
+    return tuple(item)
+
+
+def _check_reading(node: str, name: str, reading: ScalingReading) -> None:
+    value = reading.value
+    if name == "max_torque_permille":
+        ok = isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 0xFFFF
+        allowed = "a whole number in 1..65535"
+    else:
+        ok = isinstance(value, (int, float)) and value > 0 and math.isfinite(value)
+        allowed = "finite and > 0"
+    if not ok:
+        raise DriveProtocolError(node, f"scaling {name} = {value!r} (from {reading.source}); must be {allowed}")
+
+
+def _agree(node: str, name: str, used: ScalingReading, other: ScalingReading) -> None:
+    """ScalingConflict unless ``other`` equals ``used`` within the larger rounding of the two (at least REL_FLOOR)."""
+    scale = max(abs(used.value), abs(other.value))
+    relative = abs(used.value - other.value) / scale if scale else 0.0
+    tolerance = max(REL_FLOOR, used.tolerance, other.tolerance)
+    if relative > tolerance:
+        raise ScalingConflict(node, name, (used.value, used.source), (other.value, other.source), relative, tolerance,
+                              SCALING_UNITS.get(name, ""))
+
+
+def merge_scaling(
+    node: str, given: DriveScaling | None, found: Mapping[str, Found], given_source: str = "caller",
+    notes: Sequence[str] = (),
+) -> tuple[DriveScaling, ScalingReport]:
+    """The drive's scaling: per field, the first of the drive's readings (``found``: field ->
+    readings in order of precedence, or one ``(value, source)`` pair), else the caller's
+    (``given``, labelled ``given_source``).
+
+    Every other reading of a field must agree with the one used within the larger of their
+    roundings (:class:`ScalingConflict` names both).  :class:`DriveProtocolError` names a field
+    no one gives, or a value the drive reports that cannot be a scaling factor.  Returns the
+    scaling and the :class:`ScalingReport` of where each factor came from (``notes`` appended).
     """
-    values: dict[str, Any] = {name: getattr(given, name) for name in SCALING_FIELDS} if given is not None else {}
-    sources = dict.fromkeys(values, "caller")
-    for name, (value, source) in found.items():
-        values[name] = value
-        sources[name] = source
-    missing = [name for name in SCALING_FIELDS if name not in values]
+    factors = []
+    missing = []
+    for name in SCALING_FIELDS:
+        readings = _readings(found[name]) if name in found else ()
+        for reading in readings:
+            _check_reading(node, name, reading)
+        if given is not None:
+            readings += (ScalingReading(getattr(given, name), given_source),)
+        if not readings:
+            missing.append(name)
+            continue
+        used, others = readings[0], readings[1:]
+        for other in others:
+            _agree(node, name, used, other)
+        factors.append(ScalingFactor(name, used, others))
     if missing:
         raise DriveProtocolError(
             node, f"scaling unknown for {', '.join(missing)}: the drive has no objects for them; pass scaling=DriveScaling(...)"
         )
-    for name in SCALING_FIELDS[:4]:
-        value = values[name]
-        if not (value > 0 and math.isfinite(value)):
-            raise DriveProtocolError(node, f"scaling {name} = {value!r} (from {sources[name]}); must be finite and > 0")
-    return DriveScaling(**values), sources
+    scaling = DriveScaling(**{f.name: f.used.value for f in factors})  # type: ignore[arg-type]
+    return scaling, ScalingReport(tuple(factors), tuple(notes))
 
 
 class Cia402Master(Drive):
@@ -102,11 +154,13 @@ class Cia402Master(Drive):
     max_commands_per_step: int
     stats: CyclicStats
 
-    def _init_master(self, name: str, scaling: DriveScaling | None) -> None:
+    def _init_master(self, name: str, scaling: DriveScaling | None, scaling_source: str = "caller") -> None:
         self.name = name
         self._given_scaling = scaling
+        self._given_source = scaling_source
         self.scaling = scaling  # type: ignore[assignment]  # complete after connect()
-        self.scaling_sources: dict[str, str] = {}
+        self.scaling_sources: dict[str, str] = {}  # field -> where its value came from, after connect()
+        self.scaling_report: ScalingReport | None = None  # the same with values and agreeing sources
         self.last_inputs: CyclicInputs | None = None
         self._controlword = SAFE_CONTROLWORD
         self._torque_limit = 0x7FFF
@@ -147,9 +201,13 @@ class Cia402Master(Drive):
         """The error that made the master send the safe outputs, or None."""
         return self._tripped
 
-    def _adopt_scaling(self, found: dict[str, tuple[float | int, str]]) -> None:
-        self.scaling, self.scaling_sources = merge_scaling(self.name, self._given_scaling, found)
+    def _adopt_scaling(self, found: Mapping[str, Found], notes: Sequence[str] = ()) -> None:
+        """Merge the drive's scaling readings with the caller's (:func:`merge_scaling`) and log where each came from."""
+        self.scaling, self.scaling_report = merge_scaling(self.name, self._given_scaling, found, self._given_source, notes)
+        self.scaling_sources = self.scaling_report.sources
         self._torque_limit = min(int(self.scaling.max_torque_permille), 0x7FFF)
+        for line in self.scaling_report.lines():
+            logger.info("%s: scaling %s", self.name, line)
 
     def _trip(self, error: DriveError) -> DriveError:
         """Safe outputs now, every later output safe too; returns ``error`` for ``raise``."""
@@ -263,7 +321,8 @@ class Cia402Master(Drive):
             if goal is State.SWITCH_ON_DISABLED:
                 command = Command.DISABLE_VOLTAGE
             elif state is State.FAULT:
-                raise DriveStateError(self.name, f"drive is in FAULT (statusword 0x{statusword:04X}); call fault_reset() first", state)
+                raise DriveStateError(self.name, f"drive is in FAULT (statusword 0x{statusword:04X}); call fault_reset() first",
+                                      state)
             else:
                 path = path_to_operation_enabled(state) if state is not None else ()
                 command = path[0] if path else None

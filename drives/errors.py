@@ -11,8 +11,10 @@ branch to an exit status (``haptic_bus.app.cli``)::
      |    |    +-- DriveStateError       the CiA-402 state machine stalled: .state
      |    |    +-- ModbusLinkLost        the Modbus link is gone: call reconnect()
      |    +-- DriveFault                 the drive reported a fault: .code
+     |    +-- ScalingConflict            two sources of a scaling factor disagree: .field, .first, .second
      |    +-- DriveProtocolError         an answer or frame the protocol forbids
      |    |    +-- SdoAbortError         SDO abort: .abort_code, .index, .subindex
+     |    |    +-- ScalingObjectError    a factor-group/SI-unit object out of range: .index, .subindex, .value, .allowed
      |    |    +-- ModbusExceptionError  exception response: .exception_code
      |    |    +-- PdoLengthError        PDO frame of the wrong length: .expected, .got
      |    +-- UnsupportedModeError       0x6502 lacks the requested mode
@@ -117,3 +119,40 @@ class PdoLengthError(DriveProtocolError):
 
 class UnsupportedModeError(DriveError):
     """The drive does not announce the requested mode of operation in 0x6502."""
+
+
+class ScalingConflict(DriveError):
+    """Two sources of one scaling factor (the drive's objects, an EDS-named object, the caller's
+    profile) disagree by more than the rounding of the drive's objects allows.
+
+    ``field`` is the :class:`~drives.base.DriveScaling` field; ``first`` and ``second`` are
+    ``(value, source)`` pairs, the one in use first; ``relative`` their relative difference and
+    ``tolerance`` the relative rounding allowed.
+    """
+
+    def __init__(self, node: str, field: str, first: tuple[float | int, str], second: tuple[float | int, str],
+                 relative: float, tolerance: float, unit: str = "") -> None:
+        self.field = field
+        self.first = first
+        self.second = second
+        self.relative = relative
+        self.tolerance = tolerance
+        suffix = f" {unit}" if unit else ""
+        super().__init__(
+            node,
+            f"scaling conflict for {field}: {first[0]:.12g}{suffix} from {first[1]} but {second[0]:.12g}{suffix} from "
+            f"{second[1]} (relative difference {relative:.3g}, more than the {tolerance:.3g} the objects' rounding "
+            f"allows); correct the profile or the drive's objects, the drive is not enabled",
+        )
+
+
+class ScalingObjectError(DriveProtocolError):
+    """A CiA-402 factor-group or SI-unit object holds a value no drive may report (a zero
+    revolution count, an unknown unit code): ``index``, ``subindex``, ``value``, ``allowed``."""
+
+    def __init__(self, node: str, index: int, subindex: int, name: str, value: int, allowed: str) -> None:
+        self.index = index
+        self.subindex = subindex
+        self.value = value
+        self.allowed = allowed
+        super().__init__(node, f"0x{index:04X}:{subindex:02X} ({name}) = {value} (0x{value:08X}) is invalid; allowed: {allowed}")

@@ -17,6 +17,8 @@ from drives.errors import (
     ModbusLinkLost,
     ParameterError,
     PdoLengthError,
+    ScalingConflict,
+    ScalingObjectError,
     SdoAbortError,
     UnsupportedModeError,
 )
@@ -33,6 +35,8 @@ __all__ = [
     "ModbusLinkLost",
     "ParameterError",
     "PdoLengthError",
+    "ScalingConflict",
+    "ScalingObjectError",
     "SdoAbortError",
     "UnsupportedModeError",
 ]

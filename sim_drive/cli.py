@@ -1,7 +1,7 @@
 """``haptic-bus sim``: run the simulated drive as a CANopen slave or a Modbus TCP server until SIGINT/SIGTERM.
 
     haptic-bus sim --interface I --channel C --node-id N [--bitrate R] [--bus-option KEY=VALUE ...]
-                   [--timing cia402|ideal|reception] [--profile P] [--realtime]
+                   [--od haptic|standard] [--timing cia402|ideal|reception] [--profile P] [--realtime]
     haptic-bus sim --modbus tcp://HOST:PORT [--unit-id N] [--word-order big|little]
                    [--timing cia402|ideal|reception] [--profile P] [--realtime]
     haptic-bus sim --eds-path
@@ -31,7 +31,7 @@ from typing import Any, NoReturn
 
 from drives.bus_config import parse_bus_option
 from drives.errors import ParameterError
-from sim_drive.eds import eds_path
+from sim_drive.eds import OD_KINDS, eds_path
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import load_profile
@@ -39,7 +39,7 @@ from sim_drive.profile import load_profile
 logger = logging.getLogger("sim_drive")
 
 _PROG = "haptic-bus sim"
-_CANOPEN_ONLY = ("eds_path", "interface", "channel", "node_id", "bitrate", "bus_option")
+_CANOPEN_ONLY = ("eds_path", "interface", "channel", "node_id", "bitrate", "bus_option", "od")
 _MODBUS_ONLY = ("unit_id", "word_order")
 _HELP = frozenset({"-h", "--help"})
 
@@ -109,6 +109,10 @@ def build_parser() -> argparse.ArgumentParser:
     canopen.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
                          help="extra python-can bus argument, e.g. port=43113 (repeatable)")
     canopen.add_argument("--eds-path", action="store_true", help="print the path of the shipped EDS and exit")
+    canopen.add_argument("--od", choices=list(OD_KINDS),
+                         help="object dictionary: haptic (default: the shipped EDS, manufacturer objects 0x2000.. "
+                              "included) or standard (CiA-301/402 objects only, the scaling in 0x608F/0x6090/0x6091/"
+                              "0x6092/0x60A8/0x60A9/0x6076, no object in 0x2000-0x5FFF)")
     modbus = parser.add_argument_group("Modbus TCP server")
     modbus.add_argument("--modbus", metavar="tcp://HOST:PORT", help="serve Modbus TCP on this address (PORT 0: any free port)")
     modbus.add_argument("--unit-id", type=int, help="Modbus unit id 0..255 (default 1)")
@@ -187,7 +191,8 @@ def _run_canopen(args: argparse.Namespace) -> int:
         config: dict[str, Any] = {"interface": args.interface, "channel": args.channel, **dict(args.bus_option)}
         if args.bitrate:
             config["bitrate"] = args.bitrate
-        sim = CanopenSimDrive(config, args.node_id, timing=timing, parameters=parameters, operator=operator, bus_meter=meter)
+        sim = CanopenSimDrive(config, args.node_id, timing=timing, parameters=parameters, operator=operator, bus_meter=meter,
+                              od=args.od or "haptic")
     except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
@@ -198,8 +203,9 @@ def _run_canopen(args: argparse.Namespace) -> int:
             print(f"{_PROG}: error: cannot open the bus: {exc}", file=sys.stderr)
             return 1
         try:
-            logger.info("node %d: serving on %s %s (timing %s); EDS %s",
-                        args.node_id, args.interface, args.channel, timing, eds_path())
+            dictionary = "standard objects only" if args.od == "standard" else f"EDS {eds_path()}"
+            logger.info("node %d: serving on %s %s (timing %s); %s",
+                        args.node_id, args.interface, args.channel, timing, dictionary)
             received = stop_signals.wait()
             logger.info("node %d: %s received, stopping", args.node_id, received.name)
         finally:

@@ -16,6 +16,10 @@ index     sub  meaning
 0x2010    1-7  operator model code (see ``sim_drive.operator.OPERATOR_CODES``)
                and its parameters p1..p6 (written before the code)
 ========  ===  =========================================================
+
+With ``od="standard"`` (``haptic-bus sim --od standard``) the slave serves this EDS without the
+manufacturer area, and states its scaling in the CiA-402 factor group instead (0x608F, 0x6090,
+0x6091, 0x6092, 0x60A8, 0x60A9, read-only; see :mod:`sim_drive.canopen.standard_od`).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from __future__ import annotations
 import pathlib
 
 EDS_NAME = "haptic_sim_drive.eds"
+OD_KINDS = ("haptic", "standard")  # the slave's object dictionaries: the shipped EDS, or standard objects only
 
 
 def eds_path() -> pathlib.Path:

@@ -339,7 +339,9 @@ def test_without_an_eds_scaling_comes_from_the_caller_and_the_drive(canopen_rig)
     with canopen_rig("virtual", "ideal", connect=False, eds=None) as r:
         with pytest.raises(DriveProtocolError, match="scaling unknown for velocity_per_count.*pass scaling="):
             r.drive.connect()
-    given = DriveScaling(velocity_per_count=2e-6, position_per_count=1e-7, rated_torque=9.0, force_per_torque=50.0)
+    # 0x6076 = 200 mN m and 0x6072 = 3000 on this drive: the caller must agree (a conflict is refused, test_standard_objects)
+    given = DriveScaling(velocity_per_count=2e-6, position_per_count=1e-7, rated_torque=0.2, force_per_torque=50.0,
+                         max_torque_permille=3000)
     with canopen_rig("virtual", "ideal", eds=None, scaling=given) as r:
         drive = r.drive
         assert drive.scaling.velocity_per_count == 2e-6  # the caller's

@@ -9,6 +9,11 @@ set up the safety chain (:class:`SafetySettings`: the drive's heartbeat consumer
 the master's heartbeat, the RPDO deadline 0x1400:05, the abort connection option 0x6007,
 each read back), set its heartbeat 0x1017, NMT start, and wait until its heartbeat shows
 OPERATIONAL.
+
+Scaling: the standard objects 0x6076, 0x6072 and the factor group (0x608F, 0x6090, 0x6091,
+0x6092, 0x60A8, 0x60A9; :mod:`drives.factor_group`) where the drive has them, and
+manufacturer objects only where an EDS the user gave names them
+(:func:`drives.canopen.od.find_scaling_objects`).
 """
 
 from __future__ import annotations
@@ -17,10 +22,12 @@ import logging
 import threading
 import time
 from dataclasses import dataclass, field
+from typing import cast
 
 import canopen
 from canopen.pdo.base import PdoMap
 
+from drives.base import ScalingReading
 from drives.canopen.events import DriveEvents
 from drives.canopen.od import find_scaling_objects
 from drives.canopen.pdo_codec import PdoCodec
@@ -50,12 +57,17 @@ from drives.cia402 import (
     ABORT_CONNECTION_OPTION_CODE,
     MAX_TORQUE,
     MOTOR_RATED_TORQUE,
+    RATIO_OBJECTS,
     STATUSWORD,
+    UNIT_OBJECTS,
     DataType,
+    RatioSpec,
     State,
     decode_statusword,
 )
+from drives.cia402_master import REAL32_ROUNDING
 from drives.errors import DriveError, DriveProtocolError, DriveTimeout, SdoAbortError
+from drives.factor_group import FactorGroup, derive
 from drives.safety import SafetySettings
 
 logger = logging.getLogger(__name__)
@@ -80,13 +92,15 @@ class CommissioningSettings:
 
 @dataclass(frozen=True)
 class Commissioned:
-    """What commissioning found: 0x1000, the PDO COB-IDs, scaling values with their sources,
-    and the safety objects the drive lacks (each a warning, unless ``strict`` refused)."""
+    """What commissioning found: 0x1000, the PDO COB-IDs, the drive's scaling readings per field
+    (in order of precedence) with notes on what its objects cannot give, and the safety objects
+    the drive lacks (each a warning, unless ``strict`` refused)."""
 
     device_type: int | None
     tpdo_cobs: tuple[int, ...]
     rpdo_cob: int
-    scaling: dict[str, tuple[float | int, str]]
+    scaling: dict[str, tuple[ScalingReading, ...]]
+    scaling_notes: tuple[str, ...] = ()
     safety_warnings: tuple[str, ...] = field(default_factory=tuple)
 
 
@@ -107,18 +121,19 @@ class Commissioning:
         self._reach()
         device_type = self._check_device_type() if self.settings.check_device_type else None
         self.sdo.write_int(COMMUNICATION_CYCLE_PERIOD, 0, DataType.UNSIGNED32, round(self.settings.period * 1e6))
-        tpdo_cobs = tuple(self._remap(self.node.tpdo[n + 1], codec, TPDO_BASES[n] + self.node.id)
+        node_id = cast(int, self.node.id)  # canopen types it Optional; a RemoteNode always has one
+        tpdo_cobs = tuple(self._remap(self.node.tpdo[n + 1], codec, TPDO_BASES[n] + node_id)
                           for n, codec in enumerate(tpdo_codecs))
         deadline_ms = self.safety.rpdo_deadline_ms(self.settings.period)
-        rpdo_cob = self._remap(self.node.rpdo[1], rpdo_codec, RPDO_BASES[0] + self.node.id, deadline_ms)
+        rpdo_cob = self._remap(self.node.rpdo[1], rpdo_codec, RPDO_BASES[0] + node_id, deadline_ms)
         for n in range(len(tpdo_codecs), PDO_CHANNELS):
             self._invalidate(TPDO_COMMUNICATION + n)
         for n in range(1, PDO_CHANNELS):
             self._invalidate(RPDO_COMMUNICATION + n)
-        scaling = self._read_scaling()
+        scaling, notes = self._read_scaling()
         warnings = self._set_up_safety(deadline_ms)
         self._start()
-        return Commissioned(device_type, tpdo_cobs, rpdo_cob, scaling, warnings)
+        return Commissioned(device_type, tpdo_cobs, rpdo_cob, scaling, notes, warnings)
 
     def refuse_another_master(self) -> None:
         """Listen before taking the bus: a SYNC from someone else, or the drive enabled by someone
@@ -247,19 +262,46 @@ class Commissioning:
             if exc.abort_code not in (SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX):
                 raise
 
-    def _read_scaling(self) -> dict[str, tuple[float | int, str]]:
-        """Scaling the drive has: 0x6076, 0x6072, and manufacturer scaling objects the EDS names."""
-        found: dict[str, tuple[float | int, str]] = {}
-        for name, spec, factor in (("rated_torque", MOTOR_RATED_TORQUE, 1e-3), ("max_torque_permille", MAX_TORQUE, 1)):
-            try:
-                raw = self.sdo.read_int(spec.index, spec.subindex, spec.data_type)
-            except SdoAbortError as exc:
-                logger.info("%s: no %s from the drive (%s)", self.name, name, exc)
-                continue
-            found[name] = (raw * factor if factor != 1 else raw, f"0x{spec.index:04X}")
+    def _read_scaling(self) -> tuple[dict[str, tuple[ScalingReading, ...]], tuple[str, ...]]:
+        """The scaling the drive states, per field in order of precedence: manufacturer objects an
+        EDS names, then the standard objects (0x6076, 0x6072, and the factor group through
+        :func:`drives.factor_group.derive`); and notes on what the standard objects cannot give."""
+        notes: list[str] = []
+        standard: dict[str, ScalingReading] = {}
+        rated = self._optional(MOTOR_RATED_TORQUE.index, 0, MOTOR_RATED_TORQUE.data_type, notes)
+        if rated is not None:
+            standard["rated_torque"] = ScalingReading(rated / 1000.0, "0x6076", 0.5 / rated if rated else 0.0, f"{rated} mN m")
+        permille = self._optional(MAX_TORQUE.index, 0, MAX_TORQUE.data_type, notes)
+        if permille is not None:
+            standard["max_torque_permille"] = ScalingReading(permille, "0x6072")
+        position_unit, velocity_unit = (self._optional(spec.index, 0, spec.data_type, notes) for spec in UNIT_OBJECTS)
+        group = FactorGroup(position_unit, velocity_unit, *(self._optional_ratio(spec, notes) for spec in RATIO_OBJECTS))
+        derived, derive_notes = derive(self.name, group)
+        standard.update(derived)
+        found: dict[str, tuple[ScalingReading, ...]] = {}
         for name, (index, subindex, fmt) in find_scaling_objects(self.node.object_dictionary).items():
-            found[name] = (self.sdo.read_real(index, subindex, fmt), f"0x{index:04X}:{subindex:02X}")
-        return found
+            rounding = REAL32_ROUNDING if fmt == "<f" else 0.0
+            found[name] = (ScalingReading(self.sdo.read_real(index, subindex, fmt), f"0x{index:04X}:{subindex:02X}", rounding,
+                                          "manufacturer object named by the EDS"),)
+        for name, reading in standard.items():
+            found[name] = (*found.get(name, ()), reading)
+        return found, (*derive_notes, *notes)
+
+    def _optional(self, index: int, subindex: int, data_type: DataType, notes: list[str]) -> int | None:
+        """An object the drive may lack: None if it answers with an SDO abort (noted unless "no such object")."""
+        try:
+            return self.sdo.read_int(index, subindex, data_type)
+        except SdoAbortError as exc:
+            if exc.abort_code not in (SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX):
+                notes.append(f"0x{index:04X}:{subindex:02X} not read: {exc.message}")
+            logger.debug("%s: %s", self.name, exc)
+            return None
+
+    def _optional_ratio(self, spec: RatioSpec, notes: list[str]) -> tuple[int, int] | None:
+        """Sub 1 and sub 2 of a factor-group ratio the drive may lack (None unless both answer)."""
+        numerator = self._optional(spec.index, 1, spec.data_type, notes)
+        denominator = self._optional(spec.index, 2, spec.data_type, notes) if numerator is not None else None
+        return None if numerator is None or denominator is None else (numerator, denominator)
 
     def _set_up_safety(self, deadline_ms: int) -> tuple[str, ...]:
         """0x1016 sub 1, 0x6007 and (already written with the mapping) 0x1400:05, each read back.
@@ -269,7 +311,8 @@ class Commissioning:
         safety = self.safety
         missing: list[str] = []
         wanted: list[tuple[int, int, DataType, int, str]] = [
-            (ABORT_CONNECTION_OPTION_CODE.index, 0, DataType.INTEGER16, safety.abort_option, "0x6007 abort connection option code"),
+            (ABORT_CONNECTION_OPTION_CODE.index, 0, DataType.INTEGER16, safety.abort_option,
+             "0x6007 abort connection option code"),
         ]
         if safety.master_node_id is not None:
             entry = safety.master_node_id << 16 | safety.consumer_ms
@@ -294,7 +337,8 @@ class Commissioning:
                 missing.append("0x1400:05 RPDO1 event timer (receive deadline)")
             else:
                 if got != deadline_ms:
-                    raise DriveProtocolError(self.name, f"0x1400:05 RPDO1 event timer reads back {got} ms after writing {deadline_ms}")
+                    raise DriveProtocolError(self.name,
+                                             f"0x1400:05 RPDO1 event timer reads back {got} ms after writing {deadline_ms}")
         if not missing:
             return ()
         text = (f"the drive lacks {', '.join(missing)}: it will not stop on its own for that cause if this master "

@@ -59,6 +59,7 @@ logger = logging.getLogger(__name__)
 DEFAULT_TPDO: tuple[ObjectSpec, ...] = (STATUSWORD, VELOCITY_ACTUAL)
 DEFAULT_TPDO_WITH_POSITION: tuple[ObjectSpec, ...] = (STATUSWORD, VELOCITY_ACTUAL, POSITION_ACTUAL)
 DEFAULT_RPDO: tuple[ObjectSpec, ...] = (CONTROLWORD, TARGET_TORQUE)
+DEFAULT_SAFETY = SafetySettings()  # frozen: one shared default
 
 
 def split_into_frames(objects: Sequence[ObjectSpec | int]) -> list[tuple[ObjectSpec, ...]]:
@@ -97,11 +98,18 @@ class CanopenDrive(Cia402Master):
     "direct" or "listener" (:mod:`drives.canopen.exchange`).  Timeouts in s;
     ``max_missed_tpdos`` consecutive cycles without TPDO raise DriveTimeout; heartbeat times in
     ms (consumer default 3x producer; 0 disables).  ``scaling``: the caller's
-    :class:`~drives.base.DriveScaling`; connect() replaces ``rated_torque`` and
-    ``max_torque_permille`` by 0x6076/0x6072 and the other fields by manufacturer scaling
-    objects the EDS names; a field neither the drive nor the caller gives makes connect()
-    fail naming it.
+    :class:`~drives.base.DriveScaling` (``scaling_source`` labels it in the report, e.g.
+    "profile [device]").  connect() takes each field from the drive where it states it --
+    manufacturer scaling objects an EDS names, else the standard objects (0x6076, 0x6072 and
+    the factor group 0x608F/0x6090/0x6091/0x6092/0x60A8/0x60A9, :mod:`drives.factor_group`) --
+    and from the caller otherwise; two sources of a field that disagree beyond the rounding of
+    the drive's objects raise :class:`~drives.errors.ScalingConflict` (the drive is never
+    enabled), a field neither gives makes connect() fail naming it.  After connect(),
+    ``scaling_report`` (:class:`~drives.base.ScalingReport`) says where each factor came from,
+    ``scaling_sources`` the same as field -> source.
     """
+
+    stats: CanopenStats
 
     def __init__(
         self,
@@ -117,6 +125,7 @@ class CanopenDrive(Cia402Master):
         period: float = 0.001,
         tpdo_objects: Sequence[ObjectSpec | int] = DEFAULT_TPDO,
         scaling: Any = None,
+        scaling_source: str = "caller",
         rx_mode: str = "direct",
         sdo_timeout: float = 0.3,
         boot_timeout: float = 1.0,
@@ -127,7 +136,7 @@ class CanopenDrive(Cia402Master):
         heartbeat_consumer_ms: int | None = None,
         reset_communication: bool = True,
         check_device_type: bool = True,
-        safety: SafetySettings = SafetySettings(),
+        safety: SafetySettings = DEFAULT_SAFETY,
     ) -> None:
         low, high = NODE_ID_RANGE
         _check("node_id", isinstance(node_id, int) and low <= node_id <= high, node_id, f"{low}..{high}")
@@ -148,7 +157,7 @@ class CanopenDrive(Cia402Master):
         _check("master_node_id", safety.master_node_id != node_id, safety.master_node_id,
                f"a node id other than the drive's ({node_id})")
 
-        self._init_master(f"CANopen node {node_id}", scaling)
+        self._init_master(f"CANopen node {node_id}", scaling, scaling_source)
         self.node_id = node_id
         self.eds = eds
         self.state_timeout = state_timeout
@@ -230,11 +239,13 @@ class CanopenDrive(Cia402Master):
             self.sdo = SdoAccess(self.name, node, self.settings.sdo_timeout, self.exchange.end)
             commissioning = Commissioning(self.name, node, self.sdo, self.events, self.settings, self.safety)
             commissioning.refuse_another_master()
+            if network.bus is None:
+                raise DriveError(self.name, "the CAN network has no bus after connecting")
             self.heartbeat.start(network.bus, network.send_lock)  # boot-up first, before the drive is touched
             found = commissioning.run(self.exchange.tpdo_codecs, self.exchange.rpdo_codec)
             self.commissioned = found
             self.exchange.configure(found.tpdo_cobs, found.rpdo_cob)
-            self._adopt_scaling(found.scaling)
+            self._adopt_scaling(found.scaling, found.scaling_notes)
             self.events.heartbeat_limit = self.settings.heartbeat_consumer_ms / 1000.0
             self.events.clear()
         except BaseException:

@@ -3,19 +3,21 @@
 The master needs an object dictionary for names in error messages, for canopen's PDO
 configuration (:meth:`canopen.pdo.PdoMap.save`) and for canopen's generic PDO path (used by
 the benchmark).  Without an EDS, :func:`minimal_cia402_od` builds the CiA-301 communication
-objects the master touches plus the standard CiA-402 objects of :mod:`drives.cia402`: a real
-drive is met with the standard dictionary, never with ours.
+objects the master touches plus the standard CiA-402 objects of :mod:`drives.cia402` (the
+factor group and SI unit objects too): a real drive is met with the standard dictionary,
+never with ours.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 
 import canopen
 from canopen import objectdictionary as od
 
 from drives.cia301 import COMMUNICATION_OBJECT_NAMES
-from drives.cia402 import OBJECTS, DataType
+from drives.cia402 import OBJECTS, RATIO_OBJECTS, UNIT_OBJECTS, DataType
 
 _CANOPEN_TYPE = {
     DataType.INTEGER8: od.INTEGER8,
@@ -75,7 +77,28 @@ def minimal_cia402_od() -> od.ObjectDictionary:
         dictionary.add_object(
             _variable(spec.name, spec.index, spec.subindex, _CANOPEN_TYPE[spec.data_type], spec.access, mappable=True)
         )
+    add_factor_group(dictionary)
     return dictionary
+
+
+def add_factor_group(dictionary: od.ObjectDictionary, values: Mapping[tuple[int, int], int] | None = None,
+                     access: str = "rw") -> None:
+    """Add the CiA-402 factor group and SI unit objects (drives.cia402 RATIO_OBJECTS, UNIT_OBJECTS)
+    to ``dictionary``: every one, or (``values`` given) those ``values`` holds ``(index, subindex)``
+    defaults for, with ``access``."""
+    for spec in UNIT_OBJECTS:
+        if values is None or (spec.index, 0) in values:
+            default = None if values is None else values[spec.index, 0]
+            dictionary.add_object(_variable(spec.name, spec.index, 0, _CANOPEN_TYPE[spec.data_type], access, default=default))
+    for ratio in RATIO_OBJECTS:
+        if values is not None and (ratio.index, 1) not in values:
+            continue
+        array = od.ODArray(ratio.name, ratio.index)
+        array.add_member(_variable("Highest sub-index supported", ratio.index, 0, od.UNSIGNED8, "const", default=2))
+        for subindex, name in ((1, ratio.numerator), (2, ratio.denominator)):
+            default = None if values is None else values[ratio.index, subindex]
+            array.add_member(_variable(name, ratio.index, subindex, _CANOPEN_TYPE[ratio.data_type], access, default=default))
+        dictionary.add_object(array)
 
 
 def object_name(dictionary: od.ObjectDictionary | None, index: int, subindex: int = 0) -> str:
@@ -117,7 +140,8 @@ def find_scaling_objects(dictionary: od.ObjectDictionary | None) -> dict[str, tu
         obj = dictionary[index]
         members = obj.values() if isinstance(obj, (od.ODRecord, od.ODArray)) else [obj]
         for var in members:
-            fmt = _REAL_FORMATS.get(getattr(var, "data_type", None))
+            data_type = getattr(var, "data_type", None)
+            fmt = _REAL_FORMATS.get(data_type) if isinstance(data_type, int) else None
             if fmt is None:
                 continue
             name = var.name.strip().lower()

@@ -105,7 +105,9 @@ def run_document(profile: Profile, controller: WallController | None, summary: R
     }
     if controller is not None:
         drive = controller.drive
-        document["scaling"] = {"values": asdict(drive.scaling), "sources": getattr(drive, "scaling_sources", {})}
+        report = getattr(drive, "scaling_report", None)
+        document["scaling"] = {"values": asdict(drive.scaling), "sources": getattr(drive, "scaling_sources", {}),
+                               **(report.to_dict() if report is not None else {})}
         document["scenes"] = [entry.to_dict() for entry in controller.scenes.history]
         document["events"] = controller.events.to_list()
         document["events_dropped"] = controller.events.dropped
