@@ -1,0 +1,221 @@
+"""Which Modbus units answer at an address, and which of them carry our register map (read-only).
+
+Every request is a read: FC03 (read holding registers) and FC43/14 (read device
+identification).  For each unit id in turn, until the time budget is spent:
+
+1. FC03 of the map identity (0x0030, 2 registers, :data:`~drives.modbus.register_map.MAP_IDENTITY`).
+   Read high word first it is our map in word order ``"big"``, swapped in ``"little"``; another
+   value, or an exception response (0x01, 0x02, ...), is a unit that is there but is not our
+   map.  No answer within ``answer_timeout``, or exception 0x0A/0x0B (a gateway reporting that
+   no device answers behind it), is no unit: it is skipped.
+2. Our map: FC03 of 0x6502 (0x0026, 2 registers) in that word order.
+3. Every unit found: FC43/14 basic device identification (objects 0x00 vendor name, 0x01
+   product code, 0x02 major/minor revision), where the server supports it.
+
+One connection, one request at a time: Modbus TCP servers serve a connection's requests in
+order (and a gateway's serial line is one at a time anyway), so the sweep is sequential; after
+a request that timed out the connection is replaced (see :class:`_Prober`).  It stops starting
+new units ``timeout`` s after it began; the units it did not reach are returned as
+``unprobed``.  Total time, bounded: every request and every connect waits at most
+``answer_timeout``, and the last unit started makes at most three requests, each at worst a
+drop, a reconnect, a resend that times out and a reconnect: ``timeout + 10 * answer_timeout`` s
+at the very worst (the first connect included); on a server that answers, ``timeout`` plus a
+few round trips.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+from pymodbus.pdu.mei_message import ReadDeviceInformationRequest
+from pymodbus.pdu.register_message import ReadHoldingRegistersRequest
+
+from drives.cia402 import SUPPORTED_DRIVE_MODES, OperationMode, supports
+from drives.errors import DriveError, DriveTimeout, ModbusExceptionError, ModbusLinkLost
+from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
+from drives.modbus.register_map import MAP_IDENTITY, REGISTER_BY_NAME, WORD_ORDERS, decode_value, register_for_object
+from drives.scan_arguments import checked_ids, checked_seconds
+
+__all__ = ["UNIT_ID_RANGE", "ModbusScan", "ModbusUnit", "scan_modbus"]
+
+UNIT_ID_RANGE = (1, 247)  # 0 is broadcast (no answer), 248..255 reserved
+DEFAULT_TIMEOUT = 1.0  # s: the sweep starts no new unit after this
+DEFAULT_ANSWER_TIMEOUT = 0.1  # s: each request
+NO_DEVICE_EXCEPTIONS = (0x0A, 0x0B)  # gateway path unavailable, gateway target failed to respond
+DEVICE_IDENTIFICATION_NAMES = {0x00: "vendor_name", 0x01: "product_code", 0x02: "revision"}
+_IDENTITY_REGISTER = REGISTER_BY_NAME["map_identity"]
+_MODES_REGISTER = register_for_object(SUPPORTED_DRIVE_MODES)
+
+
+@dataclass(frozen=True)
+class ModbusUnit:
+    """One unit that answered; None where a value could not be read (see ``notes``)."""
+
+    unit_id: int
+    word_order: str | None  # "big"/"little": our map, in that word order; None: not our map
+    map_identity: int | None  # registers 0x0030..0x0031 read high word first; None: refused
+    supported_drive_modes: int | None  # 0x6502, our map only
+    device_identification: dict[str, str] | None  # FC43/14 basic objects; None: not supported
+    notes: tuple[str, ...] = ()
+
+    @property
+    def our_map(self) -> bool:
+        """True if the unit carries the register map of :mod:`drives.modbus.register_map`."""
+        return self.word_order is not None
+
+    @property
+    def cia402(self) -> bool:
+        """True for our map: it is the CiA-402 drive's map (nothing else is known of other units)."""
+        return self.our_map
+
+    @property
+    def cst_supported(self) -> bool | None:
+        """0x6502 announces cyclic synchronous torque (bit 9); None where 0x6502 was not read."""
+        if self.supported_drive_modes is None:
+            return None
+        return supports(self.supported_drive_modes, OperationMode.CYCLIC_SYNCHRONOUS_TORQUE)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: numbers as numbers, None as null."""
+        return {
+            "protocol": "modbus",
+            "unit_id": self.unit_id,
+            "our_map": self.our_map,
+            "word_order": self.word_order,
+            "map_identity": self.map_identity,
+            "supported_drive_modes": self.supported_drive_modes,
+            "cst_supported": self.cst_supported,
+            "cia402": self.cia402,
+            "device_identification": self.device_identification,
+            "notes": list(self.notes),
+        }
+
+
+@dataclass
+class ModbusScan:
+    """What :func:`scan_modbus` found: the units that answered, and the unit ids it had no time for."""
+
+    url: str
+    units: list[ModbusUnit] = field(default_factory=list)
+    unprobed: list[int] = field(default_factory=list)
+
+
+class _Prober:
+    """The requests of the sweep over one link.
+
+    A request that times out may still be answered later, and a server serves a connection's
+    requests in order: the link is replaced by a fresh connection at once, so a late answer can
+    neither be taken for the next unit's nor hold it up.  A dropped connection is reopened and
+    the request sent once more.  A server that cannot be reached again ends the scan (DriveError).
+    """
+
+    def __init__(self, link: ModbusLink) -> None:
+        self.link = link
+
+    def _reconnect(self) -> None:
+        self.link.drop()
+        try:
+            self.link.open()
+        except DriveTimeout as exc:  # not "this unit is silent": the server is gone
+            raise DriveError(self.link.name, f"the server went away during the scan: {exc.message}") from exc
+
+    def _send_once(self, request: Any, what: str) -> Any:
+        try:
+            return self.link.send(request, what)
+        except ModbusLinkLost:
+            raise
+        except DriveTimeout:
+            self._reconnect()
+            raise
+
+    def send(self, request: Any, what: str) -> Any:
+        """One request's answer; DriveTimeout (on a fresh link) if none came in time."""
+        try:
+            return self._send_once(request, what)
+        except ModbusLinkLost:
+            self._reconnect()
+            return self._send_once(request, what)
+
+    def read(self, unit: int, address: int, count: int, what: str) -> list[int]:
+        response = self.send(ReadHoldingRegistersRequest(address=address, count=count, dev_id=unit), what)
+        registers = list(response.registers)
+        if len(registers) != count:
+            raise DriveError(self.link.name, f"{what}: {len(registers)} registers in the answer, asked for {count}")
+        return registers
+
+    def probe(self, unit: int) -> ModbusUnit | None:
+        """The unit's record, or None if no unit answers at ``unit``."""
+        notes: list[str] = []
+        try:
+            registers = self.read(unit, _IDENTITY_REGISTER.address, _IDENTITY_REGISTER.count, f"unit {unit}: map identity")
+        except DriveTimeout:
+            return None
+        except ModbusExceptionError as exc:
+            if exc.exception_code in NO_DEVICE_EXCEPTIONS:
+                return None
+            notes.append(exc.message)
+            registers = None
+        identity = None if registers is None else int(decode_value(_IDENTITY_REGISTER, registers, "big"))
+        order = next((o for o in WORD_ORDERS
+                      if registers is not None and decode_value(_IDENTITY_REGISTER, registers, o) == MAP_IDENTITY), None)
+        modes = None
+        if order is not None:
+            modes = self._optional(notes, lambda: int(decode_value(
+                _MODES_REGISTER, self.read(unit, _MODES_REGISTER.address, _MODES_REGISTER.count, f"unit {unit}: 0x6502"), order)))
+        elif identity is not None:
+            notes.append(f"map identity register reads 0x{identity:08X}, ours is 0x{MAP_IDENTITY:08X}: not our map")
+        information = self._optional(notes, lambda: self.identification(unit))
+        return ModbusUnit(unit, order, identity, modes, information, tuple(notes))
+
+    def identification(self, unit: int) -> dict[str, str]:
+        """FC43/14 basic device identification, object names to text."""
+        response = self.send(ReadDeviceInformationRequest(read_code=1, object_id=0, dev_id=unit),
+                             f"unit {unit}: read device identification")
+        found: dict[str, str] = {}
+        for object_id, value in sorted(getattr(response, "information", {}).items()):
+            parts = value if isinstance(value, list) else [value]
+            text = "".join(p.decode("latin-1") if isinstance(p, bytes) else str(p) for p in parts)
+            found[DEVICE_IDENTIFICATION_NAMES.get(object_id, f"object_0x{object_id:02X}")] = text
+        return found
+
+    @staticmethod
+    def _optional(notes: list[str], read: Any) -> Any:
+        """``read()``, or None and a note if the unit refuses it or stays silent."""
+        try:
+            return read()
+        except (ModbusExceptionError, DriveTimeout) as exc:
+            notes.append(exc.message)
+            return None
+
+
+def scan_modbus(
+    url: str,
+    unit_ids: Iterable[int] = range(UNIT_ID_RANGE[0], UNIT_ID_RANGE[1] + 1),
+    timeout: float = DEFAULT_TIMEOUT,
+    answer_timeout: float = DEFAULT_ANSWER_TIMEOUT,
+) -> ModbusScan:
+    """The units among ``unit_ids`` at ``url`` (``tcp://HOST:PORT`` or ``rtu:/dev/...``), in order
+    (module docstring).  ParameterError for bad arguments (before connecting), DriveTimeout if the
+    server cannot be reached, DriveError if the link fails."""
+    ids = checked_ids("unit ids", unit_ids, *UNIT_ID_RANGE)
+    checked_seconds("timeout", timeout)
+    address = ModbusAddress.from_url(url, checked_seconds("answer timeout", answer_timeout))
+    link = ModbusLink(f"Modbus {address.url}", address, ModbusStats())
+    result = ModbusScan(address.url)
+    end = time.monotonic() + timeout
+    link.open()
+    try:
+        prober = _Prober(link)
+        for position, unit in enumerate(ids):
+            if time.monotonic() >= end:
+                result.unprobed = ids[position:]
+                break
+            found = prober.probe(unit)
+            if found is not None:
+                result.units.append(found)
+    finally:
+        link.drop()
+    return result

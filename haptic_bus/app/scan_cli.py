@@ -1,0 +1,199 @@
+"""``haptic-bus scan``: who is on the bus, read-only: CANopen nodes, or the units of a Modbus server.
+
+    haptic-bus scan [--interface I] [--channel C] [--bitrate R] [--bus-option KEY=VALUE ...]
+                    [--node-ids 1-127] [--timeout 1] [--answer-timeout 0.1] [--json]
+    haptic-bus scan --modbus tcp://HOST:PORT [--unit-ids 1-247] [--timeout 1] [--answer-timeout 0.1] [--json]
+
+CANopen (:mod:`drives.canopen.scan`): listens for boot-ups and heartbeats, sends one SDO read
+of 0x1000 to every node id at once, listens ``--timeout`` s, then reads 0x1000, 0x1018 and
+(CiA-402 devices) 0x6502 from every node seen, in parallel, each read within
+``--answer-timeout`` s.  At most ``timeout + 6 * answer_timeout`` s plus opening the bus.
+Sends SDO reads only: no NMT command, no write.  Modbus (:mod:`drives.modbus.scan`): per unit id,
+FC03 reads of the map identity and 0x6502 and an FC43/14 device identification, each within
+``--answer-timeout`` s; new units are started for ``--timeout`` s, the ones not reached are
+named on stderr (at worst ``timeout + 10 * answer_timeout`` s in all).
+
+Output: one line per node (unit), or with ``--json`` one JSON list of objects (numbers as
+numbers; null where a value could not be read, with the reason in ``notes``).
+Exit status: 0 at least one node (unit) answered; 1 none did ("no node answered" on stderr,
+``[]`` on stdout with ``--json``, so a script can tell an empty bus from a full one), or the bus
+failed (one line on stderr); 2 invalid arguments, refused before the bus is touched.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from drives.canopen.scan import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, CanopenNode, device_kind, scan_canopen
+from drives.cia301 import NODE_ID_RANGE
+from drives.errors import ParameterError
+from drives.modbus.scan import UNIT_ID_RANGE, ModbusScan, scan_modbus
+from drives.scan_arguments import checked_seconds
+
+EXIT_OK, EXIT_NO = 0, 1
+SCAN_HELP = "list the CANopen nodes on a CAN bus (or the units of a Modbus server): identity, NMT state, CST support"
+Handler = Callable[[argparse.Namespace], int]
+
+
+# --------------------------------------------------------------------------- argument types
+
+def id_list(text: str, name: str, low: int, high: int) -> list[int]:
+    """``"5"``, ``"1-10"``, ``"5,9,20-30"`` -> sorted ids, each in ``low..high``; ArgumentTypeError otherwise."""
+    ids: set[int] = set()
+    allowed = f"ids {low}..{high} as N, N-M or a comma-separated list of those"
+    for part in text.split(","):
+        first, dash, last = part.strip().partition("-")
+        try:
+            start = int(first, 0)
+            stop = int(last, 0) if dash else start
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: {allowed}") from None
+        if not low <= start <= stop <= high:
+            where = "" if part.strip() == text.strip() else f" ({part.strip()})"
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid{where}; allowed: {allowed}")
+        ids.update(range(start, stop + 1))
+    return sorted(ids)
+
+
+def node_ids(text: str) -> list[int]:
+    """CANopen node ids 1..127 (``1-127``, ``5,9``)."""
+    return id_list(text, "node ids", *NODE_ID_RANGE)
+
+
+def unit_ids(text: str) -> list[int]:
+    """Modbus unit ids 1..247 (``1-247``, ``1,2``)."""
+    return id_list(text, "unit ids", *UNIT_ID_RANGE)
+
+
+def seconds(text: str) -> float:
+    """A time budget in (0, 3600] s."""
+    try:
+        return checked_seconds("time", float(text))
+    except (ValueError, ParameterError) as exc:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid; allowed: a time in (0, 3600] s") from exc
+
+
+def add_scan_parser(
+    command: Callable[[str, str, Handler], argparse.ArgumentParser],
+    add_bus_arguments: Callable[[argparse.ArgumentParser], None],
+    bus_arguments: Callable[[argparse.Namespace], dict[str, Any]],
+) -> argparse.ArgumentParser:
+    """Register ``scan``: ``command(name, help, handler)`` makes the subparser, ``add_bus_arguments``
+    adds the python-can options and ``bus_arguments(args)`` turns them into ``can.Bus`` keywords
+    (the command line's own helpers, handed over: this module cannot import it, that is a cycle)."""
+    parser = command("scan", SCAN_HELP, lambda args: run_scan(args, bus_arguments))
+    add_bus_arguments(parser)
+    parser.add_argument("--node-ids", type=node_ids, metavar="IDS", help="CANopen node ids to probe, e.g. 5,9 or 1-10,127; "
+                        "None: all, 1-127")
+    parser.add_argument("--modbus", metavar="URL", help="scan a Modbus server instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
+    parser.add_argument("--unit-ids", type=unit_ids, metavar="IDS", help="Modbus unit ids to probe, e.g. 1,2 or 1-10 "
+                        "(only with --modbus); None: all, 1-247")
+    parser.add_argument("--timeout", type=seconds, default=DEFAULT_TIMEOUT,
+                        help="CANopen: listening window after the probe; Modbus: time in which new units are started; s")
+    parser.add_argument("--answer-timeout", type=seconds, default=DEFAULT_ANSWER_TIMEOUT,
+                        help="each SDO read (CANopen) or request (Modbus), s")
+    parser.add_argument("--json", action="store_true", help="one JSON list on stdout")
+    return parser
+
+
+def _validate(args: argparse.Namespace) -> None:
+    """Refuse options of the other protocol, and a Modbus URL without host and port, before anything is touched."""
+    from drives.modbus.link import ModbusAddress
+
+    if args.modbus is None:
+        if args.unit_ids is not None:
+            raise ParameterError("--unit-ids", args.unit_ids, "a Modbus option: give it with --modbus URL", "scan")
+        return
+    given = [flag for flag, value in (("--interface", args.interface), ("--channel", args.channel), ("--bitrate", args.bitrate),
+                                      ("--bus-option", args.bus_option), ("--node-ids", args.node_ids)) if value]
+    if given:
+        raise ParameterError(given[0], "given with --modbus", "only Modbus options (--unit-ids) with --modbus", "scan")
+    try:
+        ModbusAddress.from_url(args.modbus)
+    except ParameterError as exc:
+        raise ParameterError("--modbus", args.modbus, exc.allowed, "scan") from None
+
+
+# --------------------------------------------------------------------------- output
+
+def _hex(value: int | None) -> str:
+    return "-" if value is None else f"0x{value:08X}"
+
+
+def _yes(value: bool | None) -> str:
+    return "-" if value is None else ("yes" if value else "no")
+
+
+def format_canopen(nodes: Sequence[CanopenNode]) -> str:
+    """One line per node (and its notes indented below)."""
+    lines = [f"{'node':>4}  {'device type':<11}  {'kind':<22}  {'vendor':<10}  {'product':<10}  {'revision':<10}  "
+             f"{'serial':<10}  {'NMT state':<15}  CST  CiA-402"]
+    for node in nodes:
+        kind = "-" if node.device_type is None else device_kind(node.device_type)
+        ident = node.identity
+        lines.append(f"{node.node_id:>4}  {_hex(node.device_type):<11}  {kind:<22}  {_hex(ident.vendor_id):<10}  "
+                     f"{_hex(ident.product_code):<10}  {_hex(ident.revision):<10}  {_hex(ident.serial):<10}  "
+                     f"{node.nmt_state or '-':<15}  {_yes(node.cst_supported):<3}  {_yes(node.cia402)}")
+        if node.boot_up_seen:
+            lines.append("      boot-up seen during the scan")
+        lines += [f"      note: {note}" for note in node.notes]
+    return "\n".join(lines)
+
+
+def format_modbus(scan: ModbusScan) -> str:
+    """One line per unit (and its notes indented below)."""
+    lines = [f"{'unit':>4}  {'register map':<20}  {'word order':<10}  {'0x6502':<10}  CST  CiA-402  device identification"]
+    for unit in scan.units:
+        where = f"ours {_hex(unit.map_identity)}" if unit.our_map else "not ours"
+        info = unit.device_identification
+        ident = "-" if info is None else (", ".join(f"{k}={v!r}" for k, v in info.items()) or "answered, no objects")
+        lines.append(f"{unit.unit_id:>4}  {where:<20}  {unit.word_order or '-':<10}  {_hex(unit.supported_drive_modes):<10}  "
+                     f"{_yes(unit.cst_supported):<3}  {_yes(unit.cia402):<7}  {ident}")
+        lines += [f"      note: {note}" for note in unit.notes]
+    return "\n".join(lines)
+
+
+def _ranges(ids: Sequence[int]) -> str:
+    """``[1, 2, 3, 7]`` -> ``"1-3,7"``."""
+    parts: list[str] = []
+    for i in ids:
+        if parts and parts[-1].split("-")[-1] == str(i - 1):
+            parts[-1] = f"{parts[-1].split('-')[0]}-{i}"
+        else:
+            parts.append(str(i))
+    return ",".join(parts)
+
+
+# --------------------------------------------------------------------------- handler
+
+def run_scan(args: argparse.Namespace, bus_arguments: Callable[[argparse.Namespace], dict[str, Any]]) -> int:
+    """Scan as ``args`` say, print the result; exit status (module docstring)."""
+    _validate(args)
+    if args.modbus is not None:
+        scan = scan_modbus(args.modbus, args.unit_ids or range(UNIT_ID_RANGE[0], UNIT_ID_RANGE[1] + 1),
+                           args.timeout, args.answer_timeout)
+        found: Sequence[Any] = scan.units
+        text = format_modbus(scan)
+        where = f"at {scan.url}"
+        if scan.unprobed:
+            print(f"haptic-bus scan: unit ids {_ranges(scan.unprobed)} not probed: --timeout {args.timeout:g} s spent "
+                  "(raise it, or narrow --unit-ids)", file=sys.stderr)
+    else:
+        bus = bus_arguments(args)
+        found = scan_canopen(bus, args.node_ids or range(NODE_ID_RANGE[0], NODE_ID_RANGE[1] + 1),
+                             args.timeout, args.answer_timeout)
+        text = format_canopen(found)
+        named = ":".join(str(bus[key]) for key in ("interface", "channel") if key in bus)
+        where = f"on {named or 'the bus of the python-can configuration'}"
+    if args.json:
+        print(json.dumps([item.to_dict() for item in found], indent=2))
+    elif found:
+        print(text)
+    if not found:
+        print(f"haptic-bus scan: no node answered {where} within {args.timeout:g} s", file=sys.stderr)
+        return EXIT_NO
+    return EXIT_OK
