@@ -267,7 +267,7 @@ class WallController:
         return self.summary(reason, error)
 
     def _end(self, exc: BaseException, kind: str) -> None:
-        logger.info("run stopped: %s", exc or type(exc).__name__)  # the summary and the command report it
+        logger.info("run stopped: %s", str(exc) or type(exc).__name__)  # the summary and the command report it
         self.events.add(self.now(), kind, str(exc) or type(exc).__name__)
         try:
             self.drive.disable()

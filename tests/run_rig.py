@@ -1,0 +1,176 @@
+"""In-process rigs for the tests of ``haptic-bus run`` (issue 11): not a test module.
+
+- :func:`simulated_drive` starts the simulated drive in this process on a real link, a CANopen
+  slave on python-can's ``virtual`` bus (a channel no other test uses) or a Modbus TCP server
+  on 127.0.0.1 (a free port), from the same profile file the run is given, and records every
+  CiA-402 state the drive enters; :attr:`DriveUnderTest.args` are the ``run`` options that
+  reach it.
+- :func:`run_cli` runs the real command line (:func:`haptic_bus.app.cli.main`) in this process
+  and gives back its exit status, stdout and stderr; it puts back the SIGINT/SIGTERM handlers
+  the run installs, so pytest keeps its own Ctrl-C.
+- :func:`profile_variant` writes a shipped profile with literal edits and extra tables into a
+  test's folder: the run and the simulated drive read the same file.
+- :func:`late_clock` is a test double of the virtual clock that reports chosen cycles as late
+  (the supervisor's input), for a deterministic lateness in a lock-step run.
+
+Every wait here is bounded in time.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import pathlib
+import signal
+import uuid
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pytest
+
+from drives.cia402 import State
+from haptic_bus.app.cli import main
+from haptic_bus.app.profiles import resolve_profile
+from haptic_bus.control.clock import VirtualClock
+from sim_drive.device import SimulatedDrive
+from sim_drive.parameters import Timing
+from sim_drive.profile import load_profile as load_drive_profile
+
+NODE = 5  # the simulated drive's CANopen node id
+TRANSPORTS = ("canopen", "modbus")
+RECORD_FILES = ("record.csv", "position_force.png", "region.png", "run.json")  # in the order a run writes them
+
+
+@dataclass
+class DriveUnderTest:
+    """The simulated drive a run talks to: the ``run`` options that reach it, its hardware, the
+    CiA-402 states it entered (in order), and the virtual-bus channel (CANopen only)."""
+
+    transport: str
+    args: list[str]
+    drive: SimulatedDrive
+    states: list[State] = field(default_factory=list)
+    channel: str | None = None
+    stop: Callable[[], None] = lambda: None
+
+    @property
+    def was_enabled(self) -> bool:
+        """True once the drive entered OPERATION ENABLED."""
+        return State.OPERATION_ENABLED in self.states
+
+
+@contextmanager
+def simulated_drive(transport: str, profile: pathlib.Path | str) -> Iterator[DriveUnderTest]:
+    """The simulated drive of ``profile`` in this process, on ``transport`` ("canopen": the
+    ``virtual`` bus, node 5; "modbus": TCP on 127.0.0.1); stopped on exit (``stop`` may end it earlier)."""
+    truth = load_drive_profile(profile)
+    timing = truth.timing or Timing.CIA402
+    if transport == "canopen":
+        from sim_drive.canopen.slave import CanopenSimDrive
+
+        channel = f"run-test-{os.getpid()}-{uuid.uuid4().hex[:10]}"
+        slave = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, timing=timing,
+                                parameters=truth.parameters, operator=truth.operator)
+        under = DriveUnderTest(transport, ["--interface", "virtual", "--channel", channel, "--node-id", str(NODE)],
+                               slave.drive, channel=channel, stop=slave.stop)
+        slave.drive.state_listeners.append(lambda old, new, number: under.states.append(new))
+        slave.start()
+    elif transport == "modbus":
+        from sim_drive.modbus.server import ModbusSimServer
+
+        server = ModbusSimServer("127.0.0.1", 0, timing=timing, parameters=truth.parameters, operator=truth.operator)
+        under = DriveUnderTest(transport, [], server.drive, stop=server.stop)
+        server.drive.state_listeners.append(lambda old, new, number: under.states.append(new))
+        server.start()
+        under.args = ["--modbus", server.url]
+    else:
+        raise ValueError(transport)
+    try:
+        yield under
+    finally:
+        under.stop()
+
+
+@dataclass(frozen=True)
+class CliResult:
+    """What one command did: exit status, stdout, stderr."""
+
+    code: int
+    out: str
+    err: str
+
+    @property
+    def err_lines(self) -> list[str]:
+        """The non-empty lines on stderr."""
+        return [line for line in self.err.splitlines() if line.strip()]
+
+
+def run_cli(capsys: pytest.CaptureFixture[str], *args: str) -> CliResult:
+    """``haptic-bus ARGS`` in this process (the real CLI); SIGINT/SIGTERM handlers put back after."""
+    capsys.readouterr()  # what came before is not this command's
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        code = main(list(args))
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+    captured = capsys.readouterr()
+    return CliResult(code, captured.out, captured.err)
+
+
+def profile_variant(folder: pathlib.Path, base: str, name: str, edits: Mapping[str, str] | None = None,
+                    extra: str = "") -> pathlib.Path:
+    """``folder/name.toml``: the shipped profile ``base`` with each literal ``old -> new`` of
+    ``edits`` applied (each must occur exactly once) and ``extra`` TOML appended."""
+    text = resolve_profile(base).read_text()
+    for old, new in (edits or {}).items():
+        assert text.count(old) == 1, f"{old!r} occurs {text.count(old)} times in {base}"
+        text = text.replace(old, new)
+    path = folder / f"{name}.toml"
+    path.write_text(text + "\n" + extra)
+    return path
+
+
+def late_clock(lateness: Mapping[int, float]) -> type[VirtualClock]:
+    """A :class:`VirtualClock` (lock-step, nothing waits) that reports cycle ``k`` as
+    ``lateness[k]`` s late (0 for the others): what the supervisor and the live view see."""
+
+    class LateClock(VirtualClock):
+        name = "virtual, with injected lateness (test double)"
+
+        def __init__(self, period: float) -> None:
+            super().__init__(period)
+            self.reported: list[float] = []
+
+        def wait_next(self, cycle: int) -> float:
+            late = lateness.get(cycle, 0.0)
+            self.reported.append(late)
+            return late
+
+        def lateness(self, last: int | None = None) -> np.ndarray:
+            values = np.array(self.reported)
+            return values if last is None else values[-last:]
+
+    return LateClock
+
+
+def read_record(folder: pathlib.Path) -> tuple[list[str], dict[str, np.ndarray]]:
+    """``record.csv`` of a run folder: its header, and each column as floats (exact: written with ``repr``)."""
+    with (folder / "record.csv").open(newline="") as handle:
+        rows = list(csv.reader(handle))
+    header, body = rows[0], np.array(rows[1:], dtype=float)
+    return header, {name: body[:, i] for i, name in enumerate(header)}
+
+
+def read_run(folder: pathlib.Path) -> dict[str, Any]:
+    """``run.json`` of a run folder."""
+    return json.loads((folder / "run.json").read_text())
+
+
+def events_of(document: Mapping[str, Any], kind: str) -> list[dict[str, Any]]:
+    """The run's events of ``kind``."""
+    return [event for event in document.get("events", []) if event["kind"] == kind]

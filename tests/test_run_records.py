@@ -1,0 +1,151 @@
+"""Issue 11, records that are always kept: ``runs/<UTC>-<profile>/`` (or ``--out``) is made and
+shown writable before any bus is touched, and whatever ends the run it receives ``record.csv``,
+``run.json`` and the plots; the run says where it wrote them.
+
+The real command line runs in this process against the simulated drive on a real link (a
+CANopen slave on python-can's ``virtual`` bus, or a Modbus TCP server on 127.0.0.1).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import os
+import pathlib
+import re
+import socket
+import threading
+import time
+
+import can
+import pytest
+
+import haptic_bus
+from haptic_bus.app.profiles import resolve_profile
+from haptic_bus.control.record import COLUMNS
+from tests.run_rig import NODE, RECORD_FILES, TRANSPORTS, read_record, read_run, run_cli, simulated_drive
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_default_folder_is_runs_utc_profile_and_holds_every_record(
+        tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)
+    before = dt.datetime.now(dt.UTC).replace(microsecond=0)
+    with simulated_drive("canopen", "cia402-handle") as drive:
+        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "0.2", "-q")
+    after = dt.datetime.now(dt.UTC)
+    assert result.code == 0, result.err
+    (folder,) = (tmp_path / "runs").iterdir()
+    match = re.fullmatch(r"(\d{8}T\d{6}Z)-cia402-handle", folder.name)
+    assert match is not None, folder.name
+    stamp = dt.datetime.strptime(match.group(1), "%Y%m%dT%H%M%SZ").replace(tzinfo=dt.UTC)
+    assert before <= stamp <= after
+    relative = pathlib.Path("runs") / folder.name
+    assert f"ended: completed; wrote {', '.join(str(relative / name) for name in RECORD_FILES)}" in result.out
+    for name in RECORD_FILES:
+        assert (folder / name).stat().st_size > 0, name
+    assert (folder / "position_force.png").read_bytes()[:8] == PNG and (folder / "region.png").read_bytes()[:8] == PNG
+    header, record = read_record(folder)
+    assert tuple(header) == COLUMNS and record["time_s"].size == 200
+
+    document = read_run(folder)
+    assert document["software"]["haptic_bus"] == haptic_bus.__version__
+    assert {"python", "numpy", "scipy", "python-can", "canopen", "pymodbus", "matplotlib"} <= set(document["software"])
+    shipped = resolve_profile("cia402-handle")
+    assert document["profile"] == {"name": "cia402-handle", "path": str(shipped),
+                                   "sha256": hashlib.sha256(shipped.read_bytes()).hexdigest()}
+    assert document["settings"]["device"]["mass"] == 1.0 and document["settings"]["device"]["friction"] == 20.0
+    assert document["loop"] == {"period": 0.001, "timing": "cia402", "delay_assumed": 1, "delay_observed": 1.0}
+    assert document["link"]["kind"] == "canopen" and document["link"]["node_id"] == NODE
+    assert document["link"]["bus"]["interface"] == "virtual" and document["link"]["bus"]["channel"] == drive.channel
+    assert document["link"]["controller_node_id"] == 127
+    assert {"values", "sources"} <= set(document["scaling"])
+    assert document["scaling"]["values"]["velocity_per_count"] == pytest.approx(1.1984224905356573e-07, rel=1e-15)
+    (scene,) = document["scenes"]
+    assert scene["scene_id"] == 0 and scene["origin"] == "profile"
+    assert scene["objects"] == [{"name": "end-stop", "kind": "wall", "stiffness": 1500.0, "damping": 10.0}]
+    (wall,) = scene["walls"]
+    assert (wall["K"], wall["B"]) == (1500.0, 10.0) and wall["margin"] == pytest.approx(11.09, abs=0.01)  # the profile's
+    assert document["summary"]["exit_reason"] == document["exit_reason"] == "completed" and document["error"] is None
+    assert document["summary"]["cycles"] == 200 and document["events"] == [] and document["events_dropped"] == 0
+    assert document["files"] == [str(relative / name) for name in RECORD_FILES]
+    assert dt.datetime.fromisoformat(document["started_utc"]) <= dt.datetime.fromisoformat(document["ended_utc"])
+
+
+def _in_the_way(tmp_path: pathlib.Path, how: str) -> pathlib.Path:
+    """An ``--out`` that cannot be written: a file in its place, a file where its parent should
+    be, or a folder without write permission."""
+    if how == "file":
+        path = tmp_path / "out"
+        path.write_text("not a folder")
+        return path
+    if how == "under-a-file":
+        (tmp_path / "file").write_text("not a folder")
+        return tmp_path / "file" / "out"
+    if os.geteuid() == 0:
+        pytest.skip("root writes into a read-only folder: no permission to withhold here")
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o555)
+    return locked / "out"
+
+
+@pytest.mark.parametrize("how", ["file", "under-a-file", "read-only"])
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_an_out_that_cannot_be_written_is_exit_2_before_the_bus_is_touched(
+        transport: str, how: str, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = _in_the_way(tmp_path, how)
+    if transport == "canopen":
+        with simulated_drive("canopen", "cia402-handle") as drive, \
+                can.Bus(interface="virtual", channel=drive.channel) as sniffer:
+            result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--out", str(out))
+            heard = {message.arbitration_id for message in iter(lambda: sniffer.recv(0.05), None)}
+            assert heard <= {0x700 + NODE}, [hex(i) for i in heard]  # only the drive's own heartbeat
+            assert drive.states == []
+    else:  # a bare listening socket: whoever connects would be queued there
+        with socket.create_server(("127.0.0.1", 0)) as listener:
+            port = listener.getsockname()[1]
+            result = run_cli(capsys, "run", "cia402-handle", "--modbus", f"tcp://127.0.0.1:{port}", "--virtual-time",
+                             "--out", str(out))
+            listener.setblocking(False)
+            with pytest.raises(BlockingIOError):
+                listener.accept()  # nobody connected
+    assert result.code == 2 and result.out == ""
+    (line,) = result.err_lines
+    assert line.startswith(f"haptic-bus run: error: run: --out = '{out}' is invalid; allowed: a folder this user can create "
+                           "and write (")
+    assert "Traceback" not in result.err
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_a_drive_that_dies_mid_run_still_leaves_every_record(
+        transport: str, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    with simulated_drive(transport, "cia402-handle") as drive:
+        def kill_after_300_cycles() -> None:
+            deadline = time.monotonic() + 60.0
+            while drive.drive.sync_count < 300 and time.monotonic() < deadline:
+                time.sleep(0.005)
+            drive.stop()  # the drive stops serving: no answer, no heartbeat (CANopen), connection gone (Modbus)
+
+        killer = threading.Thread(target=kill_after_300_cycles, daemon=True)
+        killer.start()
+        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "60", "--out",
+                         str(out), "-q")
+        killer.join(timeout=10.0)
+    assert result.code == 1, result.err
+    (line,) = result.err_lines
+    assert line.startswith("haptic-bus run: drive error: ") and "Traceback" not in result.err
+    assert f"ended: drive error; wrote {', '.join(str(out / name) for name in RECORD_FILES)}" in result.out
+    for name in RECORD_FILES:
+        assert (out / name).stat().st_size > 0, name
+    header, record = read_record(out)
+    cycles = record["time_s"].size
+    assert tuple(header) == COLUMNS and cycles >= 299  # the drive took 300 SYNCs (Modbus: SYNC 0 at start)
+    document = read_run(out)
+    assert document["exit_reason"] == document["summary"]["exit_reason"] == "drive error"
+    assert document["summary"]["cycles"] == cycles
+    fault = document["events"][-1]
+    assert fault["kind"] == "fault" and fault["message"] == document["error"] == document["summary"]["error"]
+    assert fault["time_s"] == pytest.approx(cycles * 1e-3, abs=1e-12)  # the run's clock when it ended
+    assert line == f"haptic-bus run: drive error: {document['error']}"

@@ -1,0 +1,320 @@
+"""Issue 11, the supervisor: a run measures what the gate assumed (the loop delay, the
+observer's energy) and a policy warns, derates or stops (exit 3, "assumption broken").
+
+Lateness is injected, never waited for:
+
+- in a lock-step run (virtual time, the real CLI in this process, the simulated drive on the
+  ``virtual`` CAN bus or Modbus TCP) a test double of the virtual clock reports cycles 100..129
+  as 0.6 T late (:func:`tests.run_rig.late_clock`): just beyond the default tolerance of 0.5 T,
+  so the supervisor's 11th late cycle (limit 10 in a window of 1000) is cycle 110, and the
+  delay it observes is 1 + 0.6 = 1.6 samples;
+- in a real-time run (two processes on udp_multicast) the test stops the controller with
+  SIGSTOP for 150 ms, far beyond the 80 ms tolerance the profile sets there.  That run's period
+  is 5 ms: at 1 ms this loaded 2-core machine lets a udp_multicast loop fall behind by tens of
+  ms on its own; at 5 ms its worst start was 7 ms late (measured), a tenth of the tolerance, so
+  the scheduler cannot cause the alarm (and the test checks the alarm's worst lateness).
+
+An observer alarm needs energy the gate does not see: the observer's sum is a function of
+the measured velocities alone, and for any scene the gate admits it cannot go negative for
+any velocity sequence (that is what passive means), whatever the true plant.  A wall made
+stiffer while the handle is inside it releases ``(K2 - K1) x^2 / 2`` it never stored: the
+tests upload one (accepted by the gate: the stiffer wall is passive on its own) and the
+observer stops the run.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import can
+import numpy as np
+import pytest
+
+from drives.cia402 import State
+from drives.errors import DriveTimeout
+from haptic_bus.app import runner
+from haptic_bus.app.profiles import load_profile
+from haptic_bus.control.controller import WallController, encoder_origin
+from haptic_bus.control.gate import DeviceLoop, GatePolicy, PassivityGate
+from haptic_bus.control.node import upload_walls
+from tests.run_rig import (
+    NODE,
+    TRANSPORTS,
+    events_of,
+    late_clock,
+    profile_variant,
+    read_record,
+    read_run,
+    run_cli,
+    simulated_drive,
+)
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+PERIOD = 1e-3  # s
+LATE = {k: 0.6 * PERIOD for k in range(100, 130)}  # cycles 100..129, each 0.6 T late
+ALARM_CYCLE = 110  # the 11th late cycle: more than late_limit = 10 in the window
+
+
+def _disabled_not_faulted(states: list[State]) -> bool:
+    """The drive was enabled, then left OPERATION ENABLED by the master (disabled), never by a fault."""
+    return State.OPERATION_ENABLED in states and State.FAULT not in states and states[-1] is not State.OPERATION_ENABLED
+
+
+@pytest.fixture
+def injected_lateness(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The run's virtual clock reports :data:`LATE` (a test double: the production clock is not touched)."""
+    monkeypatch.setattr(runner, "VirtualClock", late_clock(LATE))
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_lateness_beyond_the_limit_stops_the_run_with_exit_3(
+        transport: str, injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    with simulated_drive(transport, "cia402-handle") as drive:
+        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "1", "--out", str(out))
+    assert result.code == 3, result.err
+    assert result.err_lines == [
+        "haptic-bus run: assumption broken: the loop delay: 11 of the last 1000 cycles started more than 0.5 T late "
+        "(worst 0.6 ms at T = 1 ms): a loop delay of about 1.6 samples; the gate assumed a loop delay of 1 sample(s)"]
+    assert "cycles 111;" in result.out and "late cycles 11" in result.out and "ended: assumption broken" in result.out
+    assert _disabled_not_faulted(drive.states), drive.states
+    assert drive.drive.torque_actual == 0
+    _, record = read_record(out)
+    late = np.flatnonzero(record["late"])
+    assert record["late"].size == ALARM_CYCLE + 1 and late.tolist() == list(range(100, ALARM_CYCLE + 1))
+    document = read_run(out)
+    assert document["exit_reason"] == "assumption broken" and document["summary"]["exit_reason"] == "assumption broken"
+    (alarm,) = events_of(document, "alarm")
+    assert alarm["time_s"] == pytest.approx(ALARM_CYCLE * PERIOD + PERIOD, abs=1e-12)  # acted on after cycle 110 is recorded
+    assert alarm["data"] == {"alarm": "late", "action": "stop"}
+    assert [event["kind"] for event in document["events"]] == ["alarm", "stop"]
+    assert document["loop"]["delay_assumed"] == 1 and document["loop"]["delay_observed"] == pytest.approx(1.6, abs=1e-12)
+    assert document["summary"]["late_cycles"] == 11 and document["summary"]["alarms"] == 1
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_warn_records_the_alarm_and_the_run_goes_on(
+        transport: str, injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    profile = profile_variant(tmp_path, "cia402-handle", "warn", extra='[supervisor]\non_late = "warn"\n')
+    out = tmp_path / "run"
+    with simulated_drive(transport, profile) as drive:
+        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "0.3", "--out", str(out))
+    assert result.code == 0, result.err
+    (warning,) = result.err_lines  # the log's warning, one line
+    assert warning.startswith("WARNING haptic_bus.control.controller: supervisor: 11 of the last 1000 cycles started")
+    assert _disabled_not_faulted(drive.states)
+    _, record = read_record(out)
+    assert record["late"].size == 300 and np.flatnonzero(record["late"]).tolist() == list(range(100, 130))
+    document = read_run(out)
+    (alarm,) = events_of(document, "alarm")  # one alarm a window: the warning does not flood the record
+    assert alarm["data"] == {"alarm": "late", "action": "warn"} and alarm["time_s"] == pytest.approx(0.111, abs=1e-12)
+    assert document["exit_reason"] == "completed" and document["summary"]["late_cycles"] == 30
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_derate_switches_to_the_scene_the_gate_proves_passive_at_the_observed_delay(
+        transport: str, injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """stiff-wall (K 16 500, B 7: 95 % of the largest passive K at D = 1) is active at D = 1.6;
+    the derate table's next prepared delay, D = 2, serves it."""
+    profile = profile_variant(tmp_path, "stiff-wall", "derate", extra='[supervisor]\non_late = "derate"\n')
+    out = tmp_path / "run"
+    with simulated_drive(transport, profile) as drive:
+        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "0.3", "--out", str(out),
+                         "-q")
+    assert result.code == 0, result.err
+    _, record = read_record(out)
+    scene_id = record["scene_id"]
+    assert np.all(scene_id[: ALARM_CYCLE + 1] == 0) and np.all(scene_id[ALARM_CYCLE + 1:] == 1)  # from the next cycle on
+    document = read_run(out)
+    first, derated = document["scenes"]
+    assert derated["scene_id"] == 1 and derated["origin"] == "derate to a loop delay of 1.6 samples"
+    (wall,) = derated["objects"]
+    scale = wall["stiffness"] / 16500.0
+    assert 0.0 < scale < 1.0 and wall["damping"] / 7.0 == pytest.approx(scale, rel=1e-12)  # the scene scaled, K and B alike
+    # independently: the gate at the prepared delay D = 2 passes it with the profile's margin
+    # (1 N s/m), and the largest such scale to 1e-6 (the table bisects to 2^-40)
+    device = DeviceLoop(1.0, 20.0, PERIOD, 2.0, "average")
+    judge = PassivityGate(device, GatePolicy(safety_margin=1.0))
+    scaled = load_profile(profile).compiled_scene().scaled(scale)
+    assert judge.judge(scaled).accepted and not judge.passes(load_profile(profile).compiled_scene().scaled(scale * (1 + 1e-6)))
+    assert derated["worst_margin"] >= 1.0 and first["worst_margin"] == pytest.approx(1.084, abs=1e-3)
+    kinds = [(event["kind"], event.get("data")) for event in document["events"]]
+    assert kinds == [("alarm", {"alarm": "late", "action": "derate"}),
+                     ("derate", {"scene_id": 1, "worst_margin": derated["worst_margin"]})]
+    assert document["events"][1]["message"] == "scene 1: derate to a loop delay of 1.6 samples"
+    # the derated wall is what acts: force = K' (x - 3 mm) + B' v inside it (1e-9 N: rounding of ~20 N terms)
+    x, v, force = record["position_m"], record["velocity_m_per_s"], record["force_n"]
+    after = np.arange(x.size) > ALARM_CYCLE
+    inside = after & (x > 0.003)
+    assert inside.sum() > 100
+    np.testing.assert_allclose(force[inside], wall["stiffness"] * (x[inside] - 0.003) + wall["damping"] * v[inside],
+                               rtol=0, atol=1e-9)
+    assert document["exit_reason"] == "completed" and _disabled_not_faulted(drive.states)
+
+
+# ----------------------------------------------------------------------------- the observer
+
+STIFFER = (5000.0, 10.0)  # N/m, N s/m: passive on its own (margin > 2 N s/m at D = 1), alpha 2 (a warning)
+
+
+def _soft_wall_pushed_in(folder: pathlib.Path, supervisor: str = "") -> pathlib.Path:
+    """cia402-handle with a soft end-stop (K 500) 5 mm behind the start, a 5 N push, a 0.1 s start
+    ramp and the bandwidth rule as a warning.  The handle settles 10 mm deep (x = +5 mm); in the
+    stiffer wall it is pushed back to 1 mm deep (x = -4 mm), behind its start: the operator then
+    has taken out 5 N * 4 mm = 20 mJ, more than the 6.25 mJ the soft wall held at the start."""
+    return profile_variant(folder, "cia402-handle", "soft", {
+        "position = 0.003 ": "position = -0.005 ", "stiffness = 1500.0 ": "stiffness = 500.0 ",
+        "level = 3.0 ": "level = 5.0 ", 'bandwidth = "strict"': 'bandwidth = "warn"'},
+        '[start]\nin_contact = "ramp"\nramp_time = 0.1\n' + supervisor)
+
+
+def test_an_observer_alarm_stops_the_run_with_exit_3(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Over CANopen: the stiffer wall comes as a gated upload over the bus, from another thread,
+    as soon as the controller node answers: the end state does not depend on when.  (An answer
+    can be late on this loaded machine, so an upload may be repeated: what counts is run.json.)"""
+    profile = _soft_wall_pushed_in(tmp_path)
+    out = tmp_path / "run"
+    answers: list[str] = []
+    done = threading.Event()
+
+    with simulated_drive("canopen", profile) as drive:
+        def upload() -> None:
+            while not answers and not done.wait(0.05):  # bounded by the run (at most 30 s of virtual time)
+                try:
+                    answers.append(upload_walls({"interface": "virtual", "channel": drive.channel}, 127, {0: STIFFER},
+                                                timeout=1.0))
+                except DriveTimeout:  # the controller node is not up yet, or its answer came late
+                    continue
+
+        uploader = threading.Thread(target=upload, daemon=True)
+        uploader.start()
+        try:
+            result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "30", "--out",
+                             str(out), "-q")
+        finally:
+            done.set()
+            uploader.join(timeout=10.0)
+    assert result.code == 3, result.err
+    (line,) = result.err_lines
+    assert line.startswith("haptic-bus run: assumption broken: the passivity observer: the observer's interface energy is -")
+    document = read_run(out)
+    *uploads, alarm, stop = document["events"]
+    assert uploads and {event["kind"] for event in uploads} == {"upload"} and stop["kind"] == "stop"
+    assert alarm["kind"] == "alarm" and alarm["data"] == {"alarm": "observer", "action": "stop"}
+    assert alarm["time_s"] > uploads[0]["time_s"]
+    stiffness = [scene["objects"][0]["stiffness"] for scene in document["scenes"]]
+    assert stiffness[0] == 500.0 and set(stiffness[1:]) == {STIFFER[0]}
+    _, record = read_record(out)
+    energy, scene_id = record["energy_j"], record["scene_id"]
+    limit = 1e-3  # J, the default observer_limit
+    assert energy[0] == pytest.approx(0.5 * 500.0 * 0.005**2, rel=1e-12)  # started in contact: 6.25 mJ held
+    assert energy[scene_id == 0].min() >= -limit  # no alarm before the upload, the start in contact included
+    assert energy[-1] < -limit and np.all(energy[:-1] >= -limit)  # the run stopped at the first cycle below
+    assert _disabled_not_faulted(drive.states)
+
+
+@pytest.mark.parametrize("policy", ["stop", "warn", "derate"])
+def test_an_observer_alarm_over_modbus_acts_as_the_policy_says(policy: str, tmp_path: pathlib.Path) -> None:
+    """Over Modbus TCP (no upload server there): the Python API, the same stiffer wall at cycle
+    400.  ``derate`` has no observed delay to derate to on an observer alarm: it stops."""
+    from drives.modbus.drive import ModbusDrive
+
+    path = _soft_wall_pushed_in(tmp_path, f'[supervisor]\non_observer = "{policy}"\n')
+    profile = load_profile(path)
+    with simulated_drive("modbus", path) as simulated:
+        url = simulated.args[1]
+        drive = ModbusDrive.from_url(url, scaling=profile.scaling(), safety=profile.safety.for_virtual_time(PERIOD))
+        try:
+            drive.connect()
+            origin = encoder_origin(drive)
+            drive.enable()
+            controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
+                                        origin=origin, supervisor=profile.supervisor, ramp_time=profile.start.ramp_time)
+
+            def stiffen(c: WallController) -> None:
+                if c.cycles == 400:
+                    c.set_wall("end-stop", *STIFFER)
+
+            summary = controller.run(1500, on_cycle=stiffen)
+        finally:
+            drive.close()
+    energy = controller.record.column("energy_j")
+    assert energy[:401].min() >= -1e-3 and energy.min() < -1e-3
+    kinds = [e.kind for e in controller.events.events]
+    alarm = controller.events.events[1]
+    assert alarm.kind == "alarm" and alarm.data == {"alarm": "observer", "action": policy}
+    if policy == "warn":  # an event, and the run goes on: one alarm a window of 1000 cycles while it lasts
+        assert summary.exit_reason == "completed" and summary.cycles == 1500 and kinds == ["upload", "alarm", "alarm"]
+        assert controller.events.events[2].time_s == pytest.approx(alarm.time_s + 1.0, abs=1e-9)
+        assert energy[-1] == pytest.approx(0.5 * 500.0 * 0.005**2 - 5.0 * 0.004, abs=0.5e-3)  # at rest: 6.25 - 20 mJ
+        return
+    assert summary.alarms == 1 and summary.exit_reason == "assumption broken" and summary.error is not None
+    assert summary.error.startswith("assumption broken: the passivity observer: the observer's interface energy is -")
+    assert 400 < summary.cycles < 1500 and energy[-1] < -1e-3 and kinds == ["upload", "alarm", "stop"]
+    assert _disabled_not_faulted(simulated.states)
+
+
+# ----------------------------------------------------------------------------- real time, real lateness
+
+@pytest.mark.slow
+def test_a_real_time_run_stopped_for_150_ms_breaks_the_delay_assumption_and_exits_3(
+        multicast: tuple[str, int], sim_process: Callable[..., Any], tmp_path: pathlib.Path) -> None:
+    """Two processes on udp_multicast, real time, T = 5 ms (the wall's alpha is then 1.3: the
+    bandwidth rule warns).  The drive's own watchdogs are set to 2 s here, so that the 150 ms
+    stop is the supervisor's to catch (the safety chain is tested apart)."""
+    group, port = multicast
+    bus_args = ["--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}"]
+    profile = profile_variant(tmp_path, "cia402-handle", "late", {
+        "period = 0.001 ": "period = 0.005 ", 'bandwidth = "strict"': 'bandwidth = "warn"'}, extra=(
+        "[supervisor]\nlate_tolerance = 16.0\nlate_limit = 5\n"  # 16 T = 80 ms
+        "[safety]\nconsumer_ms = 2000\nrpdo_deadline_periods = 400\n"))  # 2 s
+    sim = sim_process(*bus_args, "--node-id", str(NODE), "--profile", str(profile))
+    out = tmp_path / "run"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
+    run = subprocess.Popen([sys.executable, "-m", "haptic_bus.app.cli", "run", str(profile), *bus_args, "--node-id",
+                            str(NODE), "--duration", "60", "-q", "--out", str(out)],
+                           cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sniffer = can.Bus(interface="udp_multicast", channel=group, port=port)
+    try:
+        deadline, tpdos = time.monotonic() + 40.0, 0
+        while tpdos < 100 and time.monotonic() < deadline and run.poll() is None:
+            message = sniffer.recv(0.2)
+            tpdos += message is not None and message.arbitration_id == 0x180 + NODE
+        assert tpdos >= 100 and run.poll() is None, f"the run did not cycle: {_ended(run)} {sim.log()[-2000:]}"
+        run.send_signal(signal.SIGSTOP)
+        time.sleep(0.15)
+        run.send_signal(signal.SIGCONT)
+        _, stderr = run.communicate(timeout=30)
+    finally:
+        sniffer.shutdown()
+        if run.poll() is None:
+            run.kill()
+            run.communicate(timeout=10)
+    assert run.returncode == 3, stderr
+    assert "Traceback" not in stderr and len(stderr.strip().splitlines()) == 1
+    assert stderr.startswith("haptic-bus run: assumption broken: the loop delay: 6 of the last 1000 cycles started more "
+                             "than 16 T late"), stderr
+    (alarm,) = events_of(read_run(out), "alarm")
+    worst = float(re.search(r"worst ([0-9.]+) ms", alarm["message"]).group(1))  # type: ignore[union-attr]
+    assert worst >= 100.0, alarm  # the injected stop, not this machine's scheduler
+    _, record = read_record(out)
+    assert record["late"].sum() == 6 and record["late"][-1] == 1
+    log = sim.log()
+    assert "OPERATION ENABLED -> SWITCH ON DISABLED" in log and "FAULT" not in log, log[-2000:]
+
+
+def _ended(process: subprocess.Popen) -> str:
+    """What a process that ended said (empty while it runs)."""
+    if process.poll() is None:
+        return ""
+    out, err = process.communicate(timeout=10)
+    return f"exit {process.returncode}: {err[-2000:]} {out[-1000:]}"
