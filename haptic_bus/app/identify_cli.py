@@ -1,0 +1,232 @@
+"""``haptic-bus identify``: measure the handle's m, b, Coulomb friction, loop delay and velocity model.
+
+    haptic-bus identify --profile P --node-id N [--interface I --channel C --bitrate R --bus-option K=V ...]
+                        [--controller-node-id M]
+    haptic-bus identify --profile P --modbus URL [--unit-id U]
+        [--duration 20] [--travel 0.01] [--max-delay 4] [--virtual-time] [--json] [--write-profile FILE]
+
+The profile gives the drive's scaling, the loop period, the force limit and the ``[safety]``
+settings (its ``[device]`` numbers are what is being checked, so its scene is not judged).  The
+run: a probe that refuses a handle not free to move, ``--duration`` s of a multisine within the
+force limit and ``--travel`` m either side of the start, then the fit
+(:mod:`haptic_bus.app.identify_run`, :mod:`haptic_bus.identify`).  Output: a table of estimates
+with standard errors and 95 % intervals, the residual check, the velocity model 0x606C matches,
+and what the data cannot support; or ``--json``.  ``--write-profile FILE`` writes a copy of the
+profile with the measured values (:mod:`haptic_bus.app.identify_profile`), only when the data
+support them.
+
+Exit status: 0 the data support the estimate; 1 the handle was refused (not free to move), the
+data cannot support the estimate, or a drive/bus error; 2 invalid input (before any bus or
+file is touched); 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import sys
+from collections.abc import Callable
+from typing import Any
+
+from drives.cia301 import NODE_ID_RANGE
+from drives.errors import ParameterError
+from haptic_bus.identify import Identification
+from haptic_bus.identify.fit import MAX_DELAY, Estimate, PlantFit
+from haptic_bus.identify.session import DURATION_RANGE, TRAVEL_RANGE
+
+UNIT_ID_RANGE = (1, 247)
+DELAY_SEARCH_RANGE = (0, 50)  # whole samples
+IDENTIFY_HELP = "measure the handle's m, b, Coulomb friction, loop delay and 0x606C's velocity model"
+
+BusArguments = Callable[[argparse.ArgumentParser], None]
+BusDictionary = Callable[[argparse.Namespace], dict[str, Any]]
+
+
+def _number(low: float, high: float, name: str, unit: str) -> Callable[[str], float]:
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not a number") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{name} = {text} is invalid; allowed: a number in [{low:g}, {high:g}] {unit}")
+        return value
+
+    return parse
+
+
+def _whole(low: int, high: int, name: str) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text, 0)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not an integer") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{name} = {value} is invalid; allowed: {low}..{high}")
+        return value
+
+    return parse
+
+
+def _modbus_url(text: str) -> str:
+    from drives.modbus.link import ModbusAddress
+
+    try:
+        ModbusAddress.from_url(text)
+    except ParameterError as exc:
+        raise argparse.ArgumentTypeError(f"--modbus {text!r} is invalid; allowed: {exc.allowed}") from None
+    return text
+
+
+def add_identify_parser(subparsers: argparse._SubParsersAction, add_bus_arguments: BusArguments,
+                        bus_arguments: BusDictionary) -> argparse.ArgumentParser:
+    """Register ``identify`` on ``subparsers`` (with the CAN bus options ``add_bus_arguments`` adds and
+    ``bus_arguments`` reads back); it sets ``handler``."""
+    parser = subparsers.add_parser("identify", help=IDENTIFY_HELP, description=IDENTIFY_HELP,
+                                   formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--profile", required=True, help="profile name or TOML path: scaling, period, force limit, [safety]")
+    add_bus_arguments(parser)
+    parser.add_argument("--node-id", type=_whole(*NODE_ID_RANGE, "node id"), help="the drive's CANopen node id 1..127")
+    parser.add_argument("--controller-node-id", type=_whole(*NODE_ID_RANGE, "controller node id"),
+                        help="this controller's CANopen node id, whose heartbeat the drive watches (127 if not given)")
+    parser.add_argument("--modbus", type=_modbus_url, metavar="URL",
+                        help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/...")
+    parser.add_argument("--unit-id", type=_whole(*UNIT_ID_RANGE, "unit id"), help="Modbus unit id 1..247 (1 if not given)")
+    parser.add_argument("--duration", type=_number(*DURATION_RANGE, "duration", "s"), default=20.0,
+                        help="seconds of excitation")
+    parser.add_argument("--travel", type=_number(*TRAVEL_RANGE, "travel", "m"), default=0.01,
+                        help="how far the handle may move either side of its start, m (keep it clear of the end stops)")
+    parser.add_argument("--max-delay", type=_whole(*DELAY_SEARCH_RANGE, "max delay"), default=MAX_DELAY,
+                        help="largest whole loop delay searched, samples")
+    parser.add_argument("--virtual-time", action="store_true", help="lock-step with a simulated drive (no pacing)")
+    parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    parser.add_argument("--write-profile", metavar="FILE", help="write a copy of the profile with the measured values")
+    parser.set_defaults(handler=lambda args: run_identify(args, bus_arguments))
+    return parser
+
+
+def _validate(args: argparse.Namespace) -> pathlib.Path | None:
+    """Refuse conflicting options and an unwritable --write-profile before anything is touched."""
+    from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID
+
+    if args.modbus:
+        given = [flag for flag, value in (("--interface", args.interface), ("--channel", args.channel),
+                                          ("--bitrate", args.bitrate), ("--bus-option", args.bus_option),
+                                          ("--node-id", args.node_id), ("--controller-node-id", args.controller_node_id))
+                 if value]
+        if given:
+            raise ParameterError(given[0], "given with --modbus", "only Modbus options (--unit-id) with --modbus", "identify")
+    elif args.unit_id is not None:
+        raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL", "identify")
+    elif args.node_id is None:
+        raise ParameterError("--node-id", None, "the drive's CANopen node id 1..127 (or --modbus URL)", "identify")
+    elif (args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID) == args.node_id:
+        raise ParameterError("--controller-node-id", args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID,
+                             f"a node id other than the drive's ({args.node_id})", "identify")
+    if args.write_profile is None:
+        return None
+    target = pathlib.Path(args.write_profile)
+    folder = target.parent if str(target.parent) else pathlib.Path(".")
+    if target.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK):
+        raise ParameterError("--write-profile", args.write_profile, "a file in an existing, writable folder", "identify")
+    return target
+
+
+def run_identify(args: argparse.Namespace, bus_arguments: BusDictionary) -> int:
+    """The ``identify`` handler: validate, run, report, write the profile; the exit status."""
+    from haptic_bus.app.identify_profile import write_identified_profile
+    from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen, identify_modbus
+    from haptic_bus.app.profiles import TIMINGS, read_profile
+    from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID, StopRequest
+
+    target = _validate(args)
+    profile = read_profile(args.profile)
+    if target is not None and profile.path is not None and target.resolve() == profile.path.resolve():
+        raise ParameterError("--write-profile", args.write_profile, "a new file, not the --profile itself", "identify")
+    stop = StopRequest()
+    options = IdentifyOptions(args.duration, args.travel, realtime=not args.virtual_time, max_delay=args.max_delay, stop=stop)
+    stop.install()
+    if args.modbus:
+        outcome = identify_modbus(profile, args.modbus, args.unit_id or 1, options)
+    else:
+        outcome = identify_canopen(profile, bus_arguments(args), args.node_id, options,
+                                   args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
+    found = outcome.identification
+    written = None
+    if found is not None and found.supported and target is not None and profile.path is not None:
+        least = TIMINGS[profile.loop.timing] or 0.0  # the least [loop] delay the profile's timing allows
+        written = write_identified_profile(profile.path, target, found, least)
+    if args.json:
+        print(json.dumps({"exit_reason": outcome.exit_reason, "error": outcome.error, "link": outcome.link,
+                          "identification": None if found is None else found.to_dict(),
+                          "wrote": None if written is None else str(written)}))
+    elif found is not None:
+        pacing = "virtual time" if args.virtual_time else "real time"
+        print(format_identification(found, f"{profile.name} ({profile.path}); {describe_link(outcome.link)}, {pacing}"))
+        if written is not None:
+            print(f"wrote {written}")
+    if outcome.error:
+        said = outcome.error if outcome.error.startswith(outcome.exit_reason) else f"{outcome.exit_reason}: {outcome.error}"
+        print(f"haptic-bus identify: {said}", file=sys.stderr)
+    elif found is not None and not found.supported:
+        print("haptic-bus identify: the data cannot support the estimate (see the findings)", file=sys.stderr)
+    return outcome.exit_status
+
+
+# --------------------------------------------------------------------------- the human report
+
+def _row(name: str, estimate: Estimate, unit: str) -> str:
+    low, high = estimate.interval()
+    return f"  {name:<22}{estimate.value:>12.6g} {unit:<8}{estimate.stderr:>11.2g}   [{low:.6g}, {high:.6g}]"
+
+
+def _delay_words(fit: PlantFit) -> str:
+    if fit.whole_delay is not None:
+        return f"whole samples: {fit.whole_delay}"
+    if fit.fraction_resolved:
+        return f"{fit.delay.value:.3f} samples: the fraction resolved to +-{fit.delay.stderr:.2g}"
+    return f"fraction not resolved: pessimistic {fit.delay_high:g} samples"
+
+
+def describe_link(link: dict[str, Any]) -> str:
+    """``CANopen node 5 on udp_multicast 239.74.163.1`` or ``Modbus unit 1 at tcp://...``."""
+    if link.get("kind") == "modbus":
+        return f"Modbus unit {link['unit_id']} at {link['url']}"
+    bus = link.get("bus", {})
+    return f"CANopen node {link.get('node_id')} on {bus.get('interface', '?')} {bus.get('channel', '')}".rstrip()
+
+
+def format_identification(found: Identification, source: str) -> str:
+    """The human report of one identification."""
+    record = found.record
+    lines = [f"haptic-bus identify: profile {source}",
+             f"probe: {found.probe.message}",
+             f"run: {record.cycles} cycles ({record.seconds:.3g} s), excitation {record.excitation_seconds:.3g} s, "
+             f"{record.saturated} clipped at the {record.force_limit:.3g} N force limit"]
+    fit, velocity = found.fit, found.velocity
+    if fit is not None and velocity is not None:
+        lines += ["", f"  {'':<22}{'estimate':>12} {'':<8}{'std. error':>11}   95 % interval",
+                  _row("mass m", fit.mass, "kg"),
+                  _row("viscous friction b", fit.friction, "N s/m"),
+                  _row("Coulomb friction Fc", fit.coulomb, "N"),
+                  _row("loop delay D", fit.delay, "samples") + f"   {_delay_words(fit)}", ""]
+        verdict = ("consistent with the exact model" if fit.residual_rms <= 3 * fit.quantization_rms
+                   and fit.residual_correlation <= fit.correlation_bound else "see the findings")
+        lines.append(f"residual: {fit.residual_rms:.3g} increments rms over {fit.equations} cycles (rounding alone "
+                     f"{fit.quantization_rms:.3g}), |autocorrelation| at lags 3-20 <= {fit.residual_correlation:.2g} "
+                     f"(bound {fit.correlation_bound:.2g}): {verdict}; the rounding compensation moved b by "
+                     f"{fit.compensation:+.2g} N s/m")
+        others = ", ".join(f"{d.model} {d.rms:.4g}" for d in velocity.distances[1:])
+        declared = ("" if velocity.declared is None else
+                    f"; declared {velocity.declared.model}: {'matches' if velocity.matches_declared else 'CONTRADICTED'}")
+        lines.append(f"velocity (0x606C): matches {velocity.best} (rms {velocity.distances[0].rms:.4g} counts over "
+                     f"{velocity.samples} cycles; {others}){declared}")
+        lines.append(f"for the gate: b >= {fit.friction_low:.6g} N s/m (b - 3 sigma), D <= {fit.delay_high:.4g} samples")
+    for finding in found.findings:
+        lines.append(f"{finding.severity}: {finding.topic}: {finding.message}")
+    lines.append("verdict: " + ("supported" if found.supported else
+                                "REFUSED: the handle is not free to move" if not found.probe.free else
+                                "the data cannot support the estimate"))
+    return "\n".join(lines)

@@ -1,0 +1,38 @@
+"""System identification of the haptic handle: bus-free excitation design, the exact-model fit, the velocity check.
+
+``haptic-bus identify`` (:mod:`haptic_bus.app.identify_cli`) runs a :class:`Session` against a
+drive, records the cycles (:class:`Recorder`) and hands the :class:`Record` to :func:`identify`:
+``m``, ``b``, Coulomb friction and the loop delay fitted on the exact zero-order-hold model
+(:mod:`~haptic_bus.identify.model`, :mod:`~haptic_bus.identify.fit`), which velocity 0x606C
+reports (:mod:`~haptic_bus.identify.velocity_check`), and what the data can support
+(:mod:`~haptic_bus.identify.assessment`).  Nothing here touches a bus.
+"""
+
+from haptic_bus.identify.assessment import Finding
+from haptic_bus.identify.fit import Estimate, NotIdentifiable, PlantFit, fit_plant
+from haptic_bus.identify.model import Plant
+from haptic_bus.identify.probe import ProbeResult
+from haptic_bus.identify.record import Phases, Record, Recorder, Scale
+from haptic_bus.identify.result import Identification, identify
+from haptic_bus.identify.session import Plan, Session
+from haptic_bus.identify.velocity_check import VelocityCheck, check_velocity
+
+__all__ = [
+    "Estimate",
+    "Finding",
+    "Identification",
+    "NotIdentifiable",
+    "Phases",
+    "Plan",
+    "Plant",
+    "PlantFit",
+    "ProbeResult",
+    "Record",
+    "Recorder",
+    "Scale",
+    "Session",
+    "VelocityCheck",
+    "check_velocity",
+    "fit_plant",
+    "identify",
+]

@@ -1,0 +1,272 @@
+"""``haptic-bus identify`` over a real bus: the CANopen master against the simulated drive, whose
+truth (another profile) the controller does not know.
+
+In one process on python-can's virtual bus in virtual time (the run, the command line, the
+refusal), and in two processes on udp_multicast: ``haptic-bus identify`` against ``haptic-bus sim
+--profile HIDDEN`` (the estimate, the profile it writes, Ctrl-C).  The tolerances are those of
+``tests/test_identify_fit.py`` (the issue's bounds and 4 standard errors of the fit).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from drives.cia402 import State
+from haptic_bus.app.cli import main
+from haptic_bus.app.identify_cli import format_identification
+from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen
+from haptic_bus.app.profiles import load_profile, read_profile
+from sim_drive.canopen.slave import CanopenSimDrive
+from sim_drive.operator import HandModel, OperatorModel
+from sim_drive.parameters import DeviceParameters
+
+REPO = Path(__file__).resolve().parents[1]
+NODE = 5
+SIGMAS = 4.0
+START_WAIT = 30.0  # s: a process imports numpy/scipy/canopen before it answers
+RUN_WAIT = 120.0  # s: 10 s of excitation in lock-step over udp_multicast takes about 10 s; room for a loaded machine
+HIDDEN = dict(m=0.37, b=2.9, coulomb_friction=0.2, velocity_noise=1000.0, noise_seed=21)
+
+CONTROLLER = """\
+# What the controller believes: not the drive's truth.
+[profile]
+name = "identify-test"
+operator = "commissioning engineer"
+task = "measure the handle before trusting the gate"
+description = "a 0.5 kg guess with a datasheet b; the drive is said to report v(kT)"
+
+[device]
+mass = 0.5                       # kg: a guess
+friction = 1.0                   # N s/m: a datasheet guess
+friction_source = "datasheet"
+velocity = "point"               # what the controller believes 0x606C is
+velocity_per_count = 1e-6
+position_per_count = 1e-7
+rated_torque = 0.2
+force_per_torque = 50.0
+max_torque_permille = 3000
+
+[loop]
+period = 0.001
+timing = "cia402"
+
+[limits]
+force_limit = {force_limit}
+
+[gate]
+safety_margin = 0.0
+bandwidth = "warn"
+
+[scene]
+objects = []
+
+[safety]
+heartbeat_ms = 100               # a loaded test machine: the watchdogs guard a dead master, not a busy one
+consumer_ms = 2000
+"""
+
+
+def controller_profile(folder: Path, force_limit: float = 5.0) -> Path:
+    """The controller's profile in ``folder``."""
+    path = folder / "controller.toml"
+    path.write_text(CONTROLLER.format(force_limit=force_limit))
+    return path
+
+
+@contextmanager
+def hidden_drive(timing: str, operator: OperatorModel | None = None, **truth: object) -> Iterator[tuple[CanopenSimDrive, str]]:
+    """The simulated drive with the hidden truth on a fresh virtual channel, node NODE."""
+    channel = f"identify-{uuid.uuid4().hex[:12]}"
+    parameters = DeviceParameters(**(HIDDEN | truth))  # type: ignore[arg-type]
+    sim = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, timing=timing, parameters=parameters,
+                          operator=operator).start()
+    try:
+        yield sim, channel
+    finally:
+        sim.stop()
+
+
+def within(estimate: dict, truth: float) -> bool:
+    """The truth lies within SIGMAS standard errors of a JSON estimate."""
+    return abs(estimate["value"] - truth) <= SIGMAS * estimate["stderr"]
+
+
+def test_identify_over_the_virtual_bus_in_virtual_time(tmp_path: Path) -> None:
+    """The hidden drive reports the encoder difference (average) where the controller says point:
+    m, b, Fc and the delay found, the model contradicted, the drive disabled at the end."""
+    profile = read_profile(controller_profile(tmp_path))
+    with hidden_drive("cia402", velocity="average") as (sim, channel):
+        outcome = identify_canopen(profile, {"interface": "virtual", "channel": channel}, NODE,
+                                   IdentifyOptions(duration=10.0, realtime=False))
+        state = sim.drive.state
+    found = outcome.identification
+    assert outcome.exit_reason == "completed" and outcome.exit_status == 0, outcome.error
+    assert found is not None and found.fit is not None and found.velocity is not None
+    fit = found.fit
+    assert abs(fit.mass.value / 0.37 - 1) < 0.03 and abs(fit.mass.value - 0.37) <= SIGMAS * fit.mass.stderr
+    assert abs(fit.friction.value / 2.9 - 1) < 0.05 and abs(fit.friction.value - 2.9) <= SIGMAS * fit.friction.stderr
+    assert abs(fit.coulomb.value - 0.2) <= SIGMAS * fit.coulomb.stderr
+    assert fit.whole_delay == 1
+    assert found.velocity.best == "average" and found.velocity.matches_declared is False
+    assert found.record.excitation_seconds == pytest.approx(10.0)
+    assert state is State.SWITCH_ON_DISABLED
+    report = format_identification(found, "identify-test")
+    for row in ("mass m", "viscous friction b", "Coulomb friction Fc", "loop delay D", "whole samples: 1",
+                "velocity (0x606C): matches average", "declared point: CONTRADICTED", "verdict: supported"):
+        assert row in report
+
+
+def test_a_blocked_handle_is_refused_and_the_drive_left_disabled(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A stiff stop at the start: exit 1, the reason on stderr, no excitation, nothing written."""
+    written = tmp_path / "written.toml"
+    with hidden_drive("cia402", operator=HandModel(1e5, 50.0)) as (sim, channel):
+        code = main(["identify", "--profile", str(controller_profile(tmp_path)), "--interface", "virtual", "--channel",
+                     channel, "--node-id", str(NODE), "--virtual-time", "--write-profile", str(written)])
+        state = sim.drive.state
+    captured = capsys.readouterr()
+    assert code == 1
+    assert "refused: the handle is not free to move towards +x" in captured.err
+    assert "REFUSED" in captured.out and not written.exists()
+    assert state is State.SWITCH_ON_DISABLED
+
+
+def test_data_that_cannot_support_the_estimate_exit_1_and_write_nothing(tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A 0.3 N force limit against 0.2 N of Coulomb friction: the handle is free, but it sticks."""
+    written = tmp_path / "written.toml"
+    with hidden_drive("cia402") as (_, channel):
+        code = main(["identify", "--profile", str(controller_profile(tmp_path, force_limit=0.3)), "--interface", "virtual",
+                     "--channel", channel, "--node-id", str(NODE), "--virtual-time", "--duration", "5", "--json",
+                     "--write-profile", str(written)])
+    document = json.loads(capsys.readouterr().out)
+    assert code == 1 and not written.exists()
+    assert document["identification"]["supported"] is False
+    assert any(f["topic"] == "sticking" and f["severity"] == "cannot support" for f in document["identification"]["findings"])
+
+
+@pytest.mark.parametrize("arguments", [
+    [],  # no --node-id, no --modbus
+    ["--node-id", "5", "--unit-id", "2"],
+    ["--node-id", "5", "--modbus", "tcp://127.0.0.1:1502"],
+    ["--node-id", "5", "--controller-node-id", "5"],
+    ["--node-id", "5", "--travel", "1e-6"],  # the probe needs 20 increments of 0.1 um: more than half of it
+    ["--node-id", "5", "--duration", "0.5"],
+    ["--node-id", "5", "--write-profile", "/nonexistent-folder/x.toml"],
+    ["--node-id", "5", "--write-profile", "{profile}"],
+])
+def test_invalid_input_is_refused_before_the_bus_is_touched(arguments: list[str], tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """Exit 2 with one line on stderr; the interface does not exist, so touching the bus would be exit 1."""
+    profile = controller_profile(tmp_path)
+    arguments = [a.replace("{profile}", str(profile)) for a in arguments]
+    try:
+        code: object = main(["identify", "--profile", str(profile), "--interface", "no-such-interface", *arguments])
+    except SystemExit as usage:  # argparse's own refusals end the parse
+        code = usage.code
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert len(err.strip().splitlines()) == 1 and "haptic-bus identify" in err
+
+
+# --------------------------------------------------------------------------- two processes on udp_multicast
+
+def _hidden_profile(folder: Path) -> Path:
+    """The simulated drive's truth, which the controller is never given."""
+    path = folder / "hidden.toml"
+    path.write_text("""\
+[device]
+mass = 0.37
+friction = 2.9
+coulomb_friction = 0.2
+velocity_noise = 1000
+noise_seed = 22
+velocity = "point"
+velocity_per_count = 1e-6
+position_per_count = 1e-7
+
+[loop]
+period = 0.001
+timing = "cia402"
+""")
+    return path
+
+
+def _identify_process(multicast: tuple[str, int], *arguments: str) -> subprocess.Popen[str]:
+    group, port = multicast
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.Popen(
+        [sys.executable, "-m", "haptic_bus.app.cli", "identify", "--interface", "udp_multicast", "--channel", group,
+         "--bus-option", f"port={port}", "--node-id", str(NODE), "--virtual-time", *arguments],
+        cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _start_sim(sim_process: Any, multicast: tuple[str, int], hidden: Path) -> Any:
+    group, port = multicast
+    sim = sim_process("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
+                      "--node-id", str(NODE), "--profile", str(hidden))
+    sim.wait_for_line("serving on", START_WAIT)
+    return sim
+
+
+def test_identify_against_haptic_bus_sim_in_another_process(multicast: tuple[str, int], sim_process: Any,
+                                                             tmp_path: Path) -> None:
+    sim = _start_sim(sim_process, multicast, _hidden_profile(tmp_path))
+    written = tmp_path / "identified.toml"
+    run = _identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "10", "--json",
+                            "--write-profile", str(written))
+    try:
+        out, err = run.communicate(timeout=RUN_WAIT)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.communicate(timeout=10)
+    code, log = sim.stop()
+    assert run.returncode == 0, err
+    document = json.loads(out)
+    fit = document["identification"]["fit"]
+    assert abs(fit["mass"]["value"] / 0.37 - 1) < 0.03 and within(fit["mass"], 0.37)
+    assert abs(fit["friction"]["value"] / 2.9 - 1) < 0.05 and within(fit["friction"], 2.9)
+    assert within(fit["coulomb_friction"], 0.2) and fit["delay"]["whole"] == 1
+    assert document["identification"]["run"]["excitation_s"] == pytest.approx(10.0)
+    assert document["identification"]["velocity"]["best"] == "point"
+    assert document["wrote"] == str(written)
+    profile = load_profile(written)  # the loader accepts it: [device] and [loop] agree with [identification]
+    identified = tomllib.loads(written.read_text())["identification"]
+    assert profile.device.mass == pytest.approx(fit["mass"]["value"], rel=1e-5)
+    assert profile.device.friction <= identified["friction"] - 3 * identified["friction_stderr"] < 2.9
+    assert profile.loop.delay >= identified["delay"] + 3 * identified["delay_stderr"] >= 1.0
+    assert str(profile.device.velocity) == identified["velocity"] == "point"
+    assert "coulomb_friction" not in tomllib.loads(written.read_text())["device"]  # the truth stays the drive's
+    assert "# What the controller believes" in written.read_text()  # the user's comments are kept
+    assert "OPERATION ENABLED -> SWITCH ON DISABLED" in log and code == 0
+
+
+def test_ctrl_c_disables_the_drive_and_exits_130(multicast: tuple[str, int], sim_process: Any, tmp_path: Path) -> None:
+    sim = _start_sim(sim_process, multicast, _hidden_profile(tmp_path))
+    run = _identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "600")
+    try:
+        sim.wait_for_line("-> OPERATION ENABLED", START_WAIT)
+        time.sleep(0.5)  # well into the probe or the excitation
+        run.send_signal(signal.SIGINT)
+        _, err = run.communicate(timeout=RUN_WAIT)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.communicate(timeout=10)
+    code, log = sim.stop()
+    assert run.returncode == 130, err
+    assert "interrupted" in err
+    assert "OPERATION ENABLED -> SWITCH ON DISABLED" in log and code == 0
