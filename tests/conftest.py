@@ -32,16 +32,17 @@ Fixtures:
     ``wait_for_line(text, timeout)``, ``log()``).  Every process it started and the test did not
     stop is stopped at teardown (SIGTERM, bounded wait, then SIGKILL).
 ``bus_spec``
-    A factory: ``bus_spec(interface)`` is a :class:`BusSpec` of ``"virtual"``,
+    A factory: ``bus_spec(interface)`` is a :class:`BusSpec` of ``"virtual"``, ``"lockstep"``,
     ``"udp_multicast"`` or ``"socketcan"`` that no other test shares (``open()`` gives a bus
     handle, ``drive_kwargs()`` the ``CanopenDrive`` keywords).
 ``canopen_rig``
     A factory: ``canopen_rig(interface="virtual", timing="ideal", node_id=5, connect=True,
     **drive_kwargs)`` is a context manager yielding a :class:`Rig` -- a (connected) CANopen
     master ``drive`` on a fresh bus ``spec`` with the simulated drive in process (``sim``,
-    ``virtual``) or as a ``python -m sim_drive`` subprocess (``process``, the other interfaces,
-    its heartbeat awaited first).  Everything is stopped on exit; a subprocess that does not exit
-    with status 0 on SIGTERM fails the test.
+    ``virtual``, or ``lockstep``: the drive serves each frame in the sender's thread, so a test
+    that cycles runs in one thread, deterministically) or as a ``python -m sim_drive``
+    subprocess (``process``, the other interfaces, its heartbeat awaited first).  Everything is
+    stopped on exit; a subprocess that does not exit with status 0 on SIGTERM fails the test.
 
 Markers: ``vcan0`` skips a test (or a ``pytest.param`` case) where SocketCAN ``vcan0`` does not
 exist on this kernel.
@@ -139,8 +140,8 @@ class BusSpec:
 
 def new_bus_spec(interface: str) -> BusSpec:
     """A bus of ``interface`` not shared with any other test (unique channel or port)."""
-    if interface == "virtual":
-        return BusSpec("virtual", unique_name("master-test"))
+    if interface in ("virtual", "lockstep"):
+        return BusSpec(interface, unique_name("master-test"))
     if interface == "udp_multicast":
         group, port = unique_multicast()
         return BusSpec("udp_multicast", group, {"port": port})
@@ -375,8 +376,8 @@ def _rig(
 
     spec = new_bus_spec(interface)
     sim = process = None
-    if interface == "virtual":
-        sim = CanopenSimDrive({"interface": "virtual", "channel": spec.channel}, node_id, timing=timing).start()
+    if interface in ("virtual", "lockstep"):
+        sim = CanopenSimDrive({"interface": interface, "channel": spec.channel}, node_id, timing=timing).start()
     else:
         process = sim_process(*spec.sim_args(), "--node-id", str(node_id), "--timing", timing)
         wait_for_heartbeat(spec, node_id, HEARTBEAT_WAIT, process)

@@ -127,10 +127,12 @@ class CanopenExchange:
 
     # ------------------------------------------------------------------ receive
 
-    def _receive(self, deadline: float) -> tuple[int, bytes] | None:
+    def _receive(self, deadline: float) -> tuple[int, bytes | bytearray] | None:
         """The next frame on one of the TPDO COB-IDs before ``deadline`` (perf_counter s), or None."""
         if self.link.direct:
             bus = self.link.bus
+            if bus is None:
+                raise DriveError(self.name, "the bus is closed")
             slots = self._slots
             while True:
                 remaining = deadline - time.perf_counter()
@@ -158,6 +160,8 @@ class CanopenExchange:
     def _dispatch(self, msg: can.Message) -> None:
         """Direct mode: a frame that is not ours goes to canopen's subscribers (SDO, heartbeat, EMCY)."""
         network = self.link.network
+        if network is None:
+            return
         try:
             network.notify(msg.arbitration_id, msg.data, msg.timestamp)
         except Exception as exc:  # canopen's notifier logs and drops such a frame; so do we, counted
@@ -211,7 +215,7 @@ class CanopenExchange:
     def send(self, msg: can.Message) -> None:
         """Send one frame under the network's send lock (shared with canopen's SDO and NMT)."""
         network = self.link.network
-        if network is None:
+        if network is None or network.bus is None:
             raise DriveError(self.name, "the bus is closed")
         try:
             with network.send_lock:

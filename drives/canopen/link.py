@@ -67,6 +67,12 @@ def shut_down(network: canopen.Network, name: str) -> None:
         network.bus = None
 
 
+def _restart_notifier(network: canopen.Network) -> None:
+    """A fresh canopen notifier reading ``network``'s bus (for SDO, heartbeat and EMCY)."""
+    if network.bus is not None:
+        network.notifier = can.Notifier(network.bus, network.listeners, network.NOTIFIER_CYCLE)
+
+
 class NetworkLink:
     """The master's canopen Network (see the module docstring for ownership)."""
 
@@ -99,7 +105,7 @@ class NetworkLink:
             network = canopen.Network(bus)
         network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         if self._errors not in network.listeners:
-            network.listeners.append(self._errors)
+            network.listeners.append(self._errors)  # type: ignore[arg-type]  # a can.Listener, as python-can wants
         if network.notifier is None or network.notifier.stopped:
             network.connect()
         self.network = network
@@ -123,7 +129,7 @@ class NetworkLink:
         if not self.direct or self.network is None:
             return
         self.direct = False
-        self.network.notifier = can.Notifier(self.bus, self.network.listeners, self.network.NOTIFIER_CYCLE)
+        _restart_notifier(self.network)
 
     def receive_failure(self) -> BaseException | None:
         """The first exception the notifier's receive raised, if one did."""
@@ -137,12 +143,12 @@ class NetworkLink:
             return
         self.network = None
         if self._errors in network.listeners:
-            network.listeners.remove(self._errors)
+            network.listeners.remove(self._errors)  # type: ignore[arg-type]  # see open()
         try:
             if self._given_network is not None:
                 if self.direct:
                     self.direct = False
-                    network.notifier = can.Notifier(network.bus, network.listeners, network.NOTIFIER_CYCLE)
+                    _restart_notifier(network)
                 return
             notifier = network.notifier
             if notifier is not None and not notifier.stopped:

@@ -32,7 +32,13 @@ class _OneLineParser(argparse.ArgumentParser):
 
 
 class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Help that shows every default."""
+    """Help that shows every default (once: not where the help text states it, nor an unset one)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        unset = action.default is None or action.default is False or action.default == []
+        if unset or "default" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
 
 
 # --------------------------------------------------------------------------- argument types
@@ -201,8 +207,11 @@ def _run(args: argparse.Namespace) -> int:
     _validate_run(args)
     profile = load_profile(args.profile)
     stop = StopRequest()
+    from haptic_bus.app.realtime import RealtimeSettings
+
     options = RunOptions(args.duration, realtime=not args.virtual_time, out_dir=None if args.out is None else pathlib.Path(args.out),
-                         start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop)
+                         start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
+                         scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings())
     stop.install()
     if args.modbus:
         result = run_modbus(profile, args.modbus, args.unit_id or 1, options)
@@ -222,7 +231,8 @@ def _run(args: argparse.Namespace) -> int:
                   f"max {late['max'] * 1e6:.1f} us; overruns {summary.overruns}; late cycles {summary.late_cycles}")
     print(f"ended: {result.exit_reason}; wrote {', '.join(str(f) for f in result.files)}")
     if result.error:
-        print(f"haptic-bus run: {result.exit_reason}: {result.error}", file=sys.stderr)
+        said = result.error if result.error.startswith(result.exit_reason) else f"{result.exit_reason}: {result.error}"
+        print(f"haptic-bus run: {said}", file=sys.stderr)
     return exit_status(result.exit_reason)
 
 
@@ -307,7 +317,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--modbus", type=modbus_url, metavar="URL", help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
     run.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1; only with --modbus)")
     run.add_argument("--duration", type=seconds, default=10.0, help="seconds to run")
-    run.add_argument("--virtual-time", action="store_true", help="lock-step with a simulated drive (no pacing)")
+    pacing = run.add_mutually_exclusive_group()
+    pacing.add_argument("--virtual-time", action="store_true", help="lock-step with a simulated drive (no pacing)")
+    pacing.add_argument("--realtime", action="store_true",
+                        help="ask the OS for real-time scheduling of the control thread: SCHED_FIFO priority 80, one CPU, "
+                             "memory locked (mlockall); what it cannot get is logged as a warning and kept in run.json")
     run.add_argument("--start-in-contact", choices=("refuse", "ramp"),
                      help="a start inside an object: refuse, or ramp the force in (default: the profile's [start])")
     run.add_argument("--out", help="folder for record.csv, run.json and plots (default: runs/<UTC time>-<profile>)")
@@ -323,6 +337,14 @@ def build_parser() -> argparse.ArgumentParser:
     from haptic_bus.app.profiles_cli import add_profiles_parser
 
     add_profiles_parser(sub)
+
+    from haptic_bus.app.identify_cli import add_identify_parser
+
+    add_identify_parser(sub, _add_bus_arguments, _bus_arguments)
+
+    from haptic_bus.app.scan_cli import add_scan_parser
+
+    add_scan_parser(command, _add_bus_arguments, _bus_arguments)
 
     report = command("report", "the seed's Figs. 4-6 for a profile, as PNGs, plus a markdown summary", _report)
     report.add_argument("profile", help="profile name or TOML path")
@@ -351,7 +373,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if argv and argv[0] in _PASS_THROUGH:
             return _PASS_THROUGH[argv[0]](argv[1:])
-        args = build_parser().parse_args(argv)
+        try:
+            args = build_parser().parse_args(argv)
+        except SystemExit as done:  # help (0), or a usage error (2) whose one line argparse has printed
+            return int(done.code or 0)
         _configure_logging(args.verbose, args.quiet)
         return _dispatch(args)
     except KeyboardInterrupt:

@@ -1,8 +1,9 @@
 """``haptic-bus demo``: the default profile's wall, simulated drive and controller, one process.
 
-The simulated CiA-402 drive and the controller talk CANopen on python-can's ``virtual`` bus
-in virtual time; an operator pushes into the wall.  The demo prints a short summary and writes
-the run's PNG plots and CSV record to an output directory.
+The simulated CiA-402 drive and the controller talk CANopen on the lock-step bus
+(:mod:`drives.lockstep_bus`: one thread, deterministic) in virtual time; an operator pushes
+into the wall.  The demo prints a short summary and writes the run's PNG plots and CSV record
+to an output directory.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from haptic_bus.app.rig import simulated_canopen
 from haptic_bus.app.run_folder import prepare_run_folder, run_document, write_run
 from haptic_bus.control.controller import RunSummary, WallController, encoder_origin
 from haptic_bus.control.gate import GateDecision
+from haptic_bus.control.record import RunRecord
 
 
 @dataclass
@@ -37,7 +39,7 @@ class DemoResult:
 def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, seconds: float = 2.0) -> DemoResult:
     """Run ``profile`` (default: the shipped default) for ``seconds`` of virtual time; write
     ``record.csv``, ``run.json`` and the plots to ``out_dir``, whatever ends the run (Ctrl-C too)."""
-    started = dt.datetime.now(dt.timezone.utc)
+    started = dt.datetime.now(dt.UTC)
     profile = profile or default_profile()
     out = prepare_run_folder(out_dir, profile.name)
     cycles = max(1, round(seconds / profile.loop.period))
@@ -56,14 +58,14 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, second
         final_x = float(np.mean(record.column("position_m")[-max(1, cycles // 20):]))
         surface = min(surfaces, key=lambda s: abs(s - final_x))
         penetration, expected = abs(final_x - surface), abs(push) / contact
-    link = {"kind": "canopen", "bus": {"interface": "virtual"}, "simulated": True}
+    link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True}
     extra = {"exit_reason": summary.exit_reason, "error": summary.error, "operator_energy_exact": operator_energy,
              "loop": {"period": profile.loop.period, "timing": profile.loop.timing, "delay_assumed": profile.loop.delay}}
     files = write_run(out, profile, controller, run_document(profile, controller, summary, link, extra, started))
     return DemoResult(profile, controller.decision, summary, penetration, expected, operator_energy, files)
 
 
-def _contact_stiffness(controller: WallController, record) -> float | None:
+def _contact_stiffness(controller: WallController, record: RunRecord) -> float | None:
     """The summed K acting where the handle ended (N/m), or None if nothing acts there."""
     x = float(record.column("position_m")[-1])
     scene = controller.scene
@@ -77,14 +79,16 @@ def format_demo(result: DemoResult) -> str:
     profile = result.profile
     walls = ", ".join(f"{'+'.join(w.objects)} margin {w.verdict.margin:.3g} N s/m" for w in result.decision.walls)
     lines = [
-        f"profile: {profile.name} ({profile.loop.timing} timing, delay {profile.loop.delay} sample(s), T = {profile.loop.period * 1e3:g} ms)",
+        f"profile: {profile.name} ({profile.loop.timing} timing, delay {profile.loop.delay} sample(s), "
+        f"T = {profile.loop.period * 1e3:g} ms)",
         f"gate: passed ({walls})" + (f"; warnings: {'; '.join(s.warnings)}" if s.warnings else ""),
         f"cycles: {s.cycles} in virtual time ({s.clock}); force saturated in {s.saturated_cycles}",
         f"peak force: {s.peak_force:.4g} N",
     ]
-    if result.penetration is not None:
+    if result.penetration is not None and result.expected_penetration is not None:
         error = (result.penetration - result.expected_penetration) / result.expected_penetration
-        lines.append(f"steady penetration: {result.penetration * 1e3:.4f} mm vs F/K = {result.expected_penetration * 1e3:.4f} mm ({error:+.2%})")
+        lines.append(f"steady penetration: {result.penetration * 1e3:.4f} mm vs F/K = "
+                     f"{result.expected_penetration * 1e3:.4f} mm ({error:+.2%})")
     lines.append(f"energy: operator put in {result.operator_energy * 1e3:.4g} mJ (exact, simulated drive); observer: "
                  f"interface {s.interface_energy * 1e3:.4g} mJ (wall + b v^2 + kinetic; below zero in "
                  f"{s.observer_active_cycles} cycles), wall alone {s.wall_energy * 1e3:.4g} mJ")

@@ -1,19 +1,23 @@
 """The one place haptic_bus reaches the simulated drive: the demo rig, ``haptic-bus sim``, the bench.
 
-:func:`simulated_canopen` runs a profile's loop against the simulated drive in this process on
-python-can's virtual bus (``haptic-bus demo``, the end-to-end tests, the bench): the simulated
-drive is a real CANopen slave (:class:`sim_drive.canopen.slave.CanopenSimDrive`) and the
-controller reaches it through the real master (:class:`drives.canopen.drive.CanopenDrive`),
-frames and all.  :func:`simulator_command` is how a second process starts it.
+:func:`simulated_canopen` runs a profile's loop against the simulated drive in this process
+(``haptic-bus demo``, the end-to-end tests, the bench): the simulated drive is a real CANopen
+slave (:class:`sim_drive.canopen.slave.CanopenSimDrive`) and the controller reaches it through
+the real master (:class:`drives.canopen.drive.CanopenDrive`), frames and all.  By default they
+share the lock-step bus (:mod:`drives.lockstep_bus`: each frame is served in the sender's
+thread, so a virtual-time run is one thread, deterministic and free of thread hand-offs);
+``interface="virtual"`` puts them on python-can's threaded virtual bus instead (the same
+trajectories, bit for bit).  :func:`simulator_command` is how a second process starts it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import uuid
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from typing import Iterator
+from typing import Any, cast
 
 from drives.canopen.drive import CanopenDrive
 from drives.safety import SafetySettings
@@ -31,11 +35,28 @@ __all__ = [
     "cycle_bits",
     "eds_path",
     "frame_bits",
+    "operator_from_table",
     "profile_operator",
     "sim_main",
     "simulated_canopen",
     "simulator_command",
+    "virtual_time_safety",
 ]
+
+
+VIRTUAL_TIME_WATCHDOG_MS = 1000  # ms: both heartbeat consumers in a virtual-time run (see virtual_time_safety)
+
+
+def virtual_time_safety(period: float) -> SafetySettings:
+    """The safety chain for a virtual-time run in this process: the RPDO deadline, and the drive's
+    consumer of the controller's heartbeat, at least :data:`VIRTUAL_TIME_WATCHDOG_MS` of wall clock.
+
+    The heartbeats come from helper threads that a loop running flat out in the main thread
+    lets have the interpreter only at its switch interval; on a loaded machine they can fall
+    silent for more than the 60 ms the drive watches by default, with nothing dead.
+    """
+    settings = SafetySettings().for_virtual_time(period)
+    return dataclasses.replace(settings, consumer_ms=max(settings.consumer_ms, VIRTUAL_TIME_WATCHDOG_MS))
 
 
 def simulator_command(*arguments: str) -> list[str]:
@@ -63,23 +84,25 @@ def simulated_canopen(
     operator: OperatorModel | None = None,
     channel: str | None = None,
     substeps: int = 1,
+    interface: str = "lockstep",
 ) -> Iterator[tuple[CanopenSimDrive, CanopenDrive]]:
     """Start the simulated drive and connect the master, enabled in CST; stop both on exit.
 
-    ``substeps``: plant sub-steps per period with the operator force re-evaluated on each.
+    ``substeps``: plant sub-steps per period with the operator force re-evaluated on each;
+    ``interface``: ``"lockstep"`` (one thread) or ``"virtual"`` (python-can's, one thread per side).
     """
     channel = channel or f"haptic-bus-{uuid.uuid4().hex[:12]}"
     sim = CanopenSimDrive(
-        {"interface": "virtual", "channel": channel},
+        {"interface": interface, "channel": channel},
         node_id,
         timing=profile.loop.timing,
-        parameters=DeviceParameters(**profile.sim_device_parameters(), substeps=substeps),
+        parameters=DeviceParameters(**cast(dict[str, Any], profile.sim_device_parameters()), substeps=substeps),
         operator=operator if operator is not None else profile_operator(profile),
     )
     sim.start()
-    drive = CanopenDrive(node_id, interface="virtual", channel=channel, period=profile.loop.period,
-                         scaling=profile.scaling(), eds=eds_path(),
-                         safety=SafetySettings().for_virtual_time(profile.loop.period))
+    drive = CanopenDrive(node_id, interface=interface, channel=channel, period=profile.loop.period,
+                         scaling=profile.scaling(), eds=eds_path(), safety=virtual_time_safety(profile.loop.period),
+                         heartbeat_consumer_ms=VIRTUAL_TIME_WATCHDOG_MS)
     try:
         drive.connect()
         drive.enable()

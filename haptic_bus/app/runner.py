@@ -33,19 +33,22 @@ from typing import Any
 
 from drives.base import Drive
 from drives.bus_config import resolve_bus_config
+from drives.cia402_master import Cia402Master
 from drives.errors import DriveError, HapticBusError
 from haptic_bus.app.live import LiveView
 from haptic_bus.app.profiles import Profile
+from haptic_bus.app.realtime import RealtimeReport, RealtimeSettings, realtime_session
 from haptic_bus.app.run_folder import prepare_run_folder, run_document, write_run
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import Derate, RunSummary, WallController, encoder_origin
-from haptic_bus.control.gate import GateDecision, PassivityGate
+from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.supervisor import Action
 
 logger = logging.getLogger(__name__)
 
 DEFAULT_CONTROLLER_NODE_ID = 127
+PROFILE_SCALING_SOURCE = "profile [device]"  # how the profile's scaling values are named in the report
 DERATE_SCALE_STEPS = 40  # bisection steps of the derate's margin search inside a passive interval: 2^-40
 DERATE_EXTRA_DELAYS = (0.25, 0.5, 1.0, 2.0, 3.0)  # samples beyond the assumed delay a derated scene is prepared for
 EXIT_STATUS = {"completed": 0, "stopped": 0, "refused": 1, "drive error": 1, "assumption broken": 3, "interrupted": 130}
@@ -75,7 +78,8 @@ class StopRequest:
 @dataclasses.dataclass(frozen=True)
 class RunOptions:
     """One run: ``duration`` (s), real time or virtual time, the output folder (None: ``runs/...``),
-    the start-in-contact policy (None: the profile's), the live view, and the stop request."""
+    the start-in-contact policy (None: the profile's), the live view, the stop request, and what a
+    real-time run asks of the OS for its control thread (:mod:`~haptic_bus.app.realtime`)."""
 
     duration: float
     realtime: bool
@@ -83,6 +87,7 @@ class RunOptions:
     start_in_contact: str | None = None
     live: bool = True
     stop: StopRequest = dataclasses.field(default_factory=StopRequest)
+    scheduling: RealtimeSettings = RealtimeSettings()
 
 
 @dataclasses.dataclass
@@ -125,9 +130,11 @@ def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options:
     def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
         drive = CanopenDrive(node_id, interface=config["interface"], channel=config.get("channel"),
                              bitrate=config.get("bitrate"), bus_kwargs=extra, period=period, scaling=profile.scaling(),
+                             scaling_source=PROFILE_SCALING_SOURCE,
                              safety=safety if options.realtime else safety.for_virtual_time(period))
         stack.callback(drive.close)
         drive.connect()
+        _show_scaling(drive, options)
         link["safety_warnings"] = list(drive.safety_warnings)
 
         def serve(controller: WallController) -> None:
@@ -152,6 +159,7 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
         drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety)
         stack.callback(drive.close)
         drive.connect()
+        _show_scaling(drive, options)
         poll = None if drive.simulated_delay is not None else measure_poll(drive, 500)
         delay = loop_delay(drive, period, poll)
         link["poll"] = None if poll is None else dataclasses.asdict(poll)
@@ -161,6 +169,12 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
         return drive, gate, lambda controller: None
 
     return _session(profile, options, folder, link, open_drive)
+
+
+def _show_scaling(drive: Cia402Master, options: RunOptions) -> None:
+    """Say where each scaling factor came from (run.json records it too), unless the run is quiet."""
+    if options.live and drive.scaling_report is not None:
+        print("\n".join(f"scaling: {line}" for line in drive.scaling_report.lines()), flush=True)
 
 
 # --------------------------------------------------------------------------- one session
@@ -182,22 +196,23 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
             scene = profile.compiled_scene()
             origin, ramp_time = _safe_start(profile, drive, gate, scene, options)
             extra["start"] = {"position_m": origin, "ramp_time_s": ramp_time}
-            drive.enable()
             period = profile.loop.period
-            clock = RealClock(period) if options.realtime else VirtualClock(period)
+            clock = RealClock(period, spin=options.scheduling.spin) if options.realtime else VirtualClock(period)
             derate = prepare_derate(gate, scene) if Action.DERATE.value in (profile.supervisor.on_late,
                                                                             profile.supervisor.on_observer) else None
             controller = WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
                                         supervisor=profile.supervisor, ramp_time=ramp_time, derate=derate)
+            drive.enable()  # after the derate table and the scene's admission: the drive's watchdogs run from here
             serve(controller)
-            with _live(controller, profile, options):
+            with _live(controller, profile, options), _scheduling(options) as scheduling:
+                extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
                 summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
             reason, error = summary.exit_reason, summary.error
             if reason == "stopped" and options.stop.interrupted:
                 reason = "interrupted"
             if reason in ("completed", "stopped", "interrupted"):
                 drive.disable()
-    except StartRefused as exc:
+    except (StartRefused, GateRefusal) as exc:  # refused before the drive is enabled
         reason, error = "refused", str(exc)
     except DriveError as exc:
         reason, error = "drive error", str(exc)
@@ -217,6 +232,16 @@ def _live(controller: WallController, profile: Profile, options: RunOptions) -> 
         return
     with LiveView(controller, f"haptic-bus run {profile.name}"):
         yield
+
+
+@contextmanager
+def _scheduling(options: RunOptions) -> Iterator[RealtimeReport | None]:
+    """A real-time run's control thread set up for the cycles (entered last: helper threads keep theirs)."""
+    if not options.realtime:
+        yield None
+        return
+    with realtime_session(options.scheduling) as report:
+        yield report
 
 
 def _safe_start(profile: Profile, drive: Drive, gate: PassivityGate, scene: CompiledScene,

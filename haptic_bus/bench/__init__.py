@@ -1,19 +1,27 @@
-"""``haptic-bus bench [--quick] [--out DIR]``: run time against error, the bus against its limit.
+"""``haptic-bus bench [--quick] [--out DIR] [--soak [CYCLES]]``: run time against error, the bus against its limit.
 
-One module per comparison (issue 6), each measured side by side in one run and quoted as a
-ratio (absolute times are printed, never asserted):
+One module per comparison (issues 6 and 14), each measured side by side in one run and quoted
+as a ratio (absolute times are printed, never asserted); every timing is a median with its
+min-max over at least 5 repeats (:mod:`~haptic_bus.bench.timing`):
 
 1. :mod:`~haptic_bus.bench.passivity` -- passivity check: closed form, exact criterion, fixed
    theta grids 10^2..10^6, python-control; time per check vs error of the boundary against
-   mpmath (:mod:`~haptic_bus.bench.mp_boundary`).
+   mpmath (:mod:`~haptic_bus.bench.mp_boundary`); a full check at delay 1 against one
+   10^4-point numpy evaluation of ``T_fund``.
 2. :mod:`~haptic_bus.bench.plant_sim` -- plant simulation in the closed loop: exact ZOH, Euler,
    RK4, solve_ivp; time per simulated second vs trajectory error against mpmath.
 3. :mod:`~haptic_bus.bench.scene_cost` -- controller compute per cycle for 1..10 000 objects,
    compiled scene vs per-object loop.
-4. :mod:`~haptic_bus.bench.loop_rate` -- closed-loop cycles/s in virtual time (virtual bus,
-   udp_multicast, Modbus TCP) and the hot path vs canopen's generic PDO path.
+4. :mod:`~haptic_bus.bench.loop_rate` -- closed-loop cycles/s in virtual time (lock-step bus,
+   python-can's virtual bus, udp_multicast, Modbus TCP), the lock-step loop against
+   python-can's threaded echo, and the hot path vs canopen's generic PDO path.
 5. :mod:`~haptic_bus.bench.bus_limit` -- bits per cycle per axis, bus load, axes that fit.
-6. :mod:`~haptic_bus.bench.realtime` -- ``T = 1 ms`` with the real clock: period error, overruns.
+6. :mod:`~haptic_bus.bench.realtime` -- ``T = 1 ms`` with the real clock, two processes: lateness
+   and the controller's share of a core in three set-ups, quiet and beside a CPU hog.
+7. :mod:`~haptic_bus.bench.startup` -- ``check --json``, ``profiles list``, ``--help`` against
+   ``python -c "import numpy"``.
+8. :mod:`~haptic_bus.bench.soak` (only with ``--soak``; alone unless ``--only`` names other
+   sections) -- 10^7 cycles in virtual time: the integer position sum exact, memory flat.
 
 Writes ``DIR/bench.json`` (every figure, the machine, versions, date), ``DIR/bench.md`` (the
 tables, also printed) and PNG plots.  ``--quick`` (what CI runs) keeps to about a minute on a
@@ -28,14 +36,15 @@ import math
 import sys
 import time
 import traceback
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Callable, Sequence
 
 from haptic_bus.bench.timing import machine
 
-SECTIONS = ("passivity", "plant", "scene", "loop", "bus", "realtime")
+SECTIONS = ("passivity", "plant", "scene", "loop", "bus", "realtime", "startup")
 # progress ticks each section makes (quick, full): for the bar's total
-_TICKS = {"passivity": (6, 16), "plant": (15, 17), "scene": (5, 5), "loop": (4, 4), "bus": (2, 2), "realtime": (1, 1)}
+_TICKS = {"passivity": (7, 17), "plant": (15, 17), "scene": (5, 5), "loop": (6, 6), "bus": (2, 2), "realtime": (6, 6),
+          "startup": (3, 3)}
 
 
 class Progress:
@@ -68,13 +77,23 @@ def _runner(name: str) -> Callable[..., dict]:
     from importlib import import_module
 
     module = {"passivity": "passivity", "plant": "plant_sim", "scene": "scene_cost", "loop": "loop_rate",
-              "bus": "bus_limit", "realtime": "realtime"}[name]
+              "bus": "bus_limit", "realtime": "realtime", "startup": "startup"}[name]
     return import_module(f"haptic_bus.bench.{module}").run
 
 
+def _soak_runner(cycles: int) -> Callable[..., dict]:
+    def run(quick: bool, tick: Callable[[str], None]) -> dict:
+        from haptic_bus.bench.soak import run as soak
+
+        return soak(cycles, tick)
+
+    return run
+
+
 def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
-              sections: Sequence[str] = SECTIONS) -> dict:
-    """Run the benchmark sections; write ``bench.json``, ``bench.md`` and PNGs into ``out_dir``.
+              sections: Sequence[str] = SECTIONS, soak: int | None = None) -> dict:
+    """Run the benchmark sections (and the soak of ``soak`` cycles, if given); write ``bench.json``,
+    ``bench.md`` and PNGs into ``out_dir``.
 
     Returns the result dictionary (the content of ``bench.json``).  A section that cannot
     run (a missing optional package, a link that fails) is recorded with
@@ -82,20 +101,24 @@ def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    bar = Progress(sum(_TICKS[s][0 if quick else 1] for s in sections), progress)
+    runners = {name: _runner(name) for name in sections}
+    if soak is not None:
+        runners["soak"] = _soak_runner(soak)
+    ticks = sum(_TICKS[s][0 if quick else 1] for s in sections) + (soak // 1_000_000 + 1 if soak is not None else 0)
+    bar = Progress(ticks, progress)
     started = time.perf_counter()
-    result: dict = {"command": "haptic-bus bench" + (" --quick" if quick else ""), "quick": quick,
-                    "machine": machine(), "sections": {}}
+    result: dict = {"command": "haptic-bus bench" + (" --quick" if quick else "") + (f" --soak {soak}" if soak else ""),
+                    "quick": quick, "machine": machine(), "sections": {}}
     try:
-        for name in sections:
+        for name, runner in runners.items():
             t0 = time.perf_counter()
             try:
-                section = _runner(name)(quick, bar.tick)
+                section = runner(quick, bar.tick)
                 section.setdefault("available", True)
             except KeyboardInterrupt:  # Ctrl-C: what ran so far is still written
                 result["interrupted"] = name
                 break
-            except Exception as exc:  # noqa: BLE001 - reported in the output, the run goes on
+            except Exception as exc:
                 section = {"available": False, "reason": f"{type(exc).__name__}: {exc}",
                            "traceback": traceback.format_exc(limit=6)}
             section["section_seconds"] = time.perf_counter() - t0
@@ -126,7 +149,20 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", default="bench-out", help="output folder (default: ./bench-out)")
     parser.add_argument("--only", action="append", choices=SECTIONS, help="run only this section (repeatable)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    parser.add_argument("--soak", type=_cycles, nargs="?", const=10_000_000, metavar="CYCLES",
+                        help="run CYCLES cycles in virtual time (default 10^7): exact position sum, flat memory "
+                             "(alone, or after the --only sections)")
     return parser
+
+
+def _cycles(text: str) -> int:
+    try:
+        value = int(float(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of cycles") from None
+    if not 1 <= value <= 10**9:
+        raise argparse.ArgumentTypeError(f"{text} cycles is invalid; allowed: 1..1e9")
+    return value
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -136,8 +172,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
-    result = run_bench(args.out, quick=args.quick, progress=not args.no_progress,
-                       sections=args.only or SECTIONS)
+    sections = args.only or (() if args.soak else SECTIONS)  # --soak alone runs the soak alone
+    result = run_bench(args.out, quick=args.quick, progress=not args.no_progress, sections=sections, soak=args.soak)
     print((Path(args.out) / "bench.md").read_text())
     print(f"wrote {Path(args.out) / 'bench.json'}, {Path(args.out) / 'bench.md'}"
           + "".join(f", {p}" for p in result["plots"]))

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import math
 import uuid
-from typing import Callable
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -38,13 +39,14 @@ from drives.cia402 import (
     TARGET_TORQUE,
     TORQUE_ACTUAL,
     VELOCITY_ACTUAL,
+    ObjectSpec,
 )
 from haptic_bus.app.rig import BusLoadMeter, cycle_bits, frame_bits
 
 BITRATES = (125_000, 500_000, 1_000_000)
 PERIOD = 1e-3
 LOAD_CEILING = 0.7
-MAPPINGS = {
+MAPPINGS: dict[str, dict[str, tuple[ObjectSpec, ...]]] = {
     "minimal": {"tpdo": (STATUSWORD, VELOCITY_ACTUAL), "rpdo": (CONTROLWORD, TARGET_TORQUE)},
     "naive_full": {"tpdo": (STATUSWORD, POSITION_ACTUAL, TORQUE_ACTUAL, VELOCITY_ACTUAL, MODES_OF_OPERATION_DISPLAY,
                             ERROR_CODE),
@@ -52,11 +54,11 @@ MAPPINGS = {
 }
 
 
-def _frame_bytes(objects) -> list[int]:
+def _frame_bytes(objects: Sequence[ObjectSpec]) -> list[int]:
     return [sum(spec.data_type.size for spec in frame) for frame in split_into_frames(objects)]
 
 
-def mapping_budget(name: str) -> dict:
+def mapping_budget(name: str) -> dict[str, Any]:
     """Frames, bytes and worst-case bits per axis per cycle of one mapping."""
     mapping = MAPPINGS[name]
     tpdo, rpdo = _frame_bytes(mapping["tpdo"]), _frame_bytes(mapping["rpdo"])
@@ -76,8 +78,8 @@ def axes_that_fit(per_axis: int, bitrate: float, period: float = PERIOD, ceiling
     return max(0, math.floor(budget / per_axis))
 
 
-def measured_bits_per_cycle(tpdo_objects, cycles: int = 200) -> float:
-    """Median bits per SYNC cycle the BusLoadMeter counts on the virtual bus (in-process run)."""
+def measured_bits_per_cycle(tpdo_objects: Sequence[ObjectSpec], cycles: int = 200) -> float:
+    """Median bits per SYNC cycle the BusLoadMeter counts on the lock-step bus (in-process run)."""
     from drives.canopen.drive import CanopenDrive
     from drives.safety import SafetySettings
     from haptic_bus.app.rig import CanopenSimDrive, eds_path
@@ -85,8 +87,8 @@ def measured_bits_per_cycle(tpdo_objects, cycles: int = 200) -> float:
 
     channel = f"bench-bus-{uuid.uuid4().hex[:12]}"
     meter = BusLoadMeter(1_000_000, PERIOD)
-    sim = CanopenSimDrive({"interface": "virtual", "channel": channel}, 5, bus_meter=meter).start()
-    drive = CanopenDrive(5, interface="virtual", channel=channel, period=PERIOD, tpdo_objects=tpdo_objects, eds=eds_path(),
+    sim = CanopenSimDrive({"interface": "lockstep", "channel": channel}, 5, bus_meter=meter).start()
+    drive = CanopenDrive(5, interface="lockstep", channel=channel, period=PERIOD, tpdo_objects=tpdo_objects, eds=eds_path(),
                          safety=SafetySettings().for_virtual_time(PERIOD))
     try:
         drive.connect()
@@ -105,7 +107,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
     mappings = {name: mapping_budget(name) for name in MAPPINGS}
     table = []
     for bitrate in BITRATES:
-        row = {"bitrate": bitrate}
+        row: dict[str, Any] = {"bitrate": bitrate}
         for name, budget in mappings.items():
             one = budget["bits_one_axis_cycle"]
             row[name] = {
@@ -116,7 +118,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
             }
         table.append(row)
     tick("bus: model")
-    measured = {}
+    measured: dict[str, Any] = {}
     try:
         from drives.canopen.drive import DEFAULT_TPDO, DEFAULT_TPDO_WITH_POSITION
 
@@ -125,7 +127,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
             tpdo = _frame_bytes(objects)
             measured[label] = {"model_bits": frame_bits(0) + cycle_bits(tpdo + _frame_bytes(MAPPINGS["minimal"]["rpdo"])),
                                "meter_bits_median": measured_bits_per_cycle(objects, 100 if quick else 1000)}
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         measured = {"available": False, "reason": f"{type(exc).__name__}: {exc}"}
     tick("bus: measured")
     ratio = mappings["naive_full"]["bits_per_axis"] / mappings["minimal"]["bits_per_axis"]
@@ -135,5 +137,5 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
         "period_s": PERIOD, "load_ceiling": LOAD_CEILING,
         "mappings": mappings, "bitrates": table,
         "naive_over_minimal_bits": ratio,
-        "measured_on_virtual_bus": measured,
+        "measured_on_lockstep_bus": measured,
     }

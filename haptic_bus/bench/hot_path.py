@@ -11,7 +11,11 @@
 
 and returns the ratio generic/hot.  No bus is involved: it isolates the encode/decode cost.
 :func:`bench_closed_loop` measures whole closed-loop cycles per second on a connected,
-enabled drive (bus, drive and simulation included).  ``haptic-bus bench`` calls both.
+enabled drive (bus, drive and simulation included).  :func:`bench_echo_floor` is the floor a
+threaded in-process bus sets: python-can's own ``virtual`` bus with a responder thread that
+answers each SYNC with a TPDO, the caller sending SYNC, reading the TPDO and sending an RPDO
+(no CANopen library, no drive, no controller: frames and thread hand-offs only).
+``haptic-bus bench`` calls all three.
 
 Usage::
 
@@ -23,29 +27,44 @@ Usage::
 from __future__ import annotations
 
 import random
+import threading
 import time
+import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
+import can
 import canopen
 
 from drives.base import Drive
 from drives.canopen.od import minimal_cia402_od
 from drives.canopen.pdo_codec import PdoCodec, object_spec
 from drives.cia402 import CONTROLWORD, STATUSWORD, TARGET_TORQUE, VELOCITY_ACTUAL, ObjectSpec
+from haptic_bus.bench.timing import REPEATS, Spread, timed_once
 
 
 @dataclass(frozen=True)
 class CodecBenchResult:
-    """Seconds per cycle (decode one TPDO + encode one RPDO) on both paths, and their ratio."""
+    """Seconds per cycle (decode one TPDO + encode one RPDO) on both paths (spreads over repeats)."""
 
     frames: int
-    hot_path_s: float
-    generic_s: float
+    hot_path: Spread
+    generic: Spread
+
+    @property
+    def hot_path_s(self) -> float:
+        """Median seconds per cycle on the hot path."""
+        return self.hot_path.median
+
+    @property
+    def generic_s(self) -> float:
+        """Median seconds per cycle on canopen's generic PDO path."""
+        return self.generic.median
 
     @property
     def ratio(self) -> float:
-        """How many times slower canopen's generic PDO path is than the hot path."""
+        """How many times slower canopen's generic PDO path is than the hot path (medians)."""
         return self.generic_s / self.hot_path_s
 
     def __str__(self) -> str:
@@ -64,8 +83,9 @@ def _frames(codec: PdoCodec, count: int, seed: int) -> list[bytearray]:
     return frames
 
 
-def _generic_maps(tpdo: Sequence[ObjectSpec], node_id: int):
+def _generic_maps(tpdo: Sequence[ObjectSpec], node_id: int) -> tuple[Any, Any]:
     node = canopen.RemoteNode(node_id, minimal_cia402_od())
+    assert node.tpdo.map is not None and node.rpdo.map is not None  # canopen builds both maps with the node
     tmap = node.tpdo.map[1]
     tmap.clear()
     for spec in tpdo:
@@ -83,7 +103,7 @@ def _generic_maps(tpdo: Sequence[ObjectSpec], node_id: int):
 def bench_pdo_codecs(
     frames: int = 20000,
     tpdo_objects: Sequence[ObjectSpec | int] = (STATUSWORD, VELOCITY_ACTUAL),
-    repeat: int = 3,
+    repeat: int = REPEATS,
     seed: int = 1,
 ) -> CodecBenchResult:
     """Per-cycle cost (s) of hot-path vs canopen generic PDO decode+encode on the same frames."""
@@ -129,15 +149,9 @@ def bench_pdo_codecs(
 
     if hot() != generic():  # both paths must see the same numbers before they are timed
         raise AssertionError("hot path and canopen's generic path disagree on the benchmark frames")
-    hot_s = min(_timed(hot) for _ in range(repeat)) / frames
-    generic_s = min(_timed(generic) for _ in range(repeat)) / frames
+    hot_s = Spread.of([timed_once(hot)[0] for _ in range(repeat)]).scaled(1.0 / frames)
+    generic_s = Spread.of([timed_once(generic)[0] for _ in range(repeat)]).scaled(1.0 / frames)
     return CodecBenchResult(frames, hot_s, generic_s)
-
-
-def _timed(func) -> float:
-    start = time.perf_counter()
-    func()
-    return time.perf_counter() - start
 
 
 @dataclass(frozen=True)
@@ -171,3 +185,38 @@ def bench_closed_loop(drive: Drive, cycles: int = 2000, damping_permille_per_cou
         inputs = read()
         write(-round(gain * inputs.velocity))
     return LoopBenchResult(cycles, time.perf_counter() - start)
+
+
+def bench_echo_floor(cycles: int = 2000, interface: str = "virtual") -> LoopBenchResult:
+    """``cycles`` SYNC -> TPDO -> RPDO exchanges with a responder thread on a fresh ``interface`` channel."""
+    channel = f"echo-{uuid.uuid4().hex[:12]}"
+    master, drive = can.Bus(interface=interface, channel=channel), can.Bus(interface=interface, channel=channel)
+    stop = threading.Event()
+    tpdo = can.Message(arbitration_id=0x185, data=bytes(6), is_extended_id=False)
+
+    def respond() -> None:
+        while not stop.is_set():
+            msg = drive.recv(0.05)
+            if msg is not None and msg.arbitration_id == 0x080:
+                drive.send(tpdo)
+
+    responder = threading.Thread(target=respond, name="echo-responder", daemon=True)
+    responder.start()
+    sync = can.Message(arbitration_id=0x080, data=b"", is_extended_id=False)
+    rpdo = can.Message(arbitration_id=0x205, data=bytes(4), is_extended_id=False)
+    try:
+        start = time.perf_counter()
+        for _ in range(cycles):
+            master.send(sync)
+            while (msg := master.recv(1.0)) is not None and msg.arbitration_id != 0x185:
+                pass
+            if msg is None:
+                raise RuntimeError("the echo responder did not answer a SYNC within 1 s")
+            master.send(rpdo)
+        seconds = time.perf_counter() - start
+    finally:
+        stop.set()
+        responder.join(1.0)
+        master.shutdown()
+        drive.shutdown()
+    return LoopBenchResult(cycles, seconds)

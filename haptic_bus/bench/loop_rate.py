@@ -5,8 +5,9 @@ Every run is the product's controller (:class:`haptic_bus.control.controller.Wal
 simulated drive, whose plant advances exactly ``T`` per cycle, so the rate is what the CPU and
 the link allow:
 
-* **virtual bus, 1 process** -- :func:`haptic_bus.app.rig.simulated_canopen` (the simulated
-  CANopen slave and the master on python-can's ``virtual`` bus, in one process);
+* **lock-step bus, 1 process** -- :func:`haptic_bus.app.rig.simulated_canopen` on
+  :mod:`drives.lockstep_bus` (each frame served in the sender's thread: one thread in all);
+* **python-can virtual bus, 1 process** -- the same on python-can's threaded ``virtual`` bus;
 * **udp_multicast, 2 processes** -- ``python -m sim_drive`` as a subprocess on a unique
   loopback multicast port, the master here;
 * **Modbus TCP loopback, 2 processes** -- ``haptic_bus.bench.modbus_poll``'s simulator subprocess and
@@ -14,94 +15,94 @@ the link allow:
   cycle), plus that module's own ``bench_cycle`` in both cycle modes.
 
 Beside each, :func:`haptic_bus.bench.hot_path.bench_closed_loop` (the bare read/write cycle
-with a damper law, no scene, no observer, no record) on the same link.  Finally
+with a damper law, no scene, no observer, no record) on the same link.  Every rate is a median
+with min-max over at least 5 runs.  Issue 14's yardstick: the lock-step loop against python-can's
+own two-thread SYNC/TPDO/RPDO echo on its virtual bus
+(:func:`~haptic_bus.bench.hot_path.bench_echo_floor`), timed pairwise (target >= 1.5 x); and
+the two in-process buses' trajectories from the same start compared bit for bit.  Finally
 :func:`haptic_bus.bench.hot_path.bench_pdo_codecs`: the master's hot path against canopen's
-generic PDO path on the same frames (ratio).
+generic PDO path on the same frames.
 """
 
 from __future__ import annotations
 
-import os
-import random
-import subprocess
-import time
-from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
+import numpy as np
+
+from drives.base import Drive
 from haptic_bus.app.profiles import Profile, load_profile
-from haptic_bus.app.rig import simulator_command
-from haptic_bus.bench.timing import timed_once
+from haptic_bus.bench.timing import REPEATS, Spread, paired, repeated, timed_once
 from haptic_bus.control.clock import VirtualClock
 from haptic_bus.control.controller import WallController
+from haptic_bus.control.gate import PassivityGate
 
 PROFILE = "cia402-handle"
 NODE_ID = 5
-_START_WAIT = 30.0  # s: the subprocess imports numpy/scipy/canopen before it answers
-_REPO = Path(__file__).resolve().parents[2]
+FLOOR_RATIO_TARGET = 1.5
+TRAJECTORY = ("time_s", "position_m", "velocity_m_per_s", "force_n", "torque_permille", "energy_j", "scene_id", "scale")
 
 
-def _controller_rate(profile: Profile, drive, gate, cycles: int) -> dict:
-    """Cycles/s of the WallController on an enabled ``drive``, and of the bare read/write loop."""
-    from haptic_bus.bench.hot_path import bench_closed_loop
+def _controller(profile: Profile, drive: Drive, gate: PassivityGate) -> WallController:
+    return WallController(drive, gate, profile.compiled_scene(), force_limit=profile.force_limit,
+                          clock=VirtualClock(profile.loop.period))
 
-    controller = WallController(drive, gate, profile.compiled_scene(), force_limit=profile.force_limit,
-                                clock=VirtualClock(profile.loop.period))
-    controller.run(min(200, cycles))  # warm-up
+
+def _timed_run(controller: WallController, cycles: int) -> float:
     seconds, summary = timed_once(lambda: controller.run(cycles))
     if summary.error:
         raise RuntimeError(f"the controller run ended with an error: {summary.error}")
-    bare = bench_closed_loop(drive, cycles)
-    return {"cycles": cycles, "controller_cycles_per_s": cycles / seconds,
-            "controller_compute_p50_s": summary.compute_percentiles.get("p50"),
-            "bare_cycles_per_s": bare.cycles_per_second}
+    return seconds
 
 
-def virtual_bus(profile: Profile, cycles: int) -> dict:
-    """In-process: simulated slave + master on python-can's virtual bus."""
+def _controller_rate(profile: Profile, drive: Drive, gate: PassivityGate, cycles: int) -> dict:
+    """Cycles/s of the WallController on an enabled ``drive``, and of the bare read/write loop (spreads)."""
+    from haptic_bus.bench.hot_path import bench_closed_loop
+
+    controller = _controller(profile, drive, gate)
+    controller.run(min(200, cycles))  # warm-up
+    rate = repeated(lambda: _timed_run(controller, cycles)).rate(cycles)
+    compute = controller.summary().compute_percentiles.get("p50")
+    bare = repeated(lambda: bench_closed_loop(drive, cycles).seconds).rate(cycles)
+    return {"cycles": cycles, "controller_cycles_per_s": rate.median, "controller_rate": rate.to_dict(),
+            "controller_compute_p50_s": compute, "bare_cycles_per_s": bare.median, "bare_rate": bare.to_dict()}
+
+
+def in_process(profile: Profile, cycles: int, interface: str) -> tuple[dict, np.ndarray]:
+    """In-process simulated slave + master on ``interface``: the rates, and the trajectory of the
+    first ``cycles`` cycles from the start (columns :data:`TRAJECTORY`)."""
     from haptic_bus.app.rig import simulated_canopen
 
+    with simulated_canopen(profile, interface=interface) as (_, drive):
+        controller = _controller(profile, drive, profile.gate())
+        _timed_run(controller, cycles)
+        trajectory = np.column_stack([controller.record.column(name) for name in TRAJECTORY])
+        return _controller_rate(profile, drive, profile.gate(), cycles), trajectory
+
+
+def against_echo_floor(profile: Profile, cycles: int) -> dict:
+    """The lock-step closed loop against python-can's threaded echo, pairwise (ratio of rates)."""
+    from haptic_bus.app.rig import simulated_canopen
+    from haptic_bus.bench.hot_path import bench_echo_floor
+
     with simulated_canopen(profile) as (_, drive):
-        return _controller_rate(profile, drive, profile.gate(), cycles)
-
-
-def _wait_heartbeat(bus_kwargs: dict, node_id: int, process: subprocess.Popen, timeout: float) -> None:
-    import can
-
-    deadline = time.monotonic() + timeout
-    with can.Bus(**bus_kwargs) as bus:
-        while time.monotonic() < deadline:
-            if process.poll() is not None:
-                raise RuntimeError(f"the simulator exited early with status {process.returncode}")
-            msg = bus.recv(0.1)
-            if msg is not None and msg.arbitration_id == 0x700 + node_id:
-                return
-    raise RuntimeError(f"no heartbeat of node {node_id} within {timeout} s")
-
-
-def _stop(process: subprocess.Popen) -> int:
-    process.terminate()
-    try:
-        return process.wait(10)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        return process.wait(10)
+        controller = _controller(profile, drive, profile.gate())
+        controller.run(min(200, cycles))
+        echo, loop, ratio = paired(lambda: bench_echo_floor(cycles).seconds, lambda: _timed_run(controller, cycles))
+    return {"cycles": cycles, "lockstep_rate": loop.rate(cycles).to_dict(), "echo_floor_rate": echo.rate(cycles).to_dict(),
+            "ratio": ratio.to_dict(), "ratio_target": FLOOR_RATIO_TARGET, "met": ratio.median >= FLOOR_RATIO_TARGET,
+            "note": "ratio = lock-step controller cycles/s over python-can's two-thread SYNC/TPDO/RPDO echo on its "
+                    "virtual bus, per pair of runs"}
 
 
 def udp_multicast(profile: Profile, cycles: int) -> dict:
     """Two processes: ``python -m sim_drive`` on udp_multicast (unique port) and the master here."""
     from drives.canopen.drive import CanopenDrive
     from drives.safety import SafetySettings
+    from haptic_bus.bench.processes import canopen_simulator
 
-    group = f"239.74.{160 + os.getpid() % 64}.{1 + os.getpid() % 250}"
-    port = random.randint(45000, 55000)
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_REPO), env.get("PYTHONPATH")]))
-    args = simulator_command("--interface", "udp_multicast", "--channel", group,
-                             "--bus-option", f"port={port}", "--node-id", str(NODE_ID), "--profile", PROFILE)
-    process = subprocess.Popen(args, cwd=_REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        _wait_heartbeat({"interface": "udp_multicast", "channel": group, "port": port}, NODE_ID, process, _START_WAIT)
-        drive = CanopenDrive(NODE_ID, interface="udp_multicast", channel=group, bus_kwargs={"port": port},
+    with canopen_simulator(PROFILE, NODE_ID) as (bus, _):
+        drive = CanopenDrive(NODE_ID, interface=bus["interface"], channel=bus["channel"], bus_kwargs={"port": bus["port"]},
                              period=profile.loop.period, scaling=profile.scaling(),
                              safety=SafetySettings().for_virtual_time(profile.loop.period))
         try:
@@ -111,10 +112,7 @@ def udp_multicast(profile: Profile, cycles: int) -> dict:
             drive.disable()
         finally:
             drive.close()
-    finally:
-        status = _stop(process)
-    result["simulator_exit_status"] = status
-    result["bus"] = f"udp_multicast {group} port {port}"
+    result["bus"] = f"udp_multicast {bus['channel']} port {bus['port']}"
     return result
 
 
@@ -125,9 +123,8 @@ def modbus_tcp(profile: Profile, cycles: int) -> dict:
     from drives.modbus.drive import CYCLE_MODES, ModbusDrive
     from drives.modbus.timing import loop_delay
     from haptic_bus.bench.modbus_poll import bench_cycle, start_simulator, stop_simulator
-    from haptic_bus.control.gate import PassivityGate
 
-    process, url = start_simulator("ideal")
+    process, url = start_simulator("ideal", profile=PROFILE)  # its scaling objects match the profile's
     try:
         drive = ModbusDrive.from_url(url, scaling=profile.scaling())
         try:
@@ -141,10 +138,12 @@ def modbus_tcp(profile: Profile, cycles: int) -> dict:
             drive.close()
         result["bench_cycle"] = {}
         for mode in CYCLE_MODES:
-            timing = bench_cycle(url, mode, cycles)
-            result["bench_cycle"][mode] = {"cycles_per_s": timing.cycles_per_second,
-                                           "requests_per_cycle": timing.requests_per_cycle,
-                                           "round_trip_p50_s": timing.p50, "round_trip_p99_s": timing.p99}
+            timings = [bench_cycle(url, mode, cycles) for _ in range(REPEATS)]
+            rate = Spread.of([t.cycles_per_second for t in timings])
+            result["bench_cycle"][mode] = {"cycles_per_s": rate.median, "rate": rate.to_dict(),
+                                           "requests_per_cycle": timings[0].requests_per_cycle,
+                                           "round_trip_p50_s": float(np.median([t.p50 for t in timings])),
+                                           "round_trip_p99_s": float(np.median([t.p99 for t in timings]))}
     finally:
         status = stop_simulator(process)
     result["simulator_exit_status"] = status
@@ -159,25 +158,42 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
     cycles = 2_000 if quick else 20_000
     profile = load_profile(PROFILE)
     links: dict[str, dict] = {}
-    for key, label, func in (("virtual", "virtual bus, 1 process", virtual_bus),
+    trajectories: dict[str, np.ndarray] = {}
+
+    def one_process(interface: str) -> Callable[[Profile, int], dict]:
+        def measure(profile: Profile, cycles: int) -> dict:
+            rates, trajectories[interface] = in_process(profile, cycles, interface)
+            return rates
+        return measure
+
+    for key, label, func in (("lockstep", "lock-step bus, 1 process", one_process("lockstep")),
+                             ("virtual", "python-can virtual bus, 1 process", one_process("virtual")),
                              ("udp_multicast", "udp_multicast, 2 processes", udp_multicast),
                              ("modbus_tcp", "Modbus TCP loopback, 2 processes", modbus_tcp)):
         try:
             links[key] = {"label": label, "available": True, **func(profile, cycles)}
-        except Exception as exc:  # noqa: BLE001 - a link that cannot run is a row that says why
+        except Exception as exc:
             links[key] = {"label": label, "available": False, "reason": f"{type(exc).__name__}: {exc}"}
         tick(f"loop: {label}")
-    codec = bench_pdo_codecs(frames=5_000 if quick else 20_000, repeat=5)
+    floor = against_echo_floor(profile, cycles)
+    tick("loop: lock-step against the echo floor")
+    codec = bench_pdo_codecs(frames=5_000 if quick else 20_000, repeat=REPEATS)
     tick("loop: PDO codecs")
-    base = links["virtual"].get("controller_cycles_per_s")
+    base = links["lockstep"].get("controller_cycles_per_s")
     for entry in links.values():
         if entry.get("available") and base:
-            entry["ratio_to_virtual"] = entry["controller_cycles_per_s"] / base
+            entry["ratio_to_lockstep"] = entry["controller_cycles_per_s"] / base
+    same = ("lockstep" in trajectories and "virtual" in trajectories
+            and trajectories["lockstep"].shape == trajectories["virtual"].shape
+            and bool(np.all(trajectories["lockstep"] == trajectories["virtual"])))
     return {
-        "description": "closed-loop cycles per second in virtual time (controller + simulated drive); "
-                       "hot path vs canopen's generic PDO path",
+        "description": "closed-loop cycles per second in virtual time (controller + simulated drive); the lock-step "
+                       "loop against python-can's threaded echo; hot path vs canopen's generic PDO path",
         "profile": PROFILE,
         "links": links,
+        "echo_floor": floor,
+        "trajectories_identical": {"cycles": cycles, "lockstep_equals_virtual": same},
         "pdo_codec": {"frames": codec.frames, "hot_path_s": codec.hot_path_s, "generic_s": codec.generic_s,
+                      "hot_path": codec.hot_path.to_dict(), "generic": codec.generic.to_dict(),
                       "ratio_generic_over_hot": codec.ratio},
     }

@@ -24,21 +24,23 @@ from collections.abc import Sequence
 import numpy as np
 
 from drives.modbus.drive import CYCLE_MODES, ModbusDrive
+from drives.modbus.link import ModbusStats
 from drives.modbus.timing import PollTiming
 from haptic_bus.app.rig import simulator_command
 
 _BOUND = re.compile(r"serving Modbus TCP on (tcp://\S+)")
 
 
-def start_simulator(timing: str = "ideal", timeout: float = 10.0) -> tuple[subprocess.Popen, str]:
-    """Start ``python -m sim_drive --modbus tcp://127.0.0.1:0``; return the process and its URL."""
+def start_simulator(timing: str = "ideal", timeout: float = 10.0, profile: str | None = None) -> tuple[subprocess.Popen, str]:
+    """Start ``python -m sim_drive --modbus tcp://127.0.0.1:0`` (the device of ``profile``, if given);
+    return the process and its URL."""
     process = subprocess.Popen(
-        simulator_command("--modbus", "tcp://127.0.0.1:0", "--timing", timing),
+        simulator_command("--modbus", "tcp://127.0.0.1:0", "--timing", timing, *(("--profile", profile) if profile else ())),
         stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
     )
     deadline = time.monotonic() + timeout
     lines: list[str] = []
-    while time.monotonic() < deadline:
+    while time.monotonic() < deadline and process.stderr is not None:
         line = process.stderr.readline()
         if not line:
             break
@@ -64,7 +66,8 @@ def stop_simulator(process: subprocess.Popen, timeout: float = 10.0) -> int:
 def bench_cycle(url: str, cycle: str, cycles: int, *, time_limit: float = 30.0) -> PollTiming:
     """``cycles`` wall-law cycles over ``url`` with ``cycle`` mode; the timing of each cycle."""
     K, B, T = 200.0, 100.0, 1e-3
-    with ModbusDrive.from_url(url, cycle=cycle) as drive:
+    drive = ModbusDrive.from_url(url, cycle=cycle)
+    with drive:
         drive.connect()
         drive.enable()
         scaling = drive.scaling
@@ -72,7 +75,9 @@ def bench_cycle(url: str, cycle: str, cycles: int, *, time_limit: float = 30.0) 
         samples = np.empty(cycles)
         clock = time.perf_counter
         read, write, torque_of = drive.read_inputs, drive.write_outputs, scaling.torque_permille
-        requests_before = drive.stats.cyclic_requests
+        stats = drive.stats
+        assert isinstance(stats, ModbusStats)  # a ModbusDrive counts its requests
+        requests_before = stats.cyclic_requests
         x = 0.0
         started = clock()
         deadline = started + time_limit
@@ -88,7 +93,7 @@ def bench_cycle(url: str, cycle: str, cycles: int, *, time_limit: float = 30.0) 
             if t1 > deadline:
                 break
         wall = clock() - started
-        requests = drive.stats.cyclic_requests - requests_before
+        requests = stats.cyclic_requests - requests_before
         drive.disable()
     used = samples[:done]
     p50, p99 = np.percentile(used, [50, 99])

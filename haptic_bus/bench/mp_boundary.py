@@ -31,7 +31,9 @@ from __future__ import annotations
 
 import functools
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import mpmath as mp
 
@@ -57,7 +59,7 @@ class ReferenceBoundary:
     verified: bool
 
 
-def _model(loop: WallLoop):
+def _model(loop: WallLoop) -> tuple[Any, Any, Any, tuple[int, Any] | None]:
     """Physical (A, b, C, reset) of the plant with its measurement; reset = (state, time in s) or None."""
     m, b, T = (mp.mpf(x) for x in (loop.m, loop.b, loop.T))
     kind = loop.velocity.kind
@@ -70,7 +72,7 @@ def _model(loop: WallLoop):
     return mp.matrix([[-b / m, 0], [1, 0]]), mp.matrix([1 / m, 0]), mp.matrix([[0, 1 / width]]), (1, T - width)
 
 
-def sampled_map(loop: WallLoop):
+def sampled_map(loop: WallLoop) -> tuple[Any, Any, Any, Any]:
     """(Phi, g_now, g_before, C) of one period, physical units, from matrix exponentials (cached per precision)."""
     return _sampled_map(loop.m, loop.b, loop.T, loop.delay, loop.velocity, mp.mp.dps)
 
@@ -106,7 +108,7 @@ def _sampled_map(m_, b_, T_, delay, velocity, dps):
     return phi, g["now"], g["before"], C
 
 
-def measurement(loop: WallLoop, s):
+def measurement(loop: WallLoop, s: Any) -> Any:
     """``M(s)`` of the velocity model (dimensionless) at the Laplace variable ``s`` (1/s)."""
     kind = loop.velocity.kind
     if kind == "point":
@@ -117,7 +119,7 @@ def measurement(loop: WallLoop, s):
     return (1 - mp.exp(-s * width)) / (s * width)
 
 
-def response_terms(loop: WallLoop, theta, K=None, B=None):
+def response_terms(loop: WallLoop, theta: Any, K: Any = None, B: Any = None) -> tuple[Any, Any, Any, Any]:
     """(G11, G_md, K_d, (H/T) e^{-s D T} M(s)) at theta (mpf), the wall K, B overriding the loop's."""
     m, b, T = (mp.mpf(x) for x in (loop.m, loop.b, loop.T))
     K = mp.mpf(loop.K if K is None else K)
@@ -138,13 +140,13 @@ def response_terms(loop: WallLoop, theta, K=None, B=None):
     return g11, g_md, wall, hold * mp.exp(-s * D * T) * measurement(loop, s)
 
 
-def impedance(loop: WallLoop, K, B, theta):
+def impedance(loop: WallLoop, K: Any, B: Any, theta: Any) -> Any:
     """``1/T_fund`` in N s/m at ``theta`` for the wall ``K``, ``B`` (all mpf), from the definition."""
     g11, g_md, wall, path = response_terms(loop, theta, K, B)
     return 1 / (g11 * (1 - path * wall * g11 / (1 + g_md * wall)))
 
 
-def closed_loop_matrix(loop: WallLoop, K, B):
+def closed_loop_matrix(loop: WallLoop, K: Any, B: Any) -> Any:
     """``M`` of ``xi_{k+1} = M xi_k``, ``xi = [s, x_{k-1}, u_{k-1}, .., u_{k-L}]`` (physical units, mpf)."""
     phi, g_now, g_before, C = sampled_map(loop)
     T = mp.mpf(loop.T)
@@ -203,7 +205,7 @@ class _Loop:
         K, B = self.wall(x)
         return max(abs(e) for e in mp.eig(closed_loop_matrix(self.loop, K, B), left=False, right=False))
 
-    def minimum(self, x) -> tuple[mp.mpf, mp.mpf, tuple]:
+    def minimum(self, x: Any) -> tuple[Any, Any, tuple]:
         """(min Re Z over (0, pi], theta there, bracket): dense scan, then golden section at each local minimum."""
         thetas = [mp.pi * i / _UNIFORM for i in range(1, _UNIFORM + 1)]
         low = -mp.log10(THETA_LOW)
@@ -235,11 +237,11 @@ class _Loop:
                 fd = self.re_z(x, d)
         return (fc, c) if fc < fd else (fd, d)
 
-    def passive(self, x) -> bool:
+    def passive(self, x: Any) -> bool:
         return self.spectral_radius(x) < 1 and self.minimum(x)[0] >= 0
 
 
-def _bracketed_root(f, x0, lower: bool = False):
+def _bracketed_root(f: Callable[[Any], Any], x0: Any, lower: bool = False) -> Any:
     """Root of ``f`` (positive below and negative above, or the reverse if ``lower``) near ``x0``:
     bracket, then Anderson-Bjorck."""
     width = mp.mpf("1e-6")

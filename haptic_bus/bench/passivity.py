@@ -26,6 +26,15 @@ Methods (a *check* is one verdict on one loop, its time the median of repeats):
   system cannot be interconnected (``Systems have incompatible timebases``); so those two
   steps are numpy, and ``T_fund`` is assembled point by point from control's responses.
 
+Every time is a median over the points of each point's median of at least 5 repeats, with the
+medians of the repeats' minima and maxima beside it.
+
+**The full check against numpy's floor** (issue 14): at each delay-1 point, one full check
+(:func:`full_check`: the exact verdict and every passive ``K`` and ``B``, what ``haptic-bus
+check`` decides first) against one evaluation of ``T_fund`` on 10^4 uniform points in plain
+numpy (:func:`numpy_t_fund`, DESIGN 3.2's formula as written), timed pairwise; target <= 5 x,
+with the boundaries within 1e-12 of the reference.
+
 The boundary of a grid-based method (grids, python-control) is found by Newton's method on
 that method's own margin (N s/m) along ``K`` (or ``B``), started at the reference boundary,
 with the slope of the exact criterion's margin there: one step when it moves less than 1e-6
@@ -35,22 +44,24 @@ the accumulated correction.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any
 
 import numpy as np
 
 from haptic_bus.analysis.closed_form import region_map, velocity_sampling_factor, velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict
-from haptic_bus.analysis.frequency import z_fund
-from haptic_bus.analysis.limits import max_damping, max_stiffness
+from haptic_bus.analysis.frequency import t_fund, z_fund
+from haptic_bus.analysis.limits import max_damping, max_stiffness, passive_limits
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import phi1
 from haptic_bus.analysis.poles import is_stable
-from haptic_bus.bench.timing import time_per_call, timed_once
+from haptic_bus.bench.timing import Spread, paired_calls, time_per_call
 
 SEED = 20240606
 PERIOD = 1e-3
@@ -59,6 +70,8 @@ CONTROL_GRID = 10_000
 FULL_POINTS = 8
 QUICK_POINTS = (0, 1, 5)  # of the full set: a flip (d = 0), an interior tangency and a theta -> 0 boundary (d = 1)
 ERROR_FLOOR = 1e-17  # plotted instead of an error of exactly 0
+FULL_CHECK_RATIO_TARGET = 5.0  # issue 14: a full check at delay 1 within 5 x one 10^4-point numpy T_fund
+FULL_CHECK_ERROR_TARGET = 1e-12  # issue 14: its boundaries within 1e-12 of the 40-digit reference
 _SLOPE_STEP = 1e-6
 
 
@@ -110,7 +123,7 @@ def control_margin(loop: WallLoop, grid: np.ndarray) -> float:
     k1 = T / m * phi1(c)
     g11 = control.tf([1.0], [m, b])
     g11d = control.tf([k1], [1.0, -math.exp(-c)], T)
-    wall = control.tf([K * T + B, -B], [1.0, -1.0] + [0.0] * d, T)
+    wall = control.tf([K * T + B, -B], [1.0, -1.0] + [0.0] * round(d), T)
     closed = control.feedback(g11d, wall)
     if not np.all(np.abs(control.poles(closed)) < 1.0):
         return -math.inf
@@ -143,12 +156,11 @@ def exact_slope(loop: WallLoop, which: str, x: float) -> float:
 
 
 def newton_boundary(margin: Callable[[WallLoop], float], loop: WallLoop, which: str, start: float,
-                    slope: float, times: list[float], max_steps: int = 8) -> float:
-    """Root of ``margin`` along ``which`` from ``start`` with a fixed ``slope``; call times appended."""
+                    slope: float, max_steps: int = 8) -> float:
+    """Root of ``margin`` along ``which`` from ``start`` with a fixed ``slope``."""
     x = start
     for i in range(max_steps):
-        seconds, value = timed_once(lambda: margin(_with(loop, which, x)))
-        times.append(seconds)
+        value = margin(_with(loop, which, x))
         if value == 0.0:
             return x
         if not math.isfinite(value):  # unstable by this method's test: the boundary is further inside
@@ -169,32 +181,80 @@ def newton_boundary(margin: Callable[[WallLoop], float], loop: WallLoop, which: 
 class _Method:
     name: str
     key: str
-    check: Callable[[WallLoop], float] | None  # margin-like, timed per check
+    check: Callable[[WallLoop], float]  # margin-like, timed per check
     applies: Callable[[WallLoop], bool]
     newton: bool  # boundary by Newton on ``check``; else a dedicated boundary function
-    large: bool = False  # too slow to time separately: time the Newton evaluations instead
+    large: bool = False  # slow: each timed batch is one call
 
 
 def _methods(grid_sizes: tuple[int, ...], with_control: bool) -> list[_Method]:
     methods = [
-        _Method("closed form (eq. 23)", "closed_form", velocity_sampling_slack, lambda l: l.delay == 0, False),
-        _Method("exact criterion", "exact", lambda l: exact_verdict(l).margin, lambda l: True, False),
+        _Method("closed form (eq. 23)", "closed_form", velocity_sampling_slack, lambda lp: lp.delay == 0, False),
+        _Method("exact criterion", "exact", lambda lp: exact_verdict(lp).margin, lambda lp: True, False),
     ]
     for n in grid_sizes:
         grid = uniform_grid(n)
-        methods.append(_Method(f"grid 10^{round(math.log10(n))}", f"grid_{n}",
-                               lambda l, g=grid: grid_margin(l, g), lambda l: True, True, large=n >= 100_000))
+        methods.append(_Method(f"grid 10^{round(math.log10(n))}", f"grid_{n}", functools.partial(grid_margin, grid=grid),
+                               lambda lp: True, True, large=n >= 100_000))
     if with_control:
         grid = uniform_grid(CONTROL_GRID)
         methods.append(_Method(f"python-control (grid 10^{round(math.log10(CONTROL_GRID))})", "control",
-                               lambda l, g=grid: control_margin(l, g), lambda l: True, True))
+                               functools.partial(control_margin, grid=grid), lambda lp: True, True))
     return methods
 
 
-def _region_map_time(loop: WallLoop) -> float:
+def _region_map_time(loop: WallLoop) -> Spread:
     """Seconds for one eq. (24) passive-region map over 10^6 (alpha, beta) points."""
     alpha, beta = np.meshgrid(np.logspace(-2, 3, 1000), np.logspace(-3, 2, 1000))
-    return time_per_call(lambda: region_map(alpha, beta, loop.c), repeats=3)
+    return time_per_call(lambda: region_map(alpha, beta, loop.c), min_ns=0)
+
+
+def median_of(spreads: list[Spread]) -> Spread:
+    """A figure over several parameter points: the median of their medians, of their mins and of their maxes."""
+    return Spread(float(np.median([s.median for s in spreads])), float(np.median([s.low for s in spreads])),
+                  float(np.median([s.high for s in spreads])), min(s.repeats for s in spreads))
+
+
+# --------------------------------------------------------------------------- the full check against numpy's floor
+
+
+def numpy_t_fund(loop: WallLoop, theta: np.ndarray) -> np.ndarray:
+    """The floor: DESIGN 3.2's ``T_fund`` for point sampling and a whole delay, written as plain numpy
+    complex arithmetic (no care for cancellation), m/(N s)."""
+    m, b, T, d = loop.m, loop.b, loop.T, round(loop.delay)
+    z = np.exp(1j * theta)
+    g11 = 1.0 / (m * 1j * theta / T + b)
+    g11d = T / m * phi1(loop.c) / (z - math.exp(-loop.c))
+    wall = (loop.K * T * z / (z - 1.0) + loop.B) * z ** (-d)
+    hold = (1.0 - np.exp(-1j * theta)) / (1j * theta)
+    return g11 * (1.0 - hold * wall * g11 / (1.0 + g11d * wall))
+
+
+def full_check(loop: WallLoop) -> tuple[bool, float | None, float | None]:
+    """What ``haptic-bus check`` decides first: the exact verdict, the largest passive ``K`` and ``B``."""
+    stiffness, damping = passive_limits(loop)
+    return exact_verdict(loop).passive, stiffness.largest, damping.largest
+
+
+def full_check_against_floor(loops: list[WallLoop]) -> dict:
+    """Issue 14's yardstick: a full check (:func:`full_check`) against one 10^4-point :func:`numpy_t_fund`,
+    timed pairwise at each delay-1 point; the product's cancellation-free ``t_fund`` on the same grid beside."""
+    grid = uniform_grid(CONTROL_GRID)
+    rows, ratios = [], []
+    for loop in loops:
+        agreement = float(np.max(np.abs(numpy_t_fund(loop, grid) / t_fund(loop, grid) - 1.0)))
+        check, floor, ratio = paired_calls(functools.partial(full_check, loop), functools.partial(numpy_t_fund, loop, grid))
+        product = time_per_call(functools.partial(t_fund, loop, grid))
+        ratios.append(ratio)
+        rows.append({"m": loop.m, "b": loop.b, "K": loop.K, "B": loop.B, "delay": loop.delay,
+                     "full_check_s": check.to_dict(), "numpy_t_fund_1e4_s": floor.to_dict(), "ratio": ratio.to_dict(),
+                     "product_t_fund_1e4_s": product.to_dict(), "numpy_vs_product_max_relative": agreement})
+    worst = max(ratios, key=lambda r: r.median)
+    return {"points": rows, "ratio": {"median": float(np.median([r.median for r in ratios])), "max": worst.median,
+                                      "worst_point": worst.to_dict()},
+            "ratio_target": FULL_CHECK_RATIO_TARGET,
+            "note": "full check = exact verdict + every passive K at the point's B + every passive B at its K; the floor "
+                    "is T_fund on 10^4 uniform theta points in plain numpy (DESIGN 3.2, point sampling, whole delay)"}
 
 
 def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
@@ -211,19 +271,21 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
         points = [points[i] for i in QUICK_POINTS]
     grid_sizes = GRID_SIZES_FULL
     methods = _methods(grid_sizes, with_control)
-    per_point = []
-    times: dict[str, list[float]] = {m.key: [] for m in methods}
+    per_point: list[dict[str, Any]] = []
+    times: dict[str, list[Spread]] = {m.key: [] for m in methods}
     errors: dict[str, dict[str, list[float]]] = {m.key: {"K": [], "B": []} for m in methods}
-    boundary_times: dict[str, list[float]] = {"exact": [], "closed_form": []}
+    boundary_times: dict[str, list[Spread]] = {"exact": [], "closed_form": []}
     for p_index, loop in enumerate(points):
-        record = {"m": loop.m, "b": loop.b, "T": loop.T, "K": loop.K, "B": loop.B, "delay": loop.delay, "c": loop.c,
-                  "boundaries": {}}
+        record: dict[str, Any] = {"m": loop.m, "b": loop.b, "T": loop.T, "K": loop.K, "B": loop.B, "delay": loop.delay,
+                                  "c": loop.c, "boundaries": {}}
         for which, exact_limit in (("K", max_stiffness), ("B", max_damping)):
-            seconds, estimate = timed_once(lambda: exact_limit(loop))
-            boundary_times["exact"].append(seconds)
+            estimate = exact_limit(loop)
+            if estimate is None:
+                raise RuntimeError(f"no passive {which} at a benchmark point: {loop}")
+            boundary_times["exact"].append(time_per_call(functools.partial(exact_limit, loop), min_ns=0))
             ref = reference_boundary(loop, which, estimate)
             slope = exact_slope(loop, which, ref.value)
-            entry = {"reference": ref.value, "reference_theta": ref.theta, "reference_kind": ref.kind,
+            entry: dict[str, Any] = {"reference": ref.value, "reference_theta": ref.theta, "reference_kind": ref.kind,
                      "reference_verified": ref.verified, "methods": {}}
             for method in methods:
                 if not method.applies(loop):
@@ -231,48 +293,58 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
                 if method.key == "exact":
                     value = estimate
                 elif method.key == "closed_form":
-                    seconds, value = timed_once(lambda: closed_form_boundary(loop, which))
-                    boundary_times["closed_form"].append(seconds)
+                    value = closed_form_boundary(loop, which)
+                    boundary_times["closed_form"].append(time_per_call(functools.partial(closed_form_boundary, loop, which)))
                 else:
-                    sink = times[method.key] if method.large else []
-                    value = newton_boundary(method.check, loop, which, ref.value, slope, sink)
+                    value = newton_boundary(method.check, loop, which, ref.value, slope)
                 error = abs(value - ref.value) / ref.value
                 errors[method.key][which].append(error)
                 entry["methods"][method.key] = {"boundary": value, "relative_error": error}
             record["boundaries"][which] = entry
             tick(f"passivity: point {p_index + 1}/{len(points)} {which}")
         for method in methods:
-            if method.applies(loop) and not method.large:
-                times[method.key].append(time_per_call(lambda: method.check(loop), repeats=5))
+            if method.applies(loop):
+                times[method.key].append(time_per_call(functools.partial(method.check, loop),
+                                                       min_ns=0 if method.large else 2_000_000))
         per_point.append(record)
-    exact_time = float(np.median(times["exact"]))
+    exact_time = median_of(times["exact"]).median
     region = _region_map_time(points[0])
     summary = []
     for method in methods:
         errs = errors[method.key]["K"] + errors[method.key]["B"]
         if not errs:
             continue
-        t = float(np.median(times[method.key]))
+        t = median_of(times[method.key])
         summary.append({
             "method": method.name, "key": method.key,
-            "time_per_check_s": t, "time_ratio_to_exact": t / exact_time,
+            "time_per_check_s": t.median, "time_per_check": t.to_dict(), "time_ratio_to_exact": t.median / exact_time,
             "error_K_median": float(np.median(errors[method.key]["K"])), "error_K_max": float(np.max(errors[method.key]["K"])),
             "error_B_median": float(np.median(errors[method.key]["B"])), "error_B_max": float(np.max(errors[method.key]["B"])),
             "error_max": float(np.max(errs)), "points": len(errs) // 2,
         })
+    delayed = [i for i, loop in enumerate(points) if loop.delay == 1]
+    full = full_check_against_floor([points[i] for i in delayed])
+    full["boundary_error_max"] = max(max(p["boundaries"][w]["methods"]["exact"]["relative_error"] for w in ("K", "B"))
+                                     for p in (per_point[i] for i in delayed))
+    full["boundary_error_target"] = FULL_CHECK_ERROR_TARGET
+    full["met"] = full["ratio"]["max"] <= FULL_CHECK_RATIO_TARGET and full["boundary_error_max"] <= FULL_CHECK_ERROR_TARGET
+    tick("passivity: full check against the numpy floor")
     return {
         "description": "time per passivity check vs relative error of the boundary (largest passive K at the "
                        "point's B, largest passive B at its K) against a 40-digit mpmath reference",
         "points": per_point,
         "methods": summary,
-        "boundary_time_s": {k: float(np.median(v)) for k, v in boundary_times.items() if v},
+        "full_check": full,
+        "boundary_time_s": {k: median_of(v).median for k, v in boundary_times.items() if v},
+        "boundary_time": {k: median_of(v).to_dict() for k, v in boundary_times.items() if v},
         "control_note": control_note or (
             "python-control builds G11 (continuous), G11d and K_d z^-d (discrete, dt = T) and evaluates their "
             "frequency responses; the hold H/T is numpy (transcendental) and T_fund is assembled pointwise "
             "(continuous and discrete systems cannot be interconnected in python-control)"),
         "grid_note": "uniform theta = pi i/N, i = 1..N, pi included; boundary by Newton on the method's own margin "
                      "from the reference, slope of the exact margin",
-        "region_map_1e6_s": region,
+        "region_map_1e6_s": region.median,
+        "region_map_1e6": region.to_dict(),
         "region_map_note": "closed_form.region_map on a 1000 x 1000 (alpha, beta) mesh (eq. 24 at the point's c)",
         "all_references_verified": all(e["reference_verified"] for p in per_point for e in p["boundaries"].values()),
     }

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
 
 ERROR_FLOOR = 1e-17  # plotted for an error of exactly 0
 
@@ -38,143 +39,227 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
+def _ts(spread: dict | None) -> str:
+    """A timing with its spread: ``median (min-max)`` in the median's unit."""
+    if not spread:
+        return "-"
+    median = spread["median"]
+    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9)):
+        if abs(median) >= scale or unit == "ns":
+            return f"{median / scale:.3g} {unit} ({spread['min'] / scale:.3g}-{spread['max'] / scale:.3g})"
+    return "-"
+
+
+def _rs(spread: dict | None, digits: int = 3) -> str:
+    """A dimensionless figure (a ratio, a rate) with its spread: ``median (min-max)``."""
+    if not spread:
+        return "-"
+    return f"{spread['median']:.{digits}g} ({spread['min']:.{digits}g}-{spread['max']:.{digits}g})"
+
+
+def _met(flag: object) -> str:
+    return "met" if flag else "NOT met"
+
+
 def _unavailable(section: dict) -> str | None:
     return None if section.get("available", True) else f"not available: {section.get('reason')}"
+
+
+def _passivity(s: dict) -> list[str]:
+    rows = [[r["method"], _ts(r.get("time_per_check")), _r(r["time_ratio_to_exact"]), _e(r["error_K_median"]),
+             _e(r["error_K_max"]), _e(r["error_B_median"]), _e(r["error_B_max"]), str(r["points"])]
+            for r in s["methods"]]
+    out = [_table(["method", "time/check (min-max)", "x exact", "err K med", "err K max", "err B med", "err B max",
+                   "points"], rows)]
+    out += ["", f"Relative error of the largest passive K (at the point's B) and B (at its K) against a "
+                f"40-digit mpmath reference (all references verified: {s['all_references_verified']}). "
+                f"Exact criterion's boundary search: {_ts(s.get('boundary_time', {}).get('exact'))} per boundary. "
+                f"Eq. (24) region map over 10^6 (alpha, beta) points: {_ts(s.get('region_map_1e6'))}. "
+                f"python-control: {s['control_note']}."]
+    full = s.get("full_check")
+    if full:
+        rows = [[f"m {p['m']:.3g}, b {p['b']:.3g}, K {p['K']:.4g}, B {p['B']:.4g}", _ts(p["full_check_s"]),
+                 _ts(p["numpy_t_fund_1e4_s"]), _rs(p["ratio"]), _ts(p["product_t_fund_1e4_s"])] for p in full["points"]]
+        out += ["", "Full check at delay 1 (exact verdict + every passive K + every passive B) against one 10^4-point "
+                    "numpy evaluation of T_fund, pairwise:", "",
+                _table(["delay-1 point", "full check", "numpy T_fund 10^4", "ratio", "product t_fund 10^4"], rows),
+                "", f"Worst point's ratio {full['ratio']['max']:.3g} (target <= {full['ratio_target']:g}); largest boundary "
+                    f"error {_e(full['boundary_error_max'])} (target <= {full['boundary_error_target']:g}): "
+                    f"{_met(full['met'])}."]
+    return out
+
+
+def _plant(s: dict) -> list[str]:
+    sc = s["scenario"]
+    rows = [[r["method"], _ts(r.get("time_per_simulated")), _r(r["time_ratio_to_exact"]), _e(r["relative_error"])]
+            for r in s["methods"]]
+    return [_table(["method", "time / simulated s (min-max)", "x exact ZOH", "max rel. error"], rows),
+            "", f"m = {sc['m']} kg, b = {sc['b']} N s/m, T = {sc['T']} s (c = {sc['c']:.3g}), delay {sc['delay']}, "
+                f"wall K = {sc['K']} N/m, B = {sc['B']} N s/m at {sc['wall_at'] * 1e3:g} mm; push {sc['push_N']} N, "
+                f"release at {sc['release_s']} s, {sc['duration_s']} s simulated."]
+
+
+def _scene(s: dict) -> list[str]:
+    rows = [[str(r["objects"]), _ts(r.get("compiled_cycle_p50")), _r(r["compiled_cycle_ratio_to_one_object"]),
+             _ts(r.get("naive_cycle_p50")), _r(r["naive_over_compiled_cycle"]), _ts(r.get("compiled_force")),
+             _ts(r.get("naive_force"))] for r in s["rows"]]
+    tg = s["target"]
+    return [_table(["objects", "compiled p50", "x 1 object", "naive p50", "naive/compiled", "force() compiled",
+                    "force() naive"], rows),
+            "", f"Issue-4 targets: one wall {_t(tg['one_wall_p50_s'])} median (target <= 5 us: {_met(tg['one_wall_met'])}); "
+                f"1000 objects / one wall = {tg['thousand_over_one']:.2f} (target <= 1.5: {_met(tg['thousand_met'])})."]
+
+
+def _loop(s: dict) -> list[str]:
+    rows = []
+    for link in s["links"].values():
+        if link["available"]:
+            rows.append([link["label"], _rs(link.get("controller_rate"), 4), _r(link.get("ratio_to_lockstep")),
+                         _rs(link.get("bare_rate"), 4), _t(link.get("controller_compute_p50_s"))])
+        else:
+            rows.append([link["label"], "not available", "-", "-", link["reason"]])
+    out = [_table(["link", "controller cycles/s (min-max)", "x lock-step", "bare read/write cycles/s",
+                   "controller compute p50"], rows)]
+    floor = s.get("echo_floor")
+    if floor:
+        out += ["", f"Lock-step loop against python-can's two-thread SYNC/TPDO/RPDO echo on its virtual bus "
+                    f"({floor['cycles']} cycles a run, pairwise): {_rs(floor['lockstep_rate'], 4)} against "
+                    f"{_rs(floor['echo_floor_rate'], 4)} cycles/s, ratio {_rs(floor['ratio'])} (target >= "
+                    f"{floor['ratio_target']:g}: {_met(floor['met'])}). Trajectories of the lock-step and the threaded "
+                    f"virtual bus from the same start, {s['trajectories_identical']['cycles']} cycles: "
+                    f"{'bit-identical' if s['trajectories_identical']['lockstep_equals_virtual'] else 'DIFFERENT'}."]
+    modbus = s["links"].get("modbus_tcp", {})
+    if modbus.get("bench_cycle"):
+        out += ["", "haptic_bus.bench.modbus_poll.bench_cycle: " + "; ".join(
+            f"{mode} {_rs(b.get('rate'), 4)} cycles/s ({b['requests_per_cycle']:.2f} requests/cycle, round trip "
+            f"p50 {_t(b['round_trip_p50_s'])})" for mode, b in modbus["bench_cycle"].items()) + "."]
+    c = s["pdo_codec"]
+    out += ["", f"PDO codec, same {c['frames']} frames: hot path {_ts(c.get('hot_path'))}/cycle, canopen generic PDO "
+                f"{_ts(c.get('generic'))}/cycle: generic/hot = {c['ratio_generic_over_hot']:.1f}."]
+    return out
+
+
+def _bus(s: dict) -> list[str]:
+    mp_, nf = s["mappings"]["minimal"], s["mappings"]["naive_full"]
+    out = [_table(["mapping", "TPDO bytes", "RPDO bytes", "bits/axis/cycle", "1 axis + SYNC"], [
+        ["minimal", str(mp_["tpdo_frame_bytes"]), str(mp_["rpdo_frame_bytes"]), str(mp_["bits_per_axis"]),
+         str(mp_["bits_one_axis_cycle"])],
+        ["naive full", str(nf["tpdo_frame_bytes"]), str(nf["rpdo_frame_bytes"]), str(nf["bits_per_axis"]),
+         str(nf["bits_one_axis_cycle"])]]), ""]
+    rows = [[f"{r['bitrate'] // 1000}k", f"{r['minimal']['load_one_axis']:.1%}", str(r["minimal"]["axes_fit"]),
+             _t(r["minimal"]["latency_one_axis_s"]), f"{r['naive_full']['load_one_axis']:.1%}",
+             str(r["naive_full"]["axes_fit"]), _t(r["naive_full"]["latency_one_axis_s"])] for r in s["bitrates"]]
+    out.append(_table(["bit/s", "minimal: load 1 axis", "axes fit", "latency", "naive: load 1 axis", "axes fit",
+                       "latency"], rows))
+    out += ["", f"T = {s['period_s'] * 1e3:g} ms, load ceiling {s['load_ceiling']:.0%}; naive/minimal bits per axis "
+                f"= {s['naive_over_minimal_bits']:.2f}. Minimal: " + ", ".join(mp_["tpdo_objects"] + mp_["rpdo_objects"])
+            + ". Naive full: " + ", ".join(nf["tpdo_objects"] + nf["rpdo_objects"]) + "."]
+    meas = s["measured_on_lockstep_bus"]
+    if meas.get("available", True):
+        out += ["", "BusLoadMeter on the frames actually exchanged (lock-step bus): " + "; ".join(
+            f"{k}: {val['meter_bits_median']:.0f} bits/cycle (model {val['model_bits']})" for k, val in meas.items()) + "."]
+    return out
+
+
+def _realtime(s: dict) -> list[str]:
+    rows = []
+    for load, setups in s["runs"].items():
+        for name, entry in setups.items():
+            if not entry.get("available", True):
+                rows.append([name, load, "not available", "-", "-", "-", "-", "-", entry["reason"]])
+                continue
+            c, bare = entry["controller"], entry["bare_clock"]
+            if "core_share" not in c:
+                rows.append([name, load, f"run ended: {c['exit_reason']}", "-", "-", "-", "-", "-", str(c.get("error"))])
+                continue
+            rows.append([name, load, _rs(c["core_share"], 2), _ts(c["lateness_p50_s"]), _ts(c["lateness_p99_s"]),
+                         _t(c["lateness_s"].get("max")), str(c["overruns"]),
+                         "yes" if c["no_startup_stall"] else f"NO ({_t(c['first_cycles_max_late_s'])})",
+                         f"{_rs(bare['core_share'], 2)}; p99 {_ts(bare['lateness_p99_s'])}"
+                         + ("" if c["exit_reason"] == "completed" else f"; run ended: {c['exit_reason']}")])
+    out = [_table(["set-up", "load", "core share", "lateness p50", "lateness p99", "max", "overruns", "no start stall",
+                   "bare clock: core share; p99"], rows)]
+    default = s["runs"]["quiet"].get("default", {}).get("controller", {})
+    if default.get("thread_cpu_s"):
+        out += ["", "Where the controller process's CPU went (default set-up, quiet; CPU seconds per thread over the "
+                    f"{s['duration_s']:g} s run): " + ", ".join(f"{k} {v:.3g}" for k, v in default["thread_cpu_s"].items())
+                + ". The canopen notifier is the controller node's SDO server: on udp_multicast it reads and unpacks "
+                  "every frame on the bus."]
+    tg, sch = s["target"], s["scheduler"]
+    out += ["", f"T = {s['period_s'] * 1e3:g} ms, {s['duration_s']:g} s per run; spreads over {s['segments']} consecutive "
+                f"stretches of each run; hog: {s['hog_processes']} busy processes. The simulated drive's threads run "
+                f"SCHED_FIFO 70 where allowed. This thread outside the runs: policy {sch.get('policy')}, CPUs "
+                f"{sch.get('affinity')}, timer slack {sch.get('timer_slack_ns')} ns."]
+    if "core_met" in tg:
+        out += ["", f"Issue-14 targets (quiet, default set-up): core share {tg['default_core_share']:.3f} (target <= "
+                    f"{tg['core_share_target']:g}: {_met(tg['core_met'])}); lateness p99 {_t(tg['default_lateness_p99_s'])} "
+                    f"against {_t(tg['untuned_lateness_p99_s'])} untuned ({_met(tg['lateness_no_worse'])}); "
+                    f"no start-up stall: {_met(tg['no_startup_stall'])}."]
+    return out
+
+
+def _startup(s: dict) -> list[str]:
+    rows = [[label, _ts(r["wall_s"]), _ts(r["numpy_import_s"]), _rs(r["ratio"]), _met(r["met"])]
+            for label, r in s["commands"].items()]
+    costs = ", ".join(f"{c['module']} {_t(c['self_s'])}" for c in s["check_import_costs"])
+    return [_table(["haptic-bus ...", "wall time", "python -c 'import numpy'", "ratio", f"<= {s['ratio_target']:g} x"],
+                   rows), "", f"Largest own import times of haptic-bus check (numpy's left out): {costs}."]
+
+
+def _soak(s: dict) -> list[str]:
+    total, memory = s["integer_sum"], s["memory"]
+    return [f"{s['cycles']:,} cycles in {s['seconds']:.0f} s ({s['cycles_per_s']:.0f} cycles/s), ended "
+            f"{s['exit_reason']}. Integer position sum exact: {total['exact']} (position exact: "
+            f"{total['position_exact']}; a float accumulator would have drifted {total['float_accumulator_drift_m']:.3g} m). "
+            f"Resident memory after each {memory['chunk_cycles']:,} cycles: "
+            + ", ".join(f"{b / 2**20:.1f}" for b in memory["resident_bytes"])
+            + f" MiB; spread over the second half of the run {memory['second_half_spread_bytes'] / 2**20:.2f} MiB."]
+
+
+_SECTIONS = (
+    ("passivity", "1. Passivity check: time per check vs error of the boundary", _passivity),
+    ("plant", "2. Plant simulation: time per simulated second vs trajectory error", _plant),
+    ("scene", "3. Scene cost: controller compute per cycle", _scene),
+    ("loop", "4. The loop: closed-loop cycles per second (virtual time)", _loop),
+    ("bus", "5. The bus against its physical limit (worst-case stuffing)", _bus),
+    ("realtime", "6. Real time: T = 1 ms, two processes", _realtime),
+    ("startup", "7. Start-up of the command line", _startup),
+    ("soak", "8. Soak in virtual time", _soak),
+)
 
 
 def markdown(result: dict) -> str:
     """All tables of one benchmark run, with the machine and the command."""
     m = result["machine"]
     v = m["versions"]
-    out = [f"# haptic-bus bench{' --quick' if result['quick'] else ''}",
+    load = m.get("load_average")
+    out = [f"# {result['command']}",
            "",
-           f"{m['date']}; {m['platform']}; {m['cpu']} ({m['cpu_count']} CPUs); Python {m['python']}; "
+           f"{m['date']}; {m['platform']}; {m['cpu']} ({m['cpu_count']} CPUs"
+           + (f", load average {load[0]:.2f} at the start" if load else "") + f"); Python {m['python']}; "
            + ", ".join(f"{k} {val}" for k, val in v.items() if val) + f". Total {result['total_seconds']:.1f} s.",
-           "Times are medians of repeats in this run; ratios compare figures measured side by side."]
+           "Every timing is the median of at least 5 repeats in this run, with min-max in brackets; ratios compare "
+           "figures measured side by side (pairwise where marked)."]
     if "interrupted" in result:
         out += ["", f"**Interrupted (Ctrl-C) in section {result['interrupted']}: only the sections before it ran.**"]
     sections = result["sections"]
-
-    s = sections.get("passivity")
-    out += ["", "## 1. Passivity check: time per check vs error of the boundary", ""]
-    if s and s.get("available", True):
-        rows = [[r["method"], _t(r["time_per_check_s"]), _r(r["time_ratio_to_exact"]), _e(r["error_K_median"]),
-                 _e(r["error_K_max"]), _e(r["error_B_median"]), _e(r["error_B_max"]), str(r["points"])]
-                for r in s["methods"]]
-        out.append(_table(["method", "time/check", "x exact", "err K med", "err K max", "err B med", "err B max",
-                           "points"], rows))
-        out += ["", f"Relative error of the largest passive K (at the point's B) and B (at its K) against a "
-                    f"40-digit mpmath reference (all references verified: {s['all_references_verified']}). "
-                    f"Exact criterion's boundary search: {_t(s['boundary_time_s'].get('exact'))} per boundary. "
-                    f"Eq. (24) region map over 10^6 (alpha, beta) points: {_t(s.get('region_map_1e6_s'))}. "
-                    f"python-control: {s['control_note']}."]
-    else:
-        out.append(_unavailable(s or {"available": False, "reason": "not run"}))
-
-    s = sections.get("plant")
-    out += ["", "## 2. Plant simulation: time per simulated second vs trajectory error", ""]
-    if s and s.get("available", True):
-        sc = s["scenario"]
-        rows = [[r["method"], _t(r["time_per_simulated_s"]), _r(r["time_ratio_to_exact"]), _e(r["relative_error"])]
-                for r in s["methods"]]
-        out.append(_table(["method", "time / simulated s", "x exact ZOH", "max rel. error"], rows))
-        out += ["", f"m = {sc['m']} kg, b = {sc['b']} N s/m, T = {sc['T']} s (c = {sc['c']:.3g}), delay {sc['delay']}, "
-                    f"wall K = {sc['K']} N/m, B = {sc['B']} N s/m at {sc['wall_at'] * 1e3:g} mm; push {sc['push_N']} N, "
-                    f"release at {sc['release_s']} s, {sc['duration_s']} s simulated."]
-    else:
-        out.append(_unavailable(s or {"available": False, "reason": "not run"}))
-
-    s = sections.get("scene")
-    out += ["", "## 3. Scene cost: controller compute per cycle", ""]
-    if s and s.get("available", True):
-        rows = [[str(r["objects"]), _t(r["compiled_cycle_p50_s"]), _r(r["compiled_cycle_ratio_to_one_object"]),
-                 _t(r["naive_cycle_p50_s"]), _r(r["naive_over_compiled_cycle"]), _t(r["compiled_force_s"]),
-                 _t(r["naive_force_s"])] for r in s["rows"]]
-        out.append(_table(["objects", "compiled p50", "x 1 object", "naive p50", "naive/compiled", "force() compiled",
-                           "force() naive"], rows))
-        tg = s["target"]
-        out += ["", f"Issue-4 targets: one wall {_t(tg['one_wall_p50_s'])} median (target <= 5 us: "
-                    f"{'met' if tg['one_wall_met'] else 'NOT met'}); 1000 objects / one wall = "
-                    f"{tg['thousand_over_one']:.2f} (target <= 1.5: {'met' if tg['thousand_met'] else 'NOT met'})."]
-    else:
-        out.append(_unavailable(s or {"available": False, "reason": "not run"}))
-
-    s = sections.get("loop")
-    out += ["", "## 4. The loop: closed-loop cycles per second (virtual time)", ""]
-    if s and s.get("available", True):
-        rows = []
-        for link in s["links"].values():
-            if link["available"]:
-                rows.append([link["label"], f"{link['controller_cycles_per_s']:.0f}", _r(link.get("ratio_to_virtual")),
-                             f"{link['bare_cycles_per_s']:.0f}", _t(link.get("controller_compute_p50_s"))])
-            else:
-                rows.append([link["label"], "not available", "-", "-", link["reason"]])
-        out.append(_table(["link", "controller cycles/s", "x virtual", "bare read/write cycles/s",
-                           "controller compute p50"], rows))
-        modbus = s["links"].get("modbus_tcp", {})
-        if modbus.get("bench_cycle"):
-            out += ["", "haptic_bus.bench.modbus_poll.bench_cycle: " + "; ".join(
-                f"{mode} {b['cycles_per_s']:.0f} cycles/s ({b['requests_per_cycle']:.2f} requests/cycle, round trip "
-                f"p50 {_t(b['round_trip_p50_s'])})" for mode, b in modbus["bench_cycle"].items()) + "."]
-        c = s["pdo_codec"]
-        out += ["", f"PDO codec, same {c['frames']} frames: hot path {_t(c['hot_path_s'])}/cycle, canopen generic PDO "
-                    f"{_t(c['generic_s'])}/cycle: generic/hot = {c['ratio_generic_over_hot']:.1f}."]
-    else:
-        out.append(_unavailable(s or {"available": False, "reason": "not run"}))
-
-    s = sections.get("bus")
-    out += ["", "## 5. The bus against its physical limit (worst-case stuffing)", ""]
-    if s and s.get("available", True):
-        mp_, nf = s["mappings"]["minimal"], s["mappings"]["naive_full"]
-        out.append(_table(["mapping", "TPDO bytes", "RPDO bytes", "bits/axis/cycle", "1 axis + SYNC"], [
-            ["minimal", str(mp_["tpdo_frame_bytes"]), str(mp_["rpdo_frame_bytes"]), str(mp_["bits_per_axis"]),
-             str(mp_["bits_one_axis_cycle"])],
-            ["naive full", str(nf["tpdo_frame_bytes"]), str(nf["rpdo_frame_bytes"]), str(nf["bits_per_axis"]),
-             str(nf["bits_one_axis_cycle"])]]))
-        out.append("")
-        rows = [[f"{r['bitrate'] // 1000}k", f"{r['minimal']['load_one_axis']:.1%}", str(r["minimal"]["axes_fit"]),
-                 _t(r["minimal"]["latency_one_axis_s"]), f"{r['naive_full']['load_one_axis']:.1%}",
-                 str(r["naive_full"]["axes_fit"]), _t(r["naive_full"]["latency_one_axis_s"])] for r in s["bitrates"]]
-        out.append(_table(["bit/s", "minimal: load 1 axis", "axes fit", "latency", "naive: load 1 axis", "axes fit",
-                           "latency"], rows))
-        out += ["", f"T = {s['period_s'] * 1e3:g} ms, load ceiling {s['load_ceiling']:.0%}; naive/minimal bits per axis "
-                    f"= {s['naive_over_minimal_bits']:.2f}. Minimal: " + ", ".join(mp_["tpdo_objects"] + mp_["rpdo_objects"])
-                + ". Naive full: " + ", ".join(nf["tpdo_objects"] + nf["rpdo_objects"]) + "."]
-        meas = s["measured_on_virtual_bus"]
-        if meas.get("available", True):
-            out += ["", "BusLoadMeter on the frames actually exchanged (virtual bus): " + "; ".join(
-                f"{k}: {val['meter_bits_median']:.0f} bits/cycle (model {val['model_bits']})" for k, val in meas.items()) + "."]
-    else:
-        out.append(_unavailable(s or {"available": False, "reason": "not run"}))
-
-    s = sections.get("realtime")
-    out += ["", "## 6. Real time", ""]
-    if s and s.get("available", True):
-        lat, per = s["lateness_s"], s["period_error_abs_s"]
-        out.append(_table(["", "p50", "p99", "p99.9", "max"], [
-            ["start lateness", _t(lat.get("p50")), _t(lat.get("p99")), _t(lat.get("p99.9")), _t(lat.get("max"))],
-            ["period error (abs)", _t(per.get("p50")), _t(per.get("p99")), _t(per.get("p99.9")), _t(per.get("max"))],
-            ["bare clock lateness", *(_t(s["bare_clock"]["lateness_s"].get(k)) for k in ("p50", "p99", "p99.9", "max"))]]))
-        sch = s["scheduler"]
-        out += ["", f"T = {s['period_s'] * 1e3:g} ms for {s['duration_s']:g} s ({s['cycles']} cycles): {s['overruns']} "
-                    f"overruns (start later than deadline + T), {s['late_over_100us']} starts > 100 us late; the bare clock "
-                    f"(no drive, no controller, same duration): {s['bare_clock']['overruns']} overruns, "
-                    f"{s['bare_clock']['late_over_100us']} starts > 100 us late. Clock: "
-                    f"{s['clock']}; OS policy {sch.get('policy')}, nice {sch.get('nice')}, CPUs {sch.get('affinity')}, "
-                    f"timer slack {sch.get('timer_slack_ns')} ns."]
-    else:
-        out.append(_unavailable(s or {"available": False, "reason": "not run"}))
+    for key, title, render in _SECTIONS:
+        s = sections.get(key)
+        if s is None:  # not asked for (--only, --soak)
+            continue
+        out += ["", f"## {title}", ""]
+        out += render(s) if s.get("available", True) else [_unavailable(s) or ""]
     return "\n".join(out) + "\n"
 
 
-def _loglog(ax, points, label, marker="o", line=False):
+def _loglog(ax: Any, points: list[tuple[float, float]], label: str, marker: str = "o", line: bool = False) -> None:
     xs = [p[0] for p in points]
     ys = [max(p[1], ERROR_FLOOR) for p in points]
     ax.loglog(xs, ys, marker=marker, linestyle="-" if line else "none", label=label)
 
 
 def plots(result: dict, out_dir: Path) -> list[Path]:
-    """PNG plots of sections 1-3 (and the real-time lateness); returns the paths written."""
+    """PNG plots of sections 1-3; returns the paths written."""
     written = []
     sections = result["sections"]
     s = sections.get("passivity")
@@ -221,7 +306,7 @@ def plots(result: dict, out_dir: Path) -> list[Path]:
     return written
 
 
-def _save(fig, path: Path) -> Path:
+def _save(fig: Any, path: Path) -> Path:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -6,7 +6,7 @@ short of the bus (saturate at the torque limit, ``struct.pack_into`` the RPDO). 
 controller (:class:`haptic_bus.control.controller.WallController`, the product's) times its own
 cycle from after ``read_inputs`` to after ``write_outputs`` (position, scene force,
 saturation, per-mille conversion, encode) with ``time.perf_counter``; the median of those is
-the compute per cycle.
+the compute per cycle, taken over 5 runs (median, min-max).
 
 Scenes for N objects: one wall ahead of the handle plus ``N - 1`` non-overlapping detents
 spread over 20 mm behind it (all ``K = 1500 N/m``, ``B = 10 N s/m``: the contact walls the gate
@@ -18,16 +18,18 @@ one each cycle ("without culling"); both give the same force (checked before tim
 
 from __future__ import annotations
 
+import functools
 import math
-from typing import Callable
+from collections.abc import Callable
+from typing import Any, cast
 
 import numpy as np
 
 from drives.base import CyclicInputs, Drive, DriveScaling
 from drives.canopen.drive import DEFAULT_RPDO
 from drives.canopen.pdo_codec import PdoCodec
-from drives.cia402 import OperationMode
-from haptic_bus.bench.timing import time_per_call
+from drives.cia402 import ObjectSpec, OperationMode
+from haptic_bus.bench.timing import REPEATS, Spread, time_per_call
 from haptic_bus.control.clock import VirtualClock
 from haptic_bus.control.controller import WallController
 from haptic_bus.control.gate import DeviceLoop, GatePolicy, PassivityGate
@@ -62,7 +64,7 @@ class CannedDrive(Drive):
     def enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
         """Always enabled."""
 
-    def read_object(self, spec) -> int:
+    def read_object(self, spec: ObjectSpec | int) -> int:
         """Every object reads 0."""
         return 0
 
@@ -132,7 +134,7 @@ def canned_velocities(cycles: int, seed: int = 6) -> list[int]:
     return [int(c) for c in counts]
 
 
-def controller_compute(scene, velocities: list[int], cycles: int) -> np.ndarray:
+def controller_compute(scene: CompiledScene, velocities: list[int], cycles: int) -> np.ndarray:
     """Per-cycle compute (s) of :class:`WallController` rendering ``scene`` on a canned drive."""
     gate = PassivityGate(DEVICE, GatePolicy())
     controller = WallController(CannedDrive(velocities), gate, scene, force_limit=FORCE_LIMIT,
@@ -155,30 +157,36 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
     cycles = 5_000 if quick else 40_000
     velocities = canned_velocities(cycles)
     xs = [float(x) for x in np.linspace(-0.021, 0.003, 257)]
-    rows = []
+    rows: list[dict[str, Any]] = []
+
+    def sweep(scene: CompiledScene | NaiveScene) -> None:
+        force = scene.force
+        for x in xs:
+            force(x, 0.01)
+
     controller_compute(compile_scene(scene_objects(1)), velocities, min(cycles, 2_000))  # warm-up, discarded
     for n in SIZES:
         compiled = compile_scene(scene_objects(n))
         naive = NaiveScene(compiled)
         _check_same_force(compiled, naive)
         naive_cycles = max(200, min(cycles, cycles * 100 // n))
-        c_compute = controller_compute(compiled, velocities, cycles)
-        n_compute = controller_compute(naive, velocities, naive_cycles)
+        c_runs = [controller_compute(compiled, velocities, cycles) for _ in range(REPEATS)]
+        stand_in = cast(CompiledScene, naive)  # the controller uses force(), contacts and stored_energy(): NaiveScene has them
+        n_runs = [controller_compute(stand_in, velocities, naive_cycles) for _ in range(REPEATS)]
+        c_p50 = Spread.of([float(np.median(r)) for r in c_runs])
+        n_p50 = Spread.of([float(np.median(r)) for r in n_runs])
 
-        def sweep(scene=compiled):
-            force = scene.force
-            for x in xs:
-                force(x, 0.01)
-
-        c_force = time_per_call(sweep, repeats=5) / len(xs)
-        n_force = time_per_call(lambda: [naive.force(x, 0.01) for x in xs], repeats=3 if n >= 1000 else 5,
-                                min_ns=1_000_000) / len(xs)
+        c_force = time_per_call(functools.partial(sweep, compiled)).scaled(1.0 / len(xs))
+        n_force = time_per_call(functools.partial(sweep, naive), min_ns=1_000_000).scaled(1.0 / len(xs))
         rows.append({
             "objects": n, "intervals": len(compiled.breaks) + 1,
-            "compiled_cycle_p50_s": float(np.median(c_compute)), "compiled_cycle_p99_s": float(np.percentile(c_compute, 99)),
-            "naive_cycle_p50_s": float(np.median(n_compute)), "naive_cycle_p99_s": float(np.percentile(n_compute, 99)),
-            "compiled_force_s": c_force, "naive_force_s": n_force,
-            "naive_over_compiled_cycle": float(np.median(n_compute) / np.median(c_compute)),
+            "compiled_cycle_p50_s": c_p50.median, "compiled_cycle_p50": c_p50.to_dict(),
+            "compiled_cycle_p99_s": float(np.percentile(np.concatenate(c_runs), 99)),
+            "naive_cycle_p50_s": n_p50.median, "naive_cycle_p50": n_p50.to_dict(),
+            "naive_cycle_p99_s": float(np.percentile(np.concatenate(n_runs), 99)),
+            "compiled_force_s": c_force.median, "compiled_force": c_force.to_dict(),
+            "naive_force_s": n_force.median, "naive_force": n_force.to_dict(),
+            "naive_over_compiled_cycle": n_p50.median / c_p50.median,
         })
         tick(f"scene: {n} objects")
     one = rows[0]["compiled_cycle_p50_s"]

@@ -9,9 +9,13 @@ the error register (:mod:`~sim_drive.canopen.emergency`), and fault injection.
 
 One receive thread owns the bus and every timer: it blocks in ``bus.recv`` until the next
 frame or due time, handles SYNC and RPDOs directly (the hot path) and everything else
-through canopen's dispatcher.  No frame can stop it: a frame that cannot be used is counted
-and dropped, a receive error is counted, and if the bus keeps failing the node stops its
-heartbeat and faults the drive, so it never says it is alive while it cannot serve.
+through canopen's dispatcher.  On a lock-step bus (:mod:`drives.lockstep_bus`) the frames are
+handed to the node in the sender's thread instead, so a master in the same process gets its
+TPDO before its SYNC ``send`` returns; the thread then keeps only the timers (wall clock,
+like the master's heartbeat: they guard against a dead peer, never pace the plant).  No
+frame can stop it: a frame that cannot be used is counted and dropped, a receive error is
+counted, and if the bus keeps failing the node stops its heartbeat and faults the drive, so
+it never says it is alive while it cannot serve.
 
 - NMT: boot-up message then PRE-OPERATIONAL on :meth:`start`; the boot-up counts as the first
   heartbeat, then one every 0x1017 ms; SDO in PRE-OPERATIONAL and OPERATIONAL; PDOs only in
@@ -38,7 +42,7 @@ from typing import Any
 import can
 import canopen
 from canopen import SdoAbortedError
-from canopen.objectdictionary import ObjectDictionary, import_od
+from canopen.objectdictionary import ObjectDictionary
 
 from drives.canopen.local_node import StrictLocalNode
 from drives.cia301 import (
@@ -50,6 +54,7 @@ from drives.cia301 import (
     NmtState,
     SdoAbort,
 )
+from drives.lockstep_bus import LockstepBus
 from haptic_bus.validation import whole_in_range
 from sim_drive.bus_timing import BusLoadMeter
 from sim_drive.canopen.communication import CommunicationObjects
@@ -57,9 +62,9 @@ from sim_drive.canopen.emergency import Emergency
 from sim_drive.canopen.manufacturer import ManufacturerObjects
 from sim_drive.canopen.pdo_engine import PdoEngine, SlaveCounters
 from sim_drive.canopen.pdo_table import PdoChannel, PdoTable
+from sim_drive.canopen.standard_od import object_dictionary
 from sim_drive.canopen.timers import NodeTimers, Watchdog
 from sim_drive.device import POWER_STAGE_ON, ObjectAccessError, SimulatedDrive
-from sim_drive.eds import eds_path
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
 
@@ -116,7 +121,9 @@ class CanopenSimDrive:
     ``can.Bus`` (``{"interface": "virtual", "channel": "x"}``; opened by :meth:`start`, shut
     down by :meth:`stop`).  ``timing``, ``parameters``, ``operator``: see
     :class:`~sim_drive.device.SimulatedDrive`.  ``bus_meter``: optional bit-time accounting.
-    ``dictionary``: the object dictionary (default: the shipped EDS).
+    ``od``: "haptic" (the shipped EDS, manufacturer area included) or "standard" (CiA-301/402
+    objects only, the scaling in the factor group: :mod:`sim_drive.canopen.standard_od`).
+    ``dictionary``: an object dictionary to use instead of the kind's default.
     """
 
     def __init__(
@@ -129,6 +136,7 @@ class CanopenSimDrive:
         operator: OperatorModel | None = None,
         bus_meter: BusLoadMeter | None = None,
         dictionary: ObjectDictionary | None = None,
+        od: str = "haptic",
     ) -> None:
         self.node_id = whole_in_range("node_id", node_id, 1, 127, context="CANopen slave")
         self._bus: can.BusABC | None = bus if isinstance(bus, can.BusABC) else None
@@ -143,15 +151,17 @@ class CanopenSimDrive:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._network: _SlaveNetwork | None = None
-        od = dictionary if dictionary is not None else import_od(str(eds_path()), self.node_id)
-        self._node = StrictLocalNode(self.node_id, od)
+        dictionary, read_standard = object_dictionary(od, self.node_id, self.drive, dictionary)
+        self._node = StrictLocalNode(self.node_id, dictionary)
         self._node.add_read_callback(self._on_sdo_read)
+        if read_standard is not None:
+            self._node.add_read_callback(read_standard)
         self._node.add_write_callback(self._on_sdo_write)
         self.timers = NodeTimers()
         self.emergency = Emergency(self._node.emcy, self.drive, self._may_send_emcy)
-        self._comm = CommunicationObjects(od, self.drive, self.timers, self.emergency)
+        self._comm = CommunicationObjects(dictionary, self.drive, self.timers, self.emergency)
         self._manufacturer = ManufacturerObjects(self.drive, self.counters)
-        self._pdos = PdoTable(od, self.drive.readable_objects(), self.drive.writable_objects(), self._on_pdo_change)
+        self._pdos = PdoTable(dictionary, self.drive.readable_objects(), self.drive.writable_objects(), self._on_pdo_change)
         self._engine = PdoEngine(self._pdos, self.drive, self._send, self.emergency, self.counters)
         self._reset_communication()
 
@@ -168,7 +178,11 @@ class CanopenSimDrive:
         self._stop.clear()
         with self._lock:
             self._boot()
-        self._thread = threading.Thread(target=self._run, name=f"sim-drive-{self.node_id}", daemon=True)
+        target = self._run
+        if isinstance(self._bus, LockstepBus):
+            self._bus.set_receiver(self._on_frame)
+            target = self._run_timers
+        self._thread = threading.Thread(target=target, name=f"sim-drive-{self.node_id}", daemon=True)
         self._thread.start()
         return self
 
@@ -179,6 +193,8 @@ class CanopenSimDrive:
         self._stop.set()
         self._thread.join(timeout=5 * RECV_TIMEOUT + 1.0)
         self._thread = None
+        if isinstance(self._bus, LockstepBus):
+            self._bus.set_receiver(None)
         self._network.subscribe(NMT_COB_ID, self._node.nmt.on_command)  # type: ignore[union-attr]
         self._node.remove_network()
         if self._bus_config is not None and self._bus is not None:
@@ -326,8 +342,7 @@ class CanopenSimDrive:
                     for _ in range(MAX_FRAMES_PER_WAKE):  # everything that arrived, then the timers
                         if message is None:
                             break
-                        if not (self.silent or message.is_error_frame or message.is_remote_frame or message.is_extended_id):
-                            self._guarded_dispatch(message)
+                        self._take(message)
                         message = self._receive(0.0)
                     self._tick(time.monotonic())
         except Exception as exc:
@@ -335,6 +350,24 @@ class CanopenSimDrive:
             with self._lock:
                 self.timers.stop_producer()
                 self.drive.fault(EmcyCode.COMMUNICATION)
+
+    def _run_timers(self) -> None:
+        """Lock-step bus: the frames come inline (:meth:`_on_frame`); this thread keeps the timers."""
+        while not self._stop.is_set():
+            due = self.timers.next_due()
+            self._stop.wait(RECV_TIMEOUT if due is None else min(RECV_TIMEOUT, max(due - time.monotonic(), 0.0)))
+            with self._lock:
+                self._tick(time.monotonic())
+
+    def _on_frame(self, message: can.Message) -> None:
+        """Lock-step bus: one frame, in the sender's thread."""
+        with self._lock:
+            self._take(message)
+
+    def _take(self, message: can.Message) -> None:
+        """One received frame (the lock held): used unless silent, an error, remote or extended frame."""
+        if not (self.silent or message.is_error_frame or message.is_remote_frame or message.is_extended_id):
+            self._guarded_dispatch(message)
 
     def _receive(self, timeout: float) -> can.Message | None:
         """The next frame within ``timeout`` s, or None; a receive error is counted and dropped,

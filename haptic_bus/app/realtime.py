@@ -1,0 +1,206 @@
+"""What a real-time run asks of the OS for its control thread, and what it got.
+
+:func:`realtime_session` is one context manager around the cyclic phase of a run (entered
+after set-up, in the control thread, so threads started before it keep their own settings):
+
+always (``haptic-bus run`` in real time)
+    the thread's timer slack to 1 ns (``prctl(PR_SET_TIMERSLACK)``: a sleep then wakes within
+    the scheduler's latency instead of up to 50 us late, so the clock's final spin can be
+    short); ``gc.freeze()`` (everything built in set-up leaves the collector's view; only the
+    young generation is collected first, a full collection between the drive's enable and the
+    first cycle could outlast its RPDO deadline) and the automatic collector off (the real clock collects in the slack
+    before a deadline instead, :mod:`haptic_bus.control.clock`); ``sys.setswitchinterval``
+    lowered, so a helper thread (heartbeat, SDO server, live view) that takes the GIL gives
+    it back within tens of microseconds instead of 5 ms;
+opt-in (``haptic-bus run --realtime``)
+    ``SCHED_FIFO`` at :data:`FIFO_PRIORITY`, the control thread pinned to one CPU (the last
+    it may run on), and ``mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)``: no page the loop
+    has touched is ever paged out, and entering takes milliseconds (without ``MCL_ONFAULT``,
+    on kernels before 4.4, every mapped page is faulted in first: ~50 ms and the whole address
+    space resident).
+
+Each item asked for is either got or reported missing with the reason and what would grant
+it (a warning in the log, and :class:`RealtimeReport` in ``run.json``); nothing missing stops
+the run.  On exit every setting is put back as it was found.  Linux only for the
+``prctl``/``mlockall`` items (elsewhere they are reported missing).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import dataclasses
+import errno
+import gc
+import logging
+import os
+import resource
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
+
+from haptic_bus.control.clock import PR_GET_TIMERSLACK, libc
+
+logger = logging.getLogger(__name__)
+
+FIFO_PRIORITY = 80  # SCHED_FIFO priority of the control thread under --realtime (1..99)
+_PR_SET_TIMERSLACK = 29
+_MCL_CURRENT, _MCL_FUTURE, _MCL_ONFAULT = 1, 2, 4
+
+
+@dataclasses.dataclass(frozen=True)
+class RealtimeSettings:
+    """What to ask for (None or False: leave it as it is).
+
+    ``timer_slack_ns``: the thread's timer slack; ``switch_interval`` (s): the interpreter's
+    GIL switch interval while running; ``freeze_gc``: ``gc.freeze()`` and the automatic
+    collector off; ``spin`` (s): the real clock's final spin (None: its default);
+    ``fifo_priority``: ``SCHED_FIFO`` at this priority; ``cpu``: pin the thread to this CPU
+    (-1: the last CPU it may run on); ``lock_memory``: ``mlockall``.
+    """
+
+    timer_slack_ns: int | None = 1
+    switch_interval: float | None = 50e-6
+    freeze_gc: bool = True
+    spin: float | None = None
+    fifo_priority: int | None = None
+    cpu: int | None = None
+    lock_memory: bool = False
+
+    @classmethod
+    def privileged(cls) -> RealtimeSettings:
+        """``--realtime``: the defaults plus SCHED_FIFO, one CPU and locked memory."""
+        return cls(fifo_priority=FIFO_PRIORITY, cpu=-1, lock_memory=True)
+
+    @classmethod
+    def untuned(cls) -> RealtimeSettings:
+        """Nothing asked: the OS defaults, and the clock's 200 us spin of before issue 14 (the bench's baseline)."""
+        return cls(timer_slack_ns=None, switch_interval=None, freeze_gc=False, spin=200e-6)
+
+
+@dataclasses.dataclass
+class RealtimeReport:
+    """What a session got (item -> what) and could not get (item -> why, and what would grant it)."""
+
+    got: dict[str, str] = dataclasses.field(default_factory=dict)
+    missing: dict[str, str] = dataclasses.field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, dict[str, str]]:
+        """JSON-ready."""
+        return {"got": dict(self.got), "missing": dict(self.missing)}
+
+    def summary(self) -> str:
+        """One line: what was got, and what was not and why."""
+        parts = [f"got {', '.join(f'{k} ({v})' for k, v in self.got.items()) or 'nothing'}"]
+        parts += [f"could NOT get {k}: {why}" for k, why in self.missing.items()]
+        return "real time: " + "; ".join(parts)
+
+
+def _os_error(text: str) -> OSError:
+    code = ctypes.get_errno()
+    return OSError(code, f"{text}: {os.strerror(code)}")
+
+
+class _Session:
+    """The items of one session; each ``ask_*`` records into ``report`` and pushes its undo on ``undo``."""
+
+    def __init__(self, report: RealtimeReport, undo: ExitStack) -> None:
+        self.report = report
+        self.undo = undo
+        self.libc = libc()
+
+    def ask(self, item: str, get: Callable[[], str], remedy: str) -> None:
+        """Run ``get`` (returns what was got); an OSError or ValueError makes ``item`` missing."""
+        try:
+            self.report.got[item] = get()
+        except (OSError, ValueError, AttributeError) as exc:
+            denied = isinstance(exc, OSError) and exc.errno in (errno.EPERM, errno.EACCES, errno.ENOMEM)
+            self.report.missing[item] = f"{exc}" + (f" ({remedy})" if denied else "")
+
+    def timer_slack(self, ns: int) -> str:
+        c = self.libc
+        if c is None:
+            raise OSError(errno.ENOSYS, "prctl(PR_SET_TIMERSLACK) is Linux only")
+        zero = ctypes.c_ulong(0)
+        before = c.prctl(PR_GET_TIMERSLACK, zero, zero, zero, zero)
+        if c.prctl(_PR_SET_TIMERSLACK, ctypes.c_ulong(ns), zero, zero, zero) != 0:
+            raise _os_error("prctl(PR_SET_TIMERSLACK)")
+        self.undo.callback(c.prctl, _PR_SET_TIMERSLACK, ctypes.c_ulong(max(before, 1)), zero, zero, zero)
+        return f"{ns} ns, was {before} ns"
+
+    def switch_interval(self, seconds: float) -> str:
+        before = sys.getswitchinterval()
+        sys.setswitchinterval(seconds)
+        self.undo.callback(sys.setswitchinterval, before)
+        return f"{seconds * 1e6:g} us, was {before * 1e6:g} us"
+
+    def freeze_gc(self) -> str:
+        enabled = gc.isenabled()
+        gc.collect(0)  # the young generation only: a full collection here could take longer than the RPDO deadline
+        gc.freeze()
+        gc.disable()
+        self.undo.callback(gc.unfreeze)
+        if enabled:
+            self.undo.callback(gc.enable)
+        return f"{gc.get_freeze_count()} set-up objects frozen; collections only in the clock's slack"
+
+    def fifo(self, priority: int) -> str:
+        before = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        self.undo.callback(os.sched_setscheduler, 0, before[0], os.sched_param(before[1]))
+        return f"priority {priority}"
+
+    def pin(self, cpu: int) -> str:
+        before = os.sched_getaffinity(0)
+        chosen = max(before) if cpu < 0 else cpu
+        os.sched_setaffinity(0, {chosen})
+        self.undo.callback(os.sched_setaffinity, 0, before)
+        return f"CPU {chosen} of {sorted(before)}"
+
+    def lock_memory(self) -> str:
+        c = self.libc
+        if c is None:
+            raise OSError(errno.ENOSYS, "mlockall is Linux only")
+        if c.mlockall(_MCL_CURRENT | _MCL_FUTURE | _MCL_ONFAULT) == 0:
+            self.undo.callback(c.munlockall)
+            return "current and future pages, each locked once touched (MCL_ONFAULT)"
+        if ctypes.get_errno() != errno.EINVAL or c.mlockall(_MCL_CURRENT | _MCL_FUTURE) != 0:  # EINVAL: a kernel before 4.4
+            raise _os_error("mlockall")
+        self.undo.callback(c.munlockall)
+        return "current and future pages"
+
+
+def _memlock_limit() -> str:
+    soft, _ = resource.getrlimit(resource.RLIMIT_MEMLOCK)
+    return "unlimited" if soft == resource.RLIM_INFINITY else f"{soft // 1024} KiB"
+
+
+@contextmanager
+def realtime_session(settings: RealtimeSettings) -> Iterator[RealtimeReport]:
+    """Apply ``settings`` to the calling thread (and the interpreter) until the block ends; yield
+    the :class:`RealtimeReport` (each missing item is also logged as a warning)."""
+    report = RealtimeReport()
+    with ExitStack() as undo:
+        session = _Session(report, undo)
+        slack, interval = settings.timer_slack_ns, settings.switch_interval
+        if slack is not None:
+            session.ask("timer slack", lambda: session.timer_slack(slack), "")
+        if interval is not None:
+            session.ask("switch interval", lambda: session.switch_interval(interval), "")
+        if settings.freeze_gc:
+            session.ask("gc frozen", session.freeze_gc, "")
+        if settings.fifo_priority is not None:
+            priority = settings.fifo_priority
+            session.ask("SCHED_FIFO", lambda: session.fifo(priority),
+                        f"needs CAP_SYS_NICE, or an RLIMIT_RTPRIO of at least {priority}: e.g. "
+                        f"'ulimit -r {priority}' or an rtprio entry in /etc/security/limits.conf")
+        if settings.cpu is not None:
+            cpu = settings.cpu
+            session.ask("CPU affinity", lambda: session.pin(cpu), "")
+        if settings.lock_memory:
+            session.ask("mlockall", session.lock_memory,
+                        f"RLIMIT_MEMLOCK is {_memlock_limit()}: needs CAP_IPC_LOCK or 'ulimit -l unlimited'")
+        for item, why in report.missing.items():
+            logger.warning("real time: could not get %s: %s", item, why)
+        if report.got:
+            logger.info("real time: got %s", ", ".join(f"{k} ({v})" for k, v in report.got.items()))
+        yield report

@@ -1,0 +1,96 @@
+"""The benchmark's other processes: the simulated CANopen drive on udp_multicast, and CPU hogs.
+
+Every process started here is stopped by the context manager that started it (SIGTERM, a
+bounded wait, then SIGKILL); a CPU hog also asks the kernel to kill it when the thread that
+started it ends (``PR_SET_PDEATHSIG``), so an interrupted or killed benchmark leaves none behind.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from haptic_bus.app.rig import simulator_command
+
+START_WAIT = 30.0  # s: the subprocess imports numpy/scipy/canopen before it answers
+_REPO = Path(__file__).resolve().parents[2]
+_HOG = "import ctypes, signal; ctypes.CDLL(None).prctl(1, signal.SIGKILL)\nwhile True: pass"  # 1 = PR_SET_PDEATHSIG
+
+
+def stop(process: subprocess.Popen) -> int:
+    """SIGTERM, a bounded wait, then SIGKILL; the exit status."""
+    if process.poll() is None:
+        process.terminate()
+    try:
+        return process.wait(10)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        return process.wait(10)
+
+
+def wait_heartbeat(bus_kwargs: dict[str, Any], node_id: int, process: subprocess.Popen, timeout: float) -> None:
+    """Block until node ``node_id``'s heartbeat is on the bus (bounded by ``timeout`` s)."""
+    import can
+
+    deadline = time.monotonic() + timeout
+    with can.Bus(**bus_kwargs) as bus:
+        while time.monotonic() < deadline:
+            if process.poll() is not None:
+                raise RuntimeError(f"the simulator exited early with status {process.returncode}")
+            msg = bus.recv(0.1)
+            if msg is not None and msg.arbitration_id == 0x700 + node_id:
+                return
+    raise RuntimeError(f"no heartbeat of node {node_id} within {timeout} s")
+
+
+@contextmanager
+def canopen_simulator(profile: str, node_id: int) -> Iterator[tuple[dict[str, Any], subprocess.Popen]]:
+    """``python -m sim_drive`` for ``profile`` as node ``node_id`` on a unique udp_multicast group and
+    port; yields the bus keyword arguments and the process, once its heartbeat is seen."""
+    group = f"239.74.{160 + os.getpid() % 64}.{1 + random.randrange(250)}"
+    port = random.randint(45000, 55000)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_REPO), env.get("PYTHONPATH")]))
+    args = simulator_command("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
+                             "--node-id", str(node_id), "--profile", profile)
+    process = subprocess.Popen(args, cwd=_REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    bus = {"interface": "udp_multicast", "channel": group, "port": port}
+    try:
+        wait_heartbeat(bus, node_id, process, START_WAIT)
+        yield bus, process
+    finally:
+        stop(process)
+
+
+def boost(pid: int, priority: int) -> str | None:
+    """Every thread of process ``pid`` to SCHED_FIFO ``priority``; None if done, else why not."""
+    try:
+        for task in os.listdir(f"/proc/{pid}/task"):
+            os.sched_setscheduler(int(task), os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as exc:
+        return f"{type(exc).__name__}: {exc}"
+    return None
+
+
+@contextmanager
+def cpu_hogs(count: int) -> Iterator[list[subprocess.Popen]]:
+    """``count`` busy Python processes (``while True: pass``, normal priority) until the block ends."""
+    hogs: list[subprocess.Popen] = []
+    try:
+        for _ in range(count):
+            hogs.append(subprocess.Popen([sys.executable, "-c", _HOG], stdout=subprocess.DEVNULL,
+                                         stderr=subprocess.DEVNULL))
+        time.sleep(0.2)  # let them reach the loop
+        yield hogs
+    finally:
+        for hog in hogs:
+            hog.kill()
+        for hog in hogs:
+            hog.wait(10)
