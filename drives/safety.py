@@ -74,3 +74,6 @@ class SafetySettings:
         if not self.rpdo_deadline_periods:
             return 0
         return min(0xFFFF, max(1, round(self.rpdo_deadline_periods * period * 1000.0)))
+
+
+DEFAULT_SAFETY = SafetySettings()  # frozen: the one shared default of every master

@@ -44,7 +44,7 @@ def whole_in_range(name: str, value: object, low: int, high: int, *, context: st
     if isinstance(value, numbers.Integral):
         whole = int(value)
     elif isinstance(value, numbers.Real) and math.isfinite(float(value)) and float(value).is_integer():
-        whole = int(value)
+        whole = int(float(value))
     else:
         raise ParameterError(name, value, allowed, context)
     if not low <= whole <= high:

@@ -21,7 +21,7 @@ import math
 import pathlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from drives.errors import ParameterError
 from haptic_bus.validation import real_in_range
@@ -36,7 +36,9 @@ SPEED_LIMIT = 1e6  # m/s
 
 
 class OperatorModel(abc.ABC):
-    """A hand on the handle: the force it applies, in N."""
+    """A hand on the handle: the force it applies, in N.  Every model is a frozen dataclass."""
+
+    __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]  # what makes dataclasses.fields() accept it
 
     @abc.abstractmethod
     def force(self, t: float, position: float, velocity: float) -> float:
@@ -186,7 +188,8 @@ class RecordedForce(OperatorModel):
     def __post_init__(self) -> None:
         name = "operator recorded"
         if len(self.times) != len(self.forces) or not self.times:
-            raise ParameterError("times/forces", (len(self.times), len(self.forces)), "two non-empty columns of equal length", name)
+            raise ParameterError("times/forces", (len(self.times), len(self.forces)),
+                                 "two non-empty columns of equal length", name)
         times = tuple(real_in_range("time", t, 0.0, TIME_LIMIT, unit="s", context=name) for t in self.times)
         forces = tuple(real_in_range("force", f, -FORCE_LIMIT, FORCE_LIMIT, unit="N", context=name) for f in self.forces)
         for i in range(1, len(times)):
@@ -198,7 +201,7 @@ class RecordedForce(OperatorModel):
         object.__setattr__(self, "forces", forces)
 
     @classmethod
-    def from_csv(cls, path: str | pathlib.Path, interpolation: str = "hold") -> "RecordedForce":
+    def from_csv(cls, path: str | pathlib.Path, interpolation: str = "hold") -> RecordedForce:
         """Load a CSV with columns ``time`` (s) and ``force`` (N); a header row is optional."""
         times: list[float] = []
         forces: list[float] = []

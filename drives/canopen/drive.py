@@ -52,14 +52,13 @@ from drives.cia402 import (
 )
 from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
 from drives.errors import DriveError, DriveProtocolError, DriveTimeout, ParameterError
-from drives.safety import SafetySettings
+from drives.safety import DEFAULT_SAFETY, SafetySettings
 
 logger = logging.getLogger(__name__)
 
 DEFAULT_TPDO: tuple[ObjectSpec, ...] = (STATUSWORD, VELOCITY_ACTUAL)
 DEFAULT_TPDO_WITH_POSITION: tuple[ObjectSpec, ...] = (STATUSWORD, VELOCITY_ACTUAL, POSITION_ACTUAL)
 DEFAULT_RPDO: tuple[ObjectSpec, ...] = (CONTROLWORD, TARGET_TORQUE)
-DEFAULT_SAFETY = SafetySettings()  # frozen: one shared default
 
 
 def split_into_frames(objects: Sequence[ObjectSpec | int]) -> list[tuple[ObjectSpec, ...]]:

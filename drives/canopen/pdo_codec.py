@@ -48,7 +48,8 @@ class PdoCodec:
         self.size: int = self.struct.size
         if self.size > MAX_PDO_BYTES:
             names = ", ".join(f"0x{e.index:04X}" for e in self.entries)
-            raise ParameterError("entries", names, f"objects of at most {MAX_PDO_BYTES} bytes in all (these need {self.size})", name)
+            raise ParameterError("entries", names,
+                                 f"objects of at most {MAX_PDO_BYTES} bytes in all (these need {self.size})", name)
         self.mapping_words: tuple[int, ...] = tuple(
             e.index << 16 | e.subindex << 8 | 8 * e.data_type.size for e in self.entries
         )

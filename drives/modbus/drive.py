@@ -31,6 +31,7 @@ explicit :meth:`ModbusDrive.reconnect`.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from typing import Any
 
 from pymodbus.pdu import ModbusPDU
@@ -63,19 +64,19 @@ from drives.modbus.register_map import (
     OUTPUT_BLOCK,
     OUTPUT_BLOCK_COUNT,
     REGISTER_BY_NAME,
+    SIM_TIMING_CODES,
     InputBlockCodec,
     RegisterSpec,
     decode_value,
     describe_range,
     encode_value,
-    SIM_TIMING_CODES,
     register_for_object,
 )
-from drives.safety import SafetySettings
+from drives.safety import DEFAULT_SAFETY, SafetySettings
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ModbusDrive", "ModbusStats", "CYCLE_MODES"]
+__all__ = ["CYCLE_MODES", "ModbusDrive", "ModbusStats"]
 
 CYCLE_MODES = ("split", "fc23")
 _TIMING_NAMES = {code: name for name, code in SIM_TIMING_CODES.items()}
@@ -98,6 +99,8 @@ class ModbusDrive(Cia402Master):
     ``bytesize`` (needs pyserial at connect time).
     """
 
+    stats: ModbusStats
+
     def __init__(
         self,
         host: str | None = "127.0.0.1",
@@ -115,7 +118,7 @@ class ModbusDrive(Cia402Master):
         parity: str = "N",
         stopbits: int = 1,
         bytesize: int = 8,
-        safety: SafetySettings = SafetySettings(),
+        safety: SafetySettings = DEFAULT_SAFETY,
     ) -> None:
         self._setup(ModbusAddress(host, port, timeout, baudrate, parity, stopbits, bytesize), unit_id, word_order,
                     cycle, with_position, scaling, state_timeout, check_identity, safety)
@@ -140,12 +143,12 @@ class ModbusDrive(Cia402Master):
         self.link = ModbusLink(self.name, address, self.stats)
         self._codec = InputBlockCodec(word_order, with_position)
         self._requests = _CyclicRequests(unit_id, self._codec.count)
-        self._cached: list[int] | None = None  # fc23: inputs read by the last output write
+        self._cached: Sequence[int] | None = None  # fc23: inputs read by the last output write
         self._connected = False
         self._closed = False
 
     @classmethod
-    def from_url(cls, url: str, *, timeout: float = 0.1, **options: Any) -> "ModbusDrive":
+    def from_url(cls, url: str, *, timeout: float = 0.1, **options: Any) -> ModbusDrive:
         """``tcp://HOST:PORT`` or ``rtu:/dev/ttyUSB0`` -> a ModbusDrive (``options`` as the constructor)."""
         address = ModbusAddress.from_url(url, timeout)
         return cls(address.host, address.port, timeout=timeout, **options)
@@ -208,12 +211,13 @@ class ModbusDrive(Cia402Master):
 
     def _configure(self) -> None:
         if self.check_identity:
-            identity = self._read_spec(REGISTER_BY_NAME["map_identity"])
+            identity = int(self._read_spec(REGISTER_BY_NAME["map_identity"]))  # a UINT32 register
             if identity != MAP_IDENTITY:
                 swapped = (identity & 0xFFFF) << 16 | identity >> 16
                 hint = (f"; the server uses the other word order than word_order={self.word_order!r}"
                         if swapped == MAP_IDENTITY else "; not the haptic_bus register map")
-                raise DriveProtocolError(self.name, f"map identity register 0x0030 reads 0x{identity:08X}, expected 0x{MAP_IDENTITY:08X}{hint}")
+                raise DriveProtocolError(
+                    self.name, f"map identity register 0x0030 reads 0x{identity:08X}, expected 0x{MAP_IDENTITY:08X}{hint}")
         self._read_scaling()
         try:
             self.simulated_timing = _TIMING_NAMES.get(int(self._read_spec(REGISTER_BY_NAME["sim_timing"])))

@@ -12,6 +12,7 @@ Errors name the drive and what the request was for:
 
 from __future__ import annotations
 
+import contextlib
 import math
 import urllib.parse
 from dataclasses import dataclass
@@ -70,7 +71,7 @@ class ModbusAddress:
         return f"rtu:{self.port}" if self.serial else f"tcp://{self.host}:{self.port}"
 
     @classmethod
-    def from_url(cls, url: str, timeout: float = 0.1) -> "ModbusAddress":
+    def from_url(cls, url: str, timeout: float = 0.1) -> ModbusAddress:
         """``tcp://HOST:PORT`` or ``rtu:/dev/ttyUSB0``; ParameterError naming the URL otherwise."""
         parsed = urllib.parse.urlsplit(url)
         if parsed.scheme == "tcp":
@@ -128,10 +129,8 @@ class ModbusLink:
         """Close the connection; the link is down until :meth:`open`."""
         self.up = False
         if self.client is not None:
-            try:
+            with contextlib.suppress(OSError, ModbusException):
                 self.client.close()
-            except (OSError, ModbusException):
-                pass
 
     def send(self, request: ModbusPDU, what: str) -> ModbusPDU:
         """One request (``what`` names it in errors); the answer, or a typed error (module docstring)."""

@@ -55,8 +55,8 @@ Modbus specification orders it).
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable
 
 from drives.cia402 import (
     ABORT_CONNECTION_OPTION_CODE,
@@ -77,24 +77,24 @@ from drives.cia402 import (
 )
 
 __all__ = [
-    "WORD_ORDERS",
-    "RegisterSpec",
-    "REGISTERS",
-    "REGISTER_BY_NAME",
+    "EXCEPTION_NAMES",
     "INPUT_BLOCK",
     "INPUT_BLOCK_COUNT",
     "INPUT_BLOCK_COUNT_NO_POSITION",
+    "MAP_IDENTITY",
     "OUTPUT_BLOCK",
     "OUTPUT_BLOCK_COUNT",
-    "MAP_IDENTITY",
-    "register_for_object",
-    "register_at",
+    "REGISTERS",
+    "REGISTER_BY_NAME",
+    "WORD_ORDERS",
+    "InputBlockCodec",
+    "RegisterSpec",
+    "decode_value",
     "describe_range",
     "encode_value",
-    "decode_value",
-    "InputBlockCodec",
-    "EXCEPTION_NAMES",
     "exception_name",
+    "register_at",
+    "register_for_object",
 ]
 
 WORD_ORDERS = ("big", "little")
@@ -231,16 +231,16 @@ def encode_value(spec: RegisterSpec, value: int | float, word_order: str = "big"
     _check_order(word_order)
     count, fmt = _KINDS[spec.kind]
     limits = spec.range
-    if limits is not None:
-        if isinstance(value, bool) or not isinstance(value, int) or not limits[0] <= value <= limits[1]:
-            raise ValueError(f"{spec.label} = {value!r} is invalid; allowed: integers {limits[0]}..{limits[1]}")
+    whole = isinstance(value, int) and not isinstance(value, bool)
+    if limits is not None and not (whole and limits[0] <= value <= limits[1]):
+        raise ValueError(f"{spec.label} = {value!r} is invalid; allowed: integers {limits[0]}..{limits[1]}")
     words = list(struct.unpack(f">{count}H", struct.pack(fmt, value)))
     if word_order == "little":
         words.reverse()
     return words
 
 
-def decode_value(spec: RegisterSpec, registers: list[int] | tuple[int, ...], word_order: str = "big") -> int | float:
+def decode_value(spec: RegisterSpec, registers: Sequence[int], word_order: str = "big") -> int | float:
     """The value of ``spec`` from its registers (exactly ``spec.count`` of them)."""
     _check_order(word_order)
     count, fmt = _KINDS[spec.kind]
@@ -267,26 +267,26 @@ class InputBlockCodec:
         self.count = INPUT_BLOCK_COUNT if with_position else INPUT_BLOCK_COUNT_NO_POSITION
         self._words = struct.Struct(f">{self.count}H")
         self._values = struct.Struct(">Hii" if with_position else ">Hi")
-        self.decode: Callable[[list[int]], tuple[int, int, int | None]] = self._build_decode()
+        self.decode: Callable[[Sequence[int]], tuple[int, int, int | None]] = self._build_decode()
         self.encode: Callable[..., list[int]] = self._build_encode()
 
-    def _build_decode(self) -> Callable[[list[int]], tuple[int, int, int | None]]:
+    def _build_decode(self) -> Callable[[Sequence[int]], tuple[int, int, int | None]]:
         pack, unpack = self._words.pack, self._values.unpack
         big = self.word_order == "big"
         if self.with_position:
             if big:
-                def decode(r: list[int]) -> tuple[int, int, int | None]:
+                def decode(r: Sequence[int]) -> tuple[int, int, int | None]:
                     return unpack(pack(*r))
             else:
-                def decode(r: list[int]) -> tuple[int, int, int | None]:
+                def decode(r: Sequence[int]) -> tuple[int, int, int | None]:
                     return unpack(pack(r[0], r[2], r[1], r[4], r[3]))
         else:
             if big:
-                def decode(r: list[int]) -> tuple[int, int, int | None]:
+                def decode(r: Sequence[int]) -> tuple[int, int, int | None]:
                     sw, vel = unpack(pack(*r))
                     return sw, vel, None
             else:
-                def decode(r: list[int]) -> tuple[int, int, int | None]:
+                def decode(r: Sequence[int]) -> tuple[int, int, int | None]:
                     sw, vel = unpack(pack(r[0], r[2], r[1]))
                     return sw, vel, None
         return decode

@@ -12,33 +12,40 @@ Each writes one PNG to ``path`` and returns the path.
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 
-from haptic_bus.analysis.criterion import exact_verdict  # noqa: E402
-from haptic_bus.analysis.design import (  # noqa: E402
+from haptic_bus.analysis.criterion import exact_verdict
+from haptic_bus.analysis.design import (
     BANDWIDTH_ALPHA,
     SETTLING_BAND,
+    NyquistData,
     exact_region_boundary,
     exact_region_floor,
     force_step_response,
     nyquist_data,
     passive_region_curves,
 )
-from haptic_bus.analysis.loop import WallLoop  # noqa: E402
-from haptic_bus.analysis.velocity import POINT, VelocityModel  # noqa: E402
+from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.analysis.velocity import POINT, VelocityModel
 
 _DPI = 110
 _BOUNDARY_POINTS = 120
+PathLike = str | os.PathLike[str]
+WallPoint = WallLoop | tuple[float, float] | None  # a wall to mark: its loop, or (alpha, beta)
+
 _TITLE_POLES = 4  # the step figure's title names the poles of largest magnitude, at most this many
 
 
-def _save(fig, path) -> Path:
+def _save(fig: Figure, path: PathLike) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=_DPI)
@@ -46,7 +53,7 @@ def _save(fig, path) -> Path:
     return path
 
 
-def _point_coordinates(point, m: float, b: float, T: float) -> tuple[float, float] | None:
+def _point_coordinates(point: WallPoint, m: float, b: float, T: float) -> tuple[float, float] | None:
     if point is None:
         return None
     if isinstance(point, WallLoop):
@@ -55,7 +62,7 @@ def _point_coordinates(point, m: float, b: float, T: float) -> tuple[float, floa
     return float(alpha), float(beta)
 
 
-def plot_region(path, m: float, b: float, T: float, delay: float = 0, point=None,
+def plot_region(path: PathLike, m: float, b: float, T: float, delay: float = 0, point: WallPoint = None,
                 velocity: VelocityModel | str = POINT) -> Path:
     """Fig. 4 for the device (``m`` kg, ``b`` N s/m) at period ``T`` s, loop delay ``delay``
     (samples, real) and the drive's ``velocity`` model (the exact boundary's; the seed's
@@ -99,7 +106,8 @@ def plot_region(path, m: float, b: float, T: float, delay: float = 0, point=None
         ax.fill_betweenx(eb, np.minimum(ea, hi_a), hi_a, color="tab:green", alpha=0.13, lw=0, zorder=0)
         ax.plot(ea, eb, color="tab:green", lw=5, alpha=0.45, zorder=1, label=label)
     else:
-        ax.plot([], [], color="tab:green", lw=5, alpha=0.45, label=f"exact criterion, D = {loop.delay:g}, {loop.velocity} velocity: no passive wall in view")
+        ax.plot([], [], color="tab:green", lw=5, alpha=0.45,
+                label=f"exact criterion, D = {loop.delay:g}, {loop.velocity} velocity: no passive wall in view")
 
     if marked is not None:
         verdict = exact_verdict(point) if isinstance(point, WallLoop) else None
@@ -121,7 +129,7 @@ def plot_region(path, m: float, b: float, T: float, delay: float = 0, point=None
     return _save(fig, path)
 
 
-def plot_nyquist(path, loop: WallLoop) -> Path:
+def plot_nyquist(path: PathLike, loop: WallLoop) -> Path:
     """Fig. 5: ``T_zw`` (seed, eq. 10) and the exact ``T_fund`` in m/(N s), Nyquist and real part."""
     data = nyquist_data(loop, 4000)
     verdict = exact_verdict(loop)
@@ -159,18 +167,19 @@ def plot_nyquist(path, loop: WallLoop) -> Path:
     _nyquist_inset(ax, data)
     state = "passive" if verdict.passive else "NOT passive"
     fig.suptitle(f"m = {loop.m:g} kg, b = {loop.b:g} N s/m, T = {loop.T * 1e3:g} ms, K = {loop.K:g} N/m, "
-                 f"B = {loop.B:g} N s/m, D = {loop.delay:g}, {loop.velocity} velocity: exact criterion {state}, margin {verdict.margin:.3g} N s/m",
+                 f"B = {loop.B:g} N s/m, D = {loop.delay:g}, {loop.velocity} velocity: "
+                 f"exact criterion {state}, margin {verdict.margin:.3g} N s/m",
                  fontsize=10)
     fig.tight_layout()
     return _save(fig, path)
 
 
-def _nyquist_inset(ax, data, theta_from: float = 1.0) -> None:
+def _nyquist_inset(ax: Axes, data: NyquistData, theta_from: float = 1.0) -> None:
     """Zoom on the high-frequency end (``theta >= theta_from``), where the two responses part."""
     keep = data.theta >= theta_from
     if keep.sum() < 2:
         return
-    inset = ax.inset_axes([0.64, 0.06, 0.34, 0.34])
+    inset = ax.inset_axes((0.64, 0.06, 0.34, 0.34))
     inset.plot(data.t_zw.real[keep], data.t_zw.imag[keep], color="tab:blue", lw=1.3)
     inset.plot(data.t_fund.real[keep], data.t_fund.imag[keep], "--", color="tab:orange", lw=1.3)
     inset.axvline(0.0, color="k", lw=0.7)
@@ -182,7 +191,7 @@ def _nyquist_inset(ax, data, theta_from: float = 1.0) -> None:
     inset.grid(True, color="0.9")
 
 
-def plot_step(path, loop: WallLoop) -> Path:
+def plot_step(path: PathLike, loop: WallLoop) -> Path:
     """Fig. 6: wall force (N) after a unit operator-force step (N), start and whole horizon."""
     step = force_step_response(loop)
     rep = step.report
@@ -205,7 +214,8 @@ def plot_step(path, loop: WallLoop) -> Path:
     ax2.plot(step.time, deviation, color="tab:blue", lw=1.2, label=r"$(u_k - u_\infty)/u_\infty$")
     ax2.axhline(0.0, color="k", lw=0.8)
     if rep.overshoot > 0:
-        ax2.plot(rep.peak_time, rep.overshoot, "v", color="tab:red", label=f"peak: {rep.overshoot:.3g} % at {rep.peak_time * 1e3:.3g} ms")
+        ax2.plot(rep.peak_time, rep.overshoot, "v", color="tab:red",
+                 label=f"peak: {rep.overshoot:.3g} % at {rep.peak_time * 1e3:.3g} ms")
     top = max(2.0 * max(rep.overshoot, 0.0), 0.5)
     ax2.set_ylim(-2.0 * top, top)
     ax2.set_xlabel("time  (s)")
@@ -214,7 +224,8 @@ def plot_step(path, loop: WallLoop) -> Path:
     ax2.grid(True, color="0.9")
     ax2.legend(fontsize=8, loc="lower right")
     poles = sorted(rep.poles, key=abs, reverse=True)
-    shown = ", ".join(f"{p:.4g}" for p in poles[:_TITLE_POLES]) + (f" and {len(poles) - _TITLE_POLES} more" if len(poles) > _TITLE_POLES else "")
+    more = len(poles) - _TITLE_POLES
+    shown = ", ".join(f"{p:.4g}" for p in poles[:_TITLE_POLES]) + (f" and {more} more" if more > 0 else "")
     fig.suptitle(f"Unit step of operator force: overshoot {rep.overshoot:.3g} %, 2 % settling {rep.settling_time * 1e3:.3g} ms, "
                  f"poles {shown}  (D = {loop.delay:g}, {loop.velocity} velocity)", fontsize=10)
     fig.tight_layout()

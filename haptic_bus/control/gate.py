@@ -129,7 +129,9 @@ class PassivityGate:
 
     def judge(self, scene: CompiledScene) -> GateDecision:
         """The decision on ``scene``, never raising for a refusal."""
-        walls, reasons, warnings = [], [], []
+        walls: list[WallJudgement] = []
+        reasons: list[str] = []
+        warnings: list[str] = []
         for (K, B), names in sorted(scene.contacts().items()):
             loop = self.device.wall(K, B)
             verdict = _judge_wall(loop)

@@ -32,7 +32,8 @@ from __future__ import annotations
 
 import logging
 import struct
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import canopen
 from canopen import SdoAbortedError
@@ -80,7 +81,7 @@ def controller_dictionary(names: list[str], heartbeat_ms: int = 0) -> ObjectDict
     od.add_object(_constant("Error register", 0x1001, 0, datatypes.UNSIGNED8, 0))
     od.add_object(_constant("Producer heartbeat time", 0x1017, 0, datatypes.UNSIGNED16, heartbeat_ms))
     identity = ODRecord("Identity object", 0x1018)
-    major, minor, *_ = (int(part) for part in __version__.split(".") + ["0", "0"])
+    major, minor, *_ = (int(part) for part in [*__version__.split("."), "0", "0"])
     for sub, name, value in ((0, "Highest sub-index supported", 4), (1, "Vendor-ID", 0), (2, "Product code", PRODUCT_CODE),
                              (3, "Revision number", major << 16 | minor), (4, "Serial number", 0)):
         identity.add_member(_constant(name, 0x1018, sub, datatypes.UNSIGNED8 if sub == 0 else datatypes.UNSIGNED32, value))
@@ -88,7 +89,7 @@ def controller_dictionary(names: list[str], heartbeat_ms: int = 0) -> ObjectDict
     od.add_object(_variable("Number of scene objects", OBJECT_COUNT, 0, datatypes.UNSIGNED8, "ro"))
     od.add_object(_variable("Commit wall parameters", COMMIT, 0, datatypes.UNSIGNED8, "wo"))
     od.add_object(_variable("Last commit result", LAST_RESULT, 0, datatypes.VISIBLE_STRING, "ro"))
-    for i, name in enumerate(names):
+    for i in range(len(names)):  # the Name sub-index is answered by the read callback
         record = ODRecord(f"Scene object {i}", WALL_BASE + i)
         count = _variable("Highest sub-index", WALL_BASE + i, 0, datatypes.UNSIGNED8, "ro")
         count.default = 3
@@ -123,7 +124,7 @@ class ControllerNode:
     def start(self) -> None:
         """Open the bus and answer SDO requests (in canopen's notifier thread, which a receive
         error does not end: it is counted and logged)."""
-        self._network.listeners.append(ReceiveErrors(f"controller node {self.node_id}"))
+        self._network.listeners.append(ReceiveErrors(f"controller node {self.node_id}"))  # type: ignore[arg-type]  # a can.Listener, as python-can wants
         self._network.connect(**self._bus_config)
         self._network.add_node(self._node)
         self._node.nmt.state = "OPERATIONAL"
@@ -133,7 +134,7 @@ class ControllerNode:
         self._node.remove_network()
         shut_down(self._network, f"controller node {self.node_id}")
 
-    def __enter__(self) -> "ControllerNode":
+    def __enter__(self) -> ControllerNode:
         self.start()
         return self
 
@@ -166,12 +167,12 @@ class ControllerNode:
     def _commit(self) -> None:
         staged, self._staged = self._staged, {}
         try:
-            for i, (K, B) in sorted(staged.items()):
-                current = self.controller.latest_scene.by_name()[self._names[i]]
-                K = current.stiffness if K is None else K
-                B = current.damping if B is None else B
-                staged[i] = [K, B]
-            decision = self.controller.set_walls({self._names[i]: (K, B) for i, (K, B) in staged.items()})
+            current = self.controller.latest_scene.by_name()
+            walls: dict[str, tuple[float, float]] = {}
+            for i, (K, B) in sorted(staged.items()):  # a half-written pair keeps the scene's other value
+                wall = current[self._names[i]]
+                walls[self._names[i]] = (wall.stiffness if K is None else K, wall.damping if B is None else B)
+            decision = self.controller.set_walls(walls)
         except HapticBusError as error:  # GateRefusal or an invalid value (NaN, negative, ...)
             self.refused += 1
             self.last_result = f"refused: {error}"
@@ -203,7 +204,7 @@ def upload_walls(
     when node ``node_id`` does not answer within ``timeout`` s.
     """
     network = canopen.Network()
-    network.listeners.append(ReceiveErrors("upload"))
+    network.listeners.append(ReceiveErrors("upload"))  # type: ignore[arg-type]  # a can.Listener, as python-can wants
     network.connect(**dict(bus))
     try:
         node = network.add_node(canopen.RemoteNode(node_id, controller_dictionary([])))

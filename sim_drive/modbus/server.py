@@ -185,7 +185,7 @@ class ModbusSimServer:
             registers[offset : offset + count] = result
             return None
         with self.lock:
-            rc = self.bank.write(address, values)  # type: ignore[arg-type]
+            rc = self.bank.write(address, values)
             if not rc:
                 if writes_command(address, len(values)):
                     self.controller = request.handler
