@@ -11,15 +11,15 @@ import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
-from haptic_bus.app.cli import main
+from drives.errors import ParameterError
 from haptic_bus.analysis.closed_form import velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict, seed_verdict
-from drives.errors import ParameterError
 from haptic_bus.analysis.frequency import seed_t_zw, seed_z_zw, t_fund, z_fund
 from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, max_damping, max_stiffness
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import ExactPlant, phi1, phi2, zoh_coefficients
 from haptic_bus.analysis.poles import closed_loop_poles, is_stable
+from haptic_bus.app.cli import main
 from tests.mp_reference import t_fund_mp, t_zw_mp
 
 SEED = WallLoop(m=0.5, b=0.1, T=1e-3, K=200.0, B=100.0)
@@ -143,7 +143,7 @@ BOUNDARY_BAND = 1e-9
 
 
 @settings(max_examples=400, deadline=None)
-@given(loop=loops.map(lambda l: WallLoop(l.m, l.b, l.T, l.K, l.B, 0)))
+@given(loop=loops.map(lambda loop: WallLoop(loop.m, loop.b, loop.T, loop.K, loop.B, 0)))
 def test_exact_criterion_agrees_with_eq23_without_delay(loop: WallLoop) -> None:
     slack = velocity_sampling_slack(loop)
     scale = loop.b + 0.5 * loop.K * loop.T + loop.B
@@ -199,7 +199,7 @@ def _mp_boundary(loop: WallLoop, stiffness: float, theta: float) -> float:
     """The K where min_theta Re(1/T_fund) touches 0 (tangency), solved in 60 digits."""
 
     def equations(k, th):  # Re Z = 0 and d/dtheta Re Z = 0 together: the tangency
-        f = lambda t: mp.re(1 / _t_fund_any_k(loop, k, t))  # noqa: E731
+        f = lambda t: mp.re(1 / _t_fund_any_k(loop, k, t))
         return [f(th), mp.diff(f, th)]
 
     k, _ = mp.findroot(equations, (mp.mpf(stiffness), mp.mpf(theta)))
@@ -267,13 +267,13 @@ def test_float32_and_numpy_inputs_are_accepted() -> None:
 
 def test_check_cli_json_fields_and_exit_codes(capsys: pytest.CaptureFixture[str]) -> None:
     seed_args = ["check", "--mass", "0.5", "--friction", "0.1", "--period", "0.001", "--stiffness", "200", "--damping", "100"]
-    assert main(seed_args + ["--json"]) == 0
+    assert main([*seed_args, "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["passive"] is True and report["margin"] >= 0
     assert report["max_stiffness"] == pytest.approx(1.8e6, rel=1e-6)
     assert report["max_damping"] == pytest.approx(999.9, rel=1e-6)
     assert report["critical_theta"] == pytest.approx(math.pi)
-    assert main(seed_args + ["--delay", "1", "--json"]) == 1
+    assert main([*seed_args, "--delay", "1", "--json"]) == 1
     report = json.loads(capsys.readouterr().out)
     assert report["passive"] is False and report["margin"] < 0 and report["max_stiffness"] is None
 

@@ -5,10 +5,13 @@ from __future__ import annotations
 import struct
 
 import pytest
+from canopen.emcy import EmcyError
 
 from drives.bus_config import resolve_bus_config
-from drives.errors import BusConfigError
 from drives.canopen.drive import split_into_frames
+from drives.canopen.events import describe_emcy
+from drives.canopen.pdo_codec import PdoCodec
+from drives.cia301 import describe_emcy_code, is_restricted_cob_id
 from drives.cia402 import (
     CONTROLWORD,
     MODES_OF_OPERATION,
@@ -20,12 +23,7 @@ from drives.cia402 import (
     DataType,
     ObjectSpec,
 )
-from canopen.emcy import EmcyError
-
-from drives.canopen.events import describe_emcy
-from drives.canopen.pdo_codec import PdoCodec
-from drives.cia301 import describe_emcy_code, is_restricted_cob_id
-from drives.errors import PdoLengthError
+from drives.errors import BusConfigError, PdoLengthError
 
 
 def test_default_tpdo_layout_and_mapping_words():

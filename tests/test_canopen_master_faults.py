@@ -14,13 +14,11 @@ import canopen
 import pytest
 
 from drives.base import DriveScaling
-from drives.errors import DriveFault, DriveProtocolError, DriveTimeout
-from drives.errors import BusConfigError
 from drives.canopen.drive import CanopenDrive
-from drives.cia402_master import SAFE_CONTROLWORD
-from sim_drive.eds import eds_path
-from drives.errors import DriveStateError, UnsupportedModeError
 from drives.cia402 import CONTROLWORD, STATUSWORD, SUPPORTED_DRIVE_MODES, OperationMode, State, decode_statusword
+from drives.cia402_master import SAFE_CONTROLWORD
+from drives.errors import BusConfigError, DriveFault, DriveProtocolError, DriveStateError, DriveTimeout, UnsupportedModeError
+from sim_drive.eds import eds_path
 
 NODE_ID = 5  # canopen_rig's default node (the messages checked below name node 5)
 RPDO1 = 0x200 + NODE_ID
@@ -49,7 +47,7 @@ class Sniffer:
 
 def run_cycles(drive, count: int, torque: int = 200) -> int:
     """``count`` cycles; the number completed before an exception propagates."""
-    for done in range(count):
+    for _done in range(count):
         drive.read_inputs()
         drive.write_outputs(torque)
     return count
@@ -64,7 +62,7 @@ def assert_safe_frame_last(sniffer: Sniffer) -> None:
 def test_connect_configures_the_drive_over_sdo(canopen_rig):
     with canopen_rig("virtual", "ideal", heartbeat_producer_ms=50) as r:
         drive = r.drive
-        u32 = lambda index, sub: struct.unpack("<I", drive.sdo_read(index, sub))[0]  # noqa: E731
+        u32 = lambda index, sub: struct.unpack("<I", drive.sdo_read(index, sub))[0]
         assert u32(0x1006, 0) == 1000  # us
         assert struct.unpack("<H", drive.sdo_read(0x1017, 0))[0] == 50
         assert drive.sdo_read(0x1A00, 0)[0] == 2
@@ -109,7 +107,7 @@ def test_silent_drive_is_detected_within_the_configured_cycles(canopen_rig):
             r.sim.go_silent()
             calls = 0
             with pytest.raises(DriveTimeout) as info:
-                for calls in range(1, 10):
+                for calls in range(1, 10):  # noqa: B007  (read after the raise: the cycle that raised)
                     drive.read_inputs()
                     drive.write_outputs(200)
             assert calls == 3
@@ -241,7 +239,7 @@ def test_unsupported_mode_is_refused_naming_0x6502(monkeypatch, canopen_rig):
         drive = r.drive
         real_read = drive.read_object
         monkeypatch.setattr(drive, "read_object", lambda spec: 0 if spec is SUPPORTED_DRIVE_MODES else real_read(spec))
-        with pytest.raises(UnsupportedModeError, match="0x6502.*CYCLIC_SYNCHRONOUS_TORQUE"):
+        with pytest.raises(UnsupportedModeError, match=r"0x6502.*CYCLIC_SYNCHRONOUS_TORQUE"):
             drive.enable()
         with pytest.raises(UnsupportedModeError, match="PROFILE_TORQUE"):
             drive.enable(OperationMode.PROFILE_TORQUE)
@@ -337,7 +335,7 @@ def test_controlword_never_leaves_fault_reset_high_after_disable(canopen_rig):
 def test_without_an_eds_scaling_comes_from_the_caller_and_the_drive(canopen_rig):
     """eds=None: the minimal CiA-402 dictionary; no manufacturer scaling objects are known."""
     with canopen_rig("virtual", "ideal", connect=False, eds=None) as r:
-        with pytest.raises(DriveProtocolError, match="scaling unknown for velocity_per_count.*pass scaling="):
+        with pytest.raises(DriveProtocolError, match=r"scaling unknown for velocity_per_count.*pass scaling="):
             r.drive.connect()
     # 0x6076 = 200 mN m and 0x6072 = 3000 on this drive: the caller must agree (a conflict is refused, test_standard_objects)
     given = DriveScaling(velocity_per_count=2e-6, position_per_count=1e-7, rated_torque=0.2, force_per_torque=50.0,

@@ -13,18 +13,18 @@ import uuid
 import numpy as np
 import pytest
 
-from haptic_bus.app.cli import main
-from haptic_bus.control.controller import WallController, encoder_origin
-from haptic_bus.control.node import ABORT_INVALID_VALUE, ControllerNode, UploadRefused, upload_walls
 from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.design import force_step_response
 from haptic_bus.analysis.energy import commensurate_theta
 from haptic_bus.analysis.frequency import t_fund
-from haptic_bus.control.gate import DeviceLoop, GateRefusal, PassivityGate
 from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import load_profile
-from haptic_bus.control.scene import Wall, compile_scene
 from haptic_bus.app.rig import simulated_canopen
+from haptic_bus.control.controller import WallController, encoder_origin
+from haptic_bus.control.gate import DeviceLoop, GateRefusal, PassivityGate
+from haptic_bus.control.node import ABORT_INVALID_VALUE, ControllerNode, UploadRefused, upload_walls
+from haptic_bus.control.scene import Wall, compile_scene
 from sim_drive.operator import ConstantPush, Sinusoid, StepPush
 
 
@@ -135,7 +135,7 @@ def test_a_wall_that_only_a_wrong_friction_made_passive_gives_energy_as_the_anal
 
 def test_refused_upload_on_the_api_keeps_the_running_wall() -> None:
     profile = seed_at_the_wall()
-    with simulated_canopen(profile) as (sim, drive):
+    with simulated_canopen(profile) as (_sim, drive):
         controller = controller_for(profile, drive)
         controller.run(10)
         before = controller.scene
@@ -152,7 +152,7 @@ def test_refused_upload_over_the_bus_is_an_sdo_abort_and_changes_nothing() -> No
     profile = seed_at_the_wall()
     channel = f"upload-{uuid.uuid4().hex[:10]}"
     bus = {"interface": "virtual", "channel": channel}
-    with simulated_canopen(profile, channel=channel) as (sim, drive):
+    with simulated_canopen(profile, channel=channel) as (_sim, drive):
         controller = controller_for(profile, drive)
         with ControllerNode(controller, 42, bus):
             with pytest.raises(UploadRefused) as info:
@@ -166,9 +166,9 @@ def test_refused_upload_over_the_bus_is_an_sdo_abort_and_changes_nothing() -> No
             assert controller.scene.by_name()["wall"].damping == 120.0
             # the CLI path, same bus: exit 1 for a refusal, one line on stderr
             args = ["upload", "--interface", "virtual", "--channel", channel, "--node-id", "42", "--object", "0"]
-            assert main(args + ["--stiffness", "5e6", "--damping", "1"]) == 1
-            assert main(args + ["--stiffness", "nan", "--damping", "1"]) == 2
-            assert main(args + ["--stiffness", "210", "--damping", "110"]) == 0
+            assert main([*args, "--stiffness", "5e6", "--damping", "1"]) == 1
+            assert main([*args, "--stiffness", "nan", "--damping", "1"]) == 2
+            assert main([*args, "--stiffness", "210", "--damping", "110"]) == 0
             controller.run(1)
             assert controller.scene.by_name()["wall"].stiffness == 210.0
 
@@ -199,7 +199,7 @@ def test_a_storm_of_concurrent_uploads_never_tears_k_from_b() -> None:
         seen.add((wall.stiffness, wall.damping))
         assert c.scene.stiffness[-1] == wall.stiffness and c.scene.damping[-1] == wall.damping
 
-    with simulated_canopen(profile) as (sim, drive):
+    with simulated_canopen(profile) as (_sim, drive):
         controller = controller_for(profile, drive)
         threads = [threading.Thread(target=uploader, args=(seed,)) for seed in range(4)]
         for t in threads:
@@ -242,7 +242,7 @@ def test_a_drive_fault_ends_the_run_safely_and_keeps_the_record(fault: str, tmp_
 
 def test_force_is_saturated_at_the_profile_limit_and_counted() -> None:
     profile = dataclasses.replace(seed_at_the_wall(), force_limit=0.5)
-    with simulated_canopen(profile, operator=ConstantPush(2.0)) as (sim, drive):
+    with simulated_canopen(profile, operator=ConstantPush(2.0)) as (_sim, drive):
         controller = controller_for(profile, drive)
         summary = controller.run(400)
     assert summary.saturated_cycles > 0
@@ -266,7 +266,7 @@ def test_real_clock_paces_the_loop_and_reports_every_late_start() -> None:
     from haptic_bus.control.clock import RealClock
 
     profile = seed_at_the_wall()
-    with simulated_canopen(profile) as (sim, drive):
+    with simulated_canopen(profile) as (_sim, drive):
         controller = controller_for(profile, drive, clock=RealClock(1e-3))
         started = time.perf_counter()
         summary = controller.run(100)

@@ -127,7 +127,8 @@ def test_ten_thousand_random_frames_silence_neither_side(channel) -> None:
         # the drive still answers SDO and still beats
         fuzzer.shutdown()
         with can.Bus(interface="virtual", channel=channel) as probe:
-            probe.send(can.Message(arbitration_id=0x600 + NODE, data=struct.pack("<BHB4x", 0x40, 0x1000, 0), is_extended_id=False))
+            read_device_type = struct.pack("<BHB4x", 0x40, 0x1000, 0)  # SDO upload request for 0x1000:00
+            probe.send(can.Message(arbitration_id=0x600 + NODE, data=read_device_type, is_extended_id=False))
             answers, beats, end = [], 0, time.monotonic() + 1.0
             while time.monotonic() < end and not (answers and beats):
                 message = probe.recv(0.05)

@@ -73,7 +73,8 @@ def test_illegal_value_names_register_object_and_exception(running) -> None:
     assert server.drive.quick_stop_option_code == 2 and server.drive.mode == 10  # nothing applied
 
 
-@pytest.mark.parametrize("code, name", [(0x06, "SERVER DEVICE BUSY"), (0x02, "ILLEGAL DATA ADDRESS"), (0x03, "ILLEGAL DATA VALUE")])
+@pytest.mark.parametrize("code, name", [(0x06, "SERVER DEVICE BUSY"), (0x02, "ILLEGAL DATA ADDRESS"),
+                                        (0x03, "ILLEGAL DATA VALUE")])
 def test_exception_in_the_cycle_trips_and_writes_zero_torque(running, code: int, name: str) -> None:
     server, drive = running
     if drive.cycle == "fc23":

@@ -105,7 +105,7 @@ def test_constant_push_settles_at_f_over_k(seed_rig) -> None:
 
 def test_force_step_response_is_the_analytic_discrete_loop(seed_rig) -> None:
     level, cycles = 2.0, 1500
-    server, drive, controller = seed_rig(StepPush(level, 0.0))
+    _server, drive, controller = seed_rig(StepPush(level, 0.0))
     controller.run(cycles)
     force = controller.record.column("force_n")
     # cycle k of the controller reads the sample taken at t = kT (no time passes while enabling)

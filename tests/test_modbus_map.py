@@ -8,6 +8,7 @@ import math
 import pytest
 
 from drives.cia402 import CONTROLWORD, POSITION_ACTUAL, TARGET_TORQUE, VELOCITY_ACTUAL
+from drives.errors import ParameterError
 from drives.modbus.register_map import (
     INPUT_BLOCK,
     INPUT_BLOCK_COUNT,
@@ -22,7 +23,6 @@ from drives.modbus.register_map import (
     register_at,
     register_for_object,
 )
-from drives.errors import ParameterError
 from drives.modbus.timing import SAFETY_FACTOR, assumed_delay
 from sim_drive.device import SimulatedDrive
 from sim_drive.modbus import RegisterBank
@@ -95,7 +95,7 @@ def test_input_block_codec(order: str, with_position: bool) -> None:
     registers = codec.encode(sw, vel, pos)
     assert len(registers) == codec.count == (5 if with_position else 3)
     # the block is the concatenation of the individual registers of the map
-    expected = [sw] + encode_value(VELOCITY, vel, order)
+    expected = [sw, *encode_value(VELOCITY, vel, order)]
     if with_position:
         expected += encode_value(register_for_object(POSITION_ACTUAL), pos, order)
     assert registers == expected
@@ -107,7 +107,8 @@ def test_block_layout() -> None:
     assert [register_at(a).obj for a in range(INPUT_BLOCK, INPUT_BLOCK + INPUT_BLOCK_COUNT)] == [
         register_at(0).obj, VELOCITY_ACTUAL, VELOCITY_ACTUAL, POSITION_ACTUAL, POSITION_ACTUAL]
     assert [register_at(OUTPUT_BLOCK + i).obj for i in range(2)] == [CONTROLWORD, TARGET_TORQUE]
-    assert describe_range(OUTPUT_BLOCK, 2) == "registers 0x0010..0x0011: 0x0010 (0x6040 Controlword), 0x0011 (0x6071 Target torque)"
+    assert describe_range(OUTPUT_BLOCK, 2) == ("registers 0x0010..0x0011: "
+                                                "0x0010 (0x6040 Controlword), 0x0011 (0x6071 Target torque)")
     assert describe_range(7, 1) == "register 0x0007: 0x0007 (unmapped)"
 
 

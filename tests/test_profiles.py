@@ -10,12 +10,20 @@ import pathlib
 import pytest
 
 from haptic_bus.analysis.check import check_loop
-from haptic_bus.analysis.loop import BANDWIDTH_ALPHA
-from haptic_bus.control.gate import GateRefusal
-from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.app.profiles import (DEFAULT_PROFILE, Profile, ProfileError, ProfileRefusal, default_profile, profile_to_dict,
-                                 load_profile, read_profile, shipped_profiles)
+from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
+from haptic_bus.app.profiles import (
+    DEFAULT_PROFILE,
+    Profile,
+    ProfileError,
+    ProfileRefusal,
+    default_profile,
+    load_profile,
+    profile_to_dict,
+    read_profile,
+    shipped_profiles,
+)
 from haptic_bus.app.profiles_cli import add_profiles_parser, cmd_check, cmd_list, cmd_show
+from haptic_bus.control.gate import GateRefusal
 from haptic_bus.control.scene import Detent, Slot, Wall
 
 SHIPPED = shipped_profiles()

@@ -27,8 +27,9 @@ import pathlib
 import re
 import tomllib
 import types
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from drives.base import DriveScaling
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, TARGET_TORQUE
@@ -198,9 +199,9 @@ class Profile:
     gate_policy: GatePolicy
     operator_model: Mapping[str, Any] = field(hash=False, compare=True)
     path: pathlib.Path | None = None
-    safety: SafetySettings = SafetySettings()
-    supervisor: SupervisorPolicy = SupervisorPolicy()
-    start: StartPolicy = StartPolicy()
+    safety: SafetySettings = field(default_factory=SafetySettings)
+    supervisor: SupervisorPolicy = field(default_factory=SupervisorPolicy)
+    start: StartPolicy = field(default_factory=StartPolicy)
     identification: Identification | None = None
 
     def device_loop(self) -> DeviceLoop:

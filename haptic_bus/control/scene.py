@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable, Union
 
 from drives.errors import ParameterError
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
@@ -68,7 +68,7 @@ class Wall:
             return [(self.position, math.inf, self.stiffness, self.position, self.damping)]
         return [(-math.inf, self.position, self.stiffness, self.position, self.damping)]
 
-    def with_parameters(self, stiffness: float, damping: float) -> "Wall":
+    def with_parameters(self, stiffness: float, damping: float) -> Wall:
         return Wall(self.name, self.position, self.normal, stiffness, damping)
 
 
@@ -97,7 +97,7 @@ class Slot:
         K, B = self.stiffness, self.damping
         return [(-math.inf, self.low, K, self.low, B), (self.high, math.inf, K, self.high, B)]
 
-    def with_parameters(self, stiffness: float, damping: float) -> "Slot":
+    def with_parameters(self, stiffness: float, damping: float) -> Slot:
         return Slot(self.name, self.low, self.high, stiffness, damping)
 
 
@@ -122,11 +122,11 @@ class Detent:
     def pieces(self) -> list[tuple[float, float, float, float, float]]:
         return [(self.center - self.reach, self.center + self.reach, self.stiffness, self.center, self.damping)]
 
-    def with_parameters(self, stiffness: float, damping: float) -> "Detent":
+    def with_parameters(self, stiffness: float, damping: float) -> Detent:
         return Detent(self.name, self.center, self.reach, stiffness, damping)
 
 
-SceneObject = Union[Wall, Slot, Detent]
+SceneObject = Wall | Slot | Detent
 
 
 @dataclass(frozen=True)
