@@ -142,6 +142,11 @@ def supports(supported_drive_modes: int, mode: OperationMode) -> bool:
     return bool(supported_drive_modes >> mode.supported_bit & 1)
 
 
+def cst_announced(supported_drive_modes: int | None) -> bool | None:
+    """Whether 0x6502 announces cyclic synchronous torque (bit 9); None where it was not read."""
+    return None if supported_drive_modes is None else supports(supported_drive_modes, OperationMode.CYCLIC_SYNCHRONOUS_TORQUE)
+
+
 class State(enum.Enum):
     """The eight states of the CiA-402 power drive system."""
 

@@ -22,7 +22,7 @@ Total time: at most ``timeout + 6 * answer_timeout`` s plus opening and closing 
 Device type 0x1000 (CiA 301 7.5.2.1): bits 0..15 the device profile number (402 = drives and
 motion control), bits 16..23 the profile's type (CiA 402: 1 frequency converter, 2 servo
 drive, 3 stepper motor), bits 24..31 mode bits.  0x6502 bit ``mode - 1`` announces mode
-``mode`` (bit 9: cyclic synchronous torque), see :func:`drives.cia402.supports`.  0x6502 is
+``mode`` (bit 9: cyclic synchronous torque), see :func:`drives.cia402.cst_announced`.  0x6502 is
 read only where 0x1000 names profile 402: in another profile 0x6502 is not that object.
 """
 
@@ -52,7 +52,7 @@ from drives.cia301 import (
     NmtState,
     nmt_state_name,
 )
-from drives.cia402 import SUPPORTED_DRIVE_MODES, DataType, OperationMode, supports
+from drives.cia402 import SUPPORTED_DRIVE_MODES, DataType, cst_announced
 from drives.errors import DriveError, DriveTimeout, SdoAbortError
 from drives.scan_arguments import checked_ids, checked_seconds
 
@@ -100,10 +100,8 @@ class CanopenNode:
 
     @property
     def cst_supported(self) -> bool | None:
-        """0x6502 announces cyclic synchronous torque (bit 9); None where 0x6502 was not read."""
-        if self.supported_drive_modes is None:
-            return None
-        return supports(self.supported_drive_modes, OperationMode.CYCLIC_SYNCHRONOUS_TORQUE)
+        """0x6502 announces cyclic synchronous torque; None where 0x6502 was not read."""
+        return cst_announced(self.supported_drive_modes)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: numbers as numbers, None as null."""

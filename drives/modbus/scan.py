@@ -33,7 +33,7 @@ from typing import Any
 from pymodbus.pdu.mei_message import ReadDeviceInformationRequest
 from pymodbus.pdu.register_message import ReadHoldingRegistersRequest
 
-from drives.cia402 import SUPPORTED_DRIVE_MODES, OperationMode, supports
+from drives.cia402 import SUPPORTED_DRIVE_MODES, cst_announced
 from drives.errors import DriveError, DriveTimeout, ModbusExceptionError, ModbusLinkLost
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import MAP_IDENTITY, REGISTER_BY_NAME, WORD_ORDERS, decode_value, register_for_object
@@ -73,10 +73,8 @@ class ModbusUnit:
 
     @property
     def cst_supported(self) -> bool | None:
-        """0x6502 announces cyclic synchronous torque (bit 9); None where 0x6502 was not read."""
-        if self.supported_drive_modes is None:
-            return None
-        return supports(self.supported_drive_modes, OperationMode.CYCLIC_SYNCHRONOUS_TORQUE)
+        """0x6502 announces cyclic synchronous torque; None where 0x6502 was not read."""
+        return cst_announced(self.supported_drive_modes)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: numbers as numbers, None as null."""

@@ -88,10 +88,10 @@ def add_scan_parser(
     parser = command("scan", SCAN_HELP, lambda args: run_scan(args, bus_arguments))
     add_bus_arguments(parser)
     parser.add_argument("--node-ids", type=node_ids, metavar="IDS", help="CANopen node ids to probe, e.g. 5,9 or 1-10,127; "
-                        "None: all, 1-127")
+                        "default: all, 1-127")
     parser.add_argument("--modbus", metavar="URL", help="scan a Modbus server instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
     parser.add_argument("--unit-ids", type=unit_ids, metavar="IDS", help="Modbus unit ids to probe, e.g. 1,2 or 1-10 "
-                        "(only with --modbus); None: all, 1-247")
+                        "(only with --modbus); default: all, 1-247")
     parser.add_argument("--timeout", type=seconds, default=DEFAULT_TIMEOUT,
                         help="CANopen: listening window after the probe; Modbus: time in which new units are started; s")
     parser.add_argument("--answer-timeout", type=seconds, default=DEFAULT_ANSWER_TIMEOUT,
