@@ -85,7 +85,7 @@ def test_a_drive_without_the_watchdog_objects_is_warned_about_or_refused(channel
         drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path(), safety=SafetySettings(strict=strict))
         try:
             if strict:
-                with pytest.raises(DriveProtocolError, match="strict safety policy.*0x6007.*0x1016:01"):
+                with pytest.raises(DriveProtocolError, match=r"strict safety policy.*0x6007.*0x1016:01"):
                     drive.connect()
             else:
                 drive.connect()
@@ -213,8 +213,12 @@ def test_a_killed_or_stopped_modbus_controller_faults_the_drive(sim_process, tmp
             time.sleep(0.002)
         elapsed = time.monotonic() - signalled
         assert probe.state() is State.FAULT
-        expected = 0x8100 if sig is signal.SIGKILL else 0x8130  # the connection closed / the watchdog ran out
-        assert probe.read_object(0x603F) == expected and probe.read_object(0x6077) == 0
+        # SIGSTOP leaves the connection open: only the watchdog (0x8130) can fire.  SIGKILL closes it,
+        # but the kernel tears the address space down before it closes the files (30-40 ms measured
+        # for this process on a loaded 2-core machine), so the 50 ms watchdog may run out first:
+        # either code names a watchdog that really fired.
+        expected = {0x8100, 0x8130} if sig is signal.SIGKILL else {0x8130}
+        assert probe.read_object(0x603F) in expected and probe.read_object(0x6077) == 0
         assert elapsed < STOP_BOUND, f"{sig.name}: the drive faulted {elapsed * 1e3:.1f} ms after the signal"
     finally:
         probe.close()

@@ -125,7 +125,7 @@ def test_profile_tables(tmp_path: pathlib.Path) -> None:
     assert parameters.period == 0.002 and profile.timing is Timing.IDEAL
     assert profile.operator == HandModel(250.0, 3.0)
     path.write_text("[device]\nm = 1.0\n")
-    with pytest.raises(ParameterError, match="device.m"):
+    with pytest.raises(ParameterError, match=r"device\.m"):
         load_profile(path)
     path.write_text("[device\n")
     with pytest.raises(ParameterError, match="valid TOML"):
@@ -139,7 +139,8 @@ def test_every_shipped_profile_reads_as_a_drive() -> None:
 
 
 @pytest.mark.parametrize(
-    "sig, twice", [(signal.SIGTERM, False), (signal.SIGINT, False), (signal.SIGTERM, True)], ids=["SIGTERM", "SIGINT", "SIGTERM-twice"]
+    "sig, twice", [(signal.SIGTERM, False), (signal.SIGINT, False), (signal.SIGTERM, True)],
+    ids=["SIGTERM", "SIGINT", "SIGTERM-twice"],
 )
 def test_signal_stops_cleanly_and_state_changes_are_logged(
     sig: signal.Signals, twice: bool, multicast: tuple[str, int], sim_process, frames

@@ -53,7 +53,7 @@ def test_state_machine_walk_and_statusword() -> None:
     ]
     for command, state, number in steps:
         drive.write_controlword(command.word)
-        assert drive.state is state
+        assert drive.state is state, f"transition {number}"
         assert decode_statusword(drive.statusword) is state
         assert drive.read_object(0x6041) == drive.statusword
     assert seen == [(s, n) for _, s, n in steps]

@@ -55,6 +55,21 @@ def test_cia402_objects_match_the_protocol_tables(od: canopen.ObjectDictionary) 
     assert od[0x6502].default == 1 << 9 and od[0x6072].default == 3000 and od[0x6076].default == 200
 
 
+def test_the_safety_chain_objects_are_in_the_eds(od: canopen.ObjectDictionary) -> None:
+    """Issue 10: the heartbeat consumer, the RPDO deadline, 0x6007 and the error objects, with
+    the power-on values the drive starts from (watchdogs off until a master sets them, 0x6007 fault)."""
+    assert od[0x1001].data_type == datatypes.UNSIGNED8 and not od[0x1001].writable
+    assert od[0x1016][1].data_type == datatypes.UNSIGNED32 and od[0x1016][1].default == 0
+    assert od[0x1017].default == 100
+    for n in range(4):
+        deadline = od[0x1400 + n][5]
+        assert deadline.data_type == datatypes.UNSIGNED16 and deadline.writable and deadline.default == 0
+    option = od[0x6007]
+    assert option.data_type == datatypes.INTEGER16 and option.writable and option.default == 1
+    assert od[0x603F].data_type == datatypes.UNSIGNED16 and od[0x603F].pdo_mappable
+    assert od[0x1014].default == 0x80 + NODE
+
+
 def test_manufacturer_area_is_real64(od: canopen.ObjectDictionary) -> None:
     assert isinstance(od[0x2000], ODRecord)
     assert (od[0x2000][1].default, od[0x2000][2].default) == (0.5, 0.1)

@@ -113,7 +113,7 @@ def test_profile_tables(tmp_path: pathlib.Path) -> None:
     (tmp_path / "rec.csv").write_text("0,1\n")
     recorded = operator_from_table({"model": "recorded", "path": "rec.csv", "interpolation": "linear"}, base=tmp_path)
     assert recorded.forces == (1.0,) and recorded.interpolation == "linear"
-    with pytest.raises(ParameterError, match="operator.model"):
+    with pytest.raises(ParameterError, match=r"operator\.model"):
         operator_from_table({"model": "ghost"})
     with pytest.raises(ParameterError, match="fields of sinusoid"):
         operator_from_table({"model": "sinusoid", "amplitude": 1.0, "frequency": 1.0, "colour": 3})

@@ -108,7 +108,8 @@ def test_rpdo_deadline_is_not_watched_before_the_first_rpdo(sim, master, frames)
     assert sim.drive.state is State.OPERATION_ENABLED
 
 
-@pytest.mark.parametrize(("option", "state"), [(2, State.SWITCH_ON_DISABLED), (3, State.SWITCH_ON_DISABLED), (0, State.OPERATION_ENABLED)])
+@pytest.mark.parametrize(("option", "state"),
+                         [(2, State.SWITCH_ON_DISABLED), (3, State.SWITCH_ON_DISABLED), (0, State.OPERATION_ENABLED)])
 def test_0x6007_decides_what_a_lost_heartbeat_does(sim, master, frames, option, state) -> None:
     assert frames.sdo_write(master, 0x6007, 0, option, 2)[0] == 0x60
     enabled(frames, master)
@@ -195,7 +196,7 @@ def test_a_receive_error_is_counted_and_the_node_keeps_serving(channel, master, 
 
 
 def test_a_bus_that_keeps_failing_stops_the_heartbeat_and_faults_the_drive(channel, master, frames) -> None:
-    from sim_drive.canopen.slave import MAX_RECEIVE_ERRORS_IN_ROW, CanopenSimDrive
+    from sim_drive.canopen.slave import MAX_RECEIVE_ERRORS_IN_ROW, RECEIVE_FAILURE_TIME, CanopenSimDrive
 
     class DeadBus(can.BusABC):
         def __init__(self) -> None:
@@ -220,7 +221,7 @@ def test_a_bus_that_keeps_failing_stops_the_heartbeat_and_faults_the_drive(chann
         sim = CanopenSimDrive(bus, NODE).start()
         assert frames.recv_id(master, HEARTBEAT) is not None
         bus.dead = True
-        deadline = time.monotonic() + frames.wait
+        deadline = time.monotonic() + RECEIVE_FAILURE_TIME + frames.wait
         while sim.serving and time.monotonic() < deadline:
             time.sleep(0.005)
         assert not sim.serving and sim.counters.receive_errors >= MAX_RECEIVE_ERRORS_IN_ROW

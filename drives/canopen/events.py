@@ -11,6 +11,7 @@ stops the drive), never an exception inside a receive thread.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
@@ -21,7 +22,7 @@ from canopen.emcy import EmcyError
 
 from drives.canopen.exchange import CanopenStats
 from drives.cia301 import EMCY_BASE, EMCY_LENGTH, HEARTBEAT_BASE, NmtState, describe_emcy_code, nmt_state_name
-from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout
+from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout, ParameterError
 
 logger = logging.getLogger(__name__)
 
@@ -54,9 +55,12 @@ class DriveEvents:
         self._last_heartbeat: float | None = None
         self._pending: DriveError | None = None
         self._state_seen = threading.Condition()
+        node_id = node.id
+        if node_id is None:  # canopen lets a node take its id from its dictionary; the master always names it
+            raise ParameterError("node_id", None, "1..127", f"{name}: the node watched for EMCY and heartbeat")
         self._guards: list[tuple[int, Handler, Handler]] = [
-            (EMCY_BASE + node.id, node.emcy.on_emcy, self._guard(node.emcy.on_emcy, EMCY_LENGTH, "EMCY")),
-            (HEARTBEAT_BASE + node.id, node.nmt.on_heartbeat, self._guard(node.nmt.on_heartbeat, 1, "heartbeat", _NMT_STATES)),
+            (EMCY_BASE + node_id, node.emcy.on_emcy, self._guard(node.emcy.on_emcy, EMCY_LENGTH, "EMCY")),
+            (HEARTBEAT_BASE + node_id, node.nmt.on_heartbeat, self._guard(node.nmt.on_heartbeat, 1, "heartbeat", _NMT_STATES)),
         ]
         for can_id, original, guard in self._guards:
             network.unsubscribe(can_id, original)
@@ -67,10 +71,8 @@ class DriveEvents:
     def release(self) -> None:
         """Give canopen its own subscriptions back (before the node leaves the network)."""
         for can_id, original, guard in self._guards:
-            try:
+            with contextlib.suppress(KeyError, ValueError):
                 self.network.unsubscribe(can_id, guard)
-            except (KeyError, ValueError):
-                pass
             self.network.subscribe(can_id, original)
         self._guards = []
 
@@ -80,10 +82,12 @@ class DriveEvents:
         def guarded(can_id: int, data: bytearray, timestamp: float) -> None:
             if len(data) != length or (first_bytes is not None and data[0] & 0x7F not in first_bytes):
                 self.stats.malformed_frames += 1
+                wants = f"{length} byte{'s' if length > 1 else ''}"
+                if first_bytes is not None:
+                    wants += f" holding an NMT state ({', '.join(f'0x{s:02X}' for s in sorted(first_bytes))})"
                 self._pending = self._pending or DriveProtocolError(
                     self.name, f"malformed {what} frame 0x{can_id:03X} of {len(data)} bytes ({bytes(data).hex() or 'empty'}); "
-                    f"CiA 301 wants {length} byte{'s' if length > 1 else ''}"
-                    + ("" if first_bytes is None else f" holding an NMT state ({', '.join(f'0x{s:02X}' for s in sorted(first_bytes))})"),
+                    f"CiA 301 wants {wants}",
                 )
                 return
             handler(can_id, data, timestamp)

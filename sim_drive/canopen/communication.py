@@ -38,6 +38,7 @@ from drives.cia301 import (
 from drives.cia301 import COB_ID_EMCY as COB_ID_EMCY_OBJECT
 from drives.errors import HapticBusError
 from sim_drive.canopen.emergency import Emergency
+from sim_drive.canopen.od_defaults import default_int
 from sim_drive.canopen.timers import NodeTimers
 from sim_drive.device import SimulatedDrive
 
@@ -61,20 +62,17 @@ class CommunicationObjects:
         self.sync_cob = 0
         self.sync_window_us = 0
         self._emcy_word = 0
+        self.producer_ms = 0  # 0x1017 as it stands (the EDS value after a reset), ms
         self.reset()
 
     def reset(self) -> None:
         """Back to the object dictionary's values (communication reset); the producer is not started."""
         od = self._od
-        self.sync_cob = od[COB_ID_SYNC].default & COB_ID_MASK
-        self.sync_window_us = od[SYNCHRONOUS_WINDOW_LENGTH].default if SYNCHRONOUS_WINDOW_LENGTH in od else 0
-        self._set_emcy(od[COB_ID_EMCY_OBJECT].default)
-        self._consumer(od[CONSUMER_HEARTBEAT_TIME][1].default if CONSUMER_HEARTBEAT_TIME in od else 0)
-
-    @property
-    def producer_ms(self) -> int:
-        """The power-on producer heartbeat time (the OD's default), ms."""
-        return int(self._od[PRODUCER_HEARTBEAT_TIME].default)
+        self.sync_cob = default_int(od, COB_ID_SYNC) & COB_ID_MASK
+        self.sync_window_us = default_int(od, SYNCHRONOUS_WINDOW_LENGTH, absent=0)
+        self._set_emcy(default_int(od, COB_ID_EMCY_OBJECT))
+        self._consumer(default_int(od, CONSUMER_HEARTBEAT_TIME, 1, absent=0))
+        self.producer_ms = default_int(od, PRODUCER_HEARTBEAT_TIME)
 
     def owns(self, index: int) -> bool:
         """True for the objects of the module table."""
@@ -104,6 +102,7 @@ class CommunicationObjects:
         elif index == CONSUMER_HEARTBEAT_TIME and subindex == 1:
             self._consumer(value)
         elif index == PRODUCER_HEARTBEAT_TIME:
+            self.producer_ms = value
             self._timers.start_producer(value / 1000.0, time.monotonic())
 
     def _set_emcy(self, word: int) -> None:

@@ -9,8 +9,9 @@ The EMCY's error-register byte is always 0x1001 as it reads at that moment:
 
 An EMCY goes out when the drive enters FAULT (code 0x603F), when a communication error
 starts, and an error-reset EMCY (code 0x0000) when the last error is gone (fault reset, a
-watchdog recovered, or right after a one-off event such as a late PDO).  Nothing is sent while the node is STOPPED, silent, or its EMCY is
-invalidated (0x1014 bit 31); frames go through canopen's :class:`~canopen.emcy.EmcyProducer`.
+watchdog recovered, or right after a one-off event such as a late PDO).  Nothing is sent while
+the node is STOPPED, silent, or its EMCY is invalidated (0x1014 bit 31); frames go through
+canopen's :class:`~canopen.emcy.EmcyProducer`.
 """
 
 from __future__ import annotations

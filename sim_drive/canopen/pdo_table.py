@@ -32,6 +32,7 @@ from canopen import ObjectDictionary, SdoAbortedError
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 
 from drives.cia301 import COB_ID_29_BIT, COB_ID_INVALID, COB_ID_MASK, is_restricted_cob_id
+from sim_drive.canopen.od_defaults import default_int
 
 MAX_ENTRIES = 8
 MAX_BITS = 64
@@ -107,12 +108,12 @@ class PdoTable:
         self.tx = [self._channel_from_od(n, transmit=True) for n in range(1, CHANNELS + 1)]
 
     def _channel_from_od(self, number: int, transmit: bool) -> PdoChannel:
-        com = self._od[(TX_COM if transmit else RX_COM) + number - 1]
-        mapping = self._od[(TX_MAP if transmit else RX_MAP) + number - 1]
-        channel = PdoChannel(number, transmit, int(com[1].default), int(com[2].default),
-                             *(int(com[sub].default) if sub in com else 0 for sub in (3, 5)))
-        channel.entries = [int(mapping[k].default) for k in range(1, MAX_ENTRIES + 1)]
-        channel.count = int(mapping[0].default)
+        od, com = self._od, (TX_COM if transmit else RX_COM) + number - 1
+        mapping = (TX_MAP if transmit else RX_MAP) + number - 1
+        channel = PdoChannel(number, transmit, default_int(od, com, 1), default_int(od, com, 2),
+                             inhibit_time=default_int(od, com, 3, absent=0), event_timer=default_int(od, com, 5, absent=0))
+        channel.entries = [default_int(od, mapping, k) for k in range(1, MAX_ENTRIES + 1)]
+        channel.count = default_int(od, mapping, 0)
         self._compile(channel)
         return channel
 
@@ -189,4 +190,12 @@ class PdoTable:
     def _compile(self, channel: PdoChannel) -> None:
         variables = [self._mapped_variable(channel, e) for e in channel.entries[: channel.count]]
         channel.indices = tuple(v.index for v in variables)
-        channel.codec = struct.Struct("<" + "".join(v.STRUCT_TYPES[v.data_type].format[-1] for v in variables))
+        channel.codec = struct.Struct("<" + "".join(_struct_code(v) for v in variables))
+
+
+def _struct_code(variable: ODVariable) -> str:
+    """The ``struct`` format character of a mapped variable (a type without one cannot be mapped)."""
+    codec = None if variable.data_type is None else variable.STRUCT_TYPES.get(variable.data_type)
+    if codec is None:
+        raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+    return codec.format[-1]

@@ -72,11 +72,12 @@ logger = logging.getLogger(__name__)
 
 FAULT_GENERIC = 0x1000
 RECV_TIMEOUT = 0.05  # s: longest the receive thread blocks before looking at its stop flag
-MAX_RECEIVE_ERRORS_IN_ROW = 100  # a bus that fails this often in a row is gone
+MAX_RECEIVE_ERRORS_IN_ROW = 100  # a bus that fails this often in a row ...
+RECEIVE_FAILURE_TIME = 0.5  # s: ... and for this long, with no receive that worked in between, is gone
 MAX_FRAMES_PER_WAKE = 256  # frames handled before the timers are looked at (a flood cannot starve them)
 SDO_FRAME_LENGTH = 8
 _ABORTS = {"unknown": SdoAbort.NO_OBJECT, "read-only": SdoAbort.READ_ONLY, "range": SdoAbort.VALUE_RANGE}
-_NMT_STATES = {
+_NMT_STATES: dict[int, NmtState] = {
     NmtCommand.START: NmtState.OPERATIONAL,
     NmtCommand.STOP: NmtState.STOPPED,
     NmtCommand.ENTER_PRE_OPERATIONAL: NmtState.PRE_OPERATIONAL,
@@ -107,7 +108,7 @@ class _SlaveNetwork(canopen.Network):
         if self._slave.silent:
             return
         self._slave._meter_frame(len(data))
-        super().send_message(can_id, data, remote)
+        super().send_message(can_id, bytes(data), remote)
 
     def send_periodic(self, can_id: int, data: Any, period: float, remote: bool = False) -> Any:
         """canopen's NmtSlave asks for a periodic heartbeat on a 0x1017 write: the slave's own thread does it."""
@@ -147,6 +148,7 @@ class CanopenSimDrive:
         self.silent = False
         self.nmt = NmtState.BOOT_UP
         self._errors_in_row = 0
+        self._failing_since = 0.0  # time.monotonic() of the first receive error in a row
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -170,19 +172,18 @@ class CanopenSimDrive:
         """Open the bus (if given as a config), boot (boot-up message, PRE-OPERATIONAL), serve."""
         if self._thread is not None:
             raise RuntimeError(f"node {self.node_id}: already started")
-        if self._bus is None:
-            self._bus = can.Bus(**(self._bus_config or {}))
-        self._network = _SlaveNetwork(self._bus, self)
+        bus = self._bus = self._bus if self._bus is not None else can.Bus(**(self._bus_config or {}))
+        self._network = _SlaveNetwork(bus, self)
         self._network.add_node(self._node)
         self._network.unsubscribe(NMT_COB_ID, self._node.nmt.on_command)
         self._stop.clear()
         with self._lock:
             self._boot()
-        target = self._run
-        if isinstance(self._bus, LockstepBus):
-            self._bus.set_receiver(self._on_frame)
-            target = self._run_timers
-        self._thread = threading.Thread(target=target, name=f"sim-drive-{self.node_id}", daemon=True)
+        if isinstance(bus, LockstepBus):
+            bus.set_receiver(self._on_frame)
+            self._thread = threading.Thread(target=self._run_timers, name=f"sim-drive-{self.node_id}", daemon=True)
+        else:
+            self._thread = threading.Thread(target=self._run, args=(bus,), name=f"sim-drive-{self.node_id}", daemon=True)
         self._thread.start()
         return self
 
@@ -195,7 +196,8 @@ class CanopenSimDrive:
         self._thread = None
         if isinstance(self._bus, LockstepBus):
             self._bus.set_receiver(None)
-        self._network.subscribe(NMT_COB_ID, self._node.nmt.on_command)  # type: ignore[union-attr]
+        if self._network is not None:
+            self._network.subscribe(NMT_COB_ID, self._node.nmt.on_command)
         self._node.remove_network()
         if self._bus_config is not None and self._bus is not None:
             self._bus.shutdown()
@@ -263,7 +265,8 @@ class CanopenSimDrive:
         logger.info("node %d: boot-up, %s", self.node_id, self.nmt_state)
 
     def _start_heartbeat(self) -> None:
-        self.timers.start_producer(self._node.sdo[0x1017].raw / 1000.0, time.monotonic())
+        """The producer at 0x1017's current value (the boot-up or the resume counts as the first)."""
+        self.timers.start_producer(self._comm.producer_ms / 1000.0, time.monotonic())
 
     def _on_nmt(self, data: bytearray) -> None:
         if len(data) != 2:
@@ -280,7 +283,7 @@ class CanopenSimDrive:
             self._reset_communication()
             self._boot()
             return
-        new = _NMT_STATES.get(command)  # type: ignore[call-overload]
+        new = _NMT_STATES.get(command)
         if new is None or new is self.nmt:
             return
         if self.nmt is NmtState.OPERATIONAL:
@@ -320,11 +323,12 @@ class CanopenSimDrive:
         return self.nmt in _SERVING and not self.silent
 
     def _send(self, cob_id: int, data: bytes) -> None:
-        if self.silent or self._network is None:
+        bus, network = self._bus, self._network
+        if self.silent or bus is None or network is None:
             return
         message = can.Message(arbitration_id=cob_id, data=data, is_extended_id=False)
-        with self._network.send_lock:
-            self._bus.send(message)  # type: ignore[union-attr]
+        with network.send_lock:
+            bus.send(message)
         self._meter_frame(len(data))
 
     def _meter_frame(self, data_bytes: int) -> None:
@@ -332,18 +336,18 @@ class CanopenSimDrive:
             self.bus_meter.frame(data_bytes)
 
     # ----------------------------------------------------------------- receive thread
-    def _run(self) -> None:
+    def _run(self, bus: can.BusABC) -> None:
         """Frames and timers until :meth:`stop`; if the bus is gone, stop saying alive and fault."""
         try:
             while not self._stop.is_set():
                 due = self.timers.next_due()
-                message = self._receive(RECV_TIMEOUT if due is None else min(RECV_TIMEOUT, max(due - time.monotonic(), 0.0)))
+                message = self._receive(bus, RECV_TIMEOUT if due is None else min(RECV_TIMEOUT, max(due - time.monotonic(), 0.0)))
                 with self._lock:
                     for _ in range(MAX_FRAMES_PER_WAKE):  # everything that arrived, then the timers
                         if message is None:
                             break
                         self._take(message)
-                        message = self._receive(0.0)
+                        message = self._receive(bus, 0.0)
                     self._tick(time.monotonic())
         except Exception as exc:
             logger.error("node %d: cannot serve any more, heartbeat stopped and drive faulted: %r", self.node_id, exc)
@@ -369,18 +373,25 @@ class CanopenSimDrive:
         if not (self.silent or message.is_error_frame or message.is_remote_frame or message.is_extended_id):
             self._guarded_dispatch(message)
 
-    def _receive(self, timeout: float) -> can.Message | None:
+    def _receive(self, bus: can.BusABC, timeout: float) -> can.Message | None:
         """The next frame within ``timeout`` s, or None; a receive error is counted and dropped,
-        and re-raised only when the bus has failed :data:`MAX_RECEIVE_ERRORS_IN_ROW` times in a row."""
+        and re-raised only when every receive failed for :data:`RECEIVE_FAILURE_TIME` s, at least
+        :data:`MAX_RECEIVE_ERRORS_IN_ROW` times: a dead interface, not a burst of bad datagrams
+        (those drain in milliseconds, and the first receive that works starts the count over)."""
         try:
-            message = self._bus.recv(timeout)  # type: ignore[union-attr]
+            message = bus.recv(timeout)
         except Exception as exc:  # any interface's receive failure
+            now = time.monotonic()
             self.counters.receive_errors += 1
             self._errors_in_row += 1
-            logger.warning("node %d: bus receive failed (%d in a row): %r", self.node_id, self._errors_in_row, exc)
-            if self._errors_in_row >= MAX_RECEIVE_ERRORS_IN_ROW:
+            if self._errors_in_row == 1:
+                self._failing_since = now
+                logger.warning("node %d: bus receive failed: %r", self.node_id, exc)
+            if self._errors_in_row >= MAX_RECEIVE_ERRORS_IN_ROW and now - self._failing_since >= RECEIVE_FAILURE_TIME:
                 raise
             return None
+        if self._errors_in_row > 1:
+            logger.warning("node %d: bus receive failed %d times in a row", self.node_id, self._errors_in_row)
         self._errors_in_row = 0
         return message
 
@@ -445,7 +456,8 @@ class CanopenSimDrive:
         if cob_id == self._node.sdo.rx_cobid and len(message.data) != SDO_FRAME_LENGTH:
             self.counters.malformed_frames += 1  # CiA 301: every SDO frame carries 8 bytes
             return
-        self._network.notify(cob_id, message.data, message.timestamp)  # type: ignore[union-attr]
+        if self._network is not None:  # None only once stopped
+            self._network.notify(cob_id, message.data, message.timestamp)
         self._send_event_tpdos()
 
     # ----------------------------------------------------------------- SDO bridge
