@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import HealthCheck, Phase, example, given, settings
 from hypothesis import strategies as st
 
 from drives.base import CyclicInputs
@@ -152,7 +152,8 @@ def test_a_fraction_of_a_sample_is_resolved() -> None:
 def test_the_velocity_check_names_the_model_the_drive_reports(model: str, timing: str) -> None:
     """0x606C with 1000 counts rms of noise: the drive's model is the best and the only consistent
     one; a declared other model is contradicted, the right one matches (a filter constant within
-    5 %: the fitted one sits within 1 % of 2 ms here)."""
+    5 %: the fitted one sits within 1 % of 2 ms here); the longest credible filter constant is not
+    shorter than the truth's."""
     truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, velocity_noise=1000, noise_seed=6,
                              velocity=VelocityModel.parse(model))
     wrong = "average" if model == "point" else "point"
@@ -162,6 +163,9 @@ def test_the_velocity_check_names_the_model_the_drive_reports(model: str, timing
     best = VelocityModel.parse(check.best)
     assert best.kind == VelocityModel.parse(model).kind and best.time == pytest.approx(VelocityModel.parse(model).time, rel=0.05)
     assert check.consistent == (check.best,)
+    # what --write-profile writes: the same kind, its time the longest credible (3 sigma), so at least the truth's
+    credible = VelocityModel.parse(check.credible)
+    assert credible.kind == best.kind and best.time <= credible.time and VelocityModel.parse(model).time <= credible.time
     assert check.matches_declared is False
     assert any(f.topic == "velocity" and f.severity == "warning" for f in found.findings)
     assert check.distances[0].rms == pytest.approx(1000.0, rel=0.05)  # what is left is the drive's noise
@@ -296,30 +300,64 @@ def test_the_doublet_mass_cancels_friction(mass: float, coulomb: float, b: float
 
 # --------------------------------------------------------------------------- property: any plausible plant
 
-@settings(max_examples=6, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow],
-          phases=[Phase.explicit, Phase.generate])  # a shrink would rerun the whole identification hundreds of times
-@given(mass=st.floats(0.03, 3.0), time_constant=st.floats(0.02, 2.0), coulomb_share=st.floats(0.0, 0.3),
-       delay=st.sampled_from([("ideal", 0.0), ("cia402", 1.0), ("reception", 0.15), ("reception", 0.7)]),
-       resolution=st.sampled_from([1e-8, 1e-7, 5e-7]), believed=st.floats(0.5, 2.0))
-def test_any_plausible_plant_is_found_within_its_standard_errors(mass: float, time_constant: float, coulomb_share: float,
-                                                                  delay: tuple[str, float], resolution: float,
-                                                                  believed: float) -> None:
-    """m from 30 g to 3 kg, m/b from 20 ms to 2 s, Coulomb friction up to 30 % of a force limit of
-    10 N per kg, the four timings, encoders from 10 nm to 0.5 um, a profile mass off by up to 2x:
-    10 s of excitation find m, b and D within 4 standard errors (and Fc within 4 sigma + 1 mN),
-    whether or not the standard errors are small enough for the estimate to be supported."""
+BOUND_BIAS = 0.005  # samples: how far above a true D = 0 the estimate may sit beyond SIGMAS standard errors
+"""At ``D = 0`` the delay sits on the lower end of the search (``delta >= 0`` with ``d = 0``): the
+estimate is truncated there and biased upwards, which the standard error (a normal approximation
+at an interior point) does not describe.  Measured on the worst corner of the property's range
+(m 30 g, m/b 2 s, Coulomb friction 30 % of the force limit, profile mass half the truth, 10 nm..0.5 um
+encoders), 40 runs at slightly different profile masses: D = +0.0026 +- 0.0007 samples (+2.6 +- 0.8
+standard errors), largest +0.0047 (4.4 standard errors); interior delays (0.15, 0.25, 1) show no
+such bias (mean within 0.2 standard errors).  0.005 samples (5 us at 1 kHz) covers the largest seen,
+and it errs on the safe side of the gate (a larger delay)."""
+
+
+def _plausible_plant(mass: float, time_constant: float, coulomb_share: float, delay: tuple[str, float],
+                     resolution: float, believed: float) -> None:
     timing, truth_delay = delay
     force_limit = 10.0 * mass
     truth = DeviceParameters(m=mass, b=mass / time_constant, coulomb_friction=coulomb_share * force_limit,
                              position_per_count=resolution, reception_delay=truth_delay if timing == "reception" else 0.25,
                              max_torque_permille=30000, rated_torque=0.001 * math.ceil(force_limit * 2.0))
-    _, found = identify_simulated(truth, timing, mass=mass * believed, force_limit=force_limit, duration=10.0)
+    session, found = identify_simulated(truth, timing, mass=mass * believed, force_limit=force_limit, duration=10.0)
+    assert not session.refused, found.probe.message  # every plant here is a free handle
     fit = found.fit
     assert fit is not None, [f.message for f in found.findings]
     assert within(fit.mass.value, fit.mass.stderr, truth.m)
     assert within(fit.friction.value, fit.friction.stderr, truth.b)
-    assert abs(fit.coulomb.value - truth.coulomb_friction) <= SIGMAS * fit.coulomb.stderr + 1e-3
-    assert within(fit.delay.value, fit.delay.stderr, truth_delay)
+    assert within(fit.coulomb.value, fit.coulomb.stderr, truth.coulomb_friction)
+    slack = BOUND_BIAS if truth_delay == 0.0 else 0.0
+    assert abs(fit.delay.value - truth_delay) <= SIGMAS * fit.delay.stderr + slack
+
+
+@settings(max_examples=6, deadline=None, derandomize=True, database=None, suppress_health_check=[HealthCheck.too_slow],
+          phases=[Phase.explicit, Phase.generate])  # a shrink would rerun the whole identification hundreds of times
+@given(mass=st.floats(0.03, 3.0), time_constant=st.floats(0.02, 2.0), coulomb_share=st.floats(0.0, 0.3),
+       delay=st.sampled_from([("ideal", 0.0), ("cia402", 1.0), ("reception", 0.15), ("reception", 0.7)]),
+       resolution=st.sampled_from([1e-8, 1e-7, 5e-7]), believed=st.floats(0.5, 2.0))
+@example(mass=3.0, time_constant=0.02, coulomb_share=0.3, delay=("cia402", 1.0), resolution=1e-7, believed=0.5)
+@example(mass=0.03, time_constant=0.02, coulomb_share=0.3, delay=("reception", 0.7), resolution=1e-8, believed=0.5)
+@example(mass=0.03, time_constant=2.0, coulomb_share=0.3, delay=("ideal", 0.0), resolution=1e-7, believed=0.5)
+def test_any_plausible_plant_is_found_within_its_standard_errors(mass: float, time_constant: float, coulomb_share: float,
+                                                                  delay: tuple[str, float], resolution: float,
+                                                                  believed: float) -> None:
+    """m from 30 g to 3 kg, m/b from 20 ms to 2 s, Coulomb friction up to 30 % of a force limit of
+    10 N per kg, the four timings, encoders from 10 nm to 0.5 um, a profile mass off by up to 2x:
+    the probe finds the handle free, and 10 s of excitation find m, b, Fc and D within 4 standard
+    errors (D = 0 within 4 sigma + :data:`BOUND_BIAS`), whether or not the standard errors are small
+    enough for the estimate to be supported.
+
+    Deterministic: ``derandomize`` fixes the generated examples (a hash of this function), no
+    database replays old ones, and every example is a fixed simulation (no noise enters the fit).
+    Why 4 sigma holds: over 260 fits spanning the range (every corner of it and 68 random points)
+    the errors in standard errors had rms 0.9 (m), 0.56 (b), 1.1 (D), largest 2.9, 2.2, 3.7 (and the
+    4.4 at D = 0, see :data:`BOUND_BIAS`), Fc's largest 2.6; 40 repeated runs at the corner of the
+    3.7 gave D's rms 1.0: a 4-sigma miss (6e-5 for a normal estimate) means a broken fit.
+    The explicit examples are corners that failed before: a heavily damped handle (m/b 20 ms)
+    with 30 % Coulomb friction and a profile mass half the truth was refused as "not free to move"
+    (the probe allowed only a frictionless handle's push time), and the light, nearly undamped
+    handle at D = 0 that measured the bound's bias.
+    """
+    _plausible_plant(mass, time_constant, coulomb_share, delay, resolution, believed)
 
 
 # --------------------------------------------------------------------------- the profile it writes

@@ -221,9 +221,11 @@ def format_identification(found: Identification, source: str) -> str:
         others = ", ".join(f"{d.model} {d.rms:.4g}" for d in velocity.distances[1:])
         declared = ("" if velocity.declared is None else
                     f"; declared {velocity.declared.model}: {'matches' if velocity.matches_declared else 'CONTRADICTED'}")
-        lines.append(f"velocity (0x606C): matches {velocity.best} (rms {velocity.distances[0].rms:.4g} counts over "
+        credible = "" if velocity.credible == velocity.best else f", longest credible {velocity.credible}"
+        lines.append(f"velocity (0x606C): matches {velocity.best}{credible} (rms {velocity.distances[0].rms:.4g} counts over "
                      f"{velocity.samples} cycles; {others}){declared}")
-        lines.append(f"for the gate: b >= {fit.friction_low:.6g} N s/m (b - 3 sigma), D <= {fit.delay_high:.4g} samples")
+        lines.append(f"for the gate: b >= {fit.friction_low:.6g} N s/m (b - 3 sigma), D <= {fit.delay_high:.4g} samples, "
+                     f"velocity {velocity.credible}")
     for finding in found.findings:
         lines.append(f"{finding.severity}: {finding.topic}: {finding.message}")
     lines.append("verdict: " + ("supported" if found.supported else

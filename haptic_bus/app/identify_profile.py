@@ -4,7 +4,8 @@ The copy keeps the source's layout and comments (``tomlkit``); it changes only
 
 * ``[device]``: ``mass`` (the estimate), ``friction`` (the lowest credible ``b``, ``max(0, b - 3
   sigma)``: the gate judges with it), ``friction_source`` (what was measured, when, and that the
-  gate uses ``b - 3 sigma``) and ``velocity`` (the model 0x606C matched);
+  gate uses ``b - 3 sigma``) and ``velocity`` (the model 0x606C matched, a window or filter with
+  the longest time the data allow: :attr:`~haptic_bus.identify.velocity_check.VelocityCheck.credible`);
 * ``[loop]``: ``delay`` (the largest credible delay in samples, ``D + 3 sigma``, in whole samples
   when the fraction was not resolved; never below the least delay of the profile's ``timing``:
   a ``cia402`` profile keeps at least 1 even if the drive closes the loop faster);
@@ -83,7 +84,8 @@ def identified_profile(source: pathlib.Path, identification: Identification, lea
     _set(device, "friction", friction, "N s/m: b - 3 sigma of the identified b, what the gate judges with")
     _set(device, "friction_source",
          f"identified {when}: b = {b:.6g} ± {b_sigma:.2g} N s/m (1 sigma); the gate uses b - 3 sigma")
-    _set(device, "velocity", velocity.best, f"0x606C as measured {when}")
+    matched = "" if velocity.credible == velocity.best else f" (best fit {velocity.best}; the longest credible time)"
+    _set(device, "velocity", velocity.credible, f"0x606C as measured {when}{matched}")
     why = ("D + 3 sigma" if fit.fraction_resolved else "whole samples: the fraction was not resolved") + (
         "" if delay > least_delay else f"; at least {least_delay:g} for the timing")
     _set(loop, "delay", delay, f"samples: the largest credible loop delay ({why})")
@@ -95,7 +97,7 @@ def identified_profile(source: pathlib.Path, identification: Identification, lea
         "friction": b, "friction_stderr": b_sigma,
         "coulomb_friction": fit.coulomb.value, "coulomb_friction_stderr": fit.coulomb.stderr,
         "delay": d, "delay_stderr": d_sigma,
-        "velocity": velocity.best,
+        "velocity": velocity.credible,
         "excitation_s": identification.record.excitation_seconds,
         "residual_rms": fit.residual_rms * identification.record.scale.position,
     }

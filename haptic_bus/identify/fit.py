@@ -129,7 +129,8 @@ def fit_plant(record: Record, max_delay: int = MAX_DELAY) -> PlantFit:
     usable = usable_equations(record)
     if usable.sum() < MIN_EQUATIONS:
         raise NotIdentifiable(f"only {int(usable.sum())} of {usable.size} cycles moved clearly in one direction "
-                              f"(at least {MIN_EQUATIONS} are needed): the handle hardly moved or kept sticking")
+                              f"(at least {MIN_EQUATIONS} are needed): the handle moved too few encoder increments "
+                              f"({record.scale.position:g} m each) per cycle, or kept sticking")
     systems = [IncrementEquations(record, d, usable) for d in range(max_delay + 1)]
     linear = [_linear_start(system) for system in systems]
     ranked = sorted(range(len(systems)), key=lambda d: linear[d][1])[:REFINED]

@@ -2,14 +2,19 @@
 
 In each direction (+x, then -x) the probe pushes with a force that doubles from 1/32 of the
 force limit up to the limit, until the handle has moved ``target`` m.  At force ``F`` the push
-lasts at most ``t_max = sqrt(2 target MASS_FACTOR m / F)``: the time a free frictionless handle
-:data:`MASS_FACTOR` times heavier than the profile's ``m`` needs to cover ``target`` (no longer
-than :data:`MAX_PUSH_SECONDS`).  Once the target is reached the same force brakes the handle
+lasts at most ``t_max`` (:func:`free_travel_time`, no longer than :data:`MAX_PUSH_SECONDS`): the
+time the slowest handle that still counts as free needs to cover ``target`` -- one
+:data:`MASS_FACTOR` times heavier than the profile's ``m``, with a viscous time constant ``m/b``
+of :data:`MIN_TIME_CONSTANT` (so ``b = MASS_FACTOR m / MIN_TIME_CONSTANT``) and Coulomb friction
+taking :data:`COULOMB_SHARE` of the push.  (Viscous friction matters: a handle with a drive's
+damping, ``m/b`` = 50 ms, needs several times longer than a frictionless one, and was refused
+as blocked before it counted.)  Once the target is reached the same force brakes the handle
 until it stops moving forward, then the force is removed for :data:`REST_SECONDS`.
 
 The handle is **free** when, in both directions, some force up to the limit moved it ``target``
-within ``t_max`` (so it moves like a free handle of at most ``MASS_FACTOR m``: not blocked, not
-against an end stop, not held by friction above the force limit), and it stayed where the
+within ``t_max`` (so it moves like a free handle of at most ``MASS_FACTOR m``, ``m/b`` at least
+``MIN_TIME_CONSTANT``, Coulomb friction at most ``COULOMB_SHARE`` of the force: not blocked, not
+against an end stop, not held by friction near or above the force limit), and it stayed where the
 brake left it (a handle held by a spring -- a hand, a compliant stop -- springs back more than
 :data:`SPRING_BACK` of its excursion).  Otherwise the identification is refused before any
 excitation.  Units: s, m, N.
@@ -21,8 +26,12 @@ import math
 from collections.abc import Generator
 from dataclasses import dataclass
 
+from scipy.special import lambertw
+
 LEVELS = 6  # forces F_limit / 2^5 .. F_limit
 MASS_FACTOR = 4.0  # a free handle is at most this much heavier than the profile says
+MIN_TIME_CONSTANT = 0.01  # s: m/b of a free handle at least (published desktop plants 9-50 ms, a damped servo axis 50 ms)
+COULOMB_SHARE = 0.5  # of the push: the Coulomb friction a free handle may have at most
 MIN_PUSH_SAMPLES = 5
 MAX_PUSH_SECONDS = 0.5
 REST_SECONDS = 0.1
@@ -31,6 +40,21 @@ SPRING_BACK = 0.5  # of the excursion: a free handle keeps more than half of it
 Phase = Generator[float, float, "tuple[ProbeResult, float]"]
 """A phase of the run: sent each cycle's position (m), yields that cycle's force (N); returns
 its result and the position it was last sent (to which the next phase answers)."""
+
+
+def free_travel_time(distance: float, mass: float, force: float, time_constant: float) -> float:
+    """The time (s) a handle of ``mass`` kg with viscous time constant ``time_constant`` s (``b = mass /
+    time_constant``) needs to move ``distance`` m from rest under a constant net ``force`` N.
+
+    ``x(t) = (F tau / m) (t - tau (1 - exp(-t/tau)))``; with ``s = t/tau`` and ``c = x m / (F tau^2)``,
+    ``s - 1 + exp(-s) = c`` has the root ``s = c + 1 + W0(-exp(-(c + 1)))`` (Lambert's W, principal
+    branch).  For ``c`` below 1e-6 (a nearly frictionless push, where the closed form cancels) the
+    frictionless ``s = sqrt(2 c)`` is used, within 1e-4 of the root there.
+    """
+    c = distance * mass / (force * time_constant * time_constant)
+    if c < 1e-6:
+        return time_constant * math.sqrt(2.0 * c)
+    return time_constant * (c + 1.0 + float(lambertw(-math.exp(-(c + 1.0))).real))
 
 
 @dataclass(frozen=True)
@@ -44,8 +68,8 @@ class ProbeSettings:
 
     def push_samples(self, force: float) -> int:
         """The longest push at ``force`` N, in cycles (see the module docstring)."""
-        seconds = min(MAX_PUSH_SECONDS, math.sqrt(2.0 * self.target * MASS_FACTOR * self.mass / force))
-        return max(MIN_PUSH_SAMPLES, math.ceil(seconds / self.period))
+        seconds = free_travel_time(self.target, MASS_FACTOR * self.mass, (1.0 - COULOMB_SHARE) * force, MIN_TIME_CONSTANT)
+        return max(MIN_PUSH_SAMPLES, math.ceil(min(MAX_PUSH_SECONDS, seconds) / self.period))
 
     def levels(self) -> list[float]:
         """The probe forces in N, weakest first."""

@@ -66,8 +66,9 @@ def _fit_dict(fit: PlantFit) -> dict[str, Any]:
 def _velocity_dict(velocity: VelocityCheck) -> dict[str, Any]:
     declared = velocity.declared
     return {
-        "best": velocity.best, "consistent": list(velocity.consistent), "samples": velocity.samples,
-        "distances": [{"model": d.model, "rms": d.rms, "bic": d.bic} for d in velocity.distances],
+        "best": velocity.best, "credible": velocity.credible, "consistent": list(velocity.consistent),
+        "samples": velocity.samples,
+        "distances": [{"model": d.model, "rms": d.rms, "bic": d.bic, "credible": d.credible} for d in velocity.distances],
         "declared": None if declared is None else {"model": declared.model, "rms": declared.rms, "bic": declared.bic},
         "matches_declared": velocity.matches_declared,
     }
