@@ -48,7 +48,8 @@ RECORD_FILES = ("record.csv", "position_force.png", "region.png", "run.json")  #
 @dataclass
 class DriveUnderTest:
     """The simulated drive a run talks to: the ``run`` options that reach it, its hardware, the
-    CiA-402 states it entered (in order), and the virtual-bus channel (CANopen only)."""
+    CiA-402 states it entered (in order), the virtual-bus channel and the fault injection that
+    makes the next TPDO one byte short (CANopen only)."""
 
     transport: str
     args: list[str]
@@ -56,6 +57,7 @@ class DriveUnderTest:
     states: list[State] = field(default_factory=list)
     channel: str | None = None
     stop: Callable[[], None] = lambda: None
+    short_next_tpdo: Callable[[], None] | None = None
 
     @property
     def was_enabled(self) -> bool:
@@ -76,7 +78,7 @@ def simulated_drive(transport: str, profile: pathlib.Path | str) -> Iterator[Dri
         slave = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, timing=timing,
                                 parameters=truth.parameters, operator=truth.operator)
         under = DriveUnderTest(transport, ["--interface", "virtual", "--channel", channel, "--node-id", str(NODE)],
-                               slave.drive, channel=channel, stop=slave.stop)
+                               slave.drive, channel=channel, stop=slave.stop, short_next_tpdo=slave.short_next_tpdo)
         slave.drive.state_listeners.append(lambda old, new, number: under.states.append(new))
         slave.start()
     elif transport == "modbus":

@@ -16,6 +16,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -216,10 +217,12 @@ def test_another_master_is_refused_and_the_first_run_goes_on_until_ctrl_c(
     (refusal,) = second.err_lines
     assert refusal.startswith("haptic-bus run: drive error: CANopen node 5: another SYNC producer is on the bus"), refusal
     assert read_run(tmp_path / "second")["exit_reason"] == "drive error"
-    assert status == 130 and said == [], said  # SIGINT stops the loop at a cycle boundary: nothing went wrong
+    # SIGINT stops the loop at a cycle boundary: one line says so, nothing went wrong
+    assert status == 130 and said == ["haptic-bus run: interrupted (Ctrl-C)"], said
     assert "ended: interrupted; wrote " in printed
     document = read_run(tmp_path / "first")
     assert document["exit_reason"] == "interrupted" and document["events"] == []  # no fault, no alarm
+    assert document["error"] == "interrupted (Ctrl-C)"
     _, record = read_record(tmp_path / "first")
     assert record["time_s"].size == document["summary"]["cycles"] >= 600
     log = sim.log()
@@ -291,3 +294,51 @@ def test_a_pipe_to_head_is_no_traceback() -> None:
     done = subprocess.run(f"{sys.executable} -m haptic_bus.app.cli profiles list | head -1", shell=True, cwd=REPO, env=env,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stderr == "" and len(done.stdout.splitlines()) == 1
+
+
+def test_another_master_over_modbus_is_refused_without_a_write(tmp_path: pathlib.Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """Modbus TCP on 127.0.0.1: a first master (the Python API, cycling in a thread) has the drive
+    enabled; a second ``run`` finds it OPERATION ENABLED and is refused (exit 1) before it writes
+    anything -- not even the safe outputs a closing master writes -- and the first cycles on."""
+    from drives.cia402 import State
+    from drives.modbus.drive import ModbusDrive
+    from haptic_bus.app.profiles import load_profile
+    from haptic_bus.control.controller import WallController, encoder_origin
+    from tests.run_rig import simulated_drive
+
+    profile = load_profile("cia402-handle")
+    ended: list[Any] = []
+    with simulated_drive("modbus", "cia402-handle") as sim:
+        url = sim.args[1]
+        first = ModbusDrive.from_url(url, scaling=profile.scaling(), safety=profile.safety.for_virtual_time(1e-3))
+        stop = threading.Event()
+        try:
+            first.connect()
+            first.enable()
+            controller = WallController(first, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
+                                        origin=encoder_origin(first))
+            thread = threading.Thread(target=lambda: ended.append(controller.run(10_000_000, stop)), daemon=True)
+            thread.start()
+            deadline = time.monotonic() + 30.0
+            while controller.cycles < 200 and time.monotonic() < deadline:
+                time.sleep(0.01)
+            second = run_cli(capsys, "run", "cia402-handle", "--modbus", url, "--virtual-time", "--duration", "1",
+                             "--out", str(tmp_path / "second"))
+            states, cycles = list(sim.states), controller.cycles
+            deadline = time.monotonic() + 30.0
+            while controller.cycles < cycles + 200 and time.monotonic() < deadline:
+                time.sleep(0.01)
+        finally:
+            stop.set()
+            thread.join(timeout=10.0)
+            first.close()
+    assert second.code == 1, second.err
+    (refusal,) = second.err_lines
+    assert refusal == (f"haptic-bus run: drive error: Modbus unit 1 at {url}: the drive is in OPERATION ENABLED before "
+                       "this master enabled it: another master drives it; stop that master, or disable the drive, before "
+                       "starting this one")
+    assert read_run(tmp_path / "second")["exit_reason"] == "drive error"
+    assert states[-1] is State.OPERATION_ENABLED and states.count(State.OPERATION_ENABLED) == 1, states  # undisturbed
+    (summary,) = ended
+    assert summary.exit_reason == "stopped" and summary.cycles >= cycles + 200

@@ -149,3 +149,8 @@ def test_a_drive_that_dies_mid_run_still_leaves_every_record(
     assert fault["kind"] == "fault" and fault["message"] == document["error"] == document["summary"]["error"]
     assert fault["time_s"] == pytest.approx(cycles * 1e-3, abs=1e-12)  # the run's clock when it ended
     assert line == f"haptic-bus run: drive error: {document['error']}"
+    link = document["link"]  # the bus or the Modbus URL the run used
+    if transport == "modbus":
+        assert (link["kind"], link["url"], link["unit_id"]) == ("modbus", drive.args[1], 1)
+    else:
+        assert (link["kind"], link["bus"]["channel"], link["node_id"]) == ("canopen", drive.channel, NODE)

@@ -161,6 +161,44 @@ def test_derate_switches_to_the_scene_the_gate_proves_passive_at_the_observed_de
     assert document["exit_reason"] == "completed" and _disabled_not_faulted(drive.states)
 
 
+def test_a_torque_computed_from_a_missed_tpdo_is_a_late_cycle(
+        tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """CANopen, lock-step: from the 100th SYNC after the drive is enabled, the TPDO of every other
+    SYNC is one byte short (the master drops it, waits out its TPDO timeout, and computes that
+    cycle's torque from the last velocity again: an input one sample older than the gate
+    assumed).  The clock is never late here (virtual time): the input's age alone makes the 11th
+    such cycle an alarm, the run stops with exit 3 and the observed delay is 1 + 1 = 2 samples."""
+    out = tmp_path / "run"
+    with simulated_drive("canopen", "cia402-handle") as drive:
+        sim, sync, inject = drive.drive, drive.drive.sync, drive.short_next_tpdo
+        assert inject is not None
+        enabled_at: list[int] = []
+
+        def sync_then_maybe_short() -> None:  # in the drive's receive thread, before it sends the TPDO
+            sync()
+            if sim.state is State.OPERATION_ENABLED:
+                enabled_at[:] = enabled_at or [sim.sync_count]
+                k = sim.sync_count - enabled_at[0]
+                if 100 <= k < 140 and k % 2 == 0:
+                    inject()
+
+        monkeypatch.setattr(sim, "sync", sync_then_maybe_short)
+        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "1", "--out", str(out))
+    assert result.code == 3, result.err
+    (line,) = result.err_lines
+    assert line.startswith("haptic-bus run: assumption broken: the loop delay: 11 of the last 1000 cycles acted more than "
+                           "0.5 T late (11 on an input the drive did not renew in time; worst 1 ms at T = 1 ms): a loop "
+                           "delay of about 2 samples"), line
+    assert _disabled_not_faulted(drive.states), drive.states
+    _, record = read_record(out)
+    late = np.flatnonzero(record["late"])
+    assert late.size == 11 and np.all(np.diff(late) == 2) and late[-1] == record["late"].size - 1, late
+    assert 95 <= late[0] <= 105  # about the 100th cycle: the enable's own SYNCs shift the count by a few
+    document = read_run(out)
+    assert document["loop"]["delay_observed"] == 2.0 and document["summary"]["late_cycles"] == 11
+    assert document["summary"]["lateness_percentiles"] == {}  # the lock-step clock measures none: the input's age alone
+
+
 # ----------------------------------------------------------------------------- the observer
 
 STIFFER = (5000.0, 10.0)  # N/m, N s/m: passive on its own (margin > 2 N s/m at D = 1), alpha 2 (a warning)
@@ -261,6 +299,33 @@ def test_an_observer_alarm_over_modbus_acts_as_the_policy_says(policy: str, tmp_
     assert summary.error.startswith("assumption broken: the passivity observer: the observer's interface energy is -")
     assert 400 < summary.cycles < 1500 and energy[-1] < -1e-3 and kinds == ["upload", "alarm", "stop"]
     assert _disabled_not_faulted(simulated.states)
+
+
+def test_a_handle_weaker_than_configured_is_not_the_observers_to_see(
+        tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """The limit of the observer, stated as a test: the simulated drive's hidden truth is b = 5 N s/m
+    where stiff-wall says 20 (the wall is passive down to b = 18.92 only).  The interface is then
+    truly active -- the drive's own energy ledger shows the operator taking out more than he put in
+    -- yet the observer, which sums with the configured b, stays at or above zero, and the run
+    ends 0.  No run-time sum without the operator's force can tell a weaker handle from a pushing
+    operator: b and m are the commissioning's to measure (``haptic-bus identify``)."""
+    truth = profile_variant(tmp_path, "stiff-wall", "weaker", {"friction = 20.0 ": "friction = 5.0 "})
+    out = tmp_path / "run"
+    with simulated_drive("canopen", truth) as drive:
+        sim, sync = drive.drive, drive.drive.sync
+        least = [0.0]
+
+        def sync_and_watch() -> None:
+            sync()
+            least[0] = min(least[0], sim.operator_energy)
+
+        monkeypatch.setattr(sim, "sync", sync_and_watch)
+        result = run_cli(capsys, "run", "stiff-wall", *drive.args, "--virtual-time", "--duration", "2", "--out", str(out), "-q")
+    assert result.code == 0, result.err
+    # measured: least -8.1 mJ in 2 s.  -2 mJ is twice the observer's alarm limit, well inside that
+    assert least[0] < -2e-3, least
+    _, record = read_record(out)
+    assert record["energy_j"].min() >= 0.0 and read_run(out)["events"] == []
 
 
 # ----------------------------------------------------------------------------- real time, real lateness

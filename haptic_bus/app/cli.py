@@ -51,7 +51,8 @@ def _number(text: str, name: str, low: float, high: float, low_open: bool, unit:
     below = value <= low if low_open else value < low
     if not math.isfinite(value) or below or value > high:
         bracket = "(" if low_open else "["
-        raise argparse.ArgumentTypeError(f"{name} = {text} is invalid; allowed: a finite number in {bracket}{low:g}, {high:g}] {unit}")
+        raise argparse.ArgumentTypeError(
+            f"{name} = {text} is invalid; allowed: a finite number in {bracket}{low:g}, {high:g}] {unit}")
     return value
 
 
@@ -209,7 +210,8 @@ def _run(args: argparse.Namespace) -> int:
     stop = StopRequest()
     from haptic_bus.app.realtime import RealtimeSettings
 
-    options = RunOptions(args.duration, realtime=not args.virtual_time, out_dir=None if args.out is None else pathlib.Path(args.out),
+    out_dir = None if args.out is None else pathlib.Path(args.out)
+    options = RunOptions(args.duration, realtime=not args.virtual_time, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
                          scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings())
     stop.install()
@@ -314,7 +316,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--controller-node-id", type=node_id,
                      help="this controller's CANopen node id: its heartbeat, which the drive watches, and gated wall "
                           "uploads (default 127)")
-    run.add_argument("--modbus", type=modbus_url, metavar="URL", help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
+    run.add_argument("--modbus", type=modbus_url, metavar="URL",
+                     help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
     run.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1; only with --modbus)")
     run.add_argument("--duration", type=seconds, default=10.0, help="seconds to run")
     pacing = run.add_mutually_exclusive_group()
@@ -360,7 +363,8 @@ _PASS_THROUGH: dict[str, Callable[[Sequence[str]], int]] = {"sim": _sim, "bench"
 
 
 def _configure_logging(verbose: int | None, quiet: bool | None) -> None:
-    level = logging.CRITICAL if quiet else {None: logging.WARNING, 0: logging.WARNING, 1: logging.INFO}.get(verbose, logging.DEBUG)
+    levels = {None: logging.WARNING, 0: logging.WARNING, 1: logging.INFO}
+    level = logging.CRITICAL if quiet else levels.get(verbose, logging.DEBUG)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr, force=True)
     library_level = {None: logging.CRITICAL, 0: logging.CRITICAL, 1: logging.WARNING}.get(verbose, logging.DEBUG)
     for name in _NOISY_LIBRARIES:  # their chatter ("Transfer aborted ...", "... not properly shut down") only on -v

@@ -10,11 +10,15 @@ from __future__ import annotations
 
 import sys
 import threading
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
 from haptic_bus.control.controller import WallController
+
+if TYPE_CHECKING:
+    from rich.live import Live
+    from rich.panel import Panel
 
 REFRESH = 1.0  # s
 
@@ -51,7 +55,7 @@ class LiveView:
         self.stream = stream if stream is not None else sys.stderr
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._live = None
+        self._live: Live | None = None
 
     def __enter__(self) -> LiveView:
         if self.stream.isatty():
@@ -73,7 +77,7 @@ class LiveView:
         if self._thread is not None:
             self._thread.join(timeout=2 * REFRESH)
 
-    def _panel(self):  # rich renderable
+    def _panel(self) -> Panel:
         from rich.panel import Panel
         from rich.table import Table
 

@@ -35,7 +35,7 @@ _DISTRIBUTIONS = ("numpy", "scipy", "python-can", "canopen", "pymodbus", "matplo
 
 
 def _utc_now() -> dt.datetime:
-    return dt.datetime.now(dt.timezone.utc)
+    return dt.datetime.now(dt.UTC)
 
 
 def prepare_run_folder(out: str | pathlib.Path | None, profile_name: str, root: pathlib.Path = DEFAULT_ROOT) -> pathlib.Path:
@@ -119,7 +119,8 @@ def run_document(profile: Profile, controller: WallController | None, summary: R
     return _finite(document)
 
 
-def write_run(folder: pathlib.Path, profile: Profile, controller: WallController | None, document: dict[str, Any]) -> list[pathlib.Path]:
+def write_run(folder: pathlib.Path, profile: Profile, controller: WallController | None,
+              document: dict[str, Any]) -> list[pathlib.Path]:
     """Write ``record.csv``, the plots and ``run.json`` into ``folder``; the paths written."""
     written: list[pathlib.Path] = []
     if controller is not None and controller.record.total:
@@ -128,7 +129,7 @@ def write_run(folder: pathlib.Path, profile: Profile, controller: WallController
     path = folder / "run.json"
     document["files"] = [str(p) for p in written] + [str(path)]
     path.write_text(json.dumps(document, indent=1) + "\n")
-    return written + [path]
+    return [*written, path]
 
 
 def write_plots(folder: pathlib.Path, profile: Profile, controller: WallController) -> list[pathlib.Path]:

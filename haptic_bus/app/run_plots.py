@@ -7,9 +7,9 @@ import pathlib
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
 
-from haptic_bus.control.record import RunRecord  # noqa: E402
+from haptic_bus.control.record import RunRecord
 
 
 def plot_run(path: str | pathlib.Path, record: RunRecord, title: str, walls_at: list[float] | None = None) -> pathlib.Path:

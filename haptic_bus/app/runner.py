@@ -10,8 +10,10 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
 3. **safe start**: the handle's position is read before enabling; inside an object the run is
    refused (:class:`StartRefused`, the drive never enabled), or with ``in_contact = "ramp"`` the
    force rises from 0 over ``ramp_time`` once the gate has proven every scaled wall passive;
-4. the drive is enabled and the controller cycles under the supervisor (``[supervisor]``),
-   serving gated wall uploads as a CANopen node, with a live view once a second;
+4. the upload server (a CANopen node serving gated wall uploads), the live view and the
+   real-time session are set up; then the drive is enabled, right before the first cycle (its
+   RPDO deadline runs from there), and the controller cycles under the supervisor
+   (``[supervisor]``);
 5. whatever ends it (the time, SIGTERM, Ctrl-C, a drive error, an assumption broken), the drive
    is left disabled and ``record.csv``, ``run.json`` and the plots are written.
 
@@ -29,10 +31,11 @@ import signal
 import threading
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import ExitStack, contextmanager
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drives.base import Drive
 from drives.bus_config import resolve_bus_config
+from drives.cia402 import State
 from drives.cia402_master import Cia402Master
 from drives.errors import DriveError, HapticBusError
 from haptic_bus.app.live import LiveView
@@ -44,6 +47,9 @@ from haptic_bus.control.controller import Derate, RunSummary, WallController, en
 from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.supervisor import Action
+
+if TYPE_CHECKING:
+    from drives.modbus.drive import ModbusDrive
 
 logger = logging.getLogger(__name__)
 
@@ -87,7 +93,7 @@ class RunOptions:
     start_in_contact: str | None = None
     live: bool = True
     stop: StopRequest = dataclasses.field(default_factory=StopRequest)
-    scheduling: RealtimeSettings = RealtimeSettings()
+    scheduling: RealtimeSettings = dataclasses.field(default_factory=RealtimeSettings)
 
 
 @dataclasses.dataclass
@@ -158,7 +164,8 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
         drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety)
         stack.callback(drive.close)
-        drive.connect()
+        drive.connect()  # reads only: identity, scaling, timing
+        _refuse_another_master(drive)  # before the poll measurement, which writes
         _show_scaling(drive, options)
         poll = None if drive.simulated_delay is not None else measure_poll(drive, 500)
         delay = loop_delay(drive, period, poll)
@@ -169,6 +176,17 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
         return drive, gate, lambda controller: None
 
     return _session(profile, options, folder, link, open_drive)
+
+
+def _refuse_another_master(drive: ModbusDrive) -> None:
+    """A drive already OPERATION ENABLED when we arrive is driven by another master (every run
+    leaves it disabled, and its watchdog faults it when a master dies): refuse before writing
+    anything, rather than disable it under that master.  (The CANopen master does the same,
+    and also listens for another SYNC, at commissioning.)"""
+    if drive.state() is State.OPERATION_ENABLED:
+        drive.link.drop()  # leave without a write: closing a live link writes the safe outputs, disabling it
+        raise DriveError(drive.name, "the drive is in OPERATION ENABLED before this master enabled it: another master "
+                                     "drives it; stop that master, or disable the drive, before starting this one")
 
 
 def _show_scaling(drive: Cia402Master, options: RunOptions) -> None:
@@ -184,7 +202,7 @@ OpenDrive = Callable[[ExitStack], "tuple[Drive, PassivityGate, Callable[[WallCon
 
 def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: dict[str, Any],
              open_drive: OpenDrive) -> RunResult:
-    started = dt.datetime.now(dt.timezone.utc)
+    started = dt.datetime.now(dt.UTC)
     controller: WallController | None = None
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": {"period": profile.loop.period, "timing": profile.loop.timing}}
@@ -202,14 +220,16 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
                                                                             profile.supervisor.on_observer) else None
             controller = WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
                                         supervisor=profile.supervisor, ramp_time=ramp_time, derate=derate)
-            drive.enable()  # after the derate table and the scene's admission: the drive's watchdogs run from here
             serve(controller)
             with _live(controller, profile, options), _scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
+                # last before the first cycle: the drive's RPDO deadline (20 T by default) runs from
+                # here, and the set-up above (the upload server, the real-time session) can take longer
+                drive.enable()
                 summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
             reason, error = summary.exit_reason, summary.error
             if reason == "stopped" and options.stop.interrupted:
-                reason = "interrupted"
+                reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr
             if reason in ("completed", "stopped", "interrupted"):
                 drive.disable()
     except (StartRefused, GateRefusal) as exc:  # refused before the drive is enabled

@@ -28,8 +28,8 @@ import numpy as np
 from drives.base import Drive
 from drives.cia402 import POSITION_ACTUAL
 from drives.errors import DriveError, ParameterError
-from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.analysis.velocity import VelocityModel
+from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.gate import GateDecision, PassivityGate
 from haptic_bus.control.observer import PassivityObserver
 from haptic_bus.control.record import EventLog, RunRecord
@@ -44,6 +44,12 @@ Derate = Callable[[CompiledScene, float], "tuple[PassivityGate, CompiledScene, G
 scaled down so that it passes it, and the decision; None if no scale passes."""
 
 EXIT_REASONS = ("completed", "stopped", "interrupted", "drive error", "assumption broken")
+
+
+def missed_inputs(drive: Drive) -> int:
+    """How many cycles so far the drive's input did not arrive and the last one was used again
+    (a CANopen master's missed TPDOs; 0 for a drive that never reuses an input)."""
+    return int(getattr(getattr(drive, "stats", None), "missed_tpdos", 0))
 
 
 def encoder_origin(drive: Drive) -> float:
@@ -139,6 +145,7 @@ class WallController:
         self.record = RunRecord(record_capacity)
         self.ramp_cycles = round(ramp_time / self.period)
         self._derate = derate
+        self._input_age = 0  # samples: how much older than its cycle the input just used was
         self.cycles = 0
         self.saturated_cycles = 0
         self.peak_force = 0.0
@@ -197,8 +204,10 @@ class WallController:
         """
         entry: SceneEntry = self.scenes.adopt()  # one read: the whole accepted scene, never half of one
         drive = self.drive
+        missed = missed_inputs(drive)
         inputs = drive.read_inputs()
         started = time.perf_counter()
+        self._input_age = self._input_age + 1 if missed_inputs(drive) != missed else 0
         scaling = drive.scaling
         v = inputs.velocity * scaling.velocity_per_count
         x = self.integrator.add(inputs.velocity)
@@ -213,7 +222,8 @@ class WallController:
         drive.write_outputs(torque)
         compute = time.perf_counter() - started
         energy = self.observer.update(v, force)
-        late, alarm = self.supervisor.cycle(lateness, energy) if self.supervisor is not None else (False, None)
+        supervisor = self.supervisor
+        late, alarm = supervisor.cycle(lateness, energy, self._input_age) if supervisor is not None else (False, None)
         if abs(force) > self.peak_force:
             self.peak_force = abs(force)
         self.record.append(self.cycles * self.period, x, v, force, torque, energy, entry.scene_id, scale, late, compute)
@@ -231,7 +241,8 @@ class WallController:
             derated = self._derate(self.scene, alarm.observed_delay)
             if derated is not None:
                 gate, scene, decision = derated
-                entry = self.scenes.replace(gate, scene, decision, f"derate to a loop delay of {alarm.observed_delay:.3g} samples")
+                origin = f"derate to a loop delay of {alarm.observed_delay:.3g} samples"
+                entry = self.scenes.replace(gate, scene, decision, origin)
                 self.events.add(self.now(), "derate", f"scene {entry.scene_id}: {entry.origin}",
                                 scene_id=entry.scene_id, worst_margin=decision.worst_margin)
                 logger.warning("supervisor: %s; derated (scene %d)", alarm.message, entry.scene_id)

@@ -5,11 +5,22 @@ assumed, the configured ``m`` and ``b``.  At run time two things can break that,
 module watches both (DESIGN 4.1):
 
 - **lateness**: a cycle that starts later than ``late_tolerance * T`` after its deadline held
-  the previous torque that much longer, a loop delay beyond the assumed one.  More than
-  ``late_limit`` late cycles among the last ``late_window`` is an alarm;
+  the previous torque that much longer, a loop delay beyond the assumed one.  So does a cycle
+  whose torque was computed from an older input than its own (on CANopen: this cycle's TPDO
+  missed, the last one's velocity used again): its input is ``input_age`` whole samples older
+  than the gate assumed.  A cycle is late when its start lateness plus ``input_age * T``
+  exceeds the tolerance; more than ``late_limit`` late cycles among the last ``late_window``
+  is an alarm;
 - **the observer**: the interface energy (:mod:`~haptic_bus.control.observer`, which starts
   from the energy stored in the walls the run begins in contact with) more than
-  ``observer_limit`` J below zero is an alarm.
+  ``observer_limit`` J below zero is an alarm.  It sees energy the gate's linear,
+  time-invariant model does not: a scene changed while the handle is inside it (a stiffer wall
+  releases ``(K2 - K1) x^2 / 2`` it never stored), the unilateral contact.  It cannot see a
+  handle whose true ``b`` or ``m`` is smaller than configured: its sum uses the configured ones,
+  and for a scene the gate admits that sum stays non-negative for the motions its verdict
+  covers, whatever the true plant; the operator's force is not measured, so no run-time sum
+  can tell a weaker handle from a pushing operator.  ``m`` and ``b``
+  are measured at commissioning (``haptic-bus identify``, a profile's ``[identification]``).
 
 What an alarm does is the policy's (``[supervisor]`` in a profile): ``warn`` (an event, the run
 goes on), ``derate`` (the scene scaled down to what the gate proves passive at the observed
@@ -92,7 +103,8 @@ class Alarm:
         """The exit-3 error this alarm stands for."""
         if self.kind == "late":
             return AssumptionBroken("the loop delay", self.message, f"a loop delay of {assumed_delay:g} sample(s)")
-        return AssumptionBroken("the passivity observer", self.message, "an interface that never gives back more energy than it held")
+        return AssumptionBroken("the passivity observer", self.message,
+                                "an interface that never gives back more energy than it held")
 
 
 class Supervisor:
@@ -110,21 +122,25 @@ class Supervisor:
         self.late_cycles = 0
         self.alarms = 0
         self._tolerance = policy.late_tolerance * period
-        self._lateness = np.zeros(policy.late_window)
+        self._lateness = np.zeros(policy.late_window)  # s beyond the assumed delay: start lateness + input age
         self._late = np.zeros(policy.late_window, dtype=bool)
+        self._stale = np.zeros(policy.late_window, dtype=bool)  # computed from an older input than the cycle's
         self._late_in_window = 0
         self._slot = 0
         self._quiet_until = {"late": 0, "observer": 0}
         self._cycle = 0
 
-    def cycle(self, lateness: float, energy: float) -> tuple[bool, Alarm | None]:
-        """Account one cycle: its start ``lateness`` (s) and the observer's ``energy`` (J)."""
+    def cycle(self, lateness: float, energy: float, input_age: int = 0) -> tuple[bool, Alarm | None]:
+        """Account one cycle: its start ``lateness`` (s), the observer's ``energy`` (J), and how many
+        samples older than the cycle's own its input was (``input_age``, 0: fresh)."""
         policy = self.policy
         slot = self._slot
-        late = lateness > self._tolerance
+        beyond = lateness + input_age * self.period
+        late = beyond > self._tolerance
         self._late_in_window += late - bool(self._late[slot])
         self._late[slot] = late
-        self._lateness[slot] = lateness
+        self._stale[slot] = input_age > 0
+        self._lateness[slot] = beyond
         self._slot = slot + 1 if slot + 1 < policy.late_window else 0
         self._cycle += 1
         if late:
@@ -132,8 +148,8 @@ class Supervisor:
             if self._late_in_window > policy.late_limit and self._cycle >= self._quiet_until["late"]:
                 return late, self._raise("late", Action(policy.on_late), self._late_message())
         if energy < -policy.observer_limit and self._cycle >= self._quiet_until["observer"]:
-            message = (f"the observer's interface energy is {energy * 1e3:.4g} mJ, below the -{policy.observer_limit * 1e3:.4g} mJ "
-                       "allowed: the interface gave back more energy than it held (is b or m smaller than configured?)")
+            message = (f"the observer's interface energy is {energy * 1e3:.4g} mJ, below the "
+                       f"-{policy.observer_limit * 1e3:.4g} mJ allowed: the interface gave back more energy than it held")
             return late, self._raise("observer", Action(policy.on_observer), message)
         return late, None
 
@@ -146,8 +162,10 @@ class Supervisor:
 
     def _late_message(self) -> str:
         worst = float(self._lateness.max())
-        return (f"{self._late_in_window} of the last {self.policy.late_window} cycles started more than "
-                f"{self.policy.late_tolerance:g} T late (worst {worst * 1e3:.3g} ms at T = {self.period * 1e3:g} ms): "
+        stale = int(np.count_nonzero(self._stale))
+        verb, why = ("started", "") if not stale else ("acted", f"{stale} on an input the drive did not renew in time; ")
+        return (f"{self._late_in_window} of the last {self.policy.late_window} cycles {verb} more than "
+                f"{self.policy.late_tolerance:g} T late ({why}worst {worst * 1e3:.3g} ms at T = {self.period * 1e3:g} ms): "
                 f"a loop delay of about {self.observed_delay():.3g} samples")
 
     def _raise(self, kind: str, action: Action, message: str) -> Alarm:
