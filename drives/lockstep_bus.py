@@ -83,6 +83,9 @@ class LockstepBus(can.BusABC):
     ``preserve_timestamps``: keep the sender's ``timestamp`` instead of the time of sending.
     """
 
+    concurrent_send = True
+    """:meth:`send` may be called from several threads at once, no lock needed (see the module docstring)."""
+
     def __init__(self, channel: Any = "lockstep", receive_own_messages: bool = False,
                  preserve_timestamps: bool = False, **kwargs: Any) -> None:
         self.channel_info = f"lock-step in-process bus, channel {channel!r}"

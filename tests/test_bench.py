@@ -45,9 +45,21 @@ def test_quick_bench_writes_every_file(quick_run: QuickRun) -> None:
     for name in ("bench.json", "bench.md", "passivity_time_vs_error.png", "plant_time_vs_error.png", "scene_cost.png"):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     text = (out / "bench.md").read_text()
-    for heading in ("## 1.", "## 2.", "## 3.", "## 4.", "## 5.", "## 6.", "## 7."):
+    for heading in ("## Issue 14: Done when", "## 1.", "## 2.", "## 3.", "## 4.", "## 5.", "## 6.", "## 7.", "## 8."):
         assert heading in text
-    assert "## 8." not in text  # the soak runs only when asked for
+
+
+@pytest.mark.slow
+def test_every_done_when_line_of_issue_14_is_a_row_with_a_verdict(quick_run: QuickRun) -> None:
+    _, result = quick_run
+    rows = result["done_when"]
+    assert {r["line"] for r in rows} == {1, 2, 3, 4, 5}
+    for row in rows:
+        assert row["result"] in ("PASS", "FAIL", "n/a") and row["target"], row
+        if row["spread"] is not None:  # a timing ratio: at least 5 repeats behind it
+            assert row["spread"]["repeats"] >= REPEATS and row["spread"]["min"] <= row["spread"]["max"], row
+    lines_with_a_figure = {r["line"] for r in rows if r["result"] != "n/a"}
+    assert {1, 2, 4, 5} <= lines_with_a_figure  # no external link needed for these
 
 
 @pytest.mark.slow
@@ -142,9 +154,26 @@ def test_the_soak_option_defaults_to_ten_million_cycles() -> None:
 
 
 def test_a_short_soak_reports_an_exact_sum_and_the_memory_it_sampled() -> None:
+    from haptic_bus.bench.soak import SAMPLES
     from haptic_bus.bench.soak import run as soak
 
     result = soak(2_000)
-    assert result["cycles"] == 2_000 and result["exit_reason"] == "completed"
+    assert result["cycles"] == result["cycles_asked"] == 2_000 and result["exit_reason"] == "completed"
     assert result["integer_sum"]["exact"] and result["integer_sum"]["position_exact"]
-    assert len(result["memory"]["resident_bytes"]) == 2  # before, and after the one chunk
+    memory = result["memory"]
+    assert len(memory["resident_bytes"]) == len(memory["at_cycles"]) == SAMPLES + 1  # before, and after each chunk
+    assert memory["at_cycles"][-1] == 2_000 and math.isfinite(memory["slope_bytes_per_cycle"])
+
+
+def test_ctrl_c_ends_the_bench_with_130_and_one_line_on_stderr(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    import haptic_bus.bench as bench
+
+    def interrupted(quick: bool, tick: Any) -> dict:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(bench, "_runner", lambda name: interrupted)
+    assert main(["--quick", "--no-progress", "--only", "bus", "--out", str(tmp_path)]) == 130
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "interrupted in section bus" in err and "Traceback" not in err
+    assert json.loads((tmp_path / "bench.json").read_text())["interrupted"] == "bus"  # what ran is still written

@@ -213,13 +213,20 @@ class CanopenExchange:
     # ------------------------------------------------------------------ send
 
     def send(self, msg: can.Message) -> None:
-        """Send one frame under the network's send lock (shared with canopen's SDO and NMT)."""
+        """Send one frame under the network's send lock (shared with canopen's SDO and NMT), unless the
+        bus says its ``send`` is safe from several threads at once (``concurrent_send``, e.g. the
+        lock-step bus, whose ``send`` runs the receiving node inline: holding the lock through that
+        for most of every cycle starves the heartbeat thread, which takes the same lock)."""
         network = self.link.network
-        if network is None or network.bus is None:
+        bus = network.bus if network is not None else None
+        if network is None or bus is None:
             raise DriveError(self.name, "the bus is closed")
         try:
-            with network.send_lock:
-                network.bus.send(msg)
+            if getattr(bus, "concurrent_send", False):
+                bus.send(msg)
+            else:
+                with network.send_lock:
+                    bus.send(msg)
         except (can.CanError, OSError) as exc:
             raise DriveError(self.name, f"CAN send failed: {exc!r}") from exc
 

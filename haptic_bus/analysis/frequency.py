@@ -36,7 +36,6 @@ each ``theta`` (:func:`impedance_quadratic`): the passivity limits come from its
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,6 +63,14 @@ class LoopTerms:
     P: ThetaComplex
     E: ThetaComplex
 
+    def take(self, where: np.ndarray) -> LoopTerms:
+        """These terms at ``theta[where]`` only (``where``: a boolean mask or indices)."""
+
+        def part(x: ThetaComplex) -> ThetaComplex:
+            return ThetaComplex(x.theta[where], x.re[where], x.im[where], x.mag_re[where], x.mag_im[where])
+
+        return LoopTerms(self.theta[where], self.c, self.scale, part(self.hold), part(self.P), part(self.E))
+
 
 def _rotation(theta: np.ndarray, delay: float) -> ThetaComplex:
     """``e^{-j theta delay}``: ``Re = cos``, ``Im/theta = -delay sinc``."""
@@ -89,8 +96,10 @@ def loop_terms(loop: WallLoop, theta: ArrayLike) -> LoopTerms:
     """:class:`LoopTerms` of ``loop`` (its wall ignored) at ``theta`` (rad, > 0)."""
     theta = np.atleast_1d(np.asarray(theta, dtype=float))
     hold = ThetaComplex.exact(theta, 2.0 * sinpi(0.5 * theta / np.pi) ** 2, sincpi(theta / np.pi))
-    P = _rotation(theta, loop.whole_delay) * alias_function(loop, theta)
-    E = _rotation(theta, loop.delay) * _measurement(loop, theta)
+    whole = _rotation(theta, loop.whole_delay)
+    P = whole * alias_function(loop, theta)
+    rotation = whole if loop.delay == loop.whole_delay else _rotation(theta, loop.delay)
+    E = rotation if loop.velocity.kind == "point" else rotation * _measurement(loop, theta)  # M = 1 exactly
     return LoopTerms(theta, loop.c, loop.m / loop.T, hold, P, E)
 
 

@@ -18,7 +18,10 @@ unit circle at ``theta*`` makes ``Re Z(theta*) = 0``, so every change of stabili
 of some ``Q_theta`` and, generically, an end of an interval: stability is constant inside each
 candidate interval, and one eigenvalue test at an interior point keeps or drops it.
 
-One evaluation of the wall-independent terms on the grid serves ``K`` and ``B`` alike.
+One evaluation of the wall-independent terms on the grid serves ``K`` and ``B`` alike, and the
+ends of every interval of both are refined by one joint zoom (:func:`_envelopes`): each zoom
+round evaluates the wall-independent terms once, on the points of every end together, so a
+check's ``K`` and ``B`` cost the terms' evaluations of one boundary, not of each.
 """
 
 from __future__ import annotations
@@ -37,6 +40,9 @@ from haptic_bus.analysis.theta_complex import ThetaComplex
 from haptic_bus.analysis.theta_search import refine_minima, theta_grid
 
 _NO_ROOT = 1e300  # stands in for "no root on that side" (finite, so the zoom's differences stay finite)
+_LANE = 4.0  # rad: the joint zoom keeps end k's theta in [k LANE, k LANE + pi] (LANE > pi, a power of 2)
+_ZOOM_COUNT = 3  # minima refined per end, as the criterion's zoom does
+_NOT_A_MINIMUM, _AN_END = 1e9, 2e9  # zoom selection keys of the points that are not minima, and of the grid's ends
 
 RELATIVE_TOLERANCE = 1e-12
 """Relative accuracy of every limit: an envelope minimum located by the zoom, in double precision."""
@@ -169,22 +175,75 @@ def _allowed(forbidden: list[tuple[float, float]], top: float) -> list[tuple[flo
     return [(lo, hi) for lo, hi in out if lo <= hi]
 
 
-def _envelope(family: _Family, grid: np.ndarray, q: np.ndarray, inside: float, upper: bool) -> float:
-    """``min_theta`` of the first root above ``inside`` (``upper``) or ``max_theta`` of the last below, refined."""
+@dataclass(frozen=True)
+class _End:
+    """One end to refine: of ``family``'s interval around ``inside``, its upper end (``upper``) or its lower."""
 
-    def branch(coefficients: np.ndarray) -> np.ndarray:
-        r1, r2 = _roots(coefficients)
-        if upper:
-            return np.where(r1 > inside, r1, np.where(r2 > inside, r2, np.inf))
-        return -np.where(r2 < inside, r2, np.where(r1 < inside, r1, -np.inf))
+    family: _Family
+    inside: float
+    upper: bool
 
-    def objective(theta: np.ndarray) -> np.ndarray:
-        return np.fmin(branch(family.quadratic(loop_terms(family.loop, theta))[0]), _NO_ROOT)
+    def branch(self, q: np.ndarray) -> np.ndarray:
+        """Per column of ``q``: the first root above ``inside`` (upper), or minus the last below (lower),
+        capped at :data:`_NO_ROOT`; the end is the minimum over ``theta`` (of minus it, for a lower)."""
+        r1, r2 = _roots(q)
+        inside = self.inside
+        if self.upper:
+            near = np.where(r1 > inside, r1, np.where(r2 > inside, r2, np.inf))
+        else:
+            near = -np.where(r2 < inside, r2, np.where(r1 < inside, r1, -np.inf))
+        return np.fmin(near, _NO_ROOT)
 
-    values = np.fmin(branch(q), _NO_ROOT)
-    _, refined = refine_minima(objective, grid, values)
-    best = float(np.min(np.concatenate([values, refined])))
-    return best if upper else -best
+
+def _selection_keys(values: np.ndarray) -> np.ndarray:
+    """Keys with the same interior minima as ``values``, each keyed by its rank among them (0 the
+    lowest); every other point above them all and the two ends above everything, never minima."""
+    keys = np.full(values.shape, _NOT_A_MINIMUM)
+    interior = np.flatnonzero((values[1:-1] <= values[:-2]) & (values[1:-1] <= values[2:])) + 1
+    keys[interior[np.argsort(values[interior], kind="stable")]] = np.arange(interior.size)
+    keys[[0, -1]] = _AN_END
+    return keys
+
+
+def _envelopes(loop: WallLoop, terms: LoopTerms, quadratics: dict[str, np.ndarray], ends: list[_End]) -> list[float]:
+    """Every end of ``ends`` (scaled ``x``): ``min_theta`` of its root branch on the grid, refined by one
+    joint zoom of :func:`~haptic_bus.analysis.theta_search.refine_minima`.
+
+    End ``k``'s grid is laid in the lane ``theta + k LANE``; its :func:`_selection_keys` make the zoom
+    refine the :data:`_ZOOM_COUNT` lowest minima of every end (as separate zooms would), and each
+    round's points of all ends are evaluated by one :func:`loop_terms` call.
+    """
+    if not ends:
+        return []
+    grid = terms.theta
+    values = [end.branch(quadratics[end.family.which]) for end in ends]
+    lanes = _LANE * np.arange(len(ends))
+    families = {end.family.which: end.family for end in ends}
+    lanes_of = {which: [k for k, end in enumerate(ends) if end.family.which == which] for which in families}
+
+    def objective(points: np.ndarray) -> np.ndarray:
+        lane = np.floor(points / _LANE).astype(int)
+        at = loop_terms(loop, points - _LANE * lane)
+        out = np.empty(points.shape)
+        for which, family in families.items():  # each family's quadratic on its own ends' points only
+            mine = np.isin(lane, lanes_of[which])
+            q, own = family.quadratic(at.take(mine))[0], lane[mine]
+            part = np.empty(own.shape)
+            for k in lanes_of[which]:
+                here = own == k
+                part[here] = ends[k].branch(q[:, here])
+            out[mine] = part
+        return out
+
+    stacked = np.concatenate([grid + lane for lane in lanes])
+    keys = np.concatenate([_selection_keys(v) for v in values])
+    thetas, refined = refine_minima(objective, stacked, keys, count=_ZOOM_COUNT * len(ends))
+    lane_of = np.floor(thetas / _LANE)
+    out = []
+    for k, end in enumerate(ends):
+        best = float(np.min(np.concatenate([values[k], refined[lane_of == k]])))
+        out.append(best if end.upper else -best)
+    return out
 
 
 def _scale_grid(loop: WallLoop) -> np.ndarray:
@@ -195,32 +254,54 @@ def _scale_grid(loop: WallLoop) -> np.ndarray:
     return np.unique(np.concatenate(grids))
 
 
+def passive_sets(loop: WallLoop, which: tuple[str, ...], terms: LoopTerms | None = None) -> tuple[PassiveSet, ...]:
+    """:func:`passive_set` of each family in ``which``, from one grid evaluation and one joint zoom."""
+    for name in which:
+        if name not in FAMILIES:
+            raise ParameterError("which", name, " or ".join(repr(f) for f in FAMILIES), "passive set")
+    if terms is None:
+        grid = _scale_grid(loop) if "scale" in which else theta_grid(loop, closed_loop_poles(loop))
+        terms = loop_terms(loop, grid)
+    quadratics: dict[str, np.ndarray] = {}
+    ends: list[_End] = []
+    plans: list[tuple[_Family, list[tuple[float | int, float | int]]]] = []  # per family: (low, high) or end indices
+    for name in which:
+        family = _Family(loop, name)
+        top = family.ceiling * family.unit
+        q, tolerant = family.quadratic(terms)
+        quadratics[name] = q
+        plan: list[tuple[float | int, float | int]] = []
+        for lo, hi in _allowed(_forbidden(tolerant, top), top):
+            inside = 0.5 * (lo + hi) if hi > lo else lo
+            candidate = family.at(inside)
+            if not (candidate.lossless or is_stable(candidate)):
+                continue
+            low: float | int = 0.0 if lo == 0.0 else len(ends)  # an int: the index of an end to refine
+            if isinstance(low, int):
+                ends.append(_End(family, inside, upper=False))
+            high: float | int = float(top) if hi >= top else len(ends)
+            if isinstance(high, int):
+                ends.append(_End(family, inside, upper=True))
+            plan.append((low, high))
+        plans.append((family, plan))
+    refined = _envelopes(loop, terms, quadratics, ends)
+    out = []
+    for family, plan in plans:
+        intervals = [(family.value(refined[lo] if isinstance(lo, int) else lo),
+                      family.value(refined[hi] if isinstance(hi, int) else hi)) for lo, hi in plan]
+        if family.at(0.0).lossless and not (intervals and intervals[0][0] == 0.0):
+            intervals.insert(0, (0.0, 0.0))  # the free mass itself: lossless, so passive
+        out.append(PassiveSet(family.which, tuple(intervals)))
+    return tuple(out)
+
+
 def passive_set(loop: WallLoop, which: str, terms: LoopTerms | None = None) -> PassiveSet:
     """The passive ``K`` (``which = "K"``, at the loop's ``B``), ``B`` (at its ``K``) or scales
     ``s`` of the whole wall (``which = "scale"``: ``(s K, s B)``, ``s`` in ``[0, 1]``): closed intervals.
 
     ``terms``: the wall-independent terms on the search grid, if already evaluated.
     """
-    if which not in FAMILIES:
-        raise ParameterError("which", which, " or ".join(repr(f) for f in FAMILIES), "passive set")
-    family = _Family(loop, which)
-    if terms is None:
-        grid = _scale_grid(loop) if which == "scale" else theta_grid(loop, closed_loop_poles(loop))
-        terms = loop_terms(loop, grid)
-    top = family.ceiling * family.unit
-    q, tolerant = family.quadratic(terms)
-    intervals: list[tuple[float, float]] = []
-    for lo, hi in _allowed(_forbidden(tolerant, top), top):
-        inside = 0.5 * (lo + hi) if hi > lo else lo
-        candidate = family.at(inside)
-        if not (candidate.lossless or is_stable(candidate)):
-            continue
-        low = 0.0 if lo == 0.0 else _envelope(family, terms.theta, q, inside, upper=False)
-        high = top if hi >= top else _envelope(family, terms.theta, q, inside, upper=True)
-        intervals.append((family.value(low), family.value(high)))
-    if family.at(0.0).lossless and not (intervals and intervals[0][0] == 0.0):
-        intervals.insert(0, (0.0, 0.0))  # the free mass itself: lossless, so passive
-    return PassiveSet(which, tuple(intervals))
+    return passive_sets(loop, (which,), terms)[0]
 
 
 def passive_scales(loop: WallLoop) -> PassiveSet:
@@ -231,8 +312,8 @@ def passive_scales(loop: WallLoop) -> PassiveSet:
 
 def passive_limits(loop: WallLoop) -> tuple[PassiveSet, PassiveSet]:
     """(passive ``K`` at the loop's ``B``, passive ``B`` at its ``K``), from one grid evaluation."""
-    terms = loop_terms(loop, theta_grid(loop, closed_loop_poles(loop)))
-    return passive_set(loop, "K", terms), passive_set(loop, "B", terms)
+    stiffness, damping = passive_sets(loop, ("K", "B"))
+    return stiffness, damping
 
 
 def max_stiffness(loop: WallLoop) -> float | None:

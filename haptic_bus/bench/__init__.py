@@ -20,12 +20,16 @@ min-max over at least 5 repeats (:mod:`~haptic_bus.bench.timing`):
    and the controller's share of a core in three set-ups, quiet and beside a CPU hog.
 7. :mod:`~haptic_bus.bench.startup` -- ``check --json``, ``profiles list``, ``--help`` against
    ``python -c "import numpy"``.
-8. :mod:`~haptic_bus.bench.soak` (only with ``--soak``; alone unless ``--only`` names other
-   sections) -- 10^7 cycles in virtual time: the integer position sum exact, memory flat.
+8. :mod:`~haptic_bus.bench.soak` -- cycles in virtual time (``--soak [CYCLES]``: 10^7; otherwise
+   10^5 quick, 10^6 full): the integer position sum exact, memory flat.
+
+Above the sections, issue 14's "Done when" (:mod:`~haptic_bus.bench.targets`): one row per line
+with the measured figure, its spread, the target and PASS/FAIL, all from this one run.
 
 Writes ``DIR/bench.json`` (every figure, the machine, versions, date), ``DIR/bench.md`` (the
-tables, also printed) and PNG plots.  ``--quick`` (what CI runs) keeps to about a minute on a
-2-core machine; the full run takes minutes and shows a progress bar on stderr.
+tables, also printed) and PNG plots.  ``--quick`` (what CI runs) keeps to a few minutes on a
+2-core machine; the full run takes longer and shows a progress bar on stderr.  Ctrl-C ends the
+run: what finished is written and printed, one line on stderr says where it stopped, exit 130.
 """
 
 from __future__ import annotations
@@ -33,18 +37,21 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from haptic_bus.bench.timing import machine
 
-SECTIONS = ("passivity", "plant", "scene", "loop", "bus", "realtime", "startup")
+SECTIONS = ("passivity", "plant", "scene", "loop", "bus", "realtime", "startup", "soak")
 # progress ticks each section makes (quick, full): for the bar's total
 _TICKS = {"passivity": (7, 17), "plant": (15, 17), "scene": (5, 5), "loop": (6, 6), "bus": (2, 2), "realtime": (6, 6),
-          "startup": (3, 3)}
+          "startup": (3, 3), "soak": (10, 10)}
 
 
 class Progress:
@@ -66,11 +73,39 @@ class Progress:
         sys.stderr.write(f"\r[{bar}] {self.done}/{self.total} {elapsed:5.0f} s  {label[:50]:<50}")
         sys.stderr.flush()
 
-    def close(self) -> None:
-        """End the bar's line."""
+    def close(self, erase: bool = False) -> None:
+        """End the bar's line (``erase``: blank it, so that the next line on stderr is the only one)."""
         if self.enabled:
-            sys.stderr.write("\n")
+            sys.stderr.write(f"\r{' ' * (self.width + 70)}\r" if erase else "\n")
             sys.stderr.flush()
+
+
+class Interrupts:
+    """Remembers a Ctrl-C (SIGINT, main thread only) even where the code it lands in swallows the
+    ``KeyboardInterrupt`` (a controller run ends "interrupted" and returns), so the run stops at the
+    section's next progress step."""
+
+    def __init__(self) -> None:
+        self.seen = False
+        self._previous: Any = None
+
+    def __enter__(self) -> Interrupts:
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+    def _on_sigint(self, signum: int, frame: object) -> None:
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def check(self) -> None:
+        """Raise ``KeyboardInterrupt`` if a Ctrl-C came."""
+        if self.seen:
+            raise KeyboardInterrupt
 
 
 def _runner(name: str) -> Callable[..., dict]:
@@ -81,19 +116,20 @@ def _runner(name: str) -> Callable[..., dict]:
     return import_module(f"haptic_bus.bench.{module}").run
 
 
-def _soak_runner(cycles: int) -> Callable[..., dict]:
+def _soak_runner(cycles: int | None) -> Callable[..., dict]:
     def run(quick: bool, tick: Callable[[str], None]) -> dict:
+        from haptic_bus.bench.soak import FULL_CYCLES, QUICK_CYCLES
         from haptic_bus.bench.soak import run as soak
 
-        return soak(cycles, tick)
+        return soak(cycles or (QUICK_CYCLES if quick else FULL_CYCLES), tick)
 
     return run
 
 
 def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
               sections: Sequence[str] = SECTIONS, soak: int | None = None) -> dict:
-    """Run the benchmark sections (and the soak of ``soak`` cycles, if given); write ``bench.json``,
-    ``bench.md`` and PNGs into ``out_dir``.
+    """Run the benchmark sections (the soak of ``soak`` cycles, default by ``quick``); write
+    ``bench.json``, ``bench.md`` and PNGs into ``out_dir``.
 
     Returns the result dictionary (the content of ``bench.json``).  A section that cannot
     run (a missing optional package, a link that fails) is recorded with
@@ -101,32 +137,40 @@ def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    runners = {name: _runner(name) for name in sections}
-    if soak is not None:
-        runners["soak"] = _soak_runner(soak)
-    ticks = sum(_TICKS[s][0 if quick else 1] for s in sections) + (soak // 1_000_000 + 1 if soak is not None else 0)
-    bar = Progress(ticks, progress)
+    runners = {name: _soak_runner(soak) if name == "soak" else _runner(name) for name in dict.fromkeys(sections)}
+    bar = Progress(sum(_TICKS[s][0 if quick else 1] for s in runners), progress)
     started = time.perf_counter()
-    result: dict = {"command": "haptic-bus bench" + (" --quick" if quick else "") + (f" --soak {soak}" if soak else ""),
+    result: dict = {"command": "haptic-bus bench" + (" --quick" if quick else "") + (f" --soak {soak:.0e}" if soak else "")
+                    + "".join(f" --only {s}" for s in sections if set(sections) != set(SECTIONS)),
                     "quick": quick, "machine": machine(), "sections": {}}
-    try:
-        for name, runner in runners.items():
-            t0 = time.perf_counter()
-            try:
-                section = runner(quick, bar.tick)
-                section.setdefault("available", True)
-            except KeyboardInterrupt:  # Ctrl-C: what ran so far is still written
-                result["interrupted"] = name
-                break
-            except Exception as exc:
-                section = {"available": False, "reason": f"{type(exc).__name__}: {exc}",
-                           "traceback": traceback.format_exc(limit=6)}
-            section["section_seconds"] = time.perf_counter() - t0
-            result["sections"][name] = section
-    finally:
-        bar.close()
+    with Interrupts() as interrupts:
+
+        def tick(label: str) -> None:
+            bar.tick(label)
+            interrupts.check()
+
+        try:
+            for name, runner in runners.items():
+                t0 = time.perf_counter()
+                try:
+                    section = runner(quick, tick)
+                    section.setdefault("available", True)
+                    interrupts.check()
+                except KeyboardInterrupt:  # Ctrl-C: what ran so far is still written
+                    result["interrupted"] = name
+                    break
+                except Exception as exc:
+                    section = {"available": False, "reason": f"{type(exc).__name__}: {exc}",
+                               "traceback": traceback.format_exc(limit=6)}
+                section["section_seconds"] = time.perf_counter() - t0
+                result["sections"][name] = section
+        finally:
+            bar.close(erase="interrupted" in result)
     result["total_seconds"] = time.perf_counter() - started
     from haptic_bus.bench.report import markdown, plots
+    from haptic_bus.bench.targets import done_when
+
+    result["done_when"] = done_when(result["sections"])
 
     (out / "bench.json").write_text(json.dumps(result, indent=1, default=_json_default, allow_nan=True) + "\n")
     (out / "bench.md").write_text(markdown(result))
@@ -150,8 +194,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--only", action="append", choices=SECTIONS, help="run only this section (repeatable)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     parser.add_argument("--soak", type=_cycles, nargs="?", const=10_000_000, metavar="CYCLES",
-                        help="run CYCLES cycles in virtual time (default 10^7): exact position sum, flat memory "
-                             "(alone, or after the --only sections)")
+                        help="the soak's cycles in virtual time (exact position sum, flat memory): CYCLES, 10^7 "
+                             "without a number; default 10^5 with --quick, else 10^6")
     return parser
 
 
@@ -172,11 +216,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
-    sections = args.only or (() if args.soak else SECTIONS)  # --soak alone runs the soak alone
-    result = run_bench(args.out, quick=args.quick, progress=not args.no_progress, sections=sections, soak=args.soak)
-    print((Path(args.out) / "bench.md").read_text())
-    print(f"wrote {Path(args.out) / 'bench.json'}, {Path(args.out) / 'bench.md'}"
-          + "".join(f", {p}" for p in result["plots"]))
+    try:
+        result = run_bench(args.out, quick=args.quick, progress=not args.no_progress, sections=args.only or SECTIONS,
+                           soak=args.soak)
+        print((Path(args.out) / "bench.md").read_text())
+        print(f"wrote {Path(args.out) / 'bench.json'}, {Path(args.out) / 'bench.md'}"
+              + "".join(f", {p}" for p in result["plots"]))
+    except KeyboardInterrupt:  # outside a section (starting, writing): nothing more to show
+        print("haptic-bus bench: interrupted", file=sys.stderr)
+        return 130
     if "interrupted" in result:
         print(f"haptic-bus bench: interrupted in section {result['interrupted']}", file=sys.stderr)
         return 130

@@ -40,6 +40,8 @@ from haptic_bus.control.gate import PassivityGate
 PROFILE = "cia402-handle"
 NODE_ID = 5
 FLOOR_RATIO_TARGET = 1.5
+ECHO_CYCLES = 4_000  # cycles a run against the echo floor: the lock-step drive idles through each echo run, and its
+# RPDO deadline (1 s of wall clock in virtual time, drives.safety.VIRTUAL_TIME_DEADLINE) must not expire meanwhile
 TRAJECTORY = ("time_s", "position_m", "velocity_m_per_s", "force_n", "torque_permille", "energy_j", "scene_id", "scale")
 
 
@@ -85,6 +87,7 @@ def against_echo_floor(profile: Profile, cycles: int) -> dict:
     from haptic_bus.app.rig import simulated_canopen
     from haptic_bus.bench.hot_path import bench_echo_floor
 
+    cycles = min(cycles, ECHO_CYCLES)
     with simulated_canopen(profile) as (_, drive):
         controller = _controller(profile, drive, profile.gate())
         controller.run(min(200, cycles))

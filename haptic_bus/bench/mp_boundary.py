@@ -35,7 +35,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import mpmath as mp
+import mpmath as mp  # type: ignore[import-untyped]  # no stubs
 
 from haptic_bus.analysis.loop import WallLoop
 

@@ -116,7 +116,7 @@ def uniform_grid(n: int) -> np.ndarray:
 
 def control_margin(loop: WallLoop, grid: np.ndarray) -> float:
     """python-control method: ``min Re 1/T_fund`` (N s/m) on ``grid`` from control's responses."""
-    import control
+    import control  # type: ignore[import-untyped]  # no stubs
 
     m, b, T, K, B, d = loop.m, loop.b, loop.T, loop.K, loop.B, loop.delay
     c = loop.c

@@ -138,7 +138,7 @@ def ivp_stepper(s: Scenario, method: str, tol: float) -> Stepper:
 
 def mp_reference(s: Scenario, digits: int = 40) -> tuple[np.ndarray, np.ndarray]:
     """The loop with the exact solution in mpmath at ``digits`` digits; (v_k, p_k) as floats."""
-    import mpmath as mp
+    import mpmath as mp  # type: ignore[import-untyped]  # no stubs
 
     with mp.workdps(digits):
         m, b, T, K, B, wall = (mp.mpf(x) for x in (s.m, s.b, s.T, s.K, s.B, s.wall_at))

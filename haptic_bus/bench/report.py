@@ -202,18 +202,37 @@ def _startup(s: dict) -> list[str]:
     rows = [[label, _ts(r["wall_s"]), _ts(r["numpy_import_s"]), _rs(r["ratio"]), _met(r["met"])]
             for label, r in s["commands"].items()]
     costs = ", ".join(f"{c['module']} {_t(c['self_s'])}" for c in s["check_import_costs"])
-    return [_table(["haptic-bus ...", "wall time", "python -c 'import numpy'", "ratio", f"<= {s['ratio_target']:g} x"],
-                   rows), "", f"Largest own import times of haptic-bus check (numpy's left out): {costs}."]
+    out = [_table(["haptic-bus ...", "wall time", "python -c 'import numpy'", "ratio", f"<= {s['ratio_target']:g} x"],
+                  rows), "", f"Largest own import times of haptic-bus check (numpy's left out): {costs}."]
+    heavy = s.get("check_heavy_imports")
+    if heavy:
+        out += ["", "Modules check --json should not import, and who imported them first: "
+                + ("; ".join(f"{m} (via {' <- '.join(heavy['chains'][m])})" for m in heavy["imported"]) or "none") + "."]
+    return out
 
 
 def _soak(s: dict) -> list[str]:
     total, memory = s["integer_sum"], s["memory"]
-    return [f"{s['cycles']:,} cycles in {s['seconds']:.0f} s ({s['cycles_per_s']:.0f} cycles/s), ended "
-            f"{s['exit_reason']}. Integer position sum exact: {total['exact']} (position exact: "
-            f"{total['position_exact']}; a float accumulator would have drifted {total['float_accumulator_drift_m']:.3g} m). "
-            f"Resident memory after each {memory['chunk_cycles']:,} cycles: "
-            + ", ".join(f"{b / 2**20:.1f}" for b in memory["resident_bytes"])
-            + f" MiB; spread over the second half of the run {memory['second_half_spread_bytes'] / 2**20:.2f} MiB."]
+    resident = memory["resident_bytes"]
+    shown = resident[:: max(1, len(resident) // 10)]
+    return [f"{s['cycles']:,} of {s['cycles_asked']:,} cycles in {s['seconds']:.0f} s ({s['cycles_per_s']:.0f} cycles/s), "
+            f"ended {s['exit_reason']}" + (f" ({s['error']})" if s.get("error") else "") + ". Integer position sum exact: "
+            f"{total['exact']} (position exact: {total['position_exact']}; a float accumulator would have drifted "
+            f"{total['float_accumulator_drift_m']:.3g} m). Resident memory sampled every {memory['chunk_cycles']:,} cycles "
+            f"({len(resident)} samples; every {max(1, len(resident) // 10)}th shown): "
+            + ", ".join(f"{b / 2**20:.1f}" for b in shown)
+            + f" MiB; over the second half of the run: spread {memory['second_half_spread_bytes'] / 2**20:.2f} MiB, "
+              f"least-squares slope {memory['slope_bytes_per_cycle'] * 1e6 / 1024:.3g} KiB per 10^6 cycles "
+              f"({memory['growth_bytes'] / 2**20:.3g} MiB over the run; flat if <= {memory['flat_bytes'] / 2**20:g} MiB)."]
+
+
+def _done_when(rows: list[dict]) -> list[str]:
+    table = _table(["#", "Done when (issue 14)", "measured: median (min-max)", "target", "result"],
+                   [[str(r["line"]), r["what"] + (f"; {r['note']}" if r["note"] else ""), r["measured"], r["target"],
+                     f"**{r['result']}**"] for r in rows])
+    counts = {k: sum(r["result"] == k for r in rows) for k in ("PASS", "FAIL", "n/a")}
+    return [table, "", f"{counts['PASS']} PASS, {counts['FAIL']} FAIL, {counts['n/a']} n/a (a section not run or a "
+                       "figure missing). Ratios are measured pairwise in this run; spreads over >= 5 repeats."]
 
 
 _SECTIONS = (
@@ -243,6 +262,8 @@ def markdown(result: dict) -> str:
     if "interrupted" in result:
         out += ["", f"**Interrupted (Ctrl-C) in section {result['interrupted']}: only the sections before it ran.**"]
     sections = result["sections"]
+    if result.get("done_when"):
+        out += ["", "## Issue 14: Done when", "", *_done_when(result["done_when"])]
     for key, title, render in _SECTIONS:
         s = sections.get(key)
         if s is None:  # not asked for (--only, --soak)

@@ -2,16 +2,19 @@
 
 The ``cia402-handle`` profile's controller against the in-process simulated drive
 (:func:`haptic_bus.app.rig.simulated_canopen`, lock-step bus), an operator pushing a sinusoid
-(2 N + 5 N at 2 Hz: the handle keeps going in and out of the wall), 10^7 cycles by default in
-chunks of 10^6.  Checked at the end:
+(2 N + 5 N at 2 Hz: the handle keeps going in and out of the wall), 10^7 cycles with ``--soak``
+(a shorter default in every run: :data:`QUICK_CYCLES`, :data:`FULL_CYCLES`), in :data:`SAMPLES`
+chunks.  Checked at the end:
 
 * the position's integer sum is exact: the controller's sum of 0x606C counts equals a sum
   taken independently of every input it was given (Python integers), and the position it
   rendered last is ``origin + T * velocity_per_count * sum`` with one rounding; beside it, how
   far a float accumulator ``x += T v`` would have drifted;
-* memory is flat: the resident set after each chunk (``/proc/self/statm``), and how much it
-  moves over the second half of the run (the first chunks touch the controller's 200 000-row
-  record, 16 MB, and the allocator's pools for the summaries' temporaries).
+* memory is flat: the resident set after each chunk (``/proc/self/statm``) and its least-squares
+  slope over the second half of the run (the first chunks touch the controller's record, at
+  most a tenth of the run long, and the allocator's pools for the summaries' temporaries);
+  flat when that slope, over the whole run, adds at most :data:`FLAT_BYTES`.  A leak of one
+  small Python object per cycle is >= 28 bytes a cycle: 280 MB over 10^7 cycles.
 """
 
 from __future__ import annotations
@@ -20,12 +23,18 @@ import os
 import time
 from collections.abc import Callable
 
+import numpy as np
+
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.control.controller import WallController
 
 PROFILE = "cia402-handle"
-CYCLES = 10_000_000
-CHUNK = 1_000_000
+CYCLES = 10_000_000  # --soak without a number
+QUICK_CYCLES = 100_000  # the soak of every --quick run
+FULL_CYCLES = 1_000_000  # the soak of every full run
+SAMPLES = 100  # resident-set samples over a run
+RECORD_ROWS = 200_000  # the controller's record (haptic-bus run's default), at most a tenth of a shorter run
+FLAT_BYTES = 2 * 2**20  # memory is flat if the second half's slope adds at most this over the whole run
 OPERATOR = {"model": "sinusoid", "amplitude": 5.0, "frequency": 2.0, "offset": 2.0}
 
 
@@ -40,9 +49,10 @@ def run(cycles: int = CYCLES, tick: Callable[[str], None] = lambda _: None) -> d
     from haptic_bus.app.rig import operator_from_table, simulated_canopen
 
     profile = load_profile(PROFILE)
-    chunk = min(CHUNK, cycles)
+    chunk = max(1, cycles // SAMPLES)
     with simulated_canopen(profile, operator=operator_from_table(OPERATOR)) as (_, drive):
-        controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit)
+        controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
+                                    record_capacity=max(1, min(RECORD_ROWS, cycles // 10)))
         step = controller.integrator.step
         read = drive.read_inputs
         tally = {"counts": 0, "float_position": controller.integrator.origin}
@@ -54,28 +64,35 @@ def run(cycles: int = CYCLES, tick: Callable[[str], None] = lambda _: None) -> d
             return inputs
 
         drive.read_inputs = counted  # type: ignore[method-assign]
-        resident, started, done = [resident_bytes()], time.perf_counter(), 0
+        resident, at, started, done = [resident_bytes()], [0], time.perf_counter(), 0
         while done < cycles:
             summary = controller.run(min(chunk, cycles - done))
             done = controller.cycles
             resident.append(resident_bytes())
-            tick(f"soak: {done:,} of {cycles:,} cycles")
+            at.append(done)
+            if len(at) % (SAMPLES // 10) == 0:
+                tick(f"soak: {done:,} of {cycles:,} cycles")
             if summary.error:
                 break
         seconds = time.perf_counter() - started
     counts = tally["counts"]
     exact_position = controller.integrator.origin + step * counts
     last = controller.record.latest() or {}
-    second_half = resident[len(resident) // 2:]
+    half = len(resident) // 2
+    second_half = resident[half:]
+    slope = float(np.polyfit(at[half:], second_half, 1)[0]) if len(second_half) >= 3 else 0.0  # bytes per cycle
+    growth = max(slope, 0.0) * cycles
     return {
         "description": f"{cycles:,} cycles of the {PROFILE} loop in virtual time on the lock-step bus, operator "
                        f"{OPERATOR}",
-        "cycles": done, "seconds": seconds, "cycles_per_s": done / seconds if seconds else None,
+        "cycles_asked": cycles, "cycles": done, "seconds": seconds, "cycles_per_s": done / seconds if seconds else None,
         "exit_reason": summary.exit_reason, "error": summary.error,
         "integer_sum": {"controller": controller.integrator.counts, "independent": counts,
                         "exact": controller.integrator.counts == counts,
                         "position_exact": last.get("position_m") == exact_position,
                         "float_accumulator_drift_m": abs(tally["float_position"] - exact_position)},
-        "memory": {"resident_bytes": resident, "second_half_spread_bytes": max(second_half) - min(second_half),
-                   "chunk_cycles": chunk},
+        "memory": {"resident_bytes": resident, "at_cycles": at, "chunk_cycles": chunk,
+                   "second_half_spread_bytes": max(second_half) - min(second_half),
+                   "slope_bytes_per_cycle": slope, "growth_bytes": growth, "flat_bytes": FLAT_BYTES,
+                   "flat": growth <= FLAT_BYTES},
     }

@@ -5,7 +5,9 @@ else ``python -m haptic_bus.app.cli``), alternating with ``python -c "import num
 each pair gives one ratio; wall time from ``Popen`` to exit.  Issue 14's target: ``check
 --json``, ``profiles list`` and ``--help`` within 2.5 x the numpy import.  Beside it, the
 modules that cost ``haptic-bus check`` the most import time (``python -X importtime``, one run,
-numpy's own modules left out: numpy is the yardstick).
+numpy's own modules left out: numpy is the yardstick), and which of the modules ``check`` has no
+use for it imports (:data:`FORBIDDEN`: scipy.optimize, matplotlib, canopen, pymodbus), each with
+the chain of modules that imported it.
 """
 
 from __future__ import annotations
@@ -18,7 +20,6 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 from haptic_bus.bench.timing import REPEATS, paired
 
@@ -27,6 +28,7 @@ CHECK_ARGS = ("check", "--mass", "0.5", "--friction", "0.1", "--period", "1e-3",
               "--damping", "100", "--delay", "1", "--json")
 COMMANDS = {"check --json": CHECK_ARGS, "profiles list": ("profiles", "list"), "--help": ("--help",)}
 NUMPY = (sys.executable, "-c", "import numpy")
+FORBIDDEN = ("scipy.optimize", "matplotlib", "canopen", "pymodbus")  # nothing check --json needs
 
 
 def haptic_bus_command() -> list[str]:
@@ -48,20 +50,44 @@ def _environment() -> dict[str, str]:
     return env
 
 
-def import_costs(command: list[str], top: int = 8) -> list[dict]:
-    """The ``top`` modules by own import time (s) when ``command`` runs, numpy's left out."""
+ImportLine = tuple[float, float, int, str]  # own s, cumulative s, nesting depth, module
+
+
+def import_lines(command: list[str]) -> list[ImportLine]:
+    """``python -X importtime``'s lines when ``command`` runs (an importer comes after what it imported)."""
     env = _environment()
     env["PYTHONPROFILEIMPORTTIME"] = "1"
     result = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, check=False, env=env)
-    rows: list[dict[str, Any]] = []
+    lines: list[ImportLine] = []
     for line in result.stderr.splitlines():
         parts = line.removeprefix("import time:").split("|")
         if len(parts) != 3 or not parts[0].strip().isdigit():
             continue
-        name = parts[2].strip()
-        if name.split(".")[0] != "numpy":
-            rows.append({"module": name, "self_s": int(parts[0]) * 1e-6, "cumulative_s": int(parts[1]) * 1e-6})
-    return sorted(rows, key=lambda r: float(r["self_s"]), reverse=True)[:top]
+        name = parts[2].rstrip()
+        depth = (len(name) - len(name.lstrip())) // 2
+        lines.append((int(parts[0]) * 1e-6, int(parts[1]) * 1e-6, depth, name.strip()))
+    return lines
+
+
+def import_costs(lines: list[ImportLine], top: int = 8) -> list[dict]:
+    """The ``top`` modules by own import time (s), numpy's left out."""
+    kept = sorted((line for line in lines if line[3].split(".")[0] != "numpy"), key=lambda line: line[0], reverse=True)
+    return [{"module": name, "self_s": own, "cumulative_s": total} for own, total, _, name in kept[:top]]
+
+
+def heavy_imports(lines: list[ImportLine], forbidden: tuple[str, ...] = FORBIDDEN) -> dict:
+    """Which of ``forbidden`` were imported, each with its importers (nearest first)."""
+    chains: dict[str, list[str]] = {}
+    for i, (_, _, depth, name) in enumerate(lines):
+        if name not in forbidden:
+            continue
+        chain = []
+        for _, _, outer, importer in lines[i + 1:]:
+            if outer < depth:
+                chain.append(importer)
+                depth = outer
+        chains[name] = chain
+    return {"forbidden": list(forbidden), "imported": [m for m in forbidden if m in chains], "chains": chains}
 
 
 def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
@@ -70,6 +96,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
     base = haptic_bus_command()
     wall_time(NUMPY)  # warm the page cache for both sides
     rows = {}
+    lines = import_lines([*base, *CHECK_ARGS])
     for label, args in COMMANDS.items():
         command = [*base, *args]
         wall_time(command)
@@ -81,5 +108,6 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
         "description": "wall time of a fresh haptic-bus process against python -c 'import numpy', pairwise",
         "ratio_target": RATIO_TARGET,
         "commands": rows,
-        "check_import_costs": import_costs([*base, *CHECK_ARGS]),
+        "check_import_costs": import_costs(lines),
+        "check_heavy_imports": heavy_imports(lines),
     }

@@ -1,0 +1,141 @@
+"""Issue 14's "Done when", one row per line, read off the sections of one benchmark run.
+
+Each row: which line of the issue (1-5), what is compared, the measured figure with its spread
+(median, min-max over >= 5 repeats, or a single count where the figure is one), the target,
+and PASS, FAIL or n/a (the section did not run, or a figure it needs is missing).  Nothing is
+measured here: every number comes from the section that measured it, in the same run.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+PASS, FAIL, MISSING = "PASS", "FAIL", "n/a"
+
+
+def _row(line: int, what: str, measured: str, target: str, passed: bool | None, spread: dict | None = None,
+         note: str = "") -> dict[str, Any]:
+    return {"line": line, "what": what, "measured": measured, "spread": spread, "target": target,
+            "result": MISSING if passed is None else PASS if passed else FAIL, "note": note}
+
+
+def _spread_text(spread: dict, digits: int = 3) -> str:
+    return f"{spread['median']:.{digits}g} ({spread['min']:.{digits}g}-{spread['max']:.{digits}g})"
+
+
+def _available(sections: dict, name: str) -> dict | None:
+    section = sections.get(name)
+    return section if section is not None and section.get("available", True) else None
+
+
+def _passivity(sections: dict) -> list[dict]:
+    s = _available(sections, "passivity")
+    full = s.get("full_check") if s else None
+    if not full:
+        return [_row(1, "full check at delay 1 / one 10^4-point numpy T_fund", "-", "<= 5 x", None),
+                _row(1, "boundary error against the 40-digit reference", "-", "<= 1e-12", None)]
+    worst = full["ratio"]["worst_point"]
+    return [
+        _row(1, "full check at delay 1 / one 10^4-point numpy T_fund (worst delay-1 point, pairwise)",
+             _spread_text(worst), f"<= {full['ratio_target']:g} x", worst["median"] <= full["ratio_target"], worst,
+             f"median over the {len(full['points'])} delay-1 points {full['ratio']['median']:.3g}"),
+        _row(1, "boundary error (largest passive K and B) against the 40-digit mpmath reference",
+             f"{full['boundary_error_max']:.1e}", f"<= {full['boundary_error_target']:g}",
+             full["boundary_error_max"] <= full["boundary_error_target"]),
+    ]
+
+
+def _startup(sections: dict) -> list[dict]:
+    s = _available(sections, "startup")
+    row = s["commands"].get("check --json") if s else None
+    if s is None or row is None:
+        return [_row(2, "haptic-bus check --json / python -c 'import numpy'", "-", "<= 2.5 x", None)]
+    heavy = s.get("check_heavy_imports")
+    rows = [_row(2, "haptic-bus check --json wall time / python -c 'import numpy' (pairwise)",
+                 _spread_text(row["ratio"]), f"<= {s['ratio_target']:g} x", row["met"], row["ratio"])]
+    if heavy is not None:
+        rows.append(_row(2, "modules check --json must not import (python -X importtime)",
+                         ", ".join(heavy["imported"]) or "none", "none of " + ", ".join(heavy["forbidden"]),
+                         not heavy["imported"]))
+    return rows
+
+
+def _realtime(sections: dict) -> list[dict]:
+    s = _available(sections, "realtime")
+    if s is None:
+        return [_row(3, "controller at T = 1 ms, share of a core", "-", "<= 0.12", None)]
+    target = s["target"]
+    rows = []
+    for load, setups in s["runs"].items():
+        for name, entry in setups.items():
+            what = f"controller core share, {name}, {load}"
+            controller = entry.get("controller", {}) if entry.get("available", True) else {}
+            share = controller.get("core_share")
+            if share is None:
+                why = entry.get("reason") or f"run ended: {controller.get('exit_reason')}: {controller.get('error')}"
+                rows.append(_row(3, what, "-", f"<= {target['core_share_target']:g}", None, note=why))
+                continue
+            ended = controller.get("exit_reason", "completed")
+            rows.append(_row(3, what, _spread_text(share, 2), f"<= {target['core_share_target']:g}",
+                             share["median"] <= target["core_share_target"], share,
+                             "" if ended == "completed" else f"run ended: {ended}"))
+    default = s["runs"].get("quiet", {}).get("default", {}).get("controller", {})
+    untuned = s["runs"].get("quiet", {}).get("untuned", {}).get("controller", {})
+    if default.get("lateness_p99_s") and untuned.get("lateness_p99_s"):
+        now, before = default["lateness_p99_s"], untuned["lateness_p99_s"]
+        rows.append(_row(3, "lateness p99 (us), default set-up, quiet", _spread_text(_scaled(now, 1e6)),
+                         f"<= untuned {before['median'] * 1e6:.3g} us", now["median"] <= before["median"],
+                         _scaled(now, 1e6)))
+    else:
+        rows.append(_row(3, "lateness p99, default set-up, quiet", "-", "<= untuned", None))
+    if "no_startup_stall" in default:
+        rows.append(_row(3, "first 50 cycles' lateness within the run's p99 (default, quiet): max of the first 50 (us)",
+                         f"{default['first_cycles_max_late_s'] * 1e6:.3g}",
+                         f"<= p99 {default['lateness_s']['p99'] * 1e6:.3g} us", default["no_startup_stall"]))
+    else:
+        rows.append(_row(3, "no start-up stall", "-", "first 50 within p99", None))
+    return rows
+
+
+def _scaled(spread: dict, factor: float) -> dict:
+    return {**spread, "median": spread["median"] * factor, "min": spread["min"] * factor, "max": spread["max"] * factor}
+
+
+def _loop(sections: dict) -> list[dict]:
+    s = _available(sections, "loop")
+    floor = s.get("echo_floor") if s else None
+    if s is None or not floor:
+        return [_row(4, "lock-step loop / python-can threaded echo", "-", ">= 1.5 x", None),
+                _row(4, "trajectories lock-step == threaded virtual", "-", "bit-identical", None)]
+    same = s["trajectories_identical"]
+    return [
+        _row(4, "in-process lock-step loop cycles/s / python-can's threaded virtual echo (pairwise)",
+             _spread_text(floor["ratio"]), f">= {floor['ratio_target']:g} x", floor["met"], floor["ratio"]),
+        _row(4, f"trajectories lock-step vs threaded virtual bus, {same['cycles']} cycles",
+             "identical" if same["lockstep_equals_virtual"] else "different", "bit-identical (==)",
+             same["lockstep_equals_virtual"]),
+    ]
+
+
+def _soak(sections: dict) -> list[dict]:
+    s = _available(sections, "soak")
+    if s is None:
+        return [_row(5, "soak in virtual time: integer position sum exact", "-", "exact", None),
+                _row(5, "soak: resident memory slope", "-", "flat", None)]
+    total, memory = s["integer_sum"], s["memory"]
+    done = s["cycles"] == s["cycles_asked"] and s["exit_reason"] == "completed"
+    return [
+        _row(5, f"soak of {s['cycles_asked']:.0e} cycles in virtual time ({s['seconds']:.0f} s): integer position sum "
+                "exact, position exact", "exact" if total["exact"] and total["position_exact"] else "NOT exact",
+             "exact", done and total["exact"] and total["position_exact"],
+             note=f"{s['cycles']:,} cycles, ended {s['exit_reason']}"),
+        _row(5, "soak: resident memory slope over the second half (KiB per 10^6 cycles)",
+             f"{memory['slope_bytes_per_cycle'] * 1e6 / 1024:.3g}",
+             f"growth over the run <= {memory['flat_bytes'] / 2**20:g} MiB",
+             done and memory["flat"], note=f"extrapolated over the run: {memory['growth_bytes'] / 2**20:.3g} MiB"),
+    ]
+
+
+def done_when(sections: dict) -> list[dict]:
+    """Every row of issue 14's "Done when" from the sections of one run (see the module docstring)."""
+    return _passivity(sections) + _startup(sections) + _realtime(sections) + _loop(sections) + _soak(sections)
