@@ -9,6 +9,8 @@ from collections.abc import Iterable
 from drives.errors import ParameterError
 
 MAX_SECONDS = 3600.0
+DEFAULT_TIMEOUT = 1.0  # s: CANopen: the listening window after the probe; Modbus: no new unit started after it
+DEFAULT_ANSWER_TIMEOUT = 0.1  # s: each SDO read (CANopen) or request (Modbus)
 
 
 def checked_ids(name: str, ids: Iterable[int], low: int, high: int) -> list[int]:

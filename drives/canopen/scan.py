@@ -54,12 +54,10 @@ from drives.cia301 import (
 )
 from drives.cia402 import SUPPORTED_DRIVE_MODES, DataType, cst_announced
 from drives.errors import DriveError, DriveTimeout, SdoAbortError
-from drives.scan_arguments import checked_ids, checked_seconds
+from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, checked_ids, checked_seconds
 
 __all__ = ["CanopenNode", "Identity", "device_kind", "scan_canopen"]
 
-DEFAULT_TIMEOUT = 1.0  # s: listening window after the probe
-DEFAULT_ANSWER_TIMEOUT = 0.1  # s: each SDO read of the details
 SEND_RETRY = 0.001  # s: wait before sending again into a full transmit queue
 _PROBE = struct.pack("<BHB4x", REQUEST_UPLOAD, DEVICE_TYPE, 0)  # SDO upload request of 0x1000:00
 _DEVICE_KINDS_402 = {1: "frequency converter", 2: "servo drive", 3: "stepper motor"}

@@ -76,6 +76,8 @@ from drives.cia402 import (
     ObjectSpec,
 )
 
+UNIT_ID_RANGE = (1, 247)  # Modbus unit ids that answer: 0 is broadcast (no answer), 248..255 reserved
+
 __all__ = [
     "EXCEPTION_NAMES",
     "INPUT_BLOCK",

@@ -36,14 +36,18 @@ from pymodbus.pdu.register_message import ReadHoldingRegistersRequest
 from drives.cia402 import SUPPORTED_DRIVE_MODES, cst_announced
 from drives.errors import DriveError, DriveTimeout, ModbusExceptionError, ModbusLinkLost
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
-from drives.modbus.register_map import MAP_IDENTITY, REGISTER_BY_NAME, WORD_ORDERS, decode_value, register_for_object
-from drives.scan_arguments import checked_ids, checked_seconds
+from drives.modbus.register_map import (
+    MAP_IDENTITY,
+    REGISTER_BY_NAME,
+    UNIT_ID_RANGE,
+    WORD_ORDERS,
+    decode_value,
+    register_for_object,
+)
+from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, checked_ids, checked_seconds
 
 __all__ = ["UNIT_ID_RANGE", "ModbusScan", "ModbusUnit", "scan_modbus"]
 
-UNIT_ID_RANGE = (1, 247)  # 0 is broadcast (no answer), 248..255 reserved
-DEFAULT_TIMEOUT = 1.0  # s: the sweep starts no new unit after this
-DEFAULT_ANSWER_TIMEOUT = 0.1  # s: each request
 NO_DEVICE_EXCEPTIONS = (0x0A, 0x0B)  # gateway path unavailable, gateway target failed to respond
 DEVICE_IDENTIFICATION_NAMES = {0x00: "vendor_name", 0x01: "product_code", 0x02: "revision"}
 _IDENTITY_REGISTER = REGISTER_BY_NAME["map_identity"]

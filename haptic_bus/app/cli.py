@@ -11,99 +11,35 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import os
 import pathlib
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any
 
-EXIT_OK, EXIT_NO, EXIT_INVALID, EXIT_ASSUMPTION, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
-NODE_IDS = (1, 127)
-UNIT_IDS = (1, 247)
+from haptic_bus.app.arguments import (
+    EXIT_ASSUMPTION,
+    EXIT_INTERRUPTED,
+    EXIT_INVALID,
+    EXIT_NO,
+    EXIT_OK,
+    OneLineParser,
+    add_bus_arguments,
+    add_command,
+    add_verbosity,
+    bus_arguments,
+    modbus_url,
+    node_id,
+    seconds,
+    timeout,
+    unit_id,
+)
+from haptic_bus.app.identify_cli import add_identify_parser
+from haptic_bus.app.scan_cli import add_scan_parser
+
 _NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
 
 
-class _OneLineParser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line on stderr and exit status 2."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(EXIT_INVALID, f"{self.prog}: error: {message}\n")
-
-
-class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Help that shows every default (once: not where the help text states it, nor an unset one)."""
-
-    def _get_help_string(self, action: argparse.Action) -> str | None:
-        unset = action.default is None or action.default is False or action.default == []
-        if unset or "default" in (action.help or ""):
-            return action.help
-        return super()._get_help_string(action)
-
-
-# --------------------------------------------------------------------------- argument types
-
-def _number(text: str, name: str, low: float, high: float, low_open: bool, unit: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{name} = {text!r} is not a number") from None
-    below = value <= low if low_open else value < low
-    if not math.isfinite(value) or below or value > high:
-        bracket = "(" if low_open else "["
-        raise argparse.ArgumentTypeError(
-            f"{name} = {text} is invalid; allowed: a finite number in {bracket}{low:g}, {high:g}] {unit}")
-    return value
-
-
-def seconds(text: str) -> float:
-    """A duration: finite, > 0, s."""
-    return _number(text, "duration", 0.0, 1e7, True, "s")
-
-
-def timeout(text: str) -> float:
-    """A timeout: finite, > 0, s."""
-    return _number(text, "timeout", 0.0, 3600.0, True, "s")
-
-
-def _whole(text: str, name: str, low: int, high: int) -> int:
-    try:
-        value = int(text, 0)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{name} = {text!r} is not an integer") from None
-    if not low <= value <= high:
-        raise argparse.ArgumentTypeError(f"{name} = {value} is invalid; allowed: {low}..{high}")
-    return value
-
-
-def node_id(text: str) -> int:
-    """A CANopen node id, 1..127."""
-    return _whole(text, "node id", *NODE_IDS)
-
-
-def unit_id(text: str) -> int:
-    """A Modbus unit id, 1..247 (0 is broadcast: no answer)."""
-    return _whole(text, "unit id", *UNIT_IDS)
-
-
-def modbus_url(text: str) -> str:
-    """``tcp://HOST:PORT`` (port 1..65535) or ``rtu:/dev/...``."""
-    from drives.errors import ParameterError
-    from drives.modbus.link import ModbusAddress
-
-    try:
-        ModbusAddress.from_url(text)
-    except ParameterError as exc:
-        raise argparse.ArgumentTypeError(f"--modbus {text!r} is invalid; allowed: {exc.allowed}") from None
-    return text
-
-
-def bus_option(text: str) -> tuple[str, Any]:
-    """``KEY=VALUE`` for python-can (ints where they parse)."""
-    from drives.bus_config import parse_bus_option
-
-    return parse_bus_option(text)
-
+# --------------------------------------------------------------------------- shared arguments
 
 def _add_device_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mass", type=float, required=True, help="handle mass m, kg")
@@ -116,22 +52,6 @@ def _add_device_arguments(parser: argparse.ArgumentParser) -> None:
                         help="what the drive's velocity is: point (v at SYNC, the seed's assumption), average "
                              "(encoder difference over T, most drives), window:SECONDS (difference over a shorter "
                              "window), lowpass:SECONDS (first-order filter)")
-
-
-def _add_bus_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--interface", help="python-can interface (socketcan, virtual, udp_multicast, ...)")
-    parser.add_argument("--channel", help="python-can channel (can0, vcan0, a multicast group, ...)")
-    parser.add_argument("--bitrate", type=int, help="bit/s")
-    parser.add_argument("--bus-option", type=bus_option, action="append", default=[], metavar="KEY=VALUE",
-                        help="extra python-can bus argument, e.g. port=43113 (repeatable)")
-
-
-def _bus_arguments(args: argparse.Namespace) -> dict[str, Any]:
-    bus = dict(args.bus_option)
-    for key in ("interface", "channel", "bitrate"):
-        if getattr(args, key) is not None:
-            bus[key] = getattr(args, key)
-    return bus
 
 
 # --------------------------------------------------------------------------- handlers
@@ -218,7 +138,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.modbus:
         result = run_modbus(profile, args.modbus, args.unit_id or 1, options)
     else:
-        result = run_canopen(profile, _bus_arguments(args), args.node_id, options,
+        result = run_canopen(profile, bus_arguments(args), args.node_id, options,
                              args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
     summary = result.summary
     if summary is not None:
@@ -246,7 +166,7 @@ def _upload(args: argparse.Namespace) -> int:
     K = real_in_range("stiffness", args.stiffness, 0.0, 1e15, unit="N/m", context="upload")
     B = real_in_range("damping", args.damping, 0.0, 1e15, unit="N s/m", context="upload")
     try:
-        print(upload_walls(_bus_arguments(args), args.node_id, {index: (K, B)}, timeout=args.timeout))
+        print(upload_walls(bus_arguments(args), args.node_id, {index: (K, B)}, timeout=args.timeout))
     except UploadRefused as error:
         print(f"haptic-bus upload: {error.reason}", file=sys.stderr)
         return EXIT_NO
@@ -276,23 +196,14 @@ def _sim(argv: Sequence[str]) -> int:
 
 # --------------------------------------------------------------------------- parser
 
-def _add_verbosity(parser: argparse.ArgumentParser, default: object) -> None:
-    group = parser.add_mutually_exclusive_group()
-    group.add_argument("-v", "--verbose", action="count", default=default, help="more log output (-vv: debug)")
-    group.add_argument("-q", "--quiet", action="store_true", default=default, help="errors only, no live view")
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand that haptic_bus itself parses."""
-    parser = _OneLineParser(prog="haptic-bus", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    _add_verbosity(parser, None)
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser)
+    parser = OneLineParser(prog="haptic-bus", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_verbosity(parser, None)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
     def command(name: str, help_text: str, handler: Callable[[argparse.Namespace], int]) -> argparse.ArgumentParser:
-        p = sub.add_parser(name, help=help_text, description=help_text, formatter_class=_Formatter)
-        _add_verbosity(p, argparse.SUPPRESS)
-        p.set_defaults(handler=handler)
-        return p
+        return add_command(sub, name, help_text, handler)
 
     check = command("check", "judge one wall loop's passivity", _check)
     _add_device_arguments(check)
@@ -311,7 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = command("run", "run a profile's controller against a drive on a CAN bus or over Modbus", _run)
     run.add_argument("profile", help="profile name or TOML path")
-    _add_bus_arguments(run)
+    add_bus_arguments(run)
     run.add_argument("--node-id", type=node_id, help="the drive's CANopen node id 1..127")
     run.add_argument("--controller-node-id", type=node_id,
                      help="this controller's CANopen node id: its heartbeat, which the drive watches, and gated wall "
@@ -330,7 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", help="folder for record.csv, run.json and plots (default: runs/<UTC time>-<profile>)")
 
     upload = command("upload", "change a running controller's wall K and B over the bus (gated)", _upload)
-    _add_bus_arguments(upload)
+    add_bus_arguments(upload)
     upload.add_argument("--node-id", type=node_id, required=True, help="the controller's CANopen node id")
     upload.add_argument("--object", type=int, required=True, help="scene object index (0x2100 + index)")
     upload.add_argument("--stiffness", type=float, required=True, help="K, N/m")
@@ -341,13 +252,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_profiles_parser(sub)
 
-    from haptic_bus.app.identify_cli import add_identify_parser
-
-    add_identify_parser(sub, _add_bus_arguments, _bus_arguments)
-
-    from haptic_bus.app.scan_cli import add_scan_parser
-
-    add_scan_parser(command, _add_bus_arguments, _bus_arguments)
+    add_identify_parser(sub)
+    add_scan_parser(sub)
 
     report = command("report", "the seed's Figs. 4-6 for a profile, as PNGs, plus a markdown summary", _report)
     report.add_argument("profile", help="profile name or TOML path")

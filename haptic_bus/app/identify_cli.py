@@ -27,83 +27,46 @@ import json
 import os
 import pathlib
 import sys
-from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from drives.cia301 import NODE_ID_RANGE
 from drives.errors import ParameterError
-from haptic_bus.identify import Identification
-from haptic_bus.identify.fit import MAX_DELAY, Estimate, PlantFit
-from haptic_bus.identify.session import DURATION_RANGE, TRAVEL_RANGE
+from haptic_bus.app.arguments import add_bus_arguments, add_command, bus_arguments, modbus_url, node_id, number, unit_id, whole
+from haptic_bus.identify.bounds import (
+    DEFAULT_DURATION,
+    DEFAULT_TRAVEL,
+    DELAY_SEARCH_RANGE,
+    DURATION_RANGE,
+    MAX_DELAY,
+    TRAVEL_RANGE,
+)
 
-UNIT_ID_RANGE = (1, 247)
-DELAY_SEARCH_RANGE = (0, 50)  # whole samples
+if TYPE_CHECKING:  # the fit loads scipy: only when an identification runs
+    from haptic_bus.identify import Identification
+    from haptic_bus.identify.fit import Estimate, PlantFit
+
 IDENTIFY_HELP = "measure the handle's m, b, Coulomb friction, loop delay and 0x606C's velocity model"
 
-BusArguments = Callable[[argparse.ArgumentParser], None]
-BusDictionary = Callable[[argparse.Namespace], dict[str, Any]]
 
-
-def _number(low: float, high: float, name: str, unit: str) -> Callable[[str], float]:
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not a number") from None
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"{name} = {text} is invalid; allowed: a number in [{low:g}, {high:g}] {unit}")
-        return value
-
-    return parse
-
-
-def _whole(low: int, high: int, name: str) -> Callable[[str], int]:
-    def parse(text: str) -> int:
-        try:
-            value = int(text, 0)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not an integer") from None
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"{name} = {value} is invalid; allowed: {low}..{high}")
-        return value
-
-    return parse
-
-
-def _modbus_url(text: str) -> str:
-    from drives.modbus.link import ModbusAddress
-
-    try:
-        ModbusAddress.from_url(text)
-    except ParameterError as exc:
-        raise argparse.ArgumentTypeError(f"--modbus {text!r} is invalid; allowed: {exc.allowed}") from None
-    return text
-
-
-def add_identify_parser(subparsers: argparse._SubParsersAction, add_bus_arguments: BusArguments,
-                        bus_arguments: BusDictionary) -> argparse.ArgumentParser:
-    """Register ``identify`` on ``subparsers`` (with the CAN bus options ``add_bus_arguments`` adds and
-    ``bus_arguments`` reads back); it sets ``handler``."""
-    parser = subparsers.add_parser("identify", help=IDENTIFY_HELP, description=IDENTIFY_HELP,
-                                   formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+def add_identify_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register ``identify`` on ``subparsers``; it sets ``handler``."""
+    parser = add_command(subparsers, "identify", IDENTIFY_HELP, run_identify)
     parser.add_argument("--profile", required=True, help="profile name or TOML path: scaling, period, force limit, [safety]")
     add_bus_arguments(parser)
-    parser.add_argument("--node-id", type=_whole(*NODE_ID_RANGE, "node id"), help="the drive's CANopen node id 1..127")
-    parser.add_argument("--controller-node-id", type=_whole(*NODE_ID_RANGE, "controller node id"),
-                        help="this controller's CANopen node id, whose heartbeat the drive watches (127 if not given)")
-    parser.add_argument("--modbus", type=_modbus_url, metavar="URL",
+    parser.add_argument("--node-id", type=node_id, help="the drive's CANopen node id 1..127")
+    parser.add_argument("--controller-node-id", type=node_id,
+                        help="this controller's CANopen node id, whose heartbeat the drive watches (default 127)")
+    parser.add_argument("--modbus", type=modbus_url, metavar="URL",
                         help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/...")
-    parser.add_argument("--unit-id", type=_whole(*UNIT_ID_RANGE, "unit id"), help="Modbus unit id 1..247 (1 if not given)")
-    parser.add_argument("--duration", type=_number(*DURATION_RANGE, "duration", "s"), default=20.0,
+    parser.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1)")
+    parser.add_argument("--duration", type=number("duration", *DURATION_RANGE, "s"), default=DEFAULT_DURATION,
                         help="seconds of excitation")
-    parser.add_argument("--travel", type=_number(*TRAVEL_RANGE, "travel", "m"), default=0.01,
+    parser.add_argument("--travel", type=number("travel", *TRAVEL_RANGE, "m"), default=DEFAULT_TRAVEL,
                         help="how far the handle may move either side of its start, m (keep it clear of the end stops)")
-    parser.add_argument("--max-delay", type=_whole(*DELAY_SEARCH_RANGE, "max delay"), default=MAX_DELAY,
+    parser.add_argument("--max-delay", type=whole("max delay", *DELAY_SEARCH_RANGE), default=MAX_DELAY,
                         help="largest whole loop delay searched, samples")
     parser.add_argument("--virtual-time", action="store_true", help="lock-step with a simulated drive (no pacing)")
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
     parser.add_argument("--write-profile", metavar="FILE", help="write a copy of the profile with the measured values")
-    parser.set_defaults(handler=lambda args: run_identify(args, bus_arguments))
     return parser
 
 
@@ -134,7 +97,7 @@ def _validate(args: argparse.Namespace) -> pathlib.Path | None:
     return target
 
 
-def run_identify(args: argparse.Namespace, bus_arguments: BusDictionary) -> int:
+def run_identify(args: argparse.Namespace) -> int:
     """The ``identify`` handler: validate, run, report, write the profile; the exit status."""
     from haptic_bus.app.identify_profile import write_identified_profile
     from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen, identify_modbus

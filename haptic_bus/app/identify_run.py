@@ -34,12 +34,10 @@ from haptic_bus.app.profiles import Profile
 from haptic_bus.app.runner import EXIT_STATUS, StopRequest
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.identify import Identification, Plan, Record, Recorder, Scale, Session, identify
-from haptic_bus.identify.fit import MAX_DELAY
+from haptic_bus.identify.bounds import DEFAULT_DURATION, DEFAULT_TRAVEL, MAX_DELAY
 
 logger = logging.getLogger(__name__)
 
-DEFAULT_DURATION = 20.0  # s of excitation
-DEFAULT_TRAVEL = 0.01  # m either side of the start
 
 
 class CycleDrive(Protocol):

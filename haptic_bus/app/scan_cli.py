@@ -25,18 +25,20 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
-from drives.canopen.scan import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, CanopenNode, device_kind, scan_canopen
 from drives.cia301 import NODE_ID_RANGE
 from drives.errors import ParameterError
-from drives.modbus.scan import UNIT_ID_RANGE, ModbusScan, scan_modbus
-from drives.scan_arguments import checked_seconds
+from drives.modbus.register_map import UNIT_ID_RANGE
+from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, MAX_SECONDS
+from haptic_bus.app.arguments import EXIT_NO, EXIT_OK, add_bus_arguments, add_command, bus_arguments, number
 
-EXIT_OK, EXIT_NO = 0, 1
+if TYPE_CHECKING:  # the scans import canopen and pymodbus: only when a scan runs
+    from drives.canopen.scan import CanopenNode
+    from drives.modbus.scan import ModbusScan
+
 SCAN_HELP = "list the CANopen nodes on a CAN bus (or the units of a Modbus server): identity, NMT state, CST support"
-Handler = Callable[[argparse.Namespace], int]
 
 
 # --------------------------------------------------------------------------- argument types
@@ -69,32 +71,19 @@ def unit_ids(text: str) -> list[int]:
     return id_list(text, "unit ids", *UNIT_ID_RANGE)
 
 
-def seconds(text: str) -> float:
-    """A time budget in (0, 3600] s."""
-    try:
-        return checked_seconds("time", float(text))
-    except (ValueError, ParameterError) as exc:
-        raise argparse.ArgumentTypeError(f"{text!r} is invalid; allowed: a time in (0, 3600] s") from exc
-
-
-def add_scan_parser(
-    command: Callable[[str, str, Handler], argparse.ArgumentParser],
-    add_bus_arguments: Callable[[argparse.ArgumentParser], None],
-    bus_arguments: Callable[[argparse.Namespace], dict[str, Any]],
-) -> argparse.ArgumentParser:
-    """Register ``scan``: ``command(name, help, handler)`` makes the subparser, ``add_bus_arguments``
-    adds the python-can options and ``bus_arguments(args)`` turns them into ``can.Bus`` keywords
-    (the command line's own helpers, handed over: this module cannot import it, that is a cycle)."""
-    parser = command("scan", SCAN_HELP, lambda args: run_scan(args, bus_arguments))
+def add_scan_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register ``scan`` on ``subparsers``; it sets ``handler``."""
+    parser = add_command(subparsers, "scan", SCAN_HELP, run_scan)
     add_bus_arguments(parser)
     parser.add_argument("--node-ids", type=node_ids, metavar="IDS", help="CANopen node ids to probe, e.g. 5,9 or 1-10,127; "
                         "default: all, 1-127")
     parser.add_argument("--modbus", metavar="URL", help="scan a Modbus server instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
     parser.add_argument("--unit-ids", type=unit_ids, metavar="IDS", help="Modbus unit ids to probe, e.g. 1,2 or 1-10 "
                         "(only with --modbus); default: all, 1-247")
-    parser.add_argument("--timeout", type=seconds, default=DEFAULT_TIMEOUT,
+    parser.add_argument("--timeout", type=number("--timeout", 0.0, MAX_SECONDS, "s", low_open=True), default=DEFAULT_TIMEOUT,
                         help="CANopen: listening window after the probe; Modbus: time in which new units are started; s")
-    parser.add_argument("--answer-timeout", type=seconds, default=DEFAULT_ANSWER_TIMEOUT,
+    parser.add_argument("--answer-timeout", type=number("--answer-timeout", 0.0, MAX_SECONDS, "s", low_open=True),
+                        default=DEFAULT_ANSWER_TIMEOUT,
                         help="each SDO read (CANopen) or request (Modbus), s")
     parser.add_argument("--json", action="store_true", help="one JSON list on stdout")
     return parser
@@ -132,6 +121,8 @@ def format_canopen(nodes: Sequence[CanopenNode]) -> str:
     """One line per node (and its notes indented below)."""
     lines = [f"{'node':>4}  {'device type':<11}  {'kind':<22}  {'vendor':<10}  {'product':<10}  {'revision':<10}  "
              f"{'serial':<10}  {'NMT state':<15}  CST  CiA-402"]
+    from drives.canopen.scan import device_kind
+
     for node in nodes:
         kind = "-" if node.device_type is None else device_kind(node.device_type)
         ident = node.identity
@@ -170,8 +161,11 @@ def _ranges(ids: Sequence[int]) -> str:
 
 # --------------------------------------------------------------------------- handler
 
-def run_scan(args: argparse.Namespace, bus_arguments: Callable[[argparse.Namespace], dict[str, Any]]) -> int:
+def run_scan(args: argparse.Namespace) -> int:
     """Scan as ``args`` say, print the result; exit status (module docstring)."""
+    from drives.canopen.scan import scan_canopen
+    from drives.modbus.scan import scan_modbus
+
     _validate(args)
     if args.modbus is not None:
         scan = scan_modbus(args.modbus, args.unit_ids or range(UNIT_ID_RANGE[0], UNIT_ID_RANGE[1] + 1),

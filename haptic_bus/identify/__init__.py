@@ -8,14 +8,33 @@ reports (:mod:`~haptic_bus.identify.velocity_check`), and what the data can supp
 (:mod:`~haptic_bus.identify.assessment`).  Nothing here touches a bus.
 """
 
-from haptic_bus.identify.assessment import Finding
-from haptic_bus.identify.fit import Estimate, NotIdentifiable, PlantFit, fit_plant
-from haptic_bus.identify.model import Plant
-from haptic_bus.identify.probe import ProbeResult
-from haptic_bus.identify.record import Phases, Record, Recorder, Scale
-from haptic_bus.identify.result import Identification, identify
-from haptic_bus.identify.session import Plan, Session
-from haptic_bus.identify.velocity_check import VelocityCheck, check_velocity
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from haptic_bus.identify.assessment import Finding
+    from haptic_bus.identify.fit import Estimate, NotIdentifiable, PlantFit, fit_plant
+    from haptic_bus.identify.model import Plant
+    from haptic_bus.identify.probe import ProbeResult
+    from haptic_bus.identify.record import Phases, Record, Recorder, Scale
+    from haptic_bus.identify.result import Identification, identify
+    from haptic_bus.identify.session import Plan, Session
+    from haptic_bus.identify.velocity_check import VelocityCheck, check_velocity
+
+_HOME = {  # each public name -> its module, imported on first use (the fit loads scipy: ~0.8 s)
+    "Finding": "assessment", "Estimate": "fit", "NotIdentifiable": "fit", "PlantFit": "fit", "fit_plant": "fit",
+    "Plant": "model", "ProbeResult": "probe", "Phases": "record", "Record": "record", "Recorder": "record",
+    "Scale": "record", "Identification": "result", "identify": "result", "Plan": "session", "Session": "session",
+    "VelocityCheck": "velocity_check", "check_velocity": "velocity_check",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """``haptic_bus.identify.X``: the public name from its module, imported now (PEP 562)."""
+    if name not in _HOME:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{_HOME[name]}"), name)
+
 
 __all__ = [
     "Estimate",

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptic_bus.identify.fit import MAX_DELAY, PlantFit
+from haptic_bus.identify.bounds import MAX_DELAY
+from haptic_bus.identify.fit import PlantFit
 from haptic_bus.identify.model import usable_equations
 from haptic_bus.identify.record import Record
 from haptic_bus.identify.velocity_check import VelocityCheck

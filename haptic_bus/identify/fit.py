@@ -33,10 +33,10 @@ from scipy.optimize import OptimizeResult, least_squares
 
 from drives.errors import HapticBusError
 from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
+from haptic_bus.identify.bounds import MAX_DELAY
 from haptic_bus.identify.model import IncrementEquations, Plant, quantization_variance, usable_equations
 from haptic_bus.identify.record import Record
 
-MAX_DELAY = 4  # whole samples searched: D in [0, MAX_DELAY + 1]
 MIN_EQUATIONS = 200
 REFINED = 2  # whole delays refined by the nonlinear fit
 DELTA_STARTS = (0.25, 0.75)

@@ -7,7 +7,8 @@ from typing import Any
 
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.identify.assessment import Finding, assess
-from haptic_bus.identify.fit import MAX_DELAY, Estimate, NotIdentifiable, PlantFit, fit_plant
+from haptic_bus.identify.bounds import MAX_DELAY
+from haptic_bus.identify.fit import Estimate, NotIdentifiable, PlantFit, fit_plant
 from haptic_bus.identify.probe import ProbeResult
 from haptic_bus.identify.record import Record
 from haptic_bus.identify.velocity_check import VelocityCheck, check_velocity

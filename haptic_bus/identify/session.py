@@ -22,6 +22,7 @@ from collections.abc import Generator
 from dataclasses import dataclass
 
 from drives.errors import ParameterError
+from haptic_bus.identify.bounds import DURATION_RANGE, TRAVEL_RANGE
 from haptic_bus.identify.excitation import (
     GUARD_SECONDS,
     TARGET_SHARE,
@@ -39,8 +40,6 @@ SETTLE_SECONDS = 0.5
 PROBE_SHARE = 0.1  # of the travel: how far the probe moves the handle
 MIN_PROBE_COUNTS = 20  # position increments the probe must see at least
 AMPLITUDE_SHARE = 0.7  # of the force limit: the multisine's ceiling (the rest holds the handle)
-DURATION_RANGE = (1.0, 600.0)  # s
-TRAVEL_RANGE = (1e-6, 10.0)  # m
 
 
 @dataclass(frozen=True)

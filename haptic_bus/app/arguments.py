@@ -1,0 +1,133 @@
+"""What every ``haptic-bus`` subcommand parses the same way: exit statuses, the one-line parser,
+the help formatter, the argument types (numbers with their ranges, node and unit ids, Modbus
+URLs, python-can bus options) and the registration of a subcommand.
+
+Only light modules are imported here (no numpy, scipy, canopen, pymodbus): building the whole
+parser must cost little more than starting Python.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+from typing import Any
+
+from drives.cia301 import NODE_ID_RANGE
+from drives.modbus.register_map import UNIT_ID_RANGE
+
+EXIT_OK, EXIT_NO, EXIT_INVALID, EXIT_ASSUMPTION, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+Handler = Callable[[argparse.Namespace], int]
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line on stderr and exit status 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_INVALID, f"{self.prog}: error: {message}\n")
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Help that shows every default (once: not where the help text states it, nor an unset one)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        unset = action.default is None or action.default is False or action.default == []
+        if unset or "default" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
+
+
+# --------------------------------------------------------------------------- argument types
+
+def number(name: str, low: float, high: float, unit: str, *, low_open: bool = False) -> Callable[[str], float]:
+    """A parser of a finite number in ``[low, high]`` (``(low, high]`` with ``low_open``), in ``unit``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not a number") from None
+        below = value <= low if low_open else value < low
+        if not math.isfinite(value) or below or value > high:
+            bracket = "(" if low_open else "["
+            raise argparse.ArgumentTypeError(
+                f"{name} = {text} is invalid; allowed: a finite number in {bracket}{low:g}, {high:g}] {unit}")
+        return value
+
+    return parse
+
+
+def whole(name: str, low: int, high: int) -> Callable[[str], int]:
+    """A parser of an integer in ``low..high`` (decimal, or 0x.. hexadecimal)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text, 0)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not an integer") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{name} = {value} is invalid; allowed: {low}..{high}")
+        return value
+
+    return parse
+
+
+seconds = number("duration", 0.0, 1e7, "s", low_open=True)
+timeout = number("timeout", 0.0, 3600.0, "s", low_open=True)
+node_id = whole("node id", *NODE_ID_RANGE)
+unit_id = whole("unit id", *UNIT_ID_RANGE)
+
+
+def modbus_url(text: str) -> str:
+    """``tcp://HOST:PORT`` (port 1..65535) or ``rtu:/dev/...``."""
+    from drives.errors import ParameterError
+    from drives.modbus.link import ModbusAddress
+
+    try:
+        ModbusAddress.from_url(text)
+    except ParameterError as exc:
+        raise argparse.ArgumentTypeError(f"--modbus {text!r} is invalid; allowed: {exc.allowed}") from None
+    return text
+
+
+def bus_option(text: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` for python-can (ints where they parse)."""
+    from drives.bus_config import parse_bus_option
+
+    return parse_bus_option(text)
+
+
+# --------------------------------------------------------------------------- shared options
+
+def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
+    """The python-can bus options: ``--interface``, ``--channel``, ``--bitrate``, ``--bus-option``."""
+    parser.add_argument("--interface", help="python-can interface (socketcan, virtual, udp_multicast, ...)")
+    parser.add_argument("--channel", help="python-can channel (can0, vcan0, a multicast group, ...)")
+    parser.add_argument("--bitrate", type=int, help="bit/s")
+    parser.add_argument("--bus-option", type=bus_option, action="append", default=[], metavar="KEY=VALUE",
+                        help="extra python-can bus argument, e.g. port=43113 (repeatable)")
+
+
+def bus_arguments(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``can.Bus`` keywords the bus options gave (the rest from python-can's configuration)."""
+    bus = dict(args.bus_option)
+    for key in ("interface", "channel", "bitrate"):
+        if getattr(args, key) is not None:
+            bus[key] = getattr(args, key)
+    return bus
+
+
+def add_verbosity(parser: argparse.ArgumentParser, default: object) -> None:
+    """``-v`` (repeatable) / ``-q``, mutually exclusive."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("-v", "--verbose", action="count", default=default, help="more log output (-vv: debug)")
+    group.add_argument("-q", "--quiet", action="store_true", default=default, help="errors only, no live view")
+
+
+def add_command(subparsers: argparse._SubParsersAction, name: str, help_text: str, handler: Handler) -> argparse.ArgumentParser:
+    """A subcommand ``name`` with the shared help formatter and verbosity options; it sets ``handler``."""
+    parser: argparse.ArgumentParser = subparsers.add_parser(name, help=help_text, description=help_text,
+                                                            formatter_class=HelpFormatter)
+    add_verbosity(parser, argparse.SUPPRESS)
+    parser.set_defaults(handler=handler)
+    return parser
