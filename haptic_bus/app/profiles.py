@@ -27,7 +27,7 @@ import pathlib
 import re
 import tomllib
 import types
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,12 +43,11 @@ from haptic_bus.analysis.loop import (
     PERIOD_RANGE,
     STIFFNESS_RANGE,
 )
-from haptic_bus.analysis.velocity import ALLOWED as VELOCITY_MODELS
 from haptic_bus.analysis.velocity import VelocityModel
+from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader
 from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
-from haptic_bus.validation import real_in_range, whole_in_range
 
 DEFAULT_PROFILE = "cia402-handle"
 TIMINGS: dict[str, float | None] = {"ideal": 0, "cia402": 1, "reception": None}
@@ -65,34 +64,23 @@ RATED_TORQUE_RANGE = (1e-3, MOTOR_RATED_TORQUE.data_type.range[1] / 1000.0)  # N
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 # Operator models, aligned with sim_drive.operator (field -> (low, high, unit, default or
-# _REQUIRED)); haptic_bus does not import sim_drive (dependencies point the other way).
-_REQUIRED = object()
+# REQUIRED)); haptic_bus does not import sim_drive (dependencies point the other way).
 _F, _HZ, _T = (-1e6, 1e6, "N"), (0.0, 1e6, "Hz"), (0.0, 1e9, "s")
 OPERATOR_FIELDS: dict[str, dict[str, tuple]] = {
     "none": {},
-    "constant": {"level": (*_F, _REQUIRED)},
-    "step": {"level": (*_F, _REQUIRED), "start": (*_T, _REQUIRED)},
-    "sinusoid": {"amplitude": (0.0, 1e6, "N", _REQUIRED), "frequency": (*_HZ, _REQUIRED),
+    "constant": {"level": (*_F, REQUIRED)},
+    "step": {"level": (*_F, REQUIRED), "start": (*_T, REQUIRED)},
+    "sinusoid": {"amplitude": (0.0, 1e6, "N", REQUIRED), "frequency": (*_HZ, REQUIRED),
                  "phase": (-2 * math.pi, 2 * math.pi, "rad", 0.0), "offset": (*_F, 0.0)},
-    "chirp": {"amplitude": (0.0, 1e6, "N", _REQUIRED), "f0": (*_HZ, _REQUIRED), "f1": (*_HZ, _REQUIRED),
-              "duration": (0.0, 1e9, "s", _REQUIRED)},
-    "hand": {"stiffness": (0.0, 1e12, "N/m", _REQUIRED), "damping": (0.0, 1e12, "N s/m", _REQUIRED),
+    "chirp": {"amplitude": (0.0, 1e6, "N", REQUIRED), "f0": (*_HZ, REQUIRED), "f1": (*_HZ, REQUIRED),
+              "duration": (0.0, 1e9, "s", REQUIRED)},
+    "hand": {"stiffness": (0.0, 1e12, "N/m", REQUIRED), "damping": (0.0, 1e12, "N s/m", REQUIRED),
              "start": (-1e6, 1e6, "m", 0.0), "speed": (-1e6, 1e6, "m/s", 0.0),
              "amplitude": (0.0, 1e6, "m", 0.0), "frequency": (*_HZ, 0.0)},
     "recorded": {},  # path (CSV: time s, force N) and interpolation, checked apart
 }
 OPERATOR_ALIASES = {"csv": "recorded"}
 INTERPOLATIONS = ("hold", "linear")
-
-
-class ProfileError(ParameterError):
-    """A profile file is invalid: ``path`` (the file), ``field`` (dotted, e.g.
-    ``scene.objects[2].stiffness``), ``value`` and ``allowed``."""
-
-    def __init__(self, path: pathlib.Path | str, field: str, value: object, allowed: str) -> None:
-        self.path = str(path)
-        self.field = field
-        super().__init__(field, value, allowed, context=f"profile {self.path}")
 
 
 class ProfileRefusal(GateRefusal):
@@ -263,78 +251,8 @@ def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:
 
 # --------------------------------------------------------------------------- validation
 
-class _Reader:
-    """Reads one table of the document, tracking which keys were used (typo protection)."""
-
-    def __init__(self, path: pathlib.Path, prefix: str, table: object) -> None:
-        self.path, self.prefix = path, prefix
-        if not isinstance(table, dict):
-            raise ProfileError(path, prefix, table, "a TOML table")
-        self.table = table
-        self.used: set[str] = set()
-
-    def field(self, key: str) -> str:
-        return f"{self.prefix}.{key}" if self.prefix else key
-
-    def raw(self, key: str, allowed: str, default: object = _REQUIRED) -> object:
-        self.used.add(key)
-        if key not in self.table:
-            if default is _REQUIRED:
-                raise ProfileError(self.path, self.field(key), "<missing>", f"required: {allowed}")
-            return default
-        return self.table[key]
-
-    def _wrap(self, key: str, check: Callable[[object], Any], value: object) -> Any:
-        try:
-            return check(value)
-        except ParameterError as error:
-            raise ProfileError(self.path, self.field(key), value, error.allowed) from None
-
-    def real(self, key: str, low: float, high: float, unit: str, *, low_inclusive: bool = True,
-             default: object = _REQUIRED) -> float:
-        allowed = f"a finite real in {'[' if low_inclusive else '('}{low:g}, {high:g}] {unit}"
-        value = self.raw(key, allowed, default)
-        return self._wrap(key, lambda v: real_in_range(key, v, low, high, low_inclusive=low_inclusive, unit=unit), value)
-
-    def whole(self, key: str, low: int, high: int, default: object = _REQUIRED) -> int:
-        value = self.raw(key, f"an integer in [{low}, {high}]", default)
-        if isinstance(value, float):  # TOML distinguishes 3000 from 3000.0; a count is an integer
-            raise ProfileError(self.path, self.field(key), value, f"an integer in [{low}, {high}]")
-        return self._wrap(key, lambda v: whole_in_range(key, v, low, high), value)
-
-    def flag(self, key: str, default: object = _REQUIRED) -> bool:
-        value = self.raw(key, "true or false", default)
-        if not isinstance(value, bool):
-            raise ProfileError(self.path, self.field(key), value, "true or false")
-        return value
-
-    def text(self, key: str, *, pattern: re.Pattern | None = None, choices: tuple[str, ...] = (),
-             default: object = _REQUIRED) -> str:
-        allowed = (" or ".join(repr(c) for c in choices) if choices
-                   else "a name of letters, digits, '.', '_', '-'" if pattern else "a non-empty string")
-        value = self.raw(key, allowed, default)
-        ok = isinstance(value, str) and value.strip() != ""
-        ok = ok and (not choices or value in choices) and (pattern is None or bool(pattern.match(value)))
-        if not ok:
-            raise ProfileError(self.path, self.field(key), value, allowed)
-        return value  # type: ignore[return-value]  # checked: a str
-
-    def velocity_model(self, key: str) -> VelocityModel:
-        """A velocity model string (``"point"``, ``"average"``, ``"window:S"``, ``"lowpass:S"``); required."""
-        value = self.raw(key, f"the model of the drive's 0x606C: {VELOCITY_MODELS}; most drives report "
-                              "'average' (an encoder difference over the cycle); 'point' only for a drive "
-                              "documented to sample its velocity at SYNC")
-        return self._wrap(key, VelocityModel.parse, value)
-
-    def done(self) -> None:
-        unknown = [k for k in self.table if k not in self.used]
-        if unknown:
-            raise ProfileError(self.path, self.field(unknown[0]), self.table[unknown[0]],
-                               f"no such key; keys of [{self.prefix or 'top level'}]: {', '.join(sorted(self.used))}")
-
-
 def _read_device(path: pathlib.Path, table: object) -> DeviceProfile:
-    r = _Reader(path, "device", table)
+    r = Reader(path, "device", table)
     mass = r.real("mass", *MASS_RANGE, "kg")
     friction = r.real("friction", *FRICTION_RANGE, "N s/m")
     source = r.text("friction_source")
@@ -356,12 +274,12 @@ def _read_device(path: pathlib.Path, table: object) -> DeviceProfile:
 
 
 def _read_loop(path: pathlib.Path, table: object) -> LoopProfile:
-    r = _Reader(path, "loop", table)
+    r = Reader(path, "loop", table)
     period = r.real("period", *PERIOD_RANGE, "s")
     timing = r.text("timing", choices=tuple(TIMINGS))
     least = TIMINGS[timing]
     low = 0.0 if least is None else least
-    delay = r.real("delay", low, DELAY_RANGE[1], f"samples (timing {timing!r})", default=_REQUIRED if least is None else least)
+    delay = r.real("delay", low, DELAY_RANGE[1], f"samples (timing {timing!r})", default=REQUIRED if least is None else least)
     r.done()
     return LoopProfile(period, timing, int(delay) if float(delay).is_integer() else delay)
 
@@ -370,7 +288,7 @@ def _read_identification(path: pathlib.Path, table: object) -> Identification | 
     """``[identification]`` (optional): what ``haptic-bus identify`` measured (see :class:`Identification`)."""
     if table is None:
         return None
-    r = _Reader(path, "identification", table)
+    r = Reader(path, "identification", table)
     date = r.text("date")
     values = {key: r.real(key, 0.0, high, unit) for key, high, unit in (
         ("mass", MASS_RANGE[1], "kg"), ("mass_stderr", MASS_RANGE[1], "kg"),
@@ -404,7 +322,7 @@ def _check_against_identification(path: pathlib.Path, device: DeviceProfile, loo
 
 
 def _read_gate(path: pathlib.Path, table: object) -> GatePolicy:
-    r = _Reader(path, "gate", table)
+    r = Reader(path, "gate", table)
     margin = r.real("safety_margin", 0.0, 1e12, "N s/m")
     bandwidth = r.text("bandwidth", choices=BANDWIDTH_POLICIES)
     r.done()
@@ -417,7 +335,7 @@ def _read_safety(path: pathlib.Path, table: object) -> SafetySettings:
     defaults = SafetySettings()
     if table is None:
         return defaults
-    r = _Reader(path, "safety", table)
+    r = Reader(path, "safety", table)
     heartbeat = r.whole("heartbeat_ms", 1, 0xFFFF, default=defaults.heartbeat_ms)
     consumer = r.whole("consumer_ms", heartbeat + 1, 0xFFFF, default=max(defaults.consumer_ms, 3 * heartbeat))
     deadline = r.whole("rpdo_deadline_periods", 0, 10_000, default=defaults.rpdo_deadline_periods)
@@ -434,7 +352,7 @@ def _read_supervisor(path: pathlib.Path, table: object) -> SupervisorPolicy:
     defaults = SupervisorPolicy()
     if table is None:
         return defaults
-    r = _Reader(path, "supervisor", table)
+    r = Reader(path, "supervisor", table)
     actions = tuple(a.value for a in Action)
     on_late = r.text("on_late", choices=actions, default=defaults.on_late)
     tolerance = r.real("late_tolerance", 0.0, 100.0, "of the period T", low_inclusive=False, default=defaults.late_tolerance)
@@ -451,7 +369,7 @@ def _read_start(path: pathlib.Path, table: object) -> StartPolicy:
     defaults = StartPolicy()
     if table is None:
         return defaults
-    r = _Reader(path, "start", table)
+    r = Reader(path, "start", table)
     policy = StartPolicy(r.text("in_contact", choices=START_POLICIES, default=defaults.in_contact),
                          r.real("ramp_time", 0.0, 3600.0, "s", low_inclusive=False, default=defaults.ramp_time))
     r.done()
@@ -459,7 +377,7 @@ def _read_start(path: pathlib.Path, table: object) -> StartPolicy:
 
 
 def _read_object(path: pathlib.Path, index: int, table: object) -> SceneObject:
-    r = _Reader(path, f"scene.objects[{index}]", table)
+    r = Reader(path, f"scene.objects[{index}]", table)
     kind = r.text("kind", choices=("wall", "slot", "detent"))
     name = r.text("name", pattern=_NAME)
     stiffness = r.real("stiffness", *STIFFNESS_RANGE, "N/m")
@@ -485,7 +403,7 @@ def _read_object(path: pathlib.Path, index: int, table: object) -> SceneObject:
 
 
 def _read_scene(path: pathlib.Path, table: object) -> tuple[SceneObject, ...]:
-    r = _Reader(path, "scene", table)
+    r = Reader(path, "scene", table)
     objects = r.raw("objects", "an array of tables [[scene.objects]] (may be empty)", default=[])
     if not isinstance(objects, list):
         raise ProfileError(path, "scene.objects", objects, "an array of tables [[scene.objects]]")
@@ -503,7 +421,7 @@ def _read_scene(path: pathlib.Path, table: object) -> tuple[SceneObject, ...]:
 def _read_operator_model(path: pathlib.Path, table: object) -> Mapping[str, Any]:
     if table is None:
         return types.MappingProxyType({"model": "none"})
-    r = _Reader(path, "operator_model", table)
+    r = Reader(path, "operator_model", table)
     names = tuple(OPERATOR_FIELDS) + tuple(OPERATOR_ALIASES)
     model = OPERATOR_ALIASES.get(name := r.text("model", choices=names), name)
     out: dict[str, Any] = {"model": model}
@@ -532,8 +450,8 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
         raise ProfileError(path, "profile", str(path), f"a readable file ({error.strerror})") from None
     except tomllib.TOMLDecodeError as error:
         raise ProfileError(path, "(TOML syntax)", str(error), "valid TOML 1.0") from None
-    top = _Reader(path, "", document)
-    meta = _Reader(path, "profile", top.raw("profile", "a [profile] table"))
+    top = Reader(path, "", document)
+    meta = Reader(path, "profile", top.raw("profile", "a [profile] table"))
     name = meta.text("name", pattern=_NAME)
     operator = meta.text("operator")
     task = meta.text("task")
@@ -541,7 +459,7 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
     meta.done()
     device = _read_device(path, top.raw("device", "a [device] table"))
     loop = _read_loop(path, top.raw("loop", "a [loop] table"))
-    limits = _Reader(path, "limits", top.raw("limits", "a [limits] table"))
+    limits = Reader(path, "limits", top.raw("limits", "a [limits] table"))
     allowed_force = device.max_force
     force_limit = limits.real("force_limit", *FORCE_RANGE, "N", low_inclusive=False)
     limits.done()

@@ -1,0 +1,98 @@
+"""Reading one table of a profile's TOML document: typed fields whose errors name the file, the
+dotted field, the value and the allowed range, and a check that no key was left unread (a typo
+is an error, not a silent default)."""
+
+from __future__ import annotations
+
+import pathlib
+import re
+from collections.abc import Callable
+from typing import Any
+
+from drives.errors import ParameterError
+from haptic_bus.analysis.velocity import ALLOWED as VELOCITY_MODELS
+from haptic_bus.analysis.velocity import VelocityModel
+from haptic_bus.validation import real_in_range, whole_in_range
+
+REQUIRED = object()
+"""The default of a field that must be given."""
+
+
+class ProfileError(ParameterError):
+    """A profile file is invalid: ``path`` (the file), ``field`` (dotted, e.g.
+    ``scene.objects[2].stiffness``), ``value`` and ``allowed``."""
+
+    def __init__(self, path: pathlib.Path | str, field: str, value: object, allowed: str) -> None:
+        self.path = str(path)
+        self.field = field
+        super().__init__(field, value, allowed, context=f"profile {self.path}")
+
+
+class Reader:
+    """Reads one table of the document, tracking which keys were used (typo protection)."""
+
+    def __init__(self, path: pathlib.Path, prefix: str, table: object) -> None:
+        self.path, self.prefix = path, prefix
+        if not isinstance(table, dict):
+            raise ProfileError(path, prefix, table, "a TOML table")
+        self.table = table
+        self.used: set[str] = set()
+
+    def field(self, key: str) -> str:
+        return f"{self.prefix}.{key}" if self.prefix else key
+
+    def raw(self, key: str, allowed: str, default: object = REQUIRED) -> object:
+        self.used.add(key)
+        if key not in self.table:
+            if default is REQUIRED:
+                raise ProfileError(self.path, self.field(key), "<missing>", f"required: {allowed}")
+            return default
+        return self.table[key]
+
+    def _wrap(self, key: str, check: Callable[[object], Any], value: object) -> Any:
+        try:
+            return check(value)
+        except ParameterError as error:
+            raise ProfileError(self.path, self.field(key), value, error.allowed) from None
+
+    def real(self, key: str, low: float, high: float, unit: str, *, low_inclusive: bool = True,
+             default: object = REQUIRED) -> float:
+        allowed = f"a finite real in {'[' if low_inclusive else '('}{low:g}, {high:g}] {unit}"
+        value = self.raw(key, allowed, default)
+        return self._wrap(key, lambda v: real_in_range(key, v, low, high, low_inclusive=low_inclusive, unit=unit), value)
+
+    def whole(self, key: str, low: int, high: int, default: object = REQUIRED) -> int:
+        value = self.raw(key, f"an integer in [{low}, {high}]", default)
+        if isinstance(value, float):  # TOML distinguishes 3000 from 3000.0; a count is an integer
+            raise ProfileError(self.path, self.field(key), value, f"an integer in [{low}, {high}]")
+        return self._wrap(key, lambda v: whole_in_range(key, v, low, high), value)
+
+    def flag(self, key: str, default: object = REQUIRED) -> bool:
+        value = self.raw(key, "true or false", default)
+        if not isinstance(value, bool):
+            raise ProfileError(self.path, self.field(key), value, "true or false")
+        return value
+
+    def text(self, key: str, *, pattern: re.Pattern | None = None, choices: tuple[str, ...] = (),
+             default: object = REQUIRED) -> str:
+        allowed = (" or ".join(repr(c) for c in choices) if choices
+                   else "a name of letters, digits, '.', '_', '-'" if pattern else "a non-empty string")
+        value = self.raw(key, allowed, default)
+        ok = isinstance(value, str) and value.strip() != ""
+        ok = ok and (not choices or value in choices) and (pattern is None or bool(pattern.match(value)))
+        if not ok:
+            raise ProfileError(self.path, self.field(key), value, allowed)
+        return value  # type: ignore[return-value]  # checked: a str
+
+    def velocity_model(self, key: str) -> VelocityModel:
+        """A velocity model string (``"point"``, ``"average"``, ``"window:S"``, ``"lowpass:S"``); required."""
+        value = self.raw(key, f"the model of the drive's 0x606C: {VELOCITY_MODELS}; most drives report "
+                              "'average' (an encoder difference over the cycle); 'point' only for a drive "
+                              "documented to sample its velocity at SYNC")
+        return self._wrap(key, VelocityModel.parse, value)
+
+    def done(self) -> None:
+        unknown = [k for k in self.table if k not in self.used]
+        if unknown:
+            raise ProfileError(self.path, self.field(unknown[0]), self.table[unknown[0]],
+                               f"no such key; keys of [{self.prefix or 'top level'}]: {', '.join(sorted(self.used))}")
