@@ -21,12 +21,15 @@ from drives.errors import ParameterError
 class CyclicInputs:
     """What the drive reports each cycle, in its own integer units.
 
-    ``position`` is None when the cyclic mapping does not carry 0x6064.
+    ``position`` is None when the cyclic mapping does not carry 0x6064.  ``age``: how many samples
+    older than its cycle the input is (0: this cycle's; a master that hands out the last input
+    again when this cycle's did not arrive counts up).
     """
 
     statusword: int
     velocity: int
     position: int | None = None
+    age: int = 0
 
 
 @dataclass(frozen=True)

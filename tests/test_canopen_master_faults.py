@@ -6,6 +6,7 @@ with the safe controlword (checked on the wire by a sniffer on the same virtual 
 
 from __future__ import annotations
 
+import dataclasses
 import struct
 import time
 
@@ -184,7 +185,8 @@ def test_wrong_length_tpdo_is_dropped_and_counted_never_decoded(canopen_rig):
         before = drive.last_inputs
         r.sim.short_next_tpdo(1, missing_bytes=1)
         held = drive.read_inputs()
-        assert held is before  # the cycle's only TPDO was 5 bytes: dropped, last inputs held
+        # the cycle's only TPDO was 5 bytes: dropped, the last inputs held, one sample old
+        assert held == dataclasses.replace(before, age=1) and before.age == 0
         assert drive.stats.dropped_frames == 1 and drive.stats.missed_tpdos == 1
         drive.write_outputs(500)
         fresh = drive.read_inputs()

@@ -20,6 +20,7 @@ Until :meth:`CanopenDrive.fault_reset` or :meth:`CanopenDrive.enable`, every
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 from collections.abc import Sequence
@@ -311,7 +312,8 @@ class CanopenDrive(Cia402Master):
                     f"no TPDO (COB-ID 0x{exchange.tpdo_cobs[0]:03X}) for {self._missed_in_row} consecutive cycles "
                     f"(timeout {exchange.timeout * 1e3:.3g} ms each); torque set to zero",
                 ))
-            return self.last_inputs if self.last_inputs is not None else CyclicInputs(0, 0)
+            last = self.last_inputs if self.last_inputs is not None else CyclicInputs(0, 0)
+            return dataclasses.replace(last, age=self._missed_in_row)
         self._missed_in_row = 0
         return self._accept_inputs(inputs)
 

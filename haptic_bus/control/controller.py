@@ -46,12 +46,6 @@ scaled down so that it passes it, and the decision; None if no scale passes."""
 EXIT_REASONS = ("completed", "stopped", "interrupted", "drive error", "assumption broken")
 
 
-def missed_inputs(drive: Drive) -> int:
-    """How many cycles so far the drive's input did not arrive and the last one was used again
-    (a CANopen master's missed TPDOs; 0 for a drive that never reuses an input)."""
-    return int(getattr(getattr(drive, "stats", None), "missed_tpdos", 0))
-
-
 def encoder_origin(drive: Drive) -> float:
     """The handle's absolute position (m) from 0x6064, read once, acyclically, before cycling."""
     return drive.read_object(POSITION_ACTUAL) * drive.scaling.position_per_count
@@ -145,7 +139,6 @@ class WallController:
         self.record = RunRecord(record_capacity)
         self.ramp_cycles = round(ramp_time / self.period)
         self._derate = derate
-        self._input_age = 0  # samples: how much older than its cycle the input just used was
         self.cycles = 0
         self.saturated_cycles = 0
         self.peak_force = 0.0
@@ -204,10 +197,8 @@ class WallController:
         """
         entry: SceneEntry = self.scenes.adopt()  # one read: the whole accepted scene, never half of one
         drive = self.drive
-        missed = missed_inputs(drive)
         inputs = drive.read_inputs()
         started = time.perf_counter()
-        self._input_age = self._input_age + 1 if missed_inputs(drive) != missed else 0
         scaling = drive.scaling
         v = inputs.velocity * scaling.velocity_per_count
         x = self.integrator.add(inputs.velocity)
@@ -223,7 +214,7 @@ class WallController:
         compute = time.perf_counter() - started
         energy = self.observer.update(v, force)
         supervisor = self.supervisor
-        late, alarm = supervisor.cycle(lateness, energy, self._input_age) if supervisor is not None else (False, None)
+        late, alarm = supervisor.cycle(lateness, energy, inputs.age) if supervisor is not None else (False, None)
         if abs(force) > self.peak_force:
             self.peak_force = abs(force)
         self.record.append(self.cycles * self.period, x, v, force, torque, energy, entry.scene_id, scale, late, compute)
