@@ -6,16 +6,27 @@ taken from python-can's own configuration chain (``can.rc``, the environment var
 ``/etc/can.conf``, ``~/.can``, ``~/.canrc``; see :func:`can.util.load_config`).  Any
 python-can interface works: ``virtual``, ``udp_multicast``, ``socketcan`` (``vcan0``,
 ``can0``), vendor adapters.
+
+Frames stay on this host unless asked otherwise: python-can's ``udp_multicast`` sends with a
+hop limit (IPv4 TTL) of 1, so every frame also leaves through the network interface.  Whenever
+a configuration names no ``hop_limit`` for ``udp_multicast``, :func:`resolve_bus_config` sets
+``hop_limit=0`` (the kernel then delivers to local sockets only).  A user who bridges two
+machines over udp_multicast sets ``hop_limit`` on purpose (``--bus-option hop_limit=1``).
 """
 
 from __future__ import annotations
 
 import argparse
-from typing import Any
-
-import can
+from typing import TYPE_CHECKING, Any
 
 from drives.errors import BusConfigError
+
+if TYPE_CHECKING:
+    import can
+
+LOCAL_HOP_LIMIT = 0  # udp_multicast's default here: frames are delivered on this host only
+BUS_OPTION_HELP = ("extra python-can bus argument, e.g. port=43113 (repeatable); udp_multicast gets hop_limit=0 "
+                   "(frames stay on this host) unless you name one")
 
 _NO_INTERFACE = (
     "no CAN interface selected: pass interface=... (e.g. 'socketcan', 'virtual', 'udp_multicast'), "
@@ -32,7 +43,8 @@ def resolve_bus_config(
     context: str | None = None,
     **kwargs: Any,
 ) -> dict[str, Any]:
-    """The complete python-can bus configuration: explicit arguments over python-can's config chain."""
+    """The complete python-can bus configuration: explicit arguments over python-can's config chain
+    (``udp_multicast`` with no ``hop_limit`` gets :data:`LOCAL_HOP_LIMIT`, module docstring)."""
     given: dict[str, Any] = dict(kwargs)
     if interface is not None:
         given["interface"] = interface
@@ -40,6 +52,8 @@ def resolve_bus_config(
         given["channel"] = channel
     if bitrate is not None:
         given["bitrate"] = bitrate
+    import can  # python-can on use: a command line that only parses never loads it
+
     where = f"bus {interface or '?'}:{channel if channel is not None else '?'}"
     try:
         config = dict(can.util.load_config(path=config_file, config=given, context=context))
@@ -49,6 +63,8 @@ def resolve_bus_config(
         raise BusConfigError(where, f"invalid CAN bus configuration: {exc}") from exc
     if not config.get("interface"):
         raise BusConfigError(where, _NO_INTERFACE)
+    if config["interface"] == "udp_multicast":
+        config.setdefault("hop_limit", LOCAL_HOP_LIMIT)
     return config
 
 
@@ -62,6 +78,8 @@ def open_bus(
     **kwargs: Any,
 ) -> can.BusABC:
     """Open a python-can bus from explicit arguments and/or python-can's configuration chain."""
+    import can
+
     config = resolve_bus_config(interface, channel, bitrate, config_file=config_file, context=context, **kwargs)
     where = f"bus {config.get('interface')}:{config.get('channel')}"
     try:

@@ -29,8 +29,8 @@ import time
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
-from drives.bus_config import parse_bus_option
-from drives.errors import ParameterError
+from drives.bus_config import BUS_OPTION_HELP, parse_bus_option
+from drives.errors import BusConfigError, ParameterError
 from sim_drive.eds import OD_KINDS, eds_path
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
@@ -107,7 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
     canopen.add_argument("--node-id", type=int, help="CANopen node id 1..127")
     canopen.add_argument("--bitrate", type=int, help="bit/s; also enables the bus-load report")
     canopen.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
-                         help="extra python-can bus argument, e.g. port=43113 (repeatable)")
+                         help=BUS_OPTION_HELP)
     canopen.add_argument("--eds-path", action="store_true", help="print the path of the shipped EDS and exit")
     canopen.add_argument("--od", choices=list(OD_KINDS),
                          help="object dictionary: haptic (default: the shipped EDS, manufacturer objects 0x2000.. "
@@ -199,6 +199,9 @@ def _run_canopen(args: argparse.Namespace) -> int:
     with _StopSignals() as stop_signals:  # from before the boot-up: an early signal still stops cleanly
         try:
             sim.start()
+        except BusConfigError as exc:
+            print(f"{_PROG}: error: {exc}", file=sys.stderr)
+            return 1
         except (can.CanError, OSError, ValueError) as exc:
             print(f"{_PROG}: error: cannot open the bus: {exc}", file=sys.stderr)
             return 1

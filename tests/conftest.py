@@ -123,8 +123,10 @@ class BusSpec:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def open(self) -> can.BusABC:
-        """A new bus handle on this bus (a sniffer, an injector)."""
-        return can.Bus(interface=self.interface, channel=self.channel, **self.extra)
+        """A new bus handle on this bus (a sniffer, an injector), configured as the project's own buses are."""
+        from drives.bus_config import open_bus
+
+        return open_bus(interface=self.interface, channel=self.channel, **self.extra)
 
     def drive_kwargs(self) -> dict[str, Any]:
         """The CanopenDrive keyword arguments selecting this bus."""

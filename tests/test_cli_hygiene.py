@@ -24,6 +24,7 @@ from typing import Any
 import can
 import pytest
 
+from drives.bus_config import open_bus
 from tests.run_rig import NODE, profile_variant, read_record, read_run, run_cli
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -189,7 +190,7 @@ def test_another_master_is_refused_and_the_first_run_goes_on_until_ctrl_c(
     profile = profile_variant(tmp_path, "cia402-handle", "patient", extra="[safety]\nconsumer_ms = 1000\n")
     first = Command("run", str(profile), *bus, "--node-id", str(NODE), "--virtual-time", "--duration", "600", "-q",
                     "--out", str(tmp_path / "first"))
-    sniffer = can.Bus(interface="udp_multicast", channel=group, port=port)
+    sniffer = open_bus(interface="udp_multicast", channel=group, port=port)
     tpdos = [0]
 
     def cycled(count: int) -> Callable[[], bool]:

@@ -24,6 +24,7 @@ import can
 import msgpack
 import pytest
 
+from drives.bus_config import open_bus
 from drives.errors import DriveError
 
 NODE = 5
@@ -166,7 +167,7 @@ def test_haptic_bus_run_under_fuzz_exits_0_or_1_with_its_record(multicast, sim_p
                             str(NODE), "--virtual-time", "--duration", "600", "-q", "--out", str(out)],
                            cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     rng = random.Random(SEED + 1)
-    fuzzer = can.Bus(interface="udp_multicast", channel=group, port=port)
+    fuzzer = open_bus(interface="udp_multicast", channel=group, port=port)
     raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     raw.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
     try:
@@ -198,7 +199,7 @@ def test_haptic_bus_run_under_fuzz_exits_0_or_1_with_its_record(multicast, sim_p
     if run.returncode == 1:
         assert len(stderr.strip().splitlines()) == 1 and "drive error" in stderr
     assert sim.process.poll() is None, sim.log()[-2000:]  # the drive lives on, and serves:
-    with can.Bus(interface="udp_multicast", channel=group, port=port) as probe:
+    with open_bus(interface="udp_multicast", channel=group, port=port) as probe:
         probe.send(can.Message(arbitration_id=0x600 + NODE, data=struct.pack("<BHB4x", 0x40, 0x1000, 0), is_extended_id=False))
         end, answered = time.monotonic() + 2.0, False
         while time.monotonic() < end and not answered:

@@ -35,10 +35,10 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import can
 import numpy as np
 import pytest
 
+from drives.bus_config import open_bus
 from drives.cia402 import State
 from drives.errors import DriveTimeout
 from haptic_bus.app import runner
@@ -348,7 +348,7 @@ def test_a_real_time_run_stopped_for_150_ms_breaks_the_delay_assumption_and_exit
     run = subprocess.Popen([sys.executable, "-m", "haptic_bus.app.cli", "run", str(profile), *bus_args, "--node-id",
                             str(NODE), "--duration", "60", "-q", "--out", str(out)],
                            cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    sniffer = can.Bus(interface="udp_multicast", channel=group, port=port)
+    sniffer = open_bus(interface="udp_multicast", channel=group, port=port)
     try:
         deadline, tpdos = time.monotonic() + 40.0, 0
         while tpdos < 100 and time.monotonic() < deadline and run.poll() is None:

@@ -23,6 +23,7 @@ import time
 import can
 import pytest
 
+from drives.bus_config import open_bus
 from drives.canopen.drive import CanopenDrive
 from drives.cia402 import State
 from drives.errors import DriveError, DriveProtocolError
@@ -162,7 +163,7 @@ def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(m
     sim = sim_process(*bus_args, "--node-id", str(NODE), "--profile", "cia402-handle")
     run = _run_command("run", _profile_that_warns_when_late(tmp_path), *bus_args, "--node-id", str(NODE), "--duration", "60",
                        "-q", "--out", str(tmp_path / "run"))
-    sniffer = can.Bus(interface="udp_multicast", channel=group, port=port)
+    sniffer = open_bus(interface="udp_multicast", channel=group, port=port)
     try:
         deadline, tpdos = time.monotonic() + START_WAIT, 0
         while tpdos < 300 and time.monotonic() < deadline and run.poll() is None:

@@ -23,6 +23,7 @@ import canopen
 import msgpack
 import pytest
 
+from drives.bus_config import open_bus
 from drives.cia402 import State
 
 NODE = 5
@@ -82,7 +83,7 @@ def test_a_burst_of_undecodable_datagrams_does_not_silence_the_drive(multicast) 
             time.sleep(0.01)
         # the loopback socket buffer holds the whole burst (about 60 bytes each), so every one arrives
         assert sim.counters.receive_errors == burst and sim.serving, sim.counters
-        with can.Bus(interface="udp_multicast", channel=group, port=port) as probe:  # opened after the burst
+        with open_bus(interface="udp_multicast", channel=group, port=port) as probe:  # opened after the burst
             probe.send(can.Message(arbitration_id=0x600 + NODE, data=struct.pack("<BHB4x", 0x40, 0x1000, 0),
                                    is_extended_id=False))
             answers = {}

@@ -11,9 +11,9 @@ import struct
 import subprocess
 import sys
 
-import can
 import pytest
 
+from drives.bus_config import open_bus
 from drives.cia402 import Command
 from drives.errors import ParameterError
 from sim_drive.cli import main
@@ -146,7 +146,7 @@ def test_signal_stops_cleanly_and_state_changes_are_logged(
     sig: signal.Signals, twice: bool, multicast: tuple[str, int], sim_process, frames
 ) -> None:
     group, port = multicast
-    with can.Bus(interface="udp_multicast", channel=group, port=port) as master:
+    with open_bus(interface="udp_multicast", channel=group, port=port) as master:
         process = sim_process("--interface", "udp_multicast", "--channel", group, "--node-id", str(NODE),
                               "--bus-option", f"port={port}", "--realtime", "--bitrate", "1000000")
         try:

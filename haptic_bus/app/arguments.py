@@ -13,6 +13,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
+from drives.bus_config import BUS_OPTION_HELP, parse_bus_option
 from drives.cia301 import NODE_ID_RANGE
 from drives.modbus.register_map import UNIT_ID_RANGE
 
@@ -90,12 +91,6 @@ def modbus_url(text: str) -> str:
     return text
 
 
-def bus_option(text: str) -> tuple[str, Any]:
-    """``KEY=VALUE`` for python-can (ints where they parse)."""
-    from drives.bus_config import parse_bus_option
-
-    return parse_bus_option(text)
-
 
 # --------------------------------------------------------------------------- shared options
 
@@ -104,8 +99,8 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--interface", help="python-can interface (socketcan, virtual, udp_multicast, ...)")
     parser.add_argument("--channel", help="python-can channel (can0, vcan0, a multicast group, ...)")
     parser.add_argument("--bitrate", type=int, help="bit/s")
-    parser.add_argument("--bus-option", type=bus_option, action="append", default=[], metavar="KEY=VALUE",
-                        help="extra python-can bus argument, e.g. port=43113 (repeatable)")
+    parser.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
+                        help=BUS_OPTION_HELP)
 
 
 def bus_arguments(args: argparse.Namespace) -> dict[str, Any]:

@@ -37,10 +37,10 @@ def stop(process: subprocess.Popen) -> int:
 
 def wait_heartbeat(bus_kwargs: dict[str, Any], node_id: int, process: subprocess.Popen, timeout: float) -> None:
     """Block until node ``node_id``'s heartbeat is on the bus (bounded by ``timeout`` s)."""
-    import can
+    from drives.bus_config import open_bus
 
     deadline = time.monotonic() + timeout
-    with can.Bus(**bus_kwargs) as bus:
+    with open_bus(**bus_kwargs) as bus:
         while time.monotonic() < deadline:
             if process.poll() is not None:
                 raise RuntimeError(f"the simulator exited early with status {process.returncode}")

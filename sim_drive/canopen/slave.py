@@ -44,6 +44,7 @@ import canopen
 from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary
 
+from drives.bus_config import open_bus
 from drives.canopen.local_node import StrictLocalNode
 from drives.cia301 import (
     ERROR_REGISTER,
@@ -172,7 +173,7 @@ class CanopenSimDrive:
         """Open the bus (if given as a config), boot (boot-up message, PRE-OPERATIONAL), serve."""
         if self._thread is not None:
             raise RuntimeError(f"node {self.node_id}: already started")
-        bus = self._bus = self._bus if self._bus is not None else can.Bus(**(self._bus_config or {}))
+        bus = self._bus = self._bus if self._bus is not None else open_bus(**(self._bus_config or {}))
         self._network = _SlaveNetwork(bus, self)
         self._network.add_node(self._node)
         self._network.unsubscribe(NMT_COB_ID, self._node.nmt.on_command)
