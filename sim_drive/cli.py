@@ -35,6 +35,7 @@ from sim_drive.eds import OD_KINDS, eds_path
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import load_profile
+from sim_drive.sync_clock import SYNC_CLOCKS, sync_clock
 
 logger = logging.getLogger("sim_drive")
 
@@ -101,6 +102,10 @@ def build_parser() -> argparse.ArgumentParser:
                            "default 0.25, of a period after the SYNC); default: the profile's [loop] timing")
     both.add_argument("--profile", help="operator profile (name or TOML path): [device], [loop], [operator_model]")
     both.add_argument("--realtime", action="store_true", help="timestamp log lines with the wall clock")
+    both.add_argument("--clock", choices=SYNC_CLOCKS, default="virtual",
+                      help="how far the handle moves per cycle: virtual (exactly T per SYNC or Modbus output "
+                           "write, for a master in virtual time) or wall (the time between them, as a real "
+                           "handle lives a late cycle; use it against a real-time run)")
     canopen = parser.add_argument_group("CANopen slave (the default)")
     canopen.add_argument("--interface", help="python-can interface (virtual, udp_multicast, socketcan, ...)")
     canopen.add_argument("--channel", help="python-can channel (e.g. vcan0, a multicast group)")
@@ -192,7 +197,7 @@ def _run_canopen(args: argparse.Namespace) -> int:
         if args.bitrate:
             config["bitrate"] = args.bitrate
         sim = CanopenSimDrive(config, args.node_id, timing=timing, parameters=parameters, operator=operator, bus_meter=meter,
-                              od=args.od or "haptic")
+                              od=args.od or "haptic", sync_clock=sync_clock(args.clock))
     except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
@@ -233,7 +238,7 @@ def _run_modbus(args: argparse.Namespace) -> int:
         host, port = parse_modbus_url(args.modbus)
         parameters, operator, timing = _drive_setup(args)
         sim = ModbusSimServer(host, port, unit_id=unit_id, timing=timing, parameters=parameters, operator=operator,
-                              word_order=word_order)
+                              word_order=word_order, sync_clock=sync_clock(args.clock))
     except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2

@@ -127,6 +127,7 @@ class SimulatedDrive:
         self.abort_connection_option_code = int(AbortConnectionOption.FAULT)
         self.error_code = 0
         self.sync_count = 0
+        self._interval: float | None = None  # the closing interval's length, s (None: T)
         self._latched = 0  # per mille: cia402, latched at the last SYNC; reception, acting since the last switch
         self._newton_per_permille = self.parameters.rated_torque_mnm / 1e6 * self.parameters.force_per_torque
         self.sensor = Sensor(self.parameters)
@@ -402,8 +403,13 @@ class SimulatedDrive:
         return target if -limit <= target <= limit else saturate(target, -limit, limit)
 
     # ----------------------------------------------------------------- the cycle
-    def sync(self) -> None:
-        """One SYNC: advance the plant over the closing interval (if any), then sample."""
+    def sync(self, interval: float | None = None) -> None:
+        """One SYNC: advance the plant over the closing interval (if any), then sample.
+
+        ``interval``: how long that interval was, s (None: exactly the period ``T``, virtual
+        time; a real-time drive passes the time since the last SYNC, so a late SYNC holds the
+        latched torque that much longer, as a real drive does)."""
+        self._interval = interval
         if self.sync_count:
             self._close_interval()
         if self.state is _QUICK_STOP_ACTIVE and not 5 <= self.quick_stop_option_code <= 8:
@@ -413,18 +419,26 @@ class SimulatedDrive:
         self.sensor.sample(self.handle)
         self.sync_count += 1
 
+    def _advance(self, before: float, now: float) -> None:
+        """The plant over the closing interval: ``before`` N until the switch, ``now`` N after it."""
+        interval = self._interval
+        if interval is None:
+            self.handle.advance(before, now)
+        elif interval > 0.0:
+            self.handle.advance_for(interval, before, now)
+
     def _close_cia402(self) -> None:
         """The closing interval under the torque latched at the SYNC before."""
         force = (self._latched if self._torque_enabled() else 0) * self._newton_per_permille
-        self.handle.advance(force, force)
+        self._advance(force, force)
 
     def _close_ideal(self) -> None:
         """The closing interval under the target present now."""
         force = self._effective_target() * self._newton_per_permille
-        self.handle.advance(force, force)
+        self._advance(force, force)
 
     def _close_reception(self) -> None:
         """The closing interval: the torque acting before for ``reception_delay``, the target present now after."""
         before = self._latched if self._torque_enabled() else 0
         self._latched = self._effective_target()
-        self.handle.advance(before * self._newton_per_permille, self._latched * self._newton_per_permille)
+        self._advance(before * self._newton_per_permille, self._latched * self._newton_per_permille)

@@ -45,6 +45,7 @@ from sim_drive.operator import NoOperator, OperatorModel
 from sim_drive.parameters import DeviceParameters
 
 _SERIES_BELOW = 1.0
+_STRETCHED_KEPT = 256  # interval lengths other than T whose pieces are kept
 _SERIES_TERMS = 26  # (2c)^n / (n + 3)! < 1e-20 for c < 1
 
 
@@ -175,7 +176,9 @@ class Handle:
         self._track = meter.track if meter is not None else None
         self._restart = meter.restart if meter is not None else _nothing
         self._meter_coefficients = meter.coefficients if meter is not None else None
-        self._pieces = _schedule(period, substeps, switch, meter.window if meter is not None else None, self._step)
+        self._switch, self._window, self._substeps = switch, meter.window if meter is not None else None, substeps
+        self._pieces = _schedule(period, substeps, switch, self._window, self._step)
+        self._stretched: dict[float, list[Piece]] = {}
         self._offsets = tuple(j * (period / substeps) for j in range(substeps))
         whole = self._step(period / substeps)
         self._coefficients = (whole.a, whole.k1, whole.p_v, whole.p_f, whole.q_vv, whole.q_vf, whole.q_ff)
@@ -212,10 +215,34 @@ class Handle:
 
     def _advance_pieces(self, before: float, now: float) -> None:
         """One period: motor force ``before`` (N) until the switch, ``now`` after it, piece by piece."""
+        self._run(self._pieces, self._period, before, now)
+
+    def advance_for(self, duration: float, before: float, now: float) -> None:
+        """An interval of ``duration`` s instead of one period (a SYNC that came late or early):
+        the motor force ``before`` (N) until the switch, ``now`` after it.  The operator is
+        evaluated on sub-steps as long as the period's, the switch comes as long after the
+        interval's start as in a period (at its end at the latest), and a measurement window
+        closes with the interval, as a drive sampling at its own rate does."""
+        if duration == self._period:
+            self.advance(before, now)
+            return
+        pieces = self._stretched.get(duration)
+        if pieces is None:
+            if len(self._stretched) > _STRETCHED_KEPT:
+                self._stretched.clear()
+            ratio = self._period / duration
+            substeps = max(1, round(self._substeps / ratio))
+            window = None if self._window is None else min(1.0, self._window * ratio)
+            pieces = self._stretched[duration] = _schedule(duration, substeps, min(1.0, self._switch * ratio), window,
+                                                           self._step)
+        self._run(pieces, duration, before, now)
+
+    def _run(self, pieces: list[Piece], length: float, before: float, now: float) -> None:
+        """The pieces of an interval of ``length`` s: ``before`` (N) until the switch, ``now`` after it."""
         operator = self.operator
         t0 = self.time
         w = 0.0
-        for piece in self._pieces:
+        for piece in pieces:
             if piece.restart:
                 self._restart()
             if piece.offset is not None:
@@ -224,7 +251,7 @@ class Handle:
             dx = self._move(piece.step, w + motor)
             self.operator_energy += w * dx
             self.wall_energy -= motor * dx
-        self.time = t0 + self._period
+        self.time = t0 + length
 
     def _move(self, step: Step, force: float) -> float:
         """One piece with the external force ``force`` (N) held, Coulomb friction included; the displacement (m)."""

@@ -24,6 +24,7 @@ from drives.cia301 import EmcyCode
 from sim_drive.canopen.emergency import Emergency
 from sim_drive.canopen.pdo_table import PdoChannel, PdoTable
 from sim_drive.device import ObjectAccessError, SimulatedDrive
+from sim_drive.sync_clock import SyncClock
 
 logger = logging.getLogger(__name__)
 
@@ -44,12 +45,13 @@ class PdoEngine:
     """TPDO encoding and RPDO decoding for one slave; ``send(cob_id, data)`` puts a frame on the bus."""
 
     def __init__(self, table: PdoTable, drive: SimulatedDrive, send: Callable[[int, bytes], None],
-                 emergency: Emergency, counters: SlaveCounters) -> None:
+                 emergency: Emergency, counters: SlaveCounters, sync_clock: SyncClock | None = None) -> None:
         self.table = table
         self.drive = drive
         self.send = send
         self.emergency = emergency
         self.counters = counters
+        self.sync_clock = sync_clock  # None: each SYNC closes exactly one period (virtual time)
         self.rx_by_cob: dict[int, PdoChannel] = {}
         self.tx_cobs: frozenset[int] = frozenset()
         self._tx_plan: list[tuple[PdoChannel, Readers]] = []
@@ -101,7 +103,7 @@ class PdoEngine:
         for channel, data in self._pending:
             self._apply(channel, data)
         self._pending.clear()
-        self.drive.sync()
+        self.drive.sync(None if self.sync_clock is None else self.sync_clock(timestamp))
         if not operational:
             return
         counts = self._sync_counts

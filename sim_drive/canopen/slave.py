@@ -68,6 +68,7 @@ from sim_drive.canopen.timers import NodeTimers, Watchdog
 from sim_drive.device import POWER_STAGE_ON, ObjectAccessError, SimulatedDrive
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
+from sim_drive.sync_clock import SyncClock
 
 logger = logging.getLogger(__name__)
 
@@ -125,7 +126,8 @@ class CanopenSimDrive:
     :class:`~sim_drive.device.SimulatedDrive`.  ``bus_meter``: optional bit-time accounting.
     ``od``: "haptic" (the shipped EDS, manufacturer area included) or "standard" (CiA-301/402
     objects only, the scaling in the factor group: :mod:`sim_drive.canopen.standard_od`).
-    ``dictionary``: an object dictionary to use instead of the kind's default.
+    ``dictionary``: an object dictionary to use instead of the kind's default.  ``sync_clock``:
+    how long the interval each SYNC closes was (:mod:`sim_drive.sync_clock`; None: exactly ``T``).
     """
 
     def __init__(
@@ -139,6 +141,7 @@ class CanopenSimDrive:
         bus_meter: BusLoadMeter | None = None,
         dictionary: ObjectDictionary | None = None,
         od: str = "haptic",
+        sync_clock: SyncClock | None = None,
     ) -> None:
         self.node_id = whole_in_range("node_id", node_id, 1, 127, context="CANopen slave")
         self._bus: can.BusABC | None = bus if isinstance(bus, can.BusABC) else None
@@ -165,7 +168,7 @@ class CanopenSimDrive:
         self._comm = CommunicationObjects(dictionary, self.drive, self.timers, self.emergency)
         self._manufacturer = ManufacturerObjects(self.drive, self.counters)
         self._pdos = PdoTable(dictionary, self.drive.readable_objects(), self.drive.writable_objects(), self._on_pdo_change)
-        self._engine = PdoEngine(self._pdos, self.drive, self._send, self.emergency, self.counters)
+        self._engine = PdoEngine(self._pdos, self.drive, self._send, self.emergency, self.counters, sync_clock)
         self._reset_communication()
 
     # ----------------------------------------------------------------- lifecycle

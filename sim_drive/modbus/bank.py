@@ -47,6 +47,7 @@ from drives.modbus.register_map import (
     register_at,
 )
 from sim_drive.device import POWER_STAGE_ON, ObjectAccessError, SimulatedDrive
+from sim_drive.sync_clock import SyncClock
 
 logger = logging.getLogger("sim_drive.modbus")
 
@@ -67,11 +68,13 @@ class RegisterBank:
 
     ``read(address, count)`` returns the registers or an exception code (int);
     ``write(address, values)`` returns 0 or an exception code.  ``word_order`` is ``"big"``
-    (high word first) or ``"little"``.  See the module docstring for when a write closes a cycle.
+    (high word first) or ``"little"``.  See the module docstring for when a write closes a cycle;
+    ``sync_clock`` (:mod:`sim_drive.sync_clock`) how long the interval it closes was.
     """
 
-    def __init__(self, drive: SimulatedDrive, word_order: str = "big") -> None:
+    def __init__(self, drive: SimulatedDrive, word_order: str = "big", sync_clock: SyncClock | None = None) -> None:
         self.drive = drive
+        self.sync_clock = sync_clock  # how long the interval a cycle-closing write ends was (None: T)
         self.word_order = word_order
         self.cycles = 0  # writes that closed a cycle
         self.watchdog_ms = 0
@@ -147,7 +150,7 @@ class RegisterBank:
                 logger.warning("%s: write of %s refused: %s", drive.name, spec.label, exc)
                 return ExcCodes.ILLEGAL_VALUE if exc.reason == "range" else ExcCodes.ILLEGAL_ADDRESS
         if address <= OUTPUT_BLOCK and address + len(values) >= OUTPUT_BLOCK + OUTPUT_BLOCK_COUNT:
-            drive.sync()
+            drive.sync(None if self.sync_clock is None else self.sync_clock(time.time()))
             self.cycles += 1
         return 0
 

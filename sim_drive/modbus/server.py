@@ -38,6 +38,7 @@ from sim_drive.modbus.bank import RegisterBank, writes_command
 from sim_drive.modbus.faults import FaultInjector
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
+from sim_drive.sync_clock import SyncClock
 
 logger = logging.getLogger("sim_drive.modbus")
 
@@ -125,6 +126,7 @@ class ModbusSimServer:
         parameters: DeviceParameters | None = None,
         operator: OperatorModel | None = None,
         word_order: str = "big",
+        sync_clock: SyncClock | None = None,
     ) -> None:
         if not 0 <= unit_id <= 255:
             raise ParameterError("unit_id", unit_id, "0..255")
@@ -132,7 +134,7 @@ class ModbusSimServer:
         self.requested_port = port
         self.unit_id = unit_id
         self.drive = SimulatedDrive(parameters, timing, operator, name=f"Modbus unit {unit_id}")
-        self.bank = RegisterBank(self.drive, word_order)
+        self.bank = RegisterBank(self.drive, word_order, sync_clock)
         self.faults = FaultInjector()
         self.lock = threading.Lock()  # the bank and the drive, between the server and other threads
         self.port: int | None = None

@@ -1,0 +1,36 @@
+"""How long the interval a SYNC closes was: virtual time, or the wall clock between SYNC frames.
+
+A :data:`SyncClock` maps a SYNC frame's reception timestamp (s, python-can's ``msg.timestamp``)
+to the length of the interval that SYNC closes, s, or None for exactly one period ``T``
+(virtual time: the plant advances ``T`` per SYNC however fast the master runs).
+:class:`WallSyncClock` takes the time between SYNC receptions instead, as a real drive's
+handle lives it: a SYNC that comes late holds the latched torque that much longer.  On
+``udp_multicast`` python-can stamps a frame with the kernel's reception time (``SIOCGSTAMP``),
+so a stalled simulator thread does not stretch the interval it reports.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+SyncClock = Callable[[float], "float | None"]
+SYNC_CLOCKS = ("virtual", "wall")
+
+
+class WallSyncClock:
+    """Interval lengths from SYNC reception timestamps (s); the first SYNC closes none."""
+
+    def __init__(self) -> None:
+        self._last: float | None = None
+
+    def __call__(self, timestamp: float) -> float | None:
+        """The time since the previous SYNC's ``timestamp``, s (never negative)."""
+        last, self._last = self._last, timestamp
+        return None if last is None else max(0.0, timestamp - last)
+
+
+def sync_clock(kind: str) -> SyncClock | None:
+    """The clock of ``kind`` (:data:`SYNC_CLOCKS`): None for virtual time, else a fresh :class:`WallSyncClock`."""
+    if kind not in SYNC_CLOCKS:
+        raise ValueError(f"sync clock {kind!r}; allowed: {', '.join(SYNC_CLOCKS)}")
+    return WallSyncClock() if kind == "wall" else None
