@@ -23,13 +23,16 @@ class CyclicInputs:
 
     ``position`` is None when the cyclic mapping does not carry 0x6064.  ``age``: how many samples
     older than its cycle the input is (0: this cycle's; a master that hands out the last input
-    again when this cycle's did not arrive counts up).
+    again when this cycle's did not arrive counts up).  ``sampled_by_ns``: ``time.perf_counter_ns()``
+    by which the drive had sampled them (right after the SYNC left, or when the Modbus answer
+    arrived): an upper bound of the sampling instant on this process's clock; 0 when unknown.
     """
 
     statusword: int
     velocity: int
     position: int | None = None
     age: int = 0
+    sampled_by_ns: int = 0
 
 
 @dataclass(frozen=True)

@@ -1,14 +1,12 @@
-"""The controller's arithmetic without a bus: exact position, observer, record."""
+"""The controller's arithmetic without a bus: exact position, record (the observer: test_port_energy.py)."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
-import pytest
 
 from haptic_bus.control.controller import PositionIntegrator
-from haptic_bus.control.observer import PassivityObserver
 from haptic_bus.control.record import COLUMNS, RunRecord
 
 
@@ -35,42 +33,10 @@ def test_ten_million_cycles_add_no_rounding_drift() -> None:
     assert abs(naive - x) > 100 * math.ulp(abs(x))
 
 
-def test_observer_pairs_each_force_with_the_interval_it_acts_in() -> None:
-    T = 1e-3
-    ideal, delayed = PassivityObserver(T, 0, 0.0, 0.0), PassivityObserver(T, 1, 0.0, 0.0)
-    velocities = [0.0, 1.0, 1.0, 0.0]
-    forces = [2.0, 3.0, 5.0, 7.0]
-    for v, f in zip(velocities, forces):
-        ideal.update(v, f)
-        delayed.update(v, f)
-    # interval k has displacement T (v_k + v_{k+1})/2: 0.5T, T, 0.5T
-    assert ideal.wall_energy == pytest.approx(T * (2.0 * 0.5 + 3.0 * 1.0 + 5.0 * 0.5))
-    assert delayed.wall_energy == pytest.approx(T * (0.0 * 0.5 + 2.0 * 1.0 + 3.0 * 0.5))
-
-
-def test_interface_energy_adds_friction_and_kinetic_energy() -> None:
-    T, m, b = 1e-3, 0.5, 2.0
-    observer = PassivityObserver(T, 1, m, b)
-    for v, f in [(0.0, -1.0), (1.0, -1.0), (1.0, 0.0)]:
-        observer.update(v, f)
-    wall = T * (0.0 * 0.5 + (-1.0) * 1.0)  # the delayed force: 0 then -1 N
-    dissipated = b * T * (0.5 * (0.0 + 1.0) + 0.5 * (1.0 + 1.0))
-    assert observer.wall_energy == pytest.approx(wall)
-    assert observer.interface_energy == pytest.approx(wall + dissipated + 0.5 * m * 1.0)
-    assert not observer.flagged  # the wall gave energy back; friction and the handle took more
-
-
-def test_observer_flags_energy_the_interface_gave_out() -> None:
-    observer = PassivityObserver(1e-3, 0, 0.0, 0.0)
-    for v, f in [(0.0, -1.0), (1.0, -1.0), (1.0, 0.0)]:
-        observer.update(v, f)
-    assert observer.interface_energy < 0 and observer.flagged and observer.active_cycles == 2
-
-
 def test_record_is_bounded_and_keeps_the_latest_rows(tmp_path) -> None:
     record = RunRecord(capacity=5)
     for k in range(12):
-        record.append(k * 1e-3, 0.1, 0.2, float(k), k, 0.0, 3, 0.5, k % 2 == 1, 1e-6)
+        record.append(k * 1e-3, 0.1, 0.2, float(k), k, 0.0, 3, 0.5, k % 2 == 1, 1e-6, 0.25)
     data = record.array()
     assert data.shape == (5, len(COLUMNS)) and record.total == 12
     assert list(data[:, 3]) == [7.0, 8.0, 9.0, 10.0, 11.0]

@@ -13,7 +13,7 @@ from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.frequency import t_fund, z_fund
 from haptic_bus.analysis.limits import max_damping, max_stiffness
 from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.control.observer import PassivityObserver
+from haptic_bus.control.port_energy import PortObserver
 
 any_float = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True),
@@ -53,21 +53,24 @@ def test_extreme_but_valid_corners_stay_finite() -> None:
         assert math.isfinite(exact_verdict(loop).margin)
 
 
-def test_observer_sum_over_ten_million_cycles_stays_within_its_rounding_bound() -> None:
-    """The observer adds one product a cycle; after N cycles plain summation is within
+def test_port_observer_sum_over_a_million_cycles_stays_within_its_rounding_bound() -> None:
+    """The port observer adds one term a cycle; after N cycles plain summation is within
     N eps sum|terms| of the exact sum (here far inside it).  Reference: math.fsum of the same
-    terms, correctly rounded."""
-    n = 10_000_000
-    k = np.arange(n)
-    velocity = 0.05 * np.sin(2 * np.pi * k / 997.0)
+    terms (``b dx^2 / T - F dx``), correctly rounded."""
+    n = 1_000_000
+    k = np.arange(n + 1)
+    position = 1e-3 * np.sin(2 * np.pi * k / 997.0)
     force = 3.0 + 2.0 * np.cos(2 * np.pi * k / 997.0 + 0.3)
-    T = 1e-3
-    observer = PassivityObserver(T, 0, 0.0, 0.0)
-    update = observer.update
-    for v, f in zip(velocity.tolist(), force.tolist()):
-        update(v, f)
-    terms = force[:-1] * 0.5 * (velocity[:-1] + velocity[1:]) * T
+    T, b = 1e-3, 20.0
+    observer = PortObserver(b, 0.0)
+    apply, sample = observer.apply, observer.sample
+    sample(float(position[0]))
+    for x, f in zip(position[1:].tolist(), force[:-1].tolist()):
+        apply(f, T)
+        sample(x)
+    dx = np.diff(position)
+    terms = b * dx * dx / T - force[:-1] * dx
     exact = math.fsum(terms.tolist())
     bound = n * np.finfo(float).eps * float(np.sum(np.abs(terms)))
-    assert abs(observer.wall_energy - exact) <= bound
-    assert abs(observer.wall_energy - exact) <= 1e-9 * float(np.sum(np.abs(terms)))  # what it really is
+    assert abs(observer.energy - exact) <= bound
+    assert abs(observer.energy - exact) <= 1e-9 * float(np.sum(np.abs(terms)))  # what it really is

@@ -181,6 +181,7 @@ class CanopenExchange:
     def exchange(self) -> CyclicInputs | None:
         """SYNC out, then this cycle's inputs from every TPDO of the cycle; None on timeout."""
         self.send(self._sync)
+        synced = time.perf_counter_ns()  # the drive samples at the SYNC: by now it has
         self.stats.syncs_sent += 1
         slots = self._slots
         count = len(slots)
@@ -208,7 +209,8 @@ class CanopenExchange:
             for part in parts:
                 values += part  # type: ignore[operator]
         sw, vel, pos = self._at
-        return CyclicInputs(values[sw], values[vel], None if pos is None else values[pos])  # type: ignore[index]
+        return CyclicInputs(values[sw], values[vel], None if pos is None else values[pos],  # type: ignore[index]
+                            sampled_by_ns=synced)
 
     # ------------------------------------------------------------------ send
 

@@ -31,6 +31,7 @@ explicit :meth:`ModbusDrive.reconnect`.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -144,6 +145,7 @@ class ModbusDrive(Cia402Master):
         self._codec = InputBlockCodec(word_order, with_position)
         self._requests = _CyclicRequests(unit_id, self._codec.count)
         self._cached: Sequence[int] | None = None  # fc23: inputs read by the last output write
+        self._cached_at = 0  # perf_counter_ns when that answer arrived
         self._connected = False
         self._closed = False
 
@@ -346,13 +348,15 @@ class ModbusDrive(Cia402Master):
         if registers is None:
             self.stats.cyclic_requests += 1
             registers = self._cyclic(requests.read, requests.read_label).registers
+            answered = time.perf_counter_ns()  # the drive sampled before it answered
         else:
             self._cached = None
+            answered = self._cached_at
         if len(registers) != self._codec.count:
             raise self._trip(DriveProtocolError(
                 self.name, f"{len(registers)} registers answered for {requests.read_what}, expected {self._codec.count}"))
         statusword, velocity, position = self._codec.decode(registers)
-        return self._accept_inputs(CyclicInputs(statusword, velocity, position))
+        return self._accept_inputs(CyclicInputs(statusword, velocity, position, sampled_by_ns=answered))
 
     def _send_outputs(self, controlword: int, target_torque: int) -> None:
         if not self.link.up:
@@ -363,6 +367,7 @@ class ModbusDrive(Cia402Master):
         self.stats.cyclic_requests += 1
         if self.cycle == "fc23":
             self._cached = self._cyclic(requests.read_write, requests.read_write_label).registers
+            self._cached_at = time.perf_counter_ns()
         else:
             self._cyclic(requests.write, requests.write_label)
 

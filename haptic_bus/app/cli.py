@@ -144,8 +144,9 @@ def _run(args: argparse.Namespace) -> int:
     if summary is not None:
         p, late = summary.compute_percentiles, summary.lateness_percentiles
         print(f"cycles {summary.cycles}; peak force {summary.peak_force:.4g} N; saturated {summary.saturated_cycles}; "
-              f"observer: interface energy {summary.interface_energy:.4g} J (least {summary.least_interface_energy:.4g} J, "
-              f"below zero in {summary.observer_active_cycles} cycles), wall {summary.wall_energy:.4g} J")
+              f"port energy {summary.energy:.4g} J (least {summary.least_energy:.4g} J, below zero in "
+              f"{summary.observer_active_cycles} cycles, counts rounding within {summary.rounding_bound:.2g} J); "
+              f"passivity layer {summary.layer}: lowered {summary.layer_interventions} targets")
         if p:
             print(f"compute p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us; clock: {summary.clock}")
         if late:

@@ -21,6 +21,7 @@ index), the value and the allowed range.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.resources
 import math
 import pathlib
@@ -46,6 +47,7 @@ from haptic_bus.analysis.loop import (
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader
 from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
+from haptic_bus.control.passivity_layer import LAYER_MODES, LayerPolicy
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
 
@@ -191,6 +193,7 @@ class Profile:
     supervisor: SupervisorPolicy = field(default_factory=SupervisorPolicy)
     start: StartPolicy = field(default_factory=StartPolicy)
     identification: Identification | None = None
+    passivity: LayerPolicy = field(default_factory=LayerPolicy)
 
     def device_loop(self) -> DeviceLoop:
         """The loop the gate judges: m kg, effective b N s/m, T s, delay samples, velocity model."""
@@ -346,10 +349,27 @@ def _read_safety(path: pathlib.Path, table: object) -> SafetySettings:
     return SafetySettings(defaults.master_node_id, heartbeat, consumer, deadline, ABORT_OPTIONS[option], strict, watchdog)
 
 
-def _read_supervisor(path: pathlib.Path, table: object) -> SupervisorPolicy:
+def _read_passivity(path: pathlib.Path, table: object) -> LayerPolicy:
+    """``[passivity]`` (optional): layer ("off", "guard", "bound"), budget_cap (J), beyond_gate."""
+    defaults = LayerPolicy()
+    if table is None:
+        return defaults
+    r = Reader(path, "passivity", table)
+    layer = r.text("layer", choices=LAYER_MODES, default=defaults.layer)
+    cap = r.real("budget_cap", 0.0, 1e6, "J", low_inclusive=False) if "budget_cap" in r.table else None
+    beyond = r.flag("beyond_gate", default=False)
+    r.done()
+    if beyond and layer != "bound":
+        raise ProfileError(path, "passivity.beyond_gate", True, 'false unless layer = "bound" (only the bound '
+                           "guarantees passivity for walls the gate refuses)")
+    return LayerPolicy(layer, cap, beyond)
+
+
+def _read_supervisor(path: pathlib.Path, table: object, passivity: LayerPolicy) -> SupervisorPolicy:
     """``[supervisor]`` (optional): on_late, on_observer ("warn", "derate", "stop"), late_tolerance
-    (fraction of T), late_window (cycles), late_limit (cycles), observer_limit (J)."""
-    defaults = SupervisorPolicy()
+    (fraction of T), late_window (cycles), late_limit (cycles), observer_limit (J).  A late cycle
+    is a warning while a passivity layer holds the port passive, and stops a run without one."""
+    defaults = SupervisorPolicy(on_late=Action.WARN.value if passivity.layer != "off" else Action.STOP.value)
     if table is None:
         return defaults
     r = Reader(path, "supervisor", table)
@@ -472,7 +492,8 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
     scene = _read_scene(path, top.raw("scene", "a [scene] table with [[scene.objects]]"))
     operator_model = _read_operator_model(path, top.raw("operator_model", "", default=None))
     safety = _read_safety(path, top.raw("safety", "a [safety] table", default=None))
-    supervisor = _read_supervisor(path, top.raw("supervisor", "a [supervisor] table", default=None))
+    passivity = _read_passivity(path, top.raw("passivity", "a [passivity] table", default=None))
+    supervisor = _read_supervisor(path, top.raw("supervisor", "a [supervisor] table", default=None), passivity)
     start = _read_start(path, top.raw("start", "a [start] table", default=None))
     identification = _read_identification(path, top.raw("identification", "an [identification] table", default=None))
     top.done()
@@ -483,7 +504,7 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
     except ParameterError as error:
         raise ProfileError(path, "device.velocity", error.value, error.allowed) from None
     return Profile(name, operator, task, description, device, loop, scene, force_limit, policy,
-                   operator_model, path, safety, supervisor, start, identification)
+                   operator_model, path, safety, supervisor, start, identification, passivity)
 
 
 def load_profile(path_or_name: str | pathlib.Path) -> Profile:
@@ -523,5 +544,6 @@ def profile_to_dict(profile: Profile) -> dict[str, Any]:
         "operator_model": dict(profile.operator_model),
         "safety": {k: getattr(profile.safety, k) for k in profile.safety.__dataclass_fields__ if k != "master_node_id"},
         "supervisor": {k: getattr(profile.supervisor, k) for k in profile.supervisor.__dataclass_fields__},
+        "passivity": dataclasses.asdict(profile.passivity),
         "start": {k: getattr(profile.start, k) for k in profile.start.__dataclass_fields__},
     }

@@ -19,7 +19,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, cast
 
-from drives.canopen.drive import CanopenDrive
+from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
 from drives.safety import SafetySettings
 from haptic_bus.app.profiles import Profile
 from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits
@@ -27,6 +27,7 @@ from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.eds import eds_path
 from sim_drive.operator import OperatorModel, operator_from_table
 from sim_drive.parameters import DeviceParameters
+from sim_drive.sync_clock import SyncClock
 
 __all__ = [
     "BusLoadMeter",
@@ -85,11 +86,14 @@ def simulated_canopen(
     channel: str | None = None,
     substeps: int = 1,
     interface: str = "lockstep",
+    sync_clock: SyncClock | None = None,
 ) -> Iterator[tuple[CanopenSimDrive, CanopenDrive]]:
     """Start the simulated drive and connect the master, enabled in CST; stop both on exit.
 
     ``substeps``: plant sub-steps per period with the operator force re-evaluated on each;
-    ``interface``: ``"lockstep"`` (one thread) or ``"virtual"`` (python-can's, one thread per side).
+    ``interface``: ``"lockstep"`` (one thread) or ``"virtual"`` (python-can's, one thread per side);
+    ``sync_clock``: how long each period the drive closes lasts (:mod:`sim_drive.sync_clock`;
+    None: exactly ``T``).  The TPDOs carry the position (0x6064) for the port observer.
     """
     channel = channel or f"haptic-bus-{uuid.uuid4().hex[:12]}"
     sim = CanopenSimDrive(
@@ -98,9 +102,11 @@ def simulated_canopen(
         timing=profile.loop.timing,
         parameters=DeviceParameters(**cast(dict[str, Any], profile.sim_device_parameters()), substeps=substeps),
         operator=operator if operator is not None else profile_operator(profile),
+        sync_clock=sync_clock,
     )
     sim.start()
     drive = CanopenDrive(node_id, interface=interface, channel=channel, period=profile.loop.period,
+                         tpdo_objects=DEFAULT_TPDO_WITH_POSITION,
                          scaling=profile.scaling(), eds=eds_path(), safety=virtual_time_safety(profile.loop.period),
                          heartbeat_consumer_ms=VIRTUAL_TIME_WATCHDOG_MS)
     try:

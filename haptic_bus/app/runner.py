@@ -38,6 +38,7 @@ from drives.bus_config import resolve_bus_config
 from drives.cia402 import State
 from drives.cia402_master import Cia402Master
 from drives.errors import DriveError, HapticBusError
+from haptic_bus.app import preflight
 from haptic_bus.app.live import LiveView
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.realtime import RealtimeReport, RealtimeSettings, realtime_session
@@ -122,7 +123,7 @@ def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options:
     The controller is CANopen node ``controller_node_id``: its heartbeat (``[safety]``) is what
     the drive watches, and it serves gated wall uploads over SDO.
     """
-    from drives.canopen.drive import CanopenDrive
+    from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
     from haptic_bus.control.node import ControllerNode
 
     folder = prepare_run_folder(options.out_dir, profile.name)
@@ -135,7 +136,8 @@ def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options:
 
     def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
         drive = CanopenDrive(node_id, interface=config["interface"], channel=config.get("channel"),
-                             bitrate=config.get("bitrate"), bus_kwargs=extra, period=period, scaling=profile.scaling(),
+                             bitrate=config.get("bitrate"), bus_kwargs=extra, period=period,
+                             tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling=profile.scaling(),
                              scaling_source=PROFILE_SCALING_SOURCE,
                              safety=safety if options.realtime else safety.for_virtual_time(period))
         stack.callback(drive.close)
@@ -148,7 +150,11 @@ def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options:
 
         return drive, profile.gate(), serve
 
-    return _session(profile, options, folder, link, open_drive)
+    hold = longest_hold(period, options.realtime, safety.rpdo_deadline_ms(period), safety.consumer_ms)
+    deadline = safety.rpdo_deadline_ms(period) / 1000.0 if safety.rpdo_deadline_periods else math.inf
+    slack = (safety.consumer_ms - safety.heartbeat_ms) / 1000.0 if safety.master_node_id is not None else math.inf
+    watchdog = Watchdog(min(deadline, slack), safety.rpdo_deadline_periods if deadline <= slack else None)
+    return _session(profile, options, folder, link, open_drive, hold, watchdog)
 
 
 def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) -> RunResult:
@@ -162,7 +168,7 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
 
     def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
-        drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety)
+        drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True)
         stack.callback(drive.close)
         drive.connect()  # reads only: identity, scaling, timing
         _refuse_another_master(drive)  # before the poll measurement, which writes
@@ -175,7 +181,21 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
         gate.admit(profile.compiled_scene())  # the profile was judged at its own timing's delay
         return drive, gate, lambda controller: None
 
-    return _session(profile, options, folder, link, open_drive)
+    hold = longest_hold(period, options.realtime, safety.modbus_watchdog_ms, 0)
+    watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
+    return _session(profile, options, folder, link, open_drive, hold, watchdog)
+
+
+def longest_hold(period: float, realtime: bool, deadline_ms: int, fallback_ms: int) -> float:
+    """How long (s) the drive may hold one torque target before its watchdog removes it: the
+    ``bound`` layer's budget per target.  In virtual time the simulated plant advances one
+    period per SYNC, so a target acts exactly ``period``; in real time up to the drive's receive
+    deadline (RPDO deadline, Modbus watchdog; else ``fallback_ms``, the heartbeat consumer) plus
+    the period it was latched for.  With no watchdog at all nothing bounds it: ``inf``."""
+    if not realtime:
+        return period
+    watchdog = deadline_ms or fallback_ms
+    return watchdog / 1000.0 + period if watchdog else math.inf
 
 
 def _refuse_another_master(drive: ModbusDrive) -> None:
@@ -200,8 +220,17 @@ def _show_scaling(drive: Cia402Master, options: RunOptions) -> None:
 OpenDrive = Callable[[ExitStack], "tuple[Drive, PassivityGate, Callable[[WallController], None]]"]
 
 
+@dataclasses.dataclass(frozen=True)
+class Watchdog:
+    """The shortest stall (s) that faults the drive (inf: none), and the RPDO deadline in periods
+    when that is the binding one (a longer ``T`` lengthens it), else None."""
+
+    stall: float
+    periods: int | None
+
+
 def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: dict[str, Any],
-             open_drive: OpenDrive) -> RunResult:
+             open_drive: OpenDrive, hold: float, watchdog: Watchdog) -> RunResult:
     started = dt.datetime.now(dt.UTC)
     controller: WallController | None = None
     summary: RunSummary | None = None
@@ -219,12 +248,18 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
             derate = prepare_derate(gate, scene) if Action.DERATE.value in (profile.supervisor.on_late,
                                                                             profile.supervisor.on_observer) else None
             controller = WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
-                                        supervisor=profile.supervisor, ramp_time=ramp_time, derate=derate)
+                                        supervisor=profile.supervisor, ramp_time=ramp_time, derate=derate,
+                                        passivity=profile.passivity, hold=hold)
+            extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold,
+                                  "budget_cap_j": controller.observer.cap, "friction_min": gate.device.b,
+                                  "beyond_gate": profile.passivity.beyond_gate}
             serve(controller)
             with _live(controller, profile, options), _scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
-                # last before the first cycle: the drive's RPDO deadline (20 T by default) runs from
-                # here, and the set-up above (the upload server, the real-time session) can take longer
+                if options.realtime:
+                    _preflight(drive, gate, scene, profile, options, watchdog, extra)
+                # last before the first cycle: the drive's RPDO deadline runs from here, and the
+                # set-up above (the upload server, the real-time session) can take longer
                 drive.enable()
                 summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
             reason, error = summary.exit_reason, summary.error
@@ -243,6 +278,22 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
         document = run_document(profile, controller, summary, link, extra, started)
         files = write_run(folder, profile, controller, document)
     return RunResult(reason, error, summary, controller, folder, files)
+
+
+def _preflight(drive: Drive, gate: PassivityGate, scene: CompiledScene, profile: Profile, options: RunOptions,
+               watchdog: Watchdog, extra: dict[str, Any]) -> None:
+    """Measure this machine's lateness on this bus with the drive not enabled, print it and record it
+    in ``extra``, and refuse (:class:`StartRefused`) a run the drive's watchdogs, or the gate without
+    a layer, cannot hold."""
+    timing = preflight.measure(drive, profile.loop.period, spin=options.scheduling.spin)
+    report = preflight.judge(timing, gate, scene, profile.passivity.layer, watchdog.stall, watchdog.periods)
+    extra["preflight"] = report.to_dict()
+    for line in report.lines():
+        logger.info("%s", line)
+        if options.live:
+            print(line, flush=True)
+    if not report.holdable:
+        raise StartRefused(report.reason.removeprefix("refused: "))
 
 
 @contextmanager

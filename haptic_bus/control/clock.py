@@ -1,4 +1,5 @@
-"""The controller's two clocks: virtual (lock-step, as fast as the CPU allows) and real time.
+"""The controller's clocks: virtual (lock-step, as fast as the CPU allows), real time, and a
+scheduled one that replays a given timing in virtual time (adversarial timing, exactly).
 
 The real clock is a deadline scheduler: cycle ``k`` is due at ``start + k T``.  It sleeps to
 ``spin`` before the deadline and spins the rest on ``perf_counter_ns``: ``time.sleep`` wakes
@@ -23,8 +24,10 @@ from __future__ import annotations
 import ctypes
 import functools
 import gc
+import math
 import sys
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -64,6 +67,10 @@ class VirtualClock:
         """Return at once (lateness 0 s): the drive's plant advances exactly ``T`` per SYNC."""
         return 0.0
 
+    def period_bound(self, sampled_by_ns: int) -> float:
+        """The length of the period that the latest sample closed: exactly ``T`` s."""
+        return self.period
+
     def lateness(self, last: int | None = None) -> np.ndarray:
         """Virtual time is never late."""
         return np.zeros(0)
@@ -87,6 +94,8 @@ class RealClock:
         self._cpu = np.zeros(capacity, dtype=np.int64)  # process CPU time at each cycle start, ns
         self._at = np.zeros(capacity, dtype=np.int64)  # perf_counter at each cycle start, ns
         self._count = 0
+        self._previous_ns = 0  # perf_counter_ns at the start of the cycle before the current one
+        self._current_ns = 0
         self.overruns = 0
         self.slack_collections = 0
 
@@ -118,6 +127,7 @@ class RealClock:
                     time.sleep((remaining - self._spin_ns) * 1e-9)
             while (now := time.perf_counter_ns()) < deadline:
                 pass
+        self._previous_ns, self._current_ns = self._current_ns, now
         late = now - deadline
         if late > self._period_ns:
             self.overruns += 1
@@ -129,6 +139,17 @@ class RealClock:
             self._cpu[count] = time.process_time_ns()
             self._count = count + 1
         return lateness
+
+    def period_bound(self, sampled_by_ns: int) -> float:
+        """An upper bound (s) of the period that the latest sample closed: from the start of the cycle
+        before (the SYNC that opened the period left after it) to ``sampled_by_ns`` (the drive had
+        sampled by then; 0: unknown, then to the current cycle's start plus one period, the longest
+        a cycle's request takes before the loop counts it late)."""
+        previous = self._previous_ns
+        if not previous:
+            return self.period
+        end = sampled_by_ns if sampled_by_ns else self._current_ns + self._period_ns
+        return (end - previous) * 1e-9
 
     def _collect(self) -> None:
         """A collection the automatic collector would have made by now, in the slack before a deadline."""
@@ -152,3 +173,68 @@ class RealClock:
         if last <= first:
             return 0.0, 0.0
         return float(self._at[last] - self._at[first]) * 1e-9, float(self._cpu[last] - self._cpu[first]) * 1e-9
+
+
+class ScheduledClock:
+    """Virtual time that keeps a timing it is given: cycle ``k`` starts (and its SYNC goes out) at
+    ``starts[k]`` s, so that stalls, late cycles and jitter are replayed exactly and repeatably.
+
+    The simulated drive must live the same timing: :meth:`sync_clock` is its
+    :data:`sim_drive.sync_clock.SyncClock` (the interval the current cycle's SYNC closes).
+    """
+
+    name = "scheduled (virtual time, a given timing)"
+
+    def __init__(self, period: float, starts: np.ndarray) -> None:
+        starts = np.asarray(starts, dtype=float)
+        if starts.ndim != 1 or starts.size < 1 or not np.all(np.diff(starts) >= 0):
+            raise ValueError("starts: a non-decreasing 1-D array of cycle start times (s)")
+        self.period = period
+        self.starts = starts
+        self.overruns = 0
+        self._cycle = -1
+
+    def wait_next(self, cycle: int) -> float:
+        """Cycle ``cycle`` starts at ``starts[cycle]``: its lateness after ``cycle * T``, s."""
+        self._cycle = cycle
+        late = float(self.starts[cycle]) - cycle * self.period
+        if late > self.period:
+            self.overruns += 1
+        return late
+
+    def period_bound(self, sampled_by_ns: int) -> float:
+        """The length (s) of the period the current cycle's SYNC closes, exactly."""
+        k = self._cycle
+        return self.period if k < 1 else float(self.starts[k] - self.starts[k - 1])
+
+    def sync_clock(self) -> Callable[[float], float | None]:
+        """The simulated drive's view of the same timing (None before the first cycle: ``T``)."""
+        def interval(timestamp: float) -> float | None:
+            return None if self._cycle < 1 else self.period_bound(0)
+
+        return interval
+
+    def lateness(self, last: int | None = None) -> np.ndarray:
+        """Each started cycle's lateness (s), the ``last`` ones only if given."""
+        count = self._cycle + 1
+        late = self.starts[:count] - np.arange(count) * self.period
+        return late if last is None else late[max(0, count - last):]
+
+
+def adversarial_starts(period: float, cycles: int, seed: int, *, stall_probability: float = 0.01,
+                       stall: tuple[float, float] = (2e-3, 20e-3), late_probability: float = 0.05,
+                       late: tuple[float, float] = (0.5, 1.0), jitter: float = 20e-6, busy: float = 50e-6) -> np.ndarray:
+    """Cycle start times (s) of a deadline scheduler on a machine that misbehaves, seeded:
+    cycle ``k`` is due at ``k T`` but starts no earlier than ``busy`` s after the one before (it
+    catches up after a stall, cycle after cycle), plus a jitter (exponential, mean ``jitter`` s),
+    plus with probability ``late_probability`` a lateness of ``late`` (fractions of ``T``,
+    uniform) and with probability ``stall_probability`` a stall of ``stall`` s (uniform)."""
+    rng = np.random.default_rng(seed)
+    extra = rng.exponential(jitter, cycles) if jitter > 0 else np.zeros(cycles)
+    extra += np.where(rng.random(cycles) < late_probability, rng.uniform(*late, cycles) * period, 0.0)
+    extra += np.where(rng.random(cycles) < stall_probability, rng.uniform(*stall, cycles), 0.0)
+    starts = np.empty(cycles)
+    previous = -math.inf
+    for k in range(cycles):
+        previous = starts[k] = max(k * period, previous + busy) + extra[k]
+    return starts

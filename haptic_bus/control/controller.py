@@ -1,11 +1,14 @@
 """The haptic wall controller: one cycle per period ``T`` over any :class:`drives.base.Drive`.
 
-Each cycle: ``read_inputs`` (on CANopen: SYNC out, the drive's TPDO back) -> integrate the
-position exactly as the seed's backward difference does, ``x_k = x_{k-1} + T v_k``, but in
-the drive's integer velocity units (an exact integer sum, so ten million cycles add no
-rounding) -> the scene's force, times the start ramp's scale -> saturate at the profile's
-limit (counted) -> torque target in per mille -> ``write_outputs``.  Beside it: the passivity
-observer, the supervisor (lateness and the observer against the gate's assumptions,
+Each cycle: ``read_inputs`` (on CANopen: SYNC out, the drive's TPDO back) -> the port's energy
+over the period that sample closed (:mod:`~haptic_bus.control.port_energy`: the measured
+position, the force the drive applied, the period's length) -> integrate the position exactly
+as the seed's backward difference does, ``x_k = x_{k-1} + T v_k``, but in the drive's integer
+velocity units (an exact integer sum, so ten million cycles add no rounding) -> the scene's
+force, times the start ramp's scale -> saturate at the profile's limit (counted) -> torque
+target in per mille -> the passivity layer lowers it to what the energy budget allows
+(:mod:`~haptic_bus.control.passivity_layer`) -> ``write_outputs``.  Beside it: the supervisor
+(lateness and the observer against the gate's assumptions,
 :mod:`~haptic_bus.control.supervisor`), a bounded record and the run's events.  Wall changes
 pass the gate first, in the caller's thread, and take effect whole at the next cycle boundary
 (:mod:`~haptic_bus.control.scenes`); a refused change leaves the running scene untouched.
@@ -20,18 +23,19 @@ import logging
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from drives.base import Drive
+from drives.base import CyclicInputs, Drive
 from drives.cia402 import POSITION_ACTUAL
-from drives.errors import DriveError, ParameterError
-from haptic_bus.analysis.velocity import VelocityModel
+from drives.errors import DriveError, DriveProtocolError, ParameterError
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.gate import GateDecision, PassivityGate
-from haptic_bus.control.observer import PassivityObserver
+from haptic_bus.control.passivity_layer import LayerPolicy, PassivityLayer, default_budget_cap
+from haptic_bus.control.port_energy import PortObserver
 from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.scenes import SceneEntry, SceneSlot
@@ -69,7 +73,9 @@ class PositionIntegrator:
 
 @dataclass
 class RunSummary:
-    """What a run did: counts, peaks, energy (J), compute and lateness percentiles (s), and its end.
+    """What a run did: counts, peaks, the port's energy (J: the last, the least, and the counts
+    rounding bound under which the truth may lie), the passivity layer and how often it lowered a
+    target, compute and lateness percentiles (s), and its end.
 
     ``exit_reason`` is one of :data:`EXIT_REASONS`; ``error`` the message that ended it early.
     """
@@ -77,10 +83,12 @@ class RunSummary:
     cycles: int
     saturated_cycles: int
     peak_force: float
-    wall_energy: float
-    interface_energy: float
-    least_interface_energy: float
+    energy: float
+    least_energy: float
+    rounding_bound: float
     observer_active_cycles: int
+    layer: str
+    layer_interventions: int
     compute_percentiles: dict[str, float]
     clock: str
     overruns: int
@@ -93,7 +101,7 @@ class RunSummary:
 
     @property
     def observer_flagged(self) -> bool:
-        """True once the interface gave the operator more energy than it held."""
+        """True once the port gave the operator more energy than it held."""
         return self.observer_active_cycles > 0
 
 
@@ -104,7 +112,10 @@ class WallController:
     or :class:`RealClock`; ``record_capacity`` bounds the record; ``origin`` (m) is the handle's
     position at the first cycle; ``supervisor`` the policy (None: no supervision);
     ``ramp_time`` (s) scales the force from 0 to 1 over the first seconds (0: none; the caller
-    proves every scaled wall passive); ``derate`` is what a "derate" alarm calls.
+    proves every scaled wall passive); ``derate`` is what a "derate" alarm calls; ``passivity``
+    the layer's policy and ``hold`` (s) the longest the drive may hold a target before its
+    watchdog faults it (the ``bound`` layer's budget per target; default one period).  The port
+    observer needs the drive's cyclic inputs to carry the position (0x6064).
     """
 
     def __init__(
@@ -120,6 +131,8 @@ class WallController:
         supervisor: SupervisorPolicy | None = None,
         ramp_time: float = 0.0,
         derate: Derate | None = None,
+        passivity: LayerPolicy | None = None,
+        hold: float | None = None,
     ) -> None:
         if not (isinstance(ramp_time, (int, float)) and 0.0 <= ramp_time < math.inf):
             raise ParameterError("ramp_time", ramp_time, "a finite time >= 0 s", "controller")
@@ -131,10 +144,22 @@ class WallController:
         self.scenes = SceneSlot(gate, scene, self.events, self.now)
         self.integrator = PositionIntegrator(self.period, drive.scaling.velocity_per_count, origin)
         device = gate.device
+        policy = passivity if passivity is not None else LayerPolicy()
+        self.passivity = policy
+        whole = math.floor(device.delay)
+        self._latency = whole  # targets sent before the one a period carries (latched at SYNC)
+        self._switching = device.delay != whole  # the target changes at an unknown instant within a period
+        committed = whole + self._switching
+        self.hold = hold if policy.layer == "bound" and hold is not None else self.period
+        scaling = drive.scaling
+        springs = [k for k in scene.stiffness if k > 0]
+        cap = policy.budget_cap if policy.budget_cap is not None else default_budget_cap(
+            min(force_limit, scaling.max_force), device.b, self.hold, committed, min(springs, default=0.0))
         tolerance = supervisor.observer_limit if supervisor is not None else 0.0
-        self.observer = PassivityObserver(self.period, math.ceil(device.delay), device.m, device.b, tolerance,
-                                          initial_energy=scene.stored_energy(origin),
-                                          average_velocity=VelocityModel.parse(device.velocity).kind == "average")
+        self.observer = PortObserver(device.b, scaling.position_per_count, initial_energy=scene.stored_energy(origin),
+                                     cap=cap, tolerance=tolerance)
+        self.layer = PassivityLayer(policy.layer, device.b, self.hold, committed, scaling.newton_per_permille)
+        self._sent: deque[float] = deque([0.0] * (whole + 2), maxlen=whole + 2)  # forces sent, N, newest last
         self.supervisor = Supervisor(supervisor, self.period, device.delay) if supervisor is not None else None
         self.record = RunRecord(record_capacity)
         self.ramp_cycles = round(ramp_time / self.period)
@@ -200,6 +225,7 @@ class WallController:
         inputs = drive.read_inputs()
         started = time.perf_counter()
         scaling = drive.scaling
+        energy = self._account_port(inputs, scaling.position_per_count)
         v = inputs.velocity * scaling.velocity_per_count
         x = self.integrator.add(inputs.velocity)
         force = entry.scene.force(x, v)
@@ -209,18 +235,39 @@ class WallController:
         if force > limit or force < -limit:
             force = limit if force > 0 else -limit
             self.saturated_cycles += 1
-        torque = scaling.torque_permille(-force)  # the motor pushes against the wall force
+        torque = self.layer.limit(scaling.torque_permille(-force), self.observer.budget)  # the motor pushes against the wall
         drive.write_outputs(torque)
+        self._sent.append(torque * scaling.newton_per_permille)
         compute = time.perf_counter() - started
-        energy = self.observer.update(v, force)
         supervisor = self.supervisor
         late, alarm = supervisor.cycle(lateness, energy, inputs.age) if supervisor is not None else (False, None)
         if abs(force) > self.peak_force:
             self.peak_force = abs(force)
-        self.record.append(self.cycles * self.period, x, v, force, torque, energy, entry.scene_id, scale, late, compute)
+        self.record.append(self.cycles * self.period, x, v, force, torque, energy, entry.scene_id, scale, late, compute,
+                           self.layer.removed)
         self.cycles += 1
         if alarm is not None:
             self._act(alarm)
+
+    def _account_port(self, inputs: CyclicInputs, position_per_count: float) -> float:
+        """The port's energy (J) up to this cycle's sample: the period it closes, with the force(s)
+        the drive applied over it (:mod:`~haptic_bus.control.port_energy`); a stale input closes none."""
+        observer = self.observer
+        position = inputs.position
+        if position is None:
+            raise DriveProtocolError(self.drive.name, "the cyclic inputs carry no position (0x6064): the port "
+                                                      "observer and the passivity layer need it mapped")
+        if self.cycles:
+            fresh = not inputs.age
+            duration = self.clock.period_bound(inputs.sampled_by_ns if fresh else 0)
+            sent, latency = self._sent, self._latency
+            if self._switching:
+                observer.switch(sent[-2 - latency], sent[-1 - latency], duration)
+            else:
+                observer.apply(sent[-1 - latency], duration)
+            if not fresh:
+                return observer.energy
+        return observer.sample(position * position_per_count)
 
     def _act(self, alarm: Alarm) -> None:
         self.events.add(self.now(), "alarm", alarm.message, alarm=alarm.kind, action=alarm.action.value)
@@ -283,10 +330,12 @@ class WallController:
             cycles=self.cycles,
             saturated_cycles=self.saturated_cycles,
             peak_force=self.peak_force,
-            wall_energy=self.observer.wall_energy,
-            interface_energy=self.observer.interface_energy,
-            least_interface_energy=self.observer.least_interface_energy,
+            energy=self.observer.energy,
+            least_energy=self.observer.least,
+            rounding_bound=self.observer.rounding,
             observer_active_cycles=self.observer.active_cycles,
+            layer=self.layer.mode,
+            layer_interventions=self.layer.interventions,
             compute_percentiles=percentiles(self.record.column("compute_s")),
             clock=self.clock.name,
             overruns=self.clock.overruns,

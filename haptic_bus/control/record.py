@@ -14,8 +14,11 @@ from typing import Any
 import numpy as np
 
 COLUMNS = ("time_s", "position_m", "velocity_m_per_s", "force_n", "torque_permille", "energy_j",
-           "scene_id", "scale", "late", "compute_s")
-"""``energy_j``: the observer's interface energy; ``scene_id``: the scene in effect (see the run's
+           "scene_id", "scale", "late", "compute_s", "layer_n")
+"""``force_n``: the wall force the scene asked (saturated at the force limit); ``torque_permille``:
+the target sent (after the passivity layer); ``energy_j``: the port observer's energy ``E`` up to
+the cycle's sample; ``layer_n``: the force the passivity layer took off the target (N, 0 when it
+did not act); ``scene_id``: the scene in effect (see the run's
 ``scenes``); ``scale``: the factor on its force (the start ramp, 1 otherwise); ``late``: 1 when
 the supervisor found the cycle late; ``compute_s``: from the drive's inputs in hand to the
 outputs handed to the drive (position, scene, saturation, conversion, encode and send)."""
@@ -33,11 +36,11 @@ class RunRecord:
         self.total = 0
 
     def append(self, t: float, x: float, v: float, force: float, torque: int, energy: float,
-               scene_id: int, scale: float, late: bool, compute: float) -> None:
-        """Store one cycle (s, m, m/s, N, per mille, J, id, factor, flag, s)."""
+               scene_id: int, scale: float, late: bool, compute: float, removed: float) -> None:
+        """Store one cycle (s, m, m/s, N, per mille, J, id, factor, flag, s, N)."""
         row = self._rows[self._next]
         row[0], row[1], row[2], row[3], row[4] = t, x, v, force, torque
-        row[5], row[6], row[7], row[8], row[9] = energy, scene_id, scale, late, compute
+        row[5], row[6], row[7], row[8], row[9], row[10] = energy, scene_id, scale, late, compute, removed
         self._next = (self._next + 1) % self._rows.shape[0]
         self.total += 1
 

@@ -63,7 +63,7 @@ class SupervisorPolicy:
     ``T``), ``late_window`` (cycles), ``late_limit`` (late cycles tolerated in a window),
     ``observer_limit`` (J below zero)."""
 
-    on_late: str = Action.STOP.value
+    on_late: str = Action.WARN.value  # the passivity layer holds a late cycle passive (a profile without one: stop)
     late_tolerance: float = 0.5
     late_window: int = 1000
     late_limit: int = 10

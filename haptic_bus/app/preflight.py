@@ -1,0 +1,142 @@
+"""Pre-flight timing: how late this machine runs the loop on this bus, measured before enabling.
+
+A real-time run's verdict depends on timing the gate cannot see.  Before the drive is enabled
+the run cycles a few hundred times with SYNC running (CANopen: SYNC, the drive's TPDO, an RPDO
+with the held controlword and zero torque; Modbus: the same read and write), paced by the real
+clock under the run's own scheduling, and keeps how late each cycle started.  Then it judges:
+
+* **the watchdogs** -- a cycle held up longer than the drive's receive watchdog (the RPDO
+  deadline, the heartbeat consumer's slack, the Modbus watchdog) faults the drive.  If the
+  longest stall measured, times :data:`STALL_MARGIN`, reaches it, the run is refused (exit 1,
+  nothing enabled), naming the smallest period ``T`` whose watchdog (a deadline counted in
+  periods) would hold that stall;
+* **the gate at the measured delay** -- the loop delay the gate assumed plus the measured p99
+  lateness in samples.  Passive there: nothing to add.  Not passive: with a passivity layer the
+  run goes on (the layer holds the port passive; it may act), without one it is refused.
+
+The run prints the distribution and the verdict, and ``run.json`` records both (``preflight``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from drives.base import Drive
+from haptic_bus.control.clock import RealClock
+from haptic_bus.control.controller import percentiles
+from haptic_bus.control.gate import PassivityGate
+from haptic_bus.control.scene import CompiledScene
+
+PREFLIGHT_CYCLES = 500  # cycles measured before enabling: 0.5 s at T = 1 ms
+STALL_MARGIN = 1.5  # the longest stall measured, times this, must stay under the drive's watchdog
+PERIOD_GRID = 0.25e-3  # s: the smallest T is proposed on this grid
+
+
+@dataclass(frozen=True)
+class PreflightReport:
+    """What pre-flight measured and decided.
+
+    ``lateness``: p50/p99/p99.9/max of the cycles' start lateness (s); ``cycle``: the same of one
+    cycle's exchange with the drive (s, SYNC out to RPDO out); ``longest_gap``: the longest time
+    between two cycle starts (s: what the drive went without a SYNC); ``overruns``: cycles started
+    more than ``T`` late; ``observed_delay``: the gate's delay plus the p99 lateness (samples);
+    ``passive_at_observed``: the gate's verdict there; ``watchdog``: the shortest stall (s) that
+    faults the drive (inf: none); ``holdable``: False refuses the run, ``reason`` says why;
+    ``smallest_period``: the shortest ``T`` (s) this machine holds, where one can be named."""
+
+    cycles: int
+    period: float
+    lateness: dict[str, float]
+    cycle: dict[str, float]
+    longest_gap: float
+    overruns: int
+    observed_delay: float
+    passive_at_observed: bool
+    watchdog: float
+    holdable: bool
+    reason: str
+    smallest_period: float | None
+
+    def lines(self) -> list[str]:
+        """What the run prints."""
+        late, cycle = self.lateness, self.cycle
+        first = (f"pre-flight: {self.cycles} cycles at T = {self.period * 1e3:g} ms, no torque: start lateness "
+                 f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms; "
+                 f"exchange p99 {cycle['p99'] * 1e6:.0f} us; longest gap {self.longest_gap * 1e3:.3g} ms; "
+                 f"{self.overruns} overruns")
+        return [first, f"pre-flight: {self.reason}"]
+
+    def to_dict(self) -> dict[str, Any]:
+        """For ``run.json``."""
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Pre-flight's raw measurement: each cycle's start lateness, start time and exchange time (s)."""
+
+    period: float
+    lateness: np.ndarray
+    starts: np.ndarray
+    exchange: np.ndarray
+    overruns: int
+
+
+def measure(drive: Drive, period: float, cycles: int = PREFLIGHT_CYCLES, spin: float | None = None) -> Timing:
+    """Cycle ``drive`` (not enabled: zero torque) ``cycles`` times on a fresh real clock."""
+    clock = RealClock(period, capacity=cycles, spin=spin)
+    starts = np.zeros(cycles)
+    exchange = np.zeros(cycles)
+    for k in range(cycles):
+        clock.wait_next(k)
+        started = time.perf_counter()
+        drive.read_inputs()
+        drive.write_outputs(0)
+        starts[k], exchange[k] = started, time.perf_counter() - started
+    return Timing(period, clock.lateness(), starts, exchange, clock.overruns)
+
+
+def _on_grid(period: float) -> float:
+    return math.ceil(period / PERIOD_GRID - 1e-9) * PERIOD_GRID
+
+
+def judge(timing: Timing, gate: PassivityGate, scene: CompiledScene, layer: str, watchdog: float,
+          deadline_periods: int | None) -> PreflightReport:
+    """The verdict on the measured timing (module docstring).  ``watchdog`` (s): the shortest stall
+    that faults the drive; ``deadline_periods``: the RPDO deadline in periods when it is the
+    binding watchdog (then a longer ``T`` lengthens it), else None."""
+    period = timing.period
+    late, cycle = percentiles(timing.lateness), percentiles(timing.exchange)
+    gap = float(np.max(np.diff(timing.starts))) if timing.starts.size > 1 else period
+    observed = gate.device.delay + late["p99"] / period
+    passive = PassivityGate(dataclasses.replace(gate.device, delay=observed), gate.policy).passes(scene)
+
+    def report(holdable: bool, reason: str, smallest: float | None = None) -> PreflightReport:
+        return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, observed, passive,
+                               watchdog, holdable, reason, smallest)
+
+    if cycle["p99"] > period:
+        slowest = _on_grid(STALL_MARGIN * cycle["p99"])
+        return report(False, f"refused: one exchange with the drive takes {cycle['p99'] * 1e3:.3g} ms (p99), more than "
+                             f"T = {period * 1e3:g} ms: this machine holds T >= {slowest * 1e3:g} ms", slowest)
+    if STALL_MARGIN * gap >= watchdog:
+        smallest: float | None = None
+        where = "; lengthen the drive's watchdog ([safety])"
+        if deadline_periods:
+            smallest = _on_grid(STALL_MARGIN * gap / deadline_periods)
+            where = f"; this machine holds T >= {smallest * 1e3:g} ms (RPDO deadline {deadline_periods} periods)"
+        return report(False, f"refused: a gap of {gap * 1e3:.3g} ms between cycles measured, x{STALL_MARGIN:g}, reaches "
+                             f"the drive's watchdog of {watchdog * 1e3:.3g} ms: the drive would fault{where}", smallest)
+    if passive:
+        return report(True, f"the gate passes the scene at the measured loop delay of {observed:.3g} samples")
+    if layer != "off":
+        return report(True, f"the scene is not passive at the measured loop delay of {observed:.3g} samples; the "
+                            f"passivity layer ({layer}) holds the port passive and may lower the force")
+    return report(False, f"refused: the scene is not passive at the measured loop delay of {observed:.3g} samples "
+                         f'and [passivity] layer = "off"; use layer "guard" or "bound", or a longer T')

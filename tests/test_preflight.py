@@ -1,0 +1,58 @@
+"""Pre-flight's verdict on measured timing: held, held by the layer, or refused with the T that holds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from haptic_bus.app.preflight import PERIOD_GRID, STALL_MARGIN, Timing, judge
+from haptic_bus.app.profiles import load_profile
+
+T = 1e-3
+
+
+def timing(lateness: np.ndarray, exchange: float = 100e-6, gap_at: int | None = None, gap: float = 0.0) -> Timing:
+    """Cycles due every T with the given lateness; one extra gap of ``gap`` s before cycle ``gap_at``."""
+    starts = np.arange(lateness.size) * T + lateness
+    if gap_at is not None:
+        starts[gap_at:] += gap
+        lateness = lateness.copy()
+        lateness[gap_at] += gap
+    return Timing(T, lateness, starts, np.full(lateness.size, exchange), int(np.sum(lateness > T)))
+
+
+def test_a_quiet_machine_is_judged_at_its_measured_delay() -> None:
+    profile = load_profile("cia402-handle")
+    late = np.full(500, 20e-6)
+    late[::50] = 300e-6  # 2 % of the cycles: p99 = 300 us
+    report = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.020, 20)
+    assert report.holdable and report.passive_at_observed
+    assert report.observed_delay == pytest.approx(1.0 + 0.3, rel=1e-9)
+    assert report.lateness["p99"] == pytest.approx(300e-6)
+    assert "passes the scene" in report.reason
+
+
+def test_a_stall_that_would_trip_the_rpdo_deadline_refuses_naming_the_period_that_holds_it() -> None:
+    profile = load_profile("cia402-handle")
+    report = judge(timing(np.zeros(500), gap_at=250, gap=15e-3), profile.gate(), profile.compiled_scene(), "guard", 0.020, 20)
+    assert not report.holdable
+    assert report.longest_gap == pytest.approx(16e-3)
+    expected = np.ceil(STALL_MARGIN * 16e-3 / 20 / PERIOD_GRID - 1e-9) * PERIOD_GRID  # 1.2 ms -> 1.25 ms
+    assert report.smallest_period == pytest.approx(expected) and expected == pytest.approx(1.25e-3)
+    assert "this machine holds T >= 1.25 ms" in report.reason and "16 ms" in report.reason
+
+
+def test_a_machine_slower_than_the_period_refuses() -> None:
+    profile = load_profile("cia402-handle")
+    report = judge(timing(np.zeros(500), exchange=2e-3), profile.gate(), profile.compiled_scene(), "guard", 0.020, 20)
+    assert not report.holdable and report.smallest_period == pytest.approx(3e-3)
+    assert "more than T = 1 ms" in report.reason
+
+
+def test_lateness_the_gate_cannot_cover_is_held_by_the_layer_and_refused_without_it() -> None:
+    profile = load_profile("stiff-wall")  # passive at D = 1 with a small margin, not at D = 1.9
+    late = np.full(500, 900e-6)
+    covered = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
+    assert covered.holdable and not covered.passive_at_observed and "layer (guard) holds" in covered.reason
+    bare = judge(timing(late), profile.gate(), profile.compiled_scene(), "off", 0.050, 50)
+    assert not bare.holdable and 'layer = "off"' in bare.reason
