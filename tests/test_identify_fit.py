@@ -14,6 +14,8 @@ error, so a 4-sigma miss of a normal estimate (probability 6e-5) means a broken 
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 from pathlib import Path
 
@@ -55,13 +57,12 @@ class DirectDrive:
 
 
 class StaleEvery(DirectDrive):
-    """Every ``every``-th cycle repeats the last inputs, as a CANopen master does when a TPDO misses
-    its timeout (its ``stats.cycles`` counts only the fresh ones)."""
+    """Every ``every``-th cycle repeats the last inputs with their age, as a CANopen master does
+    when a TPDO misses its timeout."""
 
     def __init__(self, sim: SimulatedDrive, every: int) -> None:
         super().__init__(sim)
         self.every = every
-        self.stats = type("Stats", (), {"cycles": 0})()
         self._last: CyclicInputs | None = None
         self._count = 0
 
@@ -69,8 +70,7 @@ class StaleEvery(DirectDrive):
         inputs = super().read_inputs()
         self._count += 1
         if self._last is not None and self._count % self.every == 0:
-            return self._last
-        self.stats.cycles += 1
+            return dataclasses.replace(self._last, age=1)
         self._last = inputs
         return inputs
 
@@ -218,8 +218,6 @@ def test_cycles_without_fresh_inputs_are_left_out() -> None:
     out, the estimate is as good as ever, a warning names them.  Unmarked, the motion mask would
     have dropped nearly all of them as well (a zero step in a moving handle is no clear motion),
     to within a tenth of a standard error: the mark makes sure, and tells."""
-    import dataclasses
-
     from haptic_bus.identify import fit_plant
 
     truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, noise_seed=9)

@@ -110,3 +110,53 @@ def test_with_the_layer_the_port_stays_passive(scenario: str, layer: str) -> Non
     truth, measured, rounding = run(scenario, layer)
     assert np.all(truth >= -rounding - ROUNDING_SLACK), f"least truth {truth.min():.3g} J"
     assert np.all(measured - rounding <= truth + ROUNDING_SLACK)
+
+
+def test_under_nominal_timing_guard_leaves_the_demo_wall_alone_and_the_observer_meets_the_ledger(tmp_path) -> None:
+    """10 s of the demo (cia402-handle, a 3 N push into the wall): the guard never lowers a target,
+    and the port observer is within 1 % of the drive's exact ledger, never above it by more than
+    its rounding bound."""
+    from haptic_bus.app.demo import run_demo
+
+    result = run_demo(tmp_path, seconds=10.0)
+    summary = result.summary
+    assert summary.exit_reason == "completed" and summary.cycles == 10_000
+    assert summary.layer == "guard" and summary.layer_interventions == 0
+    assert summary.energy - summary.rounding_bound <= result.port_energy
+    assert summary.energy == pytest.approx(result.port_energy, rel=0.01)
+
+
+def test_bound_runs_a_wall_beyond_the_gate_passively_when_the_profile_opts_in() -> None:
+    """K = 60 000 N/m, B = 0 on the stiff-wall device: the gate refuses it (the design notes' active
+    example), a profile that says ``layer = "bound"`` and ``beyond_gate = true`` runs it, and under
+    adversarial timing and contact chatter the port stays above minus the rounding bound."""
+    from haptic_bus.control.scene import Wall
+
+    base = load_profile("stiff-wall")
+    wall = Wall("end-stop", 0.003, -1, 60000.0, 0.0)
+    profile = dataclasses.replace(base, scene=(wall,), passivity=LayerPolicy("bound", beyond_gate=True))
+    assert not profile.gate().judge(profile.compiled_scene()).accepted
+    period = profile.loop.period
+    clock = ScheduledClock(period, adversarial_starts(period, SCHEDULE, 1))
+    truth, rounding = [], []
+    with simulated_canopen(profile, operator=Chatter(25.0, 25.0), sync_clock=clock.sync_clock(), substeps=4) as (sim, drive):
+        origin = encoder_origin(drive)
+        scene = profile.compiled_scene()
+        controller = WallController(drive, profile.gate(), scene, force_limit=profile.force_limit, clock=clock,
+                                    origin=origin, supervisor=None, passivity=profile.passivity, hold=HOLD)
+        summary = controller.run(1500, on_cycle=lambda c: (truth.append(sim.drive.viscous_energy + sim.drive.wall_energy),
+                                                           rounding.append(c.observer.rounding)))
+    assert summary.exit_reason == "completed" and summary.layer_interventions > 0
+    assert not controller.scenes.history[0].decision.accepted  # recorded as refused by the gate
+    assert np.all(np.array(truth) >= -np.array(rounding) - ROUNDING_SLACK)
+
+
+def test_beyond_gate_needs_the_bound_layer(tmp_path) -> None:
+    from haptic_bus.app.profile_reader import ProfileError
+    from haptic_bus.app.profiles import resolve_profile
+
+    text = resolve_profile("stiff-wall").read_text() + '\n[passivity]\nlayer = "guard"\nbeyond_gate = true\n'
+    path = tmp_path / "beyond.toml"
+    path.write_text(text)
+    with pytest.raises(ProfileError, match=r"passivity\.beyond_gate.*bound"):
+        load_profile(path)

@@ -40,6 +40,9 @@ logger = logging.getLogger(__name__)
 
 
 
+PERIOD_TOLERANCE = 0.25  # of T: a period longer than this is a stall the fit leaves out
+
+
 class CycleDrive(Protocol):
     """What the cycle loop needs of a drive (a :class:`~drives.base.Drive` has it)."""
 
@@ -57,6 +60,9 @@ class Clock(Protocol):
 
     def wait_next(self, cycle: int) -> float:
         """Block until cycle ``cycle`` is due; how late it started, s."""
+
+    def period_bound(self, sampled_by_ns: int) -> float:
+        """How long (s, at most) the period the latest sample closed lasted."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,16 +108,18 @@ def run_cycles(drive: CycleDrive, session: Session, recorder: Recorder, clock: C
                stop: threading.Event | None = None) -> bool:
     """Cycle until the session is done (True) or ``stop`` is set (False); every cycle recorded.
 
-    A drive with a master's ``stats.cycles`` (the inputs it received fresh) tells which cycles
-    repeated the last inputs instead (a TPDO that missed its timeout): they are recorded as stale.
+    A cycle is recorded as not fresh, and the fit leaves out every equation that touches it, when
+    its inputs repeat the last ones (a TPDO that missed its timeout: ``age`` > 0) or when the
+    period its sample closes was longer than ``T`` by more than :data:`PERIOD_TOLERANCE` (a stall
+    of the machine: a real handle moved under the held torque for that long, which the
+    fixed-period model does not describe).  The torque recorded is the one sent, per mille.
     """
     scaling = drive.scaling
     per_count = scaling.position_per_count
-    stats = getattr(drive, "stats", None)
+    longest = (1.0 + PERIOD_TOLERANCE) * session.plan.period
     cycle = 0
     while stop is None or not stop.is_set():
         clock.wait_next(cycle)
-        received = stats.cycles if stats is not None else -1
         inputs = drive.read_inputs()
         if inputs.position is None:
             raise DriveProtocolError(getattr(drive, "name", "drive"),
@@ -121,7 +129,8 @@ def run_cycles(drive: CycleDrive, session: Session, recorder: Recorder, clock: C
             return True
         torque = scaling.torque_permille(force)
         drive.write_outputs(torque)
-        recorder.append(inputs.position, inputs.velocity, torque, stats is None or stats.cycles > received)
+        recorder.append(inputs.position, inputs.velocity, torque,
+                        not inputs.age and clock.period_bound(inputs.sampled_by_ns) <= longest)
         cycle += 1
     return False
 

@@ -508,10 +508,11 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
 
 
 def load_profile(path_or_name: str | pathlib.Path) -> Profile:
-    """Read, validate and gate a profile; raise ProfileError (invalid) or ProfileRefusal (not passive)."""
+    """Read, validate and gate a profile; raise ProfileError (invalid) or ProfileRefusal (not passive,
+    unless the profile runs beyond the gate under the bound layer: ``[passivity] beyond_gate``)."""
     profile = read_profile(path_or_name)
     decision = profile.gate().judge(profile.compiled_scene())
-    if not decision.accepted:
+    if not decision.accepted and not profile.passivity.beyond_gate:
         raise ProfileRefusal(profile.path or profile.name, decision)
     return profile
 

@@ -178,7 +178,8 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
         link["poll"] = None if poll is None else dataclasses.asdict(poll)
         logger.info("Modbus poll: the gate assumes a loop delay of %.4g sample(s)", delay)
         gate = PassivityGate(dataclasses.replace(profile.device_loop(), delay=delay), profile.gate_policy)
-        gate.admit(profile.compiled_scene())  # the profile was judged at its own timing's delay
+        if not profile.passivity.beyond_gate:  # the profile was judged at its own timing's delay
+            gate.admit(profile.compiled_scene())
         return drive, gate, lambda controller: None
 
     hold = longest_hold(period, options.realtime, safety.modbus_watchdog_ms, 0)

@@ -141,11 +141,11 @@ class WallController:
         self.force_limit = force_limit
         self.clock = clock if clock is not None else VirtualClock(self.period)
         self.events = EventLog()
-        self.scenes = SceneSlot(gate, scene, self.events, self.now)
-        self.integrator = PositionIntegrator(self.period, drive.scaling.velocity_per_count, origin)
-        device = gate.device
         policy = passivity if passivity is not None else LayerPolicy()
         self.passivity = policy
+        self.scenes = SceneSlot(gate, scene, self.events, self.now, beyond_gate=policy.beyond_gate)
+        self.integrator = PositionIntegrator(self.period, drive.scaling.velocity_per_count, origin)
+        device = gate.device
         whole = math.floor(device.delay)
         self._latency = whole  # targets sent before the one a period carries (latched at SYNC)
         self._switching = device.delay != whole  # the target changes at an unknown instant within a period

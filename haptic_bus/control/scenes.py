@@ -6,6 +6,10 @@ reference (nothing is ever cleared, so no upload can be lost between a read and 
 Every scene that is ever in effect gets an id; the history keeps its objects and the gate's
 decision (what ``run.json`` reports).  A derate (the supervisor's) is adopted at once by the
 control thread itself.
+
+With ``beyond_gate`` (a ``bound`` passivity layer that guarantees passivity at run time, opted
+into by the profile) a scene the gate refuses is admitted all the same: its decision, refused,
+stays in the history and the event says so.
 """
 
 from __future__ import annotations
@@ -47,15 +51,18 @@ class SceneEntry:
 class SceneSlot:
     """The running scene, the last accepted one, and their history (module docstring).
 
-    ``now`` gives the run's clock (s) for events; ``events`` receives "upload" and "refused".
+    ``now`` gives the run's clock (s) for events; ``events`` receives "upload" and "refused";
+    ``beyond_gate``: admit scenes the gate refuses (module docstring).
     """
 
-    def __init__(self, gate: PassivityGate, scene: CompiledScene, events: EventLog, now: Callable[[], float]) -> None:
+    def __init__(self, gate: PassivityGate, scene: CompiledScene, events: EventLog, now: Callable[[], float],
+                 beyond_gate: bool = False) -> None:
         self.gate = gate
         self.events = events
+        self.beyond_gate = beyond_gate
         self._now = now
         self._lock = threading.Lock()
-        first = SceneEntry(0, "profile", scene, gate.admit(scene))
+        first = SceneEntry(0, "profile", scene, self._decide(scene))
         self.history: list[SceneEntry] = [first]
         self.running = first
         self._latest = first
@@ -82,17 +89,25 @@ class SceneSlot:
             changed = [obj.with_parameters(*changes[obj.name]) if obj.name in changes else obj for obj in base.objects]
             return self._admit(compile_scene(changed), origin)
 
+    def _decide(self, scene: CompiledScene) -> GateDecision:
+        """The gate's decision; GateRefusal for a refused scene unless beyond the gate is allowed."""
+        decision = self.gate.judge(scene)
+        if not decision.accepted and not self.beyond_gate:
+            raise GateRefusal(decision)
+        return decision
+
     def _admit(self, scene: CompiledScene, origin: str) -> GateDecision:
         try:
-            decision = self.gate.admit(scene)
+            decision = self._decide(scene)
         except GateRefusal as refusal:
             self.events.add(self._now(), "refused", f"{origin} refused by the gate", reasons=list(refusal.decision.reasons))
             raise
         entry = SceneEntry(len(self.history), origin, scene, decision)
         self.history.append(entry)
         self._latest = entry
-        self.events.add(self._now(), "upload", f"{origin} accepted as scene {entry.scene_id}",
-                        scene_id=entry.scene_id, worst_margin=decision.worst_margin)
+        beyond = "" if decision.accepted else " beyond the gate (the bound passivity layer holds it passive)"
+        self.events.add(self._now(), "upload", f"{origin} accepted as scene {entry.scene_id}{beyond}",
+                        scene_id=entry.scene_id, worst_margin=decision.worst_margin, gate_passed=decision.accepted)
         return decision
 
     def adopt(self) -> SceneEntry:

@@ -11,19 +11,20 @@ module watches both (DESIGN 4.1):
   than the gate assumed.  A cycle is late when its start lateness plus ``input_age * T``
   exceeds the tolerance; more than ``late_limit`` late cycles among the last ``late_window``
   is an alarm;
-- **the observer**: the interface energy (:mod:`~haptic_bus.control.observer`, which starts
+- **the observer**: the port's energy (:mod:`~haptic_bus.control.port_energy`, which starts
   from the energy stored in the walls the run begins in contact with) more than
   ``observer_limit`` J below zero is an alarm.  It sees energy the gate's linear,
-  time-invariant model does not: a scene changed while the handle is inside it (a stiffer wall
-  releases ``(K2 - K1) x^2 / 2`` it never stored), the unilateral contact.  It cannot see a
-  handle whose true ``b`` or ``m`` is smaller than configured: its sum uses the configured ones,
-  and for a scene the gate admits that sum stays non-negative for the motions its verdict
-  covers, whatever the true plant; the operator's force is not measured, so no run-time sum
-  can tell a weaker handle from a pushing operator.  ``m`` and ``b``
-  are measured at commissioning (``haptic-bus identify``, a profile's ``[identification]``).
+  time-invariant model does not: lateness, a scene changed while the handle is inside it (a
+  stiffer wall releases ``(K2 - K1) x^2 / 2`` it never stored), the unilateral contact.  With
+  a passivity layer on, the layer keeps it from going below zero in the first place
+  (:mod:`~haptic_bus.control.passivity_layer`); the alarm is for what the layer cannot cover.
+  It cannot see a handle whose true ``b`` is smaller than configured: its sum credits the
+  configured ``b`` with its dissipation, and the operator's force is not measured, so no
+  run-time sum can tell a weaker handle from a pushing operator.  ``m`` and ``b`` are measured
+  at commissioning (``haptic-bus identify``, a profile's ``[identification]``).
 
 What an alarm does is the policy's (``[supervisor]`` in a profile): ``warn`` (an event, the run
-goes on), ``derate`` (the scene scaled down to what the gate proves passive at the observed
+goes on: the default for lateness, which the passivity layer holds passive), ``derate`` (the scene scaled down to what the gate proves passive at the observed
 delay; a stop if none is), ``stop`` (torque zero, drive disabled, summary, exit 3: an
 assumption of the gate broken at run time).  Every alarm is an event of the run's record.
 """
@@ -104,7 +105,7 @@ class Alarm:
         if self.kind == "late":
             return AssumptionBroken("the loop delay", self.message, f"a loop delay of {assumed_delay:g} sample(s)")
         return AssumptionBroken("the passivity observer", self.message,
-                                "an interface that never gives back more energy than it held")
+                                "a port that never gives back more energy than it held")
 
 
 class Supervisor:
@@ -148,8 +149,8 @@ class Supervisor:
             if self._late_in_window > policy.late_limit and self._cycle >= self._quiet_until["late"]:
                 return late, self._raise("late", Action(policy.on_late), self._late_message())
         if energy < -policy.observer_limit and self._cycle >= self._quiet_until["observer"]:
-            message = (f"the observer's interface energy is {energy * 1e3:.4g} mJ, below the "
-                       f"-{policy.observer_limit * 1e3:.4g} mJ allowed: the interface gave back more energy than it held")
+            message = (f"the port's energy is {energy * 1e3:.4g} mJ, below the -{policy.observer_limit * 1e3:.4g} mJ "
+                       f"allowed: the port gave the operator more energy than it held")
             return late, self._raise("observer", Action(policy.on_observer), message)
         return late, None
 

@@ -96,8 +96,9 @@ def _data_findings(record: Record, left_envelope: bool) -> list[Finding]:
                                               f"too much of the {record.force_limit:.3g} N force limit"))
     stale = int(np.count_nonzero(~record.fresh))
     if stale:
-        findings.append(_warning("stale", f"{stale} cycle(s) without fresh inputs (a TPDO missed its timeout): "
-                                          "the equations around them were left out"))
+        findings.append(_warning("stale", f"{stale} cycle(s) without fresh inputs (a TPDO missed its timeout) or "
+                                          "closing a period the machine stretched (a stall): the equations around "
+                                          "them were left out"))
     if left_envelope:
         findings.append(_warning("envelope", f"the handle left the travel envelope after "
                                              f"{record.excitation_seconds:.3g} s; the excitation ended early"))

@@ -5,7 +5,8 @@ written in answer (per mille of rated torque).  The integers are kept as they tr
 fit sees exactly what the drive reported and exactly what it was told to apply (the controller
 clips at the force limit itself, below 0x6072, so the drive never clips what was recorded).
 A cycle whose inputs were not fresh (a CANopen master repeats the last ones when a TPDO misses
-its timeout) is marked, and the fit leaves out every equation that touches it.
+its timeout), or whose period a stall of the machine stretched, is marked, and the fit leaves
+out every equation that touches it.
 """
 
 from __future__ import annotations
