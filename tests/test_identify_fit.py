@@ -15,7 +15,6 @@ error, so a 4-sigma miss of a normal estimate (probability 6e-5) means a broken 
 from __future__ import annotations
 
 import dataclasses
-
 import math
 from pathlib import Path
 

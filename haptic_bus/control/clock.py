@@ -238,3 +238,7 @@ def adversarial_starts(period: float, cycles: int, seed: int, *, stall_probabili
     for k in range(cycles):
         previous = starts[k] = max(k * period, previous + busy) + extra[k]
     return starts
+
+
+CycleClock = VirtualClock | RealClock | ScheduledClock
+"""Any of the controller's clocks."""

@@ -32,7 +32,7 @@ import numpy as np
 from drives.base import CyclicInputs, Drive
 from drives.cia402 import POSITION_ACTUAL
 from drives.errors import DriveError, DriveProtocolError, ParameterError
-from haptic_bus.control.clock import RealClock, VirtualClock
+from haptic_bus.control.clock import CycleClock, VirtualClock
 from haptic_bus.control.gate import GateDecision, PassivityGate
 from haptic_bus.control.passivity_layer import LayerPolicy, PassivityLayer, default_budget_cap
 from haptic_bus.control.port_energy import PortObserver
@@ -125,7 +125,7 @@ class WallController:
         scene: CompiledScene,
         *,
         force_limit: float,
-        clock: VirtualClock | RealClock | None = None,
+        clock: CycleClock | None = None,
         record_capacity: int = 200_000,
         origin: float = 0.0,
         supervisor: SupervisorPolicy | None = None,
