@@ -108,9 +108,9 @@ class RunSummary:
 class WallController:
     """Renders a gated scene on ``drive`` every ``period`` s.
 
-    ``force_limit`` (N) saturates the wall force; ``clock`` is a :class:`VirtualClock` (default)
-    or :class:`RealClock`; ``record_capacity`` bounds the record; ``origin`` (m) is the handle's
-    position at the first cycle; ``supervisor`` the policy (None: no supervision);
+    ``force_limit`` (N) saturates the wall force; ``clock`` is a :class:`VirtualClock` (default),
+    :class:`RealClock` or :class:`ScheduledClock`; ``record_capacity`` bounds the record;
+    ``origin`` (m) is the handle's position at the first cycle; ``supervisor`` the policy (None: no supervision);
     ``ramp_time`` (s) scales the force from 0 to 1 over the first seconds (0: none; the caller
     proves every scaled wall passive); ``derate`` is what a "derate" alarm calls; ``passivity``
     the layer's policy and ``hold`` (s) the longest the drive may hold a target before its

@@ -24,9 +24,10 @@ module watches both (DESIGN 4.1):
   at commissioning (``haptic-bus identify``, a profile's ``[identification]``).
 
 What an alarm does is the policy's (``[supervisor]`` in a profile): ``warn`` (an event, the run
-goes on: the default for lateness, which the passivity layer holds passive), ``derate`` (the scene scaled down to what the gate proves passive at the observed
-delay; a stop if none is), ``stop`` (torque zero, drive disabled, summary, exit 3: an
-assumption of the gate broken at run time).  Every alarm is an event of the run's record.
+goes on: the default for lateness, which the passivity layer holds passive), ``derate`` (the
+scene scaled down to what the gate proves passive at the observed delay; a stop if none is),
+``stop`` (torque zero, drive disabled, summary, exit 3: an assumption of the gate broken at run
+time). Every alarm is an event of the run's record.
 """
 
 from __future__ import annotations
