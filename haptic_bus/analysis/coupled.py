@@ -42,6 +42,45 @@ For one axis ``A = 0``, and an axis-aligned wall leaves the axes apart
 the terms summed (``max b_i`` plus the Frobenius norms of the wall part's term magnitudes).
 The search over ``theta``: the union of every axis' 1-D grid with fans at the coupled loop's
 lightly damped poles, and the 1-D zoom (:mod:`haptic_bus.analysis.theta_search`).
+
+**Is checking each axis' projection enough?  No** (issue 22; pinned by
+tests/test_coupled_projection.py, every number below checked there, the active ones against the
+exact time-domain energy of :mod:`haptic_bus.analysis.coupled_energy`).  ``T = 1 ms``, ``B = 0``,
+a plane at 45 degrees, ``n = (1, 1)/sqrt 2``.
+
+* *Each axis alone with ``K n_i^2``, ``B n_i^2``* can be optimistic by up to a factor ``N``,
+  even for identical axes: the wall's negative damping ``K tau`` acts along ``n`` and the
+  operator can move along ``n`` with both axes' friction in series, not one.  Two
+  cia402-handle axes (``m = 1 kg``, ``b = 20 N s/m``, ``D = 1``, ``average``): per axis every
+  ``K <= 26 667 N/m`` passes, the coupled limit is ``13 333 N/m``; at ``K = 20 000`` each axis
+  alone has margin ``+5.0 N s/m`` while the coupled loop is unstable (largest ``|z|``
+  ``1.00478``) and the operator's energy from rest falls below ``-2e6 J``.
+* *The 1-D loop along ``n`` with ``n^T M n``, ``n^T b n``* is optimistic as soon as the axes
+  differ: ``m = (1, 0.25) kg``, ``b = (20, 5) N s/m`` (same timing): the arithmetic
+  projection (0.625 kg, 12.5 N s/m) passes ``K <= 8 333``, the coupled limit is ``5 333``; at
+  ``K = 7 000`` the projection has margin ``+2.0`` and the coupled loop is unstable.
+* *The 1-D loop along ``n`` with the mobility projection* ``m_n = 1/(n^T M^{-1} n)``,
+  ``b_n = 1/(n^T diag(b)^{-1} n)`` **is exact when every axis has the same timing (``D``,
+  velocity model) and the same ``b_i/m_i``** -- proof: the plant ``dv_i/dt = -(c/T) v_i - (n_i/m_i) f``
+  gives ``s = n^T v`` the 1-D plant ``m_n ds/dt = -b_n s - f`` and the other directions the
+  decoupled decay ``e^{-c}``; the measurement filters and delays being alike, ``n^T y`` is
+  ``s`` measured, so the poles are the 1-D loop's plus ``e^{-c}``'s; and ``Herm Z = diag(b) +
+  r(theta) n n^T`` with the 1-D wall term ``r`` of ``(m_n, b_n)``, PSD iff
+  ``1 + r n^T diag(b)^{-1} n >= 0``, i.e. iff ``b_n + r = Re Z_1D >= 0`` (the example above:
+  both limits ``5 333.33465 N/m``).  Otherwise it is not: the aliasing terms ``P_i`` depend on
+  each ``c_i = b_i T/m_i``, and the axes' delays and filters differ.  ``m = (1, 1)``,
+  ``b = (20, 2)``, ``point``, ``D = 0`` (the seed's ideal loop): the mobility projection
+  (1 kg, 3.64 N s/m) passes ``K <= 4.000e6``, the coupled limit is ``3.078e6`` (the flip
+  boundary at ``theta = pi``); at ``K = 3.5e6`` margin ``+1.65`` against ``-1.50 N s/m``,
+  and ``-0.709 W`` per (m/s)^2 measured in the time domain.  With different timing there is no
+  one projection: ``(1 kg, 20 N s/m, D = 1, point)`` beside ``(0.5 kg, 10 N s/m, D = 0.5,
+  average)`` (equal ``b/m``, equal low-frequency lag): the coupled limit ``13 318.5`` lies
+  between the mobility projection with the second axis' timing (``13 333.3``, optimistic: at
+  ``K = 13 325`` margin ``+0.0083`` against ``-0.0058``, ``-0.0029 W`` in the time domain) and
+  with the first axis' (``13 289.1``).
+
+So the gate judges the coupled loop itself.  The mobility projection is what to reason with
+(``K`` roughly ``<= b_n / tau_eff`` along ``n``, DESIGN 3.5), never what to gate with.
 """
 
 from __future__ import annotations

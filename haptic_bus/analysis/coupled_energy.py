@@ -208,8 +208,10 @@ def commensurate(theta: float, max_samples: int = 4096) -> tuple[float, int]:
 def steady_mean_power(machine: CoupledMachine, samples: int) -> float:
     """Mean operator power (W) of the periodic steady state of a tone that repeats after ``samples`` periods.
 
-    The state that repeats is solved for (``(I - M^q) chi = M^q_{chi, osc} osc_0``), then the
-    exact work over those ``q`` periods summed.  Needs a stable loop.
+    The state that repeats is solved for (``(I - M^q) chi = M^q_{chi, osc} osc_0``, least
+    squares: the controller's position across the wall's normal is integrated but never fed
+    back, a ``z = 1`` mode the work does not see), then the exact work over those ``q`` periods
+    summed.  Needs a stable loop.
     """
     M = machine.matrix
     power = np.linalg.matrix_power(M, samples)
@@ -217,7 +219,8 @@ def steady_mean_power(machine: CoupledMachine, samples: int) -> float:
     osc = np.zeros(machine.size, dtype=bool)
     osc[machine.oscillator : machine.oscillator + 2] = True
     rest = ~osc
-    xi[rest] = np.linalg.solve(np.eye(int(rest.sum())) - power[np.ix_(rest, rest)], power[np.ix_(rest, osc)] @ xi[osc])
+    xi[rest] = np.linalg.lstsq(np.eye(int(rest.sum())) - power[np.ix_(rest, rest)], power[np.ix_(rest, osc)] @ xi[osc],
+                               rcond=None)[0]
     Q = machine.period_work
     total = 0.0
     for _ in range(samples):
