@@ -21,7 +21,7 @@ continuous models and ``scipy.linalg.expm``.
 quadratic form in ``xi_k``.  :func:`simulate_energies` runs many machines at once (states
 padded to one size, one batched product per period): the energy ``E`` (J) at every piece
 boundary from rest.  :func:`energy_after` gives ``E`` after ``2^j`` periods by doubling (exact
-sums of quadratic forms, no stepping), :func:`steady_mean_power` the exact mean power of the
+sums of quadratic forms, no stepping, with a bound on their round-off), :func:`steady_mean_power` the exact mean power of the
 periodic steady state.
 """
 
@@ -180,21 +180,31 @@ def simulate_energies(machines: list[CoupledMachine], n_samples: int) -> EnergyR
     return EnergyRuns(energy, lowest, (n_samples + 64) * _UNIT_ROUNDOFF * magnitude)
 
 
-def energy_after(machine: CoupledMachine, doublings: int) -> np.ndarray:
-    """``E`` (J) from rest after ``2^j`` periods, ``j = 0 .. doublings``: ``E(n) = xi_0^T S_n xi_0`` with
-    ``S_n = sum_{k<n} M^{kT} Q M^k``, by ``S_2n = S_n + M^{nT} S_n M^n`` (stops at an overflow: NaN after)."""
+def energy_after(machine: CoupledMachine, doublings: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(E, bound)`` in J from rest after ``2^j`` periods, ``j = 0 .. doublings`` (NaN after an overflow).
+
+    ``E(n) = xi_0^T S_n xi_0`` with ``S_n = sum_{k<n} M^{kT} Q M^k``, by ``S_2n = S_n + M^{nT} S_n M^n``
+    and ``M^2n = (M^n)^2``: no stepping.  The bound carries the magnitudes alongside
+    (``|S|_2n = |S|_n + |M^n|^T |S|_n |M^n|``): each doubling's products and sum err by at most
+    ``(2 size + 2) u`` times them (elementwise bound of a matrix product, Higham 3.5), and the
+    errors of ``j`` doublings add: ``(j + 1)(2 size + 2) u xi_0^T |S| xi_0``.
+    """
     xi0 = machine.initial_state()
     S, power = machine.period_work, machine.matrix
-    out = np.full(doublings + 1, np.nan)
+    magnitude = np.abs(S)
+    energies, bounds = np.full(doublings + 1, np.nan), np.full(doublings + 1, np.nan)
+    per_step = (2 * machine.size + 2) * _UNIT_ROUNDOFF
     with np.errstate(over="ignore", invalid="ignore"):
         for j in range(doublings + 1):
             value = float(xi0 @ S @ xi0)
             if not math.isfinite(value):
                 break
-            out[j] = value
+            energies[j] = value
+            bounds[j] = (j + 1) * per_step * float(xi0 @ magnitude @ xi0)
             S = S + power.T @ S @ power
+            magnitude = magnitude + np.abs(power).T @ magnitude @ np.abs(power)
             power = power @ power
-    return out
+    return energies, bounds
 
 
 def commensurate(theta: float, max_samples: int = 4096) -> tuple[float, int]:
