@@ -190,7 +190,7 @@ def hermitian_impedance(loop: CoupledLoop, theta: np.ndarray) -> HermitianImpeda
     half_sum, half_diff = 0.5 * (D[:, None] + D[None, :]), 0.5 * (D[:, None] - D[None, :])
     x = theta3 * (half_sum / np.pi)
     turn = cospi(x), -half_sum * sincpi(x)  # e^{-j theta (D_i + D_k)/2}
-    gap = -2.0 * half_diff * sincpi(theta3 * (half_diff / np.pi))
+    gap = -2.0 * half_diff * sincpi(theta3 * (np.abs(half_diff) / np.pi))  # sinc is even; trig wants x >= 0
     rho = ThetaComplex(theta3, gap * turn[0], gap * turn[1], np.abs(gap * turn[0]), np.abs(gap * turn[1]))
     nu_col, nu_row = _lift(nu, theta3, column=True), _lift(nu, theta3, column=False)
     spread = nu_col + nu_row * -1.0

@@ -89,7 +89,7 @@ def _pair_terms(wall: PlaneWall, theta: np.ndarray) -> tuple[ThetaComplex, Theta
         for k in range(i + 1, len(wall.axes)):
             half_diff, half_sum = 0.5 * (axis_i.delay - wall.axes[k].delay), 0.5 * (axis_i.delay + wall.axes[k].delay)
             x = theta * (half_sum / np.pi)
-            gap = -2.0 * half_diff * sincpi(theta * (half_diff / np.pi))
+            gap = -2.0 * half_diff * sincpi(theta * (abs(half_diff) / np.pi))  # sinc is even; trig wants x >= 0
             rho = ThetaComplex.exact(theta, gap * cospi(x), -gap * half_sum * sincpi(x))  # (eps_i - eps_k)/(j theta)
             psi = rho * mu[i] + eps[k] * (nu[k] + nu[i] * -1.0)
             spread += 0.25 * weights[i] * weights[k] * psi.abs2()  # i < k: each pair once, (1/8) * 2
