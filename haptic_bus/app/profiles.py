@@ -450,6 +450,9 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
         raise ProfileError(path, "profile", str(path), f"a readable file ({error.strerror})") from None
     except tomllib.TOMLDecodeError as error:
         raise ProfileError(path, "(TOML syntax)", str(error), "valid TOML 1.0") from None
+    if "axes" in document:  # a multi-axis profile: its own reader (haptic_bus.app.axes_profile)
+        raise ProfileError(path, "axes", "[[axes]]",
+                           "no [[axes]] in a one-axis profile; multi-axis profiles load with load_axes_profile")
     top = Reader(path, "", document)
     meta = Reader(path, "profile", top.raw("profile", "a [profile] table"))
     name = meta.text("name", pattern=_NAME)
