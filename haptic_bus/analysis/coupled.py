@@ -92,7 +92,7 @@ import numpy as np
 
 from drives.errors import ParameterError
 from haptic_bus.analysis.coupled_loop import CoupledLoop, components, coupled_poles
-from haptic_bus.analysis.criterion import EXACT, SIGN_TOLERANCE, exact_verdict
+from haptic_bus.analysis.criterion import EXACT, SIGN_TOLERANCE, Verdict, exact_verdict
 from haptic_bus.analysis.frequency import delay_rotation, loop_terms, measurement_terms
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.poles import radius_excess
@@ -118,10 +118,8 @@ def measurement_lag(axis: WallLoop, theta: np.ndarray) -> ThetaComplex:
     kind = axis.velocity.kind
     if kind == "point":
         return ThetaComplex.exact(theta, 0.0, 0.0)
-    if kind == "lowpass":
-        tau = axis.velocity.time / axis.T
-        den = 1.0 + (theta * tau) ** 2
-        return ThetaComplex.exact(theta, tau / den, -tau * tau / den)
+    if kind == "lowpass":  # 1 - M = j theta tau M
+        return measurement_terms(axis, theta) * (axis.velocity.time / axis.T)
     width = window_fraction(axis)
     y2 = (theta * width) ** 2
     return ThetaComplex.exact(theta, width * np.polyval(_LAG_EVEN, y2), -width * width * np.polyval(_LAG_ODD, y2))
@@ -224,36 +222,17 @@ def _phase_fixed(v: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class CoupledVerdict:
-    """The coupled criterion's outcome.
-
-    ``margin`` (N s/m, ``>= 0`` iff passive) at ``critical_theta`` (rad) in the axis group
-    ``group``; ``direction`` the worst velocity direction there (complex, unit, one entry per
-    axis of the loop); ``spectral_radius`` the largest pole magnitude over every group;
-    ``groups`` the axis groups judged apart (:func:`components`), ``lossless`` when every
-    group is a free frictionless axis.
+class CoupledVerdict(Verdict):
+    """The coupled criterion's outcome: a :class:`~haptic_bus.analysis.criterion.Verdict` (``margin`` in
+    N s/m, ``>= 0`` iff passive, at ``critical_theta`` rad; ``spectral_radius`` the largest pole
+    magnitude over every group; ``lossless`` when every group is a free frictionless axis) with
+    ``direction`` the worst velocity direction (complex, unit, one entry per axis of the loop),
+    ``group`` the axes it lies in, and ``groups`` the axis groups judged apart (:func:`components`).
     """
 
-    passive: bool
-    stable: bool
-    margin: float
-    critical_theta: float
-    spectral_radius: float
-    direction: tuple[complex, ...]
-    group: tuple[int, ...]
-    groups: tuple[tuple[int, ...], ...]
-    criterion: str = COUPLED
-    method: str = _SEARCH
-    lossless: bool = False
-
-    @property
-    def outcome(self) -> str:
-        """``"lossless"``, ``"passive"``, ``"not passive"`` (stable, some direction with negative damping) or ``"unstable"``."""
-        if self.lossless:
-            return "lossless"
-        if self.passive:
-            return "passive"
-        return "not passive" if self.stable else "unstable"
+    direction: tuple[complex, ...] = ()
+    group: tuple[int, ...] = ()
+    groups: tuple[tuple[int, ...], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -322,14 +301,15 @@ def coupled_verdict(loop: CoupledLoop, split: bool = True) -> CoupledVerdict:
     direction = np.zeros(loop.size, dtype=complex)
     direction[groups[worst]] = results[worst].direction
     return CoupledVerdict(
+        criterion=EXACT if loop.size == 1 else COUPLED,
         passive=all(r.passive for r in results),
         stable=all(r.stable for r in results),
         margin=results[worst].margin,
         critical_theta=results[worst].theta,
         spectral_radius=max(r.radius for r in results),
+        method=_SEARCH,
+        lossless=all(r.lossless for r in results),
         direction=tuple(complex(v) for v in direction),
         group=tuple(groups[worst]),
         groups=tuple(tuple(g) for g in groups),
-        criterion=EXACT if loop.size == 1 else COUPLED,
-        lossless=all(r.lossless for r in results),
     )

@@ -32,7 +32,6 @@ a profile that loads is one the gate admits.  :func:`load_any_profile` reads eit
 from __future__ import annotations
 
 import pathlib
-import tomllib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -54,6 +53,7 @@ from haptic_bus.app.profiles import (
     _read_gate,
     _read_safety,
     load_profile,
+    read_document,
     resolve_profile,
 )
 from haptic_bus.control.bus_load import PDO_MAPPINGS, axes_bus_load
@@ -70,9 +70,8 @@ class AxesProfileRefusal(SpaceGateRefusal):
     """The coupled gate refused a multi-axis profile's scene; ``path`` names the file."""
 
     def __init__(self, path: pathlib.Path | str, decision: SpaceDecision) -> None:
-        super().__init__(decision)
+        super().__init__(decision, f"profile {path}")
         self.path = str(path)
-        self.args = (f"profile {self.path}: {self.args[0]}",)
 
 
 @dataclass(frozen=True)
@@ -199,13 +198,7 @@ def _unique(path: pathlib.Path, where: str, values: list[Any], what: str) -> Non
 def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
     """Parse and validate a multi-axis profile without judging it; raise ProfileError."""
     path = resolve_profile(path_or_name)
-    try:
-        with open(path, "rb") as handle:
-            document = tomllib.load(handle)
-    except OSError as error:
-        raise ProfileError(path, "profile", str(path), f"a readable file ({error.strerror})") from None
-    except tomllib.TOMLDecodeError as error:
-        raise ProfileError(path, "(TOML syntax)", str(error), "valid TOML 1.0") from None
+    document = read_document(path)
     top = Reader(path, "", document)
     meta = Reader(path, "profile", top.raw("profile", "a [profile] table"))
     name, operator, task, description = (meta.text("name", pattern=_NAME), meta.text("operator"), meta.text("task"),
@@ -261,9 +254,4 @@ def load_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
 def load_any_profile(path_or_name: str | pathlib.Path) -> Profile | AxesProfile:
     """A one-axis profile (:func:`~haptic_bus.app.profiles.load_profile`) or, with ``[[axes]]``, a multi-axis one."""
     path = resolve_profile(path_or_name)
-    try:
-        with open(path, "rb") as handle:
-            multi = "axes" in tomllib.load(handle)
-    except (OSError, tomllib.TOMLDecodeError):
-        multi = False  # the one-axis reader reports it
-    return load_axes_profile(path) if multi else load_profile(path)
+    return load_axes_profile(path) if "axes" in read_document(path) else load_profile(path)

@@ -440,16 +440,21 @@ def _read_operator_model(path: pathlib.Path, table: object) -> Mapping[str, Any]
     return types.MappingProxyType(out)
 
 
-def read_profile(path_or_name: str | pathlib.Path) -> Profile:
-    """Parse and validate a profile file (or shipped name) without judging it; raise ProfileError."""
-    path = resolve_profile(path_or_name)
+def read_document(path: pathlib.Path) -> dict[str, Any]:
+    """The TOML document of a profile file; ProfileError when unreadable or not TOML."""
     try:
         with open(path, "rb") as handle:
-            document = tomllib.load(handle)
+            return tomllib.load(handle)
     except OSError as error:
         raise ProfileError(path, "profile", str(path), f"a readable file ({error.strerror})") from None
     except tomllib.TOMLDecodeError as error:
         raise ProfileError(path, "(TOML syntax)", str(error), "valid TOML 1.0") from None
+
+
+def read_profile(path_or_name: str | pathlib.Path) -> Profile:
+    """Parse and validate a profile file (or shipped name) without judging it; raise ProfileError."""
+    path = resolve_profile(path_or_name)
+    document = read_document(path)
     if "axes" in document:  # a multi-axis profile: its own reader (haptic_bus.app.axes_profile)
         raise ProfileError(path, "axes", "[[axes]]",
                            "no [[axes]] in a one-axis profile; multi-axis profiles load with load_axes_profile")

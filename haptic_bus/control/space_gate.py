@@ -98,11 +98,12 @@ class SpaceDecision:
 
 
 class SpaceGateRefusal(HapticBusError):
-    """A scene in space was refused; ``decision`` holds every reason."""
+    """A scene in space was refused; ``decision`` holds every reason, ``where`` (e.g. ``profile PATH``)
+    prefixes the message."""
 
-    def __init__(self, decision: SpaceDecision) -> None:
+    def __init__(self, decision: SpaceDecision, where: str = "") -> None:
         self.decision = decision
-        super().__init__("passivity gate refused the scene: " + "; ".join(decision.reasons))
+        super().__init__((f"{where}: " if where else "") + "passivity gate refused the scene: " + "; ".join(decision.reasons))
 
 
 class SpaceGate:

@@ -54,10 +54,12 @@ def _point(field: str, value: ArrayLike, context: str) -> tuple[float, ...]:
     return tuple(real_in_range(field, v, *POSITION_RANGE, unit="m", context=context) for v in values)
 
 
-def _wall(name: str, K: float, B: float, kind: str) -> tuple[float, float]:
-    context = f"{kind} {name!r}"
-    return (real_in_range("stiffness", K, *STIFFNESS_RANGE, unit="N/m", context=context),
-            real_in_range("damping", B, *DAMPING_RANGE, unit="N s/m", context=context))
+def _validate_wall(obj: Plane | Box | Sphere, kind: str) -> None:
+    """Set ``obj``'s stiffness (N/m) and damping (N s/m) to validated floats, else ParameterError."""
+    context = f"{kind} {obj.name!r}"
+    object.__setattr__(obj, "stiffness", real_in_range("stiffness", obj.stiffness, *STIFFNESS_RANGE, unit="N/m",
+                                                        context=context))
+    object.__setattr__(obj, "damping", real_in_range("damping", obj.damping, *DAMPING_RANGE, unit="N s/m", context=context))
 
 
 @dataclass(frozen=True)
@@ -81,9 +83,7 @@ class Plane:
         object.__setattr__(self, "point", point)
         object.__setattr__(self, "normal", tuple(float(c) for c in normal / length))
         object.__setattr__(self, "_level", math.fsum(p * n for p, n in zip(self.point, self.normal)))  # point . normal
-        K, B = _wall(self.name, self.stiffness, self.damping, "plane")
-        object.__setattr__(self, "stiffness", K)
-        object.__setattr__(self, "damping", B)
+        _validate_wall(self, "plane")
 
     @property
     def dimension(self) -> int:
@@ -124,9 +124,7 @@ class Box:
             raise ParameterError("half", self.half, f"{len(center)} half sizes, one per axis", context)
         object.__setattr__(self, "center", center)
         object.__setattr__(self, "half", tuple(real_in_range("half", h, *SIZE_RANGE, unit="m", context=context) for h in half))
-        K, B = _wall(self.name, self.stiffness, self.damping, "box")
-        object.__setattr__(self, "stiffness", K)
-        object.__setattr__(self, "damping", B)
+        _validate_wall(self, "box")
 
     @property
     def dimension(self) -> int:
@@ -171,9 +169,7 @@ class Sphere:
         context = f"sphere {self.name!r}"
         object.__setattr__(self, "center", _point("center", self.center, context))
         object.__setattr__(self, "radius", real_in_range("radius", self.radius, *SIZE_RANGE, unit="m", context=context))
-        K, B = _wall(self.name, self.stiffness, self.damping, "sphere")
-        object.__setattr__(self, "stiffness", K)
-        object.__setattr__(self, "damping", B)
+        _validate_wall(self, "sphere")
 
     @property
     def dimension(self) -> int:
