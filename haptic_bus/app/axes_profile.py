@@ -42,7 +42,7 @@ from drives.safety import SafetySettings
 from haptic_bus.analysis.can_timing import BITRATE_RANGE, BusLoad
 from haptic_bus.analysis.coupled_loop import MAX_AXES
 from haptic_bus.analysis.loop import DAMPING_RANGE, DELAY_RANGE, PERIOD_RANGE, STIFFNESS_RANGE, WallLoop
-from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader
+from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader, read_document
 from haptic_bus.app.profiles import (
     _NAME,
     FORCE_RANGE,
@@ -53,7 +53,6 @@ from haptic_bus.app.profiles import (
     _read_gate,
     _read_safety,
     load_profile,
-    read_document,
     resolve_profile,
 )
 from haptic_bus.control.bus_load import PDO_MAPPINGS, axes_bus_load

@@ -25,7 +25,6 @@ import importlib.resources
 import math
 import pathlib
 import re
-import tomllib
 import types
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -44,7 +43,7 @@ from haptic_bus.analysis.loop import (
     STIFFNESS_RANGE,
 )
 from haptic_bus.analysis.velocity import VelocityModel
-from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader
+from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader, read_document
 from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
@@ -438,17 +437,6 @@ def _read_operator_model(path: pathlib.Path, table: object) -> Mapping[str, Any]
         out[key] = r.real(key, low, high, unit, low_inclusive=low_inclusive, default=default)
     r.done()
     return types.MappingProxyType(out)
-
-
-def read_document(path: pathlib.Path) -> dict[str, Any]:
-    """The TOML document of a profile file; ProfileError when unreadable or not TOML."""
-    try:
-        with open(path, "rb") as handle:
-            return tomllib.load(handle)
-    except OSError as error:
-        raise ProfileError(path, "profile", str(path), f"a readable file ({error.strerror})") from None
-    except tomllib.TOMLDecodeError as error:
-        raise ProfileError(path, "(TOML syntax)", str(error), "valid TOML 1.0") from None
 
 
 def read_profile(path_or_name: str | pathlib.Path) -> Profile:
