@@ -1,21 +1,5 @@
-"""Bit-time model of classic CAN: worst-case frame lengths, bus load and cycle latency.
-
-A standard (11-bit identifier) data frame with ``n`` data bytes is, on the wire:
-
-==========================================  ===========
-field                                       bits
-==========================================  ===========
-SOF 1, identifier 11, RTR 1, IDE 1, r0 1    15
-DLC 4, data 8 n, CRC 15                     19 + 8 n
-==========================================  ===========
-
-These first ``34 + 8 n`` bits are subject to bit stuffing: after five equal bits the sender
-inserts a complementary bit.  In the worst case (a stuff bit itself starting the next run of
-five) there is one stuff bit after the first 5 bits and then one after every further 4, i.e.
-``floor((34 + 8 n - 1) / 4)`` stuff bits = ``8 + 2 n``.  Then come the unstuffed CRC
-delimiter 1, ACK slot 1, ACK delimiter 1, end of frame 7, and the inter-frame space 3: 13
-bits.  Total ``34 + 8 n + 8 + 2 n + 13 = 55 + 10 n`` bit times (DESIGN section 6): 55 for
-an empty frame (SYNC), 75 for 2 bytes, 135 for 8 bytes.
+"""The simulated drive's bus-load meter, on the bit-time model of :mod:`haptic_bus.analysis.can_timing`
+(worst-case ``55 + 10 n`` bit times for a standard frame with ``n`` data bytes).
 
 The wire carries one frame at a time; :class:`BusLoadMeter` adds up what one SYNC cycle puts
 on it (SYNC, TPDOs, RPDOs, anything else seen) to report bus load and the cycle's latency
@@ -24,34 +8,19 @@ on it (SYNC, TPDOs, RPDOs, anything else seen) to report bus load and the cycle'
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from drives.errors import ParameterError
-from haptic_bus.validation import real_in_range, whole_in_range
+from haptic_bus.analysis.can_timing import (
+    MAX_DATA_BYTES,
+    checked_bitrate,
+    checked_period,
+    cycle_bits,
+    frame_bits,
+    frame_time,
+)
 
-MAX_DATA_BYTES = 8
-BITRATE_RANGE = (1_000.0, 1_000_000.0)  # bit/s: classic CAN
-
-
-def frame_bits(data_bytes: int) -> int:
-    """Worst-case bit times of a standard data frame with ``data_bytes`` bytes, IFS included."""
-    n = whole_in_range("data_bytes", data_bytes, 0, MAX_DATA_BYTES, context="CAN frame")
-    return 55 + 10 * n
-
-
-def frame_time(data_bytes: int, bitrate: float) -> float:
-    """Worst-case time in s one such frame holds the bus at ``bitrate`` bit/s."""
-    return frame_bits(data_bytes) / _bitrate(bitrate)
-
-
-def cycle_bits(data_lengths: Sequence[int]) -> int:
-    """Bit times of a cycle made of frames with these data lengths (sent back to back)."""
-    return sum(frame_bits(n) for n in data_lengths)
-
-
-def _bitrate(bitrate: float) -> float:
-    return real_in_range("bitrate", bitrate, *BITRATE_RANGE, unit="bit/s", context="CAN bus")
+__all__ = ["BusLoadMeter", "cycle_bits", "frame_bits", "frame_time"]
 
 
 @dataclass
@@ -68,8 +37,8 @@ class BusLoadMeter:
     _current: int | None = None
 
     def __post_init__(self) -> None:
-        self.bitrate = _bitrate(self.bitrate)
-        self.period = real_in_range("period", self.period, 0.0, 10.0, low_inclusive=False, unit="s", context="CAN bus")
+        self.bitrate = checked_bitrate(self.bitrate)
+        self.period = checked_period(self.period)
 
     def sync(self, data_bytes: int = 0) -> None:
         """A SYNC frame (0 or 1 data byte): close the running cycle, start a new one."""

@@ -173,7 +173,7 @@ class RandomSinusoids:
 # --------------------------------------------------------------------------- the exact machine
 
 
-def _van_loan(F: np.ndarray, Q: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+def van_loan(F: np.ndarray, Q: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     """``(e^{F h}, int_0^h e^{F^T t} Q e^{F t} dt)``.
 
     Over a step ``h0 = h / 2^s`` with ``||F|| h0 <= 1`` both are blocks of one exponential,
@@ -235,7 +235,7 @@ class _Machine:
         self.delta = loop.fractional_delay
         times = sorted(set(event_times(loop)) | {j / substeps for j in range(substeps)})
         self.boundaries = times
-        exps = {h: _van_loan(F, Q, h) for h in {round(b - a, 15) for a, b in itertools.pairwise(times)}}
+        exps = {h: van_loan(F, Q, h) for h in {round(b - a, 15) for a, b in itertools.pairwise(times)}}
 
         # the sampled plant + oscillator over one period, for the closed loop
         phi = np.eye(nsg)
@@ -354,7 +354,7 @@ class EnergyRecord:
                     total += float(xi @ piece.work @ xi)
                 else:
                     x = piece.start_map @ xi
-                    _, work = _van_loan(machine.F, machine.Q, tau - piece.start)
+                    _, work = van_loan(machine.F, machine.Q, tau - piece.start)
                     total += float(x @ work @ x)
             out.append(total)
         return np.array(out)

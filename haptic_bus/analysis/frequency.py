@@ -72,13 +72,13 @@ class LoopTerms:
         return LoopTerms(self.theta[where], self.c, self.scale, part(self.hold), part(self.P), part(self.E))
 
 
-def _rotation(theta: np.ndarray, delay: float) -> ThetaComplex:
+def delay_rotation(theta: np.ndarray, delay: float) -> ThetaComplex:
     """``e^{-j theta delay}``: ``Re = cos``, ``Im/theta = -delay sinc``."""
     x = theta * (delay / np.pi)
     return ThetaComplex.exact(theta, cospi(x), -delay * sincpi(x))
 
 
-def _measurement(loop: WallLoop, theta: np.ndarray) -> ThetaComplex:
+def measurement_terms(loop: WallLoop, theta: np.ndarray) -> ThetaComplex:
     """``M(j theta)`` as ``(Re, Im/theta)`` in closed form (exact at ``theta -> 0``)."""
     kind = loop.velocity.kind
     if kind == "point":
@@ -89,17 +89,17 @@ def _measurement(loop: WallLoop, theta: np.ndarray) -> ThetaComplex:
         return ThetaComplex.exact(theta, 1.0 / den, -tau / den)
     half = 0.5 * window_fraction(loop)
     envelope = sincpi(theta * (half / np.pi))  # (1 - e^{-j theta w})/(j theta w) = e^{-j theta w/2} sinc
-    return _rotation(theta, half) * ThetaComplex.exact(theta, envelope, 0.0)
+    return delay_rotation(theta, half) * ThetaComplex.exact(theta, envelope, 0.0)
 
 
 def loop_terms(loop: WallLoop, theta: ArrayLike) -> LoopTerms:
     """:class:`LoopTerms` of ``loop`` (its wall ignored) at ``theta`` (rad, > 0)."""
     theta = np.atleast_1d(np.asarray(theta, dtype=float))
     hold = ThetaComplex.exact(theta, 2.0 * sinpi(0.5 * theta / np.pi) ** 2, sincpi(theta / np.pi))
-    whole = _rotation(theta, loop.whole_delay)
+    whole = delay_rotation(theta, loop.whole_delay)
     P = whole * alias_function(loop, theta)
-    rotation = whole if loop.delay == loop.whole_delay else _rotation(theta, loop.delay)
-    E = rotation if loop.velocity.kind == "point" else rotation * _measurement(loop, theta)  # M = 1 exactly
+    rotation = whole if loop.delay == loop.whole_delay else delay_rotation(theta, loop.delay)
+    E = rotation if loop.velocity.kind == "point" else rotation * measurement_terms(loop, theta)  # M = 1 exactly
     return LoopTerms(theta, loop.c, loop.m / loop.T, hold, P, E)
 
 

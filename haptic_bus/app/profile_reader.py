@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import pathlib
 import re
+import tomllib
 from collections.abc import Callable
 from typing import Any
 
@@ -26,6 +27,17 @@ class ProfileError(ParameterError):
         self.path = str(path)
         self.field = field
         super().__init__(field, value, allowed, context=f"profile {self.path}")
+
+
+def read_document(path: pathlib.Path) -> dict[str, Any]:
+    """The TOML document of a profile file; ProfileError when unreadable or not TOML."""
+    try:
+        with open(path, "rb") as handle:
+            return tomllib.load(handle)
+    except OSError as error:
+        raise ProfileError(path, "profile", str(path), f"a readable file ({error.strerror})") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ProfileError(path, "(TOML syntax)", str(error), "valid TOML 1.0") from None
 
 
 class Reader:

@@ -26,7 +26,6 @@ import importlib.resources
 import math
 import pathlib
 import re
-import tomllib
 import types
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -45,7 +44,7 @@ from haptic_bus.analysis.loop import (
     STIFFNESS_RANGE,
 )
 from haptic_bus.analysis.velocity import VelocityModel
-from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader
+from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader, read_document
 from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.passivity_layer import LAYER_MODES, LayerPolicy
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene
@@ -463,13 +462,10 @@ def _read_operator_model(path: pathlib.Path, table: object) -> Mapping[str, Any]
 def read_profile(path_or_name: str | pathlib.Path) -> Profile:
     """Parse and validate a profile file (or shipped name) without judging it; raise ProfileError."""
     path = resolve_profile(path_or_name)
-    try:
-        with open(path, "rb") as handle:
-            document = tomllib.load(handle)
-    except OSError as error:
-        raise ProfileError(path, "profile", str(path), f"a readable file ({error.strerror})") from None
-    except tomllib.TOMLDecodeError as error:
-        raise ProfileError(path, "(TOML syntax)", str(error), "valid TOML 1.0") from None
+    document = read_document(path)
+    if "axes" in document:  # a multi-axis profile: its own reader (haptic_bus.app.axes_profile)
+        raise ProfileError(path, "axes", "[[axes]]",
+                           "no [[axes]] in a one-axis profile; multi-axis profiles load with load_axes_profile")
     top = Reader(path, "", document)
     meta = Reader(path, "profile", top.raw("profile", "a [profile] table"))
     name = meta.text("name", pattern=_NAME)

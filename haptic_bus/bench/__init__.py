@@ -22,6 +22,8 @@ min-max over at least 5 repeats (:mod:`~haptic_bus.bench.timing`):
    ``python -c "import numpy"``.
 8. :mod:`~haptic_bus.bench.soak` -- cycles in virtual time (``--soak [CYCLES]``: 10^7; otherwise
    10^5 quick, 10^6 full): the integer position sum exact, memory flat.
+9. :mod:`~haptic_bus.bench.space_scene_cost` -- a scene in space (plane, boxes, spheres): seconds
+   per ``force()`` call for 1..10 000 objects beside the 1-D scene's.
 
 Above the sections, issue 14's "Done when" (:mod:`~haptic_bus.bench.targets`): one row per line
 with the measured figure, its spread, the target and PASS/FAIL, all from this one run.
@@ -48,10 +50,10 @@ from typing import Any
 
 from haptic_bus.bench.timing import machine
 
-SECTIONS = ("passivity", "plant", "scene", "loop", "bus", "realtime", "startup", "soak")
+SECTIONS = ("passivity", "plant", "scene", "space", "loop", "bus", "realtime", "startup", "soak")
 # progress ticks each section makes (quick, full): for the bar's total
-_TICKS = {"passivity": (7, 17), "plant": (15, 17), "scene": (5, 5), "loop": (6, 6), "bus": (2, 2), "realtime": (6, 6),
-          "startup": (3, 3), "soak": (10, 10)}
+_TICKS = {"passivity": (7, 17), "plant": (15, 17), "scene": (5, 5), "space": (5, 5), "loop": (6, 6), "bus": (2, 2),
+          "realtime": (6, 6), "startup": (3, 3), "soak": (10, 10)}
 
 
 class Progress:
@@ -111,7 +113,8 @@ class Interrupts:
 def _runner(name: str) -> Callable[..., dict]:
     from importlib import import_module
 
-    module = {"passivity": "passivity", "plant": "plant_sim", "scene": "scene_cost", "loop": "loop_rate",
+    module = {"passivity": "passivity", "plant": "plant_sim", "scene": "scene_cost", "space": "space_scene_cost",
+              "loop": "loop_rate",
               "bus": "bus_limit", "realtime": "realtime", "startup": "startup"}[name]
     return import_module(f"haptic_bus.bench.{module}").run
 

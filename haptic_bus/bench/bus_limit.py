@@ -1,6 +1,6 @@
 """Benchmark 5: the CAN bus against its physical limit (worst-case bit-time model).
 
-Bits per cycle come from :mod:`sim_drive.bus_timing` (``55 + 10 n`` bit times for a standard
+Bits per cycle come from :mod:`haptic_bus.analysis.can_timing` (``55 + 10 n`` bit times for a standard
 frame with ``n`` data bytes, worst-case stuffing and inter-frame space included); objects are
 packed into frames by the master's own :func:`drives.canopen.drive.split_into_frames`.
 
@@ -20,7 +20,6 @@ bookkeeping against the frames actually exchanged.
 
 from __future__ import annotations
 
-import math
 import uuid
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -41,11 +40,11 @@ from drives.cia402 import (
     VELOCITY_ACTUAL,
     ObjectSpec,
 )
-from haptic_bus.app.rig import BusLoadMeter, cycle_bits, frame_bits
+from haptic_bus.analysis.can_timing import LOAD_CEILING, axes_that_fit, cycle_bits, frame_bits
+from haptic_bus.app.rig import BusLoadMeter
 
 BITRATES = (125_000, 500_000, 1_000_000)
 PERIOD = 1e-3
-LOAD_CEILING = 0.7
 MAPPINGS: dict[str, dict[str, tuple[ObjectSpec, ...]]] = {
     "minimal": {"tpdo": (STATUSWORD, VELOCITY_ACTUAL), "rpdo": (CONTROLWORD, TARGET_TORQUE)},
     "naive_full": {"tpdo": (STATUSWORD, POSITION_ACTUAL, TORQUE_ACTUAL, VELOCITY_ACTUAL, MODES_OF_OPERATION_DISPLAY,
@@ -70,12 +69,6 @@ def mapping_budget(name: str) -> dict[str, Any]:
         "bits_per_axis": per_axis, "sync_bits": frame_bits(0),
         "bits_one_axis_cycle": frame_bits(0) + per_axis,
     }
-
-
-def axes_that_fit(per_axis: int, bitrate: float, period: float = PERIOD, ceiling: float = LOAD_CEILING) -> int:
-    """How many axes' frames fit with the SYNC in ``ceiling`` of the bus over ``period`` s."""
-    budget = ceiling * bitrate * period - frame_bits(0)
-    return max(0, math.floor(budget / per_axis))
 
 
 def measured_bits_per_cycle(tpdo_objects: Sequence[ObjectSpec], cycles: int = 200) -> float:
@@ -112,7 +105,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
             one = budget["bits_one_axis_cycle"]
             row[name] = {
                 "load_one_axis": one / (bitrate * PERIOD),
-                "axes_fit": axes_that_fit(budget["bits_per_axis"], bitrate),
+                "axes_fit": axes_that_fit(budget["bits_per_axis"], bitrate, PERIOD),
                 "latency_one_axis_s": one / bitrate,
                 "min_period_one_axis_s": one / (LOAD_CEILING * bitrate),
             }

@@ -110,6 +110,15 @@ def _scene(s: dict) -> list[str]:
                 f"1000 objects / one wall = {tg['thousand_over_one']:.2f} (target <= 1.5: {_met(tg['thousand_met'])})."]
 
 
+def _space(s: dict) -> list[str]:
+    rows = [[str(r["objects"]), str(r["grid_cells"]), f"{r['candidates_per_call']:.2f}", f"{r['contacts_per_call']:.2f}",
+             _ts(r["space_force"]), _r(r["space_ratio_to_one_object"]), _ts(r["line_force"]),
+             _r(r["line_ratio_to_one_object"]), _ts(r.get("per_object_force")), _r(r.get("per_object_over_compiled")),
+             _t(r["compile_space_s"])] for r in s["rows"]]
+    return [_table(["objects", "grid cells", "tested/call", "inside/call", "3-D force()", "x 1 object", "1-D force()",
+                    "x 1 object", "3-D one by one", "one by one/grid", "compile"], rows), "", s["note"]]
+
+
 def _loop(s: dict) -> list[str]:
     rows = []
     for link in s["links"].values():
@@ -244,6 +253,7 @@ _SECTIONS = (
     ("realtime", "6. Real time: T = 1 ms, two processes", _realtime),
     ("startup", "7. Start-up of the command line", _startup),
     ("soak", "8. Soak in virtual time", _soak),
+    ("space", "9. Scenes in space: force() per call", _space),
 )
 
 

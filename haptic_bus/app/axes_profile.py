@@ -1,0 +1,256 @@
+"""Multi-axis profiles: ``[[axes]]``, each axis its own drive, a scene in space, the coupled gate on load.
+
+A profile with an ``[[axes]]`` array describes a Cartesian device (axis ``i`` moves coordinate
+``i``, :class:`~haptic_bus.control.kinematics.Cartesian`); a profile without it is the one-axis
+profile of :mod:`haptic_bus.app.profiles`, unchanged (which refuses ``[[axes]]`` with a pointer
+here).  Tables:
+
+* ``[profile]``: ``name``, ``operator``, ``task``, ``description`` (as one-axis profiles);
+* ``[loop]``: ``period`` T in s -- one SYNC for every axis;
+* ``[bus]`` (optional): ``bitrate`` in bit/s (default 1 000 000) -- the bus-load check of a
+  CANopen device runs on load (:mod:`haptic_bus.control.bus_load`: refused above 70 %);
+* ``[gate]``: ``safety_margin`` (N s/m) and ``bandwidth`` as one-axis profiles (the bandwidth
+  rule is a 1-D rule and is not applied to objects in space);
+* ``[safety]`` (optional): as one-axis profiles, for every axis' drive;
+* ``[[axes]]``, one table per axis, in coordinate order: ``name``; ``node_id`` (CANopen, 1..127)
+  **or** ``unit_id`` (Modbus, 1..247), one kind for all axes; ``timing`` ("ideal", "cia402",
+  "reception") and ``delay`` (samples, real; defaults as ``[loop]`` of a one-axis profile);
+  ``mapping`` ("minimal" or "with-position", default "minimal"); ``force_limit`` (N, at most what
+  the axis' 0x6072 allows); and ``[axes.device]``, the one-axis ``[device]`` table: ``mass``,
+  ``friction`` (effective b), ``friction_source``, the scaling (0x606C, 0x6064, 0x6076,
+  transmission, 0x6072) and the ``velocity`` model;
+* ``[[space.objects]]``: ``kind`` = plane | box | sphere, ``name``, ``stiffness`` (N/m),
+  ``damping`` (N s/m), and ``point`` + ``normal`` (plane), ``center`` + ``half`` (box) or
+  ``center`` + ``radius`` (sphere), positions in m with one coordinate per axis.
+
+:func:`load_axes_profile` validates everything (unknown keys, types, ranges, names; one-line
+errors naming the file, the dotted field, the value and the allowed range), checks the bus load
+and puts the scene through the coupled gate (:class:`~haptic_bus.control.space_gate.SpaceGate`):
+a profile that loads is one the gate admits.  :func:`load_any_profile` reads either kind.
+"""
+
+from __future__ import annotations
+
+import pathlib
+from dataclasses import dataclass, field
+from typing import Any
+
+from drives.cia301 import NODE_ID_RANGE
+from drives.errors import ParameterError
+from drives.modbus.register_map import UNIT_ID_RANGE
+from drives.safety import SafetySettings
+from haptic_bus.analysis.can_timing import BITRATE_RANGE, BusLoad
+from haptic_bus.analysis.coupled_loop import MAX_AXES
+from haptic_bus.analysis.loop import DAMPING_RANGE, DELAY_RANGE, PERIOD_RANGE, STIFFNESS_RANGE, WallLoop
+from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader, read_document
+from haptic_bus.app.profiles import (
+    _NAME,
+    FORCE_RANGE,
+    TIMINGS,
+    DeviceProfile,
+    Profile,
+    _read_device,
+    _read_gate,
+    _read_safety,
+    load_profile,
+    resolve_profile,
+)
+from haptic_bus.control.bus_load import PDO_MAPPINGS, axes_bus_load
+from haptic_bus.control.gate import GatePolicy
+from haptic_bus.control.kinematics import Cartesian
+from haptic_bus.control.space_gate import SpaceDecision, SpaceGate, SpaceGateRefusal
+from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere, compile_space_scene
+
+DEFAULT_BITRATE = 1_000_000
+_FIELDS = {"plane": ("point", "normal"), "box": ("center", "half"), "sphere": ("center", "radius")}
+
+
+class AxesProfileRefusal(SpaceGateRefusal):
+    """The coupled gate refused a multi-axis profile's scene; ``path`` names the file."""
+
+    def __init__(self, path: pathlib.Path | str, decision: SpaceDecision) -> None:
+        super().__init__(decision, f"profile {path}")
+        self.path = str(path)
+
+
+@dataclass(frozen=True)
+class AxisProfile:
+    """One axis: its ``name``, ``node_id`` (CANopen) or ``unit_id`` (Modbus), ``device`` (the one-axis
+    device table), ``timing`` and loop ``delay`` (samples), PDO ``mapping``, ``force_limit`` (N)."""
+
+    name: str
+    node_id: int | None
+    unit_id: int | None
+    device: DeviceProfile
+    timing: str
+    delay: float
+    mapping: str
+    force_limit: float
+
+
+@dataclass(frozen=True)
+class AxesProfile:
+    """A validated, gate-admitted multi-axis profile (SI units)."""
+
+    name: str
+    operator: str
+    task: str
+    description: str
+    period: float
+    axes: tuple[AxisProfile, ...]
+    space: tuple[SpaceObject, ...]
+    gate_policy: GatePolicy
+    bitrate: float
+    safety: SafetySettings = field(default_factory=SafetySettings)
+    path: pathlib.Path | None = None
+
+    def axis_loops(self) -> tuple[WallLoop, ...]:
+        """Every axis' loop as the coupled gate judges it (m, effective b, T, its delay and velocity model)."""
+        return tuple(WallLoop(a.device.mass, a.device.friction, self.period, 0.0, 0.0, a.delay, a.device.velocity)
+                     for a in self.axes)
+
+    def space_scene(self) -> SpaceScene:
+        """The scene in space, compiled."""
+        return compile_space_scene(self.space)
+
+    def gate(self) -> SpaceGate:
+        """The coupled gate for these axes and this policy (what an upload path calls)."""
+        return SpaceGate(self.axis_loops(), self.gate_policy)
+
+    def kinematics(self) -> Cartesian:
+        """The device's kinematics: Cartesian, axis i along coordinate i."""
+        return Cartesian(len(self.axes))
+
+    def bus_load(self) -> BusLoad | None:
+        """The CANopen cycle's load (None for Modbus axes); ParameterError above 70 %."""
+        if self.axes[0].node_id is None:
+            return None
+        return axes_bus_load([a.mapping for a in self.axes], self.bitrate, self.period)
+
+
+def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> AxisProfile:
+    r = Reader(path, f"axes[{index}]", table)
+    name = r.text("name", pattern=_NAME)
+    if ("node_id" in r.table) == ("unit_id" in r.table):
+        raise ProfileError(path, r.field("node_id"), r.table.get("node_id", "<missing>"),
+                           "exactly one of node_id (CANopen, 1..127) and unit_id (Modbus, 1..247)")
+    node = r.whole("node_id", *NODE_ID_RANGE) if "node_id" in r.table else None
+    unit = r.whole("unit_id", *UNIT_ID_RANGE) if "unit_id" in r.table else None
+    r.used.update(("node_id", "unit_id"))
+    timing = r.text("timing", choices=tuple(TIMINGS))
+    least = TIMINGS[timing]
+    delay = r.real("delay", 0.0 if least is None else least, DELAY_RANGE[1], f"samples (timing {timing!r})",
+                   default=REQUIRED if least is None else least)
+    mapping = r.text("mapping", choices=tuple(PDO_MAPPINGS), default="minimal")
+    try:  # the one-axis [device] reader, its fields named inside this axis
+        device = _read_device(path, r.raw("device", "an [axes.device] table: the one-axis [device] fields"))
+    except ProfileError as error:
+        raise ProfileError(path, f"axes[{index}].{error.field}", error.value, error.allowed) from None
+    force_limit = r.real("force_limit", *FORCE_RANGE, "N", low_inclusive=False)
+    r.done()
+    if force_limit > device.max_force * (1 + 1e-12):
+        raise ProfileError(path, r.field("force_limit"), force_limit,
+                           f"(0, {device.max_force:g}] N, the force this axis' 0x6072 allows")
+    try:
+        device.velocity.check_period(period)
+    except ParameterError as error:
+        raise ProfileError(path, f"axes[{index}].device.velocity", error.value, error.allowed) from None
+    return AxisProfile(name, node, unit, device, timing, int(delay) if float(delay).is_integer() else delay, mapping,
+                       force_limit)
+
+
+def _coordinates(r: Reader, key: str, size: int) -> tuple[Any, ...]:
+    """An array of ``size`` entries (the object checks each is a position in range)."""
+    value = r.raw(key, f"an array of {size} numbers (one per axis, m)")
+    if not isinstance(value, list) or len(value) != size:
+        raise ProfileError(r.path, r.field(key), value, f"an array of {size} numbers, one per axis")
+    return tuple(value)
+
+
+def _read_object(path: pathlib.Path, index: int, table: object, size: int) -> SpaceObject:
+    r = Reader(path, f"space.objects[{index}]", table)
+    kind = r.text("kind", choices=tuple(_FIELDS))
+    name = r.text("name", pattern=_NAME)
+    stiffness = r.real("stiffness", *STIFFNESS_RANGE, "N/m")
+    damping = r.real("damping", *DAMPING_RANGE, "N s/m")
+    where, extent = _FIELDS[kind]
+    position = _coordinates(r, where, size)
+    shape: Any = r.real("radius", 0.0, 1e6, "m", low_inclusive=False) if kind == "sphere" else _coordinates(r, extent, size)
+    r.done()
+    try:
+        if kind == "plane":
+            return Plane(name, position, shape, stiffness, damping)
+        return Box(name, position, shape, stiffness, damping) if kind == "box" else Sphere(name, position, shape, stiffness,
+                                                                                            damping)
+    except ParameterError as error:
+        raise ProfileError(path, f"space.objects[{index}].{error.name}", error.value, error.allowed) from None
+
+
+def _unique(path: pathlib.Path, where: str, values: list[Any], what: str) -> None:
+    seen: dict[Any, int] = {}
+    for i, value in enumerate(values):
+        if value is not None and value in seen:
+            raise ProfileError(path, f"{where}[{i}]", value, f"{what} no other entry uses ({where}[{seen[value]}] has it)")
+        seen[value] = i
+
+
+def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
+    """Parse and validate a multi-axis profile without judging it; raise ProfileError."""
+    path = resolve_profile(path_or_name)
+    document = read_document(path)
+    top = Reader(path, "", document)
+    meta = Reader(path, "profile", top.raw("profile", "a [profile] table"))
+    name, operator, task, description = (meta.text("name", pattern=_NAME), meta.text("operator"), meta.text("task"),
+                                         meta.text("description"))
+    meta.done()
+    loop = Reader(path, "loop", top.raw("loop", "a [loop] table with the period"))
+    period = loop.real("period", *PERIOD_RANGE, "s")
+    loop.done()
+    bus = Reader(path, "bus", top.raw("bus", "a [bus] table", default={}))
+    bitrate = bus.real("bitrate", *BITRATE_RANGE, "bit/s", default=float(DEFAULT_BITRATE))
+    bus.done()
+    tables = top.raw("axes", f"an array of 1 to {MAX_AXES} tables [[axes]]")
+    if not isinstance(tables, list) or not 1 <= len(tables) <= MAX_AXES:
+        raise ProfileError(path, "axes", tables, f"an array of 1 to {MAX_AXES} tables [[axes]], one per axis")
+    axes = tuple(_read_axis(path, i, table, period) for i, table in enumerate(tables))
+    _unique(path, "axes", [a.name for a in axes], "a name")
+    _unique(path, "axes", [a.node_id for a in axes], "a node_id")
+    _unique(path, "axes", [a.unit_id for a in axes], "a unit_id")
+    if len({a.node_id is None for a in axes}) > 1:
+        raise ProfileError(path, "axes", [a.node_id or a.unit_id for a in axes],
+                           "one kind of bus for every axis: all node_id (CANopen) or all unit_id (Modbus)")
+    policy = _read_gate(path, top.raw("gate", "a [gate] table"))
+    safety = _read_safety(path, top.raw("safety", "a [safety] table", default=None))
+    space = Reader(path, "space", top.raw("space", "a [space] table with [[space.objects]]"))
+    objects = space.raw("objects", "an array of tables [[space.objects]] (may be empty)", default=[])
+    if not isinstance(objects, list):
+        raise ProfileError(path, "space.objects", objects, "an array of tables [[space.objects]]")
+    space.done()
+    top.done()
+    scene = tuple(_read_object(path, i, table, len(axes)) for i, table in enumerate(objects))
+    _unique(path, "space.objects", [obj.name for obj in scene], "a name")
+    return AxesProfile(name, operator, task, description, period, axes, scene, policy, bitrate, safety, path)
+
+
+def load_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
+    """Read and validate a multi-axis profile, check its bus load, and judge its scene by the coupled gate.
+
+    Raises ProfileError (invalid, or the bus load above 70 %: ``loop.period`` with the load and the
+    smallest T) or :class:`AxesProfileRefusal` (a wall the coupled gate refuses).
+    """
+    profile = read_axes_profile(path_or_name)
+    where = profile.path or profile.name
+    try:
+        profile.bus_load()
+    except ParameterError as error:
+        raise ProfileError(where, "loop.period", profile.period, error.allowed) from None
+    decision = profile.gate().judge(profile.space_scene())
+    if not decision.accepted:
+        raise AxesProfileRefusal(where, decision)
+    return profile
+
+
+def load_any_profile(path_or_name: str | pathlib.Path) -> Profile | AxesProfile:
+    """A one-axis profile (:func:`~haptic_bus.app.profiles.load_profile`) or, with ``[[axes]]``, a multi-axis one."""
+    path = resolve_profile(path_or_name)
+    return load_axes_profile(path) if "axes" in read_document(path) else load_profile(path)

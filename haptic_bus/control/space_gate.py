@@ -1,0 +1,183 @@
+"""The passivity gate for a scene in space on coupled axes (issue 22): every wall a contact can make.
+
+The device: a Cartesian set of axes (:mod:`haptic_bus.control.kinematics`), each a
+:class:`~haptic_bus.analysis.loop.WallLoop` with its own ``m``, ``b``, velocity model and delay.
+A contact with an object is, linearised, a plane wall ``K n n^T``, ``B n n^T`` along the
+object's penetration normal ``n``, judged by the exact coupled criterion
+(:func:`~haptic_bus.analysis.coupled.coupled_verdict`); the gate asks every such wall for
+``margin >= safety_margin`` (N s/m, :class:`~haptic_bus.control.gate.GatePolicy`).
+
+* a plane: its normal;
+* a box: its face normals (one per axis: ``n`` and ``-n`` are one wall);
+* a sphere: every direction can be its normal.  Judged on the directions :func:`sphere_directions`
+  gives (the axes, the diagonals of every pair of axes, the diagonals of the cube) and then from
+  the worst of them a local search of the least margin (Nelder-Mead over the direction, at most
+  ``SEARCH_EVALUATIONS`` verdicts): a search, not a proof over the continuum of directions.
+* two objects whose solids meet (bounding boxes overlap; a plane's half-space meets the other's
+  box) add: ``K1 n1 n1^T + K2 n2 n2^T`` for every pair of their directions (a sphere's sampled
+  ones).  Three or more objects overlapping at one point are not judged together.
+
+Verdicts are cached per wall (the same ``K``, ``B`` and normals on the same axes are judged once).
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from drives.errors import HapticBusError
+from haptic_bus.analysis.coupled import CoupledVerdict, coupled_verdict
+from haptic_bus.analysis.coupled_loop import CoupledLoop, unit_normal
+from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.control.gate import GatePolicy
+from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere
+
+SEARCH_EVALUATIONS = 24
+DEFAULT_POLICY = GatePolicy()
+
+
+def sphere_directions(size: int) -> list[tuple[float, ...]]:
+    """Unit directions up to sign: the axes, ``(e_i +- e_j)/sqrt 2`` and ``(1, +-1, .., +-1)/sqrt size``."""
+    eye = np.eye(size)
+    found = [eye[i] for i in range(size)]
+    found += [(eye[i] + s * eye[j]) / math.sqrt(2) for i, j in itertools.combinations(range(size), 2) for s in (1, -1)]
+    if size > 2:
+        found += [np.array((1.0, *signs)) / math.sqrt(size) for signs in itertools.product((1.0, -1.0), repeat=size - 1)]
+    return [tuple(float(c) for c in d) for d in found]
+
+
+def object_directions(obj: SpaceObject, size: int) -> list[tuple[float, ...]]:
+    """The normals a contact with ``obj`` can have (up to sign; a sphere's sampled)."""
+    if isinstance(obj, Plane):
+        return [obj.normal]
+    if isinstance(obj, Box):
+        return obj.face_normals()
+    return sphere_directions(size)
+
+
+def _overlap(a: SpaceObject, b: SpaceObject) -> bool:
+    """Whether the solids of ``a`` and ``b`` can meet (bounding boxes; a plane against the other's box)."""
+    if isinstance(a, Plane) and isinstance(b, Plane):  # two half-spaces are disjoint only back to back, apart
+        facing = float(np.dot(a.normal, b.normal))
+        return facing > -1.0 + 1e-12 or float(np.dot(b.point, a.normal)) < float(np.dot(a.point, a.normal))
+    if isinstance(a, Plane) or isinstance(b, Plane):
+        plane, other = (a, b) if isinstance(a, Plane) else (b, a)
+        assert isinstance(plane, Plane) and not isinstance(other, Plane)
+        low, high = other.bounds()
+        return bool(plane.meets(low[None, :], high[None, :])[0])
+    assert not isinstance(a, Plane) and not isinstance(b, Plane)
+    (alow, ahigh), (blow, bhigh) = a.bounds(), b.bounds()
+    return bool(np.all(alow < bhigh) and np.all(blow < ahigh))
+
+
+@dataclass(frozen=True)
+class SpaceWall:
+    """One wall a contact can make: the objects, each one's ``(K, B, normal)``, and its verdict."""
+
+    objects: tuple[str, ...]
+    parts: tuple[tuple[float, float, tuple[float, ...]], ...]
+    verdict: CoupledVerdict
+
+
+@dataclass(frozen=True)
+class SpaceDecision:
+    """Whether a scene in space passes, every wall judged (the worst per object or pair), and the reasons."""
+
+    accepted: bool
+    walls: tuple[SpaceWall, ...]
+    reasons: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def worst_margin(self) -> float | None:
+        """The least margin over the walls (N s/m), None for an empty scene."""
+        return min((w.verdict.margin for w in self.walls), default=None)
+
+
+class SpaceGateRefusal(HapticBusError):
+    """A scene in space was refused; ``decision`` holds every reason, ``where`` (e.g. ``profile PATH``)
+    prefixes the message."""
+
+    def __init__(self, decision: SpaceDecision, where: str = "") -> None:
+        self.decision = decision
+        super().__init__((f"{where}: " if where else "") + "passivity gate refused the scene: " + "; ".join(decision.reasons))
+
+
+class SpaceGate:
+    """Judges scenes in space on one set of coupled axes (module docstring); thread-safe (a verdict cache only)."""
+
+    def __init__(self, axes: tuple[WallLoop, ...], policy: GatePolicy = DEFAULT_POLICY) -> None:
+        self.axes = tuple(axes)
+        self.policy = policy
+        CoupledLoop(self.axes, np.zeros((len(self.axes),) * 2), np.zeros((len(self.axes),) * 2))  # validates the axes now
+
+    def wall(self, parts: tuple[tuple[float, float, tuple[float, ...]], ...]) -> CoupledVerdict:
+        """The verdict on the sum of the plane walls ``parts`` = ``((K, B, normal), ...)``; cached."""
+        return _judge(self.axes, tuple((K, B, tuple(unit_normal(n, len(self.axes)))) for K, B, n in parts))
+
+    def _sphere(self, name: str, K: float, B: float) -> SpaceWall:
+        size = len(self.axes)
+
+        def margin(direction: np.ndarray) -> float:
+            return self.wall(((K, B, tuple(direction)),)).margin if np.any(direction) else math.inf
+
+        start = np.array(min(sphere_directions(size), key=lambda d: margin(np.array(d))))
+        best = start
+        if size > 1:
+            from scipy.optimize import minimize  # lazily: only spheres need the search
+
+            found = minimize(margin, start, method="Nelder-Mead", options={"maxfev": SEARCH_EVALUATIONS, "xatol": 1e-3})
+            if margin(found.x) < margin(start):
+                best = found.x
+        direction = tuple(float(c) for c in unit_normal(best, size))
+        return SpaceWall((name,), ((K, B, direction),), self.wall(((K, B, direction),)))
+
+    def judge(self, scene: SpaceScene) -> SpaceDecision:
+        """The decision on ``scene``, never raising for a refusal."""
+        if scene.objects and scene.dimension != len(self.axes):
+            return SpaceDecision(False, (), (f"the scene has {scene.dimension} coordinates, the device {len(self.axes)} axes",))
+        walls: list[SpaceWall] = []
+        for obj in scene.objects:
+            if isinstance(obj, Sphere):
+                walls.append(self._sphere(obj.name, obj.stiffness, obj.damping))
+                continue
+            judged = [SpaceWall((obj.name,), ((obj.stiffness, obj.damping, n),), self.wall(((obj.stiffness, obj.damping, n),)))
+                      for n in object_directions(obj, len(self.axes))]
+            walls.append(min(judged, key=lambda w: w.verdict.margin))
+        for a, b in itertools.combinations(scene.objects, 2):
+            if not _overlap(a, b):
+                continue
+            judged = [SpaceWall((a.name, b.name), parts, self.wall(parts))
+                      for na in object_directions(a, len(self.axes)) for nb in object_directions(b, len(self.axes))
+                      for parts in [((a.stiffness, a.damping, na), (b.stiffness, b.damping, nb))]]
+            walls.append(min(judged, key=lambda w: w.verdict.margin))
+        reasons = [self._explain(w) for w in walls if w.verdict.margin < self.policy.safety_margin]
+        return SpaceDecision(not reasons, tuple(walls), tuple(reasons))
+
+    def admit(self, scene: SpaceScene) -> SpaceDecision:
+        """The decision on ``scene``; raises :class:`SpaceGateRefusal` if it is refused."""
+        decision = self.judge(scene)
+        if not decision.accepted:
+            raise SpaceGateRefusal(decision)
+        return decision
+
+    def _explain(self, wall: SpaceWall) -> str:
+        parts = " + ".join(f"K = {K:g} N/m, B = {B:g} N s/m along ({', '.join(f'{c:.3g}' for c in n)})"
+                           for K, B, n in wall.parts)
+        v = wall.verdict
+        return (f"{'+'.join(wall.objects)} ({parts}) is {v.outcome}: margin {v.margin:.4g} N s/m at theta = "
+                f"{v.critical_theta:.3g} rad, allowed: margin >= {self.policy.safety_margin:g} N s/m")
+
+
+@functools.lru_cache(maxsize=4096)
+def _judge(axes: tuple[WallLoop, ...], parts: tuple[tuple[float, float, tuple[float, ...]], ...]) -> CoupledVerdict:
+    size = len(axes)
+    K, B = np.zeros((size, size)), np.zeros((size, size))
+    for k, b, n in parts:
+        outer = np.outer(n, n)
+        K += k * outer
+        B += b * outer
+    return coupled_verdict(CoupledLoop(axes, K, B))
