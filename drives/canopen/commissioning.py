@@ -163,7 +163,8 @@ class Commissioning:
         """A note (logged as a warning) for each mapping the drive refused, ending with the one in use."""
         if not applied.refusals:
             return ()
-        notes = (*applied.refusals, f"{kind} mapping in use: {applied.plan.describe()}")
+        notes = (*(f"{kind} mapping {refusal}" for refusal in applied.refusals),
+                 f"{kind} mapping in use: {applied.plan.describe()}")
         for note in notes:
             logger.warning("%s: %s", self.name, note)
         return notes
