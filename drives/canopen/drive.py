@@ -6,6 +6,8 @@ Built on ``canopen`` (NMT, SDO, EMCY and heartbeat consumers, PDO configuration)
     read_inputs()          SYNC  ->  drive samples, sends TPDO1 (statusword, velocity[, position])
     write_outputs(torque)  RPDO1 (controlword, target torque)  ->  applied at the next SYNC
 
+(more TPDOs or RPDOs where the drive's PDOs make commissioning split the objects).
+
 The pieces: :mod:`~drives.canopen.link` (the network and who owns it),
 :mod:`~drives.canopen.commissioning` (NMT, PDO mapping, scaling), :mod:`~drives.canopen.exchange`
 (the cycle on the wire), :mod:`~drives.canopen.events` (EMCY, heartbeat, NMT state).
@@ -87,8 +89,14 @@ class CanopenDrive(Cia402Master):
     CiA-301/402 dictionary.  ``period`` (s) is the cycle time written to 0x1006.
     ``tpdo_objects`` are the objects the drive sends each cycle, in order, packed into
     TPDO1.. (8 bytes each; must hold 0x6041 and 0x606C; with 0x6064,
-    :data:`DEFAULT_TPDO_WITH_POSITION`, position travels in TPDO2).  RPDO1 is 0x6040 + 0x6071.
-    All are transmission type 1 (every SYNC); unused PDOs are invalidated.  ``rx_mode``:
+    :data:`DEFAULT_TPDO_WITH_POSITION`, position travels in TPDO2); the RPDO carries 0x6040 +
+    0x6071.  That is the plan for a drive whose PDOs allow it: connect() reads what the drive
+    has and, where its mapping records hold fewer entries or it refuses a mapping, splits the
+    objects further or takes its default mapping (:mod:`drives.canopen.pdo_plan`;
+    ``commissioned.mapping_notes`` says so), and ``tpdo_codecs`` are then the ones in use.
+    All are transmission type 1 (every SYNC); unused PDOs are invalidated.  What the drive
+    lacks of the safety chain is one warning per object (``safety_warnings``), or a refusal
+    with ``safety.strict``; no object the drive lacks is ever written, at connect or close.  ``rx_mode``:
     "direct" or "listener" (:mod:`drives.canopen.exchange`).  Timeouts in s;
     ``max_missed_tpdos`` consecutive cycles without TPDO raise DriveTimeout; heartbeat times in
     ms (consumer default 3x producer; 0 disables).  ``scaling``: the caller's
