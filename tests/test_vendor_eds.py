@@ -268,6 +268,21 @@ def test_a_refused_mapping_falls_back_says_so_and_the_cycle_runs(tmp_path: pathl
     assert heartbeat_consumer_writes == (2 if source == SIMCO else 0)  # set and cleared at close; the iPOS has none
 
 
+def test_an_object_no_pdo_can_carry_is_refused_naming_every_attempt(tmp_path: pathlib.Path) -> None:
+    # the iPOS with 0x606C not PDO-mappable: every mapping is refused 0x06040041, and its default
+    # TPDO4 (0x6041, 0x606C) cannot start either
+    with vendor_drive(eds_variant(IPOS, tmp_path, edits={("606C", "PDOMapping"): "0"})) as (drive, sim, _sniffer):
+        states = states_of(sim)
+        with pytest.raises(DriveProtocolError) as refused:
+            drive.connect()
+    message = str(refused.value)
+    assert message.startswith("CANopen node 5: no PDO mapping the drive accepts: packed: TPDO1 (0x6041, 0x606C) refused "
+                              "(SDO abort writing 0x1A00:00 (TPDO1 mapping parameter.Number of mapped objects): 0x06040041")
+    assert message.count("0x06040041") == 2 and "one object per PDO: TPDO1 (0x6041), TPDO2 (0x606C) refused" in message
+    assert message.endswith("the drive's default mapping: no set of the drive's PDOs carries 0x6041, 0x606C")
+    assert "\n" not in message and states == []
+
+
 def test_a_drive_without_target_torque_is_refused_in_one_line() -> None:
     with vendor_drive(ISD860) as (drive, sim, sniffer):
         states = states_of(sim)

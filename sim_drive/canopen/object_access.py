@@ -60,9 +60,8 @@ class ObjectAccess:
 
     def writer(self, variable: ODVariable) -> Callable[[Value], None]:
         """What an RPDO does with its value for ``variable``."""
-        index, subindex = variable.index, variable.subindex
         if self._core(variable):
-            drive = self._drive
+            drive, index = self._drive, variable.index
 
             def command(value: Value) -> None:
                 try:
@@ -71,9 +70,8 @@ class ObjectAccess:
                     logger.warning("%s: RPDO value refused: %s", drive.name, exc)
 
             return command
-        store = self._node.data_store
+        return lambda value: self.keep(variable, value)
 
-        def keep(value: Value) -> None:
-            store.setdefault(index, {})[subindex] = variable.encode_raw(value)
-
-        return keep
+    def keep(self, variable: ODVariable, value: Value) -> None:
+        """Hold ``value`` as ``variable``'s value: what an SDO read answers from now on."""
+        self._node.data_store.setdefault(variable.index, {})[variable.subindex] = variable.encode_raw(value)

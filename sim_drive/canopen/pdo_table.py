@@ -23,7 +23,8 @@ Rules enforced (CiA 301 7.5.2.35-7.5.2.38):
 The PDOs and their limits are the object dictionary's: a PDO whose communication record the
 dictionary lacks does not exist (SDO abort 0x06020000 from the SDO server), a mapping record
 holds the sub-indices it declares, a communication record without sub 5 has no event timer.
-A default mapping the slave cannot carry (an object it cannot map) starts unmapped, logged.
+A default mapping the slave cannot carry (an object it cannot map) starts unmapped (sub 0 reads
+0), logged.
 
 Abort codes: 0x06090030 value range, 0x06010000 unsupported access (PDO valid / mapping
 enabled), 0x06040041 object cannot be mapped, 0x06040042 mapping exceeds the PDO length.
@@ -142,6 +143,9 @@ class PdoTable:
                            "unmapped", "TPDO" if transmit else "RPDO", number, words)
             channel.count = 0
             self._compile(channel)
+            record = od[mapping]
+            if isinstance(record, (ODRecord, ODArray)) and 0 in record:
+                self._access.keep(record[0], 0)  # an SDO read of sub 0 says so
         return channel
 
     def owns(self, index: int) -> bool:
