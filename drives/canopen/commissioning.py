@@ -2,13 +2,17 @@
 
 In order: make sure no other master drives the bus (no foreign SYNC, the drive not enabled
 by someone else), reach the node (NMT reset communication and its boot-up, or an SDO answer),
-check 0x1000 is a CiA-402 device, write the cycle period 0x1006, map the TPDOs and RPDO1
-through canopen's :meth:`~canopen.pdo.PdoMap.save` (which copes with drives whose mapping
-count is fixed), invalidate the PDOs the cycle does not use, read the scaling the drive has,
-set up the safety chain (:class:`SafetySettings`: the drive's heartbeat consumer 0x1016 for
-the master's heartbeat, the RPDO deadline 0x1400:05, the abort connection option 0x6007,
-each read back), set its heartbeat 0x1017, NMT start, and wait until its heartbeat shows
-OPERATIONAL.
+check 0x1000 is a CiA-402 device, then **read what the drive has** before writing anything
+(:mod:`drives.canopen.inventory`: the optional objects, the cyclic objects, its PDOs, their
+sub-indices and how many entries each mapping holds).  A drive without an object the cycle
+maps is refused; what the safety chain wants and the drive lacks is one warning per object
+(:mod:`drives.canopen.safety_setup`), or a refusal under ``[safety] strict``, before any write.
+Then: the cycle period 0x1006, the TPDOs and the RPDO(s) (:mod:`drives.canopen.pdo_plan`:
+packed into 8-byte frames within each mapping's entries, else one object per PDO, else the
+drive's default mapping; :mod:`drives.canopen.pdo_setup` writes them and falls back when the
+drive refuses one, and the refusal is a note), the other PDOs invalidated, the scaling the drive
+has, 0x6007 and 0x1016:01 written and read back, its heartbeat 0x1017, NMT start, and its
+heartbeat showing OPERATIONAL.  Every write goes to an object the inventory found.
 
 Scaling: the standard objects 0x6076, 0x6072 and the factor group (0x608F, 0x6090, 0x6091,
 0x6092, 0x60A8, 0x60A9; :mod:`drives.factor_group`) where the drive has them, and
@@ -25,42 +29,36 @@ from dataclasses import dataclass, field
 from typing import cast
 
 import canopen
-from canopen.pdo.base import PdoMap
 
 from drives.base import ScalingReading
 from drives.canopen.events import DriveEvents
+from drives.canopen.inventory import DriveInventory, InventoryReader
 from drives.canopen.od import find_scaling_objects
 from drives.canopen.pdo_codec import PdoCodec
+from drives.canopen.pdo_plan import object_label, plans
+from drives.canopen.pdo_setup import AppliedMapping, PdoSetup
+from drives.canopen.safety_setup import missing_objects, refuse_if_strict, write_safety_objects
 from drives.canopen.sdo import SdoAccess
 from drives.cia301 import (
-    COB_ID_INVALID,
-    COB_ID_MASK,
-    COB_ID_NO_RTR,
     COMMUNICATION_CYCLE_PERIOD,
-    CONSUMER_HEARTBEAT_TIME,
     DEVICE_PROFILE_402,
     DEVICE_TYPE,
-    PDO_COB_ID,
-    PDO_EVENT_TIMER,
     PRODUCER_HEARTBEAT_TIME,
     RPDO_BASES,
-    RPDO_COMMUNICATION,
     SYNC_COB_ID,
     TPDO_BASES,
-    TPDO_COMMUNICATION,
-    TRANSMISSION_SYNCHRONOUS_EVERY_SYNC,
     NmtCommand,
     NmtState,
     SdoAbort,
 )
 from drives.cia402 import (
-    ABORT_CONNECTION_OPTION_CODE,
     MAX_TORQUE,
     MOTOR_RATED_TORQUE,
     RATIO_OBJECTS,
     STATUSWORD,
     UNIT_OBJECTS,
     DataType,
+    ObjectSpec,
     RatioSpec,
     State,
     decode_statusword,
@@ -72,7 +70,6 @@ from drives.safety import SafetySettings
 
 logger = logging.getLogger(__name__)
 
-PDO_CHANNELS = 4
 
 
 @dataclass(frozen=True)
@@ -92,16 +89,21 @@ class CommissioningSettings:
 
 @dataclass(frozen=True)
 class Commissioned:
-    """What commissioning found: 0x1000, the PDO COB-IDs, the drive's scaling readings per field
-    (in order of precedence) with notes on what its objects cannot give, and the safety objects
-    the drive lacks (each a warning, unless ``strict`` refused)."""
+    """What commissioning found and set up: 0x1000, the TPDOs and RPDOs the cycle uses (codecs and
+    COB-IDs, in order), the drive's scaling readings per field (in order of precedence) with notes
+    on what its objects cannot give, one warning per object the drive lacks (unless ``strict``
+    refused), a note per PDO mapping the drive refused, and the inventory it was all decided from."""
 
     device_type: int | None
+    tpdo_codecs: tuple[PdoCodec, ...]
     tpdo_cobs: tuple[int, ...]
-    rpdo_cob: int
+    rpdo_codecs: tuple[PdoCodec, ...]
+    rpdo_cobs: tuple[int, ...]
     scaling: dict[str, tuple[ScalingReading, ...]]
+    inventory: DriveInventory
     scaling_notes: tuple[str, ...] = ()
     safety_warnings: tuple[str, ...] = field(default_factory=tuple)
+    mapping_notes: tuple[str, ...] = field(default_factory=tuple)
 
 
 class Commissioning:
@@ -116,24 +118,56 @@ class Commissioning:
         self.settings = settings
         self.safety = safety
 
-    def run(self, tpdo_codecs: tuple[PdoCodec, ...], rpdo_codec: PdoCodec) -> Commissioned:
-        """Commission the drive for ``tpdo_codecs`` (TPDO1..) and ``rpdo_codec`` (RPDO1)."""
+    def run(self, tpdo_objects: tuple[ObjectSpec, ...], rpdo_objects: tuple[ObjectSpec, ...]) -> Commissioned:
+        """Commission the drive for ``tpdo_objects`` (drive -> master, in order) and ``rpdo_objects``."""
         self._reach()
         device_type = self._check_device_type() if self.settings.check_device_type else None
-        self.sdo.write_int(COMMUNICATION_CYCLE_PERIOD, 0, DataType.UNSIGNED32, round(self.settings.period * 1e6))
-        node_id = cast(int, self.node.id)  # canopen types it Optional; a RemoteNode always has one
-        tpdo_cobs = tuple(self._remap(self.node.tpdo[n + 1], codec, TPDO_BASES[n] + node_id)
-                          for n, codec in enumerate(tpdo_codecs))
+        inventory = InventoryReader(self.sdo).read((*tpdo_objects, *rpdo_objects))
+        lacking = [spec for spec in (*tpdo_objects, *rpdo_objects) if not inventory.has(spec.index, spec.subindex)]
+        if lacking:
+            raise DriveProtocolError(self.name, "the drive lacks " + ", ".join(f"{object_label(s)} {s.name}" for s in lacking)
+                                     + ": it cannot be driven in cyclic synchronous torque mode by this master")
+        tpdo_plans, tpdo_skipped = plans(tpdo_objects, inventory.tpdos, exact=False, max_bytes=inventory.max_pdo_bytes)
+        rpdo_plans, rpdo_skipped = plans(rpdo_objects, inventory.rpdos, exact=True, max_bytes=inventory.max_pdo_bytes)
         deadline_ms = self.safety.rpdo_deadline_ms(self.settings.period)
-        rpdo_cob = self._remap(self.node.rpdo[1], rpdo_codec, RPDO_BASES[0] + node_id, deadline_ms)
-        for n in range(len(tpdo_codecs), PDO_CHANNELS):
-            self._invalidate(TPDO_COMMUNICATION + n)
-        for n in range(1, PDO_CHANNELS):
-            self._invalidate(RPDO_COMMUNICATION + n)
+        first_rpdos = [frame.pdo for frame in rpdo_plans[0].frames] if rpdo_plans else []
+        refuse_if_strict(self.name, self.safety,
+                         missing_objects(inventory, self.safety, deadline_ms, self.settings.period, first_rpdos))
+        if inventory.has(COMMUNICATION_CYCLE_PERIOD):
+            self.sdo.write_int(COMMUNICATION_CYCLE_PERIOD, 0, DataType.UNSIGNED32, round(self.settings.period * 1e6))
+        setup = PdoSetup(self.name, self.sdo, cast(int, self.node.id))  # canopen types it Optional; a RemoteNode has one
+        tpdos = setup.apply(tpdo_plans, tpdo_skipped, TPDO_BASES)
+        rpdos = setup.apply(rpdo_plans, rpdo_skipped, RPDO_BASES, deadline_ms)
+        used = {frame.pdo for frame in (*tpdos.plan.frames, *rpdos.plan.frames)}
+        for pdo in (*inventory.tpdos, *inventory.rpdos):
+            if pdo not in used:
+                setup.invalidate(pdo)
+        rpdo_channels = [frame.pdo for frame in rpdos.plan.frames]
+        missing = missing_objects(inventory, self.safety, deadline_ms, self.settings.period, rpdo_channels)
+        refuse_if_strict(self.name, self.safety, missing)  # a fallback may use an RPDO without a deadline
         scaling, notes = self._read_scaling()
-        warnings = self._set_up_safety(deadline_ms)
-        self._start()
-        return Commissioned(device_type, tpdo_cobs, rpdo_cob, scaling, notes, warnings)
+        write_safety_objects(self.name, self.sdo, inventory, self.safety, deadline_ms, rpdo_channels)
+        for item in missing:
+            logger.warning("%s: %s", self.name, item.warning)
+        mapping_notes = (*self._mapping_notes("TPDO", tpdos), *self._mapping_notes("RPDO", rpdos))
+        self._start(inventory)
+        node = self.node.id
+        return Commissioned(
+            device_type,
+            tuple(PdoCodec(f.objects, name=f"{f.pdo.label} of node {node}") for f in tpdos.plan.frames), tpdos.cob_ids,
+            tuple(PdoCodec(f.objects, name=f"{f.pdo.label} of node {node}") for f in rpdos.plan.frames), rpdos.cob_ids,
+            scaling, inventory, notes, tuple(item.warning for item in missing), mapping_notes,
+        )
+
+    def _mapping_notes(self, kind: str, applied: AppliedMapping) -> tuple[str, ...]:
+        """A note (logged as a warning) for each mapping the drive refused, ending with the one in use."""
+        if not applied.refusals:
+            return ()
+        notes = (*(f"{kind} mapping {refusal}" for refusal in applied.refusals),
+                 f"{kind} mapping in use: {applied.plan.describe()}")
+        for note in notes:
+            logger.warning("%s: %s", self.name, note)
+        return notes
 
     def refuse_another_master(self) -> None:
         """Listen before taking the bus: a SYNC from someone else, or the drive enabled by someone
@@ -223,45 +257,6 @@ class Commissioning:
             )
         return device_type
 
-    def _remap(self, pdo: PdoMap, codec: PdoCodec, predefined: int, event_timer_ms: int = 0) -> int:
-        """Map ``codec``'s objects into ``pdo``, synchronous (every SYNC), valid, with an event
-        timer (an RPDO's receive deadline) if ``event_timer_ms`` and the drive has sub 5; its COB-ID."""
-        com = pdo.com_record.od.index
-        current = self.sdo.read_int(com, PDO_COB_ID, DataType.UNSIGNED32)
-        cob_id = current & COB_ID_MASK or predefined
-        if cob_id != predefined:
-            logger.info("%s: 0x%04X uses COB-ID 0x%X, not the predefined 0x%X", self.name, com, cob_id, predefined)
-        pdo.clear()
-        for entry in codec.entries:
-            pdo.add_variable(entry.index, entry.subindex)
-        if len(pdo.map) != len(codec.entries):
-            raise DriveProtocolError(self.name, f"cannot map {codec}: the object dictionary lacks one of its objects")
-        pdo.cob_id = cob_id
-        pdo.trans_type = TRANSMISSION_SYNCHRONOUS_EVERY_SYNC
-        pdo.rtr_allowed = not current & COB_ID_NO_RTR  # keep what the drive had: some refuse RTR
-        pdo.enabled = True
-        pdo.event_timer = event_timer_ms if event_timer_ms and PDO_EVENT_TIMER in pdo.com_record.od else None
-        with self.sdo.translated("mapping", com, PDO_COB_ID):
-            pdo.save()
-        self.node.network.unsubscribe(cob_id, pdo.on_message)  # the cyclic path decodes its own frames
-        mapping = pdo.map_array.od.index
-        count = self.sdo.read_int(mapping, 0, DataType.UNSIGNED8)
-        if count != len(codec.entries):
-            raise DriveProtocolError(
-                self.name, f"0x{mapping:04X}:00 reads back {count} mapped objects after writing {len(codec.entries)}"
-            )
-        return cob_id
-
-    def _invalidate(self, com: int) -> None:
-        """Invalidate an unused PDO so that only the configured frames travel (absent PDOs are fine)."""
-        try:
-            current = self.sdo.read_int(com, PDO_COB_ID, DataType.UNSIGNED32)
-            if not current & COB_ID_INVALID:
-                self.sdo.write_int(com, PDO_COB_ID, DataType.UNSIGNED32, current | COB_ID_INVALID)
-        except SdoAbortError as exc:
-            if exc.abort_code not in (SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX):
-                raise
-
     def _read_scaling(self) -> tuple[dict[str, tuple[ScalingReading, ...]], tuple[str, ...]]:
         """The scaling the drive states, per field in order of precedence: manufacturer objects an
         EDS names, then the standard objects (0x6076, 0x6072, and the factor group through
@@ -303,55 +298,11 @@ class Commissioning:
         denominator = self._optional(spec.index, 2, spec.data_type, notes) if numerator is not None else None
         return None if numerator is None or denominator is None else (numerator, denominator)
 
-    def _set_up_safety(self, deadline_ms: int) -> tuple[str, ...]:
-        """0x1016 sub 1, 0x6007 and (already written with the mapping) 0x1400:05, each read back.
-
-        A drive without one of them gets a warning naming it, or a refusal when ``strict``.
-        """
-        safety = self.safety
-        missing: list[str] = []
-        wanted: list[tuple[int, int, DataType, int, str]] = [
-            (ABORT_CONNECTION_OPTION_CODE.index, 0, DataType.INTEGER16, safety.abort_option,
-             "0x6007 abort connection option code"),
-        ]
-        if safety.master_node_id is not None:
-            entry = safety.master_node_id << 16 | safety.consumer_ms
-            wanted.append((CONSUMER_HEARTBEAT_TIME, 1, DataType.UNSIGNED32, entry, "0x1016:01 consumer heartbeat time"))
-        for index, subindex, data_type, value, what in wanted:
-            try:
-                self.sdo.write_int(index, subindex, data_type, value)
-                got = self.sdo.read_int(index, subindex, data_type)
-            except SdoAbortError as exc:
-                if exc.abort_code not in (SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX):
-                    raise
-                missing.append(what)
-                continue
-            if got != value:
-                raise DriveProtocolError(self.name, f"{what} reads back {got} after writing {value}")
-        if deadline_ms:
-            try:
-                got = self.sdo.read_int(RPDO_COMMUNICATION, PDO_EVENT_TIMER, DataType.UNSIGNED16)
-            except SdoAbortError as exc:
-                if exc.abort_code not in (SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX):
-                    raise
-                missing.append("0x1400:05 RPDO1 event timer (receive deadline)")
-            else:
-                if got != deadline_ms:
-                    raise DriveProtocolError(self.name,
-                                             f"0x1400:05 RPDO1 event timer reads back {got} ms after writing {deadline_ms}")
-        if not missing:
-            return ()
-        text = (f"the drive lacks {', '.join(missing)}: it will not stop on its own for that cause if this master "
-                "dies; a drive watchdog (or an emergency stop) must cover it")
-        if safety.strict:
-            raise DriveProtocolError(self.name, f"refused under the strict safety policy: {text}")
-        logger.warning("%s: %s", self.name, text)
-        return (text,)
-
-    def _start(self) -> None:
-        """Heartbeat 0x1017, NMT start, and its heartbeat showing OPERATIONAL."""
-        producer_ms = self.settings.heartbeat_producer_ms
-        self.sdo.write_int(PRODUCER_HEARTBEAT_TIME, 0, DataType.UNSIGNED16, producer_ms)
+    def _start(self, inventory: DriveInventory) -> None:
+        """Heartbeat 0x1017 (if the drive has it), NMT start, and its heartbeat showing OPERATIONAL."""
+        producer_ms = self.settings.heartbeat_producer_ms if inventory.has(PRODUCER_HEARTBEAT_TIME) else 0
+        if inventory.has(PRODUCER_HEARTBEAT_TIME):
+            self.sdo.write_int(PRODUCER_HEARTBEAT_TIME, 0, DataType.UNSIGNED16, producer_ms)
         self.events.forget_state()
         self.node.nmt.send_command(NmtCommand.START)
         if not producer_ms:

@@ -6,6 +6,8 @@ Built on ``canopen`` (NMT, SDO, EMCY and heartbeat consumers, PDO configuration)
     read_inputs()          SYNC  ->  drive samples, sends TPDO1 (statusword, velocity[, position])
     write_outputs(torque)  RPDO1 (controlword, target torque)  ->  applied at the next SYNC
 
+(more TPDOs or RPDOs where the drive's PDOs make commissioning split the objects).
+
 The pieces: :mod:`~drives.canopen.link` (the network and who owns it),
 :mod:`~drives.canopen.commissioning` (NMT, PDO mapping, scaling), :mod:`~drives.canopen.exchange`
 (the cycle on the wire), :mod:`~drives.canopen.events` (EMCY, heartbeat, NMT state).
@@ -35,11 +37,13 @@ from drives.canopen.commissioning import Commissioned, Commissioning, Commission
 from drives.canopen.events import DriveEvents
 from drives.canopen.exchange import RX_MODES, CanopenExchange, CanopenStats
 from drives.canopen.heartbeat import HeartbeatProducer
+from drives.canopen.inventory import MAX_MAPPING_ENTRIES
 from drives.canopen.link import NetworkLink
 from drives.canopen.od import load_object_dictionary
-from drives.canopen.pdo_codec import MAX_PDO_BYTES, PdoCodec, object_spec
+from drives.canopen.pdo_codec import PdoCodec, object_spec
+from drives.canopen.pdo_plan import pack
 from drives.canopen.sdo import SdoAccess
-from drives.cia301 import CONSUMER_HEARTBEAT_TIME, NODE_ID_RANGE, NmtCommand
+from drives.cia301 import CONSUMER_HEARTBEAT_TIME, NODE_ID_RANGE, PRODUCER_HEARTBEAT_TIME, NmtCommand
 from drives.cia402 import (
     CONTROLWORD,
     POSITION_ACTUAL,
@@ -64,16 +68,8 @@ DEFAULT_RPDO: tuple[ObjectSpec, ...] = (CONTROLWORD, TARGET_TORQUE)
 
 def split_into_frames(objects: Sequence[ObjectSpec | int]) -> list[tuple[ObjectSpec, ...]]:
     """Pack ``objects`` in order into as few CAN frames (<= 8 bytes each) as that order allows."""
-    frames: list[list[ObjectSpec]] = []
-    used = MAX_PDO_BYTES
-    for obj in objects:
-        spec = object_spec(obj)
-        if used + spec.data_type.size > MAX_PDO_BYTES:
-            frames.append([])
-            used = 0
-        frames[-1].append(spec)
-        used += spec.data_type.size
-    return [tuple(frame) for frame in frames]
+    specs = [object_spec(obj) for obj in objects]
+    return [frame for _, frame in pack(specs, [MAX_MAPPING_ENTRIES] * len(specs)) or ()]
 
 
 def _check(name: str, ok: bool, value: object, allowed: str) -> None:
@@ -93,8 +89,14 @@ class CanopenDrive(Cia402Master):
     CiA-301/402 dictionary.  ``period`` (s) is the cycle time written to 0x1006.
     ``tpdo_objects`` are the objects the drive sends each cycle, in order, packed into
     TPDO1.. (8 bytes each; must hold 0x6041 and 0x606C; with 0x6064,
-    :data:`DEFAULT_TPDO_WITH_POSITION`, position travels in TPDO2).  RPDO1 is 0x6040 + 0x6071.
-    All are transmission type 1 (every SYNC); unused PDOs are invalidated.  ``rx_mode``:
+    :data:`DEFAULT_TPDO_WITH_POSITION`, position travels in TPDO2); the RPDO carries 0x6040 +
+    0x6071.  That is the plan for a drive whose PDOs allow it: connect() reads what the drive
+    has and, where its mapping records hold fewer entries or it refuses a mapping, splits the
+    objects further or takes its default mapping (:mod:`drives.canopen.pdo_plan`;
+    ``commissioned.mapping_notes`` says so), and ``tpdo_codecs`` are then the ones in use.
+    All are transmission type 1 (every SYNC); unused PDOs are invalidated.  What the drive
+    lacks of the safety chain is one warning per object (``safety_warnings``), or a refusal
+    with ``safety.strict``; no object the drive lacks is ever written, at connect or close.  ``rx_mode``:
     "direct" or "listener" (:mod:`drives.canopen.exchange`).  Timeouts in s;
     ``max_missed_tpdos`` consecutive cycles without TPDO raise DriveTimeout; heartbeat times in
     ms (consumer default 3x producer; 0 disables).  ``scaling``: the caller's
@@ -172,9 +174,10 @@ class CanopenDrive(Cia402Master):
         self.link = NetworkLink(self.name, network=network, bus=bus,
                                 bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})))
         self.stats = CanopenStats()
+        self.tpdo_objects = tuple(spec for frame in frames for spec in frame)
         tpdo_codecs = tuple(PdoCodec(frame, name=f"TPDO{n} of node {node_id}") for n, frame in enumerate(frames, 1))
         self.exchange = CanopenExchange(self.name, self.link, tpdo_codecs,
-                                        PdoCodec(DEFAULT_RPDO, name=f"RPDO1 of node {node_id}"), rx_mode,
+                                        (PdoCodec(DEFAULT_RPDO, name=f"RPDO1 of node {node_id}"),), rx_mode,
                                         tpdo_timeout, self.stats)
         self.node: canopen.RemoteNode | None = None
         self.events: DriveEvents | None = None
@@ -242,11 +245,12 @@ class CanopenDrive(Cia402Master):
             if network.bus is None:
                 raise DriveError(self.name, "the CAN network has no bus after connecting")
             self.heartbeat.start(network.bus, network.send_lock)  # boot-up first, before the drive is touched
-            found = commissioning.run(self.exchange.tpdo_codecs, self.exchange.rpdo_codec)
+            found = commissioning.run(self.tpdo_objects, DEFAULT_RPDO)
             self.commissioned = found
-            self.exchange.configure(found.tpdo_cobs, found.rpdo_cob)
+            self.exchange.configure(found.tpdo_codecs, found.tpdo_cobs, found.rpdo_codecs, found.rpdo_cobs)
             self._adopt_scaling(found.scaling, found.scaling_notes)
-            self.events.heartbeat_limit = self.settings.heartbeat_consumer_ms / 1000.0
+            beats = found.inventory.has(PRODUCER_HEARTBEAT_TIME)  # a drive without 0x1017 sends no heartbeat
+            self.events.heartbeat_limit = self.settings.heartbeat_consumer_ms / 1000.0 if beats else 0.0
             self.events.clear()
         except BaseException:
             self._teardown(reachable=False)
@@ -386,7 +390,7 @@ class CanopenDrive(Cia402Master):
                     self.exchange.send_rpdo(SAFE_CONTROLWORD, 0)
                     self.exchange.send_safe()
                     self.node.nmt.send_command(NmtCommand.ENTER_PRE_OPERATIONAL)
-                    if self.safety.master_node_id is not None and self.sdo is not None:
+                    if self.safety.master_node_id is not None and self.sdo is not None and self._has(CONSUMER_HEARTBEAT_TIME, 1):
                         self.sdo.write_int(CONSUMER_HEARTBEAT_TIME, 1, DataType.UNSIGNED32, 0)  # a clean goodbye
                 except Exception as exc:  # a best-effort goodbye: whatever fails here, the bus is released below
                     logger.warning("%s: could not send the closing frames: %r", self.name, exc)
@@ -400,6 +404,10 @@ class CanopenDrive(Cia402Master):
             logger.warning("%s: closing: %s", self.name, exc)
         finally:
             self.link.close()
+
+    def _has(self, index: int, subindex: int = 0) -> bool:
+        """True if commissioning found ``index:subindex`` in the drive (False before it did)."""
+        return self.commissioned is not None and self.commissioned.inventory.has(index, subindex)
 
     def __repr__(self) -> str:
         return f"CanopenDrive(node_id={self.node_id}, period={self.period}, rx_mode={self.rx_mode!r})"

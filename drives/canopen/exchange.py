@@ -33,7 +33,7 @@ from drives.base import CyclicInputs
 from drives.canopen.link import NetworkLink
 from drives.canopen.pdo_codec import PdoCodec
 from drives.cia301 import SYNC_COB_ID
-from drives.cia402 import POSITION_ACTUAL, STATUSWORD, VELOCITY_ACTUAL
+from drives.cia402 import CONTROLWORD, POSITION_ACTUAL, STATUSWORD, TARGET_TORQUE, VELOCITY_ACTUAL
 from drives.cia402_master import SAFE_CONTROLWORD, CyclicStats
 from drives.errors import DriveError
 
@@ -57,11 +57,14 @@ class CanopenStats(CyclicStats):
 
 
 class CanopenExchange:
-    """SYNC out, this cycle's TPDOs in, RPDO out, for one drive on ``link``.
+    """SYNC out, this cycle's TPDOs in, RPDOs out, for one drive on ``link``.
 
-    ``tpdo_codecs`` in TPDO order (together holding 0x6041, 0x606C and optionally 0x6064);
-    ``rpdo_codec`` packs (controlword, target torque);
-    ``timeout`` (s) is how long one cycle waits for all its TPDOs.
+    ``tpdo_codecs`` in TPDO order (together holding 0x6041, 0x606C and optionally 0x6064, and
+    whatever else a drive's default mapping carries); ``rpdo_codecs`` in RPDO order, together
+    holding the controlword 0x6040 and the target torque 0x6071 and nothing else (one frame,
+    (controlword, torque), unless the drive's PDOs made commissioning split them);
+    ``timeout`` (s) is how long one cycle waits for all its TPDOs.  :meth:`configure` sets the
+    layout commissioning chose.
     """
 
     def __init__(
@@ -69,38 +72,51 @@ class CanopenExchange:
         name: str,
         link: NetworkLink,
         tpdo_codecs: tuple[PdoCodec, ...],
-        rpdo_codec: PdoCodec,
+        rpdo_codecs: tuple[PdoCodec, ...],
         rx_mode: str,
         timeout: float,
         stats: CanopenStats,
     ) -> None:
         self.name = name
         self.link = link
-        self.tpdo_codecs = tpdo_codecs
-        self.rpdo_codec = rpdo_codec
         self.rx_mode = rx_mode
         self.timeout = timeout
         self.stats = stats
-        flat = [(spec.index, spec.subindex) for codec in tpdo_codecs for spec in codec.entries]
-        position = (POSITION_ACTUAL.index, 0)
-        self._at = (flat.index((STATUSWORD.index, 0)), flat.index((VELOCITY_ACTUAL.index, 0)),
-                    flat.index(position) if position in flat else None)
         self.tpdo_cobs: tuple[int, ...] = ()
         self._slots: dict[int, tuple[int, int, object]] = {}
         self._queue: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
         self._subscribed = False
-        self._rpdo_pack_into = rpdo_codec.struct.pack_into
         self._sync = can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False)
-        self._rpdo = can.Message(arbitration_id=0, data=bytes(rpdo_codec.size), is_extended_id=False)
-        self._safe = can.Message(arbitration_id=0, data=rpdo_codec.encode(SAFE_CONTROLWORD, 0), is_extended_id=False)
+        self._layout(tpdo_codecs, rpdo_codecs)
 
-    def configure(self, tpdo_cobs: tuple[int, ...], rpdo_cob: int) -> None:
-        """The COB-IDs commissioning gave the TPDOs (in order) and the RPDO."""
+    def _layout(self, tpdo_codecs: tuple[PdoCodec, ...], rpdo_codecs: tuple[PdoCodec, ...]) -> None:
+        """Where statusword, velocity and position sit in the TPDOs, and the RPDO frames."""
+        self.tpdo_codecs = tpdo_codecs
+        self.rpdo_codecs = rpdo_codecs
+        flat = [(spec.index, spec.subindex) for codec in tpdo_codecs for spec in codec.entries]
+        position = (POSITION_ACTUAL.index, 0)
+        self._at = (flat.index((STATUSWORD.index, 0)), flat.index((VELOCITY_ACTUAL.index, 0)),
+                    flat.index(position) if position in flat else None)
+        outputs = ((CONTROLWORD.index, 0), (TARGET_TORQUE.index, 0))
+        # each RPDO frame: its message and which of (controlword, torque) it carries, in frame order
+        self._rpdos = [(can.Message(arbitration_id=0, data=bytes(codec.size), is_extended_id=False), codec.struct.pack_into,
+                        tuple(outputs.index((e.index, e.subindex)) for e in codec.entries)) for codec in rpdo_codecs]
+        self._rpdo, self._rpdo_pack_into, order = self._rpdos[0]
+        self._one_rpdo = len(self._rpdos) == 1 and order == (0, 1)  # the hot path: one frame, one pack_into
+        safe = (SAFE_CONTROLWORD, 0)
+        self._safe = [can.Message(arbitration_id=0, data=codec.encode(*(safe[i] for i in order)), is_extended_id=False)
+                      for codec, (_, _, order) in zip(rpdo_codecs, self._rpdos)]
+
+    def configure(self, tpdo_codecs: tuple[PdoCodec, ...], tpdo_cobs: tuple[int, ...],
+                  rpdo_codecs: tuple[PdoCodec, ...], rpdo_cobs: tuple[int, ...]) -> None:
+        """The TPDOs and RPDOs commissioning set up: codecs and COB-IDs, in order."""
         self.end()
+        self._layout(tpdo_codecs, rpdo_codecs)
         self.tpdo_cobs = tpdo_cobs
         self._slots = {cob: (slot, codec.size, codec.struct.unpack)
                        for slot, (cob, codec) in enumerate(zip(tpdo_cobs, self.tpdo_codecs))}
-        self._rpdo.arbitration_id = self._safe.arbitration_id = rpdo_cob
+        for (message, _, _), safe, cob in zip(self._rpdos, self._safe, rpdo_cobs):
+            message.arbitration_id = safe.arbitration_id = cob
 
     # ------------------------------------------------------------------ phases
 
@@ -233,11 +249,18 @@ class CanopenExchange:
             raise DriveError(self.name, f"CAN send failed: {exc!r}") from exc
 
     def send_rpdo(self, controlword: int, torque: int) -> None:
-        """RPDO1: ``controlword`` and ``torque`` (per mille), packed in place."""
-        msg = self._rpdo
-        self._rpdo_pack_into(msg.data, 0, controlword, torque)
-        self.send(msg)
-        self.stats.rpdos_sent += 1
+        """The RPDO(s): ``controlword`` and ``torque`` (per mille), packed in place."""
+        if self._one_rpdo:
+            msg = self._rpdo
+            self._rpdo_pack_into(msg.data, 0, controlword, torque)
+            self.send(msg)
+            self.stats.rpdos_sent += 1
+            return
+        values = (controlword, torque)
+        for msg, pack_into, order in self._rpdos:
+            pack_into(msg.data, 0, *[values[i] for i in order])
+            self.send(msg)
+            self.stats.rpdos_sent += 1
 
     def send_safe(self) -> None:
         """Zero torque with DISABLE VOLTAGE, and one SYNC so that a synchronous drive applies it.
@@ -245,8 +268,9 @@ class CanopenExchange:
         Never raises: it runs while another error is being raised, which matters more.
         """
         try:
-            self.send(self._safe)
-            self.stats.rpdos_sent += 1
+            for msg in self._safe:
+                self.send(msg)
+                self.stats.rpdos_sent += 1
             self.send(self._sync)
             self.stats.syncs_sent += 1
         except DriveError as exc:

@@ -1,11 +1,11 @@
 """Object dictionaries for the CANopen master: the drive's EDS, or the standard one.
 
-The master needs an object dictionary for names in error messages, for canopen's PDO
-configuration (:meth:`canopen.pdo.PdoMap.save`) and for canopen's generic PDO path (used by
-the benchmark).  Without an EDS, :func:`minimal_cia402_od` builds the CiA-301 communication
-objects the master touches plus the standard CiA-402 objects of :mod:`drives.cia402` (the
-factor group and SI unit objects too): a real drive is met with the standard dictionary,
-never with ours.
+The master needs an object dictionary for names in error messages and for canopen's generic
+PDO path (used by the benchmark); what the drive itself has is read from the drive
+(:mod:`drives.canopen.inventory`), never assumed from this dictionary.  Without an EDS,
+:func:`minimal_cia402_od` builds the CiA-301 communication objects the master touches plus the
+standard CiA-402 objects of :mod:`drives.cia402` (the factor group and SI unit objects too): a
+real drive is met with the standard dictionary, never with ours.
 """
 
 from __future__ import annotations

@@ -30,7 +30,9 @@ from drives.cia301 import (
     COB_ID_SYNC_GENERATOR,
     COMMUNICATION_CYCLE_PERIOD,
     CONSUMER_HEARTBEAT_TIME,
+    EMCY_BASE,
     PRODUCER_HEARTBEAT_TIME,
+    SYNC_COB_ID,
     SYNCHRONOUS_WINDOW_LENGTH,
     SdoAbort,
     is_restricted_cob_id,
@@ -54,8 +56,9 @@ class CommunicationObjects:
     """The running values of the objects in the module table, for one slave."""
 
     def __init__(self, dictionary: ObjectDictionary, drive: SimulatedDrive, timers: NodeTimers,
-                 emergency: Emergency) -> None:
+                 emergency: Emergency, node_id: int) -> None:
         self._od = dictionary
+        self._node_id = node_id
         self._drive = drive
         self._timers = timers
         self._emergency = emergency
@@ -66,13 +69,15 @@ class CommunicationObjects:
         self.reset()
 
     def reset(self) -> None:
-        """Back to the object dictionary's values (communication reset); the producer is not started."""
+        """Back to the object dictionary's values (communication reset); the producer is not started.
+        An object the dictionary lacks keeps the CiA-301 predefined value (SYNC 0x80, EMCY 0x80 +
+        node id) or is off (no heartbeat consumer, no producer, no sync window)."""
         od = self._od
-        self.sync_cob = default_int(od, COB_ID_SYNC) & COB_ID_MASK
+        self.sync_cob = default_int(od, COB_ID_SYNC, absent=SYNC_COB_ID) & COB_ID_MASK
         self.sync_window_us = default_int(od, SYNCHRONOUS_WINDOW_LENGTH, absent=0)
-        self._set_emcy(default_int(od, COB_ID_EMCY_OBJECT))
+        self._set_emcy(default_int(od, COB_ID_EMCY_OBJECT, absent=EMCY_BASE + self._node_id))
         self._consumer(default_int(od, CONSUMER_HEARTBEAT_TIME, 1, absent=0))
-        self.producer_ms = default_int(od, PRODUCER_HEARTBEAT_TIME)
+        self.producer_ms = default_int(od, PRODUCER_HEARTBEAT_TIME, absent=0)
 
     def owns(self, index: int) -> bool:
         """True for the objects of the module table."""

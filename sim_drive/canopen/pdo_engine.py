@@ -14,7 +14,6 @@ Each frame is one precompiled ``struct`` call.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -22,13 +21,13 @@ import can
 
 from drives.cia301 import EmcyCode
 from sim_drive.canopen.emergency import Emergency
+from sim_drive.canopen.object_access import ObjectAccess, Value
 from sim_drive.canopen.pdo_table import PdoChannel, PdoTable
-from sim_drive.device import ObjectAccessError, SimulatedDrive
+from sim_drive.device import SimulatedDrive
 from sim_drive.sync_clock import SyncClock
 
-logger = logging.getLogger(__name__)
-
-Readers = tuple[Callable[[], int], ...]
+Readers = tuple[Callable[[], Value], ...]
+Writers = tuple[Callable[[Value], None], ...]
 
 
 @dataclass
@@ -42,17 +41,20 @@ class SlaveCounters:
 
 
 class PdoEngine:
-    """TPDO encoding and RPDO decoding for one slave; ``send(cob_id, data)`` puts a frame on the bus."""
+    """TPDO encoding and RPDO decoding for one slave (objects read and written through ``access``);
+    ``send(cob_id, data)`` puts a frame on the bus."""
 
-    def __init__(self, table: PdoTable, drive: SimulatedDrive, send: Callable[[int, bytes], None],
+    def __init__(self, table: PdoTable, drive: SimulatedDrive, access: ObjectAccess, send: Callable[[int, bytes], None],
                  emergency: Emergency, counters: SlaveCounters, sync_clock: SyncClock | None = None) -> None:
         self.table = table
         self.drive = drive
+        self.access = access
         self.send = send
         self.emergency = emergency
         self.counters = counters
         self.sync_clock = sync_clock  # None: each SYNC closes exactly one period (virtual time)
         self.rx_by_cob: dict[int, PdoChannel] = {}
+        self._writers: dict[int, Writers] = {}
         self.tx_cobs: frozenset[int] = frozenset()
         self._tx_plan: list[tuple[PdoChannel, Readers]] = []
         self._sync_counts: dict[int, int] = {}
@@ -64,10 +66,11 @@ class PdoEngine:
 
     def rebuild(self) -> None:
         """Recompute the plan after a configuration change (every TPDO counts as changed)."""
-        drive = self.drive
+        access = self.access
         self.rx_by_cob = {ch.cob_id: ch for ch in self.table.rx if ch.valid}
+        self._writers = {ch.number: tuple(access.writer(v) for v in ch.variables) for ch in self.table.rx}
         self.tx_cobs = frozenset(ch.cob_id for ch in self.table.tx)
-        self._tx_plan = [(ch, tuple(drive.reader(i) for i in ch.indices)) for ch in self.table.tx if ch.valid]
+        self._tx_plan = [(ch, tuple(access.reader(v) for v in ch.variables)) for ch in self.table.tx if ch.valid]
         self._sync_counts = {ch.number: 0 for ch, _ in self._tx_plan}
         self._last = {}
 
@@ -149,8 +152,5 @@ class PdoEngine:
         return True
 
     def _apply(self, channel: PdoChannel, data: bytes) -> None:
-        for index, value in zip(channel.indices, channel.codec.unpack(data)):
-            try:
-                self.drive.write_object(index, value)
-            except ObjectAccessError as exc:
-                logger.warning("%s: RPDO%d value refused: %s", self.drive.name, channel.number, exc)
+        for write, value in zip(self._writers[channel.number], channel.codec.unpack(data)):
+            write(value)

@@ -34,6 +34,7 @@ it never says it is alive while it cannot serve.
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections.abc import Mapping
@@ -61,6 +62,7 @@ from sim_drive.bus_timing import BusLoadMeter
 from sim_drive.canopen.communication import CommunicationObjects
 from sim_drive.canopen.emergency import Emergency
 from sim_drive.canopen.manufacturer import ManufacturerObjects
+from sim_drive.canopen.object_access import ObjectAccess
 from sim_drive.canopen.pdo_engine import PdoEngine, SlaveCounters
 from sim_drive.canopen.pdo_table import PdoChannel, PdoTable
 from sim_drive.canopen.standard_od import object_dictionary
@@ -126,8 +128,11 @@ class CanopenSimDrive:
     :class:`~sim_drive.device.SimulatedDrive`.  ``bus_meter``: optional bit-time accounting.
     ``od``: "haptic" (the shipped EDS, manufacturer area included) or "standard" (CiA-301/402
     objects only, the scaling in the factor group: :mod:`sim_drive.canopen.standard_od`).
-    ``dictionary``: an object dictionary to use instead of the kind's default.  ``sync_clock``:
-    how long the interval each SYNC closes was (:mod:`sim_drive.sync_clock`; None: exactly ``T``).
+    ``dictionary``: an object dictionary to use instead of the kind's default.  ``eds``: a user's
+    own EDS (a vendor's) instead: the simulated core behind that dictionary, objects it lacks
+    absent, its PDO limits, its manufacturer area stored values (:mod:`sim_drive.canopen.vendor_od`).
+    ``sync_clock``: how long the interval each SYNC closes was (:mod:`sim_drive.sync_clock`;
+    None: exactly ``T``).
     """
 
     def __init__(
@@ -141,6 +146,7 @@ class CanopenSimDrive:
         bus_meter: BusLoadMeter | None = None,
         dictionary: ObjectDictionary | None = None,
         od: str = "haptic",
+        eds: str | os.PathLike[str] | None = None,
         sync_clock: SyncClock | None = None,
     ) -> None:
         self.node_id = whole_in_range("node_id", node_id, 1, 127, context="CANopen slave")
@@ -157,7 +163,7 @@ class CanopenSimDrive:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._network: _SlaveNetwork | None = None
-        dictionary, read_standard = object_dictionary(od, self.node_id, self.drive, dictionary)
+        dictionary, read_standard = object_dictionary(od, self.node_id, self.drive, dictionary, eds)
         self._node = StrictLocalNode(self.node_id, dictionary)
         self._node.add_read_callback(self._on_sdo_read)
         if read_standard is not None:
@@ -165,10 +171,11 @@ class CanopenSimDrive:
         self._node.add_write_callback(self._on_sdo_write)
         self.timers = NodeTimers()
         self.emergency = Emergency(self._node.emcy, self.drive, self._may_send_emcy)
-        self._comm = CommunicationObjects(dictionary, self.drive, self.timers, self.emergency)
-        self._manufacturer = ManufacturerObjects(self.drive, self.counters)
-        self._pdos = PdoTable(dictionary, self.drive.readable_objects(), self.drive.writable_objects(), self._on_pdo_change)
-        self._engine = PdoEngine(self._pdos, self.drive, self._send, self.emergency, self.counters, sync_clock)
+        self._comm = CommunicationObjects(dictionary, self.drive, self.timers, self.emergency, self.node_id)
+        self._manufacturer = ManufacturerObjects(self.drive, self.counters) if eds is None else None  # a vendor's area is its own
+        access = ObjectAccess(self.drive, self._node)
+        self._pdos = PdoTable(dictionary, access, self._on_pdo_change)
+        self._engine = PdoEngine(self._pdos, self.drive, access, self._send, self.emergency, self.counters, sync_clock)
         self._reset_communication()
 
     # ----------------------------------------------------------------- lifecycle
@@ -218,6 +225,11 @@ class CanopenSimDrive:
     def nmt_state(self) -> str:
         """The NMT state: INITIALISING, PRE-OPERATIONAL, OPERATIONAL or STOPPED."""
         return "INITIALISING" if self.nmt is NmtState.BOOT_UP else self.nmt.label
+
+    @property
+    def object_dictionary(self) -> ObjectDictionary:
+        """The dictionary the slave serves (the shipped EDS, the standard objects, or a user's EDS)."""
+        return self._node.object_dictionary
 
     @property
     def serving(self) -> bool:
@@ -468,7 +480,7 @@ class CanopenSimDrive:
     def _on_sdo_read(self, index: int, subindex: int, od: Any) -> int | float | None:
         if subindex == 0 and index in self.drive.readable_objects():
             return self.drive.read_object(index)
-        if subindex and self._manufacturer.owns(index):
+        if subindex and self._manufacturer is not None and self._manufacturer.owns(index):
             return self._manufacturer.read(index, subindex)
         if index == ERROR_REGISTER:
             return self.emergency.register
@@ -481,7 +493,7 @@ class CanopenSimDrive:
                 self.drive.write_object(index, value)
             except ObjectAccessError as exc:
                 raise SdoAbortedError(_ABORTS[exc.reason]) from exc
-        elif self._manufacturer.owns(index):
+        elif self._manufacturer is not None and self._manufacturer.owns(index):
             self._manufacturer.write(index, subindex, value)
         elif self._pdos.owns(index):
             self._pdos.write(index, subindex, value)

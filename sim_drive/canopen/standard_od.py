@@ -35,6 +35,7 @@ answers SDO abort 0x08000024, no data available).
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable
 from fractions import Fraction
 from typing import Any
@@ -54,6 +55,7 @@ from drives.cia402 import (
 )
 from drives.errors import ParameterError
 from drives.factor_group import INCREMENT, METRE, SECOND, SiUnit, best_ratio, power_of_ten
+from sim_drive.canopen.vendor_od import load_vendor_eds
 from sim_drive.device import SimulatedDrive
 from sim_drive.eds import OD_KINDS, eds_path
 from sim_drive.parameters import DeviceParameters
@@ -129,13 +131,19 @@ class StandardObjects:
         return value
 
 
-def object_dictionary(kind: str, node_id: int, drive: SimulatedDrive,
-                      given: ObjectDictionary | None = None) -> tuple[ObjectDictionary, ReadCallback | None]:
+def object_dictionary(kind: str, node_id: int, drive: SimulatedDrive, given: ObjectDictionary | None = None,
+                      eds: str | os.PathLike[str] | None = None) -> tuple[ObjectDictionary, ReadCallback | None]:
     """The slave's dictionary for ``kind`` ("haptic": the shipped EDS; "standard":
-    :func:`standard_dictionary`), or ``given`` instead, and the SDO read callback the kind needs
-    besides the slave's own (None for "haptic")."""
+    :func:`standard_dictionary`), or ``given`` instead, or a user's ``eds`` (a vendor's, kind
+    "haptic" only: :mod:`sim_drive.canopen.vendor_od`), and the SDO read callback the dictionary
+    needs besides the slave's own (None for the shipped EDS)."""
     if kind not in OD_KINDS:
         raise ParameterError("od", kind, " or ".join(map(repr, OD_KINDS)), "simulated drive")
+    if eds is not None:
+        if kind != "haptic" or given is not None:
+            raise ParameterError("eds", os.fspath(eds), "an EDS alone (not with --od standard or a dictionary)",
+                                 "simulated drive")
+        return load_vendor_eds(eds, node_id), StandardObjects(drive).read
     if kind == "haptic":
         return given if given is not None else import_od(str(eds_path()), node_id), None
     return given if given is not None else standard_dictionary(node_id, drive.parameters), StandardObjects(drive).read
