@@ -8,14 +8,13 @@ heartbeat producer, consumer and RPDO deadlines (:mod:`~sim_drive.canopen.timers
 the error register (:mod:`~sim_drive.canopen.emergency`), and fault injection.
 
 One receive thread owns the bus and every timer: it blocks in ``bus.recv`` until the next
-frame or due time, handles SYNC and RPDOs directly (the hot path) and everything else
-through canopen's dispatcher.  On a lock-step bus (:mod:`drives.lockstep_bus`) the frames are
-handed to the node in the sender's thread instead, so a master in the same process gets its
-TPDO before its SYNC ``send`` returns; the thread then keeps only the timers (wall clock,
-like the master's heartbeat: they guard against a dead peer, never pace the plant).  No
-frame can stop it: a frame that cannot be used is counted and dropped, a receive error is
-counted, and if the bus keeps failing the node stops its heartbeat and faults the drive, so
-it never says it is alive while it cannot serve.
+frame or due time, handles SYNC and RPDOs directly (the hot path), everything else through
+canopen's dispatcher.  On a lock-step bus (:mod:`drives.lockstep_bus`) the frames are handed
+to the node in the sender's thread, so a master in the same process gets its TPDO before its
+SYNC ``send`` returns; the thread keeps only the timers (wall clock: they guard against a dead
+peer, never pace the plant).  No frame can stop it: an unusable frame is counted and dropped,
+a receive error counted, and if the bus keeps failing the node stops its heartbeat and faults
+the drive, so it never says it is alive while it cannot serve.
 
 - NMT: boot-up message then PRE-OPERATIONAL on :meth:`start`; the boot-up counts as the first
   heartbeat, then one every 0x1017 ms; SDO in PRE-OPERATIONAL and OPERATIONAL; PDOs only in
@@ -23,7 +22,8 @@ it never says it is alive while it cannot serve.
   restores the drive's power-on values and the manufacturer area, reset communication the
   EDS values of 0x1000..0x1FFF, and both boot again.
 - SYNC (COB-ID 0x1005, 0 data bytes) in PRE-OPERATIONAL and OPERATIONAL: one drive SYNC (the
-  plant advances exactly ``T``); a SYNC of another length is not used (EMCY 0x8240).
+  plant advances ``T``, or the time since the last SYNC with a wall sync clock); a SYNC of
+  another length is not used (EMCY 0x8240).
 - Abort connection (0x6007 applied by the drive, CiA 402): the master's heartbeat lost
   (0x1016, EMCY 0x8130), an RPDO deadline missed (0x1400+n sub 5, EMCY 0x8250), or NMT taking
   the node out of OPERATIONAL while the power stage is on (0x8100).
