@@ -27,8 +27,7 @@ the drive, so it never says it is alive while it cannot serve.
 - Abort connection (0x6007 applied by the drive, CiA 402): the master's heartbeat lost
   (0x1016, EMCY 0x8130), an RPDO deadline missed (0x1400+n sub 5, EMCY 0x8250), or NMT taking
   the node out of OPERATIONAL while the power stage is on (0x8100).
-- Not implemented: TPDO inhibit time and event timer, SYNC start value, RTR, SYNC counter, LSS,
-  0x1010/0x1011.
+- Not implemented: TPDO inhibit time and event timer, SYNC start value, RTR, SYNC counter, LSS, 0x1010/0x1011.
 """
 
 from __future__ import annotations
