@@ -144,6 +144,7 @@ def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options:
         drive.connect()
         _show_scaling(drive, options)
         link["safety_warnings"] = list(drive.safety_warnings)
+        link["pdo_mapping_notes"] = list(drive.commissioned.mapping_notes) if drive.commissioned is not None else []
 
         def serve(controller: WallController) -> None:
             stack.enter_context(ControllerNode(controller, controller_node_id, config, safety.heartbeat_ms))
