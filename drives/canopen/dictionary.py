@@ -67,7 +67,8 @@ def load_dictionary(eds: str | os.PathLike[str] | None, node_id: int) -> od.Obje
     try:
         dictionary = canopen.import_od(path, node_id)
     except Exception as exc:  # configparser, KeyError, ValueError...: whatever a malformed EDS raises
-        raise ParameterError("--eds", path, f"an EDS or DCF file canopen can read ({type(exc).__name__}: {exc})") from None
+        reason = " ".join(str(exc).split())  # one line, whatever the parser's message spans
+        raise ParameterError("--eds", path, f"an EDS or DCF file canopen can read ({type(exc).__name__}: {reason})") from None
     if not len(dictionary):
         raise ParameterError("--eds", path, "an EDS or DCF file with objects (this one has none)")
     return dictionary
