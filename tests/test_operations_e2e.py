@@ -10,15 +10,18 @@ from __future__ import annotations
 import json
 import os
 import pathlib
-import struct
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
+
+import can
 
 from drives.bus_config import open_bus
 from drives.cia402 import STATUSWORD, State, decode_statusword
 from drives.modbus.objects import ModbusObjects
+from drives.object_access import ObjectAccess
 
 NODE = 5
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -57,14 +60,6 @@ def _command(*args: str) -> tuple[int, str, str]:
     return done.returncode, done.stdout, done.stderr
 
 
-def _end(process: subprocess.Popen) -> None:
-    if process.poll() is None:
-        process.kill()
-    process.wait(timeout=10)
-    if process.stderr is not None:
-        process.stderr.close()
-
-
 def _status_reset_and_run_again(drive: list[str], profile: str, folder: pathlib.Path, codes: set[int]) -> dict[str, Any]:
     """status (FAULT, its error code one of ``codes``), fault-reset, status (SWITCH ON DISABLED), a
     short run (exit 0: the simulated operator left the handle inside the wall, so it starts with
@@ -86,34 +81,52 @@ def _status_reset_and_run_again(drive: list[str], profile: str, folder: pathlib.
     return faulted
 
 
+def _wait_for(access: ObjectAccess, state: State, timeout: float, run: subprocess.Popen, log: Callable[[], str]) -> None:
+    """Poll the drive's statusword until it shows ``state`` (bounded by ``timeout`` s)."""
+    deadline = time.monotonic() + timeout
+    while decode_statusword(access.read(STATUSWORD)) is not state:
+        if time.monotonic() > deadline:
+            raise AssertionError(f"no {state.value} within {timeout} s: {log()[-2000:]}")
+        if state is State.OPERATION_ENABLED and run.poll() is not None:
+            raise AssertionError(f"the run ended ({run.returncode}): {run.stderr.read() if run.stderr else ''}")
+        time.sleep(0.02)
+
+
+def _first(bus: can.BusABC, wanted: Callable[[can.Message], bool], timeout: float) -> can.Message | None:
+    """The first frame on ``bus`` that is ``wanted``, within ``timeout`` s, or None."""
+    deadline = time.monotonic() + timeout
+    while (left := deadline - time.monotonic()) > 0:
+        message = bus.recv(min(left, 0.2))
+        if message is not None and wanted(message):
+            return message
+    return None
+
+
 def test_canopen_status_fault_reset_and_run_again_after_kill_9(multicast: tuple[str, int], sim_process: Any,
                                                                tmp_path: pathlib.Path) -> None:
     group, port = multicast
-    bus = ["--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}"]
-    drive = [*bus, "--node-id", str(NODE)]
+    drive = ["--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}", "--node-id", str(NODE)]
     sim = sim_process(*drive, "--profile", "cia402-handle")
     sim.wait_for_line(f"node {NODE}: serving on", START_WAIT)
     profile = _profile(tmp_path)
     run = _start("run", profile, *drive, "--duration", "60", "-q", "--out", str(tmp_path / "killed"))
+    # Listen only: a second SDO client would collide with the run's on the drive's one SDO channel.
     sniffer = open_bus(interface="udp_multicast", channel=group, port=port)
     try:
-        deadline, tpdos = time.monotonic() + START_WAIT, 0
-        while tpdos < 300 and time.monotonic() < deadline and run.poll() is None:
-            message = sniffer.recv(0.2)
-            tpdos += message is not None and message.arbitration_id == 0x180 + NODE
-        assert tpdos >= 300, f"the run did not cycle: {run.stderr.read() if run.poll() is not None else sim.log()[-2000:]}"
+        enabled = _first(sniffer, lambda m: m.arbitration_id == 0x180 + NODE
+                         and decode_statusword(int.from_bytes(m.data[:2], "little")) is State.OPERATION_ENABLED, START_WAIT)
+        assert enabled is not None, run.stderr.read() if run.poll() is not None else sim.log()[-2000:]
+        time.sleep(0.3)  # cycling
         run.kill()  # kill -9
-        emcy = None
-        deadline = time.monotonic() + FAULT_WAIT
-        while emcy is None and time.monotonic() < deadline:
-            message = sniffer.recv(0.05)
-            if message is not None and message.arbitration_id == 0x80 + NODE and len(message.data) == 8:
-                emcy = struct.unpack_from("<H", message.data)[0] or None
-        assert emcy in (0x8250, 0x8130), f"no EMCY from the drive after kill -9: {sim.log()[-2000:]}"
+        emcy = _first(sniffer, lambda m: m.arbitration_id == 0x80 + NODE and len(m.data) == 8 and any(m.data[:2]), FAULT_WAIT)
     finally:
         sniffer.shutdown()
-        _end(run)
-    faulted = _status_reset_and_run_again(drive, profile, tmp_path, {emcy})
+        run.kill()  # (again: a no-op if it is gone)
+        run.communicate(timeout=10)  # reaped, its pipe closed
+    assert emcy is not None, f"no EMCY from the drive after kill -9: {sim.log()[-2000:]}"
+    code = int.from_bytes(emcy.data[:2], "little")
+    assert code in (0x8250, 0x8130)  # the RPDO deadline (0.2 s) or the heartbeat consumer (0.5 s) said it
+    faulted = _status_reset_and_run_again(drive, profile, tmp_path, {code})
     assert faulted["nmt_state"] == "OPERATIONAL"  # as the killed run left it: status changes nothing
     assert faulted["readings"]["error_register"]["value"] == 0x11  # generic + communication
 
@@ -126,17 +139,12 @@ def test_modbus_status_fault_reset_and_run_again_after_kill_9(sim_process: Any, 
     run = _start("run", profile, "--modbus", url, "--duration", "60", "-q", "--out", str(tmp_path / "killed"))
     try:
         with ModbusObjects(url, 1, 0.5) as probe:
-            deadline = time.monotonic() + START_WAIT
-            while decode_statusword(probe.read(STATUSWORD)) is not State.OPERATION_ENABLED:
-                assert time.monotonic() < deadline and run.poll() is None, run.stderr.read() if run.poll() else sim.log()[-2000:]
-                time.sleep(0.05)
-            time.sleep(0.2)  # cycling
+            _wait_for(probe, State.OPERATION_ENABLED, START_WAIT, run, sim.log)
+            time.sleep(0.3)  # cycling
             run.kill()  # kill -9
-            deadline = time.monotonic() + FAULT_WAIT
-            while decode_statusword(probe.read(STATUSWORD)) is not State.FAULT:
-                assert time.monotonic() < deadline, f"the drive did not fault after kill -9: {sim.log()[-2000:]}"
-                time.sleep(0.01)
+            _wait_for(probe, State.FAULT, FAULT_WAIT, run, sim.log)
     finally:
-        _end(run)
+        run.kill()  # (again: a no-op if it is gone)
+        run.communicate(timeout=10)  # reaped, its pipe closed
     # the connection closed (0x8100) or the watchdog ran out first (0x8130), see tests/test_safety_chain.py
     _status_reset_and_run_again(["--modbus", url], profile, tmp_path, {0x8100, 0x8130})

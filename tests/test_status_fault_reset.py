@@ -229,20 +229,12 @@ def test_fault_reset_says_when_the_cause_persists(transport: str, channel: str, 
 def test_fault_reset_is_refused_while_a_master_cycles(channel: str, master: can.BusABC, sim: CanopenSimDrive,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     sim.enter_fault(0x8250)
-    stop = threading.Event()
-
-    def other_master() -> None:
-        with can.Bus(interface="virtual", channel=channel) as bus:
-            while not stop.wait(0.005):
-                bus.send(can.Message(arbitration_id=0x80, data=b"", is_extended_id=False))
-
-    thread = threading.Thread(target=other_master, daemon=True)
-    thread.start()
-    try:
-        result = run_cli(capsys, "fault-reset", *bus_args(channel), "--node-id", "5")
-    finally:
-        stop.set()
-        thread.join(timeout=2.0)
+    with can.Bus(interface="virtual", channel=channel) as other_master:
+        sync = other_master.send_periodic(can.Message(arbitration_id=0x80, data=b"", is_extended_id=False), 0.005)
+        try:
+            result = run_cli(capsys, "fault-reset", *bus_args(channel), "--node-id", "5")
+        finally:
+            sync.stop()
     assert result.code == 1 and "another master is cycling" in one_line(result)
     assert sim.drive.state is State.FAULT
     assert controlword_writes(sent_by_tool(master)) == []
