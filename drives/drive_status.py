@@ -1,11 +1,12 @@
 """A drive's state as ``haptic-bus status`` reports it: each object read, with its meaning in words.
 
-Bus-neutral: :func:`read_reading` reads one object through any
+Bus-neutral: :meth:`StatusObject.read` reads one object through any
 :class:`~drives.object_access.ObjectAccess`; an object the drive lacks (or refuses) becomes a
 :class:`Reading` that says so (``missing``), never an exception; silence (a
 :class:`~drives.errors.DriveTimeout`) still raises.  :data:`CIA402_OBJECTS` are the readings
 every CiA-402 drive is asked for, in the order they are shown; the fieldbus adds its own
-(:mod:`drives.canopen.service`, :mod:`drives.modbus.service`).
+(:mod:`drives.canopen.service`, :mod:`drives.modbus.service`).  :func:`describe_value` says
+what a standard object's value means, for ``haptic-bus sdo``.
 """
 
 from __future__ import annotations
@@ -70,16 +71,6 @@ class Reading:
         return f"  {self.label:<{LABEL_WIDTH}} {text:<{TEXT_WIDTH}} {self.source}"
 
 
-def read_reading(access: ObjectAccess, key: str, label: str, spec: ObjectSpec, describe: Callable[[int], str]) -> Reading:
-    """Object ``spec`` as a :class:`Reading` (its meaning from ``describe``), or one that says why
-    the drive gave none; DriveTimeout (silence) is raised."""
-    try:
-        value = access.read(spec)
-    except DriveProtocolError as exc:
-        return missing_reading(key, label, access.source(spec), exc)
-    return Reading(key, label, access.source(spec), value, describe(value))
-
-
 def missing_reading(key: str, label: str, source: str, error: DriveProtocolError) -> Reading:
     """The Reading of an object the drive refused: "absent" or "not readable", with its reason
     (an SDO abort as its code and meaning)."""
@@ -100,8 +91,13 @@ class StatusObject:
     describe: Callable[[int], str]
 
     def read(self, access: ObjectAccess) -> Reading:
-        """This object from ``access`` (see :func:`read_reading`)."""
-        return read_reading(access, self.key, self.label, self.spec, self.describe)
+        """This object from ``access`` as a :class:`Reading`, or one that says why the drive gave
+        none (:func:`missing_reading`); DriveTimeout (silence) is raised."""
+        try:
+            value = access.read(self.spec)
+        except DriveProtocolError as exc:
+            return missing_reading(self.key, self.label, access.source(self.spec), exc)
+        return Reading(self.key, self.label, access.source(self.spec), value, self.describe(value))
 
 
 STATE = StatusObject("cia402_state", "CiA-402 state", STATUSWORD, lambda v: f"{state_text(v)} (statusword 0x{v:04X})")

@@ -17,6 +17,7 @@ from collections.abc import Callable
 from typing import Any
 
 import can
+import pytest
 
 from drives.bus_config import open_bus
 from drives.cia402 import STATUSWORD, State, decode_statusword
@@ -102,6 +103,7 @@ def _first(bus: can.BusABC, wanted: Callable[[can.Message], bool], timeout: floa
     return None
 
 
+@pytest.mark.slow
 def test_canopen_status_fault_reset_and_run_again_after_kill_9(multicast: tuple[str, int], sim_process: Any,
                                                                tmp_path: pathlib.Path) -> None:
     group, port = multicast
@@ -131,6 +133,7 @@ def test_canopen_status_fault_reset_and_run_again_after_kill_9(multicast: tuple[
     assert faulted["readings"]["error_register"]["value"] == 0x11  # generic + communication
 
 
+@pytest.mark.slow
 def test_modbus_status_fault_reset_and_run_again_after_kill_9(sim_process: Any, tmp_path: pathlib.Path) -> None:
     sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--profile", "cia402-handle")
     log = sim.wait_for_line("serving Modbus TCP on", START_WAIT)

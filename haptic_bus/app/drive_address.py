@@ -55,6 +55,10 @@ class DriveAddress:
         """``haptic-bus NAME OPTIONS`` for this drive, quoted for a POSIX shell."""
         return shlex.join(["haptic-bus", name, *self.arguments()])
 
+    def fault_reset_hint(self) -> str:
+        """What a user types to clear this drive's fault: ``clear the cause, then: haptic-bus fault-reset ...``."""
+        return f"clear the cause, then: {self.command('fault-reset')}"
+
     def read_status(self, listen: float, timeout: float) -> DriveStatus:
         """The drive's status (:mod:`drives.canopen.service`, :mod:`drives.modbus.service`); ``listen``
         (s) is CANopen's listening window, ``timeout`` (s) each answer's."""

@@ -252,7 +252,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
     except DriveError as exc:
         reason, error = "drive error", str(exc)
         if isinstance(exc, DriveStateError) and exc.state is State.FAULT:
-            error += f"; clear the cause, then: {address.command('fault-reset')} (or run with --reset-fault)"
+            error += f"; {address.fault_reset_hint()} (or run with --reset-fault)"
     except KeyboardInterrupt:
         reason, error = "interrupted", "interrupted (Ctrl-C)"
     finally:

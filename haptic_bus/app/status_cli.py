@@ -46,7 +46,6 @@ def run_status(args: argparse.Namespace) -> int:
     status = address.read_status(args.listen or DEFAULT_LISTEN, args.timeout)
     print(json.dumps(status.to_dict(), indent=2) if args.json else "\n".join(status.lines()))
     if status.faulted:
-        print(f"haptic-bus status: {status.headline()}; clear the cause, then: {address.command('fault-reset')}",
-              file=sys.stderr)
+        print(f"haptic-bus status: {status.headline()}; {address.fault_reset_hint()}", file=sys.stderr)
         return EXIT_NO
     return EXIT_OK
