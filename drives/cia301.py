@@ -83,6 +83,7 @@ def is_restricted_cob_id(cob_id: int) -> bool:
 
 DEVICE_TYPE = 0x1000
 ERROR_REGISTER = 0x1001
+PRE_DEFINED_ERROR_FIELD = 0x1003  # sub 0: number of errors; sub n: error code (bits 0-15), manufacturer info (16-31)
 COB_ID_SYNC = 0x1005
 COMMUNICATION_CYCLE_PERIOD = 0x1006  # us
 SYNCHRONOUS_WINDOW_LENGTH = 0x1007  # us
@@ -104,10 +105,26 @@ ERROR_REGISTER_TEMPERATURE = 1 << 3
 ERROR_REGISTER_COMMUNICATION = 1 << 4
 ERROR_REGISTER_PROFILE = 1 << 5
 ERROR_REGISTER_MANUFACTURER = 1 << 7
+ERROR_REGISTER_BITS: dict[int, str] = {
+    ERROR_REGISTER_GENERIC: "generic",
+    ERROR_REGISTER_CURRENT: "current",
+    ERROR_REGISTER_VOLTAGE: "voltage",
+    ERROR_REGISTER_TEMPERATURE: "temperature",
+    ERROR_REGISTER_COMMUNICATION: "communication",
+    ERROR_REGISTER_PROFILE: "device profile specific",
+    1 << 6: "reserved bit 6",
+    ERROR_REGISTER_MANUFACTURER: "manufacturer specific",
+}
+
+
+def describe_error_register(value: int) -> str:
+    """The 0x1001 bits set, in words (``"generic, communication"``), or ``"no error"``."""
+    return ", ".join(name for bit, name in ERROR_REGISTER_BITS.items() if value & bit) or "no error"
 
 COMMUNICATION_OBJECT_NAMES: dict[int, str] = {
     0x1000: "Device type",
     0x1001: "Error register",
+    0x1003: "Pre-defined error field",
     0x1005: "COB-ID SYNC message",
     0x1006: "Communication cycle period",
     0x1007: "Synchronous window length",

@@ -137,6 +137,21 @@ class OperationMode(enum.IntEnum):
         return {1: 0, 2: 1, 3: 2, 4: 3, 6: 5, 7: 6, 8: 7, 9: 8, 10: 9}[int(self)]
 
 
+def _enum_text(kind: type[enum.IntEnum], value: int, what: str) -> str:
+    """``value`` of a CiA-402 code object in words; negative values are the manufacturer's (CiA-402)."""
+    if value < 0:
+        return f"manufacturer-specific {what}"
+    try:
+        return kind(value).name.lower().replace("_", " ")
+    except ValueError:
+        return f"reserved {what}"
+
+
+def describe_mode(value: int) -> str:
+    """A 0x6060/0x6061 value in words: ``"cyclic synchronous torque"``, ``"no mode"``, ``"reserved mode"``."""
+    return "no mode" if value == 0 else _enum_text(OperationMode, value, "mode")
+
+
 def supports(supported_drive_modes: int, mode: OperationMode) -> bool:
     """True if the 0x6502 bit field announces ``mode``."""
     return bool(supported_drive_modes >> mode.supported_bit & 1)
@@ -231,6 +246,11 @@ class AbortConnectionOption(enum.IntEnum):
     FAULT = 1
     DISABLE_VOLTAGE = 2
     QUICK_STOP = 3
+
+
+def describe_abort_option(value: int) -> str:
+    """A 0x6007 value in words: ``"fault"``, ``"no action"``, ``"reserved option"``."""
+    return _enum_text(AbortConnectionOption, value, "option")
 
 
 CW_FAULT_RESET = 1 << 7

@@ -34,6 +34,7 @@ from drives.base import (
 )
 from drives.cia402 import (
     CW_FAULT_RESET,
+    ERROR_CODE,
     MODES_OF_OPERATION,
     MODES_OF_OPERATION_DISPLAY,
     SUPPORTED_DRIVE_MODES,
@@ -47,6 +48,7 @@ from drives.cia402 import (
     supports,
 )
 from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveStateError, ScalingConflict, UnsupportedModeError
+from drives.fault_reset import clear_fault, error_code_text
 
 logger = logging.getLogger(__name__)
 
@@ -281,6 +283,13 @@ class Cia402Master(Drive):
         self._controlword = SAFE_CONTROLWORD
         self._tripped = None
 
+    def _error_code(self) -> int | None:
+        """0x603F, or None where it cannot be read."""
+        try:
+            return self.read_object(ERROR_CODE)
+        except DriveError:
+            return None
+
     def _hold_word(self) -> int:
         return self._controlword if self._tripped is None else SAFE_CONTROLWORD
 
@@ -321,8 +330,8 @@ class Cia402Master(Drive):
             if goal is State.SWITCH_ON_DISABLED:
                 command = Command.DISABLE_VOLTAGE
             elif state is State.FAULT:
-                raise DriveStateError(self.name, f"drive is in FAULT (statusword 0x{statusword:04X}); call fault_reset() first",
-                                      state)
+                raise DriveStateError(self.name, f"drive is in FAULT (statusword 0x{statusword:04X}, error code "
+                                                 f"{error_code_text(self._error_code())}): it needs a fault reset first", state)
             else:
                 path = path_to_operation_enabled(state) if state is not None else ()
                 command = path[0] if path else None
@@ -346,19 +355,15 @@ class Cia402Master(Drive):
         return state
 
     def _reset_fault(self) -> None:
-        """Controlword bit 7 low, high (the rising edge), low again; wait until the drive leaves
-        FAULT (and FAULT REACTION ACTIVE), bounded by ``state_timeout``."""
-        statusword = self._command(SAFE_CONTROLWORD)  # bit 7 low: the edge needs a low phase
+        """The fault-reset sequence (:func:`drives.fault_reset.clear_fault`); DriveStateError if the
+        drive is still in FAULT (or FAULT REACTION ACTIVE) ``state_timeout`` s after the edge."""
+        statusword = clear_fault(self._command, self.state_timeout)
         state = decode_statusword(statusword)
-        deadline = time.monotonic() + self.state_timeout
-        while state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
-            if time.monotonic() > deadline:
-                raise DriveStateError(
-                    self.name,
-                    f"still in {state_name(state)} (statusword 0x{statusword:04X}) {self.state_timeout:.3g} s "
-                    f"after the fault reset edge",
-                    state,
-                )
-            statusword = self._command(CW_FAULT_RESET if state is State.FAULT else SAFE_CONTROLWORD)
-            state = decode_statusword(statusword)
-        self._command(SAFE_CONTROLWORD)  # bit 7 back to 0
+        if state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+            detail, _ = self._fault_detail()
+            raise DriveStateError(
+                self.name,
+                f"still in {state_name(state)} (statusword 0x{statusword:04X}{detail}) {self.state_timeout:.3g} s "
+                f"after the fault reset edge: the cause of the fault persists",
+                state,
+            )

@@ -14,6 +14,7 @@ branch to an exit status (``haptic_bus.app.cli``)::
      |    +-- ScalingConflict            two sources of a scaling factor disagree: .field, .first, .second
      |    +-- DriveProtocolError         an answer or frame the protocol forbids
      |    |    +-- SdoAbortError         SDO abort: .abort_code, .index, .subindex
+     |    |    +-- ObjectAbsent          the drive (or its register map) has no such object: .index, .subindex
      |    |    +-- ScalingObjectError    a factor-group/SI-unit object out of range: .index, .subindex, .value, .allowed
      |    |    +-- ModbusExceptionError  exception response: .exception_code
      |    |    +-- PdoLengthError        PDO frame of the wrong length: .expected, .got
@@ -95,6 +96,16 @@ class SdoAbortError(DriveProtocolError):
 
     def __init__(self, node: str, message: str, abort_code: int, index: int, subindex: int) -> None:
         self.abort_code = abort_code
+        self.index = index
+        self.subindex = subindex
+        super().__init__(node, message)
+
+
+class ObjectAbsent(DriveProtocolError):
+    """The drive has no object ``index:subindex`` where it was asked for (a register map without it);
+    an SDO abort saying the same stays an :class:`SdoAbortError`."""
+
+    def __init__(self, node: str, message: str, index: int, subindex: int = 0) -> None:
         self.index = index
         self.subindex = subindex
         super().__init__(node, message)

@@ -152,7 +152,8 @@ def test_fault_bit_raises_and_fault_reset_recovers_to_operation_enabled(canopen_
             run_cycles(drive, 5)
         assert info.value.code == 0x4310 and "temperature" in str(info.value).lower()
         assert sim.drive.state is State.FAULT
-        with pytest.raises(DriveStateError, match="call fault_reset"):
+        with pytest.raises(DriveStateError, match=r"in FAULT \(statusword 0x0208, error code 0x4310 Excess temperature "
+                                                   r"drive\): it needs a fault reset first"):
             drive.enable()
         drive.fault_reset()
         assert sim.drive.state is State.SWITCH_ON_DISABLED

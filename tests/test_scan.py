@@ -32,11 +32,12 @@ from sim_drive.eds import eds_path
 from sim_drive.modbus.server import ModbusSimServer
 
 REPO = Path(__file__).resolve().parents[1]
+STATE_KEYS = {"statusword", "cia402_state", "error_code", "error_code_text"}
 CANOPEN_KEYS = {"protocol", "node_id", "device_type", "device_profile", "device_kind", "vendor_id", "product_code", "revision",
-                "serial", "nmt_state", "boot_up_seen", "supported_drive_modes", "cst_supported", "cia402", "notes"}
+                "serial", "nmt_state", "boot_up_seen", "supported_drive_modes", "cst_supported", "cia402", "notes", *STATE_KEYS}
 MODBUS_KEYS = {"protocol", "unit_id", "our_map", "word_order", "map_identity", "supported_drive_modes", "cst_supported",
-               "cia402", "device_identification", "notes"}
-# A scan's time bound is timeout + 6 * answer_timeout (plus opening and closing the bus); a
+               "cia402", "device_identification", "notes", *STATE_KEYS}
+# A scan's time bound is timeout + 8 * answer_timeout (plus opening and closing the bus); a
 # loaded 2-core machine may stall a thread for a few hundred ms, so elapsed times are held to
 # several times the bound, never to the bound itself.
 SLACK = 5.0
@@ -65,12 +66,14 @@ def identity_of(dictionary: canopen.ObjectDictionary) -> dict[str, int]:
 SIM_IDENTITY = identity_of(canopen.import_od(str(eds_path())))
 
 
-def expect_sim_drive(node: dict[str, Any], node_id: int, nmt_state: str | None) -> None:
+def expect_sim_drive(node: dict[str, Any], node_id: int, nmt_state: str | None, cia402_state: str = "SWITCH ON DISABLED",
+                     error_code: int = 0) -> None:
     assert set(node) == CANOPEN_KEYS
     assert {key: node[key] for key in SIM_IDENTITY} == SIM_IDENTITY
     assert (node["node_id"], node["nmt_state"], node["supported_drive_modes"]) == (node_id, nmt_state, SUPPORTED_DRIVE_MODES)
     assert node["device_profile"] == 402 and node["device_kind"] == "CiA-402 servo drive"
     assert node["cst_supported"] is True and node["cia402"] is True and node["notes"] == []
+    assert (node["cia402_state"], node["error_code"]) == (cia402_state, error_code)
 
 
 @pytest.fixture
@@ -122,8 +125,8 @@ def test_the_scan_sends_sdo_upload_requests_only(channel: str, master: can.BusAB
     assert sent and all(0x600 < m.arbitration_id < 0x680 for m in sent), "only SDO requests: no NMT, SYNC, PDO, EMCY"
     assert all(m.data[0] == 0x40 for m in sent), "initiate upload (read) requests only: no download, no abort"
     per_node = {node: sum(m.arbitration_id == 0x600 + node for m in sent) for node in range(1, 128)}
-    # the probe reaches every id once; the two drives are then read 0x1000, 0x1018:01..04, 0x6502
-    assert per_node == {node: 7 if node in (5, 9) else 1 for node in range(1, 128)}
+    # the probe reaches every id once; the two drives are then read 0x1000, 0x1018:01..04, 0x6502, 0x6041, 0x603F
+    assert per_node == {node: 9 if node in (5, 9) else 1 for node in range(1, 128)}
 
 
 def test_a_node_booting_during_the_window_is_listed_and_a_malformed_heartbeat_is_noted(
@@ -153,14 +156,14 @@ def test_an_empty_bus_answers_no_within_the_bound(channel: str, capsys: pytest.C
     start = time.monotonic()
     assert scan_canopen({"interface": "virtual", "channel": channel}, timeout=timeout, answer_timeout=answer) == []
     elapsed = time.monotonic() - start
-    assert timeout <= elapsed < SLACK * (timeout + 6 * answer)  # the window is listened to in full, and no longer
+    assert timeout <= elapsed < SLACK * (timeout + 8 * answer)  # the window is listened to in full, and no longer
     start = time.monotonic()
     status = scan_cli("--interface", "virtual", "--channel", channel, "--timeout", str(timeout), "--json")
     elapsed = time.monotonic() - start
     out, err = capsys.readouterr()
     assert status == 1 and json.loads(out) == []
     assert err.strip() == f"haptic-bus scan: no node answered on virtual:{channel} within {timeout:g} s"
-    assert timeout <= elapsed < SLACK * (timeout + 6 * answer)
+    assert timeout <= elapsed < SLACK * (timeout + 8 * answer)
 
 
 def test_cli_json_and_table(channel: str, second_drive: CanopenSimDrive, capsys: pytest.CaptureFixture[str]) -> None:
@@ -175,7 +178,18 @@ def test_cli_json_and_table(channel: str, second_drive: CanopenSimDrive, capsys:
     assert len(lines) == 2 and lines[0].split()[:3] == ["node", "device", "type"]
     assert lines[1].split() == ["9", f"0x{SIM_IDENTITY['device_type']:08X}", "CiA-402", "servo", "drive",
                                 *(f"0x{SIM_IDENTITY[k]:08X}" for k in ("vendor_id", "product_code", "revision", "serial")),
-                                "PRE-OPERATIONAL", "yes", "yes"]
+                                "PRE-OPERATIONAL", "yes", "yes", "SWITCH", "ON", "DISABLED", "0x0000"]
+
+
+def test_a_faulted_drive_shows_fault_and_its_error_code(channel: str, sim: CanopenSimDrive,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    sim.enter_fault(0x8250)  # RPDO timeout, as the drive's own deadline would
+    assert scan_cli("--interface", "virtual", "--channel", channel, "--timeout", "0.3", "--json") == 0
+    (node,) = json.loads(capsys.readouterr().out)
+    expect_sim_drive(node, 5, "PRE-OPERATIONAL", "FAULT", 0x8250)
+    assert node["statusword"] == sim.drive.statusword and node["error_code_text"] == "RPDO timeout"
+    assert scan_cli("--interface", "virtual", "--channel", channel, "--timeout", "0.3") == 0
+    assert capsys.readouterr().out.splitlines()[1].split()[-2:] == ["FAULT", "0x8250"]
 
 
 @pytest.mark.parametrize("argv", [
@@ -237,7 +251,7 @@ def test_udp_multicast_two_drives_and_a_running_controller_undisturbed(bus_spec:
         document = {node["node_id"]: node for node in json.loads(capsys.readouterr().out)}
         assert run.poll() is None, "the scan must not disturb the running loop"
         assert sorted(document) == [5, 9, 42]
-        expect_sim_drive(document[5], 5, "OPERATIONAL")  # the run started it
+        expect_sim_drive(document[5], 5, "OPERATIONAL", "OPERATION ENABLED")  # the run started it and enabled it
         expect_sim_drive(document[9], 9, "PRE-OPERATIONAL")
         controller = document[42]
         assert {key: controller[key] for key in SIM_IDENTITY} == identity_of(controller_dictionary([]))
@@ -265,8 +279,21 @@ def test_modbus_finds_the_simulated_unit_only(word_order: str) -> None:
     assert set(unit) == MODBUS_KEYS
     assert unit["our_map"] is True and unit["word_order"] == word_order and unit["cia402"] is True
     assert unit["supported_drive_modes"] == SUPPORTED_DRIVE_MODES and unit["cst_supported"] is True
+    assert (unit["cia402_state"], unit["statusword"], unit["error_code"]) == ("SWITCH ON DISABLED", 0x0240, 0)
     # pymodbus answers FC43/14 with no objects: the simulator configures no device identification
     assert unit["device_identification"] == {} and unit["notes"] == []
+
+
+def test_modbus_a_faulted_unit_shows_fault_and_its_error_code(capsys: pytest.CaptureFixture[str]) -> None:
+    with ModbusSimServer(port=0, unit_id=2) as server:
+        server.drive.fault(0x8130)  # the watchdog's code
+        assert scan_cli("--modbus", server.url, "--unit-ids", "1-3", "--json") == 0
+        (unit,) = json.loads(capsys.readouterr().out)
+        assert scan_cli("--modbus", server.url, "--unit-ids", "2") == 0
+        row = capsys.readouterr().out.splitlines()[1].split()
+    assert (unit["unit_id"], unit["cia402_state"], unit["error_code"]) == (2, "FAULT", 0x8130)
+    assert unit["error_code_text"] == "Life guard error or heartbeat error" and unit["notes"] == []
+    assert row[-5:] == ["FAULT", "0x8130", "answered,", "no", "objects"], row
 
 
 def test_modbus_exception_means_present_but_not_our_map_and_a_drop_is_reconnected() -> None:

@@ -13,23 +13,24 @@ a read unanswered, as CiA 301 asks of a client that gives up.)
    for instead of failing half-way, see :func:`_send_probe`).
 3. Listen until ``timeout`` s after the probe: answers, boot-ups, heartbeats (a heartbeat
    period longer than ``timeout`` may go unheard: ``nmt_state`` is then None).
-4. From every node seen, read 0x1000, 0x1018:01..04 and, for a CiA-402 device, 0x6502, each
-   read bounded by ``answer_timeout`` s; the nodes are read in parallel, and a node that lets
-   one read time out is not asked again.
+4. From every node seen, read 0x1000, 0x1018:01..04 and, for a CiA-402 device, 0x6502, the
+   statusword 0x6041 (its CiA-402 state) and the error code 0x603F, each read bounded by
+   ``answer_timeout`` s; the nodes are read in parallel, and a node that lets one read time out
+   is not asked again.
 
-Total time: at most ``timeout + 6 * answer_timeout`` s plus opening and closing the bus.
+Total time: at most ``timeout + 8 * answer_timeout`` s plus opening and closing the bus.
 
 Device type 0x1000 (CiA 301 7.5.2.1): bits 0..15 the device profile number (402 = drives and
 motion control), bits 16..23 the profile's type (CiA 402: 1 frequency converter, 2 servo
 drive, 3 stepper motor), bits 24..31 mode bits.  0x6502 bit ``mode - 1`` announces mode
-``mode`` (bit 9: cyclic synchronous torque), see :func:`drives.cia402.cst_announced`.  0x6502 is
-read only where 0x1000 names profile 402: in another profile 0x6502 is not that object.
+``mode`` (bit 9: cyclic synchronous torque), see :func:`drives.cia402.cst_announced`.  0x6502,
+0x6041 and 0x603F are read only where 0x1000 names profile 402: in another profile they are
+not those objects.
 """
 
 from __future__ import annotations
 
 import struct
-import threading
 import time
 from collections.abc import Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
@@ -41,6 +42,7 @@ import canopen
 from canopen.sdo.constants import REQUEST_UPLOAD
 
 from drives.canopen.link import NetworkLink
+from drives.canopen.listen import HeartbeatLog
 from drives.canopen.sdo import SdoAccess
 from drives.cia301 import (
     DEVICE_PROFILE_402,
@@ -49,11 +51,11 @@ from drives.cia301 import (
     IDENTITY,
     NODE_ID_RANGE,
     SDO_RX_BASE,
-    NmtState,
-    nmt_state_name,
+    describe_emcy_code,
 )
-from drives.cia402 import SUPPORTED_DRIVE_MODES, DataType, cst_announced
+from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES, DataType, cst_announced
 from drives.errors import DriveError, DriveTimeout, SdoAbortError
+from drives.fault_reset import state_text
 from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, checked_ids, checked_seconds
 
 __all__ = ["CanopenNode", "Identity", "device_kind", "scan_canopen"]
@@ -85,6 +87,8 @@ class CanopenNode:
     boot_up_seen: bool
     supported_drive_modes: int | None  # 0x6502, read only from a CiA-402 device
     notes: tuple[str, ...] = ()
+    statusword: int | None = None  # 0x6041, CiA-402 devices only
+    error_code: int | None = None  # 0x603F, CiA-402 devices only
 
     @property
     def device_profile(self) -> int | None:
@@ -101,6 +105,11 @@ class CanopenNode:
         """0x6502 announces cyclic synchronous torque; None where 0x6502 was not read."""
         return cst_announced(self.supported_drive_modes)
 
+    @property
+    def cia402_state(self) -> str | None:
+        """The CiA-402 state 0x6041 shows ("FAULT", ...); None where 0x6041 was not read."""
+        return None if self.statusword is None else state_text(self.statusword)
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: numbers as numbers, None as null."""
         return {
@@ -115,6 +124,10 @@ class CanopenNode:
             "supported_drive_modes": self.supported_drive_modes,
             "cst_supported": self.cst_supported,
             "cia402": self.cia402,
+            "statusword": self.statusword,
+            "cia402_state": self.cia402_state,
+            "error_code": self.error_code,
+            "error_code_text": None if self.error_code is None else describe_emcy_code(self.error_code),
             "notes": list(self.notes),
         }
 
@@ -127,44 +140,6 @@ def device_kind(device_type: int) -> str:
     if profile == DEVICE_PROFILE_402 and kind in _DEVICE_KINDS_402:
         return f"CiA-402 {_DEVICE_KINDS_402[kind]}"
     return f"CiA-{profile} (type 0x{kind:02X})"
-
-
-class HeartbeatLog:
-    """The NMT state of the last boot-up or heartbeat of each node (fed by canopen's dispatcher thread).
-
-    A boot-up (state byte 0) means the node is now PRE-OPERATIONAL (CiA 301 7.3.2.2.1).  A frame
-    on a heartbeat COB-ID that is not exactly one byte is no heartbeat: it is counted, not used.
-    """
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._states: dict[int, int] = {}
-        self._booted: set[int] = set()
-        self._malformed: dict[int, int] = {}
-
-    def on_heartbeat(self, can_id: int, data: bytes | bytearray, timestamp: float) -> None:
-        """canopen subscriber callback for COB-ID 0x700 + node id."""
-        node_id = can_id - HEARTBEAT_BASE
-        with self._lock:
-            if len(data) != 1:
-                self._malformed[node_id] = self._malformed.get(node_id, 0) + 1
-                return
-            state = data[0] & 0x7F
-            if state == NmtState.BOOT_UP:
-                self._booted.add(node_id)
-                state = NmtState.PRE_OPERATIONAL
-            self._states[node_id] = state
-
-    def heard(self) -> set[int]:
-        """Node ids with at least one heartbeat-COB-ID frame (valid or not)."""
-        with self._lock:
-            return set(self._states) | set(self._malformed)
-
-    def state(self, node_id: int) -> tuple[str | None, bool, int]:
-        """(NMT state name or None, boot-up heard, malformed frames) of ``node_id``."""
-        with self._lock:
-            code = self._states.get(node_id)
-            return (None if code is None else nmt_state_name(code)), node_id in self._booted, self._malformed.get(node_id, 0)
 
 
 def _send_probe(network: canopen.Network, node_ids: list[int], deadline: float) -> None:
@@ -182,7 +157,8 @@ def _send_probe(network: canopen.Network, node_ids: list[int], deadline: float) 
 
 
 def _read_details(node_id: int, sdo: SdoAccess, heartbeats: HeartbeatLog) -> CanopenNode:
-    """0x1000, 0x1018:01..04 and (CiA-402 only) 0x6502 of node ``node_id``; stops at its first timeout."""
+    """0x1000, 0x1018:01..04 and (CiA-402 only) 0x6502, 0x6041, 0x603F of node ``node_id``; stops at its
+    first timeout."""
     values: dict[tuple[int, int], int | None] = {}
     notes: list[str] = []
     reads = [(DEVICE_TYPE, 0), *((IDENTITY, sub) for sub in range(1, 5))]
@@ -191,7 +167,8 @@ def _read_details(node_id: int, sdo: SdoAccess, heartbeats: HeartbeatLog) -> Can
             values[index, subindex] = _read_optional(sdo, index, subindex, notes)
         device_type = values[DEVICE_TYPE, 0]
         if device_type is not None and device_type & 0xFFFF == DEVICE_PROFILE_402:
-            values[SUPPORTED_DRIVE_MODES.index, 0] = _read_optional(sdo, SUPPORTED_DRIVE_MODES.index, 0, notes)
+            for spec in (SUPPORTED_DRIVE_MODES, STATUSWORD, ERROR_CODE):
+                values[spec.index, 0] = _read_optional(sdo, spec.index, 0, notes, spec.data_type)
     except DriveTimeout as exc:
         notes.append(f"{exc.message}; not asked again")
     except DriveError as exc:  # a malformed answer: the node is there, its answer unusable
@@ -201,13 +178,15 @@ def _read_details(node_id: int, sdo: SdoAccess, heartbeats: HeartbeatLog) -> Can
         notes.append(f"{malformed} frame(s) on COB-ID 0x{HEARTBEAT_BASE + node_id:03X} that are not 1-byte heartbeats")
     identity = Identity(*(values.get((IDENTITY, sub)) for sub in range(1, 5)))
     return CanopenNode(node_id, values.get((DEVICE_TYPE, 0)), identity, state, booted,
-                       values.get((SUPPORTED_DRIVE_MODES.index, 0)), tuple(notes))
+                       values.get((SUPPORTED_DRIVE_MODES.index, 0)), tuple(notes),
+                       values.get((STATUSWORD.index, 0)), values.get((ERROR_CODE.index, 0)))
 
 
-def _read_optional(sdo: SdoAccess, index: int, subindex: int, notes: list[str]) -> int | None:
-    """An UNSIGNED32 object, or None (and a note) if the node aborts the read."""
+def _read_optional(sdo: SdoAccess, index: int, subindex: int, notes: list[str],
+                   data_type: DataType = DataType.UNSIGNED32) -> int | None:
+    """An integer object of ``data_type``, or None (and a note) if the node aborts the read."""
     try:
-        return sdo.read_int(index, subindex, DataType.UNSIGNED32)
+        return sdo.read_int(index, subindex, data_type)
     except SdoAbortError as exc:
         notes.append(exc.message)
         return None

@@ -40,7 +40,6 @@ from pymodbus.pdu.register_message import (
     ReadHoldingRegistersRequest,
     ReadWriteMultipleRegistersRequest,
     WriteMultipleRegistersRequest,
-    WriteSingleRegisterRequest,
 )
 
 from drives.base import CyclicInputs, DriveScaling
@@ -251,32 +250,17 @@ class ModbusDrive(Cia402Master):
 
     # ------------------------------------------------------------------ requests
 
-    def _checked_registers(self, response: ModbusPDU, count: int, what: str) -> list[int]:
-        registers = response.registers
-        if len(registers) != count:
-            raise DriveProtocolError(self.name, f"{len(registers)} registers answered while {what}, expected {count}")
-        return list(registers)
-
     def read_registers(self, address: int, count: int) -> list[int]:
         """Raw FC03 read of ``count`` holding registers from ``address`` (acyclic)."""
         self._require_link()
         self._cached = None
-        what = f"reading {describe_range(address, count)}"
-        response = self.link.send(ReadHoldingRegistersRequest(address=address, count=count, dev_id=self.unit_id), what)
-        return self._checked_registers(response, count, what)
+        return self.link.read_holding(self.unit_id, address, count)
 
     def write_registers(self, address: int, values: list[int]) -> None:
         """Raw write of holding registers from ``address`` (FC06 for one, FC16 for more; acyclic)."""
         self._require_link()
         self._cached = None
-        what = f"writing {describe_range(address, len(values))}"
-        request: ModbusPDU
-        if len(values) == 1:
-            request = WriteSingleRegisterRequest(address=address, registers=list(values), dev_id=self.unit_id)
-        else:
-            request = WriteMultipleRegistersRequest(address=address, registers=list(values), dev_id=self.unit_id)
-            request.count = len(values)
-        self.link.send(request, what)
+        self.link.write_holding(self.unit_id, address, values)
 
     def _read_spec(self, spec: RegisterSpec) -> int | float:
         return decode_value(spec, self.read_registers(spec.address, spec.count), self.word_order)

@@ -20,10 +20,11 @@ from typing import Any
 
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.pdu import ModbusPDU
+from pymodbus.pdu.register_message import ReadHoldingRegistersRequest, WriteMultipleRegistersRequest, WriteSingleRegisterRequest
 
 from drives.cia402_master import CyclicStats
 from drives.errors import DriveError, DriveProtocolError, DriveTimeout, ModbusExceptionError, ModbusLinkLost, ParameterError
-from drives.modbus.register_map import exception_name
+from drives.modbus.register_map import describe_range, exception_name
 
 
 @dataclass(slots=True)
@@ -153,3 +154,23 @@ class ModbusLink:
             code = int(getattr(response, "exception_code", 0))
             raise ModbusExceptionError(self.name, f"{what}: exception {exception_name(code)}", code)
         return response
+
+    def read_holding(self, unit_id: int, address: int, count: int) -> list[int]:
+        """FC03: ``count`` holding registers of unit ``unit_id`` from ``address``; errors name what they map to."""
+        what = f"reading {describe_range(address, count)}"
+        response = self.send(ReadHoldingRegistersRequest(address=address, count=count, dev_id=unit_id), what)
+        registers = list(response.registers)
+        if len(registers) != count:
+            raise DriveProtocolError(self.name, f"{len(registers)} registers answered while {what}, expected {count}")
+        return registers
+
+    def write_holding(self, unit_id: int, address: int, values: list[int]) -> None:
+        """FC06 (one register) or FC16 (more) to unit ``unit_id`` from ``address``."""
+        what = f"writing {describe_range(address, len(values))}"
+        request: ModbusPDU
+        if len(values) == 1:
+            request = WriteSingleRegisterRequest(address=address, registers=list(values), dev_id=unit_id)
+        else:
+            request = WriteMultipleRegistersRequest(address=address, registers=list(values), dev_id=unit_id)
+            request.count = len(values)
+        self.send(request, what)

@@ -97,6 +97,7 @@ __all__ = [
     "exception_name",
     "register_at",
     "register_for_object",
+    "word_order_of",
 ]
 
 WORD_ORDERS = ("big", "little")
@@ -221,6 +222,13 @@ def describe_range(address: int, count: int) -> str:
             names.append(text)
     span = f"register 0x{address:04X}" if count <= 1 else f"registers 0x{address:04X}..0x{address + count - 1:04X}"
     return f"{span}: {', '.join(names)}" if names else span
+
+
+def word_order_of(identity_registers: Sequence[int]) -> str | None:
+    """The word order in which the map identity registers (0x0030, 2 registers) read
+    :data:`MAP_IDENTITY`: ``"big"`` or ``"little"``; None if neither (not this map)."""
+    spec = REGISTER_BY_NAME["map_identity"]
+    return next((order for order in WORD_ORDERS if decode_value(spec, identity_registers, order) == MAP_IDENTITY), None)
 
 
 def _check_order(word_order: str) -> None:

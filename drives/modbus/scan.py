@@ -8,7 +8,8 @@ identification).  For each unit id in turn, until the time budget is spent:
    value, or an exception response (0x01, 0x02, ...), is a unit that is there but is not our
    map.  No answer within ``answer_timeout``, or exception 0x0A/0x0B (a gateway reporting that
    no device answers behind it), is no unit: it is skipped.
-2. Our map: FC03 of 0x6502 (0x0026, 2 registers) in that word order.
+2. Our map: FC03 of 0x6502 (0x0026, 2 registers) in that word order, of the statusword 0x6041
+   (0x0000: its CiA-402 state) and of the error code 0x603F (0x0028).
 3. Every unit found: FC43/14 basic device identification (objects 0x00 vendor name, 0x01
    product code, 0x02 major/minor revision), where the server supports it.
 
@@ -17,14 +18,15 @@ order (and a gateway's serial line is one at a time anyway), so the sweep is seq
 a request that timed out the connection is replaced (see :class:`_Prober`).  It stops starting
 new units ``timeout`` s after it began; the units it did not reach are returned as
 ``unprobed``.  Total time, bounded: every request and every connect waits at most
-``answer_timeout``, and the last unit started makes at most three requests, each at worst a
-drop, a reconnect, a resend that times out and a reconnect: ``timeout + 10 * answer_timeout`` s
+``answer_timeout``, and the last unit started makes at most five requests, each at worst a
+drop, a reconnect, a resend that times out and a reconnect: ``timeout + 16 * answer_timeout`` s
 at the very worst (the first connect included); on a server that answers, ``timeout`` plus a
 few round trips.
 """
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -33,16 +35,19 @@ from typing import Any
 from pymodbus.pdu.mei_message import ReadDeviceInformationRequest
 from pymodbus.pdu.register_message import ReadHoldingRegistersRequest
 
-from drives.cia402 import SUPPORTED_DRIVE_MODES, cst_announced
+from drives.cia301 import describe_emcy_code
+from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES, cst_announced
 from drives.errors import DriveError, DriveTimeout, ModbusExceptionError, ModbusLinkLost
+from drives.fault_reset import state_text
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import (
     MAP_IDENTITY,
     REGISTER_BY_NAME,
     UNIT_ID_RANGE,
-    WORD_ORDERS,
+    RegisterSpec,
     decode_value,
     register_for_object,
+    word_order_of,
 )
 from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, checked_ids, checked_seconds
 
@@ -52,6 +57,8 @@ NO_DEVICE_EXCEPTIONS = (0x0A, 0x0B)  # gateway path unavailable, gateway target 
 DEVICE_IDENTIFICATION_NAMES = {0x00: "vendor_name", 0x01: "product_code", 0x02: "revision"}
 _IDENTITY_REGISTER = REGISTER_BY_NAME["map_identity"]
 _MODES_REGISTER = register_for_object(SUPPORTED_DRIVE_MODES)
+_STATUSWORD_REGISTER = register_for_object(STATUSWORD)
+_ERROR_CODE_REGISTER = register_for_object(ERROR_CODE)
 
 
 @dataclass(frozen=True)
@@ -64,6 +71,8 @@ class ModbusUnit:
     supported_drive_modes: int | None  # 0x6502, our map only
     device_identification: dict[str, str] | None  # FC43/14 basic objects; None: not supported
     notes: tuple[str, ...] = ()
+    statusword: int | None = None  # 0x6041, our map only
+    error_code: int | None = None  # 0x603F, our map only
 
     @property
     def our_map(self) -> bool:
@@ -80,6 +89,11 @@ class ModbusUnit:
         """0x6502 announces cyclic synchronous torque; None where 0x6502 was not read."""
         return cst_announced(self.supported_drive_modes)
 
+    @property
+    def cia402_state(self) -> str | None:
+        """The CiA-402 state 0x6041 shows ("FAULT", ...); None where 0x6041 was not read."""
+        return None if self.statusword is None else state_text(self.statusword)
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: numbers as numbers, None as null."""
         return {
@@ -92,6 +106,10 @@ class ModbusUnit:
             "cst_supported": self.cst_supported,
             "cia402": self.cia402,
             "device_identification": self.device_identification,
+            "statusword": self.statusword,
+            "cia402_state": self.cia402_state,
+            "error_code": self.error_code,
+            "error_code_text": None if self.error_code is None else describe_emcy_code(self.error_code),
             "notes": list(self.notes),
         }
 
@@ -161,16 +179,20 @@ class _Prober:
             notes.append(exc.message)
             registers = None
         identity = None if registers is None else int(decode_value(_IDENTITY_REGISTER, registers, "big"))
-        order = next((o for o in WORD_ORDERS
-                      if registers is not None and decode_value(_IDENTITY_REGISTER, registers, o) == MAP_IDENTITY), None)
-        modes = None
+        order = None if registers is None else word_order_of(registers)
+        values: dict[RegisterSpec, int | None] = {}
         if order is not None:
-            modes = self._optional(notes, lambda: int(decode_value(
-                _MODES_REGISTER, self.read(unit, _MODES_REGISTER.address, _MODES_REGISTER.count, f"unit {unit}: 0x6502"), order)))
+            for spec in (_MODES_REGISTER, _STATUSWORD_REGISTER, _ERROR_CODE_REGISTER):
+                values[spec] = self._optional(notes, functools.partial(self.value, unit, spec, order))
         elif identity is not None:
             notes.append(f"map identity register reads 0x{identity:08X}, ours is 0x{MAP_IDENTITY:08X}: not our map")
         information = self._optional(notes, lambda: self.identification(unit))
-        return ModbusUnit(unit, order, identity, modes, information, tuple(notes))
+        return ModbusUnit(unit, order, identity, values.get(_MODES_REGISTER), information, tuple(notes),
+                          values.get(_STATUSWORD_REGISTER), values.get(_ERROR_CODE_REGISTER))
+
+    def value(self, unit: int, spec: RegisterSpec, word_order: str) -> int:
+        """The integer of ``spec`` at ``unit``, read in ``word_order``."""
+        return int(decode_value(spec, self.read(unit, spec.address, spec.count, f"unit {unit}: {spec.label}"), word_order))
 
     def identification(self, unit: int) -> dict[str, str]:
         """FC43/14 basic device identification, object names to text."""

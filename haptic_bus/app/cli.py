@@ -33,8 +33,12 @@ from haptic_bus.app.arguments import (
     timeout,
     unit_id,
 )
+from haptic_bus.app.drive_address import DriveAddress, drive_address
+from haptic_bus.app.fault_cli import add_fault_reset_parser
 from haptic_bus.app.identify_cli import add_identify_parser
 from haptic_bus.app.scan_cli import add_scan_parser
+from haptic_bus.app.sdo_cli import add_sdo_parser
+from haptic_bus.app.status_cli import add_status_parser
 
 _NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
 
@@ -93,25 +97,17 @@ def _demo(args: argparse.Namespace) -> int:
         result.summary.exit_reason, EXIT_NO)
 
 
-def _validate_run(args: argparse.Namespace) -> None:
-    """Refuse conflicting or ignored options before anything is touched."""
+def _validate_run(args: argparse.Namespace) -> DriveAddress:
+    """The drive the run talks to; conflicting or ignored options refused before anything is touched."""
     from drives.errors import ParameterError
 
-    if args.modbus:
-        given = [flag for flag, value in (("--interface", args.interface), ("--channel", args.channel),
-                                          ("--bitrate", args.bitrate), ("--bus-option", args.bus_option),
-                                          ("--node-id", args.node_id), ("--controller-node-id", args.controller_node_id))
-                 if value]
-        if given:
-            raise ParameterError(given[0], "given with --modbus", "only Modbus options (--unit-id) with --modbus", "run")
-        return
-    if args.unit_id is not None:
-        raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL", "run")
-    if args.node_id is None:
-        raise ParameterError("--node-id", None, "the drive's CANopen node id 1..127 (or --modbus URL)", "run")
+    if args.modbus and args.controller_node_id is not None:
+        raise ParameterError("--controller-node-id", "given with --modbus", "only Modbus options (--unit-id) with --modbus")
+    address = drive_address(args)
     if args.controller_node_id is not None and args.controller_node_id == args.node_id:
         raise ParameterError("--controller-node-id", args.controller_node_id,
-                             f"a node id other than the drive's ({args.node_id})", "run")
+                             f"a node id other than the drive's ({args.node_id})")
+    return address
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -125,7 +121,7 @@ def _run(args: argparse.Namespace) -> int:
         run_modbus,
     )
 
-    _validate_run(args)
+    address = _validate_run(args)
     profile = load_profile(args.profile)
     stop = StopRequest()
     from haptic_bus.app.realtime import RealtimeSettings
@@ -133,12 +129,13 @@ def _run(args: argparse.Namespace) -> int:
     out_dir = None if args.out is None else pathlib.Path(args.out)
     options = RunOptions(args.duration, realtime=not args.virtual_time, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
-                         scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings())
+                         scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings(),
+                         reset_fault=args.reset_fault)
     stop.install()
-    if args.modbus:
-        result = run_modbus(profile, args.modbus, args.unit_id or 1, options)
+    if address.url is not None:
+        result = run_modbus(profile, address.url, address.unit_id, options)
     else:
-        result = run_canopen(profile, bus_arguments(args), args.node_id, options,
+        result = run_canopen(profile, address.bus, address.checked_node_id, options,
                              args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
     summary = result.summary
     if summary is not None:
@@ -240,6 +237,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--start-in-contact", choices=("refuse", "ramp"),
                      help="a start inside an object: refuse, or ramp the force in (default: the profile's [start])")
     run.add_argument("--out", help="folder for record.csv, run.json and plots (default: runs/<UTC time>-<profile>)")
+    run.add_argument("--reset-fault", action="store_true",
+                     help="before commissioning, reset a drive found in FAULT (as haptic-bus fault-reset does; logged "
+                          "in run.json's events with the error code it had); without it a faulted drive is refused")
 
     upload = command("upload", "change a running controller's wall K and B over the bus (gated)", _upload)
     add_bus_arguments(upload)
@@ -255,6 +255,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_identify_parser(sub)
     add_scan_parser(sub)
+    add_status_parser(sub)
+    add_fault_reset_parser(sub)
+    add_sdo_parser(sub)
 
     report = command("report", "the seed's Figs. 4-6 for a profile, as PNGs, plus a markdown summary", _report)
     report.add_argument("profile", help="profile name or TOML path")

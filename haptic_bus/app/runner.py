@@ -5,6 +5,10 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
 
 1. the run's folder is created and shown writable (:mod:`~haptic_bus.app.run_folder`) before
    any bus is touched;
+   with ``reset_fault`` a drive found in FAULT is reset first, as ``haptic-bus fault-reset``
+   does (:meth:`~haptic_bus.app.drive_address.DriveAddress.reset_fault`), and the reset is the
+   first of run.json's events; without it a faulted drive is refused at enabling, with the
+   command that clears it;
 2. the drive is reached and commissioned (CANopen: the safety chain of ``[safety]``; Modbus: the
    gate judges with the loop delay the poll measured, :func:`drives.modbus.timing.loop_delay`);
 3. **safe start**: the handle's position is read before enabling; inside an object the run is
@@ -37,8 +41,11 @@ from drives.base import Drive
 from drives.bus_config import resolve_bus_config
 from drives.cia402 import State
 from drives.cia402_master import Cia402Master
-from drives.errors import DriveError, HapticBusError
+from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
+from drives.errors import DriveError, DriveFault, DriveStateError, HapticBusError
+from drives.fault_reset import DEFAULT_WAIT
 from haptic_bus.app import preflight
+from haptic_bus.app.drive_address import DriveAddress
 from haptic_bus.app.live import LiveView
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.realtime import RealtimeReport, RealtimeSettings, realtime_session
@@ -46,6 +53,7 @@ from haptic_bus.app.run_folder import prepare_run_folder, run_document, write_ru
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import Derate, RunSummary, WallController, encoder_origin
 from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
+from haptic_bus.control.record import Event
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.supervisor import Action
 
@@ -85,8 +93,9 @@ class StopRequest:
 @dataclasses.dataclass(frozen=True)
 class RunOptions:
     """One run: ``duration`` (s), real time or virtual time, the output folder (None: ``runs/...``),
-    the start-in-contact policy (None: the profile's), the live view, the stop request, and what a
-    real-time run asks of the OS for its control thread (:mod:`~haptic_bus.app.realtime`)."""
+    the start-in-contact policy (None: the profile's), the live view, the stop request, what a
+    real-time run asks of the OS for its control thread (:mod:`~haptic_bus.app.realtime`), and
+    whether a drive found in FAULT is reset before commissioning."""
 
     duration: float
     realtime: bool
@@ -95,6 +104,7 @@ class RunOptions:
     live: bool = True
     stop: StopRequest = dataclasses.field(default_factory=StopRequest)
     scheduling: RealtimeSettings = dataclasses.field(default_factory=RealtimeSettings)
+    reset_fault: bool = False
 
 
 @dataclasses.dataclass
@@ -155,7 +165,8 @@ def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options:
     deadline = safety.rpdo_deadline_ms(period) / 1000.0 if safety.rpdo_deadline_periods else math.inf
     slack = (safety.consumer_ms - safety.heartbeat_ms) / 1000.0 if safety.master_node_id is not None else math.inf
     watchdog = Watchdog(min(deadline, slack), safety.rpdo_deadline_periods if deadline <= slack else None)
-    return _session(profile, options, folder, link, open_drive, hold, watchdog)
+    return _session(profile, options, folder, link, open_drive, hold, watchdog,
+                    DriveAddress(bus=dict(bus), node_id=node_id))
 
 
 def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) -> RunResult:
@@ -185,7 +196,7 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
 
     hold = longest_hold(period, options.realtime, safety.modbus_watchdog_ms, 0)
     watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
-    return _session(profile, options, folder, link, open_drive, hold, watchdog)
+    return _session(profile, options, folder, link, open_drive, hold, watchdog, DriveAddress(url=url, unit_id=unit_id))
 
 
 def longest_hold(period: float, realtime: bool, deadline_ms: int, fallback_ms: int) -> float:
@@ -232,14 +243,17 @@ class Watchdog:
 
 
 def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: dict[str, Any],
-             open_drive: OpenDrive, hold: float, watchdog: Watchdog) -> RunResult:
+             open_drive: OpenDrive, hold: float, watchdog: Watchdog, address: DriveAddress) -> RunResult:
     started = dt.datetime.now(dt.UTC)
     controller: WallController | None = None
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": {"period": profile.loop.period, "timing": profile.loop.timing}}
     reason, error = "completed", None
+    before: list[Event] = []  # what happened before the controller (and its event log) existed
     try:
         with ExitStack() as stack:
+            if options.reset_fault:
+                before += _reset_fault_first(address, options, extra)
             drive, gate, serve = open_drive(stack)
             extra["loop"]["delay_assumed"] = gate.device.delay
             scene = profile.compiled_scene()
@@ -255,6 +269,8 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
             extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold,
                                   "budget_cap_j": controller.observer.cap, "friction_min": gate.device.b,
                                   "beyond_gate": profile.passivity.beyond_gate}
+            for event in before:
+                controller.events.add(event.time_s, event.kind, event.message, **event.data)
             serve(controller)
             with _live(controller, profile, options), _scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
@@ -273,6 +289,8 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
         reason, error = "refused", str(exc)
     except DriveError as exc:
         reason, error = "drive error", str(exc)
+        if isinstance(exc, DriveStateError) and exc.state is State.FAULT:
+            error += f"; {address.fault_reset_hint()} (or run with --reset-fault)"
     except KeyboardInterrupt:
         reason, error = "interrupted", "interrupted (Ctrl-C)"
     finally:
@@ -296,6 +314,23 @@ def _preflight(drive: Drive, gate: PassivityGate, scene: CompiledScene, profile:
             print(line, flush=True)
     if not report.holdable:
         raise StartRefused(report.reason.removeprefix("refused: "))
+
+
+def _reset_fault_first(address: DriveAddress, options: RunOptions, extra: dict[str, Any]) -> list[Event]:
+    """``--reset-fault``: reset a drive found in FAULT before commissioning; the reset as an event
+    (run.json's ``events``, also when the run ends before it cycles), or none if the drive was
+    not in FAULT.  DriveFault if the cause persists."""
+    outcome = address.reset_fault(DEFAULT_WAIT, DEFAULT_ANSWER_TIMEOUT)
+    if not outcome.reset_sent and outcome.cleared:
+        logger.info("%s", outcome.message())
+        return []
+    event = Event(0.0, "fault reset", f"before commissioning: {outcome.message()}", outcome.to_dict())
+    extra["events"] = [event.to_dict()]
+    if not outcome.cleared:
+        raise DriveFault(outcome.drive, f"--reset-fault: {outcome.detail()}", outcome.error_code_after)
+    if options.live:
+        print(f"fault reset: {outcome.message()}", flush=True)
+    return [event]
 
 
 @contextmanager

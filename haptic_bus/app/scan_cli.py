@@ -6,12 +6,13 @@
 
 CANopen (:mod:`drives.canopen.scan`): listens for boot-ups and heartbeats, sends one SDO read
 of 0x1000 to every node id at once, listens ``--timeout`` s, then reads 0x1000, 0x1018 and
-(CiA-402 devices) 0x6502 from every node seen, in parallel, each read within
-``--answer-timeout`` s.  At most ``timeout + 6 * answer_timeout`` s plus opening the bus.
+(CiA-402 devices) 0x6502, 0x6041 (the CiA-402 state) and 0x603F (the error code) from every
+node seen, in parallel, each read within ``--answer-timeout`` s.  At most
+``timeout + 8 * answer_timeout`` s plus opening the bus.
 Sends SDO reads only: no NMT command, no write.  Modbus (:mod:`drives.modbus.scan`): per unit id,
-FC03 reads of the map identity and 0x6502 and an FC43/14 device identification, each within
-``--answer-timeout`` s; new units are started for ``--timeout`` s, the ones not reached are
-named on stderr (at worst ``timeout + 10 * answer_timeout`` s in all).
+FC03 reads of the map identity, 0x6502, 0x6041 and 0x603F and an FC43/14 device identification,
+each within ``--answer-timeout`` s; new units are started for ``--timeout`` s, the ones not
+reached are named on stderr (at worst ``timeout + 16 * answer_timeout`` s in all).
 
 Output: one line per node (unit), or with ``--json`` one JSON list of objects (numbers as
 numbers; null where a value could not be read, with the reason in ``notes``).
@@ -38,7 +39,8 @@ if TYPE_CHECKING:  # the scans import canopen and pymodbus: only when a scan run
     from drives.canopen.scan import CanopenNode
     from drives.modbus.scan import ModbusScan
 
-SCAN_HELP = "list the CANopen nodes on a CAN bus (or the units of a Modbus server): identity, NMT state, CST support"
+SCAN_HELP = ("list the CANopen nodes on a CAN bus (or the units of a Modbus server): identity, NMT state, CST support, "
+             "CiA-402 state and error code 0x603F")
 
 
 # --------------------------------------------------------------------------- argument types
@@ -117,10 +119,14 @@ def _yes(value: bool | None) -> str:
     return "-" if value is None else ("yes" if value else "no")
 
 
+def _word(value: int | None) -> str:
+    return "-" if value is None else f"0x{value:04X}"
+
+
 def format_canopen(nodes: Sequence[CanopenNode]) -> str:
     """One line per node (and its notes indented below)."""
     lines = [f"{'node':>4}  {'device type':<11}  {'kind':<22}  {'vendor':<10}  {'product':<10}  {'revision':<10}  "
-             f"{'serial':<10}  {'NMT state':<15}  CST  CiA-402"]
+             f"{'serial':<10}  {'NMT state':<15}  CST  CiA-402  {'CiA-402 state':<22}  0x603F"]
     from drives.canopen.scan import device_kind
 
     for node in nodes:
@@ -128,7 +134,8 @@ def format_canopen(nodes: Sequence[CanopenNode]) -> str:
         ident = node.identity
         lines.append(f"{node.node_id:>4}  {_hex(node.device_type):<11}  {kind:<22}  {_hex(ident.vendor_id):<10}  "
                      f"{_hex(ident.product_code):<10}  {_hex(ident.revision):<10}  {_hex(ident.serial):<10}  "
-                     f"{node.nmt_state or '-':<15}  {_yes(node.cst_supported):<3}  {_yes(node.cia402)}")
+                     f"{node.nmt_state or '-':<15}  {_yes(node.cst_supported):<3}  {_yes(node.cia402):<7}  "
+                     f"{node.cia402_state or '-':<22}  {_word(node.error_code)}")
         if node.boot_up_seen:
             lines.append("      boot-up seen during the scan")
         lines += [f"      note: {note}" for note in node.notes]
@@ -137,13 +144,15 @@ def format_canopen(nodes: Sequence[CanopenNode]) -> str:
 
 def format_modbus(scan: ModbusScan) -> str:
     """One line per unit (and its notes indented below)."""
-    lines = [f"{'unit':>4}  {'register map':<20}  {'word order':<10}  {'0x6502':<10}  CST  CiA-402  device identification"]
+    lines = [f"{'unit':>4}  {'register map':<20}  {'word order':<10}  {'0x6502':<10}  CST  CiA-402  "
+             f"{'CiA-402 state':<22}  0x603F  device identification"]
     for unit in scan.units:
         where = f"ours {_hex(unit.map_identity)}" if unit.our_map else "not ours"
         info = unit.device_identification
         ident = "-" if info is None else (", ".join(f"{k}={v!r}" for k, v in info.items()) or "answered, no objects")
         lines.append(f"{unit.unit_id:>4}  {where:<20}  {unit.word_order or '-':<10}  {_hex(unit.supported_drive_modes):<10}  "
-                     f"{_yes(unit.cst_supported):<3}  {_yes(unit.cia402):<7}  {ident}")
+                     f"{_yes(unit.cst_supported):<3}  {_yes(unit.cia402):<7}  {unit.cia402_state or '-':<22}  "
+                     f"{_word(unit.error_code):<6}  {ident}")
         lines += [f"      note: {note}" for note in unit.notes]
     return "\n".join(lines)
 
