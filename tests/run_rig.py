@@ -42,7 +42,12 @@ from sim_drive.profile import load_profile as load_drive_profile
 
 NODE = 5  # the simulated drive's CANopen node id
 TRANSPORTS = ("canopen", "modbus")
-RECORD_FILES = ("record.csv", "position_force.png", "region.png", "run.json")  # in the order a run writes them
+RECORD_FILES = ("record.csv", "timeline.png", "force_position.png", "region.png", "run.json")  # Modbus, in the order written
+
+
+def record_files(transport: str) -> tuple[str, ...]:
+    """What a run on ``transport`` writes, in the order its "wrote" line names them (CANopen: the bus log too)."""
+    return ("record.csv", "bus.asc", *RECORD_FILES[1:]) if transport == "canopen" else RECORD_FILES
 
 
 @dataclass

@@ -23,7 +23,6 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
 from __future__ import annotations
 
 import dataclasses
-import datetime as dt
 import logging
 import math
 import pathlib
@@ -41,7 +40,8 @@ from drives.errors import DriveError, HapticBusError
 from haptic_bus.app.live import LiveView
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.realtime import RealtimeReport, RealtimeSettings, realtime_session
-from haptic_bus.app.run_folder import prepare_run_folder, run_document, write_run
+from haptic_bus.app.run_folder import RunJournal, gate_loop, prepare_run_folder
+from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import Derate, RunSummary, WallController, encoder_origin
 from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
@@ -85,7 +85,8 @@ class StopRequest:
 class RunOptions:
     """One run: ``duration`` (s), real time or virtual time, the output folder (None: ``runs/...``),
     the start-in-contact policy (None: the profile's), the live view, the stop request, and what a
-    real-time run asks of the OS for its control thread (:mod:`~haptic_bus.app.realtime`)."""
+    real-time run asks of the OS for its control thread (:mod:`~haptic_bus.app.realtime`), and
+    whether a CANopen run logs every frame (``bus.asc``, :mod:`~haptic_bus.app.bus_log`)."""
 
     duration: float
     realtime: bool
@@ -94,6 +95,7 @@ class RunOptions:
     live: bool = True
     stop: StopRequest = dataclasses.field(default_factory=StopRequest)
     scheduling: RealtimeSettings = dataclasses.field(default_factory=RealtimeSettings)
+    bus_log: bool = True
 
 
 @dataclasses.dataclass
@@ -148,7 +150,7 @@ def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options:
 
         return drive, profile.gate(), serve
 
-    return _session(profile, options, folder, link, open_drive)
+    return _session(profile, options, folder, link, open_drive, bus=config)
 
 
 def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) -> RunResult:
@@ -201,16 +203,22 @@ OpenDrive = Callable[[ExitStack], "tuple[Drive, PassivityGate, Callable[[WallCon
 
 
 def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: dict[str, Any],
-             open_drive: OpenDrive) -> RunResult:
-    started = dt.datetime.now(dt.UTC)
+             open_drive: OpenDrive, bus: dict[str, Any] | None = None) -> RunResult:
+    """One run (module docstring); ``bus``: the CAN bus's configuration, for the bus log (None: no bus)."""
     controller: WallController | None = None
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": {"period": profile.loop.period, "timing": profile.loop.timing}}
+    journal = RunJournal(folder, profile, link, extra)
+    journal.write()  # "running", before any bus is touched: a run killed from here on says so
+    recorder = RunRecorder(folder, journal)
     reason, error = "completed", None
     try:
         with ExitStack() as stack:
+            if bus is not None and options.bus_log:
+                recorder.log_bus(stack, bus)  # before the drive: commissioning's frames too
             drive, gate, serve = open_drive(stack)
             extra["loop"]["delay_assumed"] = gate.device.delay
+            extra["gate_loop"] = gate_loop(gate.device)
             scene = profile.compiled_scene()
             origin, ramp_time = _safe_start(profile, drive, gate, scene, options)
             extra["start"] = {"position_m": origin, "ramp_time_s": ramp_time}
@@ -220,6 +228,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
                                                                             profile.supervisor.on_observer) else None
             controller = WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
                                         supervisor=profile.supervisor, ramp_time=ramp_time, derate=derate)
+            recorder.stream(stack, controller)
             serve(controller)
             with _live(controller, profile, options), _scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
@@ -240,8 +249,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
         reason, error = "interrupted", "interrupted (Ctrl-C)"
     finally:
         extra["exit_reason"], extra["error"] = reason, error
-        document = run_document(profile, controller, summary, link, extra, started)
-        files = write_run(folder, profile, controller, document)
+        files = recorder.finish(summary)
     return RunResult(reason, error, summary, controller, folder, files)
 
 
