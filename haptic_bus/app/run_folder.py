@@ -36,6 +36,7 @@ from typing import Any
 
 from drives.errors import ParameterError
 from haptic_bus._version import __version__
+from haptic_bus.app.output import writable_folder
 from haptic_bus.app.profiles import Profile, profile_to_dict
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.gate import DeviceLoop
@@ -63,14 +64,7 @@ def prepare_run_folder(out: str | pathlib.Path | None, profile_name: str, root: 
         while path.exists():
             path = root / f"{stamp}-{profile_name}-{n}"
             n += 1
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        probe = path / ".haptic-bus-write-test"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as exc:
-        raise ParameterError("--out", str(path), f"a folder this user can create and write ({exc.strerror})", "run") from None
-    return path
+    return writable_folder(path, "--out", "run")
 
 
 @functools.cache
@@ -193,7 +187,7 @@ class RunJournal:
         self.extra["files"] = [str(p) for p in written] + [str(self.path)]
         self.write(summary, ended=True)
         if (self.folder / RECORD_CSV) in written:
-            written = written + render_run(self.folder)
+            written = written + render_run(read_run_folder(self.folder))
             self.extra["files"] = [str(p) for p in written] + [str(self.path)]
             self.write(summary, ended=True)
         return [*written, self.path]

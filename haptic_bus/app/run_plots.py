@@ -32,7 +32,7 @@ from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
-from haptic_bus.app.run_folder import RunFolder, read_run_folder
+from haptic_bus.app.run_folder import RunFolder
 from haptic_bus.control.record import RecordTable
 from haptic_bus.control.scene import SceneObject, object_from_dict
 
@@ -45,13 +45,12 @@ _TITLE_WIDTH = 110  # characters a title line holds before it wraps
 _EVENT_LABEL_WIDTH = 40  # characters of an event's label beside its line (the whole message is in run.json)
 
 
-def render_run(folder: str | pathlib.Path, out: str | pathlib.Path | None = None) -> list[pathlib.Path]:
-    """Draw a run folder's pictures (:data:`PICTURES`) into ``out`` (default: the folder); the paths.
+def render_run(run: RunFolder, out: pathlib.Path | None = None) -> list[pathlib.Path]:
+    """Draw a run's pictures (:data:`PICTURES`) into ``out`` (default: its folder); the paths.
     A run that never cycled (no ``record.csv``) gets the K-B plane only."""
     from haptic_bus.app.kb_plane import kb_plane_figure
 
-    run = read_run_folder(folder)
-    target = pathlib.Path(out) if out is not None else run.path
+    target = out if out is not None else run.path
     figures: list[tuple[str, Figure]] = []
     if run.record is not None and run.record.cycles:
         figures += [("timeline.png", timeline_figure(run)), ("force_position.png", force_position_figure(run))]
