@@ -53,8 +53,8 @@ def record_files(transport: str) -> tuple[str, ...]:
 @dataclass
 class DriveUnderTest:
     """The simulated drive a run talks to: the ``run`` options that reach it, its hardware, the
-    CiA-402 states it entered (in order), the virtual-bus channel and the fault injection that
-    makes the next TPDO one byte short (CANopen only)."""
+    CiA-402 states it entered (in order), the virtual-bus channel and the fault injections that
+    make the next TPDO one byte short and put the drive into FAULT with an error code (CANopen only)."""
 
     transport: str
     args: list[str]
@@ -63,6 +63,7 @@ class DriveUnderTest:
     channel: str | None = None
     stop: Callable[[], None] = lambda: None
     short_next_tpdo: Callable[[], None] | None = None
+    enter_fault: Callable[[int], None] | None = None
 
     @property
     def was_enabled(self) -> bool:
@@ -83,7 +84,8 @@ def simulated_drive(transport: str, profile: pathlib.Path | str) -> Iterator[Dri
         slave = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, timing=timing,
                                 parameters=truth.parameters, operator=truth.operator)
         under = DriveUnderTest(transport, ["--interface", "virtual", "--channel", channel, "--node-id", str(NODE)],
-                               slave.drive, channel=channel, stop=slave.stop, short_next_tpdo=slave.short_next_tpdo)
+                               slave.drive, channel=channel, stop=slave.stop, short_next_tpdo=slave.short_next_tpdo,
+                               enter_fault=slave.enter_fault)
         slave.drive.state_listeners.append(lambda old, new, number: under.states.append(new))
         slave.start()
     elif transport == "modbus":

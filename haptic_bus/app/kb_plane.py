@@ -107,7 +107,8 @@ def kb_plane_figure(run: RunFolder) -> Figure:
         at = (max(wall.K, k_low), max(wall.B, b_low))  # K = 0 or B = 0 at the plane's edge
         ax.plot(*at, marker=wall.marker, ms=15 if wall.marker == "*" else 10, color=shade, mec="black", ls="none",
                 label=wall.label)
-        ax.annotate(f"scene {wall.scene_id}", at, xytext=(7, 5), textcoords="offset points", fontsize=8, color=shade)
+        ax.annotate(f"scene {wall.scene_id}: {'+'.join(wall.objects)}", at, xytext=(7, 5), textcoords="offset points",
+                    fontsize=7, color=shade)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlim(k_low, k_high)
