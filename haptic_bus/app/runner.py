@@ -258,7 +258,7 @@ def _live(controller: WallController, profile: Profile, options: RunOptions) -> 
     if not options.live:
         yield
         return
-    with LiveView(controller, f"haptic-bus run {profile.name}"):
+    with LiveView(controller, f"haptic-bus run {profile.name}", duration=options.duration):
         yield
 
 
