@@ -149,3 +149,32 @@ def test_multi_object_draws_each_of_its_five_objects(tmp_path: pathlib.Path) -> 
     walls = [line for line in _texts(plane).splitlines() if line.startswith("scene 0 (profile): ")]
     assert len(walls) == 5 and np.all([" K " in w for w in walls])  # the five contact walls the gate judged
     plt.close(plane)
+
+
+REGION = ["region", "--mass", "1", "--friction", "20", "--period", "0.001", "--delay", "1", "--velocity", "average"]
+
+
+@pytest.mark.parametrize("args, line", [
+    ([*REGION, "--png", "{file}/x.png"], "haptic-bus region: error: region: --png = '{file}/x.png' is invalid; allowed: a "
+                                         "file this user can create and write ({file} is a file, not a folder)"),
+    ([*REGION, "--png", "{tmp}/r.png", "--mark", "0,10"],
+     "haptic-bus region: error: argument --mark: '0,10': K and B must be finite and > 0 (alpha = B/(KT) and beta = b/B "
+     "are points of the plane only then)"),
+    ([*REGION, "--png", "{tmp}/r.png", "--mark", "1500"], "haptic-bus region: error: argument --mark: '1500' is not K,B "
+                                                           "(two numbers: N/m, N s/m)"),
+    (["plot", "{tmp}"], "haptic-bus plot: error: plot: RUN_DIR = '{tmp}' is invalid; allowed: a run folder: one with "
+                        "run.json (written by haptic-bus run or demo)"),
+], ids=["png-under-a-file", "mark-zero", "mark-one-number", "plot-not-a-run"])
+def test_bad_output_and_marks_are_one_line_and_exit_2(args: list[str], line: str, tmp_path: pathlib.Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "afile").write_text("not a folder")
+    values = {"file": str(tmp_path / "afile"), "tmp": str(tmp_path)}
+    result = run_cli(capsys, *[arg.format(**values) for arg in args])
+    assert (result.code, result.out, result.err_lines) == (2, "", [line.format(**values)])
+    assert not (tmp_path / "r.png").exists()
+
+
+def test_region_marks_walls_with_their_verdicts(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    result = run_cli(capsys, *REGION, "--png", str(tmp_path / "r"), "--mark", "1500,10", "--mark", "30000,2")
+    assert result.code == 0 and result.out == f"wrote {tmp_path / 'r.png'}\n"
+    assert (tmp_path / "r.png").stat().st_size > 30_000
