@@ -107,7 +107,7 @@ def _plot(args: argparse.Namespace) -> int:
     out = writable_folder(pathlib.Path(args.out) if args.out else run.path, "--out", "plot")
     for note in run.notes():
         print(f"note: {note}")
-    from haptic_bus.app.run_plots import render_run
+    from haptic_bus.app.run_pictures import render_run
 
     print(f"wrote {', '.join(str(path) for path in render_run(run, out))}")
     return EXIT_OK

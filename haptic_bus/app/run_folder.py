@@ -179,17 +179,10 @@ class RunJournal:
             self.write()
 
     def finish(self, summary: RunSummary | None, written: list[pathlib.Path]) -> list[pathlib.Path]:
-        """The run has ended: ``run.json`` completed, the pictures drawn from the folder
-        (:func:`haptic_bus.app.run_plots.render_run`, what ``haptic-bus plot`` does), ``run.json``
-        again with every file; the paths written, ``run.json`` last."""
-        from haptic_bus.app.run_plots import render_run
-
+        """The run has ended: ``run.json`` completed, naming the files ``written`` and itself
+        (called again when more files come); the paths, ``run.json`` last."""
         self.extra["files"] = [str(p) for p in written] + [str(self.path)]
         self.write(summary, ended=True)
-        if (self.folder / RECORD_CSV) in written:
-            written = written + render_run(read_run_folder(self.folder))
-            self.extra["files"] = [str(p) for p in written] + [str(self.path)]
-            self.write(summary, ended=True)
         return [*written, self.path]
 
 

@@ -1,6 +1,6 @@
 """A run's pictures, drawn from its folder (``record.csv`` and ``run.json``) and nothing else:
 ``haptic-bus run`` and ``haptic-bus demo`` draw them when they end, ``haptic-bus plot RUN_DIR``
-draws them again (:func:`render_run`).
+draws them again (:func:`haptic_bus.app.run_pictures.render_run`).
 
 * ``timeline.png`` (:func:`timeline_figure`): position with every scene object's extent, wall
   force, the observer's interface energy and each cycle's lateness over the run's time; every
@@ -12,14 +12,13 @@ draws them again (:func:`render_run`).
 * ``region.png`` (:mod:`~haptic_bus.app.kb_plane`): the K-B plane of the gate's loop with every
   scene's contact walls.
 
-Each ``*_figure`` returns the matplotlib figure (tests read its texts); :func:`render_run` saves
+Each ``*_figure`` returns the matplotlib figure (tests read its texts); ``render_run`` saves
 and closes them.
 """
 
 from __future__ import annotations
 
 import math
-import pathlib
 import textwrap
 from typing import Any
 
@@ -36,33 +35,11 @@ from haptic_bus.app.run_folder import RunFolder
 from haptic_bus.control.record import RecordTable
 from haptic_bus.control.scene import SceneObject, object_from_dict
 
-DPI = 110
-PICTURES = ("timeline.png", "force_position.png", "region.png")
 EVENT_COLORS = {"upload": "tab:green", "refused": "tab:gray", "alarm": "tab:orange", "derate": "tab:purple",
                 "fault": "tab:red", "stop": "black"}
 OTHER_EVENT_COLOR = "tab:brown"
 _TITLE_WIDTH = 110  # characters a title line holds before it wraps
 _EVENT_LABEL_WIDTH = 40  # characters of an event's label beside its line (the whole message is in run.json)
-
-
-def render_run(run: RunFolder, out: pathlib.Path | None = None) -> list[pathlib.Path]:
-    """Draw a run's pictures (:data:`PICTURES`) into ``out`` (default: its folder); the paths.
-    A run that never cycled (no ``record.csv``) gets the K-B plane only."""
-    from haptic_bus.app.kb_plane import kb_plane_figure
-
-    target = out if out is not None else run.path
-    figures: list[tuple[str, Figure]] = []
-    if run.record is not None and run.record.cycles:
-        figures += [("timeline.png", timeline_figure(run)), ("force_position.png", force_position_figure(run))]
-    if "gate_loop" in run.document:
-        figures.append(("region.png", kb_plane_figure(run)))
-    written = []
-    for name, figure in figures:
-        path = target / name
-        figure.savefig(path, dpi=DPI, bbox_inches="tight")  # the legends beside the axes too
-        plt.close(figure)
-        written.append(path)
-    return written
 
 
 # --------------------------------------------------------------------------- what every picture shares

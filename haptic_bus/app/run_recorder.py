@@ -1,6 +1,7 @@
 """What a run writes while it goes on, in one place: the streamed ``record.csv``, the bus log, and
 ``run.json`` kept current (:class:`~haptic_bus.app.run_folder.RunJournal`); at the end, the journal
-completed and the pictures drawn.  ``haptic-bus run`` and ``haptic-bus demo`` both record through it.
+completed and the pictures drawn (:func:`~haptic_bus.app.run_pictures.render_run`, what ``haptic-bus
+plot`` does).  ``haptic-bus run`` and ``haptic-bus demo`` both record through it.
 """
 
 from __future__ import annotations
@@ -11,7 +12,8 @@ from typing import Any
 
 from haptic_bus.app.bus_log import LOG_NAME, BusLog
 from haptic_bus.app.record_stream import RecordStream
-from haptic_bus.app.run_folder import RECORD_CSV, RunJournal
+from haptic_bus.app.run_folder import RECORD_CSV, RunJournal, read_run_folder
+from haptic_bus.app.run_pictures import render_run
 from haptic_bus.control.controller import RunSummary, WallController
 
 
@@ -47,4 +49,7 @@ class RunRecorder:
         if self.bus_log is not None:
             self.journal.extra["bus_log"] = {"frames": self.bus_log.frames}
             written.append(self.bus_log.path)
+        self.journal.finish(summary, written)  # ended, before the pictures (which read it)
+        if self.record is not None:
+            written += render_run(read_run_folder(self.folder))
         return self.journal.finish(summary, written)
