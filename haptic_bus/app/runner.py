@@ -4,7 +4,8 @@ The drive may be the simulated one in another process (``udp_multicast``, ``vcan
 TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, in order:
 
 1. the run's folder is created and shown writable (:mod:`~haptic_bus.app.run_folder`) before
-   any bus is touched;
+   any bus is touched, and ``run.json`` written there ("running"); on CANopen the bus log
+   (``bus.asc``) starts before the drive is reached;
 2. the drive is reached and commissioned (CANopen: the safety chain of ``[safety]``; Modbus: the
    gate judges with the loop delay the poll measured, :func:`drives.modbus.timing.loop_delay`);
 3. **safe start**: the handle's position is read before enabling; inside an object the run is
@@ -14,8 +15,9 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
    real-time session are set up; then the drive is enabled, right before the first cycle (its
    RPDO deadline runs from there), and the controller cycles under the supervisor
    (``[supervisor]``);
-5. whatever ends it (the time, SIGTERM, Ctrl-C, a drive error, an assumption broken), the drive
-   is left disabled and ``record.csv``, ``run.json`` and the plots are written.
+5. ``record.csv`` is streamed from the first cycle (:mod:`~haptic_bus.app.run_recorder`), so a
+   killed run keeps its cycles; whatever else ends it (the time, SIGTERM, Ctrl-C, a drive error,
+   an assumption broken), the drive is left disabled, ``run.json`` completed and the pictures drawn.
 
 :func:`exit_status` maps how a run ended to the command's exit status.
 """
