@@ -5,8 +5,9 @@ wall clock's), position, force, contact (in or out, and which objects), the ``K`
 effect there, the scene (and the start ramp's scale), the start lateness (p99 of the last
 second) and overruns, the observer's interface energy, and the whole last event (wrapped on a
 terminal, never cut).  It runs in a thread of its own and only reads the controller, so the
-control loop never waits for the screen; ``--quiet`` turns it off.  A last view is shown when
-the run ends.
+control loop never waits for the screen; ``--quiet`` turns it off.  On a terminal the panel is
+left showing the state the run ended in (plain lines add none: a failed run's stderr stays the
+one line that says why).
 
 On a terminal the panel is a :class:`rich.live.Live` and every log line goes through it: while
 the view is up, the root logger's handlers that write to the terminal are replaced by one that
@@ -117,9 +118,9 @@ def _logging_through(console: Console, streams: tuple[object, ...]) -> Iterator[
 
 
 class LiveView:
-    """Shows :func:`status_fields` every ``refresh`` s while the run goes on (``with`` block), and
-    once more at its end; ``duration`` (s) is the run's planned length; ``refresh`` None: no
-    thread (views only on :meth:`update`)."""
+    """Shows :func:`status_fields` every ``refresh`` s while the run goes on (``with`` block; a
+    panel is drawn once more at its end); ``duration`` (s) is the run's planned length;
+    ``refresh`` None: no thread (views only on :meth:`update`)."""
 
     def __init__(self, controller: WallController, title: str, stream: TextIO | None = None, *,
                  duration: float | None = None, clock: Callable[[], float] = time.monotonic,
@@ -156,8 +157,8 @@ class LiveView:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2 * (self.refresh or REFRESH))
-        self.update()  # the state the run ended in
         if self._live is not None:
+            self._live.update(self._panel(), refresh=True)  # the panel stays with the state the run ended in
             self._live.stop()
         self._routing.close()
 
