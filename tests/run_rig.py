@@ -42,14 +42,19 @@ from sim_drive.profile import load_profile as load_drive_profile
 
 NODE = 5  # the simulated drive's CANopen node id
 TRANSPORTS = ("canopen", "modbus")
-RECORD_FILES = ("record.csv", "position_force.png", "region.png", "run.json")  # in the order a run writes them
+RECORD_FILES = ("record.csv", "timeline.png", "force_position.png", "region.png", "run.json")  # Modbus, in the order written
+
+
+def record_files(transport: str) -> tuple[str, ...]:
+    """What a run on ``transport`` writes, in the order its "wrote" line names them (CANopen: the bus log too)."""
+    return ("record.csv", "bus.asc", *RECORD_FILES[1:]) if transport == "canopen" else RECORD_FILES
 
 
 @dataclass
 class DriveUnderTest:
     """The simulated drive a run talks to: the ``run`` options that reach it, its hardware, the
-    CiA-402 states it entered (in order), the virtual-bus channel and the fault injection that
-    makes the next TPDO one byte short (CANopen only)."""
+    CiA-402 states it entered (in order), the virtual-bus channel and the fault injections that
+    make the next TPDO one byte short and put the drive into FAULT with an error code (CANopen only)."""
 
     transport: str
     args: list[str]
@@ -58,6 +63,7 @@ class DriveUnderTest:
     channel: str | None = None
     stop: Callable[[], None] = lambda: None
     short_next_tpdo: Callable[[], None] | None = None
+    enter_fault: Callable[[int], None] | None = None
 
     @property
     def was_enabled(self) -> bool:
@@ -78,7 +84,8 @@ def simulated_drive(transport: str, profile: pathlib.Path | str) -> Iterator[Dri
         slave = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, timing=timing,
                                 parameters=truth.parameters, operator=truth.operator)
         under = DriveUnderTest(transport, ["--interface", "virtual", "--channel", channel, "--node-id", str(NODE)],
-                               slave.drive, channel=channel, stop=slave.stop, short_next_tpdo=slave.short_next_tpdo)
+                               slave.drive, channel=channel, stop=slave.stop, short_next_tpdo=slave.short_next_tpdo,
+                               enter_fault=slave.enter_fault)
         slave.drive.state_listeners.append(lambda old, new, number: under.states.append(new))
         slave.start()
     elif transport == "modbus":

@@ -31,10 +31,10 @@ def test_demo_runs_as_a_command_and_writes_real_plots(tmp_path: Path) -> None:
     out = done.stdout
     assert "gate: passed" in out and "cycles: 2000" in out
     assert "steady penetration: 2.0000 mm vs F/K = 2.0000 mm" in out
-    for name in ("position_force.png", "region.png"):
+    for name in ("timeline.png", "force_position.png", "region.png"):
         assert _is_real_png(tmp_path / name), name
     rows = (tmp_path / "record.csv").read_text().splitlines()
-    assert rows[0].startswith("time_s,position_m,velocity_m_per_s,force_n") and len(rows) == 2001
+    assert rows[0].startswith("time_s,wall_clock_s,monotonic_s,lateness_s,statusword,velocity_counts") and len(rows) == 2001
 
 
 def test_report_writes_the_seed_figures(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -245,7 +245,7 @@ def test_ctrl_c_in_demo_is_130_with_the_record_written(tmp_path: pathlib.Path) -
     assert read_run(out)["exit_reason"] == "interrupted"
     _, record = read_record(out)
     assert 0 < record["time_s"].size < 1_000_000
-    assert (out / "position_force.png").is_file() and (out / "region.png").is_file()
+    assert all((out / name).is_file() for name in ("timeline.png", "force_position.png", "region.png"))
 
 
 @pytest.mark.slow

@@ -5,9 +5,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from haptic_bus.control.controller import PositionIntegrator
-from haptic_bus.control.record import COLUMNS, RunRecord
+from haptic_bus.control.record import COLUMNS, RecordFormatError, RunRecord, read_record
 
 
 def test_ten_million_cycles_add_no_rounding_drift() -> None:
@@ -36,13 +37,34 @@ def test_ten_million_cycles_add_no_rounding_drift() -> None:
 def test_record_is_bounded_and_keeps_the_latest_rows(tmp_path) -> None:
     record = RunRecord(capacity=5)
     for k in range(12):
-        record.append(k * 1e-3, 0.1, 0.2, float(k), k, 0.0, 3, 0.5, k % 2 == 1, 1e-6, 0.25)
+        record.append(k * 1e-3, 1.7e9 + k * 1e-3, 50.0 + k * 1e-3, 2e-5, 0x1237, -k, k % 3, 0.1, 0.2, float(k), k, 0.0, 3,
+                      0.5, k % 2 == 1, 1e-6, 0.25)
     data = record.array()
     assert data.shape == (5, len(COLUMNS)) and record.total == 12
-    assert list(data[:, 3]) == [7.0, 8.0, 9.0, 10.0, 11.0]
+    assert list(data[:, COLUMNS.index("force_n")]) == [7.0, 8.0, 9.0, 10.0, 11.0]
+    first, rows = record.rows_from(3)  # rows 3..6 were overwritten: the reader is told where its rows start
+    assert first == 7 and rows.shape == (5, len(COLUMNS)) and record.rows_from(12)[1].shape == (0, len(COLUMNS))
     path = record.write_csv(tmp_path / "run.csv")
     lines = path.read_text().splitlines()
     assert lines[0] == ",".join(COLUMNS) and len(lines) == 6
-    first = dict(zip(COLUMNS, lines[1].split(",")))
-    assert (first["torque_permille"], first["scene_id"], first["late"], first["scale"]) == ("7", "3", "1", "0.5")
-    assert float(first["time_s"]) == 7e-3  # repr: every float written to the last bit
+    first_row = dict(zip(COLUMNS, lines[1].split(",")))
+    assert (first_row["torque_permille"], first_row["scene_id"], first_row["late"], first_row["scale"]) == ("7", "3", "1", "0.5")
+    assert (first_row["statusword"], first_row["velocity_counts"], first_row["input_age"]) == (str(0x1237), "-7", "1")
+    assert float(first_row["time_s"]) == 7e-3 and float(first_row["wall_clock_s"]) == 1.7e9 + 7e-3  # repr: every bit
+
+
+def test_a_torn_last_line_is_left_out_and_a_bad_line_named(tmp_path) -> None:
+    record = RunRecord(capacity=10)
+    for k in range(4):
+        record.append(k * 1e-3, 1.7e9, 50.0, 0.0, 0x1237, k, 0, 0.1, 0.2, float(k), k, 0.0, 0, 1.0, False, 1e-6, 0.0)
+    path = record.write_csv(tmp_path / "record.csv")
+    whole = read_record(path)
+    assert whole.cycles == 4 and not whole.torn_line and list(whole["velocity_counts"]) == [0, 1, 2, 3]
+    text = path.read_text()
+    path.write_text(text[:-7])  # killed while writing the last line
+    torn = read_record(path)
+    assert torn.cycles == 3 and torn.torn_line and list(torn["force_n"]) == [0.0, 1.0, 2.0]
+    lines = text.splitlines(keepends=True)
+    path.write_text("".join([*lines[:2], "1,2\n", *lines[2:]]))
+    with pytest.raises(RecordFormatError, match=r"line 3 has 2 fields, the header 17"):
+        read_record(path)

@@ -23,7 +23,7 @@ import pytest
 import haptic_bus
 from haptic_bus.app.profiles import resolve_profile
 from haptic_bus.control.record import COLUMNS
-from tests.run_rig import NODE, RECORD_FILES, TRANSPORTS, read_record, read_run, run_cli, simulated_drive
+from tests.run_rig import NODE, TRANSPORTS, read_record, read_run, record_files, run_cli, simulated_drive
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -42,10 +42,11 @@ def test_the_default_folder_is_runs_utc_profile_and_holds_every_record(
     stamp = dt.datetime.strptime(match.group(1), "%Y%m%dT%H%M%SZ").replace(tzinfo=dt.UTC)
     assert before <= stamp <= after
     relative = pathlib.Path("runs") / folder.name
-    assert f"ended: completed; wrote {', '.join(str(relative / name) for name in RECORD_FILES)}" in result.out
-    for name in RECORD_FILES:
+    files = record_files("canopen")
+    assert f"ended: completed; wrote {', '.join(str(relative / name) for name in files)}" in result.out
+    for name in files:
         assert (folder / name).stat().st_size > 0, name
-    assert (folder / "position_force.png").read_bytes()[:8] == PNG and (folder / "region.png").read_bytes()[:8] == PNG
+    assert all((folder / name).read_bytes()[:8] == PNG for name in ("timeline.png", "force_position.png", "region.png"))
     header, record = read_record(folder)
     assert tuple(header) == COLUMNS and record["time_s"].size == 200
 
@@ -64,12 +65,16 @@ def test_the_default_folder_is_runs_utc_profile_and_holds_every_record(
     assert document["scaling"]["values"]["velocity_per_count"] == pytest.approx(1.1984224905356573e-07, rel=1e-15)
     (scene,) = document["scenes"]
     assert scene["scene_id"] == 0 and scene["origin"] == "profile"
-    assert scene["objects"] == [{"name": "end-stop", "kind": "wall", "stiffness": 1500.0, "damping": 10.0}]
+    assert scene["objects"] == [{"name": "end-stop", "kind": "wall", "position": 0.003, "normal": -1, "stiffness": 1500.0,
+                                 "damping": 10.0}]
     (wall,) = scene["walls"]
     assert (wall["K"], wall["B"]) == (1500.0, 10.0) and wall["margin"] == pytest.approx(11.09, abs=0.01)  # the profile's
     assert document["summary"]["exit_reason"] == document["exit_reason"] == "completed" and document["error"] is None
     assert document["summary"]["cycles"] == 200 and document["events"] == [] and document["events_dropped"] == 0
-    assert document["files"] == [str(relative / name) for name in RECORD_FILES]
+    assert document["files"] == [str(relative / name) for name in files]
+    assert document["status"] == "completed" and document["ended"] is True
+    assert document["gate_loop"] == {"m": 1.0, "b": 20.0, "T": 0.001, "delay": 1, "velocity": "average"}
+    assert document["record"] == {"rows_written": 200, "rows_lost": 0} and document["bus_log"]["frames"] > 3 * 200
     assert dt.datetime.fromisoformat(document["started_utc"]) <= dt.datetime.fromisoformat(document["ended_utc"])
 
 
@@ -136,12 +141,14 @@ def test_a_drive_that_dies_mid_run_still_leaves_every_record(
     assert result.code == 1, result.err
     (line,) = result.err_lines
     assert line.startswith("haptic-bus run: drive error: ") and "Traceback" not in result.err
-    assert f"ended: drive error; wrote {', '.join(str(out / name) for name in RECORD_FILES)}" in result.out
-    for name in RECORD_FILES:
+    assert f"ended: drive error; wrote {', '.join(str(out / name) for name in record_files(transport))}" in result.out
+    for name in record_files(transport):
         assert (out / name).stat().st_size > 0, name
     header, record = read_record(out)
     cycles = record["time_s"].size
-    assert tuple(header) == COLUMNS and cycles >= 299  # the drive took 300 SYNCs (Modbus: SYNC 0 at start)
+    # the drive took 300 SYNCs, up to ten of them before the first cycle (the enable walk's exchanges;
+    # Modbus: SYNC 0 at start); every cycle the controller ran is in the record
+    assert tuple(header) == COLUMNS and cycles >= 290
     document = read_run(out)
     assert document["exit_reason"] == document["summary"]["exit_reason"] == "drive error"
     assert document["summary"]["cycles"] == cycles

@@ -63,5 +63,5 @@ def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast:
     kinds = [event["kind"] for event in document["events"]]
     assert kinds.count("upload") == 2 and kinds.count("refused") == 1  # every upload, accepted or refused, is logged
     assert [scene["objects"][0]["stiffness"] for scene in document["scenes"]] == [200.0, 200.0, 300.0]
-    assert (tmp_path / "record.csv").is_file() and (tmp_path / "position_force.png").is_file()
+    assert (tmp_path / "record.csv").is_file() and (tmp_path / "timeline.png").is_file()
     assert code == 0, log

@@ -73,16 +73,47 @@ def _check(args: argparse.Namespace) -> int:
     return EXIT_OK if report.passive else EXIT_NO
 
 
+def _mark(text: str) -> tuple[float, float]:
+    """``K,B`` (N/m, N s/m), both finite and > 0 (a point of the alpha-beta plane)."""
+    parts = text.split(",")
+    try:
+        K, B = (float(part) for part in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not K,B (two numbers: N/m, N s/m)") from None
+    if not (0 < K < float("inf") and 0 < B < float("inf")):
+        raise argparse.ArgumentTypeError(f"{text!r}: K and B must be finite and > 0 (alpha = B/(KT) and beta = b/B "
+                                         "are points of the plane only then)")
+    return K, B
+
+
 def _region(args: argparse.Namespace) -> int:
     from haptic_bus.analysis.loop import WallLoop
     from haptic_bus.analysis.velocity import VelocityModel
-    from haptic_bus.app.plots import plot_region
+    from haptic_bus.app.output import writable_file
 
     loop = WallLoop(args.mass, args.friction, args.period, 0.0, 0.0, args.delay, VelocityModel.parse(args.velocity))
+    marks = [loop.with_wall(K, B) for K, B in args.mark or []]
     path = pathlib.Path(args.png)
     if path.suffix.lower() != ".png":
         path = path.with_name(path.name + ".png")
-    print(f"wrote {plot_region(path, loop.m, loop.b, loop.T, delay=loop.delay, velocity=loop.velocity)}")
+    writable_file(path, "--png", "region")  # before the minutes of work, not after
+    from haptic_bus.app.plots import plot_region
+
+    print(f"wrote {plot_region(path, loop.m, loop.b, loop.T, delay=loop.delay, velocity=loop.velocity, marks=marks)}")
+    return EXIT_OK
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from haptic_bus.app.output import writable_folder
+    from haptic_bus.app.run_folder import read_run_folder
+
+    run = read_run_folder(args.run_dir)
+    out = writable_folder(pathlib.Path(args.out) if args.out else run.path, "--out", "plot")
+    for note in run.notes():
+        print(f"note: {note}")
+    from haptic_bus.app.run_pictures import render_run
+
+    print(f"wrote {', '.join(str(path) for path in render_run(run, out))}")
     return EXIT_OK
 
 
@@ -130,7 +161,7 @@ def _run(args: argparse.Namespace) -> int:
     options = RunOptions(args.duration, realtime=not args.virtual_time, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
                          scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings(),
-                         reset_fault=args.reset_fault)
+                         reset_fault=args.reset_fault, bus_log=not args.no_bus_log)
     stop.install()
     if address.url is not None:
         result = run_modbus(profile, address.url, address.unit_id, options)
@@ -212,6 +243,13 @@ def build_parser() -> argparse.ArgumentParser:
     region = command("region", "write the seed's Fig. 4 (alpha-beta passive regions) as PNG", _region)
     _add_device_arguments(region)
     region.add_argument("--png", required=True, help="output PNG file (.png is added if missing)")
+    region.add_argument("--mark", type=_mark, action="append", metavar="K,B",
+                        help="mark the wall K N/m, B N s/m on the plane, with the exact verdict (repeatable)")
+
+    plot = command("plot", "draw a run folder's pictures again: timeline with events, force against position, "
+                           "the K-B plane", _plot)
+    plot.add_argument("run_dir", metavar="RUN_DIR", help="a folder haptic-bus run or demo wrote (run.json, record.csv)")
+    plot.add_argument("--out", help="folder for the PNGs (default: RUN_DIR)")
 
     demo = command("demo", "simulated drive + controller on a virtual CAN bus, in virtual time", _demo)
     demo.add_argument("--out", default="haptic-bus-demo", help="output directory for PNGs, the CSV record and run.json")
@@ -236,7 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "memory locked (mlockall); what it cannot get is logged as a warning and kept in run.json")
     run.add_argument("--start-in-contact", choices=("refuse", "ramp"),
                      help="a start inside an object: refuse, or ramp the force in (default: the profile's [start])")
-    run.add_argument("--out", help="folder for record.csv, run.json and plots (default: runs/<UTC time>-<profile>)")
+    run.add_argument("--out", help="folder for record.csv, run.json, bus.asc and plots (default: runs/<UTC time>-<profile>)")
+    run.add_argument("--no-bus-log", action="store_true",
+                     help="do not log the CAN bus's frames into bus.asc (on by default; Modbus runs have none)")
     run.add_argument("--reset-fault", action="store_true",
                      help="before commissioning, reset a drive found in FAULT (as haptic-bus fault-reset does; logged "
                           "in run.json's events with the error code it had); without it a faulted drive is refused")

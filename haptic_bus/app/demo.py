@@ -2,22 +2,25 @@
 
 The simulated CiA-402 drive and the controller talk CANopen on the lock-step bus
 (:mod:`drives.lockstep_bus`: one thread, deterministic) in virtual time; an operator pushes
-into the wall.  The demo prints a short summary and writes the run's PNG plots and CSV record
-to an output directory.
+into the wall.  The demo prints a short summary and records as a run does
+(:mod:`~haptic_bus.app.run_recorder`: ``record.csv`` streamed, ``run.json``, the same pictures
+:mod:`~haptic_bus.app.run_plots` draws for a run), without a bus log (its bus is in-process).
 """
 
 from __future__ import annotations
 
 import bisect
-import datetime as dt
 import pathlib
+from contextlib import ExitStack
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from haptic_bus.app.profiles import Profile, default_profile
 from haptic_bus.app.rig import simulated_canopen
-from haptic_bus.app.run_folder import prepare_run_folder, run_document, write_run
+from haptic_bus.app.run_folder import RunJournal, gate_loop, prepare_run_folder
+from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.controller import RunSummary, WallController, encoder_origin
 from haptic_bus.control.gate import GateDecision
 from haptic_bus.control.record import RunRecord
@@ -40,15 +43,22 @@ class DemoResult:
 def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, seconds: float = 2.0) -> DemoResult:
     """Run ``profile`` (default: the shipped default) for ``seconds`` of virtual time; write
     ``record.csv``, ``run.json`` and the plots to ``out_dir``, whatever ends the run (Ctrl-C too)."""
-    started = dt.datetime.now(dt.UTC)
     profile = profile or default_profile()
     out = prepare_run_folder(out_dir, profile.name)
     cycles = max(1, round(seconds / profile.loop.period))
-    with simulated_canopen(profile) as (sim, drive):
+    link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True}
+    extra: dict[str, Any] = {"loop": {"period": profile.loop.period, "timing": profile.loop.timing,
+                                      "delay_assumed": profile.loop.delay}}
+    journal = RunJournal(out, profile, link, extra)
+    journal.write()
+    recorder = RunRecorder(out, journal)
+    with ExitStack() as stack, simulated_canopen(profile) as (sim, drive):
         origin = encoder_origin(drive)
         scene = profile.compiled_scene()
         controller = WallController(drive, profile.gate(), scene, force_limit=profile.force_limit,
                                     origin=origin, supervisor=profile.supervisor, passivity=profile.passivity)
+        extra["gate_loop"] = gate_loop(controller.gate.device)
+        recorder.stream(stack, controller)
         summary = controller.run(cycles)
         operator_energy = sim.drive.operator_energy
         # the port's energy as the simulated drive's exact ledger has it: b int v^2 dt minus the motor's work
@@ -63,11 +73,9 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, second
         final_x = float(np.mean(record.column("position_m")[-max(1, cycles // 20):]))
         surface = min(surfaces, key=lambda s: abs(s - final_x))
         penetration, expected = abs(final_x - surface), abs(push) / contact
-    link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True}
-    extra = {"exit_reason": summary.exit_reason, "error": summary.error, "operator_energy_exact": operator_energy,
-             "port_energy_exact": port_energy,
-             "loop": {"period": profile.loop.period, "timing": profile.loop.timing, "delay_assumed": profile.loop.delay}}
-    files = write_run(out, profile, controller, run_document(profile, controller, summary, link, extra, started))
+    extra.update(exit_reason=summary.exit_reason, error=summary.error, operator_energy_exact=operator_energy,
+                 port_energy_exact=port_energy)
+    files = recorder.finish(summary)
     return DemoResult(profile, controller.decision, summary, penetration, expected, operator_energy, port_energy, files)
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
@@ -63,26 +64,33 @@ def _point_coordinates(point: WallPoint, m: float, b: float, T: float) -> tuple[
 
 
 def plot_region(path: PathLike, m: float, b: float, T: float, delay: float = 0, point: WallPoint = None,
-                velocity: VelocityModel | str = POINT) -> Path:
+                velocity: VelocityModel | str = POINT, label: str = "profile", marks: Sequence[WallLoop] = ()) -> Path:
     """Fig. 4 for the device (``m`` kg, ``b`` N s/m) at period ``T`` s, loop delay ``delay``
     (samples, real) and the drive's ``velocity`` model (the exact boundary's; the seed's
     closed forms are for a point velocity).
 
-    ``point`` (optional) is a :class:`WallLoop` or an ``(alpha, beta)`` pair to mark.  Axes are
-    ``alpha = B/(KT)`` and ``beta = b/B`` (log-log); above a boundary is passive by it.
+    ``point`` (optional) is a :class:`WallLoop` or an ``(alpha, beta)`` pair to mark, named
+    ``label``; each of ``marks`` (walls ``K``, ``B`` > 0 on this device) is marked with its ``K``
+    and ``B``.  Axes are ``alpha = B/(KT)`` and ``beta = b/B`` (log-log); above a boundary is
+    passive by it.
     """
     loop = WallLoop(m, b, T, 0.0, 0.0, delay, VelocityModel.parse(velocity))  # validates the device
-    marked = _point_coordinates(point, m, b, T)
+    shown = [(point, label)] if point is not None else []
+    shown += [(mark, f"K = {mark.K:g} N/m, B = {mark.B:g} N s/m") for mark in marks]
+    points = [(coordinates, text, wall) for wall, text in shown
+              if (coordinates := _point_coordinates(wall, m, b, T)) is not None]
     periods = (T, 5 * T, 10 * T)
     lo_a, hi_a = 1e-2, 1e3
-    if marked is not None and math.isfinite(marked[0]) and marked[0] > 0:
-        lo_a, hi_a = min(lo_a, marked[0] / 3), max(hi_a, marked[0] * 3)
+    for (a, _), _, _ in points:
+        if math.isfinite(a) and a > 0:
+            lo_a, hi_a = min(lo_a, a / 3), max(hi_a, a * 3)
     alpha = np.geomspace(lo_a, hi_a, 400)
     curves = passive_region_curves(alpha, loop.m, loop.b, periods)
     lo_b = max(float(np.min(curves.velocity)) / 5, 1e-12)
     hi_b = float(np.max(curves.colgate)) * 3
-    if marked is not None and math.isfinite(marked[1]) and marked[1] > 0:
-        lo_b, hi_b = min(lo_b, marked[1] / 3), max(hi_b, marked[1] * 3)
+    for (_, beta), _, _ in points:
+        if math.isfinite(beta) and beta > 0:
+            lo_b, hi_b = min(lo_b, beta / 3), max(hi_b, beta * 3)
 
     fig, ax = plt.subplots(figsize=(11.5, 5.8))
     ax.axvspan(BANDWIDTH_ALPHA, hi_a, color="0.93", zorder=0)
@@ -109,11 +117,12 @@ def plot_region(path: PathLike, m: float, b: float, T: float, delay: float = 0, 
         ax.plot([], [], color="tab:green", lw=5, alpha=0.45,
                 label=f"exact criterion, D = {loop.delay:g}, {loop.velocity} velocity: no passive wall in view")
 
-    if marked is not None:
-        verdict = exact_verdict(point) if isinstance(point, WallLoop) else None
-        text = "" if verdict is None else (" (passive)" if verdict.passive else " (NOT passive)")
-        ax.plot(*marked, marker="*", ms=15, color="tab:red", mec="k", ls="none",
-                label=rf"profile: $\alpha$ = {marked[0]:.3g}, $\beta$ = {marked[1]:.3g}{text}")
+    for number, (marked, text, wall) in enumerate(points):
+        verdict = exact_verdict(wall) if isinstance(wall, WallLoop) else None
+        judged = "" if verdict is None else (" (passive)" if verdict.passive else " (NOT passive)")
+        ax.plot(*marked, marker="*" if number == 0 and point is not None else "o", ms=15 if number == 0 else 10,
+                color=plt.get_cmap("tab10")((3 + number) % 10), mec="k", ls="none",
+                label=rf"{text}: $\alpha$ = {marked[0]:.3g}, $\beta$ = {marked[1]:.3g}{judged}")
 
     ax.set_xscale("log")
     ax.set_yscale("log")

@@ -47,7 +47,7 @@ from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader, read_document
 from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.passivity_layer import LAYER_MODES, LayerPolicy
-from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene
+from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene, object_to_dict
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
 
 DEFAULT_PROFILE = "cia402-handle"
@@ -516,12 +516,6 @@ def load_profile(path_or_name: str | pathlib.Path) -> Profile:
 def default_profile() -> Profile:
     """The shipped :data:`DEFAULT_PROFILE` (the one ``haptic-bus demo`` runs)."""
     return load_profile(DEFAULT_PROFILE)
-
-
-def object_to_dict(obj: SceneObject) -> dict[str, Any]:
-    """A scene object as its TOML table (``kind`` plus fields)."""
-    kind = {Wall: "wall", Slot: "slot", Detent: "detent"}[type(obj)]
-    return {"kind": kind, **{k: getattr(obj, k) for k in obj.__dataclass_fields__}}
 
 
 def profile_to_dict(profile: Profile) -> dict[str, Any]:

@@ -1,36 +1,50 @@
-"""Where a run keeps its record: ``runs/<UTC timestamp>-<profile>/`` (or ``--out``), always written.
+"""Where a run keeps its record: ``runs/<UTC timestamp>-<profile>/`` (or ``--out``), written as it goes.
 
 The folder is created and probed for writing before any bus is touched (an unwritable one is
-a :class:`~drives.errors.ParameterError`: exit 2).  Whatever ends the run, it receives:
+a :class:`~drives.errors.ParameterError`: exit 2).  It receives:
 
-- ``record.csv``: one row a cycle (:data:`haptic_bus.control.record.COLUMNS`);
-- ``run.json``: software versions, the profile file and its SHA-256, device, loop (delay
-  assumed and observed), link, scaling and where each factor came from, safety settings,
-  every scene in effect (each object's K and B, the gate's margin per contact wall), the
-  summary with its ``exit_reason``, and the events (uploads accepted and refused, alarms,
-  derates, faults), each with its time;
-- ``position_force.png`` and ``region.png``: the plots the demo draws.
+- ``run.json`` (:class:`RunJournal`), at once: ``status`` "running", ``"ended": false``; kept
+  current while the run goes on (each event, each scene) and completed at the end: software
+  versions, the profile file and its SHA-256, device, loop (delay assumed and observed), the
+  loop the gate judged (``gate_loop``), link, scaling and where each factor came from, safety
+  settings, every scene in effect (each object with its geometry, K and B, the gate's margin per
+  contact wall), the summary with its ``exit_reason``, the events (uploads accepted and refused,
+  alarms, derates, faults), each with its time, and the files.  Written whole each time (a
+  temporary file renamed over it), so a killed run leaves the last version, saying it did not end;
+- ``record.csv``: one row a cycle (:data:`haptic_bus.control.record.COLUMNS`), streamed
+  (:mod:`~haptic_bus.app.record_stream`);
+- ``bus.asc``: every CAN frame (:mod:`~haptic_bus.app.bus_log`; CANopen runs, unless ``--no-bus-log``);
+- at the end, the pictures (:mod:`~haptic_bus.app.run_plots`), drawn from the files themselves:
+  ``haptic-bus plot RUN_DIR`` draws the same again from :func:`read_run_folder`.
 """
 
 from __future__ import annotations
 
 import datetime as dt
+import functools
 import hashlib
 import importlib.metadata
 import json
 import math
+import os
 import pathlib
 import platform
 import sys
-from dataclasses import asdict
+import threading
+from dataclasses import asdict, dataclass
 from typing import Any
 
 from drives.errors import ParameterError
 from haptic_bus._version import __version__
+from haptic_bus.app.output import writable_folder
 from haptic_bus.app.profiles import Profile, profile_to_dict
 from haptic_bus.control.controller import RunSummary, WallController
+from haptic_bus.control.gate import DeviceLoop
+from haptic_bus.control.record import RecordTable, read_record
 
 DEFAULT_ROOT = pathlib.Path("runs")
+RUN_JSON, RECORD_CSV = "run.json", "record.csv"
+RUNNING = "running"  # run.json's status until the run ends
 _DISTRIBUTIONS = ("numpy", "scipy", "python-can", "canopen", "pymodbus", "matplotlib")
 
 
@@ -50,16 +64,10 @@ def prepare_run_folder(out: str | pathlib.Path | None, profile_name: str, root: 
         while path.exists():
             path = root / f"{stamp}-{profile_name}-{n}"
             n += 1
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        probe = path / ".haptic-bus-write-test"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as exc:
-        raise ParameterError("--out", str(path), f"a folder this user can create and write ({exc.strerror})", "run") from None
-    return path
+    return writable_folder(path, "--out", "run")
 
 
+@functools.cache
 def software_versions() -> dict[str, str]:
     """haptic_bus, Python and the libraries a run depends on."""
     versions = {"haptic_bus": __version__, "python": platform.python_version()}
@@ -90,14 +98,17 @@ def _finite(value: Any) -> Any:
 
 
 def run_document(profile: Profile, controller: WallController | None, summary: RunSummary | None,
-                 link: dict[str, Any], extra: dict[str, Any], started: dt.datetime) -> dict[str, Any]:
+                 link: dict[str, Any], extra: dict[str, Any], started: dt.datetime, ended: bool = True) -> dict[str, Any]:
     """The content of ``run.json`` (see the module docstring); ``controller`` and ``summary`` may
-    be None for a run that ended before it cycled (then ``extra`` carries the reason)."""
+    be None for a run that ended before it cycled (then ``extra`` carries the reason).  While the
+    run goes on (``ended`` False) ``status`` is "running" and ``ended_utc`` None."""
     document: dict[str, Any] = {
-        "software": software_versions(),
+        "status": extra.get("exit_reason", "ended") if ended else RUNNING,
+        "ended": ended,
+        "software": dict(software_versions()),
         "command": sys.argv,
         "started_utc": started.isoformat(),
-        "ended_utc": _utc_now().isoformat(),
+        "ended_utc": _utc_now().isoformat() if ended else None,
         "profile": profile_identity(profile),
         "settings": profile_to_dict(profile),
         "link": link,
@@ -108,7 +119,7 @@ def run_document(profile: Profile, controller: WallController | None, summary: R
         report = getattr(drive, "scaling_report", None)
         document["scaling"] = {"values": asdict(drive.scaling), "sources": getattr(drive, "scaling_sources", {}),
                                **(report.to_dict() if report is not None else {})}
-        document["scenes"] = [entry.to_dict() for entry in controller.scenes.history]
+        document["scenes"] = [entry.to_dict() for entry in list(controller.scenes.history)]
         document["events"] = controller.events.to_list()
         document["events_dropped"] = controller.events.dropped
         supervisor = controller.supervisor
@@ -119,31 +130,99 @@ def run_document(profile: Profile, controller: WallController | None, summary: R
     return _finite(document)
 
 
-def write_run(folder: pathlib.Path, profile: Profile, controller: WallController | None,
-              document: dict[str, Any]) -> list[pathlib.Path]:
-    """Write ``record.csv``, the plots and ``run.json`` into ``folder``; the paths written."""
-    written: list[pathlib.Path] = []
-    if controller is not None and controller.record.total:
-        written.append(controller.record.write_csv(folder / "record.csv"))
-        written += write_plots(folder, profile, controller)
-    path = folder / "run.json"
-    document["files"] = [str(p) for p in written] + [str(path)]
-    path.write_text(json.dumps(document, indent=1) + "\n")
-    return [*written, path]
+def gate_loop(device: DeviceLoop) -> dict[str, Any]:
+    """The loop the gate judged the run's scenes with (``run.json``'s ``gate_loop``): ``m`` kg,
+    ``b`` N s/m, ``T`` s, ``delay`` samples, ``velocity`` model; what the K-B plane is drawn for."""
+    return {"m": device.m, "b": device.b, "T": device.T, "delay": device.delay, "velocity": str(device.velocity)}
 
 
-def write_plots(folder: pathlib.Path, profile: Profile, controller: WallController) -> list[pathlib.Path]:
-    """``position_force.png`` (position, force, observer energy over time) and ``region.png``
-    (the seed's Fig. 4 for the device, with the running wall marked)."""
-    from haptic_bus.app.plots import plot_region
-    from haptic_bus.app.run_plots import plot_run
+def write_json(path: pathlib.Path, document: dict[str, Any]) -> pathlib.Path:
+    """Write ``document`` to ``path`` whole or not at all (a temporary file renamed over it), so a
+    process killed meanwhile leaves the previous version, never half of one."""
+    temporary = path.with_name(f".{path.name}.tmp")
+    temporary.write_text(json.dumps(document, indent=1) + "\n")
+    os.replace(temporary, path)
+    return path
 
-    surfaces = [obj.position for obj in profile.scene if hasattr(obj, "position")]
-    loop = controller.gate.device
-    title = f"{profile.name}: {profile.loop.timing} timing, T = {loop.T * 1e3:g} ms"
-    run_png = plot_run(folder / "position_force.png", controller.record, title, surfaces)
-    main_wall = max(controller.decision.walls, key=lambda w: w.K, default=None)
-    point = None if main_wall is None or main_wall.K == 0 or main_wall.B == 0 else (
-        main_wall.B / (main_wall.K * loop.T), loop.b / main_wall.B)
-    region_png = plot_region(folder / "region.png", loop.m, loop.b, loop.T, delay=loop.delay, point=point)
-    return [run_png, region_png]
+
+class RunJournal:
+    """``run.json`` over a run's life: written before anything is touched (``status`` "running",
+    ``ended`` false), rewritten whenever the events or the scenes change (:meth:`refresh`, from the
+    record's writer thread), and completed at the end (:meth:`finish`).  A run killed at any moment
+    leaves it saying ``"ended": false``: :func:`read_run_folder` reports it as not ended cleanly."""
+
+    def __init__(self, folder: pathlib.Path, profile: Profile, link: dict[str, Any], extra: dict[str, Any]) -> None:
+        self.folder = folder
+        self.path = folder / RUN_JSON
+        self.profile = profile
+        self.link = link
+        self.extra = extra
+        self.started = _utc_now()
+        self.controller: WallController | None = None
+        self._lock = threading.Lock()
+        self._seen: tuple[int, int] = (0, 1)
+
+    def write(self, summary: RunSummary | None = None, ended: bool = False) -> pathlib.Path:
+        """Write ``run.json`` as the run stands now."""
+        with self._lock:
+            document = run_document(self.profile, self.controller, summary, self.link, self.extra, self.started, ended)
+            return write_json(self.path, document)
+
+    def refresh(self) -> None:
+        """Rewrite ``run.json`` if an event or a scene came since the last write (cheap otherwise)."""
+        controller = self.controller
+        if controller is None:
+            return
+        seen = (len(controller.events.events), len(controller.scenes.history))
+        if seen != self._seen:
+            self._seen = seen
+            self.write()
+
+    def finish(self, summary: RunSummary | None, written: list[pathlib.Path]) -> list[pathlib.Path]:
+        """The run has ended: ``run.json`` completed, naming the files ``written`` and itself
+        (called again when more files come); the paths, ``run.json`` last."""
+        self.extra["files"] = [str(p) for p in written] + [str(self.path)]
+        self.write(summary, ended=True)
+        return [*written, self.path]
+
+
+@dataclass(frozen=True)
+class RunFolder:
+    """A run folder read back: ``run.json``'s document, ``record.csv`` (None if the run never
+    cycled), and whether the run ended cleanly."""
+
+    path: pathlib.Path
+    document: dict[str, Any]
+    record: RecordTable | None
+
+    @property
+    def ended_cleanly(self) -> bool:
+        """True when ``run.json`` was completed (``"ended": true``)."""
+        return self.document.get("ended", True) is True
+
+    def notes(self) -> list[str]:
+        """What a reader should know before trusting the pictures (one line each)."""
+        notes = []
+        if not self.ended_cleanly:
+            cycles = self.record.cycles if self.record is not None else 0
+            notes.append(f"{self.path}: the run did not end cleanly (run.json still says {self.document.get('status')!r}: "
+                         f"the process was killed or crashed); record.csv holds {cycles} cycles")
+        if self.record is not None and self.record.torn_line:
+            notes.append(f"{self.path / RECORD_CSV}: its last line was torn (written when the process died) and is left out")
+        return notes
+
+
+def read_run_folder(folder: str | pathlib.Path) -> RunFolder:
+    """Read a run folder (``run.json`` and ``record.csv``); ParameterError naming what is missing or unreadable."""
+    path = pathlib.Path(folder)
+    if not (path / RUN_JSON).is_file():
+        raise ParameterError("RUN_DIR", str(path), "a run folder: one with run.json (written by haptic-bus run or demo)",
+                             "plot")
+    try:
+        document = json.loads((path / RUN_JSON).read_text())
+        record = read_record(path / RECORD_CSV) if (path / RECORD_CSV).is_file() else None
+    except (OSError, ValueError) as exc:
+        raise ParameterError("RUN_DIR", str(path), f"a readable run folder ({exc})", "plot") from None
+    if not isinstance(document, dict):
+        raise ParameterError("RUN_DIR", str(path), "a run folder whose run.json is a JSON object", "plot")
+    return RunFolder(path, document, record)

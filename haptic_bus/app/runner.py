@@ -4,7 +4,8 @@ The drive may be the simulated one in another process (``udp_multicast``, ``vcan
 TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, in order:
 
 1. the run's folder is created and shown writable (:mod:`~haptic_bus.app.run_folder`) before
-   any bus is touched;
+   any bus is touched, and ``run.json`` written there ("running"); on CANopen the bus log
+   (``bus.asc``) starts before the drive is reached;
    with ``reset_fault`` a drive found in FAULT is reset first, as ``haptic-bus fault-reset``
    does (:meth:`~haptic_bus.app.drive_address.DriveAddress.reset_fault`), and the reset is the
    first of run.json's events; without it a faulted drive is refused at enabling, with the
@@ -18,8 +19,9 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
    real-time session are set up; then the drive is enabled, right before the first cycle (its
    RPDO deadline runs from there), and the controller cycles under the supervisor
    (``[supervisor]``);
-5. whatever ends it (the time, SIGTERM, Ctrl-C, a drive error, an assumption broken), the drive
-   is left disabled and ``record.csv``, ``run.json`` and the plots are written.
+5. ``record.csv`` is streamed from the first cycle (:mod:`~haptic_bus.app.run_recorder`), so a
+   killed run keeps its cycles; whatever else ends it (the time, SIGTERM, Ctrl-C, a drive error,
+   an assumption broken), the drive is left disabled, ``run.json`` completed and the pictures drawn.
 
 :func:`exit_status` maps how a run ended to the command's exit status.
 """
@@ -27,7 +29,6 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
 from __future__ import annotations
 
 import dataclasses
-import datetime as dt
 import logging
 import math
 import pathlib
@@ -49,7 +50,8 @@ from haptic_bus.app.drive_address import DriveAddress
 from haptic_bus.app.live import LiveView
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.realtime import RealtimeReport, RealtimeSettings, realtime_session
-from haptic_bus.app.run_folder import prepare_run_folder, run_document, write_run
+from haptic_bus.app.run_folder import RunJournal, gate_loop, prepare_run_folder
+from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import Derate, RunSummary, WallController, encoder_origin
 from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
@@ -94,8 +96,9 @@ class StopRequest:
 class RunOptions:
     """One run: ``duration`` (s), real time or virtual time, the output folder (None: ``runs/...``),
     the start-in-contact policy (None: the profile's), the live view, the stop request, what a
-    real-time run asks of the OS for its control thread (:mod:`~haptic_bus.app.realtime`), and
-    whether a drive found in FAULT is reset before commissioning."""
+    real-time run asks of the OS for its control thread (:mod:`~haptic_bus.app.realtime`),
+    whether a drive found in FAULT is reset before commissioning, and whether a CANopen run logs
+    every frame (``bus.asc``, :mod:`~haptic_bus.app.bus_log`)."""
 
     duration: float
     realtime: bool
@@ -105,6 +108,7 @@ class RunOptions:
     stop: StopRequest = dataclasses.field(default_factory=StopRequest)
     scheduling: RealtimeSettings = dataclasses.field(default_factory=RealtimeSettings)
     reset_fault: bool = False
+    bus_log: bool = True
 
 
 @dataclasses.dataclass
@@ -165,8 +169,8 @@ def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options:
     deadline = safety.rpdo_deadline_ms(period) / 1000.0 if safety.rpdo_deadline_periods else math.inf
     slack = (safety.consumer_ms - safety.heartbeat_ms) / 1000.0 if safety.master_node_id is not None else math.inf
     watchdog = Watchdog(min(deadline, slack), safety.rpdo_deadline_periods if deadline <= slack else None)
-    return _session(profile, options, folder, link, open_drive, hold, watchdog,
-                    DriveAddress(bus=dict(bus), node_id=node_id))
+    return _session(profile, options, folder, link, open_drive,
+                    DriveSide(hold, watchdog, DriveAddress(bus=dict(bus), node_id=node_id), config))
 
 
 def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) -> RunResult:
@@ -196,7 +200,7 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
 
     hold = longest_hold(period, options.realtime, safety.modbus_watchdog_ms, 0)
     watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
-    return _session(profile, options, folder, link, open_drive, hold, watchdog, DriveAddress(url=url, unit_id=unit_id))
+    return _session(profile, options, folder, link, open_drive, DriveSide(hold, watchdog, DriveAddress(url=url, unit_id=unit_id)))
 
 
 def longest_hold(period: float, realtime: bool, deadline_ms: int, fallback_ms: int) -> float:
@@ -242,20 +246,39 @@ class Watchdog:
     periods: int | None
 
 
+@dataclasses.dataclass(frozen=True)
+class DriveSide:
+    """What a session knows of the drive beside opening it: ``hold``, the longest it may hold a
+    torque target (s, the ``bound`` layer's budget per target); its ``watchdog`` (pre-flight);
+    its ``address`` (a fault reset before commissioning); ``bus``, the CAN bus configuration for
+    the bus log (None: not a CAN bus)."""
+
+    hold: float
+    watchdog: Watchdog
+    address: DriveAddress
+    bus: dict[str, Any] | None = None
+
+
 def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: dict[str, Any],
-             open_drive: OpenDrive, hold: float, watchdog: Watchdog, address: DriveAddress) -> RunResult:
-    started = dt.datetime.now(dt.UTC)
+             open_drive: OpenDrive, side: DriveSide) -> RunResult:
+    """One run (module docstring)."""
     controller: WallController | None = None
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": {"period": profile.loop.period, "timing": profile.loop.timing}}
+    journal = RunJournal(folder, profile, link, extra)
+    journal.write()  # "running", before any bus is touched: a run killed from here on says so
+    recorder = RunRecorder(folder, journal)
     reason, error = "completed", None
     before: list[Event] = []  # what happened before the controller (and its event log) existed
     try:
         with ExitStack() as stack:
+            if side.bus is not None and options.bus_log:
+                recorder.log_bus(stack, side.bus)  # before the drive: commissioning's frames too
             if options.reset_fault:
-                before += _reset_fault_first(address, options, extra)
+                before += _reset_fault_first(side.address, options, extra)
             drive, gate, serve = open_drive(stack)
             extra["loop"]["delay_assumed"] = gate.device.delay
+            extra["gate_loop"] = gate_loop(gate.device)
             scene = profile.compiled_scene()
             origin, ramp_time = _safe_start(profile, drive, gate, scene, options)
             extra["start"] = {"position_m": origin, "ramp_time_s": ramp_time}
@@ -265,17 +288,18 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
                                                                             profile.supervisor.on_observer) else None
             controller = WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
                                         supervisor=profile.supervisor, ramp_time=ramp_time, derate=derate,
-                                        passivity=profile.passivity, hold=hold)
+                                        passivity=profile.passivity, hold=side.hold)
             extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold,
                                   "budget_cap_j": controller.observer.cap, "friction_min": gate.device.b,
                                   "beyond_gate": profile.passivity.beyond_gate}
             for event in before:
                 controller.events.add(event.time_s, event.kind, event.message, **event.data)
+            recorder.stream(stack, controller)
             serve(controller)
             with _live(controller, profile, options), _scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
                 if options.realtime:
-                    _preflight(drive, gate, scene, profile, options, watchdog, extra)
+                    _preflight(drive, gate, scene, profile, options, side.watchdog, extra)
                 # last before the first cycle: the drive's RPDO deadline runs from here, and the
                 # set-up above (the upload server, the real-time session) can take longer
                 drive.enable()
@@ -290,13 +314,12 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
     except DriveError as exc:
         reason, error = "drive error", str(exc)
         if isinstance(exc, DriveStateError) and exc.state is State.FAULT:
-            error += f"; {address.fault_reset_hint()} (or run with --reset-fault)"
+            error += f"; {side.address.fault_reset_hint()} (or run with --reset-fault)"
     except KeyboardInterrupt:
         reason, error = "interrupted", "interrupted (Ctrl-C)"
     finally:
         extra["exit_reason"], extra["error"] = reason, error
-        document = run_document(profile, controller, summary, link, extra, started)
-        files = write_run(folder, profile, controller, document)
+        files = recorder.finish(summary)
     return RunResult(reason, error, summary, controller, folder, files)
 
 
@@ -338,7 +361,7 @@ def _live(controller: WallController, profile: Profile, options: RunOptions) -> 
     if not options.live:
         yield
         return
-    with LiveView(controller, f"haptic-bus run {profile.name}"):
+    with LiveView(controller, f"haptic-bus run {profile.name}", duration=options.duration):
         yield
 
 

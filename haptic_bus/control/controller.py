@@ -224,6 +224,7 @@ class WallController:
         drive = self.drive
         inputs = drive.read_inputs()
         started = time.perf_counter()
+        wall_clock = time.time()
         scaling = drive.scaling
         energy = self._account_port(inputs, scaling.position_per_count)
         v = inputs.velocity * scaling.velocity_per_count
@@ -243,7 +244,8 @@ class WallController:
         late, alarm = supervisor.cycle(lateness, energy, inputs.age) if supervisor is not None else (False, None)
         if abs(force) > self.peak_force:
             self.peak_force = abs(force)
-        self.record.append(self.cycles * self.period, x, v, force, torque, energy, entry.scene_id, scale, late, compute,
+        self.record.append(self.cycles * self.period, wall_clock, started, lateness, inputs.statusword, inputs.velocity,
+                           inputs.age, x, v, force, torque, energy, entry.scene_id, scale, late, compute,
                            self.layer.removed)
         self.cycles += 1
         if alarm is not None:

@@ -19,6 +19,7 @@ import bisect
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from drives.errors import ParameterError
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
@@ -127,6 +128,22 @@ class Detent:
 
 
 SceneObject = Wall | Slot | Detent
+OBJECT_KINDS: dict[str, type[SceneObject]] = {"wall": Wall, "slot": Slot, "detent": Detent}
+
+
+def object_to_dict(obj: SceneObject) -> dict[str, Any]:
+    """A scene object as its profile's TOML table: ``kind`` plus every field (m, N/m, N s/m)."""
+    kind = next(name for name, cls in OBJECT_KINDS.items() if isinstance(obj, cls))
+    return {"kind": kind, **{k: getattr(obj, k) for k in obj.__dataclass_fields__}}
+
+
+def object_from_dict(table: dict[str, Any]) -> SceneObject:
+    """The object :func:`object_to_dict` wrote (validated as any object is)."""
+    fields = dict(table)
+    kind = fields.pop("kind", None)
+    if kind not in OBJECT_KINDS:
+        raise ParameterError("kind", kind, " or ".join(map(repr, OBJECT_KINDS)), "scene object")
+    return OBJECT_KINDS[kind](**fields)
 
 
 @dataclass(frozen=True)

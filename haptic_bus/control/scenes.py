@@ -22,7 +22,7 @@ from typing import Any
 from drives.errors import ParameterError
 from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
 from haptic_bus.control.record import EventLog
-from haptic_bus.control.scene import CompiledScene, compile_scene
+from haptic_bus.control.scene import CompiledScene, compile_scene, object_to_dict
 
 
 @dataclass(frozen=True)
@@ -35,12 +35,11 @@ class SceneEntry:
     decision: GateDecision
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: every object's K and B, and the gate's margin for each contact wall."""
+        """JSON-ready: every object (its kind, geometry, K and B), and the gate's margin for each contact wall."""
         return {
             "scene_id": self.scene_id,
             "origin": self.origin,
-            "objects": [{"name": o.name, "kind": type(o).__name__.lower(), "stiffness": o.stiffness, "damping": o.damping}
-                        for o in self.scene.objects],
+            "objects": [object_to_dict(o) for o in self.scene.objects],
             "walls": [{"objects": list(w.objects), "K": w.K, "B": w.B, "margin": w.verdict.margin,
                        "critical_theta": w.verdict.critical_theta} for w in self.decision.walls],
             "worst_margin": self.decision.worst_margin,

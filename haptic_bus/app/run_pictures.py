@@ -1,0 +1,37 @@
+"""A run's pictures written as PNGs: what ``haptic-bus run`` and ``demo`` do when they end, and
+``haptic-bus plot RUN_DIR`` does again (:mod:`~haptic_bus.app.run_plots`, :mod:`~haptic_bus.app.kb_plane`)."""
+
+from __future__ import annotations
+
+import pathlib
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+from matplotlib.figure import Figure
+
+from haptic_bus.app.kb_plane import kb_plane_figure
+from haptic_bus.app.run_folder import RunFolder
+from haptic_bus.app.run_plots import force_position_figure, timeline_figure
+
+DPI = 110
+PICTURES = ("timeline.png", "force_position.png", "region.png")
+
+
+def render_run(run: RunFolder, out: pathlib.Path | None = None) -> list[pathlib.Path]:
+    """Draw a run's pictures (:data:`PICTURES`) into ``out`` (default: its folder); the paths.
+    A run that never cycled (no ``record.csv``) gets the K-B plane only."""
+    target = out if out is not None else run.path
+    figures: list[tuple[str, Figure]] = []
+    if run.record is not None and run.record.cycles:
+        figures += [("timeline.png", timeline_figure(run)), ("force_position.png", force_position_figure(run))]
+    if "gate_loop" in run.document:
+        figures.append(("region.png", kb_plane_figure(run)))
+    written = []
+    for name, figure in figures:
+        path = target / name
+        figure.savefig(path, dpi=DPI, bbox_inches="tight")  # the legends beside the axes too
+        plt.close(figure)
+        written.append(path)
+    return written
