@@ -69,7 +69,8 @@ def test_the_fields_show_time_contact_k_b_and_the_whole_last_event() -> None:
         assert fields == {"cycles": "10", "time": "0.0 s of 10.0 s (wall clock 1:05.0)", "remaining": "10.0 s",
                           "position": f"{row['position_m'] * 1e3:+.3f} mm", "force": "+0.000 N",
                           "contact": "out (free)", "K, B": "0 N/m, 0 N s/m", "scene": "0 (ramp 2%)",
-                          "observer": f"{row['energy_j'] * 1e3:+.4g} mJ", "overruns": "0"}  # virtual time: no lateness
+                          "port energy": f"{row['energy_j'] * 1e3:+.4g} mJ",
+                          "passivity layer": "guard, lowered 0 targets", "overruns": "0"}  # virtual time: no lateness
         while controller.record.latest()["position_m"] < 0.004 and controller.cycles < 2000:  # type: ignore[index]
             controller.step()  # the operator pushes the handle 1 mm into the end stop (at 3 mm)
         controller.events.add(controller.now(), "upload", LONG_EVENT)
@@ -100,7 +101,7 @@ def test_a_fake_clock_drives_the_plain_view_without_waiting() -> None:
     assert len(lines) == 2  # two updates, two lines: none added at the end (a failed run's stderr keeps its one line)
     assert re.fullmatch(r"view: cycles 500; time 0\.5 s of 2\.0 s \(wall clock 5\.0 s\); remaining 1\.5 s; "
                         r"position \+\d\.\d{3} mm; force \+\d\.\d{3} N; contact (in end-stop|out \(free\)); "
-                        r"K, B \d+ N/m, \d+ N s/m; scene 0; observer [+-][0-9.e+-]+ mJ; overruns 0", lines[0]), lines[0]
+                        r"K, B \d+ N/m, \d+ N s/m; scene 0; port energy [+-][0-9.e+-]+ mJ; passivity layer guard, lowered 0 targets; overruns 0", lines[0]), lines[0]
     assert lines[1].startswith("view: cycles 1500; time 1.5 s of 2.0 s (wall clock 7.5 s); remaining 0.5 s; ")
 
 

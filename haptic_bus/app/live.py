@@ -3,7 +3,8 @@
 What it shows (:func:`status_fields`): cycles, the run's elapsed and remaining time (and the
 wall clock's), position, force, contact (in or out, and which objects), the ``K`` and ``B`` in
 effect there, the scene (and the start ramp's scale), the start lateness (p99 of the last
-second) and overruns, the observer's interface energy, and the whole last event (wrapped on a
+second) and overruns, the port observer's energy and what the passivity layer did (the
+targets it lowered), and the whole last event (wrapped on a
 terminal, never cut).  It runs in a thread of its own and only reads the controller, so the
 control loop never waits for the screen; ``--quiet`` turns it off.  On a terminal the panel is
 left showing the state the run ended in (plain lines add none: a failed run's stderr stays the
@@ -74,7 +75,8 @@ def status_fields(controller: WallController, wall_elapsed: float | None = None,
             "contact": f"in {' + '.join(names)}" if names else "out (free)",
             "K, B": f"{scale * scene.stiffness[i]:g} N/m, {scale * scene.damping[i]:g} N s/m",
             "scene": f"{int(row['scene_id'])}" + ("" if scale >= 1.0 else f" (ramp {scale:.0%})"),
-            "observer": f"{row['energy_j'] * 1e3:+.4g} mJ",
+            "port energy": f"{row['energy_j'] * 1e3:+.4g} mJ",
+            "passivity layer": f"{controller.layer.mode}, lowered {controller.layer.interventions} targets",
         }
     if recent.size:
         fields["lateness p99"] = f"{float(np.percentile(recent, 99)) * 1e6:.0f} us"
