@@ -101,7 +101,8 @@ def test_a_fake_clock_drives_the_plain_view_without_waiting() -> None:
     assert len(lines) == 2  # two updates, two lines: none added at the end (a failed run's stderr keeps its one line)
     assert re.fullmatch(r"view: cycles 500; time 0\.5 s of 2\.0 s \(wall clock 5\.0 s\); remaining 1\.5 s; "
                         r"position \+\d\.\d{3} mm; force \+\d\.\d{3} N; contact (in end-stop|out \(free\)); "
-                        r"K, B \d+ N/m, \d+ N s/m; scene 0; port energy [+-][0-9.e+-]+ mJ; passivity layer guard, lowered 0 targets; overruns 0", lines[0]), lines[0]
+                        r"K, B \d+ N/m, \d+ N s/m; scene 0; port energy [+-][0-9.e+-]+ mJ; "
+                        r"passivity layer guard, lowered 0 targets; overruns 0", lines[0]), lines[0]
     assert lines[1].startswith("view: cycles 1500; time 1.5 s of 2.0 s (wall clock 7.5 s); remaining 0.5 s; ")
 
 
