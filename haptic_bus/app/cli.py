@@ -29,6 +29,7 @@ from haptic_bus.app.arguments import (
     bus_arguments,
     modbus_url,
     node_id,
+    refuse_can_options_with_modbus,
     seconds,
     timeout,
     unit_id,
@@ -98,12 +99,7 @@ def _validate_run(args: argparse.Namespace) -> None:
     from drives.errors import ParameterError
 
     if args.modbus:
-        given = [flag for flag, value in (("--interface", args.interface), ("--channel", args.channel),
-                                          ("--bitrate", args.bitrate), ("--bus-option", args.bus_option),
-                                          ("--node-id", args.node_id), ("--controller-node-id", args.controller_node_id))
-                 if value]
-        if given:
-            raise ParameterError(given[0], "given with --modbus", "only Modbus options (--unit-id) with --modbus", "run")
+        refuse_can_options_with_modbus(args, "run", ("node_id", "controller_node_id"))
         return
     if args.unit_id is not None:
         raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL", "run")
@@ -198,7 +194,10 @@ def _sim(argv: Sequence[str]) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand that haptic_bus itself parses."""
+    from haptic_bus._version import __version__
+
     parser = OneLineParser(prog="haptic-bus", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"haptic-bus {__version__}")
     add_verbosity(parser, None)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
