@@ -155,16 +155,23 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _upload(args: argparse.Namespace) -> int:
-    from haptic_bus.control.node import UploadRefused, upload_walls
+    """0 accepted; 1 refused by the gate, or no controller on the node (silent, or another device);
+    2 invalid input, an object index the controller does not have included (asked before any write)."""
+    from drives.errors import DriveError
+    from haptic_bus.control.upload import UploadRefused, upload_walls
     from haptic_bus.validation import real_in_range, whole_in_range
 
     index = whole_in_range("object", args.object, 0, 255, context="upload")
     K = real_in_range("stiffness", args.stiffness, 0.0, 1e15, unit="N/m", context="upload")
     B = real_in_range("damping", args.damping, 0.0, 1e15, unit="N s/m", context="upload")
+    bus = bus_arguments(args)
     try:
-        print(upload_walls(bus_arguments(args), args.node_id, {index: (K, B)}, timeout=args.timeout))
+        print(upload_walls(bus, args.node_id, {index: (K, B)}, timeout=args.timeout))
     except UploadRefused as error:
         print(f"haptic-bus upload: {error.reason}", file=sys.stderr)
+        return EXIT_NO
+    except DriveError as error:  # no controller there: the node's own words, not "drive error"
+        print(f"haptic-bus upload: {error.message}", file=sys.stderr)
         return EXIT_NO
     return EXIT_OK
 
@@ -239,7 +246,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="a start inside an object: refuse, or ramp the force in (default: the profile's [start])")
     run.add_argument("--out", help="folder for record.csv, run.json and plots (default: runs/<UTC time>-<profile>)")
 
-    upload = command("upload", "change a running controller's wall K and B over the bus (gated)", _upload)
+    upload = command("upload", "change a running controller's wall K and B over the bus (gated); exit 0 accepted, 1 refused "
+                               "or no controller answered on the node, 2 invalid input (an object the scene lacks included)",
+                     _upload)
     add_bus_arguments(upload)
     upload.add_argument("--node-id", type=node_id, required=True, help="the controller's CANopen node id")
     upload.add_argument("--object", type=int, required=True, help="scene object index (0x2100 + index)")
