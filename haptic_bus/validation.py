@@ -1,9 +1,11 @@
-"""Checks that turn user numbers into validated floats and ints, or raise ParameterError."""
+"""Checks that turn user input into validated floats, ints and output folders, or raise ParameterError."""
 
 from __future__ import annotations
 
 import math
 import numbers
+import os
+import pathlib
 
 from drives.errors import ParameterError
 
@@ -50,3 +52,18 @@ def whole_in_range(name: str, value: object, low: int, high: int, *, context: st
     if not low <= whole <= high:
         raise ParameterError(name, value, allowed, context)
     return whole
+
+
+def writable_folder(name: str, path: str | os.PathLike[str], *, context: str = "") -> pathlib.Path:
+    """``path`` as a folder this user can write, created (with its parents) if missing and probed with a
+    file now, before any work that would write there; ParameterError naming ``name`` otherwise."""
+    folder = pathlib.Path(path)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / ".haptic-bus-write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        why = "it is a file" if folder.is_file() else exc.strerror or type(exc).__name__
+        raise ParameterError(name, str(folder), f"a folder this user can create and write ({why})", context) from None
+    return folder

@@ -179,8 +179,10 @@ def _upload(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     from haptic_bus.app.profiles import load_profile
     from haptic_bus.app.report import write_report
+    from haptic_bus.validation import writable_folder
 
-    for path in write_report(load_profile(args.profile), args.out):
+    profile = load_profile(args.profile)
+    for path in write_report(profile, writable_folder("--out", args.out, context="report")):
         print(f"wrote {path}")
     return EXIT_OK
 

@@ -25,10 +25,10 @@ import sys
 from dataclasses import asdict
 from typing import Any
 
-from drives.errors import ParameterError
 from haptic_bus._version import __version__
 from haptic_bus.app.profiles import Profile, profile_to_dict
 from haptic_bus.control.controller import RunSummary, WallController
+from haptic_bus.validation import writable_folder
 
 DEFAULT_ROOT = pathlib.Path("runs")
 _DISTRIBUTIONS = ("numpy", "scipy", "python-can", "canopen", "pymodbus", "matplotlib")
@@ -50,14 +50,7 @@ def prepare_run_folder(out: str | pathlib.Path | None, profile_name: str, root: 
         while path.exists():
             path = root / f"{stamp}-{profile_name}-{n}"
             n += 1
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        probe = path / ".haptic-bus-write-test"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as exc:
-        raise ParameterError("--out", str(path), f"a folder this user can create and write ({exc.strerror})", "run") from None
-    return path
+    return writable_folder("--out", path, context="run")
 
 
 def software_versions() -> dict[str, str]:
@@ -120,12 +113,13 @@ def run_document(profile: Profile, controller: WallController | None, summary: R
 
 
 def write_run(folder: pathlib.Path, profile: Profile, controller: WallController | None,
-              document: dict[str, Any]) -> list[pathlib.Path]:
-    """Write ``record.csv``, the plots and ``run.json`` into ``folder``; the paths written."""
+              document: dict[str, Any], plots: bool = True) -> list[pathlib.Path]:
+    """Write ``record.csv``, the plots (unless not ``plots``) and ``run.json`` into ``folder``; the paths written."""
     written: list[pathlib.Path] = []
     if controller is not None and controller.record.total:
         written.append(controller.record.write_csv(folder / "record.csv"))
-        written += write_plots(folder, profile, controller)
+        if plots:
+            written += write_plots(folder, profile, controller)
     path = folder / "run.json"
     document["files"] = [str(p) for p in written] + [str(path)]
     path.write_text(json.dumps(document, indent=1) + "\n")

@@ -84,8 +84,10 @@ class StopRequest:
 @dataclasses.dataclass(frozen=True)
 class RunOptions:
     """One run: ``duration`` (s), real time or virtual time, the output folder (None: ``runs/...``),
-    the start-in-contact policy (None: the profile's), the live view, the stop request, and what a
-    real-time run asks of the OS for its control thread (:mod:`~haptic_bus.app.realtime`)."""
+    the start-in-contact policy (None: the profile's), the live view, the stop request, what a
+    real-time run asks of the OS for its control thread (:mod:`~haptic_bus.app.realtime`), and
+    whether the plots are drawn (seconds of matplotlib and of the region's boundary: the benchmark,
+    which runs the session many times, leaves them out)."""
 
     duration: float
     realtime: bool
@@ -94,6 +96,7 @@ class RunOptions:
     live: bool = True
     stop: StopRequest = dataclasses.field(default_factory=StopRequest)
     scheduling: RealtimeSettings = dataclasses.field(default_factory=RealtimeSettings)
+    plots: bool = True
 
 
 @dataclasses.dataclass
@@ -241,7 +244,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
     finally:
         extra["exit_reason"], extra["error"] = reason, error
         document = run_document(profile, controller, summary, link, extra, started)
-        files = write_run(folder, profile, controller, document)
+        files = write_run(folder, profile, controller, document, plots=options.plots)
     return RunResult(reason, error, summary, controller, folder, files)
 
 

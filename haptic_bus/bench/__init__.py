@@ -1,4 +1,4 @@
-"""``haptic-bus bench [--quick] [--out DIR] [--soak [CYCLES]]``: run time against error, the bus against its limit.
+"""``haptic-bus bench [--quick | --smoke] [--out DIR] [--soak [CYCLES]]``: run time against error, the bus against its limit.
 
 One module per comparison (issues 6 and 14), each measured side by side in one run and quoted
 as a ratio (absolute times are printed, never asserted); every timing is a median with its
@@ -27,9 +27,14 @@ Above the sections, issue 14's "Done when" (:mod:`~haptic_bus.bench.targets`): o
 with the measured figure, its spread, the target and PASS/FAIL, all from this one run.
 
 Writes ``DIR/bench.json`` (every figure, the machine, versions, date), ``DIR/bench.md`` (the
-tables, also printed) and PNG plots.  ``--quick`` (what CI runs) keeps to a few minutes on a
-2-core machine; the full run takes longer and shows a progress bar on stderr.  Ctrl-C ends the
-run: what finished is written and printed, one line on stderr says where it stopped, exit 130.
+tables, also printed) and PNG plots.  Three sizes (:mod:`~haptic_bus.bench.size`): the full run,
+``--quick`` (what CI runs: every section, fewer points and shorter runs) and ``--smoke`` (what the
+test suite runs: every section at its smallest, figures that only show the bench works); a
+progress bar on stderr.  Ctrl-C ends the run: what finished is written and printed, one line on
+stderr says where it stopped, exit 130.
+
+Before any work: the packages of the ``[bench]`` extra (:data:`BENCH_EXTRA`) are there and the
+output folder is writable, else one line on stderr and exit 2.
 """
 
 from __future__ import annotations
@@ -46,12 +51,15 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from haptic_bus.bench.size import FULL, QUICK, SMOKE, Size
 from haptic_bus.bench.timing import machine
 
 SECTIONS = ("passivity", "plant", "scene", "loop", "bus", "realtime", "startup", "soak")
-# progress ticks each section makes (quick, full): for the bar's total
-_TICKS = {"passivity": (7, 17), "plant": (15, 17), "scene": (5, 5), "loop": (6, 6), "bus": (2, 2), "realtime": (6, 6),
-          "startup": (3, 3), "soak": (10, 10)}
+# progress ticks each section makes (smoke, quick, full): for the bar's total
+_TICKS = {"passivity": (5, 7, 17), "plant": (7, 15, 17), "scene": (5, 5, 5), "loop": (6, 6, 6), "bus": (2, 2, 2),
+          "realtime": (3, 6, 6), "startup": (1, 3, 3), "soak": (10, 10, 10)}
+BENCH_EXTRA = {"control": "control", "mpmath": "mpmath"}  # import name -> distribution: pyproject's [bench] extra
+SMOKE_SOAK_CYCLES = 2_000
 
 
 class Progress:
@@ -117,18 +125,25 @@ def _runner(name: str) -> Callable[..., dict]:
 
 
 def _soak_runner(cycles: int | None) -> Callable[..., dict]:
-    def run(quick: bool, tick: Callable[[str], None]) -> dict:
+    def run(size: Size, tick: Callable[[str], None]) -> dict:
         from haptic_bus.bench.soak import FULL_CYCLES, QUICK_CYCLES
         from haptic_bus.bench.soak import run as soak
 
-        return soak(cycles or (QUICK_CYCLES if quick else FULL_CYCLES), tick)
+        return soak(cycles or size.pick(SMOKE_SOAK_CYCLES, QUICK_CYCLES, FULL_CYCLES), tick)
 
     return run
 
 
-def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
+def missing_packages() -> list[str]:
+    """The distributions of the ``[bench]`` extra that cannot be imported here (found, not imported: seconds)."""
+    from importlib.util import find_spec
+
+    return [distribution for module, distribution in BENCH_EXTRA.items() if find_spec(module) is None]
+
+
+def run_bench(out_dir: str | Path, size: Size = FULL, progress: bool = False,
               sections: Sequence[str] = SECTIONS, soak: int | None = None) -> dict:
-    """Run the benchmark sections (the soak of ``soak`` cycles, default by ``quick``); write
+    """Run the benchmark sections at ``size`` (the soak of ``soak`` cycles, default by ``size``); write
     ``bench.json``, ``bench.md`` and PNGs into ``out_dir``.
 
     Returns the result dictionary (the content of ``bench.json``).  A section that cannot
@@ -138,11 +153,12 @@ def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     runners = {name: _soak_runner(soak) if name == "soak" else _runner(name) for name in dict.fromkeys(sections)}
-    bar = Progress(sum(_TICKS[s][0 if quick else 1] for s in runners), progress)
+    bar = Progress(sum(_TICKS[s][size.pick(0, 1, 2)] for s in runners), progress)
     started = time.perf_counter()
-    result: dict = {"command": "haptic-bus bench" + (" --quick" if quick else "") + (f" --soak {soak:.0e}" if soak else "")
+    flag = size.pick(" --smoke", " --quick", "")
+    result: dict = {"command": "haptic-bus bench" + flag + (f" --soak {soak:.0e}" if soak else "")
                     + "".join(f" --only {s}" for s in sections if set(sections) != set(SECTIONS)),
-                    "quick": quick, "machine": machine(), "sections": {}}
+                    "size": size.name, "quick": size is not FULL, "machine": machine(), "sections": {}}
     with Interrupts() as interrupts:
 
         def tick(label: str) -> None:
@@ -153,7 +169,7 @@ def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
             for name, runner in runners.items():
                 t0 = time.perf_counter()
                 try:
-                    section = runner(quick, tick)
+                    section = runner(size, tick)
                     section.setdefault("available", True)
                     interrupts.check()
                 except KeyboardInterrupt:  # Ctrl-C: what ran so far is still written
@@ -189,7 +205,11 @@ def _json_default(value):
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``haptic-bus bench``."""
     parser = argparse.ArgumentParser(prog="haptic-bus bench", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="the short run CI uses (about a minute)")
+    sizes = parser.add_mutually_exclusive_group()
+    sizes.add_argument("--quick", action="store_const", dest="size", const=QUICK, default=FULL,
+                       help="the short run CI uses: every section, fewer points, shorter runs")
+    sizes.add_argument("--smoke", action="store_const", dest="size", const=SMOKE,
+                       help="every section at its smallest, seconds: the figures only show that the bench runs")
     parser.add_argument("--out", default="bench-out", help="output folder (default: ./bench-out)")
     parser.add_argument("--only", action="append", choices=SECTIONS, help="run only this section (repeatable)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
@@ -209,15 +229,36 @@ def _cycles(text: str) -> int:
     return value
 
 
+def _refusal(args: argparse.Namespace) -> str | None:
+    """Why the bench cannot start (a missing package of the [bench] extra, an unwritable --out), or None."""
+    from drives.errors import ParameterError
+    from haptic_bus.validation import writable_folder
+
+    missing = missing_packages()
+    if missing:
+        return (f"the [bench] extra is missing: {', '.join(missing)}; install it with: pip install 'haptic_bus[bench]' "
+                "(from a checkout: pip install -e '.[bench]')")
+    try:
+        writable_folder("--out", args.out, context="bench")
+    except ParameterError as error:
+        return str(error)
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``haptic-bus bench``; print the tables; exit 0 (2 for bad arguments)."""
+    """Run ``haptic-bus bench``; print the tables; exit 0 (2 for bad arguments, a missing package
+    of the [bench] extra or an unwritable --out, each one line on stderr)."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
+    refusal = _refusal(args)
+    if refusal is not None:
+        print(f"haptic-bus bench: error: {refusal}", file=sys.stderr)
+        return 2
     try:
-        result = run_bench(args.out, quick=args.quick, progress=not args.no_progress, sections=args.only or SECTIONS,
+        result = run_bench(args.out, size=args.size, progress=not args.no_progress, sections=args.only or SECTIONS,
                            soak=args.soak)
         print((Path(args.out) / "bench.md").read_text())
         print(f"wrote {Path(args.out) / 'bench.json'}, {Path(args.out) / 'bench.md'}"
