@@ -18,10 +18,10 @@ min-max over at least 5 repeats (:mod:`~haptic_bus.bench.timing`):
 5. :mod:`~haptic_bus.bench.bus_limit` -- bits per cycle per axis, bus load, axes that fit.
 6. :mod:`~haptic_bus.bench.realtime` -- ``T = 1 ms`` with the real clock, two processes: lateness
    and the controller's share of a core in three set-ups, quiet and beside a CPU hog.
-7. :mod:`~haptic_bus.bench.startup` -- ``check --json``, ``profiles list``, ``--help`` against
+7. :mod:`~haptic_bus.bench.startup` -- ``check --json``, ``--help`` and (full run) ``profiles list`` against
    ``python -c "import numpy"``.
 8. :mod:`~haptic_bus.bench.soak` -- cycles in virtual time (``--soak [CYCLES]``: 10^7; otherwise
-   10^5 quick, 10^6 full): the integer position sum exact, memory flat.
+   5 x 10^4 quick, 2 x 10^3 smoke, 10^6 full): the integer position sum exact, memory flat.
 
 Above the sections, issue 14's "Done when" (:mod:`~haptic_bus.bench.targets`): one row per line
 with the measured figure, its spread, the target and PASS/FAIL, all from this one run.
@@ -57,7 +57,7 @@ from haptic_bus.bench.timing import machine
 SECTIONS = ("passivity", "plant", "scene", "loop", "bus", "realtime", "startup", "soak")
 # progress ticks each section makes (smoke, quick, full): for the bar's total
 _TICKS = {"passivity": (5, 7, 17), "plant": (7, 15, 17), "scene": (5, 5, 5), "loop": (6, 6, 6), "bus": (2, 2, 2),
-          "realtime": (3, 6, 6), "startup": (1, 3, 3), "soak": (10, 10, 10)}
+          "realtime": (3, 6, 6), "startup": (1, 2, 3), "soak": (10, 10, 10)}
 BENCH_EXTRA = {"control": "control", "mpmath": "mpmath"}  # import name -> distribution: pyproject's [bench] extra
 SMOKE_SOAK_CYCLES = 2_000
 
@@ -215,7 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     parser.add_argument("--soak", type=_cycles, nargs="?", const=10_000_000, metavar="CYCLES",
                         help="the soak's cycles in virtual time (exact position sum, flat memory): CYCLES, 10^7 "
-                             "without a number; default 10^5 with --quick, else 10^6")
+                             "without a number; default 5e4 with --quick, 2e3 with --smoke, else 10^6")
     return parser
 
 

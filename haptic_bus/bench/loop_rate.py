@@ -159,7 +159,7 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 4; returns its section of ``bench.json`` (a failing link is reported, not raised)."""
     from haptic_bus.bench.hot_path import bench_pdo_codecs
 
-    cycles = size.pick(300, 1_000, 20_000)
+    cycles = size.pick(300, 500, 20_000)
     profile = load_profile(PROFILE)
     links: dict[str, dict] = {}
     trajectories: dict[str, np.ndarray] = {}

@@ -156,7 +156,7 @@ def _check_same_force(compiled: CompiledScene, naive: NaiveScene) -> None:
 
 def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 3; returns its section of ``bench.json``."""
-    cycles = size.pick(500, 5_000, 40_000)
+    cycles = size.pick(500, 2_000, 40_000)
     velocities = canned_velocities(cycles)
     xs = [float(x) for x in np.linspace(-0.021, 0.003, 257)]
     rows: list[dict[str, Any]] = []
