@@ -12,18 +12,8 @@ import canopen
 import pytest
 
 from haptic_bus._version import __version__
+from sim_drive import operator as models
 from sim_drive.cli import _drive_setup, _parse, build_parser, main
-from sim_drive.operator import (
-    Chirp,
-    ConstantPush,
-    HandModel,
-    NoOperator,
-    RecordedForce,
-    Sinusoid,
-    StepPush,
-    operator_code,
-    operator_from_spec,
-)
 
 CANOPEN = ["--interface", "virtual", "--channel", "overrides", "--node-id", "5"]
 HEARTBEAT_WAIT = 15.0  # s: the subprocess imports numpy/scipy/canopen first
@@ -39,36 +29,36 @@ def test_the_flags_override_the_profiles_truth_and_operator() -> None:
                                           "--operator", "none")
     assert (parameters.m, parameters.b, parameters.coulomb_friction, parameters.velocity_noise, parameters.noise_seed) == (
         0.37, 2.9, 0.2, 1000.0, 7)
-    assert operator == NoOperator() and timing == "cia402"
+    assert operator == models.NoOperator() and timing == "cia402"
     assert parameters.rated_torque == 0.32 and str(parameters.velocity) == "average"  # the rest is still the profile's
     parameters, operator, _ = _setup("--profile", "cia402-handle")
-    assert (parameters.m, parameters.b) == (1.0, 20.0) and operator == ConstantPush(3.0)  # no flag: the profile's
+    assert (parameters.m, parameters.b) == (1.0, 20.0) and operator == models.ConstantPush(3.0)  # no flag: the profile's
 
 
 def test_without_a_profile_the_flags_override_the_defaults() -> None:
     parameters, operator, _ = _setup("--mass", "2", "--operator", "constant:-1.5")
-    assert parameters.m == 2.0 and parameters.b == 0.1 and operator == ConstantPush(-1.5)
+    assert parameters.m == 2.0 and parameters.b == 0.1 and operator == models.ConstantPush(-1.5)
 
 
 @pytest.mark.parametrize("spec, model", [
-    ("none", NoOperator()),
-    ("constant:3", ConstantPush(3.0)),
-    ("step:2,0.5", StepPush(2.0, 0.5)),
-    ("sinusoid:1,2", Sinusoid(1.0, 2.0)),
-    ("sinusoid:1,2,0.5,-1", Sinusoid(1.0, 2.0, 0.5, -1.0)),
-    ("chirp:1,0.5,20,10", Chirp(1.0, 0.5, 20.0, 10.0)),
-    ("hand:300,5", HandModel(300.0, 5.0)),
-    ("hand:300,5,0.001,0.01,0.002,1.5", HandModel(300.0, 5.0, 0.001, 0.01, 0.002, 1.5)),
+    ("none", models.NoOperator()),
+    ("constant:3", models.ConstantPush(3.0)),
+    ("step:2,0.5", models.StepPush(2.0, 0.5)),
+    ("sinusoid:1,2", models.Sinusoid(1.0, 2.0)),
+    ("sinusoid:1,2,0.5,-1", models.Sinusoid(1.0, 2.0, 0.5, -1.0)),
+    ("chirp:1,0.5,20,10", models.Chirp(1.0, 0.5, 20.0, 10.0)),
+    ("hand:300,5", models.HandModel(300.0, 5.0)),
+    ("hand:300,5,0.001,0.01,0.002,1.5", models.HandModel(300.0, 5.0, 0.001, 0.01, 0.002, 1.5)),
 ])
 def test_every_operator_model_has_a_spelled_form(spec: str, model: object) -> None:
-    assert operator_from_spec(spec) == model
+    assert models.operator_from_spec(spec) == model
 
 
 def test_a_recorded_operator_reads_its_csv(tmp_path: Any) -> None:
     track = tmp_path / "push, slow.csv"  # a comma in the path: only a trailing hold|linear is the interpolation
     track.write_text("time,force\n0,0\n1,2\n")
-    assert operator_from_spec(f"recorded:{track}") == RecordedForce((0.0, 1.0), (0.0, 2.0), "hold")
-    assert operator_from_spec(f"recorded:{track},linear").interpolation == "linear"
+    assert models.operator_from_spec(f"recorded:{track}") == models.RecordedForce((0.0, 1.0), (0.0, 2.0), "hold")
+    assert models.operator_from_spec(f"recorded:{track},linear").interpolation == "linear"
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -123,6 +113,6 @@ def test_the_running_drive_serves_the_flags_values(sim_process: Callable[..., An
     finally:
         network.disconnect()
     assert (mass, friction) == (0.37, 2.9)
-    assert code == operator_code(NoOperator())  # the profile's constant push is overridden
+    assert code == models.operator_code(models.NoOperator())  # the profile's constant push is overridden
     status, log = process.stop()
     assert status == 0, log
