@@ -17,9 +17,10 @@ machines over udp_multicast sets ``hop_limit`` on purpose (``--bus-option hop_li
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
-from drives.errors import BusConfigError
+from drives.errors import BusConfigError, ParameterError
 
 if TYPE_CHECKING:
     import can
@@ -27,6 +28,9 @@ if TYPE_CHECKING:
 LOCAL_HOP_LIMIT = 0  # udp_multicast's default here: frames are delivered on this host only
 BUS_OPTION_HELP = ("extra python-can bus argument, e.g. port=43113 (repeatable); udp_multicast gets hop_limit=0 "
                    "(frames stay on this host) unless you name one")
+BUS_KWARGS_HELP = ("python-can's own spelling of --bus-option, as can.logger and can.viewer take it: one or more "
+                   "KEY=VALUE after one flag (--bus-kwargs port=43113 hop_limit=0); the same values as --bus-option; "
+                   "a key given twice with different values is refused")
 
 _NO_INTERFACE = (
     "no CAN interface selected: pass interface=... (e.g. 'socketcan', 'virtual', 'udp_multicast'), "
@@ -97,3 +101,16 @@ def parse_bus_option(text: str) -> tuple[str, Any]:
         return key, int(value, 0)
     except ValueError:
         return key, value
+
+
+def merge_bus_options(*groups: Iterable[tuple[str, Any]]) -> dict[str, Any]:
+    """The ``(key, value)`` pairs of ``--bus-option``, ``--bus-kwargs`` (and ``--interface``...) as one
+    dict of python-can bus arguments; ParameterError when a key is given twice with different values."""
+    merged: dict[str, Any] = {}
+    for group in groups:
+        for key, value in group:
+            if key in merged and merged[key] != value:
+                raise ParameterError(f"bus argument {key}", value,
+                                     f"one value per key ({key} = {merged[key]!r} is given too)")
+            merged[key] = value
+    return merged

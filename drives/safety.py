@@ -65,15 +65,16 @@ class SafetySettings:
 
     def for_virtual_time(self, period: float) -> SafetySettings:
         """These settings for a loop nothing paces (virtual time, cycle period ``period`` s): the
-        RPDO deadline and the Modbus watchdog of at least :data:`VIRTUAL_TIME_DEADLINE` s of wall
-        clock, so that they guard against a dead master, not a busy machine that paused a
-        lock-step run."""
+        RPDO deadline, the drive's heartbeat consumer time and the Modbus watchdog of at least
+        :data:`VIRTUAL_TIME_DEADLINE` s of wall clock, so that they guard against a dead master,
+        not a busy machine that paused a lock-step run or the master's heartbeat thread."""
         floor_ms = round(VIRTUAL_TIME_DEADLINE * 1000)
         periods = self.rpdo_deadline_periods
         if periods:
             periods = min(10_000, max(periods, math.ceil(VIRTUAL_TIME_DEADLINE / period)))
         watchdog = max(self.modbus_watchdog_ms, floor_ms) if self.modbus_watchdog_ms else 0
-        return dataclasses.replace(self, rpdo_deadline_periods=periods, modbus_watchdog_ms=watchdog)
+        return dataclasses.replace(self, rpdo_deadline_periods=periods, modbus_watchdog_ms=watchdog,
+                                   consumer_ms=max(self.consumer_ms, floor_ms))
 
     def rpdo_deadline_ms(self, period: float) -> int:
         """The RPDO event timer for cycle period ``period`` s, ms (0: none; at least 1 otherwise)."""

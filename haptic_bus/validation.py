@@ -1,9 +1,11 @@
-"""Checks that turn user numbers into validated floats and ints, or raise ParameterError."""
+"""Checks that turn user input into validated floats, ints and output folders, or raise ParameterError."""
 
 from __future__ import annotations
 
 import math
 import numbers
+import os
+import pathlib
 
 from drives.errors import ParameterError
 
@@ -50,3 +52,44 @@ def whole_in_range(name: str, value: object, low: int, high: int, *, context: st
     if not low <= whole <= high:
         raise ParameterError(name, value, allowed, context)
     return whole
+
+
+def writable_folder(name: str, path: str | os.PathLike[str], *, context: str = "") -> pathlib.Path:
+    """``path`` as a folder this user can write, created (with its parents) if missing and probed with a
+    file now, before any work that would write there; ParameterError naming ``name`` otherwise (a file
+    in the way named, else the system's reason)."""
+    folder = pathlib.Path(path)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / ".haptic-bus-write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise ParameterError(name, str(folder), f"a folder this user can create and write ({_unwritable(folder, exc)})",
+                             context) from None
+    return folder
+
+
+def writable_file(name: str, path: str | os.PathLike[str], *, context: str = "") -> pathlib.Path:
+    """``path``'s folder created and the file shown writable (opened for appending; a file that did not
+    exist is removed again); ParameterError naming ``name`` otherwise."""
+    file = pathlib.Path(path)
+    existed = file.exists()
+    try:
+        file.parent.mkdir(parents=True, exist_ok=True)
+        with file.open("ab"):
+            pass
+        if not existed:
+            file.unlink()
+    except OSError as exc:
+        raise ParameterError(name, str(file), f"a file this user can create and write ({_unwritable(file.parent, exc)})",
+                             context) from None
+    return file
+
+
+def _unwritable(folder: pathlib.Path, exc: OSError) -> str:
+    """Why ``folder`` cannot be made or written: a file in its way named, else the system's words."""
+    for ancestor in (folder, *folder.parents):
+        if ancestor.exists():
+            return f"{ancestor} is a file, not a folder" if not ancestor.is_dir() else str(exc.strerror)
+    return str(exc.strerror)

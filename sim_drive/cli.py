@@ -5,7 +5,14 @@
     haptic-bus sim --modbus tcp://HOST:PORT [--unit-id N] [--word-order big|little]
                    [--timing cia402|ideal|reception] [--profile P] [--realtime]
     haptic-bus sim --eds-path
+    haptic-bus sim --version
     python -m sim_drive ...   (the same)
+
+The hidden truth and the operator (either server) override the profile's (or the defaults'):
+``--mass KG``, ``--friction N_S_PER_M``, ``--coulomb N``, ``--velocity-noise COUNTS`` (0x606C
+counts rms), ``--noise-seed N``, ``--operator none|constant:LEVEL|...`` (``none``: a free handle,
+so that ``haptic-bus identify`` is not refused).  ``--bus-kwargs KEY=VALUE ...`` is python-can's
+spelling of ``--bus-option``.
 
 One parser: ``--modbus`` selects the Modbus server (:mod:`sim_drive.modbus`), otherwise the
 CANopen slave runs; the options of the other server are refused.  Logs one line per CiA-402
@@ -21,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import logging
 import signal
 import socket
@@ -29,10 +37,11 @@ import time
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
-from drives.bus_config import BUS_OPTION_HELP, parse_bus_option
+from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, merge_bus_options, parse_bus_option
 from drives.errors import BusConfigError, ParameterError
+from haptic_bus._version import __version__
 from sim_drive.eds import OD_KINDS, eds_path
-from sim_drive.operator import OperatorModel
+from sim_drive.operator import OperatorModel, operator_from_spec, operator_usage
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import load_profile
 from sim_drive.sync_clock import SYNC_CLOCKS, sync_clock
@@ -40,7 +49,7 @@ from sim_drive.sync_clock import SYNC_CLOCKS, sync_clock
 logger = logging.getLogger("sim_drive")
 
 _PROG = "haptic-bus sim"
-_CANOPEN_ONLY = ("eds_path", "interface", "channel", "node_id", "bitrate", "bus_option", "od", "eds")
+_CANOPEN_ONLY = ("eds_path", "interface", "channel", "node_id", "bitrate", "bus_option", "bus_kwargs", "od", "eds")
 _MODBUS_ONLY = ("unit_id", "word_order")
 _HELP = frozenset({"-h", "--help"})
 
@@ -126,7 +135,53 @@ def build_parser() -> argparse.ArgumentParser:
     modbus.add_argument("--modbus", metavar="tcp://HOST:PORT", help="serve Modbus TCP on this address (PORT 0: any free port)")
     modbus.add_argument("--unit-id", type=int, help="Modbus unit id 0..255 (default 1)")
     modbus.add_argument("--word-order", choices=["big", "little"], help="32-bit word order (default big: high word first)")
+    _add_overrides(parser, canopen)
     return parser
+
+
+# --------------------------------------------------------------------------- the hidden truth, the operator, python-can's
+# spelling of bus options, the version: the command line over the profile (issue 20)
+
+_TRUTH_FLAGS = {"mass": "m", "friction": "b", "coulomb": "coulomb_friction", "velocity_noise": "velocity_noise",
+                "noise_seed": "noise_seed"}  # argparse dest -> DeviceParameters field
+
+
+def _add_overrides(parser: argparse.ArgumentParser, canopen: argparse._ArgumentGroup) -> None:
+    """``--mass``, ``--friction``, ``--coulomb``, ``--velocity-noise``, ``--noise-seed``, ``--operator``
+    (either server), ``--bus-kwargs`` (CANopen) and ``--version``."""
+    truth = parser.add_argument_group("the hidden truth and the operator (either server; over the profile's)")
+    truth.add_argument("--mass", type=float, metavar="KG", help="handle mass m, kg")
+    truth.add_argument("--friction", type=float, metavar="N_S_PER_M", help="viscous friction b, N s/m")
+    truth.add_argument("--coulomb", type=float, metavar="N", help="Coulomb friction, N")
+    truth.add_argument("--velocity-noise", type=float, metavar="COUNTS", help="rms of the noise on 0x606C, counts")
+    truth.add_argument("--noise-seed", type=int, metavar="N", help="seed of that noise (default: fresh entropy)")
+    truth.add_argument("--operator", metavar="MODEL",
+                       help=f"what pushes the handle: {operator_usage()} (SI units; none: a free handle, nobody "
+                            "touches it, as haptic-bus identify needs)")
+    canopen.add_argument("--bus-kwargs", type=parse_bus_option, nargs="+", action="append", default=[],
+                         metavar="KEY=VALUE", help=BUS_KWARGS_HELP)
+    parser.add_argument("--version", action="version", version=f"{_PROG} {__version__}")
+
+
+def _overridden(parameters: DeviceParameters, operator: OperatorModel | None,
+                args: argparse.Namespace) -> tuple[DeviceParameters, OperatorModel | None]:
+    """``parameters`` and ``operator`` with the command line's truth and operator; ParameterError names the flag."""
+    given = {field: getattr(args, dest) for dest, field in _TRUTH_FLAGS.items() if getattr(args, dest) is not None}
+    try:
+        parameters = dataclasses.replace(parameters, **given)
+    except ParameterError as exc:
+        flag = next(dest for dest, field in _TRUTH_FLAGS.items() if field == exc.name)
+        raise ParameterError("--" + flag.replace("_", "-"), exc.value, exc.allowed) from None
+    return parameters, operator if args.operator is None else operator_from_spec(args.operator)
+
+
+def _bus_config(args: argparse.Namespace) -> dict[str, Any]:
+    """The CANopen slave's python-can arguments; ParameterError for a key given twice with different values."""
+    named = [(key, getattr(args, key)) for key in ("interface", "channel", "bitrate") if getattr(args, key)]
+    return merge_bus_options(named, args.bus_option, *args.bus_kwargs)
+
+
+# --------------------------------------------------------------------------- running
 
 
 def _flags(args: argparse.Namespace, parser: argparse.ArgumentParser, dests: Sequence[str]) -> str:
@@ -173,8 +228,8 @@ def _configure_logging(realtime: bool, library: str, level: int) -> None:
 def _drive_setup(args: argparse.Namespace) -> tuple[DeviceParameters, OperatorModel | None, str]:
     """Device parameters, operator model and timing from ``--profile``/``--timing``; ParameterError if invalid."""
     profile = load_profile(args.profile) if args.profile else None
-    parameters = profile.parameters if profile else DeviceParameters()
-    operator = profile.operator if profile else None
+    parameters, operator = _overridden(profile.parameters if profile else DeviceParameters(),
+                                       profile.operator if profile else None, args)
     timing = args.timing or (profile.timing.value if profile and profile.timing else Timing.CIA402.value)
     return parameters, operator, timing
 
@@ -197,9 +252,7 @@ def _run_canopen(args: argparse.Namespace) -> int:
     try:
         parameters, operator, timing = _drive_setup(args)
         meter = BusLoadMeter(args.bitrate, parameters.period) if args.bitrate else None
-        config: dict[str, Any] = {"interface": args.interface, "channel": args.channel, **dict(args.bus_option)}
-        if args.bitrate:
-            config["bitrate"] = args.bitrate
+        config = _bus_config(args)
         sim = CanopenSimDrive(config, args.node_id, timing=timing, parameters=parameters, operator=operator, bus_meter=meter,
                               od=args.od or "haptic", eds=args.eds, sync_clock=sync_clock(args.clock))
     except ParameterError as exc:

@@ -303,3 +303,50 @@ def operator_from_table(table: Mapping[str, Any], base: pathlib.Path | None = No
         return cls(**params)
     except TypeError as exc:
         raise ParameterError("operator", sorted(params), f"all required fields of {name}: {sorted(fields)}", "profile") from exc
+
+
+def operator_usage() -> str:
+    """Every spelled form :func:`operator_from_spec` takes, ``" | "``-separated (optional fields in brackets)."""
+    forms = []
+    for name, cls in OPERATOR_NAMES.items():
+        if cls is RecordedForce:
+            forms.append(f"{name}:CSV[,{'|'.join(INTERPOLATIONS)}]")
+            continue
+        fields = dataclasses.fields(cls)
+        required = [f.name for f in fields if f.default is dataclasses.MISSING]
+        optional = [f.name for f in fields if f.default is not dataclasses.MISSING]
+        text = ",".join(required) + (f"[,{','.join(optional)}]" if optional else "")
+        forms.append(f"{name}:{text}" if text else name)
+    return " | ".join(forms)
+
+
+def operator_from_spec(spec: str) -> OperatorModel:
+    """The model a command line spells ``NAME[:V1,V2,...]``: the values are the model's fields in
+    order (:func:`operator_usage`; SI units: N, s, Hz, rad, m, N/m, N s/m), trailing optional ones
+    may be left out; ``recorded:CSV[,hold|linear]`` loads a force track (columns time s, force N).
+    ParameterError (named ``--operator``) for anything else."""
+    name, _, values = spec.partition(":")
+    cls = OPERATOR_NAMES.get(name.strip())
+    allowed = operator_usage()
+    if cls is None:
+        raise ParameterError("--operator", spec, allowed)
+    if cls is RecordedForce:
+        path, _, interpolation = values.rpartition(",")
+        if interpolation not in INTERPOLATIONS:  # no interpolation named: the comma, if any, is the path's
+            path, interpolation = values, "hold"
+        if not path:
+            raise ParameterError("--operator", spec, allowed)
+        return RecordedForce.from_csv(path, interpolation)
+    fields = dataclasses.fields(cls)
+    required = sum(f.default is dataclasses.MISSING for f in fields)
+    texts = [text.strip() for text in values.split(",")] if values else []
+    try:
+        numbers = [float(text) for text in texts]
+    except ValueError:
+        raise ParameterError("--operator", spec, allowed) from None
+    if not required <= len(numbers) <= len(fields):
+        raise ParameterError("--operator", spec, allowed)
+    try:
+        return cls(*numbers)
+    except ParameterError as exc:  # a field out of its range, named as the command line spells it
+        raise ParameterError(exc.name, exc.value, exc.allowed, f"--operator {name}") from None

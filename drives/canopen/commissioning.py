@@ -14,10 +14,9 @@ drive refuses one, and the refusal is a note), the other PDOs invalidated, the s
 has, 0x6007 and 0x1016:01 written and read back, its heartbeat 0x1017, NMT start, and its
 heartbeat showing OPERATIONAL.  Every write goes to an object the inventory found.
 
-Scaling: the standard objects 0x6076, 0x6072 and the factor group (0x608F, 0x6090, 0x6091,
-0x6092, 0x60A8, 0x60A9; :mod:`drives.factor_group`) where the drive has them, and
-manufacturer objects only where an EDS the user gave names them
-(:func:`drives.canopen.od.find_scaling_objects`).
+Scaling: what the drive states, :mod:`drives.canopen.stated_scaling` (the standard objects
+0x6076, 0x6072 and the factor group where the drive has them, manufacturer objects only where an
+EDS the user gave names them).
 """
 
 from __future__ import annotations
@@ -33,12 +32,12 @@ import canopen
 from drives.base import ScalingReading
 from drives.canopen.events import DriveEvents
 from drives.canopen.inventory import DriveInventory, InventoryReader
-from drives.canopen.od import find_scaling_objects
 from drives.canopen.pdo_codec import PdoCodec
 from drives.canopen.pdo_plan import object_label, plans
 from drives.canopen.pdo_setup import AppliedMapping, PdoSetup
 from drives.canopen.safety_setup import missing_objects, refuse_if_strict, write_safety_objects
 from drives.canopen.sdo import SdoAccess
+from drives.canopen.stated_scaling import read_stated_scaling
 from drives.cia301 import (
     COMMUNICATION_CYCLE_PERIOD,
     DEVICE_PROFILE_402,
@@ -49,23 +48,15 @@ from drives.cia301 import (
     TPDO_BASES,
     NmtCommand,
     NmtState,
-    SdoAbort,
 )
 from drives.cia402 import (
-    MAX_TORQUE,
-    MOTOR_RATED_TORQUE,
-    RATIO_OBJECTS,
     STATUSWORD,
-    UNIT_OBJECTS,
     DataType,
     ObjectSpec,
-    RatioSpec,
     State,
     decode_statusword,
 )
-from drives.cia402_master import REAL32_ROUNDING
 from drives.errors import DriveError, DriveProtocolError, DriveTimeout, SdoAbortError
-from drives.factor_group import FactorGroup, derive
 from drives.safety import SafetySettings
 
 logger = logging.getLogger(__name__)
@@ -258,45 +249,8 @@ class Commissioning:
         return device_type
 
     def _read_scaling(self) -> tuple[dict[str, tuple[ScalingReading, ...]], tuple[str, ...]]:
-        """The scaling the drive states, per field in order of precedence: manufacturer objects an
-        EDS names, then the standard objects (0x6076, 0x6072, and the factor group through
-        :func:`drives.factor_group.derive`); and notes on what the standard objects cannot give."""
-        notes: list[str] = []
-        standard: dict[str, ScalingReading] = {}
-        rated = self._optional(MOTOR_RATED_TORQUE.index, 0, MOTOR_RATED_TORQUE.data_type, notes)
-        if rated is not None:
-            standard["rated_torque"] = ScalingReading(rated / 1000.0, "0x6076", 0.5 / rated if rated else 0.0, f"{rated} mN m")
-        permille = self._optional(MAX_TORQUE.index, 0, MAX_TORQUE.data_type, notes)
-        if permille is not None:
-            standard["max_torque_permille"] = ScalingReading(permille, "0x6072")
-        position_unit, velocity_unit = (self._optional(spec.index, 0, spec.data_type, notes) for spec in UNIT_OBJECTS)
-        group = FactorGroup(position_unit, velocity_unit, *(self._optional_ratio(spec, notes) for spec in RATIO_OBJECTS))
-        derived, derive_notes = derive(self.name, group)
-        standard.update(derived)
-        found: dict[str, tuple[ScalingReading, ...]] = {}
-        for name, (index, subindex, fmt) in find_scaling_objects(self.node.object_dictionary).items():
-            rounding = REAL32_ROUNDING if fmt == "<f" else 0.0
-            found[name] = (ScalingReading(self.sdo.read_real(index, subindex, fmt), f"0x{index:04X}:{subindex:02X}", rounding,
-                                          "manufacturer object named by the EDS"),)
-        for name, reading in standard.items():
-            found[name] = (*found.get(name, ()), reading)
-        return found, (*derive_notes, *notes)
-
-    def _optional(self, index: int, subindex: int, data_type: DataType, notes: list[str]) -> int | None:
-        """An object the drive may lack: None if it answers with an SDO abort (noted unless "no such object")."""
-        try:
-            return self.sdo.read_int(index, subindex, data_type)
-        except SdoAbortError as exc:
-            if exc.abort_code not in (SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX):
-                notes.append(f"0x{index:04X}:{subindex:02X} not read: {exc.message}")
-            logger.debug("%s: %s", self.name, exc)
-            return None
-
-    def _optional_ratio(self, spec: RatioSpec, notes: list[str]) -> tuple[int, int] | None:
-        """Sub 1 and sub 2 of a factor-group ratio the drive may lack (None unless both answer)."""
-        numerator = self._optional(spec.index, 1, spec.data_type, notes)
-        denominator = self._optional(spec.index, 2, spec.data_type, notes) if numerator is not None else None
-        return None if numerator is None or denominator is None else (numerator, denominator)
+        """The scaling the drive states (:func:`drives.canopen.stated_scaling.read_stated_scaling`)."""
+        return read_stated_scaling(self.name, self.sdo, self.node.object_dictionary)
 
     def _start(self, inventory: DriveInventory) -> None:
         """Heartbeat 0x1017 (if the drive has it), NMT start, and its heartbeat showing OPERATIONAL."""

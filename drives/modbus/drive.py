@@ -212,14 +212,8 @@ class ModbusDrive(Cia402Master):
 
     def _configure(self) -> None:
         if self.check_identity:
-            identity = int(self._read_spec(REGISTER_BY_NAME["map_identity"]))  # a UINT32 register
-            if identity != MAP_IDENTITY:
-                swapped = (identity & 0xFFFF) << 16 | identity >> 16
-                hint = (f"; the server uses the other word order than word_order={self.word_order!r}"
-                        if swapped == MAP_IDENTITY else "; not the haptic_bus register map")
-                raise DriveProtocolError(
-                    self.name, f"map identity register 0x0030 reads 0x{identity:08X}, expected 0x{MAP_IDENTITY:08X}{hint}")
-        self._read_scaling()
+            self.check_map_identity()
+        self._adopt_scaling(self.stated_scaling())
         try:
             self.simulated_timing = _TIMING_NAMES.get(int(self._read_spec(REGISTER_BY_NAME["sim_timing"])))
         except DriveProtocolError:
@@ -229,7 +223,20 @@ class ModbusDrive(Cia402Master):
         elif self.simulated_timing is not None:
             self.simulated_delay = float(_TIMING_DELAYS[self.simulated_timing])
 
-    def _read_scaling(self) -> None:
+    def check_map_identity(self) -> None:
+        """DriveProtocolError unless the map identity register 0x0030 reads the haptic_bus map in this
+        word order (the link must be open: :meth:`connect`, or ``link.open()`` for reads alone)."""
+        identity = int(self._read_spec(REGISTER_BY_NAME["map_identity"]))  # a UINT32 register
+        if identity != MAP_IDENTITY:
+            swapped = (identity & 0xFFFF) << 16 | identity >> 16
+            hint = (f"; the server uses the other word order than word_order={self.word_order!r}"
+                    if swapped == MAP_IDENTITY else "; not the haptic_bus register map")
+            raise DriveProtocolError(
+                self.name, f"map identity register 0x0030 reads 0x{identity:08X}, expected 0x{MAP_IDENTITY:08X}{hint}")
+
+    def stated_scaling(self) -> dict[str, tuple[float | int, str]]:
+        """What the drive's registers state (0x6076, 0x6072, the scaling registers 0x0040..): field ->
+        (value, register); a register the drive refuses is left out (the link must be open)."""
         sources: list[tuple[str, RegisterSpec, float]] = [
             ("rated_torque", register_for_object(MOTOR_RATED_TORQUE), 1e-3),  # mN m -> N m
             ("max_torque_permille", register_for_object(MAX_TORQUE), 1),
@@ -242,11 +249,11 @@ class ModbusDrive(Cia402Master):
             try:
                 raw = self._read_spec(spec)
             except DriveProtocolError as exc:
-                logger.info("%s: keeping the given %s (%s)", self.name, field_name, exc)
+                logger.info("%s: the drive states no %s (%s)", self.name, field_name, exc)
                 continue
             found[field_name] = (raw if factor == 1 and isinstance(raw, int) else raw * factor,
                                  f"register 0x{spec.address:04X}")
-        self._adopt_scaling(found)
+        return found
 
     # ------------------------------------------------------------------ requests
 

@@ -13,7 +13,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from drives.bus_config import BUS_OPTION_HELP, parse_bus_option
+from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, merge_bus_options, parse_bus_option
 from drives.cia301 import NODE_ID_RANGE
 from drives.modbus.register_map import UNIT_ID_RANGE
 
@@ -101,15 +101,26 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bitrate", type=int, help="bit/s")
     parser.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
                         help=BUS_OPTION_HELP)
+    parser.add_argument("--bus-kwargs", type=parse_bus_option, nargs="+", action="append", default=[], metavar="KEY=VALUE",
+                        help=BUS_KWARGS_HELP)
 
 
 def bus_arguments(args: argparse.Namespace) -> dict[str, Any]:
-    """The ``can.Bus`` keywords the bus options gave (the rest from python-can's configuration)."""
-    bus = dict(args.bus_option)
-    for key in ("interface", "channel", "bitrate"):
-        if getattr(args, key) is not None:
-            bus[key] = getattr(args, key)
-    return bus
+    """The ``can.Bus`` keywords the bus options gave (the rest from python-can's configuration);
+    ParameterError for a key given twice with different values."""
+    named = [(key, getattr(args, key)) for key in ("interface", "channel", "bitrate") if getattr(args, key) is not None]
+    return merge_bus_options(named, args.bus_option, *args.bus_kwargs)
+
+
+def refuse_can_options_with_modbus(args: argparse.Namespace, command: str, others: tuple[str, ...] = (),
+                                   modbus_options: str = "--unit-id") -> None:
+    """ParameterError naming the first CAN bus option (or one of ``others``, argparse dests) given beside ``--modbus``."""
+    from drives.errors import ParameterError
+
+    given = [dest for dest in ("interface", "channel", "bitrate", "bus_option", "bus_kwargs", *others) if getattr(args, dest)]
+    if given:
+        raise ParameterError("--" + given[0].replace("_", "-"), "given with --modbus",
+                             f"only Modbus options ({modbus_options}) with --modbus", command)
 
 
 def add_verbosity(parser: argparse.ArgumentParser, default: object) -> None:

@@ -44,8 +44,8 @@ from haptic_bus.analysis.coupled_loop import MAX_AXES
 from haptic_bus.analysis.loop import DAMPING_RANGE, DELAY_RANGE, PERIOD_RANGE, STIFFNESS_RANGE, WallLoop
 from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader, read_document
 from haptic_bus.app.profiles import (
-    _NAME,
     FORCE_RANGE,
+    NAME_PATTERN,
     TIMINGS,
     DeviceProfile,
     Profile,
@@ -130,7 +130,7 @@ class AxesProfile:
 
 def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> AxisProfile:
     r = Reader(path, f"axes[{index}]", table)
-    name = r.text("name", pattern=_NAME)
+    name = r.text("name", pattern=NAME_PATTERN)
     if ("node_id" in r.table) == ("unit_id" in r.table):
         raise ProfileError(path, r.field("node_id"), r.table.get("node_id", "<missing>"),
                            "exactly one of node_id (CANopen, 1..127) and unit_id (Modbus, 1..247)")
@@ -170,7 +170,7 @@ def _coordinates(r: Reader, key: str, size: int) -> tuple[Any, ...]:
 def _read_object(path: pathlib.Path, index: int, table: object, size: int) -> SpaceObject:
     r = Reader(path, f"space.objects[{index}]", table)
     kind = r.text("kind", choices=tuple(_FIELDS))
-    name = r.text("name", pattern=_NAME)
+    name = r.text("name", pattern=NAME_PATTERN)
     stiffness = r.real("stiffness", *STIFFNESS_RANGE, "N/m")
     damping = r.real("damping", *DAMPING_RANGE, "N s/m")
     where, extent = _FIELDS[kind]
@@ -200,7 +200,7 @@ def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
     document = read_document(path)
     top = Reader(path, "", document)
     meta = Reader(path, "profile", top.raw("profile", "a [profile] table"))
-    name, operator, task, description = (meta.text("name", pattern=_NAME), meta.text("operator"), meta.text("task"),
+    name, operator, task, description = (meta.text("name", pattern=NAME_PATTERN), meta.text("operator"), meta.text("task"),
                                          meta.text("description"))
     meta.done()
     loop = Reader(path, "loop", top.raw("loop", "a [loop] table with the period"))

@@ -29,6 +29,7 @@ from haptic_bus.app.arguments import (
     bus_arguments,
     modbus_url,
     node_id,
+    refuse_can_options_with_modbus,
     seconds,
     timeout,
     unit_id,
@@ -89,14 +90,14 @@ def _mark(text: str) -> tuple[float, float]:
 def _region(args: argparse.Namespace) -> int:
     from haptic_bus.analysis.loop import WallLoop
     from haptic_bus.analysis.velocity import VelocityModel
-    from haptic_bus.app.output import writable_file
+    from haptic_bus.validation import writable_file
 
     loop = WallLoop(args.mass, args.friction, args.period, 0.0, 0.0, args.delay, VelocityModel.parse(args.velocity))
     marks = [loop.with_wall(K, B) for K, B in args.mark or []]
     path = pathlib.Path(args.png)
     if path.suffix.lower() != ".png":
         path = path.with_name(path.name + ".png")
-    writable_file(path, "--png", "region")  # before the minutes of work, not after
+    writable_file("--png", path, context="region")  # before the minutes of work, not after
     from haptic_bus.app.plots import plot_region
 
     print(f"wrote {plot_region(path, loop.m, loop.b, loop.T, delay=loop.delay, velocity=loop.velocity, marks=marks)}")
@@ -104,11 +105,11 @@ def _region(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    from haptic_bus.app.output import writable_folder
     from haptic_bus.app.run_folder import read_run_folder
+    from haptic_bus.validation import writable_folder
 
     run = read_run_folder(args.run_dir)
-    out = writable_folder(pathlib.Path(args.out) if args.out else run.path, "--out", "plot")
+    out = writable_folder("--out", pathlib.Path(args.out) if args.out else run.path, context="plot")
     for note in run.notes():
         print(f"note: {note}")
     from haptic_bus.app.run_pictures import render_run
@@ -132,8 +133,8 @@ def _validate_run(args: argparse.Namespace) -> DriveAddress:
     """The drive the run talks to; conflicting or ignored options refused before anything is touched."""
     from drives.errors import ParameterError
 
-    if args.modbus and args.controller_node_id is not None:
-        raise ParameterError("--controller-node-id", "given with --modbus", "only Modbus options (--unit-id) with --modbus")
+    if args.modbus:
+        refuse_can_options_with_modbus(args, "run", ("node_id", "controller_node_id"))
     address = drive_address(args)
     if args.controller_node_id is not None and args.controller_node_id == args.node_id:
         raise ParameterError("--controller-node-id", args.controller_node_id,
@@ -188,16 +189,23 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _upload(args: argparse.Namespace) -> int:
-    from haptic_bus.control.node import UploadRefused, upload_walls
+    """0 accepted; 1 refused by the gate, or no controller on the node (silent, or another device);
+    2 invalid input, an object index the controller does not have included (asked before any write)."""
+    from drives.errors import DriveError
+    from haptic_bus.control.upload import UploadRefused, upload_walls
     from haptic_bus.validation import real_in_range, whole_in_range
 
     index = whole_in_range("object", args.object, 0, 255, context="upload")
     K = real_in_range("stiffness", args.stiffness, 0.0, 1e15, unit="N/m", context="upload")
     B = real_in_range("damping", args.damping, 0.0, 1e15, unit="N s/m", context="upload")
+    bus = bus_arguments(args)
     try:
-        print(upload_walls(bus_arguments(args), args.node_id, {index: (K, B)}, timeout=args.timeout))
+        print(upload_walls(bus, args.node_id, {index: (K, B)}, timeout=args.timeout))
     except UploadRefused as error:
         print(f"haptic-bus upload: {error.reason}", file=sys.stderr)
+        return EXIT_NO
+    except DriveError as error:  # no controller there: the node's own words, not "drive error"
+        print(f"haptic-bus upload: {error.message}", file=sys.stderr)
         return EXIT_NO
     return EXIT_OK
 
@@ -205,8 +213,10 @@ def _upload(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     from haptic_bus.app.profiles import load_profile
     from haptic_bus.app.report import write_report
+    from haptic_bus.validation import writable_folder
 
-    for path in write_report(load_profile(args.profile), args.out):
+    profile = load_profile(args.profile)
+    for path in write_report(profile, writable_folder("--out", args.out, context="report")):
         print(f"wrote {path}")
     return EXIT_OK
 
@@ -227,7 +237,10 @@ def _sim(argv: Sequence[str]) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand that haptic_bus itself parses."""
+    from haptic_bus._version import __version__
+
     parser = OneLineParser(prog="haptic-bus", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"haptic-bus {__version__}")
     add_verbosity(parser, None)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
@@ -281,7 +294,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="before commissioning, reset a drive found in FAULT (as haptic-bus fault-reset does; logged "
                           "in run.json's events with the error code it had); without it a faulted drive is refused")
 
-    upload = command("upload", "change a running controller's wall K and B over the bus (gated)", _upload)
+    upload = command("upload", "change a running controller's wall K and B over the bus (gated); exit 0 accepted, 1 refused "
+                               "or no controller answered on the node, 2 invalid input (an object the scene lacks included)",
+                     _upload)
     add_bus_arguments(upload)
     upload.add_argument("--node-id", type=node_id, required=True, help="the controller's CANopen node id")
     upload.add_argument("--object", type=int, required=True, help="scene object index (0x2100 + index)")

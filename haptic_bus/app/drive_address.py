@@ -17,7 +17,15 @@ from typing import TYPE_CHECKING, Any
 
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.errors import ParameterError
-from haptic_bus.app.arguments import add_bus_arguments, bus_arguments, modbus_url, node_id, number, unit_id
+from haptic_bus.app.arguments import (
+    add_bus_arguments,
+    bus_arguments,
+    modbus_url,
+    node_id,
+    number,
+    refuse_can_options_with_modbus,
+    unit_id,
+)
 
 if TYPE_CHECKING:  # the services import canopen or pymodbus: only when a command runs
     from drives.drive_status import DriveStatus
@@ -109,11 +117,7 @@ def seconds(flag: str) -> argparse._ActionType:
 def drive_address(args: argparse.Namespace) -> DriveAddress:
     """The drive ``args`` name; ParameterError (exit 2) for options of both kinds, or no drive at all."""
     if args.modbus is not None:
-        given = [flag for flag, value in (("--interface", args.interface), ("--channel", args.channel),
-                                          ("--bitrate", args.bitrate), ("--bus-option", args.bus_option),
-                                          ("--node-id", args.node_id)) if value]
-        if given:
-            raise ParameterError(given[0], "given with --modbus", "only Modbus options (--unit-id) with --modbus")
+        refuse_can_options_with_modbus(args, "", ("node_id",))
         return DriveAddress(url=args.modbus, unit_id=args.unit_id or DEFAULT_UNIT_ID)
     if args.unit_id is not None:
         raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL")

@@ -30,7 +30,17 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 from drives.errors import ParameterError
-from haptic_bus.app.arguments import add_bus_arguments, add_command, bus_arguments, modbus_url, node_id, number, unit_id, whole
+from haptic_bus.app.arguments import (
+    add_bus_arguments,
+    add_command,
+    bus_arguments,
+    modbus_url,
+    node_id,
+    number,
+    refuse_can_options_with_modbus,
+    unit_id,
+    whole,
+)
 from haptic_bus.identify.bounds import (
     DEFAULT_DURATION,
     DEFAULT_TRAVEL,
@@ -75,12 +85,7 @@ def _validate(args: argparse.Namespace) -> pathlib.Path | None:
     from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID
 
     if args.modbus:
-        given = [flag for flag, value in (("--interface", args.interface), ("--channel", args.channel),
-                                          ("--bitrate", args.bitrate), ("--bus-option", args.bus_option),
-                                          ("--node-id", args.node_id), ("--controller-node-id", args.controller_node_id))
-                 if value]
-        if given:
-            raise ParameterError(given[0], "given with --modbus", "only Modbus options (--unit-id) with --modbus", "identify")
+        refuse_can_options_with_modbus(args, "identify", ("node_id", "controller_node_id"))
     elif args.unit_id is not None:
         raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL", "identify")
     elif args.node_id is None:

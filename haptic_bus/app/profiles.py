@@ -62,7 +62,7 @@ FORCE_RANGE = (0.0, 1e6)  # N, exclusive low
 # 0x6072 is UNSIGNED16, but a torque beyond the INTEGER16 0x6071 can never be commanded.
 PERMILLE_RANGE = (1, min(MAX_TORQUE.data_type.range[1], TARGET_TORQUE.data_type.range[1]))
 RATED_TORQUE_RANGE = (1e-3, MOTOR_RATED_TORQUE.data_type.range[1] / 1000.0)  # N m (0x6076 in mN m)
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")  # a profile's name
 
 # Operator models, aligned with sim_drive.operator (field -> (low, high, unit, default or
 # REQUIRED)); haptic_bus does not import sim_drive (dependencies point the other way).
@@ -398,7 +398,7 @@ def _read_start(path: pathlib.Path, table: object) -> StartPolicy:
 def _read_object(path: pathlib.Path, index: int, table: object) -> SceneObject:
     r = Reader(path, f"scene.objects[{index}]", table)
     kind = r.text("kind", choices=("wall", "slot", "detent"))
-    name = r.text("name", pattern=_NAME)
+    name = r.text("name", pattern=NAME_PATTERN)
     stiffness = r.real("stiffness", *STIFFNESS_RANGE, "N/m")
     damping = r.real("damping", *DAMPING_RANGE, "N s/m")
     if kind == "wall":
@@ -468,7 +468,7 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
                            "no [[axes]] in a one-axis profile; multi-axis profiles load with load_axes_profile")
     top = Reader(path, "", document)
     meta = Reader(path, "profile", top.raw("profile", "a [profile] table"))
-    name = meta.text("name", pattern=_NAME)
+    name = meta.text("name", pattern=NAME_PATTERN)
     operator = meta.text("operator")
     task = meta.text("task")
     description = meta.text("description")

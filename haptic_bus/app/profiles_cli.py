@@ -1,28 +1,50 @@
-"""``haptic-bus profiles list|show|check [NAME_OR_PATH] [--json]``: operator parameter profiles.
+"""``haptic-bus profiles list|show|check [NAME_OR_PATH] [--json]`` and ``profiles new NAME``: operator
+parameter profiles.
 
-Exit status: 0 ok (passive), 1 the gate refuses (not passive, or below the profile's safety
-margin, or the strict bandwidth rule fails), 2 invalid input (one line on stderr).
+Exit status: 0 ok (passive, written), 1 the gate refuses (not passive, or below the profile's safety
+margin, or the strict bandwidth rule fails) or the drive cannot be read, 2 invalid input (one line on
+stderr; for ``check``, a profile that still lacks values ``profiles new`` asked for: each listed).
 ``check`` prints, for every summed wall the scene can put on the handle, the very report
-``haptic-bus check`` prints for those numbers.
+``haptic-bus check`` prints for those numbers.  ``new`` writes a commented profile
+(:mod:`haptic_bus.app.profile_template`), from what a drive states with ``--from-drive``.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime as dt
 import json
+import os
+import pathlib
+import shlex
 import sys
+import tomllib
 from typing import Any
 
-from drives.errors import HapticBusError
+from drives.errors import HapticBusError, ParameterError
 from haptic_bus.analysis.check import check_loop, format_check
+from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
+from haptic_bus.app.arguments import (
+    add_bus_arguments,
+    bus_arguments,
+    modbus_url,
+    node_id,
+    number,
+    refuse_can_options_with_modbus,
+    timeout,
+    unit_id,
+)
 from haptic_bus.app.profiles import (
     DEFAULT_PROFILE,
+    FORCE_RANGE,
+    NAME_PATTERN,
     Profile,
     ProfileError,
     load_profile,
     object_to_dict,
     profile_to_dict,
     read_profile,
+    resolve_profile,
     shipped_profiles,
 )
 from haptic_bus.control.gate import GateDecision, GateRefusal
@@ -127,9 +149,31 @@ def cmd_show(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def cmd_check(args: argparse.Namespace) -> int:
-    """``haptic-bus check`` on every contact wall of a profile; 0 passive (gate admits), 1 not, 2 invalid."""
+def _still_missing(path: pathlib.Path) -> int | None:
+    """Exit 2 with every value a new profile still lacks listed (stdout) and one line on stderr; None if none."""
+    from haptic_bus.app.profile_template import missing
+
     try:
+        with open(path, "rb") as handle:
+            lacking = missing(tomllib.load(handle))
+    except (OSError, tomllib.TOMLDecodeError):
+        return None  # the loader says what is wrong with the file
+    if not lacking:
+        return None
+    print(f"profile {path}: {len(lacking)} value{'s' if len(lacking) > 1 else ''} still missing:")
+    for ask in lacking:
+        print(f"  {ask.key:<28} {ask.allowed}; {ask.why}")
+    print(f"haptic-bus profiles check: error: {path}: still missing {', '.join(a.key for a in lacking)}", file=sys.stderr)
+    return EXIT_INVALID
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    """``haptic-bus check`` on every contact wall of a profile; 0 passive (gate admits), 1 not, 2 invalid
+    (a value missing: every one listed)."""
+    try:
+        lacking = _still_missing(resolve_profile(args.profile))
+        if lacking is not None:
+            return lacking
         profile = read_profile(args.profile)
         decision = profile.gate().judge(profile.compiled_scene())
         loop, device_loop = profile.loop, profile.device_loop()
@@ -163,9 +207,89 @@ def cmd_check(args: argparse.Namespace) -> int:
     return status
 
 
+def _new_target(args: argparse.Namespace) -> pathlib.Path:
+    """The file ``profiles new`` writes, checked before any bus or file is touched (ParameterError)."""
+    if not NAME_PATTERN.match(args.name):
+        raise ParameterError("NAME", args.name, "a name of letters, digits, '.', '_', '-' (not starting with '.', '_', '-')",
+                             "profiles new")
+    if args.modbus:
+        refuse_can_options_with_modbus(args, "profiles new", ("node_id",), "--unit-id")
+    elif args.unit_id is not None:
+        raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL", "profiles new")
+    drive_given = [flag for flag, dest in (("--node-id", "node_id"), ("--modbus", "modbus"), ("--interface", "interface"),
+                                           ("--channel", "channel"), ("--bus-option", "bus_option"),
+                                           ("--bus-kwargs", "bus_kwargs")) if getattr(args, dest)]
+    if not args.from_drive and drive_given:
+        raise ParameterError(drive_given[0], "given without --from-drive", "drive options only with --from-drive",
+                             "profiles new")
+    if args.from_drive and args.node_id is None and not args.modbus:
+        raise ParameterError("--from-drive", "without a drive", "--node-id N (and the bus) or --modbus URL", "profiles new")
+    target = pathlib.Path(args.out or f"{args.name}.toml")
+    folder = target.parent
+    if target.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK):
+        raise ParameterError("--out", str(target), "a file in an existing folder this user can write", "profiles new")
+    if target.exists() and not args.force:
+        raise ParameterError("--out", str(target), "a file that does not exist yet (--force overwrites it)", "profiles new")
+    return target
+
+
+def cmd_new(args: argparse.Namespace) -> int:
+    """Write a commented profile (from what the drive states with ``--from-drive``); 0 written, 1 the
+    drive cannot be read, 2 invalid input (an existing file without --force, an unwritable folder)."""
+    from haptic_bus.analysis.velocity import VelocityModel
+    from haptic_bus.app.drive_statement import canopen_statement, modbus_statement
+    from haptic_bus.app.profile_template import missing, template
+
+    target = _new_target(args)
+    given: dict[str, Any] = {key: getattr(args, key) for key in ("mass", "friction", "force_limit")
+                             if getattr(args, key) is not None}
+    if args.velocity is not None:
+        given["velocity"] = str(VelocityModel.parse(args.velocity))
+    bus = bus_arguments(args) if args.from_drive and not args.modbus else None
+    statement = None
+    if args.modbus:
+        statement = modbus_statement(args.modbus, args.unit_id or 1)
+    elif bus is not None:
+        statement = canopen_statement(bus, args.node_id, args.timeout)
+    command = f"haptic-bus profiles new {args.name}" + (" --from-drive" if statement is not None else "")
+    text = template(args.name, statement, given, command, dt.datetime.now(dt.UTC))
+    try:
+        target.write_text(text)
+    except OSError as exc:
+        raise ParameterError("--out", str(target), f"a file this user can write ({exc.strerror})", "profiles new") from None
+    stated = ", ".join(statement.scaling) if statement is not None else "nothing (no --from-drive)"
+    lacking = [ask.key for ask in missing(tomllib.loads(text))]
+    print(f"wrote {target}: from the drive {stated}; still to give: {', '.join(lacking)} "
+          f"(haptic-bus profiles check {shlex.quote(str(target))} lists them)")
+    return EXIT_OK
+
+
+def _add_new_parser(sub: argparse._SubParsersAction) -> None:
+    new = sub.add_parser("new", help="write a commented profile, from what a drive states with --from-drive; it asks "
+                                     "for the rest (profiles check lists what is still missing)")
+    new.add_argument("name", metavar="NAME", help="the profile's name (letters, digits, '.', '_', '-')")
+    new.add_argument("--from-drive", action="store_true",
+                     help="read 0x6076, 0x6072 and the CiA-402 factor group (Modbus: the scaling registers) from the "
+                          "drive, reads only: with --node-id and the bus options, or --modbus URL")
+    add_bus_arguments(new)
+    new.add_argument("--node-id", type=node_id, help="the drive's CANopen node id 1..127")
+    new.add_argument("--modbus", type=modbus_url, metavar="URL", help="a Modbus drive instead: tcp://HOST:PORT")
+    new.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1)")
+    new.add_argument("--timeout", type=timeout, default=1.0, help="SDO answer timeout, s (default 1)")
+    new.add_argument("--mass", type=number("mass", *MASS_RANGE, "kg"), help="a first guess of the handle's mass, kg")
+    new.add_argument("--friction", type=number("friction", *FRICTION_RANGE, "N s/m"),
+                     help="a first guess of its viscous friction b, N s/m")
+    new.add_argument("--velocity", metavar="MODEL", help="what 0x606C is: point, average, window:SECONDS, lowpass:SECONDS")
+    new.add_argument("--force-limit", type=number("force limit", *FORCE_RANGE, "N", low_open=True),
+                     help="the most force identify and the walls may ask, N")
+    new.add_argument("--out", metavar="FILE", help="the file to write (default NAME.toml here)")
+    new.add_argument("--force", action="store_true", help="overwrite an existing --out")
+    new.set_defaults(handler=cmd_new)
+
+
 def add_profiles_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    """Register ``profiles list|show|check`` on ``subparsers``; each leaf sets ``handler``."""
-    parser = subparsers.add_parser("profiles", help="operator parameter profiles: list, show, check")
+    """Register ``profiles list|show|check|new`` on ``subparsers``; each leaf sets ``handler``."""
+    parser = subparsers.add_parser("profiles", help="operator parameter profiles: list, show, check, new")
     sub = parser.add_subparsers(dest="profiles_command", required=True)
     listing = sub.add_parser("list", help="the shipped profiles and their gate verdicts")
     listing.add_argument("--json", action="store_true", help="one JSON array on stdout")
@@ -177,4 +301,5 @@ def add_profiles_parser(subparsers: argparse._SubParsersAction) -> argparse.Argu
                           help=f"shipped profile name or TOML path (default {DEFAULT_PROFILE})")
         leaf.add_argument("--json", action="store_true", help="one JSON object on stdout")
         leaf.set_defaults(handler=handler)
+    _add_new_parser(sub)
     return parser

@@ -36,11 +36,11 @@ from typing import Any
 
 from drives.errors import ParameterError
 from haptic_bus._version import __version__
-from haptic_bus.app.output import writable_folder
 from haptic_bus.app.profiles import Profile, profile_to_dict
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.gate import DeviceLoop
 from haptic_bus.control.record import RecordTable, read_record
+from haptic_bus.validation import writable_folder
 
 DEFAULT_ROOT = pathlib.Path("runs")
 RUN_JSON, RECORD_CSV = "run.json", "record.csv"
@@ -64,7 +64,7 @@ def prepare_run_folder(out: str | pathlib.Path | None, profile_name: str, root: 
         while path.exists():
             path = root / f"{stamp}-{profile_name}-{n}"
             n += 1
-    return writable_folder(path, "--out", "run")
+    return writable_folder("--out", path, context="run")
 
 
 @functools.cache

@@ -40,8 +40,9 @@ class RunRecorder:
         self.record = RecordStream(self.folder / RECORD_CSV, controller.record, self.journal.refresh).start()
         stack.callback(self.record.close)
 
-    def finish(self, summary: RunSummary | None) -> list[pathlib.Path]:
-        """After the streams are closed: ``run.json`` completed, the pictures; the files written."""
+    def finish(self, summary: RunSummary | None, pictures: bool = True) -> list[pathlib.Path]:
+        """After the streams are closed: ``run.json`` completed, the pictures (unless not ``pictures``);
+        the files written."""
         written = []
         if self.record is not None:
             self.journal.extra["record"] = {"rows_written": self.record.written, "rows_lost": self.record.lost}
@@ -50,6 +51,6 @@ class RunRecorder:
             self.journal.extra["bus_log"] = {"frames": self.bus_log.frames}
             written.append(self.bus_log.path)
         self.journal.finish(summary, written)  # ended, before the pictures (which read it)
-        if self.record is not None:
+        if self.record is not None and pictures:
             written += render_run(read_run_folder(self.folder))
         return self.journal.finish(summary, written)

@@ -97,8 +97,10 @@ class RunOptions:
     """One run: ``duration`` (s), real time or virtual time, the output folder (None: ``runs/...``),
     the start-in-contact policy (None: the profile's), the live view, the stop request, what a
     real-time run asks of the OS for its control thread (:mod:`~haptic_bus.app.realtime`),
-    whether a drive found in FAULT is reset before commissioning, and whether a CANopen run logs
-    every frame (``bus.asc``, :mod:`~haptic_bus.app.bus_log`)."""
+    whether a drive found in FAULT is reset before commissioning, whether a CANopen run logs
+    every frame (``bus.asc``, :mod:`~haptic_bus.app.bus_log`), and whether the pictures are drawn
+    (seconds of matplotlib and of the region's boundary: the benchmark, which runs the session
+    many times, leaves them out)."""
 
     duration: float
     realtime: bool
@@ -109,6 +111,7 @@ class RunOptions:
     scheduling: RealtimeSettings = dataclasses.field(default_factory=RealtimeSettings)
     reset_fault: bool = False
     bus_log: bool = True
+    plots: bool = True
 
 
 @dataclasses.dataclass
@@ -319,7 +322,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
         reason, error = "interrupted", "interrupted (Ctrl-C)"
     finally:
         extra["exit_reason"], extra["error"] = reason, error
-        files = recorder.finish(summary)
+        files = recorder.finish(summary, pictures=options.plots)
     return RunResult(reason, error, summary, controller, folder, files)
 
 

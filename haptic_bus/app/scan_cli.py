@@ -33,7 +33,15 @@ from drives.cia301 import NODE_ID_RANGE
 from drives.errors import ParameterError
 from drives.modbus.register_map import UNIT_ID_RANGE
 from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, MAX_SECONDS
-from haptic_bus.app.arguments import EXIT_NO, EXIT_OK, add_bus_arguments, add_command, bus_arguments, number
+from haptic_bus.app.arguments import (
+    EXIT_NO,
+    EXIT_OK,
+    add_bus_arguments,
+    add_command,
+    bus_arguments,
+    number,
+    refuse_can_options_with_modbus,
+)
 
 if TYPE_CHECKING:  # the scans import canopen and pymodbus: only when a scan runs
     from drives.canopen.scan import CanopenNode
@@ -99,10 +107,7 @@ def _validate(args: argparse.Namespace) -> None:
         if args.unit_ids is not None:
             raise ParameterError("--unit-ids", args.unit_ids, "a Modbus option: give it with --modbus URL", "scan")
         return
-    given = [flag for flag, value in (("--interface", args.interface), ("--channel", args.channel), ("--bitrate", args.bitrate),
-                                      ("--bus-option", args.bus_option), ("--node-ids", args.node_ids)) if value]
-    if given:
-        raise ParameterError(given[0], "given with --modbus", "only Modbus options (--unit-ids) with --modbus", "scan")
+    refuse_can_options_with_modbus(args, "scan", ("node_ids",), "--unit-ids")
     try:
         ModbusAddress.from_url(args.modbus)
     except ParameterError as exc:

@@ -1,4 +1,4 @@
-"""``haptic-bus bench [--quick] [--out DIR] [--soak [CYCLES]]``: run time against error, the bus against its limit.
+"""``haptic-bus bench [--quick | --smoke] [--out DIR] [--soak [CYCLES]]``: run time against error, the bus against its limit.
 
 One module per comparison (issues 6 and 14), each measured side by side in one run and quoted
 as a ratio (absolute times are printed, never asserted); every timing is a median with its
@@ -18,10 +18,10 @@ min-max over at least 5 repeats (:mod:`~haptic_bus.bench.timing`):
 5. :mod:`~haptic_bus.bench.bus_limit` -- bits per cycle per axis, bus load, axes that fit.
 6. :mod:`~haptic_bus.bench.realtime` -- ``T = 1 ms`` with the real clock, two processes: lateness
    and the controller's share of a core in three set-ups, quiet and beside a CPU hog.
-7. :mod:`~haptic_bus.bench.startup` -- ``check --json``, ``profiles list``, ``--help`` against
+7. :mod:`~haptic_bus.bench.startup` -- ``check --json``, ``--help`` and (full run) ``profiles list`` against
    ``python -c "import numpy"``.
 8. :mod:`~haptic_bus.bench.soak` -- cycles in virtual time (``--soak [CYCLES]``: 10^7; otherwise
-   10^5 quick, 10^6 full): the integer position sum exact, memory flat.
+   5 x 10^4 quick, 2 x 10^3 smoke, 10^6 full): the integer position sum exact, memory flat.
 9. :mod:`~haptic_bus.bench.space_scene_cost` -- a scene in space (plane, boxes, spheres): seconds
    per ``force()`` call for 1..10 000 objects beside the 1-D scene's.
 
@@ -29,9 +29,14 @@ Above the sections, issue 14's "Done when" (:mod:`~haptic_bus.bench.targets`): o
 with the measured figure, its spread, the target and PASS/FAIL, all from this one run.
 
 Writes ``DIR/bench.json`` (every figure, the machine, versions, date), ``DIR/bench.md`` (the
-tables, also printed) and PNG plots.  ``--quick`` (what CI runs) keeps to a few minutes on a
-2-core machine; the full run takes longer and shows a progress bar on stderr.  Ctrl-C ends the
-run: what finished is written and printed, one line on stderr says where it stopped, exit 130.
+tables, also printed) and PNG plots.  Three sizes (:mod:`~haptic_bus.bench.size`): the full run,
+``--quick`` (what CI runs: every section, fewer points and shorter runs) and ``--smoke`` (what the
+test suite runs: every section at its smallest, figures that only show the bench works); a
+progress bar on stderr.  Ctrl-C ends the run: what finished is written and printed, one line on
+stderr says where it stopped, exit 130.
+
+Before any work: the packages of the ``[bench]`` extra (:data:`BENCH_EXTRA`) are there and the
+output folder is writable, else one line on stderr and exit 2.
 """
 
 from __future__ import annotations
@@ -48,12 +53,16 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from haptic_bus.bench.size import FULL, QUICK, SMOKE, Size
 from haptic_bus.bench.timing import machine
 
-SECTIONS = ("passivity", "plant", "scene", "space", "loop", "bus", "realtime", "startup", "soak")
-# progress ticks each section makes (quick, full): for the bar's total
-_TICKS = {"passivity": (7, 17), "plant": (15, 17), "scene": (5, 5), "space": (5, 5), "loop": (6, 6), "bus": (2, 2),
-          "realtime": (6, 6), "startup": (3, 3), "soak": (10, 10)}
+SECTIONS = ("passivity", "plant", "scene", "space", "loop", "bus", "realtime", "startup", "soak", "layer")
+# progress ticks each section makes (smoke, quick, full): for the bar's total
+_TICKS = {"passivity": (5, 7, 17), "plant": (7, 15, 17), "scene": (5, 5, 5), "space": (5, 5, 5), "loop": (6, 6, 6),
+          "bus": (2, 2, 2), "realtime": (3, 6, 6), "startup": (1, 2, 3), "soak": (10, 10, 10),
+          "layer": (1, 9, 9)}
+BENCH_EXTRA = {"control": "control", "mpmath": "mpmath"}  # import name -> distribution: pyproject's [bench] extra
+SMOKE_SOAK_CYCLES = 2_000
 
 
 class Progress:
@@ -115,23 +124,30 @@ def _runner(name: str) -> Callable[..., dict]:
 
     module = {"passivity": "passivity", "plant": "plant_sim", "scene": "scene_cost", "space": "space_scene_cost",
               "loop": "loop_rate",
-              "bus": "bus_limit", "realtime": "realtime", "startup": "startup"}[name]
+              "bus": "bus_limit", "realtime": "realtime", "startup": "startup", "layer": "layer_cost"}[name]
     return import_module(f"haptic_bus.bench.{module}").run
 
 
 def _soak_runner(cycles: int | None) -> Callable[..., dict]:
-    def run(quick: bool, tick: Callable[[str], None]) -> dict:
+    def run(size: Size, tick: Callable[[str], None]) -> dict:
         from haptic_bus.bench.soak import FULL_CYCLES, QUICK_CYCLES
         from haptic_bus.bench.soak import run as soak
 
-        return soak(cycles or (QUICK_CYCLES if quick else FULL_CYCLES), tick)
+        return soak(cycles or size.pick(SMOKE_SOAK_CYCLES, QUICK_CYCLES, FULL_CYCLES), tick)
 
     return run
 
 
-def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
+def missing_packages() -> list[str]:
+    """The distributions of the ``[bench]`` extra that cannot be imported here (found, not imported: seconds)."""
+    from importlib.util import find_spec
+
+    return [distribution for module, distribution in BENCH_EXTRA.items() if find_spec(module) is None]
+
+
+def run_bench(out_dir: str | Path, size: Size = FULL, progress: bool = False,
               sections: Sequence[str] = SECTIONS, soak: int | None = None) -> dict:
-    """Run the benchmark sections (the soak of ``soak`` cycles, default by ``quick``); write
+    """Run the benchmark sections at ``size`` (the soak of ``soak`` cycles, default by ``size``); write
     ``bench.json``, ``bench.md`` and PNGs into ``out_dir``.
 
     Returns the result dictionary (the content of ``bench.json``).  A section that cannot
@@ -141,11 +157,12 @@ def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     runners = {name: _soak_runner(soak) if name == "soak" else _runner(name) for name in dict.fromkeys(sections)}
-    bar = Progress(sum(_TICKS[s][0 if quick else 1] for s in runners), progress)
+    bar = Progress(sum(_TICKS[s][size.pick(0, 1, 2)] for s in runners), progress)
     started = time.perf_counter()
-    result: dict = {"command": "haptic-bus bench" + (" --quick" if quick else "") + (f" --soak {soak:.0e}" if soak else "")
+    flag = size.pick(" --smoke", " --quick", "")
+    result: dict = {"command": "haptic-bus bench" + flag + (f" --soak {soak:.0e}" if soak else "")
                     + "".join(f" --only {s}" for s in sections if set(sections) != set(SECTIONS)),
-                    "quick": quick, "machine": machine(), "sections": {}}
+                    "size": size.name, "quick": size is not FULL, "machine": machine(), "sections": {}}
     with Interrupts() as interrupts:
 
         def tick(label: str) -> None:
@@ -156,7 +173,7 @@ def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
             for name, runner in runners.items():
                 t0 = time.perf_counter()
                 try:
-                    section = runner(quick, tick)
+                    section = runner(size, tick)
                     section.setdefault("available", True)
                     interrupts.check()
                 except KeyboardInterrupt:  # Ctrl-C: what ran so far is still written
@@ -192,13 +209,17 @@ def _json_default(value):
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``haptic-bus bench``."""
     parser = argparse.ArgumentParser(prog="haptic-bus bench", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="the short run CI uses (about a minute)")
+    sizes = parser.add_mutually_exclusive_group()
+    sizes.add_argument("--quick", action="store_const", dest="size", const=QUICK, default=FULL,
+                       help="the short run CI uses: every section, fewer points, shorter runs")
+    sizes.add_argument("--smoke", action="store_const", dest="size", const=SMOKE,
+                       help="every section at its smallest, seconds: the figures only show that the bench runs")
     parser.add_argument("--out", default="bench-out", help="output folder (default: ./bench-out)")
     parser.add_argument("--only", action="append", choices=SECTIONS, help="run only this section (repeatable)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     parser.add_argument("--soak", type=_cycles, nargs="?", const=10_000_000, metavar="CYCLES",
                         help="the soak's cycles in virtual time (exact position sum, flat memory): CYCLES, 10^7 "
-                             "without a number; default 10^5 with --quick, else 10^6")
+                             "without a number; default 5e4 with --quick, 2e3 with --smoke, else 10^6")
     return parser
 
 
@@ -212,15 +233,36 @@ def _cycles(text: str) -> int:
     return value
 
 
+def _refusal(args: argparse.Namespace) -> str | None:
+    """Why the bench cannot start (a missing package of the [bench] extra, an unwritable --out), or None."""
+    from drives.errors import ParameterError
+    from haptic_bus.validation import writable_folder
+
+    missing = missing_packages()
+    if missing:
+        return (f"the [bench] extra is missing: {', '.join(missing)}; install it with: pip install 'haptic_bus[bench]' "
+                "(from a checkout: pip install -e '.[bench]')")
+    try:
+        writable_folder("--out", args.out, context="bench")
+    except ParameterError as error:
+        return str(error)
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``haptic-bus bench``; print the tables; exit 0 (2 for bad arguments)."""
+    """Run ``haptic-bus bench``; print the tables; exit 0 (2 for bad arguments, a missing package
+    of the [bench] extra or an unwritable --out, each one line on stderr)."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
+    refusal = _refusal(args)
+    if refusal is not None:
+        print(f"haptic-bus bench: error: {refusal}", file=sys.stderr)
+        return 2
     try:
-        result = run_bench(args.out, quick=args.quick, progress=not args.no_progress, sections=args.only or SECTIONS,
+        result = run_bench(args.out, size=args.size, progress=not args.no_progress, sections=args.only or SECTIONS,
                            soak=args.soak)
         print((Path(args.out) / "bench.md").read_text())
         print(f"wrote {Path(args.out) / 'bench.json'}, {Path(args.out) / 'bench.md'}"

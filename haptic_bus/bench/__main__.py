@@ -1,4 +1,4 @@
-"""``python -m haptic_bus.bench [--quick] [--out DIR]``: the same as ``haptic-bus bench``."""
+"""``python -m haptic_bus.bench [--quick | --smoke] [--out DIR]``: the same as ``haptic-bus bench``."""
 
 import sys
 

@@ -42,6 +42,7 @@ from drives.cia402 import (
 )
 from haptic_bus.analysis.can_timing import LOAD_CEILING, axes_that_fit, cycle_bits, frame_bits
 from haptic_bus.app.rig import BusLoadMeter
+from haptic_bus.bench.size import Size
 
 BITRATES = (125_000, 500_000, 1_000_000)
 PERIOD = 1e-3
@@ -95,7 +96,7 @@ def measured_bits_per_cycle(tpdo_objects: Sequence[ObjectSpec], cycles: int = 20
     return float(np.median(counts))
 
 
-def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
+def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 5; returns its section of ``bench.json``."""
     mappings = {name: mapping_budget(name) for name in MAPPINGS}
     table = []
@@ -119,7 +120,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
                                ("with position (0x6041 + 0x606C + 0x6064)", DEFAULT_TPDO_WITH_POSITION)):
             tpdo = _frame_bytes(objects)
             measured[label] = {"model_bits": frame_bits(0) + cycle_bits(tpdo + _frame_bytes(MAPPINGS["minimal"]["rpdo"])),
-                               "meter_bits_median": measured_bits_per_cycle(objects, 100 if quick else 1000)}
+                               "meter_bits_median": measured_bits_per_cycle(objects, size.pick(20, 100, 1000))}
     except Exception as exc:
         measured = {"available": False, "reason": f"{type(exc).__name__}: {exc}"}
     tick("bus: measured")

@@ -25,6 +25,7 @@ import numpy as np
 from drives.safety import DEFAULT_SAFETY
 from haptic_bus.app.profiles import load_profile, shipped_profiles
 from haptic_bus.app.rig import simulated_canopen
+from haptic_bus.bench.size import Size
 from haptic_bus.control.clock import ScheduledClock, VirtualClock, adversarial_starts
 from haptic_bus.control.controller import WallController, encoder_origin
 from haptic_bus.control.passivity_layer import LAYER_MODES, LayerPolicy
@@ -67,11 +68,11 @@ def measure(profile_name: str, layer: str, adversarial: bool, seconds: float) ->
             "least_energy": float(least), "cycles": summary.cycles}
 
 
-def run(quick: bool, tick: Callable[[str], None], profiles: Sequence[str] | None = None) -> dict[str, Any]:
-    """Every shipped profile x {nominal, adversarial} x every layer (``quick``: 2 s each, else 10 s)."""
-    seconds = 2.0 if quick else 10.0
+def run(size: Size, tick: Callable[[str], None] = lambda _: None, profiles: Sequence[str] | None = None) -> dict[str, Any]:
+    """Every shipped profile (smoke: one) x {nominal, adversarial} x every layer, 0.2 / 2 / 10 s each."""
+    seconds = size.pick(0.2, 2.0, 10.0)
     rows = []
-    for name in profiles or sorted(shipped_profiles()):
+    for name in profiles or size.pick(["cia402-handle"], sorted(shipped_profiles()), sorted(shipped_profiles())):
         for adversarial in (False, True):
             for layer in LAYER_MODES:
                 rows.append({"profile": name, "timing": "adversarial" if adversarial else "nominal", "layer": layer,

@@ -32,6 +32,7 @@ import numpy as np
 
 from drives.base import Drive
 from haptic_bus.app.profiles import Profile, load_profile
+from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import REPEATS, Spread, paired, repeated, timed_once
 from haptic_bus.control.clock import VirtualClock
 from haptic_bus.control.controller import WallController
@@ -154,11 +155,11 @@ def modbus_tcp(profile: Profile, cycles: int) -> dict:
     return result
 
 
-def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
+def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 4; returns its section of ``bench.json`` (a failing link is reported, not raised)."""
     from haptic_bus.bench.hot_path import bench_pdo_codecs
 
-    cycles = 2_000 if quick else 20_000
+    cycles = size.pick(300, 500, 20_000)
     profile = load_profile(PROFILE)
     links: dict[str, dict] = {}
     trajectories: dict[str, np.ndarray] = {}
@@ -180,7 +181,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
         tick(f"loop: {label}")
     floor = against_echo_floor(profile, cycles)
     tick("loop: lock-step against the echo floor")
-    codec = bench_pdo_codecs(frames=5_000 if quick else 20_000, repeat=REPEATS)
+    codec = bench_pdo_codecs(frames=size.pick(500, 5_000, 20_000), repeat=REPEATS)
     tick("loop: PDO codecs")
     base = links["lockstep"].get("controller_cycles_per_s")
     for entry in links.values():

@@ -4,9 +4,10 @@ Parameter points: a seeded set of realistic loops, ``T = 1 ms``, ``m`` log-unifo
 0.02..2 kg, ``c = bT/m`` log-uniform in 1e-4..1, delay ``d`` alternating 0 and 1, ``B`` a
 random fraction (5-50 %) of the largest passive ``B`` without a spring and ``K`` a random
 fraction of the largest passive ``K`` at that ``B``; 8 points (``--quick``: 3 of them, a flip,
-an interior tangency and a low-frequency boundary).  At each point two boundaries: the largest
-passive ``K`` at the point's ``B`` and the largest passive ``B`` at its ``K``, each against the
-40-digit reference of :mod:`haptic_bus.bench.mp_boundary`.
+an interior tangency and a low-frequency boundary, and grids up to 10^5; ``--smoke``: 2, grids
+10^2 and 10^3).  At each point two boundaries: the largest passive ``K`` at the point's ``B`` and
+the largest passive ``B`` at its ``K``, each against the 40-digit reference of
+:mod:`haptic_bus.bench.mp_boundary`.
 
 Methods (a *check* is one verdict on one loop, its time the median of repeats):
 
@@ -61,6 +62,7 @@ from haptic_bus.analysis.limits import max_damping, max_stiffness, passive_limit
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import phi1
 from haptic_bus.analysis.poles import is_stable
+from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import Spread, paired_calls, time_per_call
 
 SEED = 20240606
@@ -69,6 +71,7 @@ GRID_SIZES_FULL = (100, 1_000, 10_000, 100_000, 1_000_000)
 CONTROL_GRID = 10_000
 FULL_POINTS = 8
 QUICK_POINTS = (0, 1, 5)  # of the full set: a flip (d = 0), an interior tangency and a theta -> 0 boundary (d = 1)
+SMOKE_POINTS = (0, 5)  # one with d = 0 (the closed form applies), one with d = 1 (the full check)
 ERROR_FLOOR = 1e-17  # plotted instead of an error of exactly 0
 FULL_CHECK_RATIO_TARGET = 5.0  # issue 14: a full check at delay 1 within 5 x one 10^4-point numpy T_fund
 FULL_CHECK_ERROR_TARGET = 1e-12  # issue 14: its boundaries within 1e-12 of the 40-digit reference
@@ -257,19 +260,19 @@ def full_check_against_floor(loops: list[WallLoop]) -> dict:
                     "is T_fund on 10^4 uniform theta points in plain numpy (DESIGN 3.2, point sampling, whole delay)"}
 
 
-def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
+def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 1; returns its section of ``bench.json``."""
     from haptic_bus.bench.mp_boundary import reference_boundary
 
-    try:
-        importlib.import_module("control")
-        with_control, control_note = True, None
+    try:  # seconds to import: not for the smoke
+        with_control, control_note = size.pick(False, True, True), size.pick("python-control: not in the smoke run", None, None)
+        if with_control:
+            importlib.import_module("control")
     except ImportError as exc:
         with_control, control_note = False, f"python-control not installed ({exc}); pip install 'haptic_bus[bench]'"
     points = parameter_points(FULL_POINTS)
-    if quick:
-        points = [points[i] for i in QUICK_POINTS]
-    grid_sizes = GRID_SIZES_FULL
+    points = [points[i] for i in size.pick(SMOKE_POINTS, QUICK_POINTS, range(FULL_POINTS))]
+    grid_sizes = size.pick(GRID_SIZES_FULL[:2], GRID_SIZES_FULL[:4], GRID_SIZES_FULL)
     methods = _methods(grid_sizes, with_control)
     per_point: list[dict[str, Any]] = []
     times: dict[str, list[Spread]] = {m.key: [] for m in methods}

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from haptic_bus.analysis.plant import ExactPlant
+from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import time_per_call
 
 M, B_FRICTION, T = 0.032, 3.62, 1e-3
@@ -171,12 +172,12 @@ def trajectory_error(run: tuple[np.ndarray, np.ndarray], ref: tuple[np.ndarray, 
     return float(max(np.max(np.abs(v - v_ref)) / np.max(np.abs(v_ref)), np.max(np.abs(p - p_ref)) / np.max(np.abs(p_ref))))
 
 
-def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
+def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 2; returns its section of ``bench.json``."""
     s = Scenario()
     ref = mp_reference(s)
-    substeps = (1, 10, 100, 1000)
-    tolerances = (1e-3, 1e-6, 1e-9) if quick else (1e-3, 1e-6, 1e-9, 1e-12)
+    substeps = size.pick((1, 10), (1, 10, 100, 1000), (1, 10, 100, 1000))
+    tolerances = size.pick((1e-3,), (1e-3, 1e-6, 1e-9), (1e-3, 1e-6, 1e-9, 1e-12))
     cases: list[tuple[str, str, float, Stepper]] = [("exact ZOH", "exact", 1, exact_stepper(s))]
     cases += [(f"Euler x{n}", "euler", n, euler_stepper(s, n)) for n in substeps]
     cases += [(f"RK4 x{n}", "rk4", n, rk4_stepper(s, n)) for n in substeps]

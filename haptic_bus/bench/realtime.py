@@ -2,7 +2,9 @@
 
 ``haptic-bus run``'s own session (:func:`haptic_bus.app.runner.run_canopen`, the ``cia402-handle``
 profile, supervisor, heartbeat and SDO server included) against ``python -m sim_drive`` on
-udp_multicast, in three set-ups of the control thread (:mod:`haptic_bus.app.realtime`):
+udp_multicast (one simulator for every run of the section: an operator's hand holds the handle
+1.5 mm inside the wall, so each run starts in contact and ramps the wall in), in three set-ups of
+the control thread (:mod:`haptic_bus.app.realtime`):
 
 * **untuned** -- as before issue 14: the OS defaults (timer slack 50 us, GIL switch interval
   5 ms, the collector on) and a 200 us final spin;
@@ -10,7 +12,8 @@ udp_multicast, in three set-ups of the control thread (:mod:`haptic_bus.app.real
   collector frozen and kept to the clock's slack, switch interval 50 us;
 * **--realtime** -- the default plus SCHED_FIFO 80, one CPU and ``mlockall``;
 
-each once on a quiet machine and once beside a CPU hog (one busy process per CPU).  The
+each once on a quiet machine and once beside a CPU hog (one busy process per CPU); ``--smoke``
+runs untuned and default quiet and default beside the hog, 0.3 s each (``--quick`` 1 s, full 15 s).  The
 simulated drive stands in for hardware: its threads are raised to SCHED_FIFO 70 where allowed
 (said in the output), so that the hog slows the controller, not the drive's answers.
 
@@ -26,6 +29,7 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import subprocess
 import tempfile
 import threading
 from collections.abc import Callable
@@ -36,6 +40,7 @@ import numpy as np
 
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.realtime import RealtimeSettings, realtime_session
+from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import Spread
 from haptic_bus.control.clock import RealClock
 
@@ -46,6 +51,9 @@ FIRST_CYCLES = 50
 SIM_PRIORITY = 70
 CORE_TARGET = 0.12  # issue 14: the controller at T = 1 ms within 0.12 of a core
 SETUPS = {"untuned": RealtimeSettings.untuned(), "default": RealtimeSettings(), "--realtime": RealtimeSettings.privileged()}
+RUNS = {"quiet": tuple(SETUPS), "CPU hog": tuple(SETUPS)}  # load -> the set-ups run under it
+SMOKE_RUNS = {"quiet": ("untuned", "default"), "CPU hog": ("default",)}  # what the targets need, and one hogged run
+HAND = "hand:300,5,0.0045"  # the simulated operator: a hand spring (N/m, N s/m) towards 4.5 mm, 1.5 mm inside the wall
 _POLICIES = {getattr(os, n): n for n in ("SCHED_OTHER", "SCHED_FIFO", "SCHED_RR", "SCHED_BATCH", "SCHED_IDLE")
              if hasattr(os, n)}
 
@@ -152,17 +160,18 @@ class ThreadCpu:
         return {k: round(v, 3) for k, v in sorted(out.items(), key=lambda kv: -kv[1])}
 
 
-def controller_run(settings: RealtimeSettings, duration: float) -> dict:
-    """One ``haptic-bus run`` session against a fresh simulated drive in another process."""
+def controller_run(settings: RealtimeSettings, duration: float, bus: dict, process: subprocess.Popen) -> dict:
+    """One ``haptic-bus run`` session against the simulated drive ``process`` on ``bus``, started in contact."""
     from haptic_bus.app.runner import RunOptions, run_canopen
-    from haptic_bus.bench.processes import boost, canopen_simulator
+    from haptic_bus.bench.processes import boost
 
     profile = load_profile(PROFILE)
-    with canopen_simulator(PROFILE, NODE_ID) as (bus, process), tempfile.TemporaryDirectory() as out:
+    with tempfile.TemporaryDirectory() as out:
         boosted = boost(process.pid, SIM_PRIORITY)
         with ThreadCpu() as threads:
             result = run_canopen(profile, bus, NODE_ID, RunOptions(duration, realtime=True, out_dir=Path(out) / "run",
-                                                                   live=False, scheduling=settings))
+                                                                   live=False, scheduling=settings, start_in_contact="ramp",
+                                                                   plots=False))
         document = json.loads((result.folder / "run.json").read_text()) if (result.folder / "run.json").exists() else {}
     figures = {"exit_reason": result.exit_reason, "error": result.error, "thread_cpu_s": threads.by_name(),
                "drive_boosted": boosted is None, "drive_boost_error": boosted, "scheduling": document.get("realtime")}
@@ -172,27 +181,27 @@ def controller_run(settings: RealtimeSettings, duration: float) -> dict:
     return figures
 
 
-def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
+def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 6; returns its section of ``bench.json``."""
-    from haptic_bus.bench.processes import cpu_hogs
+    from haptic_bus.bench.processes import canopen_simulator, cpu_hogs
 
-    duration = 2.0 if quick else 15.0
+    duration = size.pick(0.3, 1.0, 15.0)
     period = load_profile(PROFILE).loop.period
     hogs = os.cpu_count() or 1
     runs: dict[str, dict] = {}
-    for hogged in (False, True):
-        label = "CPU hog" if hogged else "quiet"
-        runs[label] = {}
-        for name, settings in SETUPS.items():
-            entry: dict = {}
-            try:
-                with cpu_hogs(hogs) if hogged else nullcontext():
-                    entry["controller"] = controller_run(settings, duration)
-                    entry["bare_clock"] = bare_clock(settings, period, round(duration / 2 / period))
-            except Exception as exc:
-                entry = {"available": False, "reason": f"{type(exc).__name__}: {exc}"}
-            runs[label][name] = entry
-            tick(f"real time: {name}, {label}")
+    with canopen_simulator(PROFILE, NODE_ID, "--operator", HAND) as (bus, process):
+        for label, names in size.pick(SMOKE_RUNS, RUNS, RUNS).items():
+            runs[label] = {}
+            for name in names:
+                entry: dict = {}
+                try:
+                    with cpu_hogs(hogs) if label == "CPU hog" else nullcontext():
+                        entry["controller"] = controller_run(SETUPS[name], duration, bus, process)
+                        entry["bare_clock"] = bare_clock(SETUPS[name], period, round(duration / 2 / period))
+                except Exception as exc:
+                    entry = {"available": False, "reason": f"{type(exc).__name__}: {exc}"}
+                runs[label][name] = entry
+                tick(f"real time: {name}, {label}")
     quiet = runs["quiet"]
     default, untuned = quiet["default"].get("controller", {}), quiet["untuned"].get("controller", {})
     target = {"core_share_target": CORE_TARGET}
@@ -207,8 +216,8 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
         })
     return {
         "description": f"T = {period * 1e3:g} ms with the real clock for {duration:g} s: haptic-bus run's session against "
-                       "python -m sim_drive on udp_multicast (two processes), three set-ups of the control thread, "
-                       f"quiet and beside {hogs} busy processes",
+                       f"python -m sim_drive --operator {HAND} on udp_multicast (two processes, started in contact, the "
+                       f"wall ramped in), set-ups of the control thread quiet and beside {hogs} busy processes",
         "period_s": period, "duration_s": duration, "segments": SEGMENTS, "hog_processes": hogs,
         "scheduler": scheduler_info(), "runs": runs, "target": target,
     }

@@ -29,6 +29,7 @@ from drives.base import CyclicInputs, Drive, DriveScaling
 from drives.canopen.drive import DEFAULT_RPDO
 from drives.canopen.pdo_codec import PdoCodec
 from drives.cia402 import ObjectSpec, OperationMode
+from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import REPEATS, Spread, time_per_call
 from haptic_bus.control.clock import VirtualClock
 from haptic_bus.control.controller import WallController
@@ -36,6 +37,7 @@ from haptic_bus.control.gate import DeviceLoop, GatePolicy, PassivityGate
 from haptic_bus.control.scene import CompiledScene, Detent, Wall, compile_scene
 
 SIZES = (1, 10, 100, 1_000, 10_000)
+SMOKE_SIZES = (1, 100, 1_000)  # one wall and the 1 000 objects of the target: the per-object loop costs seconds at 10 000
 STIFFNESS, DAMPING = 1500.0, 10.0
 SPAN = 0.02  # m the detents occupy
 SCALING = DriveScaling(velocity_per_count=1.1984224905356573e-07, position_per_count=1.1984224905356573e-07,
@@ -51,7 +53,9 @@ class CannedDrive(Drive):
 
     def __init__(self, velocities: list[int], scaling: DriveScaling = SCALING) -> None:
         self.scaling = scaling
-        self._inputs = [CyclicInputs(0x0237, v) for v in velocities]
+        counts_per_step = DEVICE.T * scaling.velocity_per_count / scaling.position_per_count  # 0x6064 per 0x606C*T
+        positions = np.round(np.cumsum(velocities) * counts_per_step).astype(int).tolist()
+        self._inputs = [CyclicInputs(0x0237, v, p) for v, p in zip(velocities, positions)]  # the port observer reads 0x6064
         self._next = 0
         codec = PdoCodec(DEFAULT_RPDO, name="RPDO1")
         self._pack_into = codec.struct.pack_into
@@ -152,9 +156,9 @@ def _check_same_force(compiled: CompiledScene, naive: NaiveScene) -> None:
             raise AssertionError(f"compiled and naive scenes disagree at x = {x}: {a} vs {b}")
 
 
-def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
+def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 3; returns its section of ``bench.json``."""
-    cycles = 5_000 if quick else 40_000
+    cycles = size.pick(500, 2_000, 40_000)
     velocities = canned_velocities(cycles)
     xs = [float(x) for x in np.linspace(-0.021, 0.003, 257)]
     rows: list[dict[str, Any]] = []
@@ -165,7 +169,7 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
             force(x, 0.01)
 
     controller_compute(compile_scene(scene_objects(1)), velocities, min(cycles, 2_000))  # warm-up, discarded
-    for n in SIZES:
+    for n in size.pick(SMOKE_SIZES, SIZES, SIZES):
         compiled = compile_scene(scene_objects(n))
         naive = NaiveScene(compiled)
         _check_same_force(compiled, naive)

@@ -30,7 +30,7 @@ from haptic_bus.control.controller import WallController
 
 PROFILE = "cia402-handle"
 CYCLES = 10_000_000  # --soak without a number
-QUICK_CYCLES = 100_000  # the soak of every --quick run
+QUICK_CYCLES = 50_000  # the soak of every --quick run
 FULL_CYCLES = 1_000_000  # the soak of every full run
 SAMPLES = 100  # resident-set samples over a run
 RECORD_ROWS = 200_000  # the controller's record (haptic-bus run's default), at most a tenth of a shorter run

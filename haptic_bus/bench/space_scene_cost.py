@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from haptic_bus.bench.scene_cost import SIZES, scene_objects
+from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import time_per_call
 from haptic_bus.control.scene import compile_scene
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere, compile_space_scene
@@ -80,8 +81,9 @@ def _sweep_time(force: Callable[[Any, Any], Any], points: list[Any], velocity: A
     return time_per_call(sweep, min_ns=min_ns).scaled(1.0 / len(points)).to_dict()
 
 
-def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
+def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 9; returns its section of ``bench.json``."""
+    min_ns = size.pick(100_000, 2_000_000, 2_000_000)  # ns each timing runs at least
     points = list(sweep_points())
     velocity = np.array([0.01, -0.02, -0.01])
     xs = [float(x) for x in np.linspace(-0.021, 0.003, SWEEP)]
@@ -95,8 +97,8 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
                                "grid_cells": 0 if space.grid is None else len(space.grid.members),
                                "candidates_per_call": float(np.mean([len(space.candidates(x.tolist())) for x in points])),
                                "contacts_per_call": float(np.mean([len(space.contacts(x)) for x in points])),
-                               "space_force": _sweep_time(space.force, points, velocity, 2_000_000),
-                               "line_force": _sweep_time(line.force, xs, 0.01, 2_000_000)}
+                               "space_force": _sweep_time(space.force, points, velocity, min_ns),
+                               "line_force": _sweep_time(line.force, xs, 0.01, min_ns)}
         if n <= NAIVE_UP_TO:
             naive = PerObject(space)
             for x in points:
@@ -115,6 +117,6 @@ def run(quick: bool, tick: Callable[[str], None] = lambda _: None) -> dict:
                        "uniform grid) beside the 1-D compiled scene and the 3-D objects tested one by one",
         "rows": rows,
         "note": "one call = one cycle's scene evaluation; the 1-D figures are force() alone, not benchmark 3's whole cycle",
-        "quick": quick,
+        "size": size.name,
         "sizes": list(SIZES),
     }

@@ -152,7 +152,7 @@ class WallController:
         committed = whole + self._switching
         self.hold = hold if policy.layer == "bound" and hold is not None else self.period
         scaling = drive.scaling
-        springs = [k for k in scene.stiffness if k > 0]
+        springs = [k for k, _ in scene.contacts() if k > 0]  # the summed K that can act anywhere
         cap = policy.budget_cap if policy.budget_cap is not None else default_budget_cap(
             min(force_limit, scaling.max_force), device.b, self.hold, committed, min(springs, default=0.0))
         tolerance = supervisor.observer_limit if supervisor is not None else 0.0

@@ -41,8 +41,7 @@ from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable, dat
 
 from drives.canopen.link import ReceiveErrors, shut_down
 from drives.canopen.local_node import StrictLocalNode
-from drives.canopen.sdo import SdoAccess
-from drives.errors import HapticBusError, SdoAbortError
+from drives.errors import HapticBusError
 from haptic_bus._version import __version__
 from haptic_bus.control.controller import WallController
 from haptic_bus.validation import whole_in_range
@@ -182,40 +181,3 @@ class ControllerNode:
         worst = decision.worst_margin
         self.last_result = "accepted" + ("" if worst is None else f": worst margin {worst:.4g} N s/m")
         logger.info("node %d: commit %s", self.node_id, self.last_result)
-
-
-class UploadRefused(HapticBusError):
-    """A running controller refused an upload (SDO abort ``abort_code``); ``reason`` is its 0x2002 text."""
-
-    def __init__(self, node_id: int, abort_code: int, reason: str) -> None:
-        self.node_id = node_id
-        self.abort_code = abort_code
-        self.reason = reason
-        super().__init__(f"controller node {node_id} refused the upload (abort 0x{abort_code:08X}): {reason}")
-
-
-def upload_walls(
-    bus: Mapping[str, Any], node_id: int, changes: Mapping[int, tuple[float, float]], timeout: float = 1.0
-) -> str:
-    """Write ``{object index: (K, B)}`` to a running controller and commit; return its verdict.
-
-    Raises :class:`UploadRefused` when the controller aborts a write or the commit (the gate
-    refused: 0x06090030, with the reason read from 0x2002), :class:`~drives.errors.DriveTimeout`
-    when node ``node_id`` does not answer within ``timeout`` s.
-    """
-    network = canopen.Network()
-    network.listeners.append(ReceiveErrors("upload"))  # type: ignore[arg-type]  # a can.Listener, as python-can wants
-    network.connect(**dict(bus))
-    try:
-        node = network.add_node(canopen.RemoteNode(node_id, controller_dictionary([])))
-        sdo = SdoAccess(f"controller node {node_id}", node, timeout, lambda: None)
-        try:
-            for i, (K, B) in changes.items():
-                sdo.download(WALL_BASE + i, SUB_STIFFNESS, _REAL64.pack(K))
-                sdo.download(WALL_BASE + i, SUB_DAMPING, _REAL64.pack(B))
-            sdo.download(COMMIT, 0, b"\x01")
-        except SdoAbortError as error:
-            raise UploadRefused(node_id, error.abort_code, sdo.upload(LAST_RESULT, 0).decode(errors="replace")) from None
-        return sdo.upload(LAST_RESULT, 0).decode(errors="replace")
-    finally:
-        shut_down(network, "upload")

@@ -1,0 +1,75 @@
+"""The small things of issue 20: ``--version``, python-can's ``--bus-kwargs`` beside ``--bus-option``,
+and ``report --out`` refused in one line (exit 2) before any work when it cannot be a folder."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from haptic_bus._version import __version__
+from haptic_bus.app.arguments import bus_arguments
+from haptic_bus.app.cli import build_parser, main
+
+HEARTBEAT_WAIT = 15.0  # s: the simulator subprocess imports numpy/scipy/canopen first
+
+
+def test_version(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == f"haptic-bus {__version__}\n"
+    assert main(["sim", "--version"]) == 0
+    assert capsys.readouterr().out == f"haptic-bus sim {__version__}\n"
+
+
+def test_bus_kwargs_is_bus_option_as_python_can_spells_it() -> None:
+    parser = build_parser()
+    base = ["run", "cia402-handle", "--interface", "udp_multicast", "--channel", "239.74.20.99", "--node-id", "5"]
+    spelled = bus_arguments(parser.parse_args([*base, "--bus-kwargs", "port=43113", "hop_limit=0", "--bus-kwargs", "x=a"]))
+    options = bus_arguments(parser.parse_args([*base, "--bus-option", "port=43113", "--bus-option", "hop_limit=0",
+                                               "--bus-option", "x=a"]))
+    assert spelled == options == {"interface": "udp_multicast", "channel": "239.74.20.99", "port": 43113, "hop_limit": 0,
+                                  "x": "a"}
+    both = bus_arguments(parser.parse_args([*base, "--bus-option", "port=43113", "--bus-kwargs", "port=43113"]))
+    assert both["port"] == 43113  # the same value twice is no conflict
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--bus-option", "port=1", "--bus-kwargs", "port=2"], "bus argument port = 2 is invalid; allowed: one value per key "
+                                                            "(port = 1 is given too)"),
+    (["--bus-kwargs", "channel=other"], "bus argument channel = 'other' is invalid; allowed: one value per key"),
+    (["--bus-kwargs", "port"], "argument --bus-kwargs: 'port' is not KEY=VALUE"),
+])
+def test_conflicting_bus_arguments_are_one_line_and_exit_2(argv: list[str], message: str,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["scan", "--interface", "no-such-interface", "--channel", "c", *argv]) == 2  # the bus is never opened
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err
+
+
+def test_a_scan_finds_a_drive_through_bus_kwargs(sim_process: Callable[..., Any], bus_spec: Callable[[str], Any],
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    spec = bus_spec("udp_multicast")
+    process = sim_process(*spec.sim_args(), "--node-id", "7")  # the drive's bus given with --bus-option
+    process.wait_for_line("serving on", HEARTBEAT_WAIT)
+    assert main(["scan", "--interface", spec.interface, "--channel", spec.channel, "--node-ids", "7",
+                 "--bus-kwargs", *(f"{key}={value}" for key, value in spec.extra.items())]) == 0
+    assert re.search(r"^\s+7\s+0x00020192\s+CiA-402 servo drive", capsys.readouterr().out, re.M)
+    status, log = process.stop()
+    assert status == 0, log
+
+
+@pytest.mark.parametrize("where", ["a file", "inside a file"])
+def test_report_out_that_cannot_be_a_folder_is_one_line_and_exit_2(where: str, tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("kept\n")
+    out = afile if where == "a file" else afile / "report"
+    assert main(["report", "cia402-handle", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    why = f"{afile} is a file, not a folder"  # the file in the way named, in both cases
+    assert err == (f"haptic-bus report: error: report: --out = '{out}' is invalid; allowed: a folder this user can create "
+                   f"and write ({why})\n")
+    assert afile.read_text() == "kept\n"
