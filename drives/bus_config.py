@@ -81,12 +81,17 @@ def open_bus(
     context: str | None = None,
     **kwargs: Any,
 ) -> can.BusABC:
-    """Open a python-can bus from explicit arguments and/or python-can's configuration chain."""
+    """Open a python-can bus from explicit arguments and/or python-can's configuration chain
+    (``udp_multicast``: :class:`drives.udp_multicast.FilteredMulticastBus`)."""
     import can
 
     config = resolve_bus_config(interface, channel, bitrate, config_file=config_file, context=context, **kwargs)
     where = f"bus {config.get('interface')}:{config.get('channel')}"
     try:
+        if config["interface"] == "udp_multicast":  # the same interface, its filters applied before decoding
+            from drives.udp_multicast import FilteredMulticastBus
+
+            return FilteredMulticastBus(**{key: value for key, value in config.items() if key != "interface"})
         return can.Bus(**config)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
         raise BusConfigError(where, f"cannot open the CAN bus: {exc}") from exc

@@ -169,7 +169,7 @@ def test_haptic_bus_run_under_fuzz_exits_0_or_1_with_its_record(multicast, sim_p
     rng = random.Random(SEED + 1)
     fuzzer = open_bus(interface="udp_multicast", channel=group, port=port)
     raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    raw.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
+    raw.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)  # this host only
     try:
         deadline, tpdos = time.monotonic() + 40.0, 0
         while tpdos < 500 and time.monotonic() < deadline and run.poll() is None:

@@ -75,7 +75,7 @@ def test_a_burst_of_undecodable_datagrams_does_not_silence_the_drive(multicast) 
     burst = 2 * MAX_RECEIVE_ERRORS_IN_ROW
     with CanopenSimDrive({"interface": "udp_multicast", "channel": group, "port": port}, NODE) as sim:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as raw:
-            raw.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
+            raw.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)  # this host only
             for n in range(burst):
                 raw.sendto(_undecodable_datagram(0x600 + NODE if n % 2 else 0x000), (group, port))
         deadline = time.monotonic() + 5 * WAIT

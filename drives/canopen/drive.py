@@ -88,8 +88,9 @@ class CanopenDrive(Cia402Master):
     ``eds``: the drive's EDS (path or object dictionary); None (default) uses the standard
     CiA-301/402 dictionary.  ``period`` (s) is the cycle time written to 0x1006.
     ``tpdo_objects`` are the objects the drive sends each cycle, in order, packed into
-    TPDO1.. (8 bytes each; must hold 0x6041 and 0x606C; with 0x6064,
-    :data:`DEFAULT_TPDO_WITH_POSITION`, position travels in TPDO2); the RPDO carries 0x6040 +
+    TPDO1.. (8 bytes each; must hold 0x6041 and 0x606C; the default,
+    :data:`DEFAULT_TPDO_WITH_POSITION`, adds 0x6064 in TPDO2: the controller's port observer
+    needs it; :data:`DEFAULT_TPDO` leaves it out); the RPDO carries 0x6040 +
     0x6071.  That is the plan for a drive whose PDOs allow it: connect() reads what the drive
     has and, where its mapping records hold fewer entries or it refuses a mapping, splits the
     objects further or takes its default mapping (:mod:`drives.canopen.pdo_plan`;
@@ -125,7 +126,7 @@ class CanopenDrive(Cia402Master):
         bus_kwargs: dict[str, Any] | None = None,
         eds: str | os.PathLike[str] | od.ObjectDictionary | None = None,
         period: float = 0.001,
-        tpdo_objects: Sequence[ObjectSpec | int] = DEFAULT_TPDO,
+        tpdo_objects: Sequence[ObjectSpec | int] = DEFAULT_TPDO_WITH_POSITION,
         scaling: Any = None,
         scaling_source: str = "caller",
         rx_mode: str = "direct",

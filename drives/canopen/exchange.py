@@ -123,7 +123,7 @@ class CanopenExchange:
     def begin(self) -> None:
         """Enter the cyclic phase (direct: pause canopen's notifier; listener: subscribe the TPDOs)."""
         if self.rx_mode == "direct":
-            self.link.read_directly()
+            self.link.read_directly(frozenset(self.tpdo_cobs))
         elif not self._subscribed and self.link.network is not None:
             for cob in self.tpdo_cobs:
                 self.link.network.subscribe(cob, self._on_tpdo)

@@ -24,6 +24,7 @@ import canopen
 
 from drives.bus_config import open_bus
 from drives.errors import DriveError
+from drives.udp_multicast import standard_filters
 
 logger = logging.getLogger(__name__)
 
@@ -112,8 +113,11 @@ class NetworkLink:
         self.bus = network.bus
         return network
 
-    def read_directly(self) -> None:
-        """Pause canopen's notifier: from now on the caller reads the bus itself."""
+    def read_directly(self, wanted: frozenset[int] = frozenset()) -> None:
+        """Pause canopen's notifier: from now on the caller reads the bus itself.  On a bus the link
+        opened, receive only the standard identifiers ``wanted`` and those canopen subscribes to
+        (python-can's filters: on ``udp_multicast`` applied before a frame is decoded, on SocketCAN
+        in the kernel); a bus the caller gave is left as it is."""
         if self.direct or self.network is None:
             return
         notifier = self.network.notifier
@@ -122,14 +126,23 @@ class NetworkLink:
         failure = self.receive_failure()
         if failure is not None:
             raise DriveError(self.name, f"CAN receive failed: {failure!r}")
+        if self._owns_bus and self.bus is not None:
+            self.bus.set_filters(standard_filters(wanted | set(self.network.subscribers)))
         self.direct = True
 
     def read_by_notifier(self) -> None:
-        """Give the bus back to a fresh canopen notifier (SDO needs it)."""
+        """Give the bus back to a fresh canopen notifier (SDO needs it), every frame received again."""
         if not self.direct or self.network is None:
             return
         self.direct = False
+        if self._owns_bus and self.bus is not None:
+            self.bus.set_filters(None)
         _restart_notifier(self.network)
+
+    @property
+    def _owns_bus(self) -> bool:
+        """Whether the link opened the bus (then its receive filters are the link's to set)."""
+        return self._given_bus is None and self._given_network is None
 
     def receive_failure(self) -> BaseException | None:
         """The first exception the notifier's receive raised, if one did."""

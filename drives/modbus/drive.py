@@ -92,7 +92,7 @@ class ModbusDrive(Cia402Master):
     ``unit_id``: the Modbus unit (device id) 0..247; ``timeout`` (s): answer timeout of every
     request (also the TCP connect timeout); ``word_order``: of 32/64-bit values ("big" = high
     word first); ``cycle``: "split" or "fc23" (module docstring); ``with_position``: read
-    0x6064 each cycle; ``scaling``: the caller's :class:`DriveScaling`, whose fields are
+    0x6064 each cycle (the default: the controller's port observer needs it); ``scaling``: the caller's :class:`DriveScaling`, whose fields are
     replaced by 0x6076/0x6072 and the manufacturer scaling registers where the drive has them;
     ``state_timeout`` (s): per state-machine step; ``check_identity``: verify the map identity
     register (catches a word-order mismatch).  RTU: ``baudrate``, ``parity``, ``stopbits``,
@@ -110,7 +110,7 @@ class ModbusDrive(Cia402Master):
         timeout: float = 0.1,
         word_order: str = "big",
         cycle: str = "split",
-        with_position: bool = False,
+        with_position: bool = True,
         scaling: DriveScaling | None = None,
         state_timeout: float = 1.0,
         check_identity: bool = True,

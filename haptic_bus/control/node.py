@@ -39,9 +39,12 @@ import canopen
 from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable, datatypes
 
+from drives.bus_config import open_bus
 from drives.canopen.link import ReceiveErrors, shut_down
 from drives.canopen.local_node import StrictLocalNode
+from drives.cia301 import NMT_COB_ID, SDO_RX_BASE
 from drives.errors import HapticBusError
+from drives.udp_multicast import standard_filters
 from haptic_bus._version import __version__
 from haptic_bus.control.controller import WallController
 from haptic_bus.validation import whole_in_range
@@ -124,7 +127,11 @@ class ControllerNode:
         """Open the bus and answer SDO requests (in canopen's notifier thread, which a receive
         error does not end: it is counted and logged)."""
         self._network.listeners.append(ReceiveErrors(f"controller node {self.node_id}"))  # type: ignore[arg-type]  # a can.Listener, as python-can wants
-        self._network.connect(**self._bus_config)
+        bus = self._network.bus = open_bus(**self._bus_config)
+        # SDO requests to this node and NMT commands only: on udp_multicast the other frames of a
+        # 1 kHz loop are dropped before they are decoded (drives.udp_multicast), not in this process's Python
+        bus.set_filters(standard_filters({SDO_RX_BASE + self.node_id, NMT_COB_ID}))
+        self._network.connect()
         self._network.add_node(self._node)
         self._node.nmt.state = "OPERATIONAL"
 
