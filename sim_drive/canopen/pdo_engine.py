@@ -106,7 +106,10 @@ class PdoEngine:
         for channel, data in self._pending:
             self._apply(channel, data)
         self._pending.clear()
-        self.drive.sync(None if self.sync_clock is None else self.sync_clock(timestamp))
+        if self.sync_clock is None:
+            self.drive.sync()
+        else:
+            self.drive.sync(self.sync_clock(timestamp))
         if not operational:
             return
         counts = self._sync_counts

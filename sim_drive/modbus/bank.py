@@ -150,7 +150,10 @@ class RegisterBank:
                 logger.warning("%s: write of %s refused: %s", drive.name, spec.label, exc)
                 return ExcCodes.ILLEGAL_VALUE if exc.reason == "range" else ExcCodes.ILLEGAL_ADDRESS
         if address <= OUTPUT_BLOCK and address + len(values) >= OUTPUT_BLOCK + OUTPUT_BLOCK_COUNT:
-            drive.sync(None if self.sync_clock is None else self.sync_clock(time.time()))
+            if self.sync_clock is None:
+                drive.sync()
+            else:
+                drive.sync(self.sync_clock(time.time()))
             self.cycles += 1
         return 0
 
