@@ -58,7 +58,8 @@ Fixtures
     ``duration``: s of virtual time (``realtime=True``: of wall clock); ``out_dir``: the run's
     folder (None: a fresh temporary one).  ``run.wait(timeout=120)`` lets it end by itself,
     ``run.stop(timeout=30)`` ends it at the next cycle, both return the :class:`RecordedRun`
-    of its folder; ``run.wait_cycling(timeout=30)`` blocks until its SYNC is on the bus.
+    of its folder; ``run.wait_cycling(timeout=30)`` blocks until it cycles (the drive, enabled,
+    has answered its first cycle).
     Teardown stops every run still going (before the drives stop).
 
 ``recorded_run``

@@ -26,8 +26,8 @@ if TYPE_CHECKING:
 
 RUN_WAIT = 120.0  # s of wall clock: the longest :meth:`ControllerRun.wait` waits for a run to end by itself
 STOP_WAIT = 30.0  # s of wall clock: the longest a run is given to end once asked to stop
-CYCLING_WAIT = 30.0  # s of wall clock: the longest :meth:`ControllerRun.wait_cycling` waits for the first SYNC
-SYNC_COB_ID = 0x080  # CiA 301: the SYNC the controller produces every cycle
+CYCLING_WAIT = 30.0  # s of wall clock: the longest :meth:`ControllerRun.wait_cycling` waits for the first cycle
+ENABLED_ANSWERS = 2  # TPDOs in OPERATION ENABLED that prove a cycle: the enable walk's last, then the first cycle's
 
 
 class ControllerRun:
@@ -84,19 +84,27 @@ class ControllerRun:
         return self._ended()
 
     def wait_cycling(self, timeout: float = CYCLING_WAIT) -> None:
-        """Block until the controller's SYNC is heard on the drive's bus (it cycles), at most
-        ``timeout`` s.  AssertionError if the run ends first (give the run a ``duration`` long
-        enough to be seen, and :meth:`stop` it)."""
+        """Block until the controller cycles, at most ``timeout`` s: the drive's TPDO1 (statusword
+        first) has reported OPERATION ENABLED twice, the enable walk's last exchange and the first
+        cycle's, so the record will hold at least one cycle.  AssertionError if the run ends
+        first (give the run a ``duration`` long enough to be seen, and :meth:`stop` it)."""
+        from drives.cia301 import TPDO_BASES
+        from drives.cia402 import State, decode_statusword
+
+        tpdo1, enabled = TPDO_BASES[0] + self.node.node_id, 0
         deadline = time.monotonic() + timeout
         with self.node.spec.open() as bus:
             while time.monotonic() < deadline:
                 message = bus.recv(0.1)
-                if message is not None and message.arbitration_id == SYNC_COB_ID:
-                    return
+                if message is not None and message.arbitration_id == tpdo1 and len(message.data) >= 2:
+                    statusword = int.from_bytes(message.data[:2], "little")
+                    enabled += decode_statusword(statusword) is State.OPERATION_ENABLED
+                    if enabled >= ENABLED_ANSWERS:
+                        return
                 if not self.running:
                     reason = self.result.exit_reason if self.result is not None else repr(self.failure)
-                    raise AssertionError(f"the controller's run ended ({reason}) before its SYNC was heard")
-        raise AssertionError(f"no SYNC from the controller within {timeout} s on {self.node.spec}")
+                    raise AssertionError(f"the controller's run ended ({reason}) before it was seen cycling")
+        raise AssertionError(f"the drive did not answer a cycle in OPERATION ENABLED within {timeout} s on {self.node.spec}")
 
     def _ended(self) -> RecordedRun:
         if self.failure is not None:
