@@ -8,12 +8,13 @@ the package is importable but not installed.  A complete test::
     import pytest
 
     def test_the_end_stop_holds_a_steady_push(haptic_sim, haptic_controller):
+        # the hardware is heavier and more damped than the profile says; a hand pushes 3 N into the wall
         drive = haptic_sim("cia402-handle", mass=1.4, friction=24.0, operator={"model": "constant", "level": 3.0})
-        run = haptic_controller("cia402-handle", drive, duration=1.0).wait()
+        run = haptic_controller("cia402-handle", drive, duration=1.0).wait()  # 1 s of virtual time
         assert run.exit_reason == "completed"
-        assert run.record["energy_j"].min() >= 0.0
-        depth = run.record["position_m"][-100:].mean() - 0.003
-        assert depth == pytest.approx(3.0 / 1500.0, rel=0.02)
+        assert run.record["energy_j"].min() >= 0.0  # the port never gave the hand energy
+        depth = run.record["position_m"][-100:].mean() - 0.003  # the wall's surface is 3 mm ahead
+        assert depth == pytest.approx(3.0 / 1500.0, rel=1e-3)  # F / K, whatever the mass and friction
 
 SI units throughout: s, m, m/s, N, kg, N/m, N s/m, J; times given to a fixture are seconds
 of wall clock when they bound a wait, seconds of virtual time when they say how long a
@@ -56,8 +57,8 @@ Fixtures
     :class:`SimDriveNode` ``drive`` and returns a :class:`ControllerRun`.  ``profile``: a
     shipped name, a TOML path (loaded and gated) or a :class:`haptic_bus.Profile`;
     ``duration``: s of virtual time (``realtime=True``: of wall clock); ``out_dir``: the run's
-    folder (None: a fresh temporary one).  ``run.wait(timeout=120)`` lets it end by itself,
-    ``run.stop(timeout=30)`` ends it at the next cycle, both return the :class:`RecordedRun`
+    folder (None: a fresh temporary one).  ``run.wait(timeout=600)`` lets it end by itself,
+    ``run.stop(timeout=300)`` ends it at the next cycle, both return the :class:`RecordedRun`
     of its folder; ``run.wait_cycling(timeout=30)`` blocks until it cycles (the drive, enabled,
     has answered its first cycle).
     Teardown stops every run still going (before the drives stop).
