@@ -24,7 +24,7 @@ from haptic_bus.testing.buses import vcan0_exists
 from tests.plugin_readme import REPO, readme_plugin_example
 
 INNER_PYTEST_WAIT = 900.0  # s of wall clock: a pytest of its own, two controller runs and their plots (26 s here; about
-# 130 s beside two CPU-bound processes)
+# 163 s beside four CPU-bound processes at a load average of 11)
 
 # Left running on purpose by the first test; the second finds them stopped by the fixtures' teardown.
 TEARDOWN_CHECK = '''

@@ -24,8 +24,8 @@ if TYPE_CHECKING:
     from haptic_bus.app.runner import RunOptions, RunResult
     from haptic_bus.testing.simulated import SimDriveNode
 
-# Bounds on a hang, not paces: 5x what this 2-core machine took with two CPU-bound processes beside the test
-# (the README example's 1 s run, plots included, 67 s; a stop, the folder and plots written, 39 s).
+# Bounds on a hang, not paces: 5x what this 2-core machine took with four CPU-bound processes beside the test at a
+# load average of 11 (the README example's 1 s run, plots included, 67 s; a stop, the folder and plots written, 39 s).
 RUN_WAIT = 600.0  # s of wall clock: the longest :meth:`ControllerRun.wait` waits for a run to end by itself
 STOP_WAIT = 300.0  # s of wall clock: the longest a run is given to end once asked to stop
 CYCLING_WAIT = 30.0  # s of wall clock: the longest :meth:`ControllerRun.wait_cycling` waits for the first cycle

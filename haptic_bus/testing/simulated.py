@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 
 ProfileSource = str | pathlib.Path  # a shipped profile name or a TOML path
 # s: a simulator subprocess imports numpy, scipy and canopen before its boot-up (a bound, not a pace: 6.5 s measured
-# with two CPU-bound processes beside the test)
+# with four CPU-bound processes beside the test)
 HEARTBEAT_WAIT = 60.0
 CONTEXT = "simulated drive"
 _truth_files = itertools.count(1)
