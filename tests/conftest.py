@@ -26,15 +26,6 @@ Fixtures:
     A ``(group, port)`` for ``udp_multicast`` unique to this test.
 ``free_port``
     A TCP port (``int``) free on 127.0.0.1 when the test starts.
-``sim_process``
-    A factory: ``sim_process(*args)`` starts ``python -m sim_drive ARGS`` and returns a
-    :class:`SimProcess` (its stderr log in a file that cannot fill up; ``stop(sig, timeout)``,
-    ``wait_for_line(text, timeout)``, ``log()``).  Every process it started and the test did not
-    stop is stopped at teardown (SIGTERM, bounded wait, then SIGKILL).
-``bus_spec``
-    A factory: ``bus_spec(interface)`` is a :class:`BusSpec` of ``"virtual"``, ``"lockstep"``,
-    ``"udp_multicast"`` or ``"socketcan"`` that no other test shares (``open()`` gives a bus
-    handle, ``drive_kwargs()`` the ``CanopenDrive`` keywords).
 ``canopen_rig``
     A factory: ``canopen_rig(interface="virtual", timing="ideal", node_id=5, connect=True,
     **drive_kwargs)`` is a context manager yielding a :class:`Rig` -- a (connected) CANopen
@@ -44,49 +35,48 @@ Fixtures:
     subprocess (``process``, the other interfaces, its heartbeat awaited first).  Everything is
     stopped on exit; a subprocess that does not exit with status 0 on SIGTERM fails the test.
 
+From the project's pytest plugin, :mod:`haptic_bus.testing` (loaded by ``-p haptic_bus.testing``
+in pyproject.toml's ``addopts``, under the name of the ``pytest11`` entry point every user gets):
+``sim_process`` (``python -m sim_drive ARGS`` as a subprocess, stopped at teardown), ``bus_spec``
+(a :class:`BusSpec` of ``"virtual"``, ``"lockstep"``, ``"udp_multicast"`` or ``"socketcan"``
+that no other test shares), ``haptic_sim`` (the simulated drive on a private bus, which
+``canopen_rig`` starts its simulator with), ``haptic_controller`` and ``recorded_run``.
+
 Markers: ``vcan0`` skips a test (or a ``pytest.param`` case) where SocketCAN ``vcan0`` does not
 exist on this kernel.
 
 The project's own modules (``drives``, ``sim_drive``) are imported inside the fixtures, not at
 the top: this file is loaded for every test module, and a module that cannot be imported must
-fail only the tests that use it.
+fail only the tests that use it (the plugin imports only the standard library and pytest).
 """
 
 from __future__ import annotations
 
-import itertools
-import os
-import pathlib
-import signal
 import socket
 import struct
-import subprocess
-import sys
-import tempfile
 import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import can
 import canopen
 import pytest
 
+from haptic_bus.testing.buses import VCAN0_REASON, BusSpec, unique_multicast, unique_name, vcan0_exists
+from haptic_bus.testing.buses import new_bus_spec as new_bus_spec  # re-exported: test modules import these from here
+from haptic_bus.testing.buses import wait_for_heartbeat as wait_for_heartbeat
+from haptic_bus.testing.processes import SimProcess
+from haptic_bus.testing.simulated import HEARTBEAT_WAIT as HEARTBEAT_WAIT
+from haptic_bus.testing.simulated import SimDriveNode
+
 if TYPE_CHECKING:
     from drives.canopen.drive import CanopenDrive
     from sim_drive.canopen.slave import CanopenSimDrive
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
 NODE = 5  # the node of ``sim``, of ``remote`` and of ``canopen_rig`` by default
 WAIT = 1.0  # s: the longest any single frame is waited for (a bound, not a pace)
-HEARTBEAT_WAIT = 15.0  # s: the simulator subprocess imports numpy/scipy/canopen first
-STOP_WAIT = 10.0  # s: the longest a simulator subprocess is given to exit on a signal
-VCAN0_REASON = (
-    "SocketCAN vcan0 does not exist on this kernel "
-    "(create it with: modprobe vcan; ip link add dev vcan0 type vcan; ip link set up vcan0)"
-)
-_counter = itertools.count()
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -94,7 +84,7 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    if pathlib.Path("/sys/class/net/vcan0").exists():
+    if vcan0_exists():
         return
     skip = pytest.mark.skip(reason=VCAN0_REASON)
     for item in items:
@@ -103,55 +93,6 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 
 # ----------------------------------------------------------------------------- unique buses
-def unique_name(prefix: str) -> str:
-    """A channel name no other test in this process uses (the pid keeps concurrent runs apart)."""
-    return f"{prefix}-{os.getpid()}-{next(_counter)}"
-
-
-def unique_multicast() -> tuple[str, int]:
-    """A multicast group and port unique to this test (the port keeps groups apart on Linux)."""
-    n = next(_counter)
-    return f"239.74.{163 + (os.getpid() % 64)}.{1 + n % 250}", 43200 + (os.getpid() % 400) * 40 + n % 40
-
-
-@dataclass
-class BusSpec:
-    """How both ends open the same bus."""
-
-    interface: str
-    channel: str
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    def open(self) -> can.BusABC:
-        """A new bus handle on this bus (a sniffer, an injector), configured as the project's own buses are."""
-        from drives.bus_config import open_bus
-
-        return open_bus(interface=self.interface, channel=self.channel, **self.extra)
-
-    def drive_kwargs(self) -> dict[str, Any]:
-        """The CanopenDrive keyword arguments selecting this bus."""
-        return {"interface": self.interface, "channel": self.channel, "bus_kwargs": dict(self.extra)}
-
-    def sim_args(self) -> list[str]:
-        """The ``python -m sim_drive`` arguments selecting this bus."""
-        args = ["--interface", self.interface, "--channel", self.channel]
-        for key, value in self.extra.items():
-            args += ["--bus-option", f"{key}={value}"]
-        return args
-
-
-def new_bus_spec(interface: str) -> BusSpec:
-    """A bus of ``interface`` not shared with any other test (unique channel or port)."""
-    if interface in ("virtual", "lockstep"):
-        return BusSpec(interface, unique_name("master-test"))
-    if interface == "udp_multicast":
-        group, port = unique_multicast()
-        return BusSpec("udp_multicast", group, {"port": port})
-    if interface == "socketcan":
-        return BusSpec("socketcan", "vcan0")
-    raise ValueError(interface)
-
-
 @pytest.fixture
 def channel() -> str:
     """A fresh virtual-bus channel name."""
@@ -170,12 +111,6 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
-
-
-@pytest.fixture
-def bus_spec() -> Callable[[str], BusSpec]:
-    """``bus_spec(interface)``: a BusSpec no other test shares."""
-    return new_bus_spec
 
 
 # ----------------------------------------------------------------------------- frames by hand
@@ -265,77 +200,6 @@ def remote(channel: str) -> Iterator[canopen.RemoteNode]:
     network.disconnect()
 
 
-# ----------------------------------------------------------------------------- subprocesses
-class SimProcess:
-    """``python -m sim_drive ARGS`` as a subprocess, its log (stderr) in a file that cannot fill up."""
-
-    def __init__(self, *args: str) -> None:
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
-        self.args = [sys.executable, "-m", "sim_drive", *args]
-        self._log, path = tempfile.mkstemp(prefix="sim_drive-", suffix=".log")  # a file, not a pipe: it cannot fill up
-        os.unlink(path)  # the descriptor keeps it; nothing is left behind
-        self.process = subprocess.Popen(self.args, cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=self._log)
-
-    def log(self) -> str:
-        """Everything the process wrote to stderr so far (``pread``: the shared file offset does not move)."""
-        return os.pread(self._log, os.fstat(self._log).st_size, 0).decode(errors="replace")
-
-    def wait_for_line(self, text: str, timeout: float) -> str:
-        """Block until the log contains ``text`` (bounded by ``timeout`` s); the log so far."""
-        deadline = time.monotonic() + timeout
-        while True:
-            log = self.log()
-            if text in log:
-                return log
-            if self.process.poll() is not None:
-                raise AssertionError(f"simulator exited ({self.process.returncode}) before {text!r}: {log[-2000:]}")
-            if time.monotonic() >= deadline:
-                raise AssertionError(f"no {text!r} from the simulator within {timeout} s: {log[-2000:]}")
-            time.sleep(0.02)
-
-    def stop(self, sig: signal.Signals = signal.SIGTERM, timeout: float = STOP_WAIT) -> tuple[int, str]:
-        """Send ``sig``, bounded wait; the exit status and the log.  A hang fails the test."""
-        if self.process.poll() is None:
-            self.process.send_signal(sig)
-        try:
-            self.process.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait(timeout=timeout)
-            pytest.fail(f"simulated drive did not stop on {sig.name} within {timeout} s")
-        return self.process.returncode, self.log()
-
-    def close(self) -> None:
-        """Kill the process if it still runs (bounded wait) and drop the log."""
-        if self.process.poll() is None:
-            self.process.kill()
-            self.process.wait(timeout=STOP_WAIT)
-        if self._log >= 0:
-            os.close(self._log)
-            self._log = -1
-
-
-@pytest.fixture
-def sim_process() -> Iterator[Callable[..., SimProcess]]:
-    """``sim_process(*args)``: a started ``python -m sim_drive ARGS``; all stopped at teardown."""
-    started: list[SimProcess] = []
-
-    def start(*args: str) -> SimProcess:
-        process = SimProcess(*args)
-        started.append(process)
-        return process
-
-    yield start
-    try:
-        for process in started:
-            if process.process.poll() is None:
-                process.stop()
-    finally:
-        for process in started:
-            process.close()
-
-
 # ----------------------------------------------------------------------------- the CANopen master rig
 @dataclass
 class Rig:
@@ -347,70 +211,47 @@ class Rig:
     process: SimProcess | None = None  # a subprocess (the other interfaces) only
 
 
-def wait_for_heartbeat(spec: BusSpec, node_id: int, timeout: float, process: SimProcess | None = None) -> None:
-    """Block until node ``node_id``'s heartbeat is seen on ``spec`` (bounded by ``timeout`` s)."""
-    deadline = time.monotonic() + timeout
-    with spec.open() as bus:
-        while time.monotonic() < deadline:
-            if process is not None and process.process.poll() is not None:
-                _, err = process.stop()
-                raise AssertionError(f"simulator exited early ({process.process.returncode}): {err[-2000:]}")
-            msg = bus.recv(0.1)
-            if msg is not None and msg.arbitration_id == 0x700 + node_id:
-                return
-    raise AssertionError(f"no heartbeat of node {node_id} within {timeout} s on {spec}")
-
-
 @contextmanager
 def _rig(
-    sim_process: Callable[..., SimProcess],
+    haptic_sim: Callable[..., SimDriveNode],
     interface: str = "virtual",
     timing: str = "ideal",
     node_id: int = NODE,
     connect: bool = True,
     **drive_kwargs: Any,
 ) -> Iterator[Rig]:
-    """A simulated drive and a master on a fresh bus of ``interface``; everything stopped on exit."""
+    """A simulated drive (the plugin's ``haptic_sim``) and a master on a fresh bus of ``interface``;
+    everything stopped on exit."""
     from drives.canopen.drive import CanopenDrive
     from drives.safety import SafetySettings
-    from sim_drive.canopen.slave import CanopenSimDrive
     from sim_drive.eds import eds_path
 
-    spec = new_bus_spec(interface)
-    sim = process = None
-    if interface in ("virtual", "lockstep"):
-        sim = CanopenSimDrive({"interface": interface, "channel": spec.channel}, node_id, timing=timing).start()
-    else:
-        process = sim_process(*spec.sim_args(), "--node-id", str(node_id), "--timing", timing)
-        wait_for_heartbeat(spec, node_id, HEARTBEAT_WAIT, process)
+    node = haptic_sim(interface=interface, timing=timing, node_id=node_id)
     drive_kwargs.setdefault("eds", eds_path())
     # A test paces nothing: a loaded machine may pause it for tens of ms, which the drive's
     # RPDO deadline would rightly call a dead master.  Tests of the deadline set their own.
     drive_kwargs.setdefault("safety", SafetySettings().for_virtual_time(drive_kwargs.get("period", 1e-3)))
-    drive = CanopenDrive(node_id, **spec.drive_kwargs(), **drive_kwargs)
+    drive = CanopenDrive(node_id, **node.spec.drive_kwargs(), **drive_kwargs)
     status = None
     try:
         if connect:
             drive.connect()
-        yield Rig(drive, spec, sim, process)
+        yield Rig(drive, node.spec, node.sim, node.process)
     finally:
         drive.close()
-        if sim is not None:
-            sim.stop()
-        if process is not None:
-            status = process.stop()
+        status = node.stop()
     if status is not None and status[0] != 0:  # reached only when the test body passed
         raise AssertionError(f"simulator did not exit cleanly on SIGTERM (status {status[0]}): {status[1][-2000:]}")
 
 
 @pytest.fixture
-def canopen_rig(sim_process: Callable[..., SimProcess]) -> Callable[..., AbstractContextManager[Rig]]:
+def canopen_rig(haptic_sim: Callable[..., SimDriveNode]) -> Callable[..., AbstractContextManager[Rig]]:
     """``canopen_rig(interface="virtual", timing="ideal", node_id=5, connect=True, **drive_kwargs)``:
     a context manager yielding a :class:`Rig`, everything stopped on exit."""
 
     def make(
         interface: str = "virtual", timing: str = "ideal", node_id: int = NODE, connect: bool = True, **drive_kwargs: Any
     ) -> AbstractContextManager[Rig]:
-        return _rig(sim_process, interface, timing, node_id, connect, **drive_kwargs)
+        return _rig(haptic_sim, interface, timing, node_id, connect, **drive_kwargs)
 
     return make

@@ -1,0 +1,146 @@
+"""The pytest plugin (:mod:`haptic_bus.testing`) in this tree: its fixtures, as a user's test uses them.
+
+The README's example and a teardown check run in a pytest of their own (a subprocess with
+``-p haptic_bus.testing``, as where the package is importable but not installed); the other
+tests use the fixtures directly (this suite loads the plugin in pyproject.toml's ``addopts``).
+The fresh installation, entry point and all, is ``tests/test_plugin_fresh_venv.py``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import pathlib
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from drives.bus_config import resolve_bus_config
+from haptic_bus.errors import ParameterError
+from haptic_bus.testing.buses import vcan0_exists
+from tests.plugin_readme import REPO, readme_plugin_example
+
+INNER_PYTEST_WAIT = 900.0  # s of wall clock: a pytest of its own, two controller runs and their plots (26 s here; about
+# 163 s beside four CPU-bound processes at a load average of 11)
+
+# Left running on purpose by the first test; the second finds them stopped by the fixtures' teardown.
+TEARDOWN_CHECK = '''
+import json
+import pathlib
+
+LEFT = {}
+
+
+def test_leaves_a_drive_in_another_process_and_a_run_going(haptic_sim, haptic_controller):
+    drive = haptic_sim("cia402-handle", interface="udp_multicast")
+    run = haptic_controller("cia402-handle", drive, duration=600.0)  # 10 minutes of virtual time
+    run.wait_cycling()
+    assert run.running
+    LEFT.update(drive=drive, run=run)
+    pathlib.Path("sim.pid").write_text(str(drive.process.process.pid))
+
+
+def test_the_teardown_stopped_the_run_then_the_drive(recorded_run):
+    run, drive = LEFT["run"], LEFT["drive"]
+    assert not run.running and run.result.exit_reason == "stopped"
+    assert drive.process.process.returncode == 0  # SIGTERM, a clean exit
+    recorded = recorded_run(run.folder)
+    assert recorded.exit_reason == "stopped"
+    assert recorded.record["time_s"].size == recorded.summary["cycles"] > 0
+'''
+
+
+def test_the_readme_example_and_the_teardown_pass_in_a_pytest_of_their_own(tmp_path: pathlib.Path) -> None:
+    (tmp_path / "test_readme_example.py").write_text(readme_plugin_example())
+    (tmp_path / "test_teardown.py").write_text(TEARDOWN_CHECK)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+    done = subprocess.run([sys.executable, "-m", "pytest", "-p", "haptic_bus.testing", "-p", "no:cacheprovider", "-q",
+                           "test_readme_example.py", "test_teardown.py"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=INNER_PYTEST_WAIT)
+    assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
+    assert "3 passed" in done.stdout, done.stdout[-2000:]
+    pid = int((tmp_path / "sim.pid").read_text())
+    with pytest.raises(ProcessLookupError):  # stopped and reaped, not left behind as an orphan
+        os.kill(pid, 0)
+
+
+def _free_motion_velocity(push: float, coulomb: float, mass: float, friction: float, t: float) -> float:
+    """Velocity (m/s) at ``t`` s of a handle (kg, N s/m) pushed from rest with ``push`` N against ``coulomb`` N."""
+    return (push - coulomb) / friction * -math.expm1(-friction * t / mass)
+
+
+def test_a_drive_in_another_process_runs_its_hidden_truth_not_the_profile(haptic_sim, haptic_controller) -> None:
+    """The controller believes cia402-handle (b 20 N s/m, no Coulomb friction); the hardware has
+    b = 30 N s/m and 0.15 N of Coulomb friction.  Free motion under a 0.6 N push shows the truth:
+    at 0.12 s, 3.6 time constants in, the handle moves at 97 % of (0.6 - 0.15)/30 = 15 mm/s.  The
+    drive's clock runs a few periods ahead of the record's (the enable walk's SYNC exchanges
+    advance the plant, the hand already pushing): each ms moves that velocity by 0.08 %, so 2 %
+    covers 24 ms (measured: +0.5 %).  The belief would say 27 mm/s."""
+    push, coulomb, mass, friction, at = 0.6, 0.15, 1.0, 30.0, 0.12
+    drive = haptic_sim("cia402-handle", interface="udp_multicast", friction=friction, coulomb_friction=coulomb,
+                       operator={"model": "constant", "level": push})
+    assert drive.process is not None and drive.sim is None
+    assert resolve_bus_config(**drive.bus)["hop_limit"] == 0  # the frames stay on this machine
+    run = haptic_controller("cia402-handle", drive, duration=0.3).wait()
+    assert run.exit_reason == "completed", run.error
+    assert run.record["energy_j"].min() >= 0.0
+    k = int(np.argmin(np.abs(run.record["time_s"] - at)))
+    assert run.record["time_s"][k] == pytest.approx(at, abs=1e-9)
+    assert run.record["position_m"][k] < 0.003  # still in free motion: the wall is 3 mm ahead
+    measured = run.record["velocity_m_per_s"][k]
+    assert measured == pytest.approx(_free_motion_velocity(push, coulomb, mass, friction, at), rel=0.02)
+    believed = _free_motion_velocity(push, 0.0, mass, 20.0, at)
+    assert measured < 0.6 * believed
+
+
+def test_an_in_process_drive_is_built_from_the_truth_file(haptic_sim) -> None:
+    drive = haptic_sim("seed-ideal", interface="lockstep", mass=0.8, velocity_noise=3.0, noise_seed=7, timing="cia402")
+    assert drive.process is None and drive.sim is not None and drive.truth is not None
+    parameters = drive.sim.drive.parameters
+    assert (parameters.m, parameters.b, parameters.velocity_noise, parameters.noise_seed) == (0.8, 0.1, 3.0, 7)
+    assert drive.sim.drive.handle.operator.level == 1.0  # seed-ideal's own operator: a 1 N step
+    assert drive.truth.name.startswith("seed-ideal-truth-") and "mass = 0.8" in drive.truth.read_text()
+
+
+@pytest.mark.parametrize("call, message", [
+    (dict(profile="cia402-handle", mass=-1.0), "device.mass = -1.0 is invalid; allowed: "),
+    (dict(profile="cia402-handle", mas=1.0), "simulated drive: truth mas = 1.0 is invalid; allowed: keys of a "
+                                             "profile's [device] table: mass, friction, "),
+    (dict(profile="cia402-handle", operator={"model": "constant", "level": "x"}), "operator_model.level = 'x' is invalid"),
+    (dict(profile="cia402-handle", interface="can0"), "simulated drive: interface = 'can0' is invalid; allowed: "
+                                                      "virtual, lockstep, udp_multicast, socketcan"),
+    (dict(mass=1.0), "simulated drive: profile = None is invalid; allowed: a shipped profile name or a TOML path"),
+], ids=["out-of-range", "unknown-key", "bad-operator", "bad-interface", "truth-without-profile"])
+def test_a_bad_truth_is_one_line_naming_the_field(haptic_sim, call: dict, message: str) -> None:
+    kwargs = dict(call)
+    profile = kwargs.pop("profile", None)
+    with pytest.raises(ParameterError) as refused:
+        haptic_sim(profile, interface=kwargs.pop("interface", "udp_multicast"), **kwargs)
+    assert message in str(refused.value) and "\n" not in str(refused.value)
+
+
+def test_socketcan_runs_on_vcan0_or_skips_saying_why(haptic_sim) -> None:
+    if vcan0_exists():
+        drive = haptic_sim(interface="socketcan")
+        assert drive.process is not None and drive.bus["channel"] == "vcan0"
+        return
+    with pytest.raises(pytest.skip.Exception, match=r"SocketCAN vcan0 does not exist on this kernel \(create it with: "):
+        haptic_sim(interface="socketcan")
+
+
+def test_the_plugin_loads_only_the_standard_library_and_pytest() -> None:
+    code = textwrap.dedent("""
+        import sys
+        before = set(sys.modules)
+        import haptic_bus.testing
+        heavy = sorted(m for m in ("numpy", "can", "canopen", "pymodbus", "scipy", "matplotlib", "sim_drive", "drives")
+                       if m in sys.modules and m not in before)
+        print(heavy)
+    """)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
