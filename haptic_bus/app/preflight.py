@@ -9,7 +9,9 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
   deadline, the heartbeat consumer's slack, the Modbus watchdog) faults the drive.  If the
   longest stall measured, times :data:`STALL_MARGIN`, reaches it, the run is refused (exit 1,
   nothing enabled), naming the smallest period ``T`` whose watchdog (a deadline counted in
-  periods) would hold that stall;
+  periods) would hold that stall; so is a machine whose median exchange with the drive takes
+  longer than ``T`` (the loop would fall further behind every cycle; late cycles now and then
+  are what the passivity layer and the supervisor are for);
 * **the gate at the measured delay** -- the loop delay the gate assumed plus the measured p99
   lateness in samples.  Passive there: nothing to add.  Not passive: with a passivity layer the
   run goes on (the layer holds the port passive; it may act), without one it is refused.
@@ -121,10 +123,10 @@ def judge(timing: Timing, gate: PassivityGate, scene: CompiledScene, layer: str,
         return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, observed, passive,
                                watchdog, holdable, reason, smallest)
 
-    if cycle["p99"] > period:
-        slowest = _on_grid(STALL_MARGIN * cycle["p99"])
-        return report(False, f"refused: one exchange with the drive takes {cycle['p99'] * 1e3:.3g} ms (p99), more than "
-                             f"T = {period * 1e3:g} ms: this machine holds T >= {slowest * 1e3:g} ms", slowest)
+    if cycle["p50"] > period:  # the loop cannot keep its period: it falls further behind every cycle
+        slowest = _on_grid(STALL_MARGIN * cycle["p50"])
+        return report(False, f"refused: one exchange with the drive takes {cycle['p50'] * 1e3:.3g} ms (median), more "
+                             f"than T = {period * 1e3:g} ms: this machine holds T >= {slowest * 1e3:g} ms", slowest)
     if STALL_MARGIN * gap >= watchdog:
         smallest: float | None = None
         where = "; lengthen the drive's watchdog ([safety])"
