@@ -92,8 +92,9 @@ class ModbusDrive(Cia402Master):
     ``unit_id``: the Modbus unit (device id) 0..247; ``timeout`` (s): answer timeout of every
     request (also the TCP connect timeout); ``word_order``: of 32/64-bit values ("big" = high
     word first); ``cycle``: "split" or "fc23" (module docstring); ``with_position``: read
-    0x6064 each cycle (the default: the controller's port observer needs it); ``scaling``: the caller's :class:`DriveScaling`, whose fields are
-    replaced by 0x6076/0x6072 and the manufacturer scaling registers where the drive has them;
+    0x6064 each cycle (the default: the controller's port observer needs it); ``scaling``: the
+    caller's :class:`DriveScaling`, whose fields are replaced by 0x6076/0x6072 and the
+    manufacturer scaling registers where the drive has them;
     ``state_timeout`` (s): per state-machine step; ``check_identity``: verify the map identity
     register (catches a word-order mismatch).  RTU: ``baudrate``, ``parity``, ``stopbits``,
     ``bytesize`` (needs pyserial at connect time).
