@@ -45,7 +45,7 @@ from sim_drive.operator import NoOperator, OperatorModel
 from sim_drive.parameters import DeviceParameters
 
 _SERIES_BELOW = 1.0
-_STRETCHED_KEPT = 256  # interval lengths other than T whose pieces are kept
+_STRETCHED_KEPT = 4096  # interval lengths other than T whose pieces are kept
 _SERIES_TERMS = 26  # (2c)^n / (n + 3)! < 1e-20 for c < 1
 
 

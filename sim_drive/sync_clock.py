@@ -6,7 +6,9 @@ to the length of the interval that SYNC closes, s, or None for exactly one perio
 :class:`WallSyncClock` takes the time between SYNC receptions instead, as a real drive's
 handle lives it: a SYNC that comes late holds the latched torque that much longer.  On
 ``udp_multicast`` python-can stamps a frame with the kernel's reception time (``SIOCGSTAMP``),
-so a stalled simulator thread does not stretch the interval it reports.
+so a stalled simulator thread does not stretch the interval it reports.  Intervals are taken to
+the microsecond (:data:`RESOLUTION`): a drive's own clock is no finer, and a few hundred distinct
+lengths let the plant reuse its exact coefficients instead of computing them every period.
 """
 
 from __future__ import annotations
@@ -15,10 +17,11 @@ from collections.abc import Callable
 
 SyncClock = Callable[[float], "float | None"]
 SYNC_CLOCKS = ("virtual", "wall")
+RESOLUTION = 1e-6  # s: the wall clock's intervals are rounded to this
 
 
 class WallSyncClock:
-    """Interval lengths from SYNC reception timestamps (s); the first SYNC closes none."""
+    """Interval lengths from SYNC reception timestamps (s, to the microsecond); the first SYNC closes none."""
 
     def __init__(self) -> None:
         self._last: float | None = None
@@ -26,7 +29,7 @@ class WallSyncClock:
     def __call__(self, timestamp: float) -> float | None:
         """The time since the previous SYNC's ``timestamp``, s (never negative)."""
         last, self._last = self._last, timestamp
-        return None if last is None else max(0.0, timestamp - last)
+        return None if last is None else max(0.0, round((timestamp - last) / RESOLUTION) * RESOLUTION)
 
 
 def sync_clock(kind: str) -> SyncClock | None:
