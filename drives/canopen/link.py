@@ -94,7 +94,10 @@ class NetworkLink:
         self._errors = ReceiveErrors(name)
 
     def open(self) -> canopen.Network:
-        """The network, connected and with its notifier reading the bus."""
+        """The network, connected and with its notifier reading the bus (the same one again if
+        already open: several drives on one bus share one link)."""
+        if self.network is not None:
+            return self.network
         if self._given_network is not None:
             network = self._given_network
         else:
