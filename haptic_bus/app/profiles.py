@@ -234,9 +234,10 @@ def _profiles_folder() -> pathlib.Path:
     return pathlib.Path(str(importlib.resources.files("profiles")))
 
 
-def shipped_profiles() -> dict[str, pathlib.Path]:
-    """The profiles shipped in the ``profiles`` package: name (file stem) -> path, sorted."""
-    return {p.stem: p for p in sorted(_profiles_folder().glob("*.toml"))}
+def shipped_profiles(axes: bool = False) -> dict[str, pathlib.Path]:
+    """The one-axis profiles shipped in the ``profiles`` package (``axes``: the multi-axis ones,
+    those with ``[[axes]]``): name (file stem) -> path, sorted."""
+    return {p.stem: p for p in sorted(_profiles_folder().glob("*.toml")) if ("axes" in read_document(p)) == axes}
 
 
 def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:

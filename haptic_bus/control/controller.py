@@ -23,19 +23,18 @@ import logging
 import math
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from drives.base import CyclicInputs, Drive
+from drives.base import Drive
 from drives.cia402 import POSITION_ACTUAL
-from drives.errors import DriveError, DriveProtocolError, ParameterError
+from drives.errors import DriveError, ParameterError
 from haptic_bus.control.clock import CycleClock, VirtualClock
 from haptic_bus.control.gate import GateDecision, PassivityGate
-from haptic_bus.control.passivity_layer import LayerPolicy, PassivityLayer, default_budget_cap
-from haptic_bus.control.port_energy import PortObserver
+from haptic_bus.control.passivity_layer import LayerPolicy
+from haptic_bus.control.port_account import PortAccount
 from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.scenes import SceneEntry, SceneSlot
@@ -146,20 +145,15 @@ class WallController:
         self.scenes = SceneSlot(gate, scene, self.events, self.now, beyond_gate=policy.beyond_gate)
         self.integrator = PositionIntegrator(self.period, drive.scaling.velocity_per_count, origin)
         device = gate.device
-        whole = math.floor(device.delay)
-        self._latency = whole  # targets sent before the one a period carries (latched at SYNC)
-        self._switching = device.delay != whole  # the target changes at an unknown instant within a period
-        committed = whole + self._switching
         self.hold = hold if policy.layer == "bound" and hold is not None else self.period
         scaling = drive.scaling
-        springs = [k for k in scene.stiffness if k > 0]
-        cap = policy.budget_cap if policy.budget_cap is not None else default_budget_cap(
-            min(force_limit, scaling.max_force), device.b, self.hold, committed, min(springs, default=0.0))
-        tolerance = supervisor.observer_limit if supervisor is not None else 0.0
-        self.observer = PortObserver(device.b, scaling.position_per_count, initial_energy=scene.stored_energy(origin),
-                                     cap=cap, tolerance=tolerance)
-        self.layer = PassivityLayer(policy.layer, device.b, self.hold, committed, scaling.newton_per_permille)
-        self._sent: deque[float] = deque([0.0] * (whole + 2), maxlen=whole + 2)  # forces sent, N, newest last
+        self.port = PortAccount(drive.name, friction=device.b, count=scaling.position_per_count,
+                                newton_per_permille=scaling.newton_per_permille, delay=device.delay, clock=self.clock,
+                                policy=policy, hold=self.hold, force_limit=min(force_limit, scaling.max_force),
+                                softest_spring=min((k for k in scene.stiffness if k > 0), default=0.0),
+                                initial_energy=scene.stored_energy(origin),
+                                tolerance=supervisor.observer_limit if supervisor is not None else 0.0)
+        self.observer, self.layer = self.port.observer, self.port.layer
         self.supervisor = Supervisor(supervisor, self.period, device.delay) if supervisor is not None else None
         self.record = RunRecord(record_capacity)
         self.ramp_cycles = round(ramp_time / self.period)
@@ -225,7 +219,7 @@ class WallController:
         inputs = drive.read_inputs()
         started = time.perf_counter()
         scaling = drive.scaling
-        energy = self._account_port(inputs, scaling.position_per_count)
+        energy = self.port.account(inputs, scaling.position_per_count)
         v = inputs.velocity * scaling.velocity_per_count
         x = self.integrator.add(inputs.velocity)
         force = entry.scene.force(x, v)
@@ -235,9 +229,8 @@ class WallController:
         if force > limit or force < -limit:
             force = limit if force > 0 else -limit
             self.saturated_cycles += 1
-        torque = self.layer.limit(scaling.torque_permille(-force), self.observer.budget)  # the motor pushes against the wall
+        torque = self.port.limit(scaling.torque_permille(-force))  # the motor pushes against the wall
         drive.write_outputs(torque)
-        self._sent.append(torque * scaling.newton_per_permille)
         compute = time.perf_counter() - started
         supervisor = self.supervisor
         late, alarm = supervisor.cycle(lateness, energy, inputs.age) if supervisor is not None else (False, None)
@@ -248,26 +241,6 @@ class WallController:
         self.cycles += 1
         if alarm is not None:
             self._act(alarm)
-
-    def _account_port(self, inputs: CyclicInputs, position_per_count: float) -> float:
-        """The port's energy (J) up to this cycle's sample: the period it closes, with the force(s)
-        the drive applied over it (:mod:`~haptic_bus.control.port_energy`); a stale input closes none."""
-        observer = self.observer
-        position = inputs.position
-        if position is None:
-            raise DriveProtocolError(self.drive.name, "the cyclic inputs carry no position (0x6064): the port "
-                                                      "observer and the passivity layer need it mapped")
-        if self.cycles:
-            fresh = not inputs.age
-            duration = self.clock.period_bound(inputs.sampled_by_ns if fresh else 0)
-            sent, latency = self._sent, self._latency
-            if self._switching:
-                observer.switch(sent[-2 - latency], sent[-1 - latency], duration)
-            else:
-                observer.apply(sent[-1 - latency], duration)
-            if not fresh:
-                return observer.energy
-        return observer.sample(position * position_per_count)
 
     def _act(self, alarm: Alarm) -> None:
         self.events.add(self.now(), "alarm", alarm.message, alarm=alarm.kind, action=alarm.action.value)
