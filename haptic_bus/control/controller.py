@@ -14,39 +14,35 @@ pass the gate first, in the caller's thread, and take effect whole at the next c
 (:mod:`~haptic_bus.control.scenes`); a refused change leaves the running scene untouched.
 
 A run ends with torque zero and the drive disabled whatever ends it: the cycles done, the stop
-flag, a drive error, an assumption broken, Ctrl-C; the summary says which (``exit_reason``).
+flag, a drive error, an assumption broken, Ctrl-C; the summary says which (``exit_reason``;
+the loop is :class:`~haptic_bus.control.cycle_loop.CycleLoop`'s).
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-
-import numpy as np
 
 from drives.base import Drive
 from drives.cia402 import POSITION_ACTUAL
-from drives.errors import DriveError, ParameterError
+from drives.errors import ParameterError
 from haptic_bus.control.clock import CycleClock, VirtualClock
+from haptic_bus.control.cycle_loop import CycleLoop, RunSummary, percentiles
 from haptic_bus.control.gate import GateDecision, PassivityGate
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.port_account import PortAccount
 from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.scenes import SceneEntry, SceneSlot
-from haptic_bus.control.supervisor import Action, Alarm, AssumptionBroken, Supervisor, SupervisorPolicy
+from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
 
 logger = logging.getLogger(__name__)
 
 Derate = Callable[[CompiledScene, float], "tuple[PassivityGate, CompiledScene, GateDecision] | None"]
 """Given the running scene and the observed loop delay (samples): a gate for that loop, the scene
 scaled down so that it passes it, and the decision; None if no scale passes."""
-
-EXIT_REASONS = ("completed", "stopped", "interrupted", "drive error", "assumption broken")
 
 
 def encoder_origin(drive: Drive) -> float:
@@ -70,41 +66,7 @@ class PositionIntegrator:
         return self.origin + self.step * self.counts
 
 
-@dataclass
-class RunSummary:
-    """What a run did: counts, peaks, the port's energy (J: the last, the least, and the counts
-    rounding bound under which the truth may lie), the passivity layer and how often it lowered a
-    target, compute and lateness percentiles (s), and its end.
-
-    ``exit_reason`` is one of :data:`EXIT_REASONS`; ``error`` the message that ended it early.
-    """
-
-    cycles: int
-    saturated_cycles: int
-    peak_force: float
-    energy: float
-    least_energy: float
-    rounding_bound: float
-    observer_active_cycles: int
-    layer: str
-    layer_interventions: int
-    compute_percentiles: dict[str, float]
-    clock: str
-    overruns: int
-    lateness_percentiles: dict[str, float]
-    late_cycles: int
-    alarms: int
-    exit_reason: str = "completed"
-    error: str | None = None
-    warnings: list[str] = field(default_factory=list)
-
-    @property
-    def observer_flagged(self) -> bool:
-        """True once the port gave the operator more energy than it held."""
-        return self.observer_active_cycles > 0
-
-
-class WallController:
+class WallController(CycleLoop):
     """Renders a gated scene on ``drive`` every ``period`` s.
 
     ``force_limit`` (N) saturates the wall force; ``clock`` is a :class:`VirtualClock` (default),
@@ -260,41 +222,8 @@ class WallController:
                 return
         raise alarm.broken(assumed)
 
-    def run(self, cycles: int, stop: threading.Event | None = None,
-            on_cycle: Callable[[WallController], None] | None = None) -> RunSummary:
-        """Run up to ``cycles`` cycles (or until ``stop`` is set).  Whatever ends the run leaves
-        torque zero and the drive disabled, the record kept, and the end in the summary."""
-        reason, error = "completed", None
-        try:
-            for _ in range(cycles):
-                if stop is not None and stop.is_set():
-                    reason = "stopped"
-                    break
-                self.step(self.clock.wait_next(self.cycles))
-                if on_cycle is not None:
-                    on_cycle(self)
-        except DriveError as exc:
-            reason, error = "drive error", str(exc)
-            self.stopped_on_error = True
-            self._end(exc, "fault")
-        except AssumptionBroken as exc:
-            reason, error = "assumption broken", str(exc)
-            self._end(exc, "stop")
-        except KeyboardInterrupt as exc:
-            reason, error = "interrupted", "interrupted (Ctrl-C)"
-            self._end(exc, "stop")
-        except BaseException as exc:  # a bug: still leave the drive safe, then let it surface
-            self._end(exc, "fault")
-            raise
-        return self.summary(reason, error)
-
-    def _end(self, exc: BaseException, kind: str) -> None:
-        logger.info("run stopped: %s", str(exc) or type(exc).__name__)  # the summary and the command report it
-        self.events.add(self.now(), kind, str(exc) or type(exc).__name__)
-        try:
-            self.drive.disable()
-        except DriveError as failure:  # the drive may be gone; its own trip already zeroed torque
-            logger.info("could not disable the drive: %s", failure)  # a consequence of the error reported
+    def _disable(self) -> None:
+        self.drive.disable()
 
     def summary(self, exit_reason: str = "completed", error: str | None = None) -> RunSummary:
         """The summary of everything run so far."""
@@ -319,11 +248,3 @@ class WallController:
             error=error,
             warnings=list(self.scenes.history[0].decision.warnings),
         )
-
-
-def percentiles(values: np.ndarray) -> dict[str, float]:
-    """p50, p99, p99.9 and max of ``values`` (empty dict for none)."""
-    if values.size == 0:
-        return {}
-    p50, p99, p999 = np.percentile(values, [50, 99, 99.9])
-    return {"p50": float(p50), "p99": float(p99), "p99.9": float(p999), "max": float(values.max())}
