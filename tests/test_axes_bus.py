@@ -108,7 +108,7 @@ def test_one_sync_per_cycle_and_every_tpdo_before_any_torque(rig) -> None:
 
 
 def test_a_missing_tpdo_makes_the_whole_cycle_late(rig) -> None:
-    profile, sim, axes, _ = rig
+    _, sim, axes, _ = rig
     axes.enable()
     for _ in range(5):
         axes.read_inputs()

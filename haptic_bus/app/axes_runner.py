@@ -12,7 +12,8 @@ The drives may be the simulated device in another process (``haptic-bus sim --no
    ``[bus] bitrate``) and ``T``; above 70 % the run is refused, naming the load and the smallest
    ``T`` that fits (exit 1, no bus opened, nothing enabled);
 3. every drive is reached and commissioned (:class:`drives.canopen.axes.CanopenAxes`: each its own
-   safety chain; one heartbeat of this controller's node for all);
+   safety chain; one heartbeat of this controller's node for all; in virtual time the master's own
+   patience is :data:`VIRTUAL_TIME_PATIENCE`);
 4. **safe start**: every axis' position is read before enabling; a handle inside an object is
    refused (exit 1, nothing enabled) -- a start ramp for coupled axes is not built;
 5. real time only: pre-flight timing (:mod:`~haptic_bus.app.preflight`) with the coupled gate at
@@ -61,6 +62,9 @@ from haptic_bus.control.space_scene import SpaceScene
 logger = logging.getLogger(__name__)
 
 RUN_MAPPING = "with-position"
+VIRTUAL_TIME_PATIENCE: dict[str, Any] = {"tpdo_timeout": 0.25, "heartbeat_consumer_ms": 1000}
+"""In virtual time nothing paces the loop: how long the master waits for an axis' TPDO (s) and
+for a drive's heartbeat (ms) catches a dead drive, not a machine busy elsewhere."""
 
 
 @dataclasses.dataclass
@@ -120,7 +124,8 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                                interface=config["interface"], channel=config.get("channel"), bitrate=config.get("bitrate"),
                                bus_kwargs={k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")},
                                period=period, tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling_source=PROFILE_SCALING_SOURCE,
-                               safety=safety if options.realtime else safety.for_virtual_time(period))
+                               safety=safety if options.realtime else safety.for_virtual_time(period),
+                               **({} if options.realtime else VIRTUAL_TIME_PATIENCE))
             stack.callback(axes.close)
             axes.connect()
             _describe(axes, options, link)
