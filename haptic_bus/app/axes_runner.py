@@ -14,10 +14,12 @@ The drives may be the simulated device in another process (``haptic-bus sim --no
 3. every drive is reached and commissioned (:class:`drives.canopen.axes.CanopenAxes`: each its own
    safety chain; one heartbeat of this controller's node for all; in virtual time the master's own
    patience is :data:`VIRTUAL_TIME_PATIENCE`);
-4. **safe start**: every axis' position is read before enabling; a handle inside an object is
-   refused (exit 1, nothing enabled) -- a start ramp for coupled axes is not built;
-5. real time only: pre-flight timing (:mod:`~haptic_bus.app.preflight`) with the coupled gate at
-   the measured delay; then every drive is enabled in the same cycle and the controller cycles
+4. real time only: pre-flight timing (:mod:`~haptic_bus.app.preflight`) with the coupled gate at
+   the measured delay;
+5. **safe start**: every axis' position is read right before enabling (after pre-flight, whose
+   SYNCs a real handle lives through); a handle inside an object is refused (exit 1, nothing
+   enabled) -- a start ramp for coupled axes is not built; then every drive is enabled in the
+   same cycle and the controller cycles
    (:class:`~haptic_bus.control.axes_controller.AxesController`) under the supervisor;
 6. whatever ends it (the time, SIGTERM, Ctrl-C, any axis' fault -- which zeroes every axis'
    torque in the same cycle -- an assumption broken), the drives are left disabled and every
@@ -130,17 +132,18 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
             axes.connect()
             _describe(axes, options, link)
             scene = profile.space_scene()
-            extra["start"] = {"positions_m": _safe_start(axes, profile, scene)}
-            clock = RealClock(period, spin=options.scheduling.spin) if options.realtime else VirtualClock(period)
-            hold = longest_hold(period, options.realtime, safety.rpdo_deadline_ms(period), safety.consumer_ms)
-            controller = AxesController(axes, profile.gate(), scene, names=[axis.name for axis in profile.axes],
-                                        force_limits=[axis.force_limit for axis in profile.axes], clock=clock,
-                                        supervisor=profile.supervisor, passivity=profile.passivity, hold=hold)
-            extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold, "per_axis": True}
+            gate = profile.gate()
             with control_thread_scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
                 if options.realtime:
-                    _preflight(axes, controller.gate, scene, profile, options, extra)
+                    _preflight(axes, gate, scene, profile, options, extra)
+                extra["start"] = {"positions_m": _safe_start(axes, profile, scene)}  # after pre-flight: where it is now
+                clock = RealClock(period, spin=options.scheduling.spin) if options.realtime else VirtualClock(period)
+                hold = longest_hold(period, options.realtime, safety.rpdo_deadline_ms(period), safety.consumer_ms)
+                controller = AxesController(axes, gate, scene, names=[axis.name for axis in profile.axes],
+                                            force_limits=[axis.force_limit for axis in profile.axes], clock=clock,
+                                            supervisor=profile.supervisor, passivity=profile.passivity, hold=hold)
+                extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold, "per_axis": True}
                 axes.enable()  # every drive in the same cycle, right before the first: their RPDO deadlines run from here
                 summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
             reason, error = summary.exit_reason, summary.error

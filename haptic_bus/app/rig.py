@@ -129,16 +129,17 @@ def simulated_canopen(
         sim.stop()
 
 
-def simulated_axes_device(profile: AxesProfile, bus: dict[str, Any]) -> MultiAxisSim:
+def simulated_axes_device(profile: AxesProfile, bus: dict[str, Any], clock: str = "virtual") -> MultiAxisSim:
     """The simulated device a multi-axis profile describes (its axes' plants and hidden truth, its
-    hand in space), not started, on ``bus`` (python-can keyword arguments)."""
+    hand in space), not started, on ``bus`` (python-can keyword arguments); ``clock``: "virtual"
+    (each SYNC advances the plants ``T``) or "wall" (the time between SYNCs, for a real-time run)."""
     from sim_drive.parameters import Timing
     from sim_drive.space_operator import hand_from_table
 
     setups = [(cast(int, axis.node_id),
                DeviceParameters(**cast(dict[str, Any], axis.device.sim_parameters(profile.period, axis.timing, axis.delay))),
                Timing(axis.timing)) for axis in profile.axes]
-    return MultiAxisSim(bus, setups, hand_from_table(profile.operator_model, len(profile.axes)))
+    return MultiAxisSim(bus, setups, hand_from_table(profile.operator_model, len(profile.axes)), clock=clock)
 
 
 @contextmanager
