@@ -183,7 +183,6 @@ def _drive_setup(args: argparse.Namespace) -> tuple[DeviceParameters, OperatorMo
 
 def _run_canopen(args: argparse.Namespace) -> int:
     """The CANopen slave until SIGINT/SIGTERM."""
-    import can  # the bus libraries of one server only: the other's are not imported
 
     from sim_drive.bus_timing import BusLoadMeter
     from sim_drive.canopen.slave import CanopenSimDrive
@@ -210,13 +209,7 @@ def _run_canopen(args: argparse.Namespace) -> int:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
     with _StopSignals() as stop_signals:  # from before the boot-up: an early signal still stops cleanly
-        try:
-            sim.start()
-        except BusConfigError as exc:
-            print(f"{_PROG}: error: {exc}", file=sys.stderr)
-            return 1
-        except (can.CanError, OSError, ValueError) as exc:
-            print(f"{_PROG}: error: cannot open the bus: {exc}", file=sys.stderr)
+        if not started(sim):
             return 1
         try:
             dictionary = "standard objects only" if args.od == "standard" else f"EDS {args.eds or eds_path()}"
@@ -280,7 +273,6 @@ def _axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
 
 def run_axes(args: argparse.Namespace) -> int:
     """The simulated multi-axis device (``--node-ids``) until SIGINT/SIGTERM: one CANopen slave per node."""
-    import can
 
     from sim_drive.canopen.multi_axis import MultiAxisSim
 
@@ -299,13 +291,7 @@ def run_axes(args: argparse.Namespace) -> int:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
     with _StopSignals() as stop_signals:
-        try:
-            sim.start()
-        except BusConfigError as exc:
-            print(f"{_PROG}: error: {exc}", file=sys.stderr)
-            return 1
-        except (can.CanError, OSError, ValueError) as exc:
-            print(f"{_PROG}: error: cannot open the bus: {exc}", file=sys.stderr)
+        if not started(sim):
             return 1
         try:
             logger.info("nodes %s: serving on %s %s (one simulated drive per axis, the hand: %s)",
@@ -320,6 +306,21 @@ def run_axes(args: argparse.Namespace) -> int:
         logger.info("node %d: stopped after %d SYNCs, virtual time %.6f s, operator energy %.6g J, wall energy %.6g J",
                     node.node_id, drive.sync_count, drive.time, drive.operator_energy, drive.wall_energy)
     return 0
+
+
+def started(sim: Any) -> bool:
+    """Start ``sim`` (a slave or the multi-axis device); False after one line on stderr if its bus cannot be opened."""
+    import can
+
+    try:
+        sim.start()
+    except BusConfigError as exc:
+        print(f"{_PROG}: error: {exc}", file=sys.stderr)
+        return False
+    except (can.CanError, OSError, ValueError) as exc:
+        print(f"{_PROG}: error: cannot open the bus: {exc}", file=sys.stderr)
+        return False
+    return True
 
 
 def log_eds_gaps(node_id: int, dictionary: Any) -> None:

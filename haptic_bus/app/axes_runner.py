@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
-import logging
 import pathlib
 from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
@@ -53,6 +52,7 @@ from haptic_bus.app.runner import (
     canopen_watchdog,
     control_thread_scheduling,
     longest_hold,
+    settle_preflight,
 )
 from haptic_bus.control.axes_controller import AxesController
 from haptic_bus.control.bus_load import axes_bus_load
@@ -60,8 +60,6 @@ from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.cycle_loop import RunSummary
 from haptic_bus.control.space_gate import SpaceGate, SpaceGateRefusal
 from haptic_bus.control.space_scene import SpaceScene
-
-logger = logging.getLogger(__name__)
 
 RUN_MAPPING = "with-position"
 VIRTUAL_TIME_PATIENCE: dict[str, Any] = {"tpdo_timeout": 0.25, "heartbeat_consumer_ms": 1000}
@@ -211,11 +209,5 @@ def _preflight(axes: CanopenAxes, gate: SpaceGate, scene: SpaceScene, profile: A
 
     watchdog = canopen_watchdog(axes.drives[0].safety, profile.period)
     timing = preflight.measure(Cycle(), profile.period, spin=options.scheduling.spin)
-    report = preflight.judge_delay(timing, assumed, passes_at, profile.passivity.layer, watchdog.stall, watchdog.periods)
-    extra["preflight"] = report.to_dict()
-    for line in report.lines():
-        logger.info("%s", line)
-        if options.live:
-            print(line, flush=True)
-    if not report.holdable:
-        raise StartRefused(report.reason.removeprefix("refused: "))
+    settle_preflight(preflight.judge_delay(timing, assumed, passes_at, profile.passivity.layer, watchdog.stall,
+                                           watchdog.periods), options, extra)

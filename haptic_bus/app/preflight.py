@@ -30,7 +30,7 @@ import numpy as np
 
 from drives.base import Drive
 from haptic_bus.control.clock import RealClock
-from haptic_bus.control.controller import percentiles
+from haptic_bus.control.cycle_loop import percentiles
 from haptic_bus.control.gate import PassivityGate
 from haptic_bus.control.scene import CompiledScene
 

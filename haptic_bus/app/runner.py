@@ -312,7 +312,13 @@ def _preflight(drive: Drive, gate: PassivityGate, scene: CompiledScene, profile:
     in ``extra``, and refuse (:class:`StartRefused`) a run the drive's watchdogs, or the gate without
     a layer, cannot hold."""
     timing = preflight.measure(drive, profile.loop.period, spin=options.scheduling.spin)
-    report = preflight.judge(timing, gate, scene, profile.passivity.layer, watchdog.stall, watchdog.periods)
+    settle_preflight(preflight.judge(timing, gate, scene, profile.passivity.layer, watchdog.stall, watchdog.periods),
+                     options, extra)
+
+
+def settle_preflight(report: preflight.PreflightReport, options: RunOptions, extra: dict[str, Any]) -> None:
+    """Record pre-flight's ``report`` in ``extra``, log and print it, and refuse the run
+    (:class:`StartRefused`) if the machine cannot hold it."""
     extra["preflight"] = report.to_dict()
     for line in report.lines():
         logger.info("%s", line)

@@ -49,7 +49,7 @@ from drives.base import CyclicInputs, DriveScaling
 from drives.errors import ParameterError
 from haptic_bus.control.clock import CycleClock, VirtualClock
 from haptic_bus.control.controller import PositionIntegrator
-from haptic_bus.control.cycle_loop import CycleLoop, RunSummary, percentiles
+from haptic_bus.control.cycle_loop import CycleLoop, RunSummary
 from haptic_bus.control.kinematics import Cartesian, Kinematics
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.port_account import PortAccount
@@ -265,26 +265,11 @@ class AxesController(CycleLoop):
 
     def summary(self, exit_reason: str = "completed", error: str | None = None) -> RunSummary:
         """The whole device's summary: the port's energy is the sum over axes (each axis' in :meth:`axis_summaries`)."""
-        supervisor = self.supervisor
-        return RunSummary(
-            cycles=self.cycles,
-            saturated_cycles=self.saturated_cycles,
-            peak_force=self.peak_force,
-            energy=self.energy,
-            least_energy=self.least_energy,
-            rounding_bound=sum(port.observer.rounding for port in self.ports),
-            observer_active_cycles=self.observer_active_cycles,
-            layer=self.passivity.layer,
-            layer_interventions=sum(port.layer.interventions for port in self.ports),
-            compute_percentiles=percentiles(self.records[0].column("compute_s")),
-            clock=self.clock.name,
-            overruns=self.clock.overruns,
-            lateness_percentiles=percentiles(self.clock.lateness()),
-            late_cycles=supervisor.late_cycles if supervisor is not None else 0,
-            alarms=supervisor.alarms if supervisor is not None else 0,
-            exit_reason=exit_reason,
-            error=error,
-        )
+        return self._summary(exit_reason, error, energy=self.energy, least_energy=self.least_energy,
+                             rounding_bound=sum(port.observer.rounding for port in self.ports),
+                             observer_active_cycles=self.observer_active_cycles, layer=self.passivity.layer,
+                             layer_interventions=sum(port.layer.interventions for port in self.ports),
+                             compute=self.records[0].column("compute_s"))
 
     def axis_summaries(self) -> list[dict[str, float | int | str]]:
         """Per axis: its name, its port energy ``E_i`` (J, the last and the least), its counts rounding

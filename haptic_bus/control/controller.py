@@ -29,7 +29,7 @@ from drives.base import Drive
 from drives.cia402 import POSITION_ACTUAL
 from drives.errors import ParameterError
 from haptic_bus.control.clock import CycleClock, VirtualClock
-from haptic_bus.control.cycle_loop import CycleLoop, RunSummary, percentiles
+from haptic_bus.control.cycle_loop import CycleLoop, RunSummary
 from haptic_bus.control.gate import GateDecision, PassivityGate
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.port_account import PortAccount
@@ -227,24 +227,9 @@ class WallController(CycleLoop):
 
     def summary(self, exit_reason: str = "completed", error: str | None = None) -> RunSummary:
         """The summary of everything run so far."""
-        supervisor = self.supervisor
-        return RunSummary(
-            cycles=self.cycles,
-            saturated_cycles=self.saturated_cycles,
-            peak_force=self.peak_force,
-            energy=self.observer.energy,
-            least_energy=self.observer.least,
-            rounding_bound=self.observer.rounding,
-            observer_active_cycles=self.observer.active_cycles,
-            layer=self.layer.mode,
-            layer_interventions=self.layer.interventions,
-            compute_percentiles=percentiles(self.record.column("compute_s")),
-            clock=self.clock.name,
-            overruns=self.clock.overruns,
-            lateness_percentiles=percentiles(self.clock.lateness()),
-            late_cycles=supervisor.late_cycles if supervisor is not None else 0,
-            alarms=supervisor.alarms if supervisor is not None else 0,
-            exit_reason=exit_reason,
-            error=error,
-            warnings=list(self.scenes.history[0].decision.warnings),
-        )
+        observer = self.observer
+        return self._summary(exit_reason, error, energy=observer.energy, least_energy=observer.least,
+                             rounding_bound=observer.rounding, observer_active_cycles=observer.active_cycles,
+                             layer=self.layer.mode, layer_interventions=self.layer.interventions,
+                             compute=self.record.column("compute_s"),
+                             warnings=self.scenes.history[0].decision.warnings)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -21,7 +21,7 @@ import numpy as np
 from drives.errors import DriveError
 from haptic_bus.control.clock import CycleClock
 from haptic_bus.control.record import EventLog
-from haptic_bus.control.supervisor import AssumptionBroken
+from haptic_bus.control.supervisor import AssumptionBroken, Supervisor
 
 logger = logging.getLogger(__name__)
 
@@ -71,6 +71,9 @@ class CycleLoop:
     events: EventLog
     cycles: int
     stopped_on_error: bool
+    supervisor: Supervisor | None
+    saturated_cycles: int
+    peak_force: float
 
     def step(self, lateness: float = 0.0) -> None:
         """One cycle, ``lateness`` s after its deadline."""
@@ -87,6 +90,21 @@ class CycleLoop:
     def _disable(self) -> None:
         """Disable the drive(s) (torque zero)."""
         raise NotImplementedError
+
+    def _summary(self, exit_reason: str, error: str | None, *, energy: float, least_energy: float, rounding_bound: float,
+                 observer_active_cycles: int, layer: str, layer_interventions: int, compute: np.ndarray,
+                 warnings: Sequence[str] = ()) -> RunSummary:
+        """A :class:`RunSummary` from the port's figures (J, counts) and the cycles' compute times (s),
+        with what the loop, its clock and its supervisor counted."""
+        supervisor = self.supervisor
+        return RunSummary(
+            cycles=self.cycles, saturated_cycles=self.saturated_cycles, peak_force=self.peak_force, energy=energy,
+            least_energy=least_energy, rounding_bound=rounding_bound, observer_active_cycles=observer_active_cycles,
+            layer=layer, layer_interventions=layer_interventions, compute_percentiles=percentiles(compute),
+            clock=self.clock.name, overruns=self.clock.overruns, lateness_percentiles=percentiles(self.clock.lateness()),
+            late_cycles=supervisor.late_cycles if supervisor is not None else 0,
+            alarms=supervisor.alarms if supervisor is not None else 0,
+            exit_reason=exit_reason, error=error, warnings=list(warnings))
 
     def run(self, cycles: int, stop: threading.Event | None = None,
             on_cycle: Callable[[Any], None] | None = None) -> RunSummary:
