@@ -280,7 +280,6 @@ def run_axes(args: argparse.Namespace) -> int:
     if missing:
         print(f"{_PROG}: error: missing --{', --'.join(missing)}", file=sys.stderr)
         return 2
-    _configure_logging(args.realtime, "canopen", logging.WARNING)
     config: dict[str, Any] = {"interface": args.interface, "channel": args.channel, **dict(args.bus_option)}
     if args.bitrate:
         config["bitrate"] = args.bitrate
@@ -290,6 +289,7 @@ def run_axes(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
+    _configure_logging(args.realtime, "canopen", logging.WARNING)  # once the arguments hold: a refusal logs nothing
     with _StopSignals() as stop_signals:
         if not started(sim):
             return 1

@@ -77,9 +77,10 @@ class CanopenAxes:
         if len(scalings) != len(nodes):
             raise ParameterError("scalings", len(scalings), f"one per axis ({len(nodes)})", "CANopen axes")
         self.name = "CANopen nodes " + ", ".join(map(str, nodes))
-        self.link = NetworkLink(self.name, bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})))
+        self.link = NetworkLink(self.name, bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})), shared=True)
         master = safety.master_node_id
-        self.heartbeat = HeartbeatProducer(master or 0, safety.heartbeat_ms / 1000.0 if master is not None else 0.0)
+        self.heartbeat = HeartbeatProducer(master or 0, safety.heartbeat_ms / 1000.0 if master is not None else 0.0,
+                                           shared=True)
         self.drives = tuple(
             CanopenDrive(node, link=self.link, heartbeat=self.heartbeat, period=period, tpdo_objects=tpdo_objects,
                          scaling=scaling, scaling_source=scaling_source, eds=eds, safety=safety,

@@ -98,8 +98,9 @@ class CanopenDrive(Cia402Master):
     lacks of the safety chain is one warning per object (``safety_warnings``), or a refusal
     with ``safety.strict``; no object the drive lacks is ever written, at connect or close.
     ``link`` and ``heartbeat``: a link and the master's heartbeat producer the caller owns and
-    shares among several drives on one bus (:mod:`drives.canopen.axes`): connect() opens the
-    link and starts the heartbeat if they are not yet, close() leaves both running.  ``rx_mode``:
+    shares among several drives on one bus (:mod:`drives.canopen.axes`; marked ``shared``):
+    connect() opens the link and starts the heartbeat if they are not yet, close() leaves a shared
+    one running.  ``rx_mode``:
     "direct" or "listener" (:mod:`drives.canopen.exchange`).  Timeouts in s;
     ``max_missed_tpdos`` consecutive cycles without TPDO raise DriveTimeout; heartbeat times in
     ms (consumer default 3x producer; 0 disables).  ``scaling``: the caller's
@@ -176,7 +177,6 @@ class CanopenDrive(Cia402Master):
         self.commissioned: Commissioned | None = None
         _check("link", link is None or (network is None and bus is None and interface is None and channel is None),
                "a shared link", "no network, bus, interface or channel besides it")
-        self._shared = (link is not None, heartbeat is not None)  # the caller's to open and close, not this drive's
         self.heartbeat = heartbeat if heartbeat is not None else HeartbeatProducer(
             safety.master_node_id or 0, safety.heartbeat_ms / 1000.0 if safety.master_node_id is not None else 0.0)
         self.link = link if link is not None else NetworkLink(
@@ -406,7 +406,7 @@ class CanopenDrive(Cia402Master):
                         self.sdo.write_int(CONSUMER_HEARTBEAT_TIME, 1, DataType.UNSIGNED32, 0)  # a clean goodbye
                 except Exception as exc:  # a best-effort goodbye: whatever fails here, the bus is released below
                     logger.warning("%s: could not send the closing frames: %r", self.name, exc)
-            if not self._shared[1]:
+            if not self.heartbeat.shared:
                 self.heartbeat.stop()
             self.exchange.end()
             if self.events is not None:
@@ -416,7 +416,7 @@ class CanopenDrive(Cia402Master):
         except DriveError as exc:
             logger.warning("%s: closing: %s", self.name, exc)
         finally:
-            if not self._shared[0]:
+            if not self.link.shared:
                 self.link.close()
 
     def _has(self, index: int, subindex: int = 0) -> bool:

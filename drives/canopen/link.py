@@ -83,8 +83,10 @@ class NetworkLink:
         network: canopen.Network | None = None,
         bus: can.BusABC | None = None,
         bus_args: tuple[str | None, Any, int | None, dict[str, Any]] = (None, None, None, {}),
+        shared: bool = False,
     ) -> None:
         self.name = name
+        self.shared = shared  # several drives use it (one bus): only its owner closes it
         self._given_network = network
         self._given_bus = bus
         self._bus_args = bus_args

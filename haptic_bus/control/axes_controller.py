@@ -170,9 +170,7 @@ class AxesController(CycleLoop):
         self.least_energy = 0.0
         self.observer_active_cycles = 0
         self.stopped_on_error = False
-        self._tolerance = supervisor.observer_limit if supervisor is not None else 0.0
-        self._q = np.zeros(size)
-        self._q_dot = np.zeros(size)
+        self._joints = np.zeros((2, size))  # q (m) and q_dot (m/s) of the latest cycle
 
     # ------------------------------------------------------------------ gated changes
 
@@ -205,7 +203,7 @@ class AxesController(CycleLoop):
         scene_id, scene = self.scenes.adopt(self.now())
         inputs = self.axes.read_inputs()
         started = time.perf_counter()
-        q, q_dot = self._q, self._q_dot
+        q, q_dot = self._joints
         energy = 0.0
         age = 0
         first = not self.cycles
@@ -246,7 +244,7 @@ class AxesController(CycleLoop):
         self.energy = energy
         if energy < self.least_energy:
             self.least_energy = energy
-        if energy < -self._tolerance:
+        if energy < -(self.supervisor.policy.observer_limit if self.supervisor is not None else 0.0):
             self.observer_active_cycles += 1
         self.saturated_cycles += saturated
         magnitude = float(np.hypot.reduce(forces)) if forces else 0.0
