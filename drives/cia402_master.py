@@ -211,8 +211,10 @@ class Cia402Master(Drive):
         for line in self.scaling_report.lines():
             logger.info("%s: scaling %s", self.name, line)
 
-    def _trip(self, error: DriveError) -> DriveError:
-        """Safe outputs now, every later output safe too; returns ``error`` for ``raise``."""
+    def trip(self, error: DriveError) -> DriveError:
+        """Safe outputs now, every later output safe too (until :meth:`enable` or
+        :meth:`fault_reset`); returns ``error`` for ``raise``.  A master of several drives on one
+        SYNC trips every drive when one faults."""
         self._controlword = SAFE_CONTROLWORD
         self._armed = False
         self.stats.safe_stops += 1
@@ -220,14 +222,15 @@ class Cia402Master(Drive):
         self._tripped = error
         return error
 
-    def _accept_inputs(self, inputs: CyclicInputs) -> CyclicInputs:
-        """Count a cycle's inputs; trip on the fault bit once the drive was enabled."""
+    def accept_inputs(self, inputs: CyclicInputs) -> CyclicInputs:
+        """Count a cycle's inputs; trip on the fault bit once the drive was enabled (the inputs of
+        a cycle this master, or a master of several drives, received)."""
         self.last_inputs = inputs
         self.stats.cycles += 1
         statusword = inputs.statusword
         if statusword & SW_FAULT and self._armed:
             detail, code = self._fault_detail()
-            raise self._trip(DriveFault(
+            raise self.trip(DriveFault(
                 self.name,
                 f"fault bit set in statusword 0x{statusword:04X} ({state_name(decode_statusword(statusword))})"
                 f"{detail}; torque set to zero",
@@ -259,19 +262,33 @@ class Cia402Master(Drive):
 
     def enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
         """Check 0x6502, write 0x6060, await 0x6061, walk to OPERATION ENABLED (timeouts per step)."""
+        self.prepare_enable(mode)
+        self._walk(State.OPERATION_ENABLED, self.hold_word())
+        self.mark_enabled()
+
+    def prepare_enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
+        """What :meth:`enable` does before the state-machine walk: check 0x6502, write 0x6060, await
+        0x6061, forget the last trip and the events seen.  A master walking several drives on one
+        SYNC calls it per drive, walks them together (:class:`StateWalk`), then :meth:`mark_enabled`."""
         self._require_connected()
         self._select_mode(mode)
         self._before_enable()
         self._tripped = None
         self._clear_events()
-        self._walk(State.OPERATION_ENABLED, self._hold_word())
+
+    def mark_enabled(self) -> None:
+        """The drive reached OPERATION ENABLED: hold ENABLE OPERATION, and a fault bit now trips."""
         self._controlword = Command.ENABLE_OPERATION.word
         self._armed = True
 
-    def disable(self) -> None:
-        """Zero torque, DISABLE VOLTAGE, and check the drive reaches SWITCH ON DISABLED (or sits in FAULT)."""
+    def mark_disabled(self) -> None:
+        """From now on DISABLE VOLTAGE is held and the fault bit no longer trips (before a walk to SWITCH ON DISABLED)."""
         self._armed = False
         self._controlword = SAFE_CONTROLWORD
+
+    def disable(self) -> None:
+        """Zero torque, DISABLE VOLTAGE, and check the drive reaches SWITCH ON DISABLED (or sits in FAULT)."""
+        self.mark_disabled()
         self._walk(State.SWITCH_ON_DISABLED, SAFE_CONTROLWORD, accept=(State.FAULT,))
 
     def fault_reset(self) -> None:
@@ -290,7 +307,8 @@ class Cia402Master(Drive):
         except DriveError:
             return None
 
-    def _hold_word(self) -> int:
+    def hold_word(self) -> int:
+        """The controlword this master holds (DISABLE VOLTAGE once tripped)."""
         return self._controlword if self._tripped is None else SAFE_CONTROLWORD
 
     def _select_mode(self, mode: OperationMode) -> None:
@@ -320,38 +338,12 @@ class Cia402Master(Drive):
     def _walk(self, goal: State, first_word: int, accept: tuple[State, ...] = ()) -> State:
         """Command the state machine to ``goal`` (or a state in ``accept``), starting with
         ``first_word``; :class:`DriveStateError` if one step stalls for ``state_timeout``."""
-        statusword = self._command(first_word)
-        state = decode_statusword(statusword)
-        step_started = time.monotonic()
-        previous_word = first_word
-        commands = 0
-        while state is not goal and state not in accept:
-            command: Command | None
-            if goal is State.SWITCH_ON_DISABLED:
-                command = Command.DISABLE_VOLTAGE
-            elif state is State.FAULT:
-                raise DriveStateError(self.name, f"drive is in FAULT (statusword 0x{statusword:04X}, error code "
-                                                 f"{error_code_text(self._error_code())}): it needs a fault reset first", state)
-            else:
-                path = path_to_operation_enabled(state) if state is not None else ()
-                command = path[0] if path else None
-            word = command.word if command is not None else previous_word & ~CW_FAULT_RESET
-            if time.monotonic() - step_started > self.state_timeout or commands > self.max_commands_per_step:
-                sent = f"{command.name} (controlword 0x{word:04X})" if command is not None else f"controlword 0x{word:04X}"
-                raise DriveStateError(
-                    self.name,
-                    f"state machine stuck in {state_name(state)} (statusword 0x{statusword:04X}) for "
-                    f"{self.state_timeout:.3g} s while sending {sent} towards {goal.value}",
-                    state,
-                )
-            statusword = self._command(word)
-            commands += 1
-            previous_word = word
-            new_state = decode_statusword(statusword)
-            if new_state is not state:
-                state = new_state
-                step_started = time.monotonic()
-                commands = 0
+        walk = StateWalk(self, goal, first_word, accept)
+        word: int | None = first_word
+        while word is not None:
+            word = walk.next_word(self._command(word))
+        state = walk.state
+        assert state is not None  # a walk ends only in a state it arrived at
         return state
 
     def _reset_fault(self) -> None:
@@ -367,3 +359,63 @@ class Cia402Master(Drive):
                 f"after the fault reset edge: the cause of the fault persists",
                 state,
             )
+
+
+class StateWalk:
+    """One drive's walk of the CiA-402 state machine towards ``goal`` (or a state in ``accept``),
+    one controlword per exchange, starting with ``first_word``.
+
+    :meth:`next_word` takes the statusword that answered the last word sent and returns the next
+    word to send, or None once the drive is there; it raises :class:`DriveStateError` when the
+    drive sits in FAULT on the way to an enabled state, or when one step stalls for the master's
+    ``state_timeout`` (or ``max_commands_per_step`` exchanges).  ``word`` is the last word sent
+    (what keeps an arrived drive where it is while others still walk), ``state`` the last seen.
+    A master walks one drive with it (:meth:`Cia402Master._walk`); a master of several drives
+    on one SYNC walks them together, one exchange serving every walk.
+    """
+
+    def __init__(self, master: Cia402Master, goal: State, first_word: int, accept: tuple[State, ...] = ()) -> None:
+        self.master = master
+        self.goal = goal
+        self.accept = accept
+        self.word = first_word
+        self.state: State | None = None
+        self._step_started: float | None = None
+        self._commands = 0
+
+    @property
+    def arrived(self) -> bool:
+        """True once the last statusword showed ``goal`` or a state in ``accept``."""
+        return self.state is self.goal or self.state in self.accept
+
+    def next_word(self, statusword: int) -> int | None:
+        """The controlword to send next, given the ``statusword`` that answered the last one; None when arrived."""
+        master, goal = self.master, self.goal
+        state = decode_statusword(statusword)
+        now = time.monotonic()
+        if self._step_started is None or state is not self.state:
+            self.state, self._step_started, self._commands = state, now, 0
+        if self.arrived:
+            return None
+        command: Command | None
+        if goal is State.SWITCH_ON_DISABLED:
+            command = Command.DISABLE_VOLTAGE
+        elif state is State.FAULT:
+            raise DriveStateError(master.name, f"drive is in FAULT (statusword 0x{statusword:04X}, error code "
+                                               f"{error_code_text(master._error_code())}): it needs a fault reset first",
+                                  state)
+        else:
+            path = path_to_operation_enabled(state) if state is not None else ()
+            command = path[0] if path else None
+        word = command.word if command is not None else self.word & ~CW_FAULT_RESET
+        if now - self._step_started > master.state_timeout or self._commands > master.max_commands_per_step:
+            sent = f"{command.name} (controlword 0x{word:04X})" if command is not None else f"controlword 0x{word:04X}"
+            raise DriveStateError(
+                master.name,
+                f"state machine stuck in {state_name(state)} (statusword 0x{statusword:04X}) for "
+                f"{master.state_timeout:.3g} s while sending {sent} towards {goal.value}",
+                state,
+            )
+        self._commands += 1
+        self.word = word
+        return word

@@ -2,6 +2,7 @@
 
     haptic-bus sim --interface I --channel C --node-id N [--bitrate R] [--bus-option KEY=VALUE ...]
                    [--od haptic|standard | --eds FILE] [--timing cia402|ideal|reception] [--profile P] [--realtime]
+    haptic-bus sim --interface I --channel C --node-ids 5,6,7 [--profile gantry-3d] [...]   (several axes)
     haptic-bus sim --modbus tcp://HOST:PORT [--unit-id N] [--word-order big|little]
                    [--timing cia402|ideal|reception] [--profile P] [--realtime]
     haptic-bus sim --eds-path
@@ -49,7 +50,8 @@ from sim_drive.sync_clock import SYNC_CLOCKS, sync_clock
 logger = logging.getLogger("sim_drive")
 
 _PROG = "haptic-bus sim"
-_CANOPEN_ONLY = ("eds_path", "interface", "channel", "node_id", "bitrate", "bus_option", "bus_kwargs", "od", "eds")
+_CANOPEN_ONLY = ("eds_path", "interface", "channel", "node_id", "bitrate", "bus_option", "bus_kwargs", "od", "eds",
+                 "node_ids")
 _MODBUS_ONLY = ("unit_id", "word_order")
 _HELP = frozenset({"-h", "--help"})
 
@@ -119,6 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
     canopen.add_argument("--interface", help="python-can interface (virtual, udp_multicast, socketcan, ...)")
     canopen.add_argument("--channel", help="python-can channel (e.g. vcan0, a multicast group)")
     canopen.add_argument("--node-id", type=int, help="CANopen node id 1..127")
+    add_axes_arguments(canopen)
     canopen.add_argument("--bitrate", type=int, help="bit/s; also enables the bus-load report")
     canopen.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
                          help=BUS_OPTION_HELP)
@@ -236,7 +239,6 @@ def _drive_setup(args: argparse.Namespace) -> tuple[DeviceParameters, OperatorMo
 
 def _run_canopen(args: argparse.Namespace) -> int:
     """The CANopen slave until SIGINT/SIGTERM."""
-    import can  # the bus libraries of one server only: the other's are not imported
 
     from sim_drive.bus_timing import BusLoadMeter
     from sim_drive.canopen.slave import CanopenSimDrive
@@ -244,6 +246,8 @@ def _run_canopen(args: argparse.Namespace) -> int:
     if args.eds_path:
         print(eds_path())
         return 0
+    if args.node_ids is not None:
+        return run_axes(args)
     missing = [name for name in ("interface", "channel", "node_id") if getattr(args, name) is None]
     if missing:
         print(f"{_PROG}: error: missing --{', --'.join(m.replace('_', '-') for m in missing)}", file=sys.stderr)
@@ -259,13 +263,7 @@ def _run_canopen(args: argparse.Namespace) -> int:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
     with _StopSignals() as stop_signals:  # from before the boot-up: an early signal still stops cleanly
-        try:
-            sim.start()
-        except BusConfigError as exc:
-            print(f"{_PROG}: error: {exc}", file=sys.stderr)
-            return 1
-        except (can.CanError, OSError, ValueError) as exc:
-            print(f"{_PROG}: error: cannot open the bus: {exc}", file=sys.stderr)
+        if not started(sim):
             return 1
         try:
             dictionary = "standard objects only" if args.od == "standard" else f"EDS {args.eds or eds_path()}"
@@ -284,6 +282,99 @@ def _run_canopen(args: argparse.Namespace) -> int:
         logger.info("node %d: bus load %.1f %% at %d bit/s, worst cycle %.1f us",
                     args.node_id, 100 * meter.load(), args.bitrate, 1e6 * meter.worst_latency())
     return 0
+
+
+# ----------------------------------------------------------------------------- several axes (issue 22)
+
+def add_axes_arguments(group: argparse._ArgumentGroup) -> None:
+    """``--node-ids 5,6,7``: a simulated multi-axis device, one CANopen slave per node."""
+    group.add_argument("--node-ids", metavar="IDS",
+                       help="several axes in one process (e.g. 5,6,7): one simulated drive per node on the bus, each its "
+                            "own exact plant; with a multi-axis --profile ([[axes]]) each node takes its axis' plant and "
+                            "hidden truth, and the profile's hand in space ([space.operator]) pushes them all")
+
+
+def _node_ids(text: str) -> list[int]:
+    try:
+        nodes = [int(part) for part in text.split(",")]
+    except ValueError:
+        nodes = []
+    if not nodes or len(set(nodes)) != len(nodes) or not all(1 <= n <= 127 for n in nodes):
+        raise ParameterError("--node-ids", text, "distinct CANopen node ids 1..127 separated by commas, e.g. 5,6,7")
+    return nodes
+
+
+def _axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
+    """``(axes, hand, coordinates)`` for ``--node-ids``; ParameterError if the arguments or the profile are invalid."""
+    from sim_drive.axes_profile import is_axes_profile, load_axes_device
+    from sim_drive.space_operator import SpaceHand
+
+    nodes = _node_ids(args.node_ids)
+    if args.node_id is not None or args.eds is not None:
+        raise ParameterError("--node-ids", args.node_ids, "without --node-id and --eds (one dictionary kind: --od)")
+    if args.profile and is_axes_profile(args.profile):
+        device = load_axes_device(args.profile)
+        known = [axis.node_id for axis in device.axes]
+        unknown = [n for n in nodes if n not in known]
+        if unknown:
+            raise ParameterError("--node-ids", args.node_ids, f"node ids of the profile's [[axes]]: {known}")
+        chosen = [known.index(n) for n in nodes]
+        axes = [(n, device.axes[i].parameters, args.timing or device.axes[i].timing) for n, i in zip(nodes, chosen)]
+        return axes, device.make_hand(), chosen
+    parameters, _, timing = _drive_setup(args)
+    return [(n, parameters, timing) for n in nodes], SpaceHand(len(nodes)), list(range(len(nodes)))
+
+
+def run_axes(args: argparse.Namespace) -> int:
+    """The simulated multi-axis device (``--node-ids``) until SIGINT/SIGTERM: one CANopen slave per node."""
+
+    from sim_drive.canopen.multi_axis import MultiAxisSim
+
+    missing = [name for name in ("interface", "channel") if getattr(args, name) is None]
+    if missing:
+        print(f"{_PROG}: error: missing --{', --'.join(missing)}", file=sys.stderr)
+        return 2
+    config: dict[str, Any] = {"interface": args.interface, "channel": args.channel, **dict(args.bus_option)}
+    if args.bitrate:
+        config["bitrate"] = args.bitrate
+    try:
+        axes, hand, coordinates = _axes_setup(args)
+        sim = MultiAxisSim(config, axes, hand, coordinates=coordinates, clock=args.clock, od=args.od or "haptic")
+    except ParameterError as exc:
+        print(f"{_PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    _configure_logging(args.realtime, "canopen", logging.WARNING)  # once the arguments hold: a refusal logs nothing
+    with _StopSignals() as stop_signals:
+        if not started(sim):
+            return 1
+        try:
+            logger.info("nodes %s: serving on %s %s (one simulated drive per axis, the hand: %s)",
+                        ", ".join(str(node.node_id) for node in sim.nodes), args.interface, args.channel,
+                        type(hand).__name__)
+            received = stop_signals.wait()
+            logger.info("nodes: %s received, stopping", received.name)
+        finally:
+            sim.stop()
+    for node in sim.nodes:
+        drive = node.drive
+        logger.info("node %d: stopped after %d SYNCs, virtual time %.6f s, operator energy %.6g J, wall energy %.6g J",
+                    node.node_id, drive.sync_count, drive.time, drive.operator_energy, drive.wall_energy)
+    return 0
+
+
+def started(sim: Any) -> bool:
+    """Start ``sim`` (a slave or the multi-axis device); False after one line on stderr if its bus cannot be opened."""
+    import can
+
+    try:
+        sim.start()
+    except BusConfigError as exc:
+        print(f"{_PROG}: error: {exc}", file=sys.stderr)
+        return False
+    except (can.CanError, OSError, ValueError) as exc:
+        print(f"{_PROG}: error: cannot open the bus: {exc}", file=sys.stderr)
+        return False
+    return True
 
 
 def log_eds_gaps(node_id: int, dictionary: Any) -> None:

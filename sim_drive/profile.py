@@ -23,6 +23,7 @@ import importlib.resources
 import pathlib
 import tomllib
 from dataclasses import dataclass
+from typing import Any
 
 from drives.errors import ParameterError
 from sim_drive.operator import NoOperator, OperatorModel, operator_from_table
@@ -67,23 +68,39 @@ def resolve(path_or_name: str | pathlib.Path) -> pathlib.Path:
 
 def load_profile(path_or_name: str | pathlib.Path) -> DriveProfile:
     """The device parameters, timing and operator model a profile states (defaults where silent)."""
+    document = read_toml(path_or_name)
+    path = resolve(path_or_name)
+    device, loop, operator = (document.get(key, {}) for key in ("device", "loop", "operator_model"))
+    for key, table in (("device", device), ("loop", loop), ("operator_model", operator)):
+        if not isinstance(table, dict):
+            raise ParameterError(key, table, "a TOML table", f"profile {path}")
+    parameters, timing = device_parameters(device, loop, f"profile {path}")
+    model = operator_from_table(operator, base=path.parent) if operator else NoOperator()
+    return DriveProfile(parameters, timing, model)
+
+
+def read_toml(path_or_name: str | pathlib.Path) -> dict[str, Any]:
+    """The TOML document of a profile (a path, or a shipped profile's name); ParameterError if unreadable."""
     path = resolve(path_or_name)
     try:
         with open(path, "rb") as handle:
-            document = tomllib.load(handle)
+            return tomllib.load(handle)
     except OSError as exc:
         allowed = f"a readable TOML file or a shipped profile name ({exc.strerror})"
         raise ParameterError("profile", str(path_or_name), allowed) from exc
     except tomllib.TOMLDecodeError as exc:
         raise ParameterError("profile", str(path), f"valid TOML ({exc})") from exc
-    device, loop, operator = (document.get(key, {}) for key in ("device", "loop", "operator_model"))
-    for key, table in (("device", device), ("loop", loop), ("operator_model", operator)):
-        if not isinstance(table, dict):
-            raise ParameterError(key, table, "a TOML table", f"profile {path}")
-    context = f"profile {path}"
+
+
+def device_parameters(device: dict[str, Any], loop: dict[str, Any], context: str,
+                      prefix: str = "") -> tuple[DeviceParameters, Timing | None]:
+    """The plant, scaling and hidden truth of a ``[device]`` table, with ``[loop]``'s ``period``,
+    ``timing`` and ``delay``; errors name the field as the profile spells it (``prefix`` before it,
+    e.g. ``axes[1].``)."""
     unknown = sorted(set(device) - set(_DEVICE_FIELDS) - _DESCRIPTIVE)
     if unknown:
-        raise ParameterError(f"device.{unknown[0]}", device[unknown[0]], f"keys among {sorted(_DEVICE_FIELDS)}", context)
+        raise ParameterError(f"{prefix}device.{unknown[0]}", device[unknown[0]], f"keys among {sorted(_DEVICE_FIELDS)}",
+                             context)
     fields = {_DEVICE_FIELDS[key]: value for key, value in device.items() if key in _DEVICE_FIELDS}
     if "period" in loop:
         fields["period"] = loop["period"]
@@ -91,11 +108,9 @@ def load_profile(path_or_name: str | pathlib.Path) -> DriveProfile:
     if timing is Timing.RECEPTION and "delay" in loop:
         fields["reception_delay"] = loop["delay"]
     try:
-        parameters = DeviceParameters(**fields)
+        return DeviceParameters(**fields), timing
     except ParameterError as exc:  # named as the profile spells it
-        raise ParameterError(_PROFILE_KEYS.get(exc.name, exc.name), exc.value, exc.allowed, context) from None
-    model = operator_from_table(operator, base=path.parent) if operator else NoOperator()
-    return DriveProfile(parameters, timing, model)
+        raise ParameterError(prefix + _PROFILE_KEYS.get(exc.name, exc.name), exc.value, exc.allowed, context) from None
 
 
 def _read_timing(loop: dict[str, object], context: str) -> Timing | None:

@@ -97,7 +97,11 @@ class CanopenDrive(Cia402Master):
     ``commissioned.mapping_notes`` says so), and ``tpdo_codecs`` are then the ones in use.
     All are transmission type 1 (every SYNC); unused PDOs are invalidated.  What the drive
     lacks of the safety chain is one warning per object (``safety_warnings``), or a refusal
-    with ``safety.strict``; no object the drive lacks is ever written, at connect or close.  ``rx_mode``:
+    with ``safety.strict``; no object the drive lacks is ever written, at connect or close.
+    ``link`` and ``heartbeat``: a link and the master's heartbeat producer the caller owns and
+    shares among several drives on one bus (:mod:`drives.canopen.axes`; marked ``shared``):
+    connect() opens the link and starts the heartbeat if they are not yet, close() leaves a shared
+    one running.  ``rx_mode``:
     "direct" or "listener" (:mod:`drives.canopen.exchange`).  Timeouts in s;
     ``max_missed_tpdos`` consecutive cycles without TPDO raise DriveTimeout; heartbeat times in
     ms (consumer default 3x producer; 0 disables).  ``scaling``: the caller's
@@ -140,6 +144,8 @@ class CanopenDrive(Cia402Master):
         reset_communication: bool = True,
         check_device_type: bool = True,
         safety: SafetySettings = DEFAULT_SAFETY,
+        link: NetworkLink | None = None,
+        heartbeat: HeartbeatProducer | None = None,
     ) -> None:
         low, high = NODE_ID_RANGE
         _check("node_id", isinstance(node_id, int) and low <= node_id <= high, node_id, f"{low}..{high}")
@@ -170,10 +176,12 @@ class CanopenDrive(Cia402Master):
                                               check_device_type, heartbeat_producer_ms, heartbeat_consumer_ms)
         self.safety = safety
         self.commissioned: Commissioned | None = None
-        self.heartbeat = HeartbeatProducer(safety.master_node_id or 0, safety.heartbeat_ms / 1000.0
-                                           if safety.master_node_id is not None else 0.0)
-        self.link = NetworkLink(self.name, network=network, bus=bus,
-                                bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})))
+        _check("link", link is None or (network is None and bus is None and interface is None and channel is None),
+               "a shared link", "no network, bus, interface or channel besides it")
+        self.heartbeat = heartbeat if heartbeat is not None else HeartbeatProducer(
+            safety.master_node_id or 0, safety.heartbeat_ms / 1000.0 if safety.master_node_id is not None else 0.0)
+        self.link = link if link is not None else NetworkLink(
+            self.name, network=network, bus=bus, bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})))
         self.stats = CanopenStats()
         self.tpdo_objects = tuple(spec for frame in frames for spec in frame)
         tpdo_codecs = tuple(PdoCodec(frame, name=f"TPDO{n} of node {node_id}") for n, frame in enumerate(frames, 1))
@@ -307,12 +315,12 @@ class CanopenDrive(Cia402Master):
                 self.events.check()  # type: ignore[union-attr]
             inputs = exchange.exchange()
         except DriveError as error:
-            raise self._trip(error) from error.__cause__
+            raise self.trip(error) from error.__cause__
         if inputs is None:
             self.stats.missed_tpdos += 1
             self._missed_in_row += 1
             if self._missed_in_row >= self.max_missed_tpdos:
-                raise self._trip(DriveTimeout(
+                raise self.trip(DriveTimeout(
                     self.name,
                     f"no TPDO (COB-ID 0x{exchange.tpdo_cobs[0]:03X}) for {self._missed_in_row} consecutive cycles "
                     f"(timeout {exchange.timeout * 1e3:.3g} ms each); torque set to zero",
@@ -320,7 +328,7 @@ class CanopenDrive(Cia402Master):
             last = self.last_inputs if self.last_inputs is not None else CyclicInputs(0, 0)
             return dataclasses.replace(last, age=self._missed_in_row)
         self._missed_in_row = 0
-        return self._accept_inputs(inputs)
+        return self.accept_inputs(inputs)
 
     def _fault_detail(self) -> tuple[str, int | None]:
         return self.events.fault_detail() if self.events is not None else ("", None)
@@ -330,7 +338,7 @@ class CanopenDrive(Cia402Master):
         try:
             self.exchange.send_rpdo(controlword, target_torque)
         except DriveError as error:
-            raise self._trip(error) from error.__cause__
+            raise self.trip(error) from error.__cause__
 
     def _send_safe_outputs(self) -> None:
         self.exchange.send_safe()
@@ -352,19 +360,23 @@ class CanopenDrive(Cia402Master):
     def state(self) -> State | None:
         """The drive's CiA-402 state: one SYNC/TPDO exchange, answered with the held controlword and zero torque."""
         self._require_connected()
-        return decode_statusword(self._command(self._hold_word()))
+        return decode_statusword(self._command(self.hold_word()))
 
-    def enable(self, *args: Any, **kwargs: Any) -> None:
-        """Check 0x6502, write 0x6060, await 0x6061, walk to OPERATION ENABLED (timeouts per step)."""
-        super().enable(*args, **kwargs)
+    def mark_enabled(self) -> None:
+        """OPERATION ENABLED: hold ENABLE OPERATION; a fault bit, an EMCY or a heartbeat loss now trips."""
+        super().mark_enabled()
         self.events.armed = True  # type: ignore[union-attr]
+
+    def mark_disabled(self) -> None:
+        """Hold DISABLE VOLTAGE; EMCYs and NMT changes are news, no longer trips."""
+        super().mark_disabled()
+        if self.events is not None:
+            self.events.armed = False
 
     def disable(self) -> None:
         """Zero torque, DISABLE VOLTAGE, and check the drive reaches SWITCH ON DISABLED (or sits in FAULT)."""
         if not self._connected:
             return
-        if self.events is not None:
-            self.events.armed = False
         super().disable()
 
     def fault_reset(self) -> None:
@@ -395,7 +407,8 @@ class CanopenDrive(Cia402Master):
                         self.sdo.write_int(CONSUMER_HEARTBEAT_TIME, 1, DataType.UNSIGNED32, 0)  # a clean goodbye
                 except Exception as exc:  # a best-effort goodbye: whatever fails here, the bus is released below
                     logger.warning("%s: could not send the closing frames: %r", self.name, exc)
-            self.heartbeat.stop()
+            if not self.heartbeat.shared:
+                self.heartbeat.stop()
             self.exchange.end()
             if self.events is not None:
                 self.events.release()
@@ -404,7 +417,8 @@ class CanopenDrive(Cia402Master):
         except DriveError as exc:
             logger.warning("%s: closing: %s", self.name, exc)
         finally:
-            self.link.close()
+            if not self.link.shared:
+                self.link.close()
 
     def _has(self, index: int, subindex: int = 0) -> bool:
         """True if commissioning found ``index:subindex`` in the drive (False before it did)."""

@@ -25,6 +25,7 @@ from __future__ import annotations
 import logging
 import queue
 import time
+from collections.abc import Callable, Container
 from dataclasses import dataclass
 
 import can
@@ -64,7 +65,9 @@ class CanopenExchange:
     holding the controlword 0x6040 and the target torque 0x6071 and nothing else (one frame,
     (controlword, torque), unless the drive's PDOs made commissioning split them);
     ``timeout`` (s) is how long one cycle waits for all its TPDOs.  :meth:`configure` sets the
-    layout commissioning chose.
+    layout commissioning chose.  ``produces_sync`` (default True): with False, several drives
+    share one SYNC that another object sends (:mod:`drives.canopen.axes_cycle`): this exchange
+    then sends no SYNC, not even with its safe outputs, and refuses to run a cycle of its own.
     """
 
     def __init__(
@@ -87,6 +90,7 @@ class CanopenExchange:
         self._queue: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
         self._subscribed = False
         self._sync = can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False)
+        self.produces_sync = True  # False: another object sends the one SYNC of several drives' cycle
         self._layout(tpdo_codecs, rpdo_codecs)
 
     def _layout(self, tpdo_codecs: tuple[PdoCodec, ...], rpdo_codecs: tuple[PdoCodec, ...]) -> None:
@@ -146,24 +150,7 @@ class CanopenExchange:
     def _receive(self, deadline: float) -> tuple[int, bytes | bytearray] | None:
         """The next frame on one of the TPDO COB-IDs before ``deadline`` (perf_counter s), or None."""
         if self.link.direct:
-            bus = self.link.bus
-            if bus is None:
-                raise DriveError(self.name, "the bus is closed")
-            slots = self._slots
-            while True:
-                remaining = deadline - time.perf_counter()
-                try:
-                    msg = bus.recv(remaining if remaining > 0.0 else 0.0)
-                except Exception as exc:  # any interface's failure: the receive path is gone
-                    raise DriveError(self.name, f"CAN receive failed: {exc!r}") from exc
-                if msg is None:
-                    return None
-                if msg.is_error_frame or msg.is_remote_frame:
-                    continue
-                can_id = msg.arbitration_id
-                if can_id in slots and not msg.is_extended_id:
-                    return can_id, msg.data
-                self._dispatch(msg)
+            return receive_direct(self.name, self.link, self._slots, deadline, self.dispatch)
         failure = self.link.receive_failure()
         if failure is not None:
             raise DriveError(self.name, f"CAN receive failed: {failure!r}")
@@ -173,7 +160,7 @@ class CanopenExchange:
         except queue.Empty:
             return None
 
-    def _dispatch(self, msg: can.Message) -> None:
+    def dispatch(self, msg: can.Message) -> None:
         """Direct mode: a frame that is not ours goes to canopen's subscribers (SDO, heartbeat, EMCY)."""
         network = self.link.network
         if network is None:
@@ -194,8 +181,28 @@ class CanopenExchange:
             else:
                 self.stats.stale_tpdos += 1
 
+    @property
+    def slots(self) -> dict[int, tuple[int, int, object]]:
+        """TPDO COB-ID -> (its place among this drive's TPDOs, its length in bytes, its ``struct`` unpack)."""
+        return self._slots
+
+    def inputs(self, parts: list[tuple[int, ...] | None], synced: int) -> CyclicInputs:
+        """One cycle's inputs from the decoded TPDOs ``parts`` (in TPDO order, all present);
+        ``synced``: ``time.perf_counter_ns()`` right after the SYNC left."""
+        if len(parts) == 1:
+            values = parts[0]
+        else:
+            values = ()
+            for part in parts:
+                values += part  # type: ignore[operator]
+        sw, vel, pos = self._at
+        return CyclicInputs(values[sw], values[vel], None if pos is None else values[pos],  # type: ignore[index]
+                            sampled_by_ns=synced)
+
     def exchange(self) -> CyclicInputs | None:
         """SYNC out, then this cycle's inputs from every TPDO of the cycle; None on timeout."""
+        if not self.produces_sync:
+            raise DriveError(self.name, "this drive shares a SYNC another object sends: its cycles run there")
         self.send(self._sync)
         synced = time.perf_counter_ns()  # the drive samples at the SYNC: by now it has
         self.stats.syncs_sent += 1
@@ -218,15 +225,7 @@ class CanopenExchange:
             else:
                 self.stats.stale_tpdos += 1
             parts[slot] = unpack(data)  # type: ignore[operator]
-        if count == 1:
-            values = parts[0]
-        else:
-            values = ()
-            for part in parts:
-                values += part  # type: ignore[operator]
-        sw, vel, pos = self._at
-        return CyclicInputs(values[sw], values[vel], None if pos is None else values[pos],  # type: ignore[index]
-                            sampled_by_ns=synced)
+        return self.inputs(parts, synced)
 
     # ------------------------------------------------------------------ send
 
@@ -263,7 +262,8 @@ class CanopenExchange:
             self.stats.rpdos_sent += 1
 
     def send_safe(self) -> None:
-        """Zero torque with DISABLE VOLTAGE, and one SYNC so that a synchronous drive applies it.
+        """Zero torque with DISABLE VOLTAGE, and one SYNC so that a synchronous drive applies it (none
+        where another object sends the SYNC: it sends one after every drive's safe outputs).
 
         Never raises: it runs while another error is being raised, which matters more.
         """
@@ -271,7 +271,33 @@ class CanopenExchange:
             for msg in self._safe:
                 self.send(msg)
                 self.stats.rpdos_sent += 1
-            self.send(self._sync)
-            self.stats.syncs_sent += 1
+            if self.produces_sync:
+                self.send(self._sync)
+                self.stats.syncs_sent += 1
         except DriveError as exc:
             logger.error("%s: could not send the safe stop frame: %s", self.name, exc)
+
+
+def receive_direct(name: str, link: NetworkLink, wanted: Container[int], deadline: float,
+                   dispatch: Callable[[can.Message], None]) -> tuple[int, bytearray] | None:
+    """Read ``link``'s bus in this thread until a standard data frame with a COB-ID in ``wanted``
+    arrives (returned as ``(cob_id, data)``) or ``deadline`` (``time.perf_counter()`` s) passes
+    (None); every other data frame goes to ``dispatch``.  A receive that fails is a DriveError
+    naming ``name``."""
+    bus = link.bus
+    if bus is None:
+        raise DriveError(name, "the bus is closed")
+    while True:
+        remaining = deadline - time.perf_counter()
+        try:
+            msg = bus.recv(remaining if remaining > 0.0 else 0.0)
+        except Exception as exc:  # any interface's failure: the receive path is gone
+            raise DriveError(name, f"CAN receive failed: {exc!r}") from exc
+        if msg is None:
+            return None
+        if msg.is_error_frame or msg.is_remote_frame:
+            continue
+        can_id = msg.arbitration_id
+        if can_id in wanted and not msg.is_extended_id:
+            return can_id, msg.data
+        dispatch(msg)

@@ -20,11 +20,13 @@ logger = logging.getLogger(__name__)
 
 
 class HeartbeatProducer:
-    """Node ``node_id``'s heartbeat on ``bus`` every ``period`` s, sends under ``lock``."""
+    """Node ``node_id``'s heartbeat on ``bus`` every ``period`` s, sends under ``lock``.  ``shared``:
+    several drives' masters use it (one controller node): only its owner stops it."""
 
-    def __init__(self, node_id: int, period: float) -> None:
+    def __init__(self, node_id: int, period: float, shared: bool = False) -> None:
         self.node_id = node_id
         self.period = period
+        self.shared = shared
         self.sent = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None

@@ -84,8 +84,10 @@ class NetworkLink:
         network: canopen.Network | None = None,
         bus: can.BusABC | None = None,
         bus_args: tuple[str | None, Any, int | None, dict[str, Any]] = (None, None, None, {}),
+        shared: bool = False,
     ) -> None:
         self.name = name
+        self.shared = shared  # several drives use it (one bus): only its owner closes it
         self._given_network = network
         self._given_bus = bus
         self._bus_args = bus_args
@@ -95,7 +97,10 @@ class NetworkLink:
         self._errors = ReceiveErrors(name)
 
     def open(self) -> canopen.Network:
-        """The network, connected and with its notifier reading the bus."""
+        """The network, connected and with its notifier reading the bus (the same one again if
+        already open: several drives on one bus share one link)."""
+        if self.network is not None:
+            return self.network
         if self._given_network is not None:
             network = self._given_network
         else:

@@ -313,15 +313,15 @@ class ModbusDrive(Cia402Master):
         try:
             return self.link.send(request, what)
         except ModbusLinkLost as exc:
-            raise self._trip(exc) from exc.__cause__
+            raise self.trip(exc) from exc.__cause__
         except DriveTimeout as exc:
             self._send_safe_outputs()
             self._drop_link()
             lost = ModbusLinkLost(self.name, f"{exc.message}; link closed (a late answer could not be told from "
                                              f"the next), call reconnect()")
-            raise self._trip(lost) from exc.__cause__
+            raise self.trip(lost) from exc.__cause__
         except DriveProtocolError as exc:
-            raise self._trip(exc) from exc.__cause__
+            raise self.trip(exc) from exc.__cause__
 
     def _fault_detail(self) -> tuple[str, int | None]:
         try:
@@ -345,10 +345,10 @@ class ModbusDrive(Cia402Master):
             self._cached = None
             answered = self._cached_at
         if len(registers) != self._codec.count:
-            raise self._trip(DriveProtocolError(
+            raise self.trip(DriveProtocolError(
                 self.name, f"{len(registers)} registers answered for {requests.read_what}, expected {self._codec.count}"))
         statusword, velocity, position = self._codec.decode(registers)
-        return self._accept_inputs(CyclicInputs(statusword, velocity, position, sampled_by_ns=answered))
+        return self.accept_inputs(CyclicInputs(statusword, velocity, position, sampled_by_ns=answered))
 
     def _send_outputs(self, controlword: int, target_torque: int) -> None:
         if not self.link.up:

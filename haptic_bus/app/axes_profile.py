@@ -12,6 +12,9 @@ here).  Tables:
 * ``[gate]``: ``safety_margin`` (N s/m) and ``bandwidth`` as one-axis profiles (the bandwidth
   rule is a 1-D rule and is not applied to objects in space);
 * ``[safety]`` (optional): as one-axis profiles, for every axis' drive;
+* ``[passivity]`` and ``[supervisor]`` (optional): as one-axis profiles, for the port observer
+  and the passivity layer of every axis and the run's supervisor; ``derate`` is a one-axis action
+  (the coupled gate has no derate search yet) and is refused here;
 * ``[[axes]]``, one table per axis, in coordinate order: ``name``; ``node_id`` (CANopen, 1..127)
   **or** ``unit_id`` (Modbus, 1..247), one kind for all axes; ``timing`` ("ideal", "cia402",
   "reception") and ``delay`` (samples, real; defaults as ``[loop]`` of a one-axis profile);
@@ -21,7 +24,10 @@ here).  Tables:
   transmission, 0x6072) and the ``velocity`` model;
 * ``[[space.objects]]``: ``kind`` = plane | box | sphere, ``name``, ``stiffness`` (N/m),
   ``damping`` (N s/m), and ``point`` + ``normal`` (plane), ``center`` + ``half`` (box) or
-  ``center`` + ``radius`` (sphere), positions in m with one coordinate per axis.
+  ``center`` + ``radius`` (sphere), positions in m with one coordinate per axis;
+* ``[space.operator]`` (optional): the simulated hand in space (``sim_drive.space_operator``):
+  ``model`` = "none" or "push", with ``force`` (N), ``toward`` (a point, or a list of points, m)
+  and ``dwell`` (s per point).
 
 :func:`load_axes_profile` validates everything (unknown keys, types, ranges, names; one-line
 errors naming the file, the dotted field, the value and the allowed range), checks the bus load
@@ -32,7 +38,9 @@ a profile that loads is one the gate admits.  :func:`load_any_profile` reads eit
 from __future__ import annotations
 
 import pathlib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 from drives.cia301 import NODE_ID_RANGE
@@ -51,17 +59,22 @@ from haptic_bus.app.profiles import (
     Profile,
     _read_device,
     _read_gate,
+    _read_passivity,
     _read_safety,
+    _read_supervisor,
     load_profile,
     resolve_profile,
 )
 from haptic_bus.control.bus_load import PDO_MAPPINGS, axes_bus_load
 from haptic_bus.control.gate import GatePolicy
 from haptic_bus.control.kinematics import Cartesian
+from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.space_gate import SpaceDecision, SpaceGate, SpaceGateRefusal
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere, compile_space_scene
+from haptic_bus.control.supervisor import Action, SupervisorPolicy
 
 DEFAULT_BITRATE = 1_000_000
+HAND_MODELS = ("none", "push")
 _FIELDS = {"plane": ("point", "normal"), "box": ("center", "half"), "sphere": ("center", "radius")}
 
 
@@ -103,6 +116,10 @@ class AxesProfile:
     bitrate: float
     safety: SafetySettings = field(default_factory=SafetySettings)
     path: pathlib.Path | None = None
+    passivity: LayerPolicy = field(default_factory=LayerPolicy)
+    supervisor: SupervisorPolicy = field(default_factory=SupervisorPolicy)
+    operator_model: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({"model": "none"}),
+                                              hash=False, compare=True)
 
     def axis_loops(self) -> tuple[WallLoop, ...]:
         """Every axis' loop as the coupled gate judges it (m, effective b, T, its delay and velocity model)."""
@@ -186,6 +203,27 @@ def _read_object(path: pathlib.Path, index: int, table: object, size: int) -> Sp
         raise ProfileError(path, f"space.objects[{index}].{error.name}", error.value, error.allowed) from None
 
 
+def _read_hand(path: pathlib.Path, table: object, size: int) -> Mapping[str, Any]:
+    """``[space.operator]``: the simulated hand in space (module docstring), checked here, built by the simulator."""
+    if table is None:
+        return MappingProxyType({"model": "none"})
+    r = Reader(path, "space.operator", table)
+    model = r.text("model", choices=HAND_MODELS)
+    out: dict[str, Any] = {"model": model}
+    if model == "push":
+        out["force"] = r.real("force", 0.0, 1e6, "N")
+        toward = r.raw("toward", f"a point of {size} coordinates (m), or a list of them")
+        points: list[Any] = toward if isinstance(toward, list) and toward and isinstance(toward[0], list) else [toward]
+        if not all(isinstance(p, list) and len(p) == size and all(isinstance(c, (int, float)) and not isinstance(c, bool)
+                                                                   and abs(c) <= 1e6 for c in p) for p in points):
+            raise ProfileError(path, r.field("toward"), toward, f"a point of {size} coordinates (m), or a list of them")
+        out["toward"] = [[float(c) for c in p] for p in points]
+        if "dwell" in r.table:
+            out["dwell"] = r.real("dwell", 0.0, 1e9, "s", low_inclusive=False)
+    r.done()
+    return MappingProxyType(out)
+
+
 def _unique(path: pathlib.Path, where: str, values: list[Any], what: str) -> None:
     seen: dict[Any, int] = {}
     for i, value in enumerate(values):
@@ -221,15 +259,23 @@ def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
                            "one kind of bus for every axis: all node_id (CANopen) or all unit_id (Modbus)")
     policy = _read_gate(path, top.raw("gate", "a [gate] table"))
     safety = _read_safety(path, top.raw("safety", "a [safety] table", default=None))
+    passivity = _read_passivity(path, top.raw("passivity", "a [passivity] table", default=None))
+    supervisor = _read_supervisor(path, top.raw("supervisor", "a [supervisor] table", default=None), passivity)
+    for key in ("on_late", "on_observer"):
+        if getattr(supervisor, key) == Action.DERATE.value:
+            raise ProfileError(path, f"supervisor.{key}", "derate", '"warn" or "stop" for a multi-axis profile (the '
+                               "coupled gate has no derate search)")
     space = Reader(path, "space", top.raw("space", "a [space] table with [[space.objects]]"))
     objects = space.raw("objects", "an array of tables [[space.objects]] (may be empty)", default=[])
     if not isinstance(objects, list):
         raise ProfileError(path, "space.objects", objects, "an array of tables [[space.objects]]")
+    hand = _read_hand(path, space.raw("operator", "a [space.operator] table", default=None), len(axes))
     space.done()
     top.done()
     scene = tuple(_read_object(path, i, table, len(axes)) for i, table in enumerate(objects))
     _unique(path, "space.objects", [obj.name for obj in scene], "a name")
-    return AxesProfile(name, operator, task, description, period, axes, scene, policy, bitrate, safety, path)
+    return AxesProfile(name, operator, task, description, period, axes, scene, policy, bitrate, safety, path,
+                       passivity, supervisor, hand)
 
 
 def load_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:

@@ -15,6 +15,7 @@ import os
 import pathlib
 import sys
 from collections.abc import Callable, Sequence
+from typing import Any
 
 from haptic_bus.app.arguments import (
     EXIT_ASSUMPTION,
@@ -119,14 +120,21 @@ def _plot(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
+    from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
     from haptic_bus.app.demo import format_demo, run_demo
-    from haptic_bus.app.profiles import load_profile
 
-    profile = load_profile(args.profile) if args.profile else None
-    result = run_demo(args.out, profile, seconds=args.duration)
-    print(format_demo(result))
-    return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(
-        result.summary.exit_reason, EXIT_NO)
+    profile = load_any_profile(args.profile) if args.profile else None
+    if isinstance(profile, AxesProfile):
+        from haptic_bus.app.axes_demo import format_axes_demo, run_axes_demo
+
+        axes_result = run_axes_demo(args.out, profile, seconds=args.duration)
+        print(format_axes_demo(axes_result))
+        reason = axes_result.summary.exit_reason
+    else:
+        result = run_demo(args.out, profile, seconds=args.duration)
+        print(format_demo(result))
+        reason = result.summary.exit_reason
+    return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(reason, EXIT_NO)
 
 
 def _validate_run(args: argparse.Namespace) -> DriveAddress:
@@ -143,7 +151,7 @@ def _validate_run(args: argparse.Namespace) -> DriveAddress:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from haptic_bus.app.profiles import load_profile
+    from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
     from haptic_bus.app.runner import (
         DEFAULT_CONTROLLER_NODE_ID,
         RunOptions,
@@ -153,8 +161,8 @@ def _run(args: argparse.Namespace) -> int:
         run_modbus,
     )
 
-    address = _validate_run(args)
-    profile = load_profile(args.profile)
+    profile = load_any_profile(args.profile)
+    address = None if isinstance(profile, AxesProfile) else _validate_run(args)
     stop = StopRequest()
     from haptic_bus.app.realtime import RealtimeSettings
 
@@ -163,10 +171,19 @@ def _run(args: argparse.Namespace) -> int:
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
                          scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings(),
                          reset_fault=args.reset_fault, bus_log=not args.no_bus_log)
-    stop.install()
-    if address.url is not None:
+    if isinstance(profile, AxesProfile):
+        from haptic_bus.app.axes_runner import check_run, run_axes_canopen
+
+        _refuse_single_axis_options(args)
+        controller_node_id = args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID
+        check_run(profile, controller_node_id)
+        stop.install()
+        result: Any = run_axes_canopen(profile, bus_arguments(args), options, controller_node_id)
+    elif address is not None and address.url is not None:
+        stop.install()
         result = run_modbus(profile, address.url, address.unit_id, options)
-    else:
+    elif address is not None:
+        stop.install()
         result = run_canopen(profile, address.bus, address.checked_node_id, options,
                              args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
     summary = result.summary
@@ -186,6 +203,19 @@ def _run(args: argparse.Namespace) -> int:
         said = result.error if result.error.startswith(result.exit_reason) else f"{result.exit_reason}: {result.error}"
         print(f"haptic-bus run: {said}", file=sys.stderr)
     return exit_status(result.exit_reason)
+
+
+def _refuse_single_axis_options(args: argparse.Namespace) -> None:
+    """A multi-axis profile names its drives in ``[[axes]]``: the options that name one drive, or act
+    on one, are refused (exit 2) before anything is touched."""
+    from drives.errors import ParameterError
+
+    given = [flag for flag, value in (("--node-id", args.node_id), ("--modbus", args.modbus), ("--unit-id", args.unit_id),
+                                      ("--reset-fault", args.reset_fault),
+                                      ("--start-in-contact", args.start_in_contact == "ramp")) if value]
+    if given:
+        raise ParameterError(given[0], "given with a multi-axis profile", "the bus options only: the node ids come "
+                             "from [[axes]] (no Modbus axes, fault reset or start ramp for several axes yet)")
 
 
 def _upload(args: argparse.Namespace) -> int:

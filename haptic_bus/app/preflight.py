@@ -24,14 +24,15 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from drives.base import Drive
 from haptic_bus.control.clock import RealClock
-from haptic_bus.control.controller import percentiles
+from haptic_bus.control.cycle_loop import percentiles
 from haptic_bus.control.gate import PassivityGate
 from haptic_bus.control.scene import CompiledScene
 
@@ -90,7 +91,19 @@ class Timing:
     overruns: int
 
 
-def measure(drive: Drive, period: float, cycles: int = PREFLIGHT_CYCLES, spin: float | None = None) -> Timing:
+class Cycling(Protocol):
+    """What pre-flight cycles: a drive, or several on one SYNC (:class:`drives.base.Drive` has these)."""
+
+    def read_inputs(self) -> object:
+        """Start a cycle and return its inputs."""
+        ...
+
+    def write_outputs(self, target_torque: int) -> None:
+        """Send this cycle's target torque (per mille; every drive's)."""
+        ...
+
+
+def measure(drive: Cycling | Drive, period: float, cycles: int = PREFLIGHT_CYCLES, spin: float | None = None) -> Timing:
     """Cycle ``drive`` (not enabled: zero torque) ``cycles`` times on a fresh real clock."""
     clock = RealClock(period, capacity=cycles, spin=spin)
     starts = np.zeros(cycles)
@@ -113,11 +126,21 @@ def judge(timing: Timing, gate: PassivityGate, scene: CompiledScene, layer: str,
     """The verdict on the measured timing (module docstring).  ``watchdog`` (s): the shortest stall
     that faults the drive; ``deadline_periods``: the RPDO deadline in periods when it is the
     binding watchdog (then a longer ``T`` lengthens it), else None."""
+    def passes_at(delay: float) -> bool:
+        return PassivityGate(dataclasses.replace(gate.device, delay=delay), gate.policy).passes(scene)
+
+    return judge_delay(timing, gate.device.delay, passes_at, layer, watchdog, deadline_periods)
+
+
+def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float], bool], layer: str, watchdog: float,
+                deadline_periods: int | None) -> PreflightReport:
+    """:func:`judge` for any gate: ``assumed_delay`` (samples) is the delay it judged with,
+    ``passes_at(delay)`` its verdict on the scene at another loop delay (samples)."""
     period = timing.period
     late, cycle = percentiles(timing.lateness), percentiles(timing.exchange)
     gap = float(np.max(np.diff(timing.starts))) if timing.starts.size > 1 else period
-    observed = gate.device.delay + late["p99"] / period
-    passive = PassivityGate(dataclasses.replace(gate.device, delay=observed), gate.policy).passes(scene)
+    observed = assumed_delay + late["p99"] / period
+    passive = passes_at(observed)
 
     def report(holdable: bool, reason: str, smallest: float | None = None) -> PreflightReport:
         return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, observed, passive,

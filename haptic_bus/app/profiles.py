@@ -118,6 +118,24 @@ class DeviceProfile:
         """Handle force in N that 0x6072 allows: permille * rated torque * transmission / 1000."""
         return self.max_torque_permille * self.rated_torque * self.force_per_torque / 1000.0
 
+    def scaling(self) -> DriveScaling:
+        """The drive-unit conversion of :mod:`drives.base`."""
+        return DriveScaling(self.velocity_per_count, self.position_per_count, self.rated_torque, self.force_per_torque,
+                            self.max_torque_permille)
+
+    def sim_parameters(self, period: float, timing: str, delay: float) -> dict[str, object]:
+        """Keyword arguments of ``sim_drive.parameters.DeviceParameters`` for this device on a loop of
+        ``period`` s and ``timing`` (with the hidden truth: Coulomb friction, velocity noise and its seed)."""
+        parameters: dict[str, object] = {
+            "m": self.mass, "b": self.friction, "period": period,
+            "velocity_per_count": self.velocity_per_count, "position_per_count": self.position_per_count,
+            "rated_torque": self.rated_torque, "force_per_torque": self.force_per_torque,
+            "max_torque_permille": self.max_torque_permille, "velocity": self.velocity,
+            "coulomb_friction": self.coulomb_friction, "velocity_noise": self.velocity_noise, "noise_seed": self.noise_seed}
+        if timing == "reception":
+            parameters["reception_delay"] = delay
+        return parameters
+
 
 @dataclass(frozen=True)
 class LoopProfile:
@@ -201,9 +219,7 @@ class Profile:
 
     def scaling(self) -> DriveScaling:
         """The drive-unit conversion of :mod:`drives.base`."""
-        d = self.device
-        return DriveScaling(d.velocity_per_count, d.position_per_count, d.rated_torque, d.force_per_torque,
-                            d.max_torque_permille)
+        return self.device.scaling()
 
     def compiled_scene(self) -> CompiledScene:
         """The scene as the piecewise-affine law the controller evaluates."""
@@ -216,16 +232,7 @@ class Profile:
     def sim_device_parameters(self) -> dict[str, object]:
         """Keyword arguments of ``sim_drive.parameters.DeviceParameters`` for this device and loop
         (with the hidden truth: Coulomb friction, velocity noise and its seed)."""
-        d = self.device
-        parameters: dict[str, object] = {
-            "m": d.mass, "b": d.friction, "period": self.loop.period,
-            "velocity_per_count": d.velocity_per_count, "position_per_count": d.position_per_count,
-            "rated_torque": d.rated_torque, "force_per_torque": d.force_per_torque,
-            "max_torque_permille": d.max_torque_permille, "velocity": d.velocity,
-            "coulomb_friction": d.coulomb_friction, "velocity_noise": d.velocity_noise, "noise_seed": d.noise_seed}
-        if self.loop.timing == "reception":
-            parameters["reception_delay"] = self.loop.delay
-        return parameters
+        return self.device.sim_parameters(self.loop.period, self.loop.timing, self.loop.delay)
 
 
 # --------------------------------------------------------------------------- finding files
@@ -234,9 +241,10 @@ def _profiles_folder() -> pathlib.Path:
     return pathlib.Path(str(importlib.resources.files("profiles")))
 
 
-def shipped_profiles() -> dict[str, pathlib.Path]:
-    """The profiles shipped in the ``profiles`` package: name (file stem) -> path, sorted."""
-    return {p.stem: p for p in sorted(_profiles_folder().glob("*.toml"))}
+def shipped_profiles(axes: bool = False) -> dict[str, pathlib.Path]:
+    """The one-axis profiles shipped in the ``profiles`` package (``axes``: the multi-axis ones,
+    those with ``[[axes]]``): name (file stem) -> path, sorted."""
+    return {p.stem: p for p in sorted(_profiles_folder().glob("*.toml")) if ("axes" in read_document(p)) == axes}
 
 
 def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:
@@ -244,7 +252,7 @@ def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:
     candidate = pathlib.Path(path_or_name)
     if candidate.is_file():
         return candidate
-    shipped = shipped_profiles()
+    shipped = {**shipped_profiles(), **shipped_profiles(axes=True)}
     if isinstance(path_or_name, str) and path_or_name in shipped:
         return shipped[path_or_name]
     raise ProfileError(path_or_name, "profile", str(path_or_name),

@@ -1,5 +1,10 @@
 """The one place haptic_bus reaches the simulated drive: the demo rig, ``haptic-bus sim``, the bench.
 
+:func:`simulated_axes` does for a multi-axis profile what :func:`simulated_canopen` does for one
+axis: the simulated device (:class:`sim_drive.canopen.multi_axis.MultiAxisSim`, one CANopen
+slave per axis and the profile's hand in space) and the real multi-axis master
+(:class:`drives.canopen.axes.CanopenAxes`) on one bus in this process.
+
 :func:`simulated_canopen` runs a profile's loop against the simulated drive in this process
 (``haptic-bus demo``, the end-to-end tests, the bench): the simulated drive is a real CANopen
 slave (:class:`sim_drive.canopen.slave.CanopenSimDrive`) and the controller reaches it through
@@ -19,10 +24,13 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, cast
 
+from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
 from drives.safety import SafetySettings
+from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.profiles import Profile
 from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits
+from sim_drive.canopen.multi_axis import MultiAxisSim
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.eds import eds_path
 from sim_drive.operator import OperatorModel, operator_from_table
@@ -33,12 +41,15 @@ __all__ = [
     "BusLoadMeter",
     "CanopenSimDrive",
     "DeviceParameters",
+    "MultiAxisSim",
     "cycle_bits",
     "eds_path",
     "frame_bits",
     "operator_from_table",
     "profile_operator",
     "sim_main",
+    "simulated_axes",
+    "simulated_axes_device",
     "simulated_canopen",
     "simulator_command",
     "virtual_time_safety",
@@ -115,4 +126,36 @@ def simulated_canopen(
         yield sim, drive
     finally:
         drive.close()
+        sim.stop()
+
+
+def simulated_axes_device(profile: AxesProfile, bus: dict[str, Any], clock: str = "virtual") -> MultiAxisSim:
+    """The simulated device a multi-axis profile describes (its axes' plants and hidden truth, its
+    hand in space), not started, on ``bus`` (python-can keyword arguments); ``clock``: "virtual"
+    (each SYNC advances the plants ``T``) or "wall" (the time between SYNCs, for a real-time run)."""
+    from sim_drive.parameters import Timing
+    from sim_drive.space_operator import hand_from_table
+
+    setups = [(cast(int, axis.node_id),
+               DeviceParameters(**cast(dict[str, Any], axis.device.sim_parameters(profile.period, axis.timing, axis.delay))),
+               Timing(axis.timing)) for axis in profile.axes]
+    return MultiAxisSim(bus, setups, hand_from_table(profile.operator_model, len(profile.axes)), clock=clock)
+
+
+@contextmanager
+def simulated_axes(profile: AxesProfile, *, channel: str | None = None,
+                   interface: str = "lockstep") -> Iterator[tuple[MultiAxisSim, CanopenAxes]]:
+    """Start the simulated multi-axis device and connect the multi-axis master (every axis maps
+    0x6064), not enabled; stop both on exit.  ``interface``: "lockstep" (one thread) or "virtual"."""
+    channel = channel or f"haptic-bus-{uuid.uuid4().hex[:12]}"
+    sim = simulated_axes_device(profile, {"interface": interface, "channel": channel}).start()
+    safety = virtual_time_safety(profile.period)
+    axes = CanopenAxes([cast(int, axis.node_id) for axis in profile.axes],
+                       scalings=[axis.device.scaling() for axis in profile.axes], interface=interface, channel=channel,
+                       period=profile.period, eds=eds_path(), safety=safety, heartbeat_consumer_ms=VIRTUAL_TIME_WATCHDOG_MS)
+    try:
+        axes.connect()
+        yield sim, axes
+    finally:
+        axes.close()
         sim.stop()

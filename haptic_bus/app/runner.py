@@ -45,6 +45,7 @@ from drives.cia402_master import Cia402Master
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.errors import DriveError, DriveFault, DriveStateError, HapticBusError
 from drives.fault_reset import DEFAULT_WAIT
+from drives.safety import SafetySettings
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DriveAddress
 from haptic_bus.app.live import LiveView
@@ -169,11 +170,8 @@ def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options:
         return drive, profile.gate(), serve
 
     hold = longest_hold(period, options.realtime, safety.rpdo_deadline_ms(period), safety.consumer_ms)
-    deadline = safety.rpdo_deadline_ms(period) / 1000.0 if safety.rpdo_deadline_periods else math.inf
-    slack = (safety.consumer_ms - safety.heartbeat_ms) / 1000.0 if safety.master_node_id is not None else math.inf
-    watchdog = Watchdog(min(deadline, slack), safety.rpdo_deadline_periods if deadline <= slack else None)
     return _session(profile, options, folder, link, open_drive,
-                    DriveSide(hold, watchdog, DriveAddress(bus=dict(bus), node_id=node_id), config))
+                    DriveSide(hold, canopen_watchdog(safety, period), DriveAddress(bus=dict(bus), node_id=node_id), config))
 
 
 def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) -> RunResult:
@@ -216,6 +214,14 @@ def longest_hold(period: float, realtime: bool, deadline_ms: int, fallback_ms: i
         return period
     watchdog = deadline_ms or fallback_ms
     return watchdog / 1000.0 + period if watchdog else math.inf
+
+
+def canopen_watchdog(safety: SafetySettings, period: float) -> Watchdog:
+    """The shortest stall that faults a CANopen drive with these settings at period ``period`` s:
+    its RPDO deadline, or the slack its heartbeat consumer leaves over the controller's heartbeat."""
+    deadline = safety.rpdo_deadline_ms(period) / 1000.0 if safety.rpdo_deadline_periods else math.inf
+    slack = (safety.consumer_ms - safety.heartbeat_ms) / 1000.0 if safety.master_node_id is not None else math.inf
+    return Watchdog(min(deadline, slack), safety.rpdo_deadline_periods if deadline <= slack else None)
 
 
 def _refuse_another_master(drive: ModbusDrive) -> None:
@@ -299,7 +305,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
                 controller.events.add(event.time_s, event.kind, event.message, **event.data)
             recorder.stream(stack, controller)
             serve(controller)
-            with _live(controller, profile, options), _scheduling(options) as scheduling:
+            with _live(controller, profile, options), control_thread_scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
                 if options.realtime:
                     _preflight(drive, gate, scene, profile, options, side.watchdog, extra)
@@ -332,7 +338,13 @@ def _preflight(drive: Drive, gate: PassivityGate, scene: CompiledScene, profile:
     in ``extra``, and refuse (:class:`StartRefused`) a run the drive's watchdogs, or the gate without
     a layer, cannot hold."""
     timing = preflight.measure(drive, profile.loop.period, spin=options.scheduling.spin)
-    report = preflight.judge(timing, gate, scene, profile.passivity.layer, watchdog.stall, watchdog.periods)
+    settle_preflight(preflight.judge(timing, gate, scene, profile.passivity.layer, watchdog.stall, watchdog.periods),
+                     options, extra)
+
+
+def settle_preflight(report: preflight.PreflightReport, options: RunOptions, extra: dict[str, Any]) -> None:
+    """Record pre-flight's ``report`` in ``extra``, log and print it, and refuse the run
+    (:class:`StartRefused`) if the machine cannot hold it."""
     extra["preflight"] = report.to_dict()
     for line in report.lines():
         logger.info("%s", line)
@@ -369,7 +381,7 @@ def _live(controller: WallController, profile: Profile, options: RunOptions) -> 
 
 
 @contextmanager
-def _scheduling(options: RunOptions) -> Iterator[RealtimeReport | None]:
+def control_thread_scheduling(options: RunOptions) -> Iterator[RealtimeReport | None]:
     """A real-time run's control thread set up for the cycles (entered last: helper threads keep theirs)."""
     if not options.realtime:
         yield None

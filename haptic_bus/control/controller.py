@@ -14,40 +14,35 @@ pass the gate first, in the caller's thread, and take effect whole at the next c
 (:mod:`~haptic_bus.control.scenes`); a refused change leaves the running scene untouched.
 
 A run ends with torque zero and the drive disabled whatever ends it: the cycles done, the stop
-flag, a drive error, an assumption broken, Ctrl-C; the summary says which (``exit_reason``).
+flag, a drive error, an assumption broken, Ctrl-C; the summary says which (``exit_reason``;
+the loop is :class:`~haptic_bus.control.cycle_loop.CycleLoop`'s).
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import threading
 import time
-from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
-import numpy as np
-
-from drives.base import CyclicInputs, Drive
+from drives.base import Drive
 from drives.cia402 import POSITION_ACTUAL
-from drives.errors import DriveError, DriveProtocolError, ParameterError
+from drives.errors import ParameterError
 from haptic_bus.control.clock import CycleClock, VirtualClock
+from haptic_bus.control.cycle_loop import CycleLoop, RunSummary
 from haptic_bus.control.gate import GateDecision, PassivityGate
-from haptic_bus.control.passivity_layer import LayerPolicy, PassivityLayer, default_budget_cap
-from haptic_bus.control.port_energy import PortObserver
+from haptic_bus.control.passivity_layer import LayerPolicy
+from haptic_bus.control.port_account import PortAccount
 from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.scenes import SceneEntry, SceneSlot
-from haptic_bus.control.supervisor import Action, Alarm, AssumptionBroken, Supervisor, SupervisorPolicy
+from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
 
 logger = logging.getLogger(__name__)
 
 Derate = Callable[[CompiledScene, float], "tuple[PassivityGate, CompiledScene, GateDecision] | None"]
 """Given the running scene and the observed loop delay (samples): a gate for that loop, the scene
 scaled down so that it passes it, and the decision; None if no scale passes."""
-
-EXIT_REASONS = ("completed", "stopped", "interrupted", "drive error", "assumption broken")
 
 
 def encoder_origin(drive: Drive) -> float:
@@ -71,41 +66,7 @@ class PositionIntegrator:
         return self.origin + self.step * self.counts
 
 
-@dataclass
-class RunSummary:
-    """What a run did: counts, peaks, the port's energy (J: the last, the least, and the counts
-    rounding bound under which the truth may lie), the passivity layer and how often it lowered a
-    target, compute and lateness percentiles (s), and its end.
-
-    ``exit_reason`` is one of :data:`EXIT_REASONS`; ``error`` the message that ended it early.
-    """
-
-    cycles: int
-    saturated_cycles: int
-    peak_force: float
-    energy: float
-    least_energy: float
-    rounding_bound: float
-    observer_active_cycles: int
-    layer: str
-    layer_interventions: int
-    compute_percentiles: dict[str, float]
-    clock: str
-    overruns: int
-    lateness_percentiles: dict[str, float]
-    late_cycles: int
-    alarms: int
-    exit_reason: str = "completed"
-    error: str | None = None
-    warnings: list[str] = field(default_factory=list)
-
-    @property
-    def observer_flagged(self) -> bool:
-        """True once the port gave the operator more energy than it held."""
-        return self.observer_active_cycles > 0
-
-
-class WallController:
+class WallController(CycleLoop):
     """Renders a gated scene on ``drive`` every ``period`` s.
 
     ``force_limit`` (N) saturates the wall force; ``clock`` is a :class:`VirtualClock` (default),
@@ -146,20 +107,15 @@ class WallController:
         self.scenes = SceneSlot(gate, scene, self.events, self.now, beyond_gate=policy.beyond_gate)
         self.integrator = PositionIntegrator(self.period, drive.scaling.velocity_per_count, origin)
         device = gate.device
-        whole = math.floor(device.delay)
-        self._latency = whole  # targets sent before the one a period carries (latched at SYNC)
-        self._switching = device.delay != whole  # the target changes at an unknown instant within a period
-        committed = whole + self._switching
         self.hold = hold if policy.layer == "bound" and hold is not None else self.period
         scaling = drive.scaling
-        springs = [k for k, _ in scene.contacts() if k > 0]  # the summed K that can act anywhere
-        cap = policy.budget_cap if policy.budget_cap is not None else default_budget_cap(
-            min(force_limit, scaling.max_force), device.b, self.hold, committed, min(springs, default=0.0))
-        tolerance = supervisor.observer_limit if supervisor is not None else 0.0
-        self.observer = PortObserver(device.b, scaling.position_per_count, initial_energy=scene.stored_energy(origin),
-                                     cap=cap, tolerance=tolerance)
-        self.layer = PassivityLayer(policy.layer, device.b, self.hold, committed, scaling.newton_per_permille)
-        self._sent: deque[float] = deque([0.0] * (whole + 2), maxlen=whole + 2)  # forces sent, N, newest last
+        self.port = PortAccount(drive.name, friction=device.b, count=scaling.position_per_count,
+                                newton_per_permille=scaling.newton_per_permille, delay=device.delay, clock=self.clock,
+                                policy=policy, hold=self.hold, force_limit=min(force_limit, scaling.max_force),
+                                softest_spring=min((k for k, _ in scene.contacts() if k > 0), default=0.0),
+                                initial_energy=scene.stored_energy(origin),
+                                tolerance=supervisor.observer_limit if supervisor is not None else 0.0)
+        self.observer, self.layer = self.port.observer, self.port.layer
         self.supervisor = Supervisor(supervisor, self.period, device.delay) if supervisor is not None else None
         self.record = RunRecord(record_capacity)
         self.ramp_cycles = round(ramp_time / self.period)
@@ -226,7 +182,7 @@ class WallController:
         started = time.perf_counter()
         wall_clock = time.time()
         scaling = drive.scaling
-        energy = self._account_port(inputs, scaling.position_per_count)
+        energy = self.port.account(inputs, scaling.position_per_count)
         v = inputs.velocity * scaling.velocity_per_count
         x = self.integrator.add(inputs.velocity)
         force = entry.scene.force(x, v)
@@ -236,9 +192,8 @@ class WallController:
         if force > limit or force < -limit:
             force = limit if force > 0 else -limit
             self.saturated_cycles += 1
-        torque = self.layer.limit(scaling.torque_permille(-force), self.observer.budget)  # the motor pushes against the wall
+        torque = self.port.limit(scaling.torque_permille(-force))  # the motor pushes against the wall
         drive.write_outputs(torque)
-        self._sent.append(torque * scaling.newton_per_permille)
         compute = time.perf_counter() - started
         supervisor = self.supervisor
         late, alarm = supervisor.cycle(lateness, energy, inputs.age) if supervisor is not None else (False, None)
@@ -250,26 +205,6 @@ class WallController:
         self.cycles += 1
         if alarm is not None:
             self._act(alarm)
-
-    def _account_port(self, inputs: CyclicInputs, position_per_count: float) -> float:
-        """The port's energy (J) up to this cycle's sample: the period it closes, with the force(s)
-        the drive applied over it (:mod:`~haptic_bus.control.port_energy`); a stale input closes none."""
-        observer = self.observer
-        position = inputs.position
-        if position is None:
-            raise DriveProtocolError(self.drive.name, "the cyclic inputs carry no position (0x6064): the port "
-                                                      "observer and the passivity layer need it mapped")
-        if self.cycles:
-            fresh = not inputs.age
-            duration = self.clock.period_bound(inputs.sampled_by_ns if fresh else 0)
-            sent, latency = self._sent, self._latency
-            if self._switching:
-                observer.switch(sent[-2 - latency], sent[-1 - latency], duration)
-            else:
-                observer.apply(sent[-1 - latency], duration)
-            if not fresh:
-                return observer.energy
-        return observer.sample(position * position_per_count)
 
     def _act(self, alarm: Alarm) -> None:
         self.events.add(self.now(), "alarm", alarm.message, alarm=alarm.kind, action=alarm.action.value)
@@ -289,70 +224,14 @@ class WallController:
                 return
         raise alarm.broken(assumed)
 
-    def run(self, cycles: int, stop: threading.Event | None = None,
-            on_cycle: Callable[[WallController], None] | None = None) -> RunSummary:
-        """Run up to ``cycles`` cycles (or until ``stop`` is set).  Whatever ends the run leaves
-        torque zero and the drive disabled, the record kept, and the end in the summary."""
-        reason, error = "completed", None
-        try:
-            for _ in range(cycles):
-                if stop is not None and stop.is_set():
-                    reason = "stopped"
-                    break
-                self.step(self.clock.wait_next(self.cycles))
-                if on_cycle is not None:
-                    on_cycle(self)
-        except DriveError as exc:
-            reason, error = "drive error", str(exc)
-            self.stopped_on_error = True
-            self._end(exc, "fault")
-        except AssumptionBroken as exc:
-            reason, error = "assumption broken", str(exc)
-            self._end(exc, "stop")
-        except KeyboardInterrupt as exc:
-            reason, error = "interrupted", "interrupted (Ctrl-C)"
-            self._end(exc, "stop")
-        except BaseException as exc:  # a bug: still leave the drive safe, then let it surface
-            self._end(exc, "fault")
-            raise
-        return self.summary(reason, error)
-
-    def _end(self, exc: BaseException, kind: str) -> None:
-        logger.info("run stopped: %s", str(exc) or type(exc).__name__)  # the summary and the command report it
-        self.events.add(self.now(), kind, str(exc) or type(exc).__name__)
-        try:
-            self.drive.disable()
-        except DriveError as failure:  # the drive may be gone; its own trip already zeroed torque
-            logger.info("could not disable the drive: %s", failure)  # a consequence of the error reported
+    def _disable(self) -> None:
+        self.drive.disable()
 
     def summary(self, exit_reason: str = "completed", error: str | None = None) -> RunSummary:
         """The summary of everything run so far."""
-        supervisor = self.supervisor
-        return RunSummary(
-            cycles=self.cycles,
-            saturated_cycles=self.saturated_cycles,
-            peak_force=self.peak_force,
-            energy=self.observer.energy,
-            least_energy=self.observer.least,
-            rounding_bound=self.observer.rounding,
-            observer_active_cycles=self.observer.active_cycles,
-            layer=self.layer.mode,
-            layer_interventions=self.layer.interventions,
-            compute_percentiles=percentiles(self.record.column("compute_s")),
-            clock=self.clock.name,
-            overruns=self.clock.overruns,
-            lateness_percentiles=percentiles(self.clock.lateness()),
-            late_cycles=supervisor.late_cycles if supervisor is not None else 0,
-            alarms=supervisor.alarms if supervisor is not None else 0,
-            exit_reason=exit_reason,
-            error=error,
-            warnings=list(self.scenes.history[0].decision.warnings),
-        )
-
-
-def percentiles(values: np.ndarray) -> dict[str, float]:
-    """p50, p99, p99.9 and max of ``values`` (empty dict for none)."""
-    if values.size == 0:
-        return {}
-    p50, p99, p999 = np.percentile(values, [50, 99, 99.9])
-    return {"p50": float(p50), "p99": float(p99), "p99.9": float(p999), "max": float(values.max())}
+        observer = self.observer
+        return self._summary(exit_reason, error, energy=observer.energy, least_energy=observer.least,
+                             rounding_bound=observer.rounding, observer_active_cycles=observer.active_cycles,
+                             layer=self.layer.mode, layer_interventions=self.layer.interventions,
+                             compute=self.record.column("compute_s"),
+                             warnings=self.scenes.history[0].decision.warnings)

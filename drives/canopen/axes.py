@@ -1,0 +1,258 @@
+"""Several CiA-402 drives on one CAN bus, one SYNC per cycle: the master of a multi-axis device.
+
+Each axis is a :class:`~drives.canopen.drive.CanopenDrive`, commissioned exactly as a single
+drive is: its own NMT, PDO mapping, scaling and its own safety chain -- the heartbeat consumer
+0x1016 (watching this controller's one heartbeat), the RPDO deadline 0x1400:05 and 0x6007,
+written to each node and read back.  They share one link (one bus, one canopen network) and
+one heartbeat producer, which this object owns.  What it adds:
+
+* **one SYNC per cycle** (:class:`~drives.canopen.axes_cycle.AxesCycle`): every axis' TPDOs
+  (status, velocity, position) are collected before any RPDO goes out.  The cycle waits for the
+  last axis, up to ``tpdo_timeout``: an axis whose TPDO missed it hands out its last input again
+  with ``age`` counting up, so the cycle is as late as its oldest input, and
+  ``max_missed_tpdos`` in a row is a :class:`~drives.errors.DriveTimeout`.  The axes' own
+  exchanges never send a SYNC;
+* **one fate**: whatever error any axis meets (its EMCY, its heartbeat lost, its fault bit, its
+  TPDOs missing, a send that failed), every axis is tripped in that same cycle -- each gets zero
+  torque with DISABLE VOLTAGE, then one SYNC, at which every drive latches it -- and the error
+  is raised.  From then on every output is the safe one until :meth:`enable`;
+* **the state machine walked together**: one SYNC per step serves every axis' walk
+  (:class:`~drives.cia402_master.StateWalk`), so no axis is left without SYNC or RPDO while
+  another is being enabled, and every drive is enabled (or disabled) in the same cycle.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Sequence
+from typing import Any
+
+from canopen import objectdictionary as od
+
+from drives.base import CyclicInputs, DriveScaling
+from drives.canopen.axes_cycle import AxesCycle
+from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
+from drives.canopen.heartbeat import HeartbeatProducer
+from drives.canopen.link import NetworkLink
+from drives.cia402 import State
+from drives.cia402_master import SAFE_CONTROLWORD, StateWalk
+from drives.errors import DriveError, DriveTimeout, ParameterError
+from drives.safety import DEFAULT_SAFETY, SafetySettings
+
+MAX_AXES = 6
+
+
+class CanopenAxes:
+    """The drives ``node_ids`` (one per axis, in axis order) on one bus, one SYNC per cycle.
+
+    The bus: ``interface``/``channel``/``bitrate``/``bus_kwargs`` as :class:`CanopenDrive` takes
+    them (python-can's configuration chain fills the gaps); ``scalings`` one per axis (None: the
+    drive's own objects must give it), labelled ``scaling_source``.  ``period`` (s), ``tpdo_objects``,
+    ``eds``, ``safety`` (``master_node_id`` is this controller's node: one heartbeat for all),
+    ``tpdo_timeout`` (s), ``max_missed_tpdos`` and ``heartbeat_consumer_ms`` apply to every axis.
+    """
+
+    def __init__(
+        self,
+        node_ids: Sequence[int],
+        *,
+        scalings: Sequence[DriveScaling | None],
+        interface: str | None = None,
+        channel: Any = None,
+        bitrate: int | None = None,
+        bus_kwargs: dict[str, Any] | None = None,
+        period: float = 0.001,
+        tpdo_objects: Sequence[Any] = DEFAULT_TPDO_WITH_POSITION,
+        eds: str | os.PathLike[str] | od.ObjectDictionary | None = None,
+        scaling_source: str = "caller",
+        safety: SafetySettings = DEFAULT_SAFETY,
+        tpdo_timeout: float = 0.05,
+        max_missed_tpdos: int = 3,
+        heartbeat_consumer_ms: int | None = None,
+    ) -> None:
+        nodes = list(node_ids)
+        if not 1 <= len(nodes) <= MAX_AXES or len(set(nodes)) != len(nodes):
+            raise ParameterError("node_ids", nodes, f"1 to {MAX_AXES} distinct node ids, one per axis", "CANopen axes")
+        if len(scalings) != len(nodes):
+            raise ParameterError("scalings", len(scalings), f"one per axis ({len(nodes)})", "CANopen axes")
+        self.name = "CANopen nodes " + ", ".join(map(str, nodes))
+        self.link = NetworkLink(self.name, bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})), shared=True)
+        master = safety.master_node_id
+        self.heartbeat = HeartbeatProducer(master or 0, safety.heartbeat_ms / 1000.0 if master is not None else 0.0,
+                                           shared=True)
+        self.drives = tuple(
+            CanopenDrive(node, link=self.link, heartbeat=self.heartbeat, period=period, tpdo_objects=tpdo_objects,
+                         scaling=scaling, scaling_source=scaling_source, eds=eds, safety=safety,
+                         tpdo_timeout=tpdo_timeout, max_missed_tpdos=max_missed_tpdos,
+                         heartbeat_consumer_ms=heartbeat_consumer_ms)
+            for node, scaling in zip(nodes, scalings))
+        for drive in self.drives:
+            drive.exchange.produces_sync = False
+        self.cycle = AxesCycle(self.name, self.link, [drive.exchange for drive in self.drives], tpdo_timeout)
+        self._missed = [0] * len(nodes)
+        self._connected = False
+        self._closed = False
+
+    @property
+    def node_ids(self) -> tuple[int, ...]:
+        """The axes' node ids, in axis order."""
+        return tuple(drive.node_id for drive in self.drives)
+
+    @property
+    def scalings(self) -> tuple[DriveScaling, ...]:
+        """Every axis' drive-unit scaling (after :meth:`connect`)."""
+        return tuple(drive.scaling for drive in self.drives)
+
+    # ------------------------------------------------------------------ connection
+
+    def connect(self) -> None:
+        """Open the bus, start this controller's heartbeat and commission every drive in turn; on
+        any failure everything is closed again and the error raised."""
+        if self._closed:
+            raise DriveError(self.name, "closed; create a new one")
+        if self._connected:
+            return
+        try:
+            self.link.open()
+            for drive in self.drives:
+                drive.connect()  # the first starts the shared heartbeat (its boot-up before any drive is touched)
+            self.cycle.configure()
+        except BaseException:
+            self.close()
+            raise
+        self._connected = True
+
+    # ------------------------------------------------------------------ state machine
+
+    def enable(self) -> None:
+        """Every drive to OPERATION ENABLED in cyclic synchronous torque mode, walked together."""
+        self._require_connected()
+        self.cycle.end()  # mode selection is SDO
+        for drive in self.drives:
+            drive.prepare_enable()
+        self._walk(State.OPERATION_ENABLED, [drive.hold_word() for drive in self.drives])
+        for drive in self.drives:
+            drive.mark_enabled()
+        self._missed = [0] * len(self.drives)
+
+    def disable(self) -> None:
+        """Zero torque and DISABLE VOLTAGE on every drive, walked together to SWITCH ON DISABLED (or FAULT)."""
+        if not self._connected:
+            return
+        for drive in self.drives:
+            drive.mark_disabled()
+        self._walk(State.SWITCH_ON_DISABLED, [SAFE_CONTROLWORD] * len(self.drives), (State.FAULT,))
+
+    def _walk(self, goal: State, first_words: list[int], accept: tuple[State, ...] = ()) -> None:
+        walks = [StateWalk(drive, goal, word, accept) for drive, word in zip(self.drives, first_words)]
+        words = list(first_words)
+        walking = True
+        while walking:
+            statuswords = self._command(words)
+            walking = False
+            for i, (walk, statusword) in enumerate(zip(walks, statuswords)):
+                walking |= walk.next_word(statusword) is not None
+                words[i] = walk.word  # an arrived drive keeps getting the word that brought it there
+
+    def _command(self, words: list[int]) -> list[int]:
+        """One exchange for the state machines: SYNC, every TPDO, then each drive's RPDO(word, 0)."""
+        cycle = self.cycle
+        cycle.begin()
+        cycle.drain()
+        received = cycle.exchange()
+        for drive, word in zip(self.drives, words):
+            drive.exchange.send_rpdo(word, 0)
+        silent = [drive.name for drive, inputs in zip(self.drives, received) if inputs is None]
+        if silent:
+            raise DriveTimeout(self.name, f"no TPDO from {', '.join(silent)} within {cycle.timeout * 1e3:.3g} ms while "
+                                          "commanding the state machines")
+        statuswords = []
+        for drive, inputs in zip(self.drives, received):
+            assert inputs is not None
+            drive.last_inputs = inputs
+            statuswords.append(inputs.statusword)
+        return statuswords
+
+    # ------------------------------------------------------------------ cyclic
+
+    def read_inputs(self) -> tuple[CyclicInputs, ...]:
+        """One SYNC and every axis' inputs of this cycle (an axis whose TPDO missed: its last ones,
+        ``age`` counting up); any axis' error trips every axis (module docstring) and is raised."""
+        self._require_connected()
+        cycle = self.cycle
+        drives = self.drives
+        try:
+            cycle.begin()
+            cycle.drain()
+            for drive in drives:
+                if drive.tripped is None:
+                    drive.events.check()  # type: ignore[union-attr]  # connected: it has events
+            received = cycle.exchange()
+            inputs: list[CyclicInputs] = []
+            for i, (drive, found) in enumerate(zip(drives, received)):
+                if found is None:
+                    inputs.append(self._missing(i, drive))
+                else:
+                    self._missed[i] = 0
+                    inputs.append(drive.accept_inputs(found))
+        except DriveError as error:
+            raise self._trip_all(error) from error.__cause__
+        return tuple(inputs)
+
+    def _missing(self, axis: int, drive: CanopenDrive) -> CyclicInputs:
+        drive.stats.missed_tpdos += 1
+        self._missed[axis] += 1
+        missed = self._missed[axis]
+        if missed >= drive.max_missed_tpdos:
+            cobs = ", ".join(f"0x{cob:03X}" for cob in drive.exchange.tpdo_cobs)
+            raise DriveTimeout(drive.name, f"no TPDO (COB-ID {cobs}) for {missed} consecutive cycles (timeout "
+                                           f"{self.cycle.timeout * 1e3:.3g} ms each); torque set to zero on every axis")
+        last = drive.last_inputs if drive.last_inputs is not None else CyclicInputs(0, 0)
+        return dataclasses.replace(last, age=missed)
+
+    def write_outputs(self, torques: Sequence[int]) -> None:
+        """Every axis' target torque (0x6071, per mille, in axis order); the safe outputs on every axis
+        once any tripped.  A send that fails trips every axis."""
+        try:
+            for drive, torque in zip(self.drives, torques):
+                drive.write_outputs(torque)
+        except DriveError as error:
+            raise self._trip_all(error) from error.__cause__
+
+    def _trip_all(self, error: DriveError) -> DriveError:
+        """Zero torque with DISABLE VOLTAGE on every axis, then one SYNC: every drive latches it at that SYNC."""
+        for drive in self.drives:
+            if drive.tripped is None:
+                drive.trip(error if drive.name == error.node else
+                           DriveError(drive.name, f"stopped together with {error.node}: {error.message}"))
+        self.cycle.send_safe()
+        return error
+
+    # ------------------------------------------------------------------ shutdown
+
+    def close(self) -> None:
+        """Safe outputs and one SYNC, then every drive's goodbye (NMT pre-operational, 0x1016 off),
+        the heartbeat stopped and the bus released.  Never raises for a bus that is gone."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self._connected and self.link.network is not None:
+                self.cycle.send_safe()
+        finally:
+            for drive in self.drives:
+                drive.close()
+            self.heartbeat.stop()
+            self.link.close()
+            self._connected = False
+
+    def _require_connected(self) -> None:
+        if not self._connected:
+            raise DriveError(self.name, "not connected; call connect() first")
+
+    def __enter__(self) -> CanopenAxes:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,123 @@
+"""What a multi-axis run keeps: one record per axis, ``run.json`` with every axis, the trajectory plot.
+
+Whatever ends the run (its folder created before any bus is touched,
+:func:`~haptic_bus.app.run_folder.prepare_run_folder`), it receives:
+
+- ``record-<axis>.csv``, one per axis (``record-x.csv``, ``record-y.csv``, ...), each with the
+  one-axis record's columns (:data:`haptic_bus.control.record.COLUMNS`): that axis' joint
+  position and velocity, the wall force along it (``force_n``, the joint effort ``J^T u``), its
+  target torque, its own port energy ``E_i`` (``energy_j``), the force its layer took off, and
+  the cycle's scene id, lateness flag and compute time (the same in every file).  One file per
+  axis, not columns per axis: each reads like a one-axis record, and the rows of all files are
+  the same cycles (the same ``time_s``);
+- ``run.json``: software versions, the profile (file, SHA-256, every axis and object), the link
+  (bus, node ids, each axis' safety warnings and mapping notes, the bus load), each axis' scaling,
+  the scenes in effect with the coupled gate's margins, the summary (the whole port: ``energy``
+  is ``sum E_i``) and per axis (``axes``), the events, and how the run ended;
+- ``trajectory.png`` (:mod:`~haptic_bus.app.axes_plots`): the trajectory in its plane of motion
+  against the objects, the positions and forces over time.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import hashlib
+import json
+import math
+import pathlib
+import sys
+from typing import Any
+
+from haptic_bus.app.axes_profile import AxesProfile
+from haptic_bus.app.run_folder import software_versions
+from haptic_bus.control.axes_controller import AxesController
+from haptic_bus.control.cycle_loop import RunSummary
+from haptic_bus.control.space_gate import SpaceDecision
+from haptic_bus.control.space_scene import SpaceObject
+
+
+def object_dict(obj: SpaceObject) -> dict[str, Any]:
+    """One object of a scene in space, JSON-ready."""
+    fields = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if not f.name.startswith("_")}
+    return {"kind": type(obj).__name__.lower(), **fields}
+
+
+def decision_dict(decision: SpaceDecision) -> dict[str, Any]:
+    """The coupled gate's decision: accepted, the least margin, every wall judged."""
+    return {"accepted": decision.accepted, "worst_margin": decision.worst_margin,
+            "walls": [{"objects": list(w.objects), "margin": w.verdict.margin, "outcome": w.verdict.outcome,
+                       "parts": [{"K": K, "B": B, "normal": list(n)} for K, B, n in w.parts]} for w in decision.walls]}
+
+
+def axes_profile_dict(profile: AxesProfile) -> dict[str, Any]:
+    """The multi-axis profile as run: loop, bus, every axis, the objects, the policies."""
+    return {
+        "name": profile.name, "period": profile.period, "bitrate": profile.bitrate,
+        "axes": [{"name": a.name, "node_id": a.node_id, "unit_id": a.unit_id, "timing": a.timing, "delay": a.delay,
+                  "mapping": a.mapping, "force_limit": a.force_limit,
+                  "device": {**{k: v for k, v in dataclasses.asdict(a.device).items() if k != "velocity"},
+                             "velocity": str(a.device.velocity)}} for a in profile.axes],
+        "space": {"objects": [object_dict(obj) for obj in profile.space], "operator": dict(profile.operator_model)},
+        "gate": dataclasses.asdict(profile.gate_policy), "safety": dataclasses.asdict(profile.safety),
+        "passivity": dataclasses.asdict(profile.passivity), "supervisor": dataclasses.asdict(profile.supervisor),
+    }
+
+
+def _json_ready(value: Any) -> Any:
+    """JSON without NaN/inf (as strings) and with tuples as lists."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {str(k): _json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_ready(v) for v in value]
+    return value
+
+
+def axes_run_document(profile: AxesProfile, controller: AxesController | None, summary: RunSummary | None,
+                      link: dict[str, Any], extra: dict[str, Any], started: dt.datetime) -> dict[str, Any]:
+    """The content of ``run.json`` (module docstring); ``controller``/``summary`` None for a run
+    that ended before it cycled (``extra`` then carries the reason)."""
+    path = profile.path
+    document: dict[str, Any] = {
+        "software": software_versions(),
+        "command": sys.argv,
+        "started_utc": started.isoformat(),
+        "ended_utc": dt.datetime.now(dt.UTC).isoformat(),
+        "profile": {"name": profile.name, "path": None if path is None else str(path),
+                    "sha256": hashlib.sha256(path.read_bytes()).hexdigest() if path is not None and path.is_file() else None},
+        "settings": axes_profile_dict(profile),
+        "link": link,
+        **extra,
+    }
+    if controller is not None:
+        scalings = controller.axes.scalings
+        document["scaling"] = {name: dataclasses.asdict(s) for name, s in zip(controller.names, scalings)}
+        document["scenes"] = [{"scene_id": i, "adopted_s": t, "objects": [object_dict(o) for o in scene.objects],
+                               "decision": decision_dict(decision)} for i, t, scene, decision in controller.scenes.entries]
+        document["axes"] = controller.axis_summaries()
+        document["events"] = controller.events.to_list()
+        document["events_dropped"] = controller.events.dropped
+        if controller.supervisor is not None:
+            document.setdefault("loop", {})["delay_observed"] = controller.supervisor.observed_delay()
+    if summary is not None:
+        document["summary"] = dataclasses.asdict(summary)
+    return _json_ready(document)
+
+
+def write_axes_run(folder: pathlib.Path, profile: AxesProfile, controller: AxesController | None,
+                   document: dict[str, Any]) -> list[pathlib.Path]:
+    """Write every axis' record, the plot and ``run.json`` into ``folder``; the paths written."""
+    written: list[pathlib.Path] = []
+    if controller is not None and controller.records[0].total:
+        from haptic_bus.app.axes_plots import plot_trajectory
+
+        for name, record in zip(controller.names, controller.records):
+            written.append(record.write_csv(folder / f"record-{name}.csv"))
+        written.append(plot_trajectory(folder / "trajectory.png", controller, f"{profile.name}: {len(profile.axes)} axes, "
+                                                                              f"T = {profile.period * 1e3:g} ms"))
+    path = folder / "run.json"
+    document["files"] = [str(p) for p in written] + [str(path)]
+    path.write_text(json.dumps(document, indent=1) + "\n")
+    return [*written, path]

@@ -1,0 +1,213 @@
+"""``haptic-bus run <multi-axis profile>``: a scene in space through several CANopen drives on one SYNC.
+
+The drives may be the simulated device in another process (``haptic-bus sim --node-ids 5,6,7
+--profile gantry-3d`` on ``udp_multicast``), or real ones.  One run, in order:
+
+1. the profile's axes must map 0x6064 (``mapping = "with-position"``: the port observer and the
+   passivity layer read it every cycle; exit 2 otherwise) and the controller's node id must be
+   none of theirs -- checked before anything is touched; the run's folder is created and shown
+   writable (:mod:`~haptic_bus.app.run_folder`);
+2. **the bus load** (:func:`haptic_bus.control.bus_load.axes_bus_load`): one SYNC and every axis'
+   PDOs at the bus' bitrate (``--bitrate``, python-can's configuration, else the profile's
+   ``[bus] bitrate``) and ``T``; above 70 % the run is refused, naming the load and the smallest
+   ``T`` that fits (exit 1, no bus opened, nothing enabled);
+3. every drive is reached and commissioned (:class:`drives.canopen.axes.CanopenAxes`: each its own
+   safety chain; one heartbeat of this controller's node for all; in virtual time the master's own
+   patience is :data:`VIRTUAL_TIME_PATIENCE`);
+4. real time only: pre-flight timing (:mod:`~haptic_bus.app.preflight`) with the coupled gate at
+   the measured delay;
+5. **safe start**: every axis' position is read right before enabling (after pre-flight, whose
+   SYNCs a real handle lives through); a handle inside an object is refused (exit 1, nothing
+   enabled) -- a start ramp for coupled axes is not built; then every drive is enabled in the
+   same cycle and the controller cycles
+   (:class:`~haptic_bus.control.axes_controller.AxesController`) under the supervisor;
+6. whatever ends it (the time, SIGTERM, Ctrl-C, any axis' fault -- which zeroes every axis'
+   torque in the same cycle -- an assumption broken), the drives are left disabled and every
+   axis' record, ``run.json`` and the plot are written (:mod:`~haptic_bus.app.axes_records`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import pathlib
+from collections.abc import Mapping, Sequence
+from contextlib import ExitStack
+from typing import Any
+
+from drives.bus_config import resolve_bus_config
+from drives.canopen.axes import CanopenAxes
+from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
+from drives.cia402 import POSITION_ACTUAL
+from drives.errors import DriveError, ParameterError
+from haptic_bus.app import preflight
+from haptic_bus.app.axes_profile import AxesProfile
+from haptic_bus.app.axes_records import axes_run_document, write_axes_run
+from haptic_bus.app.run_folder import prepare_run_folder
+from haptic_bus.app.runner import (
+    DEFAULT_CONTROLLER_NODE_ID,
+    PROFILE_SCALING_SOURCE,
+    RunOptions,
+    StartRefused,
+    canopen_watchdog,
+    control_thread_scheduling,
+    longest_hold,
+    settle_preflight,
+)
+from haptic_bus.control.axes_controller import AxesController
+from haptic_bus.control.bus_load import axes_bus_load
+from haptic_bus.control.clock import RealClock, VirtualClock
+from haptic_bus.control.cycle_loop import RunSummary
+from haptic_bus.control.space_gate import SpaceGate, SpaceGateRefusal
+from haptic_bus.control.space_scene import SpaceScene
+
+RUN_MAPPING = "with-position"
+VIRTUAL_TIME_PATIENCE: dict[str, Any] = {"tpdo_timeout": 0.25, "heartbeat_consumer_ms": 1000}
+"""In virtual time nothing paces the loop: how long the master waits for an axis' TPDO (s) and
+for a drive's heartbeat (ms) catches a dead drive, not a machine busy elsewhere."""
+
+
+@dataclasses.dataclass
+class AxesRunResult:
+    """How a multi-axis run ended (``exit_reason``, ``error``), what it did, and where it wrote."""
+
+    exit_reason: str
+    error: str | None
+    summary: RunSummary | None
+    controller: AxesController | None
+    folder: pathlib.Path
+    files: list[pathlib.Path]
+
+
+def check_run(profile: AxesProfile, controller_node_id: int) -> list[int]:
+    """The axes' node ids, once the profile can be run as the controller node ``controller_node_id``;
+    ParameterError (exit 2) naming the field otherwise."""
+    nodes = [axis.node_id for axis in profile.axes]
+    if any(node is None for node in nodes):
+        raise ParameterError("axes[0].unit_id", profile.axes[0].unit_id,
+                             "a node_id per axis: a multi-axis run drives CANopen axes (Modbus axes are not built)",
+                             f"profile {profile.path or profile.name}")
+    for i, axis in enumerate(profile.axes):
+        if axis.mapping != RUN_MAPPING:
+            raise ParameterError(f"axes[{i}].mapping", axis.mapping, f'"{RUN_MAPPING}" for a run: the port observer and '
+                                 "the passivity layer read 0x6064 every cycle", f"profile {profile.path or profile.name}")
+    if controller_node_id in nodes:
+        raise ParameterError("--controller-node-id", controller_node_id, f"a node id none of the axes has ({nodes})")
+    return [node for node in nodes if node is not None]
+
+
+def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunOptions,
+                     controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID) -> AxesRunResult:
+    """Run ``profile`` against its axes' drives on ``bus`` (python-can keyword arguments) as CANopen
+    node ``controller_node_id`` (module docstring)."""
+    nodes = check_run(profile, controller_node_id)
+    folder = prepare_run_folder(options.out_dir, profile.name)
+    config = resolve_bus_config(**bus)
+    period = profile.period
+    safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
+    bitrate = float(config.get("bitrate") or profile.bitrate)
+    link: dict[str, Any] = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_ids": nodes,
+                            "controller_node_id": controller_node_id, "bitrate_checked": bitrate}
+    extra: dict[str, Any] = {"loop": {"period": period, "delays": [axis.delay for axis in profile.axes]}}
+    started = dt.datetime.now(dt.UTC)
+    controller: AxesController | None = None
+    summary: RunSummary | None = None
+    reason, error = "completed", None
+    try:
+        try:
+            load = axes_bus_load([axis.mapping for axis in profile.axes], bitrate, period)
+        except ParameterError as refusal:
+            raise StartRefused(f"the bus cannot carry this cycle; allowed: {refusal.allowed}") from None
+        link["bus_load"] = dataclasses.asdict(load)
+        with ExitStack() as stack:
+            axes = CanopenAxes(nodes, scalings=[axis.device.scaling() for axis in profile.axes],
+                               interface=config["interface"], channel=config.get("channel"), bitrate=config.get("bitrate"),
+                               bus_kwargs={k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")},
+                               period=period, tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling_source=PROFILE_SCALING_SOURCE,
+                               safety=safety if options.realtime else safety.for_virtual_time(period),
+                               **({} if options.realtime else VIRTUAL_TIME_PATIENCE))
+            stack.callback(axes.close)
+            axes.connect()
+            _describe(axes, options, link)
+            scene = profile.space_scene()
+            gate = profile.gate()
+            with control_thread_scheduling(options) as scheduling:
+                extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
+                if options.realtime:
+                    _preflight(axes, gate, scene, profile, options, extra)
+                extra["start"] = {"positions_m": _safe_start(axes, profile, scene)}  # after pre-flight: where it is now
+                clock = RealClock(period, spin=options.scheduling.spin) if options.realtime else VirtualClock(period)
+                hold = longest_hold(period, options.realtime, safety.rpdo_deadline_ms(period), safety.consumer_ms)
+                controller = AxesController(axes, gate, scene, names=[axis.name for axis in profile.axes],
+                                            force_limits=[axis.force_limit for axis in profile.axes], clock=clock,
+                                            supervisor=profile.supervisor, passivity=profile.passivity, hold=hold)
+                extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold, "per_axis": True}
+                axes.enable()  # every drive in the same cycle, right before the first: their RPDO deadlines run from here
+                summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
+            reason, error = summary.exit_reason, summary.error
+            if reason == "stopped" and options.stop.interrupted:
+                reason, error = "interrupted", "interrupted (Ctrl-C)"
+            if reason in ("completed", "stopped", "interrupted"):
+                axes.disable()
+    except (StartRefused, SpaceGateRefusal) as exc:
+        reason, error = "refused", str(exc)
+    except DriveError as exc:
+        reason, error = "drive error", str(exc)
+    except KeyboardInterrupt:
+        reason, error = "interrupted", "interrupted (Ctrl-C)"
+    finally:
+        extra["exit_reason"], extra["error"] = reason, error
+        files = write_axes_run(folder, profile, controller,
+                               axes_run_document(profile, controller, summary, link, extra, started))
+    return AxesRunResult(reason, error, summary, controller, folder, files)
+
+
+def _describe(axes: CanopenAxes, options: RunOptions, link: dict[str, Any]) -> None:
+    """Each axis' scaling sources, safety warnings and PDO mapping notes: printed (unless quiet) and in ``link``."""
+    link["safety_warnings"] = {drive.name: list(drive.safety_warnings) for drive in axes.drives}
+    link["pdo_mapping_notes"] = {drive.name: list(drive.commissioned.mapping_notes) if drive.commissioned else []
+                                 for drive in axes.drives}
+    if options.live:
+        for drive in axes.drives:
+            report = drive.scaling_report
+            lines = report.lines() if report is not None else []
+            print("\n".join(f"scaling of {drive.name}: {line}" for line in lines), flush=True)
+
+
+def _safe_start(axes: CanopenAxes, profile: AxesProfile, scene: SpaceScene) -> list[float]:
+    """Every axis' position (m) before enabling; :class:`StartRefused` if the handle is inside an object."""
+    q = [drive.read_object(POSITION_ACTUAL) * scaling.position_per_count
+         for drive, scaling in zip(axes.drives, axes.scalings)]
+    x = profile.kinematics().position(q)
+    inside = scene.contacts(x)
+    if inside:
+        force = float(sum(value * value for value in scene.force(x, [0.0] * len(q))) ** 0.5)
+        raise StartRefused(f"handle is inside {'+'.join(inside)} at ({', '.join(f'{c * 1e3:.3g}' for c in x)}) mm (at rest "
+                           f"it would feel {force:.3g} N); move it out first (a start ramp for coupled axes is not built)")
+    return q
+
+
+def _preflight(axes: CanopenAxes, gate: SpaceGate, scene: SpaceScene, profile: AxesProfile, options: RunOptions,
+               extra: dict[str, Any]) -> None:
+    """Pre-flight timing with every drive not enabled; the coupled gate judged at the measured delay."""
+    size = len(profile.axes)
+
+    class Cycle:
+        """Every axis' cycle at zero torque, as pre-flight measures one drive's."""
+
+        def read_inputs(self) -> Sequence[object]:
+            return axes.read_inputs()
+
+        def write_outputs(self, target_torque: int) -> None:
+            axes.write_outputs([target_torque] * size)
+
+    assumed = max(loop.delay for loop in gate.axes)
+
+    def passes_at(delay: float) -> bool:
+        later = tuple(dataclasses.replace(loop, delay=loop.delay + delay - assumed) for loop in gate.axes)
+        return SpaceGate(later, gate.policy).judge(scene).accepted
+
+    watchdog = canopen_watchdog(axes.drives[0].safety, profile.period)
+    timing = preflight.measure(Cycle(), profile.period, spin=options.scheduling.spin)
+    settle_preflight(preflight.judge_delay(timing, assumed, passes_at, profile.passivity.layer, watchdog.stall,
+                                           watchdog.periods), options, extra)

@@ -1,0 +1,163 @@
+"""Several CiA-402 drives on one bus (issue 22): one SYNC per cycle, every axis' TPDOs before any
+torque, one safety chain per node, one fate for all axes.
+
+The simulated multi-axis device (one real CANopen slave per axis) and the multi-axis master
+(``drives.canopen.axes.CanopenAxes``) share the lock-step bus in this process: each frame is
+served in the sender's thread, so the order of frames on the bus is the order they were sent,
+and a sniffer (a plain queue receiver on the same channel) sees exactly that order.
+"""
+
+from __future__ import annotations
+
+import pathlib
+from collections.abc import Iterator
+
+import can
+import pytest
+
+from drives.canopen.axes import CanopenAxes
+from drives.cia301 import SYNC_COB_ID
+from drives.cia402 import State
+from drives.errors import DriveError, DriveTimeout, ParameterError
+from haptic_bus.app.axes_profile import AxesProfile, load_axes_profile
+from haptic_bus.app.rig import MultiAxisSim, simulated_axes
+from haptic_bus.control.axes_controller import AxesController
+
+NODES = (5, 6, 7)
+RPDO1 = {node: 0x200 + node for node in NODES}
+TPDOS = {cob: node for node in NODES for cob in (0x180 + node, 0x280 + node)}
+
+
+def slope_only(tmp_path: pathlib.Path) -> AxesProfile:
+    """gantry-3d with the hand pushing straight at the slope (all three axes in contact within 0.5 s)."""
+    text = pathlib.Path(load_axes_profile("gantry-3d").path or "").read_text()  # type: ignore[arg-type]
+    text = text.replace("toward = [[0.0, -0.03, 0.0], [-0.03, 0.0, 0.0], [0.02, 0.02, 0.01]]", "toward = [0.02, 0.02, 0.01]")
+    path = tmp_path / "slope.toml"
+    path.write_text(text)
+    return load_axes_profile(path)
+
+
+@pytest.fixture
+def rig(tmp_path: pathlib.Path) -> Iterator[tuple[AxesProfile, MultiAxisSim, CanopenAxes, can.BusABC]]:
+    """The slope-only gantry on a lock-step bus, the master connected (not enabled), and a sniffer."""
+    profile = slope_only(tmp_path)
+    with simulated_axes(profile, channel=f"axes-bus-{tmp_path.name}") as (sim, axes):
+        sniffer = can.Bus(interface="lockstep", channel=f"axes-bus-{tmp_path.name}")
+        try:
+            yield profile, sim, axes, sniffer
+        finally:
+            sniffer.shutdown()
+
+
+def frames(bus: can.BusABC) -> list[can.Message]:
+    """Everything the sniffer got so far (bounded)."""
+    seen = []
+    for _ in range(100_000):
+        message = bus.recv(0.0)
+        if message is None:
+            break
+        seen.append(message)
+    return seen
+
+
+def controller_for(profile: AxesProfile, axes: CanopenAxes) -> AxesController:
+    return AxesController(axes, profile.gate(), profile.space_scene(), names=[a.name for a in profile.axes],
+                          force_limits=[a.force_limit for a in profile.axes], supervisor=profile.supervisor,
+                          passivity=profile.passivity)
+
+
+def test_each_node_has_its_own_safety_chain_written_and_the_sync_is_the_masters(rig) -> None:
+    profile, sim, axes, _ = rig
+    period_ms = round(profile.period * 1000)
+    for drive in axes.drives:
+        consumer = int.from_bytes(drive.sdo_read(0x1016, 1), "little")
+        assert consumer >> 16 == 127 and consumer & 0xFFFF == 1000  # the controller's one heartbeat, per node
+        assert int.from_bytes(drive.sdo_read(0x1400, 5), "little") == max(30, 1000 // period_ms) * period_ms
+        assert int.from_bytes(drive.sdo_read(0x6007, 0), "little", signed=True) == 1  # fault
+        assert drive.exchange.produces_sync is False
+        with pytest.raises(DriveError, match="shares a SYNC"):
+            drive.exchange.exchange()  # an axis' own exchange never sends a SYNC
+    assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED] * 3
+    with pytest.raises(ParameterError, match="distinct node ids"):
+        CanopenAxes([5, 5], scalings=[None, None], interface="lockstep", channel="unused")
+
+
+def test_one_sync_per_cycle_and_every_tpdo_before_any_torque(rig) -> None:
+    profile, sim, axes, sniffer = rig
+    axes.enable()
+    assert [node.drive.state for node in sim.nodes] == [State.OPERATION_ENABLED] * 3
+    frames(sniffer)
+    controller = controller_for(profile, axes)
+    summary = controller.run(300)
+    assert summary.exit_reason == "completed" and summary.cycles == 300
+    seen = [m for m in frames(sniffer) if m.arbitration_id in (SYNC_COB_ID, *RPDO1.values(), *TPDOS)]
+    cycles = []
+    for message in seen:
+        if message.arbitration_id == SYNC_COB_ID:
+            cycles.append([])
+        elif cycles:
+            cycles[-1].append(message.arbitration_id)
+    assert len(cycles) == 300  # one SYNC per cycle, for the three axes
+    for ids in cycles:
+        tpdos, rpdos = [i for i in ids if i in TPDOS], [i for i in ids if i in RPDO1.values()]
+        assert sorted(tpdos) == sorted(TPDOS) and sorted(rpdos) == sorted(RPDO1.values())
+        assert max(ids.index(i) for i in tpdos) < min(ids.index(i) for i in rpdos)  # every TPDO before any torque
+    assert axes.cycle.syncs_sent == sum(node.drive.sync_count for node in sim.nodes[:1])
+    # the three plants saw the same SYNCs: one clock for the device
+    assert len({node.drive.sync_count for node in sim.nodes}) == 1
+
+
+def test_a_missing_tpdo_makes_the_whole_cycle_late(rig) -> None:
+    _, sim, axes, _ = rig
+    axes.enable()
+    for _ in range(5):
+        axes.read_inputs()
+        axes.write_outputs([0, 0, 0])
+    sim.node(6).short_next_tpdo(1)  # node 6's next TPDO1 one byte short: dropped by the master
+    inputs = axes.read_inputs()
+    assert [i.age for i in inputs] == [0, 1, 0]  # node 6's last input again, one sample old
+    assert inputs[1].statusword == axes.drives[1].last_inputs.statusword
+    axes.write_outputs([0, 0, 0])
+    assert axes.drives[1].stats.missed_tpdos == 1 and axes.drives[1].stats.dropped_frames == 1
+    assert [i.age for i in axes.read_inputs()] == [0, 0, 0]
+
+
+def test_a_silent_axis_zeroes_every_torque_in_the_same_cycle(rig) -> None:
+    """Node 6 stops answering while all three axes push on the slope: after its third missed TPDO
+    every axis gets zero torque with DISABLE VOLTAGE before one SYNC, and both drives that still
+    answer latch zero at that same SYNC; the run ends with a drive error, the record kept."""
+    profile, sim, axes, _ = rig
+    log: dict[int, list[tuple[int, int, State]]] = {5: [], 7: []}
+    for node_id in log:
+        drive = sim.node(node_id).drive
+        original = drive.sync
+
+        def sync(interval: float | None = None, drive=drive, original=original, node_id=node_id) -> None:
+            original(interval)
+            log[node_id].append((drive.sync_count, drive.torque_actual, drive.state))
+
+        drive.sync = sync  # type: ignore[method-assign]
+    axes.enable()
+    controller = controller_for(profile, axes)
+    silenced = 400  # cycles: 0.8 s, resting on the slope by then
+
+    def maybe_silence(running: AxesController) -> None:
+        if running.cycles == silenced:
+            sim.node(6).go_silent()
+
+    summary = controller.run(1000, on_cycle=maybe_silence)
+    assert summary.exit_reason == "drive error" and "CANopen node 6" in (summary.error or "")
+    assert "no TPDO" in (summary.error or "") or "heartbeat" in (summary.error or "")
+    assert controller.records[0].total == controller.cycles  # the record is kept, every axis
+    assert controller.cycles == silenced + 2  # the third cycle without node 6 raised
+    zero_at = {}
+    for node_id, entries in log.items():
+        pushing = [count for count, torque, _ in entries if torque != 0]
+        assert len(pushing) > silenced - 200  # in contact with the slope for most of the run, until the trip
+        zero_at[node_id] = pushing[-1] + 1  # the SYNC from which the drive applies zero
+        assert entries[-1][0] > zero_at[node_id]
+    assert zero_at[5] == zero_at[7]  # the same SYNC
+    assert [sim.node(n).drive.state for n in (5, 7)] == [State.SWITCH_ON_DISABLED] * 2
+    assert [d.tripped is not None for d in axes.drives] == [True, True, True]
+    with pytest.raises(DriveTimeout):
+        axes.read_inputs()  # node 6 is still silent: no cycle of its own any more
