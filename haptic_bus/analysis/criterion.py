@@ -35,7 +35,7 @@ import numpy as np
 
 from haptic_bus.analysis.frequency import loop_terms, scaled_impedance, seed_z_zw
 from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.analysis.poles import closed_loop_poles, radius_excess, shifted_poles
+from haptic_bus.analysis.poles import closed_loop_poles, stability
 from haptic_bus.analysis.theta_search import refine_minima, theta_grid
 
 SIGN_TOLERANCE = 64 * np.finfo(float).eps  # ~1.4e-14, relative to the magnitude of the terms that cancel
@@ -96,8 +96,8 @@ def minimum_real_part(real_parts: RealParts, loop: WallLoop, poles: np.ndarray) 
 
 def _verdict(loop: WallLoop, real_parts: RealParts, criterion: str, require_stability: bool) -> Verdict:
     poles = closed_loop_poles(loop)
-    excess = float(radius_excess(shifted_poles(loop)[:1])[0])  # |z| - 1 without the rounding of 1 + w
-    radius, stable = 1.0 + excess, excess < 0.0
+    judged = stability(loop)
+    excess, radius, stable = judged.excess, judged.radius, judged.stable
     value, theta, ok = minimum_real_part(real_parts, loop, poles)
     scale = loop.m / loop.T
     if require_stability and not stable:
