@@ -111,14 +111,15 @@ def evaluate(char: Characteristic, wall: np.ndarray, integrator: bool, w: np.nda
     magnitudes of the terms ``f`` is formed from (its round-off is a few ``eps`` times ``size``)."""
     w = np.asarray(w, dtype=complex)
     a = char.denominator(integrator)
-    log_z = log_one_plus(w)
-    with np.errstate(invalid="ignore"):
-        grow = np.maximum(char.lag * log_z.real, 0.0) if char.lag else np.zeros(w.shape)
-    grow = np.where(np.isnan(grow), 0.0, grow)
+    if char.lag:
+        log_z = log_one_plus(w)
+        grow = np.maximum(char.lag * log_z.real, 0.0)  # -inf at z = 0: no growth there
+        with np.errstate(over="ignore", invalid="ignore"):
+            zl = np.exp(char.lag * log_z - grow)  # z^L |z|^-L where |z| > 1 (0 at z = 0)
+        zl = np.where(np.isfinite(zl), zl, 0.0)
+    else:
+        grow, zl = np.zeros(w.shape), np.ones(w.shape, dtype=complex)
     scale = np.exp(-grow)
-    with np.errstate(over="ignore", invalid="ignore"):
-        zl = np.exp(char.lag * log_z - grow)  # z^L |z|^-L where |z| > 1 (0 at z = 0)
-    zl = np.where(np.isfinite(zl), zl, 0.0)
     av = np.polyval(a, w)
     ad = np.polyval(np.polyder(a), w) if a.size > 1 else np.zeros_like(w)
     nv, wv = np.polyval(char.numerator, w), np.polyval(wall, w)
