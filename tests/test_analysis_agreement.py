@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.limits import PassiveSet, passive_limits
 from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.analysis.velocity import VelocityModel
 
 _NEAR = 1e-9
 T = 1e-3
@@ -31,7 +32,7 @@ def loops(draw: st.DrawFn) -> WallLoop:
     velocity = draw(st.sampled_from(["point", "average", f"window:{0.4 * T!r}", f"lowpass:{0.5 * T!r}"]))
     K = draw(st.one_of(st.just(0.0), st.floats(-7.0, 0.6).map(lambda e: 10**e * m / T**2)))
     B = draw(st.one_of(st.just(0.0), st.floats(-7.0, 0.3).map(lambda e: 10**e * m / T)))
-    return WallLoop(m, c * m / T, T, K, B, delay, velocity)
+    return WallLoop(m, c * m / T, T, K, B, delay, VelocityModel.parse(velocity))
 
 
 def _near_an_end(passive: PassiveSet, value: float) -> bool:

@@ -34,6 +34,7 @@ import numpy as np
 
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.sampled_loop import period_map
+from haptic_bus.analysis.velocity import VelocityModel
 
 EPS = float(np.finfo(float).eps)
 
@@ -75,11 +76,12 @@ def log_one_plus(w: np.ndarray) -> np.ndarray:
 
 def characteristic(loop: WallLoop) -> Characteristic:
     """:class:`Characteristic` of ``loop``'s device, velocity model and delay (its wall ignored); cached."""
-    return _characteristic(WallLoop(loop.m, loop.b, loop.T, 0.0, 0.0, loop.delay, loop.velocity))
+    return _characteristic(loop.m, loop.b, loop.T, loop.delay, loop.velocity)
 
 
 @functools.lru_cache(maxsize=512)
-def _characteristic(device: WallLoop) -> Characteristic:
+def _characteristic(m: float, b: float, T: float, delay: float, velocity: VelocityModel) -> Characteristic:
+    device = WallLoop(m, b, T, 0.0, 0.0, delay, velocity)
     pmap = period_map(device)
     whole, fraction = device.whole_delay, device.fractional_delay > 0.0
     E = pmap.phi_minus_identity

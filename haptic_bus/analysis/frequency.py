@@ -45,7 +45,7 @@ from haptic_bus.analysis.alias import alias_function
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.sampled_loop import period_map, pulse_transfer, window_fraction
 from haptic_bus.analysis.theta_complex import ThetaComplex
-from haptic_bus.analysis.trig import cospi, sincpi, sinpi, unit_point
+from haptic_bus.analysis.trig import cospi, half_angle, sincpi, sinpi, unit_point
 
 
 @dataclass(frozen=True)
@@ -63,8 +63,8 @@ class LoopTerms:
     P: ThetaComplex
     E: ThetaComplex
 
-    def take(self, where: np.ndarray) -> LoopTerms:
-        """These terms at ``theta[where]`` only (``where``: a boolean mask or indices)."""
+    def take(self, where: np.ndarray | slice) -> LoopTerms:
+        """These terms at ``theta[where]`` only (``where``: a boolean mask, indices or a slice)."""
 
         def part(x: ThetaComplex) -> ThetaComplex:
             return ThetaComplex(x.theta[where], x.re[where], x.im[where], x.mag_re[where], x.mag_im[where])
@@ -93,11 +93,16 @@ def _measurement(loop: WallLoop, theta: np.ndarray) -> ThetaComplex:
 
 
 def loop_terms(loop: WallLoop, theta: ArrayLike) -> LoopTerms:
-    """:class:`LoopTerms` of ``loop`` (its wall ignored) at ``theta`` (rad, > 0)."""
+    """:class:`LoopTerms` of ``loop`` (its wall ignored) at ``theta`` (rad, in ``(0, pi]``)."""
     theta = np.atleast_1d(np.asarray(theta, dtype=float))
-    hold = ThetaComplex.exact(theta, 2.0 * sinpi(0.5 * theta / np.pi) ** 2, sincpi(theta / np.pi))
-    whole = _rotation(theta, loop.whole_delay)
-    P = whole * alias_function(loop, theta)
+    circle = half_angle(theta)
+    sinc = circle.sinc()
+    hold = ThetaComplex.exact(theta, 2.0 * circle.s * circle.s, sinc)
+    if loop.whole_delay == 1:  # z^-1 = cos - j sin
+        whole = ThetaComplex.exact(theta, circle.c * circle.c - circle.s * circle.s, -sinc)
+    else:
+        whole = _rotation(theta, loop.whole_delay)
+    P = whole * alias_function(loop, theta, circle)
     rotation = whole if loop.delay == loop.whole_delay else _rotation(theta, loop.delay)
     E = rotation if loop.velocity.kind == "point" else rotation * _measurement(loop, theta)  # M = 1 exactly
     return LoopTerms(theta, loop.c, loop.m / loop.T, hold, P, E)
@@ -157,6 +162,35 @@ def impedance_quadratic(terms: LoopTerms, base: ThetaComplex | float, slope: The
         c * (U.mag_re**2 + t2 * U.mag_im**2) + q0.mag_im,
     ])
     return coefficients, magnitudes
+
+
+Pair = tuple[np.ndarray, np.ndarray]  # (Re X, Im X / theta), no magnitudes
+
+
+def _pair(x: ThetaComplex | float, zero: np.ndarray) -> Pair:
+    return (x.re, x.im) if isinstance(x, ThetaComplex) else (zero + x, zero)
+
+
+def _mul(x: Pair, y: Pair, t2: np.ndarray) -> Pair:
+    """The product in the ``(Re, Im/theta)`` form (``t2 = theta^2``)."""
+    return (x[0] * y[0] - t2 * x[1] * y[1], x[0] * y[1] + x[1] * y[0])
+
+
+def quadratic_coefficients(terms: LoopTerms, base: ThetaComplex | float, slope: ThetaComplex | float) -> np.ndarray:
+    """The coefficients of :func:`impedance_quadratic` alone (no magnitudes), ``(3, n)``: what a zoom needs."""
+    c, t2 = terms.c, terms.theta * terms.theta
+    zero = np.zeros(t2.shape)
+    P, E = (terms.P.re, terms.P.im), (terms.E.re, terms.E.im)
+    b, k = _pair(base, zero), _pair(slope, zero)
+    bp = _mul(b, P, t2)
+    U = (1.0 + bp[0], bp[1])
+    V = _mul(k, P, t2)
+    ke, be = _mul(k, E, t2), _mul(b, E, t2)
+    conj_u, conj_v = (U[0], -U[1]), (V[0], -V[1])
+    q2 = c * (V[0] ** 2 + t2 * V[1] ** 2) + _mul(ke, conj_v, t2)[1]
+    q1 = 2.0 * c * _mul(U, conj_v, t2)[0] + _mul(ke, conj_u, t2)[1] + _mul(be, conj_v, t2)[1]
+    q0 = c * (U[0] ** 2 + t2 * U[1] ** 2) + _mul(be, conj_u, t2)[1]
+    return np.stack([q2, q1, q0])
 
 
 def _theta_array(theta: ArrayLike) -> np.ndarray:

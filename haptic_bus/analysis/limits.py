@@ -45,9 +45,15 @@ import numpy as np
 from drives.errors import ParameterError
 from haptic_bus.analysis.characteristic import characteristic, flip_value
 from haptic_bus.analysis.criterion import SIGN_TOLERANCE
-from haptic_bus.analysis.frequency import LoopTerms, impedance_quadratic, loop_terms, scaled_impedance
+from haptic_bus.analysis.frequency import (
+    LoopTerms,
+    impedance_quadratic,
+    loop_terms,
+    quadratic_coefficients,
+    scaled_impedance,
+)
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE, WallLoop
-from haptic_bus.analysis.poles import closed_loop_poles, is_stable
+from haptic_bus.analysis.poles import closed_loop_poles, stable_all
 from haptic_bus.analysis.theta_complex import ThetaComplex
 from haptic_bus.analysis.theta_search import Group, Lane, LaneMinimum, refine_lanes, theta_grid
 
@@ -220,28 +226,34 @@ def _roots(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _forbidden(q: np.ndarray, top: float) -> list[tuple[float, float]]:
-    """Open intervals of ``[0, top]`` where some column's quadratic is negative."""
+    """Open intervals of ``[0, top]`` where some column's quadratic is negative, merged and ascending."""
     r1, r2 = _roots(q)
     a, b, c = q
-    out: list[tuple[float, float]] = []
     none = np.isnan(r1)
-    # no real root: negative everywhere iff the value at 0 is negative
-    for _ in np.flatnonzero(none & (c < 0))[:1]:
-        out.append((-math.inf, math.inf))
     linear = (a == 0) & ~none
     up = (a > 0) & ~none & ~linear
     down = (a < 0) & ~none & ~linear
-    out += [(lo, hi) for lo, hi in zip(r1[up], r2[up]) if lo < hi]
-    out += [(-math.inf, lo) for lo in r1[down]] + [(hi, math.inf) for hi in r2[down]]
-    out += [(-math.inf, r) if s > 0 else (r, math.inf) for r, s in zip(r1[linear], b[linear]) if s != 0]
-    out += [(-math.inf, math.inf) for _ in np.flatnonzero(linear & (b == 0) & (c < 0))[:1]]
-    merged: list[tuple[float, float]] = []
-    for lo, hi in sorted((max(lo, -1.0), min(hi, 2.0 * top)) for lo, hi in out if hi > 0 and lo < top):
-        if merged and lo <= merged[-1][1]:
-            merged[-1] = (merged[-1][0], max(merged[-1][1], hi))
-        else:
-            merged.append((lo, hi))
-    return merged
+    inf = np.full(a.shape, math.inf)
+    pieces = [
+        (-inf[none & (c < 0)], inf[none & (c < 0)]),  # no real root and negative at 0: negative everywhere
+        (r1[up], r2[up]),  # between the roots of an upward parabola
+        (-inf[down], r1[down]), (r2[down], inf[down]),  # outside those of a downward one
+        (-inf[linear & (b > 0)], r1[linear & (b > 0)]), (r1[linear & (b < 0)], inf[linear & (b < 0)]),
+        (-inf[linear & (b == 0) & (c < 0)], inf[linear & (b == 0) & (c < 0)]),
+    ]
+    lo = np.concatenate([p[0] for p in pieces])
+    hi = np.concatenate([p[1] for p in pieces])
+    keep = (lo < hi) & (hi > 0) & (lo < top)
+    lo, hi = np.maximum(lo[keep], -1.0), np.minimum(hi[keep], 2.0 * top)
+    if lo.size == 0:
+        return []
+    order = np.argsort(lo, kind="stable")
+    lo, hi = lo[order], hi[order]
+    reach = np.maximum.accumulate(hi)
+    starts = np.concatenate([[True], lo[1:] > reach[:-1]])  # a new merged interval where nothing before reaches
+    first = np.flatnonzero(starts)
+    last = np.concatenate([first[1:] - 1, [lo.size - 1]])
+    return [(float(lo[i]), float(reach[j])) for i, j in zip(first, last)]
 
 
 def _allowed(forbidden: list[tuple[float, float]], top: float) -> list[tuple[float, float]]:
@@ -315,27 +327,34 @@ class LimitsPlan:
         self.plans: list[tuple[_Family, list[tuple[End, End]], bool]] = []
         self.groups: dict[str, Group] = {}
         lanes: list[Lane] = []
+        drafts = []
         for name in which:
             family = _Family(loop, name)
             q, tolerant = family.quadratic(terms)
-            pieces = _allowed(_forbidden(tolerant, family.top), family.top)
-            flip = family.flip
+            pieces = [(lo, hi) for lo, hi in _split(_allowed(_forbidden(tolerant, family.top), family.top), family.flip)]
+            drafts.append((family, q, pieces))
+        # one batch of pole tests: each family's start (x = 0) and one interior point of every candidate
+        probes = [family.at(0.0) for family, _, _ in drafts]
+        probes += [family.at(0.5 * (lo + hi)) for family, _, pieces in drafts for lo, hi in pieces if lo < hi]
+        verdicts = iter(stable_all(probes))
+        starts = [next(verdicts) for _ in drafts]
+        for (family, q, pieces), start_stable in zip(drafts, starts):
             start = family.at(0.0)
-            start_ok = bool(pieces) and pieces[0][0] == 0.0 and (start.lossless or is_stable(start))
+            start_ok = bool(pieces) and pieces[0][0] == 0.0 and (start.lossless or start_stable)
             plan: list[tuple[End, End]] = []
-            for lo, hi in _split(pieces, flip):
-                if lo == hi or not is_stable(family.at(0.5 * (lo + hi))):
+            for lo, hi in pieces:
+                if lo == hi or not next(verdicts):
                     continue
-                low: End = "flip" if lo == flip else 0.0 if lo == 0.0 else len(self.ends)
+                low: End = "flip" if lo == family.flip else 0.0 if lo == 0.0 else len(self.ends)
                 if isinstance(low, int):
                     self.ends.append(_End(family, 0.5 * (lo + hi), False, lo, hi))
-                high: End = "flip" if hi == flip else float(family.top) if hi >= family.top else len(self.ends)
+                high: End = "flip" if hi == family.flip else float(family.top) if hi >= family.top else len(self.ends)
                 if isinstance(high, int):
                     self.ends.append(_End(family, 0.5 * (lo + hi), True, lo, hi))
                 plan.append((low, high))
             self.plans.append((family, plan, start_ok))
-            self.groups[name] = Group(_quadratic_of(family))
-            lanes += [Lane(end.branch(q), name, end.branch) for end in self.ends[len(lanes):]]
+            self.groups[family.which] = Group(_quadratic_of(family))
+            lanes += [Lane(end.branch(q), family.which, end.branch) for end in self.ends[len(lanes):]]
         self.lanes = lanes
 
     def finish(self, minima: list[LaneMinimum]) -> tuple[PassiveSet, ...]:
@@ -389,7 +408,7 @@ class LimitsPlan:
 
 def _quadratic_of(family: _Family) -> Callable[[LoopTerms], np.ndarray]:
     def evaluate(terms: LoopTerms) -> np.ndarray:
-        return family.quadratic(terms)[0]
+        return quadratic_coefficients(terms, *family.lines(terms))
 
     return evaluate
 

@@ -4,8 +4,9 @@ The poles are ``z = 1 + w``, ``w`` the zeros of ``f(w) = (1 + w)^L A(w) + N(w) W
 (:mod:`haptic_bus.analysis.characteristic`: every velocity model, every real delay, the delay
 line a shift and the plant's order kept).  No polynomial in ``z`` is ever expanded.
 
-**How they are found.**  Starting points: for at most :data:`DENSE_LIMIT` poles the eigenvalues
-of ``M - I`` (:func:`~haptic_bus.analysis.sampled_loop.loop_matrix`, LAPACK ``geev``); for more
+**How they are found.**  For at most :data:`DENSE_LIMIT` poles the eigenvalues of ``M - I``
+(:func:`~haptic_bus.analysis.sampled_loop.loop_matrix`, LAPACK ``geev``), which decide alone for
+poles at least ``1e-6 sqrt(max|M - I|)`` from the circle and are the starting points for the others; for more
 (a long delay) the ring ``z^L = -N W / A`` solved branch by branch, and the zeros of ``A``.
 Then Newton steps on ``f`` itself (each accepted only if it lowers ``|f|``), and Aberth-Ehrlich
 steps if two starting points ran into one zero -- ``O(L)`` work per step instead of the dense
@@ -29,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -38,6 +40,7 @@ from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.sampled_loop import loop_matrix
 
 DENSE_LIMIT = 96  # poles: up to this many, the dense eigenvalues give the starting points
+_DENSE_TRUST = 1e-6  # |z| - 1 beyond this (times sqrt max |M - I|): a dense eigenvalue decides alone
 _NEWTON_STEPS = 40
 _ABERTH_STEPS = 60
 _BOUND_FACTOR = 8.0
@@ -196,13 +199,21 @@ def _zeros(loop: WallLoop) -> tuple[np.ndarray, np.ndarray]:
         w = np.concatenate([np.roots(a).astype(complex) if a.size > 1 else np.empty(0), -np.ones(char.lag)])
         return w, np.zeros(w.size)
     if char.degree(integrator) <= DENSE_LIMIT:
-        w, _ = _newton(char, wall, integrator, np.linalg.eigvals(loop_matrix(loop)).astype(complex), _NEWTON_STEPS)
+        matrix = loop_matrix(loop)
+        w = np.linalg.eigvals(matrix).astype(complex)
+        # LAPACK's eigenvalues err by ~eps |M - I|, ~sqrt(eps |M - I|) at a double pole: far from the circle they decide
+        near = np.abs(radius_excess(w)) < _DENSE_TRUST * math.sqrt(max(1.0, float(np.max(np.abs(matrix)))))
+        if not near.any():
+            return w, np.zeros(w.size)
+        w[near], _ = _newton(char, wall, integrator, w[near], _NEWTON_STEPS)
     else:
+        near = np.ones(char.degree(integrator), dtype=bool)
         w = _long_delay_zeros(char, wall, integrator, loop.q)
-    _, df, size = evaluate(char, wall, integrator, w)
+    bound = np.zeros(w.size)
+    _, df, size = evaluate(char, wall, integrator, w[near])
     with np.errstate(divide="ignore"):
-        bound = _BOUND_FACTOR * EPS * size / np.abs(df)
-    bound = 2.0 * np.where(np.isfinite(bound), bound, np.inf) + 4 * EPS * (2 * np.abs(w.real) + np.abs(w) ** 2)
+        first = _BOUND_FACTOR * EPS * size / np.abs(df)
+    bound[near] = 2.0 * np.where(np.isfinite(first), first, np.inf) + 4 * EPS * (2 * np.abs(w[near].real) + np.abs(w[near]) ** 2)
     return w, bound
 
 
@@ -269,6 +280,27 @@ def stability(loop: WallLoop) -> Stability:
 def spectral_radius(loop: WallLoop) -> float:
     """Largest closed-loop pole magnitude (dimensionless); < 1 means stable."""
     return _poles(loop).stability.radius
+
+
+def stable_all(loops: list[WallLoop]) -> list[bool]:
+    """:func:`is_stable` of each loop; the small ones' dense eigenvalues computed as one batch per
+    matrix size (each decided alone where it is clearly inside or outside, else by :func:`stability`)."""
+    out: list[bool | None] = [None] * len(loops)
+    by_size: dict[int, list[tuple[int, np.ndarray]]] = {}
+    for i, loop in enumerate(loops):
+        char, wall, integrator = _wall(loop)
+        if char.degree(integrator) <= DENSE_LIMIT and np.any(wall):
+            matrix = loop_matrix(loop)
+            by_size.setdefault(matrix.shape[0], []).append((i, matrix))
+    for batch in by_size.values():
+        matrices = np.stack([matrix for _, matrix in batch])
+        excess = radius_excess(np.linalg.eigvals(matrices))
+        trust = _DENSE_TRUST * np.sqrt(np.maximum(1.0, np.max(np.abs(matrices), axis=(1, 2))))
+        decided = np.all(np.abs(excess) >= trust[:, None], axis=1)
+        for (i, _), clear, top in zip(batch, decided, np.max(excess, axis=1)):
+            if clear:
+                out[i] = bool(top < 0)
+    return [is_stable(loop) if known is None else known for loop, known in zip(loops, out)]
 
 
 def is_stable(loop: WallLoop) -> bool:

@@ -6,15 +6,15 @@ The grid (:func:`theta_grid`): uniform points (more for a long delay, whose resp
 ``theta``), a fan at the low-pass corner ``T/TAU`` and a fan of points at the angle of every
 lightly damped closed-loop pole with spacing scaled by ``1 - |pole|``.
 
-The zoom (:func:`refine_minima`): the lowest interior local minima of the grid values are
-refined together, vectorised: each round evaluates 11 points inside every bracket and keeps
-the neighbours of the best (the bracket shrinks 5x a round); after 5 rounds a parabola through
-the last three points ends it.  A smooth minimum is then located to ``~1e-6`` of the grid step
-and its value is exact to round-off.
-
-The joint zoom (:func:`refine_lanes`): several functions of ``theta`` on one grid (the margin,
-the seed's test, every end of every passive interval) zoomed at once, each round's points of
-all of them evaluated by one call of the costly shared part (the loop's terms).
+The zoom (:func:`refine_lanes`): several functions of ``theta`` on one grid (*lanes*: the
+margin, the seed's test, every end of every passive interval) are refined at once.  The three
+lowest interior local minima of each lane's grid values are bracketed by their neighbours; each
+round evaluates 41 points inside every bracket and keeps the neighbours of the best (the bracket
+shrinks 20x a round); after 3 rounds (8000x) the parabola through the best point and its two
+neighbours gives the vertex, evaluated once more.  A smooth minimum is then located to
+``~1e-8`` of the grid step and its value is exact to round-off.  Each round evaluates the costly
+shared part (the loop's terms) once, on the points of every lane together: 4 evaluations refine
+everything a check asks for.
 """
 
 from __future__ import annotations
@@ -35,10 +35,8 @@ _FAN = np.array([-16.0, -8.0, -4.0, -2.0, -1.0, -0.5, -0.25, 0.0, 0.25, 0.5, 1.0
 _LOG_POINTS = 16
 _LIGHT_DAMPING = 0.2  # poles within this of the unit circle get a fan
 _MAX_POLE_FANS = 64
-_ZOOM_POINTS = 11
-_ZOOM_ROUNDS = 5
-
-Objective = Callable[[np.ndarray], np.ndarray]
+_ZOOM_POINTS = 41
+_ZOOM_ROUNDS = 2
 
 
 def uniform_points(loop: WallLoop) -> int:
@@ -59,36 +57,6 @@ def theta_grid(loop: WallLoop, poles: np.ndarray) -> np.ndarray:
     grid = np.concatenate(pieces)
     grid = grid[(grid >= LOWEST_THETA) & (grid <= math.pi)]
     return np.unique(np.append(grid, math.pi))
-
-
-def refine_minima(objective: Objective, grid: np.ndarray, values: np.ndarray, count: int = 3
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Refine the ``count`` lowest interior local minima of ``values = objective(grid)``.
-
-    Returns ``(theta, value)`` arrays of the refined points (and the zoom's last midpoints),
-    to be compared with the grid's own minimum by the caller.
-    """
-    interior = np.flatnonzero((values[1:-1] <= values[:-2]) & (values[1:-1] <= values[2:])) + 1
-    chosen = interior[np.argsort(values[interior], kind="stable")][:count]
-    if chosen.size == 0:
-        return np.empty(0), np.empty(0)
-    lo, hi = grid[chosen - 1], grid[chosen + 1]
-    fractions = np.linspace(0.0, 1.0, _ZOOM_POINTS)
-    rows = np.arange(chosen.size)
-    for _ in range(_ZOOM_ROUNDS):
-        points = lo[:, None] + (hi - lo)[:, None] * fractions
-        f = objective(points.ravel()).reshape(points.shape)
-        k = np.clip(np.argmin(f, axis=1), 1, _ZOOM_POINTS - 2)
-        lo, hi = points[rows, k - 1], points[rows, k + 1]
-    mid = 0.5 * (lo + hi)
-    triple = np.stack([lo, mid, hi], axis=1)
-    f = objective(triple.ravel()).reshape(triple.shape)
-    curvature = f[:, 0] - 2 * f[:, 1] + f[:, 2]
-    safe = np.where(curvature > 0, curvature, 1.0)
-    step = np.where(curvature > 0, 0.25 * (hi - lo) * (f[:, 0] - f[:, 2]) / safe, 0.0)
-    vertex = np.clip(mid + step, lo, hi)
-    thetas = np.concatenate([vertex, mid])
-    return thetas, np.concatenate([objective(vertex), f[:, 1]])
 
 
 @dataclass(frozen=True)
@@ -127,72 +95,82 @@ class Group:
 
 def refine_lanes(grid: np.ndarray, lanes: list[Lane], groups: dict[str, Group], shared: Callable[[np.ndarray], Any],
                  count: int = 3) -> list[LaneMinimum]:
-    """:func:`refine_minima` for every lane at once (``count`` minima each); each round computes
-    ``shared`` once, on the points of every lane whose group uses it (``shared(theta).take(mask)``
-    splits it), and each group once."""
-    fractions = np.linspace(0.0, 1.0, _ZOOM_POINTS)
-    brackets: list[tuple[np.ndarray, np.ndarray]] = []
+    """Every lane's least value: its ``count`` lowest interior grid minima zoomed (see the module
+    docstring).  Each round computes ``shared`` once, on the points of every lane whose group uses
+    it, and each group once; the brackets of all lanes are refined as one array."""
+    names = sorted(groups, key=lambda name: not groups[name].shared)  # the shared groups' points first
+    order = [k for name in names for k, lane in enumerate(lanes) if lane.group == name]  # lanes by group
     best = []
-    for lane in lanes:
+    lows, highs, owners = [], [], []
+    for k, lane in enumerate(lanes):
         on_grid = lane.values
         interior = np.flatnonzero((on_grid[1:-1] <= on_grid[:-2]) & (on_grid[1:-1] <= on_grid[2:])) + 1
         chosen = interior[np.argsort(on_grid[interior], kind="stable")][:count]
-        brackets.append((grid[chosen - 1], grid[chosen + 1]))
+        lows.append(grid[chosen - 1])
+        highs.append(grid[chosen + 1])
+        owners.append(np.full(chosen.size, k))
         i = int(np.argmin(on_grid))
         least = float(np.min(lane.grid_check)) if lane.grid_check is not None else math.inf
         best.append([float(on_grid[i]), float(grid[i]), least])
+    if not order or sum(o.size for o in owners) == 0:
+        return [LaneMinimum(*b) for b in best]
+    lo = np.concatenate([lows[k] for k in order])
+    hi = np.concatenate([highs[k] for k in order])
+    owner = np.concatenate([owners[k] for k in order])
+    rows_of = {k: int(owners[k].size) for k in order}
+    shared_rows = sum(rows_of[k] for k in order if groups[lanes[k].group].shared)
 
-    def evaluate(points: list[np.ndarray]) -> list[np.ndarray]:
-        """Every lane's values at its ``points`` (flat): ``shared`` once, each group once."""
-        out: list[np.ndarray] = [np.empty(0)] * len(lanes)
-        users = [k for k, lane in enumerate(lanes) if groups[lane.group].shared and points[k].size]
-        owner = np.concatenate([np.full(points[k].size, k) for k in users]) if users else np.empty(0, dtype=int)
-        terms = shared(np.concatenate([points[k] for k in users])) if users else None
-        for name, group in groups.items():
-            members = [k for k, lane in enumerate(lanes) if lane.group == name and points[k].size]
-            if not members:
+    def evaluate(points: np.ndarray) -> np.ndarray:
+        """Values at ``points`` (one row per bracket, in ``order``): ``shared`` once, each group once."""
+        width = points.shape[1]
+        flat = points.ravel()
+        out = np.empty(flat.size)
+        terms = shared(flat[: shared_rows * width]) if shared_rows else None
+        start = 0
+        for name in names:
+            ks = [k for k in order if lanes[k].group == name and rows_of[k]]
+            size = sum(rows_of[k] for k in ks) * width
+            if not size:
                 continue
-            if group.shared:
+            if groups[name].shared:
                 assert terms is not None
-                data = group.evaluate(terms.take(np.isin(owner, members)))
-                sizes = [int(np.count_nonzero(owner == k)) for k in members]
+                data = groups[name].evaluate(terms.take(slice(start, start + size)))
             else:
-                data = group.evaluate(np.concatenate([points[k] for k in members]))
-                sizes = [points[k].size for k in members]
-            for k, part in zip(members, np.split(data, np.cumsum(sizes)[:-1], axis=-1)):
+                data = groups[name].evaluate(flat[start:start + size])
+            offset = 0
+            for k in ks:
+                part = data[..., offset:offset + rows_of[k] * width]
                 lane = lanes[k]
-                out[k] = lane.pick(part)
+                out[start + offset:start + offset + part.shape[-1]] = lane.pick(part)
                 if lane.check is not None:
                     best[k][2] = min(best[k][2], float(np.min(lane.check(part))))
-        return out
+                offset += part.shape[-1]
+            start += size
+        return out.reshape(points.shape)
 
+    fractions = np.linspace(0.0, 1.0, _ZOOM_POINTS)
+    rows = np.arange(lo.size)
     for _ in range(_ZOOM_ROUNDS):
-        points = [lo[:, None] + (hi - lo)[:, None] * fractions for lo, hi in brackets]
-        values = evaluate([p.ravel() for p in points])
-        for k, (p, v) in enumerate(zip(points, values)):
-            if not p.size:
-                continue
-            f = v.reshape(p.shape)
-            j = np.clip(np.argmin(f, axis=1), 1, _ZOOM_POINTS - 2)
-            rows = np.arange(p.shape[0])
-            brackets[k] = (p[rows, j - 1], p[rows, j + 1])
-    triples = [np.stack([lo, 0.5 * (lo + hi), hi], axis=1) for lo, hi in brackets]
-    values = evaluate([t.ravel() for t in triples])
-    vertices = []
-    for (lo, hi), t, v in zip(brackets, triples, values):
-        f = v.reshape(t.shape) if t.size else np.empty((0, 3))
-        curvature = f[:, 0] - 2 * f[:, 1] + f[:, 2]
-        safe = np.where(curvature > 0, curvature, 1.0)
-        step = np.where(curvature > 0, 0.25 * (hi - lo) * (f[:, 0] - f[:, 2]) / safe, 0.0)
-        vertices.append(np.clip(t[:, 1] + step, lo, hi) if t.size else np.empty(0))
-    at_vertices = evaluate(vertices)
+        points = lo[:, None] + (hi - lo)[:, None] * fractions
+        f = evaluate(points)
+        j = np.clip(np.argmin(f, axis=1), 1, _ZOOM_POINTS - 2)
+        lo, hi = points[rows, j - 1], points[rows, j + 1]
+        middle, f_lo, f_mid, f_hi = points[rows, j], f[rows, j - 1], f[rows, j], f[rows, j + 1]
+    # the parabola through the best point and its equally spaced neighbours
+    curvature = f_lo - 2 * f_mid + f_hi
+    safe = np.where(curvature > 0, curvature, 1.0)
+    step = np.where(curvature > 0, 0.25 * (hi - lo) * (f_lo - f_hi) / safe, 0.0)
+    vertex = np.clip(middle + step, lo, hi)
+    at_vertex = evaluate(vertex[:, None])[:, 0]
+    thetas = np.concatenate([middle, vertex])
+    refined = np.concatenate([f_mid, at_vertex])
+    owners_twice = np.concatenate([owner, owner])
     out = []
-    for k, (t, v, vertex, at_vertex) in enumerate(zip(triples, values, vertices, at_vertices)):
-        thetas = np.concatenate([t[:, 1], vertex]) if t.size else np.empty(0)
-        refined = np.concatenate([v.reshape(t.shape)[:, 1], at_vertex]) if t.size else np.empty(0)
+    for k in range(len(lanes)):
         value, theta, least = best[k]
-        if refined.size and float(np.min(refined)) < value:
-            i = int(np.argmin(refined))
+        mine = np.flatnonzero(owners_twice == k)
+        if mine.size and float(np.min(refined[mine])) < value:
+            i = mine[int(np.argmin(refined[mine]))]
             value, theta = float(refined[i]), float(thetas[i])
         out.append(LaneMinimum(value, theta, least))
     return out
