@@ -22,6 +22,7 @@ from haptic_bus.analysis.limits import max_stiffness
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import phi1
 from haptic_bus.analysis.poles import closed_loop_poles, is_stable, shifted_poles, spectral_radius, stability
+from haptic_bus.analysis.velocity import VelocityModel
 
 ISSUE_40 = WallLoop(0.5, 1.0, 1e-3, 1.0, 0.01, 40)
 
@@ -180,3 +181,27 @@ def test_the_long_delay_solver_finds_every_dense_eigenvalue(loop: WallLoop) -> N
     for w in ours:
         k = int(np.argmin(np.abs(np.array(remaining) - w)))
         assert abs(remaining.pop(k) - w) < 1e-9
+
+
+def test_schur_cohn_decides_long_delays_as_the_poles_do() -> None:
+    """The recursion on the expanded polynomial decides a long delay's stability in O(L) per step;
+    where it answers (its margin beyond 1e-8) it agrees with the poles on every loop drawn."""
+    from haptic_bus.analysis.characteristic import SCHUR_COHN_TRUST, characteristic, schur_cohn
+
+    rng = np.random.default_rng(5)
+    answered = 0
+    for _ in range(40):
+        m, b = 10 ** rng.uniform(-2, 1), float(rng.choice([0.0, 10 ** rng.uniform(-3, 2)]))
+        K, B = float(rng.choice([0.0, 10 ** rng.uniform(-3, 4)])), float(rng.choice([0.0, 10 ** rng.uniform(-4, 2)]))
+        delay = float(rng.choice([97, 120.5, 300, 999.25, 1000]))
+        velocity = VelocityModel.parse(str(rng.choice(["point", "average", "lowpass:0.0005", "window:0.0004"])))
+        loop = WallLoop(m, b, 1e-3, K, B, delay, velocity)
+        char = characteristic(loop)
+        wall = char.wall(loop.kappa, loop.q, loop.K > 0)
+        if not np.any(wall):
+            continue
+        margin = schur_cohn(char, wall, loop.K > 0)
+        if abs(margin) > SCHUR_COHN_TRUST:
+            answered += 1
+            assert (margin > 0) == stability(loop).stable, loop
+    assert answered >= 25

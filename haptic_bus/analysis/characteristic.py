@@ -28,6 +28,7 @@ each): where a pole sits at ``z = -1``.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +38,7 @@ from haptic_bus.analysis.sampled_loop import period_map
 from haptic_bus.analysis.velocity import VelocityModel
 
 EPS = float(np.finfo(float).eps)
+SCHUR_COHN_TRUST = 1e-8  # |1 - max |k_j|| below this: the double-precision recursion decides nothing
 
 
 @dataclass(frozen=True)
@@ -149,3 +151,59 @@ def flip_value(char: Characteristic, base: np.ndarray, slope: np.ndarray, integr
     if gain == 0.0:
         return None
     return float(-(lead + n * b0) / gain)
+
+
+def _in_z(coefficients: np.ndarray) -> np.ndarray:
+    """A polynomial in ``w`` (highest first) as one in ``z = 1 + w`` (highest first): Horner with ``z - 1``."""
+    out = np.zeros(1)
+    for a in coefficients:
+        out = np.append(out, 0.0) - np.append(0.0, out)  # times (z - 1)
+        out[-1] += a
+    return np.trim_zeros(out, "f") if np.any(out) else np.zeros(1)
+
+
+def schur_cohn(char: Characteristic, wall: np.ndarray, integrator: bool) -> float:
+    """``1 - max |k_j|`` over the Schur-Cohn (Jury) reflection coefficients of ``f`` in powers of ``z``:
+    positive iff every zero lies strictly inside the unit circle.  ``O(L^2)`` flops on one array
+    (normalised each step); in double precision, so a result within :data:`SCHUR_COHN_TRUST` of 0
+    decides nothing (poles that close to the circle, or ``z``-coefficients that lost them: the caller asks
+    :mod:`haptic_bus.analysis.poles`).  Stops at the first ``|k_j| > 1``."""
+    top = _in_z(char.denominator(integrator))[::-1]  # ascending
+    bottom = _in_z(np.convolve(char.numerator, wall))[::-1]
+    m = max(top.size, bottom.size) - 1
+    degree = char.lag + top.size - 1
+    least = 1.0
+    if degree > 2 * m + 2:  # z^L A + B: two blocks of m + 1 coefficients, a gap between; the gap shrinks by one a step
+        low = [float(x) for x in np.pad(bottom, (0, m + 1 - bottom.size))]
+        high = [float(x) for x in np.pad(top, (m + 1 - top.size, 0))]
+        while degree > 2 * m + 2:
+            if high[m] == 0.0:
+                return -math.inf
+            k = low[0] / high[m]
+            least = min(least, 1.0 - abs(k))
+            if least < -SCHUR_COHN_TRUST:
+                return least
+            low, high = ([(low[j + 1] if j < m else 0.0) - k * (high[m - 1 - j] if j < m else 0.0) for j in range(m + 1)],
+                         [high[t] - k * low[m - t] for t in range(m + 1)])
+            scale = abs(high[m]) or 1.0
+            low, high = [x / scale for x in low], [x / scale for x in high]
+            degree -= 1
+        a = np.zeros(degree + 1)
+        a[:m + 1] += low
+        a[degree - m:] += high
+    else:
+        a = np.zeros(char.lag + top.size)
+        a[char.lag:] += top
+        a[:bottom.size] += bottom
+        a = np.trim_zeros(a, "b")
+    for _ in range(a.size - 1):
+        lead, constant = a[-1], a[0]
+        if lead == 0.0:
+            return -math.inf
+        k = constant / lead
+        least = min(least, 1.0 - abs(float(k)))
+        if least < -SCHUR_COHN_TRUST:
+            return least
+        a = (a - k * a[::-1])[1:]  # (p - k p*)/z, p* the reversed polynomial
+        a = a / abs(a[-1]) if a[-1] != 0.0 else a
+    return least

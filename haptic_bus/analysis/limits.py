@@ -55,7 +55,7 @@ from haptic_bus.analysis.frequency import (
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE, WallLoop
 from haptic_bus.analysis.poles import closed_loop_poles, stable_all
 from haptic_bus.analysis.theta_complex import ThetaComplex
-from haptic_bus.analysis.theta_search import Group, Lane, LaneMinimum, refine_lanes, theta_grid
+from haptic_bus.analysis.theta_search import Group, Lane, LaneMinimum, refine_lanes, sorted_unique, theta_grid
 
 _NO_ROOT = 1e300  # stands in for "no root on that side" (finite, so the zoom's differences stay finite)
 _ZOOM_COUNT = 3  # minima refined per end, as the criterion's zoom does
@@ -172,6 +172,12 @@ class _Family:
         if self.which == "B":
             return loop.with_wall(loop.K, value)
         return loop.with_wall(value * loop.K, value * loop.B)
+
+    def probe(self, lo: float, hi: float) -> WallLoop:
+        """A loop inside the candidate ``(lo, hi)`` (scaled): the loop itself if its own value is
+        inside (its poles are already known), else the midpoint."""
+        own = {"K": self.loop.kappa, "B": self.loop.q}.get(self.which, 1.0)
+        return self.loop if lo < own < hi else self.at(0.5 * (lo + hi))
 
     def walls(self, x: float) -> tuple[float, float]:
         """The scaled wall ``(kappa, q)`` at scaled ``x`` (unclipped)."""
@@ -335,12 +341,12 @@ class LimitsPlan:
             drafts.append((family, q, pieces))
         # one batch of pole tests: each family's start (x = 0) and one interior point of every candidate
         probes = [family.at(0.0) for family, _, _ in drafts]
-        probes += [family.at(0.5 * (lo + hi)) for family, _, pieces in drafts for lo, hi in pieces if lo < hi]
+        probes += [family.probe(lo, hi) for family, _, pieces in drafts for lo, hi in pieces if lo < hi]
         verdicts = iter(stable_all(probes))
         starts = [next(verdicts) for _ in drafts]
         for (family, q, pieces), start_stable in zip(drafts, starts):
             start = family.at(0.0)
-            start_ok = bool(pieces) and pieces[0][0] == 0.0 and (start.lossless or start_stable)
+            start_ok = bool(pieces and pieces[0][0] == 0.0 and (start.lossless or start_stable))
             plan: list[tuple[End, End]] = []
             for lo, hi in pieces:
                 if lo == hi or not next(verdicts):
@@ -418,7 +424,7 @@ def _scale_grid(loop: WallLoop) -> np.ndarray:
     so every lightly damped pole the ramp passes near has its fan of points."""
     grids = [theta_grid(scaled, closed_loop_poles(scaled))
              for scaled in (loop.with_wall(s * loop.K, s * loop.B) for s in (0.0, 0.25, 0.5, 0.75, 1.0))]
-    return np.unique(np.concatenate(grids))
+    return sorted_unique(np.concatenate(grids))
 
 
 def passive_sets(loop: WallLoop, which: tuple[str, ...], terms: LoopTerms | None = None) -> tuple[PassiveSet, ...]:

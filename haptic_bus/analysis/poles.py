@@ -35,7 +35,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from haptic_bus.analysis.characteristic import EPS, Characteristic, characteristic, evaluate
+from haptic_bus.analysis.characteristic import (
+    EPS,
+    SCHUR_COHN_TRUST,
+    Characteristic,
+    characteristic,
+    evaluate,
+    schur_cohn,
+)
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.sampled_loop import loop_matrix
 
@@ -283,15 +290,23 @@ def spectral_radius(loop: WallLoop) -> float:
 
 
 def stable_all(loops: list[WallLoop]) -> list[bool]:
-    """:func:`is_stable` of each loop; the small ones' dense eigenvalues computed as one batch per
-    matrix size (each decided alone where it is clearly inside or outside, else by :func:`stability`)."""
+    """:func:`is_stable` of each loop, decided the cheapest way that is sure: the small ones' dense
+    eigenvalues as one batch per matrix size, a long delay's by the Schur-Cohn recursion
+    (:func:`~haptic_bus.analysis.characteristic.schur_cohn`), each where it is clearly inside or
+    outside; else by :func:`stability`."""
     out: list[bool | None] = [None] * len(loops)
     by_size: dict[int, list[tuple[int, np.ndarray]]] = {}
     for i, loop in enumerate(loops):
         char, wall, integrator = _wall(loop)
-        if char.degree(integrator) <= DENSE_LIMIT and np.any(wall):
+        if not np.any(wall):
+            continue
+        if char.degree(integrator) <= DENSE_LIMIT:
             matrix = loop_matrix(loop)
             by_size.setdefault(matrix.shape[0], []).append((i, matrix))
+        else:
+            margin = schur_cohn(char, wall, integrator)
+            if abs(margin) > SCHUR_COHN_TRUST:
+                out[i] = bool(margin > 0)
     for batch in by_size.values():
         matrices = np.stack([matrix for _, matrix in batch])
         excess = radius_excess(np.linalg.eigvals(matrices))

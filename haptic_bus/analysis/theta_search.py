@@ -56,7 +56,13 @@ def theta_grid(loop: WallLoop, poles: np.ndarray) -> np.ndarray:
         pieces.append(abs(np.angle(pole)) + width * _FAN)
     grid = np.concatenate(pieces)
     grid = grid[(grid >= LOWEST_THETA) & (grid <= math.pi)]
-    return np.unique(np.append(grid, math.pi))
+    return sorted_unique(np.append(grid, math.pi))
+
+
+def sorted_unique(values: np.ndarray) -> np.ndarray:
+    """``values`` sorted, repeats dropped (``np.unique`` without its import of ``numpy.ma``: 0.1 s at start-up)."""
+    ordered = np.sort(values)
+    return ordered[np.concatenate([[True], ordered[1:] != ordered[:-1]])] if ordered.size else ordered
 
 
 @dataclass(frozen=True)
