@@ -205,3 +205,21 @@ def test_schur_cohn_decides_long_delays_as_the_poles_do() -> None:
             answered += 1
             assert (margin > 0) == stability(loop).stable, loop
     assert answered >= 25
+
+
+def test_delay_1000_limit_agrees_with_40_digits() -> None:
+    """At D = 1000 the largest passive K at B = 0 is the low-frequency root Re Z(K, theta -> 0) = 0:
+    solved in 80 digits from matrix exponentials (tests.mp_reference), it agrees to 1e-12; the
+    Schur-Cohn recursion in 40 digits on the characteristic polynomial says stable just inside."""
+    from haptic_bus.bench.mp_boundary import THETA_LOW, schur_cohn_stable
+    from tests.mp_reference import re_z_mp
+
+    loop = WallLoop(0.5, 1.0, 1e-3, 0.5, 0.0, 1000)
+    k_max = max_stiffness(loop)
+    assert k_max is not None
+    with mp.workdps(40):
+        root = mp.findroot(lambda K: re_z_mp(loop, THETA_LOW, K, 0), (k_max * (1 - 1e-6), k_max * (1 + 1e-6)),
+                           solver="anderson")
+        assert abs(k_max - float(root)) <= 1e-12 * float(root)
+        assert schur_cohn_stable(loop, root * (1 - mp.mpf("1e-9")), mp.mpf(0))
+    assert float(re_z_mp(loop, THETA_LOW, k_max * (1 + 1e-9), 0)) < 0
