@@ -26,7 +26,6 @@ from haptic_bus.analysis.criterion import (
     impedance_group,
     judge,
     lossless_verdict,
-    seed_group,
     seed_judgement,
     seed_lane,
     verdict_lane,
@@ -164,11 +163,11 @@ def _verdicts(loop: WallLoop) -> tuple[Verdict, Verdict, PassiveSet, PassiveSet]
     """(exact verdict, seed's verdict, passive K, passive B): one grid, one joint zoom."""
     grid = theta_grid(loop, closed_loop_poles(loop))
     terms = loop_terms(loop, grid)
-    exact_group, seed = impedance_group(loop), seed_group(loop)
+    group = impedance_group(loop, seed=True)
     plan = LimitsPlan(loop, ("K", "B"), terms)
-    lanes = [verdict_lane(exact_group.evaluate(terms)), seed_lane(seed.evaluate(grid)), *plan.lanes]
-    minima = refine_lanes(grid, lanes, {"impedance": exact_group, "seed": seed, **plan.groups},
-                          lambda theta: loop_terms(loop, theta))
+    data = group.evaluate(terms)
+    lanes = [verdict_lane(data), seed_lane(data), *plan.lanes]
+    minima = refine_lanes(grid, lanes, {"impedance": group, **plan.groups}, lambda theta: loop_terms(loop, theta))
     exact = lossless_verdict() if loop.lossless else judge(loop, stability(loop), minima[0])
     stiffness, damping = plan.finish(minima[2:])
     return exact, seed_judgement(loop, minima[1]), stiffness, damping

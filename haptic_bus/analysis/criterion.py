@@ -46,13 +46,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptic_bus.analysis.frequency import LoopTerms, loop_terms, scaled_impedance, seed_z_zw
+from haptic_bus.analysis.frequency import LoopTerms, loop_terms, scaled_impedance, seed_impedance
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.poles import MARGINAL_STATE, Stability, closed_loop_poles, stability
 from haptic_bus.analysis.theta_search import Group, Lane, LaneMinimum, refine_lanes, theta_grid
 
 SIGN_TOLERANCE = 64 * np.finfo(float).eps  # ~1.4e-14, relative to the magnitude of the terms that cancel
-SEED_TOLERANCE = 1e-14  # relative to |Z|: the seed's T_zw is evaluated as an ordinary complex number
+SEED_TOLERANCE = 1e-14  # relative to |Z_zw|, as the seed's test has always been judged
 NOT_PASSIVE_FLOOR = -math.ulp(0.0)  # the margin of a loop that fails by its poles alone (on the circle)
 
 EXACT = "exact: closed-loop stability and Re T_fund >= 0 on (0, pi]"
@@ -102,12 +102,18 @@ class Verdict:
         return "not passive" if self.stable else "unstable"
 
 
-def impedance_group(loop: WallLoop) -> Group:
-    """The lanes' group of ``Re Z``: from the loop's terms, rows ``Re Z T/m`` and that plus its sign tolerance."""
+def impedance_group(loop: WallLoop, seed: bool = False) -> Group:
+    """The lanes' group of ``Re Z``: from the loop's terms, rows ``Re Z T/m`` and that plus its sign
+    tolerance; with ``seed``, also ``Re Z_zw T/m`` of the seed's test and that plus its tolerance
+    (:func:`~haptic_bus.analysis.frequency.seed_impedance`, from the same terms)."""
 
     def evaluate(terms: LoopTerms) -> np.ndarray:
         z = scaled_impedance(terms, loop.kappa, loop.q)
-        return np.stack([z.re, z.re + SIGN_TOLERANCE * z.scale])
+        rows = [z.re, z.re + SIGN_TOLERANCE * z.scale]
+        if seed:
+            re, im = seed_impedance(terms, loop.kappa, loop.q)
+            rows += [re, re + SEED_TOLERANCE * np.hypot(re, im)]
+        return np.stack(rows)
 
     return Group(evaluate)
 
@@ -153,19 +159,9 @@ def exact_verdict(loop: WallLoop) -> Verdict:
     return judge(loop, stability(loop), minimum)
 
 
-def seed_group(loop: WallLoop) -> Group:
-    """The lanes' group of the seed's test: from ``theta``, rows ``Re(Z_zw T/m)`` and that plus its tolerance."""
-
-    def evaluate(theta: np.ndarray) -> np.ndarray:
-        z = (loop.T / loop.m) * seed_z_zw(loop, theta)
-        return np.stack([z.real, z.real + SEED_TOLERANCE * np.abs(z)])
-
-    return Group(evaluate, shared=False)
-
-
 def seed_lane(data: np.ndarray) -> Lane:
-    """The lane of the seed's margin, from :func:`seed_group`'s ``data`` on the grid."""
-    return Lane(data[0], "seed", lambda part: part[0], lambda part: part[1], data[1])
+    """The lane of the seed's margin, from :func:`impedance_group`'s ``data`` (with ``seed``) on the grid."""
+    return Lane(data[2], "impedance", lambda part: part[2], lambda part: part[3], data[3])
 
 
 def seed_judgement(loop: WallLoop, minimum: LaneMinimum) -> Verdict:
@@ -181,6 +177,7 @@ def seed_judgement(loop: WallLoop, minimum: LaneMinimum) -> Verdict:
 def seed_verdict(loop: WallLoop) -> Verdict:
     """The seed's frequency test ``Re T_zw >= 0`` alone (no stability test, as in the seed)."""
     grid = theta_grid(loop, closed_loop_poles(loop))
-    group = seed_group(loop)
-    [minimum] = refine_lanes(grid, [seed_lane(group.evaluate(grid))], {"seed": group}, lambda theta: None)
+    group = impedance_group(loop, seed=True)
+    [minimum] = refine_lanes(grid, [seed_lane(group.evaluate(loop_terms(loop, grid)))], {"impedance": group},
+                             lambda theta: loop_terms(loop, theta))
     return seed_judgement(loop, minimum)

@@ -118,13 +118,14 @@ class ScaledImpedance:
     scale: np.ndarray
 
 
-def _wall(terms: LoopTerms, kappa: float, q: float) -> ThetaComplex:
-    """``L = kappa + q (1 - z^{-1})``."""
+def _wall(terms: LoopTerms, kappa: float | np.ndarray, q: float | np.ndarray) -> ThetaComplex:
+    """``L = kappa + q (1 - z^{-1})`` (``kappa``, ``q`` scalars, or arrays: one wall per point)."""
     return terms.hold * q + kappa
 
 
-def scaled_impedance(terms: LoopTerms, kappa: float, q: float) -> ScaledImpedance:
-    """``Z T/m = s + L E/(j theta U)`` for the scaled wall ``kappa``, ``q`` (see the module docstring)."""
+def scaled_impedance(terms: LoopTerms, kappa: float | np.ndarray, q: float | np.ndarray) -> ScaledImpedance:
+    """``Z T/m = s + L E/(j theta U)`` for the scaled wall ``kappa``, ``q`` (see the module docstring;
+    arrays of walls: one per point)."""
     L = _wall(terms, kappa, q)
     U = L * terms.P + 1.0
     Y = L * terms.E * U.conj()
@@ -133,6 +134,16 @@ def scaled_impedance(terms: LoopTerms, kappa: float, q: float) -> ScaledImpedanc
     u_spread = (U.mag_re**2 + (terms.theta * U.mag_im) ** 2) / size
     scale = terms.c + Y.mag_im / size + np.abs(wall_re) * u_spread
     return ScaledImpedance(terms.c + wall_re, terms.theta - Y.re / (terms.theta * size), scale)
+
+
+def seed_impedance(terms: LoopTerms, kappa: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(Re, Im)`` of the seed's ``Z_zw T/m = s (1 + G_md K_d) = s U + L E/(j theta)`` from the same terms
+    (``G_md = hold (P + E/(j theta s))``, ``K_d = L/hold``): :func:`seed_z_zw` without its own evaluation."""
+    L = _wall(terms, kappa, q)
+    U = L * terms.P + 1.0
+    sU = ThetaComplex.exact(terms.theta, terms.c, 1.0) * U
+    LE = L * terms.E
+    return sU.re + LE.im, terms.theta * sU.im - LE.re / terms.theta
 
 
 def impedance_quadratic(terms: LoopTerms, base: ThetaComplex | float, slope: ThetaComplex | float

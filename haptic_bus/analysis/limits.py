@@ -403,13 +403,9 @@ class LimitsPlan:
         if not values:
             return []
         terms = loop_terms(self.loop, np.array(thetas))
-        out = []
-        for k, (end, x) in enumerate(zip(self.ends, values)):
-            kappa, q = end.family.walls(x)
-            z = scaled_impedance(terms.take(np.array([k])), kappa, q)
-            size = math.hypot(terms.c, thetas[k])
-            out.append(bool(math.hypot(float(z.re[0]), float(z.im[0])) < _POLE_ON_CIRCLE * size))
-        return out
+        walls = np.array([end.family.walls(x) for end, x in zip(self.ends, values)])
+        z = scaled_impedance(terms, walls[:, 0], walls[:, 1])  # one wall per end, element-wise
+        return [bool(v) for v in np.hypot(z.re, z.im) < _POLE_ON_CIRCLE * np.hypot(terms.c, terms.theta)]
 
 
 def _quadratic_of(family: _Family) -> Callable[[LoopTerms], np.ndarray]:

@@ -269,6 +269,11 @@ def _poles(loop: WallLoop) -> _Poles:
     return _Poles(w, bound, stability)
 
 
+def forget_walls() -> None:
+    """Empty the per-wall cache of poles (a benchmark times a wall not judged before)."""
+    _poles.cache_clear()
+
+
 def shifted_poles(loop: WallLoop) -> np.ndarray:
     """Closed-loop poles minus one, ``w = z - 1`` (complex), largest ``|z|`` first; accurate near ``z = 1``."""
     return _poles(loop).w

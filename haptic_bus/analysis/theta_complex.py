@@ -43,15 +43,15 @@ class ThetaComplex:
         """From an ordinary complex array (accurate where ``theta`` is not small)."""
         return cls.exact(theta, value.real, value.imag / theta)
 
-    def __add__(self, other: ThetaComplex | float) -> ThetaComplex:
+    def __add__(self, other: ThetaComplex | float | np.ndarray) -> ThetaComplex:
         if isinstance(other, ThetaComplex):
             return ThetaComplex(self.theta, self.re + other.re, self.im + other.im,
                                 self.mag_re + other.mag_re, self.mag_im + other.mag_im)
-        return ThetaComplex(self.theta, self.re + other, self.im, self.mag_re + abs(other), self.mag_im)
+        return ThetaComplex(self.theta, self.re + other, self.im, self.mag_re + np.abs(other), self.mag_im)
 
     __radd__ = __add__
 
-    def __mul__(self, other: ThetaComplex | float) -> ThetaComplex:
+    def __mul__(self, other: ThetaComplex | float | np.ndarray) -> ThetaComplex:
         if isinstance(other, ThetaComplex):
             t2 = self.theta * self.theta
             return ThetaComplex(
@@ -61,7 +61,8 @@ class ThetaComplex:
                 self.mag_re * other.mag_re + t2 * self.mag_im * other.mag_im,
                 self.mag_re * other.mag_im + self.mag_im * other.mag_re,
             )
-        return ThetaComplex(self.theta, self.re * other, self.im * other, self.mag_re * abs(other), self.mag_im * abs(other))
+        return ThetaComplex(self.theta, self.re * other, self.im * other, self.mag_re * np.abs(other),
+                            self.mag_im * np.abs(other))
 
     __rmul__ = __mul__
 

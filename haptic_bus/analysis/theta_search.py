@@ -35,7 +35,7 @@ _FAN = np.array([-16.0, -8.0, -4.0, -2.0, -1.0, -0.5, -0.25, 0.0, 0.25, 0.5, 1.0
 _LOG_POINTS = 16
 _LIGHT_DAMPING = 0.2  # poles within this of the unit circle get a fan
 _MAX_POLE_FANS = 64
-_ZOOM_POINTS = 41
+_ZOOM_POINTS = 25
 _ZOOM_ROUNDS = 2
 
 

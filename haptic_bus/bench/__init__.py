@@ -23,8 +23,10 @@ min-max over at least 5 repeats (:mod:`~haptic_bus.bench.timing`):
 8. :mod:`~haptic_bus.bench.soak` -- cycles in virtual time (``--soak [CYCLES]``: 10^7; otherwise
    10^5 quick, 10^6 full): the integer position sum exact, memory flat.
 
-Above the sections, issue 14's "Done when" (:mod:`~haptic_bus.bench.targets`): one row per line
-with the measured figure, its spread, the target and PASS/FAIL, all from this one run.
+Above the sections, issues 14 and 19's "Done when" (:mod:`~haptic_bus.bench.targets`): one row per
+line with the measured figure, its spread, the target and PASS/FAIL, all from this one run (issue
+19: the gate's verdict, the full check and the out-of-band exposure side by side against one numpy
+``T_fund``, ``check --delay 1000``, ``check --json``).
 
 Writes ``DIR/bench.json`` (every figure, the machine, versions, date), ``DIR/bench.md`` (the
 tables, also printed) and PNG plots.  ``--quick`` (what CI runs) keeps to a few minutes on a
@@ -51,7 +53,7 @@ from haptic_bus.bench.timing import machine
 SECTIONS = ("passivity", "plant", "scene", "loop", "bus", "realtime", "startup", "soak")
 # progress ticks each section makes (quick, full): for the bar's total
 _TICKS = {"passivity": (7, 17), "plant": (15, 17), "scene": (5, 5), "loop": (6, 6), "bus": (2, 2), "realtime": (6, 6),
-          "startup": (3, 3), "soak": (10, 10)}
+          "startup": (4, 4), "soak": (10, 10)}
 
 
 class Progress:
@@ -168,9 +170,10 @@ def run_bench(out_dir: str | Path, quick: bool = False, progress: bool = False,
             bar.close(erase="interrupted" in result)
     result["total_seconds"] = time.perf_counter() - started
     from haptic_bus.bench.report import markdown, plots
-    from haptic_bus.bench.targets import done_when
+    from haptic_bus.bench.targets import done_when, issue_19
 
     result["done_when"] = done_when(result["sections"])
+    result["done_when_19"] = issue_19(result["sections"])
 
     (out / "bench.json").write_text(json.dumps(result, indent=1, default=_json_default, allow_nan=True) + "\n")
     (out / "bench.md").write_text(markdown(result))

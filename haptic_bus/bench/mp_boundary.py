@@ -9,7 +9,8 @@ piece by piece over the period (force switch at ``delta T``, window start at ``T
 ``Z = 1/T_fund``, ``T_fund = G11 [1 - (H/T) e^{-j omega D T} K_d M G11 / (1 + G_md K_d)]`` at
 ``z = e^{j theta}``, ``s = j theta/T``.  Stability: the eigenvalues (``mp.eig``) of the closed-loop
 matrix on ``[plant states, x_{k-1}, u_{k-1}, ..]``; for a delay over 60 samples the Schur-Cohn
-recursion on its characteristic polynomial (:func:`schur_cohn_stable`, in the working precision).  The largest passive ``K`` at a given ``B``
+recursion on its characteristic polynomial (:func:`schur_cohn_stable`, in the working precision).
+The largest passive ``K`` at a given ``B``
 (or ``B`` at a given ``K``) is where ``min_theta Re Z`` touches zero:
 
 1. scan ``Re Z`` at the double-precision estimate on 240 uniform points of ``(0, pi]`` (4 per turn
