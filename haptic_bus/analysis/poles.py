@@ -56,6 +56,8 @@ MP_DIGITS = 50
 MARGINAL = 1e-40  # relative to |w|: a pole this close to the circle in 50 digits is on it
 
 STABLE, MARGINAL_STATE, UNSTABLE = "stable", "marginal", "unstable"
+_JUDGED_MAX = 4096
+_judged: dict[WallLoop, bool] = {}  # loops whose poles were found: stable or not (what stable_all asks first)
 
 
 def radius_excess(w: np.ndarray) -> np.ndarray:
@@ -266,12 +268,16 @@ def _poles(loop: WallLoop) -> _Poles:
         stability = Stability(state, top, extended=True)
     w.setflags(write=False)
     bound.setflags(write=False)
+    if len(_judged) >= _JUDGED_MAX:
+        _judged.clear()
+    _judged[loop] = stability.stable
     return _Poles(w, bound, stability)
 
 
 def forget_walls() -> None:
     """Empty the per-wall cache of poles (a benchmark times a wall not judged before)."""
     _poles.cache_clear()
+    _judged.clear()
 
 
 def shifted_poles(loop: WallLoop) -> np.ndarray:
@@ -299,9 +305,11 @@ def stable_all(loops: list[WallLoop]) -> list[bool]:
     eigenvalues as one batch per matrix size, a long delay's by the Schur-Cohn recursion
     (:func:`~haptic_bus.analysis.characteristic.schur_cohn`), each where it is clearly inside or
     outside; else by :func:`stability`."""
-    out: list[bool | None] = [None] * len(loops)
+    out: list[bool | None] = [_judged.get(loop) for loop in loops]
     by_size: dict[int, list[tuple[int, np.ndarray]]] = {}
     for i, loop in enumerate(loops):
+        if out[i] is not None:
+            continue
         char, wall, integrator = _wall(loop)
         if not np.any(wall):
             continue
@@ -316,10 +324,11 @@ def stable_all(loops: list[WallLoop]) -> list[bool]:
         matrices = np.stack([matrix for _, matrix in batch])
         excess = radius_excess(np.linalg.eigvals(matrices))
         trust = _DENSE_TRUST * np.sqrt(np.maximum(1.0, np.max(np.abs(matrices), axis=(1, 2))))
-        decided = np.all(np.abs(excess) >= trust[:, None], axis=1)
-        for (i, _), clear, top in zip(batch, decided, np.max(excess, axis=1)):
-            if clear:
-                out[i] = bool(top < 0)
+        outside = np.any(excess >= trust[:, None], axis=1)  # one pole clearly outside decides
+        inside = np.all(excess <= -trust[:, None], axis=1)
+        for (i, _), unstable, stable in zip(batch, outside, inside):
+            if unstable or stable:
+                out[i] = bool(stable)
     return [is_stable(loop) if known is None else known for loop, known in zip(loops, out)]
 
 
