@@ -112,23 +112,35 @@ def alias_function(loop: WallLoop, theta: np.ndarray, circle: HalfAngle | None =
     the half angles of ``theta``, if already known)."""
     key = device_key(loop)
     theta = np.asarray(theta, dtype=float)
-    re, im = np.empty(theta.shape), np.empty(theta.shape)
-    mag_re, mag_im = np.empty(theta.shape), np.empty(theta.shape)
     small = theta < SERIES_BELOW
-    if small.any():
-        table, cancelled = _series(key)
-        values = np.vander(theta[small] ** 2, table.shape[0], increasing=True) @ table
-        re[small], im[small] = values[:, 0], values[:, 1]
-        mag_re[small] = np.maximum(values[:, 2], cancelled)
-        mag_im[small] = np.maximum(values[:, 3], cancelled / _RADII[0])
-    if not small.all():
-        big = theta[~small]
-        sampled, continuous = _alias_terms(key, big, None if circle is None else circle.take(~small))
-        value = sampled - continuous
-        re[~small], im[~small] = value.real, value.imag / big
-        # each part errs by ~eps times the terms that cancel; at z = -1 the sampled term is real
-        # and the imaginary part is the continuous term's own, exact to its ulps
-        size = np.maximum(np.abs(sampled), np.abs(continuous))
-        mag_re[~small] = np.maximum(np.abs(re[~small]), size)
-        mag_im[~small] = np.maximum(np.abs(im[~small]), np.where(big == np.pi, 0.0, size / big))
-    return ThetaComplex(theta, re, im, mag_re, mag_im)
+    if small.all():
+        return _series_part(key, theta)
+    if not small.any():
+        return _direct_part(key, theta, circle)
+    low, high = _series_part(key, theta[small]), _direct_part(key, theta[~small], None if circle is None else circle.take(~small))
+    parts = []
+    for a, b in ((low.re, high.re), (low.im, high.im), (low.mag_re, high.mag_re), (low.mag_im, high.mag_im)):
+        out = np.empty(theta.shape)
+        out[small], out[~small] = a, b
+        parts.append(out)
+    return ThetaComplex(theta, *parts)
+
+
+def _series_part(key: WallLoop, theta: np.ndarray) -> ThetaComplex:
+    """``g`` below :data:`SERIES_BELOW` from its Taylor series."""
+    table, cancelled = _series(key)
+    values = np.vander(theta * theta, table.shape[0], increasing=True) @ table
+    return ThetaComplex(theta, values[:, 0], values[:, 1], np.maximum(values[:, 2], cancelled),
+                        np.maximum(values[:, 3], cancelled / _RADII[0]))
+
+
+def _direct_part(key: WallLoop, theta: np.ndarray, circle: HalfAngle | None) -> ThetaComplex:
+    """``g`` from and above :data:`SERIES_BELOW` as the difference itself."""
+    sampled, continuous = _alias_terms(key, theta, circle)
+    value = sampled - continuous
+    re, im = value.real, value.imag / theta
+    # each part errs by ~eps times the terms that cancel; at z = -1 the sampled term is real
+    # and the imaginary part is the continuous term's own, exact to its ulps
+    size = np.maximum(np.abs(sampled), np.abs(continuous))
+    return ThetaComplex(theta, re, im, np.maximum(np.abs(re), size),
+                        np.maximum(np.abs(im), np.where(theta == np.pi, 0.0, size / theta)))

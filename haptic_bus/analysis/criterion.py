@@ -120,7 +120,7 @@ def impedance_group(loop: WallLoop, seed: bool = False) -> Group:
 
 def verdict_lane(data: np.ndarray) -> Lane:
     """The lane of the margin, from :func:`impedance_group`'s ``data`` on the grid."""
-    return Lane(data[0], "impedance", lambda part: part[0], lambda part: part[1], data[1])
+    return Lane(data[0], "impedance", lambda part: part[0], lambda part: part[1], data[1], rounds=1)
 
 
 def judge(loop: WallLoop, judged: Stability, minimum: LaneMinimum) -> Verdict:
@@ -161,7 +161,7 @@ def exact_verdict(loop: WallLoop) -> Verdict:
 
 def seed_lane(data: np.ndarray) -> Lane:
     """The lane of the seed's margin, from :func:`impedance_group`'s ``data`` (with ``seed``) on the grid."""
-    return Lane(data[2], "impedance", lambda part: part[2], lambda part: part[3], data[3])
+    return Lane(data[2], "impedance", lambda part: part[2], lambda part: part[3], data[3], rounds=1)
 
 
 def seed_judgement(loop: WallLoop, minimum: LaneMinimum) -> Verdict:

@@ -21,6 +21,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 
+def _filled(value: ArrayLike, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as a float array of ``shape`` (an array of that shape as it is, a scalar repeated)."""
+    if isinstance(value, np.ndarray) and value.shape == shape and value.dtype == float:
+        return value
+    return np.broadcast_to(np.asarray(value, dtype=float), shape)
+
+
 @dataclass(frozen=True)
 class ThetaComplex:
     """``re = Re X``, ``im = Im X / theta`` on a ``theta`` array (rad), with term magnitudes."""
@@ -34,8 +41,7 @@ class ThetaComplex:
     @classmethod
     def exact(cls, theta: np.ndarray, re: ArrayLike, im_over_theta: ArrayLike) -> ThetaComplex:
         """A value known to round-off in both parts (its magnitudes are its absolute values)."""
-        re = np.broadcast_to(np.asarray(re, dtype=float), theta.shape)
-        im = np.broadcast_to(np.asarray(im_over_theta, dtype=float), theta.shape)
+        re, im = _filled(re, theta.shape), _filled(im_over_theta, theta.shape)
         return cls(theta, re, im, np.abs(re), np.abs(im))
 
     @classmethod

@@ -70,13 +70,15 @@ class Lane:
     """One function of ``theta`` for :func:`refine_lanes`: its ``values`` on the shared grid,
     the ``group`` whose evaluation it reads, ``pick`` (that evaluation at its points -> its values)
     and, optionally, ``check`` (-> values that must stay >= 0: the least over every point it
-    evaluated is returned too)."""
+    evaluated is returned too); ``rounds`` of zoom before the parabola (2: an envelope to 1e-12
+    in ``x``; 1: a minimum's value to about 1e-10 relative, what a margin needs)."""
 
     values: np.ndarray
     group: str
     pick: Callable[[np.ndarray], np.ndarray]
     check: Callable[[np.ndarray], np.ndarray] | None = None
     grid_check: np.ndarray | None = None
+    rounds: int = 2
 
 
 @dataclass(frozen=True)
@@ -123,19 +125,21 @@ def refine_lanes(grid: np.ndarray, lanes: list[Lane], groups: dict[str, Group], 
     lo = np.concatenate([lows[k] for k in order])
     hi = np.concatenate([highs[k] for k in order])
     owner = np.concatenate([owners[k] for k in order])
-    rows_of = {k: int(owners[k].size) for k in order}
-    shared_rows = sum(rows_of[k] for k in order if groups[lanes[k].group].shared)
+    rounds = np.array([lanes[k].rounds for k in owner])
 
-    def evaluate(points: np.ndarray) -> np.ndarray:
-        """Values at ``points`` (one row per bracket, in ``order``): ``shared`` once, each group once."""
+    def evaluate(points: np.ndarray, active: np.ndarray) -> np.ndarray:
+        """Values at the ``active`` rows of ``points`` (one row per bracket, in ``order``; inf elsewhere):
+        ``shared`` once, each group once."""
         width = points.shape[1]
-        flat = points.ravel()
-        out = np.empty(flat.size)
+        rows_of = np.bincount(owner[active], minlength=len(lanes))
+        flat = points[active].ravel()
+        values = np.empty(flat.size)
+        shared_rows = sum(int(rows_of[k]) for k in order if groups[lanes[k].group].shared)
         terms = shared(flat[: shared_rows * width]) if shared_rows else None
         start = 0
         for name in names:
             ks = [k for k in order if lanes[k].group == name and rows_of[k]]
-            size = sum(rows_of[k] for k in ks) * width
+            size = sum(int(rows_of[k]) for k in ks) * width
             if not size:
                 continue
             if groups[name].shared:
@@ -145,29 +149,33 @@ def refine_lanes(grid: np.ndarray, lanes: list[Lane], groups: dict[str, Group], 
                 data = groups[name].evaluate(flat[start:start + size])
             offset = 0
             for k in ks:
-                part = data[..., offset:offset + rows_of[k] * width]
+                part = data[..., offset:offset + int(rows_of[k]) * width]
                 lane = lanes[k]
-                out[start + offset:start + offset + part.shape[-1]] = lane.pick(part)
+                values[start + offset:start + offset + part.shape[-1]] = lane.pick(part)
                 if lane.check is not None:
                     best[k][2] = min(best[k][2], float(np.min(lane.check(part))))
                 offset += part.shape[-1]
             start += size
-        return out.reshape(points.shape)
+        out = np.full(points.shape, np.inf)
+        out[active] = values.reshape(-1, width)
+        return out
 
     fractions = np.linspace(0.0, 1.0, _ZOOM_POINTS)
     rows = np.arange(lo.size)
-    for _ in range(_ZOOM_ROUNDS):
+    middle = f_lo = f_mid = f_hi = np.zeros(lo.size)
+    for r in range(int(np.max(rounds))):
+        active = rounds > r
         points = lo[:, None] + (hi - lo)[:, None] * fractions
-        f = evaluate(points)
+        f = evaluate(points, active)
         j = np.clip(np.argmin(f, axis=1), 1, _ZOOM_POINTS - 2)
-        lo, hi = points[rows, j - 1], points[rows, j + 1]
-        middle, f_lo, f_mid, f_hi = points[rows, j], f[rows, j - 1], f[rows, j], f[rows, j + 1]
+        new = (points[rows, j - 1], points[rows, j + 1], points[rows, j], f[rows, j - 1], f[rows, j], f[rows, j + 1])
+        lo, hi, middle, f_lo, f_mid, f_hi = (np.where(active, a, b) for a, b in zip(new, (lo, hi, middle, f_lo, f_mid, f_hi)))
     # the parabola through the best point and its equally spaced neighbours
     curvature = f_lo - 2 * f_mid + f_hi
     safe = np.where(curvature > 0, curvature, 1.0)
     step = np.where(curvature > 0, 0.25 * (hi - lo) * (f_lo - f_hi) / safe, 0.0)
     vertex = np.clip(middle + step, lo, hi)
-    at_vertex = evaluate(vertex[:, None])[:, 0]
+    at_vertex = evaluate(vertex[:, None], np.ones(lo.size, dtype=bool))[:, 0]
     thetas = np.concatenate([middle, vertex])
     refined = np.concatenate([f_mid, at_vertex])
     owners_twice = np.concatenate([owner, owner])
