@@ -129,7 +129,10 @@ def alias_function(loop: WallLoop, theta: np.ndarray, circle: HalfAngle | None =
 def _series_part(key: WallLoop, theta: np.ndarray) -> ThetaComplex:
     """``g`` below :data:`SERIES_BELOW` from its Taylor series."""
     table, cancelled = _series(key)
-    values = np.vander(theta * theta, table.shape[0], increasing=True) @ table
+    t2 = (theta * theta)[:, None]
+    values = np.broadcast_to(table[-1], (theta.size, table.shape[1]))
+    for row in table[-2::-1]:  # Horner, elementwise: no BLAS call (a threaded one spins on a busy machine)
+        values = values * t2 + row
     return ThetaComplex(theta, values[:, 0], values[:, 1], np.maximum(values[:, 2], cancelled),
                         np.maximum(values[:, 3], cancelled / _RADII[0]))
 
