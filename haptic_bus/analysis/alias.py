@@ -129,10 +129,8 @@ def alias_function(loop: WallLoop, theta: np.ndarray, circle: HalfAngle | None =
 def _series_part(key: WallLoop, theta: np.ndarray) -> ThetaComplex:
     """``g`` below :data:`SERIES_BELOW` from its Taylor series."""
     table, cancelled = _series(key)
-    t2 = (theta * theta)[:, None]
-    values = np.broadcast_to(table[-1], (theta.size, table.shape[1]))
-    for row in table[-2::-1]:  # Horner, elementwise: no BLAS call (a threaded one spins on a busy machine)
-        values = values * t2 + row
+    # powers of theta^2 times the table; einsum's own loop, no BLAS call (a threaded one spins on a busy machine)
+    values = np.einsum("ij,jk->ik", np.vander(theta * theta, table.shape[0], increasing=True), table)
     return ThetaComplex(theta, values[:, 0], values[:, 1], np.maximum(values[:, 2], cancelled),
                         np.maximum(values[:, 3], cancelled / _RADII[0]))
 

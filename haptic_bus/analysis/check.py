@@ -30,11 +30,11 @@ from haptic_bus.analysis.criterion import (
     seed_lane,
     verdict_lane,
 )
-from haptic_bus.analysis.frequency import loop_terms
+from haptic_bus.analysis.frequency import grid_terms, loop_terms
 from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, LimitsPlan, PassiveSet
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
 from haptic_bus.analysis.poles import closed_loop_poles, stability
-from haptic_bus.analysis.theta_search import refine_lanes, theta_grid
+from haptic_bus.analysis.theta_search import refine_lanes
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 
 MARGIN_UNITS = "N s/m (least Re of the impedance 1/T_fund the operator feels; >= 0 iff passive)"
@@ -161,8 +161,8 @@ class CheckReport:
 
 def _verdicts(loop: WallLoop) -> tuple[Verdict, Verdict, PassiveSet, PassiveSet]:
     """(exact verdict, seed's verdict, passive K, passive B): one grid, one joint zoom."""
-    grid = theta_grid(loop, closed_loop_poles(loop))
-    terms = loop_terms(loop, grid)
+    terms = grid_terms(loop, closed_loop_poles(loop))
+    grid = terms.theta
     group = impedance_group(loop, seed=True)
     plan = LimitsPlan(loop, ("K", "B"), terms)
     data = group.evaluate(terms)

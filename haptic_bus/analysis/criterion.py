@@ -46,10 +46,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptic_bus.analysis.frequency import LoopTerms, loop_terms, scaled_impedance, seed_impedance
+from haptic_bus.analysis.frequency import LoopTerms, grid_terms, loop_terms, scaled_impedance, seed_impedance
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.poles import MARGINAL_STATE, Stability, closed_loop_poles, stability
-from haptic_bus.analysis.theta_search import Group, Lane, LaneMinimum, refine_lanes, theta_grid
+from haptic_bus.analysis.theta_search import Group, Lane, LaneMinimum, refine_lanes
 
 SIGN_TOLERANCE = 64 * np.finfo(float).eps  # ~1.4e-14, relative to the magnitude of the terms that cancel
 SEED_TOLERANCE = 1e-14  # relative to |Z_zw|, as the seed's test has always been judged
@@ -152,9 +152,9 @@ def exact_verdict(loop: WallLoop) -> Verdict:
     """The exact criterion (stability and ``Re T_fund >= 0``): what the passivity gate uses."""
     if loop.lossless:
         return lossless_verdict()
-    grid = theta_grid(loop, closed_loop_poles(loop))
+    terms = grid_terms(loop, closed_loop_poles(loop))
     group = impedance_group(loop)
-    [minimum] = refine_lanes(grid, [verdict_lane(group.evaluate(loop_terms(loop, grid)))], {"impedance": group},
+    [minimum] = refine_lanes(terms.theta, [verdict_lane(group.evaluate(terms))], {"impedance": group},
                              lambda theta: loop_terms(loop, theta))
     return judge(loop, stability(loop), minimum)
 
@@ -176,8 +176,8 @@ def seed_judgement(loop: WallLoop, minimum: LaneMinimum) -> Verdict:
 
 def seed_verdict(loop: WallLoop) -> Verdict:
     """The seed's frequency test ``Re T_zw >= 0`` alone (no stability test, as in the seed)."""
-    grid = theta_grid(loop, closed_loop_poles(loop))
+    terms = grid_terms(loop, closed_loop_poles(loop))
     group = impedance_group(loop, seed=True)
-    [minimum] = refine_lanes(grid, [seed_lane(group.evaluate(loop_terms(loop, grid)))], {"impedance": group},
+    [minimum] = refine_lanes(terms.theta, [seed_lane(group.evaluate(terms))], {"impedance": group},
                              lambda theta: loop_terms(loop, theta))
     return seed_judgement(loop, minimum)

@@ -35,6 +35,7 @@ each ``theta`` (:func:`impedance_quadratic`): the passivity limits come from its
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -45,7 +46,9 @@ from haptic_bus.analysis.alias import alias_function
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.sampled_loop import period_map, pulse_transfer, window_fraction
 from haptic_bus.analysis.theta_complex import ThetaComplex
+from haptic_bus.analysis.theta_search import grid_parts
 from haptic_bus.analysis.trig import cospi, half_angle, sincpi, sinpi, unit_point
+from haptic_bus.analysis.velocity import VelocityModel
 
 
 @dataclass(frozen=True)
@@ -63,6 +66,20 @@ class LoopTerms:
     P: ThetaComplex
     E: ThetaComplex
 
+    def merged(self, other: LoopTerms) -> LoopTerms:
+        """These terms and ``other``'s (same loop) on the sorted union of their ``theta`` (repeats once)."""
+        def join(a: ThetaComplex, b: ThetaComplex) -> ThetaComplex:
+            return ThetaComplex(theta, *(np.concatenate([x, y]) for x, y in
+                                         ((a.re, b.re), (a.im, b.im), (a.mag_re, b.mag_re), (a.mag_im, b.mag_im))))
+
+        theta = np.concatenate([self.theta, other.theta])
+        whole = LoopTerms(theta, self.c, self.scale, join(self.hold, other.hold), join(self.P, other.P),
+                          join(self.E, other.E))
+        order = np.argsort(theta, kind="stable")
+        ordered = theta[order]
+        first = np.concatenate([[True], ordered[1:] != ordered[:-1]])
+        return whole.take(order[first])
+
     def take(self, where: np.ndarray | slice) -> LoopTerms:
         """These terms at ``theta[where]`` only (``where``: a boolean mask, indices or a slice)."""
 
@@ -70,6 +87,23 @@ class LoopTerms:
             return ThetaComplex(x.theta[where], x.re[where], x.im[where], x.mag_re[where], x.mag_im[where])
 
         return LoopTerms(self.theta[where], self.c, self.scale, part(self.hold), part(self.P), part(self.E))
+
+
+def grid_terms(loop: WallLoop, poles: np.ndarray) -> LoopTerms:
+    """:func:`loop_terms` on :func:`~haptic_bus.analysis.theta_search.theta_grid`: the grid's
+    wall-independent part evaluated once per device (cached: a gate judges many walls on one
+    device), the fans at ``poles``' angles for this wall."""
+    base, fans = grid_parts(loop, poles)
+    terms = _device_terms(loop.m, loop.b, loop.T, loop.delay, loop.velocity, base.size)
+    return terms.merged(loop_terms(loop, fans)) if fans.size else terms
+
+
+@functools.lru_cache(maxsize=256)
+def _device_terms(m: float, b: float, T: float, delay: float, velocity: VelocityModel, size: int) -> LoopTerms:
+    device = WallLoop(m, b, T, 0.0, 0.0, delay, velocity)
+    terms = loop_terms(device, grid_parts(device, np.empty(0))[0])
+    assert terms.theta.size == size
+    return terms
 
 
 def _rotation(theta: np.ndarray, delay: float) -> ThetaComplex:

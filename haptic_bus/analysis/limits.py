@@ -47,6 +47,7 @@ from haptic_bus.analysis.characteristic import characteristic, flip_value
 from haptic_bus.analysis.criterion import SIGN_TOLERANCE
 from haptic_bus.analysis.frequency import (
     LoopTerms,
+    grid_terms,
     impedance_quadratic,
     loop_terms,
     quadratic_coefficients,
@@ -426,8 +427,7 @@ def _scale_grid(loop: WallLoop) -> np.ndarray:
 def passive_sets(loop: WallLoop, which: tuple[str, ...], terms: LoopTerms | None = None) -> tuple[PassiveSet, ...]:
     """:func:`passive_set` of each family in ``which``, from one grid evaluation and one joint zoom."""
     if terms is None:
-        grid = _scale_grid(loop) if "scale" in which else theta_grid(loop, closed_loop_poles(loop))
-        terms = loop_terms(loop, grid)
+        terms = loop_terms(loop, _scale_grid(loop)) if "scale" in which else grid_terms(loop, closed_loop_poles(loop))
     plan = LimitsPlan(loop, which, terms)
     minima = refine_lanes(terms.theta, plan.lanes, plan.groups, lambda theta: loop_terms(loop, theta),
                           count=_ZOOM_COUNT)

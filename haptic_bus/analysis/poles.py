@@ -202,20 +202,22 @@ def _long_delay_zeros(char: Characteristic, wall: np.ndarray, integrator: bool, 
 
 def _zeros(loop: WallLoop) -> tuple[np.ndarray, np.ndarray]:
     """Every zero ``w`` of ``f`` and its first-order error bound."""
-    char, wall, integrator = _wall(loop)
-    a = char.denominator(integrator)
-    if not np.any(wall):  # no wall: the plant's own poles and a delay line of zeros (z = 0)
+    if loop.K == 0.0 and loop.B == 0.0:  # no wall: the plant's own poles and a delay line of zeros (z = 0)
+        char, _, integrator = _wall(loop)
+        a = char.denominator(integrator)
         w = np.concatenate([np.roots(a).astype(complex) if a.size > 1 else np.empty(0), -np.ones(char.lag)])
         return w, np.zeros(w.size)
-    if char.degree(integrator) <= DENSE_LIMIT:
+    if characteristic(loop).degree(loop.K > 0) <= DENSE_LIMIT:
         matrix = loop_matrix(loop)
         w = np.linalg.eigvals(matrix).astype(complex)
         # LAPACK's eigenvalues err by ~eps |M - I|, ~sqrt(eps |M - I|) at a double pole: far from the circle they decide
         near = np.abs(radius_excess(w)) < _DENSE_TRUST * math.sqrt(max(1.0, float(np.max(np.abs(matrix)))))
         if not near.any():
             return w, np.zeros(w.size)
+        char, wall, integrator = _wall(loop)
         w[near], _ = _newton(char, wall, integrator, w[near], _NEWTON_STEPS)
     else:
+        char, wall, integrator = _wall(loop)
         near = np.ones(char.degree(integrator), dtype=bool)
         w = _long_delay_zeros(char, wall, integrator, loop.q)
     bound = np.zeros(w.size)

@@ -19,6 +19,7 @@ everything a check asks for.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -46,17 +47,32 @@ def uniform_points(loop: WallLoop) -> int:
 
 def theta_grid(loop: WallLoop, poles: np.ndarray) -> np.ndarray:
     """The search grid on [1e-9, pi] (rad), sorted, ``pi`` included (see the module docstring)."""
-    n = uniform_points(loop)
-    pieces = [np.linspace(math.pi / n, math.pi, n), np.geomspace(LOWEST_THETA, math.pi / n, _LOG_POINTS)]
-    if loop.velocity.kind == "lowpass":
-        pieces.append(loop.T / loop.velocity.time * np.exp2(np.arange(-4.0, 5.0)))
+    base, fans = grid_parts(loop, poles)
+    return sorted_unique(np.concatenate([base, fans])) if fans.size else base
+
+
+def grid_parts(loop: WallLoop, poles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the wall-independent part of :func:`theta_grid`, sorted and shared: uniform points, the log
+    fan, the low-pass corner's fan; the fans at ``poles``' angles, unsorted)."""
+    base = _base_grid(uniform_points(loop), loop.T / loop.velocity.time if loop.velocity.kind == "lowpass" else 0.0)
     light = poles[np.abs(1.0 - np.abs(poles)) < _LIGHT_DAMPING][:_MAX_POLE_FANS]
-    for pole in light:
-        width = max(abs(1.0 - abs(pole)), 1e-9)
-        pieces.append(abs(np.angle(pole)) + width * _FAN)
+    if not light.size:
+        return base, np.empty(0)
+    width = np.maximum(np.abs(1.0 - np.abs(light)), 1e-9)
+    fans = (np.abs(np.angle(light))[:, None] + width[:, None] * _FAN).ravel()
+    return base, fans[(fans >= LOWEST_THETA) & (fans <= math.pi)]
+
+
+@functools.lru_cache(maxsize=256)
+def _base_grid(n: int, corner: float) -> np.ndarray:
+    """The wall-independent part of the grid: ``n`` uniform points, the log fan, the low-pass corner's fan."""
+    pieces = [np.linspace(math.pi / n, math.pi, n), np.geomspace(LOWEST_THETA, math.pi / n, _LOG_POINTS)]
+    if corner:
+        pieces.append(corner * np.exp2(np.arange(-4.0, 5.0)))
     grid = np.concatenate(pieces)
-    grid = grid[(grid >= LOWEST_THETA) & (grid <= math.pi)]
-    return sorted_unique(np.append(grid, math.pi))
+    grid = sorted_unique(np.append(grid[(grid >= LOWEST_THETA) & (grid <= math.pi)], math.pi))
+    grid.setflags(write=False)
+    return grid
 
 
 def sorted_unique(values: np.ndarray) -> np.ndarray:
