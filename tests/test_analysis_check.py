@@ -13,7 +13,7 @@ OLD_KEYS = {"passive", "criterion", "margin", "margin_units", "critical_theta", 
 
 
 def test_the_report_keeps_every_old_key_and_adds_the_new_ones() -> None:
-    report = check_passivity(0.5, 0.1, 1e-3, 20.0, 0.05, delay=1.25, velocity="lowpass:0.0005")
+    report = check_passivity(0.5, 0.1, 1e-3, 20.0, 0.05, delay=1.25, velocity="lowpass:0.0005", out_of_band=True)
     data = json.loads(json.dumps(report.to_dict()))
     assert set(data) >= OLD_KEYS
     assert data["parameters"]["delay"] == 1.25 and data["parameters"]["velocity"] == "lowpass:0.0005"
@@ -27,17 +27,26 @@ def test_the_report_keeps_every_old_key_and_adds_the_new_ones() -> None:
 def test_passive_intervals_that_do_not_start_at_zero_are_reported_and_printed() -> None:
     report = check_loop(WallLoop(0.5, 0.1, 1e-3, 100.0, 0.03, 1))
     low, high = report.damping_set.intervals[0]
-    assert 0 < low < high == report.max_damping
+    assert 0 < low < high == report.max_damping and report.damping_set.ends() == ((True, True),)
     text = format_check(report)
     assert f"passive B at this K: [{low:.9g}, {high:.9g}] N s/m" in text
     assert "velocity=point" in text and "delay=1 samples" in text and "out of band" in text
 
 
 def test_an_unstable_loop_has_no_out_of_band_figure_and_says_so() -> None:
-    report = check_passivity(0.5, 0.1, 1e-3, 1e7, 0.0)
+    report = check_passivity(0.5, 0.1, 1e-3, 1e7, 0.0, out_of_band=True)
     assert not report.stable and report.out_of_band is None and report.outcome == "unstable"
     assert report.to_dict()["out_of_band"] is None
-    assert "not applicable, the loop is unstable" in format_check(report)
+    assert "not applicable, the loop is not stable" in format_check(report)
+
+
+def test_the_library_check_computes_the_exposure_only_when_asked() -> None:
+    """``check_passivity`` (the API) leaves the out-of-band search out unless asked; ``check_loop``
+    (what ``haptic-bus check`` runs) asks by default."""
+    quiet = check_passivity(0.5, 0.1, 1e-3, 200.0, 100.0)
+    assert quiet.out_of_band is None and not quiet.out_of_band_asked
+    assert "out of band (above Nyquist): not asked" in format_check(quiet)
+    assert check_loop(WallLoop(0.5, 0.1, 1e-3, 200.0, 100.0)).out_of_band is not None
 
 
 def test_eq23_applies_only_to_the_seeds_own_loop() -> None:

@@ -144,7 +144,7 @@ def test_refused_upload_on_the_api_keeps_the_running_wall() -> None:
         controller = controller_for(profile, drive)
         controller.run(10)
         before = controller.scene
-        with pytest.raises(GateRefusal, match=r"passive K at this B: \[0, 1.8e\+06\] N/m"):
+        with pytest.raises(GateRefusal, match=r"passive K at this B: \[0, 1.8e\+06\) N/m"):
             controller.set_wall("wall", 2.0e6, 100.0)
         controller.run(10)
         assert controller.scene is before and controller.applied_scenes == 0

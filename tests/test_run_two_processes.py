@@ -45,7 +45,7 @@ def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast:
         assert answer is not None and answer.startswith("accepted"), run.stderr.read() if run.poll() is not None else answer
         with pytest.raises(UploadRefused) as refused:
             upload_walls(bus, CONTROLLER_NODE, {0: (2.0e6, 100.0)})
-        assert refused.value.abort_code == 0x06090030 and "passive K at this B: [0, 1.8e+06] N/m" in refused.value.reason
+        assert refused.value.abort_code == 0x06090030 and "passive K at this B: [0, 1.8e+06) N/m" in refused.value.reason
         assert upload_walls(bus, CONTROLLER_NODE, {0: (300.0, 150.0)}).startswith("accepted")
         assert run.poll() is None, "the run must go on through the uploads"
     finally:

@@ -31,7 +31,7 @@ import numpy as np
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.sampled_loop import measurement_response, period_map, pulse_transfer
 from haptic_bus.analysis.theta_complex import ThetaComplex
-from haptic_bus.analysis.trig import cospi, sinpi, unit_point
+from haptic_bus.analysis.trig import HalfAngle, cospi, sinpi, unit_point
 
 SERIES_BELOW = 0.5  # rad: below, g from its Taylor series
 _CIRCLE_POINTS = 64
@@ -40,6 +40,7 @@ _RADII = (1.0, 1.5, 2.0, 2.5)
 _POLE_CLEARANCE = 0.25
 
 
+@functools.lru_cache(maxsize=4096)
 def device_key(loop: WallLoop) -> WallLoop:
     """The part of ``loop`` that ``g`` depends on: device, velocity model and ``delta`` (no wall, no ``d``)."""
     return WallLoop(loop.m, loop.b, loop.T, 0.0, 0.0, loop.fractional_delay, loop.velocity)
@@ -51,17 +52,24 @@ def alias_direct(key: WallLoop, theta: np.ndarray) -> np.ndarray:
     return sampled - continuous
 
 
-def _alias_terms(key: WallLoop, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The two terms of :func:`alias_direct`, ``G(z)/(1 - z^{-1})`` and ``F(theta)``."""
-    z, z_minus_1 = unit_point(theta)
+def _alias_terms(key: WallLoop, theta: np.ndarray, circle: HalfAngle | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The two terms of :func:`alias_direct`, ``G(z)/(1 - z^{-1})`` and ``F(theta)`` (``circle``: the
+    half angles of real ``theta``, if already known)."""
+    z, z_minus_1 = unit_point(theta) if circle is None else (circle.z, circle.z_minus_1)
     sampled = pulse_transfer(period_map(key), z, z_minus_1) * z / z_minus_1
+    delta = key.fractional_delay
+    shift: np.ndarray | float
     if np.iscomplexobj(theta):
-        shift = np.exp(-1j * theta * key.fractional_delay)
-    else:
-        x = theta * (key.fractional_delay / np.pi)
+        shift = np.exp(-1j * theta * delta)
+    elif delta:
+        x = theta * (delta / np.pi)
         shift = cospi(x) - 1j * sinpi(x)
-    continuous = measurement_response(key, theta) * shift / (1j * theta * (key.c + 1j * theta))
-    return sampled, continuous
+    else:
+        shift = 1.0
+    continuous = 1.0 / (1j * theta * (key.c + 1j * theta))
+    if key.velocity.kind != "point":
+        continuous = continuous * measurement_response(key, theta)
+    return sampled, continuous * shift
 
 
 def _circle_radius(key: WallLoop) -> float:
@@ -87,29 +95,53 @@ def taylor_coefficients(key: WallLoop) -> tuple[np.ndarray, float]:
     return gamma, 2.0 * float(np.max(np.maximum(np.abs(sampled), np.abs(continuous))))
 
 
-def alias_function(loop: WallLoop, theta: np.ndarray) -> ThetaComplex:
-    """``g(theta)`` on real ``theta >= 0`` (rad) as ``(Re g, Im g/theta)``, scaled units."""
+@functools.lru_cache(maxsize=256)
+def _series(key: WallLoop) -> tuple[np.ndarray, float]:
+    """Columns ``Re g``, ``Im g/theta`` and their magnitudes as polynomials in ``theta^2`` (powers
+    ascending, ``(16, 4)``), and the cancelled magnitude of :func:`taylor_coefficients`."""
+    gamma, cancelled = taylor_coefficients(key)
+    signs = (-1.0) ** np.arange(_SERIES_TERMS // 2)
+    even, odd = gamma[0::2] * signs, gamma[1::2] * signs
+    table = np.stack([even, odd, np.abs(even), np.abs(odd)], axis=1)
+    table.setflags(write=False)
+    return table, cancelled
+
+
+def alias_function(loop: WallLoop, theta: np.ndarray, circle: HalfAngle | None = None) -> ThetaComplex:
+    """``g(theta)`` on real ``theta >= 0`` (rad) as ``(Re g, Im g/theta)``, scaled units (``circle``:
+    the half angles of ``theta``, if already known)."""
     key = device_key(loop)
     theta = np.asarray(theta, dtype=float)
-    re, im = np.empty(theta.shape), np.empty(theta.shape)
-    mag_re, mag_im = np.empty(theta.shape), np.empty(theta.shape)
     small = theta < SERIES_BELOW
-    if small.any():
-        gamma, cancelled = taylor_coefficients(key)
-        signs = (-1.0) ** np.arange(_SERIES_TERMS // 2)
-        even, odd = (gamma[0::2] * signs)[::-1], (gamma[1::2] * signs)[::-1]
-        t2 = theta[small] ** 2
-        re[small], im[small] = np.polyval(even, t2), np.polyval(odd, t2)
-        mag_re[small] = np.maximum(np.polyval(np.abs(even), t2), cancelled)
-        mag_im[small] = np.maximum(np.polyval(np.abs(odd), t2), cancelled / _RADII[0])
-    if not small.all():
-        big = theta[~small]
-        sampled, continuous = _alias_terms(key, big)
-        value = sampled - continuous
-        re[~small], im[~small] = value.real, value.imag / big
-        # each part errs by ~eps times the terms that cancel; at z = -1 the sampled term is real
-        # and the imaginary part is the continuous term's own, exact to its ulps
-        size = np.maximum(np.abs(sampled), np.abs(continuous))
-        mag_re[~small] = np.maximum(np.abs(re[~small]), size)
-        mag_im[~small] = np.maximum(np.abs(im[~small]), np.where(big == np.pi, 0.0, size / big))
-    return ThetaComplex(theta, re, im, mag_re, mag_im)
+    if small.all():
+        return _series_part(key, theta)
+    if not small.any():
+        return _direct_part(key, theta, circle)
+    low, high = _series_part(key, theta[small]), _direct_part(key, theta[~small], None if circle is None else circle.take(~small))
+    parts = []
+    for a, b in ((low.re, high.re), (low.im, high.im), (low.mag_re, high.mag_re), (low.mag_im, high.mag_im)):
+        out = np.empty(theta.shape)
+        out[small], out[~small] = a, b
+        parts.append(out)
+    return ThetaComplex(theta, *parts)
+
+
+def _series_part(key: WallLoop, theta: np.ndarray) -> ThetaComplex:
+    """``g`` below :data:`SERIES_BELOW` from its Taylor series."""
+    table, cancelled = _series(key)
+    # powers of theta^2 times the table; einsum's own loop, no BLAS call (a threaded one spins on a busy machine)
+    values = np.einsum("ij,jk->ik", np.vander(theta * theta, table.shape[0], increasing=True), table)
+    return ThetaComplex(theta, values[:, 0], values[:, 1], np.maximum(values[:, 2], cancelled),
+                        np.maximum(values[:, 3], cancelled / _RADII[0]))
+
+
+def _direct_part(key: WallLoop, theta: np.ndarray, circle: HalfAngle | None) -> ThetaComplex:
+    """``g`` from and above :data:`SERIES_BELOW` as the difference itself."""
+    sampled, continuous = _alias_terms(key, theta, circle)
+    value = sampled - continuous
+    re, im = value.real, value.imag / theta
+    # each part errs by ~eps times the terms that cancel; at z = -1 the sampled term is real
+    # and the imaginary part is the continuous term's own, exact to its ulps
+    size = np.maximum(np.abs(sampled), np.abs(continuous))
+    return ThetaComplex(theta, re, im, np.maximum(np.abs(re), size),
+                        np.maximum(np.abs(im), np.where(theta == np.pi, 0.0, size / theta)))

@@ -3,9 +3,13 @@
 :func:`check_passivity` returns a frozen :class:`CheckReport`; ``report.to_dict()`` is the
 JSON ``haptic-bus check --json`` prints and ``format_check(report)`` the text it prints.
 
-Beside the band-limited verdict (operator forces below Nyquist) the report carries the loop's
-out-of-band exposure (:mod:`haptic_bus.analysis.aliasing`): the worst mean power a force with
-content above Nyquist -- a tone and one alias, and up to ``N`` aliases -- can take out.
+The exact verdict, the seed's test and every end of the passive ``K`` and ``B`` intervals are
+zoomed jointly (:func:`~haptic_bus.analysis.theta_search.refine_lanes`): one evaluation of the
+loop's terms on the grid and one per zoom round serve them all.  Asked for (``check_loop``'s
+default, what ``haptic-bus check`` and ``report`` show; ``check_passivity(..., out_of_band=True)``),
+the report carries the loop's out-of-band exposure
+(:mod:`haptic_bus.analysis.aliasing`): the worst mean power a force with content above Nyquist
+-- a tone and one alias, and up to ``N`` aliases -- can take out.
 Importing this module loads numpy only (no scipy).
 """
 
@@ -16,10 +20,21 @@ from dataclasses import dataclass
 
 from haptic_bus.analysis.aliasing import DEFAULT_HARMONICS, Exposure, worst_force
 from haptic_bus.analysis.closed_form import colgate_slack, liu2011_slack, velocity_sampling_slack
-from haptic_bus.analysis.criterion import EXACT, exact_verdict, seed_verdict
-from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, PassiveSet, passive_limits
+from haptic_bus.analysis.criterion import (
+    EXACT,
+    Verdict,
+    impedance_group,
+    judge,
+    lossless_verdict,
+    seed_judgement,
+    seed_lane,
+    verdict_lane,
+)
+from haptic_bus.analysis.frequency import grid_terms, loop_terms
+from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, LimitsPlan, PassiveSet
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
-from haptic_bus.analysis.poles import closed_loop_poles
+from haptic_bus.analysis.poles import closed_loop_poles, stability
+from haptic_bus.analysis.theta_search import refine_lanes
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 
 MARGIN_UNITS = "N s/m (least Re of the impedance 1/T_fund the operator feels; >= 0 iff passive)"
@@ -46,7 +61,7 @@ class ClosedForm:
 
 @dataclass(frozen=True)
 class OutOfBand:
-    """Exposure to operator forces above Nyquist (None for an unstable loop: no steady state).
+    """Exposure to operator forces above Nyquist (None for a loop that is not stable: no steady state).
 
     ``pair``: the worst tone below Nyquist plus one alias; ``harmonics``: the worst force made
     of up to ``N`` aliases each side (W per N^2 of force, ``sum A^2 = 1``; < 0: energy out).
@@ -61,12 +76,15 @@ class CheckReport:
     """A wall loop's passivity by every criterion.
 
     ``passive``/``margin`` (N s/m)/``critical_theta`` (rad) are the exact criterion's (the one
-    the gate uses), ``outcome`` its name ("passive", "lossless", "not passive", "unstable");
-    ``stiffness_set`` (N/m) and ``damping_set`` (N s/m) every passive ``K`` at this ``B`` and
-    ``B`` at this ``K`` (closed intervals, not necessarily from 0), ``max_stiffness`` and
-    ``max_damping`` their upper ends (None: no passive value); ``closed_loop_poles`` in the
-    z-plane, largest magnitude first; ``alpha = B/(K T)`` (inf for K = 0) against the seed's
-    bandwidth rule ``alpha > 6``; ``out_of_band`` the exposure above Nyquist.
+    the gate uses), ``outcome`` its name ("passive", "lossless", "lossless oscillator",
+    "marginal", "not passive", "unstable"); ``stiffness_set`` (N/m) and ``damping_set`` (N s/m)
+    every passive ``K`` at this ``B`` and ``B`` at this ``K`` (intervals with their open or
+    closed ends, not necessarily from 0), ``max_stiffness`` and ``max_damping`` their upper ends
+    (None: no passive value; at least that, where the set reaches the input ceiling);
+    ``closed_loop_poles`` in the z-plane, largest magnitude first, ``poles_extended`` True when
+    50-digit arithmetic judged them; ``alpha = B/(K T)`` (inf for K = 0) against the seed's
+    bandwidth rule ``alpha > 6``; ``out_of_band`` the exposure above Nyquist (None when not
+    asked, ``out_of_band_asked``, or the loop is not stable).
     """
 
     loop: WallLoop
@@ -89,6 +107,8 @@ class CheckReport:
     out_of_band: OutOfBand | None
     criterion: str = EXACT
     limits_relative_tolerance: float = RELATIVE_TOLERANCE
+    out_of_band_asked: bool = True
+    poles_extended: bool = False
 
     @property
     def lossless(self) -> bool:
@@ -124,6 +144,7 @@ class CheckReport:
                 "pair": self.out_of_band.pair.to_dict(), "harmonics": self.out_of_band.harmonics.to_dict(),
                 "units": "W per N^2 of operator force (sum of squared tone amplitudes = 1 N^2); power < 0: energy out"},
             "closed_loop_poles": [[p.real, p.imag] for p in self.closed_loop_poles],
+            "poles_extended_precision": self.poles_extended,
             "seed_t_zw": {"passive": self.seed.passive, "margin": self.seed.margin,
                           "critical_theta": self.seed.critical_theta},
             "closed_forms": {
@@ -138,15 +159,28 @@ class CheckReport:
         }
 
 
-def check_loop(loop: WallLoop, harmonics: int = DEFAULT_HARMONICS) -> CheckReport:
-    """Judge ``loop`` by every criterion (exact, seed, closed forms), with its limits, poles and
+def _verdicts(loop: WallLoop) -> tuple[Verdict, Verdict, PassiveSet, PassiveSet]:
+    """(exact verdict, seed's verdict, passive K, passive B): one grid, one joint zoom."""
+    terms = grid_terms(loop, closed_loop_poles(loop))
+    grid = terms.theta
+    group = impedance_group(loop, seed=True)
+    plan = LimitsPlan(loop, ("K", "B"), terms)
+    data = group.evaluate(terms)
+    lanes = [verdict_lane(data), seed_lane(data), *plan.lanes]
+    minima = refine_lanes(grid, lanes, {"impedance": group, **plan.groups}, lambda theta: loop_terms(loop, theta))
+    exact = lossless_verdict() if loop.lossless else judge(loop, stability(loop), minima[0])
+    stiffness, damping = plan.finish(minima[2:])
+    return exact, seed_judgement(loop, minima[1]), stiffness, damping
+
+
+def check_loop(loop: WallLoop, harmonics: int = DEFAULT_HARMONICS, out_of_band: bool = True) -> CheckReport:
+    """Judge ``loop`` by every criterion (exact, seed, closed forms), with its limits and poles, and
+    (``out_of_band``, what ``haptic-bus check``, ``report`` and ``profiles check`` show) its
     out-of-band exposure (aliases up to ``harmonics`` each side)."""
-    exact = exact_verdict(loop)
-    seed = seed_verdict(loop)
+    exact, seed, stiffness, damping = _verdicts(loop)
     eq23, eq2, eq4 = velocity_sampling_slack(loop), colgate_slack(loop), liu2011_slack(loop)
-    stiffness, damping = passive_limits(loop)
     exposure = None
-    if exact.stable:
+    if out_of_band and exact.stable:
         exposure = OutOfBand(worst_force(loop, harmonics, pair=True), worst_force(loop, harmonics))
     return CheckReport(
         loop=loop,
@@ -167,29 +201,26 @@ def check_loop(loop: WallLoop, harmonics: int = DEFAULT_HARMONICS) -> CheckRepor
         damping_set=damping,
         outcome=exact.outcome,
         out_of_band=exposure,
+        out_of_band_asked=out_of_band,
+        poles_extended=stability(loop).extended,
     )
 
 
 def check_passivity(mass: float, friction: float, period: float, stiffness: float, damping: float,
-                    delay: float = 0, velocity: VelocityModel | str = "point") -> CheckReport:
+                    delay: float = 0, velocity: VelocityModel | str = "point", out_of_band: bool = False) -> CheckReport:
     """Is a wall ``K`` (N/m), ``B`` (N s/m) passive on a handle ``m`` (kg), ``b`` (N s/m) sampled
     every ``T`` (s) with a loop delay of ``delay`` samples (real) and the drive's ``velocity``
     model (``"point"``, ``"average"``, ``"window:SECONDS"``, ``"lowpass:SECONDS"``)?  Every
-    criterion's answer.
+    criterion's answer, the passive intervals, and (``out_of_band``) the exposure above Nyquist.
 
     Raises :class:`~drives.errors.ParameterError` naming a parameter outside its range.
     """
-    return check_loop(WallLoop(mass, friction, period, stiffness, damping, delay, VelocityModel.parse(velocity)))
+    loop = WallLoop(mass, friction, period, stiffness, damping, delay, VelocityModel.parse(velocity))
+    return check_loop(loop, out_of_band=out_of_band)
 
 
 def _yes(flag: bool) -> str:
     return "passive" if flag else "NOT passive"
-
-
-def _interval_text(passive: PassiveSet, unit: str) -> str:
-    if not passive.intervals:
-        return "none"
-    return " and ".join(f"[{lo:.9g}, {hi:.9g}]" for lo, hi in passive.intervals) + f" {unit}"
 
 
 def _exposure_text(exposure: Exposure) -> str:
@@ -203,31 +234,43 @@ def format_check(report: CheckReport) -> str:
     eq23 = report.velocity_sampling_eq23
     alpha = "inf" if not math.isfinite(report.alpha) else f"{report.alpha:.4g}"
     holds = report.bandwidth_rule_holds
+    on_circle = report.outcome in ("lossless oscillator", "marginal")
     if report.lossless:
         state = "marginally stable: lossless, its only mode is the constant velocity (z = 1)"
+    elif report.outcome == "lossless oscillator":
+        state = ("marginally stable: a lossless oscillator, its poles on the unit circle (product 1); not strictly "
+                 "inside, so the strict rule does not call it passive")
+    elif report.outcome == "marginal":
+        state = "marginally stable: a pole on the unit circle (not strictly inside: not passive)"
     else:
         state = "stable" if report.stable else "UNSTABLE"
+    extended = "; judged in 50-digit arithmetic (within round-off of the circle in double)" if report.poles_extended else ""
+    margin = ("margin none: Re Z >= 0 decides nothing without strict stability" if on_circle else
+              f"margin {report.margin:+.6g} N s/m at theta = {report.critical_theta:.6g} rad")
+    verdict = "passive (lossless)" if report.lossless else _yes(report.passive)
+    if report.outcome == "lossless oscillator":
+        verdict += " (lossless oscillator)"
     lines = [
         f"loop: m={p.m:g} kg  b={p.b:g} N s/m  T={p.T:g} s  K={p.K:g} N/m  B={p.B:g} N s/m  delay={p.delay:g} samples"
         f"  velocity={p.velocity}",
-        f"verdict: {'passive (lossless)' if report.lossless else _yes(report.passive)}  ({report.criterion};"
-        " operator forces below Nyquist)",
-        f"  margin {report.margin:+.6g} N s/m at theta = {report.critical_theta:.6g} rad;"
-        f" closed loop {state} (largest |pole| {report.spectral_radius:.9g})",
+        f"verdict: {verdict}  ({report.criterion}; operator forces below Nyquist)",
+        f"  {margin}; closed loop {state} (largest |pole| {report.spectral_radius:.9g}){extended}",
         f"seed T_zw (eq. 11): {_yes(report.seed.passive)}, margin {report.seed.margin:+.6g} N s/m at theta = "
         f"{report.seed.critical_theta:.6g}",
         f"eq. 23 velocity sampling: {'holds' if eq23.holds else 'fails'}, slack {eq23.slack:+.6g} N s/m"
         + ("" if eq23.applies else " (ignores the loop delay)"),
         f"eq. 2 Colgate (position sampling): {'holds' if report.position_colgate_eq2.holds else 'fails'};"
         f" eq. 4 Liu 2011 (position sampling): {'holds' if report.position_liu2011_eq4.holds else 'fails'}",
-        f"passive K at this B: {_interval_text(report.stiffness_set, 'N/m')};"
-        f" passive B at this K: {_interval_text(report.damping_set, 'N s/m')}"
+        f"passive K at this B: {report.stiffness_set.describe('N/m')};"
+        f" passive B at this K: {report.damping_set.describe('N s/m')}"
         f" (relative tolerance {report.limits_relative_tolerance:g})",
         f"bandwidth rule alpha = B/(K T) = {alpha} {'>' if holds else '<='} 6: {'ok' if holds else 'violated'}",
     ]
     band = report.out_of_band
-    if band is None:
-        lines.append("out of band (above Nyquist): not applicable, the loop is unstable")
+    if not report.out_of_band_asked:
+        lines.append("out of band (above Nyquist): not asked")
+    elif band is None:
+        lines.append("out of band (above Nyquist): not applicable, the loop is not stable (no steady state)")
     else:
         lines.append(f"out of band (above Nyquist): worst pair {_exposure_text(band.pair)}")
         lines.append(f"  worst force of up to {band.harmonics.harmonics} aliases each side:"

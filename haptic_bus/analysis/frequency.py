@@ -35,6 +35,7 @@ each ``theta`` (:func:`impedance_quadratic`): the passivity limits come from its
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -45,7 +46,9 @@ from haptic_bus.analysis.alias import alias_function
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.sampled_loop import period_map, pulse_transfer, window_fraction
 from haptic_bus.analysis.theta_complex import ThetaComplex
-from haptic_bus.analysis.trig import cospi, sincpi, sinpi, unit_point
+from haptic_bus.analysis.theta_search import grid_parts
+from haptic_bus.analysis.trig import cospi, half_angle, sincpi, sinpi, unit_point
+from haptic_bus.analysis.velocity import VelocityModel
 
 
 @dataclass(frozen=True)
@@ -63,13 +66,44 @@ class LoopTerms:
     P: ThetaComplex
     E: ThetaComplex
 
-    def take(self, where: np.ndarray) -> LoopTerms:
-        """These terms at ``theta[where]`` only (``where``: a boolean mask or indices)."""
+    def merged(self, other: LoopTerms) -> LoopTerms:
+        """These terms and ``other``'s (same loop) on the sorted union of their ``theta`` (repeats once)."""
+        def join(a: ThetaComplex, b: ThetaComplex) -> ThetaComplex:
+            return ThetaComplex(theta, *(np.concatenate([x, y]) for x, y in
+                                         ((a.re, b.re), (a.im, b.im), (a.mag_re, b.mag_re), (a.mag_im, b.mag_im))))
+
+        theta = np.concatenate([self.theta, other.theta])
+        whole = LoopTerms(theta, self.c, self.scale, join(self.hold, other.hold), join(self.P, other.P),
+                          join(self.E, other.E))
+        order = np.argsort(theta, kind="stable")
+        ordered = theta[order]
+        first = np.concatenate([[True], ordered[1:] != ordered[:-1]])
+        return whole.take(order[first])
+
+    def take(self, where: np.ndarray | slice) -> LoopTerms:
+        """These terms at ``theta[where]`` only (``where``: a boolean mask, indices or a slice)."""
 
         def part(x: ThetaComplex) -> ThetaComplex:
             return ThetaComplex(x.theta[where], x.re[where], x.im[where], x.mag_re[where], x.mag_im[where])
 
         return LoopTerms(self.theta[where], self.c, self.scale, part(self.hold), part(self.P), part(self.E))
+
+
+def grid_terms(loop: WallLoop, poles: np.ndarray) -> LoopTerms:
+    """:func:`loop_terms` on :func:`~haptic_bus.analysis.theta_search.theta_grid`: the grid's
+    wall-independent part evaluated once per device (cached: a gate judges many walls on one
+    device), the fans at ``poles``' angles for this wall."""
+    base, fans = grid_parts(loop, poles)
+    terms = _device_terms(loop.m, loop.b, loop.T, loop.delay, loop.velocity, base.size)
+    return terms.merged(loop_terms(loop, fans)) if fans.size else terms
+
+
+@functools.lru_cache(maxsize=256)
+def _device_terms(m: float, b: float, T: float, delay: float, velocity: VelocityModel, size: int) -> LoopTerms:
+    device = WallLoop(m, b, T, 0.0, 0.0, delay, velocity)
+    terms = loop_terms(device, grid_parts(device, np.empty(0))[0])
+    assert terms.theta.size == size
+    return terms
 
 
 def delay_rotation(theta: np.ndarray, delay: float) -> ThetaComplex:
@@ -93,11 +127,16 @@ def measurement_terms(loop: WallLoop, theta: np.ndarray) -> ThetaComplex:
 
 
 def loop_terms(loop: WallLoop, theta: ArrayLike) -> LoopTerms:
-    """:class:`LoopTerms` of ``loop`` (its wall ignored) at ``theta`` (rad, > 0)."""
+    """:class:`LoopTerms` of ``loop`` (its wall ignored) at ``theta`` (rad, in ``(0, pi]``)."""
     theta = np.atleast_1d(np.asarray(theta, dtype=float))
-    hold = ThetaComplex.exact(theta, 2.0 * sinpi(0.5 * theta / np.pi) ** 2, sincpi(theta / np.pi))
-    whole = delay_rotation(theta, loop.whole_delay)
-    P = whole * alias_function(loop, theta)
+    circle = half_angle(theta)
+    sinc = circle.sinc()
+    hold = ThetaComplex.exact(theta, 2.0 * circle.s * circle.s, sinc)
+    if loop.whole_delay == 1:  # z^-1 = cos - j sin
+        whole = ThetaComplex.exact(theta, circle.c * circle.c - circle.s * circle.s, -sinc)
+    else:
+        whole = delay_rotation(theta, loop.whole_delay)
+    P = whole * alias_function(loop, theta, circle)
     rotation = whole if loop.delay == loop.whole_delay else delay_rotation(theta, loop.delay)
     E = rotation if loop.velocity.kind == "point" else rotation * measurement_terms(loop, theta)  # M = 1 exactly
     return LoopTerms(theta, loop.c, loop.m / loop.T, hold, P, E)
@@ -113,13 +152,14 @@ class ScaledImpedance:
     scale: np.ndarray
 
 
-def _wall(terms: LoopTerms, kappa: float, q: float) -> ThetaComplex:
-    """``L = kappa + q (1 - z^{-1})``."""
+def _wall(terms: LoopTerms, kappa: float | np.ndarray, q: float | np.ndarray) -> ThetaComplex:
+    """``L = kappa + q (1 - z^{-1})`` (``kappa``, ``q`` scalars, or arrays: one wall per point)."""
     return terms.hold * q + kappa
 
 
-def scaled_impedance(terms: LoopTerms, kappa: float, q: float) -> ScaledImpedance:
-    """``Z T/m = s + L E/(j theta U)`` for the scaled wall ``kappa``, ``q`` (see the module docstring)."""
+def scaled_impedance(terms: LoopTerms, kappa: float | np.ndarray, q: float | np.ndarray) -> ScaledImpedance:
+    """``Z T/m = s + L E/(j theta U)`` for the scaled wall ``kappa``, ``q`` (see the module docstring;
+    arrays of walls: one per point)."""
     L = _wall(terms, kappa, q)
     U = L * terms.P + 1.0
     Y = L * terms.E * U.conj()
@@ -128,6 +168,16 @@ def scaled_impedance(terms: LoopTerms, kappa: float, q: float) -> ScaledImpedanc
     u_spread = (U.mag_re**2 + (terms.theta * U.mag_im) ** 2) / size
     scale = terms.c + Y.mag_im / size + np.abs(wall_re) * u_spread
     return ScaledImpedance(terms.c + wall_re, terms.theta - Y.re / (terms.theta * size), scale)
+
+
+def seed_impedance(terms: LoopTerms, kappa: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(Re, Im)`` of the seed's ``Z_zw T/m = s (1 + G_md K_d) = s U + L E/(j theta)`` from the same terms
+    (``G_md = hold (P + E/(j theta s))``, ``K_d = L/hold``): :func:`seed_z_zw` without its own evaluation."""
+    L = _wall(terms, kappa, q)
+    U = L * terms.P + 1.0
+    sU = ThetaComplex.exact(terms.theta, terms.c, 1.0) * U
+    LE = L * terms.E
+    return sU.re + LE.im, terms.theta * sU.im - LE.re / terms.theta
 
 
 def impedance_quadratic(terms: LoopTerms, base: ThetaComplex | float, slope: ThetaComplex | float
@@ -157,6 +207,35 @@ def impedance_quadratic(terms: LoopTerms, base: ThetaComplex | float, slope: The
         c * (U.mag_re**2 + t2 * U.mag_im**2) + q0.mag_im,
     ])
     return coefficients, magnitudes
+
+
+Pair = tuple[np.ndarray, np.ndarray]  # (Re X, Im X / theta), no magnitudes
+
+
+def _pair(x: ThetaComplex | float, zero: np.ndarray) -> Pair:
+    return (x.re, x.im) if isinstance(x, ThetaComplex) else (zero + x, zero)
+
+
+def _mul(x: Pair, y: Pair, t2: np.ndarray) -> Pair:
+    """The product in the ``(Re, Im/theta)`` form (``t2 = theta^2``)."""
+    return (x[0] * y[0] - t2 * x[1] * y[1], x[0] * y[1] + x[1] * y[0])
+
+
+def quadratic_coefficients(terms: LoopTerms, base: ThetaComplex | float, slope: ThetaComplex | float) -> np.ndarray:
+    """The coefficients of :func:`impedance_quadratic` alone (no magnitudes), ``(3, n)``: what a zoom needs."""
+    c, t2 = terms.c, terms.theta * terms.theta
+    zero = np.zeros(t2.shape)
+    P, E = (terms.P.re, terms.P.im), (terms.E.re, terms.E.im)
+    b, k = _pair(base, zero), _pair(slope, zero)
+    bp = _mul(b, P, t2)
+    U = (1.0 + bp[0], bp[1])
+    V = _mul(k, P, t2)
+    ke, be = _mul(k, E, t2), _mul(b, E, t2)
+    conj_u, conj_v = (U[0], -U[1]), (V[0], -V[1])
+    q2 = c * (V[0] ** 2 + t2 * V[1] ** 2) + _mul(ke, conj_v, t2)[1]
+    q1 = 2.0 * c * _mul(U, conj_v, t2)[0] + _mul(ke, conj_u, t2)[1] + _mul(be, conj_v, t2)[1]
+    q0 = c * (U[0] ** 2 + t2 * U[1] ** 2) + _mul(be, conj_u, t2)[1]
+    return np.stack([q2, q1, q0])
 
 
 def _theta_array(theta: ArrayLike) -> np.ndarray:

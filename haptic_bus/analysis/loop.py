@@ -107,6 +107,13 @@ class WallLoop:
         return self.b == 0.0 and self.K == 0.0 and self.B == 0.0
 
     @property
+    def oscillator(self) -> bool:
+        """A spring alone on a frictionless handle, no delay, point velocity (``b = B = 0 < K``,
+        ``K T^2/m < 4``): a lossless oscillator, its poles on the unit circle."""
+        return (self.b == 0.0 and self.B == 0.0 and self.K > 0.0 and self.delay == 0
+                and self.velocity.kind == "point" and self.kappa < 4.0)
+
+    @property
     def alpha(self) -> float:
         """The seed's ``alpha = B / (K T)`` (inf when K = 0)."""
         return self.B / (self.K * self.T) if self.K > 0 else float("inf")

@@ -187,10 +187,10 @@ def pulse_transfer(pmap: PeriodMap, z: np.ndarray, z_minus_1: np.ndarray) -> np.
     rhs = pmap.gamma_now[:, None] + pmap.gamma_before[:, None] / z[None, :]
     n = shifted.shape[0]
     solution = np.empty((n, z.size), dtype=complex)
-    for i in range(n):
-        acc = rhs[i] + shifted[i, :i] @ solution[:i] if i else rhs[i]
+    for i in range(n):  # elementwise (n <= 2): no BLAS call for a long theta array
+        acc = rhs[i] + sum(shifted[i, j] * solution[j] for j in range(i)) if i else rhs[i]
         solution[i] = acc / (z_minus_1 - shifted[i, i])
-    return pmap.c @ solution
+    return sum(pmap.c[i] * solution[i] for i in range(n))
 
 
 class ClosedLoopLayout:

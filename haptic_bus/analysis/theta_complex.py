@@ -21,6 +21,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 
+def _filled(value: ArrayLike, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as a float array of ``shape`` (an array of that shape as it is, a scalar repeated)."""
+    if isinstance(value, np.ndarray) and value.shape == shape and value.dtype == float:
+        return value
+    return np.broadcast_to(np.asarray(value, dtype=float), shape)
+
+
 @dataclass(frozen=True)
 class ThetaComplex:
     """``re = Re X``, ``im = Im X / theta`` on a ``theta`` array (rad), with term magnitudes."""
@@ -34,8 +41,7 @@ class ThetaComplex:
     @classmethod
     def exact(cls, theta: np.ndarray, re: ArrayLike, im_over_theta: ArrayLike) -> ThetaComplex:
         """A value known to round-off in both parts (its magnitudes are its absolute values)."""
-        re = np.broadcast_to(np.asarray(re, dtype=float), theta.shape)
-        im = np.broadcast_to(np.asarray(im_over_theta, dtype=float), theta.shape)
+        re, im = _filled(re, theta.shape), _filled(im_over_theta, theta.shape)
         return cls(theta, re, im, np.abs(re), np.abs(im))
 
     @classmethod
@@ -43,15 +49,15 @@ class ThetaComplex:
         """From an ordinary complex array (accurate where ``theta`` is not small)."""
         return cls.exact(theta, value.real, value.imag / theta)
 
-    def __add__(self, other: ThetaComplex | float) -> ThetaComplex:
+    def __add__(self, other: ThetaComplex | float | np.ndarray) -> ThetaComplex:
         if isinstance(other, ThetaComplex):
             return ThetaComplex(self.theta, self.re + other.re, self.im + other.im,
                                 self.mag_re + other.mag_re, self.mag_im + other.mag_im)
-        return ThetaComplex(self.theta, self.re + other, self.im, self.mag_re + abs(other), self.mag_im)
+        return ThetaComplex(self.theta, self.re + other, self.im, self.mag_re + np.abs(other), self.mag_im)
 
     __radd__ = __add__
 
-    def __mul__(self, other: ThetaComplex | float) -> ThetaComplex:
+    def __mul__(self, other: ThetaComplex | float | np.ndarray) -> ThetaComplex:
         if isinstance(other, ThetaComplex):
             t2 = self.theta * self.theta
             return ThetaComplex(
@@ -61,7 +67,8 @@ class ThetaComplex:
                 self.mag_re * other.mag_re + t2 * self.mag_im * other.mag_im,
                 self.mag_re * other.mag_im + self.mag_im * other.mag_re,
             )
-        return ThetaComplex(self.theta, self.re * other, self.im * other, self.mag_re * abs(other), self.mag_im * abs(other))
+        return ThetaComplex(self.theta, self.re * other, self.im * other, self.mag_re * np.abs(other),
+                            self.mag_im * np.abs(other))
 
     __rmul__ = __mul__
 

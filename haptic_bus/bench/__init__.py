@@ -25,8 +25,10 @@ min-max over at least 5 repeats (:mod:`~haptic_bus.bench.timing`):
 9. :mod:`~haptic_bus.bench.space_scene_cost` -- a scene in space (plane, boxes, spheres): seconds
    per ``force()`` call for 1..10 000 objects beside the 1-D scene's.
 
-Above the sections, issue 14's "Done when" (:mod:`~haptic_bus.bench.targets`): one row per line
-with the measured figure, its spread, the target and PASS/FAIL, all from this one run.
+Above the sections, issues 14 and 19's "Done when" (:mod:`~haptic_bus.bench.targets`): one row per
+line with the measured figure, its spread, the target and PASS/FAIL, all from this one run (issue
+19: the gate's verdict, the full check and the out-of-band exposure side by side against one numpy
+``T_fund``, ``check --delay 1000``, ``check --json``).
 
 Writes ``DIR/bench.json`` (every figure, the machine, versions, date), ``DIR/bench.md`` (the
 tables, also printed) and PNG plots.  Three sizes (:mod:`~haptic_bus.bench.size`): the full run,
@@ -59,7 +61,7 @@ from haptic_bus.bench.timing import machine
 SECTIONS = ("passivity", "plant", "scene", "space", "loop", "bus", "realtime", "startup", "soak", "layer")
 # progress ticks each section makes (smoke, quick, full): for the bar's total
 _TICKS = {"passivity": (5, 7, 17), "plant": (7, 15, 17), "scene": (5, 5, 5), "space": (5, 5, 5), "loop": (6, 6, 6),
-          "bus": (2, 2, 2), "realtime": (3, 6, 6), "startup": (1, 2, 3), "soak": (10, 10, 10),
+          "bus": (2, 2, 2), "realtime": (3, 6, 6), "startup": (1, 3, 4), "soak": (10, 10, 10),
           "layer": (1, 9, 9)}
 BENCH_EXTRA = {"control": "control", "mpmath": "mpmath"}  # import name -> distribution: pyproject's [bench] extra
 SMOKE_SOAK_CYCLES = 2_000
@@ -188,9 +190,10 @@ def run_bench(out_dir: str | Path, size: Size = FULL, progress: bool = False,
             bar.close(erase="interrupted" in result)
     result["total_seconds"] = time.perf_counter() - started
     from haptic_bus.bench.report import markdown, plots
-    from haptic_bus.bench.targets import done_when
+    from haptic_bus.bench.targets import done_when, issue_19
 
     result["done_when"] = done_when(result["sections"])
+    result["done_when_19"] = issue_19(result["sections"])
 
     (out / "bench.json").write_text(json.dumps(result, indent=1, default=_json_default, allow_nan=True) + "\n")
     (out / "bench.md").write_text(markdown(result))

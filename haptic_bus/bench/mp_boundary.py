@@ -8,10 +8,13 @@ piece by piece over the period (force switch at ``delta T``, window start at ``T
 ``G_md = z^{-d} C (zI - Phi)^{-1} (g_now + g_before/z)``.  The impedance the operator feels is
 ``Z = 1/T_fund``, ``T_fund = G11 [1 - (H/T) e^{-j omega D T} K_d M G11 / (1 + G_md K_d)]`` at
 ``z = e^{j theta}``, ``s = j theta/T``.  Stability: the eigenvalues (``mp.eig``) of the closed-loop
-matrix on ``[plant states, x_{k-1}, u_{k-1}, ..]``.  The largest passive ``K`` at a given ``B``
+matrix on ``[plant states, x_{k-1}, u_{k-1}, ..]``; for a delay over 60 samples the Schur-Cohn
+recursion on its characteristic polynomial (:func:`schur_cohn_stable`, in the working precision).
+The largest passive ``K`` at a given ``B``
 (or ``B`` at a given ``K``) is where ``min_theta Re Z`` touches zero:
 
-1. scan ``Re Z`` at the double-precision estimate on 240 uniform points of ``(0, pi]`` plus a
+1. scan ``Re Z`` at the double-precision estimate on 240 uniform points of ``(0, pi]`` (4 per turn
+   of a long delay's ``e^{-j theta D}`` if more) plus a
    logarithmic fan from ``1e-12`` (standing in for ``theta -> 0``: ``Re Z`` is even in
    ``theta``, so it is off by ``O(1e-24)``) and refine every interior local minimum by golden
    section (to ``1e-15`` rad);
@@ -41,6 +44,8 @@ from haptic_bus.analysis.loop import WallLoop
 
 DIGITS = 40
 _UNIFORM = 240
+_PER_TURN = 4  # scan points per turn of e^{-j theta D} at least (a long delay winds D times)
+_DENSE_DELAY = 60  # samples: above, stability by the Schur-Cohn recursion instead of mp.eig
 _FAN = 24
 _FLAT_BELOW = mp.mpf("1e-6")
 THETA_LOW = mp.mpf("1e-12")  # stands in for theta -> 0: Re Z is even, so it errs by O(theta^2)
@@ -186,6 +191,64 @@ def closed_loop_matrix(loop: WallLoop, K: Any, B: Any) -> Any:
     return M
 
 
+def _poly_mul(a: list, b: list) -> list:
+    """Product of two polynomials given by ascending coefficient lists."""
+    out = [mp.mpf(0)] * (len(a) + len(b) - 1)
+    for i, x in enumerate(a):
+        for j, y in enumerate(b):
+            out[i + j] += x * y
+    return out
+
+
+def _poly_add(a: list, b: list) -> list:
+    n = max(len(a), len(b))
+    return [(a[i] if i < len(a) else 0) + (b[i] if i < len(b) else 0) for i in range(n)]
+
+
+def characteristic_parts(loop: WallLoop, K: Any, B: Any) -> tuple[int, list, list]:
+    """``(L, top, bottom)`` with ``det(zI - M) = z^L top(z) + bottom(z)`` (ascending coefficients, mpf):
+    ``top = (z - 1) det(zI - Phi)`` (with the controller's integrator, ``K > 0``) or ``det(zI - Phi)``,
+    ``bottom = C adj(zI - Phi) (g_now z + g_before) (K T z + B (z - 1))`` (or ``B`` alone without the
+    integrator); ``g_now`` alone and ``L = d`` for a whole delay, ``L = d + 1`` with a fraction."""
+    phi, g_now, g_before, C = sampled_map(loop)
+    n = phi.rows
+    T, D = mp.mpf(loop.T), mp.mpf(loop.delay)
+    d = int(mp.floor(D))
+    fraction = D > d
+    if n == 1:
+        det = [-phi[0, 0], mp.mpf(1)]
+        adj = [[[mp.mpf(1)]]]
+    else:
+        det = [phi[0, 0] * phi[1, 1] - phi[0, 1] * phi[1, 0], -(phi[0, 0] + phi[1, 1]), mp.mpf(1)]
+        adj = [[[-phi[1, 1], mp.mpf(1)], [phi[0, 1]]], [[phi[1, 0]], [-phi[0, 0], mp.mpf(1)]]]
+    numerator: list = [mp.mpf(0)]
+    for i in range(n):
+        for j in range(n):
+            force = [g_before[j], g_now[j]] if fraction else [g_now[j]]
+            numerator = _poly_add(numerator, [C[0, i] * c for c in _poly_mul(adj[i][j], force)])
+    integrator = K > 0
+    wall = [-B, K * T + B] if integrator else [B]
+    top = _poly_mul([mp.mpf(-1), mp.mpf(1)], det) if integrator else det
+    return (d + 1 if fraction else d), top, _poly_mul(numerator, wall)
+
+
+def schur_cohn_stable(loop: WallLoop, K: Any, B: Any) -> bool:
+    """Every zero of ``det(zI - M)`` strictly inside the unit circle: the Schur-Cohn (Jury) recursion
+    on the polynomial, in the working precision, every reflection coefficient below 1 in magnitude."""
+    lag, top, bottom = characteristic_parts(loop, K, B)
+    a = [mp.mpf(0)] * (lag + len(top))
+    for i, c in enumerate(bottom):
+        a[i] += c
+    for i, c in enumerate(top):
+        a[lag + i] += c
+    while len(a) > 1:
+        k = a[0] / a[-1]
+        if abs(k) >= 1:
+            return False
+        a = [a[i + 1] - k * a[len(a) - 2 - i] for i in range(len(a) - 1)]
+    return True
+
+
 class _Loop:
     def __init__(self, loop: WallLoop, which: str) -> None:
         if which not in ("K", "B"):
@@ -207,9 +270,10 @@ class _Loop:
 
     def minimum(self, x: Any) -> tuple[Any, Any, tuple]:
         """(min Re Z over (0, pi], theta there, bracket): dense scan, then golden section at each local minimum."""
-        thetas = [mp.pi * i / _UNIFORM for i in range(1, _UNIFORM + 1)]
+        uniform = max(_UNIFORM, _PER_TURN * (int(mp.ceil(mp.mpf(self.loop.delay))) + 1))
+        thetas = [mp.pi * i / uniform for i in range(1, uniform + 1)]
         low = -mp.log10(THETA_LOW)
-        fan = [mp.mpf(10) ** (-low + (mp.log10(mp.pi / _UNIFORM) + low) * i / _FAN) for i in range(_FAN)]
+        fan = [mp.mpf(10) ** (-low + (mp.log10(mp.pi / uniform) + low) * i / _FAN) for i in range(_FAN)]
         grid = sorted(fan + thetas)
         values = [self.re_z(x, t) for t in grid]
         best = (values[-1], grid[-1], (grid[-1], grid[-1]))
@@ -237,8 +301,15 @@ class _Loop:
                 fd = self.re_z(x, d)
         return (fc, c) if fc < fd else (fd, d)
 
+    def stable(self, x: Any) -> bool:
+        """Eigenvalues of the closed-loop matrix for a short delay; the Schur-Cohn recursion for a long one."""
+        if self.loop.delay <= _DENSE_DELAY:
+            return bool(self.spectral_radius(x) < 1)
+        K, B = self.wall(x)
+        return schur_cohn_stable(self.loop, K, B)
+
     def passive(self, x: Any) -> bool:
-        return self.spectral_radius(x) < 1 and self.minimum(x)[0] >= 0
+        return self.stable(x) and self.minimum(x)[0] >= 0
 
 
 def _bracketed_root(f: Callable[[Any], Any], x0: Any, lower: bool = False) -> Any:

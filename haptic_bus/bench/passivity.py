@@ -30,11 +30,12 @@ Methods (a *check* is one verdict on one loop, its time the median of repeats):
 Every time is a median over the points of each point's median of at least 5 repeats, with the
 medians of the repeats' minima and maxima beside it.
 
-**The full check against numpy's floor** (issue 14): at each delay-1 point, one full check
-(:func:`full_check`: the exact verdict and every passive ``K`` and ``B``, what ``haptic-bus
-check`` decides first) against one evaluation of ``T_fund`` on 10^4 uniform points in plain
-numpy (:func:`numpy_t_fund`, DESIGN 3.2's formula as written), timed pairwise; target <= 5 x,
-with the boundaries within 1e-12 of the reference.
+**Against numpy's floor** (issues 14 and 19): at each delay-1 point, side by side, the gate's
+verdict (:func:`gate_verdict`, target <= 2 x), the full check with its limits (:func:`full_check`,
+``check_passivity`` without the out-of-band search, <= 5 x) and the out-of-band exposure
+(:func:`exposure`, <= 20 x), each against one evaluation of ``T_fund`` on 10^4 uniform points in
+plain numpy (:func:`numpy_t_fund`, DESIGN 3.2's formula as written), timed pairwise, each call a new
+wall; the boundaries within 1e-12 of the reference.
 
 The boundary of a grid-based method (grids, python-control) is found by Newton's method on
 that method's own margin (N s/m) along ``K`` (or ``B``), started at the reference boundary,
@@ -55,13 +56,15 @@ from typing import Any
 
 import numpy as np
 
+from haptic_bus.analysis.aliasing import worst_force
+from haptic_bus.analysis.check import check_loop
 from haptic_bus.analysis.closed_form import region_map, velocity_sampling_factor, velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.frequency import t_fund, z_fund
-from haptic_bus.analysis.limits import max_damping, max_stiffness, passive_limits
+from haptic_bus.analysis.limits import max_damping, max_stiffness
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import phi1
-from haptic_bus.analysis.poles import is_stable
+from haptic_bus.analysis.poles import forget_walls, is_stable
 from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import Spread, paired_calls, time_per_call
 
@@ -233,31 +236,69 @@ def numpy_t_fund(loop: WallLoop, theta: np.ndarray) -> np.ndarray:
     return g11 * (1.0 - hold * wall * g11 / (1.0 + g11d * wall))
 
 
+def _new_wall(func: Callable[[], object]) -> Callable[[], object]:
+    """``func`` as for a wall not judged before: the poles' cache emptied first (the device's own
+    caches -- period map, alias series -- stay warm, as they are for a gate on one device)."""
+
+    def call() -> object:
+        forget_walls()
+        return func()
+
+    return call
+
+
+def gate_verdict(loop: WallLoop) -> bool:
+    """What the gate decides on an upload or a profile load: the exact verdict alone."""
+    return exact_verdict(loop).passive
+
+
 def full_check(loop: WallLoop) -> tuple[bool, float | None, float | None]:
-    """What ``haptic-bus check`` decides first: the exact verdict, the largest passive ``K`` and ``B``."""
-    stiffness, damping = passive_limits(loop)
-    return exact_verdict(loop).passive, stiffness.largest, damping.largest
+    """``check_passivity`` with its limits (no out-of-band search): verdict, seed's test, every passive ``K`` and ``B``."""
+    report = check_loop(loop, out_of_band=False)
+    return report.passive, report.max_stiffness, report.max_damping
+
+
+def exposure(loop: WallLoop) -> tuple[float, float]:
+    """The out-of-band exposure as ``haptic-bus check`` shows it: the worst pair and the worst force of 16 aliases."""
+    return worst_force(loop, pair=True).power, worst_force(loop).power
+
+
+RATIO_TARGETS = {"verdict": 2.0, "full_check": 5.0, "exposure": 20.0}
+"""Issue 19: each against one 10^4-point numpy ``T_fund`` at delay 1."""
 
 
 def full_check_against_floor(loops: list[WallLoop]) -> dict:
-    """Issue 14's yardstick: a full check (:func:`full_check`) against one 10^4-point :func:`numpy_t_fund`,
-    timed pairwise at each delay-1 point; the product's cancellation-free ``t_fund`` on the same grid beside."""
+    """Issues 14 and 19's yardstick, side by side at each delay-1 point: the gate's verdict
+    (:func:`gate_verdict`), the full check with limits (:func:`full_check`) and the out-of-band
+    exposure (:func:`exposure`), each timed pairwise against one 10^4-point :func:`numpy_t_fund`
+    (each call a new wall: :func:`_new_wall`); the product's cancellation-free ``t_fund`` beside."""
     grid = uniform_grid(CONTROL_GRID)
-    rows, ratios = [], []
+    rows = []
+    ratios: dict[str, list[Spread]] = {key: [] for key in RATIO_TARGETS}
     for loop in loops:
         agreement = float(np.max(np.abs(numpy_t_fund(loop, grid) / t_fund(loop, grid) - 1.0)))
-        check, floor, ratio = paired_calls(functools.partial(full_check, loop), functools.partial(numpy_t_fund, loop, grid))
-        product = time_per_call(functools.partial(t_fund, loop, grid))
-        ratios.append(ratio)
-        rows.append({"m": loop.m, "b": loop.b, "K": loop.K, "B": loop.B, "delay": loop.delay,
-                     "full_check_s": check.to_dict(), "numpy_t_fund_1e4_s": floor.to_dict(), "ratio": ratio.to_dict(),
-                     "product_t_fund_1e4_s": product.to_dict(), "numpy_vs_product_max_relative": agreement})
-    worst = max(ratios, key=lambda r: r.median)
-    return {"points": rows, "ratio": {"median": float(np.median([r.median for r in ratios])), "max": worst.median,
-                                      "worst_point": worst.to_dict()},
+        floor_call = functools.partial(numpy_t_fund, loop, grid)
+        row: dict[str, Any] = {"m": loop.m, "b": loop.b, "K": loop.K, "B": loop.B, "delay": loop.delay}
+        for key, func in (("verdict", gate_verdict), ("full_check", full_check), ("exposure", exposure)):
+            own, floor, ratio = paired_calls(_new_wall(functools.partial(func, loop)), floor_call)
+            ratios[key].append(ratio)
+            row[f"{key}_s"], row[f"{key}_ratio"] = own.to_dict(), ratio.to_dict()
+            if key == "full_check":
+                row["numpy_t_fund_1e4_s"], row["ratio"] = floor.to_dict(), ratio.to_dict()
+        row["product_t_fund_1e4_s"] = time_per_call(functools.partial(t_fund, loop, grid)).to_dict()
+        row["numpy_vs_product_max_relative"] = agreement
+        rows.append(row)
+    summary = {}
+    for key, spreads in ratios.items():
+        worst = max(spreads, key=lambda r: r.median)
+        summary[key] = {"median": float(np.median([r.median for r in spreads])), "max": worst.median,
+                        "worst_point": worst.to_dict(), "target": RATIO_TARGETS[key]}
+    return {"points": rows, "ratio": summary["full_check"], "ratios": summary,
             "ratio_target": FULL_CHECK_RATIO_TARGET,
-            "note": "full check = exact verdict + every passive K at the point's B + every passive B at its K; the floor "
-                    "is T_fund on 10^4 uniform theta points in plain numpy (DESIGN 3.2, point sampling, whole delay)"}
+            "note": "verdict = the gate's exact verdict alone; full check = check_passivity without the out-of-band "
+                    "search (exact verdict + seed's test + every passive K and B); exposure = worst pair + worst "
+                    "force of 16 aliases; each call a new wall (poles' cache emptied); the floor is T_fund on 10^4 "
+                    "uniform theta points in plain numpy (DESIGN 3.2, point sampling, whole delay)"}
 
 
 def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:

@@ -243,8 +243,8 @@ def _soak(s: dict) -> list[str]:
               f"({memory['growth_bytes'] / 2**20:.3g} MiB over the run; flat if <= {memory['flat_bytes'] / 2**20:g} MiB)."]
 
 
-def _done_when(rows: list[dict]) -> list[str]:
-    table = _table(["#", "Done when (issue 14)", "measured: median (min-max)", "target", "result"],
+def _done_when(rows: list[dict], issue: int = 14) -> list[str]:
+    table = _table(["#", f"Done when (issue {issue})", "measured: median (min-max)", "target", "result"],
                    [[str(r["line"]), r["what"] + (f"; {r['note']}" if r["note"] else ""), r["measured"], r["target"],
                      f"**{r['result']}**"] for r in rows])
     counts = {k: sum(r["result"] == k for r in rows) for k in ("PASS", "FAIL", "n/a")}
@@ -283,6 +283,8 @@ def markdown(result: dict) -> str:
     sections = result["sections"]
     if result.get("done_when"):
         out += ["", "## Issue 14: Done when", "", *_done_when(result["done_when"])]
+    if result.get("done_when_19"):
+        out += ["", "## Issue 19: Done when", "", *_done_when(result["done_when_19"], 19)]
     for key, title, render in _SECTIONS:
         s = sections.get(key)
         if s is None:  # not asked for (--only, --soak)

@@ -1,4 +1,4 @@
-"""Issue 14's "Done when", one row per line, read off the sections of one benchmark run.
+"""Issues 14 and 19's "Done when", one row per line, read off the sections of one benchmark run.
 
 Each row: which line of the issue (1-5), what is compared, the measured figure with its spread
 (median, min-max over >= 5 repeats, or a single count where the figure is one), the target,
@@ -139,3 +139,47 @@ def _soak(sections: dict) -> list[dict]:
 def done_when(sections: dict) -> list[dict]:
     """Every row of issue 14's "Done when" from the sections of one run (see the module docstring)."""
     return _passivity(sections) + _startup(sections) + _realtime(sections) + _loop(sections) + _soak(sections)
+
+
+def _ratio_row(line: int, what: str, ratios: dict | None, key: str) -> dict:
+    entry = ratios.get(key) if ratios else None
+    if not entry:
+        return _row(line, what, "-", "-", None)
+    worst = entry["worst_point"]
+    return _row(line, what + " (worst delay-1 point, pairwise)", _spread_text(worst), f"<= {entry['target']:g} x",
+                worst["median"] <= entry["target"], worst, f"median over the points {entry['median']:.3g}")
+
+
+def issue_19(sections: dict) -> list[dict]:
+    """Issue 19's "Done when" rows: the three costs against one 10^4-point numpy ``T_fund`` side by side
+    (the passivity section), ``check --delay 1000`` and ``check --json`` (the start-up section), and the
+    boundaries' error against the 40-digit reference."""
+    s = _available(sections, "passivity")
+    full = s.get("full_check") if s else None
+    ratios = full.get("ratios") if full else None
+    rows = [
+        _ratio_row(1, "gate verdict alone (stability + Re T_fund) / one 10^4-point numpy T_fund", ratios, "verdict"),
+        _ratio_row(2, "full check_passivity with limits / one 10^4-point numpy T_fund", ratios, "full_check"),
+        _ratio_row(3, "out-of-band exposure (worst pair + 16 aliases) / one 10^4-point numpy T_fund", ratios, "exposure"),
+    ]
+    start = _available(sections, "startup") or {"commands": {}}
+    long_delay = start["commands"].get("check --delay 1000")
+    if long_delay is None:
+        rows.append(_row(4, "haptic-bus check --delay 1000 wall time", "-", "<= 0.5 s idle", None))
+    else:
+        wall = long_delay["wall_s"]
+        load = start.get("load_average")
+        rows.append(_row(4, "haptic-bus check --delay 1000 wall time (fresh process, out-of-band included)",
+                         _spread_text(wall), f"<= {start['long_delay_target_s']:g} s idle",
+                         wall["median"] <= start["long_delay_target_s"], wall,
+                         f"load average {load[0]:.2f}" if load else ""))
+    json_row = start["commands"].get("check --json")
+    if json_row is None:
+        rows.append(_row(5, "haptic-bus check --json / python -c 'import numpy'", "-", "<= 2.5 x", None))
+    else:
+        rows.append(_row(5, "haptic-bus check --json / python -c 'import numpy' (pairwise)", _spread_text(json_row["ratio"]),
+                         f"<= {start['ratio_target']:g} x", json_row["met"], json_row["ratio"]))
+    error = full.get("boundary_error_max") if full else None
+    rows.append(_row(6, "boundary (largest passive K and B) against the 40-digit mpmath reference",
+                     "-" if error is None else f"{error:.1e}", "<= 1e-12", None if error is None else error <= 1e-12))
+    return rows

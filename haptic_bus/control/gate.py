@@ -5,7 +5,9 @@ The gate judges the loop *as configured* -- device mass ``m`` (kg), effective fr
 measured), the velocity the drive reports (:mod:`haptic_bus.analysis.velocity`) -- with the
 exact criterion of :mod:`haptic_bus.analysis.criterion`, for every summed ``(K, B)`` that can act on
 the handle at once (overlapping objects add).  A scene passes when every such wall has
-``margin >= safety_margin`` (N s/m).  The seed's bandwidth rule ``alpha = B/(K T) > 6`` is a
+``margin >= safety_margin`` (N s/m).  The gate calls that verdict alone (stability and
+``Re T_fund``): an upload or a profile load pays for no passive interval and no out-of-band
+exposure; only a refusal's message names the passive intervals.  The seed's bandwidth rule ``alpha = B/(K T) > 6`` is a
 warning by default and a refusal under ``bandwidth = "strict"``.  A start ramp (the scene's
 walls scaled from 0 to 1) is proven passive on the whole way by :meth:`PassivityGate.proves_ramp`.
 """
@@ -73,10 +75,14 @@ class RampProof:
     def reason(self) -> str:
         """Why the ramp is not proven ('' when it is): the first wall whose scales leave a gap."""
         for names, scales in self.walls:
-            if scales.intervals[:1] != ((0.0, 1.0),):
-                gaps = ", ".join(f"[{lo:.4g}, {hi:.4g}]" for lo, hi in scales.intervals) or "none"
-                return f"{'+'.join(names)} scaled by s is passive only for s in {gaps}, not all of [0, 1]"
+            if not _whole_ramp(scales):
+                return f"{'+'.join(names)} scaled by s is passive only for s in {scales.describe('', 4)}, not all of [0, 1]"
         return ""
+
+
+def _whole_ramp(scales: PassiveSet) -> bool:
+    """The scales are the one closed interval [0, 1]."""
+    return scales.intervals[:1] == ((0.0, 1.0),) and scales.ends()[0] == (True, True)
 
 
 @dataclass(frozen=True)
@@ -162,7 +168,7 @@ class PassivityGate:
         the policy's safety margin through :meth:`admit`."""
         walls = tuple((names, passive_scales(self.device.wall(K, B)))
                       for (K, B), names in sorted(scene.contacts().items()))
-        proven = all(scales.intervals[:1] == ((0.0, 1.0),) for _, scales in walls)
+        proven = all(_whole_ramp(scales) for _, scales in walls)
         return RampProof(proven, walls)
 
     def passive_scales(self, scene: CompiledScene) -> tuple[tuple[float, float], ...]:
@@ -182,16 +188,11 @@ class PassivityGate:
         return decision
 
     def _explain(self, label: str, loop: WallLoop, verdict: Verdict) -> str:
+        """A refusal's reason; only a refusal pays for the passive intervals it names."""
         stiffness, damping = passive_limits(loop)
-        limits = f"passive K at this B: {_intervals(stiffness, 'N/m')}; passive B at this K: {_intervals(damping, 'N s/m')}"
-        state = "passive" if verdict.passive else ("not passive" if verdict.stable else "unstable")
+        limits = f"passive K at this B: {stiffness.describe('N/m', 6)}; passive B at this K: {damping.describe('N s/m', 6)}"
+        state = {"lossless oscillator": "a lossless oscillator (poles on the unit circle)",
+                 "marginal": "marginal (a pole on the unit circle)"}.get(verdict.outcome, verdict.outcome)
         return (f"{label} is {state} with {self.device.describe()}: margin {verdict.margin:.4g} N s/m at "
                 f"theta = {verdict.critical_theta:.3g} rad, allowed: margin >= {self.policy.safety_margin:g} N s/m; "
                 f"{limits}")
-
-
-def _intervals(passive: PassiveSet, unit: str) -> str:
-    """``[lo, hi] unit`` for each passive interval, or ``none``."""
-    if not passive.intervals:
-        return "none"
-    return " or ".join(f"[{lo:.6g}, {hi:.6g}]" for lo, hi in passive.intervals) + f" {unit}"
