@@ -72,7 +72,8 @@ def test_connect_configures_the_drive_over_sdo(canopen_rig):
         assert [u32(0x1600, 1), u32(0x1600, 2)] == [0x60400010, 0x60710010]
         assert drive.sdo_read(0x1800, 2)[0] == 1 and drive.sdo_read(0x1400, 2)[0] == 1
         assert u32(0x1800, 1) == TPDO1 and u32(0x1400, 1) & 0x7FF == RPDO1
-        for com in (0x1801, 0x1802, 0x1803, 0x1401, 0x1402, 0x1403):
+        assert drive.sdo_read(0x1A01, 0)[0] == 1 and u32(0x1A01, 1) == 0x60640020  # the position, for the port observer
+        for com in (0x1802, 0x1803, 0x1401, 0x1402, 0x1403):
             assert u32(com, 1) & (1 << 31), f"0x{com:04X} should be invalid"
         assert r.sim.nmt_state == "OPERATIONAL"
         assert drive.scaling == r.sim.drive.parameters.scaling

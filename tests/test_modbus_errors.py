@@ -88,7 +88,8 @@ def test_exception_in_the_cycle_trips_and_writes_zero_torque(running, code: int,
         server.faults.exception(code)
         with pytest.raises(DriveProtocolError) as caught:
             drive.read_inputs()
-        assert "registers 0x0000..0x0002: 0x0000 (0x6041 Statusword), 0x0001 (0x606C Velocity actual value)" in str(caught.value)
+        assert ("registers 0x0000..0x0004: 0x0000 (0x6041 Statusword), 0x0001 (0x606C Velocity actual value), "
+                "0x0003 (0x6064 Position actual value)") in str(caught.value)
     unit_named(caught.value, server.port)
     assert f"exception 0x{code:02X} {name}" in str(caught.value)
     # one zero-torque write with DISABLE VOLTAGE reached the drive

@@ -160,7 +160,7 @@ def test_the_readme_walkthrough_runs_as_it_stands(shell: Shell, tmp_path: pathli
         outputs.append(output)
     sim, _, scan, new, first_check, identify, _, check, run, _ = outputs
     assert sim == ""  # its log goes to sim.log
-    assert re.search(r"^\s+5\s+0x00020192\s+CiA-402 servo drive .* yes\s+yes$", scan, re.M), scan
+    assert re.search(r"^\s+5\s+0x00020192\s+CiA-402 servo drive .* yes\s+yes\s+SWITCH ON DISABLED\s+0x0000$", scan, re.M), scan
     assert "from the drive rated_torque, max_torque_permille, position_per_count, force_per_torque, velocity_per_count" in new
     assert "still missing scene.objects" in first_check
     mass = _number(r"mass m\s+([0-9.e+-]+) kg", identify)

@@ -272,29 +272,8 @@ def test_an_observer_alarm_stops_the_run_with_exit_3(tmp_path: pathlib.Path, cap
 def test_an_observer_alarm_over_modbus_acts_as_the_policy_says(policy: str, tmp_path: pathlib.Path) -> None:
     """Over Modbus TCP (no upload server there): the Python API, the same stiffer wall at cycle
     400.  ``derate`` has no observed delay to derate to on an observer alarm: it stops."""
-    from drives.modbus.drive import ModbusDrive
-
     path = _soft_wall_pushed_in(tmp_path, f'[supervisor]\non_observer = "{policy}"\n')
-    profile = load_profile(path)
-    with simulated_drive("modbus", path) as simulated:
-        url = simulated.args[1]
-        drive = ModbusDrive.from_url(url, scaling=profile.scaling(), safety=profile.safety.for_virtual_time(PERIOD),
-                                     with_position=True)
-        try:
-            drive.connect()
-            origin = encoder_origin(drive)
-            drive.enable()
-            controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
-                                        origin=origin, supervisor=profile.supervisor, ramp_time=profile.start.ramp_time,
-                                        passivity=profile.passivity)
-
-            def stiffen(c: WallController) -> None:
-                if c.cycles == 400:
-                    c.set_wall("end-stop", *STIFFER)
-
-            summary = controller.run(1500, on_cycle=stiffen)
-        finally:
-            drive.close()
+    summary, controller, states = _stiffened_over_modbus(path)
     energy = controller.record.column("energy_j")
     assert energy[:401].min() >= -1e-3 and energy.min() < -1e-3
     kinds = [e.kind for e in controller.events.events]
@@ -308,16 +287,14 @@ def test_an_observer_alarm_over_modbus_acts_as_the_policy_says(policy: str, tmp_
     assert summary.alarms == 1 and summary.exit_reason == "assumption broken" and summary.error is not None
     assert summary.error.startswith("assumption broken: the passivity observer: the port's energy is -")
     assert 400 < summary.cycles < 1500 and energy[-1] < -1e-3 and kinds == ["upload", "alarm", "stop"]
-    assert _disabled_not_faulted(simulated.states)
+    assert _disabled_not_faulted(states)
 
 
-def test_with_the_guard_layer_the_same_upload_is_held_passive_and_the_run_goes_on(tmp_path: pathlib.Path) -> None:
-    """The shipped default (``[passivity] layer = "guard"``): the stiffer wall's push out of the
-    wall is lowered to what the port's energy budget allows; the port's energy never goes below
-    zero, no alarm, the run completes."""
+def _stiffened_over_modbus(path: pathlib.Path) -> tuple[Any, WallController, list[State]]:
+    """The profile at ``path`` run 1500 cycles over Modbus TCP through the Python API, the stiffer
+    wall set at cycle 400: the summary, the controller and the drive's states."""
     from drives.modbus.drive import ModbusDrive
 
-    path = _soft_wall_pushed_in(tmp_path, layer="guard")
     profile = load_profile(path)
     with simulated_drive("modbus", path) as simulated:
         drive = ModbusDrive.from_url(simulated.args[1], scaling=profile.scaling(),
@@ -332,6 +309,14 @@ def test_with_the_guard_layer_the_same_upload_is_held_passive_and_the_run_goes_o
             summary = controller.run(1500, on_cycle=lambda c: c.set_wall("end-stop", *STIFFER) if c.cycles == 400 else None)
         finally:
             drive.close()
+        return summary, controller, list(simulated.states)
+
+
+def test_with_the_guard_layer_the_same_upload_is_held_passive_and_the_run_goes_on(tmp_path: pathlib.Path) -> None:
+    """The shipped default (``[passivity] layer = "guard"``): the stiffer wall's push out of the
+    wall is lowered to what the port's energy budget allows; the port's energy never goes below
+    zero, no alarm, the run completes."""
+    summary, controller, _ = _stiffened_over_modbus(_soft_wall_pushed_in(tmp_path, layer="guard"))
     energy = controller.record.column("energy_j")
     assert summary.exit_reason == "completed" and summary.alarms == 0 and summary.layer_interventions > 0
     assert energy.min() >= 0.0
@@ -408,8 +393,9 @@ def test_a_real_time_run_stopped_for_150_ms_breaks_the_delay_assumption_and_exit
             run.communicate(timeout=10)
     assert run.returncode == 3, stderr
     assert "Traceback" not in stderr and len(stderr.strip().splitlines()) == 1
-    assert stderr.startswith("haptic-bus run: assumption broken: the loop delay: 6 of the last 1000 cycles started more "
-                             "than 16 T late"), stderr
+    # "started", or "acted" when a TPDO the stop held back was missed too
+    assert re.match(r"haptic-bus run: assumption broken: the loop delay: 6 of the last 1000 cycles (started|acted) more "
+                    r"than 16 T late", stderr), stderr
     (alarm,) = events_of(read_run(out), "alarm")
     worst = float(re.search(r"worst ([0-9.]+) ms", alarm["message"]).group(1))  # type: ignore[union-attr]
     assert worst >= 100.0, alarm  # the injected stop, not this machine's scheduler

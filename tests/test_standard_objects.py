@@ -28,6 +28,7 @@ from drives.canopen.drive import CanopenDrive
 from drives.errors import ScalingConflict, ScalingObjectError
 from drives.factor_group import FactorGroup, SiUnit, derive
 from drives.safety import SafetySettings
+from haptic_bus.control.record import COLUMNS
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.canopen.standard_od import encode, standard_dictionary
 from sim_drive.eds import eds_path
@@ -359,9 +360,18 @@ def test_the_standard_path_closes_the_same_loop_as_the_haptic_one(channel: str, 
     standard = _run(profile, "standard", tmp_path / "standard", f"{channel}-standard")
     assert haptic.controller is not None and standard.controller is not None
     a, b = haptic.controller.record.array(), standard.controller.record.array()
-    assert a.shape == b.shape == (1000, 10)
-    assert np.array_equal(a[:, :9], b[:, :9])
-    assert np.max(np.abs(a[:, 1])) > 4e-3  # the step pushed the handle into the wall (5 mm): a real trajectory
+    assert a.shape == b.shape == (1000, len(COLUMNS))
+    # all but when and how long the machine took, and whether a TPDO missed its 50 ms timeout (a loaded
+    # machine can pause the simulated drive's thread that long even in virtual time: it is counted, not hidden)
+    machine = ("wall_clock_s", "monotonic_s", "compute_s", "input_age", "late", "energy_j")
+    loop = [COLUMNS.index(name) for name in COLUMNS if name not in machine]
+    assert np.array_equal(a[:, loop], b[:, loop])
+    assert np.count_nonzero(a[:, COLUMNS.index("input_age")]) + np.count_nonzero(b[:, COLUMNS.index("input_age")]) <= 5
+    # the port's energy sums b dx^2/T - F dx with dx in counts times 0x6064's size, which the standard
+    # path derives from the factor group to 4.5e-14 relative: the sums agree to round-off
+    energy = COLUMNS.index("energy_j")
+    assert np.allclose(a[:, energy], b[:, energy], rtol=1e-11, atol=1e-15)
+    assert np.max(np.abs(a[:, COLUMNS.index("position_m")])) > 4e-3  # the step pushed the handle 5 mm into the wall
     document = json.loads((tmp_path / "standard" / "run.json").read_text())
     assert document["scaling"]["sources"]["position_per_count"] == "0x60A8"
     assert document["scaling"]["sources"]["force_per_torque"] == "0x6091/0x6092/0x60A8"

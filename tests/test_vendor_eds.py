@@ -276,10 +276,12 @@ def test_an_object_no_pdo_can_carry_is_refused_naming_every_attempt(tmp_path: pa
         with pytest.raises(DriveProtocolError) as refused:
             drive.connect()
     message = str(refused.value)
-    assert message.startswith("CANopen node 5: no PDO mapping the drive accepts: packed: TPDO1 (0x6041, 0x606C) refused "
-                              "(SDO abort writing 0x1A00:00 (TPDO1 mapping parameter.Number of mapped objects): 0x06040041")
-    assert message.count("0x06040041") == 2 and "one object per PDO: TPDO1 (0x6041), TPDO2 (0x606C) refused" in message
-    assert message.endswith("the drive's default mapping: no set of the drive's PDOs carries 0x6041, 0x606C")
+    assert message.startswith("CANopen node 5: no PDO mapping the drive accepts: packed: TPDO1 (0x6041, 0x606C), TPDO2 "
+                              "(0x6064) refused (SDO abort writing 0x1A00:00 (TPDO1 mapping parameter.Number of mapped "
+                              "objects): 0x06040041")
+    assert message.count("0x06040041") == 2
+    assert "one object per PDO: TPDO1 (0x6041), TPDO2 (0x606C), TPDO3 (0x6064) refused" in message
+    assert message.endswith("the drive's default mapping: no set of the drive's PDOs carries 0x6041, 0x606C, 0x6064")
     assert "\n" not in message and states == []
 
 
