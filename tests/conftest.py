@@ -62,6 +62,7 @@ from typing import TYPE_CHECKING, Any
 
 import can
 import canopen
+import hypothesis
 import pytest
 
 from haptic_bus.testing.buses import VCAN0_REASON, BusSpec, unique_multicast, unique_name, vcan0_exists
@@ -77,6 +78,13 @@ if TYPE_CHECKING:
 
 NODE = 5  # the node of ``sim``, of ``remote`` and of ``canopen_rig`` by default
 WAIT = 1.0  # s: the longest any single frame is waited for (a bound, not a pace)
+
+
+# Hypothesis: a small default profile for the README's test command, a thorough one for a long run
+# (``python -m pytest --hypothesis-profile thorough``); a test that sets its own count keeps it.
+hypothesis.settings.register_profile("default", max_examples=100, deadline=None)
+hypothesis.settings.register_profile("thorough", max_examples=2000, deadline=None)
+hypothesis.settings.load_profile("default")
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -103,7 +103,7 @@ def test_zoh_limit_without_friction_is_the_pure_mass() -> None:
 # --- frequency responses against mpmath --------------------------------------------------------
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(loop=loops, theta=st.sampled_from([1e-12, 1e-7, 1e-3, 0.7, 2.0, math.pi - 1e-12, math.pi]))
 def test_responses_match_mpmath_and_never_flip_sign(loop: WallLoop, theta: float) -> None:
     # A backward-stable evaluation is exact for parameters a few ulps away; near a closed-loop
@@ -119,7 +119,7 @@ def test_responses_match_mpmath_and_never_flip_sign(loop: WallLoop, theta: float
             assert math.copysign(1, ours.real) == math.copysign(1, ref.real)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(deadline=None)
 @given(loop=loops)
 @example(loop=WallLoop(0.001, 1.0, 0.1, 0.0, 1.0, 0))  # a pole on the unit circle to double precision
 def test_everything_is_finite_over_the_whole_range(loop: WallLoop) -> None:
@@ -142,7 +142,7 @@ def test_everything_is_finite_over_the_whole_range(loop: WallLoop) -> None:
 BOUNDARY_BAND = 1e-9
 
 
-@settings(max_examples=400, deadline=None)
+@settings(deadline=None)
 @given(loop=loops.map(lambda loop: WallLoop(loop.m, loop.b, loop.T, loop.K, loop.B, 0)))
 def test_exact_criterion_agrees_with_eq23_without_delay(loop: WallLoop) -> None:
     slack = velocity_sampling_slack(loop)
@@ -164,7 +164,7 @@ def test_eq23_misses_low_frequency_activity_when_the_plant_settles_within_a_samp
     assert float(mp.re(1 / t_fund_mp(loop, 0.05))) < -1000  # N s/m, from the definition itself
 
 
-@settings(max_examples=60, deadline=None)
+@settings(deadline=None)
 @given(loop=loops)
 def test_more_physical_damping_never_makes_a_passive_loop_active(loop: WallLoop) -> None:
     assume(exact_verdict(loop).passive and loop.c <= 3.0)

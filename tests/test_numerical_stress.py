@@ -22,7 +22,7 @@ any_float = st.one_of(
 )
 
 
-@settings(max_examples=300, deadline=None)
+@settings(deadline=None)
 @given(m=any_float, b=any_float, T=any_float, K=any_float, B=any_float)
 def test_any_float_gives_a_typed_error_or_a_finite_verdict(m, b, T, K, B) -> None:
     try:

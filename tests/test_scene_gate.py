@@ -40,7 +40,7 @@ objects = st.lists(
 ).map(lambda objs: [type(o)(**{**o.__dict__, "name": f"o{i}"}) for i, o in enumerate(objs)])
 
 
-@settings(max_examples=150, deadline=None)
+@settings(deadline=None)
 @given(objs=objects, x=st.floats(-0.2, 0.2), v=st.floats(-1, 1))
 def test_compiled_force_equals_the_sum_over_every_object(objs, x: float, v: float) -> None:
     scene = compile_scene(objs)

@@ -188,7 +188,7 @@ def _agree(loop: WallLoop, p: int, q: int) -> None:
     assert abs(simulated - predicted) <= 0.01 * abs(predicted) + 1e-9 * 0.5 * abs(response)
 
 
-_PROPERTY = settings(max_examples=200, deadline=None, derandomize=True, database=None,
+_PROPERTY = settings(deadline=None, derandomize=True, database=None,
                      suppress_health_check=[HealthCheck.filter_too_much, HealthCheck.too_slow])
 _FREQUENCY = st.integers(3, 256).flatmap(lambda q: st.tuples(st.integers(1, (q - 1) // 2), st.just(q)))
 
