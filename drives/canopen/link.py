@@ -93,6 +93,7 @@ class NetworkLink:
         self._bus_args = bus_args
         self.network: canopen.Network | None = None
         self.bus: can.BusABC | None = None
+        self._passed: set[int] = set()  # the identifiers the bus's receive filters let through (empty: all)
         self.direct = False  # True while the master reads the bus itself
         self._errors = ReceiveErrors(name)
 
@@ -120,27 +121,32 @@ class NetworkLink:
 
     def read_directly(self, wanted: frozenset[int] = frozenset()) -> None:
         """Pause canopen's notifier: from now on the caller reads the bus itself.  On a bus the link
-        opened, receive only the standard identifiers ``wanted`` and those canopen subscribes to
-        (python-can's filters: on ``udp_multicast`` applied before a frame is decoded, on SocketCAN
-        in the kernel); a bus the caller gave is left as it is."""
-        if self.direct or self.network is None:
+        opened, receive only the standard identifiers ``wanted`` (added to those of earlier calls,
+        e.g. one drive's then every axis') and those canopen subscribes to (python-can's filters: on
+        ``udp_multicast`` applied before a frame is decoded, on SocketCAN in the kernel); a bus the
+        caller gave is left as it is."""
+        if self.network is None:
             return
-        notifier = self.network.notifier
-        if notifier is not None and not notifier.stopped:
-            notifier.stop(timeout=5.0)
-        failure = self.receive_failure()
-        if failure is not None:
-            raise DriveError(self.name, f"CAN receive failed: {failure!r}")
-        if self._owns_bus and self.bus is not None:
-            self.bus.set_filters(standard_filters(wanted | set(self.network.subscribers)))
-        self.direct = True
+        if not self.direct:
+            notifier = self.network.notifier
+            if notifier is not None and not notifier.stopped:
+                notifier.stop(timeout=5.0)
+            failure = self.receive_failure()
+            if failure is not None:
+                raise DriveError(self.name, f"CAN receive failed: {failure!r}")
+            self.direct = True
+        needed = wanted | set(self.network.subscribers)
+        if self._owns_bus and self.bus is not None and not needed <= self._passed:
+            self._passed |= needed
+            self.bus.set_filters(standard_filters(self._passed))
 
     def read_by_notifier(self) -> None:
         """Give the bus back to a fresh canopen notifier (SDO needs it), every frame received again."""
         if not self.direct or self.network is None:
             return
         self.direct = False
-        if self._owns_bus and self.bus is not None:
+        if self._owns_bus and self.bus is not None and self._passed:
+            self._passed = set()
             self.bus.set_filters(None)
         _restart_notifier(self.network)
 

@@ -57,6 +57,7 @@ __all__ = [
 
 
 VIRTUAL_TIME_WATCHDOG_MS = 1000  # ms: both heartbeat consumers in a virtual-time run (see virtual_time_safety)
+VIRTUAL_TIME_TPDO_WAIT = 0.25  # s: a TPDO waited for in virtual time, where a frame another thread is delivering can queue
 
 
 def virtual_time_safety(period: float) -> SafetySettings:
@@ -152,7 +153,8 @@ def simulated_axes(profile: AxesProfile, *, channel: str | None = None,
     safety = virtual_time_safety(profile.period)
     axes = CanopenAxes([cast(int, axis.node_id) for axis in profile.axes],
                        scalings=[axis.device.scaling() for axis in profile.axes], interface=interface, channel=channel,
-                       period=profile.period, eds=eds_path(), safety=safety, heartbeat_consumer_ms=VIRTUAL_TIME_WATCHDOG_MS)
+                       period=profile.period, eds=eds_path(), safety=safety, heartbeat_consumer_ms=VIRTUAL_TIME_WATCHDOG_MS,
+                       tpdo_timeout=VIRTUAL_TIME_TPDO_WAIT)
     try:
         axes.connect()
         yield sim, axes
