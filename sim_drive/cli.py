@@ -41,6 +41,7 @@ from typing import Any, NoReturn
 from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, merge_bus_options, parse_bus_option
 from drives.errors import BusConfigError, ParameterError
 from haptic_bus._version import __version__
+from haptic_bus.console import StderrHandler
 from sim_drive.eds import OD_KINDS, eds_path
 from sim_drive.operator import OperatorModel, operator_from_spec, operator_usage
 from sim_drive.parameters import DeviceParameters, Timing
@@ -224,7 +225,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _configure_logging(realtime: bool, library: str, level: int) -> None:
     """Log lines on stderr (wall-clock stamped with ``realtime``); the bus ``library`` only from ``level``."""
     fmt = "%(asctime)s %(message)s" if realtime else "%(message)s"
-    logging.basicConfig(level=logging.INFO, format=fmt, stream=sys.stderr, force=True)
+    logging.basicConfig(level=logging.INFO, format=fmt, handlers=[StderrHandler()], force=True)
     logging.getLogger(library).setLevel(level)
 
 

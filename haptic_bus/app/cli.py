@@ -41,6 +41,7 @@ from haptic_bus.app.identify_cli import add_identify_parser
 from haptic_bus.app.scan_cli import add_scan_parser
 from haptic_bus.app.sdo_cli import add_sdo_parser
 from haptic_bus.app.status_cli import add_status_parser
+from haptic_bus.console import StderrHandler
 
 _NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
 
@@ -357,24 +358,10 @@ def build_parser() -> argparse.ArgumentParser:
 _PASS_THROUGH: dict[str, Callable[[Sequence[str]], int]] = {"sim": _sim, "bench": _bench}
 
 
-class _StderrHandler(logging.StreamHandler):
-    """Writes each record to ``sys.stderr`` as it is when the record comes (a redirect, a test's
-    capture, the live view's console), never to a stream that was stderr once and is closed now."""
-
-    @property
-    def stream(self) -> Any:
-        """The current ``sys.stderr``."""
-        return sys.stderr
-
-    @stream.setter
-    def stream(self, value: Any) -> None:
-        """Ignored: the stream is always the current ``sys.stderr``."""
-
-
 def _configure_logging(verbose: int | None, quiet: bool | None) -> None:
     levels = {None: logging.WARNING, 0: logging.WARNING, 1: logging.INFO}
     level = logging.CRITICAL if quiet else levels.get(verbose, logging.DEBUG)
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", handlers=[_StderrHandler()], force=True)
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", handlers=[StderrHandler()], force=True)
     library_level = {None: logging.CRITICAL, 0: logging.CRITICAL, 1: logging.WARNING}.get(verbose, logging.DEBUG)
     for name in _NOISY_LIBRARIES:  # their chatter ("Transfer aborted ...", "... not properly shut down") only on -v
         logging.getLogger(name).setLevel(library_level)
