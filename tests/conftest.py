@@ -239,6 +239,9 @@ def _rig(
     # A test paces nothing: a loaded machine may pause it for tens of ms, which the drive's
     # RPDO deadline would rightly call a dead master.  Tests of the deadline set their own.
     drive_kwargs.setdefault("safety", SafetySettings().for_virtual_time(drive_kwargs.get("period", 1e-3)))
+    # The same pause can hold the simulator's thread past the master's 50 ms TPDO wait (measured
+    # once in a CI run beside two CPU-bound jobs); 0.25 s, as the multi-axis rig waits.
+    drive_kwargs.setdefault("tpdo_timeout", 0.25)
     drive = CanopenDrive(node_id, **node.spec.drive_kwargs(), **drive_kwargs)
     status = None
     try:

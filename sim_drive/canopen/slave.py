@@ -304,8 +304,8 @@ class CanopenSimDrive:
         if self.nmt is NmtState.OPERATIONAL:
             self.timers.stop_rpdo_monitoring()
             self._abort_connection()  # while still OPERATIONAL: its EMCY may go out
-        old, self.nmt = self.nmt, new
-        logger.info("node %d: NMT %s -> %s", self.node_id, old.label, new.label)
+        logger.info("node %d: NMT %s -> %s", self.node_id, self.nmt.label, new.label)  # logged before it shows
+        self.nmt = new
         if new is NmtState.OPERATIONAL:
             self._engine.forget_sent()
             self._send_event_tpdos()
