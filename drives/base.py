@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from drives.cia402 import ObjectSpec, OperationMode
-from drives.errors import ParameterError
+from drives.errors import DriveArgumentError
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,10 +55,10 @@ class DriveScaling:
         for name in ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
-                raise ParameterError(name, value, "a finite real > 0", "drive scaling")
+                raise DriveArgumentError(name, value, "a finite real > 0", "drive scaling")
         permille = self.max_torque_permille
         if isinstance(permille, bool) or not isinstance(permille, int) or not 1 <= permille <= 0xFFFF:
-            raise ParameterError("max_torque_permille", permille, "an integer in [1, 65535] (0x6072)", "drive scaling")
+            raise DriveArgumentError("max_torque_permille", permille, "an integer in [1, 65535] (0x6072)", "drive scaling")
 
     @property
     def newton_per_permille(self) -> float:

@@ -20,7 +20,7 @@ import argparse
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
-from drives.errors import BusConfigError, ParameterError
+from drives.errors import BusConfigError, DriveArgumentError
 
 if TYPE_CHECKING:
     import can
@@ -110,12 +110,12 @@ def parse_bus_option(text: str) -> tuple[str, Any]:
 
 def merge_bus_options(*groups: Iterable[tuple[str, Any]]) -> dict[str, Any]:
     """The ``(key, value)`` pairs of ``--bus-option``, ``--bus-kwargs`` (and ``--interface``...) as one
-    dict of python-can bus arguments; ParameterError when a key is given twice with different values."""
+    dict of python-can bus arguments; DriveArgumentError when a key is given twice with different values."""
     merged: dict[str, Any] = {}
     for group in groups:
         for key, value in group:
             if key in merged and merged[key] != value:
-                raise ParameterError(f"bus argument {key}", value,
+                raise DriveArgumentError(f"bus argument {key}", value,
                                      f"one value per key ({key} = {merged[key]!r} is given too)")
             merged[key] = value
     return merged

@@ -1,28 +1,11 @@
-"""The error tree of the whole distribution, rooted here because ``drives`` is its bottom layer.
+"""The errors of ``drives``, rooted at :class:`FieldbusError` (``drives`` imports nothing of ours).
 
-Every error raised on purpose carries its data from construction; the command line maps the
-branch to an exit status (``haptic_bus.app.cli``)::
-
-    HapticBusError                       anything raised on purpose
-     +-- ParameterError (ValueError)     invalid input: .name, .value, .allowed      exit 2
-     +-- DriveError                      a drive or bus failed: .node                 exit 1
-     |    +-- BusConfigError             no usable CAN bus configuration
-     |    +-- DriveTimeout               silence: no answer in time
-     |    |    +-- DriveStateError       the CiA-402 state machine stalled: .state
-     |    |    +-- ModbusLinkLost        the Modbus link is gone: call reconnect()
-     |    +-- DriveFault                 the drive reported a fault: .code
-     |    +-- ScalingConflict            two sources of a scaling factor disagree: .field, .first, .second
-     |    +-- DriveProtocolError         an answer or frame the protocol forbids
-     |    |    +-- SdoAbortError         SDO abort: .abort_code, .index, .subindex
-     |    |    +-- ObjectAbsent          the drive (or its register map) has no such object: .index, .subindex
-     |    |    +-- ScalingObjectError    a factor-group/SI-unit object out of range: .index, .subindex, .value, .allowed
-     |    |    +-- ModbusExceptionError  exception response: .exception_code
-     |    |    +-- PdoLengthError        PDO frame of the wrong length: .expected, .got
-     |    +-- UnsupportedModeError       0x6502 lacks the requested mode
-     +-- GateRefusal                     (haptic_bus) the passivity gate said no      exit 1
-     +-- AssumptionBroken                (haptic_bus) the gate's assumption failed    exit 3
-
-``haptic_bus.errors`` re-exports all of them beside the ones it adds.
+Every error raised on purpose carries its data from construction (the way canopen's
+``SdoAbortedError`` carries its code).  A silence is a :class:`DriveTimeout`, which is also the
+builtin :class:`TimeoutError` (as python-can's ``CanTimeoutError`` is); an invalid argument to drive
+code is a :class:`DriveArgumentError`, also a :class:`ValueError`.  The tree of the whole
+distribution, this one and ``haptic_bus``' beside it, is drawn once, in :mod:`haptic_bus.errors`,
+which is also where users import every class from.
 """
 
 from __future__ import annotations
@@ -30,15 +13,15 @@ from __future__ import annotations
 from typing import Any
 
 
-class HapticBusError(Exception):
-    """Base class of every error the distribution raises on purpose."""
+class FieldbusError(Exception):
+    """Base class of every error ``drives`` raises on purpose."""
 
 
-class ParameterError(HapticBusError, ValueError):
-    """A parameter is outside its allowed range (or not a number at all).
+class DriveArgumentError(FieldbusError, ValueError):
+    """An argument to drive code is outside its allowed range (a bus setting, a node id, a value to
+    write), found before the bus is touched.
 
-    ``name``, ``value`` and ``allowed`` are given at construction, so a commissioning engineer
-    can act on the message without reading code; ``context`` says where it was read.
+    ``name``, ``value`` and ``allowed`` are given at construction; ``context`` says where it was read.
     """
 
     def __init__(self, name: str, value: object, allowed: str, context: str = "") -> None:
@@ -50,7 +33,7 @@ class ParameterError(HapticBusError, ValueError):
         super().__init__(f"{where}{name} = {value!r} is invalid; allowed: {allowed}")
 
 
-class DriveError(HapticBusError):
+class DriveError(FieldbusError):
     """A drive or its bus failed; ``node`` names the drive (node id or unit id)."""
 
     def __init__(self, node: str, message: str) -> None:
@@ -63,7 +46,7 @@ class BusConfigError(DriveError):
     """No usable CAN bus configuration (no interface selected, unknown interface, open failed)."""
 
 
-class DriveTimeout(DriveError):
+class DriveTimeout(DriveError, TimeoutError):
     """The drive did not answer within its timeout (silent node, wrong node id, lost link)."""
 
 

@@ -14,7 +14,7 @@ from typing import Protocol
 
 from drives.cia301 import SdoAbort
 from drives.cia402 import ObjectSpec
-from drives.errors import DriveProtocolError, ModbusExceptionError, ObjectAbsent, ParameterError, SdoAbortError
+from drives.errors import DriveArgumentError, DriveProtocolError, ModbusExceptionError, ObjectAbsent, SdoAbortError
 
 ILLEGAL_DATA_ADDRESS = 0x02  # Modbus exception: no such register
 _ABSENT_ABORTS = frozenset({SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX})
@@ -55,13 +55,13 @@ OBJECT_SYNTAX = "INDEX[:SUB], INDEX 0x0001..0xFFFF and SUB 0..255, decimal or 0x
 
 
 def parse_object(text: str) -> tuple[int, int]:
-    """``"0x6041"`` -> (0x6041, 0), ``"0x1018:4"`` -> (0x1018, 4); ParameterError naming the syntax otherwise."""
+    """``"0x6041"`` -> (0x6041, 0), ``"0x1018:4"`` -> (0x1018, 4); DriveArgumentError naming the syntax otherwise."""
     index_text, colon, sub_text = text.strip().partition(":")
     try:
         index = int(index_text, 0)
         subindex = int(sub_text, 0) if colon else 0
     except ValueError:
-        raise ParameterError("object", text, OBJECT_SYNTAX) from None
+        raise DriveArgumentError("object", text, OBJECT_SYNTAX) from None
     if not (INDEX_RANGE[0] <= index <= INDEX_RANGE[1] and SUBINDEX_RANGE[0] <= subindex <= SUBINDEX_RANGE[1]):
-        raise ParameterError("object", text, OBJECT_SYNTAX)
+        raise DriveArgumentError("object", text, OBJECT_SYNTAX)
     return index, subindex

@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 
 from drives.cia402 import AbortConnectionOption
-from drives.errors import ParameterError
+from drives.errors import DriveArgumentError
 
 VIRTUAL_TIME_DEADLINE = 1.0  # s: the RPDO deadline's floor when nothing paces the loop
 ABORT_OPTIONS = {"none": 0, "fault": 1, "disable-voltage": 2, "quick-stop": 3}  # 0x6007 by name
@@ -46,7 +46,7 @@ class SafetySettings:
     def __post_init__(self) -> None:
         def check(name: str, ok: bool, allowed: str) -> None:
             if not ok:
-                raise ParameterError(name, getattr(self, name), allowed, "CANopen safety settings")
+                raise DriveArgumentError(name, getattr(self, name), allowed, "CANopen safety settings")
 
         def whole(value: object) -> bool:
             return isinstance(value, int) and not isinstance(value, bool)

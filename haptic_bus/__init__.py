@@ -44,9 +44,9 @@ _HOMES = {
     "RunOptions": "haptic_bus.app.runner",
     "run_canopen": "haptic_bus.app.runner",
     "run_modbus": "haptic_bus.app.runner",
-    "HapticBusError": "drives.errors",
-    "ParameterError": "drives.errors",
-    "DriveError": "drives.errors",
+    "HapticBusError": "haptic_bus.errors",
+    "ParameterError": "haptic_bus.errors",
+    "DriveError": "haptic_bus.errors",
 }
 
 __all__ = [
@@ -90,7 +90,6 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:
-    from drives.errors import DriveError, HapticBusError, ParameterError
     from haptic_bus.analysis.check import CheckReport, check_passivity, format_check
     from haptic_bus.analysis.loop import WallLoop
     from haptic_bus.app.profiles import Profile, load_profile
@@ -98,3 +97,4 @@ if TYPE_CHECKING:
     from haptic_bus.control.controller import RunSummary, WallController
     from haptic_bus.control.gate import DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
     from haptic_bus.control.scene import Detent, Slot, Wall, compile_scene
+    from haptic_bus.errors import DriveError, HapticBusError, ParameterError

@@ -7,7 +7,7 @@ import numbers
 import os
 import pathlib
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 
 
 def real_in_range(

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import device_parameters, read_toml, resolve
 from sim_drive.space_operator import SpaceHand, hand_from_table

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from drives.errors import ParameterError
 from haptic_bus.analysis.can_timing import (
     MAX_DATA_BYTES,
     checked_bitrate,
@@ -19,6 +18,7 @@ from haptic_bus.analysis.can_timing import (
     frame_bits,
     frame_time,
 )
+from haptic_bus.errors import ParameterError
 
 __all__ = ["BusLoadMeter", "cycle_bits", "frame_bits", "frame_time"]
 

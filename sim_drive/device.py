@@ -56,7 +56,7 @@ from drives.cia402 import (
     supports,
     transitions,
 )
-from drives.errors import HapticBusError
+from haptic_bus.errors import HapticBusError
 from sim_drive.handle import Handle
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing

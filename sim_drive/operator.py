@@ -23,7 +23,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range
 
 FORCE_LIMIT = 1e6  # N: far beyond any haptic handle, keeps every product finite

@@ -35,9 +35,9 @@ from dataclasses import dataclass
 
 from drives.base import DriveScaling
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE
-from drives.errors import ParameterError
 from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE
 from haptic_bus.analysis.velocity import POINT, VelocityModel
+from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range, whole_in_range
 
 SCALE_RANGE = (0.0, 1e6)  # exclusive low: m/s per count, m per count, N per N m

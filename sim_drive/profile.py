@@ -25,7 +25,7 @@ import tomllib
 from dataclasses import dataclass
 from typing import Any
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from sim_drive.operator import NoOperator, OperatorModel, operator_from_table
 from sim_drive.parameters import DeviceParameters, Timing
 

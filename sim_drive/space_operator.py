@@ -26,7 +26,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range
 from sim_drive.device import SimulatedDrive
 from sim_drive.operator import FORCE_LIMIT, POSITION_LIMIT, TIME_LIMIT, OperatorModel

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.closed_form import velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict, seed_verdict
 from haptic_bus.analysis.frequency import seed_t_zw, seed_z_zw, t_fund, z_fund

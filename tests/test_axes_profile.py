@@ -7,7 +7,7 @@ import pathlib
 
 import pytest
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.app.axes_profile import AxesProfileRefusal, load_any_profile, load_axes_profile, read_axes_profile
 from haptic_bus.app.profile_reader import ProfileError

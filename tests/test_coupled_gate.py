@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.coupled import coupled_verdict, hermitian_impedance, worst_direction
 from haptic_bus.analysis.coupled_energy import CoupledMachine, commensurate, steady_mean_power
 from haptic_bus.analysis.coupled_loop import CoupledLoop, components, coupled_poles, plane_wall

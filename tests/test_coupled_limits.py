@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.coupled import coupled_verdict, least_eigenvalue
 from haptic_bus.analysis.coupled_limits import PlaneWall, passive_along, plane_quadratic
 from haptic_bus.analysis.coupled_loop import plane_wall, unit_normal

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.closed_form import velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict, seed_verdict
 from haptic_bus.analysis.energy import (

@@ -206,7 +206,7 @@ def test_too_little_travel_for_the_encoder_cannot_support_the_estimate() -> None
 
 
 def test_a_travel_shorter_than_the_encoder_can_show_is_refused_as_input() -> None:
-    from drives.errors import ParameterError
+    from haptic_bus.errors import ParameterError
 
     with pytest.raises(ParameterError, match="travel"):
         Plan(1e-3, 5.0, 1e-3, 20.0, 0.5, 1e-4)

@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.frequency import t_fund, z_fund
 from haptic_bus.analysis.limits import max_damping, max_stiffness

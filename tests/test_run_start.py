@@ -17,7 +17,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.app.profiles import StartPolicy, load_profile
 from haptic_bus.app.runner import RunOptions, run_canopen
 from haptic_bus.control.record import COLUMNS

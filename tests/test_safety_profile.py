@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from drives.safety import SafetySettings
 from haptic_bus.app.profiles import load_profile, resolve_profile
 

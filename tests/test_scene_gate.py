@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.control.gate import DeviceLoop, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.scene import Detent, Slot, Wall, compile_scene
 

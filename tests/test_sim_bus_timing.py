@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits, frame_time
 
 

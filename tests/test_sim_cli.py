@@ -15,7 +15,7 @@ import pytest
 
 from drives.bus_config import open_bus
 from drives.cia402 import Command
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from sim_drive.cli import main
 from sim_drive.eds import eds_path
 from sim_drive.operator import HandModel

@@ -7,7 +7,7 @@ import pathlib
 
 import pytest
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from sim_drive.operator import (
     OPERATOR_CODES,
     Chirp,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from drives.cia402 import Command
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from sim_drive.device import SimulatedDrive
 from sim_drive.handle import Handle
 from sim_drive.operator import ConstantPush, Sinusoid

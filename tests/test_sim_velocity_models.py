@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from drives.cia402 import Command
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.energy import Tones, simulate, wall_forces
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.poles import spectral_radius

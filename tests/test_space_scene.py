@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.coupled import coupled_verdict
 from haptic_bus.analysis.coupled_loop import plane_wall
 from haptic_bus.analysis.loop import WallLoop

@@ -26,7 +26,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import expm
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.energy import Sinusoid, periodic_mean_power
 from haptic_bus.analysis.frequency import t_fund
 from haptic_bus.analysis.loop import WallLoop

@@ -56,7 +56,7 @@ from drives.cia402 import (
     decode_statusword,
 )
 from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
-from drives.errors import DriveError, DriveProtocolError, DriveTimeout, ParameterError
+from drives.errors import DriveArgumentError, DriveError, DriveProtocolError, DriveTimeout
 from drives.safety import DEFAULT_SAFETY, SafetySettings
 
 logger = logging.getLogger(__name__)
@@ -74,7 +74,7 @@ def split_into_frames(objects: Sequence[ObjectSpec | int]) -> list[tuple[ObjectS
 
 def _check(name: str, ok: bool, value: object, allowed: str) -> None:
     if not ok:
-        raise ParameterError(name, value, allowed, "CANopen drive")
+        raise DriveArgumentError(name, value, allowed, "CANopen drive")
 
 
 class CanopenDrive(Cia402Master):
@@ -299,7 +299,7 @@ class CanopenDrive(Cia402Master):
         spec = object_spec(spec)
         low, high = spec.data_type.range
         if not low <= value <= high:
-            raise ParameterError(f"0x{spec.index:04X} ({spec.name})", value, f"{spec.data_type.name} [{low}, {high}]")
+            raise DriveArgumentError(f"0x{spec.index:04X} ({spec.name})", value, f"{spec.data_type.name} [{low}, {high}]")
         self.sdo.write_int(spec.index, spec.subindex, spec.data_type, value)  # type: ignore[union-attr]
 
     # ------------------------------------------------------------------ cyclic hot path

@@ -14,7 +14,7 @@ import struct
 from collections.abc import Iterable, Sequence
 
 from drives.cia402 import OBJECTS, ObjectSpec
-from drives.errors import ParameterError, PdoLengthError
+from drives.errors import DriveArgumentError, PdoLengthError
 
 MAX_PDO_BYTES = 8  # classical CAN
 
@@ -27,7 +27,7 @@ def object_spec(obj: ObjectSpec | int) -> ObjectSpec:
         return OBJECTS[int(obj)]
     except KeyError:
         known = ", ".join(f"0x{i:04X}" for i in sorted(OBJECTS))
-        raise ParameterError("object", f"0x{int(obj):04X}", f"an ObjectSpec, or one of {known}", "PDO mapping") from None
+        raise DriveArgumentError("object", f"0x{int(obj):04X}", f"an ObjectSpec, or one of {known}", "PDO mapping") from None
 
 
 class PdoCodec:
@@ -42,13 +42,13 @@ class PdoCodec:
         self.name = name
         self.entries: tuple[ObjectSpec, ...] = tuple(object_spec(e) for e in entries)
         if not self.entries:
-            raise ParameterError("entries", "()", "at least one mapped object", name)
+            raise DriveArgumentError("entries", "()", "at least one mapped object", name)
         fmt = "<" + "".join(e.data_type.struct_format for e in self.entries)
         self.struct = struct.Struct(fmt)
         self.size: int = self.struct.size
         if self.size > MAX_PDO_BYTES:
             names = ", ".join(f"0x{e.index:04X}" for e in self.entries)
-            raise ParameterError("entries", names,
+            raise DriveArgumentError("entries", names,
                                  f"objects of at most {MAX_PDO_BYTES} bytes in all (these need {self.size})", name)
         self.mapping_words: tuple[int, ...] = tuple(
             e.index << 16 | e.subindex << 8 | 8 * e.data_type.size for e in self.entries
@@ -64,7 +64,7 @@ class PdoCodec:
         for position, entry in enumerate(self.entries):
             if entry.index == index and entry.subindex == subindex:
                 return position
-        raise ParameterError("object", f"0x{index:04X}:{subindex:02X}", "a mapped object", self.name)
+        raise DriveArgumentError("object", f"0x{index:04X}:{subindex:02X}", "a mapped object", self.name)
 
     def decode(self, data: bytes | bytearray | memoryview) -> tuple[int, ...]:
         """Values of one frame, in mapping order; PdoLengthError if the length does not match."""
@@ -87,8 +87,8 @@ class PdoCodec:
     def check(self, values: Sequence[int]) -> None:
         """Raise ValueError naming the object if a value does not fit its data type."""
         if len(values) != len(self.entries):
-            raise ParameterError("values", len(values), f"exactly {len(self.entries)} values", self.name)
+            raise DriveArgumentError("values", len(values), f"exactly {len(self.entries)} values", self.name)
         for value, (low, high), entry in zip(values, self._ranges, self.entries):
             if not low <= value <= high:
-                raise ParameterError(f"0x{entry.index:04X} ({entry.name})", value,
+                raise DriveArgumentError(f"0x{entry.index:04X} ({entry.name})", value,
                                      f"{entry.data_type.name} range [{low}, {high}]", self.name)

@@ -201,7 +201,7 @@ def scan_canopen(
     """The nodes among ``node_ids`` on the CAN bus ``bus`` (python-can keyword arguments:
     ``interface``, ``channel``, ``bitrate``, ...; missing ones from python-can's configuration),
     by node id.  ``timeout``: the listening window after the probe, s; ``answer_timeout``: each
-    SDO read of the details, s (module docstring).  ParameterError for bad arguments (before the
+    SDO read of the details, s (module docstring).  DriveArgumentError for bad arguments (before the
     bus is opened), BusConfigError if the bus cannot be opened, DriveError if it fails."""
     ids = checked_ids("node ids", node_ids, *NODE_ID_RANGE)
     window = checked_seconds("timeout", timeout)

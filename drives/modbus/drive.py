@@ -56,7 +56,7 @@ from drives.cia402 import (
     decode_statusword,
 )
 from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
-from drives.errors import DriveError, DriveProtocolError, DriveTimeout, ModbusExceptionError, ModbusLinkLost, ParameterError
+from drives.errors import DriveArgumentError, DriveError, DriveProtocolError, DriveTimeout, ModbusExceptionError, ModbusLinkLost
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import (
     INPUT_BLOCK,
@@ -127,9 +127,9 @@ class ModbusDrive(Cia402Master):
     def _setup(self, address: ModbusAddress, unit_id: int, word_order: str, cycle: str, with_position: bool,
                scaling: DriveScaling | None, state_timeout: float, check_identity: bool, safety: SafetySettings) -> None:
         if isinstance(unit_id, bool) or not isinstance(unit_id, int) or not 0 <= unit_id <= 247:
-            raise ParameterError("unit_id", unit_id, "0..247", "Modbus drive")
+            raise DriveArgumentError("unit_id", unit_id, "0..247", "Modbus drive")
         if cycle not in CYCLE_MODES:
-            raise ParameterError("cycle", cycle, " or ".join(map(repr, CYCLE_MODES)), "Modbus drive")
+            raise DriveArgumentError("cycle", cycle, " or ".join(map(repr, CYCLE_MODES)), "Modbus drive")
         self._init_master(f"Modbus unit {unit_id} at {address.url}", scaling)
         self.unit_id = unit_id
         self.cycle = cycle
@@ -278,10 +278,10 @@ class ModbusDrive(Cia402Master):
         return int(self._read_spec(register_for_object(spec)))
 
     def write_object(self, spec: ObjectSpec | int, value: int) -> None:
-        """Write a CiA-402 object of the register map, in drive units (ParameterError if out of range)."""
+        """Write a CiA-402 object of the register map, in drive units (DriveArgumentError if out of range)."""
         reg = register_for_object(spec)
         if reg.access != "rw":
-            raise ParameterError("register", reg.label, "a writable register (this one is read-only)", self.name)
+            raise DriveArgumentError("register", reg.label, "a writable register (this one is read-only)", self.name)
         self.write_registers(reg.address, encode_value(reg, value, self.word_order))
 
     def _require_link(self) -> None:

@@ -222,7 +222,7 @@ def scan_modbus(
     answer_timeout: float = DEFAULT_ANSWER_TIMEOUT,
 ) -> ModbusScan:
     """The units among ``unit_ids`` at ``url`` (``tcp://HOST:PORT`` or ``rtu:/dev/...``), in order
-    (module docstring).  ParameterError for bad arguments (before connecting), DriveTimeout if the
+    (module docstring).  DriveArgumentError for bad arguments (before connecting), DriveTimeout if the
     server cannot be reached, DriveError if the link fails."""
     ids = checked_ids("unit ids", unit_ids, *UNIT_ID_RANGE)
     checked_seconds("timeout", timeout)

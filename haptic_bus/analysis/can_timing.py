@@ -31,7 +31,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range, whole_in_range
 
 MAX_DATA_BYTES = 8

@@ -213,7 +213,7 @@ def check_passivity(mass: float, friction: float, period: float, stiffness: floa
     model (``"point"``, ``"average"``, ``"window:SECONDS"``, ``"lowpass:SECONDS"``)?  Every
     criterion's answer, the passive intervals, and (``out_of_band``) the exposure above Nyquist.
 
-    Raises :class:`~drives.errors.ParameterError` naming a parameter outside its range.
+    Raises :class:`~haptic_bus.errors.ParameterError` naming a parameter outside its range.
     """
     loop = WallLoop(mass, friction, period, stiffness, damping, delay, VelocityModel.parse(velocity))
     return check_loop(loop, out_of_band=out_of_band)

@@ -90,7 +90,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drives.errors import ParameterError
 from haptic_bus.analysis.coupled_loop import CoupledLoop, components, coupled_poles
 from haptic_bus.analysis.criterion import EXACT, SIGN_TOLERANCE, Verdict, exact_verdict
 from haptic_bus.analysis.frequency import delay_rotation, loop_terms, measurement_terms
@@ -100,6 +99,7 @@ from haptic_bus.analysis.sampled_loop import window_fraction
 from haptic_bus.analysis.theta_complex import ThetaComplex
 from haptic_bus.analysis.theta_search import refine_minima, theta_grid
 from haptic_bus.analysis.trig import cospi, sincpi
+from haptic_bus.errors import ParameterError
 
 COUPLED = "exact, coupled axes: closed-loop stability and Herm T_fund >= 0 on (0, pi] (least eigenvalue)"
 _SEARCH = "union of the axes' grids + coupled pole fans + vectorised zoom + parabola"

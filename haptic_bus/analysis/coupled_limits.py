@@ -39,7 +39,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from drives.errors import ParameterError
 from haptic_bus.analysis.coupled import measurement_lag
 from haptic_bus.analysis.coupled_loop import coupled_poles, plane_wall, unit_normal
 from haptic_bus.analysis.criterion import SIGN_TOLERANCE
@@ -50,6 +49,7 @@ from haptic_bus.analysis.poles import radius_excess
 from haptic_bus.analysis.theta_complex import ThetaComplex
 from haptic_bus.analysis.theta_search import refine_minima, theta_grid
 from haptic_bus.analysis.trig import cospi, sincpi
+from haptic_bus.errors import ParameterError
 
 FAMILIES = ("K", "B")
 

@@ -44,10 +44,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from drives.errors import ParameterError
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE, WallLoop
 from haptic_bus.analysis.poles import radius_excess
 from haptic_bus.analysis.sampled_loop import ClosedLoopLayout, period_map, shifted_closed_loop
+from haptic_bus.errors import ParameterError
 
 MAX_AXES = 6
 RANK_TOLERANCE = 1e-12

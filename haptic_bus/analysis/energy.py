@@ -37,7 +37,6 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from drives.errors import ParameterError
 from haptic_bus.analysis.frequency import seed_t_zw, t_fund
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.poles import spectral_radius
@@ -48,6 +47,7 @@ from haptic_bus.analysis.sampled_loop import (
     event_times,
     shifted_closed_loop,
 )
+from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range, whole_in_range
 
 MAX_SAMPLES = 10_000_000

@@ -42,7 +42,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drives.errors import ParameterError
 from haptic_bus.analysis.characteristic import characteristic, flip_value
 from haptic_bus.analysis.criterion import SIGN_TOLERANCE
 from haptic_bus.analysis.frequency import (
@@ -57,6 +56,7 @@ from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE, WallLoop
 from haptic_bus.analysis.poles import closed_loop_poles, stable_all
 from haptic_bus.analysis.theta_complex import ThetaComplex
 from haptic_bus.analysis.theta_search import Group, Lane, LaneMinimum, refine_lanes, sorted_unique, theta_grid
+from haptic_bus.errors import ParameterError
 
 _NO_ROOT = 1e300  # stands in for "no root on that side" (finite, so the zoom's differences stay finite)
 _ZOOM_COUNT = 3  # minima refined per end, as the criterion's zoom does

@@ -23,7 +23,7 @@ import math
 import numbers
 from dataclasses import dataclass
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 
 KINDS = ("point", "average", "window", "lowpass")
 LOWPASS_RANGE = (1e-12, 100.0)  # s: TAU; T/TAU stays finite for every valid T

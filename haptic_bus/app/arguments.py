@@ -81,12 +81,12 @@ unit_id = whole("unit id", *UNIT_ID_RANGE)
 
 def modbus_url(text: str) -> str:
     """``tcp://HOST:PORT`` (port 1..65535) or ``rtu:/dev/...``."""
-    from drives.errors import ParameterError
     from drives.modbus.link import ModbusAddress
+    from haptic_bus.errors import DriveArgumentError
 
     try:
         ModbusAddress.from_url(text)
-    except ParameterError as exc:
+    except DriveArgumentError as exc:
         raise argparse.ArgumentTypeError(f"--modbus {text!r} is invalid; allowed: {exc.allowed}") from None
     return text
 
@@ -115,7 +115,7 @@ def bus_arguments(args: argparse.Namespace) -> dict[str, Any]:
 def refuse_can_options_with_modbus(args: argparse.Namespace, command: str, others: tuple[str, ...] = (),
                                    modbus_options: str = "--unit-id") -> None:
     """ParameterError naming the first CAN bus option (or one of ``others``, argparse dests) given beside ``--modbus``."""
-    from drives.errors import ParameterError
+    from haptic_bus.errors import ParameterError
 
     given = [dest for dest in ("interface", "channel", "bitrate", "bus_option", "bus_kwargs", *others) if getattr(args, dest)]
     if given:

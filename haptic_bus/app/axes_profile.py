@@ -44,7 +44,6 @@ from types import MappingProxyType
 from typing import Any
 
 from drives.cia301 import NODE_ID_RANGE
-from drives.errors import ParameterError
 from drives.modbus.register_map import UNIT_ID_RANGE
 from drives.safety import SafetySettings
 from haptic_bus.analysis.can_timing import BITRATE_RANGE, BusLoad
@@ -72,6 +71,7 @@ from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.space_gate import SpaceDecision, SpaceGate, SpaceGateRefusal
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere, compile_space_scene
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
+from haptic_bus.errors import ParameterError
 
 DEFAULT_BITRATE = 1_000_000
 HAND_MODELS = ("none", "push")

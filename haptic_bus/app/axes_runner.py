@@ -39,7 +39,6 @@ from drives.bus_config import resolve_bus_config
 from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
 from drives.cia402 import POSITION_ACTUAL
-from drives.errors import DriveError, ParameterError
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.axes_records import axes_run_document, write_axes_run
@@ -60,6 +59,7 @@ from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.cycle_loop import RunSummary
 from haptic_bus.control.space_gate import SpaceGate, SpaceGateRefusal
 from haptic_bus.control.space_scene import SpaceScene
+from haptic_bus.errors import DriveError, ParameterError
 
 RUN_MAPPING = "with-position"
 VIRTUAL_TIME_PATIENCE: dict[str, Any] = {"tpdo_timeout": 0.25, "heartbeat_consumer_ms": 1000}

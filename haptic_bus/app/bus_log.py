@@ -28,8 +28,8 @@ from typing import Any
 import can
 
 from drives.bus_config import open_bus
-from drives.errors import DriveError
 from haptic_bus.app.record_stream import FLUSH_INTERVAL, write_whole
+from haptic_bus.errors import DriveError
 
 logger = logging.getLogger(__name__)
 

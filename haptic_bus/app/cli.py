@@ -140,7 +140,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _validate_run(args: argparse.Namespace) -> DriveAddress:
     """The drive the run talks to; conflicting or ignored options refused before anything is touched."""
-    from drives.errors import ParameterError
+    from haptic_bus.errors import ParameterError
 
     if args.modbus:
         refuse_can_options_with_modbus(args, "run", ("node_id", "controller_node_id"))
@@ -209,7 +209,7 @@ def _run(args: argparse.Namespace) -> int:
 def _refuse_single_axis_options(args: argparse.Namespace) -> None:
     """A multi-axis profile names its drives in ``[[axes]]``: the options that name one drive, or act
     on one, are refused (exit 2) before anything is touched."""
-    from drives.errors import ParameterError
+    from haptic_bus.errors import ParameterError
 
     given = [flag for flag, value in (("--node-id", args.node_id), ("--modbus", args.modbus), ("--unit-id", args.unit_id),
                                       ("--reset-fault", args.reset_fault),
@@ -222,8 +222,8 @@ def _refuse_single_axis_options(args: argparse.Namespace) -> None:
 def _upload(args: argparse.Namespace) -> int:
     """0 accepted; 1 refused by the gate, or no controller on the node (silent, or another device);
     2 invalid input, an object index the controller does not have included (asked before any write)."""
-    from drives.errors import DriveError
     from haptic_bus.control.upload import UploadRefused, upload_walls
+    from haptic_bus.errors import DriveError
     from haptic_bus.validation import real_in_range, whole_in_range
 
     index = whole_in_range("object", args.object, 0, 255, context="upload")
@@ -389,13 +389,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
-    from drives.errors import DriveError, HapticBusError, ParameterError
-    from haptic_bus.control.gate import GateRefusal
-    from haptic_bus.control.supervisor import AssumptionBroken
+    from haptic_bus.errors import INVALID_INPUT, AssumptionBroken, DriveError, GateRefusal, HapticBusError
 
     try:
         return int(args.handler(args))
-    except ParameterError as error:
+    except INVALID_INPUT as error:
         print(f"haptic-bus {args.command}: error: {error}", file=sys.stderr)
         return EXIT_INVALID
     except DriveError as error:

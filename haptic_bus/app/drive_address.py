@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
-from drives.errors import ParameterError
 from haptic_bus.app.arguments import (
     add_bus_arguments,
     bus_arguments,
@@ -26,6 +25,7 @@ from haptic_bus.app.arguments import (
     refuse_can_options_with_modbus,
     unit_id,
 )
+from haptic_bus.errors import ParameterError
 
 if TYPE_CHECKING:  # the services import canopen or pymodbus: only when a command runs
     from drives.drive_status import DriveStatus

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from drives.base import ScalingReading
-from drives.errors import DriveProtocolError, DriveTimeout
+from haptic_bus.errors import DriveProtocolError, DriveTimeout
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,6 @@ import pathlib
 import sys
 from typing import TYPE_CHECKING, Any
 
-from drives.errors import ParameterError
 from haptic_bus.app.arguments import (
     add_bus_arguments,
     add_command,
@@ -41,6 +40,7 @@ from haptic_bus.app.arguments import (
     unit_id,
     whole,
 )
+from haptic_bus.errors import ParameterError
 from haptic_bus.identify.bounds import (
     DEFAULT_DURATION,
     DEFAULT_TRAVEL,

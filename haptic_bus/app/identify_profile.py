@@ -30,7 +30,7 @@ from typing import Any
 import tomlkit
 from tomlkit.items import Table
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.identify import Identification
 
 DIGITS = 6  # significant digits written

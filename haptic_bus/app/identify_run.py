@@ -29,10 +29,10 @@ from typing import Any, Protocol
 
 from drives.base import CyclicInputs, Drive, DriveScaling
 from drives.bus_config import resolve_bus_config
-from drives.errors import DriveError, DriveProtocolError
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.runner import EXIT_STATUS, StopRequest
 from haptic_bus.control.clock import RealClock, VirtualClock
+from haptic_bus.errors import DriveError, DriveProtocolError
 from haptic_bus.identify import Identification, Plan, Record, Recorder, Scale, Session, identify
 from haptic_bus.identify.bounds import DEFAULT_DURATION, DEFAULT_TRAVEL, MAX_DELAY
 

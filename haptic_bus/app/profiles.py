@@ -33,7 +33,6 @@ from typing import Any
 
 from drives.base import DriveScaling
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, TARGET_TORQUE
-from drives.errors import ParameterError
 from drives.safety import ABORT_OPTIONS, SafetySettings
 from haptic_bus.analysis.loop import (
     DAMPING_RANGE,
@@ -49,6 +48,7 @@ from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision
 from haptic_bus.control.passivity_layer import LAYER_MODES, LayerPolicy
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene, object_to_dict
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
+from haptic_bus.errors import ParameterError
 
 DEFAULT_PROFILE = "cia402-handle"
 TIMINGS: dict[str, float | None] = {"ideal": 0, "cia402": 1, "reception": None}

@@ -21,7 +21,6 @@ import sys
 import tomllib
 from typing import Any
 
-from drives.errors import HapticBusError, ParameterError
 from haptic_bus.analysis.check import check_loop, format_check
 from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
 from haptic_bus.app.arguments import (
@@ -48,6 +47,7 @@ from haptic_bus.app.profiles import (
     shipped_profiles,
 )
 from haptic_bus.control.gate import GateDecision, GateRefusal
+from haptic_bus.errors import HapticBusError, ParameterError
 
 EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
 

@@ -1,7 +1,7 @@
 """Where a run keeps its record: ``runs/<UTC timestamp>-<profile>/`` (or ``--out``), written as it goes.
 
 The folder is created and probed for writing before any bus is touched (an unwritable one is
-a :class:`~drives.errors.ParameterError`: exit 2).  It receives:
+a :class:`~haptic_bus.errors.ParameterError`: exit 2).  It receives:
 
 - ``run.json`` (:class:`RunJournal`), at once: ``status`` "running", ``"ended": false``; kept
   current while the run goes on (each event, each scene) and completed at the end: software
@@ -34,12 +34,12 @@ import threading
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from drives.errors import ParameterError
 from haptic_bus._version import __version__
 from haptic_bus.app.profiles import Profile, profile_to_dict
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.gate import DeviceLoop
 from haptic_bus.control.record import RecordTable, read_record
+from haptic_bus.errors import ParameterError
 from haptic_bus.validation import writable_folder
 
 DEFAULT_ROOT = pathlib.Path("runs")

@@ -43,7 +43,6 @@ from drives.bus_config import resolve_bus_config
 from drives.cia402 import State
 from drives.cia402_master import Cia402Master
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
-from drives.errors import DriveError, DriveFault, DriveStateError, HapticBusError
 from drives.fault_reset import DEFAULT_WAIT
 from drives.safety import SafetySettings
 from haptic_bus.app import preflight
@@ -59,6 +58,7 @@ from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
 from haptic_bus.control.record import Event
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.supervisor import Action
+from haptic_bus.errors import DriveError, DriveFault, DriveStateError, HapticBusError
 
 if TYPE_CHECKING:
     from drives.modbus.drive import ModbusDrive

@@ -30,7 +30,6 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from drives.cia301 import NODE_ID_RANGE
-from drives.errors import ParameterError
 from drives.modbus.register_map import UNIT_ID_RANGE
 from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, MAX_SECONDS
 from haptic_bus.app.arguments import (
@@ -42,6 +41,7 @@ from haptic_bus.app.arguments import (
     number,
     refuse_can_options_with_modbus,
 )
+from haptic_bus.errors import DriveArgumentError, ParameterError
 
 if TYPE_CHECKING:  # the scans import canopen and pymodbus: only when a scan runs
     from drives.canopen.scan import CanopenNode
@@ -110,7 +110,7 @@ def _validate(args: argparse.Namespace) -> None:
     refuse_can_options_with_modbus(args, "scan", ("node_ids",), "--unit-ids")
     try:
         ModbusAddress.from_url(args.modbus)
-    except ParameterError as exc:
+    except DriveArgumentError as exc:
         raise ParameterError("--modbus", args.modbus, exc.allowed, "scan") from None
 
 

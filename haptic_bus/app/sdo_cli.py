@@ -21,10 +21,10 @@ import argparse
 import json
 from typing import TYPE_CHECKING, Any
 
-from drives.errors import DriveProtocolError, ParameterError
 from drives.object_access import parse_object
 from haptic_bus.app.arguments import EXIT_OK, add_command
 from haptic_bus.app.drive_address import DriveAddress, add_drive_arguments, drive_address
+from haptic_bus.errors import DriveProtocolError, ParameterError
 
 if TYPE_CHECKING:
     from canopen import objectdictionary as od

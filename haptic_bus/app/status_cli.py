@@ -21,9 +21,9 @@ import json
 import sys
 
 from drives.drive_status import DEFAULT_LISTEN
-from drives.errors import ParameterError
 from haptic_bus.app.arguments import EXIT_NO, EXIT_OK, add_command
 from haptic_bus.app.drive_address import add_drive_arguments, drive_address, seconds
+from haptic_bus.errors import ParameterError
 
 STATUS_HELP = ("a drive's state, read only: NMT state, CiA-402 state, mode, error code and register, EMCYs, "
                "position, velocity, the safety objects")

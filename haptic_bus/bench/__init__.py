@@ -238,7 +238,7 @@ def _cycles(text: str) -> int:
 
 def _refusal(args: argparse.Namespace) -> str | None:
     """Why the bench cannot start (a missing package of the [bench] extra, an unwritable --out), or None."""
-    from drives.errors import ParameterError
+    from haptic_bus.errors import ParameterError
     from haptic_bus.validation import writable_folder
 
     missing = missing_packages()

@@ -46,7 +46,6 @@ from typing import Protocol
 import numpy as np
 
 from drives.base import CyclicInputs, DriveScaling
-from drives.errors import ParameterError
 from haptic_bus.control.clock import CycleClock, VirtualClock
 from haptic_bus.control.controller import PositionIntegrator
 from haptic_bus.control.cycle_loop import CycleLoop, RunSummary
@@ -57,6 +56,7 @@ from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.space_gate import SpaceDecision, SpaceGate, SpaceGateRefusal
 from haptic_bus.control.space_scene import SpaceScene
 from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
+from haptic_bus.errors import ParameterError
 
 logger = logging.getLogger(__name__)
 

@@ -21,8 +21,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from drives.cia402 import CONTROLWORD, POSITION_ACTUAL, STATUSWORD, TARGET_TORQUE, VELOCITY_ACTUAL, ObjectSpec
-from drives.errors import ParameterError
 from haptic_bus.analysis.can_timing import BusLoad, check_bus_load
+from haptic_bus.errors import ParameterError
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,6 @@ from collections.abc import Callable
 
 from drives.base import Drive
 from drives.cia402 import POSITION_ACTUAL
-from drives.errors import ParameterError
 from haptic_bus.control.clock import CycleClock, VirtualClock
 from haptic_bus.control.cycle_loop import CycleLoop, RunSummary
 from haptic_bus.control.gate import GateDecision, PassivityGate
@@ -37,6 +36,7 @@ from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.scenes import SceneEntry, SceneSlot
 from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
+from haptic_bus.errors import ParameterError
 
 logger = logging.getLogger(__name__)
 

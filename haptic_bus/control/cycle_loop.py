@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from drives.errors import DriveError
 from haptic_bus.control.clock import CycleClock
 from haptic_bus.control.record import EventLog
 from haptic_bus.control.supervisor import AssumptionBroken, Supervisor
+from haptic_bus.errors import DriveError
 
 logger = logging.getLogger(__name__)
 

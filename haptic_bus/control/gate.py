@@ -17,12 +17,12 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass, field
 
-from drives.errors import HapticBusError, ParameterError
 from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from haptic_bus.analysis.limits import PassiveSet, passive_limits, passive_scales
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 from haptic_bus.control.scene import CompiledScene
+from haptic_bus.errors import GateRefusal, ParameterError
 from haptic_bus.validation import real_in_range
 
 BANDWIDTH_POLICIES = ("warn", "strict")
@@ -109,14 +109,6 @@ class GateDecision:
     def worst_margin(self) -> float | None:
         """The smallest margin over the contact walls (N s/m), None for an empty scene."""
         return min((w.verdict.margin for w in self.walls), default=None)
-
-
-class GateRefusal(HapticBusError):
-    """A change of wall parameters was refused; ``decision`` holds every reason."""
-
-    def __init__(self, decision: GateDecision) -> None:
-        self.decision = decision
-        super().__init__("passivity gate refused the change: " + "; ".join(decision.reasons))
 
 
 @functools.lru_cache(maxsize=4096)

@@ -21,8 +21,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from drives.errors import ParameterError
 from haptic_bus.analysis.coupled_loop import MAX_AXES
+from haptic_bus.errors import ParameterError
 
 
 class Kinematics(Protocol):

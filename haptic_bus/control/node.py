@@ -43,10 +43,10 @@ from drives.bus_config import open_bus
 from drives.canopen.link import ReceiveErrors, shut_down
 from drives.canopen.local_node import StrictLocalNode
 from drives.cia301 import NMT_COB_ID, SDO_RX_BASE
-from drives.errors import HapticBusError
 from drives.udp_multicast import standard_filters
 from haptic_bus._version import __version__
 from haptic_bus.control.controller import WallController
+from haptic_bus.errors import HapticBusError
 from haptic_bus.validation import whole_in_range
 
 logger = logging.getLogger(__name__)

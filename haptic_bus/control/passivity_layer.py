@@ -35,7 +35,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 
 LAYER_MODES = ("off", "guard", "bound")
 

@@ -15,10 +15,10 @@ import math
 from collections import deque
 
 from drives.base import CyclicInputs
-from drives.errors import DriveProtocolError
 from haptic_bus.control.clock import CycleClock
 from haptic_bus.control.passivity_layer import LayerPolicy, PassivityLayer, default_budget_cap
 from haptic_bus.control.port_energy import PortObserver
+from haptic_bus.errors import DriveProtocolError
 
 
 class PortAccount:

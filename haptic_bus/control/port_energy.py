@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 
 
 def interval_energy(friction: float, displacement: float, forces: list[float], durations: list[float]) -> tuple[float, float]:

@@ -21,8 +21,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from drives.errors import ParameterError
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
+from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range
 
 _POSITION_RANGE = (-1e6, 1e6)  # m

@@ -19,10 +19,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from drives.errors import ParameterError
 from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
 from haptic_bus.control.record import EventLog
 from haptic_bus.control.scene import CompiledScene, compile_scene, object_to_dict
+from haptic_bus.errors import ParameterError
 
 
 @dataclass(frozen=True)

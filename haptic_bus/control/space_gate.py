@@ -29,12 +29,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drives.errors import HapticBusError
 from haptic_bus.analysis.coupled import CoupledVerdict, coupled_verdict
 from haptic_bus.analysis.coupled_loop import CoupledLoop, unit_normal
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.control.gate import GatePolicy
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere
+from haptic_bus.errors import GateRefusal
 
 SEARCH_EVALUATIONS = 24
 DEFAULT_POLICY = GatePolicy()
@@ -97,13 +97,11 @@ class SpaceDecision:
         return min((w.verdict.margin for w in self.walls), default=None)
 
 
-class SpaceGateRefusal(HapticBusError):
+class SpaceGateRefusal(GateRefusal[SpaceDecision]):
     """A scene in space was refused; ``decision`` holds every reason, ``where`` (e.g. ``profile PATH``)
     prefixes the message."""
 
-    def __init__(self, decision: SpaceDecision, where: str = "") -> None:
-        self.decision = decision
-        super().__init__((f"{where}: " if where else "") + "passivity gate refused the scene: " + "; ".join(decision.reasons))
+    subject = "scene"
 
 
 class SpaceGate:

@@ -36,8 +36,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
-from drives.errors import ParameterError
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
+from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range
 
 POSITION_RANGE = (-1e6, 1e6)  # m, as the 1-D scene

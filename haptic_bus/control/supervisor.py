@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drives.errors import HapticBusError, ParameterError
+from haptic_bus.errors import AssumptionBroken, ParameterError
 
 
 class Action(enum.Enum):
@@ -46,17 +46,6 @@ class Action(enum.Enum):
     WARN = "warn"
     DERATE = "derate"
     STOP = "stop"
-
-
-class AssumptionBroken(HapticBusError):
-    """An assumption of the gate's verdict failed at run time (exit 3): ``assumption`` says which,
-    ``observed`` what was measured, ``allowed`` what the gate assumed."""
-
-    def __init__(self, assumption: str, observed: str, allowed: str) -> None:
-        self.assumption = assumption
-        self.observed = observed
-        self.allowed = allowed
-        super().__init__(f"assumption broken: {assumption}: {observed}; the gate assumed {allowed}")
 
 
 @dataclass(frozen=True)

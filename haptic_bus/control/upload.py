@@ -28,7 +28,6 @@ from drives.canopen.scan import device_kind
 from drives.canopen.sdo import SdoAccess
 from drives.cia301 import DEVICE_TYPE, IDENTITY, SdoAbort, sdo_abort_text
 from drives.cia402 import DataType
-from drives.errors import DriveError, DriveTimeout, HapticBusError, ParameterError, SdoAbortError
 from haptic_bus.control.node import (
     COMMIT,
     LAST_RESULT,
@@ -39,6 +38,7 @@ from haptic_bus.control.node import (
     SUB_STIFFNESS,
     WALL_BASE,
 )
+from haptic_bus.errors import DriveError, DriveTimeout, HapticBusError, ParameterError, SdoAbortError
 
 _REAL64 = struct.Struct("<d")
 _NAMES_SHOWN = 8  # object names listed when an index is refused

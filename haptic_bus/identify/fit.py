@@ -31,8 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from drives.errors import HapticBusError
 from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
+from haptic_bus.errors import HapticBusError
 from haptic_bus.identify.bounds import MAX_DELAY
 from haptic_bus.identify.model import IncrementEquations, Plant, quantization_variance, usable_equations
 from haptic_bus.identify.record import Record

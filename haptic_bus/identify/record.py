@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 
 
 @dataclass(frozen=True)

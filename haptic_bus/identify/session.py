@@ -21,7 +21,7 @@ import math
 from collections.abc import Generator
 from dataclasses import dataclass
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.identify.bounds import DURATION_RANGE, TRAVEL_RANGE
 from haptic_bus.identify.excitation import (
     GUARD_SECONDS,

@@ -38,7 +38,7 @@ from drives.cia301 import (
     is_restricted_cob_id,
 )
 from drives.cia301 import COB_ID_EMCY as COB_ID_EMCY_OBJECT
-from drives.errors import HapticBusError
+from haptic_bus.errors import HapticBusError
 from sim_drive.canopen.emergency import Emergency
 from sim_drive.canopen.od_defaults import default_int
 from sim_drive.canopen.timers import NodeTimers

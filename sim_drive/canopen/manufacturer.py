@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from canopen import SdoAbortedError
 
-from drives.errors import HapticBusError
+from haptic_bus.errors import HapticBusError
 from sim_drive.canopen.pdo_engine import SlaveCounters
 from sim_drive.device import SimulatedDrive
 from sim_drive.operator import MAX_OD_PARAMETERS, operator_code, operator_from_code

@@ -53,8 +53,8 @@ from drives.cia402 import (
     VELOCITY_ENCODER_RESOLUTION,
     RatioSpec,
 )
-from drives.errors import ParameterError
 from drives.factor_group import INCREMENT, METRE, SECOND, SiUnit, best_ratio, power_of_ten
+from haptic_bus.errors import ParameterError
 from sim_drive.canopen.vendor_od import load_vendor_eds
 from sim_drive.device import SimulatedDrive
 from sim_drive.eds import OD_KINDS, eds_path

@@ -27,7 +27,7 @@ import os
 from canopen.objectdictionary import NUMBER_TYPES, ObjectDictionary, ODArray, ODRecord, import_od
 
 from drives.cia301 import DEVICE_TYPE
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 
 SERVO_DEVICE_TYPE = 0x00020192  # 0x1000 of a CiA-402 servo drive (type 0x0002, profile 402)
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from pymodbus.constants import ExcCodes
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 
 __all__ = ["Fault", "FaultInjector"]
 

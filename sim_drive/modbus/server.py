@@ -32,7 +32,7 @@ from pymodbus.server import ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from drives.errors import ParameterError
+from haptic_bus.errors import ParameterError
 from sim_drive.device import POWER_STAGE_ON, SimulatedDrive
 from sim_drive.modbus.bank import RegisterBank, writes_command
 from sim_drive.modbus.faults import FaultInjector
