@@ -6,7 +6,7 @@ Each carries its data from construction; the command line maps the branch to an 
     HapticBusError                         haptic_bus refused or broke (this module)
      +-- ParameterError (ValueError)       invalid input: .name, .value, .allowed, .context      exit 2
      |    +-- ProfileError                 (app.profile_reader) a profile field: .path, .field
-     |    +-- NoSuchObject                 (control.upload) the controller has no such scene object
+     |    +-- NoSuchObject                 (node.upload) the controller has no such scene object
      +-- GateRefusal                       a passivity gate said no: .decision                    exit 1
      |    +-- ProfileRefusal               (app.profiles) a profile's scene: .path
      |    +-- SpaceGateRefusal             (control.space_gate) a scene in space
@@ -14,7 +14,7 @@ Each carries its data from construction; the command line maps the branch to an 
      +-- AssumptionBroken                  the gate's assumption failed at run time:             exit 3
      |                                     .assumption, .observed, .allowed
      +-- StartRefused                      (app.runner) the handle starts inside an object       exit 1
-     +-- UploadRefused                     (control.upload) a controller refused: .abort_code     exit 1
+     +-- UploadRefused                     (node.upload) a controller refused: .abort_code     exit 1
      +-- NotIdentifiable                   (identify.fit) too few usable equations                exit 1
      +-- ObjectAccessError                 (sim_drive.device) the simulated drive refuses an object
 
@@ -25,7 +25,7 @@ Each carries its data from construction; the command line maps the branch to an 
           +-- DriveTimeout (TimeoutError)  silence: no answer in time
           |    +-- DriveStateError         the CiA-402 state machine stalled: .state
           |    +-- ModbusLinkLost          the Modbus link is gone: call reconnect()
-          |    +-- NoController            (control.upload) no controller on that node id
+          |    +-- NoController            (node.upload) no controller on that node id
           +-- DriveFault                   the drive reported a fault: .code
           +-- ScalingConflict              two sources of a scaling factor disagree: .field, .first, .second
           +-- DriveProtocolError           an answer or frame the protocol forbids
@@ -35,7 +35,7 @@ Each carries its data from construction; the command line maps the branch to an 
           |    +-- ModbusExceptionError    exception response: .exception_code
           |    +-- PdoLengthError          PDO frame of the wrong length: .expected, .got
           +-- UnsupportedModeError         0x6502 lacks the requested mode
-          +-- NotAController               (control.upload) the node answered but is no controller
+          +-- NotAController               (node.upload) the node answered but is no controller
 
 Two roots, because ``drives`` is the bottom layer and usable alone (the simulator, the service
 commands, a user's own master): its errors cannot derive from :class:`HapticBusError`, and

@@ -11,7 +11,6 @@ import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
-from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.closed_form import velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict, seed_verdict
 from haptic_bus.analysis.frequency import seed_t_zw, seed_z_zw, t_fund, z_fund
@@ -20,6 +19,7 @@ from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import ExactPlant, phi1, phi2, zoh_coefficients
 from haptic_bus.analysis.poles import closed_loop_poles, is_stable
 from haptic_bus.app.cli import main
+from haptic_bus.errors import ParameterError
 from tests.mp_reference import t_fund_mp, t_zw_mp
 
 SEED = WallLoop(m=0.5, b=0.1, T=1e-3, K=200.0, B=100.0)

@@ -1,9 +1,11 @@
-"""The dependency direction DESIGN.md section 2 draws, read off the import graph of the source.
+"""The dependency direction the README's layout draws, read off the import graph of the source.
 
-drives <- haptic_bus base (errors, validation) <- analysis <- control <- app/bench;
-sim_drive uses drives and haptic_bus' analysis (the plant) and base, never the controller;
-haptic_bus reaches sim_drive only through ``haptic_bus.app.rig``.  Every import statement is
-counted, including the ones inside functions (a lazy import is still a dependency).
+``drives`` imports nothing of ours; ``sim_drive`` uses drives and haptic_bus' analysis (the plant)
+and base, never the controller; inside haptic_bus every module sits in one layer of
+:data:`LAYERS` and imports only layers below its own (siblings on one level import neither
+way); haptic_bus reaches sim_drive only through ``haptic_bus.app.rig``.  Every import statement is
+counted, including the ones inside functions and under ``TYPE_CHECKING`` (a lazy import is still a
+dependency).  A failure names each offending import as ``module imports target``.
 """
 
 from __future__ import annotations
@@ -19,6 +21,18 @@ import pytest
 REPO = pathlib.Path(__file__).resolve().parents[1]
 PACKAGES = ("haptic_bus", "drives", "sim_drive")
 BUS_LIBRARIES = ("can", "canopen", "pymodbus")
+BASE = ("haptic_bus.errors", "haptic_bus.validation", "haptic_bus.console", "haptic_bus._version")
+
+# haptic_bus bottom to top, as the README draws it; the packages of one level are siblings.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    BASE,
+    ("haptic_bus.analysis",),
+    ("haptic_bus.control", "haptic_bus.identify"),
+    ("haptic_bus.node",),
+    ("haptic_bus.app",),
+    ("haptic_bus.bench", "haptic_bus.testing"),
+)
+FACADE = "haptic_bus"  # haptic_bus/__init__.py: the public API, above every layer
 
 
 def _module_name(path: pathlib.Path) -> str:
@@ -63,45 +77,93 @@ def _offenders(modules: str, forbidden: tuple[str, ...], allowed: tuple[str, ...
     )
 
 
+def _layer_of(module: str) -> tuple[int, str] | None:
+    """(level, package) of a haptic_bus module, the facade above every level; None if in no layer."""
+    if module == FACADE:
+        return len(LAYERS), FACADE
+    for level, packages in enumerate(LAYERS):
+        for package in packages:
+            if _within(module, package):
+                return level, "base" if packages is BASE else package  # the base's modules are one package
+    return None
+
+
+def _report(offenders: list[str], rule: str) -> str:
+    return f"{rule}; offending imports:\n  " + "\n  ".join(offenders)
+
+
 def test_the_graph_covers_every_package():
     assert {m.split(".")[0] for m in GRAPH} == set(PACKAGES)
     assert "drives.canopen.drive" in GRAPH and "haptic_bus.analysis.criterion" in GRAPH
 
 
+def test_every_haptic_bus_module_sits_in_a_layer_the_readme_draws():
+    homeless = sorted(m for m in GRAPH if _within(m, "haptic_bus") and _layer_of(m) is None)
+    assert not homeless, f"modules in no layer of LAYERS (add them to the README's layout and here): {homeless}"
+    readme = (REPO / "README.md").read_text()
+    layout = readme[readme.index("## Layout"):readme.index("## Python API")]
+    drawn = next(line for line in layout.splitlines() if line.strip().startswith("haptic_bus layers: "))
+    levels = [tuple(sorted(p.strip() for p in level.split("|"))) for level in drawn.split(": ", 1)[1].split(" <- ")]
+    tested = [("base",), *(tuple(sorted(p.removeprefix("haptic_bus.") for p in level)) for level in LAYERS[1:])]
+    assert levels == tested, f"the README draws {drawn.strip()!r}; LAYERS here are {tested}"
+    for package in (p for level in LAYERS[1:] for p in level):
+        assert f"\n  {package.split('.')[-1]}/ " in layout, f"{package} is missing from the README's layout"
+
+
+def test_haptic_bus_imports_only_layers_below():
+    offenders = []
+    for module, targets in GRAPH.items():
+        home = _layer_of(module) if _within(module, "haptic_bus") else None
+        if home is None:
+            continue
+        for target in targets:
+            there = _layer_of(target) if _within(target, "haptic_bus") else None
+            if there is not None and there[1] != home[1] and there[0] >= home[0]:
+                where = "a sibling on its level" if there[0] == home[0] else "a layer above it"
+                offenders.append(f"{module} imports {target} ({where})")
+    levels = " <- ".join(" | ".join(p.removeprefix("haptic_bus.") for p in level) for level in LAYERS[1:])
+    assert not offenders, _report(sorted(offenders), f"haptic_bus' layers are base <- {levels}")
+
+
 def test_drives_import_nothing_of_ours_above_them():
-    assert _offenders("drives", ("haptic_bus", "sim_drive")) == []
+    offenders = _offenders("drives", ("haptic_bus", "sim_drive"))
+    assert not offenders, _report(offenders, "drives is the bottom layer")
 
 
 def test_sim_drive_uses_only_the_analysis_and_the_base_of_haptic_bus():
-    allowed = ("haptic_bus.analysis", "haptic_bus.validation", "haptic_bus.errors", "haptic_bus.console",
-               "haptic_bus._version")  # a constant
-    assert _offenders("sim_drive", ("haptic_bus",), allowed) == []
+    offenders = _offenders("sim_drive", ("haptic_bus",), ("haptic_bus.analysis", *BASE))
+    assert not offenders, _report(offenders, "sim_drive uses haptic_bus' analysis and base, never the controller")
 
 
 def test_haptic_bus_reaches_the_simulator_only_through_the_rig():
     offenders = [o for o in _offenders("haptic_bus", ("sim_drive",)) if not o.startswith("haptic_bus.app.rig ")]
-    assert offenders == []
+    assert not offenders, _report(offenders, "haptic_bus.app.rig is the one place haptic_bus reaches sim_drive")
 
 
-def test_the_analysis_imports_no_bus_code_and_nothing_above_it():
-    forbidden = (*BUS_LIBRARIES, "haptic_bus.control", "haptic_bus.app", "haptic_bus.bench", "sim_drive")
-    assert _offenders("haptic_bus.analysis", forbidden) == []
-    assert _offenders("haptic_bus.analysis", ("drives",), ("drives.errors",)) == []
+@pytest.mark.parametrize("modules", ["haptic_bus.analysis", "haptic_bus.identify", *BASE])
+def test_the_pure_layers_import_no_drive_and_no_bus_code(modules):
+    allowed = ("drives.errors",) if modules == "haptic_bus.errors" else ()  # it re-exports drives' errors
+    offenders = _offenders(modules, (*BUS_LIBRARIES, "drives", "sim_drive"), allowed)
+    assert not offenders, _report(offenders, f"{modules} imports no bus library and nothing of drives")
 
 
-def test_the_base_sits_at_the_bottom():
-    for base in ("haptic_bus.errors", "haptic_bus.validation", "haptic_bus.console"):
-        assert _offenders(base, ("haptic_bus", "sim_drive"), ("haptic_bus.errors",)) == []
-        assert _offenders(base, ("drives",), ("drives.errors",)) == []
-
-
-def test_control_never_imports_the_application():
-    assert _offenders("haptic_bus.control", ("haptic_bus.app", "haptic_bus.bench", "sim_drive")) == []
+def test_the_control_layer_imports_no_bus_library():
+    offenders = _offenders("haptic_bus.control", BUS_LIBRARIES)
+    assert not offenders, _report(offenders, "bus-facing controller code belongs to haptic_bus.node or above")
 
 
 def test_protocol_tables_touch_no_bus():
     for tables in ("drives.cia301", "drives.cia402", "drives.modbus.register_map", "drives.errors", "drives.base"):
-        assert _offenders(tables, BUS_LIBRARIES) == []
+        offenders = _offenders(tables, BUS_LIBRARIES)
+        assert not offenders, _report(offenders, f"{tables} is a table")
+
+
+def test_importing_the_analysis_loads_nothing_of_drives():
+    code = ("import sys; import haptic_bus.analysis.check, haptic_bus.analysis.coupled, haptic_bus.validation; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('drives', 'sim_drive', 'can', 'canopen')))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "['drives', 'drives.errors']"  # haptic_bus.errors re-exports drives' errors only
 
 
 def _cycles() -> list[list[str]]:

@@ -9,10 +9,10 @@ from __future__ import annotations
 import pytest
 
 from drives.canopen.drive import DEFAULT_RPDO, DEFAULT_TPDO, DEFAULT_TPDO_WITH_POSITION, split_into_frames
-from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.can_timing import axes_that_fit, bus_load, check_bus_load
 from haptic_bus.bench.bus_limit import mapping_budget
 from haptic_bus.control.bus_load import PDO_MAPPINGS, axes_bus_load
+from haptic_bus.errors import ParameterError
 
 
 def test_the_mappings_are_the_frames_the_master_maps() -> None:

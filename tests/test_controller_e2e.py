@@ -23,10 +23,10 @@ from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_canopen
 from haptic_bus.control.controller import WallController, encoder_origin
 from haptic_bus.control.gate import DeviceLoop, GateRefusal, PassivityGate
-from haptic_bus.control.node import ABORT_INVALID_VALUE, ControllerNode
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.scene import Wall, compile_scene
-from haptic_bus.control.upload import UploadRefused, upload_walls
+from haptic_bus.node.controller_node import ABORT_INVALID_VALUE, ControllerNode
+from haptic_bus.node.upload import UploadRefused, upload_walls
 from sim_drive.operator import ConstantPush, Sinusoid, StepPush
 
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.coupled import coupled_verdict, hermitian_impedance, worst_direction
 from haptic_bus.analysis.coupled_energy import CoupledMachine, commensurate, steady_mean_power
 from haptic_bus.analysis.coupled_loop import CoupledLoop, components, coupled_poles, plane_wall
@@ -24,6 +23,7 @@ from haptic_bus.analysis.frequency import z_fund
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.poles import closed_loop_poles
 from haptic_bus.analysis.theta_search import theta_grid
+from haptic_bus.errors import ParameterError
 
 T = 1e-3
 MODELS = ["point", "average", "window:0.0004", "lowpass:0.002"]

@@ -11,12 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.coupled import coupled_verdict, least_eigenvalue
 from haptic_bus.analysis.coupled_limits import PlaneWall, passive_along, plane_quadratic
 from haptic_bus.analysis.coupled_loop import plane_wall, unit_normal
 from haptic_bus.analysis.limits import passive_set
 from haptic_bus.analysis.loop import STIFFNESS_RANGE, WallLoop
+from haptic_bus.errors import ParameterError
 
 T = 1e-3
 MIXED = (WallLoop(1.0, 20.0, T, 0, 0, 1, "average"), WallLoop(0.3, 2.0, T, 0, 0, 0.4, "lowpass:0.001"),

@@ -24,7 +24,6 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.closed_form import velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict, seed_verdict
 from haptic_bus.analysis.energy import (
@@ -39,6 +38,7 @@ from haptic_bus.analysis.energy import (
 )
 from haptic_bus.analysis.frequency import t_fund
 from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.errors import ParameterError
 
 SEED = WallLoop(0.5, 0.1, 1e-3, 200.0, 100.0, 0)
 SEED_D1 = WallLoop(0.5, 0.1, 1e-3, 200.0, 100.0, 1)

@@ -14,9 +14,9 @@ from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
 from drives.cia402 import QUICK_STOP_OPTION_CODE, State
-from haptic_bus.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout, ModbusLinkLost, ParameterError
 from drives.modbus.drive import ModbusDrive
 from drives.safety import SafetySettings
+from haptic_bus.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout, ModbusLinkLost, ParameterError
 from sim_drive.modbus import LINK_LOST_ERROR_CODE, FaultInjector, ModbusSimServer
 
 # the loop runs in virtual time: the drive's watchdog guards a dead master, not a busy machine

@@ -8,12 +8,12 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.frequency import t_fund, z_fund
 from haptic_bus.analysis.limits import max_damping, max_stiffness
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.control.port_energy import PortObserver
+from haptic_bus.errors import ParameterError
 
 any_float = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True),

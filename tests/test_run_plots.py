@@ -27,7 +27,7 @@ from haptic_bus.app.kb_plane import kb_plane_figure
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.run_folder import read_run_folder
 from haptic_bus.app.run_plots import energy_exchange, force_position_figure, timeline_figure
-from haptic_bus.control.upload import upload_walls
+from haptic_bus.node.upload import upload_walls
 from tests.run_rig import events_of, profile_variant, read_run, run_cli, simulated_drive
 
 FAULT_CODE = 0x2310  # EMCY: continuous over-current

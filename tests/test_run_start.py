@@ -17,11 +17,11 @@ import pathlib
 import numpy as np
 import pytest
 
-from haptic_bus.errors import ParameterError
 from haptic_bus.app.profiles import StartPolicy, load_profile
 from haptic_bus.app.runner import RunOptions, run_canopen
 from haptic_bus.control.record import COLUMNS
 from haptic_bus.control.scene import Wall
+from haptic_bus.errors import ParameterError
 from tests.run_rig import events_of, profile_variant, read_record, read_run, run_cli, simulated_drive
 
 K, B, DEPTH = 1500.0, 10.0, 0.005  # cia402-handle's end-stop (N/m, N s/m) and how deep the run starts in it (m)

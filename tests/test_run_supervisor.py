@@ -45,7 +45,7 @@ from haptic_bus.app import runner
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.control.controller import WallController, encoder_origin
 from haptic_bus.control.gate import DeviceLoop, GatePolicy, PassivityGate
-from haptic_bus.control.upload import upload_walls
+from haptic_bus.node.upload import upload_walls
 from tests.run_rig import (
     NODE,
     TRANSPORTS,

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from drives.errors import DriveTimeout
-from haptic_bus.control.upload import UploadRefused, upload_walls
+from haptic_bus.node.upload import UploadRefused, upload_walls
 
 REPO = Path(__file__).resolve().parents[1]
 NODE = 5

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from haptic_bus.errors import ParameterError
 from drives.safety import SafetySettings
 from haptic_bus.app.profiles import load_profile, resolve_profile
+from haptic_bus.errors import ParameterError
 
 
 def _profile_with(tmp_path, table: str):

@@ -101,7 +101,7 @@ def test_the_controller_node_answers_as_a_canopen_node() -> None:
     from haptic_bus.app.profiles import load_profile
     from haptic_bus.app.rig import simulated_canopen
     from haptic_bus.control.controller import WallController, encoder_origin
-    from haptic_bus.control.node import ControllerNode
+    from haptic_bus.node.controller_node import ControllerNode
 
     profile = load_profile("seed-ideal")
     channel = f"controller-node-{uuid.uuid4().hex[:10]}"

@@ -25,7 +25,7 @@ import pytest
 from drives.canopen.scan import scan_canopen
 from drives.modbus.scan import scan_modbus
 from haptic_bus.app.cli import main
-from haptic_bus.control.node import controller_dictionary
+from haptic_bus.node.controller_node import controller_dictionary
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.device import SUPPORTED_DRIVE_MODES
 from sim_drive.eds import eds_path

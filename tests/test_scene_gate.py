@@ -8,9 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptic_bus.errors import ParameterError
 from haptic_bus.control.gate import DeviceLoop, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.scene import Detent, Slot, Wall, compile_scene
+from haptic_bus.errors import ParameterError
 
 SEED_IDEAL = DeviceLoop(m=0.5, b=0.1, T=1e-3, delay=0)
 SEED_CIA402 = DeviceLoop(m=0.5, b=0.1, T=1e-3, delay=1)

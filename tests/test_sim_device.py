@@ -7,8 +7,8 @@ import math
 import pytest
 
 from drives.cia402 import Command, State, decode_statusword
-from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.plant import zoh_coefficients
+from haptic_bus.errors import ParameterError
 from sim_drive.device import ObjectAccessError, SimulatedDrive
 from sim_drive.operator import ConstantPush, Sinusoid
 from sim_drive.parameters import DeviceParameters, Timing

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 from drives.cia402 import Command
-from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.energy import Tones, simulate, wall_forces
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.poles import spectral_radius
 from haptic_bus.analysis.sampled_loop import ClosedLoopLayout, period_map, shifted_closed_loop
 from haptic_bus.analysis.velocity import VelocityModel
+from haptic_bus.errors import ParameterError
 from sim_drive.canopen.manufacturer import TIMING, ManufacturerObjects
 from sim_drive.canopen.pdo_engine import SlaveCounters
 from sim_drive.cli import build_parser

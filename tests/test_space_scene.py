@@ -13,7 +13,6 @@ import math
 import numpy as np
 import pytest
 
-from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.coupled import coupled_verdict
 from haptic_bus.analysis.coupled_loop import plane_wall
 from haptic_bus.analysis.loop import WallLoop
@@ -22,6 +21,7 @@ from haptic_bus.control.gate import GatePolicy
 from haptic_bus.control.kinematics import Cartesian, handle_velocity, joint_efforts
 from haptic_bus.control.space_gate import SpaceGate, SpaceGateRefusal, sphere_directions
 from haptic_bus.control.space_scene import Box, Plane, Sphere, compile_space_scene
+from haptic_bus.errors import ParameterError
 
 T = 1e-3
 GANTRY = (WallLoop(2.0, 30.0, T, 0, 0, 1, "average"), WallLoop(1.0, 20.0, T, 0, 0, 1, "average"),

@@ -17,8 +17,8 @@ from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_canopen
 from haptic_bus.control.controller import WallController, encoder_origin
-from haptic_bus.control.node import ControllerNode
 from haptic_bus.control.scene import Wall
+from haptic_bus.node.controller_node import ControllerNode
 
 DRIVE, CONTROLLER = 5, 42
 
@@ -38,7 +38,8 @@ def controller_and_drive() -> Iterator[tuple[list[str], WallController]]:
 
 def one_line(err: str) -> str:
     """The upload's one line (the controller node, in this process too, logs its own refusals)."""
-    err = "".join(line for line in err.splitlines(keepends=True) if not line.startswith("WARNING haptic_bus.control.node:"))
+    node_log = "WARNING haptic_bus.node.controller_node:"
+    err = "".join(line for line in err.splitlines(keepends=True) if not line.startswith(node_log))
     assert err.count("\n") == 1 and "Traceback" not in err, err
     return err
 

@@ -26,7 +26,6 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import expm
 
-from haptic_bus.errors import ParameterError
 from haptic_bus.analysis.energy import Sinusoid, periodic_mean_power
 from haptic_bus.analysis.frequency import t_fund
 from haptic_bus.analysis.loop import WallLoop
@@ -34,6 +33,7 @@ from haptic_bus.analysis.poles import closed_loop_poles, spectral_radius
 from haptic_bus.analysis.sampled_loop import continuous_model, event_times, period_map, pulse_transfer
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.bench.mp_boundary import sampled_map
+from haptic_bus.errors import ParameterError
 from tests.mp_reference import t_fund_mp
 
 MODELS = ("point", "average", "window:0.0004", "lowpass:0.0005")

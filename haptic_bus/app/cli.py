@@ -222,8 +222,8 @@ def _refuse_single_axis_options(args: argparse.Namespace) -> None:
 def _upload(args: argparse.Namespace) -> int:
     """0 accepted; 1 refused by the gate, or no controller on the node (silent, or another device);
     2 invalid input, an object index the controller does not have included (asked before any write)."""
-    from haptic_bus.control.upload import UploadRefused, upload_walls
     from haptic_bus.errors import DriveError
+    from haptic_bus.node.upload import UploadRefused, upload_walls
     from haptic_bus.validation import real_in_range, whole_in_range
 
     index = whole_in_range("object", args.object, 0, 255, context="upload")
@@ -253,9 +253,12 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _bench(argv: Sequence[str]) -> int:
-    from haptic_bus.bench import main as bench_main
-
-    return bench_main(list(argv))
+    """``haptic-bus bench ARGS`` becomes ``python -m haptic_bus.bench ARGS`` in this process (same
+    pid, signals, streams and exit status): the bench sits above the application and measures it,
+    so the application never imports the bench (POSIX exec)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.execv(sys.executable, [sys.executable, "-m", "haptic_bus.bench", *argv])
 
 
 def _sim(argv: Sequence[str]) -> int:

@@ -142,7 +142,7 @@ def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options:
     the drive watches, and it serves gated wall uploads over SDO.
     """
     from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
-    from haptic_bus.control.node import ControllerNode
+    from haptic_bus.node.controller_node import ControllerNode
 
     folder = prepare_run_folder(options.out_dir, profile.name)
     config = resolve_bus_config(**bus)  # python-can's config chain fills what ``bus`` leaves out

@@ -23,9 +23,7 @@ POLL_INTERVAL = 0.02  # s: how often a wait looks at the log
 
 def installation_root() -> pathlib.Path:
     """The folder holding the ``haptic_bus`` (and so ``sim_drive``) this process imported."""
-    import haptic_bus
-
-    return pathlib.Path(haptic_bus.__file__).resolve().parents[1]
+    return pathlib.Path(__file__).resolve().parents[2]  # haptic_bus/testing/processes.py
 
 
 class SimProcess:

@@ -1,7 +1,7 @@
 """``haptic-bus upload``'s side: change a running controller's walls over SDO, gated by its node.
 
 The client asks before it writes: 0x1000 and 0x1018:02 say whether the node is a haptic-bus
-controller (device type 0, product code "HBUS", :mod:`haptic_bus.control.node`), 0x2000 how many
+controller (device type 0, product code "HBUS", :mod:`haptic_bus.node.controller_node`), 0x2000 how many
 scene objects it has; only then are the staged K and B written (0x2100 + i, sub 1 and 2) and
 committed (0x2001), and the verdict read (0x2002).  What can go wrong, each its own error with
 one line to say:
@@ -28,7 +28,8 @@ from drives.canopen.scan import device_kind
 from drives.canopen.sdo import SdoAccess
 from drives.cia301 import DEVICE_TYPE, IDENTITY, SdoAbort, sdo_abort_text
 from drives.cia402 import DataType
-from haptic_bus.control.node import (
+from haptic_bus.errors import DriveError, DriveTimeout, HapticBusError, ParameterError, SdoAbortError
+from haptic_bus.node.controller_node import (
     COMMIT,
     LAST_RESULT,
     OBJECT_COUNT,
@@ -38,7 +39,6 @@ from haptic_bus.control.node import (
     SUB_STIFFNESS,
     WALL_BASE,
 )
-from haptic_bus.errors import DriveError, DriveTimeout, HapticBusError, ParameterError, SdoAbortError
 
 _REAL64 = struct.Struct("<d")
 _NAMES_SHOWN = 8  # object names listed when an index is refused
