@@ -3,7 +3,7 @@
 Every error raised on purpose carries its data from construction (the way canopen's
 ``SdoAbortedError`` carries its code).  A silence is a :class:`DriveTimeout`, which is also the
 builtin :class:`TimeoutError` (as python-can's ``CanTimeoutError`` is); an invalid argument to drive
-code is a :class:`DriveArgumentError`, also a :class:`ValueError`.  The tree of the whole
+code is a :class:`DriveArgumentError`, also an :class:`InvalidInput` (a :class:`ValueError`).  The tree of the whole
 distribution, this one and ``haptic_bus``' beside it, is drawn once, in :mod:`haptic_bus.errors`,
 which is also where users import every class from.
 """
@@ -17,11 +17,12 @@ class FieldbusError(Exception):
     """Base class of every error ``drives`` raises on purpose."""
 
 
-class DriveArgumentError(FieldbusError, ValueError):
-    """An argument to drive code is outside its allowed range (a bus setting, a node id, a value to
-    write), found before the bus is touched.
+class InvalidInput(ValueError):
+    """A value outside its allowed range (or not a number at all): the shape every invalid-input
+    error shares, whichever root it belongs to (exit 2).
 
-    ``name``, ``value`` and ``allowed`` are given at construction; ``context`` says where it was read.
+    ``name``, ``value`` and ``allowed`` are given at construction, so a commissioning engineer can
+    act on the message without reading code; ``context`` says where it was read.
     """
 
     def __init__(self, name: str, value: object, allowed: str, context: str = "") -> None:
@@ -31,6 +32,11 @@ class DriveArgumentError(FieldbusError, ValueError):
         self.context = context
         where = f"{context}: " if context else ""
         super().__init__(f"{where}{name} = {value!r} is invalid; allowed: {allowed}")
+
+
+class DriveArgumentError(FieldbusError, InvalidInput):
+    """An argument to drive code is outside its allowed range (a bus setting, a node id, a value to
+    write), found before the bus is touched."""
 
 
 class DriveError(FieldbusError):

@@ -4,7 +4,7 @@ Each carries its data from construction; the command line maps the branch to an 
 (``haptic_bus.app.cli``)::
 
     HapticBusError                         haptic_bus refused or broke (this module)
-     +-- ParameterError (ValueError)       invalid input: .name, .value, .allowed, .context      exit 2
+     +-- ParameterError (InvalidInput)     invalid input haptic_bus found                        exit 2
      |    +-- ProfileError                 (app.profile_reader) a profile field: .path, .field
      |    +-- NoSuchObject                 (node.upload) the controller has no such scene object
      +-- GateRefusal                       a passivity gate said no: .decision                    exit 1
@@ -14,12 +14,12 @@ Each carries its data from construction; the command line maps the branch to an 
      +-- AssumptionBroken                  the gate's assumption failed at run time:             exit 3
      |                                     .assumption, .observed, .allowed
      +-- StartRefused                      (app.runner) the handle starts inside an object       exit 1
-     +-- UploadRefused                     (node.upload) a controller refused: .abort_code     exit 1
+     +-- UploadRefused                     (node.upload) a controller refused: .abort_code       exit 1
      +-- NotIdentifiable                   (identify.fit) too few usable equations                exit 1
      +-- ObjectAccessError                 (sim_drive.device) the simulated drive refuses an object
 
     FieldbusError                          drives failed or was misused (drives.errors)
-     +-- DriveArgumentError (ValueError)   invalid argument to drive code: .name, .value, .allowed exit 2
+     +-- DriveArgumentError (InvalidInput) an invalid argument to drive code                     exit 2
      +-- DriveError                        a drive or bus failed: .node, .message                 exit 1
           +-- BusConfigError               no usable CAN bus configuration
           +-- DriveTimeout (TimeoutError)  silence: no answer in time
@@ -37,14 +37,18 @@ Each carries its data from construction; the command line maps the branch to an 
           +-- UnsupportedModeError         0x6502 lacks the requested mode
           +-- NotAController               (node.upload) the node answered but is no controller
 
+    InvalidInput (ValueError)              (drives.errors) the shape of both invalid-input errors:
+                                           .name, .value, .allowed, .context
+
 Two roots, because ``drives`` is the bottom layer and usable alone (the simulator, the service
 commands, a user's own master): its errors cannot derive from :class:`HapticBusError`, and
 wrapping every drive error the controller meets would hide what it is (a ``DriveTimeout`` is a
 ``TimeoutError``, an ``SdoAbortError`` has its abort code).  So ``except HapticBusError`` means
 "haptic_bus refused or broke"; ``except ALL_ERRORS`` catches everything raised on purpose,
-including a drive failing while the controller runs, in one clause; ``except INVALID_INPUT``
-catches every invalid input (exit 2), whichever layer found it.  The analysis raises only
-:class:`ParameterError` and imports nothing of ``drives``.
+including a drive failing while the controller runs, in one clause; ``except InvalidInput``
+(both ``ParameterError`` and ``DriveArgumentError``) catches every invalid input (exit 2),
+whichever layer found it.  The analysis raises only :class:`ParameterError` and imports nothing
+of ``drives`` itself; through this module it loads ``drives.errors`` (plain classes) and nothing else.
 """
 
 from __future__ import annotations
@@ -60,6 +64,7 @@ from drives.errors import (
     DriveStateError,
     DriveTimeout,
     FieldbusError,
+    InvalidInput,
     ModbusExceptionError,
     ModbusLinkLost,
     ObjectAbsent,
@@ -75,20 +80,9 @@ class HapticBusError(Exception):
     """Base class of every error haptic_bus (and its simulator) raises on purpose."""
 
 
-class ParameterError(HapticBusError, ValueError):
-    """A parameter is outside its allowed range (or not a number at all).
-
-    ``name``, ``value`` and ``allowed`` are given at construction, so a commissioning engineer
-    can act on the message without reading code; ``context`` says where it was read.
-    """
-
-    def __init__(self, name: str, value: object, allowed: str, context: str = "") -> None:
-        self.name = name
-        self.value = value
-        self.allowed = allowed
-        self.context = context
-        where = f"{context}: " if context else ""
-        super().__init__(f"{where}{name} = {value!r} is invalid; allowed: {allowed}")
+class ParameterError(HapticBusError, InvalidInput):
+    """A parameter is outside its allowed range (or not a number at all): ``name``, ``value``,
+    ``allowed`` and where it was read, ``context``."""
 
 
 class Decision(Protocol):
@@ -128,12 +122,8 @@ class AssumptionBroken(HapticBusError):
 ALL_ERRORS: tuple[type[HapticBusError], type[FieldbusError]] = (HapticBusError, FieldbusError)
 """Every error the distribution raises on purpose: ``except ALL_ERRORS``."""
 
-INVALID_INPUT: tuple[type[ParameterError], type[DriveArgumentError]] = (ParameterError, DriveArgumentError)
-"""Every invalid input (exit 2), found by haptic_bus or by drive code: ``except INVALID_INPUT``."""
-
 __all__ = [
     "ALL_ERRORS",
-    "INVALID_INPUT",
     "AssumptionBroken",
     "BusConfigError",
     "DriveArgumentError",
@@ -145,6 +135,7 @@ __all__ = [
     "FieldbusError",
     "GateRefusal",
     "HapticBusError",
+    "InvalidInput",
     "ModbusExceptionError",
     "ModbusLinkLost",
     "ObjectAbsent",

@@ -392,11 +392,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
-    from haptic_bus.errors import INVALID_INPUT, AssumptionBroken, DriveError, GateRefusal, HapticBusError
+    from haptic_bus.errors import AssumptionBroken, DriveError, GateRefusal, HapticBusError, InvalidInput
 
     try:
         return int(args.handler(args))
-    except INVALID_INPUT as error:
+    except InvalidInput as error:
         print(f"haptic-bus {args.command}: error: {error}", file=sys.stderr)
         return EXIT_INVALID
     except DriveError as error:

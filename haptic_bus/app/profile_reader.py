@@ -12,7 +12,7 @@ from typing import Any
 
 from haptic_bus.analysis.velocity import ALLOWED as VELOCITY_MODELS
 from haptic_bus.analysis.velocity import VelocityModel
-from haptic_bus.errors import INVALID_INPUT, ParameterError
+from haptic_bus.errors import InvalidInput, ParameterError
 from haptic_bus.validation import real_in_range, whole_in_range
 
 REQUIRED = object()
@@ -64,7 +64,7 @@ class Reader:
     def _wrap(self, key: str, check: Callable[[object], Any], value: object) -> Any:
         try:
             return check(value)
-        except INVALID_INPUT as error:
+        except InvalidInput as error:
             raise ProfileError(self.path, self.field(key), value, error.allowed) from None
 
     def real(self, key: str, low: float, high: float, unit: str, *, low_inclusive: bool = True,
