@@ -134,10 +134,11 @@ def test_a_node_booting_during_the_window_is_listed_and_a_malformed_heartbeat_is
     result: list[Any] = []
     scanner = threading.Thread(target=lambda: result.append(
         scan_canopen({"interface": "virtual", "channel": channel}, timeout=1.5)))
+    late = CanopenSimDrive({"interface": "virtual", "channel": channel}, 12)  # built (its dictionary read) before the window
     scanner.start()
     time.sleep(0.3)  # well inside the 1.5 s window, after the probe went out
     frames.send(master, 0x705, b"")  # on node 5's heartbeat COB-ID, but no state byte
-    late = CanopenSimDrive({"interface": "virtual", "channel": channel}, 12).start()  # boot-up now
+    late.start()  # boot-up now
     try:
         scanner.join(timeout=10.0)
         assert not scanner.is_alive()
