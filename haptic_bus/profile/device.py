@@ -26,6 +26,7 @@ from haptic_bus.profile.reader import REQUIRED, ProfileError, Reader
 
 TIMINGS: dict[str, float | None] = {"ideal": 0, "cia402": 1, "reception": None}
 """Timing name -> its least loop delay in samples, the default of ``[loop] delay`` (None: required)."""
+# The ranges a profile's [device] and the simulated drive's parameters (sim_drive.parameters) share:
 NOISE_SEED_RANGE = (0, 2**64 - 1)
 SCALE_RANGE = (0.0, 1e6)  # exclusive low: m/s per count, m per count, N per N m
 COULOMB_RANGE = (0.0, 1e6)  # N
