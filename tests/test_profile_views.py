@@ -92,3 +92,23 @@ def test_identification_is_written_and_read_as_one_table(tmp_path: pathlib.Path)
     text = "".join(f"{key} = {value!r}\n".replace("'", '"') for key, value in table.items())
     assert read_identification(tmp_path / "p.toml", tomllib.loads(text)) == measured
     assert measured.lowest_credible_friction == pytest.approx(19.9) and measured.largest_credible_delay == pytest.approx(1.25)
+
+
+def test_both_views_of_a_multi_axis_profile_refuse_a_bad_axis_with_the_same_line(tmp_path: pathlib.Path) -> None:
+    from haptic_bus.app.axes_profile import read_axes_profile
+    from sim_drive.axes_profile import load_axes_device
+
+    text = resolve_profile("gantry-3d").read_text()
+    path = tmp_path / "axes.toml"
+    path.write_text(text.replace("\nmass = 0.5\n", "\nmass = -0.5\n", 1))
+    lines = []
+    for read in (read_axes_profile, load_axes_device):
+        with pytest.raises(ProfileError) as caught:
+            read(path)
+        assert caught.value.field == "axes[2].device.mass" and "[1e-09, 1e+09] kg" in caught.value.allowed
+        lines.append(str(caught.value))
+    assert lines[0] == lines[1]
+    truth = load_axes_device("gantry-3d")
+    believed = read_axes_profile("gantry-3d")
+    assert [(a.name, a.node_id, a.parameters.m, a.parameters.b) for a in truth.axes] == [
+        (a.name, a.node_id, a.device.mass, a.device.friction) for a in believed.axes]
