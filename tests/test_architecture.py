@@ -73,8 +73,8 @@ def test_drives_import_nothing_of_ours_above_them():
 
 
 def test_sim_drive_uses_only_the_analysis_and_the_base_of_haptic_bus():
-    allowed = ("haptic_bus.analysis", "haptic_bus.validation", "haptic_bus.errors", "haptic_bus.console",
-               "haptic_bus._version")  # a constant
+    allowed = ("haptic_bus.analysis", "haptic_bus.profile", "haptic_bus.validation", "haptic_bus.errors",
+               "haptic_bus.console", "haptic_bus._version")  # a constant
     assert _offenders("sim_drive", ("haptic_bus",), allowed) == []
 
 
@@ -93,6 +93,14 @@ def test_the_base_sits_at_the_bottom():
     for base in ("haptic_bus.errors", "haptic_bus.validation", "haptic_bus.console"):
         assert _offenders(base, ("haptic_bus", "sim_drive"), ("haptic_bus.errors",)) == []
         assert _offenders(base, ("drives",), ("drives.errors",)) == []
+
+
+def test_the_profile_schema_sits_below_the_controller():
+    """One profile reader for the controller and the simulated drive: it uses drives' tables, the
+    base and the analysis, never the control layer, the application or the simulator."""
+    forbidden = (*BUS_LIBRARIES, "haptic_bus.control", "haptic_bus.app", "haptic_bus.bench", "haptic_bus.identify",
+                 "sim_drive")
+    assert _offenders("haptic_bus.profile", forbidden) == []
 
 
 def test_control_never_imports_the_application():

@@ -106,8 +106,9 @@ def run_identify(args: argparse.Namespace) -> int:
     """The ``identify`` handler: validate, run, report, write the profile; the exit status."""
     from haptic_bus.app.identify_profile import write_identified_profile
     from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen, identify_modbus
-    from haptic_bus.app.profiles import TIMINGS, read_profile
+    from haptic_bus.app.profiles import read_profile
     from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID, StopRequest
+    from haptic_bus.profile.device import TIMINGS
 
     target = _validate(args)
     profile = read_profile(args.profile)
