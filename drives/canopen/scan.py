@@ -51,12 +51,11 @@ from drives.cia301 import (
     IDENTITY,
     NODE_ID_RANGE,
     SDO_RX_BASE,
-    describe_emcy_code,
 )
-from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES, DataType, cst_announced
+from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES, DataType
 from drives.errors import DriveError, DriveTimeout, SdoAbortError
-from drives.fault_reset import state_text
 from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, checked_ids, checked_seconds
+from drives.scan_readings import DriveReadings
 
 __all__ = ["CanopenNode", "Identity", "device_kind", "scan_canopen"]
 
@@ -77,7 +76,7 @@ class Identity:
 
 
 @dataclass(frozen=True)
-class CanopenNode:
+class CanopenNode(DriveReadings):
     """One node found by :func:`scan_canopen`; None where a value could not be read (see ``notes``)."""
 
     node_id: int
@@ -100,16 +99,6 @@ class CanopenNode:
         """True if 0x1000 names the CiA-402 profile."""
         return self.device_profile == DEVICE_PROFILE_402
 
-    @property
-    def cst_supported(self) -> bool | None:
-        """0x6502 announces cyclic synchronous torque; None where 0x6502 was not read."""
-        return cst_announced(self.supported_drive_modes)
-
-    @property
-    def cia402_state(self) -> str | None:
-        """The CiA-402 state 0x6041 shows ("FAULT", ...); None where 0x6041 was not read."""
-        return None if self.statusword is None else state_text(self.statusword)
-
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: numbers as numbers, None as null."""
         return {
@@ -121,13 +110,8 @@ class CanopenNode:
             **{field: getattr(self.identity, field) for field in _IDENTITY_FIELDS},
             "nmt_state": self.nmt_state,
             "boot_up_seen": self.boot_up_seen,
-            "supported_drive_modes": self.supported_drive_modes,
-            "cst_supported": self.cst_supported,
             "cia402": self.cia402,
-            "statusword": self.statusword,
-            "cia402_state": self.cia402_state,
-            "error_code": self.error_code,
-            "error_code_text": None if self.error_code is None else describe_emcy_code(self.error_code),
+            **self.readings_dict(),
             "notes": list(self.notes),
         }
 
