@@ -10,10 +10,8 @@ refusal), and in two processes on udp_multicast: ``haptic-bus identify`` against
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
-import sys
 import time
 import tomllib
 import uuid
@@ -32,8 +30,8 @@ from haptic_bus.app.profiles import load_profile, read_profile
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.operator import HandModel, OperatorModel
 from sim_drive.parameters import DeviceParameters
+from tests.cli_process import cli_process, reaped
 
-REPO = Path(__file__).resolve().parents[1]
 NODE = 5
 SIGMAS = 4.0
 START_WAIT = 30.0  # s: a process imports numpy/scipy/canopen before it answers
@@ -206,11 +204,8 @@ timing = "cia402"
 
 def _identify_process(multicast: tuple[str, int], *arguments: str) -> subprocess.Popen[str]:
     group, port = multicast
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.Popen(
-        [sys.executable, "-m", "haptic_bus.app.cli", "identify", "--interface", "udp_multicast", "--channel", group,
-         "--bus-option", f"port={port}", "--node-id", str(NODE), "--virtual-time", *arguments],
-        cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return cli_process("identify", "--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
+                       "--node-id", str(NODE), "--virtual-time", *arguments)
 
 
 def _start_sim(sim_process: Any, multicast: tuple[str, int], hidden: Path) -> Any:
@@ -225,14 +220,10 @@ def test_identify_against_haptic_bus_sim_in_another_process(multicast: tuple[str
                                                              tmp_path: Path) -> None:
     sim = _start_sim(sim_process, multicast, _hidden_profile(tmp_path))
     written = tmp_path / "identified.toml"
-    run = _identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "5", "--json",
-                            "--write-profile", str(written))  # 5 s: b's standard error ~0.2 %, far inside the 5 % bound
-    try:
+    # 5 s: b's standard error ~0.2 %, far inside the 5 % bound
+    with reaped(_identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "5", "--json",
+                                  "--write-profile", str(written))) as run:
         out, err = run.communicate(timeout=RUN_WAIT)
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.communicate(timeout=10)
     code, log = sim.stop()
     assert run.returncode == 0, err
     document = json.loads(out)
@@ -256,16 +247,11 @@ def test_identify_against_haptic_bus_sim_in_another_process(multicast: tuple[str
 
 def test_ctrl_c_disables_the_drive_and_exits_130(multicast: tuple[str, int], sim_process: Any, tmp_path: Path) -> None:
     sim = _start_sim(sim_process, multicast, _hidden_profile(tmp_path))
-    run = _identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "600")
-    try:
+    with reaped(_identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "600")) as run:
         sim.wait_for_line("-> OPERATION ENABLED", START_WAIT)
         time.sleep(0.5)  # well into the probe or the excitation
         run.send_signal(signal.SIGINT)
         _, err = run.communicate(timeout=RUN_WAIT)
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.communicate(timeout=10)
     code, log = sim.stop()
     assert run.returncode == 130, err
     assert "interrupted" in err
