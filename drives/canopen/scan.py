@@ -35,7 +35,7 @@ import time
 from collections.abc import Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import can
 import canopen
@@ -55,7 +55,7 @@ from drives.cia301 import (
 from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES, DataType
 from drives.errors import DriveError, DriveTimeout, SdoAbortError
 from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, checked_ids, checked_seconds
-from drives.scan_readings import DriveReadings
+from drives.scanned_device import ScannedDevice
 
 __all__ = ["CanopenNode", "Identity", "device_kind", "scan_canopen"]
 
@@ -76,8 +76,10 @@ class Identity:
 
 
 @dataclass(frozen=True)
-class CanopenNode(DriveReadings):
+class CanopenNode(ScannedDevice):
     """One node found by :func:`scan_canopen`; None where a value could not be read (see ``notes``)."""
+
+    protocol: ClassVar[str] = "canopen"
 
     node_id: int
     device_type: int | None
@@ -99,10 +101,9 @@ class CanopenNode(DriveReadings):
         """True if 0x1000 names the CiA-402 profile."""
         return self.device_profile == DEVICE_PROFILE_402
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: numbers as numbers, None as null."""
+    def identity_dict(self) -> dict[str, Any]:
+        """The node id, 0x1000 (also in words), 0x1018 and the NMT state heard."""
         return {
-            "protocol": "canopen",
             "node_id": self.node_id,
             "device_type": self.device_type,
             "device_profile": self.device_profile,
@@ -110,9 +111,6 @@ class CanopenNode(DriveReadings):
             **{field: getattr(self.identity, field) for field in _IDENTITY_FIELDS},
             "nmt_state": self.nmt_state,
             "boot_up_seen": self.boot_up_seen,
-            "cia402": self.cia402,
-            **self.readings_dict(),
-            "notes": list(self.notes),
         }
 
 

@@ -30,7 +30,7 @@ import functools
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from pymodbus.pdu.mei_message import ReadDeviceInformationRequest
 from pymodbus.pdu.register_message import ReadHoldingRegistersRequest
@@ -48,7 +48,7 @@ from drives.modbus.register_map import (
     word_order_of,
 )
 from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, checked_ids, checked_seconds
-from drives.scan_readings import DriveReadings
+from drives.scanned_device import ScannedDevice
 
 __all__ = ["UNIT_ID_RANGE", "ModbusScan", "ModbusUnit", "scan_modbus"]
 
@@ -61,8 +61,10 @@ _ERROR_CODE_REGISTER = register_for_object(ERROR_CODE)
 
 
 @dataclass(frozen=True)
-class ModbusUnit(DriveReadings):
+class ModbusUnit(ScannedDevice):
     """One unit that answered; None where a value could not be read (see ``notes``)."""
+
+    protocol: ClassVar[str] = "modbus"
 
     unit_id: int
     word_order: str | None  # "big"/"little": our map, in that word order; None: not our map
@@ -83,19 +85,10 @@ class ModbusUnit(DriveReadings):
         """True for our map: it is the CiA-402 drive's map (nothing else is known of other units)."""
         return self.our_map
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: numbers as numbers, None as null."""
-        return {
-            "protocol": "modbus",
-            "unit_id": self.unit_id,
-            "our_map": self.our_map,
-            "word_order": self.word_order,
-            "map_identity": self.map_identity,
-            "cia402": self.cia402,
-            "device_identification": self.device_identification,
-            **self.readings_dict(),
-            "notes": list(self.notes),
-        }
+    def identity_dict(self) -> dict[str, Any]:
+        """The unit id, whether it carries our map (in which word order), and its FC43/14 identification."""
+        return {"unit_id": self.unit_id, "our_map": self.our_map, "word_order": self.word_order,
+                "map_identity": self.map_identity, "device_identification": self.device_identification}
 
 
 @dataclass
