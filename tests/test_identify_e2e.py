@@ -31,6 +31,7 @@ from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.operator import HandModel, OperatorModel
 from sim_drive.parameters import DeviceParameters
 from tests.cli_process import cli_process, reaped
+from tests.guess_profile import guess_profile
 
 NODE = 5
 SIGMAS = 4.0
@@ -38,50 +39,13 @@ START_WAIT = 30.0  # s: a process imports numpy/scipy/canopen before it answers
 RUN_WAIT = 120.0  # s: 5 s of excitation in lock-step over udp_multicast takes about 5-10 s; room for a loaded machine
 HIDDEN = dict(m=0.37, b=2.9, coulomb_friction=0.2, velocity_noise=1000.0, noise_seed=21)
 
-CONTROLLER = """\
-# What the controller believes: not the drive's truth.
-[profile]
-name = "identify-test"
-operator = "commissioning engineer"
-task = "measure the handle before trusting the gate"
-description = "a 0.5 kg guess with a datasheet b; the drive is said to report v(kT)"
-
-[device]
-mass = 0.5                       # kg: a guess
-friction = 1.0                   # N s/m: a datasheet guess
-friction_source = "datasheet"
-velocity = "point"               # what the controller believes 0x606C is
-velocity_per_count = 1e-6
-position_per_count = 1e-7
-rated_torque = 0.2
-force_per_torque = 50.0
-max_torque_permille = 3000
-
-[loop]
-period = 0.001
-timing = "cia402"
-
-[limits]
-force_limit = {force_limit}
-
-[gate]
-safety_margin = 0.0
-bandwidth = "warn"
-
-[scene]
-objects = []
-
-[safety]
-heartbeat_ms = 100               # a loaded test machine: the watchdogs guard a dead master, not a busy one
-consumer_ms = 2000
-"""
-
-
 def controller_profile(folder: Path, force_limit: float = 5.0) -> Path:
-    """The controller's profile in ``folder``."""
-    path = folder / "controller.toml"
-    path.write_text(CONTROLLER.format(force_limit=force_limit))
-    return path
+    """The controller's profile in ``folder``: what it believes, not the drive's truth."""
+    return guess_profile(folder / "controller.toml", comment="What the controller believes: not the drive's truth.",
+                         name="identify-test", task="measure the handle before trusting the gate",
+                         description="a 0.5 kg guess with a datasheet b; the drive is said to report v(kT)",
+                         mass=0.5, friction=1.0, velocity="point", rated_torque=0.2, period=0.001,
+                         force_limit=force_limit)
 
 
 @contextmanager
