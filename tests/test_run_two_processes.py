@@ -4,19 +4,14 @@ with gated wall uploads from a third party over the same bus while the loop runs
 from __future__ import annotations
 
 import json
-import os
-import signal
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import pytest
 
 from drives.errors import DriveTimeout
 from haptic_bus.control.upload import UploadRefused, upload_walls
+from tests.cli_process import cli_process, terminated
 
-REPO = Path(__file__).resolve().parents[1]
 NODE = 5
 CONTROLLER_NODE = 42
 START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen before they answer
@@ -30,13 +25,9 @@ def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast:
     bus = {"interface": "udp_multicast", "channel": group, "port": port}
     sim = sim_process("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
                       "--node-id", str(NODE), "--profile", "seed-ideal")
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    run = subprocess.Popen(
-        [sys.executable, "-m", "haptic_bus.app.cli", "run", "seed-ideal", "--interface", "udp_multicast", "--channel", group,
-         "--bus-option", f"port={port}", "--node-id", str(NODE), "--virtual-time", "--duration", "600",
-         "--controller-node-id", str(CONTROLLER_NODE), "--out", str(tmp_path)],
-        cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )
+    run = cli_process("run", "seed-ideal", "--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
+                      "--node-id", str(NODE), "--virtual-time", "--duration", "600",
+                      "--controller-node-id", str(CONTROLLER_NODE), "--out", str(tmp_path))
     try:
         deadline = time.monotonic() + START_WAIT
         answer = None
@@ -52,12 +43,7 @@ def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast:
         assert upload_walls(bus, CONTROLLER_NODE, {0: (300.0, 150.0)}, timeout=SDO_PATIENCE).startswith("accepted")
         assert run.poll() is None, "the run must go on through the uploads"
     finally:
-        run.send_signal(signal.SIGTERM)
-        try:
-            out, err = run.communicate(timeout=20)
-        except subprocess.TimeoutExpired:
-            run.kill()
-            out, err = run.communicate(timeout=10)
+        out, err = terminated(run, 20)
         code, log = sim.stop()
     assert run.returncode == 0, err
     assert "cycles" in out and "compute p50" in out and "ended: stopped" in out
