@@ -83,7 +83,7 @@ def test_scan_finds_every_axis_and_identify_measures_one_while_the_others_stay(
         profile_path = tmp_path / "gantry-y.toml"
         profile_path.write_text(AXIS_Y)
         outcome = identify_canopen(read_profile(profile_path), {"interface": "virtual", "channel": channel}, 6,
-                                   IdentifyOptions(duration=6.0, realtime=False))
+                                   IdentifyOptions(duration=6.0, pacing="virtual"))
         states = [node.drive.state for node in sim.nodes]
         positions = [node.drive.handle.position for node in sim.nodes]
         syncs = [node.drive.sync_count for node in sim.nodes]

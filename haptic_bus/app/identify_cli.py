@@ -107,14 +107,15 @@ def run_identify(args: argparse.Namespace) -> int:
     from haptic_bus.app.identify_profile import write_identified_profile
     from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen, identify_modbus
     from haptic_bus.app.profiles import TIMINGS, read_profile
-    from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID, StopRequest
+    from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID, VIRTUAL, WALL, StopRequest
 
     target = _validate(args)
     profile = read_profile(args.profile)
     if target is not None and profile.path is not None and target.resolve() == profile.path.resolve():
         raise ParameterError("--write-profile", args.write_profile, "a new file, not the --profile itself", "identify")
     stop = StopRequest()
-    options = IdentifyOptions(args.duration, args.travel, realtime=not args.virtual_time, max_delay=args.max_delay, stop=stop)
+    options = IdentifyOptions(args.duration, args.travel, pacing=VIRTUAL if args.virtual_time else WALL,
+                              max_delay=args.max_delay, stop=stop)
     stop.install()
     if args.modbus:
         outcome = identify_modbus(profile, args.modbus, args.unit_id or 1, options)
