@@ -37,13 +37,6 @@ class Discretisation(enum.Enum):
     BACKWARD_DIFFERENCE = "backward"
 
 
-class Sampling(enum.Enum):
-    """Which signal the controller samples (the seed's section II vs III)."""
-
-    VELOCITY = "velocity"
-    POSITION = "position"
-
-
 @dataclass(frozen=True)
 class WallLoop:
     """Validated parameters of one linear wall loop (SI units, delay in samples).
