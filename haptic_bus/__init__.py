@@ -44,7 +44,7 @@ _HOMES = {
     "GatePolicy": "haptic_bus.control.gate",
     "GateDecision": "haptic_bus.control.gate",
     "GateRefusal": "haptic_bus.control.gate",
-    "DeviceLoop": "haptic_bus.control.gate",
+    "DeviceLoop": "haptic_bus.analysis.loop",
     "WallController": "haptic_bus.control.controller",
     "RunSummary": "haptic_bus.control.controller",
     "AssumptionBroken": "haptic_bus.control.supervisor",
@@ -115,10 +115,10 @@ if TYPE_CHECKING:
     from drives.errors import DriveError, HapticBusError, ParameterError
     from drives.modbus.drive import ModbusDrive
     from haptic_bus.analysis.check import CheckReport, check_passivity, format_check
-    from haptic_bus.analysis.loop import WallLoop
+    from haptic_bus.analysis.loop import DeviceLoop, WallLoop
     from haptic_bus.app.profiles import Profile, load_profile
     from haptic_bus.app.runner import RunOptions, RunResult, run_canopen, run_modbus
     from haptic_bus.control.controller import RunSummary, WallController
-    from haptic_bus.control.gate import DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
+    from haptic_bus.control.gate import GateDecision, GatePolicy, GateRefusal, PassivityGate
     from haptic_bus.control.scene import Detent, Slot, Wall, compile_scene
     from haptic_bus.control.supervisor import AssumptionBroken, SupervisorPolicy

@@ -42,10 +42,11 @@ from haptic_bus.analysis.loop import (
     MASS_RANGE,
     PERIOD_RANGE,
     STIFFNESS_RANGE,
+    DeviceLoop,
 )
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader, read_document
-from haptic_bus.control.gate import BANDWIDTH_POLICIES, DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
+from haptic_bus.control.gate import BANDWIDTH_POLICIES, GateDecision, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.passivity_layer import LAYER_MODES, LayerPolicy
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene, object_to_dict
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
