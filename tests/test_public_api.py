@@ -33,7 +33,7 @@ def test_every_public_name_resolves():
     assert issubclass(hb.AssumptionBroken, hb.HapticBusError)
 
 
-def test_the_docstring_example_runs_as_written(haptic_sim, tmp_path, monkeypatch):
+def test_the_docstring_example_runs_as_written(haptic_sim, recorded_run, tmp_path, monkeypatch):
     """The example, against the simulated drive in another process (``python -m sim_drive``, as the
     example's comment starts it), on a multicast group and port of this test's own (hop limit 0)
     instead of the documented ones: the one substitution."""
@@ -51,8 +51,12 @@ def test_the_docstring_example_runs_as_written(haptic_sim, tmp_path, monkeypatch
     assert isinstance(result.controller, hb.WallController)
     assert re.fullmatch(r"\d{8}T\d{6}(\.\d+)?Z?-cia402-handle.*", result.folder.name), result.folder.name
     assert result.folder.parent.resolve() == (tmp_path / "runs").resolve()
-    run = json.loads((result.folder / "run.json").read_text())
-    assert run["link"]["upload_server"] is True and run["status"] == "completed"
+    run = recorded_run(result.folder)
+    assert run.document["link"]["upload_server"] is True and run.document["status"] == "completed"
+    # the profile's hand pushes into the end-stop (K = 1500 N/m, surface 3 mm ahead): it settles at F / K
+    steady_force = run.record["force_n"][-100:].mean()
+    assert steady_force == pytest.approx(3.0, rel=1e-3)
+    assert run.record["position_m"][-100:].mean() - 0.003 == pytest.approx(steady_force / 1500.0, rel=1e-3)
 
 
 def test_run_canopen_takes_an_open_bus(haptic_sim, tmp_path):
