@@ -160,7 +160,7 @@ def test_a_start_inside_an_object_is_refused_with_nothing_enabled(tmp_path: path
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}).start()
     try:
         result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
-                                  RunOptions(1.0, realtime=False, out_dir=tmp_path / "run", live=False))
+                                  RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False))
         assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED] * 3
     finally:
         sim.stop()
@@ -272,7 +272,7 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path) -
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}, clock="wall").start()
     try:
         result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
-                                  RunOptions(8.0, realtime=True, out_dir=tmp_path / "run", live=False))
+                                  RunOptions(8.0, pacing="wall", out_dir=tmp_path / "run", live=False))
     finally:
         sim.stop()
     assert result.exit_reason == "completed", result.error

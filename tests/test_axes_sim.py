@@ -50,7 +50,7 @@ def test_scan_finds_every_axis_and_identify_measures_one_while_the_others_stay(
                                      description="the y axis of gantry-3d, node 6", mass=0.8, friction=15.0,
                                      velocity="average", rated_torque=0.1, period=0.002, force_limit=10.0)
         outcome = identify_canopen(read_profile(profile_path), {"interface": "virtual", "channel": channel}, 6,
-                                   IdentifyOptions(duration=6.0, realtime=False))
+                                   IdentifyOptions(duration=6.0, pacing="virtual"))
         states = [node.drive.state for node in sim.nodes]
         positions = [node.drive.handle.position for node in sim.nodes]
         syncs = [node.drive.sync_count for node in sim.nodes]

@@ -72,7 +72,7 @@ def test_identify_over_the_virtual_bus_in_virtual_time(tmp_path: Path) -> None:
     profile = read_profile(controller_profile(tmp_path))
     with hidden_drive("cia402", velocity="average") as (sim, channel):
         outcome = identify_canopen(profile, {"interface": "virtual", "channel": channel}, NODE,
-                                   IdentifyOptions(duration=10.0, realtime=False))
+                                   IdentifyOptions(duration=10.0, pacing="virtual"))
         state = sim.drive.state
     found = outcome.identification
     assert outcome.exit_reason == "completed" and outcome.exit_status == 0, outcome.error

@@ -126,7 +126,7 @@ def test_the_api_never_enables_the_drive_for_a_scene_the_gate_has_not_proven(
     path = inside(tmp_path)
     profile = dataclasses.replace(load_profile(path), scene=(dataclasses.replace(ACTIVE_WALL, position=surface),),
                                   start=StartPolicy(policy, RAMP_TIME))
-    options = RunOptions(duration=0.5, realtime=False, out_dir=tmp_path / "run", live=False)
+    options = RunOptions(duration=0.5, pacing="virtual", out_dir=tmp_path / "run", live=False)
     with simulated_drive("canopen", path) as drive:
         result = run_canopen(profile, {"interface": "virtual", "channel": drive.channel}, 5, options)
     assert not drive.was_enabled, drive.states

@@ -41,10 +41,11 @@ import pytest
 from drives.bus_config import open_bus
 from drives.cia402 import State
 from drives.errors import DriveTimeout
+from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.app import runner
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.control.controller import WallController, encoder_origin
-from haptic_bus.control.gate import DeviceLoop, GatePolicy, PassivityGate
+from haptic_bus.control.gate import GatePolicy, PassivityGate
 from haptic_bus.control.upload import upload_walls
 from tests.run_rig import (
     NODE,

@@ -9,7 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drives.errors import ParameterError
-from haptic_bus.control.gate import DeviceLoop, GatePolicy, GateRefusal, PassivityGate
+from haptic_bus.analysis.loop import DeviceLoop
+from haptic_bus.control.gate import GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.scene import Detent, Slot, Wall, compile_scene
 
 SEED_IDEAL = DeviceLoop(m=0.5, b=0.1, T=1e-3, delay=0)

@@ -148,7 +148,7 @@ def test_signal_stops_cleanly_and_state_changes_are_logged(
     group, port = multicast
     with open_bus(interface="udp_multicast", channel=group, port=port) as master:
         process = sim_process("--interface", "udp_multicast", "--channel", group, "--node-id", str(NODE),
-                              "--bus-option", f"port={port}", "--realtime", "--bitrate", "1000000")
+                              "--bus-option", f"port={port}", "--log-wall-clock", "--bitrate", "1000000")
         try:
             assert frames.recv_id(master, 0x700 + NODE, timeout=BOOT_WAIT) is not None, "no boot-up/heartbeat"
             frames.send(master, 0x000, [0x01, NODE])

@@ -312,7 +312,7 @@ def _run(profile: Profile, od: str, tmp: Path, channel: str) -> RunResult:
                           operator=profile_operator(profile), od=od).start()
     try:
         result = run_canopen(profile, {"interface": "virtual", "channel": channel}, NODE,
-                             RunOptions(1.0, realtime=False, out_dir=tmp, live=False), controller_node_id=42)
+                             RunOptions(1.0, pacing="virtual", out_dir=tmp, live=False), controller_node_id=42)
     finally:
         sim.stop()
     assert result.exit_reason == "completed", result.error

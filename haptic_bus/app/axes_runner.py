@@ -124,8 +124,8 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                                interface=config["interface"], channel=config.get("channel"), bitrate=config.get("bitrate"),
                                bus_kwargs={k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")},
                                period=period, tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling_source=PROFILE_SCALING_SOURCE,
-                               safety=safety if options.realtime else safety.for_virtual_time(period),
-                               **({} if options.realtime else VIRTUAL_TIME_PATIENCE))
+                               safety=safety if options.wall_paced else safety.for_virtual_time(period),
+                               **({} if options.wall_paced else VIRTUAL_TIME_PATIENCE))
             stack.callback(axes.close)
             axes.connect()
             _describe(axes, options, link)
@@ -133,11 +133,11 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
             gate = profile.gate()
             with control_thread_scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
-                if options.realtime:
+                if options.wall_paced:
                     _preflight(axes, gate, scene, profile, options, extra)
                 extra["start"] = {"positions_m": _safe_start(axes, profile, scene)}  # after pre-flight: where it is now
-                clock = RealClock(period, spin=options.scheduling.spin) if options.realtime else VirtualClock(period)
-                hold = longest_hold(period, options.realtime, safety.rpdo_deadline_ms(period), safety.consumer_ms)
+                clock = RealClock(period, spin=options.scheduling.spin) if options.wall_paced else VirtualClock(period)
+                hold = longest_hold(period, options.wall_paced, safety.rpdo_deadline_ms(period), safety.consumer_ms)
                 controller = AxesController(axes, gate, scene, names=[axis.name for axis in profile.axes],
                                             force_limits=[axis.force_limit for axis in profile.axes], clock=clock,
                                             supervisor=profile.supervisor, passivity=profile.passivity, hold=hold)

@@ -90,7 +90,7 @@ def run_identify(args: argparse.Namespace) -> int:
     from haptic_bus.app.identify_profile import write_identified_profile
     from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen, identify_modbus
     from haptic_bus.app.profiles import read_profile
-    from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID, StopRequest
+    from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID, VIRTUAL, WALL, StopRequest
     from haptic_bus.profile.device import TIMINGS
 
     address, target = _validate(args)
@@ -98,7 +98,8 @@ def run_identify(args: argparse.Namespace) -> int:
     if target is not None and profile.path is not None and target.resolve() == profile.path.resolve():
         raise ParameterError("--write-profile", args.write_profile, "a new file, not the --profile itself", "identify")
     stop = StopRequest()
-    options = IdentifyOptions(args.duration, args.travel, realtime=not args.virtual_time, max_delay=args.max_delay, stop=stop)
+    options = IdentifyOptions(args.duration, args.travel, pacing=VIRTUAL if args.virtual_time else WALL,
+                              max_delay=args.max_delay, stop=stop)
     stop.install()
     if address.url is not None:
         outcome = identify_modbus(profile, address.url, address.unit_id, options)

@@ -27,7 +27,7 @@ from typing import Any
 
 from drives.base import DriveScaling
 from drives.safety import SafetySettings
-from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
+from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE, DeviceLoop
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.app.profile_policies import (
     NAME_PATTERN,
@@ -39,7 +39,7 @@ from haptic_bus.app.profile_policies import (
     read_start,
     read_supervisor,
 )
-from haptic_bus.control.gate import DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
+from haptic_bus.control.gate import GateDecision, GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene, object_to_dict
 from haptic_bus.control.supervisor import SupervisorPolicy
