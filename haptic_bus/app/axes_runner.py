@@ -40,6 +40,7 @@ from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
 from drives.cia402 import POSITION_ACTUAL
 from drives.errors import DriveError, ParameterError
+from drives.safety import VIRTUAL_TIME_DEADLINE, VIRTUAL_TIME_WAIT
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.axes_records import axes_run_document, write_axes_run
@@ -62,7 +63,8 @@ from haptic_bus.control.space_gate import SpaceGate, SpaceGateRefusal
 from haptic_bus.control.space_scene import SpaceScene
 
 RUN_MAPPING = "with-position"
-VIRTUAL_TIME_PATIENCE: dict[str, Any] = {"tpdo_timeout": 0.25, "heartbeat_consumer_ms": 1000}
+VIRTUAL_TIME_PATIENCE: dict[str, Any] = {"tpdo_timeout": VIRTUAL_TIME_WAIT,
+                                         "heartbeat_consumer_ms": round(VIRTUAL_TIME_DEADLINE * 1000)}
 """In virtual time nothing paces the loop: how long the master waits for an axis' TPDO (s) and
 for a drive's heartbeat (ms) catches a dead drive, not a machine busy elsewhere."""
 

@@ -31,7 +31,7 @@ from drives.base import CyclicInputs, Drive, DriveScaling
 from drives.bus_config import resolve_bus_config
 from drives.errors import DriveError, DriveProtocolError
 from haptic_bus.app.profiles import Profile
-from haptic_bus.app.runner import EXIT_STATUS, WALL, StopRequest, check_pacing
+from haptic_bus.app.runner import EXIT_STATUS, WALL, StopRequest, check_pacing, patient
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.identify import Identification, Plan, Record, Recorder, Scale, Session, identify
 from haptic_bus.identify.bounds import DEFAULT_DURATION, DEFAULT_TRAVEL, MAX_DELAY
@@ -155,7 +155,8 @@ def identify_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, opt
         return CanopenDrive(node_id, interface=config["interface"], channel=config.get("channel"),
                             bitrate=config.get("bitrate"), bus_kwargs=extra, period=period, scaling=profile.scaling(),
                             tpdo_objects=DEFAULT_TPDO_WITH_POSITION,
-                            safety=safety if options.pacing == WALL else safety.for_virtual_time(period))
+                            safety=safety if options.pacing == WALL else safety.for_virtual_time(period),
+                            **patient(options.pacing == WALL, "tpdo_timeout"))
 
     return _identify(profile, options, link, open_drive)
 
@@ -170,7 +171,8 @@ def identify_modbus(profile: Profile, url: str, unit_id: int, options: IdentifyO
     link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
 
     def open_drive() -> Drive:
-        return ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True)
+        return ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True,
+                                    **patient(options.pacing == WALL, "timeout"))
 
     return _identify(profile, options, link, open_drive)
 

@@ -45,7 +45,7 @@ from drives.cia402_master import Cia402Master
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.errors import DriveError, DriveFault, DriveStateError, HapticBusError, ParameterError
 from drives.fault_reset import DEFAULT_WAIT
-from drives.safety import SafetySettings
+from drives.safety import VIRTUAL_TIME_WAIT, SafetySettings
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DriveAddress
 from haptic_bus.app.live import LiveView
@@ -189,7 +189,8 @@ def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
         drive = CanopenDrive(node_id, **where, period=period,
                              tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling=profile.scaling(),
                              scaling_source=PROFILE_SCALING_SOURCE,
-                             safety=safety if options.wall_paced else safety.for_virtual_time(period))
+                             safety=safety if options.wall_paced else safety.for_virtual_time(period),
+                             **patient(options.wall_paced, "tpdo_timeout"))
         stack.callback(drive.close)
         drive.connect()
         _show_scaling(drive, options)
@@ -219,7 +220,8 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
 
     def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
-        drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True)
+        drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True,
+                                     **patient(options.wall_paced, "timeout"))
         stack.callback(drive.close)
         drive.connect()  # reads only: identity, scaling, timing
         _refuse_another_master(drive)  # before the poll measurement, which writes
@@ -236,6 +238,13 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     hold = longest_hold(period, options.wall_paced, safety.modbus_watchdog_ms, 0)
     watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
     return _session(profile, options, folder, link, open_drive, DriveSide(hold, watchdog, DriveAddress(url=url, unit_id=unit_id)))
+
+
+def patient(wall_paced: bool, keyword: str) -> dict[str, Any]:
+    """The drive's keyword argument ``keyword`` (its wait for one answer, s) set to
+    :data:`~drives.safety.VIRTUAL_TIME_WAIT` when nothing paces the loop; nothing (the drive's
+    real-time default) when the wall clock does."""
+    return {} if wall_paced else {keyword: VIRTUAL_TIME_WAIT}
 
 
 def longest_hold(period: float, wall_paced: bool, deadline_ms: int, fallback_ms: int) -> float:
