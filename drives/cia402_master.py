@@ -20,7 +20,7 @@ import logging
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from drives.base import (
     SCALING_FIELDS,
@@ -68,10 +68,6 @@ class CyclicStats:
     saturated_outputs: int = 0  # torques clamped to +-0x6072
     suppressed_outputs: int = 0  # write_outputs replaced by the safe outputs while tripped
     safe_stops: int = 0
-
-    def as_dict(self) -> dict[str, int]:
-        """The counters as a plain dict."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 Found = tuple[float | int, str] | Sequence[ScalingReading]

@@ -145,6 +145,15 @@ class FactorGroup:
         return ((POSITION_ENCODER_RESOLUTION, self.position_encoder), (VELOCITY_ENCODER_RESOLUTION, self.velocity_encoder),
                 (GEAR_RATIO, self.gear_ratio), (FEED_CONSTANT, self.feed_constant))
 
+    def objects(self) -> dict[tuple[int, int], int]:
+        """The objects present as a drive reports them: ``{(index, subindex): raw}``, a ratio as sub 1 and sub 2."""
+        values = {(spec.index, 0): raw for spec, raw in ((SI_UNIT_POSITION, self.position_unit),
+                                                          (SI_UNIT_VELOCITY, self.velocity_unit)) if raw is not None}
+        for spec, ratio in self.ratios():
+            if ratio is not None:
+                values[spec.index, 1], values[spec.index, 2] = ratio
+        return values
+
 
 def _unit_error(node: str, spec: ObjectSpec, raw: int, allowed: str) -> ScalingObjectError:
     return ScalingObjectError(node, spec.index, 0, spec.name, raw, allowed)

@@ -9,11 +9,19 @@ users write ``haptic_bus.check_passivity(...)``, never a module path::
     report.passive, report.margin, report.max_stiffness, report.to_dict()
 
     profile = hb.load_profile("cia402-handle")            # validated and gated
-    summary, controller = hb.run_canopen(profile, {"interface": "udp_multicast", "channel": ...},
-                                         node_id=5, options=hb.RunOptions(duration=10.0, realtime=True))
+    # the drive: any CANopen drive, here the simulated one started as
+    #   haptic-bus sim --interface udp_multicast --channel 239.74.163.2 --bus-option port=43113 --node-id 5
+    bus = {"interface": "udp_multicast", "channel": "239.74.163.2", "port": 43113}  # or an open can.BusABC
+    result = hb.run_canopen(profile, bus, node_id=5, options=hb.RunOptions(duration=1.0, pacing="virtual"))
+    result.exit_reason, result.summary.cycles, result.folder  # "completed", 1000, runs/<UTC>-cia402-handle
+
+``pacing="virtual"`` runs in lock-step with a simulated drive (1.0 s of the drive's time);
+``pacing="wall"`` (the default) keeps the wall clock, as a real drive needs.  The run's
+:class:`RunResult` says how it ended; ``result.controller`` is the :class:`WallController`.
 
 Names load on first use (PEP 562), so ``import haptic_bus`` is cheap and the analysis never
-loads python-can, canopen or pymodbus; only :func:`run_canopen` and :func:`run_modbus` do.
+loads python-can, canopen or pymodbus; the runs (:func:`run_canopen`, :func:`run_modbus`) and the
+drive classes (:class:`CanopenDrive`, :class:`ModbusDrive`) do.
 """
 
 from __future__ import annotations
@@ -35,13 +43,19 @@ _HOMES = {
     "PassivityGate": "haptic_bus.control.gate",
     "GatePolicy": "haptic_bus.control.gate",
     "GateDecision": "haptic_bus.control.gate",
-    "GateRefusal": "haptic_bus.control.gate",
-    "DeviceLoop": "haptic_bus.control.gate",
+    "GateRefusal": "haptic_bus.errors",
+    "DeviceLoop": "haptic_bus.analysis.loop",
     "WallController": "haptic_bus.control.controller",
     "RunSummary": "haptic_bus.control.controller",
+    "AssumptionBroken": "haptic_bus.errors",
+    "SupervisorPolicy": "haptic_bus.control.supervisor",
+    "Drive": "drives.base",
+    "CanopenDrive": "drives.canopen.drive",
+    "ModbusDrive": "drives.modbus.drive",
     "Profile": "haptic_bus.app.profiles",
     "load_profile": "haptic_bus.app.profiles",
     "RunOptions": "haptic_bus.app.runner",
+    "RunResult": "haptic_bus.app.runner",
     "run_canopen": "haptic_bus.app.runner",
     "run_modbus": "haptic_bus.app.runner",
     "HapticBusError": "haptic_bus.errors",
@@ -50,20 +64,26 @@ _HOMES = {
 }
 
 __all__ = [
+    "AssumptionBroken",
+    "CanopenDrive",
     "CheckReport",
     "Detent",
     "DeviceLoop",
+    "Drive",
     "DriveError",
     "GateDecision",
     "GatePolicy",
     "GateRefusal",
     "HapticBusError",
+    "ModbusDrive",
     "ParameterError",
     "PassivityGate",
     "Profile",
     "RunOptions",
+    "RunResult",
     "RunSummary",
     "Slot",
+    "SupervisorPolicy",
     "Wall",
     "WallController",
     "WallLoop",
@@ -90,11 +110,15 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:
+    from drives.base import Drive
+    from drives.canopen.drive import CanopenDrive
+    from drives.modbus.drive import ModbusDrive
     from haptic_bus.analysis.check import CheckReport, check_passivity, format_check
-    from haptic_bus.analysis.loop import WallLoop
+    from haptic_bus.analysis.loop import DeviceLoop, WallLoop
     from haptic_bus.app.profiles import Profile, load_profile
-    from haptic_bus.app.runner import RunOptions, run_canopen, run_modbus
+    from haptic_bus.app.runner import RunOptions, RunResult, run_canopen, run_modbus
     from haptic_bus.control.controller import RunSummary, WallController
-    from haptic_bus.control.gate import DeviceLoop, GateDecision, GatePolicy, GateRefusal, PassivityGate
+    from haptic_bus.control.gate import GateDecision, GatePolicy, PassivityGate
     from haptic_bus.control.scene import Detent, Slot, Wall, compile_scene
-    from haptic_bus.errors import DriveError, HapticBusError, ParameterError
+    from haptic_bus.control.supervisor import SupervisorPolicy
+    from haptic_bus.errors import AssumptionBroken, DriveError, GateRefusal, HapticBusError, ParameterError

@@ -5,7 +5,7 @@ Each carries its data from construction; the command line maps the branch to an 
 
     HapticBusError                         haptic_bus refused or broke (this module)
      +-- ParameterError (InvalidInput)     invalid input haptic_bus found                        exit 2
-     |    +-- ProfileError                 (app.profile_reader) a profile field: .path, .field
+     |    +-- ProfileError                 (profile.reader) a profile field: .path, .field
      |    +-- NoSuchObject                 (node.upload) the controller has no such scene object
      +-- GateRefusal                       a passivity gate said no: .decision                    exit 1
      |    +-- ProfileRefusal               (app.profiles) a profile's scene: .path

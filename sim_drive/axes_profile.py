@@ -1,10 +1,11 @@
 """What the simulated multi-axis device reads from a multi-axis profile (``[[axes]]``).
 
 The same TOML files the controller loads (``haptic_bus.app.axes_profile`` validates the whole
-file); the simulator reads its part: ``[loop] period``, and per ``[[axes]]`` table the ``name``,
-``node_id``, ``timing``/``delay`` and ``[axes.device]`` (plant, scaling and hidden truth, as
-:func:`sim_drive.profile.device_parameters` reads a one-axis ``[device]``), and the hand in
-space ``[space.operator]`` (:func:`sim_drive.space_operator.hand_from_table`).
+file), read with the same readers (:mod:`haptic_bus.profile`); the simulator reads its part:
+``[loop] period``, and per ``[[axes]]`` table the ``name``, ``node_id``, ``timing``/``delay``
+and ``[axes.device]`` (plant, scaling and hidden truth, as :func:`sim_drive.profile.load_profile`
+reads a one-axis ``[device]``, with the same defaults where it is silent), and the hand in space
+``[space.operator]`` (:func:`sim_drive.space_operator.hand_from_table`).
 """
 
 from __future__ import annotations
@@ -14,10 +15,17 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from drives.cia301 import NODE_ID_RANGE
+from haptic_bus.analysis.loop import PERIOD_RANGE
 from haptic_bus.errors import ParameterError
+from haptic_bus.profile.device import check_velocity_period, read_device, read_timing
+from haptic_bus.profile.files import resolve_profile
+from haptic_bus.profile.reader import ProfileError, Reader, read_document
 from sim_drive.parameters import DeviceParameters, Timing
-from sim_drive.profile import device_parameters, read_toml, resolve
+from sim_drive.profile import SILENT, drive_parameters
 from sim_drive.space_operator import SpaceHand, hand_from_table
+
+_CONTROLLER_KEYS = ("unit_id", "mapping", "force_limit")  # of an [[axes]] table: the controller's business
 
 
 @dataclass(frozen=True)
@@ -44,36 +52,38 @@ class AxesDeviceProfile:
 
 def is_axes_profile(path_or_name: str | pathlib.Path) -> bool:
     """True for a profile with an ``[[axes]]`` array."""
-    return "axes" in read_toml(path_or_name)
+    return "axes" in read_document(resolve_profile(path_or_name))
 
 
-def _table(value: object, name: str, context: str) -> dict[str, Any]:
-    if not isinstance(value, dict):
-        raise ParameterError(name, value, "a TOML table", context)
-    return value
+def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> SimAxis:
+    r = Reader(path, f"axes[{index}]", table, silent={"name": f"axis{index}", "timing": Timing.CIA402.value})
+    name = r.text("name")
+    node = r.whole("node_id", *NODE_ID_RANGE)
+    timing, delay = read_timing(r)
+    device = read_device(path, r.raw("device", "an [axes.device] table", default={}), r.field("device"), SILENT.device)
+    r.used.update(_CONTROLLER_KEYS)
+    r.done()
+    check_velocity_period(path, r.field("device.velocity"), device, period)
+    return SimAxis(name, node, drive_parameters(path, device, period, timing, delay, f"axes[{index}]."), Timing(timing))
 
 
 def load_axes_device(path_or_name: str | pathlib.Path) -> AxesDeviceProfile:
-    """The axes and the hand a multi-axis profile states; ParameterError naming the field."""
-    document = read_toml(path_or_name)
-    context = f"profile {resolve(path_or_name)}"
-    loop = _table(document.get("loop", {}), "loop", context)
+    """The axes and the hand a multi-axis profile states; ProfileError (a ParameterError) naming the field."""
+    path = resolve_profile(path_or_name)
+    document = read_document(path)
+    loop = Reader(path, "loop", document.get("loop", {}), SILENT.loop)
+    period = loop.real("period", *PERIOD_RANGE, "s")
     tables = document.get("axes")
     if not isinstance(tables, list) or not tables:
-        raise ParameterError("axes", tables, "an array of tables [[axes]]", context)
-    axes = []
-    for i, table in enumerate(tables):
-        table = _table(table, f"axes[{i}]", context)
-        node = table.get("node_id")
-        if not isinstance(node, int) or isinstance(node, bool) or not 1 <= node <= 127:
-            raise ParameterError(f"axes[{i}].node_id", node, "a CANopen node id 1..127", context)
-        axis_loop = {"period": loop["period"]} if "period" in loop else {}
-        axis_loop.update({key: table[key] for key in ("timing", "delay") if key in table})
-        device = _table(table.get("device", {}), f"axes[{i}].device", context)
-        parameters, timing = device_parameters(device, axis_loop, context, prefix=f"axes[{i}].")
-        axes.append(SimAxis(str(table.get("name", f"axis{i}")), node, parameters, timing or Timing.CIA402))
-    space = _table(document.get("space", {}), "space", context)
-    hand = _table(space.get("operator", {"model": "none"}), "space.operator", context)
-    profile = AxesDeviceProfile(tuple(axes), dict(hand))
-    profile.make_hand()  # checked now, not at the first SYNC
+        raise ProfileError(path, "axes", tables, "an array of tables [[axes]]")
+    axes = tuple(_read_axis(path, i, table, period) for i, table in enumerate(tables))
+    space = Reader(path, "space", document.get("space", {}))
+    hand = space.raw("operator", "a [space.operator] table", default={"model": "none"})
+    if not isinstance(hand, dict):
+        raise ProfileError(path, "space.operator", hand, "a TOML table")
+    profile = AxesDeviceProfile(axes, dict(hand))
+    try:
+        profile.make_hand()  # checked now, not at the first SYNC
+    except ParameterError as error:
+        raise ProfileError(path, error.name, error.value, error.allowed) from None
     return profile

@@ -1,10 +1,10 @@
 """``haptic-bus sim``: run the simulated drive as a CANopen slave or a Modbus TCP server until SIGINT/SIGTERM.
 
     haptic-bus sim --interface I --channel C --node-id N [--bitrate R] [--bus-option KEY=VALUE ...]
-                   [--od haptic|standard | --eds FILE] [--timing cia402|ideal|reception] [--profile P] [--realtime]
+                   [--od haptic|standard | --eds FILE] [--timing cia402|ideal|reception] [--profile P] [--log-wall-clock]
     haptic-bus sim --interface I --channel C --node-ids 5,6,7 [--profile gantry-3d] [...]   (several axes)
     haptic-bus sim --modbus tcp://HOST:PORT [--unit-id N] [--word-order big|little]
-                   [--timing cia402|ideal|reception] [--profile P] [--realtime]
+                   [--timing cia402|ideal|reception] [--profile P] [--log-wall-clock]
     haptic-bus sim --eds-path
     haptic-bus sim --version
     python -m sim_drive ...   (the same)
@@ -17,9 +17,9 @@ spelling of ``--bus-option``.
 
 One parser: ``--modbus`` selects the Modbus server (:mod:`sim_drive.modbus`), otherwise the
 CANopen slave runs; the options of the other server are refused.  Logs one line per CiA-402
-state change through ``logging``, each with the drive's virtual time.  ``--realtime`` paces
-nothing (the SYNC producer, or the Modbus client, sets the pace) but prefixes every line with
-the wall-clock time it was seen.  With ``--bitrate`` the CANopen run ends with the bus load and
+state change through ``logging``, each with the drive's virtual time.  ``--log-wall-clock``
+prefixes every line with the wall-clock time it was seen (the simulator paces nothing: the SYNC
+producer, or the Modbus client, sets the pace).  With ``--bitrate`` the CANopen run ends with the bus load and
 worst cycle latency of the worst-case bit-time model.
 Exit status: 0 after a clean stop (or help), 2 for bad arguments or parameters (one line on
 stderr), 1 if the bus or the socket fails.
@@ -113,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="cia402 (default), ideal or reception (a target acts the profile's [loop] delay, "
                            "default 0.25, of a period after the SYNC); default: the profile's [loop] timing")
     both.add_argument("--profile", help="operator profile (name or TOML path): [device], [loop], [operator_model]")
-    both.add_argument("--realtime", action="store_true", help="timestamp log lines with the wall clock")
+    both.add_argument("--log-wall-clock", action="store_true", help="timestamp log lines with the wall clock")
     both.add_argument("--clock", choices=SYNC_CLOCKS, default="virtual",
                       help="how far the handle moves per cycle: virtual (exactly T per SYNC or Modbus output "
                            "write, for a master in virtual time) or wall (the time between them, as a real "
@@ -222,9 +222,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     return _run_canopen(args)
 
 
-def _configure_logging(realtime: bool, library: str, level: int) -> None:
-    """Log lines on stderr (wall-clock stamped with ``realtime``); the bus ``library`` only from ``level``."""
-    fmt = "%(asctime)s %(message)s" if realtime else "%(message)s"
+def _configure_logging(wall_clock: bool, library: str, level: int) -> None:
+    """Log lines on stderr (stamped with the wall clock with ``wall_clock``); the bus ``library`` only from ``level``."""
+    fmt = "%(asctime)s %(message)s" if wall_clock else "%(message)s"
     logging.basicConfig(level=logging.INFO, format=fmt, handlers=[StderrHandler()], force=True)
     logging.getLogger(library).setLevel(level)
 
@@ -253,7 +253,7 @@ def _run_canopen(args: argparse.Namespace) -> int:
     if missing:
         print(f"{_PROG}: error: missing --{', --'.join(m.replace('_', '-') for m in missing)}", file=sys.stderr)
         return 2
-    _configure_logging(args.realtime, "canopen", logging.WARNING)
+    _configure_logging(args.log_wall_clock, "canopen", logging.WARNING)
     try:
         parameters, operator, timing = _drive_setup(args)
         meter = BusLoadMeter(args.bitrate, parameters.period) if args.bitrate else None
@@ -344,7 +344,7 @@ def run_axes(args: argparse.Namespace) -> int:
     except InvalidInput as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
-    _configure_logging(args.realtime, "canopen", logging.WARNING)  # once the arguments hold: a refusal logs nothing
+    _configure_logging(args.log_wall_clock, "canopen", logging.WARNING)  # once the arguments hold: a refusal logs nothing
     with _StopSignals() as stop_signals:
         if not started(sim):
             return 1
@@ -391,7 +391,7 @@ def _run_modbus(args: argparse.Namespace) -> int:
     """The Modbus TCP server until SIGINT/SIGTERM."""
     from sim_drive.modbus import ModbusSimServer, parse_modbus_url
 
-    _configure_logging(args.realtime, "pymodbus", logging.CRITICAL)
+    _configure_logging(args.log_wall_clock, "pymodbus", logging.CRITICAL)
     unit_id = 1 if args.unit_id is None else args.unit_id
     word_order = args.word_order or "big"
     try:

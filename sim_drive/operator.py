@@ -21,7 +21,7 @@ import math
 import pathlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range
@@ -35,10 +35,30 @@ POSITION_LIMIT = 1e6  # m
 SPEED_LIMIT = 1e6  # m/s
 
 
+class Range(NamedTuple):
+    """The values a model's field may take: ``low..high`` in ``unit`` (``low`` itself only if ``low_inclusive``)."""
+
+    low: float
+    high: float
+    unit: str
+    low_inclusive: bool = True
+
+
 class OperatorModel(abc.ABC):
-    """A hand on the handle: the force it applies, in N.  Every model is a frozen dataclass."""
+    """A hand on the handle: the force it applies, in N.  Every model is a frozen dataclass; a
+    model with numeric fields names itself in ``kind`` and their allowed values in ``ranges``,
+    which construction checks."""
 
     __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]  # what makes dataclasses.fields() accept it
+    kind: ClassVar[str] = ""
+    ranges: ClassVar[Mapping[str, Range]] = {}
+
+    def __post_init__(self) -> None:
+        """Each field of ``ranges`` as a float in its range, else ParameterError (naming ``operator KIND``)."""
+        for name, (low, high, unit, low_inclusive) in self.ranges.items():
+            value = real_in_range(name, getattr(self, name), low, high, low_inclusive=low_inclusive, unit=unit,
+                                  context=f"operator {self.kind}")
+            object.__setattr__(self, name, value)
 
     @abc.abstractmethod
     def force(self, t: float, position: float, velocity: float) -> float:
@@ -47,10 +67,6 @@ class OperatorModel(abc.ABC):
     def parameters(self) -> tuple[float, ...]:
         """The model's numeric parameters in field order (the ``p1..`` of object 0x2010)."""
         return tuple(float(getattr(self, f.name)) for f in dataclasses.fields(self))
-
-
-def _check(cls_name: str, name: str, value: object, low: float, high: float, unit: str, *, low_inclusive: bool = True) -> float:
-    return real_in_range(name, value, low, high, low_inclusive=low_inclusive, unit=unit, context=f"operator {cls_name}")
 
 
 @dataclass(frozen=True)
@@ -66,10 +82,10 @@ class NoOperator(OperatorModel):
 class ConstantPush(OperatorModel):
     """A constant push of ``level`` N from t = 0 on."""
 
-    level: float
+    kind: ClassVar[str] = "constant"
+    ranges: ClassVar[Mapping[str, Range]] = {"level": Range(-FORCE_LIMIT, FORCE_LIMIT, "N")}
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "level", _check("constant", "level", self.level, -FORCE_LIMIT, FORCE_LIMIT, "N"))
+    level: float
 
     def force(self, t: float, position: float, velocity: float) -> float:
         """``level`` N."""
@@ -80,12 +96,11 @@ class ConstantPush(OperatorModel):
 class StepPush(OperatorModel):
     """0 N before ``start`` s, ``level`` N from ``start`` on."""
 
+    kind: ClassVar[str] = "step"
+    ranges: ClassVar[Mapping[str, Range]] = {"level": Range(-FORCE_LIMIT, FORCE_LIMIT, "N"), "start": Range(0.0, TIME_LIMIT, "s")}
+
     level: float
     start: float
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "level", _check("step", "level", self.level, -FORCE_LIMIT, FORCE_LIMIT, "N"))
-        object.__setattr__(self, "start", _check("step", "start", self.start, 0.0, TIME_LIMIT, "s"))
 
     def force(self, t: float, position: float, velocity: float) -> float:
         """``level`` N once ``t >= start``, else 0 N."""
@@ -96,17 +111,16 @@ class StepPush(OperatorModel):
 class Sinusoid(OperatorModel):
     """``offset + amplitude sin(2 pi frequency t + phase)`` N (phase in rad)."""
 
+    kind: ClassVar[str] = "sinusoid"
+    ranges: ClassVar[Mapping[str, Range]] = {
+        "amplitude": Range(0.0, FORCE_LIMIT, "N"), "frequency": Range(0.0, FREQUENCY_LIMIT, "Hz"),
+        "phase": Range(-2 * math.pi, 2 * math.pi, "rad"), "offset": Range(-FORCE_LIMIT, FORCE_LIMIT, "N"),
+    }
+
     amplitude: float
     frequency: float
     phase: float = 0.0
     offset: float = 0.0
-
-    def __post_init__(self) -> None:
-        set_ = object.__setattr__
-        set_(self, "amplitude", _check("sinusoid", "amplitude", self.amplitude, 0.0, FORCE_LIMIT, "N"))
-        set_(self, "frequency", _check("sinusoid", "frequency", self.frequency, 0.0, FREQUENCY_LIMIT, "Hz"))
-        set_(self, "phase", _check("sinusoid", "phase", self.phase, -2 * math.pi, 2 * math.pi, "rad"))
-        set_(self, "offset", _check("sinusoid", "offset", self.offset, -FORCE_LIMIT, FORCE_LIMIT, "N"))
 
     def force(self, t: float, position: float, velocity: float) -> float:
         """The sinusoid's value in N at ``t``."""
@@ -117,17 +131,16 @@ class Sinusoid(OperatorModel):
 class Chirp(OperatorModel):
     """Linear chirp ``amplitude sin(2 pi (f0 t + (f1 - f0) t^2 / (2 duration)))`` N on [0, duration], 0 N after."""
 
+    kind: ClassVar[str] = "chirp"
+    ranges: ClassVar[Mapping[str, Range]] = {
+        "amplitude": Range(0.0, FORCE_LIMIT, "N"), "f0": Range(0.0, FREQUENCY_LIMIT, "Hz"),
+        "f1": Range(0.0, FREQUENCY_LIMIT, "Hz"), "duration": Range(0.0, TIME_LIMIT, "s", low_inclusive=False),
+    }
+
     amplitude: float
     f0: float
     f1: float
     duration: float
-
-    def __post_init__(self) -> None:
-        set_ = object.__setattr__
-        set_(self, "amplitude", _check("chirp", "amplitude", self.amplitude, 0.0, FORCE_LIMIT, "N"))
-        set_(self, "f0", _check("chirp", "f0", self.f0, 0.0, FREQUENCY_LIMIT, "Hz"))
-        set_(self, "f1", _check("chirp", "f1", self.f1, 0.0, FREQUENCY_LIMIT, "Hz"))
-        set_(self, "duration", _check("chirp", "duration", self.duration, 0.0, TIME_LIMIT, "s", low_inclusive=False))
 
     def force(self, t: float, position: float, velocity: float) -> float:
         """The chirp's value in N at ``t`` (0 N outside [0, duration])."""
@@ -145,21 +158,19 @@ class HandModel(OperatorModel):
     (m); the force is ``stiffness (x_s - x) + damping (dx_s/dt - v)`` N.
     """
 
+    kind: ClassVar[str] = "hand"
+    ranges: ClassVar[Mapping[str, Range]] = {
+        "stiffness": Range(0.0, STIFFNESS_LIMIT, "N/m"), "damping": Range(0.0, DAMPING_LIMIT, "N s/m"),
+        "start": Range(-POSITION_LIMIT, POSITION_LIMIT, "m"), "speed": Range(-SPEED_LIMIT, SPEED_LIMIT, "m/s"),
+        "amplitude": Range(0.0, POSITION_LIMIT, "m"), "frequency": Range(0.0, FREQUENCY_LIMIT, "Hz"),
+    }
+
     stiffness: float
     damping: float
     start: float = 0.0
     speed: float = 0.0
     amplitude: float = 0.0
     frequency: float = 0.0
-
-    def __post_init__(self) -> None:
-        set_ = object.__setattr__
-        set_(self, "stiffness", _check("hand", "stiffness", self.stiffness, 0.0, STIFFNESS_LIMIT, "N/m"))
-        set_(self, "damping", _check("hand", "damping", self.damping, 0.0, DAMPING_LIMIT, "N s/m"))
-        set_(self, "start", _check("hand", "start", self.start, -POSITION_LIMIT, POSITION_LIMIT, "m"))
-        set_(self, "speed", _check("hand", "speed", self.speed, -SPEED_LIMIT, SPEED_LIMIT, "m/s"))
-        set_(self, "amplitude", _check("hand", "amplitude", self.amplitude, 0.0, POSITION_LIMIT, "m"))
-        set_(self, "frequency", _check("hand", "frequency", self.frequency, 0.0, FREQUENCY_LIMIT, "Hz"))
 
     def force(self, t: float, position: float, velocity: float) -> float:
         """Spring-damper force in N between the moving set-point and the handle."""

@@ -38,13 +38,10 @@ from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE
 from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 from haptic_bus.errors import ParameterError
+from haptic_bus.profile.device import COULOMB_RANGE, NOISE_RANGE, NOISE_SEED_RANGE, SCALE_RANGE
 from haptic_bus.validation import real_in_range, whole_in_range
 
-SCALE_RANGE = (0.0, 1e6)  # exclusive low: m/s per count, m per count, N per N m
 SUBSTEP_RANGE = (1, 100_000)
-COULOMB_RANGE = (0.0, 1e6)  # N
-NOISE_RANGE = (0.0, 2.0**31)  # 0x606C counts rms: up to the INTEGER32 range itself
-SEED_RANGE = (0, 2**64 - 1)
 DEFAULT_RECEPTION_DELAY = 0.25  # samples
 
 
@@ -134,7 +131,7 @@ class DeviceParameters:
         noise = real_in_range("velocity_noise", self.velocity_noise, *NOISE_RANGE, unit="0x606C counts rms", context=ctx)
         set_(self, "velocity_noise", noise)
         if self.noise_seed is not None:
-            set_(self, "noise_seed", whole_in_range("noise_seed", self.noise_seed, *SEED_RANGE, context=ctx))
+            set_(self, "noise_seed", whole_in_range("noise_seed", self.noise_seed, *NOISE_SEED_RANGE, context=ctx))
 
     @property
     def rated_torque_mnm(self) -> int:

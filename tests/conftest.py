@@ -52,8 +52,10 @@ fail only the tests that use it (the plugin imports only the standard library an
 
 from __future__ import annotations
 
+import os
 import socket
 import struct
+import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
@@ -75,6 +77,15 @@ from haptic_bus.testing.simulated import SimDriveNode
 if TYPE_CHECKING:
     from drives.canopen.drive import CanopenDrive
     from sim_drive.canopen.slave import CanopenSimDrive
+
+# This machine's environment sets PYTHONDONTWRITEBYTECODE=1, so every process of the suite (each
+# xdist worker's collection, each command and simulated drive a test starts) would
+# compile the project's 200 modules again, and pytest would rewrite every test module's asserts
+# again: measured 21 s of CPU per collection without the cache and 10 s with it, and 0.2 s per
+# command.  The suite keeps its bytecode in the tree's __pycache__ folders (git ignores them),
+# for itself and for the processes it starts (they inherit this environment).
+sys.dont_write_bytecode = False
+os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
 
 NODE = 5  # the node of ``sim``, of ``remote`` and of ``canopen_rig`` by default
 WAIT = 1.0  # s: the longest any single frame is waited for (a bound, not a pace)

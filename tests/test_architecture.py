@@ -1,7 +1,7 @@
 """The dependency direction the README's layout draws, read off the import graph of the source.
 
-``drives`` imports nothing of ours; ``sim_drive`` uses drives and haptic_bus' analysis (the plant)
-and base, never the controller; inside haptic_bus every module sits in one layer of
+``drives`` imports nothing of ours; ``sim_drive`` uses drives and haptic_bus' analysis (the plant),
+profile (the one profile reader) and base, never the controller; inside haptic_bus every module sits in one layer of
 :data:`LAYERS` and imports only layers below its own (siblings on one level import neither
 way); haptic_bus reaches sim_drive only through ``haptic_bus.app.rig``.  Every import statement is
 counted, including the ones inside functions and under ``TYPE_CHECKING`` (a lazy import is still a
@@ -27,6 +27,7 @@ BASE = ("haptic_bus.errors", "haptic_bus.validation", "haptic_bus.console", "hap
 LAYERS: tuple[tuple[str, ...], ...] = (
     BASE,
     ("haptic_bus.analysis",),
+    ("haptic_bus.profile",),
     ("haptic_bus.control", "haptic_bus.identify"),
     ("haptic_bus.node",),
     ("haptic_bus.app",),
@@ -130,9 +131,9 @@ def test_drives_import_nothing_of_ours_above_them():
     assert not offenders, _report(offenders, "drives is the bottom layer")
 
 
-def test_sim_drive_uses_only_the_analysis_and_the_base_of_haptic_bus():
-    offenders = _offenders("sim_drive", ("haptic_bus",), ("haptic_bus.analysis", *BASE))
-    assert not offenders, _report(offenders, "sim_drive uses haptic_bus' analysis and base, never the controller")
+def test_sim_drive_uses_only_the_analysis_the_profile_and_the_base_of_haptic_bus():
+    offenders = _offenders("sim_drive", ("haptic_bus",), ("haptic_bus.analysis", "haptic_bus.profile", *BASE))
+    assert not offenders, _report(offenders, "sim_drive uses haptic_bus' analysis, profile and base, never the controller")
 
 
 def test_haptic_bus_reaches_the_simulator_only_through_the_rig():
@@ -150,6 +151,14 @@ def test_the_pure_layers_import_no_drive_and_no_bus_code(modules):
 def test_the_control_layer_imports_no_bus_library():
     offenders = _offenders("haptic_bus.control", BUS_LIBRARIES)
     assert not offenders, _report(offenders, "bus-facing controller code belongs to haptic_bus.node or above")
+
+
+def test_the_profile_schema_touches_no_bus_and_no_simulator():
+    """One profile reader for the controller and the simulated drive: it uses drives' tables, the
+    base and the analysis (its place in LAYERS keeps it below the controller), no bus library and
+    nothing of the simulator."""
+    offenders = _offenders("haptic_bus.profile", (*BUS_LIBRARIES, "sim_drive"))
+    assert not offenders, _report(offenders, "haptic_bus.profile is read by the controller and the simulator alike")
 
 
 def test_protocol_tables_touch_no_bus():

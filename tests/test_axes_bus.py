@@ -22,6 +22,7 @@ from drives.errors import DriveArgumentError, DriveError, DriveTimeout
 from haptic_bus.app.axes_profile import AxesProfile, load_axes_profile
 from haptic_bus.app.rig import MultiAxisSim, simulated_axes
 from haptic_bus.control.axes_controller import AxesController
+from tests.raw_bus import queued
 
 NODES = (5, 6, 7)
 RPDO1 = {node: 0x200 + node for node in NODES}
@@ -47,17 +48,6 @@ def rig(tmp_path: pathlib.Path) -> Iterator[tuple[AxesProfile, MultiAxisSim, Can
             yield profile, sim, axes, sniffer
         finally:
             sniffer.shutdown()
-
-
-def frames(bus: can.BusABC) -> list[can.Message]:
-    """Everything the sniffer got so far (bounded)."""
-    seen = []
-    for _ in range(100_000):
-        message = bus.recv(0.0)
-        if message is None:
-            break
-        seen.append(message)
-    return seen
 
 
 def controller_for(profile: AxesProfile, axes: CanopenAxes) -> AxesController:
@@ -86,11 +76,11 @@ def test_one_sync_per_cycle_and_every_tpdo_before_any_torque(rig) -> None:
     profile, sim, axes, sniffer = rig
     axes.enable()
     assert [node.drive.state for node in sim.nodes] == [State.OPERATION_ENABLED] * 3
-    frames(sniffer)
+    queued(sniffer)
     controller = controller_for(profile, axes)
     summary = controller.run(300)
     assert summary.exit_reason == "completed" and summary.cycles == 300
-    seen = [m for m in frames(sniffer) if m.arbitration_id in (SYNC_COB_ID, *RPDO1.values(), *TPDOS)]
+    seen = [m for m in queued(sniffer) if m.arbitration_id in (SYNC_COB_ID, *RPDO1.values(), *TPDOS)]
     cycles = []
     for message in seen:
         if message.arbitration_id == SYNC_COB_ID:

@@ -9,9 +9,9 @@ import pytest
 
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.app.axes_profile import AxesProfileRefusal, load_any_profile, load_axes_profile, read_axes_profile
-from haptic_bus.app.profile_reader import ProfileError
 from haptic_bus.app.profiles import Profile, load_profile
 from haptic_bus.errors import ParameterError
+from haptic_bus.profile.reader import ProfileError
 
 AXIS = """
 [[axes]]

@@ -28,11 +28,8 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import pathlib
 import signal
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -45,8 +42,8 @@ from haptic_bus.app.axes_runner import run_axes_canopen
 from haptic_bus.app.cli import main
 from haptic_bus.app.rig import simulated_axes_device
 from haptic_bus.app.runner import RunOptions
+from tests.cli_process import cli_process, reaped
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
 START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen and judge the profile first
 RUN_WAIT = 240.0  # s: a 2 000-cycle run across two processes on this loaded 2-CPU machine takes about 10
 GANTRY = pathlib.Path(str(load_axes_profile("gantry-3d").path))
@@ -98,12 +95,6 @@ def test_the_demo_renders_a_ball_a_block_and_a_slope_with_k_times_the_penetratio
     assert (tmp_path / "demo" / "trajectory.png").stat().st_size > 20_000
 
 
-def run_cli_process(*args: str) -> subprocess.Popen[str]:
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.Popen([sys.executable, "-m", "haptic_bus.app.cli", *args], cwd=REPO, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
 @pytest.mark.slow
 def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
         tmp_path: pathlib.Path, multicast: tuple[str, int], sim_process) -> None:
@@ -114,14 +105,9 @@ def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
     bus = ["--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}"]
     sim = sim_process(*bus, "--node-ids", "5,6,7", "--profile", str(profile_path))
     sim.wait_for_line("nodes 5, 6, 7: serving", START_WAIT)
-    run = run_cli_process("run", str(profile_path), *bus, "--virtual-time", "--duration", "4", "--out",
-                          str(tmp_path / "two"), "-q")
-    try:
+    with reaped(cli_process("run", str(profile_path), *bus, "--virtual-time", "--duration", "4", "--out",
+                            str(tmp_path / "two"), "-q")) as run:
         out, err = run.communicate(timeout=RUN_WAIT)
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.communicate(timeout=10)
     code, log = sim.stop()
     assert run.returncode == 0, err
     assert "ended: completed" in out and code == 0, log
@@ -174,7 +160,7 @@ def test_a_start_inside_an_object_is_refused_with_nothing_enabled(tmp_path: path
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}).start()
     try:
         result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
-                                  RunOptions(1.0, realtime=False, out_dir=tmp_path / "run", live=False))
+                                  RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False))
         assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED] * 3
     finally:
         sim.stop()
@@ -219,28 +205,26 @@ def test_killing_one_axis_drive_process_zeroes_every_torque_in_the_same_cycle(
     two.wait_for_line("nodes 5, 7: serving", START_WAIT)
     one.wait_for_line("nodes 6: serving", START_WAIT)
     sniffer = spec.open()
-    run = run_cli_process("run", str(profile_path), *spec.sim_args(), "--virtual-time", "--duration", "600",
-                          "--out", str(tmp_path / "run"), "-q")
+    run = cli_process("run", str(profile_path), *spec.sim_args(), "--virtual-time", "--duration", "600",
+                      "--out", str(tmp_path / "run"), "-q")
     seen: list[tuple[int, bytes]] = []
     try:
-        deadline = time.monotonic() + RUN_WAIT
-        torques = {0x205: 0, 0x206: 0, 0x207: 0}
-        while not all(torques.values()) and time.monotonic() < deadline and run.poll() is None:
-            message = sniffer.recv(0.5)  # until every axis pushes on the slope
-            if message is not None and message.arbitration_id in torques:
-                torques[message.arbitration_id] = int.from_bytes(message.data[2:4], "little", signed=True)
-        assert all(torques.values()), run.stderr.read() if run.poll() is not None else "the run never pushed on the slope"
-        one.process.send_signal(signal.SIGKILL)
-        one.process.wait(timeout=10)
-        while run.poll() is None and time.monotonic() < deadline:
-            message = sniffer.recv(0.2)
-            if message is not None:
-                seen.append((message.arbitration_id, bytes(message.data)))
-        _, err = run.communicate(timeout=30)
+        with reaped(run):
+            deadline = time.monotonic() + RUN_WAIT
+            torques = {0x205: 0, 0x206: 0, 0x207: 0}
+            while not all(torques.values()) and time.monotonic() < deadline and run.poll() is None:
+                message = sniffer.recv(0.5)  # until every axis pushes on the slope
+                if message is not None and message.arbitration_id in torques:
+                    torques[message.arbitration_id] = int.from_bytes(message.data[2:4], "little", signed=True)
+            assert all(torques.values()), run.stderr.read() if run.poll() is not None else "the run never pushed on the slope"
+            one.process.send_signal(signal.SIGKILL)
+            one.process.wait(timeout=10)
+            while run.poll() is None and time.monotonic() < deadline:
+                message = sniffer.recv(0.2)
+                if message is not None:
+                    seen.append((message.arbitration_id, bytes(message.data)))
+            _, err = run.communicate(timeout=30)
     finally:
-        if run.poll() is None:
-            run.kill()
-            run.communicate(timeout=10)
         sniffer.shutdown()
     code, log = two.stop()
     assert run.returncode == 1, err
@@ -288,7 +272,7 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path) -
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}, clock="wall").start()
     try:
         result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
-                                  RunOptions(8.0, realtime=True, out_dir=tmp_path / "run", live=False))
+                                  RunOptions(8.0, pacing="wall", out_dir=tmp_path / "run", live=False))
     finally:
         sim.stop()
     assert result.exit_reason == "completed", result.error

@@ -26,46 +26,9 @@ from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen
 from haptic_bus.app.profiles import read_profile
 from haptic_bus.app.rig import simulated_axes_device
 from sim_drive.cli import main as sim_main
+from tests.guess_profile import guess_profile
 
 SIGMAS = 4.0
-
-AXIS_Y = """\
-# The y axis of gantry-3d as a one-axis profile: what identify needs of it (scaling, period, force limit).
-[profile]
-name = "gantry-y"
-operator = "commissioning engineer"
-task = "identify one axis of the gantry"
-description = "the y axis of gantry-3d, node 6"
-
-[device]
-mass = 0.8                       # kg: a guess (the truth is 1.0)
-friction = 15.0                  # N s/m: a guess (the truth is 20)
-friction_source = "datasheet"
-velocity = "average"
-velocity_per_count = 1e-06
-position_per_count = 1e-07
-rated_torque = 0.1
-force_per_torque = 50.0
-max_torque_permille = 3000
-
-[loop]
-period = 0.002
-timing = "cia402"
-
-[limits]
-force_limit = 10.0
-
-[gate]
-safety_margin = 0.0
-bandwidth = "warn"
-
-[scene]
-objects = []
-
-[safety]
-heartbeat_ms = 100               # a loaded test machine: the watchdogs guard a dead master, not a busy one
-consumer_ms = 2000
-"""
 
 
 def test_scan_finds_every_axis_and_identify_measures_one_while_the_others_stay(
@@ -80,10 +43,14 @@ def test_scan_finds_every_axis_and_identify_measures_one_while_the_others_stay(
         assert code == 0
         assert [row["node_id"] for row in found] == [5, 6, 7]
         assert all(row["cia402"] and row["cst_supported"] for row in found), found
-        profile_path = tmp_path / "gantry-y.toml"
-        profile_path.write_text(AXIS_Y)
+        # the y axis of gantry-3d as a one-axis profile: what identify needs of it (scaling, period, force limit);
+        # the guesses 0.8 kg and 15 N s/m (the truth is 1 kg and 20 N s/m)
+        profile_path = guess_profile(tmp_path / "gantry-y.toml", comment="The y axis of gantry-3d as a one-axis profile.",
+                                     name="gantry-y", task="identify one axis of the gantry",
+                                     description="the y axis of gantry-3d, node 6", mass=0.8, friction=15.0,
+                                     velocity="average", rated_torque=0.1, period=0.002, force_limit=10.0)
         outcome = identify_canopen(read_profile(profile_path), {"interface": "virtual", "channel": channel}, 6,
-                                   IdentifyOptions(duration=6.0, realtime=False))
+                                   IdentifyOptions(duration=6.0, pacing="virtual"))
         states = [node.drive.state for node in sim.nodes]
         positions = [node.drive.handle.position for node in sim.nodes]
         syncs = [node.drive.sync_count for node in sim.nodes]

@@ -17,12 +17,12 @@ from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.design import force_step_response
 from haptic_bus.analysis.energy import commensurate_theta
 from haptic_bus.analysis.frequency import t_fund
-from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.analysis.loop import DeviceLoop, WallLoop
 from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_canopen
 from haptic_bus.control.controller import WallController, encoder_origin
-from haptic_bus.control.gate import DeviceLoop, GateRefusal, PassivityGate
+from haptic_bus.control.gate import GateRefusal, PassivityGate
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.scene import Wall, compile_scene
 from haptic_bus.node.controller_node import ABORT_INVALID_VALUE, ControllerNode

@@ -19,7 +19,7 @@ from haptic_bus.app.cli import EXIT_INVALID, main
 from haptic_bus.validation import real_in_range
 
 # every module that defines an error class the docstring draws beside its own module
-HOMES = ("haptic_bus.app.profile_reader", "haptic_bus.app.profiles", "haptic_bus.app.axes_profile",
+HOMES = ("haptic_bus.profile.reader", "haptic_bus.app.profiles", "haptic_bus.app.axes_profile",
          "haptic_bus.app.runner", "haptic_bus.control.space_gate", "haptic_bus.node.upload",
          "haptic_bus.identify.fit", "sim_drive.device")
 

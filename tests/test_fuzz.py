@@ -26,6 +26,7 @@ import pytest
 
 from drives.bus_config import open_bus
 from drives.errors import DriveError
+from tests.raw_bus import FailingBus
 
 NODE = 5
 SEED = 20261130
@@ -56,31 +57,6 @@ def random_frame(rng: random.Random) -> can.Message:
     return can.Message(arbitration_id=can_id, data=bytes(rng.randrange(256) for _ in range(length)), is_extended_id=False)
 
 
-class FlakyVirtualBus(can.BusABC):
-    """python-can's virtual bus whose receive raises every ``every``-th call (a bad datagram)."""
-
-    def __init__(self, channel: str, every: int) -> None:
-        self.inner = can.Bus(interface="virtual", channel=channel)
-        self.every = every
-        self.calls = 0
-        self.raised = 0
-        super().__init__(channel=channel)
-
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        self.calls += 1
-        if self.calls % self.every == 0:
-            self.raised += 1
-            raise can.CanOperationError("could not unpack received message")
-        return self.inner.recv(timeout), False
-
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        self.inner.send(msg, timeout)
-
-    def shutdown(self) -> None:
-        self.inner.shutdown()
-        super().shutdown()
-
-
 def test_ten_thousand_random_frames_silence_neither_side(channel) -> None:
     from drives.canopen.drive import CanopenDrive
     from drives.cia402 import State
@@ -92,7 +68,7 @@ def test_ten_thousand_random_frames_silence_neither_side(channel) -> None:
     from sim_drive.parameters import DeviceParameters
 
     profile = load_profile("cia402-handle")
-    sim_bus = FlakyVirtualBus(channel, every=997)
+    sim_bus = FailingBus(channel, lambda call: call % 997 == 0, "could not unpack received message")  # a bad datagram
     sim = CanopenSimDrive(sim_bus, NODE, parameters=DeviceParameters(**profile.sim_device_parameters())).start()
     drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path(), period=profile.loop.period,
                          scaling=profile.scaling(), safety=SafetySettings().for_virtual_time(profile.loop.period))

@@ -10,10 +10,8 @@ refusal), and in two processes on udp_multicast: ``haptic-bus identify`` against
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
-import sys
 import time
 import tomllib
 import uuid
@@ -32,58 +30,22 @@ from haptic_bus.app.profiles import load_profile, read_profile
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.operator import HandModel, OperatorModel
 from sim_drive.parameters import DeviceParameters
+from tests.cli_process import cli_process, reaped
+from tests.guess_profile import guess_profile
 
-REPO = Path(__file__).resolve().parents[1]
 NODE = 5
 SIGMAS = 4.0
 START_WAIT = 30.0  # s: a process imports numpy/scipy/canopen before it answers
 RUN_WAIT = 120.0  # s: 5 s of excitation in lock-step over udp_multicast takes about 5-10 s; room for a loaded machine
 HIDDEN = dict(m=0.37, b=2.9, coulomb_friction=0.2, velocity_noise=1000.0, noise_seed=21)
 
-CONTROLLER = """\
-# What the controller believes: not the drive's truth.
-[profile]
-name = "identify-test"
-operator = "commissioning engineer"
-task = "measure the handle before trusting the gate"
-description = "a 0.5 kg guess with a datasheet b; the drive is said to report v(kT)"
-
-[device]
-mass = 0.5                       # kg: a guess
-friction = 1.0                   # N s/m: a datasheet guess
-friction_source = "datasheet"
-velocity = "point"               # what the controller believes 0x606C is
-velocity_per_count = 1e-6
-position_per_count = 1e-7
-rated_torque = 0.2
-force_per_torque = 50.0
-max_torque_permille = 3000
-
-[loop]
-period = 0.001
-timing = "cia402"
-
-[limits]
-force_limit = {force_limit}
-
-[gate]
-safety_margin = 0.0
-bandwidth = "warn"
-
-[scene]
-objects = []
-
-[safety]
-heartbeat_ms = 100               # a loaded test machine: the watchdogs guard a dead master, not a busy one
-consumer_ms = 2000
-"""
-
-
 def controller_profile(folder: Path, force_limit: float = 5.0) -> Path:
-    """The controller's profile in ``folder``."""
-    path = folder / "controller.toml"
-    path.write_text(CONTROLLER.format(force_limit=force_limit))
-    return path
+    """The controller's profile in ``folder``: what it believes, not the drive's truth."""
+    return guess_profile(folder / "controller.toml", comment="What the controller believes: not the drive's truth.",
+                         name="identify-test", task="measure the handle before trusting the gate",
+                         description="a 0.5 kg guess with a datasheet b; the drive is said to report v(kT)",
+                         mass=0.5, friction=1.0, velocity="point", rated_torque=0.2, period=0.001,
+                         force_limit=force_limit)
 
 
 @contextmanager
@@ -110,7 +72,7 @@ def test_identify_over_the_virtual_bus_in_virtual_time(tmp_path: Path) -> None:
     profile = read_profile(controller_profile(tmp_path))
     with hidden_drive("cia402", velocity="average") as (sim, channel):
         outcome = identify_canopen(profile, {"interface": "virtual", "channel": channel}, NODE,
-                                   IdentifyOptions(duration=10.0, realtime=False))
+                                   IdentifyOptions(duration=10.0, pacing="virtual"))
         state = sim.drive.state
     found = outcome.identification
     assert outcome.exit_reason == "completed" and outcome.exit_status == 0, outcome.error
@@ -206,11 +168,8 @@ timing = "cia402"
 
 def _identify_process(multicast: tuple[str, int], *arguments: str) -> subprocess.Popen[str]:
     group, port = multicast
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.Popen(
-        [sys.executable, "-m", "haptic_bus.app.cli", "identify", "--interface", "udp_multicast", "--channel", group,
-         "--bus-option", f"port={port}", "--node-id", str(NODE), "--virtual-time", *arguments],
-        cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return cli_process("identify", "--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
+                       "--node-id", str(NODE), "--virtual-time", *arguments)
 
 
 def _start_sim(sim_process: Any, multicast: tuple[str, int], hidden: Path) -> Any:
@@ -225,14 +184,10 @@ def test_identify_against_haptic_bus_sim_in_another_process(multicast: tuple[str
                                                              tmp_path: Path) -> None:
     sim = _start_sim(sim_process, multicast, _hidden_profile(tmp_path))
     written = tmp_path / "identified.toml"
-    run = _identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "5", "--json",
-                            "--write-profile", str(written))  # 5 s: b's standard error ~0.2 %, far inside the 5 % bound
-    try:
+    # 5 s: b's standard error ~0.2 %, far inside the 5 % bound
+    with reaped(_identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "5", "--json",
+                                  "--write-profile", str(written))) as run:
         out, err = run.communicate(timeout=RUN_WAIT)
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.communicate(timeout=10)
     code, log = sim.stop()
     assert run.returncode == 0, err
     document = json.loads(out)
@@ -256,16 +211,11 @@ def test_identify_against_haptic_bus_sim_in_another_process(multicast: tuple[str
 
 def test_ctrl_c_disables_the_drive_and_exits_130(multicast: tuple[str, int], sim_process: Any, tmp_path: Path) -> None:
     sim = _start_sim(sim_process, multicast, _hidden_profile(tmp_path))
-    run = _identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "600")
-    try:
+    with reaped(_identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "600")) as run:
         sim.wait_for_line("-> OPERATION ENABLED", START_WAIT)
         time.sleep(0.5)  # well into the probe or the excitation
         run.send_signal(signal.SIGINT)
         _, err = run.communicate(timeout=RUN_WAIT)
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.communicate(timeout=10)
     code, log = sim.stop()
     assert run.returncode == 130, err
     assert "interrupted" in err

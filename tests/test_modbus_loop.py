@@ -24,8 +24,9 @@ from drives.cia402 import POSITION_ACTUAL
 from drives.modbus.drive import ModbusDrive
 from drives.modbus.timing import SAFETY_FACTOR, loop_delay, measure_poll
 from drives.safety import SafetySettings
+from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.control.controller import WallController
-from haptic_bus.control.gate import DeviceLoop, PassivityGate
+from haptic_bus.control.gate import PassivityGate
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.scene import Wall, compile_scene
 from sim_drive.modbus import ModbusSimServer

@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 
-from haptic_bus.analysis.aliasing import confirm_by_simulation, exposure_at, exposure_convergence, worst_force
 from haptic_bus.analysis.frequency import t_fund
 from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.analysis.out_of_band import confirm_by_simulation, exposure_at, exposure_convergence, worst_force
 
 SEED = WallLoop(0.5, 0.1, 1e-3, 200.0, 100.0)
 

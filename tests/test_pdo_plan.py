@@ -23,7 +23,7 @@ RPDO = (CONTROLWORD, TARGET_TORQUE)
 def pdos(transmit: bool, capacities: list[int], mappings: list[tuple[ObjectSpec, ...]] | None = None) -> list[DrivePdo]:
     base = 0x1800 if transmit else 0x1400
     mappings = mappings or [()] * len(capacities)
-    return [DrivePdo(n + 1, transmit, base + n, 2, 0x80000000, False, False, capacity,
+    return [DrivePdo(n + 1, transmit, base + n, 0x80000000, False, False, capacity,
                      tuple(mapping_word(spec) for spec in mapping))
             for n, (capacity, mapping) in enumerate(zip(capacities, mappings))]
 

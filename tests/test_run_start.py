@@ -22,7 +22,16 @@ from haptic_bus.app.runner import RunOptions, run_canopen
 from haptic_bus.control.record import COLUMNS
 from haptic_bus.control.scene import Wall
 from haptic_bus.errors import ParameterError
-from tests.run_rig import events_of, profile_variant, read_record, read_run, run_cli, simulated_drive
+from tests.run_rig import (
+    CliResult,
+    DriveUnderTest,
+    events_of,
+    profile_variant,
+    read_record,
+    read_run,
+    run_cli,
+    simulated_drive,
+)
 
 K, B, DEPTH = 1500.0, 10.0, 0.005  # cia402-handle's end-stop (N/m, N s/m) and how deep the run starts in it (m)
 SURFACE = -DEPTH  # m
@@ -37,17 +46,24 @@ def inside(folder: pathlib.Path, start: str = "") -> pathlib.Path:
     return profile_variant(folder, "cia402-handle", "inside", {"position = 0.003 ": f"position = {SURFACE!r} "}, start)
 
 
+def run_inside(folder: pathlib.Path, capsys: pytest.CaptureFixture[str], transport: str, start: str,
+               *options: str) -> tuple[CliResult, DriveUnderTest, pathlib.Path]:
+    """``haptic-bus run OPTIONS`` in virtual time of :func:`inside` (with ``start``) against the
+    simulated drive on ``transport``: what the command did, the drive, the run's folder."""
+    profile = inside(folder, start)
+    out = folder / "run"
+    with simulated_drive(transport, profile) as drive:
+        result = run_cli(capsys, "run", str(profile), *drive.args, *options, "--virtual-time", "--out", str(out))
+    return result, drive, out
+
+
 @pytest.mark.parametrize("transport, start, option", [
     ("canopen", "", []),  # the default policy
     ("modbus", '[start]\nin_contact = "ramp"\n', ["--start-in-contact", "refuse"]),  # the option wins over the profile
 ])
 def test_a_start_inside_an_object_is_refused_and_the_drive_never_enabled(
         transport: str, start: str, option: list[str], tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
-    profile = inside(tmp_path, start)
-    out = tmp_path / "run"
-    with simulated_drive(transport, profile) as drive:
-        result = run_cli(capsys, "run", str(profile), *drive.args, *option, "--virtual-time", "--duration", "1",
-                         "--out", str(out))
+    result, drive, out = run_inside(tmp_path, capsys, transport, start, *option, "--duration", "1")
     assert result.code == 1, result.err
     assert result.err_lines == [f"haptic-bus run: refused: {REFUSAL}"]
     assert not drive.was_enabled and drive.drive.state.value == "SWITCH ON DISABLED", drive.states
@@ -65,11 +81,7 @@ def test_a_start_inside_an_object_is_refused_and_the_drive_never_enabled(
 ])
 def test_the_start_ramp_scales_the_scene_from_0_to_1_and_is_no_observer_alarm(
         transport: str, start: str, option: list[str], tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
-    profile = inside(tmp_path, start)
-    out = tmp_path / "run"
-    with simulated_drive(transport, profile) as drive:
-        result = run_cli(capsys, "run", str(profile), *drive.args, *option, "--virtual-time", "--duration", "0.5",
-                         "--out", str(out), "-q")
+    result, drive, out = run_inside(tmp_path, capsys, transport, start, *option, "--duration", "0.5", "-q")
     assert result.code == 0, result.err
     assert drive.was_enabled and drive.states[-1].value != "FAULT"
     header, record = read_record(out)
@@ -114,7 +126,7 @@ def test_the_api_never_enables_the_drive_for_a_scene_the_gate_has_not_proven(
     path = inside(tmp_path)
     profile = dataclasses.replace(load_profile(path), scene=(dataclasses.replace(ACTIVE_WALL, position=surface),),
                                   start=StartPolicy(policy, RAMP_TIME))
-    options = RunOptions(duration=0.5, realtime=False, out_dir=tmp_path / "run", live=False)
+    options = RunOptions(duration=0.5, pacing="virtual", out_dir=tmp_path / "run", live=False)
     with simulated_drive("canopen", path) as drive:
         result = run_canopen(profile, {"interface": "virtual", "channel": drive.channel}, 5, options)
     assert not drive.was_enabled, drive.states

@@ -41,10 +41,11 @@ import pytest
 from drives.bus_config import open_bus
 from drives.cia402 import State
 from drives.errors import DriveTimeout
+from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.app import runner
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.control.controller import WallController, encoder_origin
-from haptic_bus.control.gate import DeviceLoop, GatePolicy, PassivityGate
+from haptic_bus.control.gate import GatePolicy, PassivityGate
 from haptic_bus.node.upload import upload_walls
 from tests.run_rig import (
     NODE,
@@ -191,6 +192,8 @@ def test_a_torque_computed_from_a_missed_tpdo_is_a_late_cycle(
                     inject()
 
         monkeypatch.setattr(sim, "sync", sync_then_maybe_short)
+        # the master waits out each dropped TPDO: 50 ms (the real-time default), not virtual time's 0.5 s
+        monkeypatch.setattr(runner, "VIRTUAL_TIME_WAIT", 0.05)
         result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "1", "--out", str(out))
     assert result.code == 3, result.err
     (line,) = result.err_lines

@@ -6,12 +6,8 @@ objects, never written down twice."""
 from __future__ import annotations
 
 import json
-import os
 import re
-import signal
 import socket
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -30,8 +26,9 @@ from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.device import SUPPORTED_DRIVE_MODES
 from sim_drive.eds import eds_path
 from sim_drive.modbus.server import ModbusSimServer
+from tests.cli_process import cli_process, terminated
+from tests.raw_bus import queued
 
-REPO = Path(__file__).resolve().parents[1]
 STATE_KEYS = {"statusword", "cia402_state", "error_code", "error_code_text"}
 CANOPEN_KEYS = {"protocol", "node_id", "device_type", "device_profile", "device_kind", "vendor_id", "product_code", "revision",
                 "serial", "nmt_state", "boot_up_seen", "supported_drive_modes", "cst_supported", "cia402", "notes", *STATE_KEYS}
@@ -84,17 +81,6 @@ def second_drive(channel: str, sim: CanopenSimDrive) -> Iterator[CanopenSimDrive
     drive.stop()
 
 
-def drained(bus: can.BusABC) -> list[can.Message]:
-    """Every frame queued on ``bus`` now (bounded)."""
-    frames = []
-    for _ in range(100_000):
-        message = bus.recv(0.0)
-        if message is None:
-            break
-        frames.append(message)
-    return frames
-
-
 # ----------------------------------------------------------------------------- CANopen, virtual bus
 def test_virtual_bus_lists_exactly_the_drives_with_their_eds_identity_nmt_state_and_cst(
         channel: str, master: can.BusABC, second_drive: CanopenSimDrive, frames: Any) -> None:
@@ -121,7 +107,7 @@ def test_the_scan_sends_sdo_upload_requests_only(channel: str, master: can.BusAB
                                                  frames: Any) -> None:
     frames.drain(master)
     scan_canopen({"interface": "virtual", "channel": channel}, timeout=0.3)
-    sent = [m for m in drained(master) if not (0x580 < m.arbitration_id < 0x600 or 0x700 < m.arbitration_id < 0x780)]
+    sent = [m for m in queued(master) if not (0x580 < m.arbitration_id < 0x600 or 0x700 < m.arbitration_id < 0x780)]
     assert sent and all(0x600 < m.arbitration_id < 0x680 for m in sent), "only SDO requests: no NMT, SYNC, PDO, EMCY"
     assert all(m.data[0] == 0x40 for m in sent), "initiate upload (read) requests only: no download, no abort"
     per_node = {node: sum(m.arbitration_id == 0x600 + node for m in sent) for node in range(1, 128)}
@@ -134,10 +120,11 @@ def test_a_node_booting_during_the_window_is_listed_and_a_malformed_heartbeat_is
     result: list[Any] = []
     scanner = threading.Thread(target=lambda: result.append(
         scan_canopen({"interface": "virtual", "channel": channel}, timeout=1.5)))
+    late = CanopenSimDrive({"interface": "virtual", "channel": channel}, 12)  # built (its dictionary read) before the window
     scanner.start()
     time.sleep(0.3)  # well inside the 1.5 s window, after the probe went out
     frames.send(master, 0x705, b"")  # on node 5's heartbeat COB-ID, but no state byte
-    late = CanopenSimDrive({"interface": "virtual", "channel": channel}, 12).start()  # boot-up now
+    late.start()  # boot-up now
     try:
         scanner.join(timeout=10.0)
         assert not scanner.is_alive()
@@ -238,10 +225,8 @@ def test_udp_multicast_two_drives_and_a_running_controller_undisturbed(bus_spec:
     drives = {node: sim_process(*spec.sim_args(), "--node-id", str(node)) for node in (5, 9)}
     for node, process in drives.items():
         process.wait_for_line(f"node {node}: serving on", START_WAIT)
-    run = subprocess.Popen(
-        [sys.executable, "-m", "haptic_bus.app.cli", "run", "seed-ideal", *spec.sim_args(), "--node-id", "5",
-         "--virtual-time", "--duration", "600", "--controller-node-id", "42", "--out", str(tmp_path), "-q"],
-        cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    run = cli_process("run", "seed-ideal", *spec.sim_args(), "--node-id", "5", "--virtual-time", "--duration", "600",
+                      "--controller-node-id", "42", "--out", str(tmp_path), "-q")
     try:
         deadline = time.monotonic() + START_WAIT  # the controller node answers once the drive is commissioned
         while not scan_canopen(bus, [42], timeout=0.2, answer_timeout=0.5) and time.monotonic() < deadline:
@@ -258,12 +243,7 @@ def test_udp_multicast_two_drives_and_a_running_controller_undisturbed(bus_spec:
         assert controller["nmt_state"] == "OPERATIONAL" and controller["device_kind"] == "no device profile"
         assert controller["cia402"] is False and controller["cst_supported"] is None and controller["notes"] == []
     finally:
-        run.send_signal(signal.SIGTERM)
-        try:
-            out, err = run.communicate(timeout=20)
-        except subprocess.TimeoutExpired:
-            run.kill()
-            out, err = run.communicate(timeout=10)
+        out, err = terminated(run, 20)
     assert run.returncode == 0 and "ended: stopped" in out, err
     for process in drives.values():
         assert process.stop()[0] == 0

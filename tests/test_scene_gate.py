@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptic_bus.control.gate import DeviceLoop, GatePolicy, GateRefusal, PassivityGate
+from haptic_bus.analysis.loop import DeviceLoop
+from haptic_bus.control.gate import GatePolicy, GateRefusal, PassivityGate
 from haptic_bus.control.scene import Detent, Slot, Wall, compile_scene
 from haptic_bus.errors import ParameterError
 

@@ -47,7 +47,7 @@ def test_eds_path(capsys: pytest.CaptureFixture[str]) -> None:
         (["--interface", "virtual", "--channel", "x", "--node-id", "0"], "node_id = 0"),
         (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--timing", "late"], "invalid choice"),
         (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--bus-option", "port"], "KEY=VALUE"),
-        (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--profile", "/nonexistent.toml"], "readable TOML"),
+        (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--profile", "/nonexistent.toml"], "existing TOML"),
     ],
 )
 def test_bad_arguments_exit_2(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -83,7 +83,7 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
         (["--modbus", MODBUS_URL, "--unit-id", "256"], "unit_id = 256"),
         (["--modbus", MODBUS_URL, "--unit-id", "one"], "invalid int value"),
         (["--modbus", MODBUS_URL, "--word-order", "middle"], "invalid choice"),
-        (["--modbus", MODBUS_URL, "--profile", "/nonexistent.toml"], "readable TOML"),
+        (["--modbus", MODBUS_URL, "--profile", "/nonexistent.toml"], "an existing TOML file"),
         (["--frobnicate"], "unrecognized arguments: --frobnicate"),
     ],
 )
@@ -148,7 +148,7 @@ def test_signal_stops_cleanly_and_state_changes_are_logged(
     group, port = multicast
     with open_bus(interface="udp_multicast", channel=group, port=port) as master:
         process = sim_process("--interface", "udp_multicast", "--channel", group, "--node-id", str(NODE),
-                              "--bus-option", f"port={port}", "--realtime", "--bitrate", "1000000")
+                              "--bus-option", f"port={port}", "--log-wall-clock", "--bitrate", "1000000")
         try:
             assert frames.recv_id(master, 0x700 + NODE, timeout=BOOT_WAIT) is not None, "no boot-up/heartbeat"
             frames.send(master, 0x000, [0x01, NODE])

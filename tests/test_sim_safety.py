@@ -9,6 +9,7 @@ error-register byte against 0x1001, the state after 0x6007's reaction, the torqu
 from __future__ import annotations
 
 import struct
+import threading
 import time
 
 import can
@@ -16,6 +17,7 @@ import canopen
 import pytest
 
 from drives.cia402 import Command, State, decode_statusword
+from tests.raw_bus import FailingBus
 
 NODE = 5
 SDO_RX, SDO_TX, EMCY, HEARTBEAT, RPDO1, TPDO1 = 0x600 + NODE, 0x580 + NODE, 0x80 + NODE, 0x700 + NODE, 0x200 + NODE, 0x180 + NODE
@@ -164,28 +166,7 @@ def test_a_zero_byte_sdo_request_is_dropped_and_the_node_keeps_serving(sim, mast
 def test_a_receive_error_is_counted_and_the_node_keeps_serving(channel, master, frames) -> None:
     from sim_drive.canopen.slave import CanopenSimDrive
 
-    class FlakyBus(can.BusABC):
-        """A virtual bus whose receive fails every so often, as a bad udp_multicast datagram does."""
-
-        def __init__(self) -> None:
-            self.inner = can.Bus(interface="virtual", channel=channel)
-            self.calls = 0
-            super().__init__(channel=channel)
-
-        def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-            self.calls += 1
-            if self.calls % 7 == 3:
-                raise can.CanOperationError("datagram of the wrong length")
-            return self.inner.recv(timeout), False
-
-        def send(self, msg: can.Message, timeout: float | None = None) -> None:
-            self.inner.send(msg, timeout)
-
-        def shutdown(self) -> None:
-            self.inner.shutdown()
-            super().shutdown()
-
-    bus = FlakyBus()
+    bus = FailingBus(channel, lambda call: call % 7 == 3, "datagram of the wrong length")
     try:
         with CanopenSimDrive(bus, NODE) as sim:
             for _ in range(5):
@@ -198,29 +179,12 @@ def test_a_receive_error_is_counted_and_the_node_keeps_serving(channel, master, 
 def test_a_bus_that_keeps_failing_stops_the_heartbeat_and_faults_the_drive(channel, master, frames) -> None:
     from sim_drive.canopen.slave import MAX_RECEIVE_ERRORS_IN_ROW, RECEIVE_FAILURE_TIME, CanopenSimDrive
 
-    class DeadBus(can.BusABC):
-        def __init__(self) -> None:
-            self.inner = can.Bus(interface="virtual", channel=channel)
-            self.dead = False
-            super().__init__(channel=channel)
-
-        def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-            if self.dead:
-                raise can.CanOperationError("interface gone")
-            return self.inner.recv(timeout), False
-
-        def send(self, msg: can.Message, timeout: float | None = None) -> None:
-            self.inner.send(msg, timeout)
-
-        def shutdown(self) -> None:
-            self.inner.shutdown()
-            super().shutdown()
-
-    bus = DeadBus()
+    dead = threading.Event()
+    bus = FailingBus(channel, lambda call: dead.is_set(), "interface gone")
     try:
         sim = CanopenSimDrive(bus, NODE).start()
         assert frames.recv_id(master, HEARTBEAT) is not None
-        bus.dead = True
+        dead.set()
         deadline = time.monotonic() + RECEIVE_FAILURE_TIME + frames.wait
         while sim.serving and time.monotonic() < deadline:
             time.sleep(0.005)

@@ -15,7 +15,8 @@ import os
 import struct
 import subprocess
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -53,6 +54,17 @@ def open_drive(channel: str, **kwargs: Any) -> CanopenDrive:
     """The master, no EDS, on the virtual ``channel``; SafetySettings for a test that paces nothing."""
     kwargs.setdefault("safety", SafetySettings().for_virtual_time(1e-3))
     return CanopenDrive(NODE, interface="virtual", channel=channel, **kwargs)
+
+
+@contextmanager
+def master_of(sim: CanopenSimDrive, channel: str, **kwargs: Any) -> Iterator[CanopenDrive]:
+    """The master (:func:`open_drive`) of the simulated drive ``sim``; on exit the master is closed and ``sim`` stopped."""
+    drive = open_drive(channel, **kwargs)
+    try:
+        yield drive
+    finally:
+        drive.close()
+        sim.stop()
 
 
 def set_default(dictionary: ObjectDictionary, index: int, subindex: int, value: int) -> None:
@@ -121,8 +133,7 @@ def test_the_simulated_drive_states_its_default_scaling_in_standard_objects() ->
 
 def test_the_master_derives_every_factor_from_the_standard_objects(channel: str) -> None:
     sim = standard_sim(channel)
-    drive = open_drive(channel)
-    try:
+    with master_of(sim, channel) as drive:
         drive.connect()
         truth = sim.drive.parameters
         scaling = drive.scaling
@@ -145,24 +156,17 @@ def test_the_master_derives_every_factor_from_the_standard_objects(channel: str)
             drive.read_inputs()
             drive.write_outputs(100)
         drive.disable()
-    finally:
-        drive.close()
-        sim.stop()
 
 
 def test_velocity_in_increments_comes_through_the_velocity_encoder(channel: str) -> None:
     """2.5 um/s per count is no power of ten: the drive reports increments per second and the
     increments per motor revolution in 0x6090 (67664 revolutions for 3401163605 increments)."""
     sim = standard_sim(channel, velocity_per_count=2.5e-6)
-    drive = open_drive(channel)
-    try:
+    with master_of(sim, channel) as drive:
         drive.connect()
         assert drive.scaling.velocity_per_count == pytest.approx(2.5e-6, rel=FEED_ROUNDING)
         assert drive.scaling_sources["velocity_per_count"] == "0x60A9/0x6090/0x6091/0x6092/0x60A8"
         assert struct.unpack("<I", drive.sdo_read(0x60A9, 0))[0] == 0x00B50300
-    finally:
-        drive.close()
-        sim.stop()
 
 
 def test_a_drive_lacking_the_factor_group_falls_back_to_the_profile(channel: str) -> None:
@@ -170,8 +174,7 @@ def test_a_drive_lacking_the_factor_group_falls_back_to_the_profile(channel: str
     object: 0x6076 and 0x6072 from the drive, the other three from the profile."""
     sim = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, timing="ideal").start()
     given = DeviceParameters().scaling
-    drive = open_drive(channel, scaling=given, scaling_source=PROFILE_SOURCE)
-    try:
+    with master_of(sim, channel, scaling=given, scaling_source=PROFILE_SOURCE) as drive:
         drive.connect()
         assert drive.scaling == given
         assert drive.scaling_sources == {
@@ -183,9 +186,6 @@ def test_a_drive_lacking_the_factor_group_falls_back_to_the_profile(channel: str
         assert any("no 0x60A8" in note for note in report.notes)
         rated = next(f for f in report.factors if f.name == "rated_torque")
         assert [r.source for r in rated.agreed] == [PROFILE_SOURCE]  # the profile's value checked against 0x6076
-    finally:
-        drive.close()
-        sim.stop()
 
 
 def test_a_drive_reporting_increments_falls_back_to_the_profile(channel: str) -> None:
@@ -194,17 +194,13 @@ def test_a_drive_reporting_increments_falls_back_to_the_profile(channel: str) ->
     per_increment = 2 * math.pi * 0.02 / 2**20
     sim = standard_sim(channel, velocity_per_count=per_increment, position_per_count=per_increment)
     given = sim.drive.parameters.scaling
-    drive = open_drive(channel, scaling=given, scaling_source=PROFILE_SOURCE)
-    try:
+    with master_of(sim, channel, scaling=given, scaling_source=PROFILE_SOURCE) as drive:
         drive.connect()
         assert drive.scaling == given
         for name in ("velocity_per_count", "position_per_count", "force_per_torque"):
             assert drive.scaling_sources[name] == PROFILE_SOURCE
         assert struct.unpack("<I", drive.sdo_read(0x60A8, 0))[0] == 0x00B50000
         assert struct.unpack("<II", drive.sdo_read(0x608F, 1) + drive.sdo_read(0x608F, 2)) == (1 << 20, 1)
-    finally:
-        drive.close()
-        sim.stop()
 
 
 def test_a_feed_constant_that_disagrees_with_the_profile_is_refused_before_enabling(channel: str) -> None:
@@ -213,13 +209,9 @@ def test_a_feed_constant_that_disagrees_with_the_profile_is_refused_before_enabl
     sim = standard_sim(channel, force_per_torque=52.0)
     transitions: list[object] = []
     sim.drive.state_listeners.append(lambda old, new, number: transitions.append((old, new)))
-    drive = open_drive(channel, scaling=DeviceParameters().scaling, scaling_source=PROFILE_SOURCE)
-    try:
+    with master_of(sim, channel, scaling=DeviceParameters().scaling, scaling_source=PROFILE_SOURCE) as drive:
         with pytest.raises(ScalingConflict) as refused:
             drive.connect()
-    finally:
-        drive.close()
-        sim.stop()
     error = refused.value
     assert error.field == "force_per_torque"
     assert error.first[1] == "0x6091/0x6092/0x60A8" and error.first[0] == pytest.approx(52.0, rel=FEED_ROUNDING)
@@ -236,14 +228,10 @@ def test_a_feed_within_its_rounding_is_accepted(channel: str) -> None:
         set_default(dictionary, index, 1, 1256637)
         set_default(dictionary, index, 2, 1)
     sim = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, timing="ideal", dictionary=dictionary).start()
-    drive = open_drive(channel, scaling=DeviceParameters().scaling, scaling_source=PROFILE_SOURCE)
-    try:
+    with master_of(sim, channel, scaling=DeviceParameters().scaling, scaling_source=PROFILE_SOURCE) as drive:
         drive.connect()
         assert drive.scaling.force_per_torque == pytest.approx(math.tau / 0.1256637, rel=1e-15)
         assert drive.scaling_sources["force_per_torque"] == "0x6091/0x6092/0x60A8"
-    finally:
-        drive.close()
-        sim.stop()
 
 
 @pytest.mark.parametrize(("index", "subindex", "value", "allowed"), [
@@ -259,13 +247,9 @@ def test_malformed_standard_objects_are_typed_errors(channel: str, index: int, s
     dictionary = standard_dictionary(NODE, DeviceParameters())
     set_default(dictionary, index, subindex, value)
     sim = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, timing="ideal", dictionary=dictionary).start()
-    drive = open_drive(channel)
-    try:
+    with master_of(sim, channel) as drive:
         with pytest.raises(ScalingObjectError) as bad:
             drive.connect()
-    finally:
-        drive.close()
-        sim.stop()
     error = bad.value
     assert (error.index, error.subindex, error.value) == (index, subindex, value)
     assert allowed in error.allowed and f"0x{index:04X}:{subindex:02X}" in str(error)
@@ -275,8 +259,7 @@ def test_malformed_standard_objects_are_typed_errors(channel: str, index: int, s
 def test_the_eds_path_still_reads_the_manufacturer_objects(channel: str) -> None:
     """With the EDS that names them, 0x2001:01-03 give the three factors; the profile agrees."""
     sim = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, timing="ideal").start()
-    drive = open_drive(channel, eds=eds_path(), scaling=DeviceParameters().scaling, scaling_source=PROFILE_SOURCE)
-    try:
+    with master_of(sim, channel, eds=eds_path(), scaling=DeviceParameters().scaling, scaling_source=PROFILE_SOURCE) as drive:
         drive.connect()
         assert drive.scaling == sim.drive.parameters.scaling
         sources = drive.scaling_sources
@@ -285,9 +268,6 @@ def test_the_eds_path_still_reads_the_manufacturer_objects(channel: str) -> None
         report = drive.scaling_report
         assert report is not None
         assert all(PROFILE_SOURCE in [r.source for r in f.agreed] for f in report.factors)
-    finally:
-        drive.close()
-        sim.stop()
 
 
 def test_the_standard_dictionary_has_no_manufacturer_area(channel: str) -> None:
@@ -313,15 +293,11 @@ def test_the_standard_dictionary_has_no_manufacturer_area(channel: str) -> None:
 def test_reconfigured_parameters_show_in_the_objects(channel: str) -> None:
     """The objects follow the drive's parameters: a new pulley, a new feed."""
     sim = standard_sim(channel)
-    drive = open_drive(channel)
-    try:
+    with master_of(sim, channel) as drive:
         drive.connect()
         sim.drive.reconfigure(force_per_torque=100.0)
         feed = struct.unpack("<II", drive.sdo_read(0x6092, 1) + drive.sdo_read(0x6092, 2))
         assert float(Fraction(*feed) / 10**7) == pytest.approx(math.tau / 100.0, rel=FEED_ROUNDING)
-    finally:
-        drive.close()
-        sim.stop()
 
 
 # ----------------------------------------------------------------------------- closed loop
@@ -336,7 +312,7 @@ def _run(profile: Profile, od: str, tmp: Path, channel: str) -> RunResult:
                           operator=profile_operator(profile), od=od).start()
     try:
         result = run_canopen(profile, {"interface": "virtual", "channel": channel}, NODE,
-                             RunOptions(1.0, realtime=False, out_dir=tmp, live=False), controller_node_id=42)
+                             RunOptions(1.0, pacing="virtual", out_dir=tmp, live=False), controller_node_id=42)
     finally:
         sim.stop()
     assert result.exit_reason == "completed", result.error

@@ -193,25 +193,8 @@ _PROPERTY = settings(deadline=None, derandomize=True, database=None,
 _FREQUENCY = st.integers(3, 256).flatmap(lambda q: st.tuples(st.integers(1, (q - 1) // 2), st.just(q)))
 
 
+@pytest.mark.parametrize("model", ["point", "average", "window:0.4", "lowpass:0.7"])
 @_PROPERTY
-@given(loop=_loops("point"), pq=_FREQUENCY)
-def test_mean_power_point_velocity(loop: WallLoop, pq: tuple[int, int]) -> None:
-    _agree(loop, *pq)
-
-
-@_PROPERTY
-@given(loop=_loops("average"), pq=_FREQUENCY)
-def test_mean_power_average_velocity(loop: WallLoop, pq: tuple[int, int]) -> None:
-    _agree(loop, *pq)
-
-
-@_PROPERTY
-@given(loop=_loops("window:0.4"), pq=_FREQUENCY)
-def test_mean_power_window_velocity(loop: WallLoop, pq: tuple[int, int]) -> None:
-    _agree(loop, *pq)
-
-
-@_PROPERTY
-@given(loop=_loops("lowpass:0.7"), pq=_FREQUENCY)
-def test_mean_power_lowpass_velocity(loop: WallLoop, pq: tuple[int, int]) -> None:
-    _agree(loop, *pq)
+@given(data=st.data(), pq=_FREQUENCY)
+def test_mean_power_matches_the_frequency_response(model: str, data: st.DataObject, pq: tuple[int, int]) -> None:
+    _agree(data.draw(_loops(model), label="loop"), *pq)

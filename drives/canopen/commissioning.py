@@ -97,17 +97,16 @@ class Commissioned:
     mapping_notes: tuple[str, ...] = field(default_factory=tuple)
 
 
+@dataclass
 class Commissioning:
     """One commissioning run against ``node`` (see the module docstring)."""
 
-    def __init__(self, name: str, node: canopen.RemoteNode, sdo: SdoAccess, events: DriveEvents,
-                 settings: CommissioningSettings, safety: SafetySettings) -> None:
-        self.name = name
-        self.node = node
-        self.sdo = sdo
-        self.events = events
-        self.settings = settings
-        self.safety = safety
+    name: str
+    node: canopen.RemoteNode
+    sdo: SdoAccess
+    events: DriveEvents
+    settings: CommissioningSettings
+    safety: SafetySettings
 
     def run(self, tpdo_objects: tuple[ObjectSpec, ...], rpdo_objects: tuple[ObjectSpec, ...]) -> Commissioned:
         """Commission the drive for ``tpdo_objects`` (drive -> master, in order) and ``rpdo_objects``."""

@@ -49,15 +49,14 @@ MAPPING_OFFSET = 0x200  # mapping record = communication record + 0x200
 @dataclass(frozen=True)
 class DrivePdo:
     """One PDO the drive has: ``number`` 1..4, its direction, its communication record
-    (``communication``, and ``communication + 0x200`` the mapping record), the highest sub-index
-    of the communication record, the COB-ID word as read, whether sub 3 (inhibit time) and sub 5
-    (event timer) exist, how many entries the mapping record holds, and the mapping words as they
+    (``communication``, and ``communication + 0x200`` the mapping record), the COB-ID word as
+    read, whether sub 3 (inhibit time) and sub 5 (event timer) exist, how many entries the
+    mapping record holds, and the mapping words as they
     stand (index << 16 | subindex << 8 | bits)."""
 
     number: int
     transmit: bool
     communication: int
-    highest_subindex: int
     cob_word: int
     has_inhibit_time: bool
     has_event_timer: bool
@@ -88,10 +87,6 @@ class DriveInventory:
     def has(self, index: int, subindex: int = 0) -> bool:
         """True if the drive has ``index:subindex`` (False for an object that was not probed)."""
         return self.present.get((index, subindex), False)
-
-    def channels(self, transmit: bool) -> tuple[DrivePdo, ...]:
-        """The drive's TPDOs (``transmit``) or RPDOs, in number order."""
-        return self.tpdos if transmit else self.rpdos
 
 
 # (index, subindex) the master may write outside the PDOs, probed up front
@@ -146,7 +141,7 @@ class InventoryReader:
         count = self._read(mapping_record, 0, DataType.UNSIGNED8)
         capacity = self._capacity(mapping_record) if count is not None else 0
         words = tuple(self._read(mapping_record, k, DataType.UNSIGNED32) or 0 for k in range(1, min(count or 0, capacity) + 1))
-        return DrivePdo(number, transmit, communication, highest, cob_word, inhibit, timer, capacity, words)
+        return DrivePdo(number, transmit, communication, cob_word, inhibit, timer, capacity, words)
 
     def _capacity(self, mapping_record: int) -> int:
         """The highest of sub 1..8 the mapping record has (its entries are contiguous from sub 1)."""

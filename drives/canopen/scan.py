@@ -35,7 +35,7 @@ import time
 from collections.abc import Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import can
 import canopen
@@ -51,12 +51,11 @@ from drives.cia301 import (
     IDENTITY,
     NODE_ID_RANGE,
     SDO_RX_BASE,
-    describe_emcy_code,
 )
-from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES, DataType, cst_announced
+from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES, DataType
 from drives.errors import DriveError, DriveTimeout, SdoAbortError
-from drives.fault_reset import state_text
 from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, checked_ids, checked_seconds
+from drives.scanned_device import ScannedDevice
 
 __all__ = ["CanopenNode", "Identity", "device_kind", "scan_canopen"]
 
@@ -77,8 +76,10 @@ class Identity:
 
 
 @dataclass(frozen=True)
-class CanopenNode:
+class CanopenNode(ScannedDevice):
     """One node found by :func:`scan_canopen`; None where a value could not be read (see ``notes``)."""
+
+    protocol: ClassVar[str] = "canopen"
 
     node_id: int
     device_type: int | None
@@ -100,20 +101,9 @@ class CanopenNode:
         """True if 0x1000 names the CiA-402 profile."""
         return self.device_profile == DEVICE_PROFILE_402
 
-    @property
-    def cst_supported(self) -> bool | None:
-        """0x6502 announces cyclic synchronous torque; None where 0x6502 was not read."""
-        return cst_announced(self.supported_drive_modes)
-
-    @property
-    def cia402_state(self) -> str | None:
-        """The CiA-402 state 0x6041 shows ("FAULT", ...); None where 0x6041 was not read."""
-        return None if self.statusword is None else state_text(self.statusword)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: numbers as numbers, None as null."""
+    def identity_dict(self) -> dict[str, Any]:
+        """The node id, 0x1000 (also in words), 0x1018 and the NMT state heard."""
         return {
-            "protocol": "canopen",
             "node_id": self.node_id,
             "device_type": self.device_type,
             "device_profile": self.device_profile,
@@ -121,14 +111,6 @@ class CanopenNode:
             **{field: getattr(self.identity, field) for field in _IDENTITY_FIELDS},
             "nmt_state": self.nmt_state,
             "boot_up_seen": self.boot_up_seen,
-            "supported_drive_modes": self.supported_drive_modes,
-            "cst_supported": self.cst_supported,
-            "cia402": self.cia402,
-            "statusword": self.statusword,
-            "cia402_state": self.cia402_state,
-            "error_code": self.error_code,
-            "error_code_text": None if self.error_code is None else describe_emcy_code(self.error_code),
-            "notes": list(self.notes),
         }
 
 

@@ -30,15 +30,13 @@ import functools
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from pymodbus.pdu.mei_message import ReadDeviceInformationRequest
 from pymodbus.pdu.register_message import ReadHoldingRegistersRequest
 
-from drives.cia301 import describe_emcy_code
-from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES, cst_announced
+from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES
 from drives.errors import DriveError, DriveTimeout, ModbusExceptionError, ModbusLinkLost
-from drives.fault_reset import state_text
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import (
     MAP_IDENTITY,
@@ -50,6 +48,7 @@ from drives.modbus.register_map import (
     word_order_of,
 )
 from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, checked_ids, checked_seconds
+from drives.scanned_device import ScannedDevice
 
 __all__ = ["UNIT_ID_RANGE", "ModbusScan", "ModbusUnit", "scan_modbus"]
 
@@ -62,8 +61,10 @@ _ERROR_CODE_REGISTER = register_for_object(ERROR_CODE)
 
 
 @dataclass(frozen=True)
-class ModbusUnit:
+class ModbusUnit(ScannedDevice):
     """One unit that answered; None where a value could not be read (see ``notes``)."""
+
+    protocol: ClassVar[str] = "modbus"
 
     unit_id: int
     word_order: str | None  # "big"/"little": our map, in that word order; None: not our map
@@ -84,34 +85,10 @@ class ModbusUnit:
         """True for our map: it is the CiA-402 drive's map (nothing else is known of other units)."""
         return self.our_map
 
-    @property
-    def cst_supported(self) -> bool | None:
-        """0x6502 announces cyclic synchronous torque; None where 0x6502 was not read."""
-        return cst_announced(self.supported_drive_modes)
-
-    @property
-    def cia402_state(self) -> str | None:
-        """The CiA-402 state 0x6041 shows ("FAULT", ...); None where 0x6041 was not read."""
-        return None if self.statusword is None else state_text(self.statusword)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: numbers as numbers, None as null."""
-        return {
-            "protocol": "modbus",
-            "unit_id": self.unit_id,
-            "our_map": self.our_map,
-            "word_order": self.word_order,
-            "map_identity": self.map_identity,
-            "supported_drive_modes": self.supported_drive_modes,
-            "cst_supported": self.cst_supported,
-            "cia402": self.cia402,
-            "device_identification": self.device_identification,
-            "statusword": self.statusword,
-            "cia402_state": self.cia402_state,
-            "error_code": self.error_code,
-            "error_code_text": None if self.error_code is None else describe_emcy_code(self.error_code),
-            "notes": list(self.notes),
-        }
+    def identity_dict(self) -> dict[str, Any]:
+        """The unit id, whether it carries our map (in which word order), and its FC43/14 identification."""
+        return {"unit_id": self.unit_id, "our_map": self.our_map, "word_order": self.word_order,
+                "map_identity": self.map_identity, "device_identification": self.device_identification}
 
 
 @dataclass

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +44,7 @@ import numpy as np
 from drives.errors import DriveArgumentError
 from drives.modbus.drive import ModbusDrive
 
-__all__ = ["PollTiming", "SAFETY_FACTOR", "assumed_delay", "measure_poll", "loop_delay"]
+__all__ = ["PollTiming", "SAFETY_FACTOR", "assumed_delay", "measure_poll", "loop_delay", "time_cycles"]
 
 SAFETY_FACTOR = 1.5
 """The gate's loop delay is this many times the p99 round trip (module docstring)."""
@@ -98,19 +99,29 @@ def measure_poll(drive: ModbusDrive, cycles: int = 1000, *, torque: int = 0, tim
     outputs (DISABLE VOLTAGE, zero torque), and against the simulated drive each cycle advances
     its virtual time by one period.
     """
+    read, write = drive.read_inputs, drive.write_outputs
+
+    def poll() -> None:
+        read()
+        write(torque)
+
+    return time_cycles(drive, poll, cycles, time_limit)
+
+
+def time_cycles(drive: ModbusDrive, cycle: Callable[[], object], cycles: int, time_limit: float) -> PollTiming:
+    """Run ``cycle`` (one exchange with ``drive``) ``cycles`` times back to back, or until one ends
+    more than ``time_limit`` s after the first began; each cycle timed (``time.perf_counter``, s)."""
     if cycles < 1:
         raise ValueError(f"cycles = {cycles!r} is invalid; allowed: >= 1")
     samples = np.empty(cycles)
     clock = time.perf_counter
-    read, write = drive.read_inputs, drive.write_outputs
     requests_before = drive.stats.cyclic_requests
     started = clock()
     deadline = started + time_limit
     done = 0
     for i in range(cycles):
         t0 = clock()
-        read()
-        write(torque)
+        cycle()
         t1 = clock()
         samples[i] = t1 - t0
         done = i + 1

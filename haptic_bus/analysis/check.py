@@ -8,7 +8,7 @@ zoomed jointly (:func:`~haptic_bus.analysis.theta_search.refine_lanes`): one eva
 loop's terms on the grid and one per zoom round serve them all.  Asked for (``check_loop``'s
 default, what ``haptic-bus check`` and ``report`` show; ``check_passivity(..., out_of_band=True)``),
 the report carries the loop's out-of-band exposure
-(:mod:`haptic_bus.analysis.aliasing`): the worst mean power a force with content above Nyquist
+(:mod:`haptic_bus.analysis.out_of_band`): the worst mean power a force with content above Nyquist
 -- a tone and one alias, and up to ``N`` aliases -- can take out.
 Importing this module loads numpy only (no scipy).
 """
@@ -18,7 +18,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from haptic_bus.analysis.aliasing import DEFAULT_HARMONICS, Exposure, worst_force
 from haptic_bus.analysis.closed_form import colgate_slack, liu2011_slack, velocity_sampling_slack
 from haptic_bus.analysis.criterion import (
     EXACT,
@@ -33,6 +32,7 @@ from haptic_bus.analysis.criterion import (
 from haptic_bus.analysis.frequency import grid_terms, loop_terms
 from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, LimitsPlan, PassiveSet
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
+from haptic_bus.analysis.out_of_band import DEFAULT_HARMONICS, Exposure, worst_force
 from haptic_bus.analysis.poles import closed_loop_poles, stability
 from haptic_bus.analysis.theta_search import refine_lanes
 from haptic_bus.analysis.velocity import POINT, VelocityModel

@@ -234,7 +234,6 @@ class _Machine:
         self.reset = model.reset
         self.delta = loop.fractional_delay
         times = sorted(set(event_times(loop)) | {j / substeps for j in range(substeps)})
-        self.boundaries = times
         exps = {h: van_loan(F, Q, h) for h in {round(b - a, 15) for a, b in itertools.pairwise(times)}}
 
         # the sampled plant + oscillator over one period, for the closed loop

@@ -15,7 +15,7 @@ Two responses, both admittances from operator force to handle velocity in m/(N s
   function of the period map (:mod:`haptic_bus.analysis.sampled_loop`).
 
 **The form evaluated.**  Split ``G_md`` into the fundamental path ``(H/T) e^{-j omega D T} M G11``
-and its aliases ``z^{-d} (1 - z^{-1}) g(theta)`` (:mod:`haptic_bus.analysis.alias`).  Then the
+and its aliases ``z^{-d} (1 - z^{-1}) g(theta)`` (:mod:`haptic_bus.analysis.alias_sum`).  Then the
 impedance the operator feels, ``Z = 1/T_fund``, is exactly the handle plus the wall as the
 sampled loop presents it,
 
@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from haptic_bus.analysis.alias import alias_function
+from haptic_bus.analysis.alias_sum import alias_function
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.sampled_loop import period_map, pulse_transfer, window_fraction
 from haptic_bus.analysis.theta_complex import ThetaComplex

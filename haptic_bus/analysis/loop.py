@@ -37,13 +37,6 @@ class Discretisation(enum.Enum):
     BACKWARD_DIFFERENCE = "backward"
 
 
-class Sampling(enum.Enum):
-    """Which signal the controller samples (the seed's section II vs III)."""
-
-    VELOCITY = "velocity"
-    POSITION = "position"
-
-
 @dataclass(frozen=True)
 class WallLoop:
     """Validated parameters of one linear wall loop (SI units, delay in samples).
@@ -130,3 +123,26 @@ class WallLoop:
     def with_delay(self, delay: float) -> WallLoop:
         """The same device, velocity model and wall with another delay (samples)."""
         return WallLoop(self.m, self.b, self.T, self.K, self.B, delay, self.velocity, self.discretisation)
+
+
+@dataclass(frozen=True)
+class DeviceLoop:
+    """The loop the walls run in, without a wall: ``m`` kg, effective ``b`` N s/m, ``T`` s,
+    ``delay`` samples (real), and the ``velocity`` model of the drive's 0x606C (a model or its
+    profile string).  What the gate holds (:class:`~haptic_bus.control.gate.PassivityGate`);
+    :meth:`wall` adds a wall and gives the :class:`WallLoop` the criterion judges."""
+
+    m: float
+    b: float
+    T: float
+    delay: float
+    velocity: VelocityModel | str = POINT
+
+    def wall(self, K: float, B: float) -> WallLoop:
+        """The linear loop with the wall ``K`` N/m, ``B`` N s/m (validated)."""
+        return WallLoop(self.m, self.b, self.T, K, B, self.delay, VelocityModel.parse(self.velocity))
+
+    def describe(self) -> str:
+        """``m = .. kg, b = .. N s/m, T = .. s, delay D = .. samples, velocity ..`` for messages."""
+        return (f"m = {self.m:g} kg, b = {self.b:g} N s/m, T = {self.T:g} s, delay D = {self.delay:g} samples, "
+                f"velocity {VelocityModel.parse(self.velocity)}")

@@ -44,11 +44,6 @@ class ThetaComplex:
         re, im = _filled(re, theta.shape), _filled(im_over_theta, theta.shape)
         return cls(theta, re, im, np.abs(re), np.abs(im))
 
-    @classmethod
-    def from_complex(cls, theta: np.ndarray, value: np.ndarray) -> ThetaComplex:
-        """From an ordinary complex array (accurate where ``theta`` is not small)."""
-        return cls.exact(theta, value.real, value.imag / theta)
-
     def __add__(self, other: ThetaComplex | float | np.ndarray) -> ThetaComplex:
         if isinstance(other, ThetaComplex):
             return ThetaComplex(self.theta, self.re + other.re, self.im + other.im,

@@ -48,22 +48,9 @@ from drives.modbus.register_map import UNIT_ID_RANGE
 from drives.safety import SafetySettings
 from haptic_bus.analysis.can_timing import BITRATE_RANGE, BusLoad
 from haptic_bus.analysis.coupled_loop import MAX_AXES
-from haptic_bus.analysis.loop import DAMPING_RANGE, DELAY_RANGE, PERIOD_RANGE, STIFFNESS_RANGE, WallLoop
-from haptic_bus.app.profile_reader import REQUIRED, ProfileError, Reader, read_document
-from haptic_bus.app.profiles import (
-    FORCE_RANGE,
-    NAME_PATTERN,
-    TIMINGS,
-    DeviceProfile,
-    Profile,
-    _read_device,
-    _read_gate,
-    _read_passivity,
-    _read_safety,
-    _read_supervisor,
-    load_profile,
-    resolve_profile,
-)
+from haptic_bus.analysis.loop import DAMPING_RANGE, PERIOD_RANGE, STIFFNESS_RANGE, WallLoop
+from haptic_bus.app.profile_policies import NAME_PATTERN, read_about, read_gate, read_passivity, read_safety, read_supervisor
+from haptic_bus.app.profiles import FORCE_RANGE, Profile, load_profile
 from haptic_bus.control.bus_load import PDO_MAPPINGS, axes_bus_load
 from haptic_bus.control.gate import GatePolicy
 from haptic_bus.control.kinematics import Cartesian
@@ -72,6 +59,9 @@ from haptic_bus.control.space_gate import SpaceDecision, SpaceGate, SpaceGateRef
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere, compile_space_scene
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
 from haptic_bus.errors import ParameterError
+from haptic_bus.profile.device import DeviceProfile, check_velocity_period, read_device, read_timing
+from haptic_bus.profile.files import resolve_profile
+from haptic_bus.profile.reader import ProfileError, Reader, read_document
 
 DEFAULT_BITRATE = 1_000_000
 HAND_MODELS = ("none", "push")
@@ -154,26 +144,16 @@ def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> 
     node = r.whole("node_id", *NODE_ID_RANGE) if "node_id" in r.table else None
     unit = r.whole("unit_id", *UNIT_ID_RANGE) if "unit_id" in r.table else None
     r.used.update(("node_id", "unit_id"))
-    timing = r.text("timing", choices=tuple(TIMINGS))
-    least = TIMINGS[timing]
-    delay = r.real("delay", 0.0 if least is None else least, DELAY_RANGE[1], f"samples (timing {timing!r})",
-                   default=REQUIRED if least is None else least)
+    timing, delay = read_timing(r)
     mapping = r.text("mapping", choices=tuple(PDO_MAPPINGS), default="minimal")
-    try:  # the one-axis [device] reader, its fields named inside this axis
-        device = _read_device(path, r.raw("device", "an [axes.device] table: the one-axis [device] fields"))
-    except ProfileError as error:
-        raise ProfileError(path, f"axes[{index}].{error.field}", error.value, error.allowed) from None
+    device = read_device(path, r.raw("device", "an [axes.device] table: the one-axis [device] fields"), r.field("device"))
     force_limit = r.real("force_limit", *FORCE_RANGE, "N", low_inclusive=False)
     r.done()
     if force_limit > device.max_force * (1 + 1e-12):
         raise ProfileError(path, r.field("force_limit"), force_limit,
                            f"(0, {device.max_force:g}] N, the force this axis' 0x6072 allows")
-    try:
-        device.velocity.check_period(period)
-    except ParameterError as error:
-        raise ProfileError(path, f"axes[{index}].device.velocity", error.value, error.allowed) from None
-    return AxisProfile(name, node, unit, device, timing, int(delay) if float(delay).is_integer() else delay, mapping,
-                       force_limit)
+    check_velocity_period(path, r.field("device.velocity"), device, period)
+    return AxisProfile(name, node, unit, device, timing, delay, mapping, force_limit)
 
 
 def _coordinates(r: Reader, key: str, size: int) -> tuple[Any, ...]:
@@ -237,10 +217,7 @@ def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
     path = resolve_profile(path_or_name)
     document = read_document(path)
     top = Reader(path, "", document)
-    meta = Reader(path, "profile", top.raw("profile", "a [profile] table"))
-    name, operator, task, description = (meta.text("name", pattern=NAME_PATTERN), meta.text("operator"), meta.text("task"),
-                                         meta.text("description"))
-    meta.done()
+    name, operator, task, description = read_about(top)
     loop = Reader(path, "loop", top.raw("loop", "a [loop] table with the period"))
     period = loop.real("period", *PERIOD_RANGE, "s")
     loop.done()
@@ -257,10 +234,10 @@ def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
     if len({a.node_id is None for a in axes}) > 1:
         raise ProfileError(path, "axes", [a.node_id or a.unit_id for a in axes],
                            "one kind of bus for every axis: all node_id (CANopen) or all unit_id (Modbus)")
-    policy = _read_gate(path, top.raw("gate", "a [gate] table"))
-    safety = _read_safety(path, top.raw("safety", "a [safety] table", default=None))
-    passivity = _read_passivity(path, top.raw("passivity", "a [passivity] table", default=None))
-    supervisor = _read_supervisor(path, top.raw("supervisor", "a [supervisor] table", default=None), passivity)
+    policy = read_gate(path, top.raw("gate", "a [gate] table"))
+    safety = read_safety(path, top.raw("safety", "a [safety] table", default=None))
+    passivity = read_passivity(path, top.raw("passivity", "a [passivity] table", default=None))
+    supervisor = read_supervisor(path, top.raw("supervisor", "a [supervisor] table", default=None), passivity)
     for key in ("on_late", "on_observer"):
         if getattr(supervisor, key) == Action.DERATE.value:
             raise ProfileError(path, f"supervisor.{key}", "derate", '"warn" or "stop" for a multi-axis profile (the '

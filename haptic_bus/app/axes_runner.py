@@ -39,6 +39,7 @@ from drives.bus_config import resolve_bus_config
 from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
 from drives.cia402 import POSITION_ACTUAL
+from drives.safety import VIRTUAL_TIME_DEADLINE, VIRTUAL_TIME_WAIT
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.axes_records import axes_run_document, write_axes_run
@@ -62,7 +63,8 @@ from haptic_bus.control.space_scene import SpaceScene
 from haptic_bus.errors import DriveError, ParameterError
 
 RUN_MAPPING = "with-position"
-VIRTUAL_TIME_PATIENCE: dict[str, Any] = {"tpdo_timeout": 0.25, "heartbeat_consumer_ms": 1000}
+VIRTUAL_TIME_PATIENCE: dict[str, Any] = {"tpdo_timeout": VIRTUAL_TIME_WAIT,
+                                         "heartbeat_consumer_ms": round(VIRTUAL_TIME_DEADLINE * 1000)}
 """In virtual time nothing paces the loop: how long the master waits for an axis' TPDO (s) and
 for a drive's heartbeat (ms) catches a dead drive, not a machine busy elsewhere."""
 
@@ -124,8 +126,8 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                                interface=config["interface"], channel=config.get("channel"), bitrate=config.get("bitrate"),
                                bus_kwargs={k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")},
                                period=period, tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling_source=PROFILE_SCALING_SOURCE,
-                               safety=safety if options.realtime else safety.for_virtual_time(period),
-                               **({} if options.realtime else VIRTUAL_TIME_PATIENCE))
+                               safety=safety if options.wall_paced else safety.for_virtual_time(period),
+                               **({} if options.wall_paced else VIRTUAL_TIME_PATIENCE))
             stack.callback(axes.close)
             axes.connect()
             _describe(axes, options, link)
@@ -133,11 +135,11 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
             gate = profile.gate()
             with control_thread_scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
-                if options.realtime:
+                if options.wall_paced:
                     _preflight(axes, gate, scene, profile, options, extra)
                 extra["start"] = {"positions_m": _safe_start(axes, profile, scene)}  # after pre-flight: where it is now
-                clock = RealClock(period, spin=options.scheduling.spin) if options.realtime else VirtualClock(period)
-                hold = longest_hold(period, options.realtime, safety.rpdo_deadline_ms(period), safety.consumer_ms)
+                clock = RealClock(period, spin=options.scheduling.spin) if options.wall_paced else VirtualClock(period)
+                hold = longest_hold(period, options.wall_paced, safety.rpdo_deadline_ms(period), safety.consumer_ms)
                 controller = AxesController(axes, gate, scene, names=[axis.name for axis in profile.axes],
                                             force_limits=[axis.force_limit for axis in profile.axes], clock=clock,
                                             supervisor=profile.supervisor, passivity=profile.passivity, hold=hold)

@@ -155,6 +155,8 @@ def _run(args: argparse.Namespace) -> int:
     from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
     from haptic_bus.app.runner import (
         DEFAULT_CONTROLLER_NODE_ID,
+        VIRTUAL,
+        WALL,
         RunOptions,
         StopRequest,
         exit_status,
@@ -168,7 +170,7 @@ def _run(args: argparse.Namespace) -> int:
     from haptic_bus.app.realtime import RealtimeSettings
 
     out_dir = None if args.out is None else pathlib.Path(args.out)
-    options = RunOptions(args.duration, realtime=not args.virtual_time, out_dir=out_dir,
+    options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
                          scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings(),
                          reset_fault=args.reset_fault, bus_log=not args.no_bus_log)
@@ -315,7 +317,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1; only with --modbus)")
     run.add_argument("--duration", type=seconds, default=10.0, help="seconds to run")
     pacing = run.add_mutually_exclusive_group()
-    pacing.add_argument("--virtual-time", action="store_true", help="lock-step with a simulated drive (no pacing)")
+    pacing.add_argument("--virtual-time", action="store_true",
+                        help="lock-step with a simulated drive, no wall-clock pacing (default: each cycle at its "
+                             "deadline on the wall clock)")
     pacing.add_argument("--realtime", action="store_true",
                         help="ask the OS for real-time scheduling of the control thread: SCHED_FIFO priority 80, one CPU, "
                              "memory locked (mlockall); what it cannot get is logged as a warning and kept in run.json")

@@ -96,14 +96,18 @@ class DriveAddress:
         return self.node_id
 
 
-def add_drive_arguments(parser: argparse.ArgumentParser) -> None:
-    """The options that name one drive (the bus options and ``--node-id``, or ``--modbus`` and
-    ``--unit-id``), each answer's ``--timeout`` and ``--json``."""
+def add_address_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options that name one drive: the bus options and ``--node-id``, or ``--modbus`` and ``--unit-id``."""
     add_bus_arguments(parser)
     parser.add_argument("--node-id", type=node_id, help="the drive's CANopen node id 1..127")
     parser.add_argument("--modbus", type=modbus_url, metavar="URL",
                         help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
     parser.add_argument("--unit-id", type=unit_id, help=f"Modbus unit id 1..247 (default {DEFAULT_UNIT_ID}; only with --modbus)")
+
+
+def add_drive_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options that name one drive (:func:`add_address_arguments`), each answer's ``--timeout`` and ``--json``."""
+    add_address_arguments(parser)
     parser.add_argument("--timeout", type=seconds("--timeout"), default=DEFAULT_ANSWER_TIMEOUT,
                         help="each SDO answer or Modbus request, s")
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
@@ -114,13 +118,16 @@ def seconds(flag: str) -> argparse._ActionType:
     return number(flag, 0.0, MAX_SECONDS, "s", low_open=True)
 
 
-def drive_address(args: argparse.Namespace) -> DriveAddress:
-    """The drive ``args`` name; ParameterError (exit 2) for options of both kinds, or no drive at all."""
+def drive_address(args: argparse.Namespace, command: str = "", can_only: tuple[str, ...] = ("node_id",),
+                  node_required: bool = True) -> DriveAddress:
+    """The drive ``args`` name (:func:`add_address_arguments`); ParameterError (exit 2) naming
+    ``command`` for options of both kinds (``can_only``: the argparse dests besides the bus options
+    that only a CANopen drive takes) or, where ``node_required``, no drive at all."""
     if args.modbus is not None:
-        refuse_can_options_with_modbus(args, "", ("node_id",))
+        refuse_can_options_with_modbus(args, command, can_only)
         return DriveAddress(url=args.modbus, unit_id=args.unit_id or DEFAULT_UNIT_ID)
     if args.unit_id is not None:
-        raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL")
-    if args.node_id is None:
-        raise ParameterError("--node-id", None, "the drive's CANopen node id 1..127 (or --modbus URL)")
+        raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL", command)
+    if args.node_id is None and node_required:
+        raise ParameterError("--node-id", None, "the drive's CANopen node id 1..127 (or --modbus URL)", command)
     return DriveAddress(bus=bus_arguments(args), node_id=args.node_id)

@@ -29,17 +29,8 @@ import pathlib
 import sys
 from typing import TYPE_CHECKING, Any
 
-from haptic_bus.app.arguments import (
-    add_bus_arguments,
-    add_command,
-    bus_arguments,
-    modbus_url,
-    node_id,
-    number,
-    refuse_can_options_with_modbus,
-    unit_id,
-    whole,
-)
+from haptic_bus.app.arguments import add_command, node_id, number, whole
+from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
 from haptic_bus.errors import ParameterError
 from haptic_bus.identify.bounds import (
     DEFAULT_DURATION,
@@ -61,13 +52,9 @@ def add_identify_parser(subparsers: argparse._SubParsersAction) -> argparse.Argu
     """Register ``identify`` on ``subparsers``; it sets ``handler``."""
     parser = add_command(subparsers, "identify", IDENTIFY_HELP, run_identify)
     parser.add_argument("--profile", required=True, help="profile name or TOML path: scaling, period, force limit, [safety]")
-    add_bus_arguments(parser)
-    parser.add_argument("--node-id", type=node_id, help="the drive's CANopen node id 1..127")
+    add_address_arguments(parser)
     parser.add_argument("--controller-node-id", type=node_id,
                         help="this controller's CANopen node id, whose heartbeat the drive watches (default 127)")
-    parser.add_argument("--modbus", type=modbus_url, metavar="URL",
-                        help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/...")
-    parser.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1)")
     parser.add_argument("--duration", type=number("duration", *DURATION_RANGE, "s"), default=DEFAULT_DURATION,
                         help="seconds of excitation")
     parser.add_argument("--travel", type=number("travel", *TRAVEL_RANGE, "m"), default=DEFAULT_TRAVEL,
@@ -80,46 +67,44 @@ def add_identify_parser(subparsers: argparse._SubParsersAction) -> argparse.Argu
     return parser
 
 
-def _validate(args: argparse.Namespace) -> pathlib.Path | None:
-    """Refuse conflicting options and an unwritable --write-profile before anything is touched."""
+def _validate(args: argparse.Namespace) -> tuple[DriveAddress, pathlib.Path | None]:
+    """The drive, and the file --write-profile names; conflicting options and an unwritable
+    --write-profile refused before anything is touched."""
     from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID
 
-    if args.modbus:
-        refuse_can_options_with_modbus(args, "identify", ("node_id", "controller_node_id"))
-    elif args.unit_id is not None:
-        raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL", "identify")
-    elif args.node_id is None:
-        raise ParameterError("--node-id", None, "the drive's CANopen node id 1..127 (or --modbus URL)", "identify")
-    elif (args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID) == args.node_id:
+    address = drive_address(args, "identify", ("node_id", "controller_node_id"))
+    if not address.modbus and (args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID) == address.node_id:
         raise ParameterError("--controller-node-id", args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID,
-                             f"a node id other than the drive's ({args.node_id})", "identify")
+                             f"a node id other than the drive's ({address.node_id})", "identify")
     if args.write_profile is None:
-        return None
+        return address, None
     target = pathlib.Path(args.write_profile)
     folder = target.parent if str(target.parent) else pathlib.Path(".")
     if target.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK):
         raise ParameterError("--write-profile", args.write_profile, "a file in an existing, writable folder", "identify")
-    return target
+    return address, target
 
 
 def run_identify(args: argparse.Namespace) -> int:
     """The ``identify`` handler: validate, run, report, write the profile; the exit status."""
     from haptic_bus.app.identify_profile import write_identified_profile
     from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen, identify_modbus
-    from haptic_bus.app.profiles import TIMINGS, read_profile
-    from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID, StopRequest
+    from haptic_bus.app.profiles import read_profile
+    from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID, VIRTUAL, WALL, StopRequest
+    from haptic_bus.profile.device import TIMINGS
 
-    target = _validate(args)
+    address, target = _validate(args)
     profile = read_profile(args.profile)
     if target is not None and profile.path is not None and target.resolve() == profile.path.resolve():
         raise ParameterError("--write-profile", args.write_profile, "a new file, not the --profile itself", "identify")
     stop = StopRequest()
-    options = IdentifyOptions(args.duration, args.travel, realtime=not args.virtual_time, max_delay=args.max_delay, stop=stop)
+    options = IdentifyOptions(args.duration, args.travel, pacing=VIRTUAL if args.virtual_time else WALL,
+                              max_delay=args.max_delay, stop=stop)
     stop.install()
-    if args.modbus:
-        outcome = identify_modbus(profile, args.modbus, args.unit_id or 1, options)
+    if address.url is not None:
+        outcome = identify_modbus(profile, address.url, address.unit_id, options)
     else:
-        outcome = identify_canopen(profile, bus_arguments(args), args.node_id, options,
+        outcome = identify_canopen(profile, address.bus, address.checked_node_id, options,
                                    args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
     found = outcome.identification
     written = None

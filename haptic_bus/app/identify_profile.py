@@ -30,11 +30,12 @@ from typing import Any
 import tomlkit
 from tomlkit.items import Table
 
+from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.errors import ParameterError
 from haptic_bus.identify import Identification
+from haptic_bus.profile.identification import CREDIBLE_SIGMAS, IdentifiedDevice
 
 DIGITS = 6  # significant digits written
-SIGMAS = 3.0  # the credible ends: estimate -/+ this many standard errors (as the profile loader)
 
 
 def _digits(value: float, rounding: str = decimal.ROUND_HALF_EVEN) -> float:
@@ -74,8 +75,8 @@ def identified_profile(source: pathlib.Path, identification: Identification, lea
     # [identification] as written (6 digits); the gate's values from exactly those numbers, rounded the safe way
     b, b_sigma = _digits(fit.friction.value), _digits(fit.friction.stderr)
     d, d_sigma = _digits(fit.delay.value), _digits(fit.delay.stderr)
-    friction = _digits(max(0.0, b - SIGMAS * b_sigma), decimal.ROUND_FLOOR)
-    high = d + SIGMAS * d_sigma if fit.fraction_resolved else float(math.ceil(fit.delay_high - 1e-9))
+    friction = _digits(max(0.0, b - CREDIBLE_SIGMAS * b_sigma), decimal.ROUND_FLOOR)
+    high = d + CREDIBLE_SIGMAS * d_sigma if fit.fraction_resolved else float(math.ceil(fit.delay_high - 1e-9))
     delay = max(least_delay, _digits(high, decimal.ROUND_CEILING))
     document = tomlkit.parse(source.read_text())
     device, loop = document["device"], document["loop"]
@@ -91,17 +92,11 @@ def identified_profile(source: pathlib.Path, identification: Identification, lea
     _set(loop, "delay", delay, f"samples: the largest credible loop delay ({why})")
     table = tomlkit.table()
     table.comment("written by haptic-bus identify; descriptive (the gate uses [device] and [loop])")
-    values: dict[str, Any] = {
-        "date": when,
-        "mass": fit.mass.value, "mass_stderr": fit.mass.stderr,
-        "friction": b, "friction_stderr": b_sigma,
-        "coulomb_friction": fit.coulomb.value, "coulomb_friction_stderr": fit.coulomb.stderr,
-        "delay": d, "delay_stderr": d_sigma,
-        "velocity": velocity.credible,
-        "excitation_s": identification.record.excitation_seconds,
-        "residual_rms": fit.residual_rms * identification.record.scale.position,
-    }
-    for key, value in values.items():
+    measured = IdentifiedDevice(
+        when, fit.mass.value, fit.mass.stderr, b, b_sigma, fit.coulomb.value, fit.coulomb.stderr, d, d_sigma,
+        VelocityModel.parse(velocity.credible), identification.record.excitation_seconds,
+        fit.residual_rms * identification.record.scale.position)
+    for key, value in measured.as_table().items():
         table[key] = _digits(value) if isinstance(value, float) else value
     table["residual_rms"].comment("m: the fit's residual, in position")
     document["identification"] = table

@@ -30,7 +30,7 @@ from typing import Any, Protocol
 from drives.base import CyclicInputs, Drive, DriveScaling
 from drives.bus_config import resolve_bus_config
 from haptic_bus.app.profiles import Profile
-from haptic_bus.app.runner import EXIT_STATUS, StopRequest
+from haptic_bus.app.runner import EXIT_STATUS, WALL, StopRequest, check_pacing, patient
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.errors import DriveError, DriveProtocolError
 from haptic_bus.identify import Identification, Plan, Record, Recorder, Scale, Session, identify
@@ -68,13 +68,17 @@ class Clock(Protocol):
 @dataclasses.dataclass(frozen=True)
 class IdentifyOptions:
     """One identification: ``duration`` s of excitation, ``travel`` m either side of the start,
-    real time or virtual time, the whole delays searched (``max_delay``), and the stop request."""
+    its ``pacing`` ("wall" or "virtual", as :class:`~haptic_bus.app.runner.RunOptions`), the whole
+    delays searched (``max_delay``), and the stop request."""
 
     duration: float = DEFAULT_DURATION
     travel: float = DEFAULT_TRAVEL
-    realtime: bool = True
+    pacing: str = WALL
     max_delay: int = MAX_DELAY
     stop: StopRequest = dataclasses.field(default_factory=StopRequest)
+
+    def __post_init__(self) -> None:
+        check_pacing(self.pacing)
 
 
 @dataclasses.dataclass
@@ -151,7 +155,8 @@ def identify_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, opt
         return CanopenDrive(node_id, interface=config["interface"], channel=config.get("channel"),
                             bitrate=config.get("bitrate"), bus_kwargs=extra, period=period, scaling=profile.scaling(),
                             tpdo_objects=DEFAULT_TPDO_WITH_POSITION,
-                            safety=safety if options.realtime else safety.for_virtual_time(period))
+                            safety=safety if options.pacing == WALL else safety.for_virtual_time(period),
+                            **patient(options.pacing == WALL, "tpdo_timeout"))
 
     return _identify(profile, options, link, open_drive)
 
@@ -162,11 +167,12 @@ def identify_modbus(profile: Profile, url: str, unit_id: int, options: IdentifyO
 
     plan_for(profile, profile.scaling(), options)
     period = profile.loop.period
-    safety = profile.safety if options.realtime else profile.safety.for_virtual_time(period)
+    safety = profile.safety if options.pacing == WALL else profile.safety.for_virtual_time(period)
     link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
 
     def open_drive() -> Drive:
-        return ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True)
+        return ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True,
+                                    **patient(options.pacing == WALL, "timeout"))
 
     return _identify(profile, options, link, open_drive)
 
@@ -189,7 +195,7 @@ def _identify(profile: Profile, options: IdentifyOptions, link: dict[str, Any],
             scale = Scale(scaling.position_per_count, scaling.velocity_per_count, scaling.newton_per_permille)
             stack.callback(lambda: _disable(drive))
             drive.enable()
-            clock = RealClock(plan.period) if options.realtime else VirtualClock(plan.period)
+            clock = RealClock(plan.period) if options.pacing == WALL else VirtualClock(plan.period)
             try:
                 if not run_cycles(drive, session, recorder, clock, options.stop.event):
                     reason, error = ("interrupted", "interrupted (Ctrl-C)") if options.stop.interrupted else (

@@ -28,7 +28,8 @@ from drives.base import SCALING_UNITS, ScalingReading
 from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
 from haptic_bus.analysis.velocity import ALLOWED as VELOCITY_MODELS
 from haptic_bus.app.drive_statement import DriveStatement
-from haptic_bus.app.profiles import FORCE_RANGE, PERMILLE_RANGE, RATED_TORQUE_RANGE, SCALE_RANGE
+from haptic_bus.app.profiles import FORCE_RANGE
+from haptic_bus.profile.device import PERMILLE_RANGE, RATED_TORQUE_RANGE, SCALE_RANGE
 
 DEFAULT_PERIOD = 0.001  # s
 DEFAULT_TIMING = "cia402"

@@ -23,16 +23,8 @@ from typing import Any
 
 from haptic_bus.analysis.check import check_loop, format_check
 from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
-from haptic_bus.app.arguments import (
-    add_bus_arguments,
-    bus_arguments,
-    modbus_url,
-    node_id,
-    number,
-    refuse_can_options_with_modbus,
-    timeout,
-    unit_id,
-)
+from haptic_bus.app.arguments import number, timeout
+from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
 from haptic_bus.app.profiles import (
     DEFAULT_PROFILE,
     FORCE_RANGE,
@@ -207,22 +199,20 @@ def cmd_check(args: argparse.Namespace) -> int:
     return status
 
 
-def _new_target(args: argparse.Namespace) -> pathlib.Path:
-    """The file ``profiles new`` writes, checked before any bus or file is touched (ParameterError)."""
+def _new_target(args: argparse.Namespace) -> tuple[pathlib.Path, DriveAddress]:
+    """The file ``profiles new`` writes and the drive it reads (with ``--from-drive``), checked
+    before any bus or file is touched (ParameterError)."""
     if not NAME_PATTERN.match(args.name):
         raise ParameterError("NAME", args.name, "a name of letters, digits, '.', '_', '-' (not starting with '.', '_', '-')",
                              "profiles new")
-    if args.modbus:
-        refuse_can_options_with_modbus(args, "profiles new", ("node_id",), "--unit-id")
-    elif args.unit_id is not None:
-        raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL", "profiles new")
+    address = drive_address(args, "profiles new", node_required=False)
     drive_given = [flag for flag, dest in (("--node-id", "node_id"), ("--modbus", "modbus"), ("--interface", "interface"),
                                            ("--channel", "channel"), ("--bus-option", "bus_option"),
                                            ("--bus-kwargs", "bus_kwargs")) if getattr(args, dest)]
     if not args.from_drive and drive_given:
         raise ParameterError(drive_given[0], "given without --from-drive", "drive options only with --from-drive",
                              "profiles new")
-    if args.from_drive and args.node_id is None and not args.modbus:
+    if args.from_drive and address.node_id is None and not address.modbus:
         raise ParameterError("--from-drive", "without a drive", "--node-id N (and the bus) or --modbus URL", "profiles new")
     target = pathlib.Path(args.out or f"{args.name}.toml")
     folder = target.parent
@@ -230,7 +220,7 @@ def _new_target(args: argparse.Namespace) -> pathlib.Path:
         raise ParameterError("--out", str(target), "a file in an existing folder this user can write", "profiles new")
     if target.exists() and not args.force:
         raise ParameterError("--out", str(target), "a file that does not exist yet (--force overwrites it)", "profiles new")
-    return target
+    return target, address
 
 
 def cmd_new(args: argparse.Namespace) -> int:
@@ -240,17 +230,16 @@ def cmd_new(args: argparse.Namespace) -> int:
     from haptic_bus.app.drive_statement import canopen_statement, modbus_statement
     from haptic_bus.app.profile_template import missing, template
 
-    target = _new_target(args)
+    target, address = _new_target(args)
     given: dict[str, Any] = {key: getattr(args, key) for key in ("mass", "friction", "force_limit")
                              if getattr(args, key) is not None}
     if args.velocity is not None:
         given["velocity"] = str(VelocityModel.parse(args.velocity))
-    bus = bus_arguments(args) if args.from_drive and not args.modbus else None
     statement = None
-    if args.modbus:
-        statement = modbus_statement(args.modbus, args.unit_id or 1)
-    elif bus is not None:
-        statement = canopen_statement(bus, args.node_id, args.timeout)
+    if address.url is not None:
+        statement = modbus_statement(address.url, address.unit_id)
+    elif args.from_drive:
+        statement = canopen_statement(address.bus, address.checked_node_id, args.timeout)
     command = f"haptic-bus profiles new {args.name}" + (" --from-drive" if statement is not None else "")
     text = template(args.name, statement, given, command, dt.datetime.now(dt.UTC))
     try:
@@ -271,10 +260,7 @@ def _add_new_parser(sub: argparse._SubParsersAction) -> None:
     new.add_argument("--from-drive", action="store_true",
                      help="read 0x6076, 0x6072 and the CiA-402 factor group (Modbus: the scaling registers) from the "
                           "drive, reads only: with --node-id and the bus options, or --modbus URL")
-    add_bus_arguments(new)
-    new.add_argument("--node-id", type=node_id, help="the drive's CANopen node id 1..127")
-    new.add_argument("--modbus", type=modbus_url, metavar="URL", help="a Modbus drive instead: tcp://HOST:PORT")
-    new.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1)")
+    add_address_arguments(new)
     new.add_argument("--timeout", type=timeout, default=1.0, help="SDO answer timeout, s (default 1)")
     new.add_argument("--mass", type=number("mass", *MASS_RANGE, "kg"), help="a first guess of the handle's mass, kg")
     new.add_argument("--friction", type=number("friction", *FRICTION_RANGE, "N s/m"),

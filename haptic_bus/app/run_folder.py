@@ -35,9 +35,9 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from haptic_bus._version import __version__
+from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.app.profiles import Profile, profile_to_dict
 from haptic_bus.control.controller import RunSummary, WallController
-from haptic_bus.control.gate import DeviceLoop
 from haptic_bus.control.record import RecordTable, read_record
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import writable_folder

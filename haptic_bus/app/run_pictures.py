@@ -16,12 +16,11 @@ from haptic_bus.app.run_folder import RunFolder
 from haptic_bus.app.run_plots import force_position_figure, timeline_figure
 
 DPI = 110
-PICTURES = ("timeline.png", "force_position.png", "region.png")
 
 
 def render_run(run: RunFolder, out: pathlib.Path | None = None) -> list[pathlib.Path]:
-    """Draw a run's pictures (:data:`PICTURES`) into ``out`` (default: its folder); the paths.
-    A run that never cycled (no ``record.csv``) gets the K-B plane only."""
+    """Draw a run's pictures (``timeline.png``, ``force_position.png``, ``region.png``) into ``out``
+    (default: its folder); the paths.  A run that never cycled (no ``record.csv``) gets the K-B plane only."""
     target = out if out is not None else run.path
     figures: list[tuple[str, Figure]] = []
     if run.record is not None and run.record.cycles:

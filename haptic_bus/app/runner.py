@@ -44,7 +44,7 @@ from drives.cia402 import State
 from drives.cia402_master import Cia402Master
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.fault_reset import DEFAULT_WAIT
-from drives.safety import SafetySettings
+from drives.safety import VIRTUAL_TIME_WAIT, SafetySettings
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DriveAddress
 from haptic_bus.app.live import LiveView
@@ -58,9 +58,11 @@ from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
 from haptic_bus.control.record import Event
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.supervisor import Action
-from haptic_bus.errors import DriveError, DriveFault, DriveStateError, HapticBusError
+from haptic_bus.errors import DriveError, DriveFault, DriveStateError, HapticBusError, ParameterError
 
 if TYPE_CHECKING:
+    import can
+
     from drives.modbus.drive import ModbusDrive
 
 logger = logging.getLogger(__name__)
@@ -69,6 +71,8 @@ DEFAULT_CONTROLLER_NODE_ID = 127
 PROFILE_SCALING_SOURCE = "profile [device]"  # how the profile's scaling values are named in the report
 DERATE_SCALE_STEPS = 40  # bisection steps of the derate's margin search inside a passive interval: 2^-40
 DERATE_EXTRA_DELAYS = (0.25, 0.5, 1.0, 2.0, 3.0)  # samples beyond the assumed delay a derated scene is prepared for
+WALL, VIRTUAL = "wall", "virtual"
+PACINGS = (WALL, VIRTUAL)  # what paces a run's cycles: the wall clock, or the simulated drive (lock-step)
 EXIT_STATUS = {"completed": 0, "stopped": 0, "refused": 1, "drive error": 1, "assumption broken": 3, "interrupted": 130}
 
 
@@ -95,16 +99,18 @@ class StopRequest:
 
 @dataclasses.dataclass(frozen=True)
 class RunOptions:
-    """One run: ``duration`` (s), real time or virtual time, the output folder (None: ``runs/...``),
-    the start-in-contact policy (None: the profile's), the live view, the stop request, what a
-    real-time run asks of the OS for its control thread (:mod:`~haptic_bus.app.realtime`),
+    """One run: ``duration`` (s), its ``pacing`` (:data:`PACINGS`: "wall", each cycle at its
+    deadline on the wall clock, or "virtual", lock-step with a simulated drive, a cycle as soon
+    as the last one ends), the output folder (None: ``runs/...``), the start-in-contact policy
+    (None: the profile's), the live view, the stop request, what a wall-paced run asks of the OS
+    for its control thread (``scheduling``, :mod:`~haptic_bus.app.realtime`: ``--realtime``),
     whether a drive found in FAULT is reset before commissioning, whether a CANopen run logs
     every frame (``bus.asc``, :mod:`~haptic_bus.app.bus_log`), and whether the pictures are drawn
     (seconds of matplotlib and of the region's boundary: the benchmark, which runs the session
     many times, leaves them out)."""
 
     duration: float
-    realtime: bool
+    pacing: str = WALL
     out_dir: pathlib.Path | None = None
     start_in_contact: str | None = None
     live: bool = True
@@ -113,6 +119,20 @@ class RunOptions:
     reset_fault: bool = False
     bus_log: bool = True
     plots: bool = True
+
+    def __post_init__(self) -> None:
+        check_pacing(self.pacing)
+
+    @property
+    def wall_paced(self) -> bool:
+        """Whether the cycles keep the wall clock (``pacing == "wall"``)."""
+        return self.pacing == WALL
+
+
+def check_pacing(pacing: str) -> None:
+    """ParameterError unless ``pacing`` is one of :data:`PACINGS`."""
+    if pacing not in PACINGS:
+        raise ParameterError("pacing", pacing, " or ".join(repr(p) for p in PACINGS), "run options")
 
 
 @dataclasses.dataclass
@@ -134,30 +154,43 @@ def exit_status(reason: str) -> int:
 
 # --------------------------------------------------------------------------- the two links
 
-def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options: RunOptions,
+def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: int, options: RunOptions,
                 controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID) -> RunResult:
-    """Run against CANopen drive ``node_id`` on ``bus`` (python-can keyword arguments).
+    """Run against CANopen drive ``node_id`` on ``bus`` and return how it ended (:class:`RunResult`).
 
-    The controller is CANopen node ``controller_node_id``: its heartbeat (``[safety]``) is what
-    the drive watches, and it serves gated wall uploads over SDO.
+    ``bus``: a configuration (python-can keyword arguments, ``{"interface": ..., "channel":
+    ...}``; python-can's configuration chain fills what it leaves out), or an open
+    :class:`can.BusABC` that the caller owns (the run neither closes it nor sets its receive
+    filters).  With a configuration the controller is also CANopen node ``controller_node_id``
+    serving gated wall uploads over SDO, and ``bus.asc`` logs every frame, each on a handle of
+    its own; an open bus is one handle, which the drive's cycle reads, so that run has neither
+    (run.json's ``link`` says so) and ``reset_fault`` is refused (:class:`ParameterError`).
+    The heartbeat the drive watches (``[safety]``) is sent as node ``controller_node_id`` either way.
     """
     from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
     from haptic_bus.node.controller_node import ControllerNode
 
+    given = None if isinstance(bus, Mapping) else bus
+    if given is not None and options.reset_fault:
+        raise ParameterError("reset_fault", True, "False with an open bus (the reset needs a bus configuration)",
+                             "run_canopen")
     folder = prepare_run_folder(options.out_dir, profile.name)
-    config = resolve_bus_config(**bus)  # python-can's config chain fills what ``bus`` leaves out
-    extra = {k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")}
+    config = resolve_bus_config(**bus) if isinstance(bus, Mapping) else \
+        {"interface": type(bus).__name__, "channel": bus.channel_info}
     period = profile.loop.period
     safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
     link = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_id": node_id,
-            "controller_node_id": controller_node_id}
+            "controller_node_id": controller_node_id, "upload_server": given is None}
+    where = ({"bus": given} if given is not None else
+             {"interface": config["interface"], "channel": config.get("channel"), "bitrate": config.get("bitrate"),
+              "bus_kwargs": {k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")}})
 
     def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
-        drive = CanopenDrive(node_id, interface=config["interface"], channel=config.get("channel"),
-                             bitrate=config.get("bitrate"), bus_kwargs=extra, period=period,
+        drive = CanopenDrive(node_id, **where, period=period,
                              tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling=profile.scaling(),
                              scaling_source=PROFILE_SCALING_SOURCE,
-                             safety=safety if options.realtime else safety.for_virtual_time(period))
+                             safety=safety if options.wall_paced else safety.for_virtual_time(period),
+                             **patient(options.wall_paced, "tpdo_timeout"))
         stack.callback(drive.close)
         drive.connect()
         _show_scaling(drive, options)
@@ -165,13 +198,15 @@ def run_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, options:
         link["pdo_mapping_notes"] = list(drive.commissioned.mapping_notes) if drive.commissioned is not None else []
 
         def serve(controller: WallController) -> None:
-            stack.enter_context(ControllerNode(controller, controller_node_id, config, safety.heartbeat_ms))
+            if given is None:
+                stack.enter_context(ControllerNode(controller, controller_node_id, config, safety.heartbeat_ms))
 
         return drive, profile.gate(), serve
 
-    hold = longest_hold(period, options.realtime, safety.rpdo_deadline_ms(period), safety.consumer_ms)
+    hold = longest_hold(period, options.wall_paced, safety.rpdo_deadline_ms(period), safety.consumer_ms)
+    address = DriveAddress(bus=dict(bus) if isinstance(bus, Mapping) else {}, node_id=node_id)
     return _session(profile, options, folder, link, open_drive,
-                    DriveSide(hold, canopen_watchdog(safety, period), DriveAddress(bus=dict(bus), node_id=node_id), config))
+                    DriveSide(hold, canopen_watchdog(safety, period), address, config if given is None else None))
 
 
 def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) -> RunResult:
@@ -181,11 +216,12 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
 
     folder = prepare_run_folder(options.out_dir, profile.name)
     period = profile.loop.period
-    safety = profile.safety if options.realtime else profile.safety.for_virtual_time(period)
+    safety = profile.safety if options.wall_paced else profile.safety.for_virtual_time(period)
     link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
 
     def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
-        drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True)
+        drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True,
+                                     **patient(options.wall_paced, "timeout"))
         stack.callback(drive.close)
         drive.connect()  # reads only: identity, scaling, timing
         _refuse_another_master(drive)  # before the poll measurement, which writes
@@ -199,18 +235,25 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
             gate.admit(profile.compiled_scene())
         return drive, gate, lambda controller: None
 
-    hold = longest_hold(period, options.realtime, safety.modbus_watchdog_ms, 0)
+    hold = longest_hold(period, options.wall_paced, safety.modbus_watchdog_ms, 0)
     watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
     return _session(profile, options, folder, link, open_drive, DriveSide(hold, watchdog, DriveAddress(url=url, unit_id=unit_id)))
 
 
-def longest_hold(period: float, realtime: bool, deadline_ms: int, fallback_ms: int) -> float:
+def patient(wall_paced: bool, keyword: str) -> dict[str, Any]:
+    """The drive's keyword argument ``keyword`` (its wait for one answer, s) set to
+    :data:`~drives.safety.VIRTUAL_TIME_WAIT` when nothing paces the loop; nothing (the drive's
+    real-time default) when the wall clock does."""
+    return {} if wall_paced else {keyword: VIRTUAL_TIME_WAIT}
+
+
+def longest_hold(period: float, wall_paced: bool, deadline_ms: int, fallback_ms: int) -> float:
     """How long (s) the drive may hold one torque target before its watchdog removes it: the
     ``bound`` layer's budget per target.  In virtual time the simulated plant advances one
-    period per SYNC, so a target acts exactly ``period``; in real time up to the drive's receive
+    period per SYNC, so a target acts exactly ``period``; wall-paced (``wall_paced``) up to the drive's receive
     deadline (RPDO deadline, Modbus watchdog; else ``fallback_ms``, the heartbeat consumer) plus
     the period it was latched for.  With no watchdog at all nothing bounds it: ``inf``."""
-    if not realtime:
+    if not wall_paced:
         return period
     watchdog = deadline_ms or fallback_ms
     return watchdog / 1000.0 + period if watchdog else math.inf
@@ -292,7 +335,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
             origin, ramp_time = _safe_start(profile, drive, gate, scene, options)
             extra["start"] = {"position_m": origin, "ramp_time_s": ramp_time}
             period = profile.loop.period
-            clock = RealClock(period, spin=options.scheduling.spin) if options.realtime else VirtualClock(period)
+            clock = RealClock(period, spin=options.scheduling.spin) if options.wall_paced else VirtualClock(period)
             derate = prepare_derate(gate, scene) if Action.DERATE.value in (profile.supervisor.on_late,
                                                                             profile.supervisor.on_observer) else None
             controller = WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
@@ -307,7 +350,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
             serve(controller)
             with _live(controller, profile, options), control_thread_scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
-                if options.realtime:
+                if options.wall_paced:
                     _preflight(drive, gate, scene, profile, options, side.watchdog, extra)
                 # last before the first cycle: the drive's RPDO deadline runs from here, and the
                 # set-up above (the upload server, the real-time session) can take longer
@@ -382,8 +425,8 @@ def _live(controller: WallController, profile: Profile, options: RunOptions) -> 
 
 @contextmanager
 def control_thread_scheduling(options: RunOptions) -> Iterator[RealtimeReport | None]:
-    """A real-time run's control thread set up for the cycles (entered last: helper threads keep theirs)."""
-    if not options.realtime:
+    """A wall-paced run's control thread set up for the cycles (entered last: helper threads keep theirs)."""
+    if not options.wall_paced:
         yield None
         return
     with realtime_session(options.scheduling) as report:

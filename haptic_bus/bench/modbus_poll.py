@@ -21,11 +21,8 @@ import sys
 import time
 from collections.abc import Sequence
 
-import numpy as np
-
 from drives.modbus.drive import CYCLE_MODES, ModbusDrive
-from drives.modbus.link import ModbusStats
-from drives.modbus.timing import PollTiming
+from drives.modbus.timing import PollTiming, time_cycles
 from haptic_bus.app.rig import simulator_command
 
 _BOUND = re.compile(r"serving Modbus TCP on (tcp://\S+)")
@@ -72,32 +69,18 @@ def bench_cycle(url: str, cycle: str, cycles: int, *, time_limit: float = 30.0) 
         drive.enable()
         scaling = drive.scaling
         per_count = scaling.velocity_per_count
-        samples = np.empty(cycles)
-        clock = time.perf_counter
         read, write, torque_of = drive.read_inputs, drive.write_outputs, scaling.torque_permille
-        stats = drive.stats
-        assert isinstance(stats, ModbusStats)  # a ModbusDrive counts its requests
-        requests_before = stats.cyclic_requests
         x = 0.0
-        started = clock()
-        deadline = started + time_limit
-        done = 0
-        for i in range(cycles):
-            t0 = clock()
+
+        def wall_cycle() -> None:
+            nonlocal x
             v = read().velocity * per_count
             x += T * v
             write(torque_of(-(K * x + B * v)) if x > 0 else 0)
-            t1 = clock()
-            samples[i] = t1 - t0
-            done = i + 1
-            if t1 > deadline:
-                break
-        wall = clock() - started
-        requests = stats.cyclic_requests - requests_before
+
+        timing = time_cycles(drive, wall_cycle, cycles, time_limit)
         drive.disable()
-    used = samples[:done]
-    p50, p99 = np.percentile(used, [50, 99])
-    return PollTiming(done, cycle, requests / done, float(p50), float(p99), float(used.max()), float(used.mean()), wall)
+    return timing
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -56,13 +56,13 @@ from typing import Any
 
 import numpy as np
 
-from haptic_bus.analysis.aliasing import worst_force
 from haptic_bus.analysis.check import check_loop
 from haptic_bus.analysis.closed_form import region_map, velocity_sampling_factor, velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.frequency import t_fund, z_fund
 from haptic_bus.analysis.limits import max_damping, max_stiffness
 from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.analysis.out_of_band import worst_force
 from haptic_bus.analysis.plant import phi1
 from haptic_bus.analysis.poles import forget_walls, is_stable
 from haptic_bus.bench.size import Size
@@ -189,23 +189,22 @@ class _Method:
     key: str
     check: Callable[[WallLoop], float]  # margin-like, timed per check
     applies: Callable[[WallLoop], bool]
-    newton: bool  # boundary by Newton on ``check``; else a dedicated boundary function
     large: bool = False  # slow: each timed batch is one call
 
 
 def _methods(grid_sizes: tuple[int, ...], with_control: bool) -> list[_Method]:
     methods = [
-        _Method("closed form (eq. 23)", "closed_form", velocity_sampling_slack, lambda lp: lp.delay == 0, False),
-        _Method("exact criterion", "exact", lambda lp: exact_verdict(lp).margin, lambda lp: True, False),
+        _Method("closed form (eq. 23)", "closed_form", velocity_sampling_slack, lambda lp: lp.delay == 0),
+        _Method("exact criterion", "exact", lambda lp: exact_verdict(lp).margin, lambda lp: True),
     ]
     for n in grid_sizes:
         grid = uniform_grid(n)
         methods.append(_Method(f"grid 10^{round(math.log10(n))}", f"grid_{n}", functools.partial(grid_margin, grid=grid),
-                               lambda lp: True, True, large=n >= 100_000))
+                               lambda lp: True, large=n >= 100_000))
     if with_control:
         grid = uniform_grid(CONTROL_GRID)
         methods.append(_Method(f"python-control (grid 10^{round(math.log10(CONTROL_GRID))})", "control",
-                               functools.partial(control_margin, grid=grid), lambda lp: True, True))
+                               functools.partial(control_margin, grid=grid), lambda lp: True))
     return methods
 
 

@@ -169,7 +169,7 @@ def controller_run(settings: RealtimeSettings, duration: float, bus: dict, proce
     with tempfile.TemporaryDirectory() as out:
         boosted = boost(process.pid, SIM_PRIORITY)
         with ThreadCpu() as threads:
-            result = run_canopen(profile, bus, NODE_ID, RunOptions(duration, realtime=True, out_dir=Path(out) / "run",
+            result = run_canopen(profile, bus, NODE_ID, RunOptions(duration, pacing="wall", out_dir=Path(out) / "run",
                                                                    live=False, scheduling=settings, start_in_contact="ramp",
                                                                    plots=False))
         document = json.loads((result.folder / "run.json").read_text()) if (result.folder / "run.json").exists() else {}

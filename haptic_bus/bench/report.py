@@ -310,12 +310,8 @@ def plots(result: dict, out_dir: Path) -> list[Path]:
         for r in s["methods"]:
             _loglog(ax, [(r["time_per_check_s"], r["error_max"])], r["method"])
         ax.axhline(ERROR_FLOOR, color="grey", lw=0.5)
-        ax.set_xlabel("time per check (s)")
-        ax.set_ylabel("largest relative error of the boundary (K and B)")
-        ax.set_title("Passivity check: run time vs error")
-        ax.grid(True, which="both", lw=0.3)
-        ax.legend(fontsize=8)
-        written.append(_save(fig, out_dir / "passivity_time_vs_error.png"))
+        written.append(_label_and_save(fig, ax, ("time per check (s)", "largest relative error of the boundary (K and B)"),
+                             "Passivity check: run time vs error", out_dir / "passivity_time_vs_error.png"))
     s = sections.get("plant")
     if s and s.get("available", True):
         fig, ax = plt.subplots(figsize=(7, 5))
@@ -326,12 +322,8 @@ def plots(result: dict, out_dir: Path) -> list[Path]:
                   "ivp_RK45": "solve_ivp RK45 (tolerances)", "ivp_DOP853": "solve_ivp DOP853 (tolerances)"}
         for family, points in families.items():
             _loglog(ax, points, labels.get(family, family), line=len(points) > 1)
-        ax.set_xlabel("run time per simulated second (s)")
-        ax.set_ylabel("largest relative trajectory error")
-        ax.set_title("Plant simulation in the closed loop: run time vs error")
-        ax.grid(True, which="both", lw=0.3)
-        ax.legend(fontsize=8)
-        written.append(_save(fig, out_dir / "plant_time_vs_error.png"))
+        written.append(_label_and_save(fig, ax, ("run time per simulated second (s)", "largest relative trajectory error"),
+                             "Plant simulation in the closed loop: run time vs error", out_dir / "plant_time_vs_error.png"))
     s = sections.get("scene")
     if s and s.get("available", True):
         fig, ax = plt.subplots(figsize=(7, 5))
@@ -339,16 +331,18 @@ def plots(result: dict, out_dir: Path) -> list[Path]:
         ax.loglog(n, [r["compiled_cycle_p50_s"] for r in s["rows"]], "o-", label="compiled scene (bisect)")
         ax.loglog(n, [r["naive_cycle_p50_s"] for r in s["rows"]], "s-", label="per-object loop (no culling)")
         ax.axhline(5e-6, color="grey", ls="--", lw=0.8, label="issue-4 target, one wall (5 us)")
-        ax.set_xlabel("scene objects")
-        ax.set_ylabel("controller compute per cycle, median (s)")
-        ax.set_title("Scene cost")
-        ax.grid(True, which="both", lw=0.3)
-        ax.legend(fontsize=8)
-        written.append(_save(fig, out_dir / "scene_cost.png"))
+        written.append(_label_and_save(fig, ax, ("scene objects", "controller compute per cycle, median (s)"), "Scene cost",
+                             out_dir / "scene_cost.png"))
     return written
 
 
-def _save(fig: Any, path: Path) -> Path:
+def _label_and_save(fig: Any, ax: Any, labels: tuple[str, str], title: str, path: Path) -> Path:
+    """Label the log-log axes (x, y), title, grid and legend them, and write ``fig`` to ``path`` (PNG, 110 dpi)."""
+    ax.set_xlabel(labels[0])
+    ax.set_ylabel(labels[1])
+    ax.set_title(title)
+    ax.grid(True, which="both", lw=0.3)
+    ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

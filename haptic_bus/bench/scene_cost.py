@@ -29,11 +29,12 @@ from drives.base import CyclicInputs, Drive, DriveScaling
 from drives.canopen.drive import DEFAULT_RPDO
 from drives.canopen.pdo_codec import PdoCodec
 from drives.cia402 import ObjectSpec, OperationMode
+from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import REPEATS, Spread, time_per_call
 from haptic_bus.control.clock import VirtualClock
 from haptic_bus.control.controller import WallController
-from haptic_bus.control.gate import DeviceLoop, GatePolicy, PassivityGate
+from haptic_bus.control.gate import GatePolicy, PassivityGate
 from haptic_bus.control.scene import CompiledScene, Detent, Wall, compile_scene
 
 SIZES = (1, 10, 100, 1_000, 10_000)

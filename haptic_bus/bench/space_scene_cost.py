@@ -7,7 +7,8 @@ Per call of ``force(x, v)`` (the per-cycle work of a scene), seconds, for 1..10 
 * **space**: :class:`haptic_bus.control.space_scene.SpaceScene` in 3-D: a floor plane plus
   ``N - 1`` spheres and boxes (alternating, seeded positions in a 20 mm cube, sizes 0.4 of their
   spacing), the handle swept along a helix through the cube and the floor;
-* **space, per object**: the same objects each tested every call (no grid), up to 1 000.
+* **space, per object**: the same objects each tested every call (no grid), up to 1 000 (100 in
+  the smoke run).
 
 Each figure is the median over a 257-point sweep of :func:`~haptic_bus.bench.timing.time_per_call`
 (5 repeats); the ratio to one object is the figure over the same kind's one-object figure.
@@ -99,12 +100,12 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
                                "contacts_per_call": float(np.mean([len(space.contacts(x)) for x in points])),
                                "space_force": _sweep_time(space.force, points, velocity, min_ns),
                                "line_force": _sweep_time(line.force, xs, 0.01, min_ns)}
-        if n <= NAIVE_UP_TO:
+        if n <= size.pick(NAIVE_UP_TO // 10, NAIVE_UP_TO, NAIVE_UP_TO):
             naive = PerObject(space)
             for x in points:
                 if not np.allclose(space.force(x, velocity), naive.force(x, velocity), rtol=1e-12, atol=1e-12):
                     raise AssertionError(f"compiled and per-object space scenes disagree at x = {x}")
-            row["per_object_force"] = _sweep_time(naive.force, points, velocity, 1_000_000)
+            row["per_object_force"] = _sweep_time(naive.force, points, velocity, size.pick(min_ns, 1_000_000, 1_000_000))
         rows.append(row)
         tick(f"space scene: {n} objects")
     for row in rows:

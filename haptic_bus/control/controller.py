@@ -34,7 +34,7 @@ from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.port_account import PortAccount
 from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.scene import CompiledScene
-from haptic_bus.control.scenes import SceneEntry, SceneSlot
+from haptic_bus.control.scenes import SceneEntry, SceneSwitch
 from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
 from haptic_bus.errors import ParameterError
 
@@ -104,7 +104,7 @@ class WallController(CycleLoop):
         self.events = EventLog()
         policy = passivity if passivity is not None else LayerPolicy()
         self.passivity = policy
-        self.scenes = SceneSlot(gate, scene, self.events, self.now, beyond_gate=policy.beyond_gate)
+        self.scenes = SceneSwitch(gate, scene, self.events, self.now, beyond_gate=policy.beyond_gate)
         self.integrator = PositionIntegrator(self.period, drive.scaling.velocity_per_count, origin)
         device = gate.device
         self.hold = hold if policy.layer == "bound" and hold is not None else self.period

@@ -25,16 +25,14 @@ from haptic_bus.errors import DriveError
 
 logger = logging.getLogger(__name__)
 
-EXIT_REASONS = ("completed", "stopped", "interrupted", "drive error", "assumption broken")
-
-
 @dataclass
 class RunSummary:
     """What a run did: counts, peaks, the port's energy (J: the last, the least, and the counts
     rounding bound under which the truth may lie), the passivity layer and how often it lowered a
     target, compute and lateness percentiles (s), and its end.
 
-    ``exit_reason`` is one of :data:`EXIT_REASONS`; ``error`` the message that ended it early.
+    ``exit_reason`` is "completed", "stopped", "interrupted", "drive error" or "assumption broken";
+    ``error`` the message that ended it early.
     """
 
     cycles: int

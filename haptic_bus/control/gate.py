@@ -19,8 +19,7 @@ from dataclasses import dataclass, field
 
 from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from haptic_bus.analysis.limits import PassiveSet, passive_limits, passive_scales
-from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
-from haptic_bus.analysis.velocity import POINT, VelocityModel
+from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, DeviceLoop, WallLoop
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.errors import GateRefusal, ParameterError
 from haptic_bus.validation import real_in_range
@@ -40,27 +39,6 @@ class GatePolicy:
                            real_in_range("safety_margin", self.safety_margin, 0.0, 1e12, unit="N s/m", context="gate"))
         if self.bandwidth not in BANDWIDTH_POLICIES:
             raise ParameterError("bandwidth", self.bandwidth, " or ".join(BANDWIDTH_POLICIES), "gate")
-
-
-@dataclass(frozen=True)
-class DeviceLoop:
-    """The loop the walls run in: ``m`` kg, effective ``b`` N s/m, ``T`` s, ``delay`` samples
-    (real), and the ``velocity`` model of the drive's 0x606C (a model or its profile string)."""
-
-    m: float
-    b: float
-    T: float
-    delay: float
-    velocity: VelocityModel | str = POINT
-
-    def wall(self, K: float, B: float) -> WallLoop:
-        """The linear loop with the wall ``K`` N/m, ``B`` N s/m (validated)."""
-        return WallLoop(self.m, self.b, self.T, K, B, self.delay, VelocityModel.parse(self.velocity))
-
-    def describe(self) -> str:
-        """``m = .. kg, b = .. N s/m, T = .. s, delay D = .. samples, velocity ..`` for messages."""
-        return (f"m = {self.m:g} kg, b = {self.b:g} N s/m, T = {self.T:g} s, delay D = {self.delay:g} samples, "
-                f"velocity {VelocityModel.parse(self.velocity)}")
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -202,8 +203,7 @@ def compile_scene(objects: Iterable[SceneObject]) -> CompiledScene:
     exactly zero force and no round-off carries from one interval to the next.
     """
     objects = tuple(objects)
-    names = [obj.name for obj in objects]
-    duplicates = sorted({n for n in names if names.count(n) > 1})
+    duplicates = sorted(name for name, count in Counter(obj.name for obj in objects).items() if count > 1)
     if duplicates:
         raise ParameterError("name", duplicates[0], "a name used by one scene object only", "scene")
     pieces = [piece for obj in objects for piece in obj.pieces()]

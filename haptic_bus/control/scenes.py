@@ -47,8 +47,10 @@ class SceneEntry:
         }
 
 
-class SceneSlot:
-    """The running scene, the last accepted one, and their history (module docstring).
+class SceneSwitch:
+    """Switches a running controller's scene, gated, at a cycle boundary: the running scene, the
+    last accepted one, and their history (module docstring).  (Not :class:`~haptic_bus.control.scene.Slot`,
+    a scene object: a box the handle is held inside.)
 
     ``now`` gives the run's clock (s) for events; ``events`` receives "upload" and "refused";
     ``beyond_gate``: admit scenes the gate refuses (module docstring).

@@ -51,12 +51,12 @@ Fixtures
     not exit with status 0 on SIGTERM within 10 s is killed and fails the test.
 
 ``haptic_controller``
-    A factory: ``haptic_controller(profile, drive, *, duration=1.0, realtime=False,
+    A factory: ``haptic_controller(profile, drive, *, duration=1.0, pacing="virtual",
     controller_node_id=127, start_in_contact=None, reset_fault=False, out_dir=None)`` starts
     :func:`haptic_bus.run_canopen` (what ``haptic-bus run`` runs) in a thread against the
     :class:`SimDriveNode` ``drive`` and returns a :class:`ControllerRun`.  ``profile``: a
     shipped name, a TOML path (loaded and gated) or a :class:`haptic_bus.Profile`;
-    ``duration``: s of virtual time (``realtime=True``: of wall clock); ``out_dir``: the run's
+    ``duration``: s of virtual time (``pacing="wall"``: of wall clock); ``out_dir``: the run's
     folder (None: a fresh temporary one).  ``run.wait(timeout=600)`` lets it end by itself,
     ``run.stop(timeout=300)`` ends it at the next cycle, both return the :class:`RecordedRun`
     of its folder; ``run.wait_cycling(timeout=30)`` blocks until it cycles (the drive, enabled,
@@ -205,7 +205,7 @@ def _each(items: Iterable[Any], teardown: Callable[[Any], None]) -> None:
 @pytest.fixture
 def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
                       tmp_path_factory: pytest.TempPathFactory) -> Iterator[Callable[..., ControllerRun]]:
-    """``haptic_controller(profile, drive, *, duration=1.0, realtime=False, controller_node_id=127,
+    """``haptic_controller(profile, drive, *, duration=1.0, pacing="virtual", controller_node_id=127,
     start_in_contact=None, reset_fault=False, out_dir=None)``: ``haptic-bus run`` in a thread
     (see the module docstring); every run still going is stopped at teardown, before the drives."""
     from haptic_bus.app.profiles import Profile, load_profile
@@ -214,12 +214,12 @@ def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
     runs: list[ControllerRun] = []
 
     def start(profile: ProfileSource | Profile, drive: SimDriveNode, *, duration: float = 1.0,
-              realtime: bool = False, controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID,
+              pacing: str = "virtual", controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID,
               start_in_contact: str | None = None, reset_fault: bool = False,
               out_dir: str | os.PathLike[str] | None = None) -> ControllerRun:
         believed = profile if isinstance(profile, Profile) else load_profile(profile)
         folder = pathlib.Path(out_dir) if out_dir is not None else tmp_path_factory.mktemp("haptic-run")
-        options = RunOptions(duration=duration, realtime=realtime, out_dir=folder, start_in_contact=start_in_contact,
+        options = RunOptions(duration=duration, pacing=pacing, out_dir=folder, start_in_contact=start_in_contact,
                              live=False, stop=StopRequest(), reset_fault=reset_fault)
         run = ControllerRun(believed, drive, options, controller_node_id)
         runs.append(run)

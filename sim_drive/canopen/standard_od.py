@@ -44,16 +44,8 @@ from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary, import_od
 
 from drives.canopen.od import add_factor_group
-from drives.cia402 import (
-    FEED_CONSTANT,
-    GEAR_RATIO,
-    POSITION_ENCODER_RESOLUTION,
-    SI_UNIT_POSITION,
-    SI_UNIT_VELOCITY,
-    VELOCITY_ENCODER_RESOLUTION,
-    RatioSpec,
-)
-from drives.factor_group import INCREMENT, METRE, SECOND, SiUnit, best_ratio, power_of_ten
+from drives.cia402 import SI_UNIT_POSITION, SI_UNIT_VELOCITY
+from drives.factor_group import INCREMENT, METRE, SECOND, FactorGroup, SiUnit, best_ratio, power_of_ten
 from haptic_bus.errors import ParameterError
 from sim_drive.canopen.vendor_od import load_vendor_eds
 from sim_drive.device import SimulatedDrive
@@ -67,38 +59,27 @@ Encoding = dict[tuple[int, int], int]
 ReadCallback = Callable[..., "int | None"]
 
 
-def _ratio(values: Encoding, spec: RatioSpec, ratio: tuple[int, int]) -> None:
-    values[spec.index, 1], values[spec.index, 2] = ratio
-
-
 def encode(parameters: DeviceParameters) -> Encoding:
     """The factor-group and SI unit objects that state ``parameters``' scaling: ``{(index, subindex): raw}``."""
-    values: Encoding = {}
     per_motor_rev = Fraction(math.tau) / Fraction(parameters.force_per_torque)  # m, exactly what a master inverts
     position = power_of_ten(parameters.position_per_count)
     velocity = power_of_ten(parameters.velocity_per_count)
     if position is not None:
-        values[SI_UNIT_POSITION.index, 0] = SiUnit(position, METRE).encode()
         feed = best_ratio(per_motor_rev / Fraction(10) ** position)
-        if feed is not None:
-            _ratio(values, FEED_CONSTANT, feed)
-            _ratio(values, GEAR_RATIO, (1, 1))
-            _ratio(values, POSITION_ENCODER_RESOLUTION, feed)
+        resolution = None
+        velocity_unit = None
         if velocity is not None:
-            values[SI_UNIT_VELOCITY.index, 0] = SiUnit(velocity, METRE, SECOND).encode()
+            velocity_unit = SiUnit(velocity, METRE, SECOND).encode()
         elif feed is not None and (resolution := best_ratio(per_motor_rev / Fraction(parameters.velocity_per_count))):
-            values[SI_UNIT_VELOCITY.index, 0] = SiUnit(0, INCREMENT, SECOND).encode()
-            _ratio(values, VELOCITY_ENCODER_RESOLUTION, resolution)
-        return values
-    values[SI_UNIT_POSITION.index, 0] = SiUnit(0, INCREMENT).encode()
+            velocity_unit = SiUnit(0, INCREMENT, SECOND).encode()
+        return FactorGroup(SiUnit(position, METRE).encode(), velocity_unit, position_encoder=feed,
+                           velocity_encoder=resolution, gear_ratio=None if feed is None else (1, 1),
+                           feed_constant=feed).objects()
     increments = best_ratio(per_motor_rev / Fraction(parameters.position_per_count))
-    if increments is not None:
-        _ratio(values, POSITION_ENCODER_RESOLUTION, increments)
-        _ratio(values, GEAR_RATIO, (1, 1))
-        _ratio(values, FEED_CONSTANT, increments)
-    if parameters.velocity_per_count == parameters.position_per_count:
-        values[SI_UNIT_VELOCITY.index, 0] = SiUnit(0, INCREMENT, SECOND).encode()
-    return values
+    in_increments = parameters.velocity_per_count == parameters.position_per_count
+    return FactorGroup(SiUnit(0, INCREMENT).encode(), SiUnit(0, INCREMENT, SECOND).encode() if in_increments else None,
+                       position_encoder=increments, gear_ratio=None if increments is None else (1, 1),
+                       feed_constant=increments).objects()
 
 
 def standard_dictionary(node_id: int, parameters: DeviceParameters) -> ObjectDictionary:

@@ -1,13 +1,17 @@
 """Reading one table of a profile's TOML document: typed fields whose errors name the file, the
 dotted field, the value and the allowed range, and a check that no key was left unread (a typo
-is an error, not a silent default)."""
+is an error, not a silent default).
+
+A reader may be given ``silent``: defaults for required keys its caller lets be left out (the
+simulated drive's view of a profile, which runs a bare ``[device]`` with its own defaults); a
+default goes through the same check as a written value."""
 
 from __future__ import annotations
 
 import pathlib
 import re
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from haptic_bus.analysis.velocity import ALLOWED as VELOCITY_MODELS
@@ -43,11 +47,12 @@ def read_document(path: pathlib.Path) -> dict[str, Any]:
 class Reader:
     """Reads one table of the document, tracking which keys were used (typo protection)."""
 
-    def __init__(self, path: pathlib.Path, prefix: str, table: object) -> None:
+    def __init__(self, path: pathlib.Path, prefix: str, table: object, silent: Mapping[str, object] | None = None) -> None:
         self.path, self.prefix = path, prefix
         if not isinstance(table, dict):
             raise ProfileError(path, prefix, table, "a TOML table")
         self.table = table
+        self.silent: Mapping[str, object] = silent or {}
         self.used: set[str] = set()
 
     def field(self, key: str) -> str:
@@ -56,6 +61,7 @@ class Reader:
     def raw(self, key: str, allowed: str, default: object = REQUIRED) -> object:
         self.used.add(key)
         if key not in self.table:
+            default = self.silent.get(key, REQUIRED) if default is REQUIRED else default
             if default is REQUIRED:
                 raise ProfileError(self.path, self.field(key), "<missing>", f"required: {allowed}")
             return default
@@ -96,11 +102,11 @@ class Reader:
             raise ProfileError(self.path, self.field(key), value, allowed)
         return value  # type: ignore[return-value]  # checked: a str
 
-    def velocity_model(self, key: str) -> VelocityModel:
-        """A velocity model string (``"point"``, ``"average"``, ``"window:S"``, ``"lowpass:S"``); required."""
+    def velocity_model(self, key: str, default: object = REQUIRED) -> VelocityModel:
+        """A velocity model string (``"point"``, ``"average"``, ``"window:S"``, ``"lowpass:S"``)."""
         value = self.raw(key, f"the model of the drive's 0x606C: {VELOCITY_MODELS}; most drives report "
                               "'average' (an encoder difference over the cycle); 'point' only for a drive "
-                              "documented to sample its velocity at SYNC")
+                              "documented to sample its velocity at SYNC", default)
         return self._wrap(key, VelocityModel.parse, value)
 
     def done(self) -> None:

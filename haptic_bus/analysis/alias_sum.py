@@ -46,14 +46,9 @@ def device_key(loop: WallLoop) -> WallLoop:
     return WallLoop(loop.m, loop.b, loop.T, 0.0, 0.0, loop.fractional_delay, loop.velocity)
 
 
-def alias_direct(key: WallLoop, theta: np.ndarray) -> np.ndarray:
-    """``g(theta) = G(z)/(1 - z^{-1}) - F(theta)`` at real or complex ``theta`` (dimensionless, scaled units)."""
-    sampled, continuous = _alias_terms(key, theta)
-    return sampled - continuous
-
-
 def _alias_terms(key: WallLoop, theta: np.ndarray, circle: HalfAngle | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The two terms of :func:`alias_direct`, ``G(z)/(1 - z^{-1})`` and ``F(theta)`` (``circle``: the
+    """The two terms of ``g(theta) = G(z)/(1 - z^{-1}) - F(theta)`` at real or complex ``theta``
+    (dimensionless, scaled units), ``G(z)/(1 - z^{-1})`` and ``F(theta)`` (``circle``: the
     half angles of real ``theta``, if already known)."""
     z, z_minus_1 = unit_point(theta) if circle is None else (circle.z, circle.z_minus_1)
     sampled = pulse_transfer(period_map(key), z, z_minus_1) * z / z_minus_1

@@ -1,0 +1,17 @@
+"""Operator profiles: one TOML format, one schema, read once (the base layer of haptic_bus).
+
+Below the controller and above the analysis, so both the controller (:mod:`haptic_bus.app`) and
+the simulated drive (:mod:`sim_drive`) read profiles through it:
+
+* :mod:`~haptic_bus.profile.reader`: one table at a time, typed fields, one-line errors that name
+  the file, the dotted field, the value and the allowed range; unknown keys refused;
+* :mod:`~haptic_bus.profile.files`: shipped profiles by name, others by path;
+* :mod:`~haptic_bus.profile.device`: ``[device]`` and ``[loop]``;
+* :mod:`~haptic_bus.profile.identification`: ``[identification]``, what ``haptic-bus identify`` wrote;
+* :mod:`~haptic_bus.profile.operator`: ``[operator_model]``, the simulated operator;
+* :mod:`~haptic_bus.profile.plant`: those tables of a one-axis profile read together, the part
+  the controller's view and the simulator's view share.
+
+The controller's own tables (limits, gate, scene, policies) are read by :mod:`haptic_bus.app.profiles`
+and :mod:`haptic_bus.app.axes_profile`, which need the control layer's types.
+"""

@@ -1,0 +1,142 @@
+"""``[device]`` and ``[loop]``: the handle, its drive and the loop timing, as the controller and the
+simulated drive both read them (SI units).
+
+``[device]``: ``mass`` kg, effective ``friction`` b N s/m and its ``friction_source``, the drive's
+scaling (0x606C, 0x6064, 0x6076 N m, transmission N/(N m), 0x6072), the ``velocity`` model of
+0x606C, and a simulated drive's hidden truth (``coulomb_friction`` N, ``velocity_noise`` 0x606C
+counts rms, ``noise_seed``) that the controller never uses.  ``[loop]``: ``period`` T in s,
+``timing`` (``"ideal"`` = no delay, ``"cia402"`` = torque applied at the next SYNC,
+``"reception"`` = applied on arrival) and the loop ``delay`` in samples the gate judges with
+(real; at least the timing's own, default it; required for ``"reception"``).
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from drives.base import DriveScaling
+from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, TARGET_TORQUE
+from haptic_bus.analysis.loop import DELAY_RANGE, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE
+from haptic_bus.analysis.velocity import VelocityModel
+from haptic_bus.errors import ParameterError
+from haptic_bus.profile.reader import REQUIRED, ProfileError, Reader
+
+TIMINGS: dict[str, float | None] = {"ideal": 0, "cia402": 1, "reception": None}
+"""Timing name -> its least loop delay in samples, the default of ``[loop] delay`` (None: required)."""
+# The ranges a profile's [device] and the simulated drive's parameters (sim_drive.parameters) share:
+NOISE_SEED_RANGE = (0, 2**64 - 1)
+SCALE_RANGE = (0.0, 1e6)  # exclusive low: m/s per count, m per count, N per N m
+COULOMB_RANGE = (0.0, 1e6)  # N
+NOISE_RANGE = (0.0, 2.0**31)  # 0x606C counts rms: up to the INTEGER32 range itself
+# 0x6072 is UNSIGNED16, but a torque beyond the INTEGER16 0x6071 can never be commanded.
+PERMILLE_RANGE = (1, min(MAX_TORQUE.data_type.range[1], TARGET_TORQUE.data_type.range[1]))
+RATED_TORQUE_RANGE = (1e-3, MOTOR_RATED_TORQUE.data_type.range[1] / 1000.0)  # N m (0x6076 in mN m)
+
+
+@dataclass(frozen=True)
+class DeviceProfile:
+    """The handle and its drive: ``mass`` kg, effective ``friction`` b N s/m (and where it
+    comes from), drive scaling (0x606C, 0x6064, 0x6076 N m, transmission N/(N m), 0x6072), the
+    ``velocity`` model of 0x606C.  ``coulomb_friction`` (N), ``velocity_noise`` (0x606C counts
+    rms) and ``noise_seed`` are a simulated drive's hidden truth: the controller never uses them."""
+
+    mass: float
+    friction: float
+    friction_source: str
+    velocity_per_count: float
+    position_per_count: float
+    rated_torque: float
+    force_per_torque: float
+    max_torque_permille: int
+    velocity: VelocityModel
+    coulomb_friction: float = 0.0
+    velocity_noise: float = 0.0
+    noise_seed: int | None = None
+
+    @property
+    def max_force(self) -> float:
+        """Handle force in N that 0x6072 allows: permille * rated torque * transmission / 1000."""
+        return self.max_torque_permille * self.rated_torque * self.force_per_torque / 1000.0
+
+    def scaling(self) -> DriveScaling:
+        """The drive-unit conversion of :mod:`drives.base`."""
+        return DriveScaling(self.velocity_per_count, self.position_per_count, self.rated_torque, self.force_per_torque,
+                            self.max_torque_permille)
+
+    def sim_parameters(self, period: float, timing: str, delay: float) -> dict[str, object]:
+        """Keyword arguments of ``sim_drive.parameters.DeviceParameters`` for this device on a loop of
+        ``period`` s and ``timing`` (with the hidden truth: Coulomb friction, velocity noise and its seed)."""
+        parameters: dict[str, object] = {
+            "m": self.mass, "b": self.friction, "period": period,
+            "velocity_per_count": self.velocity_per_count, "position_per_count": self.position_per_count,
+            "rated_torque": self.rated_torque, "force_per_torque": self.force_per_torque,
+            "max_torque_permille": self.max_torque_permille, "velocity": self.velocity,
+            "coulomb_friction": self.coulomb_friction, "velocity_noise": self.velocity_noise, "noise_seed": self.noise_seed}
+        if timing == "reception":
+            parameters["reception_delay"] = delay
+        return parameters
+
+
+@dataclass(frozen=True)
+class LoopProfile:
+    """The control loop: ``period`` T in s, ``timing`` ("ideal", "cia402" or "reception") and the
+    loop ``delay`` D in samples (real; an int when whole) that the gate judges with."""
+
+    period: float
+    timing: str
+    delay: float
+
+
+def read_device(path: pathlib.Path, table: object, prefix: str = "device",
+                silent: Mapping[str, object] | None = None) -> DeviceProfile:
+    """A ``[device]`` table (``prefix``: its dotted name, e.g. ``axes[1].device``); ``silent``:
+    defaults for keys the caller lets be left out (the simulated drive's), else every key but the
+    hidden truth is required."""
+    r = Reader(path, prefix, table, silent)
+    mass = r.real("mass", *MASS_RANGE, "kg")
+    friction = r.real("friction", *FRICTION_RANGE, "N s/m")
+    source = r.text("friction_source")
+    velocity = r.real("velocity_per_count", *SCALE_RANGE, "m/s per 0x606C unit", low_inclusive=False)
+    position = r.real("position_per_count", *SCALE_RANGE, "m per 0x6064 increment", low_inclusive=False)
+    rated = r.real("rated_torque", *RATED_TORQUE_RANGE, "N m (0x6076)")
+    if not math.isclose(rated * 1000.0, round(rated * 1000.0), rel_tol=1e-12, abs_tol=1e-9):
+        raise ProfileError(path, r.field("rated_torque"), rated, "a whole number of mN m (0x6076 is UNSIGNED32 in mN m)")
+    transmission = r.real("force_per_torque", *SCALE_RANGE, "N/(N m)", low_inclusive=False)
+    permille = r.whole("max_torque_permille", *PERMILLE_RANGE)
+    model = r.velocity_model("velocity")
+    coulomb = r.real("coulomb_friction", *COULOMB_RANGE, "N (a simulated drive's truth)", default=0.0)
+    noise = r.real("velocity_noise", *NOISE_RANGE, "0x606C counts rms (a simulated drive's truth)", default=0.0)
+    seed = r.whole("noise_seed", *NOISE_SEED_RANGE, default=None) if "noise_seed" in r.table else None
+    r.used.add("noise_seed")
+    r.done()
+    return DeviceProfile(mass, friction, source, velocity, position, rated, transmission, permille, model,
+                         coulomb, noise, seed)
+
+
+def read_timing(r: Reader) -> tuple[str, float]:
+    """``timing`` and the loop ``delay`` (samples, an int when whole) of the table ``r`` reads."""
+    timing = r.text("timing", choices=tuple(TIMINGS))
+    least = TIMINGS[timing]
+    delay = r.real("delay", 0.0 if least is None else least, DELAY_RANGE[1], f"samples (timing {timing!r})",
+                   default=REQUIRED if least is None else least)
+    return timing, int(delay) if float(delay).is_integer() else delay
+
+
+def read_loop(path: pathlib.Path, table: object, silent: Mapping[str, object] | None = None) -> LoopProfile:
+    """A ``[loop]`` table: ``period``, ``timing`` and ``delay`` (``silent`` as :func:`read_device`'s)."""
+    r = Reader(path, "loop", table, silent)
+    period = r.real("period", *PERIOD_RANGE, "s")
+    timing, delay = read_timing(r)
+    r.done()
+    return LoopProfile(period, timing, delay)
+
+
+def check_velocity_period(path: pathlib.Path, field: str, device: DeviceProfile, period: float) -> None:
+    """The velocity model against the period: a window longer than T is no model of this loop."""
+    try:
+        device.velocity.check_period(period)
+    except ParameterError as error:
+        raise ProfileError(path, field, error.value, error.allowed) from None

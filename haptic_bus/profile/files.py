@@ -1,0 +1,30 @@
+"""Where profiles live: the shipped ones (the ``profiles`` package) by name, any other by path."""
+
+from __future__ import annotations
+
+import importlib.resources
+import pathlib
+
+from haptic_bus.profile.reader import ProfileError, read_document
+
+
+def _profiles_folder() -> pathlib.Path:
+    return pathlib.Path(str(importlib.resources.files("profiles")))
+
+
+def shipped_profiles(axes: bool = False) -> dict[str, pathlib.Path]:
+    """The one-axis profiles shipped in the ``profiles`` package (``axes``: the multi-axis ones,
+    those with ``[[axes]]``): name (file stem) -> path, sorted."""
+    return {p.stem: p for p in sorted(_profiles_folder().glob("*.toml")) if ("axes" in read_document(p)) == axes}
+
+
+def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:
+    """The file of a shipped profile name, or ``path_or_name`` as a path if it is one; ProfileError if neither."""
+    candidate = pathlib.Path(path_or_name)
+    if candidate.is_file():
+        return candidate
+    shipped = {**shipped_profiles(), **shipped_profiles(axes=True)}
+    if isinstance(path_or_name, str) and path_or_name in shipped:
+        return shipped[path_or_name]
+    raise ProfileError(path_or_name, "profile", str(path_or_name),
+                       f"an existing TOML file or a shipped profile name: {', '.join(shipped) or 'none'}")

@@ -1,0 +1,114 @@
+"""One profile format, read once: the controller's view and the simulated drive's view of the same file.
+
+``haptic_bus.profile`` reads ``[device]``, ``[loop]``, ``[operator_model]`` and ``[identification]``
+for both; these tests hold the two views to the same numbers and the same one-line errors.
+"""
+
+from __future__ import annotations
+
+import pathlib
+import tomllib
+
+import pytest
+
+from haptic_bus.app.cli import main as haptic_bus_main
+from haptic_bus.app.profiles import read_profile, resolve_profile, shipped_profiles
+from haptic_bus.profile.identification import IdentifiedDevice, read_identification
+from haptic_bus.profile.reader import ProfileError
+from sim_drive.cli import main as sim_main
+from sim_drive.parameters import DeviceParameters, Timing
+from sim_drive.profile import load_profile as load_drive_profile
+
+
+@pytest.mark.parametrize("name", sorted(shipped_profiles()))
+def test_both_views_of_every_shipped_profile_agree(name: str) -> None:
+    believed = read_profile(name)
+    truth = load_drive_profile(name)
+    assert truth.parameters == DeviceParameters(**believed.sim_device_parameters())  # type: ignore[arg-type]
+    assert truth.timing is Timing(believed.loop.timing)
+
+
+def _variant(tmp_path: pathlib.Path, old: str, new: str) -> pathlib.Path:
+    text = resolve_profile("cia402-handle").read_text()
+    assert old in text
+    path = tmp_path / "variant.toml"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+@pytest.mark.parametrize(("old", "new", "field", "allowed"), [
+    ("mass = 1.0", "mass = nan", "device.mass", "a finite real in [1e-09, 1e+09] kg"),
+    ("mass = 1.0", "mass = -1.0", "device.mass", "a finite real in [1e-09, 1e+09] kg"),
+    ("mass = 1.0", 'mass = "1.0"', "device.mass", "a finite real in [1e-09, 1e+09] kg"),
+    ("max_torque_permille = 2000", "max_torque_permille = 2000.0", "device.max_torque_permille", "an integer in [1, 32767]"),
+    ("[loop]", "[loop]\nperod = 0.001", "loop.perod", "no such key; keys of [loop]"),
+    ("[device]", "[devcie]\n[device]", "devcie", "no such key; keys of [top level]"),
+])
+def test_both_views_refuse_a_bad_value_with_the_same_line(tmp_path: pathlib.Path, old: str, new: str, field: str,
+                                                           allowed: str) -> None:
+    path = _variant(tmp_path, old, new)
+    lines = []
+    for read in (read_profile, load_drive_profile):
+        with pytest.raises(ProfileError) as caught:
+            read(path)
+        assert caught.value.field == field and allowed in caught.value.allowed and str(path) in str(caught.value)
+        lines.append(str(caught.value))
+    assert lines[0] == lines[1] and "\n" not in lines[0]
+
+
+def test_the_command_lines_say_it_in_one_line_and_exit_2(tmp_path: pathlib.Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    path = _variant(tmp_path, "friction = 20.0", "friction = inf")
+    assert haptic_bus_main(["profiles", "check", str(path)]) == 2
+    controller = capsys.readouterr().err.strip()
+    assert sim_main(["--interface", "virtual", "--channel", "views", "--node-id", "3", "--profile", str(path)]) == 2
+    simulator = capsys.readouterr().err.strip()
+    for err in (controller, simulator):
+        assert err.count("\n") == 0 and "Traceback" not in err
+        assert f"profile {path}: device.friction = inf is invalid; allowed: a finite real in [0" in err
+
+
+def test_the_simulator_fills_what_a_profile_leaves_out_and_takes_an_identified_delay(tmp_path: pathlib.Path) -> None:
+    bare = tmp_path / "bare.toml"
+    bare.write_text('[device]\nmass = 0.8\n')
+    drive = load_drive_profile(bare)
+    assert drive.parameters == DeviceParameters(m=0.8) and drive.timing is None
+    # identify --write-profile writes the largest credible delay: above cia402's own sample, still a cia402 drive
+    path = _variant(tmp_path, 'timing = "cia402"', 'timing = "cia402"\ndelay = 1.3')
+    assert read_profile(path).loop.delay == 1.3 and load_drive_profile(path).timing is Timing.CIA402
+
+
+def test_the_simulator_refuses_a_multi_axis_profile_for_one_node() -> None:
+    with pytest.raises(ProfileError) as caught:
+        load_drive_profile("gantry-3d")
+    assert caught.value.field == "axes" and "--node-ids" in caught.value.allowed
+
+
+def test_identification_is_written_and_read_as_one_table(tmp_path: pathlib.Path) -> None:
+    measured = IdentifiedDevice("2026-12-02T05:00:00Z", 1.02, 0.01, 20.5, 0.2, 0.3, 0.05, 1.1, 0.05,
+                                read_profile("cia402-handle").device.velocity, 30.0, 2e-6)
+    table = measured.as_table()
+    assert table["velocity"] == "average" and next(iter(table)) == "date"
+    text = "".join(f"{key} = {value!r}\n".replace("'", '"') for key, value in table.items())
+    assert read_identification(tmp_path / "p.toml", tomllib.loads(text)) == measured
+    assert measured.lowest_credible_friction == pytest.approx(19.9) and measured.largest_credible_delay == pytest.approx(1.25)
+
+
+def test_both_views_of_a_multi_axis_profile_refuse_a_bad_axis_with_the_same_line(tmp_path: pathlib.Path) -> None:
+    from haptic_bus.app.axes_profile import read_axes_profile
+    from sim_drive.axes_profile import load_axes_device
+
+    text = resolve_profile("gantry-3d").read_text()
+    path = tmp_path / "axes.toml"
+    path.write_text(text.replace("\nmass = 0.5\n", "\nmass = -0.5\n", 1))
+    lines = []
+    for read in (read_axes_profile, load_axes_device):
+        with pytest.raises(ProfileError) as caught:
+            read(path)
+        assert caught.value.field == "axes[2].device.mass" and "[1e-09, 1e+09] kg" in caught.value.allowed
+        lines.append(str(caught.value))
+    assert lines[0] == lines[1]
+    truth = load_axes_device("gantry-3d")
+    believed = read_axes_profile("gantry-3d")
+    assert [(a.name, a.node_id, a.parameters.m, a.parameters.b) for a in truth.axes] == [
+        (a.name, a.node_id, a.device.mass, a.device.friction) for a in believed.axes]

@@ -1,0 +1,102 @@
+"""The public API as documented: ``haptic_bus``'s docstring example runs as written against the
+simulated drive, ``run_canopen`` takes an open python-can bus, and every name of ``__all__`` is there."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+import haptic_bus as hb
+
+DOCUMENTED_BUS = '{"interface": "udp_multicast", "channel": "239.74.163.2", "port": 43113}'
+
+
+def docstring_example() -> str:
+    """The code block of ``haptic_bus.__doc__`` (the indented lines after its ``::``), dedented."""
+    block = hb.__doc__.split("::\n", 1)[1]
+    lines = []
+    for line in block.splitlines()[1:]:
+        if line and not line.startswith("    "):
+            break
+        lines.append(line[4:])
+    return "\n".join(lines)
+
+
+def test_every_public_name_resolves():
+    missing = [name for name in hb.__all__ if getattr(hb, name, None) is None]
+    assert missing == []
+    for name in ("RunResult", "AssumptionBroken", "SupervisorPolicy", "Drive", "CanopenDrive", "ModbusDrive"):
+        assert name in hb.__all__
+    assert issubclass(hb.CanopenDrive, hb.Drive) and issubclass(hb.ModbusDrive, hb.Drive)
+    assert issubclass(hb.AssumptionBroken, hb.HapticBusError)
+
+
+def test_the_docstring_example_runs_as_written(haptic_sim, recorded_run, tmp_path, monkeypatch):
+    """The example, against the simulated drive in another process (``python -m sim_drive``, as the
+    example's comment starts it), on a multicast group and port of this test's own (hop limit 0)
+    instead of the documented ones: the one substitution."""
+    code = docstring_example()
+    assert code.count(DOCUMENTED_BUS) == 1
+    drive = haptic_sim("cia402-handle", interface="udp_multicast", node_id=5)
+    monkeypatch.chdir(tmp_path)  # the run's folder: runs/<UTC>-cia402-handle here
+    namespace: dict[str, object] = {}
+    exec(compile(code.replace(DOCUMENTED_BUS, repr(drive.bus)), "haptic_bus.__doc__", "exec"), namespace)
+    report, result = namespace["report"], namespace["result"]
+    assert isinstance(report, hb.CheckReport) and report.passive is False
+    assert isinstance(result, hb.RunResult)
+    assert (result.exit_reason, result.error) == ("completed", None)
+    assert result.summary is not None and result.summary.cycles == 1000  # 1.0 s at T = 1 ms
+    assert isinstance(result.controller, hb.WallController)
+    assert re.fullmatch(r"\d{8}T\d{6}(\.\d+)?Z?-cia402-handle.*", result.folder.name), result.folder.name
+    assert result.folder.parent.resolve() == (tmp_path / "runs").resolve()
+    run = recorded_run(result.folder)
+    assert run.document["link"]["upload_server"] is True and run.document["status"] == "completed"
+    # the profile's hand pushes into the end-stop (K = 1500 N/m, surface 3 mm ahead): it settles at F / K
+    steady_force = run.record["force_n"][-100:].mean()
+    assert steady_force == pytest.approx(3.0, rel=1e-3)
+    assert run.record["position_m"][-100:].mean() - 0.003 == pytest.approx(steady_force / 1500.0, rel=1e-3)
+
+
+def test_run_canopen_takes_an_open_bus(haptic_sim, tmp_path):
+    """An open ``can.BusABC`` (python-can's virtual bus, the drive in this process): the run cycles
+    on it, leaves it open for its owner, and has no upload server or bus log (one handle)."""
+    import can
+
+    drive = haptic_sim("cia402-handle", interface="virtual", node_id=5)
+    bus = drive.spec.open()
+    try:
+        assert isinstance(bus, can.BusABC)
+        options = hb.RunOptions(duration=0.5, pacing="virtual", out_dir=tmp_path / "run", live=False, plots=False)
+        result = hb.run_canopen(hb.load_profile("cia402-handle"), bus, node_id=5, options=options)
+        assert (result.exit_reason, result.error) == ("completed", None)
+        assert result.summary is not None and result.summary.cycles == 500
+        run = json.loads((result.folder / "run.json").read_text())
+        assert run["link"]["upload_server"] is False
+        assert run["link"]["bus"]["interface"] == type(bus).__name__
+        assert not (result.folder / "bus.asc").exists()
+        rows = (result.folder / "record.csv").read_text().splitlines()
+        assert len(rows) == 1 + 500  # the header and one row a cycle
+        bus.send(can.Message(arbitration_id=0x080, is_extended_id=False))  # still open: the caller's to close
+    finally:
+        bus.shutdown()
+
+
+def test_an_open_bus_refuses_reset_fault_before_anything_is_written(haptic_sim, tmp_path):
+    drive = haptic_sim("cia402-handle", interface="virtual", node_id=5)
+    bus = drive.spec.open()
+    try:
+        options = hb.RunOptions(duration=0.1, pacing="virtual", out_dir=tmp_path / "run", live=False, reset_fault=True)
+        with pytest.raises(hb.ParameterError, match=r"reset_fault = True is invalid; allowed: False with an open bus"):
+            hb.run_canopen(hb.load_profile("cia402-handle"), bus, node_id=5, options=options)
+        assert not (tmp_path / "run").exists()
+    finally:
+        bus.shutdown()
+
+
+def test_pacing_is_wall_or_virtual():
+    assert hb.RunOptions(duration=1.0).wall_paced
+    assert not hb.RunOptions(duration=1.0, pacing="virtual").wall_paced
+    with pytest.raises(hb.ParameterError, match=r"pacing = 'realtime' is invalid; allowed: 'wall' or 'virtual'"):
+        hb.RunOptions(duration=1.0, pacing="realtime")
