@@ -18,7 +18,15 @@ from drives.base import DriveScaling
 from drives.canopen.drive import CanopenDrive
 from drives.cia402 import CONTROLWORD, STATUSWORD, SUPPORTED_DRIVE_MODES, OperationMode, State, decode_statusword
 from drives.cia402_master import SAFE_CONTROLWORD
-from drives.errors import BusConfigError, DriveError, DriveFault, DriveProtocolError, DriveStateError, DriveTimeout, UnsupportedModeError
+from drives.errors import (
+    BusConfigError,
+    DriveError,
+    DriveFault,
+    DriveProtocolError,
+    DriveStateError,
+    DriveTimeout,
+    UnsupportedModeError,
+)
 from sim_drive.eds import eds_path
 
 NODE_ID = 5  # canopen_rig's default node (the messages checked below name node 5)
