@@ -14,19 +14,12 @@ import can
 import canopen
 import pytest
 
+from drives import errors
 from drives.base import DriveScaling
 from drives.canopen.drive import CanopenDrive
 from drives.cia402 import CONTROLWORD, STATUSWORD, SUPPORTED_DRIVE_MODES, OperationMode, State, decode_statusword
 from drives.cia402_master import SAFE_CONTROLWORD
-from drives.errors import (
-    BusConfigError,
-    DriveError,
-    DriveFault,
-    DriveProtocolError,
-    DriveStateError,
-    DriveTimeout,
-    UnsupportedModeError,
-)
+from drives.errors import BusConfigError, DriveFault, DriveProtocolError, DriveStateError, DriveTimeout, UnsupportedModeError
 from sim_drive.eds import eds_path
 
 NODE_ID = 5  # canopen_rig's default node (the messages checked below name node 5)
@@ -292,7 +285,7 @@ def test_connect_returns_the_connection_whole_and_close_drops_it(canopen_rig):
     with canopen_rig("virtual", "ideal", connect=False) as r:
         drive = r.drive
         assert drive.connection is None
-        with pytest.raises(DriveError, match="not connected; call connect"):
+        with pytest.raises(errors.DriveError, match="not connected; call connect"):
             drive.read_object(STATUSWORD)
         connection = drive.connect()
         assert drive.connect() is connection is drive.connection
@@ -308,7 +301,7 @@ def test_connect_returns_the_connection_whole_and_close_drops_it(canopen_rig):
             assert r.sim.drive.target_torque == -200
         drive.close()
         assert drive.connection is None
-        with pytest.raises(DriveError, match="not connected; call connect"):
+        with pytest.raises(errors.DriveError, match="not connected; call connect"):
             drive.read_object(STATUSWORD)
 
 
