@@ -4,7 +4,9 @@ A controller needs exactly this from a drive: connect, enable in a mode, read th
 inputs of a cycle, write the cyclic outputs of that cycle, disable, fault reset, close.
 Cyclic values travel in the drive's own integer units (0x606C velocity units, 0x6064
 increments, 0x6071 per mille of rated torque); :class:`DriveScaling` converts them to SI
-once, at the drive edge.
+once, at the drive edge.  A loop takes its cycles from :meth:`Drive.cyclic` (a
+:class:`DriveCycle`, bound once), and every target torque passes the drive's
+:class:`TorqueClamp`, the one place one is saturated.
 """
 
 from __future__ import annotations
