@@ -39,16 +39,10 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from pymodbus.pdu import ModbusPDU
-from pymodbus.pdu.register_message import (
-    ReadHoldingRegistersRequest,
-    ReadWriteMultipleRegistersRequest,
-    WriteMultipleRegistersRequest,
-)
 
 from drives.base import CyclicInputs, DriveCycle, DriveScaling
 from drives.cia402 import (
@@ -65,18 +59,15 @@ from drives.cia402 import (
 )
 from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
 from drives.errors import DriveError, DriveProtocolError, DriveTimeout, ModbusExceptionError, ModbusLinkLost, ParameterError
+from drives.modbus.cyclic_requests import CyclicRequests
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import (
-    INPUT_BLOCK,
     MAP_IDENTITY,
-    OUTPUT_BLOCK,
-    OUTPUT_BLOCK_COUNT,
     REGISTER_BY_NAME,
     SIM_TIMING_CODES,
     InputBlockCodec,
     RegisterSpec,
     decode_value,
-    describe_range,
     encode_value,
     register_for_object,
 )
@@ -159,7 +150,7 @@ class ModbusDrive(Cia402Master):
         self.safety_warnings: tuple[str, ...] = ()
         self.link = ModbusLink(self.name, address, stats)
         self._codec = InputBlockCodec(word_order, with_position)
-        self._requests = _CyclicRequests(unit_id, self._codec.count)
+        self._requests = CyclicRequests(unit_id, self._codec.count)
         self.connection: ModbusConnection | None = None  # what connect() found, until close()
         self._closed = False
 
@@ -470,27 +461,3 @@ class ModbusDrive(Cia402Master):
 
     def __repr__(self) -> str:
         return f"ModbusDrive({self.address!r}, unit_id={self.unit_id}, cycle={self.cycle!r}, word_order={self.word_order!r})"
-
-
-class _CyclicRequests:
-    """The cyclic pymodbus requests of one drive, built once (the output registers are updated
-    in place), and their labels (no string formatting per cycle); ``cached``: with ``cycle="fc23"``,
-    the inputs the last output write read (None: none held), ``cached_at`` the
-    ``time.perf_counter_ns()`` its answer arrived."""
-
-    def __init__(self, unit_id: int, input_count: int) -> None:
-        self.outputs = [SAFE_CONTROLWORD, 0]
-        self.cached: Sequence[int] | None = None
-        self.cached_at = 0
-        self.read = ReadHoldingRegistersRequest(address=INPUT_BLOCK, count=input_count, dev_id=unit_id)
-        self.write = WriteMultipleRegistersRequest(address=OUTPUT_BLOCK, registers=self.outputs, dev_id=unit_id)
-        self.write.count = OUTPUT_BLOCK_COUNT
-        self.read_write = ReadWriteMultipleRegistersRequest(
-            read_address=INPUT_BLOCK, read_count=input_count, write_address=OUTPUT_BLOCK,
-            write_registers=self.outputs, dev_id=unit_id,
-        )
-        self.read_what = describe_range(INPUT_BLOCK, input_count)
-        self.write_what = describe_range(OUTPUT_BLOCK, OUTPUT_BLOCK_COUNT)
-        self.read_label = f"reading {self.read_what}"
-        self.write_label = f"writing {self.write_what}"
-        self.read_write_label = f"writing {self.write_what} and reading {self.read_what} (FC23)"
