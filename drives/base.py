@@ -4,14 +4,18 @@ A controller needs exactly this from a drive: connect, enable in a mode, read th
 inputs of a cycle, write the cyclic outputs of that cycle, disable, fault reset, close.
 Cyclic values travel in the drive's own integer units (0x606C velocity units, 0x6064
 increments, 0x6071 per mille of rated torque); :class:`DriveScaling` converts them to SI
-once, at the drive edge.
+once, at the drive edge.  A loop takes its cycles from :meth:`Drive.cyclic` (a
+:class:`DriveCycle`, bound once), and every target torque passes the drive's
+:class:`TorqueClamp`, the one place one is saturated.
 """
 
 from __future__ import annotations
 
 import abc
+import contextlib
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 from drives.cia402 import ObjectSpec, OperationMode
 from drives.errors import DriveArgumentError
@@ -71,10 +75,9 @@ class DriveScaling:
         return self.max_torque_permille * self.newton_per_permille
 
     def torque_permille(self, force: float) -> int:
-        """The 0x6071 value (per mille, rounded, saturated at +-0x6072) for a handle force in N."""
-        limit = self.max_torque_permille
-        permille = round(force / self.newton_per_permille)
-        return limit if permille > limit else -limit if permille < -limit else permille
+        """The 0x6071 value (per mille, rounded) for a handle force in N; not saturated: the drive's
+        :class:`TorqueClamp` is the one place a target is held within +-0x6072."""
+        return round(force / self.newton_per_permille)
 
 
 SCALING_FIELDS = ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque", "max_torque_permille")
@@ -149,19 +152,75 @@ class ScalingReport:
         }
 
 
+class SaturationCount(Protocol):
+    """Where a :class:`TorqueClamp` counts the targets it clamped (a drive's cyclic stats)."""
+
+    saturated_outputs: int
+
+
+class TorqueClamp:
+    """The one place a target torque is saturated: at +-``limit`` per mille, each clamp counted
+    once in ``counts.saturated_outputs``.  A drive holds one (``limit``: 0x6072, or lower while a
+    caller's :meth:`Drive.cyclic` asks for less); a controller's force limit reaches the drive as
+    that lower limit, so a target is clamped once, at one limit, wherever it comes from."""
+
+    __slots__ = ("counts", "limit")
+
+    def __init__(self, limit: int, counts: SaturationCount) -> None:
+        self.limit = limit
+        self.counts = counts
+
+    def __call__(self, torque: int) -> int:
+        """``torque`` (per mille) held within +-``limit``."""
+        limit = self.limit
+        if torque > limit:
+            self.counts.saturated_outputs += 1
+            return limit
+        if torque < -limit:
+            self.counts.saturated_outputs += 1
+            return -limit
+        return torque
+
+
+@dataclass(frozen=True, slots=True)
+class DriveCycle:
+    """One drive's cyclic phase, bound once when it begins (``with drive.cyclic(limit) as cycle``).
+
+    ``read()`` starts a cycle and returns its inputs; ``saturate(torque)`` is the drive's
+    :class:`TorqueClamp` (per mille, at the phase's limit, counted); ``write(torque)`` sends a
+    target ``saturate`` returned (or the safe outputs while the drive is tripped).  A controller
+    that lowers a target after saturating it (the passivity layer) calls the two in turn;
+    :meth:`exchange` is both for one that does not.
+    """
+
+    read: Callable[[], CyclicInputs]
+    saturate: TorqueClamp
+    write: Callable[[int], None]
+
+    def exchange(self, torque: int) -> int:
+        """Saturate ``torque`` and send it; the torque sent (per mille)."""
+        torque = self.saturate(torque)
+        self.write(torque)
+        return torque
+
+
 class Drive(abc.ABC):
     """A servo drive reached over a fieldbus, seen from the controller.
 
     The cycle is ``read_inputs()`` then ``write_outputs()``: on CANopen ``read_inputs``
     produces the SYNC and waits for the drive's TPDO, on Modbus it is one read request.
+    A loop of many cycles takes them from :meth:`cyclic` instead, bound once.  A subclass sets
+    ``clamp`` (its :class:`TorqueClamp`) and implements :meth:`_send_torque`.
     """
 
     name: str
     scaling: DriveScaling
+    clamp: TorqueClamp
 
     @abc.abstractmethod
-    def connect(self) -> None:
-        """Reach the drive and configure it (cyclic mapping, cycle period); raise DriveTimeout."""
+    def connect(self) -> object:
+        """Reach the drive and configure it (cyclic mapping, cycle period); raise DriveTimeout.
+        Returns what the connection holds (a subclass says what)."""
 
     @abc.abstractmethod
     def enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
@@ -175,9 +234,30 @@ class Drive(abc.ABC):
     def read_inputs(self) -> CyclicInputs:
         """Start a cycle and return the drive's inputs of this cycle; raise on timeout or fault."""
 
-    @abc.abstractmethod
     def write_outputs(self, target_torque: int) -> None:
-        """Send this cycle's target torque (0x6071, per mille of rated torque)."""
+        """Send this cycle's target torque (0x6071, per mille of rated torque), saturated by ``clamp``."""
+        self._send_torque(self.clamp(target_torque))
+
+    @abc.abstractmethod
+    def _send_torque(self, target_torque: int) -> None:
+        """Send a saturated target torque (per mille) with this cycle's controlword."""
+
+    @contextlib.contextmanager
+    def cyclic(self, torque_limit: int | None = None) -> Iterator[DriveCycle]:
+        """The cyclic phase: a :class:`DriveCycle` bound once, whose ``saturate`` holds targets within
+        ``torque_limit`` (per mille; None: the drive's own, 0x6072) until the phase ends."""
+        clamp = self.clamp
+        own = clamp.limit
+        if torque_limit is not None:
+            clamp.limit = min(own, torque_limit)
+        try:
+            yield self._bind_cycle()
+        finally:
+            clamp.limit = own
+
+    def _bind_cycle(self) -> DriveCycle:
+        """The cycle's bound methods (a bus enters its cyclic phase here)."""
+        return DriveCycle(self.read_inputs, self.clamp, self._send_torque)
 
     @abc.abstractmethod
     def disable(self) -> None:

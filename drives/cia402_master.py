@@ -1,8 +1,8 @@
 """What every CiA-402 master does the same way, whatever the fieldbus.
 
 Mode selection, the state-machine walk and the fault reset, and the cyclic safety state both
-masters keep: the trip (after which every output is the safe one), the torque clamp at
-0x6072, the fault-bit check, the merge of the drive's scaling with the caller's, and the
+masters keep: the trip (after which every output is the safe one), the torque clamp
+(:class:`~drives.base.TorqueClamp`, at 0x6072), the fault-bit check, the merge of the drive's scaling with the caller's, and the
 counters.  A fieldbus master subclasses :class:`Cia402Master` and provides the primitives:
 
 - :meth:`~Cia402Master._command`: send a controlword (zero torque) and return the statusword
@@ -31,6 +31,7 @@ from drives.base import (
     ScalingFactor,
     ScalingReading,
     ScalingReport,
+    TorqueClamp,
 )
 from drives.cia402 import (
     CW_FAULT_RESET,
@@ -65,7 +66,7 @@ class CyclicStats:
     """Counters every master keeps (since construction)."""
 
     cycles: int = 0  # read_inputs calls that returned inputs
-    saturated_outputs: int = 0  # torques clamped to +-0x6072
+    saturated_outputs: int = 0  # targets the drive's TorqueClamp clamped (at 0x6072, or a caller's lower limit)
     suppressed_outputs: int = 0  # write_outputs replaced by the safe outputs while tripped
     safe_stops: int = 0
 
@@ -152,16 +153,16 @@ class Cia402Master(Drive):
     max_commands_per_step: int
     stats: CyclicStats
 
-    def _init_master(self, name: str, scaling: DriveScaling | None, scaling_source: str = "caller") -> None:
+    def _init_master(self, name: str, stats: CyclicStats, scaling: DriveScaling | None,
+                     scaling_source: str = "caller") -> None:
         self.name = name
-        self._given_scaling = scaling
-        self._given_source = scaling_source
+        self.stats = stats
+        self._given_scaling = (scaling, scaling_source)  # the caller's, and its label in the report
         self.scaling = scaling  # type: ignore[assignment]  # complete after connect()
-        self.scaling_sources: dict[str, str] = {}  # field -> where its value came from, after connect()
-        self.scaling_report: ScalingReport | None = None  # the same with values and agreeing sources
+        self.scaling_report: ScalingReport | None = None  # where each factor came from, after connect()
+        self.clamp = TorqueClamp(0x7FFF, stats)  # 0x6072 once the scaling is known
         self.last_inputs: CyclicInputs | None = None
         self._controlword = SAFE_CONTROLWORD
-        self._torque_limit = 0x7FFF
         self._armed = False  # OPERATION ENABLED reached: the fault bit raises
         self._tripped: DriveError | None = None
 
@@ -199,11 +200,16 @@ class Cia402Master(Drive):
         """The error that made the master send the safe outputs, or None."""
         return self._tripped
 
+    @property
+    def scaling_sources(self) -> dict[str, str]:
+        """Field -> where its value came from (empty before connect())."""
+        return self.scaling_report.sources if self.scaling_report is not None else {}
+
     def _adopt_scaling(self, found: Mapping[str, Found], notes: Sequence[str] = ()) -> None:
         """Merge the drive's scaling readings with the caller's (:func:`merge_scaling`) and log where each came from."""
-        self.scaling, self.scaling_report = merge_scaling(self.name, self._given_scaling, found, self._given_source, notes)
-        self.scaling_sources = self.scaling_report.sources
-        self._torque_limit = min(int(self.scaling.max_torque_permille), 0x7FFF)
+        given, source = self._given_scaling
+        self.scaling, self.scaling_report = merge_scaling(self.name, given, found, source, notes)
+        self.clamp.limit = min(int(self.scaling.max_torque_permille), 0x7FFF)
         for line in self.scaling_report.lines():
             logger.info("%s: scaling %s", self.name, line)
 
@@ -238,20 +244,13 @@ class Cia402Master(Drive):
         """Text to append to a fault-bit message and the drive's error code, where known (hook)."""
         return "", None
 
-    def write_outputs(self, target_torque: int) -> None:
-        """Send the held controlword and ``target_torque`` (per mille, saturated at +-0x6072);
-        the safe outputs instead while tripped."""
+    def _send_torque(self, target_torque: int) -> None:
+        """Send the held controlword and ``target_torque`` (per mille, already saturated by
+        ``clamp``); the safe outputs instead while tripped."""
         if self._tripped is not None:
             self.stats.suppressed_outputs += 1
             self._send_outputs(SAFE_CONTROLWORD, 0)
             return
-        limit = self._torque_limit
-        if target_torque > limit:
-            target_torque = limit
-            self.stats.saturated_outputs += 1
-        elif target_torque < -limit:
-            target_torque = -limit
-            self.stats.saturated_outputs += 1
         self._send_outputs(self._controlword, target_torque)
 
     # ------------------------------------------------------------------ state machine

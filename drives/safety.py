@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from drives.cia402 import AbortConnectionOption
 from drives.errors import DriveArgumentError
@@ -19,6 +20,14 @@ VIRTUAL_TIME_WAIT = 0.5
 the loop.  Only a dead drive should trip it, not a machine busy elsewhere: beside two CPU-bound jobs
 and five test sessions a simulated drive's process went 250 ms without a turn (measured), and three
 waits missed in a row (1.5 s) still end before the drive's own :data:`VIRTUAL_TIME_DEADLINE`."""
+VIRTUAL_TIME_CANOPEN_PATIENCE: dict[str, Any] = {"tpdo_timeout": VIRTUAL_TIME_WAIT,
+                                                 "heartbeat_consumer_ms": round(VIRTUAL_TIME_DEADLINE * 1000)}
+"""A CANopen master's waits when nothing paces the loop (keyword arguments of
+:class:`~drives.canopen.drive.CanopenDrive` and :class:`~drives.canopen.axes.CanopenAxes`): one
+TPDO, and the drives' heartbeats, which helper threads send that a loop running flat out lets
+have the interpreter only at its switch interval."""
+VIRTUAL_TIME_MODBUS_PATIENCE: dict[str, Any] = {"timeout": VIRTUAL_TIME_WAIT}
+"""A Modbus master's wait for one reply when nothing paces the loop (of :class:`~drives.modbus.drive.ModbusDrive`)."""
 ABORT_OPTIONS = {"none": 0, "fault": 1, "disable-voltage": 2, "quick-stop": 3}  # 0x6007 by name
 
 

@@ -19,6 +19,7 @@ from drives.canopen.axes import CanopenAxes
 from drives.cia301 import SYNC_COB_ID
 from drives.cia402 import State
 from drives.errors import DriveArgumentError, DriveError, DriveTimeout
+from drives.safety import VIRTUAL_TIME_DEADLINE
 from haptic_bus.app.axes_profile import AxesProfile, load_axes_profile
 from haptic_bus.app.rig import MultiAxisSim, simulated_axes
 from haptic_bus.control.axes_controller import AxesController
@@ -61,8 +62,9 @@ def test_each_node_has_its_own_safety_chain_written_and_the_sync_is_the_masters(
     period_ms = round(profile.period * 1000)
     for drive in axes.drives:
         consumer = int.from_bytes(drive.sdo_read(0x1016, 1), "little")
-        assert consumer >> 16 == 127 and consumer & 0xFFFF == 1000  # the controller's one heartbeat, per node
-        assert int.from_bytes(drive.sdo_read(0x1400, 5), "little") == max(30, 1000 // period_ms) * period_ms
+        floor_ms = round(VIRTUAL_TIME_DEADLINE * 1000)  # a virtual-time rig's watchdogs
+        assert consumer >> 16 == 127 and consumer & 0xFFFF == floor_ms  # the controller's one heartbeat, per node
+        assert int.from_bytes(drive.sdo_read(0x1400, 5), "little") == max(30, floor_ms // period_ms) * period_ms
         assert int.from_bytes(drive.sdo_read(0x6007, 0), "little", signed=True) == 1  # fault
         assert drive.exchange.produces_sync is False
         with pytest.raises(DriveError, match="shares a SYNC"):

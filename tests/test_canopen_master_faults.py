@@ -14,6 +14,7 @@ import can
 import canopen
 import pytest
 
+from drives import errors
 from drives.base import DriveScaling
 from drives.canopen.drive import CanopenDrive
 from drives.cia402 import CONTROLWORD, STATUSWORD, SUPPORTED_DRIVE_MODES, OperationMode, State, decode_statusword
@@ -278,6 +279,30 @@ def test_torque_saturates_at_0x6072_never_wraps(canopen_rig):
         drive.read_inputs()
         assert r.sim.drive.target_torque == -3000
         assert drive.stats.saturated_outputs == 2
+
+
+def test_connect_returns_the_connection_whole_and_close_drops_it(canopen_rig):
+    with canopen_rig("virtual", "ideal", connect=False) as r:
+        drive = r.drive
+        assert drive.connection is None
+        with pytest.raises(errors.DriveError, match="not connected; call connect"):
+            drive.read_object(STATUSWORD)
+        connection = drive.connect()
+        assert drive.connect() is connection is drive.connection
+        assert connection.node.id == drive.node_id
+        assert connection.sdo.node is connection.node and connection.events.node is connection.node
+        assert connection.commissioned.tpdo_codecs == drive.tpdo_codecs
+        assert decode_statusword(drive.read_object(STATUSWORD)) is State.SWITCH_ON_DISABLED
+        with drive.cyclic(torque_limit=200) as cycle:  # the receive mode entered once, read/saturate/write bound
+            drive.enable()
+            assert decode_statusword(cycle.read().statusword) is State.OPERATION_ENABLED
+            assert cycle.exchange(-900) == -200 and drive.stats.saturated_outputs == 1
+            cycle.read()  # the SYNC at which the drive applies it
+            assert r.sim.drive.target_torque == -200
+        drive.close()
+        assert drive.connection is None
+        with pytest.raises(errors.DriveError, match="not connected; call connect"):
+            drive.read_object(STATUSWORD)
 
 
 def test_bus_from_python_can_environment(monkeypatch, bus_spec):

@@ -255,6 +255,25 @@ def test_force_is_saturated_at_the_profile_limit_and_counted() -> None:
     assert np.max(np.abs(controller.record.column("force_n"))) == 0.5
 
 
+def test_a_target_beyond_the_drives_limit_is_clamped_once_and_counted_once() -> None:
+    # The handle starts 1 m inside a 200 N/m wall: 200 N asked, the drive allows 0x6072 = 3000 per
+    # mille = 30 N, the profile's force limit (100 N) is above that: the drive's clamp (the one
+    # place a target is saturated) holds it at -3000 and counts it; nothing else clamps or counts.
+    profile = load_profile("seed-ideal")
+    profile = dataclasses.replace(profile, scene=(Wall("wall", -1.0, -1, 200.0, 100.0),), force_limit=100.0)
+    with simulated_canopen(profile) as (sim, drive):
+        limit = drive.scaling.max_torque_permille
+        assert limit == 3000 and drive.scaling.max_force < profile.force_limit
+        controller = controller_for(profile, drive)
+        summary = controller.run(1)
+        drive.read_inputs()  # the SYNC at which the drive applies the cycle's RPDO
+        applied = sim.drive.target_torque
+    assert summary.exit_reason == "completed" and summary.cycles == 1
+    assert summary.saturated_cycles == 1 and drive.stats.saturated_outputs == 1
+    assert int(controller.record.column("torque_permille")[0]) == -limit == applied
+    assert controller.record.column("force_n")[0] == pytest.approx(limit * drive.scaling.newton_per_permille, rel=1e-12)
+
+
 def test_a_frame_with_the_wrong_length_is_dropped_counted_and_the_run_goes_on() -> None:
     profile = seed_at_the_wall()
     with simulated_canopen(profile, operator=ConstantPush(1.0)) as (sim, drive):

@@ -200,6 +200,7 @@ def test_trajectories_are_bit_identical_to_the_threaded_virtual_bus_and_run_to_r
 def test_a_short_soak_keeps_the_position_an_exact_integer_sum() -> None:
     from haptic_bus.app.profiles import load_profile
     from haptic_bus.app.rig import simulated_canopen
+    from haptic_bus.bench.soak import observe_inputs
     from haptic_bus.control.controller import WallController
     from sim_drive.operator import operator_from_table
 
@@ -207,15 +208,13 @@ def test_a_short_soak_keeps_the_position_an_exact_integer_sum() -> None:
     operator = operator_from_table({"model": "sinusoid", "amplitude": 5.0, "frequency": 2.0, "offset": 2.0})
     with simulated_canopen(profile, operator=operator) as (_, drive):
         controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit)
-        read, total = drive.read_inputs, [0, 0]
+        total = [0, 0]
 
-        def counted() -> Any:
-            inputs = read()
+        def add(inputs: Any) -> None:  # every input the controller gets, summed apart from it
             total[0] += inputs.velocity
             total[1] += abs(inputs.velocity)
-            return inputs
 
-        drive.read_inputs = counted  # type: ignore[method-assign]
+        observe_inputs(drive, add)
         assert controller.run(10_000).exit_reason == "completed"
     assert controller.integrator.counts == total[0]  # integers: exact, no tolerance
     last = controller.record.latest()

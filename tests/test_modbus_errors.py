@@ -44,6 +44,23 @@ def running(request):
         server.stop()
 
 
+def test_a_cyclic_phase_saturates_at_its_limit_once_and_counts_it_once(running) -> None:
+    server, drive = running
+    assert drive.connect() is drive.connection and drive.connection.simulated_timing == "ideal"
+    before = drive.stats.saturated_outputs
+    with drive.cyclic(torque_limit=400) as cycle:
+        cycle.read()
+        assert cycle.exchange(900) == 400  # beyond the phase's limit: clamped once, at it
+        assert server.drive.target_torque == 400
+        cycle.read()
+        assert cycle.exchange(-300) == -300
+        assert server.drive.target_torque == -300
+    assert drive.stats.saturated_outputs == before + 1
+    drive.read_inputs()
+    drive.write_outputs(900)  # the phase over: the drive's own limit (0x6072 = 3000) again
+    assert server.drive.target_torque == 900 and drive.stats.saturated_outputs == before + 1
+
+
 def unit_named(error: DriveError, port: int) -> None:
     assert f"Modbus unit {UNIT} at tcp://127.0.0.1:{port}" in str(error)
 

@@ -41,9 +41,9 @@ def test_commissioning_writes_and_reads_back_the_drive_watchdogs(canopen_rig) ->
     with canopen_rig(safety=SafetySettings()) as r:
         drive, sim = r.drive, r.sim
         defaults = SafetySettings()
-        assert drive.sdo.read_int(0x1016, 1, drive_type("U32")) == MASTER << 16 | defaults.consumer_ms
+        assert drive.connected().sdo.read_int(0x1016, 1, drive_type("U32")) == MASTER << 16 | defaults.consumer_ms
         assert sim.drive.read_object(0x6007) == 1
-        assert drive.sdo.read_int(0x1400, 5, drive_type("U16")) == defaults.rpdo_deadline_periods  # periods of 1 ms
+        assert drive.connected().sdo.read_int(0x1400, 5, drive_type("U16")) == defaults.rpdo_deadline_periods  # periods of 1 ms
         assert drive.safety_warnings == ()
 
 

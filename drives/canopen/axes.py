@@ -187,7 +187,7 @@ class CanopenAxes:
             cycle.drain()
             for drive in drives:
                 if drive.tripped is None:
-                    drive.events.check()  # type: ignore[union-attr]  # connected: it has events
+                    drive.connected().events.check()
             received = cycle.exchange()
             inputs: list[CyclicInputs] = []
             for i, (drive, found) in enumerate(zip(drives, received)):

@@ -16,19 +16,20 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import can
 
 from drives.base import CyclicInputs
-from drives.canopen.exchange import CanopenExchange, receive_direct
+from drives.canopen.exchange import CanopenExchange, Unpack, receive_direct
 from drives.canopen.link import NetworkLink
 from drives.cia301 import SYNC_COB_ID
 from drives.errors import DriveError, DriveProtocolError
 
 logger = logging.getLogger(__name__)
 
-Slot = tuple[int, int, int, Callable[[bytes | bytearray], tuple[int, ...]]]  # axis, TPDO place, length, unpack
+Slot = tuple[int, int, int, Unpack]  # axis, TPDO place, length, unpack
 
 
 class AxesCycle:
@@ -57,7 +58,7 @@ class AxesCycle:
                     other = self.exchanges[slots[cob][0]].name
                     raise DriveProtocolError(exchange.name, f"its TPDO COB-ID 0x{cob:03X} is also {other}'s: two "
                                                             "drives cannot share a TPDO on one bus")
-                slots[cob] = (axis, place, size, unpack)  # type: ignore[assignment]  # struct's unpack
+                slots[cob] = (axis, place, size, unpack)
         self._slots = slots
         self._counts = tuple(len(exchange.slots) for exchange in self.exchanges)
 
@@ -91,7 +92,7 @@ class AxesCycle:
         self.send_sync()
         synced = time.perf_counter_ns()  # every drive samples at the SYNC: by now they have
         slots = self._slots
-        parts: list[list[tuple[int, ...] | None]] = [[None] * count for count in self._counts]
+        parts: list[list[tuple[Any, ...]]] = [[()] * count for count in self._counts]  # (): not arrived
         missing = sum(self._counts)
         deadline = time.perf_counter() + self.timeout
         while missing:
@@ -104,12 +105,12 @@ class AxesCycle:
             if len(data) != size:
                 stats.dropped_frames += 1
                 continue
-            if parts[axis][place] is None:
-                missing -= 1
-            else:
+            if parts[axis][place]:
                 stats.stale_tpdos += 1
+            else:
+                missing -= 1
             parts[axis][place] = unpack(data)
-        return [exchange.inputs(found, synced) if None not in found else None
+        return [exchange.inputs(found, synced) if () not in found else None
                 for exchange, found in zip(self.exchanges, parts)]
 
     def send_sync(self) -> None:

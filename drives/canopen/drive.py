@@ -18,11 +18,22 @@ that cannot be read make the master send zero torque with the safe controlword (
 VOLTAGE) plus one SYNC so that it is applied, *then* raise a :class:`~drives.errors.DriveError`.
 Until :meth:`CanopenDrive.fault_reset` or :meth:`CanopenDrive.enable`, every
 ``write_outputs`` sends that safe frame instead of the caller's torque.
+
+A connected drive: the object is built without touching the bus; ``connect()`` returns a
+:class:`~drives.canopen.connection.CanopenConnection` (node, SDO access, events, what
+commissioning found) built whole, which the drive keeps until ``close()``.  The drive stays the
+one object users hold (the controller, the CLI and the multi-axis master keep one name for one
+drive through connect, runs, reconnects and close), and its methods that need the bus take the
+connection first (``DriveError`` "not connected" otherwise), so nothing checks for a part that is
+None.  A loop takes its cycles from ``with drive.cyclic(limit) as cycle``
+(:class:`~drives.base.DriveCycle`): the receive mode entered once, the way frames are sent
+resolved at connect, ``read``/``saturate``/``write`` bound once.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import os
 from collections.abc import Sequence
@@ -32,8 +43,9 @@ import can
 import canopen
 from canopen import objectdictionary as od
 
-from drives.base import CyclicInputs
+from drives.base import CyclicInputs, DriveCycle
 from drives.canopen.commissioning import Commissioned, Commissioning, CommissioningSettings
+from drives.canopen.connection import CanopenConnection
 from drives.canopen.events import DriveEvents
 from drives.canopen.exchange import RX_MODES, CanopenExchange, CanopenStats
 from drives.canopen.heartbeat import HeartbeatProducer
@@ -166,7 +178,8 @@ class CanopenDrive(Cia402Master):
         _check("master_node_id", safety.master_node_id != node_id, safety.master_node_id,
                f"a node id other than the drive's ({node_id})")
 
-        self._init_master(f"CANopen node {node_id}", scaling, scaling_source)
+        stats = CanopenStats()
+        self._init_master(f"CANopen node {node_id}", stats, scaling, scaling_source)
         self.node_id = node_id
         self.eds = eds
         self.state_timeout = state_timeout
@@ -175,24 +188,19 @@ class CanopenDrive(Cia402Master):
         self.settings = CommissioningSettings(period, boot_timeout, sdo_timeout, reset_communication,
                                               check_device_type, heartbeat_producer_ms, heartbeat_consumer_ms)
         self.safety = safety
-        self.commissioned: Commissioned | None = None
         _check("link", link is None or (network is None and bus is None and interface is None and channel is None),
                "a shared link", "no network, bus, interface or channel besides it")
         self.heartbeat = heartbeat if heartbeat is not None else HeartbeatProducer(
             safety.master_node_id or 0, safety.heartbeat_ms / 1000.0 if safety.master_node_id is not None else 0.0)
         self.link = link if link is not None else NetworkLink(
             self.name, network=network, bus=bus, bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})))
-        self.stats = CanopenStats()
         self.tpdo_objects = tuple(spec for frame in frames for spec in frame)
         tpdo_codecs = tuple(PdoCodec(frame, name=f"TPDO{n} of node {node_id}") for n, frame in enumerate(frames, 1))
         self.exchange = CanopenExchange(self.name, self.link, tpdo_codecs,
                                         (PdoCodec(DEFAULT_RPDO, name=f"RPDO1 of node {node_id}"),), rx_mode,
-                                        tpdo_timeout, self.stats)
-        self.node: canopen.RemoteNode | None = None
-        self.events: DriveEvents | None = None
-        self.sdo: SdoAccess | None = None
+                                        tpdo_timeout, stats)
+        self.connection: CanopenConnection | None = None  # what connect() built, until close()
         self._missed_in_row = 0
-        self._connected = False
         self._closed = False
 
     @property
@@ -211,108 +219,130 @@ class CanopenDrive(Cia402Master):
         return self.exchange.rx_mode
 
     @property
+    def commissioned(self) -> Commissioned | None:
+        """What commissioning found (None before connect and after close)."""
+        return self.connection.commissioned if self.connection is not None else None
+
+    @property
     def nmt_state(self) -> int | None:
         """The NMT state the drive's last heartbeat showed (0x05 OPERATIONAL, ...)."""
-        return self.events.nmt_state if self.events is not None else None
+        return self.connection.events.nmt_state if self.connection is not None else None
 
     @property
     def device_type(self) -> int | None:
         """0x1000 as commissioning read it (None before connect, or with the check off)."""
-        return self.commissioned.device_type if self.commissioned is not None else None
+        return self.connection.commissioned.device_type if self.connection is not None else None
 
     @property
     def safety_warnings(self) -> tuple[str, ...]:
         """What commissioning found missing in the drive's safety chain (empty when complete)."""
-        return self.commissioned.safety_warnings if self.commissioned is not None else ()
+        return self.connection.commissioned.safety_warnings if self.connection is not None else ()
 
     @property
     def last_emcy(self) -> canopen.emcy.EmcyError | None:
         """The newest EMCY other than an error reset."""
-        return self.events.last_emcy if self.events is not None else None
+        return self.connection.events.last_emcy if self.connection is not None else None
 
     # ------------------------------------------------------------------ connection
 
-    def connect(self) -> None:
-        """Reach the drive and configure it (NMT, SDO, PDO mapping, 0x1006, heartbeat); raise DriveTimeout."""
+    def connect(self) -> CanopenConnection:
+        """Reach the drive and configure it (NMT, SDO, PDO mapping, 0x1006, heartbeat); raise DriveTimeout.
+        Returns the connection (the same one again while connected)."""
         if self._closed:
             raise DriveError(self.name, "the drive object is closed; create a new one")
-        if self._connected:
-            return
+        if self.connection is not None:
+            return self.connection
         try:
             dictionary = load_object_dictionary(self.eds, self.node_id)
         except (OSError, ValueError, KeyError) as exc:
             raise DriveProtocolError(self.name, f"cannot load the object dictionary {self.eds!r}: {exc}") from exc
         network = self.link.open()
+        node: canopen.RemoteNode | None = None
+        events: DriveEvents | None = None
         try:
             node = canopen.RemoteNode(self.node_id, dictionary)
             network.add_node(node)
-            self.node = node
-            self.events = DriveEvents(self.name, node, network, self.stats)
-            self.sdo = SdoAccess(self.name, node, self.settings.sdo_timeout, self.exchange.end)
-            commissioning = Commissioning(self.name, node, self.sdo, self.events, self.settings, self.safety)
+            events = DriveEvents(self.name, node, network, self.stats)
+            sdo = SdoAccess(self.name, node, self.settings.sdo_timeout, self.exchange.end)
+            commissioning = Commissioning(self.name, node, sdo, events, self.settings, self.safety)
             commissioning.refuse_another_master()
             if network.bus is None:
                 raise DriveError(self.name, "the CAN network has no bus after connecting")
             self.heartbeat.start(network.bus, network.send_lock)  # boot-up first, before the drive is touched
             found = commissioning.run(self.tpdo_objects, DEFAULT_RPDO)
-            self.commissioned = found
             self.exchange.configure(found.tpdo_codecs, found.tpdo_cobs, found.rpdo_codecs, found.rpdo_cobs)
             self._adopt_scaling(found.scaling, found.scaling_notes)
             beats = found.inventory.has(PRODUCER_HEARTBEAT_TIME)  # a drive without 0x1017 sends no heartbeat
-            self.events.heartbeat_limit = self.settings.heartbeat_consumer_ms / 1000.0 if beats else 0.0
-            self.events.clear()
+            events.heartbeat_limit = self.settings.heartbeat_consumer_ms / 1000.0 if beats else 0.0
+            events.clear()
         except BaseException:
-            self._teardown(reachable=False)
+            self._release(node, events)
             raise
-        self._connected = True
+        self.connection = CanopenConnection(node, sdo, events, found)
+        return self.connection
+
+    def connected(self) -> CanopenConnection:
+        """The connection; DriveError if there is none (before connect(), after close())."""
+        connection = self.connection
+        if connection is None:
+            raise DriveError(self.name, "not connected; call connect() first")
+        return connection
 
     def _require_connected(self) -> None:
-        if not self._connected:
-            raise DriveError(self.name, "not connected; call connect() first")
+        self.connected()
 
     def _clear_events(self) -> None:
         self._missed_in_row = 0
-        if self.events is not None:
-            self.events.clear()
+        if self.connection is not None:
+            self.connection.events.clear()
 
     # ------------------------------------------------------------------ acyclic
 
     def sdo_read(self, index: int, subindex: int = 0) -> bytes:
         """Upload ``index:subindex`` (raw bytes); SdoAbortError on abort, DriveTimeout on silence."""
-        self._require_connected()
-        return self.sdo.upload(index, subindex)  # type: ignore[union-attr]
+        return self.connected().sdo.upload(index, subindex)
 
     def sdo_write(self, index: int, subindex: int, data: bytes) -> None:
         """Download raw ``data`` to ``index:subindex``; SdoAbortError on abort, DriveTimeout on silence."""
-        self._require_connected()
-        self.sdo.download(index, subindex, data)  # type: ignore[union-attr]
+        self.connected().sdo.download(index, subindex, data)
 
     def read_object(self, spec: ObjectSpec | int) -> int:
         """Read a CiA-402 object (ObjectSpec or index of drives.cia402) over SDO, in drive units."""
-        self._require_connected()
+        sdo = self.connected().sdo
         spec = object_spec(spec)
-        return self.sdo.read_int(spec.index, spec.subindex, spec.data_type)  # type: ignore[union-attr]
+        return sdo.read_int(spec.index, spec.subindex, spec.data_type)
 
     def write_object(self, spec: ObjectSpec | int, value: int) -> None:
         """Write a CiA-402 object (ObjectSpec or index of drives.cia402) over SDO, in drive units."""
-        self._require_connected()
+        sdo = self.connected().sdo
         spec = object_spec(spec)
         low, high = spec.data_type.range
         if not low <= value <= high:
             raise DriveArgumentError(f"0x{spec.index:04X} ({spec.name})", value, f"{spec.data_type.name} [{low}, {high}]")
-        self.sdo.write_int(spec.index, spec.subindex, spec.data_type, value)  # type: ignore[union-attr]
+        sdo.write_int(spec.index, spec.subindex, spec.data_type, value)
 
     # ------------------------------------------------------------------ cyclic hot path
 
     def read_inputs(self) -> CyclicInputs:
         """Send SYNC, wait for this cycle's TPDO (<= tpdo_timeout s) and decode it; raise on fault/timeout."""
-        self._require_connected()
+        return self._cycle_inputs(self.connected().events)
+
+    def _bind_cycle(self) -> DriveCycle:
+        """The cycle's read bound to this connection's events, the receive mode entered once."""
+        events = self.connected().events
+        self.exchange.begin()
+        return DriveCycle(functools.partial(self._cycle_inputs, events), self.clamp, self._send_torque)
+
+    def _cycle_inputs(self, events: DriveEvents) -> CyclicInputs:
+        """One cycle's inputs (:meth:`read_inputs`), the receive mode entered again only where an SDO
+        access left it (listener mode: subscribed once)."""
         exchange = self.exchange
         try:
-            exchange.begin()
+            if not self.link.direct:
+                exchange.begin()
             exchange.drain()
             if self._tripped is None:
-                self.events.check()  # type: ignore[union-attr]
+                events.check()
             inputs = exchange.exchange()
         except DriveError as error:
             raise self.trip(error) from error.__cause__
@@ -331,10 +361,9 @@ class CanopenDrive(Cia402Master):
         return self.accept_inputs(inputs)
 
     def _fault_detail(self) -> tuple[str, int | None]:
-        return self.events.fault_detail() if self.events is not None else ("", None)
+        return self.connection.events.fault_detail() if self.connection is not None else ("", None)
 
     def _send_outputs(self, controlword: int, target_torque: int) -> None:
-        self._require_connected()
         try:
             self.exchange.send_rpdo(controlword, target_torque)
         except DriveError as error:
@@ -365,64 +394,64 @@ class CanopenDrive(Cia402Master):
     def mark_enabled(self) -> None:
         """OPERATION ENABLED: hold ENABLE OPERATION; a fault bit, an EMCY or a heartbeat loss now trips."""
         super().mark_enabled()
-        self.events.armed = True  # type: ignore[union-attr]
+        self.connected().events.armed = True
 
     def mark_disabled(self) -> None:
         """Hold DISABLE VOLTAGE; EMCYs and NMT changes are news, no longer trips."""
         super().mark_disabled()
-        if self.events is not None:
-            self.events.armed = False
+        if self.connection is not None:
+            self.connection.events.armed = False
 
     def disable(self) -> None:
         """Zero torque, DISABLE VOLTAGE, and check the drive reaches SWITCH ON DISABLED (or sits in FAULT)."""
-        if not self._connected:
+        if self.connection is None:
             return
         super().disable()
 
     def fault_reset(self) -> None:
         """Rising edge of controlword bit 7, then back to 0; check the drive leaves FAULT."""
-        if self.events is not None:
-            self.events.armed = False
+        if self.connection is not None:
+            self.connection.events.armed = False
         super().fault_reset()
 
     # ------------------------------------------------------------------ shutdown
 
     def close(self) -> None:
-        """Safe outputs and NMT pre-operational if reachable, then release the node and (if owned) the bus."""
+        """Safe outputs and NMT pre-operational if connected, then release the node and (if owned) the bus."""
         if self._closed:
             return
         self._closed = True
-        self._teardown(reachable=self._connected)
-        self._connected = False
+        connection, self.connection = self.connection, None
+        if connection is None:
+            self._release(None, None)
+            return
+        try:
+            self.exchange.send_rpdo(SAFE_CONTROLWORD, 0)
+            self.exchange.send_safe()
+            connection.node.nmt.send_command(NmtCommand.ENTER_PRE_OPERATIONAL)
+            if self.safety.master_node_id is not None and connection.commissioned.inventory.has(CONSUMER_HEARTBEAT_TIME, 1):
+                connection.sdo.write_int(CONSUMER_HEARTBEAT_TIME, 1, DataType.UNSIGNED32, 0)  # a clean goodbye
+        except Exception as exc:  # a best-effort goodbye: whatever fails here, the bus is released below
+            logger.warning("%s: could not send the closing frames: %r", self.name, exc)
+        self._release(connection.node, connection.events)
 
-    def _teardown(self, reachable: bool) -> None:
+    def _release(self, node: canopen.RemoteNode | None, events: DriveEvents | None) -> None:
+        """Stop the heartbeat (unless shared), leave the cyclic phase, drop ``events``' subscriptions and
+        ``node`` from the network, close the link (unless shared); nothing is sent to the drive."""
         network = self.link.network
         try:
-            if reachable and network is not None and self.node is not None:
-                try:
-                    self.exchange.send_rpdo(SAFE_CONTROLWORD, 0)
-                    self.exchange.send_safe()
-                    self.node.nmt.send_command(NmtCommand.ENTER_PRE_OPERATIONAL)
-                    if self.safety.master_node_id is not None and self.sdo is not None and self._has(CONSUMER_HEARTBEAT_TIME, 1):
-                        self.sdo.write_int(CONSUMER_HEARTBEAT_TIME, 1, DataType.UNSIGNED32, 0)  # a clean goodbye
-                except Exception as exc:  # a best-effort goodbye: whatever fails here, the bus is released below
-                    logger.warning("%s: could not send the closing frames: %r", self.name, exc)
             if not self.heartbeat.shared:
                 self.heartbeat.stop()
-            self.exchange.end()
-            if self.events is not None:
-                self.events.release()
-            if network is not None and self.node is not None and network.nodes.get(self.node_id) is self.node:
+            self.exchange.release()
+            if events is not None:
+                events.release()
+            if network is not None and node is not None and network.nodes.get(self.node_id) is node:
                 del network[self.node_id]
         except DriveError as exc:
             logger.warning("%s: closing: %s", self.name, exc)
         finally:
             if not self.link.shared:
                 self.link.close()
-
-    def _has(self, index: int, subindex: int = 0) -> bool:
-        """True if commissioning found ``index:subindex`` in the drive (False before it did)."""
-        return self.commissioned is not None and self.commissioned.inventory.has(index, subindex)
 
     def __repr__(self) -> str:
         return f"CanopenDrive(node_id={self.node_id}, period={self.period}, rx_mode={self.rx_mode!r})"

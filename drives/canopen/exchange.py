@@ -27,6 +27,7 @@ import queue
 import time
 from collections.abc import Callable, Container
 from dataclasses import dataclass
+from typing import Any
 
 import can
 
@@ -41,6 +42,7 @@ from drives.errors import DriveError
 logger = logging.getLogger(__name__)
 
 RX_MODES = ("direct", "listener")
+Unpack = Callable[[bytes | bytearray], tuple[Any, ...]]  # a TPDO's struct unpack
 
 
 @dataclass(slots=True)
@@ -65,7 +67,8 @@ class CanopenExchange:
     holding the controlword 0x6040 and the target torque 0x6071 and nothing else (one frame,
     (controlword, torque), unless the drive's PDOs made commissioning split them);
     ``timeout`` (s) is how long one cycle waits for all its TPDOs.  :meth:`configure` sets the
-    layout commissioning chose.  ``produces_sync`` (default True): with False, several drives
+    layout commissioning chose and resolves, once, how a frame goes out (:meth:`send`).
+    ``produces_sync`` (default True): with False, several drives
     share one SYNC that another object sends (:mod:`drives.canopen.axes_cycle`): this exchange
     then sends no SYNC, not even with its safe outputs, and refuses to run a cycle of its own.
     """
@@ -86,7 +89,8 @@ class CanopenExchange:
         self.timeout = timeout
         self.stats = stats
         self.tpdo_cobs: tuple[int, ...] = ()
-        self._slots: dict[int, tuple[int, int, object]] = {}
+        self._slots: dict[int, tuple[int, int, Unpack]] = {}
+        self._transmit: Callable[[can.Message], None] = self._closed
         self._queue: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
         self._subscribed = False
         self._sync = can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False)
@@ -121,6 +125,34 @@ class CanopenExchange:
                        for slot, (cob, codec) in enumerate(zip(tpdo_cobs, self.tpdo_codecs))}
         for (message, _, _), safe, cob in zip(self._rpdos, self._safe, rpdo_cobs):
             message.arbitration_id = safe.arbitration_id = cob
+        self._transmit = self._transmitter()
+
+    def release(self) -> None:
+        """Leave the cyclic phase and forget the bus: every later send is "the bus is closed"."""
+        self.end()
+        self._transmit = self._closed
+
+    def _transmitter(self) -> Callable[[can.Message], None]:
+        """How a frame goes out, resolved once: under the network's send lock (shared with canopen's
+        SDO and NMT), unless the bus says its ``send`` is safe from several threads at once
+        (``concurrent_send``, e.g. the lock-step bus, whose ``send`` runs the receiving node inline:
+        holding the lock through that for most of every cycle starves the heartbeat thread, which
+        takes the same lock)."""
+        network = self.link.network
+        bus = network.bus if network is not None else None
+        if network is None or bus is None:
+            return self._closed
+        if getattr(bus, "concurrent_send", False):
+            return bus.send
+        lock, send = network.send_lock, bus.send
+
+        def locked(msg: can.Message) -> None:
+            with lock:
+                send(msg)
+        return locked
+
+    def _closed(self, msg: can.Message) -> None:
+        raise DriveError(self.name, "the bus is closed")
 
     # ------------------------------------------------------------------ phases
 
@@ -182,22 +214,16 @@ class CanopenExchange:
                 self.stats.stale_tpdos += 1
 
     @property
-    def slots(self) -> dict[int, tuple[int, int, object]]:
+    def slots(self) -> dict[int, tuple[int, int, Unpack]]:
         """TPDO COB-ID -> (its place among this drive's TPDOs, its length in bytes, its ``struct`` unpack)."""
         return self._slots
 
-    def inputs(self, parts: list[tuple[int, ...] | None], synced: int) -> CyclicInputs:
+    def inputs(self, parts: list[tuple[Any, ...]], synced: int) -> CyclicInputs:
         """One cycle's inputs from the decoded TPDOs ``parts`` (in TPDO order, all present);
         ``synced``: ``time.perf_counter_ns()`` right after the SYNC left."""
-        if len(parts) == 1:
-            values = parts[0]
-        else:
-            values = ()
-            for part in parts:
-                values += part  # type: ignore[operator]
+        values = parts[0] if len(parts) == 1 else sum(parts, ())
         sw, vel, pos = self._at
-        return CyclicInputs(values[sw], values[vel], None if pos is None else values[pos],  # type: ignore[index]
-                            sampled_by_ns=synced)
+        return CyclicInputs(values[sw], values[vel], None if pos is None else values[pos], sampled_by_ns=synced)
 
     def exchange(self) -> CyclicInputs | None:
         """SYNC out, then this cycle's inputs from every TPDO of the cycle; None on timeout."""
@@ -208,7 +234,7 @@ class CanopenExchange:
         self.stats.syncs_sent += 1
         slots = self._slots
         count = len(slots)
-        parts: list[tuple[int, ...] | None] = [None] * count
+        parts: list[tuple[Any, ...]] = [()] * count  # () until the slot's TPDO arrived
         missing = count
         deadline = time.perf_counter() + self.timeout
         while missing:
@@ -220,30 +246,20 @@ class CanopenExchange:
             if len(data) != size:
                 self.stats.dropped_frames += 1
                 continue
-            if parts[slot] is None:
-                missing -= 1
-            else:
+            if parts[slot]:
                 self.stats.stale_tpdos += 1
-            parts[slot] = unpack(data)  # type: ignore[operator]
+            else:
+                missing -= 1
+            parts[slot] = unpack(data)
         return self.inputs(parts, synced)
 
     # ------------------------------------------------------------------ send
 
     def send(self, msg: can.Message) -> None:
-        """Send one frame under the network's send lock (shared with canopen's SDO and NMT), unless the
-        bus says its ``send`` is safe from several threads at once (``concurrent_send``, e.g. the
-        lock-step bus, whose ``send`` runs the receiving node inline: holding the lock through that
-        for most of every cycle starves the heartbeat thread, which takes the same lock)."""
-        network = self.link.network
-        bus = network.bus if network is not None else None
-        if network is None or bus is None:
-            raise DriveError(self.name, "the bus is closed")
+        """Send one frame the way :meth:`configure` resolved (:meth:`_transmitter`); DriveError "the
+        bus is closed" before it and after :meth:`release`."""
         try:
-            if getattr(bus, "concurrent_send", False):
-                bus.send(msg)
-            else:
-                with network.send_lock:
-                    bus.send(msg)
+            self._transmit(msg)
         except (can.CanError, OSError) as exc:
             raise DriveError(self.name, f"CAN send failed: {exc!r}") from exc
 

@@ -26,23 +26,25 @@ where the link still answers, close the link where it cannot be trusted (timeout
 safe output block instead of the caller's torque (while the link is up), until
 :meth:`ModbusDrive.fault_reset` or :meth:`ModbusDrive.enable`; a closed link needs an
 explicit :meth:`ModbusDrive.reconnect`.
+
+As on CANopen (:mod:`drives.canopen.drive`), ``connect()`` returns what the connection found
+(:class:`ModbusConnection`: which simulated timing the server states), kept by the drive until
+``close()``, and a loop takes its cycles from ``with drive.cyclic(limit) as cycle``
+(:class:`~drives.base.DriveCycle`: ``read``/``saturate``/``write`` bound once, the requests
+built at construction).  The link itself exists from construction: pymodbus' client is opened
+by ``connect()`` and may be dropped and reopened (:meth:`ModbusDrive.reconnect`).
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from pymodbus.pdu import ModbusPDU
-from pymodbus.pdu.register_message import (
-    ReadHoldingRegistersRequest,
-    ReadWriteMultipleRegistersRequest,
-    WriteMultipleRegistersRequest,
-)
 
-from drives.base import CyclicInputs, DriveScaling
+from drives.base import CyclicInputs, DriveCycle, DriveScaling
 from drives.cia402 import (
     ABORT_CONNECTION_OPTION_CODE,
     CONTROLWORD,
@@ -57,18 +59,15 @@ from drives.cia402 import (
 )
 from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
 from drives.errors import DriveArgumentError, DriveError, DriveProtocolError, DriveTimeout, ModbusExceptionError, ModbusLinkLost
+from drives.modbus.cyclic_requests import CyclicRequests
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import (
-    INPUT_BLOCK,
     MAP_IDENTITY,
-    OUTPUT_BLOCK,
-    OUTPUT_BLOCK_COUNT,
     REGISTER_BY_NAME,
     SIM_TIMING_CODES,
     InputBlockCodec,
     RegisterSpec,
     decode_value,
-    describe_range,
     encode_value,
     register_for_object,
 )
@@ -76,7 +75,7 @@ from drives.safety import DEFAULT_SAFETY, SafetySettings
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["CYCLE_MODES", "ModbusDrive", "ModbusStats"]
+__all__ = ["CYCLE_MODES", "ModbusConnection", "ModbusDrive", "ModbusStats"]
 
 CYCLE_MODES = ("split", "fc23")
 _TIMING_NAMES = {code: name for name, code in SIM_TIMING_CODES.items()}
@@ -84,6 +83,16 @@ _TIMING_DELAYS = {"ideal": 0, "cia402": 1}  # samples; "reception" reads its del
 _CONTROLWORD_REG = register_for_object(CONTROLWORD)
 _TORQUE_REG = register_for_object(TARGET_TORQUE)
 _STATUSWORD_REG = register_for_object(STATUSWORD)
+
+
+@dataclass(frozen=True, slots=True)
+class ModbusConnection:
+    """What ``connect()`` found besides the scaling: ``simulated_timing`` ("ideal", "cia402",
+    "reception") when the server is the simulated drive (None otherwise) and ``simulated_delay``,
+    that drive's loop delay in samples (None otherwise)."""
+
+    simulated_timing: str | None = None
+    simulated_delay: float | None = None
 
 
 class ModbusDrive(Cia402Master):
@@ -130,7 +139,8 @@ class ModbusDrive(Cia402Master):
             raise DriveArgumentError("unit_id", unit_id, "0..247", "Modbus drive")
         if cycle not in CYCLE_MODES:
             raise DriveArgumentError("cycle", cycle, " or ".join(map(repr, CYCLE_MODES)), "Modbus drive")
-        self._init_master(f"Modbus unit {unit_id} at {address.url}", scaling)
+        stats = ModbusStats()
+        self._init_master(f"Modbus unit {unit_id} at {address.url}", stats, scaling)
         self.unit_id = unit_id
         self.cycle = cycle
         self.state_timeout = state_timeout
@@ -138,15 +148,10 @@ class ModbusDrive(Cia402Master):
         self.check_identity = check_identity
         self.safety = safety
         self.safety_warnings: tuple[str, ...] = ()
-        self.simulated_timing: str | None = None  # "ideal"/"cia402"/"reception" when the server is sim_drive
-        self.simulated_delay: float | None = None  # that simulated drive's loop delay, samples
-        self.stats = ModbusStats()
-        self.link = ModbusLink(self.name, address, self.stats)
+        self.link = ModbusLink(self.name, address, stats)
         self._codec = InputBlockCodec(word_order, with_position)
-        self._requests = _CyclicRequests(unit_id, self._codec.count)
-        self._cached: Sequence[int] | None = None  # fc23: inputs read by the last output write
-        self._cached_at = 0  # perf_counter_ns when that answer arrived
-        self._connected = False
+        self._requests = CyclicRequests(unit_id, self._codec.count)
+        self.connection: ModbusConnection | None = None  # what connect() found, until close()
         self._closed = False
 
     @classmethod
@@ -171,6 +176,16 @@ class ModbusDrive(Cia402Master):
         return self._codec.with_position
 
     @property
+    def simulated_timing(self) -> str | None:
+        """"ideal"/"cia402"/"reception" when the server is the simulated drive (after connect())."""
+        return self.connection.simulated_timing if self.connection is not None else None
+
+    @property
+    def simulated_delay(self) -> float | None:
+        """That simulated drive's loop delay, samples (after connect())."""
+        return self.connection.simulated_delay if self.connection is not None else None
+
+    @property
     def link_up(self) -> bool:
         """True while the link is open and trusted."""
         return self.link.up
@@ -178,28 +193,29 @@ class ModbusDrive(Cia402Master):
     # ------------------------------------------------------------------ link
 
     def _drop_link(self) -> None:
-        self._cached = None
+        self._requests.cached = None
         self.link.drop()
 
-    def connect(self) -> None:
-        """Open the link, check the map identity, read scaling (0x6076, 0x6072, 0x0040..); raise DriveTimeout."""
+    def connect(self) -> ModbusConnection:
+        """Open the link, check the map identity, read scaling (0x6076, 0x6072, 0x0040..); raise DriveTimeout.
+        Returns the connection (the same one again while connected)."""
         if self._closed:
             raise DriveError(self.name, "the drive object is closed; create a new one")
-        if self._connected:
-            return
-        self._establish()
+        if self.connection is not None:
+            return self.connection
+        return self._establish()
 
-    def _establish(self) -> None:
+    def _establish(self) -> ModbusConnection:
         self.link.open()
-        self._cached = None
+        self._requests.cached = None
         try:
-            self._configure()
+            self.connection = self._configure()
         except BaseException:
             self._drop_link()
             raise
-        self._connected = True
+        return self.connection
 
-    def reconnect(self) -> None:
+    def reconnect(self) -> ModbusConnection:
         """Close and reopen the link (explicit; never done silently), re-check identity and scaling.
 
         The trip state stays: call :meth:`fault_reset` or :meth:`enable` afterwards.
@@ -207,22 +223,21 @@ class ModbusDrive(Cia402Master):
         if self._closed:
             raise DriveError(self.name, "the drive object is closed; create a new one")
         self._drop_link()
-        self._connected = False
+        self.connection = None
         self._armed = False
-        self._establish()
+        return self._establish()
 
-    def _configure(self) -> None:
+    def _configure(self) -> ModbusConnection:
         if self.check_identity:
             self.check_map_identity()
         self._adopt_scaling(self.stated_scaling())
         try:
-            self.simulated_timing = _TIMING_NAMES.get(int(self._read_spec(REGISTER_BY_NAME["sim_timing"])))
+            timing = _TIMING_NAMES.get(int(self._read_spec(REGISTER_BY_NAME["sim_timing"])))
         except DriveProtocolError:
-            self.simulated_timing = None
-        if self.simulated_timing == "reception":
-            self.simulated_delay = float(self._read_spec(REGISTER_BY_NAME["sim_reception_delay"]))
-        elif self.simulated_timing is not None:
-            self.simulated_delay = float(_TIMING_DELAYS[self.simulated_timing])
+            return ModbusConnection()
+        if timing == "reception":
+            return ModbusConnection(timing, float(self._read_spec(REGISTER_BY_NAME["sim_reception_delay"])))
+        return ModbusConnection(timing, None if timing is None else float(_TIMING_DELAYS[timing]))
 
     def check_map_identity(self) -> None:
         """DriveProtocolError unless the map identity register 0x0030 reads the haptic_bus map in this
@@ -261,13 +276,13 @@ class ModbusDrive(Cia402Master):
     def read_registers(self, address: int, count: int) -> list[int]:
         """Raw FC03 read of ``count`` holding registers from ``address`` (acyclic)."""
         self._require_link()
-        self._cached = None
+        self._requests.cached = None
         return self.link.read_holding(self.unit_id, address, count)
 
     def write_registers(self, address: int, values: list[int]) -> None:
         """Raw write of holding registers from ``address`` (FC06 for one, FC16 for more; acyclic)."""
         self._require_link()
-        self._cached = None
+        self._requests.cached = None
         self.link.write_holding(self.unit_id, address, values)
 
     def _read_spec(self, spec: RegisterSpec) -> int | float:
@@ -289,14 +304,14 @@ class ModbusDrive(Cia402Master):
             raise DriveError(self.name, "not connected; call connect() first")
 
     def _require_connected(self) -> None:
-        if not self._connected:
+        if self.connection is None:
             raise DriveError(self.name, "not connected; call connect() first")
 
     # ------------------------------------------------------------------ safety
 
     def _send_safe_outputs(self) -> None:
         """One attempt to write zero torque with DISABLE VOLTAGE, if the link is up; never raises."""
-        self._cached = None
+        self._requests.cached = None
         if not self.link.up:
             return
         requests = self._requests
@@ -335,15 +350,23 @@ class ModbusDrive(Cia402Master):
     def read_inputs(self) -> CyclicInputs:
         """This cycle's statusword, velocity[, position]: FC03, or the inputs the last FC23 brought."""
         self._require_connected()
-        registers = self._cached
+        return self._cycle_inputs()
+
+    def _bind_cycle(self) -> DriveCycle:
+        """The cycle's read past the connection check (done once here)."""
+        self._require_connected()
+        return DriveCycle(self._cycle_inputs, self.clamp, self._send_torque)
+
+    def _cycle_inputs(self) -> CyclicInputs:
         requests = self._requests
+        registers = requests.cached
         if registers is None:
             self.stats.cyclic_requests += 1
             registers = self._cyclic(requests.read, requests.read_label).registers
             answered = time.perf_counter_ns()  # the drive sampled before it answered
         else:
-            self._cached = None
-            answered = self._cached_at
+            requests.cached = None
+            answered = requests.cached_at
         if len(registers) != self._codec.count:
             raise self.trip(DriveProtocolError(
                 self.name, f"{len(registers)} registers answered for {requests.read_what}, expected {self._codec.count}"))
@@ -358,8 +381,8 @@ class ModbusDrive(Cia402Master):
         requests.outputs[1] = target_torque & 0xFFFF
         self.stats.cyclic_requests += 1
         if self.cycle == "fc23":
-            self._cached = self._cyclic(requests.read_write, requests.read_write_label).registers
-            self._cached_at = time.perf_counter_ns()
+            requests.cached = self._cyclic(requests.read_write, requests.read_write_label).registers
+            requests.cached_at = time.perf_counter_ns()
         else:
             self._cyclic(requests.write, requests.write_label)
 
@@ -412,7 +435,7 @@ class ModbusDrive(Cia402Master):
 
     def disable(self) -> None:
         """Zero torque, DISABLE VOLTAGE, and check the drive reaches SWITCH ON DISABLED (or sits in FAULT)."""
-        if not self._connected:
+        if self.connection is None:
             return
         self._armed = False
         self.write_object(TARGET_TORQUE, 0)
@@ -425,7 +448,7 @@ class ModbusDrive(Cia402Master):
         if self._closed:
             return
         self._closed = True
-        if self._connected and self.link.up:
+        if self.connection is not None and self.link.up:
             self._armed = False
             try:
                 self.write_registers(_TORQUE_REG.address, [0])
@@ -433,28 +456,8 @@ class ModbusDrive(Cia402Master):
             except DriveError as exc:
                 logger.warning("%s: could not write the safe outputs on close: %s", self.name, exc)
         self._drop_link()
-        self._connected = False
+        self.connection = None
         self.link.client = None
 
     def __repr__(self) -> str:
         return f"ModbusDrive({self.address!r}, unit_id={self.unit_id}, cycle={self.cycle!r}, word_order={self.word_order!r})"
-
-
-class _CyclicRequests:
-    """The cyclic pymodbus requests of one drive, built once (the output registers are updated
-    in place), and their labels (no string formatting per cycle)."""
-
-    def __init__(self, unit_id: int, input_count: int) -> None:
-        self.outputs = [SAFE_CONTROLWORD, 0]
-        self.read = ReadHoldingRegistersRequest(address=INPUT_BLOCK, count=input_count, dev_id=unit_id)
-        self.write = WriteMultipleRegistersRequest(address=OUTPUT_BLOCK, registers=self.outputs, dev_id=unit_id)
-        self.write.count = OUTPUT_BLOCK_COUNT
-        self.read_write = ReadWriteMultipleRegistersRequest(
-            read_address=INPUT_BLOCK, read_count=input_count, write_address=OUTPUT_BLOCK,
-            write_registers=self.outputs, dev_id=unit_id,
-        )
-        self.read_what = describe_range(INPUT_BLOCK, input_count)
-        self.write_what = describe_range(OUTPUT_BLOCK, OUTPUT_BLOCK_COUNT)
-        self.read_label = f"reading {self.read_what}"
-        self.write_label = f"writing {self.write_what}"
-        self.read_write_label = f"writing {self.write_what} and reading {self.read_what} (FC23)"

@@ -13,7 +13,7 @@ The drives may be the simulated device in another process (``haptic-bus sim --no
    ``T`` that fits (exit 1, no bus opened, nothing enabled);
 3. every drive is reached and commissioned (:class:`drives.canopen.axes.CanopenAxes`: each its own
    safety chain; one heartbeat of this controller's node for all; in virtual time the master's own
-   patience is :data:`VIRTUAL_TIME_PATIENCE`);
+   patience is :data:`drives.safety.VIRTUAL_TIME_CANOPEN_PATIENCE`);
 4. real time only: pre-flight timing (:mod:`~haptic_bus.app.preflight`) with the coupled gate at
    the measured delay;
 5. **safe start**: every axis' position is read right before enabling (after pre-flight, whose
@@ -39,7 +39,7 @@ from drives.bus_config import resolve_bus_config
 from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
 from drives.cia402 import POSITION_ACTUAL
-from drives.safety import VIRTUAL_TIME_DEADLINE, VIRTUAL_TIME_WAIT
+from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.axes_records import axes_run_document, write_axes_run
@@ -52,6 +52,7 @@ from haptic_bus.app.runner import (
     canopen_watchdog,
     control_thread_scheduling,
     longest_hold,
+    patient,
     settle_preflight,
 )
 from haptic_bus.control.axes_controller import AxesController
@@ -63,10 +64,6 @@ from haptic_bus.control.space_scene import SpaceScene
 from haptic_bus.errors import DriveError, ParameterError
 
 RUN_MAPPING = "with-position"
-VIRTUAL_TIME_PATIENCE: dict[str, Any] = {"tpdo_timeout": VIRTUAL_TIME_WAIT,
-                                         "heartbeat_consumer_ms": round(VIRTUAL_TIME_DEADLINE * 1000)}
-"""In virtual time nothing paces the loop: how long the master waits for an axis' TPDO (s) and
-for a drive's heartbeat (ms) catches a dead drive, not a machine busy elsewhere."""
 
 
 @dataclasses.dataclass
@@ -127,7 +124,7 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                                bus_kwargs={k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")},
                                period=period, tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling_source=PROFILE_SCALING_SOURCE,
                                safety=safety if options.wall_paced else safety.for_virtual_time(period),
-                               **({} if options.wall_paced else VIRTUAL_TIME_PATIENCE))
+                               **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
             stack.callback(axes.close)
             axes.connect()
             _describe(axes, options, link)

@@ -29,6 +29,7 @@ from typing import Any, Protocol
 
 from drives.base import CyclicInputs, Drive, DriveScaling
 from drives.bus_config import resolve_bus_config
+from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.runner import EXIT_STATUS, WALL, StopRequest, check_pacing, patient
 from haptic_bus.control.clock import RealClock, VirtualClock
@@ -156,7 +157,7 @@ def identify_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, opt
                             bitrate=config.get("bitrate"), bus_kwargs=extra, period=period, scaling=profile.scaling(),
                             tpdo_objects=DEFAULT_TPDO_WITH_POSITION,
                             safety=safety if options.pacing == WALL else safety.for_virtual_time(period),
-                            **patient(options.pacing == WALL, "tpdo_timeout"))
+                            **patient(options.pacing == WALL, VIRTUAL_TIME_CANOPEN_PATIENCE))
 
     return _identify(profile, options, link, open_drive)
 
@@ -172,7 +173,7 @@ def identify_modbus(profile: Profile, url: str, unit_id: int, options: IdentifyO
 
     def open_drive() -> Drive:
         return ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True,
-                                    **patient(options.pacing == WALL, "timeout"))
+                                    **patient(options.pacing == WALL, VIRTUAL_TIME_MODBUS_PATIENCE))
 
     return _identify(profile, options, link, open_drive)
 

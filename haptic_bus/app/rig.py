@@ -17,7 +17,6 @@ trajectories, bit for bit).  :func:`simulator_command` is how a second process s
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import uuid
 from collections.abc import Iterator, Sequence
@@ -26,7 +25,7 @@ from typing import Any, cast
 
 from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
-from drives.safety import SafetySettings
+from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, SafetySettings
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.profiles import Profile
 from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits
@@ -52,24 +51,7 @@ __all__ = [
     "simulated_axes_device",
     "simulated_canopen",
     "simulator_command",
-    "virtual_time_safety",
 ]
-
-
-VIRTUAL_TIME_WATCHDOG_MS = 1000  # ms: both heartbeat consumers in a virtual-time run (see virtual_time_safety)
-VIRTUAL_TIME_TPDO_WAIT = 0.25  # s: a TPDO waited for in virtual time, where a frame another thread is delivering can queue
-
-
-def virtual_time_safety(period: float) -> SafetySettings:
-    """The safety chain for a virtual-time run in this process: the RPDO deadline, and the drive's
-    consumer of the controller's heartbeat, at least :data:`VIRTUAL_TIME_WATCHDOG_MS` of wall clock.
-
-    The heartbeats come from helper threads that a loop running flat out in the main thread
-    lets have the interpreter only at its switch interval; on a loaded machine they can fall
-    silent for more than the 60 ms the drive watches by default, with nothing dead.
-    """
-    settings = SafetySettings().for_virtual_time(period)
-    return dataclasses.replace(settings, consumer_ms=max(settings.consumer_ms, VIRTUAL_TIME_WATCHDOG_MS))
 
 
 def simulator_command(*arguments: str) -> list[str]:
@@ -119,8 +101,8 @@ def simulated_canopen(
     sim.start()
     drive = CanopenDrive(node_id, interface=interface, channel=channel, period=profile.loop.period,
                          tpdo_objects=DEFAULT_TPDO_WITH_POSITION,
-                         scaling=profile.scaling(), eds=eds_path(), safety=virtual_time_safety(profile.loop.period),
-                         heartbeat_consumer_ms=VIRTUAL_TIME_WATCHDOG_MS)
+                         scaling=profile.scaling(), eds=eds_path(), safety=SafetySettings().for_virtual_time(profile.loop.period),
+                         **VIRTUAL_TIME_CANOPEN_PATIENCE)
     try:
         drive.connect()
         drive.enable()
@@ -150,11 +132,10 @@ def simulated_axes(profile: AxesProfile, *, channel: str | None = None,
     0x6064), not enabled; stop both on exit.  ``interface``: "lockstep" (one thread) or "virtual"."""
     channel = channel or f"haptic-bus-{uuid.uuid4().hex[:12]}"
     sim = simulated_axes_device(profile, {"interface": interface, "channel": channel}).start()
-    safety = virtual_time_safety(profile.period)
+    safety = SafetySettings().for_virtual_time(profile.period)
     axes = CanopenAxes([cast(int, axis.node_id) for axis in profile.axes],
                        scalings=[axis.device.scaling() for axis in profile.axes], interface=interface, channel=channel,
-                       period=profile.period, eds=eds_path(), safety=safety, heartbeat_consumer_ms=VIRTUAL_TIME_WATCHDOG_MS,
-                       tpdo_timeout=VIRTUAL_TIME_TPDO_WAIT)
+                       period=profile.period, eds=eds_path(), safety=safety, **VIRTUAL_TIME_CANOPEN_PATIENCE)
     try:
         axes.connect()
         yield sim, axes

@@ -44,7 +44,7 @@ from drives.cia402 import State
 from drives.cia402_master import Cia402Master
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.fault_reset import DEFAULT_WAIT
-from drives.safety import VIRTUAL_TIME_WAIT, SafetySettings
+from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DriveAddress
 from haptic_bus.app.live import LiveView
@@ -190,7 +190,7 @@ def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
                              tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling=profile.scaling(),
                              scaling_source=PROFILE_SCALING_SOURCE,
                              safety=safety if options.wall_paced else safety.for_virtual_time(period),
-                             **patient(options.wall_paced, "tpdo_timeout"))
+                             **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
         stack.callback(drive.close)
         drive.connect()
         _show_scaling(drive, options)
@@ -221,7 +221,7 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
 
     def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
         drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True,
-                                     **patient(options.wall_paced, "timeout"))
+                                     **patient(options.wall_paced, VIRTUAL_TIME_MODBUS_PATIENCE))
         stack.callback(drive.close)
         drive.connect()  # reads only: identity, scaling, timing
         _refuse_another_master(drive)  # before the poll measurement, which writes
@@ -240,11 +240,10 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     return _session(profile, options, folder, link, open_drive, DriveSide(hold, watchdog, DriveAddress(url=url, unit_id=unit_id)))
 
 
-def patient(wall_paced: bool, keyword: str) -> dict[str, Any]:
-    """The drive's keyword argument ``keyword`` (its wait for one answer, s) set to
-    :data:`~drives.safety.VIRTUAL_TIME_WAIT` when nothing paces the loop; nothing (the drive's
-    real-time default) when the wall clock does."""
-    return {} if wall_paced else {keyword: VIRTUAL_TIME_WAIT}
+def patient(wall_paced: bool, waits: dict[str, Any]) -> dict[str, Any]:
+    """A master's keyword arguments for its waits: ``waits`` (:data:`~drives.safety.VIRTUAL_TIME_CANOPEN_PATIENCE`
+    or ``..._MODBUS_PATIENCE``) when nothing paces the loop, none (the real-time defaults) when the wall clock does."""
+    return {} if wall_paced else dict(waits)
 
 
 def longest_hold(period: float, wall_paced: bool, deadline_ms: int, fallback_ms: int) -> float:

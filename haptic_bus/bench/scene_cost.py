@@ -25,10 +25,11 @@ from typing import Any, cast
 
 import numpy as np
 
-from drives.base import CyclicInputs, Drive, DriveScaling
+from drives.base import CyclicInputs, Drive, DriveScaling, TorqueClamp
 from drives.canopen.drive import DEFAULT_RPDO
 from drives.canopen.pdo_codec import PdoCodec
 from drives.cia402 import ObjectSpec, OperationMode
+from drives.cia402_master import CyclicStats
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import REPEATS, Spread, time_per_call
@@ -61,7 +62,7 @@ class CannedDrive(Drive):
         codec = PdoCodec(DEFAULT_RPDO, name="RPDO1")
         self._pack_into = codec.struct.pack_into
         self._frame = bytearray(codec.size)
-        self._limit = scaling.max_torque_permille
+        self.clamp = TorqueClamp(scaling.max_torque_permille, CyclicStats())
 
     def connect(self) -> None:
         """Nothing to reach."""
@@ -79,13 +80,8 @@ class CannedDrive(Drive):
         self._next = (self._next + 1) % len(self._inputs)
         return inputs
 
-    def write_outputs(self, target_torque: int) -> None:
-        """Saturate and encode RPDO1 (controlword, torque) as the CANopen master does, minus the send."""
-        limit = self._limit
-        if target_torque > limit:
-            target_torque = limit
-        elif target_torque < -limit:
-            target_torque = -limit
+    def _send_torque(self, target_torque: int) -> None:
+        """Encode RPDO1 (controlword, saturated torque) as the CANopen master does, minus the send."""
         self._pack_into(self._frame, 0, 0x000F, target_torque)
 
     def disable(self) -> None:

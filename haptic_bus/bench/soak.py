@@ -19,12 +19,15 @@ chunks.  Checked at the end:
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
+from drives.base import CyclicInputs, Drive, DriveCycle
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.control.controller import WallController
 
@@ -36,6 +39,26 @@ SAMPLES = 100  # resident-set samples over a run
 RECORD_ROWS = 200_000  # the controller's record (haptic-bus run's default), at most a tenth of a shorter run
 FLAT_BYTES = 2 * 2**20  # memory is flat if the second half's slope adds at most this over the whole run
 OPERATOR = {"model": "sinusoid", "amplitude": 5.0, "frequency": 2.0, "offset": 2.0}
+
+
+def observe_inputs(drive: Drive, each: Callable[[CyclicInputs], None]) -> None:
+    """From now on every cyclic phase of ``drive`` (:meth:`~drives.base.Drive.cyclic`, where a
+    controller reads its inputs) also hands each input it reads to ``each``: a tally taken apart
+    from the controller."""
+    cyclic = drive.cyclic
+
+    @contextlib.contextmanager
+    def observed(torque_limit: int | None = None) -> Iterator[DriveCycle]:
+        with cyclic(torque_limit) as cycle:
+            read = cycle.read
+
+            def counted() -> CyclicInputs:
+                inputs = read()
+                each(inputs)
+                return inputs
+            yield dataclasses.replace(cycle, read=counted)
+
+    drive.cyclic = observed  # type: ignore[method-assign]
 
 
 def resident_bytes() -> int:
@@ -54,16 +77,13 @@ def run(cycles: int = CYCLES, tick: Callable[[str], None] = lambda _: None) -> d
         controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
                                     record_capacity=max(1, min(RECORD_ROWS, cycles // 10)))
         step = controller.integrator.step
-        read = drive.read_inputs
         tally = {"counts": 0, "float_position": controller.integrator.origin}
 
-        def counted():  # every input the controller gets, summed apart from it
-            inputs = read()
+        def add(inputs: CyclicInputs) -> None:  # every input the controller gets, summed apart from it
             tally["counts"] += inputs.velocity
             tally["float_position"] += step * inputs.velocity
-            return inputs
 
-        drive.read_inputs = counted  # type: ignore[method-assign]
+        observe_inputs(drive, add)
         resident, at, started, done = [resident_bytes()], [0], time.perf_counter(), 0
         while done < cycles:
             summary = controller.run(min(chunk, cycles - done))

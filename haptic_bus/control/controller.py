@@ -5,9 +5,11 @@ over the period that sample closed (:mod:`~haptic_bus.control.port_energy`: the 
 position, the force the drive applied, the period's length) -> integrate the position exactly
 as the seed's backward difference does, ``x_k = x_{k-1} + T v_k``, but in the drive's integer
 velocity units (an exact integer sum, so ten million cycles add no rounding) -> the scene's
-force, times the start ramp's scale -> saturate at the profile's limit (counted) -> torque
-target in per mille -> the passivity layer lowers it to what the energy budget allows
-(:mod:`~haptic_bus.control.passivity_layer`) -> ``write_outputs``.  Beside it: the supervisor
+force, times the start ramp's scale -> torque target in per mille -> saturated by the drive's
+clamp (:class:`~drives.base.TorqueClamp`, the one place a target is saturated: at the profile's
+force limit, or 0x6072 where that is lower; counted) -> the passivity layer lowers it to what the
+energy budget allows (:mod:`~haptic_bus.control.passivity_layer`) -> sent.  The cycles run in
+the drive's cyclic phase (:meth:`drives.base.Drive.cyclic`), entered once per :meth:`run`.  Beside it: the supervisor
 (lateness and the observer against the gate's assumptions,
 :mod:`~haptic_bus.control.supervisor`), a bounded record and the run's events.  Wall changes
 pass the gate first, in the caller's thread, and take effect whole at the next cycle boundary
@@ -20,12 +22,13 @@ the loop is :class:`~haptic_bus.control.cycle_loop.CycleLoop`'s).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
-from drives.base import Drive
+from drives.base import Drive, DriveCycle
 from drives.cia402 import POSITION_ACTUAL
 from haptic_bus.control.clock import CycleClock, VirtualClock
 from haptic_bus.control.cycle_loop import CycleLoop, RunSummary
@@ -69,7 +72,8 @@ class PositionIntegrator:
 class WallController(CycleLoop):
     """Renders a gated scene on ``drive`` every ``period`` s.
 
-    ``force_limit`` (N) saturates the wall force; ``clock`` is a :class:`VirtualClock` (default),
+    ``force_limit`` (N) saturates the wall force (the drive's clamp holds the torque target at it);
+    ``clock`` is a :class:`VirtualClock` (default),
     :class:`RealClock` or :class:`ScheduledClock`; ``record_capacity`` bounds the record;
     ``origin`` (m) is the handle's position at the first cycle; ``supervisor`` the policy (None: no supervision);
     ``ramp_time`` (s) scales the force from 0 to 1 over the first seconds (0: none; the caller
@@ -124,6 +128,9 @@ class WallController(CycleLoop):
         self.saturated_cycles = 0
         self.peak_force = 0.0
         self.stopped_on_error = False
+        limit = force_limit / scaling.newton_per_permille  # per mille: the drive's clamp holds targets within it
+        self.torque_limit = round(limit) if limit < 0x7FFF else None
+        self._cycle: DriveCycle | None = None  # the drive's cyclic phase while run() runs
 
     # ------------------------------------------------------------------ gated changes
 
@@ -176,24 +183,29 @@ class WallController(CycleLoop):
         ``lateness`` (s) is how late the cycle started (the clock's); an alarm the supervisor
         raises acts after the cycle is recorded.
         """
+        if self._cycle is None:
+            with self._cyclic():
+                self.step(lateness)
+            return
+        cycle = self._cycle
         entry: SceneEntry = self.scenes.adopt()  # one read: the whole accepted scene, never half of one
-        drive = self.drive
-        inputs = drive.read_inputs()
+        inputs = cycle.read()
         started = time.perf_counter()
         wall_clock = time.time()
-        scaling = drive.scaling
+        scaling = self.drive.scaling
         energy = self.port.account(inputs, scaling.position_per_count)
         v = inputs.velocity * scaling.velocity_per_count
         x = self.integrator.add(inputs.velocity)
         force = entry.scene.force(x, v)
         scale = 1.0 if self.cycles >= self.ramp_cycles else (self.cycles + 1) / self.ramp_cycles
         force *= scale
-        limit = self.force_limit
-        if force > limit or force < -limit:
-            force = limit if force > 0 else -limit
+        target = scaling.torque_permille(-force)  # the motor pushes against the wall
+        torque = cycle.saturate(target)
+        if torque != target:
             self.saturated_cycles += 1
-        torque = self.port.limit(scaling.torque_permille(-force))  # the motor pushes against the wall
-        drive.write_outputs(torque)
+            force = -torque * scaling.newton_per_permille  # the force asked of the drive
+        torque = self.port.limit(torque)
+        cycle.write(torque)
         compute = time.perf_counter() - started
         supervisor = self.supervisor
         late, alarm = supervisor.cycle(lateness, energy, inputs.age) if supervisor is not None else (False, None)
@@ -223,6 +235,16 @@ class WallController(CycleLoop):
                 logger.warning("supervisor: %s; derated (scene %d)", alarm.message, entry.scene_id)
                 return
         raise alarm.broken(assumed)
+
+    @contextlib.contextmanager
+    def _cyclic(self) -> Iterator[None]:
+        """The drive's cyclic phase, its clamp at this controller's torque limit, for the cycles run in it."""
+        with self.drive.cyclic(self.torque_limit) as cycle:
+            self._cycle = cycle
+            try:
+                yield
+            finally:
+                self._cycle = None
 
     def _disable(self) -> None:
         self.drive.disable()

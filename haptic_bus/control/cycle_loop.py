@@ -10,6 +10,7 @@ drive(s) disabled, the record kept, and the end in the summary (``exit_reason``)
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 from collections.abc import Callable, Sequence
@@ -89,6 +90,10 @@ class CycleLoop:
         """Disable the drive(s) (torque zero)."""
         raise NotImplementedError
 
+    def _cyclic(self) -> contextlib.AbstractContextManager[None]:
+        """The phase the cycles of one :meth:`run` share (a drive's cyclic phase; none by default)."""
+        return contextlib.nullcontext()
+
     def _summary(self, exit_reason: str, error: str | None, *, energy: float, least_energy: float, rounding_bound: float,
                  observer_active_cycles: int, layer: str, layer_interventions: int, compute: np.ndarray,
                  warnings: Sequence[str] = ()) -> RunSummary:
@@ -111,13 +116,14 @@ class CycleLoop:
         kept, and the end in the summary."""
         reason, error = "completed", None
         try:
-            for _ in range(cycles):
-                if stop is not None and stop.is_set():
-                    reason = "stopped"
-                    break
-                self.step(self.clock.wait_next(self.cycles))
-                if on_cycle is not None:
-                    on_cycle(self)
+            with self._cyclic():
+                for _ in range(cycles):
+                    if stop is not None and stop.is_set():
+                        reason = "stopped"
+                        break
+                    self.step(self.clock.wait_next(self.cycles))
+                    if on_cycle is not None:
+                        on_cycle(self)
         except DriveError as exc:
             reason, error = "drive error", str(exc)
             self.stopped_on_error = True
