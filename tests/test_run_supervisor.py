@@ -193,7 +193,8 @@ def test_a_torque_computed_from_a_missed_tpdo_is_a_late_cycle(
 
         monkeypatch.setattr(sim, "sync", sync_then_maybe_short)
         # the master waits out each dropped TPDO: 50 ms (the real-time default), not virtual time's 0.5 s
-        monkeypatch.setattr(runner, "VIRTUAL_TIME_CANOPEN_PATIENCE", {**runner.VIRTUAL_TIME_CANOPEN_PATIENCE, "tpdo_timeout": 0.05})
+        monkeypatch.setattr(runner, "VIRTUAL_TIME_CANOPEN_PATIENCE",
+                            {**runner.VIRTUAL_TIME_CANOPEN_PATIENCE, "tpdo_timeout": 0.05})
         result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "1", "--out", str(out))
     assert result.code == 3, result.err
     (line,) = result.err_lines
