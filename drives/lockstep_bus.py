@@ -135,7 +135,7 @@ class LockstepBus(can.BusABC):
         self._check_open()
         stamp = msg.timestamp if self.preserve_timestamps else time.time()
         channel = self._channel
-        inline = False
+        inline = []
         for bus in channel.buses:
             if bus is self and not self.receive_own_messages:
                 continue
@@ -147,9 +147,12 @@ class LockstepBus(can.BusABC):
             if bus._receiver is None:
                 bus._queue.put(copy)
             else:
-                channel.pending.append((bus, copy))
-                inline = True
+                inline.append((bus, copy))
+        # Only now may an inline receiver see the frame: a thread delivering concurrently could
+        # otherwise hand it over, and queue the answers, before a queue later in the list had it
+        # (measured: a sniffer saw a drive's TPDOs before the SYNC they answered, 1 run in 30).
         if inline:
+            channel.pending.extend(inline)
             channel.deliver()
 
     # ------------------------------------------------------------------ lifecycle

@@ -4,6 +4,7 @@ thread, bit-identical to python-can's threaded virtual bus and deterministic run
 
 from __future__ import annotations
 
+import queue
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager
@@ -152,6 +153,41 @@ def test_two_nodes_answering_each_other_from_their_own_threads_do_not_deadlock(p
         thread.join(JOIN)
     assert not any(thread.is_alive() for thread in threads), "deadlocked"
     assert counts["a"] + counts["b"] == 2 * (rounds // 200) * 201  # every frame of every ping-pong delivered
+
+
+class SlowToTakeSync(queue.Queue):
+    """A receive queue that takes 0.4 s to accept a SYNC (0x080)."""
+
+    def put(self, item: can.Message, block: bool = True, timeout: float | None = None) -> None:
+        if item.arbitration_id == 0x080:
+            threading.Event().wait(0.4)
+        super().put(item, block, timeout)
+
+
+def test_every_queue_has_a_frame_before_any_inline_receiver_can_answer_it(channel: str) -> None:
+    """The order a sniffer sees is the order of cause and effect, even while another thread is
+    delivering on the channel: a drive (inline) answers SYNC 0x080 with TPDO 0x185; a slow node
+    (inline) keeps a second thread inside its receiver for 0.2 s; the sniffer (a queue) takes
+    0.4 s to accept the SYNC.  The drive may only see the SYNC once the sniffer has it."""
+    drive, slow, sniffer, master = (LockstepBus(channel=channel) for _ in range(4))
+    inside = threading.Event()
+    drive.set_receiver(lambda msg: drive.send(frame(0x185)) if msg.arbitration_id == 0x080 else None)
+    slow.set_receiver(lambda msg: (inside.set(), threading.Event().wait(0.2)) if msg.arbitration_id == 0x700 else None)
+    sniffer._queue = SlowToTakeSync()  # type: ignore[assignment]
+    try:
+        busy = threading.Thread(target=master.send, args=(frame(0x700, b"\x05"),))  # delivered by this thread, slowly
+        busy.start()
+        assert inside.wait(JOIN)
+        master.send(frame(0x080))  # the busy thread delivers it to the drive when the slow node returns
+        busy.join(JOIN)
+        for _ in range(100):  # the drive's answer, bounded
+            if sniffer._queue.qsize() >= 3:
+                break
+            threading.Event().wait(0.01)
+        assert [sniffer.recv(0.0).arbitration_id for _ in range(3)] == [0x700, 0x080, 0x185]  # type: ignore[union-attr]
+    finally:
+        for bus in (drive, slow, sniffer, master):
+            bus.shutdown()
 
 
 # ----------------------------------------------------------------------------- drive and controller on it
