@@ -225,6 +225,31 @@ def test_the_drive_serves_the_controller_in_the_controllers_thread() -> None:
     assert threads == {threading.get_ident()}
 
 
+def test_a_drive_may_be_handed_a_sync_by_the_thread_that_sends_for_it(channel: str) -> None:
+    """The simulated drive's timer thread sends its heartbeat under the node's send lock; on this
+    bus that send may deliver the master's pending SYNC to the same node, which answers with its
+    TPDO from inside the send.  The lock must let it (a plain Lock deadlocked that thread)."""
+    from sim_drive.canopen.slave import CanopenSimDrive
+
+    master = LockstepBus(channel=channel)
+    sim = CanopenSimDrive({"interface": "lockstep", "channel": channel}, 5).start()
+    try:
+        master.send(frame(0x000, bytes([0x01, 5])))  # NMT start: its synchronous TPDOs answer SYNCs
+        done = threading.Event()
+
+        def send_under_the_nodes_lock() -> None:
+            with sim._network.send_lock:  # type: ignore[union-attr]  # what its heartbeat holds
+                master.send(frame(0x080))  # delivered in this thread: the node answers inside
+            done.set()
+
+        threading.Thread(target=send_under_the_nodes_lock, daemon=True).start()
+        assert done.wait(JOIN), "the node's send deadlocked"
+        assert 0x185 in [m.arbitration_id for m in iter(lambda: master.recv(0.0), None)]
+    finally:
+        sim.stop()
+        master.shutdown()
+
+
 def test_trajectories_are_bit_identical_to_the_threaded_virtual_bus_and_run_to_run() -> None:
     # The same plant, controller and frames; only who carries the frames differs: == , no tolerance.
     lockstep = _trajectory("lockstep", 3_000)

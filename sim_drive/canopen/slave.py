@@ -105,6 +105,11 @@ class _SlaveNetwork(canopen.Network):
     def __init__(self, bus: can.BusABC, slave: CanopenSimDrive) -> None:
         super().__init__(bus)
         self._slave = slave
+        # Re-entrant, as drives.lockstep_bus asks of a lock held while sending: on the lock-step
+        # bus the thread that sends (a heartbeat, under this lock) may deliver the master's SYNC
+        # to this very node, whose TPDO is then sent from inside that send.  A plain Lock
+        # deadlocked that thread (measured: 1 multi-axis demo in 8 beside three CPU hogs).
+        self.send_lock = threading.RLock()  # type: ignore[assignment]
 
     def send_message(self, can_id: int, data: bytes | bytearray | list[int], remote: bool = False) -> None:
         """Send unless the slave is silent."""
