@@ -7,23 +7,20 @@ what ``LocalNode`` lacks: PDOs that follow SDO remapping (:mod:`~sim_drive.canop
 heartbeat producer, consumer and RPDO deadlines (:mod:`~sim_drive.canopen.timers`), EMCY and
 the error register (:mod:`~sim_drive.canopen.emergency`), and fault injection.
 
-One receive thread owns the bus and every timer: it blocks in ``bus.recv`` until the next
-frame or due time, handles SYNC and RPDOs directly (the hot path), everything else through
-canopen's dispatcher.  On a lock-step bus (:mod:`drives.lockstep_bus`) the frames are handed
-to the node in the sender's thread, so a master in the same process gets its TPDO before its
-SYNC ``send`` returns; the thread keeps only the timers (wall clock: they guard against a dead
-peer, never pace the plant).  No frame can stop it: an unusable frame is counted and dropped,
-a receive error counted, and if the bus keeps failing the node stops its heartbeat and faults
-the drive, so it never says it is alive while it cannot serve.
+One receive thread owns the bus and every timer: it blocks in ``bus.recv`` until the next frame
+or due time, handles SYNC and RPDOs directly (the hot path), the rest through canopen's
+dispatcher.  On a lock-step bus (:mod:`drives.lockstep_bus`) frames reach the node in the
+sender's thread (a master in the process has its TPDO when its SYNC ``send`` returns); the
+thread keeps only the timers (wall clock: they guard against a dead peer, never pace the plant).
+No frame can stop it: an unusable frame is counted and dropped, a receive error counted, and if
+the bus keeps failing the node stops its heartbeat and faults the drive.
 
-- NMT: boot-up message then PRE-OPERATIONAL on :meth:`start`; the boot-up counts as the first
-  heartbeat, then one every 0x1017 ms; SDO in PRE-OPERATIONAL and OPERATIONAL; PDOs only in
-  OPERATIONAL; nothing but NMT (and the heartbeat) in STOPPED, no EMCY either; reset node
-  restores the drive's power-on values and the manufacturer area, reset communication the
-  EDS values of 0x1000..0x1FFF, and both boot again.
-- SYNC (COB-ID 0x1005, 0 data bytes) in PRE-OPERATIONAL and OPERATIONAL: one drive SYNC (the
-  plant advances ``T``, or the time since the last SYNC with a wall sync clock); a SYNC of
-  another length is not used (EMCY 0x8240).
+- NMT: boot-up then PRE-OPERATIONAL on :meth:`start` (the boot-up is the first heartbeat, then
+  one every 0x1017 ms); SDO in PRE-OPERATIONAL and OPERATIONAL; PDOs only in OPERATIONAL; only
+  NMT and the heartbeat in STOPPED; reset node restores the power-on values and the manufacturer
+  area, reset communication the EDS values of 0x1000..0x1FFF, and both boot again.
+- SYNC (COB-ID 0x1005, 0 data bytes) in PRE-OPERATIONAL and OPERATIONAL: one drive SYNC (the plant
+  advances ``T``, or the time since the last SYNC with a wall clock); another length: EMCY 0x8240.
 - Abort connection (0x6007 applied by the drive, CiA 402): the master's heartbeat lost
   (0x1016, EMCY 0x8130), an RPDO deadline missed (0x1400+n sub 5, EMCY 0x8250), or NMT taking
   the node out of OPERATIONAL while the power stage is on (0x8100).
@@ -105,10 +102,8 @@ class _SlaveNetwork(canopen.Network):
     def __init__(self, bus: can.BusABC, slave: CanopenSimDrive) -> None:
         super().__init__(bus)
         self._slave = slave
-        # Re-entrant, as drives.lockstep_bus asks of a lock held while sending: on the lock-step
-        # bus the thread that sends (a heartbeat, under this lock) may deliver the master's SYNC
-        # to this very node, whose TPDO is then sent from inside that send.  A plain Lock
-        # deadlocked that thread (measured: 1 multi-axis demo in 8 beside three CPU hogs).
+        # Re-entrant (drives.lockstep_bus): a heartbeat sent under it may deliver the master's SYNC
+        # to this node, whose TPDO is then sent inside that send; a plain Lock deadlocked there.
         self.send_lock = threading.RLock()  # type: ignore[assignment]
 
     def send_message(self, can_id: int, data: bytes | bytearray | list[int], remote: bool = False) -> None:
