@@ -103,6 +103,10 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    # The longest tests first (stable: each set keeps its order), so that on pytest-xdist's
+    # workers they start at once and the short ones fill in around them, instead of one long
+    # test starting late and leaving the other worker idle at the end.
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
     if vcan0_exists():
         return
     skip = pytest.mark.skip(reason=VCAN0_REASON)

@@ -18,6 +18,8 @@ from haptic_bus.bench import BENCH_EXTRA, SECTIONS, build_parser, main, run_benc
 from haptic_bus.bench.size import FULL, QUICK, SMOKE
 from haptic_bus.bench.timing import REPEATS, Spread, paired, time_per_call
 
+pytestmark = pytest.mark.slow  # the smoke bench behind these tests takes 40-100 s
+
 SmokeRun = tuple[Path, dict[str, Any]]
 REPO = Path(__file__).resolve().parents[1]
 

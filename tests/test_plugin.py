@@ -53,6 +53,7 @@ def test_the_teardown_stopped_the_run_then_the_drive(recorded_run):
 '''
 
 
+@pytest.mark.slow
 def test_the_readme_example_and_the_teardown_pass_in_a_pytest_of_their_own(tmp_path: pathlib.Path) -> None:
     (tmp_path / "test_readme_example.py").write_text(readme_plugin_example())
     (tmp_path / "test_teardown.py").write_text(TEARDOWN_CHECK)

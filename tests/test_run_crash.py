@@ -22,6 +22,7 @@ from typing import Any
 
 import can
 import numpy as np
+import pytest
 
 from haptic_bus.app.cli import main
 from haptic_bus.app.run_folder import read_run_folder
@@ -81,6 +82,7 @@ def _check_trial(out: Path, killed: float) -> dict[str, Any]:
     return {"cycles": cycles, "gap_s": gap, "frames": len(frames), "syncs": syncs, "torn": record.torn_line}
 
 
+@pytest.mark.slow
 def test_kill_9_at_random_moments_keeps_every_cycle_but_the_last_0_2_s(multicast: tuple[str, int], sim_process: Any,
                                                                        tmp_path: Path, capsys: Any) -> None:
     group, port = multicast

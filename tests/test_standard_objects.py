@@ -319,6 +319,7 @@ def _run(profile: Profile, od: str, tmp: Path, channel: str) -> RunResult:
     return result
 
 
+@pytest.mark.slow
 def test_the_standard_path_closes_the_same_loop_as_the_haptic_one(channel: str, tmp_path: Path) -> None:
     """seed-ideal for 1 s of virtual time, the operator's 1 N step at 0.1 s: the same record,
     column for column (time, position, velocity, wall force, torque, energy, scene, scale, late).
@@ -354,6 +355,7 @@ def test_the_standard_path_closes_the_same_loop_as_the_haptic_one(channel: str, 
     assert json.loads((tmp_path / "haptic" / "run.json").read_text())["scaling"]["sources"]["position_per_count"] != "0x60A8"
 
 
+@pytest.mark.slow
 def test_haptic_bus_run_drives_haptic_bus_sim_od_standard_in_two_processes(
         multicast: tuple[str, int], sim_process: Callable[..., Any], tmp_path: Path) -> None:
     group, port = multicast
