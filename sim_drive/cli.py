@@ -146,7 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
 # --------------------------------------------------------------------------- the hidden truth, the operator, python-can's
 # spelling of bus options, the version: the command line over the profile (issue 20)
 
-_TRUTH_FLAGS = {"mass": "m", "friction": "b", "coulomb": "coulomb_friction", "velocity_noise": "velocity_noise",
+_TRUTH_FLAGS = {"mass": "mass", "friction": "friction", "coulomb": "coulomb_friction", "velocity_noise": "velocity_noise",
                 "noise_seed": "noise_seed"}  # argparse dest -> DeviceParameters field
 
 

@@ -170,7 +170,7 @@ class Handle:
         """Take new plant parameters, measurement ``meter`` (None: point) and the fraction ``switch``
         of the period at which a new motor force takes over (0: at the SYNC); the handle keeps its
         velocity and position."""
-        m, b, period, substeps = parameters.m, parameters.b, parameters.period, parameters.substeps
+        m, b, period, substeps = parameters.mass, parameters.friction, parameters.period, parameters.substeps
         self._m, self._b, self._period = m, b, period
         self._coulomb = parameters.coulomb_friction
         self._track = meter.track if meter is not None else None

@@ -5,8 +5,8 @@ Defaults (the seed's device on a typical servo drive):
 =======================  ============  ==============================================
 field                    default       meaning
 =======================  ============  ==============================================
-``m``                    0.5 kg        handle mass
-``b``                    0.1 N s/m     viscous friction
+``mass``                 0.5 kg        handle mass ``m``
+``friction``             0.1 N s/m     viscous friction ``b``
 ``period``               1 ms          SYNC period ``T`` (0x1006 = 1000 us)
 ``velocity_per_count``   1e-6 m/s      one 0x606C velocity unit at the handle
 ``position_per_count``   1e-7 m        one 0x6064 increment at the handle
@@ -84,8 +84,8 @@ class Timing(enum.Enum):
 class DeviceParameters:
     """The simulated drive's plant, scaling, measurement and truth, in SI units (see the module table)."""
 
-    m: float = 0.5
-    b: float = 0.1
+    mass: float = 0.5
+    friction: float = 0.1
     period: float = 1e-3
     velocity_per_count: float = 1e-6
     position_per_count: float = 1e-7
@@ -102,8 +102,8 @@ class DeviceParameters:
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         ctx = "simulated drive"
-        set_(self, "m", real_in_range("m", self.m, *MASS_RANGE, unit="kg", context=ctx))
-        set_(self, "b", real_in_range("b", self.b, *FRICTION_RANGE, unit="N s/m", context=ctx))
+        set_(self, "mass", real_in_range("mass", self.mass, *MASS_RANGE, unit="kg", context=ctx))
+        set_(self, "friction", real_in_range("friction", self.friction, *FRICTION_RANGE, unit="N s/m", context=ctx))
         set_(self, "period", real_in_range("period", self.period, *PERIOD_RANGE, unit="s", context=ctx))
         for name, unit in (("velocity_per_count", "m/s"), ("position_per_count", "m"), ("force_per_torque", "N/(N m)")):
             value = real_in_range(name, getattr(self, name), *SCALE_RANGE, low_inclusive=False, unit=unit, context=ctx)

@@ -30,14 +30,14 @@ from sim_drive.parameters import DEFAULT_RECEPTION_DELAY, DeviceParameters, Timi
 
 _DEFAULTS = DeviceParameters()
 SILENT = Silent(
-    device={"mass": _DEFAULTS.m, "friction": _DEFAULTS.b, "friction_source": "the simulated drive's default",
+    device={"mass": _DEFAULTS.mass, "friction": _DEFAULTS.friction, "friction_source": "the simulated drive's default",
             "velocity_per_count": _DEFAULTS.velocity_per_count, "position_per_count": _DEFAULTS.position_per_count,
             "rated_torque": _DEFAULTS.rated_torque, "force_per_torque": _DEFAULTS.force_per_torque,
             "max_torque_permille": _DEFAULTS.max_torque_permille, "velocity": _DEFAULTS.velocity},
     loop={"period": _DEFAULTS.period, "timing": Timing.CIA402.value, "delay": DEFAULT_RECEPTION_DELAY})
 """What the drive takes where a profile is silent: :class:`DeviceParameters`' defaults, cia402 timing
 (a "reception" delay of :data:`DEFAULT_RECEPTION_DELAY` samples)."""
-_PROFILE_KEYS = {"m": "device.mass", "b": "device.friction", "period": "loop.period", "reception_delay": "loop.delay"}
+_PROFILE_KEYS = {"period": "loop.period", "reception_delay": "loop.delay"}
 """DeviceParameters field -> the profile key that sets it (where the names differ)."""
 
 

@@ -111,7 +111,7 @@ def make_meter(parameters: DeviceParameters, previous: Meter | None, velocity: f
         return WindowMeter(window, parameters.period)
     if model.kind == "lowpass":
         nu = previous.nu if isinstance(previous, LowpassMeter) else velocity
-        return LowpassMeter(model.time, parameters.m, parameters.b, nu)
+        return LowpassMeter(model.time, parameters.mass, parameters.friction, nu)
     return None
 
 

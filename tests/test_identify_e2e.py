@@ -37,7 +37,7 @@ NODE = 5
 SIGMAS = 4.0
 START_WAIT = 30.0  # s: a process imports numpy/scipy/canopen before it answers
 RUN_WAIT = 120.0  # s: 5 s of excitation in lock-step over udp_multicast takes about 5-10 s; room for a loaded machine
-HIDDEN = dict(m=0.37, b=2.9, coulomb_friction=0.2, velocity_noise=1000.0, noise_seed=21)
+HIDDEN = dict(mass=0.37, friction=2.9, coulomb_friction=0.2, velocity_noise=1000.0, noise_seed=21)
 
 def controller_profile(folder: Path, force_limit: float = 5.0) -> Path:
     """The controller's profile in ``folder``: what it believes, not the drive's truth."""

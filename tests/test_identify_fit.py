@@ -103,13 +103,13 @@ def within(estimate: float, stderr: float, truth: float) -> bool:
 # --------------------------------------------------------------------------- the hidden plants
 
 HIDDEN = {  # name: truth, timing, the controller's mass, force limit N, the delay the fit must find
-    "handle-cia402": (DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, velocity_noise=1000, noise_seed=1),
+    "handle-cia402": (DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2, velocity_noise=1000, noise_seed=1),
                       "cia402", 0.5, 5.0, 1),
-    "handle-ideal": (DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, velocity_noise=1000, noise_seed=2),
+    "handle-ideal": (DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2, velocity_noise=1000, noise_seed=2),
                      "ideal", 0.5, 5.0, 0),
-    "desktop": (DeviceParameters(m=0.05, b=0.3, coulomb_friction=0.05, velocity_noise=1000, noise_seed=3),
+    "desktop": (DeviceParameters(mass=0.05, friction=0.3, coulomb_friction=0.05, velocity_noise=1000, noise_seed=3),
                 "cia402", 0.08, 3.3, 1),
-    "industrial": (DeviceParameters(m=1.0, b=20.0, coulomb_friction=0.5, velocity_noise=300, noise_seed=4,
+    "industrial": (DeviceParameters(mass=1.0, friction=20.0, coulomb_friction=0.5, velocity_noise=300, noise_seed=4,
                                     position_per_count=1.2e-7, velocity_per_count=1.2e-7, rated_torque=0.32,
                                     max_torque_permille=2000), "cia402", 1.5, 30.0, 1),
 }
@@ -123,11 +123,11 @@ def test_hidden_plants_are_found_within_the_bounds_and_their_standard_errors(nam
     assert found.supported and fit is not None, [f.message for f in found.findings]
     assert found.record.excitation_seconds == pytest.approx(DURATION) and found.record.excitation_seconds < 30.0
     assert not session.left_envelope and found.record.saturated == 0
-    assert abs(fit.mass.value / truth.m - 1) < 0.03 and within(fit.mass.value, fit.mass.stderr, truth.m)
-    assert abs(fit.friction.value / truth.b - 1) < 0.05 and within(fit.friction.value, fit.friction.stderr, truth.b)
+    assert abs(fit.mass.value / truth.mass - 1) < 0.03 and within(fit.mass.value, fit.mass.stderr, truth.mass)
+    assert abs(fit.friction.value / truth.friction - 1) < 0.05 and within(fit.friction.value, fit.friction.stderr, truth.friction)
     assert within(fit.coulomb.value, fit.coulomb.stderr, truth.coulomb_friction)
     assert fit.whole_delay == delay and within(fit.delay.value, fit.delay.stderr, delay)
-    assert fit.friction_low <= truth.b and fit.delay_high >= delay  # the gate's ends are on the safe side
+    assert fit.friction_low <= truth.friction and fit.delay_high >= delay  # the gate's ends are on the safe side
     # the residual is the encoder's rounding and nothing else: within 5 % of its rms (n > 10^4 equations)
     assert fit.residual_rms == pytest.approx(fit.quantization_rms, rel=0.05)
     assert fit.residual_correlation <= fit.correlation_bound
@@ -137,14 +137,15 @@ def test_hidden_plants_are_found_within_the_bounds_and_their_standard_errors(nam
 def test_a_fraction_of_a_sample_is_resolved() -> None:
     """A drive applying the target 0.3 T after the SYNC: D = 0.3 to within 0.01 samples; the fit's
     standard error (about 3e-4 samples) says it is resolved far below the 0.05 required."""
-    truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, velocity_noise=1000, noise_seed=5, reception_delay=0.3)
+    truth = DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2, velocity_noise=1000, noise_seed=5,
+                             reception_delay=0.3)
     _, found = identify_simulated(truth, "reception", mass=0.5, force_limit=5.0)
     fit = found.fit
     assert found.supported and fit is not None
     assert fit.fraction_resolved and fit.whole_delay is None and fit.delay.stderr < 0.002
     assert abs(fit.delay.value - 0.3) < 0.01 and within(fit.delay.value, fit.delay.stderr, 0.3)
     assert 0.3 <= fit.delay_high < 0.31
-    assert abs(fit.mass.value / truth.m - 1) < 0.03 and abs(fit.friction.value / truth.b - 1) < 0.05
+    assert abs(fit.mass.value / truth.mass - 1) < 0.03 and abs(fit.friction.value / truth.friction - 1) < 0.05
 
 
 @pytest.mark.parametrize(("model", "timing"), [("point", "cia402"), ("average", "ideal"), ("lowpass:0.002", "cia402")])
@@ -153,7 +154,7 @@ def test_the_velocity_check_names_the_model_the_drive_reports(model: str, timing
     one; a declared other model is contradicted, the right one matches (a filter constant within
     5 %: the fitted one sits within 1 % of 2 ms here); the longest credible filter constant is not
     shorter than the truth's."""
-    truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, velocity_noise=1000, noise_seed=6,
+    truth = DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2, velocity_noise=1000, noise_seed=6,
                              velocity=VelocityModel.parse(model))
     wrong = "average" if model == "point" else "point"
     _, found = identify_simulated(truth, timing, mass=0.5, force_limit=5.0, duration=10.0, declared=wrong)
@@ -174,7 +175,7 @@ def test_the_velocity_check_names_the_model_the_drive_reports(model: str, timing
 
 def test_a_handle_against_a_stiff_stop_is_refused_before_any_excitation() -> None:
     """A stop of 10^5 N/m at the start: 20 N moves it 0.2 mm, where a free handle moves 1 mm."""
-    truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2)
+    truth = DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2)
     session, found = identify_simulated(truth, "cia402", mass=0.5, force_limit=20.0, operator=HandModel(1e5, 50.0))
     assert session.refused and not found.supported and found.fit is None
     assert "not free to move towards +x" in found.probe.message and "blocked" in found.probe.message
@@ -183,7 +184,7 @@ def test_a_handle_against_a_stiff_stop_is_refused_before_any_excitation() -> Non
 
 def test_a_handle_held_by_a_spring_is_refused() -> None:
     """500 N/m holding the handle: it moves, but springs back when the push ends."""
-    truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2)
+    truth = DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2)
     session, found = identify_simulated(truth, "cia402", mass=0.5, force_limit=20.0, operator=HandModel(500.0, 5.0))
     assert session.refused and "springs back" in found.probe.message and not found.supported
 
@@ -191,7 +192,7 @@ def test_a_handle_held_by_a_spring_is_refused() -> None:
 def test_a_force_limit_barely_above_coulomb_friction_cannot_support_the_estimate() -> None:
     """0.3 N against 0.2 N of Coulomb friction: the probe moves the handle (it is free), but the
     excitation (at most 0.7 x 0.3 N) leaves it stuck nearly all the time."""
-    truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, noise_seed=7)
+    truth = DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2, noise_seed=7)
     session, found = identify_simulated(truth, "cia402", mass=0.5, force_limit=0.3, duration=10.0)
     assert not session.refused and not found.supported
     blocking = {f.topic for f in found.findings if f.blocks}
@@ -200,7 +201,7 @@ def test_a_force_limit_barely_above_coulomb_friction_cannot_support_the_estimate
 
 def test_too_little_travel_for_the_encoder_cannot_support_the_estimate() -> None:
     """0.2 mm per increment: the handle moves a fraction of an increment per cycle."""
-    truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, position_per_count=2e-4, noise_seed=8)
+    truth = DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2, position_per_count=2e-4, noise_seed=8)
     _, found = identify_simulated(truth, "cia402", mass=0.5, force_limit=5.0, travel=0.02, duration=5.0)
     assert not found.supported and any(f.topic == "travel" and f.blocks for f in found.findings)
 
@@ -219,12 +220,12 @@ def test_cycles_without_fresh_inputs_are_left_out() -> None:
     to within a tenth of a standard error: the mark makes sure, and tells."""
     from haptic_bus.identify import fit_plant
 
-    truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, noise_seed=9)
+    truth = DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2, noise_seed=9)
     _, found = identify_simulated(truth, "cia402", mass=0.5, force_limit=5.0, duration=10.0, stale_every=500)
     fit = found.fit
     stale = int(np.count_nonzero(~found.record.fresh))
     assert stale > 15 and fit is not None and found.supported
-    assert within(fit.mass.value, fit.mass.stderr, truth.m) and within(fit.friction.value, fit.friction.stderr, truth.b)
+    assert within(fit.mass.value, fit.mass.stderr, truth.mass) and within(fit.friction.value, fit.friction.stderr, truth.friction)
     assert fit.residual_rms == pytest.approx(fit.quantization_rms, rel=0.05)
     assert any(f.topic == "stale" and str(stale) in f.message for f in found.findings)
     unmarked = fit_plant(dataclasses.replace(found.record, fresh=np.ones(found.record.cycles, dtype=bool)))
@@ -239,12 +240,12 @@ def test_the_model_is_exact_against_the_simulated_drive() -> None:
     """With an encoder of 1e-12 m the equations' residuals at the true plant are rounding of the
     doubles alone (Coulomb friction, a fractional delay, sticking excluded by the mask): below 1e-6
     of the increments they relate, where one increment of a 1e-7 m encoder would be 1e5 times it."""
-    truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, position_per_count=1e-12, reception_delay=0.3)
+    truth = DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2, position_per_count=1e-12, reception_delay=0.3)
     _, found = identify_simulated(truth, "reception", mass=0.5, force_limit=5.0, duration=3.0, travel=0.01)
     record = found.record
     usable = usable_equations(record)
     equations = IncrementEquations(record, 0, usable)
-    residuals = equations.residuals(truth.m, truth.b, truth.coulomb_friction, 0.3)
+    residuals = equations.residuals(truth.mass, truth.friction, truth.coulomb_friction, 0.3)
     steps = np.abs(np.diff(record.position_counts.astype(float)))
     assert usable.sum() > 1000
     assert np.max(np.abs(residuals)) < 1e-6 * np.sqrt(np.mean(steps**2))
@@ -286,7 +287,7 @@ def test_the_doublet_mass_cancels_friction(mass: float, coulomb: float, b: float
         return
     from sim_drive.handle import Handle
 
-    handle = Handle(DeviceParameters(m=mass, b=b, coulomb_friction=coulomb, period=1e-5))
+    handle = Handle(DeviceParameters(mass=mass, friction=b, coulomb_friction=coulomb, period=1e-5))
     while handle.position < pushed:
         handle.advance(force, force)
     speed, covered = handle.velocity, handle.position
@@ -312,15 +313,15 @@ def _plausible_plant(mass: float, time_constant: float, coulomb_share: float, de
                      resolution: float, believed: float) -> None:
     timing, truth_delay = delay
     force_limit = 10.0 * mass
-    truth = DeviceParameters(m=mass, b=mass / time_constant, coulomb_friction=coulomb_share * force_limit,
+    truth = DeviceParameters(mass=mass, friction=mass / time_constant, coulomb_friction=coulomb_share * force_limit,
                              position_per_count=resolution, reception_delay=truth_delay if timing == "reception" else 0.25,
                              max_torque_permille=30000, rated_torque=0.001 * math.ceil(force_limit * 2.0))
     session, found = identify_simulated(truth, timing, mass=mass * believed, force_limit=force_limit, duration=10.0)
     assert not session.refused, found.probe.message  # every plant here is a free handle
     fit = found.fit
     assert fit is not None, [f.message for f in found.findings]
-    assert within(fit.mass.value, fit.mass.stderr, truth.m)
-    assert within(fit.friction.value, fit.friction.stderr, truth.b)
+    assert within(fit.mass.value, fit.mass.stderr, truth.mass)
+    assert within(fit.friction.value, fit.friction.stderr, truth.friction)
     assert within(fit.coulomb.value, fit.coulomb.stderr, truth.coulomb_friction)
     slack = BOUND_BIAS if truth_delay == 0.0 else 0.0
     assert abs(fit.delay.value - truth_delay) <= SIGMAS * fit.delay.stderr + slack
@@ -370,7 +371,7 @@ def test_the_written_profile_keeps_the_layout_and_never_claims_more_than_was_mea
     from haptic_bus.app.profiles import load_profile, shipped_profiles
 
     source = shipped_profiles()["cia402-handle"]
-    truth = DeviceParameters(m=1.0, b=20.0, coulomb_friction=0.5, position_per_count=1.2e-7, velocity_per_count=1.2e-7,
+    truth = DeviceParameters(mass=1.0, friction=20.0, coulomb_friction=0.5, position_per_count=1.2e-7, velocity_per_count=1.2e-7,
                              rated_torque=0.32, max_torque_permille=2000, velocity=VelocityModel.parse("average"))
     _, found = identify_simulated(truth, "ideal", mass=1.0, force_limit=30.0, duration=10.0, declared="average")
     assert found.supported and found.fit is not None and found.fit.whole_delay == 0

@@ -61,7 +61,8 @@ def seed_rig(request):
     rigs = []
 
     def make(operator, timing="ideal"):
-        server = ModbusSimServer(timing=timing, operator=operator, parameters=DeviceParameters(m=M, b=B_FRICTION, period=T))
+        server = ModbusSimServer(timing=timing, operator=operator,
+                                 parameters=DeviceParameters(mass=M, friction=B_FRICTION, period=T))
         server.start()
         drive = ModbusDrive("127.0.0.1", server.port, cycle=request.param, timeout=2.0, with_position=True,
                             safety=VIRTUAL_TIME_SAFETY)
@@ -131,7 +132,7 @@ def test_force_step_response_is_the_analytic_discrete_loop(seed_rig) -> None:
 def test_torque_acts_when_the_canopen_simulator_would(timing: str, first_moving_sample: int, cycle: str) -> None:
     """A 1000 per mille (10 N) pulse written in cycle 0: ``ideal`` shows it in sample 1, ``cia402``
     (latched at the next SYNC, like a synchronous drive) in sample 2, as on CANopen."""
-    with ModbusSimServer(timing=timing, parameters=DeviceParameters(m=M, b=B_FRICTION, period=T)) as server:
+    with ModbusSimServer(timing=timing, parameters=DeviceParameters(mass=M, friction=B_FRICTION, period=T)) as server:
         with ModbusDrive("127.0.0.1", server.port, cycle=cycle, timeout=2.0, safety=VIRTUAL_TIME_SAFETY) as drive:
             drive.connect()
             assert loop_delay(drive, T) == {"ideal": 0, "cia402": 1}[timing]
@@ -160,7 +161,7 @@ def test_poll_timing_on_loopback_gives_the_fractional_delay_of_its_round_trip() 
 
 def test_a_simulated_drive_with_reception_timing_announces_its_fractional_delay() -> None:
     """Registers 0x0050 (timing 2) and 0x0060 (delta): the gate judges with D = 0.3 samples."""
-    parameters = DeviceParameters(m=M, b=B_FRICTION, period=T, reception_delay=0.3)
+    parameters = DeviceParameters(mass=M, friction=B_FRICTION, period=T, reception_delay=0.3)
     with ModbusSimServer(timing="reception", parameters=parameters) as server, \
             ModbusDrive("127.0.0.1", server.port, timeout=2.0, safety=VIRTUAL_TIME_SAFETY) as drive:
         drive.connect()

@@ -101,7 +101,7 @@ def test_an_in_process_drive_is_built_from_the_truth_file(haptic_sim) -> None:
     drive = haptic_sim("seed-ideal", interface="lockstep", mass=0.8, velocity_noise=3.0, noise_seed=7, timing="cia402")
     assert drive.process is None and drive.sim is not None and drive.truth is not None
     parameters = drive.sim.drive.parameters
-    assert (parameters.m, parameters.b, parameters.velocity_noise, parameters.noise_seed) == (0.8, 0.1, 3.0, 7)
+    assert (parameters.mass, parameters.friction, parameters.velocity_noise, parameters.noise_seed) == (0.8, 0.1, 3.0, 7)
     assert drive.sim.drive.handle.operator.level == 1.0  # seed-ideal's own operator: a 1 N step
     assert drive.truth.name.startswith("seed-ideal-truth-") and "mass = 0.8" in drive.truth.read_text()
 

@@ -72,7 +72,7 @@ def test_the_simulator_fills_what_a_profile_leaves_out_and_takes_an_identified_d
     bare = tmp_path / "bare.toml"
     bare.write_text('[device]\nmass = 0.8\n')
     drive = load_drive_profile(bare)
-    assert drive.parameters == DeviceParameters(m=0.8) and drive.timing is None
+    assert drive.parameters == DeviceParameters(mass=0.8) and drive.timing is None
     # identify --write-profile writes the largest credible delay: above cia402's own sample, still a cia402 drive
     path = _variant(tmp_path, 'timing = "cia402"', 'timing = "cia402"\ndelay = 1.3')
     assert read_profile(path).loop.delay == 1.3 and load_drive_profile(path).timing is Timing.CIA402
@@ -110,5 +110,5 @@ def test_both_views_of_a_multi_axis_profile_refuse_a_bad_axis_with_the_same_line
     assert lines[0] == lines[1]
     truth = load_axes_device("gantry-3d")
     believed = read_axes_profile("gantry-3d")
-    assert [(a.name, a.node_id, a.parameters.m, a.parameters.b) for a in truth.axes] == [
+    assert [(a.name, a.node_id, a.parameters.mass, a.parameters.friction) for a in truth.axes] == [
         (a.name, a.node_id, a.device.mass, a.device.friction) for a in believed.axes]

@@ -67,10 +67,10 @@ def test_remote_node_reads_identity_and_manufacturer_objects(sim: CanopenSimDriv
     assert remote.sdo[0x1018][2].raw == 0x48415054
     assert remote.sdo[0x2000][1].raw == 0.5
     remote.sdo[0x2000][2].raw = 0.25
-    assert sim.drive.parameters.b == 0.25
+    assert sim.drive.parameters.friction == 0.25
     with pytest.raises(canopen.SdoAbortedError) as info:
         remote.sdo[0x2000][1].raw = -1.0
-    assert info.value.code == 0x06090030 and sim.drive.parameters.m == 0.5
+    assert info.value.code == 0x06090030 and sim.drive.parameters.mass == 0.5
     with pytest.raises(canopen.SdoAbortedError) as info:
         remote.sdo[0x6041].raw = 0
     assert info.value.code == 0x06010002

@@ -121,7 +121,8 @@ def test_profile_tables(tmp_path: pathlib.Path) -> None:
     )
     profile = load_profile(path)
     parameters = profile.parameters
-    assert (parameters.m, parameters.b, parameters.rated_torque_mnm, parameters.max_torque_permille) == (0.8, 2.0, 500, 1500)
+    assert (parameters.mass, parameters.friction, parameters.rated_torque_mnm, parameters.max_torque_permille) == (
+        0.8, 2.0, 500, 1500)
     assert parameters.period == 0.002 and profile.timing is Timing.IDEAL
     assert profile.operator == HandModel(250.0, 3.0)
     path.write_text("[device]\nm = 1.0\n")

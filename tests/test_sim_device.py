@@ -13,7 +13,7 @@ from sim_drive.device import ObjectAccessError, SimulatedDrive
 from sim_drive.operator import ConstantPush, Sinusoid
 from sim_drive.parameters import DeviceParameters, Timing
 
-P = DeviceParameters()  # m 0.5 kg, b 0.1 N s/m, T 1 ms, 1e-6 m/s per count, 10 mN per per-mille
+P = DeviceParameters()  # mass 0.5 kg, friction 0.1 N s/m, T 1 ms, 1e-6 m/s per count, 10 mN per per-mille
 
 
 def walk(drive: SimulatedDrive, *commands: Command) -> None:
@@ -154,7 +154,7 @@ def test_constant_torque_step_is_the_exact_first_order_response(timing: Timing) 
     for k in range(1, 400):
         drive.sync()
         n = max(k - shift, 0)
-        exact = force / P.b * -math.expm1(-P.b * n * P.period / P.m)
+        exact = force / P.friction * -math.expm1(-P.friction * n * P.period / P.mass)
         # quantisation to the nearest count: within half a count (plus double rounding)
         assert abs(drive.velocity_counts * P.velocity_per_count - exact) <= 0.5 * P.velocity_per_count * (1 + 1e-9)
         assert drive.velocity == pytest.approx(exact, rel=1e-12, abs=1e-18)
@@ -166,7 +166,7 @@ def test_position_is_the_exact_integral_and_increments_are_rounded() -> None:
     drive.write_object(0x6071, 100)
     for _ in range(50):
         drive.sync()
-    co = zoh_coefficients(P.m, P.b, 50 * P.period)
+    co = zoh_coefficients(P.mass, P.friction, 50 * P.period)
     assert drive.position == pytest.approx(co.p_f * 1.0, rel=1e-12)
     assert drive.position_counts == round(drive.position / P.position_per_count)
 
@@ -219,8 +219,8 @@ def test_object_access_errors() -> None:
 
 def test_reconfigure_is_validated_and_nothing_half_applied() -> None:
     drive = SimulatedDrive()
-    with pytest.raises(ParameterError, match="m = -1"):
-        drive.reconfigure(m=-1.0, b=0.2)
+    with pytest.raises(ParameterError, match="mass = -1"):
+        drive.reconfigure(mass=-1.0, friction=0.2)
     assert drive.parameters == DeviceParameters()
     drive.write_object(0x6076, 300)
     assert drive.parameters.rated_torque == 0.3
@@ -228,7 +228,7 @@ def test_reconfigure_is_validated_and_nothing_half_applied() -> None:
 
 @pytest.mark.parametrize(
     "field, value",
-    [("m", 0.0), ("b", -0.1), ("period", 0.0), ("velocity_per_count", 0.0), ("rated_torque", 0.2005),
+    [("mass", 0.0), ("friction", -0.1), ("period", 0.0), ("velocity_per_count", 0.0), ("rated_torque", 0.2005),
      ("max_torque_permille", 70000), ("substeps", 0), ("force_per_torque", float("nan"))],
 )
 def test_bad_parameters_raise_typed_errors(field: str, value: float) -> None:
@@ -310,7 +310,7 @@ def test_reset_application_restores_every_power_on_value() -> None:
     drive.write_object(0x6072, 1200)
     drive.write_object(0x6076, 450)
     drive.write_object(0x6007, 3)
-    drive.reconfigure(velocity_per_count=2e-6, m=0.7)
+    drive.reconfigure(velocity_per_count=2e-6, mass=0.7)
     drive.reset_application()
     assert (drive.read_object(0x6072), drive.read_object(0x6076), drive.read_object(0x6007)) == (3000, 200, 1)
     assert drive.parameters == DeviceParameters()

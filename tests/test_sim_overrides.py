@@ -27,17 +27,18 @@ def test_the_flags_override_the_profiles_truth_and_operator() -> None:
     parameters, operator, timing = _setup("--profile", "cia402-handle", "--mass", "0.37", "--friction", "2.9",
                                           "--coulomb", "0.2", "--velocity-noise", "1000", "--noise-seed", "7",
                                           "--operator", "none")
-    assert (parameters.m, parameters.b, parameters.coulomb_friction, parameters.velocity_noise, parameters.noise_seed) == (
-        0.37, 2.9, 0.2, 1000.0, 7)
+    p = parameters
+    assert (p.mass, p.friction, p.coulomb_friction, p.velocity_noise, p.noise_seed) == (0.37, 2.9, 0.2, 1000.0, 7)
     assert operator == models.NoOperator() and timing == "cia402"
     assert parameters.rated_torque == 0.32 and str(parameters.velocity) == "average"  # the rest is still the profile's
     parameters, operator, _ = _setup("--profile", "cia402-handle")
-    assert (parameters.m, parameters.b) == (1.0, 20.0) and operator == models.ConstantPush(3.0)  # no flag: the profile's
+    assert (parameters.mass, parameters.friction) == (1.0, 20.0)  # no flag: the profile's
+    assert operator == models.ConstantPush(3.0)
 
 
 def test_without_a_profile_the_flags_override_the_defaults() -> None:
     parameters, operator, _ = _setup("--mass", "2", "--operator", "constant:-1.5")
-    assert parameters.m == 2.0 and parameters.b == 0.1 and operator == models.ConstantPush(-1.5)
+    assert parameters.mass == 2.0 and parameters.friction == 0.1 and operator == models.ConstantPush(-1.5)
 
 
 @pytest.mark.parametrize("spec, model", [

@@ -29,7 +29,7 @@ def enable(drive: SimulatedDrive) -> SimulatedDrive:
 
 def ledger_residual(drive: SimulatedDrive) -> float:
     """``operator - (kinetic + viscous + Coulomb + motor)`` in J: zero for an exact ledger from rest."""
-    kinetic = 0.5 * drive.parameters.m * drive.velocity**2
+    kinetic = 0.5 * drive.parameters.mass * drive.velocity**2
     return drive.operator_energy - (kinetic + drive.viscous_energy + drive.friction_energy + drive.wall_energy)
 
 
@@ -39,7 +39,7 @@ def ledger_residual(drive: SimulatedDrive) -> float:
 @pytest.mark.parametrize("operator", [ConstantPush(1.9), ConstantPush(-1.9), Sinusoid(1.2, 30.0, offset=0.7)])
 def test_a_push_below_the_coulomb_force_does_not_move_a_resting_handle(operator) -> None:
     """|w + F| <= Fc throughout (F = 0.05 N from the motor): the handle sticks, exactly, and nothing does work."""
-    drive = enable(SimulatedDrive(DeviceParameters(m=M, b=B, coulomb_friction=2.0, substeps=4), "ideal", operator))
+    drive = enable(SimulatedDrive(DeviceParameters(mass=M, friction=B, coulomb_friction=2.0, substeps=4), "ideal", operator))
     drive.sync()
     drive.write_object(0x6071, -5 if operator.force(0.0, 0.0, 0.0) < 0 else 5)
     for _ in range(1000):
@@ -53,7 +53,7 @@ def test_above_it_the_velocity_is_the_first_order_response_to_the_push_minus_fc(
     """From rest, ``v(t) = ((F - Fc sgn F)/b)(1 - exp(-b t/m))`` and the steady velocity is ``(F - Fc)/b``
     (32 time constants: ``exp(-32) = 1.3e-14`` of it is left); exact ZOH, so to 1e-12 relative."""
     coulomb = 1.0
-    drive = SimulatedDrive(DeviceParameters(m=M, b=B, coulomb_friction=coulomb), operator=ConstantPush(push))
+    drive = SimulatedDrive(DeviceParameters(mass=M, friction=B, coulomb_friction=coulomb), operator=ConstantPush(push))
     steady = (push - math.copysign(coulomb, push)) / B
     for k in range(8001):
         drive.sync()
@@ -70,7 +70,7 @@ def test_a_sliding_handle_stops_when_and_where_the_closed_form_says(b: float, su
     b = 0), at ``x* = (m v0 - Fc t*)/b`` (``m v0^2/(2 Fc)``), and stays: velocity exactly 0 after.
     The Coulomb loss is ``Fc x*`` and the viscous loss the rest of ``m v0^2/2`` (to round-off)."""
     v0, coulomb = 0.3037, 1.0
-    handle = Handle(DeviceParameters(m=M, b=b, coulomb_friction=coulomb, substeps=substeps))
+    handle = Handle(DeviceParameters(mass=M, friction=b, coulomb_friction=coulomb, substeps=substeps))
     handle.velocity = v0
     stop = M / b * math.log1p(b * v0 / coulomb) if b else M * v0 / coulomb
     where = (M * v0 - coulomb * stop) / b if b else M * v0 * v0 / (2 * coulomb)
@@ -86,7 +86,8 @@ def test_a_sliding_handle_stops_when_and_where_the_closed_form_says(b: float, su
 def test_stops_inside_pieces_compose_exactly_across_sub_steps() -> None:
     """Held forces with stops, sticks and reversals inside the pieces: 1 or 7 sub-steps per period give
     the same motion to round-off (a stop found approximately would depend on where pieces end)."""
-    drives = [enable(SimulatedDrive(DeviceParameters(m=M, b=B, coulomb_friction=0.6, substeps=n), "cia402")) for n in (1, 7)]
+    drives = [enable(SimulatedDrive(DeviceParameters(mass=M, friction=B, coulomb_friction=0.6, substeps=n), "cia402"))
+              for n in (1, 7)]
     targets = [90, 90, 40, -20, -75, -75, 0, 55, -58, 10] * 40  # per mille, 10 mN each
     stuck = 0
     for target in targets:
@@ -112,7 +113,7 @@ def test_the_energy_ledger_closes_through_stick_slip(b: float, timing: str) -> N
     over ~10^4 pieces, each exact to a few ulp: the residual is below 1e-11 of the energy
     turned over (the dissipated energy plus the motor's work).
     """
-    parameters = DeviceParameters(m=M, b=b, coulomb_friction=0.8, substeps=3, velocity="lowpass:0.002",
+    parameters = DeviceParameters(mass=M, friction=b, coulomb_friction=0.8, substeps=3, velocity="lowpass:0.002",
                                   velocity_per_count=1e-9, rated_torque=0.001, force_per_torque=100.0,
                                   max_torque_permille=30000)
     drive = enable(SimulatedDrive(parameters, timing, Sinusoid(1.5, 2.0)))
@@ -207,7 +208,7 @@ def test_a_profile_states_the_drives_truth(tmp_path: pathlib.Path) -> None:
         'velocity_noise = 2.5\nnoise_seed = 42\n[loop]\nperiod = 0.001\ntiming = "reception"\ndelay = 0.3\n'
     )))
     p = profile.parameters
-    assert (p.m, p.b, str(p.velocity)) == (0.8, 2.0, "window:0.0005")
+    assert (p.mass, p.friction, str(p.velocity)) == (0.8, 2.0, "window:0.0005")
     assert (p.coulomb_friction, p.velocity_noise, p.noise_seed) == (0.4, 2.5, 42)
     assert profile.timing is Timing.RECEPTION and p.reception_delay == 0.3
     assert SimulatedDrive(p, profile.timing).loop_delay == 0.3

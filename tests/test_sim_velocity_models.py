@@ -149,7 +149,7 @@ def test_the_drive_closes_the_loop_the_analysis_models(model: str, timing: str, 
     u_reference, _ = wall_forces(loop, tones, N_SAMPLES + 1)
     newton_per_permille = float(np.abs(u_reference).max()) / (0.8 * FULL_SCALE)  # 20 % headroom: no saturation
     parameters = DeviceParameters(
-        m=M, b=B_VISCOUS, period=T, velocity_per_count=VELOCITY_PER_COUNT, position_per_count=1e-12,
+        mass=M, friction=B_VISCOUS, period=T, velocity_per_count=VELOCITY_PER_COUNT, position_per_count=1e-12,
         rated_torque=RATED_TORQUE, force_per_torque=newton_per_permille / (RATED_TORQUE / 1000.0),
         max_torque_permille=FULL_SCALE, substeps=SUBSTEPS, velocity=model, reception_delay=delta,
     )
@@ -184,15 +184,15 @@ def test_reception_applies_the_target_delta_after_the_sync(delta: float) -> None
     p = drive.parameters
     for k in range(1, 300):
         drive.sync()
-        exact = force / p.b * -math.expm1(-p.b * (k - delta) * p.period / p.m)
+        exact = force / p.friction * -math.expm1(-p.friction * (k - delta) * p.period / p.mass)
         assert drive.velocity == pytest.approx(exact, rel=1e-12)
     assert drive.loop_delay == delta and drive.torque_actual == 15
 
 
 def exact_step_velocity(model: VelocityModel, force: float, p: DeviceParameters, t: float) -> float:
     """The velocity ``model`` reports at ``t`` s after a force step ``force`` N on the handle at rest (closed forms)."""
-    rate = p.b / p.m
-    terminal = force / p.b
+    rate = p.friction / p.mass
+    terminal = force / p.friction
     if t <= 0.0:
         return 0.0
     if model.kind == "point":
@@ -258,7 +258,7 @@ def test_timing_delays_and_changes() -> None:
     expected = before
     for force, fraction in ((100 * per_mille, 0.4), (-50 * per_mille, 0.6)):
         h = fraction * p.period
-        expected = expected * math.exp(-p.b * h / p.m) + force / p.b * -math.expm1(-p.b * h / p.m)
+        expected = expected * math.exp(-p.friction * h / p.mass) + force / p.friction * -math.expm1(-p.friction * h / p.mass)
     assert drive.velocity == pytest.approx(expected, rel=1e-12)
     assert drive.torque_actual == -50
     drive.reconfigure(reception_delay=0.0)

@@ -46,7 +46,7 @@ And the loop's names, each for one thing:
 * ``LoopProfile`` (:mod:`haptic_bus.app.profiles`, ``period, timing, delay``): a profile's
   ``[loop]`` table as read, where ``T`` and ``D`` come from (``timing`` says how the drive
   applies a target); ``Profile.device_loop()`` turns a profile into its ``DeviceLoop``.
-* ``DeviceParameters`` (:mod:`sim_drive.parameters`, ``m, b, period, ...``): the simulated
+* ``DeviceParameters`` (:mod:`sim_drive.parameters`, ``mass, friction, period, ...``): the simulated
   drive's hidden truth (plant, scaling, Coulomb friction, noise); the controller and this
   analysis never see it.
 """

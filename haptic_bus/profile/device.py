@@ -70,7 +70,7 @@ class DeviceProfile:
         """Keyword arguments of ``sim_drive.parameters.DeviceParameters`` for this device on a loop of
         ``period`` s and ``timing`` (with the hidden truth: Coulomb friction, velocity noise and its seed)."""
         parameters: dict[str, object] = {
-            "m": self.mass, "b": self.friction, "period": period,
+            "mass": self.mass, "friction": self.friction, "period": period,
             "velocity_per_count": self.velocity_per_count, "position_per_count": self.position_per_count,
             "rated_torque": self.rated_torque, "force_per_torque": self.force_per_torque,
             "max_torque_permille": self.max_torque_permille, "velocity": self.velocity,

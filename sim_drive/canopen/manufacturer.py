@@ -2,7 +2,7 @@
 
 Layout (all REAL64 values are IEEE 754 doubles in SI units; see also ``sim_drive.eds``):
 
-- 0x2000 plant: sub 1 ``m`` kg, sub 2 ``b`` N s/m, sub 3 plant sub-steps per SYNC (UNSIGNED16)
+- 0x2000 plant: sub 1 ``mass`` kg, sub 2 ``friction`` N s/m, sub 3 plant sub-steps per SYNC (UNSIGNED16)
 - 0x2001 scaling: sub 1 velocity per count m/s, sub 2 position per count m, sub 3 force per
   torque N/(N m)
 - 0x2002 timing: sub 1 loop timing (0 cia402, 1 ideal, 2 reception), sub 2 SYNC count, sub 3
@@ -29,8 +29,8 @@ from sim_drive.parameters import Timing
 ABORT_RANGE = 0x06090030
 PLANT, SCALING, TIMING, ENERGY, OPERATOR = 0x2000, 0x2001, 0x2002, 0x2003, 0x2010
 _PARAMETER_FIELDS = {
-    (PLANT, 1): "m",
-    (PLANT, 2): "b",
+    (PLANT, 1): "mass",
+    (PLANT, 2): "friction",
     (PLANT, 3): "substeps",
     (SCALING, 1): "velocity_per_count",
     (SCALING, 2): "position_per_count",
