@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import abc
 import contextlib
+import numbers
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 from drives.cia402 import ObjectSpec, OperationMode
-from drives.errors import DriveArgumentError
+from drives.errors import DriveArgumentError, DriveError
 
 
 @dataclass(frozen=True, slots=True)
@@ -182,7 +183,6 @@ class TorqueClamp:
         return torque
 
 
-@dataclass(frozen=True, slots=True)
 class DriveCycle:
     """One drive's cyclic phase, bound once when it begins (``with drive.cyclic(limit) as cycle``).
 
@@ -190,18 +190,42 @@ class DriveCycle:
     :class:`TorqueClamp` (per mille, at the phase's limit, counted); ``write(torque)`` sends a
     target ``saturate`` returned (or the safe outputs while the drive is tripped).  A controller
     that lowers a target after saturating it (the passivity layer) calls the two in turn;
-    :meth:`exchange` is both for one that does not.
+    :meth:`exchange` is both for one that does not.  A target is an integer (per mille of the
+    rated torque, 0x6071), else :class:`~drives.errors.DriveArgumentError` and nothing is sent;
+    once the phase has ended, ``read`` and ``write`` raise :class:`~drives.errors.DriveError`.
     """
 
-    read: Callable[[], CyclicInputs]
-    saturate: TorqueClamp
-    write: Callable[[int], None]
+    __slots__ = ("_name", "_read", "_send", "open", "saturate")
+
+    def __init__(self, name: str, read: Callable[[], CyclicInputs], saturate: TorqueClamp,
+                 send: Callable[[int], None]) -> None:
+        self._name, self._read, self.saturate, self._send = name, read, saturate, send
+        self.open = True
+
+    def read(self) -> CyclicInputs:
+        """Start a cycle: the drive's inputs of this cycle."""
+        if not self.open:
+            raise DriveError(self._name, "its cyclic phase has ended: read and write inside 'with drive.cyclic()'")
+        return self._read()
+
+    def write(self, torque: int) -> None:
+        """Send ``torque`` (per mille, as :meth:`saturate` returned it) with this cycle's controlword."""
+        if not self.open:
+            raise DriveError(self._name, "its cyclic phase has ended: read and write inside 'with drive.cyclic()'")
+        self._send(checked_torque(self._name, torque))
 
     def exchange(self, torque: int) -> int:
         """Saturate ``torque`` and send it; the torque sent (per mille)."""
-        torque = self.saturate(torque)
+        torque = self.saturate(checked_torque(self._name, torque))
         self.write(torque)
         return torque
+
+
+def checked_torque(name: str, torque: object) -> int:
+    """``torque`` as a target torque (per mille): an integer (numpy's too), else DriveArgumentError."""
+    if isinstance(torque, bool) or not isinstance(torque, numbers.Integral):
+        raise DriveArgumentError("target torque", torque, "an integer, per mille of the rated torque (0x6071)", name)
+    return int(torque)
 
 
 class Drive(abc.ABC):
@@ -216,6 +240,7 @@ class Drive(abc.ABC):
     name: str
     scaling: DriveScaling
     clamp: TorqueClamp
+    _phase_open = False  # True inside :meth:`cyclic`
 
     @abc.abstractmethod
     def connect(self) -> object:
@@ -235,8 +260,8 @@ class Drive(abc.ABC):
         """Start a cycle and return the drive's inputs of this cycle; raise on timeout or fault."""
 
     def write_outputs(self, target_torque: int) -> None:
-        """Send this cycle's target torque (0x6071, per mille of rated torque), saturated by ``clamp``."""
-        self._send_torque(self.clamp(target_torque))
+        """Send this cycle's target torque (0x6071, per mille of rated torque, an integer), saturated by ``clamp``."""
+        self._send_torque(self.clamp(checked_torque(self.name, target_torque)))
 
     @abc.abstractmethod
     def _send_torque(self, target_torque: int) -> None:
@@ -248,16 +273,26 @@ class Drive(abc.ABC):
         ``torque_limit`` (per mille; None: the drive's own, 0x6072) until the phase ends."""
         clamp = self.clamp
         own = clamp.limit
+        if torque_limit is not None and (isinstance(torque_limit, bool) or not isinstance(torque_limit, numbers.Integral)
+                                         or torque_limit < 1):
+            raise DriveArgumentError("torque_limit", torque_limit,
+                                     f"None or an integer >= 1 per mille (held to the drive's own {own}, 0x6072)", self.name)
+        if self._phase_open:
+            raise DriveError(self.name, "a cyclic phase is open already: one 'with drive.cyclic()' at a time")
         if torque_limit is not None:
-            clamp.limit = min(own, torque_limit)
+            clamp.limit = min(own, int(torque_limit))
+        cycle = self._bind_cycle()
+        self._phase_open = True
         try:
-            yield self._bind_cycle()
+            yield cycle
         finally:
+            cycle.open = False
+            self._phase_open = False
             clamp.limit = own
 
     def _bind_cycle(self) -> DriveCycle:
         """The cycle's bound methods (a bus enters its cyclic phase here)."""
-        return DriveCycle(self.read_inputs, self.clamp, self._send_torque)
+        return DriveCycle(self.name, self.read_inputs, self.clamp, self._send_torque)
 
     @abc.abstractmethod
     def disable(self) -> None:

@@ -331,7 +331,7 @@ class CanopenDrive(Cia402Master):
         """The cycle's read bound to this connection's events, the receive mode entered once."""
         events = self.connected().events
         self.exchange.begin()
-        return DriveCycle(functools.partial(self._cycle_inputs, events), self.clamp, self._send_torque)
+        return DriveCycle(self.name, functools.partial(self._cycle_inputs, events), self.clamp, self._send_torque)
 
     def _cycle_inputs(self, events: DriveEvents) -> CyclicInputs:
         """One cycle's inputs (:meth:`read_inputs`), the receive mode entered again only where an SDO

@@ -355,7 +355,7 @@ class ModbusDrive(Cia402Master):
     def _bind_cycle(self) -> DriveCycle:
         """The cycle's read past the connection check (done once here)."""
         self._require_connected()
-        return DriveCycle(self._cycle_inputs, self.clamp, self._send_torque)
+        return DriveCycle(self.name, self._cycle_inputs, self.clamp, self._send_torque)
 
     def _cycle_inputs(self) -> CyclicInputs:
         requests = self._requests

@@ -20,7 +20,6 @@ chunks.  Checked at the end:
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -56,7 +55,7 @@ def observe_inputs(drive: Drive, each: Callable[[CyclicInputs], None]) -> None:
                 inputs = read()
                 each(inputs)
                 return inputs
-            yield dataclasses.replace(cycle, read=counted)
+            yield DriveCycle(drive.name, counted, cycle.saturate, cycle.write)  # the phase's checks stay in cycle
 
     drive.cyclic = observed  # type: ignore[method-assign]
 
