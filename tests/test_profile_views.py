@@ -68,6 +68,22 @@ def test_the_command_lines_say_it_in_one_line_and_exit_2(tmp_path: pathlib.Path,
         assert f"profile {path}: device.friction = inf is invalid; allowed: a finite real in [0" in err
 
 
+def test_a_file_that_is_not_utf8_is_one_line_and_exit_2_everywhere(tmp_path: pathlib.Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "binary.toml"
+    path.write_bytes(b"\xff\xfe garbage")
+    commands = [(haptic_bus_main, ["profiles", "check", str(path)]),
+                (haptic_bus_main, ["run", str(path), "--interface", "virtual", "--channel", "utf8", "--node-id", "5",
+                                   "--virtual-time", "--out", str(tmp_path / "run")]),
+                (sim_main, ["--interface", "virtual", "--channel", "utf8", "--node-id", "3", "--profile", str(path)])]
+    for command, args in commands:
+        assert command(args) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "Traceback" not in err
+        assert err.endswith(f"profile {path}: (encoding) = 'byte 0xFF at 0' is invalid; allowed: UTF-8 text (TOML 1.0)")
+    assert not (tmp_path / "run").exists()
+
+
 def test_the_simulator_fills_what_a_profile_leaves_out_and_takes_an_identified_delay(tmp_path: pathlib.Path) -> None:
     bare = tmp_path / "bare.toml"
     bare.write_text('[device]\nmass = 0.8\n')

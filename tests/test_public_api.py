@@ -100,3 +100,14 @@ def test_pacing_is_wall_or_virtual():
     assert not hb.RunOptions(duration=1.0, pacing="virtual").wall_paced
     with pytest.raises(hb.ParameterError, match=r"pacing = 'realtime' is invalid; allowed: 'wall' or 'virtual'"):
         hb.RunOptions(duration=1.0, pacing="realtime")
+
+
+@pytest.mark.parametrize(("options", "named"), [({"duration": float("nan")}, "duration = nan"),
+                                                ({"duration": -1.0}, "duration = -1.0"),
+                                                ({"duration": "1"}, "duration = '1'"),
+                                                ({"duration": 1.0, "start_in_contact": "bogus"}, "start_in_contact = 'bogus'"),
+                                                ({"duration": 1.0, "scheduling": "bogus"}, "scheduling = 'bogus'"),
+                                                ({"duration": 1.0, "pacing": "fast"}, "pacing = 'fast'")])
+def test_run_options_refuse_what_a_run_cannot_use_before_anything_starts(options: dict, named: str) -> None:
+    with pytest.raises(hb.ParameterError, match=f"run options: {re.escape(named)} is invalid; allowed: "):
+        hb.RunOptions(**options)

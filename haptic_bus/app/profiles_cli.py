@@ -148,7 +148,7 @@ def _still_missing(path: pathlib.Path) -> int | None:
     try:
         with open(path, "rb") as handle:
             lacking = missing(tomllib.load(handle))
-    except (OSError, tomllib.TOMLDecodeError):
+    except (OSError, ValueError):  # TOMLDecodeError and UnicodeDecodeError are ValueErrors
         return None  # the loader says what is wrong with the file
     if not lacking:
         return None

@@ -48,6 +48,7 @@ from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PAT
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DriveAddress
 from haptic_bus.app.live import LiveView
+from haptic_bus.app.profile_policies import START_POLICIES
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.realtime import RealtimeReport, RealtimeSettings, realtime_session
 from haptic_bus.app.run_folder import RunJournal, gate_loop, prepare_run_folder
@@ -59,6 +60,7 @@ from haptic_bus.control.record import Event
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.supervisor import Action
 from haptic_bus.errors import DriveError, DriveFault, DriveStateError, HapticBusError, ParameterError
+from haptic_bus.validation import real_in_range
 
 if TYPE_CHECKING:
     import can
@@ -121,7 +123,13 @@ class RunOptions:
     plots: bool = True
 
     def __post_init__(self) -> None:
+        real_in_range("duration", self.duration, 0.0, 1e9, low_inclusive=False, unit="s", context="run options")
         check_pacing(self.pacing)
+        if self.start_in_contact not in (None, *START_POLICIES):
+            raise ParameterError("start_in_contact", self.start_in_contact,
+                                 "None (the profile's) or " + " or ".join(repr(p) for p in START_POLICIES), "run options")
+        if not isinstance(self.scheduling, RealtimeSettings):
+            raise ParameterError("scheduling", self.scheduling, "a RealtimeSettings", "run options")
 
     @property
     def wall_paced(self) -> bool:

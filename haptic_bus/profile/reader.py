@@ -42,6 +42,9 @@ def read_document(path: pathlib.Path) -> dict[str, Any]:
         raise ProfileError(path, "profile", str(path), f"a readable file ({error.strerror})") from None
     except tomllib.TOMLDecodeError as error:
         raise ProfileError(path, "(TOML syntax)", str(error), "valid TOML 1.0") from None
+    except UnicodeDecodeError as error:  # TOML is UTF-8 text
+        raise ProfileError(path, "(encoding)", f"byte 0x{error.object[error.start]:02X} at {error.start}",
+                           "UTF-8 text (TOML 1.0)") from None
 
 
 class Reader:
