@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import abc
 import contextlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -170,6 +170,17 @@ class TorqueClamp:
         self.limit = limit
         self.counts = counts
 
+    @contextlib.contextmanager
+    def lowered(self, limit: int | None) -> Iterator[TorqueClamp]:
+        """This clamp held at ``limit`` (per mille; None: unchanged) if that is lower, until the block ends."""
+        own = self.limit
+        if limit is not None:
+            self.limit = min(own, limit)
+        try:
+            yield self
+        finally:
+            self.limit = own
+
     def __call__(self, torque: int) -> int:
         """``torque`` (per mille) held within +-``limit``."""
         limit = self.limit
@@ -202,6 +213,31 @@ class DriveCycle:
         torque = self.saturate(torque)
         self.write(torque)
         return torque
+
+
+@dataclass(frozen=True, slots=True)
+class AxesDriveCycle:
+    """Several drives' cyclic phase on one SYNC, bound once (``with axes.cyclic(limits) as cycle``).
+
+    The shape of a :class:`DriveCycle`, one value per axis in axis order: ``read()`` starts a cycle
+    (one SYNC) and returns every axis' inputs; ``clamps`` are the axes' :class:`TorqueClamp` (per
+    mille, each at its axis' limit, counted in its drive's stats); ``write(torques)`` sends targets
+    :meth:`saturate` returned (or the safe outputs on every axis once any tripped).
+    """
+
+    read: Callable[[], tuple[CyclicInputs, ...]]
+    clamps: tuple[TorqueClamp, ...]
+    write: Callable[[Sequence[int]], None]
+
+    def saturate(self, torques: Sequence[int]) -> list[int]:
+        """Every axis' ``torques`` (per mille) through its own clamp."""
+        return [clamp(torque) for clamp, torque in zip(self.clamps, torques)]
+
+    def exchange(self, torques: Sequence[int]) -> list[int]:
+        """Saturate ``torques`` and send them; the torques sent (per mille)."""
+        sent = self.saturate(torques)
+        self.write(sent)
+        return sent
 
 
 class Drive(abc.ABC):
@@ -246,14 +282,8 @@ class Drive(abc.ABC):
     def cyclic(self, torque_limit: int | None = None) -> Iterator[DriveCycle]:
         """The cyclic phase: a :class:`DriveCycle` bound once, whose ``saturate`` holds targets within
         ``torque_limit`` (per mille; None: the drive's own, 0x6072) until the phase ends."""
-        clamp = self.clamp
-        own = clamp.limit
-        if torque_limit is not None:
-            clamp.limit = min(own, torque_limit)
-        try:
+        with self.clamp.lowered(torque_limit):
             yield self._bind_cycle()
-        finally:
-            clamp.limit = own
 
     def _bind_cycle(self) -> DriveCycle:
         """The cycle's bound methods (a bus enters its cyclic phase here)."""
