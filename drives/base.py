@@ -79,6 +79,12 @@ class DriveScaling:
         :class:`TorqueClamp` is the one place a target is held within +-0x6072."""
         return round(force / self.newton_per_permille)
 
+    def torque_limit(self, force_limit: float) -> int | None:
+        """The per mille a handle force limit in N allows, rounded, for a drive's cyclic phase
+        (:meth:`Drive.cyclic`); None beyond what 0x6071 carries (the drive's own 0x6072 holds)."""
+        limit = force_limit / self.newton_per_permille
+        return round(limit) if limit < 0x7FFF else None
+
 
 SCALING_FIELDS = ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque", "max_torque_permille")
 SCALING_UNITS = {"velocity_per_count": "m/s", "position_per_count": "m", "rated_torque": "N m",

@@ -155,8 +155,7 @@ class AxesController(CycleLoop):
         self.passivity = policy
         self.hold = hold if policy.layer == "bound" and hold is not None else self.period
         limits = [min(limit, s.max_force) for limit, s in zip(force_limits, scalings)]
-        permille = [limit / s.newton_per_permille for limit, s in zip(force_limits, scalings)]
-        self.torque_limits = [round(limit) if limit < 0x7FFF else None for limit in permille]  # each drive's clamp
+        self.torque_limits = [s.torque_limit(limit) for limit, s in zip(force_limits, scalings)]  # each drive's clamp
         softest = min((obj.stiffness for obj in scene.objects if obj.stiffness > 0), default=0.0)
         self.ports = tuple(
             PortAccount(f"axis {name}", friction=loop.b, count=s.position_per_count, newton_per_permille=s.newton_per_permille,

@@ -128,8 +128,7 @@ class WallController(CycleLoop):
         self.saturated_cycles = 0
         self.peak_force = 0.0
         self.stopped_on_error = False
-        limit = force_limit / scaling.newton_per_permille  # per mille: the drive's clamp holds targets within it
-        self.torque_limit = round(limit) if limit < 0x7FFF else None
+        self.torque_limit = scaling.torque_limit(force_limit)  # per mille: the drive's clamp holds targets within it
         self._cycle: DriveCycle | None = None  # the drive's cyclic phase while run() runs
 
     # ------------------------------------------------------------------ gated changes
