@@ -45,7 +45,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from typing import Protocol
 
 import numpy as np
@@ -108,7 +108,7 @@ class SceneHistory:
         return scene_id, scene
 
 
-class AxesController(CycleLoop):
+class AxesController(CycleLoop[AxesDriveCycle]):
     """Renders a gated scene in space on the drives ``axes`` every period.
 
     ``gate``: the coupled gate of these axes (its ``axes`` give each axis' ``b``, ``T`` and loop
@@ -268,15 +268,9 @@ class AxesController(CycleLoop):
             return
         raise alarm.broken(self.supervisor.assumed_delay if self.supervisor is not None else 0.0)
 
-    @contextlib.contextmanager
-    def _cyclic(self) -> Iterator[None]:
-        """The axes' cyclic phase, each clamp at its axis' torque limit, for the cycles run in it."""
-        with self.axes.cyclic(self.torque_limits) as cycle:
-            self._cycle = cycle
-            try:
-                yield
-            finally:
-                self._cycle = None
+    def _phase(self) -> contextlib.AbstractContextManager[AxesDriveCycle]:
+        """The axes' cyclic phase, each clamp at its axis' torque limit."""
+        return self.axes.cyclic(self.torque_limits)
 
     def _disable(self) -> None:
         self.axes.disable()
