@@ -14,7 +14,7 @@ from __future__ import annotations
 import abc
 import contextlib
 import numbers
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -79,6 +79,12 @@ class DriveScaling:
         """The 0x6071 value (per mille, rounded) for a handle force in N; not saturated: the drive's
         :class:`TorqueClamp` is the one place a target is held within +-0x6072."""
         return round(force / self.newton_per_permille)
+
+    def torque_limit(self, force_limit: float) -> int | None:
+        """The per mille a handle force limit in N allows, rounded, for a drive's cyclic phase
+        (:meth:`Drive.cyclic`); None beyond what 0x6071 carries (the drive's own 0x6072 holds)."""
+        limit = force_limit / self.newton_per_permille
+        return round(limit) if limit < 0x7FFF else None
 
 
 SCALING_FIELDS = ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque", "max_torque_permille")
@@ -171,6 +177,21 @@ class TorqueClamp:
         self.limit = limit
         self.counts = counts
 
+    @contextlib.contextmanager
+    def lowered(self, limit: int | None, owner: str) -> Iterator[TorqueClamp]:
+        """This clamp held at ``limit`` (per mille; None: unchanged) if that is lower, until the block
+        ends; ``limit`` None or an integer >= 1, else DriveArgumentError naming ``owner`` (the drive)."""
+        own = self.limit
+        if limit is not None and (isinstance(limit, bool) or not isinstance(limit, numbers.Integral) or limit < 1):
+            raise DriveArgumentError("torque_limit", limit,
+                                     f"None or an integer >= 1 per mille (held to the drive's own {own}, 0x6072)", owner)
+        if limit is not None:
+            self.limit = min(own, int(limit))
+        try:
+            yield self
+        finally:
+            self.limit = own
+
     def __call__(self, torque: int) -> int:
         """``torque`` (per mille) held within +-``limit``."""
         limit = self.limit
@@ -228,6 +249,31 @@ def checked_torque(name: str, torque: object) -> int:
     return int(torque)
 
 
+@dataclass(frozen=True, slots=True)
+class AxesDriveCycle:
+    """Several drives' cyclic phase on one SYNC, bound once (``with axes.cyclic(limits) as cycle``).
+
+    The shape of a :class:`DriveCycle`, one value per axis in axis order: ``read()`` starts a cycle
+    (one SYNC) and returns every axis' inputs; ``clamps`` are the axes' :class:`TorqueClamp` (per
+    mille, each at its axis' limit, counted in its drive's stats); ``write(torques)`` sends targets
+    :meth:`saturate` returned (or the safe outputs on every axis once any tripped).
+    """
+
+    read: Callable[[], tuple[CyclicInputs, ...]]
+    clamps: tuple[TorqueClamp, ...]
+    write: Callable[[Sequence[int]], None]
+
+    def saturate(self, torques: Sequence[int]) -> list[int]:
+        """Every axis' ``torques`` (per mille) through its own clamp."""
+        return [clamp(torque) for clamp, torque in zip(self.clamps, torques)]
+
+    def exchange(self, torques: Sequence[int]) -> list[int]:
+        """Saturate ``torques`` and send them; the torques sent (per mille)."""
+        sent = self.saturate(torques)
+        self.write(sent)
+        return sent
+
+
 class Drive(abc.ABC):
     """A servo drive reached over a fieldbus, seen from the controller.
 
@@ -271,24 +317,16 @@ class Drive(abc.ABC):
     def cyclic(self, torque_limit: int | None = None) -> Iterator[DriveCycle]:
         """The cyclic phase: a :class:`DriveCycle` bound once, whose ``saturate`` holds targets within
         ``torque_limit`` (per mille; None: the drive's own, 0x6072) until the phase ends."""
-        clamp = self.clamp
-        own = clamp.limit
-        if torque_limit is not None and (isinstance(torque_limit, bool) or not isinstance(torque_limit, numbers.Integral)
-                                         or torque_limit < 1):
-            raise DriveArgumentError("torque_limit", torque_limit,
-                                     f"None or an integer >= 1 per mille (held to the drive's own {own}, 0x6072)", self.name)
         if self._phase_open:
             raise DriveError(self.name, "a cyclic phase is open already: one 'with drive.cyclic()' at a time")
-        if torque_limit is not None:
-            clamp.limit = min(own, int(torque_limit))
-        cycle = self._bind_cycle()
-        self._phase_open = True
-        try:
-            yield cycle
-        finally:
-            cycle.open = False
-            self._phase_open = False
-            clamp.limit = own
+        with self.clamp.lowered(torque_limit, self.name):
+            cycle = self._bind_cycle()
+            self._phase_open = True
+            try:
+                yield cycle
+            finally:
+                cycle.open = False
+                self._phase_open = False
 
     def _bind_cycle(self) -> DriveCycle:
         """The cycle's bound methods (a bus enters its cyclic phase here)."""

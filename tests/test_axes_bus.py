@@ -9,10 +9,12 @@ and a sniffer (a plain queue receiver on the same channel) sees exactly that ord
 
 from __future__ import annotations
 
+import dataclasses
 import pathlib
 from collections.abc import Iterator
 
 import can
+import numpy as np
 import pytest
 
 from drives.canopen.axes import CanopenAxes
@@ -97,6 +99,57 @@ def test_one_sync_per_cycle_and_every_tpdo_before_any_torque(rig) -> None:
     assert axes.cycle.syncs_sent == sum(node.drive.sync_count for node in sim.nodes[:1])
     # the three plants saw the same SYNCs: one clock for the device
     assert len({node.drive.sync_count for node in sim.nodes}) == 1
+
+
+def rpdo_torques(frames: list[can.Message], node: int) -> list[int]:
+    """The target torques (0x6071, per mille) of ``node``'s RPDO1 (controlword, torque) among ``frames``."""
+    return [int.from_bytes(m.data[2:4], "little", signed=True) for m in frames if m.arbitration_id == RPDO1[node]]
+
+
+def test_each_axis_target_is_clamped_once_at_its_own_limit_in_the_axes_phase(rig) -> None:
+    """In the axes' cyclic phase, a target beyond its axis' limit goes out at that limit, counted
+    once in that axis' stats; the other axes' targets go out as asked; the limits end with the phase."""
+    _, _, axes, sniffer = rig
+    axes.enable()
+    with pytest.raises(DriveArgumentError, match="one per axis"):
+        with axes.cyclic([100, 100]):
+            pass
+    queued(sniffer)
+    with axes.cyclic([None, 100, 400]) as cycle:
+        cycle.read()
+        sent = cycle.exchange([250, -250, -250])
+    assert sent == [250, -100, -250]
+    assert rpdo_torques(queued(sniffer), 6) == [-100]  # on the wire: the clamped target, once
+    assert [d.stats.saturated_outputs for d in axes.drives] == [0, 1, 0]
+    assert [d.clamp.limit for d in axes.drives] == [3000, 3000, 3000]  # each drive's own 0x6072 again
+    axes.read_inputs()
+    axes.write_outputs([0, 3500, 0])  # outside a phase: the drive's own 0x6072
+    assert rpdo_torques(queued(sniffer), 6) == [3000]
+    assert [d.stats.saturated_outputs for d in axes.drives] == [0, 2, 0]
+
+
+def test_the_controller_saturates_each_axis_once_through_its_drive(rig) -> None:
+    """The y axis' force limit set to 1.5 N (300 per mille) while the hand pushes all three axes onto
+    the slope: every cycle that asked more of y sent exactly 300 per mille, counted once in y's
+    stats and in the controller's saturated cycles; x and z (12 N) are not clamped."""
+    profile, _, axes, sniffer = rig
+    limited = dataclasses.replace(profile.axes[1], force_limit=1.5)
+    profile = dataclasses.replace(profile, axes=(profile.axes[0], limited, profile.axes[2]))
+    axes.enable()
+    queued(sniffer)
+    controller = controller_for(profile, axes)
+    assert controller.torque_limits == [2400, 300, 2400]
+    summary = controller.run(600)
+    assert summary.exit_reason == "completed"
+    newton_per_permille = axes.scalings[1].newton_per_permille
+    forces = [controller.records[i].column("force_n") for i in range(3)]
+    at_limit = int(np.sum(np.abs(forces[1]) == 300 * newton_per_permille))  # the force asked of y once clamped
+    assert at_limit > 100  # y pressed on the slope beyond 1.5 N for most of the run
+    assert [d.stats.saturated_outputs for d in axes.drives] == [0, at_limit, 0]
+    assert summary.saturated_cycles == at_limit
+    assert max(abs(t) for t in rpdo_torques(queued(sniffer), 6)) == 300  # the passivity layer only lowers it
+    assert float(np.max(np.abs(forces[0]))) < 12.0 and float(np.max(np.abs(forces[2]))) < 12.0
+    assert [d.clamp.limit for d in axes.drives] == [3000, 3000, 3000]
 
 
 def test_a_missing_tpdo_makes_the_whole_cycle_late(rig) -> None:

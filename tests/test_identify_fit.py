@@ -14,8 +14,10 @@ error, so a 4-sigma miss of a normal estimate (probability 6e-5) means a broken 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +25,7 @@ import pytest
 from hypothesis import HealthCheck, Phase, example, given, settings
 from hypothesis import strategies as st
 
-from drives.base import CyclicInputs
+from drives.base import CyclicInputs, DriveCycle, TorqueClamp
 from drives.cia402 import Command
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.app.identify_run import run_cycles
@@ -41,17 +43,28 @@ DURATION = 20.0  # s: the command's default excitation
 
 
 class DirectDrive:
-    """The simulated drive's core as a cycle drive: one SYNC per read, the target written directly."""
+    """The simulated drive's core as a cycle drive: one SYNC per read, the target saturated by a
+    :class:`TorqueClamp` as a drive's cyclic phase does (counted in ``saturated_outputs``), then
+    written directly."""
 
     def __init__(self, sim: SimulatedDrive) -> None:
         self.sim = sim
         self.scaling = sim.parameters.scaling
+        self.saturated_outputs = 0
+        self.sent: list[int] = []  # every 0x6071 written, per mille
+        self.clamp = TorqueClamp(self.scaling.max_torque_permille, self)
+
+    @contextlib.contextmanager
+    def cyclic(self, torque_limit: int | None = None) -> Iterator[DriveCycle]:
+        with self.clamp.lowered(torque_limit, "direct drive") as clamp:
+            yield DriveCycle(self.read_inputs, clamp, self.write_outputs)
 
     def read_inputs(self) -> CyclicInputs:
         self.sim.sync()
         return CyclicInputs(self.sim.statusword, self.sim.velocity_counts, self.sim.position_counts)
 
     def write_outputs(self, target_torque: int) -> None:
+        self.sent.append(target_torque)
         self.sim.write_object(0x6071, target_torque)
 
 
@@ -90,7 +103,7 @@ def identify_simulated(parameters: DeviceParameters, timing: str, *, mass: float
     assert run_cycles(drive, session, recorder, VirtualClock(plan.period))
     scaling = drive.scaling
     scale = Scale(scaling.position_per_count, scaling.velocity_per_count, scaling.newton_per_permille)
-    record = recorder.record(plan.period, scale, force_limit, session.saturated, session.phases)
+    record = recorder.record(plan.period, scale, force_limit, session.phases)
     assert session.probe is not None
     return session, identify(record, session.probe, session.left_envelope, declared)
 
@@ -180,6 +193,26 @@ def test_a_handle_against_a_stiff_stop_is_refused_before_any_excitation() -> Non
     assert session.refused and not found.supported and found.fit is None
     assert "not free to move towards +x" in found.probe.message and "blocked" in found.probe.message
     assert found.record.phases.excitation == found.record.phases.probe  # nothing was excited
+
+
+def test_a_force_beyond_the_drives_limit_is_clamped_once_by_the_drive_and_recorded_as_sent() -> None:
+    """A plan of 5 N on a drive whose 0x6072 allows 1.5 N (150 per mille): the probe's pushes beyond
+    it go out at 150 per mille, each counted once (by the drive's clamp and in the record), and the
+    torque recorded each cycle is the one written to the drive."""
+    truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, max_torque_permille=150)
+    sim = SimulatedDrive(truth, "cia402")
+    sim.write_object(0x6060, 10)
+    for command in (Command.SHUTDOWN, Command.SWITCH_ON, Command.ENABLE_OPERATION):
+        sim.write_controlword(command.word)
+    drive = DirectDrive(sim)
+    plan = Plan(truth.period, 5.0, 0.01, 3.0, 0.5, truth.position_per_count)
+    session, recorder = Session(plan), Recorder(plan.cycles)
+    assert run_cycles(drive, session, recorder, VirtualClock(plan.period))
+    record = recorder.record(plan.period, Scale(1.0, 1.0, 1.0), plan.force_limit, session.phases)
+    assert record.saturated == drive.saturated_outputs > 10
+    assert drive.clamp.limit == 150  # the phase's 500 per mille ended; the drive's own limit stays
+    assert record.torque_permille.tolist() == drive.sent
+    assert int(np.max(np.abs(record.torque_permille))) == 150
 
 
 def test_a_handle_held_by_a_spring_is_refused() -> None:

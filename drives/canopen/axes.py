@@ -16,6 +16,9 @@ one heartbeat producer, which this object owns.  What it adds:
   TPDOs missing, a send that failed), every axis is tripped in that same cycle -- each gets zero
   torque with DISABLE VOLTAGE, then one SYNC, at which every drive latches it -- and the error
   is raised.  From then on every output is the safe one until :meth:`enable`;
+* **one cyclic phase** (:meth:`CanopenAxes.cyclic`, an :class:`~drives.base.AxesDriveCycle` of
+  the shape of one drive's): each axis' target saturated by its own drive's clamp, at its own
+  limit, counted once in its own ``stats.saturated_outputs``;
 * **the state machine walked together**: one SYNC per step serves every axis' walk
   (:class:`~drives.cia402_master.StateWalk`), so no axis is left without SYNC or RPDO while
   another is being enabled, and every drive is enabled (or disabled) in the same cycle.
@@ -23,14 +26,15 @@ one heartbeat producer, which this object owns.  What it adds:
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 from canopen import objectdictionary as od
 
-from drives.base import CyclicInputs, DriveScaling
+from drives.base import AxesDriveCycle, CyclicInputs, DriveScaling
 from drives.canopen.axes_cycle import AxesCycle
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
 from drives.canopen.heartbeat import HeartbeatProducer
@@ -176,14 +180,36 @@ class CanopenAxes:
 
     # ------------------------------------------------------------------ cyclic
 
+    @contextlib.contextmanager
+    def cyclic(self, torque_limits: Sequence[int | None] | None = None) -> Iterator[AxesDriveCycle]:
+        """The cyclic phase of every axis: an :class:`~drives.base.AxesDriveCycle` bound once (the bus
+        read in this thread from here), each axis' clamp -- the one place its target is saturated --
+        held within its ``torque_limits`` entry (per mille; None: its drive's own 0x6072) until the
+        phase ends."""
+        self._require_connected()
+        limits = list(torque_limits) if torque_limits is not None else [None] * len(self.drives)
+        if len(limits) != len(self.drives):
+            raise DriveArgumentError("torque_limits", len(limits), f"one per axis ({len(self.drives)})", self.name)
+        with contextlib.ExitStack() as stack:
+            clamps = tuple(stack.enter_context(drive.clamp.lowered(limit, drive.name))
+                           for drive, limit in zip(self.drives, limits))
+            self.cycle.begin()
+            yield AxesDriveCycle(self._cycle_inputs, clamps, self._send_torques)
+
     def read_inputs(self) -> tuple[CyclicInputs, ...]:
         """One SYNC and every axis' inputs of this cycle (an axis whose TPDO missed: its last ones,
         ``age`` counting up); any axis' error trips every axis (module docstring) and is raised."""
         self._require_connected()
+        return self._cycle_inputs()
+
+    def _cycle_inputs(self) -> tuple[CyclicInputs, ...]:
+        """One cycle's inputs (:meth:`read_inputs`), the bus read in this thread again only where an
+        SDO access gave it back to canopen's notifier."""
         cycle = self.cycle
         drives = self.drives
         try:
-            cycle.begin()
+            if not self.link.direct:
+                cycle.begin()
             cycle.drain()
             for drive in drives:
                 if drive.tripped is None:
@@ -212,11 +238,15 @@ class CanopenAxes:
         return dataclasses.replace(last, age=missed)
 
     def write_outputs(self, torques: Sequence[int]) -> None:
-        """Every axis' target torque (0x6071, per mille, in axis order); the safe outputs on every axis
-        once any tripped.  A send that fails trips every axis."""
+        """Every axis' target torque (0x6071, per mille, in axis order), each saturated by its drive's
+        clamp; the safe outputs on every axis once any tripped.  A send that fails trips every axis."""
+        self._send_torques([drive.clamp(torque) for drive, torque in zip(self.drives, torques)])
+
+    def _send_torques(self, torques: Sequence[int]) -> None:
+        """Every axis' saturated target torque (per mille) with its held controlword (:meth:`write_outputs`)."""
         try:
             for drive, torque in zip(self.drives, torques):
-                drive.write_outputs(torque)
+                drive._send_torque(torque)
         except DriveError as error:
             raise self._trip_all(error) from error.__cause__
 

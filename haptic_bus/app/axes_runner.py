@@ -35,6 +35,7 @@ from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
 from typing import Any
 
+from drives.base import AxesDriveCycle
 from drives.bus_config import resolve_bus_config
 from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
@@ -192,13 +193,16 @@ def _preflight(axes: CanopenAxes, gate: SpaceGate, scene: SpaceScene, profile: A
     size = len(profile.axes)
 
     class Cycle:
-        """Every axis' cycle at zero torque, as pre-flight measures one drive's."""
+        """Every axis' cycle at zero torque in the axes' cyclic phase, as pre-flight measures one drive's."""
+
+        def __init__(self, cycle: AxesDriveCycle) -> None:
+            self.cycle = cycle
 
         def read_inputs(self) -> Sequence[object]:
-            return axes.read_inputs()
+            return self.cycle.read()
 
         def write_outputs(self, target_torque: int) -> None:
-            axes.write_outputs([target_torque] * size)
+            self.cycle.exchange([target_torque] * size)
 
     assumed = max(loop.delay for loop in gate.axes)
 
@@ -207,6 +211,7 @@ def _preflight(axes: CanopenAxes, gate: SpaceGate, scene: SpaceScene, profile: A
         return SpaceGate(later, gate.policy).judge(scene).accepted
 
     watchdog = canopen_watchdog(axes.drives[0].safety, profile.period)
-    timing = preflight.measure(Cycle(), profile.period, spin=options.scheduling.spin)
+    with axes.cyclic() as cycle:
+        timing = preflight.measure(Cycle(cycle), profile.period, spin=options.scheduling.spin)
     settle_preflight(preflight.judge_delay(timing, assumed, passes_at, profile.passivity.layer, watchdog.stall,
                                            watchdog.periods), options, extra)

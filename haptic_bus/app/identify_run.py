@@ -15,7 +15,8 @@ One run, in order:
    and closed; then the record is fitted (:func:`haptic_bus.identify.identify`).
 
 :func:`run_cycles` is the cycle loop alone, over anything with the :class:`~drives.base.Drive`
-cycle (``read_inputs``/``write_outputs``/``scaling``).
+cyclic phase (``cyclic``/``scaling``): each force's torque saturated there, once, at the plan's
+force limit (counted in the record), and recorded as sent.
 """
 
 from __future__ import annotations
@@ -24,10 +25,10 @@ import dataclasses
 import logging
 import threading
 from collections.abc import Callable, Mapping
-from contextlib import ExitStack
+from contextlib import AbstractContextManager, ExitStack
 from typing import Any, Protocol
 
-from drives.base import CyclicInputs, Drive, DriveScaling
+from drives.base import Drive, DriveCycle, DriveScaling
 from drives.bus_config import resolve_bus_config
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE
 from haptic_bus.app.profiles import Profile
@@ -49,11 +50,8 @@ class CycleDrive(Protocol):
 
     scaling: DriveScaling
 
-    def read_inputs(self) -> CyclicInputs:
-        """Start a cycle; this cycle's inputs (position included)."""
-
-    def write_outputs(self, target_torque: int) -> None:
-        """This cycle's target torque, per mille."""
+    def cyclic(self, torque_limit: int | None = None) -> AbstractContextManager[DriveCycle]:
+        """The cyclic phase, targets saturated at ``torque_limit`` (per mille; None: the drive's own)."""
 
 
 class Clock(Protocol):
@@ -117,26 +115,28 @@ def run_cycles(drive: CycleDrive, session: Session, recorder: Recorder, clock: C
     its inputs repeat the last ones (a TPDO that missed its timeout: ``age`` > 0) or when the
     period its sample closes was longer than ``T`` by more than :data:`PERIOD_TOLERANCE` (a stall
     of the machine: a real handle moved under the held torque for that long, which the
-    fixed-period model does not describe).  The torque recorded is the one sent, per mille.
+    fixed-period model does not describe).  The torque recorded is the one sent, per mille: the
+    drive's clamp holds it at the plan's force limit (such cycles counted in the record).
     """
     scaling = drive.scaling
     per_count = scaling.position_per_count
     longest = (1.0 + PERIOD_TOLERANCE) * session.plan.period
     cycle = 0
-    while stop is None or not stop.is_set():
-        clock.wait_next(cycle)
-        inputs = drive.read_inputs()
-        if inputs.position is None:
-            raise DriveProtocolError(getattr(drive, "name", "drive"),
-                                     "the cyclic inputs carry no position (0x6064): identification needs it")
-        force = session.step(inputs.position * per_count)
-        if session.done:
-            return True
-        torque = scaling.torque_permille(force)
-        drive.write_outputs(torque)
-        recorder.append(inputs.position, inputs.velocity, torque,
-                        not inputs.age and clock.period_bound(inputs.sampled_by_ns) <= longest)
-        cycle += 1
+    with drive.cyclic(scaling.torque_limit(session.plan.force_limit)) as phase:
+        while stop is None or not stop.is_set():
+            clock.wait_next(cycle)
+            inputs = phase.read()
+            if inputs.position is None:
+                raise DriveProtocolError(getattr(drive, "name", "drive"),
+                                         "the cyclic inputs carry no position (0x6064): identification needs it")
+            force = session.step(inputs.position * per_count)
+            if session.done:
+                return True
+            target = scaling.torque_permille(force)
+            torque = phase.exchange(target)
+            recorder.append(inputs.position, inputs.velocity, torque,
+                            not inputs.age and clock.period_bound(inputs.sampled_by_ns) <= longest, torque != target)
+            cycle += 1
     return False
 
 
@@ -202,7 +202,7 @@ def _identify(profile: Profile, options: IdentifyOptions, link: dict[str, Any],
                     reason, error = ("interrupted", "interrupted (Ctrl-C)") if options.stop.interrupted else (
                         "stopped", "stopped (SIGTERM) before the run was done")
             finally:
-                record = recorder.record(plan.period, scale, plan.force_limit, session.saturated, session.phases)
+                record = recorder.record(plan.period, scale, plan.force_limit, session.phases)
             if session.refused and session.probe is not None:
                 reason, error = "refused", session.probe.message
         except DriveError as exc:

@@ -1,17 +1,21 @@
 """The multi-axis controller: a scene in space rendered through several drives on one SYNC.
 
-Each cycle (``T`` for every axis): ``read_inputs`` -- one SYNC, every axis' TPDOs (status,
+Each cycle (``T`` for every axis): ``read`` -- one SYNC, every axis' TPDOs (status,
 velocity, position) before any torque goes out (:class:`drives.canopen.axes.CanopenAxes`) ->
 per axis, the port's energy over the period that sample closed (:class:`PortAccount`) and the
 joint position as an exact integer sum of 0x606C counts (``q_k = q_{k-1} + T v_k``, the seed's
 backward difference per axis, from ``q_0`` = the first cycle's 0x6064: the handle may have
 moved while the drives were enabled) -> the handle's position and velocity ``x = f(q)``, ``v = J q_dot``
 (:mod:`~haptic_bus.control.kinematics`) -> the scene's wall force ``u(x, v)``
-(:mod:`~haptic_bus.control.space_scene`) -> the joint efforts ``J^T u`` -> per axis: saturate at
-its force limit, per mille of its own rated torque, lowered by its own passivity layer ->
-``write_outputs`` for every axis.  Beside it: the supervisor (lateness of the cycle -- its
-oldest input: a missing axis makes the whole cycle late -- and the whole port's energy), one
-bounded record per axis and the run's events.  Scene uploads pass the coupled gate
+(:mod:`~haptic_bus.control.space_scene`) -> the joint efforts ``J^T u`` -> per axis: the torque
+target in per mille of its own rated torque, saturated by its own drive's clamp
+(:class:`~drives.base.TorqueClamp`, the one place a target is saturated: at the axis' force
+limit, or its 0x6072 where that is lower; counted in that drive's stats), lowered by its own
+passivity layer -> sent for every axis.  The cycles run in the axes' cyclic phase
+(:meth:`drives.canopen.axes.CanopenAxes.cyclic`), entered once per :meth:`AxesController.run`.
+Beside it: the supervisor (lateness of the cycle -- its oldest input: a missing axis makes the
+whole cycle late -- and the whole port's energy), one bounded record per axis and the run's
+events.  Scene uploads pass the coupled gate
 (:class:`~haptic_bus.control.space_gate.SpaceGate`) in the caller's thread and take effect whole
 at the next cycle boundary; a refused one leaves the running scene untouched.
 
@@ -38,6 +42,7 @@ budget needs nothing but its own cycle, and an axis that stalls or drops out nev
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from collections.abc import Sequence
@@ -45,7 +50,7 @@ from typing import Protocol
 
 import numpy as np
 
-from drives.base import CyclicInputs, DriveScaling
+from drives.base import AxesDriveCycle, DriveScaling
 from haptic_bus.control.clock import CycleClock, VirtualClock
 from haptic_bus.control.controller import PositionIntegrator
 from haptic_bus.control.cycle_loop import CycleLoop, RunSummary
@@ -71,12 +76,10 @@ class AxesDrive(Protocol):
         """Every axis' drive-unit scaling, in axis order."""
         ...
 
-    def read_inputs(self) -> Sequence[CyclicInputs]:
-        """One cycle's inputs of every axis (one SYNC); raise on any axis' fault, every axis tripped."""
-        ...
-
-    def write_outputs(self, torques: Sequence[int]) -> None:
-        """Every axis' target torque (per mille)."""
+    def cyclic(self, torque_limits: Sequence[int | None] | None = None
+               ) -> contextlib.AbstractContextManager[AxesDriveCycle]:
+        """The cyclic phase of every axis (one SYNC per cycle; any axis' fault trips every axis), each
+        axis' clamp held within its ``torque_limits`` entry (per mille; None: its drive's own)."""
         ...
 
     def disable(self) -> None:
@@ -105,12 +108,12 @@ class SceneHistory:
         return scene_id, scene
 
 
-class AxesController(CycleLoop):
+class AxesController(CycleLoop[AxesDriveCycle]):
     """Renders a gated scene in space on the drives ``axes`` every period.
 
     ``gate``: the coupled gate of these axes (its ``axes`` give each axis' ``b``, ``T`` and loop
     delay); ``scene`` must pass it.  ``names``: the axes' names; ``force_limits`` (N) saturate
-    each axis' force; ``clock``,
+    each axis' force (its drive's clamp holds the torque target at it); ``clock``,
     ``record_capacity``, ``supervisor``, ``passivity`` and ``hold`` (s) as
     :class:`~haptic_bus.control.controller.WallController` takes them; ``kinematics``: the device
     (default Cartesian).  Every axis' inputs must carry 0x6064 (the port observer reads it).
@@ -151,13 +154,14 @@ class AxesController(CycleLoop):
         policy = passivity if passivity is not None else LayerPolicy()
         self.passivity = policy
         self.hold = hold if policy.layer == "bound" and hold is not None else self.period
-        self.force_limits = tuple(min(limit, s.max_force) for limit, s in zip(force_limits, scalings))
+        limits = [min(limit, s.max_force) for limit, s in zip(force_limits, scalings)]
+        self.torque_limits = [s.torque_limit(limit) for limit, s in zip(force_limits, scalings)]  # each drive's clamp
         softest = min((obj.stiffness for obj in scene.objects if obj.stiffness > 0), default=0.0)
         self.ports = tuple(
             PortAccount(f"axis {name}", friction=loop.b, count=s.position_per_count, newton_per_permille=s.newton_per_permille,
                         delay=loop.delay, clock=self.clock, policy=policy, hold=self.hold, force_limit=limit,
                         softest_spring=softest)
-            for name, loop, s, limit in zip(self.names, loops, scalings, self.force_limits))
+            for name, loop, s, limit in zip(self.names, loops, scalings, limits))
         self.integrators = tuple(PositionIntegrator(self.period, s.velocity_per_count) for s in scalings)
         self._scalings = scalings
         self.supervisor = Supervisor(supervisor, self.period, max(loop.delay for loop in loops)) \
@@ -171,6 +175,7 @@ class AxesController(CycleLoop):
         self.observer_active_cycles = 0
         self.stopped_on_error = False
         self._joints = np.zeros((2, size))  # q (m) and q_dot (m/s) of the latest cycle
+        self._cycle: AxesDriveCycle | None = None  # the axes' cyclic phase while run() runs
 
     # ------------------------------------------------------------------ gated changes
 
@@ -200,8 +205,13 @@ class AxesController(CycleLoop):
 
     def step(self, lateness: float = 0.0) -> None:
         """One cycle of every axis (module docstring); ``lateness`` (s): how late it started."""
+        if self._cycle is None:
+            with self._cyclic():
+                self.step(lateness)
+            return
+        cycle = self._cycle
         scene_id, scene = self.scenes.adopt(self.now())
-        inputs = self.axes.read_inputs()
+        inputs = cycle.read()
         started = time.perf_counter()
         wall_clock = time.time()
         q, q_dot = self._joints
@@ -220,16 +230,15 @@ class AxesController(CycleLoop):
         kinematics = self.kinematics
         jacobian = kinematics.jacobian(q)
         wall = jacobian.T @ scene.force(kinematics.position(q), jacobian @ q_dot)  # joint efforts of the wall force
-        forces: list[float] = []
-        torques: list[int] = []
-        saturated = False
-        for port, limit, scaling, force in zip(self.ports, self.force_limits, self._scalings, wall.tolist()):
-            if force > limit or force < -limit:
-                force = limit if force > 0 else -limit
-                saturated = True
-            forces.append(force)
-            torques.append(port.limit(scaling.torque_permille(-force)))  # each motor pushes against the wall
-        self.axes.write_outputs(torques)
+        forces: list[float] = wall.tolist()
+        targets = [scaling.torque_permille(-force) for scaling, force in zip(self._scalings, forces)]  # against the wall
+        sent = cycle.saturate(targets)
+        saturated = sent != targets
+        for i, (target, torque, scaling) in enumerate(zip(targets, sent, self._scalings)):
+            if torque != target:
+                forces[i] = -torque * scaling.newton_per_permille  # the force asked of the drive
+        torques = [port.limit(torque) for port, torque in zip(self.ports, sent)]
+        cycle.write(torques)
         compute = time.perf_counter() - started
         late, alarm = self.supervisor.cycle(lateness, energy, age) if self.supervisor is not None else (False, None)
         self._account(energy, forces, saturated)
@@ -258,6 +267,10 @@ class AxesController(CycleLoop):
             logger.warning("supervisor: %s", alarm.message)
             return
         raise alarm.broken(self.supervisor.assumed_delay if self.supervisor is not None else 0.0)
+
+    def _phase(self) -> contextlib.AbstractContextManager[AxesDriveCycle]:
+        """The axes' cyclic phase, each clamp at its axis' torque limit."""
+        return self.axes.cyclic(self.torque_limits)
 
     def _disable(self) -> None:
         self.axes.disable()

@@ -26,7 +26,7 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 from drives.base import Drive, DriveCycle
 from drives.cia402 import POSITION_ACTUAL
@@ -69,7 +69,7 @@ class PositionIntegrator:
         return self.origin + self.step * self.counts
 
 
-class WallController(CycleLoop):
+class WallController(CycleLoop[DriveCycle]):
     """Renders a gated scene on ``drive`` every ``period`` s.
 
     ``force_limit`` (N) saturates the wall force (the drive's clamp holds the torque target at it);
@@ -128,8 +128,7 @@ class WallController(CycleLoop):
         self.saturated_cycles = 0
         self.peak_force = 0.0
         self.stopped_on_error = False
-        limit = force_limit / scaling.newton_per_permille  # per mille: the drive's clamp holds targets within it
-        self.torque_limit = round(limit) if limit < 0x7FFF else None
+        self.torque_limit = scaling.torque_limit(force_limit)  # per mille: the drive's clamp holds targets within it
         self._cycle: DriveCycle | None = None  # the drive's cyclic phase while run() runs
 
     # ------------------------------------------------------------------ gated changes
@@ -236,15 +235,9 @@ class WallController(CycleLoop):
                 return
         raise alarm.broken(assumed)
 
-    @contextlib.contextmanager
-    def _cyclic(self) -> Iterator[None]:
-        """The drive's cyclic phase, its clamp at this controller's torque limit, for the cycles run in it."""
-        with self.drive.cyclic(self.torque_limit) as cycle:
-            self._cycle = cycle
-            try:
-                yield
-            finally:
-                self._cycle = None
+    def _phase(self) -> contextlib.AbstractContextManager[DriveCycle]:
+        """The drive's cyclic phase, its clamp at this controller's torque limit."""
+        return self.drive.cyclic(self.torque_limit)
 
     def _disable(self) -> None:
         self.drive.disable()

@@ -13,9 +13,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -25,6 +25,8 @@ from haptic_bus.control.supervisor import AssumptionBroken, Supervisor
 from haptic_bus.errors import DriveError
 
 logger = logging.getLogger(__name__)
+
+Phase = TypeVar("Phase")
 
 @dataclass
 class RunSummary:
@@ -61,11 +63,13 @@ class RunSummary:
         return self.observer_active_cycles > 0
 
 
-class CycleLoop:
+class CycleLoop(Generic[Phase]):
     """The run loop of a controller (module docstring).  A subclass sets ``clock``, ``events``,
-    ``cycles`` and ``stopped_on_error`` and implements :meth:`step`, :meth:`now`,
-    :meth:`summary` and :meth:`_disable`."""
+    ``cycles``, ``stopped_on_error`` and ``_cycle`` (None) and implements :meth:`step`, :meth:`now`,
+    :meth:`summary`, :meth:`_disable` and :meth:`_phase` (its drives' cyclic phase, a ``Phase``:
+    held in ``_cycle`` while :meth:`run` runs)."""
 
+    _cycle: Phase | None
     clock: CycleClock
     events: EventLog
     cycles: int
@@ -90,9 +94,19 @@ class CycleLoop:
         """Disable the drive(s) (torque zero)."""
         raise NotImplementedError
 
-    def _cyclic(self) -> contextlib.AbstractContextManager[None]:
-        """The phase the cycles of one :meth:`run` share (a drive's cyclic phase; none by default)."""
-        return contextlib.nullcontext()
+    def _phase(self) -> contextlib.AbstractContextManager[Phase]:
+        """The drive(s)' cyclic phase, entered once for the cycles of one :meth:`run`."""
+        raise NotImplementedError
+
+    @contextlib.contextmanager
+    def _cyclic(self) -> Iterator[None]:
+        """The phase the cycles of one :meth:`run` share, held in ``_cycle`` until they end."""
+        with self._phase() as cycle:
+            self._cycle = cycle
+            try:
+                yield
+            finally:
+                self._cycle = None
 
     def _summary(self, exit_reason: str, error: str | None, *, energy: float, least_energy: float, rounding_bound: float,
                  observer_active_cycles: int, layer: str, layer_interventions: int, compute: np.ndarray,

@@ -41,8 +41,8 @@ class Phases:
 class Record:
     """One run: per cycle the position and velocity counts sampled at SYNC ``k``, the torque
     (per mille) commanded in answer and whether the inputs were ``fresh``; ``period`` s; ``scale``;
-    ``force_limit`` N; ``saturated``: cycles whose command the controller clipped at the force
-    limit; ``phases``."""
+    ``force_limit`` N; ``saturated``: cycles whose command the drive's clamp held at the force
+    limit (the torque recorded is the one sent); ``phases``."""
 
     period: float
     position_counts: np.ndarray
@@ -96,18 +96,21 @@ class Recorder:
     def __init__(self, capacity: int) -> None:
         self._columns = np.zeros((4, capacity), dtype=np.int64)
         self._count = 0
+        self.saturated = 0
 
-    def append(self, position_counts: int, velocity_counts: int, torque_permille: int, fresh: bool = True) -> None:
-        """One cycle (counts as the drive sent them, the per mille commanded, whether the inputs were
-        this cycle's); beyond capacity: dropped."""
+    def append(self, position_counts: int, velocity_counts: int, torque_permille: int, fresh: bool = True,
+               saturated: bool = False) -> None:
+        """One cycle (counts as the drive sent them, the per mille sent, whether the inputs were this
+        cycle's, whether the drive's clamp held the target at the force limit); beyond capacity: dropped."""
         if self._count < self._columns.shape[1]:
+            self.saturated += saturated
             self._columns[:, self._count] = (position_counts, velocity_counts, torque_permille, fresh)
             self._count += 1
 
     def __len__(self) -> int:
         return self._count
 
-    def record(self, period: float, scale: Scale, force_limit: float, saturated: int, phases: Phases) -> Record:
+    def record(self, period: float, scale: Scale, force_limit: float, phases: Phases) -> Record:
         """The cycles collected so far as a :class:`Record`."""
         position, velocity, torque, fresh = (column[: self._count].copy() for column in self._columns)
-        return Record(period, position, velocity, torque, fresh.astype(bool), scale, force_limit, saturated, phases)
+        return Record(period, position, velocity, torque, fresh.astype(bool), scale, force_limit, self.saturated, phases)

@@ -11,8 +11,9 @@ drive, the simulated drive in-process) sees the same forces for the same positio
 3. **settling** for :data:`SETTLE_SECONDS`: the multisine faded out, the holding loop alone slows
    the handle before the drive is disabled.
 
-Every force is clipped at the profile's force limit (the clipped cycles are counted).
-Units: s, m, N.
+The forces are asked, not clipped: the caller's drive clamps each at the plan's force limit
+(:class:`drives.base.TorqueClamp`, the one place a target is saturated), and the torque recorded
+is the one it sent.  Units: s, m, N.
 """
 
 from __future__ import annotations
@@ -82,14 +83,13 @@ class Plan:
 
 class Session:
     """The run's controller: :meth:`step` per cycle until :attr:`done`; then :attr:`probe`,
-    :attr:`phases`, :attr:`saturated` and :attr:`left_envelope` say what happened."""
+    :attr:`phases` and :attr:`left_envelope` say what happened."""
 
     def __init__(self, plan: Plan) -> None:
         self.plan = plan
         self.done = False
         self.probe: ProbeResult | None = None
         self.left_envelope = False
-        self.saturated = 0
         self.cycles = 0
         self._probe_end = 0
         self._excitation_end = 0
@@ -107,18 +107,14 @@ class Session:
         return Phases(self._probe_end, self._excitation_end)
 
     def step(self, position: float) -> float:
-        """The force (N, within the force limit) for the cycle whose sampled position is ``position`` m;
-        0 once :attr:`done` (then nothing is to be written any more)."""
+        """The force (N; the drive holds it within the force limit) for the cycle whose sampled position
+        is ``position`` m; 0 once :attr:`done` (then nothing is to be written any more)."""
         try:
             force = self._script.send(position)
         except StopIteration:
             self.done = True
             return 0.0
         self.cycles += 1
-        limit = self.plan.force_limit
-        if not -limit <= force <= limit:
-            self.saturated += 1
-            force = math.copysign(limit, force)
         return force
 
     def _run(self) -> Generator[float, float, None]:
