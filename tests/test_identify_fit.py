@@ -57,7 +57,7 @@ class DirectDrive:
     @contextlib.contextmanager
     def cyclic(self, torque_limit: int | None = None) -> Iterator[DriveCycle]:
         with self.clamp.lowered(torque_limit, "direct drive") as clamp:
-            yield DriveCycle(self.read_inputs, clamp, self.write_outputs)
+            yield DriveCycle("direct drive", self.read_inputs, clamp, self.write_outputs)
 
     def read_inputs(self) -> CyclicInputs:
         self.sim.sync()
@@ -199,7 +199,7 @@ def test_a_force_beyond_the_drives_limit_is_clamped_once_by_the_drive_and_record
     """A plan of 5 N on a drive whose 0x6072 allows 1.5 N (150 per mille): the probe's pushes beyond
     it go out at 150 per mille, each counted once (by the drive's clamp and in the record), and the
     torque recorded each cycle is the one written to the drive."""
-    truth = DeviceParameters(m=0.37, b=2.9, coulomb_friction=0.2, max_torque_permille=150)
+    truth = DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2, max_torque_permille=150)
     sim = SimulatedDrive(truth, "cia402")
     sim.write_object(0x6060, 10)
     for command in (Command.SHUTDOWN, Command.SWITCH_ON, Command.ENABLE_OPERATION):
