@@ -9,15 +9,18 @@ users write ``haptic_bus.check_passivity(...)``, never a module path::
     report.passive, report.margin, report.max_stiffness, report.to_dict()
 
     profile = hb.load_profile("cia402-handle")            # validated and gated
-    # the drive: any CANopen drive, here the simulated one started as
-    #   haptic-bus sim --interface udp_multicast --channel 239.74.163.2 --bus-option port=43113 --node-id 5
+    # the drive: any CANopen drive, here the simulated one of the same profile, started as
+    #   haptic-bus sim --profile cia402-handle --interface udp_multicast --channel 239.74.163.2 \
+    #       --bus-option port=43113 --node-id 5
     bus = {"interface": "udp_multicast", "channel": "239.74.163.2", "port": 43113}  # or an open can.BusABC
     result = hb.run_canopen(profile, bus, node_id=5, options=hb.RunOptions(duration=1.0, pacing="virtual"))
     result.exit_reason, result.summary.cycles, result.folder  # "completed", 1000, runs/<UTC>-cia402-handle
 
 ``pacing="virtual"`` runs in lock-step with a simulated drive (1.0 s of the drive's time);
 ``pacing="wall"`` (the default) keeps the wall clock, as a real drive needs.  The run's
-:class:`RunResult` says how it ended; ``result.controller`` is the :class:`WallController`.
+:class:`RunResult` says how it ended (``exit_reason``, ``error``; ``summary`` is None when the
+run never cycled, e.g. a drive whose 0x6076 disagrees with the profile's rated torque: a
+simulator started without ``--profile`` has its own); ``result.controller`` is the :class:`WallController`.
 
 Names load on first use (PEP 562), so ``import haptic_bus`` is cheap and the analysis never
 loads python-can, canopen or pymodbus; the runs (:func:`run_canopen`, :func:`run_modbus`) and the

@@ -1,4 +1,6 @@
-"""Every error the distribution raises on purpose: haptic_bus' own, drives' re-exported.  Import them here.
+"""Every error the distribution raises on purpose, drawn once.  The two roots, the exit-code
+branches and drives' errors import from here; a class marked with a module in parentheses lives
+in that module (beside the code that raises it, above this base layer) and imports from there.
 
 Each carries its data from construction; the command line maps the branch to an exit status
 (``haptic_bus.app.cli``)::
