@@ -64,6 +64,9 @@ def resolve_bus_config(
     except (can.CanInterfaceNotImplementedError, NotImplementedError, ValueError, TypeError) as exc:
         if "None" in str(exc):
             raise BusConfigError(where, _NO_INTERFACE) from exc
+        if interface is not None and interface not in can.interfaces.VALID_INTERFACES:  # the user's typo: exit 2
+            raise DriveArgumentError("interface", interface, "one of python-can's: "
+                                     + ", ".join(sorted(can.interfaces.VALID_INTERFACES)), where) from None
         raise BusConfigError(where, f"invalid CAN bus configuration: {exc}") from exc
     if not config.get("interface"):
         raise BusConfigError(where, _NO_INTERFACE)

@@ -73,3 +73,17 @@ def test_report_out_that_cannot_be_a_folder_is_one_line_and_exit_2(where: str, t
     assert err == (f"haptic-bus report: error: report: --out = '{out}' is invalid; allowed: a folder this user can create "
                    f"and write ({why})\n")
     assert afile.read_text() == "kept\n"
+
+
+@pytest.mark.parametrize("command", [["run", "cia402-handle", "--virtual-time"], ["status"], ["scan"]])
+def test_an_interface_python_can_does_not_know_is_invalid_input(command: list[str], tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A typo in --interface is the user's (exit 2, one line listing python-can's interfaces), and
+    a run writes no folder for it."""
+    out = ["--out", str(tmp_path / "run")] if command[0] == "run" else []
+    node = ["--node-id", "5"] if command[0] != "scan" else []
+    assert main([*command, "--interface", "nope", "--channel", "x", *node, *out]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "interface = 'nope' is invalid; allowed: one of python-can's: " in err
+    assert "udp_multicast" in err and "virtual" in err
+    assert not (tmp_path / "run").exists()

@@ -101,8 +101,8 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
     """Run ``profile`` against its axes' drives on ``bus`` (python-can keyword arguments) as CANopen
     node ``controller_node_id`` (module docstring)."""
     nodes = check_run(profile, controller_node_id)
+    config = resolve_bus_config(**bus)  # before any file: an unknown interface is exit 2
     folder = prepare_run_folder(options.out_dir, profile.name)
-    config = resolve_bus_config(**bus)
     period = profile.period
     safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
     bitrate = float(config.get("bitrate") or profile.bitrate)

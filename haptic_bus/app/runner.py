@@ -182,9 +182,9 @@ def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
     if given is not None and options.reset_fault:
         raise ParameterError("reset_fault", True, "False with an open bus (the reset needs a bus configuration)",
                              "run_canopen")
-    folder = prepare_run_folder(options.out_dir, profile.name)
     config = resolve_bus_config(**bus) if isinstance(bus, Mapping) else \
-        {"interface": type(bus).__name__, "channel": bus.channel_info}
+        {"interface": type(bus).__name__, "channel": bus.channel_info}  # before any file: an unknown interface is exit 2
+    folder = prepare_run_folder(options.out_dir, profile.name)
     period = profile.loop.period
     safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
     link = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_id": node_id,
