@@ -111,3 +111,20 @@ def test_pacing_is_wall_or_virtual():
 def test_run_options_refuse_what_a_run_cannot_use_before_anything_starts(options: dict, named: str) -> None:
     with pytest.raises(hb.ParameterError, match=f"run options: {re.escape(named)} is invalid; allowed: "):
         hb.RunOptions(**options)
+
+
+def test_check_passivity_names_each_parameter_as_the_caller_spelled_it() -> None:
+    good = {"mass": 1.0, "friction": 20.0, "period": 1e-3, "stiffness": 1500.0, "damping": 10.0}
+    for word, bad in (("mass", float("nan")), ("friction", -1.0), ("period", 0.0), ("stiffness", float("inf")),
+                      ("damping", -2.0)):
+        with pytest.raises(hb.ParameterError, match=f"^{word} = .* is invalid; allowed: a finite real in"):
+            hb.check_passivity(**{**good, word: bad})
+
+
+@pytest.mark.parametrize(("fields", "named"), [({"m": -1.0}, "m = -1.0"), ({"T": float("nan")}, "T = nan"),
+                                               ({"delay": -1}, "delay = -1"), ({"velocity": "bogus"}, "velocity = 'bogus'")])
+def test_a_device_loop_is_usable_once_it_exists_or_refused_when_built(fields: dict, named: str) -> None:
+    from haptic_bus.analysis.loop import DeviceLoop
+
+    with pytest.raises(hb.ParameterError, match=f"^{re.escape(named)} is invalid; allowed: "):
+        DeviceLoop(**{"m": 1.0, "b": 20.0, "T": 1e-3, "delay": 1, **fields})

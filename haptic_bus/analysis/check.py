@@ -31,11 +31,12 @@ from haptic_bus.analysis.criterion import (
 )
 from haptic_bus.analysis.frequency import grid_terms, loop_terms
 from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, LimitsPlan, PassiveSet
-from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
+from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WORDS, WallLoop
 from haptic_bus.analysis.out_of_band import DEFAULT_HARMONICS, Exposure, worst_force
 from haptic_bus.analysis.poles import closed_loop_poles, stability
 from haptic_bus.analysis.theta_search import refine_lanes
 from haptic_bus.analysis.velocity import POINT, VelocityModel
+from haptic_bus.errors import ParameterError
 
 MARGIN_UNITS = "N s/m (least Re of the impedance 1/T_fund the operator feels; >= 0 iff passive)"
 
@@ -215,7 +216,10 @@ def check_passivity(mass: float, friction: float, period: float, stiffness: floa
 
     Raises :class:`~haptic_bus.errors.ParameterError` naming a parameter outside its range.
     """
-    loop = WallLoop(mass, friction, period, stiffness, damping, delay, VelocityModel.parse(velocity))
+    try:
+        loop = WallLoop(mass, friction, period, stiffness, damping, delay, VelocityModel.parse(velocity))
+    except ParameterError as error:  # named as the caller spelled it
+        raise ParameterError(WORDS.get(error.name, error.name), error.value, error.allowed, error.context) from None
     return check_loop(loop, out_of_band=out_of_band)
 
 

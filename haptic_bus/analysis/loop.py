@@ -26,6 +26,8 @@ PERIOD_RANGE = (1e-9, 10.0)  # s
 STIFFNESS_RANGE = (0.0, 1e15)  # N/m
 DAMPING_RANGE = (0.0, 1e15)  # N s/m
 DELAY_RANGE = (0, 1000)  # samples (real)
+WORDS = {"m": "mass", "b": "friction", "T": "period", "K": "stiffness", "B": "damping"}
+"""The paper's symbols (the loop objects' fields) -> the words users type (the package docstring's vocabulary)."""
 
 BANDWIDTH_ALPHA = 6.0
 """Eq. (25): ``alpha = B/(KT)`` must exceed this (crossover below 0.1 Nyquist, corner at half of it)."""
@@ -137,6 +139,9 @@ class DeviceLoop:
     T: float
     delay: float
     velocity: VelocityModel | str = POINT
+
+    def __post_init__(self) -> None:
+        self.wall(0.0, 0.0)  # validated as a loop is (ParameterError naming m, b, T, delay or velocity): usable once it exists
 
     def wall(self, K: float, B: float) -> WallLoop:
         """The linear loop with the wall ``K`` N/m, ``B`` N s/m (validated)."""

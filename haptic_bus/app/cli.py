@@ -66,12 +66,10 @@ def _add_device_arguments(parser: argparse.ArgumentParser) -> None:
 def _check(args: argparse.Namespace) -> int:
     import json
 
-    from haptic_bus.analysis.check import check_loop, format_check
-    from haptic_bus.analysis.loop import WallLoop
-    from haptic_bus.analysis.velocity import VelocityModel
+    from haptic_bus.analysis.check import check_passivity, format_check
 
-    report = check_loop(WallLoop(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay,
-                                 VelocityModel.parse(args.velocity)))
+    report = check_passivity(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay,
+                             args.velocity, out_of_band=True)  # parameters named as the user typed them
     print(json.dumps(report.to_dict()) if args.json else format_check(report))
     return EXIT_OK if report.passive else EXIT_NO
 
