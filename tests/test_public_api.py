@@ -128,3 +128,15 @@ def test_a_device_loop_is_usable_once_it_exists_or_refused_when_built(fields: di
 
     with pytest.raises(hb.ParameterError, match=f"^{re.escape(named)} is invalid; allowed: "):
         DeviceLoop(**{"m": 1.0, "b": 20.0, "T": 1e-3, "delay": 1, **fields})
+
+
+@pytest.mark.parametrize(("bus", "node_id", "named"), [({"interface": "virtual", "channel": "unused"}, True, "node_id = True"),
+                                                      ({"interface": "virtual", "channel": "unused"}, 0, "node_id = 0"),
+                                                      ({"interface": "virtual", "channel": "unused"}, 128, "node_id = 128"),
+                                                      (42, 5, "bus = 42")])
+def test_run_canopen_refuses_a_bus_or_node_it_cannot_use_before_anything_starts(bus: object, node_id: object, named: str,
+                                                                                tmp_path) -> None:
+    options = hb.RunOptions(duration=0.1, pacing="virtual", out_dir=tmp_path / "run")
+    with pytest.raises(hb.ParameterError, match=f"^run_canopen: {re.escape(named)} is invalid; allowed: "):
+        hb.run_canopen(hb.load_profile("cia402-handle"), bus, node_id=node_id, options=options)  # type: ignore[arg-type]
+    assert not (tmp_path / "run").exists()

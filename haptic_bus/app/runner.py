@@ -175,9 +175,16 @@ def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
     (run.json's ``link`` says so) and ``reset_fault`` is refused (:class:`ParameterError`).
     The heartbeat the drive watches (``[safety]``) is sent as node ``controller_node_id`` either way.
     """
+    import can
+
     from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
     from haptic_bus.node.controller_node import ControllerNode
 
+    if not isinstance(bus, (Mapping, can.BusABC)):
+        raise ParameterError("bus", bus, "python-can keyword arguments (a mapping) or an open can.BusABC", "run_canopen")
+    for name, value in (("node_id", node_id), ("controller_node_id", controller_node_id)):
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 127:
+            raise ParameterError(name, value, "a CANopen node id, an integer 1..127", "run_canopen")
     given = None if isinstance(bus, Mapping) else bus
     if given is not None and options.reset_fault:
         raise ParameterError("reset_fault", True, "False with an open bus (the reset needs a bus configuration)",
