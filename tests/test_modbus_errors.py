@@ -311,3 +311,13 @@ def test_a_dropped_request_closes_its_own_connection_only() -> None:
         finally:
             commander.close()
             other.close()
+
+
+def test_a_url_given_as_the_host_is_refused_naming_from_url() -> None:
+    from drives.errors import DriveArgumentError
+    from drives.modbus.drive import ModbusDrive
+
+    for url in ("tcp://127.0.0.1:1502", "rtu:/dev/ttyUSB0"):
+        refusal = r"host = .* is invalid; allowed: a host name or address \(a URL: ModbusDrive.from_url\)"
+        with pytest.raises(DriveArgumentError, match=refusal):
+            ModbusDrive(url)

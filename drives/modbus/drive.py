@@ -130,6 +130,8 @@ class ModbusDrive(Cia402Master):
         bytesize: int = 8,
         safety: SafetySettings = DEFAULT_SAFETY,
     ) -> None:
+        if isinstance(host, str) and ("://" in host or host.startswith("rtu:")):
+            raise DriveArgumentError("host", host, "a host name or address (a URL: ModbusDrive.from_url)", "Modbus drive")
         self._setup(ModbusAddress(host, port, timeout, baudrate, parity, stopbits, bytesize), unit_id, word_order,
                     cycle, with_position, scaling, state_timeout, check_identity, safety)
 
