@@ -54,11 +54,19 @@ def whole_in_range(name: str, value: object, low: int, high: int, *, context: st
     return whole
 
 
+def folder_path(name: str, path: str | os.PathLike[str], *, context: str = "") -> pathlib.Path:
+    """``path`` as a folder's path, touching nothing; ParameterError naming ``name`` if it is empty
+    (an empty string is no folder, not the current one)."""
+    if not os.fspath(path):
+        raise ParameterError(name, "", "a folder path (empty: none given)", context)
+    return pathlib.Path(path)
+
+
 def writable_folder(name: str, path: str | os.PathLike[str], *, context: str = "") -> pathlib.Path:
     """``path`` as a folder this user can write, created (with its parents) if missing and probed with a
     file now, before any work that would write there; ParameterError naming ``name`` otherwise (a file
     in the way named, else the system's reason)."""
-    folder = pathlib.Path(path)
+    folder = folder_path(name, path, context=context)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         probe = folder / ".haptic-bus-write-test"

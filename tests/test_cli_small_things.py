@@ -87,3 +87,15 @@ def test_an_interface_python_can_does_not_know_is_invalid_input(command: list[st
     assert err.count("\n") == 1 and "interface = 'nope' is invalid; allowed: one of python-can's: " in err
     assert "udp_multicast" in err and "virtual" in err
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("command", [["run", "cia402-handle", "--interface", "virtual", "--channel", "x", "--node-id", "5",
+                                      "--virtual-time"], ["demo"], ["report", "cia402-handle"]])
+def test_an_empty_out_is_refused_not_taken_as_the_current_folder(command: list[str], tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert main([*command, "--out", ""]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--out = '' is invalid; allowed: a folder path (empty: none given)" in err
+    assert list(tmp_path.iterdir()) == []

@@ -42,6 +42,7 @@ from haptic_bus.app.scan_cli import add_scan_parser
 from haptic_bus.app.sdo_cli import add_sdo_parser
 from haptic_bus.app.status_cli import add_status_parser
 from haptic_bus.console import StderrHandler
+from haptic_bus.validation import folder_path, writable_file, writable_folder
 
 _NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
 
@@ -90,7 +91,6 @@ def _mark(text: str) -> tuple[float, float]:
 def _region(args: argparse.Namespace) -> int:
     from haptic_bus.analysis.loop import WallLoop
     from haptic_bus.analysis.velocity import VelocityModel
-    from haptic_bus.validation import writable_file
 
     loop = WallLoop(args.mass, args.friction, args.period, 0.0, 0.0, args.delay, VelocityModel.parse(args.velocity))
     marks = [loop.with_wall(K, B) for K, B in args.mark or []]
@@ -106,7 +106,6 @@ def _region(args: argparse.Namespace) -> int:
 
 def _plot(args: argparse.Namespace) -> int:
     from haptic_bus.app.run_folder import read_run_folder
-    from haptic_bus.validation import writable_folder
 
     run = read_run_folder(args.run_dir)
     out = writable_folder("--out", pathlib.Path(args.out) if args.out else run.path, context="plot")
@@ -167,7 +166,7 @@ def _run(args: argparse.Namespace) -> int:
     stop = StopRequest()
     from haptic_bus.app.realtime import RealtimeSettings
 
-    out_dir = None if args.out is None else pathlib.Path(args.out)
+    out_dir = None if args.out is None else folder_path("--out", args.out, context="run")  # created once the bus is known
     options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
                          scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings(),
@@ -244,7 +243,6 @@ def _upload(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     from haptic_bus.app.profiles import load_profile
     from haptic_bus.app.report import write_report
-    from haptic_bus.validation import writable_folder
 
     profile = load_profile(args.profile)
     for path in write_report(profile, writable_folder("--out", args.out, context="report")):

@@ -56,7 +56,7 @@ def prepare_run_folder(out: str | pathlib.Path | None, profile_name: str, root: 
     """The run's folder, created and shown writable now: ``out``, or ``root/<UTC>-<profile>``
     (``-2``, ``-3``... if that exists).  ParameterError naming the folder otherwise."""
     if out is not None:
-        path = pathlib.Path(out)
+        return writable_folder("--out", out, context="run")  # as given: an empty one is refused, not '.'
     else:
         stamp = _utc_now().strftime("%Y%m%dT%H%M%SZ")
         path = root / f"{stamp}-{profile_name}"
