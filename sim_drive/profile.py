@@ -57,12 +57,11 @@ def load_profile(path_or_name: str | pathlib.Path) -> DriveProfile:
     top = Reader(path, "", read_document(path))
     if "axes" in top.table:
         raise ProfileError(path, "axes", "[[axes]]", "a one-axis profile (a multi-axis profile runs with --node-ids)")
+    top.only(ONE_AXIS_TABLES)  # the controller's tables are its business, a table no profile has is refused
     loop_table = top.table.get("loop")
     if isinstance(loop_table, dict) and "delay" in loop_table and "timing" not in loop_table:
         raise ProfileError(path, "loop.delay", loop_table["delay"], "a delay only with [loop] timing")
     plant = read_plant(top, SILENT)
-    top.used.update(ONE_AXIS_TABLES)  # the controller's tables are its business
-    top.done()
     timing = Timing(plant.loop.timing) if isinstance(loop_table, dict) and "timing" in loop_table else None
     parameters = drive_parameters(path, plant.device, plant.loop.period, plant.loop.timing, plant.loop.delay)
     operator = NoOperator() if plant.operator_model["model"] == "none" else operator_from_table(plant.operator_model)

@@ -46,7 +46,7 @@ from haptic_bus.control.supervisor import SupervisorPolicy
 from haptic_bus.profile.device import DeviceProfile, LoopProfile
 from haptic_bus.profile.files import resolve_profile, shipped_profiles
 from haptic_bus.profile.identification import IdentifiedDevice
-from haptic_bus.profile.plant import read_plant
+from haptic_bus.profile.plant import ONE_AXIS_TABLES, read_plant
 from haptic_bus.profile.reader import ProfileError, Reader, read_document
 
 __all__ = ["DEFAULT_PROFILE", "DeviceProfile", "LoopProfile", "Profile", "ProfileError", "ProfileRefusal", "StartPolicy",
@@ -162,6 +162,7 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
         raise ProfileError(path, "axes", "[[axes]]",
                            "no [[axes]] in a one-axis profile; multi-axis profiles load with load_axes_profile")
     top = Reader(path, "", document)
+    top.only(ONE_AXIS_TABLES)  # a misspelt table first, not the required one it hides
     name, operator, task, description = read_about(top)
     plant = read_plant(top)
     device = plant.device
