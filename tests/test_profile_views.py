@@ -128,3 +128,65 @@ def test_both_views_of_a_multi_axis_profile_refuse_a_bad_axis_with_the_same_line
     believed = read_axes_profile("gantry-3d")
     assert [(a.name, a.node_id, a.parameters.mass, a.parameters.friction) for a in truth.axes] == [
         (a.name, a.node_id, a.device.mass, a.device.friction) for a in believed.axes]
+
+
+def test_a_misspelt_table_is_named_first_by_both_views_and_every_command(tmp_path: pathlib.Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    path = _variant(tmp_path, "[loop]", "[loopp]")
+    lines = []
+    for read in (read_profile, load_drive_profile):
+        with pytest.raises(ProfileError) as caught:
+            read(path)
+        assert caught.value.field == "loopp" and "no such key; keys of [top level]: device, gate" in caught.value.allowed
+        lines.append(str(caught.value))
+    assert lines[0] == lines[1] and "\n" not in lines[0]
+    commands = [(haptic_bus_main, ["profiles", "check", str(path)]),
+                (haptic_bus_main, ["profiles", "show", str(path)]),
+                (haptic_bus_main, ["run", str(path), "--interface", "virtual", "--channel", "loopp", "--node-id", "5",
+                                   "--virtual-time", "--out", str(tmp_path / "run")]),
+                (sim_main, ["--interface", "virtual", "--channel", "loopp", "--node-id", "3", "--profile", str(path)])]
+    for command, args in commands:
+        assert command(args) == 2
+        out = capsys.readouterr()
+        assert out.err.count("\n") == 1 and out.err.strip().endswith(lines[0]) and "still missing" not in out.out
+    assert not (tmp_path / "run").exists()
+
+
+def _gantry_variant(tmp_path: pathlib.Path, old: str, new: str) -> pathlib.Path:
+    text = resolve_profile("gantry-3d").read_text()
+    assert old in text
+    path = tmp_path / "gantry.toml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+def test_profiles_check_and_show_judge_a_multi_axis_profile_by_the_coupled_gate(
+        tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from haptic_bus.app.axes_profile import load_axes_profile
+
+    profile = load_axes_profile("gantry-3d")
+    decision = profile.gate().judge(profile.space_scene())
+    assert haptic_bus_main(["profiles", "check", "gantry-3d", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["gate_decision"]["accepted"] and [a["name"] for a in report["axes"]] == ["x", "y", "z"]
+    assert report["gate_decision"]["worst_margin"] == pytest.approx(decision.worst_margin, rel=1e-12)
+    assert report["gate_decision"]["worst_margin"] == pytest.approx(4.28, abs=0.005)  # the profile's own comment
+    assert [o["name"] for o in report["space"]["objects"]] == ["ball", "block", "slope"]
+    assert haptic_bus_main(["profiles", "show", "gantry-3d"]) == 0
+    shown = capsys.readouterr().out
+    assert "z (node 7): m=0.5 kg b=10 N s/m" in shown and "sphere ball: center=(0, -0.03, 0), radius=0.01" in shown
+    assert "coupled gate: accepts" in shown and "ball: margin +4.277 N s/m" in shown
+    # a wall the coupled gate refuses: check says so (exit 1), show still shows it (exit 0)
+    stiff = _gantry_variant(tmp_path, "stiffness = 1500", "stiffness = 200000")
+    assert haptic_bus_main(["profiles", "check", str(stiff)]) == 1
+    assert "coupled gate: REFUSES" in capsys.readouterr().out
+    assert haptic_bus_main(["profiles", "show", str(stiff)]) == 0
+    assert "refused:" in capsys.readouterr().out
+    # an invalid value: one line, exit 2, from both commands
+    bad = _gantry_variant(tmp_path, "\nmass = 0.5\n", "\nmass = nan\n")
+    for command in ("check", "show"):
+        assert haptic_bus_main(["profiles", command, str(bad)]) == 2
+        out = capsys.readouterr()
+        assert out.out == "" and out.err.count("\n") == 1 and "axes[2].device.mass = nan is invalid" in out.err
