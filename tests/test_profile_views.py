@@ -43,6 +43,10 @@ def _variant(tmp_path: pathlib.Path, old: str, new: str) -> pathlib.Path:
     ("max_torque_permille = 2000", "max_torque_permille = 2000.0", "device.max_torque_permille", "an integer in [1, 32767]"),
     ("[loop]", "[loop]\nperod = 0.001", "loop.perod", "no such key; keys of [loop]"),
     ("[device]", "[devcie]\n[device]", "devcie", "no such key; keys of [top level]"),
+    ("stiffness = 1500.0", "stiffness = nan", "scene.objects[0].stiffness", "a finite real in [0"),
+    ("force_limit = 30.0", "force_limit = -5", "limits.force_limit", "a finite real in (0, 1e+06] N"),
+    ("force_limit = 30.0", "force_limit = 1000.0", "limits.force_limit", "the force 0x6072 allows"),
+    ('kind = "wall"', 'kind = "wal"', "scene.objects[0].kind", "'wall' or 'slot' or 'detent'"),
 ])
 def test_both_views_refuse_a_bad_value_with_the_same_line(tmp_path: pathlib.Path, old: str, new: str, field: str,
                                                            allowed: str) -> None:
@@ -190,3 +194,12 @@ def test_profiles_check_and_show_judge_a_multi_axis_profile_by_the_coupled_gate(
         assert haptic_bus_main(["profiles", command, str(bad)]) == 2
         out = capsys.readouterr()
         assert out.out == "" and out.err.count("\n") == 1 and "axes[2].device.mass = nan is invalid" in out.err
+
+
+def test_the_simulator_refuses_a_bad_scene_before_serving(tmp_path: pathlib.Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    path = _variant(tmp_path, "stiffness = 1500.0", "stiffness = nan")
+    assert sim_main(["--interface", "virtual", "--channel", "scene", "--node-id", "3", "--profile", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.endswith(f"profile {path}: scene.objects[0].stiffness = nan is invalid; "
+                                                 "allowed: a finite real in [0, 1e+15] N/m")

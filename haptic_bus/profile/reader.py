@@ -19,6 +19,9 @@ from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.errors import InvalidInput, ParameterError
 from haptic_bus.validation import real_in_range, whole_in_range
 
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+"""A name in a profile (the profile's, an object's, an axis'): letters, digits, '.', '_', '-', not starting with '.', '_', '-'."""
+
 REQUIRED = object()
 """The default of a field that must be given."""
 
