@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import pathlib
 import tomllib
+from collections.abc import Callable
 
 import pytest
 
@@ -28,12 +29,25 @@ def test_both_views_of_every_shipped_profile_agree(name: str) -> None:
     assert truth.timing is Timing(believed.loop.timing)
 
 
-def _variant(tmp_path: pathlib.Path, old: str, new: str) -> pathlib.Path:
-    text = resolve_profile("cia402-handle").read_text()
+def _variant(tmp_path: pathlib.Path, old: str, new: str, name: str = "cia402-handle", count: int = 1) -> pathlib.Path:
+    """The shipped profile ``name`` with ``old`` replaced by ``new`` (``count`` times, -1: everywhere)."""
+    text = resolve_profile(name).read_text()
     assert old in text
     path = tmp_path / "variant.toml"
-    path.write_text(text.replace(old, new, 1))
+    path.write_text(text.replace(old, new, count))
     return path
+
+
+def _same_line(path: pathlib.Path, readers: tuple[Callable[[pathlib.Path], object], ...], field: str) -> str:
+    """The one line every reader refuses ``path`` with (ProfileError on ``field``), asserted the same."""
+    lines = []
+    for read in readers:
+        with pytest.raises(ProfileError) as caught:
+            read(path)
+        assert caught.value.field == field
+        lines.append(str(caught.value))
+    assert lines[0] == lines[-1] and "\n" not in lines[0]
+    return lines[0]
 
 
 @pytest.mark.parametrize(("old", "new", "field", "allowed"), [
@@ -51,13 +65,9 @@ def _variant(tmp_path: pathlib.Path, old: str, new: str) -> pathlib.Path:
 def test_both_views_refuse_a_bad_value_with_the_same_line(tmp_path: pathlib.Path, old: str, new: str, field: str,
                                                            allowed: str) -> None:
     path = _variant(tmp_path, old, new)
-    lines = []
-    for read in (read_profile, load_drive_profile):
-        with pytest.raises(ProfileError) as caught:
-            read(path)
-        assert caught.value.field == field and allowed in caught.value.allowed and str(path) in str(caught.value)
-        lines.append(str(caught.value))
-    assert lines[0] == lines[1] and "\n" not in lines[0]
+    line = _same_line(path, (read_profile, load_drive_profile), field)
+    assert allowed in line.split("allowed: ", 1)[1]
+    assert line.startswith(f"profile {path}: {field} = ")
 
 
 def test_the_command_lines_say_it_in_one_line_and_exit_2(tmp_path: pathlib.Path,
@@ -118,16 +128,8 @@ def test_both_views_of_a_multi_axis_profile_refuse_a_bad_axis_with_the_same_line
     from haptic_bus.app.axes_profile import read_axes_profile
     from sim_drive.axes_profile import load_axes_device
 
-    text = resolve_profile("gantry-3d").read_text()
-    path = tmp_path / "axes.toml"
-    path.write_text(text.replace("\nmass = 0.5\n", "\nmass = -0.5\n", 1))
-    lines = []
-    for read in (read_axes_profile, load_axes_device):
-        with pytest.raises(ProfileError) as caught:
-            read(path)
-        assert caught.value.field == "axes[2].device.mass" and "[1e-09, 1e+09] kg" in caught.value.allowed
-        lines.append(str(caught.value))
-    assert lines[0] == lines[1]
+    path = _variant(tmp_path, "\nmass = 0.5\n", "\nmass = -0.5\n", "gantry-3d")
+    assert "[1e-09, 1e+09] kg" in _same_line(path, (read_axes_profile, load_axes_device), "axes[2].device.mass")
     truth = load_axes_device("gantry-3d")
     believed = read_axes_profile("gantry-3d")
     assert [(a.name, a.node_id, a.parameters.mass, a.parameters.friction) for a in truth.axes] == [
@@ -137,13 +139,8 @@ def test_both_views_of_a_multi_axis_profile_refuse_a_bad_axis_with_the_same_line
 def test_a_misspelt_table_is_named_first_by_both_views_and_every_command(tmp_path: pathlib.Path,
                                                                           capsys: pytest.CaptureFixture[str]) -> None:
     path = _variant(tmp_path, "[loop]", "[loopp]")
-    lines = []
-    for read in (read_profile, load_drive_profile):
-        with pytest.raises(ProfileError) as caught:
-            read(path)
-        assert caught.value.field == "loopp" and "no such key; keys of [top level]: device, gate" in caught.value.allowed
-        lines.append(str(caught.value))
-    assert lines[0] == lines[1] and "\n" not in lines[0]
+    line = _same_line(path, (read_profile, load_drive_profile), "loopp")
+    assert "no such key; keys of [top level]: device, gate, identification, limits, loop," in line
     commands = [(haptic_bus_main, ["profiles", "check", str(path)]),
                 (haptic_bus_main, ["profiles", "show", str(path)]),
                 (haptic_bus_main, ["run", str(path), "--interface", "virtual", "--channel", "loopp", "--node-id", "5",
@@ -152,16 +149,8 @@ def test_a_misspelt_table_is_named_first_by_both_views_and_every_command(tmp_pat
     for command, args in commands:
         assert command(args) == 2
         out = capsys.readouterr()
-        assert out.err.count("\n") == 1 and out.err.strip().endswith(lines[0]) and "still missing" not in out.out
+        assert out.err.count("\n") == 1 and out.err.strip().endswith(line) and "still missing" not in out.out
     assert not (tmp_path / "run").exists()
-
-
-def _gantry_variant(tmp_path: pathlib.Path, old: str, new: str) -> pathlib.Path:
-    text = resolve_profile("gantry-3d").read_text()
-    assert old in text
-    path = tmp_path / "gantry.toml"
-    path.write_text(text.replace(old, new))
-    return path
 
 
 def test_profiles_check_and_show_judge_a_multi_axis_profile_by_the_coupled_gate(
@@ -183,13 +172,13 @@ def test_profiles_check_and_show_judge_a_multi_axis_profile_by_the_coupled_gate(
     assert "z (node 7): m=0.5 kg b=10 N s/m" in shown and "sphere ball: center=(0, -0.03, 0), radius=0.01" in shown
     assert "coupled gate: accepts" in shown and "ball: margin +4.277 N s/m" in shown
     # a wall the coupled gate refuses: check says so (exit 1), show still shows it (exit 0)
-    stiff = _gantry_variant(tmp_path, "stiffness = 1500", "stiffness = 200000")
+    stiff = _variant(tmp_path, "stiffness = 1500", "stiffness = 200000", "gantry-3d", -1)
     assert haptic_bus_main(["profiles", "check", str(stiff)]) == 1
     assert "coupled gate: REFUSES" in capsys.readouterr().out
     assert haptic_bus_main(["profiles", "show", str(stiff)]) == 0
     assert "refused:" in capsys.readouterr().out
     # an invalid value: one line, exit 2, from both commands
-    bad = _gantry_variant(tmp_path, "\nmass = 0.5\n", "\nmass = nan\n")
+    bad = _variant(tmp_path, "\nmass = 0.5\n", "\nmass = nan\n", "gantry-3d")
     for command in ("check", "show"):
         assert haptic_bus_main(["profiles", command, str(bad)]) == 2
         out = capsys.readouterr()
