@@ -7,8 +7,10 @@ model and hidden truth (``coulomb_friction`` N, ``velocity_noise`` 0x606C counts
 "reception") and ``delay`` (samples; with "reception" the fraction ``delta`` in [0, 1) after the
 SYNC at which a target acts); and ``[operator_model]``.  The checks and the one-line errors are
 the controller's.  Unlike the controller, the drive runs a profile that is silent on some keys
-(its own defaults, :class:`DeviceParameters`', fill them) and leaves the controller's tables
-(scene, gate, limits, policies) to it, though a top-level table no profile has is refused.  A
+(its own defaults, :class:`DeviceParameters`', fill them); of the controller's tables it checks
+``[limits]`` and ``[[scene.objects]]`` where given, by the same code
+(:mod:`haptic_bus.profile.scene`), and leaves the policies (``[profile]``, ``[gate]``, ``[safety]``,
+``[passivity]``, ``[supervisor]``, ``[start]``) to it; a top-level table no profile has is refused.  A
 bare name is looked up among the shipped profiles.
 
 A profile the drive runs is its truth; the controller may be given another profile (what it
@@ -25,6 +27,7 @@ from haptic_bus.profile.device import DeviceProfile
 from haptic_bus.profile.files import resolve_profile
 from haptic_bus.profile.plant import ONE_AXIS_TABLES, Silent, read_plant
 from haptic_bus.profile.reader import ProfileError, Reader, read_document
+from haptic_bus.profile.scene import read_force_limit, read_scene
 from sim_drive.operator import NoOperator, OperatorModel, operator_from_table
 from sim_drive.parameters import DEFAULT_RECEPTION_DELAY, DeviceParameters, Timing
 
@@ -57,12 +60,15 @@ def load_profile(path_or_name: str | pathlib.Path) -> DriveProfile:
     top = Reader(path, "", read_document(path))
     if "axes" in top.table:
         raise ProfileError(path, "axes", "[[axes]]", "a one-axis profile (a multi-axis profile runs with --node-ids)")
+    top.only(ONE_AXIS_TABLES)  # the controller's tables are its business, a table no profile has is refused
     loop_table = top.table.get("loop")
     if isinstance(loop_table, dict) and "delay" in loop_table and "timing" not in loop_table:
         raise ProfileError(path, "loop.delay", loop_table["delay"], "a delay only with [loop] timing")
     plant = read_plant(top, SILENT)
-    top.used.update(ONE_AXIS_TABLES)  # the controller's tables are its business
-    top.done()
+    if "limits" in top.table:  # the controller's tables, checked by the same code (the drive runs neither)
+        read_force_limit(path, top.table["limits"], plant.device)
+    if "scene" in top.table:
+        read_scene(path, top.table["scene"])
     timing = Timing(plant.loop.timing) if isinstance(loop_table, dict) and "timing" in loop_table else None
     parameters = drive_parameters(path, plant.device, plant.loop.period, plant.loop.timing, plant.loop.delay)
     operator = NoOperator() if plant.operator_model["model"] == "none" else operator_from_table(plant.operator_model)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import pathlib
 import tomllib
+from collections.abc import Callable
 
 import pytest
 
@@ -28,12 +29,25 @@ def test_both_views_of_every_shipped_profile_agree(name: str) -> None:
     assert truth.timing is Timing(believed.loop.timing)
 
 
-def _variant(tmp_path: pathlib.Path, old: str, new: str) -> pathlib.Path:
-    text = resolve_profile("cia402-handle").read_text()
+def _variant(tmp_path: pathlib.Path, old: str, new: str, name: str = "cia402-handle", count: int = 1) -> pathlib.Path:
+    """The shipped profile ``name`` with ``old`` replaced by ``new`` (``count`` times, -1: everywhere)."""
+    text = resolve_profile(name).read_text()
     assert old in text
     path = tmp_path / "variant.toml"
-    path.write_text(text.replace(old, new, 1))
+    path.write_text(text.replace(old, new, count))
     return path
+
+
+def _same_line(path: pathlib.Path, readers: tuple[Callable[[pathlib.Path], object], ...], field: str) -> str:
+    """The one line every reader refuses ``path`` with (ProfileError on ``field``), asserted the same."""
+    lines = []
+    for read in readers:
+        with pytest.raises(ProfileError) as caught:
+            read(path)
+        assert caught.value.field == field
+        lines.append(str(caught.value))
+    assert lines[0] == lines[-1] and "\n" not in lines[0]
+    return lines[0]
 
 
 @pytest.mark.parametrize(("old", "new", "field", "allowed"), [
@@ -43,17 +57,17 @@ def _variant(tmp_path: pathlib.Path, old: str, new: str) -> pathlib.Path:
     ("max_torque_permille = 2000", "max_torque_permille = 2000.0", "device.max_torque_permille", "an integer in [1, 32767]"),
     ("[loop]", "[loop]\nperod = 0.001", "loop.perod", "no such key; keys of [loop]"),
     ("[device]", "[devcie]\n[device]", "devcie", "no such key; keys of [top level]"),
+    ("stiffness = 1500.0", "stiffness = nan", "scene.objects[0].stiffness", "a finite real in [0"),
+    ("force_limit = 30.0", "force_limit = -5", "limits.force_limit", "a finite real in (0, 1e+06] N"),
+    ("force_limit = 30.0", "force_limit = 1000.0", "limits.force_limit", "the force 0x6072 allows"),
+    ('kind = "wall"', 'kind = "wal"', "scene.objects[0].kind", "'wall' or 'slot' or 'detent'"),
 ])
 def test_both_views_refuse_a_bad_value_with_the_same_line(tmp_path: pathlib.Path, old: str, new: str, field: str,
                                                            allowed: str) -> None:
     path = _variant(tmp_path, old, new)
-    lines = []
-    for read in (read_profile, load_drive_profile):
-        with pytest.raises(ProfileError) as caught:
-            read(path)
-        assert caught.value.field == field and allowed in caught.value.allowed and str(path) in str(caught.value)
-        lines.append(str(caught.value))
-    assert lines[0] == lines[1] and "\n" not in lines[0]
+    line = _same_line(path, (read_profile, load_drive_profile), field)
+    assert allowed in line.split("allowed: ", 1)[1]
+    assert line.startswith(f"profile {path}: {field} = ")
 
 
 def test_the_command_lines_say_it_in_one_line_and_exit_2(tmp_path: pathlib.Path,
@@ -114,17 +128,67 @@ def test_both_views_of_a_multi_axis_profile_refuse_a_bad_axis_with_the_same_line
     from haptic_bus.app.axes_profile import read_axes_profile
     from sim_drive.axes_profile import load_axes_device
 
-    text = resolve_profile("gantry-3d").read_text()
-    path = tmp_path / "axes.toml"
-    path.write_text(text.replace("\nmass = 0.5\n", "\nmass = -0.5\n", 1))
-    lines = []
-    for read in (read_axes_profile, load_axes_device):
-        with pytest.raises(ProfileError) as caught:
-            read(path)
-        assert caught.value.field == "axes[2].device.mass" and "[1e-09, 1e+09] kg" in caught.value.allowed
-        lines.append(str(caught.value))
-    assert lines[0] == lines[1]
+    path = _variant(tmp_path, "\nmass = 0.5\n", "\nmass = -0.5\n", "gantry-3d")
+    assert "[1e-09, 1e+09] kg" in _same_line(path, (read_axes_profile, load_axes_device), "axes[2].device.mass")
     truth = load_axes_device("gantry-3d")
     believed = read_axes_profile("gantry-3d")
     assert [(a.name, a.node_id, a.parameters.mass, a.parameters.friction) for a in truth.axes] == [
         (a.name, a.node_id, a.device.mass, a.device.friction) for a in believed.axes]
+
+
+def test_a_misspelt_table_is_named_first_by_both_views_and_every_command(tmp_path: pathlib.Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    path = _variant(tmp_path, "[loop]", "[loopp]")
+    line = _same_line(path, (read_profile, load_drive_profile), "loopp")
+    assert "no such key; keys of [top level]: device, gate, identification, limits, loop," in line
+    commands = [(haptic_bus_main, ["profiles", "check", str(path)]),
+                (haptic_bus_main, ["profiles", "show", str(path)]),
+                (haptic_bus_main, ["run", str(path), "--interface", "virtual", "--channel", "loopp", "--node-id", "5",
+                                   "--virtual-time", "--out", str(tmp_path / "run")]),
+                (sim_main, ["--interface", "virtual", "--channel", "loopp", "--node-id", "3", "--profile", str(path)])]
+    for command, args in commands:
+        assert command(args) == 2
+        out = capsys.readouterr()
+        assert out.err.count("\n") == 1 and out.err.strip().endswith(line) and "still missing" not in out.out
+    assert not (tmp_path / "run").exists()
+
+
+def test_profiles_check_and_show_judge_a_multi_axis_profile_by_the_coupled_gate(
+        tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from haptic_bus.app.axes_profile import load_axes_profile
+
+    profile = load_axes_profile("gantry-3d")
+    decision = profile.gate().judge(profile.space_scene())
+    assert haptic_bus_main(["profiles", "check", "gantry-3d", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["gate_decision"]["accepted"] and [a["name"] for a in report["axes"]] == ["x", "y", "z"]
+    assert report["gate_decision"]["worst_margin"] == pytest.approx(decision.worst_margin, rel=1e-12)
+    assert report["gate_decision"]["worst_margin"] == pytest.approx(4.28, abs=0.005)  # the profile's own comment
+    assert [o["name"] for o in report["space"]["objects"]] == ["ball", "block", "slope"]
+    assert haptic_bus_main(["profiles", "show", "gantry-3d"]) == 0
+    shown = capsys.readouterr().out
+    assert "z (node 7): m=0.5 kg b=10 N s/m" in shown and "sphere ball: center=(0, -0.03, 0), radius=0.01" in shown
+    assert "coupled gate: accepts" in shown and "ball: margin +4.277 N s/m" in shown
+    # a wall the coupled gate refuses: check says so (exit 1), show still shows it (exit 0)
+    stiff = _variant(tmp_path, "stiffness = 1500", "stiffness = 200000", "gantry-3d", -1)
+    assert haptic_bus_main(["profiles", "check", str(stiff)]) == 1
+    assert "coupled gate: REFUSES" in capsys.readouterr().out
+    assert haptic_bus_main(["profiles", "show", str(stiff)]) == 0
+    assert "refused:" in capsys.readouterr().out
+    # an invalid value: one line, exit 2, from both commands
+    bad = _variant(tmp_path, "\nmass = 0.5\n", "\nmass = nan\n", "gantry-3d")
+    for command in ("check", "show"):
+        assert haptic_bus_main(["profiles", command, str(bad)]) == 2
+        out = capsys.readouterr()
+        assert out.out == "" and out.err.count("\n") == 1 and "axes[2].device.mass = nan is invalid" in out.err
+
+
+def test_the_simulator_refuses_a_bad_scene_before_serving(tmp_path: pathlib.Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    path = _variant(tmp_path, "stiffness = 1500.0", "stiffness = nan")
+    assert sim_main(["--interface", "virtual", "--channel", "scene", "--node-id", "3", "--profile", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.endswith(f"profile {path}: scene.objects[0].stiffness = nan is invalid; "
+                                                 "allowed: a finite real in [0, 1e+15] N/m")

@@ -117,7 +117,7 @@ def test_profile_tables(tmp_path: pathlib.Path) -> None:
     path.write_text(
         '[device]\nmass = 0.8\nfriction = 2.0\nfriction_source = "guide"\nrated_torque = 0.5\nmax_torque_permille = 1500\n'
         '[loop]\nperiod = 0.002\ntiming = "ideal"\n'
-        '[operator_model]\nmodel = "hand"\nstiffness = 250.0\ndamping = 3.0\n[[scene.objects]]\nkind = "wall"\n'
+        '[operator_model]\nmodel = "hand"\nstiffness = 250.0\ndamping = 3.0\n'
     )
     profile = load_profile(path)
     parameters = profile.parameters
@@ -125,6 +125,9 @@ def test_profile_tables(tmp_path: pathlib.Path) -> None:
         0.8, 2.0, 500, 1500)
     assert parameters.period == 0.002 and profile.timing is Timing.IDEAL
     assert profile.operator == HandModel(250.0, 3.0)
+    path.write_text(path.read_text() + '[[scene.objects]]\nkind = "wall"\n')  # the controller's table, checked alike
+    with pytest.raises(ParameterError, match=r"scene\.objects\[0\]\.name = '<missing>'"):
+        load_profile(path)
     path.write_text("[device]\nm = 1.0\n")
     with pytest.raises(ParameterError, match=r"device\.m"):
         load_profile(path)

@@ -255,25 +255,35 @@ def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
                        passivity, supervisor, hand)
 
 
+def judge_axes_profile(path_or_name: str | pathlib.Path) -> tuple[AxesProfile, SpaceDecision]:
+    """Read and validate a multi-axis profile, check its bus load, and the coupled gate's decision on its
+    scene (accepted or not: ``profiles check`` reports either); ProfileError as :func:`load_axes_profile`."""
+    profile = read_axes_profile(path_or_name)
+    try:
+        profile.bus_load()
+    except ParameterError as error:
+        raise ProfileError(profile.path or profile.name, "loop.period", profile.period, error.allowed) from None
+    return profile, profile.gate().judge(profile.space_scene())
+
+
 def load_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
     """Read and validate a multi-axis profile, check its bus load, and judge its scene by the coupled gate.
 
     Raises ProfileError (invalid, or the bus load above 70 %: ``loop.period`` with the load and the
     smallest T) or :class:`AxesProfileRefusal` (a wall the coupled gate refuses).
     """
-    profile = read_axes_profile(path_or_name)
-    where = profile.path or profile.name
-    try:
-        profile.bus_load()
-    except ParameterError as error:
-        raise ProfileError(where, "loop.period", profile.period, error.allowed) from None
-    decision = profile.gate().judge(profile.space_scene())
+    profile, decision = judge_axes_profile(path_or_name)
     if not decision.accepted:
-        raise AxesProfileRefusal(where, decision)
+        raise AxesProfileRefusal(profile.path or profile.name, decision)
     return profile
+
+
+def is_axes_profile(path: pathlib.Path) -> bool:
+    """Whether the profile file at ``path`` is a multi-axis one (has ``[[axes]]``); ProfileError if unreadable."""
+    return "axes" in read_document(path)
 
 
 def load_any_profile(path_or_name: str | pathlib.Path) -> Profile | AxesProfile:
     """A one-axis profile (:func:`~haptic_bus.app.profiles.load_profile`) or, with ``[[axes]]``, a multi-axis one."""
     path = resolve_profile(path_or_name)
-    return load_axes_profile(path) if "axes" in read_document(path) else load_profile(path)
+    return load_axes_profile(path) if is_axes_profile(path) else load_profile(path)

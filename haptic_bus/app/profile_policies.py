@@ -7,17 +7,15 @@ and not in :mod:`haptic_bus.profile`)."""
 from __future__ import annotations
 
 import pathlib
-import re
 from dataclasses import dataclass
 
 from drives.safety import ABORT_OPTIONS, SafetySettings
 from haptic_bus.control.gate import BANDWIDTH_POLICIES, GatePolicy
 from haptic_bus.control.passivity_layer import LAYER_MODES, LayerPolicy
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
-from haptic_bus.profile.reader import ProfileError, Reader
+from haptic_bus.profile.reader import NAME_PATTERN, ProfileError, Reader
 
 START_POLICIES = ("refuse", "ramp")
-NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")  # a profile's name
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from typing import Any
 
 from drives.base import DriveScaling
 from drives.safety import SafetySettings
-from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE, DeviceLoop
+from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.app.profile_policies import (
     NAME_PATTERN,
@@ -46,15 +46,15 @@ from haptic_bus.control.supervisor import SupervisorPolicy
 from haptic_bus.profile.device import DeviceProfile, LoopProfile
 from haptic_bus.profile.files import resolve_profile, shipped_profiles
 from haptic_bus.profile.identification import IdentifiedDevice
-from haptic_bus.profile.plant import read_plant
+from haptic_bus.profile.plant import ONE_AXIS_TABLES, read_plant
 from haptic_bus.profile.reader import ProfileError, Reader, read_document
+from haptic_bus.profile.scene import FORCE_RANGE, ObjectTable, read_force_limit, read_scene
 
-__all__ = ["DEFAULT_PROFILE", "DeviceProfile", "LoopProfile", "Profile", "ProfileError", "ProfileRefusal", "StartPolicy",
+__all__ = ["DEFAULT_PROFILE", "FORCE_RANGE", "NAME_PATTERN",
+           "DeviceProfile", "LoopProfile", "Profile", "ProfileError", "ProfileRefusal", "StartPolicy",
            "default_profile", "load_profile", "profile_to_dict", "read_profile", "resolve_profile", "shipped_profiles"]
 
 DEFAULT_PROFILE = "cia402-handle"
-POSITION_RANGE = (-1e6, 1e6)  # m, as haptic_bus.control.scene
-FORCE_RANGE = (0.0, 1e6)  # N, exclusive low
 
 
 class ProfileRefusal(GateRefusal):
@@ -112,46 +112,13 @@ class Profile:
 
 # --------------------------------------------------------------------------- the controller's tables
 
-def _read_object(path: pathlib.Path, index: int, table: object) -> SceneObject:
-    r = Reader(path, f"scene.objects[{index}]", table)
-    kind = r.text("kind", choices=("wall", "slot", "detent"))
-    name = r.text("name", pattern=NAME_PATTERN)
-    stiffness = r.real("stiffness", *STIFFNESS_RANGE, "N/m")
-    damping = r.real("damping", *DAMPING_RANGE, "N s/m")
-    if kind == "wall":
-        position = r.real("position", *POSITION_RANGE, "m")
-        normal = r.raw("normal", "-1 (solid above position, pushed into in +x) or +1 (solid below)")
-        if isinstance(normal, bool) or normal not in (-1, 1):
-            raise ProfileError(path, r.field("normal"), normal, "-1 (solid above position) or +1 (solid below)")
-        r.done()
-        return Wall(name, position, int(normal), stiffness, damping)
-    if kind == "slot":
-        low = r.real("low", *POSITION_RANGE, "m")
-        high = r.real("high", *POSITION_RANGE, "m")
-        if not high > low:
-            raise ProfileError(path, r.field("high"), high, f"greater than low = {low:g} m")
-        r.done()
-        return Slot(name, low, high, stiffness, damping)
-    center = r.real("center", *POSITION_RANGE, "m")
-    reach = r.real("reach", 0.0, 1e6, "m", low_inclusive=False)
-    r.done()
-    return Detent(name, center, reach, stiffness, damping)
-
-
-def _read_scene(path: pathlib.Path, table: object) -> tuple[SceneObject, ...]:
-    r = Reader(path, "scene", table)
-    objects = r.raw("objects", "an array of tables [[scene.objects]] (may be empty)", default=[])
-    if not isinstance(objects, list):
-        raise ProfileError(path, "scene.objects", objects, "an array of tables [[scene.objects]]")
-    r.done()
-    scene = tuple(_read_object(path, i, obj) for i, obj in enumerate(objects))
-    seen: dict[str, int] = {}
-    for i, obj in enumerate(scene):
-        if obj.name in seen:
-            raise ProfileError(path, f"scene.objects[{i}].name", obj.name,
-                               f"a name no other object uses (scene.objects[{seen[obj.name]}] has it)")
-        seen[obj.name] = i
-    return scene
+def _build(obj: ObjectTable) -> SceneObject:
+    """The controller's scene object of a checked ``[[scene.objects]]`` table."""
+    first, second = obj.where
+    if obj.kind == "wall":
+        return Wall(obj.name, first, int(second), obj.stiffness, obj.damping)
+    kind = Slot if obj.kind == "slot" else Detent
+    return kind(obj.name, first, second, obj.stiffness, obj.damping)
 
 
 def read_profile(path_or_name: str | pathlib.Path) -> Profile:
@@ -162,20 +129,13 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
         raise ProfileError(path, "axes", "[[axes]]",
                            "no [[axes]] in a one-axis profile; multi-axis profiles load with load_axes_profile")
     top = Reader(path, "", document)
+    top.only(ONE_AXIS_TABLES)  # a misspelt table first, not the required one it hides
     name, operator, task, description = read_about(top)
     plant = read_plant(top)
     device = plant.device
-    limits = Reader(path, "limits", top.raw("limits", "a [limits] table"))
-    allowed_force = device.max_force
-    force_limit = limits.real("force_limit", *FORCE_RANGE, "N", low_inclusive=False)
-    limits.done()
-    if force_limit > allowed_force * (1 + 1e-12):
-        raise ProfileError(
-            path, "limits.force_limit", force_limit,
-            f"(0, {allowed_force:g}] N, the force 0x6072 allows: max_torque_permille {device.max_torque_permille}"
-            f" * rated_torque {device.rated_torque:g} N m * force_per_torque {device.force_per_torque:g} N/(N m) / 1000")
+    force_limit = read_force_limit(path, top.raw("limits", "a [limits] table"), device)
     policy = read_gate(path, top.raw("gate", "a [gate] table"))
-    scene = _read_scene(path, top.raw("scene", "a [scene] table with [[scene.objects]]"))
+    scene = tuple(_build(obj) for obj in read_scene(path, top.raw("scene", "a [scene] table with [[scene.objects]]")))
     safety = read_safety(path, top.raw("safety", "a [safety] table", default=None))
     passivity = read_passivity(path, top.raw("passivity", "a [passivity] table", default=None))
     supervisor = read_supervisor(path, top.raw("supervisor", "a [supervisor] table", default=None), passivity)

@@ -40,6 +40,7 @@ from haptic_bus.app.profiles import (
 )
 from haptic_bus.control.gate import GateDecision, GateRefusal
 from haptic_bus.errors import HapticBusError, ParameterError
+from haptic_bus.profile.plant import ONE_AXIS_TABLES
 
 EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
 
@@ -125,8 +126,28 @@ def _format_show(profile: Profile, decision: GateDecision) -> str:
     return "\n".join(lines)
 
 
+def _axes_profile(command: str, args: argparse.Namespace) -> int | None:
+    """``show``/``check`` of a multi-axis profile (``[[axes]]``) through its own reader and the coupled
+    gate: 0 (check: the gate accepts), 1 (check: it refuses), 2 invalid; None for a one-axis profile."""
+    from haptic_bus.app.axes_profile import is_axes_profile, judge_axes_profile
+    from haptic_bus.app.axes_profile_view import axes_profile_to_dict, format_axes_profile
+
+    try:
+        path = resolve_profile(args.profile)
+        if not is_axes_profile(path):
+            return None
+        profile, decision = judge_axes_profile(path)
+    except HapticBusError as error:
+        return _fail(command, error)
+    print(json.dumps(axes_profile_to_dict(profile, decision)) if args.json else format_axes_profile(profile, decision))
+    return EXIT_OK if command == "show" or decision.accepted else EXIT_NO
+
+
 def cmd_show(args: argparse.Namespace) -> int:
     """Print one profile (default: the default profile) and the gate's decision on it."""
+    axes = _axes_profile("show", args)
+    if axes is not None:
+        return axes
     try:
         profile = load_profile(args.profile)
     except ProfileError as error:
@@ -147,10 +168,12 @@ def _still_missing(path: pathlib.Path) -> int | None:
 
     try:
         with open(path, "rb") as handle:
-            lacking = missing(tomllib.load(handle))
+            document = tomllib.load(handle)
     except (OSError, ValueError):  # TOMLDecodeError and UnicodeDecodeError are ValueErrors
         return None  # the loader says what is wrong with the file
-    if not lacking:
+    lacking = missing(document)
+    if not lacking or not set(document) <= set(ONE_AXIS_TABLES):  # a misspelt table: the loader names it
+        return None
         return None
     print(f"profile {path}: {len(lacking)} value{'s' if len(lacking) > 1 else ''} still missing:")
     for ask in lacking:
@@ -161,7 +184,10 @@ def _still_missing(path: pathlib.Path) -> int | None:
 
 def cmd_check(args: argparse.Namespace) -> int:
     """``haptic-bus check`` on every contact wall of a profile; 0 passive (gate admits), 1 not, 2 invalid
-    (a value missing: every one listed)."""
+    (a value missing: every one listed); a multi-axis profile: the coupled gate's verdict."""
+    axes = _axes_profile("check", args)
+    if axes is not None:
+        return axes
     try:
         lacking = _still_missing(resolve_profile(args.profile))
         if lacking is not None:

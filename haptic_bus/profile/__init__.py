@@ -10,8 +10,11 @@ the simulated drive (:mod:`sim_drive`) read profiles through it:
 * :mod:`~haptic_bus.profile.identification`: ``[identification]``, what ``haptic-bus identify`` wrote;
 * :mod:`~haptic_bus.profile.operator`: ``[operator_model]``, the simulated operator;
 * :mod:`~haptic_bus.profile.plant`: those tables of a one-axis profile read together, the part
-  the controller's view and the simulator's view share.
+  the controller's view and the simulator's view share;
+* :mod:`~haptic_bus.profile.scene`: the controller's ``[limits]`` and ``[[scene.objects]]``, checked
+  here so the simulator refuses their mistakes with the same line.
 
-The controller's own tables (limits, gate, scene, policies) are read by :mod:`haptic_bus.app.profiles`
-and :mod:`haptic_bus.app.axes_profile`, which need the control layer's types.
+The controller builds its scene from those tables and reads its policies (gate, safety, passivity,
+supervisor, start) in :mod:`haptic_bus.app.profiles` and :mod:`haptic_bus.app.axes_profile`, which
+need the control layer's types.
 """

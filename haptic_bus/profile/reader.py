@@ -11,13 +11,16 @@ from __future__ import annotations
 import pathlib
 import re
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from haptic_bus.analysis.velocity import ALLOWED as VELOCITY_MODELS
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.errors import InvalidInput, ParameterError
 from haptic_bus.validation import real_in_range, whole_in_range
+
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+"""A name in a profile (the profile's, an object's, an axis'): letters, digits, '.', '_', '-', not starting with '.', '_', '-'."""
 
 REQUIRED = object()
 """The default of a field that must be given."""
@@ -113,7 +116,14 @@ class Reader:
         return self._wrap(key, VelocityModel.parse, value)
 
     def done(self) -> None:
-        unknown = [k for k in self.table if k not in self.used]
+        """Refuse the first key no field read (a typo), listing the keys that were read."""
+        self.only(self.used)
+
+    def only(self, keys: Iterable[str]) -> None:
+        """Refuse the first key of the table not among ``keys`` (a typo), listing ``keys``; run before
+        reading, it names a misspelt table ahead of the required one it hides."""
+        allowed = set(keys)
+        unknown = [k for k in self.table if k not in allowed]
         if unknown:
             raise ProfileError(self.path, self.field(unknown[0]), self.table[unknown[0]],
-                               f"no such key; keys of [{self.prefix or 'top level'}]: {', '.join(sorted(self.used))}")
+                               f"no such key; keys of [{self.prefix or 'top level'}]: {', '.join(sorted(allowed))}")
