@@ -28,6 +28,13 @@ TPDO, and the drives' heartbeats, which helper threads send that a loop running 
 have the interpreter only at its switch interval."""
 VIRTUAL_TIME_MODBUS_PATIENCE: dict[str, Any] = {"timeout": VIRTUAL_TIME_WAIT}
 """A Modbus master's wait for one reply when nothing paces the loop (of :class:`~drives.modbus.drive.ModbusDrive`)."""
+
+
+def patient(wall_paced: bool, waits: dict[str, Any]) -> dict[str, Any]:
+    """A master's keyword arguments for its waits: ``waits`` (:data:`VIRTUAL_TIME_CANOPEN_PATIENCE` or
+    :data:`VIRTUAL_TIME_MODBUS_PATIENCE`) when nothing paces the loop, none (the real-time defaults) when
+    the wall clock does."""
+    return {} if wall_paced else dict(waits)
 ABORT_OPTIONS = {"none": 0, "fault": 1, "disable-voltage": 2, "quick-stop": 3}  # 0x6007 by name
 
 

@@ -23,7 +23,7 @@ from drives.cia402 import (
     DataType,
     ObjectSpec,
 )
-from drives.errors import BusConfigError, PdoLengthError
+from drives.errors import BusConfigError, DriveArgumentError, PdoLengthError
 
 
 def test_default_tpdo_layout_and_mapping_words():
@@ -191,5 +191,5 @@ def test_bus_config_missing_or_unknown_interface_is_a_readable_error(monkeypatch
     monkeypatch.setattr("can.rc", {})
     with pytest.raises(BusConfigError, match="no CAN interface selected"):
         resolve_bus_config(config_file="/nonexistent/can.conf")
-    with pytest.raises(BusConfigError, match="nonesuch"):
-        resolve_bus_config("nonesuch", config_file="/nonexistent/can.conf")
+    with pytest.raises(DriveArgumentError, match="interface = 'nonesuch' is invalid; allowed: one of python-can's: "):
+        resolve_bus_config("nonesuch", config_file="/nonexistent/can.conf")  # the user's typo: exit 2

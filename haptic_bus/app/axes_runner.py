@@ -40,7 +40,7 @@ from drives.bus_config import resolve_bus_config
 from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
 from drives.cia402 import POSITION_ACTUAL
-from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE
+from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, patient
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.axes_records import axes_run_document, write_axes_run
@@ -53,7 +53,6 @@ from haptic_bus.app.runner import (
     canopen_watchdog,
     control_thread_scheduling,
     longest_hold,
-    patient,
     settle_preflight,
 )
 from haptic_bus.control.axes_controller import AxesController

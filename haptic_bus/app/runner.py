@@ -3,13 +3,11 @@
 The drive may be the simulated one in another process (``udp_multicast``, ``vcan0``, Modbus
 TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, in order:
 
-1. the run's folder is created and shown writable (:mod:`~haptic_bus.app.run_folder`) before
-   any bus is touched, and ``run.json`` written there ("running"); on CANopen the bus log
-   (``bus.asc``) starts before the drive is reached;
-   with ``reset_fault`` a drive found in FAULT is reset first, as ``haptic-bus fault-reset``
-   does (:meth:`~haptic_bus.app.drive_address.DriveAddress.reset_fault`), and the reset is the
-   first of run.json's events; without it a faulted drive is refused at enabling, with the
-   command that clears it;
+1. the run's folder is created and shown writable (:mod:`~haptic_bus.app.run_folder`) before any
+   bus is touched, and ``run.json`` written there ("running"); on CANopen ``bus.asc`` starts before
+   the drive is reached; with ``reset_fault`` a drive in FAULT is reset first, as ``haptic-bus
+   fault-reset`` does (the first of run.json's events); without it a faulted drive is refused at
+   enabling, with the command that clears it;
 2. the drive is reached and commissioned (CANopen: the safety chain of ``[safety]``; Modbus: the
    gate judges with the loop delay the poll measured, :func:`drives.modbus.timing.loop_delay`);
 3. **safe start**: the handle's position is read before enabling; inside an object the run is
@@ -17,8 +15,7 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
    force rises from 0 over ``ramp_time`` once the gate has proven every scaled wall passive;
 4. the upload server (a CANopen node serving gated wall uploads), the live view and the
    real-time session are set up; then the drive is enabled, right before the first cycle (its
-   RPDO deadline runs from there), and the controller cycles under the supervisor
-   (``[supervisor]``);
+   RPDO deadline runs from there), and the controller cycles under the supervisor (``[supervisor]``);
 5. ``record.csv`` is streamed from the first cycle (:mod:`~haptic_bus.app.run_recorder`), so a
    killed run keeps its cycles; whatever else ends it (the time, SIGTERM, Ctrl-C, a drive error,
    an assumption broken), the drive is left disabled, ``run.json`` completed and the pictures drawn.
@@ -44,7 +41,7 @@ from drives.cia402 import State
 from drives.cia402_master import Cia402Master
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.fault_reset import DEFAULT_WAIT
-from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings
+from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings, patient
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DriveAddress
 from haptic_bus.app.live import LiveView
@@ -253,12 +250,6 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     hold = longest_hold(period, options.wall_paced, safety.modbus_watchdog_ms, 0)
     watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
     return _session(profile, options, folder, link, open_drive, DriveSide(hold, watchdog, DriveAddress(url=url, unit_id=unit_id)))
-
-
-def patient(wall_paced: bool, waits: dict[str, Any]) -> dict[str, Any]:
-    """A master's keyword arguments for its waits: ``waits`` (:data:`~drives.safety.VIRTUAL_TIME_CANOPEN_PATIENCE`
-    or ``..._MODBUS_PATIENCE``) when nothing paces the loop, none (the real-time defaults) when the wall clock does."""
-    return {} if wall_paced else dict(waits)
 
 
 def longest_hold(period: float, wall_paced: bool, deadline_ms: int, fallback_ms: int) -> float:
