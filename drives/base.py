@@ -223,27 +223,32 @@ class DriveCycle:
         self._name, self._read, self.saturate, self._send = name, read, saturate, send
         self.open = True
 
-    def read(self) -> CyclicInputs:
-        """Start a cycle: the drive's inputs of this cycle."""
+    def _check_open(self) -> None:
         if not self.open:
             raise DriveError(self._name, "its cyclic phase has ended: read and write inside 'with drive.cyclic()'")
+
+    def read(self) -> CyclicInputs:
+        """Start a cycle: the drive's inputs of this cycle."""
+        self._check_open()
         return self._read()
 
     def write(self, torque: int) -> None:
         """Send ``torque`` (per mille, as :meth:`saturate` returned it) with this cycle's controlword."""
-        if not self.open:
-            raise DriveError(self._name, "its cyclic phase has ended: read and write inside 'with drive.cyclic()'")
+        self._check_open()
         self._send(checked_torque(self._name, torque))
 
     def exchange(self, torque: int) -> int:
         """Saturate ``torque`` and send it; the torque sent (per mille)."""
+        self._check_open()
         torque = self.saturate(checked_torque(self._name, torque))
-        self.write(torque)
+        self._send(torque)
         return torque
 
 
 def checked_torque(name: str, torque: object) -> int:
     """``torque`` as a target torque (per mille): an integer (numpy's too), else DriveArgumentError."""
+    if type(torque) is int:  # every cycle of the controllers: the one check they pay (26 ns, not 0.7 us)
+        return torque
     if isinstance(torque, bool) or not isinstance(torque, numbers.Integral):
         raise DriveArgumentError("target torque", torque, "an integer, per mille of the rated torque (0x6071)", name)
     return int(torque)
