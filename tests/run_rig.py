@@ -23,6 +23,7 @@ import json
 import os
 import pathlib
 import signal
+import time
 import uuid
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
@@ -183,3 +184,11 @@ def read_run(folder: pathlib.Path) -> dict[str, Any]:
 def events_of(document: Mapping[str, Any], kind: str) -> list[dict[str, Any]]:
     """The run's events of ``kind``."""
     return [event for event in document.get("events", []) if event["kind"] == kind]
+
+
+def wait_until(condition: Callable[[], bool], timeout: float = 2.0) -> bool:
+    """Poll ``condition`` every 10 ms for at most ``timeout`` s; its last value."""
+    deadline = time.monotonic() + timeout
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return condition()

@@ -18,6 +18,7 @@ from drives.modbus.drive import ModbusDrive
 from drives.safety import SafetySettings
 from haptic_bus.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout, ModbusLinkLost, ParameterError
 from sim_drive.modbus import LINK_LOST_ERROR_CODE, FaultInjector, ModbusSimServer
+from tests.run_rig import wait_until
 
 # the loop runs in virtual time: the drive's watchdog guards a dead master, not a busy machine
 VIRTUAL_TIME_SAFETY = SafetySettings().for_virtual_time(1e-3)
@@ -237,14 +238,6 @@ def plain_client(server: ModbusSimServer) -> ModbusTcpClient:
     client = ModbusTcpClient("127.0.0.1", port=server.port, timeout=1.0, retries=0)
     assert client.connect()
     return client
-
-
-def wait_until(condition, timeout: float = 2.0) -> bool:
-    """Poll ``condition`` every 10 ms for at most ``timeout`` s; its last value."""
-    deadline = time.monotonic() + timeout
-    while not condition() and time.monotonic() < deadline:
-        time.sleep(0.01)
-    return condition()
 
 
 def test_an_injected_fault_is_met_once_per_request_and_once_per_fc23() -> None:

@@ -11,7 +11,7 @@ import socket
 import struct
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -26,7 +26,7 @@ from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.device import SimulatedDrive
 from sim_drive.eds import eds_path
 from sim_drive.modbus.server import ModbusSimServer
-from tests.run_rig import CliResult, profile_variant, read_run, run_cli, simulated_drive
+from tests.run_rig import CliResult, profile_variant, read_run, run_cli, simulated_drive, wait_until
 
 NODE = 5
 # These runs are about the fault reset, not the heartbeat chain: a lock-step run on a loaded
@@ -66,14 +66,6 @@ def refault_on_reset(drive: SimulatedDrive, code: int) -> None:
     drive.state_listeners.append(lambda old, new, number: drive.fault(code) if old is State.FAULT else None)
 
 
-def wait_for(condition: Callable[[], bool], timeout: float = 5.0) -> None:
-    """Poll ``condition`` every millisecond until it holds; fails after ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < deadline, "the simulated drive did not get there in time"
-        time.sleep(0.001)
-
-
 def one_line(result: CliResult) -> str:
     assert len(result.err_lines) == 1 and "Traceback" not in result.err, result.err
     return result.err_lines[0]
@@ -83,7 +75,8 @@ def one_line(result: CliResult) -> str:
 def test_status_of_a_faulted_drive_reads_only_and_names_the_error(channel: str, master: can.BusABC, sim: CanopenSimDrive,
                                                                   frames: Any, capsys: pytest.CaptureFixture[str]) -> None:
     frames.nmt_start(master)
-    wait_for(lambda: sim.nmt_state == "OPERATIONAL")  # its log line is written by then, not into the command's stderr
+    # its log line is written by then, not into the command's stderr
+    assert wait_until(lambda: sim.nmt_state == "OPERATIONAL", 5.0)
     sim.enter_fault(0x8250)  # what the drive's RPDO deadline does
     frames.drain(master)
     result = run_cli(capsys, "status", *bus_args(channel), "--node-id", "5", "--listen", "0.3", "--json")
