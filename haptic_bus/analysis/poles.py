@@ -32,6 +32,7 @@ import contextlib
 import functools
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -240,7 +241,7 @@ def _refine_extended(loop: WallLoop, w: np.ndarray) -> list[float]:
     out = []
     with mp.workdps(MP_DIGITS):
         def f(x: mp.mpc) -> mp.mpc:
-            return mp.power(1 + x, lag) * mp.polyval(a, x) + mp.polyval(numerator, x) * mp.polyval(wall_mp, x)
+            return mp.power(1 + x, lag) * _horner(a, x) + _horner(numerator, x) * _horner(wall_mp, x)
 
         for start in w:
             x = mp.mpc(complex(start))
@@ -249,6 +250,18 @@ def _refine_extended(loop: WallLoop, w: np.ndarray) -> list[float]:
             excess = (2 * mp.re(x) + abs(x) ** 2) / (abs(1 + x) + 1)
             out.append(0.0 if abs(excess) <= MARGINAL * max(abs(x), abs(x) ** 2) else float(excess))
     return out
+
+
+def _horner(coefficients: list[Any], x: Any) -> Any:
+    """The polynomial with ``coefficients`` (highest power first) at ``x``, in ``x``'s arithmetic (Horner's rule).
+
+    mpmath's ``polyval`` does the same, but its coefficient order changed in 1.4 (descending is
+    deprecated, ``asc`` is unknown before it): the project supports both.
+    """
+    value = x * 0
+    for c in coefficients:
+        value = value * x + c
+    return value
 
 
 @functools.lru_cache(maxsize=1024)
