@@ -31,6 +31,7 @@ import itertools
 import math
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import NamedTuple
 
 import numpy as np
 
@@ -215,13 +216,26 @@ def commensurate(theta: float, max_samples: int = 4096) -> tuple[float, int]:
     return 2 * math.pi * ratio.numerator / ratio.denominator, ratio.denominator
 
 
-def steady_mean_power(machine: CoupledMachine, samples: int) -> float:
+class SteadyPower(NamedTuple):
+    """The exact mean power of a periodic steady state (W), and the bound on its round-off (W)."""
+
+    mean: float
+    roundoff: float
+
+
+def steady_mean_power(machine: CoupledMachine, samples: int) -> SteadyPower:
     """Mean operator power (W) of the periodic steady state of a tone that repeats after ``samples`` periods.
 
     The state that repeats is solved for (``(I - M^q) chi = M^q_{chi, osc} osc_0``, least
     squares: the controller's position across the wall's normal is integrated but never fed
     back, a ``z = 1`` mode the work does not see), then the exact work over those ``q`` periods
     summed.  Needs a stable loop.
+
+    The round-off bound is ``2 q eps sum_k |w_k| / (q T)``: recursive summation of ``q`` terms
+    errs by at most ``(q - 1) eps sum |w_k|`` (Higham, *Accuracy and Stability*, 2002, sec. 4.2),
+    and each term, propagated through at most ``q`` products with ``M``, carries an error of the
+    same order.  Near Nyquist or at a slow tone the terms cancel to a small mean, and this bound,
+    not the mean, sets how many digits are right.
     """
     M = machine.matrix
     power = np.linalg.matrix_power(M, samples)
@@ -233,10 +247,14 @@ def steady_mean_power(machine: CoupledMachine, samples: int) -> float:
                                rcond=None)[0]
     Q = machine.period_work
     total = 0.0
+    magnitude = 0.0
     for _ in range(samples):
-        total += float(xi @ Q @ xi)
+        work = float(xi @ Q @ xi)
+        total += work
+        magnitude += abs(work)
         xi = M @ xi
-    return total / (samples * machine.loop.T)
+    duration = samples * machine.loop.T
+    return SteadyPower(total / duration, 2.0 * samples * float(np.finfo(float).eps) * magnitude / duration)
 
 
 def adversarial_input(loop: CoupledLoop, thetas: np.ndarray) -> tuple[float, np.ndarray]:

@@ -63,7 +63,7 @@ SECTIONS = ("passivity", "plant", "scene", "space", "loop", "bus", "realtime", "
 _TICKS = {"passivity": (5, 7, 17), "plant": (7, 15, 17), "scene": (5, 5, 5), "space": (5, 5, 5), "loop": (6, 6, 6),
           "bus": (2, 2, 2), "realtime": (3, 6, 6), "startup": (1, 3, 4), "soak": (10, 10, 10),
           "layer": (1, 9, 9)}
-BENCH_EXTRA = {"control": "control", "mpmath": "mpmath"}  # import name -> distribution: pyproject's [bench] extra
+BENCH_EXTRA = {"control": "control"}  # import name -> distribution: pyproject's [bench] extra (mpmath is a runtime dependency)
 SMOKE_SOAK_CYCLES = 2_000
 
 
