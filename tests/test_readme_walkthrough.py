@@ -125,6 +125,9 @@ class Shell:
         if self.process.poll() is None:
             os.killpg(self.process.pid, signal.SIGKILL)
         self.process.wait(10)
+        for pipe in (self.process.stdin, self.process.stdout):
+            if pipe is not None:
+                pipe.close()  # wait() leaves them open: their collection would be an unraisable ResourceWarning
 
 
 @pytest.fixture
