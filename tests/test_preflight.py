@@ -56,3 +56,34 @@ def test_lateness_the_gate_cannot_cover_is_held_by_the_layer_and_refused_without
     assert covered.holdable and not covered.passive_at_observed and "layer (guard) holds" in covered.reason
     bare = judge(timing(late), profile.gate(), profile.compiled_scene(), "off", 0.050, 50)
     assert not bare.holdable and 'layer = "off"' in bare.reason
+
+
+def test_overruns_above_one_percent_refuse_naming_the_period_the_busy_time_holds() -> None:
+    """7 of 500 cycles (1.4 %) start more than T late: refused; the period named is 1.5 x the p99 of
+    lateness + exchange, up to the 0.25 ms grid (the p99 busy time is 1.1 + 0.1 ms: 1.5 x 1.2 = 1.8 -> 2 ms)."""
+    profile = load_profile("cia402-handle")
+    late = np.full(500, 20e-6)
+    late[::80] = 1.1e-3  # 7 cycles a period late, so numpy's p99 (rank 494.01 of 0..499) is one of them
+    report = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
+    assert report.overruns == 7 and not report.holdable
+    assert report.smallest_period == pytest.approx(2e-3)
+    assert "7 of 500 cycles started a whole period late" in report.reason
+    assert report.reason.endswith("this machine holds T >= 2 ms")
+
+
+def test_a_held_run_prints_its_measurement_its_period_and_its_verdict_in_one_line() -> None:
+    profile = load_profile("cia402-handle")
+    late = np.full(500, 20e-6)
+    report = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.020, 20)
+    line = report.line()
+    assert "\n" not in line and line.startswith("pre-flight: 500 cycles at T = 1 ms")
+    assert report.smallest_period == pytest.approx(0.25e-3)  # 1.5 x (20 + 100) us, up to the grid
+    assert "holds T >= 0.25 ms: the gate passes the scene" in line
+
+
+def test_overruns_within_one_percent_are_held() -> None:
+    profile = load_profile("cia402-handle")
+    late = np.full(500, 20e-6)
+    late[::100] = 1.1e-3  # 5 of 500: exactly 1 %
+    report = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
+    assert report.overruns == 5 and report.holdable

@@ -5,18 +5,21 @@ the run cycles a few hundred times with SYNC running (CANopen: SYNC, the drive's
 with the held controlword and zero torque; Modbus: the same read and write), paced by the real
 clock under the run's own scheduling, and keeps how late each cycle started.  Then it judges:
 
+* **the period** -- a cycle's busy time is how late it started plus its exchange with the drive;
+  the smallest ``T`` on a :data:`PERIOD_GRID` grid above :data:`STALL_MARGIN` times its p99 is the
+  period this machine holds for this bus (CANopen's SYNC cycle or the Modbus poll), named in
+  every verdict.  A median exchange longer than ``T`` (the loop would fall further behind every
+  cycle), or more than :data:`OVERRUN_LIMIT` of the cycles started a whole period late, refuses
+  the run (exit 1, nothing enabled);
 * **the watchdogs** -- a cycle held up longer than the drive's receive watchdog (the RPDO
   deadline, the heartbeat consumer's slack, the Modbus watchdog) faults the drive.  If the
-  longest stall measured, times :data:`STALL_MARGIN`, reaches it, the run is refused (exit 1,
-  nothing enabled), naming the smallest period ``T`` whose watchdog (a deadline counted in
-  periods) would hold that stall; so is a machine whose median exchange with the drive takes
-  longer than ``T`` (the loop would fall further behind every cycle; late cycles now and then
-  are what the passivity layer and the supervisor are for);
+  longest stall measured, times :data:`STALL_MARGIN`, reaches it, the run is refused, naming the
+  smallest period ``T`` whose watchdog (a deadline counted in periods) would hold that stall;
 * **the gate at the measured delay** -- the loop delay the gate assumed plus the measured p99
   lateness in samples.  Passive there: nothing to add.  Not passive: with a passivity layer the
   run goes on (the layer holds the port passive; it may act), without one it is refused.
 
-The run prints the distribution and the verdict, and ``run.json`` records both (``preflight``).
+The run prints what was measured and the verdict in one line, and ``run.json`` records both (``preflight``).
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from haptic_bus.control.scene import CompiledScene
 PREFLIGHT_CYCLES = 500  # cycles measured before enabling: 0.5 s at T = 1 ms
 STALL_MARGIN = 1.5  # the longest stall measured, times this, must stay under the drive's watchdog
 PERIOD_GRID = 0.25e-3  # s: the smallest T is proposed on this grid
+OVERRUN_LIMIT = 0.01  # the share of cycles that may start a whole period late (issue 26: a run keeps overruns under 1 %)
 
 
 @dataclass(frozen=True)
@@ -51,7 +55,8 @@ class PreflightReport:
     more than ``T`` late; ``observed_delay``: the gate's delay plus the p99 lateness (samples);
     ``passive_at_observed``: the gate's verdict there; ``watchdog``: the shortest stall (s) that
     faults the drive (inf: none); ``holdable``: False refuses the run, ``reason`` says why;
-    ``smallest_period``: the shortest ``T`` (s) this machine holds, where one can be named."""
+    ``smallest_period``: the shortest ``T`` (s) this machine holds (the busy time's, or the
+    watchdog's where a stall binds; None where no ``T`` holds the stall measured)."""
 
     cycles: int
     period: float
@@ -66,14 +71,14 @@ class PreflightReport:
     reason: str
     smallest_period: float | None
 
-    def lines(self) -> list[str]:
-        """What the run prints."""
+    def line(self) -> str:
+        """What the run prints: the measurement and the verdict, one line."""
         late, cycle = self.lateness, self.cycle
-        first = (f"pre-flight: {self.cycles} cycles at T = {self.period * 1e3:g} ms, no torque: start lateness "
-                 f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms; "
-                 f"exchange p99 {cycle['p99'] * 1e6:.0f} us; longest gap {self.longest_gap * 1e3:.3g} ms; "
-                 f"{self.overruns} overruns")
-        return [first, f"pre-flight: {self.reason}"]
+        holds = f"; holds T >= {self.smallest_period * 1e3:g} ms" if self.holdable and self.smallest_period else ""
+        return (f"pre-flight: {self.cycles} cycles at T = {self.period * 1e3:g} ms, no torque: start lateness "
+                f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms; "
+                f"exchange p99 {cycle['p99'] * 1e6:.0f} us; longest gap {self.longest_gap * 1e3:.3g} ms; "
+                f"{self.overruns} overruns{holds}: {self.reason}")
 
     def to_dict(self) -> dict[str, Any]:
         """For ``run.json``."""
@@ -141,21 +146,26 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     gap = float(np.max(np.diff(timing.starts))) if timing.starts.size > 1 else period
     observed = assumed_delay + late["p99"] / period
     passive = passes_at(observed)
+    holds = busy_period(timing)
 
-    def report(holdable: bool, reason: str, smallest: float | None = None) -> PreflightReport:
+    def report(holdable: bool, reason: str, smallest: float | None = holds) -> PreflightReport:
+        if not holdable and smallest is not None:
+            reason += f": this machine holds T >= {smallest * 1e3:g} ms"
         return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, observed, passive,
                                watchdog, holdable, reason, smallest)
 
     if cycle["p50"] > period:  # the loop cannot keep its period: it falls further behind every cycle
-        slowest = _on_grid(STALL_MARGIN * cycle["p50"])
         return report(False, f"refused: one exchange with the drive takes {cycle['p50'] * 1e3:.3g} ms (median), more "
-                             f"than T = {period * 1e3:g} ms: this machine holds T >= {slowest * 1e3:g} ms", slowest)
+                             f"than T = {period * 1e3:g} ms")
+    if timing.overruns > OVERRUN_LIMIT * timing.lateness.size:
+        return report(False, f"refused: {timing.overruns} of {timing.lateness.size} cycles started a whole period late "
+                             f"(at most {OVERRUN_LIMIT:.0%} hold T = {period * 1e3:g} ms)")
     if STALL_MARGIN * gap >= watchdog:
         smallest: float | None = None
         where = "; lengthen the drive's watchdog ([safety])"
         if deadline_periods:
-            smallest = _on_grid(STALL_MARGIN * gap / deadline_periods)
-            where = f"; this machine holds T >= {smallest * 1e3:g} ms (RPDO deadline {deadline_periods} periods)"
+            smallest = max(holds, _on_grid(STALL_MARGIN * gap / deadline_periods))
+            where = f" (RPDO deadline {deadline_periods} periods)"
         return report(False, f"refused: a gap of {gap * 1e3:.3g} ms between cycles measured, x{STALL_MARGIN:g}, reaches "
                              f"the drive's watchdog of {watchdog * 1e3:.3g} ms: the drive would fault{where}", smallest)
     if passive:
@@ -164,4 +174,11 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
         return report(True, f"the scene is not passive at the measured loop delay of {observed:.3g} samples; the "
                             f"passivity layer ({layer}) holds the port passive and may lower the force")
     return report(False, f"refused: the scene is not passive at the measured loop delay of {observed:.3g} samples "
-                         f'and [passivity] layer = "off"; use layer "guard" or "bound", or a longer T')
+                         f'and [passivity] layer = "off"; use layer "guard" or "bound", or a longer T', None)
+
+
+def busy_period(timing: Timing) -> float:
+    """The smallest ``T`` (s, on the grid) this machine holds: :data:`STALL_MARGIN` times the p99 of
+    each cycle's busy time (its start lateness plus its exchange with the drive)."""
+    busy = timing.lateness + timing.exchange
+    return _on_grid(STALL_MARGIN * float(np.percentile(busy, 99))) if busy.size else timing.period

@@ -394,10 +394,9 @@ def settle_preflight(report: preflight.PreflightReport, options: RunOptions, ext
     """Record pre-flight's ``report`` in ``extra``, log and print it, and refuse the run
     (:class:`StartRefused`) if the machine cannot hold it."""
     extra["preflight"] = report.to_dict()
-    for line in report.lines():
-        logger.info("%s", line)
-        if options.live:
-            print(line, flush=True)
+    logger.info("%s", report.line())
+    if options.live:
+        print(report.line(), flush=True)
     if not report.holdable:
         raise StartRefused(report.reason.removeprefix("refused: "))
 
