@@ -44,8 +44,10 @@ def test_a_stall_that_would_trip_the_rpdo_deadline_refuses_naming_the_period_tha
 
 def test_a_machine_slower_than_the_period_refuses() -> None:
     profile = load_profile("cia402-handle")
-    report = judge(timing(np.zeros(500), exchange=2e-3), profile.gate(), profile.compiled_scene(), "guard", 0.020, 20)
-    assert not report.holdable and report.smallest_period == pytest.approx(3e-3)
+    k = np.arange(500)
+    behind = Timing(T, k * 1e-3, k * 2e-3, np.full(500, 2e-3), 499)  # each cycle starts when the last one ends
+    report = judge(behind, profile.gate(), profile.compiled_scene(), "guard", 0.020, 20)
+    assert not report.holdable and report.smallest_period == pytest.approx(3e-3)  # 1.5 x 2 ms, not the growing lateness
     assert "more than T = 1 ms" in report.reason
 
 

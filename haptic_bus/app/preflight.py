@@ -179,6 +179,12 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
 
 def busy_period(timing: Timing) -> float:
     """The smallest ``T`` (s, on the grid) this machine holds: :data:`STALL_MARGIN` times the p99 of
-    each cycle's busy time (its start lateness plus its exchange with the drive)."""
-    busy = timing.lateness + timing.exchange
-    return _on_grid(STALL_MARGIN * float(np.percentile(busy, 99))) if busy.size else timing.period
+    each cycle's busy time, its exchange with the drive plus how late it started after it could
+    have (its deadline, or the end of the cycle before when that ran past it: a loop that fell
+    behind carries its lateness on, which says nothing of the period it would hold)."""
+    if not timing.exchange.size:
+        return timing.period
+    deadlines = timing.starts - timing.lateness
+    ends = np.concatenate(([-np.inf], (timing.starts + timing.exchange)[:-1]))
+    busy = timing.exchange + (timing.starts - np.maximum(deadlines, ends))
+    return _on_grid(STALL_MARGIN * float(np.percentile(busy, 99)))
