@@ -67,6 +67,17 @@ def test_every_done_when_line_of_issue_14_is_a_row_with_a_verdict(smoke_run: Smo
     assert {1, 2, 4, 5} <= lines_with_a_figure  # no external link needed for these
 
 
+def test_every_timing_line_of_issue_26_is_a_row_with_a_verdict(smoke_run: SmokeRun) -> None:
+    """CPU against python-can's floor, lateness against the bare clock, overruns, for both loads, and
+    the loop delay observed when quiet: a figure where the run cycled, "n/a" where pre-flight refused it."""
+    _, result = smoke_run
+    rows = result["done_when_26"]
+    assert len(rows) == 9 and {r["line"] for r in rows} == {1, 2}
+    for row in rows:
+        assert row["result"] in ("PASS", "FAIL", "n/a") and row["target"].startswith("<="), row
+        assert (row["result"] == "n/a") == (row["measured"] == "-"), row
+
+
 def test_smoke_bench_json_has_every_section_and_the_machine(smoke_run: SmokeRun) -> None:
     out, _ = smoke_run
     data = json.loads((out / "bench.json").read_text())
@@ -123,6 +134,9 @@ def test_smoke_bench_ratios_are_finite_and_positive(smoke_run: SmokeRun) -> None
             assert entry.get("available", True) or entry["reason"], name
             if "controller" in entry and "core_share" in entry["controller"]:
                 assert _finite_positive(entry["controller"]["core_share"]["median"]) and entry["controller"]["cycles"] > 0
+        floor = s["realtime"]["runs"][load]["default"].get("floor", {})
+        if floor.get("available", True):  # python-can alone, the same frames, beside the default run
+            assert _finite_positive(floor["core_share"]) and floor["cycles"] > 0 and floor["lateness_s"]["p99"] >= 0
     for label, row in s["startup"]["commands"].items():
         assert _finite_positive(row["ratio"]["median"]), label
     assert s["startup"]["check_import_costs"]

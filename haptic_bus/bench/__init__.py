@@ -190,10 +190,11 @@ def run_bench(out_dir: str | Path, size: Size = FULL, progress: bool = False,
             bar.close(erase="interrupted" in result)
     result["total_seconds"] = time.perf_counter() - started
     from haptic_bus.bench.report import markdown, plots
-    from haptic_bus.bench.targets import done_when, issue_19
+    from haptic_bus.bench.targets import done_when, issue_19, issue_26
 
     result["done_when"] = done_when(result["sections"])
     result["done_when_19"] = issue_19(result["sections"])
+    result["done_when_26"] = issue_26(result["sections"])
 
     (out / "bench.json").write_text(json.dumps(result, indent=1, default=_json_default, allow_nan=True) + "\n")
     (out / "bench.md").write_text(markdown(result))

@@ -285,6 +285,8 @@ def markdown(result: dict) -> str:
         out += ["", "## Issue 14: Done when", "", *_done_when(result["done_when"])]
     if result.get("done_when_19"):
         out += ["", "## Issue 19: Done when", "", *_done_when(result["done_when_19"], 19)]
+    if result.get("done_when_26"):
+        out += ["", "## Issue 26: Done when (timing)", "", *_done_when(result["done_when_26"], 26)]
     for key, title, render in _SECTIONS:
         s = sections.get(key)
         if s is None:  # not asked for (--only, --soak)

@@ -1,4 +1,4 @@
-"""Issues 14 and 19's "Done when", one row per line, read off the sections of one benchmark run.
+"""Issues 14, 19 and 26's "Done when", one row per line, read off the sections of one benchmark run.
 
 Each row: which line of the issue (1-5), what is compared, the measured figure with its spread
 (median, min-max over >= 5 repeats, or a single count where the figure is one), the target,
@@ -182,4 +182,37 @@ def issue_19(sections: dict) -> list[dict]:
     error = full.get("boundary_error_max") if full else None
     rows.append(_row(6, "boundary (largest passive K and B) against the 40-digit mpmath reference",
                      "-" if error is None else f"{error:.1e}", "<= 1e-12", None if error is None else error <= 1e-12))
+    return rows
+
+
+def issue_26(sections: dict) -> list[dict]:
+    """Issue 26's timing rows, from the real-time section's default set-up (quiet and beside the hogs):
+    the control process's core share over python-can's floor for the same cycle (line 1), its start
+    lateness p99 and p99.9 over the bare clock's (line 2), its overruns (line 2) and the loop delay it
+    observed (line 2, quiet).  Each pair was measured side by side in one run."""
+    s = _available(sections, "realtime")
+    figures = s.get("issue_26") if s else None
+    if not figures:
+        return [_row(1, "control process CPU / python-can's floor, T = 1 ms", "-", "<= 1.5 x", None),
+                _row(2, "start lateness p99 and p99.9 / the bare clock's", "-", "<= 2 x", None)]
+    rows = []
+    for load in ("quiet", "CPU hog"):
+        got = figures.get(load, {})
+        ratio = got.get("core_ratio")
+        rows.append(_row(1, f"control process CPU / python-can's floor, 1 axis, {load}",
+                         "-" if ratio is None else f"{ratio:.3g}", f"<= {figures['core_ratio_target']:g} x",
+                         None if ratio is None else ratio <= figures["core_ratio_target"],
+                         note="" if ratio is None else f"floor {got['floor_core_share']:.3g} of a core"))
+        for quantile in ("p99", "p99.9"):
+            late = got.get(f"lateness_{quantile}_ratio")
+            rows.append(_row(2, f"start lateness {quantile} / the bare clock's, {load}", "-" if late is None else f"{late:.3g}",
+                             f"<= {figures['lateness_ratio_target']:g} x",
+                             None if late is None else late <= figures["lateness_ratio_target"]))
+        share = got.get("overrun_share")
+        rows.append(_row(2, f"overruns, share of cycles, {load}", "-" if share is None else f"{share:.2%}",
+                         f"<= {figures['overrun_target']:.1%}", None if share is None else share <= figures["overrun_target"]))
+    delay = figures.get("quiet", {}).get("observed_delay")
+    rows.append(_row(2, "loop delay the run observed (assumed + p99 of lateness and input age), quiet, samples",
+                     "-" if delay is None else f"{delay:.3g}", f"<= {figures['delay_target']:g}",
+                     None if delay is None else delay <= figures["delay_target"]))
     return rows
