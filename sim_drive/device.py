@@ -303,7 +303,7 @@ class SimulatedDrive:
         word = STATE_STATUS_BITS[self.state] | SW_REMOTE
         if self.state in _VOLTAGE_STATES:
             word |= SW_VOLTAGE_ENABLED
-        if self._torque_enabled():
+        if self.torque_enabled:
             word |= SW_OPERATION_MODE_SPECIFIC_12
             if abs(self.target_torque) > self.parameters.max_torque_permille:
                 word |= SW_INTERNAL_LIMIT_ACTIVE
@@ -314,7 +314,7 @@ class SimulatedDrive:
         """0x6077 in per mille of rated torque: the torque acting from the latest SYNC on (with
         ``reception`` timing: from the latest target's reception on)."""
         if self._latch_at_sync:
-            return self._latched if self._torque_enabled() else 0
+            return self._latched if self.torque_enabled else 0
         return self._effective_target()
 
     def write_controlword(self, word: int) -> None:
@@ -392,12 +392,14 @@ class SimulatedDrive:
         for listener in self.state_listeners:
             listener(old, new, number)
 
-    def _torque_enabled(self) -> bool:
+    @property
+    def torque_enabled(self) -> bool:
+        """Whether a written torque acts: OPERATION ENABLED, cyclic synchronous torque, no halt."""
         return self.state is _OPERATION_ENABLED and self.mode_display == _CST and not self.controlword & CW_HALT
 
     def _effective_target(self) -> int:
         """0x6071 saturated at +-0x6072 while torque is enabled, else 0 (per mille)."""
-        if not self._torque_enabled():
+        if not self.torque_enabled:
             return 0
         target, limit = self.target_torque, self.parameters.max_torque_permille
         return target if -limit <= target <= limit else saturate(target, -limit, limit)
@@ -429,7 +431,7 @@ class SimulatedDrive:
 
     def _close_cia402(self) -> None:
         """The closing interval under the torque latched at the SYNC before."""
-        force = (self._latched if self._torque_enabled() else 0) * self._newton_per_permille
+        force = (self._latched if self.torque_enabled else 0) * self._newton_per_permille
         self._advance(force, force)
 
     def _close_ideal(self) -> None:
@@ -439,6 +441,6 @@ class SimulatedDrive:
 
     def _close_reception(self) -> None:
         """The closing interval: the torque acting before for ``reception_delay``, the target present now after."""
-        before = self._latched if self._torque_enabled() else 0
+        before = self._latched if self.torque_enabled else 0
         self._latched = self._effective_target()
         self._advance(before * self._newton_per_permille, self._latched * self._newton_per_permille)

@@ -16,6 +16,12 @@ period's start then: the master sends SYNC ``k`` only after every axis' TPDO of 
 the others reuse it, whatever order their threads run in (a lock orders them; periods are
 counted per axis, so axes whose SYNC counters differ still share each period's force).  An axis this
 process does not simulate is at 0 m for the hand.
+
+The hand pushes only once every axis it simulates has its torque enabled (OPERATION ENABLED in
+cyclic synchronous torque mode), as a person would take the handle once the device is on: before
+that it pushes nothing, and its time -- the ``t`` of :meth:`SpaceHand.vector`, which picks the
+target -- counts from the first period in which they all were.  So a controller's pre-flight
+cycles and commissioning SYNCs, which advance the plants' time, never move the handle.
 """
 
 from __future__ import annotations
@@ -45,6 +51,7 @@ class SpaceHand:
         self._seen: list[int | None] = [None] * size  # each axis' SYNC count at its last call
         self._round = [0] * size  # each axis' periods so far
         self._vectors: dict[int, list[float]] = {}  # the force of each recent period, by round
+        self._since: float | None = None  # the time (s) of the first period with every simulated axis enabled
 
     def bind(self, drives: Sequence[SimulatedDrive | None]) -> None:
         """The simulated drive of every axis (None: an axis simulated elsewhere, at 0 m here)."""
@@ -67,14 +74,24 @@ class SpaceHand:
             period = self._round[axis]
             vector = self._vectors.get(period)
             if vector is None:  # the first axis into this period: every axis is at its start
-                positions = [d.handle.position if d is not None else 0.0 for d in self._drives]
-                vector = self._vectors[period] = self.vector(t, positions)
+                vector = self._vectors[period] = self._held(t)
                 for old in [k for k in self._vectors if k < period - ROUNDS_KEPT]:
                     del self._vectors[old]
             return vector[axis]
 
+    def _held(self, t: float) -> list[float]:
+        """The force over the period starting at the drives' time ``t`` s: nothing until every simulated
+        axis is enabled, then :meth:`vector` at the time since."""
+        drives = [d for d in self._drives if d is not None]
+        if self._since is None:
+            if not drives or not all(d.torque_enabled for d in drives):
+                return [0.0] * self.size
+            self._since = t
+        positions = [d.handle.position if d is not None else 0.0 for d in self._drives]
+        return self.vector(t - self._since, positions)
+
     def vector(self, t: float, positions: Sequence[float]) -> list[float]:
-        """The force (N per axis) at time ``t`` s with the handle at ``positions`` (m)."""
+        """The force (N per axis) ``t`` s after the hand took the handle, with it at ``positions`` (m)."""
         return [0.0] * self.size
 
     def energy_balance(self) -> float:

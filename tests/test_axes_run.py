@@ -257,12 +257,12 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path) -
     three-axis exchange took 2.5 ms at p99 here beside other work (pre-flight refuses a T below the
     exchange), 8 times less; the walls softened to what the coupled gate passes at 20 ms (K 200 N/m,
     B 2 N s/m, margin +5.39 N s/m) and the push to 0.6 N, (0.4, 0.4, 0.2) N along the slope's normal,
-    whole per mille.  The hand waits at the start for the first 12 s of the plants' time (pre-flight's
-    500 cycles are 10 s of it), then pushes."""
+    whole per mille.  The hand takes the handle once the drives are enabled (pre-flight's 500 cycles,
+    10 s of the plants' time, never move it) and pushes towards the slope."""
     text = GANTRY.read_text()
     for old, new in (("period = 0.002 ", "period = 0.02 "), ("stiffness = 1500.0", "stiffness = 200.0"),
-                     ("damping = 5.0", "damping = 2.0"), ("force = 3.0 ", "force = 0.6 "), ("dwell = 4.0 ", "dwell = 12.0 "),
-                     (TARGETS, "toward = [[0.0, 0.0, 0.0], [0.02, 0.02, 0.01]]")):
+                     ("damping = 5.0", "damping = 2.0"), ("force = 3.0 ", "force = 0.6 "),
+                     (TARGETS, "toward = [0.02, 0.02, 0.01]")):
         assert old in text
         text = text.replace(old, new)
     path = tmp_path / "real-time.toml"
@@ -275,6 +275,8 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path) -
                                   RunOptions(8.0, pacing="wall", out_dir=tmp_path / "run", live=False))
     finally:
         sim.stop()
+    if result.exit_reason == "refused" and "this machine holds T >=" in (result.error or ""):
+        pytest.skip(f"this machine cannot hold T = 20 ms now, and the run said so at pre-flight: {result.error}")
     assert result.exit_reason == "completed", result.error
     summary = result.summary
     assert summary is not None and summary.cycles == 400 and summary.clock.startswith("real")

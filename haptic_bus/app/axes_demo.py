@@ -30,6 +30,7 @@ from haptic_bus.control.cycle_loop import RunSummary
 from haptic_bus.control.space_scene import SpaceScene
 
 STEADY_LEAD = 0.05  # s: a steady state is read this long before the hand turns to its next target
+STILL_TOUR = 8.0  # s: the demo of a hand that stays on one target (or pushes nothing)
 
 
 @dataclass(frozen=True)
@@ -107,15 +108,25 @@ class AxesDemoResult:
     files: list[pathlib.Path]
 
 
-def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: float = 8.0) -> AxesDemoResult:
-    """Run ``profile`` for ``seconds`` of virtual time; the steady state read at the end of each
-    target's dwell (and at the end); every axis' record, ``run.json`` and the plot written."""
+def tour_seconds(profile: AxesProfile) -> float:
+    """How long (s) the profile's hand takes to visit every target (``dwell`` each), once it has taken
+    the handle; :data:`STILL_TOUR` where it has a single target or none."""
+    dwell = profile.operator_model.get("dwell", math.inf)
+    targets = len(profile.operator_model.get("toward", ()))
+    return dwell * targets if math.isfinite(dwell) and targets > 1 else STILL_TOUR
+
+
+def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: float | None = None) -> AxesDemoResult:
+    """Run ``profile`` for ``seconds`` of virtual time (None: the hand's whole tour, :func:`tour_seconds`);
+    the steady state read at the end of each target's dwell (and at the end); every axis' record,
+    ``run.json`` and the plot written."""
     started = dt.datetime.now(dt.UTC)
     out = prepare_run_folder(out_dir, profile.name)
     period = profile.period
+    seconds = tour_seconds(profile) if seconds is None else seconds
     cycles = max(1, round(seconds / period))
     dwell = profile.operator_model.get("dwell", math.inf)
-    lead = round(STEADY_LEAD / period)  # the simulated plants are a few periods ahead: the enabling walk's SYNCs
+    lead = round(STEADY_LEAD / period)
     ends = {round(j * dwell / period) - lead for j in range(1, len(profile.operator_model.get("toward", ())) + 1)
             if j * dwell < seconds} if math.isfinite(dwell) else set()
     ends.add(cycles - 1)

@@ -129,7 +129,7 @@ def _demo(args: argparse.Namespace) -> int:
         print(format_axes_demo(axes_result))
         reason = axes_result.summary.exit_reason
     else:
-        result = run_demo(args.out, profile, seconds=args.duration)
+        result = run_demo(args.out, profile) if args.duration is None else run_demo(args.out, profile, seconds=args.duration)
         print(format_demo(result))
         reason = result.summary.exit_reason
     return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(reason, EXIT_NO)
@@ -299,7 +299,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo = command("demo", "simulated drive + controller on a virtual CAN bus, in virtual time", _demo)
     demo.add_argument("--out", default="haptic-bus-demo", help="output directory for PNGs, the CSV record and run.json")
     demo.add_argument("--profile", help="profile name or TOML path (default: the shipped default)")
-    demo.add_argument("--duration", type=seconds, default=2.0, help="virtual seconds to run")
+    demo.add_argument("--duration", type=seconds, help="virtual seconds to run (default: 2, or a multi-axis hand's whole tour)")
 
     run = command("run", "run a profile's controller against a drive on a CAN bus or over Modbus", _run)
     run.add_argument("profile", help="profile name or TOML path")
