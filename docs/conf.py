@@ -18,7 +18,7 @@ from haptic_bus import __version__  # noqa: E402  (after the path is set)
 
 project = "haptic_bus"
 author = "the haptic_bus authors"
-copyright = "the haptic_bus authors"  # noqa: A001  (Sphinx's configuration name)
+copyright = "the haptic_bus authors"
 version = release = __version__
 
 extensions = [

@@ -1,5 +1,5 @@
-"""The README's commissioning walk-through ("Commissioning a drive: scan, identify, then run") runs by
-copy-paste: every ``$ `` command of that section's console blocks is typed, as it stands, into one
+"""The manual's commissioning walk-through (docs/commissioning.md, "Commissioning a drive: scan, identify,
+then run") runs by copy-paste: every ``$ `` command of that page's console blocks is typed, as it stands, into one
 bash (in a fresh folder, bounded in time), and each command's exit status and key output are checked;
 the simulated drive it starts in the background is stopped by the walk-through's own ``kill %1``.
 
@@ -11,7 +11,7 @@ Measured over this walk-through's runs: m within 0.02 %, b within 0.1 %, Coulomb
 stale cycles (TPDOs that missed their timeout) the fit leaves out, and still catch a fit that
 mistakes the plant (a wrong velocity model or delay moves m and b by tens of per cent).
 
-The README's bus (udp_multicast group and port) is fixed, as a user types it; concurrent runs of this
+The page's bus (udp_multicast group and port) is fixed, as a user types it; concurrent runs of this
 test on one machine take turns (a file lock), and the port is outside the ranges the other tests
 draw theirs from (conftest: 43200 and up).
 """
@@ -34,10 +34,10 @@ from dataclasses import dataclass
 import pytest
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
-SECTION = "## Commissioning a drive: scan, identify, then run"
+PAGE = REPO / "docs" / "commissioning.md"
 LOCK = pathlib.Path(tempfile.gettempdir()) / "haptic-bus-readme-walkthrough.lock"
 TRUTH = {"mass": 0.37, "friction": 2.9, "coulomb": 0.2}
-EXPECTED = [  # each README command in order: how it starts, its exit status, the longest it may take (s)
+EXPECTED = [  # each command of the page in order: how it starts, its exit status, the longest it may take (s)
     ("haptic-bus sim ", 0, 60),
     ("while ! grep -q ", 0, 120),  # until the simulator serves (it imports numpy, scipy, canopen first)
     ("haptic-bus scan ", 0, 120),
@@ -54,24 +54,21 @@ EXPECTED = [  # each README command in order: how it starts, its exit status, th
 @dataclass(frozen=True)
 class Command:
     """One command of the walk-through as typed (continuation lines and a here-document included) and
-    the output the README shows for it."""
+    the output the page shows for it."""
 
     text: str
     shown: str
 
 
-def walkthrough_commands(readme: str) -> list[Command]:
-    """Every ``$ `` command of the section's ``console`` blocks, in order."""
-    start = readme.index(SECTION)
-    end = readme.find("\n## ", start + len(SECTION))
-    section = readme[start:end if end >= 0 else None]
+def walkthrough_commands(page: str) -> list[Command]:
+    """Every ``$ `` command of the page's ``console`` blocks, in order."""
     commands: list[Command] = []
-    for block in re.findall(r"```console\n(.*?)```", section, re.S):
+    for block in re.findall(r"```console\n(.*?)```", page, re.S):
         lines = block.splitlines()
         i = 0
         while i < len(lines):
             if not lines[i].startswith("$ "):
-                raise AssertionError(f"README walk-through: output before any command: {lines[i]!r}")
+                raise AssertionError(f"walk-through: output before any command: {lines[i]!r}")
             typed = [lines[i][2:]]
             while typed[-1].endswith("\\"):
                 i += 1
@@ -133,7 +130,7 @@ class Shell:
 @pytest.fixture
 def shell(tmp_path: pathlib.Path) -> Iterator[Shell]:
     with open(LOCK, "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)  # the README's bus is one: one walk-through at a time on this machine
+        fcntl.flock(lock, fcntl.LOCK_EX)  # the page's bus is one: one walk-through at a time on this machine
         bash = Shell(tmp_path)
         try:
             yield bash
@@ -147,15 +144,15 @@ def _number(pattern: str, text: str) -> float:
     return float(found.group(1))
 
 
-def test_the_readme_lists_the_walkthrough_in_order() -> None:
-    commands = walkthrough_commands((REPO / "README.md").read_text())
+def test_the_page_lists_the_walkthrough_in_order() -> None:
+    commands = walkthrough_commands(PAGE.read_text())
     assert [c.text.split("\n")[0][:len(prefix)] for c, (prefix, _, _) in zip(commands, EXPECTED, strict=True)] == [
         prefix for prefix, _, _ in EXPECTED]
 
 
 @pytest.mark.slow
-def test_the_readme_walkthrough_runs_as_it_stands(shell: Shell, tmp_path: pathlib.Path) -> None:
-    commands = walkthrough_commands((REPO / "README.md").read_text())
+def test_the_walkthrough_runs_as_it_stands(shell: Shell, tmp_path: pathlib.Path) -> None:
+    commands = walkthrough_commands(PAGE.read_text())
     outputs: list[str] = []
     for command, (_, status, limit) in zip(commands, EXPECTED, strict=True):
         got, output = shell.type(command.text, limit)
