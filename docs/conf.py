@@ -33,9 +33,11 @@ myst_heading_anchors = 3  # "[...](page.md#a-section)" links to a section by its
 myst_enable_extensions = ["colon_fence"]
 
 autodoc_member_order = "bysource"
-autodoc_typehints = "description"
+autodoc_typehints = "signature"
+autodoc_preserve_defaults = True  # a default as the source spells it (DEFAULT_TPDO_WITH_POSITION), not its repr
 autodoc_default_options = {"members": True, "show-inheritance": True}
 
+smartquotes = False  # "--smoke" stays two hyphens, as typed
 html_theme = "alabaster"
 html_title = f"haptic_bus {release}"
 html_theme_options = {"page_width": "1150px", "sidebar_width": "230px"}

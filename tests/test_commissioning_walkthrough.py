@@ -19,19 +19,14 @@ draw theirs from (conftest: 43200 and up).
 from __future__ import annotations
 
 import fcntl
-import os
 import pathlib
 import re
-import select
-import signal
-import subprocess
-import sys
 import tempfile
-import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 
 import pytest
+
+from tests.console import Shell, console_commands
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 PAGE = REPO / "docs" / "commissioning.md"
@@ -49,82 +44,6 @@ EXPECTED = [  # each command of the page in order: how it starts, its exit statu
     ("haptic-bus run identified.toml ", 0, 300),
     ("kill %1", 0, 10),
 ]
-
-
-@dataclass(frozen=True)
-class Command:
-    """One command of the walk-through as typed (continuation lines and a here-document included) and
-    the output the page shows for it."""
-
-    text: str
-    shown: str
-
-
-def walkthrough_commands(page: str) -> list[Command]:
-    """Every ``$ `` command of the page's ``console`` blocks, in order."""
-    commands: list[Command] = []
-    for block in re.findall(r"```console\n(.*?)```", page, re.S):
-        lines = block.splitlines()
-        i = 0
-        while i < len(lines):
-            if not lines[i].startswith("$ "):
-                raise AssertionError(f"walk-through: output before any command: {lines[i]!r}")
-            typed = [lines[i][2:]]
-            while typed[-1].endswith("\\"):
-                i += 1
-                typed.append(lines[i])
-            heredoc = re.search(r"<<'?(\w+)'?", typed[0])
-            if heredoc:
-                while lines[i] != heredoc.group(1):
-                    i += 1
-                    typed.append(lines[i])
-            i += 1
-            shown = []
-            while i < len(lines) and not lines[i].startswith("$ "):
-                shown.append(lines[i])
-                i += 1
-            commands.append(Command("\n".join(typed), "\n".join(shown)))
-    return commands
-
-
-class Shell:
-    """One bash, its stderr merged into stdout, fed command by command as a user types them."""
-
-    def __init__(self, cwd: pathlib.Path) -> None:
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))  # this tree's haptic_bus
-        env["PATH"] = os.pathsep.join([str(pathlib.Path(sys.executable).parent), env.get("PATH", "")])  # its haptic-bus
-        self.process = subprocess.Popen(["bash", "--norc", "--noprofile"], cwd=cwd, env=env, stdin=subprocess.PIPE,
-                                        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
-        self._pending = b""
-        self.type("exec 2>&1", 10)
-
-    def type(self, text: str, limit: float) -> tuple[int, str]:
-        """Run ``text``; its exit status and output, within ``limit`` s (else the test fails)."""
-        assert self.process.stdin is not None and self.process.stdout is not None
-        marker = f"__exit_status_{time.monotonic_ns()}__"
-        self.process.stdin.write(f"{text}\necho \"{marker}$?\"\n".encode())
-        self.process.stdin.flush()
-        deadline = time.monotonic() + limit
-        pattern = re.compile(rf"{marker}(\d+)\n".encode())
-        while (found := pattern.search(self._pending)) is None:
-            left = deadline - time.monotonic()
-            if left <= 0 or self.process.poll() is not None:
-                raise AssertionError(f"{text!r} did not finish within {limit} s: {self._pending.decode(errors='replace')}")
-            ready, _, _ = select.select([self.process.stdout], [], [], min(left, 1.0))
-            if ready:
-                self._pending += os.read(self.process.stdout.fileno(), 65536)
-        output, self._pending = self._pending[:found.start()], self._pending[found.end():]
-        return int(found.group(1)), output.decode(errors="replace")
-
-    def close(self) -> None:
-        """End the shell and everything it started that is still there (its own session)."""
-        if self.process.poll() is None:
-            os.killpg(self.process.pid, signal.SIGKILL)
-        self.process.wait(10)
-        for pipe in (self.process.stdin, self.process.stdout):
-            if pipe is not None:
-                pipe.close()  # wait() leaves them open: their collection would be an unraisable ResourceWarning
 
 
 @pytest.fixture
@@ -145,14 +64,14 @@ def _number(pattern: str, text: str) -> float:
 
 
 def test_the_page_lists_the_walkthrough_in_order() -> None:
-    commands = walkthrough_commands(PAGE.read_text())
+    commands = console_commands(PAGE.read_text())
     assert [c.text.split("\n")[0][:len(prefix)] for c, (prefix, _, _) in zip(commands, EXPECTED, strict=True)] == [
         prefix for prefix, _, _ in EXPECTED]
 
 
 @pytest.mark.slow
 def test_the_walkthrough_runs_as_it_stands(shell: Shell, tmp_path: pathlib.Path) -> None:
-    commands = walkthrough_commands(PAGE.read_text())
+    commands = console_commands(PAGE.read_text())
     outputs: list[str] = []
     for command, (_, status, limit) in zip(commands, EXPECTED, strict=True):
         got, output = shell.type(command.text, limit)

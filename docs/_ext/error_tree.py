@@ -66,6 +66,7 @@ def _label(cls: type) -> str:
 def _summary(cls: type) -> str:
     """The first sentence of the class's own docstring (none for a class without one)."""
     doc = " ".join((cls.__doc__ or "").split())
+    doc = re.sub(r":\w+:`~?(?:[\w.]*\.)?(\w+)`", r"\1", doc).replace("``", "")  # roles and literals as plain text
     return re.split(r"(?<!e\.g)(?<!i\.e)\.(?:\s|$)", doc)[0]
 
 
