@@ -109,15 +109,16 @@ def test_the_errors_page_catches_both_roots_in_one_clause() -> None:
 
 
 def test_the_drive_loop_of_the_python_api_page_runs_against_the_simulated_drive(haptic_sim) -> None:
-    """1000 cycles of the page's 2 N s/m damper against the simulated drive in this process (python-can's
-    virtual bus), whose hand pushes a constant 3 N on a handle of m = 1 kg, b = 20 N s/m.  The handle
+    """1000 cycles of the page's 2 N s/m damper against the simulated drive in this process (the lock-step
+    bus), whose hand pushes a constant 3 N on a handle of m = 1 kg, b = 20 N s/m.  The handle
     settles at v = 3 / (20 + 2) m/s: its time constant m / 22 = 45 ms is 1/22 of the loop's second
     (transient e^-22), and the damper's force is sent in whole per mille of torque (one per mille is
     0.32 N m x 50 / 1000 = 16 mN), so v is within 8 mN / 22 N s/m = 0.36 mm/s of it, plus one
     0x606C count (1 um/s)."""
     code = _example("python-api.md")
     assert code.count(DOCUMENTED_DRIVE_BUS) == 1
-    drive = haptic_sim("cia402-handle", mass=1.0, friction=20.0, operator={"model": "constant", "level": 3.0})
+    push = {"model": "constant", "level": 3.0}
+    drive = haptic_sim("cia402-handle", interface="lockstep", mass=1.0, friction=20.0, operator=push)
     bus = dict(drive.bus)
     interface, channel = bus.pop("interface"), bus.pop("channel")
     spelled = f"interface={interface!r}, channel={channel!r}, bus_kwargs={bus!r}"
