@@ -28,7 +28,12 @@ HOMES = ("haptic_bus.errors", "drives.errors")
 
 
 def _ours(cls: type) -> bool:
+    """True for a class defined in one of the three packages."""
     return cls.__module__.split(".")[0] in PACKAGES
+
+
+def _our_error(cls: type) -> bool:
+    return _ours(cls) and issubclass(cls, BaseException)
 
 
 def _import_every_module() -> None:
@@ -46,15 +51,14 @@ def roots() -> list[type[BaseException]]:
     for home in HOMES:
         module = importlib.import_module(home)
         for _, cls in inspect.getmembers(module, inspect.isclass):
-            if (cls.__module__ == home and issubclass(cls, BaseException)
-                    and not any(_ours(base) and issubclass(base, BaseException) for base in cls.__bases__)):
+            if cls.__module__ == home and issubclass(cls, BaseException) and not any(map(_our_error, cls.__bases__)):
                 found.append(cls)
     return sorted(found, key=lambda cls: (HOMES.index(cls.__module__), inspect.getsourcelines(cls)[1]))
 
 
 def _parent(cls: type) -> type | None:
     """The error of ours that ``cls`` is drawn under: its first base that is one."""
-    return next((base for base in cls.__bases__ if _ours(base) and issubclass(base, BaseException)), None)
+    return next(filter(_our_error, cls.__bases__), None)
 
 
 def _label(cls: type) -> str:
@@ -71,7 +75,7 @@ def _summary(cls: type) -> str:
 
 
 def _children(cls: type) -> list[type]:
-    subclasses = (sub for sub in cls.__subclasses__() if _ours(sub) and _parent(sub) is cls)
+    subclasses = (sub for sub in cls.__subclasses__() if _our_error(sub) and _parent(sub) is cls)
     return sorted(subclasses, key=lambda sub: (sub.__module__ not in HOMES, sub.__module__, sub.__name__))
 
 
