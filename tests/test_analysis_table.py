@@ -1,4 +1,5 @@
-"""The README table: largest passive K at B = 0 by velocity model and delay, checked against theory.
+"""The manual's table (docs/passivity.md): largest passive K at B = 0 by velocity model and delay,
+checked against theory, and the page shows what the code computes.
 
 Anchors: point velocity without delay is eq. 23's flip ``K = 2 b / (T tanh(c/2))``; average
 velocity without delay is Colgate's position-sampled wall ``b >= K T/2``; in between, a spring
@@ -10,12 +11,14 @@ values agree with that rule to the rule's own ``O(c)`` accuracy (1e-3 here).
 from __future__ import annotations
 
 import math
+import pathlib
 
 import pytest
 
 from haptic_bus.analysis.tables import DEVICES, LOWPASS_TAU, largest_stiffness, stiffness_table, stiffness_table_markdown
 
 SEED_DEVICE = DEVICES[0]
+REPO = pathlib.Path(__file__).resolve().parents[1]
 
 
 def test_the_zero_delay_anchors_are_eq23_and_colgate() -> None:
@@ -37,3 +40,4 @@ def test_the_markdown_table_has_every_device_model_and_delay() -> None:
     assert len(rows) == 9 and all(len(values) == 4 for _, _, values in rows)
     text = stiffness_table_markdown()
     assert text.count("\n") == 10 and "| D = 0.25 |" in text and "cia402-handle" in text and "desktop-omni" in text
+    assert text.strip() in (REPO / "docs" / "passivity.md").read_text()  # the page's copy is the table, every digit

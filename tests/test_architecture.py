@@ -1,4 +1,4 @@
-"""The dependency direction the README's layout draws, read off the import graph of the source.
+"""The dependency direction the manual's layout (docs/layout.md) draws, read off the import graph of the source.
 
 ``drives`` imports nothing of ours; ``sim_drive`` uses drives and haptic_bus' analysis (the plant),
 profile (the one profile reader) and base, never the controller; inside haptic_bus every module sits in one layer of
@@ -23,7 +23,7 @@ PACKAGES = ("haptic_bus", "drives", "sim_drive")
 BUS_LIBRARIES = ("can", "canopen", "pymodbus")
 BASE = ("haptic_bus.errors", "haptic_bus.validation", "haptic_bus.console", "haptic_bus._version")
 
-# haptic_bus bottom to top, as the README draws it; the packages of one level are siblings.
+# haptic_bus bottom to top, as docs/layout.md draws it; the packages of one level are siblings.
 LAYERS: tuple[tuple[str, ...], ...] = (
     BASE,
     ("haptic_bus.analysis",),
@@ -98,17 +98,16 @@ def test_the_graph_covers_every_package():
     assert "drives.canopen.drive" in GRAPH and "haptic_bus.analysis.criterion" in GRAPH
 
 
-def test_every_haptic_bus_module_sits_in_a_layer_the_readme_draws():
+def test_every_haptic_bus_module_sits_in_a_layer_the_layout_page_draws():
     homeless = sorted(m for m in GRAPH if _within(m, "haptic_bus") and _layer_of(m) is None)
-    assert not homeless, f"modules in no layer of LAYERS (add them to the README's layout and here): {homeless}"
-    readme = (REPO / "README.md").read_text()
-    layout = readme[readme.index("## Layout"):readme.index("## Python API")]
+    assert not homeless, f"modules in no layer of LAYERS (add them to docs/layout.md and here): {homeless}"
+    layout = (REPO / "docs" / "layout.md").read_text()
     drawn = next(line for line in layout.splitlines() if line.strip().startswith("haptic_bus layers: "))
     levels = [tuple(sorted(p.strip() for p in level.split("|"))) for level in drawn.split(": ", 1)[1].split(" <- ")]
     tested = [("base",), *(tuple(sorted(p.removeprefix("haptic_bus.") for p in level)) for level in LAYERS[1:])]
-    assert levels == tested, f"the README draws {drawn.strip()!r}; LAYERS here are {tested}"
+    assert levels == tested, f"docs/layout.md draws {drawn.strip()!r}; LAYERS here are {tested}"
     for package in (p for level in LAYERS[1:] for p in level):
-        assert f"\n  {package.split('.')[-1]}/ " in layout, f"{package} is missing from the README's layout"
+        assert f"\n  {package.split('.')[-1]}/ " in layout, f"{package} is missing from docs/layout.md"
 
 
 def test_haptic_bus_imports_only_layers_below():

@@ -140,3 +140,14 @@ def test_run_canopen_refuses_a_bus_or_node_it_cannot_use_before_anything_starts(
     with pytest.raises(hb.ParameterError, match=f"^run_canopen: {re.escape(named)} is invalid; allowed: "):
         hb.run_canopen(hb.load_profile("cia402-handle"), bus, node_id=node_id, options=options)  # type: ignore[arg-type]
     assert not (tmp_path / "run").exists()
+
+
+def test_the_readme_shows_the_docstring_example() -> None:
+    """The README's Python example is this docstring's, which the test above runs: the same code, line for
+    line (the comment lines aside: the docstring's ``\\`` joins its two comment lines into one)."""
+    from tests.doc_blocks import README, code_blocks
+
+    def code(text: str) -> list[str]:
+        return [line.rstrip() for line in text.strip().splitlines() if not line.lstrip().startswith("#")]
+
+    assert code(code_blocks(README, "python")[0]) == code(docstring_example())
