@@ -163,7 +163,7 @@ class WallController(CycleLoop[DriveCycle]):
         return self.scenes.applied
 
     def upload_scene(self, scene: CompiledScene) -> GateDecision:
-        """Gate ``scene`` and stage it for the next cycle boundary; raise GateRefusal if refused."""
+        """Gate ``scene`` and stage it for the next cycle boundary; raise Refusal if refused."""
         return self.scenes.upload(scene)
 
     def set_wall(self, name: str, stiffness: float, damping: float) -> GateDecision:
