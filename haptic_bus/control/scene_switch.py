@@ -21,7 +21,7 @@ from typing import Any
 
 from haptic_bus.control.gate import GateDecision, PassivityGate
 from haptic_bus.control.record import EventLog
-from haptic_bus.control.scene import CompiledScene, compile_scene, object_to_dict
+from haptic_bus.control.scene import CompiledScene, compile_scene, object_to_dict, with_wall_law
 from haptic_bus.errors import ParameterError, Refusal
 
 
@@ -87,7 +87,7 @@ class SceneSwitch:
             unknown = sorted(set(changes) - set(objects))
             if unknown:
                 raise ParameterError("object", unknown[0], f"one of {sorted(objects)}", "scene")
-            changed = [obj.with_parameters(*changes[obj.name]) if obj.name in changes else obj for obj in base.objects]
+            changed = [with_wall_law(obj, *changes[obj.name]) if obj.name in changes else obj for obj in base.objects]
             return self._admit(compile_scene(changed), origin)
 
     def _decide(self, scene: CompiledScene) -> GateDecision:
