@@ -68,7 +68,7 @@ def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> 
 
 
 def load_axes_device(path_or_name: str | pathlib.Path) -> AxesDeviceProfile:
-    """The axes and the hand a multi-axis profile states; ParameterError (a ParameterError) naming the field."""
+    """The axes and the hand a multi-axis profile states; ParameterError naming the field."""
     path = resolve_profile(path_or_name)
     document = read_document(path)
     loop = Reader(path, "loop", document.get("loop", {}), SILENT.loop)

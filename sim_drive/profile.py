@@ -55,7 +55,7 @@ class DriveProfile:
 
 def load_profile(path_or_name: str | pathlib.Path) -> DriveProfile:
     """The device parameters, timing and operator model a profile states (defaults where silent);
-    ParameterError (a ParameterError) naming the file and the key."""
+    ParameterError naming the file and the key."""
     path = resolve_profile(path_or_name)
     top = Reader(path, "", read_document(path))
     if "axes" in top.table:

@@ -184,7 +184,7 @@ def scan_canopen(
     ``interface``, ``channel``, ``bitrate``, ...; missing ones from python-can's configuration),
     by node id.  ``timeout``: the listening window after the probe, s; ``answer_timeout``: each
     SDO read of the details, s (module docstring).  ParameterError for bad arguments (before the
-    bus is opened), DriveError if the bus cannot be opened, DriveError if it fails."""
+    bus is opened), DriveError if the bus cannot be opened or the scan fails."""
     ids = checked_ids("node ids", node_ids, *NODE_ID_RANGE)
     window = checked_seconds("timeout", timeout)
     answer = checked_seconds("answer timeout", answer_timeout)

@@ -2,7 +2,7 @@
 
 canopen's SDO client raises :class:`canopen.SdoAbortedError` (abort code only) and
 :class:`canopen.SdoCommunicationError`; the master wants errors that name the drive, the
-object and its name: :class:`~drives.errors.DriveRefusal` (with ``abort_code``, ``index``,
+object and its name: :class:`~drives.errors.DriveRefusal` (with ``code``, ``index``,
 ``subindex``) and :class:`~drives.errors.DriveTimeout`.
 """
 

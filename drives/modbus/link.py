@@ -5,7 +5,7 @@ connection or an undecodable answer closes the link until the master reconnects 
 Errors name the drive and what the request was for:
 
 - exception response (0x02 illegal address, 0x03 illegal value, 0x06 busy, ...) ->
-  :class:`~drives.errors.DriveRefusal` (``exception_code``);
+  :class:`~drives.errors.DriveRefusal` (``code``, the exception code);
 - no answer within ``timeout`` -> :class:`~drives.errors.DriveTimeout`;
 - a dropped connection -> :class:`~drives.errors.ModbusLinkLost`.
 """
