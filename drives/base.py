@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from drives.cia402 import ObjectSpec, OperationMode
-from drives.errors import DriveArgumentError, DriveError
+from drives.errors import DriveError, ParameterError
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,10 +60,10 @@ class DriveScaling:
         for name in ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
-                raise DriveArgumentError(name, value, "a finite real > 0", "drive scaling")
+                raise ParameterError(name, value, "a finite real > 0", "drive scaling")
         permille = self.max_torque_permille
         if isinstance(permille, bool) or not isinstance(permille, int) or not 1 <= permille <= 0xFFFF:
-            raise DriveArgumentError("max_torque_permille", permille, "an integer in [1, 65535] (0x6072)", "drive scaling")
+            raise ParameterError("max_torque_permille", permille, "an integer in [1, 65535] (0x6072)", "drive scaling")
 
     @property
     def newton_per_permille(self) -> float:
@@ -180,11 +180,11 @@ class TorqueClamp:
     @contextlib.contextmanager
     def lowered(self, limit: int | None, owner: str) -> Iterator[TorqueClamp]:
         """This clamp held at ``limit`` (per mille; None: unchanged) if that is lower, until the block
-        ends; ``limit`` None or an integer >= 1, else DriveArgumentError naming ``owner`` (the drive)."""
+        ends; ``limit`` None or an integer >= 1, else ParameterError naming ``owner`` (the drive)."""
         own = self.limit
         if limit is not None and (isinstance(limit, bool) or not isinstance(limit, numbers.Integral) or limit < 1):
-            raise DriveArgumentError("torque_limit", limit,
-                                     f"None or an integer >= 1 per mille (held to the drive's own {own}, 0x6072)", owner)
+            raise ParameterError("torque_limit", limit,
+                                 f"None or an integer >= 1 per mille (held to the drive's own {own}, 0x6072)", owner)
         if limit is not None:
             self.limit = min(own, int(limit))
         try:
@@ -212,7 +212,7 @@ class DriveCycle:
     target ``saturate`` returned (or the safe outputs while the drive is tripped).  A controller
     that lowers a target after saturating it (the passivity layer) calls the two in turn;
     :meth:`exchange` is both for one that does not.  A target is an integer (per mille of the
-    rated torque, 0x6071), else :class:`~drives.errors.DriveArgumentError` and nothing is sent;
+    rated torque, 0x6071), else :class:`~drives.errors.ParameterError` and nothing is sent;
     once the phase has ended, ``read`` and ``write`` raise :class:`~drives.errors.DriveError`.
     """
 
@@ -246,11 +246,11 @@ class DriveCycle:
 
 
 def checked_torque(name: str, torque: object) -> int:
-    """``torque`` as a target torque (per mille): an integer (numpy's too), else DriveArgumentError."""
+    """``torque`` as a target torque (per mille): an integer (numpy's too), else ParameterError."""
     if type(torque) is int:  # every cycle of the controllers: the one check they pay (26 ns, not 0.7 us)
         return torque
     if isinstance(torque, bool) or not isinstance(torque, numbers.Integral):
-        raise DriveArgumentError("target torque", torque, "an integer, per mille of the rated torque (0x6071)", name)
+        raise ParameterError("target torque", torque, "an integer, per mille of the rated torque (0x6071)", name)
     return int(torque)
 
 

@@ -20,7 +20,7 @@ import argparse
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
-from drives.errors import BusConfigError, DriveArgumentError
+from drives.errors import DriveError, ParameterError
 
 if TYPE_CHECKING:
     import can
@@ -63,13 +63,13 @@ def resolve_bus_config(
         config = dict(can.util.load_config(path=config_file, config=given, context=context))
     except (can.CanInterfaceNotImplementedError, NotImplementedError, ValueError, TypeError) as exc:
         if "None" in str(exc):
-            raise BusConfigError(where, _NO_INTERFACE) from exc
+            raise DriveError(where, _NO_INTERFACE) from exc
         if interface is not None and interface not in can.interfaces.VALID_INTERFACES:  # the user's typo: exit 2
-            raise DriveArgumentError("interface", interface, "one of python-can's: "
-                                     + ", ".join(sorted(can.interfaces.VALID_INTERFACES)), where) from None
-        raise BusConfigError(where, f"invalid CAN bus configuration: {exc}") from exc
+            raise ParameterError("interface", interface, "one of python-can's: "
+                                 + ", ".join(sorted(can.interfaces.VALID_INTERFACES)), where) from None
+        raise DriveError(where, f"invalid CAN bus configuration: {exc}") from exc
     if not config.get("interface"):
-        raise BusConfigError(where, _NO_INTERFACE)
+        raise DriveError(where, _NO_INTERFACE)
     if config["interface"] == "udp_multicast":
         config.setdefault("hop_limit", LOCAL_HOP_LIMIT)
     return config
@@ -97,7 +97,7 @@ def open_bus(
             return FilteredMulticastBus(**{key: value for key, value in config.items() if key != "interface"})
         return can.Bus(**config)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
-        raise BusConfigError(where, f"cannot open the CAN bus: {exc}") from exc
+        raise DriveError(where, f"cannot open the CAN bus: {exc}") from exc
 
 
 def parse_bus_option(text: str) -> tuple[str, Any]:
@@ -113,12 +113,12 @@ def parse_bus_option(text: str) -> tuple[str, Any]:
 
 def merge_bus_options(*groups: Iterable[tuple[str, Any]]) -> dict[str, Any]:
     """The ``(key, value)`` pairs of ``--bus-option``, ``--bus-kwargs`` (and ``--interface``...) as one
-    dict of python-can bus arguments; DriveArgumentError when a key is given twice with different values."""
+    dict of python-can bus arguments; ParameterError when a key is given twice with different values."""
     merged: dict[str, Any] = {}
     for group in groups:
         for key, value in group:
             if key in merged and merged[key] != value:
-                raise DriveArgumentError(f"bus argument {key}", value,
+                raise ParameterError(f"bus argument {key}", value,
                                      f"one value per key ({key} = {merged[key]!r} is given too)")
             merged[key] = value
     return merged

@@ -48,7 +48,7 @@ from drives.cia402 import (
     path_to_operation_enabled,
     supports,
 )
-from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveStateError, ScalingConflict, UnsupportedModeError
+from drives.errors import DriveError, DriveFault, DriveProtocolError
 from drives.fault_reset import clear_fault, error_code_text
 
 logger = logging.getLogger(__name__)
@@ -96,13 +96,19 @@ def _check_reading(node: str, name: str, reading: ScalingReading) -> None:
 
 
 def _agree(node: str, name: str, used: ScalingReading, other: ScalingReading) -> None:
-    """ScalingConflict unless ``other`` equals ``used`` within the larger rounding of the two (at least REL_FLOOR)."""
+    """DriveError (a scaling conflict naming both sources) unless ``other`` equals ``used`` within the larger
+    rounding of the two (at least REL_FLOOR)."""
     scale = max(abs(used.value), abs(other.value))
     relative = abs(used.value - other.value) / scale if scale else 0.0
     tolerance = max(REL_FLOOR, used.tolerance, other.tolerance)
     if relative > tolerance:
-        raise ScalingConflict(node, name, (used.value, used.source), (other.value, other.source), relative, tolerance,
-                              SCALING_UNITS.get(name, ""))
+        unit = f" {SCALING_UNITS[name]}" if SCALING_UNITS.get(name) else ""
+        raise DriveError(
+            node,
+            f"scaling conflict for {name}: {used.value:.12g}{unit} from {used.source} but {other.value:.12g}{unit} from "
+            f"{other.source} (relative difference {relative:.3g}, more than the {tolerance:.3g} the objects' rounding "
+            f"allows); correct the profile or the drive's objects, the drive is not enabled",
+        )
 
 
 def merge_scaling(
@@ -114,7 +120,7 @@ def merge_scaling(
     (``given``, labelled ``given_source``).
 
     Every other reading of a field must agree with the one used within the larger of their
-    roundings (:class:`ScalingConflict` names both).  :class:`DriveProtocolError` names a field
+    roundings (a :class:`DriveError` names both).  :class:`DriveProtocolError` names a field
     no one gives, or a value the drive reports that cannot be a scaling factor.  Returns the
     scaling and the :class:`ScalingReport` of where each factor came from (``notes`` appended).
     """
@@ -311,28 +317,27 @@ class Cia402Master(Drive):
         and wait (``state_timeout``) until 0x6061 shows it."""
         mode = OperationMode(mode)
         if mode is not OperationMode.CYCLIC_SYNCHRONOUS_TORQUE:
-            raise UnsupportedModeError(
+            raise DriveError(
                 self.name, f"this master drives only CYCLIC_SYNCHRONOUS_TORQUE (10); {mode.name} ({int(mode)}) was asked"
             )
         supported = self.read_object(SUPPORTED_DRIVE_MODES)
         if not supports(supported, mode):
-            raise UnsupportedModeError(
+            raise DriveError(
                 self.name, f"0x6502 supported drive modes = 0x{supported:08X} lacks {mode.name} (bit {mode.supported_bit})"
             )
         self.write_object(MODES_OF_OPERATION, int(mode))
         deadline = time.monotonic() + self.state_timeout
         while (shown := self.read_object(MODES_OF_OPERATION_DISPLAY)) != int(mode):
             if time.monotonic() > deadline:
-                raise DriveStateError(
+                raise DriveFault(
                     self.name,
                     f"0x6061 modes of operation display = {shown}, still not {int(mode)} ({mode.name}) "
                     f"{self.state_timeout:.3g} s after writing 0x6060",
-                    None,
                 )
 
     def _walk(self, goal: State, first_word: int, accept: tuple[State, ...] = ()) -> State:
         """Command the state machine to ``goal`` (or a state in ``accept``), starting with
-        ``first_word``; :class:`DriveStateError` if one step stalls for ``state_timeout``."""
+        ``first_word``; :class:`DriveFault` if one step stalls for ``state_timeout``."""
         walk = StateWalk(self, goal, first_word, accept)
         word: int | None = first_word
         while word is not None:
@@ -342,17 +347,17 @@ class Cia402Master(Drive):
         return state
 
     def _reset_fault(self) -> None:
-        """The fault-reset sequence (:func:`drives.fault_reset.clear_fault`); DriveStateError if the
+        """The fault-reset sequence (:func:`drives.fault_reset.clear_fault`); DriveFault if the
         drive is still in FAULT (or FAULT REACTION ACTIVE) ``state_timeout`` s after the edge."""
         statusword = clear_fault(self._command, self.state_timeout)
         state = decode_statusword(statusword)
         if state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
             detail, _ = self._fault_detail()
-            raise DriveStateError(
+            raise DriveFault(
                 self.name,
                 f"still in {state_name(state)} (statusword 0x{statusword:04X}{detail}) {self.state_timeout:.3g} s "
                 f"after the fault reset edge: the cause of the fault persists",
-                state,
+                state=state,
             )
 
 
@@ -361,7 +366,7 @@ class StateWalk:
     one controlword per exchange, starting with ``first_word``.
 
     :meth:`next_word` takes the statusword that answered the last word sent and returns the next
-    word to send, or None once the drive is there; it raises :class:`DriveStateError` when the
+    word to send, or None once the drive is there; it raises :class:`DriveFault` when the
     drive sits in FAULT on the way to an enabled state, or when one step stalls for the master's
     ``state_timeout`` (or ``max_commands_per_step`` exchanges).  ``word`` is the last word sent
     (what keeps an arrived drive where it is while others still walk), ``state`` the last seen.
@@ -396,20 +401,20 @@ class StateWalk:
         if goal is State.SWITCH_ON_DISABLED:
             command = Command.DISABLE_VOLTAGE
         elif state is State.FAULT:
-            raise DriveStateError(master.name, f"drive is in FAULT (statusword 0x{statusword:04X}, error code "
-                                               f"{error_code_text(master._error_code())}): it needs a fault reset first",
-                                  state)
+            raise DriveFault(master.name, f"drive is in FAULT (statusword 0x{statusword:04X}, error code "
+                                         f"{error_code_text(master._error_code())}): it needs a fault reset first",
+                             state=state)
         else:
             path = path_to_operation_enabled(state) if state is not None else ()
             command = path[0] if path else None
         word = command.word if command is not None else self.word & ~CW_FAULT_RESET
         if now - self._step_started > master.state_timeout or self._commands > master.max_commands_per_step:
             sent = f"{command.name} (controlword 0x{word:04X})" if command is not None else f"controlword 0x{word:04X}"
-            raise DriveStateError(
+            raise DriveFault(
                 master.name,
                 f"state machine stuck in {state_name(state)} (statusword 0x{statusword:04X}) for "
                 f"{master.state_timeout:.3g} s while sending {sent} towards {goal.value}",
-                state,
+                state=state,
             )
         self._commands += 1
         self.word = word

@@ -31,7 +31,7 @@ from drives.cia402 import (
     describe_abort_option,
     describe_mode,
 )
-from drives.errors import DriveProtocolError, SdoAbortError
+from drives.errors import DriveProtocolError, DriveRefusal
 from drives.fault_reset import error_code_meaning, error_code_text, state_text
 from drives.object_access import ObjectAccess, is_absent
 
@@ -74,8 +74,8 @@ class Reading:
 def missing_reading(key: str, label: str, source: str, error: DriveProtocolError) -> Reading:
     """The Reading of an object the drive refused: "absent" or "not readable", with its reason
     (an SDO abort as its code and meaning)."""
-    if isinstance(error, SdoAbortError):
-        reason = f"SDO abort 0x{error.abort_code:08X} {sdo_abort_text(error.abort_code)}"
+    if isinstance(error, DriveRefusal):
+        reason = f"SDO abort 0x{error.code:08X} {sdo_abort_text(error.code)}"
     else:
         reason = error.message
     return Reading(key, label, source, None, reason, "absent" if is_absent(error) else "not readable")

@@ -69,7 +69,7 @@ from drives.cia402 import (
     ObjectSpec,
     RatioSpec,
 )
-from drives.errors import ScalingObjectError
+from drives.errors import DriveProtocolError
 
 EXPONENT_RANGE = (-18, 18)
 UINT32_MAX = 0xFFFFFFFF
@@ -155,12 +155,18 @@ class FactorGroup:
         return values
 
 
-def _unit_error(node: str, spec: ObjectSpec, raw: int, allowed: str) -> ScalingObjectError:
-    return ScalingObjectError(node, spec.index, 0, spec.name, raw, allowed)
+def _object_error(node: str, index: int, subindex: int, name: str, value: int, allowed: str) -> DriveProtocolError:
+    """A factor-group or SI-unit object ``index:subindex`` holding ``value``, which no drive may report."""
+    return DriveProtocolError(node, f"0x{index:04X}:{subindex:02X} ({name}) = {value} (0x{value:08X}) is invalid; "
+                                    f"allowed: {allowed}")
+
+
+def _unit_error(node: str, spec: ObjectSpec, raw: int, allowed: str) -> DriveProtocolError:
+    return _object_error(node, spec.index, 0, spec.name, raw, allowed)
 
 
 def check_unit(node: str, spec: ObjectSpec, raw: int) -> SiUnit:
-    """Decode 0x60A8 (``spec`` SI_UNIT_POSITION) or 0x60A9; ScalingObjectError for a value no drive may report."""
+    """Decode 0x60A8 (``spec`` SI_UNIT_POSITION) or 0x60A9; DriveProtocolError for a value no drive may report."""
     unit = SiUnit.decode(raw)
     low, high = EXPONENT_RANGE
     known = sorted({*LENGTH_UNITS, *ANGLE_UNITS, *OTHER_UNITS})
@@ -178,11 +184,11 @@ def check_unit(node: str, spec: ObjectSpec, raw: int) -> SiUnit:
 
 
 def check_ratio(node: str, spec: RatioSpec, value: tuple[int, int]) -> tuple[int, int]:
-    """A ratio object's two values, each a whole number in 1..2^32-1; ScalingObjectError otherwise."""
+    """A ratio object's two values, each a whole number in 1..2^32-1; DriveProtocolError otherwise."""
     for subindex, (number, name) in enumerate(zip(value, (spec.numerator, spec.denominator), strict=True), 1):
         if not 1 <= number <= UINT32_MAX:
-            raise ScalingObjectError(node, spec.index, subindex, f"{spec.name}: {name}", number,
-                                     f"1..{UINT32_MAX} (both terms of {spec.name.lower()} = sub 1 / sub 2 are > 0)")
+            raise _object_error(node, spec.index, subindex, f"{spec.name}: {name}", number,
+                                f"1..{UINT32_MAX} (both terms of {spec.name.lower()} = sub 1 / sub 2 are > 0)")
     return value
 
 
@@ -199,7 +205,7 @@ class _Mechanics:
 def derive(node: str, group: FactorGroup) -> tuple[dict[str, ScalingReading], tuple[str, ...]]:
     """The DriveScaling fields the objects determine (velocity_per_count, position_per_count,
     force_per_torque), each a :class:`ScalingReading`, and notes on the fields they cannot
-    give.  Every object present is checked first (ScalingObjectError names a bad one)."""
+    give.  Every object present is checked first (DriveProtocolError names a bad one)."""
     ratios = {spec.index: Fraction(*check_ratio(node, spec, value)) for spec, value in group.ratios() if value is not None}
     position = check_unit(node, SI_UNIT_POSITION, group.position_unit) if group.position_unit is not None else None
     velocity = check_unit(node, SI_UNIT_VELOCITY, group.velocity_unit) if group.velocity_unit is not None else None

@@ -3,9 +3,10 @@
 A CANopen drive is read and written over SDO (:class:`drives.canopen.client.NodeClient`), a
 Modbus drive through its register map (:class:`drives.modbus.objects.ModbusObjects`); both
 give values in the object's own integer units and raise the project's errors:
-:class:`~drives.errors.DriveTimeout` for silence, a :class:`~drives.errors.DriveProtocolError`
-(SDO abort, Modbus exception, :class:`~drives.errors.ObjectAbsent`) for an object that cannot
-be read or written.
+:class:`~drives.errors.DriveTimeout` for silence, a :class:`~drives.errors.DriveRefusal` (SDO
+abort, Modbus exception, an object the register map lacks) or a
+:class:`~drives.errors.DriveProtocolError` (an answer that cannot be used) for an object that
+cannot be read or written.
 """
 
 from __future__ import annotations
@@ -14,10 +15,10 @@ from typing import Protocol
 
 from drives.cia301 import SdoAbort
 from drives.cia402 import ObjectSpec
-from drives.errors import DriveArgumentError, DriveProtocolError, ModbusExceptionError, ObjectAbsent, SdoAbortError
+from drives.errors import DriveProtocolError, DriveRefusal, ParameterError
 
 ILLEGAL_DATA_ADDRESS = 0x02  # Modbus exception: no such register
-_ABSENT_ABORTS = frozenset({SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX})
+_ABSENT_CODES = frozenset({SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX, ILLEGAL_DATA_ADDRESS})
 
 
 class ObjectAccess(Protocol):
@@ -35,13 +36,10 @@ class ObjectAccess(Protocol):
         """Where ``spec`` lives on this bus: ``"0x6041"``, ``"0x1400:05"``, ``"register 0x0000"``."""
 
 
-def is_absent(error: DriveProtocolError) -> bool:
-    """True if ``error`` says the object does not exist (rather than that it cannot be read now)."""
-    if isinstance(error, ObjectAbsent):
-        return True
-    if isinstance(error, SdoAbortError):
-        return error.abort_code in _ABSENT_ABORTS
-    return isinstance(error, ModbusExceptionError) and error.exception_code == ILLEGAL_DATA_ADDRESS
+def is_absent(error: DriveProtocolError | DriveRefusal) -> bool:
+    """True if ``error`` says the object does not exist (rather than that it cannot be read now).
+    The SDO abort codes (0x05030000 and up) and the Modbus exception codes (0x01..0x0B) never meet."""
+    return isinstance(error, DriveRefusal) and error.code in _ABSENT_CODES
 
 
 def object_label(spec: ObjectSpec) -> str:
@@ -55,13 +53,13 @@ OBJECT_SYNTAX = "INDEX[:SUB], INDEX 0x0001..0xFFFF and SUB 0..255, decimal or 0x
 
 
 def parse_object(text: str) -> tuple[int, int]:
-    """``"0x6041"`` -> (0x6041, 0), ``"0x1018:4"`` -> (0x1018, 4); DriveArgumentError naming the syntax otherwise."""
+    """``"0x6041"`` -> (0x6041, 0), ``"0x1018:4"`` -> (0x1018, 4); ParameterError naming the syntax otherwise."""
     index_text, colon, sub_text = text.strip().partition(":")
     try:
         index = int(index_text, 0)
         subindex = int(sub_text, 0) if colon else 0
     except ValueError:
-        raise DriveArgumentError("object", text, OBJECT_SYNTAX) from None
+        raise ParameterError("object", text, OBJECT_SYNTAX) from None
     if not (INDEX_RANGE[0] <= index <= INDEX_RANGE[1] and SUBINDEX_RANGE[0] <= subindex <= SUBINDEX_RANGE[1]):
-        raise DriveArgumentError("object", text, OBJECT_SYNTAX)
+        raise ParameterError("object", text, OBJECT_SYNTAX)
     return index, subindex

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from drives.cia402 import AbortConnectionOption
-from drives.errors import DriveArgumentError
+from drives.errors import ParameterError
 
 VIRTUAL_TIME_DEADLINE = 2.0  # s: the drive watchdogs' floor (RPDO deadline, consumer, Modbus) when nothing paces the loop
 VIRTUAL_TIME_WAIT = 0.5
@@ -67,7 +67,7 @@ class SafetySettings:
     def __post_init__(self) -> None:
         def check(name: str, ok: bool, allowed: str) -> None:
             if not ok:
-                raise DriveArgumentError(name, getattr(self, name), allowed, "CANopen safety settings")
+                raise ParameterError(name, getattr(self, name), allowed, "CANopen safety settings")
 
         def whole(value: object) -> bool:
             return isinstance(value, int) and not isinstance(value, bool)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 
-from drives.errors import DriveArgumentError
+from drives.errors import ParameterError
 
 MAX_SECONDS = 3600.0
 DEFAULT_TIMEOUT = 1.0  # s: CANopen: the listening window after the probe; Modbus: no new unit started after it
@@ -14,16 +14,16 @@ DEFAULT_ANSWER_TIMEOUT = 0.1  # s: each SDO read (CANopen) or request (Modbus)
 
 
 def checked_ids(name: str, ids: Iterable[int], low: int, high: int) -> list[int]:
-    """``ids`` sorted without repeats; DriveArgumentError naming ``name`` if empty or any is outside ``low..high``."""
+    """``ids`` sorted without repeats; ParameterError naming ``name`` if empty or any is outside ``low..high``."""
     found = sorted(set(ids))
     bad = [i for i in found if isinstance(i, bool) or not isinstance(i, int) or not low <= i <= high]
     if bad or not found:
-        raise DriveArgumentError(name, bad or found, f"one or more ids {low}..{high}", "scan")
+        raise ParameterError(name, bad or found, f"one or more ids {low}..{high}", "scan")
     return found
 
 
 def checked_seconds(name: str, value: float) -> float:
-    """A time in (0, 3600] s as float; DriveArgumentError naming ``name`` otherwise."""
+    """A time in (0, 3600] s as float; ParameterError naming ``name`` otherwise."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 < value <= MAX_SECONDS and math.isfinite(value)):
-        raise DriveArgumentError(name, value, f"a time in (0, {MAX_SECONDS:g}] s", "scan")
+        raise ParameterError(name, value, f"a time in (0, {MAX_SECONDS:g}] s", "scan")
     return float(value)

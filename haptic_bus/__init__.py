@@ -46,7 +46,7 @@ _HOMES = {
     "PassivityGate": "haptic_bus.control.gate",
     "GatePolicy": "haptic_bus.control.gate",
     "GateDecision": "haptic_bus.control.gate",
-    "GateRefusal": "haptic_bus.errors",
+    "Refusal": "haptic_bus.errors",
     "DeviceLoop": "haptic_bus.analysis.loop",
     "WallController": "haptic_bus.control.controller",
     "RunSummary": "haptic_bus.control.controller",
@@ -76,12 +76,12 @@ __all__ = [
     "DriveError",
     "GateDecision",
     "GatePolicy",
-    "GateRefusal",
     "HapticBusError",
     "ModbusDrive",
     "ParameterError",
     "PassivityGate",
     "Profile",
+    "Refusal",
     "RunOptions",
     "RunResult",
     "RunSummary",
@@ -124,4 +124,4 @@ if TYPE_CHECKING:
     from haptic_bus.control.gate import GateDecision, GatePolicy, PassivityGate
     from haptic_bus.control.scene import Detent, Slot, Wall, compile_scene
     from haptic_bus.control.supervisor import SupervisorPolicy
-    from haptic_bus.errors import AssumptionBroken, DriveError, GateRefusal, HapticBusError, ParameterError
+    from haptic_bus.errors import AssumptionBroken, DriveError, HapticBusError, ParameterError, Refusal

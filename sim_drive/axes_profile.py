@@ -20,7 +20,7 @@ from haptic_bus.analysis.loop import PERIOD_RANGE
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import check_velocity_period, read_device, read_timing
 from haptic_bus.profile.files import resolve_profile
-from haptic_bus.profile.reader import ProfileError, Reader, read_document
+from haptic_bus.profile.reader import Reader, profile_error, read_document
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import SILENT, drive_parameters
 from sim_drive.space_operator import SpaceHand, hand_from_table
@@ -68,22 +68,22 @@ def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> 
 
 
 def load_axes_device(path_or_name: str | pathlib.Path) -> AxesDeviceProfile:
-    """The axes and the hand a multi-axis profile states; ProfileError (a ParameterError) naming the field."""
+    """The axes and the hand a multi-axis profile states; ParameterError naming the field."""
     path = resolve_profile(path_or_name)
     document = read_document(path)
     loop = Reader(path, "loop", document.get("loop", {}), SILENT.loop)
     period = loop.real("period", *PERIOD_RANGE, "s")
     tables = document.get("axes")
     if not isinstance(tables, list) or not tables:
-        raise ProfileError(path, "axes", tables, "an array of tables [[axes]]")
+        raise profile_error(path, "axes", tables, "an array of tables [[axes]]")
     axes = tuple(_read_axis(path, i, table, period) for i, table in enumerate(tables))
     space = Reader(path, "space", document.get("space", {}))
     hand = space.raw("operator", "a [space.operator] table", default={"model": "none"})
     if not isinstance(hand, dict):
-        raise ProfileError(path, "space.operator", hand, "a TOML table")
+        raise profile_error(path, "space.operator", hand, "a TOML table")
     profile = AxesDeviceProfile(axes, dict(hand))
     try:
         profile.make_hand()  # checked now, not at the first SYNC
     except ParameterError as error:
-        raise ProfileError(path, error.name, error.value, error.allowed) from None
+        raise profile_error(path, error.name, error.value, error.allowed) from None
     return profile

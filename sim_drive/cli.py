@@ -41,7 +41,7 @@ from typing import Any, NoReturn
 from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, merge_bus_options, parse_bus_option
 from haptic_bus._version import __version__
 from haptic_bus.console import StderrHandler
-from haptic_bus.errors import BusConfigError, InvalidInput, ParameterError
+from haptic_bus.errors import DriveError, ParameterError
 from sim_drive.eds import OD_KINDS, eds_path
 from sim_drive.operator import OperatorModel, operator_from_spec, operator_usage
 from sim_drive.parameters import DeviceParameters, Timing
@@ -180,7 +180,7 @@ def _overridden(parameters: DeviceParameters, operator: OperatorModel | None,
 
 
 def _bus_config(args: argparse.Namespace) -> dict[str, Any]:
-    """The CANopen slave's python-can arguments; DriveArgumentError for a key given twice with different values."""
+    """The CANopen slave's python-can arguments; ParameterError for a key given twice with different values."""
     named = [(key, getattr(args, key)) for key in ("interface", "channel", "bitrate") if getattr(args, key)]
     return merge_bus_options(named, args.bus_option, *args.bus_kwargs)
 
@@ -260,7 +260,7 @@ def _run_canopen(args: argparse.Namespace) -> int:
         config = _bus_config(args)
         sim = CanopenSimDrive(config, args.node_id, timing=timing, parameters=parameters, operator=operator, bus_meter=meter,
                               od=args.od or "haptic", eds=args.eds, sync_clock=sync_clock(args.clock))
-    except InvalidInput as exc:
+    except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
     with _StopSignals() as stop_signals:  # from before the boot-up: an early signal still stops cleanly
@@ -341,7 +341,7 @@ def run_axes(args: argparse.Namespace) -> int:
     try:
         axes, hand, coordinates = _axes_setup(args)
         sim = MultiAxisSim(config, axes, hand, coordinates=coordinates, clock=args.clock, od=args.od or "haptic")
-    except InvalidInput as exc:
+    except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
     _configure_logging(args.log_wall_clock, "canopen", logging.WARNING)  # once the arguments hold: a refusal logs nothing
@@ -369,7 +369,7 @@ def started(sim: Any) -> bool:
 
     try:
         sim.start()
-    except BusConfigError as exc:
+    except DriveError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return False
     except (can.CanError, OSError, ValueError) as exc:
@@ -399,7 +399,7 @@ def _run_modbus(args: argparse.Namespace) -> int:
         parameters, operator, timing = _drive_setup(args)
         sim = ModbusSimServer(host, port, unit_id=unit_id, timing=timing, parameters=parameters, operator=operator,
                               word_order=word_order, sync_clock=sync_clock(args.clock))
-    except InvalidInput as exc:
+    except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
 

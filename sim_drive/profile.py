@@ -26,7 +26,7 @@ from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import DeviceProfile
 from haptic_bus.profile.files import resolve_profile
 from haptic_bus.profile.plant import ONE_AXIS_TABLES, Silent, read_plant
-from haptic_bus.profile.reader import ProfileError, Reader, read_document
+from haptic_bus.profile.reader import Reader, profile_error, read_document
 from haptic_bus.profile.scene import read_force_limit, read_scene
 from sim_drive.operator import NoOperator, OperatorModel, operator_from_table
 from sim_drive.parameters import DEFAULT_RECEPTION_DELAY, DeviceParameters, Timing
@@ -55,15 +55,15 @@ class DriveProfile:
 
 def load_profile(path_or_name: str | pathlib.Path) -> DriveProfile:
     """The device parameters, timing and operator model a profile states (defaults where silent);
-    ProfileError (a ParameterError) naming the file and the key."""
+    ParameterError naming the file and the key."""
     path = resolve_profile(path_or_name)
     top = Reader(path, "", read_document(path))
     if "axes" in top.table:
-        raise ProfileError(path, "axes", "[[axes]]", "a one-axis profile (a multi-axis profile runs with --node-ids)")
+        raise profile_error(path, "axes", "[[axes]]", "a one-axis profile (a multi-axis profile runs with --node-ids)")
     top.only(ONE_AXIS_TABLES)  # the controller's tables are its business, a table no profile has is refused
     loop_table = top.table.get("loop")
     if isinstance(loop_table, dict) and "delay" in loop_table and "timing" not in loop_table:
-        raise ProfileError(path, "loop.delay", loop_table["delay"], "a delay only with [loop] timing")
+        raise profile_error(path, "loop.delay", loop_table["delay"], "a delay only with [loop] timing")
     plant = read_plant(top, SILENT)
     if "limits" in top.table:  # the controller's tables, checked by the same code (the drive runs neither)
         read_force_limit(path, top.table["limits"], plant.device)
@@ -78,10 +78,10 @@ def load_profile(path_or_name: str | pathlib.Path) -> DriveProfile:
 def drive_parameters(path: pathlib.Path, device: DeviceProfile, period: float, timing: str, delay: float,
                      prefix: str = "") -> DeviceParameters:
     """The simulated drive of ``device`` on a loop of ``period`` s and ``timing``; a value the drive
-    cannot take (a "reception" delay of a whole sample or more) is a ProfileError naming the
+    cannot take (a "reception" delay of a whole sample or more) is a ParameterError naming the
     profile's key (``prefix`` before it, e.g. ``axes[1].``)."""
     try:
         return DeviceParameters(**device.sim_parameters(period, timing, delay))  # type: ignore[arg-type]
     except ParameterError as error:
-        raise ProfileError(path, prefix + _PROFILE_KEYS.get(error.name, f"device.{error.name}"), error.value,
-                           error.allowed) from None
+        raise profile_error(path, prefix + _PROFILE_KEYS.get(error.name, f"device.{error.name}"), error.value,
+                            error.allowed) from None

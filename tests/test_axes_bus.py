@@ -20,7 +20,7 @@ import pytest
 from drives.canopen.axes import CanopenAxes
 from drives.cia301 import SYNC_COB_ID
 from drives.cia402 import State
-from drives.errors import DriveArgumentError, DriveError, DriveTimeout
+from drives.errors import DriveError, DriveTimeout, ParameterError
 from drives.safety import VIRTUAL_TIME_DEADLINE
 from haptic_bus.app.axes_profile import AxesProfile, load_axes_profile
 from haptic_bus.app.rig import MultiAxisSim, simulated_axes
@@ -72,7 +72,7 @@ def test_each_node_has_its_own_safety_chain_written_and_the_sync_is_the_masters(
         with pytest.raises(DriveError, match="shares a SYNC"):
             drive.exchange.exchange()  # an axis' own exchange never sends a SYNC
     assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED] * 3
-    with pytest.raises(DriveArgumentError, match="distinct node ids"):
+    with pytest.raises(ParameterError, match="distinct node ids"):
         CanopenAxes([5, 5], scalings=[None, None], interface="lockstep", channel="unused")
 
 
@@ -111,7 +111,7 @@ def test_each_axis_target_is_clamped_once_at_its_own_limit_in_the_axes_phase(rig
     once in that axis' stats; the other axes' targets go out as asked; the limits end with the phase."""
     _, _, axes, sniffer = rig
     axes.enable()
-    with pytest.raises(DriveArgumentError, match="one per axis"):
+    with pytest.raises(ParameterError, match="one per axis"):
         with axes.cyclic([100, 100]):
             pass
     queued(sniffer)

@@ -8,10 +8,9 @@ import pathlib
 import pytest
 
 from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.app.axes_profile import AxesProfileRefusal, load_any_profile, load_axes_profile, read_axes_profile
+from haptic_bus.app.axes_profile import load_any_profile, load_axes_profile, read_axes_profile
 from haptic_bus.app.profiles import Profile, load_profile
-from haptic_bus.errors import ParameterError
-from haptic_bus.profile.reader import ProfileError
+from haptic_bus.errors import ParameterError, Refusal
 
 AXIS = """
 [[axes]]
@@ -101,12 +100,12 @@ def test_a_gantry_profile_loads_judged_by_the_coupled_gate(tmp_path: pathlib.Pat
 def test_one_axis_profiles_are_unchanged_and_refuse_axes(tmp_path: pathlib.Path) -> None:
     assert isinstance(load_profile("cia402-handle"), Profile)
     assert isinstance(load_any_profile("cia402-handle"), Profile)
-    with pytest.raises(ProfileError, match=r"axes = '\[\[axes\]\]' is invalid; allowed: no \[\[axes\]\].*load_axes_profile"):
+    with pytest.raises(ParameterError, match=r"axes = '\[\[axes\]\]' is invalid; allowed: no \[\[axes\]\].*load_axes_profile"):
         load_profile(gantry(tmp_path))
 
 
 def test_the_bus_load_is_refused_with_the_load_and_the_smallest_period(tmp_path: pathlib.Path) -> None:
-    with pytest.raises(ProfileError) as refused:
+    with pytest.raises(ParameterError) as refused:
         load_axes_profile(gantry(tmp_path, bitrate=125_000))
     message = str(refused.value)
     assert "\n" not in message and "loop.period = 0.001" in message
@@ -114,7 +113,7 @@ def test_the_bus_load_is_refused_with_the_load_and_the_smallest_period(tmp_path:
 
 
 def test_a_wall_the_coupled_gate_refuses_is_named(tmp_path: pathlib.Path) -> None:
-    with pytest.raises(AxesProfileRefusal, match=r"gantry.toml: passivity gate refused the scene: block \(K = 40000"):
+    with pytest.raises(Refusal, match=r"gantry.toml: passivity gate refused the scene: block \(K = 40000"):
         load_axes_profile(gantry(tmp_path, box_k=40_000.0))
 
 
@@ -144,9 +143,9 @@ def _one_axis(**changes: object) -> str:
 ])
 def test_axes_errors_name_the_field_and_the_allowed_range(tmp_path: pathlib.Path, axes: str, field: str,
                                                           allowed: str) -> None:
-    with pytest.raises(ProfileError) as error:
+    with pytest.raises(ParameterError) as error:
         read_axes_profile(gantry(tmp_path, axes=axes or "axes = []\n"))
-    assert error.value.field == field and allowed in error.value.allowed
+    assert error.value.name == field and allowed in error.value.allowed
     assert "\n" not in str(error.value)
 
 
@@ -163,5 +162,5 @@ def test_space_errors_name_the_field_and_the_allowed_range(tmp_path: pathlib.Pat
     path.write_text(path.read_text().replace(old, new))
     with pytest.raises(ParameterError) as error:
         read_axes_profile(path)
-    assert isinstance(error.value, ProfileError)
-    assert error.value.field == field and allowed in error.value.allowed
+    assert isinstance(error.value, ParameterError)
+    assert error.value.name == field and allowed in error.value.allowed

@@ -22,11 +22,12 @@ from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_canopen
 from haptic_bus.control.controller import WallController, encoder_origin
-from haptic_bus.control.gate import GateRefusal, PassivityGate
+from haptic_bus.control.gate import PassivityGate
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.scene import Wall, compile_scene
+from haptic_bus.errors import Refusal
 from haptic_bus.node.controller_node import ABORT_INVALID_VALUE, ControllerNode
-from haptic_bus.node.upload import UploadRefused, upload_walls
+from haptic_bus.node.upload import upload_walls
 from sim_drive.operator import ConstantPush, Sinusoid, StepPush
 
 
@@ -144,7 +145,7 @@ def test_refused_upload_on_the_api_keeps_the_running_wall() -> None:
         controller = controller_for(profile, drive)
         controller.run(10)
         before = controller.scene
-        with pytest.raises(GateRefusal, match=r"passive K at this B: \[0, 1.8e\+06\) N/m"):
+        with pytest.raises(Refusal, match=r"passive K at this B: \[0, 1.8e\+06\) N/m"):
             controller.set_wall("wall", 2.0e6, 100.0)
         controller.run(10)
         assert controller.scene is before and controller.applied_scenes == 0
@@ -160,10 +161,11 @@ def test_refused_upload_over_the_bus_is_an_sdo_abort_and_changes_nothing() -> No
     with simulated_canopen(profile, channel=channel) as (_sim, drive):
         controller = controller_for(profile, drive)
         with ControllerNode(controller, 42, bus):
-            with pytest.raises(UploadRefused) as info:
+            with pytest.raises(Refusal) as info:
                 upload_walls(bus, 42, {0: (2.0e6, 100.0)})
-            assert info.value.abort_code == ABORT_INVALID_VALUE
-            assert info.value.reason.startswith("refused: passivity gate refused") and "K = 2e+06" in info.value.reason
+            assert f"(abort 0x{ABORT_INVALID_VALUE:08X})" in str(info.value)
+            (reason,) = info.value.reasons  # the node's 0x2002 text
+            assert reason.startswith("refused: passivity gate refused") and "K = 2e+06" in reason
             controller.run(5)
             assert controller.scene.by_name()["wall"].stiffness == 200.0
             assert upload_walls(bus, 42, {0: (250.0, 120.0)}).startswith("accepted")
@@ -196,7 +198,7 @@ def test_a_storm_of_concurrent_uploads_never_tears_k_from_b() -> None:
             try:
                 controller.set_wall("wall", K, B)
                 accepted.append((K, B))
-            except GateRefusal:
+            except Refusal:
                 refusals.append((K, B))
 
     def watch(c: WallController) -> None:

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from haptic_bus.control.controller import PositionIntegrator
-from haptic_bus.control.record import COLUMNS, RecordFormatError, RunRecord, read_record
+from haptic_bus.control.record import COLUMNS, RunRecord, read_record
+from haptic_bus.errors import ParameterError
 
 
 def test_ten_million_cycles_add_no_rounding_drift() -> None:
@@ -66,5 +67,5 @@ def test_a_torn_last_line_is_left_out_and_a_bad_line_named(tmp_path) -> None:
     assert torn.cycles == 3 and torn.torn_line and list(torn["force_n"]) == [0.0, 1.0, 2.0]
     lines = text.splitlines(keepends=True)
     path.write_text("".join([*lines[:2], "1,2\n", *lines[2:]]))
-    with pytest.raises(RecordFormatError, match=r"line 3 has 2 fields, the header 17"):
+    with pytest.raises(ParameterError, match=r"record.csv: line 3 = '2 fields' is invalid; allowed: 17 fields, as the header"):
         read_record(path)

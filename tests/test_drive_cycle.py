@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from drives.errors import DriveArgumentError, DriveError
+from drives.errors import DriveError, ParameterError
 
 
 @pytest.mark.parametrize("limit", [-1, 0, math.nan, 1.5, True, "500"])
@@ -24,7 +24,7 @@ def test_a_limit_that_is_not_a_positive_integer_is_refused_and_changes_nothing(
         own = r.drive.clamp.limit
         assert own == 3000  # the simulated drive's 0x6072 here
         refusal = r"torque_limit = .* is invalid; allowed: None or an integer >= 1 per mille \(held to the drive's own 3000"
-        with pytest.raises(DriveArgumentError, match=refusal):
+        with pytest.raises(ParameterError, match=refusal):
             with r.drive.cyclic(limit):
                 pass
         assert r.drive.clamp.limit == own
@@ -41,11 +41,11 @@ def test_a_target_that_is_not_an_integer_sends_nothing(canopen_rig: Callable[...
             assert cycle.exchange(np.int64(100)) == 100  # numpy's integers are integers
             sent = drive.stats.rpdos_sent
             for bad in (math.nan, 250.7, "100", None, True):
-                with pytest.raises(DriveArgumentError, match=r"target torque = .* allowed: an integer, per mille"):
+                with pytest.raises(ParameterError, match=r"target torque = .* allowed: an integer, per mille"):
                     cycle.exchange(bad)
-                with pytest.raises(DriveArgumentError):
+                with pytest.raises(ParameterError):
                     cycle.write(bad)
-            with pytest.raises(DriveArgumentError):
+            with pytest.raises(ParameterError):
                 drive.write_outputs(math.nan)  # type: ignore[arg-type]
             assert drive.stats.rpdos_sent == sent  # nothing went out
             assert cycle.exchange(-9000) == -500  # the phase's limit, with its sign

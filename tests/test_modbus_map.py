@@ -8,7 +8,7 @@ import math
 import pytest
 
 from drives.cia402 import CONTROLWORD, POSITION_ACTUAL, TARGET_TORQUE, VELOCITY_ACTUAL
-from drives.errors import DriveArgumentError
+from drives.errors import ParameterError
 from drives.modbus.register_map import (
     INPUT_BLOCK,
     INPUT_BLOCK_COUNT,
@@ -142,7 +142,7 @@ def test_assumed_delay_is_the_p99_round_trip_over_the_period_with_its_safety_fac
     assert assumed_delay(1e-3, T) == pytest.approx(1.5, rel=1e-15)
     assert assumed_delay(2.5e-3, T) == pytest.approx(3.75, rel=1e-15)
     for bad in (-1e-6, math.nan, math.inf):
-        with pytest.raises(DriveArgumentError, match="round_trip_p99"):
+        with pytest.raises(ParameterError, match="round_trip_p99"):
             assumed_delay(bad, T)
-    with pytest.raises(DriveArgumentError, match="T = 0"):
+    with pytest.raises(ParameterError, match="T = 0"):
         assumed_delay(1e-4, 0)

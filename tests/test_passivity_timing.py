@@ -153,10 +153,10 @@ def test_bound_runs_a_wall_beyond_the_gate_passively_when_the_profile_opts_in() 
 
 def test_beyond_gate_needs_the_bound_layer(tmp_path) -> None:
     from haptic_bus.app.profiles import resolve_profile
-    from haptic_bus.profile.reader import ProfileError
+    from haptic_bus.profile.reader import ParameterError
 
     text = resolve_profile("stiff-wall").read_text() + '\n[passivity]\nlayer = "guard"\nbeyond_gate = true\n'
     path = tmp_path / "beyond.toml"
     path.write_text(text)
-    with pytest.raises(ProfileError, match=r"passivity\.beyond_gate.*bound"):
+    with pytest.raises(ParameterError, match=r"passivity\.beyond_gate.*bound"):
         load_profile(path)

@@ -14,8 +14,8 @@ import pytest
 
 from haptic_bus.app.cli import main as haptic_bus_main
 from haptic_bus.app.profiles import read_profile, resolve_profile, shipped_profiles
+from haptic_bus.errors import ParameterError
 from haptic_bus.profile.identification import IdentifiedDevice, read_identification
-from haptic_bus.profile.reader import ProfileError
 from sim_drive.cli import main as sim_main
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import load_profile as load_drive_profile
@@ -39,12 +39,12 @@ def _variant(tmp_path: pathlib.Path, old: str, new: str, name: str = "cia402-han
 
 
 def _same_line(path: pathlib.Path, readers: tuple[Callable[[pathlib.Path], object], ...], field: str) -> str:
-    """The one line every reader refuses ``path`` with (ProfileError on ``field``), asserted the same."""
+    """The one line every reader refuses ``path`` with (ParameterError on ``field``), asserted the same."""
     lines = []
     for read in readers:
-        with pytest.raises(ProfileError) as caught:
+        with pytest.raises(ParameterError) as caught:
             read(path)
-        assert caught.value.field == field
+        assert caught.value.name == field
         lines.append(str(caught.value))
     assert lines[0] == lines[-1] and "\n" not in lines[0]
     return lines[0]
@@ -109,9 +109,9 @@ def test_the_simulator_fills_what_a_profile_leaves_out_and_takes_an_identified_d
 
 
 def test_the_simulator_refuses_a_multi_axis_profile_for_one_node() -> None:
-    with pytest.raises(ProfileError) as caught:
+    with pytest.raises(ParameterError) as caught:
         load_drive_profile("gantry-3d")
-    assert caught.value.field == "axes" and "--node-ids" in caught.value.allowed
+    assert caught.value.name == "axes" and "--node-ids" in caught.value.allowed
 
 
 def test_identification_is_written_and_read_as_one_table(tmp_path: pathlib.Path) -> None:

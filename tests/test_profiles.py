@@ -14,8 +14,6 @@ from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
 from haptic_bus.app.profiles import (
     DEFAULT_PROFILE,
     Profile,
-    ProfileError,
-    ProfileRefusal,
     default_profile,
     load_profile,
     profile_to_dict,
@@ -23,8 +21,8 @@ from haptic_bus.app.profiles import (
     shipped_profiles,
 )
 from haptic_bus.app.profiles_cli import add_profiles_parser, cmd_check, cmd_list, cmd_show
-from haptic_bus.control.gate import GateRefusal
 from haptic_bus.control.scene import Detent, Slot, Wall
+from haptic_bus.errors import ParameterError, Refusal
 
 SHIPPED = shipped_profiles()
 
@@ -157,9 +155,9 @@ def test_seed_ideal_numbers():
 def test_seed_profile_with_cia402_timing_is_refused(tmp_path):
     text = SHIPPED["seed-ideal"].read_text().replace('timing = "ideal"', 'timing = "cia402"')
     path = write(tmp_path, text, "seed-cia402.toml")
-    with pytest.raises(GateRefusal) as caught:
+    with pytest.raises(Refusal) as caught:
         load_profile(path)
-    assert isinstance(caught.value, ProfileRefusal) and caught.value.path == str(path)
+    assert str(caught.value).startswith(f"profile {path}: passivity gate refused the change: ")
     assert str(path) in str(caught.value)
     (wall,) = caught.value.decision.walls
     assert wall.verdict.margin == pytest.approx(-84.09, abs=0.01)  # haptic-bus check --delay 1
@@ -195,85 +193,85 @@ def test_multi_object_has_overlaps():
 
 # ---------------------------------------------------------------- malformed profiles
 
-def broken(tmp_path, old: str, new: str) -> ProfileError:
+def broken(tmp_path, old: str, new: str) -> ParameterError:
     assert old in BASE
     path = write(tmp_path, BASE.replace(old, new, 1))
-    with pytest.raises(ProfileError) as caught:
+    with pytest.raises(ParameterError) as caught:
         load_profile(path)
     error = caught.value
-    assert error.path == str(path) and str(path) in str(error)
-    assert error.field in str(error) and error.allowed in str(error)
+    assert error.context == f"profile {path}" and str(path) in str(error)
+    assert error.name in str(error) and error.allowed in str(error)
     return error
 
 
 def test_missing_field(tmp_path):
     error = broken(tmp_path, "mass = 1.0\n", "")
-    assert error.field == "device.mass" and "required" in error.allowed and "kg" in error.allowed
+    assert error.name == "device.mass" and "required" in error.allowed and "kg" in error.allowed
 
 
 def test_wrong_type(tmp_path):
     error = broken(tmp_path, "mass = 1.0", 'mass = "1.0"')
-    assert error.field == "device.mass" and error.value == "1.0" and "finite real" in error.allowed
+    assert error.name == "device.mass" and error.value == "1.0" and "finite real" in error.allowed
 
 
 def test_nan(tmp_path):
     error = broken(tmp_path, "friction = 20.0", "friction = nan")
-    assert error.field == "device.friction" and math.isnan(error.value)
+    assert error.name == "device.friction" and math.isnan(error.value)
     assert "N s/m" in error.allowed and "nan" in str(error)
 
 
 def test_negative_mass(tmp_path):
     error = broken(tmp_path, "mass = 1.0", "mass = -0.5")
-    assert (error.field, error.value) == ("device.mass", -0.5)
+    assert (error.name, error.value) == ("device.mass", -0.5)
     assert "[1e-09, 1e+09] kg" in error.allowed
 
 
 def test_negative_stiffness_names_the_object(tmp_path):
     error = broken(tmp_path, "stiffness = 500.0", "stiffness = -500.0")
-    assert (error.field, error.value) == ("scene.objects[2].stiffness", -500.0)
+    assert (error.name, error.value) == ("scene.objects[2].stiffness", -500.0)
     assert "N/m" in error.allowed
 
 
 def test_unknown_object_kind(tmp_path):
     error = broken(tmp_path, 'kind = "detent"', 'kind = "cylinder"')
-    assert (error.field, error.value) == ("scene.objects[1].kind", "cylinder")
+    assert (error.name, error.value) == ("scene.objects[1].kind", "cylinder")
     assert all(k in error.allowed for k in ("wall", "slot", "detent"))
 
 
 def test_unknown_key_is_a_typo(tmp_path):
     error = broken(tmp_path, "damping = 8.0", "damping = 8.0\ndampng = 9.0")
-    assert (error.field, error.value) == ("scene.objects[0].dampng", 9.0)
+    assert (error.name, error.value) == ("scene.objects[0].dampng", 9.0)
     assert "no such key" in error.allowed and "damping" in error.allowed
 
 
 def test_unknown_table(tmp_path):
     error = broken(tmp_path, "[limits]", "[limit]\nx = 1\n\n[limits]")
-    assert error.field == "limit"
+    assert error.name == "limit"
 
 
 def test_duplicate_object_names(tmp_path):
     error = broken(tmp_path, 'name = "c"', 'name = "a"')
-    assert (error.field, error.value) == ("scene.objects[2].name", "a")
+    assert (error.name, error.value) == ("scene.objects[2].name", "a")
     assert "scene.objects[0]" in error.allowed
 
 
 def test_force_limit_above_0x6072(tmp_path):
     error = broken(tmp_path, "force_limit = 10.0", "force_limit = 10.5")
-    assert (error.field, error.value) == ("limits.force_limit", 10.5)
+    assert (error.name, error.value) == ("limits.force_limit", 10.5)
     assert "(0, 10] N" in error.allowed and "0x6072" in error.allowed
 
 
 def test_bad_timing_and_permille_type(tmp_path):
-    assert broken(tmp_path, 'timing = "cia402"', 'timing = "ethercat"').field == "loop.timing"
-    assert broken(tmp_path, "max_torque_permille = 1000", "max_torque_permille = 1000.0").field == \
+    assert broken(tmp_path, 'timing = "cia402"', 'timing = "ethercat"').name == "loop.timing"
+    assert broken(tmp_path, "max_torque_permille = 1000", "max_torque_permille = 1000.0").name == \
         "device.max_torque_permille"
 
 
 def test_bad_operator_model(tmp_path):
     error = broken(tmp_path, "level = 2.0", "levle = 2.0")
-    assert error.field == "operator_model.level" and "required" in error.allowed
+    assert error.name == "operator_model.level" and "required" in error.allowed
     error = broken(tmp_path, 'model = "constant"', 'model = "jitter"')
-    assert error.field == "operator_model.model" and "'hand'" in error.allowed
+    assert error.name == "operator_model.model" and "'hand'" in error.allowed
 
 
 def test_csv_operator_resolves_beside_the_profile(tmp_path):
@@ -286,16 +284,16 @@ def test_csv_operator_resolves_beside_the_profile(tmp_path):
     model = operator_from_table(profile.operator_model)
     assert isinstance(model, RecordedForce) and model.force(0.2, 0.0, 0.0) == 2.0
     missing = BASE.replace('model = "constant"\nlevel = 2.0', 'model = "csv"\npath = "gone.csv"')
-    with pytest.raises(ProfileError) as caught:
+    with pytest.raises(ParameterError) as caught:
         load_profile(write(tmp_path, missing, "q.toml"))
-    assert caught.value.field == "operator_model.path"
+    assert caught.value.name == "operator_model.path"
 
 
 def test_toml_syntax_and_unknown_name(tmp_path):
-    with pytest.raises(ProfileError) as caught:
+    with pytest.raises(ParameterError) as caught:
         load_profile(write(tmp_path, BASE + "\n[device\n"))
-    assert caught.value.field == "(TOML syntax)"
-    with pytest.raises(ProfileError) as caught:
+    assert caught.value.name == "(TOML syntax)"
+    with pytest.raises(ParameterError) as caught:
         load_profile("no-such-profile")
     assert "cia402-handle" in caught.value.allowed
 
@@ -375,11 +373,11 @@ residual_rms = 1e-7
 
 def test_the_velocity_model_is_required_and_named_with_its_choices(tmp_path):
     error = broken(tmp_path, 'velocity = "average"\n', "")
-    assert error.field == "device.velocity" and "'average'" in error.allowed and "encoder difference" in error.allowed
+    assert error.name == "device.velocity" and "'average'" in error.allowed and "encoder difference" in error.allowed
     error = broken(tmp_path, 'velocity = "average"\n', 'velocity = "tacho"\n')
-    assert error.field == "device.velocity" and "lowpass:SECONDS" in error.allowed
+    assert error.name == "device.velocity" and "lowpass:SECONDS" in error.allowed
     error = broken(tmp_path, 'velocity = "average"\n', 'velocity = "window:0.002"\n')  # longer than T = 1 ms
-    assert error.field == "device.velocity" and "(0, T]" in error.allowed
+    assert error.name == "device.velocity" and "(0, T]" in error.allowed
 
 
 def test_the_profile_velocity_model_reaches_the_gate_and_the_simulated_drive(tmp_path):
@@ -401,11 +399,11 @@ def test_the_loop_delay_is_real_and_defaults_to_the_timing(tmp_path, timing, giv
 
 def test_a_delay_below_the_timing_or_missing_for_reception_is_refused(tmp_path):
     error = broken(tmp_path, 'timing = "cia402"', 'timing = "cia402"\ndelay = 0.5')
-    assert error.field == "loop.delay" and "[1, 1000]" in error.allowed and "cia402" in error.allowed
+    assert error.name == "loop.delay" and "[1, 1000]" in error.allowed and "cia402" in error.allowed
     error = broken(tmp_path, 'timing = "cia402"', 'timing = "reception"')
-    assert error.field == "loop.delay" and "required" in error.allowed
+    assert error.name == "loop.delay" and "required" in error.allowed
     error = broken(tmp_path, 'timing = "cia402"', 'timing = "ideal"\ndelay = nan')
-    assert error.field == "loop.delay"
+    assert error.name == "loop.delay"
 
 
 def test_the_hidden_truth_keys_go_to_the_simulated_drive_only(tmp_path):
@@ -415,7 +413,7 @@ def test_the_hidden_truth_keys_go_to_the_simulated_drive_only(tmp_path):
     parameters = profile.sim_device_parameters()
     assert (parameters["coulomb_friction"], parameters["velocity_noise"], parameters["noise_seed"]) == (0.2, 1000.0, 7)
     assert profile.device_loop() == load_profile(write(tmp_path, BASE)).device_loop()  # the gate never sees them
-    assert broken(tmp_path, 'velocity = "average"\n', 'velocity = "average"\nnoise_seed = -1\n').field == "device.noise_seed"
+    assert broken(tmp_path, 'velocity = "average"\n', 'velocity = "average"\nnoise_seed = -1\n').name == "device.noise_seed"
 
 
 def test_a_profile_as_pessimistic_as_its_identification_loads(tmp_path):
@@ -432,6 +430,6 @@ def test_a_profile_as_pessimistic_as_its_identification_loads(tmp_path):
 ])
 def test_a_profile_more_optimistic_than_its_identification_is_refused(tmp_path, old, new, field, needle):
     path = write(tmp_path, BASE.replace(old, new, 1) + IDENTIFIED)
-    with pytest.raises(ProfileError) as caught:
+    with pytest.raises(ParameterError) as caught:
         load_profile(path)
-    assert caught.value.field == field and needle in caught.value.allowed and "2026-11-30" in caught.value.allowed
+    assert caught.value.name == field and needle in caught.value.allowed and "2026-11-30" in caught.value.allowed

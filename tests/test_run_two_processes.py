@@ -9,7 +9,8 @@ import time
 import pytest
 
 from drives.errors import DriveTimeout
-from haptic_bus.node.upload import UploadRefused, upload_walls
+from haptic_bus.errors import Refusal
+from haptic_bus.node.upload import upload_walls
 from tests.cli_process import cli_process, terminated
 
 NODE = 5
@@ -37,9 +38,9 @@ def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast:
             except DriveTimeout:
                 time.sleep(0.2)
         assert answer is not None and answer.startswith("accepted"), run.stderr.read() if run.poll() is not None else answer
-        with pytest.raises(UploadRefused) as refused:
+        with pytest.raises(Refusal) as refused:
             upload_walls(bus, CONTROLLER_NODE, {0: (2.0e6, 100.0)}, timeout=SDO_PATIENCE)
-        assert refused.value.abort_code == 0x06090030 and "passive K at this B: [0, 1.8e+06) N/m" in refused.value.reason
+        assert "(abort 0x06090030)" in str(refused.value) and "passive K at this B: [0, 1.8e+06) N/m" in refused.value.reasons[0]
         assert upload_walls(bus, CONTROLLER_NODE, {0: (300.0, 150.0)}, timeout=SDO_PATIENCE).startswith("accepted")
         assert run.poll() is None, "the run must go on through the uploads"
     finally:

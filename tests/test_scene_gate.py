@@ -9,9 +9,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from haptic_bus.analysis.loop import DeviceLoop
-from haptic_bus.control.gate import GatePolicy, GateRefusal, PassivityGate
+from haptic_bus.control.gate import GatePolicy, PassivityGate
 from haptic_bus.control.scene import Detent, Slot, Wall, compile_scene
-from haptic_bus.errors import ParameterError
+from haptic_bus.errors import ParameterError, Refusal
 
 SEED_IDEAL = DeviceLoop(m=0.5, b=0.1, T=1e-3, delay=0)
 SEED_CIA402 = DeviceLoop(m=0.5, b=0.1, T=1e-3, delay=1)
@@ -80,7 +80,7 @@ def test_overlapping_objects_add_and_the_gate_judges_the_sum() -> None:
 def test_gate_refuses_the_seed_wall_with_one_sample_of_delay_and_says_why() -> None:
     scene = compile_scene([Wall("floor", 0.0, -1, 200.0, 100.0)])
     assert PassivityGate(SEED_IDEAL).admit(scene).accepted
-    with pytest.raises(GateRefusal) as info:
+    with pytest.raises(Refusal) as info:
         PassivityGate(SEED_CIA402).admit(scene)
     message = str(info.value)
     assert "floor" in message and "delay D = 1 samples, velocity point" in message and "margin -84.09 N s/m" in message

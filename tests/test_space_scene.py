@@ -19,9 +19,9 @@ from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.bench.space_scene_cost import PerObject, space_objects
 from haptic_bus.control.gate import GatePolicy
 from haptic_bus.control.kinematics import Cartesian, handle_velocity, joint_efforts
-from haptic_bus.control.space_gate import SpaceGate, SpaceGateRefusal, sphere_directions
+from haptic_bus.control.space_gate import SpaceGate, sphere_directions
 from haptic_bus.control.space_scene import Box, Plane, Sphere, compile_space_scene
-from haptic_bus.errors import ParameterError
+from haptic_bus.errors import ParameterError, Refusal
 
 T = 1e-3
 GANTRY = (WallLoop(2.0, 30.0, T, 0, 0, 1, "average"), WallLoop(1.0, 20.0, T, 0, 0, 1, "average"),
@@ -137,7 +137,7 @@ def test_the_gate_judges_every_contact_normal_on_the_coupled_axes() -> None:
 def test_the_gate_refuses_with_the_object_and_judges_overlaps_together() -> None:
     gate = SpaceGate(GANTRY)
     stiff = Box("stiff", (0.0, 0.0, 0.1), (0.01, 0.01, 0.01), 40_000.0, 0.0)
-    with pytest.raises(SpaceGateRefusal, match="stiff") as refused:
+    with pytest.raises(Refusal, match="stiff") as refused:
         gate.admit(compile_space_scene([FLOOR, stiff]))
     assert "margin" in str(refused.value) and "allowed: margin >= 0" in str(refused.value)
     sunk = Box("sunk", (0.0, 0.0, 0.0), (0.01, 0.01, 0.005), 800.0, 0.0)

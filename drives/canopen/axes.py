@@ -41,7 +41,7 @@ from drives.canopen.heartbeat import HeartbeatProducer
 from drives.canopen.link import NetworkLink
 from drives.cia402 import State
 from drives.cia402_master import SAFE_CONTROLWORD, StateWalk
-from drives.errors import DriveArgumentError, DriveError, DriveTimeout
+from drives.errors import DriveError, DriveTimeout, ParameterError
 from drives.safety import DEFAULT_SAFETY, SafetySettings
 
 MAX_AXES = 6
@@ -77,9 +77,9 @@ class CanopenAxes:
     ) -> None:
         nodes = list(node_ids)
         if not 1 <= len(nodes) <= MAX_AXES or len(set(nodes)) != len(nodes):
-            raise DriveArgumentError("node_ids", nodes, f"1 to {MAX_AXES} distinct node ids, one per axis", "CANopen axes")
+            raise ParameterError("node_ids", nodes, f"1 to {MAX_AXES} distinct node ids, one per axis", "CANopen axes")
         if len(scalings) != len(nodes):
-            raise DriveArgumentError("scalings", len(scalings), f"one per axis ({len(nodes)})", "CANopen axes")
+            raise ParameterError("scalings", len(scalings), f"one per axis ({len(nodes)})", "CANopen axes")
         self.name = "CANopen nodes " + ", ".join(map(str, nodes))
         self.link = NetworkLink(self.name, bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})), shared=True)
         master = safety.master_node_id
@@ -189,7 +189,7 @@ class CanopenAxes:
         self._require_connected()
         limits = list(torque_limits) if torque_limits is not None else [None] * len(self.drives)
         if len(limits) != len(self.drives):
-            raise DriveArgumentError("torque_limits", len(limits), f"one per axis ({len(self.drives)})", self.name)
+            raise ParameterError("torque_limits", len(limits), f"one per axis ({len(self.drives)})", self.name)
         with contextlib.ExitStack() as stack:
             clamps = tuple(stack.enter_context(drive.clamp.lowered(limit, drive.name))
                            for drive, limit in zip(self.drives, limits))

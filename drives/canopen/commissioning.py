@@ -56,7 +56,7 @@ from drives.cia402 import (
     State,
     decode_statusword,
 )
-from drives.errors import DriveError, DriveProtocolError, DriveTimeout, SdoAbortError
+from drives.errors import DriveError, DriveProtocolError, DriveRefusal, DriveTimeout
 from drives.safety import SafetySettings
 
 logger = logging.getLogger(__name__)
@@ -223,7 +223,7 @@ class Commissioning:
         try:
             self.sdo.upload(DEVICE_TYPE, 0)
             return
-        except SdoAbortError:
+        except DriveRefusal:
             return  # it answered
         except DriveTimeout:
             pass

@@ -24,7 +24,7 @@ from drives.cia301 import (
     PRE_DEFINED_ERROR_FIELD,
     SYNCHRONOUS_WINDOW_LENGTH,
 )
-from drives.errors import DriveArgumentError
+from drives.errors import ParameterError
 
 _DEVICE_STRINGS = {0x1008: "Manufacturer device name", 0x1009: "Manufacturer hardware version",
                    0x100A: "Manufacturer software version"}
@@ -58,19 +58,19 @@ def standard_dictionary() -> od.ObjectDictionary:
 
 def load_dictionary(eds: str | os.PathLike[str] | None, node_id: int) -> od.ObjectDictionary:
     """The EDS/DCF at ``eds`` (``$NODEID`` resolved for ``node_id``), or :func:`standard_dictionary`;
-    DriveArgumentError naming the file if it cannot be read as one (checked before any bus is opened)."""
+    ParameterError naming the file if it cannot be read as one (checked before any bus is opened)."""
     if eds is None:
         return standard_dictionary()
     path = os.fspath(eds)
     if not os.path.isfile(path):
-        raise DriveArgumentError("--eds", path, "an existing EDS or DCF file")
+        raise ParameterError("--eds", path, "an existing EDS or DCF file")
     try:
         dictionary = canopen.import_od(path, node_id)
     except Exception as exc:  # configparser, KeyError, ValueError...: whatever a malformed EDS raises
         reason = " ".join(str(exc).split())  # one line, whatever the parser's message spans
-        raise DriveArgumentError("--eds", path, f"an EDS or DCF file canopen can read ({type(exc).__name__}: {reason})") from None
+        raise ParameterError("--eds", path, f"an EDS or DCF file canopen can read ({type(exc).__name__}: {reason})") from None
     if not len(dictionary):
-        raise DriveArgumentError("--eds", path, "an EDS or DCF file with objects (this one has none)")
+        raise ParameterError("--eds", path, "an EDS or DCF file with objects (this one has none)")
     return dictionary
 
 

@@ -68,7 +68,7 @@ from drives.cia402 import (
     decode_statusword,
 )
 from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
-from drives.errors import DriveArgumentError, DriveError, DriveProtocolError, DriveTimeout
+from drives.errors import DriveError, DriveProtocolError, DriveTimeout, ParameterError
 from drives.safety import DEFAULT_SAFETY, SafetySettings
 
 logger = logging.getLogger(__name__)
@@ -86,7 +86,7 @@ def split_into_frames(objects: Sequence[ObjectSpec | int]) -> list[tuple[ObjectS
 
 def _check(name: str, ok: bool, value: object, allowed: str) -> None:
     if not ok:
-        raise DriveArgumentError(name, value, allowed, "CANopen drive")
+        raise ParameterError(name, value, allowed, "CANopen drive")
 
 
 class CanopenDrive(Cia402Master):
@@ -122,7 +122,7 @@ class CanopenDrive(Cia402Master):
     manufacturer scaling objects an EDS names, else the standard objects (0x6076, 0x6072 and
     the factor group 0x608F/0x6090/0x6091/0x6092/0x60A8/0x60A9, :mod:`drives.factor_group`) --
     and from the caller otherwise; two sources of a field that disagree beyond the rounding of
-    the drive's objects raise :class:`~drives.errors.ScalingConflict` (the drive is never
+    the drive's objects raise a :class:`~drives.errors.DriveError` (the drive is never
     enabled), a field neither gives makes connect() fail naming it.  After connect(),
     ``scaling_report`` (:class:`~drives.base.ScalingReport`) says where each factor came from,
     ``scaling_sources`` the same as field -> source.
@@ -299,11 +299,11 @@ class CanopenDrive(Cia402Master):
     # ------------------------------------------------------------------ acyclic
 
     def sdo_read(self, index: int, subindex: int = 0) -> bytes:
-        """Upload ``index:subindex`` (raw bytes); SdoAbortError on abort, DriveTimeout on silence."""
+        """Upload ``index:subindex`` (raw bytes); DriveRefusal on abort, DriveTimeout on silence."""
         return self.connected().sdo.upload(index, subindex)
 
     def sdo_write(self, index: int, subindex: int, data: bytes) -> None:
-        """Download raw ``data`` to ``index:subindex``; SdoAbortError on abort, DriveTimeout on silence."""
+        """Download raw ``data`` to ``index:subindex``; DriveRefusal on abort, DriveTimeout on silence."""
         self.connected().sdo.download(index, subindex, data)
 
     def read_object(self, spec: ObjectSpec | int) -> int:
@@ -318,7 +318,7 @@ class CanopenDrive(Cia402Master):
         spec = object_spec(spec)
         low, high = spec.data_type.range
         if not low <= value <= high:
-            raise DriveArgumentError(f"0x{spec.index:04X} ({spec.name})", value, f"{spec.data_type.name} [{low}, {high}]")
+            raise ParameterError(f"0x{spec.index:04X} ({spec.name})", value, f"{spec.data_type.name} [{low}, {high}]")
         sdo.write_int(spec.index, spec.subindex, spec.data_type, value)
 
     # ------------------------------------------------------------------ cyclic hot path

@@ -38,7 +38,7 @@ from drives.cia301 import (
     SdoAbort,
 )
 from drives.cia402 import ABORT_CONNECTION_OPTION_CODE, DataType, ObjectSpec
-from drives.errors import SdoAbortError
+from drives.errors import DriveRefusal
 
 PDO_CHANNELS = 4
 MAX_MAPPING_ENTRIES = 8  # CiA 301: sub 1..8 of a mapping record at most for 8-byte frames
@@ -118,16 +118,16 @@ class InventoryReader:
         """The value, or None if the drive lacks the object or sub-index."""
         try:
             return self.sdo.read_int(index, subindex, data_type)
-        except SdoAbortError as exc:
-            if exc.abort_code in ABSENT:
+        except DriveRefusal as exc:
+            if exc.code in ABSENT:
                 return None
             raise
 
     def _exists(self, index: int, subindex: int) -> bool:
         try:
             self.sdo.upload(index, subindex)
-        except SdoAbortError as exc:
-            return exc.abort_code not in ABSENT  # e.g. write-only, no data available: it is there
+        except DriveRefusal as exc:
+            return exc.code not in ABSENT  # e.g. write-only, no data available: it is there
         return True
 
     def _channel(self, communication: int, number: int, transmit: bool) -> DrivePdo | None:

@@ -3,7 +3,7 @@
 A :class:`PdoCodec` is built once from the ordered list of mapped objects and then packs or
 unpacks a whole frame in one ``struct`` call: atomic per frame (every value of a decoded
 tuple comes from the same CAN frame) and allocation-light.  A frame whose length differs
-from the mapping is never decoded (:class:`PdoLengthError`).
+from the mapping is never decoded (a :class:`~drives.errors.DriveProtocolError`).
 
 Values travel in the objects' own integer units; nothing here knows SI.
 """
@@ -14,7 +14,7 @@ import struct
 from collections.abc import Iterable, Sequence
 
 from drives.cia402 import OBJECTS, ObjectSpec
-from drives.errors import DriveArgumentError, PdoLengthError
+from drives.errors import DriveProtocolError, ParameterError
 
 MAX_PDO_BYTES = 8  # classical CAN
 
@@ -27,7 +27,7 @@ def object_spec(obj: ObjectSpec | int) -> ObjectSpec:
         return OBJECTS[int(obj)]
     except KeyError:
         known = ", ".join(f"0x{i:04X}" for i in sorted(OBJECTS))
-        raise DriveArgumentError("object", f"0x{int(obj):04X}", f"an ObjectSpec, or one of {known}", "PDO mapping") from None
+        raise ParameterError("object", f"0x{int(obj):04X}", f"an ObjectSpec, or one of {known}", "PDO mapping") from None
 
 
 class PdoCodec:
@@ -42,13 +42,13 @@ class PdoCodec:
         self.name = name
         self.entries: tuple[ObjectSpec, ...] = tuple(object_spec(e) for e in entries)
         if not self.entries:
-            raise DriveArgumentError("entries", "()", "at least one mapped object", name)
+            raise ParameterError("entries", "()", "at least one mapped object", name)
         fmt = "<" + "".join(e.data_type.struct_format for e in self.entries)
         self.struct = struct.Struct(fmt)
         self.size: int = self.struct.size
         if self.size > MAX_PDO_BYTES:
             names = ", ".join(f"0x{e.index:04X}" for e in self.entries)
-            raise DriveArgumentError("entries", names,
+            raise ParameterError("entries", names,
                                  f"objects of at most {MAX_PDO_BYTES} bytes in all (these need {self.size})", name)
         self.mapping_words: tuple[int, ...] = tuple(
             e.index << 16 | e.subindex << 8 | 8 * e.data_type.size for e in self.entries
@@ -64,12 +64,12 @@ class PdoCodec:
         for position, entry in enumerate(self.entries):
             if entry.index == index and entry.subindex == subindex:
                 return position
-        raise DriveArgumentError("object", f"0x{index:04X}:{subindex:02X}", "a mapped object", self.name)
+        raise ParameterError("object", f"0x{index:04X}:{subindex:02X}", "a mapped object", self.name)
 
     def decode(self, data: bytes | bytearray | memoryview) -> tuple[int, ...]:
-        """Values of one frame, in mapping order; PdoLengthError if the length does not match."""
+        """Values of one frame, in mapping order; DriveProtocolError if the length does not match (drop the frame)."""
         if len(data) != self.size:
-            raise PdoLengthError(self.name, self.size, len(data))
+            raise self._length_error(len(data))
         return self.struct.unpack(data)
 
     def encode(self, *values: int) -> bytes:
@@ -80,15 +80,19 @@ class PdoCodec:
     def encode_into(self, buffer: bytearray, *values: int) -> None:
         """Pack ``values`` into ``buffer`` (exactly ``size`` bytes long) without allocating."""
         if len(buffer) != self.size:
-            raise PdoLengthError(self.name, self.size, len(buffer))
+            raise self._length_error(len(buffer))
         self.check(values)
         self.struct.pack_into(buffer, 0, *values)
+
+    def _length_error(self, got: int) -> DriveProtocolError:
+        """A frame (or buffer) of ``got`` bytes where the mapping needs exactly ``size``."""
+        return DriveProtocolError(self.name, f"frame of {got} bytes, mapping needs exactly {self.size}")
 
     def check(self, values: Sequence[int]) -> None:
         """Raise ValueError naming the object if a value does not fit its data type."""
         if len(values) != len(self.entries):
-            raise DriveArgumentError("values", len(values), f"exactly {len(self.entries)} values", self.name)
+            raise ParameterError("values", len(values), f"exactly {len(self.entries)} values", self.name)
         for value, (low, high), entry in zip(values, self._ranges, self.entries):
             if not low <= value <= high:
-                raise DriveArgumentError(f"0x{entry.index:04X} ({entry.name})", value,
+                raise ParameterError(f"0x{entry.index:04X} ({entry.name})", value,
                                      f"{entry.data_type.name} range [{low}, {high}]", self.name)

@@ -38,7 +38,7 @@ from drives.cia301 import (
     SdoAbort,
 )
 from drives.cia402 import DataType
-from drives.errors import DriveProtocolError, SdoAbortError
+from drives.errors import DriveProtocolError, DriveRefusal
 
 MAPPING_REFUSALS = frozenset({SdoAbort.NOT_MAPPABLE, SdoAbort.PDO_LENGTH_EXCEEDED, SdoAbort.PARAMETER_INCOMPATIBLE})
 FIXED_MAPPING = frozenset({SdoAbort.READ_ONLY, SdoAbort.UNSUPPORTED_ACCESS})  # at the mapping record
@@ -70,7 +70,7 @@ class PdoSetup:
             try:
                 cobs = tuple(self.configure(frame, bases[frame.pdo.number - 1] + self.node_id, event_timer_ms)
                              for frame in plan.frames)
-            except SdoAbortError as exc:
+            except DriveRefusal as exc:
                 if not self._is_refusal(exc, plan):
                     raise
                 refusals.append(f"{plan.describe()} refused ({exc.message})")
@@ -80,14 +80,14 @@ class PdoSetup:
         raise DriveProtocolError(self.name, f"no PDO mapping the drive accepts: {tried}")
 
     @staticmethod
-    def _is_refusal(exc: SdoAbortError, plan: MappingPlan) -> bool:
+    def _is_refusal(exc: DriveRefusal, plan: MappingPlan) -> bool:
         """A refused mapping: a mapping abort at any PDO record of the plan, or a read-only/unsupported
         access to a mapping record (a fixed mapping)."""
         records = {frame.pdo.communication for frame in plan.frames}
         mappings = {frame.pdo.mapping_record for frame in plan.frames}
-        if exc.index in mappings and exc.abort_code in FIXED_MAPPING:
+        if exc.index in mappings and exc.code in FIXED_MAPPING:
             return True
-        return exc.index in records | mappings and exc.abort_code in MAPPING_REFUSALS
+        return exc.index in records | mappings and exc.code in MAPPING_REFUSALS
 
     def configure(self, frame: Frame, predefined: int, event_timer_ms: int = 0) -> int:
         """Configure ``frame``'s PDO (see the module docstring); its COB-ID."""

@@ -53,7 +53,7 @@ from drives.cia301 import (
     SDO_RX_BASE,
 )
 from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES, DataType
-from drives.errors import DriveError, DriveTimeout, SdoAbortError
+from drives.errors import DriveError, DriveRefusal, DriveTimeout
 from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, checked_ids, checked_seconds
 from drives.scanned_device import ScannedDevice
 
@@ -169,7 +169,7 @@ def _read_optional(sdo: SdoAccess, index: int, subindex: int, notes: list[str],
     """An integer object of ``data_type``, or None (and a note) if the node aborts the read."""
     try:
         return sdo.read_int(index, subindex, data_type)
-    except SdoAbortError as exc:
+    except DriveRefusal as exc:
         notes.append(exc.message)
         return None
 
@@ -183,8 +183,8 @@ def scan_canopen(
     """The nodes among ``node_ids`` on the CAN bus ``bus`` (python-can keyword arguments:
     ``interface``, ``channel``, ``bitrate``, ...; missing ones from python-can's configuration),
     by node id.  ``timeout``: the listening window after the probe, s; ``answer_timeout``: each
-    SDO read of the details, s (module docstring).  DriveArgumentError for bad arguments (before the
-    bus is opened), BusConfigError if the bus cannot be opened, DriveError if it fails."""
+    SDO read of the details, s (module docstring).  ParameterError for bad arguments (before the
+    bus is opened), DriveError if the bus cannot be opened or the scan fails."""
     ids = checked_ids("node ids", node_ids, *NODE_ID_RANGE)
     window = checked_seconds("timeout", timeout)
     answer = checked_seconds("answer timeout", answer_timeout)

@@ -2,7 +2,7 @@
 
 canopen's SDO client raises :class:`canopen.SdoAbortedError` (abort code only) and
 :class:`canopen.SdoCommunicationError`; the master wants errors that name the drive, the
-object and its name: :class:`~drives.errors.SdoAbortError` (with ``abort_code``, ``index``,
+object and its name: :class:`~drives.errors.DriveRefusal` (with ``code``, ``index``,
 ``subindex``) and :class:`~drives.errors.DriveTimeout`.
 """
 
@@ -18,7 +18,7 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError
 from drives.canopen.od import object_name
 from drives.cia301 import sdo_abort_text
 from drives.cia402 import DataType
-from drives.errors import DriveProtocolError, DriveTimeout, SdoAbortError
+from drives.errors import DriveProtocolError, DriveRefusal, DriveTimeout
 
 
 class SdoAccess:
@@ -43,7 +43,7 @@ class SdoAccess:
             yield
         except SdoAbortedError as exc:
             name = object_name(self.node.object_dictionary, index, subindex)
-            raise SdoAbortError(
+            raise DriveRefusal(
                 self.name,
                 f"SDO abort {what} 0x{index:04X}:{subindex:02X} ({name}): 0x{exc.code:08X} {sdo_abort_text(exc.code)}",
                 exc.code, index, subindex,

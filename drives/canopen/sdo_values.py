@@ -5,7 +5,7 @@ UNSIGNEDn / INTEGERn), ``f32 f64`` (REAL32 / REAL64), ``bool`` (BOOLEAN), ``str`
 (VISIBLE_STRING, ASCII) and ``hex`` (the bytes as they are: OCTET_STRING, DOMAIN, any type
 without a name here).  The byte layout is canopen's (:meth:`canopen.objectdictionary.ODVariable.encode_raw`
 and ``decode_raw``: little-endian, as CiA 301 says); this module adds the checks a command
-line needs before the bus is touched, each a :class:`~drives.errors.DriveArgumentError` that names
+line needs before the bus is touched, each a :class:`~drives.errors.ParameterError` that names
 the allowed range.
 """
 
@@ -17,7 +17,7 @@ import string
 from canopen import objectdictionary as od
 from canopen.objectdictionary import datatypes as dt
 
-from drives.errors import DriveArgumentError
+from drives.errors import ParameterError
 
 TYPES: dict[str, int] = {
     "u8": dt.UNSIGNED8, "u16": dt.UNSIGNED16, "u32": dt.UNSIGNED32, "u64": dt.UNSIGNED64,
@@ -94,14 +94,14 @@ def _parse(name: str, text: str) -> Value:
 
 
 def encode_text(name: str, text: str, what: str, low: float | None = None, high: float | None = None) -> bytes:
-    """``text`` as the bytes of a ``name`` value; DriveArgumentError (naming ``what``) if it is not
+    """``text`` as the bytes of a ``name`` value; ParameterError (naming ``what``) if it is not
     one, or outside ``low``..``high`` (an EDS's LowLimit/HighLimit)."""
     try:
         value = _parse(name, text)
     except ValueError:
-        raise DriveArgumentError(what, text, allowed(name)) from None
+        raise ParameterError(what, text, allowed(name)) from None
     if isinstance(value, (int, float)) and ((low is not None and value < low) or (high is not None and value > high)):
-        raise DriveArgumentError(what, text, f"{low if low is not None else '-inf'}..{high if high is not None else 'inf'} "
+        raise ParameterError(what, text, f"{low if low is not None else '-inf'}..{high if high is not None else 'inf'} "
                                          "(the object's range in the dictionary)")
     return bytes(_variable(name).encode_raw(value))
 

@@ -126,7 +126,7 @@ def read_status(bus: Mapping[str, Any], node_id: int, listen: float = DEFAULT_LI
                 timeout: float = DEFAULT_ANSWER_TIMEOUT) -> DriveStatus:
     """Node ``node_id``'s status on ``bus`` (python-can keyword arguments), listening ``listen`` s
     and waiting ``timeout`` s for each SDO answer (module docstring).  DriveTimeout if the node
-    does not answer; BusConfigError if the bus cannot be opened."""
+    does not answer; DriveError if the bus cannot be opened."""
     with NodeClient(bus, node_id, timeout) as client:
         readings = [STATE.read(client), MODE.read(client), ERROR.read(client), ERROR_REGISTER_OBJECT.read(client),
                     _error_history(client), POSITION.read(client), VELOCITY.read(client), _heartbeat_consumers(client),

@@ -20,7 +20,7 @@ from drives.canopen.sdo import SdoAccess
 from drives.cia301 import SdoAbort
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, RATIO_OBJECTS, UNIT_OBJECTS, DataType, RatioSpec
 from drives.cia402_master import REAL32_ROUNDING
-from drives.errors import SdoAbortError
+from drives.errors import DriveRefusal
 from drives.factor_group import FactorGroup, derive
 
 logger = logging.getLogger(__name__)
@@ -59,8 +59,8 @@ def _optional(name: str, sdo: SdoAccess, index: int, subindex: int, data_type: D
     """An object the drive may lack: None if it answers with an SDO abort (noted unless "no such object")."""
     try:
         return sdo.read_int(index, subindex, data_type)
-    except SdoAbortError as exc:
-        if exc.abort_code not in (SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX):
+    except DriveRefusal as exc:
+        if exc.code not in (SdoAbort.NO_OBJECT, SdoAbort.NO_SUBINDEX):
             notes.append(f"0x{index:04X}:{subindex:02X} not read: {exc.message}")
         logger.debug("%s: %s", name, exc)
         return None

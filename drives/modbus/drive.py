@@ -58,7 +58,7 @@ from drives.cia402 import (
     decode_statusword,
 )
 from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
-from drives.errors import DriveArgumentError, DriveError, DriveProtocolError, DriveTimeout, ModbusExceptionError, ModbusLinkLost
+from drives.errors import DriveError, DriveProtocolError, DriveRefusal, DriveTimeout, ModbusLinkLost, ParameterError
 from drives.modbus.cyclic_requests import CyclicRequests
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import (
@@ -131,16 +131,16 @@ class ModbusDrive(Cia402Master):
         safety: SafetySettings = DEFAULT_SAFETY,
     ) -> None:
         if isinstance(host, str) and ("://" in host or host.startswith("rtu:")):
-            raise DriveArgumentError("host", host, "a host name or address (a URL: ModbusDrive.from_url)", "Modbus drive")
+            raise ParameterError("host", host, "a host name or address (a URL: ModbusDrive.from_url)", "Modbus drive")
         self._setup(ModbusAddress(host, port, timeout, baudrate, parity, stopbits, bytesize), unit_id, word_order,
                     cycle, with_position, scaling, state_timeout, check_identity, safety)
 
     def _setup(self, address: ModbusAddress, unit_id: int, word_order: str, cycle: str, with_position: bool,
                scaling: DriveScaling | None, state_timeout: float, check_identity: bool, safety: SafetySettings) -> None:
         if isinstance(unit_id, bool) or not isinstance(unit_id, int) or not 0 <= unit_id <= 247:
-            raise DriveArgumentError("unit_id", unit_id, "0..247", "Modbus drive")
+            raise ParameterError("unit_id", unit_id, "0..247", "Modbus drive")
         if cycle not in CYCLE_MODES:
-            raise DriveArgumentError("cycle", cycle, " or ".join(map(repr, CYCLE_MODES)), "Modbus drive")
+            raise ParameterError("cycle", cycle, " or ".join(map(repr, CYCLE_MODES)), "Modbus drive")
         stats = ModbusStats()
         self._init_master(f"Modbus unit {unit_id} at {address.url}", stats, scaling)
         self.unit_id = unit_id
@@ -295,10 +295,10 @@ class ModbusDrive(Cia402Master):
         return int(self._read_spec(register_for_object(spec)))
 
     def write_object(self, spec: ObjectSpec | int, value: int) -> None:
-        """Write a CiA-402 object of the register map, in drive units (DriveArgumentError if out of range)."""
+        """Write a CiA-402 object of the register map, in drive units (ParameterError if out of range)."""
         reg = register_for_object(spec)
         if reg.access != "rw":
-            raise DriveArgumentError("register", reg.label, "a writable register (this one is read-only)", self.name)
+            raise ParameterError("register", reg.label, "a writable register (this one is read-only)", self.name)
         self.write_registers(reg.address, encode_value(reg, value, self.word_order))
 
     def _require_link(self) -> None:
@@ -418,8 +418,8 @@ class ModbusDrive(Cia402Master):
             try:
                 self.write_registers(spec.address, encode_value(spec, value, self.word_order))
                 got = self._read_spec(spec)
-            except ModbusExceptionError as exc:
-                if exc.exception_code != 0x02:  # anything but "no such register"
+            except DriveRefusal as exc:
+                if exc.code != 0x02:  # anything but "no such register"
                     raise
                 missing.append(what)
                 continue

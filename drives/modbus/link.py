@@ -5,7 +5,7 @@ connection or an undecodable answer closes the link until the master reconnects 
 Errors name the drive and what the request was for:
 
 - exception response (0x02 illegal address, 0x03 illegal value, 0x06 busy, ...) ->
-  :class:`~drives.errors.ModbusExceptionError` (``exception_code``);
+  :class:`~drives.errors.DriveRefusal` (``code``, the exception code);
 - no answer within ``timeout`` -> :class:`~drives.errors.DriveTimeout`;
 - a dropped connection -> :class:`~drives.errors.ModbusLinkLost`.
 """
@@ -23,7 +23,7 @@ from pymodbus.pdu import ModbusPDU
 from pymodbus.pdu.register_message import ReadHoldingRegistersRequest, WriteMultipleRegistersRequest, WriteSingleRegisterRequest
 
 from drives.cia402_master import CyclicStats
-from drives.errors import DriveArgumentError, DriveError, DriveProtocolError, DriveTimeout, ModbusExceptionError, ModbusLinkLost
+from drives.errors import DriveError, DriveProtocolError, DriveRefusal, DriveTimeout, ModbusLinkLost, ParameterError
 from drives.modbus.register_map import describe_range, exception_name
 
 
@@ -55,11 +55,11 @@ class ModbusAddress:
     def __post_init__(self) -> None:
         timeout = self.timeout
         if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not (timeout > 0 and math.isfinite(timeout)):
-            raise DriveArgumentError("timeout", timeout, "a finite time > 0 s", "Modbus drive")
+            raise ParameterError("timeout", timeout, "a finite time > 0 s", "Modbus drive")
         if not self.serial and not (isinstance(self.port, int) and not isinstance(self.port, bool) and 0 < self.port <= 65535):
-            raise DriveArgumentError("port", self.port, "a TCP port 1..65535 or a serial device path", "Modbus drive")
+            raise ParameterError("port", self.port, "a TCP port 1..65535 or a serial device path", "Modbus drive")
         if not self.serial and not self.host:
-            raise DriveArgumentError("host", self.host, "a host name or address (Modbus TCP)", "Modbus drive")
+            raise ParameterError("host", self.host, "a host name or address (Modbus TCP)", "Modbus drive")
 
     @property
     def serial(self) -> bool:
@@ -73,7 +73,7 @@ class ModbusAddress:
 
     @classmethod
     def from_url(cls, url: str, timeout: float = 0.1) -> ModbusAddress:
-        """``tcp://HOST:PORT`` or ``rtu:/dev/ttyUSB0``; DriveArgumentError naming the URL otherwise."""
+        """``tcp://HOST:PORT`` or ``rtu:/dev/ttyUSB0``; ParameterError naming the URL otherwise."""
         parsed = urllib.parse.urlsplit(url)
         if parsed.scheme == "tcp":
             try:
@@ -81,11 +81,11 @@ class ModbusAddress:
             except ValueError:
                 port = None
             if not parsed.hostname or not port or parsed.path not in ("", "/"):
-                raise DriveArgumentError("url", url, "tcp://HOST:PORT with a port 1..65535", "Modbus drive")
+                raise ParameterError("url", url, "tcp://HOST:PORT with a port 1..65535", "Modbus drive")
             return cls(parsed.hostname, port, timeout)
         if parsed.scheme == "rtu" and (parsed.path or parsed.netloc):
             return cls(None, parsed.netloc + parsed.path, timeout)
-        raise DriveArgumentError("url", url, "tcp://HOST:PORT or rtu:/dev/SERIAL", "Modbus drive")
+        raise ParameterError("url", url, "tcp://HOST:PORT or rtu:/dev/SERIAL", "Modbus drive")
 
 
 class ModbusLink:
@@ -152,7 +152,7 @@ class ModbusLink:
         if response.function_code & 0x80:
             self.stats.exceptions += 1
             code = int(getattr(response, "exception_code", 0))
-            raise ModbusExceptionError(self.name, f"{what}: exception {exception_name(code)}", code)
+            raise DriveRefusal(self.name, f"{what}: exception {exception_name(code)}", code)
         return response
 
     def read_holding(self, unit_id: int, address: int, count: int) -> list[int]:

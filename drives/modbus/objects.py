@@ -5,14 +5,14 @@ status``, ``fault-reset`` and ``sdo --modbus`` read and write.
 connects (one TCP connection, or the RTU line) and reads the map identity (0x0030), which
 tells the word order of 32-bit values (:func:`~drives.modbus.register_map.word_order_of`); a
 unit whose identity is not ours is refused (the addresses would mean something else there).
-An object the map does not carry is :class:`~drives.errors.ObjectAbsent`, before any request.
+An object the map does not carry is :class:`~drives.errors.DriveRefusal`, before any request.
 Nothing is written but what the caller writes: no scaling read, no watchdog set.
 """
 
 from __future__ import annotations
 
 from drives.cia402 import ObjectSpec
-from drives.errors import DriveProtocolError, ObjectAbsent
+from drives.errors import DriveProtocolError, DriveRefusal
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import (
     MAP_IDENTITY,
@@ -23,7 +23,7 @@ from drives.modbus.register_map import (
     register_for_object,
     word_order_of,
 )
-from drives.object_access import object_label
+from drives.object_access import ILLEGAL_DATA_ADDRESS, object_label
 
 _IDENTITY = REGISTER_BY_NAME["map_identity"]
 
@@ -58,20 +58,20 @@ class ModbusObjects:
         self.link.drop()
 
     def register(self, spec: ObjectSpec) -> RegisterSpec:
-        """The register carrying ``spec``; ObjectAbsent if the map has none."""
+        """The register carrying ``spec``; DriveRefusal (0x02, as the drive would answer) if the map has none."""
         try:
             if spec.subindex == 0:
                 return register_for_object(spec.index)
         except KeyError:
             pass
-        raise ObjectAbsent(self.name, f"{object_label(spec)} ({spec.name}) is not in the Modbus register map",
-                           spec.index, spec.subindex)
+        raise DriveRefusal(self.name, f"{object_label(spec)} ({spec.name}) is not in the Modbus register map",
+                           ILLEGAL_DATA_ADDRESS, spec.index, spec.subindex)
 
     def source(self, spec: ObjectSpec) -> str:
         """``"register 0x0000"`` for a mapped object, else the object's own label."""
         try:
             return f"register 0x{self.register(spec).address:04X}"
-        except ObjectAbsent:
+        except DriveRefusal:
             return object_label(spec)
 
     def read_register(self, register: RegisterSpec) -> int | float:

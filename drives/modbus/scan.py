@@ -36,7 +36,7 @@ from pymodbus.pdu.mei_message import ReadDeviceInformationRequest
 from pymodbus.pdu.register_message import ReadHoldingRegistersRequest
 
 from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES
-from drives.errors import DriveError, DriveTimeout, ModbusExceptionError, ModbusLinkLost
+from drives.errors import DriveError, DriveRefusal, DriveTimeout, ModbusLinkLost
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import (
     MAP_IDENTITY,
@@ -150,8 +150,8 @@ class _Prober:
             registers = self.read(unit, _IDENTITY_REGISTER.address, _IDENTITY_REGISTER.count, f"unit {unit}: map identity")
         except DriveTimeout:
             return None
-        except ModbusExceptionError as exc:
-            if exc.exception_code in NO_DEVICE_EXCEPTIONS:
+        except DriveRefusal as exc:
+            if exc.code in NO_DEVICE_EXCEPTIONS:
                 return None
             notes.append(exc.message)
             registers = None
@@ -187,7 +187,7 @@ class _Prober:
         """``read()``, or None and a note if the unit refuses it or stays silent."""
         try:
             return read()
-        except (ModbusExceptionError, DriveTimeout) as exc:
+        except (DriveRefusal, DriveTimeout) as exc:
             notes.append(exc.message)
             return None
 
@@ -199,7 +199,7 @@ def scan_modbus(
     answer_timeout: float = DEFAULT_ANSWER_TIMEOUT,
 ) -> ModbusScan:
     """The units among ``unit_ids`` at ``url`` (``tcp://HOST:PORT`` or ``rtu:/dev/...``), in order
-    (module docstring).  DriveArgumentError for bad arguments (before connecting), DriveTimeout if the
+    (module docstring).  ParameterError for bad arguments (before connecting), DriveTimeout if the
     server cannot be reached, DriveError if the link fails."""
     ids = checked_ids("unit ids", unit_ids, *UNIT_ID_RANGE)
     checked_seconds("timeout", timeout)

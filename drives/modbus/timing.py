@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drives.errors import DriveArgumentError
+from drives.errors import ParameterError
 from drives.modbus.drive import ModbusDrive
 
 __all__ = ["PollTiming", "SAFETY_FACTOR", "assumed_delay", "measure_poll", "loop_delay", "time_cycles"]
@@ -52,12 +52,12 @@ SAFETY_FACTOR = 1.5
 
 def assumed_delay(round_trip_p99: float, T: float) -> float:
     """The loop delay in samples (real) for a poll with this p99 round trip (s) at period ``T`` (s):
-    ``SAFETY_FACTOR * round_trip_p99 / T``.  DriveArgumentError for a negative or non-finite round
+    ``SAFETY_FACTOR * round_trip_p99 / T``.  ParameterError for a negative or non-finite round
     trip or a non-positive period."""
     if not (T > 0 and math.isfinite(T)):
-        raise DriveArgumentError("T", T, "a finite period > 0 s", "Modbus loop delay")
+        raise ParameterError("T", T, "a finite period > 0 s", "Modbus loop delay")
     if not (round_trip_p99 >= 0 and math.isfinite(round_trip_p99)):
-        raise DriveArgumentError("round_trip_p99", round_trip_p99, "a finite round trip >= 0 s", "Modbus loop delay")
+        raise ParameterError("round_trip_p99", round_trip_p99, "a finite round trip >= 0 s", "Modbus loop delay")
     return SAFETY_FACTOR * round_trip_p99 / T
 
 

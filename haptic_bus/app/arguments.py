@@ -82,11 +82,11 @@ unit_id = whole("unit id", *UNIT_ID_RANGE)
 def modbus_url(text: str) -> str:
     """``tcp://HOST:PORT`` (port 1..65535) or ``rtu:/dev/...``."""
     from drives.modbus.link import ModbusAddress
-    from haptic_bus.errors import DriveArgumentError
+    from haptic_bus.errors import ParameterError
 
     try:
         ModbusAddress.from_url(text)
-    except DriveArgumentError as exc:
+    except ParameterError as exc:
         raise argparse.ArgumentTypeError(f"--modbus {text!r} is invalid; allowed: {exc.allowed}") from None
     return text
 

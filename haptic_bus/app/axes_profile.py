@@ -55,25 +55,17 @@ from haptic_bus.control.bus_load import PDO_MAPPINGS, axes_bus_load
 from haptic_bus.control.gate import GatePolicy
 from haptic_bus.control.kinematics import Cartesian
 from haptic_bus.control.passivity_layer import LayerPolicy
-from haptic_bus.control.space_gate import SpaceDecision, SpaceGate, SpaceGateRefusal
+from haptic_bus.control.space_gate import SpaceDecision, SpaceGate
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere, compile_space_scene
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
-from haptic_bus.errors import ParameterError
+from haptic_bus.errors import ParameterError, Refusal
 from haptic_bus.profile.device import DeviceProfile, check_velocity_period, read_device, read_timing
 from haptic_bus.profile.files import resolve_profile
-from haptic_bus.profile.reader import ProfileError, Reader, read_document
+from haptic_bus.profile.reader import Reader, profile_error, read_document
 
 DEFAULT_BITRATE = 1_000_000
 HAND_MODELS = ("none", "push")
 _FIELDS = {"plane": ("point", "normal"), "box": ("center", "half"), "sphere": ("center", "radius")}
-
-
-class AxesProfileRefusal(SpaceGateRefusal):
-    """The coupled gate refused a multi-axis profile's scene; ``path`` names the file."""
-
-    def __init__(self, path: pathlib.Path | str, decision: SpaceDecision) -> None:
-        super().__init__(decision, f"profile {path}")
-        self.path = str(path)
 
 
 @dataclass(frozen=True)
@@ -139,8 +131,8 @@ def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> 
     r = Reader(path, f"axes[{index}]", table)
     name = r.text("name", pattern=NAME_PATTERN)
     if ("node_id" in r.table) == ("unit_id" in r.table):
-        raise ProfileError(path, r.field("node_id"), r.table.get("node_id", "<missing>"),
-                           "exactly one of node_id (CANopen, 1..127) and unit_id (Modbus, 1..247)")
+        raise profile_error(path, r.field("node_id"), r.table.get("node_id", "<missing>"),
+                            "exactly one of node_id (CANopen, 1..127) and unit_id (Modbus, 1..247)")
     node = r.whole("node_id", *NODE_ID_RANGE) if "node_id" in r.table else None
     unit = r.whole("unit_id", *UNIT_ID_RANGE) if "unit_id" in r.table else None
     r.used.update(("node_id", "unit_id"))
@@ -150,8 +142,8 @@ def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> 
     force_limit = r.real("force_limit", *FORCE_RANGE, "N", low_inclusive=False)
     r.done()
     if force_limit > device.max_force * (1 + 1e-12):
-        raise ProfileError(path, r.field("force_limit"), force_limit,
-                           f"(0, {device.max_force:g}] N, the force this axis' 0x6072 allows")
+        raise profile_error(path, r.field("force_limit"), force_limit,
+                            f"(0, {device.max_force:g}] N, the force this axis' 0x6072 allows")
     check_velocity_period(path, r.field("device.velocity"), device, period)
     return AxisProfile(name, node, unit, device, timing, delay, mapping, force_limit)
 
@@ -160,7 +152,7 @@ def _coordinates(r: Reader, key: str, size: int) -> tuple[Any, ...]:
     """An array of ``size`` entries (the object checks each is a position in range)."""
     value = r.raw(key, f"an array of {size} numbers (one per axis, m)")
     if not isinstance(value, list) or len(value) != size:
-        raise ProfileError(r.path, r.field(key), value, f"an array of {size} numbers, one per axis")
+        raise profile_error(r.path, r.field(key), value, f"an array of {size} numbers, one per axis")
     return tuple(value)
 
 
@@ -180,7 +172,7 @@ def _read_object(path: pathlib.Path, index: int, table: object, size: int) -> Sp
         return Box(name, position, shape, stiffness, damping) if kind == "box" else Sphere(name, position, shape, stiffness,
                                                                                             damping)
     except ParameterError as error:
-        raise ProfileError(path, f"space.objects[{index}].{error.name}", error.value, error.allowed) from None
+        raise profile_error(path, f"space.objects[{index}].{error.name}", error.value, error.allowed) from None
 
 
 def _read_hand(path: pathlib.Path, table: object, size: int) -> Mapping[str, Any]:
@@ -196,7 +188,7 @@ def _read_hand(path: pathlib.Path, table: object, size: int) -> Mapping[str, Any
         points: list[Any] = toward if isinstance(toward, list) and toward and isinstance(toward[0], list) else [toward]
         if not all(isinstance(p, list) and len(p) == size and all(isinstance(c, (int, float)) and not isinstance(c, bool)
                                                                    and abs(c) <= 1e6 for c in p) for p in points):
-            raise ProfileError(path, r.field("toward"), toward, f"a point of {size} coordinates (m), or a list of them")
+            raise profile_error(path, r.field("toward"), toward, f"a point of {size} coordinates (m), or a list of them")
         out["toward"] = [[float(c) for c in p] for p in points]
         if "dwell" in r.table:
             out["dwell"] = r.real("dwell", 0.0, 1e9, "s", low_inclusive=False)
@@ -208,12 +200,12 @@ def _unique(path: pathlib.Path, where: str, values: list[Any], what: str) -> Non
     seen: dict[Any, int] = {}
     for i, value in enumerate(values):
         if value is not None and value in seen:
-            raise ProfileError(path, f"{where}[{i}]", value, f"{what} no other entry uses ({where}[{seen[value]}] has it)")
+            raise profile_error(path, f"{where}[{i}]", value, f"{what} no other entry uses ({where}[{seen[value]}] has it)")
         seen[value] = i
 
 
 def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
-    """Parse and validate a multi-axis profile without judging it; raise ProfileError."""
+    """Parse and validate a multi-axis profile without judging it; raise ParameterError."""
     path = resolve_profile(path_or_name)
     document = read_document(path)
     top = Reader(path, "", document)
@@ -226,26 +218,26 @@ def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
     bus.done()
     tables = top.raw("axes", f"an array of 1 to {MAX_AXES} tables [[axes]]")
     if not isinstance(tables, list) or not 1 <= len(tables) <= MAX_AXES:
-        raise ProfileError(path, "axes", tables, f"an array of 1 to {MAX_AXES} tables [[axes]], one per axis")
+        raise profile_error(path, "axes", tables, f"an array of 1 to {MAX_AXES} tables [[axes]], one per axis")
     axes = tuple(_read_axis(path, i, table, period) for i, table in enumerate(tables))
     _unique(path, "axes", [a.name for a in axes], "a name")
     _unique(path, "axes", [a.node_id for a in axes], "a node_id")
     _unique(path, "axes", [a.unit_id for a in axes], "a unit_id")
     if len({a.node_id is None for a in axes}) > 1:
-        raise ProfileError(path, "axes", [a.node_id or a.unit_id for a in axes],
-                           "one kind of bus for every axis: all node_id (CANopen) or all unit_id (Modbus)")
+        raise profile_error(path, "axes", [a.node_id or a.unit_id for a in axes],
+                            "one kind of bus for every axis: all node_id (CANopen) or all unit_id (Modbus)")
     policy = read_gate(path, top.raw("gate", "a [gate] table"))
     safety = read_safety(path, top.raw("safety", "a [safety] table", default=None))
     passivity = read_passivity(path, top.raw("passivity", "a [passivity] table", default=None))
     supervisor = read_supervisor(path, top.raw("supervisor", "a [supervisor] table", default=None), passivity)
     for key in ("on_late", "on_observer"):
         if getattr(supervisor, key) == Action.DERATE.value:
-            raise ProfileError(path, f"supervisor.{key}", "derate", '"warn" or "stop" for a multi-axis profile (the '
-                               "coupled gate has no derate search)")
+            raise profile_error(path, f"supervisor.{key}", "derate", '"warn" or "stop" for a multi-axis profile (the '
+                                "coupled gate has no derate search)")
     space = Reader(path, "space", top.raw("space", "a [space] table with [[space.objects]]"))
     objects = space.raw("objects", "an array of tables [[space.objects]] (may be empty)", default=[])
     if not isinstance(objects, list):
-        raise ProfileError(path, "space.objects", objects, "an array of tables [[space.objects]]")
+        raise profile_error(path, "space.objects", objects, "an array of tables [[space.objects]]")
     hand = _read_hand(path, space.raw("operator", "a [space.operator] table", default=None), len(axes))
     space.done()
     top.done()
@@ -257,29 +249,29 @@ def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
 
 def judge_axes_profile(path_or_name: str | pathlib.Path) -> tuple[AxesProfile, SpaceDecision]:
     """Read and validate a multi-axis profile, check its bus load, and the coupled gate's decision on its
-    scene (accepted or not: ``profiles check`` reports either); ProfileError as :func:`load_axes_profile`."""
+    scene (accepted or not: ``profiles check`` reports either); ParameterError as :func:`load_axes_profile`."""
     profile = read_axes_profile(path_or_name)
     try:
         profile.bus_load()
     except ParameterError as error:
-        raise ProfileError(profile.path or profile.name, "loop.period", profile.period, error.allowed) from None
+        raise profile_error(profile.path or profile.name, "loop.period", profile.period, error.allowed) from None
     return profile, profile.gate().judge(profile.space_scene())
 
 
 def load_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
     """Read and validate a multi-axis profile, check its bus load, and judge its scene by the coupled gate.
 
-    Raises ProfileError (invalid, or the bus load above 70 %: ``loop.period`` with the load and the
-    smallest T) or :class:`AxesProfileRefusal` (a wall the coupled gate refuses).
+    Raises ParameterError (invalid, or the bus load above 70 %: ``loop.period`` with the load and the
+    smallest T) or :class:`Refusal` (a wall the coupled gate refuses).
     """
     profile, decision = judge_axes_profile(path_or_name)
     if not decision.accepted:
-        raise AxesProfileRefusal(profile.path or profile.name, decision)
+        raise Refusal.by_gate(decision, f"profile {profile.path or profile.name}", "scene")
     return profile
 
 
 def is_axes_profile(path: pathlib.Path) -> bool:
-    """Whether the profile file at ``path`` is a multi-axis one (has ``[[axes]]``); ProfileError if unreadable."""
+    """Whether the profile file at ``path`` is a multi-axis one (has ``[[axes]]``); ParameterError if unreadable."""
     return "axes" in read_document(path)
 
 

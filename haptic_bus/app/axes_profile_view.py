@@ -2,7 +2,7 @@
 space and the coupled gate's decision (:mod:`haptic_bus.app.axes_profile`), as text or JSON.
 
 ``check`` exits 0 when the coupled gate accepts every wall (passive with the profile's safety
-margin), 1 when it does not; an invalid profile is a ProfileError (exit 2) before any of this.
+margin), 1 when it does not; an invalid profile is a ParameterError (exit 2) before any of this.
 """
 
 from __future__ import annotations

@@ -49,7 +49,6 @@ from haptic_bus.app.runner import (
     DEFAULT_CONTROLLER_NODE_ID,
     PROFILE_SCALING_SOURCE,
     RunOptions,
-    StartRefused,
     canopen_watchdog,
     control_thread_scheduling,
     longest_hold,
@@ -59,9 +58,9 @@ from haptic_bus.control.axes_controller import AxesController
 from haptic_bus.control.bus_load import axes_bus_load
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.cycle_loop import RunSummary
-from haptic_bus.control.space_gate import SpaceGate, SpaceGateRefusal
+from haptic_bus.control.space_gate import SpaceGate
 from haptic_bus.control.space_scene import SpaceScene
-from haptic_bus.errors import DriveError, ParameterError
+from haptic_bus.errors import DriveError, ParameterError, Refusal
 
 RUN_MAPPING = "with-position"
 
@@ -116,7 +115,7 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
         try:
             load = axes_bus_load([axis.mapping for axis in profile.axes], bitrate, period)
         except ParameterError as refusal:
-            raise StartRefused(f"the bus cannot carry this cycle; allowed: {refusal.allowed}") from None
+            raise Refusal(f"the bus cannot carry this cycle; allowed: {refusal.allowed}") from None
         link["bus_load"] = dataclasses.asdict(load)
         with ExitStack() as stack:
             axes = CanopenAxes(nodes, scalings=[axis.device.scaling() for axis in profile.axes],
@@ -148,7 +147,7 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                 reason, error = "interrupted", "interrupted (Ctrl-C)"
             if reason in ("completed", "stopped", "interrupted"):
                 axes.disable()
-    except (StartRefused, SpaceGateRefusal) as exc:
+    except Refusal as exc:
         reason, error = "refused", str(exc)
     except DriveError as exc:
         reason, error = "drive error", str(exc)
@@ -174,15 +173,15 @@ def _describe(axes: CanopenAxes, options: RunOptions, link: dict[str, Any]) -> N
 
 
 def _safe_start(axes: CanopenAxes, profile: AxesProfile, scene: SpaceScene) -> list[float]:
-    """Every axis' position (m) before enabling; :class:`StartRefused` if the handle is inside an object."""
+    """Every axis' position (m) before enabling; :class:`Refusal` if the handle is inside an object."""
     q = [drive.read_object(POSITION_ACTUAL) * scaling.position_per_count
          for drive, scaling in zip(axes.drives, axes.scalings)]
     x = profile.kinematics().position(q)
     inside = scene.contacts(x)
     if inside:
         force = float(sum(value * value for value in scene.force(x, [0.0] * len(q))) ** 0.5)
-        raise StartRefused(f"handle is inside {'+'.join(inside)} at ({', '.join(f'{c * 1e3:.3g}' for c in x)}) mm (at rest "
-                           f"it would feel {force:.3g} N); move it out first (a start ramp for coupled axes is not built)")
+        raise Refusal(f"handle is inside {'+'.join(inside)} at ({', '.join(f'{c * 1e3:.3g}' for c in x)}) mm (at rest "
+                      f"it would feel {force:.3g} N); move it out first (a start ramp for coupled axes is not built)")
     return q
 
 

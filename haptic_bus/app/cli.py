@@ -221,8 +221,8 @@ def _refuse_single_axis_options(args: argparse.Namespace) -> None:
 def _upload(args: argparse.Namespace) -> int:
     """0 accepted; 1 refused by the gate, or no controller on the node (silent, or another device);
     2 invalid input, an object index the controller does not have included (asked before any write)."""
-    from haptic_bus.errors import DriveError
-    from haptic_bus.node.upload import UploadRefused, upload_walls
+    from haptic_bus.errors import DriveError, Refusal
+    from haptic_bus.node.upload import upload_walls
     from haptic_bus.validation import real_in_range, whole_in_range
 
     index = whole_in_range("object", args.object, 0, 255, context="upload")
@@ -231,8 +231,8 @@ def _upload(args: argparse.Namespace) -> int:
     bus = bus_arguments(args)
     try:
         print(upload_walls(bus, args.node_id, {index: (K, B)}, timeout=args.timeout))
-    except UploadRefused as error:
-        print(f"haptic-bus upload: {error.reason}", file=sys.stderr)
+    except Refusal as error:  # the node's 0x2002 text
+        print(f"haptic-bus upload: {error.reasons[0]}", file=sys.stderr)
         return EXIT_NO
     except DriveError as error:  # no controller there: the node's own words, not "drive error"
         print(f"haptic-bus upload: {error.message}", file=sys.stderr)
@@ -392,11 +392,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
-    from haptic_bus.errors import AssumptionBroken, DriveError, GateRefusal, HapticBusError, InvalidInput
+    from haptic_bus.errors import AssumptionBroken, DriveError, HapticBusError, ParameterError
 
     try:
         return int(args.handler(args))
-    except InvalidInput as error:
+    except ParameterError as error:
         print(f"haptic-bus {args.command}: error: {error}", file=sys.stderr)
         return EXIT_INVALID
     except DriveError as error:
@@ -405,7 +405,7 @@ def _dispatch(args: argparse.Namespace) -> int:
     except AssumptionBroken as error:
         print(f"haptic-bus {args.command}: {error}", file=sys.stderr)
         return EXIT_ASSUMPTION
-    except (GateRefusal, HapticBusError) as error:
+    except HapticBusError as error:  # a Refusal, or another error raised on purpose
         print(f"haptic-bus {args.command}: {error}", file=sys.stderr)
         return EXIT_NO
 

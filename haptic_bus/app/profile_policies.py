@@ -13,7 +13,7 @@ from drives.safety import ABORT_OPTIONS, SafetySettings
 from haptic_bus.control.gate import BANDWIDTH_POLICIES, GatePolicy
 from haptic_bus.control.passivity_layer import LAYER_MODES, LayerPolicy
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
-from haptic_bus.profile.reader import NAME_PATTERN, ProfileError, Reader
+from haptic_bus.profile.reader import NAME_PATTERN, Reader, profile_error
 
 START_POLICIES = ("refuse", "ramp")
 
@@ -73,8 +73,8 @@ def read_passivity(path: pathlib.Path, table: object) -> LayerPolicy:
     beyond = r.flag("beyond_gate", default=False)
     r.done()
     if beyond and layer != "bound":
-        raise ProfileError(path, "passivity.beyond_gate", True, 'false unless layer = "bound" (only the bound '
-                           "guarantees passivity for walls the gate refuses)")
+        raise profile_error(path, "passivity.beyond_gate", True, 'false unless layer = "bound" (only the bound '
+                            "guarantees passivity for walls the gate refuses)")
     return LayerPolicy(layer, cap, beyond)
 
 

@@ -39,31 +39,23 @@ from haptic_bus.app.profile_policies import (
     read_start,
     read_supervisor,
 )
-from haptic_bus.control.gate import GateDecision, GatePolicy, GateRefusal, PassivityGate
+from haptic_bus.control.gate import GatePolicy, PassivityGate
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene, object_to_dict
 from haptic_bus.control.supervisor import SupervisorPolicy
+from haptic_bus.errors import ParameterError, Refusal
 from haptic_bus.profile.device import DeviceProfile, LoopProfile
 from haptic_bus.profile.files import resolve_profile, shipped_profiles
 from haptic_bus.profile.identification import IdentifiedDevice
 from haptic_bus.profile.plant import ONE_AXIS_TABLES, read_plant
-from haptic_bus.profile.reader import ProfileError, Reader, read_document
+from haptic_bus.profile.reader import Reader, profile_error, read_document
 from haptic_bus.profile.scene import FORCE_RANGE, ObjectTable, read_force_limit, read_scene
 
 __all__ = ["DEFAULT_PROFILE", "FORCE_RANGE", "NAME_PATTERN",
-           "DeviceProfile", "LoopProfile", "Profile", "ProfileError", "ProfileRefusal", "StartPolicy",
+           "DeviceProfile", "LoopProfile", "Profile", "ParameterError", "Refusal", "StartPolicy",
            "default_profile", "load_profile", "profile_to_dict", "read_profile", "resolve_profile", "shipped_profiles"]
 
 DEFAULT_PROFILE = "cia402-handle"
-
-
-class ProfileRefusal(GateRefusal):
-    """The passivity gate refused a profile's scene; ``path`` names the file."""
-
-    def __init__(self, path: pathlib.Path | str, decision: GateDecision) -> None:
-        super().__init__(decision)
-        self.path = str(path)
-        self.args = (f"profile {self.path}: {self.args[0]}",)
 
 
 @dataclass(frozen=True)
@@ -122,12 +114,12 @@ def _build(obj: ObjectTable) -> SceneObject:
 
 
 def read_profile(path_or_name: str | pathlib.Path) -> Profile:
-    """Parse and validate a profile file (or shipped name) without judging it; raise ProfileError."""
+    """Parse and validate a profile file (or shipped name) without judging it; raise ParameterError."""
     path = resolve_profile(path_or_name)
     document = read_document(path)
     if "axes" in document:  # a multi-axis profile: its own reader (haptic_bus.app.axes_profile)
-        raise ProfileError(path, "axes", "[[axes]]",
-                           "no [[axes]] in a one-axis profile; multi-axis profiles load with load_axes_profile")
+        raise profile_error(path, "axes", "[[axes]]",
+                            "no [[axes]] in a one-axis profile; multi-axis profiles load with load_axes_profile")
     top = Reader(path, "", document)
     top.only(ONE_AXIS_TABLES)  # a misspelt table first, not the required one it hides
     name, operator, task, description = read_about(top)
@@ -146,12 +138,12 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
 
 
 def load_profile(path_or_name: str | pathlib.Path) -> Profile:
-    """Read, validate and gate a profile; raise ProfileError (invalid) or ProfileRefusal (not passive,
+    """Read, validate and gate a profile; raise ParameterError (invalid) or Refusal (not passive,
     unless the profile runs beyond the gate under the bound layer: ``[passivity] beyond_gate``)."""
     profile = read_profile(path_or_name)
     decision = profile.gate().judge(profile.compiled_scene())
     if not decision.accepted and not profile.passivity.beyond_gate:
-        raise ProfileRefusal(profile.path or profile.name, decision)
+        raise Refusal.by_gate(decision, f"profile {profile.path or profile.name}")
     return profile
 
 

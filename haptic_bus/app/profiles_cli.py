@@ -30,7 +30,6 @@ from haptic_bus.app.profiles import (
     FORCE_RANGE,
     NAME_PATTERN,
     Profile,
-    ProfileError,
     load_profile,
     object_to_dict,
     profile_to_dict,
@@ -38,8 +37,8 @@ from haptic_bus.app.profiles import (
     resolve_profile,
     shipped_profiles,
 )
-from haptic_bus.control.gate import GateDecision, GateRefusal
-from haptic_bus.errors import HapticBusError, ParameterError
+from haptic_bus.control.gate import GateDecision
+from haptic_bus.errors import HapticBusError, ParameterError, Refusal
 from haptic_bus.profile.plant import ONE_AXIS_TABLES
 
 EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
@@ -50,7 +49,7 @@ def _fail(command: str, error: Exception) -> int:
     return EXIT_INVALID
 
 
-def _refused(command: str, refusal: GateRefusal) -> int:
+def _refused(command: str, refusal: Refusal) -> int:
     print(f"haptic-bus profiles {command}: {refusal}", file=sys.stderr)
     return EXIT_NO
 
@@ -73,10 +72,10 @@ def cmd_list(args: argparse.Namespace) -> int:
                        friction=profile.device.friction, period=profile.loop.period,
                        objects=len(profile.scene), worst_margin=decision.worst_margin,
                        warnings=len(decision.warnings), task=profile.task)
-        except ProfileError as error:
+        except ParameterError as error:
             row.update(status="invalid", error=str(error))
             status = EXIT_INVALID
-        except GateRefusal as refusal:
+        except Refusal as refusal:
             row.update(status="refused", error=str(refusal))
             status = max(status, EXIT_NO)
         rows.append(row)
@@ -150,9 +149,9 @@ def cmd_show(args: argparse.Namespace) -> int:
         return axes
     try:
         profile = load_profile(args.profile)
-    except ProfileError as error:
+    except ParameterError as error:
         return _fail("show", error)
-    except GateRefusal as refusal:
+    except Refusal as refusal:
         return _refused("show", refusal)
     decision = profile.gate().judge(profile.compiled_scene())
     if args.json:

@@ -11,7 +11,7 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
 2. the drive is reached and commissioned (CANopen: the safety chain of ``[safety]``; Modbus: the
    gate judges with the loop delay the poll measured, :func:`drives.modbus.timing.loop_delay`);
 3. **safe start**: the handle's position is read before enabling; inside an object the run is
-   refused (:class:`StartRefused`, the drive never enabled), or with ``in_contact = "ramp"`` the
+   refused (:class:`Refusal`, the drive never enabled), or with ``in_contact = "ramp"`` the
    force rises from 0 over ``ramp_time`` once the gate has proven every scaled wall passive;
 4. the upload server (a CANopen node serving gated wall uploads), the live view and the
    real-time session are set up; then the drive is enabled, right before the first cycle (its
@@ -52,11 +52,11 @@ from haptic_bus.app.run_folder import RunJournal, gate_loop, prepare_run_folder
 from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import Derate, RunSummary, WallController, encoder_origin
-from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
+from haptic_bus.control.gate import GateDecision, PassivityGate
 from haptic_bus.control.record import Event
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.supervisor import Action
-from haptic_bus.errors import DriveError, DriveFault, DriveStateError, HapticBusError, ParameterError
+from haptic_bus.errors import DriveError, DriveFault, ParameterError, Refusal
 from haptic_bus.validation import real_in_range
 
 if TYPE_CHECKING:
@@ -73,10 +73,6 @@ DERATE_EXTRA_DELAYS = (0.25, 0.5, 1.0, 2.0, 3.0)  # samples beyond the assumed d
 WALL, VIRTUAL = "wall", "virtual"
 PACINGS = (WALL, VIRTUAL)  # what paces a run's cycles: the wall clock, or the simulated drive (lock-step)
 EXIT_STATUS = {"completed": 0, "stopped": 0, "refused": 1, "drive error": 1, "assumption broken": 3, "interrupted": 130}
-
-
-class StartRefused(HapticBusError):
-    """The handle starts inside an object and the start policy is "refuse" (exit 1)."""
 
 
 class StopRequest:
@@ -366,11 +362,11 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
                 reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr
             if reason in ("completed", "stopped", "interrupted"):
                 drive.disable()
-    except (StartRefused, GateRefusal) as exc:  # refused before the drive is enabled
+    except Refusal as exc:  # refused before the drive is enabled
         reason, error = "refused", str(exc)
     except DriveError as exc:
         reason, error = "drive error", str(exc)
-        if isinstance(exc, DriveStateError) and exc.state is State.FAULT:
+        if isinstance(exc, DriveFault) and exc.state is State.FAULT:
             error += f"; {side.address.fault_reset_hint()} (or run with --reset-fault)"
     except KeyboardInterrupt:
         reason, error = "interrupted", "interrupted (Ctrl-C)"
@@ -383,7 +379,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
 def _preflight(drive: Drive, gate: PassivityGate, scene: CompiledScene, profile: Profile, options: RunOptions,
                watchdog: Watchdog, extra: dict[str, Any]) -> None:
     """Measure this machine's lateness on this bus with the drive not enabled, print it and record it
-    in ``extra``, and refuse (:class:`StartRefused`) a run the drive's watchdogs, or the gate without
+    in ``extra``, and refuse (:class:`Refusal`) a run the drive's watchdogs, or the gate without
     a layer, cannot hold."""
     timing = preflight.measure(drive, profile.loop.period, spin=options.scheduling.spin)
     settle_preflight(preflight.judge(timing, gate, scene, profile.passivity.layer, watchdog.stall, watchdog.periods),
@@ -392,13 +388,13 @@ def _preflight(drive: Drive, gate: PassivityGate, scene: CompiledScene, profile:
 
 def settle_preflight(report: preflight.PreflightReport, options: RunOptions, extra: dict[str, Any]) -> None:
     """Record pre-flight's ``report`` in ``extra``, log and print it, and refuse the run
-    (:class:`StartRefused`) if the machine cannot hold it."""
+    (:class:`Refusal`) if the machine cannot hold it."""
     extra["preflight"] = report.to_dict()
     logger.info("%s", report.line())
     if options.live:
         print(report.line(), flush=True)
     if not report.holdable:
-        raise StartRefused(report.reason.removeprefix("refused: "))
+        raise Refusal(report.reason.removeprefix("refused: "))
 
 
 def _reset_fault_first(address: DriveAddress, options: RunOptions, extra: dict[str, Any]) -> list[Event]:
@@ -441,7 +437,7 @@ def _safe_start(profile: Profile, drive: Drive, gate: PassivityGate, scene: Comp
                 options: RunOptions) -> tuple[float, float]:
     """The handle's position (m) before enabling, and the start ramp's time (s, 0 = none).
 
-    Inside an object: :class:`StartRefused` under "refuse"; under "ramp" the ramp time, once the
+    Inside an object: :class:`Refusal` under "refuse"; under "ramp" the ramp time, once the
     gate has proven every wall scaled by a factor in (0, 1] passive.
     """
     origin = encoder_origin(drive)
@@ -452,10 +448,10 @@ def _safe_start(profile: Profile, drive: Drive, gate: PassivityGate, scene: Comp
     where = f"handle is {depth * 1e3:.1f} mm inside {'+'.join(names)} (at rest it would feel {abs(force):.3g} N)"
     policy = options.start_in_contact or profile.start.in_contact
     if policy != "ramp":
-        raise StartRefused(f"{where}; move it out or use --start-in-contact ramp")
+        raise Refusal(f"{where}; move it out or use --start-in-contact ramp")
     proof = gate.proves_ramp(scene)
     if not proof.proven:
-        raise StartRefused(f"{where}; and the start ramp is refused: {proof.reason}")
+        raise Refusal(f"{where}; and the start ramp is refused: {proof.reason}")
     logger.info("%s: ramping the force in over %g s", where, profile.start.ramp_time)
     return origin, profile.start.ramp_time
 

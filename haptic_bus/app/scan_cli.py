@@ -41,7 +41,7 @@ from haptic_bus.app.arguments import (
     number,
     refuse_can_options_with_modbus,
 )
-from haptic_bus.errors import DriveArgumentError, ParameterError
+from haptic_bus.errors import ParameterError
 
 if TYPE_CHECKING:  # the scans import canopen and pymodbus: only when a scan runs
     from drives.canopen.scan import CanopenNode
@@ -110,7 +110,7 @@ def _validate(args: argparse.Namespace) -> None:
     refuse_can_options_with_modbus(args, "scan", ("node_ids",), "--unit-ids")
     try:
         ModbusAddress.from_url(args.modbus)
-    except DriveArgumentError as exc:
+    except ParameterError as exc:
         raise ParameterError("--modbus", args.modbus, exc.allowed, "scan") from None
 
 

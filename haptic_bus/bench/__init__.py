@@ -16,7 +16,7 @@ min-max over at least 5 repeats (:mod:`~haptic_bus.bench.timing`):
    python-can's virtual bus, udp_multicast, Modbus TCP), the lock-step loop against
    python-can's threaded echo, and the hot path vs canopen's generic PDO path.
 5. :mod:`~haptic_bus.bench.bus_limit` -- bits per cycle per axis, bus load, axes that fit.
-6. :mod:`~haptic_bus.bench.realtime` -- ``T = 1 ms`` with the real clock, two processes: lateness
+6. :mod:`~haptic_bus.bench.thread_tuning` -- ``T = 1 ms`` with the real clock, two processes: lateness
    and the controller's share of a core in three set-ups, quiet and beside a CPU hog.
 7. :mod:`~haptic_bus.bench.startup` -- ``check --json``, ``--help`` and (full run) ``profiles list`` against
    ``python -c "import numpy"``.
@@ -126,7 +126,7 @@ def _runner(name: str) -> Callable[..., dict]:
 
     module = {"passivity": "passivity", "plant": "plant_sim", "scene": "scene_cost", "space": "space_scene_cost",
               "loop": "loop_rate",
-              "bus": "bus_limit", "realtime": "realtime", "startup": "startup", "layer": "layer_cost"}[name]
+              "bus": "bus_limit", "realtime": "thread_tuning", "startup": "startup", "layer": "layer_cost"}[name]
     return import_module(f"haptic_bus.bench.{module}").run
 
 

@@ -7,10 +7,13 @@ late cycles, jitter) that the simulated drive lives too.  For each layer (``off`
 ``bound`` with the default safety settings' hold: the RPDO deadline plus a period):
 
 * ``lowered``: the share of cycles whose target the layer lowered;
-* ``gain``: the least-squares share of the asked wall force that reached the handle over the
-  cycles in contact, ``sum(applied * asked) / sum(asked^2)`` (1: untouched; what the operator
-  feels as the wall's stiffness and damping scaled);
-* ``removed_max``: the largest force the layer took off one target, N;
+* ``reached``: the share of the force asked of the drive (the wall force after the force limit,
+  ``force_n``) that the target sent carried (``torque_permille``, after the layer), over the
+  cycles in contact: ``sum_k min(|asked_k|, max(0, applied_k sign(asked_k))) / sum_k |asked_k|``,
+  in [0, 1] by construction (a target rounded above its asked force counts as the asked force, one
+  rounded below as what it carried); None when no cycle was in contact;
+* ``removed_max``: the largest force the layer took off one target (``layer_n``), N; at most the
+  profile's force limit, since the layer only lowers a target the drive's clamp holds within it;
 * ``least_energy``: the least port energy of the run by the simulated drive's exact ledger, J
   (below zero: the wall gave the operator energy).
 """
@@ -33,7 +36,7 @@ from haptic_bus.control.passivity_layer import LAYER_MODES, LayerPolicy
 SEED = 1  # the adversarial schedule's seed
 
 
-def measure(profile_name: str, layer: str, adversarial: bool, seconds: float) -> dict[str, float]:
+def measure(profile_name: str, layer: str, adversarial: bool, seconds: float) -> dict[str, float | None]:
     """One run of ``profile_name`` under ``layer``: the figures of the module docstring."""
     profile = load_profile(profile_name)
     period = profile.loop.period
@@ -55,17 +58,24 @@ def measure(profile_name: str, layer: str, adversarial: bool, seconds: float) ->
             least = min(least, stored + sim.drive.viscous_energy + sim.drive.wall_energy)
 
         summary = controller.run(cycles, on_cycle=watch)
-    data = controller.record.array()
-    columns = {name: i for i, name in enumerate(("time_s", "position_m", "velocity_m_per_s", "force_n",
-                                                  "torque_permille", "energy_j", "scene_id", "scale", "late",
-                                                  "compute_s", "layer_n"))}
-    asked = data[:, columns["force_n"]]
-    applied = -data[:, columns["torque_permille"]] * drive.scaling.newton_per_permille
-    contact = asked != 0.0
-    gain = float(np.dot(applied[contact], asked[contact]) / np.dot(asked[contact], asked[contact])) if contact.any() else 1.0
-    return {"lowered": summary.layer_interventions / max(summary.cycles, 1), "gain": gain,
-            "removed_max": float(np.max(np.abs(data[:, columns["layer_n"]]), initial=0.0)),
+    record = controller.record
+    asked = record.column("force_n")
+    applied = -record.column("torque_permille") * drive.scaling.newton_per_permille
+    return {"lowered": summary.layer_interventions / max(summary.cycles, 1), "reached": reached_share(asked, applied),
+            "removed_max": float(np.max(np.abs(record.column("layer_n")), initial=0.0)),
             "least_energy": float(least), "cycles": summary.cycles}
+
+
+def reached_share(asked: np.ndarray, applied: np.ndarray) -> float | None:
+    """The share of the ``asked`` forces (N, per cycle) that the ``applied`` ones (N) carried over the
+    cycles in contact (asked non-zero), in [0, 1]: each cycle counts what went out in the asked
+    direction, at most what was asked; None without contact."""
+    contact = asked != 0.0
+    if not contact.any():
+        return None
+    magnitude = np.abs(asked[contact])
+    carried = np.clip(applied[contact] * np.sign(asked[contact]), 0.0, magnitude)
+    return float(np.sum(carried) / np.sum(magnitude))
 
 
 def run(size: Size, tick: Callable[[str], None] = lambda _: None, profiles: Sequence[str] | None = None) -> dict[str, Any]:

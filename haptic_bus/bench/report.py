@@ -120,11 +120,16 @@ def _space(s: dict) -> list[str]:
 
 
 def _layer(s: dict) -> list[str]:
-    rows = [[r["profile"], r["timing"], r["layer"], f"{100 * r['lowered']:.2f} %", f"{r['gain']:.4f}",
+    rows = [[r["profile"], r["timing"], r["layer"], f"{100 * r['lowered']:.2f} %",
+             "n/a (no contact)" if r["reached"] is None else f"{100 * r['reached']:.2f} %",
              f"{r['removed_max']:.3g} N", f"{r['least_energy'] * 1e3:+.4g} mJ"] for r in s["rows"]]
-    return [_table(["profile", "timing", "layer", "targets lowered", "gain", "most removed", "least port energy (exact)"],
-                   rows), "", f"{s['seconds']:g} s of virtual time each; adversarial timing seed {s['seed']}; gain: the "
-                              "share of the asked wall force that reached the handle in contact."]
+    return [_table(["profile", "timing", "layer", "targets lowered", "wall force sent", "most removed from a target",
+                    "least port energy (exact)"], rows), "",
+            f"{s['seconds']:g} s of virtual time each; adversarial timing seed {s['seed']}; wall force sent: the share "
+            "of the force asked of the drive (the wall's, after the force limit) that the targets carried over the "
+            "cycles in contact, after the layer (below 100 % by the targets' per-mille rounding where the layer takes "
+            "nothing); most removed: the largest force the layer took off one target, at most the profile's force limit "
+            "(the drive's clamp holds every target within it)."]
 
 
 def _loop(s: dict) -> list[str]:

@@ -58,10 +58,10 @@ from haptic_bus.control.kinematics import Cartesian, Kinematics
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.port_account import PortAccount
 from haptic_bus.control.record import EventLog, RunRecord
-from haptic_bus.control.space_gate import SpaceDecision, SpaceGate, SpaceGateRefusal
+from haptic_bus.control.space_gate import SpaceDecision, SpaceGate
 from haptic_bus.control.space_scene import SpaceScene
 from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
-from haptic_bus.errors import ParameterError
+from haptic_bus.errors import ParameterError, Refusal
 
 logger = logging.getLogger(__name__)
 
@@ -190,10 +190,10 @@ class AxesController(CycleLoop[AxesDriveCycle]):
 
     def upload_scene(self, scene: SpaceScene) -> SpaceDecision:
         """Judge ``scene`` by the coupled gate (in the caller's thread) and stage it for the next cycle
-        boundary; a refusal raises :class:`SpaceGateRefusal` and leaves the running scene as it was."""
+        boundary; a refusal raises :class:`Refusal` and leaves the running scene as it was."""
         try:
             decision = self.gate.admit(scene)
-        except SpaceGateRefusal as refusal:
+        except Refusal as refusal:
             self.events.add(self.now(), "refused", str(refusal))
             raise
         self.scenes.staged = (scene, decision)

@@ -13,7 +13,7 @@ the drive's cyclic phase (:meth:`drives.base.Drive.cyclic`), entered once per :m
 (lateness and the observer against the gate's assumptions,
 :mod:`~haptic_bus.control.supervisor`), a bounded record and the run's events.  Wall changes
 pass the gate first, in the caller's thread, and take effect whole at the next cycle boundary
-(:mod:`~haptic_bus.control.scenes`); a refused change leaves the running scene untouched.
+(:mod:`~haptic_bus.control.scene_switch`); a refused change leaves the running scene untouched.
 
 A run ends with torque zero and the drive disabled whatever ends it: the cycles done, the stop
 flag, a drive error, an assumption broken, Ctrl-C; the summary says which (``exit_reason``;
@@ -37,7 +37,7 @@ from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.port_account import PortAccount
 from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.scene import CompiledScene
-from haptic_bus.control.scenes import SceneEntry, SceneSwitch
+from haptic_bus.control.scene_switch import SceneEntry, SceneSwitch
 from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
 from haptic_bus.errors import ParameterError
 
@@ -163,7 +163,7 @@ class WallController(CycleLoop[DriveCycle]):
         return self.scenes.applied
 
     def upload_scene(self, scene: CompiledScene) -> GateDecision:
-        """Gate ``scene`` and stage it for the next cycle boundary; raise GateRefusal if refused."""
+        """Gate ``scene`` and stage it for the next cycle boundary; raise Refusal if refused."""
         return self.scenes.upload(scene)
 
     def set_wall(self, name: str, stiffness: float, damping: float) -> GateDecision:

@@ -21,8 +21,8 @@ import numpy as np
 
 from haptic_bus.control.clock import CycleClock
 from haptic_bus.control.record import EventLog
-from haptic_bus.control.supervisor import AssumptionBroken, Supervisor
-from haptic_bus.errors import DriveError
+from haptic_bus.control.supervisor import Supervisor
+from haptic_bus.errors import AssumptionBroken, DriveError
 
 logger = logging.getLogger(__name__)
 

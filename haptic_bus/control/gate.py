@@ -21,7 +21,7 @@ from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from haptic_bus.analysis.limits import PassiveSet, passive_limits, passive_scales
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, DeviceLoop, WallLoop
 from haptic_bus.control.scene import CompiledScene
-from haptic_bus.errors import GateRefusal, ParameterError
+from haptic_bus.errors import ParameterError, Refusal
 from haptic_bus.validation import real_in_range
 
 BANDWIDTH_POLICIES = ("warn", "strict")
@@ -151,10 +151,10 @@ class PassivityGate:
         return tuple(common)
 
     def admit(self, scene: CompiledScene) -> GateDecision:
-        """The decision on ``scene``; raises :class:`GateRefusal` if it is refused."""
+        """The decision on ``scene``; raises :class:`Refusal` if it is refused."""
         decision = self.judge(scene)
         if not decision.accepted:
-            raise GateRefusal(decision)
+            raise Refusal.by_gate(decision)
         return decision
 
     def _explain(self, label: str, loop: WallLoop, verdict: Verdict) -> str:

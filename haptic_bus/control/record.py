@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from haptic_bus.errors import ParameterError
+
 COLUMNS = ("time_s", "wall_clock_s", "monotonic_s", "lateness_s", "statusword", "velocity_counts", "input_age",
            "position_m", "velocity_m_per_s", "force_n", "torque_permille", "energy_j", "scene_id", "scale", "late",
            "compute_s", "layer_n")
@@ -138,21 +140,18 @@ class RecordTable:
         return self.columns[name]
 
 
-class RecordFormatError(ValueError):
-    """``record.csv`` is not a record: a header or a line (not the last) that does not parse."""
-
-
 def read_record(path: str | pathlib.Path) -> RecordTable:
     """Read ``record.csv``; a last line without its newline is torn and left out.
 
     Columns are taken by the header's names (a record from another version reads as it was
-    written).  RecordFormatError naming the line for anything else that does not parse.
+    written).  ParameterError (exit 2) naming the file and the line for anything else that does not
+    parse: a header or a line (not the last) that is not a record's.
     """
     text = pathlib.Path(path).read_text()
     header, _, body = text.partition("\n")
     names = header.strip().split(",")
     if not header or not all(names):
-        raise RecordFormatError(f"{path}: line 1 is not a header of column names")
+        raise ParameterError("line 1", header, "a header of column names", context=str(path))
     torn = bool(body) and not body.endswith("\n")
     if torn:
         body = body[: body.rfind("\n") + 1]
@@ -161,11 +160,12 @@ def read_record(path: str | pathlib.Path) -> RecordTable:
     if len(fields) != lines * len(names):
         number, line = next((n, line) for n, line in enumerate(body.splitlines(), start=2)
                             if len(line.split(",")) != len(names))
-        raise RecordFormatError(f"{path}: line {number} has {len(line.split(','))} fields, the header {len(names)}")
+        raise ParameterError(f"line {number}", f"{len(line.split(','))} fields", f"{len(names)} fields, as the header",
+                             context=str(path))
     try:
         values = np.array(fields, dtype=float)  # parsed in C
     except ValueError as exc:
-        raise RecordFormatError(f"{path}: {exc}") from None
+        raise ParameterError("a field", str(exc), "numbers in every field", context=str(path)) from None
     table = values.reshape(lines, len(names))
     return RecordTable({name: table[:, i] for i, name in enumerate(names)}, torn)
 

@@ -16,11 +16,12 @@ and the summed ``(K, B)`` of every interval is what the passivity gate judges.
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
 from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
 from haptic_bus.errors import ParameterError
@@ -29,11 +30,24 @@ from haptic_bus.validation import real_in_range
 _POSITION_RANGE = (-1e6, 1e6)  # m
 
 
-def _validated(name: str, K: float, B: float, context: str) -> tuple[float, float]:
-    return (
-        real_in_range("stiffness", K, *STIFFNESS_RANGE, unit="N/m", context=f"{context} {name!r}"),
-        real_in_range("damping", B, *DAMPING_RANGE, unit="N s/m", context=f"{context} {name!r}"),
-    )
+class WallObject(Protocol):
+    """A scene object with a name and a wall law (a 1-D one here, one in space in :mod:`~haptic_bus.control.space_scene`)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def stiffness(self) -> float: ...
+    @property
+    def damping(self) -> float: ...
+
+
+def validate_wall(obj: WallObject, kind: str) -> None:
+    """Set ``obj``'s (a frozen dataclass') stiffness (N/m) and damping (N s/m) to validated floats, else
+    ParameterError naming ``kind`` and its name."""
+    context = f"{kind} {obj.name!r}"
+    object.__setattr__(obj, "stiffness", real_in_range("stiffness", obj.stiffness, *STIFFNESS_RANGE, unit="N/m",
+                                                        context=context))
+    object.__setattr__(obj, "damping", real_in_range("damping", obj.damping, *DAMPING_RANGE, unit="N s/m", context=context))
 
 
 def _position(field: str, value: float, context: str) -> float:
@@ -59,9 +73,7 @@ class Wall:
         if isinstance(self.normal, bool) or self.normal not in (-1, 1):
             raise ParameterError("normal", self.normal, "-1 (solid above position) or +1 (solid below)", f"wall {self.name!r}")
         object.__setattr__(self, "normal", int(self.normal))
-        K, B = _validated(self.name, self.stiffness, self.damping, "wall")
-        object.__setattr__(self, "stiffness", K)
-        object.__setattr__(self, "damping", B)
+        validate_wall(self, "wall")
         object.__setattr__(self, "position", _position("position", self.position, f"wall {self.name!r}"))
 
     def pieces(self) -> list[tuple[float, float, float, float, float]]:
@@ -69,9 +81,6 @@ class Wall:
         if self.normal == -1:
             return [(self.position, math.inf, self.stiffness, self.position, self.damping)]
         return [(-math.inf, self.position, self.stiffness, self.position, self.damping)]
-
-    def with_parameters(self, stiffness: float, damping: float) -> Wall:
-        return Wall(self.name, self.position, self.normal, stiffness, damping)
 
 
 @dataclass(frozen=True)
@@ -85,9 +94,7 @@ class Slot:
     damping: float
 
     def __post_init__(self) -> None:
-        K, B = _validated(self.name, self.stiffness, self.damping, "slot")
-        object.__setattr__(self, "stiffness", K)
-        object.__setattr__(self, "damping", B)
+        validate_wall(self, "slot")
         low = _position("low", self.low, f"slot {self.name!r}")
         high = _position("high", self.high, f"slot {self.name!r}")
         if not high > low:
@@ -98,9 +105,6 @@ class Slot:
     def pieces(self) -> list[tuple[float, float, float, float, float]]:
         K, B = self.stiffness, self.damping
         return [(-math.inf, self.low, K, self.low, B), (self.high, math.inf, K, self.high, B)]
-
-    def with_parameters(self, stiffness: float, damping: float) -> Slot:
-        return Slot(self.name, self.low, self.high, stiffness, damping)
 
 
 @dataclass(frozen=True)
@@ -114,9 +118,7 @@ class Detent:
     damping: float
 
     def __post_init__(self) -> None:
-        K, B = _validated(self.name, self.stiffness, self.damping, "detent")
-        object.__setattr__(self, "stiffness", K)
-        object.__setattr__(self, "damping", B)
+        validate_wall(self, "detent")
         object.__setattr__(self, "center", _position("center", self.center, f"detent {self.name!r}"))
         object.__setattr__(self, "reach", real_in_range("reach", self.reach, 0.0, 1e6, low_inclusive=False, unit="m",
                                                         context=f"detent {self.name!r}"))
@@ -124,12 +126,15 @@ class Detent:
     def pieces(self) -> list[tuple[float, float, float, float, float]]:
         return [(self.center - self.reach, self.center + self.reach, self.stiffness, self.center, self.damping)]
 
-    def with_parameters(self, stiffness: float, damping: float) -> Detent:
-        return Detent(self.name, self.center, self.reach, stiffness, damping)
-
 
 SceneObject = Wall | Slot | Detent
 OBJECT_KINDS: dict[str, type[SceneObject]] = {"wall": Wall, "slot": Slot, "detent": Detent}
+ObjectT = TypeVar("ObjectT", bound=SceneObject)
+
+
+def with_wall_law(obj: ObjectT, stiffness: float, damping: float) -> ObjectT:
+    """``obj`` with its stiffness (N/m) and damping (N s/m) replaced, validated again."""
+    return dataclasses.replace(obj, stiffness=stiffness, damping=damping)
 
 
 def object_to_dict(obj: SceneObject) -> dict[str, Any]:
@@ -192,7 +197,7 @@ class CompiledScene:
 
     def scaled(self, factor: float) -> CompiledScene:
         """The same objects with every ``K`` and ``B`` times ``factor`` (dimensionless, >= 0)."""
-        return compile_scene(obj.with_parameters(factor * obj.stiffness, factor * obj.damping) for obj in self.objects)
+        return compile_scene(with_wall_law(obj, factor * obj.stiffness, factor * obj.damping) for obj in self.objects)
 
 
 def compile_scene(objects: Iterable[SceneObject]) -> CompiledScene:

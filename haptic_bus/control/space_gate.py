@@ -34,7 +34,7 @@ from haptic_bus.analysis.coupled_loop import CoupledLoop, unit_normal
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.control.gate import GatePolicy
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere
-from haptic_bus.errors import GateRefusal
+from haptic_bus.errors import Refusal
 
 SEARCH_EVALUATIONS = 24
 DEFAULT_POLICY = GatePolicy()
@@ -97,13 +97,6 @@ class SpaceDecision:
         return min((w.verdict.margin for w in self.walls), default=None)
 
 
-class SpaceGateRefusal(GateRefusal[SpaceDecision]):
-    """A scene in space was refused; ``decision`` holds every reason, ``where`` (e.g. ``profile PATH``)
-    prefixes the message."""
-
-    subject = "scene"
-
-
 class SpaceGate:
     """Judges scenes in space on one set of coupled axes (module docstring); thread-safe (a verdict cache only)."""
 
@@ -156,10 +149,10 @@ class SpaceGate:
         return SpaceDecision(not reasons, tuple(walls), tuple(reasons))
 
     def admit(self, scene: SpaceScene) -> SpaceDecision:
-        """The decision on ``scene``; raises :class:`SpaceGateRefusal` if it is refused."""
+        """The decision on ``scene``; raises :class:`Refusal` if it is refused."""
         decision = self.judge(scene)
         if not decision.accepted:
-            raise SpaceGateRefusal(decision)
+            raise Refusal.by_gate(decision, subject="scene")
         return decision
 
     def _explain(self, wall: SpaceWall) -> str:

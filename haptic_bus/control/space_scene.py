@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
-from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
+from haptic_bus.control.scene import validate_wall
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range
 
@@ -52,14 +52,6 @@ def _point(field: str, value: ArrayLike, context: str) -> tuple[float, ...]:
     if values.ndim != 1 or not 1 <= values.size <= MAX_DIMENSION:
         raise ParameterError(field, value, f"1 to {MAX_DIMENSION} coordinates, one per axis", context)
     return tuple(real_in_range(field, v, *POSITION_RANGE, unit="m", context=context) for v in values)
-
-
-def _validate_wall(obj: Plane | Box | Sphere, kind: str) -> None:
-    """Set ``obj``'s stiffness (N/m) and damping (N s/m) to validated floats, else ParameterError."""
-    context = f"{kind} {obj.name!r}"
-    object.__setattr__(obj, "stiffness", real_in_range("stiffness", obj.stiffness, *STIFFNESS_RANGE, unit="N/m",
-                                                        context=context))
-    object.__setattr__(obj, "damping", real_in_range("damping", obj.damping, *DAMPING_RANGE, unit="N s/m", context=context))
 
 
 @dataclass(frozen=True)
@@ -83,7 +75,7 @@ class Plane:
         object.__setattr__(self, "point", point)
         object.__setattr__(self, "normal", tuple(float(c) for c in normal / length))
         object.__setattr__(self, "_level", math.fsum(p * n for p, n in zip(self.point, self.normal)))  # point . normal
-        _validate_wall(self, "plane")
+        validate_wall(self, "plane")
 
     @property
     def dimension(self) -> int:
@@ -124,7 +116,7 @@ class Box:
             raise ParameterError("half", self.half, f"{len(center)} half sizes, one per axis", context)
         object.__setattr__(self, "center", center)
         object.__setattr__(self, "half", tuple(real_in_range("half", h, *SIZE_RANGE, unit="m", context=context) for h in half))
-        _validate_wall(self, "box")
+        validate_wall(self, "box")
 
     @property
     def dimension(self) -> int:
@@ -169,7 +161,7 @@ class Sphere:
         context = f"sphere {self.name!r}"
         object.__setattr__(self, "center", _point("center", self.center, context))
         object.__setattr__(self, "radius", real_in_range("radius", self.radius, *SIZE_RANGE, unit="m", context=context))
-        _validate_wall(self, "sphere")
+        validate_wall(self, "sphere")
 
     @property
     def dimension(self) -> int:

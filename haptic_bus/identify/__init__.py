@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from haptic_bus.identify.assessment import Finding
-    from haptic_bus.identify.fit import Estimate, NotIdentifiable, PlantFit, fit_plant
+    from haptic_bus.identify.fit import Estimate, PlantFit, Refusal, fit_plant
     from haptic_bus.identify.model import Plant
     from haptic_bus.identify.probe import ProbeResult
     from haptic_bus.identify.record import Phases, Record, Recorder, Scale
@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from haptic_bus.identify.velocity_check import VelocityCheck, check_velocity
 
 _HOME = {  # each public name -> its module, imported on first use (the fit loads scipy: ~0.8 s)
-    "Finding": "assessment", "Estimate": "fit", "NotIdentifiable": "fit", "PlantFit": "fit", "fit_plant": "fit",
+    "Finding": "assessment", "Estimate": "fit", "Refusal": "fit", "PlantFit": "fit", "fit_plant": "fit",
     "Plant": "model", "ProbeResult": "probe", "Phases": "record", "Record": "record", "Recorder": "record",
     "Scale": "record", "Identification": "result", "identify": "result", "Plan": "session", "Session": "session",
     "VelocityCheck": "velocity_check", "check_velocity": "velocity_check",
@@ -40,7 +40,7 @@ __all__ = [
     "Estimate",
     "Finding",
     "Identification",
-    "NotIdentifiable",
+    "Refusal",
     "Phases",
     "Plan",
     "Plant",

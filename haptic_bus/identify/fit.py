@@ -32,7 +32,7 @@ import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
 from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
-from haptic_bus.errors import HapticBusError
+from haptic_bus.errors import Refusal
 from haptic_bus.identify.bounds import MAX_DELAY
 from haptic_bus.identify.model import IncrementEquations, Plant, quantization_variance, usable_equations
 from haptic_bus.identify.record import Record
@@ -44,10 +44,6 @@ CORRELATION_LAGS = range(3, 21)  # beyond the rounding's own reach (lags 1, 2)
 DELAY_RESOLUTION = 0.05  # samples: the fraction is resolved when its standard error is below this
 WHOLE_TOLERANCE = 0.01  # samples: a delay this close to a whole number (or within 3 sigma) is whole
 _TOLERANCE = 1e-12
-
-
-class NotIdentifiable(HapticBusError):
-    """The record holds too few usable equations for any fit (the handle hardly moved)."""
 
 
 @dataclass(frozen=True)
@@ -124,13 +120,13 @@ class PlantFit:
 
 
 def fit_plant(record: Record, max_delay: int = MAX_DELAY) -> PlantFit:
-    """Fit ``m``, ``b``, ``Fc`` and ``D`` to ``record`` (see the module docstring); NotIdentifiable
+    """Fit ``m``, ``b``, ``Fc`` and ``D`` to ``record`` (see the module docstring); Refusal
     when fewer than :data:`MIN_EQUATIONS` equations are usable."""
     usable = usable_equations(record)
     if usable.sum() < MIN_EQUATIONS:
-        raise NotIdentifiable(f"only {int(usable.sum())} of {usable.size} cycles moved clearly in one direction "
-                              f"(at least {MIN_EQUATIONS} are needed): the handle moved too few encoder increments "
-                              f"({record.scale.position:g} m each) per cycle, or kept sticking")
+        raise Refusal(f"only {int(usable.sum())} of {usable.size} cycles moved clearly in one direction "
+                      f"(at least {MIN_EQUATIONS} are needed): the handle moved too few encoder increments "
+                      f"({record.scale.position:g} m each) per cycle, or kept sticking")
     systems = [IncrementEquations(record, d, usable) for d in range(max_delay + 1)]
     linear = [_linear_start(system) for system in systems]
     ranked = sorted(range(len(systems)), key=lambda d: linear[d][1])[:REFINED]

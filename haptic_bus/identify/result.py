@@ -6,9 +6,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from haptic_bus.analysis.velocity import VelocityModel
+from haptic_bus.errors import Refusal
 from haptic_bus.identify.assessment import Finding, assess
 from haptic_bus.identify.bounds import MAX_DELAY
-from haptic_bus.identify.fit import Estimate, NotIdentifiable, PlantFit, fit_plant
+from haptic_bus.identify.fit import Estimate, PlantFit, fit_plant
 from haptic_bus.identify.probe import ProbeResult
 from haptic_bus.identify.record import Record
 from haptic_bus.identify.velocity_check import VelocityCheck, check_velocity
@@ -83,7 +84,7 @@ def identify(record: Record, probe: ProbeResult, left_envelope: bool = False,
         return Identification(record, probe, None, None, ())
     try:
         fit = fit_plant(record, max_delay)
-    except NotIdentifiable as error:
+    except Refusal as error:
         return Identification(record, probe, None, None, (Finding("travel", "cannot support", str(error)),))
     velocity = check_velocity(record, fit.plant, declared)
     return Identification(record, probe, fit, velocity, assess(record, fit, velocity, left_envelope, max_delay))

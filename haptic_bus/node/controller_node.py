@@ -179,7 +179,7 @@ class ControllerNode:
                 wall = current[self._names[i]]
                 walls[self._names[i]] = (wall.stiffness if K is None else K, wall.damping if B is None else B)
             decision = self.controller.set_walls(walls)
-        except HapticBusError as error:  # GateRefusal or an invalid value (NaN, negative, ...)
+        except HapticBusError as error:  # Refusal or an invalid value (NaN, negative, ...)
             self.refused += 1
             self.last_result = f"refused: {error}"
             logger.warning("node %d: commit %s", self.node_id, self.last_result)

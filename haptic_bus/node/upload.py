@@ -6,12 +6,11 @@ scene objects it has; only then are the staged K and B written (0x2100 + i, sub 
 committed (0x2001), and the verdict read (0x2002).  What can go wrong, each its own error with
 one line to say:
 
-- nobody answers on the node within the timeout: :class:`NoController` (a ``DriveTimeout``);
+- nobody answers on the node within the timeout: a ``DriveTimeout`` asking whether a run is going on;
 - another device answers (a drive's node id given instead of the controller's):
-  :class:`NotAController`, naming its 0x1000 (and 0x1018:02);
-- an object index the controller does not have: :class:`NoSuchObject` (a ``ParameterError``:
-  nothing was written);
-- the gate refuses: :class:`UploadRefused`, with the reason the node keeps at 0x2002.
+  a ``DriveError``, naming its 0x1000 (and 0x1018:02);
+- an object index the controller does not have: a ``ParameterError`` (nothing was written);
+- the gate refuses: a ``Refusal``, with the abort code and the reason the node keeps at 0x2002.
 """
 
 from __future__ import annotations
@@ -28,7 +27,7 @@ from drives.canopen.scan import device_kind
 from drives.canopen.sdo import SdoAccess
 from drives.cia301 import DEVICE_TYPE, IDENTITY, SdoAbort, sdo_abort_text
 from drives.cia402 import DataType
-from haptic_bus.errors import DriveError, DriveTimeout, HapticBusError, ParameterError, SdoAbortError
+from haptic_bus.errors import DriveError, DriveRefusal, DriveTimeout, ParameterError, Refusal
 from haptic_bus.node.controller_node import (
     COMMIT,
     LAST_RESULT,
@@ -44,41 +43,16 @@ _REAL64 = struct.Struct("<d")
 _NAMES_SHOWN = 8  # object names listed when an index is refused
 
 
-class UploadRefused(HapticBusError):
-    """A running controller refused an upload (SDO abort ``abort_code``); ``reason`` is its 0x2002 text."""
-
-    def __init__(self, node_id: int, abort_code: int, reason: str) -> None:
-        self.node_id = node_id
-        self.abort_code = abort_code
-        self.reason = reason
-        super().__init__(f"controller node {node_id} refused the upload (abort 0x{abort_code:08X}): {reason}")
-
-
-class NoController(DriveTimeout):
-    """Nothing answered on the controller's node id within the timeout."""
-
-    def __init__(self, node_id: int, timeout: float) -> None:
-        super().__init__(f"node {node_id}", f"no controller answered on node {node_id} within {timeout:g} s "
-                                            f"(is haptic-bus run going on this bus with --controller-node-id {node_id}?)")
-
-
-class NotAController(DriveError):
-    """A node answered, but it is not a haptic-bus controller (a drive's node id, say)."""
-
-
-class NoSuchObject(ParameterError):
-    """The controller has no scene object of that index (asked before any write)."""
-
-
 def _device_type(sdo: SdoAccess, node_id: int, timeout: float) -> int:
-    """0x1000 of the node: NoController if silent, NotAController if it aborts the read."""
+    """0x1000 of the node: DriveTimeout if silent, DriveError if it aborts the read."""
     try:
         return sdo.read_int(DEVICE_TYPE, 0, DataType.UNSIGNED32)
-    except SdoAbortError as error:
-        raise NotAController(f"node {node_id}", f"node {node_id} answered, but not as a haptic-bus controller "
-                                                f"(reading 0x1000: {sdo_abort_text(error.abort_code)})") from None
+    except DriveRefusal as error:
+        raise DriveError(f"node {node_id}", f"node {node_id} answered, but not as a haptic-bus controller "
+                                            f"(reading 0x1000: {sdo_abort_text(error.code)})") from None
     except DriveTimeout:
-        raise NoController(node_id, timeout) from None
+        raise DriveTimeout(f"node {node_id}", f"no controller answered on node {node_id} within {timeout:g} s (is "
+                                              f"haptic-bus run going on this bus with --controller-node-id {node_id}?)") from None
 
 
 def check_controller(sdo: SdoAccess, node_id: int, timeout: float) -> int:
@@ -86,30 +60,30 @@ def check_controller(sdo: SdoAccess, node_id: int, timeout: float) -> int:
     device_type = _device_type(sdo, node_id, timeout)
     if device_type != 0:
         role = "a drive" if device_type & 0xFFFF == 402 else "another device"
-        raise NotAController(f"node {node_id}", f"node {node_id} answered as {role}, not a haptic-bus controller "
+        raise DriveError(f"node {node_id}", f"node {node_id} answered as {role}, not a haptic-bus controller "
                                                 f"(0x1000 = 0x{device_type:08X}: {device_kind(device_type)})")
     try:
         product = sdo.read_int(IDENTITY, 2, DataType.UNSIGNED32)
-    except SdoAbortError:
+    except DriveRefusal:
         product = None
     if product != PRODUCT_CODE:
         said = "no 0x1018:02" if product is None else f"0x1018:02 = 0x{product:08X}"
-        raise NotAController(f"node {node_id}", f"node {node_id} answered, but not as a haptic-bus controller "
+        raise DriveError(f"node {node_id}", f"node {node_id} answered, but not as a haptic-bus controller "
                                                 f"(0x1000 = 0, {said}, a controller's is 0x{PRODUCT_CODE:08X} 'HBUS')")
     return sdo.read_int(OBJECT_COUNT, 0, DataType.UNSIGNED8)
 
 
 def _refuse_unknown_objects(sdo: SdoAccess, node_id: int, count: int, indices: list[int]) -> None:
-    """NoSuchObject for the first index not below ``count``, listing the objects the controller has."""
+    """ParameterError for the first index not below ``count``, listing the objects the controller has."""
     missing = [i for i in indices if not 0 <= i < count]
     if not missing:
         return
     if count == 0:
-        raise NoSuchObject("--object", missing[0], f"an object of the running scene; controller node {node_id} has none",
-                           "upload")
+        raise ParameterError("--object", missing[0], f"an object of the running scene; controller node {node_id} has none",
+                             "upload")
     names = [f"{i} {sdo.upload(WALL_BASE + i, SUB_NAME).decode(errors='replace')!r}" for i in range(min(count, _NAMES_SHOWN))]
     listing = ", ".join(names) + (", ..." if count > _NAMES_SHOWN else "")
-    raise NoSuchObject("--object", missing[0], f"an object of the running scene, 0..{count - 1} (controller node "
+    raise ParameterError("--object", missing[0], f"an object of the running scene, 0..{count - 1} (controller node "
                                                f"{node_id} has {count} object{'s' if count > 1 else ''}: {listing})", "upload")
 
 
@@ -119,8 +93,8 @@ def upload_walls(
     """Write ``{object index: (K, B)}`` to the running controller on ``node_id`` and commit; its verdict.
 
     ``bus``: python-can keyword arguments (python-can's configuration fills in the rest, as for
-    every bus here).  Raises (module docstring) :class:`NoController`, :class:`NotAController`,
-    :class:`NoSuchObject` (before any write) or :class:`UploadRefused`.
+    every bus here).  Raises (module docstring) :class:`DriveTimeout` (no controller), :class:`DriveError`
+    (not a controller), :class:`ParameterError` (before any write) or :class:`Refusal`.
     """
     network = canopen.Network(open_bus(**dict(bus)))
     network.listeners.append(ReceiveErrors("upload"))  # type: ignore[arg-type]  # a can.Listener, as python-can wants
@@ -135,10 +109,11 @@ def upload_walls(
                 sdo.download(WALL_BASE + i, SUB_STIFFNESS, _REAL64.pack(K))
                 sdo.download(WALL_BASE + i, SUB_DAMPING, _REAL64.pack(B))
             sdo.download(COMMIT, 0, b"\x01")
-        except SdoAbortError as error:
-            reason = (sdo.upload(LAST_RESULT, 0).decode(errors="replace") if error.abort_code == SdoAbort.VALUE_RANGE
+        except DriveRefusal as error:
+            reason = (sdo.upload(LAST_RESULT, 0).decode(errors="replace") if error.code == SdoAbort.VALUE_RANGE
                       else error.message)
-            raise UploadRefused(node_id, error.abort_code, reason) from None
+            raise Refusal(f"controller node {node_id} refused the upload (abort 0x{error.code:08X}): {reason}",
+                          (reason,)) from None
         return sdo.upload(LAST_RESULT, 0).decode(errors="replace")
     finally:
         shut_down(network, "upload")

@@ -22,7 +22,7 @@ from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, TARGET_TORQUE
 from haptic_bus.analysis.loop import DELAY_RANGE, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.errors import ParameterError
-from haptic_bus.profile.reader import REQUIRED, ProfileError, Reader
+from haptic_bus.profile.reader import REQUIRED, Reader, profile_error
 
 TIMINGS: dict[str, float | None] = {"ideal": 0, "cia402": 1, "reception": None}
 """Timing name -> its least loop delay in samples, the default of ``[loop] delay`` (None: required)."""
@@ -103,7 +103,7 @@ def read_device(path: pathlib.Path, table: object, prefix: str = "device",
     position = r.real("position_per_count", *SCALE_RANGE, "m per 0x6064 increment", low_inclusive=False)
     rated = r.real("rated_torque", *RATED_TORQUE_RANGE, "N m (0x6076)")
     if not math.isclose(rated * 1000.0, round(rated * 1000.0), rel_tol=1e-12, abs_tol=1e-9):
-        raise ProfileError(path, r.field("rated_torque"), rated, "a whole number of mN m (0x6076 is UNSIGNED32 in mN m)")
+        raise profile_error(path, r.field("rated_torque"), rated, "a whole number of mN m (0x6076 is UNSIGNED32 in mN m)")
     transmission = r.real("force_per_torque", *SCALE_RANGE, "N/(N m)", low_inclusive=False)
     permille = r.whole("max_torque_permille", *PERMILLE_RANGE)
     model = r.velocity_model("velocity")
@@ -139,4 +139,4 @@ def check_velocity_period(path: pathlib.Path, field: str, device: DeviceProfile,
     try:
         device.velocity.check_period(period)
     except ParameterError as error:
-        raise ProfileError(path, field, error.value, error.allowed) from None
+        raise profile_error(path, field, error.value, error.allowed) from None

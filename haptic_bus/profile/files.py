@@ -5,7 +5,7 @@ from __future__ import annotations
 import importlib.resources
 import pathlib
 
-from haptic_bus.profile.reader import ProfileError, read_document
+from haptic_bus.profile.reader import profile_error, read_document
 
 
 def _profiles_folder() -> pathlib.Path:
@@ -19,12 +19,12 @@ def shipped_profiles(axes: bool = False) -> dict[str, pathlib.Path]:
 
 
 def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:
-    """The file of a shipped profile name, or ``path_or_name`` as a path if it is one; ProfileError if neither."""
+    """The file of a shipped profile name, or ``path_or_name`` as a path if it is one; ParameterError if neither."""
     candidate = pathlib.Path(path_or_name)
     if candidate.is_file():
         return candidate
     shipped = {**shipped_profiles(), **shipped_profiles(axes=True)}
     if isinstance(path_or_name, str) and path_or_name in shipped:
         return shipped[path_or_name]
-    raise ProfileError(path_or_name, "profile", str(path_or_name),
-                       f"an existing TOML file or a shipped profile name: {', '.join(shipped) or 'none'}")
+    raise profile_error(path_or_name, "profile", str(path_or_name),
+                        f"an existing TOML file or a shipped profile name: {', '.join(shipped) or 'none'}")

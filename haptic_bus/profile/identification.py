@@ -13,7 +13,7 @@ from dataclasses import dataclass, fields
 from haptic_bus.analysis.loop import DELAY_RANGE, FRICTION_RANGE, MASS_RANGE
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.profile.device import DeviceProfile, LoopProfile
-from haptic_bus.profile.reader import ProfileError, Reader
+from haptic_bus.profile.reader import Reader, profile_error
 
 CREDIBLE_SIGMAS = 3.0
 """Identified values: the gate judges at the estimate -/+ this many standard errors."""
@@ -78,13 +78,13 @@ def check_against_identification(path: pathlib.Path, device: DeviceProfile, loop
     largest credible (:data:`CREDIBLE_SIGMAS` standard errors)."""
     declared, found = device.velocity, measured.velocity
     if declared.kind != found.kind or declared.time < found.time * (1.0 - 1e-9):
-        raise ProfileError(path, "device.velocity", str(declared),
-                           f"the model identification measured on {measured.date}: {found} (or a longer window or filter)")
+        raise profile_error(path, "device.velocity", str(declared),
+                            f"the model identification measured on {measured.date}: {found} (or a longer window or filter)")
     if device.friction > measured.lowest_credible_friction * (1.0 + 1e-9):
-        raise ProfileError(path, "device.friction", device.friction,
-                           f"at most {measured.lowest_credible_friction:.6g} N s/m, the lowest credible value measured on "
-                           f"{measured.date} (b = {measured.friction:.6g} ± {measured.friction_stderr:.2g} N s/m)")
+        raise profile_error(path, "device.friction", device.friction,
+                            f"at most {measured.lowest_credible_friction:.6g} N s/m, the lowest credible value measured on "
+                            f"{measured.date} (b = {measured.friction:.6g} ± {measured.friction_stderr:.2g} N s/m)")
     if loop.delay < measured.largest_credible_delay - 1e-9:
-        raise ProfileError(path, "loop.delay", loop.delay,
-                           f"at least {measured.largest_credible_delay:.6g} samples, the largest credible delay measured "
-                           f"on {measured.date} (D = {measured.delay:.6g} ± {measured.delay_stderr:.2g} samples)")
+        raise profile_error(path, "loop.delay", loop.delay,
+                            f"at least {measured.largest_credible_delay:.6g} samples, the largest credible delay measured "
+                            f"on {measured.date} (D = {measured.delay:.6g} ± {measured.delay_stderr:.2g} samples)")

@@ -14,7 +14,7 @@ import types
 from collections.abc import Mapping
 from typing import Any
 
-from haptic_bus.profile.reader import REQUIRED, ProfileError, Reader
+from haptic_bus.profile.reader import REQUIRED, Reader, profile_error
 
 # Operator models, aligned with sim_drive.operator (field -> (low, high, unit, default or
 # REQUIRED)); haptic_bus does not import sim_drive (dependencies point the other way).
@@ -50,8 +50,8 @@ def read_operator_model(path: pathlib.Path, table: object) -> Mapping[str, Any]:
         given = r.text("path")
         csv = (path.parent / given).resolve()
         if not csv.is_file():
-            raise ProfileError(path, "operator_model.path", given,
-                               f"a CSV file (time s, force N), relative to {path.parent}")
+            raise profile_error(path, "operator_model.path", given,
+                                f"a CSV file (time s, force N), relative to {path.parent}")
         out["path"] = str(csv)
         out["interpolation"] = r.text("interpolation", choices=INTERPOLATIONS, default="hold")
     for key, (low, high, unit, default) in OPERATOR_FIELDS[model].items():

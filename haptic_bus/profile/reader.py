@@ -16,7 +16,7 @@ from typing import Any
 
 from haptic_bus.analysis.velocity import ALLOWED as VELOCITY_MODELS
 from haptic_bus.analysis.velocity import VelocityModel
-from haptic_bus.errors import InvalidInput, ParameterError
+from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range, whole_in_range
 
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
@@ -26,28 +26,24 @@ REQUIRED = object()
 """The default of a field that must be given."""
 
 
-class ProfileError(ParameterError):
-    """A profile file is invalid: ``path`` (the file), ``field`` (dotted, e.g.
-    ``scene.objects[2].stiffness``), ``value`` and ``allowed``."""
-
-    def __init__(self, path: pathlib.Path | str, field: str, value: object, allowed: str) -> None:
-        self.path = str(path)
-        self.field = field
-        super().__init__(field, value, allowed, context=f"profile {self.path}")
+def profile_error(path: pathlib.Path | str, field: str, value: object, allowed: str) -> ParameterError:
+    """The error for an invalid field of the profile file at ``path``: ``field`` (dotted, e.g.
+    ``scene.objects[2].stiffness``) is its ``name``, ``profile PATH`` its ``context``."""
+    return ParameterError(field, value, allowed, context=f"profile {path}")
 
 
 def read_document(path: pathlib.Path) -> dict[str, Any]:
-    """The TOML document of a profile file; ProfileError when unreadable or not TOML."""
+    """The TOML document of a profile file; ParameterError when unreadable or not TOML."""
     try:
         with open(path, "rb") as handle:
             return tomllib.load(handle)
     except OSError as error:
-        raise ProfileError(path, "profile", str(path), f"a readable file ({error.strerror})") from None
+        raise profile_error(path, "profile", str(path), f"a readable file ({error.strerror})") from None
     except tomllib.TOMLDecodeError as error:
-        raise ProfileError(path, "(TOML syntax)", str(error), "valid TOML 1.0") from None
+        raise profile_error(path, "(TOML syntax)", str(error), "valid TOML 1.0") from None
     except UnicodeDecodeError as error:  # TOML is UTF-8 text
-        raise ProfileError(path, "(encoding)", f"byte 0x{error.object[error.start]:02X} at {error.start}",
-                           "UTF-8 text (TOML 1.0)") from None
+        raise profile_error(path, "(encoding)", f"byte 0x{error.object[error.start]:02X} at {error.start}",
+                            "UTF-8 text (TOML 1.0)") from None
 
 
 class Reader:
@@ -56,7 +52,7 @@ class Reader:
     def __init__(self, path: pathlib.Path, prefix: str, table: object, silent: Mapping[str, object] | None = None) -> None:
         self.path, self.prefix = path, prefix
         if not isinstance(table, dict):
-            raise ProfileError(path, prefix, table, "a TOML table")
+            raise profile_error(path, prefix, table, "a TOML table")
         self.table = table
         self.silent: Mapping[str, object] = silent or {}
         self.used: set[str] = set()
@@ -69,15 +65,15 @@ class Reader:
         if key not in self.table:
             default = self.silent.get(key, REQUIRED) if default is REQUIRED else default
             if default is REQUIRED:
-                raise ProfileError(self.path, self.field(key), "<missing>", f"required: {allowed}")
+                raise profile_error(self.path, self.field(key), "<missing>", f"required: {allowed}")
             return default
         return self.table[key]
 
     def _wrap(self, key: str, check: Callable[[object], Any], value: object) -> Any:
         try:
             return check(value)
-        except InvalidInput as error:
-            raise ProfileError(self.path, self.field(key), value, error.allowed) from None
+        except ParameterError as error:
+            raise profile_error(self.path, self.field(key), value, error.allowed) from None
 
     def real(self, key: str, low: float, high: float, unit: str, *, low_inclusive: bool = True,
              default: object = REQUIRED) -> float:
@@ -88,13 +84,13 @@ class Reader:
     def whole(self, key: str, low: int, high: int, default: object = REQUIRED) -> int:
         value = self.raw(key, f"an integer in [{low}, {high}]", default)
         if isinstance(value, float):  # TOML distinguishes 3000 from 3000.0; a count is an integer
-            raise ProfileError(self.path, self.field(key), value, f"an integer in [{low}, {high}]")
+            raise profile_error(self.path, self.field(key), value, f"an integer in [{low}, {high}]")
         return self._wrap(key, lambda v: whole_in_range(key, v, low, high), value)
 
     def flag(self, key: str, default: object = REQUIRED) -> bool:
         value = self.raw(key, "true or false", default)
         if not isinstance(value, bool):
-            raise ProfileError(self.path, self.field(key), value, "true or false")
+            raise profile_error(self.path, self.field(key), value, "true or false")
         return value
 
     def text(self, key: str, *, pattern: re.Pattern | None = None, choices: tuple[str, ...] = (),
@@ -105,7 +101,7 @@ class Reader:
         ok = isinstance(value, str) and value.strip() != ""
         ok = ok and (not choices or value in choices) and (pattern is None or bool(pattern.match(value)))
         if not ok:
-            raise ProfileError(self.path, self.field(key), value, allowed)
+            raise profile_error(self.path, self.field(key), value, allowed)
         return value  # type: ignore[return-value]  # checked: a str
 
     def velocity_model(self, key: str, default: object = REQUIRED) -> VelocityModel:
@@ -125,5 +121,5 @@ class Reader:
         allowed = set(keys)
         unknown = [k for k in self.table if k not in allowed]
         if unknown:
-            raise ProfileError(self.path, self.field(unknown[0]), self.table[unknown[0]],
-                               f"no such key; keys of [{self.prefix or 'top level'}]: {', '.join(sorted(allowed))}")
+            raise profile_error(self.path, self.field(unknown[0]), self.table[unknown[0]],
+                                f"no such key; keys of [{self.prefix or 'top level'}]: {', '.join(sorted(allowed))}")

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
 from haptic_bus.profile.device import DeviceProfile
-from haptic_bus.profile.reader import NAME_PATTERN, ProfileError, Reader
+from haptic_bus.profile.reader import NAME_PATTERN, Reader, profile_error
 
 POSITION_RANGE = (-1e6, 1e6)  # m, as haptic_bus.control.scene
 FORCE_RANGE = (0.0, 1e6)  # N, exclusive low
@@ -40,13 +40,13 @@ def _read_object(path: pathlib.Path, index: int, table: object) -> ObjectTable:
         position = r.real("position", *POSITION_RANGE, "m")
         normal = r.raw("normal", "-1 (solid above position, pushed into in +x) or +1 (solid below)")
         if isinstance(normal, bool) or normal not in (-1, 1):
-            raise ProfileError(path, r.field("normal"), normal, "-1 (solid above position) or +1 (solid below)")
+            raise profile_error(path, r.field("normal"), normal, "-1 (solid above position) or +1 (solid below)")
         where = (position, -1.0 if normal == -1 else 1.0)
     elif kind == "slot":
         low = r.real("low", *POSITION_RANGE, "m")
         high = r.real("high", *POSITION_RANGE, "m")
         if not high > low:
-            raise ProfileError(path, r.field("high"), high, f"greater than low = {low:g} m")
+            raise profile_error(path, r.field("high"), high, f"greater than low = {low:g} m")
         where = (low, high)
     else:
         where = (r.real("center", *POSITION_RANGE, "m"), r.real("reach", 0.0, 1e6, "m", low_inclusive=False))
@@ -55,29 +55,29 @@ def _read_object(path: pathlib.Path, index: int, table: object) -> ObjectTable:
 
 
 def read_scene(path: pathlib.Path, table: object) -> tuple[ObjectTable, ...]:
-    """``[scene]``: its ``[[scene.objects]]`` checked (types, ranges, unique names); ProfileError naming the field."""
+    """``[scene]``: its ``[[scene.objects]]`` checked (types, ranges, unique names); ParameterError naming the field."""
     r = Reader(path, "scene", table)
     objects = r.raw("objects", "an array of tables [[scene.objects]] (may be empty)", default=[])
     if not isinstance(objects, list):
-        raise ProfileError(path, "scene.objects", objects, "an array of tables [[scene.objects]]")
+        raise profile_error(path, "scene.objects", objects, "an array of tables [[scene.objects]]")
     r.done()
     scene = tuple(_read_object(path, i, obj) for i, obj in enumerate(objects))
     seen: dict[str, int] = {}
     for i, obj in enumerate(scene):
         if obj.name in seen:
-            raise ProfileError(path, f"scene.objects[{i}].name", obj.name,
-                               f"a name no other object uses (scene.objects[{seen[obj.name]}] has it)")
+            raise profile_error(path, f"scene.objects[{i}].name", obj.name,
+                                f"a name no other object uses (scene.objects[{seen[obj.name]}] has it)")
         seen[obj.name] = i
     return scene
 
 
 def read_force_limit(path: pathlib.Path, table: object, device: DeviceProfile) -> float:
-    """``[limits] force_limit`` in N: in (0, what the device's 0x6072 allows]; ProfileError otherwise."""
+    """``[limits] force_limit`` in N: in (0, what the device's 0x6072 allows]; ParameterError otherwise."""
     limits = Reader(path, "limits", table)
     force_limit = limits.real("force_limit", *FORCE_RANGE, "N", low_inclusive=False)
     limits.done()
     if force_limit > device.max_force * (1 + 1e-12):
-        raise ProfileError(
+        raise profile_error(
             path, "limits.force_limit", force_limit,
             f"(0, {device.max_force:g}] N, the force 0x6072 allows: max_torque_permille {device.max_torque_permille}"
             f" * rated_torque {device.rated_torque:g} N m * force_per_torque {device.force_per_torque:g} N/(N m) / 1000")

@@ -56,7 +56,7 @@ def write_truth(profile: ProfileSource, truth: Mapping[str, Any], operator: Mapp
                 folder: pathlib.Path) -> pathlib.Path:
     """``folder/<name>-truth-N.toml``: profile ``profile`` (a shipped name or a path) with each
     ``[device]`` value of ``truth`` and, if given, the ``[operator_model]`` table ``operator``
-    replaced; read back and validated whole (ProfileError/ParameterError naming the field)."""
+    replaced; read back and validated whole (ParameterError naming the field)."""
     import tomlkit
 
     from haptic_bus.app.profiles import read_profile, resolve_profile

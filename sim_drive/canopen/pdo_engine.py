@@ -21,7 +21,7 @@ import can
 
 from drives.cia301 import EmcyCode
 from sim_drive.canopen.emergency import Emergency
-from sim_drive.canopen.object_access import ObjectAccess, Value
+from sim_drive.canopen.pdo_access import PdoAccess, Value
 from sim_drive.canopen.pdo_table import PdoChannel, PdoTable
 from sim_drive.device import SimulatedDrive
 from sim_drive.sync_clock import SyncClock
@@ -44,7 +44,7 @@ class PdoEngine:
     """TPDO encoding and RPDO decoding for one slave (objects read and written through ``access``);
     ``send(cob_id, data)`` puts a frame on the bus."""
 
-    def __init__(self, table: PdoTable, drive: SimulatedDrive, access: ObjectAccess, send: Callable[[int, bytes], None],
+    def __init__(self, table: PdoTable, drive: SimulatedDrive, access: PdoAccess, send: Callable[[int, bytes], None],
                  emergency: Emergency, counters: SlaveCounters, sync_clock: SyncClock | None = None) -> None:
         self.table = table
         self.drive = drive

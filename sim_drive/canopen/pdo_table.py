@@ -17,7 +17,7 @@ Rules enforced (CiA 301 7.5.2.35-7.5.2.38):
 - mapping entries (sub 1..n) are writable only while the PDO is invalid and sub 0 is 0;
 - sub 0 may be set only while the PDO is invalid, to at most the entries the mapping record
   has (and its HighLimit, if the dictionary gives one); the entries it enables must name
-  PDO-mappable objects of the right direction (:mod:`~sim_drive.canopen.object_access`) with
+  PDO-mappable objects of the right direction (:mod:`~sim_drive.canopen.pdo_access`) with
   their full bit length, 64 bits at most.
 
 The PDOs and their limits are the object dictionary's: a PDO whose communication record the
@@ -41,8 +41,8 @@ from canopen import ObjectDictionary, SdoAbortedError
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 
 from drives.cia301 import COB_ID_29_BIT, COB_ID_INVALID, COB_ID_MASK, is_restricted_cob_id
-from sim_drive.canopen.object_access import ObjectAccess
 from sim_drive.canopen.od_defaults import default_int
+from sim_drive.canopen.pdo_access import PdoAccess
 
 logger = logging.getLogger(__name__)
 
@@ -106,7 +106,7 @@ class PdoTable:
     def __init__(
         self,
         object_dictionary: ObjectDictionary,
-        access: ObjectAccess,
+        access: PdoAccess,
         on_change: Callable[[PdoChannel | None], None],
     ) -> None:
         self._od = object_dictionary

@@ -58,7 +58,7 @@ from sim_drive.bus_timing import BusLoadMeter
 from sim_drive.canopen.communication import CommunicationObjects
 from sim_drive.canopen.emergency import Emergency
 from sim_drive.canopen.manufacturer import ManufacturerObjects
-from sim_drive.canopen.object_access import ObjectAccess
+from sim_drive.canopen.pdo_access import PdoAccess
 from sim_drive.canopen.pdo_engine import PdoEngine, SlaveCounters
 from sim_drive.canopen.pdo_table import PdoChannel, PdoTable
 from sim_drive.canopen.standard_od import object_dictionary
@@ -172,7 +172,7 @@ class CanopenSimDrive:
         self.emergency = Emergency(self._node.emcy, self.drive, self._may_send_emcy)
         self._comm = CommunicationObjects(dictionary, self.drive, self.timers, self.emergency, self.node_id)
         self._manufacturer = ManufacturerObjects(self.drive, self.counters) if eds is None else None  # a vendor's area is its own
-        access = ObjectAccess(self.drive, self._node)
+        access = PdoAccess(self.drive, self._node)
         self._pdos = PdoTable(dictionary, access, self._on_pdo_change)
         self._engine = PdoEngine(self._pdos, self.drive, access, self._send, self.emergency, self.counters, sync_clock)
         self._reset_communication()

@@ -9,7 +9,7 @@ The slave serves the EDS as it stands, through canopen's EDS import (:func:`cano
   (and the HighLimit of its sub 0), its default mappings and COB-IDs
   (:mod:`sim_drive.canopen.pdo_table`);
 - the CiA-402 objects the core implements are live where the EDS has them; its other objects
-  hold their EDS default, and what is written to them (:mod:`sim_drive.canopen.object_access`);
+  hold their EDS default, and what is written to them (:mod:`sim_drive.canopen.pdo_access`);
   the manufacturer area is the vendor's (stored values), never the simulator's 0x2000..;
 - the factor group and SI unit objects the EDS has state the simulated plant's scaling, as with
   ``--od standard`` (:class:`~sim_drive.canopen.standard_od.StandardObjects`);

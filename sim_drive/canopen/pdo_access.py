@@ -28,7 +28,7 @@ logger = logging.getLogger(__name__)
 Value = int | float
 
 
-class ObjectAccess:
+class PdoAccess:
     """PDO access to the objects of ``node``'s dictionary, live for those ``drive`` implements."""
 
     def __init__(self, drive: SimulatedDrive, node: LocalNode) -> None:

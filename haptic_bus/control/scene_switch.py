@@ -19,10 +19,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
+from haptic_bus.control.gate import GateDecision, PassivityGate
 from haptic_bus.control.record import EventLog
-from haptic_bus.control.scene import CompiledScene, compile_scene, object_to_dict
-from haptic_bus.errors import ParameterError
+from haptic_bus.control.scene import CompiledScene, compile_scene, object_to_dict, with_wall_law
+from haptic_bus.errors import ParameterError, Refusal
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ class SceneSwitch:
         return self._latest
 
     def upload(self, scene: CompiledScene, origin: str = "upload") -> GateDecision:
-        """Gate ``scene`` and stage it for the next cycle boundary; GateRefusal (logged) if refused."""
+        """Gate ``scene`` and stage it for the next cycle boundary; Refusal (logged) if refused."""
         with self._lock:
             return self._admit(scene, origin)
 
@@ -87,21 +87,21 @@ class SceneSwitch:
             unknown = sorted(set(changes) - set(objects))
             if unknown:
                 raise ParameterError("object", unknown[0], f"one of {sorted(objects)}", "scene")
-            changed = [obj.with_parameters(*changes[obj.name]) if obj.name in changes else obj for obj in base.objects]
+            changed = [with_wall_law(obj, *changes[obj.name]) if obj.name in changes else obj for obj in base.objects]
             return self._admit(compile_scene(changed), origin)
 
     def _decide(self, scene: CompiledScene) -> GateDecision:
-        """The gate's decision; GateRefusal for a refused scene unless beyond the gate is allowed."""
+        """The gate's decision; Refusal for a refused scene unless beyond the gate is allowed."""
         decision = self.gate.judge(scene)
         if not decision.accepted and not self.beyond_gate:
-            raise GateRefusal(decision)
+            raise Refusal.by_gate(decision)
         return decision
 
     def _admit(self, scene: CompiledScene, origin: str) -> GateDecision:
         try:
             decision = self._decide(scene)
-        except GateRefusal as refusal:
-            self.events.add(self._now(), "refused", f"{origin} refused by the gate", reasons=list(refusal.decision.reasons))
+        except Refusal as refusal:
+            self.events.add(self._now(), "refused", f"{origin} refused by the gate", reasons=list(refusal.reasons))
             raise
         entry = SceneEntry(len(self.history), origin, scene, decision)
         self.history.append(entry)
