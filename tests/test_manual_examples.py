@@ -11,6 +11,7 @@ every ``haptic-bus`` command line of every page is parsed by its own parser in `
 
 from __future__ import annotations
 
+import ast
 import json
 import pathlib
 import re
@@ -107,11 +108,18 @@ def test_the_simulator_behind_a_vendors_eds_logs_what_the_eds_lacks(tmp_path: pa
     assert status == 0
 
 
-def test_the_errors_page_catches_both_roots_in_one_clause() -> None:
-    from haptic_bus.errors import ALL_ERRORS
+def test_the_errors_page_catches_each_branch_before_the_root() -> None:
+    """The block runs (its body is `...`: it catches nothing); its handlers catch the classes haptic_bus.errors
+    exports, each branch before the root, none after a class it derives from (a clause that never runs)."""
+    from haptic_bus import errors
 
-    namespace = _run(_example("errors.md"), "errors.md")
-    assert namespace["ALL_ERRORS"] is ALL_ERRORS  # the block's body is `...`: it runs, catching nothing
+    code = _example("errors.md")
+    namespace = _run(code, "errors.md")
+    [block] = [node for node in ast.walk(ast.parse(code)) if isinstance(node, ast.Try)]
+    caught = [namespace[ast.unparse(handler.type)] for handler in block.handlers if handler.type is not None]
+    assert caught == [errors.ParameterError, errors.Refusal, errors.DriveError, errors.HapticBusError]
+    assert not [(later, earlier) for i, earlier in enumerate(caught) for later in caught[i + 1:]
+                if issubclass(later, earlier)]
 
 
 def test_the_drive_loop_of_the_python_api_page_runs_against_the_simulated_drive(haptic_sim) -> None:

@@ -2,7 +2,7 @@
 build time from the class hierarchy (no hand-kept copy to drift).
 
 The roots are the classes of ``haptic_bus.errors`` and ``drives.errors`` that derive from no
-error of ours (``HapticBusError``, ``FieldbusError``, ``InvalidInput``).  Every module of
+error of ours: one, ``HapticBusError`` (defined in ``drives.errors``).  Every module of
 ``haptic_bus``, ``drives`` and ``sim_drive`` is imported first, so that the errors defined beside
 the code that raises them are subclasses Python knows of; the test and bench tooling
 (``haptic_bus.testing``, ``haptic_bus.bench``) is left out, since its extras may be absent where
