@@ -1,8 +1,7 @@
 """The loop every controller runs, and what it reports: cycles until done, stopped, or an error.
 
-A controller (:class:`~haptic_bus.control.controller.WallController` for one drive,
-:class:`~haptic_bus.control.axes_controller.AxesController` for several on one SYNC) provides
-one cycle (``step``), the run's clock and event log, how to disable its drive(s), and its
+A controller (:class:`~haptic_bus.control.controller.WallController`, for one drive or several
+on one SYNC) provides one cycle (``step``), the run's clock and event log, how to disable its drive(s), and its
 summary; :meth:`CycleLoop.run` runs the cycles and, whatever ends them -- the count, the stop
 flag, a drive error, an assumption of the gate broken, Ctrl-C -- leaves torque zero and the
 drive(s) disabled, the record kept, and the end in the summary (``exit_reason``).
