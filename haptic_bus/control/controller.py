@@ -129,7 +129,7 @@ def _per_axis(name: str, value: float | Sequence[float], size: int) -> list[floa
     return values
 
 
-class WallController(CycleLoop[AxesDriveCycle], Generic[SceneT, DecisionT]):
+class WallController(CycleLoop, Generic[SceneT, DecisionT]):
     """Renders a gated scene on ``drive`` every period (module docstring).
 
     ``drive``: one :class:`~drives.base.Drive`, or several on one SYNC (:class:`~drives.base.AxesDrive`);
