@@ -188,12 +188,19 @@ class SpaceGate:
 
     def proves_ramp(self, scene: SpaceScene) -> SpaceRampProof:
         """Whether every object's wall, scaled by every ``s`` in [0, 1], is passive along each normal a
-        contact with it can have (a sphere's: the sampled ones, as :meth:`judge` samples them): exact
-        over the continuum of ``s`` (:func:`~haptic_bus.analysis.coupled_limits.passive_along`), margin
-        >= 0.  Two overlapping objects are not judged together: the ramp is then not proven."""
+        contact with it can have (a sphere's: the sampled ones and the least-margin one the search
+        finds, as :meth:`judge` has them): exact over the continuum of ``s``
+        (:func:`~haptic_bus.analysis.coupled_limits.passive_along`), margin >= 0.  Two overlapping
+        objects are not judged together: the ramp is then not proven."""
         size = len(self.axes)
+
+        def normals(obj: SpaceObject) -> list[tuple[float, ...]]:
+            sampled = object_directions(obj, size)
+            return [*sampled, self._sphere(obj.name, obj.stiffness, obj.damping).parts[0][2]] if isinstance(obj, Sphere) \
+                else sampled
+
         walls = tuple((obj.name, n, passive_along(self.axes, n, obj.stiffness, obj.damping, "scale"))
-                      for obj in scene.objects for n in object_directions(obj, size))
+                      for obj in scene.objects for n in normals(obj))
         overlapping = tuple((a.name, b.name) for a, b in itertools.combinations(scene.objects, 2) if _overlap(a, b))
         return SpaceRampProof(all(whole_ramp(scales) for _, _, scales in walls) and not overlapping, walls, overlapping)
 
