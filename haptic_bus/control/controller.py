@@ -21,7 +21,7 @@ mille of its rated torque, saturated by its drive's clamp (:class:`~drives.base.
 the one place a target is saturated: at the axis' force limit, or 0x6072 where that is lower;
 counted) -> lowered by its own passivity layer to what its port's budget allows
 (:mod:`~haptic_bus.control.passivity_layer`) -> sent for every axis.  One axis with a 1-D
-scene takes the scalar path: the same steps in floats, no array and no tuple a cycle.
+scene (the 1-D gate's) takes the scalar path: the same steps in floats, no array and no tuple a cycle.
 
 Beside it: the supervisor (lateness of the cycle -- its oldest input: a missing axis makes the
 whole cycle late -- and the whole port's energy, :mod:`~haptic_bus.control.supervisor`), one
@@ -70,12 +70,12 @@ from drives.base import AxesDrive, AxesDriveCycle, Drive, OneAxis
 from drives.cia402 import POSITION_ACTUAL
 from haptic_bus.control.clock import CycleClock, VirtualClock
 from haptic_bus.control.cycle_loop import CycleLoop, RunSummary
+from haptic_bus.control.gate import PassivityGate
 from haptic_bus.control.kinematics import Cartesian, Kinematics
 from haptic_bus.control.passivity_layer import LayerPolicy, PassivityLayer
 from haptic_bus.control.port_account import PortAccount
 from haptic_bus.control.protocols import DecisionT, Gate, SceneT
 from haptic_bus.control.record import EventLog, RunRecord
-from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.scenes import SceneSwitch
 from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
 from haptic_bus.errors import ParameterError
@@ -98,13 +98,14 @@ def encoder_origins(axes: AxesDrive) -> list[float]:
 
 
 class PositionIntegrator:
-    """``x_k = x_0 + T * velocity_per_count * sum(v_counts)``: an exact integer sum, one rounding."""
+    """``x_k = x_0 + T * velocity_per_count * sum(v_counts)``: an exact integer sum, one rounding
+    (``x_0``, m: 0 until :meth:`start` sets it from the first sample)."""
 
     __slots__ = ("counts", "origin", "step")
 
-    def __init__(self, period: float, velocity_per_count: float, origin: float = 0.0) -> None:
+    def __init__(self, period: float, velocity_per_count: float) -> None:
         self.step = period * velocity_per_count  # m per (count * cycle)
-        self.origin = origin
+        self.origin = 0.0
         self.counts = 0
 
     def add(self, velocity_counts: int) -> float:
@@ -117,8 +118,6 @@ class PositionIntegrator:
         sample's velocity (0x606C units); returns the position in m."""
         self.origin = position - self.step * velocity_counts
         return self.add(velocity_counts)
-
-
 
 
 def _per_axis(name: str, value: float | Sequence[float], size: int) -> list[float]:
@@ -177,7 +176,7 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         names = tuple(names) if names is not None else tuple(d.name for d in axes.drives)
         if not len(scalings) == len(names) == size:
             raise ParameterError("axes", len(scalings), f"{size} drives and names (the gate's axes)", "controller")
-        self.scalar = size == 1 and isinstance(scene, CompiledScene)  # the scalar path: floats, no arrays
+        self.scalar = isinstance(gate, PassivityGate)  # the 1-D gate's scenes are 1-D: the scalar path, floats
         if not self.scalar and supervisor is not None and Action.DERATE.value in (supervisor.on_late,
                                                                                    supervisor.on_observer):
             raise ParameterError("supervisor", "derate", '"warn" or "stop" (no derate search for coupled axes)',
@@ -195,7 +194,6 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         self.hold = hold if policy.layer == "bound" and hold is not None else self.period
         limits = _per_axis("force_limit", force_limit, size)
         origins = _per_axis("origin", origin, size)
-        self.force_limits = limits
         self.torque_limits = [s.torque_limit(limit) for limit, s in zip(limits, scalings)]  # each drive's clamp
         self.integrators = tuple(PositionIntegrator(self.period, s.velocity_per_count) for s in scalings)
         softest = min((obj.stiffness for obj in scene.objects if obj.stiffness > 0), default=0.0)
