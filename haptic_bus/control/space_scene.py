@@ -277,10 +277,15 @@ class SpaceScene:
             if obj.name in changes else obj for obj in self.objects)
 
     def object_dicts(self) -> list[dict[str, Any]]:
-        """Every object, JSON-ready: ``kind`` ("plane", "box", "sphere") and its fields (m, N/m, N s/m)."""
-        return [{"kind": type(obj).__name__.lower(),
-                 **{f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if not f.name.startswith("_")}}
-                for obj in self.objects]
+        """Every object as its profile table (:func:`space_object_to_dict`)."""
+        return [space_object_to_dict(obj) for obj in self.objects]
+
+
+def space_object_to_dict(obj: SpaceObject) -> dict[str, Any]:
+    """An object in space as its profile table: ``kind`` ("plane", "box", "sphere"), ``name``, its
+    position fields (m, as lists), K (N/m), B (N s/m)."""
+    fields = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if f.init}
+    return {"kind": type(obj).__name__.lower()} | {k: list(v) if isinstance(v, tuple) else v for k, v in fields.items()}
 
 
 def _cell_size(finite: list[tuple[np.ndarray, np.ndarray]], low: np.ndarray, high: np.ndarray) -> float:
