@@ -170,7 +170,11 @@ def test_three_axes_take_uploads_through_the_coupled_gate_whole_at_a_cycle_bound
     assert [entry.to_dict()["objects"][0]["kind"] for entry in controller.scenes.history] == ["sphere", "sphere"]
 
 
-def test_a_derate_policy_is_refused_for_coupled_axes(gantry: AxesProfile) -> None:
-    with simulated_axes(gantry) as (_, axes), pytest.raises(ParameterError, match="no derate search for coupled axes"):
-        WallController(axes, gantry.gate(), gantry.space_scene(), force_limit=10.0,
-                       supervisor=SupervisorPolicy(on_late="derate"))
+def test_a_derate_policy_is_refused_for_coupled_axes_and_a_1d_scene_for_several_drives(gantry: AxesProfile) -> None:
+    one_axis = load_profile("cia402-handle")
+    with simulated_axes(gantry) as (_, axes):
+        with pytest.raises(ParameterError, match="no derate search for coupled axes"):
+            WallController(axes, gantry.gate(), gantry.space_scene(), force_limit=10.0,
+                           supervisor=SupervisorPolicy(on_late="derate"))
+        with pytest.raises(ParameterError, match="one Drive for a 1-D scene"):
+            WallController(axes, one_axis.gate(), one_axis.compiled_scene(), force_limit=10.0)

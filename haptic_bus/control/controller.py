@@ -170,13 +170,16 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         if not (isinstance(ramp_time, (int, float)) and 0.0 <= ramp_time < math.inf):
             raise ParameterError("ramp_time", ramp_time, "a finite time >= 0 s", "controller")
         axes = OneAxis(drive) if isinstance(drive, Drive) else drive
+        self.scalar = isinstance(gate, PassivityGate)  # the 1-D gate's scenes are 1-D: the scalar path, floats
+        if self.scalar and not isinstance(drive, Drive):
+            raise ParameterError("drive", axes.name, "one Drive for a 1-D scene (several drives render a scene in space, "
+                                 "judged by the coupled gate)", "controller")
         loops = tuple(gate.axes)
         size = len(loops)
         scalings = axes.scalings
         names = tuple(names) if names is not None else tuple(d.name for d in axes.drives)
         if not len(scalings) == len(names) == size:
             raise ParameterError("axes", len(scalings), f"{size} drives and names (the gate's axes)", "controller")
-        self.scalar = isinstance(gate, PassivityGate)  # the 1-D gate's scenes are 1-D: the scalar path, floats
         if not self.scalar and supervisor is not None and Action.DERATE.value in (supervisor.on_late,
                                                                                    supervisor.on_observer):
             raise ParameterError("supervisor", "derate", '"warn" or "stop" (no derate search for coupled axes)',
