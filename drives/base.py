@@ -261,12 +261,15 @@ class AxesDriveCycle:
     The shape of a :class:`DriveCycle`, one value per axis in axis order: ``read()`` starts a cycle
     (one SYNC) and returns every axis' inputs; ``clamps`` are the axes' :class:`TorqueClamp` (per
     mille, each at its axis' limit, counted in its drive's stats); ``write(torques)`` sends targets
-    :meth:`saturate` returned (or the safe outputs on every axis once any tripped).
+    :meth:`saturate` returned (or the safe outputs on every axis once any tripped).  ``one``: for one
+    drive seen as axes (:class:`OneAxis`), that drive's own :class:`DriveCycle`, which a controller's
+    scalar path calls directly (no tuple a cycle); None for several drives.
     """
 
     read: Callable[[], tuple[CyclicInputs, ...]]
     clamps: tuple[TorqueClamp, ...]
     write: Callable[[Sequence[int]], None]
+    one: DriveCycle | None = None
 
     def saturate(self, torques: Sequence[int]) -> list[int]:
         """Every axis' ``torques`` (per mille) through its own clamp."""
@@ -354,3 +357,56 @@ class Drive(abc.ABC):
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class AxesDrive(Protocol):
+    """What a controller drives: N drives on one SYNC (:class:`drives.canopen.axes.CanopenAxes`), or
+    one drive as N = 1 (:class:`OneAxis`)."""
+
+    name: str
+
+    @property
+    def drives(self) -> Sequence[Drive]:
+        """Every axis' drive, in axis order (acyclic reads: 0x6064 before cycling)."""
+        ...
+
+    @property
+    def scalings(self) -> tuple[DriveScaling, ...]:
+        """Every axis' drive-unit scaling, in axis order."""
+        ...
+
+    def cyclic(self, torque_limits: Sequence[int | None] | None = None
+               ) -> contextlib.AbstractContextManager[AxesDriveCycle]:
+        """The cyclic phase of every axis (one SYNC per cycle; any axis' fault trips every axis), each
+        axis' clamp held within its ``torque_limits`` entry (per mille; None: its drive's own)."""
+        ...
+
+    def disable(self) -> None:
+        """Zero torque and every drive disabled."""
+        ...
+
+
+class OneAxis:
+    """One :class:`Drive` as axes on one SYNC, N = 1: its cyclic phase in the N-shape
+    (:class:`AxesDriveCycle`), carrying the drive's own :class:`DriveCycle` as ``one``."""
+
+    def __init__(self, drive: Drive) -> None:
+        self.drive = drive
+        self.name = drive.name
+        self.drives = (drive,)
+
+    @property
+    def scalings(self) -> tuple[DriveScaling, ...]:
+        """The drive's scaling, the one axis'."""
+        return (self.drive.scaling,)
+
+    @contextlib.contextmanager
+    def cyclic(self, torque_limits: Sequence[int | None] | None = None) -> Iterator[AxesDriveCycle]:
+        """The drive's cyclic phase (:meth:`Drive.cyclic`, its clamp within ``torque_limits[0]`` per mille)."""
+        with self.drive.cyclic(torque_limits[0] if torque_limits else None) as cycle:
+            yield AxesDriveCycle(lambda: (cycle.read(),), (cycle.saturate,), lambda torques: cycle.write(torques[0]),
+                                 one=cycle)
+
+    def disable(self) -> None:
+        """Torque zero, the drive disabled."""
+        self.drive.disable()

@@ -24,7 +24,7 @@ from drives.errors import DriveError, DriveTimeout, ParameterError
 from drives.safety import VIRTUAL_TIME_DEADLINE
 from haptic_bus.app.axes_profile import AxesProfile, load_axes_profile
 from haptic_bus.app.rig import MultiAxisSim, simulated_axes
-from haptic_bus.control.axes_controller import AxesController
+from haptic_bus.control.controller import WallController, encoder_origins
 from tests.raw_bus import queued
 
 NODES = (5, 6, 7)
@@ -53,10 +53,10 @@ def rig(tmp_path: pathlib.Path) -> Iterator[tuple[AxesProfile, MultiAxisSim, Can
             sniffer.shutdown()
 
 
-def controller_for(profile: AxesProfile, axes: CanopenAxes) -> AxesController:
-    return AxesController(axes, profile.gate(), profile.space_scene(), names=[a.name for a in profile.axes],
-                          force_limits=[a.force_limit for a in profile.axes], supervisor=profile.supervisor,
-                          passivity=profile.passivity)
+def controller_for(profile: AxesProfile, axes: CanopenAxes) -> WallController:
+    return WallController(axes, profile.gate(), profile.space_scene(), names=[a.name for a in profile.axes],
+                          force_limit=[a.force_limit for a in profile.axes], origin=encoder_origins(axes),
+                          supervisor=profile.supervisor, passivity=profile.passivity)
 
 
 def test_each_node_has_its_own_safety_chain_written_and_the_sync_is_the_masters(rig) -> None:
@@ -186,7 +186,7 @@ def test_a_silent_axis_zeroes_every_torque_in_the_same_cycle(rig) -> None:
     controller = controller_for(profile, axes)
     silenced = 400  # cycles: 0.8 s, resting on the slope by then
 
-    def maybe_silence(running: AxesController) -> None:
+    def maybe_silence(running: WallController) -> None:
         if running.cycles == silenced:
             sim.node(6).go_silent()
 

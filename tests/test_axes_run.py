@@ -169,6 +169,27 @@ def test_a_start_inside_an_object_is_refused_with_nothing_enabled(tmp_path: path
     assert (tmp_path / "run" / "run.json").is_file()
 
 
+def test_a_start_inside_an_object_ramps_the_force_in_once_the_coupled_gate_proves_the_ramp(tmp_path: pathlib.Path) -> None:
+    path = variant(tmp_path, "inside", 'center = [0.0, -0.03, 0.0]       # m: 20 mm from the start along -y',
+                   "center = [0.0, -0.005, 0.0]")
+    profile = load_axes_profile(path)
+    channel = f"ramp-{tmp_path.name}"
+    sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}).start()
+    try:
+        result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
+                                  RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False,
+                                             start_in_contact="ramp"))
+    finally:
+        sim.stop()
+    assert result.exit_reason == "completed" and result.summary is not None and result.controller is not None
+    assert result.summary.least_energy >= 0.0 and not result.summary.observer_flagged
+    ramp = round(0.5 / profile.period)  # the default ramp time, 0.5 s, in cycles
+    scale = records(result.folder)["y"]["scale"]
+    assert scale[:ramp].tolist() == [(k + 1) / ramp for k in range(ramp)] and np.all(scale[ramp:] == 1.0)
+    document = json.loads((result.folder / "run.json").read_text())
+    assert document["start"]["ramp_time_s"] == 0.5 and len(document["start"]["positions_m"]) == 3
+
+
 @pytest.mark.parametrize(("args", "expected"), [
     (["--node-id", "5"], "--node-id = 'given with a multi-axis profile'"),
     (["--controller-node-id", "6"], "--controller-node-id = 6 is invalid; allowed: a node id none of the axes has"),

@@ -136,7 +136,7 @@ def test_a_wall_that_only_a_wrong_friction_made_passive_gives_energy_as_the_anal
     assert predicted < 0
     assert power == pytest.approx(predicted, rel=0.03)
     assert sim.drive.wall_energy < 0  # the motor gave energy out
-    assert not controller.observer.flagged  # it trusts b = 20 N s/m
+    assert not controller.ports[0].observer.flagged  # it trusts b = 20 N s/m
 
 
 def test_refused_upload_on_the_api_keeps_the_running_wall() -> None:

@@ -277,9 +277,9 @@ def test_a_short_soak_keeps_the_position_an_exact_integer_sum() -> None:
 
         observe_inputs(drive, add)
         assert controller.run(10_000).exit_reason == "completed"
-    assert controller.integrator.counts == total[0]  # integers: exact, no tolerance
+    assert controller.integrators[0].counts == total[0]  # integers: exact, no tolerance
     last = controller.record.latest()
-    assert last is not None and last["position_m"] == controller.integrator.origin + controller.integrator.step * total[0]
+    assert last is not None and last["position_m"] == controller.integrators[0].origin + controller.integrators[0].step * total[0]
     assert total[1] > 10_000 * 1_000  # the handle kept moving (|v| well above one count per cycle)
 
 

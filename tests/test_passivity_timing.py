@@ -89,8 +89,8 @@ def run(scenario: str, layer: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
         def record(c: WallController) -> None:
             truth.append(stored + sim.drive.viscous_energy + sim.drive.wall_energy)
-            measured.append(c.observer.energy)
-            rounding.append(c.observer.rounding)
+            measured.append(c.ports[0].observer.energy)
+            rounding.append(c.ports[0].observer.rounding)
 
         summary = controller.run(cycles, on_cycle=record)
     assert summary.exit_reason == "completed" and summary.cycles == cycles
@@ -145,7 +145,7 @@ def test_bound_runs_a_wall_beyond_the_gate_passively_when_the_profile_opts_in() 
         controller = WallController(drive, profile.gate(), scene, force_limit=profile.force_limit, clock=clock,
                                     origin=origin, supervisor=None, passivity=profile.passivity, hold=HOLD)
         summary = controller.run(1500, on_cycle=lambda c: (truth.append(sim.drive.viscous_energy + sim.drive.wall_energy),
-                                                           rounding.append(c.observer.rounding)))
+                                                           rounding.append(c.ports[0].observer.rounding)))
     assert summary.exit_reason == "completed" and summary.layer_interventions > 0
     assert not controller.scenes.history[0].decision.accepted  # recorded as refused by the gate
     assert np.all(np.array(truth) >= -np.array(rounding) - ROUNDING_SLACK)

@@ -51,7 +51,7 @@ from haptic_bus.analysis.theta_search import refine_minima, theta_grid
 from haptic_bus.analysis.trig import cospi, sincpi
 from haptic_bus.errors import ParameterError
 
-FAMILIES = ("K", "B")
+FAMILIES = ("K", "B", "scale")
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,9 @@ class PlaneWall:
     B: float
 
     def with_value(self, which: str, value: float) -> PlaneWall:
-        """The same wall with ``K`` (``which = "K"``) or ``B`` set to ``value``."""
+        """The same wall with ``K`` (``which = "K"``) or ``B`` set to ``value``, or both scaled by it (``"scale"``)."""
+        if which == "scale":
+            return PlaneWall(self.axes, self.normal, value * self.K, value * self.B)
         return PlaneWall(self.axes, self.normal, value, self.B) if which == "K" else PlaneWall(self.axes, self.normal,
                                                                                                 self.K, value)
 
@@ -97,12 +99,15 @@ def _pair_terms(wall: PlaneWall, theta: np.ndarray) -> tuple[ThetaComplex, Theta
 
 
 def plane_quadratic(wall: PlaneWall, which: str, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``F_theta(x) = Q2 x^2 + Q1 x + Q0`` with ``x`` = ``K`` (N/m) or ``B`` (N s/m), the other held:
+    """``F_theta(x) = Q2 x^2 + Q1 x + Q0`` with ``x`` = ``K`` (N/m) or ``B`` (N s/m), the other held,
+    or the scale ``s`` of the wall ``(s K, s B)`` (``which = "scale"``: ``ell = s (K T + B h)``):
     coefficients ``(3, n)`` highest power first, and the same with every term's magnitude."""
     T = wall.axes[0].T
     p, sigma, hold, spread = _pair_terms(wall, theta)
     if which == "K":
         base, slope = hold * wall.B, ThetaComplex.exact(theta, T, 0.0)
+    elif which == "scale":
+        base, slope = ThetaComplex.exact(theta, 0.0, 0.0), hold * wall.B + wall.K * T
     else:
         base, slope = ThetaComplex.exact(theta, wall.K * T, 0.0), hold
     U, V = p * base + 1.0, p * slope
@@ -151,10 +156,11 @@ def _ends(wall: PlaneWall, which: str, grid: np.ndarray, inside: float, upper: b
 
 
 def passive_along(axes: tuple[WallLoop, ...], normal: ArrayLike, K: float, B: float, which: str) -> PassiveSet:
-    """Every passive ``K`` (N/m) at this ``B`` (``which = "K"``), or ``B`` (N s/m) at this ``K``, of the
-    plane wall with ``normal`` on ``axes`` (module docstring): closed intervals, ascending."""
+    """Every passive ``K`` (N/m) at this ``B`` (``which = "K"``), or ``B`` (N s/m) at this ``K``, or scale
+    ``s`` in [0, 1] of the wall ``(s K, s B)`` (``"scale"``: a start ramp's), of the plane wall with
+    ``normal`` on ``axes`` (module docstring): closed intervals, ascending."""
     if which not in FAMILIES:
-        raise ParameterError("which", which, "'K' or 'B'", "passive set along a direction")
+        raise ParameterError("which", which, "'K', 'B' or 'scale'", "passive set along a direction")
     n = unit_normal(normal, len(axes))
     touched = [i for i in range(len(axes)) if n[i] != 0.0]
     if len(touched) == 1:
@@ -164,7 +170,7 @@ def passive_along(axes: tuple[WallLoop, ...], normal: ArrayLike, K: float, B: fl
         raise ParameterError("b", [axes[i].b for i in touched], "b > 0 N s/m on every axis the wall couples",
                              "limits along a direction")
     wall = PlaneWall(tuple(axes[i] for i in touched), n[touched], K, B)
-    top = STIFFNESS_RANGE[1] if which == "K" else DAMPING_RANGE[1]
+    top = {"K": STIFFNESS_RANGE[1], "B": DAMPING_RANGE[1], "scale": 1.0}[which]
     poles = coupled_poles(plane_wall(wall.axes, wall.normal, K, B))
     grid = np.unique(np.concatenate([theta_grid(axis, poles) for axis in wall.axes]))
     q, magnitudes = plane_quadratic(wall, which, grid)

@@ -25,8 +25,9 @@ from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.axes_records import axes_run_document, write_axes_run
 from haptic_bus.app.rig import MultiAxisSim, simulated_axes
 from haptic_bus.app.run_folder import prepare_run_folder
-from haptic_bus.control.axes_controller import AxesController
+from haptic_bus.control.controller import WallController, encoder_origins
 from haptic_bus.control.cycle_loop import RunSummary
+from haptic_bus.control.space_gate import SpaceDecision
 from haptic_bus.control.space_scene import SpaceScene
 
 STEADY_LEAD = 0.05  # s: a steady state is read this long before the hand turns to its next target
@@ -74,7 +75,7 @@ def contact(scene: SpaceScene, x: np.ndarray) -> tuple[str, float, float, np.nda
     return obj.name, obj.stiffness, depth, np.array(normal)
 
 
-def steady_state(controller: AxesController, sim: MultiAxisSim) -> SteadyState | None:
+def steady_state(controller: WallController[SpaceScene, SpaceDecision], sim: MultiAxisSim) -> SteadyState | None:
     """The steady state of the latest cycle (:class:`SteadyState`), None out of contact."""
     rows = [record.latest() for record in controller.records]
     if any(row is None for row in rows):
@@ -100,7 +101,7 @@ class AxesDemoResult:
     """The demo's numbers (SI), its steady states, and the files it wrote."""
 
     profile: AxesProfile
-    controller: AxesController
+    controller: WallController[SpaceScene, SpaceDecision]
     summary: RunSummary
     steady: list[SteadyState]
     operator_energy: float
@@ -132,8 +133,8 @@ def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: fl
     ends.add(cycles - 1)
     steady: list[SteadyState] = []
     with simulated_axes(profile) as (sim, axes):
-        controller = AxesController(axes, profile.gate(), profile.space_scene(), names=[a.name for a in profile.axes],
-                                    force_limits=[a.force_limit for a in profile.axes],
+        controller = WallController(axes, profile.gate(), profile.space_scene(), names=[a.name for a in profile.axes],
+                                    force_limit=[a.force_limit for a in profile.axes], origin=encoder_origins(axes),
                                     supervisor=profile.supervisor, passivity=profile.passivity)
         axes.enable()
 
@@ -158,7 +159,7 @@ def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: fl
 def format_axes_demo(result: AxesDemoResult) -> str:
     """The demo's short summary, one fact a line."""
     s, profile = result.summary, result.profile
-    decision = result.controller.scenes.running[3]
+    decision = result.controller.decision
     lines = [
         f"profile: {profile.name} ({len(profile.axes)} axes, nodes {', '.join(str(a.node_id) for a in profile.axes)}, "
         f"one SYNC every {profile.period * 1e3:g} ms)",

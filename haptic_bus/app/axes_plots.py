@@ -18,7 +18,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from haptic_bus.control.axes_controller import AxesController
+from haptic_bus.control.controller import WallController
+from haptic_bus.control.space_gate import SpaceDecision
+from haptic_bus.control.space_scene import SpaceScene
 
 _DPI = 110
 _GRID = 240  # points per side of the grid the sections are found on
@@ -36,7 +38,7 @@ def motion_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return origin, directions[:2]
 
 
-def plot_trajectory(path: str | pathlib.Path, controller: AxesController, title: str) -> pathlib.Path:
+def plot_trajectory(path: str | pathlib.Path, controller: WallController[SpaceScene, SpaceDecision], title: str) -> pathlib.Path:
     """Write the figure (module docstring) of ``controller``'s record to ``path`` (PNG); returns the path."""
     records = controller.records
     time_s = records[0].column("time_s")
@@ -75,7 +77,7 @@ def plot_trajectory(path: str | pathlib.Path, controller: AxesController, title:
     return path
 
 
-def _draw_sections(axes: plt.Axes, controller: AxesController, x: np.ndarray) -> None:
+def _draw_sections(axes: plt.Axes, controller: WallController[SpaceScene, SpaceDecision], x: np.ndarray) -> None:
     """The trajectory in its plane of motion, and each object's section with that plane."""
     origin, basis = motion_plane(x)
     plane = (x - origin) @ basis.T  # (a, b) of each point, m

@@ -7,18 +7,11 @@ margin), 1 when it does not; an invalid profile is a ParameterError (exit 2) bef
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.control.space_gate import SpaceDecision
-from haptic_bus.control.space_scene import SpaceObject
-
-
-def space_object_to_dict(obj: SpaceObject) -> dict[str, Any]:
-    """An object in space as its profile table: ``kind``, ``name``, its position fields (m), K (N/m), B (N s/m)."""
-    fields = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if f.init}
-    return {"kind": type(obj).__name__.lower()} | {k: list(v) if isinstance(v, tuple) else v for k, v in fields.items()}
+from haptic_bus.control.space_scene import space_object_to_dict
 
 
 def decision_to_dict(decision: SpaceDecision) -> dict[str, Any]:

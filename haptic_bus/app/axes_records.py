@@ -31,10 +31,10 @@ from typing import Any
 
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.run_folder import software_versions
-from haptic_bus.control.axes_controller import AxesController
+from haptic_bus.control.controller import WallController
 from haptic_bus.control.cycle_loop import RunSummary
 from haptic_bus.control.space_gate import SpaceDecision
-from haptic_bus.control.space_scene import SpaceObject
+from haptic_bus.control.space_scene import SpaceObject, SpaceScene
 
 
 def object_dict(obj: SpaceObject) -> dict[str, Any]:
@@ -75,8 +75,9 @@ def _json_ready(value: Any) -> Any:
     return value
 
 
-def axes_run_document(profile: AxesProfile, controller: AxesController | None, summary: RunSummary | None,
-                      link: dict[str, Any], extra: dict[str, Any], started: dt.datetime) -> dict[str, Any]:
+def axes_run_document(profile: AxesProfile, controller: WallController[SpaceScene, SpaceDecision] | None,
+                      summary: RunSummary | None, link: dict[str, Any], extra: dict[str, Any],
+                      started: dt.datetime) -> dict[str, Any]:
     """The content of ``run.json`` (module docstring); ``controller``/``summary`` None for a run
     that ended before it cycled (``extra`` then carries the reason)."""
     path = profile.path
@@ -94,8 +95,9 @@ def axes_run_document(profile: AxesProfile, controller: AxesController | None, s
     if controller is not None:
         scalings = controller.axes.scalings
         document["scaling"] = {name: dataclasses.asdict(s) for name, s in zip(controller.names, scalings)}
-        document["scenes"] = [{"scene_id": i, "adopted_s": t, "objects": [object_dict(o) for o in scene.objects],
-                               "decision": decision_dict(decision)} for i, t, scene, decision in controller.scenes.entries]
+        document["scenes"] = [{"scene_id": entry.scene_id, "origin": entry.origin,
+                               "objects": [object_dict(o) for o in entry.scene.objects],
+                               "decision": decision_dict(entry.decision)} for entry in controller.scenes.history]
         document["axes"] = controller.axis_summaries()
         document["events"] = controller.events.to_list()
         document["events_dropped"] = controller.events.dropped
@@ -106,7 +108,7 @@ def axes_run_document(profile: AxesProfile, controller: AxesController | None, s
     return _json_ready(document)
 
 
-def write_axes_run(folder: pathlib.Path, profile: AxesProfile, controller: AxesController | None,
+def write_axes_run(folder: pathlib.Path, profile: AxesProfile, controller: WallController[SpaceScene, SpaceDecision] | None,
                    document: dict[str, Any]) -> list[pathlib.Path]:
     """Write every axis' record, the plot and ``run.json`` into ``folder``; the paths written."""
     written: list[pathlib.Path] = []

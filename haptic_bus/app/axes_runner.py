@@ -18,9 +18,10 @@ The drives may be the simulated device in another process (``haptic-bus sim --no
    the measured delay;
 5. **safe start**: every axis' position is read right before enabling (after pre-flight, whose
    SYNCs a real handle lives through); a handle inside an object is refused (exit 1, nothing
-   enabled) -- a start ramp for coupled axes is not built; then every drive is enabled in the
-   same cycle and the controller cycles
-   (:class:`~haptic_bus.control.axes_controller.AxesController`) under the supervisor;
+   enabled), or with ``--start-in-contact ramp`` the force ramps in along each contact normal
+   once the coupled gate has proven every scaled wall passive; then every drive is enabled in the
+   same cycle and the controller cycles (:class:`~haptic_bus.control.controller.WallController`)
+   under the supervisor;
 6. whatever ends it (the time, SIGTERM, Ctrl-C, any axis' fault -- which zeroes every axis'
    torque in the same cycle -- an assumption broken), the drives are left disabled and every
    axis' record, ``run.json`` and the plot are written (:mod:`~haptic_bus.app.axes_records`).
@@ -39,11 +40,11 @@ from drives.base import AxesDriveCycle
 from drives.bus_config import resolve_bus_config
 from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
-from drives.cia402 import POSITION_ACTUAL
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, patient
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.axes_records import axes_run_document, write_axes_run
+from haptic_bus.app.profile_policies import StartPolicy
 from haptic_bus.app.run_folder import prepare_run_folder
 from haptic_bus.app.runner import (
     DEFAULT_CONTROLLER_NODE_ID,
@@ -54,11 +55,11 @@ from haptic_bus.app.runner import (
     longest_hold,
     settle_preflight,
 )
-from haptic_bus.control.axes_controller import AxesController
 from haptic_bus.control.bus_load import axes_bus_load
 from haptic_bus.control.clock import RealClock, VirtualClock
+from haptic_bus.control.controller import WallController, encoder_origins
 from haptic_bus.control.cycle_loop import RunSummary
-from haptic_bus.control.space_gate import SpaceGate
+from haptic_bus.control.space_gate import SpaceDecision, SpaceGate
 from haptic_bus.control.space_scene import SpaceScene
 from haptic_bus.errors import DriveError, ParameterError, Refusal
 
@@ -72,7 +73,7 @@ class AxesRunResult:
     exit_reason: str
     error: str | None
     summary: RunSummary | None
-    controller: AxesController | None
+    controller: WallController[SpaceScene, SpaceDecision] | None
     folder: pathlib.Path
     files: list[pathlib.Path]
 
@@ -108,7 +109,7 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                             "controller_node_id": controller_node_id, "bitrate_checked": bitrate}
     extra: dict[str, Any] = {"loop": {"period": period, "delays": [axis.delay for axis in profile.axes]}}
     started = dt.datetime.now(dt.UTC)
-    controller: AxesController | None = None
+    controller: WallController[SpaceScene, SpaceDecision] | None = None
     summary: RunSummary | None = None
     reason, error = "completed", None
     try:
@@ -133,12 +134,14 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
                 if options.wall_paced:
                     _preflight(axes, gate, scene, profile, options, extra)
-                extra["start"] = {"positions_m": _safe_start(axes, profile, scene)}  # after pre-flight: where it is now
+                origin, ramp_time = _safe_start(axes, profile, gate, scene, options)  # after pre-flight: where it is now
+                extra["start"] = {"positions_m": origin, "ramp_time_s": ramp_time}
                 clock = RealClock(period, spin=options.scheduling.spin) if options.wall_paced else VirtualClock(period)
                 hold = longest_hold(period, options.wall_paced, safety.rpdo_deadline_ms(period), safety.consumer_ms)
-                controller = AxesController(axes, gate, scene, names=[axis.name for axis in profile.axes],
-                                            force_limits=[axis.force_limit for axis in profile.axes], clock=clock,
-                                            supervisor=profile.supervisor, passivity=profile.passivity, hold=hold)
+                controller = WallController(axes, gate, scene, names=[axis.name for axis in profile.axes],
+                                            force_limit=[axis.force_limit for axis in profile.axes], clock=clock,
+                                            origin=origin, supervisor=profile.supervisor, ramp_time=ramp_time,
+                                            passivity=profile.passivity, hold=hold)
                 extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold, "per_axis": True}
                 axes.enable()  # every drive in the same cycle, right before the first: their RPDO deadlines run from here
                 summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
@@ -172,17 +175,27 @@ def _describe(axes: CanopenAxes, options: RunOptions, link: dict[str, Any]) -> N
             print("\n".join(f"scaling of {drive.name}: {line}" for line in lines), flush=True)
 
 
-def _safe_start(axes: CanopenAxes, profile: AxesProfile, scene: SpaceScene) -> list[float]:
-    """Every axis' position (m) before enabling; :class:`Refusal` if the handle is inside an object."""
-    q = [drive.read_object(POSITION_ACTUAL) * scaling.position_per_count
-         for drive, scaling in zip(axes.drives, axes.scalings)]
+def _safe_start(axes: CanopenAxes, profile: AxesProfile, gate: SpaceGate, scene: SpaceScene,
+                options: RunOptions) -> tuple[list[float], float]:
+    """Every axis' position (m) before enabling, and the start ramp's time (s, 0 = none).
+
+    Inside an object: :class:`Refusal`, or under ``--start-in-contact ramp`` the ramp time once
+    the coupled gate has proven every wall scaled by a factor in [0, 1] passive along its normals.
+    """
+    q = encoder_origins(axes)
     x = profile.kinematics().position(q)
     inside = scene.contacts(x)
-    if inside:
-        force = float(sum(value * value for value in scene.force(x, [0.0] * len(q))) ** 0.5)
-        raise Refusal(f"handle is inside {'+'.join(inside)} at ({', '.join(f'{c * 1e3:.3g}' for c in x)}) mm (at rest "
-                      f"it would feel {force:.3g} N); move it out first (a start ramp for coupled axes is not built)")
-    return q
+    if not inside:
+        return q, 0.0
+    force = float(sum(value * value for value in scene.force(x, [0.0] * len(q))) ** 0.5)
+    where = (f"handle is inside {'+'.join(inside)} at ({', '.join(f'{c * 1e3:.3g}' for c in x)}) mm (at rest "
+             f"it would feel {force:.3g} N)")
+    if options.start_in_contact != "ramp":
+        raise Refusal(f"{where}; move it out first or use --start-in-contact ramp")
+    proof = gate.proves_ramp(scene)
+    if not proof.proven:
+        raise Refusal(f"{where}; and the start ramp is refused: {proof.reason}")
+    return q, StartPolicy().ramp_time
 
 
 def _preflight(axes: CanopenAxes, gate: SpaceGate, scene: SpaceScene, profile: AxesProfile, options: RunOptions,

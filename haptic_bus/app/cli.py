@@ -211,11 +211,10 @@ def _refuse_single_axis_options(args: argparse.Namespace) -> None:
     from haptic_bus.errors import ParameterError
 
     given = [flag for flag, value in (("--node-id", args.node_id), ("--modbus", args.modbus), ("--unit-id", args.unit_id),
-                                      ("--reset-fault", args.reset_fault),
-                                      ("--start-in-contact", args.start_in_contact == "ramp")) if value]
+                                      ("--reset-fault", args.reset_fault)) if value]
     if given:
         raise ParameterError(given[0], "given with a multi-axis profile", "the bus options only: the node ids come "
-                             "from [[axes]] (no Modbus axes, fault reset or start ramp for several axes yet)")
+                             "from [[axes]] (no Modbus axes or fault reset for several axes yet)")
 
 
 def _upload(args: argparse.Namespace) -> int:

@@ -55,9 +55,10 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, second
     with ExitStack() as stack, simulated_canopen(profile) as (sim, drive):
         origin = encoder_origin(drive)
         scene = profile.compiled_scene()
-        controller = WallController(drive, profile.gate(), scene, force_limit=profile.force_limit,
+        gate = profile.gate()
+        controller = WallController(drive, gate, scene, force_limit=profile.force_limit,
                                     origin=origin, supervisor=profile.supervisor, passivity=profile.passivity)
-        extra["gate_loop"] = gate_loop(controller.gate.device)
+        extra["gate_loop"] = gate_loop(gate.device)
         recorder.stream(stack, controller)
         summary = controller.run(cycles)
         operator_energy = sim.drive.operator_energy

@@ -115,7 +115,7 @@ def run_document(profile: Profile, controller: WallController | None, summary: R
         **extra,
     }
     if controller is not None:
-        drive = controller.drive
+        drive = controller.axes.drives[0]
         report = getattr(drive, "scaling_report", None)
         document["scaling"] = {"values": asdict(drive.scaling), "sources": getattr(drive, "scaling_sources", {}),
                                **(report.to_dict() if report is not None else {})}

@@ -343,7 +343,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
                                         supervisor=profile.supervisor, ramp_time=ramp_time, derate=derate,
                                         passivity=profile.passivity, hold=side.hold)
             extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold,
-                                  "budget_cap_j": controller.observer.cap, "friction_min": gate.device.b,
+                                  "budget_cap_j": controller.ports[0].observer.cap, "friction_min": gate.device.b,
                                   "beyond_gate": profile.passivity.beyond_gate}
             for event in before:
                 controller.events.add(event.time_s, event.kind, event.message, **event.data)

@@ -189,7 +189,8 @@ def observed_delay(controller: WallController) -> float | None:
     start lateness and input age (the supervisor's measure, over the whole run); None before a cycle."""
     record = controller.record
     beyond = record.column("lateness_s") / controller.period + record.column("input_age")
-    return controller.gate.device.delay + float(np.percentile(beyond, 99)) if beyond.size else None
+    assumed = max(axis.delay for axis in controller.gate.axes)
+    return assumed + float(np.percentile(beyond, 99)) if beyond.size else None
 
 
 def controller_run(settings: RealtimeSettings, duration: float, bus: dict, process: subprocess.Popen) -> dict:

@@ -1,8 +1,7 @@
 """The loop every controller runs, and what it reports: cycles until done, stopped, or an error.
 
-A controller (:class:`~haptic_bus.control.controller.WallController` for one drive,
-:class:`~haptic_bus.control.axes_controller.AxesController` for several on one SYNC) provides
-one cycle (``step``), the run's clock and event log, how to disable its drive(s), and its
+A controller (:class:`~haptic_bus.control.controller.WallController`, for one drive or several
+on one SYNC) provides one cycle (``step``), the run's clock and event log, how to disable its drive(s), and its
 summary; :meth:`CycleLoop.run` runs the cycles and, whatever ends them -- the count, the stop
 flag, a drive error, an assumption of the gate broken, Ctrl-C -- leaves torque zero and the
 drive(s) disabled, the record kept, and the end in the summary (``exit_reason``).
@@ -15,18 +14,17 @@ import logging
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Generic, TypeVar
+from typing import Any
 
 import numpy as np
 
+from drives.base import AxesDriveCycle
 from haptic_bus.control.clock import CycleClock
 from haptic_bus.control.record import EventLog
 from haptic_bus.control.supervisor import Supervisor
 from haptic_bus.errors import AssumptionBroken, DriveError
 
 logger = logging.getLogger(__name__)
-
-Phase = TypeVar("Phase")
 
 @dataclass
 class RunSummary:
@@ -63,13 +61,13 @@ class RunSummary:
         return self.observer_active_cycles > 0
 
 
-class CycleLoop(Generic[Phase]):
+class CycleLoop:
     """The run loop of a controller (module docstring).  A subclass sets ``clock``, ``events``,
     ``cycles``, ``stopped_on_error`` and ``_cycle`` (None) and implements :meth:`step`, :meth:`now`,
-    :meth:`summary`, :meth:`_disable` and :meth:`_phase` (its drives' cyclic phase, a ``Phase``:
+    :meth:`summary`, :meth:`_disable` and :meth:`_phase` (its drives' cyclic phase:
     held in ``_cycle`` while :meth:`run` runs)."""
 
-    _cycle: Phase | None
+    _cycle: AxesDriveCycle | None
     clock: CycleClock
     events: EventLog
     cycles: int
@@ -94,7 +92,7 @@ class CycleLoop(Generic[Phase]):
         """Disable the drive(s) (torque zero)."""
         raise NotImplementedError
 
-    def _phase(self) -> contextlib.AbstractContextManager[Phase]:
+    def _phase(self) -> contextlib.AbstractContextManager[AxesDriveCycle]:
         """The drive(s)' cyclic phase, entered once for the cycles of one :meth:`run`."""
         raise NotImplementedError
 

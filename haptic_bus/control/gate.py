@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
+from typing import Any
 
 from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from haptic_bus.analysis.limits import PassiveSet, passive_limits, passive_scales
@@ -53,12 +54,12 @@ class RampProof:
     def reason(self) -> str:
         """Why the ramp is not proven ('' when it is): the first wall whose scales leave a gap."""
         for names, scales in self.walls:
-            if not _whole_ramp(scales):
+            if not whole_ramp(scales):
                 return f"{'+'.join(names)} scaled by s is passive only for s in {scales.describe('', 4)}, not all of [0, 1]"
         return ""
 
 
-def _whole_ramp(scales: PassiveSet) -> bool:
+def whole_ramp(scales: PassiveSet) -> bool:
     """The scales are the one closed interval [0, 1]."""
     return scales.intervals[:1] == ((0.0, 1.0),) and scales.ends()[0] == (True, True)
 
@@ -88,6 +89,11 @@ class GateDecision:
         """The smallest margin over the contact walls (N s/m), None for an empty scene."""
         return min((w.verdict.margin for w in self.walls), default=None)
 
+    def wall_dicts(self) -> list[dict[str, Any]]:
+        """Every contact wall judged: its objects, ``K`` (N/m), ``B`` (N s/m), margin (N s/m) and critical ``theta`` (rad)."""
+        return [{"objects": list(w.objects), "K": w.K, "B": w.B, "margin": w.verdict.margin,
+                 "critical_theta": w.verdict.critical_theta} for w in self.walls]
+
 
 @functools.lru_cache(maxsize=4096)
 def _judge_wall(loop: WallLoop) -> Verdict:
@@ -102,6 +108,11 @@ class PassivityGate:
         self.device = device
         self.policy = policy
         device.wall(0.0, 0.0)  # validates m, b, T, delay now, not at the first upload
+
+    @property
+    def axes(self) -> tuple[DeviceLoop]:
+        """The one axis' loop (the gate protocol's :attr:`~haptic_bus.control.protocols.Gate.axes`)."""
+        return (self.device,)
 
     def judge(self, scene: CompiledScene) -> GateDecision:
         """The decision on ``scene``, never raising for a refusal."""
@@ -138,7 +149,7 @@ class PassivityGate:
         the policy's safety margin through :meth:`admit`."""
         walls = tuple((names, passive_scales(self.device.wall(K, B)))
                       for (K, B), names in sorted(scene.contacts().items()))
-        proven = all(_whole_ramp(scales) for _, scales in walls)
+        proven = all(whole_ramp(scales) for _, scales in walls)
         return RampProof(proven, walls)
 
     def passive_scales(self, scene: CompiledScene) -> tuple[tuple[float, float], ...]:

@@ -19,7 +19,7 @@ import bisect
 import dataclasses
 import math
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
@@ -194,6 +194,19 @@ class CompiledScene:
         return math.fsum(0.5 * K * (x - anchor) ** 2
                          for obj in self.objects
                          for start, end, K, anchor, _ in obj.pieces() if start <= x < end)
+
+    def with_walls(self, changes: Mapping[str, tuple[float, float]]) -> CompiledScene:
+        """The same objects, those named in ``changes`` with its ``(K, B)`` (N/m, N s/m), compiled;
+        ParameterError for a name the scene does not have."""
+        unknown = sorted(set(changes) - {obj.name for obj in self.objects})
+        if unknown:
+            raise ParameterError("object", unknown[0], f"one of {sorted(obj.name for obj in self.objects)}", "scene")
+        return compile_scene(with_wall_law(obj, *changes[obj.name]) if obj.name in changes else obj
+                             for obj in self.objects)
+
+    def object_dicts(self) -> list[dict[str, Any]]:
+        """Every object as its profile's TOML table (:func:`object_to_dict`)."""
+        return [object_to_dict(obj) for obj in self.objects]
 
     def scaled(self, factor: float) -> CompiledScene:
         """The same objects with every ``K`` and ``B`` times ``factor`` (dimensionless, >= 0)."""

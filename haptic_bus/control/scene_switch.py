@@ -15,48 +15,47 @@ stays in the history and the event says so.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Generic
 
-from haptic_bus.control.gate import GateDecision, PassivityGate
+from haptic_bus.control.protocols import DecisionT, Gate, SceneT
 from haptic_bus.control.record import EventLog
-from haptic_bus.control.scene import CompiledScene, compile_scene, object_to_dict, with_wall_law
-from haptic_bus.errors import ParameterError, Refusal
+from haptic_bus.errors import Refusal
 
 
 @dataclass(frozen=True)
-class SceneEntry:
+class SceneEntry(Generic[SceneT, DecisionT]):
     """A scene that was in effect (or staged): its id, where it came from, the gate's decision."""
 
     scene_id: int
     origin: str
-    scene: CompiledScene
-    decision: GateDecision
+    scene: SceneT
+    decision: DecisionT
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: every object (its kind, geometry, K and B), and the gate's margin for each contact wall."""
         return {
             "scene_id": self.scene_id,
             "origin": self.origin,
-            "objects": [object_to_dict(o) for o in self.scene.objects],
-            "walls": [{"objects": list(w.objects), "K": w.K, "B": w.B, "margin": w.verdict.margin,
-                       "critical_theta": w.verdict.critical_theta} for w in self.decision.walls],
+            "objects": self.scene.object_dicts(),
+            "walls": self.decision.wall_dicts(),
             "worst_margin": self.decision.worst_margin,
             "warnings": list(self.decision.warnings),
         }
 
 
-class SceneSwitch:
+class SceneSwitch(Generic[SceneT, DecisionT]):
     """Switches a running controller's scene, gated, at a cycle boundary: the running scene, the
     last accepted one, and their history (module docstring).  (Not :class:`~haptic_bus.control.scene.Slot`,
     a scene object: a box the handle is held inside.)
 
-    ``now`` gives the run's clock (s) for events; ``events`` receives "upload" and "refused";
+    ``gate``: the 1-D or the coupled gate (:class:`~haptic_bus.control.protocols.Gate`); ``now``
+    gives the run's clock (s) for events; ``events`` receives "upload" and "refused";
     ``beyond_gate``: admit scenes the gate refuses (module docstring).
     """
 
-    def __init__(self, gate: PassivityGate, scene: CompiledScene, events: EventLog, now: Callable[[], float],
+    def __init__(self, gate: Gate[SceneT, DecisionT], scene: SceneT, events: EventLog, now: Callable[[], float],
                  beyond_gate: bool = False) -> None:
         self.gate = gate
         self.events = events
@@ -64,40 +63,31 @@ class SceneSwitch:
         self._now = now
         self._lock = threading.Lock()
         first = SceneEntry(0, "profile", scene, self._decide(scene))
-        self.history: list[SceneEntry] = [first]
+        self.history: list[SceneEntry[SceneT, DecisionT]] = [first]
         self.running = first
         self._latest = first
         self.applied = 0  # scenes adopted after the first
 
     @property
-    def latest(self) -> SceneEntry:
+    def latest(self) -> SceneEntry[SceneT, DecisionT]:
         """The last accepted scene (running, or staged for the next cycle boundary)."""
         return self._latest
 
-    def upload(self, scene: CompiledScene, origin: str = "upload") -> GateDecision:
+    def upload(self, scene: SceneT, origin: str = "upload") -> DecisionT:
         """Gate ``scene`` and stage it for the next cycle boundary; Refusal (logged) if refused."""
         with self._lock:
             return self._admit(scene, origin)
 
-    def set_walls(self, changes: dict[str, tuple[float, float]], origin: str = "upload") -> GateDecision:
+    def set_walls(self, changes: Mapping[str, tuple[float, float]], origin: str = "upload") -> DecisionT:
         """Change several objects' ``(K, B)`` (N/m, N s/m) as one upload: all pass the gate, or none applies."""
         with self._lock:
-            base = self._latest.scene
-            objects = base.by_name()
-            unknown = sorted(set(changes) - set(objects))
-            if unknown:
-                raise ParameterError("object", unknown[0], f"one of {sorted(objects)}", "scene")
-            changed = [with_wall_law(obj, *changes[obj.name]) if obj.name in changes else obj for obj in base.objects]
-            return self._admit(compile_scene(changed), origin)
+            return self._admit(self._latest.scene.with_walls(changes), origin)
 
-    def _decide(self, scene: CompiledScene) -> GateDecision:
-        """The gate's decision; Refusal for a refused scene unless beyond the gate is allowed."""
-        decision = self.gate.judge(scene)
-        if not decision.accepted and not self.beyond_gate:
-            raise Refusal.by_gate(decision)
-        return decision
+    def _decide(self, scene: SceneT) -> DecisionT:
+        """The gate's decision; the gate's Refusal for a refused scene unless beyond the gate is allowed."""
+        return self.gate.judge(scene) if self.beyond_gate else self.gate.admit(scene)
 
-    def _admit(self, scene: CompiledScene, origin: str) -> GateDecision:
+    def _admit(self, scene: SceneT, origin: str) -> DecisionT:
         try:
             decision = self._decide(scene)
         except Refusal as refusal:
@@ -111,7 +101,7 @@ class SceneSwitch:
                         scene_id=entry.scene_id, worst_margin=decision.worst_margin, gate_passed=decision.accepted)
         return decision
 
-    def adopt(self) -> SceneEntry:
+    def adopt(self) -> SceneEntry[SceneT, DecisionT]:
         """At a cycle boundary: the last accepted scene becomes the running one (one read, whole)."""
         latest = self._latest
         if latest is not self.running:
@@ -119,7 +109,8 @@ class SceneSwitch:
             self.applied += 1
         return latest
 
-    def replace(self, gate: PassivityGate, scene: CompiledScene, decision: GateDecision, origin: str) -> SceneEntry:
+    def replace(self, gate: Gate[SceneT, DecisionT], scene: SceneT, decision: DecisionT,
+                origin: str) -> SceneEntry[SceneT, DecisionT]:
         """From the control thread: ``scene``, judged by ``gate``, runs from now on and stays the
         latest; later uploads are judged by ``gate`` (a derate's: the loop as observed)."""
         with self._lock:

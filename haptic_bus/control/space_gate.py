@@ -26,13 +26,16 @@ import functools
 import itertools
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from haptic_bus.analysis.coupled import CoupledVerdict, coupled_verdict
+from haptic_bus.analysis.coupled_limits import passive_along
 from haptic_bus.analysis.coupled_loop import CoupledLoop, unit_normal
+from haptic_bus.analysis.limits import PassiveSet
 from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.control.gate import GatePolicy
+from haptic_bus.control.gate import GatePolicy, whole_ramp
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere
 from haptic_bus.errors import Refusal
 
@@ -90,11 +93,39 @@ class SpaceDecision:
     accepted: bool
     walls: tuple[SpaceWall, ...]
     reasons: tuple[str, ...] = field(default_factory=tuple)
+    warnings: tuple[str, ...] = field(default_factory=tuple)
 
     @property
     def worst_margin(self) -> float | None:
         """The least margin over the walls (N s/m), None for an empty scene."""
         return min((w.verdict.margin for w in self.walls), default=None)
+
+    def wall_dicts(self) -> list[dict[str, Any]]:
+        """Every wall judged: its objects, margin (N s/m), outcome, and each part's ``K`` (N/m), ``B`` (N s/m), normal."""
+        return [{"objects": list(w.objects), "margin": w.verdict.margin, "outcome": w.verdict.outcome,
+                 "parts": [{"K": K, "B": B, "normal": list(n)} for K, B, n in w.parts]} for w in self.walls]
+
+
+@dataclass(frozen=True)
+class SpaceRampProof:
+    """Whether a start ramp of a scene in space (every wall scaled by ``s`` from 0 to 1, along each
+    contact normal) is passive all the way: ``proven``, and per object and normal its passive scales."""
+
+    proven: bool
+    walls: tuple[tuple[str, tuple[float, ...], PassiveSet], ...]
+    overlapping: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def reason(self) -> str:
+        """Why the ramp is not proven ('' when it is): the first wall whose scales leave a gap, or overlapping objects."""
+        for name, normal, scales in self.walls:
+            if not whole_ramp(scales):
+                return (f"{name} scaled by s along ({', '.join(f'{c:.3g}' for c in normal)}) is passive only for "
+                        f"s in {scales.describe('', 4)}, not all of [0, 1]")
+        if self.overlapping:
+            a, b = self.overlapping[0]
+            return f"{a} and {b} overlap: the ramp of two objects acting together is not judged"
+        return ""
 
 
 class SpaceGate:
@@ -147,6 +178,24 @@ class SpaceGate:
             walls.append(min(judged, key=lambda w: w.verdict.margin))
         reasons = [self._explain(w) for w in walls if w.verdict.margin < self.policy.safety_margin]
         return SpaceDecision(not reasons, tuple(walls), tuple(reasons))
+
+    def proves_ramp(self, scene: SpaceScene) -> SpaceRampProof:
+        """Whether every object's wall, scaled by every ``s`` in [0, 1], is passive along each normal a
+        contact with it can have (a sphere's: the sampled ones and the least-margin one the search
+        finds, as :meth:`judge` has them): exact over the continuum of ``s``
+        (:func:`~haptic_bus.analysis.coupled_limits.passive_along`), margin >= 0.  Two overlapping
+        objects are not judged together: the ramp is then not proven."""
+        size = len(self.axes)
+
+        def normals(obj: SpaceObject) -> list[tuple[float, ...]]:
+            sampled = object_directions(obj, size)
+            return [*sampled, self._sphere(obj.name, obj.stiffness, obj.damping).parts[0][2]] if isinstance(obj, Sphere) \
+                else sampled
+
+        walls = tuple((obj.name, n, passive_along(self.axes, n, obj.stiffness, obj.damping, "scale"))
+                      for obj in scene.objects for n in normals(obj))
+        overlapping = tuple((a.name, b.name) for a, b in itertools.combinations(scene.objects, 2) if _overlap(a, b))
+        return SpaceRampProof(all(whole_ramp(scales) for _, _, scales in walls) and not overlapping, walls, overlapping)
 
     def admit(self, scene: SpaceScene) -> SpaceDecision:
         """The decision on ``scene``; raises :class:`Refusal` if it is refused."""

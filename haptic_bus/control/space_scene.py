@@ -27,11 +27,13 @@ operations in Python.)
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import operator
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -255,6 +257,27 @@ class SpaceScene:
     def by_name(self) -> dict[str, SpaceObject]:
         """The scene's objects by name."""
         return {obj.name: obj for obj in self.objects}
+
+    def with_walls(self, changes: Mapping[str, tuple[float, float]]) -> SpaceScene:
+        """The same objects, those named in ``changes`` with its ``(K, B)`` (N/m, N s/m), compiled;
+        ParameterError for a name the scene does not have."""
+        unknown = sorted(set(changes) - {obj.name for obj in self.objects})
+        if unknown:
+            raise ParameterError("object", unknown[0], f"one of {sorted(obj.name for obj in self.objects)}", "scene")
+        return compile_space_scene(
+            dataclasses.replace(obj, stiffness=changes[obj.name][0], damping=changes[obj.name][1])
+            if obj.name in changes else obj for obj in self.objects)
+
+    def object_dicts(self) -> list[dict[str, Any]]:
+        """Every object as its profile table (:func:`space_object_to_dict`)."""
+        return [space_object_to_dict(obj) for obj in self.objects]
+
+
+def space_object_to_dict(obj: SpaceObject) -> dict[str, Any]:
+    """An object in space as its profile table: ``kind`` ("plane", "box", "sphere"), ``name``, its
+    position fields (m, as lists), K (N/m), B (N s/m)."""
+    fields = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if f.init}
+    return {"kind": type(obj).__name__.lower()} | {k: list(v) if isinstance(v, tuple) else v for k, v in fields.items()}
 
 
 def _cell_size(finite: list[tuple[np.ndarray, np.ndarray]], low: np.ndarray, high: np.ndarray) -> float:
