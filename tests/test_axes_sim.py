@@ -27,6 +27,7 @@ from haptic_bus.app.profiles import read_profile
 from haptic_bus.app.rig import simulated_axes_device
 from sim_drive.cli import main as sim_main
 from tests.guess_profile import guess_profile
+from tests.run_rig import wait_until
 
 SIGMAS = 4.0
 
@@ -51,6 +52,9 @@ def test_scan_finds_every_axis_and_identify_measures_one_while_the_others_stay(
                                      velocity="average", rated_torque=0.1, period=0.002, force_limit=10.0)
         outcome = identify_canopen(read_profile(profile_path), {"interface": "virtual", "channel": channel}, 6,
                                    IdentifyOptions(duration=6.0, pacing="virtual"))
+        # python-can's virtual bus hands each node its frames in that node's own thread: the last SYNC may
+        # still be on its way to one of them when identify returns
+        wait_until(lambda: len({node.drive.sync_count for node in sim.nodes}) == 1)
         states = [node.drive.state for node in sim.nodes]
         positions = [node.drive.handle.position for node in sim.nodes]
         syncs = [node.drive.sync_count for node in sim.nodes]
