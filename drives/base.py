@@ -324,7 +324,7 @@ class Drive(abc.ABC):
         ``torque_limit`` (per mille; None: the drive's own, 0x6072) until the phase ends."""
         if self._phase_open:
             raise DriveError(self.name, "a cyclic phase is open already: one 'with drive.cyclic()' at a time")
-        with self.clamp.lowered(torque_limit, self.name):
+        with self.clamp.lowered(torque_limit, self.name), self._phase_duties():
             cycle = self._bind_cycle()
             self._phase_open = True
             try:
@@ -332,6 +332,10 @@ class Drive(abc.ABC):
             finally:
                 cycle.open = False
                 self._phase_open = False
+
+    def _phase_duties(self) -> contextlib.AbstractContextManager[None]:
+        """What the cyclic phase takes over while it runs (CANopen: the controller's heartbeat); none here."""
+        return contextlib.nullcontext()
 
     def _bind_cycle(self) -> DriveCycle:
         """The cycle's bound methods (a bus enters its cyclic phase here)."""

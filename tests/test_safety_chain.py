@@ -69,6 +69,35 @@ def test_the_controller_node_boots_then_beats(channel, master, frames) -> None:
     assert beat is not None and bytes(beat.data) == b"\x05"
 
 
+def _heartbeat_threads() -> list[str]:
+    import threading
+
+    return [thread.name for thread in threading.enumerate() if thread.name == f"heartbeat-{MASTER}"]
+
+
+def test_the_cyclic_phase_sends_the_heartbeat_itself(canopen_rig) -> None:
+    """Every round(heartbeat / T) = 10 cycles the cycle sends the controller's heartbeat, right
+    after its RPDO; no heartbeat thread runs while it cycles; afterwards the thread is back."""
+    safety = SafetySettings(heartbeat_ms=10, consumer_ms=40).for_virtual_time(1e-3)
+    with canopen_rig(interface="lockstep", safety=safety) as r:
+        drive = r.drive
+        sent: list[int] = []
+        drive.link.tap = lambda msg, outgoing: sent.append(msg.arbitration_id) if outgoing else None
+        assert _heartbeat_threads() == [f"heartbeat-{MASTER}"]
+        with drive.cyclic() as cycle:
+            assert _heartbeat_threads() == []
+            sent.clear()  # the thread's last beat may be in: from here on only the cycle sends
+            for _ in range(35):
+                cycle.read()
+                cycle.write(0)
+            beats = [i for i, cob in enumerate(sent) if cob == 0x700 + MASTER]
+        assert _heartbeat_threads() == [f"heartbeat-{MASTER}"]
+        drive.link.tap = None
+    rpdo = 0x200 + NODE
+    assert len(beats) == 4  # cycles 0, 10, 20 and 30 of 35
+    assert all(sent[i - 1] == rpdo for i in beats)  # each right after its cycle's RPDO
+
+
 def _dictionary_without(*indices: int):
     from canopen.objectdictionary import import_od
 
