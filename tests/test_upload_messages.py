@@ -32,7 +32,7 @@ def controller_and_drive() -> Iterator[tuple[list[str], WallController]]:
     with simulated_canopen(profile, node_id=DRIVE, channel=channel, interface="virtual") as (_, drive):
         controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
                                     origin=encoder_origin(drive))
-        with ControllerNode(controller, CONTROLLER, {"interface": "virtual", "channel": channel}):
+        with ControllerNode(controller, CONTROLLER).attached(drive.link.network):
             yield ["upload", "--interface", "virtual", "--channel", channel], controller
 
 

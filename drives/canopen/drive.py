@@ -37,7 +37,7 @@ import dataclasses
 import functools
 import logging
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import can
@@ -335,10 +335,16 @@ class CanopenDrive(Cia402Master):
         self.exchange.begin()
         return DriveCycle(self.name, functools.partial(self._cycle_inputs, events), self.clamp, self._send_and_beat)
 
-    def _phase_duties(self) -> contextlib.AbstractContextManager[None]:
+    @contextlib.contextmanager
+    def _phase_duties(self) -> Iterator[None]:
         """The cyclic phase sends the controller's heartbeat from the cycle, its thread stopped
-        (:meth:`~drives.canopen.heartbeat.HeartbeatProducer.from_cycle`)."""
-        return self.heartbeat.from_cycle(self.period)
+        (:meth:`~drives.canopen.heartbeat.HeartbeatProducer.from_cycle`); when it ends, canopen's
+        notifier reads the bus again (SDO answers and requests, EMCY, heartbeats between phases)."""
+        with self.heartbeat.from_cycle(self.period):
+            try:
+                yield
+            finally:
+                self.exchange.end()
 
     def _send_and_beat(self, target_torque: int) -> None:
         """The cycle's outputs (:meth:`_send_torque`), then the heartbeat if one is due."""

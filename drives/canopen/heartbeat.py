@@ -30,6 +30,7 @@ import can
 
 from drives.cia301 import HEARTBEAT_BASE, NmtState
 from drives.errors import DriveError
+from drives.os_threads import show_own_name
 
 logger = logging.getLogger(__name__)
 
@@ -77,6 +78,7 @@ class HeartbeatProducer:
             thread.join(timeout=max(1.0, 2 * self.period))
 
     def _run(self) -> None:
+        show_own_name()
         due = self._last + self.period
         while not self._stop.wait(max(due - time.monotonic(), 0.0)):
             if not self._beat_now():

@@ -24,6 +24,7 @@ notifier outside the cyclic phase).  Unset, it costs one ``is not None`` test pe
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -32,6 +33,7 @@ import canopen
 
 from drives.bus_config import open_bus
 from drives.errors import DriveError
+from drives.os_threads import show_name
 from drives.udp_multicast import standard_filters
 
 logger = logging.getLogger(__name__)
@@ -96,6 +98,16 @@ def _restart_notifier(network: canopen.Network) -> None:
     """A fresh canopen notifier reading ``network``'s bus (for SDO, heartbeat and EMCY)."""
     if network.bus is not None:
         network.notifier = can.Notifier(network.bus, network.listeners, network.NOTIFIER_CYCLE)
+        _show_notifier_names(network)
+
+
+def _show_notifier_names(network: canopen.Network) -> None:
+    """The OS sees canopen's notifier thread as ``canopen-notify`` (:mod:`drives.os_threads`)."""
+    notifier = network.notifier
+    for thread in getattr(notifier, "_readers", ()):
+        if isinstance(thread, threading.Thread):
+            thread.name = "canopen-notify"
+            show_name(thread)
 
 
 class NetworkLink:
@@ -141,6 +153,7 @@ class NetworkLink:
             network.listeners.append(self._errors)  # type: ignore[arg-type]  # a can.Listener, as python-can wants
         if network.notifier is None or network.notifier.stopped:
             network.connect()
+            _show_notifier_names(network)
         network.send_message = self.send_message  # type: ignore[method-assign]  # canopen's frames go out tapped
         self.network = network
         self.bus = network.bus

@@ -1,8 +1,10 @@
 """The scene a running controller renders, and every change to it, each through the gate.
 
-Uploads (the Python API, SDO writes to the controller node) are judged in the caller's thread
-and staged; the control loop adopts the last accepted one at a cycle boundary, whole, by
-reference (nothing is ever cleared, so no upload can be lost between a read and a clear).
+Uploads through the Python API are judged in the caller's thread and staged; an upload judged
+elsewhere (the controller node's, in a worker process: :func:`changed_scene` builds the scene
+there) is staged with its decision (:meth:`SceneSwitch.stage`), never judged again.  The control
+loop adopts the last accepted one at a cycle boundary, whole, by reference (nothing is ever
+cleared, so no upload can be lost between a read and a clear).
 Every scene that is ever in effect gets an id; the history keeps its objects and the gate's
 decision (what ``run.json`` reports).  A derate (the supervisor's) is adopted at once by the
 control thread itself.
@@ -22,7 +24,22 @@ from typing import Any
 from haptic_bus.control.gate import GateDecision, GateRefusal, PassivityGate
 from haptic_bus.control.record import EventLog
 from haptic_bus.control.scene import CompiledScene, compile_scene, object_to_dict
-from haptic_bus.errors import ParameterError
+from haptic_bus.errors import HapticBusError, ParameterError
+
+
+class StaleJudgement(HapticBusError):
+    """A scene judged elsewhere arrived after the scene or the gate it was judged against changed."""
+
+
+def changed_scene(base: CompiledScene, changes: dict[str, tuple[float, float]]) -> CompiledScene:
+    """``base`` with several objects' ``(K, B)`` (N/m, N s/m) changed; ParameterError for an object
+    it does not have, or an invalid value."""
+    objects = base.by_name()
+    unknown = sorted(set(changes) - set(objects))
+    if unknown:
+        raise ParameterError("object", unknown[0], f"one of {sorted(objects)}", "scene")
+    return compile_scene([obj.with_parameters(*changes[obj.name]) if obj.name in changes else obj
+                          for obj in base.objects])
 
 
 @dataclass(frozen=True)
@@ -82,13 +99,21 @@ class SceneSwitch:
     def set_walls(self, changes: dict[str, tuple[float, float]], origin: str = "upload") -> GateDecision:
         """Change several objects' ``(K, B)`` (N/m, N s/m) as one upload: all pass the gate, or none applies."""
         with self._lock:
-            base = self._latest.scene
-            objects = base.by_name()
-            unknown = sorted(set(changes) - set(objects))
-            if unknown:
-                raise ParameterError("object", unknown[0], f"one of {sorted(objects)}", "scene")
-            changed = [obj.with_parameters(*changes[obj.name]) if obj.name in changes else obj for obj in base.objects]
-            return self._admit(compile_scene(changed), origin)
+            return self._admit(changed_scene(self._latest.scene, changes), origin)
+
+    def stage(self, scene: CompiledScene, decision: GateDecision, judged: tuple[PassivityGate, SceneEntry],
+              origin: str = "upload") -> GateDecision:
+        """Stage ``scene`` with the ``decision`` a judge elsewhere gave (never judged again here), as
+        :meth:`upload` would; ``judged``: the gate and the latest entry it was judged against, still
+        both current, else :class:`StaleJudgement` (a derate or another upload came in between).
+        GateRefusal (logged) if refused."""
+        with self._lock:
+            gate, base = judged
+            if gate is not self.gate or base is not self._latest:
+                what = "the gate (a derate)" if gate is not self.gate else f"the scene (now scene {self._latest.scene_id})"
+                self.events.add(self._now(), "refused", f"{origin} judged against a scene no longer the latest")
+                raise StaleJudgement(f"{what} changed while the {origin} was judged; upload again")
+            return self._stage(scene, decision, origin)
 
     def _decide(self, scene: CompiledScene) -> GateDecision:
         """The gate's decision; GateRefusal for a refused scene unless beyond the gate is allowed."""
@@ -98,11 +123,12 @@ class SceneSwitch:
         return decision
 
     def _admit(self, scene: CompiledScene, origin: str) -> GateDecision:
-        try:
-            decision = self._decide(scene)
-        except GateRefusal as refusal:
-            self.events.add(self._now(), "refused", f"{origin} refused by the gate", reasons=list(refusal.decision.reasons))
-            raise
+        return self._stage(scene, self.gate.judge(scene), origin)
+
+    def _stage(self, scene: CompiledScene, decision: GateDecision, origin: str) -> GateDecision:
+        if not decision.accepted and not self.beyond_gate:
+            self.events.add(self._now(), "refused", f"{origin} refused by the gate", reasons=list(decision.reasons))
+            raise GateRefusal(decision)
         entry = SceneEntry(len(self.history), origin, scene, decision)
         self.history.append(entry)
         self._latest = entry

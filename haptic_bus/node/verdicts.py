@@ -1,0 +1,71 @@
+"""Upload verdicts from a worker process: the gate never runs in the control thread.
+
+The controller node hands a commit's staged walls to :func:`judge_walls` in this process's one
+judge worker (:func:`judge_pool`: a :class:`concurrent.futures.ProcessPoolExecutor` of one
+process, started by ``forkserver``, so nothing of the control process is forked with its threads
+and bus handles).  What crosses is plain data and picklable objects: the gate, the scene the
+upload changes, ``{name: (K, B)}`` one way; the new scene and the gate's decision, or the reason
+the values are invalid (a ``str``), the other.  The worker is started, and has imported the
+gate's modules, before a run's first cycle (:func:`judge_pool` waits for it).  The executor's
+two threads in this process are named: ``verdict-collect`` (collects the worker's answers and
+runs their callbacks) and ``verdict-feed`` (pickles the work into the worker's pipe).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import threading
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+
+from drives.os_threads import show_name
+from haptic_bus.control.gate import GateDecision, PassivityGate
+from haptic_bus.control.scene import CompiledScene
+from haptic_bus.control.scenes import changed_scene
+from haptic_bus.errors import HapticBusError
+
+START_METHOD = "forkserver"  # not fork: the control process has threads and open bus handles
+_pool: ProcessPoolExecutor | None = None
+_pool_lock = threading.Lock()
+
+Verdict = tuple[CompiledScene, GateDecision] | str
+
+
+def judge_walls(gate: PassivityGate, base: CompiledScene, walls: dict[str, tuple[float, float]]) -> Verdict:
+    """In the worker: ``base`` with ``walls`` (name -> (K N/m, B N s/m)) changed, and ``gate``'s
+    decision on it; or, for an invalid value, the reason (a ``str``: plain data crosses back)."""
+    try:
+        scene = changed_scene(base, walls)
+        return scene, gate.judge(scene)
+    except HapticBusError as error:
+        return str(error)
+
+
+def _ready() -> bool:
+    """In the worker: its imports are done (the module that holds this function is loaded)."""
+    return True
+
+
+def judge_pool() -> ProcessPoolExecutor:
+    """This process's judge worker, started (and its imports done) on the first call, started anew
+    if it died."""
+    global _pool
+    with _pool_lock:
+        if _pool is None or _broken(_pool):
+            before = set(threading.enumerate())
+            pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context(START_METHOD))
+            pool.submit(_ready).result()
+            for thread in set(threading.enumerate()) - before:
+                thread.name = "verdict-feed" if thread.name == "QueueFeederThread" else "verdict-collect"
+                show_name(thread)
+            _pool = pool
+        return _pool
+
+
+def _broken(pool: ProcessPoolExecutor) -> bool:
+    """Whether ``pool`` can no longer take work (its worker died)."""
+    try:
+        pool.submit(_ready)
+    except (BrokenProcessPool, RuntimeError):
+        return True
+    return False
