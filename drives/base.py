@@ -211,7 +211,7 @@ class DriveCycle:
     :class:`TorqueClamp` (per mille, at the phase's limit, counted); ``write(torque)`` sends a
     target ``saturate`` returned (or the safe outputs while the drive is tripped).  A controller
     that lowers a target after saturating it (the passivity layer) calls the two in turn;
-    :meth:`exchange` is both for one that does not.  A target is an integer (per mille of the
+    :meth:`saturate_and_write` is both for one that does not.  A target is an integer (per mille of the
     rated torque, 0x6071), else :class:`~drives.errors.DriveArgumentError` and nothing is sent;
     once the phase has ended, ``read`` and ``write`` raise :class:`~drives.errors.DriveError`.
     """
@@ -237,7 +237,7 @@ class DriveCycle:
         self._check_open()
         self._send(checked_torque(self._name, torque))
 
-    def exchange(self, torque: int) -> int:
+    def saturate_and_write(self, torque: int) -> int:
         """Saturate ``torque`` and send it; the torque sent (per mille)."""
         self._check_open()
         torque = self.saturate(checked_torque(self._name, torque))
@@ -272,7 +272,7 @@ class AxesDriveCycle:
         """Every axis' ``torques`` (per mille) through its own clamp."""
         return [clamp(torque) for clamp, torque in zip(self.clamps, torques)]
 
-    def exchange(self, torques: Sequence[int]) -> list[int]:
+    def saturate_and_write(self, torques: Sequence[int]) -> list[int]:
         """Saturate ``torques`` and send them; the torques sent (per mille)."""
         sent = self.saturate(torques)
         self.write(sent)

@@ -165,7 +165,7 @@ class CanopenAxes:
         cycle = self.cycle
         cycle.begin()
         cycle.drain()
-        received = cycle.exchange()
+        received = cycle.sync_and_collect()
         for drive, word in zip(self.drives, words):
             drive.exchange.send_rpdo(word, 0)
         silent = [drive.name for drive, inputs in zip(self.drives, received) if inputs is None]
@@ -217,7 +217,7 @@ class CanopenAxes:
             for drive in drives:
                 if drive.tripped is None:
                     drive.connected().events.check()
-            received = cycle.exchange()
+            received = cycle.sync_and_collect()
             inputs: list[CyclicInputs] = []
             for i, (drive, found) in enumerate(zip(drives, received)):
                 if found is None:

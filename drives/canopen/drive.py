@@ -361,7 +361,7 @@ class CanopenDrive(Cia402Master):
             exchange.drain()
             if self._tripped is None:
                 events.check()
-            inputs = exchange.exchange()
+            inputs = exchange.sync_and_collect()
         except DriveError as error:
             raise self.trip(error) from error.__cause__
         if inputs is None:
@@ -397,7 +397,7 @@ class CanopenDrive(Cia402Master):
         exchange = self.exchange
         exchange.begin()
         exchange.drain()
-        inputs = exchange.exchange()
+        inputs = exchange.sync_and_collect()
         exchange.send_rpdo(controlword, 0)
         if inputs is None:
             raise DriveTimeout(self.name, f"no TPDO within {exchange.timeout * 1e3:.3g} ms while commanding the state machine")

@@ -207,7 +207,7 @@ class CanopenExchange:
         sw, vel, pos = self._at
         return CyclicInputs(values[sw], values[vel], None if pos is None else values[pos], sampled_by_ns=synced)
 
-    def exchange(self) -> CyclicInputs | None:
+    def sync_and_collect(self) -> CyclicInputs | None:
         """SYNC out, then this cycle's inputs from every TPDO of the cycle; None on timeout."""
         if not self.produces_sync:
             raise DriveError(self.name, "this drive shares a SYNC another object sends: its cycles run there")

@@ -201,7 +201,7 @@ def _preflight(axes: CanopenAxes, gate: SpaceGate, scene: SpaceScene, profile: A
             return self.cycle.read()
 
         def write_outputs(self, target_torque: int) -> None:
-            self.cycle.exchange([target_torque] * size)
+            self.cycle.saturate_and_write([target_torque] * size)
 
     assumed = max(loop.delay for loop in gate.axes)
 
