@@ -47,6 +47,9 @@ def show_own_name() -> None:
 
 
 def show_names() -> None:
-    """Every running thread of this process shows its Python name to the OS (:func:`show_name`)."""
+    """Every running thread of this process but the main one shows its Python name to the OS
+    (:func:`show_name`); the main thread keeps the process's name (``ps``, ``pgrep`` find it by it)."""
+    main = threading.main_thread()
     for thread in threading.enumerate():
-        show_name(thread)
+        if thread is not main:
+            show_name(thread)

@@ -40,6 +40,7 @@ from drives.bus_config import resolve_bus_config
 from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
 from drives.cia402 import POSITION_ACTUAL
+from drives.os_threads import show_names
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, patient
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
@@ -141,6 +142,7 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                                             force_limits=[axis.force_limit for axis in profile.axes], clock=clock,
                                             supervisor=profile.supervisor, passivity=profile.passivity, hold=hold)
                 extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold, "per_axis": True}
+                show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
                 axes.enable()  # every drive in the same cycle, right before the first: their RPDO deadlines run from here
                 summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
             reason, error = summary.exit_reason, summary.error

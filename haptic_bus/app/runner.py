@@ -41,6 +41,7 @@ from drives.cia402 import State
 from drives.cia402_master import Cia402Master
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.fault_reset import DEFAULT_WAIT
+from drives.os_threads import show_names
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings, patient
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DriveAddress
@@ -366,6 +367,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
                     _preflight(drive, gate, scene, profile, options, side.watchdog, extra)
                 # last before the first cycle: the drive's RPDO deadline runs from here, and the
                 # set-up above (the upload server, the real-time session) can take longer
+                show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
                 drive.enable()
                 with node.cycling() if node is not None else nullcontext():  # its verdicts answered by the cycle
                     summary = controller.run(max(1, round(options.duration / period)), options.stop.event,

@@ -2,18 +2,24 @@
 
 The controller node hands a commit's staged walls to :func:`judge_walls` in this process's one
 judge worker (:func:`judge_pool`: a :class:`concurrent.futures.ProcessPoolExecutor` of one
-process, started by ``forkserver``, so nothing of the control process is forked with its threads
-and bus handles).  What crosses is plain data and picklable objects: the gate, the scene the
+process, started by ``spawn``, so nothing of the control process -- its threads, its bus handles
+-- is forked into it).  What crosses is plain data and picklable objects: the gate, the scene the
 upload changes, ``{name: (K, B)}`` one way; the new scene and the gate's decision, or the reason
 the values are invalid (a ``str``), the other.  The worker is started, and has imported the
-gate's modules, before a run's first cycle (:func:`judge_pool` waits for it).  The executor's
-two threads in this process are named: ``verdict-collect`` (collects the worker's answers and
-runs their callbacks) and ``verdict-feed`` (pickles the work into the worker's pipe).
+gate's modules, before a run's first cycle (:func:`judge_pool` waits for it).  It dies with the
+control process (Linux: ``PR_SET_PDEATHSIG``), so a run killed with SIGKILL leaves no worker
+behind holding its pipes.  The executor's two threads in this process are named:
+``verdict-collect`` (collects the worker's answers and runs their callbacks) and
+``verdict-feed`` (pickles the work into the worker's pipe).
 """
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import multiprocessing
+import os
+import signal
 import threading
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -24,7 +30,8 @@ from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.scenes import changed_scene
 from haptic_bus.errors import HapticBusError
 
-START_METHOD = "forkserver"  # not fork: the control process has threads and open bus handles
+START_METHOD = "spawn"  # not fork: the control process has threads and open bus handles
+PR_SET_PDEATHSIG = 1  # prctl(2): the signal this process gets when its parent dies
 _pool: ProcessPoolExecutor | None = None
 _pool_lock = threading.Lock()
 
@@ -41,6 +48,18 @@ def judge_walls(gate: PassivityGate, base: CompiledScene, walls: dict[str, tuple
         return str(error)
 
 
+def _die_with(parent: int) -> None:
+    """In the worker, first: SIGKILL when the control process ``parent`` dies (Linux), and exit now
+    if it already has."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):  # no prctl: the worker ends when its pipe from the parent breaks
+        return
+    if os.getppid() != parent:
+        os._exit(0)
+
+
 def _ready() -> bool:
     """In the worker: its imports are done (the module that holds this function is loaded)."""
     return True
@@ -53,7 +72,8 @@ def judge_pool() -> ProcessPoolExecutor:
     with _pool_lock:
         if _pool is None or _broken(_pool):
             before = set(threading.enumerate())
-            pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context(START_METHOD))
+            pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context(START_METHOD),
+                                       initializer=_die_with, initargs=(os.getpid(),))
             pool.submit(_ready).result()
             for thread in set(threading.enumerate()) - before:
                 thread.name = "verdict-feed" if thread.name == "QueueFeederThread" else "verdict-collect"
