@@ -247,6 +247,7 @@ class BusCalls:
         self.cycling = False
         self.cycles_entered = 0
         self.started = threading.Event()  # the first cyclic phase has begun
+        self.names: list[str] = []  # the threads of this process when it began
         opened, cyclic = link_module.open_bus, CycleLoop._cyclic
 
         def open_recorded(*args, **kwargs):
@@ -259,6 +260,7 @@ class BusCalls:
         def recorded_phase(loop):
             with cyclic(loop):
                 self.cycling, self.cycles_entered = True, self.cycles_entered + 1
+                self.names = sorted(thread.name for thread in threading.enumerate())
                 self.started.set()
                 try:
                     yield
@@ -319,6 +321,9 @@ def test_one_thread_owns_the_bus_of_a_one_axis_run_and_answers_its_uploads(monke
     assert result.controller.scene.by_name()[wall.name].stiffness == 0.9 * wall.stiffness
     assert calls.cycles_entered == 1 and result.summary is not None and result.summary.cycles > 0
     assert True not in judged_here  # the upload's judgement ran in the worker, not in the control thread
+    # while it cycles, neither the heartbeat thread nor the link's notifier runs; the judge's threads are named
+    assert "heartbeat-127" not in calls.names and "canopen-notify" not in calls.names, calls.names
+    assert {"verdict-collect", "verdict-feed"} <= set(calls.names), calls.names
     assert calls.threads == {"send": {threading.get_ident()}, "recv": {threading.get_ident()}}
     assert calls.count["send"] >= 2 * result.summary.cycles  # SYNC and RPDO every cycle, from this thread
 
@@ -345,6 +350,7 @@ def test_one_thread_owns_the_bus_of_a_three_axis_run(monkeypatch, tmp_path) -> N
     assert result.summary is not None and result.summary.cycles == round(0.5 / profile.period)
     assert calls.cycles_entered == 1
     assert calls.threads == {"send": {threading.get_ident()}, "recv": {threading.get_ident()}}
+    assert "heartbeat-127" not in calls.names and "canopen-notify" not in calls.names, calls.names
     # one SYNC and three RPDOs every cycle (and a heartbeat every round(heartbeat / T) cycles)
     assert calls.count["send"] >= 4 * result.summary.cycles
 
