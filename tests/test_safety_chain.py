@@ -70,14 +70,13 @@ def test_the_controller_node_boots_then_beats(channel, master, frames) -> None:
 
 
 def _heartbeat_threads() -> list[str]:
-    import threading
-
     return [thread.name for thread in threading.enumerate() if thread.name == f"heartbeat-{MASTER}"]
 
 
 def test_the_cyclic_phase_sends_the_heartbeat_itself(canopen_rig) -> None:
-    """Every round(heartbeat / T) = 10 cycles the cycle sends the controller's heartbeat, right
-    after its RPDO; no heartbeat thread runs while it cycles; afterwards the thread is back."""
+    """At least every round(heartbeat / T) = 10 cycles, and after any cycle that comes a heartbeat
+    period (10 ms) after the last beat, the cycle sends the controller's heartbeat, right after its
+    RPDO; no heartbeat thread runs while it cycles; afterwards the thread is back."""
     safety = SafetySettings(heartbeat_ms=10, consumer_ms=40).for_virtual_time(1e-3)
     with canopen_rig(interface="lockstep", safety=safety) as r:
         drive = r.drive
@@ -87,15 +86,24 @@ def test_the_cyclic_phase_sends_the_heartbeat_itself(canopen_rig) -> None:
         with drive.cyclic() as cycle:
             assert _heartbeat_threads() == []
             sent.clear()  # the thread's last beat may be in: from here on only the cycle sends
+            rpdos = []
             for _ in range(35):
                 cycle.read()
                 cycle.write(0)
-            beats = [i for i, cob in enumerate(sent) if cob == 0x700 + MASTER]
+                rpdos.append(len(sent))  # where each cycle's frames end
+            slow = len(sent)
+            for _ in range(3):  # cycles slower than the heartbeat period: each one beats
+                time.sleep(0.012)
+                cycle.read()
+                cycle.write(0)
         assert _heartbeat_threads() == [f"heartbeat-{MASTER}"]
         drive.link.tap = None
-    rpdo = 0x200 + NODE
-    assert len(beats) == 4  # cycles 0, 10, 20 and 30 of 35
-    assert all(sent[i - 1] == rpdo for i in beats)  # each right after its cycle's RPDO
+    beat = 0x700 + MASTER
+    beats = [i for i, cob in enumerate(sent[:slow]) if cob == beat]
+    cycles_of = [next(k for k, end in enumerate(rpdos) if i < end) for i in beats]
+    assert cycles_of[0] == 0 and all(b - a <= 10 for a, b in zip(cycles_of, [*cycles_of[1:], 35]))
+    assert all(sent[i - 1] == 0x200 + NODE for i in beats)  # each right after its cycle's RPDO
+    assert sent[slow:].count(beat) == 3
 
 
 def _dictionary_without(*indices: int):

@@ -10,9 +10,10 @@ Two senders take turns, never both at once:
 - outside the cyclic phase (commissioning, SDO set-up, enabling) a thread of its own,
   ``heartbeat-<node id>``, sends it every period;
 - inside it (:meth:`HeartbeatProducer.from_cycle`) that thread is stopped and the control thread
-  sends it itself, every ``round(period / T)`` cycles (every cycle if that rounds to 0), right
-  after the cycle's RPDOs (:meth:`HeartbeatProducer.tick`): a cycle that stops, stalls or dies
-  stops the heartbeat with it, and the drive's consumer faults the drive.
+  sends it itself, every ``round(period / T)`` cycles (every cycle if that rounds to 0), and
+  sooner if a period has passed since the last one (cycles slower than ``T`` on a loaded
+  machine), right after the cycle's RPDOs (:meth:`HeartbeatProducer.tick`): a cycle that stops,
+  stalls or dies stops the heartbeat with it, and the drive's consumer faults the drive.
 
 At each hand-over the next heartbeat is due at most one period after the last one: the cycle
 sends its first at its first tick, and the thread, restarted, one period after the cycle's last.
@@ -106,7 +107,8 @@ class HeartbeatProducer:
     def from_cycle(self, cycle_period: float) -> Iterator[None]:
         """The cyclic phase (cycles of ``cycle_period`` s): the heartbeat thread stopped, the
         heartbeat sent by :meth:`tick` every ``round(period / cycle_period)`` cycles (at least
-        every cycle); the thread back afterwards, its first beat a period after the cycle's last."""
+        every cycle), or sooner when a period has passed; the thread back afterwards, its first
+        beat a period after the cycle's last."""
         if self._thread is None:  # not started (no heartbeat), or the cycle sends it already
             yield
             return
@@ -121,10 +123,11 @@ class HeartbeatProducer:
                 self._start_thread()
 
     def tick(self) -> None:
-        """One cycle of the cyclic phase: the heartbeat if one is due (the control thread sends it)."""
+        """One cycle of the cyclic phase: the heartbeat if one is due, by the cycle count or by a
+        period past since the last (the control thread sends it)."""
         if self._every:
             self._countdown -= 1
-            if self._countdown < 0:
+            if self._countdown < 0 or time.monotonic() - self._last >= self.period:
                 self._countdown = self._every - 1
                 self._beat_now()
 

@@ -13,9 +13,12 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
 3. **safe start**: the handle's position is read before enabling; inside an object the run is
    refused (:class:`StartRefused`, the drive never enabled), or with ``in_contact = "ramp"`` the
    force rises from 0 over ``ramp_time`` once the gate has proven every scaled wall passive;
-4. the upload server (a CANopen node serving gated wall uploads), the live view and the
-   real-time session are set up; then the drive is enabled, right before the first cycle (its
-   RPDO deadline runs from there), and the controller cycles under the supervisor (``[supervisor]``);
+4. the upload server (CANopen: the controller's node on the drive's own network, its commits
+   judged in a worker process started here, :mod:`~haptic_bus.node.controller_node`), the live
+   view and the real-time session are set up; then the drive is enabled, right before the first
+   cycle (its RPDO deadline runs from there), and the controller cycles under the supervisor
+   (``[supervisor]``), the control thread alone on the bus handle: it sends SYNC, RPDO and the
+   controller's heartbeat, reads every frame, and answers the upload server's SDO requests;
 5. ``record.csv`` is streamed from the first cycle (:mod:`~haptic_bus.app.run_recorder`), so a
    killed run keeps its cycles; whatever else ends it (the time, SIGTERM, Ctrl-C, a drive error,
    an assumption broken), the drive is left disabled, ``run.json`` completed and the pictures drawn.
