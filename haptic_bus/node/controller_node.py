@@ -232,10 +232,7 @@ class ControllerNode:
         try:
             future = pool.submit(judge_walls, scenes.gate, base.scene, walls)
         except (BrokenProcessPool, RuntimeError) as error:  # the worker died: no verdict to wait for
-            self.refused += 1
-            self.last_result = f"not judged: {error!r}"
-            logger.error("node %d: commit %s", self.node_id, self.last_result)
-            raise SdoAbortedError(ABORT_GENERAL) from error
+            raise SdoAbortedError(self._refuse(f"not judged: {error!r}", ABORT_GENERAL)) from error
         self._judging = _Judging(future, scenes.gate, base)
         future.add_done_callback(self._on_verdict)
 
@@ -261,22 +258,24 @@ class ControllerNode:
             scene, decision = verdict
             self.controller.scenes.stage(scene, decision, (judging.gate, judging.base))
         except HapticBusError as error:  # GateRefusal, an invalid value, or judged against an older scene
-            self.refused += 1
-            self.last_result = f"refused: {error}"
-            logger.warning("node %d: commit %s", self.node_id, self.last_result)
-            self._answer(ABORT_INVALID_VALUE)
+            self._answer(self._refuse(f"refused: {error}", ABORT_INVALID_VALUE))
             return
         except Exception as error:  # the worker died or could not be reached: the commit is not judged
-            self.refused += 1
-            self.last_result = f"not judged: {error!r}"
-            logger.error("node %d: commit %s", self.node_id, self.last_result)
-            self._answer(ABORT_GENERAL)
+            self._answer(self._refuse(f"not judged: {error!r}", ABORT_GENERAL))
             return
         self.accepted += 1
         worst = decision.worst_margin
         self.last_result = "accepted" + ("" if worst is None else f": worst margin {worst:.4g} N s/m")
         logger.info("node %d: commit %s", self.node_id, self.last_result)
         self._answer(None)
+
+    def _refuse(self, result: str, abort_code: int) -> int:
+        """Count and log a refused commit, keep ``result`` at 0x2002; the SDO abort code to answer."""
+        self.refused += 1
+        self.last_result = result
+        logger.log(logging.WARNING if abort_code == ABORT_INVALID_VALUE else logging.ERROR, "node %d: commit %s",
+                   self.node_id, result)
+        return abort_code
 
     def _answer(self, abort_code: int | None) -> None:
         """The commit's SDO answer, if the node is still on the bus (a bus gone: the client times out)."""
