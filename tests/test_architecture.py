@@ -247,7 +247,7 @@ class BusCalls:
         self.cycling = False
         self.cycles_entered = 0
         self.started = threading.Event()  # the first cyclic phase has begun
-        self.names: list[str] = []  # the threads of this process when it began
+        self.names: list[str] = []  # the threads of this process as the last cyclic phase ended
         opened, cyclic = link_module.open_bus, CycleLoop._cyclic
 
         def open_recorded(*args, **kwargs):
@@ -260,12 +260,12 @@ class BusCalls:
         def recorded_phase(loop):
             with cyclic(loop):
                 self.cycling, self.cycles_entered = True, self.cycles_entered + 1
-                self.names = sorted(thread.name for thread in threading.enumerate())
                 self.started.set()
                 try:
                     yield
                 finally:
                     self.cycling = False
+                    self.names = sorted(thread.name for thread in threading.enumerate())
 
         monkeypatch.setattr(link_module, "open_bus", open_recorded)
         monkeypatch.setattr(CycleLoop, "_cyclic", recorded_phase)

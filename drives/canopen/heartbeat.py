@@ -9,7 +9,7 @@ Two senders take turns, never both at once:
 
 - outside the cyclic phase (commissioning, SDO set-up, enabling) a thread of its own,
   ``heartbeat-<node id>``, sends it every period;
-- inside it (:meth:`HeartbeatProducer.from_cycle`) that thread is stopped and the control thread
+- inside it (:meth:`HeartbeatProducer.from_cycle`) that thread is silenced and the control thread
   sends it itself, every ``round(period / T)`` cycles (every cycle if that rounds to 0), and
   sooner if a period has passed since the last one (cycles slower than ``T`` on a loaded
   machine), right after the cycle's RPDOs (:meth:`HeartbeatProducer.tick`): a cycle that stops,
@@ -51,7 +51,8 @@ class HeartbeatProducer:
         self._boot = can.Message(arbitration_id=cob_id, data=bytes([NmtState.BOOT_UP]), is_extended_id=False)
         self._beat = can.Message(arbitration_id=cob_id, data=bytes([NmtState.OPERATIONAL]), is_extended_id=False)
         self._send: Send | None = None
-        self._stop = threading.Event()
+        self._halt = threading.Event()  # set: the running heartbeat thread sends no more
+        self._turn = threading.Lock()  # held by the thread around each beat, and to silence it
         self._thread: threading.Thread | None = None
         self._last = 0.0  # time.monotonic() of the last heartbeat sent
         self._every = 0  # cycles between the cycle's heartbeats (0: the cycle sends none)
@@ -68,22 +69,29 @@ class HeartbeatProducer:
         self._start_thread()
 
     def _start_thread(self) -> None:
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, daemon=True, name=f"heartbeat-{self.node_id}")
+        halt = self._halt = threading.Event()  # one per thread: a restart never revives an old one
+        self._thread = threading.Thread(target=self._run, args=(halt,), daemon=True, name=f"heartbeat-{self.node_id}")
         self._thread.start()
 
-    def _stop_thread(self) -> None:
+    def _silence_thread(self) -> threading.Thread | None:
+        """The heartbeat thread sends nothing from now on (it checks under the same lock before each
+        beat), without waiting for it to end; the thread, to join later (None: there was none)."""
         thread, self._thread = self._thread, None
+        with self._turn:
+            self._halt.set()
+        return thread
+
+    def _join(self, thread: threading.Thread | None) -> None:
         if thread is not None:
-            self._stop.set()
             thread.join(timeout=max(1.0, 2 * self.period))
 
-    def _run(self) -> None:
+    def _run(self, halt: threading.Event) -> None:
         show_own_name()
         due = self._last + self.period
-        while not self._stop.wait(max(due - time.monotonic(), 0.0)):
-            if not self._beat_now():
-                return
+        while not halt.wait(max(due - time.monotonic(), 0.0)):
+            with self._turn:
+                if halt.is_set() or not self._beat_now():
+                    return
             due += self.period
             now = time.monotonic()
             if due < now:  # late (a stalled machine): the next one a period from now, no burst
@@ -112,13 +120,16 @@ class HeartbeatProducer:
         if self._thread is None:  # not started (no heartbeat), or the cycle sends it already
             yield
             return
-        self._stop_thread()
+        # silenced, not joined: joining would wait for the GIL (measured up to 29 ms beside one
+        # busy thread), while the drive's RPDO deadline runs from the enabling just before
+        thread = self._silence_thread()
         self._every = max(1, round(self.period / cycle_period))
         self._countdown = 0  # the first cycle sends one: no gap longer than a period at the hand-over
         try:
             yield
         finally:
             self._every = 0
+            self._join(thread)  # ended long ago
             if self._send is not None:
                 self._start_thread()
 
@@ -134,5 +145,5 @@ class HeartbeatProducer:
     def stop(self) -> None:
         """No more heartbeats (the drive's consumer will see the silence unless it was switched off)."""
         self._every = 0
-        self._stop_thread()
+        self._join(self._silence_thread())
         self._send = None
