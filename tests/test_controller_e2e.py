@@ -160,15 +160,19 @@ def test_refused_upload_over_the_bus_is_an_sdo_abort_and_changes_nothing() -> No
     with simulated_canopen(profile, channel=channel, interface="virtual") as (_sim, drive):
         controller = controller_for(profile, drive)
         with ControllerNode(controller, 42).attached(drive.link.network):
+            # between runs canopen's notifier reads the drive's bus (in a run the control thread does)
+            drive.link.read_by_notifier()
             with pytest.raises(UploadRefused) as info:
                 upload_walls(bus, 42, {0: (2.0e6, 100.0)})
             assert info.value.abort_code == ABORT_INVALID_VALUE
             assert info.value.reason.startswith("refused: passivity gate refused") and "K = 2e+06" in info.value.reason
             controller.run(5)
             assert controller.scene.by_name()["wall"].stiffness == 200.0
+            drive.link.read_by_notifier()
             assert upload_walls(bus, 42, {0: (250.0, 120.0)}).startswith("accepted")
             controller.run(1)
             assert controller.scene.by_name()["wall"].damping == 120.0
+            drive.link.read_by_notifier()
             # the CLI path, same bus: exit 1 for a refusal, one line on stderr
             args = ["upload", "--interface", "virtual", "--channel", channel, "--node-id", "42", "--object", "0"]
             assert main([*args, "--stiffness", "5e6", "--damping", "1"]) == 1

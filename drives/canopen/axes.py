@@ -186,7 +186,7 @@ class CanopenAxes:
         """The cyclic phase of every axis: an :class:`~drives.base.AxesDriveCycle` bound once (the bus
         read in this thread from here), each axis' clamp -- the one place its target is saturated --
         held within its ``torque_limits`` entry (per mille; None: its drive's own 0x6072) until the
-        phase ends (then canopen's notifier reads the bus again)."""
+        phase ends."""
         self._require_connected()
         limits = list(torque_limits) if torque_limits is not None else [None] * len(self.drives)
         if len(limits) != len(self.drives):
@@ -195,7 +195,6 @@ class CanopenAxes:
             clamps = tuple(stack.enter_context(drive.clamp.lowered(limit, drive.name))
                            for drive, limit in zip(self.drives, limits))
             stack.enter_context(self.heartbeat.from_cycle(self.drives[0].period))  # the cycle sends it (_send_torques)
-            stack.callback(self.cycle.end)  # afterwards canopen's notifier reads the bus again
             self.cycle.begin()
             yield AxesDriveCycle(self._cycle_inputs, clamps, self._send_torques)
 

@@ -37,7 +37,7 @@ import dataclasses
 import functools
 import logging
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import can
@@ -335,16 +335,13 @@ class CanopenDrive(Cia402Master):
         self.exchange.begin()
         return DriveCycle(self.name, functools.partial(self._cycle_inputs, events), self.clamp, self._send_and_beat)
 
-    @contextlib.contextmanager
-    def _phase_duties(self) -> Iterator[None]:
-        """The cyclic phase sends the controller's heartbeat from the cycle, its thread stopped
-        (:meth:`~drives.canopen.heartbeat.HeartbeatProducer.from_cycle`); when it ends, canopen's
-        notifier reads the bus again (SDO answers and requests, EMCY, heartbeats between phases)."""
-        with self.heartbeat.from_cycle(self.period):
-            try:
-                yield
-            finally:
-                self.exchange.end()
+    def _phase_duties(self) -> contextlib.AbstractContextManager[None]:
+        """The cyclic phase sends the controller's heartbeat from the cycle, its thread silenced
+        (:meth:`~drives.canopen.heartbeat.HeartbeatProducer.from_cycle`).  The bus stays read
+        directly when it ends (the next SDO access gives it back to canopen's notifier): stopping
+        that notifier again for the disabling walk would hold the drive's RPDOs up by its receive
+        timeout, against an RPDO deadline of a few periods."""
+        return self.heartbeat.from_cycle(self.period)
 
     def _send_and_beat(self, target_torque: int) -> None:
         """The cycle's outputs (:meth:`_send_torque`), then the heartbeat if one is due."""
