@@ -18,7 +18,11 @@ cycle's SYNC and RPDOs, the controller's heartbeat, and canopen's own frames (SD
 server, NMT: the network's ``send_message`` is routed here while the link holds it).  The
 link's :attr:`~NetworkLink.tap`, when set, sees each of them (``sent`` True) and every frame
 received on the bus, whoever reads it (the control thread's direct receive, or canopen's
-notifier outside the cyclic phase).  Unset, it costs one ``is not None`` test per frame.
+notifier outside the cyclic phase).  Unset, it costs one ``is not None`` test per frame.  It is
+called in whichever thread sends or receives (the control thread while it cycles; canopen's
+notifier, the heartbeat thread or the upload verdicts' thread outside it), so it must be quick,
+never block and be safe from several threads; and it must copy what it keeps of a sent frame:
+the cycle reuses its SYNC and RPDO messages, packing each cycle's values into them in place.
 """
 
 from __future__ import annotations
