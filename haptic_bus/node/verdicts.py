@@ -49,12 +49,13 @@ def judge_walls(gate: PassivityGate, base: CompiledScene, walls: dict[str, tuple
 
 
 def _die_with(parent: int) -> None:
-    """In the worker, first: SIGKILL when the control process ``parent`` dies (Linux), and exit now
-    if it already has."""
+    """In the worker, first: SIGKILL when the thread of the control process ``parent`` that started
+    it ends (Linux; a pool started by a thread that ended is found broken and started anew by
+    :func:`judge_pool`), and exit now if ``parent`` is gone already."""
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
         libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):  # no prctl: the worker ends when its pipe from the parent breaks
+    except (OSError, AttributeError):  # no prctl here: a killed control process may leave the worker behind
         return
     if os.getppid() != parent:
         os._exit(0)
