@@ -211,7 +211,7 @@ class DriveCycle:
     :class:`TorqueClamp` (per mille, at the phase's limit, counted); ``write(torque)`` sends a
     target ``saturate`` returned (or the safe outputs while the drive is tripped).  A controller
     that lowers a target after saturating it (the passivity layer) calls the two in turn;
-    :meth:`exchange` is both for one that does not.  A target is an integer (per mille of the
+    :meth:`saturate_and_write` is both for one that does not.  A target is an integer (per mille of the
     rated torque, 0x6071), else :class:`~drives.errors.ParameterError` and nothing is sent;
     once the phase has ended, ``read`` and ``write`` raise :class:`~drives.errors.DriveError`.
     """
@@ -237,7 +237,7 @@ class DriveCycle:
         self._check_open()
         self._send(checked_torque(self._name, torque))
 
-    def exchange(self, torque: int) -> int:
+    def saturate_and_write(self, torque: int) -> int:
         """Saturate ``torque`` and send it; the torque sent (per mille)."""
         self._check_open()
         torque = self.saturate(checked_torque(self._name, torque))
@@ -275,7 +275,7 @@ class AxesDriveCycle:
         """Every axis' ``torques`` (per mille) through its own clamp."""
         return [clamp(torque) for clamp, torque in zip(self.clamps, torques)]
 
-    def exchange(self, torques: Sequence[int]) -> list[int]:
+    def saturate_and_write(self, torques: Sequence[int]) -> list[int]:
         """Saturate ``torques`` and send them; the torques sent (per mille)."""
         sent = self.saturate(torques)
         self.write(sent)
@@ -327,7 +327,7 @@ class Drive(abc.ABC):
         ``torque_limit`` (per mille; None: the drive's own, 0x6072) until the phase ends."""
         if self._phase_open:
             raise DriveError(self.name, "a cyclic phase is open already: one 'with drive.cyclic()' at a time")
-        with self.clamp.lowered(torque_limit, self.name):
+        with self.clamp.lowered(torque_limit, self.name), self._phase_duties():
             cycle = self._bind_cycle()
             self._phase_open = True
             try:
@@ -335,6 +335,10 @@ class Drive(abc.ABC):
             finally:
                 cycle.open = False
                 self._phase_open = False
+
+    def _phase_duties(self) -> contextlib.AbstractContextManager[None]:
+        """What the cyclic phase takes over while it runs (CANopen: the controller's heartbeat); none here."""
+        return contextlib.nullcontext()
 
     def _bind_cycle(self) -> DriveCycle:
         """The cycle's bound methods (a bus enters its cyclic phase here)."""

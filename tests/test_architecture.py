@@ -225,3 +225,153 @@ def test_the_public_api_loads_no_bus_library(call):
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+
+
+# ----------------------------------------------------------------------------- one thread owns the bus
+
+class BusCalls:
+    """Which threads call the drive link's bus handle's ``send`` and ``recv`` while a controller cycles
+    (between entering and leaving :meth:`CycleLoop._cyclic`), recorded by wrapping both on every bus
+    the link opens; ``cycles_entered`` counts the cyclic phases."""
+
+    def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        import contextlib
+        import threading
+
+        import drives.canopen.link as link_module
+        from haptic_bus.control.cycle_loop import CycleLoop
+
+        self.threads: dict[str, set[int]] = {"send": set(), "recv": set()}
+        self.count = {"send": 0, "recv": 0}
+        self.cycling = False
+        self.cycles_entered = 0
+        self.started = threading.Event()  # the first cyclic phase has begun
+        self.names: list[str] = []  # the threads of this process as the last cyclic phase ended
+        opened, cyclic = link_module.open_bus, CycleLoop._cyclic
+
+        def open_recorded(*args, **kwargs):
+            bus = opened(*args, **kwargs)
+            for name in ("send", "recv"):
+                setattr(bus, name, self._recorded(name, getattr(bus, name)))
+            return bus
+
+        @contextlib.contextmanager
+        def recorded_phase(loop):
+            with cyclic(loop):
+                self.cycling, self.cycles_entered = True, self.cycles_entered + 1
+                self.started.set()
+                try:
+                    yield
+                finally:
+                    self.cycling = False
+                    self.names = sorted(thread.name for thread in threading.enumerate())
+
+        monkeypatch.setattr(link_module, "open_bus", open_recorded)
+        monkeypatch.setattr(CycleLoop, "_cyclic", recorded_phase)
+
+    def _recorded(self, name, call):
+        import threading
+
+        def recorded(*args, **kwargs):
+            if self.cycling:
+                self.threads[name].add(threading.get_ident())
+                self.count[name] += 1
+            return call(*args, **kwargs)
+        return recorded
+
+
+def test_one_thread_owns_the_bus_of_a_one_axis_run_and_answers_its_uploads(monkeypatch, haptic_sim, tmp_path) -> None:
+    """A virtual-time run of cia402-handle on the lock-step bus, with a gated upload from another
+    handle while it cycles: the control thread (this test's) is the only one that sends or receives
+    on the run's handle in the cyclic phase, the upload's SDO answers included; the gate never judges
+    in this process while it cycles; the accepted wall is adopted at a cycle boundary."""
+    import threading
+
+    import haptic_bus as hb
+    from haptic_bus.control.gate import PassivityGate
+    from haptic_bus.node.upload import upload_walls
+
+    calls = BusCalls(monkeypatch)
+    judged_here: list[int] = []  # the gate judging in this process while it cycles: never (a worker process does)
+    judge = PassivityGate.judge
+    monkeypatch.setattr(PassivityGate, "judge",
+                        lambda gate, scene: judged_here.append(calls.cycling) or judge(gate, scene))
+    drive = haptic_sim("cia402-handle", interface="lockstep", node_id=5)
+    profile = hb.load_profile("cia402-handle")
+    wall = profile.compiled_scene().objects[0]
+    options = hb.RunOptions(duration=60.0, pacing="virtual", out_dir=tmp_path / "run", live=False, plots=False,
+                            bus_log=False)
+    verdicts: list[str] = []
+
+    def upload() -> None:  # another handle, another thread: a client as `haptic-bus upload` is
+        try:
+            if calls.started.wait(30.0):
+                verdicts.append(upload_walls(drive.bus, 127, {0: (0.9 * wall.stiffness, wall.damping)}, timeout=5.0))
+        finally:
+            options.stop.event.set()  # the run ends once the upload is answered (or could not be)
+
+    client = threading.Thread(target=upload, name="test-upload")
+    client.start()
+    result = hb.run_canopen(profile, drive.bus, node_id=5, options=options)
+    client.join(timeout=30.0)
+    assert result.exit_reason == "stopped", result.error
+    assert verdicts and verdicts[0].startswith("accepted"), verdicts
+    assert result.controller is not None and result.controller.applied_scenes == 1
+    assert result.controller.scene.by_name()[wall.name].stiffness == 0.9 * wall.stiffness
+    assert calls.cycles_entered == 1 and result.summary is not None and result.summary.cycles > 0
+    assert True not in judged_here  # the upload's judgement ran in the worker, not in the control thread
+    # while it cycles, neither the heartbeat thread nor the link's notifier runs; the judge's threads are named
+    assert "heartbeat-127" not in calls.names and "canopen-notify" not in calls.names, calls.names
+    assert {"verdict-collect", "verdict-feed"} <= set(calls.names), calls.names
+    assert calls.threads == {"send": {threading.get_ident()}, "recv": {threading.get_ident()}}
+    assert calls.count["send"] >= 2 * result.summary.cycles  # SYNC and RPDO every cycle, from this thread
+
+
+def test_one_thread_owns_the_bus_of_a_three_axis_run(monkeypatch, tmp_path) -> None:
+    """gantry-3d in virtual time against the three-axis simulator on the lock-step bus: in the
+    cyclic phase only the control thread sends or receives on the run's one handle."""
+    import threading
+
+    from haptic_bus.app.axes_profile import load_axes_profile
+    from haptic_bus.app.axes_runner import run_axes_canopen
+    from haptic_bus.app.rig import simulated_axes_device
+    from haptic_bus.app.runner import RunOptions
+
+    calls = BusCalls(monkeypatch)
+    profile = load_axes_profile("gantry-3d")
+    bus = {"interface": "lockstep", "channel": f"one-thread-{tmp_path.name}"}
+    sim = simulated_axes_device(profile, bus).start()
+    try:
+        result = run_axes_canopen(profile, bus, RunOptions(0.5, pacing="virtual", out_dir=tmp_path / "run", live=False))
+    finally:
+        sim.stop()
+    assert result.exit_reason == "completed", result.error
+    assert result.summary is not None and result.summary.cycles == round(0.5 / profile.period)
+    assert calls.cycles_entered == 1
+    assert calls.threads == {"send": {threading.get_ident()}, "recv": {threading.get_ident()}}
+    assert "heartbeat-127" not in calls.names and "canopen-notify" not in calls.names, calls.names
+    # one SYNC and three RPDOs every cycle (and a heartbeat every round(heartbeat / T) cycles)
+    assert calls.count["send"] >= 4 * result.summary.cycles
+
+
+def test_the_link_tap_sees_every_frame_sent_and_received(canopen_rig) -> None:
+    """The tap (drives.canopen.link) sees canopen's SDO request and its answer outside the cyclic
+    phase, and the cycle's SYNC, TPDOs and RPDO in it, each marked sent or received."""
+    from drives.cia402 import STATUSWORD
+
+    with canopen_rig(interface="lockstep") as rig:
+        drive = rig.drive
+        node = drive.node_id
+        seen: list[tuple[int, bool]] = []
+        drive.link.tap = lambda msg, sent: seen.append((msg.arbitration_id, sent))
+        drive.read_object(STATUSWORD)  # SDO, answered through canopen's notifier
+        sdo = [frame for frame in seen if frame[0] in (0x600 + node, 0x580 + node)]
+        assert sdo == [(0x600 + node, True), (0x580 + node, False)]
+        seen.clear()
+        with drive.cyclic() as cycle:
+            for _ in range(3):
+                cycle.read()
+                cycle.write(0)
+        drive.link.tap = None
+    cyclic = [frame for frame in seen if frame[0] in (0x80, 0x180 + node, 0x280 + node, 0x200 + node)]
+    assert cyclic == [(0x80, True), (0x180 + node, False), (0x280 + node, False), (0x200 + node, True)] * 3

@@ -70,7 +70,7 @@ def test_each_node_has_its_own_safety_chain_written_and_the_sync_is_the_masters(
         assert int.from_bytes(drive.sdo_read(0x6007, 0), "little", signed=True) == 1  # fault
         assert drive.exchange.produces_sync is False
         with pytest.raises(DriveError, match="shares a SYNC"):
-            drive.exchange.exchange()  # an axis' own exchange never sends a SYNC
+            drive.exchange.sync_and_collect()  # an axis' own exchange never sends a SYNC
     assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED] * 3
     with pytest.raises(ParameterError, match="distinct node ids"):
         CanopenAxes([5, 5], scalings=[None, None], interface="lockstep", channel="unused")
@@ -117,7 +117,7 @@ def test_each_axis_target_is_clamped_once_at_its_own_limit_in_the_axes_phase(rig
     queued(sniffer)
     with axes.cyclic([None, 100, 400]) as cycle:
         cycle.read()
-        sent = cycle.exchange([250, -250, -250])
+        sent = cycle.saturate_and_write([250, -250, -250])
     assert sent == [250, -100, -250]
     assert rpdo_torques(queued(sniffer), 6) == [-100]  # on the wire: the clamped target, once
     assert [d.stats.saturated_outputs for d in axes.drives] == [0, 1, 0]

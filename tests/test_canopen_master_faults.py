@@ -296,7 +296,7 @@ def test_connect_returns_the_connection_whole_and_close_drops_it(canopen_rig):
         with drive.cyclic(torque_limit=200) as cycle:  # the receive mode entered once, read/saturate/write bound
             drive.enable()
             assert decode_statusword(cycle.read().statusword) is State.OPERATION_ENABLED
-            assert cycle.exchange(-900) == -200 and drive.stats.saturated_outputs == 1
+            assert cycle.saturate_and_write(-900) == -200 and drive.stats.saturated_outputs == 1
             cycle.read()  # the SYNC at which the drive applies it
             assert r.sim.drive.target_torque == -200
         drive.close()

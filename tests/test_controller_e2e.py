@@ -157,10 +157,12 @@ def test_refused_upload_on_the_api_keeps_the_running_wall() -> None:
 def test_refused_upload_over_the_bus_is_an_sdo_abort_and_changes_nothing() -> None:
     profile = seed_at_the_wall()
     channel = f"upload-{uuid.uuid4().hex[:10]}"
-    bus = {"interface": "virtual", "channel": channel}
-    with simulated_canopen(profile, channel=channel) as (_sim, drive):
+    bus = {"interface": "virtual", "channel": channel}  # the node on the drive's network; the client a handle of its own
+    with simulated_canopen(profile, channel=channel, interface="virtual") as (_sim, drive):
         controller = controller_for(profile, drive)
-        with ControllerNode(controller, 42, bus):
+        with ControllerNode(controller, 42).attached(drive.link.network):
+            # between runs canopen's notifier reads the drive's bus (in a run the control thread does)
+            drive.link.read_by_notifier()
             with pytest.raises(Refusal) as info:
                 upload_walls(bus, 42, {0: (2.0e6, 100.0)})
             assert f"(abort 0x{ABORT_INVALID_VALUE:08X})" in str(info.value)
@@ -168,9 +170,11 @@ def test_refused_upload_over_the_bus_is_an_sdo_abort_and_changes_nothing() -> No
             assert reason.startswith("refused: passivity gate refused") and "K = 2e+06" in reason
             controller.run(5)
             assert controller.scene.by_name()["wall"].stiffness == 200.0
+            drive.link.read_by_notifier()
             assert upload_walls(bus, 42, {0: (250.0, 120.0)}).startswith("accepted")
             controller.run(1)
             assert controller.scene.by_name()["wall"].damping == 120.0
+            drive.link.read_by_notifier()
             # the CLI path, same bus: exit 1 for a refusal, one line on stderr
             args = ["upload", "--interface", "virtual", "--channel", channel, "--node-id", "42", "--object", "0"]
             assert main([*args, "--stiffness", "5e6", "--damping", "1"]) == 1
@@ -178,6 +182,26 @@ def test_refused_upload_over_the_bus_is_an_sdo_abort_and_changes_nothing() -> No
             assert main([*args, "--stiffness", "210", "--damping", "110"]) == 0
             controller.run(1)
             assert controller.scene.by_name()["wall"].stiffness == 210.0
+
+
+def test_a_verdict_judged_against_a_scene_no_longer_the_latest_is_refused() -> None:
+    """The controller node's worker judged against the latest scene; another upload accepted in
+    between makes that verdict stale: refused, the other upload kept."""
+    from haptic_bus.node.verdicts import judge_walls
+
+    profile = seed_at_the_wall()
+    with simulated_canopen(profile) as (_sim, drive):
+        controller = controller_for(profile, drive)
+        scenes = controller.scenes
+        judged = (scenes.gate, scenes.latest)
+        verdict = judge_walls(scenes.gate, scenes.latest.scene, {"wall": (300.0, 150.0)})
+        assert not isinstance(verdict, str) and verdict[1].accepted
+        controller.set_wall("wall", 250.0, 120.0)
+        with pytest.raises(Refusal, match=r"the scene \(now scene 1\) changed while the upload was judged"):
+            scenes.stage(*verdict, judged)
+        assert controller.latest_scene.by_name()["wall"].stiffness == 250.0
+        assert judge_walls(scenes.gate, scenes.latest.scene, {"wall": (float("nan"), 1.0)}) == (
+            "wall 'wall': stiffness = nan is invalid; allowed: a finite real in [0, 1e+15] N/m")  # plain data back
 
 
 def test_a_storm_of_concurrent_uploads_never_tears_k_from_b() -> None:

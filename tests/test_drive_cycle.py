@@ -38,17 +38,17 @@ def test_a_target_that_is_not_an_integer_sends_nothing(canopen_rig: Callable[...
         drive.enable()
         with drive.cyclic(500) as cycle:
             cycle.read()
-            assert cycle.exchange(np.int64(100)) == 100  # numpy's integers are integers
+            assert cycle.saturate_and_write(np.int64(100)) == 100  # numpy's integers are integers
             sent = drive.stats.rpdos_sent
             for bad in (math.nan, 250.7, "100", None, True):
                 with pytest.raises(ParameterError, match=r"target torque = .* allowed: an integer, per mille"):
-                    cycle.exchange(bad)
+                    cycle.saturate_and_write(bad)
                 with pytest.raises(ParameterError):
                     cycle.write(bad)
             with pytest.raises(ParameterError):
                 drive.write_outputs(math.nan)  # type: ignore[arg-type]
             assert drive.stats.rpdos_sent == sent  # nothing went out
-            assert cycle.exchange(-9000) == -500  # the phase's limit, with its sign
+            assert cycle.saturate_and_write(-9000) == -500  # the phase's limit, with its sign
         drive.disable()
 
 
@@ -61,14 +61,14 @@ def test_a_phase_is_one_at_a_time_and_ends_with_its_block(canopen_rig: Callable[
                 with drive.cyclic():
                     pass
             cycle.read()
-            cycle.exchange(100)
+            cycle.saturate_and_write(100)
         sent = drive.stats.rpdos_sent
         with pytest.raises(DriveError, match="its cyclic phase has ended"):
             cycle.read()
         with pytest.raises(DriveError, match="its cyclic phase has ended"):
-            cycle.exchange(400)
+            cycle.saturate_and_write(400)
         assert drive.stats.rpdos_sent == sent and drive.clamp.limit == 3000
         with drive.cyclic() as again:  # a new phase opens
             again.read()
-            again.exchange(0)
+            again.saturate_and_write(0)
         drive.disable()

@@ -51,10 +51,10 @@ def test_a_cyclic_phase_saturates_at_its_limit_once_and_counts_it_once(running) 
     before = drive.stats.saturated_outputs
     with drive.cyclic(torque_limit=400) as cycle:
         cycle.read()
-        assert cycle.exchange(900) == 400  # beyond the phase's limit: clamped once, at it
+        assert cycle.saturate_and_write(900) == 400  # beyond the phase's limit: clamped once, at it
         assert server.drive.target_torque == 400
         cycle.read()
-        assert cycle.exchange(-300) == -300
+        assert cycle.saturate_and_write(-300) == -300
         assert server.drive.target_torque == -300
     assert drive.stats.saturated_outputs == before + 1
     drive.read_inputs()

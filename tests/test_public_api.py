@@ -61,7 +61,7 @@ def test_the_docstring_example_runs_as_written(haptic_sim, recorded_run, tmp_pat
 
 def test_run_canopen_takes_an_open_bus(haptic_sim, tmp_path):
     """An open ``can.BusABC`` (python-can's virtual bus, the drive in this process): the run cycles
-    on it, leaves it open for its owner, and has no upload server or bus log (one handle)."""
+    on it, leaves it open for its owner, serves uploads on it, and has no bus log (one handle)."""
     import can
 
     drive = haptic_sim("cia402-handle", interface="virtual", node_id=5)
@@ -73,7 +73,7 @@ def test_run_canopen_takes_an_open_bus(haptic_sim, tmp_path):
         assert (result.exit_reason, result.error) == ("completed", None)
         assert result.summary is not None and result.summary.cycles == 500
         run = json.loads((result.folder / "run.json").read_text())
-        assert run["link"]["upload_server"] is False
+        assert run["link"]["upload_server"] is True and run["link"]["bus_log"] is False
         assert run["link"]["bus"]["interface"] == type(bus).__name__
         assert not (result.folder / "bus.asc").exists()
         rows = (result.folder / "record.csv").read_text().splitlines()

@@ -69,6 +69,52 @@ def test_the_controller_node_boots_then_beats(channel, master, frames) -> None:
     assert beat is not None and bytes(beat.data) == b"\x05"
 
 
+def _heartbeat_threads() -> list[str]:
+    return [thread.name for thread in threading.enumerate() if thread.name == f"heartbeat-{MASTER}"]
+
+
+def _heartbeat_thread_ends() -> bool:
+    """Whether the silenced heartbeat thread ends within 1 s (it exits once it next gets the GIL)."""
+    deadline = time.monotonic() + 1.0
+    while _heartbeat_threads() and time.monotonic() < deadline:
+        time.sleep(0.001)
+    return not _heartbeat_threads()
+
+
+def test_the_cyclic_phase_sends_the_heartbeat_itself(canopen_rig) -> None:
+    """At least every round(heartbeat / T) = 10 cycles, and after any cycle that comes a heartbeat
+    period (10 ms) after the last beat, the cycle sends the controller's heartbeat, right after its
+    RPDO; the heartbeat thread, silenced when the phase begins, ends; afterwards it is back."""
+    safety = SafetySettings(heartbeat_ms=10, consumer_ms=40).for_virtual_time(1e-3)
+    with canopen_rig(interface="lockstep", safety=safety) as r:
+        drive = r.drive
+        sent: list[int] = []
+        drive.link.tap = lambda msg, outgoing: sent.append(msg.arbitration_id) if outgoing else None
+        assert _heartbeat_threads() == [f"heartbeat-{MASTER}"]
+        with drive.cyclic() as cycle:
+            sent.clear()  # the thread's last beat may be in: from here on only the cycle sends
+            rpdos = []
+            for _ in range(35):
+                cycle.read()
+                cycle.write(0)
+                rpdos.append(len(sent))  # where each cycle's frames end
+            slow = len(sent)
+            for _ in range(3):  # cycles slower than the heartbeat period: each one beats
+                time.sleep(0.012)
+                cycle.read()
+                cycle.write(0)
+            end = len(sent)  # the phase's frames (the thread, back after it, beats again)
+            assert _heartbeat_thread_ends()  # silenced at the phase's start, it ended on its own
+        assert _heartbeat_threads() == [f"heartbeat-{MASTER}"]
+        drive.link.tap = None
+    beat = 0x700 + MASTER
+    beats = [i for i, cob in enumerate(sent[:slow]) if cob == beat]
+    cycles_of = [next(k for k, end in enumerate(rpdos) if i < end) for i in beats]
+    assert cycles_of[0] == 0 and all(b - a <= 10 for a, b in zip(cycles_of, [*cycles_of[1:], 35]))
+    assert all(sent[i - 1] == 0x200 + NODE for i in beats)  # each right after its cycle's RPDO
+    assert sent[slow:end].count(beat) == 3
+
+
 def _dictionary_without(*indices: int):
     from canopen.objectdictionary import import_od
 

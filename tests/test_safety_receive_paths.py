@@ -109,7 +109,8 @@ def test_the_controller_node_answers_as_a_canopen_node() -> None:
     with simulated_canopen(profile, channel=channel, interface="virtual") as (_sim, drive):
         controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
                                     origin=encoder_origin(drive))
-        with ControllerNode(controller, 42, bus, heartbeat_ms=20):
+        with ControllerNode(controller, 42, heartbeat_ms=20).attached(drive.link.network):
+            drive.link.read_by_notifier()  # the enabling walk read the bus itself: canopen's notifier again
             network = canopen.Network()
             network.connect(**bus)
             try:

@@ -4,7 +4,8 @@ Each axis is a :class:`~drives.canopen.drive.CanopenDrive`, commissioned exactly
 drive is: its own NMT, PDO mapping, scaling and its own safety chain -- the heartbeat consumer
 0x1016 (watching this controller's one heartbeat), the RPDO deadline 0x1400:05 and 0x6007,
 written to each node and read back.  They share one link (one bus, one canopen network) and
-one heartbeat producer, which this object owns.  What it adds:
+one heartbeat producer, which this object owns (sent by the cycle itself in the cyclic phase,
+:mod:`~drives.canopen.heartbeat`).  What it adds:
 
 * **one SYNC per cycle** (:class:`~drives.canopen.axes_cycle.AxesCycle`): every axis' TPDOs
   (status, velocity, position) are collected before any RPDO goes out.  The cycle waits for the
@@ -164,7 +165,7 @@ class CanopenAxes:
         cycle = self.cycle
         cycle.begin()
         cycle.drain()
-        received = cycle.exchange()
+        received = cycle.sync_and_collect()
         for drive, word in zip(self.drives, words):
             drive.exchange.send_rpdo(word, 0)
         silent = [drive.name for drive, inputs in zip(self.drives, received) if inputs is None]
@@ -193,6 +194,7 @@ class CanopenAxes:
         with contextlib.ExitStack() as stack:
             clamps = tuple(stack.enter_context(drive.clamp.lowered(limit, drive.name))
                            for drive, limit in zip(self.drives, limits))
+            stack.enter_context(self.heartbeat.from_cycle(self.drives[0].period))  # the cycle sends it (_send_torques)
             self.cycle.begin()
             yield AxesDriveCycle(self._cycle_inputs, clamps, self._send_torques)
 
@@ -214,7 +216,7 @@ class CanopenAxes:
             for drive in drives:
                 if drive.tripped is None:
                     drive.connected().events.check()
-            received = cycle.exchange()
+            received = cycle.sync_and_collect()
             inputs: list[CyclicInputs] = []
             for i, (drive, found) in enumerate(zip(drives, received)):
                 if found is None:
@@ -243,12 +245,14 @@ class CanopenAxes:
         self._send_torques([drive.clamp(torque) for drive, torque in zip(self.drives, torques)])
 
     def _send_torques(self, torques: Sequence[int]) -> None:
-        """Every axis' saturated target torque (per mille) with its held controlword (:meth:`write_outputs`)."""
+        """Every axis' saturated target torque (per mille) with its held controlword (:meth:`write_outputs`),
+        then this controller's heartbeat when one is due (in the cyclic phase: the cycle sends it)."""
         try:
             for drive, torque in zip(self.drives, torques):
                 drive._send_torque(torque)
         except DriveError as error:
             raise self._trip_all(error) from error.__cause__
+        self.heartbeat.tick()
 
     def _trip_all(self, error: DriveError) -> DriveError:
         """Zero torque with DISABLE VOLTAGE on every axis, then one SYNC: every drive latches it at that SYNC."""

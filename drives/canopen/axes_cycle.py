@@ -86,7 +86,7 @@ class AxesCycle:
             else:
                 stats.stale_tpdos += 1
 
-    def exchange(self) -> list[CyclicInputs | None]:
+    def sync_and_collect(self) -> list[CyclicInputs | None]:
         """SYNC out, then every drive's TPDOs of this cycle: per drive its inputs, None where one of its
         TPDOs did not arrive within ``timeout`` (the cycle waits for the last drive, not the first)."""
         self.send_sync()

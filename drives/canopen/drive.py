@@ -32,6 +32,7 @@ resolved at connect, ``read``/``saturate``/``write`` bound once.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import logging
@@ -268,7 +269,7 @@ class CanopenDrive(Cia402Master):
             commissioning.refuse_another_master()
             if network.bus is None:
                 raise DriveError(self.name, "the CAN network has no bus after connecting")
-            self.heartbeat.start(network.bus, network.send_lock)  # boot-up first, before the drive is touched
+            self.heartbeat.start(self.link.send)  # boot-up first, before the drive is touched
             found = commissioning.run(self.tpdo_objects, DEFAULT_RPDO)
             self.exchange.configure(found.tpdo_codecs, found.tpdo_cobs, found.rpdo_codecs, found.rpdo_cobs)
             self._adopt_scaling(found.scaling, found.scaling_notes)
@@ -328,10 +329,24 @@ class CanopenDrive(Cia402Master):
         return self._cycle_inputs(self.connected().events)
 
     def _bind_cycle(self) -> DriveCycle:
-        """The cycle's read bound to this connection's events, the receive mode entered once."""
+        """The cycle's read bound to this connection's events, the receive mode entered once; its
+        write sends the controller's heartbeat when one is due (:meth:`_phase_duties`)."""
         events = self.connected().events
         self.exchange.begin()
-        return DriveCycle(self.name, functools.partial(self._cycle_inputs, events), self.clamp, self._send_torque)
+        return DriveCycle(self.name, functools.partial(self._cycle_inputs, events), self.clamp, self._send_and_beat)
+
+    def _phase_duties(self) -> contextlib.AbstractContextManager[None]:
+        """The cyclic phase sends the controller's heartbeat from the cycle, its thread silenced
+        (:meth:`~drives.canopen.heartbeat.HeartbeatProducer.from_cycle`).  The bus stays read
+        directly when it ends (the next SDO access gives it back to canopen's notifier): stopping
+        that notifier again for the disabling walk would hold the drive's RPDOs up by its receive
+        timeout, against an RPDO deadline of a few periods."""
+        return self.heartbeat.from_cycle(self.period)
+
+    def _send_and_beat(self, target_torque: int) -> None:
+        """The cycle's outputs (:meth:`_send_torque`), then the heartbeat if one is due."""
+        self._send_torque(target_torque)
+        self.heartbeat.tick()
 
     def _cycle_inputs(self, events: DriveEvents) -> CyclicInputs:
         """One cycle's inputs (:meth:`read_inputs`), the receive mode entered again only where an SDO
@@ -343,7 +358,7 @@ class CanopenDrive(Cia402Master):
             exchange.drain()
             if self._tripped is None:
                 events.check()
-            inputs = exchange.exchange()
+            inputs = exchange.sync_and_collect()
         except DriveError as error:
             raise self.trip(error) from error.__cause__
         if inputs is None:
@@ -379,7 +394,7 @@ class CanopenDrive(Cia402Master):
         exchange = self.exchange
         exchange.begin()
         exchange.drain()
-        inputs = exchange.exchange()
+        inputs = exchange.sync_and_collect()
         exchange.send_rpdo(controlword, 0)
         if inputs is None:
             raise DriveTimeout(self.name, f"no TPDO within {exchange.timeout * 1e3:.3g} ms while commanding the state machine")

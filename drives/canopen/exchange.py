@@ -60,7 +60,8 @@ class CanopenStats(CyclicStats):
 
 
 class CanopenExchange:
-    """SYNC out, this cycle's TPDOs in, RPDOs out, for one drive on ``link``.
+    """SYNC out, this cycle's TPDOs in, RPDOs out, for one drive on ``link`` (every frame through the
+    link: :meth:`~drives.canopen.link.NetworkLink.send`, and its tap).
 
     ``tpdo_codecs`` in TPDO order (together holding 0x6041, 0x606C and optionally 0x6064, and
     whatever else a drive's default mapping carries); ``rpdo_codecs`` in RPDO order, together
@@ -125,31 +126,12 @@ class CanopenExchange:
                        for slot, (cob, codec) in enumerate(zip(tpdo_cobs, self.tpdo_codecs))}
         for (message, _, _), safe, cob in zip(self._rpdos, self._safe, rpdo_cobs):
             message.arbitration_id = safe.arbitration_id = cob
-        self._transmit = self._transmitter()
+        self._transmit = self.link.send  # under the network's send lock where the bus needs one; tapped
 
     def release(self) -> None:
         """Leave the cyclic phase and forget the bus: every later send is "the bus is closed"."""
         self.end()
         self._transmit = self._closed
-
-    def _transmitter(self) -> Callable[[can.Message], None]:
-        """How a frame goes out, resolved once: under the network's send lock (shared with canopen's
-        SDO and NMT), unless the bus says its ``send`` is safe from several threads at once
-        (``concurrent_send``, e.g. the lock-step bus, whose ``send`` runs the receiving node inline:
-        holding the lock through that for most of every cycle starves the heartbeat thread, which
-        takes the same lock)."""
-        network = self.link.network
-        bus = network.bus if network is not None else None
-        if network is None or bus is None:
-            return self._closed
-        if getattr(bus, "concurrent_send", False):
-            return bus.send
-        lock, send = network.send_lock, bus.send
-
-        def locked(msg: can.Message) -> None:
-            with lock:
-                send(msg)
-        return locked
 
     def _closed(self, msg: can.Message) -> None:
         raise DriveError(self.name, "the bus is closed")
@@ -225,7 +207,7 @@ class CanopenExchange:
         sw, vel, pos = self._at
         return CyclicInputs(values[sw], values[vel], None if pos is None else values[pos], sampled_by_ns=synced)
 
-    def exchange(self) -> CyclicInputs | None:
+    def sync_and_collect(self) -> CyclicInputs | None:
         """SYNC out, then this cycle's inputs from every TPDO of the cycle; None on timeout."""
         if not self.produces_sync:
             raise DriveError(self.name, "this drive shares a SYNC another object sends: its cycles run there")
@@ -256,7 +238,7 @@ class CanopenExchange:
     # ------------------------------------------------------------------ send
 
     def send(self, msg: can.Message) -> None:
-        """Send one frame the way :meth:`configure` resolved (:meth:`_transmitter`); DriveError "the
+        """Send one frame through the link (:meth:`~drives.canopen.link.NetworkLink.send`); DriveError "the
         bus is closed" before it and after :meth:`release`."""
         try:
             self._transmit(msg)
@@ -298,8 +280,8 @@ def receive_direct(name: str, link: NetworkLink, wanted: Container[int], deadlin
                    dispatch: Callable[[can.Message], None]) -> tuple[int, bytearray] | None:
     """Read ``link``'s bus in this thread until a standard data frame with a COB-ID in ``wanted``
     arrives (returned as ``(cob_id, data)``) or ``deadline`` (``time.perf_counter()`` s) passes
-    (None); every other data frame goes to ``dispatch``.  A receive that fails is a DriveError
-    naming ``name``."""
+    (None); every other data frame goes to ``dispatch``.  Every frame received is shown to the
+    link's tap first.  A receive that fails is a DriveError naming ``name``."""
     bus = link.bus
     if bus is None:
         raise DriveError(name, "the bus is closed")
@@ -311,6 +293,9 @@ def receive_direct(name: str, link: NetworkLink, wanted: Container[int], deadlin
             raise DriveError(name, f"CAN receive failed: {exc!r}") from exc
         if msg is None:
             return None
+        tap = link.tap
+        if tap is not None:
+            tap(msg, False)
         if msg.is_error_frame or msg.is_remote_frame:
             continue
         can_id = msg.arbitration_id

@@ -12,11 +12,24 @@ Three ways a master gets its network, and what closing gives back:
 While the master cycles in ``direct`` receive mode it reads the bus itself in the calling
 thread, so canopen's notifier thread is paused (:meth:`NetworkLink.read_directly`) and
 restarted for SDO (:meth:`NetworkLink.read_by_notifier`).
+
+Every frame this process sends on the link goes out through :meth:`NetworkLink.send`: the
+cycle's SYNC and RPDOs, the controller's heartbeat, and canopen's own frames (SDO client and
+server, NMT: the network's ``send_message`` is routed here while the link holds it).  The
+link's :attr:`~NetworkLink.tap`, when set, sees each of them (``sent`` True) and every frame
+received on the bus, whoever reads it (the control thread's direct receive, or canopen's
+notifier outside the cyclic phase).  Unset, it costs one ``is not None`` test per frame.  It is
+called in whichever thread sends or receives (the control thread while it cycles; canopen's
+notifier, the heartbeat thread or the upload verdicts' thread outside it), so it must be quick,
+never block and be safe from several threads; and it must copy what it keeps of a sent frame:
+the cycle reuses its SYNC and RPDO messages, packing each cycle's values into them in place.
 """
 
 from __future__ import annotations
 
 import logging
+import threading
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -24,11 +37,13 @@ import canopen
 
 from drives.bus_config import open_bus
 from drives.errors import DriveError
+from drives.os_threads import show_name
 from drives.udp_multicast import standard_filters
 
 logger = logging.getLogger(__name__)
 
 NOTIFIER_CYCLE = 0.02  # s: how long canopen's notifier blocks in recv, so pausing it is quick
+Tap = Callable[[can.Message, bool], None]  # (frame, sent by this process)
 
 
 class ReceiveErrors(can.Listener):
@@ -53,6 +68,21 @@ class ReceiveErrors(can.Listener):
         logger.warning("%s: CAN receive failed: %r", self.name or "notifier", exc)
 
 
+class _LinkListener(ReceiveErrors):
+    """The link's listener on canopen's notifier: receive errors kept (:class:`ReceiveErrors`), and
+    every frame the notifier receives shown to the link's tap."""
+
+    def __init__(self, link: NetworkLink) -> None:
+        super().__init__(link.name)
+        self._link = link
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """The tap sees the frame (canopen's own listener dispatches it)."""
+        tap = self._link.tap
+        if tap is not None:
+            tap(msg, False)
+
+
 def shut_down(network: canopen.Network, name: str) -> None:
     """Stop ``network``'s notifier and shut its bus down, never raising (canopen's own
     ``disconnect()`` re-raises a receive error its notifier once met, long after it was handled)."""
@@ -72,6 +102,16 @@ def _restart_notifier(network: canopen.Network) -> None:
     """A fresh canopen notifier reading ``network``'s bus (for SDO, heartbeat and EMCY)."""
     if network.bus is not None:
         network.notifier = can.Notifier(network.bus, network.listeners, network.NOTIFIER_CYCLE)
+        _show_notifier_names(network)
+
+
+def _show_notifier_names(network: canopen.Network) -> None:
+    """The OS sees canopen's notifier thread as ``canopen-notify`` (:mod:`drives.os_threads`)."""
+    notifier = network.notifier
+    for thread in getattr(notifier, "_readers", ()):
+        if isinstance(thread, threading.Thread):
+            thread.name = "canopen-notify"
+            show_name(thread)
 
 
 class NetworkLink:
@@ -95,7 +135,9 @@ class NetworkLink:
         self.bus: can.BusABC | None = None
         self._passed: set[int] = set()  # the identifiers the bus's receive filters let through (empty: all)
         self.direct = False  # True while the master reads the bus itself
-        self._errors = ReceiveErrors(name)
+        self.tap: Tap | None = None  # sees every frame sent or received on this link (module docstring)
+        self._errors = _LinkListener(self)
+        self._send: Callable[[can.Message], None] = self._closed
 
     def open(self) -> canopen.Network:
         """The network, connected and with its notifier reading the bus (the same one again if
@@ -115,9 +157,44 @@ class NetworkLink:
             network.listeners.append(self._errors)  # type: ignore[arg-type]  # a can.Listener, as python-can wants
         if network.notifier is None or network.notifier.stopped:
             network.connect()
+            _show_notifier_names(network)
+        network.send_message = self.send_message  # type: ignore[method-assign]  # canopen's frames go out tapped
         self.network = network
         self.bus = network.bus
+        self._send = self._sender(network)
         return network
+
+    def _sender(self, network: canopen.Network) -> Callable[[can.Message], None]:
+        """How a frame goes out, resolved once: under the network's send lock (shared with canopen's SDO
+        and NMT), unless the bus says its ``send`` is safe from several threads at once
+        (``concurrent_send``, e.g. the lock-step bus, whose ``send`` runs the receiving node inline:
+        holding the lock through that for most of every cycle starves any other sender)."""
+        bus = network.bus
+        if bus is None:
+            return self._closed
+        if getattr(bus, "concurrent_send", False):
+            return bus.send
+        lock, send = network.send_lock, bus.send
+
+        def locked(msg: can.Message) -> None:
+            with lock:
+                send(msg)
+        return locked
+
+    def _closed(self, msg: can.Message) -> None:
+        raise DriveError(self.name, "the bus is closed")
+
+    def send(self, msg: can.Message) -> None:
+        """Send ``msg`` on the bus (then show it to the tap); python-can's errors as it raises them,
+        DriveError "the bus is closed" when the link is not open."""
+        self._send(msg)
+        tap = self.tap
+        if tap is not None:
+            tap(msg, True)
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
+        """canopen's :meth:`canopen.Network.send_message`, through :meth:`send` (so tapped)."""
+        self.send(can.Message(is_extended_id=can_id > 0x7FF, arbitration_id=can_id, data=data, is_remote_frame=remote))
 
     def read_directly(self, wanted: frozenset[int] = frozenset()) -> None:
         """Pause canopen's notifier: from now on the caller reads the bus itself.  On a bus the link
@@ -166,6 +243,9 @@ class NetworkLink:
         if network is None:
             return
         self.network = None
+        self._send = self._closed
+        if "send_message" in vars(network):
+            del network.send_message  # canopen's own again (a network the caller gave lives on)
         if self._errors in network.listeners:
             network.listeners.remove(self._errors)  # type: ignore[arg-type]  # see open()
         try:

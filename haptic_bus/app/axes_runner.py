@@ -40,6 +40,7 @@ from drives.base import AxesDriveCycle
 from drives.bus_config import resolve_bus_config
 from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
+from drives.os_threads import show_names
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, patient
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
@@ -143,6 +144,7 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                                             origin=origin, supervisor=profile.supervisor, ramp_time=ramp_time,
                                             passivity=profile.passivity, hold=hold)
                 extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold, "per_axis": True}
+                show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
                 axes.enable()  # every drive in the same cycle, right before the first: their RPDO deadlines run from here
                 summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
             reason, error = summary.exit_reason, summary.error
@@ -213,7 +215,7 @@ def _preflight(axes: CanopenAxes, gate: SpaceGate, scene: SpaceScene, profile: A
             return self.cycle.read()
 
         def write_outputs(self, target_torque: int) -> None:
-            self.cycle.exchange([target_torque] * size)
+            self.cycle.saturate_and_write([target_torque] * size)
 
     assumed = max(loop.delay for loop in gate.axes)
 

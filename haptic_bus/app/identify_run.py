@@ -133,7 +133,7 @@ def run_cycles(drive: CycleDrive, session: Session, recorder: Recorder, clock: C
             if session.done:
                 return True
             target = scaling.torque_permille(force)
-            torque = phase.exchange(target)
+            torque = phase.saturate_and_write(target)
             recorder.append(inputs.position, inputs.velocity, torque,
                             not inputs.age and clock.period_bound(inputs.sampled_by_ns) <= longest, torque != target)
             cycle += 1

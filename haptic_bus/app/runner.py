@@ -13,9 +13,12 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
 3. **safe start**: the handle's position is read before enabling; inside an object the run is
    refused (:class:`Refusal`, the drive never enabled), or with ``in_contact = "ramp"`` the
    force rises from 0 over ``ramp_time`` once the gate has proven every scaled wall passive;
-4. the upload server (a CANopen node serving gated wall uploads), the live view and the
-   real-time session are set up; then the drive is enabled, right before the first cycle (its
-   RPDO deadline runs from there), and the controller cycles under the supervisor (``[supervisor]``);
+4. the upload server (CANopen: the controller's node on the drive's own network, its commits
+   judged in a worker process started here, :mod:`~haptic_bus.node.controller_node`), the live
+   view and the real-time session are set up; then the drive is enabled, right before the first
+   cycle (its RPDO deadline runs from there), and the controller cycles under the supervisor
+   (``[supervisor]``), the control thread alone on the bus handle: it sends SYNC, RPDO and the
+   controller's heartbeat, reads every frame, and answers the upload server's SDO requests;
 5. ``record.csv`` is streamed from the first cycle (:mod:`~haptic_bus.app.run_recorder`), so a
    killed run keeps its cycles; whatever else ends it (the time, SIGTERM, Ctrl-C, a drive error,
    an assumption broken), the drive is left disabled, ``run.json`` completed and the pictures drawn.
@@ -32,7 +35,7 @@ import pathlib
 import signal
 import threading
 from collections.abc import Callable, Iterator, Mapping
-from contextlib import ExitStack, contextmanager
+from contextlib import ExitStack, contextmanager, nullcontext
 from typing import TYPE_CHECKING, Any
 
 from drives.base import Drive
@@ -41,6 +44,7 @@ from drives.cia402 import State
 from drives.cia402_master import Cia402Master
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.fault_reset import DEFAULT_WAIT
+from drives.os_threads import show_names
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings, patient
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DriveAddress
@@ -63,6 +67,7 @@ if TYPE_CHECKING:
     import can
 
     from drives.modbus.drive import ModbusDrive
+    from haptic_bus.node.controller_node import ControllerNode
 
 logger = logging.getLogger(__name__)
 
@@ -162,10 +167,11 @@ def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
     ``bus``: a configuration (python-can keyword arguments, ``{"interface": ..., "channel":
     ...}``; python-can's configuration chain fills what it leaves out), or an open
     :class:`can.BusABC` that the caller owns (the run neither closes it nor sets its receive
-    filters).  With a configuration the controller is also CANopen node ``controller_node_id``
-    serving gated wall uploads over SDO, and ``bus.asc`` logs every frame, each on a handle of
-    its own; an open bus is one handle, which the drive's cycle reads, so that run has neither
-    (run.json's ``link`` says so) and ``reset_fault`` is refused (:class:`ParameterError`).
+    filters).  Either way the controller is also CANopen node ``controller_node_id`` serving
+    gated wall uploads over SDO, on the drive's own network and bus handle (its requests read
+    and answered by the control thread while it cycles, :mod:`~haptic_bus.node.controller_node`).
+    With a configuration ``bus.asc`` logs every frame on a handle of its own; an open bus has no
+    bus log (run.json's ``link`` says so), and ``reset_fault`` is refused (:class:`ParameterError`).
     The heartbeat the drive watches (``[safety]``) is sent as node ``controller_node_id`` either way.
     """
     import can
@@ -188,12 +194,12 @@ def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
     period = profile.loop.period
     safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
     link = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_id": node_id,
-            "controller_node_id": controller_node_id, "upload_server": given is None}
+            "controller_node_id": controller_node_id, "upload_server": True, "bus_log": given is None}
     where = ({"bus": given} if given is not None else
              {"interface": config["interface"], "channel": config.get("channel"), "bitrate": config.get("bitrate"),
               "bus_kwargs": {k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")}})
 
-    def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
+    def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Serve]:
         drive = CanopenDrive(node_id, **where, period=period,
                              tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling=profile.scaling(),
                              scaling_source=PROFILE_SCALING_SOURCE,
@@ -205,9 +211,13 @@ def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
         link["safety_warnings"] = list(drive.safety_warnings)
         link["pdo_mapping_notes"] = list(drive.commissioned.mapping_notes) if drive.commissioned is not None else []
 
-        def serve(controller: WallController) -> None:
-            if given is None:
-                stack.enter_context(ControllerNode(controller, controller_node_id, config, safety.heartbeat_ms))
+        def serve(controller: WallController) -> ControllerNode:
+            node = ControllerNode(controller, controller_node_id, safety.heartbeat_ms)
+            if drive.link.network is None:
+                raise DriveError(drive.name, "the CAN network has no bus after connecting")
+            node.attach(drive.link.network)  # the drive's own network: one handle, read by the control thread
+            stack.callback(node.detach)
+            return node
 
         return drive, profile.gate(), serve
 
@@ -227,7 +237,7 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     safety = profile.safety if options.wall_paced else profile.safety.for_virtual_time(period)
     link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
 
-    def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Callable[[WallController], None]]:
+    def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Serve]:
         drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True,
                                      **patient(options.wall_paced, VIRTUAL_TIME_MODBUS_PATIENCE))
         stack.callback(drive.close)
@@ -241,7 +251,7 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
         gate = PassivityGate(dataclasses.replace(profile.device_loop(), delay=delay), profile.gate_policy)
         if not profile.passivity.beyond_gate:  # the profile was judged at its own timing's delay
             gate.admit(profile.compiled_scene())
-        return drive, gate, lambda controller: None
+        return drive, gate, lambda controller: None  # no upload server over Modbus
 
     hold = longest_hold(period, options.wall_paced, safety.modbus_watchdog_ms, 0)
     watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
@@ -287,7 +297,8 @@ def _show_scaling(drive: Cia402Master, options: RunOptions) -> None:
 
 # --------------------------------------------------------------------------- one session
 
-OpenDrive = Callable[[ExitStack], "tuple[Drive, PassivityGate, Callable[[WallController], None]]"]
+Serve = Callable[[WallController], "ControllerNode | None"]  # the upload server, set up for a controller (None: none)
+OpenDrive = Callable[[ExitStack], "tuple[Drive, PassivityGate, Serve]"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -348,15 +359,18 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
             for event in before:
                 controller.events.add(event.time_s, event.kind, event.message, **event.data)
             recorder.stream(stack, controller)
-            serve(controller)
+            node = serve(controller)
             with _live(controller, profile, options), control_thread_scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
                 if options.wall_paced:
                     _preflight(drive, gate, scene, profile, options, side.watchdog, extra)
                 # last before the first cycle: the drive's RPDO deadline runs from here, and the
                 # set-up above (the upload server, the real-time session) can take longer
+                show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
                 drive.enable()
-                summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
+                with node.cycling() if node is not None else nullcontext():  # its verdicts answered by the cycle
+                    summary = controller.run(max(1, round(options.duration / period)), options.stop.event,
+                                             on_cycle=node.poll if node is not None else None)
             reason, error = summary.exit_reason, summary.error
             if reason == "stopped" and options.stop.interrupted:
                 reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr

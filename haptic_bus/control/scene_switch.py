@@ -1,8 +1,10 @@
 """The scene a running controller renders, and every change to it, each through the gate.
 
-Uploads (the Python API, SDO writes to the controller node) are judged in the caller's thread
-and staged; the control loop adopts the last accepted one at a cycle boundary, whole, by
-reference (nothing is ever cleared, so no upload can be lost between a read and a clear).
+Uploads through the Python API are judged in the caller's thread and staged; an upload judged
+elsewhere (the controller node's, in a worker process: the scene's ``with_walls`` builds the
+changed scene there) is staged with its decision (:meth:`SceneSwitch.stage`), never judged again.  The control
+loop adopts the last accepted one at a cycle boundary, whole, by reference (nothing is ever
+cleared, so no upload can be lost between a read and a clear).
 Every scene that is ever in effect gets an id; the history keeps its objects and the gate's
 decision (what ``run.json`` reports).  A derate (the supervisor's) is adopted at once by the
 control thread itself.
@@ -83,6 +85,23 @@ class SceneSwitch(Generic[SceneT, DecisionT]):
         with self._lock:
             return self._admit(self._latest.scene.with_walls(changes), origin)
 
+    def stage(self, scene: SceneT, decision: DecisionT, judged: tuple[Gate[SceneT, DecisionT], SceneEntry[SceneT, DecisionT]],
+              origin: str = "upload") -> DecisionT:
+        """Stage ``scene`` with the ``decision`` a judge elsewhere gave (never judged again here), as
+        :meth:`upload` would; ``judged``: the gate and the latest entry it was judged against, still
+        both current, else :class:`~haptic_bus.errors.Refusal` (a derate or another upload came in
+        between: upload again).  Refusal (logged) if the gate refused it."""
+        with self._lock:
+            gate, base = judged
+            if gate is not self.gate or base is not self._latest:
+                what = "the gate (a derate)" if gate is not self.gate else f"the scene (now scene {self._latest.scene_id})"
+                self.events.add(self._now(), "refused", f"{origin} judged against a scene no longer the latest")
+                raise Refusal(f"{what} changed while the {origin} was judged; upload again")
+            if not decision.accepted and not self.beyond_gate:
+                self.events.add(self._now(), "refused", f"{origin} refused by the gate", reasons=list(decision.reasons))
+                raise Refusal.by_gate(decision)
+            return self._stage(scene, decision, origin)
+
     def _decide(self, scene: SceneT) -> DecisionT:
         """The gate's decision; the gate's Refusal for a refused scene unless beyond the gate is allowed."""
         return self.gate.judge(scene) if self.beyond_gate else self.gate.admit(scene)
@@ -93,6 +112,9 @@ class SceneSwitch(Generic[SceneT, DecisionT]):
         except Refusal as refusal:
             self.events.add(self._now(), "refused", f"{origin} refused by the gate", reasons=list(refusal.reasons))
             raise
+        return self._stage(scene, decision, origin)
+
+    def _stage(self, scene: SceneT, decision: DecisionT, origin: str) -> DecisionT:
         entry = SceneEntry(len(self.history), origin, scene, decision)
         self.history.append(entry)
         self._latest = entry

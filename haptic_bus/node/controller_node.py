@@ -17,36 +17,47 @@ index      sub  type           acc.  meaning
 0x2100+i   3    VISIBLE_STRING ro    object ``i``'s name
 =========  ===  =============  ====  =============================================
 
-Writes to sub 1/2 only stage values; a commit judges the whole staged set with the gate and
-either stages it for the controller's next cycle boundary or answers with SDO abort
-0x06090030 (invalid value), logs the reason, keeps it at 0x2002, and drops the staged
-values: a refused commit leaves the running scene exactly as it was.  The node has its own
-bus handle and network, so SDO traffic and the gate run outside the control thread.  Its
-boot-up and heartbeat come from the CANopen master of the same process
-(:class:`drives.canopen.heartbeat.HeartbeatProducer`, node id ``SafetySettings.master_node_id``),
-which is the same node seen from the bus; a sub-index on a single-value object is refused
-with abort 0x06090011.
+Writes to sub 1/2 only stage values.  A commit hands the whole staged set to the gate in a
+worker process (:mod:`~haptic_bus.node.verdicts`) and leaves the SDO download unanswered until
+the verdict is in; whoever holds the verdict first answers it: the control thread, which looks
+once a cycle without waiting (:meth:`ControllerNode.poll`, the run's ``on_cycle``), or, outside
+the cycles, the thread that collects the worker's answers.  An accepted scene is staged for the
+controller's next cycle boundary, never judged again; a refused one is answered with SDO abort
+0x06090030 (invalid value), its reason logged and kept at 0x2002, the staged values dropped: a
+refused commit leaves the running scene exactly as it was.  A commit while another is being
+judged is refused at once (abort 0x08000022, device state).
+
+The node is a canopen LocalNode on the drive's own network (:meth:`ControllerNode.attach`): one
+bus handle for the process, its SDO requests dispatched by whoever reads the bus (the control
+thread while it cycles) and its answers sent through the drive's link.  Its boot-up and heartbeat
+come from the CANopen master of the same process (:class:`drives.canopen.heartbeat.HeartbeatProducer`,
+node id ``SafetySettings.master_node_id``), which is the same node seen from the bus; a sub-index
+on a single-value object is refused with abort 0x06090011.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import struct
-from collections.abc import Mapping
+import threading
+from collections.abc import Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
 from typing import Any
 
 import canopen
 from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable, datatypes
 
-from drives.bus_config import open_bus
-from drives.canopen.link import ReceiveErrors, shut_down
-from drives.canopen.local_node import StrictLocalNode
-from drives.cia301 import NMT_COB_ID, SDO_RX_BASE
-from drives.udp_multicast import standard_filters
+from drives.canopen.local_node import DeferredDownloadServer, StrictLocalNode
 from haptic_bus._version import __version__
 from haptic_bus.control.controller import WallController
+from haptic_bus.control.protocols import Gate
+from haptic_bus.control.scene_switch import SceneEntry
 from haptic_bus.errors import HapticBusError
+from haptic_bus.node.verdicts import Verdict, judge_pool, judge_walls
 from haptic_bus.validation import whole_in_range
 
 logger = logging.getLogger(__name__)
@@ -57,6 +68,8 @@ LAST_RESULT = 0x2002
 WALL_BASE = 0x2100
 SUB_STIFFNESS, SUB_DAMPING, SUB_NAME = 1, 2, 3
 ABORT_INVALID_VALUE = 0x06090030
+ABORT_DEVICE_STATE = 0x08000022  # a commit while another is being judged
+ABORT_GENERAL = 0x08000000  # the judge itself failed
 _REAL64 = struct.Struct("<d")
 
 
@@ -103,13 +116,21 @@ def controller_dictionary(names: list[str], heartbeat_ms: int = 0) -> ObjectDict
     return od
 
 
+@dataclass(frozen=True)
+class _Judging:
+    """A commit out for judgement: the worker's future, and the gate and latest scene it was judged against."""
+
+    future: Future[Verdict]
+    gate: Gate[Any, Any]
+    base: SceneEntry[Any, Any]
+
+
 class ControllerNode:
-    """Serves ``controller``'s wall parameters as CANopen node ``node_id`` on its own bus handle.
+    """Serves ``controller``'s wall parameters as CANopen node ``node_id`` on the network it is
+    attached to (:meth:`attach`; the drive's), its commits judged in a worker process (module
+    docstring).  ``heartbeat_ms`` is what 0x1017 reads (the master's heartbeat)."""
 
-    ``bus``: python-can keyword arguments (``{"interface": ..., "channel": ...}``), opened here.
-    """
-
-    def __init__(self, controller: WallController, node_id: int, bus: Mapping[str, Any], heartbeat_ms: int = 0) -> None:
+    def __init__(self, controller: WallController, node_id: int, heartbeat_ms: int = 0) -> None:
         self.controller = controller
         self.node_id = whole_in_range("controller node id", node_id, 1, 127)
         self._names = [obj.name for obj in controller.scene.objects]
@@ -117,35 +138,58 @@ class ControllerNode:
         self.last_result = "no commit yet"
         self.accepted = 0
         self.refused = 0
-        self._bus_config = dict(bus)
-        self._network = canopen.Network()
         self._node = StrictLocalNode(node_id, controller_dictionary(self._names, heartbeat_ms))
+        self._server = DeferredDownloadServer(self._node, node_id, COMMIT, self._commit)
+        self._node.sdo = self._server  # before attaching: the network subscribes this server
         self._node.add_read_callback(self._on_read)
         self._node.add_write_callback(self._on_write)
+        self._network: canopen.Network | None = None
+        self._pool: ProcessPoolExecutor | None = None  # the judge worker, from attach()
+        self._judging: _Judging | None = None
+        self._verdict_in = False  # the worker answered; the next poll (or the collector) settles it
+        self._cycling = False  # the control thread polls: it answers the verdict
+        self._lock = threading.Lock()
 
-    def start(self) -> None:
-        """Open the bus and answer SDO requests (in canopen's notifier thread, which a receive
-        error does not end: it is counted and logged)."""
-        self._network.listeners.append(ReceiveErrors(f"controller node {self.node_id}"))  # type: ignore[arg-type]  # a can.Listener, as python-can wants
-        bus = self._network.bus = open_bus(**self._bus_config)
-        # SDO requests to this node and NMT commands only: on udp_multicast the other frames of a
-        # 1 kHz loop are dropped before they are decoded (drives.udp_multicast), not in this process's Python
-        bus.set_filters(standard_filters({SDO_RX_BASE + self.node_id, NMT_COB_ID}))
-        self._network.connect()
-        self._network.add_node(self._node)
+    def attach(self, network: canopen.Network) -> None:
+        """Answer SDO requests on ``network`` (the drive's), the judge worker started first."""
+        self._pool = judge_pool()
+        network.add_node(self._node)
+        self._network = network
         self._node.nmt.state = "OPERATIONAL"
 
-    def stop(self) -> None:
-        """Stop answering and close the bus handle."""
-        self._node.remove_network()
-        shut_down(self._network, f"controller node {self.node_id}")
+    def detach(self) -> None:
+        """Stop answering (a commit still out for judgement stays unanswered: the client times out)."""
+        network, self._network = self._network, None
+        if network is not None and network.nodes.get(self.node_id) is self._node:
+            del network[self.node_id]
 
-    def __enter__(self) -> ControllerNode:
-        self.start()
-        return self
+    @contextlib.contextmanager
+    def attached(self, network: canopen.Network) -> Iterator[ControllerNode]:
+        """:meth:`attach` to ``network`` for the ``with`` block, then :meth:`detach`."""
+        self.attach(network)
+        try:
+            yield self
+        finally:
+            self.detach()
 
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
+    @contextlib.contextmanager
+    def cycling(self) -> Iterator[None]:
+        """While the control thread cycles and calls :meth:`poll` every cycle, it answers verdicts."""
+        with self._lock:
+            self._cycling = True
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._cycling = False
+                ready = self._verdict_in
+            if ready:
+                self._settle()
+
+    def poll(self, _controller: object = None) -> None:
+        """Once a cycle, from the control thread, never waiting: answer a verdict that is in."""
+        if self._verdict_in:
+            self._settle()
 
     def _on_read(self, index: int, subindex: int, od: ODVariable) -> Any:
         if index == 0x1001:
@@ -165,26 +209,79 @@ class ControllerNode:
         if 0 <= i < len(self._names) and subindex in (SUB_STIFFNESS, SUB_DAMPING):
             (value,) = _REAL64.unpack(data)
             self._staged.setdefault(i, [None, None])[subindex - 1] = value
-        elif index == COMMIT:
-            if data[0] != 1:
-                raise SdoAbortedError(ABORT_INVALID_VALUE)
-            self._commit()
+        elif index == COMMIT:  # a segmented commit (1 byte is always expedited): not a commit we judge
+            raise SdoAbortedError(ABORT_INVALID_VALUE)
 
-    def _commit(self) -> None:
+    def _commit(self, data: bytes) -> None:
+        """A commit (0x2001 := 1): the staged walls out to the judge worker, the answer deferred."""
+        if data[:1] != b"\x01":
+            raise SdoAbortedError(ABORT_INVALID_VALUE)
+        pool = self._pool
+        if pool is None:  # not attached: nothing to judge with
+            raise SdoAbortedError(ABORT_DEVICE_STATE)
+        if self._judging is not None:
+            raise SdoAbortedError(ABORT_DEVICE_STATE)
         staged, self._staged = self._staged, {}
+        scenes = self.controller.scenes
+        base = scenes.latest
+        current = base.scene.by_name()
+        walls: dict[str, tuple[float, float]] = {}
+        for i, (K, B) in sorted(staged.items()):  # a half-written pair keeps the scene's other value
+            wall = current[self._names[i]]
+            walls[self._names[i]] = (wall.stiffness if K is None else K, wall.damping if B is None else B)
         try:
-            current = self.controller.latest_scene.by_name()
-            walls: dict[str, tuple[float, float]] = {}
-            for i, (K, B) in sorted(staged.items()):  # a half-written pair keeps the scene's other value
-                wall = current[self._names[i]]
-                walls[self._names[i]] = (wall.stiffness if K is None else K, wall.damping if B is None else B)
-            decision = self.controller.set_walls(walls)
-        except HapticBusError as error:  # Refusal or an invalid value (NaN, negative, ...)
-            self.refused += 1
-            self.last_result = f"refused: {error}"
-            logger.warning("node %d: commit %s", self.node_id, self.last_result)
-            raise SdoAbortedError(ABORT_INVALID_VALUE) from error
+            future = pool.submit(judge_walls, scenes.gate, base.scene, walls)
+        except (BrokenProcessPool, RuntimeError) as error:  # the worker died: no verdict to wait for
+            raise SdoAbortedError(self._refuse(f"not judged: {error!r}", ABORT_GENERAL)) from error
+        self._judging = _Judging(future, scenes.gate, base)
+        future.add_done_callback(self._on_verdict)
+
+    def _on_verdict(self, future: Future[Verdict]) -> None:
+        """In the executor's collecting thread: the control thread answers while it cycles, else this thread."""
+        with self._lock:
+            self._verdict_in = True
+            if self._cycling:
+                return
+        self._settle()
+
+    def _settle(self) -> None:
+        """Answer the commit whose verdict is in (from one thread only: the swap is locked)."""
+        with self._lock:
+            judging, self._judging = self._judging, None
+            self._verdict_in = False
+        if judging is None:
+            return
+        try:
+            verdict = judging.future.result()
+            if isinstance(verdict, str):
+                raise HapticBusError(verdict)  # an invalid value (NaN, negative, ...)
+            scene, decision = verdict
+            self.controller.scenes.stage(scene, decision, (judging.gate, judging.base))
+        except HapticBusError as error:  # Refusal (the gate's, or judged against an older scene) or an invalid value
+            self._answer(self._refuse(f"refused: {error}", ABORT_INVALID_VALUE))
+            return
+        except Exception as error:  # the worker died or could not be reached: the commit is not judged
+            self._answer(self._refuse(f"not judged: {error!r}", ABORT_GENERAL))
+            return
         self.accepted += 1
         worst = decision.worst_margin
         self.last_result = "accepted" + ("" if worst is None else f": worst margin {worst:.4g} N s/m")
         logger.info("node %d: commit %s", self.node_id, self.last_result)
+        self._answer(None)
+
+    def _refuse(self, result: str, abort_code: int) -> int:
+        """Count and log a refused commit, keep ``result`` at 0x2002; the SDO abort code to answer."""
+        self.refused += 1
+        self.last_result = result
+        logger.log(logging.WARNING if abort_code == ABORT_INVALID_VALUE else logging.ERROR, "node %d: commit %s",
+                   self.node_id, result)
+        return abort_code
+
+    def _answer(self, abort_code: int | None) -> None:
+        """The commit's SDO answer, if the node is still on the bus (a bus gone: the client times out)."""
+        if self._network is None:
+            return
+        try:
+            self._server.answer(abort_code)
+        except Exception as exc:  # any interface's send failure: the run goes on, the client times out
+            logger.warning("node %d: could not answer the commit: %r", self.node_id, exc)
