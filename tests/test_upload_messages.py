@@ -59,7 +59,7 @@ def test_an_object_the_scene_lacks_is_named_with_what_it_has_not_the_last_verdic
         assert "passivity" not in err
         controller.run(2)
         assert controller.scene.by_name()["wall"].stiffness == 200.0  # nothing was written
-        controller.drive.link.read_by_notifier()  # the run read the bus itself: canopen's notifier again
+        controller.axes.drives[0].link.read_by_notifier()  # the run read the bus itself: canopen's notifier again
         assert main([*upload, "--object", "0", "--stiffness", "250", "--damping", "120"]) == 0
         assert capsys.readouterr().out.startswith("accepted")
 
