@@ -46,9 +46,11 @@ TRANSPORTS = ("canopen", "modbus")
 RECORD_FILES = ("record.csv", "timeline.png", "force_position.png", "region.png", "run.json")  # Modbus, in the order written
 
 
-def record_files(transport: str) -> tuple[str, ...]:
-    """What a run on ``transport`` writes, in the order its "wrote" line names them (CANopen: the bus log too)."""
-    return ("record.csv", "bus.asc", *RECORD_FILES[1:]) if transport == "canopen" else RECORD_FILES
+def record_files(transport: str, plots: bool = True) -> tuple[str, ...]:
+    """What a run on ``transport`` writes, in the order its "wrote" line names them (CANopen: the bus log too;
+    the pictures unless ``--no-plots``)."""
+    files = RECORD_FILES if plots else (RECORD_FILES[0], RECORD_FILES[-1])
+    return (files[0], "bus.asc", *files[1:]) if transport == "canopen" else files
 
 
 @dataclass

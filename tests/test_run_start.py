@@ -53,7 +53,8 @@ def run_inside(folder: pathlib.Path, capsys: pytest.CaptureFixture[str], transpo
     profile = inside(folder, start)
     out = folder / "run"
     with simulated_drive(transport, profile) as drive:
-        result = run_cli(capsys, "run", str(profile), *drive.args, *options, "--virtual-time", "--out", str(out))
+        result = run_cli(capsys, "run", str(profile), *drive.args, *options, "--virtual-time", "--no-plots", "--out",
+                         str(out))
     return result, drive, out
 
 

@@ -85,7 +85,8 @@ def test_lateness_beyond_the_limit_stops_the_run_with_exit_3(
     profile = profile_variant(tmp_path, "cia402-handle", "stop", extra=STOP_ON_LATE)
     out = tmp_path / "run"
     with simulated_drive(transport, profile) as drive:
-        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "1", "--out", str(out))
+        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "1",
+                         "--out", str(out))
     assert result.code == 3, result.err
     assert result.err_lines == [
         "haptic-bus run: assumption broken: the loop delay: 11 of the last 1000 cycles started more than 0.5 T late "
@@ -113,8 +114,8 @@ def test_warn_records_the_alarm_and_the_run_goes_on(
     warning and the run goes on."""
     out = tmp_path / "run"
     with simulated_drive(transport, "cia402-handle") as drive:
-        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "0.3", "--out",
-                         str(out))
+        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--no-plots", "--duration", "0.3",
+                         "--out", str(out))
     assert result.code == 0, result.err
     # the log's warning, one line (beside it the live view's plain line, once a second of wall clock)
     (warning,) = [line for line in result.err_lines if line.startswith("WARNING")]
@@ -136,8 +137,8 @@ def test_derate_switches_to_the_scene_the_gate_proves_passive_at_the_observed_de
     profile = profile_variant(tmp_path, "stiff-wall", "derate", extra='[supervisor]\non_late = "derate"\n')
     out = tmp_path / "run"
     with simulated_drive(transport, profile) as drive:
-        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "0.3", "--out", str(out),
-                         "-q")
+        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "0.3",
+                         "--out", str(out), "-q")
     assert result.code == 0, result.err
     _, record = read_record(out)
     scene_id = record["scene_id"]
@@ -195,7 +196,8 @@ def test_a_torque_computed_from_a_missed_tpdo_is_a_late_cycle(
         # the master waits out each dropped TPDO: 50 ms (the real-time default), not virtual time's 0.5 s
         monkeypatch.setattr(runner, "VIRTUAL_TIME_CANOPEN_PATIENCE",
                             {**runner.VIRTUAL_TIME_CANOPEN_PATIENCE, "tpdo_timeout": 0.05})
-        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "1", "--out", str(out))
+        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "1",
+                         "--out", str(out))
     assert result.code == 3, result.err
     (line,) = result.err_lines
     assert line.startswith("haptic-bus run: assumption broken: the loop delay: 11 of the last 1000 cycles acted more than "
@@ -248,8 +250,8 @@ def test_an_observer_alarm_stops_the_run_with_exit_3(tmp_path: pathlib.Path, cap
         uploader = threading.Thread(target=upload, daemon=True)
         uploader.start()
         try:
-            result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "30", "--out",
-                             str(out), "-q")
+            result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "30",
+                             "--out", str(out), "-q")
         finally:
             done.set()
             uploader.join(timeout=10.0)
@@ -346,7 +348,8 @@ def test_a_handle_weaker_than_configured_is_not_the_observers_to_see(
             least[0] = min(least[0], sim.operator_energy)
 
         monkeypatch.setattr(sim, "sync", sync_and_watch)
-        result = run_cli(capsys, "run", "stiff-wall", *drive.args, "--virtual-time", "--duration", "2", "--out", str(out), "-q")
+        result = run_cli(capsys, "run", "stiff-wall", *drive.args, "--virtual-time", "--no-plots", "--duration", "2", "--out",
+                         str(out), "-q")
     assert result.code == 0, result.err
     # measured: least -8.1 mJ in 2 s.  -2 mJ is twice the observer's alarm limit, well inside that
     assert least[0] < -2e-3, least
@@ -372,7 +375,7 @@ def test_a_real_time_run_stopped_for_150_ms_breaks_the_delay_assumption_and_exit
     out = tmp_path / "run"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
     run = subprocess.Popen([sys.executable, "-m", "haptic_bus.app.cli", "run", str(profile), *bus_args, "--node-id",
-                            str(NODE), "--duration", "60", "-q", "--out", str(out)],
+                            str(NODE), "--duration", "60", "-q", "--no-plots", "--out", str(out)],
                            cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     sniffer = open_bus(interface="udp_multicast", channel=group, port=port)
     try:

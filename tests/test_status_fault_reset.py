@@ -325,7 +325,7 @@ def test_run_refuses_a_faulted_drive_naming_the_command_then_resets_it_with_rese
         refused = run_cli(capsys, "run", profile, *under.args, "--virtual-time", "--duration", "0.2", "-q",
                           "--out", str(tmp_path / "refused"))
         assert not under.was_enabled
-        done = run_cli(capsys, "run", profile, *under.args, "--virtual-time", "--duration", "0.2", "-q",
+        done = run_cli(capsys, "run", profile, *under.args, "--virtual-time", "--duration", "0.2", "-q", "--no-plots",
                        "--out", str(tmp_path / "done"), "--reset-fault")
         faulted = [State.FAULT_REACTION_ACTIVE, State.FAULT]  # the injected fault
         assert under.states[:4] == [*faulted, State.SWITCH_ON_DISABLED, State.READY_TO_SWITCH_ON] and under.was_enabled

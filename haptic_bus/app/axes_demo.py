@@ -107,9 +107,10 @@ class AxesDemoResult:
     files: list[pathlib.Path]
 
 
-def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: float = 8.0) -> AxesDemoResult:
+def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: float = 8.0,
+                  plots: bool = True) -> AxesDemoResult:
     """Run ``profile`` for ``seconds`` of virtual time; the steady state read at the end of each
-    target's dwell (and at the end); every axis' record, ``run.json`` and the plot written."""
+    target's dwell (and at the end); every axis' record, ``run.json`` and (if ``plots``) the plot written."""
     started = dt.datetime.now(dt.UTC)
     out = prepare_run_folder(out_dir, profile.name)
     period = profile.period
@@ -140,7 +141,8 @@ def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: fl
     extra = {"exit_reason": summary.exit_reason, "error": summary.error, "operator_energy_exact": operator_energy,
              "port_energy_exact": port_energy, "loop": {"period": period},
              "steady_states": [dict(vars(s)) for s in steady]}
-    files = write_axes_run(out, profile, controller, axes_run_document(profile, controller, summary, link, extra, started))
+    files = write_axes_run(out, profile, controller, axes_run_document(profile, controller, summary, link, extra, started),
+                           plots)
     return AxesDemoResult(profile, controller, summary, steady, operator_energy, port_energy, files)
 
 
