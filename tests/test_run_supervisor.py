@@ -3,9 +3,10 @@ observer's energy) and a policy warns, derates or stops (exit 3, "assumption bro
 
 Lateness is injected, never waited for:
 
-- in a lock-step run (virtual time, the real CLI in this process, the simulated drive on the
-  ``virtual`` CAN bus or Modbus TCP) a test double of the virtual clock reports cycles 100..129
-  as 0.6 T late (:func:`tests.run_rig.late_clock`): just beyond the default tolerance of 0.5 T,
+- in a lock-step run (virtual time, the real CLI in this process, the simulated drive over
+  Modbus TCP: the supervisor judges the clock, whatever the link) a test double of the virtual
+  clock reports cycles 100..129 as 0.6 T late (:func:`tests.run_rig.late_clock`): just beyond
+  the default tolerance of 0.5 T,
   so the supervisor's 11th late cycle (limit 10 in a window of 1000) is cycle 110, and the
   delay it observes is 1 + 0.6 = 1.6 samples;
 - in a real-time run (two processes on udp_multicast) the test stops the controller with
@@ -49,7 +50,6 @@ from haptic_bus.control.gate import GatePolicy, PassivityGate
 from haptic_bus.node.upload import upload_walls
 from tests.run_rig import (
     NODE,
-    TRANSPORTS,
     events_of,
     late_clock,
     profile_variant,
@@ -79,12 +79,11 @@ def injected_lateness(monkeypatch: pytest.MonkeyPatch) -> None:
 STOP_ON_LATE = '[supervisor]\non_late = "stop"\n'  # the default is "warn" while a passivity layer holds lateness passive
 
 
-@pytest.mark.parametrize("transport", TRANSPORTS)
 def test_lateness_beyond_the_limit_stops_the_run_with_exit_3(
-        transport: str, injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+        injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     profile = profile_variant(tmp_path, "cia402-handle", "stop", extra=STOP_ON_LATE)
     out = tmp_path / "run"
-    with simulated_drive(transport, profile) as drive:
+    with simulated_drive("modbus", profile) as drive:
         result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "1",
                          "--out", str(out))
     assert result.code == 3, result.err
@@ -107,13 +106,12 @@ def test_lateness_beyond_the_limit_stops_the_run_with_exit_3(
     assert document["summary"]["late_cycles"] == 11 and document["summary"]["alarms"] == 1
 
 
-@pytest.mark.parametrize("transport", TRANSPORTS)
 def test_warn_records_the_alarm_and_the_run_goes_on(
-        transport: str, injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+        injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The shipped default: the passivity layer (guard) holds a late cycle passive, so lateness is a
     warning and the run goes on."""
     out = tmp_path / "run"
-    with simulated_drive(transport, "cia402-handle") as drive:
+    with simulated_drive("modbus", "cia402-handle") as drive:
         result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--no-plots", "--duration", "0.3",
                          "--out", str(out))
     assert result.code == 0, result.err
@@ -129,14 +127,13 @@ def test_warn_records_the_alarm_and_the_run_goes_on(
     assert document["exit_reason"] == "completed" and document["summary"]["late_cycles"] == 30
 
 
-@pytest.mark.parametrize("transport", TRANSPORTS)
 def test_derate_switches_to_the_scene_the_gate_proves_passive_at_the_observed_delay(
-        transport: str, injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+        injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     """stiff-wall (K 16 500, B 7: 95 % of the largest passive K at D = 1) is active at D = 1.6;
     the derate table's next prepared delay, D = 2, serves it."""
     profile = profile_variant(tmp_path, "stiff-wall", "derate", extra='[supervisor]\non_late = "derate"\n')
     out = tmp_path / "run"
-    with simulated_drive(transport, profile) as drive:
+    with simulated_drive("modbus", profile) as drive:
         result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "0.3",
                          "--out", str(out), "-q")
     assert result.code == 0, result.err
