@@ -68,7 +68,7 @@ def eventful_run(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
 
         def events() -> None:
             at(300)
-            answers.append(upload_walls({"interface": "virtual", "channel": drive.channel}, 127, {0: (2500.0, 16.0)},
+            answers.append(upload_walls(drive.bus, 127, {0: (2500.0, 16.0)},
                                         timeout=5.0))
             at(drive.drive.sync_count + 300)
             assert drive.short_next_tpdo is not None and drive.enter_fault is not None
