@@ -3,9 +3,9 @@ observer's energy) and a policy warns, derates or stops (exit 3, "assumption bro
 
 Lateness is injected, never waited for:
 
-- in a lock-step run (virtual time, the real CLI in this process, the simulated drive over
-  Modbus TCP: the supervisor judges the clock, whatever the link) a test double of the virtual
-  clock reports cycles 100..129 as 0.6 T late (:func:`tests.run_rig.late_clock`): just beyond
+- in a lock-step run (virtual time, the real CLI in this process, the simulated drive on the
+  lock-step CAN bus: the supervisor judges the clock, whatever the link) a test double of the
+  virtual clock reports cycles 100..129 as 0.6 T late (:func:`tests.run_rig.late_clock`): just beyond
   the default tolerance of 0.5 T,
   so the supervisor's 11th late cycle (limit 10 in a window of 1000) is cycle 110, and the
   delay it observes is 1 + 0.6 = 1.6 samples;
@@ -83,7 +83,7 @@ def test_lateness_beyond_the_limit_stops_the_run_with_exit_3(
         injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     profile = profile_variant(tmp_path, "cia402-handle", "stop", extra=STOP_ON_LATE)
     out = tmp_path / "run"
-    with simulated_drive("modbus", profile) as drive:
+    with simulated_drive("canopen", profile) as drive:
         result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "1",
                          "--out", str(out))
     assert result.code == 3, result.err
@@ -111,7 +111,7 @@ def test_warn_records_the_alarm_and_the_run_goes_on(
     """The shipped default: the passivity layer (guard) holds a late cycle passive, so lateness is a
     warning and the run goes on."""
     out = tmp_path / "run"
-    with simulated_drive("modbus", "cia402-handle") as drive:
+    with simulated_drive("canopen", "cia402-handle") as drive:
         result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--no-plots", "--duration", "0.3",
                          "--out", str(out))
     assert result.code == 0, result.err
@@ -133,7 +133,7 @@ def test_derate_switches_to_the_scene_the_gate_proves_passive_at_the_observed_de
     the derate table's next prepared delay, D = 2, serves it."""
     profile = profile_variant(tmp_path, "stiff-wall", "derate", extra='[supervisor]\non_late = "derate"\n')
     out = tmp_path / "run"
-    with simulated_drive("modbus", profile) as drive:
+    with simulated_drive("canopen", profile) as drive:
         result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "0.3",
                          "--out", str(out), "-q")
     assert result.code == 0, result.err
