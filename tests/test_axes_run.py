@@ -115,6 +115,7 @@ def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
     one = tmp_path / "one"
     demo = run_axes_demo(one, load_axes_profile(profile_path), seconds=4.0, plots=False)  # the lock-step bus, one process
     assert demo.summary.exit_reason == "completed", demo.summary.error
+    assert not (tmp_path / "two" / "trajectory.png").exists() and not (one / "trajectory.png").exists()  # no plots asked
     two, alone = records(tmp_path / "two"), records(one)
     for axis in "xyz":
         for column in two[axis].dtype.names:
