@@ -38,7 +38,7 @@ from tests.run_rig import run_cli, simulated_drive
 NODE = 5
 SIGMAS = 4.0
 START_WAIT = 30.0  # s: a process imports numpy/scipy/canopen before it answers
-RUN_WAIT = 120.0  # s: 5 s of excitation in lock-step over udp_multicast takes about 5-10 s; room for a loaded machine
+RUN_WAIT = 120.0  # s: the longest an interrupted identify process is waited for (it disables the drive first)
 HIDDEN = dict(mass=0.37, friction=2.9, coulomb_friction=0.2, velocity_noise=1000.0, noise_seed=21)
 
 def controller_profile(folder: Path, force_limit: float = 5.0) -> Path:
