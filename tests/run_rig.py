@@ -1,10 +1,12 @@
 """In-process rigs for the tests of ``haptic-bus run`` (issue 11): not a test module.
 
 - :func:`simulated_drive` starts the simulated drive in this process on a real link, a CANopen
-  slave on python-can's ``virtual`` bus (a channel no other test uses) or a Modbus TCP server
-  on 127.0.0.1 (a free port), from the same profile file the run is given, and records every
-  CiA-402 state the drive enters; :attr:`DriveUnderTest.args` are the ``run`` options that
-  reach it.
+  slave on the lock-step bus (:mod:`drives.lockstep_bus`, a channel no other test uses: the
+  drive answers each frame in the sender's thread, so a virtual-time run costs no thread
+  hand-offs) or a Modbus TCP server on 127.0.0.1 (a free port), from the same profile file the
+  run is given, and records every CiA-402 state the drive enters; :attr:`DriveUnderTest.args`
+  are the ``run`` options that reach it, :attr:`DriveUnderTest.bus` the CAN bus's python-can
+  keywords.
 - :func:`run_cli` runs the real command line (:func:`haptic_bus.app.cli.main`) in this process
   and gives back its exit status, stdout and stderr; it puts back the SIGINT/SIGTERM handlers
   the run installs, so pytest keeps its own Ctrl-C.
@@ -42,13 +44,16 @@ from sim_drive.parameters import Timing
 from sim_drive.profile import load_profile as load_drive_profile
 
 NODE = 5  # the simulated drive's CANopen node id
+CAN_INTERFACE = "lockstep"  # the CAN bus of simulated_drive("canopen")
 TRANSPORTS = ("canopen", "modbus")
 RECORD_FILES = ("record.csv", "timeline.png", "force_position.png", "region.png", "run.json")  # Modbus, in the order written
 
 
-def record_files(transport: str) -> tuple[str, ...]:
-    """What a run on ``transport`` writes, in the order its "wrote" line names them (CANopen: the bus log too)."""
-    return ("record.csv", "bus.asc", *RECORD_FILES[1:]) if transport == "canopen" else RECORD_FILES
+def record_files(transport: str, plots: bool = True) -> tuple[str, ...]:
+    """What a run on ``transport`` writes, in the order its "wrote" line names them (CANopen: the bus log too;
+    the pictures unless ``--no-plots``)."""
+    files = RECORD_FILES if plots else (RECORD_FILES[0], RECORD_FILES[-1])
+    return (files[0], "bus.asc", *files[1:]) if transport == "canopen" else files
 
 
 @dataclass
@@ -67,6 +72,11 @@ class DriveUnderTest:
     enter_fault: Callable[[int], None] | None = None
 
     @property
+    def bus(self) -> dict[str, Any]:
+        """The python-can keywords of the drive's CAN bus (CANopen only)."""
+        return {"interface": CAN_INTERFACE, "channel": self.channel}
+
+    @property
     def was_enabled(self) -> bool:
         """True once the drive entered OPERATION ENABLED."""
         return State.OPERATION_ENABLED in self.states
@@ -75,16 +85,16 @@ class DriveUnderTest:
 @contextmanager
 def simulated_drive(transport: str, profile: pathlib.Path | str) -> Iterator[DriveUnderTest]:
     """The simulated drive of ``profile`` in this process, on ``transport`` ("canopen": the
-    ``virtual`` bus, node 5; "modbus": TCP on 127.0.0.1); stopped on exit (``stop`` may end it earlier)."""
+    lock-step bus, node 5; "modbus": TCP on 127.0.0.1); stopped on exit (``stop`` may end it earlier)."""
     truth = load_drive_profile(profile)
     timing = truth.timing or Timing.CIA402
     if transport == "canopen":
         from sim_drive.canopen.slave import CanopenSimDrive
 
         channel = f"run-test-{os.getpid()}-{uuid.uuid4().hex[:10]}"
-        slave = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, timing=timing,
+        slave = CanopenSimDrive({"interface": CAN_INTERFACE, "channel": channel}, NODE, timing=timing,
                                 parameters=truth.parameters, operator=truth.operator)
-        under = DriveUnderTest(transport, ["--interface", "virtual", "--channel", channel, "--node-id", str(NODE)],
+        under = DriveUnderTest(transport, ["--interface", CAN_INTERFACE, "--channel", channel, "--node-id", str(NODE)],
                                slave.drive, channel=channel, stop=slave.stop, short_next_tpdo=slave.short_next_tpdo,
                                enter_fault=slave.enter_fault)
         slave.drive.state_listeners.append(lambda old, new, number: under.states.append(new))

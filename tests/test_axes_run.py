@@ -106,15 +106,16 @@ def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
     sim = sim_process(*bus, "--node-ids", "5,6,7", "--profile", str(profile_path))
     sim.wait_for_line("nodes 5, 6, 7: serving", START_WAIT)
     with reaped(cli_process("run", str(profile_path), *bus, "--virtual-time", "--duration", "4", "--out",
-                            str(tmp_path / "two"), "-q")) as run:
+                            str(tmp_path / "two"), "-q", "--no-plots")) as run:
         out, err = run.communicate(timeout=RUN_WAIT)
     code, log = sim.stop()
     assert run.returncode == 0, err
     assert "ended: completed" in out and code == 0, log
     assert "node 6: stopped after" in log
     one = tmp_path / "one"
-    demo = run_axes_demo(one, load_axes_profile(profile_path), seconds=4.0)  # the lock-step bus, one process
+    demo = run_axes_demo(one, load_axes_profile(profile_path), seconds=4.0, plots=False)  # the lock-step bus, one process
     assert demo.summary.exit_reason == "completed", demo.summary.error
+    assert not (tmp_path / "two" / "trajectory.png").exists() and not (one / "trajectory.png").exists()  # no plots asked
     two, alone = records(tmp_path / "two"), records(one)
     for axis in "xyz":
         for column in two[axis].dtype.names:
@@ -227,7 +228,7 @@ def test_killing_one_axis_drive_process_zeroes_every_torque_in_the_same_cycle(
     one.wait_for_line("nodes 6: serving", START_WAIT)
     sniffer = spec.open()
     run = cli_process("run", str(profile_path), *spec.sim_args(), "--virtual-time", "--duration", "600",
-                      "--out", str(tmp_path / "run"), "-q")
+                      "--out", str(tmp_path / "run"), "-q", "--no-plots")
     seen: list[tuple[int, bytes]] = []
     try:
         with reaped(run):
@@ -293,7 +294,7 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path) -
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}, clock="wall").start()
     try:
         result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
-                                  RunOptions(8.0, pacing="wall", out_dir=tmp_path / "run", live=False))
+                                  RunOptions(8.0, pacing="wall", out_dir=tmp_path / "run", live=False, plots=False))
     finally:
         sim.stop()
     if result.exit_reason == "refused" and "this machine holds T >=" in (result.error or ""):

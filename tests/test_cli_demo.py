@@ -1,18 +1,14 @@
-"""The main job and the profile commands, run the way a user runs them."""
+"""The main job and the profile commands, run the way a user runs them: the real command line
+(:func:`haptic_bus.app.cli.main`) in this process (Ctrl-C of a demo process: ``test_cli_hygiene.py``)."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 from PIL import Image
 
 from haptic_bus.app.cli import main
-
-REPO = Path(__file__).resolve().parents[1]
 
 
 def _is_real_png(path: Path, min_colours: int = 8) -> bool:
@@ -23,18 +19,23 @@ def _is_real_png(path: Path, min_colours: int = 8) -> bool:
     return path.stat().st_size > 10_000 and (colours is None or len(colours) >= min_colours)
 
 
-def test_demo_runs_as_a_command_and_writes_real_plots(tmp_path: Path) -> None:
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    done = subprocess.run([sys.executable, "-m", "haptic_bus.app.cli", "demo", "--out", str(tmp_path)],
-                          cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    out = done.stdout
+def test_demo_runs_as_a_command_and_writes_real_plots(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["demo", "--out", str(tmp_path)])
+    out, err = capsys.readouterr()
+    assert code == 0, err
     assert "gate: passed" in out and "cycles: 2000" in out
     assert "steady penetration: 2.0000 mm vs F/K = 2.0000 mm" in out
     for name in ("timeline.png", "force_position.png", "region.png"):
         assert _is_real_png(tmp_path / name), name
     rows = (tmp_path / "record.csv").read_text().splitlines()
     assert rows[0].startswith("time_s,wall_clock_s,monotonic_s,lateness_s,statusword,velocity_counts") and len(rows) == 2001
+
+
+def test_demo_with_no_plots_writes_the_record_and_run_json_alone(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--no-plots", "--duration", "0.1", "--out", str(tmp_path)]) == 0
+    assert capsys.readouterr().out.endswith(f"wrote: {tmp_path / 'record.csv'}, {tmp_path / 'run.json'}\n")
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["record.csv", "run.json"]
+    assert len((tmp_path / "record.csv").read_text().splitlines()) == 1 + 100  # the header, 0.1 s at T = 1 ms
 
 
 def test_report_writes_the_seed_figures(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

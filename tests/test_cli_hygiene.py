@@ -189,7 +189,7 @@ def test_another_master_is_refused_and_the_first_run_goes_on_until_ctrl_c(
     # process for): what is tested here is the other master, not the heartbeat
     profile = profile_variant(tmp_path, "cia402-handle", "patient", extra="[safety]\nconsumer_ms = 1000\n")
     first = Command("run", str(profile), *bus, "--node-id", str(NODE), "--virtual-time", "--duration", "600", "-q",
-                    "--out", str(tmp_path / "first"))
+                    "--no-plots", "--out", str(tmp_path / "first"))
     sniffer = open_bus(interface="udp_multicast", channel=group, port=port)
     tpdos = [0]
 
@@ -207,7 +207,7 @@ def test_another_master_is_refused_and_the_first_run_goes_on_until_ctrl_c(
     try:
         first.wait_until(cycled(300), "300 cycles of the first run")
         second = run_cli(capsys, "run", "cia402-handle", *bus, "--node-id", str(NODE), "--virtual-time", "--duration", "1",
-                         "--out", str(tmp_path / "second"))
+                         "--no-plots", "--out", str(tmp_path / "second"))
         first.wait_until(cycled(tpdos[0] + 300), "300 more cycles of the first run")  # not disturbed
         status = first.interrupt()
         said, printed = _no_traceback(first), first.out
@@ -325,7 +325,7 @@ def test_another_master_over_modbus_is_refused_without_a_write(tmp_path: pathlib
             while controller.cycles < 200 and time.monotonic() < deadline:
                 time.sleep(0.01)
             second = run_cli(capsys, "run", "cia402-handle", "--modbus", url, "--virtual-time", "--duration", "1",
-                             "--out", str(tmp_path / "second"))
+                             "--no-plots", "--out", str(tmp_path / "second"))
             states, cycles = list(sim.states), controller.cycles
             deadline = time.monotonic() + 30.0
             while controller.cycles < cycles + 200 and time.monotonic() < deadline:

@@ -1,9 +1,10 @@
 """``haptic-bus identify`` over a real bus: the CANopen master against the simulated drive, whose
 truth (another profile) the controller does not know.
 
-In one process on python-can's virtual bus in virtual time (the run, the command line, the
-refusal), and in two processes on udp_multicast: ``haptic-bus identify`` against ``haptic-bus sim
---profile HIDDEN`` (the estimate, the profile it writes, Ctrl-C).  The tolerances are those of
+In one process in virtual time: on python-can's virtual bus (the run, the command line, the
+refusal) and on the lock-step bus (the command line against a drive built from a hidden profile
+file: the estimate, the profile it writes); and in two processes on udp_multicast, Ctrl-C of
+``haptic-bus identify`` against ``haptic-bus sim --profile HIDDEN``.  The tolerances are those of
 ``tests/test_identify_fit.py`` (the issue's bounds and 4 standard errors of the fit).
 """
 
@@ -32,11 +33,12 @@ from sim_drive.operator import HandModel, OperatorModel
 from sim_drive.parameters import DeviceParameters
 from tests.cli_process import cli_process, reaped
 from tests.guess_profile import guess_profile
+from tests.run_rig import run_cli, simulated_drive
 
 NODE = 5
 SIGMAS = 4.0
 START_WAIT = 30.0  # s: a process imports numpy/scipy/canopen before it answers
-RUN_WAIT = 120.0  # s: 5 s of excitation in lock-step over udp_multicast takes about 5-10 s; room for a loaded machine
+RUN_WAIT = 120.0  # s: the longest an interrupted identify process is waited for (it disables the drive first)
 HIDDEN = dict(mass=0.37, friction=2.9, coulomb_friction=0.2, velocity_noise=1000.0, noise_seed=21)
 
 def controller_profile(folder: Path, force_limit: float = 5.0) -> Path:
@@ -143,7 +145,7 @@ def test_invalid_input_is_refused_before_the_bus_is_touched(arguments: list[str]
     assert len(err.strip().splitlines()) == 1 and "haptic-bus identify" in err
 
 
-# --------------------------------------------------------------------------- two processes on udp_multicast
+# --------------------------------------------------------------------------- a hidden profile; Ctrl-C of two processes
 
 def _hidden_profile(folder: Path) -> Path:
     """The simulated drive's truth, which the controller is never given."""
@@ -180,17 +182,17 @@ def _start_sim(sim_process: Any, multicast: tuple[str, int], hidden: Path) -> An
     return sim
 
 
-def test_identify_against_haptic_bus_sim_in_another_process(multicast: tuple[str, int], sim_process: Any,
-                                                             tmp_path: Path) -> None:
-    sim = _start_sim(sim_process, multicast, _hidden_profile(tmp_path))
+def test_identify_against_a_drive_with_a_hidden_profile_writes_the_profile(tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """The command line against the simulated drive built from a profile file (as ``haptic-bus sim
+    --profile HIDDEN`` builds it), in this process on the lock-step bus."""
     written = tmp_path / "identified.toml"
-    # 5 s: b's standard error ~0.2 %, far inside the 5 % bound
-    with reaped(_identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "5", "--json",
-                                  "--write-profile", str(written))) as run:
-        out, err = run.communicate(timeout=RUN_WAIT)
-    code, log = sim.stop()
-    assert run.returncode == 0, err
-    document = json.loads(out)
+    with simulated_drive("canopen", _hidden_profile(tmp_path)) as drive:
+        # 5 s: b's standard error ~0.2 %, far inside the 5 % bound
+        result = run_cli(capsys, "identify", *drive.args, "--virtual-time", "--profile", str(controller_profile(tmp_path)),
+                         "--duration", "5", "--json", "--write-profile", str(written))
+    assert result.code == 0, result.err
+    document = json.loads(result.out)
     fit = document["identification"]["fit"]
     assert abs(fit["mass"]["value"] / 0.37 - 1) < 0.03 and within(fit["mass"], 0.37)
     assert abs(fit["friction"]["value"] / 2.9 - 1) < 0.05 and within(fit["friction"], 2.9)
@@ -206,7 +208,7 @@ def test_identify_against_haptic_bus_sim_in_another_process(multicast: tuple[str
     assert str(profile.device.velocity) == identified["velocity"] == "point"
     assert "coulomb_friction" not in tomllib.loads(written.read_text())["device"]  # the truth stays the drive's
     assert "# What the controller believes" in written.read_text()  # the user's comments are kept
-    assert "OPERATION ENABLED -> SWITCH ON DISABLED" in log and code == 0
+    assert drive.states[-2:] == [State.OPERATION_ENABLED, State.SWITCH_ON_DISABLED]  # disabled at the end, not faulted
 
 
 def test_ctrl_c_disables_the_drive_and_exits_130(multicast: tuple[str, int], sim_process: Any, tmp_path: Path) -> None:

@@ -51,7 +51,7 @@ class FakeClock:
 def test_quiet_runs_show_no_view(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     with simulated_drive("canopen", "cia402-handle") as drive:
         result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "0.3",
-                         "--out", str(tmp_path / "run"), "-q")
+                         "--out", str(tmp_path / "run"), "-q", "--no-plots")
     assert result.code == 0, result.err
     assert result.err == "" and TITLE not in result.out
 

@@ -1,8 +1,9 @@
 """Issue 20, operations, done when: after ``kill -9`` of a real-time ``haptic-bus run`` against
 ``haptic-bus sim`` in another process, ``haptic-bus status`` shows FAULT with the EMCY code,
 ``haptic-bus fault-reset`` brings the drive to SWITCH ON DISABLED, and the next ``run`` works.
-CANopen on udp_multicast and Modbus TCP on 127.0.0.1; every command is a real process started
-the way a user starts it (``python -m haptic_bus.app.cli``, ``python -m sim_drive``).
+CANopen on udp_multicast and Modbus TCP on 127.0.0.1; the drive and the killed run are real
+processes started the way a user starts them (``python -m sim_drive``, ``python -m
+haptic_bus.app.cli``), the commands after the kill the real command line in this process.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from drives.bus_config import open_bus
 from drives.cia402 import STATUSWORD, State, decode_statusword
 from drives.modbus.objects import ModbusObjects
 from drives.object_access import ObjectAccess
+from tests.run_rig import run_cli
 
 NODE = 5
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -62,17 +64,16 @@ def _start(*args: str) -> subprocess.Popen:
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 
-def _command(*args: str) -> tuple[int, str, str]:
-    """``haptic-bus ARGS`` to its end (bounded): exit status, stdout, stderr."""
-    done = subprocess.run([sys.executable, "-m", "haptic_bus.app.cli", *args], cwd=REPO, env=_environment(),
-                          capture_output=True, text=True, timeout=START_WAIT)
-    return done.returncode, done.stdout, done.stderr
-
-
-def _status_reset_and_run_again(drive: list[str], profile: str, folder: pathlib.Path, codes: set[int]) -> dict[str, Any]:
+def _status_reset_and_run_again(capsys: pytest.CaptureFixture[str], drive: list[str], profile: str, folder: pathlib.Path,
+                                codes: set[int]) -> dict[str, Any]:
     """status (FAULT, its error code one of ``codes``), fault-reset, status (SWITCH ON DISABLED), a
     short run (exit 0: the simulated operator left the handle inside the wall, so it starts with
     the ramp a user is told to use); the first status as JSON."""
+
+    def _command(*args: str) -> tuple[int, str, str]:
+        result = run_cli(capsys, *args)
+        return result.code, result.out, result.err
+
     code, out, err = _command("status", *drive, "--json")
     assert code == 1, err  # in FAULT
     faulted = json.loads(out)
@@ -83,7 +84,7 @@ def _status_reset_and_run_again(drive: list[str], profile: str, folder: pathlib.
     assert "reset: now SWITCH ON DISABLED" in out
     code, out, err = _command("status", *drive, "--json")
     assert code == 0 and json.loads(out)["cia402_state"] == "SWITCH ON DISABLED", err
-    code, out, err = _command("run", profile, *drive, "--duration", "0.5", "--start-in-contact", "ramp", "-q",
+    code, out, err = _command("run", profile, *drive, "--duration", "0.5", "--start-in-contact", "ramp", "-q", "--no-plots",
                               "--out", str(folder / "again"))
     assert code == 0, err
     assert json.loads((folder / "again" / "run.json").read_text())["exit_reason"] == "completed"
@@ -113,7 +114,8 @@ def _first(bus: can.BusABC, wanted: Callable[[can.Message], bool], timeout: floa
 
 @pytest.mark.slow
 def test_canopen_status_fault_reset_and_run_again_after_kill_9(multicast: tuple[str, int], sim_process: Any,
-                                                               tmp_path: pathlib.Path) -> None:
+                                                               tmp_path: pathlib.Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
     group, port = multicast
     drive = ["--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}", "--node-id", str(NODE)]
     sim = sim_process(*drive, "--profile", "cia402-handle")
@@ -136,13 +138,14 @@ def test_canopen_status_fault_reset_and_run_again_after_kill_9(multicast: tuple[
     assert emcy is not None, f"no EMCY from the drive after kill -9: {sim.log()[-2000:]}"
     code = int.from_bytes(emcy.data[:2], "little")
     assert code in (0x8250, 0x8130)  # the RPDO deadline (0.32 s) or the heartbeat consumer (0.5 s) said it
-    faulted = _status_reset_and_run_again(drive, profile, tmp_path, {code})
+    faulted = _status_reset_and_run_again(capsys, drive, profile, tmp_path, {code})
     assert faulted["nmt_state"] == "OPERATIONAL"  # as the killed run left it: status changes nothing
     assert faulted["readings"]["error_register"]["value"] == 0x11  # generic + communication
 
 
 @pytest.mark.slow
-def test_modbus_status_fault_reset_and_run_again_after_kill_9(sim_process: Any, tmp_path: pathlib.Path) -> None:
+def test_modbus_status_fault_reset_and_run_again_after_kill_9(sim_process: Any, tmp_path: pathlib.Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
     sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--profile", "cia402-handle")
     log = sim.wait_for_line("serving Modbus TCP on", START_WAIT)
     url = log.split("serving Modbus TCP on ", 1)[1].split()[0]
@@ -158,4 +161,4 @@ def test_modbus_status_fault_reset_and_run_again_after_kill_9(sim_process: Any, 
         run.kill()  # (again: a no-op if it is gone)
         run.communicate(timeout=10)  # reaped, its pipe closed
     # the connection closed (0x8100) or the watchdog ran out first (0x8130), see tests/test_safety_chain.py
-    _status_reset_and_run_again(["--modbus", url], profile, tmp_path, {0x8100, 0x8130})
+    _status_reset_and_run_again(capsys, ["--modbus", url], profile, tmp_path, {0x8100, 0x8130})

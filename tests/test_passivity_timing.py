@@ -118,7 +118,7 @@ def test_under_nominal_timing_guard_leaves_the_demo_wall_alone_and_the_observer_
     its rounding bound."""
     from haptic_bus.app.demo import run_demo
 
-    result = run_demo(tmp_path, seconds=10.0)
+    result = run_demo(tmp_path, seconds=10.0, plots=False)
     summary = result.summary
     assert summary.exit_reason == "completed" and summary.cycles == 10_000
     assert summary.layer == "guard" and summary.layer_interventions == 0

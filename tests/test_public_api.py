@@ -34,12 +34,12 @@ def test_every_public_name_resolves():
 
 
 def test_the_docstring_example_runs_as_written(haptic_sim, recorded_run, tmp_path, monkeypatch):
-    """The example, against the simulated drive in another process (``python -m sim_drive``, as the
-    example's comment starts it), on a multicast group and port of this test's own (hop limit 0)
-    instead of the documented ones: the one substitution."""
+    """The example, against the simulated drive of the same profile in this process on a lock-step
+    bus of this test's own instead of the documented udp_multicast bus (another process, as the
+    example's comment starts it, is the two-process tests' to run): the one substitution."""
     code = docstring_example()
     assert code.count(DOCUMENTED_BUS) == 1
-    drive = haptic_sim("cia402-handle", interface="udp_multicast", node_id=5)
+    drive = haptic_sim("cia402-handle", interface="lockstep", node_id=5)
     monkeypatch.chdir(tmp_path)  # the run's folder: runs/<UTC>-cia402-handle here
     namespace: dict[str, object] = {}
     exec(compile(code.replace(DOCUMENTED_BUS, repr(drive.bus)), "haptic_bus.__doc__", "exec"), namespace)

@@ -29,7 +29,7 @@ def test_run_over_modbus_settles_at_f_over_k(
     try:
         server.wait_for_line(f"serving Modbus TCP on {url}", 15.0)
         run = subprocess.run([sys.executable, "-m", "haptic_bus.app.cli", "run", profile_name, "--modbus", url,
-                              "--virtual-time", "--duration", "1.5", "--out", str(tmp_path)],
+                              "--virtual-time", "--duration", "1.5", "--no-plots", "--out", str(tmp_path)],
                              cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     finally:
         server_status, server_log = server.stop()  # SIGTERM, at most 10 s

@@ -68,7 +68,7 @@ def eventful_run(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
 
         def events() -> None:
             at(300)
-            answers.append(upload_walls({"interface": "virtual", "channel": drive.channel}, 127, {0: (2500.0, 16.0)},
+            answers.append(upload_walls(drive.bus, 127, {0: (2500.0, 16.0)},
                                         timeout=5.0))
             at(drive.drive.sync_count + 300)
             assert drive.short_next_tpdo is not None and drive.enter_fault is not None
@@ -78,7 +78,8 @@ def eventful_run(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
 
         thread = threading.Thread(target=orchestrate, daemon=True)
         thread.start()
-        code = main(["run", str(profile), *drive.args, "--virtual-time", "--duration", "60", "--out", str(out), "-q"])
+        code = main(["run", str(profile), *drive.args, "--virtual-time", "--duration", "60", "--out", str(out), "-q",
+                     "--no-plots"])  # haptic-bus plot draws them below
         thread.join(timeout=WAIT)
     assert code == 1 and answers and answers[0].startswith("accepted")
     return out
@@ -97,11 +98,10 @@ def test_the_run_recorded_the_upload_the_alarm_and_the_fault(eventful_run: pathl
 
 
 def test_haptic_bus_plot_shows_every_event_and_the_fault(eventful_run: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
-    for name in ("timeline.png", "force_position.png", "region.png"):
-        (eventful_run / name).unlink()
+    written = [eventful_run / name for name in ("timeline.png", "force_position.png", "region.png")]
+    assert not any(path.exists() for path in written)  # the run drew none (--no-plots)
     result = run_cli(capsys, "plot", str(eventful_run))
     assert result.code == 0 and result.err == ""
-    written = [eventful_run / name for name in ("timeline.png", "force_position.png", "region.png")]
     assert result.out == f"wrote {', '.join(map(str, written))}\n"
     assert all(path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 30_000 for path in written)
 
@@ -134,7 +134,7 @@ def test_haptic_bus_plot_shows_every_event_and_the_fault(eventful_run: pathlib.P
 
 
 def test_multi_object_draws_each_of_its_five_objects(tmp_path: pathlib.Path) -> None:
-    result = run_demo(tmp_path, load_profile("multi-object"), 1.0)
+    result = run_demo(tmp_path, load_profile("multi-object"), 1.0, plots=False)  # the figures are drawn below
     assert result.summary.exit_reason == "completed"
     run = read_run_folder(tmp_path)
     names = ("workspace (slot)", "front-stop (wall)", "home (detent)", "left-index (detent)", "right-index (detent)")

@@ -53,7 +53,8 @@ def run_inside(folder: pathlib.Path, capsys: pytest.CaptureFixture[str], transpo
     profile = inside(folder, start)
     out = folder / "run"
     with simulated_drive(transport, profile) as drive:
-        result = run_cli(capsys, "run", str(profile), *drive.args, *options, "--virtual-time", "--out", str(out))
+        result = run_cli(capsys, "run", str(profile), *drive.args, *options, "--virtual-time", "--no-plots", "--out",
+                         str(out))
     return result, drive, out
 
 
@@ -128,7 +129,7 @@ def test_the_api_never_enables_the_drive_for_a_scene_the_gate_has_not_proven(
                                   start=StartPolicy(policy, RAMP_TIME))
     options = RunOptions(duration=0.5, pacing="virtual", out_dir=tmp_path / "run", live=False)
     with simulated_drive("canopen", path) as drive:
-        result = run_canopen(profile, {"interface": "virtual", "channel": drive.channel}, 5, options)
+        result = run_canopen(profile, drive.bus, 5, options)
     assert not drive.was_enabled, drive.states
     assert result.exit_reason == "refused" and result.error is not None and result.error.startswith(reason), result.error
     document = read_run(tmp_path / "run")

@@ -4,8 +4,9 @@ observer's energy) and a policy warns, derates or stops (exit 3, "assumption bro
 Lateness is injected, never waited for:
 
 - in a lock-step run (virtual time, the real CLI in this process, the simulated drive on the
-  ``virtual`` CAN bus or Modbus TCP) a test double of the virtual clock reports cycles 100..129
-  as 0.6 T late (:func:`tests.run_rig.late_clock`): just beyond the default tolerance of 0.5 T,
+  lock-step CAN bus: the supervisor judges the clock, whatever the link) a test double of the
+  virtual clock reports cycles 100..129 as 0.6 T late (:func:`tests.run_rig.late_clock`): just beyond
+  the default tolerance of 0.5 T,
   so the supervisor's 11th late cycle (limit 10 in a window of 1000) is cycle 110, and the
   delay it observes is 1 + 0.6 = 1.6 samples;
 - in a real-time run (two processes on udp_multicast) the test stops the controller with
@@ -49,7 +50,6 @@ from haptic_bus.control.gate import GatePolicy, PassivityGate
 from haptic_bus.node.upload import upload_walls
 from tests.run_rig import (
     NODE,
-    TRANSPORTS,
     events_of,
     late_clock,
     profile_variant,
@@ -79,13 +79,13 @@ def injected_lateness(monkeypatch: pytest.MonkeyPatch) -> None:
 STOP_ON_LATE = '[supervisor]\non_late = "stop"\n'  # the default is "warn" while a passivity layer holds lateness passive
 
 
-@pytest.mark.parametrize("transport", TRANSPORTS)
 def test_lateness_beyond_the_limit_stops_the_run_with_exit_3(
-        transport: str, injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+        injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     profile = profile_variant(tmp_path, "cia402-handle", "stop", extra=STOP_ON_LATE)
     out = tmp_path / "run"
-    with simulated_drive(transport, profile) as drive:
-        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "1", "--out", str(out))
+    with simulated_drive("canopen", profile) as drive:
+        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "1",
+                         "--out", str(out))
     assert result.code == 3, result.err
     assert result.err_lines == [
         "haptic-bus run: assumption broken: the loop delay: 11 of the last 1000 cycles started more than 0.5 T late "
@@ -106,15 +106,14 @@ def test_lateness_beyond_the_limit_stops_the_run_with_exit_3(
     assert document["summary"]["late_cycles"] == 11 and document["summary"]["alarms"] == 1
 
 
-@pytest.mark.parametrize("transport", TRANSPORTS)
 def test_warn_records_the_alarm_and_the_run_goes_on(
-        transport: str, injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+        injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The shipped default: the passivity layer (guard) holds a late cycle passive, so lateness is a
     warning and the run goes on."""
     out = tmp_path / "run"
-    with simulated_drive(transport, "cia402-handle") as drive:
-        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "0.3", "--out",
-                         str(out))
+    with simulated_drive("canopen", "cia402-handle") as drive:
+        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--no-plots", "--duration", "0.3",
+                         "--out", str(out))
     assert result.code == 0, result.err
     # the log's warning, one line (beside it the live view's plain line, once a second of wall clock)
     (warning,) = [line for line in result.err_lines if line.startswith("WARNING")]
@@ -128,16 +127,15 @@ def test_warn_records_the_alarm_and_the_run_goes_on(
     assert document["exit_reason"] == "completed" and document["summary"]["late_cycles"] == 30
 
 
-@pytest.mark.parametrize("transport", TRANSPORTS)
 def test_derate_switches_to_the_scene_the_gate_proves_passive_at_the_observed_delay(
-        transport: str, injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+        injected_lateness: None, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     """stiff-wall (K 16 500, B 7: 95 % of the largest passive K at D = 1) is active at D = 1.6;
     the derate table's next prepared delay, D = 2, serves it."""
     profile = profile_variant(tmp_path, "stiff-wall", "derate", extra='[supervisor]\non_late = "derate"\n')
     out = tmp_path / "run"
-    with simulated_drive(transport, profile) as drive:
-        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "0.3", "--out", str(out),
-                         "-q")
+    with simulated_drive("canopen", profile) as drive:
+        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "0.3",
+                         "--out", str(out), "-q")
     assert result.code == 0, result.err
     _, record = read_record(out)
     scene_id = record["scene_id"]
@@ -195,7 +193,8 @@ def test_a_torque_computed_from_a_missed_tpdo_is_a_late_cycle(
         # the master waits out each dropped TPDO: 50 ms (the real-time default), not virtual time's 0.5 s
         monkeypatch.setattr(runner, "VIRTUAL_TIME_CANOPEN_PATIENCE",
                             {**runner.VIRTUAL_TIME_CANOPEN_PATIENCE, "tpdo_timeout": 0.05})
-        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "1", "--out", str(out))
+        result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "1",
+                         "--out", str(out))
     assert result.code == 3, result.err
     (line,) = result.err_lines
     assert line.startswith("haptic-bus run: assumption broken: the loop delay: 11 of the last 1000 cycles acted more than "
@@ -240,7 +239,7 @@ def test_an_observer_alarm_stops_the_run_with_exit_3(tmp_path: pathlib.Path, cap
         def upload() -> None:
             while not answers and not done.wait(0.05):  # bounded by the run (at most 30 s of virtual time)
                 try:
-                    answers.append(upload_walls({"interface": "virtual", "channel": drive.channel}, 127, {0: STIFFER},
+                    answers.append(upload_walls(drive.bus, 127, {0: STIFFER},
                                                 timeout=1.0))
                 except DriveTimeout:  # the controller node is not up yet, or its answer came late
                     continue
@@ -248,8 +247,8 @@ def test_an_observer_alarm_stops_the_run_with_exit_3(tmp_path: pathlib.Path, cap
         uploader = threading.Thread(target=upload, daemon=True)
         uploader.start()
         try:
-            result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--duration", "30", "--out",
-                             str(out), "-q")
+            result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "30",
+                             "--out", str(out), "-q")
         finally:
             done.set()
             uploader.join(timeout=10.0)
@@ -346,7 +345,8 @@ def test_a_handle_weaker_than_configured_is_not_the_observers_to_see(
             least[0] = min(least[0], sim.operator_energy)
 
         monkeypatch.setattr(sim, "sync", sync_and_watch)
-        result = run_cli(capsys, "run", "stiff-wall", *drive.args, "--virtual-time", "--duration", "2", "--out", str(out), "-q")
+        result = run_cli(capsys, "run", "stiff-wall", *drive.args, "--virtual-time", "--no-plots", "--duration", "2", "--out",
+                         str(out), "-q")
     assert result.code == 0, result.err
     # measured: least -8.1 mJ in 2 s.  -2 mJ is twice the observer's alarm limit, well inside that
     assert least[0] < -2e-3, least
@@ -372,7 +372,7 @@ def test_a_real_time_run_stopped_for_150_ms_breaks_the_delay_assumption_and_exit
     out = tmp_path / "run"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
     run = subprocess.Popen([sys.executable, "-m", "haptic_bus.app.cli", "run", str(profile), *bus_args, "--node-id",
-                            str(NODE), "--duration", "60", "-q", "--out", str(out)],
+                            str(NODE), "--duration", "60", "-q", "--no-plots", "--out", str(out)],
                            cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     sniffer = open_bus(interface="udp_multicast", channel=group, port=port)
     try:

@@ -1,7 +1,7 @@
-"""``haptic-bus scan``: real simulated drives on python-can's ``virtual`` bus and on
-``udp_multicast`` (with a running ``haptic-bus run`` and its controller node), and the real
-pymodbus simulated server on 127.0.0.1.  Expected values are read from the simulator's EDS and
-objects, never written down twice."""
+"""``haptic-bus scan``: real simulated drives on python-can's ``virtual`` bus and on the lock-step
+bus (with ``haptic-bus run``'s runner and its controller node cycling), and the real pymodbus
+simulated server on 127.0.0.1 (a scan over ``udp_multicast``: ``test_cli_small_things.py``).
+Expected values are read from the simulator's EDS and objects, never written down twice."""
 
 from __future__ import annotations
 
@@ -21,12 +21,14 @@ import pytest
 from drives.canopen.scan import scan_canopen
 from drives.modbus.scan import scan_modbus
 from haptic_bus.app.cli import main
+from haptic_bus.app.profiles import load_profile
+from haptic_bus.app.runner import RunOptions, RunResult, exit_status, run_canopen
 from haptic_bus.node.controller_node import controller_dictionary
+from haptic_bus.testing.buses import unique_name
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.device import SUPPORTED_DRIVE_MODES
 from sim_drive.eds import eds_path
 from sim_drive.modbus.server import ModbusSimServer
-from tests.cli_process import cli_process, terminated
 from tests.raw_bus import queued
 
 STATE_KEYS = {"statusword", "cia402_state", "error_code", "error_code_text"}
@@ -38,7 +40,8 @@ MODBUS_KEYS = {"protocol", "unit_id", "our_map", "word_order", "map_identity", "
 # loaded 2-core machine may stall a thread for a few hundred ms, so elapsed times are held to
 # several times the bound, never to the bound itself.
 SLACK = 5.0
-START_WAIT = 30.0  # s: a subprocess imports numpy/scipy/canopen before it serves
+START_WAIT = 30.0  # s: the longest the controller node may take to answer (commissioning first)
+RUN_STOP_WAIT = 60.0  # s: the longest a run asked to stop may take to end (its folder written)
 
 
 def scan_cli(*argv: str) -> int:
@@ -217,24 +220,26 @@ def test_invalid_modbus_arguments_exit_2_before_connecting(argv: list[str], free
             listener.accept()  # nobody connected
 
 
-# ----------------------------------------------------------------------------- CANopen, udp_multicast
-def test_udp_multicast_two_drives_and_a_running_controller_undisturbed(bus_spec: Any, sim_process: Any, tmp_path: Path,
-                                                                     capsys: pytest.CaptureFixture[str]) -> None:
-    spec = bus_spec("udp_multicast")
-    bus = {"interface": spec.interface, "channel": spec.channel, **spec.extra}
-    drives = {node: sim_process(*spec.sim_args(), "--node-id", str(node)) for node in (5, 9)}
-    for node, process in drives.items():
-        process.wait_for_line(f"node {node}: serving on", START_WAIT)
-    run = cli_process("run", "seed-ideal", *spec.sim_args(), "--node-id", "5", "--virtual-time", "--duration", "600",
-                      "--controller-node-id", "42", "--out", str(tmp_path), "-q")
+# ----------------------------------------------------------------------------- CANopen, a running controller
+def test_two_drives_and_a_running_controller_undisturbed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two drives and ``haptic-bus run``'s runner (controller node 42) cycling in a thread, all in this
+    process on the lock-step bus: the scan lists the three and the run cycles on until it is stopped."""
+    bus = {"interface": "lockstep", "channel": unique_name("scan")}
+    drives = [CanopenSimDrive(bus, node).start() for node in (5, 9)]
+    options = RunOptions(600.0, pacing="virtual", out_dir=tmp_path, live=False, plots=False)
+    ended: list[RunResult] = []
+    run = threading.Thread(target=lambda: ended.append(run_canopen(load_profile("seed-ideal"), bus, 5, options, 42)),
+                           daemon=True)
+    run.start()
     try:
         deadline = time.monotonic() + START_WAIT  # the controller node answers once the drive is commissioned
         while not scan_canopen(bus, [42], timeout=0.2, answer_timeout=0.5) and time.monotonic() < deadline:
-            assert run.poll() is None, run.communicate()[1]
+            assert run.is_alive(), ended
         capsys.readouterr()
-        assert scan_cli(*spec.sim_args(), "--timeout", "2", "--answer-timeout", "0.5", "--json") == 0
+        assert scan_cli("--interface", "lockstep", "--channel", bus["channel"], "--timeout", "2", "--answer-timeout", "0.5",
+                        "--json") == 0
         document = {node["node_id"]: node for node in json.loads(capsys.readouterr().out)}
-        assert run.poll() is None, "the scan must not disturb the running loop"
+        assert run.is_alive(), "the scan must not disturb the running loop"
         assert sorted(document) == [5, 9, 42]
         expect_sim_drive(document[5], 5, "OPERATIONAL", "OPERATION ENABLED")  # the run started it and enabled it
         expect_sim_drive(document[9], 9, "PRE-OPERATIONAL")
@@ -243,10 +248,12 @@ def test_udp_multicast_two_drives_and_a_running_controller_undisturbed(bus_spec:
         assert controller["nmt_state"] == "OPERATIONAL" and controller["device_kind"] == "no device profile"
         assert controller["cia402"] is False and controller["cst_supported"] is None and controller["notes"] == []
     finally:
-        out, err = terminated(run, 20)
-    assert run.returncode == 0 and "ended: stopped" in out, err
-    for process in drives.values():
-        assert process.stop()[0] == 0
+        options.stop.event.set()  # as SIGTERM does haptic-bus run
+        run.join(timeout=RUN_STOP_WAIT)
+        for drive in drives:
+            drive.stop()
+    assert not run.is_alive() and [result.exit_reason for result in ended] == ["stopped"]
+    assert exit_status("stopped") == 0
 
 
 # ----------------------------------------------------------------------------- Modbus TCP

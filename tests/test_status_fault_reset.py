@@ -322,10 +322,10 @@ def test_run_refuses_a_faulted_drive_naming_the_command_then_resets_it_with_rese
     profile = str(profile_variant(tmp_path, "cia402-handle", "patient", extra=PATIENT_CONSUMER))
     with simulated_drive(transport, profile) as under:
         under.drive.fault(0x8250)
-        refused = run_cli(capsys, "run", profile, *under.args, "--virtual-time", "--duration", "0.2", "-q",
+        refused = run_cli(capsys, "run", profile, *under.args, "--virtual-time", "--duration", "0.2", "-q", "--no-plots",
                           "--out", str(tmp_path / "refused"))
         assert not under.was_enabled
-        done = run_cli(capsys, "run", profile, *under.args, "--virtual-time", "--duration", "0.2", "-q",
+        done = run_cli(capsys, "run", profile, *under.args, "--virtual-time", "--duration", "0.2", "-q", "--no-plots",
                        "--out", str(tmp_path / "done"), "--reset-fault")
         faulted = [State.FAULT_REACTION_ACTIVE, State.FAULT]  # the injected fault
         assert under.states[:4] == [*faulted, State.SWITCH_ON_DISABLED, State.READY_TO_SWITCH_ON] and under.was_enabled
@@ -349,7 +349,7 @@ def test_run_reset_fault_with_a_persisting_cause_is_refused_and_logged(tmp_path:
         under.drive.fault(0x8130)
         refault_on_reset(under.drive, 0x8130)
         result = run_cli(capsys, "run", "cia402-handle", *under.args, "--virtual-time", "--duration", "0.2", "-q",
-                         "--out", str(tmp_path), "--reset-fault")
+                         "--no-plots", "--out", str(tmp_path), "--reset-fault")
         assert not under.was_enabled
     assert result.code == 1
     assert "--reset-fault: FAULT (error code 0x8130 Life guard error or heartbeat error): the cause persists" in one_line(result)

@@ -316,7 +316,8 @@ def test_a_run_against_the_issues_drive_completes_with_one_warning_per_missing_o
         tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"
     with run_against(issue_drive(tmp_path), "cia402-handle") as (args, sim, sniffer, states):
-        result = run_cli(capsys, "run", "cia402-handle", *args, "--virtual-time", "--duration", "0.2", "--out", str(out))
+        result = run_cli(capsys, "run", "cia402-handle", *args, "--virtual-time", "--no-plots", "--duration", "0.2",
+                         "--out", str(out))
         writes, nmt = bus_requests(sniffer)  # the whole run
     assert result.code == 0, result.err
     warnings = [line for line in result.err_lines if line.startswith("WARNING")]
@@ -333,7 +334,8 @@ def test_strict_refuses_the_issues_drive_on_the_command_line(tmp_path: pathlib.P
     profile = profile_variant(tmp_path, "cia402-handle", "strict", extra="[safety]\nstrict = true\n")
     out = tmp_path / "run"
     with run_against(issue_drive(tmp_path), profile) as (args, sim, sniffer, states):
-        result = run_cli(capsys, "run", str(profile), *args, "--virtual-time", "--duration", "0.2", "--out", str(out))
+        result = run_cli(capsys, "run", str(profile), *args, "--virtual-time", "--no-plots", "--duration", "0.2",
+                         "--out", str(out))
         writes = sdo_writes(sniffer)
     assert result.code == 1
     (line,) = result.err_lines

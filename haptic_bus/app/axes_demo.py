@@ -117,10 +117,11 @@ def tour_seconds(profile: AxesProfile) -> float:
     return dwell * targets if math.isfinite(dwell) and targets > 1 else STILL_TOUR
 
 
-def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: float | None = None) -> AxesDemoResult:
+def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: float | None = None,
+                  plots: bool = True) -> AxesDemoResult:
     """Run ``profile`` for ``seconds`` of virtual time (None: the hand's whole tour, :func:`tour_seconds`);
     the steady state read at the end of each target's dwell (and at the end); every axis' record,
-    ``run.json`` and the plot written."""
+    ``run.json`` and (if ``plots``) the plot written."""
     started = dt.datetime.now(dt.UTC)
     out = prepare_run_folder(out_dir, profile.name)
     period = profile.period
@@ -152,7 +153,8 @@ def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: fl
     extra = {"exit_reason": summary.exit_reason, "error": summary.error, "operator_energy_exact": operator_energy,
              "port_energy_exact": port_energy, "loop": {"period": period},
              "steady_states": [dict(vars(s)) for s in steady]}
-    files = write_axes_run(out, profile, controller, axes_run_document(profile, controller, summary, link, extra, started))
+    files = write_axes_run(out, profile, controller, axes_run_document(profile, controller, summary, link, extra, started),
+                           plots)
     return AxesDemoResult(profile, controller, summary, steady, operator_energy, port_energy, files)
 
 

@@ -109,16 +109,17 @@ def axes_run_document(profile: AxesProfile, controller: WallController[SpaceScen
 
 
 def write_axes_run(folder: pathlib.Path, profile: AxesProfile, controller: WallController[SpaceScene, SpaceDecision] | None,
-                   document: dict[str, Any]) -> list[pathlib.Path]:
-    """Write every axis' record, the plot and ``run.json`` into ``folder``; the paths written."""
+                   document: dict[str, Any], plots: bool = True) -> list[pathlib.Path]:
+    """Write every axis' record, the plot (unless not ``plots``) and ``run.json`` into ``folder``; the paths written."""
     written: list[pathlib.Path] = []
     if controller is not None and controller.records[0].total:
-        from haptic_bus.app.axes_plots import plot_trajectory
-
         for name, record in zip(controller.names, controller.records):
             written.append(record.write_csv(folder / f"record-{name}.csv"))
-        written.append(plot_trajectory(folder / "trajectory.png", controller, f"{profile.name}: {len(profile.axes)} axes, "
-                                                                              f"T = {profile.period * 1e3:g} ms"))
+        if plots:
+            from haptic_bus.app.axes_plots import plot_trajectory
+
+            written.append(plot_trajectory(folder / "trajectory.png", controller,
+                                           f"{profile.name}: {len(profile.axes)} axes, T = {profile.period * 1e3:g} ms"))
     path = folder / "run.json"
     document["files"] = [str(p) for p in written] + [str(path)]
     path.write_text(json.dumps(document, indent=1) + "\n")

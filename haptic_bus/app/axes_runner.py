@@ -161,7 +161,7 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
     finally:
         extra["exit_reason"], extra["error"] = reason, error
         files = write_axes_run(folder, profile, controller,
-                               axes_run_document(profile, controller, summary, link, extra, started))
+                               axes_run_document(profile, controller, summary, link, extra, started), options.plots)
     return AxesRunResult(reason, error, summary, controller, folder, files)
 
 

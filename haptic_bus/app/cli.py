@@ -62,6 +62,12 @@ def _add_device_arguments(parser: argparse.ArgumentParser) -> None:
                              "window), lowpass:SECONDS (first-order filter)")
 
 
+def _add_no_plots(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--no-plots", action="store_true",
+                        help="write the record and run.json, draw no pictures (saves seconds of matplotlib and of the "
+                             "K-B plane's boundary; haptic-bus plot RUN_DIR draws a one-axis run's later)")
+
+
 # --------------------------------------------------------------------------- handlers
 
 def _check(args: argparse.Namespace) -> int:
@@ -125,11 +131,12 @@ def _demo(args: argparse.Namespace) -> int:
     if isinstance(profile, AxesProfile):
         from haptic_bus.app.axes_demo import format_axes_demo, run_axes_demo
 
-        axes_result = run_axes_demo(args.out, profile, seconds=args.duration)
+        axes_result = run_axes_demo(args.out, profile, seconds=args.duration, plots=not args.no_plots)
         print(format_axes_demo(axes_result))
         reason = axes_result.summary.exit_reason
     else:
-        result = run_demo(args.out, profile) if args.duration is None else run_demo(args.out, profile, seconds=args.duration)
+        result = run_demo(args.out, profile, plots=not args.no_plots) if args.duration is None else \
+            run_demo(args.out, profile, seconds=args.duration, plots=not args.no_plots)
         print(format_demo(result))
         reason = result.summary.exit_reason
     return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(reason, EXIT_NO)
@@ -170,7 +177,7 @@ def _run(args: argparse.Namespace) -> int:
     options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
                          scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings(),
-                         reset_fault=args.reset_fault, bus_log=not args.no_bus_log)
+                         reset_fault=args.reset_fault, bus_log=not args.no_bus_log, plots=not args.no_plots)
     if isinstance(profile, AxesProfile):
         from haptic_bus.app.axes_runner import check_run, run_axes_canopen
 
@@ -299,6 +306,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="haptic-bus-demo", help="output directory for PNGs, the CSV record and run.json")
     demo.add_argument("--profile", help="profile name or TOML path (default: the shipped default)")
     demo.add_argument("--duration", type=seconds, help="virtual seconds to run (default: 2, or a multi-axis hand's whole tour)")
+    _add_no_plots(demo)
 
     run = command("run", "run a profile's controller against a drive on a CAN bus or over Modbus", _run)
     run.add_argument("profile", help="profile name or TOML path")
@@ -323,6 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", help="folder for record.csv, run.json, bus.asc and plots (default: runs/<UTC time>-<profile>)")
     run.add_argument("--no-bus-log", action="store_true",
                      help="do not log the CAN bus's frames into bus.asc (on by default; Modbus runs have none)")
+    _add_no_plots(run)
     run.add_argument("--reset-fault", action="store_true",
                      help="before commissioning, reset a drive found in FAULT (as haptic-bus fault-reset does; logged "
                           "in run.json's events with the error code it had); without it a faulted drive is refused")

@@ -40,9 +40,11 @@ class DemoResult:
     files: list[pathlib.Path]
 
 
-def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, seconds: float = 2.0) -> DemoResult:
+def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, seconds: float = 2.0,
+             plots: bool = True) -> DemoResult:
     """Run ``profile`` (default: the shipped default) for ``seconds`` of virtual time; write
-    ``record.csv``, ``run.json`` and the plots to ``out_dir``, whatever ends the run (Ctrl-C too)."""
+    ``record.csv``, ``run.json`` and (if ``plots``) the pictures to ``out_dir``, whatever ends the
+    run (Ctrl-C too)."""
     profile = profile or default_profile()
     out = prepare_run_folder(out_dir, profile.name)
     cycles = max(1, round(seconds / profile.loop.period))
@@ -76,7 +78,7 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, second
         penetration, expected = abs(final_x - surface), abs(push) / contact
     extra.update(exit_reason=summary.exit_reason, error=summary.error, operator_energy_exact=operator_energy,
                  port_energy_exact=port_energy)
-    files = recorder.finish(summary)
+    files = recorder.finish(summary, pictures=plots)
     return DemoResult(profile, controller.decision, summary, penetration, expected, operator_energy, port_energy, files)
 
 

@@ -106,8 +106,8 @@ class RunOptions:
     for its control thread (``scheduling``, :mod:`~haptic_bus.app.realtime`: ``--realtime``),
     whether a drive found in FAULT is reset before commissioning, whether a CANopen run logs
     every frame (``bus.asc``, :mod:`~haptic_bus.app.bus_log`), and whether the pictures are drawn
-    (seconds of matplotlib and of the region's boundary: the benchmark, which runs the session
-    many times, leaves them out)."""
+    (seconds of matplotlib and of the region's boundary: ``--no-plots``, the benchmark, which runs
+    the session many times, and the pytest plugin's runs leave them out)."""
 
     duration: float
     pacing: str = WALL

@@ -52,14 +52,16 @@ Fixtures
 
 ``haptic_controller``
     A factory: ``haptic_controller(profile, drive, *, duration=1.0, pacing="virtual",
-    controller_node_id=127, start_in_contact=None, reset_fault=False, out_dir=None)`` starts
-    :func:`haptic_bus.run_canopen` (what ``haptic-bus run`` runs) in a thread against the
-    :class:`SimDriveNode` ``drive`` and returns a :class:`ControllerRun`.  ``profile``: a
-    shipped name, a TOML path (loaded and gated) or a :class:`haptic_bus.Profile`;
+    controller_node_id=127, start_in_contact=None, reset_fault=False, out_dir=None,
+    plots=False)`` starts :func:`haptic_bus.run_canopen` (what ``haptic-bus run`` runs) in a
+    thread against the :class:`SimDriveNode` ``drive`` and returns a :class:`ControllerRun`.
+    ``profile``: a shipped name, a TOML path (loaded and gated) or a :class:`haptic_bus.Profile`;
     ``duration``: s of virtual time (``pacing="wall"``: of wall clock); ``out_dir``: the run's
-    folder (None: a fresh temporary one).  ``run.wait(timeout=600)`` lets it end by itself,
-    ``run.stop(timeout=300)`` ends it at the next cycle, both return the :class:`RecordedRun`
-    of its folder; ``run.wait_cycling(timeout=30)`` blocks until it cycles (the drive, enabled,
+    folder (None: a fresh temporary one); ``plots``: whether the run draws its pictures (off:
+    a test that reads the record needs none, and they cost seconds of CPU a run).
+    ``run.wait(timeout=600)`` lets it end by itself, ``run.stop(timeout=300)`` ends it at the
+    next cycle, both return the :class:`RecordedRun` of its folder;
+    ``run.wait_cycling(timeout=30)`` blocks until it cycles (the drive, enabled,
     has answered its first cycle).
     Teardown stops every run still going (before the drives stop).
 
@@ -206,7 +208,7 @@ def _each(items: Iterable[Any], teardown: Callable[[Any], None]) -> None:
 def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
                       tmp_path_factory: pytest.TempPathFactory) -> Iterator[Callable[..., ControllerRun]]:
     """``haptic_controller(profile, drive, *, duration=1.0, pacing="virtual", controller_node_id=127,
-    start_in_contact=None, reset_fault=False, out_dir=None)``: ``haptic-bus run`` in a thread
+    start_in_contact=None, reset_fault=False, out_dir=None, plots=False)``: ``haptic-bus run`` in a thread
     (see the module docstring); every run still going is stopped at teardown, before the drives."""
     from haptic_bus.app.profiles import Profile, load_profile
     from haptic_bus.app.runner import RunOptions, StopRequest
@@ -216,11 +218,11 @@ def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
     def start(profile: ProfileSource | Profile, drive: SimDriveNode, *, duration: float = 1.0,
               pacing: str = "virtual", controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID,
               start_in_contact: str | None = None, reset_fault: bool = False,
-              out_dir: str | os.PathLike[str] | None = None) -> ControllerRun:
+              out_dir: str | os.PathLike[str] | None = None, plots: bool = False) -> ControllerRun:
         believed = profile if isinstance(profile, Profile) else load_profile(profile)
         folder = pathlib.Path(out_dir) if out_dir is not None else tmp_path_factory.mktemp("haptic-run")
         options = RunOptions(duration=duration, pacing=pacing, out_dir=folder, start_in_contact=start_in_contact,
-                             live=False, stop=StopRequest(), reset_fault=reset_fault)
+                             live=False, stop=StopRequest(), reset_fault=reset_fault, plots=plots)
         run = ControllerRun(believed, drive, options, controller_node_id)
         runs.append(run)
         return run

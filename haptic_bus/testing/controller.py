@@ -3,7 +3,7 @@
 The run is the real one: it commissions the drive (the safety chain of the profile's
 ``[safety]``), serves gated wall uploads as CANopen node ``controller_node_id``, cycles under
 its supervisor, leaves the drive disabled and writes its folder (``record.csv``, ``run.json``,
-the plots).  In virtual time (the default) the plant advances one period per SYNC, so a run of
+the plots if asked).  In virtual time (the default) the plant advances one period per SYNC, so a run of
 ``duration`` s of virtual time takes as long as the machine needs; real time paces it with the
 wall clock.  Every wait on it is bounded in wall-clock time.
 """
