@@ -82,8 +82,8 @@ def test_unbounded_and_refused() -> None:
     stiff_axes = (WallLoop(1.0, 20.0, T, 0, 0, 0, "point"), WallLoop(2.0, 30.0, T, 0, 0, 0, "point"))
     ideal = passive_along(stiff_axes, [1.0, 1.0], 0.0, 0.0, "B")  # no delay, no wall spring: any B up to its flip
     assert ideal.lowest == 0.0 and 0.0 < ideal.largest < STIFFNESS_RANGE[1]
-    with pytest.raises(ParameterError, match="'K' or 'B'"):
-        passive_along(MIXED, NORMAL, 0.0, 0.0, "scale")
+    with pytest.raises(ParameterError, match="'K', 'B' or 'scale'"):
+        passive_along(MIXED, NORMAL, 0.0, 0.0, "T")
     frictionless = (WallLoop(1.0, 0.0, T, 0, 0, 1), MIXED[0])
     with pytest.raises(ParameterError, match="b > 0"):
         passive_along(frictionless, [1.0, 1.0], 0.0, 0.0, "K")

@@ -60,16 +60,16 @@ def test_lateness_the_gate_cannot_cover_is_held_by_the_layer_and_refused_without
     assert not bare.holdable and 'layer = "off"' in bare.reason
 
 
-def test_more_than_one_percent_of_cycles_busy_beyond_t_refuse_naming_the_period_that_holds() -> None:
-    """7 of 500 cycles (1.4 %) are busy longer than T (1.1 ms late + 0.1 ms exchange): refused; the period
+def test_more_than_five_percent_of_cycles_busy_beyond_t_refuse_naming_the_period_that_holds() -> None:
+    """26 of 500 cycles (5.2 %) are busy longer than T (1.1 ms late + 0.1 ms exchange): refused; the period
     named is 1.5 x the p99 busy time, up to the 0.25 ms grid (1.5 x 1.2 = 1.8 -> 2 ms), above T as it must be."""
     profile = load_profile("cia402-handle")
     late = np.full(500, 20e-6)
-    late[::80] = 1.1e-3  # 7 cycles a period late, so numpy's p99 (rank 494.01 of 0..499) is one of them
+    late[::19][:26] = 1.1e-3  # 26 cycles a period late, so numpy's p99 (rank 494.01 of 0..499) is one of them
     report = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
-    assert report.overruns == 7 and not report.holdable
+    assert report.overruns == 26 and not report.holdable
     assert report.smallest_period == pytest.approx(2e-3)
-    assert "7 of 500 cycles were busy longer than T = 1 ms" in report.reason
+    assert "26 of 500 cycles were busy longer than T = 1 ms" in report.reason
     assert report.reason.endswith("this machine holds T >= 2 ms")
 
 
@@ -83,9 +83,9 @@ def test_a_held_run_prints_its_measurement_its_period_and_its_verdict_in_one_lin
     assert "holds T >= 0.25 ms: the gate passes the scene" in line
 
 
-def test_cycles_busy_beyond_t_within_one_percent_are_held() -> None:
+def test_cycles_busy_beyond_t_within_five_percent_are_held() -> None:
     profile = load_profile("cia402-handle")
     late = np.full(500, 20e-6)
-    late[::100] = 1.1e-3  # 5 of 500: exactly 1 %
+    late[::20] = 1.1e-3  # 25 of 500: exactly 5 %
     report = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
-    assert report.overruns == 5 and report.holdable
+    assert report.overruns == 25 and report.holdable
