@@ -256,12 +256,15 @@ class CanopenExchange:
     # ------------------------------------------------------------------ send
 
     def send(self, msg: can.Message) -> None:
-        """Send one frame the way :meth:`configure` resolved (:meth:`_transmitter`); DriveError "the
-        bus is closed" before it and after :meth:`release`."""
+        """Send one frame the way :meth:`configure` resolved (:meth:`_transmitter`), then hand it to
+        the link's tap, if set; DriveError "the bus is closed" before it and after :meth:`release`."""
         try:
             self._transmit(msg)
         except (can.CanError, OSError) as exc:
             raise DriveError(self.name, f"CAN send failed: {exc!r}") from exc
+        tap = self.link.tap
+        if tap is not None:
+            tap(msg, True)
 
     def send_rpdo(self, controlword: int, torque: int) -> None:
         """The RPDO(s): ``controlword`` and ``torque`` (per mille), packed in place."""
@@ -298,8 +301,8 @@ def receive_direct(name: str, link: NetworkLink, wanted: Container[int], deadlin
                    dispatch: Callable[[can.Message], None]) -> tuple[int, bytearray] | None:
     """Read ``link``'s bus in this thread until a standard data frame with a COB-ID in ``wanted``
     arrives (returned as ``(cob_id, data)``) or ``deadline`` (``time.perf_counter()`` s) passes
-    (None); every other data frame goes to ``dispatch``.  A receive that fails is a DriveError
-    naming ``name``."""
+    (None); every other data frame goes to ``dispatch``; every frame to ``link.tap`` first, if set.
+    A receive that fails is a DriveError naming ``name``."""
     bus = link.bus
     if bus is None:
         raise DriveError(name, "the bus is closed")
@@ -311,6 +314,9 @@ def receive_direct(name: str, link: NetworkLink, wanted: Container[int], deadlin
             raise DriveError(name, f"CAN receive failed: {exc!r}") from exc
         if msg is None:
             return None
+        tap = link.tap
+        if tap is not None:
+            tap(msg, False)
         if msg.is_error_frame or msg.is_remote_frame:
             continue
         can_id = msg.arbitration_id

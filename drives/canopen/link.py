@@ -12,11 +12,19 @@ Three ways a master gets its network, and what closing gives back:
 While the master cycles in ``direct`` receive mode it reads the bus itself in the calling
 thread, so canopen's notifier thread is paused (:meth:`NetworkLink.read_directly`) and
 restarted for SDO (:meth:`NetworkLink.read_by_notifier`).
+
+``NetworkLink.tap`` (None: none) is called with every frame the link receives (``sent``
+False) or sends (``sent`` True), in the thread that handled it: the cycle's frames
+(:func:`~drives.canopen.exchange.receive_direct`, :meth:`~drives.canopen.exchange.CanopenExchange.send`),
+what canopen's notifier receives, and what canopen sends (SDO, NMT) on a network the link
+built.  A run's bus log is such a tap (it copies each frame into a ring a writer process
+drains).  Frames another thread sends on the bus directly (the heartbeat producer's) pass it by.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -51,6 +59,38 @@ class ReceiveErrors(can.Listener):
         if self.error is None:
             self.error = exc
         logger.warning("%s: CAN receive failed: %r", self.name or "notifier", exc)
+
+
+Tap = Callable[[can.Message, bool], None]
+"""Called with a frame and whether this process sent it (True) or received it (False)."""
+
+
+class FrameTap(can.Listener):
+    """Hands every frame canopen's notifier receives to its link's tap."""
+
+    def __init__(self, link: NetworkLink) -> None:
+        self.link = link
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """The link's tap, if set, with the frame (received)."""
+        tap = self.link.tap
+        if tap is not None:
+            tap(msg, False)
+
+
+class TappedNetwork(canopen.Network):
+    """canopen's Network whose own sends (SDO, NMT) also go to its link's tap."""
+
+    def __init__(self, bus: can.BusABC, link: NetworkLink) -> None:
+        super().__init__(bus)
+        self.link = link
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
+        """Send as canopen does, then hand the frame to the link's tap (sent)."""
+        super().send_message(can_id, data, remote)
+        tap = self.link.tap
+        if tap is not None:
+            tap(can.Message(arbitration_id=can_id, data=data, is_extended_id=can_id > 0x7FF, is_remote_frame=remote), True)
 
 
 def shut_down(network: canopen.Network, name: str) -> None:
@@ -96,6 +136,8 @@ class NetworkLink:
         self._passed: set[int] = set()  # the identifiers the bus's receive filters let through (empty: all)
         self.direct = False  # True while the master reads the bus itself
         self._errors = ReceiveErrors(name)
+        self._tap_listener = FrameTap(self)
+        self.tap: Tap | None = None  # every frame received or sent (module docstring)
 
     def open(self) -> canopen.Network:
         """The network, connected and with its notifier reading the bus (the same one again if
@@ -109,10 +151,11 @@ class NetworkLink:
             if bus is None:
                 interface, channel, bitrate, kwargs = self._bus_args
                 bus = open_bus(interface, channel, bitrate, **kwargs)
-            network = canopen.Network(bus)
+            network = TappedNetwork(bus, self)
         network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
-        if self._errors not in network.listeners:
-            network.listeners.append(self._errors)  # type: ignore[arg-type]  # a can.Listener, as python-can wants
+        for listener in (self._errors, self._tap_listener):
+            if listener not in network.listeners:
+                network.listeners.append(listener)  # type: ignore[arg-type]  # a can.Listener, as python-can wants
         if network.notifier is None or network.notifier.stopped:
             network.connect()
         self.network = network
@@ -166,8 +209,9 @@ class NetworkLink:
         if network is None:
             return
         self.network = None
-        if self._errors in network.listeners:
-            network.listeners.remove(self._errors)  # type: ignore[arg-type]  # see open()
+        for listener in (self._errors, self._tap_listener):
+            if listener in network.listeners:
+                network.listeners.remove(listener)  # type: ignore[arg-type]  # see open()
         try:
             if self._given_network is not None:
                 if self.direct:

@@ -114,7 +114,7 @@ class AxesController(CycleLoop[AxesDriveCycle]):
     ``gate``: the coupled gate of these axes (its ``axes`` give each axis' ``b``, ``T`` and loop
     delay); ``scene`` must pass it.  ``names``: the axes' names; ``force_limits`` (N) saturate
     each axis' force (its drive's clamp holds the torque target at it); ``clock``,
-    ``record_capacity``, ``supervisor``, ``passivity`` and ``hold`` (s) as
+    ``record_capacity``, ``shared_records`` (each axis' record), ``supervisor``, ``passivity`` and ``hold`` (s) as
     :class:`~haptic_bus.control.controller.WallController` takes them; ``kinematics``: the device
     (default Cartesian).  Every axis' inputs must carry 0x6064 (the port observer reads it).
     """
@@ -129,6 +129,7 @@ class AxesController(CycleLoop[AxesDriveCycle]):
         force_limits: Sequence[float],
         clock: CycleClock | None = None,
         record_capacity: int = 200_000,
+        shared_records: bool = False,
         supervisor: SupervisorPolicy | None = None,
         passivity: LayerPolicy | None = None,
         hold: float | None = None,
@@ -166,7 +167,7 @@ class AxesController(CycleLoop[AxesDriveCycle]):
         self._scalings = scalings
         self.supervisor = Supervisor(supervisor, self.period, max(loop.delay for loop in loops)) \
             if supervisor is not None else None
-        self.records = tuple(RunRecord(record_capacity) for _ in range(size))
+        self.records = tuple(RunRecord(record_capacity, shared=shared_records) for _ in range(size))
         self.cycles = 0
         self.saturated_cycles = 0
         self.peak_force = 0.0

@@ -74,7 +74,8 @@ class WallController(CycleLoop[DriveCycle]):
 
     ``force_limit`` (N) saturates the wall force (the drive's clamp holds the torque target at it);
     ``clock`` is a :class:`VirtualClock` (default),
-    :class:`RealClock` or :class:`ScheduledClock`; ``record_capacity`` bounds the record;
+    :class:`RealClock` or :class:`ScheduledClock`; ``record_capacity`` bounds the record, kept in
+    shared memory with ``shared_record`` (a writer process streams it);
     ``origin`` (m) is the handle's position at the first cycle; ``supervisor`` the policy (None: no supervision);
     ``ramp_time`` (s) scales the force from 0 to 1 over the first seconds (0: none; the caller
     proves every scaled wall passive); ``derate`` is what a "derate" alarm calls; ``passivity``
@@ -92,6 +93,7 @@ class WallController(CycleLoop[DriveCycle]):
         force_limit: float,
         clock: CycleClock | None = None,
         record_capacity: int = 200_000,
+        shared_record: bool = False,
         origin: float = 0.0,
         supervisor: SupervisorPolicy | None = None,
         ramp_time: float = 0.0,
@@ -121,7 +123,7 @@ class WallController(CycleLoop[DriveCycle]):
                                 tolerance=supervisor.observer_limit if supervisor is not None else 0.0)
         self.observer, self.layer = self.port.observer, self.port.layer
         self.supervisor = Supervisor(supervisor, self.period, device.delay) if supervisor is not None else None
-        self.record = RunRecord(record_capacity)
+        self.record = RunRecord(record_capacity, shared=shared_record)
         self.ramp_cycles = round(ramp_time / self.period)
         self._derate = derate
         self.cycles = 0
