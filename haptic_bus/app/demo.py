@@ -53,12 +53,13 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, second
     journal.write()
     recorder = RunRecorder(out, journal)
     with ExitStack() as stack, simulated_canopen(profile) as (sim, drive):
+        recorder.start(stack, bus_log=False)
         origin = encoder_origin(drive)
         scene = profile.compiled_scene()
-        controller = WallController(drive, profile.gate(), scene, force_limit=profile.force_limit,
-                                    origin=origin, supervisor=profile.supervisor, passivity=profile.passivity)
+        controller = WallController(drive, profile.gate(), scene, force_limit=profile.force_limit, origin=origin,
+                                    supervisor=profile.supervisor, passivity=profile.passivity, shared_record=True)
         extra["gate_loop"] = gate_loop(controller.gate.device)
-        recorder.stream(stack, controller)
+        recorder.stream(controller)
         summary = controller.run(cycles)
         operator_energy = sim.drive.operator_energy
         # the port's energy as the simulated drive's exact ledger has it: b int v^2 dt minus the motor's work

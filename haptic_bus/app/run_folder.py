@@ -11,8 +11,8 @@ a :class:`~haptic_bus.errors.ParameterError`: exit 2).  It receives:
   contact wall), the summary with its ``exit_reason``, the events (uploads accepted and refused,
   alarms, derates, faults), each with its time, and the files.  Written whole each time (a
   temporary file renamed over it), so a killed run leaves the last version, saying it did not end;
-- ``record.csv``: one row a cycle (:data:`haptic_bus.control.record.COLUMNS`), streamed
-  (:mod:`~haptic_bus.app.record_stream`);
+- ``record.csv``: one row a cycle (:data:`haptic_bus.control.record.COLUMNS`), streamed by the
+  run's writer process (:mod:`~haptic_bus.app.run_writer`, :mod:`~haptic_bus.app.record_stream`);
 - ``bus.asc``: every CAN frame (:mod:`~haptic_bus.app.bus_log`; CANopen runs, unless ``--no-bus-log``);
 - at the end, the pictures (:mod:`~haptic_bus.app.run_plots`), drawn from the files themselves:
   ``haptic-bus plot RUN_DIR`` draws the same again from :func:`read_run_folder`.
@@ -30,7 +30,6 @@ import os
 import pathlib
 import platform
 import sys
-import threading
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -147,8 +146,9 @@ def write_json(path: pathlib.Path, document: dict[str, Any]) -> pathlib.Path:
 
 class RunJournal:
     """``run.json`` over a run's life: written before anything is touched (``status`` "running",
-    ``ended`` false), rewritten whenever the events or the scenes change (:meth:`refresh`, from the
-    record's writer thread), and completed at the end (:meth:`finish`).  A run killed at any moment
+    ``ended`` false), rewritten whenever the events or the scenes change (by the run's writer
+    process, :mod:`~haptic_bus.app.run_writer`, from :meth:`document` and the events), and
+    completed at the end (:meth:`finish`).  A run killed at any moment
     leaves it saying ``"ended": false``: :func:`read_run_folder` reports it as not ended cleanly."""
 
     def __init__(self, folder: pathlib.Path, profile: Profile, link: dict[str, Any], extra: dict[str, Any]) -> None:
@@ -159,24 +159,14 @@ class RunJournal:
         self.extra = extra
         self.started = _utc_now()
         self.controller: WallController | None = None
-        self._lock = threading.Lock()
-        self._seen: tuple[int, int] = (0, 1)
+
+    def document(self, summary: RunSummary | None = None, ended: bool = False) -> dict[str, Any]:
+        """``run.json``'s content as the run stands now."""
+        return run_document(self.profile, self.controller, summary, self.link, self.extra, self.started, ended)
 
     def write(self, summary: RunSummary | None = None, ended: bool = False) -> pathlib.Path:
         """Write ``run.json`` as the run stands now."""
-        with self._lock:
-            document = run_document(self.profile, self.controller, summary, self.link, self.extra, self.started, ended)
-            return write_json(self.path, document)
-
-    def refresh(self) -> None:
-        """Rewrite ``run.json`` if an event or a scene came since the last write (cheap otherwise)."""
-        controller = self.controller
-        if controller is None:
-            return
-        seen = (len(controller.events.events), len(controller.scenes.history))
-        if seen != self._seen:
-            self._seen = seen
-            self.write()
+        return write_json(self.path, self.document(summary, ended))
 
     def finish(self, summary: RunSummary | None, written: list[pathlib.Path]) -> list[pathlib.Path]:
         """The run has ended: ``run.json`` completed, naming the files ``written`` and itself

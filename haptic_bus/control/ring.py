@@ -98,15 +98,17 @@ class Ring:
         self._total = total = self._total + 1
         self._counter[0] = total  # last: a reader sees the record complete
 
-    def read_from(self, first: int) -> tuple[int, bytes]:
-        """The records from index ``first`` on, as ``(index of the first one returned, their bytes)``
-        (a copy, oldest first); the index exceeds ``first`` when older ones were overwritten."""
+    def read_from(self, first: int, limit: int | None = None) -> tuple[int, bytes]:
+        """The records from index ``first`` on (at most ``limit`` of them), as ``(index of the first
+        one returned, their bytes)`` (a copy, oldest first); the index exceeds ``first`` when older
+        ones were overwritten."""
         total = int(self._counter[0])
         capacity, width = self.capacity, self.width
         start = max(first, total - capacity + 1)
         if start >= total:
             return max(first, total), b""
-        lo, hi = start % capacity, total % capacity
+        end = total if limit is None else min(total, start + limit)
+        lo, hi = start % capacity, end % capacity
         data = self._data
         chunk = bytes(data[lo * width:hi * width]) if lo < hi else bytes(data[lo * width:]) + bytes(data[:hi * width])
         torn = int(self._counter[0]) - capacity + 1 - start  # overwritten while copied
