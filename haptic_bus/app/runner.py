@@ -29,6 +29,7 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 import pathlib
@@ -50,7 +51,7 @@ from haptic_bus.app.drive_address import DriveAddress
 from haptic_bus.app.profile_policies import START_POLICIES
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.realtime import RealtimeReport, RealtimeSettings, realtime_session
-from haptic_bus.app.run_folder import RunJournal, gate_loop, prepare_run_folder
+from haptic_bus.app.run_folder import RECORD_CSV, RunJournal, gate_loop, prepare_run_folder, run_document, scene_dicts
 from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import Derate, RunSummary, WallController, encoder_origin
@@ -326,7 +327,7 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
     controller: WallController | None = None
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": {"period": profile.loop.period, "timing": profile.loop.timing}}
-    journal = RunJournal(folder, profile, link, extra)
+    journal = RunJournal(folder, profile, link, extra, run_document)
     journal.write()  # "running", before any bus is touched: a run killed from here on says so
     recorder = RunRecorder(folder, journal)
     reason, error = "completed", None
@@ -354,7 +355,10 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
                                   "beyond_gate": profile.passivity.beyond_gate}
             for event in before:
                 controller.events.add(event.time_s, event.kind, event.message, **event.data)
-            recorder.stream(controller, f"haptic-bus run {profile.name}" if options.live else None, options.duration)
+            journal.controller = controller
+            recorder.stream(writer, [(RECORD_CSV, "", controller.record)], controller.events,
+                            functools.partial(scene_dicts, controller), period,
+                            f"haptic-bus run {profile.name}" if options.live else None, options.duration)
             serve(controller)
             with control_thread_scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
