@@ -1,7 +1,8 @@
 """The run's writer process: everything a run writes while it cycles, away from the control process.
 
 Started by :class:`~haptic_bus.app.run_writer.RunWriter` (``multiprocessing``'s "spawn"
-context, named :data:`~haptic_bus.app.run_writer.PROCESS_NAME`) before commissioning, it
+context, named :data:`~haptic_bus.app.run_writer.PROCESS_NAME`, and :data:`COMM` where ``ps`` and
+``top`` show it) before commissioning, it
 attaches to the rings the control process fills (each axis' record, the bus' frames: shared
 memory, :mod:`~haptic_bus.control.ring`) and every :data:`~haptic_bus.app.record_stream.FLUSH_INTERVAL` s
 
@@ -21,6 +22,8 @@ the writer ignores it and ends when the control process says so.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import logging
 import os
 import pathlib
@@ -36,6 +39,17 @@ from haptic_bus.app.run_folder import RUN_JSON, write_json
 from haptic_bus.control.ring import Ring, RingSpec
 
 logger = logging.getLogger(__name__)
+
+
+COMM = "hb-writer"
+"""The writer's name where ``ps``, ``top`` and ``/proc/PID/comm`` show it (15 bytes at most)."""
+_PR_SET_NAME = 15  # prctl(2)
+
+
+def name_this_process(name: str) -> None:
+    """Give this process' main thread ``name`` in ``/proc/PID/comm`` (Linux' prctl; elsewhere nothing)."""
+    with contextlib.suppress(OSError, AttributeError):  # not Linux: the process keeps its interpreter's name
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_NAME, name.encode()[:15], 0, 0, 0)
 
 
 class Writer:
@@ -109,6 +123,7 @@ def main(folder: str, frames: RingSpec | None, conn: Connection, parent: int) ->
     """The writer process' body (module docstring): ``frames`` the frame ring (None: no bus log),
     ``parent`` the control process' id."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    name_this_process(COMM)
     writer = Writer(pathlib.Path(folder), conn)
     if frames is not None:
         writer.bus_log = BusLogFile(writer.folder / LOG_NAME, Ring.attach(frames))
