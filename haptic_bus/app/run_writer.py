@@ -24,8 +24,11 @@ import logging
 import multiprocessing
 import os
 import pathlib
+import sys
 import threading
-from collections.abc import Callable, Sequence
+import types
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 from haptic_bus.app import writer_process
@@ -41,6 +44,19 @@ STOP_TIMEOUT = 30.0  # s: its last drain of up to a ring of rows per axis
 SCENE_EVENTS = frozenset(("upload", "derate"))  # events that come with a new scene
 
 
+@contextmanager
+def _main_module_hidden() -> Iterator[None]:
+    """While a process starts: no ``__main__`` for "spawn" to import again in it.  The writer needs
+    only this package; a caller's script without an ``if __name__ == "__main__"`` guard would
+    otherwise run again, whole, inside the writer."""
+    main = sys.modules["__main__"]
+    sys.modules["__main__"] = types.ModuleType("__main__")
+    try:
+        yield
+    finally:
+        sys.modules["__main__"] = main
+
+
 class RunWriter:
     """The writer process of a run writing into ``folder`` (module docstring); ``bus_log``: a frame
     ring and ``bus.asc`` too."""
@@ -54,7 +70,8 @@ class RunWriter:
         self.process = context.Process(target=writer_process.main, name=PROCESS_NAME, daemon=True,
                                        args=(str(folder), None if self.frames is None else self.frames.spec, child,
                                              os.getpid()))
-        self.process.start()
+        with _main_module_hidden():
+            self.process.start()
         child.close()
         self._await("ready", START_TIMEOUT)
         if self.frames is not None:
