@@ -132,7 +132,8 @@ def main(folder: str, frames: RingSpec | None, conn: Connection, parent: int) ->
     flush_due, view_due = now + FLUSH_INTERVAL, now + REFRESH
     try:
         while not writer.stopped:
-            if conn.poll(max(0.0, min(flush_due, view_due) - time.monotonic())):
+            due = flush_due if writer.view is None else min(flush_due, view_due)
+            if conn.poll(max(0.0, due - time.monotonic())):
                 writer.handle(conn.recv())
             now = time.monotonic()
             if now >= flush_due:
