@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import fcntl
 import io
-import logging
 import os
 import pathlib
 import re

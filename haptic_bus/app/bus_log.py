@@ -100,8 +100,9 @@ class BusLogFile:
         return len(found)
 
     def close(self) -> None:
-        """A last drain, ``End TriggerBlock``, the file closed."""
+        """A last drain, ``End TriggerBlock``, the file closed and the ring let go."""
         self.drain()
         self._writer.stop()
         write_whole(self._file, self._staged.take())
         self._file.close()
+        self.ring.close()

@@ -54,10 +54,11 @@ class RecordFile:
         return count
 
     def close(self) -> None:
-        """A last drain, the file closed (idempotent)."""
+        """A last drain, the file closed and the ring let go (idempotent)."""
         if not self._file.closed:
             self.drain()
             self._file.close()
+            self.ring.close()
 
 
 def write_whole(file: io.FileIO, text: str) -> None:
