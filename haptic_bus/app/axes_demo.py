@@ -127,8 +127,9 @@ def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: fl
     journal = RunJournal(out, profile, link, extra, axes_run_document)
     journal.write()
     recorder = RunRecorder(out, journal)
-    with ExitStack() as stack, simulated_axes(profile) as (sim, axes):
-        writer = recorder.start(stack, bus_log=False)
+    with ExitStack() as stack:
+        writer = recorder.start(stack, bus_log=False)  # before the drives are enabled
+        sim, axes = stack.enter_context(simulated_axes(profile))
         controller = AxesController(axes, profile.gate(), profile.space_scene(), names=[a.name for a in profile.axes],
                                     force_limits=[a.force_limit for a in profile.axes],
                                     supervisor=profile.supervisor, passivity=profile.passivity, shared_records=True)

@@ -53,8 +53,9 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, second
     journal = RunJournal(out, profile, link, extra, run_document)
     journal.write()
     recorder = RunRecorder(out, journal)
-    with ExitStack() as stack, simulated_canopen(profile) as (sim, drive):
-        writer = recorder.start(stack, bus_log=False)
+    with ExitStack() as stack:
+        writer = recorder.start(stack, bus_log=False)  # before the drive is enabled: Ctrl-C from then on is recorded
+        sim, drive = stack.enter_context(simulated_canopen(profile))
         origin = encoder_origin(drive)
         scene = profile.compiled_scene()
         controller = WallController(drive, profile.gate(), scene, force_limit=profile.force_limit, origin=origin,

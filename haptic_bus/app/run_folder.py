@@ -218,7 +218,8 @@ class RunFolder:
         """Whether there is anything to draw: a record with cycles (every axis' for several), or
         the loop the gate judged (the K-B plane of a run that never cycled)."""
         if self.axes:
-            return all(table.cycles for table in self.axes.values())
+            named = len(self.document.get("settings", {}).get("axes", []))
+            return len(self.axes) == named and all(table.cycles for table in self.axes.values())
         return (self.record is not None and self.record.cycles > 0) or "gate_loop" in self.document
 
     def notes(self) -> list[str]:

@@ -71,8 +71,9 @@ class RunRecorder:
             self.journal.extra["bus_log"] = self.stats["bus_log"]
             written.append(self.folder / LOG_NAME)
         self.journal.finish(summary, written)  # ended, before the pictures (which read it)
-        if self.files and pictures:
+        run = read_run_folder(self.folder) if self.files and pictures else None
+        if run is not None and run.drawable:
             from haptic_bus.app.run_pictures import render_run
 
-            written += render_run(read_run_folder(self.folder))
+            written += render_run(run)
         return self.journal.finish(summary, written)
