@@ -5,7 +5,8 @@ the writer process' (``hb-writer``, a child of the control process).
 The run is ``haptic_bus.run_canopen`` in this process' main thread (the control thread) against
 the simulated drive in another process on ``udp_multicast``, in virtual time, live view on; a
 thread of this test samples ``threading.enumerate()`` while the record grows.  The threads still
-allowed, each with its reason, are :data:`ALLOWED`.
+allowed, each with its reason, are :data:`ALLOWED`.  The bench's per-thread CPU account counts
+the writer process beside them.
 """
 
 from __future__ import annotations
@@ -17,8 +18,10 @@ import time
 from typing import Any
 
 from haptic_bus.app.profiles import load_profile
+from haptic_bus.app.run_writer import RunWriter
 from haptic_bus.app.runner import VIRTUAL, RunOptions, run_canopen
 from haptic_bus.app.writer_process import COMM
+from haptic_bus.bench.realtime import WRITER, ThreadCpu
 
 NODE = 5
 CONTROLLER_NODE = 127
@@ -81,3 +84,14 @@ def test_while_cycling_the_control_process_runs_the_control_thread_and_no_writer
     assert all(threads == {"MainThread", *ALLOWED} for threads in seen), seen
     assert all(len(pids) == 1 for pids in writers), writers  # the record, the log and the view: one writer process
     assert _children_named(COMM) == []  # it ended with the run
+
+
+def test_the_bench_counts_the_writer_process_beside_the_threads(tmp_path: pathlib.Path) -> None:
+    with ThreadCpu(interval=0.05) as cpu:
+        writer = RunWriter(tmp_path, bus_log=True)
+        try:
+            time.sleep(0.2)  # a few samples while it runs
+        finally:
+            stats = writer.close()
+    assert stats == {"records": {}, "bus_log": {"frames": 0, "frames_lost": 0}}
+    assert cpu.by_name()[WRITER] > 0.0  # its start alone imports numpy and python-can: tens of ms of CPU at least
