@@ -22,6 +22,7 @@ from __future__ import annotations
 import io
 import pathlib
 import struct
+import threading
 import time
 
 import can
@@ -39,15 +40,19 @@ _EXTENDED, _REMOTE, _ERROR, _FD, _SENT = 1, 2, 4, 8, 16
 
 def frame_tap(ring: Ring) -> Tap:
     """A link tap that copies each frame into ``ring`` (:data:`FRAME`); a sent frame, which
-    carries no time of its own, is stamped with the time it was handed over."""
+    carries no time of its own, is stamped with the time it was handed over.  Several threads
+    tap while canopen's notifier reads the bus (its frames, and the caller's SDO requests): a lock
+    keeps the ring's writer one at a time (uncontended while the cycle alone reads and sends)."""
     put = ring.put
     now = time.time
+    lock = threading.Lock()
 
     def tap(msg: can.Message, sent: bool) -> None:
         flags = (msg.is_extended_id | msg.is_remote_frame << 1 | msg.is_error_frame << 2 | msg.is_fd << 3
                  | sent << 4)
         data = msg.data
-        put(now() if sent else msg.timestamp, msg.arbitration_id, flags, len(data), data)
+        with lock:
+            put(now() if sent else msg.timestamp, msg.arbitration_id, flags, len(data), data)
 
     return tap
 
