@@ -1,10 +1,13 @@
 """Issue 26, the ring the cycle writes into (:mod:`haptic_bus.control.ring`): records read back
 whole and in order, a reader a ring behind told how many it lost, a shared ring read through a
-second mapping after its name is gone, and frames through the bus log's tap and back unchanged."""
+second mapping after its name is gone, and frames through the bus log's tap and back unchanged,
+from two threads at once too."""
 
 from __future__ import annotations
 
 import struct
+import sys
+import threading
 from multiprocessing import shared_memory
 
 import can
@@ -70,3 +73,26 @@ def test_frames_go_through_the_tap_and_come_back_unchanged() -> None:
     assert (received.arbitration_id, bytes(received.data), received.is_rx, received.timestamp) == \
         (0x185, bytes(range(8)), True, 1_700_000_000.25)  # a received frame keeps the time it was received
     assert (asked.arbitration_id, asked.is_extended_id, asked.is_remote_frame, asked.is_rx) == (0x1ABCDE, True, True, True)
+
+
+def test_two_threads_tapping_at_once_lose_no_frame() -> None:
+    per_thread = 5_000
+    ring = Ring(FRAME, 4 * per_thread)
+    tap = frame_tap(ring)
+
+    def send(first: int) -> None:
+        for n in range(first, first + per_thread):
+            tap(can.Message(timestamp=1.0, arbitration_id=n, data=b"", is_extended_id=True), False)
+
+    threads = [threading.Thread(target=send, args=(first,)) for first in (0, per_thread)]
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # the interpreter switches threads as often as it can: races show
+    try:
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(timeout=60.0)
+    finally:
+        sys.setswitchinterval(interval)
+    start, chunk = ring.read_from(0)
+    assert start == 0 and sorted(frame.arbitration_id for frame in frames(chunk)) == list(range(2 * per_thread))
