@@ -37,20 +37,33 @@ class RingSpec:
     capacity: int
 
 
-def segment(record: struct.Struct, capacity: int) -> shared_memory.SharedMemory:
+class Segment(shared_memory.SharedMemory):
+    """A shared-memory segment that lets go of a ring's views of it before it closes: a mapping
+    with views left cannot close, and a garbage cycle may finalize the segment before its ring."""
+
+    views: tuple[memoryview, ...] = ()
+
+    def close(self) -> None:
+        """Release the ring's views, then close as ``SharedMemory`` does."""
+        for view in self.views:
+            view.release()
+        super().close()
+
+
+def segment(record: struct.Struct, capacity: int) -> Segment:
     """A new shared-memory segment (zeroed) for a ring of ``capacity`` records of ``record``."""
-    return shared_memory.SharedMemory(create=True, size=_COUNTER + capacity * record.size)
+    return Segment(create=True, size=_COUNTER + capacity * record.size)
 
 
 class Ring:
     """``capacity`` records of ``record``'s layout; one writer (:meth:`put`), readers (:meth:`read_from`).
 
     ``memory``: the shared segment the ring lives in (None: private memory).  Readers never hold
-    a view of the ring after a call returns (:meth:`read_from` copies), so :meth:`close` always
-    succeeds.
+    a view of the ring after a call returns (:meth:`read_from` copies), so closing the segment
+    (:meth:`close`, or its finalizer) always succeeds.
     """
 
-    def __init__(self, record: struct.Struct, capacity: int, memory: shared_memory.SharedMemory | None = None) -> None:
+    def __init__(self, record: struct.Struct, capacity: int, memory: Segment | None = None) -> None:
         if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 2:
             raise ValueError(f"capacity = {capacity!r} is invalid; allowed: an integer >= 2")
         size = _COUNTER + capacity * record.size
@@ -64,6 +77,8 @@ class Ring:
         self._view = memoryview(buffer if buffer is not None else bytearray(size))[:size]
         self._counter = self._view[:_COUNTER].cast("q")
         self._data = self._view[_COUNTER:]
+        if memory is not None:
+            memory.views = (self._counter, self._data, self._view)
         self._pack = record.pack_into
         self._slot = 0
         self._total = 0
@@ -76,7 +91,7 @@ class Ring:
     @classmethod
     def attach(cls, spec: RingSpec) -> Ring:
         """The ring another process made (``spec``), to read."""
-        return cls(struct.Struct(spec.format), spec.capacity, shared_memory.SharedMemory(name=spec.name))
+        return cls(struct.Struct(spec.format), spec.capacity, Segment(name=spec.name))
 
     @property
     def spec(self) -> RingSpec:
@@ -125,18 +140,12 @@ class Ring:
 
     def close(self) -> None:
         """Let go of the memory (idempotent); the ring cannot be used after it."""
-        for view in (self._counter, self._data, self._view):
-            view.release()
         if self._memory is not None:
             self._memory.close()
+        for view in (self._counter, self._data, self._view):
+            view.release()
 
     def unlink(self) -> None:
         """Remove the shared segment's name (those attached keep their mapping); nothing for private memory."""
         if self._memory is not None:
             self._memory.unlink()
-
-    def __del__(self) -> None:
-        # the views first: a segment with views of it left cannot close (SharedMemory's own __del__)
-        for view in (self.__dict__.get("_counter"), self.__dict__.get("_data"), self.__dict__.get("_view")):
-            if view is not None:
-                view.release()
