@@ -1,12 +1,13 @@
-"""Issues 11 and 20, the live view: cycles, the run's elapsed and remaining time, position, force,
-contact (in or out, which objects), the K and B in effect, the scene (and the start ramp),
-lateness p99, overruns, the observer's energy and the whole last event; a rich panel on a
-terminal with every log line printed above it (never through it), plain lines otherwise, none
-with ``-q``.
+"""Issues 11, 20 and 26, the live view, drawn in the run's writer process from the record rings:
+cycles, the run's elapsed and remaining time, position and force (per axis for several, with
+each axis' energy), the scene (and the start ramp), the port's energy (the sum over the axes),
+lateness p99, late cycles, the targets the passivity layer lowered and the whole last event; a
+rich panel on a terminal, plain lines otherwise, none with ``-q``.
 
-No test here waits on the wall clock: the view's fields are read from a controller stepped over
-the simulated drive (lock-step CANopen bus, in process), its wall-clock time comes from a fake
-clock, and views are drawn with ``LiveView.update``; the command-line tests run in virtual time
+No test here waits on the wall clock: the view's fields are read from the ring of a controller
+stepped over the simulated drive (lock-step CANopen bus, in process) or from rings filled with
+known rows, its wall-clock time comes from a fake clock, and views are drawn with
+``LiveView.update``; the command-line tests run in virtual time
 and read the view drawn when the run ends.  The terminal test reads what the view wrote to a
 pseudo-terminal through pyte, a terminal emulator, and checks the screen a user would see.
 """
@@ -15,7 +16,6 @@ from __future__ import annotations
 
 import fcntl
 import io
-import logging
 import os
 import pathlib
 import re
@@ -26,10 +26,11 @@ import threading
 import pyte
 import pytest
 
-from haptic_bus.app.live import LiveView, status_fields
+from haptic_bus.app.live import LiveView
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_canopen
 from haptic_bus.control.controller import WallController, encoder_origin
+from haptic_bus.control.record import RunRecord
 from tests.run_rig import run_cli, simulated_drive
 
 TITLE = "haptic-bus run cia402-handle"
@@ -56,28 +57,33 @@ def test_quiet_runs_show_no_view(tmp_path: pathlib.Path, capsys: pytest.CaptureF
     assert result.err == "" and TITLE not in result.out
 
 
-def test_the_fields_show_time_contact_k_b_and_the_whole_last_event() -> None:
+def test_the_fields_show_time_position_force_scene_energy_and_the_whole_last_event() -> None:
     profile = load_profile("cia402-handle")
+    clock = FakeClock()
     with simulated_canopen(profile) as (_, drive):
         controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
                                     origin=encoder_origin(drive), supervisor=profile.supervisor, ramp_time=0.5)
-        for _ in range(10):
-            controller.step()
-        row = controller.record.latest()
-        assert row is not None
-        fields = status_fields(controller, wall_elapsed=65.0, duration=10.0)
-        assert fields == {"cycles": "10", "time": "0.0 s of 10.0 s (wall clock 1:05.0)", "remaining": "10.0 s",
-                          "position": f"{row['position_m'] * 1e3:+.3f} mm", "force": "+0.000 N",
-                          "contact": "out (free)", "K, B": "0 N/m, 0 N s/m", "scene": "0 (ramp 2%)",
-                          "port energy": f"{row['energy_j'] * 1e3:+.4g} mJ",
-                          "passivity layer": "guard, lowered 0 targets", "overruns": "0"}  # virtual time: no lateness
-        while controller.record.latest()["position_m"] < 0.004 and controller.cycles < 2000:  # type: ignore[index]
-            controller.step()  # the operator pushes the handle 1 mm into the end stop (at 3 mm)
-        controller.events.add(controller.now(), "upload", LONG_EVENT)
-        fields = status_fields(controller)
-        scale = controller.record.latest()["scale"]  # type: ignore[index]
-    assert "time" not in fields and fields["contact"] == "in end-stop"
-    assert fields["K, B"] == f"{scale * 1500:g} N/m, {scale * 10:g} N s/m" and 0 < scale < 1  # the ramp scales both
+        event: dict[str, object] | None = None
+        with LiveView([("", controller.record)], "view", controller.period, io.StringIO(), duration=10.0, clock=clock,
+                      last_event=lambda: event) as view:
+            for _ in range(10):
+                controller.step()
+            clock.now += 65.0
+            row = controller.record.latest()
+            assert row is not None
+            fields = view.fields()
+            assert fields == {"cycles": "10", "time": "0.0 s of 10.0 s (wall clock 1:05.0)", "remaining": "10.0 s",
+                              "position": f"{row['position_m'] * 1e3:+.3f} mm", "force": "+0.000 N",
+                              "scene": "0 (ramp 2%)", "port energy": f"{row['energy_j'] * 1e3:+.4g} mJ",
+                              "late cycles": "0", "passivity layer": "lowered 0 targets"}  # virtual time: no lateness
+            while controller.record.latest()["position_m"] < 0.004 and controller.cycles < 2000:  # type: ignore[index]
+                controller.step()  # the operator pushes the handle 1 mm into the end stop (at 3 mm)
+            event = controller.events.add(controller.now(), "upload", LONG_EVENT).to_dict()
+            fields = view.fields()
+    row = controller.record.latest()
+    assert row is not None and 0 < row["scale"] < 1 and row["force_n"] != 0.0
+    assert fields["cycles"] == str(controller.cycles) and fields["force"] == f"{row['force_n']:+.3f} N"
+    assert fields["scene"] == f"0 (ramp {row['scale']:.0%})"
     assert fields["last event"] == f"{controller.now():.3f} s upload: {LONG_EVENT}"  # whole
 
 
@@ -88,7 +94,7 @@ def test_a_fake_clock_drives_the_plain_view_without_waiting() -> None:
     with simulated_canopen(profile) as (_, drive):
         controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
                                     origin=encoder_origin(drive))
-        with LiveView(controller, "view", stream=stream, duration=2.0, clock=clock, refresh=None) as view:
+        with LiveView([("", controller.record)], "view", controller.period, stream, duration=2.0, clock=clock) as view:
             for _ in range(500):
                 controller.step()
             clock.now += 5.0
@@ -100,10 +106,34 @@ def test_a_fake_clock_drives_the_plain_view_without_waiting() -> None:
     lines = stream.getvalue().splitlines()
     assert len(lines) == 2  # two updates, two lines: none added at the end (a failed run's stderr keeps its one line)
     assert re.fullmatch(r"view: cycles 500; time 0\.5 s of 2\.0 s \(wall clock 5\.0 s\); remaining 1\.5 s; "
-                        r"position \+\d\.\d{3} mm; force \+\d\.\d{3} N; contact (in end-stop|out \(free\)); "
-                        r"K, B \d+ N/m, \d+ N s/m; scene 0; port energy [+-][0-9.e+-]+ mJ; "
-                        r"passivity layer guard, lowered 0 targets; overruns 0", lines[0]), lines[0]
+                        r"position \+\d\.\d{3} mm; force [+-]\d+\.\d{3} N; scene 0; port energy [+-][0-9.e+-]+ mJ; "
+                        r"late cycles 0; passivity layer lowered 0 targets", lines[0]), lines[0]
     assert lines[1].startswith("view: cycles 1500; time 1.5 s of 2.0 s (wall clock 7.5 s); remaining 0.5 s; ")
+
+
+def _row(t: float, x: float, force: float, energy: float, late: bool, lateness: float, removed: float) -> tuple[float, ...]:
+    """One record row (COLUMNS order) with the fields the view reads set, the rest plausible."""
+    return (t, 1e9 + t, t, lateness, 0x1237, 0, 0, x, 0.0, force, 0, energy, 1, 1.0, late, 1e-6, removed)
+
+
+def test_several_axes_show_each_axis_and_the_whole_port() -> None:
+    records = [(name, RunRecord(100)) for name in "xyz"]
+    for k in range(50):  # 50 cycles at T = 1 ms; axis i at (i + 1) mm, i N, E_i = (i + 1) mJ; y late every 10th cycle
+        for i, (_, record) in enumerate(records):
+            record.append(*_row(k * 1e-3, (i + 1) * 1e-3, float(i), (i + 1) * 1e-3, i == 0 and k % 10 == 0,
+                                1e-4 * (k % 5), 0.5 if k == 49 else 0.0))
+    clock = FakeClock()
+    with LiveView(records, "3 axes", 1e-3, io.StringIO(), duration=1.0, clock=clock) as view:
+        clock.now += 2.0
+        fields = view.fields()
+    assert fields == {
+        "cycles": "50", "time": "0.0 s of 1.0 s (wall clock 2.0 s)", "remaining": "1.0 s",
+        "x: position": "+1.000 mm", "x: force": "+0.000 N", "x: energy": "+1 mJ",
+        "y: position": "+2.000 mm", "y: force": "+1.000 N", "y: energy": "+2 mJ",
+        "z: position": "+3.000 mm", "z: force": "+2.000 N", "z: energy": "+3 mJ",
+        "scene": "1", "port energy": "+6 mJ (sum over the axes)",
+        "lateness p99": "400 us",  # 0..0.4 ms in equal shares: p99 by linear interpolation is 0.4 ms
+        "late cycles": "5", "passivity layer": "lowered 3 targets"}  # the last cycle, on each of the 3 axes
 
 
 def _terminal(columns: int, rows: int) -> tuple[int, io.TextIOWrapper]:
@@ -113,36 +143,28 @@ def _terminal(columns: int, rows: int) -> tuple[int, io.TextIOWrapper]:
     return master, os.fdopen(slave, "w")
 
 
-def test_on_a_terminal_log_lines_go_above_one_whole_panel() -> None:
-    columns, rows = 100, 60
+def test_on_a_terminal_one_whole_panel_is_left_showing_the_end() -> None:
+    columns, rows = 100, 40
     master, terminal = _terminal(columns, rows)
     shown = bytearray()
     reader = threading.Thread(target=lambda: _drain(master, shown), daemon=True)
     reader.start()
-    root = logging.getLogger()
-    handler = logging.StreamHandler(terminal)  # what the command line's logging set-up puts on stderr
-    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
-    saved = root.level, root.handlers[:]  # earlier command-line tests leave theirs (on streams pytest has closed)
-    root.handlers = [handler]
-    root.setLevel(logging.WARNING)  # as the command line sets it
     clock = FakeClock()
     profile = load_profile("cia402-handle")
+    event: dict[str, object] | None = None
     try:
         with simulated_canopen(profile) as (_, drive):
             controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
                                         origin=encoder_origin(drive))
-            with LiveView(controller, "panel title", stream=terminal, duration=1.0, clock=clock, refresh=None) as view:
-                for number in range(5):
+            with LiveView([("", controller.record)], "panel title", controller.period, terminal, duration=1.0,
+                          clock=clock, last_event=lambda: event) as view:
+                for _ in range(5):
                     for _ in range(100):
                         controller.step()
-                    logging.getLogger("haptic_bus.test").warning("warning %d while the panel is up", number)
                     clock.now += 1.0
                     view.update()
-                controller.events.add(controller.now(), "upload", LONG_EVENT)
-            assert root.handlers.count(handler) == 1  # the terminal's handler is back
+                event = controller.events.add(controller.now(), "upload", LONG_EVENT).to_dict()
     finally:
-        root.setLevel(saved[0])
-        root.handlers = saved[1]
         terminal.close()
         reader.join(timeout=5.0)
         os.close(master)
@@ -151,9 +173,6 @@ def test_on_a_terminal_log_lines_go_above_one_whole_panel() -> None:
     lines = [line.rstrip() for line in screen.display]
     tops = [i for i, line in enumerate(lines) if "panel title" in line]
     assert len(tops) == 1, "\n".join(lines)  # one panel: none stacked, none torn
-    warnings = [i for i, line in enumerate(lines) if "while the panel is up" in line]
-    assert [lines[i] for i in warnings] == [f"WARNING haptic_bus.test: warning {n} while the panel is up" for n in range(5)]
-    assert max(warnings) < tops[0]  # every log line above the panel
     panel = " ".join(" ".join(line.strip("│ ") for line in lines[tops[0]:] if line).split())
     assert "cycles 500 time 0.5 s of 1.0 s (wall clock 5.0 s) remaining 0.5 s" in panel
     assert f"upload: {LONG_EVENT}" in panel  # the whole event, wrapped over lines

@@ -13,18 +13,20 @@ positions).  It writes every axis' record, ``run.json`` and ``trajectory.png``.
 
 from __future__ import annotations
 
-import datetime as dt
+import functools
 import math
 import pathlib
+from contextlib import ExitStack
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from haptic_bus.app.axes_profile import AxesProfile
-from haptic_bus.app.axes_records import axes_run_document, write_axes_run
+from haptic_bus.app.axes_records import axes_run_document, record_files, space_scene_dicts
 from haptic_bus.app.rig import MultiAxisSim, simulated_axes
-from haptic_bus.app.run_folder import prepare_run_folder
+from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
+from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.controller import WallController, encoder_origins
 from haptic_bus.control.cycle_loop import RunSummary
 from haptic_bus.control.space_gate import SpaceDecision
@@ -122,7 +124,6 @@ def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: fl
     """Run ``profile`` for ``seconds`` of virtual time (None: the hand's whole tour, :func:`tour_seconds`);
     the steady state read at the end of each target's dwell (and at the end); every axis' record,
     ``run.json`` and (if ``plots``) the plot written."""
-    started = dt.datetime.now(dt.UTC)
     out = prepare_run_folder(out_dir, profile.name)
     period = profile.period
     seconds = tour_seconds(profile) if seconds is None else seconds
@@ -133,10 +134,21 @@ def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: fl
             if j * dwell < seconds} if math.isfinite(dwell) else set()
     ends.add(cycles - 1)
     steady: list[SteadyState] = []
-    with simulated_axes(profile) as (sim, axes):
+    link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True,
+            "node_ids": [a.node_id for a in profile.axes]}
+    extra: dict[str, Any] = {"loop": {"period": period}}
+    journal = RunJournal(out, profile, link, extra, axes_run_document)
+    journal.write()
+    recorder = RunRecorder(out, journal)
+    with ExitStack() as stack:
+        writer = recorder.start(stack, bus_log=False)  # before the drives are enabled
+        sim, axes = stack.enter_context(simulated_axes(profile))
         controller = WallController(axes, profile.gate(), profile.space_scene(), names=[a.name for a in profile.axes],
                                     force_limit=[a.force_limit for a in profile.axes], origin=encoder_origins(axes),
-                                    supervisor=profile.supervisor, passivity=profile.passivity)
+                                    supervisor=profile.supervisor, passivity=profile.passivity, shared_records=True)
+        journal.controller = controller
+        recorder.stream(writer, record_files(controller), controller.events,
+                        functools.partial(space_scene_dicts, controller), period)
         axes.enable()
 
         def read_steady(running: Any) -> None:
@@ -148,13 +160,9 @@ def run_axes_demo(out_dir: str | pathlib.Path, profile: AxesProfile, seconds: fl
         port_energy = math.fsum(node.drive.viscous_energy + node.drive.wall_energy for node in sim.nodes)
         if summary.exit_reason == "completed":
             axes.disable()
-    link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True,
-            "node_ids": [a.node_id for a in profile.axes]}
-    extra = {"exit_reason": summary.exit_reason, "error": summary.error, "operator_energy_exact": operator_energy,
-             "port_energy_exact": port_energy, "loop": {"period": period},
-             "steady_states": [dict(vars(s)) for s in steady]}
-    files = write_axes_run(out, profile, controller, axes_run_document(profile, controller, summary, link, extra, started),
-                           plots)
+    extra.update(exit_reason=summary.exit_reason, error=summary.error, operator_energy_exact=operator_energy,
+                 port_energy_exact=port_energy, steady_states=[dict(vars(s)) for s in steady])
+    files = recorder.finish(summary, pictures=plots)
     return AxesDemoResult(profile, controller, summary, steady, operator_energy, port_energy, files)
 
 

@@ -10,19 +10,18 @@ every axis' wall force with the whole port's energy ``E = sum E_i``.
 
 from __future__ import annotations
 
-import pathlib
-
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 
-from haptic_bus.control.controller import WallController
-from haptic_bus.control.space_gate import SpaceDecision
-from haptic_bus.control.space_scene import SpaceScene
+from haptic_bus.app.axes_records import space_objects
+from haptic_bus.app.run_folder import RunFolder
+from haptic_bus.control.space_scene import SpaceObject
 
-_DPI = 110
 _GRID = 240  # points per side of the grid the sections are found on
 _MARGIN = 0.25  # the view's margin around the trajectory and the objects near it, as a fraction of its span
 
@@ -38,26 +37,29 @@ def motion_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return origin, directions[:2]
 
 
-def plot_trajectory(path: str | pathlib.Path, controller: WallController[SpaceScene, SpaceDecision], title: str) -> pathlib.Path:
-    """Write the figure (module docstring) of ``controller``'s record to ``path`` (PNG); returns the path."""
-    records = controller.records
-    time_s = records[0].column("time_s")
-    q = np.column_stack([record.column("position_m") for record in records])
-    x = np.array([controller.kinematics.position(row) for row in q]) if q.shape[1] > 1 else q
-    forces = np.column_stack([record.column("force_n") for record in records])
-    energy = np.sum([record.column("energy_j") for record in records], axis=0)
+def trajectory_figure(run: RunFolder) -> Figure:
+    """The figure (module docstring) of a multi-axis run folder ``run`` (its records and the objects
+    of its last scene); the caller saves and closes it."""
+    names = list(run.axes)
+    tables = [run.axes[name] for name in names]
+    cycles = min(table.cycles for table in tables)
+    time_s = tables[0]["time_s"][:cycles]
+    q = np.column_stack([table["position_m"][:cycles] for table in tables])
+    x = q  # Cartesian: axis i along coordinate i (the profile's kinematics)
+    forces = np.column_stack([table["force_n"][:cycles] for table in tables])
+    energy = np.sum([table["energy_j"][:cycles] for table in tables], axis=0)
     fig = plt.figure(figsize=(13, 6.2))
     grid = fig.add_gridspec(2, 2, width_ratios=(1.1, 1))
     section = fig.add_subplot(grid[:, 0])
-    _draw_sections(section, controller, x)
+    _draw_sections(section, names, space_objects(run.document), x)
     positions = fig.add_subplot(grid[0, 1])
-    for i, name in enumerate(controller.names):
+    for i, name in enumerate(names):
         positions.plot(time_s, q[:, i] * 1e3, label=f"{name}")
     positions.set_ylabel("joint position (mm)")
     positions.legend(loc="best", fontsize=8)
     positions.grid(alpha=0.3)
     force_axes = fig.add_subplot(grid[1, 1], sharex=positions)
-    for i, name in enumerate(controller.names):
+    for i, name in enumerate(names):
         force_axes.plot(time_s, forces[:, i], label=f"wall force {name}")
     force_axes.set_xlabel("time (s)")
     force_axes.set_ylabel("wall force u along the axis (N; the handle feels -u)")
@@ -68,16 +70,14 @@ def plot_trajectory(path: str | pathlib.Path, controller: WallController[SpaceSc
     lines = force_axes.get_legend_handles_labels()
     more = twin.get_legend_handles_labels()
     force_axes.legend(lines[0] + more[0], lines[1] + more[1], loc="best", fontsize=8)
-    fig.suptitle(title)
+    loop = run.document.get("loop", {})
+    fig.suptitle(f"{run.document.get('profile', {}).get('name', run.path.name)}: {len(names)} axes, "
+                 f"T = {loop.get('period', float('nan')) * 1e3:g} ms")
     fig.tight_layout()
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=_DPI)
-    plt.close(fig)
-    return path
+    return fig
 
 
-def _draw_sections(axes: plt.Axes, controller: WallController[SpaceScene, SpaceDecision], x: np.ndarray) -> None:
+def _draw_sections(axes: Axes, names: list[str], objects: list[SpaceObject], x: np.ndarray) -> None:
     """The trajectory in its plane of motion, and each object's section with that plane."""
     origin, basis = motion_plane(x)
     plane = (x - origin) @ basis.T  # (a, b) of each point, m
@@ -88,7 +88,7 @@ def _draw_sections(axes: plt.Axes, controller: WallController[SpaceScene, SpaceD
     points = origin + a[..., None] * basis[0] + b[..., None] * basis[1]
     flat = points.reshape(-1, points.shape[-1]).tolist()
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for k, obj in enumerate(controller.scene.objects):
+    for k, obj in enumerate(objects):
         inside = np.array([obj.penetration(p) is not None for p in flat]).reshape(a.shape)
         if not inside.any():
             continue
@@ -105,7 +105,7 @@ def _draw_sections(axes: plt.Axes, controller: WallController[SpaceScene, SpaceD
     axes.set_xlim(low[0] * 1e3, high[0] * 1e3)
     axes.set_ylim(low[1] * 1e3, high[1] * 1e3)
     first, second = ("(" + ", ".join(f"{c:+.2f}" for c in row) + ")" for row in basis)
-    axes.set_xlabel(f"mm along {first} in ({', '.join(controller.names)})")
+    axes.set_xlabel(f"mm along {first} in ({', '.join(names)})")
     axes.set_ylabel(f"mm along {second}")
     axes.set_title("trajectory in its plane of motion, objects cut by that plane", fontsize=10)
     axes.legend(loc="best", fontsize=8)

@@ -1,7 +1,9 @@
 """What a multi-axis run keeps: one record per axis, ``run.json`` with every axis, the trajectory plot.
 
-Whatever ends the run (its folder created before any bus is touched,
-:func:`~haptic_bus.app.run_folder.prepare_run_folder`), it receives:
+Written as one axis' run is (:class:`~haptic_bus.app.run_recorder.RunRecorder`: the run's writer
+process streams the records and keeps ``run.json`` current, written atomically, from before the
+first cycle; a killed run keeps them), its folder created before any bus is touched
+(:func:`~haptic_bus.app.run_folder.prepare_run_folder`), it receives:
 
 - ``record-<axis>.csv``, one per axis (``record-x.csv``, ``record-y.csv``, ...), each with the
   one-axis record's columns (:data:`haptic_bus.control.record.COLUMNS`): that axis' joint
@@ -14,8 +16,10 @@ Whatever ends the run (its folder created before any bus is touched,
   (bus, node ids, each axis' safety warnings and mapping notes, the bus load), each axis' scaling,
   the scenes in effect with the coupled gate's margins, the summary (the whole port: ``energy``
   is ``sum E_i``) and per axis (``axes``), the events, and how the run ended;
-- ``trajectory.png`` (:mod:`~haptic_bus.app.axes_plots`): the trajectory in its plane of motion
-  against the objects, the positions and forces over time.
+- ``bus.asc``: every frame of the one handle (:mod:`~haptic_bus.app.bus_log`);
+- ``trajectory.png`` (:mod:`~haptic_bus.app.axes_plots`, drawn from the files as ``haptic-bus
+  plot`` draws it): the trajectory in its plane of motion against the objects, the positions and
+  forces over time.
 """
 
 from __future__ import annotations
@@ -23,18 +27,17 @@ from __future__ import annotations
 import dataclasses
 import datetime as dt
 import hashlib
-import json
 import math
-import pathlib
 import sys
 from typing import Any
 
 from haptic_bus.app.axes_profile import AxesProfile
-from haptic_bus.app.run_folder import software_versions
+from haptic_bus.app.run_folder import RUNNING, software_versions
 from haptic_bus.control.controller import WallController
 from haptic_bus.control.cycle_loop import RunSummary
+from haptic_bus.control.record import RunRecord
 from haptic_bus.control.space_gate import SpaceDecision
-from haptic_bus.control.space_scene import SpaceObject, SpaceScene
+from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere
 
 
 def object_dict(obj: SpaceObject) -> dict[str, Any]:
@@ -76,16 +79,21 @@ def _json_ready(value: Any) -> Any:
 
 
 def axes_run_document(profile: AxesProfile, controller: WallController[SpaceScene, SpaceDecision] | None,
-                      summary: RunSummary | None, link: dict[str, Any], extra: dict[str, Any],
-                      started: dt.datetime) -> dict[str, Any]:
+                      summary: RunSummary | None,
+                      link: dict[str, Any], extra: dict[str, Any], started: dt.datetime, ended: bool = True
+                      ) -> dict[str, Any]:
     """The content of ``run.json`` (module docstring); ``controller``/``summary`` None for a run
-    that ended before it cycled (``extra`` then carries the reason)."""
+    that ended before it cycled (``extra`` then carries the reason).  While the run goes on
+    (``ended`` False) ``status`` is "running" and ``ended_utc`` None (a :class:`~haptic_bus.app.run_folder.RunJournal`
+    renders it)."""
     path = profile.path
     document: dict[str, Any] = {
+        "status": extra.get("exit_reason", "ended") if ended else RUNNING,
+        "ended": ended,
         "software": software_versions(),
         "command": sys.argv,
         "started_utc": started.isoformat(),
-        "ended_utc": dt.datetime.now(dt.UTC).isoformat(),
+        "ended_utc": dt.datetime.now(dt.UTC).isoformat() if ended else None,
         "profile": {"name": profile.name, "path": None if path is None else str(path),
                     "sha256": hashlib.sha256(path.read_bytes()).hexdigest() if path is not None and path.is_file() else None},
         "settings": axes_profile_dict(profile),
@@ -95,9 +103,7 @@ def axes_run_document(profile: AxesProfile, controller: WallController[SpaceScen
     if controller is not None:
         scalings = controller.axes.scalings
         document["scaling"] = {name: dataclasses.asdict(s) for name, s in zip(controller.names, scalings)}
-        document["scenes"] = [{"scene_id": entry.scene_id, "origin": entry.origin,
-                               "objects": [object_dict(o) for o in entry.scene.objects],
-                               "decision": decision_dict(entry.decision)} for entry in controller.scenes.history]
+        document["scenes"] = space_scene_dicts(controller)
         document["axes"] = controller.axis_summaries()
         document["events"] = controller.events.to_list()
         document["events_dropped"] = controller.events.dropped
@@ -108,19 +114,29 @@ def axes_run_document(profile: AxesProfile, controller: WallController[SpaceScen
     return _json_ready(document)
 
 
-def write_axes_run(folder: pathlib.Path, profile: AxesProfile, controller: WallController[SpaceScene, SpaceDecision] | None,
-                   document: dict[str, Any], plots: bool = True) -> list[pathlib.Path]:
-    """Write every axis' record, the plot (unless not ``plots``) and ``run.json`` into ``folder``; the paths written."""
-    written: list[pathlib.Path] = []
-    if controller is not None and controller.records[0].total:
-        for name, record in zip(controller.names, controller.records):
-            written.append(record.write_csv(folder / f"record-{name}.csv"))
-        if plots:
-            from haptic_bus.app.axes_plots import plot_trajectory
+def space_scene_dicts(controller: WallController[SpaceScene, SpaceDecision]) -> list[dict[str, Any]]:
+    """Every scene ``controller`` had in effect, JSON-ready (``run.json``'s ``scenes``)."""
+    return _json_ready([{"scene_id": entry.scene_id, "origin": entry.origin,
+                         "objects": [object_dict(o) for o in entry.scene.objects],
+                         "decision": decision_dict(entry.decision)} for entry in list(controller.scenes.history)])
 
-            written.append(plot_trajectory(folder / "trajectory.png", controller,
-                                           f"{profile.name}: {len(profile.axes)} axes, T = {profile.period * 1e3:g} ms"))
-    path = folder / "run.json"
-    document["files"] = [str(p) for p in written] + [str(path)]
-    path.write_text(json.dumps(document, indent=1) + "\n")
-    return [*written, path]
+
+def record_files(controller: WallController[SpaceScene, SpaceDecision]) -> list[tuple[str, str, RunRecord]]:
+    """Each axis' record and its file, ``record-<axis>.csv`` (what :class:`~haptic_bus.app.run_recorder.RunRecorder` streams)."""
+    return [(record_name(name), name, record) for name, record in zip(controller.names, controller.records)]
+
+
+def record_name(axis: str) -> str:
+    """The file of axis ``axis``' record."""
+    return f"record-{axis}.csv"
+
+
+def space_objects(document: dict[str, Any]) -> list[SpaceObject]:
+    """The objects of the last scene ``run.json``'s ``document`` names (for the trajectory's picture)."""
+    kinds = {cls.__name__.lower(): cls for cls in (Plane, Box, Sphere)}
+    scenes = document.get("scenes") or [{"objects": document["settings"]["space"]["objects"]}]
+    objects: list[SpaceObject] = []
+    for entry in scenes[-1]["objects"]:
+        fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in entry.items() if k != "kind"}
+        objects.append(kinds[entry["kind"]](**fields))
+    return objects

@@ -22,15 +22,18 @@ The drives may be the simulated device in another process (``haptic-bus sim --no
    once the coupled gate has proven every scaled wall passive; then every drive is enabled in the
    same cycle and the controller cycles (:class:`~haptic_bus.control.controller.WallController`)
    under the supervisor;
-6. whatever ends it (the time, SIGTERM, Ctrl-C, any axis' fault -- which zeroes every axis'
-   torque in the same cycle -- an assumption broken), the drives are left disabled and every
-   axis' record, ``run.json`` and the plot are written (:mod:`~haptic_bus.app.axes_records`).
+6. from the first cycle the run's writer process (started before commissioning, with the bus
+   log on the drives' one handle) streams every axis' record and keeps ``run.json`` current, as
+   for one axis (:class:`~haptic_bus.app.run_recorder.RunRecorder`, :mod:`~haptic_bus.app.axes_records`):
+   a killed run keeps them; whatever else ends it (the time, SIGTERM, Ctrl-C, any axis' fault --
+   which zeroes every axis' torque in the same cycle -- an assumption broken), the drives are left
+   disabled, ``run.json`` completed and the plot drawn.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import datetime as dt
+import functools
 import pathlib
 from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
@@ -44,9 +47,10 @@ from drives.os_threads import show_names
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, patient
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
-from haptic_bus.app.axes_records import axes_run_document, write_axes_run
+from haptic_bus.app.axes_records import axes_run_document, record_files, space_scene_dicts
 from haptic_bus.app.profile_policies import StartPolicy
-from haptic_bus.app.run_folder import prepare_run_folder
+from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
+from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.app.runner import (
     DEFAULT_CONTROLLER_NODE_ID,
     PROFILE_SCALING_SOURCE,
@@ -109,7 +113,9 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
     link: dict[str, Any] = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_ids": nodes,
                             "controller_node_id": controller_node_id, "bitrate_checked": bitrate}
     extra: dict[str, Any] = {"loop": {"period": period, "delays": [axis.delay for axis in profile.axes]}}
-    started = dt.datetime.now(dt.UTC)
+    journal = RunJournal(folder, profile, link, extra, axes_run_document)
+    journal.write()  # "running", before any bus is touched: a run killed from here on says so
+    recorder = RunRecorder(folder, journal)
     controller: WallController[SpaceScene, SpaceDecision] | None = None
     summary: RunSummary | None = None
     reason, error = "completed", None
@@ -120,6 +126,7 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
             raise Refusal(f"the bus cannot carry this cycle; allowed: {refusal.allowed}") from None
         link["bus_load"] = dataclasses.asdict(load)
         with ExitStack() as stack:
+            writer = recorder.start(stack, options.bus_log)  # before the drives: commissioning logged
             axes = CanopenAxes(nodes, scalings=[axis.device.scaling() for axis in profile.axes],
                                interface=config["interface"], channel=config.get("channel"), bitrate=config.get("bitrate"),
                                bus_kwargs={k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")},
@@ -127,6 +134,7 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                                safety=safety if options.wall_paced else safety.for_virtual_time(period),
                                **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
             stack.callback(axes.close)
+            axes.link.tap = writer.tap
             axes.connect()
             _describe(axes, options, link)
             scene = profile.space_scene()
@@ -142,8 +150,12 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                 controller = WallController(axes, gate, scene, names=[axis.name for axis in profile.axes],
                                             force_limit=[axis.force_limit for axis in profile.axes], clock=clock,
                                             origin=origin, supervisor=profile.supervisor, ramp_time=ramp_time,
-                                            passivity=profile.passivity, hold=hold)
+                                            passivity=profile.passivity, hold=hold, shared_records=True)
                 extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold, "per_axis": True}
+                journal.controller = controller
+                recorder.stream(writer, record_files(controller), controller.events,
+                                functools.partial(space_scene_dicts, controller), period,
+                                f"haptic-bus run {profile.name}" if options.live else None, options.duration)
                 show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
                 axes.enable()  # every drive in the same cycle, right before the first: their RPDO deadlines run from here
                 summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
@@ -160,8 +172,7 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
         reason, error = "interrupted", "interrupted (Ctrl-C)"
     finally:
         extra["exit_reason"], extra["error"] = reason, error
-        files = write_axes_run(folder, profile, controller,
-                               axes_run_document(profile, controller, summary, link, extra, started), options.plots)
+        files = recorder.finish(summary, pictures=options.plots)
     return AxesRunResult(reason, error, summary, controller, folder, files)
 
 

@@ -1,39 +1,68 @@
-"""``bus.asc``: every frame on a run's CAN bus, in Vector's ASCII log format, beside its record.
+"""``bus.asc``: every CAN frame of a run, in Vector's ASCII log format, beside its record.
 
-A second handle on the run's bus (a listener, as ``candump`` is: the virtual bus, udp_multicast
-and SocketCAN hand every frame to every handle) is read by a thread of its own; python-can's
-own :class:`can.ASCWriter` formats each frame.  Its lines are staged in memory and written to
-the file, whole lines only, every :data:`~haptic_bus.app.record_stream.FLUSH_INTERVAL` s, so a
-process killed at any moment leaves a log that ``can.LogReader`` reads up to the last flush
-(the header's ``date`` and ``Begin Triggerblock`` lines come with the first frames; only
-``End TriggerBlock`` is missing, which the reader does not need).  ``python -m can.player``
-replays it, ``python -m can.logconvert bus.asc bus.log`` turns it into the candump format that
-cantools reads.
+The control process logs on its one handle: the drive link's tap
+(:attr:`drives.canopen.link.NetworkLink.tap`) is :func:`frame_tap`, which copies each frame
+received or sent into a ring in shared memory (:data:`FRAME`: one ``struct.pack_into`` and a
+counter store, :class:`~haptic_bus.control.ring.Ring`).  The run's writer process
+(:mod:`~haptic_bus.app.writer_process`) drains the ring with :class:`BusLogFile`: python-can's
+own :class:`can.ASCWriter` formats each frame, and the lines go to the file, whole lines only,
+at every drain (every :data:`~haptic_bus.app.record_stream.FLUSH_INTERVAL` s), so a process
+killed at any moment leaves a log that ``can.LogReader`` reads up to the last drain (the
+header's ``date`` and ``Begin Triggerblock`` lines come with the first frames; only ``End
+TriggerBlock`` is missing, which the reader does not need).  ``python -m can.player`` replays
+it, ``python -m can.logconvert bus.asc bus.log`` turns it into the candump format that cantools
+reads.  Frames the heartbeat producer's thread sends pass the tap by (the link's docstring).
 
-The control thread does nothing for the log; the listener costs the process one receive and
-one formatted line a frame in its own thread.  An interface that cannot be opened twice (some
-vendors' adapters) gives no bus log and a warning, never a failed run.  Modbus has no frames
-to log: a Modbus run's record holds each poll's registers (statusword, velocity, torque).
+A writer more than a ring behind loses the oldest frames; :attr:`BusLogFile.lost` counts them.
+Modbus has no frames to log: a Modbus run's record holds each poll's registers.
 """
 
 from __future__ import annotations
 
 import io
-import logging
 import pathlib
+import struct
 import threading
 import time
-from typing import Any
 
 import can
 
-from drives.bus_config import open_bus
-from haptic_bus.app.record_stream import FLUSH_INTERVAL, write_whole
-from haptic_bus.errors import DriveError
-
-logger = logging.getLogger(__name__)
+from drives.canopen.link import Tap
+from haptic_bus.app.record_stream import write_whole
+from haptic_bus.control.ring import Ring
 
 LOG_NAME = "bus.asc"
+FRAME = struct.Struct("=dIBB64s")
+"""One frame in the ring: Unix time (s), identifier, flags (:data:`_FLAGS`), data length (bytes), data."""
+FRAME_CAPACITY = 1 << 16  # frames: 16 s of a 3-axis cycle at T = 1 ms (4 frames a cycle) if the writer stalls
+_EXTENDED, _REMOTE, _ERROR, _FD, _SENT = 1, 2, 4, 8, 16
+
+
+def frame_tap(ring: Ring) -> Tap:
+    """A link tap that copies each frame into ``ring`` (:data:`FRAME`); a sent frame, which
+    carries no time of its own, is stamped with the time it was handed over.  Several threads
+    tap while canopen's notifier reads the bus (its frames, and the caller's SDO requests): a lock
+    keeps the ring's writer one at a time (uncontended while the cycle alone reads and sends)."""
+    put = ring.put
+    now = time.time
+    lock = threading.Lock()
+
+    def tap(msg: can.Message, sent: bool) -> None:
+        flags = (msg.is_extended_id | msg.is_remote_frame << 1 | msg.is_error_frame << 2 | msg.is_fd << 3
+                 | sent << 4)
+        data = msg.data
+        with lock:
+            put(now() if sent else msg.timestamp, msg.arbitration_id, flags, len(data), data)
+
+    return tap
+
+
+def frames(chunk: bytes) -> list[can.Message]:
+    """The frames of a ring's raw records ``chunk``, as python-can messages (``is_rx`` False: sent here)."""
+    return [can.Message(timestamp=stamp, arbitration_id=can_id, is_extended_id=bool(flags & _EXTENDED),
+                        is_remote_frame=bool(flags & _REMOTE), is_error_frame=bool(flags & _ERROR),
+                        is_fd=bool(flags & _FD), is_rx=not flags & _SENT, dlc=length, data=data[:length])
+            for stamp, can_id, flags, length, data in FRAME.iter_unpack(chunk)]
 
 
 class _Staged(io.StringIO):
@@ -42,7 +71,7 @@ class _Staged(io.StringIO):
     def close(self) -> None:
         """Kept open: the bus log drains it once more after the writer's last line."""
 
-    def drain(self) -> str:
+    def take(self) -> str:
         """Everything staged so far, removed from the stage."""
         text = self.getvalue()
         self.seek(0)
@@ -50,52 +79,35 @@ class _Staged(io.StringIO):
         return text
 
 
-class BusLog:
-    """Every frame ``bus`` receives, into ``path`` (ASC), from a thread of its own (module docstring)."""
+class BusLogFile:
+    """The frames of ``ring`` (:data:`FRAME`) into ``path`` (ASC), at each :meth:`drain`."""
 
-    def __init__(self, path: pathlib.Path, bus: can.BusABC, interval: float = FLUSH_INTERVAL) -> None:
+    def __init__(self, path: pathlib.Path, ring: Ring) -> None:
         self.path = path
-        self.interval = interval
-        self.frames = 0
-        self._bus = bus
+        self.ring = ring
+        self.frames = 0  # frames written
+        self.lost = 0  # frames overwritten in the ring before they could be written
+        self._next = 0
         self._staged = _Staged()
         self._writer = can.ASCWriter(self._staged)
         self._file = io.FileIO(path, "w")
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._loop, name="bus-log", daemon=True)
 
-    @classmethod
-    def open(cls, path: pathlib.Path, bus_config: dict[str, Any]) -> BusLog | None:
-        """A started bus log on a new handle of the bus ``bus_config`` names; None (and a warning)
-        if the interface refuses a second handle."""
-        try:
-            bus = open_bus(**bus_config)
-        except DriveError as exc:
-            logger.warning("no bus log: %s (a second handle on the bus is needed)", exc)
-            return None
-        log = cls(path, bus)
-        log._thread.start()
-        return log
+    def drain(self) -> int:
+        """Write every frame the ring holds since the last drain, whole lines; the count written now."""
+        first, chunk = self.ring.read_from(self._next)
+        self.lost += first - self._next
+        found = frames(chunk)
+        self._next = first + len(found)
+        for message in found:
+            self._writer.on_message_received(message)
+        write_whole(self._file, self._staged.take())
+        self.frames += len(found)
+        return len(found)
 
     def close(self) -> None:
-        """Stop listening, write what is staged and ``End TriggerBlock``, close the file and the handle."""
-        self._stop.set()
-        self._thread.join(timeout=10 * self.interval + 5.0)
+        """A last drain, ``End TriggerBlock``, the file closed and the ring let go."""
+        self.drain()
         self._writer.stop()
-        write_whole(self._file, self._staged.drain())
+        write_whole(self._file, self._staged.take())
         self._file.close()
-        self._bus.shutdown()
-
-    def _loop(self) -> None:
-        due = time.monotonic() + self.interval
-        try:
-            while not self._stop.is_set():
-                message = self._bus.recv(timeout=max(0.0, due - time.monotonic()))
-                if message is not None:
-                    self._writer.on_message_received(message)
-                    self.frames += 1
-                if time.monotonic() >= due:
-                    write_whole(self._file, self._staged.drain())
-                    due = time.monotonic() + self.interval
-        except (can.CanError, OSError) as exc:
-            logger.warning("bus log %s: stopped: %s", self.path, exc)
+        self.ring.close()

@@ -112,8 +112,13 @@ def _region(args: argparse.Namespace) -> int:
 
 def _plot(args: argparse.Namespace) -> int:
     from haptic_bus.app.run_folder import read_run_folder
+    from haptic_bus.errors import ParameterError
 
     run = read_run_folder(args.run_dir)
+    if not run.drawable:
+        raise ParameterError("RUN_DIR", str(run.path), "a run folder with cycles recorded in every record, or the loop "
+                             f"its gate judged (this run has neither: run.json says {run.document.get('status')!r}, "
+                             f"{run.document.get('error')!r})", "plot")
     out = writable_folder("--out", pathlib.Path(args.out) if args.out else run.path, context="plot")
     for note in run.notes():
         print(f"note: {note}")

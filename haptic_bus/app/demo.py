@@ -10,6 +10,7 @@ into the wall.  The demo prints a short summary and records as a run does
 from __future__ import annotations
 
 import bisect
+import functools
 import pathlib
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ import numpy as np
 
 from haptic_bus.app.profiles import Profile, default_profile
 from haptic_bus.app.rig import simulated_canopen
-from haptic_bus.app.run_folder import RunJournal, gate_loop, prepare_run_folder
+from haptic_bus.app.run_folder import RECORD_CSV, RunJournal, gate_loop, prepare_run_folder, run_document, scene_dicts
 from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.controller import RunSummary, WallController, encoder_origin
 from haptic_bus.control.gate import GateDecision
@@ -51,17 +52,21 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, second
     link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True}
     extra: dict[str, Any] = {"loop": {"period": profile.loop.period, "timing": profile.loop.timing,
                                       "delay_assumed": profile.loop.delay}}
-    journal = RunJournal(out, profile, link, extra)
+    journal = RunJournal(out, profile, link, extra, run_document)
     journal.write()
     recorder = RunRecorder(out, journal)
-    with ExitStack() as stack, simulated_canopen(profile) as (sim, drive):
+    with ExitStack() as stack:
+        writer = recorder.start(stack, bus_log=False)  # before the drive is enabled: Ctrl-C from then on is recorded
+        sim, drive = stack.enter_context(simulated_canopen(profile))
         origin = encoder_origin(drive)
         scene = profile.compiled_scene()
         gate = profile.gate()
-        controller = WallController(drive, gate, scene, force_limit=profile.force_limit,
-                                    origin=origin, supervisor=profile.supervisor, passivity=profile.passivity)
+        controller = WallController(drive, gate, scene, force_limit=profile.force_limit, origin=origin,
+                                    supervisor=profile.supervisor, passivity=profile.passivity, shared_records=True)
         extra["gate_loop"] = gate_loop(gate.device)
-        recorder.stream(stack, controller)
+        journal.controller = controller
+        recorder.stream(writer, [(RECORD_CSV, "", controller.record)], controller.events,
+                        functools.partial(scene_dicts, controller), controller.period)
         summary = controller.run(cycles)
         operator_energy = sim.drive.operator_energy
         # the port's energy as the simulated drive's exact ledger has it: b int v^2 dt minus the motor's work

@@ -11,8 +11,8 @@ a :class:`~haptic_bus.errors.ParameterError`: exit 2).  It receives:
   contact wall), the summary with its ``exit_reason``, the events (uploads accepted and refused,
   alarms, derates, faults), each with its time, and the files.  Written whole each time (a
   temporary file renamed over it), so a killed run leaves the last version, saying it did not end;
-- ``record.csv``: one row a cycle (:data:`haptic_bus.control.record.COLUMNS`), streamed
-  (:mod:`~haptic_bus.app.record_stream`);
+- ``record.csv``: one row a cycle (:data:`haptic_bus.control.record.COLUMNS`), streamed by the
+  run's writer process (:mod:`~haptic_bus.app.run_writer`, :mod:`~haptic_bus.app.record_stream`);
 - ``bus.asc``: every CAN frame (:mod:`~haptic_bus.app.bus_log`; CANopen runs, unless ``--no-bus-log``);
 - at the end, the pictures (:mod:`~haptic_bus.app.run_plots`), drawn from the files themselves:
   ``haptic-bus plot RUN_DIR`` draws the same again from :func:`read_run_folder`.
@@ -30,9 +30,9 @@ import os
 import pathlib
 import platform
 import sys
-import threading
-from dataclasses import asdict, dataclass
-from typing import Any
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any, Generic, TypeVar
 
 from haptic_bus._version import __version__
 from haptic_bus.analysis.loop import DeviceLoop
@@ -119,7 +119,7 @@ def run_document(profile: Profile, controller: WallController | None, summary: R
         report = getattr(drive, "scaling_report", None)
         document["scaling"] = {"values": asdict(drive.scaling), "sources": getattr(drive, "scaling_sources", {}),
                                **(report.to_dict() if report is not None else {})}
-        document["scenes"] = [entry.to_dict() for entry in list(controller.scenes.history)]
+        document["scenes"] = scene_dicts(controller)
         document["events"] = controller.events.to_list()
         document["events_dropped"] = controller.events.dropped
         supervisor = controller.supervisor
@@ -128,6 +128,11 @@ def run_document(profile: Profile, controller: WallController | None, summary: R
     if summary is not None:
         document["summary"] = asdict(summary)
     return _finite(document)
+
+
+def scene_dicts(controller: WallController) -> list[dict[str, Any]]:
+    """Every scene ``controller`` had in effect, JSON-ready (``run.json``'s ``scenes``)."""
+    return [entry.to_dict() for entry in list(controller.scenes.history)]
 
 
 def gate_loop(device: DeviceLoop) -> dict[str, Any]:
@@ -145,38 +150,38 @@ def write_json(path: pathlib.Path, document: dict[str, Any]) -> pathlib.Path:
     return path
 
 
-class RunJournal:
+P = TypeVar("P")  # the profile: one axis' or several axes'
+C = TypeVar("C")  # the controller
+Render = Callable[[P, "C | None", "RunSummary | None", dict[str, Any], dict[str, Any], dt.datetime, bool], dict[str, Any]]
+"""``run.json``'s content from (profile, controller, summary, link, extra, started, ended): :func:`run_document`,
+or :func:`~haptic_bus.app.axes_records.axes_run_document` for several axes."""
+
+
+class RunJournal(Generic[P, C]):
     """``run.json`` over a run's life: written before anything is touched (``status`` "running",
-    ``ended`` false), rewritten whenever the events or the scenes change (:meth:`refresh`, from the
-    record's writer thread), and completed at the end (:meth:`finish`).  A run killed at any moment
+    ``ended`` false), rewritten whenever the events or the scenes change (by the run's writer
+    process, :mod:`~haptic_bus.app.run_writer`, from :meth:`document` and the events), and
+    completed at the end (:meth:`finish`).  A run killed at any moment
     leaves it saying ``"ended": false``: :func:`read_run_folder` reports it as not ended cleanly."""
 
-    def __init__(self, folder: pathlib.Path, profile: Profile, link: dict[str, Any], extra: dict[str, Any]) -> None:
+    def __init__(self, folder: pathlib.Path, profile: P, link: dict[str, Any], extra: dict[str, Any],
+                 render: Render[P, C]) -> None:
         self.folder = folder
         self.path = folder / RUN_JSON
         self.profile = profile
         self.link = link
         self.extra = extra
         self.started = _utc_now()
-        self.controller: WallController | None = None
-        self._lock = threading.Lock()
-        self._seen: tuple[int, int] = (0, 1)
+        self.controller: C | None = None
+        self._render = render
+
+    def document(self, summary: RunSummary | None = None, ended: bool = False) -> dict[str, Any]:
+        """``run.json``'s content as the run stands now."""
+        return self._render(self.profile, self.controller, summary, self.link, self.extra, self.started, ended)
 
     def write(self, summary: RunSummary | None = None, ended: bool = False) -> pathlib.Path:
         """Write ``run.json`` as the run stands now."""
-        with self._lock:
-            document = run_document(self.profile, self.controller, summary, self.link, self.extra, self.started, ended)
-            return write_json(self.path, document)
-
-    def refresh(self) -> None:
-        """Rewrite ``run.json`` if an event or a scene came since the last write (cheap otherwise)."""
-        controller = self.controller
-        if controller is None:
-            return
-        seen = (len(controller.events.events), len(controller.scenes.history))
-        if seen != self._seen:
-            self._seen = seen
-            self.write()
+        return write_json(self.path, self.document(summary, ended))
 
     def finish(self, summary: RunSummary | None, written: list[pathlib.Path]) -> list[pathlib.Path]:
         """The run has ended: ``run.json`` completed, naming the files ``written`` and itself
@@ -189,26 +194,45 @@ class RunJournal:
 @dataclass(frozen=True)
 class RunFolder:
     """A run folder read back: ``run.json``'s document, ``record.csv`` (None if the run never
-    cycled), and whether the run ended cleanly."""
+    cycled, or for several axes), each axis' record for several axes (``axes``: axis name ->
+    ``record-<axis>.csv``, empty for one axis), and whether the run ended cleanly."""
 
     path: pathlib.Path
     document: dict[str, Any]
     record: RecordTable | None
+    axes: dict[str, RecordTable] = field(default_factory=dict)
 
     @property
     def ended_cleanly(self) -> bool:
         """True when ``run.json`` was completed (``"ended": true``)."""
         return self.document.get("ended", True) is True
 
+    @property
+    def records(self) -> dict[str, RecordTable]:
+        """Every record read, by file name."""
+        one = {RECORD_CSV: self.record} if self.record is not None else {}
+        return one | {f"record-{axis}.csv": table for axis, table in self.axes.items()}
+
+    @property
+    def drawable(self) -> bool:
+        """Whether there is anything to draw: a record with cycles (every axis' for several), or
+        the loop the gate judged (the K-B plane of a run that never cycled)."""
+        if self.axes:
+            named = len(self.document.get("settings", {}).get("axes", []))
+            return len(self.axes) == named and all(table.cycles for table in self.axes.values())
+        return (self.record is not None and self.record.cycles > 0) or "gate_loop" in self.document
+
     def notes(self) -> list[str]:
         """What a reader should know before trusting the pictures (one line each)."""
         notes = []
         if not self.ended_cleanly:
-            cycles = self.record.cycles if self.record is not None else 0
+            held = "; ".join(f"{name} holds {table.cycles} cycles" for name, table in self.records.items()) or \
+                "no record"
             notes.append(f"{self.path}: the run did not end cleanly (run.json still says {self.document.get('status')!r}: "
-                         f"the process was killed or crashed); record.csv holds {cycles} cycles")
-        if self.record is not None and self.record.torn_line:
-            notes.append(f"{self.path / RECORD_CSV}: its last line was torn (written when the process died) and is left out")
+                         f"the process was killed or crashed); {held}")
+        for name, table in self.records.items():
+            if table.torn_line:
+                notes.append(f"{self.path / name}: its last line was torn (written when the process died) and is left out")
         return notes
 
 
@@ -220,9 +244,11 @@ def read_run_folder(folder: str | pathlib.Path) -> RunFolder:
                              "plot")
     try:
         document = json.loads((path / RUN_JSON).read_text())
+        if not isinstance(document, dict):
+            raise ValueError("run.json is not a JSON object")
         record = read_record(path / RECORD_CSV) if (path / RECORD_CSV).is_file() else None
-    except (OSError, ValueError) as exc:
+        names = [axis["name"] for axis in document.get("settings", {}).get("axes", [])]
+        axes = {name: read_record(path / f"record-{name}.csv") for name in names if (path / f"record-{name}.csv").is_file()}
+    except (OSError, ValueError, TypeError, KeyError) as exc:
         raise ParameterError("RUN_DIR", str(path), f"a readable run folder ({exc})", "plot") from None
-    if not isinstance(document, dict):
-        raise ParameterError("RUN_DIR", str(path), "a run folder whose run.json is a JSON object", "plot")
-    return RunFolder(path, document, record)
+    return RunFolder(path, document, record, axes)

@@ -19,11 +19,16 @@ DPI = 110
 
 
 def render_run(run: RunFolder, out: pathlib.Path | None = None) -> list[pathlib.Path]:
-    """Draw a run's pictures (``timeline.png``, ``force_position.png``, ``region.png``) into ``out``
-    (default: its folder); the paths.  A run that never cycled (no ``record.csv``) gets the K-B plane only."""
+    """Draw a run's pictures (``timeline.png``, ``force_position.png``, ``region.png``; for several
+    axes ``trajectory.png``) into ``out`` (default: its folder); the paths.  A run that never
+    cycled (no ``record.csv``) gets the K-B plane only."""
     target = out if out is not None else run.path
     figures: list[tuple[str, Figure]] = []
-    if run.record is not None and run.record.cycles:
+    if run.axes:
+        from haptic_bus.app.axes_plots import trajectory_figure
+
+        figures.append(("trajectory.png", trajectory_figure(run)))
+    elif run.record is not None and run.record.cycles:
         figures += [("timeline.png", timeline_figure(run)), ("force_position.png", force_position_figure(run))]
     if "gate_loop" in run.document:
         figures.append(("region.png", kb_plane_figure(run)))

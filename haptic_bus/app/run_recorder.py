@@ -1,56 +1,79 @@
-"""What a run writes while it goes on, in one place: the streamed ``record.csv``, the bus log, and
-``run.json`` kept current (:class:`~haptic_bus.app.run_folder.RunJournal`); at the end, the journal
-completed and the pictures drawn (:func:`~haptic_bus.app.run_pictures.render_run`, what ``haptic-bus
-plot`` does).  ``haptic-bus run`` and ``haptic-bus demo`` both record through it.
+"""What a run writes, in one place, for one axis or several: its writer process
+(:mod:`~haptic_bus.app.run_writer`: each axis' streamed record, the bus log, ``run.json`` kept
+current, the live view) and, at the end, the journal completed and the pictures drawn
+(:func:`~haptic_bus.app.run_pictures.render_run`, what ``haptic-bus plot`` does).  ``haptic-bus
+run`` and ``haptic-bus demo`` record through it, for one axis and for several.
 """
 
 from __future__ import annotations
 
 import pathlib
+from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from typing import Any
 
-from haptic_bus.app.bus_log import LOG_NAME, BusLog
-from haptic_bus.app.record_stream import RecordStream
-from haptic_bus.app.run_folder import RECORD_CSV, RunJournal, read_run_folder
-from haptic_bus.app.run_pictures import render_run
-from haptic_bus.control.controller import RunSummary, WallController
+from haptic_bus.app.bus_log import LOG_NAME
+from haptic_bus.app.run_folder import RunJournal, read_run_folder
+from haptic_bus.app.run_writer import RunWriter
+from haptic_bus.control.cycle_loop import RunSummary
+from haptic_bus.control.record import EventLog, RunRecord
 
 
 class RunRecorder:
     """The files of one run in ``folder``, with ``journal`` its ``run.json``."""
 
-    def __init__(self, folder: pathlib.Path, journal: RunJournal) -> None:
+    def __init__(self, folder: pathlib.Path, journal: RunJournal[Any, Any]) -> None:
         self.folder = folder
         self.journal = journal
-        self.record: RecordStream | None = None
-        self.bus_log: BusLog | None = None
+        self.writer: RunWriter | None = None
+        self.stats: dict[str, Any] = {}
+        self.files: list[str] = []  # the records streamed, file names
 
-    def log_bus(self, stack: ExitStack, bus: dict[str, Any]) -> None:
-        """Log every frame of the CAN bus ``bus`` (python-can configuration) into ``bus.asc``
-        until ``stack`` closes (no log, and a warning, if the bus cannot be opened twice)."""
-        self.bus_log = BusLog.open(self.folder / LOG_NAME, bus)
-        if self.bus_log is not None:
-            stack.callback(self.bus_log.close)
+    def start(self, stack: ExitStack, bus_log: bool) -> RunWriter:
+        """Start the writer process (with ``bus_log`` its frame ring and ``bus.asc``), stopped when
+        ``stack`` closes; before the drive is reached, so that commissioning's frames are logged."""
+        self.writer = writer = RunWriter(self.folder, bus_log)
+        stack.callback(self._stop)
+        return writer
 
-    def stream(self, stack: ExitStack, controller: WallController) -> None:
-        """Stream ``controller``'s record into ``record.csv`` (and keep ``run.json`` current)
-        until ``stack`` closes."""
-        self.journal.controller = controller
-        self.record = RecordStream(self.folder / RECORD_CSV, controller.record, self.journal.refresh).start()
-        stack.callback(self.record.close)
+    def stream(self, writer: RunWriter, records: Sequence[tuple[str, str, RunRecord]], events: EventLog,
+               scenes: Callable[[], list[dict[str, Any]]], period: float, live: str | None = None,
+               duration: float | None = None) -> None:
+        """Stream each ``(file name, axis name, record)`` (records made in shared memory), keep
+        ``run.json`` current with ``events`` (and ``scenes()`` when one brought a new scene), and
+        show the live view titled ``live`` (None: none) of a run of ``duration`` s at ``T = period`` s."""
+        writer.stream(records)
+        self.files = [name for name, _, _ in records]
+        writer.follow(events, scenes)
+        self.publish()
+        if live is not None:
+            writer.live(live, period, duration)
+
+    def publish(self) -> None:
+        """Hand ``run.json``'s document as it stands now to the writer (which then adds each event)."""
+        if self.writer is not None:
+            self.writer.journal(self.journal.document())
+
+    def _stop(self) -> None:
+        if self.writer is not None:
+            self.stats = self.writer.close()
 
     def finish(self, summary: RunSummary | None, pictures: bool = True) -> list[pathlib.Path]:
-        """After the streams are closed: ``run.json`` completed, the pictures (unless not ``pictures``);
+        """After the writer is stopped: ``run.json`` completed, the pictures (unless not ``pictures``);
         the files written."""
-        written = []
-        if self.record is not None:
-            self.journal.extra["record"] = {"rows_written": self.record.written, "rows_lost": self.record.lost}
-            written.append(self.record.path)
-        if self.bus_log is not None:
-            self.journal.extra["bus_log"] = {"frames": self.bus_log.frames}
-            written.append(self.bus_log.path)
+        written = [self.folder / name for name in self.files]
+        counts = self.stats.get("records", {})
+        if len(self.files) == 1:
+            self.journal.extra["record"] = counts.get(self.files[0], {"rows_written": 0, "rows_lost": 0})
+        elif self.files:
+            self.journal.extra["records"] = counts
+        if "bus_log" in self.stats:
+            self.journal.extra["bus_log"] = self.stats["bus_log"]
+            written.append(self.folder / LOG_NAME)
         self.journal.finish(summary, written)  # ended, before the pictures (which read it)
-        if self.record is not None and pictures:
-            written += render_run(read_run_folder(self.folder))
+        run = read_run_folder(self.folder) if self.files and pictures else None
+        if run is not None and run.drawable:
+            from haptic_bus.app.run_pictures import render_run
+
+            written += render_run(run)
         return self.journal.finish(summary, written)

@@ -4,24 +4,27 @@ The drive may be the simulated one in another process (``udp_multicast``, ``vcan
 TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, in order:
 
 1. the run's folder is created and shown writable (:mod:`~haptic_bus.app.run_folder`) before any
-   bus is touched, and ``run.json`` written there ("running"); on CANopen ``bus.asc`` starts before
-   the drive is reached; with ``reset_fault`` a drive in FAULT is reset first, as ``haptic-bus
-   fault-reset`` does (the first of run.json's events); without it a faulted drive is refused at
-   enabling, with the command that clears it;
+   bus is touched, and ``run.json`` written there ("running"); the run's writer process starts
+   (:mod:`~haptic_bus.app.run_writer`), and on CANopen ``bus.asc`` with it, before the drive is
+   reached (the drive link's tap copies every frame into its ring); with ``reset_fault`` a drive
+   in FAULT is reset first, as ``haptic-bus fault-reset`` does (the first of run.json's events);
+   without it a faulted drive is refused at enabling, with the command that clears it;
 2. the drive is reached and commissioned (CANopen: the safety chain of ``[safety]``; Modbus: the
    gate judges with the loop delay the poll measured, :func:`drives.modbus.timing.loop_delay`);
 3. **safe start**: the handle's position is read before enabling; inside an object the run is
    refused (:class:`Refusal`, the drive never enabled), or with ``in_contact = "ramp"`` the
    force rises from 0 over ``ramp_time`` once the gate has proven every scaled wall passive;
-4. the upload server (CANopen: the controller's node on the drive's own network, its commits
-   judged in a worker process started here, :mod:`~haptic_bus.node.controller_node`), the live
-   view and the real-time session are set up; then the drive is enabled, right before the first
-   cycle (its RPDO deadline runs from there), and the controller cycles under the supervisor
-   (``[supervisor]``), the control thread alone on the bus handle: it sends SYNC, RPDO and the
-   controller's heartbeat, reads every frame, and answers the upload server's SDO requests;
-5. ``record.csv`` is streamed from the first cycle (:mod:`~haptic_bus.app.run_recorder`), so a
-   killed run keeps its cycles; whatever else ends it (the time, SIGTERM, Ctrl-C, a drive error,
-   an assumption broken), the drive is left disabled, ``run.json`` completed and the pictures drawn.
+4. the record streamed by the writer process (and its live view), the upload server (CANopen:
+   the controller's node on the drive's own network, its commits judged in a worker process
+   started here, :mod:`~haptic_bus.node.controller_node`) and the real-time session are set up;
+   then the drive is enabled, right before the first cycle (its RPDO deadline runs from there),
+   and the controller cycles under the supervisor (``[supervisor]``), the control thread alone on
+   the bus handle: it sends SYNC, RPDO and the controller's heartbeat, reads every frame, and
+   answers the upload server's SDO requests;
+5. ``record.csv`` is streamed from the first cycle and ``run.json`` kept current by the writer
+   process (:mod:`~haptic_bus.app.run_recorder`), so a killed run keeps its cycles; whatever else
+   ends it (the time, SIGTERM, Ctrl-C, a drive error, an assumption broken), the drive is left
+   disabled, ``run.json`` completed and the pictures drawn.
 
 :func:`exit_status` maps how a run ended to the command's exit status.
 """
@@ -29,6 +32,7 @@ TCP on loopback) or real hardware (``can0``, a Modbus TCP/RTU drive).  One run, 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 import pathlib
@@ -48,11 +52,10 @@ from drives.os_threads import show_names
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings, patient
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DriveAddress
-from haptic_bus.app.live import LiveView
 from haptic_bus.app.profile_policies import START_POLICIES
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.realtime import RealtimeReport, RealtimeSettings, realtime_session
-from haptic_bus.app.run_folder import RunJournal, gate_loop, prepare_run_folder
+from haptic_bus.app.run_folder import RECORD_CSV, RunJournal, gate_loop, prepare_run_folder, run_document, scene_dicts
 from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import Derate, RunSummary, WallController, encoder_origin
@@ -66,6 +69,7 @@ from haptic_bus.validation import real_in_range
 if TYPE_CHECKING:
     import can
 
+    from drives.canopen.link import Tap
     from drives.modbus.drive import ModbusDrive
     from haptic_bus.node.controller_node import ControllerNode
 
@@ -169,9 +173,9 @@ def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
     :class:`can.BusABC` that the caller owns (the run neither closes it nor sets its receive
     filters).  Either way the controller is also CANopen node ``controller_node_id`` serving
     gated wall uploads over SDO, on the drive's own network and bus handle (its requests read
-    and answered by the control thread while it cycles, :mod:`~haptic_bus.node.controller_node`).
-    With a configuration ``bus.asc`` logs every frame on a handle of its own; an open bus has no
-    bus log (run.json's ``link`` says so), and ``reset_fault`` is refused (:class:`ParameterError`).
+    and answered by the control thread while it cycles, :mod:`~haptic_bus.node.controller_node`),
+    and ``bus.asc`` logs every frame of that handle (its tap); with an open bus ``reset_fault`` is
+    refused (:class:`ParameterError`).
     The heartbeat the drive watches (``[safety]``) is sent as node ``controller_node_id`` either way.
     """
     import can
@@ -194,18 +198,19 @@ def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
     period = profile.loop.period
     safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
     link = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_id": node_id,
-            "controller_node_id": controller_node_id, "upload_server": True, "bus_log": given is None}
+            "controller_node_id": controller_node_id, "upload_server": True, "bus_log": options.bus_log}
     where = ({"bus": given} if given is not None else
              {"interface": config["interface"], "channel": config.get("channel"), "bitrate": config.get("bitrate"),
               "bus_kwargs": {k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")}})
 
-    def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Serve]:
+    def open_drive(stack: ExitStack, tap: Tap | None) -> tuple[Drive, PassivityGate, Serve]:
         drive = CanopenDrive(node_id, **where, period=period,
                              tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling=profile.scaling(),
                              scaling_source=PROFILE_SCALING_SOURCE,
                              safety=safety if options.wall_paced else safety.for_virtual_time(period),
                              **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
         stack.callback(drive.close)
+        drive.link.tap = tap  # before commissioning: its frames are logged too
         drive.connect()
         _show_scaling(drive, options)
         link["safety_warnings"] = list(drive.safety_warnings)
@@ -224,7 +229,7 @@ def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
     hold = longest_hold(period, options.wall_paced, safety.rpdo_deadline_ms(period), safety.consumer_ms)
     address = DriveAddress(bus=dict(bus) if isinstance(bus, Mapping) else {}, node_id=node_id)
     return _session(profile, options, folder, link, open_drive,
-                    DriveSide(hold, canopen_watchdog(safety, period), address, config if given is None else None))
+                    DriveSide(hold, canopen_watchdog(safety, period), address, frames=True))
 
 
 def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) -> RunResult:
@@ -237,7 +242,7 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     safety = profile.safety if options.wall_paced else profile.safety.for_virtual_time(period)
     link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
 
-    def open_drive(stack: ExitStack) -> tuple[Drive, PassivityGate, Serve]:
+    def open_drive(stack: ExitStack, tap: Tap | None) -> tuple[Drive, PassivityGate, Serve]:
         drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True,
                                      **patient(options.wall_paced, VIRTUAL_TIME_MODBUS_PATIENCE))
         stack.callback(drive.close)
@@ -298,7 +303,7 @@ def _show_scaling(drive: Cia402Master, options: RunOptions) -> None:
 # --------------------------------------------------------------------------- one session
 
 Serve = Callable[[WallController], "ControllerNode | None"]  # the upload server, set up for a controller (None: none)
-OpenDrive = Callable[[ExitStack], "tuple[Drive, PassivityGate, Serve]"]
+OpenDrive = Callable[[ExitStack, "Tap | None"], "tuple[Drive, PassivityGate, Serve]"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -314,13 +319,13 @@ class Watchdog:
 class DriveSide:
     """What a session knows of the drive beside opening it: ``hold``, the longest it may hold a
     torque target (s, the ``bound`` layer's budget per target); its ``watchdog`` (pre-flight);
-    its ``address`` (a fault reset before commissioning); ``bus``, the CAN bus configuration for
-    the bus log (None: not a CAN bus)."""
+    its ``address`` (a fault reset before commissioning); ``frames``: whether it has CAN frames to
+    log (a CAN bus)."""
 
     hold: float
     watchdog: Watchdog
     address: DriveAddress
-    bus: dict[str, Any] | None = None
+    frames: bool = False
 
 
 def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: dict[str, Any],
@@ -329,18 +334,17 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
     controller: WallController | None = None
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": {"period": profile.loop.period, "timing": profile.loop.timing}}
-    journal = RunJournal(folder, profile, link, extra)
+    journal = RunJournal(folder, profile, link, extra, run_document)
     journal.write()  # "running", before any bus is touched: a run killed from here on says so
     recorder = RunRecorder(folder, journal)
     reason, error = "completed", None
     before: list[Event] = []  # what happened before the controller (and its event log) existed
     try:
         with ExitStack() as stack:
-            if side.bus is not None and options.bus_log:
-                recorder.log_bus(stack, side.bus)  # before the drive: commissioning's frames too
+            writer = recorder.start(stack, side.frames and options.bus_log)  # before the drive: commissioning logged
             if options.reset_fault:
                 before += _reset_fault_first(side.address, options, extra)
-            drive, gate, serve = open_drive(stack)
+            drive, gate, serve = open_drive(stack, writer.tap)
             extra["loop"]["delay_assumed"] = gate.device.delay
             extra["gate_loop"] = gate_loop(gate.device)
             scene = profile.compiled_scene()
@@ -352,18 +356,22 @@ def _session(profile: Profile, options: RunOptions, folder: pathlib.Path, link: 
                                                                             profile.supervisor.on_observer) else None
             controller = WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
                                         supervisor=profile.supervisor, ramp_time=ramp_time, derate=derate,
-                                        passivity=profile.passivity, hold=side.hold)
+                                        passivity=profile.passivity, hold=side.hold, shared_records=True)
             extra["passivity"] = {"layer": profile.passivity.layer, "hold_s": controller.hold,
                                   "budget_cap_j": controller.ports[0].observer.cap, "friction_min": gate.device.b,
                                   "beyond_gate": profile.passivity.beyond_gate}
             for event in before:
                 controller.events.add(event.time_s, event.kind, event.message, **event.data)
-            recorder.stream(stack, controller)
+            journal.controller = controller
+            recorder.stream(writer, [(RECORD_CSV, "", controller.record)], controller.events,
+                            functools.partial(scene_dicts, controller), period,
+                            f"haptic-bus run {profile.name}" if options.live else None, options.duration)
             node = serve(controller)
-            with _live(controller, profile, options), control_thread_scheduling(options) as scheduling:
+            with control_thread_scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
                 if options.wall_paced:
                     _preflight(drive, gate, scene, profile, options, side.watchdog, extra)
+                recorder.publish()  # run.json as it stands before the cycles (pre-flight's verdict in it)
                 # last before the first cycle: the drive's RPDO deadline runs from here, and the
                 # set-up above (the upload server, the real-time session) can take longer
                 show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
@@ -426,15 +434,6 @@ def _reset_fault_first(address: DriveAddress, options: RunOptions, extra: dict[s
     if options.live:
         print(f"fault reset: {outcome.message()}", flush=True)
     return [event]
-
-
-@contextmanager
-def _live(controller: WallController, profile: Profile, options: RunOptions) -> Iterator[None]:
-    if not options.live:
-        yield
-        return
-    with LiveView(controller, f"haptic-bus run {profile.name}", duration=options.duration):
-        yield
 
 
 @contextmanager

@@ -42,6 +42,7 @@ import numpy as np
 
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.realtime import RealtimeSettings, realtime_session
+from haptic_bus.app.writer_process import COMM as WRITER_COMM
 from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import Spread
 from haptic_bus.control.clock import RealClock
@@ -126,9 +127,13 @@ def bare_clock(settings: RealtimeSettings, period: float, cycles: int) -> dict:
     return clock_figures(clock)
 
 
+WRITER = "writer process"  # by_name's key for the run's writer process (a child, not a thread)
+
+
 class ThreadCpu:
-    """CPU seconds of each thread of this process (by name), sampled every ``interval`` s while the
-    block runs (a thread that ends between samples loses at most one interval of its account)."""
+    """CPU seconds of each thread of this process (by name), and of the run's writer process
+    (:data:`WRITER`), sampled every ``interval`` s while the block runs (a thread or process that
+    ends between samples loses at most one interval of its account)."""
 
     def __init__(self, interval: float = 0.25) -> None:
         self.interval = interval
@@ -156,9 +161,18 @@ class ThreadCpu:
         for thread in threading.enumerate():
             try:
                 fields = Path(f"/proc/self/task/{thread.native_id}/stat").read_text().rsplit(")", 1)[1].split()
+                children = Path(f"/proc/self/task/{thread.native_id}/children").read_text().split()
             except (OSError, IndexError):
                 continue
             self._last[thread.native_id or 0] = (thread.name, (int(fields[11]) + int(fields[12])) / tick)
+            for child in children:  # the run's writer process, beside the threads (issue 26: report its CPU too)
+                try:
+                    stat = Path(f"/proc/{child}/stat").read_text()
+                except OSError:
+                    continue
+                name, rest = stat[stat.index("(") + 1:stat.rindex(")")], stat[stat.rindex(")") + 2:].split()
+                if name == WRITER_COMM:
+                    self._last[-int(child)] = (WRITER, (int(rest[11]) + int(rest[12])) / tick)
 
     def by_name(self) -> dict[str, float]:
         """CPU seconds per thread name since the block started (threads of one name summed)."""

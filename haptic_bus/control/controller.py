@@ -136,7 +136,8 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
     ``scene`` must pass it.  ``force_limit`` (N, a number for every axis or one per axis)
     saturates each axis' force (its drive's clamp holds the torque target at it); ``names``: the
     axes' names (default: the drives'); ``clock`` is a :class:`VirtualClock` (default),
-    :class:`RealClock` or :class:`ScheduledClock`; ``record_capacity`` bounds each axis' record;
+    :class:`RealClock` or :class:`ScheduledClock`; ``record_capacity`` bounds each axis' record, kept in
+    shared memory with ``shared_records`` (a writer process streams it);
     ``origin`` (m, a number for one axis or one per axis) is each joint's position as read before
     enabling (:func:`encoder_origins`): the walls' energy there is what the ports start with (the
     joints themselves start at each axis' first 0x6064, where the enabling may have moved them);
@@ -159,6 +160,7 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         names: Sequence[str] | None = None,
         clock: CycleClock | None = None,
         record_capacity: int = 200_000,
+        shared_records: bool = False,
         origin: float | Sequence[float] = 0.0,
         supervisor: SupervisorPolicy | None = None,
         ramp_time: float = 0.0,
@@ -209,7 +211,7 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
             for name, loop, s, limit, stored in zip(names, loops, scalings, limits, self._stored_energies(scene, origins)))
         self.supervisor = Supervisor(supervisor, self.period, max(loop.delay for loop in loops)) \
             if supervisor is not None else None
-        self.records = tuple(RunRecord(record_capacity) for _ in range(size))
+        self.records = tuple(RunRecord(record_capacity, shared=shared_records) for _ in range(size))
         self.ramp_cycles = round(ramp_time / self.period)
         self._derate = derate
         self._scalings = scalings

@@ -4,8 +4,8 @@
 events (uploads accepted and refused, alarms, derates, faults, the end) go to ``run.json``
 through :class:`EventLog`.  The control thread's part is O(1) a cycle: :meth:`RunRecord.append`
 packs the row into the ring with one precompiled ``struct.pack_into`` (no allocation), and a
-writer in another thread (:mod:`haptic_bus.app.record_stream`) drains the ring into the file
-with :meth:`RunRecord.rows_from` and :func:`format_rows`.  :func:`read_record` reads a file
+writer process (:mod:`haptic_bus.app.writer_process`) drains the ring, in shared memory, into
+the file with :func:`rows_of` and :func:`format_rows`.  :func:`read_record` reads a file
 back, a torn last line (a process killed mid-write) included.
 """
 
@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import pathlib
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from haptic_bus.control.ring import Ring, segment
 from haptic_bus.errors import ParameterError
 
 COLUMNS = ("time_s", "wall_clock_s", "monotonic_s", "lateness_s", "statusword", "velocity_counts", "input_age",
@@ -42,58 +44,36 @@ INTEGRAL_COLUMNS = frozenset(("statusword", "velocity_counts", "input_age", "tor
 
 HEADER = ",".join(COLUMNS) + "\n"
 _ROW_FORMAT = ",".join("%d" if name in INTEGRAL_COLUMNS else "%r" for name in COLUMNS) + "\n"
-_ROW = struct.Struct(f"={len(COLUMNS)}d")
+ROW = struct.Struct(f"={len(COLUMNS)}d")
+"""One row of :data:`COLUMNS` as a ring's record."""
 
 
-class RunRecord:
-    """A ring of per-cycle rows (:data:`COLUMNS`, float64); memory fixed at start (``capacity``
-    rows), so a fault after an hour still leaves the last ``capacity`` cycles in memory.
+class RunRecord(Ring):
+    """A ring of per-cycle rows (:data:`COLUMNS`, float64) with memory fixed at start (``capacity``
+    rows), so a fault after an hour still leaves the last ``capacity - 1`` cycles in memory: in
+    private memory, or with ``shared`` in shared memory, where a writer process reads it
+    (:mod:`~haptic_bus.control.ring`).
 
-    One writer (the control thread) appends; readers in other threads take rows with
-    :meth:`rows_from`, which says which rows it could still return (a reader more than
-    ``capacity`` rows behind has lost the oldest).
+    :meth:`append` stores one cycle, in :data:`COLUMNS` order (s, s, s, s, raw, counts, samples,
+    m, m/s, N, per mille, J, id, factor, flag, s, N): it is :meth:`Ring.put`, one
+    ``struct.pack_into`` and one counter store.  Readers take rows with :meth:`rows_from`, which
+    says which rows it could still return (a reader more than ``capacity - 1`` rows behind has
+    lost the oldest).
     """
 
-    def __init__(self, capacity: int = 200_000) -> None:
+    def __init__(self, capacity: int = 200_000, shared: bool = False) -> None:
         if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 1:
             raise ValueError(f"capacity = {capacity!r} is invalid; allowed: an integer >= 1")
-        self._rows = np.zeros((capacity, len(COLUMNS)))
-        self._bytes = self._rows.data.cast("B")
-        self._pack = _ROW.pack_into
-        self._width = _ROW.size
-        self._next = 0
-        self.total = 0
+        size = capacity + 1  # one slot more than kept: the slot the writer fills next (ring module)
+        super().__init__(ROW, size, segment(ROW, size) if shared else None)
 
-    @property
-    def capacity(self) -> int:
-        """Rows kept in memory."""
-        return self._rows.shape[0]
-
-    def append(self, t: float, wall_clock: float, monotonic: float, lateness: float, statusword: int,
-               velocity_counts: int, input_age: int, x: float, v: float, force: float, torque: int, energy: float,
-               scene_id: int, scale: float, late: bool, compute: float, removed: float) -> None:
-        """Store one cycle, in :data:`COLUMNS` order (s, s, s, s, raw, counts, samples, m, m/s, N,
-        per mille, J, id, factor, flag, s, N): one ``struct.pack_into`` into the ring."""
-        slot = self._next
-        self._pack(self._bytes, slot * self._width, t, wall_clock, monotonic, lateness, statusword, velocity_counts,
-                   input_age, x, v, force, torque, energy, scene_id, scale, late, compute, removed)
-        self._next = slot + 1 if slot + 1 < self._rows.shape[0] else 0
-        self.total += 1  # last: a reader in another thread sees the row complete
+    append = Ring.put
 
     def rows_from(self, first: int) -> tuple[int, np.ndarray]:
         """Rows ``first`` .. ``total - 1`` (a copy, oldest first) as ``(index of the first row
         returned, rows)``; the index exceeds ``first`` when older rows were already overwritten."""
-        total = self.total
-        capacity = self._rows.shape[0]
-        start = max(first, total - capacity)
-        if start >= total:
-            return total, self._rows[:0].copy()
-        lo, hi = start % capacity, total % capacity
-        rows = self._rows[lo:hi].copy() if lo < hi else np.concatenate((self._rows[lo:], self._rows[:hi]))
-        overwritten = self.total - capacity - start  # rows the writer replaced while they were copied
-        if overwritten > 0:
-            return start + overwritten, rows[overwritten:]
-        return start, rows
+        start, chunk = self.read_from(first)
+        return start, rows_of(chunk)
 
     def array(self) -> np.ndarray:
         """The stored rows, oldest first (a copy)."""
@@ -101,9 +81,8 @@ class RunRecord:
 
     def latest(self) -> dict[str, float] | None:
         """The newest row by column name (a copy), or None before the first cycle."""
-        if not self.total:
-            return None
-        return dict(zip(COLUMNS, self._rows[self._next - 1].tolist()))
+        values = self.last()
+        return None if values is None else dict(zip(COLUMNS, values))
 
     def column(self, name: str) -> np.ndarray:
         """One column by its :data:`COLUMNS` name, oldest first."""
@@ -115,6 +94,11 @@ class RunRecord:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(HEADER + format_rows(self.array()))
         return path
+
+
+def rows_of(chunk: bytes) -> np.ndarray:
+    """The rows (:data:`COLUMNS`) of a ring's raw records ``chunk``, one row each (a copy)."""
+    return np.frombuffer(chunk, dtype=np.float64).reshape(-1, len(COLUMNS)).copy()
 
 
 def format_rows(rows: np.ndarray) -> str:
@@ -187,18 +171,23 @@ class Event:
 
 class EventLog:
     """The run's events in order; at most ``capacity`` kept (the count of dropped ones is kept too).
-    Appended from the control thread and the upload server's thread (list appends are atomic)."""
+    Appended from the control thread and the upload server's thread (list appends are atomic).
+    ``listener`` (None: none) is called with each event kept, in the thread that added it (a run
+    hands it to its writer process, which keeps ``run.json`` current)."""
 
     def __init__(self, capacity: int = 10_000) -> None:
         self.capacity = capacity
         self.events: list[Event] = []
         self.dropped = 0
+        self.listener: Callable[[Event], None] | None = None
 
     def add(self, time_s: float, kind: str, message: str, **data: Any) -> Event:
         """Record an event; returns it."""
         event = Event(time_s, kind, message, data)
         if len(self.events) < self.capacity:
             self.events.append(event)
+            if self.listener is not None:
+                self.listener(event)
         else:
             self.dropped += 1
         return event

@@ -1,0 +1,141 @@
+"""The run's writer process as the control process sees it: rings to fill, a few messages, a stop.
+
+:class:`RunWriter` starts :mod:`~haptic_bus.app.writer_process` (before commissioning, so that
+commissioning's frames are logged, and long before pre-flight) and hands it:
+
+- the frame ring (with ``bus_log``): :attr:`RunWriter.tap` is the drive link's tap
+  (:func:`~haptic_bus.app.bus_log.frame_tap`);
+- each axis' record (:meth:`RunWriter.stream`: a :class:`~haptic_bus.control.record.RunRecord`
+  made in shared memory, ``shared_record`` / ``shared_records`` of the controllers);
+- ``run.json``'s document once, then each event (:meth:`RunWriter.follow`: the event log's
+  listener; the scenes too when an event changed them);
+- the live view's title (:meth:`RunWriter.live`).
+
+What crosses while the cycles run is the rings (no system call, no lock) and, for each event,
+one pickled message on a pipe (events are rare: uploads, alarms, the end).  A shared segment's
+name is removed as soon as the writer has attached to it, so nothing is left in ``/dev/shm``
+whatever kills the processes.  :meth:`RunWriter.close` stops the writer after its last drain and
+returns what it wrote and lost (``run.json``'s ``record`` and ``bus_log``).
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+import pathlib
+import sys
+import threading
+import types
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any
+
+from haptic_bus.app import writer_process
+from haptic_bus.app.bus_log import FRAME, FRAME_CAPACITY, frame_tap
+from haptic_bus.control.record import Event, EventLog, RunRecord
+from haptic_bus.control.ring import Ring
+
+logger = logging.getLogger(__name__)
+
+PROCESS_NAME = "haptic-bus-writer"
+START_TIMEOUT = 60.0  # s: the writer imports numpy and python-can before it answers (long only on a stalled machine)
+STOP_TIMEOUT = 30.0  # s: its last drain of up to a ring of rows per axis
+SCENE_EVENTS = frozenset(("upload", "derate"))  # events that come with a new scene
+
+
+@contextmanager
+def _main_module_hidden() -> Iterator[None]:
+    """While a process starts: no ``__main__`` for "spawn" to import again in it.  The writer needs
+    only this package; a caller's script without an ``if __name__ == "__main__"`` guard would
+    otherwise run again, whole, inside the writer."""
+    main = sys.modules["__main__"]
+    sys.modules["__main__"] = types.ModuleType("__main__")
+    try:
+        yield
+    finally:
+        sys.modules["__main__"] = main
+
+
+class RunWriter:
+    """The writer process of a run writing into ``folder`` (module docstring); ``bus_log``: a frame
+    ring and ``bus.asc`` too."""
+
+    def __init__(self, folder: pathlib.Path, bus_log: bool) -> None:
+        context = multiprocessing.get_context("spawn")
+        self._conn, child = context.Pipe()
+        self._lock = threading.Lock()  # one message at a time: the control thread's and the upload server's
+        self._broken = False
+        self.frames = Ring.shared(FRAME, FRAME_CAPACITY) if bus_log else None
+        self.process = context.Process(target=writer_process.main, name=PROCESS_NAME, daemon=True,
+                                       args=(str(folder), None if self.frames is None else self.frames.spec, child,
+                                             os.getpid()))
+        with _main_module_hidden():
+            self.process.start()
+        child.close()
+        self._await("ready", START_TIMEOUT)
+        if self.frames is not None:
+            self.frames.unlink()
+        self.tap = None if self.frames is None else frame_tap(self.frames)
+
+    def stream(self, files: Sequence[tuple[str, str, RunRecord]]) -> None:
+        """Stream each ``(file name, axis name, record)``'s rows into that file of the folder."""
+        for name, axis, record in files:
+            self._send(("record", name, record.spec, axis))
+            self._await("attached", START_TIMEOUT)
+            record.unlink()
+
+    def journal(self, document: dict[str, Any]) -> None:
+        """``run.json``'s document as it stands (written by the writer at its next drain)."""
+        self._send(("journal", document))
+
+    def follow(self, events: EventLog, scenes: Callable[[], list[dict[str, Any]]]) -> None:
+        """From now on hand each event of ``events`` to the writer, with ``scenes()`` (the run's
+        scenes, JSON-ready) when the event brought a new one."""
+        def listener(event: Event) -> None:
+            self._send(("event", len(events.events), event.to_dict(), scenes() if event.kind in SCENE_EVENTS else None))
+
+        events.listener = listener
+
+    def live(self, title: str, period: float, duration: float | None) -> None:
+        """Show the live view of the streamed records (``period`` s the run's ``T``, ``duration`` s its length)."""
+        self._send(("live", title, period, duration))
+
+    def close(self) -> dict[str, Any]:
+        """Stop the writer after its last drain and wait for it; what it wrote and lost (empty if it died)."""
+        stats: dict[str, Any] = {}
+        try:
+            self._send(("stop",))
+            stats = self._await("stats", STOP_TIMEOUT)[1]
+        except OSError as exc:
+            logger.error("run writer: %s", exc)
+        self.process.join(STOP_TIMEOUT)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join()
+        self._conn.close()
+        return stats
+
+    def _send(self, message: tuple[Any, ...]) -> None:
+        """Send a message; a writer gone is logged once (the run goes on: its drive is what matters)."""
+        with self._lock:
+            if self._broken:
+                return
+            try:
+                self._conn.send(message)
+            except OSError as exc:
+                self._broken = True
+                logger.error("run writer: gone (%s); the run goes on without its files", exc)
+
+    def _await(self, kind: str, timeout: float) -> tuple[Any, ...]:
+        """The writer's next message, which must be of ``kind``; OSError if it does not come within ``timeout`` s."""
+        try:
+            if self._conn.poll(timeout):
+                message: tuple[Any, ...] = self._conn.recv()
+                if message[0] == kind:
+                    return message
+                raise OSError(f"the run's writer process answered {message[0]!r} where {kind!r} was due")
+        except EOFError:
+            pass
+        raise OSError(f"the run's writer process ({PROCESS_NAME}) did not answer {kind!r} within {timeout:g} s "
+                      f"(exit code {self.process.exitcode})")

@@ -1,0 +1,152 @@
+"""The run's writer process: everything a run writes while it cycles, away from the control process.
+
+Started by :class:`~haptic_bus.app.run_writer.RunWriter` (``multiprocessing``'s "spawn"
+context, named :data:`~haptic_bus.app.run_writer.PROCESS_NAME`, and :data:`COMM` where ``ps`` and
+``top`` show it) before commissioning, it
+attaches to the rings the control process fills (each axis' record, the bus' frames: shared
+memory, :mod:`~haptic_bus.control.ring`) and every :data:`~haptic_bus.app.record_stream.FLUSH_INTERVAL` s
+
+- drains each record ring into its ``record*.csv`` (:class:`~haptic_bus.app.record_stream.RecordFile`)
+  and the frame ring into ``bus.asc`` (:class:`~haptic_bus.app.bus_log.BusLogFile`), whole lines;
+- rewrites ``run.json`` (atomically: :func:`~haptic_bus.app.run_folder.write_json`) when an event
+  or a scene came since the last write (the control process sends the document once, before the
+  cycles, then each event);
+- once a second draws the live view (:mod:`~haptic_bus.app.live`), when asked for one.
+
+Messages from the control process come over a pipe (:func:`main`'s ``conn``).  The writer ends
+when told to (a last drain, then its counts sent back), or by itself when the control process
+is gone: the pipe's end of file (a ``kill -9`` closes it) or a parent process id that changed,
+noticed within one interval, again after a last drain.  Ctrl-C reaches the whole process group:
+the writer ignores it and ends when the control process says so.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import logging
+import os
+import pathlib
+import signal
+import time
+from multiprocessing.connection import Connection
+from typing import Any
+
+from haptic_bus.app.bus_log import LOG_NAME, BusLogFile
+from haptic_bus.app.live import REFRESH, LiveView
+from haptic_bus.app.record_stream import FLUSH_INTERVAL, RecordFile
+from haptic_bus.app.run_folder import RUN_JSON, write_json
+from haptic_bus.control.ring import Ring, RingSpec
+
+logger = logging.getLogger(__name__)
+
+
+COMM = "hb-writer"
+"""The writer's name where ``ps``, ``top`` and ``/proc/PID/comm`` show it (15 bytes at most)."""
+_PR_SET_NAME = 15  # prctl(2)
+
+
+def name_this_process(name: str) -> None:
+    """Give this process' main thread ``name`` in ``/proc/PID/comm`` (Linux' prctl; elsewhere nothing)."""
+    with contextlib.suppress(OSError, AttributeError):  # not Linux: the process keeps its interpreter's name
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_NAME, name.encode()[:15], 0, 0, 0)
+
+
+class Writer:
+    """The writer's state: the files it streams into ``folder``, ``run.json``'s document, the view."""
+
+    def __init__(self, folder: pathlib.Path, conn: Connection) -> None:
+        self.folder = folder
+        self.conn = conn
+        self.records: list[tuple[str, RecordFile]] = []  # (axis name, file)
+        self.bus_log: BusLogFile | None = None
+        self.document: dict[str, Any] | None = None
+        self.dirty = False  # the document changed since run.json was written
+        self.last_event: dict[str, Any] | None = None
+        self.view: LiveView | None = None
+        self.stopped = False
+
+    def handle(self, message: tuple[Any, ...]) -> None:
+        """One message from the control process (:class:`~haptic_bus.app.run_writer.RunWriter` sends them)."""
+        kind = message[0]
+        if kind == "record":
+            _, name, spec, axis = message
+            self.records.append((axis, RecordFile(self.folder / name, Ring.attach(spec))))
+            self.conn.send(("attached", name))
+        elif kind == "journal":
+            self.document = message[1]
+            self.dirty = True
+        elif kind == "event":
+            _, count, event, scenes = message
+            self.last_event = event
+            if self.document is not None:
+                events = self.document.setdefault("events", [])
+                if count > len(events):  # an event already in the document is not added twice
+                    events.append(event)
+                if scenes is not None:
+                    self.document["scenes"] = scenes
+                self.dirty = True
+        elif kind == "live":
+            _, title, period, duration = message
+            self.view = LiveView([(axis, record.ring) for axis, record in self.records], title, period,
+                                 duration=duration, last_event=lambda: self.last_event).__enter__()
+        elif kind == "stop":
+            self.stopped = True
+
+    def flush(self) -> None:
+        """Drain every ring into its file, and rewrite ``run.json`` if its document changed."""
+        for _, record in self.records:
+            record.drain()
+        if self.bus_log is not None:
+            self.bus_log.drain()
+        if self.dirty and self.document is not None:
+            self.dirty = False
+            write_json(self.folder / RUN_JSON, self.document)
+
+    def close(self) -> dict[str, Any]:
+        """A last drain, every file closed, the view left showing the end; what was written and lost."""
+        self.flush()
+        for _, record in self.records:
+            record.close()
+        if self.bus_log is not None:
+            self.bus_log.close()
+        if self.view is not None:
+            self.view.__exit__()
+        stats: dict[str, Any] = {"records": {record.path.name: {"rows_written": record.written, "rows_lost": record.lost}
+                                             for _, record in self.records}}
+        if self.bus_log is not None:
+            stats["bus_log"] = {"frames": self.bus_log.frames, "frames_lost": self.bus_log.lost}
+        return stats
+
+
+def main(folder: str, frames: RingSpec | None, conn: Connection, parent: int) -> None:
+    """The writer process' body (module docstring): ``frames`` the frame ring (None: no bus log),
+    ``parent`` the control process' id."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    name_this_process(COMM)
+    writer = Writer(pathlib.Path(folder), conn)
+    if frames is not None:
+        writer.bus_log = BusLogFile(writer.folder / LOG_NAME, Ring.attach(frames))
+    conn.send(("ready",))
+    now = time.monotonic()
+    flush_due, view_due = now + FLUSH_INTERVAL, now + REFRESH
+    try:
+        while not writer.stopped:
+            due = flush_due if writer.view is None else min(flush_due, view_due)
+            if conn.poll(max(0.0, due - time.monotonic())):
+                writer.handle(conn.recv())
+            now = time.monotonic()
+            if now >= flush_due:
+                writer.flush()
+                flush_due = now + FLUSH_INTERVAL
+                if os.getppid() != parent:
+                    break
+            if writer.view is not None and now >= view_due:
+                writer.view.update()
+                view_due = now + REFRESH
+    except (EOFError, OSError) as exc:  # the control process is gone (EOF), or a write failed: keep what can be kept
+        if not isinstance(exc, EOFError):
+            logger.error("run writer: %s", exc)
+    stats = writer.close()
+    if writer.stopped:
+        conn.send(("stats", stats))

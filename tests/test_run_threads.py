@@ -1,0 +1,97 @@
+"""Issue 26, side work gets data, not the GIL: while a run cycles, its control process holds the
+control thread and nothing that formats or writes: the record, the bus log and the live view are
+the writer process' (``hb-writer``, a child of the control process).
+
+The run is ``haptic_bus.run_canopen`` in this process' main thread (the control thread) against
+the simulated drive in another process on ``udp_multicast``, in virtual time, live view on; a
+thread of this test samples ``threading.enumerate()`` while the record grows.  The threads still
+allowed, each with its reason, are :data:`ALLOWED`.  The bench's per-thread CPU account counts
+the writer process beside them.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import threading
+import time
+from typing import Any
+
+from haptic_bus.app.profiles import load_profile
+from haptic_bus.app.run_writer import RunWriter
+from haptic_bus.app.runner import VIRTUAL, RunOptions, run_canopen
+from haptic_bus.app.writer_process import COMM
+from haptic_bus.bench.thread_tuning import WRITER, ThreadCpu
+
+NODE = 5
+CONTROLLER_NODE = 127
+START_WAIT = 30.0  # s: the simulated drive imports numpy/scipy/canopen before it answers
+SAMPLES = 20  # samples of the process' threads, 20 ms apart, once the run cycles
+ALLOWED = {
+    f"heartbeat-{CONTROLLER_NODE}": "the controller's heartbeat producer (drives/canopen/heartbeat.py, a thread until "
+                                    "the cycle sends the heartbeat itself: another part of issue 26)",
+    'Notifier for bus "unknown"': "the upload server's canopen notifier on its own handle (haptic_bus/node: another "
+                                  "part of issue 26 puts it on the one handle)",
+}
+
+
+def _children_named(comm: str) -> list[int]:
+    """This process' children whose ``/proc/PID/comm`` is ``comm``."""
+    found = []
+    for entry in pathlib.Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:  # gone meanwhile
+                continue
+            name, rest = stat[stat.index("(") + 1:stat.rindex(")")], stat[stat.rindex(")") + 2:].split()
+            if name == comm and int(rest[1]) == os.getpid():
+                found.append(int(entry.name))
+    return found
+
+
+def test_while_cycling_the_control_process_runs_the_control_thread_and_no_writer(
+        multicast: tuple[str, int], sim_process: Any, tmp_path: pathlib.Path) -> None:
+    group, port = multicast
+    sim = sim_process("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
+                      "--node-id", str(NODE), "--profile", "cia402-handle")
+    sim.wait_for_line("serving", START_WAIT)
+    out = tmp_path / "run"
+    seen: list[set[str]] = []
+    writers: list[list[int]] = []
+
+    def sample() -> None:
+        record = out / "record.csv"
+        deadline = time.monotonic() + START_WAIT
+        while time.monotonic() < deadline and not (record.is_file() and record.stat().st_size > 20_000):
+            time.sleep(0.01)
+        for _ in range(SAMPLES):
+            seen.append({thread.name for thread in threading.enumerate() if thread is not threading.current_thread()})
+            writers.append(_children_named(COMM))
+            time.sleep(0.02)
+
+    sampler = threading.Thread(target=sample, name="test-sampler")
+    sampler.start()
+    try:
+        result = run_canopen(load_profile("cia402-handle"), {"interface": "udp_multicast", "channel": group, "port": port},
+                             NODE, RunOptions(4.0, pacing=VIRTUAL, out_dir=out, live=True, plots=False),
+                             CONTROLLER_NODE)
+    finally:
+        sampler.join(timeout=START_WAIT + 5.0)
+        sim.stop()
+    assert (result.exit_reason, result.error) == ("completed", None)
+    assert len(seen) == SAMPLES, "the run ended before the samples were taken"
+    assert all(threads == {"MainThread", *ALLOWED} for threads in seen), seen
+    assert all(len(pids) == 1 for pids in writers), writers  # the record, the log and the view: one writer process
+    assert _children_named(COMM) == []  # it ended with the run
+
+
+def test_the_bench_counts_the_writer_process_beside_the_threads(tmp_path: pathlib.Path) -> None:
+    with ThreadCpu(interval=0.05) as cpu:
+        writer = RunWriter(tmp_path, bus_log=True)
+        try:
+            time.sleep(0.2)  # a few samples while it runs
+        finally:
+            stats = writer.close()
+    assert stats == {"records": {}, "bus_log": {"frames": 0, "frames_lost": 0}}
+    assert cpu.by_name()[WRITER] > 0.0  # its start alone imports numpy and python-can: tens of ms of CPU at least
