@@ -74,7 +74,7 @@ def test_run_canopen_takes_an_open_bus(haptic_sim, tmp_path):
         assert (result.exit_reason, result.error) == ("completed", None)
         assert result.summary is not None and result.summary.cycles == 500
         run = json.loads((result.folder / "run.json").read_text())
-        assert run["link"]["upload_server"] is True and run["link"]["bus_log"] is False
+        assert run["link"]["upload_server"] is True and run["link"]["bus_log"] is True
         assert run["link"]["bus"]["interface"] == type(bus).__name__
         syncs = sum(frame.arbitration_id == 0x080 for frame in can.LogReader(str(result.folder / "bus.asc")))
         assert syncs >= 500 and run["bus_log"]["frames_lost"] == 0  # one SYNC a cycle (and those of enabling)

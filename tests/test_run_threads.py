@@ -28,10 +28,9 @@ CONTROLLER_NODE = 127
 START_WAIT = 30.0  # s: the simulated drive imports numpy/scipy/canopen before it answers
 SAMPLES = 20  # samples of the process' threads, 20 ms apart, once the run cycles
 ALLOWED = {
-    f"heartbeat-{CONTROLLER_NODE}": "the controller's heartbeat producer (drives/canopen/heartbeat.py, a thread until "
-                                    "the cycle sends the heartbeat itself: another part of issue 26)",
-    'Notifier for bus "unknown"': "the upload server's canopen notifier on its own handle (haptic_bus/node: another "
-                                  "part of issue 26 puts it on the one handle)",
+    "verdict-collect": "the upload judge's executor thread (concurrent.futures): blocked on the worker process' "
+                       "result pipe, it runs only while an upload is judged (haptic_bus/node/verdicts.py)",
+    "verdict-feed": "the same executor's call-queue feeder: blocked until an upload is submitted",
 }
 
 
