@@ -35,11 +35,10 @@ from __future__ import annotations
 import dataclasses
 import functools
 import pathlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from contextlib import ExitStack
 from typing import Any
 
-from drives.base import AxesDriveCycle
 from drives.bus_config import resolve_bus_config
 from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
@@ -214,20 +213,6 @@ def _safe_start(axes: CanopenAxes, profile: AxesProfile, gate: SpaceGate, scene:
 def _preflight(axes: CanopenAxes, gate: SpaceGate, scene: SpaceScene, profile: AxesProfile, options: RunOptions,
                extra: dict[str, Any]) -> None:
     """Pre-flight timing with every drive not enabled; the coupled gate judged at the measured delay."""
-    size = len(profile.axes)
-
-    class Cycle:
-        """Every axis' cycle at zero torque in the axes' cyclic phase, as pre-flight measures one drive's."""
-
-        def __init__(self, cycle: AxesDriveCycle) -> None:
-            self.cycle = cycle
-
-        def read_inputs(self) -> Sequence[object]:
-            return self.cycle.read()
-
-        def write_outputs(self, target_torque: int) -> None:
-            self.cycle.saturate_and_write([target_torque] * size)
-
     assumed = max(loop.delay for loop in gate.axes)
 
     def passes_at(delay: float) -> bool:
@@ -235,7 +220,9 @@ def _preflight(axes: CanopenAxes, gate: SpaceGate, scene: SpaceScene, profile: A
         return SpaceGate(later, gate.policy).judge(scene).accepted
 
     watchdog = canopen_watchdog(axes.drives[0].safety, profile.period)
-    with axes.cyclic() as cycle:
-        timing = preflight.measure(Cycle(cycle), profile.period, spin=options.scheduling.spin)
+    zeros = [0] * len(gate.axes)
+    with axes.cyclic() as cycle:  # the run's own path, every target zero
+        timing = preflight.measure(lambda: (cycle.read(), cycle.saturate_and_write(zeros)), profile.period,
+                                   spin=options.scheduling.spin)
     settle_preflight(preflight.judge_delay(timing, assumed, passes_at, profile.passivity.layer, watchdog.stall,
                                            watchdog.periods), options, extra)

@@ -30,11 +30,10 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
-from drives.base import Drive
 from haptic_bus.control.clock import RealClock
 from haptic_bus.control.cycle_loop import percentiles
 from haptic_bus.control.gate import PassivityGate
@@ -98,30 +97,20 @@ class Timing:
     overruns: int
 
 
-class Cycling(Protocol):
-    """What pre-flight cycles: a drive, or several on one SYNC (:class:`drives.base.Drive` has these)."""
-
-    def read_inputs(self) -> object:
-        """Start a cycle and return its inputs."""
-        ...
-
-    def write_outputs(self, target_torque: int) -> None:
-        """Send this cycle's target torque (per mille; every drive's)."""
-        ...
-
-
-def measure(drive: Cycling | Drive, period: float, cycles: int = PREFLIGHT_CYCLES, spin: float | None = None) -> Timing:
-    """Cycle ``drive`` (not enabled: zero torque) ``cycles`` times on a fresh real clock."""
+def measure(exchange: Callable[[], object], period: float, cycles: int = PREFLIGHT_CYCLES,
+            spin: float | None = None) -> Timing:
+    """Time ``exchange`` -- one cycle of the drive(s) at zero torque, called in their cyclic phase so
+    that it takes the run's own path (the bus read by this thread, the heartbeat from the cycle) --
+    ``cycles`` times on a fresh real clock of period ``period`` s."""
     clock = RealClock(period, capacity=cycles, spin=spin)
     starts = np.zeros(cycles)
-    exchange = np.zeros(cycles)
+    took = np.zeros(cycles)
     for k in range(cycles):
         clock.wait_next(k)
         started = time.perf_counter()
-        drive.read_inputs()
-        drive.write_outputs(0)
-        starts[k], exchange[k] = started, time.perf_counter() - started
-    return Timing(period, clock.lateness(), starts, exchange, clock.overruns)
+        exchange()
+        starts[k], took[k] = started, time.perf_counter() - started
+    return Timing(period, clock.lateness(), starts, took, clock.overruns)
 
 
 def _on_grid(period: float) -> float:

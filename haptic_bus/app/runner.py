@@ -403,7 +403,9 @@ def _preflight(drive: Drive, gate: PassivityGate, scene: CompiledScene, profile:
     """Measure this machine's lateness on this bus with the drive not enabled, print it and record it
     in ``extra``, and refuse (:class:`Refusal`) a run the drive's watchdogs, or the gate without
     a layer, cannot hold."""
-    timing = preflight.measure(drive, profile.loop.period, spin=options.scheduling.spin)
+    with drive.cyclic() as cycle:  # the run's own path, every target zero
+        timing = preflight.measure(lambda: (cycle.read(), cycle.saturate_and_write(0)), profile.loop.period,
+                                   spin=options.scheduling.spin)
     settle_preflight(preflight.judge(timing, gate, scene, profile.passivity.layer, watchdog.stall, watchdog.periods),
                      options, extra)
 
