@@ -1,1 +1,65 @@
-"""The application: command line, profiles, demo rig, runner, reports and plots."""
+"""The application: command line, profiles, demo rig, runner, reports and plots -- and the control
+process a run is.
+
+A run (``haptic-bus run``, :func:`haptic_bus.run_canopen`, :func:`haptic_bus.run_modbus`, the
+demo) is one process that cycles, and two children that work out of its way.  In CPython only
+one thread runs Python at a time, so every thread that formats, draws, judges or decodes a frame
+it will throw away holds the cycle up for as long as it runs; the layout below keeps the control
+thread the only one that runs Python while the drives are enabled.
+
+Who does what
+-------------
+
+``MainThread`` of the control process -- the control thread
+    Owns the process's one bus handle (CANopen: one python-can bus, one canopen ``Network`` for
+    the drive(s) and the controller's own node; Modbus: one client).  Each cycle: wait for the
+    deadline (:class:`~haptic_bus.control.clock.RealClock`: sleep, then spin); SYNC; receive until
+    every axis' TPDOs are in, or the cycle's timeout; the wall force, the clamp, the passivity
+    layer; RPDOs; every ``heartbeat/T`` cycles the controller's heartbeat, so that it stops when
+    the cycle stops (:meth:`drives.canopen.heartbeat.HeartbeatProducer.from_cycle`).  Frames that
+    are not the cycle's are dispatched from that same receive without blocking: SDO requests to
+    the controller's node (gated wall uploads, :mod:`haptic_bus.node.controller_node`), whose
+    answers it sends; EMCY and heartbeats to the drive's events.  It appends one row per axis to a
+    ring in shared memory (one ``struct.pack_into`` and a counter store) and, with a bus log, each
+    frame it sends or receives to another ring (the link's tap).  Pre-flight runs this same cyclic
+    path, with zero torque, before the drives are enabled.
+``verdict-collect``, ``verdict-feed`` -- the upload judge's executor threads
+    concurrent.futures' two threads of the judge's process pool, blocked on its pipes; they run
+    only while an upload is judged (:mod:`haptic_bus.node.verdicts`).
+``heartbeat-<node>``, ``canopen-notify`` -- outside the cyclic phase only
+    Commissioning, SDO access and the disabling walk: canopen's notifier reads the bus and the
+    heartbeat thread keeps the drives' consumers fed.  Entering the cyclic phase silences the
+    heartbeat thread and stops the notifier; leaving it brings the heartbeat thread back.
+``haptic-bus-writer`` (``hb-writer`` in ``/proc``) -- a child process, spawned before commissioning
+    Drains the rings every 50 ms: ``record.csv`` (``record-<axis>.csv`` for several axes), ``bus.asc``
+    (python-can's ``ASCWriter``), ``run.json`` kept current and replaced atomically, the live view
+    (:mod:`haptic_bus.app.run_writer`, :mod:`haptic_bus.app.writer_process`).  It ends after a last
+    drain when the control process ends, however it ends: a ``kill -9`` of a run leaves every
+    axis' record to within 0.1 s of the kill.
+the judge -- a child process, spawned before the first cycle
+    Judges a committed upload with the gate (1-D or coupled); the control thread collects the
+    verdict once a cycle without waiting, adopts the judged scene at a cycle boundary and
+    answers the SDO download then (:mod:`haptic_bus.node.verdicts`).
+
+What crosses between them
+-------------------------
+
+To the writer: the rings (no system call, no lock: the writer polls the counters; a writer a
+whole ring behind loses the oldest rows and counts them) and, for each event (an upload, an
+alarm, the end), one pickled message on a pipe.  To the judge: the staged walls, the running
+scene and the gate, pickled once per upload; back: the scene and the decision.  Nothing crosses
+back into the cycle but the judge's verdict, read at a cycle boundary.
+
+Why the cycle is not held up
+----------------------------
+
+While the drives are enabled no other thread of the control process runs Python: the writer
+and the judge are processes, the executor threads wait in ``select``, the heartbeat thread and
+canopen's notifier are parked.  Heavy imports (matplotlib, scipy) happen in the children, before
+pre-flight or after the last cycle (the pictures are drawn when the run has ended); ``gc.freeze()`` and a lowered GIL switch interval come with the real-time
+session (:mod:`haptic_bus.app.realtime`).  ``tests/test_architecture.py`` checks that one thread
+touches the bus handle of a 1-axis and a 3-axis run; ``tests/test_run_threads.py`` which threads
+exist while cycling.  ``haptic-bus bench --only realtime`` measures the result side by side: the
+control process's CPU against python-can's floor for the same frames, its lateness against the
+bare clock.
+"""
