@@ -56,8 +56,9 @@ Why the cycle is not held up
 While the drives are enabled no other thread of the control process runs Python: the writer
 and the judge are processes, the executor threads wait in ``select``, the heartbeat thread and
 canopen's notifier are parked.  Heavy imports (matplotlib, scipy) happen in the children, before
-pre-flight or after the last cycle (the pictures are drawn when the run has ended); ``gc.freeze()`` and a lowered GIL switch interval come with the real-time
-session (:mod:`haptic_bus.app.realtime`).  ``tests/test_architecture.py`` checks that one thread
+pre-flight or after the last cycle (the pictures are drawn when the run has ended);
+``gc.freeze()`` and a lowered GIL switch interval come with the real-time session
+(:mod:`haptic_bus.app.realtime`).  ``tests/test_architecture.py`` checks that one thread
 touches the bus handle of a 1-axis and a 3-axis run; ``tests/test_run_threads.py`` which threads
 exist while cycling.  ``haptic-bus bench --only realtime`` measures the result side by side: the
 control process's CPU against python-can's floor for the same frames, its lateness against the
