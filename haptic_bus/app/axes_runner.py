@@ -57,7 +57,6 @@ from haptic_bus.app.runner import (
     canopen_watchdog,
     control_thread_scheduling,
     longest_hold,
-    settle_preflight,
 )
 from haptic_bus.control.bus_load import axes_bus_load
 from haptic_bus.control.clock import RealClock, VirtualClock
@@ -224,5 +223,5 @@ def _preflight(axes: CanopenAxes, gate: SpaceGate, scene: SpaceScene, profile: A
     with axes.cyclic() as cycle:  # the run's own path, every target zero
         timing = preflight.measure(lambda: (cycle.read(), cycle.saturate_and_write(zeros)), profile.period,
                                    spin=options.scheduling.spin)
-    settle_preflight(preflight.judge_delay(timing, assumed, passes_at, profile.passivity.layer, watchdog.stall,
-                                           watchdog.periods), options, extra)
+    preflight.settle(preflight.judge_delay(timing, assumed, passes_at, profile.passivity.layer, watchdog.stall,
+                                           watchdog.periods), options.live, extra)

@@ -26,6 +26,7 @@ The run prints what was measured and the verdict in one line, and ``run.json`` r
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import time
 from collections.abc import Callable
@@ -38,6 +39,9 @@ from haptic_bus.control.clock import RealClock
 from haptic_bus.control.cycle_loop import percentiles
 from haptic_bus.control.gate import PassivityGate
 from haptic_bus.control.scene import CompiledScene
+from haptic_bus.errors import Refusal
+
+logger = logging.getLogger(__name__)
 
 PREFLIGHT_CYCLES = 500  # cycles measured before enabling: 0.5 s at T = 1 ms
 STALL_MARGIN = 1.5  # the longest stall measured, times this, must stay under the drive's watchdog
@@ -177,3 +181,15 @@ def busy_times(timing: Timing) -> np.ndarray:
     deadlines = timing.starts - timing.lateness
     ends = np.concatenate(([-np.inf], (timing.starts + timing.exchange)[:-1]))
     return timing.exchange + (timing.starts - np.maximum(deadlines, ends))
+
+
+def settle(report: PreflightReport, live: bool, extra: dict[str, Any]) -> None:
+    """Record ``report`` in ``extra`` (``run.json``'s ``preflight``), log it, print its line unless
+    the run is quiet (``live`` False), and refuse the run (:class:`~haptic_bus.errors.Refusal`,
+    nothing enabled) if the machine cannot hold it."""
+    extra["preflight"] = report.to_dict()
+    logger.info("%s", report.line())
+    if live:
+        print(report.line(), flush=True)
+    if not report.holdable:
+        raise Refusal(report.reason.removeprefix("refused: "))

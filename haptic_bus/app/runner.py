@@ -406,19 +406,8 @@ def _preflight(drive: Drive, gate: PassivityGate, scene: CompiledScene, profile:
     with drive.cyclic() as cycle:  # the run's own path, every target zero
         timing = preflight.measure(lambda: (cycle.read(), cycle.saturate_and_write(0)), profile.loop.period,
                                    spin=options.scheduling.spin)
-    settle_preflight(preflight.judge(timing, gate, scene, profile.passivity.layer, watchdog.stall, watchdog.periods),
-                     options, extra)
-
-
-def settle_preflight(report: preflight.PreflightReport, options: RunOptions, extra: dict[str, Any]) -> None:
-    """Record pre-flight's ``report`` in ``extra``, log and print it, and refuse the run
-    (:class:`Refusal`) if the machine cannot hold it."""
-    extra["preflight"] = report.to_dict()
-    logger.info("%s", report.line())
-    if options.live:
-        print(report.line(), flush=True)
-    if not report.holdable:
-        raise Refusal(report.reason.removeprefix("refused: "))
+    preflight.settle(preflight.judge(timing, gate, scene, profile.passivity.layer, watchdog.stall, watchdog.periods),
+                     options.live, extra)
 
 
 def _reset_fault_first(address: DriveAddress, options: RunOptions, extra: dict[str, Any]) -> list[Event]:
