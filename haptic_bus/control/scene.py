@@ -21,27 +21,17 @@ import math
 from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol, TypeVar
+from typing import Any, TypeVar
 
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
+from haptic_bus.control import protocols
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range
 
 _POSITION_RANGE = (-1e6, 1e6)  # m
 
 
-class WallObject(Protocol):
-    """A scene object with a name and a wall law (a 1-D one here, one in space in :mod:`~haptic_bus.control.space_scene`)."""
-
-    @property
-    def name(self) -> str: ...
-    @property
-    def stiffness(self) -> float: ...
-    @property
-    def damping(self) -> float: ...
-
-
-def validate_wall(obj: WallObject, kind: str) -> None:
+def validate_wall(obj: protocols.SceneObject, kind: str) -> None:
     """Set ``obj``'s (a frozen dataclass') stiffness (N/m) and damping (N s/m) to validated floats, else
     ParameterError naming ``kind`` and its name."""
     context = f"{kind} {obj.name!r}"
