@@ -327,30 +327,54 @@ def test_one_thread_owns_the_bus_of_a_one_axis_run_and_answers_its_uploads(monke
     assert calls.count["send"] >= 2 * result.summary.cycles  # SYNC and RPDO every cycle, from this thread
 
 
-def test_one_thread_owns_the_bus_of_a_three_axis_run(monkeypatch, tmp_path) -> None:
-    """gantry-3d in virtual time against the three-axis simulator on the lock-step bus: in the
-    cyclic phase only the control thread sends or receives on the run's one handle."""
+def test_one_thread_owns_the_bus_of_a_three_axis_run_and_its_uploads_pass_the_coupled_gate(monkeypatch, tmp_path) -> None:
+    """gantry-3d in virtual time against the three-axis simulator on the lock-step bus, two uploads
+    from another handle while it cycles: in the cyclic phase only the control thread sends or
+    receives on the run's one handle; the coupled gate (in the judge process) refuses a ball of
+    10^6 N/m and accepts a softer one, adopted at a cycle boundary."""
     import threading
 
     from haptic_bus.app.axes_profile import load_axes_profile
     from haptic_bus.app.axes_runner import run_axes_canopen
     from haptic_bus.app.rig import simulated_axes_device
     from haptic_bus.app.runner import RunOptions
+    from haptic_bus.errors import Refusal
+    from haptic_bus.node.upload import upload_walls
 
     calls = BusCalls(monkeypatch)
     profile = load_axes_profile("gantry-3d")
     bus = {"interface": "lockstep", "channel": f"one-thread-{tmp_path.name}"}
+    ball = [obj.name for obj in profile.space_scene().objects].index("ball")
+    options = RunOptions(60.0, pacing="virtual", out_dir=tmp_path / "run", live=False, plots=False)
+    verdicts: list[str] = []
+
+    def upload() -> None:  # another handle, another thread: a client as `haptic-bus upload` is
+        try:
+            if calls.started.wait(30.0):
+                try:
+                    upload_walls(bus, 127, {ball: (1.0e6, 5.0)}, timeout=5.0)
+                except Refusal as refused:
+                    verdicts.append(str(refused))
+                verdicts.append(upload_walls(bus, 127, {ball: (1200.0, 5.0)}, timeout=5.0))
+        finally:
+            options.stop.event.set()  # the run ends once both are answered (or could not be)
+
     sim = simulated_axes_device(profile, bus).start()
+    client = threading.Thread(target=upload, name="test-upload")
+    client.start()
     try:
-        result = run_axes_canopen(profile, bus, RunOptions(0.5, pacing="virtual", out_dir=tmp_path / "run", live=False))
+        result = run_axes_canopen(profile, bus, options)
     finally:
+        client.join(timeout=30.0)
         sim.stop()
-    assert result.exit_reason == "completed", result.error
-    assert result.summary is not None and result.summary.cycles == round(0.5 / profile.period)
+    assert result.exit_reason == "stopped", result.error
+    assert len(verdicts) == 2 and "passivity gate refused" in verdicts[0] and verdicts[1].startswith("accepted"), verdicts
+    assert result.controller is not None and result.controller.applied_scenes == 1
+    assert result.controller.scene.by_name()["ball"].stiffness == 1200.0
     assert calls.cycles_entered == 1
     assert calls.threads == {"send": {threading.get_ident()}, "recv": {threading.get_ident()}}
     assert "heartbeat-127" not in calls.names and "canopen-notify" not in calls.names, calls.names
-    # one SYNC and three RPDOs every cycle (and a heartbeat every round(heartbeat / T) cycles)
+    assert result.summary is not None  # one SYNC and three RPDOs every cycle (and a heartbeat every round(heartbeat / T))
     assert calls.count["send"] >= 4 * result.summary.cycles
 
 

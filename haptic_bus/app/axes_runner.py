@@ -19,9 +19,11 @@ The drives may be the simulated device in another process (``haptic-bus sim --no
 5. **safe start**: every axis' position is read right before enabling (after pre-flight, whose
    SYNCs a real handle lives through); a handle inside an object is refused (exit 1, nothing
    enabled), or with ``--start-in-contact ramp`` the force ramps in along each contact normal
-   once the coupled gate has proven every scaled wall passive; then every drive is enabled in the
-   same cycle and the controller cycles (:class:`~haptic_bus.control.controller.WallController`)
-   under the supervisor;
+   once the coupled gate has proven every scaled wall passive; then the controller's node joins the
+   axes' network (gated uploads of every object's K and B, judged by the coupled gate in the judge
+   process, :mod:`~haptic_bus.node.controller_node`), every drive is enabled in the same cycle and
+   the controller cycles (:class:`~haptic_bus.control.controller.WallController`) under the
+   supervisor, the control thread alone on the bus handle;
 6. from the first cycle the run's writer process (started before commissioning, with the bus
    log on the drives' one handle) streams every axis' record and keeps ``run.json`` current, as
    for one axis (:class:`~haptic_bus.app.run_recorder.RunRecorder`, :mod:`~haptic_bus.app.axes_records`):
@@ -65,6 +67,7 @@ from haptic_bus.control.cycle_loop import RunSummary
 from haptic_bus.control.space_gate import SpaceDecision, SpaceGate
 from haptic_bus.control.space_scene import SpaceScene
 from haptic_bus.errors import DriveError, ParameterError, Refusal
+from haptic_bus.node.controller_node import ControllerNode
 
 RUN_MAPPING = "with-position"
 
@@ -109,7 +112,7 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
     safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
     bitrate = float(config.get("bitrate") or profile.bitrate)
     link: dict[str, Any] = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_ids": nodes,
-                            "controller_node_id": controller_node_id, "bitrate_checked": bitrate}
+                            "controller_node_id": controller_node_id, "upload_server": True, "bitrate_checked": bitrate}
     extra: dict[str, Any] = {"loop": {"period": period, "delays": [axis.delay for axis in profile.axes]}}
     journal = RunJournal(folder, profile, link, extra, axes_run_document)
     journal.write()  # "running", before any bus is touched: a run killed from here on says so
@@ -154,9 +157,12 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
                 recorder.stream(writer, record_files(controller), controller.events,
                                 functools.partial(space_scene_dicts, controller), period,
                                 f"haptic-bus run {profile.name}" if options.live else None, options.duration)
+                node = _serve(stack, controller, axes, controller_node_id, safety.heartbeat_ms)
                 show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
                 axes.enable()  # every drive in the same cycle, right before the first: their RPDO deadlines run from here
-                summary = controller.run(max(1, round(options.duration / period)), options.stop.event)
+                with node.cycling():  # its verdicts answered by the cycle
+                    summary = controller.run(max(1, round(options.duration / period)), options.stop.event,
+                                             on_cycle=node.poll)
             reason, error = summary.exit_reason, summary.error
             if reason == "stopped" and options.stop.interrupted:
                 reason, error = "interrupted", "interrupted (Ctrl-C)"
@@ -172,6 +178,18 @@ def run_axes_canopen(profile: AxesProfile, bus: Mapping[str, Any], options: RunO
         extra["exit_reason"], extra["error"] = reason, error
         files = recorder.finish(summary, pictures=options.plots)
     return AxesRunResult(reason, error, summary, controller, folder, files)
+
+
+def _serve(stack: ExitStack, controller: WallController[SpaceScene, SpaceDecision], axes: CanopenAxes, node_id: int,
+           heartbeat_ms: int) -> ControllerNode:
+    """The controller as CANopen node ``node_id`` on the axes' own network (one handle, read by the
+    control thread): gated uploads of the scene's walls, judged by the coupled gate in the judge process."""
+    if axes.link.network is None:
+        raise DriveError(axes.name, "the CAN network has no bus after connecting")
+    node = ControllerNode(controller, node_id, heartbeat_ms)
+    node.attach(axes.link.network)
+    stack.callback(node.detach)
+    return node
 
 
 def _describe(axes: CanopenAxes, options: RunOptions, link: dict[str, Any]) -> None:
