@@ -151,8 +151,12 @@ class ControllerNode:
         self._lock = threading.Lock()
 
     def attach(self, network: canopen.Network) -> None:
-        """Answer SDO requests on ``network`` (the drive's), the judge worker started first."""
+        """Answer SDO requests on ``network`` (the drive's), the judge worker started first and handed
+        the running scene to judge once, not waited for: the analysis' caches are warm for the first
+        upload (a sphere in space costs the coupled gate a direction search, 0.3-1.8 s here)."""
         self._pool = judge_pool()
+        scenes = self.controller.scenes
+        self._pool.submit(judge_walls, scenes.gate, scenes.latest.scene, {})
         network.add_node(self._node)
         self._network = network
         self._node.nmt.state = "OPERATIONAL"

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import importlib
 import multiprocessing
 import os
 import signal
@@ -60,8 +61,14 @@ def _die_with(parent: int) -> None:
         os._exit(0)
 
 
+WARM_MODULES = ("haptic_bus.control.gate", "haptic_bus.control.space_gate")  # what unpickling either gate imports
+
+
 def _ready() -> bool:
-    """In the worker: its imports are done (the module that holds this function is loaded)."""
+    """In the worker: its imports are done, the gates' too (unpickling a gate imports the analysis,
+    numpy, scipy and mpmath: seconds on a loaded machine, which an upload's SDO answer must not wait for)."""
+    for name in WARM_MODULES:
+        importlib.import_module(name)
     return True
 
 
