@@ -38,7 +38,7 @@ import can
 import canopen
 
 from drives.base import Drive
-from drives.canopen.od import minimal_cia402_od
+from drives.canopen.master_dictionary import minimal_cia402_od
 from drives.canopen.pdo_codec import PdoCodec, object_spec
 from drives.cia402 import CONTROLWORD, STATUSWORD, TARGET_TORQUE, VELOCITY_ACTUAL, ObjectSpec
 from haptic_bus.bench.timing import REPEATS, Spread, timed_once
