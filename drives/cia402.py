@@ -133,8 +133,9 @@ class OperationMode(enum.IntEnum):
 
     @property
     def supported_bit(self) -> int:
-        """The bit of 0x6502 that announces support of this mode."""
-        return {1: 0, 2: 1, 3: 2, 4: 3, 6: 5, 7: 6, 8: 7, 9: 8, 10: 9}[int(self)]
+        """The bit of 0x6502 that announces support of this mode: bit ``mode - 1`` (bit 4, for the
+        reserved mode 5, stays reserved)."""
+        return int(self) - 1
 
 
 def _enum_text(kind: type[enum.IntEnum], value: int, what: str) -> str:
