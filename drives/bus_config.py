@@ -75,20 +75,12 @@ def resolve_bus_config(
     return config
 
 
-def open_bus(
-    interface: str | None = None,
-    channel: Any = None,
-    bitrate: int | None = None,
-    *,
-    config_file: str | None = None,
-    context: str | None = None,
-    **kwargs: Any,
-) -> can.BusABC:
-    """Open a python-can bus from explicit arguments and/or python-can's configuration chain
-    (``udp_multicast``: :class:`drives.udp_multicast.FilteredMulticastBus`)."""
+def open_bus(**arguments: Any) -> can.BusABC:
+    """Open the python-can bus that :func:`resolve_bus_config` makes of ``arguments`` (the same
+    keywords) (``udp_multicast``: :class:`drives.udp_multicast.FilteredMulticastBus`)."""
     import can
 
-    config = resolve_bus_config(interface, channel, bitrate, config_file=config_file, context=context, **kwargs)
+    config = resolve_bus_config(**arguments)
     where = f"bus {config.get('interface')}:{config.get('channel')}"
     try:
         if config["interface"] == "udp_multicast":  # the same interface, its filters applied before decoding

@@ -97,29 +97,16 @@ PDO_COB_ID, PDO_TRANSMISSION_TYPE, PDO_INHIBIT_TIME, PDO_EVENT_TIMER = 1, 2, 3, 
 TRANSMISSION_SYNCHRONOUS_EVERY_SYNC = 1
 DEVICE_PROFILE_402 = 402  # 0x1000 low word of a CiA-402 drive
 
-# 0x1001 error register bits (CiA 301 7.5.2.2)
-ERROR_REGISTER_GENERIC = 1 << 0
-ERROR_REGISTER_CURRENT = 1 << 1
-ERROR_REGISTER_VOLTAGE = 1 << 2
-ERROR_REGISTER_TEMPERATURE = 1 << 3
-ERROR_REGISTER_COMMUNICATION = 1 << 4
-ERROR_REGISTER_PROFILE = 1 << 5
-ERROR_REGISTER_MANUFACTURER = 1 << 7
-ERROR_REGISTER_BITS: dict[int, str] = {
-    ERROR_REGISTER_GENERIC: "generic",
-    ERROR_REGISTER_CURRENT: "current",
-    ERROR_REGISTER_VOLTAGE: "voltage",
-    ERROR_REGISTER_TEMPERATURE: "temperature",
-    ERROR_REGISTER_COMMUNICATION: "communication",
-    ERROR_REGISTER_PROFILE: "device profile specific",
-    1 << 6: "reserved bit 6",
-    ERROR_REGISTER_MANUFACTURER: "manufacturer specific",
-}
+# 0x1001 error register (CiA 301 7.5.2.2): what each bit means, bit 0 first.
+ERROR_REGISTER_BITS = ("generic", "current", "voltage", "temperature", "communication", "device profile specific",
+                       "reserved bit 6", "manufacturer specific")
+ERROR_REGISTER_GENERIC = 1 << ERROR_REGISTER_BITS.index("generic")
+ERROR_REGISTER_COMMUNICATION = 1 << ERROR_REGISTER_BITS.index("communication")
 
 
 def describe_error_register(value: int) -> str:
     """The 0x1001 bits set, in words (``"generic, communication"``), or ``"no error"``."""
-    return ", ".join(name for bit, name in ERROR_REGISTER_BITS.items() if value & bit) or "no error"
+    return ", ".join(name for bit, name in enumerate(ERROR_REGISTER_BITS) if value >> bit & 1) or "no error"
 
 COMMUNICATION_OBJECT_NAMES: dict[int, str] = {
     0x1000: "Device type",
@@ -142,64 +129,52 @@ COMMUNICATION_OBJECT_NAMES: dict[int, str] = {
 
 
 class SdoAbort(enum.IntEnum):
-    """The SDO abort codes this project sends or acts on (see :data:`SDO_ABORT_TEXTS` for all)."""
+    """The SDO abort codes of CiA 301, each with its text (:attr:`text`)."""
 
-    TIMEOUT = 0x05040000
-    UNKNOWN_COMMAND = 0x05040001
-    UNSUPPORTED_ACCESS = 0x06010000
-    WRITE_ONLY = 0x06010001
-    READ_ONLY = 0x06010002
-    NO_OBJECT = 0x06020000
-    NOT_MAPPABLE = 0x06040041
-    PDO_LENGTH_EXCEEDED = 0x06040042
-    PARAMETER_INCOMPATIBLE = 0x06040043
-    LENGTH_MISMATCH = 0x06070010
-    LENGTH_TOO_HIGH = 0x06070012
-    LENGTH_TOO_LOW = 0x06070013
-    NO_SUBINDEX = 0x06090011
-    VALUE_RANGE = 0x06090030
-    GENERAL = 0x08000000
-    DEVICE_STATE = 0x08000022
+    text: str
 
+    def __new__(cls, code: int, text: str) -> SdoAbort:
+        member = int.__new__(cls, code)
+        member._value_ = code
+        member.text = text
+        return member
 
-SDO_ABORT_TEXTS: dict[int, str] = {
-    0x05030000: "Toggle bit not alternated",
-    0x05040000: "SDO protocol timed out",
-    0x05040001: "Client/server command specifier not valid or unknown",
-    0x05040002: "Invalid block size",
-    0x05040003: "Invalid sequence number",
-    0x05040004: "CRC error",
-    0x05040005: "Out of memory",
-    0x06010000: "Unsupported access to an object",
-    0x06010001: "Attempt to read a write only object",
-    0x06010002: "Attempt to write a read only object",
-    0x06020000: "Object does not exist in the object dictionary",
-    0x06040041: "Object cannot be mapped to the PDO",
-    0x06040042: "The number and length of the objects to be mapped would exceed PDO length",
-    0x06040043: "General parameter incompatibility reason",
-    0x06040047: "General internal incompatibility in the device",
-    0x06060000: "Access failed due to a hardware error",
-    0x06070010: "Data type does not match, length of service parameter does not match",
-    0x06070012: "Data type does not match, length of service parameter too high",
-    0x06070013: "Data type does not match, length of service parameter too low",
-    0x06090011: "Sub-index does not exist",
-    0x06090030: "Invalid value for parameter (download only)",
-    0x06090031: "Value of parameter written too high (download only)",
-    0x06090032: "Value of parameter written too low (download only)",
-    0x06090036: "Maximum value is less than minimum value",
-    0x060A0023: "Resource not available: SDO connection",
-    0x08000000: "General error",
-    0x08000020: "Data cannot be transferred or stored to the application",
-    0x08000021: "Data cannot be transferred or stored to the application because of local control",
-    0x08000022: "Data cannot be transferred or stored to the application because of the present device state",
-    0x08000023: "Object dictionary dynamic generation fails or no object dictionary is present",
-    0x08000024: "No data available",
-}
+    TOGGLE_BIT = 0x05030000, "Toggle bit not alternated"
+    TIMEOUT = 0x05040000, "SDO protocol timed out"
+    UNKNOWN_COMMAND = 0x05040001, "Client/server command specifier not valid or unknown"
+    BLOCK_SIZE = 0x05040002, "Invalid block size"
+    SEQUENCE_NUMBER = 0x05040003, "Invalid sequence number"
+    CRC = 0x05040004, "CRC error"
+    OUT_OF_MEMORY = 0x05040005, "Out of memory"
+    UNSUPPORTED_ACCESS = 0x06010000, "Unsupported access to an object"
+    WRITE_ONLY = 0x06010001, "Attempt to read a write only object"
+    READ_ONLY = 0x06010002, "Attempt to write a read only object"
+    NO_OBJECT = 0x06020000, "Object does not exist in the object dictionary"
+    NOT_MAPPABLE = 0x06040041, "Object cannot be mapped to the PDO"
+    PDO_LENGTH_EXCEEDED = 0x06040042, "The number and length of the objects to be mapped would exceed PDO length"
+    PARAMETER_INCOMPATIBLE = 0x06040043, "General parameter incompatibility reason"
+    INTERNAL_INCOMPATIBLE = 0x06040047, "General internal incompatibility in the device"
+    HARDWARE = 0x06060000, "Access failed due to a hardware error"
+    LENGTH_MISMATCH = 0x06070010, "Data type does not match, length of service parameter does not match"
+    LENGTH_TOO_HIGH = 0x06070012, "Data type does not match, length of service parameter too high"
+    LENGTH_TOO_LOW = 0x06070013, "Data type does not match, length of service parameter too low"
+    NO_SUBINDEX = 0x06090011, "Sub-index does not exist"
+    VALUE_RANGE = 0x06090030, "Invalid value for parameter (download only)"
+    VALUE_TOO_HIGH = 0x06090031, "Value of parameter written too high (download only)"
+    VALUE_TOO_LOW = 0x06090032, "Value of parameter written too low (download only)"
+    MAX_BELOW_MIN = 0x06090036, "Maximum value is less than minimum value"
+    RESOURCE = 0x060A0023, "Resource not available: SDO connection"
+    GENERAL = 0x08000000, "General error"
+    NOT_STORED = 0x08000020, "Data cannot be transferred or stored to the application"
+    LOCAL_CONTROL = 0x08000021, "Data cannot be transferred or stored to the application because of local control"
+    DEVICE_STATE = 0x08000022, "Data cannot be transferred or stored to the application because of the present device state"
+    NO_DICTIONARY = 0x08000023, "Object dictionary dynamic generation fails or no object dictionary is present"
+    NO_DATA = 0x08000024, "No data available"
 
 
 def sdo_abort_text(code: int) -> str:
     """The CiA-301 text of an SDO abort code."""
-    return SDO_ABORT_TEXTS.get(code, "unknown abort code")
+    return next((abort.text for abort in SdoAbort if abort == code), "unknown abort code")
 
 
 # --------------------------------------------------------------------------- EMCY (7.2.7)
@@ -208,7 +183,7 @@ EMCY_LENGTH = 8  # error code (2), error register (1), manufacturer-specific (5)
 
 
 class EmcyCode(enum.IntEnum):
-    """EMCY error codes this project produces or acts on (see :data:`EMCY_CODES` for all)."""
+    """EMCY error codes this project produces or acts on (their texts, and every other code's, are in :data:`EMCY_CODES`)."""
 
     NO_ERROR = 0x0000
     GENERIC = 0x1000
@@ -223,8 +198,8 @@ class EmcyCode(enum.IntEnum):
 
 # Exact codes (CiA-301 table 21 and CiA-402-2 annex); looked up most specific first.
 EMCY_CODES: dict[int, str] = {
-    0x0000: "Error reset or no error",
-    0x1000: "Generic error",
+    EmcyCode.NO_ERROR: "Error reset or no error",
+    EmcyCode.GENERIC: "Generic error",
     0x2000: "Current",
     0x2100: "Current, device input side",
     0x2200: "Current inside the device",
@@ -258,18 +233,18 @@ EMCY_CODES: dict[int, str] = {
     0x7300: "Sensor",
     0x7305: "Incremental sensor 1 fault",
     0x8000: "Monitoring",
-    0x8100: "Communication",
+    EmcyCode.COMMUNICATION: "Communication",
     0x8110: "CAN overrun (objects lost)",
     0x8120: "CAN in error passive mode",
-    0x8130: "Life guard error or heartbeat error",
+    EmcyCode.HEARTBEAT: "Life guard error or heartbeat error",
     0x8140: "Recovered from bus off",
     0x8150: "CAN-ID collision",
-    0x8200: "Protocol error",
-    0x8210: "PDO not processed due to length error",
-    0x8220: "PDO length exceeded",
+    EmcyCode.PROTOCOL: "Protocol error",
+    EmcyCode.PDO_LENGTH: "PDO not processed due to length error",
+    EmcyCode.PDO_TOO_LONG: "PDO length exceeded",
     0x8230: "DAM MPDO not processed, destination object not available",
-    0x8240: "Unexpected SYNC data length",
-    0x8250: "RPDO timeout",
+    EmcyCode.SYNC_LENGTH: "Unexpected SYNC data length",
+    EmcyCode.RPDO_TIMEOUT: "RPDO timeout",
     0x8300: "Torque control",
     0x8311: "Excess torque",
     0x8400: "Velocity speed controller",

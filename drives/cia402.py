@@ -133,8 +133,9 @@ class OperationMode(enum.IntEnum):
 
     @property
     def supported_bit(self) -> int:
-        """The bit of 0x6502 that announces support of this mode."""
-        return {1: 0, 2: 1, 3: 2, 4: 3, 6: 5, 7: 6, 8: 7, 9: 8, 10: 9}[int(self)]
+        """The bit of 0x6502 that announces support of this mode: bit ``mode - 1`` (bit 4, for the
+        reserved mode 5, stays reserved)."""
+        return int(self) - 1
 
 
 def _enum_text(kind: type[enum.IntEnum], value: int, what: str) -> str:
@@ -188,16 +189,7 @@ _STATUS_PATTERNS: tuple[tuple[int, int, State], ...] = (
 )
 
 # The statusword bits 0-6 each state shows (bit 5 "quick stop" is 1 where not active).
-STATE_STATUS_BITS: dict[State, int] = {
-    State.NOT_READY_TO_SWITCH_ON: 0x00,
-    State.SWITCH_ON_DISABLED: 0x40,
-    State.READY_TO_SWITCH_ON: 0x21,
-    State.SWITCHED_ON: 0x23,
-    State.OPERATION_ENABLED: 0x27,
-    State.QUICK_STOP_ACTIVE: 0x07,
-    State.FAULT_REACTION_ACTIVE: 0x0F,
-    State.FAULT: 0x08,
-}
+STATE_STATUS_BITS: dict[State, int] = {state: value for _, value, state in _STATUS_PATTERNS}
 
 SW_FAULT = 1 << 3
 SW_VOLTAGE_ENABLED = 1 << 4

@@ -77,9 +77,9 @@ _channels_lock = threading.Lock()
 
 
 class LockstepBus(can.BusABC):
-    """One node's handle on the lock-step channel ``channel`` (any hashable name).
+    """One node's bus handle on the lock-step channel ``channel`` (any hashable name).
 
-    ``receive_own_messages``: also receive the frames this handle sends.
+    ``receive_own_messages``: also receive the frames this bus handle sends.
     ``preserve_timestamps``: keep the sender's ``timestamp`` instead of the time of sending.
     """
 
@@ -103,7 +103,7 @@ class LockstepBus(can.BusABC):
     # ------------------------------------------------------------------ receiving
 
     def set_receiver(self, receiver: Receiver | None) -> None:
-        """Hand every frame for this handle to ``receiver`` in the sender's thread (None: queue them
+        """Hand every frame for this bus handle to ``receiver`` in the sender's thread (None: queue them
         for :meth:`recv` again).  ``receiver`` should not raise; if it does, the error is counted."""
         self._receiver = receiver
 
@@ -130,7 +130,7 @@ class LockstepBus(can.BusABC):
     # ------------------------------------------------------------------ sending
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        """Put a copy of ``msg`` into every other handle's queue, or hand it to its inline
+        """Put a copy of ``msg`` into every other bus handle's queue, or hand it to its inline
         receiver before returning (see the module docstring for ordering)."""
         self._check_open()
         stamp = msg.timestamp if self.preserve_timestamps else time.time()
@@ -162,7 +162,7 @@ class LockstepBus(can.BusABC):
             raise can.CanOperationError("the lock-step bus is closed")
 
     def shutdown(self) -> None:
-        """Leave the channel (frames sent later do not reach this handle)."""
+        """Leave the channel (frames sent later do not reach this bus handle)."""
         super().shutdown()
         if not self._open:
             return

@@ -1,9 +1,9 @@
 """python-can's ``udp_multicast`` bus with its receive filters applied before a frame is decoded.
 
-On ``udp_multicast`` every handle receives every frame on the group, its own included, and
+On ``udp_multicast`` every bus handle receives every frame on the group, its own included, and
 python-can turns each datagram into a :class:`can.Message` (msgpack, then the message's
 validation) before its software filters look at the identifier: about 30 us a frame here, so a
-process with three handles on a 1 kHz loop (the master, the controller node, the bus log) spends
+process with three bus handles on a 1 kHz loop (the master, the controller node, the bus log) spends
 a third of a core decoding frames most of which it drops.  :class:`FilteredMulticastBus` is the
 same interface with the filters applied where python-can lets a backend apply them
 (``_apply_filters``, like a kernel or adapter filter): the datagram's identifier is read from

@@ -217,8 +217,8 @@ class RecordedForce(OperatorModel):
         times: list[float] = []
         forces: list[float] = []
         try:
-            with open(path, newline="") as handle:
-                rows = [row for row in csv.reader(handle) if row and any(cell.strip() for cell in row)]
+            with open(path, newline="") as file:
+                rows = [row for row in csv.reader(file) if row and any(cell.strip() for cell in row)]
         except OSError as exc:
             raise ParameterError("path", str(path), f"a readable CSV file ({exc.strerror})", "operator recorded") from exc
         if rows and [cell.strip().lower() for cell in rows[0]] == ["time", "force"]:

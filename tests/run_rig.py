@@ -180,8 +180,8 @@ def late_clock(lateness: Mapping[int, float]) -> type[VirtualClock]:
 
 def read_record(folder: pathlib.Path) -> tuple[list[str], dict[str, np.ndarray]]:
     """``record.csv`` of a run folder: its header, and each column as floats (exact: written with ``repr``)."""
-    with (folder / "record.csv").open(newline="") as handle:
-        rows = list(csv.reader(handle))
+    with (folder / "record.csv").open(newline="") as file:
+        rows = list(csv.reader(file))
     header, body = rows[0], np.array(rows[1:], dtype=float)
     return header, {name: body[:, i] for i, name in enumerate(header)}
 

@@ -303,7 +303,7 @@ def test_one_thread_owns_the_bus_of_a_one_axis_run_and_answers_its_uploads(monke
                             bus_log=False)
     verdicts: list[str] = []
 
-    def upload() -> None:  # another handle, another thread: a client as `haptic-bus upload` is
+    def upload() -> None:  # another bus handle, another thread: a client as `haptic-bus upload` is
         try:
             if calls.started.wait(30.0):
                 verdicts.append(upload_walls(drive.bus, 127, {0: (0.9 * wall.stiffness, wall.damping)}, timeout=5.0))
@@ -329,7 +329,7 @@ def test_one_thread_owns_the_bus_of_a_one_axis_run_and_answers_its_uploads(monke
 
 def test_one_thread_owns_the_bus_of_a_three_axis_run_and_its_uploads_pass_the_coupled_gate(monkeypatch, tmp_path) -> None:
     """gantry-3d in virtual time against the three-axis simulator on the lock-step bus, two uploads
-    from another handle while it cycles: in the cyclic phase only the control thread sends or
+    from another bus handle while it cycles: in the cyclic phase only the control thread sends or
     receives on the run's one bus handle; the coupled gate (in the judge process) refuses a block of
     10^6 N/m and accepts a softer one, adopted at a cycle boundary."""
     import threading
@@ -348,7 +348,7 @@ def test_one_thread_owns_the_bus_of_a_three_axis_run_and_its_uploads_pass_the_co
     options = RunOptions(60.0, pacing="virtual", out_dir=tmp_path / "run", live=False, plots=False)
     verdicts: list[str] = []
 
-    def upload() -> None:  # another handle, another thread: a client as `haptic-bus upload` is
+    def upload() -> None:  # another bus handle, another thread: a client as `haptic-bus upload` is
         try:
             if calls.started.wait(30.0):
                 try:

@@ -31,6 +31,7 @@ import math
 import pathlib
 import signal
 import time
+from typing import Any
 
 import numpy as np
 import pytest
@@ -38,7 +39,7 @@ import pytest
 from drives.cia402 import State
 from haptic_bus.app.axes_demo import contact, run_axes_demo
 from haptic_bus.app.axes_profile import load_axes_profile
-from haptic_bus.app.axes_runner import run_axes_canopen
+from haptic_bus.app.axes_runner import AxesRunResult, run_axes_canopen
 from haptic_bus.app.cli import main
 from haptic_bus.app.rig import simulated_axes_device
 from haptic_bus.app.runner import RunOptions
@@ -153,7 +154,10 @@ def test_the_bus_load_refuses_before_the_bus_is_touched_naming_the_smallest_peri
     assert document["exit_reason"] == "refused" and "summary" not in document
 
 
-def test_a_start_inside_an_object_is_refused_with_nothing_enabled(tmp_path: pathlib.Path) -> None:
+def run_started_inside_the_ball(tmp_path: pathlib.Path, **options: Any) -> tuple[AxesRunResult, float, list[State]]:
+    """A 1 s virtual-time run of gantry-3d whose ball is moved to 5 mm from the start along -y (the
+    handle starts inside it), with ``options`` added to its RunOptions: the result, the profile's
+    period (s) and each simulated drive's state when the run returned."""
     path = variant(tmp_path, "inside", 'center = [0.0, -0.03, 0.0]       # m: 20 mm from the start along -y',
                    "center = [0.0, -0.005, 0.0]")
     profile = load_axes_profile(path)
@@ -161,30 +165,25 @@ def test_a_start_inside_an_object_is_refused_with_nothing_enabled(tmp_path: path
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}).start()
     try:
         result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
-                                  RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False))
-        assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED] * 3
+                                  RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False, **options))
+        return result, profile.period, [node.drive.state for node in sim.nodes]
     finally:
         sim.stop()
+
+
+def test_a_start_inside_an_object_is_refused_with_nothing_enabled(tmp_path: pathlib.Path) -> None:
+    result, _, states = run_started_inside_the_ball(tmp_path)
+    assert states == [State.SWITCH_ON_DISABLED] * 3
     assert result.exit_reason == "refused" and result.controller is None
     assert "handle is inside ball" in (result.error or "") and "5 mm" not in (result.error or "")
     assert (tmp_path / "run" / "run.json").is_file()
 
 
 def test_a_start_inside_an_object_ramps_the_force_in_once_the_coupled_gate_proves_the_ramp(tmp_path: pathlib.Path) -> None:
-    path = variant(tmp_path, "inside", 'center = [0.0, -0.03, 0.0]       # m: 20 mm from the start along -y',
-                   "center = [0.0, -0.005, 0.0]")
-    profile = load_axes_profile(path)
-    channel = f"ramp-{tmp_path.name}"
-    sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}).start()
-    try:
-        result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
-                                  RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False,
-                                             start_in_contact="ramp"))
-    finally:
-        sim.stop()
+    result, period, _ = run_started_inside_the_ball(tmp_path, start_in_contact="ramp")
     assert result.exit_reason == "completed" and result.summary is not None and result.controller is not None
     assert result.summary.least_energy >= 0.0 and not result.summary.observer_flagged
-    ramp = round(0.5 / profile.period)  # the default ramp time, 0.5 s, in cycles
+    ramp = round(0.5 / period)  # the default ramp time, 0.5 s, in cycles
     scale = records(result.folder)["y"]["scale"]
     assert scale[:ramp].tolist() == [(k + 1) / ramp for k in range(ramp)] and np.all(scale[ramp:] == 1.0)
     document = json.loads((result.folder / "run.json").read_text())

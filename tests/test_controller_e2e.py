@@ -157,7 +157,7 @@ def test_refused_upload_on_the_api_keeps_the_running_wall() -> None:
 def test_refused_upload_over_the_bus_is_an_sdo_abort_and_changes_nothing() -> None:
     profile = seed_at_the_wall()
     channel = f"upload-{uuid.uuid4().hex[:10]}"
-    bus = {"interface": "virtual", "channel": channel}  # the node on the drive's network; the client a handle of its own
+    bus = {"interface": "virtual", "channel": channel}  # the node on the drive's network; the client a bus handle of its own
     with simulated_canopen(profile, channel=channel, interface="virtual") as (_sim, drive):
         controller = controller_for(profile, drive)
         with ControllerNode(controller, 42).attached(drive.link.network):

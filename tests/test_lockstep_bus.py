@@ -27,7 +27,7 @@ def frame(can_id: int, data: bytes = b"") -> can.Message:
 
 @pytest.fixture
 def pair(channel: str) -> Iterator[tuple[LockstepBus, LockstepBus]]:
-    """Two handles on one fresh lock-step channel."""
+    """Two bus handles on one fresh lock-step channel."""
     a, b = LockstepBus(channel=channel), LockstepBus(channel=channel)
     yield a, b
     a.shutdown()
@@ -89,7 +89,7 @@ def test_a_frame_sent_from_a_receiver_is_delivered_after_it_returns_in_order(pai
         a.send(frame(0x080))
         # no recursion: c gets the SYNC before b's answer, which waits until b's receiver returned
         assert order == ["b got 0x80", "b answered", "c got 0x80", "c got 0x185"]
-        answer = a.recv(0.0)  # the queue handle has the answer before send returned
+        answer = a.recv(0.0)  # the queued bus handle has the answer before send returned
         assert answer is not None and answer.arbitration_id == 0x185
     finally:
         channel_c.shutdown()
@@ -109,13 +109,13 @@ def test_own_messages_and_a_failing_receiver(pair: tuple[LockstepBus, LockstepBu
         b.set_receiver(broken)
         a.send(frame(0x101))  # the sender is not hurt
         assert b.receive_errors == 1
-        other = echo.recv(0.0)  # and the other handles still got it
+        other = echo.recv(0.0)  # and the other bus handles still got it
         assert other is not None and other.arbitration_id == 0x101
     finally:
         echo.shutdown()
 
 
-def test_a_closed_handle_leaves_the_channel(pair: tuple[LockstepBus, LockstepBus]) -> None:
+def test_a_closed_bus_handle_leaves_the_channel(pair: tuple[LockstepBus, LockstepBus]) -> None:
     a, b = pair
     b.shutdown()
     a.send(frame(0x181))  # nobody left to receive: no error

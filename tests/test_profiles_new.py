@@ -53,7 +53,7 @@ def one_line(err: str) -> str:
 @pytest.fixture
 def standard_drive() -> Iterator[tuple[list[str], can.BusABC]]:
     """The simulated drive with standard objects only, node 5 on a fresh virtual bus; yields the bus
-    options of the command line and a second handle on the bus that hears every frame."""
+    options of the command line and a second bus handle that hears every frame."""
     channel = f"profiles-new-{uuid.uuid4().hex[:10]}"
     sim = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, od="standard").start()
     try:

@@ -61,7 +61,7 @@ def test_the_docstring_example_runs_as_written(haptic_sim, recorded_run, tmp_pat
 
 def test_run_canopen_takes_an_open_bus(haptic_sim, tmp_path):
     """An open ``can.BusABC`` (python-can's virtual bus, the drive in this process): the run cycles
-    on it, leaves it open for its owner, serves uploads on it, and logs the frames of that one handle
+    on it, leaves it open for its owner, serves uploads on it, and logs the frames of that one bus handle
     (the drive link's tap)."""
     import can
 

@@ -37,8 +37,8 @@ def test_run_over_modbus_settles_at_f_over_k(
     assert "cycles 1500" in run.stdout
     profile = load_profile(profile_name)
     wall = profile.scene[0]
-    with (tmp_path / "record.csv").open() as handle:
-        rows = list(csv.DictReader(handle))
+    with (tmp_path / "record.csv").open() as file:
+        rows = list(csv.DictReader(file))
     position = float(rows[-1]["position_m"])
     push = profile.operator_model["level"]
     lsb = profile.scaling().newton_per_permille / wall.stiffness  # one torque count of penetration

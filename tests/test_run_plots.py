@@ -26,7 +26,7 @@ from haptic_bus.app.demo import run_demo
 from haptic_bus.app.kb_plane import kb_plane_figure
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.run_folder import read_run_folder
-from haptic_bus.app.run_plots import energy_exchange, force_position_figure, timeline_figure
+from haptic_bus.app.run_plots import force_position_figure, timeline_figure, wall_energy_taken_and_returned
 from haptic_bus.node.upload import upload_walls
 from tests.run_rig import events_of, profile_variant, read_run, run_cli, simulated_drive
 
@@ -127,7 +127,7 @@ def test_haptic_bus_plot_shows_every_event_and_the_fault(eventful_run: pathlib.P
 
     loop = force_position_figure(run)
     assert run.record is not None
-    taken, returned = energy_exchange(run.record["position_m"], run.record["force_n"])
+    taken, returned = wall_energy_taken_and_returned(run.record["position_m"], run.record["force_n"])
     assert taken > returned > 0  # a passive wall gives back less than it took
     assert f"the wall took {taken * 1e3:.4g} mJ and gave back {returned * 1e3:.4g} mJ" in _title(loop).get_text()
     plt.close(loop)

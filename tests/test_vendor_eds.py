@@ -72,8 +72,8 @@ def eds_variant(source: pathlib.Path, folder: pathlib.Path, drop: tuple[str, ...
         assert parser.has_section(section), section
         parser.set(section, key, value)
     path = folder / f"{source.stem}-variant.eds"
-    with path.open("w") as handle:
-        parser.write(handle)
+    with path.open("w") as file:
+        parser.write(file)
     return path
 
 

@@ -25,7 +25,7 @@ from canopen import objectdictionary as od
 
 from drives.canopen.link import NetworkLink
 from drives.canopen.listen import EmcyLog, FrameCounter, HeartbeatLog
-from drives.canopen.od import minimal_cia402_od
+from drives.canopen.master_dictionary import minimal_cia402_od
 from drives.canopen.sdo import SdoAccess
 from drives.cia301 import HEARTBEAT_BASE, NODE_ID_RANGE, SYNC_COB_ID, NmtState
 from drives.cia402 import ObjectSpec

@@ -52,7 +52,7 @@ from drives.canopen.exchange import RX_MODES, CanopenExchange, CanopenStats
 from drives.canopen.heartbeat import HeartbeatProducer
 from drives.canopen.inventory import MAX_MAPPING_ENTRIES
 from drives.canopen.link import NetworkLink
-from drives.canopen.od import load_object_dictionary
+from drives.canopen.master_dictionary import load_object_dictionary
 from drives.canopen.pdo_codec import PdoCodec, object_spec
 from drives.canopen.pdo_plan import pack
 from drives.canopen.sdo import SdoAccess

@@ -150,7 +150,7 @@ class NetworkLink:
             bus = self._given_bus
             if bus is None:
                 interface, channel, bitrate, kwargs = self._bus_args
-                bus = open_bus(interface, channel, bitrate, **kwargs)
+                bus = open_bus(interface=interface, channel=channel, bitrate=bitrate, **kwargs)
             network = canopen.Network(bus)
         network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         if self._errors not in network.listeners:

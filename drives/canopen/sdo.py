@@ -15,7 +15,7 @@ from contextlib import contextmanager
 import canopen
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
-from drives.canopen.od import object_name
+from drives.canopen.master_dictionary import object_name
 from drives.cia301 import sdo_abort_text
 from drives.cia402 import DataType
 from drives.errors import DriveProtocolError, DriveRefusal, DriveTimeout

@@ -3,7 +3,7 @@
 The standard objects 0x6076 (rated torque, mN m), 0x6072 (max torque, per mille) and the factor
 group (0x608F, 0x6090, 0x6091, 0x6092, 0x60A8, 0x60A9; :func:`drives.factor_group.derive`) where
 the drive has them, and manufacturer objects only where an EDS the user gave names them
-(:func:`drives.canopen.od.find_scaling_objects`).  Commissioning reads it before a run
+(:func:`drives.canopen.master_dictionary.find_scaling_objects`).  Commissioning reads it before a run
 (:mod:`drives.canopen.commissioning`); ``haptic-bus profiles new --from-drive`` writes it into a
 profile.
 """
@@ -15,7 +15,7 @@ import logging
 from canopen import objectdictionary
 
 from drives.base import ScalingReading
-from drives.canopen.od import find_scaling_objects
+from drives.canopen.master_dictionary import find_scaling_objects
 from drives.canopen.sdo import SdoAccess
 from drives.cia301 import SdoAbort
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, RATIO_OBJECTS, UNIT_OBJECTS, DataType, RatioSpec

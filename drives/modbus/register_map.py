@@ -73,6 +73,7 @@ from drives.cia402 import (
     TARGET_TORQUE,
     TORQUE_ACTUAL,
     VELOCITY_ACTUAL,
+    DataType,
     ObjectSpec,
 )
 
@@ -160,36 +161,53 @@ class RegisterSpec:
         return f"0x{self.address:04X} ({what})"
 
 
-def _spec(address: int, obj: ObjectSpec, kind: str) -> RegisterSpec:
-    return RegisterSpec(address, obj.name.lower().replace(" ", "_"), kind, obj.access, obj, obj.unit)
+_KIND_OF_TYPE: dict[DataType, str] = {
+    DataType.INTEGER8: "i8",
+    DataType.INTEGER16: "i16",
+    DataType.INTEGER32: "i32",
+    DataType.UNSIGNED16: "u16",
+    DataType.UNSIGNED32: "u32",
+}
 
 
+@dataclass(frozen=True)
+class _Extra:
+    """A mapped value that is no CiA-402 object: its name, kind, access and unit."""
+
+    name: str
+    kind: str
+    access: str = "ro"
+    unit: str = ""
+
+
+def _contiguous(address: int, *values: ObjectSpec | _Extra) -> tuple[RegisterSpec, ...]:
+    """``values`` laid out one after another from ``address``, each taking its kind's registers
+    (an object's kind is its CiA-402 data type)."""
+    specs: list[RegisterSpec] = []
+    for value in values:
+        if isinstance(value, ObjectSpec):
+            spec = RegisterSpec(address, value.name.lower().replace(" ", "_"), _KIND_OF_TYPE[value.data_type],
+                                value.access, value, value.unit)
+        else:
+            spec = RegisterSpec(address, value.name, value.kind, value.access, unit=value.unit)
+        specs.append(spec)
+        address = spec.end
+    return tuple(specs)
+
+
+# The module's table, block by block.
 REGISTERS: tuple[RegisterSpec, ...] = (
-    _spec(0x0000, STATUSWORD, "u16"),
-    _spec(0x0001, VELOCITY_ACTUAL, "i32"),
-    _spec(0x0003, POSITION_ACTUAL, "i32"),
-    _spec(0x0010, CONTROLWORD, "u16"),
-    _spec(0x0011, TARGET_TORQUE, "i16"),
-    _spec(0x0020, MODES_OF_OPERATION, "i8"),
-    _spec(0x0021, MODES_OF_OPERATION_DISPLAY, "i8"),
-    _spec(0x0022, MAX_TORQUE, "u16"),
-    _spec(0x0023, TORQUE_ACTUAL, "i16"),
-    _spec(0x0024, MOTOR_RATED_TORQUE, "u32"),
-    _spec(0x0026, SUPPORTED_DRIVE_MODES, "u32"),
-    _spec(0x0028, ERROR_CODE, "u16"),
-    _spec(0x0029, QUICK_STOP_OPTION_CODE, "i16"),
-    RegisterSpec(0x002A, "comm_watchdog_ms", "u16", "rw", unit="ms"),
-    _spec(0x002B, ABORT_CONNECTION_OPTION_CODE, "i16"),
-    RegisterSpec(0x0030, "map_identity", "u32", "ro"),
-    RegisterSpec(0x0040, "velocity_per_count", "f64", "ro", unit="m/s"),
-    RegisterSpec(0x0044, "position_per_count", "f64", "ro", unit="m"),
-    RegisterSpec(0x0048, "force_per_torque", "f64", "ro", unit="N/(N m)"),
-    RegisterSpec(0x0050, "sim_timing", "u16", "ro"),
-    RegisterSpec(0x0051, "sim_cycle_count", "u32", "ro"),
-    RegisterSpec(0x0054, "sim_time", "f64", "ro", unit="s"),
-    RegisterSpec(0x0058, "sim_operator_energy", "f64", "ro", unit="J"),
-    RegisterSpec(0x005C, "sim_wall_energy", "f64", "ro", unit="J"),
-    RegisterSpec(0x0060, "sim_reception_delay", "f64", "ro", unit="samples"),
+    *_contiguous(INPUT_BLOCK, STATUSWORD, VELOCITY_ACTUAL, POSITION_ACTUAL),
+    *_contiguous(OUTPUT_BLOCK, CONTROLWORD, TARGET_TORQUE),
+    *_contiguous(0x0020, MODES_OF_OPERATION, MODES_OF_OPERATION_DISPLAY, MAX_TORQUE, TORQUE_ACTUAL, MOTOR_RATED_TORQUE,
+                 SUPPORTED_DRIVE_MODES, ERROR_CODE, QUICK_STOP_OPTION_CODE, _Extra("comm_watchdog_ms", "u16", "rw", "ms"),
+                 ABORT_CONNECTION_OPTION_CODE),
+    *_contiguous(0x0030, _Extra("map_identity", "u32")),
+    *_contiguous(0x0040, _Extra("velocity_per_count", "f64", unit="m/s"), _Extra("position_per_count", "f64", unit="m"),
+                 _Extra("force_per_torque", "f64", unit="N/(N m)")),
+    *_contiguous(0x0050, _Extra("sim_timing", "u16"), _Extra("sim_cycle_count", "u32")),
+    *_contiguous(0x0054, _Extra("sim_time", "f64", unit="s"), _Extra("sim_operator_energy", "f64", unit="J"),
+                 _Extra("sim_wall_energy", "f64", unit="J"), _Extra("sim_reception_delay", "f64", unit="samples")),
 )
 REGISTER_BY_NAME: dict[str, RegisterSpec] = {spec.name: spec for spec in REGISTERS}
 _BY_OBJECT: dict[int, RegisterSpec] = {spec.obj.index: spec for spec in REGISTERS if spec.obj is not None}

@@ -16,7 +16,7 @@ first cycle; a killed run keeps them), its folder created before any bus is touc
   (bus, node ids, each axis' safety warnings and mapping notes, the bus load), each axis' scaling,
   the scenes in effect with the coupled gate's margins, the summary (the whole port: ``energy``
   is ``sum E_i``) and per axis (``axes``), the events, and how the run ended;
-- ``bus.asc``: every frame of the one handle (:mod:`~haptic_bus.app.bus_log`);
+- ``bus.asc``: every frame of the one bus handle (:mod:`~haptic_bus.app.bus_log`);
 - ``trajectory.png`` (:mod:`~haptic_bus.app.axes_plots`, drawn from the files as ``haptic-bus
   plot`` draws it): the trajectory in its plane of motion against the objects, the positions and
   forces over time.

@@ -1,6 +1,6 @@
 """``bus.asc``: every CAN frame of a run, in Vector's ASCII log format, beside its record.
 
-The control process logs on its one handle: the drive link's tap
+The control process logs on its one bus handle: the drive link's tap
 (:attr:`drives.canopen.link.NetworkLink.tap`) is :func:`frame_tap`, which copies each frame
 received or sent into a ring in shared memory (:data:`FRAME`: one ``struct.pack_into`` and a
 counter store, :class:`~haptic_bus.control.ring.Ring`).  The run's writer process

@@ -166,8 +166,8 @@ def _still_missing(path: pathlib.Path) -> int | None:
     from haptic_bus.app.profile_template import missing
 
     try:
-        with open(path, "rb") as handle:
-            document = tomllib.load(handle)
+        with open(path, "rb") as file:
+            document = tomllib.load(file)
     except (OSError, ValueError):  # TOMLDecodeError and UnicodeDecodeError are ValueErrors
         return None  # the loader says what is wrong with the file
     lacking = missing(document)

@@ -160,7 +160,7 @@ def _record(run: RunFolder) -> RecordTable:
 
 # --------------------------------------------------------------------------- force against position
 
-def energy_exchange(position: np.ndarray, force: np.ndarray) -> tuple[float, float]:
+def wall_energy_taken_and_returned(position: np.ndarray, force: np.ndarray) -> tuple[float, float]:
     """Energy (J) the wall took from the handle and gave back: the sums of ``u_k dx_k`` over the
     steps where it is positive and negative (``dx_k = x_{k+1} - x_k``, ``u_k`` held over the step)."""
     work = force[:-1] * np.diff(position)
@@ -171,7 +171,7 @@ def force_position_figure(run: RunFolder) -> Figure:
     """Wall force against position, taking and giving back told apart, each object's law (module docstring)."""
     record = _record(run)
     x_mm, force = record["position_m"] * 1e3, record["force_n"]
-    taken, returned = energy_exchange(record["position_m"], force)
+    taken, returned = wall_energy_taken_and_returned(record["position_m"], force)
     fig, ax = plt.subplots(figsize=(10, 6.5))
     objects = scene_objects(run.document)
     colors = _object_colors(objects)

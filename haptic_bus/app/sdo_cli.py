@@ -2,7 +2,7 @@
 
 CANopen: an SDO upload or download of ``INDEX[:SUB]`` (:class:`drives.canopen.client.NodeClient`).
 The object's name and type come from the dictionary: the standard CiA-301/402 objects
-(:func:`drives.canopen.dictionary.standard_dictionary`), or the drive's own EDS with ``--eds
+(:func:`drives.canopen.service_dictionary.standard_dictionary`), or the drive's own EDS with ``--eds
 FILE``; ``--type`` (:data:`TYPE_NAMES`, :mod:`drives.canopen.sdo_values`) overrides it, and is
 needed to write an object the dictionary does not know.  A read of an unknown object without
 ``--type`` shows its bytes.  Modbus (``--modbus``): the object's register in the register map
@@ -82,8 +82,8 @@ def run_sdo(args: argparse.Namespace) -> int:
 
 def _canopen(address: DriveAddress, index: int, subindex: int, args: argparse.Namespace) -> dict[str, Any]:
     from drives.canopen.client import NodeClient
-    from drives.canopen.dictionary import find_variable, load_dictionary
-    from drives.canopen.od import object_name
+    from drives.canopen.master_dictionary import object_name
+    from drives.canopen.service_dictionary import find_variable, load_dictionary
 
     node_id = address.checked_node_id
     dictionary = load_dictionary(args.eds, node_id)

@@ -1,7 +1,7 @@
 """python-can's floor: the same cycle's frames with nothing but python-can, in a process of its own.
 
 The yardstick of issue 26: what one controller cycle on a CAN bus costs when python-can alone does
-it -- one handle (receive filters on the drives' TPDO COB-IDs, as the controller sets them), the
+it -- one bus handle (receive filters on the drives' TPDO COB-IDs, as the controller sets them), the
 project's clock (:class:`~haptic_bus.control.clock.RealClock`, sleep then spin) under the same OS
 settings (:func:`~haptic_bus.app.realtime.realtime_session`), and per cycle: SYNC out, every
 drive's TPDOs of the cycle in, one RPDO per drive out (zero torque, controlword 0: a drive that is

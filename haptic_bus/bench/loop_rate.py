@@ -197,7 +197,7 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
         "links": links,
         "echo_floor": floor,
         "trajectories_identical": {"cycles": cycles, "lockstep_equals_virtual": same},
-        "pdo_codec": {"frames": codec.frames, "hot_path_s": codec.hot_path_s, "generic_s": codec.generic_s,
+        "pdo_codec": {"frames": codec.frames, "hot_path_s": codec.hot_path.median, "generic_s": codec.generic.median,
                       "hot_path": codec.hot_path.to_dict(), "generic": codec.generic.to_dict(),
                       "ratio_generic_over_hot": codec.ratio},
     }

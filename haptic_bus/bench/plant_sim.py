@@ -33,25 +33,21 @@ from haptic_bus.analysis.plant import ExactPlant
 from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import time_per_call
 
-M, B_FRICTION, T = 0.032, 3.62, 1e-3
-K_WALL, B_WALL, WALL_AT, DELAY = 400.0, 1.0, 1e-3, 1
-PUSH, RELEASE_SAMPLE, SAMPLES = 1.0, 250, 400
-
 
 @dataclass(frozen=True)
 class Scenario:
     """The contact run (SI units); see the module docstring."""
 
-    m: float = M
-    b: float = B_FRICTION
-    T: float = T
-    K: float = K_WALL
-    B: float = B_WALL
-    wall_at: float = WALL_AT
-    delay: int = DELAY
-    push: float = PUSH
-    release_sample: int = RELEASE_SAMPLE
-    samples: int = SAMPLES
+    m: float = 0.032  # kg
+    b: float = 3.62  # N s/m
+    T: float = 1e-3  # s
+    K: float = 400.0  # N/m
+    B: float = 1.0  # N s/m
+    wall_at: float = 1e-3  # m
+    delay: int = 1  # samples
+    push: float = 1.0  # N
+    release_sample: int = 250
+    samples: int = 400
 
     @property
     def duration(self) -> float:

@@ -33,6 +33,7 @@ the end of every multisine period the servo rescales it towards the same target;
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -105,27 +106,30 @@ def excursion_per_newton(wave: np.ndarray, period: float, mass: float, hold: Hol
     return float(np.max(np.abs(np.fft.irfft(spectrum * response, wave.size))))
 
 
+@dataclass
 class AmplitudeServo:
     """The multisine's amplitude (N), kept so that the excursion stays inside ``travel`` m.
 
-    Starts at ``start`` N (at most ``ceiling``).  At the end of every multisine period of ``length``
-    cycles the amplitude is scaled by ``TARGET_SHARE travel / peak`` (between 1/2 and 2, the
-    response being nearly proportional to it), unless the guard acted in that period; beyond
+    Starts at ``amplitude`` N (at most ``ceiling`` N).  At the end of every multisine period of
+    ``length`` cycles the amplitude is scaled by ``TARGET_SHARE travel / peak`` (between 1/2 and 2,
+    the response being nearly proportional to it), unless the guard acted in that period; beyond
     ``GUARD_SHARE travel`` it is halved at once (at most once per ``guard_window`` cycles).
     :attr:`left_envelope` is set once the handle is outside the travel.
     """
 
-    def __init__(self, start: float, ceiling: float, travel: float, length: int, guard_window: int) -> None:
-        self.amplitude = min(start, ceiling)
-        self.ceiling = ceiling
-        self.travel = travel
-        self.left_envelope = False
-        self._length = length
-        self._guard_window = guard_window
-        self._peak = 0.0
-        self._steady = True
-        self._count = 0
-        self._guarded_at: int | None = None
+    amplitude: float
+    ceiling: float
+    travel: float
+    length: int
+    guard_window: int
+    left_envelope: bool = field(default=False, init=False)
+    _peak: float = field(default=0.0, init=False)  # m, the largest excursion in this period
+    _steady: bool = field(default=True, init=False)  # no fade in this period
+    _count: int = field(default=0, init=False)  # cycles so far
+    _guarded_at: int | None = field(default=None, init=False)  # the cycle the guard last halved at
+
+    def __post_init__(self) -> None:
+        self.amplitude = min(self.amplitude, self.ceiling)
 
     def update(self, excursion: float, steady: bool = True) -> float:
         """Take this cycle's excursion ``|x - x0|`` (m); return the amplitude (N) for this cycle.
@@ -136,12 +140,12 @@ class AmplitudeServo:
         if excursion > self.travel:
             self.left_envelope = True
         if excursion > GUARD_SHARE * self.travel and (
-                self._guarded_at is None or self._count - self._guarded_at >= self._guard_window):
+                self._guarded_at is None or self._count - self._guarded_at >= self.guard_window):
             self.amplitude *= 0.5
             self._guarded_at = self._count
         self._count += 1
-        if self._count % self._length == 0:
-            guarded = self._guarded_at is not None and self._count - self._guarded_at <= self._length
+        if self._count % self.length == 0:
+            guarded = self._guarded_at is not None and self._count - self._guarded_at <= self.length
             if not guarded and self._steady and self._peak > 0:
                 ratio = min(2.0, max(0.5, TARGET_SHARE * self.travel / self._peak))
                 self.amplitude = min(self.ceiling, self.amplitude * ratio)

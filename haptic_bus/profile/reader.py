@@ -35,8 +35,8 @@ def profile_error(path: pathlib.Path | str, field: str, value: object, allowed: 
 def read_document(path: pathlib.Path) -> dict[str, Any]:
     """The TOML document of a profile file; ParameterError when unreadable or not TOML."""
     try:
-        with open(path, "rb") as handle:
-            return tomllib.load(handle)
+        with open(path, "rb") as file:
+            return tomllib.load(file)
     except OSError as error:
         raise profile_error(path, "profile", str(path), f"a readable file ({error.strerror})") from None
     except tomllib.TOMLDecodeError as error:

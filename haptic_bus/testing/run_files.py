@@ -25,8 +25,8 @@ def read_record_csv(path: str | os.PathLike[str]) -> tuple[list[str], dict[str, 
     """A ``record.csv``: its header, and each column as float64 (exact: the file is written with ``repr``)."""
     import numpy as np
 
-    with pathlib.Path(path).open(newline="") as handle:
-        rows = list(csv.reader(handle))
+    with pathlib.Path(path).open(newline="") as file:
+        rows = list(csv.reader(file))
     header = rows[0]
     body = np.array(rows[1:], dtype=float).reshape(len(rows) - 1, len(header))
     return header, {name: body[:, i] for i, name in enumerate(header)}

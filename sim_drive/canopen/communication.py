@@ -18,6 +18,7 @@ refuse it) and applies it to the running node:
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 
 from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary
@@ -52,30 +53,33 @@ def _refuse() -> SdoAbortedError:
     return SdoAbortedError(SdoAbort.VALUE_RANGE)
 
 
+@dataclass
 class CommunicationObjects:
-    """The running values of the objects in the module table, for one slave."""
+    """The running values of the objects in the module table, for one slave: ``sync_cob`` (0x1005's
+    11-bit id), ``sync_window_us`` (0x1007, us) and ``producer_ms`` (0x1017 as it stands, ms; the
+    EDS value after a reset)."""
 
-    def __init__(self, dictionary: ObjectDictionary, drive: SimulatedDrive, timers: NodeTimers,
-                 emergency: Emergency, node_id: int) -> None:
-        self._od = dictionary
-        self._node_id = node_id
-        self._drive = drive
-        self._timers = timers
-        self._emergency = emergency
-        self.sync_cob = 0
-        self.sync_window_us = 0
-        self._emcy_word = 0
-        self.producer_ms = 0  # 0x1017 as it stands (the EDS value after a reset), ms
+    dictionary: ObjectDictionary
+    drive: SimulatedDrive
+    timers: NodeTimers
+    emergency: Emergency
+    node_id: int
+    sync_cob: int = field(init=False)
+    sync_window_us: int = field(init=False)
+    producer_ms: int = field(init=False)
+    _emcy_word: int = field(init=False)  # 0x1014 as it stands
+
+    def __post_init__(self) -> None:
         self.reset()
 
     def reset(self) -> None:
         """Back to the object dictionary's values (communication reset); the producer is not started.
         An object the dictionary lacks keeps the CiA-301 predefined value (SYNC 0x80, EMCY 0x80 +
         node id) or is off (no heartbeat consumer, no producer, no sync window)."""
-        od = self._od
+        od = self.dictionary
         self.sync_cob = default_int(od, COB_ID_SYNC, absent=SYNC_COB_ID) & COB_ID_MASK
         self.sync_window_us = default_int(od, SYNCHRONOUS_WINDOW_LENGTH, absent=0)
-        self._set_emcy(default_int(od, COB_ID_EMCY_OBJECT, absent=EMCY_BASE + self._node_id))
+        self._set_emcy(default_int(od, COB_ID_EMCY_OBJECT, absent=EMCY_BASE + self.node_id))
         self._consumer(default_int(od, CONSUMER_HEARTBEAT_TIME, 1, absent=0))
         self.producer_ms = default_int(od, PRODUCER_HEARTBEAT_TIME, absent=0)
 
@@ -93,7 +97,7 @@ class CommunicationObjects:
         elif index == COMMUNICATION_CYCLE_PERIOD:
             if value:
                 try:
-                    self._drive.reconfigure(period=value * 1e-6)
+                    self.drive.reconfigure(period=value * 1e-6)
                 except HapticBusError as exc:
                     raise _refuse() from exc
         elif index == SYNCHRONOUS_WINDOW_LENGTH:
@@ -108,15 +112,15 @@ class CommunicationObjects:
             self._consumer(value)
         elif index == PRODUCER_HEARTBEAT_TIME:
             self.producer_ms = value
-            self._timers.start_producer(value / 1000.0, time.monotonic())
+            self.timers.start_producer(value / 1000.0, time.monotonic())
 
     def _set_emcy(self, word: int) -> None:
         self._emcy_word = word
-        self._emergency.enabled = not word & COB_ID_INVALID
-        self._emergency.producer.cob_id = word & COB_ID_MASK
+        self.emergency.enabled = not word & COB_ID_INVALID
+        self.emergency.producer.cob_id = word & COB_ID_MASK
 
     def _consumer(self, entry: int) -> None:
         node, period_ms = entry >> 16 & 0xFF, entry & 0xFFFF
         if node > 127:
             raise _refuse()
-        self._timers.configure_consumer(node or None, period_ms / 1000.0)
+        self.timers.configure_consumer(node or None, period_ms / 1000.0)

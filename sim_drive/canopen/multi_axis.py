@@ -24,7 +24,7 @@ AxisSetup = tuple[int, DeviceParameters, Timing | str]  # node id, plant and sca
 
 class MultiAxisSim:
     """The axes ``axes`` (node id, parameters, timing; in coordinate order) on the bus ``bus`` (the
-    keyword arguments of ``can.Bus``; each node opens its own handle), pushed by ``hand`` (None:
+    keyword arguments of ``can.Bus``; each node opens its own bus handle), pushed by ``hand`` (None:
     nobody).  ``coordinates``: the hand's coordinate of each axis simulated here (default: all of
     them, in order; a hand over more axes than this process simulates sees the others at 0 m).
     ``clock``: "virtual" or "wall" (:mod:`sim_drive.sync_clock`, one clock per node); ``od``: the

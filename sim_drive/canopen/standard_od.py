@@ -43,7 +43,7 @@ from typing import Any
 from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary, import_od
 
-from drives.canopen.od import add_factor_group
+from drives.canopen.master_dictionary import add_factor_group
 from drives.cia402 import SI_UNIT_POSITION, SI_UNIT_VELOCITY
 from drives.factor_group import INCREMENT, METRE, SECOND, FactorGroup, SiUnit, best_ratio, power_of_ten
 from haptic_bus.errors import ParameterError

@@ -1,4 +1,7 @@
-"""Object dictionaries for the CANopen master: the drive's EDS, or the standard one.
+"""The master's object dictionary: the drive's EDS, or the minimal standard one.
+
+(The ``sdo`` service command's dictionary, with more CiA-301 objects and a user's EDS checked
+before a bus is opened, is :mod:`drives.canopen.service_dictionary`.)
 
 The master needs an object dictionary for names in error messages and for canopen's generic
 PDO path (used by the benchmark); what the drive itself has is read from the drive
@@ -38,8 +41,9 @@ def load_object_dictionary(eds: str | os.PathLike | od.ObjectDictionary | None, 
     return canopen.import_od(os.fspath(eds), node_id)
 
 
-def _variable(name: str, index: int, subindex: int, data_type: int, access: str, mappable: bool = False,
+def new_variable(name: str, index: int, subindex: int, data_type: int, access: str, mappable: bool = False,
               default: int | None = None) -> od.ODVariable:
+    """A dictionary entry: ``data_type`` a canopen type code, ``access`` "ro"/"rw"/"const"."""
     var = od.ODVariable(name, index, subindex)
     var.data_type = data_type
     var.access_type = access
@@ -51,31 +55,31 @@ def _variable(name: str, index: int, subindex: int, data_type: int, access: str,
 def _pdo_records(dictionary: od.ObjectDictionary, com_base: int, map_base: int, kind: str) -> None:
     for n in range(4):
         com = od.ODRecord(f"{kind}{n + 1} communication parameter", com_base + n)
-        com.add_member(_variable("Highest sub-index supported", com_base + n, 0, od.UNSIGNED8, "const", default=5))
-        com.add_member(_variable("COB-ID", com_base + n, 1, od.UNSIGNED32, "rw"))
-        com.add_member(_variable("Transmission type", com_base + n, 2, od.UNSIGNED8, "rw"))
-        com.add_member(_variable("Inhibit time", com_base + n, 3, od.UNSIGNED16, "rw"))
-        com.add_member(_variable("Event timer", com_base + n, 5, od.UNSIGNED16, "rw"))
+        com.add_member(new_variable("Highest sub-index supported", com_base + n, 0, od.UNSIGNED8, "const", default=5))
+        com.add_member(new_variable("COB-ID", com_base + n, 1, od.UNSIGNED32, "rw"))
+        com.add_member(new_variable("Transmission type", com_base + n, 2, od.UNSIGNED8, "rw"))
+        com.add_member(new_variable("Inhibit time", com_base + n, 3, od.UNSIGNED16, "rw"))
+        com.add_member(new_variable("Event timer", com_base + n, 5, od.UNSIGNED16, "rw"))
         dictionary.add_object(com)
         mapping = od.ODRecord(f"{kind}{n + 1} mapping parameter", map_base + n)
-        mapping.add_member(_variable("Number of mapped objects", map_base + n, 0, od.UNSIGNED8, "rw"))
+        mapping.add_member(new_variable("Number of mapped objects", map_base + n, 0, od.UNSIGNED8, "rw"))
         for sub in range(1, 9):
-            mapping.add_member(_variable(f"Mapped object {sub}", map_base + n, sub, od.UNSIGNED32, "rw"))
+            mapping.add_member(new_variable(f"Mapped object {sub}", map_base + n, sub, od.UNSIGNED32, "rw"))
         dictionary.add_object(mapping)
 
 
 def minimal_cia402_od() -> od.ObjectDictionary:
     """A minimal object dictionary: CiA-301 communication objects plus drives.cia402.OBJECTS."""
     dictionary = od.ObjectDictionary()
-    dictionary.add_object(_variable("Device type", 0x1000, 0, od.UNSIGNED32, "ro"))
-    dictionary.add_object(_variable("Error register", 0x1001, 0, od.UNSIGNED8, "ro"))
-    dictionary.add_object(_variable("Communication cycle period", 0x1006, 0, od.UNSIGNED32, "rw"))
-    dictionary.add_object(_variable("Producer heartbeat time", 0x1017, 0, od.UNSIGNED16, "rw"))
+    dictionary.add_object(new_variable("Device type", 0x1000, 0, od.UNSIGNED32, "ro"))
+    dictionary.add_object(new_variable("Error register", 0x1001, 0, od.UNSIGNED8, "ro"))
+    dictionary.add_object(new_variable("Communication cycle period", 0x1006, 0, od.UNSIGNED32, "rw"))
+    dictionary.add_object(new_variable("Producer heartbeat time", 0x1017, 0, od.UNSIGNED16, "rw"))
     _pdo_records(dictionary, 0x1400, 0x1600, "RPDO")
     _pdo_records(dictionary, 0x1800, 0x1A00, "TPDO")
     for spec in OBJECTS.values():
         dictionary.add_object(
-            _variable(spec.name, spec.index, spec.subindex, _CANOPEN_TYPE[spec.data_type], spec.access, mappable=True)
+            new_variable(spec.name, spec.index, spec.subindex, _CANOPEN_TYPE[spec.data_type], spec.access, mappable=True)
         )
     add_factor_group(dictionary)
     return dictionary
@@ -89,15 +93,15 @@ def add_factor_group(dictionary: od.ObjectDictionary, values: Mapping[tuple[int,
     for spec in UNIT_OBJECTS:
         if values is None or (spec.index, 0) in values:
             default = None if values is None else values[spec.index, 0]
-            dictionary.add_object(_variable(spec.name, spec.index, 0, _CANOPEN_TYPE[spec.data_type], access, default=default))
+            dictionary.add_object(new_variable(spec.name, spec.index, 0, _CANOPEN_TYPE[spec.data_type], access, default=default))
     for ratio in RATIO_OBJECTS:
         if values is not None and (ratio.index, 1) not in values:
             continue
         array = od.ODArray(ratio.name, ratio.index)
-        array.add_member(_variable("Highest sub-index supported", ratio.index, 0, od.UNSIGNED8, "const", default=2))
+        array.add_member(new_variable("Highest sub-index supported", ratio.index, 0, od.UNSIGNED8, "const", default=2))
         for subindex, name in ((1, ratio.numerator), (2, ratio.denominator)):
             default = None if values is None else values[ratio.index, subindex]
-            array.add_member(_variable(name, ratio.index, subindex, _CANOPEN_TYPE[ratio.data_type], access, default=default))
+            array.add_member(new_variable(name, ratio.index, subindex, _CANOPEN_TYPE[ratio.data_type], access, default=default))
         dictionary.add_object(array)
 
 

@@ -1,7 +1,7 @@
-"""The object dictionary a service tool names objects and types from: the user's EDS, or the standard one.
+"""The service tools' object dictionary (``haptic-bus sdo``): the user's EDS, or the standard one.
 
 Without an EDS, :func:`standard_dictionary` is the master's minimal CiA-402 dictionary
-(:func:`drives.canopen.od.minimal_cia402_od`) plus the CiA-301 objects a person reads on any
+(:func:`drives.canopen.master_dictionary.minimal_cia402_od`) plus the CiA-301 objects a person reads on any
 node: the pre-defined error field 0x1003, the SYNC and EMCY objects, the device name and
 versions (0x1008-0x100A), the heartbeat consumer 0x1016 and the identity 0x1018.  With one, the
 EDS (or DCF) is the drive's own dictionary, whatever its vendor: its names, types and limits.
@@ -14,7 +14,7 @@ import os
 import canopen
 from canopen import objectdictionary as od
 
-from drives.canopen.od import _variable, minimal_cia402_od
+from drives.canopen.master_dictionary import minimal_cia402_od, new_variable
 from drives.cia301 import (
     COB_ID_EMCY,
     COB_ID_SYNC,
@@ -34,8 +34,8 @@ _IDENTITY_FIELDS = ("Vendor-ID", "Product code", "Revision number", "Serial numb
 def _array(index: int, count_name: str, entry_name: str, access: str) -> od.ODArray:
     """An ARRAY of UNSIGNED32 entries (canopen makes sub-indices 2..255 from sub 1)."""
     array = od.ODArray(COMMUNICATION_OBJECT_NAMES[index], index)
-    array.add_member(_variable(count_name, index, 0, od.UNSIGNED8, access))
-    array.add_member(_variable(entry_name, index, 1, od.UNSIGNED32, access))
+    array.add_member(new_variable(count_name, index, 0, od.UNSIGNED8, access))
+    array.add_member(new_variable(entry_name, index, 1, od.UNSIGNED32, access))
     return array
 
 
@@ -43,15 +43,15 @@ def standard_dictionary() -> od.ObjectDictionary:
     """The standard CiA-301/402 objects (module docstring)."""
     dictionary = minimal_cia402_od()
     for index in (COB_ID_SYNC, SYNCHRONOUS_WINDOW_LENGTH, COB_ID_EMCY):
-        dictionary.add_object(_variable(COMMUNICATION_OBJECT_NAMES[index], index, 0, od.UNSIGNED32, "rw"))
+        dictionary.add_object(new_variable(COMMUNICATION_OBJECT_NAMES[index], index, 0, od.UNSIGNED32, "rw"))
     for index, name in _DEVICE_STRINGS.items():
-        dictionary.add_object(_variable(name, index, 0, od.VISIBLE_STRING, "const"))
+        dictionary.add_object(new_variable(name, index, 0, od.VISIBLE_STRING, "const"))
     dictionary.add_object(_array(PRE_DEFINED_ERROR_FIELD, "Number of errors", "Standard error field", "ro"))
     dictionary.add_object(_array(CONSUMER_HEARTBEAT_TIME, "Highest sub-index supported", "Consumer heartbeat time", "rw"))
     identity = od.ODRecord(COMMUNICATION_OBJECT_NAMES[IDENTITY], IDENTITY)
-    identity.add_member(_variable("Highest sub-index supported", IDENTITY, 0, od.UNSIGNED8, "const"))
+    identity.add_member(new_variable("Highest sub-index supported", IDENTITY, 0, od.UNSIGNED8, "const"))
     for subindex, name in enumerate(_IDENTITY_FIELDS, 1):
-        identity.add_member(_variable(name, IDENTITY, subindex, od.UNSIGNED32, "ro"))
+        identity.add_member(new_variable(name, IDENTITY, subindex, od.UNSIGNED32, "ro"))
     dictionary.add_object(identity)
     return dictionary
 
