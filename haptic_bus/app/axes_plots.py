@@ -33,6 +33,8 @@ def motion_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     size = points.shape[1]
     if size <= 2:
         return origin, np.eye(size)[:2] if size == 2 else np.array([[1.0], [0.0]])
+    if points.shape[0] < 2:  # one position (a one-cycle run) spans no direction: the first two axes' plane
+        return origin, np.eye(size)[:2]
     _, _, directions = np.linalg.svd(points - origin, full_matrices=False)
     return origin, directions[:2]
 

@@ -58,8 +58,10 @@ class PreflightReport:
     cycle's exchange with the drive (s, SYNC out to RPDO out); ``longest_gap``: the longest time
     between two cycle starts (s: what the drive went without a SYNC); ``overruns``: cycles started
     more than ``T`` late; ``observed_delay``: the gate's delay plus the p99 lateness (samples);
-    ``passive_at_observed``: the gate's verdict there; ``watchdog``: the shortest stall (s) that
-    faults the drive (inf: none); ``holdable``: False refuses the run, ``reason`` says why;
+    ``passive_at_observed``: the gate's verdict there (None: not judged, the timing alone refuses the
+    run; at the delay of a machine far behind, hundreds of samples, the coupled gate takes minutes);
+    ``watchdog``: the shortest stall (s) that faults the drive (inf: none); ``holdable``: False
+    refuses the run, ``reason`` says why;
     ``smallest_period``: the shortest ``T`` (s) this machine holds (the busy time's, or the
     watchdog's where a stall binds; None where no ``T`` holds the stall measured)."""
 
@@ -70,7 +72,7 @@ class PreflightReport:
     longest_gap: float
     overruns: int
     observed_delay: float
-    passive_at_observed: bool
+    passive_at_observed: bool | None
     watchdog: float
     holdable: bool
     reason: str
@@ -140,12 +142,11 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     late, cycle = percentiles(timing.lateness), percentiles(timing.exchange)
     gap = float(np.max(np.diff(timing.starts))) if timing.starts.size > 1 else period
     observed = assumed_delay + late["p99"] / period
-    passive = passes_at(observed)
     busy = busy_times(timing)
     holds = _on_grid(STALL_MARGIN * float(np.percentile(busy, 99))) if busy.size else period
     overlong = int(np.count_nonzero(busy > period))
 
-    def report(holdable: bool, reason: str, smallest: float | None = holds) -> PreflightReport:
+    def report(holdable: bool, reason: str, smallest: float | None = holds, passive: bool | None = None) -> PreflightReport:
         if not holdable and smallest is not None:
             reason += f": this machine holds T >= {smallest * 1e3:g} ms"
         return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, observed, passive,
@@ -165,13 +166,14 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
             where = f" (RPDO deadline {deadline_periods} periods)"
         return report(False, f"refused: a gap of {gap * 1e3:.3g} ms between cycles measured, x{STALL_MARGIN:g}, reaches "
                              f"the drive's watchdog of {watchdog * 1e3:.3g} ms: the drive would fault{where}", smallest)
-    if passive:
-        return report(True, f"the gate passes the scene at the measured loop delay of {observed:.3g} samples")
+    if passes_at(observed):  # judged only for a timing the machine holds (its cost grows with the delay)
+        return report(True, f"the gate passes the scene at the measured loop delay of {observed:.3g} samples",
+                      passive=True)
     if layer != "off":
         return report(True, f"the scene is not passive at the measured loop delay of {observed:.3g} samples; the "
-                            f"passivity layer ({layer}) holds the port passive and may lower the force")
+                            f"passivity layer ({layer}) holds the port passive and may lower the force", passive=False)
     return report(False, f"refused: the scene is not passive at the measured loop delay of {observed:.3g} samples "
-                         f'and [passivity] layer = "off"; use layer "guard" or "bound", or a longer T', None)
+                         f'and [passivity] layer = "off"; use layer "guard" or "bound", or a longer T', None, False)
 
 
 def busy_times(timing: Timing) -> np.ndarray:

@@ -106,12 +106,12 @@ class Writer:
     def close(self) -> dict[str, Any]:
         """A last drain, every file closed, the view left showing the end; what was written and lost."""
         self.flush()
+        if self.view is not None:  # its last panel reads the rings: before the records let them go
+            self.view.__exit__()
         for _, record in self.records:
             record.close()
         if self.bus_log is not None:
             self.bus_log.close()
-        if self.view is not None:
-            self.view.__exit__()
         stats: dict[str, Any] = {"records": {record.path.name: {"rows_written": record.written, "rows_lost": record.lost}
                                              for _, record in self.records}}
         if self.bus_log is not None:

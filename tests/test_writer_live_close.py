@@ -1,0 +1,48 @@
+"""The writer process' end with a live view on a terminal: the view's last panel reads the rings, so
+it must be drawn before the records let their rings go.  Drawn after (as it was), every run on a
+terminal ended with "ValueError: operation forbidden on released memoryview object" in the writer,
+an ERROR line, ``run.json`` saying 0 rows written and no ``bus.asc`` among its files."""
+
+from __future__ import annotations
+
+import io
+import multiprocessing
+import os
+import pathlib
+import pty
+import sys
+
+import pytest
+
+from haptic_bus.app.writer_process import Writer
+from haptic_bus.control.record import COLUMNS, RunRecord
+
+ROWS = 3
+
+
+def test_a_writer_with_a_terminal_view_closes_with_every_row_counted(tmp_path: pathlib.Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    master, slave = pty.openpty()  # a real terminal: the view takes rich's Live panel
+    terminal = io.TextIOWrapper(io.FileIO(slave, "w", closefd=False), write_through=True)
+    monkeypatch.setattr(sys, "stderr", terminal)
+    ours, theirs = multiprocessing.get_context("spawn").Pipe()
+    record = RunRecord(16, shared=True)
+    try:
+        for k in range(ROWS):
+            record.append(*([k * 1e-3] + [0.0] * (len(COLUMNS) - 1)))
+        writer = Writer(tmp_path, theirs)
+        writer.handle(("record", "record.csv", record.spec, "x"))
+        assert ours.recv() == ("attached", "record.csv")
+        writer.handle(("live", "run", 1e-3, 1.0))
+        writer.handle(("stop",))
+        stats = writer.close()
+    finally:
+        record.unlink()
+        record.close()
+        ours.close()
+        theirs.close()
+        terminal.close()
+        os.close(slave)
+        os.close(master)
+    assert stats == {"records": {"record.csv": {"rows_written": ROWS, "rows_lost": 0}}}
+    assert len((tmp_path / "record.csv").read_text().splitlines()) == 1 + ROWS  # the header and each row
