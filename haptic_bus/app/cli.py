@@ -349,7 +349,8 @@ def build_parser() -> argparse.ArgumentParser:
     upload.add_argument("--object", type=int, required=True, help="scene object index (0x2100 + index)")
     upload.add_argument("--stiffness", type=float, required=True, help="K, N/m")
     upload.add_argument("--damping", type=float, required=True, help="B, N s/m")
-    upload.add_argument("--timeout", type=timeout, default=1.0, help="SDO timeout, s")
+    upload.add_argument("--timeout", type=timeout, default=1.0,
+                        help="SDO timeout, s (the commit waits for the gate's verdict, at least 30 s)")
 
     from haptic_bus.app.profiles_cli import add_profiles_parser
 
