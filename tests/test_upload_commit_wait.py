@@ -47,3 +47,32 @@ def test_a_commit_answered_after_the_sdo_timeout_is_still_the_upload_accepted() 
     assert verdict == "accepted: worst margin 11.09 N s/m"
     assert len(committed) == 1  # one commit: the client neither gave up nor sent it twice
     assert committed[0] - started >= VERDICT_AFTER
+
+
+def test_a_commit_answered_is_accepted_when_the_verdict_cannot_be_read_any_more() -> None:
+    # the run ends between its answer to the commit and the client's read of 0x2002: the node no
+    # longer answers (here: answers only after 2.5 s, past the client's 1 s and its one retry)
+    channel = f"upload-ended-{uuid.uuid4().hex}"
+    bus: dict[str, Any] = {"interface": "virtual", "channel": channel}
+    network = canopen.Network(open_bus(**bus))
+    network.connect()
+    try:
+        node = network.create_node(NODE, controller_dictionary(["end-stop"]))
+        node.sdo[OBJECT_COUNT].raw = 1
+        committed = False
+
+        def on_write(index: int, subindex: int, od: object, data: bytes) -> None:
+            nonlocal committed
+            committed = committed or index == COMMIT
+
+        def on_read(index: int, subindex: int, od: object) -> object:
+            if index == LAST_RESULT and committed:
+                time.sleep(2.5)
+            return None  # the dictionary's own value
+
+        node.add_write_callback(on_write)
+        node.add_read_callback(on_read)
+        verdict = upload_walls(bus, NODE, {0: (1200.0, 9.0)}, timeout=1.0)
+    finally:
+        network.disconnect()
+    assert committed and verdict == "accepted (the run ended before its margin could be read)"
