@@ -36,6 +36,16 @@ class SdoAccess:
         node.sdo.RESPONSE_TIMEOUT = timeout
 
     @contextmanager
+    def waiting(self, timeout: float) -> Iterator[None]:
+        """Meanwhile ``timeout`` s for each answer (a download the device answers once it has acted on it)."""
+        before = self.timeout
+        self.timeout = self.node.sdo.RESPONSE_TIMEOUT = timeout
+        try:
+            yield
+        finally:
+            self.timeout = self.node.sdo.RESPONSE_TIMEOUT = before
+
+    @contextmanager
     def translated(self, what: str, index: int, subindex: int) -> Iterator[None]:
         """Run a canopen SDO operation on ``index:subindex``; re-raise its errors as ours."""
         self._before()

@@ -116,9 +116,12 @@ def _plot(args: argparse.Namespace) -> int:
 
     run = read_run_folder(args.run_dir)
     if not run.drawable:
+        status, error = run.document.get("status"), run.document.get("error")
+        said = f"run.json says {status!r}" + (f", {error}" if error else "")
+        if status == "running":
+            said += ": the run was killed or crashed before its first cycle"
         raise ParameterError("RUN_DIR", str(run.path), "a run folder with cycles recorded in every record, or the loop "
-                             f"its gate judged (this run has neither: run.json says {run.document.get('status')!r}, "
-                             f"{run.document.get('error')!r})", "plot")
+                             f"its gate judged (this run has neither: {said})", "plot")
     out = writable_folder("--out", pathlib.Path(args.out) if args.out else run.path, context="plot")
     for note in run.notes():
         print(f"note: {note}")
@@ -349,7 +352,8 @@ def build_parser() -> argparse.ArgumentParser:
     upload.add_argument("--object", type=int, required=True, help="scene object index (0x2100 + index)")
     upload.add_argument("--stiffness", type=float, required=True, help="K, N/m")
     upload.add_argument("--damping", type=float, required=True, help="B, N s/m")
-    upload.add_argument("--timeout", type=timeout, default=1.0, help="SDO timeout, s")
+    upload.add_argument("--timeout", type=timeout, default=1.0,
+                        help="SDO timeout, s (the commit waits for the gate's verdict, at least 30 s)")
 
     from haptic_bus.app.profiles_cli import add_profiles_parser
 

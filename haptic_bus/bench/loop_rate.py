@@ -42,7 +42,7 @@ PROFILE = "cia402-handle"
 NODE_ID = 5
 FLOOR_RATIO_TARGET = 1.5
 ECHO_CYCLES = 4_000  # cycles a run against the echo floor: the lock-step drive idles through each echo run, and its
-# RPDO deadline (1 s of wall clock in virtual time, drives.safety.VIRTUAL_TIME_DEADLINE) must not expire meanwhile
+# RPDO deadline (2 s of wall clock in virtual time, drives.safety.VIRTUAL_TIME_DEADLINE) must not expire meanwhile
 TRAJECTORY = ("time_s", "position_m", "velocity_m_per_s", "force_n", "torque_permille", "energy_j", "scene_id", "scale")
 
 

@@ -1,0 +1,78 @@
+"""``haptic-bus upload``'s commit waits for the gate's verdict, not the 1 s of the other transfers.
+
+A three-axis run's coupled gate took 3-8 s in the judge process on a loaded machine: the client
+timed out on the commit ("no SDO answer writing 0x2001:00 within 1 s", exit 1) while the run
+adopted the upload.  Here the controller's own object dictionary is served by a canopen LocalNode on
+python-can's virtual bus whose commit answers 1.5 s late (its SDO server answers a download after
+the write callback returns): the upload must come back accepted.
+"""
+
+from __future__ import annotations
+
+import time
+import uuid
+from typing import Any
+
+import canopen
+
+from drives.bus_config import open_bus
+from haptic_bus.node.controller_node import COMMIT, LAST_RESULT, OBJECT_COUNT, controller_dictionary
+from haptic_bus.node.upload import upload_walls
+
+NODE = 42
+VERDICT_AFTER = 1.5  # s: longer than the client's 1 s SDO timeout, well inside its 30 s wait for a verdict
+
+
+def test_a_commit_answered_after_the_sdo_timeout_is_still_the_upload_accepted() -> None:
+    channel = f"upload-wait-{uuid.uuid4().hex}"
+    bus: dict[str, Any] = {"interface": "virtual", "channel": channel}
+    network = canopen.Network(open_bus(**bus))
+    network.connect()
+    try:
+        node = network.create_node(NODE, controller_dictionary(["end-stop"]))
+        node.sdo[OBJECT_COUNT].raw = 1
+        node.sdo[LAST_RESULT].raw = "accepted: worst margin 11.09 N s/m"
+        committed: list[float] = []
+
+        def on_write(index: int, subindex: int, od: object, data: bytes) -> None:
+            if index == COMMIT:
+                time.sleep(VERDICT_AFTER)  # the judge at work: the download's answer waits for it
+                committed.append(time.monotonic())
+
+        node.add_write_callback(on_write)
+        started = time.monotonic()
+        verdict = upload_walls(bus, NODE, {0: (1200.0, 9.0)}, timeout=1.0)
+    finally:
+        network.disconnect()
+    assert verdict == "accepted: worst margin 11.09 N s/m"
+    assert len(committed) == 1  # one commit: the client neither gave up nor sent it twice
+    assert committed[0] - started >= VERDICT_AFTER
+
+
+def test_a_commit_answered_is_accepted_when_the_verdict_cannot_be_read_any_more() -> None:
+    # the run ends between its answer to the commit and the client's read of 0x2002: the node no
+    # longer answers (here: answers only after 2.5 s, past the client's 1 s and its one retry)
+    channel = f"upload-ended-{uuid.uuid4().hex}"
+    bus: dict[str, Any] = {"interface": "virtual", "channel": channel}
+    network = canopen.Network(open_bus(**bus))
+    network.connect()
+    try:
+        node = network.create_node(NODE, controller_dictionary(["end-stop"]))
+        node.sdo[OBJECT_COUNT].raw = 1
+        committed = False
+
+        def on_write(index: int, subindex: int, od: object, data: bytes) -> None:
+            nonlocal committed
+            committed = committed or index == COMMIT
+
+        def on_read(index: int, subindex: int, od: object) -> object:
+            if index == LAST_RESULT and committed:
+                time.sleep(2.5)
+            return None  # the dictionary's own value
+
+        node.add_write_callback(on_write)
+        node.add_read_callback(on_read)
+        verdict = upload_walls(bus, NODE, {0: (1200.0, 9.0)}, timeout=1.0)
+    finally:
+        network.disconnect()
+    assert committed and verdict == "accepted (the run ended before its margin could be read)"
