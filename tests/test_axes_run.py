@@ -36,12 +36,12 @@ import numpy as np
 import pytest
 
 from drives.cia402 import State
-from haptic_bus.app.axes_demo import contact, run_axes_demo
 from haptic_bus.app.axes_profile import load_axes_profile
-from haptic_bus.app.axes_runner import run_axes_canopen
 from haptic_bus.app.cli import main
+from haptic_bus.app.demo import run_demo
 from haptic_bus.app.rig import simulated_axes_device
-from haptic_bus.app.runner import RunOptions
+from haptic_bus.app.runner import RunOptions, run
+from haptic_bus.app.steady_state import contact
 from tests.cli_process import cli_process, reaped
 
 START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen and judge the profile first
@@ -70,7 +70,7 @@ def records(folder: pathlib.Path) -> dict[str, np.ndarray]:
 
 def test_the_demo_renders_a_ball_a_block_and_a_slope_with_k_times_the_penetration(tmp_path: pathlib.Path) -> None:
     profile = load_axes_profile("gantry-3d")
-    result = run_axes_demo(tmp_path / "demo", profile, seconds=12.0)
+    result = run_demo(tmp_path / "demo", profile, seconds=12.0)
     assert result.summary.exit_reason == "completed" and result.summary.cycles == 6000
     assert [s.obj for s in result.steady] == ["ball", "block", "slope"]
     assert [s.torques for s in result.steady] == [(0, 600, 0), (600, 0, 0), (-400, -400, -200)]
@@ -113,7 +113,7 @@ def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
     assert "ended: completed" in out and code == 0, log
     assert "node 6: stopped after" in log
     one = tmp_path / "one"
-    demo = run_axes_demo(one, load_axes_profile(profile_path), seconds=4.0, plots=False)  # the lock-step bus, one process
+    demo = run_demo(one, load_axes_profile(profile_path), seconds=4.0, plots=False)  # the lock-step bus, one process
     assert demo.summary.exit_reason == "completed", demo.summary.error
     assert not (tmp_path / "two" / "trajectory.png").exists() and not (one / "trajectory.png").exists()  # no plots asked
     two, alone = records(tmp_path / "two"), records(one)
@@ -160,7 +160,7 @@ def test_a_start_inside_an_object_is_refused_with_nothing_enabled(tmp_path: path
     channel = f"inside-{tmp_path.name}"
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}).start()
     try:
-        result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
+        result = run(profile, {"interface": "lockstep", "channel": channel},
                                   RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False))
         assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED] * 3
     finally:
@@ -177,7 +177,7 @@ def test_a_start_inside_an_object_ramps_the_force_in_once_the_coupled_gate_prove
     channel = f"ramp-{tmp_path.name}"
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}).start()
     try:
-        result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
+        result = run(profile, {"interface": "lockstep", "channel": channel},
                                   RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False,
                                              start_in_contact="ramp"))
     finally:
@@ -293,7 +293,7 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path) -
     channel = f"real-time-{tmp_path.name}"
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}, clock="wall").start()
     try:
-        result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
+        result = run(profile, {"interface": "lockstep", "channel": channel},
                                   RunOptions(8.0, pacing="wall", out_dir=tmp_path / "run", live=False, plots=False))
     finally:
         sim.stop()
