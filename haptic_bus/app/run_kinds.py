@@ -160,9 +160,10 @@ class OneAxisRun:
 
     @property
     def start_after_preflight(self) -> bool:
-        """False: the position is read before pre-flight (the 1-D simulated operator pushes the
-        unpowered handle, so a position read after pre-flight's 0.5 s is one the run never meant
-        to start from; its tests depend on this order)."""
+        """False: the safe start, the controller, its records and the upload server come before
+        pre-flight, which then measures the cycle after that start-up work (the 1-D simulated
+        operator pushes the unpowered handle: a position read after pre-flight would find it
+        wherever the push took it meanwhile)."""
         return False
 
     def controller(self, drive: Any, gate: PassivityGate, scene: CompiledScene, *, clock: CycleClock | None,
@@ -261,8 +262,9 @@ class AxesRun:
 
     @property
     def start_after_preflight(self) -> bool:
-        """True: every joint's position is read after pre-flight, right before enabling (a real
-        handle lives through pre-flight's SYNCs; the simulated hand pushes only once enabled)."""
+        """True: the safe start (every joint's position) and the set-up after it come after
+        pre-flight, right before enabling (a real handle lives through pre-flight's SYNCs; the
+        simulated hand pushes only once enabled)."""
         return True
 
     def controller(self, drive: Any, gate: SpaceGate, scene: SpaceScene, *, clock: CycleClock | None,

@@ -109,6 +109,9 @@ def _serve(stack: ExitStack, link: NetworkLink, name: str, node_id: int, heartbe
     """The controller as CANopen node ``node_id`` on the drives' own network (one handle, read by the
     control thread): gated uploads of the scene's walls, judged in the judge process."""
     from haptic_bus.node.controller_node import ControllerNode
+    from haptic_bus.node.verdicts import judge_pool
+
+    judge_pool()  # the judge worker started now, before the control thread's real-time session: it keeps its scheduling
 
     def serve(controller: WallController[Any, Any]) -> ControllerNode:
         if link.network is None:

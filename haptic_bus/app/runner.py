@@ -24,9 +24,10 @@ scene or a scene in space).  One run, in order:
    poll measured, :func:`drives.modbus.timing.loop_delay`);
 5. real time only: **pre-flight** (:mod:`~haptic_bus.app.preflight`) runs the cyclic path at zero
    torque, drives not enabled, and judges the gate at the delay it measured;
-6. **safe start** (for one axis before pre-flight, step 5: :attr:`~haptic_bus.app.run_kinds.RunKind.start_after_preflight`):
-   the handle's position is read right before enabling (after pre-flight, whose SYNCs a real
-   handle lives through); inside an object the run is refused (:class:`Refusal`, the
+6. **safe start** (for one axis, with step 7, before pre-flight, which then measures the cycle
+   after that start-up work: :attr:`~haptic_bus.app.run_kinds.RunKind.start_after_preflight`):
+   the handle's position is read right before enabling (for several axes after pre-flight, whose
+   SYNCs a real handle lives through); inside an object the run is refused (:class:`Refusal`, the
    drives never enabled), or with ``in_contact = "ramp"`` the force rises from 0 over the ramp
    time (along each contact normal for several axes) once the gate has proven every scaled wall
    passive;
@@ -76,6 +77,8 @@ from haptic_bus.errors import DriveError, DriveFault, ParameterError, Refusal
 
 if TYPE_CHECKING:
     import can
+
+    from haptic_bus.node.controller_node import ControllerNode
 
 logger = logging.getLogger(__name__)
 
@@ -158,12 +161,11 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             drive, gate, serve = rig.open(stack, writer.tap)
             kind.describe_gate(gate, extra)
             scene = kind.scene()
-            with control_thread_scheduling(options) as scheduling:
-                extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
-                start = None if kind.start_after_preflight else _safe_start(kind, drive, gate, scene, options)
-                if options.wall_paced:
-                    _preflight(kind, rig, drive, gate, scene, options, extra)
-                origin, ramp_time = start or _safe_start(kind, drive, gate, scene, options)
+
+            def ready() -> tuple[WallController[Any, Any], ControllerNode | None]:
+                """Safe start, the controller, its records streamed, the upload server: all but enabling."""
+                nonlocal controller
+                origin, ramp_time = _safe_start(kind, drive, gate, scene, options)
                 extra["start"] = kind.start_extra(origin, ramp_time)
                 clock = RealClock(period, spin=options.scheduling.spin) if options.wall_paced else VirtualClock(period)
                 controller = kind.controller(drive, gate, scene, clock=clock, origin=origin, ramp_time=ramp_time,
@@ -175,13 +177,21 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                 recorder.stream(writer, kind.records(controller), controller.events, kind.scene_dicts(controller),
                                 period, f"haptic-bus run {kind.profile.name}" if options.live else None,
                                 options.duration)
-                node = serve(controller)
+                return controller, serve(controller)
+
+            with control_thread_scheduling(options) as scheduling:
+                extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
+                prepared = None if kind.start_after_preflight else ready()
+                if options.wall_paced:
+                    _preflight(kind, rig, drive, gate, scene, options, extra)
+                    recorder.publish()  # run.json as it stands before the cycles (pre-flight's verdict in it)
+                running, node = prepared or ready()
                 show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
                 # last before the first cycle: every drive in the same cycle, their RPDO deadlines run from here
                 drive.enable()
                 with node.cycling() if node is not None else nullcontext():  # its verdicts answered by the cycle
-                    summary = controller.run(max(1, round(options.duration / period)), options.stop.event,
-                                             on_cycle=node.poll if node is not None else None)
+                    summary = running.run(max(1, round(options.duration / period)), options.stop.event,
+                                          on_cycle=node.poll if node is not None else None)
             reason, error = summary.exit_reason, summary.error
             if reason == "stopped" and options.stop.interrupted:
                 reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr
