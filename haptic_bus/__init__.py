@@ -13,8 +13,12 @@ users write ``haptic_bus.check_passivity(...)``, never a module path::
     #   haptic-bus sim --profile cia402-handle --interface udp_multicast --channel 239.74.163.2 \
     #       --bus-option port=43113 --node-id 5
     bus = {"interface": "udp_multicast", "channel": "239.74.163.2", "port": 43113}  # or an open can.BusABC
-    result = hb.run_canopen(profile, bus, node_id=5, options=hb.RunOptions(duration=1.0, pacing="virtual"))
+    result = hb.run(profile, bus, hb.RunOptions(duration=1.0, pacing="virtual"), node_id=5)
     result.exit_reason, result.summary.cycles, result.folder  # "completed", 1000, runs/<UTC>-cia402-handle
+
+The same ``hb.run`` runs a multi-axis profile (``[[axes]]``, e.g. ``hb.load_any_profile("gantry-3d")``
+against ``haptic-bus sim --node-ids 5,6,7 --profile gantry-3d``: the node ids come from the profile)
+and a Modbus drive (``bus`` a URL, ``"tcp://127.0.0.1:5020"``, with ``unit_id``).
 
 ``pacing="virtual"`` runs in lock-step with a simulated drive (1.0 s of the drive's time);
 ``pacing="wall"`` (the default) keeps the wall clock, as a real drive needs.  The run's
@@ -23,7 +27,7 @@ run never cycled, e.g. a drive whose 0x6076 disagrees with the profile's rated t
 simulator started without ``--profile`` has its own); ``result.controller`` is the :class:`WallController`.
 
 Names load on first use (PEP 562), so ``import haptic_bus`` is cheap and the analysis never
-loads python-can, canopen or pymodbus; the runs (:func:`run_canopen`, :func:`run_modbus`) and the
+loads python-can, canopen or pymodbus; the runs (:func:`run`, :func:`run_canopen`, :func:`run_modbus`) and the
 drive classes (:class:`CanopenDrive`, :class:`ModbusDrive`) do.
 """
 
@@ -57,7 +61,9 @@ _HOMES = {
     "ModbusDrive": "drives.modbus.drive",
     "Profile": "haptic_bus.app.profiles",
     "load_profile": "haptic_bus.app.profiles",
-    "RunOptions": "haptic_bus.app.runner",
+    "load_any_profile": "haptic_bus.app.axes_profile",
+    "RunOptions": "haptic_bus.app.run_options",
+    "run": "haptic_bus.app.runner",
     "RunResult": "haptic_bus.app.runner",
     "run_canopen": "haptic_bus.app.runner",
     "run_modbus": "haptic_bus.app.runner",
@@ -93,7 +99,9 @@ __all__ = [
     "check_passivity",
     "compile_scene",
     "format_check",
+    "load_any_profile",
     "load_profile",
+    "run",
     "run_canopen",
     "run_modbus",
 ]
@@ -118,8 +126,10 @@ if TYPE_CHECKING:
     from drives.modbus.drive import ModbusDrive
     from haptic_bus.analysis.check import CheckReport, check_passivity, format_check
     from haptic_bus.analysis.loop import DeviceLoop, WallLoop
+    from haptic_bus.app.axes_profile import load_any_profile
     from haptic_bus.app.profiles import Profile, load_profile
-    from haptic_bus.app.runner import RunOptions, RunResult, run_canopen, run_modbus
+    from haptic_bus.app.run_options import RunOptions
+    from haptic_bus.app.runner import RunResult, run, run_canopen, run_modbus
     from haptic_bus.control.controller import RunSummary, WallController
     from haptic_bus.control.gate import GateDecision, GatePolicy, PassivityGate
     from haptic_bus.control.scene import Detent, Slot, Wall, compile_scene

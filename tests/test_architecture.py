@@ -335,9 +335,8 @@ def test_one_thread_owns_the_bus_of_a_three_axis_run_and_its_uploads_pass_the_co
     import threading
 
     from haptic_bus.app.axes_profile import load_axes_profile
-    from haptic_bus.app.axes_runner import run_axes_canopen
     from haptic_bus.app.rig import simulated_axes_device
-    from haptic_bus.app.runner import RunOptions
+    from haptic_bus.app.runner import RunOptions, run
     from haptic_bus.errors import Refusal
     from haptic_bus.node.upload import upload_walls
 
@@ -363,7 +362,7 @@ def test_one_thread_owns_the_bus_of_a_three_axis_run_and_its_uploads_pass_the_co
     client = threading.Thread(target=upload, name="test-upload")
     client.start()
     try:
-        result = run_axes_canopen(profile, bus, options)
+        result = run(profile, bus, options)
     finally:
         client.join(timeout=30.0)
         sim.stop()

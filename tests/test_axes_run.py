@@ -37,12 +37,12 @@ import numpy as np
 import pytest
 
 from drives.cia402 import State
-from haptic_bus.app.axes_demo import contact, run_axes_demo
 from haptic_bus.app.axes_profile import load_axes_profile
-from haptic_bus.app.axes_runner import AxesRunResult, run_axes_canopen
 from haptic_bus.app.cli import main
+from haptic_bus.app.demo import run_demo
 from haptic_bus.app.rig import simulated_axes_device
-from haptic_bus.app.runner import RunOptions
+from haptic_bus.app.runner import RunOptions, RunResult, run
+from haptic_bus.app.steady_state import contact
 from tests.cli_process import cli_process, reaped
 
 START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen and judge the profile first
@@ -71,7 +71,7 @@ def records(folder: pathlib.Path) -> dict[str, np.ndarray]:
 
 def test_the_demo_renders_a_ball_a_block_and_a_slope_with_k_times_the_penetration(tmp_path: pathlib.Path) -> None:
     profile = load_axes_profile("gantry-3d")
-    result = run_axes_demo(tmp_path / "demo", profile, seconds=12.0)
+    result = run_demo(tmp_path / "demo", profile, seconds=12.0)
     assert result.summary.exit_reason == "completed" and result.summary.cycles == 6000
     assert [s.obj for s in result.steady] == ["ball", "block", "slope"]
     assert [s.torques for s in result.steady] == [(0, 600, 0), (600, 0, 0), (-400, -400, -200)]
@@ -114,7 +114,7 @@ def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
     assert "ended: completed" in out and code == 0, log
     assert "node 6: stopped after" in log
     one = tmp_path / "one"
-    demo = run_axes_demo(one, load_axes_profile(profile_path), seconds=4.0, plots=False)  # the lock-step bus, one process
+    demo = run_demo(one, load_axes_profile(profile_path), seconds=4.0, plots=False)  # the lock-step bus, one process
     assert demo.summary.exit_reason == "completed", demo.summary.error
     assert not (tmp_path / "two" / "trajectory.png").exists() and not (one / "trajectory.png").exists()  # no plots asked
     two, alone = records(tmp_path / "two"), records(one)
@@ -154,7 +154,7 @@ def test_the_bus_load_refuses_before_the_bus_is_touched_naming_the_smallest_peri
     assert document["exit_reason"] == "refused" and "summary" not in document
 
 
-def run_started_inside_the_ball(tmp_path: pathlib.Path, **options: Any) -> tuple[AxesRunResult, float, list[State]]:
+def run_started_inside_the_ball(tmp_path: pathlib.Path, **options: Any) -> tuple[RunResult, float, list[State]]:
     """A 1 s virtual-time run of gantry-3d whose ball is moved to 5 mm from the start along -y (the
     handle starts inside it), with ``options`` added to its RunOptions: the result, the profile's
     period (s) and each simulated drive's state when the run returned."""
@@ -164,8 +164,8 @@ def run_started_inside_the_ball(tmp_path: pathlib.Path, **options: Any) -> tuple
     channel = f"inside-{tmp_path.name}"
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}).start()
     try:
-        result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
-                                  RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False, **options))
+        result = run(profile, {"interface": "lockstep", "channel": channel},
+                     RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False, **options))
         return result, profile.period, [node.drive.state for node in sim.nodes]
     finally:
         sim.stop()
@@ -292,7 +292,7 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path) -
     channel = f"real-time-{tmp_path.name}"
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}, clock="wall").start()
     try:
-        result = run_axes_canopen(profile, {"interface": "lockstep", "channel": channel},
+        result = run(profile, {"interface": "lockstep", "channel": channel},
                                   RunOptions(8.0, pacing="wall", out_dir=tmp_path / "run", live=False, plots=False))
     finally:
         sim.stop()

@@ -43,7 +43,7 @@ from drives.bus_config import open_bus
 from drives.cia402 import State
 from drives.errors import DriveTimeout
 from haptic_bus.analysis.loop import DeviceLoop
-from haptic_bus.app import runner
+from haptic_bus.app import run_links, runner
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.control.controller import WallController, encoder_origin
 from haptic_bus.control.gate import GatePolicy, PassivityGate
@@ -191,8 +191,8 @@ def test_a_torque_computed_from_a_missed_tpdo_is_a_late_cycle(
 
         monkeypatch.setattr(sim, "sync", sync_then_maybe_short)
         # the master waits out each dropped TPDO: 50 ms (the real-time default), not virtual time's 0.5 s
-        monkeypatch.setattr(runner, "VIRTUAL_TIME_CANOPEN_PATIENCE",
-                            {**runner.VIRTUAL_TIME_CANOPEN_PATIENCE, "tpdo_timeout": 0.05})
+        monkeypatch.setattr(run_links, "VIRTUAL_TIME_CANOPEN_PATIENCE",
+                            {**run_links.VIRTUAL_TIME_CANOPEN_PATIENCE, "tpdo_timeout": 0.05})
         result = run_cli(capsys, "run", str(profile), *drive.args, "--virtual-time", "--no-plots", "--duration", "1",
                          "--out", str(out))
     assert result.code == 3, result.err

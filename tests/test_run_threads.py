@@ -18,8 +18,9 @@ import time
 from typing import Any
 
 from haptic_bus.app.profiles import load_profile
+from haptic_bus.app.run_options import VIRTUAL
 from haptic_bus.app.run_writer import RunWriter
-from haptic_bus.app.runner import VIRTUAL, RunOptions, run_canopen
+from haptic_bus.app.runner import RunOptions, run_canopen
 from haptic_bus.app.writer_process import COMM
 from haptic_bus.bench.thread_tuning import WRITER, ThreadCpu
 

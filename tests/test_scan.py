@@ -22,7 +22,8 @@ from drives.canopen.scan import scan_canopen
 from drives.modbus.scan import scan_modbus
 from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import load_profile
-from haptic_bus.app.runner import RunOptions, RunResult, exit_status, run_canopen
+from haptic_bus.app.run_options import exit_status
+from haptic_bus.app.runner import RunOptions, RunResult, run_canopen
 from haptic_bus.node.controller_node import controller_dictionary
 from haptic_bus.testing.buses import unique_name
 from sim_drive.canopen.slave import CanopenSimDrive

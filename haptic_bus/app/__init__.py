@@ -1,7 +1,7 @@
 """The application: command line, profiles, demo rig, runner, reports and plots -- and the control
 process a run is.
 
-A run (``haptic-bus run``, :func:`haptic_bus.run_canopen`, :func:`haptic_bus.run_modbus`, the
+A run (``haptic-bus run``, :func:`haptic_bus.run` for one axis or several, the
 demo) is one process that cycles, and two children that work out of its way.  In CPython only
 one thread runs Python at a time, so every thread that formats, draws, judges or decodes a frame
 it will throw away holds the cycle up for as long as it runs; the layout below keeps the control

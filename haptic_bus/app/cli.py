@@ -132,21 +132,13 @@ def _plot(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
+    from haptic_bus.app.axes_profile import load_any_profile
     from haptic_bus.app.demo import format_demo, run_demo
 
     profile = load_any_profile(args.profile) if args.profile else None
-    if isinstance(profile, AxesProfile):
-        from haptic_bus.app.axes_demo import format_axes_demo, run_axes_demo
-
-        axes_result = run_axes_demo(args.out, profile, seconds=args.duration, plots=not args.no_plots)
-        print(format_axes_demo(axes_result))
-        reason = axes_result.summary.exit_reason
-    else:
-        result = run_demo(args.out, profile, plots=not args.no_plots) if args.duration is None else \
-            run_demo(args.out, profile, seconds=args.duration, plots=not args.no_plots)
-        print(format_demo(result))
-        reason = result.summary.exit_reason
+    result = run_demo(args.out, profile, seconds=args.duration, plots=not args.no_plots)
+    print(format_demo(result))
+    reason = result.summary.exit_reason
     return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(reason, EXIT_NO)
 
 
@@ -165,42 +157,30 @@ def _validate_run(args: argparse.Namespace) -> DriveAddress:
 
 def _run(args: argparse.Namespace) -> int:
     from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
-    from haptic_bus.app.runner import (
-        DEFAULT_CONTROLLER_NODE_ID,
-        VIRTUAL,
-        WALL,
-        RunOptions,
-        StopRequest,
-        exit_status,
-        run_canopen,
-        run_modbus,
-    )
+    from haptic_bus.app.drive_address import DEFAULT_UNIT_ID
+    from haptic_bus.app.realtime import RealtimeSettings
+    from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
+    from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
+    from haptic_bus.app.runner import run
 
     profile = load_any_profile(args.profile)
-    address = None if isinstance(profile, AxesProfile) else _validate_run(args)
+    bus: Any
+    if isinstance(profile, AxesProfile):  # the node ids come from [[axes]]
+        _refuse_single_axis_options(args)
+        bus, node_id, unit_id = bus_arguments(args), None, DEFAULT_UNIT_ID
+    else:
+        address = _validate_run(args)
+        bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, DEFAULT_UNIT_ID)
+        node_id = None if address.url is not None else address.checked_node_id
     stop = StopRequest()
-    from haptic_bus.app.realtime import RealtimeSettings
-
     out_dir = None if args.out is None else folder_path("--out", args.out, context="run")  # created once the bus is known
     options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
                          scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings(),
                          reset_fault=args.reset_fault, bus_log=not args.no_bus_log, plots=not args.no_plots)
-    if isinstance(profile, AxesProfile):
-        from haptic_bus.app.axes_runner import check_run, run_axes_canopen
-
-        _refuse_single_axis_options(args)
-        controller_node_id = args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID
-        check_run(profile, controller_node_id)
-        stop.install()
-        result: Any = run_axes_canopen(profile, bus_arguments(args), options, controller_node_id)
-    elif address is not None and address.url is not None:
-        stop.install()
-        result = run_modbus(profile, address.url, address.unit_id, options)
-    elif address is not None:
-        stop.install()
-        result = run_canopen(profile, address.bus, address.checked_node_id, options,
-                             args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
+    stop.install()
+    result = run(profile, bus, options, node_id=node_id, unit_id=unit_id,
+                 controller_node_id=args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
     summary = result.summary
     if summary is not None:
         p, late = summary.compute_percentiles, summary.lateness_percentiles

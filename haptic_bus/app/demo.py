@@ -1,126 +1,115 @@
-"""``haptic-bus demo``: the default profile's wall, simulated drive and controller, one process.
+"""``haptic-bus demo``: a profile's scene, simulated drive(s) and controller, one process, one axis or several.
 
-The simulated CiA-402 drive and the controller talk CANopen on the lock-step bus
-(:mod:`drives.lockstep_bus`: one thread, deterministic) in virtual time; an operator pushes
-into the wall.  The demo prints a short summary and records as a run does
-(:mod:`~haptic_bus.app.run_recorder`: ``record.csv`` streamed, ``run.json``, the same pictures
-:mod:`~haptic_bus.app.run_plots` draws for a run), without a bus log (its bus is in-process).
+The simulated drive(s) and the controller talk CANopen on the lock-step bus
+(:mod:`drives.lockstep_bus`: one thread, deterministic) in virtual time; an operator (one axis) or
+a hand in space (several) pushes into the walls.  The demo prints a short summary and records as
+a run does (:mod:`~haptic_bus.app.run_recorder`: every axis' record streamed, ``run.json``, the
+same pictures :mod:`~haptic_bus.app.run_pictures` draws for a run), without a bus log (its bus is
+in-process).  What differs by kind -- the simulator, what is read against its truth, the summary's
+lines -- is in :mod:`~haptic_bus.app.demo_kinds`; the scene, gate and controller come from the
+run's own kinds (:mod:`~haptic_bus.app.run_kinds`).
 """
 
 from __future__ import annotations
 
-import bisect
-import functools
 import pathlib
 from contextlib import ExitStack
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
+from haptic_bus.app.axes_profile import AxesProfile
+from haptic_bus.app.demo_kinds import Findings, demo_kind
 from haptic_bus.app.profiles import Profile, default_profile
-from haptic_bus.app.rig import simulated_canopen
-from haptic_bus.app.run_folder import RECORD_CSV, RunJournal, gate_loop, prepare_run_folder, run_document, scene_dicts
+from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
+from haptic_bus.app.run_kinds import run_kind
 from haptic_bus.app.run_recorder import RunRecorder
-from haptic_bus.control.controller import RunSummary, WallController, encoder_origin
-from haptic_bus.control.gate import GateDecision
-from haptic_bus.control.record import RunRecord
+from haptic_bus.app.steady_state import SteadyState
+from haptic_bus.control.controller import RunSummary, WallController
 
 
 @dataclass
 class DemoResult:
-    """The demo's numbers (SI) and the files it wrote."""
+    """The demo's numbers (SI), what it read against the simulated truth, and the files it wrote."""
 
-    profile: Profile
-    decision: GateDecision
+    profile: Profile | AxesProfile
+    controller: WallController[Any, Any]
     summary: RunSummary
-    penetration: float | None
-    expected_penetration: float | None
-    operator_energy: float
-    port_energy: float
+    findings: Findings
+    lines: list[str]  # the summary's lines of this kind (:func:`format_demo` adds how it ended and the files)
     files: list[pathlib.Path]
 
+    @property
+    def decision(self) -> Any:
+        """The gate's decision on the scene the demo started with."""
+        return self.controller.decision
 
-def run_demo(out_dir: str | pathlib.Path, profile: Profile | None = None, seconds: float = 2.0,
+    @property
+    def operator_energy(self) -> float:
+        """What the operator (or the hand) put in (J, exact, the simulated drives' ledger)."""
+        return self.findings.operator_energy
+
+    @property
+    def port_energy(self) -> float:
+        """The port's energy (J, exact, the simulated drives' ledger)."""
+        return self.findings.port_energy
+
+    @property
+    def penetration(self) -> float | None:
+        """One axis under a constant push: the steady penetration (m), else None."""
+        return self.findings.penetration
+
+    @property
+    def expected_penetration(self) -> float | None:
+        """One axis under a constant push: ``F/K`` (m), else None."""
+        return self.findings.expected_penetration
+
+    @property
+    def steady(self) -> list[SteadyState]:
+        """Several axes: the steady states read at the end of each dwell and at the end (one axis: none)."""
+        return self.findings.steady or []
+
+
+def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None = None, seconds: float | None = None,
              plots: bool = True) -> DemoResult:
-    """Run ``profile`` (default: the shipped default) for ``seconds`` of virtual time; write
-    ``record.csv``, ``run.json`` and (if ``plots``) the pictures to ``out_dir``, whatever ends the
-    run (Ctrl-C too)."""
+    """Run ``profile`` (default: the shipped default) for ``seconds`` of virtual time (None: 2 s for one
+    axis, the hand's whole tour for several); write every axis' record, ``run.json`` and (if
+    ``plots``) the pictures to ``out_dir``, whatever ends the run (Ctrl-C too)."""
     profile = profile or default_profile()
+    kind, demo = run_kind(profile), demo_kind(profile)
     out = prepare_run_folder(out_dir, profile.name)
-    cycles = max(1, round(seconds / profile.loop.period))
-    link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True}
-    extra: dict[str, Any] = {"loop": {"period": profile.loop.period, "timing": profile.loop.timing,
-                                      "delay_assumed": profile.loop.delay}}
-    journal = RunJournal(out, profile, link, extra, run_document)
+    seconds = demo.seconds() if seconds is None else seconds
+    cycles = max(1, round(seconds / kind.period))
+    link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True, **demo.link()}
+    extra: dict[str, Any] = {"loop": kind.loop_extra()}
+    journal = RunJournal(out, profile, link, extra, kind.render)
     journal.write()
     recorder = RunRecorder(out, journal)
     with ExitStack() as stack:
         writer = recorder.start(stack, bus_log=False)  # before the drive is enabled: Ctrl-C from then on is recorded
-        sim, drive = stack.enter_context(simulated_canopen(profile))
-        origin = encoder_origin(drive)
-        scene = profile.compiled_scene()
-        gate = profile.gate()
-        controller = WallController(drive, gate, scene, force_limit=profile.force_limit, origin=origin,
-                                    supervisor=profile.supervisor, passivity=profile.passivity, shared_records=True)
-        extra["gate_loop"] = gate_loop(gate.device)
+        sim, drive = stack.enter_context(demo.simulated())
+        origin = kind.origin(drive)
+        gate, scene = profile.gate(), kind.scene()
+        kind.describe_gate(gate, extra)
+        controller = kind.controller(drive, gate, scene, clock=None, origin=origin)
         journal.controller = controller
-        recorder.stream(writer, [(RECORD_CSV, "", controller.record)], controller.events,
-                        functools.partial(scene_dicts, controller), controller.period)
-        summary = controller.run(cycles)
-        operator_energy = sim.drive.operator_energy
-        # the port's energy as the simulated drive's exact ledger has it: b int v^2 dt minus the motor's work
-        port_energy = scene.stored_energy(origin) + sim.drive.viscous_energy + sim.drive.wall_energy
-    record = controller.record
-    model = profile.operator_model
-    push = model.get("level") if model.get("model") == "constant" else None
-    surfaces = [obj.position for obj in profile.scene if hasattr(obj, "position")]
-    penetration = expected = None
-    contact = _contact_stiffness(controller, record) if record.total else None
-    if isinstance(push, (int, float)) and contact is not None and surfaces:
-        final_x = float(np.mean(record.column("position_m")[-max(1, cycles // 20):]))
-        surface = min(surfaces, key=lambda s: abs(s - final_x))
-        penetration, expected = abs(final_x - surface), abs(push) / contact
-    extra.update(exit_reason=summary.exit_reason, error=summary.error, operator_energy_exact=operator_energy,
-                 port_energy_exact=port_energy)
+        recorder.stream(writer, kind.records(controller), controller.events, kind.scene_dicts(controller), kind.period)
+        demo.enable(drive)
+        summary = controller.run(cycles, on_cycle=demo.on_cycle(sim, cycles, seconds))
+        found = demo.findings(sim, controller, origin, cycles)
+        if summary.exit_reason == "completed":
+            drive.disable()
+    extra.update(exit_reason=summary.exit_reason, error=summary.error, operator_energy_exact=found.operator_energy,
+                 port_energy_exact=found.port_energy)
+    if found.steady is not None:
+        extra["steady_states"] = [dict(vars(s)) for s in found.steady]
     files = recorder.finish(summary, pictures=plots)
-    return DemoResult(profile, controller.decision, summary, penetration, expected, operator_energy, port_energy, files)
-
-
-def _contact_stiffness(controller: WallController, record: RunRecord) -> float | None:
-    """The summed K acting where the handle ended (N/m), or None if nothing acts there."""
-    x = float(record.column("position_m")[-1])
-    scene = controller.scene
-    k = scene.stiffness[bisect.bisect_right(scene.breaks, x)]
-    return k if k > 0 else None
+    return DemoResult(profile, controller, summary, found, list(demo.lines(controller, summary, found)), files)
 
 
 def format_demo(result: DemoResult) -> str:
     """The demo's short summary, one fact a line."""
-    s = result.summary
-    profile = result.profile
-    walls = ", ".join(f"{'+'.join(w.objects)} margin {w.verdict.margin:.3g} N s/m" for w in result.decision.walls)
-    lines = [
-        f"profile: {profile.name} ({profile.loop.timing} timing, delay {profile.loop.delay} sample(s), "
-        f"T = {profile.loop.period * 1e3:g} ms)",
-        f"gate: passed ({walls})" + (f"; warnings: {'; '.join(s.warnings)}" if s.warnings else ""),
-        f"cycles: {s.cycles} in virtual time ({s.clock}); force saturated in {s.saturated_cycles}",
-        f"peak force: {s.peak_force:.4g} N",
-    ]
-    if result.penetration is not None and result.expected_penetration is not None:
-        error = (result.penetration - result.expected_penetration) / result.expected_penetration
-        lines.append(f"steady penetration: {result.penetration * 1e3:.4f} mm vs F/K = "
-                     f"{result.expected_penetration * 1e3:.4f} mm ({error:+.2%})")
-    lines.append(f"energy: operator put in {result.operator_energy * 1e3:.4g} mJ (exact, simulated drive); port: "
-                 f"observer {s.energy * 1e3:.4g} mJ from positions (least {s.least_energy * 1e3:.4g} mJ, counts "
-                 f"rounding within {s.rounding_bound * 1e3:.2g} mJ) vs {result.port_energy * 1e3:.4g} mJ exact "
-                 f"({(s.energy - result.port_energy) / result.port_energy:+.2%})")
-    lines.append(f"passivity layer: {s.layer}, lowered {s.layer_interventions} of {s.cycles} targets")
-    p = s.compute_percentiles
-    if p:
-        lines.append(f"cycle compute, TPDO in to RPDO sent (position, scene, conversion, encode, send): "
-                     f"p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us, max {p['max'] * 1e6:.1f} us")
-    if s.error:
-        lines.append(f"run ended early ({s.exit_reason}): {s.error}")
+    lines = list(result.lines)
+    if result.summary.error:
+        lines.append(f"run ended early ({result.summary.exit_reason}): {result.summary.error}")
     lines.append("wrote: " + ", ".join(str(f) for f in result.files))
     return "\n".join(lines)

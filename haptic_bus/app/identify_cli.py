@@ -70,7 +70,7 @@ def add_identify_parser(subparsers: argparse._SubParsersAction) -> argparse.Argu
 def _validate(args: argparse.Namespace) -> tuple[DriveAddress, pathlib.Path | None]:
     """The drive, and the file --write-profile names; conflicting options and an unwritable
     --write-profile refused before anything is touched."""
-    from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID
+    from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
 
     address = drive_address(args, "identify", ("node_id", "controller_node_id"))
     if not address.modbus and (args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID) == address.node_id:
@@ -90,7 +90,8 @@ def run_identify(args: argparse.Namespace) -> int:
     from haptic_bus.app.identify_profile import write_identified_profile
     from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen, identify_modbus
     from haptic_bus.app.profiles import read_profile
-    from haptic_bus.app.runner import DEFAULT_CONTROLLER_NODE_ID, VIRTUAL, WALL, StopRequest
+    from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
+    from haptic_bus.app.run_options import VIRTUAL, WALL, StopRequest
     from haptic_bus.profile.device import TIMINGS
 
     address, target = _validate(args)

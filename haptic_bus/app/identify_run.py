@@ -32,7 +32,7 @@ from drives.base import Drive, DriveCycle, DriveScaling
 from drives.bus_config import resolve_bus_config
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, patient
 from haptic_bus.app.profiles import Profile
-from haptic_bus.app.runner import EXIT_STATUS, WALL, StopRequest, check_pacing
+from haptic_bus.app.run_options import EXIT_STATUS, WALL, StopRequest, check_pacing
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.errors import DriveError, DriveProtocolError
 from haptic_bus.identify import Identification, Plan, Record, Recorder, Scale, Session, identify

@@ -128,10 +128,15 @@ def judge(timing: Timing, gate: PassivityGate, scene: CompiledScene, layer: str,
     """The verdict on the measured timing (module docstring).  ``watchdog`` (s): the shortest stall
     that faults the drive; ``deadline_periods``: the RPDO deadline in periods when it is the
     binding watchdog (then a longer ``T`` lengthens it), else None."""
-    def passes_at(delay: float) -> bool:
+    return judge_delay(timing, gate.device.delay, passes_at(gate, scene), layer, watchdog, deadline_periods)
+
+
+def passes_at(gate: PassivityGate, scene: CompiledScene) -> Callable[[float], bool]:
+    """The 1-D gate's verdict on ``scene`` at another loop delay (samples), as a function of it."""
+    def passes(delay: float) -> bool:
         return PassivityGate(dataclasses.replace(gate.device, delay=delay), gate.policy).passes(scene)
 
-    return judge_delay(timing, gate.device.delay, passes_at, layer, watchdog, deadline_periods)
+    return passes
 
 
 def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float], bool], layer: str, watchdog: float,

@@ -211,7 +211,7 @@ def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
     start_in_contact=None, reset_fault=False, out_dir=None, plots=False)``: ``haptic-bus run`` in a thread
     (see the module docstring); every run still going is stopped at teardown, before the drives."""
     from haptic_bus.app.profiles import Profile, load_profile
-    from haptic_bus.app.runner import RunOptions, StopRequest
+    from haptic_bus.app.run_options import RunOptions, StopRequest
 
     runs: list[ControllerRun] = []
 

@@ -1,0 +1,284 @@
+"""How a run reaches its drive(s): a :class:`Rig` per link, built before anything is touched.
+
+- :func:`canopen_rig`: one CANopen drive (:class:`drives.canopen.drive.CanopenDrive`);
+- :func:`axes_rig`: several CANopen drives on one SYNC (:class:`drives.canopen.axes.CanopenAxes`),
+  once the profile's axes map 0x6064 and the bus can carry their PDOs (:func:`check_run`,
+  :func:`haptic_bus.control.bus_load.axes_bus_load`);
+- :func:`modbus_rig`: one Modbus drive (:class:`drives.modbus.drive.ModbusDrive`), its gate judged
+  at the loop delay the poll measured (:func:`drives.modbus.timing.loop_delay`).
+
+A rig says what ``run.json``'s ``link`` holds, how to open and commission the drive(s) (with the
+gate and the upload server that go with them), and what the session knows of the drives beside:
+the longest a torque target may be held (s), the shortest stall that faults them (s), the
+address a fault reset reaches, and whether there are CAN frames to log.  Units: s, ms where named.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from collections.abc import Callable, Mapping
+from contextlib import ExitStack
+from typing import TYPE_CHECKING, Any
+
+from drives.bus_config import resolve_bus_config
+from drives.cia402 import State
+from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings, patient
+from haptic_bus.app.axes_profile import AxesProfile
+from haptic_bus.app.drive_address import DriveAddress
+from haptic_bus.app.profiles import Profile
+from haptic_bus.app.run_options import RunOptions
+from haptic_bus.control.bus_load import axes_bus_load
+from haptic_bus.errors import DriveError, ParameterError, Refusal
+
+if TYPE_CHECKING:
+    import can
+
+    from drives.canopen.link import NetworkLink, Tap
+    from drives.cia402_master import Cia402Master
+    from drives.modbus.drive import ModbusDrive
+    from haptic_bus.control.controller import WallController
+    from haptic_bus.node.controller_node import ControllerNode
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_CONTROLLER_NODE_ID = 127
+PROFILE_SCALING_SOURCE = "profile [device]"  # how the profile's scaling values are named in the report
+RUN_MAPPING = "with-position"  # the TPDO mapping a multi-axis run needs: 0x6064 every cycle
+
+Serve = Callable[["WallController[Any, Any]"], "ControllerNode | None"]  # the upload server for a controller (None: none)
+Opened = tuple[Any, Any, Serve]  # the drive(s), their gate, the upload server
+OpenDrive = Callable[[ExitStack, "Tap | None"], Opened]
+
+
+@dataclasses.dataclass(frozen=True)
+class Watchdog:
+    """The shortest stall (s) that faults the drive (inf: none), and the RPDO deadline in periods
+    when that is the binding one (a longer ``T`` lengthens it), else None."""
+
+    stall: float
+    periods: int | None
+
+
+@dataclasses.dataclass
+class Rig:
+    """One run's link: ``link`` (``run.json``'s, completed as the drives are commissioned); ``open``
+    the drive(s), commissioned, with their gate and upload server; ``hold``, the longest a drive
+    may hold one torque target (s, the ``bound`` layer's budget); its ``watchdog`` (pre-flight);
+    ``address`` a fault reset reaches (None: none); ``frames``: whether there are CAN frames to
+    log; ``check``: what refuses the run before any bus is opened (:class:`Refusal`)."""
+
+    link: dict[str, Any]
+    open: OpenDrive
+    hold: float
+    watchdog: Watchdog
+    address: DriveAddress | None
+    frames: bool = False
+    check: Callable[[], None] = lambda: None
+
+
+def longest_hold(period: float, wall_paced: bool, deadline_ms: int, fallback_ms: int) -> float:
+    """How long (s) the drive may hold one torque target before its watchdog removes it: the
+    ``bound`` layer's budget per target.  In virtual time the simulated plant advances one
+    period per SYNC, so a target acts exactly ``period``; wall-paced (``wall_paced``) up to the drive's receive
+    deadline (RPDO deadline, Modbus watchdog; else ``fallback_ms``, the heartbeat consumer) plus
+    the period it was latched for.  With no watchdog at all nothing bounds it: ``inf``."""
+    if not wall_paced:
+        return period
+    watchdog = deadline_ms or fallback_ms
+    return watchdog / 1000.0 + period if watchdog else math.inf
+
+
+def canopen_watchdog(safety: SafetySettings, period: float) -> Watchdog:
+    """The shortest stall that faults a CANopen drive with these settings at period ``period`` s:
+    its RPDO deadline, or the slack its heartbeat consumer leaves over the controller's heartbeat."""
+    deadline = safety.rpdo_deadline_ms(period) / 1000.0 if safety.rpdo_deadline_periods else math.inf
+    slack = (safety.consumer_ms - safety.heartbeat_ms) / 1000.0 if safety.master_node_id is not None else math.inf
+    return Watchdog(min(deadline, slack), safety.rpdo_deadline_periods if deadline <= slack else None)
+
+
+def _canopen_rig(link: dict[str, Any], open_drive: OpenDrive, safety: SafetySettings, period: float,
+                 options: RunOptions, address: DriveAddress | None, check: Callable[[], None] = lambda: None) -> Rig:
+    """A rig of CANopen drive(s) with ``safety`` at ``T = period`` s."""
+    hold = longest_hold(period, options.wall_paced, safety.rpdo_deadline_ms(period), safety.consumer_ms)
+    return Rig(link, open_drive, hold, canopen_watchdog(safety, period), address, frames=True, check=check)
+
+
+def _serve(stack: ExitStack, link: NetworkLink, name: str, node_id: int, heartbeat_ms: int) -> Serve:
+    """The controller as CANopen node ``node_id`` on the drives' own network (one handle, read by the
+    control thread): gated uploads of the scene's walls, judged in the judge process."""
+    from haptic_bus.node.controller_node import ControllerNode
+    from haptic_bus.node.verdicts import judge_pool
+
+    judge_pool()  # the judge worker started now, before the control thread's real-time session: it keeps its scheduling
+
+    def serve(controller: WallController[Any, Any]) -> ControllerNode:
+        if link.network is None:
+            raise DriveError(name, "the CAN network has no bus after connecting")
+        node = ControllerNode(controller, node_id, heartbeat_ms)
+        node.attach(link.network)
+        stack.callback(node.detach)
+        return node
+
+    return serve
+
+
+def canopen_rig(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: int, options: RunOptions,
+                controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID) -> Rig:
+    """CANopen drive ``node_id`` on ``bus`` (python-can keyword arguments, or an open
+    :class:`can.BusABC` the caller owns: the run neither closes it nor sets its filters; then
+    ``reset_fault`` is refused), the controller node ``controller_node_id`` beside it."""
+    import can
+
+    from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
+
+    if not isinstance(bus, (Mapping, can.BusABC)):
+        raise ParameterError("bus", bus, "python-can keyword arguments (a mapping) or an open can.BusABC", "run_canopen")
+    for name, value in (("node_id", node_id), ("controller_node_id", controller_node_id)):
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 127:
+            raise ParameterError(name, value, "a CANopen node id, an integer 1..127", "run_canopen")
+    given = None if isinstance(bus, Mapping) else bus
+    if given is not None and options.reset_fault:
+        raise ParameterError("reset_fault", True, "False with an open bus (the reset needs a bus configuration)",
+                             "run_canopen")
+    config = resolve_bus_config(**bus) if isinstance(bus, Mapping) else \
+        {"interface": type(bus).__name__, "channel": bus.channel_info}  # before any file: an unknown interface is exit 2
+    period = profile.loop.period
+    safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
+    link = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_id": node_id,
+            "controller_node_id": controller_node_id, "upload_server": True, "bus_log": options.bus_log}
+    where = ({"bus": given} if given is not None else
+             {"interface": config["interface"], "channel": config.get("channel"), "bitrate": config.get("bitrate"),
+              "bus_kwargs": {k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")}})
+
+    def open_drive(stack: ExitStack, tap: Tap | None) -> Opened:
+        drive = CanopenDrive(node_id, **where, period=period,
+                             tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling=profile.scaling(),
+                             scaling_source=PROFILE_SCALING_SOURCE,
+                             safety=safety if options.wall_paced else safety.for_virtual_time(period),
+                             **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
+        stack.callback(drive.close)
+        drive.link.tap = tap  # before commissioning: its frames are logged too
+        drive.connect()
+        _show_scaling(drive, options)
+        link["safety_warnings"] = list(drive.safety_warnings)
+        link["pdo_mapping_notes"] = list(drive.commissioned.mapping_notes) if drive.commissioned is not None else []
+        return drive, profile.gate(), _serve(stack, drive.link, drive.name, controller_node_id, safety.heartbeat_ms)
+
+    address = DriveAddress(bus=dict(bus) if isinstance(bus, Mapping) else {}, node_id=node_id)
+    return _canopen_rig(link, open_drive, safety, period, options, address)
+
+
+def check_run(profile: AxesProfile, controller_node_id: int) -> list[int]:
+    """The axes' node ids, once the profile can be run as the controller node ``controller_node_id``;
+    ParameterError (exit 2) naming the field otherwise."""
+    nodes = [axis.node_id for axis in profile.axes]
+    if any(node is None for node in nodes):
+        raise ParameterError("axes[0].unit_id", profile.axes[0].unit_id,
+                             "a node_id per axis: a multi-axis run drives CANopen axes (Modbus axes are not built)",
+                             f"profile {profile.path or profile.name}")
+    for i, axis in enumerate(profile.axes):
+        if axis.mapping != RUN_MAPPING:
+            raise ParameterError(f"axes[{i}].mapping", axis.mapping, f'"{RUN_MAPPING}" for a run: the port observer and '
+                                 "the passivity layer read 0x6064 every cycle", f"profile {profile.path or profile.name}")
+    if controller_node_id in nodes:
+        raise ParameterError("--controller-node-id", controller_node_id, f"a node id none of the axes has ({nodes})")
+    return [node for node in nodes if node is not None]
+
+
+def axes_rig(profile: AxesProfile, bus: can.BusABC | Mapping[str, Any], options: RunOptions,
+             controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID) -> Rig:
+    """The profile's axes on ``bus`` (python-can keyword arguments), one SYNC, the controller node
+    ``controller_node_id`` beside them; the bus load at the bus' bitrate (python-can's, else the
+    profile's ``[bus] bitrate``) checked before any bus is opened (above 70 %: refused)."""
+    from drives.canopen.axes import CanopenAxes
+    from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
+
+    if not isinstance(bus, Mapping):
+        raise ParameterError("bus", bus, "python-can keyword arguments (a mapping) for several axes", "run")
+    if options.reset_fault:
+        raise ParameterError("reset_fault", True, "False with a multi-axis profile (no fault reset for several axes)",
+                             "run")
+    nodes = check_run(profile, controller_node_id)
+    config = resolve_bus_config(**bus)  # before any file: an unknown interface is exit 2
+    period = profile.period
+    safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
+    bitrate = float(config.get("bitrate") or profile.bitrate)
+    link: dict[str, Any] = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_ids": nodes,
+                            "controller_node_id": controller_node_id, "upload_server": True, "bitrate_checked": bitrate}
+
+    def check() -> None:
+        try:
+            load = axes_bus_load([axis.mapping for axis in profile.axes], bitrate, period)
+        except ParameterError as refusal:
+            raise Refusal(f"the bus cannot carry this cycle; allowed: {refusal.allowed}") from None
+        link["bus_load"] = dataclasses.asdict(load)
+
+    def open_drive(stack: ExitStack, tap: Tap | None) -> Opened:
+        axes = CanopenAxes(nodes, scalings=[axis.device.scaling() for axis in profile.axes],
+                           interface=config["interface"], channel=config.get("channel"), bitrate=config.get("bitrate"),
+                           bus_kwargs={k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")},
+                           period=period, tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling_source=PROFILE_SCALING_SOURCE,
+                           safety=safety if options.wall_paced else safety.for_virtual_time(period),
+                           **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
+        stack.callback(axes.close)
+        axes.link.tap = tap  # before commissioning: its frames are logged too
+        axes.connect()
+        link["safety_warnings"] = {drive.name: list(drive.safety_warnings) for drive in axes.drives}
+        link["pdo_mapping_notes"] = {drive.name: list(drive.commissioned.mapping_notes) if drive.commissioned else []
+                                     for drive in axes.drives}
+        for drive in axes.drives:
+            _show_scaling(drive, options, f" of {drive.name}")
+        return axes, profile.gate(), _serve(stack, axes.link, axes.name, controller_node_id, safety.heartbeat_ms)
+
+    return _canopen_rig(link, open_drive, safety, period, options, None, check)
+
+
+def modbus_rig(profile: Profile, url: str, unit_id: int, options: RunOptions) -> Rig:
+    """The Modbus drive at ``url`` (``tcp://HOST:PORT`` or ``rtu:/dev/...``), unit ``unit_id``; no upload server."""
+    from drives.modbus.drive import ModbusDrive
+    from drives.modbus.timing import loop_delay, measure_poll
+    from haptic_bus.control.gate import PassivityGate
+
+    period = profile.loop.period
+    safety = profile.safety if options.wall_paced else profile.safety.for_virtual_time(period)
+    link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
+
+    def open_drive(stack: ExitStack, tap: Tap | None) -> Opened:
+        drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True,
+                                     **patient(options.wall_paced, VIRTUAL_TIME_MODBUS_PATIENCE))
+        stack.callback(drive.close)
+        drive.connect()  # reads only: identity, scaling, timing
+        _refuse_another_master(drive)  # before the poll measurement, which writes
+        _show_scaling(drive, options)
+        poll = None if drive.simulated_delay is not None else measure_poll(drive, 500)
+        delay = loop_delay(drive, period, poll)
+        link["poll"] = None if poll is None else dataclasses.asdict(poll)
+        logger.info("Modbus poll: the gate assumes a loop delay of %.4g sample(s)", delay)
+        gate = PassivityGate(dataclasses.replace(profile.device_loop(), delay=delay), profile.gate_policy)
+        if not profile.passivity.beyond_gate:  # the profile was judged at its own timing's delay
+            gate.admit(profile.compiled_scene())
+        return drive, gate, lambda controller: None  # no upload server over Modbus
+
+    hold = longest_hold(period, options.wall_paced, safety.modbus_watchdog_ms, 0)
+    watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
+    return Rig(link, open_drive, hold, watchdog, DriveAddress(url=url, unit_id=unit_id))
+
+
+def _refuse_another_master(drive: ModbusDrive) -> None:
+    """A drive already OPERATION ENABLED when we arrive is driven by another master (every run
+    leaves it disabled, and its watchdog faults it when a master dies): refuse before writing
+    anything, rather than disable it under that master.  (The CANopen master does the same,
+    and also listens for another SYNC, at commissioning.)"""
+    if drive.state() is State.OPERATION_ENABLED:
+        drive.link.drop()  # leave without a write: closing a live link writes the safe outputs, disabling it
+        raise DriveError(drive.name, "the drive is in OPERATION ENABLED before this master enabled it: another master "
+                                     "drives it; stop that master, or disable the drive, before starting this one")
+
+
+def _show_scaling(drive: Cia402Master, options: RunOptions, of: str = "") -> None:
+    """Say where each scaling factor came from (run.json records it too), unless the run is quiet;
+    ``of``: which drive, for several."""
+    if options.live and drive.scaling_report is not None:
+        print("\n".join(f"scaling{of}: {line}" for line in drive.scaling_report.lines()), flush=True)

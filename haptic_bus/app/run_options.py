@@ -1,0 +1,84 @@
+"""What a run is asked to do (:class:`RunOptions`), how it is asked to stop (:class:`StopRequest`),
+and how its end maps to the command's exit status (:func:`exit_status`).  Durations in s."""
+
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+import signal
+import threading
+
+from haptic_bus.app.profile_policies import START_POLICIES
+from haptic_bus.app.realtime import RealtimeSettings
+from haptic_bus.errors import ParameterError
+from haptic_bus.validation import real_in_range
+
+WALL, VIRTUAL = "wall", "virtual"
+PACINGS = (WALL, VIRTUAL)  # what paces a run's cycles: the wall clock, or the simulated drive (lock-step)
+EXIT_STATUS = {"completed": 0, "stopped": 0, "refused": 1, "drive error": 1, "assumption broken": 3, "interrupted": 130}
+
+
+class StopRequest:
+    """How a run is asked to end: SIGTERM stops it (exit 0), SIGINT interrupts it (exit 130)."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.interrupted = False
+
+    def install(self) -> None:
+        """SIGINT and SIGTERM set the event (the loop ends at the next cycle boundary)."""
+        def on_signal(signum: int, frame: object) -> None:
+            self.interrupted = self.interrupted or signum == signal.SIGINT
+            self.event.set()
+
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, on_signal)
+
+
+@dataclasses.dataclass(frozen=True)
+class RunOptions:
+    """One run: ``duration`` (s), its ``pacing`` (:data:`PACINGS`: "wall", each cycle at its
+    deadline on the wall clock, or "virtual", lock-step with a simulated drive, a cycle as soon
+    as the last one ends), the output folder (None: ``runs/...``), the start-in-contact policy
+    (None: the profile's), the live view, the stop request, what a wall-paced run asks of the OS
+    for its control thread (``scheduling``, :mod:`~haptic_bus.app.realtime`: ``--realtime``),
+    whether a drive found in FAULT is reset before commissioning, whether a CANopen run logs
+    every frame (``bus.asc``, :mod:`~haptic_bus.app.bus_log`), and whether the pictures are drawn
+    (seconds of matplotlib and of the region's boundary: ``--no-plots``, the benchmark, which runs
+    the session many times, and the pytest plugin's runs leave them out)."""
+
+    duration: float
+    pacing: str = WALL
+    out_dir: pathlib.Path | None = None
+    start_in_contact: str | None = None
+    live: bool = True
+    stop: StopRequest = dataclasses.field(default_factory=StopRequest)
+    scheduling: RealtimeSettings = dataclasses.field(default_factory=RealtimeSettings)
+    reset_fault: bool = False
+    bus_log: bool = True
+    plots: bool = True
+
+    def __post_init__(self) -> None:
+        real_in_range("duration", self.duration, 0.0, 1e9, low_inclusive=False, unit="s", context="run options")
+        check_pacing(self.pacing)
+        if self.start_in_contact not in (None, *START_POLICIES):
+            raise ParameterError("start_in_contact", self.start_in_contact,
+                                 "None (the profile's) or " + " or ".join(repr(p) for p in START_POLICIES), "run options")
+        if not isinstance(self.scheduling, RealtimeSettings):
+            raise ParameterError("scheduling", self.scheduling, "a RealtimeSettings", "run options")
+
+    @property
+    def wall_paced(self) -> bool:
+        """Whether the cycles keep the wall clock (``pacing == "wall"``)."""
+        return self.pacing == WALL
+
+
+def check_pacing(pacing: str) -> None:
+    """ParameterError unless ``pacing`` is one of :data:`PACINGS`."""
+    if pacing not in PACINGS:
+        raise ParameterError("pacing", pacing, " or ".join(repr(p) for p in PACINGS), "run options")
+
+
+def exit_status(reason: str) -> int:
+    """0 completed or stopped, 1 refused or a drive error, 3 an assumption broken, 130 interrupted."""
+    return EXIT_STATUS[reason]
