@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     import can
 
 LOCAL_HOP_LIMIT = 0  # udp_multicast's default here: frames are delivered on this host only
+IN_PROCESS_INTERFACES = ("virtual", "lockstep")  # buses inside one process: every node on them runs in it
 BUS_OPTION_HELP = ("extra python-can bus argument, e.g. port=43113 (repeatable); udp_multicast gets hop_limit=0 "
                    "(frames stay on this host) unless you name one")
 BUS_KWARGS_HELP = ("python-can's own spelling of --bus-option, as can.logger and can.viewer take it: one or more "

@@ -211,6 +211,7 @@ def test_identify_against_a_drive_with_a_hidden_profile_writes_the_profile(tmp_p
     assert drive.states[-2:] == [State.OPERATION_ENABLED, State.SWITCH_ON_DISABLED]  # disabled at the end, not faulted
 
 
+@pytest.mark.slow  # SIGINT to a real command process is the point, against the simulator in another process
 def test_ctrl_c_disables_the_drive_and_exits_130(multicast: tuple[str, int], sim_process: Any, tmp_path: Path) -> None:
     sim = _start_sim(sim_process, multicast, _hidden_profile(tmp_path))
     with reaped(_identify_process(multicast, "--profile", str(controller_profile(tmp_path)), "--duration", "600")) as run:

@@ -144,3 +144,12 @@ def test_the_plugin_loads_only_the_standard_library_and_pytest() -> None:
     done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+def test_the_plugin_knows_the_in_process_buses_the_runtime_knows() -> None:
+    """The plugin spells :data:`drives.bus_config.IN_PROCESS_INTERFACES` itself (it loads no project
+    package): a run there writes from a thread (haptic_bus.app.run_writer), a drive there is in the test's process."""
+    from drives.bus_config import IN_PROCESS_INTERFACES
+    from haptic_bus.testing.buses import IN_PROCESS
+
+    assert IN_PROCESS == IN_PROCESS_INTERFACES

@@ -18,6 +18,8 @@ import time
 from typing import Any
 
 from haptic_bus.app.profiles import load_profile
+from haptic_bus.app.record_stream import FLUSH_INTERVAL
+from haptic_bus.app.run_folder import read_run_folder
 from haptic_bus.app.run_options import VIRTUAL
 from haptic_bus.app.run_writer import RunWriter
 from haptic_bus.app.runner import RunOptions, run_canopen
@@ -95,3 +97,33 @@ def test_the_bench_counts_the_writer_process_beside_the_threads(tmp_path: pathli
             stats = writer.close()
     assert stats == {"records": {}, "bus_log": {"frames": 0, "frames_lost": 0}}
     assert cpu.by_name()[WRITER] > 0.0  # its start alone imports numpy and python-can: tens of ms of CPU at least
+
+
+def test_a_run_whose_drive_is_in_this_process_writes_from_a_thread(haptic_sim: Any, tmp_path: pathlib.Path) -> None:
+    """On the lock-step bus the drive runs in the control process: the same writer loop runs in a
+    thread named ``hb-writer`` (no child process), and writes every cycle, as the process does."""
+    drive = haptic_sim("cia402-handle", interface="lockstep", node_id=NODE)
+    out = tmp_path / "run"
+    options = RunOptions(60.0, pacing=VIRTUAL, out_dir=out, live=False, plots=False)
+    seen: list[tuple[set[str], list[int]]] = []
+
+    def sample() -> None:  # once the writer has drained rows below the header, then the run may end
+        record = out / "record.csv"
+        deadline = time.monotonic() + START_WAIT
+        try:
+            while time.monotonic() < deadline and not (record.is_file() and record.read_bytes().count(b"\n") > 1):
+                time.sleep(FLUSH_INTERVAL / 5)
+            seen.append(({thread.name for thread in threading.enumerate()}, _children_named(COMM)))
+        finally:
+            options.stop.event.set()
+
+    sampler = threading.Thread(target=sample, name="test-sampler")
+    sampler.start()
+    result = run_canopen(load_profile("cia402-handle"), drive.bus, NODE, options, CONTROLLER_NODE)
+    sampler.join(timeout=START_WAIT + 5.0)
+    assert result.exit_reason == "stopped" and result.summary is not None, result.error
+    assert len(seen) == 1 and COMM in seen[0][0] and seen[0][1] == [], seen
+    assert COMM not in {thread.name for thread in threading.enumerate()}  # it ended with the run
+    run = read_run_folder(out)
+    assert run.record is not None and run.record.cycles == result.summary.cycles > 0
+    assert run.document["record"] == {"rows_written": result.summary.cycles, "rows_lost": 0}

@@ -21,6 +21,7 @@ START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen before they an
 SDO_PATIENCE = 5.0
 
 
+@pytest.mark.slow  # three parties on udp_multicast are the point: a run process, the simulator, an uploading client
 def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast: tuple[str, int], sim_process, tmp_path) -> None:
     group, port = multicast
     bus = {"interface": "udp_multicast", "channel": group, "port": port}

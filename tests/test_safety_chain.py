@@ -221,6 +221,7 @@ def _skip_if_refused_at_preflight(run: subprocess.Popen) -> None:
         raise AssertionError(error)
 
 
+@pytest.mark.slow  # a process killed or stopped is the point: the run and the drive are two real processes
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP])
 def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(multicast, sim_process, tmp_path, sig) -> None:
     group, port = multicast
@@ -258,6 +259,7 @@ def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(m
         _end(run)
 
 
+@pytest.mark.slow  # a process killed or stopped is the point: the run and the drive are two real processes
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP])
 def test_a_killed_or_stopped_modbus_controller_faults_the_drive(sim_process, tmp_path, sig) -> None:
     from drives.modbus.drive import ModbusDrive

@@ -36,6 +36,12 @@ Who does what
     (:mod:`haptic_bus.app.run_writer`, :mod:`haptic_bus.app.writer_process`).  It ends after a last
     drain when the control process ends, however it ends: a ``kill -9`` of a run leaves every
     axis' record to within 0.1 s of the kill.
+``hb-writer`` -- a thread instead, when the drive is on an in-process bus
+    The same writer loop over the same pipe and rings, for a run whose drive runs in the control
+    process (python-can's ``virtual`` bus, the lock-step bus: the demos, the pytest plugin's
+    simulated drive).  That process already runs the drive's code beside the cycle, a kill ends
+    the drive with the run, and a spawned writer's imports (about 1 s) cost more than a demo's
+    whole run; a ``kill -9`` loses the rows of the last drain interval (50 ms).
 the judge -- a child process, spawned before the first cycle
     Judges a committed upload with the gate (1-D or coupled); the control thread collects the
     verdict once a cycle without waiting, adopts the judged scene at a cycle boundary and
@@ -55,7 +61,8 @@ Why the cycle is not held up
 
 While the drives are enabled no other thread of the control process runs Python: the writer
 and the judge are processes, the executor threads wait in ``select``, the heartbeat thread and
-canopen's notifier are parked.  Heavy imports (matplotlib, scipy) happen in the children, before
+canopen's notifier are parked (a drive on an in-process bus is the exception: its own code, and
+so the writer's thread, share the process with the cycle).  Heavy imports (matplotlib, scipy) happen in the children, before
 pre-flight or after the last cycle (the pictures are drawn when the run has ended);
 ``gc.freeze()`` and a lowered GIL switch interval come with the real-time session
 (:mod:`haptic_bus.app.realtime`).  ``tests/test_architecture.py`` checks that one thread

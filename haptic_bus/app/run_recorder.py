@@ -1,6 +1,6 @@
-"""What a run writes, in one place, for one axis or several: its writer process
-(:mod:`~haptic_bus.app.run_writer`: each axis' streamed record, the bus log, ``run.json`` kept
-current, the live view) and, at the end, the journal completed and the pictures drawn
+"""What a run writes, in one place, for one axis or several: its writer process (a thread for a
+drive on an in-process bus; :mod:`~haptic_bus.app.run_writer`: each axis' streamed record, the bus
+log, ``run.json`` kept current, the live view) and, at the end, the journal completed and the pictures drawn
 (:func:`~haptic_bus.app.run_pictures.render_run`, what ``haptic-bus plot`` does).  ``haptic-bus
 run`` and ``haptic-bus demo`` record through it, for one axis and for several.
 """
@@ -14,7 +14,7 @@ from typing import Any
 
 from haptic_bus.app.bus_log import LOG_NAME
 from haptic_bus.app.run_folder import RunJournal, read_run_folder
-from haptic_bus.app.run_writer import RunWriter
+from haptic_bus.app.run_writer import RunWriter, writer_for
 from haptic_bus.control.cycle_loop import RunSummary
 from haptic_bus.control.record import EventLog, RunRecord
 
@@ -31,8 +31,10 @@ class RunRecorder:
 
     def start(self, stack: ExitStack, bus_log: bool) -> RunWriter:
         """Start the writer process (with ``bus_log`` its frame ring and ``bus.asc``), stopped when
-        ``stack`` closes; before the drive is reached, so that commissioning's frames are logged."""
-        self.writer = writer = RunWriter(self.folder, bus_log)
+        ``stack`` closes; before the drive is reached, so that commissioning's frames are logged.  A
+        thread of this process instead when the journal's link is an in-process bus
+        (:func:`~haptic_bus.app.run_writer.writer_for`)."""
+        self.writer = writer = RunWriter(self.folder, bus_log, in_process=writer_for(self.journal.link))
         stack.callback(self._stop)
         return writer
 

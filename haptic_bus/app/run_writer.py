@@ -16,6 +16,16 @@ one pickled message on a pipe (events are rare: uploads, alarms, the end).  A sh
 name is removed as soon as the writer has attached to it, so nothing is left in ``/dev/shm``
 whatever kills the processes.  :meth:`RunWriter.close` stops the writer after its last drain and
 returns what it wrote and lost (``run.json``'s ``record`` and ``bus_log``).
+
+A run whose drive is in the control process -- on an in-process bus
+(:data:`drives.bus_config.IN_PROCESS_INTERFACES`: the demos, the pytest plugin's and the tests'
+simulated drive) -- gets the same writer, :func:`~haptic_bus.app.writer_process.serve` over the
+same pipe and rings, in a thread named ``hb-writer`` instead of a process (:func:`writer_for`).
+Such a run's cycle already shares the interpreter lock with its drive, whose code runs in the
+control process, so a writer process would not give the cycle the lock to itself; a kill of the
+process ends its drive with it; and a spawn costs about 1 s of imports, more than a demo's or a
+test's whole run.  The one thing the thread gives up: after a ``kill -9`` the rows
+not yet drained (at most one drain interval, 50 ms) are not written.
 """
 
 from __future__ import annotations
@@ -29,8 +39,10 @@ import threading
 import types
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from multiprocessing.connection import Connection
 from typing import Any
 
+from drives.bus_config import IN_PROCESS_INTERFACES
 from haptic_bus.app import writer_process
 from haptic_bus.app.bus_log import FRAME, FRAME_CAPACITY, frame_tap
 from haptic_bus.control.record import Event, EventLog, RunRecord
@@ -57,22 +69,36 @@ def _main_module_hidden() -> Iterator[None]:
         sys.modules["__main__"] = main
 
 
-class RunWriter:
-    """The writer process of a run writing into ``folder`` (module docstring); ``bus_log``: a frame
-    ring and ``bus.asc`` too."""
+def writer_for(link: dict[str, Any]) -> bool:
+    """Whether a run on ``link`` (``run.json``'s ``link``) gets a writer thread rather than a
+    process: its CAN bus is in-process (module docstring)."""
+    return link.get("kind") == "canopen" and link.get("bus", {}).get("interface") in IN_PROCESS_INTERFACES
 
-    def __init__(self, folder: pathlib.Path, bus_log: bool) -> None:
+
+class RunWriter:
+    """The writer of a run writing into ``folder`` (module docstring): a process, or with
+    ``in_process`` a thread of this process; ``bus_log``: a frame ring and ``bus.asc`` too."""
+
+    def __init__(self, folder: pathlib.Path, bus_log: bool, in_process: bool = False) -> None:
         context = multiprocessing.get_context("spawn")
         self._conn, child = context.Pipe()
         self._lock = threading.Lock()  # one message at a time: the control thread's and the upload server's
         self._broken = False
         self.frames = Ring.shared(FRAME, FRAME_CAPACITY) if bus_log else None
-        self.process = context.Process(target=writer_process.main, name=PROCESS_NAME, daemon=True,
-                                       args=(str(folder), None if self.frames is None else self.frames.spec, child,
-                                             os.getpid()))
-        with _main_module_hidden():
+        frames = None if self.frames is None else self.frames.spec
+        self.process: multiprocessing.process.BaseProcess | threading.Thread
+        if in_process:
+            self.process = threading.Thread(target=writer_process.serve, name=writer_process.COMM, daemon=True,
+                                            args=(str(folder), frames, child, None))
             self.process.start()
-        child.close()
+            self._child: Connection | None = child  # closed once the thread has ended
+        else:
+            self.process = context.Process(target=writer_process.main, name=PROCESS_NAME, daemon=True,
+                                           args=(str(folder), frames, child, os.getpid()))
+            with _main_module_hidden():
+                self.process.start()
+            child.close()  # the child's end is the process' now (a thread uses this one)
+            self._child = None
         self._await("ready", START_TIMEOUT)
         if self.frames is not None:
             self.frames.unlink()
@@ -110,9 +136,11 @@ class RunWriter:
         except OSError as exc:
             logger.error("run writer: %s", exc)
         self.process.join(STOP_TIMEOUT)
-        if self.process.is_alive():
+        if isinstance(self.process, multiprocessing.process.BaseProcess) and self.process.is_alive():
             self.process.kill()
             self.process.join()
+        if self._child is not None and not self.process.is_alive():
+            self._child.close()
         self._conn.close()
         return stats
 
@@ -137,5 +165,6 @@ class RunWriter:
                 raise OSError(f"the run's writer process answered {message[0]!r} where {kind!r} was due")
         except EOFError:
             pass
-        raise OSError(f"the run's writer process ({PROCESS_NAME}) did not answer {kind!r} within {timeout:g} s "
-                      f"(exit code {self.process.exitcode})")
+        ended = f"exit code {self.process.exitcode}" if isinstance(self.process, multiprocessing.process.BaseProcess) \
+            else f"its thread {'runs' if self.process.is_alive() else 'ended'}"
+        raise OSError(f"the run's writer ({PROCESS_NAME}) did not answer {kind!r} within {timeout:g} s ({ended})")

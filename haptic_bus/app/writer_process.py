@@ -17,7 +17,9 @@ Messages from the control process come over a pipe (:func:`main`'s ``conn``).  T
 when told to (a last drain, then its counts sent back), or by itself when the control process
 is gone: the pipe's end of file (a ``kill -9`` closes it) or a parent process id that changed,
 noticed within one interval, again after a last drain.  Ctrl-C reaches the whole process group:
-the writer ignores it and ends when the control process says so.
+the writer ignores it and ends when the control process says so.  A run whose drive is in the
+control process (an in-process bus: the demos, a test's simulated drive) runs the same loop,
+:func:`serve`, in a thread instead (:mod:`~haptic_bus.app.run_writer` says why).
 """
 
 from __future__ import annotations
@@ -47,7 +49,8 @@ _PR_SET_NAME = 15  # prctl(2)
 
 
 def name_this_process(name: str) -> None:
-    """Give this process' main thread ``name`` in ``/proc/PID/comm`` (Linux' prctl; elsewhere nothing)."""
+    """Give the calling thread ``name`` in ``/proc`` (a process' main thread: its ``/proc/PID/comm``;
+    Linux' prctl; elsewhere nothing)."""
     with contextlib.suppress(OSError, AttributeError):  # not Linux: the process keeps its interpreter's name
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_NAME, name.encode()[:15], 0, 0, 0)
 
@@ -123,6 +126,14 @@ def main(folder: str, frames: RingSpec | None, conn: Connection, parent: int) ->
     """The writer process' body (module docstring): ``frames`` the frame ring (None: no bus log),
     ``parent`` the control process' id."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    serve(folder, frames, conn, parent)
+
+
+def serve(folder: str, frames: RingSpec | None, conn: Connection, parent: int | None) -> None:
+    """The writer's loop (module docstring), in the writer process or, for a run whose drive is in
+    the control process, in a thread of it (:class:`~haptic_bus.app.run_writer.RunWriter`);
+    ``parent``: the control process' id, watched every interval (None: the writer is a thread of
+    it, which ends with it).  Its thread shows :data:`COMM` in ``/proc``."""
     name_this_process(COMM)
     writer = Writer(pathlib.Path(folder), conn)
     if frames is not None:
@@ -139,7 +150,7 @@ def main(folder: str, frames: RingSpec | None, conn: Connection, parent: int) ->
             if now >= flush_due:
                 writer.flush()
                 flush_due = now + FLUSH_INTERVAL
-                if os.getppid() != parent:
+                if parent is not None and os.getppid() != parent:
                     break
             if writer.view is not None and now >= view_due:
                 writer.view.update()

@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from haptic_bus.testing.processes import SimProcess
 
 IN_PROCESS = ("virtual", "lockstep")  # the simulated drive runs in the test's process on these
+# (drives.bus_config.IN_PROCESS_INTERFACES, spelled here since the plugin imports no project package; a test checks)
 SUBPROCESS = ("udp_multicast", "socketcan")  # ... and as ``python -m sim_drive`` on these
 INTERFACES = IN_PROCESS + SUBPROCESS
 VCAN0 = pathlib.Path("/sys/class/net/vcan0")
