@@ -85,8 +85,9 @@ def _kill_while_cycling(run: subprocess.Popen[bytes], record: Path, rng: random.
     assert run.poll() is None and record.is_file(), "the run never started cycling"
     time.sleep(rng.uniform(0.1, 2.0))
     (writer,) = _writers_of(run.pid)
-    killed = time.time()
     os.kill(run.pid, signal.SIGKILL)
+    killed = time.time()  # after the kill is sent: a cycle the run began while this process was between the
+    # two calls is before it (read just before it, a loaded machine showed a row 4 ms after "the kill")
     run.wait(timeout=10)
     deadline = time.monotonic() + WRITER_WAIT
     while not _gone(writer) and time.monotonic() < deadline:
