@@ -153,3 +153,24 @@ def test_the_readme_shows_the_docstring_example() -> None:
         return [line.rstrip() for line in text.strip().splitlines() if not line.lstrip().startswith("#")]
 
     assert code(code_blocks(README, "python")[0]) == code(docstring_example())
+
+
+@pytest.mark.parametrize(("interrupted", "reason"), [(True, "interrupted"), (False, "stopped")])
+def test_a_stop_asked_before_the_first_cycle_never_enables_the_drive(haptic_sim, tmp_path, interrupted, reason):
+    """Ctrl-C (or SIGTERM) during set-up or pre-flight: the run ends as asked with no cycle and the
+    drive never enabled -- the check right before enabling (the breaker saw a drive enabled for 10 ms
+    after a Ctrl-C in pre-flight)."""
+    from drives.cia402 import State
+    from haptic_bus.app.run_options import exit_status
+
+    drive = haptic_sim("cia402-handle", interface="lockstep", node_id=5)
+    assert drive.sim is not None  # in this process: its state machine is watched directly
+    states: list[object] = []
+    drive.sim.drive.state_listeners.append(lambda old, new, number: states.append(new))
+    options = hb.RunOptions(duration=1.0, pacing="virtual", out_dir=tmp_path / "run", live=False, plots=False)
+    options.stop.interrupted = interrupted
+    options.stop.event.set()  # as the signal handler does
+    result = hb.run_canopen(hb.load_profile("cia402-handle"), drive.bus, node_id=5, options=options)
+    assert (result.exit_reason, result.summary) == (reason, None)
+    assert exit_status(reason) == (130 if interrupted else 0)
+    assert State.OPERATION_ENABLED not in states and drive.sim.drive.state is not State.OPERATION_ENABLED, states

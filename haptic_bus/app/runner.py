@@ -187,6 +187,8 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                     recorder.publish()  # run.json as it stands before the cycles (pre-flight's verdict in it)
                 running, node = prepared or ready()
                 show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
+                if options.stop.event.is_set():  # Ctrl-C or SIGTERM during set-up or pre-flight: never enabled
+                    raise KeyboardInterrupt if options.stop.interrupted else _StopBeforeEnabling
                 # last before the first cycle: every drive in the same cycle, their RPDO deadlines run from here
                 drive.enable()
                 with node.cycling() if node is not None else nullcontext():  # its verdicts answered by the cycle
@@ -205,10 +207,16 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             error += f"; {rig.address.fault_reset_hint()} (or run with --reset-fault)"
     except KeyboardInterrupt:
         reason, error = "interrupted", "interrupted (Ctrl-C)"
+    except _StopBeforeEnabling:
+        reason, error = "stopped", None
     finally:
         extra["exit_reason"], extra["error"] = reason, error
         files = recorder.finish(summary, pictures=options.plots)
     return RunResult(reason, error, summary, controller, folder, files)
+
+
+class _StopBeforeEnabling(BaseException):  # control flow, not an error: no caller ever sees it
+    """SIGTERM asked the run to stop before its drives were enabled: it ends "stopped", nothing enabled."""
 
 
 def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, scene: Any, options: RunOptions,
