@@ -85,7 +85,9 @@ class LiveView:
         self.names = [name for name, _ in records]
         self._tallies = [_Tally(ring, max(1, round(REFRESH / period))) for _, ring in records]
         self.title = title
-        self.stream = stream if stream is not None else sys.stderr
+        # a terminal on stderr gets the panel; otherwise plain lines on stdout, so that a failed run's
+        # stderr stays the one line that says why
+        self.stream = stream if stream is not None else sys.stderr if sys.stderr.isatty() else sys.stdout
         self.duration = duration
         self.last_event = last_event
         self.clock = clock
