@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import time
 import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import canopen
@@ -23,14 +25,23 @@ NODE = 42
 VERDICT_AFTER = 1.5  # s: longer than the client's 1 s SDO timeout, well inside its 30 s wait for a verdict
 
 
-def test_a_commit_answered_after_the_sdo_timeout_is_still_the_upload_accepted() -> None:
-    channel = f"upload-wait-{uuid.uuid4().hex}"
-    bus: dict[str, Any] = {"interface": "virtual", "channel": channel}
+@contextmanager
+def controller_dictionary_served(name: str) -> Iterator[tuple[dict[str, Any], canopen.LocalNode]]:
+    """The controller's object dictionary (one object) served as node :data:`NODE` on a private
+    virtual bus: the bus's keyword arguments and the node, whose callbacks the test sets."""
+    bus: dict[str, Any] = {"interface": "virtual", "channel": f"{name}-{uuid.uuid4().hex}"}
     network = canopen.Network(open_bus(**bus))
     network.connect()
     try:
         node = network.create_node(NODE, controller_dictionary(["end-stop"]))
         node.sdo[OBJECT_COUNT].raw = 1
+        yield bus, node
+    finally:
+        network.disconnect()
+
+
+def test_a_commit_answered_after_the_sdo_timeout_is_still_the_upload_accepted() -> None:
+    with controller_dictionary_served("upload-wait") as (bus, node):
         node.sdo[LAST_RESULT].raw = "accepted: worst margin 11.09 N s/m"
         committed: list[float] = []
 
@@ -42,8 +53,6 @@ def test_a_commit_answered_after_the_sdo_timeout_is_still_the_upload_accepted() 
         node.add_write_callback(on_write)
         started = time.monotonic()
         verdict = upload_walls(bus, NODE, {0: (1200.0, 9.0)}, timeout=1.0)
-    finally:
-        network.disconnect()
     assert verdict == "accepted: worst margin 11.09 N s/m"
     assert len(committed) == 1  # one commit: the client neither gave up nor sent it twice
     assert committed[0] - started >= VERDICT_AFTER
@@ -52,13 +61,7 @@ def test_a_commit_answered_after_the_sdo_timeout_is_still_the_upload_accepted() 
 def test_a_commit_answered_is_accepted_when_the_verdict_cannot_be_read_any_more() -> None:
     # the run ends between its answer to the commit and the client's read of 0x2002: the node no
     # longer answers (here: answers only after 2.5 s, past the client's 1 s and its one retry)
-    channel = f"upload-ended-{uuid.uuid4().hex}"
-    bus: dict[str, Any] = {"interface": "virtual", "channel": channel}
-    network = canopen.Network(open_bus(**bus))
-    network.connect()
-    try:
-        node = network.create_node(NODE, controller_dictionary(["end-stop"]))
-        node.sdo[OBJECT_COUNT].raw = 1
+    with controller_dictionary_served("upload-ended") as (bus, node):
         committed = False
 
         def on_write(index: int, subindex: int, od: object, data: bytes) -> None:
@@ -73,6 +76,4 @@ def test_a_commit_answered_is_accepted_when_the_verdict_cannot_be_read_any_more(
         node.add_write_callback(on_write)
         node.add_read_callback(on_read)
         verdict = upload_walls(bus, NODE, {0: (1200.0, 9.0)}, timeout=1.0)
-    finally:
-        network.disconnect()
     assert committed and verdict == "accepted (the run ended before its margin could be read)"
