@@ -63,6 +63,7 @@ _HOMES = {
     "load_profile": "haptic_bus.app.profiles",
     "load_any_profile": "haptic_bus.app.axes_profile",
     "RunOptions": "haptic_bus.app.run_options",
+    "RealtimeSettings": "haptic_bus.app.realtime",
     "run": "haptic_bus.app.runner",
     "RunResult": "haptic_bus.app.runner",
     "run_canopen": "haptic_bus.app.runner",
@@ -87,6 +88,7 @@ __all__ = [
     "ParameterError",
     "PassivityGate",
     "Profile",
+    "RealtimeSettings",
     "Refusal",
     "RunOptions",
     "RunResult",
@@ -128,6 +130,7 @@ if TYPE_CHECKING:
     from haptic_bus.analysis.loop import DeviceLoop, WallLoop
     from haptic_bus.app.axes_profile import load_any_profile
     from haptic_bus.app.profiles import Profile, load_profile
+    from haptic_bus.app.realtime import RealtimeSettings
     from haptic_bus.app.run_options import RunOptions
     from haptic_bus.app.runner import RunResult, run, run_canopen, run_modbus
     from haptic_bus.control.controller import RunSummary, WallController

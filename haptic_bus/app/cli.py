@@ -15,7 +15,7 @@ import os
 import pathlib
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from haptic_bus.app.arguments import (
     EXIT_ASSUMPTION,
@@ -43,6 +43,9 @@ from haptic_bus.app.sdo_cli import add_sdo_parser
 from haptic_bus.app.status_cli import add_status_parser
 from haptic_bus.console import StderrHandler
 from haptic_bus.validation import folder_path, writable_file, writable_folder
+
+if TYPE_CHECKING:
+    from haptic_bus.app.realtime import RealtimeSettings
 
 _NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
 
@@ -155,10 +158,18 @@ def _validate_run(args: argparse.Namespace) -> DriveAddress:
     return address
 
 
+def _scheduling(realtime: bool | None) -> RealtimeSettings:
+    """``--realtime`` (True), ``--no-realtime`` (False) or neither (None) as what the control thread asks of the OS."""
+    from haptic_bus.app.realtime import RealtimeSettings
+
+    if realtime is None:
+        return RealtimeSettings()
+    return RealtimeSettings(insist=True) if realtime else RealtimeSettings.unprivileged()
+
+
 def _run(args: argparse.Namespace) -> int:
     from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
     from haptic_bus.app.drive_address import DEFAULT_UNIT_ID
-    from haptic_bus.app.realtime import RealtimeSettings
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
     from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
     from haptic_bus.app.runner import run
@@ -176,7 +187,7 @@ def _run(args: argparse.Namespace) -> int:
     out_dir = None if args.out is None else folder_path("--out", args.out, context="run")  # created once the bus is known
     options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
-                         scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings(),
+                         scheduling=_scheduling(args.realtime),
                          reset_fault=args.reset_fault, bus_log=not args.no_bus_log, plots=not args.no_plots)
     stop.install()
     result = run(profile, bus, options, node_id=node_id, unit_id=unit_id,
@@ -311,9 +322,10 @@ def build_parser() -> argparse.ArgumentParser:
     pacing.add_argument("--virtual-time", action="store_true",
                         help="lock-step with a simulated drive, no wall-clock pacing (default: each cycle at its "
                              "deadline on the wall clock)")
-    pacing.add_argument("--realtime", action="store_true",
-                        help="ask the OS for real-time scheduling of the control thread: SCHED_FIFO priority 80, one CPU, "
-                             "memory locked (mlockall); what it cannot get is logged as a warning and kept in run.json")
+    pacing.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=None,
+                        help="real-time scheduling of the control thread (SCHED_FIFO priority 80, one CPU, memory "
+                             "locked) is asked for by default where the OS grants it; --realtime insists (what it "
+                             "cannot get is a warning), --no-realtime asks for none of it; kept in run.json")
     run.add_argument("--start-in-contact", choices=("refuse", "ramp"),
                      help="a start inside an object: refuse, or ramp the force in (default: the profile's [start])")
     run.add_argument("--out", help="folder for record.csv, run.json, bus.asc and plots (default: runs/<UTC time>-<profile>)")
