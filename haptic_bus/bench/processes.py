@@ -51,7 +51,8 @@ def wait_heartbeat(bus_kwargs: dict[str, Any], node_id: int, process: subprocess
 
 
 @contextmanager
-def canopen_simulator(profile: str, node_ids: tuple[int, ...], *options: str) -> Iterator[tuple[dict[str, Any], subprocess.Popen]]:
+def canopen_simulator(profile: str, node_ids: tuple[int, ...],
+                      *options: str) -> Iterator[tuple[dict[str, Any], subprocess.Popen]]:
     """``python -m sim_drive`` for ``profile`` as nodes ``node_ids`` (one, or a multi-axis device) on a
     unique udp_multicast group and port, with more of its ``options`` (``--operator ...``); yields the
     bus keyword arguments and the process, once every node's heartbeat is seen."""
