@@ -46,6 +46,7 @@ from sim_drive.eds import OD_KINDS, eds_path
 from sim_drive.operator import OperatorModel, operator_from_spec, operator_usage
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import load_profile
+from sim_drive.scheduling import answer_in_real_time
 from sim_drive.sync_clock import SYNC_CLOCKS, sync_clock
 
 logger = logging.getLogger("sim_drive")
@@ -222,11 +223,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     return _run_canopen(args)
 
 
-def _configure_logging(wall_clock: bool, library: str, level: int) -> None:
-    """Log lines on stderr (stamped with the wall clock with ``wall_clock``); the bus ``library`` only from ``level``."""
+def _set_up_process(wall_clock: bool, library: str, level: int) -> None:
+    """Log lines on stderr (stamped with the wall clock with ``wall_clock``; the bus ``library`` only
+    from ``level``), then real-time scheduling for every thread to come (:mod:`sim_drive.scheduling`)."""
     fmt = "%(asctime)s %(message)s" if wall_clock else "%(message)s"
     logging.basicConfig(level=logging.INFO, format=fmt, handlers=[StderrHandler()], force=True)
     logging.getLogger(library).setLevel(level)
+    answer_in_real_time()
 
 
 def _drive_setup(args: argparse.Namespace) -> tuple[DeviceParameters, OperatorModel | None, str]:
@@ -253,7 +256,7 @@ def _run_canopen(args: argparse.Namespace) -> int:
     if missing:
         print(f"{_PROG}: error: missing --{', --'.join(m.replace('_', '-') for m in missing)}", file=sys.stderr)
         return 2
-    _configure_logging(args.log_wall_clock, "canopen", logging.WARNING)
+    _set_up_process(args.log_wall_clock, "canopen", logging.WARNING)
     try:
         parameters, operator, timing = _drive_setup(args)
         meter = BusLoadMeter(args.bitrate, parameters.period) if args.bitrate else None
@@ -344,7 +347,7 @@ def run_axes(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
-    _configure_logging(args.log_wall_clock, "canopen", logging.WARNING)  # once the arguments hold: a refusal logs nothing
+    _set_up_process(args.log_wall_clock, "canopen", logging.WARNING)  # once the arguments hold: a refusal logs nothing
     with _StopSignals() as stop_signals:
         if not started(sim):
             return 1
@@ -391,7 +394,7 @@ def _run_modbus(args: argparse.Namespace) -> int:
     """The Modbus TCP server until SIGINT/SIGTERM."""
     from sim_drive.modbus import ModbusSimServer, parse_modbus_url
 
-    _configure_logging(args.log_wall_clock, "pymodbus", logging.CRITICAL)
+    _set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
     unit_id = 1 if args.unit_id is None else args.unit_id
     word_order = args.word_order or "big"
     try:

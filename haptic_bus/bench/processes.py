@@ -73,16 +73,6 @@ def canopen_simulator(profile: str, node_ids: tuple[int, ...],
         stop(process)
 
 
-def boost(pid: int, priority: int) -> str | None:
-    """Every thread of process ``pid`` to SCHED_FIFO ``priority``; None if done, else why not."""
-    try:
-        for task in os.listdir(f"/proc/{pid}/task"):
-            os.sched_setscheduler(int(task), os.SCHED_FIFO, os.sched_param(priority))
-    except (OSError, AttributeError) as exc:
-        return f"{type(exc).__name__}: {exc}"
-    return None
-
-
 @contextmanager
 def cpu_hogs(count: int) -> Iterator[list[subprocess.Popen]]:
     """``count`` busy Python processes (``while True: pass``, normal priority) until the block ends."""

@@ -15,8 +15,9 @@ the control thread (:mod:`haptic_bus.app.realtime`):
 
 each once on a quiet machine and once beside a CPU hog (one busy process per CPU); ``--smoke``
 runs untuned and default quiet and default beside the hog, 0.3 s each (``--quick`` 1 s, full 15 s).  The
-simulated drive stands in for hardware: its threads are raised to SCHED_FIFO 70 where allowed
-(said in the output), so that the hog slows the controller, not the drive's answers.
+simulated drive stands in for hardware: its threads run under SCHED_FIFO where the OS grants it
+(:mod:`sim_drive.scheduling`, the policy said in the output), so that the hog slows the
+controller, not the drive's answers.
 
 Per run: the share of a core the controller process used (every thread, from the clock's CPU
 time at each cycle start) and the start lateness, each over :data:`SEGMENTS` consecutive
@@ -58,7 +59,6 @@ AXES_PROFILE = "gantry-3d"  # three axes on one SYNC, at the profile's own T (2 
 AXES_NODE_IDS = (5, 6, 7)
 SEGMENTS = 5
 FIRST_CYCLES = 50
-SIM_PRIORITY = 70
 FLOOR_TPDOS = 2  # TPDO1 (0x6041 + 0x606C) and TPDO2 (0x6064): the run maps the position for its port observer
 CORE_RATIO_TARGET = 1.5  # issue 26: the control process's CPU within 1.5 x python-can's floor for the same cycle
 LATENESS_RATIO_TARGET = 2.0  # issue 26: start lateness p99 and p99.9 within 2 x the bare clock's
@@ -217,18 +217,16 @@ def controller_run(settings: RealtimeSettings, duration: float, bus: dict, proce
     """One ``haptic-bus run`` session of ``profile_name`` (one axis: drive ``node_id``; several: the
     profile's) against the simulated drive ``process`` on ``bus``, started in contact where it is."""
     from haptic_bus.app.runner import RunOptions, run
-    from haptic_bus.bench.processes import boost
 
     profile = load_any_profile(profile_name)
     with tempfile.TemporaryDirectory() as out:
-        boosted = boost(process.pid, SIM_PRIORITY)
         with ThreadCpu() as threads:
             result = run(profile, bus, RunOptions(duration, pacing="wall", out_dir=Path(out) / "run", live=False,
                                                   scheduling=settings, start_in_contact="ramp", plots=False),
                          node_id=node_id)
         document = json.loads((result.folder / "run.json").read_text()) if (result.folder / "run.json").exists() else {}
     figures = {"exit_reason": result.exit_reason, "error": result.error, "thread_cpu_s": threads.by_name(),
-               "drive_boosted": boosted is None, "drive_boost_error": boosted, "scheduling": document.get("realtime")}
+               "drive_policy": _POLICIES.get(os.sched_getscheduler(process.pid)), "scheduling": document.get("realtime")}
     if result.controller is not None and isinstance(result.controller.clock, RealClock):
         figures.update(clock_figures(result.controller.clock))
         figures["compute_s"] = result.summary.compute_percentiles if result.summary is not None else {}
