@@ -221,7 +221,9 @@ class AxesRun:
         return self.profile.space_scene()
 
     def describe_gate(self, gate: SpaceGate, extra: dict[str, Any]) -> None:
-        """Nothing beyond the axes' delays already in ``run.json``'s ``loop``."""
+        """The loop delays (samples) the coupled gate judges with, per axis, in ``run.json``'s ``loop``
+        (over Modbus, the poll's: not the profile's)."""
+        extra["loop"]["delays"] = [loop.delay for loop in gate.axes]
 
     def assumed_delay(self, gate: SpaceGate) -> float:
         """The longest loop delay (samples) of the coupled gate's axes."""

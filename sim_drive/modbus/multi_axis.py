@@ -96,15 +96,15 @@ class MultiAxisModbusSim:
 
     async def serve(self, stop: asyncio.Event, on_bound: Callable[[], None]) -> None:
         """Serve every server in the running event loop until ``stop`` is set; ``on_bound`` once all are bound."""
-        bound = [asyncio.Event() for _ in self.servers]
-        tasks = [asyncio.create_task(server.serve(stop, on_bound=event.set)) for server, event in zip(self.servers, bound)]
-        waiting = asyncio.ensure_future(asyncio.gather(*(event.wait() for event in bound)))
-        done, _ = await asyncio.wait([waiting, *tasks], return_when=asyncio.FIRST_COMPLETED)
-        if waiting in done:
-            on_bound()
-        else:
-            waiting.cancel()
-        await asyncio.gather(*tasks)
+        unbound = len(self.servers)
+
+        def one_bound() -> None:
+            nonlocal unbound
+            unbound -= 1
+            if not unbound:
+                on_bound()
+
+        await asyncio.gather(*(server.serve(stop, on_bound=one_bound) for server in self.servers))
 
     def __enter__(self) -> MultiAxisModbusSim:
         return self.start()
