@@ -170,6 +170,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             names[:] = [axis.name for axis in (OneAxis(drive) if isinstance(drive, Drive) else drive).drives]
             kind.describe_gate(gate, extra)
             scene = kind.scene()
+            derate = kind.derate(gate, scene)  # before the control thread's real-time session (a worker may build it)
 
             def ready() -> tuple[WallController[Any, Any], ControllerNode | None]:
                 """Safe start, the controller, its records streamed, the upload server: all but enabling."""
@@ -178,7 +179,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                 extra["start"] = kind.start_extra(origin, ramp_time)
                 clock = RealClock(period, spin=options.scheduling.spin) if options.wall_paced else VirtualClock(period)
                 controller = kind.controller(drive, gate, scene, clock=clock, origin=origin, ramp_time=ramp_time,
-                                             hold=rig.hold)
+                                             hold=rig.hold, derate=derate)
                 extra["passivity"] = kind.passivity_extra(controller, gate)
                 for event in before:
                     controller.events.add(event.time_s, event.kind, event.message, **event.data)
