@@ -4,8 +4,9 @@ The drives may be the simulated ones in another process (``haptic-bus sim``, ``h
 --node-ids 5,6,7 --profile gantry-3d`` on ``udp_multicast``, ``vcan0``, Modbus TCP on loopback) or
 real hardware (``can0``, a Modbus TCP/RTU drive).  One code path for any axis count: what differs
 by link sits in a :class:`~haptic_bus.app.run_links.Rig` (one CANopen drive, several on one SYNC,
-one Modbus drive), what differs by profile kind in a :mod:`~haptic_bus.app.run_kinds` kind (a 1-D
-scene or a scene in space).  One run, in order:
+one Modbus drive or several polled in one cycle -- ``haptic-bus sim --modbus tcp://127.0.0.1:0
+--unit-ids 1,2,3 --profile gantry-3d``), what differs by profile kind in a
+:mod:`~haptic_bus.app.run_kinds` kind (a 1-D scene or a scene in space).  One run, in order:
 
 1. the link is checked before anything is touched (node ids; for several axes each must map
    0x6064 and the controller's node id must be none of theirs: exit 2); the run's folder is
@@ -16,12 +17,14 @@ scene or a scene in space).  One run, in order:
    and the smallest ``T`` that fits (exit 1, no bus opened, nothing enabled);
 3. the run's writer process starts (:mod:`~haptic_bus.app.run_writer`), and on CANopen ``bus.asc``
    with it, before the drives are reached (the link's tap copies every frame into its ring); with
-   ``reset_fault`` a one-axis drive in FAULT is reset first, as ``haptic-bus fault-reset`` does
-   (the first of run.json's events); without it a faulted drive is refused at enabling, with the
-   command that clears it;
+   ``reset_fault`` every drive found in FAULT is reset first, axis by axis, as ``haptic-bus
+   fault-reset`` does (each reset one of run.json's events); without it a faulted drive is
+   refused at enabling, with the command that clears that axis' drive;
 4. the drive(s) are reached and commissioned (CANopen: each the safety chain of ``[safety]``, one
-   heartbeat of this controller's node for all; Modbus: the gate judges with the loop delay the
-   poll measured, :func:`drives.modbus.timing.loop_delay`);
+   heartbeat of this controller's node for all; Modbus: each unit's 0x6007 and watchdog, a unit
+   nobody answers for named, and the gate -- 1-D or coupled -- judges with each axis' loop delay
+   from the poll, :func:`drives.modbus.timing.loop_delay`); the supervisor's derate table, where
+   the profile asks for one, is started (:mod:`~haptic_bus.app.derate_table`);
 5. real time only: **pre-flight** (:mod:`~haptic_bus.app.preflight`) runs the cyclic path at zero
    torque, drives not enabled, and judges the gate at the delay it measured;
 6. **safe start** (for one axis, with step 7, before pre-flight, which then measures the cycle
