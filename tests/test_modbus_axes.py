@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import pathlib
+import re
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -33,12 +34,15 @@ from haptic_bus.app.run_options import RunOptions, StopRequest
 from haptic_bus.app.steady_state import contact
 from sim_drive.axes_profile import load_axes_device
 from sim_drive.modbus.multi_axis import MultiAxisModbusSim
+from tests.cli_process import cli_process, reaped
 
 GANTRY = pathlib.Path(str(load_axes_profile("gantry-3d").path))
 TARGETS = "toward = [[0.0, -0.03, 0.0], [-0.03, 0.0, 0.0], [0.02, 0.02, 0.01]]"
 UNITS = (1, 2, 3)
 TIMES = ("compute_s", "wall_clock_s", "monotonic_s")  # when and how long the machine took: not the loop's
 CYCLING_WAIT = 60.0  # s of wall clock: a bound on a hang, not a pace
+START_WAIT = 60.0  # s: the simulator process imports numpy, scipy and pymodbus and reads the profile first
+RUN_WAIT = 240.0  # s: a run process imports and judges gantry-3d's scene, then 500 cycles over loopback
 
 
 def slope_profile(tmp_path: pathlib.Path) -> pathlib.Path:
@@ -219,3 +223,34 @@ def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(
     else:
         assert result.exit_reason == "completed", result.error
         assert result.summary is not None and result.summary.overruns <= 0.01 * result.summary.cycles
+
+
+def test_the_commands_of_the_manual_run_three_units_in_two_processes(tmp_path: pathlib.Path, sim_process: Any) -> None:
+    """``haptic-bus sim --modbus tcp://127.0.0.1:0 --unit-ids 1,2,3 --profile gantry-3d`` and ``haptic-bus
+    run gantry-3d --modbus URL --unit-ids 1,2,3 --virtual-time`` (docs/axes.md): exit 0, every unit cycled."""
+    sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--unit-ids", "1,2,3", "--profile", "gantry-3d")
+    log = sim.wait_for_line("units 1, 2, 3: serving Modbus TCP on", START_WAIT)
+    url = re.search(r"serving Modbus TCP on (tcp://\S+) ", log)
+    assert url is not None, log
+    with reaped(cli_process("run", "gantry-3d", "--modbus", url[1], "--unit-ids", "1,2,3", "--virtual-time",
+                            "--duration", "1", "--out", str(tmp_path / "run"), "-q", "--no-plots")) as run:
+        out, err = run.communicate(timeout=RUN_WAIT)
+    code, log = sim.stop()
+    assert run.returncode == 0, err
+    assert "cycles 500;" in out and "ended: completed" in out and code == 0, log
+    for unit in UNITS:
+        assert f"unit {unit} at {url[1]}: stopped after" in log
+
+
+def test_unit_ids_from_the_profile(tmp_path: pathlib.Path, modbus_gantry: Callable[..., MultiAxisModbusSim]) -> None:
+    """A profile whose ``[[axes]]`` name Modbus units (``unit_id``): the run and the simulated device take them."""
+    text = GANTRY.read_text()
+    for node, unit in ((5, 11), (6, 12), (7, 13)):
+        text = text.replace(f"node_id = {node}\n", f"unit_id = {unit}\n")
+    path = tmp_path / "units.toml"
+    path.write_text(text)
+    assert [axis.unit_id for axis in load_axes_device(path).axes] == [11, 12, 13]
+    sim = modbus_gantry(path, 1, (11, 12, 13))
+    result = hb.run(load_axes_profile(path), sim.urls[0], options(tmp_path / "run", 0.2))
+    assert result.exit_reason == "completed", result.error
+    assert json.loads((tmp_path / "run" / "run.json").read_text())["link"]["unit_ids"] == [11, 12, 13]
