@@ -5,7 +5,8 @@ polled in one cycle through the one runtime (:func:`haptic_bus.run`), in virtual
 **The steady state on the slope** is checked as the CANopen runs check it (``test_axes_run.py``,
 whose module docstring says why): at rest, the force the controller asks along the slope's
 normal is ``K`` times the penetration at its measured position to 1e-9 relative, with the torques
-400/400/200 per mille that make the hand's (2, 2, 1) N push exact.  One server for the three
+400/400/200 per mille that make the hand's (2, 2, 1) N push exact; ``K`` times the simulated
+drives' true penetration is the 3 N push within the torque's rounding and the position sum's.  One server for the three
 units and a server per axis are the same cycles in virtual time (each unit's plant advances when
 its output block is written, whoever serves it): their records are equal bit for bit.  (They are
 not the CANopen demo's bit for bit: the CANopen enable walk's last SYNC already advances the
@@ -111,6 +112,12 @@ def test_three_units_rest_on_the_slope_the_same_on_one_server_or_three(
         runs[servers] = records(folder)
         assert result.controller is not None
         scene = result.controller.scene
+        true = contact(scene, np.array(sim.positions))  # the simulated drives' exact positions
+        assert true is not None and true[0] == "slope"
+        # at rest the drives apply the hand's 3 N along the normal; K times the true depth is within the
+        # torque's rounding (2.5 mN) plus K times the 0x606C rounding the position sum can gather (module docstring)
+        drift = result.summary.cycles * profile.period * profile.axes[0].device.velocity_per_count / 2  # m
+        assert abs(true[1] * true[2] - 3.0) <= 0.0025 + true[1] * drift
     one, three = runs[1], runs[3]
     for axis in "xyz":
         for column in one[axis].dtype.names:
