@@ -170,7 +170,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             if options.reset_fault:
                 before += _reset_faults_first(rig.addresses, options, extra)
             drive, gate, serve = rig.open(stack, writer.tap)
-            names[:] = [axis.name for axis in (OneAxis(drive) if isinstance(drive, Drive) else drive).drives]
+            names = [axis.name for axis in (OneAxis(drive) if isinstance(drive, Drive) else drive).drives]
             kind.describe_gate(gate, extra)
             scene = kind.scene()
             derate = kind.derate(gate, scene)  # before the control thread's real-time session (a worker may build it)
