@@ -34,6 +34,7 @@ from haptic_bus.app.arguments import (
     seconds,
     timeout,
     unit_id,
+    unit_ids,
 )
 from haptic_bus.app.drive_address import DriveAddress, drive_address
 from haptic_bus.app.fault_cli import add_fault_reset_parser
@@ -149,9 +150,14 @@ def _validate_run(args: argparse.Namespace) -> DriveAddress:
     """The drive the run talks to; conflicting or ignored options refused before anything is touched."""
     from haptic_bus.errors import ParameterError
 
+    if args.unit_ids is not None:
+        raise ParameterError("--unit-ids", args.unit_ids, "--unit-id for a one-axis profile (--unit-ids: several axes)",
+                             "run")
+    if args.modbus and len(args.modbus) > 1:
+        raise ParameterError("--modbus", args.modbus, "one URL for a one-axis profile (one per axis: several axes)", "run")
     if args.modbus:
         refuse_can_options_with_modbus(args, "run", ("node_id", "controller_node_id"))
-    address = drive_address(args)
+    address = drive_address(argparse.Namespace(**{**vars(args), "modbus": args.modbus[0] if args.modbus else None}))
     if args.controller_node_id is not None and args.controller_node_id == args.node_id:
         raise ParameterError("--controller-node-id", args.controller_node_id,
                              f"a node id other than the drive's ({args.node_id})")
@@ -176,9 +182,11 @@ def _run(args: argparse.Namespace) -> int:
 
     profile = load_any_profile(args.profile)
     bus: Any
-    if isinstance(profile, AxesProfile):  # the node ids come from [[axes]]
+    unit_ids = None
+    if isinstance(profile, AxesProfile):  # the node ids (or unit ids) come from [[axes]], or --unit-ids
         _refuse_single_axis_options(args)
-        bus, node_id, unit_id = bus_arguments(args), None, DEFAULT_UNIT_ID
+        bus, node_id, unit_id = (args.modbus or bus_arguments(args)), None, DEFAULT_UNIT_ID
+        unit_ids = args.unit_ids
     else:
         address = _validate_run(args)
         bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, DEFAULT_UNIT_ID)
@@ -190,7 +198,7 @@ def _run(args: argparse.Namespace) -> int:
                          scheduling=_scheduling(args.realtime),
                          reset_fault=args.reset_fault, bus_log=not args.no_bus_log, plots=not args.no_plots)
     stop.install()
-    result = run(profile, bus, options, node_id=node_id, unit_id=unit_id,
+    result = run(profile, bus, options, node_id=node_id, unit_id=unit_id, unit_ids=unit_ids,
                  controller_node_id=args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
     summary = result.summary
     if summary is not None:
@@ -212,15 +220,19 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _refuse_single_axis_options(args: argparse.Namespace) -> None:
-    """A multi-axis profile names its drives in ``[[axes]]``: the options that name one drive, or act
-    on one, are refused (exit 2) before anything is touched."""
+    """A multi-axis profile names its drives in ``[[axes]]`` (or ``--unit-ids`` over Modbus): the
+    options that name one drive are refused (exit 2) before anything is touched, and so are CAN
+    bus options beside ``--modbus`` and ``--unit-ids`` without it."""
     from haptic_bus.errors import ParameterError
 
-    given = [flag for flag, value in (("--node-id", args.node_id), ("--modbus", args.modbus), ("--unit-id", args.unit_id),
-                                      ("--reset-fault", args.reset_fault)) if value]
+    given = [flag for flag, value in (("--node-id", args.node_id), ("--unit-id", args.unit_id)) if value]
     if given:
-        raise ParameterError(given[0], "given with a multi-axis profile", "the bus options only: the node ids come "
-                             "from [[axes]] (no Modbus axes or fault reset for several axes yet)")
+        raise ParameterError(given[0], "given with a multi-axis profile", "the bus options, or --modbus URL (once, or "
+                             "once per axis) with --unit-ids: the node ids come from [[axes]]", "run")
+    if args.modbus:
+        refuse_can_options_with_modbus(args, "run", ("controller_node_id",), "--unit-ids")
+    elif args.unit_ids is not None:
+        raise ParameterError("--unit-ids", args.unit_ids, "a Modbus option: give it with --modbus URL", "run")
 
 
 def _upload(args: argparse.Namespace) -> int:
@@ -314,9 +326,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--controller-node-id", type=node_id,
                      help="this controller's CANopen node id: its heartbeat, which the drive watches, and gated wall "
                           "uploads (default 127)")
-    run.add_argument("--modbus", type=modbus_url, metavar="URL",
-                     help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
+    run.add_argument("--modbus", type=modbus_url, metavar="URL", action="append",
+                     help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0; a multi-axis profile: once for "
+                          "every axis' unit (one server), or once per axis (a server each)")
     run.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1; only with --modbus)")
+    run.add_argument("--unit-ids", type=unit_ids, metavar="IDS",
+                     help="a multi-axis profile over Modbus: each axis' unit id, in axis order (e.g. 1,2,3; default: the "
+                          "profile's [[axes]] unit_id, else unit 1 on each of one --modbus per axis)")
     run.add_argument("--duration", type=seconds, default=10.0, help="seconds to run")
     pacing = run.add_mutually_exclusive_group()
     pacing.add_argument("--virtual-time", action="store_true",

@@ -42,10 +42,7 @@ class MultiAxisSim:
         self.nodes = tuple(CanopenSimDrive(dict(node_bus), node, timing=timing, parameters=parameters,
                                            operator=hand.axis(place), od=od, sync_clock=sync_clock(clock))
                            for (node, parameters, timing), place in zip(axes, places, strict=True))
-        drives: list[Any] = [None] * hand.size
-        for node, place in zip(self.nodes, places):
-            drives[place] = node.drive
-        hand.bind(drives)
+        hand.bind_places(places, [node.drive for node in self.nodes])
 
     def node(self, node_id: int) -> CanopenSimDrive:
         """The simulated drive with ``node_id``."""
