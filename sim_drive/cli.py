@@ -231,13 +231,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     return _run_canopen(args)
 
 
-def _set_up_process(wall_clock: bool, library: str, level: int) -> None:
+def _set_up_process(wall_clock: bool, library: str, level: int) -> str:
     """Log lines on stderr (stamped with the wall clock with ``wall_clock``; the bus ``library`` only
-    from ``level``), then real-time scheduling for every thread to come (:mod:`sim_drive.scheduling`)."""
+    from ``level``), then real-time scheduling for every thread to come (:mod:`sim_drive.scheduling`):
+    what it got, in words for the serving line (a refusal before it logs nothing)."""
     fmt = "%(asctime)s %(message)s" if wall_clock else "%(message)s"
     logging.basicConfig(level=logging.INFO, format=fmt, handlers=[StderrHandler()], force=True)
     logging.getLogger(library).setLevel(level)
-    answer_in_real_time()
+    return answer_in_real_time()
 
 
 def _drive_setup(args: argparse.Namespace) -> tuple[DeviceParameters, OperatorModel | None, str]:
@@ -264,7 +265,7 @@ def _run_canopen(args: argparse.Namespace) -> int:
     if missing:
         print(f"{_PROG}: error: missing --{', --'.join(m.replace('_', '-') for m in missing)}", file=sys.stderr)
         return 2
-    _set_up_process(args.log_wall_clock, "canopen", logging.WARNING)
+    scheduling = _set_up_process(args.log_wall_clock, "canopen", logging.WARNING)
     try:
         parameters, operator, timing = _drive_setup(args)
         meter = BusLoadMeter(args.bitrate, parameters.period) if args.bitrate else None
@@ -281,8 +282,8 @@ def _run_canopen(args: argparse.Namespace) -> int:
             dictionary = "standard objects only" if args.od == "standard" else f"EDS {args.eds or eds_path()}"
             if args.eds:
                 log_eds_gaps(args.node_id, sim.object_dictionary)
-            logger.info("node %d: serving on %s %s (timing %s); %s",
-                        args.node_id, args.interface, args.channel, timing, dictionary)
+            logger.info("node %d: serving on %s %s (timing %s); %s; %s",
+                        args.node_id, args.interface, args.channel, timing, dictionary, scheduling)
             received = stop_signals.wait()
             logger.info("node %d: %s received, stopping", args.node_id, received.name)
         finally:
@@ -360,14 +361,14 @@ def run_axes(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
-    _set_up_process(args.log_wall_clock, "canopen", logging.WARNING)  # once the arguments hold: a refusal logs nothing
+    scheduling = _set_up_process(args.log_wall_clock, "canopen", logging.WARNING)  # once the arguments hold
     with _StopSignals() as stop_signals:
         if not started(sim):
             return 1
         try:
-            logger.info("nodes %s: serving on %s %s (one simulated drive per axis, the hand: %s)",
+            logger.info("nodes %s: serving on %s %s (one simulated drive per axis, the hand: %s); %s",
                         ", ".join(str(node.node_id) for node in sim.nodes), args.interface, args.channel,
-                        type(hand).__name__)
+                        type(hand).__name__, scheduling)
             received = stop_signals.wait()
             logger.info("nodes: %s received, stopping", received.name)
         finally:
@@ -415,7 +416,7 @@ def _run_modbus(args: argparse.Namespace) -> int:
         return 2
     if several:
         return run_modbus_axes(args)
-    _set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
+    scheduling = _set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
     unit_id = 1 if args.unit_id is None else args.unit_id
     word_order = args.word_order or "big"
     try:
@@ -428,8 +429,8 @@ def _run_modbus(args: argparse.Namespace) -> int:
         return 2
 
     def bound() -> None:
-        logger.info("unit %d: serving Modbus TCP on %s (timing %s, word order %s, started %.3f)",
-                    unit_id, sim.url, timing, word_order, time.time())
+        logger.info("unit %d: serving Modbus TCP on %s (timing %s, word order %s, started %.3f); %s",
+                    unit_id, sim.url, timing, word_order, time.time(), scheduling)
 
     if not _serve_until_stopped(args, lambda stop: sim.serve(stop, on_bound=bound)):
         return 1
@@ -490,7 +491,7 @@ def run_modbus_axes(args: argparse.Namespace) -> int:
     from sim_drive.modbus import parse_modbus_url
     from sim_drive.modbus.multi_axis import MultiAxisModbusSim
 
-    _set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
+    scheduling = _set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
     try:
         addresses = [parse_modbus_url(url) for url in args.modbus]
         axes, hand = _modbus_axes_setup(args)
@@ -501,8 +502,8 @@ def run_modbus_axes(args: argparse.Namespace) -> int:
     units = ", ".join(str(unit) for unit in sim.unit_ids)
 
     def bound() -> None:
-        logger.info("units %s: serving Modbus TCP on %s (one simulated drive per axis, the hand: %s, started %.3f)",
-                    units, ", ".join(dict.fromkeys(sim.urls)), type(hand).__name__, time.time())
+        logger.info("units %s: serving Modbus TCP on %s (one simulated drive per axis, the hand: %s, started %.3f); %s",
+                    units, ", ".join(dict.fromkeys(sim.urls)), type(hand).__name__, time.time(), scheduling)
 
     if not _serve_until_stopped(args, lambda stop: sim.serve(stop, bound)):
         return 1

@@ -217,7 +217,8 @@ def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(
         tmp_path: pathlib.Path, modbus_gantry: Callable[..., MultiAxisModbusSim]) -> None:
     """Wall-paced: pre-flight measures the three units' cycle (six requests) before anything is
     enabled, and either refuses a T this machine cannot hold (naming the one it holds, nothing
-    enabled) or the run keeps its overruns under 1 % (issue 26, "Modbus")."""
+    enabled; or, where a stall measured would trip the Modbus watchdog, naming that) or the run keeps
+    its overruns under 1 % (issue 26, "Modbus")."""
     sim = modbus_gantry()
     seen = watch_states(sim)
     result = hb.run(load_axes_profile("gantry-3d"), sim.urls[0], options(tmp_path / "run", 1.0, pacing="wall"),
@@ -225,7 +226,7 @@ def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(
     document = json.loads((tmp_path / "run" / "run.json").read_text())
     assert "preflight" in document, sorted(document)
     if result.exit_reason == "refused":
-        assert result.error is not None and "holds T >=" in result.error
+        assert result.error is not None and ("holds T >=" in result.error or "watchdog" in result.error), result.error
         assert all(State.OPERATION_ENABLED not in states for states in seen)
     else:
         assert result.exit_reason == "completed", result.error
