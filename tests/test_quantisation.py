@@ -74,7 +74,7 @@ def test_the_issue_wall_passes_with_a_tenth_of_a_newton(capsys: pytest.CaptureFi
 
 
 @pytest.mark.parametrize(("flag", "value", "allowed"), [
-    ("--position-resolution", "nan", "[0, 1] m"), ("--position-resolution", "-1e-5", "[0, 1] m"),
+    ("--position-resolution", "nan", "[0, 1e+06] m"), ("--position-resolution", "-1e-5", "[0, 1e+06] m"),
     ("--coulomb", "-0.1", "[0, 1e+06] N"), ("--coulomb", "inf", "[0, 1e+06] N")])
 def test_invalid_resolution_or_coulomb_is_one_line_and_exit_2(flag: str, value: str, allowed: str,
                                                                capsys: pytest.CaptureFixture[str]) -> None:

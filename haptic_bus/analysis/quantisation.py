@@ -52,11 +52,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.validation import real_in_range
 
-RESOLUTION_RANGE = (0.0, 1.0)  # m per 0x6064 increment (0: exact positions)
+if TYPE_CHECKING:  # the loop's module holds a device's Quantisation: no import back at run time
+    from haptic_bus.analysis.loop import WallLoop
+
+RESOLUTION_RANGE = (0.0, 1e6)  # m per 0x6064 increment (0: exact positions), as a profile's position_per_count
 VELOCITY_RESOLUTION_RANGE = (0.0, 1e6)  # m/s per 0x606C unit (0: exact velocities)
 COULOMB_RANGE = (0.0, 1e6)  # N, as a profile's [device] coulomb_friction
 

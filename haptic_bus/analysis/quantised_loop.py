@@ -59,7 +59,7 @@ class Quantiser:
     rounding: str = "floor"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "position", real_in_range("position_resolution", self.position, 0.0, 1.0, unit="m"))
+        object.__setattr__(self, "position", real_in_range("position_resolution", self.position, 0.0, 1e6, unit="m"))
         object.__setattr__(self, "velocity", real_in_range("velocity_resolution", self.velocity, 0.0, 1e6, unit="m/s"))
         if self.rounding not in ROUNDINGS:
             raise ParameterError("rounding", self.rounding, " or ".join(ROUNDINGS))

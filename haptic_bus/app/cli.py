@@ -280,7 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--stiffness", type=float, required=True, help="wall stiffness K, N/m")
     check.add_argument("--damping", type=float, required=True, help="wall damping B, N s/m")
     check.add_argument("--json", action="store_true", help="one JSON object on stdout")
-    check.add_argument("--position-resolution", type=number("--position-resolution", 0.0, 1.0, "m"), metavar="M",
+    check.add_argument("--position-resolution", type=number("--position-resolution", 0.0, 1e6, "m"), metavar="M",
                        help="encoder resolution Delta, m per 0x6064 increment: judge the quantisation condition too "
                             "(average velocity: Coulomb friction >= K Delta/2 + B Delta/T, any delay)")
     check.add_argument("--coulomb", type=number("--coulomb", 0.0, 1e6, "N"), default=0.0, metavar="N",
