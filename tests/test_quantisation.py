@@ -151,7 +151,7 @@ def test_a_point_velocity_quantum_makes_the_wall_drift_and_a_creep_cycle_leaks()
     """Push in by A, then creep out slower than vq/2: 0x606C reads 0, and the wall keeps pushing with
     its full K A all the way out.  The push stores about K A^2/2 + f_c A (plus the handle's own
     viscous loss); the creep hands back (K A - f_c) A: at K = 1500 N/m, f_c = 0.1 N, A = 1 mm the
-    operator ends near 0.9e-3 - 1.4e-3 = -0.5e-3 J, whatever Coulomb friction (only A > 4 f_c/K matters)."""
+    operator ends near 0.99e-3 - 1.45e-3 = -0.46e-3 J: Coulomb friction only sets the depth A > 4 f_c/K that leaks."""
     loop, vq, coulomb = WallLoop(0.032, 3.62, 1e-3, 1500.0, 0.0, 0, "point"), 1e-3, 0.1
     condition = quantisation_condition(loop, Quantisation(0.0, coulomb, vq))
     assert condition.kind == DRIFT and not condition.holds and math.isinf(condition.required)
