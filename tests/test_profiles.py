@@ -420,7 +420,7 @@ def test_the_hidden_truth_keys_go_to_the_simulated_drive_only(tmp_path):
     assert broken(tmp_path, 'velocity = "average"\n', 'velocity = "average"\nnoise_seed = -1\n').name == "device.noise_seed"
 
 
-def test_a_stated_coulomb_friction_below_the_quantisation_condition_is_refused_by_the_gate(tmp_path):
+def test_a_stated_coulomb_friction_below_the_quantisation_condition_is_refused_by_the_gate(tmp_path, capsys):
     """The stiffest contact is wall a + slot c: K = 1500 N/m, B = 12 N s/m; with Delta = 1e-7 m and
     average velocity it needs f_c >= K Delta/2 + B Delta/T = 7.5e-5 + 1.2e-3 = 1.275e-3 N."""
     text = BASE.replace('velocity = "average"\n', 'velocity = "average"\ncoulomb_friction = 0.001\n')
@@ -430,6 +430,9 @@ def test_a_stated_coulomb_friction_below_the_quantisation_condition_is_refused_b
     enough = load_profile(write(tmp_path, text.replace("coulomb_friction = 0.001", "coulomb_friction = 0.0013")))
     assert enough.gate().judge(enough.compiled_scene()).accepted
     assert load_profile(write(tmp_path, BASE)).device_loop().quantisation is None  # not stated: not judged
+    assert cmd_check(ns(profile=str(write(tmp_path, text)))) == 1  # profiles check says why, wall by wall
+    out = capsys.readouterr().out
+    assert "verdict: NOT passive (the quantisation condition fails)" in out and "leak 2.75e-11 J per crossing" in out
 
 
 def test_a_profile_as_pessimistic_as_its_identification_loads(tmp_path):

@@ -290,7 +290,8 @@ def format_check(report: CheckReport) -> str:
         f" (relative tolerance {report.limits_relative_tolerance:g})",
         f"bandwidth rule alpha = B/(K T) = {alpha} {'>' if holds else '<='} 6: {'ok' if holds else 'violated'}",
     ]
-    lines.append("quantisation: not asked (no --position-resolution)" if quantised is None else quantised.describe())
+    if quantised is not None:
+        lines.append(quantised.describe())
     band = report.out_of_band
     if not report.out_of_band_asked:
         lines.append("out of band (above Nyquist): not asked")
