@@ -15,7 +15,7 @@ import pytest
 
 from haptic_bus.analysis.check import check_passivity
 from haptic_bus.analysis.criterion import exact_verdict
-from haptic_bus.analysis.energy import RandomSinusoids
+from haptic_bus.analysis.energy import Constant, RandomSinusoids, simulate
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.quantisation import CROSSING, DRIFT, EXACT, Quantisation, quantisation_condition
 from haptic_bus.analysis.quantised_loop import Hand, QuantisedRun, Quantiser, simulate_quantised
@@ -52,6 +52,34 @@ def search(loop: WallLoop, delta: float, coulomb: float, samples: int) -> list[H
     tones = RandomSinusoids(loop.T, seed=7, amplitude=swing)
     hands.append(Hand(tuple(0.5 * loop.K * delta + tones((np.arange(samples) + 0.5) * loop.T)), 1, loop.b))
     return hands
+
+
+# --------------------------------------------------------------------------- the simulator itself
+
+
+@pytest.mark.parametrize("velocity", ["point", "average", "window:0.0004"])
+@pytest.mark.parametrize("delay", [0, 1, 0.4, 2.7])
+def test_without_quantum_or_friction_the_simulator_is_the_energy_modules_exact_machine(velocity: str,
+                                                                                       delay: float) -> None:
+    """Closed forms per stretch here, matrix exponentials there (:mod:`haptic_bus.analysis.energy`):
+    two exact computations of one loop under a constant 1 N push agree to round-off (1e-18 J
+    measured against energies of 1e-3 J; asserted: 1e-12 relative)."""
+    loop = WallLoop(0.5, 3.0, 1e-3, 2000.0, 5.0, delay, velocity)
+    reference = simulate(loop, Constant(1.0), 300).energy[:-1]
+    run = simulate_quantised(loop, Hand((1.0,) * 300), Quantiser(0.0))
+    np.testing.assert_allclose(run.energy, reference, rtol=0.0, atol=1e-12 * np.abs(reference).max())
+
+
+def test_a_sliding_handle_stops_where_coulomb_and_viscous_friction_say() -> None:
+    """No wall: from the speed a push left it at, the handle stops after ``t = m/b ln(1 + b v0/f_c)`` at
+    ``(m v0 - f_c t)/b`` further on (closed form; asserted to 1e-12 relative, the closed forms' round-off)."""
+    loop, coulomb = WallLoop(0.4, 2.0, 1e-3, 0.0, 0.0, 0, "average"), 0.3
+    pushed = simulate_quantised(loop, Hand((1.5,) * 101), Quantiser(0.0), coulomb)
+    x0, v0 = pushed.position[100], pushed.velocity[100]  # the state at 100 T, when the push ends
+    run = simulate_quantised(loop, Hand((1.5,) * 100 + (0.0,) * 1000), Quantiser(0.0), coulomb)
+    stop = loop.m / loop.b * math.log1p(loop.b * v0 / coulomb)
+    assert 0.1 < stop < 1.0 and run.velocity[-1] == 0.0
+    assert run.position[-1] - x0 == pytest.approx((loop.m * v0 - coulomb * stop) / loop.b, rel=1e-12)
 
 
 # --------------------------------------------------------------------------- the issue's numbers

@@ -41,6 +41,7 @@ import numpy as np
 
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import phi1, phi2
+from haptic_bus.analysis.quantisation import COULOMB_RANGE, RESOLUTION_RANGE, VELOCITY_RESOLUTION_RANGE
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range, whole_in_range
 
@@ -59,8 +60,9 @@ class Quantiser:
     rounding: str = "floor"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "position", real_in_range("position_resolution", self.position, 0.0, 1e6, unit="m"))
-        object.__setattr__(self, "velocity", real_in_range("velocity_resolution", self.velocity, 0.0, 1e6, unit="m/s"))
+        object.__setattr__(self, "position", real_in_range("position_resolution", self.position, *RESOLUTION_RANGE, unit="m"))
+        object.__setattr__(self, "velocity", real_in_range("velocity_resolution", self.velocity, *VELOCITY_RESOLUTION_RANGE,
+                                                                 unit="m/s"))
         if self.rounding not in ROUNDINGS:
             raise ParameterError("rounding", self.rounding, " or ".join(ROUNDINGS))
 
@@ -105,7 +107,7 @@ class QuantisedRun:
     """A run from rest: per sample ``k`` the true ``position`` x(kT) (m), ``velocity`` (m/s),
     the controller's ``wall_position`` x_k (m) and ``wall_force`` u_k (N), and the operator's
     ``energy`` E(kT) (J); ``least_energy`` the least E over the whole run (J) and ``work_scale``
-    the sum of ``|p dx|`` and ``c int v^2`` (J), the scale of the round-off in E."""
+    the sum of ``|p dx|`` and ``c int v^2`` (J), the scale of the round-off in E, summed over ``terms`` stretches."""
 
     position: np.ndarray
     velocity: np.ndarray
@@ -114,12 +116,13 @@ class QuantisedRun:
     energy: np.ndarray
     least_energy: float
     work_scale: float
+    terms: int
 
     def roundoff_bound(self) -> float:
         """A bound (J) on the round-off in any E: ``64 n u sum|work|`` (recursive summation of
         ``n`` terms errs by at most ``(n - 1) u sum|x_i|``, Higham eq. 4.4; each term carries a
         few ulps of its own, and the factor 64 covers them)."""
-        return 64.0 * self.energy.size * 2.0**-53 * self.work_scale
+        return 64.0 * self.terms * 2.0**-53 * self.work_scale
 
 
 class _Handle:
@@ -133,6 +136,7 @@ class _Handle:
         self.energy = 0.0
         self.least = 0.0
         self.scale = 0.0
+        self.terms = 0
 
     def advance(self, h: float, push: float, wall: float) -> None:
         """Move over ``h`` s with the push ``p`` and the wall force ``u`` (N) held."""
@@ -175,6 +179,7 @@ class _Handle:
         self.v = v1
         self.energy += push * dx - dissipated
         self.scale += abs(push * dx) + dissipated
+        self.terms += 1
         self.least = min(self.least, self.energy)
 
     def _time_of_velocity(self, v0: float, g: float, target: float, t: float) -> float | None:
@@ -199,7 +204,8 @@ def simulate_quantised(loop: WallLoop, hand: Hand, quantiser: Quantiser, coulomb
                        start: float = 0.0) -> QuantisedRun:
     """Run ``loop`` from rest at the true position ``start`` (m) with the drive's ``quantiser``,
     Coulomb friction ``coulomb`` (N) and the operator ``hand``; exact (see the module docstring)."""
-    coulomb = real_in_range("coulomb", coulomb, 0.0, 1e6, unit="N")
+    coulomb = real_in_range("coulomb", coulomb, *COULOMB_RANGE, unit="N")
+    start = real_in_range("start", start, -1e6, 1e6, unit="m")
     kind = loop.velocity.kind
     if kind == "lowpass":
         raise ParameterError("velocity", str(loop.velocity), "point, average or window (lowpass is not simulated)")
@@ -236,4 +242,4 @@ def simulate_quantised(loop: WallLoop, hand: Hand, quantiser: Quantiser, coulomb
                 window_start = quantiser.count(handle.x)
             push = pushes[k * steps + min(int(lo * steps + 1e-9), steps - 1)]
             handle.advance((hi - lo) * T, push, before if hi <= delta else now)
-    return QuantisedRun(out[0], out[1], out[2], out[3], out[4], handle.least, handle.scale)
+    return QuantisedRun(out[0], out[1], out[2], out[3], out[4], handle.least, handle.scale, handle.terms)
