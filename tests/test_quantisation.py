@@ -196,8 +196,39 @@ def test_a_point_velocity_quantum_makes_the_wall_drift_and_a_creep_cycle_leaks()
     assert run.wall_force[-1] == wall  # the wall never saw the creep
     travel = depth - run.position[-1]
     assert travel == pytest.approx(depth, rel=0.01)  # 1 % of the creep's time is its start-up transient
-    # the creep's own viscous loss (b + c) v travel is 1.6e-5 J: 1.2 % of what the wall hands back
+    # the handle's own viscous loss b v travel is 1.2e-6 J (the hand's c v^2 is its own): 0.1 % of what the wall hands back
     assert run.energy[-1] - pushed.energy[-1] == pytest.approx(-(wall - coulomb) * travel, rel=0.02)
+    assert run.energy[-1] < -4e-4
+
+
+def test_a_window_velocity_misses_counts_outside_its_window_and_a_steady_creep_leaks() -> None:
+    """``window:0.000125`` at T = 1 ms sees a count change only in the last eighth of a period.  Push
+    in to about 0.95 mm, stop, then creep out with a constant push at one count (5 um) every 4 periods,
+    timed so that every crossing falls 0.4 T into a period: a force far below Nyquist, and the wall
+    never sees one of the ~190 counts.  It holds 1.2 N all the way out: the operator's energy falls
+    from +5.0e-4 J to -5.3e-4 J (the creep hands back (1.2 - f_c) N over 0.94 mm)."""
+    loop = WallLoop(0.032, 3.62, 1e-3, 1500.0, 0.0, 1, "window:0.000125")
+    delta, coulomb, hand_damping, steps = 5e-6, 0.1, 2000.0, 16  # m, N, N s/m, pushes per period
+    assert quantisation_condition(loop, Quantisation(delta, coulomb)).kind == DRIFT
+    push_in = (10.0,) * (200 * steps)
+    wall = simulate_quantised(loop, Hand(push_in + (10.0,) * steps, steps, hand_damping),
+                              Quantiser(delta), coulomb).wall_force[200]
+    hold = (wall,) * (2 * steps)  # the push equals the wall force: the handle stops and sticks
+    held = simulate_quantised(loop, Hand(push_in + hold + (wall,) * steps, steps, hand_damping), Quantiser(delta),
+                              coulomb)
+    x = held.position[202]
+    speed = delta / (4 * loop.T)  # m/s: one count every 4 periods
+    first_crossing = (x - delta * math.floor(x / delta)) / speed  # s after the creep starts
+    wait = round(((0.4 * loop.T - first_crossing) % loop.T) / (loop.T / steps))  # pushes of T/16 held still
+    samples = 4 * round(x / delta)  # periods to creep back to about 0
+    creep = wall - coulomb - (loop.b + hand_damping) * speed  # a steady slide out at `speed`
+    pushes = push_in + hold + (wall,) * wait + (creep,) * (samples * steps - wait)
+    run = simulate_quantised(loop, Hand(pushes, steps, hand_damping), Quantiser(delta), coulomb)
+    assert np.all(run.wall_force[202:] == wall)  # not one count seen
+    travel = x - run.position[-1]
+    assert travel == pytest.approx(x, rel=0.02)  # back to within one count of the start
+    # the handle's own viscous loss b v travel is 4.3e-6 J (the hand's c v^2 is its own): 0.4 % of what the wall hands back
+    assert run.energy[-1] - held.energy[202] == pytest.approx(-(wall - coulomb) * travel, rel=0.01)
     assert run.energy[-1] < -4e-4
 
 
