@@ -428,7 +428,8 @@ def test_a_stated_coulomb_friction_below_the_quantisation_condition_is_refused_b
         load_profile(write(tmp_path, text))
     assert "quantisation" in str(caught.value) and "= 0.001275 N" in str(caught.value)
     enough = load_profile(write(tmp_path, text.replace("coulomb_friction = 0.001", "coulomb_friction = 0.0013")))
-    assert enough.gate().judge(enough.compiled_scene()).accepted
+    decision = enough.gate().judge(enough.compiled_scene())
+    assert decision.accepted and decision.wall_dicts()[0]["quantisation"]["holds"] is True
     assert load_profile(write(tmp_path, BASE)).device_loop().quantisation is None  # not stated: not judged
     assert cmd_check(ns(profile=str(write(tmp_path, text)))) == 1  # profiles check says why, wall by wall
     out = capsys.readouterr().out

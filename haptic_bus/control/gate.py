@@ -95,9 +95,11 @@ class GateDecision:
         return min((w.verdict.margin for w in self.walls), default=None)
 
     def wall_dicts(self) -> list[dict[str, Any]]:
-        """Every contact wall judged: its objects, ``K`` (N/m), ``B`` (N s/m), margin (N s/m) and critical ``theta`` (rad)."""
+        """Every contact wall judged: its objects, ``K`` (N/m), ``B`` (N s/m), margin (N s/m), critical ``theta``
+        (rad) and, when the device states one, its quantisation condition."""
         return [{"objects": list(w.objects), "K": w.K, "B": w.B, "margin": w.verdict.margin,
-                 "critical_theta": w.verdict.critical_theta} for w in self.walls]
+                 "critical_theta": w.verdict.critical_theta,
+                 **({} if w.quantisation is None else {"quantisation": w.quantisation.to_dict()})} for w in self.walls]
 
 
 @functools.lru_cache(maxsize=4096)
