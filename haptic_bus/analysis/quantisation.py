@@ -112,13 +112,17 @@ class QuantisationCondition:
     def describe(self) -> str:
         """One line for ``haptic-bus check`` and a gate's refusal."""
         verdict = "holds" if self.holds else "FAILS"
+        unit = "m" if self.velocity.startswith(("average", "window")) else "m/s"
         if self.kind == EXACT:
-            return f"quantisation: holds (no quantum enters the wall's position with {self.velocity} velocity)"
+            which = "Delta" if unit == "m" else "0x606C's quantum vq"
+            return f"quantisation: holds (no wall, or {which} = {self.quantum:g} {unit} with {self.velocity} velocity)"
         if self.kind == DRIFT:
-            unit = "m" if self.velocity.startswith("window") else "m/s"
+            unseen = ("a count that changes outside the window is never seen" if unit == "m" else
+                      "a creep slower than half the quantum is never seen")
             return (f"quantisation: {verdict}: the wall's position sums rounded {self.velocity} measurements "
-                    f"(quantum {self.quantum:g} {unit}) and drifts; a creep below the quantum returns K A^2/2 per "
-                    f"push of depth A, Coulomb friction f_c = {self.coulomb:g} N takes 2 f_c A: no f_c makes a spring passive")
+                    f"(quantum {self.quantum:g} {unit}) and drifts: {unseen}, so a push of depth A and an unseen "
+                    f"return hand back K A^2/2 against 2 f_c A of Coulomb friction (f_c = {self.coulomb:g} N): "
+                    "no f_c makes a spring passive")
         leak = "" if self.holds else f"; it can leak {self.leak_per_count:.4g} J per crossing (per count of travel)"
         formula, unit = _FORMULAS.get(self.velocity.partition(":")[0], ("B vq/2", "vq = {:g} m/s"))
         return (f"quantisation (per crossing, Abbott-Okamura with delay): {verdict}: Coulomb friction f_c = "
