@@ -124,10 +124,10 @@ class QuantisationCondition:
                     f"return hand back K A^2/2 against 2 f_c A of Coulomb friction (f_c = {self.coulomb:g} N): "
                     "no f_c makes a spring passive")
         leak = "" if self.holds else f"; it can leak {self.leak_per_count:.4g} J per crossing (per count of travel)"
-        formula, unit = _FORMULAS.get(self.velocity.partition(":")[0], ("B vq/2", "vq = {:g} m/s"))
+        formula, quantum = _FORMULAS.get(self.velocity.partition(":")[0], ("B vq/2", "vq = {:g} m/s"))
         return (f"quantisation (per crossing, Abbott-Okamura with delay): {verdict}: Coulomb friction f_c = "
                 f"{self.coulomb:g} N against the required {formula} = {self.required:.6g} N "
-                f"({unit.format(self.quantum)}){leak}")
+                f"({quantum.format(self.quantum)}){leak}")
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready (infinities as None)."""
