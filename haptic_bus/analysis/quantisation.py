@@ -18,7 +18,7 @@ has one held force, so the ``dx'_k`` add up to the path once.  Whether the error
 * ``average`` (0x606C the count difference over the cycle, exact when ``Delta/(T vq)`` is
   whole, as in every shipped profile): ``x_k = Delta n_k`` is the quantised encoder position
   itself, ``e^x`` stays in one count and ``e^y = (e^x_k - e^x_{k-1})/T``.  A constant part of
-  ``e^x`` is a shifted spring (conservative, a one-off of at most ``K Delta^2/8``); the rest is
+  ``e^x`` is a spring shifted by at most ``Delta/2`` (conservative: a bounded one-off); the rest is
   within ``Delta/2``, and ``|e^y| < Delta/T``.  So the loop is passive if
 
       f_c >= K Delta/2 + B Delta/T            (any delay; Abbott & Okamura's f_c > K Delta/2 at B = 0)
