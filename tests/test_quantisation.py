@@ -255,6 +255,8 @@ def test_which_quantum_enters_each_velocity_model() -> None:
     assert damper.kind == CROSSING and damper.required == pytest.approx(4 * 2e-5 / 5e-4)  # B Delta/TW
     lowpass = quantisation_condition(WallLoop(1, 20, 1e-3, 0, 4, 1, "lowpass:0.002"), q)
     assert lowpass.required == pytest.approx(4 * 1e-4 / 2)  # B vq/2
+    rounded = quantisation_condition(WallLoop(1, 20, 3e-4, 1000, 4, 1, "average"), q)  # 2e-5/(3e-4 1e-4) = 666.7
+    assert rounded.kind == DRIFT and "not whole" in rounded.describe()
     unquantised = quantisation_condition(WallLoop(1, 20, 1e-3, 1000, 4, 1, "point"), Quantisation(2e-5, 0.0))
     assert unquantised.kind == EXACT and unquantised.holds  # the encoder does not enter a point velocity's wall
 

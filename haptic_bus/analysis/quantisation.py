@@ -16,7 +16,8 @@ has one held force, so the ``dx'_k`` add up to the path once.  Whether the error
 ``f_c L`` depends on which quantum enters ``x_k``:
 
 * ``average`` (0x606C the count difference over the cycle, exact when ``Delta/(T vq)`` is
-  whole, as in every shipped profile): ``x_k = Delta n_k`` is the quantised encoder position
+  whole, as in every shipped profile; otherwise its rounding drifts as ``point``'s does):
+  ``x_k = Delta n_k`` is the quantised encoder position
   itself, ``e^x`` stays in one count and ``e^y = (e^x_k - e^x_{k-1})/T``.  A constant part of
   ``e^x`` is a spring shifted by at most ``Delta/2`` (conservative: a bounded one-off); the rest is
   within ``Delta/2``, and ``|e^y| < Delta/T``.  So the loop is passive if
@@ -117,8 +118,10 @@ class QuantisationCondition:
             which = "Delta" if unit == "m" else "0x606C's quantum vq"
             return f"quantisation: holds (no wall, or {which} = {self.quantum:g} {unit} with {self.velocity} velocity)"
         if self.kind == DRIFT:
-            unseen = ("a count that changes outside the window is never seen" if unit == "m" else
-                      "a creep slower than half the quantum is never seen")
+            unseen = {"average": "0x606C rounds the count difference (Delta/(T vq) is not whole), and the roundings "
+                                 "of unequal count steps in and out never cancel",
+                      "window": "a count that changes outside the window is never seen"}.get(
+                self.velocity.partition(":")[0], "a creep slower than half the quantum is never seen")
             return (f"quantisation: {verdict}: the wall's position sums rounded {self.velocity} measurements "
                     f"(quantum {self.quantum:g} {unit}) and drifts: {unseen}, so a push of depth A and an unseen "
                     f"return hand back K A^2/2 against 2 f_c A of Coulomb friction (f_c = {self.coulomb:g} N): "
@@ -140,6 +143,14 @@ def _finite(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
+def _counts_exactly(T: float, quantisation: Quantisation) -> bool:
+    """0x606C holds the count difference over ``T`` exactly: ``Delta/(T vq)`` whole (or ``vq`` not given)."""
+    if quantisation.velocity_resolution == 0.0:
+        return True
+    ratio = quantisation.position_resolution / (T * quantisation.velocity_resolution)
+    return ratio >= 0.5 and abs(ratio - round(ratio)) <= 1e-9 * ratio
+
+
 def quantisation_condition(loop: WallLoop, quantisation: Quantisation) -> QuantisationCondition:
     """The quantisation condition of the wall in ``loop`` with the device's ``quantisation``
     (see the module docstring): which quantum enters, the Coulomb friction it needs (N), the
@@ -156,7 +167,7 @@ def quantisation_condition(loop: WallLoop, quantisation: Quantisation) -> Quanti
     name = str(loop.velocity)
     if quantum == 0.0 or (K == 0.0 and B == 0.0):
         return QuantisationCondition(EXACT, True, 0.0, f_c, quantum, 0.0, name)
-    if kind != "average" and K > 0.0:
+    if K > 0.0 and (kind != "average" or not _counts_exactly(loop.T, quantisation)):
         return QuantisationCondition(DRIFT, False, math.inf, f_c, quantum, math.inf, name)
     required = (K * quantum / 2.0 if kind == "average" else 0.0) + damper
     holds = f_c >= required
