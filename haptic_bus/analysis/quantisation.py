@@ -39,9 +39,12 @@ has one held force, so the ``dx'_k`` add up to the path once.  Whether the error
   ``T`` times a sum of rounded velocities; the rounding never cancels out, and a creep slower
   than ``vq/2`` is not seen at all.  A **drift**: push in fast by ``A``, creep out unseen, and the
   wall still pushes with its full force ``K A`` all the way out: each such cycle returns
-  ``K A^2/2`` and costs ``2 f_c A``, so every ``A > 4 f_c/K`` leaks -- no Coulomb friction
-  makes a spring passive here (a force limit ``F`` caps the whole leak near ``F^2/(2K)``).  A
-  damper alone (``K = 0``) errs by ``B vq/2`` per unit travel: ``f_c >= B vq/2``.
+  ``K A^2/2`` and costs ``2 f_c A``, so every ``A > 4 f_c/K`` leaks.  It repeats with the
+  wall's position back where it was: creep in by ``A`` unseen, push in by ``A`` seen, creep out
+  by ``A`` unseen, pull out by ``A`` seen -- ``K A^2`` returned, ``4 f_c A`` of friction per
+  cycle.  No Coulomb friction makes a spring passive here; a force limit ``F`` only bounds
+  ``A`` by ``F/K``, so the cycle leaks wherever ``F > 4 f_c``.  A damper alone (``K = 0``)
+  errs by ``B vq/2`` per unit travel: ``f_c >= B vq/2``.
 * ``window:TW``: ``x_k`` sums count differences over windows shorter than the cycle; a count
   that changes outside the window is never seen: the same drift with ``Delta`` (``K > 0``), and
   ``f_c >= B Delta/TW`` for a damper alone.
