@@ -8,6 +8,7 @@ of ``64 n u sum|work|``, about 1e-20 J here, far below every leak found: >= 7e-1
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -212,6 +213,40 @@ def test_a_point_velocity_quantum_makes_the_wall_drift_and_a_creep_cycle_leaks()
     # the handle's own viscous loss b v travel is 1.2e-6 J (the hand's c v^2 is its own): 0.1 % of what the wall hands back
     assert run.energy[-1] - pushed.energy[-1] == pytest.approx(-(wall - coulomb) * travel, rel=0.02)
     assert run.energy[-1] < -4e-4
+
+
+def test_the_drift_repeats_with_the_wall_back_where_it_was() -> None:
+    """A point velocity rounded to vq = 5 mm/s; each cycle, with a hand damping of 50 N s/m holding
+    the speeds: creep in by A = 0.6 mm at 0.3 vq (unseen), push in by A at 4 vq (seen), creep out
+    unseen, pull out seen.  The wall's force and the handle come back where they were, and the
+    operator's energy falls each time by K A^2 - 4 f_c A - 2 b A (v_seen + v_creep)
+    = 5.4e-4 - 2.4e-4 - 0.87e-4 - 0.07e-4 = 2.07e-4 J (measured 1.8e-4 and 1.95e-4: the open-loop
+    pushes start and stop each move a little short of A; asserted within 20 %)."""
+    loop, vq, coulomb, hand_damping = WallLoop(0.032, 3.62, 1e-3, 1500.0, 0.0, 0, "point"), 5e-3, 0.1, 50.0
+    depth, creep, seen = 0.6e-3, 0.3 * vq, 4 * vq  # m, m/s, m/s
+    drag = loop.b + hand_damping  # N s/m: the push that holds a speed, beside the wall and Coulomb
+
+    def now(pushes: list[float]) -> tuple[float, float, float]:
+        """(x, u, E) after ``pushes``, one push per period."""
+        run = simulate_quantised(loop, Hand((*pushes, pushes[-1]), 1, hand_damping), Quantiser(0.0, vq), coulomb)
+        n = len(pushes)
+        return run.position[n], run.wall_force[n], run.energy[n]
+
+    pushes = [1.0] * 200  # at rest near (1 - f_c)/K = 0.6 mm
+    marks = [now(pushes)]
+    for _ in range(2):
+        for direction in (1, -1):
+            u = now(pushes)[1]
+            pushes += [u + direction * (coulomb + drag * creep)] * round(depth / (creep * loop.T))  # unseen
+            u = now(pushes)[1]
+            pushes += [u + direction * (loop.K * seen * loop.T * k + coulomb + drag * seen)
+                       for k in range(round(depth / (seen * loop.T)))]  # seen
+        marks.append(now(pushes))
+    predicted = loop.K * depth**2 - 4 * coulomb * depth - 2 * loop.b * depth * (seen + creep)
+    assert marks[0][1] == marks[1][1] == marks[2][1]  # the wall's force back to the same count every time
+    assert marks[2][0] == pytest.approx(marks[1][0], rel=1e-3)  # the second cycle ends where the first did
+    for (_, _, before), (_, _, after) in itertools.pairwise(marks):
+        assert before - after == pytest.approx(predicted, rel=0.2)
 
 
 def test_a_window_velocity_misses_counts_outside_its_window_and_a_steady_creep_leaks() -> None:
