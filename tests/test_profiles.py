@@ -12,7 +12,7 @@ import pytest
 
 from haptic_bus.analysis.check import check_loop
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
-from haptic_bus.analysis.quantisation import Quantisation
+from haptic_bus.analysis.resolution import Quantisation
 from haptic_bus.app.profiles import (
     DEFAULT_PROFILE,
     Profile,

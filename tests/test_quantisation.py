@@ -18,8 +18,9 @@ from haptic_bus.analysis.check import check_passivity
 from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.energy import Constant, RandomSinusoids, simulate
 from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.analysis.quantisation import CROSSING, DRIFT, EXACT, Quantisation, quantisation_condition
+from haptic_bus.analysis.quantisation import CROSSING, DRIFT, EXACT, quantisation_condition
 from haptic_bus.analysis.quantised_loop import Hand, QuantisedRun, Quantiser, simulate_quantised
+from haptic_bus.analysis.resolution import Quantisation
 from haptic_bus.app.cli import main
 from haptic_bus.errors import ParameterError
 

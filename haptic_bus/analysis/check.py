@@ -34,7 +34,8 @@ from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, LimitsPlan, PassiveSe
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WORDS, WallLoop
 from haptic_bus.analysis.out_of_band import DEFAULT_HARMONICS, Exposure, worst_force
 from haptic_bus.analysis.poles import closed_loop_poles, stability
-from haptic_bus.analysis.quantisation import Quantisation, QuantisationCondition, quantisation_condition
+from haptic_bus.analysis.quantisation import QuantisationCondition, quantisation_condition
+from haptic_bus.analysis.resolution import Quantisation
 from haptic_bus.analysis.theta_search import refine_lanes
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 from haptic_bus.errors import ParameterError

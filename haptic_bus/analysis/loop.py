@@ -15,7 +15,7 @@ import enum
 import math
 from dataclasses import dataclass
 
-from haptic_bus.analysis.quantisation import Quantisation
+from haptic_bus.analysis.resolution import Quantisation
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 from haptic_bus.validation import real_in_range
 

@@ -57,40 +57,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
-from haptic_bus.validation import real_in_range
-
-if TYPE_CHECKING:  # the loop's module holds a device's Quantisation: no import back at run time
-    from haptic_bus.analysis.loop import WallLoop
-
-RESOLUTION_RANGE = (0.0, 1e6)  # m per 0x6064 increment (0: exact positions), as a profile's position_per_count
-VELOCITY_RESOLUTION_RANGE = (0.0, 1e6)  # m/s per 0x606C unit (0: exact velocities)
-COULOMB_RANGE = (0.0, 1e6)  # N, as a profile's [device] coulomb_friction
+from haptic_bus.analysis.loop import WallLoop
+from haptic_bus.analysis.resolution import Quantisation
 
 _FORMULAS = {"average": ("K Delta/2 + B Delta/T", "Delta = {:g} m"), "window": ("B Delta/TW", "Delta = {:g} m")}
 CROSSING = "crossing"
 DRIFT = "drift"
 EXACT = "exact"
-
-
-@dataclass(frozen=True)
-class Quantisation:
-    """A device's resolution and Coulomb friction: ``position_resolution`` Delta (m per 0x6064
-    increment), ``velocity_resolution`` vq (m/s per 0x606C unit, 0: not known or exact) and
-    ``coulomb`` f_c (N).  Raises ParameterError naming a value outside its range."""
-
-    position_resolution: float
-    coulomb: float
-    velocity_resolution: float = 0.0
-
-    def __post_init__(self) -> None:
-        set_ = object.__setattr__
-        set_(self, "position_resolution", real_in_range("position_resolution", self.position_resolution,
-                                                        *RESOLUTION_RANGE, unit="m"))
-        set_(self, "coulomb", real_in_range("coulomb", self.coulomb, *COULOMB_RANGE, unit="N"))
-        set_(self, "velocity_resolution", real_in_range("velocity_resolution", self.velocity_resolution,
-                                                        *VELOCITY_RESOLUTION_RANGE, unit="m/s"))
 
 
 @dataclass(frozen=True)

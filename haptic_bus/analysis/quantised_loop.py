@@ -41,7 +41,7 @@ import numpy as np
 
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import phi1, phi2
-from haptic_bus.analysis.quantisation import COULOMB_RANGE, RESOLUTION_RANGE, VELOCITY_RESOLUTION_RANGE
+from haptic_bus.analysis.resolution import COULOMB_RANGE, RESOLUTION_RANGE, VELOCITY_RESOLUTION_RANGE
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range, whole_in_range
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from drives.base import DriveScaling
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, TARGET_TORQUE
 from haptic_bus.analysis.loop import DELAY_RANGE, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE
-from haptic_bus.analysis.quantisation import COULOMB_RANGE, Quantisation
+from haptic_bus.analysis.resolution import COULOMB_RANGE, Quantisation
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.reader import REQUIRED, Reader, profile_error
