@@ -36,6 +36,9 @@ def main() -> None:
         label = f"f_c = {coulomb:g} N"
         zoom = t < 0.06
         top.plot(t[zoom] * 1e3, run.position[zoom] / DELTA, color=colour, label=label)
+        if coulomb == 0.0:  # the count the wall uses (x_k = Delta n_k): a sample behind the handle
+            top.step(t[zoom] * 1e3, run.wall_position[zoom] / DELTA, where="post", color=colour, lw=0.8, ls=":",
+                     label="the wall's x_k / Delta at 0 N")
         middle.step(t[zoom] * 1e3, run.wall_force[zoom], where="post", color=colour, label=label)
         bottom.plot(t, run.energy * 1e6, color=colour, label=f"{label}: least E {run.least_energy * 1e6:+.3f} uJ")
     for level in (1.0, 2.0):
