@@ -395,15 +395,18 @@ def test_any_plausible_plant_is_found_within_its_standard_errors(mass: float, ti
 
 def test_the_written_profile_keeps_the_layout_and_never_claims_more_than_was_measured(tmp_path: Path) -> None:
     """A cia402 profile, a drive measured at D = 0 (ideal): [loop] delay stays 1, the timing's least;
-    friction is b - 3 sigma of exactly the numbers in [identification] (rounded down), the loader
-    accepts the copy, and every line the writer did not own is as the user wrote it."""
+    friction is b - 3 sigma of exactly the numbers in [identification] (rounded down), and so is the
+    Coulomb friction the source stated (1 N, more than the drive's 0.5 N); the loader accepts the
+    copy, and every line the writer did not own is as the user wrote it."""
     import datetime as dt
     import tomllib
 
     from haptic_bus.app.identify_profile import identified_profile
     from haptic_bus.app.profiles import load_profile, shipped_profiles
 
-    source = shipped_profiles()["cia402-handle"]
+    source = tmp_path / "source.toml"
+    source.write_text(shipped_profiles()["cia402-handle"].read_text().replace(
+        "\n[loop]", "coulomb_friction = 1.0             # N: a guess, before identification\n\n[loop]", 1))
     truth = DeviceParameters(mass=1.0, friction=20.0, coulomb_friction=0.5, position_per_count=1.2e-7, velocity_per_count=1.2e-7,
                              rated_torque=0.32, max_torque_permille=2000, velocity=VelocityModel.parse("average"))
     _, found = identify_simulated(truth, "ideal", mass=1.0, force_limit=30.0, duration=10.0, declared="average")
@@ -417,18 +420,21 @@ def test_the_written_profile_keeps_the_layout_and_never_claims_more_than_was_mea
     assert document["device"]["friction"] <= measured["friction"] - 3 * measured["friction_stderr"]
     assert document["device"]["friction"] == pytest.approx(measured["friction"] - 3 * measured["friction_stderr"], rel=1e-5)
     assert document["loop"]["delay"] == 1.0 and document["loop"]["timing"] == "cia402"
+    credible = measured["coulomb_friction"] - 3 * measured["coulomb_friction_stderr"]
+    assert document["device"]["coulomb_friction"] <= credible
+    assert document["device"]["coulomb_friction"] == pytest.approx(credible, rel=1e-5)
     assert "2026-11-30T22:50:00Z" in document["device"]["friction_source"]
     profile = load_profile(written)
     assert profile.identification is not None and profile.device.mass == pytest.approx(1.0, rel=0.03)
     original = tomllib.loads(source.read_text())
     written_keys = {("device", "mass"), ("device", "friction"), ("device", "friction_source"), ("device", "velocity"),
-                    ("loop", "delay")}
+                    ("device", "coulomb_friction"), ("loop", "delay")}
     for name, table in original.items():
         for key, value in table.items():
             assert (name, key) in written_keys or document[name][key] == value, (name, key)
     lines = source.read_text().splitlines()
     comments = [line for line in lines if line.lstrip().startswith("#")]
-    mine = ("mass", "friction", "velocity =")
+    mine = ("mass", "friction", "velocity =", "coulomb_friction")
     annotated = [line for line in lines if " = " in line and "#" in line and not line.startswith(mine)]
     kept = set(text.splitlines())
     assert comments and annotated and all(line in kept for line in comments + annotated)  # verbatim, comments and all

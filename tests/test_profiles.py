@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import pathlib
@@ -11,6 +12,7 @@ import pytest
 
 from haptic_bus.analysis.check import check_loop
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WallLoop
+from haptic_bus.analysis.resolution import Quantisation
 from haptic_bus.app.profiles import (
     DEFAULT_PROFILE,
     Profile,
@@ -412,8 +414,26 @@ def test_the_hidden_truth_keys_go_to_the_simulated_drive_only(tmp_path):
     profile = load_profile(write(tmp_path, text))
     parameters = profile.sim_device_parameters()
     assert (parameters["coulomb_friction"], parameters["velocity_noise"], parameters["noise_seed"]) == (0.2, 1000.0, 7)
-    assert profile.device_loop() == load_profile(write(tmp_path, BASE)).device_loop()  # the gate never sees them
+    # the noise never reaches the gate; the Coulomb friction does, with the encoder's resolution
+    assert profile.device_loop() == dataclasses.replace(load_profile(write(tmp_path, BASE)).device_loop(),
+                                                        quantisation=Quantisation(1e-7, 0.2, 1e-6))
     assert broken(tmp_path, 'velocity = "average"\n', 'velocity = "average"\nnoise_seed = -1\n').name == "device.noise_seed"
+
+
+def test_a_stated_coulomb_friction_below_the_quantisation_condition_is_refused_by_the_gate(tmp_path, capsys):
+    """The stiffest contact is wall a + slot c: K = 1500 N/m, B = 12 N s/m; with Delta = 1e-7 m and
+    average velocity it needs f_c >= K Delta/2 + B Delta/T = 7.5e-5 + 1.2e-3 = 1.275e-3 N."""
+    text = BASE.replace('velocity = "average"\n', 'velocity = "average"\ncoulomb_friction = 0.001\n')
+    with pytest.raises(Refusal) as caught:
+        load_profile(write(tmp_path, text))
+    assert "quantisation" in str(caught.value) and "= 0.001275 N" in str(caught.value)
+    enough = load_profile(write(tmp_path, text.replace("coulomb_friction = 0.001", "coulomb_friction = 0.0013")))
+    decision = enough.gate().judge(enough.compiled_scene())
+    assert decision.accepted and decision.wall_dicts()[0]["quantisation"]["holds"] is True
+    assert load_profile(write(tmp_path, BASE)).device_loop().quantisation is None  # not stated: not judged
+    assert cmd_check(ns(profile=str(write(tmp_path, text)))) == 1  # profiles check says why, wall by wall
+    out = capsys.readouterr().out
+    assert "verdict: NOT passive (the quantisation condition fails)" in out and "leak 2.75e-11 J per crossing" in out
 
 
 def test_a_profile_as_pessimistic_as_its_identification_loads(tmp_path):
@@ -427,6 +447,8 @@ def test_a_profile_as_pessimistic_as_its_identification_loads(tmp_path):
     ('velocity = "average"\n', 'velocity = "point"\n', "device.velocity", "average"),
     ("friction = 20.0", "friction = 20.5", "device.friction", "at most 20.4"),
     ('timing = "cia402"', 'timing = "ideal"', "loop.delay", "at least 1"),
+    ('velocity = "average"\n', 'velocity = "average"\ncoulomb_friction = 0.28\n', "device.coulomb_friction",
+     "at most 0.27"),  # 0.3 - 3 * 0.01
 ])
 def test_a_profile_more_optimistic_than_its_identification_is_refused(tmp_path, old, new, field, needle):
     path = write(tmp_path, BASE.replace(old, new, 1) + IDENTIFIED)

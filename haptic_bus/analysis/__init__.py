@@ -13,6 +13,9 @@ throughout.  Modules, one job each:
   loop's characteristic function in ``z - 1``), ``poles``;
 * ``theta_search`` (the grid and the joint zoom), ``criterion`` (the verdict), ``limits`` (passive intervals);
 * ``energy`` (the time-domain arbiter), ``out_of_band`` (the exposure to forces above Nyquist);
+* ``resolution`` (a device's encoder resolution and Coulomb friction), ``quantisation`` (their
+  condition on a wall: per crossing, or a drift),
+  ``quantised_loop`` (its arbiter: the loop with counts and Coulomb sticking, simulated exactly);
 * ``closed_form``, ``design`` (the seed's figures), ``tables`` (the README table), ``check`` (the report);
 * ``coupled_loop``, ``coupled``, ``coupled_limits``, ``coupled_energy`` (several axes coupled
   through the hand); ``can_timing`` (the CAN bit-time model: frame times, bus load).

@@ -34,6 +34,8 @@ from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, LimitsPlan, PassiveSe
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WORDS, WallLoop
 from haptic_bus.analysis.out_of_band import DEFAULT_HARMONICS, Exposure, worst_force
 from haptic_bus.analysis.poles import closed_loop_poles, stability
+from haptic_bus.analysis.quantisation import QuantisationCondition, quantisation_condition
+from haptic_bus.analysis.resolution import Quantisation
 from haptic_bus.analysis.theta_search import refine_lanes
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 from haptic_bus.errors import ParameterError
@@ -85,7 +87,9 @@ class CheckReport:
     ``closed_loop_poles`` in the z-plane, largest magnitude first, ``poles_extended`` True when
     50-digit arithmetic judged them; ``alpha = B/(K T)`` (inf for K = 0) against the seed's
     bandwidth rule ``alpha > 6``; ``out_of_band`` the exposure above Nyquist (None when not
-    asked, ``out_of_band_asked``, or the loop is not stable).
+    asked, ``out_of_band_asked``, or the loop is not stable); ``quantisation`` the encoder
+    quantisation and Coulomb friction condition (:mod:`haptic_bus.analysis.quantisation`; None
+    when not asked): ``passive`` needs it to hold too.
     """
 
     loop: WallLoop
@@ -110,6 +114,7 @@ class CheckReport:
     limits_relative_tolerance: float = RELATIVE_TOLERANCE
     out_of_band_asked: bool = True
     poles_extended: bool = False
+    quantisation: QuantisationCondition | None = None
 
     @property
     def lossless(self) -> bool:
@@ -157,6 +162,7 @@ class CheckReport:
             },
             "bandwidth_rule": {"alpha": self.alpha if math.isfinite(self.alpha) else None, "required": BANDWIDTH_ALPHA,
                                "holds": self.bandwidth_rule_holds},
+            "quantisation": None if self.quantisation is None else self.quantisation.to_dict(),
         }
 
 
@@ -174,18 +180,22 @@ def _verdicts(loop: WallLoop) -> tuple[Verdict, Verdict, PassiveSet, PassiveSet]
     return exact, seed_judgement(loop, minima[1]), stiffness, damping
 
 
-def check_loop(loop: WallLoop, harmonics: int = DEFAULT_HARMONICS, out_of_band: bool = True) -> CheckReport:
+def check_loop(loop: WallLoop, harmonics: int = DEFAULT_HARMONICS, out_of_band: bool = True,
+               quantisation: Quantisation | None = None) -> CheckReport:
     """Judge ``loop`` by every criterion (exact, seed, closed forms), with its limits and poles, and
     (``out_of_band``, what ``haptic-bus check``, ``report`` and ``profiles check`` show) its
-    out-of-band exposure (aliases up to ``harmonics`` each side)."""
+    out-of-band exposure (aliases up to ``harmonics`` each side); with ``quantisation``, also the
+    quantisation condition, which the verdict then needs too."""
     exact, seed, stiffness, damping = _verdicts(loop)
+    condition = None if quantisation is None else quantisation_condition(loop, quantisation)
+    quantised_out = exact.passive and condition is not None and not condition.holds
     eq23, eq2, eq4 = velocity_sampling_slack(loop), colgate_slack(loop), liu2011_slack(loop)
     exposure = None
     if out_of_band and exact.stable:
         exposure = OutOfBand(worst_force(loop, harmonics, pair=True), worst_force(loop, harmonics))
     return CheckReport(
         loop=loop,
-        passive=exact.passive,
+        passive=exact.passive and not quantised_out,
         margin=exact.margin,
         critical_theta=exact.critical_theta,
         stable=exact.stable,
@@ -200,19 +210,25 @@ def check_loop(loop: WallLoop, harmonics: int = DEFAULT_HARMONICS, out_of_band: 
         alpha=loop.alpha,
         stiffness_set=stiffness,
         damping_set=damping,
-        outcome=exact.outcome,
+        outcome="not passive" if quantised_out else exact.outcome,
         out_of_band=exposure,
         out_of_band_asked=out_of_band,
         poles_extended=stability(loop).extended,
+        quantisation=condition,
     )
 
 
 def check_passivity(mass: float, friction: float, period: float, stiffness: float, damping: float,
-                    delay: float = 0, velocity: VelocityModel | str = "point", out_of_band: bool = False) -> CheckReport:
+                    delay: float = 0, velocity: VelocityModel | str = "point", out_of_band: bool = False,
+                    position_resolution: float | None = None, coulomb: float = 0.0,
+                    velocity_resolution: float = 0.0) -> CheckReport:
     """Is a wall ``K`` (N/m), ``B`` (N s/m) passive on a handle ``m`` (kg), ``b`` (N s/m) sampled
     every ``T`` (s) with a loop delay of ``delay`` samples (real) and the drive's ``velocity``
     model (``"point"``, ``"average"``, ``"window:SECONDS"``, ``"lowpass:SECONDS"``)?  Every
     criterion's answer, the passive intervals, and (``out_of_band``) the exposure above Nyquist.
+    With a ``position_resolution`` (m per 0x6064 increment; or a ``velocity_resolution``, m/s
+    per 0x606C unit) the verdict needs the quantisation condition with the Coulomb friction
+    ``coulomb`` (N) too (:mod:`haptic_bus.analysis.quantisation`).
 
     Raises :class:`~haptic_bus.errors.ParameterError` naming a parameter outside its range.
     """
@@ -220,7 +236,9 @@ def check_passivity(mass: float, friction: float, period: float, stiffness: floa
         loop = WallLoop(mass, friction, period, stiffness, damping, delay, VelocityModel.parse(velocity))
     except ParameterError as error:  # named as the caller spelled it
         raise ParameterError(WORDS.get(error.name, error.name), error.value, error.allowed, error.context) from None
-    return check_loop(loop, out_of_band=out_of_band)
+    asked = position_resolution is not None or velocity_resolution != 0.0
+    quantisation = Quantisation(position_resolution or 0.0, coulomb, velocity_resolution) if asked else None
+    return check_loop(loop, out_of_band=out_of_band, quantisation=quantisation)
 
 
 def _yes(flag: bool) -> str:
@@ -252,6 +270,9 @@ def format_check(report: CheckReport) -> str:
     margin = ("margin none: Re Z >= 0 decides nothing without strict stability" if on_circle else
               f"margin {report.margin:+.6g} N s/m at theta = {report.critical_theta:.6g} rad")
     verdict = "passive (lossless)" if report.lossless else _yes(report.passive)
+    quantised = report.quantisation
+    if quantised is not None and not quantised.holds:
+        verdict += " (the quantisation condition fails)"
     if report.outcome == "lossless oscillator":
         verdict += " (lossless oscillator)"
     lines = [
@@ -270,6 +291,8 @@ def format_check(report: CheckReport) -> str:
         f" (relative tolerance {report.limits_relative_tolerance:g})",
         f"bandwidth rule alpha = B/(K T) = {alpha} {'>' if holds else '<='} 6: {'ok' if holds else 'violated'}",
     ]
+    if quantised is not None:
+        lines.append(quantised.describe())
     band = report.out_of_band
     if not report.out_of_band_asked:
         lines.append("out of band (above Nyquist): not asked")

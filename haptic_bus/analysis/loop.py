@@ -15,6 +15,7 @@ import enum
 import math
 from dataclasses import dataclass
 
+from haptic_bus.analysis.resolution import Quantisation
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 from haptic_bus.validation import real_in_range
 
@@ -132,13 +133,16 @@ class DeviceLoop:
     """The loop the walls run in, without a wall: ``m`` kg, effective ``b`` N s/m, ``T`` s,
     ``delay`` samples (real), and the ``velocity`` model of the drive's 0x606C (a model or its
     profile string).  What the gate holds (:class:`~haptic_bus.control.gate.PassivityGate`);
-    :meth:`wall` adds a wall and gives the :class:`WallLoop` the criterion judges."""
+    :meth:`wall` adds a wall and gives the :class:`WallLoop` the criterion judges.  With a
+    ``quantisation`` (encoder resolution and Coulomb friction) the gate judges every wall's
+    quantisation condition too (:mod:`haptic_bus.analysis.quantisation`)."""
 
     m: float
     b: float
     T: float
     delay: float
     velocity: VelocityModel | str = POINT
+    quantisation: Quantisation | None = None
 
     def __post_init__(self) -> None:
         self.wall(0.0, 0.0)  # validated as a loop is (ParameterError naming m, b, T, delay or velocity): usable once it exists

@@ -30,6 +30,7 @@ from haptic_bus.app.arguments import (
     bus_arguments,
     modbus_url,
     node_id,
+    number,
     refuse_can_options_with_modbus,
     seconds,
     timeout,
@@ -80,7 +81,8 @@ def _check(args: argparse.Namespace) -> int:
     from haptic_bus.analysis.check import check_passivity, format_check
 
     report = check_passivity(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay,
-                             args.velocity, out_of_band=True)  # parameters named as the user typed them
+                             args.velocity, out_of_band=True, position_resolution=args.position_resolution,
+                             coulomb=args.coulomb)  # parameters named as the user typed them
     print(json.dumps(report.to_dict()) if args.json else format_check(report))
     return EXIT_OK if report.passive else EXIT_NO
 
@@ -301,6 +303,11 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--stiffness", type=float, required=True, help="wall stiffness K, N/m")
     check.add_argument("--damping", type=float, required=True, help="wall damping B, N s/m")
     check.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    check.add_argument("--position-resolution", type=number("--position-resolution", 0.0, 1e6, "m"), metavar="M",
+                       help="encoder resolution Delta, m per 0x6064 increment: judge the quantisation condition too "
+                            "(average velocity: Coulomb friction >= K Delta/2 + B Delta/T, any delay)")
+    check.add_argument("--coulomb", type=number("--coulomb", 0.0, 1e6, "N"), default=0.0, metavar="N",
+                       help="the handle's Coulomb friction f_c, N, for the quantisation condition")
 
     region = command("region", "write the seed's Fig. 4 (alpha-beta passive regions) as PNG", _region)
     _add_device_arguments(region)

@@ -4,7 +4,8 @@ The copy keeps the source's layout and comments (``tomlkit``); it changes only
 
 * ``[device]``: ``mass`` (the estimate), ``friction`` (the lowest credible ``b``, ``max(0, b - 3
   sigma)``: the gate judges with it), ``friction_source`` (what was measured, when, and that the
-  gate uses ``b - 3 sigma``) and ``velocity`` (the model 0x606C matched, a window or filter with
+  gate uses ``b - 3 sigma``), ``coulomb_friction`` where the source states one (the lowest credible
+  ``f_c``: the gate judges the encoder's quantisation with it) and ``velocity`` (the model 0x606C matched, a window or filter with
   the longest time the data allow: :attr:`~haptic_bus.identify.velocity_check.VelocityCheck.credible`);
 * ``[loop]``: ``delay`` (the largest credible delay in samples, ``D + 3 sigma``, in whole samples
   when the fraction was not resolved; never below the least delay of the profile's ``timing``:
@@ -15,8 +16,9 @@ The copy keeps the source's layout and comments (``tomlkit``); it changes only
   safe way (friction down, delay up).
 
 Each changed line gets a comment saying what its value is now (the old comment described the old
-value).  The simulated drive's hidden truth (``coulomb_friction``, ``velocity_noise``) never goes
-into ``[device]``.
+value).  A ``coulomb_friction`` the source does not state is not added (stating it makes the gate
+judge quantisation, which refuses every spring of a ``point``, ``lowpass`` or ``window`` device:
+:mod:`haptic_bus.analysis.quantisation`); ``velocity_noise`` never goes into ``[device]``.
 """
 
 from __future__ import annotations
@@ -85,6 +87,10 @@ def identified_profile(source: pathlib.Path, identification: Identification, lea
     _set(device, "friction", friction, "N s/m: b - 3 sigma of the identified b, what the gate judges with")
     _set(device, "friction_source",
          f"identified {when}: b = {b:.6g} ± {b_sigma:.2g} N s/m (1 sigma); the gate uses b - 3 sigma")
+    if "coulomb_friction" in device:
+        f_c, f_c_sigma = _digits(fit.coulomb.value), _digits(fit.coulomb.stderr)
+        coulomb = _digits(max(0.0, f_c - CREDIBLE_SIGMAS * f_c_sigma), decimal.ROUND_FLOOR)
+        _set(device, "coulomb_friction", coulomb, "N: f_c - 3 sigma of the identified f_c, what the gate judges with")
     matched = "" if velocity.credible == velocity.best else f" (best fit {velocity.best}; the longest credible time)"
     _set(device, "velocity", velocity.credible, f"0x606C as measured {when}{matched}")
     why = ("D + 3 sigma" if fit.fraction_resolved else "whole samples: the fraction was not resolved") + (

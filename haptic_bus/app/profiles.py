@@ -80,9 +80,10 @@ class Profile:
     passivity: LayerPolicy = field(default_factory=LayerPolicy)
 
     def device_loop(self) -> DeviceLoop:
-        """The loop the gate judges: m kg, effective b N s/m, T s, delay samples, velocity model."""
+        """The loop the gate judges: m kg, effective b N s/m, T s, delay samples, velocity model, and
+        the quantisation (encoder resolution, Coulomb friction) when the profile states its Coulomb friction."""
         d = self.device
-        return DeviceLoop(d.mass, d.friction, self.loop.period, self.loop.delay, d.velocity)
+        return DeviceLoop(d.mass, d.friction, self.loop.period, self.loop.delay, d.velocity, d.quantisation())
 
     def scaling(self) -> DriveScaling:
         """The drive-unit conversion of :mod:`drives.base`."""

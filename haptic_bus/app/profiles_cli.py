@@ -196,7 +196,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         loop, device_loop = profile.loop, profile.device_loop()
         walls = []
         for (K, B), names in sorted(profile.compiled_scene().contacts().items()):
-            report = check_loop(device_loop.wall(K, B))
+            report = check_loop(device_loop.wall(K, B), quantisation=device_loop.quantisation)
             walls.append((names, K, B, report))
     except HapticBusError as error:
         return _fail("check", error)

@@ -42,8 +42,9 @@ def write_report(profile: Profile, out_dir: str | pathlib.Path) -> list[pathlib.
         nyquist = plot_nyquist(out / f"fig5_nyquist{suffix}.png", loop)
         step = plot_step(out / f"fig6_step{suffix}.png", loop)
         written += [nyquist, step]
+        report = format_check(check_loop(loop, quantisation=device.quantisation))
         lines += ["", f"## {' + '.join(wall.objects)}: K = {wall.K:g} N/m, B = {wall.B:g} N s/m", "", "```",
-                  format_check(check_loop(loop)), "```", "", f"![Fig. 5]({nyquist.name})", "", f"![Fig. 6]({step.name})"]
+                  report, "```", "", f"![Fig. 5]({nyquist.name})", "", f"![Fig. 6]({step.name})"]
     for warning in decision.warnings:
         lines += ["", f"> warning: {warning}"]
     summary = out / "report.md"

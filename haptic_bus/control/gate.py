@@ -5,7 +5,9 @@ The gate judges the loop *as configured* -- device mass ``m`` (kg), effective fr
 measured), the velocity the drive reports (:mod:`haptic_bus.analysis.velocity`) -- with the
 exact criterion of :mod:`haptic_bus.analysis.criterion`, for every summed ``(K, B)`` that can act on
 the handle at once (overlapping objects add).  A scene passes when every such wall has
-``margin >= safety_margin`` (N s/m).  The gate calls that verdict alone (stability and
+``margin >= safety_margin`` (N s/m) and, when the device states its encoder resolution and
+Coulomb friction (``DeviceLoop.quantisation``), meets the quantisation condition
+(:mod:`haptic_bus.analysis.quantisation`).  The gate calls that verdict alone (stability and
 ``Re T_fund``): an upload or a profile load pays for no passive interval and no out-of-band
 exposure; only a refusal's message names the passive intervals.  The seed's bandwidth rule ``alpha = B/(K T) > 6`` is a
 warning by default and a refusal under ``bandwidth = "strict"``.  A start ramp (the scene's
@@ -22,6 +24,7 @@ from typing import Any
 from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from haptic_bus.analysis.limits import PassiveSet, passive_limits, passive_scales
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, DeviceLoop, WallLoop
+from haptic_bus.analysis.quantisation import QuantisationCondition, quantisation_condition
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.errors import ParameterError, Refusal
 from haptic_bus.validation import real_in_range
@@ -67,13 +70,15 @@ def whole_ramp(scales: PassiveSet) -> bool:
 
 @dataclass(frozen=True)
 class WallJudgement:
-    """The gate's view of one ``(K, B)`` that can act at once, and the objects that make it."""
+    """The gate's view of one ``(K, B)`` that can act at once, and the objects that make it
+    (``quantisation``: its quantisation condition, None when the device states none)."""
 
     objects: tuple[str, ...]
     K: float
     B: float
     verdict: Verdict
     alpha: float
+    quantisation: QuantisationCondition | None = None
 
 
 @dataclass(frozen=True)
@@ -91,9 +96,11 @@ class GateDecision:
         return min((w.verdict.margin for w in self.walls), default=None)
 
     def wall_dicts(self) -> list[dict[str, Any]]:
-        """Every contact wall judged: its objects, ``K`` (N/m), ``B`` (N s/m), margin (N s/m) and critical ``theta`` (rad)."""
+        """Every contact wall judged: its objects, ``K`` (N/m), ``B`` (N s/m), margin (N s/m), critical ``theta``
+        (rad) and, when the device states one, its quantisation condition."""
         return [{"objects": list(w.objects), "K": w.K, "B": w.B, "margin": w.verdict.margin,
-                 "critical_theta": w.verdict.critical_theta} for w in self.walls]
+                 "critical_theta": w.verdict.critical_theta,
+                 **({} if w.quantisation is None else {"quantisation": w.quantisation.to_dict()})} for w in self.walls]
 
 
 @functools.lru_cache(maxsize=4096)
@@ -123,10 +130,13 @@ class PassivityGate:
         for (K, B), names in sorted(scene.contacts().items()):
             loop = self.device.wall(K, B)
             verdict = _judge_wall(loop)
-            walls.append(WallJudgement(names, K, B, verdict, loop.alpha))
+            quantised = self._quantised(loop)
+            walls.append(WallJudgement(names, K, B, verdict, loop.alpha, quantised))
             label = f"{'+'.join(names)} (K = {K:g} N/m, B = {B:g} N s/m)"
             if verdict.margin < self.policy.safety_margin:
                 reasons.append(self._explain(label, loop, verdict))
+            if quantised is not None and not quantised.holds:
+                reasons.append(f"{label} is not passive with {self.device.describe()}: {quantised.describe()}")
             if K > 0 and not loop.alpha > BANDWIDTH_ALPHA:
                 rule = f"{label}: alpha = B/(K T) = {loop.alpha:.3g}, the bandwidth rule wants > {BANDWIDTH_ALPHA:g}"
                 (reasons if self.policy.bandwidth == "strict" else warnings).append(rule)
@@ -140,7 +150,15 @@ class PassivityGate:
             loop = self.device.wall(K, B)
             if _judge_wall(loop).margin < self.policy.safety_margin or (strict and K > 0 and not loop.alpha > BANDWIDTH_ALPHA):
                 return False
+            quantised = self._quantised(loop)
+            if quantised is not None and not quantised.holds:
+                return False
         return True
+
+    def _quantised(self, loop: WallLoop) -> QuantisationCondition | None:
+        """The quantisation condition of ``loop``'s wall, None when the device states no quantisation."""
+        quantisation = self.device.quantisation
+        return None if quantisation is None else quantisation_condition(loop, quantisation)
 
     def proves_ramp(self, scene: CompiledScene) -> RampProof:
         """Whether every contact wall of ``scene``, scaled by every ``s`` in [0, 1], is passive:

@@ -3,9 +3,10 @@ simulated drive both read them (SI units).
 
 ``[device]``: ``mass`` kg, effective ``friction`` b N s/m and its ``friction_source``, the drive's
 scaling (0x606C, 0x6064, 0x6076 N m, transmission N/(N m), 0x6072), the ``velocity`` model of
-0x606C, and a simulated drive's hidden truth (``coulomb_friction`` N, ``velocity_noise`` 0x606C
-counts rms, ``noise_seed``) that the controller never uses.  ``[loop]``: ``period`` T in s,
-``timing`` (``"ideal"`` = no delay, ``"cia402"`` = torque applied at the next SYNC,
+0x606C, the handle's Coulomb friction ``coulomb_friction`` N (optional: a simulated drive's truth
+and, when stated, what the gate judges the encoder's quantisation with), and a simulated drive's
+hidden truth (``velocity_noise`` 0x606C counts rms, ``noise_seed``) that the controller never uses.
+``[loop]``: ``period`` T in s, ``timing`` (``"ideal"`` = no delay, ``"cia402"`` = torque applied at the next SYNC,
 ``"reception"`` = applied on arrival) and the loop ``delay`` in samples the gate judges with
 (real; at least the timing's own, default it; required for ``"reception"``).
 """
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 from drives.base import DriveScaling
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, TARGET_TORQUE
 from haptic_bus.analysis.loop import DELAY_RANGE, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE
+from haptic_bus.analysis.resolution import COULOMB_RANGE, Quantisation
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.reader import REQUIRED, Reader, profile_error
@@ -29,7 +31,6 @@ TIMINGS: dict[str, float | None] = {"ideal": 0, "cia402": 1, "reception": None}
 # The ranges a profile's [device] and the simulated drive's parameters (sim_drive.parameters) share:
 NOISE_SEED_RANGE = (0, 2**64 - 1)
 SCALE_RANGE = (0.0, 1e6)  # exclusive low: m/s per count, m per count, N per N m
-COULOMB_RANGE = (0.0, 1e6)  # N
 NOISE_RANGE = (0.0, 2.0**31)  # 0x606C counts rms: up to the INTEGER32 range itself
 # 0x6072 is UNSIGNED16, but a torque beyond the INTEGER16 0x6071 can never be commanded.
 PERMILLE_RANGE = (1, min(MAX_TORQUE.data_type.range[1], TARGET_TORQUE.data_type.range[1]))
@@ -40,8 +41,10 @@ RATED_TORQUE_RANGE = (1e-3, MOTOR_RATED_TORQUE.data_type.range[1] / 1000.0)  # N
 class DeviceProfile:
     """The handle and its drive: ``mass`` kg, effective ``friction`` b N s/m (and where it
     comes from), drive scaling (0x606C, 0x6064, 0x6076 N m, transmission N/(N m), 0x6072), the
-    ``velocity`` model of 0x606C.  ``coulomb_friction`` (N), ``velocity_noise`` (0x606C counts
-    rms) and ``noise_seed`` are a simulated drive's hidden truth: the controller never uses them."""
+    ``velocity`` model of 0x606C.  ``coulomb_friction`` (N; None: not stated, 0 N to a simulated
+    drive) is the handle's Coulomb friction: with ``position_per_count`` the gate's quantisation
+    condition (:meth:`quantisation`).  ``velocity_noise`` (0x606C counts rms) and ``noise_seed``
+    are a simulated drive's hidden truth: the controller never uses them."""
 
     mass: float
     friction: float
@@ -52,7 +55,7 @@ class DeviceProfile:
     force_per_torque: float
     max_torque_permille: int
     velocity: VelocityModel
-    coulomb_friction: float = 0.0
+    coulomb_friction: float | None = None
     velocity_noise: float = 0.0
     noise_seed: int | None = None
 
@@ -60,6 +63,13 @@ class DeviceProfile:
     def max_force(self) -> float:
         """Handle force in N that 0x6072 allows: permille * rated torque * transmission / 1000."""
         return self.max_torque_permille * self.rated_torque * self.force_per_torque / 1000.0
+
+    def quantisation(self) -> Quantisation | None:
+        """The encoder resolution, 0x606C's quantum and the Coulomb friction the gate judges the
+        quantisation condition with; None when the profile states no ``coulomb_friction``."""
+        if self.coulomb_friction is None:
+            return None
+        return Quantisation(self.position_per_count, self.coulomb_friction, self.velocity_per_count)
 
     def scaling(self) -> DriveScaling:
         """The drive-unit conversion of :mod:`drives.base`."""
@@ -74,7 +84,8 @@ class DeviceProfile:
             "velocity_per_count": self.velocity_per_count, "position_per_count": self.position_per_count,
             "rated_torque": self.rated_torque, "force_per_torque": self.force_per_torque,
             "max_torque_permille": self.max_torque_permille, "velocity": self.velocity,
-            "coulomb_friction": self.coulomb_friction, "velocity_noise": self.velocity_noise, "noise_seed": self.noise_seed}
+            "coulomb_friction": self.coulomb_friction or 0.0, "velocity_noise": self.velocity_noise,
+            "noise_seed": self.noise_seed}
         if timing == "reception":
             parameters["reception_delay"] = delay
         return parameters
@@ -107,7 +118,9 @@ def read_device(path: pathlib.Path, table: object, prefix: str = "device",
     transmission = r.real("force_per_torque", *SCALE_RANGE, "N/(N m)", low_inclusive=False)
     permille = r.whole("max_torque_permille", *PERMILLE_RANGE)
     model = r.velocity_model("velocity")
-    coulomb = r.real("coulomb_friction", *COULOMB_RANGE, "N (a simulated drive's truth)", default=0.0)
+    stated = "coulomb_friction" in r.table
+    coulomb = r.real("coulomb_friction", *COULOMB_RANGE, "N (the handle's Coulomb friction)") if stated else None
+    r.used.add("coulomb_friction")
     noise = r.real("velocity_noise", *NOISE_RANGE, "0x606C counts rms (a simulated drive's truth)", default=0.0)
     seed = r.whole("noise_seed", *NOISE_SEED_RANGE, default=None) if "noise_seed" in r.table else None
     r.used.add("noise_seed")

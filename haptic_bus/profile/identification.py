@@ -74,7 +74,7 @@ def read_identification(path: pathlib.Path, table: object) -> IdentifiedDevice |
 def check_against_identification(path: pathlib.Path, device: DeviceProfile, loop: LoopProfile,
                                  measured: IdentifiedDevice) -> None:
     """Refuse a ``[device]``/``[loop]`` more optimistic than what was measured: another velocity
-    model (or a shorter window or filter), friction above the lowest credible, delay below the
+    model (or a shorter window or filter), friction or Coulomb friction above the lowest credible, delay below the
     largest credible (:data:`CREDIBLE_SIGMAS` standard errors)."""
     declared, found = device.velocity, measured.velocity
     if declared.kind != found.kind or declared.time < found.time * (1.0 - 1e-9):
@@ -84,6 +84,11 @@ def check_against_identification(path: pathlib.Path, device: DeviceProfile, loop
         raise profile_error(path, "device.friction", device.friction,
                             f"at most {measured.lowest_credible_friction:.6g} N s/m, the lowest credible value measured on "
                             f"{measured.date} (b = {measured.friction:.6g} ± {measured.friction_stderr:.2g} N s/m)")
+    credible_coulomb = max(0.0, measured.coulomb_friction - CREDIBLE_SIGMAS * measured.coulomb_friction_stderr)
+    if device.coulomb_friction is not None and device.coulomb_friction > credible_coulomb * (1.0 + 1e-9):
+        raise profile_error(path, "device.coulomb_friction", device.coulomb_friction,
+                            f"at most {credible_coulomb:.6g} N, the lowest credible value measured on {measured.date} "
+                            f"(f_c = {measured.coulomb_friction:.6g} ± {measured.coulomb_friction_stderr:.2g} N)")
     if loop.delay < measured.largest_credible_delay - 1e-9:
         raise profile_error(path, "loop.delay", loop.delay,
                             f"at least {measured.largest_credible_delay:.6g} samples, the largest credible delay measured "
