@@ -116,6 +116,8 @@ class TwoMassHandle:
         self._window = meter.window if meter is not None else None
         self._pieces = schedule(self._period, self._substeps, switch, self._window, float)
         self._stretched.clear()
+        for piece in self._pieces:  # the period's exponentials now (and scipy imported): no first SYNC seconds late
+            _discrete(self._m, self._b, self.transmission, piece.step)
 
     def advance(self, before: float, now: float) -> None:
         """One period: motor force ``before`` (N) until the switch, ``now`` after it."""

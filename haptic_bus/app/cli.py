@@ -28,19 +28,17 @@ from haptic_bus.app.arguments import (
     add_command,
     add_verbosity,
     bus_arguments,
-    modbus_url,
     node_id,
-    refuse_can_options_with_modbus,
     seconds,
     timeout,
-    unit_id,
 )
-from haptic_bus.app.drive_address import DriveAddress, drive_address
 from haptic_bus.app.fault_cli import add_fault_reset_parser
 from haptic_bus.app.identify_cli import add_identify_parser
+from haptic_bus.app.run_arguments import add_link_arguments, add_output_arguments, add_pacing_arguments, one_axis_link
 from haptic_bus.app.scan_cli import add_scan_parser
 from haptic_bus.app.sdo_cli import add_sdo_parser
 from haptic_bus.app.status_cli import add_status_parser
+from haptic_bus.app.validate_cli import add_validate_parser
 from haptic_bus.console import StderrHandler
 from haptic_bus.validation import folder_path, writable_file, writable_folder
 
@@ -142,19 +140,6 @@ def _demo(args: argparse.Namespace) -> int:
     return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(reason, EXIT_NO)
 
 
-def _validate_run(args: argparse.Namespace) -> DriveAddress:
-    """The drive the run talks to; conflicting or ignored options refused before anything is touched."""
-    from haptic_bus.errors import ParameterError
-
-    if args.modbus:
-        refuse_can_options_with_modbus(args, "run", ("node_id", "controller_node_id"))
-    address = drive_address(args)
-    if args.controller_node_id is not None and args.controller_node_id == args.node_id:
-        raise ParameterError("--controller-node-id", args.controller_node_id,
-                             f"a node id other than the drive's ({args.node_id})")
-    return address
-
-
 def _run(args: argparse.Namespace) -> int:
     from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
     from haptic_bus.app.drive_address import DEFAULT_UNIT_ID
@@ -169,7 +154,7 @@ def _run(args: argparse.Namespace) -> int:
         _refuse_single_axis_options(args)
         bus, node_id, unit_id = bus_arguments(args), None, DEFAULT_UNIT_ID
     else:
-        address = _validate_run(args)
+        address = one_axis_link(args, "run")
         bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, DEFAULT_UNIT_ID)
         node_id = None if address.url is not None else address.checked_node_id
     stop = StopRequest()
@@ -298,27 +283,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = command("run", "run a profile's controller against a drive on a CAN bus or over Modbus", _run)
     run.add_argument("profile", help="profile name or TOML path")
-    add_bus_arguments(run)
-    run.add_argument("--node-id", type=node_id, help="the drive's CANopen node id 1..127")
-    run.add_argument("--controller-node-id", type=node_id,
-                     help="this controller's CANopen node id: its heartbeat, which the drive watches, and gated wall "
-                          "uploads (default 127)")
-    run.add_argument("--modbus", type=modbus_url, metavar="URL",
-                     help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
-    run.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1; only with --modbus)")
+    add_link_arguments(run)
     run.add_argument("--duration", type=seconds, default=10.0, help="seconds to run")
-    pacing = run.add_mutually_exclusive_group()
-    pacing.add_argument("--virtual-time", action="store_true",
-                        help="lock-step with a simulated drive, no wall-clock pacing (default: each cycle at its "
-                             "deadline on the wall clock)")
-    pacing.add_argument("--realtime", action="store_true",
-                        help="ask the OS for real-time scheduling of the control thread: SCHED_FIFO priority 80, one CPU, "
-                             "memory locked (mlockall); what it cannot get is logged as a warning and kept in run.json")
+    add_pacing_arguments(run)
     run.add_argument("--start-in-contact", choices=("refuse", "ramp"),
                      help="a start inside an object: refuse, or ramp the force in (default: the profile's [start])")
-    run.add_argument("--out", help="folder for record.csv, run.json, bus.asc and plots (default: runs/<UTC time>-<profile>)")
-    run.add_argument("--no-bus-log", action="store_true",
-                     help="do not log the CAN bus's frames into bus.asc (on by default; Modbus runs have none)")
+    add_output_arguments(run)
     _add_no_plots(run)
     run.add_argument("--reset-fault", action="store_true",
                      help="before commissioning, reset a drive found in FAULT (as haptic-bus fault-reset does; logged "
@@ -340,6 +310,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_profiles_parser(sub)
 
     add_identify_parser(sub)
+    add_validate_parser(sub)
     add_scan_parser(sub)
     add_status_parser(sub)
     add_fault_reset_parser(sub)

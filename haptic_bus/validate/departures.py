@@ -37,6 +37,8 @@ from haptic_bus.validate.spectra import Measured
 from haptic_bus.validate.two_mass import KINDS, TwoMass
 
 Model = Callable[[np.ndarray], np.ndarray]  # parameters -> the plant at the measured frequencies
+UNITS = {("delay", "value"): " samples (extra)", ("resonance", "frequency"): " Hz", ("resonance", "damping"): "",
+         ("filter", "tau"): " s", ("mass", "value"): " kg", ("friction", "value"): " N s/m"}
 _ERROR_FLOOR = 1e-9  # of |H|: a frequency measured without any scatter (a noiseless simulation) still gets a weight
 
 
@@ -54,9 +56,10 @@ class Finding:
         return {"kind": self.kind, **self.values, "uncertainty": uncertainty}
 
     def describe(self) -> str:
-        """One line: the kind and each value with its uncertainty."""
-        return f"{self.kind}: " + ", ".join(f"{name} {value:.4g} +- {self.uncertainty[name]:.2g}"
-                                           for name, value in self.values.items())
+        """One line: the kind and each value with its uncertainty and unit."""
+        return f"{self.kind}: " + ", ".join(
+            f"{'' if name == 'value' else name + ' '}{value:.4g} +- {self.uncertainty[name]:.2g}{UNITS[self.kind, name]}"
+            for name, value in self.values.items())
 
 
 @dataclass(frozen=True)

@@ -1,12 +1,16 @@
 """The verdict: does the measured closed loop hold to the model's prediction, and if not, how does it differ?
 
 The probe's response in velocity is compared frequency by frequency with the model's (exact,
-:mod:`~haptic_bus.validate.model`): the model **holds** when at every excited frequency
-``|measured / predicted - 1|`` is at most the tolerance plus three standard errors of the
-measurement (:mod:`~haptic_bus.validate.spectra`); the run then "holds to within X % up to f Hz",
-``X`` the largest relative difference, ``f`` the highest excited frequency.  Otherwise the
+:mod:`~haptic_bus.validate.model`).  A frequency is **resolved** when three standard errors of the
+measurement (:mod:`~haptic_bus.validate.spectra`) are within the tolerance, and there it
+**departs** when ``|measured / predicted - 1|`` exceeds the tolerance plus those three standard
+errors.  The model **holds** when the lowest frequencies are resolved and none departs: "holds to
+within X % up to f Hz", ``f`` the highest frequency of the resolved band that starts at the
+lowest, ``X`` the largest relative difference in it.  When a resolved frequency departs, the
 measured plant is fitted with every departure :mod:`~haptic_bus.validate.departures` knows, and
-the best candidate's findings name how the device differs.
+the best candidate's findings name how the device differs.  When the lowest frequency is not
+resolved, the measurement cannot tell (the noise or the timing's jitter is larger than the
+tolerance): neither verdict.
 """
 
 from __future__ import annotations
@@ -54,26 +58,31 @@ class Validation:
     position: Measured
     tolerance: float
     within: float
+    up_to: float
     holds: bool
     fits: tuple[Fit, ...]
 
     @property
-    def up_to(self) -> float:
-        """The highest excited frequency, Hz."""
-        return float(self.plan.frequencies[-1])
+    def verdict(self) -> str:
+        """``holds``, ``differs`` or ``cannot tell`` (module docstring)."""
+        return "holds" if self.holds else "differs" if self.fits else "cannot tell"
 
     @property
     def findings(self) -> list[dict[str, Any]]:
-        """The best candidate's findings, JSON-ready (none when the model holds)."""
-        return [] if self.holds or not self.fits else [finding.to_dict() for finding in self.fits[0].findings]
+        """The best candidate's findings, JSON-ready (none unless the device differs)."""
+        return [finding.to_dict() for finding in self.fits[0].findings] if self.verdict == "differs" else []
 
     def summary(self) -> str:
-        """One line: holds to within X % up to f Hz, or differs and how."""
-        if self.holds:
+        """One line: holds to within X % up to f Hz, differs and how, or cannot tell."""
+        verdict = self.verdict
+        if verdict == "holds":
             return f"the model holds to within {100 * self.within:.2g} % up to {self.up_to:.4g} Hz"
+        if verdict == "cannot tell":
+            return (f"cannot tell: at {self.plan.frequencies[0]:.3g} Hz already the measurement's uncertainty exceeds "
+                    f"the tolerance of {100 * self.tolerance:.3g} % (noise, or the cycle's timing jitter)")
         best = self.fits[0]
         said = "; ".join(finding.describe() for finding in best.findings)
-        return (f"the device differs from the model: up to {100 * self.within:.3g} % below {self.up_to:.4g} Hz "
+        return (f"the device differs from the model: by up to {100 * self.within:.3g} % up to {self.up_to:.4g} Hz "
                 f"(tolerance {100 * self.tolerance:.3g} %); best explained by {said} (rms misfit left "
                 f"{100 * best.misfit:.2g} %)")
 
@@ -81,7 +90,7 @@ class Validation:
         """JSON-ready: the verdict, the findings, every candidate's fit, the probe and the model."""
         plan = self.plan
         return {
-            "verdict": "holds" if self.holds else "differs",
+            "verdict": self.verdict,
             "within_percent": 100 * self.within,
             "up_to_hz": self.up_to,
             "tolerance_percent": 100 * self.tolerance,
@@ -90,7 +99,7 @@ class Validation:
                             "findings": [f.to_dict() for f in fit.findings]} for fit in self.fits],
             "probe": {"amplitude_n": self.amplitude, "velocity_noise_m_per_s": self.noise,
                       "hold": {"K": self.hold.stiffness, "B": self.hold.damping},
-                      "band_hz": [float(plan.frequencies[0]), self.up_to], "tones": int(plan.bins.size),
+                      "band_hz": [float(plan.frequencies[0]), float(plan.frequencies[-1])], "tones": int(plan.bins.size),
                       "period_samples": plan.samples, "quiet_cycles": plan.quiet, "settle_periods": plan.settle,
                       "measured_periods": plan.periods, "drive_seconds": plan.cycles * plan.period},
             "model": {"m": self.loop.m, "b": self.loop.b, "T": self.loop.T, "delay": self.loop.delay,
@@ -106,7 +115,15 @@ def validate(loop: DeviceLoop, hold: Hold, plan: ProbePlan, prediction: Predicti
     position = response(signals.position, signals.probe, plan, (per_position, per_force))
     plant = response(signals.velocity, signals.force, plan, (per_velocity, per_force))
     relative, error = velocity.relative_to(prediction.velocity)
-    holds = bool(np.all(relative <= tolerance + CONFIDENCE * error))
+    resolved = CONFIDENCE * error <= tolerance
+    band = int(np.argmin(resolved)) if not resolved.all() else resolved.size  # the resolved bins from the lowest
+    if band == 0:
+        return Validation(loop, hold, plan, amplitude, noise, prediction, plant, velocity, position, tolerance,
+                          float(np.max(relative)), 0.0, False, ())
+    departs = resolved & (relative > tolerance + CONFIDENCE * error)
+    holds = not bool(departs.any())
     fits = (nominal(plant, loop),) if holds else tuple(departures(plant, loop))
-    return Validation(loop, hold, plan, amplitude, noise, prediction, plant, velocity, position, tolerance,
-                      float(np.max(relative)), holds, fits)
+    within = float(np.max(relative[:band])) if holds else float(np.max(relative[resolved]))
+    up_to = float(plan.frequencies[band - 1]) if holds else float(plan.frequencies[resolved][-1])
+    return Validation(loop, hold, plan, amplitude, noise, prediction, plant, velocity, position, tolerance, within,
+                      up_to, holds, fits)

@@ -1,0 +1,150 @@
+"""``haptic-bus validate`` (issue 27, item 2): the prediction is exact for the simulated drive, and the
+command tells a device equal to its profile from one with a hidden extra delay or a transmission.
+
+The end-to-end runs are in this process, in virtual time, against the simulated drive on the lock-step
+bus or over Modbus TCP on loopback (cia402-handle: 1 kg, b 20 N s/m, T 1 ms, average velocity, one
+sample of delay), with nobody touching the handle."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+
+import numpy as np
+import pytest
+
+from drives.cia402 import Command, OperationMode
+from haptic_bus.analysis.loop import DeviceLoop
+from haptic_bus.app.profiles import load_profile
+from haptic_bus.validate.model import plant_response, predict
+from haptic_bus.validate.probe import AmplitudeRule, ProbePlan, gentle_hold, hold_scene
+from haptic_bus.validate.two_mass import TwoMass
+from sim_drive.device import SimulatedDrive
+from sim_drive.operator import NoOperator
+from sim_drive.parameters import DeviceParameters, Transmission
+from tests.run_rig import run_cli, simulated_drive
+
+PROFILE = "cia402-handle"
+TRANSMISSION = Transmission(20000.0, 2.0, 0.3)  # under the 1 kg handle: 46.9 Hz
+# counts of 1e-9 m/s rounded: sqrt(256/12) 1e-9 = 5e-9 m/s per bin against bins of at least 128 * 1e-4 m/s
+ROUNDING = 1e-5
+SAMPLES, SETTLE, PERIODS = 256, 4, 2  # 4 periods of 0.256 s: the free handle's m/b = 50 ms has decayed to 1e-9
+
+
+def _measured_plant(parameters: DeviceParameters, settle: int = SETTLE) -> tuple[np.ndarray, np.ndarray]:
+    """The simulated drive alone (no bus), driven by a periodic integer torque: the DFT ratio from the
+    force applied to 0x606C at the excited bins after ``settle`` periods, and those bins' theta (rad)."""
+    drive = SimulatedDrive(parameters)
+    drive.write_object(0x6060, int(OperationMode.CYCLIC_SYNCHRONOUS_TORQUE))
+    for command in (Command.SHUTDOWN, Command.SWITCH_ON, Command.ENABLE_OPERATION):
+        drive.write_controlword(command.word)
+    rng = np.random.default_rng(7)
+    bins = np.arange(3, 100)
+    spectrum = np.zeros(SAMPLES // 2 + 1, dtype=complex)
+    spectrum[bins] = np.exp(2j * np.pi * rng.random(bins.size))
+    wave = np.fft.irfft(spectrum, SAMPLES)
+    torque = np.round(800 * wave / np.max(np.abs(wave))).astype(int)  # per mille, known exactly
+    velocity = []
+    for k in range((settle + PERIODS) * SAMPLES):
+        drive.sync()
+        velocity.append(drive.velocity_counts * parameters.velocity_per_count)
+        drive.write_object(0x6071, int(torque[k % SAMPLES]))
+    newton = parameters.rated_torque * parameters.force_per_torque / 1000.0
+    tail = slice(settle * SAMPLES, None)
+    force = np.tile(torque, settle + PERIODS)[tail].reshape(PERIODS, SAMPLES) * newton
+    measured = np.fft.rfft(np.array(velocity)[tail].reshape(PERIODS, SAMPLES), axis=1)[:, bins]
+    ratio = measured / np.fft.rfft(force, axis=1)[:, bins]
+    assert np.allclose(ratio[0], ratio[1], rtol=ROUNDING)  # periodic: the transient is gone
+    return ratio[0], 2.0 * np.pi * bins / SAMPLES
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.3, 1.7])
+def test_the_predicted_plant_is_the_simulated_drives_to_round_off(delay: float) -> None:
+    """The exact sampled plant (the analysis package's period map) against the simulated drive's exact
+    plant with a hidden extra delay, 0x606C as the encoder difference over the cycle, counts of 1e-9 m/s."""
+    parameters = DeviceParameters(mass=1.0, friction=20.0, velocity="average", velocity_per_count=1e-9,
+                                  position_per_count=1e-9, rated_torque=0.32, extra_delay=delay)
+    measured, theta = _measured_plant(parameters)
+    predicted = plant_response(DeviceLoop(1.0, 20.0, 1e-3, 1.0 + delay, "average"), theta)
+    assert np.max(np.abs(measured / predicted - 1.0)) < ROUNDING
+
+
+def test_the_two_mass_plant_is_the_simulated_transmissions() -> None:
+    """The fit's two-mass sampled plant against the simulated drive's transmission (different code: the
+    drive steps its four states piece by piece, the fit solves the period map per frequency)."""
+    parameters = DeviceParameters(mass=1.0, friction=20.0, velocity="average", velocity_per_count=1e-9,
+                                  position_per_count=1e-9, rated_torque=0.32, transmission=TRANSMISSION)
+    measured, theta = _measured_plant(parameters, settle=12)  # the mode decays at zeta omega = 6.6 /s: e^-20 in 3 s
+    predicted = TwoMass(20000.0, 2.0, 0.3, 1.0, 20.0).response(DeviceLoop(1.0, 20.0, 1e-3, 1, "average"), theta)
+    assert np.max(np.abs(measured / predicted - 1.0)) < ROUNDING
+    assert TwoMass(20000.0, 2.0, 0.3, 1.0, 20.0).mode()[0] == pytest.approx(TRANSMISSION.resonance(1.0), rel=1e-3)
+
+
+def test_the_hold_and_the_probe_fit_the_gate_the_force_limit_and_the_travel() -> None:
+    profile = load_profile(PROFILE)
+    loop, gate = profile.device_loop(), profile.gate()
+    hold = gentle_hold(loop, gate)
+    assert gate.passes(hold_scene(hold))
+    assert hold.stiffness == pytest.approx(1.0 * (2 * np.pi * 2.0) ** 2)  # 2 Hz on 1 kg: 158 N/m
+    plan = ProbePlan.for_loop(loop, hold)
+    assert (plan.samples, plan.cycles * plan.period) == (512, pytest.approx(6.132))  # at most 30 s of the drive's time
+    rule = AmplitudeRule.design(plan, predict(loop, hold, plan.theta), 1.2e-7, 0.016, 30.0, 0.01)
+    assert 0.3 <= rule.amplitude(0.0) <= rule.ceiling <= 3.0  # 1 % .. 10 % of the 30 N force limit
+    assert rule.amplitude(1.0) == rule.ceiling  # a noisy handle gets the largest probe
+
+
+def _validate(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path, transport: str, *extra: str,
+              **hidden: object) -> tuple[int, dict[str, object], str]:
+    with simulated_drive(transport, PROFILE) as under:
+        under.drive.set_operator(NoOperator())  # --operator none
+        if hidden:
+            under.drive.reconfigure(**hidden)
+        result = run_cli(capsys, "validate", PROFILE, *under.args, "--virtual-time", "--out", str(tmp_path / "run"),
+                         "--json", *extra)
+    return result.code, json.loads(result.out), result.err
+
+
+def test_a_drive_equal_to_its_profile_holds(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path) -> None:
+    code, report, err = _validate(capsys, tmp_path, "canopen")
+    assert code == 0 and report["verdict"] == "holds" and report["findings"] == [] and err == ""
+    assert report["within_percent"] < 5.0 and report["up_to_hz"] > 390.0
+    assert report["probe"]["drive_seconds"] <= 30.0
+    folder = tmp_path / "run"
+    for name in ("validate.json", "validate-bode.png", "validate-re-z.png", "record.csv", "run.json"):
+        assert (folder / name).stat().st_size > 0
+    assert (folder / "validate-bode.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert json.loads((folder / "validate.json").read_text())["verdict"] == "holds"
+
+
+def test_a_hidden_extra_delay_is_found_over_modbus(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path) -> None:
+    code, report, _ = _validate(capsys, tmp_path, "modbus", "--no-plots", extra_delay=0.3)
+    assert code == 1 and report["verdict"] == "differs"
+    (finding,) = report["findings"]
+    assert finding["kind"] == "delay" and finding["value"] == pytest.approx(0.3, abs=0.1)
+    assert 0 < finding["uncertainty"] < 0.05
+
+
+def test_a_hidden_transmission_is_found_as_its_resonance(capsys: pytest.CaptureFixture[str],
+                                                         tmp_path: pathlib.Path) -> None:
+    code, report, _ = _validate(capsys, tmp_path, "canopen", "--no-plots", transmission=TRANSMISSION)
+    assert code == 1
+    (finding,) = report["findings"]
+    assert finding["kind"] == "resonance"
+    assert finding["frequency"] == pytest.approx(TRANSMISSION.resonance(1.0), rel=0.1)  # 46.9 Hz
+    assert 0 < finding["damping"] < 0.1 and finding["uncertainty"]["frequency"] < 1.0
+
+
+@pytest.mark.parametrize("flags, said", [
+    (["--travel", "-1", "--node-id", "5"], "travel"),
+    (["--tolerance", "0", "--node-id", "5"], "tolerance"),
+    (["--modbus", "tcp://127.0.0.1:1", "--node-id", "5"], "--interface"),
+    (["--node-id", "5", "--controller-node-id", "5"], "--controller-node-id"),
+])
+def test_invalid_input_exits_2_before_any_bus(flags: list[str], said: str, capsys: pytest.CaptureFixture[str]) -> None:
+    result = run_cli(capsys, "validate", PROFILE, "--interface", "lockstep", "--channel", "nobody-here", *flags)
+    assert result.code == 2 and len(result.err_lines) == 1 and said in result.err_lines[0]
+
+
+def test_a_multi_axis_profile_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    result = run_cli(capsys, "validate", "gantry-3d", "--interface", "lockstep", "--channel", "nobody", "--node-id", "5")
+    assert result.code == 2 and "one-axis profile" in result.err
