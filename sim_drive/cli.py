@@ -327,6 +327,9 @@ def _axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
     nodes = _node_ids(args.node_ids)
     if args.node_id is not None or args.eds is not None:
         raise ParameterError("--node-ids", args.node_ids, "without --node-id and --eds (one dictionary kind: --od)")
+    if args.transmission is not None:  # the hand in space pushes each axis' handle where its encoder is
+        raise ParameterError("--transmission", args.transmission, "one axis only (--node-id): no hand in space on "
+                             "the far side of a transmission")
     if args.profile and is_axes_profile(args.profile):
         device = load_axes_device(args.profile)
         known = [axis.node_id for axis in device.axes]

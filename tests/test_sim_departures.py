@@ -118,6 +118,27 @@ def test_the_transmissions_energy_ledger_balances() -> None:
     assert handle.viscous_energy > 0 and handle.operator_energy != 0
 
 
+def test_a_late_sync_moves_the_transmission_exactly_as_two_periods_do() -> None:
+    """A real-time drive passes the interval since the last SYNC: 2 T with the force held is, for the
+    exact plant, the same as two periods of T (its sub-steps as long as the period's)."""
+    parameters = DeviceParameters(mass=M, friction=B, substeps=2)
+    stretched, stepped = (TwoMassHandle(Transmission(20000.0, 2.0, 0.3)) for _ in range(2))
+    for handle in (stretched, stepped):
+        handle.configure(parameters)
+        handle.advance(1.5, 1.5)
+    stretched.advance_for(2 * T, 0.7, 0.7)
+    stepped.advance(0.7, 0.7)
+    stepped.advance(0.7, 0.7)
+    assert stretched.state == pytest.approx(stepped.state, rel=ROUND_OFF, abs=ROUND_OFF * np.max(np.abs(stepped.state)))
+    assert stretched.time == stepped.time == pytest.approx(3 * T)
+
+
+def test_a_transmission_is_one_axis_only(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--interface", "virtual", "--channel", "departures", "--node-ids", "5,6", "--transmission",
+                 "20000:2:0.3"]) == 2
+    assert "one axis only" in capsys.readouterr().err
+
+
 def test_the_hidden_departures_are_out_of_the_masters_reach() -> None:
     """Every SDO object and Modbus register reads the same with and without them (before motion)."""
     plain = SimulatedDrive(DeviceParameters(mass=M, friction=B))

@@ -109,6 +109,8 @@ def test_a_drive_equal_to_its_profile_holds(capsys: pytest.CaptureFixture[str], 
     assert code == 0 and report["verdict"] == "holds" and report["findings"] == [] and err == ""
     assert report["within_percent"] < 5.0 and report["up_to_hz"] > 390.0
     assert report["probe"]["drive_seconds"] <= 30.0
+    responses = report["responses"]
+    assert len(responses["frequencies_hz"]) == len(responses["position"]["error"]) == report["probe"]["tones"]
     folder = tmp_path / "run"
     for name in ("validate.json", "validate-bode.png", "validate-re-z.png", "record.csv", "run.json"):
         assert (folder / name).stat().st_size > 0

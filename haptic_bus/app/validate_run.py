@@ -117,11 +117,7 @@ class ValidateRun(OneAxisRun):
 
 def _stored_energy(prediction: Prediction, plan: ProbePlan, hold: Hold, loop: DeviceLoop, rule: AmplitudeRule) -> float:
     """The most kinetic and hold-spring energy (J) the model says the probe stores at its largest peak."""
-    wave = np.fft.rfft(plan.wave())
-    shape = np.zeros_like(wave)
-    shape[plan.bins] = wave[plan.bins]
-    velocity = np.fft.irfft(shape * np.pad(prediction.velocity, (plan.low, wave.size - plan.high - 1)), plan.samples)
-    position = np.fft.irfft(shape * np.pad(prediction.position, (plan.low, wave.size - plan.high - 1)), plan.samples)
+    velocity, position = plan.steady(prediction.velocity), plan.steady(prediction.position)
     energy = 0.5 * loop.m * velocity**2 + 0.5 * hold.stiffness * position**2
     return float(np.max(energy)) * rule.ceiling**2
 
@@ -162,6 +158,6 @@ def validate_drive(profile: Profile, bus: Mapping[str, Any] | str, options: RunO
     if pictures:
         from haptic_bus.app.validate_plots import draw
 
-        margin = profile.gate().judge(profile.compiled_scene()).worst_margin
+        margin = kind.state["gate"].judge(profile.compiled_scene()).worst_margin  # the run's gate, at its loop
         files += draw(validation, result.folder, None if margin is None or math.isinf(margin) else margin)
     return ValidateOutcome(result, validation, files)

@@ -107,6 +107,13 @@ class ProbePlan:
         """One period of the probe, peak 1 (dimensionless)."""
         return multisine(self.samples, self.low, self.high, tilt=0.0)
 
+    def steady(self, response: np.ndarray) -> np.ndarray:
+        """One period of the steady response (the output's unit per N of peak) to the probe of peak 1 N,
+        ``response`` given at the excited frequencies (the output's unit per N)."""
+        spectrum = np.zeros(self.samples // 2 + 1, dtype=complex)
+        spectrum[self.bins] = np.fft.rfft(self.wave())[self.bins] * response
+        return np.fft.irfft(spectrum, self.samples)
+
     @property
     def bins(self) -> np.ndarray:
         """The excited harmonics (DFT bins of one period)."""
@@ -155,9 +162,7 @@ class AmplitudeRule:
         per_noise = SNR * spread / float(np.min(spectrum * np.abs(prediction.velocity)))
         # the force's rounding repeats every period: it does not average out
         force_floor = SNR * math.sqrt(plan.samples / 12.0) * newton_per_permille / float(np.min(spectrum))
-        excursion = np.zeros(plan.samples // 2 + 1, dtype=complex)
-        excursion[plan.bins] = np.fft.rfft(plan.wave())[plan.bins] * prediction.position
-        per_newton = float(np.max(np.abs(np.fft.irfft(excursion, plan.samples))))  # m of excursion per N of peak
+        per_newton = float(np.max(np.abs(plan.steady(prediction.position))))  # m of excursion per N of peak
         ceiling = min(CEILING_SHARE * force_limit, 0.5 * travel / per_newton)
         return cls(per_noise, velocity_per_count / math.sqrt(12.0), force_floor, min(FLOOR_SHARE * force_limit, ceiling),
                    ceiling)

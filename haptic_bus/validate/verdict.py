@@ -87,7 +87,8 @@ class Validation:
                 f"{100 * best.misfit:.2g} %)")
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: the verdict, the findings, every candidate's fit, the probe and the model."""
+        """JSON-ready: the verdict, the findings, every candidate's fit, the probe, the model, and the
+        responses per frequency (velocity and position per N of probe, the plant in m/s per N)."""
         plan = self.plan
         return {
             "verdict": self.verdict,
@@ -104,7 +105,19 @@ class Validation:
                       "measured_periods": plan.periods, "drive_seconds": plan.cycles * plan.period},
             "model": {"m": self.loop.m, "b": self.loop.b, "T": self.loop.T, "delay": self.loop.delay,
                       "velocity": str(self.loop.velocity)},
+            "responses": {"frequencies_hz": plan.frequencies.tolist(),
+                          **{name: _response_dict(measured, predicted) for name, measured, predicted in (
+                              ("velocity", self.velocity, self.prediction.velocity),
+                              ("position", self.position, self.prediction.position),
+                              ("plant", self.plant, self.prediction.plant))}},
         }
+
+
+def _response_dict(measured: Measured, predicted: np.ndarray) -> dict[str, list[float]]:
+    """A response per excited frequency, JSON-ready: measured (real, imaginary, standard error) and predicted."""
+    return {"measured_re": measured.mean.real.tolist(), "measured_im": measured.mean.imag.tolist(),
+            "error": measured.error.tolist(), "predicted_re": predicted.real.tolist(),
+            "predicted_im": predicted.imag.tolist()}
 
 
 def validate(loop: DeviceLoop, hold: Hold, plan: ProbePlan, prediction: Prediction, signals: Signals, amplitude: float,
