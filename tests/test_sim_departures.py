@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from drives.cia402 import Command, OperationMode
+from drives.cia402 import Command
 from drives.modbus.register_map import REGISTERS
 from haptic_bus.analysis.plant import zoh_coefficients
 from sim_drive.canopen.manufacturer import ManufacturerObjects
@@ -18,17 +18,10 @@ from sim_drive.device import SimulatedDrive
 from sim_drive.modbus.bank import RegisterBank
 from sim_drive.parameters import DeviceParameters, Timing, Transmission
 from sim_drive.transmission import TwoMassHandle
+from tests.run_rig import enabled_drive
 
 M, B, T = 1.0, 20.0, 1e-3
 ROUND_OFF = 1e-12  # relative: a few dozen exact steps, each a handful of roundings
-
-
-def _enabled(parameters: DeviceParameters, timing: Timing = Timing.CIA402) -> SimulatedDrive:
-    drive = SimulatedDrive(parameters, timing)
-    drive.write_object(0x6060, int(OperationMode.CYCLIC_SYNCHRONOUS_TORQUE))
-    for command in (Command.SHUTDOWN, Command.SWITCH_ON, Command.ENABLE_OPERATION):
-        drive.write_controlword(command.word)
-    return drive
 
 
 def _velocities(drive: SimulatedDrive, targets: list[int]) -> list[float]:
@@ -47,17 +40,17 @@ def test_every_timing_with_its_extra_delay_is_the_same_loop_delay(timing: Timing
     rng = np.random.default_rng(3)
     targets = [int(t) for t in rng.integers(-900, 900, 40)]
     base = DeviceParameters(mass=M, friction=B, reception_delay=0.25)
-    reference = _velocities(_enabled(DeviceParameters(mass=M, friction=B, extra_delay=0.3)), targets)
-    other = _velocities(_enabled(DeviceParameters(mass=M, friction=B, reception_delay=0.25, extra_delay=extra), timing),
+    reference = _velocities(enabled_drive(DeviceParameters(mass=M, friction=B, extra_delay=0.3)), targets)
+    other = _velocities(enabled_drive(DeviceParameters(mass=M, friction=B, reception_delay=0.25, extra_delay=extra), timing),
                         targets)
     assert other == pytest.approx(reference, rel=ROUND_OFF, abs=ROUND_OFF * max(map(abs, reference)))
-    assert _velocities(_enabled(base), targets) != pytest.approx(reference, rel=1e-3)  # the delay shows
+    assert _velocities(enabled_drive(base), targets) != pytest.approx(reference, rel=1e-3)  # the delay shows
 
 
 def test_the_delayed_torque_switches_at_its_instant_within_the_period() -> None:
     """A step written after SYNC 0 is latched at SYNC 1 and acts from 0.3 T after it: at SYNC 2 the
     handle has moved under it for 0.7 T exactly (the exact ZOH over 0.7 T), 0x6077 still says the timing's."""
-    drive = _enabled(DeviceParameters(mass=M, friction=B, extra_delay=0.3))
+    drive = enabled_drive(DeviceParameters(mass=M, friction=B, extra_delay=0.3))
     drive.sync()
     drive.write_object(0x6071, 1000)
     drive.sync()
@@ -68,7 +61,7 @@ def test_the_delayed_torque_switches_at_its_instant_within_the_period() -> None:
 
 
 def test_a_drive_not_enabled_flushes_the_delayed_targets() -> None:
-    drive = _enabled(DeviceParameters(mass=M, friction=B, extra_delay=2.5))
+    drive = enabled_drive(DeviceParameters(mass=M, friction=B, extra_delay=2.5))
     drive.sync()
     drive.write_object(0x6071, 500)
     drive.sync()
@@ -79,7 +72,7 @@ def test_a_drive_not_enabled_flushes_the_delayed_targets() -> None:
 
 
 def _free_motor_velocities(transmission: Transmission, cycles: int) -> np.ndarray:
-    drive = _enabled(DeviceParameters(mass=M, friction=B, transmission=transmission))
+    drive = enabled_drive(DeviceParameters(mass=M, friction=B, transmission=transmission))
     return np.array(_velocities(drive, [1000] + [0] * (cycles - 1)))
 
 
@@ -100,7 +93,7 @@ def test_a_stiff_transmission_is_a_rigid_handle_of_both_masses() -> None:
     """k 1e8 N/m, c 2e4 N s/m (over-damped: its modes decay within 0.1 ms): the motor's velocity at every
     sample is that of a rigid m + M (exact ZOH) to within the coupling's lag, about c/k = 0.2 ms of 1 ms."""
     v = _free_motor_velocities(Transmission(1e8, 2e4, 0.3), 30)
-    rigid = _velocities(_enabled(DeviceParameters(mass=M + 0.3, friction=B)), [1000] + [0] * 29)
+    rigid = _velocities(enabled_drive(DeviceParameters(mass=M + 0.3, friction=B)), [1000] + [0] * 29)
     assert v == pytest.approx(rigid, rel=1e-3, abs=1e-3 * max(map(abs, rigid)))
 
 

@@ -13,16 +13,14 @@ import pathlib
 import numpy as np
 import pytest
 
-from drives.cia402 import Command, OperationMode
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.validate.model import plant_response, predict
 from haptic_bus.validate.probe import AmplitudeRule, ProbePlan, gentle_hold, hold_scene
 from haptic_bus.validate.two_mass import TwoMass
-from sim_drive.device import SimulatedDrive
 from sim_drive.operator import NoOperator
 from sim_drive.parameters import DeviceParameters, Transmission
-from tests.run_rig import run_cli, simulated_drive
+from tests.run_rig import enabled_drive, run_cli, simulated_drive
 
 PROFILE = "cia402-handle"
 TRANSMISSION = Transmission(20000.0, 2.0, 0.3)  # under the 1 kg handle: 46.9 Hz
@@ -34,10 +32,7 @@ SAMPLES, SETTLE, PERIODS = 256, 4, 2  # 4 periods of 0.256 s: the free handle's 
 def _measured_plant(parameters: DeviceParameters, settle: int = SETTLE) -> tuple[np.ndarray, np.ndarray]:
     """The simulated drive alone (no bus), driven by a periodic integer torque: the DFT ratio from the
     force applied to 0x606C at the excited bins after ``settle`` periods, and those bins' theta (rad)."""
-    drive = SimulatedDrive(parameters)
-    drive.write_object(0x6060, int(OperationMode.CYCLIC_SYNCHRONOUS_TORQUE))
-    for command in (Command.SHUTDOWN, Command.SWITCH_ON, Command.ENABLE_OPERATION):
-        drive.write_controlword(command.word)
+    drive = enabled_drive(parameters)
     rng = np.random.default_rng(7)
     bins = np.arange(3, 100)
     spectrum = np.zeros(SAMPLES // 2 + 1, dtype=complex)
