@@ -28,9 +28,10 @@ the same with their own ``G(z)`` and ``F(theta) = M e^{-j theta delta} G_p(j the
 ``theta_p - 2 pi k`` (``k != 0``) are ``g``'s own: a resonance above Nyquist aliases towards 0.
 So the circle keeps ``|rho - |theta_p|| >= 0.25 rho`` from the first and stays within half the
 distance to the nearest of the second (the 64-point Cauchy sum then errs by ``2^-64`` relative),
-from the same radii as the rigid handle or, if none is allowed, smaller ones down to 0.1; the
-series is used below ``min(0.5, rho/2)``.  With no allowed radius (a resonance within 0.2 rad of
-a multiple of the sampling frequency) ``g`` is the difference at every ``theta``.
+from the same radii as the rigid handle or, if none is allowed, smaller ones down to 0.1 and then
+half the distance to that nearest aliased pole (a resonance near a multiple of the sampling
+frequency); the series is used below ``min(0.5, rho/2)``.  With no allowed radius (one below
+1e-6 rad) ``g`` is the difference at every ``theta``.
 """
 
 from __future__ import annotations
@@ -53,6 +54,7 @@ _SERIES_TERMS = 32  # (0.5/2 pi)^32 < 1e-35
 _RADII = (1.0, 1.5, 2.0, 2.5)
 _SMALL_RADII = (0.75, 0.5, 0.35, 0.25, 0.15, 0.1)  # another plant's aliased poles may forbid the others
 _POLE_CLEARANCE = 0.25
+_LEAST_RADIUS = 1e-6  # rad: a smaller circle's terms (~1/rho^2) would drown g in their round-off
 
 
 class AliasDevice(Protocol):
@@ -130,8 +132,10 @@ def _circle_radius(key: Key) -> float | None:
     aliased = [abs(p - 2 * math.pi * k) for p in own for k in (math.floor(p.real / (2 * math.pi)),
                                                              math.ceil(p.real / (2 * math.pi))) if k]
     aliased += [abs(p - 2 * math.pi * k) for p in own for k in (-1, 1)]
-    for radius in _RADII + _SMALL_RADII:
-        if all(abs(radius - p) >= _POLE_CLEARANCE * min(radius, 1.0) for p in sizes) and all(2 * radius <= a for a in aliased):
+    nearest = min(aliased)
+    for radius in _RADII + _SMALL_RADII + tuple(0.5 * nearest * f for f in (1.0, 0.75, 0.5, 0.35)):
+        if (radius >= _LEAST_RADIUS and all(abs(radius - p) >= _POLE_CLEARANCE * min(radius, 1.0) for p in sizes)
+                and 2 * radius <= nearest):
             return radius
     return None
 

@@ -49,6 +49,7 @@ from haptic_bus.analysis.two_mass import TwoMassLoop, two_mass_poles, two_mass_s
 
 TWO_MASS = ("exact, two-mass (operator at the handle, sensing and torque at the motor): closed-loop stability and "
             "Re T_fund >= 0 on (0, pi]")
+LEAST_STIFFNESS = 1e-3  # N/m: below this the bisection stops (the passive K then is 0 alone)
 _FREE_PAIR = "a free pair (b = K = B = 0): the pair's translation (z = 1) is its only mode on the circle, none grows"
 
 
@@ -118,7 +119,8 @@ def two_mass_verdict(loop: TwoMassLoop) -> Verdict:
 
 def largest_passive_stiffness(loop: TwoMassLoop, relative: float = 1e-6, ceiling: float = 1e9) -> float | None:
     """The upper end (N/m) of the passive ``K`` from 0 at the loop's ``B``, by bisection on the verdict to
-    ``relative``; None if ``K = 0`` is not passive, ``ceiling`` if every ``K`` up to it is."""
+    ``relative`` (0 when no ``K`` above :data:`LEAST_STIFFNESS` passes); None if ``K = 0`` is not passive,
+    ``ceiling`` if every ``K`` up to it is."""
     if not two_mass_verdict(loop.with_wall(0.0, loop.handle.B)).passive:
         return None
     low, high = 0.0, 1.0
@@ -126,7 +128,7 @@ def largest_passive_stiffness(loop: TwoMassLoop, relative: float = 1e-6, ceiling
         low, high = high, 4.0 * high
         if high > ceiling:
             return ceiling
-    while high - low > relative * high:
+    while high - low > relative * high and high > LEAST_STIFFNESS:
         middle = 0.5 * (low + high)
         low, high = (middle, high) if two_mass_verdict(loop.with_wall(middle, loop.handle.B)).passive else (low, middle)
     return low
