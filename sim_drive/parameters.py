@@ -29,7 +29,7 @@ So one per mille of 0x6071 is 0.2 N m / 1000 * 50 N/(N m) = 10 mN at the handle,
 never told them (no SDO object or Modbus register serves them; its profile may say otherwise,
 and the gate judges what the controller believes).
 
-``transmission`` (:class:`Transmission`, or its ``STIFFNESS:DAMPING:MOTOR_MASS``
+``transmission`` (:class:`~haptic_bus.analysis.transmission.Transmission`, or its ``STIFFNESS:DAMPING:MOTOR_MASS``
 spelling): the encoder and the torque act on a motor-side mass coupled to the handle (``mass``,
 ``friction``) by a spring and a damper; not with Coulomb friction or a ``lowpass`` velocity.
 ``extra_delay`` (samples, real, in ``[0, 100]``): every target acts that much later than the
@@ -44,7 +44,14 @@ from dataclasses import dataclass
 
 from drives.base import DriveScaling
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE
-from haptic_bus.analysis.loop import DAMPING_RANGE, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE, STIFFNESS_RANGE
+from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE
+from haptic_bus.analysis.transmission import (
+    DAMPING_RANGE,
+    MOTOR_MASS_RANGE,
+    SPELLING,
+    STIFFNESS_RANGE,
+    Transmission,
+)
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import COULOMB_RANGE, NOISE_RANGE, NOISE_SEED_RANGE, SCALE_RANGE
@@ -90,45 +97,9 @@ class Timing(enum.Enum):
         return 1.0 if self is Timing.CIA402 else 0.0
 
 
-_ALLOWED = (f"STIFFNESS:DAMPING:MOTOR_MASS, stiffness in (0, {STIFFNESS_RANGE[1]:g}] N/m, damping in "
-            f"[0, {DAMPING_RANGE[1]:g}] N s/m, motor mass in [{MASS_RANGE[0]:g}, {MASS_RANGE[1]:g}] kg")
-
-
-@dataclass(frozen=True)
-class Transmission:
-    """A transmission (:mod:`sim_drive.transmission`) between motor and handle: ``stiffness`` N/m (> 0),
-    ``damping`` N s/m, ``motor_mass`` kg."""
-
-    stiffness: float
-    damping: float
-    motor_mass: float
-
-    def __post_init__(self) -> None:
-        values = (self.stiffness, self.damping, self.motor_mass)
-        ranges = ((STIFFNESS_RANGE, False), (DAMPING_RANGE, True), (MASS_RANGE, True))
-        for value, ((low, high), closed) in zip(values, ranges):
-            number = float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else float("nan")
-            if not ((low <= number if closed else low < number) and number <= high):
-                raise ParameterError("transmission", self.spec(), _ALLOWED, "simulated drive")
-        for name, value in zip(("stiffness", "damping", "motor_mass"), values):
-            object.__setattr__(self, name, float(value))
-
-    def spec(self) -> str:
-        """``STIFFNESS:DAMPING:MOTOR_MASS`` as the command line spells it."""
-        return f"{self.stiffness}:{self.damping}:{self.motor_mass}"
-
-    @classmethod
-    def parse(cls, text: str) -> Transmission:
-        """The transmission ``text`` spells (``20000:2:0.3``); ParameterError with the ranges if it is malformed."""
-        try:
-            stiffness, damping, motor_mass = (float(part) for part in text.split(":"))
-            return cls(stiffness, damping, motor_mass)
-        except (ValueError, ParameterError):
-            raise ParameterError("transmission", text, _ALLOWED, "simulated drive") from None
-
-    def resonance(self, handle_mass: float) -> float:
-        """The free transmission's resonance, Hz: ``sqrt(k (1/M + 1/m)) / (2 pi)`` (``handle_mass`` ``m`` kg)."""
-        return math.sqrt(self.stiffness * (1.0 / self.motor_mass + 1.0 / handle_mass)) / math.tau
+_TRANSMISSION_ALLOWED = (f"{SPELLING}, stiffness in (0, {STIFFNESS_RANGE[1]:g}] N/m, damping in "
+                         f"[0, {DAMPING_RANGE[1]:g}] N s/m, motor mass in [{MOTOR_MASS_RANGE[0]:g}, "
+                         f"{MOTOR_MASS_RANGE[1]:g}] kg")
 
 
 @dataclass(frozen=True)
@@ -188,10 +159,13 @@ class DeviceParameters:
         set_(self, "extra_delay", real_in_range("extra_delay", self.extra_delay, *EXTRA_DELAY_RANGE, unit="samples",
                                                 context=ctx))
         if isinstance(self.transmission, str):
-            set_(self, "transmission", Transmission.parse(self.transmission))
+            try:
+                set_(self, "transmission", Transmission.parse(self.transmission))
+            except ParameterError:  # one line with every range, whichever part is wrong
+                raise ParameterError("transmission", self.transmission, _TRANSMISSION_ALLOWED, ctx) from None
         if self.coupling is not None and (coulomb or velocity.kind == "lowpass"):
-            raise ParameterError("transmission", self.coupling.spec(), "no transmission with Coulomb friction or a "
-                                 "lowpass velocity (not modelled)", ctx)
+            raise ParameterError("transmission", self.coupling.describe(), "no transmission with Coulomb friction or "
+                                 "a lowpass velocity (not modelled)", ctx)
 
     @property
     def coupling(self) -> Transmission | None:

@@ -32,9 +32,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from haptic_bus.analysis.transmission import Transmission
 from sim_drive.handle import Meter, Piece, schedule, stretched_schedule
 from sim_drive.operator import NoOperator, OperatorModel
-from sim_drive.parameters import Transmission
 
 if TYPE_CHECKING:
     from sim_drive.parameters import DeviceParameters

@@ -11,12 +11,13 @@ import pytest
 from drives.cia402 import Command
 from drives.modbus.register_map import REGISTERS
 from haptic_bus.analysis.plant import zoh_coefficients
+from haptic_bus.analysis.transmission import Transmission
 from sim_drive.canopen.manufacturer import ManufacturerObjects
 from sim_drive.canopen.pdo_engine import SlaveCounters
 from sim_drive.cli import _drive_setup, _parse, build_parser, main
 from sim_drive.device import SimulatedDrive
 from sim_drive.modbus.bank import RegisterBank
-from sim_drive.parameters import DeviceParameters, Timing, Transmission
+from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.transmission import TwoMassHandle
 from tests.run_rig import enabled_drive
 
@@ -154,8 +155,8 @@ def test_the_flags_reach_the_truth() -> None:
 
 
 @pytest.mark.parametrize("flags, allowed", [
-    (["--transmission", "20000:2"], "STIFFNESS:DAMPING:MOTOR_MASS, stiffness in (0, 1e+15] N/m"),
-    (["--transmission", "0:2:0.3"], "stiffness in (0, 1e+15] N/m"),
+    (["--transmission", "20000:2"], "STIFFNESS:DAMPING:MOTOR_MASS (N/m, N s/m, kg), stiffness in (0, 1e+12] N/m"),
+    (["--transmission", "0:2:0.3"], "stiffness in (0, 1e+12] N/m"),
     (["--transmission", "20000:2:0.3", "--coulomb", "0.1"], "no transmission with Coulomb friction"),
     (["--extra-delay", "-0.1"], "a finite real in [0, 100] samples"),
     (["--extra-delay", "soon"], "a finite real in [0, 100] samples"),

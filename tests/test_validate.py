@@ -14,12 +14,13 @@ import numpy as np
 import pytest
 
 from haptic_bus.analysis.loop import DeviceLoop
+from haptic_bus.analysis.transmission import Transmission
 from haptic_bus.app.profiles import load_profile
+from haptic_bus.validate import two_mass
 from haptic_bus.validate.model import plant_response, predict
 from haptic_bus.validate.probe import AmplitudeRule, ProbePlan, gentle_hold, hold_scene
-from haptic_bus.validate.two_mass import TwoMass
 from sim_drive.operator import NoOperator
-from sim_drive.parameters import DeviceParameters, Transmission
+from sim_drive.parameters import DeviceParameters
 from tests.run_rig import enabled_drive, run_cli, simulated_drive
 
 PROFILE = "cia402-handle"
@@ -65,14 +66,16 @@ def test_the_predicted_plant_is_the_simulated_drives_to_round_off(delay: float) 
 
 
 def test_the_two_mass_plant_is_the_simulated_transmissions() -> None:
-    """The fit's two-mass sampled plant against the simulated drive's transmission (different code: the
-    drive steps its four states piece by piece, the fit solves the period map per frequency)."""
+    """The fit's two-mass sampled plant (the analysis package's period map) against the simulated drive's
+    transmission (different code: the drive steps its four states piece by piece with scipy's exponential,
+    the analysis maps the period in scaled units with its own)."""
     parameters = DeviceParameters(mass=1.0, friction=20.0, velocity="average", velocity_per_count=1e-9,
                                   position_per_count=1e-9, rated_torque=0.32, transmission=TRANSMISSION)
     measured, theta = _measured_plant(parameters, settle=12)  # the mode decays at zeta omega = 6.6 /s: e^-20 in 3 s
-    predicted = TwoMass(20000.0, 2.0, 0.3, 1.0, 20.0).response(DeviceLoop(1.0, 20.0, 1e-3, 1, "average"), theta)
+    loop = DeviceLoop(1.0, 20.0, 1e-3, 1, "average")
+    predicted = two_mass.response(loop, TRANSMISSION, theta)
     assert np.max(np.abs(measured / predicted - 1.0)) < ROUNDING
-    assert TwoMass(20000.0, 2.0, 0.3, 1.0, 20.0).mode()[0] == pytest.approx(TRANSMISSION.resonance(1.0), rel=1e-3)
+    assert two_mass.mode(loop, TRANSMISSION)[0] == pytest.approx(TRANSMISSION.resonance(1.0), rel=1e-3)
 
 
 def test_the_hold_and_the_probe_fit_the_gate_the_force_limit_and_the_travel() -> None:

@@ -7,9 +7,9 @@ squares (the residual at each frequency over its standard error, real and imagin
 
 - ``delay``: the profile's plant with the loop delay ``D + e`` (:func:`~haptic_bus.validate.model.plant_response`);
   ``value`` is the extra delay ``e`` in samples;
-- ``resonance``: a transmission between motor and handle (:class:`~haptic_bus.validate.two_mass.TwoMass`,
-  the handle keeping the profile's ``m`` and ``b``; ``point`` and ``average`` velocity only):
-  the free mode's natural ``frequency`` (Hz) and ``damping`` ratio;
+- ``resonance``: a transmission between motor and handle (:mod:`~haptic_bus.validate.two_mass`, the
+  handle keeping the profile's ``m`` and ``b``): the free mode's natural ``frequency`` (Hz) and
+  ``damping`` ratio;
 - ``filter``: a first-order lag ``1/(1 + j omega tau)`` on the force (``tau`` s; continuous, so
   exact only for ``tau`` well above ``T``);
 - ``mass`` and ``friction``: the rigid plant with other ``m`` (kg) and ``b`` (N s/m).
@@ -32,9 +32,10 @@ from typing import Any
 import numpy as np
 
 from haptic_bus.analysis.loop import DeviceLoop
+from haptic_bus.analysis.transmission import Transmission
+from haptic_bus.validate import two_mass
 from haptic_bus.validate.model import plant_response, with_delay
 from haptic_bus.validate.spectra import Measured
-from haptic_bus.validate.two_mass import KINDS, TwoMass
 
 Model = Callable[[np.ndarray], np.ndarray]  # parameters -> the plant at the measured frequencies
 UNITS = {("delay", "value"): " samples (extra)", ("resonance", "frequency"): " Hz", ("resonance", "damping"): "",
@@ -150,27 +151,23 @@ def fit_filter(measured: Measured, loop: DeviceLoop) -> Fit:
     return Fit("filter", (finding,), solution.chi2, solution.misfit)
 
 
-def fit_resonance(measured: Measured, loop: DeviceLoop) -> Fit | None:
-    """The transmission (stiffness, damping, motor mass) that fits best, as its mode's frequency
-    (Hz) and damping ratio; None for a velocity model :class:`TwoMass` does not build."""
-    from haptic_bus.analysis.velocity import VelocityModel
-
-    if VelocityModel.parse(loop.velocity).kind not in KINDS:
-        return None
+def fit_resonance(measured: Measured, loop: DeviceLoop) -> Fit:
+    """The transmission (stiffness, damping, motor mass) that fits best, as its mode's frequency (Hz)
+    and damping ratio."""
     start = _resonance_start(measured, loop)
 
-    def plant(p: np.ndarray) -> TwoMass:
-        return TwoMass(p[0], p[1], p[2], loop.m, loop.b)
+    def coupling(p: np.ndarray) -> Transmission:
+        return Transmission(p[0], p[1], p[2])
 
-    solution = _solve(measured, lambda p: plant(p).response(loop, measured.theta), start,
+    solution = _solve(measured, lambda p: two_mass.response(loop, coupling(p), measured.theta), start,
                       [start[0] * 1e-2, 0.0, start[2] * 1e-2], [start[0] * 1e2, 1e3 * max(loop.b, 1.0), start[2] * 1e2],
                       [start[0], max(loop.b, 1.0) * 0.1, start[2]])
-    mode = np.array(plant(solution.x).mode())
+    mode = np.array(two_mass.mode(loop, coupling(solution.x)))
     gradient = np.empty((2, 3))
     for i in range(3):
         step = np.zeros(3)
         step[i] = 1e-6 * max(abs(solution.x[i]), 1e-9)
-        gradient[:, i] = (np.array(plant(solution.x + step).mode()) - mode) / step[i]
+        gradient[:, i] = (np.array(two_mass.mode(loop, coupling(solution.x + step))) - mode) / step[i]
     sigma = np.sqrt(np.maximum(0.0, np.diag(gradient @ solution.covariance @ gradient.T)))
     finding = Finding("resonance", {"frequency": float(mode[0]), "damping": float(mode[1])},
                       {"frequency": float(sigma[0]), "damping": float(sigma[1])})
@@ -193,8 +190,6 @@ def _resonance_start(measured: Measured, loop: DeviceLoop) -> list[float]:
 
 def departures(measured: Measured, loop: DeviceLoop) -> list[Fit]:
     """Every candidate fitted, the best (least ``chi2``) first."""
-    fits = [fit_delay(measured, loop), fit_mass_friction(measured, loop), fit_filter(measured, loop)]
-    resonance = fit_resonance(measured, loop)
-    if resonance is not None:
-        fits.append(resonance)
+    fits = [fit_delay(measured, loop), fit_mass_friction(measured, loop), fit_filter(measured, loop),
+            fit_resonance(measured, loop)]
     return sorted(fits, key=lambda fit: fit.chi2)
