@@ -132,6 +132,8 @@ def test_a_hidden_transmission_is_found_as_its_resonance(capsys: pytest.CaptureF
     assert finding["kind"] == "resonance"
     assert finding["frequency"] == pytest.approx(TRANSMISSION.resonance(1.0), rel=0.1)  # 46.9 Hz
     assert 0 < finding["damping"] < 0.1 and finding["uncertainty"]["frequency"] < 1.0
+    fitted = (finding["stiffness"], finding["coupling_damping"], finding["motor_mass"])  # noiseless: the truth
+    assert fitted == pytest.approx((TRANSMISSION.stiffness, TRANSMISSION.damping, TRANSMISSION.motor_mass), rel=0.01)
 
 
 @pytest.mark.parametrize("flags, said", [

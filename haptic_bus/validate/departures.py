@@ -9,7 +9,8 @@ squares (the residual at each frequency over its standard error, real and imagin
   ``value`` is the extra delay ``e`` in samples;
 - ``resonance``: a transmission between motor and handle (:mod:`~haptic_bus.validate.two_mass`, the
   handle keeping the profile's ``m`` and ``b``): the free mode's natural ``frequency`` (Hz) and
-  ``damping`` ratio;
+  ``damping`` ratio, and the transmission fitted (``stiffness`` N/m, ``coupling_damping`` N s/m,
+  ``motor_mass`` kg: what a profile's ``[device.transmission]`` states);
 - ``filter``: a first-order lag ``1/(1 + j omega tau)`` on the force (``tau`` s; continuous, so
   exact only for ``tau`` well above ``T``);
 - ``mass`` and ``friction``: the rigid plant with other ``m`` (kg) and ``b`` (N s/m).
@@ -39,6 +40,7 @@ from haptic_bus.validate.spectra import Measured
 
 Model = Callable[[np.ndarray], np.ndarray]  # parameters -> the plant at the measured frequencies
 UNITS = {("delay", "value"): " samples (extra)", ("resonance", "frequency"): " Hz", ("resonance", "damping"): "",
+         ("resonance", "stiffness"): " N/m", ("resonance", "coupling_damping"): " N s/m", ("resonance", "motor_mass"): " kg",
          ("filter", "tau"): " s", ("mass", "value"): " kg", ("friction", "value"): " N s/m"}
 _ERROR_FLOOR = 1e-9  # of |H|: a frequency measured without any scatter (a noiseless simulation) still gets a weight
 
@@ -169,8 +171,11 @@ def fit_resonance(measured: Measured, loop: DeviceLoop) -> Fit:
         step[i] = 1e-6 * max(abs(solution.x[i]), 1e-9)
         gradient[:, i] = (np.array(two_mass.mode(loop, coupling(solution.x + step))) - mode) / step[i]
     sigma = np.sqrt(np.maximum(0.0, np.diag(gradient @ solution.covariance @ gradient.T)))
-    finding = Finding("resonance", {"frequency": float(mode[0]), "damping": float(mode[1])},
-                      {"frequency": float(sigma[0]), "damping": float(sigma[1])})
+    names = ("stiffness", "coupling_damping", "motor_mass")  # what a profile's [device.transmission] states
+    finding = Finding("resonance", {"frequency": float(mode[0]), "damping": float(mode[1]),
+                                    **{name: float(value) for name, value in zip(names, solution.x)}},
+                      {"frequency": float(sigma[0]), "damping": float(sigma[1]),
+                       **{name: _sigma(solution, i) for i, name in enumerate(names)}})
     return Fit("resonance", (finding,), solution.chi2, solution.misfit)
 
 
