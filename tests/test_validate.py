@@ -18,6 +18,7 @@ from haptic_bus.analysis.transmission import Transmission
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.validate import two_mass
 from haptic_bus.validate.model import plant_response, predict
+from haptic_bus.validate.verdict import Signals, validate
 from haptic_bus.validate.probe import AmplitudeRule, ProbePlan, gentle_hold, hold_scene
 from sim_drive.operator import NoOperator
 from sim_drive.parameters import DeviceParameters
@@ -89,6 +90,36 @@ def test_the_hold_and_the_probe_fit_the_gate_the_force_limit_and_the_travel() ->
     rule = AmplitudeRule.design(plan, predict(loop, hold, plan.theta), 1.2e-7, 0.016, 30.0, 0.01)
     assert 0.3 <= rule.amplitude(0.0) <= rule.ceiling <= 3.0  # 1 % .. 10 % of the 30 N force limit
     assert rule.amplitude(1.0) == rule.ceiling  # a noisy handle gets the largest probe
+
+
+def _steady_signals(noise: float) -> tuple[object, ...]:
+    """The model's own steady state under the probe (velocity from the exact prediction, the force the
+    controller then sends), plus white noise of ``noise`` m/s rms on the velocity: no bus, no rounding."""
+    profile = load_profile(PROFILE)
+    loop = profile.device_loop()
+    hold = gentle_hold(loop, profile.gate())
+    plan = ProbePlan.for_loop(loop, hold)
+    prediction = predict(loop, hold, plan.theta)
+    repeats = plan.cycles // plan.samples + 1
+    start = plan.quiet % plan.samples  # the probe's phase at cycle 0, counted back from its start
+    probe = np.roll(np.tile(plan.wave(), repeats), start)[:plan.cycles]
+    velocity = np.roll(np.tile(plan.steady(prediction.velocity), repeats), start)[:plan.cycles]
+    position = np.roll(np.tile(plan.steady(prediction.position), repeats), start)[:plan.cycles]
+    velocity = velocity + np.random.default_rng(5).normal(0.0, noise, velocity.size)
+    force = probe - hold.stiffness * position - hold.damping * velocity
+    return loop, hold, plan, prediction, Signals(velocity, position, force, probe, (0.0, 0.0, 0.0))
+
+
+@pytest.mark.parametrize("noise, verdict", [(0.0, "holds"), (1e-6, "holds"), (1e-2, "cannot tell")])
+def test_the_verdict_needs_the_lowest_frequencies_resolved(noise: float, verdict: str) -> None:
+    """The model's own response holds (to round-off without noise, and under 1 um/s of noise); 1 cm/s rms
+    of noise, 5.4 times the velocity of the probe's largest tone (1.84 mm/s at 3.9 Hz for a 1 N peak),
+    leaves even the lowest frequency unresolved: neither verdict, and no finding."""
+    loop, hold, plan, prediction, signals = _steady_signals(noise)
+    found = validate(loop, hold, plan, prediction, signals, 1.0, noise)
+    assert found.verdict == verdict and found.findings == []
+    if noise == 0.0:
+        assert found.within < 1e-9 and found.up_to == plan.frequencies[-1]
 
 
 def _validate(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path, transport: str, *extra: str,
