@@ -18,8 +18,8 @@ from haptic_bus.analysis.transmission import Transmission
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.validate import two_mass
 from haptic_bus.validate.model import plant_response, predict
-from haptic_bus.validate.verdict import Signals, validate
 from haptic_bus.validate.probe import AmplitudeRule, ProbePlan, gentle_hold, hold_scene
+from haptic_bus.validate.verdict import Signals, validate
 from sim_drive.operator import NoOperator
 from sim_drive.parameters import DeviceParameters
 from tests.run_rig import enabled_drive, run_cli, simulated_drive
