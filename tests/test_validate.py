@@ -9,15 +9,17 @@ from __future__ import annotations
 
 import json
 import pathlib
+from typing import Any
 
 import numpy as np
 import pytest
 
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.analysis.transmission import Transmission
+from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.validate import two_mass
-from haptic_bus.validate.model import plant_response, predict
+from haptic_bus.validate.model import Hold, Prediction, plant_response, predict
 from haptic_bus.validate.probe import AmplitudeRule, ProbePlan, gentle_hold, hold_scene
 from haptic_bus.validate.verdict import Signals, validate
 from sim_drive.operator import NoOperator
@@ -25,6 +27,7 @@ from sim_drive.parameters import DeviceParameters
 from tests.run_rig import enabled_drive, run_cli, simulated_drive
 
 PROFILE = "cia402-handle"
+AVERAGE = VelocityModel.parse("average")
 TRANSMISSION = Transmission(20000.0, 2.0, 0.3)  # under the 1 kg handle: 46.9 Hz
 # counts of 1e-9 m/s rounded: sqrt(256/12) 1e-9 = 5e-9 m/s per bin against bins of at least 128 * 1e-4 m/s
 ROUNDING = 1e-5
@@ -59,7 +62,7 @@ def _measured_plant(parameters: DeviceParameters, settle: int = SETTLE) -> tuple
 def test_the_predicted_plant_is_the_simulated_drives_to_round_off(delay: float) -> None:
     """The exact sampled plant (the analysis package's period map) against the simulated drive's exact
     plant with a hidden extra delay, 0x606C as the encoder difference over the cycle, counts of 1e-9 m/s."""
-    parameters = DeviceParameters(mass=1.0, friction=20.0, velocity="average", velocity_per_count=1e-9,
+    parameters = DeviceParameters(mass=1.0, friction=20.0, velocity=AVERAGE, velocity_per_count=1e-9,
                                   position_per_count=1e-9, rated_torque=0.32, extra_delay=delay)
     measured, theta = _measured_plant(parameters)
     predicted = plant_response(DeviceLoop(1.0, 20.0, 1e-3, 1.0 + delay, "average"), theta)
@@ -70,7 +73,7 @@ def test_the_two_mass_plant_is_the_simulated_transmissions() -> None:
     """The fit's two-mass sampled plant (the analysis package's period map) against the simulated drive's
     transmission (different code: the drive steps its four states piece by piece with scipy's exponential,
     the analysis maps the period in scaled units with its own)."""
-    parameters = DeviceParameters(mass=1.0, friction=20.0, velocity="average", velocity_per_count=1e-9,
+    parameters = DeviceParameters(mass=1.0, friction=20.0, velocity=AVERAGE, velocity_per_count=1e-9,
                                   position_per_count=1e-9, rated_torque=0.32, transmission=TRANSMISSION)
     measured, theta = _measured_plant(parameters, settle=12)  # the mode decays at zeta omega = 6.6 /s: e^-20 in 3 s
     loop = DeviceLoop(1.0, 20.0, 1e-3, 1, "average")
@@ -92,7 +95,7 @@ def test_the_hold_and_the_probe_fit_the_gate_the_force_limit_and_the_travel() ->
     assert rule.amplitude(1.0) == rule.ceiling  # a noisy handle gets the largest probe
 
 
-def _steady_signals(noise: float) -> tuple[object, ...]:
+def _steady_signals(noise: float) -> tuple[DeviceLoop, Hold, ProbePlan, Prediction, Signals]:
     """The model's own steady state under the probe (velocity from the exact prediction, the force the
     controller then sends), plus white noise of ``noise`` m/s rms on the velocity: no bus, no rounding."""
     profile = load_profile(PROFILE)
@@ -123,7 +126,7 @@ def test_the_verdict_needs_the_lowest_frequencies_resolved(noise: float, verdict
 
 
 def _validate(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path, transport: str, *extra: str,
-              **hidden: object) -> tuple[int, dict[str, object], str]:
+              **hidden: object) -> tuple[int, dict[str, Any], str]:
     with simulated_drive(transport, PROFILE) as under:
         under.drive.set_operator(NoOperator())  # --operator none
         if hidden:
