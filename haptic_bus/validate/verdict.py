@@ -126,7 +126,7 @@ def validate(loop: DeviceLoop, hold: Hold, plan: ProbePlan, prediction: Predicti
     per_velocity, per_position, per_force = signals.quanta  # the force's rounding acts on the probe's way in
     velocity = response(signals.velocity, signals.probe, plan, (per_velocity, per_force))
     position = response(signals.position, signals.probe, plan, (per_position, per_force))
-    plant = response(signals.velocity, signals.force, plan, (per_velocity, per_force))
+    plant = response(signals.velocity, signals.force, plan, (per_velocity, 0.0))  # the force sent is known exactly
     relative, error = velocity.relative_to(prediction.velocity)
     resolved = CONFIDENCE * error <= tolerance
     band = int(np.argmin(resolved)) if not resolved.all() else resolved.size  # the resolved bins from the lowest
