@@ -19,7 +19,7 @@ import abc
 import logging
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 from drives.base import (
@@ -419,3 +419,32 @@ class StateWalk:
         self._commands += 1
         self.word = word
         return word
+
+
+def walk_together(drives: Sequence[Cia402Master], goal: State, first_words: Sequence[int],
+                  command: Callable[[list[int]], list[int]], accept: tuple[State, ...] = ()) -> None:
+    """Walk every drive of ``drives`` to ``goal`` (or a state in ``accept``) together: each
+    ``command(words)`` exchange sends every drive its word and returns every statusword that
+    answers (one SYNC on CANopen, one request per drive on Modbus), so no drive is left without
+    its master while another walks; an arrived drive keeps getting the word that brought it there.
+    :class:`DriveFault` as :class:`StateWalk` raises it."""
+    walks = [StateWalk(drive, goal, word, accept) for drive, word in zip(drives, first_words)]
+    words = list(first_words)
+    walking = True
+    while walking:
+        statuswords = command(words)
+        walking = False
+        for i, (walk, statusword) in enumerate(zip(walks, statuswords)):
+            walking |= walk.next_word(statusword) is not None
+            words[i] = walk.word
+
+
+def trip_together(drives: Sequence[Cia402Master], error: DriveError) -> DriveError:
+    """Trip every drive of ``drives`` not tripped yet (:meth:`Cia402Master.trip`, each its safe
+    outputs): the one that met ``error`` with it, the others "stopped together with" it; returns
+    ``error`` for ``raise`` (a master of several drives: one axis' fault stops every axis)."""
+    for drive in drives:
+        if drive.tripped is None:
+            drive.trip(error if drive.name == error.node else
+                       DriveError(drive.name, f"stopped together with {error.node}: {error.message}"))
+    return error

@@ -17,8 +17,10 @@ users write ``haptic_bus.check_passivity(...)``, never a module path::
     result.exit_reason, result.summary.cycles, result.folder  # "completed", 1000, runs/<UTC>-cia402-handle
 
 The same ``hb.run`` runs a multi-axis profile (``[[axes]]``, e.g. ``hb.load_any_profile("gantry-3d")``
-against ``haptic-bus sim --node-ids 5,6,7 --profile gantry-3d``: the node ids come from the profile)
-and a Modbus drive (``bus`` a URL, ``"tcp://127.0.0.1:5020"``, with ``unit_id``).
+against ``haptic-bus sim --node-ids 5,6,7 --profile gantry-3d``: the node ids come from the profile),
+a Modbus drive (``bus`` a URL, ``"tcp://127.0.0.1:5020"``, with ``unit_id``) and several Modbus axes
+(``bus`` one URL, or a list of one per axis, with ``unit_ids=[1, 2, 3]``, against ``haptic-bus sim
+--modbus tcp://127.0.0.1:5020 --unit-ids 1,2,3 --profile gantry-3d``).
 
 ``pacing="virtual"`` runs in lock-step with a simulated drive (1.0 s of the drive's time);
 ``pacing="wall"`` (the default) keeps the wall clock, as a real drive needs.  The run's
@@ -63,6 +65,7 @@ _HOMES = {
     "load_profile": "haptic_bus.app.profiles",
     "load_any_profile": "haptic_bus.app.axes_profile",
     "RunOptions": "haptic_bus.app.run_options",
+    "RealtimeSettings": "haptic_bus.app.realtime",
     "run": "haptic_bus.app.runner",
     "RunResult": "haptic_bus.app.runner",
     "run_canopen": "haptic_bus.app.runner",
@@ -87,6 +90,7 @@ __all__ = [
     "ParameterError",
     "PassivityGate",
     "Profile",
+    "RealtimeSettings",
     "Refusal",
     "RunOptions",
     "RunResult",
@@ -128,6 +132,7 @@ if TYPE_CHECKING:
     from haptic_bus.analysis.loop import DeviceLoop, WallLoop
     from haptic_bus.app.axes_profile import load_any_profile
     from haptic_bus.app.profiles import Profile, load_profile
+    from haptic_bus.app.realtime import RealtimeSettings
     from haptic_bus.app.run_options import RunOptions
     from haptic_bus.app.runner import RunResult, run, run_canopen, run_modbus
     from haptic_bus.control.controller import RunSummary, WallController

@@ -2,7 +2,7 @@
 
 The same TOML files the controller loads (``haptic_bus.app.axes_profile`` validates the whole
 file), read with the same readers (:mod:`haptic_bus.profile`); the simulator reads its part:
-``[loop] period``, and per ``[[axes]]`` table the ``name``, ``node_id``, ``timing``/``delay``
+``[loop] period``, and per ``[[axes]]`` table the ``name``, ``node_id`` or ``unit_id``, ``timing``/``delay``
 and ``[axes.device]`` (plant, scaling and hidden truth, as :func:`sim_drive.profile.load_profile`
 reads a one-axis ``[device]``, with the same defaults where it is silent), and the hand in space
 ``[space.operator]`` (:func:`sim_drive.space_operator.hand_from_table`).
@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from drives.cia301 import NODE_ID_RANGE
+from drives.modbus.register_map import UNIT_ID_RANGE
 from haptic_bus.analysis.loop import PERIOD_RANGE
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import check_velocity_period, read_device, read_timing
@@ -25,15 +26,17 @@ from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import SILENT, drive_parameters
 from sim_drive.space_operator import SpaceHand, hand_from_table
 
-_CONTROLLER_KEYS = ("unit_id", "mapping", "force_limit")  # of an [[axes]] table: the controller's business
+_CONTROLLER_KEYS = ("mapping", "force_limit")  # of an [[axes]] table: the controller's business
 
 
 @dataclass(frozen=True)
 class SimAxis:
-    """One axis of the simulated device: its ``name``, CANopen ``node_id``, plant ``parameters`` and ``timing``."""
+    """One axis of the simulated device: its ``name``, CANopen ``node_id`` or Modbus ``unit_id`` (the
+    other None), plant ``parameters`` and ``timing``."""
 
     name: str
-    node_id: int
+    node_id: int | None
+    unit_id: int | None
     parameters: DeviceParameters
     timing: Timing
 
@@ -58,13 +61,15 @@ def is_axes_profile(path_or_name: str | pathlib.Path) -> bool:
 def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> SimAxis:
     r = Reader(path, f"axes[{index}]", table, silent={"name": f"axis{index}", "timing": Timing.CIA402.value})
     name = r.text("name")
-    node = r.whole("node_id", *NODE_ID_RANGE)
+    node = r.whole("node_id", *NODE_ID_RANGE) if "node_id" in r.table else None
+    unit = r.whole("unit_id", *UNIT_ID_RANGE) if "unit_id" in r.table else None
+    r.used.update(("node_id", "unit_id"))  # exactly one of them: the controller's profile checks it
     timing, delay = read_timing(r)
     device = read_device(path, r.raw("device", "an [axes.device] table", default={}), r.field("device"), SILENT.device)
     r.used.update(_CONTROLLER_KEYS)
     r.done()
     check_velocity_period(path, r.field("device.velocity"), device, period)
-    return SimAxis(name, node, drive_parameters(path, device, period, timing, delay, f"axes[{index}]."), Timing(timing))
+    return SimAxis(name, node, unit, drive_parameters(path, device, period, timing, delay, f"axes[{index}]."), Timing(timing))
 
 
 def load_axes_device(path_or_name: str | pathlib.Path) -> AxesDeviceProfile:

@@ -5,6 +5,8 @@
     haptic-bus sim --interface I --channel C --node-ids 5,6,7 [--profile gantry-3d] [...]   (several axes)
     haptic-bus sim --modbus tcp://HOST:PORT [--unit-id N] [--word-order big|little]
                    [--timing cia402|ideal|reception] [--profile P] [--log-wall-clock]
+    haptic-bus sim --modbus tcp://HOST:PORT --unit-ids 1,2,3 [--profile gantry-3d] [...]   (several axes, one server)
+    haptic-bus sim --modbus URL1 --modbus URL2 --modbus URL3 [--unit-ids ...] [--profile gantry-3d]   (a server per axis)
     haptic-bus sim --eds-path
     haptic-bus sim --version
     python -m sim_drive ...   (the same)
@@ -35,7 +37,7 @@ import signal
 import socket
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from typing import Any, NoReturn
 
 from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, merge_bus_options, parse_bus_option
@@ -46,6 +48,7 @@ from sim_drive.eds import OD_KINDS, eds_path
 from sim_drive.operator import OperatorModel, operator_from_spec, operator_usage
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import load_profile
+from sim_drive.scheduling import answer_in_real_time
 from sim_drive.sync_clock import SYNC_CLOCKS, sync_clock
 
 logger = logging.getLogger("sim_drive")
@@ -53,7 +56,7 @@ logger = logging.getLogger("sim_drive")
 _PROG = "haptic-bus sim"
 _CANOPEN_ONLY = ("eds_path", "interface", "channel", "node_id", "bitrate", "bus_option", "bus_kwargs", "od", "eds",
                  "node_ids")
-_MODBUS_ONLY = ("unit_id", "word_order")
+_MODBUS_ONLY = ("unit_id", "word_order", "unit_ids")
 _HELP = frozenset({"-h", "--help"})
 
 
@@ -136,8 +139,14 @@ def build_parser() -> argparse.ArgumentParser:
                               "absent (SDO abort 0x06020000/0x06090011), its PDOs and mapping limits as it declares "
                               "them; rehearse commissioning against your drive's dictionary")
     modbus = parser.add_argument_group("Modbus TCP server")
-    modbus.add_argument("--modbus", metavar="tcp://HOST:PORT", help="serve Modbus TCP on this address (PORT 0: any free port)")
+    modbus.add_argument("--modbus", metavar="tcp://HOST:PORT", action="append",
+                        help="serve Modbus TCP on this address (PORT 0: any free port); several axes: once for all "
+                             "(one server, a unit per axis) or once per axis (a server each)")
     modbus.add_argument("--unit-id", type=int, help="Modbus unit id 0..255 (default 1)")
+    modbus.add_argument("--unit-ids", metavar="IDS",
+                        help="several axes (e.g. 1,2,3): one simulated drive per unit, in axis order; with a multi-axis "
+                             "--profile ([[axes]]) each unit takes its axis' plant and hidden truth, and the profile's hand "
+                             "in space pushes them all (default: the profile's unit_id, else unit 1 on each server)")
     modbus.add_argument("--word-order", choices=["big", "little"], help="32-bit word order (default big: high word first)")
     _add_overrides(parser, canopen)
     return parser
@@ -236,11 +245,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     return _run_canopen(args)
 
 
-def _configure_logging(wall_clock: bool, library: str, level: int) -> None:
-    """Log lines on stderr (stamped with the wall clock with ``wall_clock``); the bus ``library`` only from ``level``."""
+def _set_up_process(wall_clock: bool, library: str, level: int) -> str:
+    """Log lines on stderr (stamped with the wall clock with ``wall_clock``; the bus ``library`` only
+    from ``level``), then real-time scheduling for every thread to come (:mod:`sim_drive.scheduling`):
+    what it got, in words for the serving line (a refusal before it logs nothing)."""
     fmt = "%(asctime)s %(message)s" if wall_clock else "%(message)s"
     logging.basicConfig(level=logging.INFO, format=fmt, handlers=[StderrHandler()], force=True)
     logging.getLogger(library).setLevel(level)
+    return answer_in_real_time()
 
 
 def _drive_setup(args: argparse.Namespace) -> tuple[DeviceParameters, OperatorModel | None, str]:
@@ -267,7 +279,7 @@ def _run_canopen(args: argparse.Namespace) -> int:
     if missing:
         print(f"{_PROG}: error: missing --{', --'.join(m.replace('_', '-') for m in missing)}", file=sys.stderr)
         return 2
-    _configure_logging(args.log_wall_clock, "canopen", logging.WARNING)
+    scheduling = _set_up_process(args.log_wall_clock, "canopen", logging.WARNING)
     try:
         parameters, operator, timing = _drive_setup(args)
         meter = BusLoadMeter(args.bitrate, parameters.period) if args.bitrate else None
@@ -284,8 +296,8 @@ def _run_canopen(args: argparse.Namespace) -> int:
             dictionary = "standard objects only" if args.od == "standard" else f"EDS {args.eds or eds_path()}"
             if args.eds:
                 log_eds_gaps(args.node_id, sim.object_dictionary)
-            logger.info("node %d: serving on %s %s (timing %s); %s",
-                        args.node_id, args.interface, args.channel, timing, dictionary)
+            logger.info("node %d: serving on %s %s (timing %s); %s; %s",
+                        args.node_id, args.interface, args.channel, timing, dictionary, scheduling)
             received = stop_signals.wait()
             logger.info("node %d: %s received, stopping", args.node_id, received.name)
         finally:
@@ -309,14 +321,19 @@ def add_axes_arguments(group: argparse._ArgumentGroup) -> None:
                             "hidden truth, and the profile's hand in space ([space.operator]) pushes them all")
 
 
-def _node_ids(text: str) -> list[int]:
+def id_list(flag: str, text: str, low: int, high: int, what: str) -> list[int]:
+    """``5,6,7`` -> [5, 6, 7]: distinct whole numbers in [low, high]; ParameterError naming ``flag`` otherwise."""
     try:
-        nodes = [int(part) for part in text.split(",")]
+        ids = [int(part) for part in text.split(",")]
     except ValueError:
-        nodes = []
-    if not nodes or len(set(nodes)) != len(nodes) or not all(1 <= n <= 127 for n in nodes):
-        raise ParameterError("--node-ids", text, "distinct CANopen node ids 1..127 separated by commas, e.g. 5,6,7")
-    return nodes
+        ids = []
+    if not ids or len(set(ids)) != len(ids) or not all(low <= n <= high for n in ids):
+        raise ParameterError(flag, text, f"distinct {what} {low}..{high} separated by commas, e.g. {low},{low + 1},{low + 2}")
+    return ids
+
+
+def _node_ids(text: str) -> list[int]:
+    return id_list("--node-ids", text, 1, 127, "CANopen node ids")
 
 
 def _axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
@@ -361,14 +378,14 @@ def run_axes(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
-    _configure_logging(args.log_wall_clock, "canopen", logging.WARNING)  # once the arguments hold: a refusal logs nothing
+    scheduling = _set_up_process(args.log_wall_clock, "canopen", logging.WARNING)  # once the arguments hold
     with _StopSignals() as stop_signals:
         if not started(sim):
             return 1
         try:
-            logger.info("nodes %s: serving on %s %s (one simulated drive per axis, the hand: %s)",
+            logger.info("nodes %s: serving on %s %s (one simulated drive per axis, the hand: %s); %s",
                         ", ".join(str(node.node_id) for node in sim.nodes), args.interface, args.channel,
-                        type(hand).__name__)
+                        type(hand).__name__, scheduling)
             received = stop_signals.wait()
             logger.info("nodes: %s received, stopping", received.name)
         finally:
@@ -405,14 +422,22 @@ def log_eds_gaps(node_id: int, dictionary: Any) -> None:
 
 
 def _run_modbus(args: argparse.Namespace) -> int:
-    """The Modbus TCP server until SIGINT/SIGTERM."""
+    """The Modbus TCP server until SIGINT/SIGTERM (several axes: :func:`run_modbus_axes`)."""
+    from sim_drive.axes_profile import is_axes_profile
     from sim_drive.modbus import ModbusSimServer, parse_modbus_url
 
-    _configure_logging(args.log_wall_clock, "pymodbus", logging.CRITICAL)
+    try:
+        several = args.unit_ids is not None or len(args.modbus) > 1 or bool(args.profile and is_axes_profile(args.profile))
+    except ParameterError as exc:
+        print(f"{_PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    if several:
+        return run_modbus_axes(args)
+    scheduling = _set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
     unit_id = 1 if args.unit_id is None else args.unit_id
     word_order = args.word_order or "big"
     try:
-        host, port = parse_modbus_url(args.modbus)
+        host, port = parse_modbus_url(args.modbus[0])
         parameters, operator, timing = _drive_setup(args)
         sim = ModbusSimServer(host, port, unit_id=unit_id, timing=timing, parameters=parameters, operator=operator,
                               word_order=word_order, sync_clock=sync_clock(args.clock))
@@ -421,22 +446,86 @@ def _run_modbus(args: argparse.Namespace) -> int:
         return 2
 
     def bound() -> None:
-        logger.info("unit %d: serving Modbus TCP on %s (timing %s, word order %s, started %.3f)",
-                    unit_id, sim.url, timing, word_order, time.time())
+        logger.info("unit %d: serving Modbus TCP on %s (timing %s, word order %s, started %.3f); %s",
+                    unit_id, sim.url, timing, word_order, time.time(), scheduling)
+
+    if not _serve_until_stopped(args, lambda stop: sim.serve(stop, on_bound=bound)):
+        return 1
+    drive = sim.drive
+    logger.info("unit %d: stopped after %d cycles, virtual time %.6f s, operator energy %.6g J, wall energy %.6g J",
+                unit_id, sim.bank.cycles, drive.time, drive.operator_energy, drive.wall_energy)
+    return 0
+
+
+def _serve_until_stopped(args: argparse.Namespace, serve: Callable[[asyncio.Event], Awaitable[None]]) -> bool:
+    """Run ``serve(stop)`` in an event loop until SIGINT/SIGTERM sets ``stop``; False after one line
+    on stderr if the socket cannot be served."""
 
     async def run() -> None:
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
-        await sim.serve(stop, on_bound=bound)
+        await serve(stop)
 
     try:
         asyncio.run(run())
     except (OSError, RuntimeError) as exc:
-        print(f"{_PROG}: error: cannot serve on {args.modbus}: {exc}", file=sys.stderr)
+        print(f"{_PROG}: error: cannot serve on {', '.join(args.modbus)}: {exc}", file=sys.stderr)
+        return False
+    return True
+
+
+def _modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
+    """``(axes, hand)`` for several Modbus axes: each (unit id, parameters, timing) in axis order;
+    ParameterError if the arguments or the profile are invalid (module docstring of the options)."""
+    from drives.modbus.register_map import UNIT_ID_RANGE
+    from sim_drive.axes_profile import is_axes_profile, load_axes_device
+    from sim_drive.space_operator import SpaceHand
+
+    given = id_list("--unit-ids", args.unit_ids, *UNIT_ID_RANGE, "Modbus unit ids") if args.unit_ids else None
+    if args.unit_id is not None:
+        raise ParameterError("--unit-id", args.unit_id, "--unit-ids for several axes (one unit id per axis)")
+    if args.profile and is_axes_profile(args.profile):
+        device = load_axes_device(args.profile)
+        stated = [axis.unit_id for axis in device.axes]
+        units = given or (stated if None not in stated else [UNIT_ID_RANGE[0]] * len(args.modbus))
+        if len(units) != len(device.axes) or (len(args.modbus) == 1 and len(set(units)) != len(units)):
+            raise ParameterError("--unit-ids", args.unit_ids, f"one unit id per axis of the profile ({len(device.axes)}), "
+                                 "or several --modbus addresses, one per axis")
+        return [(unit, axis.parameters, args.timing or axis.timing) for unit, axis in zip(units, device.axes)], \
+            device.make_hand()
+    units = given or [UNIT_ID_RANGE[0]] * len(args.modbus)
+    if len(args.modbus) not in (1, len(units)):
+        raise ParameterError("--modbus", len(args.modbus), f"one address for every unit, or one per unit ({len(units)})")
+    parameters, _, timing = _drive_setup(args)
+    return [(unit, parameters, timing) for unit in units], SpaceHand(len(units))
+
+
+def run_modbus_axes(args: argparse.Namespace) -> int:
+    """The simulated multi-axis device over Modbus TCP until SIGINT/SIGTERM: one unit per axis, on one
+    server or a server per axis."""
+    from sim_drive.modbus import parse_modbus_url
+    from sim_drive.modbus.multi_axis import MultiAxisModbusSim
+
+    scheduling = _set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
+    try:
+        addresses = [parse_modbus_url(url) for url in args.modbus]
+        axes, hand = _modbus_axes_setup(args)
+        sim = MultiAxisModbusSim(addresses, axes, hand, clock=args.clock, word_order=args.word_order or "big")
+    except ParameterError as exc:
+        print(f"{_PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    units = ", ".join(str(unit) for unit in sim.unit_ids)
+
+    def bound() -> None:
+        logger.info("units %s: serving Modbus TCP on %s (one simulated drive per axis, the hand: %s, started %.3f); %s",
+                    units, ", ".join(dict.fromkeys(sim.urls)), type(hand).__name__, time.time(), scheduling)
+
+    if not _serve_until_stopped(args, lambda stop: sim.serve(stop, bound)):
         return 1
-    drive = sim.drive
-    logger.info("unit %d: stopped after %d cycles, virtual time %.6f s, operator energy %.6g J, wall energy %.6g J",
-                unit_id, sim.bank.cycles, drive.time, drive.operator_energy, drive.wall_energy)
+    for unit, url in zip(sim.units, sim.urls):
+        drive = unit.drive
+        logger.info("unit %d at %s: stopped after %d cycles, virtual time %.6f s, operator energy %.6g J, wall energy "
+                    "%.6g J", unit.unit_id, url, unit.bank.cycles, drive.time, drive.operator_energy, drive.wall_energy)
     return 0

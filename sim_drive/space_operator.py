@@ -59,6 +59,14 @@ class SpaceHand:
             raise ParameterError("drives", len(drives), f"one per axis ({self.size})", "hand in space")
         self._drives = tuple(drives)
 
+    def bind_places(self, places: Sequence[int], drives: Sequence[SimulatedDrive]) -> None:
+        """Each of ``drives`` the simulated drive of the axis at its entry of ``places`` (coordinates);
+        the hand's other axes are simulated elsewhere (at 0 m here)."""
+        bound: list[SimulatedDrive | None] = [None] * self.size
+        for place, drive in zip(places, drives, strict=True):
+            bound[place] = drive
+        self.bind(bound)
+
     def axis(self, index: int) -> OperatorModel:
         """The operator model of axis ``index``: this hand's component along it."""
         return AxisShare(index, self)

@@ -307,3 +307,30 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path) -
     last = {axis: rows[-1] for axis, rows in records(tmp_path / "run").items()}
     assert [int(last[axis]["torque_permille"]) for axis in "xyz"] == [-80, -80, -40]
     assert [last[axis]["velocity_m_per_s"] for axis in "xyz"] == [0.0, 0.0, 0.0]
+
+
+def test_reset_fault_clears_the_faulted_axis_before_commissioning_and_a_run_without_it_names_the_command(
+        tmp_path: pathlib.Path) -> None:
+    """Node 6 in FAULT: a run refuses at enabling, naming node 6's fault-reset command, nothing
+    enabled; with ``reset_fault`` the run resets node 6 alone (one event in run.json) and runs."""
+    profile = load_axes_profile("gantry-3d")
+    bus = {"interface": "lockstep", "channel": f"reset-{tmp_path.name}"}
+    sim = simulated_axes_device(profile, bus).start()
+    try:
+        sim.node(6).drive.fault(0x5530)  # any error code
+        refused = run(profile, bus, RunOptions(0.3, pacing="virtual", out_dir=tmp_path / "refused", live=False))
+        assert refused.exit_reason == "drive error" and refused.summary is None
+        assert refused.error is not None and refused.error.startswith("CANopen node 6: drive is in FAULT")
+        assert refused.error.endswith("then: haptic-bus fault-reset --interface lockstep --channel "
+                                      f"{bus['channel']} --node-id 6 (or run with --reset-fault)")
+        assert [node.drive.state for node in sim.nodes] != [State.OPERATION_ENABLED] * 3
+        assert sim.node(6).drive.state is State.FAULT
+        result = run(profile, bus, RunOptions(0.3, pacing="virtual", out_dir=tmp_path / "reset", live=False,
+                                              reset_fault=True, plots=False))
+        assert result.exit_reason == "completed", result.error
+        assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED] * 3
+    finally:
+        sim.stop()
+    events = json.loads((tmp_path / "reset" / "run.json").read_text())["events"]
+    (reset,) = [event for event in events if event["kind"] == "fault reset"]
+    assert reset["data"]["drive"] == "CANopen node 6" and reset["data"]["error_code_before"] == 0x5530

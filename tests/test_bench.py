@@ -69,10 +69,12 @@ def test_every_done_when_line_of_issue_14_is_a_row_with_a_verdict(smoke_run: Smo
 
 def test_every_timing_line_of_issue_26_is_a_row_with_a_verdict(smoke_run: SmokeRun) -> None:
     """CPU against python-can's floor, lateness against the bare clock, overruns, for both loads, and
-    the loop delay observed when quiet: a figure where the run cycled, "n/a" where pre-flight refused it."""
+    the loop delay observed when quiet: a figure where the run cycled, "n/a" where pre-flight refused it.
+    Nine rows for one axis (both loads), two for three axes (the smoke size runs them quiet only)."""
     _, result = smoke_run
     rows = result["done_when_26"]
-    assert len(rows) == 9 and {r["line"] for r in rows} == {1, 2}
+    assert len(rows) == 11 and {r["line"] for r in rows} == {1, 2}
+    assert sum("3 axes" in r["what"] for r in rows) == 2
     for row in rows:
         assert row["result"] in ("PASS", "FAIL", "n/a") and row["target"].startswith("<="), row
         assert (row["result"] == "n/a") == (row["measured"] == "-"), row

@@ -1,5 +1,6 @@
 """One controller at every axis count: the scalar path and the path for several axes render the
-same physics, and the start ramp, gated uploads and the derate rule hold on three coupled axes.
+same physics, and the start ramp and gated uploads hold on three coupled axes (the derate:
+``test_coupled_derate.py``).
 
 Everything runs in this process in virtual time on the lock-step bus: the simulated drives are
 real CANopen slaves, the masters the run's own (:mod:`haptic_bus.app.rig`).
@@ -25,7 +26,6 @@ from haptic_bus.control.controller import WallController, encoder_origin, encode
 from haptic_bus.control.record import COLUMNS
 from haptic_bus.control.space_gate import SpaceDecision, SpaceGate
 from haptic_bus.control.space_scene import Plane, compile_space_scene
-from haptic_bus.control.supervisor import SupervisorPolicy
 from haptic_bus.errors import ParameterError, Refusal
 from sim_drive.operator import ConstantPush
 
@@ -170,11 +170,8 @@ def test_three_axes_take_uploads_through_the_coupled_gate_whole_at_a_cycle_bound
     assert [entry.to_dict()["objects"][0]["kind"] for entry in controller.scenes.history] == ["sphere", "sphere"]
 
 
-def test_a_derate_policy_is_refused_for_coupled_axes_and_a_1d_scene_for_several_drives(gantry: AxesProfile) -> None:
+def test_a_1d_scene_is_refused_for_several_drives(gantry: AxesProfile) -> None:
     one_axis = load_profile("cia402-handle")
     with simulated_axes(gantry) as (_, axes):
-        with pytest.raises(ParameterError, match="no derate search for coupled axes"):
-            WallController(axes, gantry.gate(), gantry.space_scene(), force_limit=10.0,
-                           supervisor=SupervisorPolicy(on_late="derate"))
         with pytest.raises(ParameterError, match="one Drive for a 1-D scene"):
             WallController(axes, one_axis.gate(), one_axis.compiled_scene(), force_limit=10.0)

@@ -74,7 +74,7 @@ def test_one_call_runs_one_axis_and_three_through_one_session(haptic_sim, sessio
 
 
 @pytest.mark.parametrize(("profile", "bus", "node_id", "named"), [
-    ("gantry-3d", "tcp://127.0.0.1:5020", None, "bus"),
+    ("gantry-3d", "tcp://127.0.0.1:5020", None, "--unit-ids"),  # Modbus axes: the profile names node ids, no unit ids
     ("gantry-3d", {"interface": "lockstep", "channel": "x"}, 5, "node_id"),
     ("cia402-handle", {"interface": "lockstep", "channel": "x"}, None, "node_id"),
 ])

@@ -153,3 +153,40 @@ def test_the_plugin_knows_the_in_process_buses_the_runtime_knows() -> None:
     from haptic_bus.testing.buses import IN_PROCESS
 
     assert IN_PROCESS == IN_PROCESS_INTERFACES
+
+
+def test_a_modbus_drive_with_its_hidden_truth_settles_at_f_over_k(haptic_sim, haptic_controller) -> None:
+    """The plugin's example over Modbus TCP on loopback: the same fixtures, ``interface="modbus"``."""
+    drive = haptic_sim("cia402-handle", interface="modbus", unit_id=3, mass=1.4, friction=24.0,
+                       operator={"model": "constant", "level": 3.0})
+    assert drive.run_kwargs() == {"unit_id": 3} and drive.run_args() == ["--modbus", drive.bus, "--unit-id", "3"]
+    run = haptic_controller("cia402-handle", drive, duration=1.0).wait()
+    assert run.exit_reason == "completed" and run.document["link"]["unit_id"] == 3
+    assert run.record["energy_j"].min() >= 0.0
+    depth = run.record["position_m"][-100:].mean() - 0.003  # the wall's surface is 3 mm ahead
+    assert depth == pytest.approx(3.0 / 1500.0, rel=1e-3)  # F / K, whatever the mass and friction
+
+
+@pytest.mark.parametrize(("interface", "servers"), [("lockstep", 1), ("modbus", 1), ("modbus", 3)])
+def test_a_multi_axis_profile_runs_through_the_same_fixtures(haptic_sim, haptic_controller, interface: str,
+                                                             servers: int) -> None:
+    """gantry-3d's three simulated axes: on the lock-step CAN bus (node ids 5, 6, 7 from the
+    profile), or over Modbus as units 1, 2, 3 of one server or of a server each; the controller
+    seen cycling, then stopped; each axis' record read back."""
+    drive = haptic_sim("gantry-3d", interface=interface, servers=servers)
+    if interface == "modbus":
+        assert drive.run_kwargs() == {"unit_ids": [1, 2, 3]} and len(set(drive.urls)) == servers
+    else:
+        assert drive.run_kwargs() == {} and drive.node_ids == (5, 6, 7)
+    run = haptic_controller("gantry-3d", drive, duration=600.0)  # 10 minutes of virtual time: stopped before
+    run.wait_cycling()
+    recorded = run.stop()
+    assert recorded.exit_reason == "stopped" and sorted(recorded.records) == ["x", "y", "z"]
+    cycles = recorded.summary["cycles"]
+    assert cycles > 0 and [recorded.records[axis]["time_s"].size for axis in "xyz"] == [cycles] * 3
+    assert recorded.summary["least_energy"] >= 0.0
+
+
+def test_a_multi_axis_profile_takes_no_truth(haptic_sim) -> None:
+    with pytest.raises(ParameterError, match="none for a multi-axis profile"):
+        haptic_sim("gantry-3d", mass=2.0)

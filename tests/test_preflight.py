@@ -52,24 +52,25 @@ def test_a_machine_slower_than_the_period_refuses() -> None:
 
 
 def test_lateness_the_gate_cannot_cover_is_held_by_the_layer_and_refused_without_it() -> None:
-    profile = load_profile("stiff-wall")  # passive at D = 1 with a small margin, not at D = 1.85
-    late = np.full(500, 850e-6)  # busy 0.95 ms a cycle with the 0.1 ms exchange: within T
+    profile = load_profile("stiff-wall")  # passive at D = 1 with a small margin, not at D = 1.2
+    late = np.full(500, 550e-6)  # busy 0.65 ms a cycle with the 0.1 ms exchange: x1.5 within T
     covered = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
     assert covered.holdable and not covered.passive_at_observed and "layer (guard) holds" in covered.reason
     bare = judge(timing(late), profile.gate(), profile.compiled_scene(), "off", 0.050, 50)
     assert not bare.holdable and 'layer = "off"' in bare.reason
 
 
-def test_more_than_five_percent_of_cycles_busy_beyond_t_refuse_naming_the_period_that_holds() -> None:
-    """26 of 500 cycles (5.2 %) are busy longer than T (1.1 ms late + 0.1 ms exchange): refused; the period
-    named is 1.5 x the p99 busy time, up to the 0.25 ms grid (1.5 x 1.2 = 1.8 -> 2 ms), above T as it must be."""
+def test_a_period_shorter_than_the_one_named_is_refused_naming_it() -> None:
+    """6 of 500 cycles (1.2 %) are busy 1.2 ms (1.1 ms late + 0.1 ms exchange): numpy's p99 (rank 494.01
+    of 0..499) is one of them, so the period named is 1.5 x 1.2 ms up to the 0.25 ms grid = 2 ms, and
+    T = 1 ms is refused: the period named and the verdict agree."""
     profile = load_profile("cia402-handle")
     late = np.full(500, 20e-6)
-    late[::19][:26] = 1.1e-3  # 26 cycles a period late, so numpy's p99 (rank 494.01 of 0..499) is one of them
+    late[::84] = 1.1e-3  # cycles 0, 84, ..., 420: six
     report = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
-    assert report.overruns == 26 and not report.holdable
+    assert report.overruns == 6 and not report.holdable
     assert report.smallest_period == pytest.approx(2e-3)
-    assert "26 of 500 cycles were busy longer than T = 1 ms" in report.reason
+    assert "1.2 ms at p99, x1.5 more than T = 1 ms (6 of 500 cycles busy longer than T)" in report.reason
     assert report.reason.endswith("this machine holds T >= 2 ms")
 
 
@@ -83,9 +84,13 @@ def test_a_held_run_prints_its_measurement_its_period_and_its_verdict_in_one_lin
     assert "holds T >= 0.25 ms: the gate passes the scene" in line
 
 
-def test_cycles_busy_beyond_t_within_five_percent_are_held() -> None:
+def test_rare_late_cycles_below_one_percent_are_held_at_the_period_the_rest_name() -> None:
+    """4 of 500 cycles (0.8 %) a period late sit above numpy's p99 (between ranks 494 and 495: 120 us
+    busy), so the period named is 1.5 x 120 us -> 0.25 ms and T = 1 ms is held: the supervisor and the
+    passivity layer cover stalls that rare at run time."""
     profile = load_profile("cia402-handle")
     late = np.full(500, 20e-6)
-    late[::20] = 1.1e-3  # 25 of 500: exactly 5 %
+    late[::125] = 1.1e-3
     report = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
-    assert report.overruns == 25 and report.holdable
+    assert report.overruns == 4 and report.holdable
+    assert report.smallest_period == pytest.approx(0.25e-3)

@@ -72,7 +72,7 @@ def test_the_clock_collects_in_the_slack_only_when_the_collector_is_off() -> Non
 @pytest.mark.skipif(not LINUX, reason="timer slack is Linux only")
 def test_the_session_sets_and_restores_slack_switch_interval_and_the_collector() -> None:
     before = _state()
-    with realtime_session(RealtimeSettings()) as report:
+    with realtime_session(RealtimeSettings.unprivileged()) as report:
         assert set(report.got) == {"timer slack", "switch interval", "gc frozen"} and not report.missing
         assert timer_slack() == pytest.approx(1e-9)
         assert sys.getswitchinterval() == pytest.approx(50e-6)
@@ -89,9 +89,9 @@ def test_an_untuned_session_asks_for_nothing() -> None:
 
 
 @pytest.mark.skipif(not LINUX, reason="SCHED_FIFO, affinity and mlockall are Linux only here")
-def test_the_privileged_items_are_each_got_or_reported_and_all_restored() -> None:
+def test_the_privileged_items_are_asked_by_default_each_got_or_reported_and_all_restored() -> None:
     before = _state()
-    with realtime_session(RealtimeSettings.privileged()) as report:
+    with realtime_session(RealtimeSettings()) as report:
         asked = {"timer slack", "switch interval", "gc frozen", "SCHED_FIFO", "CPU affinity", "mlockall"}
         assert set(report.got) | set(report.missing) == asked and not set(report.got) & set(report.missing)
         if "SCHED_FIFO" in report.got:
@@ -107,15 +107,15 @@ _UNPRIVILEGED = textwrap.dedent("""
     resource.setrlimit(resource.RLIMIT_RTPRIO, (0, 0))          # no real-time priority without the capability
     resource.setrlimit(resource.RLIMIT_MEMLOCK, (65536, 65536))  # far less than the interpreter's pages
     from haptic_bus.app.realtime import RealtimeSettings, realtime_session
-    with realtime_session(RealtimeSettings.privileged()) as report:
+    with realtime_session(RealtimeSettings(insist=sys.argv[1] == "insist")) as report:
         print(json.dumps(report.to_dict()))
 """)
 
 
-def _unprivileged_command() -> list[str] | None:
+def _unprivileged_command(insist: bool) -> list[str] | None:
     """Python without CAP_SYS_NICE and CAP_IPC_LOCK: as is for an ordinary user; for root, with
     both dropped from the bounding set (root's capabilities after exec) by setpriv."""
-    command = [sys.executable, "-c", _UNPRIVILEGED]
+    command = [sys.executable, "-c", _UNPRIVILEGED, "insist" if insist else "ask"]
     if os.geteuid() != 0:
         return command
     setpriv = shutil.which("setpriv")
@@ -125,15 +125,18 @@ def _unprivileged_command() -> list[str] | None:
 
 
 @pytest.mark.skipif(not LINUX, reason="SCHED_FIFO and mlockall are Linux only here")
-def test_without_privileges_it_says_what_it_could_not_get_and_why() -> None:
-    command = _unprivileged_command()
+@pytest.mark.parametrize("insist", [False, True], ids=["by default", "--realtime"])
+def test_without_privileges_it_says_what_it_could_not_get_and_why(insist: bool) -> None:
+    command = _unprivileged_command(insist)
     if command is None:
         pytest.skip("running as root and no setpriv to drop CAP_SYS_NICE/CAP_IPC_LOCK")
     done = subprocess.run(command, capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
-    assert set(report["missing"]) == {"SCHED_FIFO", "mlockall"}
+    assert set(report["missing"]) == {"SCHED_FIFO", "CPU affinity", "mlockall"}
     assert "CAP_SYS_NICE" in report["missing"]["SCHED_FIFO"] and "ulimit -r" in report["missing"]["SCHED_FIFO"]
     assert "RLIMIT_MEMLOCK" in report["missing"]["mlockall"] and "CAP_IPC_LOCK" in report["missing"]["mlockall"]
-    assert {"timer slack", "switch interval", "gc frozen", "CPU affinity"} <= set(report["got"])  # the run goes on
-    assert "could not get SCHED_FIFO" in done.stderr and "could not get mlockall" in done.stderr
+    assert "not pinned without SCHED_FIFO" in report["missing"]["CPU affinity"]
+    assert {"timer slack", "switch interval", "gc frozen"} <= set(report["got"])  # the run goes on
+    warned = "could not get SCHED_FIFO" in done.stderr and "could not get mlockall" in done.stderr
+    assert warned == insist  # asked by default, a process that may not have it is not warned at

@@ -85,6 +85,13 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
         (["--modbus", MODBUS_URL, "--word-order", "middle"], "invalid choice"),
         (["--modbus", MODBUS_URL, "--profile", "/nonexistent.toml"], "an existing TOML file"),
         (["--frobnicate"], "unrecognized arguments: --frobnicate"),
+        (["--interface", "virtual", "--channel", "x", "--unit-ids", "1,2"], "Modbus options need --modbus: --unit-ids"),
+        (["--modbus", MODBUS_URL, "--unit-ids", "1,1"], "--unit-ids = '1,1' is invalid; allowed: distinct Modbus unit ids"),
+        (["--modbus", MODBUS_URL, "--unit-ids", "1,248"], "Modbus unit ids 1..247"),
+        (["--modbus", MODBUS_URL, "--unit-ids", "1,2", "--unit-id", "3"], "--unit-id = 3 is invalid; allowed: --unit-ids"),
+        (["--modbus", MODBUS_URL, "--profile", "gantry-3d"], "--unit-ids = None is invalid; allowed: one unit id per axis"),
+        (["--modbus", MODBUS_URL, "--modbus", MODBUS_URL, "--profile", "gantry-3d"], "--unit-ids = None is invalid"),
+        (["--modbus", MODBUS_URL, "--unit-ids", "1,2", "--profile", "gantry-3d"], "one unit id per axis of the profile (3)"),
     ],
 )
 def test_modbus_usage_errors_exit_2_with_one_line(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:

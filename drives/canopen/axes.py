@@ -41,7 +41,7 @@ from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
 from drives.canopen.heartbeat import HeartbeatProducer
 from drives.canopen.link import NetworkLink
 from drives.cia402 import State
-from drives.cia402_master import SAFE_CONTROLWORD, StateWalk
+from drives.cia402_master import SAFE_CONTROLWORD, trip_together, walk_together
 from drives.errors import DriveError, DriveTimeout, ParameterError
 from drives.safety import DEFAULT_SAFETY, SafetySettings
 
@@ -136,7 +136,7 @@ class CanopenAxes:
         self.cycle.end()  # mode selection is SDO
         for drive in self.drives:
             drive.prepare_enable()
-        self._walk(State.OPERATION_ENABLED, [drive.hold_word() for drive in self.drives])
+        walk_together(self.drives, State.OPERATION_ENABLED, [drive.hold_word() for drive in self.drives], self._command)
         for drive in self.drives:
             drive.mark_enabled()
         self._missed = [0] * len(self.drives)
@@ -147,18 +147,8 @@ class CanopenAxes:
             return
         for drive in self.drives:
             drive.mark_disabled()
-        self._walk(State.SWITCH_ON_DISABLED, [SAFE_CONTROLWORD] * len(self.drives), (State.FAULT,))
-
-    def _walk(self, goal: State, first_words: list[int], accept: tuple[State, ...] = ()) -> None:
-        walks = [StateWalk(drive, goal, word, accept) for drive, word in zip(self.drives, first_words)]
-        words = list(first_words)
-        walking = True
-        while walking:
-            statuswords = self._command(words)
-            walking = False
-            for i, (walk, statusword) in enumerate(zip(walks, statuswords)):
-                walking |= walk.next_word(statusword) is not None
-                words[i] = walk.word  # an arrived drive keeps getting the word that brought it there
+        walk_together(self.drives, State.SWITCH_ON_DISABLED, [SAFE_CONTROLWORD] * len(self.drives), self._command,
+                      (State.FAULT,))
 
     def _command(self, words: list[int]) -> list[int]:
         """One exchange for the state machines: SYNC, every TPDO, then each drive's RPDO(word, 0)."""
@@ -256,10 +246,7 @@ class CanopenAxes:
 
     def _trip_all(self, error: DriveError) -> DriveError:
         """Zero torque with DISABLE VOLTAGE on every axis, then one SYNC: every drive latches it at that SYNC."""
-        for drive in self.drives:
-            if drive.tripped is None:
-                drive.trip(error if drive.name == error.node else
-                           DriveError(drive.name, f"stopped together with {error.node}: {error.message}"))
+        trip_together(self.drives, error)
         self.cycle.send_safe()
         return error
 

@@ -439,9 +439,13 @@ class ModbusDrive(Cia402Master):
         """Zero torque, DISABLE VOLTAGE, and check the drive reaches SWITCH ON DISABLED (or sits in FAULT)."""
         if self.connection is None:
             return
-        self._armed = False
-        self.write_object(TARGET_TORQUE, 0)
         super().disable()
+
+    def mark_disabled(self) -> None:
+        """DISABLE VOLTAGE held from now on (the fault bit no longer trips), and the target torque
+        register zeroed at once: before the walk to SWITCH ON DISABLED, alone or walked with other axes."""
+        super().mark_disabled()
+        self.write_object(TARGET_TORQUE, 0)
 
     # ------------------------------------------------------------------ shutdown
 

@@ -38,13 +38,18 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
+from drives.base import OneAxis
 from drives.errors import ParameterError
 from drives.modbus.drive import ModbusDrive
 
-__all__ = ["PollTiming", "SAFETY_FACTOR", "assumed_delay", "measure_poll", "loop_delay", "time_cycles"]
+if TYPE_CHECKING:
+    from drives.modbus.axes import ModbusAxes
+
+__all__ = ["PollTiming", "Polled", "SAFETY_FACTOR", "assumed_delay", "measure_poll", "loop_delay", "time_cycles"]
 
 SAFETY_FACTOR = 1.5
 """The gate's loop delay is this many times the p99 round trip (module docstring)."""
@@ -91,24 +96,44 @@ class PollTiming:
                 f"p99 {self.p99 * 1e6:.0f} us, max {self.max * 1e6:.0f} us")
 
 
-def measure_poll(drive: ModbusDrive, cycles: int = 1000, *, torque: int = 0, time_limit: float = 10.0) -> PollTiming:
-    """Poll ``drive`` ``cycles`` times back to back (bounded by ``time_limit`` s); the round trips.
+def measure_poll(drive: ModbusDrive | ModbusAxes, cycles: int = 1000, *, time_limit: float = 10.0) -> PollTiming:
+    """Poll ``drive`` (one drive, or every axis of :class:`~drives.modbus.axes.ModbusAxes` in one
+    cycle) ``cycles`` times back to back (bounded by ``time_limit`` s); the round trips.
 
-    Each cycle is ``read_inputs()`` then ``write_outputs(torque)``, timed from before the read
-    to after the write.  Call it before :meth:`ModbusDrive.enable`: it then writes the safe
-    outputs (DISABLE VOLTAGE, zero torque), and against the simulated drive each cycle advances
-    its virtual time by one period.
+    Each cycle is the cyclic phase's read then its write of zero torque, timed from before the
+    read to after the (last) write.  Call it before enabling: it then writes the safe outputs
+    (DISABLE VOLTAGE, zero torque), and against the simulated drive each cycle advances its
+    virtual time by one period.
     """
-    read, write = drive.read_inputs, drive.write_outputs
+    axes = OneAxis(drive) if isinstance(drive, ModbusDrive) else drive
+    with axes.cyclic() as phase:
+        zeros = [0] * len(phase.clamps)
 
-    def poll() -> None:
-        read()
-        write(torque)
+        def poll() -> None:
+            phase.read()
+            phase.saturate_and_write(zeros)
 
-    return time_cycles(drive, poll, cycles, time_limit)
+        return time_cycles(drive, poll, cycles, time_limit)
 
 
-def time_cycles(drive: ModbusDrive, cycle: Callable[[], object], cycles: int, time_limit: float) -> PollTiming:
+class Polled(Protocol):
+    """What :func:`time_cycles` reads of what it polls: the cycle mode and a count of cyclic requests."""
+
+    @property
+    def cycle(self) -> str: ...
+
+    @property
+    def stats(self) -> CyclicRequests: ...
+
+
+class CyclicRequests(Protocol):
+    """A count of cyclic requests sent so far."""
+
+    @property
+    def cyclic_requests(self) -> int: ...
+
+
+def time_cycles(drive: Polled, cycle: Callable[[], object], cycles: int, time_limit: float) -> PollTiming:
     """Run ``cycle`` (one exchange with ``drive``) ``cycles`` times back to back, or until one ends
     more than ``time_limit`` s after the first began; each cycle timed (``time.perf_counter``, s)."""
     if cycles < 1:

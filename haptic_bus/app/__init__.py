@@ -64,8 +64,10 @@ and the judge are processes, the executor threads wait in ``select``, the heartb
 canopen's notifier are parked (a drive on an in-process bus is the exception: its own code, and
 so the writer's thread, share the process with the cycle).  Heavy imports (matplotlib, scipy) happen in the children, before
 pre-flight or after the last cycle (the pictures are drawn when the run has ended);
-``gc.freeze()`` and a lowered GIL switch interval come with the real-time session
-(:mod:`haptic_bus.app.realtime`).  ``tests/test_architecture.py`` checks that one thread
+``gc.freeze()``, a lowered GIL switch interval and, where the OS grants them, ``SCHED_FIFO``,
+one CPU and locked memory come with the real-time session (:mod:`haptic_bus.app.realtime`):
+without real-time scheduling no Python loop keeps its start lateness near the bare clock's
+beside other work, so it is asked for by default.  ``tests/test_architecture.py`` checks that one thread
 touches the bus handle of a 1-axis and a 3-axis run; ``tests/test_run_threads.py`` which threads
 exist while cycling.  ``haptic-bus bench --only realtime`` measures the result side by side: the
 control process's CPU against python-can's floor for the same frames, its lateness against the

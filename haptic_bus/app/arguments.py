@@ -79,6 +79,11 @@ node_id = whole("node id", *NODE_ID_RANGE)
 unit_id = whole("unit id", *UNIT_ID_RANGE)
 
 
+def unit_ids(text: str) -> list[int]:
+    """``1,2,3``: Modbus unit ids (each 1..247), one per axis in axis order."""
+    return [unit_id(part.strip()) for part in text.split(",")]
+
+
 def modbus_url(text: str) -> str:
     """``tcp://HOST:PORT`` (port 1..65535) or ``rtu:/dev/...``."""
     from drives.modbus.link import ModbusAddress

@@ -13,8 +13,8 @@ here).  Tables:
   rule is a 1-D rule and is not applied to objects in space);
 * ``[safety]`` (optional): as one-axis profiles, for every axis' drive;
 * ``[passivity]`` and ``[supervisor]`` (optional): as one-axis profiles, for the port observer
-  and the passivity layer of every axis and the run's supervisor; ``derate`` is a one-axis action
-  (the coupled gate has no derate search yet) and is refused here;
+  and the passivity layer of every axis and the run's supervisor (``derate`` scales the scene
+  down to what the coupled gate passes at the observed delay: :mod:`haptic_bus.app.derate_table`);
 * ``[[axes]]``, one table per axis, in coordinate order: ``name``; ``node_id`` (CANopen, 1..127)
   **or** ``unit_id`` (Modbus, 1..247), one kind for all axes; ``timing`` ("ideal", "cia402",
   "reception") and ``delay`` (samples, real; defaults as ``[loop]`` of a one-axis profile);
@@ -57,7 +57,7 @@ from haptic_bus.control.kinematics import Cartesian
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.space_gate import SpaceDecision, SpaceGate
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere, compile_space_scene
-from haptic_bus.control.supervisor import Action, SupervisorPolicy
+from haptic_bus.control.supervisor import SupervisorPolicy
 from haptic_bus.errors import ParameterError, Refusal
 from haptic_bus.profile.device import DeviceProfile, check_velocity_period, read_device, read_timing
 from haptic_bus.profile.files import resolve_profile
@@ -230,10 +230,6 @@ def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
     safety = read_safety(path, top.raw("safety", "a [safety] table", default=None))
     passivity = read_passivity(path, top.raw("passivity", "a [passivity] table", default=None))
     supervisor = read_supervisor(path, top.raw("supervisor", "a [supervisor] table", default=None), passivity)
-    for key in ("on_late", "on_observer"):
-        if getattr(supervisor, key) == Action.DERATE.value:
-            raise profile_error(path, f"supervisor.{key}", "derate", '"warn" or "stop" for a multi-axis profile (the '
-                                "coupled gate has no derate search)")
     space = Reader(path, "space", top.raw("space", "a [space] table with [[space.objects]]"))
     objects = space.raw("objects", "an array of tables [[space.objects]] (may be empty)", default=[])
     if not isinstance(objects, list):

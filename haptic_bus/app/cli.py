@@ -29,12 +29,19 @@ from haptic_bus.app.arguments import (
     add_verbosity,
     bus_arguments,
     node_id,
+    refuse_can_options_with_modbus,
     seconds,
     timeout,
 )
 from haptic_bus.app.fault_cli import add_fault_reset_parser
 from haptic_bus.app.identify_cli import add_identify_parser
-from haptic_bus.app.run_arguments import add_link_arguments, add_output_arguments, add_pacing_arguments, one_axis_link
+from haptic_bus.app.run_arguments import (
+    add_link_arguments,
+    add_output_arguments,
+    add_pacing_arguments,
+    one_axis_link,
+    scheduling,
+)
 from haptic_bus.app.scan_cli import add_scan_parser
 from haptic_bus.app.sdo_cli import add_sdo_parser
 from haptic_bus.app.status_cli import add_status_parser
@@ -143,16 +150,17 @@ def _demo(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
     from haptic_bus.app.drive_address import DEFAULT_UNIT_ID
-    from haptic_bus.app.realtime import RealtimeSettings
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
     from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
     from haptic_bus.app.runner import run
 
     profile = load_any_profile(args.profile)
     bus: Any
-    if isinstance(profile, AxesProfile):  # the node ids come from [[axes]]
+    unit_ids = None
+    if isinstance(profile, AxesProfile):  # the node ids (or unit ids) come from [[axes]], or --unit-ids
         _refuse_single_axis_options(args)
-        bus, node_id, unit_id = bus_arguments(args), None, DEFAULT_UNIT_ID
+        bus, node_id, unit_id = (args.modbus or bus_arguments(args)), None, DEFAULT_UNIT_ID
+        unit_ids = args.unit_ids
     else:
         address = one_axis_link(args, "run")
         bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, DEFAULT_UNIT_ID)
@@ -161,10 +169,10 @@ def _run(args: argparse.Namespace) -> int:
     out_dir = None if args.out is None else folder_path("--out", args.out, context="run")  # created once the bus is known
     options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
-                         scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings(),
+                         scheduling=scheduling(args.realtime),
                          reset_fault=args.reset_fault, bus_log=not args.no_bus_log, plots=not args.no_plots)
     stop.install()
-    result = run(profile, bus, options, node_id=node_id, unit_id=unit_id,
+    result = run(profile, bus, options, node_id=node_id, unit_id=unit_id, unit_ids=unit_ids,
                  controller_node_id=args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
     summary = result.summary
     if summary is not None:
@@ -186,15 +194,19 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _refuse_single_axis_options(args: argparse.Namespace) -> None:
-    """A multi-axis profile names its drives in ``[[axes]]``: the options that name one drive, or act
-    on one, are refused (exit 2) before anything is touched."""
+    """A multi-axis profile names its drives in ``[[axes]]`` (or ``--unit-ids`` over Modbus): the
+    options that name one drive are refused (exit 2) before anything is touched, and so are CAN
+    bus options beside ``--modbus`` and ``--unit-ids`` without it."""
     from haptic_bus.errors import ParameterError
 
-    given = [flag for flag, value in (("--node-id", args.node_id), ("--modbus", args.modbus), ("--unit-id", args.unit_id),
-                                      ("--reset-fault", args.reset_fault)) if value]
+    given = [flag for flag, value in (("--node-id", args.node_id), ("--unit-id", args.unit_id)) if value]
     if given:
-        raise ParameterError(given[0], "given with a multi-axis profile", "the bus options only: the node ids come "
-                             "from [[axes]] (no Modbus axes or fault reset for several axes yet)")
+        raise ParameterError(given[0], "given with a multi-axis profile", "the bus options, or --modbus URL (once, or "
+                             "once per axis) with --unit-ids: the node ids come from [[axes]]", "run")
+    if args.modbus:
+        refuse_can_options_with_modbus(args, "run", ("controller_node_id",), "--unit-ids")
+    elif args.unit_ids is not None:
+        raise ParameterError("--unit-ids", args.unit_ids, "a Modbus option: give it with --modbus URL", "run")
 
 
 def _upload(args: argparse.Namespace) -> int:

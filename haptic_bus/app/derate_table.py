@@ -1,51 +1,83 @@
-"""The supervisor's derate, prepared before a one-axis run: for delays beyond the assumed one, the
-largest scale of the scene the gate still passes (the control loop never waits for the gate).
+"""The supervisor's derate, prepared before a run of one axis or several: for delays beyond the
+assumed one, the largest scale of the scene the gate still passes (the control loop never waits
+for the gate).
+
+One search for either gate: the 1-D :class:`~haptic_bus.control.gate.PassivityGate` with its
+compiled scene, or the coupled :class:`~haptic_bus.control.space_gate.SpaceGate` with a scene in
+space (each gate's ``later``, ``passes``, ``passive_scales`` and ``judge``; each scene's
+``scaled``).  The passive scales (margin >= 0) bound the search; inside the highest interval whose
+lower end the gate accepts, a bisection finds where the policy's safety margin is last met, and
+the scaled scene is judged whole.
+
+Where it runs: the 1-D gate judges a scaled scene in microseconds, so its table is built at once
+with :data:`DERATE_SCALE_STEPS` steps.  The coupled gate judges a scene with a sphere in seconds
+(a search over directions), so its table is built in the judge worker process
+(:func:`haptic_bus.node.verdicts.judge_pool`, started before the cycles), one delay after
+another, with :data:`COUPLED_SCALE_STEPS` steps (a scale within 1/256 below the largest); an
+entry serves an alarm only once it is built, and an alarm before that finds none: the supervisor
+stops the run, as beyond the table.
 
 Units: loop delays in samples, scales dimensionless in (0, 1].
 """
 
 from __future__ import annotations
 
-import dataclasses
+from collections.abc import Callable
+from concurrent.futures import Executor, Future
+from typing import Any
 
-from haptic_bus.control.controller import Derate
-from haptic_bus.control.gate import GateDecision, PassivityGate
-from haptic_bus.control.scene import CompiledScene
+from haptic_bus.control.supervisor import Action, SupervisorPolicy
 
-DERATE_SCALE_STEPS = 40  # bisection steps of the derate's margin search inside a passive interval: 2^-40
+DERATE_SCALE_STEPS = 40  # bisection steps of the 1-D derate's margin search inside a passive interval: 2^-40
+COUPLED_SCALE_STEPS = 8  # ... of the coupled gate's, whose every judgement of a sphere costs seconds: 2^-8
 DERATE_EXTRA_DELAYS = (0.25, 0.5, 1.0, 2.0, 3.0)  # samples beyond the assumed delay a derated scene is prepared for
 
+Entry = tuple[Any, Any, Any] | None  # (the gate at that delay, the scaled scene, its decision), or None: no scale passes
+Derate = Callable[[Any, float], Entry]
 
-def prepare_derate(gate: PassivityGate, scene: CompiledScene) -> Derate:
-    """The supervisor's derate, prepared before the run (the control loop never waits for the gate):
-    for each loop delay :data:`DERATE_EXTRA_DELAYS` beyond the assumed one, the largest scale of
-    ``scene`` the gate passes at that delay, judged again whole.  An observed delay is served by
-    the first prepared delay at or above it; beyond the table it gets None (the supervisor stops)."""
-    assumed = gate.device.delay
-    table = [(assumed + extra, _largest_passing_scale(
-        PassivityGate(dataclasses.replace(gate.device, delay=assumed + extra), gate.policy), scene))
-        for extra in DERATE_EXTRA_DELAYS]
 
-    def derate(running: CompiledScene, observed_delay: float) -> tuple[PassivityGate, CompiledScene, GateDecision] | None:
-        return next((entry for delay, entry in table if delay >= observed_delay), None)
+def asks_derate(policy: SupervisorPolicy) -> bool:
+    """Whether the supervisor's policy derates on an alarm (then a run prepares the table)."""
+    return Action.DERATE.value in (policy.on_late, policy.on_observer)
+
+
+def prepare_derate(gate: Any, scene: Any, steps: int = DERATE_SCALE_STEPS, pool: Executor | None = None) -> Derate:
+    """The supervisor's derate (module docstring): for each loop delay :data:`DERATE_EXTRA_DELAYS`
+    beyond the longest one ``gate`` assumes, the largest scale of ``scene`` the gate at that delay
+    passes, judged again whole; built now, or by ``pool`` (each delay one task, in order).  An
+    observed delay is served by the first built entry at or above it; beyond the table, or before
+    any entry at or above it is built, it gets None (the supervisor stops)."""
+    assumed = max(loop.delay for loop in gate.axes)
+    table: list[tuple[float, Future[Entry]]] = []
+    for extra in DERATE_EXTRA_DELAYS:
+        if pool is not None:
+            table.append((assumed + extra, pool.submit(largest_passing_scale, gate.later(extra), scene, steps)))
+            continue
+        built: Future[Entry] = Future()
+        built.set_result(largest_passing_scale(gate.later(extra), scene, steps))
+        table.append((assumed + extra, built))
+
+    def derate(running: Any, observed_delay: float) -> Entry:
+        return next((entry.result() for delay, entry in table
+                     if delay >= observed_delay and entry.done() and entry.exception() is None), None)
 
     return derate
 
 
-def _largest_passing_scale(gate: PassivityGate, scene: CompiledScene) -> tuple[PassivityGate, CompiledScene, GateDecision] | None:
-    """The scene scaled by the largest ``s`` in (0, 1] that ``gate`` accepts, or None.
+def largest_passing_scale(gate: Any, scene: Any, steps: int) -> Entry:
+    """The scene scaled by the largest ``s`` in (0, 1] that ``gate`` accepts (within ``2^-steps`` below
+    it), with ``gate`` and its decision, or None.
 
-    The passive scales are exact intervals (:meth:`PassivityGate.passive_scales`); inside the
-    highest one whose lower end the gate accepts, a bisection finds where the policy's safety
-    margin is last met.
+    The passive scales are the gate's intervals (``passive_scales``); inside the highest one whose
+    lower end the gate accepts, a bisection finds where the policy's safety margin is last met.
     """
     if gate.passes(scene):
         return gate, scene, gate.admit(scene)
     for low, high in reversed(gate.passive_scales(scene)):
-        low = max(low, 2.0 ** -DERATE_SCALE_STEPS)  # scale 0 is no wall at all: not a derate
+        low = max(low, 2.0 ** -steps)  # scale 0 is no wall at all: not a derate
         if low > high or not gate.passes(scene.scaled(low)):
             continue
-        for _ in range(DERATE_SCALE_STEPS):
+        for _ in range(steps):
             middle = 0.5 * (low + high)
             low, high = (middle, high) if gate.passes(scene.scaled(middle)) else (low, middle)
         scaled = scene.scaled(low)

@@ -3,25 +3,34 @@
 :func:`realtime_session` is one context manager around the cyclic phase of a run (entered
 after set-up, in the control thread, so threads started before it keep their own settings):
 
-always (``haptic-bus run`` in real time)
+always asked (``haptic-bus run`` in real time)
     the thread's timer slack to 1 ns (``prctl(PR_SET_TIMERSLACK)``: a sleep then wakes within
     the scheduler's latency instead of up to 50 us late, so the clock's final spin can be
     short); ``gc.freeze()`` (everything built in set-up leaves the collector's view; only the
     young generation is collected first, a full collection between the drive's enable and the
-    first cycle could outlast its RPDO deadline) and the automatic collector off (the real clock collects in the slack
-    before a deadline instead, :mod:`haptic_bus.control.clock`); ``sys.setswitchinterval``
-    lowered, so a helper thread (heartbeat, SDO server, live view) that takes the GIL gives
-    it back within tens of microseconds instead of 5 ms;
-opt-in (``haptic-bus run --realtime``)
-    ``SCHED_FIFO`` at :data:`FIFO_PRIORITY`, the control thread pinned to one CPU (the last
-    it may run on), and ``mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)``: no page the loop
-    has touched is ever paged out, and entering takes milliseconds (without ``MCL_ONFAULT``,
-    on kernels before 4.4, every mapped page is faulted in first: ~50 ms and the whole address
-    space resident).
+    first cycle could outlast its RPDO deadline) and the automatic collector off (the real clock
+    collects in the slack before a deadline instead, :mod:`haptic_bus.control.clock`);
+    ``sys.setswitchinterval`` lowered, so a helper thread that takes the GIL gives it back
+    within tens of microseconds instead of 5 ms;
+    ``SCHED_FIFO`` at :data:`FIFO_PRIORITY`; once that is got, the thread pinned to one CPU (the
+    last it may run on: an ordinary thread is not pinned, it could not move off a busy CPU);
+    and ``mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)``: no page the loop has touched is
+    ever paged out, and entering takes milliseconds (without ``MCL_ONFAULT``, on kernels before
+    4.4, every mapped page is faulted in first: ~50 ms and the whole address space resident).
+
+Without real-time scheduling no Python loop holds a 1 ms period beside other work: measured on
+this project's 2-core machine, idle, its start lateness p99 was 15 times the bare clock's (0.70
+against 0.047 ms) and the loop delay seen 1.7 samples; with it, 1.07 times and 1.06 samples
+(:mod:`haptic_bus.bench.thread_tuning`).  So it is asked for by default, as ``ros2_control``'s
+controller manager does: a process that may have it (root, ``CAP_SYS_NICE``, an
+``RLIMIT_RTPRIO``) gets it; one that may not runs on, the items it could not get logged at
+info level.  ``haptic-bus run --realtime`` insists: each item it cannot get is a warning.
+``--no-realtime`` asks only for the unprivileged items (beside another real-time process that
+must keep the CPU).
 
 Each item asked for is either got or reported missing with the reason and what would grant
-it (a warning in the log, and :class:`RealtimeReport` in ``run.json``); nothing missing stops
-the run.  On exit every setting is put back as it was found.  Linux only for the
+it (in the log, and :class:`RealtimeReport` in ``run.json``); nothing missing stops the run.
+On exit every setting is put back as it was found.  Linux only for the
 ``prctl``/``mlockall`` items (elsewhere they are reported missing).
 """
 
@@ -42,7 +51,7 @@ from haptic_bus.control.clock import PR_GET_TIMERSLACK, libc
 
 logger = logging.getLogger(__name__)
 
-FIFO_PRIORITY = 80  # SCHED_FIFO priority of the control thread under --realtime (1..99)
+FIFO_PRIORITY = 80  # SCHED_FIFO priority of the control thread (1..99)
 _PR_SET_TIMERSLACK = 29
 _MCL_CURRENT, _MCL_FUTURE, _MCL_ONFAULT = 1, 2, 4
 
@@ -54,27 +63,30 @@ class RealtimeSettings:
     ``timer_slack_ns``: the thread's timer slack; ``switch_interval`` (s): the interpreter's
     GIL switch interval while running; ``freeze_gc``: ``gc.freeze()`` and the automatic
     collector off; ``spin`` (s): the real clock's final spin (None: its default);
-    ``fifo_priority``: ``SCHED_FIFO`` at this priority; ``cpu``: pin the thread to this CPU
-    (-1: the last CPU it may run on); ``lock_memory``: ``mlockall``.
+    ``fifo_priority``: ``SCHED_FIFO`` at this priority; ``cpu``: once SCHED_FIFO is got, pin the
+    thread to this CPU (-1: the last CPU it may run on); ``lock_memory``: ``mlockall``;
+    ``insist``: an item not got is a warning (else an info line: the process may not have it).
     """
 
     timer_slack_ns: int | None = 1
     switch_interval: float | None = 50e-6
     freeze_gc: bool = True
     spin: float | None = None
-    fifo_priority: int | None = None
-    cpu: int | None = None
-    lock_memory: bool = False
+    fifo_priority: int | None = FIFO_PRIORITY
+    cpu: int | None = -1
+    lock_memory: bool = True
+    insist: bool = False
 
     @classmethod
-    def privileged(cls) -> RealtimeSettings:
-        """``--realtime``: the defaults plus SCHED_FIFO, one CPU and locked memory."""
-        return cls(fifo_priority=FIFO_PRIORITY, cpu=-1, lock_memory=True)
+    def unprivileged(cls) -> RealtimeSettings:
+        """``--no-realtime``: timer slack, switch interval and the frozen collector only."""
+        return cls(fifo_priority=None, cpu=None, lock_memory=False)
 
     @classmethod
     def untuned(cls) -> RealtimeSettings:
         """Nothing asked: the OS defaults, and the clock's 200 us spin of before issue 14 (the bench's baseline)."""
-        return cls(timer_slack_ns=None, switch_interval=None, freeze_gc=False, spin=200e-6)
+        return cls(timer_slack_ns=None, switch_interval=None, freeze_gc=False, spin=200e-6, fifo_priority=None,
+                   cpu=None, lock_memory=False)
 
 
 @dataclasses.dataclass
@@ -177,7 +189,7 @@ def _memlock_limit() -> str:
 @contextmanager
 def realtime_session(settings: RealtimeSettings) -> Iterator[RealtimeReport]:
     """Apply ``settings`` to the calling thread (and the interpreter) until the block ends; yield
-    the :class:`RealtimeReport` (each missing item is also logged as a warning)."""
+    the :class:`RealtimeReport` (each missing item is also logged: a warning if ``settings.insist``, else info)."""
     report = RealtimeReport()
     with ExitStack() as undo:
         session = _Session(report, undo)
@@ -195,12 +207,17 @@ def realtime_session(settings: RealtimeSettings) -> Iterator[RealtimeReport]:
                         f"'ulimit -r {priority}' or an rtprio entry in /etc/security/limits.conf")
         if settings.cpu is not None:
             cpu = settings.cpu
-            session.ask("CPU affinity", lambda: session.pin(cpu), "")
+            if "SCHED_FIFO" in report.got or settings.fifo_priority is None:
+                session.ask("CPU affinity", lambda: session.pin(cpu), "")
+            else:
+                report.missing["CPU affinity"] = ("not pinned without SCHED_FIFO (an ordinary thread pinned to one CPU "
+                                                  "could not move off it when it is busy)")
         if settings.lock_memory:
             session.ask("mlockall", session.lock_memory,
                         f"RLIMIT_MEMLOCK is {_memlock_limit()}: needs CAP_IPC_LOCK or 'ulimit -l unlimited'")
+        level = logging.WARNING if settings.insist else logging.INFO
         for item, why in report.missing.items():
-            logger.warning("real time: could not get %s: %s", item, why)
+            logger.log(level, "real time: could not get %s: %s", item, why)
         if report.got:
             logger.info("real time: got %s", ", ".join(f"{k} ({v})" for k, v in report.got.items()))
         yield report

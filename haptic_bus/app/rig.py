@@ -32,15 +32,20 @@ from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits
 from sim_drive.canopen.multi_axis import MultiAxisSim
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.eds import eds_path
+from sim_drive.modbus.multi_axis import MultiAxisModbusSim
+from sim_drive.modbus.server import ModbusSimServer, ServedUnit
 from sim_drive.operator import OperatorModel, operator_from_table
-from sim_drive.parameters import DeviceParameters
+from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.sync_clock import SyncClock
 
 __all__ = [
     "BusLoadMeter",
     "CanopenSimDrive",
     "DeviceParameters",
+    "ModbusSimServer",
+    "MultiAxisModbusSim",
     "MultiAxisSim",
+    "ServedUnit",
     "cycle_bits",
     "eds_path",
     "frame_bits",
@@ -50,6 +55,7 @@ __all__ = [
     "simulated_axes",
     "simulated_axes_device",
     "simulated_canopen",
+    "simulated_modbus",
     "simulator_command",
 ]
 
@@ -116,13 +122,33 @@ def simulated_axes_device(profile: AxesProfile, bus: dict[str, Any], clock: str 
     """The simulated device a multi-axis profile describes (its axes' plants and hidden truth, its
     hand in space), not started, on ``bus`` (python-can keyword arguments); ``clock``: "virtual"
     (each SYNC advances the plants ``T``) or "wall" (the time between SYNCs, for a real-time run)."""
-    from sim_drive.parameters import Timing
     from sim_drive.space_operator import hand_from_table
 
-    setups = [(cast(int, axis.node_id),
-               DeviceParameters(**cast(dict[str, Any], axis.device.sim_parameters(profile.period, axis.timing, axis.delay))),
-               Timing(axis.timing)) for axis in profile.axes]
+    setups = [(cast(int, axis.node_id), parameters, timing) for axis, (parameters, timing) in zip(profile.axes,
+                                                                                                  _axis_plants(profile))]
     return MultiAxisSim(bus, setups, hand_from_table(profile.operator_model, len(profile.axes)), clock=clock)
+
+
+def _axis_plants(profile: AxesProfile) -> list[tuple[DeviceParameters, Timing]]:
+    """Every axis' simulated plant (its ``[axes.device]`` and loop timing), in axis order."""
+    return [(DeviceParameters(**cast(dict[str, Any], axis.device.sim_parameters(profile.period, axis.timing, axis.delay))),
+             Timing(axis.timing)) for axis in profile.axes]
+
+
+def simulated_modbus(profile: Profile | AxesProfile, unit_ids: Sequence[int], servers: int = 1,
+                     host: str = "127.0.0.1") -> ModbusSimServer | MultiAxisModbusSim:
+    """The simulated drive(s) a profile describes over Modbus TCP on ``host``, each server on a free
+    port, not started: one axis, unit ``unit_ids[0]`` (its plant and operator); several, unit
+    ``unit_ids[i]`` for axis ``i`` (their plants and the profile's hand in space), on one server, or
+    ``servers`` = one per axis."""
+    from sim_drive.space_operator import hand_from_table
+
+    if isinstance(profile, AxesProfile):
+        setups = [(unit, parameters, timing) for unit, (parameters, timing) in zip(unit_ids, _axis_plants(profile))]
+        return MultiAxisModbusSim([(host, 0)] * servers, setups, hand_from_table(profile.operator_model, len(setups)))
+    parameters = DeviceParameters(**cast(dict[str, Any], profile.sim_device_parameters()))
+    return ModbusSimServer(host, 0, unit_id=unit_ids[0], timing=profile.loop.timing, parameters=parameters,
+                           operator=profile_operator(profile))
 
 
 @contextmanager

@@ -8,7 +8,9 @@ kind through the same steps; only these differ:
   another loop delay (samples);
 - where the handle is before enabling (m): one position, or one per joint mapped into space,
   and whether it is inside an object then;
-- the controller's arguments (names, force limits in N, the derate of a one-axis supervisor);
+- the controller's arguments (names, force limits in N) and where the supervisor's derate table
+  is built (:mod:`~haptic_bus.app.derate_table`: at once for the 1-D gate, in the judge worker for
+  the coupled gate, whose judgements of a scaled scene take seconds);
 - what ``run.json`` says (:func:`~haptic_bus.app.run_folder.run_document` or
   :func:`~haptic_bus.app.axes_records.axes_run_document`) and which records are streamed
   (``record.csv``, or ``record-<axis>.csv`` per axis).
@@ -27,7 +29,7 @@ from typing import Any, Protocol, TypeVar
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.axes_records import axes_run_document, record_files, space_scene_dicts
-from haptic_bus.app.derate_table import prepare_derate
+from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, Derate, asks_derate, prepare_derate
 from haptic_bus.app.profile_policies import StartPolicy
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.run_folder import RECORD_CSV, gate_loop, run_document, scene_dicts
@@ -38,7 +40,6 @@ from haptic_bus.control.record import RunRecord
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.space_gate import SpaceGate
 from haptic_bus.control.space_scene import SpaceScene
-from haptic_bus.control.supervisor import Action
 
 Records = list[tuple[str, str, RunRecord]]  # (file name, axis name, record) as the recorder streams them
 
@@ -85,8 +86,11 @@ class RunKind(Protocol[SceneT, GateT, OriginT]):
 
     def start_extra(self, origin: OriginT, ramp_time: float) -> dict[str, Any]: ...
 
+    def derate(self, gate: GateT, scene: SceneT) -> Derate | None: ...
+
     def controller(self, drive: Any, gate: GateT, scene: SceneT, *, clock: CycleClock | None, origin: OriginT,
-                   ramp_time: float = 0.0, hold: float | None = None) -> WallController[Any, Any]: ...
+                   ramp_time: float = 0.0, hold: float | None = None,
+                   derate: Derate | None = None) -> WallController[Any, Any]: ...
 
     def passivity_extra(self, controller: WallController[Any, Any], gate: GateT) -> dict[str, Any]: ...
 
@@ -166,12 +170,16 @@ class OneAxisRun:
         wherever the push took it meanwhile)."""
         return False
 
+    def derate(self, gate: PassivityGate, scene: CompiledScene) -> Derate | None:
+        """The supervisor's derate table, built now (the 1-D gate's judgements take microseconds),
+        when the profile's supervisor may derate; else None."""
+        return prepare_derate(gate, scene) if asks_derate(self.profile.supervisor) else None
+
     def controller(self, drive: Any, gate: PassivityGate, scene: CompiledScene, *, clock: CycleClock | None,
-                   origin: float, ramp_time: float = 0.0, hold: float | None = None) -> WallController[Any, Any]:
-        """The controller of this profile (with the supervisor's derate prepared when it may derate)."""
+                   origin: float, ramp_time: float = 0.0, hold: float | None = None,
+                   derate: Derate | None = None) -> WallController[Any, Any]:
+        """The controller of this profile (``derate``: the supervisor's, :meth:`derate`)."""
         profile = self.profile
-        derate = prepare_derate(gate, scene) if Action.DERATE.value in (profile.supervisor.on_late,
-                                                                        profile.supervisor.on_observer) else None
         return WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
                               supervisor=profile.supervisor, ramp_time=ramp_time, derate=derate,
                               passivity=profile.passivity, hold=hold, shared_records=True)
@@ -221,7 +229,9 @@ class AxesRun:
         return self.profile.space_scene()
 
     def describe_gate(self, gate: SpaceGate, extra: dict[str, Any]) -> None:
-        """Nothing beyond the axes' delays already in ``run.json``'s ``loop``."""
+        """The loop delays (samples) the coupled gate judges with, per axis, in ``run.json``'s ``loop``
+        (over Modbus, the poll's: not the profile's)."""
+        extra["loop"]["delays"] = [loop.delay for loop in gate.axes]
 
     def assumed_delay(self, gate: SpaceGate) -> float:
         """The longest loop delay (samples) of the coupled gate's axes."""
@@ -232,8 +242,7 @@ class AxesRun:
         assumed = self.assumed_delay(gate)
 
         def passes(delay: float) -> bool:
-            later = tuple(dataclasses.replace(loop, delay=loop.delay + delay - assumed) for loop in gate.axes)
-            return SpaceGate(later, gate.policy).judge(scene).accepted
+            return gate.later(delay - assumed).passes(scene)
 
         return passes
 
@@ -267,14 +276,24 @@ class AxesRun:
         simulated hand pushes only once enabled)."""
         return True
 
+    def derate(self, gate: SpaceGate, scene: SpaceScene) -> Derate | None:
+        """The supervisor's derate table, built in the judge worker (the coupled gate's judgements of a
+        scene with a sphere take seconds), when the profile's supervisor may derate; else None."""
+        if not asks_derate(self.profile.supervisor):
+            return None
+        from haptic_bus.node.verdicts import judge_pool
+
+        return prepare_derate(gate, scene, COUPLED_SCALE_STEPS, judge_pool())
+
     def controller(self, drive: Any, gate: SpaceGate, scene: SpaceScene, *, clock: CycleClock | None,
-                   origin: Sequence[float], ramp_time: float = 0.0, hold: float | None = None) -> WallController[Any, Any]:
-        """The controller of every axis (each its name and force limit, N)."""
+                   origin: Sequence[float], ramp_time: float = 0.0, hold: float | None = None,
+                   derate: Derate | None = None) -> WallController[Any, Any]:
+        """The controller of every axis (each its name and force limit, N; ``derate``: the supervisor's)."""
         profile = self.profile
         return WallController(drive, gate, scene, names=[axis.name for axis in profile.axes],
                               force_limit=[axis.force_limit for axis in profile.axes], clock=clock,
                               origin=list(origin), supervisor=profile.supervisor, ramp_time=ramp_time,
-                              passivity=profile.passivity, hold=hold, shared_records=True)
+                              derate=derate, passivity=profile.passivity, hold=hold, shared_records=True)
 
     def passivity_extra(self, controller: WallController[Any, Any], gate: SpaceGate) -> dict[str, Any]:
         """``run.json``'s ``passivity``: the layer (one per axis) and its budget per target (s)."""

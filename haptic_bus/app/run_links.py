@@ -4,13 +4,16 @@
 - :func:`axes_rig`: several CANopen drives on one SYNC (:class:`drives.canopen.axes.CanopenAxes`),
   once the profile's axes map 0x6064 and the bus can carry their PDOs (:func:`check_run`,
   :func:`haptic_bus.control.bus_load.axes_bus_load`);
-- :func:`modbus_rig`: one Modbus drive (:class:`drives.modbus.drive.ModbusDrive`), its gate judged
-  at the loop delay the poll measured (:func:`drives.modbus.timing.loop_delay`).
+- :func:`modbus_rig`: one Modbus drive or several axes' (:class:`drives.modbus.axes.ModbusAxes`:
+  every unit polled in one cycle, on one server or a server per axis), the gate -- 1-D or coupled --
+  judging at the loop delay each axis' poll gives (:func:`drives.modbus.timing.loop_delay`: the
+  simulated drive's own, else from the whole cycle's measured round trip).
 
 A rig says what ``run.json``'s ``link`` holds, how to open and commission the drive(s) (with the
 gate and the upload server that go with them), and what the session knows of the drives beside:
 the longest a torque target may be held (s), the shortest stall that faults them (s), the
-address a fault reset reaches, and whether there are CAN frames to log.  Units: s, ms where named.
+addresses a fault reset reaches (one per axis), and whether there are CAN frames to log.  Units:
+s, ms where named.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from contextlib import ExitStack
 from typing import TYPE_CHECKING, Any
 
@@ -26,7 +29,7 @@ from drives.bus_config import resolve_bus_config
 from drives.cia402 import State
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings, patient
 from haptic_bus.app.axes_profile import AxesProfile
-from haptic_bus.app.drive_address import DriveAddress
+from haptic_bus.app.drive_address import DEFAULT_UNIT_ID, DriveAddress
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.run_options import RunOptions
 from haptic_bus.control.bus_load import axes_bus_load
@@ -66,16 +69,24 @@ class Rig:
     """One run's link: ``link`` (``run.json``'s, completed as the drives are commissioned); ``open``
     the drive(s), commissioned, with their gate and upload server; ``hold``, the longest a drive
     may hold one torque target (s, the ``bound`` layer's budget); its ``watchdog`` (pre-flight);
-    ``address`` a fault reset reaches (None: none); ``frames``: whether there are CAN frames to
-    log; ``check``: what refuses the run before any bus is opened (:class:`Refusal`)."""
+    ``addresses`` a fault reset reaches, one per axis in axis order (none: no reset possible, an
+    open bus); ``frames``: whether there are CAN frames to log; ``check``: what refuses the run
+    before any bus is opened (:class:`Refusal`)."""
 
     link: dict[str, Any]
     open: OpenDrive
     hold: float
     watchdog: Watchdog
-    address: DriveAddress | None
+    addresses: tuple[DriveAddress, ...]
     frames: bool = False
     check: Callable[[], None] = lambda: None
+
+    def fault_hint(self, axis: int | None) -> str | None:
+        """What clears the fault of axis ``axis`` (its index; None: unknown): its ``haptic-bus
+        fault-reset`` command (None where no address reaches it)."""
+        if axis is not None and axis < len(self.addresses):
+            return self.addresses[axis].fault_reset_hint()
+        return self.addresses[0].fault_reset_hint() if len(self.addresses) == 1 else None
 
 
 def longest_hold(period: float, wall_paced: bool, deadline_ms: int, fallback_ms: int) -> float:
@@ -99,10 +110,10 @@ def canopen_watchdog(safety: SafetySettings, period: float) -> Watchdog:
 
 
 def _canopen_rig(link: dict[str, Any], open_drive: OpenDrive, safety: SafetySettings, period: float,
-                 options: RunOptions, address: DriveAddress | None, check: Callable[[], None] = lambda: None) -> Rig:
+                 options: RunOptions, addresses: tuple[DriveAddress, ...], check: Callable[[], None] = lambda: None) -> Rig:
     """A rig of CANopen drive(s) with ``safety`` at ``T = period`` s."""
     hold = longest_hold(period, options.wall_paced, safety.rpdo_deadline_ms(period), safety.consumer_ms)
-    return Rig(link, open_drive, hold, canopen_watchdog(safety, period), address, frames=True, check=check)
+    return Rig(link, open_drive, hold, canopen_watchdog(safety, period), addresses, frames=True, check=check)
 
 
 def _serve(stack: ExitStack, link: NetworkLink, name: str, node_id: int, heartbeat_ms: int) -> Serve:
@@ -166,8 +177,8 @@ def canopen_rig(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
         link["pdo_mapping_notes"] = list(drive.commissioned.mapping_notes) if drive.commissioned is not None else []
         return drive, profile.gate(), _serve(stack, drive.link, drive.name, controller_node_id, safety.heartbeat_ms)
 
-    address = DriveAddress(bus=dict(bus) if isinstance(bus, Mapping) else {}, node_id=node_id)
-    return _canopen_rig(link, open_drive, safety, period, options, address)
+    addresses = (DriveAddress(bus=dict(bus), node_id=node_id),) if isinstance(bus, Mapping) else ()
+    return _canopen_rig(link, open_drive, safety, period, options, addresses)
 
 
 def check_run(profile: AxesProfile, controller_node_id: int) -> list[int]:
@@ -176,7 +187,7 @@ def check_run(profile: AxesProfile, controller_node_id: int) -> list[int]:
     nodes = [axis.node_id for axis in profile.axes]
     if any(node is None for node in nodes):
         raise ParameterError("axes[0].unit_id", profile.axes[0].unit_id,
-                             "a node_id per axis: a multi-axis run drives CANopen axes (Modbus axes are not built)",
+                             "a node_id per axis on a CAN bus (Modbus axes: give the Modbus URL, --modbus)",
                              f"profile {profile.path or profile.name}")
     for i, axis in enumerate(profile.axes):
         if axis.mapping != RUN_MAPPING:
@@ -196,9 +207,7 @@ def axes_rig(profile: AxesProfile, bus: can.BusABC | Mapping[str, Any], options:
     from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
 
     if not isinstance(bus, Mapping):
-        raise ParameterError("bus", bus, "python-can keyword arguments (a mapping) for several axes", "run")
-    if options.reset_fault:
-        raise ParameterError("reset_fault", True, "False with a multi-axis profile (no fault reset for several axes)",
+        raise ParameterError("bus", bus, "python-can keyword arguments (a mapping), or Modbus URLs, for several axes",
                              "run")
     nodes = check_run(profile, controller_node_id)
     config = resolve_bus_config(**bus)  # before any file: an unknown interface is exit 2
@@ -232,38 +241,85 @@ def axes_rig(profile: AxesProfile, bus: can.BusABC | Mapping[str, Any], options:
             _show_scaling(drive, options, f" of {drive.name}")
         return axes, profile.gate(), _serve(stack, axes.link, axes.name, controller_node_id, safety.heartbeat_ms)
 
-    return _canopen_rig(link, open_drive, safety, period, options, None, check)
+    addresses = tuple(DriveAddress(bus=dict(bus), node_id=node) for node in nodes)
+    return _canopen_rig(link, open_drive, safety, period, options, addresses, check)
 
 
-def modbus_rig(profile: Profile, url: str, unit_id: int, options: RunOptions) -> Rig:
-    """The Modbus drive at ``url`` (``tcp://HOST:PORT`` or ``rtu:/dev/...``), unit ``unit_id``; no upload server."""
+def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Sequence[int] | None) -> list[int]:
+    """Each axis' Modbus unit id: ``unit_ids`` (one per axis), else the profile's ``[[axes]]`` unit
+    ids, else unit 1 on each server where there is one URL per axis; ParameterError (exit 2) naming
+    what is missing, before anything is touched.  ``urls``: one for every axis, or one per axis."""
+    size = len(profile.axes) if isinstance(profile, AxesProfile) else 1
+    if len(urls) not in (1, size):
+        raise ParameterError("--modbus", list(urls), f"one Modbus URL for every axis, or one per axis ({size})", "run")
+    stated = [axis.unit_id for axis in profile.axes] if isinstance(profile, AxesProfile) else [None]
+    if unit_ids is not None:
+        units = list(unit_ids)
+    elif None not in stated:
+        units = [unit for unit in stated if unit is not None]
+    elif len(urls) == size:
+        units = [DEFAULT_UNIT_ID] * size
+    else:
+        raise ParameterError("--unit-ids", None, f"one Modbus unit id per axis ({size}, e.g. --unit-ids "
+                             f"{','.join(str(i + 1) for i in range(size))}): the profile's [[axes]] state none", "run")
+    places = list(zip(list(urls) * size if len(urls) == 1 else urls, units))
+    if len(units) != size or len(set(places)) != size:
+        raise ParameterError("--unit-ids", units, f"{size} unit ids, one per axis, none twice at one URL", "run")
+    return units
+
+
+def modbus_rig(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Sequence[int], options: RunOptions) -> Rig:
+    """The Modbus drive(s): unit ``unit_ids[i]`` of axis ``i`` at ``urls[i]`` (``tcp://HOST:PORT`` or
+    ``rtu:/dev/...``; one URL: every axis' units on one server), every axis polled in one cycle
+    (:class:`~drives.modbus.axes.ModbusAxes`); the gate (1-D, or coupled for several axes) judges at
+    each axis' loop delay: the simulated drive's own, else the whole cycle's measured poll
+    (:func:`~drives.modbus.timing.loop_delay`).  No upload server over Modbus."""
+    from drives.modbus.axes import ModbusAxes
     from drives.modbus.drive import ModbusDrive
     from drives.modbus.timing import loop_delay, measure_poll
-    from haptic_bus.control.gate import PassivityGate
 
-    period = profile.loop.period
+    several = isinstance(profile, AxesProfile)
+    places = list(zip(list(urls) * len(unit_ids) if len(urls) == 1 else urls, unit_ids))
+    period = profile.period if isinstance(profile, AxesProfile) else profile.loop.period
+    scalings = [axis.device.scaling() for axis in profile.axes] if isinstance(profile, AxesProfile) else [profile.scaling()]
     safety = profile.safety if options.wall_paced else profile.safety.for_virtual_time(period)
-    link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
+    link: dict[str, Any] = ({"kind": "modbus", "urls": [url for url, _ in places], "unit_ids": list(unit_ids)} if several
+                            else {"kind": "modbus", "url": places[0][0], "unit_id": places[0][1]})
 
     def open_drive(stack: ExitStack, tap: Tap | None) -> Opened:
-        drive = ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True,
-                                     **patient(options.wall_paced, VIRTUAL_TIME_MODBUS_PATIENCE))
-        stack.callback(drive.close)
-        drive.connect()  # reads only: identity, scaling, timing
-        _refuse_another_master(drive)  # before the poll measurement, which writes
-        _show_scaling(drive, options)
-        poll = None if drive.simulated_delay is not None else measure_poll(drive, 500)
-        delay = loop_delay(drive, period, poll)
+        drives = [ModbusDrive.from_url(url, unit_id=unit, scaling=scaling, safety=safety, with_position=True,
+                                       **patient(options.wall_paced, VIRTUAL_TIME_MODBUS_PATIENCE))
+                  for (url, unit), scaling in zip(places, scalings)]
+        axes = ModbusAxes(drives)
+        stack.callback(axes.close)
+        axes.connect()  # reads only: identity, scaling, timing; a unit nobody answers for is named
+        for drive in drives:
+            _refuse_another_master(drive)  # before the poll measurement, which writes
+            _show_scaling(drive, options, f" of {drive.name}" if several else "")
+        poll = None if axes.simulated else measure_poll(axes, 500)
+        delays = [loop_delay(drive, period, poll) for drive in drives]
         link["poll"] = None if poll is None else dataclasses.asdict(poll)
-        logger.info("Modbus poll: the gate assumes a loop delay of %.4g sample(s)", delay)
-        gate = PassivityGate(dataclasses.replace(profile.device_loop(), delay=delay), profile.gate_policy)
+        logger.info("Modbus poll: the gate assumes a loop delay of %s sample(s)", ", ".join(f"{d:.4g}" for d in delays))
+        gate, scene = _gate_at(profile, delays)
         if not profile.passivity.beyond_gate:  # the profile was judged at its own timing's delay
-            gate.admit(profile.compiled_scene())
-        return drive, gate, lambda controller: None  # no upload server over Modbus
+            gate.admit(scene)
+        return (axes if several else drives[0]), gate, lambda controller: None  # no upload server over Modbus
 
     hold = longest_hold(period, options.wall_paced, safety.modbus_watchdog_ms, 0)
     watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
-    return Rig(link, open_drive, hold, watchdog, DriveAddress(url=url, unit_id=unit_id))
+    return Rig(link, open_drive, hold, watchdog, tuple(DriveAddress(url=url, unit_id=unit) for url, unit in places))
+
+
+def _gate_at(profile: Profile | AxesProfile, delays: Sequence[float]) -> tuple[Any, Any]:
+    """The profile's gate with axis ``i``'s loop delay ``delays[i]`` (samples), and its scene."""
+    from haptic_bus.control.gate import PassivityGate
+    from haptic_bus.control.space_gate import SpaceGate
+
+    if isinstance(profile, AxesProfile):
+        loops = tuple(dataclasses.replace(loop, delay=delay) for loop, delay in zip(profile.axis_loops(), delays))
+        return SpaceGate(loops, profile.gate_policy), profile.space_scene()
+    return PassivityGate(dataclasses.replace(profile.device_loop(), delay=delays[0]), profile.gate_policy), \
+        profile.compiled_scene()
 
 
 def _refuse_another_master(drive: ModbusDrive) -> None:

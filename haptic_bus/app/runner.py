@@ -4,8 +4,9 @@ The drives may be the simulated ones in another process (``haptic-bus sim``, ``h
 --node-ids 5,6,7 --profile gantry-3d`` on ``udp_multicast``, ``vcan0``, Modbus TCP on loopback) or
 real hardware (``can0``, a Modbus TCP/RTU drive).  One code path for any axis count: what differs
 by link sits in a :class:`~haptic_bus.app.run_links.Rig` (one CANopen drive, several on one SYNC,
-one Modbus drive), what differs by profile kind in a :mod:`~haptic_bus.app.run_kinds` kind (a 1-D
-scene or a scene in space).  One run, in order:
+one Modbus drive or several polled in one cycle -- ``haptic-bus sim --modbus tcp://127.0.0.1:0
+--unit-ids 1,2,3 --profile gantry-3d``), what differs by profile kind in a
+:mod:`~haptic_bus.app.run_kinds` kind (a 1-D scene or a scene in space).  One run, in order:
 
 1. the link is checked before anything is touched (node ids; for several axes each must map
    0x6064 and the controller's node id must be none of theirs: exit 2); the run's folder is
@@ -16,12 +17,14 @@ scene or a scene in space).  One run, in order:
    and the smallest ``T`` that fits (exit 1, no bus opened, nothing enabled);
 3. the run's writer process starts (:mod:`~haptic_bus.app.run_writer`), and on CANopen ``bus.asc``
    with it, before the drives are reached (the link's tap copies every frame into its ring); with
-   ``reset_fault`` a one-axis drive in FAULT is reset first, as ``haptic-bus fault-reset`` does
-   (the first of run.json's events); without it a faulted drive is refused at enabling, with the
-   command that clears it;
+   ``reset_fault`` every drive found in FAULT is reset first, axis by axis, as ``haptic-bus
+   fault-reset`` does (each reset one of run.json's events); without it a faulted drive is
+   refused at enabling, with the command that clears that axis' drive;
 4. the drive(s) are reached and commissioned (CANopen: each the safety chain of ``[safety]``, one
-   heartbeat of this controller's node for all; Modbus: the gate judges with the loop delay the
-   poll measured, :func:`drives.modbus.timing.loop_delay`);
+   heartbeat of this controller's node for all; Modbus: each unit's 0x6007 and watchdog, a unit
+   nobody answers for named, and the gate -- 1-D or coupled -- judges with each axis' loop delay
+   from the poll, :func:`drives.modbus.timing.loop_delay`); the supervisor's derate table, where
+   the profile asks for one, is started (:mod:`~haptic_bus.app.derate_table`);
 5. real time only: **pre-flight** (:mod:`~haptic_bus.app.preflight`) runs the cyclic path at zero
    torque, drives not enabled, and judges the gate at the delay it measured;
 6. **safe start** (for one axis, with step 7, before pre-flight, which then measures the cycle
@@ -52,10 +55,11 @@ from __future__ import annotations
 import dataclasses
 import logging
 import pathlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import ExitStack, contextmanager, nullcontext
 from typing import TYPE_CHECKING, Any
 
+from drives.base import Drive, OneAxis
 from drives.cia402 import State
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.fault_reset import DEFAULT_WAIT
@@ -67,7 +71,7 @@ from haptic_bus.app.profiles import Profile
 from haptic_bus.app.realtime import RealtimeReport, realtime_session
 from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
 from haptic_bus.app.run_kinds import RunKind, run_kind
-from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID, Rig, axes_rig, canopen_rig, modbus_rig
+from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID, Rig, axes_rig, canopen_rig, modbus_rig, modbus_units
 from haptic_bus.app.run_options import RunOptions
 from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.clock import RealClock, VirtualClock
@@ -95,24 +99,28 @@ class RunResult:
     files: list[pathlib.Path]
 
 
-def run(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | str, options: RunOptions, *,
-        node_id: int | None = None, unit_id: int = DEFAULT_UNIT_ID,
+def run(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | str | Sequence[str], options: RunOptions,
+        *, node_id: int | None = None, unit_id: int = DEFAULT_UNIT_ID, unit_ids: Sequence[int] | None = None,
         controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID, kind: RunKind[Any, Any, Any] | None = None) -> RunResult:
     """Run ``profile`` -- one axis, or several (``[[axes]]``) -- and return how it ended (:class:`RunResult`).
 
     ``bus``: python-can keyword arguments (``{"interface": ..., "channel": ...}``; python-can's
     configuration chain fills what it leaves out) or an open :class:`can.BusABC` the caller owns
     (one axis: the run neither closes it nor sets its receive filters, and ``reset_fault`` is
-    refused) for CANopen, or a Modbus URL (``tcp://HOST:PORT``, ``rtu:/dev/...``, one axis, unit
-    ``unit_id``).  One CANopen axis is drive ``node_id``; several take theirs from ``[[axes]]``.
-    On CANopen the controller is also node ``controller_node_id``, serving gated wall uploads
-    over SDO on the drives' own network and bus handle, sending the heartbeat the drives watch,
-    and ``bus.asc`` logs every frame of that handle.  ParameterError (nothing touched) for a
-    combination that names no drive.  ``kind``: what the run renders and how (default
-    :func:`~haptic_bus.app.run_kinds.run_kind` of ``profile``: its own scene; ``haptic-bus validate``
-    passes its probe, :class:`~haptic_bus.app.validate_run.ValidateRun`).
+    refused) for CANopen; or a Modbus URL (``tcp://HOST:PORT``, ``rtu:/dev/...``), or a list of
+    them, one per axis.  One CANopen axis is drive ``node_id``; several take theirs from
+    ``[[axes]]``.  One Modbus axis is unit ``unit_id``; several are units ``unit_ids`` (one per
+    axis, in axis order; default: the profile's ``[[axes]]`` unit ids, else unit 1 on each server
+    of a URL per axis), every unit polled in one cycle.  On CANopen the controller is also node
+    ``controller_node_id``, serving gated wall uploads over SDO on the drives' own network and bus
+    handle, sending the heartbeat the drives watch, and ``bus.asc`` logs every frame of that
+    handle.  ParameterError (nothing touched) for a combination that names no drive.  ``kind``:
+    what the run renders and how (default :func:`~haptic_bus.app.run_kinds.run_kind` of ``profile``:
+    its own scene; ``haptic-bus validate`` passes its probe,
+    :class:`~haptic_bus.app.validate_run.ValidateRun`).
     """
-    return _session(kind or run_kind(profile), _rig(profile, bus, options, node_id, unit_id, controller_node_id), options)
+    rig = _rig(profile, bus, options, node_id, unit_id, unit_ids, controller_node_id)
+    return _session(kind or run_kind(profile), rig, options)
 
 
 def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: int, options: RunOptions,
@@ -126,17 +134,20 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     return run(profile, url, options, unit_id=unit_id)
 
 
-def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | str, options: RunOptions,
-         node_id: int | None, unit_id: int, controller_node_id: int) -> Rig:
+def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | str | Sequence[str], options: RunOptions,
+         node_id: int | None, unit_id: int, unit_ids: Sequence[int] | None, controller_node_id: int) -> Rig:
     """The link ``profile`` and ``bus`` name (:mod:`~haptic_bus.app.run_links`); ParameterError if none."""
+    several = isinstance(profile, AxesProfile)
+    if (node_id is not None and several) or (unit_ids is not None and not several):
+        name, value = ("node_id", node_id) if node_id is not None else ("unit_ids", unit_ids)
+        raise ParameterError(name, value, "node_id for one CANopen axis, unit_ids for several Modbus axes (the CANopen "
+                             "node ids of several come from [[axes]])", "run")
+    if isinstance(bus, (str, Sequence)):
+        urls = [bus] if isinstance(bus, str) else list(bus)
+        units = modbus_units(profile, urls, unit_ids if several else [unit_id])
+        return modbus_rig(profile, urls, units, options)
     if isinstance(profile, AxesProfile):
-        if isinstance(bus, str) or node_id is not None:
-            raise ParameterError("bus" if isinstance(bus, str) else "node_id", bus if isinstance(bus, str) else node_id,
-                                 "python-can keyword arguments and no node_id for a multi-axis profile (the node ids "
-                                 "come from [[axes]]; no Modbus axes)", "run")
         return axes_rig(profile, bus, options, controller_node_id)
-    if isinstance(bus, str):
-        return modbus_rig(profile, bus, unit_id, options)
     if node_id is None:
         raise ParameterError("node_id", None, "the drive's CANopen node id, an integer 1..127", "run")
     return canopen_rig(profile, bus, node_id, options, controller_node_id)
@@ -153,16 +164,19 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     recorder = RunRecorder(folder, journal)
     reason, error = "completed", None
     before: list[Event] = []  # what happened before the controller (and its event log) existed
+    names: list[str] = []  # the drives' names, in axis order, once reached
     period = kind.period
     try:
         rig.check()
         with ExitStack() as stack:
             writer = recorder.start(stack, rig.frames and options.bus_log)  # before the drive: commissioning logged
-            if options.reset_fault and rig.address is not None:
-                before += _reset_fault_first(rig.address, options, extra)
+            if options.reset_fault:
+                before += _reset_faults_first(rig.addresses, options, extra)
             drive, gate, serve = rig.open(stack, writer.tap)
+            names = [axis.name for axis in (OneAxis(drive) if isinstance(drive, Drive) else drive).drives]
             kind.describe_gate(gate, extra)
             scene = kind.scene()
+            derate = kind.derate(gate, scene)  # before the control thread's real-time session (a worker may build it)
 
             def ready() -> tuple[WallController[Any, Any], ControllerNode | None]:
                 """Safe start, the controller, its records streamed, the upload server: all but enabling."""
@@ -171,7 +185,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                 extra["start"] = kind.start_extra(origin, ramp_time)
                 clock = RealClock(period, spin=options.scheduling.spin) if options.wall_paced else VirtualClock(period)
                 controller = kind.controller(drive, gate, scene, clock=clock, origin=origin, ramp_time=ramp_time,
-                                             hold=rig.hold)
+                                             hold=rig.hold, derate=derate)
                 extra["passivity"] = kind.passivity_extra(controller, gate)
                 for event in before:
                     controller.events.add(event.time_s, event.kind, event.message, **event.data)
@@ -205,8 +219,9 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
         reason, error = "refused", str(exc)
     except DriveError as exc:
         reason, error = "drive error", str(exc)
-        if isinstance(exc, DriveFault) and exc.state is State.FAULT and rig.address is not None:
-            error += f"; {rig.address.fault_reset_hint()} (or run with --reset-fault)"
+        hint = rig.fault_hint(names.index(exc.node) if exc.node in names else None)
+        if isinstance(exc, DriveFault) and exc.state is State.FAULT and hint is not None:
+            error += f"; {hint} (or run with --reset-fault)"
     except KeyboardInterrupt:
         reason, error = "interrupted", "interrupted (Ctrl-C)"
     except _StopBeforeEnabling:
@@ -256,21 +271,24 @@ def _safe_start(kind: RunKind[Any, Any, Any], drive: Any, gate: Any, scene: Any,
     return origin, kind.start.ramp_time
 
 
-def _reset_fault_first(address: DriveAddress, options: RunOptions, extra: dict[str, Any]) -> list[Event]:
-    """``--reset-fault``: reset a drive found in FAULT before commissioning; the reset as an event
-    (run.json's ``events``, also when the run ends before it cycles), or none if the drive was
-    not in FAULT.  DriveFault if the cause persists."""
-    outcome = address.reset_fault(DEFAULT_WAIT, DEFAULT_ANSWER_TIMEOUT)
-    if not outcome.reset_sent and outcome.cleared:
-        logger.info("%s", outcome.message())
-        return []
-    event = Event(0.0, "fault reset", f"before commissioning: {outcome.message()}", outcome.to_dict())
-    extra["events"] = [event.to_dict()]
-    if not outcome.cleared:
-        raise DriveFault(outcome.drive, f"--reset-fault: {outcome.detail()}", outcome.error_code_after)
-    if options.live:
-        print(f"fault reset: {outcome.message()}", flush=True)
-    return [event]
+def _reset_faults_first(addresses: Sequence[DriveAddress], options: RunOptions, extra: dict[str, Any]) -> list[Event]:
+    """``--reset-fault``: reset every drive found in FAULT before commissioning, one per axis in axis
+    order (:attr:`Rig.addresses <haptic_bus.app.run_links.Rig.addresses>`); each reset an event
+    (run.json's ``events``, also when the run ends before it cycles); a drive not in FAULT none.
+    DriveFault (nothing enabled) at the first drive whose cause persists."""
+    events: list[Event] = []
+    for address in addresses:
+        outcome = address.reset_fault(DEFAULT_WAIT, DEFAULT_ANSWER_TIMEOUT)
+        if not outcome.reset_sent and outcome.cleared:
+            logger.info("%s", outcome.message())
+            continue
+        events.append(Event(0.0, "fault reset", f"before commissioning: {outcome.message()}", outcome.to_dict()))
+        extra["events"] = [event.to_dict() for event in events]
+        if not outcome.cleared:
+            raise DriveFault(outcome.drive, f"--reset-fault: {outcome.detail()}", outcome.error_code_after)
+        if options.live:
+            print(f"fault reset: {outcome.message()}", flush=True)
+    return events
 
 
 @contextmanager

@@ -2,7 +2,7 @@
 
     haptic-bus validate PROFILE --interface I --channel C --node-id N [--controller-node-id M]
     haptic-bus validate PROFILE --modbus URL [--unit-id U]
-        [--virtual-time | --realtime] [--out DIR] [--no-bus-log] [--no-plots]
+        [--virtual-time | --realtime | --no-realtime] [--out DIR] [--no-bus-log] [--no-plots]
         [--travel 0.01] [--tolerance 5] [--json]
 
 No operator needed: the handle is held by a gentle spring and damper the gate accepts and probed
@@ -26,7 +26,13 @@ import sys
 from typing import Any
 
 from haptic_bus.app.arguments import EXIT_NO, EXIT_OK, add_command, number
-from haptic_bus.app.run_arguments import add_link_arguments, add_output_arguments, add_pacing_arguments, one_axis_link
+from haptic_bus.app.run_arguments import (
+    add_link_arguments,
+    add_output_arguments,
+    add_pacing_arguments,
+    one_axis_link,
+    scheduling,
+)
 from haptic_bus.errors import ParameterError
 from haptic_bus.identify.bounds import DEFAULT_TRAVEL, TRAVEL_RANGE
 
@@ -53,7 +59,6 @@ def add_validate_parser(subparsers: argparse._SubParsersAction) -> argparse.Argu
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``haptic-bus validate``; return the exit status (module docstring)."""
     from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
-    from haptic_bus.app.realtime import RealtimeSettings
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
     from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
     from haptic_bus.app.validate_run import validate_drive
@@ -67,7 +72,7 @@ def run_validate(args: argparse.Namespace) -> int:
     out_dir = None if args.out is None else folder_path("--out", args.out, context="validate")
     stop = StopRequest()
     options = RunOptions(1.0, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir, live=False, stop=stop,
-                         scheduling=RealtimeSettings.privileged() if args.realtime else RealtimeSettings(),
+                         scheduling=scheduling(args.realtime),
                          bus_log=not args.no_bus_log)
     stop.install()
     outcome = validate_drive(profile, bus, options, travel=args.travel, tolerance=args.tolerance / 100.0,

@@ -14,6 +14,8 @@ cycle a wall runs in, no second loop.  What differs from a wall's run, and why:
   would answer by clipping the probe.  The observer still watches: its limit is raised to
   :data:`ENERGY_MARGIN` times the most energy the model says the probe can store at its largest
   peak, so a device storing far more than predicted still ends the run (exit 3);
+- no derate: the hold is never scaled down mid-probe; a profile's "derate" on lateness warns
+  instead (the jitter shows in the measurement's scatter) and on the observer stops;
 - it lasts the plan's cycles exactly (:class:`~haptic_bus.validate.probe.ProbePlan`).
 
 :func:`validate_drive` does all of it and returns the run's end and, when the run completed, the
@@ -32,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from haptic_bus.analysis.loop import DeviceLoop
+from haptic_bus.app.derate_table import Derate
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.run_kinds import OneAxisRun
 from haptic_bus.app.run_options import RunOptions
@@ -41,6 +44,7 @@ from haptic_bus.control.controller import WallController
 from haptic_bus.control.gate import PassivityGate
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.scene import CompiledScene
+from haptic_bus.control.supervisor import Action
 from haptic_bus.errors import Refusal
 from haptic_bus.validate.model import Hold, Prediction, predict
 from haptic_bus.validate.probe import AmplitudeRule, Probe, ProbePlan, ProbeScene, gentle_hold, hold_scene
@@ -99,12 +103,21 @@ class ValidateRun(OneAxisRun):
         """Never inside: the hold is centred where the handle rests."""
         return None
 
+    def derate(self, gate: PassivityGate, scene: CompiledScene) -> Derate | None:
+        """None: the hold is not scaled down mid-probe (module docstring)."""
+        return None
+
     def controller(self, drive: Any, gate: PassivityGate, scene: CompiledScene, *, clock: CycleClock | None,
-                   origin: float, ramp_time: float = 0.0, hold: float | None = None) -> WallController[Any, Any]:
-        """The controller rendering the probe: no passivity layer, the observer's limit raised (module docstring)."""
+                   origin: float, ramp_time: float = 0.0, hold: float | None = None,
+                   derate: Derate | None = None) -> WallController[Any, Any]:
+        """The controller rendering the probe: no passivity layer, the observer's limit raised, no
+        derate (module docstring)."""
         profile = self.profile
-        supervisor = dataclasses.replace(profile.supervisor, observer_limit=max(profile.supervisor.observer_limit,
-                                                                                ENERGY_MARGIN * self.state["energy"]))
+        policy = profile.supervisor
+        supervisor = dataclasses.replace(
+            policy, observer_limit=max(policy.observer_limit, ENERGY_MARGIN * self.state["energy"]),
+            on_late=Action.WARN.value if policy.on_late == Action.DERATE.value else policy.on_late,
+            on_observer=Action.STOP.value if policy.on_observer == Action.DERATE.value else policy.on_observer)
         return WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
                               supervisor=supervisor, passivity=LayerPolicy("off"), hold=hold, shared_records=True)
 

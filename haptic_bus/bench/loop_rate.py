@@ -105,7 +105,7 @@ def udp_multicast(profile: Profile, cycles: int) -> dict:
     from drives.safety import SafetySettings
     from haptic_bus.bench.processes import canopen_simulator
 
-    with canopen_simulator(PROFILE, NODE_ID) as (bus, _):
+    with canopen_simulator(PROFILE, (NODE_ID,)) as (bus, _):
         drive = CanopenDrive(NODE_ID, interface=bus["interface"], channel=bus["channel"], bus_kwargs={"port": bus["port"]},
                              period=profile.loop.period, scaling=profile.scaling(),
                              safety=SafetySettings().for_virtual_time(profile.loop.period))

@@ -51,33 +51,26 @@ def wait_heartbeat(bus_kwargs: dict[str, Any], node_id: int, process: subprocess
 
 
 @contextmanager
-def canopen_simulator(profile: str, node_id: int, *options: str) -> Iterator[tuple[dict[str, Any], subprocess.Popen]]:
-    """``python -m sim_drive`` for ``profile`` as node ``node_id`` on a unique udp_multicast group and
-    port, with more of its ``options`` (``--operator ...``); yields the bus keyword arguments and the
-    process, once its heartbeat is seen."""
+def canopen_simulator(profile: str, node_ids: tuple[int, ...],
+                      *options: str) -> Iterator[tuple[dict[str, Any], subprocess.Popen]]:
+    """``python -m sim_drive`` for ``profile`` as nodes ``node_ids`` (one, or a multi-axis device) on a
+    unique udp_multicast group and port, with more of its ``options`` (``--operator ...``); yields the
+    bus keyword arguments and the process, once every node's heartbeat is seen."""
     group = f"239.74.{160 + os.getpid() % 64}.{1 + random.randrange(250)}"
     port = random.randint(45000, 55000)
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(_REPO), env.get("PYTHONPATH")]))
     args = simulator_command("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
-                             "--node-id", str(node_id), "--profile", profile, *options)
+                             *(("--node-id", str(node_ids[0])) if len(node_ids) == 1 else
+                               ("--node-ids", ",".join(map(str, node_ids)))), "--profile", profile, *options)
     process = subprocess.Popen(args, cwd=_REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     bus = {"interface": "udp_multicast", "channel": group, "port": port}
     try:
-        wait_heartbeat(bus, node_id, process, START_WAIT)
+        for node_id in node_ids:
+            wait_heartbeat(bus, node_id, process, START_WAIT)
         yield bus, process
     finally:
         stop(process)
-
-
-def boost(pid: int, priority: int) -> str | None:
-    """Every thread of process ``pid`` to SCHED_FIFO ``priority``; None if done, else why not."""
-    try:
-        for task in os.listdir(f"/proc/{pid}/task"):
-            os.sched_setscheduler(int(task), os.SCHED_FIFO, os.sched_param(priority))
-    except (OSError, AttributeError) as exc:
-        return f"{type(exc).__name__}: {exc}"
-    return None
 
 
 @contextmanager

@@ -205,12 +205,11 @@ def _realtime(s: dict) -> list[str]:
     if default.get("thread_cpu_s"):
         out += ["", "Where the controller process's CPU went (default set-up, quiet; CPU seconds per thread over the "
                     f"{s['duration_s']:g} s run): " + ", ".join(f"{k} {v:.3g}" for k, v in default["thread_cpu_s"].items())
-                + ". The canopen notifier is the controller node's SDO server: on udp_multicast it reads and unpacks "
-                  "every frame on the bus."]
+                + ". The control thread (MainThread) owns the bus; the writer process's share is mostly its imports."]
     tg, sch = s["target"], s["scheduler"]
     out += ["", f"T = {s['period_s'] * 1e3:g} ms, {s['duration_s']:g} s per run; spreads over {s['segments']} consecutive "
-                f"stretches of each run; hog: {s['hog_processes']} busy processes. The simulated drive's threads run "
-                f"SCHED_FIFO 70 where allowed. This thread outside the runs: policy {sch.get('policy')}, CPUs "
+                f"stretches of each run; hog: {s['hog_processes']} busy processes. The simulated drive's threads: "
+                f"{default.get('drive_policy')}. This thread outside the runs: policy {sch.get('policy')}, CPUs "
                 f"{sch.get('affinity')}, timer slack {sch.get('timer_slack_ns')} ns."]
     if "core_met" in tg:
         out += ["", f"Issue-14 targets (quiet, default set-up): core share {tg['default_core_share']:.3f} (target <= "

@@ -211,6 +211,17 @@ def issue_26(sections: dict) -> list[dict]:
         share = got.get("overrun_share")
         rows.append(_row(2, f"overruns, share of cycles, {load}", "-" if share is None else f"{share:.2%}",
                          f"<= {figures['overrun_target']:.1%}", None if share is None else share <= figures["overrun_target"]))
+    for load, got in figures.get("three axes", {}).items():
+        ratio = got.get("core_ratio")
+        rows.append(_row(1, f"control process CPU / python-can's floor, 3 axes (gantry-3d, its T = 2 ms), {load}",
+                         "-" if ratio is None else f"{ratio:.3g}", f"<= {figures['core_ratio_target']:g} x",
+                         None if ratio is None else ratio <= figures["core_ratio_target"],
+                         note="" if ratio is None else f"floor {got['floor_core_share']:.3g} of a core, writer process "
+                                                       f"{got.get('writer_cpu_s')} s"))
+        late = got.get("lateness_p99_ratio")
+        rows.append(_row(2, f"start lateness p99 / the bare clock's, 3 axes, {load}", "-" if late is None else f"{late:.3g}",
+                         f"<= {figures['lateness_ratio_target']:g} x",
+                         None if late is None else late <= figures["lateness_ratio_target"]))
     delay = figures.get("quiet", {}).get("observed_delay")
     rows.append(_row(2, "loop delay the run observed (assumed + p99 of lateness and input age), quiet, samples",
                      "-" if delay is None else f"{delay:.3g}", f"<= {figures['delay_target']:g}",

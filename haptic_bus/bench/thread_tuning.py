@@ -8,14 +8,16 @@ the control thread (:mod:`haptic_bus.app.realtime`):
 
 * **untuned** -- as before issue 14: the OS defaults (timer slack 50 us, GIL switch interval
   5 ms, the collector on) and a 200 us final spin;
-* **default** -- what ``haptic-bus run`` does now: timer slack 1 ns, a 60 us spin, the
+* **--no-realtime** -- what the OS grants any process: timer slack 1 ns, a 60 us spin, the
   collector frozen and kept to the clock's slack, switch interval 50 us;
-* **--realtime** -- the default plus SCHED_FIFO 80, one CPU and ``mlockall``;
+* **default** -- what ``haptic-bus run`` does: those plus SCHED_FIFO 80, one CPU and ``mlockall``
+  where the OS grants them (said in the output when it does not);
 
 each once on a quiet machine and once beside a CPU hog (one busy process per CPU); ``--smoke``
 runs untuned and default quiet and default beside the hog, 0.3 s each (``--quick`` 1 s, full 15 s).  The
-simulated drive stands in for hardware: its threads are raised to SCHED_FIFO 70 where allowed
-(said in the output), so that the hog slows the controller, not the drive's answers.
+simulated drive stands in for hardware: its threads run under SCHED_FIFO where the OS grants it
+(:mod:`sim_drive.scheduling`, the policy said in the output), so that the hog slows the
+controller, not the drive's answers.
 
 Per run: the share of a core the controller process used (every thread, from the clock's CPU
 time at each cycle start) and the start lateness, each over :data:`SEGMENTS` consecutive
@@ -40,6 +42,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from haptic_bus.app.axes_profile import load_any_profile, load_axes_profile
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.realtime import RealtimeSettings, realtime_session
 from haptic_bus.app.writer_process import COMM as WRITER_COMM
@@ -52,16 +55,18 @@ if TYPE_CHECKING:
 
 PROFILE = "cia402-handle"
 NODE_ID = 5
+AXES_PROFILE = "gantry-3d"  # three axes on one SYNC, at the profile's own T (2 ms: at 1 Mbit/s its frames take 48.5 % of it)
+AXES_NODE_IDS = (5, 6, 7)
 SEGMENTS = 5
 FIRST_CYCLES = 50
-SIM_PRIORITY = 70
 FLOOR_TPDOS = 2  # TPDO1 (0x6041 + 0x606C) and TPDO2 (0x6064): the run maps the position for its port observer
 CORE_RATIO_TARGET = 1.5  # issue 26: the control process's CPU within 1.5 x python-can's floor for the same cycle
 LATENESS_RATIO_TARGET = 2.0  # issue 26: start lateness p99 and p99.9 within 2 x the bare clock's
 OVERRUN_TARGET = 0.005  # issue 26: at most 0.5 % of the cycles overrun
 DELAY_TARGET = 1.5  # issue 26: the loop delay the run observes on an idle machine, samples
 CORE_TARGET = 0.12  # issue 14: the controller at T = 1 ms within 0.12 of a core
-SETUPS = {"untuned": RealtimeSettings.untuned(), "default": RealtimeSettings(), "--realtime": RealtimeSettings.privileged()}
+SETUPS = {"untuned": RealtimeSettings.untuned(), "--no-realtime": RealtimeSettings.unprivileged(),
+          "default": RealtimeSettings()}
 RUNS = {"quiet": tuple(SETUPS), "CPU hog": tuple(SETUPS)}  # load -> the set-ups run under it
 SMOKE_RUNS = {"quiet": ("untuned", "default"), "CPU hog": ("default",)}  # what the targets need, and one hogged run
 HAND = "hand:300,5,0.0045"  # the simulated operator: a hand spring (N/m, N s/m) towards 4.5 mm, 1.5 mm inside the wall
@@ -207,21 +212,21 @@ def observed_delay(controller: WallController) -> float | None:
     return assumed + float(np.percentile(beyond, 99)) if beyond.size else None
 
 
-def controller_run(settings: RealtimeSettings, duration: float, bus: dict, process: subprocess.Popen) -> dict:
-    """One ``haptic-bus run`` session against the simulated drive ``process`` on ``bus``, started in contact."""
-    from haptic_bus.app.runner import RunOptions, run_canopen
-    from haptic_bus.bench.processes import boost
+def controller_run(settings: RealtimeSettings, duration: float, bus: dict, process: subprocess.Popen,
+                   profile_name: str = PROFILE, node_id: int | None = NODE_ID) -> dict:
+    """One ``haptic-bus run`` session of ``profile_name`` (one axis: drive ``node_id``; several: the
+    profile's) against the simulated drive ``process`` on ``bus``, started in contact where it is."""
+    from haptic_bus.app.runner import RunOptions, run
 
-    profile = load_profile(PROFILE)
+    profile = load_any_profile(profile_name)
     with tempfile.TemporaryDirectory() as out:
-        boosted = boost(process.pid, SIM_PRIORITY)
         with ThreadCpu() as threads:
-            result = run_canopen(profile, bus, NODE_ID, RunOptions(duration, pacing="wall", out_dir=Path(out) / "run",
-                                                                   live=False, scheduling=settings, start_in_contact="ramp",
-                                                                   plots=False))
+            result = run(profile, bus, RunOptions(duration, pacing="wall", out_dir=Path(out) / "run", live=False,
+                                                  scheduling=settings, start_in_contact="ramp", plots=False),
+                         node_id=node_id)
         document = json.loads((result.folder / "run.json").read_text()) if (result.folder / "run.json").exists() else {}
     figures = {"exit_reason": result.exit_reason, "error": result.error, "thread_cpu_s": threads.by_name(),
-               "drive_boosted": boosted is None, "drive_boost_error": boosted, "scheduling": document.get("realtime")}
+               "drive_policy": _POLICIES.get(os.sched_getscheduler(process.pid)), "scheduling": document.get("realtime")}
     if result.controller is not None and isinstance(result.controller.clock, RealClock):
         figures.update(clock_figures(result.controller.clock))
         figures["compute_s"] = result.summary.compute_percentiles if result.summary is not None else {}
@@ -238,7 +243,7 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     period = load_profile(PROFILE).loop.period
     hogs = os.cpu_count() or 1
     runs: dict[str, dict] = {}
-    with canopen_simulator(PROFILE, NODE_ID, "--operator", HAND) as (bus, process):
+    with canopen_simulator(PROFILE, (NODE_ID,), "--operator", HAND) as (bus, process):
         for label, names in size.pick(SMOKE_RUNS, RUNS, RUNS).items():
             runs[label] = {}
             for name in names:
@@ -253,6 +258,8 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
                     entry = {"available": False, "reason": f"{type(exc).__name__}: {exc}"}
                 runs[label][name] = entry
                 tick(f"real time: {name}, {label}")
+    axes = axes_runs(size, duration)
+    tick("real time: three axes")
     quiet = runs["quiet"]
     default, untuned = quiet["default"].get("controller", {}), quiet["untuned"].get("controller", {})
     target = {"core_share_target": CORE_TARGET}
@@ -270,8 +277,36 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
                        f"python -m sim_drive --operator {HAND} on udp_multicast (two processes, started in contact, the "
                        f"wall ramped in), set-ups of the control thread quiet and beside {hogs} busy processes",
         "period_s": period, "duration_s": duration, "segments": SEGMENTS, "hog_processes": hogs,
-        "scheduler": scheduler_info(), "runs": runs, "target": target, "issue_26": issue_26_figures(runs),
+        "scheduler": scheduler_info(), "runs": runs, "target": target, "axes": axes,
+        "issue_26": issue_26_figures(runs) | {"three axes": axes_figures(axes)},
     }
+
+
+def axes_runs(size: Size, duration: float) -> dict:
+    """Three axes (:data:`AXES_PROFILE`) in the default set-up against one simulated three-axis device,
+    quiet (and, beyond the smoke size, beside the hogs), each beside python-can's floor for its cycle."""
+    from haptic_bus.bench.processes import canopen_simulator, cpu_hogs
+
+    period = load_axes_profile(AXES_PROFILE).period
+    loads = ("quiet",) if size.pick(True, False, False) else ("quiet", "CPU hog")
+    out: dict = {"profile": AXES_PROFILE, "node_ids": list(AXES_NODE_IDS), "period_s": period}
+    try:
+        with canopen_simulator(AXES_PROFILE, AXES_NODE_IDS, "--operator", "none") as (bus, process):
+            for label in loads:
+                with cpu_hogs(os.cpu_count() or 1) if label == "CPU hog" else nullcontext():
+                    out[label] = {
+                        "controller": controller_run(SETUPS["default"], duration, bus, process, AXES_PROFILE, None),
+                        "bare_clock": bare_clock(SETUPS["default"], period, round(duration / 2 / period)),
+                        "floor": can_floor(bus, AXES_NODE_IDS, FLOOR_TPDOS, period, duration),
+                    }
+    except Exception as exc:
+        out.update(available=False, reason=f"{type(exc).__name__}: {exc}")
+    return out
+
+
+def axes_figures(axes: dict) -> dict:
+    """:func:`issue_26_figures`' ratios for the three-axis runs."""
+    return {label: _ratios(entry) for label, entry in axes.items() if label in ("quiet", "CPU hog")}
 
 
 def issue_26_figures(runs: dict) -> dict:
@@ -281,19 +316,25 @@ def issue_26_figures(runs: dict) -> dict:
     out: dict = {"core_ratio_target": CORE_RATIO_TARGET, "lateness_ratio_target": LATENESS_RATIO_TARGET,
                  "overrun_target": OVERRUN_TARGET, "delay_target": DELAY_TARGET}
     for label, setups in runs.items():
-        entry = setups.get("default", {})
-        controller, bare, floor = entry.get("controller", {}), entry.get("bare_clock", {}), entry.get("floor", {})
-        figures: dict = {}
-        if controller.get("core_share") and floor.get("core_share"):
-            figures["core_ratio"] = controller["core_share"]["median"] / floor["core_share"]
-            figures["floor_core_share"] = floor["core_share"]
-        late, bare_late = controller.get("lateness_s", {}), bare.get("lateness_s", {})
-        for quantile in ("p99", "p99.9"):
-            if late.get(quantile) is not None and bare_late.get(quantile):
-                figures[f"lateness_{quantile}_ratio"] = late[quantile] / bare_late[quantile]
-        if controller.get("cycles"):
-            figures["overrun_share"] = controller["overruns"] / controller["cycles"]
-        if controller.get("observed_delay") is not None:
-            figures["observed_delay"] = controller["observed_delay"]
-        out[label] = figures
+        out[label] = _ratios(setups.get("default", {}))
     return out
+
+
+def _ratios(entry: dict) -> dict:
+    """One default-set-up entry's ratios: core share over the floor's, lateness over the bare clock's,
+    overrun share, observed delay."""
+    controller, bare, floor = entry.get("controller", {}), entry.get("bare_clock", {}), entry.get("floor", {})
+    figures: dict = {}
+    if controller.get("core_share") and floor.get("core_share"):
+        figures["core_ratio"] = controller["core_share"]["median"] / floor["core_share"]
+        figures["floor_core_share"] = floor["core_share"]
+        figures["writer_cpu_s"] = controller.get("thread_cpu_s", {}).get(WRITER)
+    late, bare_late = controller.get("lateness_s", {}), bare.get("lateness_s", {})
+    for quantile in ("p99", "p99.9"):
+        if late.get(quantile) is not None and bare_late.get(quantile):
+            figures[f"lateness_{quantile}_ratio"] = late[quantile] / bare_late[quantile]
+    if controller.get("cycles"):
+        figures["overrun_share"] = controller["overruns"] / controller["cycles"]
+    if controller.get("observed_delay") is not None:
+        figures["observed_delay"] = controller["observed_delay"]
+    return figures

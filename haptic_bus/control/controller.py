@@ -28,8 +28,9 @@ whole cycle late -- and the whole port's energy, :mod:`~haptic_bus.control.super
 bounded record per axis and the run's events.  Wall changes pass the gate first, in the
 caller's thread, and take effect whole at the next cycle boundary
 (:mod:`~haptic_bus.control.scene_switch`); a refused change leaves the running scene untouched.  A
-"derate" alarm scales a 1-D scene down to what the gate passes at the observed delay; coupled
-axes have no derate search (a policy asking for one is refused at construction).
+"derate" alarm replaces the scene by the one ``derate`` prepared for the observed delay (the
+scene scaled down to what the gate -- 1-D or coupled -- passes there:
+:mod:`haptic_bus.app.derate_table`); without one it stops.
 
 **The port, per axis and whole.**  The energy the operator puts into the device is, for any
 timing, at least ``E = sum_i E_i``, each ``E_i`` the port observer of axis ``i`` from its own
@@ -84,7 +85,7 @@ logger = logging.getLogger(__name__)
 
 Derate = Callable[[SceneT, float], "tuple[Gate[SceneT, DecisionT], SceneT, DecisionT] | None"]
 """Given the running scene and the observed loop delay (samples): a gate for that loop, the scene
-scaled down so that it passes it, and the decision; None if no scale passes (1-D scenes only)."""
+scaled down so that it passes it, and the decision; None if no scale passes (or none is prepared)."""
 
 
 def encoder_origin(drive: Drive) -> float:
@@ -144,7 +145,7 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
     ``supervisor`` the policy (None: no supervision);
     ``ramp_time`` (s) scales the force from 0 to 1 over the first seconds (0: none; the caller
     proves every scaled wall passive: the gate's ``proves_ramp``); ``derate`` is what a "derate"
-    alarm calls (1-D scenes only); ``passivity`` the layer's policy and ``hold`` (s) the longest a
+    alarm calls; ``passivity`` the layer's policy and ``hold`` (s) the longest a
     drive may hold a target before its watchdog faults it (the ``bound`` layer's budget per target;
     default one period); ``kinematics``: the device (default Cartesian).  Every axis' cyclic
     inputs must carry the position (0x6064): the port observer reads it.
@@ -182,10 +183,6 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         names = tuple(names) if names is not None else tuple(d.name for d in axes.drives)
         if not len(scalings) == len(names) == size:
             raise ParameterError("axes", len(scalings), f"{size} drives and names (the gate's axes)", "controller")
-        if not self.scalar and supervisor is not None and Action.DERATE.value in (supervisor.on_late,
-                                                                                   supervisor.on_observer):
-            raise ParameterError("supervisor", "derate", '"warn" or "stop" (no derate search for coupled axes)',
-                                 "controller")
         self.axes = axes
         self.names = names
         self.period = loops[0].T

@@ -14,6 +14,7 @@ walls scaled from 0 to 1) is proven passive on the whole way by :meth:`Passivity
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass, field
 from typing import Any
@@ -151,6 +152,10 @@ class PassivityGate:
                       for (K, B), names in sorted(scene.contacts().items()))
         proven = all(whole_ramp(scales) for _, scales in walls)
         return RampProof(proven, walls)
+
+    def later(self, extra: float) -> PassivityGate:
+        """This gate for a loop ``extra`` samples later (a derate's gate)."""
+        return PassivityGate(dataclasses.replace(self.device, delay=self.device.delay + extra), self.policy)
 
     def passive_scales(self, scene: CompiledScene) -> tuple[tuple[float, float], ...]:
         """The scales ``s`` in [0, 1] at which every contact wall of ``scene``, scaled to

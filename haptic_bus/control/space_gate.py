@@ -22,6 +22,7 @@ Verdicts are cached per wall (the same ``K``, ``B`` and normals on the same axes
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import math
@@ -203,6 +204,25 @@ class SpaceGate:
         if not decision.accepted:
             raise Refusal.by_gate(decision, subject="scene")
         return decision
+
+    def passes(self, scene: SpaceScene) -> bool:
+        """Whether :meth:`judge` accepts ``scene``."""
+        return self.judge(scene).accepted
+
+    def later(self, extra: float) -> SpaceGate:
+        """This gate for loops ``extra`` samples later on every axis (a derate's gate)."""
+        return SpaceGate(tuple(dataclasses.replace(loop, delay=loop.delay + extra) for loop in self.axes), self.policy)
+
+    def passive_scales(self, scene: SpaceScene) -> tuple[tuple[float, float], ...]:
+        """The scales ``s`` in [0, 1] at which every object of ``scene``, scaled to ``(s K, s B)``, is
+        passive (margin >= 0) along each normal :meth:`proves_ramp` judges it on: disjoint closed
+        intervals, ascending (objects acting together where they overlap are not judged here:
+        :meth:`judge` is)."""
+        common: list[tuple[float, float]] = [(0.0, 1.0)]
+        for _, _, scales in self.proves_ramp(scene).walls:
+            common = [(max(lo, a), min(hi, b)) for lo, hi in common for a, b in scales.intervals
+                      if max(lo, a) <= min(hi, b)]
+        return tuple(common)
 
     def _explain(self, wall: SpaceWall) -> str:
         parts = " + ".join(f"K = {K:g} N/m, B = {B:g} N s/m along ({', '.join(f'{c:.3g}' for c in n)})"

@@ -268,6 +268,10 @@ class SpaceScene:
             dataclasses.replace(obj, stiffness=changes[obj.name][0], damping=changes[obj.name][1])
             if obj.name in changes else obj for obj in self.objects)
 
+    def scaled(self, factor: float) -> SpaceScene:
+        """The same objects with every ``K`` and ``B`` times ``factor`` (dimensionless, >= 0)."""
+        return self.with_walls({obj.name: (factor * obj.stiffness, factor * obj.damping) for obj in self.objects})
+
     def object_dicts(self) -> list[dict[str, Any]]:
         """Every object as its profile table (:func:`space_object_to_dict`)."""
         return [space_object_to_dict(obj) for obj in self.objects]

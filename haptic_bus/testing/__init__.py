@@ -25,17 +25,26 @@ Fixtures
 --------
 
 ``haptic_sim``
-    A factory: ``haptic_sim(profile=None, *, interface="virtual", node_id=5, timing=None,
-    operator=None, **truth)`` starts the simulated CiA-402 drive as CANopen node ``node_id``
-    on a bus of its own and returns a :class:`SimDriveNode` (``bus``: the python-can keyword
-    arguments; ``run_args()``: the command-line options that reach it; ``sim``: the slave
-    object in process; ``process``: the subprocess otherwise; ``stop()``).
+    A factory: ``haptic_sim(profile=None, *, interface="virtual", node_id=5, unit_id=1,
+    servers=1, timing=None, operator=None, **truth)`` starts the simulated CiA-402 drive as
+    CANopen node ``node_id`` on a bus of its own, or as Modbus unit ``unit_id``
+    (``interface="modbus"``), and returns a :class:`SimDriveNode` (``bus``: what
+    :func:`haptic_bus.run` takes, the python-can keyword arguments or the Modbus URL;
+    ``run_kwargs()``: its keyword arguments that name the drive; ``run_args()``: the command-line
+    options that reach it; ``sim``: the simulator object in process; ``process``: the subprocess
+    otherwise; ``stop()``).
 
     - ``interface``: ``"virtual"`` or ``"lockstep"`` (the drive in this process, on
       python-can's virtual bus or the lock-step bus), ``"udp_multicast"`` (``python -m
       sim_drive`` in another process on this host: its own multicast group and UDP port, hop
-      limit 0 so no frame leaves the machine), or ``"socketcan"`` (``vcan0``; the test is
-      skipped, with the reason, where the kernel has no vcan0).
+      limit 0 so no frame leaves the machine), ``"socketcan"`` (``vcan0``; the test is
+      skipped, with the reason, where the kernel has no vcan0), or ``"modbus"`` (Modbus TCP on
+      loopback, a real pymodbus server in this process on a free port).
+    - a multi-axis ``profile`` (``[[axes]]``, e.g. ``"gantry-3d"``): the whole simulated device
+      as the profile states it, one simulated drive per axis and its hand in space (no truth
+      replaced): on a CAN bus one slave per axis with the profile's node ids; over Modbus one
+      unit per axis (the profile's unit ids, else 1, 2, 3, ...) on one server, or on ``servers``
+      = one server per axis.
     - ``profile``: a shipped profile name or a TOML path: the device, loop timing and operator
       the drive simulates (None: the simulator's defaults, nobody holding the handle).
     - ``truth``: the hidden truth, the profile's ``[device]`` values replaced: ``mass`` kg,
@@ -53,9 +62,10 @@ Fixtures
 ``haptic_controller``
     A factory: ``haptic_controller(profile, drive, *, duration=1.0, pacing="virtual",
     controller_node_id=127, start_in_contact=None, reset_fault=False, out_dir=None,
-    plots=False)`` starts :func:`haptic_bus.run_canopen` (what ``haptic-bus run`` runs) in a
-    thread against the :class:`SimDriveNode` ``drive`` and returns a :class:`ControllerRun`.
-    ``profile``: a shipped name, a TOML path (loaded and gated) or a :class:`haptic_bus.Profile`;
+    plots=False)`` starts :func:`haptic_bus.run` (what ``haptic-bus run`` runs) in a
+    thread against the :class:`SimDriveNode` ``drive`` (one axis or several, CANopen or Modbus)
+    and returns a :class:`ControllerRun`.  ``profile``: a shipped name, a TOML path (loaded and
+    gated, one axis or ``[[axes]]``) or a :class:`haptic_bus.Profile`;
     ``duration``: s of virtual time (``pacing="wall"``: of wall clock); ``out_dir``: the run's
     folder (None: a fresh temporary one); ``plots``: whether the run draws its pictures (off:
     a test that reads the record needs none, and they cost seconds of CPU a run).
@@ -67,10 +77,11 @@ Fixtures
 
 ``recorded_run``
     ``recorded_run(folder)``: a run folder (of ``haptic-bus run --out``, ``haptic-bus demo``
-    or :func:`haptic_bus.run_canopen`) read back as a :class:`RecordedRun`: ``record`` maps each
+    or :func:`haptic_bus.run`) read back as a :class:`RecordedRun`: ``record`` maps each
     ``record.csv`` column (``time_s``, ``position_m``, ``velocity_m_per_s``, ``force_n``,
-    ``torque_permille``, ``energy_j``, ...) to a numpy array, one entry per cycle; ``document``
-    is ``run.json``; ``exit_reason``, ``error``, ``summary`` and ``events(kind)`` read it.
+    ``torque_permille``, ``energy_j``, ...) to a numpy array, one entry per cycle; a multi-axis
+    run's ``records`` map each axis' name to its ``record-<axis>.csv`` read the same way;
+    ``document`` is ``run.json``; ``exit_reason``, ``error``, ``summary`` and ``events(kind)`` read it.
 
 ``bus_spec``
     A factory: ``bus_spec(interface)`` is a :class:`BusSpec` (``interface``, ``channel``,
@@ -100,7 +111,7 @@ from haptic_bus.testing.buses import INTERFACES, VCAN0_REASON, BusSpec, new_bus_
 from haptic_bus.testing.controller import ControllerRun
 from haptic_bus.testing.processes import SimProcess, stop_all
 from haptic_bus.testing.run_files import RecordedRun, read_run_folder
-from haptic_bus.testing.simulated import CONTEXT, ProfileSource, SimDriveNode, start_sim_drive, write_truth
+from haptic_bus.testing.simulated import CONTEXT, ProfileSource, SimDriveNode, start_axes, start_sim_drive, write_truth
 
 if TYPE_CHECKING:
     from haptic_bus.app.profiles import Profile
@@ -120,6 +131,8 @@ __all__ = [
 ]
 
 DEFAULT_NODE_ID = 5  # the simulated drive's CANopen node id unless a test names another
+DEFAULT_UNIT_ID = 1  # the simulated drive's Modbus unit id unless a test names another
+MODBUS = "modbus"  # haptic_sim's interface for Modbus TCP on loopback
 DEFAULT_CONTROLLER_NODE_ID = 127  # the controller's own CANopen node id (haptic-bus run's default)
 
 
@@ -128,7 +141,7 @@ def _private_bus(interface: str) -> BusSpec:
     if interface not in INTERFACES:
         from haptic_bus.errors import ParameterError
 
-        raise ParameterError("interface", interface, ", ".join(INTERFACES), CONTEXT)
+        raise ParameterError("interface", interface, ", ".join((*INTERFACES, MODBUS)), CONTEXT)
     if interface == "socketcan" and not vcan0_exists():
         pytest.skip(VCAN0_REASON)
     return new_bus_spec(interface)
@@ -163,9 +176,19 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
     folder: list[pathlib.Path] = []
 
     def start(profile: ProfileSource | None = None, *, interface: str = "virtual",
-              node_id: int = DEFAULT_NODE_ID, timing: str | None = None, operator: Mapping[str, Any] | None = None,
-              **truth: Any) -> SimDriveNode:
-        spec = _private_bus(interface)
+              node_id: int = DEFAULT_NODE_ID, unit_id: int = DEFAULT_UNIT_ID, servers: int = 1, timing: str | None = None,
+              operator: Mapping[str, Any] | None = None, **truth: Any) -> SimDriveNode:
+        spec = None if interface == MODBUS else _private_bus(interface)
+        several = _axes_profile(profile)
+        if several is not None:
+            if truth or operator is not None or timing is not None:
+                from haptic_bus.errors import ParameterError
+
+                raise ParameterError("truth", sorted(truth) or operator or timing, "none for a multi-axis profile (it is "
+                                     "simulated as it states its [[axes]] and hand)", CONTEXT)
+            node = start_axes(spec, several, sim_process, servers)
+            started.append(node)
+            return node
         path = None
         if profile is not None:
             if not folder:
@@ -176,7 +199,7 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
 
             raise ParameterError("profile", None, "a shipped profile name or a TOML path when a truth or an operator "
                                                   "is given (the rest of the device comes from it)", CONTEXT)
-        node = start_sim_drive(spec, node_id, timing, path, sim_process)
+        node = start_sim_drive(spec, unit_id if spec is None else node_id, timing, path, sim_process, servers)
         started.append(node)
         return node
 
@@ -184,11 +207,22 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
     _each(reversed(started), _stop_cleanly)
 
 
+def _axes_profile(profile: ProfileSource | None) -> pathlib.Path | None:
+    """The path of ``profile`` if it is a multi-axis one (``[[axes]]``), else None."""
+    if profile is None:
+        return None
+    from haptic_bus.app.axes_profile import is_axes_profile
+    from haptic_bus.profile.files import resolve_profile
+
+    path = resolve_profile(profile)
+    return path if is_axes_profile(path) else None
+
+
 def _stop_cleanly(node: SimDriveNode) -> None:
     """Stop ``node``; a subprocess that does not exit with status 0 on SIGTERM fails the test."""
     status = node.stop()
     if status is not None and status[0] != 0:
-        raise AssertionError(f"simulated drive node {node.node_id} did not exit cleanly on SIGTERM "
+        raise AssertionError(f"simulated drive node {node.node_ids or node.node_id} did not exit cleanly on SIGTERM "
                              f"(status {status[0]}): {status[1][-2000:]}")
 
 
@@ -210,16 +244,17 @@ def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
     """``haptic_controller(profile, drive, *, duration=1.0, pacing="virtual", controller_node_id=127,
     start_in_contact=None, reset_fault=False, out_dir=None, plots=False)``: ``haptic-bus run`` in a thread
     (see the module docstring); every run still going is stopped at teardown, before the drives."""
-    from haptic_bus.app.profiles import Profile, load_profile
+    from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
+    from haptic_bus.app.profiles import Profile
     from haptic_bus.app.run_options import RunOptions, StopRequest
 
     runs: list[ControllerRun] = []
 
-    def start(profile: ProfileSource | Profile, drive: SimDriveNode, *, duration: float = 1.0,
+    def start(profile: ProfileSource | Profile | AxesProfile, drive: SimDriveNode, *, duration: float = 1.0,
               pacing: str = "virtual", controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID,
               start_in_contact: str | None = None, reset_fault: bool = False,
               out_dir: str | os.PathLike[str] | None = None, plots: bool = False) -> ControllerRun:
-        believed = profile if isinstance(profile, Profile) else load_profile(profile)
+        believed = profile if isinstance(profile, (Profile, AxesProfile)) else load_any_profile(profile)
         folder = pathlib.Path(out_dir) if out_dir is not None else tmp_path_factory.mktemp("haptic-run")
         options = RunOptions(duration=duration, pacing=pacing, out_dir=folder, start_in_contact=start_in_contact,
                              live=False, stop=StopRequest(), reset_fault=reset_fault, plots=plots)

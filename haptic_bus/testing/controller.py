@@ -1,7 +1,8 @@
-"""A running controller: :func:`haptic_bus.run_canopen` (what ``haptic-bus run`` runs) in a thread.
+"""A running controller: :func:`haptic_bus.run` (what ``haptic-bus run`` runs) in a thread.
 
-The run is the real one: it commissions the drive (the safety chain of the profile's
-``[safety]``), serves gated wall uploads as CANopen node ``controller_node_id``, cycles under
+The run is the real one, of one axis or several, over CANopen or Modbus: it commissions the
+drive(s) (the safety chain of the profile's ``[safety]``), serves gated wall uploads as CANopen
+node ``controller_node_id`` (CANopen only), cycles under
 its supervisor, leaves the drive disabled and writes its folder (``record.csv``, ``run.json``,
 the plots if asked).  In virtual time (the default) the plant advances one period per SYNC, so a run of
 ``duration`` s of virtual time takes as long as the machine needs; real time paces it with the
@@ -20,6 +21,7 @@ import pytest
 from haptic_bus.testing.run_files import RecordedRun, read_run_folder
 
 if TYPE_CHECKING:
+    from haptic_bus.app.axes_profile import AxesProfile
     from haptic_bus.app.profiles import Profile
     from haptic_bus.app.runner import RunOptions, RunResult
     from haptic_bus.testing.simulated import SimDriveNode
@@ -40,7 +42,8 @@ class ControllerRun:
     cycle (as SIGTERM does ``haptic-bus run``); both return the folder read back.
     """
 
-    def __init__(self, profile: Profile, node: SimDriveNode, options: RunOptions, controller_node_id: int) -> None:
+    def __init__(self, profile: Profile | AxesProfile, node: SimDriveNode, options: RunOptions,
+                 controller_node_id: int) -> None:
         if options.out_dir is None:
             raise ValueError("a controller run under test needs its folder (RunOptions.out_dir)")
         self.profile = profile
@@ -54,11 +57,11 @@ class ControllerRun:
         self._thread.start()
 
     def _run(self) -> None:
-        from haptic_bus.app.runner import run_canopen
+        from haptic_bus.app.runner import run
 
         try:
-            self.result = run_canopen(self.profile, self.node.bus, self.node.node_id, self.options,
-                                      controller_node_id=self.controller_node_id)
+            self.result = run(self.profile, self.node.bus, self.options, controller_node_id=self.controller_node_id,
+                              **self.node.run_kwargs())
         except BaseException as exc:  # handed to the test's thread by wait()/stop()
             self.failure = exc
 
@@ -86,27 +89,52 @@ class ControllerRun:
         return self._ended()
 
     def wait_cycling(self, timeout: float = CYCLING_WAIT) -> None:
-        """Block until the controller cycles, at most ``timeout`` s: the drive's TPDO1 (statusword
-        first) has reported OPERATION ENABLED twice, the enable walk's last exchange and the first
-        cycle's, so the record will hold at least one cycle.  AssertionError if the run ends
-        first (give the run a ``duration`` long enough to be seen, and :meth:`stop` it)."""
+        """Block until the controller cycles, at most ``timeout`` s: on CANopen every axis' TPDO1
+        (statusword first) has reported OPERATION ENABLED twice, the enable walk's last exchange
+        and the first cycle's; over Modbus every unit is OPERATION ENABLED and has had two cycles
+        (output block writes) since; so the record will hold at least one cycle.  AssertionError if
+        the run ends first (give the run a ``duration`` long enough to be seen, and :meth:`stop` it)."""
+        deadline = time.monotonic() + timeout
+        spec = self.node.spec
+        if spec is None:
+            self._wait_modbus_cycling(deadline)
+            return
         from drives.cia301 import TPDO_BASES
         from drives.cia402 import State, decode_statusword
 
-        tpdo1, enabled = TPDO_BASES[0] + self.node.node_id, 0
-        deadline = time.monotonic() + timeout
-        with self.node.spec.open() as bus:
+        enabled = {TPDO_BASES[0] + node: 0 for node in (self.node.node_ids or (self.node.node_id,))}
+        with spec.open() as bus:
             while time.monotonic() < deadline:
                 message = bus.recv(0.1)
-                if message is not None and message.arbitration_id == tpdo1 and len(message.data) >= 2:
+                if message is not None and message.arbitration_id in enabled and len(message.data) >= 2:
                     statusword = int.from_bytes(message.data[:2], "little")
-                    enabled += decode_statusword(statusword) is State.OPERATION_ENABLED
-                    if enabled >= ENABLED_ANSWERS:
+                    enabled[message.arbitration_id] += decode_statusword(statusword) is State.OPERATION_ENABLED
+                    if min(enabled.values()) >= ENABLED_ANSWERS:
                         return
-                if not self.running:
-                    reason = self.result.exit_reason if self.result is not None else repr(self.failure)
-                    raise AssertionError(f"the controller's run ended ({reason}) before it was seen cycling")
-        raise AssertionError(f"the drive did not answer a cycle in OPERATION ENABLED within {timeout} s on {self.node.spec}")
+                self._check_running()
+        raise AssertionError(f"the drive did not answer a cycle in OPERATION ENABLED within {timeout} s on {spec}")
+
+    def _wait_modbus_cycling(self, deadline: float) -> None:
+        """:meth:`wait_cycling` over Modbus: the served units seen in this process, polled every 10 ms."""
+        from drives.cia402 import State
+
+        units = self.node.served_units()
+        since: list[int | None] = [None] * len(units)
+        while time.monotonic() < deadline:
+            for i, unit in enumerate(units):
+                if since[i] is None and unit.drive.state is State.OPERATION_ENABLED:
+                    since[i] = unit.bank.cycles
+            if all(start is not None and unit.bank.cycles >= start + ENABLED_ANSWERS for start, unit in zip(since, units)):
+                return
+            self._check_running()
+            time.sleep(0.01)
+        raise AssertionError(f"the Modbus units {self.node.unit_ids} did not cycle in OPERATION ENABLED in time")
+
+    def _check_running(self) -> None:
+        """AssertionError if the run has ended (before it was seen cycling)."""
+        if not self.running:
+            reason = self.result.exit_reason if self.result is not None else repr(self.failure)
+            raise AssertionError(f"the controller's run ended ({reason}) before it was seen cycling")
 
     def _ended(self) -> RecordedRun:
         if self.failure is not None:

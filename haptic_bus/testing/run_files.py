@@ -1,8 +1,9 @@
-"""A run folder read back: ``record.csv`` as numpy columns, ``run.json`` as a dict.
+"""A run folder read back: ``record.csv`` (a multi-axis run: ``record-<axis>.csv`` per axis) as
+numpy columns, ``run.json`` as a dict.
 
-Every run (``haptic-bus run``, ``haptic-bus demo``, :func:`haptic_bus.run_canopen`) writes
-both into its folder (:mod:`haptic_bus.app.run_folder`); ``record.csv`` only once it has
-cycled (a run refused before its first cycle has ``run.json`` alone).
+Every run (``haptic-bus run``, ``haptic-bus demo``, :func:`haptic_bus.run`) writes both into its
+folder (:mod:`haptic_bus.app.run_folder`); the records only once it has cycled (a run refused
+before its first cycle has ``run.json`` alone).
 """
 
 from __future__ import annotations
@@ -11,13 +12,14 @@ import csv
 import json
 import os
 import pathlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     import numpy as np
 
 RECORD = "record.csv"
+AXIS_RECORDS = "record-*.csv"  # a multi-axis run's, one per axis (haptic_bus.app.axes_records.record_name)
 DOCUMENT = "run.json"
 
 
@@ -37,11 +39,13 @@ class RecordedRun:
     """What a run folder holds.  ``record``: one float64 array per ``record.csv`` column
     (``time_s`` s, ``position_m`` m, ``velocity_m_per_s`` m/s, ``force_n`` N, ``torque_permille``,
     ``energy_j`` J, ... see :data:`haptic_bus.control.record.COLUMNS`), one entry per cycle, empty
-    when the run never cycled; ``document``: ``run.json``."""
+    when the run never cycled or had several axes; ``records``: a multi-axis run's, axis name ->
+    its columns the same way; ``document``: ``run.json``."""
 
     folder: pathlib.Path
     record: dict[str, np.ndarray]
     document: dict[str, Any]
+    records: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
     @property
     def exit_reason(self) -> str:
@@ -70,4 +74,5 @@ def read_run_folder(folder: str | os.PathLike[str]) -> RecordedRun:
     folder = pathlib.Path(folder)
     document = json.loads((folder / DOCUMENT).read_text())
     record = read_record_csv(folder / RECORD)[1] if (folder / RECORD).is_file() else {}
-    return RecordedRun(folder, record, document)
+    records = {path.stem.removeprefix("record-"): read_record_csv(path)[1] for path in sorted(folder.glob(AXIS_RECORDS))}
+    return RecordedRun(folder, record, document, records)

@@ -1,7 +1,8 @@
 """A simulated multi-axis device: one simulated drive per axis, each a real CANopen slave on one bus.
 
-Every axis is a :class:`~sim_drive.canopen.slave.CanopenSimDrive` (its own node id, its own bus
-handle on the shared bus, its own exact plant with its hidden truth, its own safety chain:
+Every axis is a :class:`~sim_drive.canopen.slave.CanopenSimDrive` (its own node id, its own
+handle on a lock-step channel that :class:`~sim_drive.canopen.bridge.BusBridge` joins to the bus
+through the process's one bus handle, its own exact plant with its hidden truth, its own safety chain:
 heartbeat consumer, RPDO deadline, 0x6007); the axes of a Cartesian device are independent
 plants, and what couples them is the hand (:mod:`sim_drive.space_operator`), whose force in
 space each axis takes its component of.  A master sees as many CiA-402 drives on the bus as
@@ -14,6 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from sim_drive.canopen.bridge import BusBridge
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.space_operator import SpaceHand
@@ -24,7 +26,7 @@ AxisSetup = tuple[int, DeviceParameters, Timing | str]  # node id, plant and sca
 
 class MultiAxisSim:
     """The axes ``axes`` (node id, parameters, timing; in coordinate order) on the bus ``bus`` (the
-    keyword arguments of ``can.Bus``; each node opens its own bus handle), pushed by ``hand`` (None:
+    keyword arguments of ``can.Bus``, opened once for all nodes), pushed by ``hand`` (None:
     nobody).  ``coordinates``: the hand's coordinate of each axis simulated here (default: all of
     them, in order; a hand over more axes than this process simulates sees the others at 0 m).
     ``clock``: "virtual" or "wall" (:mod:`sim_drive.sync_clock`, one clock per node); ``od``: the
@@ -35,13 +37,12 @@ class MultiAxisSim:
         hand = hand if hand is not None else SpaceHand(len(axes))
         places = list(coordinates) if coordinates is not None else list(range(len(axes)))
         self.hand = hand
-        self.nodes = tuple(CanopenSimDrive(dict(bus), node, timing=timing, parameters=parameters,
+        self._bridge = None if bus.get("interface") == "lockstep" else BusBridge(bus, self._lose_bus)
+        node_bus = dict(bus) if self._bridge is None else self._bridge.node_bus
+        self.nodes = tuple(CanopenSimDrive(dict(node_bus), node, timing=timing, parameters=parameters,
                                            operator=hand.axis(place), od=od, sync_clock=sync_clock(clock))
                            for (node, parameters, timing), place in zip(axes, places, strict=True))
-        drives: list[Any] = [None] * hand.size
-        for node, place in zip(self.nodes, places):
-            drives[place] = node.drive
-        hand.bind(drives)
+        hand.bind_places(places, [node.drive for node in self.nodes])
 
     def node(self, node_id: int) -> CanopenSimDrive:
         """The simulated drive with ``node_id``."""
@@ -53,7 +54,10 @@ class MultiAxisSim:
         return tuple(node.drive.handle.position for node in self.nodes)
 
     def start(self) -> MultiAxisSim:
-        """Boot every node (boot-up message, PRE-OPERATIONAL) and serve."""
+        """Open the bus once (:class:`~sim_drive.canopen.bridge.BusBridge`), boot every node (boot-up
+        message, PRE-OPERATIONAL) and serve."""
+        if self._bridge is not None:
+            self._bridge.start()
         started: list[CanopenSimDrive] = []
         try:
             for node in self.nodes:
@@ -61,13 +65,21 @@ class MultiAxisSim:
         except BaseException:
             for node in started:
                 node.stop()
+            if self._bridge is not None:
+                self._bridge.stop()
             raise
         return self
 
     def stop(self) -> None:
-        """Stop every node (their heartbeats stop with them)."""
+        """Stop every node (their heartbeats stop with them), then close the bus."""
         for node in self.nodes:
             node.stop()
+        if self._bridge is not None:
+            self._bridge.stop()
+
+    def _lose_bus(self, exc: BaseException) -> None:
+        for node in self.nodes:
+            node.lose_bus(exc)
 
     def __enter__(self) -> MultiAxisSim:
         return self.start()

@@ -365,10 +365,14 @@ class CanopenSimDrive:
                         message = self._receive(bus, 0.0)
                     self._tick(time.monotonic())
         except Exception as exc:
-            logger.error("node %d: cannot serve any more, heartbeat stopped and drive faulted: %r", self.node_id, exc)
-            with self._lock:
-                self.timers.stop_producer()
-                self.drive.fault(EmcyCode.COMMUNICATION)
+            self.lose_bus(exc)
+
+    def lose_bus(self, exc: BaseException) -> None:
+        """The bus is gone (``exc`` said so): stop saying alive and fault, as a drive that lost its bus does."""
+        logger.error("node %d: cannot serve any more, heartbeat stopped and drive faulted: %r", self.node_id, exc)
+        with self._lock:
+            self.timers.stop_producer()
+            self.drive.fault(EmcyCode.COMMUNICATION)
 
     def _run_timers(self) -> None:
         """Lock-step bus: the frames come inline (:meth:`_on_frame`); this thread keeps the timers."""

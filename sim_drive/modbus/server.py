@@ -6,14 +6,18 @@ holding-register access, with the registers it will answer and the values a writ
 reads or writes the :class:`~sim_drive.modbus.bank.RegisterBank` and returns the exception code
 of the request, if any.  The register semantics and the virtual time are the bank's.
 
-Around the bank, per request: a unit id other than the server's answers 0x0B; a function other
-than the holding-register ones (03, 06, 16, 22, 23) answers 0x01; one armed fault of the
-:class:`~sim_drive.modbus.faults.FaultInjector` is met (once per request, so once per FC23,
-whose write comes before its read).  Two watchdogs stop the drive when its master is gone,
-each by the drive's 0x6007 reaction (default: fault, torque zero) while the power stage is on:
-the connection that last commanded the drive (wrote its controlword or target torque) closes
-(error code 0x8100), or no valid request comes from it for the watchdog time of register
-0x002A (error code 0x8130, checked every :data:`WATCHDOG_TICK` s).
+One server may serve several units, each a simulated drive with its own bank (the axes of a
+multi-axis device, :mod:`sim_drive.modbus.multi_axis`): :meth:`ModbusSimServer.add_unit`.
+
+Around the bank, per request: a unit id the server does not serve answers 0x0B (gateway target
+failed to respond); a function other than the holding-register ones (03, 06, 16, 22, 23) answers
+0x01; one armed fault of the :class:`~sim_drive.modbus.faults.FaultInjector` is met (once per
+request, so once per FC23, whose write comes before its read).  Two watchdogs stop a unit's
+drive when its master is gone, each by the drive's 0x6007 reaction (default: fault, torque
+zero) while the power stage is on: the connection that last commanded that unit (wrote its
+controlword or target torque) closes (error code 0x8100), or no valid request for the unit
+comes from it for the watchdog time of the unit's register 0x002A (error code 0x8130, checked
+every :data:`WATCHDOG_TICK` s).
 """
 
 from __future__ import annotations
@@ -42,13 +46,24 @@ from sim_drive.sync_clock import SyncClock
 
 logger = logging.getLogger("sim_drive.modbus")
 
-__all__ = ["LINK_LOST_ERROR_CODE", "ModbusSimServer", "parse_modbus_url"]
+__all__ = ["LINK_LOST_ERROR_CODE", "ModbusSimServer", "ServedUnit", "parse_modbus_url"]
 
 LINK_LOST_ERROR_CODE = 0x8100  # CiA 301 "communication, generic"
 WATCHDOG_ERROR_CODE = 0x8130  # CiA 301 "life guard error or heartbeat error"
 WATCHDOG_TICK = 0.002  # s
 _HOLDING = frozenset({3, 6, 16, 22, 23})  # function codes on holding registers
 _ADDRESS_SPACE = 0x10000  # registers 0x0000..0xFFFF: every address reaches the action
+
+
+@dataclass
+class ServedUnit:
+    """One unit the server serves: its ``unit_id``, simulated ``drive``, register ``bank``, and the
+    connection that last commanded it (``controller``, None until one wrote a command)."""
+
+    unit_id: int
+    drive: SimulatedDrive
+    bank: RegisterBank
+    controller: _Handler | None = None
 
 
 @dataclass
@@ -112,8 +127,10 @@ class ModbusSimServer:
     """The simulated drive served over Modbus TCP (``host``, ``port``; port 0 picks a free one).
 
     Run it in a background thread (:meth:`start`/:meth:`stop`, or ``with``) or in the caller's
-    event loop (:meth:`serve`).  ``drive`` is the :class:`SimulatedDrive`; change it (operator,
-    timing) only between cycles.  ``faults`` arms injected faults; ``bank`` holds the registers.
+    event loop (:meth:`serve`).  It serves unit ``unit_id`` (and any added with :meth:`add_unit`,
+    before it starts): ``units`` by unit id.  ``drive`` is the first unit's :class:`SimulatedDrive`;
+    change it (operator, timing) only between cycles.  ``faults`` arms injected faults (any
+    unit's requests meet them); ``bank`` holds the first unit's registers.
     """
 
     def __init__(
@@ -128,24 +145,33 @@ class ModbusSimServer:
         word_order: str = "big",
         sync_clock: SyncClock | None = None,
     ) -> None:
-        if not 0 <= unit_id <= 255:
-            raise ParameterError("unit_id", unit_id, "0..255")
         self.host = host
         self.requested_port = port
         self.unit_id = unit_id
-        self.drive = SimulatedDrive(parameters, timing, operator, name=f"Modbus unit {unit_id}")
-        self.bank = RegisterBank(self.drive, word_order, sync_clock)
+        self.word_order = word_order
+        self.units: dict[int, ServedUnit] = {}
+        self.drive = self.add_unit(unit_id, timing, parameters, operator, sync_clock)
+        self.bank = self.units[unit_id].bank
         self.faults = FaultInjector()
-        self.lock = threading.Lock()  # the bank and the drive, between the server and other threads
+        self.lock = threading.Lock()  # the banks and the drives, between the server and other threads
         self.port: int | None = None
-        self.controller: _Handler | None = None  # the connection that last wrote a command
         self.connections_closed = 0
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._ready = threading.Event()
         self._stopped: asyncio.Event | None = None
         self._error: BaseException | None = None
-        self.drive.sync()  # SYNC 0: the first sample at t = 0
+
+    def add_unit(self, unit_id: int, timing: Timing | str = Timing.CIA402, parameters: DeviceParameters | None = None,
+                 operator: OperatorModel | None = None, sync_clock: SyncClock | None = None) -> SimulatedDrive:
+        """Serve one more unit ``unit_id`` (0..255, not served yet), a simulated drive of its own with
+        ``timing``, ``parameters``, ``operator`` and ``sync_clock`` (before :meth:`start`); its drive."""
+        if not 0 <= unit_id <= 255 or unit_id in self.units:
+            raise ParameterError("unit_id", unit_id, f"0..255, none served already ({sorted(self.units)})")
+        drive = SimulatedDrive(parameters, timing, operator, name=f"Modbus unit {unit_id}")
+        self.units[unit_id] = ServedUnit(unit_id, drive, RegisterBank(drive, self.word_order, sync_clock))
+        drive.sync()  # SYNC 0: the first sample at t = 0
+        return drive
 
     @property
     def url(self) -> str:
@@ -167,7 +193,8 @@ class ModbusSimServer:
     ) -> ExcCodes | None:
         """pymodbus' action: read into ``registers`` (``values`` None) or write ``values``; an exception code or None."""
         request = _REQUEST.get()
-        if request.unit != self.unit_id:
+        unit = self.units.get(request.unit)
+        if unit is None:
             return ExcCodes.GATEWAY_NO_RESPONSE
         if func_code not in _HOLDING:
             return ExcCodes.ILLEGAL_FUNCTION
@@ -178,29 +205,31 @@ class ModbusSimServer:
                 return refused
         if values is None:
             with self.lock:
-                result = self.bank.read(address, count)
+                result = unit.bank.read(address, count)
                 if not isinstance(result, int):
-                    self._served(request)
+                    self._served(unit, request)
             if isinstance(result, int):
                 return ExcCodes(result)
             offset = address - start_address
             registers[offset : offset + count] = result
             return None
         with self.lock:
-            rc = self.bank.write(address, values)
+            rc = unit.bank.write(address, values)
             if not rc:
                 if writes_command(address, len(values)):
-                    self.controller = request.handler
-                self._served(request)
+                    unit.controller = request.handler
+                self._served(unit, request)
         if rc:
             return ExcCodes(rc)
         return None
 
-    def _served(self, request: _Request) -> None:
-        """A valid request was answered: the watchdog starts over if it came from the commanding
-        connection (a monitoring client's reads must not keep a drive alive whose master is gone)."""
-        if self.controller is None or request.handler is self.controller:
-            self.bank.request_served(time.monotonic())
+    @staticmethod
+    def _served(unit: ServedUnit, request: _Request) -> None:
+        """A valid request for ``unit`` was answered: its watchdog starts over if it came from the
+        connection commanding it (a monitoring client's reads must not keep a drive alive whose
+        master is gone)."""
+        if unit.controller is None or request.handler is unit.controller:
+            unit.bank.request_served(time.monotonic())
 
     async def _fault(self, request: _Request, func_code: int) -> ExcCodes | None:
         """Meet the next armed fault, if any: its exception code, after its delay, or the dropped link."""
@@ -220,26 +249,28 @@ class ModbusSimServer:
         return ExcCodes.DEVICE_FAILURE  # never sent: the connection is gone
 
     def _connection_closed(self, handler: _Handler) -> None:
-        """The communication watchdog: the commanding connection closed."""
+        """The communication watchdog: the connection commanding a unit closed."""
         self.connections_closed += 1
-        if handler is not self.controller:
-            return
-        self.controller = None
-        with self.lock:
-            if self.drive.state in POWER_STAGE_ON:
-                logger.warning("%s: the commanding connection closed with the power stage on (0x%04X)",
-                               self.drive.name, LINK_LOST_ERROR_CODE)
-                self.drive.connection_lost(LINK_LOST_ERROR_CODE)
+        for unit in self.units.values():
+            if handler is not unit.controller:
+                continue
+            unit.controller = None
+            with self.lock:
+                if unit.drive.state in POWER_STAGE_ON:
+                    logger.warning("%s: the commanding connection closed with the power stage on (0x%04X)",
+                                   unit.drive.name, LINK_LOST_ERROR_CODE)
+                    unit.drive.connection_lost(LINK_LOST_ERROR_CODE)
 
     async def _watch(self) -> None:
         """The register 0x002A watchdog, every :data:`WATCHDOG_TICK` s."""
         while True:
             await asyncio.sleep(WATCHDOG_TICK)
             with self.lock:
-                if self.bank.watchdog_expired(time.monotonic()):
-                    logger.warning("%s: no valid request for %d ms with the power stage on (0x%04X)",
-                                   self.drive.name, self.bank.watchdog_ms, WATCHDOG_ERROR_CODE)
-                    self.drive.connection_lost(WATCHDOG_ERROR_CODE)
+                for unit in self.units.values():
+                    if unit.bank.watchdog_expired(time.monotonic()):
+                        logger.warning("%s: no valid request for %d ms with the power stage on (0x%04X)",
+                                       unit.drive.name, unit.bank.watchdog_ms, WATCHDOG_ERROR_CODE)
+                        unit.drive.connection_lost(WATCHDOG_ERROR_CODE)
 
     # ------------------------------------------------------------------ event-loop mode
     async def serve(self, stop: asyncio.Event | None = None, on_bound: Callable[[], None] | None = None) -> None:

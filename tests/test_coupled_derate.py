@@ -1,0 +1,136 @@
+"""Issue 26: the supervisor's derate for coupled axes, as one axis has it (one search for either
+gate, :mod:`haptic_bus.app.derate_table`).
+
+The scene: one plane wall with the normal (1, 1, 0)/sqrt 2, coupling the x and y axes of
+gantry-3d, K 6000 N/m and B 5 N s/m.  The coupled gate passes it at the profile's delay of one
+sample with a margin of 9.6 N s/m, at 1.5 samples 4.8, at 2 samples it is active (-0.30): a
+derate to D = 2 has to scale it down (measured: to 0.874, margin 2.06 >= the policy's 2).  The
+table is built in the judge worker (the coupled gate's judgements of a sphere take seconds); a
+test waits for it where it must (the worker runs its tasks in order: a task submitted after the
+table's is done after them), never a fixed time.
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+import haptic_bus as hb
+from haptic_bus.app import runner
+from haptic_bus.app.axes_profile import load_axes_profile
+from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, DERATE_EXTRA_DELAYS, prepare_derate
+from haptic_bus.app.run_options import RunOptions, StopRequest
+from haptic_bus.control.space_scene import Plane, SpaceScene, compile_space_scene
+from haptic_bus.node.verdicts import judge_pool
+from sim_drive.axes_profile import load_axes_device
+from sim_drive.modbus.multi_axis import MultiAxisModbusSim
+from tests.run_rig import late_clock
+
+K, B = 6000.0, 5.0  # N/m, N s/m
+GANTRY = pathlib.Path(str(load_axes_profile("gantry-3d").path))
+TABLE_WAIT = 300.0  # s of wall clock: a bound on a hang of the judge worker, not a pace
+PERIOD = 2e-3  # s: gantry-3d's T
+LATE = {k: 0.6 * PERIOD for k in range(100, 130)}  # cycles 100..129 0.6 T late: the 11th is cycle 110, D = 1.6 seen
+
+
+def plane() -> SpaceScene:
+    return compile_space_scene([Plane("wall", (0.003, 0.003, 0.0), (-1.0, -1.0, 0.0), K, B)])
+
+
+def test_the_coupled_table_holds_the_largest_scale_the_gate_passes_at_each_prepared_delay() -> None:
+    profile = load_axes_profile("gantry-3d")
+    gate, scene = profile.gate(), plane()
+    derate = prepare_derate(gate, scene, COUPLED_SCALE_STEPS)
+    assert derate(scene, 1.2) is not None and derate(scene, 1.2)[1] is scene  # D = 1.25 still passes it whole
+    served = derate(scene, 1.6)  # between the prepared 1.5 and 2: served by 2
+    assert served is not None
+    judge, scaled, decision = served
+    assert [loop.delay for loop in judge.axes] == [2.0, 2.0, 2.0]
+    assert decision.accepted and decision.worst_margin >= profile.gate_policy.safety_margin
+    (wall,) = scaled.objects
+    scale = wall.stiffness / K
+    assert 0.0 < scale < 1.0 and wall.damping / B == pytest.approx(scale, rel=1e-12)
+    assert not judge.passes(scene.scaled(scale + 2.0 ** -COUPLED_SCALE_STEPS))  # the largest, within 2^-8
+    assert derate(scene, 1.0 + max(DERATE_EXTRA_DELAYS) + 0.01) is None  # beyond the table
+    pooled = prepare_derate(gate, scene, COUPLED_SCALE_STEPS, judge_pool())
+    judge_pool().submit(int).result(timeout=TABLE_WAIT)  # after the table's tasks: it is built
+    again = pooled(scene, 1.6)
+    assert again is not None and again[1].objects[0].stiffness == wall.stiffness  # the worker's search is the same
+
+
+def derating_profile(tmp_path: pathlib.Path) -> pathlib.Path:
+    """gantry-3d with the plane alone, the hand pushing into it, and a supervisor that derates."""
+    text = GANTRY.read_text()
+    text = text[:text.index("[space.operator]")]
+    path = tmp_path / "derate.toml"
+    path.write_text(text + f"""
+[supervisor]
+on_late = "derate"
+
+[space.operator]
+model = "push"
+force = 3.0
+toward = [0.02, 0.02, 0.0]
+
+[[space.objects]]
+kind = "plane"
+name = "wall"
+point = [0.003, 0.003, 0.0]
+normal = [-1.0, -1.0, 0.0]
+stiffness = {K}
+damping = {B}
+""")
+    return path
+
+
+@pytest.fixture
+def late_after_the_table(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The run's virtual clock reports :data:`LATE`, and its first late cycle waits (bounded) for the
+    judge worker to have built the derate table: the alarm finds it, whatever this machine's load."""
+    base = late_clock(LATE)
+
+    class TableClock(base):  # type: ignore[misc, valid-type]
+        def wait_next(self, cycle: int) -> float:
+            if cycle == min(LATE):
+                judge_pool().submit(int).result(timeout=TABLE_WAIT)
+            return float(super().wait_next(cycle))
+
+    monkeypatch.setattr(runner, "VirtualClock", TableClock)
+
+
+@pytest.fixture
+def modbus_axes(tmp_path: pathlib.Path) -> Iterator[tuple[pathlib.Path, MultiAxisModbusSim]]:
+    path = derating_profile(tmp_path)
+    device = load_axes_device(path)
+    axes = [(unit, axis.parameters, axis.timing) for unit, axis in zip((1, 2, 3), device.axes)]
+    sim = MultiAxisModbusSim([("127.0.0.1", 0)], axes, device.make_hand()).start()
+    yield path, sim
+    sim.stop()
+
+
+def test_a_late_three_axis_run_derates_to_the_scene_the_coupled_gate_passes_at_the_observed_delay(
+        late_after_the_table: None, tmp_path: pathlib.Path, modbus_axes: tuple[pathlib.Path, MultiAxisModbusSim]) -> None:
+    path, sim = modbus_axes
+    out = tmp_path / "run"
+    options = RunOptions(duration=0.5, pacing="virtual", out_dir=out, live=False, plots=False, stop=StopRequest())
+    result = hb.run(load_axes_profile(path), sim.urls[0], options, unit_ids=[1, 2, 3])
+    assert result.exit_reason == "completed", result.error
+    document = json.loads((out / "run.json").read_text())
+    first, derated = document["scenes"]
+    assert derated["scene_id"] == 1 and derated["origin"] == "derate to a loop delay of 1.6 samples"
+    (wall,) = derated["objects"]
+    expected = prepare_derate(load_axes_profile(path).gate(), plane(), COUPLED_SCALE_STEPS)(plane(), 1.6)
+    assert expected is not None
+    assert wall["stiffness"] == expected[1].objects[0].stiffness and wall["damping"] == expected[1].objects[0].damping
+    margin = derated["decision"]["worst_margin"]
+    assert margin >= 2.0 and first["decision"]["worst_margin"] == pytest.approx(9.613, abs=1e-3)
+    kinds = [(event["kind"], event.get("data")) for event in document["events"]]
+    assert kinds == [("alarm", {"alarm": "late", "action": "derate"}),
+                     ("derate", {"scene_id": 1, "worst_margin": margin})]
+    for axis in "xyz":
+        scene_id = np.genfromtxt(out / f"record-{axis}.csv", delimiter=",", names=True)["scene_id"]
+        assert np.all(scene_id[:111] == 0) and np.all(scene_id[111:] == 1)  # every axis from the same next cycle on

@@ -1,0 +1,264 @@
+"""Several axes over Modbus TCP on loopback (issue 26): gantry-3d's three axes as three units of one
+simulated server, or one server per axis (real pymodbus servers in threads of this process),
+polled in one cycle through the one runtime (:func:`haptic_bus.run`), in virtual time.
+
+**The steady state on the slope** is checked as the CANopen runs check it (``test_axes_run.py``,
+whose module docstring says why): at rest, the force the controller asks along the slope's
+normal is ``K`` times the penetration at its measured position to 1e-9 relative, with the torques
+400/400/200 per mille that make the hand's (2, 2, 1) N push exact; ``K`` times the simulated
+drives' true penetration is the 3 N push within the torque's rounding and the position sum's.  One server for the three
+units and a server per axis are the same cycles in virtual time (each unit's plant advances when
+its output block is written, whoever serves it): their records are equal bit for bit.  (They are
+not the CANopen demo's bit for bit: the CANopen enable walk's last SYNC already advances the
+plants with the hand pushing, the Modbus walk's register writes never advance them, so the
+Modbus run starts one sample earlier on the hand's push.)
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import re
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+
+import haptic_bus as hb
+from drives.cia402 import State
+from haptic_bus.app.axes_profile import load_axes_profile
+from haptic_bus.app.cli import main
+from haptic_bus.app.run_options import RunOptions, StopRequest
+from haptic_bus.app.steady_state import contact
+from sim_drive.axes_profile import load_axes_device
+from sim_drive.modbus.multi_axis import MultiAxisModbusSim
+from tests.cli_process import cli_process, reaped
+
+GANTRY = pathlib.Path(str(load_axes_profile("gantry-3d").path))
+TARGETS = "toward = [[0.0, -0.03, 0.0], [-0.03, 0.0, 0.0], [0.02, 0.02, 0.01]]"
+UNITS = (1, 2, 3)
+TIMES = ("compute_s", "wall_clock_s", "monotonic_s")  # when and how long the machine took: not the loop's
+CYCLING_WAIT = 60.0  # s of wall clock: a bound on a hang, not a pace
+START_WAIT = 60.0  # s: the simulator process imports numpy, scipy and pymodbus and reads the profile first
+RUN_WAIT = 240.0  # s: a run process imports and judges gantry-3d's scene, then 500 cycles over loopback
+
+
+def slope_profile(tmp_path: pathlib.Path) -> pathlib.Path:
+    """gantry-3d whose hand pushes towards the slope only: at rest there with torques 400, 400, 200 per mille."""
+    text = GANTRY.read_text()
+    assert TARGETS in text
+    path = tmp_path / "slope.toml"
+    path.write_text(text.replace(TARGETS, "toward = [0.02, 0.02, 0.01]"))
+    return path
+
+
+@pytest.fixture
+def modbus_gantry() -> Iterator[Callable[..., MultiAxisModbusSim]]:
+    """``modbus_gantry(profile, servers=1, units=UNITS)``: the profile's simulated axes served over
+    Modbus TCP on loopback (one server for every unit, or one per axis), started; stopped at teardown."""
+    started: list[MultiAxisModbusSim] = []
+
+    def start(profile: str | pathlib.Path = "gantry-3d", servers: int = 1,
+              units: tuple[int, ...] = UNITS) -> MultiAxisModbusSim:
+        device = load_axes_device(profile)
+        axes = [(unit, axis.parameters, axis.timing) for unit, axis in zip(units, device.axes)]
+        sim = MultiAxisModbusSim([("127.0.0.1", 0)] * servers, axes, device.make_hand()).start()
+        started.append(sim)
+        return sim
+
+    yield start
+    for sim in started:
+        sim.stop()
+
+
+def options(folder: pathlib.Path, duration: float, **more: Any) -> RunOptions:
+    return RunOptions(duration=duration, pacing=more.pop("pacing", "virtual"), out_dir=folder, live=False, plots=False,
+                      stop=StopRequest(), **more)
+
+
+def records(folder: pathlib.Path) -> dict[str, np.ndarray]:
+    return {axis: np.genfromtxt(folder / f"record-{axis}.csv", delimiter=",", names=True) for axis in "xyz"}
+
+
+def watch_states(sim: MultiAxisModbusSim) -> list[list[State]]:
+    """Every state each simulated axis enters from now on, per axis."""
+    seen: list[list[State]] = [[] for _ in sim.drives]
+    for states, drive in zip(seen, sim.drives):
+        drive.state_listeners.append(lambda old, new, number, states=states: states.append(new))
+    return seen
+
+
+def test_three_units_rest_on_the_slope_the_same_on_one_server_or_three(
+        tmp_path: pathlib.Path, modbus_gantry: Callable[..., MultiAxisModbusSim]) -> None:
+    path = slope_profile(tmp_path)
+    profile = load_axes_profile(path)
+    runs = {}
+    for servers in (1, 3):
+        sim = modbus_gantry(path, servers)
+        bus = sim.urls[0] if servers == 1 else list(sim.urls)
+        folder = tmp_path / f"servers-{servers}"
+        result = hb.run(profile, bus, options(folder, 4.0), unit_ids=list(UNITS))
+        assert result.exit_reason == "completed", result.error
+        assert result.summary is not None and result.summary.cycles == 2000 and result.summary.least_energy >= 0.0
+        assert [drive.state for drive in sim.drives] == [State.SWITCH_ON_DISABLED] * 3  # left disabled
+        document = json.loads((folder / "run.json").read_text())
+        link = document["link"]
+        assert link["kind"] == "modbus" and link["unit_ids"] == [1, 2, 3] and link["urls"] == list(sim.urls)
+        assert link["poll"] is None  # the simulated drive states its loop delay: no poll is measured for the gate
+        assert document["loop"]["delays"] == [1, 1, 1]  # cia402 timing: the delays the coupled gate judged with
+        runs[servers] = records(folder)
+        assert result.controller is not None
+        scene = result.controller.scene
+        true = contact(scene, np.array(sim.positions))  # the simulated drives' exact positions
+        assert true is not None and true[0] == "slope"
+        # at rest the drives apply the hand's 3 N along the normal; K times the true depth is within the
+        # torque's rounding (2.5 mN) plus K times the 0x606C rounding the position sum can gather (module docstring)
+        drift = result.summary.cycles * profile.period * profile.axes[0].device.velocity_per_count / 2  # m
+        assert abs(true[1] * true[2] - 3.0) <= 0.0025 + true[1] * drift
+    one, three = runs[1], runs[3]
+    for axis in "xyz":
+        for column in one[axis].dtype.names:
+            if column not in TIMES:
+                assert np.array_equal(one[axis][column], three[axis][column]), (axis, column)  # bit for bit
+    x = np.array([one[axis]["position_m"][-1] for axis in "xyz"])
+    touching = contact(scene, x)
+    assert touching is not None and touching[0] == "slope"
+    _, stiffness, depth, normal = touching
+    wall = np.array([one[axis]["force_n"][-1] for axis in "xyz"])
+    assert [one[axis]["velocity_m_per_s"][-1] for axis in "xyz"] == [0.0, 0.0, 0.0]
+    assert -float(np.dot(wall, normal)) == pytest.approx(stiffness * depth, rel=1e-9)
+    assert [int(one[axis]["torque_permille"][-1]) for axis in "xyz"] == [-400, -400, -200]
+
+
+def test_a_unit_nobody_answers_for_is_one_line_and_nothing_is_enabled(
+        tmp_path: pathlib.Path, modbus_gantry: Callable[..., MultiAxisModbusSim],
+        capsys: pytest.CaptureFixture[str]) -> None:
+    sim = modbus_gantry()
+    seen = watch_states(sim)
+    url = sim.urls[0]
+    code = main(["run", "gantry-3d", "--modbus", url, "--unit-ids", "1,2,4", "--virtual-time", "--duration", "1",
+                 "--no-plots", "-q", "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1, err
+    assert f"Modbus unit 4 at {url}: no unit 4 answers at {url} (exception 0x0B)" in err
+    assert seen == [[], [], []]  # no unit's state machine was touched: nothing enabled
+    assert json.loads((tmp_path / "run" / "run.json").read_text())["exit_reason"] == "drive error"
+
+
+def test_a_server_that_is_not_there_is_one_line(tmp_path: pathlib.Path, modbus_gantry: Callable[..., MultiAxisModbusSim],
+                                                free_port: int) -> None:
+    sim = modbus_gantry("gantry-3d", 3)
+    seen = watch_states(sim)
+    urls = [*sim.urls[:2], f"tcp://127.0.0.1:{free_port}"]  # the third axis' server is not there
+    result = hb.run(load_axes_profile("gantry-3d"), urls, options(tmp_path / "run", 1.0), unit_ids=list(UNITS))
+    assert result.exit_reason == "drive error" and result.summary is None
+    assert result.error == f"Modbus unit 3 at {urls[2]}: cannot connect within 0.5 s (is the drive/server up, the address right?)"
+    assert seen == [[], [], []]
+
+
+@pytest.mark.parametrize(("args", "expected"), [
+    (["--modbus", "{url}"], "--unit-ids = None is invalid; allowed: one Modbus unit id per axis (3, e.g. --unit-ids 1,2,3)"),
+    (["--modbus", "{url}", "--unit-ids", "1,2"], "--unit-ids = [1, 2] is invalid; allowed: 3 unit ids, one per axis"),
+    (["--modbus", "{url}", "--modbus", "{url}"], "--modbus = ["),
+    (["--modbus", "{url}", "--unit-id", "2"], "--unit-id = 'given with a multi-axis profile'"),
+    (["--modbus", "{url}", "--unit-ids", "1,2,3", "--interface", "virtual"], "--interface = 'given with --modbus'"),
+    (["--interface", "virtual", "--channel", "x", "--unit-ids", "1,2,3"], "--unit-ids = [1, 2, 3] is invalid; allowed: "
+                                                                           "a Modbus option"),
+])
+def test_modbus_axes_arguments_are_checked_before_anything_is_touched(
+        tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str], args: list[str], expected: str) -> None:
+    url = "tcp://127.0.0.1:9"  # never reached: refused first
+    code = main(["run", "gantry-3d", *[a.replace("{url}", url) for a in args], "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert code == 2 and expected in err and err.count("\n") == 1, err
+    assert not (tmp_path / "r").exists()
+
+
+def test_one_axis_fault_stops_every_axis_and_reset_fault_clears_it_before_the_next_run(
+        tmp_path: pathlib.Path, modbus_gantry: Callable[..., MultiAxisModbusSim]) -> None:
+    """Unit 2 faults while the three axes cycle: the run ends "drive error" naming unit 2, every axis
+    left without torque; the next run is refused at enabling with the command that clears unit 2;
+    a run with ``reset_fault`` resets unit 2 first (an event in run.json) and runs."""
+    sim = modbus_gantry()
+    profile = load_axes_profile("gantry-3d")
+    faulty = sim.units[1]
+    run_options = options(tmp_path / "faulted", 10.0)
+    ended: list[hb.RunResult] = []
+    runner = threading.Thread(target=lambda: ended.append(hb.run(profile, sim.urls[0], run_options, unit_ids=list(UNITS))))
+    runner.start()
+    deadline = time.monotonic() + CYCLING_WAIT
+    while faulty.bank.cycles < 50 and runner.is_alive() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    with sim.servers[0].lock:
+        faulty.drive.fault(0x5530)  # CiA 301: "EEPROM", any error code
+    runner.join(CYCLING_WAIT)
+    assert not runner.is_alive() and ended, "the run did not end after the fault"
+    result = ended[0]
+    assert result.exit_reason == "drive error"
+    assert result.error is not None and result.error.startswith(f"Modbus unit 2 at {sim.urls[0]}: fault bit set")
+    assert [drive.state for drive in sim.drives] == [State.SWITCH_ON_DISABLED, State.FAULT, State.SWITCH_ON_DISABLED]
+    assert [drive.torque_actual for drive in sim.drives] == [0, 0, 0]
+    refused = hb.run(profile, sim.urls[0], options(tmp_path / "refused", 0.5), unit_ids=list(UNITS))
+    assert refused.exit_reason == "drive error" and refused.summary is None
+    assert refused.error is not None and refused.error.endswith(
+        f"then: haptic-bus fault-reset --modbus {sim.urls[0]} --unit-id 2 (or run with --reset-fault)")
+    again = hb.run(profile, sim.urls[0], options(tmp_path / "reset", 0.5, reset_fault=True), unit_ids=list(UNITS))
+    assert again.exit_reason == "completed", again.error
+    events = json.loads((tmp_path / "reset" / "run.json").read_text())["events"]
+    resets = [event for event in events if event["kind"] == "fault reset"]
+    assert len(resets) == 1 and f"unit 2 at {sim.urls[0]}" in resets[0]["message"]
+    assert resets[0]["data"]["error_code_before"] == 0x5530
+
+
+def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(
+        tmp_path: pathlib.Path, modbus_gantry: Callable[..., MultiAxisModbusSim]) -> None:
+    """Wall-paced: pre-flight measures the three units' cycle (six requests) before anything is
+    enabled, and either refuses a T this machine cannot hold (naming the one it holds, nothing
+    enabled; or, where a stall measured would trip the Modbus watchdog, naming that) or the run keeps
+    its overruns under 1 % (issue 26, "Modbus")."""
+    sim = modbus_gantry()
+    seen = watch_states(sim)
+    result = hb.run(load_axes_profile("gantry-3d"), sim.urls[0], options(tmp_path / "run", 1.0, pacing="wall"),
+                    unit_ids=list(UNITS))
+    document = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert "preflight" in document, sorted(document)
+    if result.exit_reason == "refused":
+        assert result.error is not None and ("holds T >=" in result.error or "watchdog" in result.error), result.error
+        assert all(State.OPERATION_ENABLED not in states for states in seen)
+    else:
+        assert result.exit_reason == "completed", result.error
+        assert result.summary is not None and result.summary.overruns <= 0.01 * result.summary.cycles
+
+
+def test_the_commands_of_the_manual_run_three_units_in_two_processes(tmp_path: pathlib.Path, sim_process: Any) -> None:
+    """``haptic-bus sim --modbus tcp://127.0.0.1:0 --unit-ids 1,2,3 --profile gantry-3d`` and ``haptic-bus
+    run gantry-3d --modbus URL --unit-ids 1,2,3 --virtual-time`` (docs/axes.md): exit 0, every unit cycled."""
+    sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--unit-ids", "1,2,3", "--profile", "gantry-3d")
+    log = sim.wait_for_line("units 1, 2, 3: serving Modbus TCP on", START_WAIT)
+    url = re.search(r"serving Modbus TCP on (tcp://\S+) ", log)
+    assert url is not None, log
+    with reaped(cli_process("run", "gantry-3d", "--modbus", url[1], "--unit-ids", "1,2,3", "--virtual-time",
+                            "--duration", "1", "--out", str(tmp_path / "run"), "-q", "--no-plots")) as run:
+        out, err = run.communicate(timeout=RUN_WAIT)
+    code, log = sim.stop()
+    assert run.returncode == 0, err
+    assert "cycles 500;" in out and "ended: completed" in out and code == 0, log
+    for unit in UNITS:
+        assert f"unit {unit} at {url[1]}: stopped after" in log
+
+
+def test_unit_ids_from_the_profile(tmp_path: pathlib.Path, modbus_gantry: Callable[..., MultiAxisModbusSim]) -> None:
+    """A profile whose ``[[axes]]`` name Modbus units (``unit_id``): the run and the simulated device take them."""
+    text = GANTRY.read_text()
+    for node, unit in ((5, 11), (6, 12), (7, 13)):
+        text = text.replace(f"node_id = {node}\n", f"unit_id = {unit}\n")
+    path = tmp_path / "units.toml"
+    path.write_text(text)
+    assert [axis.unit_id for axis in load_axes_device(path).axes] == [11, 12, 13]
+    sim = modbus_gantry(path, 1, (11, 12, 13))
+    result = hb.run(load_axes_profile(path), sim.urls[0], options(tmp_path / "run", 0.2))
+    assert result.exit_reason == "completed", result.error
+    assert json.loads((tmp_path / "run" / "run.json").read_text())["link"]["unit_ids"] == [11, 12, 13]
