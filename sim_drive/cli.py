@@ -156,24 +156,38 @@ def build_parser() -> argparse.ArgumentParser:
 # spelling of bus options, the version: the command line over the profile (issue 20)
 
 _TRUTH_FLAGS = {"mass": "mass", "friction": "friction", "coulomb": "coulomb_friction", "velocity_noise": "velocity_noise",
-                "noise_seed": "noise_seed"}  # argparse dest -> DeviceParameters field
+                "noise_seed": "noise_seed", "transmission": "transmission",
+                "extra_delay": "extra_delay"}  # argparse dest -> DeviceParameters field
 
 
 def _add_overrides(parser: argparse.ArgumentParser, canopen: argparse._ArgumentGroup) -> None:
-    """``--mass``, ``--friction``, ``--coulomb``, ``--velocity-noise``, ``--noise-seed``, ``--operator``
-    (either server), ``--bus-kwargs`` (CANopen) and ``--version``."""
+    """``--mass``, ``--friction``, ``--coulomb``, ``--velocity-noise``, ``--noise-seed``, ``--transmission``,
+    ``--extra-delay``, ``--operator`` (either server), ``--bus-kwargs`` (CANopen) and ``--version``."""
     truth = parser.add_argument_group("the hidden truth and the operator (either server; over the profile's)")
     truth.add_argument("--mass", type=float, metavar="KG", help="handle mass m, kg")
     truth.add_argument("--friction", type=float, metavar="N_S_PER_M", help="viscous friction b, N s/m")
     truth.add_argument("--coulomb", type=float, metavar="N", help="Coulomb friction, N")
     truth.add_argument("--velocity-noise", type=float, metavar="COUNTS", help="rms of the noise on 0x606C, counts")
     truth.add_argument("--noise-seed", type=int, metavar="N", help="seed of that noise (default: fresh entropy)")
+    truth.add_argument("--transmission", metavar="STIFFNESS:DAMPING:MOTOR_MASS",
+                       help="a handle that is not rigid: a motor-side mass (kg), where the encoder and the torque act, "
+                            "coupled to the handle (the profile's m and b) by a spring (N/m) and a damper (N s/m)")
+    truth.add_argument("--extra-delay", type=_number_or_text, metavar="SAMPLES",
+                       help="apply each target this many samples (fractional allowed) later than the timing says")
     truth.add_argument("--operator", metavar="MODEL",
                        help=f"what pushes the handle: {operator_usage()} (SI units; none: a free handle, nobody "
                             "touches it, as haptic-bus identify needs)")
     canopen.add_argument("--bus-kwargs", type=parse_bus_option, nargs="+", action="append", default=[],
                          metavar="KEY=VALUE", help=BUS_KWARGS_HELP)
     parser.add_argument("--version", action="version", version=f"{_PROG} {__version__}")
+
+
+def _number_or_text(text: str) -> float | str:
+    """``text`` as a float, or as it is: the truth's check then refuses it with its range in one line."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 def _overridden(parameters: DeviceParameters, operator: OperatorModel | None,
@@ -330,6 +344,9 @@ def _axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
     nodes = _node_ids(args.node_ids)
     if args.node_id is not None or args.eds is not None:
         raise ParameterError("--node-ids", args.node_ids, "without --node-id and --eds (one dictionary kind: --od)")
+    if args.transmission is not None:  # the hand in space pushes each axis' handle where its encoder is
+        raise ParameterError("--transmission", args.transmission, "one axis only (--node-id): no hand in space on "
+                             "the far side of a transmission")
     if args.profile and is_axes_profile(args.profile):
         device = load_axes_device(args.profile)
         known = [axis.node_id for axis in device.axes]

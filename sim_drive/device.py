@@ -21,6 +21,13 @@ acted before for the first ``reception_delay`` of the interval and the target pr
 k after it (the target written in answer to sample k-1 counts as received ``reception_delay
 * T`` after SYNC k-1).
 
+Hidden departures (:class:`~sim_drive.parameters.DeviceParameters`, never served to the master):
+``extra_delay`` ``e`` samples puts every target on a delay line, so the force the timing would
+switch to at ``s`` within an interval (0, or ``reception_delay``) switches at ``s + e`` instead:
+``n = floor(s + e)`` intervals later, ``frac(s + e)`` into the interval (0x6077 still reports the
+timing's torque); ``transmission`` moves a :class:`~sim_drive.transmission.TwoMassHandle`, whose
+motor side the encoder reads and the torque pushes.
+
 Torque is applied only in OPERATION ENABLED with mode CST (0x6061 = 10) and halt (controlword
 bit 8) clear; otherwise 0.  State changes take effect per interval: an interval closed by a
 SYNC at which the drive is not enabled carries no torque.  0x6071 saturates at +-0x6072, and
@@ -38,6 +45,8 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
+from collections import deque
 from collections.abc import Callable
 
 from drives.cia402 import (
@@ -61,6 +70,7 @@ from sim_drive.handle import Handle
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.sensor import Sensor, saturate
+from sim_drive.transmission import TwoMassHandle
 
 logger = logging.getLogger(__name__)
 
@@ -131,7 +141,8 @@ class SimulatedDrive:
         self._latched = 0  # per mille: cia402, latched at the last SYNC; reception, acting since the last switch
         self._newton_per_permille = self.parameters.rated_torque_mnm / 1e6 * self.parameters.force_per_torque
         self.sensor = Sensor(self.parameters)
-        self.handle = Handle(self.parameters, operator)
+        self.handle: Handle | TwoMassHandle = Handle(self.parameters, operator)
+        self._line: deque[float] | None = None  # the extra delay's forces (N), oldest first
         self._timing = Timing.CIA402
         self._apply_timing(Timing(timing))  # configures the sensor and the handle for the timing
         self._readers: dict[int, Callable[[], int]] = {
@@ -256,10 +267,36 @@ class SimulatedDrive:
 
     def _configure(self, parameters: DeviceParameters) -> None:
         self.parameters = parameters
+        self._mechanism(parameters)
         self.sensor.configure(parameters, self.handle.velocity)
         switch = parameters.reception_delay if self._timing is Timing.RECEPTION else 0.0
+        if parameters.extra_delay:
+            late = switch + parameters.extra_delay
+            switch = late - math.floor(late)
+            length = math.floor(late) + 2
+            if self._line is None or self._line.maxlen != length:
+                self._line = deque([0.0] * length, maxlen=length)
+        else:
+            self._line = None
         self.handle.configure(parameters, self.sensor.meter, switch)
         self._newton_per_permille = parameters.rated_torque_mnm / 1e6 * parameters.force_per_torque
+
+    def _mechanism(self, parameters: DeviceParameters) -> None:
+        """A rigid handle, or the motor and handle of ``parameters.coupling``: taken over moving as the old one did."""
+        old, coupling = self.handle, parameters.coupling
+        if coupling is None if isinstance(old, Handle) else old.transmission == coupling:
+            return
+        new: Handle | TwoMassHandle
+        if coupling is None:
+            new = Handle(parameters, old.operator)
+            new.velocity, new.position = old.velocity, old.position
+        else:
+            new = TwoMassHandle(coupling, old.operator)
+            new.place(old.velocity, old.position)
+        new.time = old.time
+        new.operator_energy, new.wall_energy = old.operator_energy, old.wall_energy
+        new.friction_energy, new.viscous_energy = old.friction_energy, old.viscous_energy
+        self.handle = new
 
     # ----------------------------------------------------------------- objects
     def read_object(self, index: int) -> int:
@@ -423,6 +460,12 @@ class SimulatedDrive:
 
     def _advance(self, before: float, now: float) -> None:
         """The plant over the closing interval: ``before`` N until the switch, ``now`` N after it."""
+        line = self._line
+        if line is not None:  # the hidden extra delay: this interval's forces come off the line
+            if not self.torque_enabled:
+                line.extend([0.0] * len(line))
+            line.append(now if self.torque_enabled else 0.0)
+            before, now = line[0], line[1]
         interval = self._interval
         if interval is None:
             self.handle.advance(before, now)

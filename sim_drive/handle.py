@@ -38,7 +38,7 @@ import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Generic, Protocol, TypeVar
 
 from haptic_bus.analysis.plant import exp_divided_difference, phi1, phi2, zoh_coefficients
 from sim_drive.operator import NoOperator, OperatorModel
@@ -122,13 +122,17 @@ def stop_time(m: float, b: float, speed: float, deceleration: float) -> float:
     return m * speed / deceleration * (math.log1p(y) / y if y else 1.0)
 
 
-@dataclass(frozen=True, slots=True)
-class Piece:
-    """One piece of the period: its :class:`Step`; ``offset`` (s after the SYNC) if a sub-step
-    starts here (the operator force is evaluated there), else None; ``now``: the motor force is
-    the new target (else the one before the switch); ``restart``: the measurement window starts here."""
+StepT = TypeVar("StepT")
 
-    step: Step
+
+@dataclass(frozen=True, slots=True)
+class Piece(Generic[StepT]):
+    """One piece of the period: its step (a :class:`Step`, or what another plant keeps per piece, e.g. its
+    length in s); ``offset`` (s after the SYNC) if a sub-step starts here (the operator force is
+    evaluated there), else None; ``now``: the motor force is the new target (else the one before the
+    switch); ``restart``: the measurement window starts here."""
+
+    step: StepT
     offset: float | None
     now: bool
     restart: bool
@@ -177,8 +181,8 @@ class Handle:
         self._restart = meter.restart if meter is not None else _nothing
         self._meter_coefficients = meter.coefficients if meter is not None else None
         self._switch, self._window, self._substeps = switch, meter.window if meter is not None else None, substeps
-        self._pieces = _schedule(period, substeps, switch, self._window, self._step)
-        self._stretched: dict[float, list[Piece]] = {}
+        self._pieces = schedule(period, substeps, switch, self._window, self._step)
+        self._stretched: dict[float, list[Piece[Step]]] = {}
         self._offsets = tuple(j * (period / substeps) for j in range(substeps))
         whole = self._step(period / substeps)
         self._coefficients = (whole.a, whole.k1, whole.p_v, whole.p_f, whole.q_vv, whole.q_vf, whole.q_ff)
@@ -226,18 +230,11 @@ class Handle:
         if duration == self._period:
             self.advance(before, now)
             return
-        pieces = self._stretched.get(duration)
-        if pieces is None:
-            if len(self._stretched) > _STRETCHED_KEPT:
-                self._stretched.clear()
-            ratio = self._period / duration
-            substeps = max(1, round(self._substeps / ratio))
-            window = None if self._window is None else min(1.0, self._window * ratio)
-            pieces = self._stretched[duration] = _schedule(duration, substeps, min(1.0, self._switch * ratio), window,
-                                                           self._step)
+        pieces = stretched_schedule(self._stretched, duration, self._period, self._substeps, self._switch, self._window,
+                                    self._step)
         self._run(pieces, duration, before, now)
 
-    def _run(self, pieces: list[Piece], length: float, before: float, now: float) -> None:
+    def _run(self, pieces: list[Piece[Step]], length: float, before: float, now: float) -> None:
         """The pieces of an interval of ``length`` s: ``before`` (N) until the switch, ``now`` after it."""
         operator = self.operator
         t0 = self.time
@@ -304,9 +301,27 @@ class Handle:
         return dx
 
 
-def _schedule(
-    period: float, substeps: int, switch: float, window: float | None, step: Callable[[float], Step]
-) -> list[Piece]:
+def stretched_schedule(
+    kept: dict[float, list[Piece[StepT]]], duration: float, period: float, substeps: int, switch: float,
+    window: float | None, step: Callable[[float], StepT]
+) -> list[Piece[StepT]]:
+    """The pieces of an interval of ``duration`` s standing for a period of ``period`` s (a late or
+    early SYNC): sub-steps as long as the period's, the ``switch`` as long after the start (at the
+    end at the latest), the window closing with the interval; kept in ``kept`` (bounded)."""
+    pieces = kept.get(duration)
+    if pieces is None:
+        if len(kept) > _STRETCHED_KEPT:
+            kept.clear()
+        ratio = period / duration
+        window = None if window is None else min(1.0, window * ratio)
+        pieces = kept[duration] = schedule(duration, max(1, round(substeps / ratio)), min(1.0, switch * ratio), window,
+                                           step)
+    return pieces
+
+
+def schedule(
+    period: float, substeps: int, switch: float, window: float | None, step: Callable[[float], StepT]
+) -> list[Piece[StepT]]:
     """The period's pieces between its events (fractions of ``period``): sub-step starts ``j/substeps``,
     the force ``switch`` and the window's start ``1 - window``.  A piece's length is taken from the
     nearer end of the period, and the window's last stretch is ``window`` itself, so a window of
@@ -321,7 +336,7 @@ def _schedule(
         left[restart] = window
     times = sorted(events)
     left = {t: 1.0 - t for t in times} | left
-    steps: dict[float, Step] = {}
+    steps: dict[float, StepT] = {}
     pieces = []
     for start, stop in itertools.pairwise(times):
         length = (stop - start if start < 0.5 else left[start] - left[stop]) * period

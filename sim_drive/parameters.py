@@ -19,12 +19,21 @@ field                    default       meaning
 ``coulomb_friction``     0 N           Coulomb friction force ``Fc`` opposing motion (the drive's truth)
 ``velocity_noise``       0 counts      rms of zero-mean Gaussian noise on 0x606C (the drive's truth)
 ``noise_seed``           None          seed of the noise generator (None: fresh entropy)
+``transmission``         None          a motor-side mass behind a spring and damper (the drive's truth)
+``extra_delay``          0 samples     the drive applies each target this much later than its timing says
 =======================  ============  ==============================================
 
 So one per mille of 0x6071 is 0.2 N m / 1000 * 50 N/(N m) = 10 mN at the handle, and
-0x6072 = 3000 allows +-30 N.  ``coulomb_friction``, ``velocity_noise`` and ``noise_seed`` are
-what the simulated hardware *is*; the controller is never told them (its profile may say
-otherwise, and the gate judges what the controller believes).
+0x6072 = 3000 allows +-30 N.  ``coulomb_friction``, ``velocity_noise``, ``noise_seed``,
+``transmission`` and ``extra_delay`` are what the simulated hardware *is*; the controller is
+never told them (no SDO object or Modbus register serves them; its profile may say otherwise,
+and the gate judges what the controller believes).
+
+``transmission`` (:class:`~haptic_bus.analysis.transmission.Transmission`, or its ``STIFFNESS:DAMPING:MOTOR_MASS``
+spelling): the encoder and the torque act on a motor-side mass coupled to the handle (``mass``,
+``friction``) by a spring and a damper; not with Coulomb friction or a ``lowpass`` velocity.
+``extra_delay`` (samples, real, in ``[0, 100]``): every target acts that much later than the
+timing says, the torque switching at the delayed instant within the period.
 """
 
 from __future__ import annotations
@@ -36,6 +45,13 @@ from dataclasses import dataclass
 from drives.base import DriveScaling
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE
 from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE
+from haptic_bus.analysis.transmission import (
+    DAMPING_RANGE,
+    MOTOR_MASS_RANGE,
+    SPELLING,
+    STIFFNESS_RANGE,
+    Transmission,
+)
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import COULOMB_RANGE, NOISE_RANGE, NOISE_SEED_RANGE, SCALE_RANGE
@@ -43,6 +59,7 @@ from haptic_bus.validation import real_in_range, whole_in_range
 
 SUBSTEP_RANGE = (1, 100_000)
 DEFAULT_RECEPTION_DELAY = 0.25  # samples
+EXTRA_DELAY_RANGE = (0.0, 100.0)  # samples
 
 
 class Timing(enum.Enum):
@@ -80,6 +97,11 @@ class Timing(enum.Enum):
         return 1.0 if self is Timing.CIA402 else 0.0
 
 
+_TRANSMISSION_ALLOWED = (f"{SPELLING}, stiffness in (0, {STIFFNESS_RANGE[1]:g}] N/m, damping in "
+                         f"[0, {DAMPING_RANGE[1]:g}] N s/m, motor mass in [{MOTOR_MASS_RANGE[0]:g}, "
+                         f"{MOTOR_MASS_RANGE[1]:g}] kg")
+
+
 @dataclass(frozen=True)
 class DeviceParameters:
     """The simulated drive's plant, scaling, measurement and truth, in SI units (see the module table)."""
@@ -98,6 +120,8 @@ class DeviceParameters:
     coulomb_friction: float = 0.0
     velocity_noise: float = 0.0
     noise_seed: int | None = None
+    transmission: Transmission | str | None = None
+    extra_delay: float = 0.0
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -132,6 +156,21 @@ class DeviceParameters:
         set_(self, "velocity_noise", noise)
         if self.noise_seed is not None:
             set_(self, "noise_seed", whole_in_range("noise_seed", self.noise_seed, *NOISE_SEED_RANGE, context=ctx))
+        set_(self, "extra_delay", real_in_range("extra_delay", self.extra_delay, *EXTRA_DELAY_RANGE, unit="samples",
+                                                context=ctx))
+        if isinstance(self.transmission, str):
+            try:
+                set_(self, "transmission", Transmission.parse(self.transmission))
+            except ParameterError:  # one line with every range, whichever part is wrong
+                raise ParameterError("transmission", self.transmission, _TRANSMISSION_ALLOWED, ctx) from None
+        if self.coupling is not None and (coulomb or velocity.kind == "lowpass"):
+            raise ParameterError("transmission", self.coupling.describe(), "no transmission with Coulomb friction or "
+                                 "a lowpass velocity (not modelled)", ctx)
+
+    @property
+    def coupling(self) -> Transmission | None:
+        """The transmission (parsed), or None for a rigid handle."""
+        return self.transmission if isinstance(self.transmission, Transmission) else None
 
     @property
     def rated_torque_mnm(self) -> int:

@@ -24,6 +24,7 @@ import random
 from haptic_bus.analysis.plant import exp_divided_difference
 from sim_drive.handle import Handle, Meter
 from sim_drive.parameters import DeviceParameters
+from sim_drive.transmission import TwoMassHandle
 
 INT32_RANGE = (-(1 << 31), (1 << 31) - 1)
 _LOW, _HIGH = INT32_RANGE
@@ -141,8 +142,8 @@ class Sensor:
             self._random = random.Random(self._seed)
         self._gauss = self._random.gauss
 
-    def sample(self, handle: Handle) -> None:
-        """Quantise the velocity estimate (plus noise) and the handle's position now."""
+    def sample(self, handle: Handle | TwoMassHandle) -> None:
+        """Quantise the velocity estimate (plus noise) and the encoder's position now (a transmission's motor side)."""
         meter = self.meter
         counts = (handle.velocity if meter is None else meter.value()) * self._per_velocity
         if self._noise:

@@ -12,6 +12,7 @@
   the run installs, so pytest keeps its own Ctrl-C.
 - :func:`profile_variant` writes a shipped profile with literal edits and extra tables into a
   test's folder: the run and the simulated drive read the same file.
+- :func:`enabled_drive` is the simulated drive alone, no bus, enabled in CST.
 - :func:`late_clock` is a test double of the virtual clock that reports chosen cycles as late
   (the supervisor's input), for a deterministic lateness in a lock-step run.
 
@@ -35,12 +36,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from drives.cia402 import State
+from drives.cia402 import Command, OperationMode, State
 from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import resolve_profile
 from haptic_bus.control.clock import VirtualClock
 from sim_drive.device import SimulatedDrive
-from sim_drive.parameters import Timing
+from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import load_profile as load_drive_profile
 
 NODE = 5  # the simulated drive's CANopen node id
@@ -140,6 +141,15 @@ def run_cli(capsys: pytest.CaptureFixture[str], *args: str) -> CliResult:
             signal.signal(sig, handler)
     captured = capsys.readouterr()
     return CliResult(code, captured.out, captured.err)
+
+
+def enabled_drive(parameters: DeviceParameters, timing: Timing = Timing.CIA402) -> SimulatedDrive:
+    """The simulated drive alone (no bus) of ``parameters``, in CST and OPERATION ENABLED."""
+    drive = SimulatedDrive(parameters, timing)
+    drive.write_object(0x6060, int(OperationMode.CYCLIC_SYNCHRONOUS_TORQUE))
+    for command in (Command.SHUTDOWN, Command.SWITCH_ON, Command.ENABLE_OPERATION):
+        drive.write_controlword(command.word)
+    return drive
 
 
 def profile_variant(folder: pathlib.Path, base: str, name: str, edits: Mapping[str, str] | None = None,

@@ -29,7 +29,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("haptic_bus.analysis",),
     ("haptic_bus.profile",),
     ("haptic_bus.control", "haptic_bus.identify"),
-    ("haptic_bus.node",),
+    ("haptic_bus.node", "haptic_bus.validate"),
     ("haptic_bus.app",),
     ("haptic_bus.bench", "haptic_bus.testing"),
 )
@@ -140,7 +140,7 @@ def test_haptic_bus_reaches_the_simulator_only_through_the_rig():
     assert not offenders, _report(offenders, "haptic_bus.app.rig is the one place haptic_bus reaches sim_drive")
 
 
-@pytest.mark.parametrize("modules", ["haptic_bus.analysis", "haptic_bus.identify", *BASE])
+@pytest.mark.parametrize("modules", ["haptic_bus.analysis", "haptic_bus.identify", "haptic_bus.validate", *BASE])
 def test_the_pure_layers_import_no_drive_and_no_bus_code(modules):
     allowed = ("drives.errors",) if modules == "haptic_bus.errors" else ()  # it re-exports drives' errors
     offenders = _offenders(modules, (*BUS_LIBRARIES, "drives", "sim_drive"), allowed)

@@ -31,7 +31,7 @@ import itertools
 import math
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -41,6 +41,26 @@ from haptic_bus.analysis.energy import van_loan
 from haptic_bus.analysis.sampled_loop import continuous_model
 
 _UNIT_ROUNDOFF = 2.0**-53
+
+
+class PeriodMachine(Protocol):
+    """A loop and its input over one period: ``xi_{k+1} = matrix xi_k``, the operator's work per piece
+    as quadratic forms in ``xi_k`` (J), and the state it starts from (:class:`CoupledMachine`, and
+    :class:`~haptic_bus.analysis.energy.LoopMachine` of one handle, rigid or two-mass)."""
+
+    @property
+    def matrix(self) -> np.ndarray: ...
+
+    @property
+    def size(self) -> int: ...
+
+    @property
+    def piece_work(self) -> list[np.ndarray]: ...
+
+    @property
+    def period_work(self) -> np.ndarray: ...
+
+    def initial_state(self) -> np.ndarray: ...
 
 
 class CoupledMachine:
@@ -148,7 +168,7 @@ class EnergyRuns:
     roundoff: np.ndarray
 
 
-def simulate_energies(machines: list[CoupledMachine], n_samples: int) -> EnergyRuns:
+def simulate_energies(machines: list[PeriodMachine], n_samples: int) -> EnergyRuns:
     """Run every machine from rest for ``n_samples`` periods at once (batched); the operator's energy.
 
     The round-off bound is ``(n + 64) u sum|work|`` per run (recursive summation, DESIGN 3.4's
@@ -181,7 +201,7 @@ def simulate_energies(machines: list[CoupledMachine], n_samples: int) -> EnergyR
     return EnergyRuns(energy, lowest, (n_samples + 64) * _UNIT_ROUNDOFF * magnitude)
 
 
-def energy_after(machine: CoupledMachine, doublings: int) -> tuple[np.ndarray, np.ndarray]:
+def energy_after(machine: PeriodMachine, doublings: int) -> tuple[np.ndarray, np.ndarray]:
     """``(E, bound)`` in J from rest after ``2^j`` periods, ``j = 0 .. doublings`` (NaN after an overflow).
 
     ``E(n) = xi_0^T S_n xi_0`` with ``S_n = sum_{k<n} M^{kT} Q M^k``, by ``S_2n = S_n + M^{nT} S_n M^n``

@@ -42,6 +42,7 @@ from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.poles import spectral_radius
 from haptic_bus.analysis.sampled_loop import (
     ClosedLoopLayout,
+    ContinuousModel,
     PeriodMap,
     continuous_model,
     event_times,
@@ -211,11 +212,16 @@ class _Piece:
     now: bool
 
 
-class _Machine:
-    """The loop driven by ``tones``: closed-loop matrix over ``xi = [s, oscillator, controller]`` and its pieces."""
+class LoopMachine:
+    """The loop driven by ``tones``: closed-loop matrix over ``xi = [s, oscillator, controller]`` and its pieces.
 
-    def __init__(self, loop: WallLoop, tones: Tones, substeps: int) -> None:
-        model = continuous_model(loop)
+    ``model``: the plant and measurement in ``loop``'s scaled units (None: ``loop``'s rigid handle),
+    with the operator's force entering at its ``operator_column`` and its power taken on the state
+    ``handle`` (a two-mass device: :mod:`haptic_bus.analysis.two_mass`).
+    """
+
+    def __init__(self, loop: WallLoop, tones: Tones, substeps: int, model: ContinuousModel | None = None) -> None:
+        model = continuous_model(loop) if model is None else model
         self.loop, self.tones = loop, tones
         T, m = loop.T, loop.m
         ns, nt = model.c.size, len(tones.omegas)
@@ -228,9 +234,9 @@ class _Machine:
         for i, (omega, amplitude) in enumerate(zip(tones.omegas, tones.amplitudes)):
             cos_i, sin_i = ns + 2 * i, ns + 2 * i + 1
             F[cos_i, sin_i], F[sin_i, cos_i] = -omega * T, omega * T
-            F[:ns, sin_i] = model.b * amplitude * T / m  # the operator's force, scaled
-            Q[0, sin_i] = Q[sin_i, 0] = 0.5 * T * amplitude  # w v T per unit scaled time, J
-        self.F, self.Q, self.nsg, self.ns = F, Q, nsg, ns
+            F[:ns, sin_i] = model.operator_column * amplitude * T / m  # the operator's force, scaled
+            Q[model.handle, sin_i] = Q[sin_i, model.handle] = 0.5 * T * amplitude  # w v T per unit scaled time, J
+        self.F, self.Q, self.nsg, self.ns, self.handle = F, Q, nsg, ns, model.handle
         self.reset = model.reset
         self.delta = loop.fractional_delay
         times = sorted(set(event_times(loop)) | {j / substeps for j in range(substeps)})
@@ -294,6 +300,21 @@ class _Machine:
         """Operator work (J) over each piece of each period: shape ``(len(states), pieces)``."""
         return np.stack([np.einsum("ki,ij,kj->k", states, p.work, states) for p in self.pieces], axis=1)
 
+    @property
+    def size(self) -> int:
+        """Length of ``xi``."""
+        return self.layout.size
+
+    @property
+    def piece_work(self) -> list[np.ndarray]:
+        """Per piece of a period the matrix ``Q_p`` with the operator's work over it ``xi_k^T Q_p xi_k`` (J)."""
+        return [p.work for p in self.pieces]
+
+    @property
+    def period_work(self) -> np.ndarray:
+        """``Q`` with the operator's work over one whole period ``xi_k^T Q xi_k`` (J)."""
+        return sum(self.piece_work[1:], self.piece_work[0])
+
 
 # --------------------------------------------------------------------------- simulation
 
@@ -316,7 +337,7 @@ class EnergyRecord:
     operator_force: np.ndarray
     wall_force: np.ndarray
     work_scale: float
-    _machine: _Machine
+    _machine: LoopMachine
     _states: np.ndarray
 
     @property
@@ -373,7 +394,7 @@ def simulate(loop: WallLoop, force: OperatorForce, n_samples: int, substeps: int
     """
     n_samples, substeps = _check_run(n_samples, substeps)
     tones = force.tones()
-    machine = _Machine(loop, tones, substeps)
+    machine = LoopMachine(loop, tones, substeps)
     states = machine.run(machine.initial_state(), n_samples)
     work = machine.work(states[:-1])  # (n, pieces)
     starts = np.array([p.start for p in machine.pieces])
@@ -381,8 +402,8 @@ def simulate(loop: WallLoop, force: OperatorForce, n_samples: int, substeps: int
     per_step = work @ (step[:, None] == np.arange(substeps)[None, :])  # (n, substeps)
     energy = np.concatenate([[0.0], np.cumsum(per_step.ravel())])
     recorded = [p for p in machine.pieces if any(abs(p.start - j / substeps) < 1e-12 for j in range(substeps))]
-    velocity = np.stack([states[:-1] @ p.start_map[0] for p in recorded], axis=1).ravel()
-    velocity = np.append(velocity, states[-1, 0])
+    velocity = np.stack([states[:-1] @ p.start_map[machine.handle] for p in recorded], axis=1).ravel()
+    velocity = np.append(velocity, states[-1, machine.handle])
     t = np.arange(n_samples * substeps + 1) * (loop.T / substeps)
     wall = states[:-1] @ machine.layout.force_now() * (loop.m / loop.T)
     return EnergyRecord(loop, substeps, t, energy, velocity, tones(t), wall, float(np.abs(work).sum()), machine, states)
@@ -392,7 +413,7 @@ def wall_forces(loop: WallLoop, force: OperatorForce, n_samples: int) -> tuple[n
     """``(u_k, u_{k-d})`` in N for ``k = 0 .. n_samples - 1``: the force the controller computes at
     ``kT`` and the one the drive holds from ``kT + delta T``, the loop starting from rest."""
     n_samples = whole_in_range("n_samples", n_samples, 1, MAX_SAMPLES)
-    machine = _Machine(loop, force.tones(), 1)
+    machine = LoopMachine(loop, force.tones(), 1)
     states = machine.run(machine.initial_state(), n_samples - 1)
     unit = loop.m / loop.T
     return states @ machine.layout.u_row * unit, states @ machine.layout.force_now() * unit
@@ -401,22 +422,24 @@ def wall_forces(loop: WallLoop, force: OperatorForce, n_samples: int) -> tuple[n
 # --------------------------------------------------------------------------- mean power
 
 
-def periodic_mean_power(loop: WallLoop, force: OperatorForce, samples: int) -> float:
+def periodic_mean_power(loop: WallLoop, force: OperatorForce, samples: int, model: ContinuousModel | None = None
+                        ) -> float:
     """Mean operator power (W) in the steady state of a force that repeats after ``samples`` periods.
 
     Every tone must satisfy ``omega T samples = 2 pi (whole number)``.  The state ``xi`` that
     repeats after ``samples`` periods is solved for (``(I - M^q) chi = M^q_{chi g} g``), then the
-    work over those periods is summed exactly.  Needs a stable loop.
+    work over those periods is summed exactly.  Needs a stable loop (``model``, another plant in
+    ``loop``'s scaled units as :class:`LoopMachine` takes it: the caller has judged its stability).
     """
     samples = whole_in_range("samples", samples, 1, MAX_PERIOD_SAMPLES)
-    if not spectral_radius(loop) < 1.0:
+    if model is None and not spectral_radius(loop) < 1.0:
         raise ParameterError("loop", loop, "a stable loop (closed-loop spectral radius < 1) for a steady state")
     tones = force.tones()
     for omega in tones.omegas:
         turns = omega * loop.T * samples / (2 * math.pi)
         if abs(turns - round(turns)) > 1e-9 * max(1.0, turns):
             raise ParameterError("omega", omega, f"a whole number of turns in {samples} periods of {loop.T:g} s")
-    machine = _Machine(loop, tones, 1)
+    machine = LoopMachine(loop, tones, 1, model)
     power = np.linalg.matrix_power(machine.matrix, samples)
     xi0 = machine.initial_state()
     osc = np.zeros(xi0.size, dtype=bool)

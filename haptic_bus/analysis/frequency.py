@@ -42,7 +42,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from haptic_bus.analysis.alias_sum import alias_function
+from haptic_bus.analysis.alias_sum import AliasDevice as AliasKey
+from haptic_bus.analysis.alias_sum import alias_function, device_alias_function
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.sampled_loop import period_map, pulse_transfer, window_fraction
 from haptic_bus.analysis.theta_complex import ThetaComplex
@@ -126,8 +127,9 @@ def measurement_terms(loop: WallLoop, theta: np.ndarray) -> ThetaComplex:
     return delay_rotation(theta, half) * ThetaComplex.exact(theta, envelope, 0.0)
 
 
-def loop_terms(loop: WallLoop, theta: ArrayLike) -> LoopTerms:
-    """:class:`LoopTerms` of ``loop`` (its wall ignored) at ``theta`` (rad, in ``(0, pi]``)."""
+def loop_terms(loop: WallLoop, theta: ArrayLike, aliases: AliasKey | None = None) -> LoopTerms:
+    """:class:`LoopTerms` of ``loop`` (its wall ignored) at ``theta`` (rad, in ``(0, pi]``); ``aliases``:
+    another plant whose alias function ``g`` goes into ``P`` (None: ``loop``'s rigid handle)."""
     theta = np.atleast_1d(np.asarray(theta, dtype=float))
     circle = half_angle(theta)
     sinc = circle.sinc()
@@ -136,7 +138,7 @@ def loop_terms(loop: WallLoop, theta: ArrayLike) -> LoopTerms:
         whole = ThetaComplex.exact(theta, circle.c * circle.c - circle.s * circle.s, -sinc)
     else:
         whole = delay_rotation(theta, loop.whole_delay)
-    P = whole * alias_function(loop, theta, circle)
+    P = whole * (alias_function(loop, theta, circle) if aliases is None else device_alias_function(aliases, theta, circle))
     rotation = whole if loop.delay == loop.whole_delay else delay_rotation(theta, loop.delay)
     E = rotation if loop.velocity.kind == "point" else rotation * measurement_terms(loop, theta)  # M = 1 exactly
     return LoopTerms(theta, loop.c, loop.m / loop.T, hold, P, E)

@@ -36,12 +36,14 @@ import functools
 import itertools
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.plant import exp_divided_difference, phi1, phi2
 from haptic_bus.analysis.trig import cospi, sincpi, sinpi
+from haptic_bus.analysis.velocity import VelocityModel
 
 
 @dataclass(frozen=True)
@@ -57,23 +59,63 @@ class ContinuousModel:
     b: np.ndarray
     c: np.ndarray
     reset: tuple[int, float] | None
+    operator: np.ndarray | None = None
+    handle: int = 0
+
+    @property
+    def operator_column(self) -> np.ndarray:
+        """Where the operator's scaled force enters: ``operator``, or ``b`` (a rigid handle: where the wall's does)."""
+        return self.b if self.operator is None else self.operator
 
 
 def continuous_model(loop: WallLoop) -> ContinuousModel:
-    """The scaled continuous model of ``loop``'s plant and velocity measurement."""
-    c = loop.c
+    """The scaled continuous model of ``loop``'s rigid plant ``dv/dt = -c v + f`` and velocity measurement."""
+    return measured_model(np.array([[-loop.c]]), np.array([1.0]), 0, loop)
+
+
+def measured_model(A: np.ndarray, b: np.ndarray, sensed: int, loop: WallLoop,
+                   operator: np.ndarray | None = None, handle: int = 0) -> ContinuousModel:
+    """The scaled plant ``ds/dt = A s + b f`` (``n`` states) with ``loop``'s velocity model measuring state ``sensed``.
+
+    ``point``: the plant alone, ``y = s[sensed]``; ``lowpass``/``average``/``window``: one more
+    state, the filter ``nu`` or the window's integral ``p`` of ``s[sensed]`` (module docstring).
+    ``operator``: the column of the operator's scaled force (None: ``b``), ``handle``: the state
+    the operator's hand moves with (the operator's power is its force times that velocity).
+    """
+    n = b.size
     kind = loop.velocity.kind
     if kind == "point":
-        return ContinuousModel(np.array([[-c]]), np.array([1.0]), np.array([1.0]), None)
+        c = np.zeros(n)
+        c[sensed] = 1.0
+        return ContinuousModel(A, b, c, None, operator, handle)
+    big = np.zeros((n + 1, n + 1))
+    big[:n, :n] = A
+    c = np.zeros(n + 1)
     if kind == "lowpass":
         rate = loop.T / loop.velocity.time
-        return ContinuousModel(np.array([[-c, 0.0], [rate, -rate]]), np.array([1.0, 0.0]), np.array([0.0, 1.0]), None)
-    width = window_fraction(loop)
-    A = np.array([[-c, 0.0], [1.0, 0.0]])
-    return ContinuousModel(A, np.array([1.0, 0.0]), np.array([0.0, 1.0 / width]), (1, 1.0 - width))
+        big[n, sensed], big[n, n] = rate, -rate
+        c[n] = 1.0
+        reset = None
+    else:
+        width = window_fraction(loop)
+        big[n, sensed] = 1.0
+        c[n] = 1.0 / width
+        reset = (n, 1.0 - width)
+    pad = None if operator is None else np.append(operator, 0.0)
+    return ContinuousModel(big, np.append(b, 0.0), c, reset, pad, handle)
 
 
-def measurement_response(loop: WallLoop, theta: np.ndarray) -> np.ndarray:
+class Measured(Protocol):
+    """What a velocity model's response needs of a loop: its period ``T`` (s) and ``velocity`` model."""
+
+    @property
+    def T(self) -> float: ...
+
+    @property
+    def velocity(self) -> VelocityModel: ...
+
+
+def measurement_response(loop: Measured, theta: np.ndarray) -> np.ndarray:
     """``M(j theta)``: the velocity model's continuous response at (complex) ``theta = omega T``.
 
     ``1`` (point), ``(1 - e^{-j theta w})/(j theta w)`` (window ``w = TW/T``), ``1/(1 + j theta TAU/T)`` (lowpass).
@@ -92,7 +134,7 @@ def measurement_response(loop: WallLoop, theta: np.ndarray) -> np.ndarray:
     return np.where(jx == 0, 1.0, -np.expm1(-safe) / safe)
 
 
-def window_fraction(loop: WallLoop) -> float:
+def window_fraction(loop: Measured) -> float:
     """``TW / T`` of a differencing model (1 for ``average``); ValueError for the others."""
     window = loop.velocity.window(loop.T)
     if window is None:

@@ -15,7 +15,7 @@ import os
 import pathlib
 import sys
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from haptic_bus.app.arguments import (
     EXIT_ASSUMPTION,
@@ -28,26 +28,27 @@ from haptic_bus.app.arguments import (
     add_command,
     add_verbosity,
     bus_arguments,
-    modbus_url,
     node_id,
     number,
     refuse_can_options_with_modbus,
     seconds,
     timeout,
-    unit_id,
-    unit_ids,
 )
-from haptic_bus.app.drive_address import DriveAddress, drive_address
 from haptic_bus.app.fault_cli import add_fault_reset_parser
 from haptic_bus.app.identify_cli import add_identify_parser
+from haptic_bus.app.run_arguments import (
+    add_link_arguments,
+    add_output_arguments,
+    add_pacing_arguments,
+    one_axis_link,
+    scheduling,
+)
 from haptic_bus.app.scan_cli import add_scan_parser
 from haptic_bus.app.sdo_cli import add_sdo_parser
 from haptic_bus.app.status_cli import add_status_parser
+from haptic_bus.app.validate_cli import add_validate_parser
 from haptic_bus.console import StderrHandler
 from haptic_bus.validation import folder_path, writable_file, writable_folder
-
-if TYPE_CHECKING:
-    from haptic_bus.app.realtime import RealtimeSettings
 
 _NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
 
@@ -148,33 +149,6 @@ def _demo(args: argparse.Namespace) -> int:
     return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(reason, EXIT_NO)
 
 
-def _validate_run(args: argparse.Namespace) -> DriveAddress:
-    """The drive the run talks to; conflicting or ignored options refused before anything is touched."""
-    from haptic_bus.errors import ParameterError
-
-    if args.unit_ids is not None:
-        raise ParameterError("--unit-ids", args.unit_ids, "--unit-id for a one-axis profile (--unit-ids: several axes)",
-                             "run")
-    if args.modbus and len(args.modbus) > 1:
-        raise ParameterError("--modbus", args.modbus, "one URL for a one-axis profile (one per axis: several axes)", "run")
-    if args.modbus:
-        refuse_can_options_with_modbus(args, "run", ("node_id", "controller_node_id"))
-    address = drive_address(argparse.Namespace(**{**vars(args), "modbus": args.modbus[0] if args.modbus else None}))
-    if args.controller_node_id is not None and args.controller_node_id == args.node_id:
-        raise ParameterError("--controller-node-id", args.controller_node_id,
-                             f"a node id other than the drive's ({args.node_id})")
-    return address
-
-
-def _scheduling(realtime: bool | None) -> RealtimeSettings:
-    """``--realtime`` (True), ``--no-realtime`` (False) or neither (None) as what the control thread asks of the OS."""
-    from haptic_bus.app.realtime import RealtimeSettings
-
-    if realtime is None:
-        return RealtimeSettings()
-    return RealtimeSettings(insist=True) if realtime else RealtimeSettings.unprivileged()
-
-
 def _run(args: argparse.Namespace) -> int:
     from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
     from haptic_bus.app.drive_address import DEFAULT_UNIT_ID
@@ -190,14 +164,14 @@ def _run(args: argparse.Namespace) -> int:
         bus, node_id, unit_id = (args.modbus or bus_arguments(args)), None, DEFAULT_UNIT_ID
         unit_ids = args.unit_ids
     else:
-        address = _validate_run(args)
+        address = one_axis_link(args, "run")
         bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, DEFAULT_UNIT_ID)
         node_id = None if address.url is not None else address.checked_node_id
     stop = StopRequest()
     out_dir = None if args.out is None else folder_path("--out", args.out, context="run")  # created once the bus is known
     options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
-                         scheduling=_scheduling(args.realtime),
+                         scheduling=scheduling(args.realtime),
                          reset_fault=args.reset_fault, bus_log=not args.no_bus_log, plots=not args.no_plots)
     stop.install()
     result = run(profile, bus, options, node_id=node_id, unit_id=unit_id, unit_ids=unit_ids,
@@ -328,32 +302,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = command("run", "run a profile's controller against a drive on a CAN bus or over Modbus", _run)
     run.add_argument("profile", help="profile name or TOML path")
-    add_bus_arguments(run)
-    run.add_argument("--node-id", type=node_id, help="the drive's CANopen node id 1..127")
-    run.add_argument("--controller-node-id", type=node_id,
-                     help="this controller's CANopen node id: its heartbeat, which the drive watches, and gated wall "
-                          "uploads (default 127)")
-    run.add_argument("--modbus", type=modbus_url, metavar="URL", action="append",
-                     help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0; a multi-axis profile: once for "
-                          "every axis' unit (one server), or once per axis (a server each)")
-    run.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1; only with --modbus)")
-    run.add_argument("--unit-ids", type=unit_ids, metavar="IDS",
-                     help="a multi-axis profile over Modbus: each axis' unit id, in axis order (e.g. 1,2,3; default: the "
-                          "profile's [[axes]] unit_id, else unit 1 on each of one --modbus per axis)")
+    add_link_arguments(run)
     run.add_argument("--duration", type=seconds, default=10.0, help="seconds to run")
-    pacing = run.add_mutually_exclusive_group()
-    pacing.add_argument("--virtual-time", action="store_true",
-                        help="lock-step with a simulated drive, no wall-clock pacing (default: each cycle at its "
-                             "deadline on the wall clock)")
-    pacing.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=None,
-                        help="real-time scheduling of the control thread (SCHED_FIFO priority 80, one CPU, memory "
-                             "locked) is asked for by default where the OS grants it; --realtime insists (what it "
-                             "cannot get is a warning), --no-realtime asks for none of it; kept in run.json")
+    add_pacing_arguments(run)
     run.add_argument("--start-in-contact", choices=("refuse", "ramp"),
                      help="a start inside an object: refuse, or ramp the force in (default: the profile's [start])")
-    run.add_argument("--out", help="folder for record.csv, run.json, bus.asc and plots (default: runs/<UTC time>-<profile>)")
-    run.add_argument("--no-bus-log", action="store_true",
-                     help="do not log the CAN bus's frames into bus.asc (on by default; Modbus runs have none)")
+    add_output_arguments(run)
     _add_no_plots(run)
     run.add_argument("--reset-fault", action="store_true",
                      help="before commissioning, reset a drive found in FAULT (as haptic-bus fault-reset does; logged "
@@ -375,6 +329,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_profiles_parser(sub)
 
     add_identify_parser(sub)
+    add_validate_parser(sub)
     add_scan_parser(sub)
     add_status_parser(sub)
     add_fault_reset_parser(sub)

@@ -101,7 +101,7 @@ class RunResult:
 
 def run(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | str | Sequence[str], options: RunOptions,
         *, node_id: int | None = None, unit_id: int = DEFAULT_UNIT_ID, unit_ids: Sequence[int] | None = None,
-        controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID) -> RunResult:
+        controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID, kind: RunKind[Any, Any, Any] | None = None) -> RunResult:
     """Run ``profile`` -- one axis, or several (``[[axes]]``) -- and return how it ended (:class:`RunResult`).
 
     ``bus``: python-can keyword arguments (``{"interface": ..., "channel": ...}``; python-can's
@@ -114,10 +114,13 @@ def run(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | st
     of a URL per axis), every unit polled in one cycle.  On CANopen the controller is also node
     ``controller_node_id``, serving gated wall uploads over SDO on the drives' own network and bus
     handle, sending the heartbeat the drives watch, and ``bus.asc`` logs every frame of that
-    handle.  ParameterError (nothing touched) for a combination that names no drive.
+    handle.  ParameterError (nothing touched) for a combination that names no drive.  ``kind``:
+    what the run renders and how (default :func:`~haptic_bus.app.run_kinds.run_kind` of ``profile``:
+    its own scene; ``haptic-bus validate`` passes its probe,
+    :class:`~haptic_bus.app.validate_run.ValidateRun`).
     """
     rig = _rig(profile, bus, options, node_id, unit_id, unit_ids, controller_node_id)
-    return _session(run_kind(profile), rig, options)
+    return _session(kind or run_kind(profile), rig, options)
 
 
 def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: int, options: RunOptions,

@@ -47,13 +47,14 @@ TARGET_SHARE = 0.5  # of the travel: the excursion the amplitude aims at
 GUARD_SHARE = 0.8  # of the travel: halve the amplitude at once
 
 
-def multisine(samples: int, low: int, high: int) -> np.ndarray:
+def multisine(samples: int, low: int, high: int, tilt: float = 0.5) -> np.ndarray:
     """One period (``samples`` values, peak 1) of harmonics ``low..high`` of ``1/samples``, amplitude
-    ``1/sqrt(k)`` (equal power per octave), Schroeder phases; ValueError for an empty band."""
+    ``k^-tilt`` (0.5: equal power per octave; 0: a flat spectrum), Schroeder phases; ValueError for
+    an empty band."""
     if not 0 < low <= high < samples // 2:
         raise ValueError(f"harmonics {low}..{high} are no band of a {samples}-sample period")
     k = np.arange(samples // 2 + 1)
-    amplitude = np.where((k >= low) & (k <= high), 1.0 / np.sqrt(np.maximum(k, 1)), 0.0)
+    amplitude = np.where((k >= low) & (k <= high), np.maximum(k, 1) ** -float(tilt), 0.0)
     power = amplitude**2 / np.sum(amplitude**2)
     before = np.cumsum(power) - power  # sum_{l<k} p_l
     moment = np.cumsum(k * power) - k * power  # sum_{l<k} l p_l

@@ -1,0 +1,83 @@
+"""The command-line options of a run, shared by ``haptic-bus run`` and ``haptic-bus validate``.
+
+:func:`add_link_arguments` names the drive(s) (the bus options and ``--node-id``, or ``--modbus``
+and ``--unit-id``/``--unit-ids``) and this controller's node (``--controller-node-id``);
+:func:`add_pacing_arguments` how the cycles are paced (``--virtual-time``, or real time with
+``--realtime``/``--no-realtime``, :func:`scheduling`); :func:`add_output_arguments` where the run
+writes (``--out``, ``--no-bus-log``).  :func:`one_axis_link` turns them into one drive's address,
+refusing conflicting options (exit 2) before anything is touched.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING
+
+from haptic_bus.app.arguments import add_bus_arguments, modbus_url, node_id, refuse_can_options_with_modbus, unit_id, unit_ids
+from haptic_bus.app.drive_address import DriveAddress, drive_address
+from haptic_bus.errors import ParameterError
+
+if TYPE_CHECKING:
+    from haptic_bus.app.realtime import RealtimeSettings
+
+
+def add_link_arguments(parser: argparse.ArgumentParser) -> None:
+    """The drive's (or the axes') address and ``--controller-node-id``."""
+    add_bus_arguments(parser)
+    parser.add_argument("--node-id", type=node_id, help="the drive's CANopen node id 1..127")
+    parser.add_argument("--controller-node-id", type=node_id,
+                        help="this controller's CANopen node id: its heartbeat, which the drive watches, and gated wall "
+                             "uploads (default 127)")
+    parser.add_argument("--modbus", type=modbus_url, metavar="URL", action="append",
+                        help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0; a multi-axis profile: once for "
+                             "every axis' unit (one server), or once per axis (a server each)")
+    parser.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1; only with --modbus)")
+    parser.add_argument("--unit-ids", type=unit_ids, metavar="IDS",
+                        help="a multi-axis profile over Modbus: each axis' unit id, in axis order (e.g. 1,2,3; default: the "
+                             "profile's [[axes]] unit_id, else unit 1 on each of one --modbus per axis)")
+
+
+def add_pacing_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--virtual-time``, or ``--realtime``/``--no-realtime`` (default: real time as the OS grants it)."""
+    pacing = parser.add_mutually_exclusive_group()
+    pacing.add_argument("--virtual-time", action="store_true",
+                        help="lock-step with a simulated drive, no wall-clock pacing (default: each cycle at its "
+                             "deadline on the wall clock)")
+    pacing.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=None,
+                        help="real-time scheduling of the control thread (SCHED_FIFO priority 80, one CPU, memory "
+                             "locked) is asked for by default where the OS grants it; --realtime insists (what it "
+                             "cannot get is a warning), --no-realtime asks for none of it; kept in run.json")
+
+
+def add_output_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--out`` (the run's folder) and ``--no-bus-log``."""
+    parser.add_argument("--out", help="folder for record.csv, run.json, bus.asc and plots (default: runs/<UTC time>-<profile>)")
+    parser.add_argument("--no-bus-log", action="store_true",
+                        help="do not log the CAN bus's frames into bus.asc (on by default; Modbus runs have none)")
+
+
+def scheduling(realtime: bool | None) -> RealtimeSettings:
+    """``--realtime`` (True), ``--no-realtime`` (False) or neither (None) as what the control thread asks of the OS."""
+    from haptic_bus.app.realtime import RealtimeSettings
+
+    if realtime is None:
+        return RealtimeSettings()
+    return RealtimeSettings(insist=True) if realtime else RealtimeSettings.unprivileged()
+
+
+def one_axis_link(args: argparse.Namespace, command: str) -> DriveAddress:
+    """The one drive ``args`` name; conflicting or ignored options refused (ParameterError naming
+    ``command``) before anything is touched."""
+    if args.unit_ids is not None:
+        raise ParameterError("--unit-ids", args.unit_ids, "--unit-id for a one-axis profile (--unit-ids: several axes)",
+                             command)
+    if args.modbus and len(args.modbus) > 1:
+        raise ParameterError("--modbus", args.modbus, "one URL for a one-axis profile (one per axis: several axes)",
+                             command)
+    if args.modbus:
+        refuse_can_options_with_modbus(args, command, ("node_id", "controller_node_id"))
+    address = drive_address(argparse.Namespace(**{**vars(args), "modbus": args.modbus[0] if args.modbus else None}))
+    if args.controller_node_id is not None and args.controller_node_id == args.node_id:
+        raise ParameterError("--controller-node-id", args.controller_node_id,
+                             f"a node id other than the drive's ({args.node_id})")
+    return address

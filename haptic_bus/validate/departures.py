@@ -1,0 +1,200 @@
+"""How the device departs from the model: fits of the measured plant, each departure with its uncertainty.
+
+The measured plant is the response from the force sent (N, the torque target each cycle: known
+exactly) to the reported velocity (m/s) at the probe's frequencies (:mod:`~haptic_bus.validate.spectra`).
+Each candidate is an exact sampled plant with a few free parameters, fitted by weighted least
+squares (the residual at each frequency over its standard error, real and imaginary parts):
+
+- ``delay``: the profile's plant with the loop delay ``D + e`` (:func:`~haptic_bus.validate.model.plant_response`);
+  ``value`` is the extra delay ``e`` in samples;
+- ``resonance``: a transmission between motor and handle (:mod:`~haptic_bus.validate.two_mass`, the
+  handle keeping the profile's ``m`` and ``b``): the free mode's natural ``frequency`` (Hz) and
+  ``damping`` ratio, and the transmission fitted (``stiffness`` N/m, ``coupling_damping`` N s/m,
+  ``motor_mass`` kg: what a profile's ``[device.transmission]`` states);
+- ``filter``: a first-order lag ``1/(1 + j omega tau)`` on the force (``tau`` s; continuous, so
+  exact only for ``tau`` well above ``T``);
+- ``mass`` and ``friction``: the rigid plant with other ``m`` (kg) and ``b`` (N s/m).
+
+The candidate with the least weighted squared residual names the departure.  Uncertainties are
+one standard deviation from the fit's covariance ``(J^T J)^-1``, scaled up by the reduced
+chi-square when the model leaves more residual than the noise explains (so an approximate model
+does not claim its noise-level precision); a derived quantity (frequency, damping) carries the
+covariance through its numerical gradient.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from haptic_bus.analysis.loop import DeviceLoop
+from haptic_bus.analysis.transmission import Transmission
+from haptic_bus.validate import two_mass
+from haptic_bus.validate.model import plant_response, with_delay
+from haptic_bus.validate.spectra import Measured
+
+Model = Callable[[np.ndarray], np.ndarray]  # parameters -> the plant at the measured frequencies
+UNITS = {("delay", "value"): " samples (extra)", ("resonance", "frequency"): " Hz", ("resonance", "damping"): "",
+         ("resonance", "stiffness"): " N/m", ("resonance", "coupling_damping"): " N s/m", ("resonance", "motor_mass"): " kg",
+         ("filter", "tau"): " s", ("mass", "value"): " kg", ("friction", "value"): " N s/m"}
+_ERROR_FLOOR = 1e-9  # of |H|: a frequency measured without any scatter (a noiseless simulation) still gets a weight
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One departure: ``kind``, its ``values`` (SI units, samples for a delay) and their ``uncertainty``."""
+
+    kind: str
+    values: dict[str, float]
+    uncertainty: dict[str, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"kind": ..., <values>, "uncertainty": u}`` (``u`` a number for one value, else one per value)."""
+        uncertainty: Any = next(iter(self.uncertainty.values())) if len(self.uncertainty) == 1 else self.uncertainty
+        return {"kind": self.kind, **self.values, "uncertainty": uncertainty}
+
+    def describe(self) -> str:
+        """One line: the kind and each value with its uncertainty and unit."""
+        return f"{self.kind}: " + ", ".join(
+            f"{'' if name == 'value' else name + ' '}{value:.4g} +- {self.uncertainty[name]:.2g}{UNITS[self.kind, name]}"
+            for name, value in self.values.items())
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A candidate fitted: its ``name``, ``findings``, weighted squared residual ``chi2`` and the rms
+    relative residual ``misfit`` it leaves (dimensionless)."""
+
+    name: str
+    findings: tuple[Finding, ...]
+    chi2: float
+    misfit: float
+
+
+@dataclass(frozen=True)
+class _Solution:
+    x: np.ndarray
+    covariance: np.ndarray
+    chi2: float
+    misfit: float
+
+
+def _weights(measured: Measured) -> np.ndarray:
+    return 1.0 / np.maximum(measured.error, _ERROR_FLOOR * np.abs(measured.mean))
+
+
+def _solve(measured: Measured, model: Model, start: Sequence[float], low: Sequence[float], high: Sequence[float],
+           scale: Sequence[float]) -> _Solution:
+    """Weighted least squares of ``model`` against ``measured`` from ``start`` within the bounds."""
+    from scipy.optimize import least_squares  # lazily: the fit loads scipy.optimize
+
+    weights = _weights(measured)
+    scale_ = np.asarray(scale, dtype=float)
+
+    def residual(u: np.ndarray) -> np.ndarray:
+        r = (model(u * scale_) - measured.mean) * weights
+        return np.concatenate([r.real, r.imag])
+
+    u0 = np.clip(np.asarray(start, dtype=float), low, high) / scale_
+    found = least_squares(residual, u0, bounds=(np.asarray(low) / scale_, np.asarray(high) / scale_), x_scale="jac",
+                          method="trf")
+    chi2 = float(2.0 * found.cost)
+    dof = max(1, 2 * measured.mean.size - u0.size)
+    jacobian = found.jac
+    covariance = np.linalg.pinv(jacobian.T @ jacobian) * max(1.0, chi2 / dof)
+    covariance = covariance * np.outer(scale_, scale_)
+    misfit = float(np.sqrt(np.mean(np.abs(model(found.x * scale_) / measured.mean - 1.0) ** 2)))
+    return _Solution(found.x * scale_, covariance, chi2, misfit)
+
+
+def _sigma(solution: _Solution, i: int) -> float:
+    return float(math.sqrt(max(0.0, solution.covariance[i, i])))
+
+
+def nominal(measured: Measured, loop: DeviceLoop) -> Fit:
+    """The profile's plant itself, nothing fitted."""
+    plant = plant_response(loop, measured.theta)
+    r = (plant - measured.mean) * _weights(measured)
+    misfit = float(np.sqrt(np.mean(np.abs(plant / measured.mean - 1.0) ** 2)))
+    return Fit("model", (), float(np.sum(np.abs(r) ** 2)), misfit)
+
+
+def fit_delay(measured: Measured, loop: DeviceLoop) -> Fit:
+    """The extra loop delay (samples) that fits best."""
+    solution = _solve(measured, lambda p: plant_response(with_delay(loop, loop.delay + p[0]), measured.theta),
+                      [0.0], [-float(loop.delay)], [float(loop.delay) + 10.0], [1.0])
+    finding = Finding("delay", {"value": float(solution.x[0])}, {"value": _sigma(solution, 0)})
+    return Fit("delay", (finding,), solution.chi2, solution.misfit)
+
+
+def fit_mass_friction(measured: Measured, loop: DeviceLoop) -> Fit:
+    """The rigid handle's mass (kg) and friction (N s/m) that fit best."""
+    def model(p: np.ndarray) -> np.ndarray:
+        return plant_response(dataclasses.replace(loop, m=p[0], b=p[1]), measured.theta)
+
+    solution = _solve(measured, model, [loop.m, loop.b], [1e-3 * loop.m, 0.0], [1e3 * loop.m, 1e3 * max(loop.b, loop.m)],
+                      [loop.m, max(loop.b, 1e-3)])
+    findings = (Finding("mass", {"value": float(solution.x[0])}, {"value": _sigma(solution, 0)}),
+                Finding("friction", {"value": float(solution.x[1])}, {"value": _sigma(solution, 1)}))
+    return Fit("mass and friction", findings, solution.chi2, solution.misfit)
+
+
+def fit_filter(measured: Measured, loop: DeviceLoop) -> Fit:
+    """The first-order lag on the force (``tau`` s) that fits best."""
+    plant = plant_response(loop, measured.theta)
+    solution = _solve(measured, lambda p: plant / (1.0 + 1j * measured.theta * p[0] / loop.T),
+                      [loop.T], [0.0], [1e3 * loop.T], [loop.T])
+    finding = Finding("filter", {"tau": float(solution.x[0])}, {"tau": _sigma(solution, 0)})
+    return Fit("filter", (finding,), solution.chi2, solution.misfit)
+
+
+def fit_resonance(measured: Measured, loop: DeviceLoop) -> Fit:
+    """The transmission (stiffness, damping, motor mass) that fits best, as its mode's frequency (Hz)
+    and damping ratio."""
+    start = _resonance_start(measured, loop)
+
+    def coupling(p: np.ndarray) -> Transmission:
+        return Transmission(p[0], p[1], p[2])
+
+    solution = _solve(measured, lambda p: two_mass.response(loop, coupling(p), measured.theta), start,
+                      [start[0] * 1e-2, 0.0, start[2] * 1e-2], [start[0] * 1e2, 1e3 * max(loop.b, 1.0), start[2] * 1e2],
+                      [start[0], max(loop.b, 1.0) * 0.1, start[2]])
+    mode = np.array(two_mass.mode(loop, coupling(solution.x)))
+    gradient = np.empty((2, 3))
+    for i in range(3):
+        step = np.zeros(3)
+        step[i] = 1e-6 * max(abs(solution.x[i]), 1e-9)
+        gradient[:, i] = (np.array(two_mass.mode(loop, coupling(solution.x + step))) - mode) / step[i]
+    sigma = np.sqrt(np.maximum(0.0, np.diag(gradient @ solution.covariance @ gradient.T)))
+    names = ("stiffness", "coupling_damping", "motor_mass")  # what a profile's [device.transmission] states
+    finding = Finding("resonance", {"frequency": float(mode[0]), "damping": float(mode[1]),
+                                    **{name: float(value) for name, value in zip(names, solution.x)}},
+                      {"frequency": float(sigma[0]), "damping": float(sigma[1]),
+                       **{name: _sigma(solution, i) for i, name in enumerate(names)}})
+    return Fit("resonance", (finding,), solution.chi2, solution.misfit)
+
+
+def _resonance_start(measured: Measured, loop: DeviceLoop) -> list[float]:
+    """Stiffness (N/m), damping (N s/m) and motor mass (kg) from the measured plant's peak and dip
+    against the model: the dip is the handle's antiresonance ``sqrt(k/m)``, the peak the resonance
+    ``sqrt(k (1/M + 1/m))``."""
+    ratio = np.abs(measured.mean / plant_response(loop, measured.theta))
+    omega = measured.theta / loop.T
+    peak = int(np.argmax(ratio))
+    dip = int(np.argmin(ratio[:peak])) if peak > 0 else 0
+    anti = omega[dip] if dip < peak else omega[peak] / 2.0
+    stiffness = loop.m * anti * anti
+    motor = 1.0 / max(omega[peak] ** 2 / stiffness - 1.0 / loop.m, 1e-3 / loop.m)
+    return [stiffness, 0.1 * max(loop.b, 1.0), motor]
+
+
+def departures(measured: Measured, loop: DeviceLoop) -> list[Fit]:
+    """Every candidate fitted, the best (least ``chi2``) first."""
+    fits = [fit_delay(measured, loop), fit_mass_friction(measured, loop), fit_filter(measured, loop),
+            fit_resonance(measured, loop)]
+    return sorted(fits, key=lambda fit: fit.chi2)

@@ -1,0 +1,142 @@
+"""The verdict: does the measured closed loop hold to the model's prediction, and if not, how does it differ?
+
+The probe's response in velocity is compared frequency by frequency with the model's (exact,
+:mod:`~haptic_bus.validate.model`).  A frequency is **resolved** when three standard errors of the
+measurement (:mod:`~haptic_bus.validate.spectra`) are within the tolerance, and there it
+**departs** when ``|measured / predicted - 1|`` exceeds the tolerance plus those three standard
+errors.  The model **holds** when the lowest frequencies are resolved and none departs: "holds to
+within X % up to f Hz", ``f`` the highest frequency of the resolved band that starts at the
+lowest, ``X`` the largest relative difference in it.  When a resolved frequency departs, the
+measured plant is fitted with every departure :mod:`~haptic_bus.validate.departures` knows, and
+the best candidate's findings name how the device differs.  When the lowest frequency is not
+resolved, the measurement cannot tell (the noise or the timing's jitter is larger than the
+tolerance): neither verdict.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from haptic_bus.analysis.loop import DeviceLoop
+from haptic_bus.validate.departures import Fit, departures, nominal
+from haptic_bus.validate.model import Hold, Prediction
+from haptic_bus.validate.probe import ProbePlan
+from haptic_bus.validate.spectra import Measured, response
+
+DEFAULT_TOLERANCE = 0.05  # relative difference the model may leave at any frequency (5 %)
+CONFIDENCE = 3.0  # standard errors of the measurement allowed on top of the tolerance
+
+
+@dataclass(frozen=True)
+class Signals:
+    """One value a cycle from the run's first: reported ``velocity`` m/s, the controller's
+    ``position`` m, the ``force`` sent N and the ``probe`` N; and the units they are rounded to
+    (``quanta``: m/s, m and N: a count of 0x606C, of 0x6064 and one per mille of torque)."""
+
+    velocity: np.ndarray
+    position: np.ndarray
+    force: np.ndarray
+    probe: np.ndarray
+    quanta: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Validation:
+    """What ``validate`` measured and concluded (SI units; ``tolerance`` and ``within`` as fractions)."""
+
+    loop: DeviceLoop
+    hold: Hold
+    plan: ProbePlan
+    amplitude: float
+    noise: float
+    prediction: Prediction
+    plant: Measured
+    velocity: Measured
+    position: Measured
+    tolerance: float
+    within: float
+    up_to: float
+    holds: bool
+    fits: tuple[Fit, ...]
+
+    @property
+    def verdict(self) -> str:
+        """``holds``, ``differs`` or ``cannot tell`` (module docstring)."""
+        return "holds" if self.holds else "differs" if self.fits else "cannot tell"
+
+    @property
+    def findings(self) -> list[dict[str, Any]]:
+        """The best candidate's findings, JSON-ready (none unless the device differs)."""
+        return [finding.to_dict() for finding in self.fits[0].findings] if self.verdict == "differs" else []
+
+    def summary(self) -> str:
+        """One line: holds to within X % up to f Hz, differs and how, or cannot tell."""
+        verdict = self.verdict
+        if verdict == "holds":
+            return f"the model holds to within {100 * self.within:.2g} % up to {self.up_to:.4g} Hz"
+        if verdict == "cannot tell":
+            return (f"cannot tell: at {self.plan.frequencies[0]:.3g} Hz already the measurement's uncertainty exceeds "
+                    f"the tolerance of {100 * self.tolerance:.3g} % (noise, or the cycle's timing jitter)")
+        best = self.fits[0]
+        said = "; ".join(finding.describe() for finding in best.findings)
+        return (f"the device differs from the model: by up to {100 * self.within:.3g} % up to {self.up_to:.4g} Hz "
+                f"(tolerance {100 * self.tolerance:.3g} %); best explained by {said} (rms misfit left "
+                f"{100 * best.misfit:.2g} %)")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the verdict, the findings, every candidate's fit, the probe, the model, and the
+        responses per frequency (velocity and position per N of probe, the plant in m/s per N)."""
+        plan = self.plan
+        return {
+            "verdict": self.verdict,
+            "within_percent": 100 * self.within,
+            "up_to_hz": self.up_to,
+            "tolerance_percent": 100 * self.tolerance,
+            "findings": self.findings,
+            "candidates": [{"name": fit.name, "chi2": fit.chi2, "misfit": fit.misfit,
+                            "findings": [f.to_dict() for f in fit.findings]} for fit in self.fits],
+            "probe": {"amplitude_n": self.amplitude, "velocity_noise_m_per_s": self.noise,
+                      "hold": {"K": self.hold.stiffness, "B": self.hold.damping},
+                      "band_hz": [float(plan.frequencies[0]), float(plan.frequencies[-1])], "tones": int(plan.bins.size),
+                      "period_samples": plan.samples, "quiet_cycles": plan.quiet, "settle_periods": plan.settle,
+                      "measured_periods": plan.periods, "drive_seconds": plan.cycles * plan.period},
+            "model": {"m": self.loop.m, "b": self.loop.b, "T": self.loop.T, "delay": self.loop.delay,
+                      "velocity": str(self.loop.velocity)},
+            "responses": {"frequencies_hz": plan.frequencies.tolist(),
+                          **{name: _response_dict(measured, predicted) for name, measured, predicted in (
+                              ("velocity", self.velocity, self.prediction.velocity),
+                              ("position", self.position, self.prediction.position),
+                              ("plant", self.plant, self.prediction.plant))}},
+        }
+
+
+def _response_dict(measured: Measured, predicted: np.ndarray) -> dict[str, list[float]]:
+    """A response per excited frequency, JSON-ready: measured (real, imaginary, standard error) and predicted."""
+    return {"measured_re": measured.mean.real.tolist(), "measured_im": measured.mean.imag.tolist(),
+            "error": measured.error.tolist(), "predicted_re": predicted.real.tolist(),
+            "predicted_im": predicted.imag.tolist()}
+
+
+def validate(loop: DeviceLoop, hold: Hold, plan: ProbePlan, prediction: Prediction, signals: Signals, amplitude: float,
+             noise: float, tolerance: float = DEFAULT_TOLERANCE) -> Validation:
+    """The verdict on one run's ``signals`` (module docstring)."""
+    per_velocity, per_position, per_force = signals.quanta  # the force's rounding acts on the probe's way in
+    velocity = response(signals.velocity, signals.probe, plan, (per_velocity, per_force))
+    position = response(signals.position, signals.probe, plan, (per_position, per_force))
+    plant = response(signals.velocity, signals.force, plan, (per_velocity, 0.0))  # the force sent is known exactly
+    relative, error = velocity.relative_to(prediction.velocity)
+    resolved = CONFIDENCE * error <= tolerance
+    band = int(np.argmin(resolved)) if not resolved.all() else resolved.size  # the resolved bins from the lowest
+    if band == 0:
+        return Validation(loop, hold, plan, amplitude, noise, prediction, plant, velocity, position, tolerance,
+                          float(np.max(relative)), 0.0, False, ())
+    departs = resolved & (relative > tolerance + CONFIDENCE * error)
+    holds = not bool(departs.any())
+    fits = (nominal(plant, loop),) if holds else tuple(departures(plant, loop))
+    within = float(np.max(relative[:band])) if holds else float(np.max(relative[resolved]))
+    up_to = float(plan.frequencies[band - 1]) if holds else float(plan.frequencies[resolved][-1])
+    return Validation(loop, hold, plan, amplitude, noise, prediction, plant, velocity, position, tolerance, within,
+                      up_to, holds, fits)
