@@ -131,6 +131,7 @@ def read_transmission(path: pathlib.Path, table: object, prefix: str) -> Transmi
     if table is None:
         return None
     r = Reader(path, prefix, table)
+    r.only(("stiffness", "damping", "motor_mass"))
     stiffness = r.real("stiffness", *TRANSMISSION_STIFFNESS, "N/m", low_inclusive=False)
     damping = r.real("damping", *TRANSMISSION_DAMPING, "N s/m")
     motor_mass = r.real("motor_mass", *MOTOR_MASS_RANGE, "kg")
