@@ -38,8 +38,8 @@ from haptic_bus.analysis.coupled_energy import energy_after, simulate_energies
 from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from haptic_bus.analysis.energy import RandomSinusoids, Sinusoid
 from haptic_bus.analysis.frequency import t_fund
-from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.analysis.transmission import Transmission
+from haptic_bus.analysis.loop import MASS_RANGE, WallLoop
+from haptic_bus.analysis.transmission import MOTOR_MASS_RANGE, Transmission
 from haptic_bus.analysis.two_mass import TwoMassLoop
 from haptic_bus.analysis.two_mass_criterion import largest_passive_stiffness, t_fund_two_mass, two_mass_verdict
 from haptic_bus.analysis.two_mass_energy import two_mass_machine, two_mass_mean_power
@@ -183,3 +183,4 @@ def test_invalid_transmissions_name_their_range(text: str, name: str) -> None:
     with pytest.raises(ParameterError) as caught:
         Transmission.parse(text)
     assert caught.value.name == name
+    assert MOTOR_MASS_RANGE == MASS_RANGE  # the motor's mass spans what a handle's may
