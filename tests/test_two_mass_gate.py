@@ -82,3 +82,18 @@ def test_a_misspelt_transmission_key_is_refused(tmp_path: pathlib.Path) -> None:
     with pytest.raises(ParameterError) as caught:
         read_profile(_belt_profile(tmp_path, "stifness = 20000.0\ndamping = 2.0\nmotor_mass = 0.3"))
     assert caught.value.name.endswith("device.transmission.stifness")
+
+
+def test_a_lightly_damped_belt_in_band_makes_the_gate_refuse_the_shipped_wall(tmp_path: pathlib.Path, capsys) -> None:
+    """1e5 N/m, 6.9 N s/m (zeta 0.05) and 50 g at the motor: 231 Hz, in band; the cia402-handle's wall, passive
+    on the rigid handle, is unstable here, and the refusal names the two-mass criterion and its passive K
+    (none: at B = 10 N s/m even K = 0, the damper alone at the motor, is active behind this belt)."""
+    path = _belt_profile(tmp_path, "stiffness = 100000.0\ndamping = 6.9\nmotor_mass = 0.05")
+    profile = read_profile(path)
+    decision = profile.gate().judge(profile.compiled_scene())
+    assert not decision.accepted and decision.walls[0].verdict.outcome == "unstable"
+    assert "transmission stiffness 100000 N/m" in decision.reasons[0]
+    assert decision.reasons[0].endswith("two-mass criterion; passive K at this B from 0: none")  # B = 10 alone is active
+    assert main(["profiles", "check", str(path), "--json"]) == 1
+    [wall] = json.loads(capsys.readouterr().out)["walls"]
+    assert wall["report"]["model"].startswith("two-mass") and wall["report"]["rigid"]["handle_alone"]["passive"]
