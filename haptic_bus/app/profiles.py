@@ -82,7 +82,7 @@ class Profile:
     def device_loop(self) -> DeviceLoop:
         """The loop the gate judges: m kg, effective b N s/m, T s, delay samples, velocity model."""
         d = self.device
-        return DeviceLoop(d.mass, d.friction, self.loop.period, self.loop.delay, d.velocity, d.transmission)
+        return DeviceLoop(d.mass, d.friction, self.loop.period, self.loop.delay, d.velocity, transmission=d.transmission)
 
     def scaling(self) -> DriveScaling:
         """The drive-unit conversion of :mod:`drives.base`."""

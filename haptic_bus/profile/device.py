@@ -121,7 +121,7 @@ def read_device(path: pathlib.Path, table: object, prefix: str = "device",
                                  r.field("transmission"))
     r.done()
     return DeviceProfile(mass, friction, source, velocity, position, rated, transmission, permille, model,
-                         coulomb, noise, seed, coupling)
+                         coulomb, noise, seed, transmission=coupling)
 
 
 def read_transmission(path: pathlib.Path, table: object, prefix: str) -> Transmission | None:
