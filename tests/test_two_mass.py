@@ -44,10 +44,16 @@ from haptic_bus.analysis.coupled_energy import energy_after, simulate_energies
 from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from haptic_bus.analysis.energy import RandomSinusoids, Sinusoid
 from haptic_bus.analysis.frequency import t_fund
+from haptic_bus.analysis.limits import passive_scales
 from haptic_bus.analysis.loop import MASS_RANGE, WallLoop
 from haptic_bus.analysis.transmission import MOTOR_MASS_RANGE, Transmission
 from haptic_bus.analysis.two_mass import TwoMassLoop
-from haptic_bus.analysis.two_mass_criterion import largest_passive_stiffness, t_fund_two_mass, two_mass_verdict
+from haptic_bus.analysis.two_mass_criterion import (
+    largest_passive_stiffness,
+    t_fund_two_mass,
+    two_mass_passive_scales,
+    two_mass_verdict,
+)
 from haptic_bus.analysis.two_mass_energy import two_mass_machine, two_mass_mean_power
 from haptic_bus.errors import ParameterError
 
@@ -200,3 +206,15 @@ def test_invalid_transmissions_name_their_range(text: str, name: str) -> None:
         Transmission.parse(text)
     assert caught.value.name == name
     assert MOTOR_MASS_RANGE == MASS_RANGE  # the motor's mass spans what a handle's may
+
+
+def test_the_sampled_ramp_scales_find_the_rigid_limits_exact_ones() -> None:
+    """K 30 000 N/m, B 10 N s/m (D = 1, average): the rigid handle of 1.3 kg is passive for scales up to
+    0.5682308 (exact); the two-mass loop at k = 1e11 N/m, its sampled search, up to 0.5682304 (the 1/k gap
+    and the 2^-30 bisection)."""
+    rigid = passive_scales(WallLoop(1.3, 20.0, T, 30000.0, 10.0, 1, "average"))
+    sampled = two_mass_passive_scales(TwoMassLoop(WallLoop(1.0, 20.0, T, 30000.0, 10.0, 1, "average"),
+                                                  Transmission(1e11, 2.0, 0.3)))
+    [(low, high)] = sampled.intervals
+    assert low == 0.0 and rigid.intervals[0][0] == 0.0
+    assert high == pytest.approx(rigid.intervals[0][1], abs=2e-6) and rigid.intervals[0][1] == pytest.approx(0.56823, abs=1e-5)
