@@ -8,11 +8,17 @@ designs -- handle ``m`` 0.03..2 kg, ``b`` 0.3..30 N s/m, every velocity model, d
 for an active loop); the exact energy ``int w v_handle dt`` (two-mass plant exact between samples,
 :mod:`haptic_bus.analysis.two_mass_energy`, scipy's ``expm``: nothing from the frequency domain) at
 every piece boundary for 1 000 periods, then after ``2^j`` periods up to ``2^30`` by doubling.
+The tone's frequency is the one among the verdict's critical ``theta`` and 48 others (1e-3..3.1 rad)
+with the least ``Re T_fund``: the most negative mean power per N^2 (W) an active loop offers.
 A passive design must never go below minus the round-off bound; an active one must go below it.
-**Boundary margin excluded:** designs with ``|margin| < 1e-3 N s/m`` would be left out -- an
-active loop that close drains ``|margin| |V|^2/2`` W against a transient that stores ``O(|W|^2/|Z|)``
-J, so the first negative energy comes after ``~1/|margin|`` periods, beyond what a fast test
-should promise -- and none of these 50 is (the least ``|margin|`` is 0.31 N s/m): the count is asserted.
+**Boundary excluded:** a stable active design whose worst tone drains less than ``5e-10`` W per N^2
+(``Re T_fund > -1e-9`` m/(N s)) would be left out.  From rest the switch-on transient puts in energy
+that friction keeps (1e-6..1e-4 J here), and only the steady drain takes it back: at that rate it
+needs more than the ``2^30`` periods (1.1e6 s) the check runs.  The margin in N s/m is no measure of
+it: near the motor's resonance against a held handle ``|Z|`` is huge, and an undamped coupling found in a
+wider search had margin -3e9 N s/m with a drain of 4e-15 W per N^2.  None of these 50 is excluded (the
+count is asserted; the least ``|margin|`` is 0.31 N s/m); 300 wider designs (coupling up to 1e9 N/m,
+delays up to 2.7) agreed too, 2 excluded.
 
 **Mean power** (:func:`test_t_fund_is_the_mean_power_of_the_two_mass_loop`): ``|W|^2 Re T_fund/2``
 against the exact periodic steady state, every velocity model, fractional delays, to 1e-9.
@@ -38,10 +44,16 @@ from haptic_bus.analysis.coupled_energy import energy_after, simulate_energies
 from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from haptic_bus.analysis.energy import RandomSinusoids, Sinusoid
 from haptic_bus.analysis.frequency import t_fund
-from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.analysis.transmission import Transmission
+from haptic_bus.analysis.limits import passive_scales
+from haptic_bus.analysis.loop import MASS_RANGE, WallLoop
+from haptic_bus.analysis.transmission import MOTOR_MASS_RANGE, Transmission
 from haptic_bus.analysis.two_mass import TwoMassLoop
-from haptic_bus.analysis.two_mass_criterion import largest_passive_stiffness, t_fund_two_mass, two_mass_verdict
+from haptic_bus.analysis.two_mass_criterion import (
+    largest_passive_stiffness,
+    t_fund_two_mass,
+    two_mass_passive_scales,
+    two_mass_verdict,
+)
 from haptic_bus.analysis.two_mass_energy import two_mass_machine, two_mass_mean_power
 from haptic_bus.errors import ParameterError
 
@@ -50,7 +62,8 @@ MODELS = ("point", "average", "window:0.0005", "lowpass:0.002")
 DELAYS = (0.0, 0.5, 1.0, 1.5)
 STEPS = 1000
 DOUBLINGS = 30
-EXCLUDED_MARGIN = 1e-3  # N s/m (module docstring)
+LEAST_DRAIN = -1e-9  # m/(N s): Re T_fund of the worst tone above this is too slow to show (module docstring)
+CANDIDATES = np.geomspace(1e-3, 3.1, 48)  # rad
 
 
 def random_designs(seed: int = 27, count: int = 50) -> list[TwoMassLoop]:
@@ -74,18 +87,27 @@ def judged() -> tuple[list[TwoMassLoop], list[Verdict]]:
     return designs, [two_mass_verdict(loop) for loop in designs]
 
 
+def _worst_tone(loop: TwoMassLoop, verdict: Verdict) -> tuple[float, float]:
+    """``(theta, Re T_fund)``: of the critical ``theta`` and :data:`CANDIDATES`, the one with the least ``Re T_fund``."""
+    thetas = np.append(CANDIDATES, min(max(verdict.critical_theta, 1e-3), 3.1))
+    drains = t_fund_two_mass(loop, thetas).real
+    k = int(np.argmin(drains))
+    return float(thetas[k]), float(drains[k])
+
+
 def test_the_two_mass_verdict_agrees_with_the_time_domain_on_50_designs(judged) -> None:
     designs, verdicts = judged
     assert Counter(v.outcome for v in verdicts) == {"passive": 30, "not passive": 10, "unstable": 10}
     assert all(v.criterion.startswith("exact, two-mass") for v in verdicts)
-    assert sum(abs(v.margin) < EXCLUDED_MARGIN for v in verdicts) == 0
     assert min(abs(v.margin) for v in verdicts) == pytest.approx(0.3055, abs=1e-3)
-    machines = [two_mass_machine(loop, Sinusoid(min(max(v.critical_theta, 1e-3), 3.1), T))
-                for loop, v in zip(designs, verdicts)]
+    tones = [_worst_tone(loop, v) for loop, v in zip(designs, verdicts)]
+    assert sum(v.stable and not v.passive and drain > LEAST_DRAIN for v, (_, drain) in zip(verdicts, tones)) == 0
+    machines = [two_mass_machine(loop, Sinusoid(theta, T)) for loop, (theta, _) in zip(designs, tones)]
     runs = simulate_energies(machines, STEPS)
     agree = []
     for k, (verdict, machine) in enumerate(zip(verdicts, machines)):
         lowest, bound = float(runs.lowest[k]), float(runs.roundoff[k])
+        bound = bound if math.isfinite(bound) else 0.0  # an unstable run may overflow: its doublings decide
         energies, bounds = energy_after(machine, DOUBLINGS)
         finite = np.isfinite(energies)
         went_negative = lowest < -bound or bool(np.any(energies[finite] < -np.maximum(bounds[finite], bound)))
@@ -94,10 +116,10 @@ def test_the_two_mass_verdict_agrees_with_the_time_domain_on_50_designs(judged) 
 
 
 def test_passive_two_mass_designs_stay_passive_for_random_tones(judged) -> None:
-    """Beyond the worst tone: each passive design under a random sum of 8 tones below Nyquist, from rest."""
+    """Beyond the worst tone: each passive design under a random sum of 4 tones below Nyquist, from rest."""
     rng = np.random.default_rng(4)
     loops = [loop for loop, verdict in zip(*judged) if verdict.passive]
-    machines = [two_mass_machine(loop, RandomSinusoids(T, int(rng.integers(2**31)))) for loop in loops]
+    machines = [two_mass_machine(loop, RandomSinusoids(T, int(rng.integers(2**31)), count=4)) for loop in loops]
     runs = simulate_energies(machines, STEPS)
     assert len(machines) == 30 and np.all(runs.lowest >= -runs.roundoff)
 
@@ -183,3 +205,16 @@ def test_invalid_transmissions_name_their_range(text: str, name: str) -> None:
     with pytest.raises(ParameterError) as caught:
         Transmission.parse(text)
     assert caught.value.name == name
+    assert MOTOR_MASS_RANGE == MASS_RANGE  # the motor's mass spans what a handle's may
+
+
+def test_the_sampled_ramp_scales_find_the_rigid_limits_exact_ones() -> None:
+    """K 30 000 N/m, B 10 N s/m (D = 1, average): the rigid handle of 1.3 kg is passive for scales up to
+    0.5682308 (exact); the two-mass loop at k = 1e11 N/m, its sampled search, up to 0.5682304 (the 1/k gap
+    and the 2^-30 bisection)."""
+    rigid = passive_scales(WallLoop(1.3, 20.0, T, 30000.0, 10.0, 1, "average"))
+    sampled = two_mass_passive_scales(TwoMassLoop(WallLoop(1.0, 20.0, T, 30000.0, 10.0, 1, "average"),
+                                                  Transmission(1e11, 2.0, 0.3)))
+    [(low, high)] = sampled.intervals
+    assert low == 0.0 and rigid.intervals[0][0] == 0.0
+    assert high == pytest.approx(rigid.intervals[0][1], abs=2e-6) and rigid.intervals[0][1] == pytest.approx(0.56823, abs=1e-5)

@@ -18,7 +18,10 @@ throughout.  Modules, one job each:
   ``quantised_loop`` (its arbiter: the loop with counts and Coulomb sticking, simulated exactly);
 * ``closed_form``, ``design`` (the seed's figures), ``tables`` (the README table), ``check`` (the report);
 * ``coupled_loop``, ``coupled``, ``coupled_limits``, ``coupled_energy`` (several axes coupled
-  through the hand); ``can_timing`` (the CAN bit-time model: frame times, bus load).
+  through the hand); ``can_timing`` (the CAN bit-time model: frame times, bus load);
+* ``transmission``, ``two_mass``, ``two_mass_criterion``, ``two_mass_energy``, ``two_mass_check`` (a handle
+  on a transmission that is not rigid: the motor senses and drives, the operator is at the handle;
+  docs/physics/transmission.md).
 
 The parameter vocabulary
 ------------------------

@@ -14,10 +14,14 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from haptic_bus.analysis.resolution import Quantisation
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 from haptic_bus.validation import real_in_range
+
+if TYPE_CHECKING:
+    from haptic_bus.analysis.transmission import Transmission
 
 # Physically meaningful bounds, wide enough for any real device, narrow enough that every
 # derived quantity (b T / m, K T^2 / m, ...) stays finite in double precision.
@@ -135,7 +139,10 @@ class DeviceLoop:
     profile string).  What the gate holds (:class:`~haptic_bus.control.gate.PassivityGate`);
     :meth:`wall` adds a wall and gives the :class:`WallLoop` the criterion judges.  With a
     ``quantisation`` (encoder resolution and Coulomb friction) the gate judges every wall's
-    quantisation condition too (:mod:`haptic_bus.analysis.quantisation`)."""
+    quantisation condition too (:mod:`haptic_bus.analysis.quantisation`).  A ``transmission``
+    (:class:`~haptic_bus.analysis.transmission.Transmission`, None: a rigid handle) makes ``m``,
+    ``b`` the handle's and the gate judge the two-mass loop
+    (:mod:`haptic_bus.analysis.two_mass_criterion`)."""
 
     m: float
     b: float
@@ -143,6 +150,7 @@ class DeviceLoop:
     delay: float
     velocity: VelocityModel | str = POINT
     quantisation: Quantisation | None = None
+    transmission: Transmission | None = None
 
     def __post_init__(self) -> None:
         self.wall(0.0, 0.0)  # validated as a loop is (ParameterError naming m, b, T, delay or velocity): usable once it exists
@@ -154,4 +162,5 @@ class DeviceLoop:
     def describe(self) -> str:
         """``m = .. kg, b = .. N s/m, T = .. s, delay D = .. samples, velocity ..`` for messages."""
         return (f"m = {self.m:g} kg, b = {self.b:g} N s/m, T = {self.T:g} s, delay D = {self.delay:g} samples, "
-                f"velocity {VelocityModel.parse(self.velocity)}")
+                f"velocity {VelocityModel.parse(self.velocity)}"
+                + ("" if self.transmission is None else f", transmission {self.transmission.describe()}"))

@@ -14,13 +14,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from haptic_bus.analysis.loop import MASS_RANGE
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range
 
 STIFFNESS_RANGE = (0.0, 1e12)  # N/m, exclusive low: no coupling is no transmission
 DAMPING_RANGE = (0.0, 1e9)  # N s/m
-MOTOR_MASS_RANGE = MASS_RANGE  # kg
+MOTOR_MASS_RANGE = (1e-9, 1e9)  # kg: the handle's own range (loop.MASS_RANGE; loop imports this module)
 SPELLING = "STIFFNESS:DAMPING:MOTOR_MASS (N/m, N s/m, kg)"
 
 

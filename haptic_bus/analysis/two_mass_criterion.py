@@ -35,6 +35,7 @@ handle), then the same zoom.  Stability: the eigenvalues of the closed-loop matr
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, replace
 
@@ -43,12 +44,15 @@ from numpy.typing import ArrayLike
 
 from haptic_bus.analysis.criterion import SIGN_TOLERANCE, Verdict, judge, verdict_lane
 from haptic_bus.analysis.frequency import loop_terms, scaled_impedance
+from haptic_bus.analysis.limits import PassiveSet
 from haptic_bus.analysis.poles import MARGINAL_STATE, Stability
 from haptic_bus.analysis.theta_search import Group, refine_lanes, theta_grid
 from haptic_bus.analysis.two_mass import TwoMassLoop, two_mass_poles, two_mass_stability
 
 TWO_MASS = ("exact, two-mass (operator at the handle, sensing and torque at the motor): closed-loop stability and "
             "Re T_fund >= 0 on (0, pi]")
+SCALE_SAMPLES = 64
+SCALE_BISECTIONS = 30
 LEAST_STIFFNESS = 1e-3  # N/m: below this the bisection stops (the passive K then is 0 alone)
 _FREE_PAIR = "a free pair (b = K = B = 0): the pair's translation (z = 1) is its only mode on the circle, none grows"
 
@@ -132,3 +136,26 @@ def largest_passive_stiffness(loop: TwoMassLoop, relative: float = 1e-6, ceiling
         middle = 0.5 * (low + high)
         low, high = (middle, high) if two_mass_verdict(loop.with_wall(middle, loop.handle.B)).passive else (low, middle)
     return low
+
+
+def two_mass_passive_scales(loop: TwoMassLoop) -> PassiveSet:
+    """The scales ``s`` in [0, 1] at which the wall ``(s K, s B)`` is passive on the two-mass device: a
+    **sampled** search -- the verdict at ``s = j/``:data:`SCALE_SAMPLES` and a bisection to ``2^-30`` at
+    every change -- not the rigid loop's exact continuum (:func:`~haptic_bus.analysis.limits.passive_scales`):
+    a passive or an active stretch shorter than ``1/64`` between two samples of the same verdict is missed."""
+    h = loop.handle
+
+    def passive(s: float) -> bool:
+        return two_mass_verdict(loop.with_wall(s * h.K, s * h.B)).passive
+
+    samples = [j / SCALE_SAMPLES for j in range(SCALE_SAMPLES + 1)]
+    verdicts = [passive(s) for s in samples]
+    edges = []
+    for (a, pa), (b, pb) in itertools.pairwise(zip(samples, verdicts)):
+        if pa != pb:
+            for _ in range(SCALE_BISECTIONS):
+                middle = 0.5 * (a + b)
+                a, b = (middle, b) if passive(middle) == pa else (a, middle)
+            edges.append(a if pa else b)  # the last passive scale on each side
+    bounds = ([0.0] if verdicts[0] else []) + edges + ([1.0] if verdicts[-1] else [])
+    return PassiveSet("scale", tuple(zip(bounds[0::2], bounds[1::2])))

@@ -139,6 +139,9 @@ def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> 
     timing, delay = read_timing(r)
     mapping = r.text("mapping", choices=tuple(PDO_MAPPINGS), default="minimal")
     device = read_device(path, r.raw("device", "an [axes.device] table: the one-axis [device] fields"), r.field("device"))
+    if device.transmission is not None:  # the coupled gate judges rigid axes only
+        raise profile_error(path, r.field("device.transmission"), device.transmission.to_dict(),
+                            "none: the coupled gate judges rigid axes (a two-mass device only in a one-axis profile)")
     force_limit = r.real("force_limit", *FORCE_RANGE, "N", low_inclusive=False)
     r.done()
     if force_limit > device.max_force * (1 + 1e-12):

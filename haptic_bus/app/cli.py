@@ -81,10 +81,27 @@ def _check(args: argparse.Namespace) -> int:
 
     from haptic_bus.analysis.check import check_passivity, format_check
 
+    if args.transmission is not None:
+        if args.position_resolution is not None:
+            raise ParameterError("--position-resolution", args.position_resolution,
+                                 "no --transmission with it: the quantisation condition is derived for a rigid handle")
+        return _check_two_mass(args)
     report = check_passivity(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay,
                              args.velocity, out_of_band=True, position_resolution=args.position_resolution,
                              coulomb=args.coulomb)  # parameters named as the user typed them
     print(json.dumps(report.to_dict()) if args.json else format_check(report))
+    return EXIT_OK if report.passive else EXIT_NO
+
+
+def _check_two_mass(args: argparse.Namespace) -> int:
+    import json
+
+    from haptic_bus.analysis.transmission import Transmission
+    from haptic_bus.analysis.two_mass_check import check_two_mass, format_two_mass
+
+    report = check_two_mass(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay,
+                            args.velocity, Transmission.parse(args.transmission))
+    print(json.dumps(report.to_dict()) if args.json else format_two_mass(report))
     return EXIT_OK if report.passive else EXIT_NO
 
 
@@ -282,6 +299,10 @@ def build_parser() -> argparse.ArgumentParser:
                             "(average velocity: Coulomb friction >= K Delta/2 + B Delta/T, any delay)")
     check.add_argument("--coulomb", type=number("--coulomb", 0.0, 1e6, "N"), default=0.0, metavar="N",
                        help="the handle's Coulomb friction f_c, N, for the quantisation condition")
+    check.add_argument("--transmission", metavar="STIFFNESS:DAMPING:MOTOR_MASS",
+                       help="judge a two-mass device: the handle (--mass, --friction) coupled by a spring N/m and a "
+                            "damper N s/m to a motor-side mass kg, where the drive senses and applies the torque "
+                            "(e.g. 20000:2:0.3)")
 
     region = command("region", "write the seed's Fig. 4 (alpha-beta passive regions) as PNG", _region)
     _add_device_arguments(region)

@@ -83,7 +83,8 @@ class Profile:
         """The loop the gate judges: m kg, effective b N s/m, T s, delay samples, velocity model, and
         the quantisation (encoder resolution, Coulomb friction) when the profile states its Coulomb friction."""
         d = self.device
-        return DeviceLoop(d.mass, d.friction, self.loop.period, self.loop.delay, d.velocity, d.quantisation())
+        return DeviceLoop(d.mass, d.friction, self.loop.period, self.loop.delay, d.velocity, d.quantisation(),
+                          transmission=d.transmission)
 
     def scaling(self) -> DriveScaling:
         """The drive-unit conversion of :mod:`drives.base`."""

@@ -21,8 +21,10 @@ import sys
 import tomllib
 from typing import Any
 
-from haptic_bus.analysis.check import check_loop, format_check
-from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
+from haptic_bus.analysis.check import CheckReport, check_loop, format_check
+from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE, DeviceLoop
+from haptic_bus.analysis.two_mass import TwoMassLoop
+from haptic_bus.analysis.two_mass_check import TwoMassReport, check_two_mass_loop, format_two_mass
 from haptic_bus.app.arguments import number, timeout
 from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
 from haptic_bus.app.profiles import (
@@ -181,6 +183,14 @@ def _still_missing(path: pathlib.Path) -> int | None:
     return EXIT_INVALID
 
 
+def _wall_report(device: DeviceLoop, K: float, B: float) -> CheckReport | TwoMassReport:
+    """Every criterion on one contact wall ``K`` N/m, ``B`` N s/m (the quantisation condition with the
+    device's); the two-mass report on a device with a transmission."""
+    if device.transmission is None:
+        return check_loop(device.wall(K, B), quantisation=device.quantisation)
+    return check_two_mass_loop(TwoMassLoop(device.wall(K, B), device.transmission))
+
+
 def cmd_check(args: argparse.Namespace) -> int:
     """``haptic-bus check`` on every contact wall of a profile; 0 passive (gate admits), 1 not, 2 invalid
     (a value missing: every one listed); a multi-axis profile: the coupled gate's verdict."""
@@ -196,8 +206,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         loop, device_loop = profile.loop, profile.device_loop()
         walls = []
         for (K, B), names in sorted(profile.compiled_scene().contacts().items()):
-            report = check_loop(device_loop.wall(K, B), quantisation=device_loop.quantisation)
-            walls.append((names, K, B, report))
+            walls.append((names, K, B, _wall_report(device_loop, K, B)))
     except HapticBusError as error:
         return _fail("check", error)
     passive = all(report.passive for *_, report in walls)
@@ -213,7 +222,7 @@ def cmd_check(args: argparse.Namespace) -> int:
           f" timing {loop.timing} (delay {loop.delay:g} samples), velocity {profile.device.velocity}")
     for names, _, _, report in walls:
         print(f"--- {'+'.join(names)} (summed K, B)")
-        print(format_check(report))
+        print(format_check(report) if isinstance(report, CheckReport) else format_two_mass(report))
     verdict = "passive" if passive else "NOT passive"
     print(f"profile verdict: {verdict}; gate {'accepts' if decision.accepted else 'REFUSES'}"
           f" (safety margin {profile.gate_policy.safety_margin:g} N s/m, bandwidth {profile.gate_policy.bandwidth})")

@@ -4,7 +4,9 @@ The gate judges the loop *as configured* -- device mass ``m`` (kg), effective fr
 (N s/m), period ``T`` (s), loop delay ``D`` (samples, real: from the drive's timing, or
 measured), the velocity the drive reports (:mod:`haptic_bus.analysis.velocity`) -- with the
 exact criterion of :mod:`haptic_bus.analysis.criterion`, for every summed ``(K, B)`` that can act on
-the handle at once (overlapping objects add).  A scene passes when every such wall has
+the handle at once (overlapping objects add); on a device with a transmission
+(``DeviceLoop.transmission``) with the two-mass criterion of
+:mod:`haptic_bus.analysis.two_mass_criterion` instead.  A scene passes when every such wall has
 ``margin >= safety_margin`` (N s/m) and, when the device states its encoder resolution and
 Coulomb friction (``DeviceLoop.quantisation``), meets the quantisation condition
 (:mod:`haptic_bus.analysis.quantisation`).  The gate calls that verdict alone (stability and
@@ -25,6 +27,12 @@ from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from haptic_bus.analysis.limits import PassiveSet, passive_limits, passive_scales
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, DeviceLoop, WallLoop
 from haptic_bus.analysis.quantisation import QuantisationCondition, quantisation_condition
+from haptic_bus.analysis.two_mass import TwoMassLoop
+from haptic_bus.analysis.two_mass_criterion import (
+    largest_passive_stiffness,
+    two_mass_passive_scales,
+    two_mass_verdict,
+)
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.errors import ParameterError, Refusal
 from haptic_bus.validation import real_in_range
@@ -108,6 +116,11 @@ def _judge_wall(loop: WallLoop) -> Verdict:
     return exact_verdict(loop)
 
 
+@functools.lru_cache(maxsize=4096)
+def _judge_two_mass(loop: TwoMassLoop) -> Verdict:
+    return two_mass_verdict(loop)
+
+
 class PassivityGate:
     """Judges compiled scenes for one configured loop; thread-safe (it keeps no mutable state
     beyond a verdict cache)."""
@@ -129,7 +142,7 @@ class PassivityGate:
         warnings: list[str] = []
         for (K, B), names in sorted(scene.contacts().items()):
             loop = self.device.wall(K, B)
-            verdict = _judge_wall(loop)
+            verdict = self._verdict(loop)
             quantised = self._quantised(loop)
             walls.append(WallJudgement(names, K, B, verdict, loop.alpha, quantised))
             label = f"{'+'.join(names)} (K = {K:g} N/m, B = {B:g} N s/m)"
@@ -148,7 +161,7 @@ class PassivityGate:
         strict = self.policy.bandwidth == "strict"
         for K, B in scene.contacts():
             loop = self.device.wall(K, B)
-            if _judge_wall(loop).margin < self.policy.safety_margin or (strict and K > 0 and not loop.alpha > BANDWIDTH_ALPHA):
+            if self._verdict(loop).margin < self.policy.safety_margin or (strict and K > 0 and not loop.alpha > BANDWIDTH_ALPHA):
                 return False
             quantised = self._quantised(loop)
             if quantised is not None and not quantised.holds:
@@ -164,9 +177,10 @@ class PassivityGate:
         """Whether every contact wall of ``scene``, scaled by every ``s`` in [0, 1], is passive:
         the proof a start ramp needs (the end point alone is not enough: with a delay, part
         of the way can be active).  Exact over the continuum of ``s``
-        (:func:`~haptic_bus.analysis.limits.passive_scales`), margin >= 0; the end point meets
+        (:func:`~haptic_bus.analysis.limits.passive_scales`; on a two-mass device a sampled search,
+        :func:`~haptic_bus.analysis.two_mass_criterion.two_mass_passive_scales`), margin >= 0; the end point meets
         the policy's safety margin through :meth:`admit`."""
-        walls = tuple((names, passive_scales(self.device.wall(K, B)))
+        walls = tuple((names, self._scales(self.device.wall(K, B)))
                       for (K, B), names in sorted(scene.contacts().items()))
         proven = all(whole_ramp(scales) for _, scales in walls)
         return RampProof(proven, walls)
@@ -180,7 +194,7 @@ class PassivityGate:
         ``(s K, s B)``, is passive (margin >= 0): disjoint closed intervals, ascending."""
         common: list[tuple[float, float]] = [(0.0, 1.0)]
         for K, B in scene.contacts():
-            intervals = passive_scales(self.device.wall(K, B)).intervals
+            intervals = self._scales(self.device.wall(K, B)).intervals
             common = [(max(lo, a), min(hi, b)) for lo, hi in common for a, b in intervals if max(lo, a) <= min(hi, b)]
         return tuple(common)
 
@@ -191,10 +205,27 @@ class PassivityGate:
             raise Refusal.by_gate(decision)
         return decision
 
+    def _verdict(self, loop: WallLoop) -> Verdict:
+        """The exact verdict on ``loop``: the two-mass criterion when the device states a transmission."""
+        transmission = self.device.transmission
+        return _judge_wall(loop) if transmission is None else _judge_two_mass(TwoMassLoop(loop, transmission))
+
+    def _scales(self, loop: WallLoop) -> PassiveSet:
+        """The passive scales of ``loop``'s wall: exact (rigid), sampled (two-mass: :func:`two_mass_passive_scales`)."""
+        transmission = self.device.transmission
+        return passive_scales(loop) if transmission is None else two_mass_passive_scales(TwoMassLoop(loop, transmission))
+
     def _explain(self, label: str, loop: WallLoop, verdict: Verdict) -> str:
         """A refusal's reason; only a refusal pays for the passive intervals it names."""
-        stiffness, damping = passive_limits(loop)
-        limits = f"passive K at this B: {stiffness.describe('N/m', 6)}; passive B at this K: {damping.describe('N s/m', 6)}"
+        transmission = self.device.transmission
+        if transmission is None:
+            stiffness, damping = passive_limits(loop)
+            limits = (f"passive K at this B: {stiffness.describe('N/m', 6)}; "
+                      f"passive B at this K: {damping.describe('N s/m', 6)}")
+        else:
+            largest = largest_passive_stiffness(TwoMassLoop(loop, transmission))
+            limits = ("two-mass criterion; passive K at this B from 0: "
+                      + ("none" if largest is None else f"up to {largest:.6g} N/m"))
         state = {"lossless oscillator": "a lossless oscillator (poles on the unit circle)",
                  "marginal": "marginal (a pole on the unit circle)"}.get(verdict.outcome, verdict.outcome)
         return (f"{label} is {state} with {self.device.describe()}: margin {verdict.margin:.4g} N s/m at "

@@ -5,8 +5,10 @@ simulated drive both read them (SI units).
 scaling (0x606C, 0x6064, 0x6076 N m, transmission N/(N m), 0x6072), the ``velocity`` model of
 0x606C, the handle's Coulomb friction ``coulomb_friction`` N (optional: a simulated drive's truth
 and, when stated, what the gate judges the encoder's quantisation with), and a simulated drive's
-hidden truth (``velocity_noise`` 0x606C counts rms, ``noise_seed``) that the controller never uses.
-``[loop]``: ``period`` T in s, ``timing`` (``"ideal"`` = no delay, ``"cia402"`` = torque applied at the next SYNC,
+hidden truth (``velocity_noise`` 0x606C counts rms, ``noise_seed``) that the controller never uses;
+an optional ``[device.transmission]`` (``stiffness`` N/m, ``damping`` N s/m, ``motor_mass`` kg)
+makes it a two-mass device, ``mass`` and ``friction`` the handle's, judged by the two-mass
+criterion.  ``[loop]``: ``period`` T in s, ``timing`` (``"ideal"`` = no delay, ``"cia402"`` = torque applied at the next SYNC,
 ``"reception"`` = applied on arrival) and the loop ``delay`` in samples the gate judges with
 (real; at least the timing's own, default it; required for ``"reception"``).
 """
@@ -22,6 +24,9 @@ from drives.base import DriveScaling
 from drives.cia402 import MAX_TORQUE, MOTOR_RATED_TORQUE, TARGET_TORQUE
 from haptic_bus.analysis.loop import DELAY_RANGE, FRICTION_RANGE, MASS_RANGE, PERIOD_RANGE
 from haptic_bus.analysis.resolution import COULOMB_RANGE, Quantisation
+from haptic_bus.analysis.transmission import DAMPING_RANGE as TRANSMISSION_DAMPING
+from haptic_bus.analysis.transmission import MOTOR_MASS_RANGE, Transmission
+from haptic_bus.analysis.transmission import STIFFNESS_RANGE as TRANSMISSION_STIFFNESS
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.reader import REQUIRED, Reader, profile_error
@@ -58,6 +63,7 @@ class DeviceProfile:
     coulomb_friction: float | None = None
     velocity_noise: float = 0.0
     noise_seed: int | None = None
+    transmission: Transmission | None = None
 
     @property
     def max_force(self) -> float:
@@ -124,9 +130,26 @@ def read_device(path: pathlib.Path, table: object, prefix: str = "device",
     noise = r.real("velocity_noise", *NOISE_RANGE, "0x606C counts rms (a simulated drive's truth)", default=0.0)
     seed = r.whole("noise_seed", *NOISE_SEED_RANGE, default=None) if "noise_seed" in r.table else None
     r.used.add("noise_seed")
+    coupling = read_transmission(path, r.raw("transmission", "a [device.transmission] table", default=None),
+                                 r.field("transmission"))
     r.done()
     return DeviceProfile(mass, friction, source, velocity, position, rated, transmission, permille, model,
-                         coulomb, noise, seed)
+                         coulomb, noise, seed, transmission=coupling)
+
+
+def read_transmission(path: pathlib.Path, table: object, prefix: str) -> Transmission | None:
+    """An optional ``[device.transmission]`` table (None: a rigid handle): ``stiffness`` N/m (> 0), ``damping``
+    N s/m and ``motor_mass`` kg, the motor side the drive senses and drives; ``[device]``'s mass and friction
+    are then the handle's."""
+    if table is None:
+        return None
+    r = Reader(path, prefix, table)
+    r.only(("stiffness", "damping", "motor_mass"))
+    stiffness = r.real("stiffness", *TRANSMISSION_STIFFNESS, "N/m", low_inclusive=False)
+    damping = r.real("damping", *TRANSMISSION_DAMPING, "N s/m")
+    motor_mass = r.real("motor_mass", *MOTOR_MASS_RANGE, "kg")
+    r.done()
+    return Transmission(stiffness, damping, motor_mass)
 
 
 def read_timing(r: Reader) -> tuple[str, float]:
