@@ -58,6 +58,14 @@ def test_check_refuses_an_invalid_transmission_in_one_line(capsys, value: str, n
     assert err.count("\n") == 1 and named in err
 
 
+def test_check_refuses_a_transmission_with_a_position_resolution_in_one_line(capsys) -> None:
+    """The quantisation condition is derived for a rigid handle: asked together, exit 2 before judging."""
+    status = main([*HANDLE, "--stiffness", "1500", "--damping", "10", "--transmission", "2e4:2:0.3",
+                   "--position-resolution", "1e-6"])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1 and "--position-resolution" in err and "rigid handle" in err
+
+
 def _belt_profile(tmp_path: pathlib.Path, table: str) -> pathlib.Path:
     text = (PROFILES / "cia402-handle.toml").read_text()
     marker = "\n[loop]"

@@ -80,6 +80,7 @@ def _check(args: argparse.Namespace) -> int:
     import json
 
     from haptic_bus.analysis.check import check_passivity, format_check
+    from haptic_bus.errors import ParameterError
 
     if args.transmission is not None:
         if args.position_resolution is not None:
