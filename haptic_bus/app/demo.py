@@ -19,6 +19,7 @@ from typing import Any
 
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.demo_kinds import Findings, demo_kind
+from haptic_bus.app.folder_lock import own_folder
 from haptic_bus.app.profiles import Profile, default_profile
 from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
 from haptic_bus.app.run_kinds import run_kind
@@ -77,6 +78,7 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
     profile = profile or default_profile()
     kind, demo = run_kind(profile), demo_kind(profile)
     out = prepare_run_folder(out_dir, profile.name)
+    lock = own_folder(out)  # held until the demo has written everything (or its process ends)
     seconds = demo.seconds() if seconds is None else seconds
     cycles = max(1, round(seconds / kind.period))
     link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True, **demo.link()}
@@ -103,6 +105,7 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
     if found.steady is not None:
         extra["steady_states"] = [dict(vars(s)) for s in found.steady]
     files = recorder.finish(summary, pictures=plots)
+    lock.release()
     return DemoResult(profile, controller, summary, found, list(demo.lines(controller, summary, found)), files)
 
 

@@ -1,7 +1,8 @@
 """Where a run keeps its record: ``runs/<UTC timestamp>-<profile>/`` (or ``--out``), written as it goes.
 
 The folder is created and probed for writing before any bus is touched (an unwritable one is
-a :class:`~haptic_bus.errors.ParameterError`: exit 2).  It receives:
+a :class:`~haptic_bus.errors.ParameterError`: exit 2), and owned by the run for its life
+(:mod:`~haptic_bus.app.folder_lock`: ``.haptic-bus.lock``; another run's folder is exit 2).  It receives:
 
 - ``run.json`` (:class:`RunJournal`), at once: ``status`` "running", ``"ended": false``; kept
   current while the run goes on (each event, each scene) and completed at the end: software

@@ -9,7 +9,8 @@ scene or a scene in space).  One run, in order:
 
 1. the link is checked before anything is touched (node ids; for several axes each must map
    0x6064 and the controller's node id must be none of theirs: exit 2); the run's folder is
-   created and shown writable (:mod:`~haptic_bus.app.run_folder`) and ``run.json`` written there
+   created and shown writable (:mod:`~haptic_bus.app.run_folder`), locked for this run (another
+   run's folder: exit 2, :mod:`~haptic_bus.app.folder_lock`) and ``run.json`` written there
    ("running");
 2. several axes: **the bus load** (:func:`haptic_bus.control.bus_load.axes_bus_load`), one SYNC and
    every axis' PDOs at the bus' bitrate and ``T``; above 70 % the run is refused, naming the load
@@ -63,6 +64,7 @@ from drives.os_threads import show_names
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.drive_address import DEFAULT_UNIT_ID, DriveAddress
+from haptic_bus.app.folder_lock import own_folder
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.realtime import RealtimeReport, realtime_session
 from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
@@ -143,6 +145,7 @@ def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | s
 def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> RunResult:
     """One run (module docstring)."""
     folder = prepare_run_folder(options.out_dir, kind.profile.name)
+    lock = own_folder(folder)  # a second run into this folder is refused here, before its bus or files
     controller: WallController[Any, Any] | None = None
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": kind.loop_extra()}
@@ -212,6 +215,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     finally:
         extra["exit_reason"], extra["error"] = reason, error
         files = recorder.finish(summary, pictures=options.plots)
+        lock.release()
     return RunResult(reason, error, summary, controller, folder, files)
 
 
