@@ -307,3 +307,24 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path) -
     last = {axis: rows[-1] for axis, rows in records(tmp_path / "run").items()}
     assert [int(last[axis]["torque_permille"]) for axis in "xyz"] == [-80, -80, -40]
     assert [last[axis]["velocity_m_per_s"] for axis in "xyz"] == [0.0, 0.0, 0.0]
+
+
+def test_a_real_time_run_names_a_faulted_axis_drive_before_pre_flight(tmp_path: pathlib.Path) -> None:
+    """One of three drives already in FAULT: the run says so once the drives are reached, naming
+    that drive and its error code, before pre-flight's cycles (none: no SYNC), nothing enabled."""
+    profile = load_axes_profile(GANTRY)
+    channel = f"faulted-{tmp_path.name}"
+    sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}, clock="wall").start()
+    try:
+        sim.nodes[1].drive.fault(0x8250)
+        result = run(profile, {"interface": "lockstep", "channel": channel},
+                     RunOptions(0.2, out_dir=tmp_path / "run", live=False, plots=False))
+        syncs = [node.drive.sync_count for node in sim.nodes]
+        assert syncs == [1, 1, 1]  # commissioning's one exchange (setting the cycle up), no pre-flight (500 cycles)
+        assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED, State.FAULT, State.SWITCH_ON_DISABLED]
+    finally:
+        sim.stop()
+    assert result.exit_reason == "drive error" and result.summary is None
+    assert result.error is not None and result.error.startswith("CANopen node 6: drive is in FAULT (statusword 0x0208, "
+                                                                "error code 0x8250 RPDO timeout)"), result.error
+    assert "preflight" not in json.loads((tmp_path / "run" / "run.json").read_text())

@@ -18,8 +18,8 @@ scene or a scene in space).  One run, in order:
 3. the run's writer process starts (:mod:`~haptic_bus.app.run_writer`), and on CANopen ``bus.asc``
    with it, before the drives are reached (the link's tap copies every frame into its ring); with
    ``reset_fault`` a one-axis drive in FAULT is reset first, as ``haptic-bus fault-reset`` does
-   (the first of run.json's events); without it a faulted drive is refused at enabling, with the
-   command that clears it;
+   (the first of run.json's events); without it a drive found in FAULT once reached (step 4) is
+   refused there, before pre-flight, naming its error code and the command that clears it;
 4. the drive(s) are reached and commissioned (CANopen: each the safety chain of ``[safety]``, one
    heartbeat of this controller's node for all; Modbus: the gate judges with the loop delay the
    poll measured, :func:`drives.modbus.timing.loop_delay`);
@@ -164,6 +164,8 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             drive, gate, serve = rig.open(stack, writer.tap)
             kind.describe_gate(gate, extra)
             scene = kind.scene()
+            for each in getattr(drive, "drives", (drive,)):  # a drive in FAULT: said now, not after pre-flight
+                each.refuse_fault()
 
             def ready() -> tuple[WallController[Any, Any], ControllerNode | None]:
                 """Safe start, the controller, its records streamed, the upload server: all but enabling."""
