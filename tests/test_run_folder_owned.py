@@ -94,4 +94,4 @@ def test_the_lock_goes_with_a_killed_process(tmp_path: pathlib.Path, capsys: pyt
     assert f"the run of process {holder.pid} holds" in refused_line(refused.err)
     assert ran.code == 0, ran.err
     assert read_run(folder)["status"] == "completed"
-    assert (folder / LOCK_NAME).read_text() == f"{os.getpid()}\n"  # the last run's id stays in the file, unlocked
+    assert not (folder / LOCK_NAME).exists()  # the killed holder's file, taken over and removed by the run that ended
