@@ -360,6 +360,9 @@ def test_a_real_time_run_names_a_faulted_drive_at_set_up_before_pre_flight(
     assert "pre-flight" not in result.out
     document = read_run(tmp_path)
     assert document["exit_reason"] == "drive error" and "preflight" not in document
+    # real time: the drive was given the profile's (default) safety settings
+    assert document["settings"]["safety"] == {"heartbeat_ms": 20, "consumer_ms": 90, "rpdo_deadline_periods": 30,
+                                              "abort_option": 1, "strict": False, "modbus_watchdog_ms": 60}
 
 
 def test_run_reset_fault_with_a_persisting_cause_is_refused_and_logged(tmp_path: Path,

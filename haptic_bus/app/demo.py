@@ -89,6 +89,7 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
     with ExitStack() as stack:
         writer = recorder.start(stack, bus_log=False)  # before the drive is enabled: Ctrl-C from then on is recorded
         sim, drive = stack.enter_context(demo.simulated())
+        journal.safety = getattr(drive, "drives", (drive,))[0].safety  # settings.safety: what its drives were given
         origin = kind.origin(drive)
         gate, scene = profile.gate(), kind.scene()
         kind.describe_gate(gate, extra)

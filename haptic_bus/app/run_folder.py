@@ -7,9 +7,11 @@ a :class:`~haptic_bus.errors.ParameterError`: exit 2), and owned by the run for 
 - ``run.json`` (:class:`RunJournal`), at once: ``status`` "running", ``"ended": false``; kept
   current while the run goes on (each event, each scene) and completed at the end: software
   versions, the profile file and its SHA-256, device, loop (delay assumed and observed), the
-  loop the gate judged (``gate_loop``), link, scaling and where each factor came from, safety
-  settings, every scene in effect (each object with its geometry, K and B, the gate's margin per
-  contact wall), the summary with its ``exit_reason``, the events (uploads accepted and refused,
+  loop the gate judged (``gate_loop``), link, scaling and where each factor came from, the safety
+  settings the drives were given (``settings.safety``: in virtual time the watchdogs' floor,
+  :meth:`~drives.safety.SafetySettings.for_virtual_time`; the profile's own are in its file),
+  every scene in effect (each object with its geometry, K and B, the gate's margin per contact
+  wall), the summary with its ``exit_reason``, the events (uploads accepted and refused,
   alarms, derates, faults), each with its time, and the files.  Written whole each time (a
   temporary file renamed over it), so a killed run leaves the last version, saying it did not end;
 - ``record.csv``: one row a cycle (:data:`haptic_bus.control.record.COLUMNS`), streamed by the
@@ -35,6 +37,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any, Generic, TypeVar
 
+from drives.safety import SafetySettings
 from haptic_bus._version import __version__
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.app.profiles import Profile, profile_to_dict
@@ -166,8 +169,9 @@ class RunJournal(Generic[P, C]):
     leaves it saying ``"ended": false``: :func:`read_run_folder` reports it as not ended cleanly."""
 
     def __init__(self, folder: pathlib.Path, profile: P, link: dict[str, Any], extra: dict[str, Any],
-                 render: Render[P, C]) -> None:
+                 render: Render[P, C], safety: SafetySettings | None = None) -> None:
         self.folder = folder
+        self.safety = safety  # what the drives were given, shown as settings.safety (None: the profile's)
         self.path = folder / RUN_JSON
         self.profile = profile
         self.link = link
@@ -177,8 +181,12 @@ class RunJournal(Generic[P, C]):
         self._render = render
 
     def document(self, summary: RunSummary | None = None, ended: bool = False) -> dict[str, Any]:
-        """``run.json``'s content as the run stands now."""
-        return self._render(self.profile, self.controller, summary, self.link, self.extra, self.started, ended)
+        """``run.json``'s content as the run stands now; ``settings.safety`` what the drives were given."""
+        document = self._render(self.profile, self.controller, summary, self.link, self.extra, self.started, ended)
+        if self.safety is not None:
+            shown = document["settings"]["safety"]
+            document["settings"]["safety"] = {key: getattr(self.safety, key) for key in shown}
+        return document
 
     def write(self, summary: RunSummary | None = None, ended: bool = False) -> pathlib.Path:
         """Write ``run.json`` as the run stands now."""

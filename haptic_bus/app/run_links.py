@@ -67,7 +67,9 @@ class Rig:
     the drive(s), commissioned, with their gate and upload server; ``hold``, the longest a drive
     may hold one torque target (s, the ``bound`` layer's budget); its ``watchdog`` (pre-flight);
     ``address`` a fault reset reaches (None: none); ``frames``: whether there are CAN frames to
-    log; ``check``: what refuses the run before any bus is opened (:class:`Refusal`)."""
+    log; ``check``: what refuses the run before any bus is opened (:class:`Refusal`); ``safety``:
+    the safety settings the drive(s) are given (in virtual time the profile's with the watchdogs'
+    floor, :meth:`~drives.safety.SafetySettings.for_virtual_time`: ``run.json``'s ``settings.safety``)."""
 
     link: dict[str, Any]
     open: OpenDrive
@@ -76,6 +78,7 @@ class Rig:
     address: DriveAddress | None
     frames: bool = False
     check: Callable[[], None] = lambda: None
+    safety: SafetySettings | None = None
 
 
 def longest_hold(period: float, wall_paced: bool, deadline_ms: int, fallback_ms: int) -> float:
@@ -102,7 +105,14 @@ def _canopen_rig(link: dict[str, Any], open_drive: OpenDrive, safety: SafetySett
                  options: RunOptions, address: DriveAddress | None, check: Callable[[], None] = lambda: None) -> Rig:
     """A rig of CANopen drive(s) with ``safety`` at ``T = period`` s."""
     hold = longest_hold(period, options.wall_paced, safety.rpdo_deadline_ms(period), safety.consumer_ms)
-    return Rig(link, open_drive, hold, canopen_watchdog(safety, period), address, frames=True, check=check)
+    return Rig(link, open_drive, hold, canopen_watchdog(safety, period), address, frames=True, check=check,
+               safety=given_safety(safety, period, options))
+
+
+def given_safety(safety: SafetySettings, period: float, options: RunOptions) -> SafetySettings:
+    """The safety settings a run at ``T = period`` s gives its drive(s): ``safety`` wall-paced, else
+    with the watchdogs' floor of virtual time."""
+    return safety if options.wall_paced else safety.for_virtual_time(period)
 
 
 def _serve(stack: ExitStack, link: NetworkLink, name: str, node_id: int, heartbeat_ms: int) -> Serve:
@@ -156,7 +166,7 @@ def canopen_rig(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
         drive = CanopenDrive(node_id, **where, period=period,
                              tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling=profile.scaling(),
                              scaling_source=PROFILE_SCALING_SOURCE,
-                             safety=safety if options.wall_paced else safety.for_virtual_time(period),
+                             safety=given_safety(safety, period, options),
                              **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
         stack.callback(drive.close)
         drive.link.tap = tap  # before commissioning: its frames are logged too
@@ -220,7 +230,7 @@ def axes_rig(profile: AxesProfile, bus: can.BusABC | Mapping[str, Any], options:
                            interface=config["interface"], channel=config.get("channel"), bitrate=config.get("bitrate"),
                            bus_kwargs={k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")},
                            period=period, tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling_source=PROFILE_SCALING_SOURCE,
-                           safety=safety if options.wall_paced else safety.for_virtual_time(period),
+                           safety=given_safety(safety, period, options),
                            **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
         stack.callback(axes.close)
         axes.link.tap = tap  # before commissioning: its frames are logged too
@@ -242,7 +252,7 @@ def modbus_rig(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     from haptic_bus.control.gate import PassivityGate
 
     period = profile.loop.period
-    safety = profile.safety if options.wall_paced else profile.safety.for_virtual_time(period)
+    safety = given_safety(profile.safety, period, options)
     link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
 
     def open_drive(stack: ExitStack, tap: Tap | None) -> Opened:
@@ -263,7 +273,7 @@ def modbus_rig(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
 
     hold = longest_hold(period, options.wall_paced, safety.modbus_watchdog_ms, 0)
     watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
-    return Rig(link, open_drive, hold, watchdog, DriveAddress(url=url, unit_id=unit_id))
+    return Rig(link, open_drive, hold, watchdog, DriveAddress(url=url, unit_id=unit_id), safety=safety)
 
 
 def _refuse_another_master(drive: ModbusDrive) -> None:
