@@ -202,6 +202,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             reason, error = summary.exit_reason, summary.error
             if reason == "stopped" and options.stop.interrupted:
                 reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr
+                summary.exit_reason, summary.error = reason, error  # run.json's summary says it as its status does
             if reason in ("completed", "stopped", "interrupted"):
                 drive.disable()
     except Refusal as exc:  # refused before the drive is enabled
