@@ -101,13 +101,21 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
         found = demo.findings(sim, controller, origin, cycles)
         if summary.exit_reason == "completed":
             drive.disable()
+    _say_write_failure(recorder, summary)
     extra.update(exit_reason=summary.exit_reason, error=summary.error, operator_energy_exact=found.operator_energy,
                  port_energy_exact=found.port_energy)
     if found.steady is not None:
         extra["steady_states"] = [dict(vars(s)) for s in found.steady]
     files = recorder.finish(summary, pictures=plots)
     lock.release()
+    _say_write_failure(recorder, summary)  # run.json's own completion too
     return DemoResult(profile, controller, summary, found, list(demo.lines(controller, summary, found)), files)
+
+
+def _say_write_failure(recorder: RunRecorder, summary: RunSummary) -> None:
+    """A folder the demo could not write (a full disk, deleted): its summary ends "write error" (exit 1), saying why."""
+    if recorder.failure is not None:
+        summary.exit_reason, summary.error = "write error", recorder.failure
 
 
 def format_demo(result: DemoResult) -> str:

@@ -149,7 +149,11 @@ def write_json(path: pathlib.Path, document: dict[str, Any]) -> pathlib.Path:
     """Write ``document`` to ``path`` whole or not at all (a temporary file renamed over it), so a
     process killed meanwhile leaves the previous version, never half of one."""
     temporary = path.with_name(f".{path.name}.tmp")
-    temporary.write_text(json.dumps(document, indent=1) + "\n")
+    try:
+        temporary.write_text(json.dumps(document, indent=1) + "\n")
+    except OSError:  # a full disk: no half-written temporary left beside the last whole version
+        temporary.unlink(missing_ok=True)
+        raise
     os.replace(temporary, path)
     return path
 

@@ -43,7 +43,9 @@ scene or a scene in space).  One run, in order:
    process (:mod:`~haptic_bus.app.run_recorder`), so a killed run keeps its cycles; whatever else
    ends it (the time, SIGTERM, Ctrl-C, a drive error -- any axis' fault zeroes every axis' torque
    in the same cycle -- an assumption broken), the drives are left disabled, ``run.json``
-   completed and the pictures drawn.
+   completed and the pictures drawn.  A folder the writer can no longer write (a full disk, the
+   folder deleted) stops the run at the next cycle boundary: the drives disabled, "write error"
+   (exit 1), what was written before kept, nothing more attempted.
 
 :func:`~haptic_bus.app.run_options.exit_status` maps how a run ended to the command's exit status.
 """
@@ -158,7 +160,8 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     try:
         rig.check()
         with ExitStack() as stack:
-            writer = recorder.start(stack, rig.frames and options.bus_log)  # before the drive: commissioning logged
+            writer = recorder.start(stack, rig.frames and options.bus_log,  # before the drive: commissioning logged
+                                    on_failure=options.stop.event.set)  # a folder that cannot be written stops the run
             if options.reset_fault and rig.address is not None:
                 before += _reset_fault_first(rig.address, options, extra)
             drive, gate, serve = rig.open(stack, writer.tap)
@@ -216,10 +219,28 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     except _StopBeforeEnabling:
         reason, error = "stopped", None
     finally:
+        reason, error = _write_failure(reason, error, recorder, summary, period)
         extra["exit_reason"], extra["error"] = reason, error
         files = recorder.finish(summary, pictures=options.plots)
         lock.release()
+    reason, error = _write_failure(reason, error, recorder, summary, period)  # run.json itself, at the end
     return RunResult(reason, error, summary, controller, folder, files)
+
+
+def _write_failure(reason: str, error: str | None, recorder: RunRecorder, summary: RunSummary | None,
+                   period: float) -> tuple[str, str | None]:
+    """A run that stopped, or completed, while its folder could not be written (a full disk, the
+    folder deleted: :attr:`RunRecorder.failure`) ends "write error" (exit 1): the failure, when the
+    run stopped (cycles and s of ``T = period``), and what was kept; any other end stays as it is."""
+    failure = recorder.failure
+    if failure is None or reason not in ("completed", "stopped"):
+        return reason, error
+    when = "before its first cycle, nothing enabled" if summary is None else \
+        f"after {summary.cycles} cycles ({summary.cycles * period:.3f} s), every drive disabled"
+    error = f"{failure}; the run stopped {when}; the folder keeps what was written before"
+    if summary is not None:
+        summary.exit_reason, summary.error = "write error", error
+    return "write error", error
 
 
 class _StopBeforeEnabling(BaseException):  # control flow, not an error: no caller ever sees it
