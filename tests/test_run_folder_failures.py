@@ -1,6 +1,7 @@
 """A run whose folder cannot be written any more -- deleted while the run goes on, or a full disk --
 stops at the next cycle boundary with its drive disabled, says why in one line ("write error",
-exit 1, naming the folder, the file and the system's reason), and keeps what was written before.
+exit 1, naming the folder, the file and the system's reason), and keeps what was written before;
+a disk already full when the run begins is its ``--out`` refused, exit 2, before the bus.
 
 Both writers are exercised: a CANopen run on the lock-step bus writes from a thread of its own
 process, a Modbus run (loopback TCP) from a writer process.  The full disk is a real one: a 256 KiB
@@ -20,10 +21,12 @@ import shutil
 import subprocess
 import sys
 import threading
+from typing import Any
 
 import pytest
 
 from drives.cia402 import State
+from haptic_bus.app.folder_lock import LOCK_NAME
 from tests.run_rig import TRANSPORTS, run_cli, simulated_drive, wait_until
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -31,19 +34,27 @@ TMPFS_BYTES = 256 * 1024  # a record of about 1000 cycles at most (about 250 byt
 CHILD_WAIT = 120.0  # s: the child imports the stack, fills the disk and stops (a few s idle)
 
 CHILD = """
-import contextlib, io, json, sys
+import contextlib, io, json, os, sys
 from haptic_bus.app.cli import main
 from haptic_bus.control.record import read_record
 from tests.run_rig import simulated_drive
 
-transport, out = sys.argv[1:3]
+transport, out, full = sys.argv[1], sys.argv[2], sys.argv[3] == "full"
+if full:  # the disk full before the run: one file takes every block there is
+    with open(f"{out}-filler", "wb", buffering=0) as filler:
+        try:
+            for _ in range(1000):
+                filler.write(bytes(4096))
+        except OSError:
+            pass
 stdout, stderr = io.StringIO(), io.StringIO()
 with simulated_drive(transport, "cia402-handle") as drive:
     with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
         code = main(["run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "60", "-q", "--no-plots",
                      "--out", out])
     states = [state.name for state in drive.states]
-kept = {"rows": read_record(f"{out}/record.csv").cycles, "status": json.load(open(f"{out}/run.json"))["status"]}
+kept = {"rows": read_record(f"{out}/record.csv").cycles, "status": json.load(open(f"{out}/run.json"))["status"]} \
+    if not full else {"files": sorted(os.listdir(out))}
 print(json.dumps({"code": code, "out": stdout.getvalue(), "err": stderr.getvalue(), "states": states, "kept": kept}))
 """
 
@@ -66,21 +77,28 @@ def one_line(err: str) -> str:
     return lines[0]
 
 
-@pytest.mark.parametrize("transport", TRANSPORTS)
-def test_a_full_disk_stops_the_run_with_one_line_and_keeps_the_record(transport: str, tmp_path: pathlib.Path) -> None:
+def on_a_small_disk(tmp_path: pathlib.Path, transport: str, full: bool) -> tuple[pathlib.Path, dict[str, Any]]:
+    """The child's 60 s run into ``--out`` on a fresh 256 KiB tmpfs (``full``: filled first): the
+    folder, and what the child reports (exit status, stdout, stderr, the drive's states, what was kept)."""
+    if not can_mount_tmpfs():
+        pytest.skip("no tmpfs can be mounted here (unshare -m / -rm refused): no full disk to run into")
     mount = tmp_path / "small"
     mount.mkdir()
     out = mount / "run"
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    child = [sys.executable, "-c", CHILD, transport, str(out)]
-    if not can_mount_tmpfs():
-        pytest.skip("no tmpfs can be mounted here (unshare -m / -rm refused): no full disk to run into")
+    child = [sys.executable, "-c", CHILD, transport, str(out), "full" if full else "empty"]
     unshare = ["unshare", "-m"] if os.geteuid() == 0 else ["unshare", "-rm"]
     script = f'mount -t tmpfs -o size={TMPFS_BYTES} tmpfs "$1" && shift && exec "$@"'
     done = subprocess.run([*unshare, "sh", "-c", script, "sh", str(mount), *child], capture_output=True, text=True,
                           env=env, cwd=REPO, timeout=CHILD_WAIT)
     assert done.returncode == 0, done.stderr[-3000:]
-    result = json.loads(done.stdout.splitlines()[-1])
+    result: dict[str, Any] = json.loads(done.stdout.splitlines()[-1])
+    return out, result
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_a_full_disk_stops_the_run_with_one_line_and_keeps_the_record(transport: str, tmp_path: pathlib.Path) -> None:
+    out, result = on_a_small_disk(tmp_path, transport, full=False)
     assert result["code"] == 1, result
     line = one_line(result["err"])
     assert line.startswith(f"haptic-bus run: write error: run folder {out}: No space left on device writing "), line
@@ -94,6 +112,15 @@ def test_a_full_disk_stops_the_run_with_one_line_and_keeps_the_record(transport:
     # 180 bytes; on CANopen bus.asc's SYNC, TPDOs and RPDO, about 60 bytes a line), so 256 KiB less run.json's
     # few KiB held more than 500 rows, each a cycle the run made; and the run stopped long before its 60 s
     assert 500 < kept["rows"] <= cycles < 60_000, (kept, cycles)
+
+
+def test_a_disk_full_before_the_run_is_exit_2_before_the_bus(tmp_path: pathlib.Path) -> None:
+    out, result = on_a_small_disk(tmp_path, "canopen", full=True)
+    assert result["code"] == 2 and result["out"] == "" and result["states"] == [], result  # the drive never reached
+    line = one_line(result["err"])
+    assert line == (f"haptic-bus run: error: run: --out = '{out}' is invalid; allowed: a folder this run can write "
+                    f"({out / LOCK_NAME}: No space left on device)")
+    assert result["kept"] == {"files": []}  # nothing left behind, not even the lock file
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)

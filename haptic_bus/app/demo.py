@@ -84,7 +84,7 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
     link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True, **demo.link()}
     extra: dict[str, Any] = {"loop": kind.loop_extra()}
     journal = RunJournal(out, profile, link, extra, kind.render)
-    journal.write()
+    journal.begin()
     recorder = RunRecorder(out, journal)
     with ExitStack() as stack:
         writer = recorder.start(stack, bus_log=False)  # before the drive is enabled: Ctrl-C from then on is recorded

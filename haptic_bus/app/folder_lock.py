@@ -64,9 +64,15 @@ def own_folder(folder: pathlib.Path, name: str = "--out", context: str = "run") 
             raise ParameterError(name, str(folder), f"a folder no other run is writing (the run of process {holder} "
                                  f"holds {path}; wait for it to end, or give another --out)", context) from None
         if _names(path, fd):
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-            return FolderLock(path, fd)
+            lock = FolderLock(path, fd)
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            except OSError as exc:  # a full disk: refused before anything else is written
+                lock.release()
+                raise ParameterError(name, str(folder), f"a folder this run can write ({path}: {exc.strerror})",
+                                     context) from None
+            return lock
         os.close(fd)  # the run that held it removed it after we opened it: lock the file the path names now
     raise ParameterError(name, str(folder), f"a folder whose {LOCK_NAME} stays put (removed {_ATTEMPTS} times while "
                          "this run took it)", context)

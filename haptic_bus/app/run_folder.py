@@ -192,6 +192,15 @@ class RunJournal(Generic[P, C]):
             document["settings"]["safety"] = {key: getattr(self.safety, key) for key in shown}
         return document
 
+    def begin(self) -> None:
+        """``run.json`` "running", before any bus is touched; ParameterError (exit 2) naming the
+        folder if it cannot be written (a full disk)."""
+        try:
+            self.write()
+        except OSError as exc:
+            raise ParameterError("--out", str(self.folder), f"a folder this run can write ({exc.strerror} writing "
+                                 f"{RUN_JSON})", "run") from None
+
     def write(self, summary: RunSummary | None = None, ended: bool = False) -> pathlib.Path:
         """Write ``run.json`` as the run stands now."""
         return write_json(self.path, self.document(summary, ended))

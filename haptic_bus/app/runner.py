@@ -152,7 +152,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": kind.loop_extra()}
     journal = RunJournal(folder, kind.profile, rig.link, extra, kind.render, rig.safety)
-    journal.write()  # "running", before any bus is touched: a run killed from here on says so
+    journal.begin()  # "running", before any bus is touched: a run killed from here on says so
     recorder = RunRecorder(folder, journal)
     reason, error = "completed", None
     before: list[Event] = []  # what happened before the controller (and its event log) existed
