@@ -38,6 +38,7 @@ from drives.cia402 import (
     ERROR_CODE,
     MODES_OF_OPERATION,
     MODES_OF_OPERATION_DISPLAY,
+    STATUSWORD,
     SUPPORTED_DRIVE_MODES,
     SW_FAULT,
     Command,
@@ -301,6 +302,20 @@ class Cia402Master(Drive):
         self._controlword = SAFE_CONTROLWORD
         self._tripped = None
 
+    def refuse_fault(self) -> None:
+        """:meth:`in_fault` if the drive sits in FAULT now (0x6041 read acyclically): what a run
+        checks as soon as the drive is reached, so that a faulted drive is its first and only news."""
+        statusword = self.read_object(STATUSWORD)
+        if decode_statusword(statusword) is State.FAULT:
+            raise self.in_fault(statusword)
+
+    def in_fault(self, statusword: int) -> DriveFault:
+        """The error of a drive found in FAULT with ``statusword``: its name, the statusword and its
+        error code (0x603F, read now), and that it needs a fault reset."""
+        return DriveFault(self.name, f"drive is in FAULT (statusword 0x{statusword:04X}, error code "
+                                     f"{error_code_text(self._error_code())}): it needs a fault reset first",
+                          state=State.FAULT)
+
     def _error_code(self) -> int | None:
         """0x603F, or None where it cannot be read."""
         try:
@@ -401,9 +416,7 @@ class StateWalk:
         if goal is State.SWITCH_ON_DISABLED:
             command = Command.DISABLE_VOLTAGE
         elif state is State.FAULT:
-            raise DriveFault(master.name, f"drive is in FAULT (statusword 0x{statusword:04X}, error code "
-                                         f"{error_code_text(master._error_code())}): it needs a fault reset first",
-                             state=state)
+            raise master.in_fault(statusword)
         else:
             path = path_to_operation_enabled(state) if state is not None else ()
             command = path[0] if path else None

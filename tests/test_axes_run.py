@@ -176,7 +176,9 @@ def test_a_start_inside_an_object_is_refused_with_nothing_enabled(tmp_path: path
     assert states == [State.SWITCH_ON_DISABLED] * 3
     assert result.exit_reason == "refused" and result.controller is None
     assert "handle is inside ball" in (result.error or "") and "5 mm" not in (result.error or "")
-    assert (tmp_path / "run" / "run.json").is_file()
+    safety = json.loads((tmp_path / "run" / "run.json").read_text())["settings"]["safety"]
+    # virtual time: the drives were given watchdogs of 2 s of wall clock (1000 periods of T = 2 ms), not the profile's
+    assert (safety["consumer_ms"], safety["rpdo_deadline_periods"], safety["modbus_watchdog_ms"]) == (2000, 1000, 2000)
 
 
 def test_a_start_inside_an_object_ramps_the_force_in_once_the_coupled_gate_proves_the_ramp(tmp_path: pathlib.Path) -> None:
@@ -334,3 +336,26 @@ def test_reset_fault_clears_the_faulted_axis_before_commissioning_and_a_run_with
     events = json.loads((tmp_path / "reset" / "run.json").read_text())["events"]
     (reset,) = [event for event in events if event["kind"] == "fault reset"]
     assert reset["data"]["drive"] == "CANopen node 6" and reset["data"]["error_code_before"] == 0x5530
+
+
+def test_a_real_time_run_names_a_faulted_axis_drive_before_pre_flight(tmp_path: pathlib.Path) -> None:
+    """One of three drives already in FAULT: the run says so once the drives are reached, naming
+    that drive and its error code, before pre-flight's cycles (none: no SYNC), nothing enabled."""
+    profile = load_axes_profile(GANTRY)
+    channel = f"faulted-{tmp_path.name}"
+    sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}, clock="wall").start()
+    try:
+        sim.nodes[1].drive.fault(0x8250)
+        result = run(profile, {"interface": "lockstep", "channel": channel},
+                     RunOptions(0.2, out_dir=tmp_path / "run", live=False, plots=False))
+        syncs = [node.drive.sync_count for node in sim.nodes]
+        assert syncs == [1, 1, 1]  # commissioning's one exchange (setting the cycle up), no pre-flight (500 cycles)
+        assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED, State.FAULT, State.SWITCH_ON_DISABLED]
+    finally:
+        sim.stop()
+    assert result.exit_reason == "drive error" and result.summary is None
+    assert result.error is not None and result.error.startswith("CANopen node 6: drive is in FAULT (statusword 0x0208, "
+                                                                "error code 0x8250 RPDO timeout)"), result.error
+    document = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert "preflight" not in document and document["settings"]["safety"]["consumer_ms"] == 90  # real time: the profile's
+    assert document["settings"]["safety"]["master_node_id"] == 127  # the controller node the drives were told to watch

@@ -57,6 +57,10 @@ def test_the_default_folder_is_runs_utc_profile_and_holds_every_record(
     assert document["profile"] == {"name": "cia402-handle", "path": str(shipped),
                                    "sha256": hashlib.sha256(shipped.read_bytes()).hexdigest()}
     assert document["settings"]["device"]["mass"] == 1.0 and document["settings"]["device"]["friction"] == 20.0
+    # what the drive was given: virtual time lifts the profile's watchdogs (default [safety]: 30 periods, 90 ms,
+    # 60 ms) to 2 s of wall clock (drives.safety.VIRTUAL_TIME_DEADLINE), 2000 periods of T = 1 ms
+    assert document["settings"]["safety"] == {"heartbeat_ms": 20, "consumer_ms": 2000, "rpdo_deadline_periods": 2000,
+                                              "abort_option": 1, "strict": False, "modbus_watchdog_ms": 2000}
     assert document["loop"] == {"period": 0.001, "timing": "cia402", "delay_assumed": 1, "delay_observed": 1.0}
     assert document["link"]["kind"] == "canopen" and document["link"]["node_id"] == NODE
     assert document["link"]["bus"]["interface"] == "lockstep" and document["link"]["bus"]["channel"] == drive.channel

@@ -34,6 +34,8 @@ ALLOWED = {
     "verdict-collect": "the upload judge's executor thread (concurrent.futures): blocked on the worker process' "
                        "result pipe, it runs only while an upload is judged (haptic_bus/node/verdicts.py)",
     "verdict-feed": "the same executor's call-queue feeder: blocked until an upload is submitted",
+    "hb-write-watch": "blocked in read on the writer's alarm pipe, it runs once if the folder cannot be written "
+                      "(a full disk, the folder deleted) to stop the run (haptic_bus/app/run_writer.py)",
 }
 
 

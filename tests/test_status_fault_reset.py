@@ -343,6 +343,28 @@ def test_run_refuses_a_faulted_drive_naming_the_command_then_resets_it_with_rese
         "state_before": "FAULT", "error_code_before": 0x8250, "error_code_before_text": "RPDO timeout", "cleared": True}
 
 
+@pytest.mark.parametrize("transport", ["canopen", "modbus"])
+def test_a_real_time_run_names_a_faulted_drive_at_set_up_before_pre_flight(
+        transport: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Real time: pre-flight would run 500 cycles (and judge the gate) before enabling; a drive
+    already in FAULT is said once reached instead, one line, exit 1, pre-flight never run."""
+    with simulated_drive(transport, "cia402-handle") as under:
+        under.drive.fault(0x8250)
+        result = run_cli(capsys, "run", "cia402-handle", *under.args, "--duration", "0.2", "--no-plots", "--no-bus-log",
+                         "--out", str(tmp_path))
+        assert not under.was_enabled
+    assert result.code == 1
+    line = one_line(result)
+    assert "drive is in FAULT (statusword 0x0208, error code 0x8250 RPDO timeout)" in line
+    assert line.endswith(f"then: haptic-bus fault-reset {' '.join(under.args)} (or run with --reset-fault)")
+    assert "pre-flight" not in result.out
+    document = read_run(tmp_path)
+    assert document["exit_reason"] == "drive error" and "preflight" not in document
+    # real time: the drive was given the profile's (default) safety settings
+    assert document["settings"]["safety"] == {"heartbeat_ms": 20, "consumer_ms": 90, "rpdo_deadline_periods": 30,
+                                              "abort_option": 1, "strict": False, "modbus_watchdog_ms": 60}
+
+
 def test_run_reset_fault_with_a_persisting_cause_is_refused_and_logged(tmp_path: Path,
                                                                        capsys: pytest.CaptureFixture[str]) -> None:
     with simulated_drive("canopen", "cia402-handle") as under:

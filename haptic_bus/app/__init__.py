@@ -26,6 +26,10 @@ Who does what
 ``verdict-collect``, ``verdict-feed`` -- the upload judge's executor threads
     concurrent.futures' two threads of the judge's process pool, blocked on its pipes; they run
     only while an upload is judged (:mod:`haptic_bus.node.verdicts`).
+``hb-write-watch`` -- the writer's alarm
+    Blocked in ``read`` on a pipe of its own from the writer; it runs once, if the writer cannot
+    write the folder (a full disk, the folder deleted), to ask the run to stop at the next cycle
+    boundary (:mod:`haptic_bus.app.run_writer`).
 ``heartbeat-<node>``, ``canopen-notify`` -- outside the cyclic phase only
     Commissioning, SDO access and the disabling walk: canopen's notifier reads the bus and the
     heartbeat thread keeps the drives' consumers fed.  Entering the cyclic phase silences the
@@ -52,7 +56,7 @@ What crosses between them
 
 To the writer: the rings (no system call, no lock: the writer polls the counters; a writer a
 whole ring behind loses the oldest rows and counts them) and, for each event (an upload, an
-alarm, the end), one pickled message on a pipe.  To the judge: the staged walls, the running
+alarm, the end), one pickled message on a pipe; back, once, a write that failed.  To the judge: the staged walls, the running
 scene and the gate, pickled once per upload; back: the scene and the decision.  Nothing crosses
 back into the cycle but the judge's verdict, read at a cycle boundary.
 
@@ -60,7 +64,8 @@ Why the cycle is not held up
 ----------------------------
 
 While the drives are enabled no other thread of the control process runs Python: the writer
-and the judge are processes, the executor threads wait in ``select``, the heartbeat thread and
+and the judge are processes, the executor threads wait in ``select`` and the writer's alarm in
+``read``, the heartbeat thread and
 canopen's notifier are parked (a drive on an in-process bus is the exception: its own code, and
 so the writer's thread, share the process with the cycle).  Heavy imports (matplotlib, scipy) happen in the children, before
 pre-flight or after the last cycle (the pictures are drawn when the run has ended);

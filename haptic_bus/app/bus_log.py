@@ -104,10 +104,13 @@ class BusLogFile:
         self.frames += len(found)
         return len(found)
 
-    def close(self) -> None:
-        """A last drain, ``End TriggerBlock``, the file closed and the ring let go."""
-        self.drain()
+    def close(self, drain: bool = True) -> None:
+        """A last drain and ``End TriggerBlock`` (unless not ``drain``: the folder can no longer be
+        written), the file closed and the ring let go."""
+        if drain:
+            self.drain()
         self._writer.stop()
-        write_whole(self._file, self._staged.take())
+        if drain:
+            write_whole(self._file, self._staged.take())
         self._file.close()
         self.ring.close()

@@ -19,6 +19,7 @@ from typing import Any
 
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.demo_kinds import Findings, demo_kind
+from haptic_bus.app.folder_lock import own_folder
 from haptic_bus.app.profiles import Profile, default_profile
 from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
 from haptic_bus.app.run_kinds import run_kind
@@ -77,16 +78,18 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
     profile = profile or default_profile()
     kind, demo = run_kind(profile), demo_kind(profile)
     out = prepare_run_folder(out_dir, profile.name)
+    lock = own_folder(out)  # held until the demo has written everything (or its process ends)
     seconds = demo.seconds() if seconds is None else seconds
     cycles = max(1, round(seconds / kind.period))
     link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True, **demo.link()}
     extra: dict[str, Any] = {"loop": kind.loop_extra()}
     journal = RunJournal(out, profile, link, extra, kind.render)
-    journal.write()
+    journal.begin()
     recorder = RunRecorder(out, journal)
     with ExitStack() as stack:
         writer = recorder.start(stack, bus_log=False)  # before the drive is enabled: Ctrl-C from then on is recorded
         sim, drive = stack.enter_context(demo.simulated())
+        journal.safety = getattr(drive, "drives", (drive,))[0].safety  # settings.safety: what its drives were given
         origin = kind.origin(drive)
         gate, scene = profile.gate(), kind.scene()
         kind.describe_gate(gate, extra)
@@ -98,12 +101,21 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
         found = demo.findings(sim, controller, origin, cycles)
         if summary.exit_reason == "completed":
             drive.disable()
+    _say_write_failure(recorder, summary)
     extra.update(exit_reason=summary.exit_reason, error=summary.error, operator_energy_exact=found.operator_energy,
                  port_energy_exact=found.port_energy)
     if found.steady is not None:
         extra["steady_states"] = [dict(vars(s)) for s in found.steady]
     files = recorder.finish(summary, pictures=plots)
+    lock.release()
+    _say_write_failure(recorder, summary)  # run.json's own completion too
     return DemoResult(profile, controller, summary, found, list(demo.lines(controller, summary, found)), files)
+
+
+def _say_write_failure(recorder: RunRecorder, summary: RunSummary) -> None:
+    """A folder the demo could not write (a full disk, deleted): its summary ends "write error" (exit 1), saying why."""
+    if recorder.failure is not None:
+        summary.exit_reason, summary.error = "write error", recorder.failure
 
 
 def format_demo(result: DemoResult) -> str:

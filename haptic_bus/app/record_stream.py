@@ -53,10 +53,12 @@ class RecordFile:
         self.written += count
         return count
 
-    def close(self) -> None:
-        """A last drain, the file closed and the ring let go (idempotent)."""
+    def close(self, drain: bool = True) -> None:
+        """A last drain (unless not ``drain``: the folder can no longer be written), the file closed
+        and the ring let go (idempotent)."""
         if not self._file.closed:
-            self.drain()
+            if drain:
+                self.drain()
             self._file.close()
             self.ring.close()
 

@@ -1,14 +1,17 @@
 """Where a run keeps its record: ``runs/<UTC timestamp>-<profile>/`` (or ``--out``), written as it goes.
 
 The folder is created and probed for writing before any bus is touched (an unwritable one is
-a :class:`~haptic_bus.errors.ParameterError`: exit 2).  It receives:
+a :class:`~haptic_bus.errors.ParameterError`: exit 2), and owned by the run for its life
+(:mod:`~haptic_bus.app.folder_lock`: ``.haptic-bus.lock``; another run's folder is exit 2).  It receives:
 
 - ``run.json`` (:class:`RunJournal`), at once: ``status`` "running", ``"ended": false``; kept
   current while the run goes on (each event, each scene) and completed at the end: software
   versions, the profile file and its SHA-256, device, loop (delay assumed and observed), the
-  loop the gate judged (``gate_loop``), link, scaling and where each factor came from, safety
-  settings, every scene in effect (each object with its geometry, K and B, the gate's margin per
-  contact wall), the summary with its ``exit_reason``, the events (uploads accepted and refused,
+  loop the gate judged (``gate_loop``), link, scaling and where each factor came from, the safety
+  settings the drives were given (``settings.safety``: in virtual time the watchdogs' floor,
+  :meth:`~drives.safety.SafetySettings.for_virtual_time`; the profile's own are in its file),
+  every scene in effect (each object with its geometry, K and B, the gate's margin per contact
+  wall), the summary with its ``exit_reason``, the events (uploads accepted and refused,
   alarms, derates, faults), each with its time, and the files.  Written whole each time (a
   temporary file renamed over it), so a killed run leaves the last version, saying it did not end;
 - ``record.csv``: one row a cycle (:data:`haptic_bus.control.record.COLUMNS`), streamed by the
@@ -34,6 +37,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any, Generic, TypeVar
 
+from drives.safety import SafetySettings
 from haptic_bus._version import __version__
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.app.profiles import Profile, profile_to_dict
@@ -145,7 +149,11 @@ def write_json(path: pathlib.Path, document: dict[str, Any]) -> pathlib.Path:
     """Write ``document`` to ``path`` whole or not at all (a temporary file renamed over it), so a
     process killed meanwhile leaves the previous version, never half of one."""
     temporary = path.with_name(f".{path.name}.tmp")
-    temporary.write_text(json.dumps(document, indent=1) + "\n")
+    try:
+        temporary.write_text(json.dumps(document, indent=1) + "\n")
+    except OSError:  # a full disk: no half-written temporary left beside the last whole version
+        temporary.unlink(missing_ok=True)
+        raise
     os.replace(temporary, path)
     return path
 
@@ -165,8 +173,9 @@ class RunJournal(Generic[P, C]):
     leaves it saying ``"ended": false``: :func:`read_run_folder` reports it as not ended cleanly."""
 
     def __init__(self, folder: pathlib.Path, profile: P, link: dict[str, Any], extra: dict[str, Any],
-                 render: Render[P, C]) -> None:
+                 render: Render[P, C], safety: SafetySettings | None = None) -> None:
         self.folder = folder
+        self.safety = safety  # what the drives were given, shown as settings.safety (None: the profile's)
         self.path = folder / RUN_JSON
         self.profile = profile
         self.link = link
@@ -176,8 +185,21 @@ class RunJournal(Generic[P, C]):
         self._render = render
 
     def document(self, summary: RunSummary | None = None, ended: bool = False) -> dict[str, Any]:
-        """``run.json``'s content as the run stands now."""
-        return self._render(self.profile, self.controller, summary, self.link, self.extra, self.started, ended)
+        """``run.json``'s content as the run stands now; ``settings.safety`` what the drives were given."""
+        document = self._render(self.profile, self.controller, summary, self.link, self.extra, self.started, ended)
+        if self.safety is not None:
+            shown = document["settings"]["safety"]
+            document["settings"]["safety"] = {key: getattr(self.safety, key) for key in shown}
+        return document
+
+    def begin(self) -> None:
+        """``run.json`` "running", before any bus is touched; ParameterError (exit 2) naming the
+        folder if it cannot be written (a full disk)."""
+        try:
+            self.write()
+        except OSError as exc:
+            raise ParameterError("--out", str(self.folder), f"a folder this run can write ({exc.strerror} writing "
+                                 f"{RUN_JSON})", "run") from None
 
     def write(self, summary: RunSummary | None = None, ended: bool = False) -> pathlib.Path:
         """Write ``run.json`` as the run stands now."""

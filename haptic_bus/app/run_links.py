@@ -71,7 +71,9 @@ class Rig:
     may hold one torque target (s, the ``bound`` layer's budget); its ``watchdog`` (pre-flight);
     ``addresses`` a fault reset reaches, one per axis in axis order (none: no reset possible, an
     open bus); ``frames``: whether there are CAN frames to log; ``check``: what refuses the run
-    before any bus is opened (:class:`Refusal`)."""
+    before any bus is opened (:class:`Refusal`); ``safety``: the safety settings the drive(s) are
+    given (in virtual time the profile's with the watchdogs' floor,
+    :meth:`~drives.safety.SafetySettings.for_virtual_time`: ``run.json``'s ``settings.safety``)."""
 
     link: dict[str, Any]
     open: OpenDrive
@@ -80,6 +82,7 @@ class Rig:
     addresses: tuple[DriveAddress, ...]
     frames: bool = False
     check: Callable[[], None] = lambda: None
+    safety: SafetySettings | None = None
 
     def fault_hint(self, axis: int | None) -> str | None:
         """What clears the fault of axis ``axis`` (its index; None: unknown): its ``haptic-bus
@@ -113,7 +116,14 @@ def _canopen_rig(link: dict[str, Any], open_drive: OpenDrive, safety: SafetySett
                  options: RunOptions, addresses: tuple[DriveAddress, ...], check: Callable[[], None] = lambda: None) -> Rig:
     """A rig of CANopen drive(s) with ``safety`` at ``T = period`` s."""
     hold = longest_hold(period, options.wall_paced, safety.rpdo_deadline_ms(period), safety.consumer_ms)
-    return Rig(link, open_drive, hold, canopen_watchdog(safety, period), addresses, frames=True, check=check)
+    return Rig(link, open_drive, hold, canopen_watchdog(safety, period), addresses, frames=True, check=check,
+               safety=given_safety(safety, period, options))
+
+
+def given_safety(safety: SafetySettings, period: float, options: RunOptions) -> SafetySettings:
+    """The safety settings a run at ``T = period`` s gives its drive(s): ``safety`` wall-paced, else
+    with the watchdogs' floor of virtual time."""
+    return safety if options.wall_paced else safety.for_virtual_time(period)
 
 
 def _serve(stack: ExitStack, link: NetworkLink, name: str, node_id: int, heartbeat_ms: int) -> Serve:
@@ -167,7 +177,7 @@ def canopen_rig(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
         drive = CanopenDrive(node_id, **where, period=period,
                              tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling=profile.scaling(),
                              scaling_source=PROFILE_SCALING_SOURCE,
-                             safety=safety if options.wall_paced else safety.for_virtual_time(period),
+                             safety=given_safety(safety, period, options),
                              **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
         stack.callback(drive.close)
         drive.link.tap = tap  # before commissioning: its frames are logged too
@@ -229,7 +239,7 @@ def axes_rig(profile: AxesProfile, bus: can.BusABC | Mapping[str, Any], options:
                            interface=config["interface"], channel=config.get("channel"), bitrate=config.get("bitrate"),
                            bus_kwargs={k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")},
                            period=period, tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling_source=PROFILE_SCALING_SOURCE,
-                           safety=safety if options.wall_paced else safety.for_virtual_time(period),
+                           safety=given_safety(safety, period, options),
                            **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
         stack.callback(axes.close)
         axes.link.tap = tap  # before commissioning: its frames are logged too
@@ -282,7 +292,7 @@ def modbus_rig(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Se
     places = list(zip(list(urls) * len(unit_ids) if len(urls) == 1 else urls, unit_ids))
     period = profile.period if isinstance(profile, AxesProfile) else profile.loop.period
     scalings = [axis.device.scaling() for axis in profile.axes] if isinstance(profile, AxesProfile) else [profile.scaling()]
-    safety = profile.safety if options.wall_paced else profile.safety.for_virtual_time(period)
+    safety = given_safety(profile.safety, period, options)
     link: dict[str, Any] = ({"kind": "modbus", "urls": [url for url, _ in places], "unit_ids": list(unit_ids)} if several
                             else {"kind": "modbus", "url": places[0][0], "unit_id": places[0][1]})
 
@@ -307,7 +317,8 @@ def modbus_rig(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Se
 
     hold = longest_hold(period, options.wall_paced, safety.modbus_watchdog_ms, 0)
     watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
-    return Rig(link, open_drive, hold, watchdog, tuple(DriveAddress(url=url, unit_id=unit) for url, unit in places))
+    return Rig(link, open_drive, hold, watchdog, tuple(DriveAddress(url=url, unit_id=unit) for url, unit in places),
+               safety=safety)
 
 
 def _gate_at(profile: Profile | AxesProfile, delays: Sequence[float]) -> tuple[Any, Any]:

@@ -15,7 +15,8 @@ from haptic_bus.validation import real_in_range
 
 WALL, VIRTUAL = "wall", "virtual"
 PACINGS = (WALL, VIRTUAL)  # what paces a run's cycles: the wall clock, or the simulated drive (lock-step)
-EXIT_STATUS = {"completed": 0, "stopped": 0, "refused": 1, "drive error": 1, "assumption broken": 3, "interrupted": 130}
+EXIT_STATUS = {"completed": 0, "stopped": 0, "refused": 1, "drive error": 1, "write error": 1, "assumption broken": 3,
+               "interrupted": 130}
 
 
 class StopRequest:
@@ -80,5 +81,6 @@ def check_pacing(pacing: str) -> None:
 
 
 def exit_status(reason: str) -> int:
-    """0 completed or stopped, 1 refused or a drive error, 3 an assumption broken, 130 interrupted."""
+    """0 completed or stopped, 1 refused, a drive error or a folder that could not be written, 3 an
+    assumption broken, 130 interrupted."""
     return EXIT_STATUS[reason]

@@ -13,7 +13,7 @@ from contextlib import ExitStack
 from typing import Any
 
 from haptic_bus.app.bus_log import LOG_NAME
-from haptic_bus.app.run_folder import RunJournal, read_run_folder
+from haptic_bus.app.run_folder import RUN_JSON, RunJournal, read_run_folder
 from haptic_bus.app.run_writer import RunWriter, writer_for
 from haptic_bus.control.cycle_loop import RunSummary
 from haptic_bus.control.record import EventLog, RunRecord
@@ -28,15 +28,23 @@ class RunRecorder:
         self.writer: RunWriter | None = None
         self.stats: dict[str, Any] = {}
         self.files: list[str] = []  # the records streamed, file names
+        self._failure: str | None = None  # run.json could not be completed (the writer's own: RunWriter.failure)
 
-    def start(self, stack: ExitStack, bus_log: bool) -> RunWriter:
+    def start(self, stack: ExitStack, bus_log: bool, on_failure: Callable[[], None] | None = None) -> RunWriter:
         """Start the writer process (with ``bus_log`` its frame ring and ``bus.asc``), stopped when
         ``stack`` closes; before the drive is reached, so that commissioning's frames are logged.  A
         thread of this process instead when the journal's link is an in-process bus
-        (:func:`~haptic_bus.app.run_writer.writer_for`)."""
-        self.writer = writer = RunWriter(self.folder, bus_log, in_process=writer_for(self.journal.link))
+        (:func:`~haptic_bus.app.run_writer.writer_for`).  ``on_failure`` is called (from another
+        thread) if the writer cannot write the folder (:attr:`failure`)."""
+        self.writer = writer = RunWriter(self.folder, bus_log, in_process=writer_for(self.journal.link),
+                                         on_failure=on_failure)
         stack.callback(self._stop)
         return writer
+
+    @property
+    def failure(self) -> str | None:
+        """Why the folder could not be written (one line naming it, the file and the reason), or None."""
+        return self._failure or (self.writer.failure if self.writer is not None else None)
 
     def stream(self, writer: RunWriter, records: Sequence[tuple[str, str, RunRecord]], events: EventLog,
                scenes: Callable[[], list[dict[str, Any]]], period: float, live: str | None = None,
@@ -62,7 +70,16 @@ class RunRecorder:
 
     def finish(self, summary: RunSummary | None, pictures: bool = True) -> list[pathlib.Path]:
         """After the writer is stopped: ``run.json`` completed, the pictures (unless not ``pictures``);
-        the files written."""
+        the files written.  A folder that can no longer be written (:attr:`failure`) gets neither:
+        the files as they are (``run.json`` its last whole version), nothing raised."""
+        try:
+            return self._finish(summary, pictures and self.failure is None)
+        except OSError as exc:
+            self._failure = self.failure or f"run folder {self.folder}: {exc.strerror or exc} writing {RUN_JSON}"
+            return [path for path in (*(self.folder / name for name in self.files), self.folder / LOG_NAME,
+                                      self.journal.path) if path.is_file()]
+
+    def _finish(self, summary: RunSummary | None, pictures: bool) -> list[pathlib.Path]:
         written = [self.folder / name for name in self.files]
         counts = self.stats.get("records", {})
         if len(self.files) == 1:

@@ -12,7 +12,11 @@ commissioning's frames are logged, and long before pre-flight) and hands it:
 - the live view's title (:meth:`RunWriter.live`).
 
 What crosses while the cycles run is the rings (no system call, no lock) and, for each event,
-one pickled message on a pipe (events are rare: uploads, alarms, the end).  A shared segment's
+one pickled message on a pipe (events are rare: uploads, alarms, the end).  A write the writer
+cannot make (a full disk, the folder deleted) comes back on a pipe of its own, which a thread
+named ``hb-write-watch`` waits on, blocked in ``read`` (never scheduled until then, so it costs
+the cycle nothing): it keeps the line (:attr:`RunWriter.failure`) and calls ``on_failure``, which
+for ``haptic-bus run`` asks the run to stop at the next cycle boundary.  A shared segment's
 name is removed as soon as the writer has attached to it, so nothing is left in ``/dev/shm``
 whatever kills the processes.  :meth:`RunWriter.close` stops the writer after its last drain and
 returns what it wrote and lost (``run.json``'s ``record`` and ``bus_log``).
@@ -53,6 +57,7 @@ logger = logging.getLogger(__name__)
 PROCESS_NAME = "haptic-bus-writer"
 START_TIMEOUT = 60.0  # s: the writer imports numpy and python-can before it answers (long only on a stalled machine)
 STOP_TIMEOUT = 30.0  # s: its last drain of up to a ring of rows per axis
+WATCH_THREAD = "hb-write-watch"  # the thread that waits for the writer's alarm (a failed write)
 SCENE_EVENTS = frozenset(("upload", "derate"))  # events that come with a new scene
 
 
@@ -79,26 +84,33 @@ class RunWriter:
     """The writer of a run writing into ``folder`` (module docstring): a process, or with
     ``in_process`` a thread of this process; ``bus_log``: a frame ring and ``bus.asc`` too."""
 
-    def __init__(self, folder: pathlib.Path, bus_log: bool, in_process: bool = False) -> None:
+    def __init__(self, folder: pathlib.Path, bus_log: bool, in_process: bool = False,
+                 on_failure: Callable[[], None] | None = None) -> None:
         context = multiprocessing.get_context("spawn")
         self._conn, child = context.Pipe()
+        alarms, alarm = context.Pipe(duplex=False)
         self._lock = threading.Lock()  # one message at a time: the control thread's and the upload server's
         self._broken = False
+        self.failure: str | None = None  # why the folder could not be written (the writer's one line), if so
         self.frames = Ring.shared(FRAME, FRAME_CAPACITY) if bus_log else None
         frames = None if self.frames is None else self.frames.spec
         self.process: multiprocessing.process.BaseProcess | threading.Thread
         if in_process:
             self.process = threading.Thread(target=writer_process.serve, name=writer_process.COMM, daemon=True,
-                                            args=(str(folder), frames, child, None))
+                                            args=(str(folder), frames, child, None, alarm))
             self.process.start()
             self._child: Connection | None = child  # closed once the thread has ended
         else:
             self.process = context.Process(target=writer_process.main, name=PROCESS_NAME, daemon=True,
-                                           args=(str(folder), frames, child, os.getpid()))
+                                           args=(str(folder), frames, child, os.getpid(), alarm))
             with _main_module_hidden():
                 self.process.start()
             child.close()  # the child's end is the process' now (a thread uses this one)
+            alarm.close()
             self._child = None
+        self._watch = threading.Thread(target=self._watch_alarms, name=WATCH_THREAD, daemon=True,
+                                       args=(alarms, on_failure))
+        self._watch.start()
         self._await("ready", START_TIMEOUT)
         if self.frames is not None:
             self.frames.unlink()
@@ -135,6 +147,7 @@ class RunWriter:
             stats = self._await("stats", STOP_TIMEOUT)[1]
         except OSError as exc:
             logger.error("run writer: %s", exc)
+        self.failure = self.failure or stats.get("failure")
         self.process.join(STOP_TIMEOUT)
         if isinstance(self.process, multiprocessing.process.BaseProcess) and self.process.is_alive():
             self.process.kill()
@@ -142,7 +155,19 @@ class RunWriter:
         if self._child is not None and not self.process.is_alive():
             self._child.close()
         self._conn.close()
+        self._watch.join(STOP_TIMEOUT)  # the writer has closed its alarm pipe: the thread is ending
         return stats
+
+    def _watch_alarms(self, alarms: Connection, on_failure: Callable[[], None] | None) -> None:
+        """The watch thread: wait for the writer's one alarm (a failed write), keep its line and call
+        ``on_failure``; end when the writer closes the pipe."""
+        with alarms:
+            try:
+                _, self.failure = alarms.recv()
+            except (EOFError, OSError):
+                return
+        if on_failure is not None:
+            on_failure()
 
     def _send(self, message: tuple[Any, ...]) -> None:
         """Send a message; a writer gone is logged once (the run goes on: its drive is what matters)."""

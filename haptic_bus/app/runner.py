@@ -10,7 +10,8 @@ one Modbus drive or several polled in one cycle -- ``haptic-bus sim --modbus tcp
 
 1. the link is checked before anything is touched (node ids; for several axes each must map
    0x6064 and the controller's node id must be none of theirs: exit 2); the run's folder is
-   created and shown writable (:mod:`~haptic_bus.app.run_folder`) and ``run.json`` written there
+   created and shown writable (:mod:`~haptic_bus.app.run_folder`), locked for this run (another
+   run's folder: exit 2, :mod:`~haptic_bus.app.folder_lock`) and ``run.json`` written there
    ("running");
 2. several axes: **the bus load** (:func:`haptic_bus.control.bus_load.axes_bus_load`), one SYNC and
    every axis' PDOs at the bus' bitrate and ``T``; above 70 % the run is refused, naming the load
@@ -18,8 +19,9 @@ one Modbus drive or several polled in one cycle -- ``haptic-bus sim --modbus tcp
 3. the run's writer process starts (:mod:`~haptic_bus.app.run_writer`), and on CANopen ``bus.asc``
    with it, before the drives are reached (the link's tap copies every frame into its ring); with
    ``reset_fault`` every drive found in FAULT is reset first, axis by axis, as ``haptic-bus
-   fault-reset`` does (each reset one of run.json's events); without it a faulted drive is
-   refused at enabling, with the command that clears that axis' drive;
+   fault-reset`` does (each reset one of run.json's events); without it a drive found in FAULT
+   once reached (step 4) is refused there, before pre-flight, naming its error code and the
+   command that clears that axis' drive;
 4. the drive(s) are reached and commissioned (CANopen: each the safety chain of ``[safety]``, one
    heartbeat of this controller's node for all; Modbus: each unit's 0x6007 and watchdog, a unit
    nobody answers for named, and the gate -- 1-D or coupled -- judges with each axis' loop delay
@@ -45,7 +47,9 @@ one Modbus drive or several polled in one cycle -- ``haptic-bus sim --modbus tcp
    process (:mod:`~haptic_bus.app.run_recorder`), so a killed run keeps its cycles; whatever else
    ends it (the time, SIGTERM, Ctrl-C, a drive error -- any axis' fault zeroes every axis' torque
    in the same cycle -- an assumption broken), the drives are left disabled, ``run.json``
-   completed and the pictures drawn.
+   completed and the pictures drawn.  A folder the writer can no longer write (a full disk, the
+   folder deleted) stops the run at the next cycle boundary: the drives disabled, "write error"
+   (exit 1), what was written before kept, nothing more attempted.
 
 :func:`~haptic_bus.app.run_options.exit_status` maps how a run ended to the command's exit status.
 """
@@ -67,6 +71,7 @@ from drives.os_threads import show_names
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.drive_address import DEFAULT_UNIT_ID, DriveAddress
+from haptic_bus.app.folder_lock import own_folder
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.realtime import RealtimeReport, realtime_session
 from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
@@ -156,11 +161,12 @@ def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | s
 def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> RunResult:
     """One run (module docstring)."""
     folder = prepare_run_folder(options.out_dir, kind.profile.name)
+    lock = own_folder(folder)  # a second run into this folder is refused here, before its bus or files
     controller: WallController[Any, Any] | None = None
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": kind.loop_extra()}
-    journal = RunJournal(folder, kind.profile, rig.link, extra, kind.render)
-    journal.write()  # "running", before any bus is touched: a run killed from here on says so
+    journal = RunJournal(folder, kind.profile, rig.link, extra, kind.render, rig.safety)
+    journal.begin()  # "running", before any bus is touched: a run killed from here on says so
     recorder = RunRecorder(folder, journal)
     reason, error = "completed", None
     before: list[Event] = []  # what happened before the controller (and its event log) existed
@@ -169,13 +175,16 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     try:
         rig.check()
         with ExitStack() as stack:
-            writer = recorder.start(stack, rig.frames and options.bus_log)  # before the drive: commissioning logged
+            writer = recorder.start(stack, rig.frames and options.bus_log,  # before the drive: commissioning logged
+                                    on_failure=options.stop.event.set)  # a folder that cannot be written stops the run
             if options.reset_fault:
                 before += _reset_faults_first(rig.addresses, options, extra)
             drive, gate, serve = rig.open(stack, writer.tap)
             names = [axis.name for axis in (OneAxis(drive) if isinstance(drive, Drive) else drive).drives]
             kind.describe_gate(gate, extra)
             scene = kind.scene()
+            for each in getattr(drive, "drives", (drive,)):  # a drive in FAULT: said now, not after pre-flight
+                each.refuse_fault()
             derate = kind.derate(gate, scene)  # before the control thread's real-time session (a worker may build it)
 
             def ready() -> tuple[WallController[Any, Any], ControllerNode | None]:
@@ -213,6 +222,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             reason, error = summary.exit_reason, summary.error
             if reason == "stopped" and options.stop.interrupted:
                 reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr
+                summary.exit_reason, summary.error = reason, error  # run.json's summary says it as its status does
             if reason in ("completed", "stopped", "interrupted"):
                 drive.disable()
     except Refusal as exc:  # refused before the drive is enabled
@@ -227,9 +237,28 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     except _StopBeforeEnabling:
         reason, error = "stopped", None
     finally:
+        reason, error = _write_failure(reason, error, recorder, summary, period)
         extra["exit_reason"], extra["error"] = reason, error
         files = recorder.finish(summary, pictures=options.plots)
+        lock.release()
+    reason, error = _write_failure(reason, error, recorder, summary, period)  # run.json itself, at the end
     return RunResult(reason, error, summary, controller, folder, files)
+
+
+def _write_failure(reason: str, error: str | None, recorder: RunRecorder, summary: RunSummary | None,
+                   period: float) -> tuple[str, str | None]:
+    """A run that stopped, or completed, while its folder could not be written (a full disk, the
+    folder deleted: :attr:`RunRecorder.failure`) ends "write error" (exit 1): the failure, when the
+    run stopped (cycles and s of ``T = period``), and what was kept; any other end stays as it is."""
+    failure = recorder.failure
+    if failure is None or reason not in ("completed", "stopped"):
+        return reason, error
+    when = "before its first cycle, nothing enabled" if summary is None else \
+        f"after {summary.cycles} cycles ({summary.cycles * period:.3f} s), every drive disabled"
+    error = f"{failure}; the run stopped {when}; the folder keeps what was written before"
+    if summary is not None:
+        summary.exit_reason, summary.error = "write error", error
+    return "write error", error
 
 
 class _StopBeforeEnabling(BaseException):  # control flow, not an error: no caller ever sees it

@@ -13,6 +13,13 @@ memory, :mod:`~haptic_bus.control.ring`) and every :data:`~haptic_bus.app.record
   cycles, then each event);
 - once a second draws the live view (:mod:`~haptic_bus.app.live`), when asked for one.
 
+A write that fails (a full disk, the folder deleted or replaced while the run goes on: checked
+at each drain) ends the writing, not the writer: it says why once on its alarm pipe (``alarm``,
+one line naming the folder, the file and the system's reason; the control process stops the run
+on it, :class:`~haptic_bus.app.run_writer.RunWriter`), writes nothing more, and keeps serving the
+control process until told to stop, whose counts then carry the same line (``failure``).  What
+was written before stays.
+
 Messages from the control process come over a pipe (:func:`main`'s ``conn``).  The writer ends
 when told to (a last drain, then its counts sent back), or by itself when the control process
 is gone: the pipe's end of file (a ``kill -9`` closes it) or a parent process id that changed,
@@ -26,6 +33,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import errno
 import logging
 import os
 import pathlib
@@ -58,9 +66,12 @@ def name_this_process(name: str) -> None:
 class Writer:
     """The writer's state: the files it streams into ``folder``, ``run.json``'s document, the view."""
 
-    def __init__(self, folder: pathlib.Path, conn: Connection) -> None:
+    def __init__(self, folder: pathlib.Path, conn: Connection, alarm: Connection | None = None) -> None:
         self.folder = folder
         self.conn = conn
+        self.alarm = alarm
+        self.failure: str | None = None  # why the folder can no longer be written (then nothing more is)
+        self._identity = os.stat(folder)  # the folder the run writes: one deleted or replaced is a failure
         self.records: list[tuple[str, RecordFile]] = []  # (axis name, file)
         self.bus_log: BusLogFile | None = None
         self.document: dict[str, Any] | None = None
@@ -74,7 +85,12 @@ class Writer:
         kind = message[0]
         if kind == "record":
             _, name, spec, axis = message
-            self.records.append((axis, RecordFile(self.folder / name, Ring.attach(spec))))
+            ring = Ring.attach(spec)
+            try:
+                self.records.append((axis, RecordFile(self.folder / name, ring)))
+            except OSError as exc:  # the folder is gone or full: attached all the same, written never
+                ring.close()
+                self.fail(exc, name)
             self.conn.send(("attached", name))
         elif kind == "journal":
             self.document = message[1]
@@ -97,47 +113,95 @@ class Writer:
             self.stopped = True
 
     def flush(self) -> None:
-        """Drain every ring into its file, and rewrite ``run.json`` if its document changed."""
-        for _, record in self.records:
-            record.drain()
-        if self.bus_log is not None:
-            self.bus_log.drain()
-        if self.dirty and self.document is not None:
-            self.dirty = False
-            write_json(self.folder / RUN_JSON, self.document)
+        """Drain every ring into its file, and rewrite ``run.json`` if its document changed; after a
+        failed write nothing (:meth:`fail`)."""
+        if self.failure is not None:
+            return
+        doing = "the folder"
+        try:
+            if not self._still_there():
+                raise FileNotFoundError(errno.ENOENT, "deleted or replaced")
+            for _, record in self.records:
+                doing = record.path.name
+                record.drain()
+            if self.bus_log is not None:
+                doing = self.bus_log.path.name
+                self.bus_log.drain()
+            if self.dirty and self.document is not None:
+                doing, self.dirty = RUN_JSON, False
+                write_json(self.folder / RUN_JSON, self.document)
+        except OSError as exc:
+            self.fail(exc, doing)
+
+    def fail(self, exc: OSError, doing: str) -> None:
+        """The folder cannot be written (``exc`` while writing ``doing``): say so once on the alarm pipe,
+        write nothing more."""
+        self.failure = (f"run folder {self.folder}: {exc.strerror or exc} writing {doing}" if self._still_there() else
+                        f"run folder {self.folder}: deleted or replaced while the run wrote it")
+        logger.info("run writer: %s", self.failure)  # the control process says it, in its one line
+        if self.alarm is not None:
+            with contextlib.suppress(OSError):  # a control process gone: nobody to tell
+                self.alarm.send(("failed", self.failure))
+
+    def _still_there(self) -> bool:
+        """Whether the run's folder is still the one it began writing (not deleted, not replaced)."""
+        try:
+            return os.path.samestat(os.stat(self.folder), self._identity)
+        except OSError:
+            return False
 
     def close(self) -> dict[str, Any]:
-        """A last drain, every file closed, the view left showing the end; what was written and lost."""
+        """A last drain, every file closed, the view left showing the end; what was written and lost
+        (and the ``failure``, if the folder could not be written)."""
         self.flush()
         if self.view is not None:  # its last panel reads the rings: before the records let them go
             self.view.__exit__()
+        writable = self.failure is None
         for _, record in self.records:
-            record.close()
+            record.close(drain=writable)
         if self.bus_log is not None:
-            self.bus_log.close()
+            self.bus_log.close(drain=writable)
         stats: dict[str, Any] = {"records": {record.path.name: {"rows_written": record.written, "rows_lost": record.lost}
                                              for _, record in self.records}}
         if self.bus_log is not None:
             stats["bus_log"] = {"frames": self.bus_log.frames, "frames_lost": self.bus_log.lost}
+        if self.failure is not None:
+            stats["failure"] = self.failure
         return stats
 
 
-def main(folder: str, frames: RingSpec | None, conn: Connection, parent: int) -> None:
+def main(folder: str, frames: RingSpec | None, conn: Connection, parent: int, alarm: Connection | None = None) -> None:
     """The writer process' body (module docstring): ``frames`` the frame ring (None: no bus log),
-    ``parent`` the control process' id."""
+    ``parent`` the control process' id, ``alarm`` where a failed write is said."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    serve(folder, frames, conn, parent)
+    serve(folder, frames, conn, parent, alarm)
 
 
-def serve(folder: str, frames: RingSpec | None, conn: Connection, parent: int | None) -> None:
+def serve(folder: str, frames: RingSpec | None, conn: Connection, parent: int | None,
+          alarm: Connection | None = None) -> None:
     """The writer's loop (module docstring), in the writer process or, for a run whose drive is in
     the control process, in a thread of it (:class:`~haptic_bus.app.run_writer.RunWriter`);
     ``parent``: the control process' id, watched every interval (None: the writer is a thread of
-    it, which ends with it).  Its thread shows :data:`COMM` in ``/proc``."""
+    it, which ends with it); ``alarm``: where a failed write is said (closed when the writer ends).
+    Its thread shows :data:`COMM` in ``/proc``."""
     name_this_process(COMM)
-    writer = Writer(pathlib.Path(folder), conn)
+    try:
+        _serve(pathlib.Path(folder), frames, conn, parent, alarm)
+    finally:
+        if alarm is not None:
+            alarm.close()
+
+
+def _serve(folder: pathlib.Path, frames: RingSpec | None, conn: Connection, parent: int | None,
+           alarm: Connection | None) -> None:
+    writer = Writer(folder, conn, alarm)
     if frames is not None:
-        writer.bus_log = BusLogFile(writer.folder / LOG_NAME, Ring.attach(frames))
+        ring = Ring.attach(frames)
+        try:
+            writer.bus_log = BusLogFile(writer.folder / LOG_NAME, ring)
+        except OSError as exc:
+            ring.close()
+            writer.fail(exc, LOG_NAME)
     conn.send(("ready",))
     now = time.monotonic()
     flush_due, view_due = now + FLUSH_INTERVAL, now + REFRESH

@@ -83,6 +83,7 @@ from haptic_bus.errors import ParameterError
 
 logger = logging.getLogger(__name__)
 
+
 Derate = Callable[[SceneT, float], "tuple[Gate[SceneT, DecisionT], SceneT, DecisionT] | None"]
 """Given the running scene and the observed loop delay (samples): a gate for that loop, the scene
 scaled down so that it passes it, and the decision; None if no scale passes (or none is prepared)."""
@@ -112,6 +113,11 @@ class PositionIntegrator:
     def add(self, velocity_counts: int) -> float:
         """Accumulate one velocity sample (0x606C units); return the position in m."""
         self.counts += velocity_counts
+        return self.origin + self.step * self.counts
+
+    @property
+    def position(self) -> float:
+        """The position (m) after the latest sample."""
         return self.origin + self.step * self.counts
 
     def start(self, position: float, velocity_counts: int) -> float:
@@ -192,10 +198,11 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         policy = passivity if passivity is not None else LayerPolicy()
         self.passivity = policy
         self.scenes: SceneSwitch[SceneT, DecisionT] = SceneSwitch(gate, scene, self.events, self.now,
-                                                                   beyond_gate=policy.beyond_gate)
+                                                                   beyond_gate=policy.beyond_gate, step=self.entered_step)
         self.hold = hold if policy.layer == "bound" and hold is not None else self.period
         limits = _per_axis("force_limit", force_limit, size)
         origins = _per_axis("origin", origin, size)
+        self._origins = origins
         self.torque_limits = [s.torque_limit(limit) for limit, s in zip(limits, scalings)]  # each drive's clamp
         self.integrators = tuple(PositionIntegrator(self.period, s.velocity_per_count) for s in scalings)
         softest = min((obj.stiffness for obj in scene.objects if obj.stiffness > 0), default=0.0)
@@ -280,6 +287,32 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
     def applied_scenes(self) -> int:
         """Scenes adopted after the first."""
         return self.scenes.applied
+
+    def handle_position(self) -> Any:
+        """Where the handle is after the latest cycle (before the first: where it was before
+        enabling): m, one axis; the point in space (m) for several."""
+        q = [integrator.position for integrator in self.integrators] if self.cycles else self._origins
+        return q[0] if self.scalar else self.kinematics.position(q)
+
+    def entered_step(self, running: SceneT, new: SceneT) -> str | None:
+        """Why ``new`` may not replace ``running`` where the handle is now, or None: the handle would
+        be inside an object of ``new`` that it is not inside now (a wall moved or added onto it, or
+        one whose ``K`` was 0), and feel its force at once -- the start's rule for a handle inside an
+        object, for an upload.  A wall it already presses, stiffened or softened, is the operator's
+        own change under the hand, judged by the gate as every upload is."""
+        x = self.handle_position()
+        entered = sorted(set(new.touching(x)) - set(running.touching(x)))
+        if not entered:
+            return None
+        rest = 0.0 if self.scalar else np.zeros(len(x))
+
+        def felt(scene: SceneT) -> float:
+            return float(np.linalg.norm(np.atleast_1d(np.asarray(scene.force(x, rest), dtype=float))))
+
+        names = "+".join(entered)
+        return (f"the handle would be inside {names} at once (its force would step from {felt(running):.3g} N to "
+                f"{felt(new):.3g} N, {new.stored_energy(x) * 1e3:.3g} mJ in the new walls' springs); move it out of "
+                f"{names}, then upload again")
 
     def upload_scene(self, scene: SceneT) -> DecisionT:
         """Gate ``scene`` and stage it for the next cycle boundary; raise Refusal if refused."""

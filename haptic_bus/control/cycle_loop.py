@@ -32,8 +32,9 @@ class RunSummary:
     rounding bound under which the truth may lie), the passivity layer and how often it lowered a
     target, compute and lateness percentiles (s), and its end.
 
-    ``exit_reason`` is "completed", "stopped", "interrupted", "drive error" or "assumption broken";
-    ``error`` the message that ended it early.
+    ``exit_reason`` is "completed", "stopped", "interrupted", "drive error" or "assumption broken" (a
+    run whose folder could not be written: "write error", set by the runner); ``error`` the message
+    that ended it early.
     """
 
     cycles: int

@@ -46,6 +46,10 @@ class Scene(Protocol):
         """The energy (J) the springs acting at ``x`` (m) hold."""
         ...
 
+    def touching(self, x: Any) -> tuple[str, ...]:
+        """The names of the objects whose spring acts on the handle at ``x`` (m): penetrated, ``K > 0``."""
+        ...
+
     def by_name(self) -> Mapping[str, SceneObject]:
         """The objects by name."""
         ...

@@ -179,6 +179,11 @@ class CompiledScene:
         i = bisect.bisect_right(self.breaks, x)
         return self.contributors[i], self.stiffness[i] * x - self.stiffness_anchor[i], self.stiffness[i]
 
+    def touching(self, x: float) -> tuple[str, ...]:
+        """The names of the objects whose spring acts on the handle at ``x`` (m): penetrated, ``K > 0``."""
+        objects = self.by_name()
+        return tuple(name for name in self.contact(x)[0] if objects[name].stiffness > 0)
+
     def stored_energy(self, x: float) -> float:
         """The energy (J) the springs acting at ``x`` (m) hold: ``sum K (x - anchor)^2 / 2``."""
         return math.fsum(0.5 * K * (x - anchor) ** 2

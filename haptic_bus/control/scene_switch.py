@@ -12,6 +12,11 @@ control thread itself.
 With ``beyond_gate`` (a ``bound`` passivity layer that guarantees passivity at run time, opted
 into by the profile) a scene the gate refuses is admitted all the same: its decision, refused,
 stays in the history and the event says so.
+
+An upload that would put the handle inside an object it is not inside now (``step``: a wall
+moved or added onto it, whose force it would then feel at once; the controller's
+:meth:`~haptic_bus.control.controller.WallController.entered_step`) is refused, as a start inside
+an object is: the gate judged the walls, not a jump onto the hand.
 """
 
 from __future__ import annotations
@@ -54,14 +59,16 @@ class SceneSwitch(Generic[SceneT, DecisionT]):
 
     ``gate``: the 1-D or the coupled gate (:class:`~haptic_bus.control.protocols.Gate`); ``now``
     gives the run's clock (s) for events; ``events`` receives "upload" and "refused";
-    ``beyond_gate``: admit scenes the gate refuses (module docstring).
+    ``beyond_gate``: admit scenes the gate refuses (module docstring); ``step``: why a scene may
+    not replace the running one where the handle is now (None: it may), or None for no such check.
     """
 
     def __init__(self, gate: Gate[SceneT, DecisionT], scene: SceneT, events: EventLog, now: Callable[[], float],
-                 beyond_gate: bool = False) -> None:
+                 beyond_gate: bool = False, step: Callable[[SceneT, SceneT], str | None] | None = None) -> None:
         self.gate = gate
         self.events = events
         self.beyond_gate = beyond_gate
+        self._step = step
         self._now = now
         self._lock = threading.Lock()
         first = SceneEntry(0, "profile", scene, self._decide(scene))
@@ -115,6 +122,10 @@ class SceneSwitch(Generic[SceneT, DecisionT]):
         return self._stage(scene, decision, origin)
 
     def _stage(self, scene: SceneT, decision: DecisionT, origin: str) -> DecisionT:
+        step = self._step(self.running.scene, scene) if self._step is not None else None
+        if step is not None:
+            self.events.add(self._now(), "refused", f"{origin} refused: {step}")
+            raise Refusal(step)
         entry = SceneEntry(len(self.history), origin, scene, decision)
         self.history.append(entry)
         self._latest = entry

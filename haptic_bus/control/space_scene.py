@@ -248,6 +248,11 @@ class SpaceScene:
         xs = np.asarray(x, dtype=float).tolist()
         return tuple(self.objects[i].name for i in self.candidates(xs) if self.objects[i].penetration(xs) is not None)
 
+    def touching(self, x: ArrayLike) -> tuple[str, ...]:
+        """The names of the objects whose spring acts on the handle at ``x`` (m): penetrated, ``K > 0``."""
+        objects = self.by_name()
+        return tuple(name for name in self.contacts(x) if objects[name].stiffness > 0)
+
     def stored_energy(self, x: ArrayLike) -> float:
         """The energy (J) the springs acting at ``x`` (m) hold: ``sum K d^2 / 2``."""
         xs = np.asarray(x, dtype=float).tolist()

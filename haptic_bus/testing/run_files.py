@@ -49,7 +49,8 @@ class RecordedRun:
 
     @property
     def exit_reason(self) -> str:
-        """How the run ended: "completed", "stopped", "refused", "drive error", "assumption broken" or "interrupted"."""
+        """How the run ended: "completed", "stopped", "refused", "drive error", "write error", "assumption broken"
+        or "interrupted"."""
         return str(self.document["exit_reason"])
 
     @property

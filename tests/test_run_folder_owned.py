@@ -1,0 +1,97 @@
+"""A run owns its folder (:mod:`haptic_bus.app.folder_lock`): a second run into the same ``--out``
+is refused, exit 2, one line naming the folder and the other run's process id, before its bus or
+the folder's files are touched; the lock goes with the process that held it, ``kill -9`` too.
+
+Real components: the simulated drive in this process on a lock-step bus, the real command line,
+a real run through the Python API in a thread, a real child process holding the lock.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import threading
+
+import can
+import pytest
+
+import haptic_bus as hb
+from haptic_bus.app.folder_lock import LOCK_NAME
+from haptic_bus.app.run_options import StopRequest
+from tests.run_rig import CAN_INTERFACE, read_run, run_cli, simulated_drive, wait_until
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+MASTER_FRAMES = {0x000, 0x080, 0x605, 0x77F}  # NMT, SYNC, SDO to node 5, the controller node's heartbeat
+HOLD_LOCK = ("import pathlib, sys; from haptic_bus.app.folder_lock import own_folder; "
+             "lock = own_folder(pathlib.Path(sys.argv[1])); print('locked', flush=True); sys.stdin.read()")
+
+
+def refused_line(err: str) -> str:
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_a_second_run_into_a_running_runs_folder_is_refused_before_its_bus(tmp_path: pathlib.Path,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "shared"
+    with simulated_drive("canopen", "cia402-handle") as first, simulated_drive("canopen", "cia402-handle") as second:
+        stop = StopRequest()
+        options = hb.RunOptions(duration=60.0, pacing="virtual", out_dir=folder, live=False, stop=stop, plots=False)
+        results: list[hb.RunResult] = []
+        profile = hb.load_profile("cia402-handle")
+        running = threading.Thread(target=lambda: results.append(hb.run(profile, first.bus, options, node_id=5)), daemon=True)
+        running.start()
+        try:
+            assert wait_until(lambda: first.was_enabled, 30.0)  # the first run is cycling
+            names, started = sorted(p.name for p in folder.iterdir()), read_run(folder)["started_utc"]
+            with can.Bus(interface=CAN_INTERFACE, channel=second.channel) as sniffer:
+                result = run_cli(capsys, "run", "cia402-handle", *second.args, "--virtual-time", "--duration", "0.2",
+                                 "-q", "--no-plots", "--out", str(folder))
+                sent = [m.arbitration_id for m in (sniffer.recv(0.0) for _ in range(10_000)) if m is not None]
+            assert not set(sent) & MASTER_FRAMES, sent  # the second drive's bus: its own heartbeats, nothing of a master
+            assert second.states == []
+            assert sorted(p.name for p in folder.iterdir()) == names and read_run(folder)["started_utc"] == started
+        finally:
+            stop.event.set()
+            running.join(30.0)
+    assert result.code == 2 and result.out == ""
+    line = refused_line(result.err)
+    assert line.startswith(f"haptic-bus run: error: run: --out = '{folder}' is invalid; allowed: a folder no other run")
+    assert f"the run of process {os.getpid()} holds {folder / LOCK_NAME}" in line
+    (done,) = results
+    assert done.exit_reason == "stopped" and read_run(folder)["status"] == "stopped"
+
+
+def test_the_lock_goes_with_a_killed_process(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "out"
+    folder.mkdir()
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    holder = subprocess.Popen([sys.executable, "-c", HOLD_LOCK, str(folder)], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "locked\n"
+        with simulated_drive("canopen", "cia402-handle") as drive:
+            refused = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "0.1", "-q",
+                              "--no-plots", "--out", str(folder))
+            assert drive.states == [] and sorted(p.name for p in folder.iterdir()) == [LOCK_NAME]
+            holder.send_signal(signal.SIGKILL)
+            holder.wait(10.0)
+            ran = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "0.1", "-q",
+                          "--no-plots", "--out", str(folder))
+    finally:
+        if holder.poll() is None:
+            holder.kill()
+        holder.wait(10.0)
+        if holder.stdout is not None:
+            holder.stdout.close()
+        if holder.stdin is not None:
+            holder.stdin.close()
+    assert refused.code == 2
+    assert f"the run of process {holder.pid} holds" in refused_line(refused.err)
+    assert ran.code == 0, ran.err
+    assert read_run(folder)["status"] == "completed"
+    assert not (folder / LOCK_NAME).exists()  # the killed holder's file, taken over and removed by the run that ended
