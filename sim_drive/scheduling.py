@@ -14,8 +14,26 @@ project's 2-core machine beside other work, three simulated axes then answered a
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
 
 DRIVE_PRIORITY = 70  # SCHED_FIFO priority of the simulated drive's threads (1..99)
+
+
+@contextmanager
+def scheduling_restored() -> Iterator[None]:
+    """This thread's scheduling policy and priority as they were once the block ends: ``haptic-bus
+    sim``'s main, called in a process that goes on (a test, a script), leaves it as it found it."""
+    try:
+        before = os.sched_getscheduler(0), os.sched_getparam(0)
+    except (OSError, AttributeError):
+        yield
+        return
+    try:
+        yield
+    finally:
+        with suppress(OSError):  # lowering one's own priority is always allowed; a policy that cannot come back stays
+            os.sched_setscheduler(0, *before)
 
 
 def answer_in_real_time() -> str:

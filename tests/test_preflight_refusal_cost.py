@@ -45,6 +45,6 @@ def test_a_timing_the_machine_holds_asks_the_gate_once_at_the_measured_delay() -
     report = judge_delay(_timing(0.2 * PERIOD, 0.1 * PERIOD), 1.0, passes_at, "off", 0.07, None)
     assert report.holdable and report.passive_at_observed is True
     assert asked == [report.observed_delay] and abs(report.observed_delay - 1.1) < 1e-12  # float division only
-    # assumed 1.5 samples, started 0.6 T late (busy 0.8 T: held): 2.1 samples, not passive, no layer
-    late = judge_delay(_timing(0.2 * PERIOD, 0.6 * PERIOD), 1.5, passes_at, "off", 0.07, None)
+    # assumed 1.7 samples, started 0.4 T late (busy 0.6 T, x1.5 within T: held): 2.1 samples, not passive, no layer
+    late = judge_delay(_timing(0.2 * PERIOD, 0.4 * PERIOD), 1.7, passes_at, "off", 0.07, None)
     assert not late.holdable and late.passive_at_observed is False and "layer = \"off\"" in late.reason
