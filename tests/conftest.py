@@ -105,7 +105,12 @@ def pytest_configure(config: pytest.Config) -> None:
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     # The longest tests first (stable: each set keeps its order), so that on pytest-xdist's
     # workers they start at once and the short ones fill in around them, instead of one long
-    # test starting late and leaving the other worker idle at the end.
+    # test starting late and leaving the other worker idle at the end.  pyproject's addopts
+    # deal the files to the workers one at a time in this order (--dist loadfile
+    # --no-loadscope-reorder), a file's module-scoped fixture set up on one worker only.  -n's
+    # default, --dist load, first hands each worker a quarter of its share as one chunk of
+    # consecutive tests: all 40 slow-marked tests landed in worker 0's first chunk (simulated
+    # from measured durations: 350 s on worker 0 against 293 s on worker 1; by file 320 and 323 s).
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)
     if vcan0_exists():
         return
