@@ -52,6 +52,7 @@ fail only the tests that use it (the plugin imports only the standard library an
 
 from __future__ import annotations
 
+import logging
 import os
 import socket
 import struct
@@ -118,6 +119,24 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if item.get_closest_marker("vcan0") is not None:
             item.add_marker(skip)
+
+
+# ----------------------------------------------------------------------------- logging
+@pytest.fixture(autouse=True)
+def _root_logger_as_found() -> Iterator[None]:
+    """A command run in-process configures logging as its process would (``haptic-bus`` and
+    ``haptic-bus sim`` call ``basicConfig(force=True)``: a stderr handler, the sim's at INFO); after the
+    test the root logger's level is what it was and those handlers are gone, so a later test's stderr
+    holds only its own lines (test_upload_messages read the sim's INFO lines after test_sim_cli had
+    run on the same worker)."""
+    from haptic_bus.console import StderrHandler
+
+    root = logging.getLogger()
+    level = root.level
+    yield
+    root.setLevel(level)
+    for handler in [handler for handler in root.handlers if isinstance(handler, StderrHandler)]:
+        root.removeHandler(handler)
 
 
 # ----------------------------------------------------------------------------- unique buses
