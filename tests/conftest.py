@@ -52,6 +52,7 @@ fail only the tests that use it (the plugin imports only the standard library an
 
 from __future__ import annotations
 
+import logging
 import os
 import socket
 import struct
@@ -105,7 +106,12 @@ def pytest_configure(config: pytest.Config) -> None:
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     # The longest tests first (stable: each set keeps its order), so that on pytest-xdist's
     # workers they start at once and the short ones fill in around them, instead of one long
-    # test starting late and leaving the other worker idle at the end.
+    # test starting late and leaving the other worker idle at the end.  pyproject's addopts
+    # deal the files to the workers one at a time in this order (--dist loadfile
+    # --no-loadscope-reorder), a file's module-scoped fixture set up on one worker only.  -n's
+    # default, --dist load, first hands each worker a quarter of its share as one chunk of
+    # consecutive tests: all 40 slow-marked tests landed in worker 0's first chunk (simulated
+    # from measured durations: 350 s on worker 0 against 293 s on worker 1; by file 320 and 323 s).
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)
     if vcan0_exists():
         return
@@ -113,6 +119,24 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if item.get_closest_marker("vcan0") is not None:
             item.add_marker(skip)
+
+
+# ----------------------------------------------------------------------------- logging
+@pytest.fixture(autouse=True)
+def _root_logger_as_found() -> Iterator[None]:
+    """A command run in-process configures logging as its process would (``haptic-bus`` and
+    ``haptic-bus sim`` call ``basicConfig(force=True)``: a stderr handler, the sim's at INFO); after the
+    test the root logger's level is what it was and those handlers are gone, so a later test's stderr
+    holds only its own lines (test_upload_messages read the sim's INFO lines after test_sim_cli had
+    run on the same worker)."""
+    from haptic_bus.console import StderrHandler
+
+    root = logging.getLogger()
+    level = root.level
+    yield
+    root.setLevel(level)
+    for handler in [handler for handler in root.handlers if isinstance(handler, StderrHandler)]:
+        root.removeHandler(handler)
 
 
 # ----------------------------------------------------------------------------- unique buses

@@ -6,6 +6,9 @@ lower ends <= 2.4e-13), plus ``1e-15`` of the parameter's natural scale (``b`` f
 ``b/T`` for ``K``) for a lower end near 0: a lower end is where the wall's negative damping
 ``~K tau`` just balances ``b``, so its value is a small difference of larger terms, which the
 quadratic's coefficients resolve to a few ulps of those terms (measured 8e-18 of ``b``).
+
+The references are the stored table of :mod:`tests.mp_boundaries` (constants of the loops below,
+12 s of CPU to compute); one entry of each kind is recomputed here.
 """
 
 from __future__ import annotations
@@ -16,15 +19,33 @@ from haptic_bus.analysis.criterion import exact_verdict
 from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, max_damping, max_stiffness, passive_limits, passive_set
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.bench.mp_boundary import reference_boundary
+from tests.mp_boundaries import D1, D2, REFERENCED, Boundary, read_table, stored
 
-D1 = WallLoop(0.5, 0.1, 1e-3, 100.0, 0.03, 1)  # the issue: max_damping said null
-D2 = WallLoop(0.5, 0.1, 1e-3, 56.23, 0.03, 2)  # the issue: passive B only in about [0.013, 0.061]
+TABLE = read_table()
 
 
-def _check_against_reference(loop: WallLoop, which: str, value: float, lower: bool) -> None:
-    ref = reference_boundary(loop, which, value, lower=lower)
+def _check_against_reference(loop: WallLoop, which: str, value: float, lower: bool, interval: int = 0) -> None:
+    ref = stored(TABLE, loop, which, interval, lower)
     natural = loop.b if which == "B" else loop.b / loop.T
     assert abs(value - ref.value) <= RELATIVE_TOLERANCE * abs(ref.value) + 1e-15 * natural, (which, lower, value, ref)
+
+
+def _one_of_each_kind() -> list[Boundary]:
+    first: dict[str, Boundary] = {}
+    for boundary in TABLE.values():
+        first.setdefault(boundary.kind, boundary)
+    return list(first.values())
+
+
+@pytest.mark.parametrize("boundary", _one_of_each_kind(), ids=lambda boundary: boundary.kind.split()[0])
+def test_the_stored_table_is_what_the_40_digit_reference_finds(boundary: Boundary) -> None:
+    """Searched from the same estimate, the reference finds the stored value to 2 ulps (its root is
+    resolved at 40 digits, far below a double's step; 2 ulps leave mpmath room to round its last
+    digits differently), at the same place, as verified as stored."""
+    ref = reference_boundary(boundary.loop, boundary.parameter, boundary.estimate, lower=boundary.lower)
+    assert ref.value == pytest.approx(boundary.value, rel=4.5e-16, abs=0)
+    assert (ref.kind, ref.verified) == (boundary.kind, boundary.verified)
+    assert ref.theta == pytest.approx(boundary.theta, rel=1e-12)
 
 
 def test_the_passive_damping_of_a_delayed_loop_starts_above_zero() -> None:
@@ -48,20 +69,14 @@ def test_seed_device_at_two_samples_has_passive_damping_only_in_a_band() -> None
         assert exact_verdict(D2.with_wall(D2.K, value)).passive is expected
 
 
-@pytest.mark.parametrize("loop", [
-    WallLoop(0.032, 3.62, 1e-3, 400.0, 1.0, 1),
-    WallLoop(0.5, 0.1, 1e-3, 20.0, 0.05, 0.5, "window:0.0003"),
-    WallLoop(0.5, 0.1, 1e-3, 0.0, 0.0, 0.3, "lowpass:0.0005"),
-    WallLoop(1.0, 20.0, 1e-3, 5e3, 5.0, 1.25, "average"),
-    WallLoop(0.032, 3.62, 1e-3, 700.0, 2.0, 0.25, "point"),
-], ids=lambda loop: f"{loop.velocity}-D{loop.delay}")
+@pytest.mark.parametrize("loop", REFERENCED, ids=lambda loop: f"{loop.velocity}-D{loop.delay}")
 def test_limits_match_the_40_digit_reference(loop: WallLoop) -> None:
     stiffness, damping = passive_limits(loop)
     for passive in (stiffness, damping):
-        for low, high in passive.intervals:
-            _check_against_reference(loop, passive.parameter, high, lower=False)
+        for interval, (low, high) in enumerate(passive.intervals):
+            _check_against_reference(loop, passive.parameter, high, lower=False, interval=interval)
             if low > 0:
-                _check_against_reference(loop, passive.parameter, low, lower=True)
+                _check_against_reference(loop, passive.parameter, low, lower=True, interval=interval)
 
 
 @pytest.mark.parametrize("loop", [D1, D2, WallLoop(0.032, 3.62, 1e-3, 700.0, 2.0, 1.5, "lowpass:0.0005"),
