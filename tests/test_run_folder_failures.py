@@ -130,7 +130,8 @@ def test_a_folder_deleted_while_the_run_goes_on_stops_it_with_one_line(transport
     with simulated_drive(transport, "cia402-handle") as drive:
         def delete_once_cycling() -> None:
             if wait_until(lambda: drive.was_enabled and drive.drive.sync_count > 200, 30.0):
-                shutil.rmtree(out)
+                gone = out.rename(tmp_path / "gone")  # at once: an rmtree of the live folder races the writer's next file
+                shutil.rmtree(gone)
 
         deleter = threading.Thread(target=delete_once_cycling, daemon=True)
         deleter.start()
