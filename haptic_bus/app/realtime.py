@@ -16,8 +16,9 @@ always asked (``haptic-bus run`` in real time)
     :data:`GIL_PRIORITY` (the GIL has no priority inheritance: a thread holding it, preempted by
     an ordinary process for a scheduler slice, held the cycle up 6 ms beside two CPU hogs, 36
     overruns in 1000 cycles; with them above ordinary processes, none); and
-    ``mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)``: no page the loop has touched is ever paged out, and entering takes milliseconds (without ``MCL_ONFAULT``, on kernels before
-    4.4, every mapped page is faulted in first: ~50 ms and the whole address space resident).
+    ``mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)``: no page the loop has touched is ever
+    paged out, and entering takes milliseconds (without ``MCL_ONFAULT``, on kernels before 4.4,
+    every mapped page is faulted in first: ~50 ms and the whole address space resident).
 
 Without real-time scheduling no Python loop holds a 1 ms period beside other work: measured on
 this project's 2-core machine, idle, its start lateness p99 was 15 times the bare clock's (0.70
