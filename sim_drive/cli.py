@@ -48,7 +48,7 @@ from sim_drive.eds import OD_KINDS, eds_path
 from sim_drive.operator import OperatorModel, operator_from_spec, operator_usage
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import load_profile
-from sim_drive.scheduling import answer_in_real_time
+from sim_drive.scheduling import answer_in_real_time, scheduling_restored
 from sim_drive.sync_clock import SYNC_CLOCKS, sync_clock
 
 logger = logging.getLogger("sim_drive")
@@ -226,9 +226,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except SystemExit as exc:  # argparse's help through an abbreviation (--he): report, do not exit
         return int(exc.code or 0)
-    if args.modbus is not None:
-        return _run_modbus(args)
-    return _run_canopen(args)
+    with scheduling_restored():  # called in-process, the caller does not stay under SCHED_FIFO
+        return _run_modbus(args) if args.modbus is not None else _run_canopen(args)
 
 
 def _set_up_process(wall_clock: bool, library: str, level: int) -> str:

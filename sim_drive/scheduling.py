@@ -9,11 +9,17 @@ is being answered.  A process the OS does not grant it (no ``CAP_SYS_NICE``, no
 ``RLIMIT_RTPRIO``) runs on as an ordinary one; the line that says the drive serves says which: measured on this
 project's 2-core machine beside other work, three simulated axes then answered a SYNC in 1.7 ms
 (median) where the controller's period was 2 ms.
+
+:func:`scheduling_restored` puts the calling thread's policy back when the simulated drive
+stops, so that a process that ran it in-process (``sim_drive.cli.main`` from a test, or a
+tool) does not go on under ``SCHED_FIFO``, nor hand it to every thread it starts afterwards.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 DRIVE_PRIORITY = 70  # SCHED_FIFO priority of the simulated drive's threads (1..99)
 
@@ -26,3 +32,18 @@ def answer_in_real_time() -> str:
     except (OSError, AttributeError) as exc:
         return f"no real-time scheduling (SCHED_FIFO {DRIVE_PRIORITY} not granted: {exc})"
     return f"SCHED_FIFO {DRIVE_PRIORITY}"
+
+
+@contextmanager
+def scheduling_restored() -> Iterator[None]:
+    """The calling thread's scheduling policy and priority as found, put back when the block ends
+    (nothing to put back where the OS has no ``sched_getscheduler``)."""
+    try:
+        found: tuple[int, os.sched_param] | None = (os.sched_getscheduler(0), os.sched_getparam(0))
+    except (OSError, AttributeError):
+        found = None
+    try:
+        yield
+    finally:
+        if found is not None:
+            os.sched_setscheduler(0, *found)
