@@ -54,9 +54,12 @@ def _utc_now() -> dt.datetime:
 
 def prepare_run_folder(out: str | pathlib.Path | None, profile_name: str, root: pathlib.Path = DEFAULT_ROOT) -> pathlib.Path:
     """The run's folder, created and shown writable now: ``out``, or ``root/<UTC>-<profile>``
-    (``-2``, ``-3``... if that exists).  ParameterError naming the folder otherwise."""
+    (``-2``, ``-3``... if that exists).  ParameterError naming the folder otherwise, and for an
+    ``out`` holding a run that has not ended (:func:`refuse_unended`)."""
     if out is not None:
-        return writable_folder("--out", out, context="run")  # as given: an empty one is refused, not '.'
+        folder = writable_folder("--out", out, context="run")  # as given: an empty one is refused, not '.'
+        refuse_unended(folder)
+        return folder
     else:
         stamp = _utc_now().strftime("%Y%m%dT%H%M%SZ")
         path = root / f"{stamp}-{profile_name}"
@@ -65,6 +68,20 @@ def prepare_run_folder(out: str | pathlib.Path | None, profile_name: str, root: 
             path = root / f"{stamp}-{profile_name}-{n}"
             n += 1
     return writable_folder("--out", path, context="run")
+
+
+def refuse_unended(folder: pathlib.Path) -> None:
+    """ParameterError if ``folder``'s ``run.json`` says its run has not ended: another run is writing
+    there now (a second run would replace its ``run.json`` and its records), or one was killed and
+    the folder keeps its last cycles.  A folder without a readable ``run.json`` passes."""
+    try:
+        document = json.loads((folder / RUN_JSON).read_text())
+    except (OSError, ValueError):
+        return
+    if isinstance(document, dict) and document.get("ended") is False:
+        raise ParameterError("--out", str(folder), "a folder without a run that has not ended (its run.json says "
+                             f"{document.get('status', RUNNING)!r}: a run writing there now, or one killed whose "
+                             "record it keeps); choose another folder", "run")
 
 
 @functools.cache

@@ -77,7 +77,7 @@ from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.record import Event
-from haptic_bus.errors import DriveError, DriveFault, ParameterError, Refusal
+from haptic_bus.errors import DriveError, DriveFault, HapticBusError, ParameterError, Refusal
 
 if TYPE_CHECKING:
     import can
@@ -225,7 +225,12 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
         reason, error = "stopped", None
     finally:
         extra["exit_reason"], extra["error"] = reason, error
-        files = recorder.finish(summary, pictures=options.plots)
+        try:
+            files = recorder.finish(summary, pictures=options.plots)
+        except OSError as exc:  # the folder deleted, or made unwritable, while the run went on: one line, exit 1
+            ended = f"{reason}: {error}" if error else reason
+            raise HapticBusError(f"run folder {folder}: cannot complete run.json ({exc.strerror or exc}): was it "
+                                 f"deleted while the run went on? The run ended {ended}") from exc
     return RunResult(reason, error, summary, controller, folder, files)
 
 
