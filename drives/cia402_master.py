@@ -55,6 +55,7 @@ from drives.fault_reset import clear_fault, error_code_text
 logger = logging.getLogger(__name__)
 
 SAFE_CONTROLWORD = Command.DISABLE_VOLTAGE.word  # -> SWITCH ON DISABLED: no torque, handle free
+ENABLED_MASK, ENABLED_BITS = 0x6F, 0x27  # statusword & mask == bits: OPERATION ENABLED (CiA 402)
 
 
 def state_name(state: State | None) -> str:
@@ -232,11 +233,22 @@ class Cia402Master(Drive):
         return error
 
     def accept_inputs(self, inputs: CyclicInputs) -> CyclicInputs:
-        """Count a cycle's inputs; trip on the fault bit once the drive was enabled (the inputs of
-        a cycle this master, or a master of several drives, received)."""
+        """Count a cycle's inputs; once the drive was enabled, trip on the fault bit, and on any
+        state but OPERATION ENABLED without it (another master's disable, the drive's own quick
+        stop or STO: a run would otherwise go on, and end "completed", with no wall on that axis)
+        (the inputs of a cycle this master, or a master of several drives, received)."""
         self.last_inputs = inputs
         self.stats.cycles += 1
         statusword = inputs.statusword
+        if self._armed and not statusword & SW_FAULT and (statusword & ENABLED_MASK) != ENABLED_BITS:
+            state = decode_statusword(statusword)
+            raise self.trip(DriveFault(
+                self.name,
+                f"left OPERATION ENABLED without a fault: statusword 0x{statusword:04X} ({state_name(state)}): "
+                "disabled by another master, or stopped by the drive itself (quick stop, STO, its panel); "
+                "torque set to zero",
+                state=state,
+            ))
         if statusword & SW_FAULT and self._armed:
             detail, code = self._fault_detail()
             raise self.trip(DriveFault(

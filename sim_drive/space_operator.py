@@ -17,11 +17,15 @@ the others reuse it, whatever order their threads run in (a lock orders them; pe
 counted per axis, so axes whose SYNC counters differ still share each period's force).  An axis this
 process does not simulate is at 0 m for the hand.
 
-The hand pushes only once every axis it simulates has its torque enabled (OPERATION ENABLED in
-cyclic synchronous torque mode), as a person would take the handle once the device is on: before
-that it pushes nothing, and its time -- the ``t`` of :meth:`SpaceHand.vector`, which picks the
-target -- counts from the first period in which they all were.  So a controller's pre-flight
-cycles and commissioning SYNCs, which advance the plants' time, never move the handle.
+The hand pushes only while every axis it simulates has its torque enabled (OPERATION ENABLED in
+cyclic synchronous torque mode), as a person would take the handle once the device is on and
+let go of it once it is off: otherwise it pushes nothing, and its time -- the ``t`` of
+:meth:`SpaceHand.vector`, which picks the target -- counts from the first period of the
+current stretch in which they all are.  So a controller's pre-flight cycles and commissioning
+SYNCs, which advance the plants' time, never move the handle -- neither the first run's nor
+those of a run after it (a hand that kept pushing the unpowered handle after a run had pushed
+it through the walls before the next run's safe start: "handle is inside slope at (313, 7.59,
+-0.986) mm", refused).
 """
 
 from __future__ import annotations
@@ -51,7 +55,7 @@ class SpaceHand:
         self._seen: list[int | None] = [None] * size  # each axis' SYNC count at its last call
         self._round = [0] * size  # each axis' periods so far
         self._vectors: dict[int, list[float]] = {}  # the force of each recent period, by round
-        self._since: float | None = None  # the time (s) of the first period with every simulated axis enabled
+        self._since: float | None = None  # the time (s) of the first period of this stretch with every axis enabled
 
     def bind(self, drives: Sequence[SimulatedDrive | None]) -> None:
         """The simulated drive of every axis (None: an axis simulated elsewhere, at 0 m here)."""
@@ -88,12 +92,13 @@ class SpaceHand:
             return vector[axis]
 
     def _held(self, t: float) -> list[float]:
-        """The force over the period starting at the drives' time ``t`` s: nothing until every simulated
-        axis is enabled, then :meth:`vector` at the time since."""
+        """The force over the period starting at the drives' time ``t`` s: nothing unless every simulated
+        axis is enabled, else :meth:`vector` at the time since they all were."""
         drives = [d for d in self._drives if d is not None]
+        if not drives or not all(d.torque_enabled for d in drives):
+            self._since = None  # let go: the next enabling starts the hand's script again
+            return [0.0] * self.size
         if self._since is None:
-            if not drives or not all(d.torque_enabled for d in drives):
-                return [0.0] * self.size
             self._since = t
         positions = [d.handle.position if d is not None else 0.0 for d in self._drives]
         return self.vector(t - self._since, positions)

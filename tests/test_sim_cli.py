@@ -179,13 +179,3 @@ def test_signal_stops_cleanly_and_state_changes_are_logged(
     assert "stopped after 2 SYNCs" in log
     assert re.search(r"bus load \d+\.\d % at 1000000 bit/s, worst cycle \d+\.\d us", log), log
 
-
-def test_main_in_process_leaves_the_callers_scheduling_as_it_found_it() -> None:
-    """The simulated drive serves under SCHED_FIFO where granted (sim_drive.scheduling); its main,
-    called in a process that goes on, puts the calling thread's policy back once it returns."""
-    import os
-
-    before = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
-    assert main(["--interface", "virtual", "--channel", "x", "--node-id", "0"]) == 2  # a usage error after set-up
-    assert main(["--eds-path"]) == 0
-    assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority) == before

@@ -303,8 +303,8 @@ def modbus_rig(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Se
         axes = ModbusAxes(drives)
         stack.callback(axes.close)
         axes.connect()  # reads only: identity, scaling, timing; a unit nobody answers for is named
+        _refuse_another_master(drives)  # before the poll measurement, which writes
         for drive in drives:
-            _refuse_another_master(drive)  # before the poll measurement, which writes
             _show_scaling(drive, options, f" of {drive.name}" if several else "")
         poll = None if axes.simulated else measure_poll(axes, 500)
         delays = [loop_delay(drive, period, poll) for drive in drives]
@@ -333,15 +333,20 @@ def _gate_at(profile: Profile | AxesProfile, delays: Sequence[float]) -> tuple[A
         profile.compiled_scene()
 
 
-def _refuse_another_master(drive: ModbusDrive) -> None:
+def _refuse_another_master(drives: Sequence[ModbusDrive]) -> None:
     """A drive already OPERATION ENABLED when we arrive is driven by another master (every run
     leaves it disabled, and its watchdog faults it when a master dies): refuse before writing
-    anything, rather than disable it under that master.  (The CANopen master does the same,
-    and also listens for another SYNC, at commissioning.)"""
-    if drive.state() is State.OPERATION_ENABLED:
-        drive.link.drop()  # leave without a write: closing a live link writes the safe outputs, disabling it
-        raise DriveError(drive.name, "the drive is in OPERATION ENABLED before this master enabled it: another master "
-                                     "drives it; stop that master, or disable the drive, before starting this one")
+    anything to any of ``drives``, rather than disable them under that master -- every link is
+    left without a write, not only that drive's (closing the others' live links wrote their safe
+    outputs: a refused run disabled two units of a running three-axis run).  (The CANopen master
+    does the same, and also listens for another SYNC, at commissioning.)"""
+    for drive in drives:
+        if drive.state() is State.OPERATION_ENABLED:
+            for each in drives:
+                each.link.drop()  # leave without a write: closing a live link writes the safe outputs, disabling it
+            raise DriveError(drive.name, "the drive is in OPERATION ENABLED before this master enabled it: another "
+                                         "master drives it; stop that master, or disable the drive, before starting "
+                                         "this one")
 
 
 def _show_scaling(drive: Cia402Master, options: RunOptions, of: str = "") -> None:

@@ -205,6 +205,7 @@ def _serve(folder: pathlib.Path, frames: RingSpec | None, conn: Connection, pare
     conn.send(("ready",))
     now = time.monotonic()
     flush_due, view_due = now + FLUSH_INTERVAL, now + REFRESH
+    failed = False
     try:
         while not writer.stopped:
             due = flush_due if writer.view is None else min(flush_due, view_due)
@@ -220,8 +221,9 @@ def _serve(folder: pathlib.Path, frames: RingSpec | None, conn: Connection, pare
                 writer.view.update()
                 view_due = now + REFRESH
     except (EOFError, OSError) as exc:  # the control process is gone (EOF), or a write failed: keep what can be kept
-        if not isinstance(exc, EOFError):
+        failed = not isinstance(exc, EOFError)
+        if failed:
             logger.error("run writer: %s", exc)
     stats = writer.close()
-    if writer.stopped:
+    if writer.stopped or failed:  # after a failed write the control process still awaits them (else 30 s lost)
         conn.send(("stats", stats))
