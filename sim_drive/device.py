@@ -459,7 +459,10 @@ class SimulatedDrive:
         self.sync_count += 1
 
     def _advance(self, before: float, now: float) -> None:
-        """The plant over the closing interval: ``before`` N until the switch, ``now`` N after it."""
+        """The plant over the closing interval: ``before`` N until the switch, ``now`` N after it; the
+        operator's hand on the handle only while the torque is on (it takes a powered handle, and lets
+        go of one whose drive is off: a push through an unpowered wall is no contact)."""
+        self.handle.hand_on = self.torque_enabled
         line = self._line
         if line is not None:  # the hidden extra delay: this interval's forces come off the line
             if not self.torque_enabled:

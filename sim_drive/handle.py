@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from typing import Generic, Protocol, TypeVar
 
 from haptic_bus.analysis.plant import exp_divided_difference, phi1, phi2, zoh_coefficients
-from sim_drive.operator import NoOperator, OperatorModel
+from sim_drive.operator import LET_GO, NoOperator, OperatorModel
 from sim_drive.parameters import DeviceParameters
 
 _SERIES_BELOW = 1.0
@@ -161,6 +161,7 @@ class Handle:
         switch: float = 0.0,
     ) -> None:
         self.operator: OperatorModel = operator if operator is not None else NoOperator()
+        self.hand_on = True  # False: the operator lets go (sim_drive.operator.LET_GO), the drive's torque being off
         self.time = 0.0
         self.velocity = 0.0
         self.position = 0.0
@@ -198,7 +199,7 @@ class Handle:
     def _advance_substeps(self, before: float, now: float) -> None:
         """One period with the motor force ``now`` (N) held throughout: the exact sub-steps, inlined."""
         a, k1, p_v, p_f, q_vv, q_vf, q_ff = self._coefficients
-        operator = self.operator
+        operator = self.operator if self.hand_on else LET_GO
         t0 = self.time
         v, x = self.velocity, self.position
         operator_work = motor_work = loss = 0.0
@@ -236,7 +237,7 @@ class Handle:
 
     def _run(self, pieces: list[Piece[Step]], length: float, before: float, now: float) -> None:
         """The pieces of an interval of ``length`` s: ``before`` (N) until the switch, ``now`` after it."""
-        operator = self.operator
+        operator = self.operator if self.hand_on else LET_GO
         t0 = self.time
         w = 0.0
         for piece in pieces:

@@ -78,6 +78,11 @@ class NoOperator(OperatorModel):
         return 0.0
 
 
+LET_GO = NoOperator()
+"""What acts while the drive's torque is off: the hand lets go of an unpowered handle (a simulated
+drive takes the operator's force only from its enabling on, as the hand in space does)."""
+
+
 @dataclass(frozen=True)
 class ConstantPush(OperatorModel):
     """A constant push of ``level`` N from t = 0 on."""

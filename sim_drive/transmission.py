@@ -34,7 +34,7 @@ import numpy as np
 
 from haptic_bus.analysis.transmission import Transmission
 from sim_drive.handle import Meter, Piece, schedule, stretched_schedule
-from sim_drive.operator import NoOperator, OperatorModel
+from sim_drive.operator import LET_GO, NoOperator, OperatorModel
 
 if TYPE_CHECKING:
     from sim_drive.parameters import DeviceParameters
@@ -67,6 +67,7 @@ class TwoMassHandle:
     def __init__(self, transmission: Transmission, operator: OperatorModel | None = None) -> None:
         self.transmission = transmission
         self.operator: OperatorModel = operator if operator is not None else NoOperator()
+        self.hand_on = True  # False: the operator lets go (sim_drive.operator.LET_GO), the drive's torque being off
         self.time = 0.0
         self.state = np.zeros(4)
         self.operator_energy = 0.0
@@ -134,7 +135,7 @@ class TwoMassHandle:
 
     def _run(self, pieces: list[Piece[float]], length: float, before: float, now: float) -> None:
         """The pieces of an interval of ``length`` s, each exact with its forces held."""
-        operator, meter, transmission = self.operator, self._meter, self.transmission
+        operator, meter, transmission = self.operator if self.hand_on else LET_GO, self._meter, self.transmission
         t0 = self.time
         w = 0.0
         energy = self.mechanical_energy()

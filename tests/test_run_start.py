@@ -141,3 +141,32 @@ def test_a_ramp_time_outside_its_range_is_refused_at_load(tmp_path: pathlib.Path
         with pytest.raises(ParameterError, match=r"start\.ramp_time"):
             load_profile(inside(tmp_path, f'[start]\nin_contact = "ramp"\nramp_time = {bad}\n'))
     assert math.isclose(load_profile(inside(tmp_path, "[start]\nramp_time = 2.5\n")).start.ramp_time, 2.5)
+
+
+def test_a_handle_moved_into_a_wall_during_pre_flight_is_refused_before_enabling(
+        tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Real time: the start is judged (outside, at 0 m) before pre-flight; a hand then moves the
+    unpowered handle 7 mm into the end-stop (surface at 3 mm) during pre-flight's cycles.  The start
+    is judged again right before enabling: refused, nothing enabled."""
+    import threading
+    import time
+
+    with simulated_drive("canopen", "cia402-handle") as drive:
+        def move_during_preflight() -> None:
+            deadline = time.monotonic() + 30.0
+            while drive.drive.sync_count < 100 and time.monotonic() < deadline:
+                time.sleep(0.001)
+            drive.drive.handle.position = 0.010
+
+        mover = threading.Thread(target=move_during_preflight, daemon=True)
+        mover.start()
+        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--duration", "1", "-q", "--no-plots",
+                         "--out", str(tmp_path / "run"))
+        mover.join(35.0)
+    if "this machine holds T >=" in result.err or "watchdog" in result.err:
+        pytest.skip(f"this machine cannot hold the loop now, and the run said so at pre-flight: {result.err.strip()}")
+    assert result.code == 1, result.err
+    assert result.err_lines == ["haptic-bus run: refused: handle is 7.0 mm inside end-stop (at rest it would feel "
+                                "10.5 N): it moved there during pre-flight, after the start was judged outside every "
+                                "object; move it out or use --start-in-contact ramp"]
+    assert not drive.was_enabled

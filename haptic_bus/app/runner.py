@@ -211,6 +211,8 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                     _preflight(kind, rig, drive, gate, scene, options, extra)
                     recorder.publish()  # run.json as it stands before the cycles (pre-flight's verdict in it)
                 running, node = prepared or ready()
+                if prepared is not None and options.wall_paced and running.ramp_cycles == 0:
+                    _still_outside(kind, drive, scene)
                 show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
                 if options.stop.event.is_set():  # Ctrl-C or SIGTERM during set-up or pre-flight: never enabled
                     raise KeyboardInterrupt if options.stop.interrupted else _StopBeforeEnabling
@@ -298,6 +300,17 @@ def _safe_start(kind: RunKind[Any, Any, Any], drive: Any, gate: Any, scene: Any,
         raise Refusal(f"{where}; and the start ramp is refused: {proof.reason}")
     logger.info("%s: ramping the force in over %g s", where, kind.start.ramp_time)
     return origin, kind.start.ramp_time
+
+
+def _still_outside(kind: RunKind[Any, Any, Any], drive: Any, scene: Any) -> None:
+    """The start judged outside every object before pre-flight, judged again right before enabling
+    (:class:`Refusal`, nothing enabled, if the handle is inside one now): an operator pushing the
+    unpowered handle, or a hand moving it, during pre-flight's cycles would otherwise have it
+    enabled deep inside a wall, the passivity layer lowering every target from its first."""
+    where = kind.inside(scene, kind.origin(drive))
+    if where is not None:
+        raise Refusal(f"{where}: it moved there during pre-flight, after the start was judged outside every object; "
+                      "move it out or use --start-in-contact ramp")
 
 
 def _reset_faults_first(addresses: Sequence[DriveAddress], options: RunOptions, extra: dict[str, Any]) -> list[Event]:
