@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     import can
 
 LOCAL_HOP_LIMIT = 0  # udp_multicast's default here: frames are delivered on this host only
+MAX_HOP_LIMIT = 255  # the IP TTL / IPv6 hop limit field is one byte
 IN_PROCESS_INTERFACES = ("virtual", "lockstep")  # buses inside one process: every node on them runs in it
 BUS_OPTION_HELP = ("extra python-can bus argument, e.g. port=43113 (repeatable); udp_multicast gets hop_limit=0 "
                    "(frames stay on this host) unless you name one")
@@ -72,7 +73,10 @@ def resolve_bus_config(
     if not config.get("interface"):
         raise DriveError(where, _NO_INTERFACE)
     if config["interface"] == "udp_multicast":
-        config.setdefault("hop_limit", LOCAL_HOP_LIMIT)
+        hops = config.setdefault("hop_limit", LOCAL_HOP_LIMIT)
+        if isinstance(hops, bool) or not isinstance(hops, int) or not 0 <= hops <= MAX_HOP_LIMIT:
+            raise ParameterError("hop_limit", hops, f"a whole number of router hops in 0..{MAX_HOP_LIMIT} "
+                                 f"(0: this host only)", where)
     return config
 
 

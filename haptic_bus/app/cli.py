@@ -82,6 +82,9 @@ def _check(args: argparse.Namespace) -> int:
     from haptic_bus.analysis.check import check_passivity, format_check
     from haptic_bus.errors import ParameterError
 
+    if args.coulomb is not None and args.position_resolution is None:
+        raise ParameterError("--coulomb", args.coulomb, "with --position-resolution M: only the quantisation condition "
+                             "uses it")
     if args.transmission is not None:
         if args.position_resolution is not None:
             raise ParameterError("--position-resolution", args.position_resolution,
@@ -89,7 +92,7 @@ def _check(args: argparse.Namespace) -> int:
         return _check_two_mass(args)
     report = check_passivity(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay,
                              args.velocity, out_of_band=True, position_resolution=args.position_resolution,
-                             coulomb=args.coulomb)  # parameters named as the user typed them
+                             coulomb=0.0 if args.coulomb is None else args.coulomb)  # named as the user typed them
     print(json.dumps(report.to_dict()) if args.json else format_check(report))
     return EXIT_OK if report.passive else EXIT_NO
 
@@ -298,8 +301,9 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--position-resolution", type=number("--position-resolution", 0.0, 1e6, "m"), metavar="M",
                        help="encoder resolution Delta, m per 0x6064 increment: judge the quantisation condition too "
                             "(average velocity: Coulomb friction >= K Delta/2 + B Delta/T, any delay)")
-    check.add_argument("--coulomb", type=number("--coulomb", 0.0, 1e6, "N"), default=0.0, metavar="N",
-                       help="the handle's Coulomb friction f_c, N, for the quantisation condition")
+    check.add_argument("--coulomb", type=number("--coulomb", 0.0, 1e6, "N"), metavar="N",
+                       help="the handle's Coulomb friction f_c, N, for the quantisation condition (only with "
+                            "--position-resolution; 0 N when not given)")
     check.add_argument("--transmission", metavar="STIFFNESS:DAMPING:MOTOR_MASS",
                        help="judge a two-mass device: the handle (--mass, --friction) coupled by a spring N/m and a "
                             "damper N s/m to a motor-side mass kg, where the drive senses and applies the torque "

@@ -28,6 +28,7 @@ from typing import Any
 from drives.base import DriveScaling
 from drives.safety import SafetySettings
 from haptic_bus.analysis.loop import DeviceLoop
+from haptic_bus.analysis.transmission import Transmission
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.app.profile_policies import (
     NAME_PATTERN,
@@ -154,6 +155,16 @@ def default_profile() -> Profile:
     return load_profile(DEFAULT_PROFILE)
 
 
+def _device_value(value: Any) -> Any:
+    """One ``[device]`` value, JSON-ready: the velocity model as its TOML text, the transmission as its
+    table (``stiffness`` N/m, ``damping`` N s/m, ``motor_mass`` kg), the rest as they are."""
+    if isinstance(value, VelocityModel):
+        return str(value)
+    if isinstance(value, Transmission):
+        return dataclasses.asdict(value)
+    return value
+
+
 def profile_to_dict(profile: Profile) -> dict[str, Any]:
     """A JSON-ready view of a profile (SI units, as in the TOML)."""
     d = profile.device
@@ -161,7 +172,7 @@ def profile_to_dict(profile: Profile) -> dict[str, Any]:
         "profile": {"name": profile.name, "operator": profile.operator, "task": profile.task,
                     "description": profile.description},
         "path": None if profile.path is None else str(profile.path),
-        "device": {k: str(v) if isinstance(v, VelocityModel) else v for k, v in vars(d).items()} | {"max_force": d.max_force},
+        "device": {k: _device_value(v) for k, v in vars(d).items()} | {"max_force": d.max_force},
         "loop": {"period": profile.loop.period, "timing": profile.loop.timing, "delay": profile.loop.delay},
         "identification": None if profile.identification is None else profile.identification.as_table(),
         "limits": {"force_limit": profile.force_limit},

@@ -49,9 +49,12 @@ def judge_walls(gate: Gate[Any, Any], base: Scene, walls: dict[str, tuple[float,
 
 
 def _die_with(parent: int) -> None:
-    """In the worker, first: SIGKILL when the thread of the control process ``parent`` that started
-    it ends (Linux; a pool started by a thread that ended is found broken and started anew by
-    :func:`judge_pool`), and exit now if ``parent`` is gone already."""
+    """In the worker, first: Ctrl-C is the control process's to handle (a terminal sends SIGINT to
+    the whole process group: the worker printed a KeyboardInterrupt traceback beside the run's one
+    line); SIGKILL when the thread of the control process ``parent`` that started it ends (Linux; a
+    pool started by a thread that ended is found broken and started anew by :func:`judge_pool`),
+    and exit now if ``parent`` is gone already."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
         libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)

@@ -84,14 +84,15 @@ class DeviceProfile:
 
     def sim_parameters(self, period: float, timing: str, delay: float) -> dict[str, object]:
         """Keyword arguments of ``sim_drive.parameters.DeviceParameters`` for this device on a loop of
-        ``period`` s and ``timing`` (with the hidden truth: Coulomb friction, velocity noise and its seed)."""
+        ``period`` s and ``timing`` (with the hidden truth: Coulomb friction, velocity noise and its seed, and
+        the transmission: a profile the drive runs is its truth, the two-mass handle the gate judges)."""
         parameters: dict[str, object] = {
             "mass": self.mass, "friction": self.friction, "period": period,
             "velocity_per_count": self.velocity_per_count, "position_per_count": self.position_per_count,
             "rated_torque": self.rated_torque, "force_per_torque": self.force_per_torque,
             "max_torque_permille": self.max_torque_permille, "velocity": self.velocity,
             "coulomb_friction": self.coulomb_friction or 0.0, "velocity_noise": self.velocity_noise,
-            "noise_seed": self.noise_seed}
+            "noise_seed": self.noise_seed, "transmission": self.transmission}
         if timing == "reception":
             parameters["reception_delay"] = delay
         return parameters

@@ -11,7 +11,8 @@ through the one runtime's cycle and :mod:`haptic_bus.app.validate_cli` is the co
 - :mod:`~haptic_bus.validate.spectra`: the measured responses per excited frequency, with their
   uncertainty from the scatter across the probe's periods;
 - :mod:`~haptic_bus.validate.two_mass`: the exact sampled plant of a handle behind a compliant
-  transmission, for the fit;
+  transmission, for the fit and for a profile that states one;
+- :mod:`~haptic_bus.validate.circle`: ``z`` and ``z - 1`` on the unit circle, which both plants use;
 - :mod:`~haptic_bus.validate.departures`: the departures fitted (extra delay, resonance, filter,
   mass and friction), each with its uncertainty, and the verdict.
 """

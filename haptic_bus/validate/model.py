@@ -14,7 +14,9 @@ delay ``delta`` of ``D = d + delta``), ``z = e^{j theta}``.  The hold is the con
     velocity: P / (1 + P C)  (m/s per N),   position: T z/(z - 1) P / (1 + P C)  (m per N).
 
 A periodic probe in a stable loop reaches exactly these at its own frequencies once the start's
-transient has decayed: no continuous approximation anywhere.
+transient has decayed: no continuous approximation anywhere.  A loop that states a transmission (a
+profile's ``[device.transmission]``, which the gate judges) has the two-mass plant in place of the
+rigid one (:mod:`~haptic_bus.validate.two_mass`), so validate checks the model the gate judges with.
 """
 
 from __future__ import annotations
@@ -26,15 +28,15 @@ import numpy as np
 
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.analysis.sampled_loop import period_map, pulse_transfer
-
-
-def unit_circle(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(z, z - 1)`` at ``theta`` (rad), ``z - 1 = 2j sin(theta/2) e^{j theta/2}`` without cancellation."""
-    return np.exp(1j * theta), 2j * np.sin(0.5 * theta) * np.exp(0.5j * theta)
+from haptic_bus.validate import two_mass
+from haptic_bus.validate.circle import unit_circle
 
 
 def plant_response(loop: DeviceLoop, theta: np.ndarray) -> np.ndarray:
-    """``P(e^{j theta})``: force sent (N) to the reported velocity (m/s), exact (module docstring)."""
+    """``P(e^{j theta})``: force sent (N) to the reported velocity (m/s), exact (module docstring); behind
+    the loop's transmission when it states one (:func:`~haptic_bus.validate.two_mass.response`)."""
+    if loop.transmission is not None:
+        return two_mass.response(loop, loop.transmission, theta)
     wall = loop.wall(0.0, 0.0)
     z, z_minus_1 = unit_circle(theta)
     return wall.T / wall.m * z ** (-wall.whole_delay) * pulse_transfer(period_map(wall), z, z_minus_1)

@@ -24,7 +24,7 @@ from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.analysis.transmission import Transmission
 from haptic_bus.analysis.two_mass import TwoMassDevice
 from haptic_bus.analysis.velocity import VelocityModel
-from haptic_bus.validate.model import unit_circle
+from haptic_bus.validate.circle import unit_circle
 
 
 def device(loop: DeviceLoop, transmission: Transmission) -> TwoMassDevice:

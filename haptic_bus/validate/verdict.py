@@ -96,7 +96,7 @@ class Validation:
             "up_to_hz": self.up_to,
             "tolerance_percent": 100 * self.tolerance,
             "findings": self.findings,
-            "candidates": [{"name": fit.name, "chi2": fit.chi2, "misfit": fit.misfit,
+            "candidates": [{"name": fit.name, "chi2": fit.chi2, "parameters": fit.parameters, "misfit": fit.misfit,
                             "findings": [f.to_dict() for f in fit.findings]} for fit in self.fits],
             "probe": {"amplitude_n": self.amplitude, "velocity_noise_m_per_s": self.noise,
                       "hold": {"K": self.hold.stiffness, "B": self.hold.damping},
