@@ -104,8 +104,9 @@ def test_the_privileged_items_are_each_got_or_reported_and_all_restored() -> Non
             asked = {"timer slack", "switch interval", "gc frozen", "SCHED_FIFO", "CPU affinity", "mlockall"}
             assert set(report.got) | set(report.missing) == asked and not set(report.got) & set(report.missing)
             if "SCHED_FIFO" in report.got:
-                assert os.sched_getscheduler(0) == os.SCHED_FIFO and os.sched_getparam(0).sched_priority == FIFO_PRIORITY
-                assert os.sched_getscheduler(other.native_id) == os.SCHED_FIFO
+                fifo_resetting = os.SCHED_FIFO | os.SCHED_RESET_ON_FORK  # what they start stays ordinary
+                assert os.sched_getscheduler(0) == fifo_resetting and os.sched_getparam(0).sched_priority == FIFO_PRIORITY
+                assert os.sched_getscheduler(other.native_id) == fifo_resetting
                 assert os.sched_getparam(other.native_id).sched_priority == GIL_PRIORITY
             if "CPU affinity" in report.got:
                 assert os.sched_getaffinity(0) == {max(before[-1])}

@@ -15,7 +15,11 @@ always asked (``haptic-bus run`` in real time)
     ``SCHED_FIFO`` at :data:`FIFO_PRIORITY`, and the process's other threads at
     :data:`GIL_PRIORITY` (the GIL has no priority inheritance: a thread holding it, preempted by
     an ordinary process for a scheduler slice, held the cycle up 6 ms beside two CPU hogs, 36
-    overruns in 1000 cycles; with them above ordinary processes, none); and
+    overruns in 1000 cycles; with them above ordinary processes, none), each with
+    ``SCHED_RESET_ON_FORK``: a process or thread started from them, the upload judge importing
+    numpy and scipy for a second among them, starts as an ordinary one (inheriting SCHED_FIFO 80
+    it starved the simulated drive during pre-flight: 9 of 10 runs refused on an idle machine,
+    2 of 6 after); and
     ``mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)``: no page the loop has touched is ever
     paged out, and entering takes milliseconds (without ``MCL_ONFAULT``, on kernels before 4.4,
     every mapped page is faulted in first: ~50 ms and the whole address space resident).
@@ -59,6 +63,7 @@ logger = logging.getLogger(__name__)
 
 FIFO_PRIORITY = 80  # SCHED_FIFO priority of the control thread (1..99)
 GIL_PRIORITY = 1  # SCHED_FIFO priority of the process's other threads while the control thread has FIFO_PRIORITY
+_RESET_ON_FORK = getattr(os, "SCHED_RESET_ON_FORK", 0)  # a child (the judge, a writer) starts as an ordinary process
 _PR_SET_TIMERSLACK = 29
 _MCL_CURRENT, _MCL_FUTURE, _MCL_ONFAULT = 1, 2, 4
 
@@ -178,7 +183,7 @@ class _Session:
 
     def _fifo(self, tid: int, priority: int) -> None:
         before = os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority
-        os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+        os.sched_setscheduler(tid, os.SCHED_FIFO | _RESET_ON_FORK, os.sched_param(priority))
         self.undo.callback(_restore_policy, tid, before[0], before[1])
 
     def pin(self, cpu: int) -> str:
