@@ -4,13 +4,15 @@ The probe's response in velocity is compared frequency by frequency with the mod
 :mod:`~haptic_bus.validate.model`).  A frequency is **resolved** when three standard errors of the
 measurement (:mod:`~haptic_bus.validate.spectra`) are within the tolerance, and there it
 **departs** when ``|measured / predicted - 1|`` exceeds the tolerance plus those three standard
-errors.  The model **holds** when the lowest frequencies are resolved and none departs: "holds to
-within X % up to f Hz", ``f`` the highest frequency of the resolved band that starts at the
-lowest, ``X`` the largest relative difference in it.  When a resolved frequency departs, the
-measured plant is fitted with every departure :mod:`~haptic_bus.validate.departures` knows, and
-the best candidate's findings name how the device differs.  When the lowest frequency is not
-resolved, the measurement cannot tell (the noise or the timing's jitter is larger than the
-tolerance): neither verdict.
+errors.  The model **holds** when every probed frequency is resolved and none departs: "holds to
+within X % up to f Hz", ``f`` the probe's highest frequency, ``X`` the largest relative
+difference.  When a resolved frequency departs, the measured plant is fitted with every
+departure :mod:`~haptic_bus.validate.departures` knows, and the best candidate's findings name
+how the device differs.  When none departs but a band of frequencies is not resolved, the
+measurement **cannot tell** (neither verdict, exit 1): from the lowest frequency already, or
+above the resolved band that starts there (noise, the timing's jitter, or a response that does
+not settle from period to period: an undamped mode the gate calls unstable left only its
+scatter, and "holds up to 55 Hz" of the probe's 398 Hz had said nothing of it).
 """
 
 from __future__ import annotations
@@ -77,6 +79,11 @@ class Validation:
         verdict = self.verdict
         if verdict == "holds":
             return f"the model holds to within {100 * self.within:.2g} % up to {self.up_to:.4g} Hz"
+        if verdict == "cannot tell" and self.up_to > 0.0:
+            return (f"cannot tell above {self.up_to:.4g} Hz (the probe reaches {self.plan.frequencies[-1]:.4g} Hz): the "
+                    f"model holds to within {100 * self.within:.2g} % up to there, above it the measurement's scatter "
+                    f"across periods exceeds the tolerance of {100 * self.tolerance:.3g} % (noise, the cycle's timing "
+                    "jitter, or a response that does not settle: an undamped mode)")
         if verdict == "cannot tell":
             return (f"cannot tell: at {self.plan.frequencies[0]:.3g} Hz already the measurement's uncertainty exceeds "
                     f"the tolerance of {100 * self.tolerance:.3g} % (noise, or the cycle's timing jitter)")
@@ -134,9 +141,11 @@ def validate(loop: DeviceLoop, hold: Hold, plan: ProbePlan, prediction: Predicti
         return Validation(loop, hold, plan, amplitude, noise, prediction, plant, velocity, position, tolerance,
                           float(np.max(relative)), 0.0, False, ())
     departs = resolved & (relative > tolerance + CONFIDENCE * error)
-    holds = not bool(departs.any())
-    fits = (nominal(plant, loop),) if holds else tuple(departures(plant, loop))
-    within = float(np.max(relative[:band])) if holds else float(np.max(relative[resolved]))
-    up_to = float(plan.frequencies[band - 1]) if holds else float(plan.frequencies[resolved][-1])
+    if not departs.any():  # holds over the resolved band; over the whole probe, or it cannot tell above it
+        within, up_to = float(np.max(relative[:band])), float(plan.frequencies[band - 1])
+        complete = band == resolved.size
+        return Validation(loop, hold, plan, amplitude, noise, prediction, plant, velocity, position, tolerance, within,
+                          up_to, complete, (nominal(plant, loop),) if complete else ())
+    within, up_to = float(np.max(relative[resolved])), float(plan.frequencies[resolved][-1])
     return Validation(loop, hold, plan, amplitude, noise, prediction, plant, velocity, position, tolerance, within,
-                      up_to, holds, fits)
+                      up_to, False, tuple(departures(plant, loop)))
