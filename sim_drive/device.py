@@ -113,7 +113,11 @@ class SimulatedDrive:
 
     ``parameters``: plant and scaling (:class:`DeviceParameters`, also the power-on values a
     reset restores); ``timing``: when a written torque acts; ``operator``: the hand on the
-    handle; ``name`` prefixes log lines.
+    handle; ``name`` prefixes log lines.  ``hand_needs_power`` (False: the operator's force acts
+    on the plant whatever the drive does, the physics the tests of the plant check): True, the hand
+    takes the handle only while the torque is on and lets go of an unpowered one, as ``haptic-bus
+    sim`` serves it (a constant push would otherwise carry the handle through a wall during a
+    controller's pre-flight, and the controller refuses to enable it there).
     """
 
     def __init__(
@@ -137,6 +141,7 @@ class SimulatedDrive:
         self.abort_connection_option_code = int(AbortConnectionOption.FAULT)
         self.error_code = 0
         self.sync_count = 0
+        self.hand_needs_power = False
         self._interval: float | None = None  # the closing interval's length, s (None: T)
         self._latched = 0  # per mille: cia402, latched at the last SYNC; reception, acting since the last switch
         self._newton_per_permille = self.parameters.rated_torque_mnm / 1e6 * self.parameters.force_per_torque
@@ -462,7 +467,7 @@ class SimulatedDrive:
         """The plant over the closing interval: ``before`` N until the switch, ``now`` N after it; the
         operator's hand on the handle only while the torque is on (it takes a powered handle, and lets
         go of one whose drive is off: a push through an unpowered wall is no contact)."""
-        self.handle.hand_on = self.torque_enabled
+        self.handle.hand_on = self.torque_enabled or not self.hand_needs_power
         line = self._line
         if line is not None:  # the hidden extra delay: this interval's forces come off the line
             if not self.torque_enabled:

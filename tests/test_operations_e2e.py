@@ -154,7 +154,7 @@ def test_modbus_status_fault_reset_and_run_again_after_kill_9(sim_process: Any, 
     try:
         with ModbusObjects(url, 1, 0.5) as probe:
             _wait_for(probe, State.OPERATION_ENABLED, START_WAIT, run, sim.log)
-            time.sleep(0.3)  # cycling
+            time.sleep(1.0)  # cycling: the hand takes the handle once powered and rests it in the wall (m/b = 50 ms)
             run.kill()  # kill -9
             _wait_for(probe, State.FAULT, FAULT_WAIT, run, sim.log)
     finally:

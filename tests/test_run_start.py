@@ -152,6 +152,8 @@ def test_a_handle_moved_into_a_wall_during_pre_flight_is_refused_before_enabling
     import time
 
     with simulated_drive("canopen", "cia402-handle") as drive:
+        drive.drive.hand_needs_power = True  # the profile's push waits for the torque: only the mover moves it
+
         def move_during_preflight() -> None:
             deadline = time.monotonic() + 30.0
             while drive.drive.sync_count < 100 and time.monotonic() < deadline:

@@ -2,8 +2,8 @@
 
 ``haptic-bus run``'s own session (:func:`haptic_bus.app.runner.run_canopen`, the ``cia402-handle``
 profile, supervisor, heartbeat and SDO server included) against ``python -m sim_drive`` on
-udp_multicast (one simulator for every run of the section: an operator's hand holds the handle
-1.5 mm inside the wall, so each run starts in contact and ramps the wall in), in three set-ups of
+udp_multicast (one simulator for every run of the section: an operator's hand, a spring towards
+1.5 mm inside the wall, takes the handle once each run enables it), in three set-ups of
 the control thread (:mod:`haptic_bus.app.realtime`):
 
 * **untuned** -- as before issue 14: the OS defaults (timer slack 50 us, GIL switch interval
@@ -69,7 +69,8 @@ SETUPS = {"untuned": RealtimeSettings.untuned(), "--no-realtime": RealtimeSettin
           "default": RealtimeSettings()}
 RUNS = {"quiet": tuple(SETUPS), "CPU hog": tuple(SETUPS)}  # load -> the set-ups run under it
 SMOKE_RUNS = {"quiet": ("untuned", "default"), "CPU hog": ("default",)}  # what the targets need, and one hogged run
-HAND = "hand:300,5,0.0045"  # the simulated operator: a hand spring (N/m, N s/m) towards 4.5 mm, 1.5 mm inside the wall
+HAND = "hand:300,5,0.0045"  # the simulated operator: a hand spring (N/m, N s/m) towards 4.5 mm, 1.5 mm inside the wall,
+# holding a powered handle (haptic-bus sim's hand lets go of an unpowered one)
 _POLICIES = {getattr(os, n): n for n in ("SCHED_OTHER", "SCHED_FIFO", "SCHED_RR", "SCHED_BATCH", "SCHED_IDLE")
              if hasattr(os, n)}
 
@@ -215,7 +216,7 @@ def observed_delay(controller: WallController) -> float | None:
 def controller_run(settings: RealtimeSettings, duration: float, bus: dict, process: subprocess.Popen,
                    profile_name: str = PROFILE, node_id: int | None = NODE_ID) -> dict:
     """One ``haptic-bus run`` session of ``profile_name`` (one axis: drive ``node_id``; several: the
-    profile's) against the simulated drive ``process`` on ``bus``, started in contact where it is."""
+    profile's) against the simulated drive ``process`` on ``bus``, ramped in if it starts in contact."""
     from haptic_bus.app.runner import RunOptions, run
 
     profile = load_any_profile(profile_name)
@@ -274,7 +275,7 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
         })
     return {
         "description": f"T = {period * 1e3:g} ms with the real clock for {duration:g} s: haptic-bus run's session against "
-                       f"python -m sim_drive --operator {HAND} on udp_multicast (two processes, started in contact, the "
+                       f"python -m sim_drive --operator {HAND} on udp_multicast (two processes, the hand taking the handle once it is powered, the "
                        f"wall ramped in), set-ups of the control thread quiet and beside {hogs} busy processes",
         "period_s": period, "duration_s": duration, "segments": SEGMENTS, "hog_processes": hogs,
         "scheduler": scheduler_info(), "runs": runs, "target": target, "axes": axes,
