@@ -275,8 +275,8 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
         })
     return {
         "description": f"T = {period * 1e3:g} ms with the real clock for {duration:g} s: haptic-bus run's session against "
-                       f"python -m sim_drive --operator {HAND} on udp_multicast (two processes, the hand taking the handle once it is powered, the "
-                       f"wall ramped in), set-ups of the control thread quiet and beside {hogs} busy processes",
+                       f"python -m sim_drive --operator {HAND} on udp_multicast (two processes, the hand taking the "
+                       f"handle once it is powered), set-ups of the control thread quiet and beside {hogs} busy processes",
         "period_s": period, "duration_s": duration, "segments": SEGMENTS, "hog_processes": hogs,
         "scheduler": scheduler_info(), "runs": runs, "target": target, "axes": axes,
         "issue_26": issue_26_figures(runs) | {"three axes": axes_figures(axes)},
