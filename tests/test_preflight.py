@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptic_bus.app.preflight import PERIOD_GRID, STALL_MARGIN, Timing, judge
+from haptic_bus.app.preflight import PERIOD_GRID, STALL_MARGIN, Timing, judge, without_realtime
 from haptic_bus.app.profiles import load_profile
 
 T = 1e-3
@@ -94,3 +94,19 @@ def test_rare_late_cycles_within_half_a_percent_are_held_at_the_period_the_rest_
     report = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
     assert report.overruns == 2 and report.holdable
     assert report.smallest_period == pytest.approx(0.25e-3)
+
+
+def test_a_refusal_says_when_real_time_scheduling_was_not_granted() -> None:
+    """A machine refused at pre-flight whose control thread could not get SCHED_FIFO (an ordinary
+    user: no CAP_SYS_NICE, no RLIMIT_RTPRIO) is told so in the refusal's one line; a held run, or one
+    that had it, is left as it was."""
+    profile = load_profile("cia402-handle")
+    late = np.full(500, 20e-6)
+    late[::84] = 1.1e-3
+    refused = judge(timing(late), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
+    why = "[Errno 1] Operation not permitted (needs CAP_SYS_NICE, or an RLIMIT_RTPRIO of at least 80)"
+    said = without_realtime(refused, {"got": {}, "missing": {"SCHED_FIFO": why}})
+    assert said.reason == f"{refused.reason} (without real-time scheduling: {why})" and "\n" not in said.reason
+    assert without_realtime(refused, {"got": {"SCHED_FIFO": "priority 80"}, "missing": {}}) == refused
+    held = judge(timing(np.full(500, 20e-6)), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
+    assert without_realtime(held, {"missing": {"SCHED_FIFO": why}}) == held

@@ -192,6 +192,16 @@ def busy_times(timing: Timing) -> np.ndarray:
     return timing.exchange + (timing.starts - np.maximum(deadlines, ends))
 
 
+def without_realtime(report: PreflightReport, realtime: dict[str, Any] | None) -> PreflightReport:
+    """``report``, its refusal saying that real-time scheduling was not granted when the control
+    thread's session (``run.json``'s ``realtime``) could not get SCHED_FIFO: the likeliest reason
+    such a machine holds only a longer period, and one its user can change."""
+    missing = (realtime or {}).get("missing", {}).get("SCHED_FIFO")
+    if report.holdable or missing is None:
+        return report
+    return dataclasses.replace(report, reason=f"{report.reason} (without real-time scheduling: {missing})")
+
+
 def settle(report: PreflightReport, live: bool, extra: dict[str, Any]) -> None:
     """Record ``report`` in ``extra`` (``run.json``'s ``preflight``), log it, print its line unless
     the run is quiet (``live`` False), and refuse the run (:class:`~haptic_bus.errors.Refusal`,

@@ -278,7 +278,7 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
                                    spin=options.scheduling.spin)
     report = preflight.judge_delay(timing, kind.assumed_delay(gate), kind.passes_at(gate, scene),
                                    kind.profile.passivity.layer, rig.watchdog.stall, rig.watchdog.periods)
-    preflight.settle(report, options.live, extra)
+    preflight.settle(preflight.without_realtime(report, extra.get("realtime")), options.live, extra)
 
 
 def _safe_start(kind: RunKind[Any, Any, Any], drive: Any, gate: Any, scene: Any, options: RunOptions) -> tuple[Any, float]:
