@@ -464,6 +464,24 @@ def walk_together(drives: Sequence[Cia402Master], goal: State, first_words: Sequ
             words[i] = walk.word
 
 
+def enable_together(drives: Sequence[Cia402Master], command: Callable[[list[int]], list[int]]) -> None:
+    """Every drive of ``drives`` to OPERATION ENABLED in cyclic synchronous torque mode, walked
+    together over ``command`` (:func:`walk_together`)."""
+    for drive in drives:
+        drive.prepare_enable()
+    walk_together(drives, State.OPERATION_ENABLED, [drive.hold_word() for drive in drives], command)
+    for drive in drives:
+        drive.mark_enabled()
+
+
+def disable_together(drives: Sequence[Cia402Master], command: Callable[[list[int]], list[int]]) -> None:
+    """Zero torque and DISABLE VOLTAGE on every drive of ``drives``, walked together over ``command``
+    to SWITCH ON DISABLED (or FAULT)."""
+    for drive in drives:
+        drive.mark_disabled()
+    walk_together(drives, State.SWITCH_ON_DISABLED, [SAFE_CONTROLWORD] * len(drives), command, (State.FAULT,))
+
+
 def trip_together(drives: Sequence[Cia402Master], error: DriveError) -> DriveError:
     """Trip every drive of ``drives`` not tripped yet (:meth:`Cia402Master.trip`, each its safe
     outputs): the one that met ``error`` with it, the others "stopped together with" it; returns

@@ -40,8 +40,7 @@ from drives.canopen.axes_cycle import AxesCycle
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
 from drives.canopen.heartbeat import HeartbeatProducer
 from drives.canopen.link import NetworkLink
-from drives.cia402 import State
-from drives.cia402_master import SAFE_CONTROLWORD, trip_together, walk_together
+from drives.cia402_master import disable_together, enable_together, trip_together
 from drives.errors import DriveError, DriveTimeout, ParameterError
 from drives.safety import DEFAULT_SAFETY, SafetySettings
 
@@ -134,21 +133,14 @@ class CanopenAxes:
         """Every drive to OPERATION ENABLED in cyclic synchronous torque mode, walked together."""
         self._require_connected()
         self.cycle.end()  # mode selection is SDO
-        for drive in self.drives:
-            drive.prepare_enable()
-        walk_together(self.drives, State.OPERATION_ENABLED, [drive.hold_word() for drive in self.drives], self._command)
-        for drive in self.drives:
-            drive.mark_enabled()
+        enable_together(self.drives, self._command)
         self._missed = [0] * len(self.drives)
 
     def disable(self) -> None:
         """Zero torque and DISABLE VOLTAGE on every drive, walked together to SWITCH ON DISABLED (or FAULT)."""
         if not self._connected:
             return
-        for drive in self.drives:
-            drive.mark_disabled()
-        walk_together(self.drives, State.SWITCH_ON_DISABLED, [SAFE_CONTROLWORD] * len(self.drives), self._command,
-                      (State.FAULT,))
+        disable_together(self.drives, self._command)
 
     def _command(self, words: list[int]) -> list[int]:
         """One exchange for the state machines: SYNC, every TPDO, then each drive's RPDO(word, 0)."""

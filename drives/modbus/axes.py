@@ -29,8 +29,7 @@ import contextlib
 from collections.abc import Iterator, Sequence
 
 from drives.base import AxesDriveCycle, CyclicInputs, DriveCycle, DriveScaling
-from drives.cia402 import State
-from drives.cia402_master import SAFE_CONTROLWORD, trip_together, walk_together
+from drives.cia402_master import disable_together, enable_together, trip_together
 from drives.errors import DriveError, DriveRefusal, ParameterError
 from drives.modbus.drive import ModbusDrive
 
@@ -107,20 +106,13 @@ class ModbusAxes:
     def enable(self) -> None:
         """Every drive to OPERATION ENABLED in cyclic synchronous torque mode, walked together."""
         self._require_connected()
-        for drive in self.drives:
-            drive.prepare_enable()
-        walk_together(self.drives, State.OPERATION_ENABLED, [drive.hold_word() for drive in self.drives], self._command)
-        for drive in self.drives:
-            drive.mark_enabled()
+        enable_together(self.drives, self._command)
 
     def disable(self) -> None:
         """Zero torque and DISABLE VOLTAGE on every drive, walked together to SWITCH ON DISABLED (or FAULT)."""
         if not self._connected:
             return
-        for drive in self.drives:
-            drive.mark_disabled()
-        walk_together(self.drives, State.SWITCH_ON_DISABLED, [SAFE_CONTROLWORD] * len(self.drives), self._command,
-                      (State.FAULT,))
+        disable_together(self.drives, self._command)
 
     def _command(self, words: list[int]) -> list[int]:
         """Each drive's controlword written (zero torque) and its statusword read, in axis order."""
