@@ -10,7 +10,7 @@ import numpy as np
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.analysis.transmission import Transmission
 from haptic_bus.validate import two_mass
-from haptic_bus.validate.departures import departures
+from haptic_bus.validate.departures import departures, explains
 from haptic_bus.validate.model import Hold, plant_response
 from haptic_bus.validate.probe import ProbePlan
 from haptic_bus.validate.spectra import Measured
@@ -55,3 +55,15 @@ def test_a_true_transmission_is_still_named_a_resonance() -> None:
     assert abs(finding.values["damping"] - damping) < 4.0 * finding.uncertainty["damping"]
     # and the simpler candidates are far behind: the rigid plant cannot show a resonance
     assert fits[1].criterion - fits[0].criterion > 1e3
+
+
+def test_a_departure_no_candidate_fits_is_not_explained_and_a_known_one_is() -> None:
+    """The belt is explained within the noise (chi2 about its 406 - 6 degrees of freedom); a plant with a
+    10 % ripple across frequency, which no candidate has, leaves a chi2 far beyond the chi-square
+    distribution's 99.9th percentile (about 494): told so, not named after the closest candidate."""
+    numbers = 2 * PLAN.bins.size
+    belt = departures(_measured(two_mass.response(LOOP, Transmission(20000.0, 2.0, 0.3), PLAN.theta), seed=29), LOOP)
+    assert explains(belt[0], numbers)
+    rippled = plant_response(LOOP, PLAN.theta) * (1.0 + 0.1 * np.sin(40.0 * PLAN.theta))
+    odd = departures(_measured(rippled, seed=30), LOOP)
+    assert not explains(odd[0], numbers) and odd[0].chi2 > 10 * numbers

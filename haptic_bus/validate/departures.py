@@ -47,6 +47,7 @@ UNITS = {("delay", "value"): " samples (extra)", ("resonance", "frequency"): " H
          ("resonance", "stiffness"): " N/m", ("resonance", "coupling_damping"): " N s/m", ("resonance", "motor_mass"): " kg",
          ("filter", "tau"): " s", ("mass", "value"): " kg", ("friction", "value"): " N s/m"}
 _ERROR_FLOOR = 1e-9  # of |H|: a frequency measured without any scatter (a noiseless simulation) still gets a weight
+EXPLAINED_QUANTILE = 0.999  # a fit's chi2 beyond this quantile of its chi-square distribution explains nothing
 
 
 @dataclass(frozen=True)
@@ -84,6 +85,17 @@ class Fit:
     def criterion(self) -> float:
         """Akaike's ``chi2 + 2 k`` (dimensionless): what ranks the candidates, ``k`` the free parameters."""
         return self.chi2 + 2.0 * self.parameters
+
+
+def explains(fit: Fit, numbers: int) -> bool:
+    """Whether ``fit``, over ``numbers`` real numbers (twice the frequencies), leaves only what the
+    measurement's uncertainty explains: its ``chi2`` within the 99.9th percentile of the chi-square
+    distribution with ``numbers - parameters`` degrees of freedom.  A device no candidate explains
+    (Coulomb friction, a velocity estimate the candidates lack) is told so, not named after the
+    candidate that came closest."""
+    from scipy.stats import chi2
+
+    return fit.chi2 <= float(chi2.ppf(EXPLAINED_QUANTILE, max(numbers - fit.parameters, 1)))
 
 
 @dataclass(frozen=True)

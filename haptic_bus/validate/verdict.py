@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from haptic_bus.analysis.loop import DeviceLoop
-from haptic_bus.validate.departures import Fit, departures, nominal
+from haptic_bus.validate.departures import Fit, departures, explains, nominal
 from haptic_bus.validate.model import Hold, Prediction
 from haptic_bus.validate.probe import ProbePlan
 from haptic_bus.validate.spectra import Measured, response
@@ -89,9 +89,18 @@ class Validation:
                     f"the tolerance of {100 * self.tolerance:.3g} % (noise, or the cycle's timing jitter)")
         best = self.fits[0]
         said = "; ".join(finding.describe() for finding in best.findings)
-        return (f"the device differs from the model: by up to {100 * self.within:.3g} % up to {self.up_to:.4g} Hz "
-                f"(tolerance {100 * self.tolerance:.3g} %); best explained by {said} (rms misfit left "
-                f"{100 * best.misfit:.2g} %)")
+        differs = (f"the device differs from the model: by up to {100 * self.within:.3g} % up to {self.up_to:.4g} Hz "
+                   f"(tolerance {100 * self.tolerance:.3g} %)")
+        if not self.explained:
+            return (f"{differs}; no departure validate fits explains it within the measurement's uncertainty (the "
+                    f"closest, {said}, leaves an rms misfit of {100 * best.misfit:.2g} %)")
+        return f"{differs}; best explained by {said} (rms misfit left {100 * best.misfit:.2g} %)"
+
+    @property
+    def explained(self) -> bool:
+        """Whether the best candidate explains the departure within the measurement's uncertainty
+        (:func:`~haptic_bus.validate.departures.explains`; True unless the device differs)."""
+        return self.verdict != "differs" or explains(self.fits[0], 2 * self.plan.bins.size)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the verdict, the findings, every candidate's fit, the probe, the model, and the
@@ -103,6 +112,7 @@ class Validation:
             "up_to_hz": self.up_to,
             "tolerance_percent": 100 * self.tolerance,
             "findings": self.findings,
+            "explained": self.explained,
             "candidates": [{"name": fit.name, "chi2": fit.chi2, "parameters": fit.parameters, "misfit": fit.misfit,
                             "findings": [f.to_dict() for f in fit.findings]} for fit in self.fits],
             "probe": {"amplitude_n": self.amplitude, "velocity_noise_m_per_s": self.noise,
