@@ -22,7 +22,7 @@ WINDOW = 0.5  # s: frames collected after one SYNC (the nodes answer within mill
 
 def _frames(bus: can.BusABC, seconds: float) -> list[can.Message]:
     """Every frame within ``seconds`` (bounded in time and count)."""
-    deadline, seen = time.monotonic() + seconds, []
+    deadline, seen = time.monotonic() + seconds, list[can.Message]()
     while time.monotonic() < deadline and len(seen) < 1000:
         message = bus.recv(0.05)
         if message is not None:
