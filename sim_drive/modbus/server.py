@@ -95,6 +95,11 @@ class _Handler(ServerRequestHandler):
         finally:
             _REQUEST.reset(token)
 
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        super().connection_made(transport)
+        if self.is_closing:  # accepted as the server shut down: pymodbus closed it before it had a transport
+            transport.close()
+
     def callback_disconnected(self, exc: Exception | None) -> None:
         super().callback_disconnected(exc)
         self.sim._connection_closed(self)
