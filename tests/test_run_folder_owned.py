@@ -29,6 +29,12 @@ HOLD_LOCK = ("import pathlib, sys; from haptic_bus.app.folder_lock import own_fo
              "lock = own_folder(pathlib.Path(sys.argv[1])); print('locked', flush=True); sys.stdin.read()")
 
 
+def settled_names(folder: pathlib.Path) -> list[str]:
+    """The folder's file names, less the temporary of an atomic ``run.json`` write the running
+    run may be making at that instant (:func:`haptic_bus.app.run_folder.write_json`)."""
+    return sorted(p.name for p in folder.iterdir() if not (p.name.startswith(".") and p.name.endswith(".tmp")))
+
+
 def refused_line(err: str) -> str:
     lines = [line for line in err.splitlines() if line.strip()]
     assert len(lines) == 1 and "Traceback" not in err, err
@@ -47,14 +53,14 @@ def test_a_second_run_into_a_running_runs_folder_is_refused_before_its_bus(tmp_p
         running.start()
         try:
             assert wait_until(lambda: first.was_enabled, 30.0)  # the first run is cycling
-            names, started = sorted(p.name for p in folder.iterdir()), read_run(folder)["started_utc"]
+            names, started = settled_names(folder), read_run(folder)["started_utc"]
             with can.Bus(interface=CAN_INTERFACE, channel=second.channel) as sniffer:
                 result = run_cli(capsys, "run", "cia402-handle", *second.args, "--virtual-time", "--duration", "0.2",
                                  "-q", "--no-plots", "--out", str(folder))
                 sent = [m.arbitration_id for m in (sniffer.recv(0.0) for _ in range(10_000)) if m is not None]
             assert not set(sent) & MASTER_FRAMES, sent  # the second drive's bus: its own heartbeats, nothing of a master
             assert second.states == []
-            assert sorted(p.name for p in folder.iterdir()) == names and read_run(folder)["started_utc"] == started
+            assert settled_names(folder) == names and read_run(folder)["started_utc"] == started
         finally:
             stop.event.set()
             running.join(30.0)
