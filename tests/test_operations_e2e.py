@@ -24,6 +24,7 @@ from drives.bus_config import open_bus
 from drives.cia402 import STATUSWORD, State, decode_statusword
 from drives.modbus.objects import ModbusObjects
 from drives.object_access import ObjectAccess
+from tests.cli_process import skip_if_refused_at_preflight
 from tests.run_rig import run_cli
 
 NODE = 5
@@ -98,6 +99,7 @@ def _wait_for(access: ObjectAccess, state: State, timeout: float, run: subproces
         if time.monotonic() > deadline:
             raise AssertionError(f"no {state.value} within {timeout} s: {log()[-2000:]}")
         if state is State.OPERATION_ENABLED and run.poll() is not None:
+            skip_if_refused_at_preflight(run)
             raise AssertionError(f"the run ended ({run.returncode}): {run.stderr.read() if run.stderr else ''}")
         time.sleep(0.02)
 

@@ -48,6 +48,7 @@ from haptic_bus.app.profiles import load_profile
 from haptic_bus.control.controller import WallController, encoder_origin
 from haptic_bus.control.gate import GatePolicy, PassivityGate
 from haptic_bus.node.upload import upload_walls
+from tests.cli_process import skip_if_refused_at_preflight
 from tests.run_rig import (
     NODE,
     events_of,
@@ -381,10 +382,7 @@ def test_a_real_time_run_stopped_for_150_ms_breaks_the_delay_assumption_and_exit
             message = sniffer.recv(0.2)  # TPDO1 of an enabled drive: the run cycles (pre-flight's do not count)
             tpdos += (message is not None and message.arbitration_id == 0x180 + NODE
                       and int.from_bytes(message.data[:2], "little") & 0x6F == 0x27)
-        if run.poll() == 1:
-            stderr = run.communicate(timeout=10)[1]
-            if "this machine holds T >=" in stderr:
-                pytest.skip(f"this machine cannot hold T = 5 ms now, and the run said so at pre-flight: {stderr.strip()}")
+        skip_if_refused_at_preflight(run, "T = 5 ms")
         assert tpdos >= 100 and run.poll() is None, f"the run did not cycle: {_ended(run)} {sim.log()[-2000:]}"
         run.send_signal(signal.SIGSTOP)
         time.sleep(0.15)

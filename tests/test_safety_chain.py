@@ -29,6 +29,7 @@ from drives.cia402 import State
 from drives.errors import DriveError, DriveProtocolError
 from drives.safety import SafetySettings
 from sim_drive.eds import eds_path
+from tests.cli_process import skip_if_refused_at_preflight
 
 NODE = 5
 MASTER = 127
@@ -211,16 +212,6 @@ def _end(process: subprocess.Popen) -> None:
         process.stderr.close()
 
 
-def _skip_if_refused_at_preflight(run: subprocess.Popen) -> None:
-    """A run this machine's timing cannot hold is refused at pre-flight, naming the period it can:
-    the right answer, but no run whose death the drive could see."""
-    if run.poll() == 1 and run.stderr is not None:
-        error = run.stderr.read()
-        if "this machine holds T >=" in error or "reaches the drive's watchdog" in error:
-            pytest.skip(f"this machine cannot hold the loop now, and the run said so at pre-flight: {error.strip()}")
-        raise AssertionError(error)
-
-
 @pytest.mark.slow  # a process killed or stopped is the point: the run and the drive are two real processes
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP])
 def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(multicast, sim_process, tmp_path, sig) -> None:
@@ -236,7 +227,7 @@ def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(m
             message = sniffer.recv(0.2)  # TPDO1 of the enabled drive: the run cycles (pre-flight's do not count)
             tpdos += (message is not None and message.arbitration_id == 0x180 + NODE
                       and int.from_bytes(message.data[:2], "little") & 0x6F == 0x27)
-        _skip_if_refused_at_preflight(run)
+        skip_if_refused_at_preflight(run)
         assert tpdos >= 300, f"the run did not cycle: {run.stderr.read() if run.poll() is not None else sim.log()[-2000:]}"
         signalled = time.monotonic()
         run.send_signal(sig)
@@ -275,7 +266,7 @@ def test_a_killed_or_stopped_modbus_controller_faults_the_drive(sim_process, tmp
         deadline = time.monotonic() + START_WAIT
         while probe.state() is not State.OPERATION_ENABLED and time.monotonic() < deadline and run.poll() is None:
             time.sleep(0.05)
-        _skip_if_refused_at_preflight(run)
+        skip_if_refused_at_preflight(run)
         assert probe.state() is State.OPERATION_ENABLED, run.stderr.read() if run.poll() is not None else sim.log()[-2000:]
         time.sleep(0.2)  # cycling
         signalled = time.monotonic()
