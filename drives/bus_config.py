@@ -72,6 +72,10 @@ def resolve_bus_config(
         raise DriveError(where, f"invalid CAN bus configuration: {exc}") from exc
     if not config.get("interface"):
         raise DriveError(where, _NO_INTERFACE)
+    rate = config.get("bitrate")
+    if rate is not None and (isinstance(rate, bool) or not isinstance(rate, int) or rate <= 0):
+        raise ParameterError("bitrate", rate, "a positive whole number of bit/s (the adapter names the rates it supports)",
+                             where)
     if config["interface"] == "udp_multicast":
         hops = config.setdefault("hop_limit", LOCAL_HOP_LIMIT)
         if isinstance(hops, bool) or not isinstance(hops, int) or not 0 <= hops <= MAX_HOP_LIMIT:

@@ -1,0 +1,58 @@
+"""The values python-can would take without a word are checked where the bus configuration is made,
+one line each, exit 2 before any bus is opened:
+
+- udp_multicast's hop_limit: a text or a value that does not fit the IP header's one byte (it was
+  python-can's struct.error traceback, exit 1, from ``--bus-option hop_limit=abc``);
+- the bitrate: a positive whole number of bit/s, from ``--bitrate``, ``--bus-option`` or python-can's
+  configuration (``haptic-bus run --bitrate -5`` was accepted).
+"""
+
+from __future__ import annotations
+
+import pathlib
+
+import pytest
+
+from drives.bus_config import LOCAL_HOP_LIMIT, resolve_bus_config
+from drives.errors import ParameterError
+from haptic_bus.app.cli import main
+
+GROUP = {"interface": "udp_multicast", "channel": "239.74.163.2", "port": 43113}
+
+
+def test_no_hop_limit_stays_on_this_host() -> None:
+    assert resolve_bus_config(**GROUP)["hop_limit"] == LOCAL_HOP_LIMIT
+
+
+def test_a_hop_limit_the_user_names_is_kept() -> None:
+    assert resolve_bus_config(**GROUP, hop_limit=1)["hop_limit"] == 1
+
+
+@pytest.mark.parametrize("hops", ["abc", -1, 256, 1.5, True])
+def test_a_hop_limit_that_is_no_byte_is_refused_in_one_line(hops: object) -> None:
+    with pytest.raises(ParameterError) as refused:
+        resolve_bus_config(**GROUP, hop_limit=hops)
+    assert "hop_limit" in str(refused.value) and "0..255" in str(refused.value)
+    assert "\n" not in str(refused.value)
+
+
+@pytest.mark.parametrize("rate", [-5, 0, 1.5, "fast", True])
+def test_a_bitrate_that_is_no_positive_whole_number_is_refused_in_one_line(rate: object) -> None:
+    with pytest.raises(ParameterError) as refused:
+        resolve_bus_config(interface="virtual", channel="checks", bitrate=rate)  # type: ignore[arg-type]
+    assert str(refused.value).startswith("bus virtual:checks: bitrate = ")
+    assert "a positive whole number of bit/s" in str(refused.value) and "\n" not in str(refused.value)
+
+
+def test_a_bitrate_the_user_names_is_kept() -> None:
+    assert resolve_bus_config(interface="virtual", channel="checks", bitrate=500_000)["bitrate"] == 500_000
+
+
+def test_run_refuses_a_negative_bitrate_with_exit_2_before_its_bus(tmp_path: pathlib.Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    code = main(["run", "cia402-handle", "--interface", "virtual", "--channel", "checks", "--node-id", "5",
+                 "--bitrate", "-5", "--duration", "0.1", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "bitrate = -5 is invalid" in err, err
+    assert not out.exists()  # refused before its folder, too
