@@ -67,3 +67,25 @@ def test_a_departure_no_candidate_fits_is_not_explained_and_a_known_one_is() -> 
     rippled = plant_response(LOOP, PLAN.theta) * (1.0 + 0.1 * np.sin(40.0 * PLAN.theta))
     odd = departures(_measured(rippled, seed=30), LOOP)
     assert not explains(odd[0], numbers) and odd[0].chi2 > 10 * numbers
+
+
+def test_a_value_the_data_do_not_determine_has_no_uncertainty_rather_than_zero() -> None:
+    # a heavier rigid handle seen through the resonance candidate: the fit's pair is over-damped, its
+    # damping ratio is 1 for any nearby parameters (zero gradient), so its spread is undetermined, not
+    # +- 0 (the breaker's report); the parameters the data do see keep a finite, positive spread
+    truth = plant_response(dataclasses.replace(LOOP, m=1.2), PLAN.theta)
+    (resonance,) = next(fit for fit in departures(_measured(truth, seed=3), LOOP) if fit.name == "resonance").findings
+    assert resonance.values["damping"] == 1.0 and resonance.uncertainty["damping"] is None
+    assert resonance.to_dict()["uncertainty"]["damping"] is None  # JSON null, never a made-up 0
+    assert "damping 1 (undetermined)" in resonance.describe()
+    determined = [sigma for name, sigma in resonance.uncertainty.items() if name != "damping"]
+    assert all(sigma is not None and 0.0 < sigma < np.inf for sigma in determined)
+
+
+def test_a_rigid_handle_leaves_the_resonance_stiffness_at_its_bound_undetermined() -> None:
+    # no transmission at all: the candidate's stiffness runs to the bound of its range, where the
+    # curvature says nothing of it; the frequency and damping it sets are undetermined with it
+    (resonance,) = next(fit for fit in departures(_measured(plant_response(LOOP, PLAN.theta), seed=3), LOOP)
+                        if fit.name == "resonance").findings
+    assert all(resonance.uncertainty[name] is None for name in ("stiffness", "frequency", "damping"))
+    assert "stiffness" in resonance.describe() and "N/m (undetermined)" in resonance.describe()

@@ -48,15 +48,18 @@ UNITS = {("delay", "value"): " samples (extra)", ("resonance", "frequency"): " H
          ("filter", "tau"): " s", ("mass", "value"): " kg", ("friction", "value"): " N s/m"}
 _ERROR_FLOOR = 1e-9  # of |H|: a frequency measured without any scatter (a noiseless simulation) still gets a weight
 EXPLAINED_QUANTILE = 0.999  # a fit's chi2 beyond this quantile of its chi-square distribution explains nothing
+_UNSEEN_WEIGHT = 1e-8  # a parameter's share of an unseen direction (unit vector) above round-off: undetermined
 
 
 @dataclass(frozen=True)
 class Finding:
-    """One departure: ``kind``, its ``values`` (SI units, samples for a delay) and their ``uncertainty``."""
+    """One departure: ``kind``, its ``values`` (SI units, samples for a delay) and their ``uncertainty``
+    (None for a value the data do not determine: the fit left it at a bound of its range, the
+    measured response does not depend on it, or it is a mode's damping ratio of an over-damped pair)."""
 
     kind: str
     values: dict[str, float]
-    uncertainty: dict[str, float]
+    uncertainty: dict[str, float | None]
 
     def to_dict(self) -> dict[str, Any]:
         """``{"kind": ..., <values>, "uncertainty": u}`` (``u`` a number for one value, else one per value)."""
@@ -66,8 +69,13 @@ class Finding:
     def describe(self) -> str:
         """One line: the kind and each value with its uncertainty and unit."""
         return f"{self.kind}: " + ", ".join(
-            f"{'' if name == 'value' else name + ' '}{value:.4g} +- {self.uncertainty[name]:.2g}{UNITS[self.kind, name]}"
+            f"{'' if name == 'value' else name + ' '}{value:.4g}{_spread(self.uncertainty[name], UNITS[self.kind, name])}"
             for name, value in self.values.items())
+
+
+def _spread(sigma: float | None, unit: str) -> str:
+    """`` +- sigma unit``, or the unit and that the data do not determine the value."""
+    return f"{unit} (undetermined)" if sigma is None else f" +- {sigma:.2g}{unit}"
 
 
 @dataclass(frozen=True)
@@ -104,6 +112,7 @@ class _Solution:
     covariance: np.ndarray
     chi2: float
     misfit: float
+    undetermined: np.ndarray  # bool per parameter: at a bound of its range, or the data do not depend on it
 
 
 def _weights(measured: Measured) -> np.ndarray:
@@ -127,15 +136,26 @@ def _solve(measured: Measured, model: Model, start: Sequence[float], low: Sequen
                           method="trf")
     chi2 = float(2.0 * found.cost)
     dof = max(1, 2 * measured.mean.size - u0.size)
-    jacobian = found.jac
-    covariance = np.linalg.pinv(jacobian.T @ jacobian) * max(1.0, chi2 / dof)
-    covariance = covariance * np.outer(scale_, scale_)
+    covariance, unseen = _covariance(found.jac)
+    covariance = covariance * max(1.0, chi2 / dof) * np.outer(scale_, scale_)
     misfit = float(np.sqrt(np.mean(np.abs(model(found.x * scale_) / measured.mean - 1.0) ** 2)))
-    return _Solution(found.x * scale_, covariance, chi2, misfit)
+    return _Solution(found.x * scale_, covariance, chi2, misfit, (found.active_mask != 0) | unseen)
 
 
-def _sigma(solution: _Solution, i: int) -> float:
-    return float(math.sqrt(max(0.0, solution.covariance[i, i])))
+def _covariance(jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(J^T J)^+`` over the directions the data see, and which parameters lie along one they do not:
+    a singular value at or below ``max(rows, columns) eps`` times the largest (the pseudo-inverse's own
+    cut) is a direction the residual does not change along, whose variance is unbounded, not zero."""
+    _, singular, directions = np.linalg.svd(jacobian, full_matrices=False)
+    seen = singular > max(jacobian.shape) * np.finfo(float).eps * singular[0]
+    kept = directions[seen]
+    unseen = np.any(np.abs(directions[~seen]) > _UNSEEN_WEIGHT, axis=0)
+    return (kept.T / singular[seen] ** 2) @ kept, unseen
+
+
+def _sigma(solution: _Solution, i: int) -> float | None:
+    """Parameter ``i``'s standard error; None where the data do not determine it."""
+    return None if solution.undetermined[i] else float(math.sqrt(max(0.0, solution.covariance[i, i])))
 
 
 def nominal(measured: Measured, loop: DeviceLoop) -> Fit:
@@ -193,10 +213,12 @@ def fit_resonance(measured: Measured, loop: DeviceLoop) -> Fit:
         step[i] = 1e-6 * max(abs(solution.x[i]), 1e-9)
         gradient[:, i] = (np.array(two_mass.mode(loop, coupling(solution.x + step))) - mode) / step[i]
     sigma = np.sqrt(np.maximum(0.0, np.diag(gradient @ solution.covariance @ gradient.T)))
+    derived: list[float | None] = [None if solution.undetermined.any() or not gradient[j].any() else float(sigma[j])
+                                   for j in range(2)]  # a zero gradient: the over-damped pair's damping ratio 1
     names = ("stiffness", "coupling_damping", "motor_mass")  # what a profile's [device.transmission] states
     finding = Finding("resonance", {"frequency": float(mode[0]), "damping": float(mode[1]),
                                     **{name: float(value) for name, value in zip(names, solution.x)}},
-                      {"frequency": float(sigma[0]), "damping": float(sigma[1]),
+                      {"frequency": derived[0], "damping": derived[1],
                        **{name: _sigma(solution, i) for i, name in enumerate(names)}})
     return Fit("resonance", (finding,), solution.chi2, solution.misfit, 3)
 
