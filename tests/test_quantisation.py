@@ -103,6 +103,23 @@ def test_the_issue_wall_passes_with_a_tenth_of_a_newton(capsys: pytest.CaptureFi
     assert report.quantisation.required == pytest.approx(0.0375, rel=1e-15)  # one product and a halving
 
 
+def test_the_limits_check_reports_are_the_quantisation_conditions_too(capsys: pytest.CaptureFixture[str]) -> None:
+    # the exact criterion alone admits K up to 2413 N/m and B up to 3.47 N s/m on the issue's loop;
+    # with f_c = 0.1 N and Delta = 5e-5 m, f_c >= K Delta/2 + B Delta/T caps K at 2 f_c/Delta = 4000 N/m
+    # (the exact limit binds) and B at (f_c - K Delta/2) T/Delta = (0.1 - 0.0375)/0.05 = 1.25 N s/m
+    report = check_passivity(0.032, 3.62, 1e-3, 1500, 0, 1, "average", position_resolution=5e-5, coulomb=0.1)
+    unquantised = check_passivity(0.032, 3.62, 1e-3, 1500, 0, 1, "average")
+    assert report.max_stiffness == unquantised.max_stiffness and report.max_damping == pytest.approx(1.25, rel=1e-12)
+    assert report.damping_set.ends() == ((True, True),)  # f_c = required passes: the cap is in the set
+    # f_c = 0.01 N: K up to 2 f_c/Delta = 400 N/m; no B at K = 1500 (the spring alone needs 0.0375 N)
+    assert main([*DONE_WHEN, "--coulomb", "0.01"]) == 1
+    out = capsys.readouterr().out
+    assert "passive K at this B: [0, 400] N/m; passive B at this K: none" in out
+    # a spring that drifts (window velocity): only K = 0; B up to f_c TW/Delta = 0.1 * 5e-4 / 5e-5 = 1 N s/m
+    window = check_passivity(0.032, 3.62, 1e-3, 0, 0, 1, "window:0.0005", position_resolution=5e-5, coulomb=0.1)
+    assert window.stiffness_set.intervals == ((0.0, 0.0),) and window.max_damping == pytest.approx(1.0, rel=1e-12)
+
+
 @pytest.mark.parametrize(("flag", "value", "allowed"), [
     ("--position-resolution", "nan", "[0, 1e+06] m"), ("--position-resolution", "-1e-5", "[0, 1e+06] m"),
     ("--coulomb", "-0.1", "[0, 1e+06] N"), ("--coulomb", "inf", "[0, 1e+06] N")])

@@ -34,7 +34,7 @@ from haptic_bus.analysis.limits import RELATIVE_TOLERANCE, LimitsPlan, PassiveSe
 from haptic_bus.analysis.loop import BANDWIDTH_ALPHA, WORDS, WallLoop
 from haptic_bus.analysis.out_of_band import DEFAULT_HARMONICS, Exposure, worst_force
 from haptic_bus.analysis.poles import closed_loop_poles, stability
-from haptic_bus.analysis.quantisation import QuantisationCondition, quantisation_condition
+from haptic_bus.analysis.quantisation import QuantisationCondition, quantisation_condition, quantised_ceiling
 from haptic_bus.analysis.resolution import Quantisation
 from haptic_bus.analysis.theta_search import refine_lanes
 from haptic_bus.analysis.velocity import POINT, VelocityModel
@@ -188,6 +188,9 @@ def check_loop(loop: WallLoop, harmonics: int = DEFAULT_HARMONICS, out_of_band: 
     quantisation condition, which the verdict then needs too."""
     exact, seed, stiffness, damping = _verdicts(loop)
     condition = None if quantisation is None else quantisation_condition(loop, quantisation)
+    if quantisation is not None:  # the limits the verdict needs: the exact criterion's and the quantisation's
+        stiffness = stiffness.at_most(quantised_ceiling(loop, quantisation, "K"))
+        damping = damping.at_most(quantised_ceiling(loop, quantisation, "B"))
     quantised_out = exact.passive and condition is not None and not condition.holds
     eq23, eq2, eq4 = velocity_sampling_slack(loop), colgate_slack(loop), liu2011_slack(loop)
     exposure = None

@@ -126,6 +126,22 @@ class PassiveSet:
             text += f", largest at least {self.ceiling:g} (the input ceiling)"
         return text
 
+    def at_most(self, ceiling: float) -> PassiveSet:
+        """The values of this set no larger than ``ceiling`` (a closed end there; ``inf``: the set itself)."""
+        if math.isinf(ceiling):
+            return self
+        intervals, closed = [], []
+        for (low, high), (low_in, high_in) in zip(self.intervals, self.ends()):
+            if low > ceiling or (low == ceiling and not low_in):
+                break
+            cut = high >= ceiling
+            intervals.append((low, ceiling if cut else high))
+            closed.append((low_in, True if cut else high_in))
+            if cut:
+                break
+        kept_ceiling = self.ceiling if len(intervals) == len(self.intervals) and self.intervals[-1][1] < ceiling else None
+        return PassiveSet(self.parameter, tuple(intervals), tuple(closed), kept_ceiling)
+
     def to_dict(self) -> dict[str, object]:
         """JSON-ready: ``lowest``, ``largest``, the ``intervals`` as ``[low, high]`` pairs, ``closed`` as
         ``[low included, high included]`` pairs, and ``largest_at_least`` (the largest is only the ceiling)."""

@@ -150,3 +150,30 @@ def quantisation_condition(loop: WallLoop, quantisation: Quantisation) -> Quanti
     holds = f_c >= required
     leak = 0.0 if holds else (required - f_c) * quantisation.position_resolution
     return QuantisationCondition(CROSSING, holds, required, f_c, quantum, leak, name)
+
+
+def quantised_ceiling(loop: WallLoop, quantisation: Quantisation, parameter: str) -> float:
+    """The largest ``parameter`` ("K" N/m at the loop's ``B``, or "B" N s/m at its ``K``) the
+    quantisation condition admits (module docstring): ``inf`` where it admits any, 0 where only none
+    (a spring that drifts), negative where not even 0 (the other parameter alone needs more Coulomb
+    friction than the device has)."""
+    kind = loop.velocity.kind
+    f_c = quantisation.coulomb
+    if kind in ("average", "window"):
+        quantum = quantisation.position_resolution
+        per_damping = quantum / (loop.velocity.window(loop.T) or loop.T)  # N of f_c per N s/m of B
+    else:
+        quantum = quantisation.velocity_resolution
+        per_damping = quantum / 2.0
+    if quantum == 0.0:
+        return math.inf
+    drifts = kind != "average" or not _counts_exactly(loop.T, quantisation)
+    if parameter == "K":
+        left = f_c - loop.B * per_damping  # what the damper leaves of f_c for the spring
+        if drifts:
+            return 0.0 if left >= 0.0 else -1.0
+        return 2.0 * left / quantum
+    if drifts and loop.K > 0.0:
+        return -1.0
+    spring = loop.K * quantum / 2.0 if kind == "average" else 0.0
+    return (f_c - spring) / per_damping
