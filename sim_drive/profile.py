@@ -23,7 +23,7 @@ import pathlib
 from dataclasses import dataclass
 
 from haptic_bus.errors import ParameterError
-from haptic_bus.profile.device import DeviceProfile
+from haptic_bus.profile.device import DeviceTable
 from haptic_bus.profile.files import resolve_profile
 from haptic_bus.profile.plant import ONE_AXIS_TABLES, Silent, read_plant
 from haptic_bus.profile.reader import Reader, profile_error, read_document
@@ -75,7 +75,7 @@ def load_profile(path_or_name: str | pathlib.Path) -> DriveProfile:
     return DriveProfile(parameters, timing, operator)
 
 
-def drive_parameters(path: pathlib.Path, device: DeviceProfile, period: float, timing: str, delay: float,
+def drive_parameters(path: pathlib.Path, device: DeviceTable, period: float, timing: str, delay: float,
                      prefix: str = "") -> DeviceParameters:
     """The simulated drive of ``device`` on a loop of ``period`` s and ``timing``; a value the drive
     cannot take (a "reception" delay of a whole sample or more) is a ParameterError naming the

@@ -46,9 +46,9 @@ _truth_files = itertools.count(1)
 
 def truth_keys() -> tuple[str, ...]:
     """The ``[device]`` keys a truth may set (every field of the profile's device table but its prose)."""
-    from haptic_bus.app.profiles import DeviceProfile
+    from haptic_bus.app.profiles import DeviceTable
 
-    return tuple(f.name for f in dataclasses.fields(DeviceProfile) if f.name != "friction_source")
+    return tuple(f.name for f in dataclasses.fields(DeviceTable) if f.name != "friction_source")
 
 
 def _with_absolute_recording(table: Mapping[str, Any], base: pathlib.Path) -> dict[str, Any]:
