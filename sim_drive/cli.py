@@ -267,7 +267,7 @@ def _profile_axes(args: argparse.Namespace) -> SimulatedDevice | None:
     """The device of a ``--profile`` with ``[[axes]]``, each axis its own plant and node or unit (None: no
     profile, or a one-axis profile, which every axis runs); ParameterError if the profile is invalid."""
     device = read_simulated_device(args.profile) if args.profile else None
-    return device if device is not None and device.operator is None else None
+    return device if device is not None and device.multi_axis else None
 
 
 def _run_canopen(args: argparse.Namespace) -> int:

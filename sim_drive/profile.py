@@ -84,6 +84,11 @@ class SimulatedDevice:
     operator: OperatorModel | None
     hand: Mapping[str, Any]
 
+    @property
+    def multi_axis(self) -> bool:
+        """True for a profile with ``[[axes]]`` (even of one axis): each axis its own node or unit, the hand in space."""
+        return self.operator is None
+
     def one_axis(self) -> tuple[SimAxis, OperatorModel]:
         """The axis and operator of a one-axis profile; ParameterError for a profile with ``[[axes]]``."""
         if self.operator is None:

@@ -210,29 +210,25 @@ def start_modbus(truth: pathlib.Path | None, unit_ids: list[int], servers: int =
     """The simulated drive of profile file ``truth`` (one axis, or every axis of a multi-axis one;
     None: the simulator's defaults) served over Modbus TCP on loopback in this process, unit
     ``unit_ids[i]`` for axis ``i``, on one server or (``servers`` > 1) one per axis; started (bound)."""
-    from haptic_bus.app.axes_profile import is_axes_profile, load_axes_profile
-    from haptic_bus.app.profiles import read_profile
-    from haptic_bus.app.rig import ModbusSimServer, MultiAxisModbusSim, simulated_modbus
+    from haptic_bus.app.rig import ModbusSimServer, MultiAxisModbusSim, read_simulated_device, simulated_modbus
 
     if truth is None:
         sim: ModbusSimServer | MultiAxisModbusSim = ModbusSimServer(unit_id=unit_ids[0])
     else:
-        sim = simulated_modbus(load_axes_profile(truth) if is_axes_profile(truth) else read_profile(truth), unit_ids,
-                               servers)
+        sim = simulated_modbus(read_simulated_device(truth), unit_ids, servers)
     sim.start()
     urls = sim.urls if isinstance(sim, MultiAxisModbusSim) else (sim.url,)
     return SimDriveNode(None, unit_ids[0], truth, sim=sim, urls=tuple(urls), unit_ids=tuple(unit_ids))
 
 
 def _in_process(spec: BusSpec, node_id: int, timing: str | None, truth: pathlib.Path | None) -> CanopenSimDrive:
-    """The slave in this process, started (boot-up sent, serving)."""
-    from haptic_bus.app.profiles import read_profile
-    from haptic_bus.app.rig import CanopenSimDrive, DeviceParameters, profile_operator
+    """The slave in this process, started (boot-up sent, serving): what ``python -m sim_drive --profile
+    TRUTH`` serves in another process, read by the same reader."""
+    from haptic_bus.app.rig import CanopenSimDrive, read_simulated_device
 
     config = {"interface": spec.interface, "channel": spec.channel, **spec.extra}
     if truth is None:
         return CanopenSimDrive(config, node_id, timing=timing or "cia402").start()
-    profile = read_profile(truth)
-    parameters = DeviceParameters(**cast(dict[str, Any], profile.sim_device_parameters()))
-    return CanopenSimDrive(config, node_id, timing=timing or profile.loop.timing, parameters=parameters,
-                           operator=profile_operator(profile)).start()
+    axis, operator = read_simulated_device(truth).one_axis()
+    return CanopenSimDrive(config, node_id, timing=timing or axis.timing, parameters=axis.parameters,
+                           operator=operator).start()
