@@ -188,7 +188,8 @@ def start_axes(spec: BusSpec | None, profile: pathlib.Path, start_process: Calla
     --node-ids``), or (``spec`` None) over Modbus, one unit per axis (:func:`start_modbus`)."""
     from haptic_bus.app.axes_profile import load_axes_profile
 
-    axes = load_axes_profile(profile).axes
+    judged = load_axes_profile(profile)  # validated and gated once
+    axes = judged.axes
     if spec is None:
         stated = [axis.unit_id for axis in axes]
         return start_modbus(profile, [u for u in stated if u is not None] if None not in stated
@@ -198,7 +199,7 @@ def start_axes(spec: BusSpec | None, profile: pathlib.Path, start_process: Calla
     if spec.interface in IN_PROCESS:
         from haptic_bus.app.rig import simulated_axes_device
 
-        node.sim = simulated_axes_device(load_axes_profile(profile), spec.config()).start()
+        node.sim = simulated_axes_device(judged, spec.config()).start()
         return node
     node.process = start_process(*spec.sim_args(), "--node-ids", ",".join(map(str, nodes)), "--profile", str(profile))
     for each in nodes:
