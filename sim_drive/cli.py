@@ -47,7 +47,7 @@ from haptic_bus.errors import DriveError, ParameterError
 from sim_drive.eds import OD_KINDS, eds_path
 from sim_drive.operator import OperatorModel, operator_from_spec, operator_usage
 from sim_drive.parameters import DeviceParameters, Timing
-from sim_drive.profile import load_profile
+from sim_drive.profile import SimulatedDevice, read_simulated_device
 from sim_drive.scheduling import answer_in_real_time, scheduling_restored
 from sim_drive.sync_clock import SYNC_CLOCKS, sync_clock
 
@@ -255,12 +255,19 @@ def _set_up_process(wall_clock: bool, library: str, level: int) -> str:
 
 
 def _drive_setup(args: argparse.Namespace) -> tuple[DeviceParameters, OperatorModel | None, str]:
-    """Device parameters, operator model and timing from ``--profile``/``--timing``; ParameterError if invalid."""
-    profile = load_profile(args.profile) if args.profile else None
-    parameters, operator = _overridden(profile.parameters if profile else DeviceParameters(),
-                                       profile.operator if profile else None, args)
-    timing = args.timing or (profile.timing.value if profile and profile.timing else Timing.CIA402.value)
+    """Device parameters, operator model and timing of one axis from ``--profile`` (a one-axis profile)
+    and ``--timing``; ParameterError if invalid."""
+    axis, operator = read_simulated_device(args.profile).one_axis() if args.profile else (None, None)
+    parameters, operator = _overridden(axis.parameters if axis else DeviceParameters(), operator, args)
+    timing = args.timing or (axis.timing if axis else Timing.CIA402).value
     return parameters, operator, timing
+
+
+def _profile_axes(args: argparse.Namespace) -> SimulatedDevice | None:
+    """The device of a ``--profile`` with ``[[axes]]``, each axis its own plant and node or unit (None: no
+    profile, or a one-axis profile, which every axis runs); ParameterError if the profile is invalid."""
+    device = read_simulated_device(args.profile) if args.profile else None
+    return device if device is not None and device.multi_axis else None
 
 
 def _run_canopen(args: argparse.Namespace) -> int:
@@ -338,7 +345,6 @@ def _node_ids(text: str) -> list[int]:
 
 def _axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
     """``(axes, hand, coordinates)`` for ``--node-ids``; ParameterError if the arguments or the profile are invalid."""
-    from sim_drive.axes_profile import is_axes_profile, load_axes_device
     from sim_drive.space_operator import SpaceHand
 
     nodes = _node_ids(args.node_ids)
@@ -347,8 +353,8 @@ def _axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
     if args.transmission is not None:  # the hand in space pushes each axis' handle where its encoder is
         raise ParameterError("--transmission", args.transmission, "one axis only (--node-id): no hand in space on "
                              "the far side of a transmission")
-    if args.profile and is_axes_profile(args.profile):
-        device = load_axes_device(args.profile)
+    device = _profile_axes(args)
+    if device is not None:
         known = [axis.node_id for axis in device.axes]
         unknown = [n for n in nodes if n not in known]
         if unknown:
@@ -423,11 +429,10 @@ def log_eds_gaps(node_id: int, dictionary: Any) -> None:
 
 def _run_modbus(args: argparse.Namespace) -> int:
     """The Modbus TCP server until SIGINT/SIGTERM (several axes: :func:`run_modbus_axes`)."""
-    from sim_drive.axes_profile import is_axes_profile
     from sim_drive.modbus import ModbusSimServer, parse_modbus_url
 
     try:
-        several = args.unit_ids is not None or len(args.modbus) > 1 or bool(args.profile and is_axes_profile(args.profile))
+        several = args.unit_ids is not None or len(args.modbus) > 1 or _profile_axes(args) is not None
     except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
@@ -481,14 +486,13 @@ def _modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
     """``(axes, hand)`` for several Modbus axes: each (unit id, parameters, timing) in axis order;
     ParameterError if the arguments or the profile are invalid (module docstring of the options)."""
     from drives.modbus.register_map import UNIT_ID_RANGE
-    from sim_drive.axes_profile import is_axes_profile, load_axes_device
     from sim_drive.space_operator import SpaceHand
 
     given = id_list("--unit-ids", args.unit_ids, *UNIT_ID_RANGE, "Modbus unit ids") if args.unit_ids else None
     if args.unit_id is not None:
         raise ParameterError("--unit-id", args.unit_id, "--unit-ids for several axes (one unit id per axis)")
-    if args.profile and is_axes_profile(args.profile):
-        device = load_axes_device(args.profile)
+    device = _profile_axes(args)
+    if device is not None:
         stated = [axis.unit_id for axis in device.axes]
         units = given or (stated if None not in stated else [UNIT_ID_RANGE[0]] * len(args.modbus))
         if len(units) != len(device.axes) or (len(args.modbus) == 1 and len(set(units)) != len(units)):

@@ -42,7 +42,7 @@ from haptic_bus.app.profiles import resolve_profile
 from haptic_bus.control.clock import VirtualClock
 from sim_drive.device import SimulatedDrive
 from sim_drive.parameters import DeviceParameters, Timing
-from sim_drive.profile import load_profile as load_drive_profile
+from sim_drive.profile import read_simulated_device
 
 NODE = 5  # the simulated drive's CANopen node id
 CAN_INTERFACE = "lockstep"  # the CAN bus of simulated_drive("canopen")
@@ -87,14 +87,13 @@ class DriveUnderTest:
 def simulated_drive(transport: str, profile: pathlib.Path | str) -> Iterator[DriveUnderTest]:
     """The simulated drive of ``profile`` in this process, on ``transport`` ("canopen": the
     lock-step bus, node 5; "modbus": TCP on 127.0.0.1); stopped on exit (``stop`` may end it earlier)."""
-    truth = load_drive_profile(profile)
-    timing = truth.timing or Timing.CIA402
+    truth, operator = read_simulated_device(profile).one_axis()
     if transport == "canopen":
         from sim_drive.canopen.slave import CanopenSimDrive
 
         channel = f"run-test-{os.getpid()}-{uuid.uuid4().hex[:10]}"
-        slave = CanopenSimDrive({"interface": CAN_INTERFACE, "channel": channel}, NODE, timing=timing,
-                                parameters=truth.parameters, operator=truth.operator)
+        slave = CanopenSimDrive({"interface": CAN_INTERFACE, "channel": channel}, NODE, timing=truth.timing,
+                                parameters=truth.parameters, operator=operator)
         under = DriveUnderTest(transport, ["--interface", CAN_INTERFACE, "--channel", channel, "--node-id", str(NODE)],
                                slave.drive, channel=channel, stop=slave.stop, short_next_tpdo=slave.short_next_tpdo,
                                enter_fault=slave.enter_fault)
@@ -103,7 +102,7 @@ def simulated_drive(transport: str, profile: pathlib.Path | str) -> Iterator[Dri
     elif transport == "modbus":
         from sim_drive.modbus.server import ModbusSimServer
 
-        server = ModbusSimServer("127.0.0.1", 0, timing=timing, parameters=truth.parameters, operator=truth.operator)
+        server = ModbusSimServer("127.0.0.1", 0, timing=truth.timing, parameters=truth.parameters, operator=operator)
         under = DriveUnderTest(transport, [], server.drive, stop=server.stop)
         server.drive.state_listeners.append(lambda old, new, number: under.states.append(new))
         server.start()

@@ -26,8 +26,8 @@ from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, DERATE_EXTRA_DELAYS
 from haptic_bus.app.run_options import RunOptions, StopRequest
 from haptic_bus.control.space_scene import Plane, SpaceScene, compile_space_scene
 from haptic_bus.node.verdicts import judge_pool
-from sim_drive.axes_profile import load_axes_device
 from sim_drive.modbus.multi_axis import MultiAxisModbusSim
+from sim_drive.profile import read_simulated_device
 from tests.run_rig import late_clock
 
 K, B = 6000.0, 5.0  # N/m, N s/m
@@ -105,7 +105,7 @@ def late_after_the_table(monkeypatch: pytest.MonkeyPatch) -> None:
 @pytest.fixture
 def modbus_axes(tmp_path: pathlib.Path) -> Iterator[tuple[pathlib.Path, MultiAxisModbusSim]]:
     path = derating_profile(tmp_path)
-    device = load_axes_device(path)
+    device = read_simulated_device(path)
     axes = [(unit, axis.parameters, axis.timing) for unit, axis in zip((1, 2, 3), device.axes)]
     sim = MultiAxisModbusSim([("127.0.0.1", 0)], axes, device.make_hand()).start()
     yield path, sim

@@ -33,8 +33,8 @@ from haptic_bus.app.axes_profile import load_axes_profile
 from haptic_bus.app.cli import main
 from haptic_bus.app.run_options import RunOptions, StopRequest
 from haptic_bus.app.steady_state import contact
-from sim_drive.axes_profile import load_axes_device
 from sim_drive.modbus.multi_axis import MultiAxisModbusSim
+from sim_drive.profile import read_simulated_device
 from tests.cli_process import cli_process, reaped
 
 GANTRY = pathlib.Path(str(load_axes_profile("gantry-3d").path))
@@ -63,7 +63,7 @@ def modbus_gantry() -> Iterator[Callable[..., MultiAxisModbusSim]]:
 
     def start(profile: str | pathlib.Path = "gantry-3d", servers: int = 1,
               units: tuple[int, ...] = UNITS) -> MultiAxisModbusSim:
-        device = load_axes_device(profile)
+        device = read_simulated_device(profile)
         axes = [(unit, axis.parameters, axis.timing) for unit, axis in zip(units, device.axes)]
         sim = MultiAxisModbusSim([("127.0.0.1", 0)] * servers, axes, device.make_hand()).start()
         started.append(sim)
@@ -257,7 +257,7 @@ def test_unit_ids_from_the_profile(tmp_path: pathlib.Path, modbus_gantry: Callab
         text = text.replace(f"node_id = {node}\n", f"unit_id = {unit}\n")
     path = tmp_path / "units.toml"
     path.write_text(text)
-    assert [axis.unit_id for axis in load_axes_device(path).axes] == [11, 12, 13]
+    assert [axis.unit_id for axis in read_simulated_device(path).axes] == [11, 12, 13]
     sim = modbus_gantry(path, 1, (11, 12, 13))
     result = hb.run(load_axes_profile(path), sim.urls[0], options(tmp_path / "run", 0.2))
     assert result.exit_reason == "completed", result.error

@@ -12,7 +12,7 @@ import pathlib
 
 from haptic_bus.analysis.transmission import Transmission
 from haptic_bus.app.profiles import load_profile, profile_to_dict
-from sim_drive.profile import load_profile as load_drive_profile
+from sim_drive.profile import read_simulated_device
 from tests.run_rig import profile_variant
 
 TABLE = "\n[device.transmission]\nstiffness = 20000.0\ndamping = 2.0\nmotor_mass = 0.3\n\n[loop]"
@@ -30,7 +30,7 @@ def test_a_profile_with_a_transmission_is_json_with_its_table(tmp_path: pathlib.
 
 
 def test_the_simulated_drive_runs_the_transmission_a_profile_states(tmp_path: pathlib.Path) -> None:
-    parameters = load_drive_profile(_belt(tmp_path)).parameters
+    parameters = read_simulated_device(_belt(tmp_path)).axes[0].parameters
     assert parameters.coupling == Transmission(20000.0, 2.0, 0.3)
     assert (parameters.mass, parameters.friction) == (1.0, 20.0)  # the handle's, as the profile states
-    assert load_drive_profile("cia402-handle").parameters.coupling is None  # no table: a rigid handle
+    assert read_simulated_device("cia402-handle").axes[0].parameters.coupling is None  # no table: a rigid handle

@@ -18,13 +18,13 @@ from haptic_bus.errors import ParameterError
 from haptic_bus.profile.identification import IdentifiedDevice, read_identification
 from sim_drive.cli import main as sim_main
 from sim_drive.parameters import DeviceParameters, Timing
-from sim_drive.profile import load_profile as load_drive_profile
+from sim_drive.profile import read_simulated_device
 
 
 @pytest.mark.parametrize("name", sorted(shipped_profiles()))
 def test_both_views_of_every_shipped_profile_agree(name: str) -> None:
     believed = read_profile(name)
-    truth = load_drive_profile(name)
+    truth, _ = read_simulated_device(name).one_axis()
     assert truth.parameters == DeviceParameters(**believed.sim_device_parameters())  # type: ignore[arg-type]
     assert truth.timing is Timing(believed.loop.timing)
 
@@ -65,7 +65,7 @@ def _same_line(path: pathlib.Path, readers: tuple[Callable[[pathlib.Path], objec
 def test_both_views_refuse_a_bad_value_with_the_same_line(tmp_path: pathlib.Path, old: str, new: str, field: str,
                                                            allowed: str) -> None:
     path = _variant(tmp_path, old, new)
-    line = _same_line(path, (read_profile, load_drive_profile), field)
+    line = _same_line(path, (read_profile, read_simulated_device), field)
     assert allowed in line.split("allowed: ", 1)[1]
     assert line.startswith(f"profile {path}: {field} = ")
 
@@ -101,16 +101,16 @@ def test_a_file_that_is_not_utf8_is_one_line_and_exit_2_everywhere(tmp_path: pat
 def test_the_simulator_fills_what_a_profile_leaves_out_and_takes_an_identified_delay(tmp_path: pathlib.Path) -> None:
     bare = tmp_path / "bare.toml"
     bare.write_text('[device]\nmass = 0.8\n')
-    drive = load_drive_profile(bare)
-    assert drive.parameters == DeviceParameters(mass=0.8) and drive.timing is None
+    (drive,) = read_simulated_device(bare).axes  # a one-axis profile is one axis; silent on timing: cia402
+    assert drive.parameters == DeviceParameters(mass=0.8) and drive.timing is Timing.CIA402
     # identify --write-profile writes the largest credible delay: above cia402's own sample, still a cia402 drive
     path = _variant(tmp_path, 'timing = "cia402"', 'timing = "cia402"\ndelay = 1.3')
-    assert read_profile(path).loop.delay == 1.3 and load_drive_profile(path).timing is Timing.CIA402
+    assert read_profile(path).loop.delay == 1.3 and read_simulated_device(path).axes[0].timing is Timing.CIA402
 
 
 def test_the_simulator_refuses_a_multi_axis_profile_for_one_node() -> None:
     with pytest.raises(ParameterError) as caught:
-        load_drive_profile("gantry-3d")
+        read_simulated_device("gantry-3d").one_axis()
     assert caught.value.name == "axes" and "--node-ids" in caught.value.allowed
 
 
@@ -126,11 +126,9 @@ def test_identification_is_written_and_read_as_one_table(tmp_path: pathlib.Path)
 
 def test_both_views_of_a_multi_axis_profile_refuse_a_bad_axis_with_the_same_line(tmp_path: pathlib.Path) -> None:
     from haptic_bus.app.axes_profile import read_axes_profile
-    from sim_drive.axes_profile import load_axes_device
-
     path = _variant(tmp_path, "\nmass = 0.5\n", "\nmass = -0.5\n", "gantry-3d")
-    assert "[1e-09, 1e+09] kg" in _same_line(path, (read_axes_profile, load_axes_device), "axes[2].device.mass")
-    truth = load_axes_device("gantry-3d")
+    assert "[1e-09, 1e+09] kg" in _same_line(path, (read_axes_profile, read_simulated_device), "axes[2].device.mass")
+    truth = read_simulated_device("gantry-3d")
     believed = read_axes_profile("gantry-3d")
     assert [(a.name, a.node_id, a.parameters.mass, a.parameters.friction) for a in truth.axes] == [
         (a.name, a.node_id, a.device.mass, a.device.friction) for a in believed.axes]
@@ -139,7 +137,7 @@ def test_both_views_of_a_multi_axis_profile_refuse_a_bad_axis_with_the_same_line
 def test_a_misspelt_table_is_named_first_by_both_views_and_every_command(tmp_path: pathlib.Path,
                                                                           capsys: pytest.CaptureFixture[str]) -> None:
     path = _variant(tmp_path, "[loop]", "[loopp]")
-    line = _same_line(path, (read_profile, load_drive_profile), "loopp")
+    line = _same_line(path, (read_profile, read_simulated_device), "loopp")
     assert "no such key; keys of [top level]: device, gate, identification, limits, loop," in line
     commands = [(haptic_bus_main, ["profiles", "check", str(path)]),
                 (haptic_bus_main, ["profiles", "show", str(path)]),

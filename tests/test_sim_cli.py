@@ -20,7 +20,7 @@ from sim_drive.cli import main
 from sim_drive.eds import eds_path
 from sim_drive.operator import HandModel
 from sim_drive.parameters import Timing
-from sim_drive.profile import load_profile
+from sim_drive.profile import read_simulated_device
 
 NODE = 11
 BOOT_WAIT = 20.0  # s: the subprocess imports numpy, canopen, python-can first
@@ -126,27 +126,27 @@ def test_profile_tables(tmp_path: pathlib.Path) -> None:
         '[loop]\nperiod = 0.002\ntiming = "ideal"\n'
         '[operator_model]\nmodel = "hand"\nstiffness = 250.0\ndamping = 3.0\n'
     )
-    profile = load_profile(path)
-    parameters = profile.parameters
+    axis, operator = read_simulated_device(path).one_axis()
+    parameters = axis.parameters
     assert (parameters.mass, parameters.friction, parameters.rated_torque_mnm, parameters.max_torque_permille) == (
         0.8, 2.0, 500, 1500)
-    assert parameters.period == 0.002 and profile.timing is Timing.IDEAL
-    assert profile.operator == HandModel(250.0, 3.0)
+    assert parameters.period == 0.002 and axis.timing is Timing.IDEAL
+    assert operator == HandModel(250.0, 3.0)
     path.write_text(path.read_text() + '[[scene.objects]]\nkind = "wall"\n')  # the controller's table, checked alike
     with pytest.raises(ParameterError, match=r"scene\.objects\[0\]\.name = '<missing>'"):
-        load_profile(path)
+        read_simulated_device(path)
     path.write_text("[device]\nm = 1.0\n")
     with pytest.raises(ParameterError, match=r"device\.m"):
-        load_profile(path)
+        read_simulated_device(path)
     path.write_text("[device\n")
     with pytest.raises(ParameterError, match="valid TOML"):
-        load_profile(path)
+        read_simulated_device(path)
 
 
 def test_every_shipped_profile_reads_as_a_drive() -> None:
-    for name in ("seed-ideal", "cia402-handle", "multi-object"):
-        profile = load_profile(name)
-        assert profile.parameters.period == 1e-3 and profile.timing is not None
+    for name, timing in (("seed-ideal", Timing.IDEAL), ("cia402-handle", Timing.CIA402), ("multi-object", Timing.CIA402)):
+        (axis,) = read_simulated_device(name).axes
+        assert axis.parameters.period == 1e-3 and axis.timing is timing
 
 
 @pytest.mark.parametrize(

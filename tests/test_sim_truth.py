@@ -14,7 +14,7 @@ from sim_drive.device import SimulatedDrive
 from sim_drive.handle import Handle
 from sim_drive.operator import ConstantPush, Sinusoid
 from sim_drive.parameters import DeviceParameters, Timing
-from sim_drive.profile import load_profile
+from sim_drive.profile import read_simulated_device
 
 M, B = 0.5, 2.0  # kg, N s/m: time constant m/b = 0.25 s
 
@@ -203,16 +203,16 @@ def write(tmp_path: pathlib.Path, text: str) -> pathlib.Path:
 
 
 def test_a_profile_states_the_drives_truth(tmp_path: pathlib.Path) -> None:
-    profile = load_profile(write(tmp_path, (
+    (axis,) = read_simulated_device(write(tmp_path, (
         '[device]\nmass = 0.8\nfriction = 2.0\nvelocity = "window:0.0005"\ncoulomb_friction = 0.4\n'
         'velocity_noise = 2.5\nnoise_seed = 42\n[loop]\nperiod = 0.001\ntiming = "reception"\ndelay = 0.3\n'
-    )))
-    p = profile.parameters
+    ))).axes
+    p = axis.parameters
     assert (p.mass, p.friction, str(p.velocity)) == (0.8, 2.0, "window:0.0005")
     assert (p.coulomb_friction, p.velocity_noise, p.noise_seed) == (0.4, 2.5, 42)
-    assert profile.timing is Timing.RECEPTION and p.reception_delay == 0.3
-    assert SimulatedDrive(p, profile.timing).loop_delay == 0.3
-    plain = load_profile(write(tmp_path, '[loop]\ntiming = "cia402"\ndelay = 1\n'))
+    assert axis.timing is Timing.RECEPTION and p.reception_delay == 0.3
+    assert SimulatedDrive(p, axis.timing).loop_delay == 0.3
+    (plain,) = read_simulated_device(write(tmp_path, '[loop]\ntiming = "cia402"\ndelay = 1\n')).axes
     assert plain.timing is Timing.CIA402 and plain.parameters == DeviceParameters()
 
 
@@ -229,5 +229,5 @@ def test_a_profile_states_the_drives_truth(tmp_path: pathlib.Path) -> None:
 )
 def test_profile_errors_name_the_profile_key(tmp_path: pathlib.Path, text: str, field: str) -> None:
     with pytest.raises(ParameterError, match=r"truth\.toml") as caught:
-        load_profile(write(tmp_path, text))
+        read_simulated_device(write(tmp_path, text))
     assert caught.value.name == field

@@ -40,7 +40,7 @@ from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.canopen.vendor_od import has
 from sim_drive.cli import main as sim_main
 from sim_drive.parameters import DeviceParameters
-from sim_drive.profile import load_profile as load_drive_profile
+from sim_drive.profile import read_simulated_device
 from tests.conftest import HEARTBEAT_WAIT, new_bus_spec, unique_name, wait_for_heartbeat
 from tests.run_rig import profile_variant, read_run, run_cli
 
@@ -303,10 +303,10 @@ def run_against(eds: pathlib.Path, profile: pathlib.Path | str) -> Iterator[tupl
     """The simulated drive of ``profile`` behind ``eds`` on a fresh virtual bus, a sniffer from
     before its boot-up, the ``run`` options that reach it and the states it enters."""
     channel = unique_name("vendor-run")
-    truth = load_drive_profile(profile)
+    truth, operator = read_simulated_device(profile).one_axis()
     with can.Bus(interface="virtual", channel=channel) as sniffer:
         sim = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, eds=eds, parameters=truth.parameters,
-                              operator=truth.operator, timing=truth.timing or "cia402")
+                              operator=operator, timing=truth.timing)
         states = states_of(sim)
         with sim:
             yield ["--interface", "virtual", "--channel", channel, "--node-id", str(NODE)], sim, sniffer, states

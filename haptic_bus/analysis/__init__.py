@@ -49,7 +49,7 @@ And the loop's names, each for one thing:
   device runs its walls in, with no wall; what the gate holds.  ``.wall(K, B)`` gives
 * :class:`~haptic_bus.analysis.loop.WallLoop` (``m, b, T, K, B, delay, velocity``): one wall in
   that loop, validated; what every criterion here judges.
-* ``LoopProfile`` (:mod:`haptic_bus.app.profiles`, ``period, timing, delay``): a profile's
+* ``LoopTiming`` (:mod:`haptic_bus.profile.device`, ``period, timing, delay``): a profile's
   ``[loop]`` table as read, where ``T`` and ``D`` come from (``timing`` says how the drive
   applies a target); ``Profile.device_loop()`` turns a profile into its ``DeviceLoop``.
 * ``DeviceParameters`` (:mod:`sim_drive.parameters`, ``mass, friction, period, ...``): the simulated

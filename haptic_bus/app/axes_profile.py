@@ -59,7 +59,7 @@ from haptic_bus.control.space_gate import SpaceDecision, SpaceGate
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere, compile_space_scene
 from haptic_bus.control.supervisor import SupervisorPolicy
 from haptic_bus.errors import ParameterError, Refusal
-from haptic_bus.profile.device import DeviceProfile, check_velocity_period, read_device, read_timing
+from haptic_bus.profile.device import DeviceTable, check_velocity_period, read_device, read_timing
 from haptic_bus.profile.files import resolve_profile
 from haptic_bus.profile.reader import Reader, profile_error, read_document
 
@@ -69,14 +69,15 @@ _FIELDS = {"plane": ("point", "normal"), "box": ("center", "half"), "sphere": ("
 
 
 @dataclass(frozen=True)
-class AxisProfile:
-    """One axis: its ``name``, ``node_id`` (CANopen) or ``unit_id`` (Modbus), ``device`` (the one-axis
-    device table), ``timing`` and loop ``delay`` (samples), PDO ``mapping``, ``force_limit`` (N)."""
+class Axis:
+    """One checked ``[[axes]]`` table of a multi-axis profile: its ``name``, ``node_id`` (CANopen) or
+    ``unit_id`` (Modbus), ``device`` (the one-axis device table), ``timing`` and loop ``delay`` (samples),
+    PDO ``mapping``, ``force_limit`` (N)."""
 
     name: str
     node_id: int | None
     unit_id: int | None
-    device: DeviceProfile
+    device: DeviceTable
     timing: str
     delay: float
     mapping: str
@@ -92,7 +93,7 @@ class AxesProfile:
     task: str
     description: str
     period: float
-    axes: tuple[AxisProfile, ...]
+    axes: tuple[Axis, ...]
     space: tuple[SpaceObject, ...]
     gate_policy: GatePolicy
     bitrate: float
@@ -127,7 +128,7 @@ class AxesProfile:
         return axes_bus_load([a.mapping for a in self.axes], self.bitrate, self.period)
 
 
-def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> AxisProfile:
+def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> Axis:
     r = Reader(path, f"axes[{index}]", table)
     name = r.text("name", pattern=NAME_PATTERN)
     if ("node_id" in r.table) == ("unit_id" in r.table):
@@ -148,7 +149,7 @@ def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> 
         raise profile_error(path, r.field("force_limit"), force_limit,
                             f"(0, {device.max_force:g}] N, the force this axis' 0x6072 allows")
     check_velocity_period(path, r.field("device.velocity"), device, period)
-    return AxisProfile(name, node, unit, device, timing, delay, mapping, force_limit)
+    return Axis(name, node, unit, device, timing, delay, mapping, force_limit)
 
 
 def _coordinates(r: Reader, key: str, size: int) -> tuple[Any, ...]:

@@ -45,7 +45,7 @@ from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene, object_to_dict
 from haptic_bus.control.supervisor import SupervisorPolicy
 from haptic_bus.errors import ParameterError, Refusal
-from haptic_bus.profile.device import DeviceProfile, LoopProfile
+from haptic_bus.profile.device import DeviceTable, LoopTiming
 from haptic_bus.profile.files import resolve_profile, shipped_profiles
 from haptic_bus.profile.identification import IdentifiedDevice
 from haptic_bus.profile.plant import ONE_AXIS_TABLES, read_plant
@@ -53,7 +53,7 @@ from haptic_bus.profile.reader import Reader, profile_error, read_document
 from haptic_bus.profile.scene import FORCE_RANGE, ObjectTable, read_force_limit, read_scene
 
 __all__ = ["DEFAULT_PROFILE", "FORCE_RANGE", "NAME_PATTERN",
-           "DeviceProfile", "LoopProfile", "Profile", "ParameterError", "Refusal", "StartPolicy",
+           "DeviceTable", "LoopTiming", "Profile", "ParameterError", "Refusal", "StartPolicy",
            "default_profile", "load_profile", "profile_to_dict", "read_profile", "resolve_profile", "shipped_profiles"]
 
 DEFAULT_PROFILE = "cia402-handle"
@@ -67,8 +67,8 @@ class Profile:
     operator: str
     task: str
     description: str
-    device: DeviceProfile
-    loop: LoopProfile
+    device: DeviceTable
+    loop: LoopTiming
     scene: tuple[SceneObject, ...]
     force_limit: float
     gate_policy: GatePolicy

@@ -26,20 +26,19 @@ from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE, DeviceLoop
 from haptic_bus.analysis.two_mass import TwoMassLoop
 from haptic_bus.analysis.two_mass_check import TwoMassReport, check_two_mass_loop, format_two_mass
 from haptic_bus.app.arguments import number, timeout
+from haptic_bus.app.axes_profile import is_axes_profile, judge_axes_profile
 from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
+from haptic_bus.app.profile_view import axes_profile_to_dict, format_axes_profile, format_profile, gate_decision_to_dict
 from haptic_bus.app.profiles import (
     DEFAULT_PROFILE,
     FORCE_RANGE,
     NAME_PATTERN,
-    Profile,
     load_profile,
-    object_to_dict,
     profile_to_dict,
     read_profile,
     resolve_profile,
     shipped_profiles,
 )
-from haptic_bus.control.gate import GateDecision
 from haptic_bus.errors import HapticBusError, ParameterError, Refusal
 from haptic_bus.profile.plant import ONE_AXIS_TABLES
 
@@ -54,11 +53,6 @@ def _fail(command: str, error: Exception) -> int:
 def _refused(command: str, refusal: Refusal) -> int:
     print(f"haptic-bus profiles {command}: {refusal}", file=sys.stderr)
     return EXIT_NO
-
-
-def _decision_dict(decision: GateDecision) -> dict[str, Any]:
-    return {"accepted": decision.accepted, "worst_margin": decision.worst_margin,
-            "reasons": list(decision.reasons), "warnings": list(decision.warnings)}
 
 
 def cmd_list(args: argparse.Namespace) -> int:
@@ -97,42 +91,9 @@ def cmd_list(args: argparse.Namespace) -> int:
     return status
 
 
-def _format_show(profile: Profile, decision: GateDecision) -> str:
-    d, loop, gate = profile.device, profile.loop, profile.gate_policy
-    lines = [
-        f"profile {profile.name}  ({profile.path})",
-        f"  operator: {profile.operator}",
-        f"  task: {profile.task}",
-        f"  description: {profile.description}",
-        f"device: m={d.mass:g} kg  b={d.friction:g} N s/m (effective)",
-        f"  friction source: {d.friction_source}",
-        f"  scaling: {d.velocity_per_count:g} m/s per 0x606C unit, {d.position_per_count:g} m per 0x6064 increment,"
-        f" 0x6076 = {d.rated_torque:g} N m, {d.force_per_torque:g} N/(N m), 0x6072 = {d.max_torque_permille}"
-        f" per mille -> {d.max_force:g} N",
-        f"loop: T={loop.period:g} s  timing {loop.timing} (delay {loop.delay:g} samples)  velocity {d.velocity}",
-        f"force limit: {profile.force_limit:g} N",
-        f"gate: safety margin {gate.safety_margin:g} N s/m, bandwidth rule {gate.bandwidth}",
-        "scene:",
-    ]
-    for obj in profile.scene:
-        fields = object_to_dict(obj)
-        kind, name = fields.pop("kind"), fields.pop("name")
-        lines.append(f"  {kind} {name}: " + ", ".join(f"{k}={v:g}" for k, v in fields.items()))
-    lines.append("operator model: " + ", ".join(f"{k}={v}" for k, v in profile.operator_model.items()))
-    lines.append(f"gate: {'accepted' if decision.accepted else 'REFUSED'}")
-    for wall in decision.walls:
-        lines.append(f"  {'+'.join(wall.objects)}: K={wall.K:g} N/m B={wall.B:g} N s/m margin "
-                     f"{wall.verdict.margin:+.4g} N s/m at theta={wall.verdict.critical_theta:.3g} rad, alpha={wall.alpha:.3g}")
-    lines += [f"  warning: {w}" for w in decision.warnings] + [f"  refused: {r}" for r in decision.reasons]
-    return "\n".join(lines)
-
-
 def _axes_profile(command: str, args: argparse.Namespace) -> int | None:
     """``show``/``check`` of a multi-axis profile (``[[axes]]``) through its own reader and the coupled
     gate: 0 (check: the gate accepts), 1 (check: it refuses), 2 invalid; None for a one-axis profile."""
-    from haptic_bus.app.axes_profile import is_axes_profile, judge_axes_profile
-    from haptic_bus.app.axes_profile_view import axes_profile_to_dict, format_axes_profile
-
     try:
         path = resolve_profile(args.profile)
         if not is_axes_profile(path):
@@ -157,9 +118,9 @@ def cmd_show(args: argparse.Namespace) -> int:
         return _refused("show", refusal)
     decision = profile.gate().judge(profile.compiled_scene())
     if args.json:
-        print(json.dumps(profile_to_dict(profile) | {"gate_decision": _decision_dict(decision)}))
+        print(json.dumps(profile_to_dict(profile) | {"gate_decision": gate_decision_to_dict(decision)}))
     else:
-        print(_format_show(profile, decision))
+        print(format_profile(profile, decision))
     return EXIT_OK
 
 
@@ -174,7 +135,6 @@ def _still_missing(path: pathlib.Path) -> int | None:
         return None  # the loader says what is wrong with the file
     lacking = missing(document)
     if not lacking or not set(document) <= set(ONE_AXIS_TABLES):  # a misspelt table: the loader names it
-        return None
         return None
     print(f"profile {path}: {len(lacking)} value{'s' if len(lacking) > 1 else ''} still missing:")
     for ask in lacking:
@@ -213,7 +173,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     status = EXIT_OK if passive and decision.accepted else EXIT_NO
     if args.json:
         print(json.dumps({"profile": profile.name, "path": str(profile.path), "passive": passive,
-                          "gate": _decision_dict(decision) | {"safety_margin": profile.gate_policy.safety_margin,
+                          "gate": gate_decision_to_dict(decision) | {"safety_margin": profile.gate_policy.safety_margin,
                                                                "bandwidth": profile.gate_policy.bandwidth},
                           "walls": [{"objects": list(names), "K": K, "B": B, "report": report.to_dict()}
                                     for names, K, B, report in walls]}))

@@ -36,6 +36,7 @@ from sim_drive.modbus.multi_axis import MultiAxisModbusSim
 from sim_drive.modbus.server import ModbusSimServer, ServedUnit
 from sim_drive.operator import OperatorModel, operator_from_table
 from sim_drive.parameters import DeviceParameters, Timing
+from sim_drive.profile import SimulatedDevice, read_simulated_device
 from sim_drive.sync_clock import SyncClock
 
 __all__ = [
@@ -46,11 +47,13 @@ __all__ = [
     "MultiAxisModbusSim",
     "MultiAxisSim",
     "ServedUnit",
+    "SimulatedDevice",
     "cycle_bits",
     "eds_path",
     "frame_bits",
     "operator_from_table",
     "profile_operator",
+    "read_simulated_device",
     "sim_main",
     "simulated_axes",
     "simulated_axes_device",
@@ -135,20 +138,17 @@ def _axis_plants(profile: AxesProfile) -> list[tuple[DeviceParameters, Timing]]:
              Timing(axis.timing)) for axis in profile.axes]
 
 
-def simulated_modbus(profile: Profile | AxesProfile, unit_ids: Sequence[int], servers: int = 1,
+def simulated_modbus(device: SimulatedDevice, unit_ids: Sequence[int], servers: int = 1,
                      host: str = "127.0.0.1") -> ModbusSimServer | MultiAxisModbusSim:
-    """The simulated drive(s) a profile describes over Modbus TCP on ``host``, each server on a free
-    port, not started: one axis, unit ``unit_ids[0]`` (its plant and operator); several, unit
-    ``unit_ids[i]`` for axis ``i`` (their plants and the profile's hand in space), on one server, or
-    ``servers`` = one per axis."""
-    from sim_drive.space_operator import hand_from_table
-
-    if isinstance(profile, AxesProfile):
-        setups = [(unit, parameters, timing) for unit, (parameters, timing) in zip(unit_ids, _axis_plants(profile))]
-        return MultiAxisModbusSim([(host, 0)] * servers, setups, hand_from_table(profile.operator_model, len(setups)))
-    parameters = DeviceParameters(**cast(dict[str, Any], profile.sim_device_parameters()))
-    return ModbusSimServer(host, 0, unit_id=unit_ids[0], timing=profile.loop.timing, parameters=parameters,
-                           operator=profile_operator(profile))
+    """The simulated ``device`` (what ``haptic-bus sim --profile`` reads, :func:`read_simulated_device`)
+    over Modbus TCP on ``host``, each server on a free port, not started: a one-axis profile's drive,
+    unit ``unit_ids[0]`` (its plant and operator); a multi-axis profile's, unit ``unit_ids[i]`` for
+    axis ``i`` (their plants and the hand in space), on one server, or ``servers`` = one per axis."""
+    if device.multi_axis:
+        setups = [(unit, axis.parameters, axis.timing) for unit, axis in zip(unit_ids, device.axes)]
+        return MultiAxisModbusSim([(host, 0)] * servers, setups, device.make_hand())
+    axis, operator = device.one_axis()
+    return ModbusSimServer(host, 0, unit_id=unit_ids[0], timing=axis.timing, parameters=axis.parameters, operator=operator)
 
 
 @contextmanager

@@ -43,8 +43,8 @@ RATED_TORQUE_RANGE = (1e-3, MOTOR_RATED_TORQUE.data_type.range[1] / 1000.0)  # N
 
 
 @dataclass(frozen=True)
-class DeviceProfile:
-    """The handle and its drive: ``mass`` kg, effective ``friction`` b N s/m (and where it
+class DeviceTable:
+    """A profile's checked ``[device]`` table, the handle and its drive: ``mass`` kg, effective ``friction`` b N s/m (and where it
     comes from), drive scaling (0x606C, 0x6064, 0x6076 N m, transmission N/(N m), 0x6072), the
     ``velocity`` model of 0x606C.  ``coulomb_friction`` (N; None: not stated, 0 N to a simulated
     drive) is the handle's Coulomb friction: with ``position_per_count`` the gate's quantisation
@@ -99,9 +99,10 @@ class DeviceProfile:
 
 
 @dataclass(frozen=True)
-class LoopProfile:
-    """The control loop: ``period`` T in s, ``timing`` ("ideal", "cia402" or "reception") and the
-    loop ``delay`` D in samples (real; an int when whole) that the gate judges with."""
+class LoopTiming:
+    """A profile's checked ``[loop]`` table, the control loop's timing: ``period`` T in s, ``timing``
+    ("ideal", "cia402" or "reception") and the loop ``delay`` D in samples (real; an int when whole)
+    that the gate judges with."""
 
     period: float
     timing: str
@@ -109,7 +110,7 @@ class LoopProfile:
 
 
 def read_device(path: pathlib.Path, table: object, prefix: str = "device",
-                silent: Mapping[str, object] | None = None) -> DeviceProfile:
+                silent: Mapping[str, object] | None = None) -> DeviceTable:
     """A ``[device]`` table (``prefix``: its dotted name, e.g. ``axes[1].device``); ``silent``:
     defaults for keys the caller lets be left out (the simulated drive's), else every key but the
     hidden truth is required."""
@@ -134,8 +135,8 @@ def read_device(path: pathlib.Path, table: object, prefix: str = "device",
     coupling = read_transmission(path, r.raw("transmission", "a [device.transmission] table", default=None),
                                  r.field("transmission"))
     r.done()
-    return DeviceProfile(mass, friction, source, velocity, position, rated, transmission, permille, model,
-                         coulomb, noise, seed, transmission=coupling)
+    return DeviceTable(mass, friction, source, velocity, position, rated, transmission, permille, model,
+                       coulomb, noise, seed, transmission=coupling)
 
 
 def read_transmission(path: pathlib.Path, table: object, prefix: str) -> Transmission | None:
@@ -162,16 +163,16 @@ def read_timing(r: Reader) -> tuple[str, float]:
     return timing, int(delay) if float(delay).is_integer() else delay
 
 
-def read_loop(path: pathlib.Path, table: object, silent: Mapping[str, object] | None = None) -> LoopProfile:
+def read_loop(path: pathlib.Path, table: object, silent: Mapping[str, object] | None = None) -> LoopTiming:
     """A ``[loop]`` table: ``period``, ``timing`` and ``delay`` (``silent`` as :func:`read_device`'s)."""
     r = Reader(path, "loop", table, silent)
     period = r.real("period", *PERIOD_RANGE, "s")
     timing, delay = read_timing(r)
     r.done()
-    return LoopProfile(period, timing, delay)
+    return LoopTiming(period, timing, delay)
 
 
-def check_velocity_period(path: pathlib.Path, field: str, device: DeviceProfile, period: float) -> None:
+def check_velocity_period(path: pathlib.Path, field: str, device: DeviceTable, period: float) -> None:
     """The velocity model against the period: a window longer than T is no model of this loop."""
     try:
         device.velocity.check_period(period)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields
 
 from haptic_bus.analysis.loop import DELAY_RANGE, FRICTION_RANGE, MASS_RANGE
 from haptic_bus.analysis.velocity import VelocityModel
-from haptic_bus.profile.device import DeviceProfile, LoopProfile
+from haptic_bus.profile.device import DeviceTable, LoopTiming
 from haptic_bus.profile.reader import Reader, profile_error
 
 CREDIBLE_SIGMAS = 3.0
@@ -71,7 +71,7 @@ def read_identification(path: pathlib.Path, table: object) -> IdentifiedDevice |
     return IdentifiedDevice(date, velocity=model, excitation_s=excitation, residual_rms=residual, **values)
 
 
-def check_against_identification(path: pathlib.Path, device: DeviceProfile, loop: LoopProfile,
+def check_against_identification(path: pathlib.Path, device: DeviceTable, loop: LoopTiming,
                                  measured: IdentifiedDevice) -> None:
     """Refuse a ``[device]``/``[loop]`` more optimistic than what was measured: another velocity
     model (or a shorter window or filter), friction or Coulomb friction above the lowest credible, delay below the

@@ -4,8 +4,8 @@
 of a profile's document and checks them together (the velocity model against the period; the
 declared device against what was measured).  The controller's view
 (:func:`haptic_bus.app.profiles.read_profile`) adds its own tables (limits, gate, scene, policies);
-the simulated drive's view (:func:`sim_drive.profile.load_profile`) builds its plant and operator
-from the same :class:`PlantProfile`, with its own defaults where the file is silent.
+the simulated drive's view (:func:`sim_drive.profile.read_simulated_device`) builds its plant and operator
+from the same :class:`PlantTables`, with its own defaults where the file is silent.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from haptic_bus.profile.device import DeviceProfile, LoopProfile, check_velocity_period, read_device, read_loop
+from haptic_bus.profile.device import DeviceTable, LoopTiming, check_velocity_period, read_device, read_loop
 from haptic_bus.profile.identification import IdentifiedDevice, check_against_identification, read_identification
 from haptic_bus.profile.operator import read_operator_model
 from haptic_bus.profile.reader import REQUIRED, Reader
@@ -34,16 +34,18 @@ class Silent:
 
 
 @dataclass(frozen=True)
-class PlantProfile:
-    """The handle and its drive, the loop, the simulated operator and what identification measured."""
+class PlantTables:
+    """The plant tables of a one-axis profile, checked together: the handle and its drive (``[device]``),
+    the loop (``[loop]``), the simulated operator (``[operator_model]``) and what identification measured
+    (``[identification]``, None when absent)."""
 
-    device: DeviceProfile
-    loop: LoopProfile
+    device: DeviceTable
+    loop: LoopTiming
     operator_model: Mapping[str, Any] = field(hash=False)
     identification: IdentifiedDevice | None
 
 
-def read_plant(top: Reader, silent: Silent | None = None) -> PlantProfile:
+def read_plant(top: Reader, silent: Silent | None = None) -> PlantTables:
     """The plant tables of the document ``top`` reads (each marked used); ``silent``: the simulated
     drive's defaults (None: every key is required, as the controller reads)."""
     path, empty = top.path, REQUIRED if silent is None else {}
@@ -55,4 +57,4 @@ def read_plant(top: Reader, silent: Silent | None = None) -> PlantProfile:
     if identification is not None:
         check_against_identification(path, device, loop, identification)
     check_velocity_period(path, "device.velocity", device, loop.period)
-    return PlantProfile(device, loop, operator_model, identification)
+    return PlantTables(device, loop, operator_model, identification)

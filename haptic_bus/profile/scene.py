@@ -9,7 +9,7 @@ import pathlib
 from dataclasses import dataclass
 
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
-from haptic_bus.profile.device import DeviceProfile
+from haptic_bus.profile.device import DeviceTable
 from haptic_bus.profile.reader import NAME_PATTERN, Reader, profile_error
 
 POSITION_RANGE = (-1e6, 1e6)  # m, as haptic_bus.control.scene
@@ -71,7 +71,7 @@ def read_scene(path: pathlib.Path, table: object) -> tuple[ObjectTable, ...]:
     return scene
 
 
-def read_force_limit(path: pathlib.Path, table: object, device: DeviceProfile) -> float:
+def read_force_limit(path: pathlib.Path, table: object, device: DeviceTable) -> float:
     """``[limits] force_limit`` in N: in (0, what the device's 0x6072 allows]; ParameterError otherwise."""
     limits = Reader(path, "limits", table)
     force_limit = limits.real("force_limit", *FORCE_RANGE, "N", low_inclusive=False)

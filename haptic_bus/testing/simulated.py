@@ -46,9 +46,9 @@ _truth_files = itertools.count(1)
 
 def truth_keys() -> tuple[str, ...]:
     """The ``[device]`` keys a truth may set (every field of the profile's device table but its prose)."""
-    from haptic_bus.app.profiles import DeviceProfile
+    from haptic_bus.app.profiles import DeviceTable
 
-    return tuple(f.name for f in dataclasses.fields(DeviceProfile) if f.name != "friction_source")
+    return tuple(f.name for f in dataclasses.fields(DeviceTable) if f.name != "friction_source")
 
 
 def _with_absolute_recording(table: Mapping[str, Any], base: pathlib.Path) -> dict[str, Any]:
@@ -188,7 +188,8 @@ def start_axes(spec: BusSpec | None, profile: pathlib.Path, start_process: Calla
     --node-ids``), or (``spec`` None) over Modbus, one unit per axis (:func:`start_modbus`)."""
     from haptic_bus.app.axes_profile import load_axes_profile
 
-    axes = load_axes_profile(profile).axes
+    judged = load_axes_profile(profile)  # validated and gated once
+    axes = judged.axes
     if spec is None:
         stated = [axis.unit_id for axis in axes]
         return start_modbus(profile, [u for u in stated if u is not None] if None not in stated
@@ -198,7 +199,7 @@ def start_axes(spec: BusSpec | None, profile: pathlib.Path, start_process: Calla
     if spec.interface in IN_PROCESS:
         from haptic_bus.app.rig import simulated_axes_device
 
-        node.sim = simulated_axes_device(load_axes_profile(profile), spec.config()).start()
+        node.sim = simulated_axes_device(judged, spec.config()).start()
         return node
     node.process = start_process(*spec.sim_args(), "--node-ids", ",".join(map(str, nodes)), "--profile", str(profile))
     for each in nodes:
@@ -210,29 +211,25 @@ def start_modbus(truth: pathlib.Path | None, unit_ids: list[int], servers: int =
     """The simulated drive of profile file ``truth`` (one axis, or every axis of a multi-axis one;
     None: the simulator's defaults) served over Modbus TCP on loopback in this process, unit
     ``unit_ids[i]`` for axis ``i``, on one server or (``servers`` > 1) one per axis; started (bound)."""
-    from haptic_bus.app.axes_profile import is_axes_profile, load_axes_profile
-    from haptic_bus.app.profiles import read_profile
-    from haptic_bus.app.rig import ModbusSimServer, MultiAxisModbusSim, simulated_modbus
+    from haptic_bus.app.rig import ModbusSimServer, MultiAxisModbusSim, read_simulated_device, simulated_modbus
 
     if truth is None:
         sim: ModbusSimServer | MultiAxisModbusSim = ModbusSimServer(unit_id=unit_ids[0])
     else:
-        sim = simulated_modbus(load_axes_profile(truth) if is_axes_profile(truth) else read_profile(truth), unit_ids,
-                               servers)
+        sim = simulated_modbus(read_simulated_device(truth), unit_ids, servers)
     sim.start()
     urls = sim.urls if isinstance(sim, MultiAxisModbusSim) else (sim.url,)
     return SimDriveNode(None, unit_ids[0], truth, sim=sim, urls=tuple(urls), unit_ids=tuple(unit_ids))
 
 
 def _in_process(spec: BusSpec, node_id: int, timing: str | None, truth: pathlib.Path | None) -> CanopenSimDrive:
-    """The slave in this process, started (boot-up sent, serving)."""
-    from haptic_bus.app.profiles import read_profile
-    from haptic_bus.app.rig import CanopenSimDrive, DeviceParameters, profile_operator
+    """The slave in this process, started (boot-up sent, serving): what ``python -m sim_drive --profile
+    TRUTH`` serves in another process, read by the same reader."""
+    from haptic_bus.app.rig import CanopenSimDrive, read_simulated_device
 
     config = {"interface": spec.interface, "channel": spec.channel, **spec.extra}
     if truth is None:
         return CanopenSimDrive(config, node_id, timing=timing or "cia402").start()
-    profile = read_profile(truth)
-    parameters = DeviceParameters(**cast(dict[str, Any], profile.sim_device_parameters()))
-    return CanopenSimDrive(config, node_id, timing=timing or profile.loop.timing, parameters=parameters,
-                           operator=profile_operator(profile)).start()
+    axis, operator = read_simulated_device(truth).one_axis()
+    return CanopenSimDrive(config, node_id, timing=timing or axis.timing, parameters=axis.parameters,
+                           operator=operator).start()

@@ -1,8 +1,7 @@
-"""``haptic-bus profiles show|check`` of a multi-axis profile (``[[axes]]``): its axes, its scene in
-space and the coupled gate's decision (:mod:`haptic_bus.app.axes_profile`), as text or JSON.
-
-``check`` exits 0 when the coupled gate accepts every wall (passive with the profile's safety
-margin), 1 when it does not; an invalid profile is a ParameterError (exit 2) before any of this.
+"""``haptic-bus profiles show|check``'s view of a profile, either kind, as text or JSON: a one-axis
+profile (device, loop, scene, operator model and the gate's decision, :mod:`haptic_bus.app.profiles`)
+and a multi-axis profile (``[[axes]]``: its axes, its scene in space and the coupled gate's decision,
+:mod:`haptic_bus.app.axes_profile`).  SI units, as in the TOML.
 """
 
 from __future__ import annotations
@@ -10,11 +9,52 @@ from __future__ import annotations
 from typing import Any
 
 from haptic_bus.app.axes_profile import AxesProfile
+from haptic_bus.app.profiles import Profile
+from haptic_bus.control.gate import GateDecision
+from haptic_bus.control.scene import object_to_dict
 from haptic_bus.control.space_gate import SpaceDecision
 from haptic_bus.control.space_scene import space_object_to_dict
 
 
-def decision_to_dict(decision: SpaceDecision) -> dict[str, Any]:
+def gate_decision_to_dict(decision: GateDecision) -> dict[str, Any]:
+    """The 1-D gate's decision: accepted, the least margin (N s/m), reasons, warnings."""
+    return {"accepted": decision.accepted, "worst_margin": decision.worst_margin,
+            "reasons": list(decision.reasons), "warnings": list(decision.warnings)}
+
+
+def format_profile(profile: Profile, decision: GateDecision) -> str:
+    """The text ``profiles show`` prints of a one-axis profile: who and what, the device, the loop, the
+    scene, the operator model, the gate's decision on every summed wall."""
+    d, loop, gate = profile.device, profile.loop, profile.gate_policy
+    lines = [
+        f"profile {profile.name}  ({profile.path})",
+        f"  operator: {profile.operator}",
+        f"  task: {profile.task}",
+        f"  description: {profile.description}",
+        f"device: m={d.mass:g} kg  b={d.friction:g} N s/m (effective)",
+        f"  friction source: {d.friction_source}",
+        f"  scaling: {d.velocity_per_count:g} m/s per 0x606C unit, {d.position_per_count:g} m per 0x6064 increment,"
+        f" 0x6076 = {d.rated_torque:g} N m, {d.force_per_torque:g} N/(N m), 0x6072 = {d.max_torque_permille}"
+        f" per mille -> {d.max_force:g} N",
+        f"loop: T={loop.period:g} s  timing {loop.timing} (delay {loop.delay:g} samples)  velocity {d.velocity}",
+        f"force limit: {profile.force_limit:g} N",
+        f"gate: safety margin {gate.safety_margin:g} N s/m, bandwidth rule {gate.bandwidth}",
+        "scene:",
+    ]
+    for obj in profile.scene:
+        fields = object_to_dict(obj)
+        kind, name = fields.pop("kind"), fields.pop("name")
+        lines.append(f"  {kind} {name}: " + ", ".join(f"{k}={v:g}" for k, v in fields.items()))
+    lines.append("operator model: " + ", ".join(f"{k}={v}" for k, v in profile.operator_model.items()))
+    lines.append(f"gate: {'accepted' if decision.accepted else 'REFUSED'}")
+    for wall in decision.walls:
+        lines.append(f"  {'+'.join(wall.objects)}: K={wall.K:g} N/m B={wall.B:g} N s/m margin "
+                     f"{wall.verdict.margin:+.4g} N s/m at theta={wall.verdict.critical_theta:.3g} rad, alpha={wall.alpha:.3g}")
+    lines += [f"  warning: {w}" for w in decision.warnings] + [f"  refused: {r}" for r in decision.reasons]
+    return "\n".join(lines)
+
+
+def space_decision_to_dict(decision: SpaceDecision) -> dict[str, Any]:
     """The coupled gate's decision: accepted, the least margin (N s/m), reasons, every wall's margin."""
     return {"accepted": decision.accepted, "worst_margin": decision.worst_margin, "reasons": list(decision.reasons),
             "walls": [{"objects": list(w.objects), "margin": w.verdict.margin,
@@ -33,7 +73,7 @@ def axes_profile_to_dict(profile: AxesProfile, decision: SpaceDecision) -> dict[
                   "mapping": a.mapping, "force_limit": a.force_limit, "mass": a.device.mass,
                   "friction": a.device.friction, "velocity": str(a.device.velocity)} for a in profile.axes],
         "space": {"objects": [space_object_to_dict(o) for o in profile.space]},
-        "gate_decision": decision_to_dict(decision),
+        "gate_decision": space_decision_to_dict(decision),
     }
 
 
