@@ -12,6 +12,7 @@ while the others stay where they are.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -56,18 +57,14 @@ class MultiAxisSim:
     def start(self) -> MultiAxisSim:
         """Open the bus once (:class:`~sim_drive.canopen.bridge.BusBridge`), boot every node (boot-up
         message, PRE-OPERATIONAL) and serve."""
-        if self._bridge is not None:
-            self._bridge.start()
-        started: list[CanopenSimDrive] = []
-        try:
-            for node in self.nodes:
-                started.append(node.start())
-        except BaseException:
-            for node in started:
-                node.stop()
+        with contextlib.ExitStack() as started:  # on a failure, what started is stopped, the bus last
             if self._bridge is not None:
-                self._bridge.stop()
-            raise
+                self._bridge.start()
+                started.callback(self._bridge.stop)
+            for node in self.nodes:
+                node.start()
+                started.callback(node.stop)
+            started.pop_all()
         return self
 
     def stop(self) -> None:

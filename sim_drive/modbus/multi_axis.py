@@ -14,6 +14,7 @@ then still at the period's start (:class:`~sim_drive.space_operator.SpaceHand`).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import Callable, Sequence
 
 from haptic_bus.errors import ParameterError
@@ -79,14 +80,11 @@ class MultiAxisModbusSim:
 
     def start(self) -> MultiAxisModbusSim:
         """Serve every server in a thread of its own (each bound when this returns)."""
-        started: list[ModbusSimServer] = []
-        try:
+        with contextlib.ExitStack() as started:  # on a failure, the servers that started are stopped
             for server in self.servers:
-                started.append(server.start())
-        except BaseException:
-            for server in started:
-                server.stop()
-            raise
+                server.start()
+                started.callback(server.stop)
+            started.pop_all()
         return self
 
     def stop(self) -> None:
