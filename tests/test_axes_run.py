@@ -73,20 +73,22 @@ def test_the_demo_renders_a_ball_a_block_and_a_slope_with_k_times_the_penetratio
     profile = load_axes_profile("gantry-3d")
     result = run_demo(tmp_path / "demo", profile, seconds=12.0)
     assert result.summary.exit_reason == "completed" and result.summary.cycles == 6000
-    assert [s.obj for s in result.steady] == ["ball", "block", "slope"]
-    assert [s.torques for s in result.steady] == [(0, 600, 0), (600, 0, 0), (-400, -400, -200)]
+    steady = result.findings.steady
+    assert steady is not None
+    assert [s.obj for s in steady] == ["ball", "block", "slope"]
+    assert [s.torques for s in steady] == [(0, 600, 0), (600, 0, 0), (-400, -400, -200)]
     unit = profile.axes[0].device
     drift = result.summary.cycles * profile.period * unit.velocity_per_count / 2  # m: 0x606C rounding, worst case
-    for state in result.steady:
+    for state in steady:
         assert state.relative_error <= 1e-9, state
         assert state.penetration == pytest.approx(2e-3, rel=2e-3)  # 3 N / 1500 N/m, within the rounding band
         assert state.applied == pytest.approx(state.push, rel=1e-9) and state.push == pytest.approx(3.0, rel=1e-12)
         assert abs(state.stiffness * state.true_penetration - state.applied) <= state.quantum + state.stiffness * drift
-    assert result.steady[-1].quantum == pytest.approx(0.0025, rel=1e-12)
+    assert steady[-1].quantum == pytest.approx(0.0025, rel=1e-12)
     summary = result.summary
     assert summary.least_energy >= 0.0 and summary.observer_active_cycles == 0 and summary.layer_interventions == 0
-    assert summary.energy <= result.port_energy + summary.rounding_bound  # a lower bound of the exact ledger ...
-    assert summary.energy == pytest.approx(result.port_energy, rel=2e-3)  # ... and close to it
+    assert summary.energy <= result.findings.port_energy + summary.rounding_bound  # a lower bound of the exact ledger ...
+    assert summary.energy == pytest.approx(result.findings.port_energy, rel=2e-3)  # ... and close to it
     names = {path.name for path in result.files}
     assert names == {"record-x.csv", "record-y.csv", "record-z.csv", "trajectory.png", "run.json"}
     document = json.loads((tmp_path / "demo" / "run.json").read_text())
