@@ -14,13 +14,13 @@ then still at the period's start (:class:`~sim_drive.space_operator.SpaceHand`).
 from __future__ import annotations
 
 import asyncio
-import contextlib
 from collections.abc import Callable, Sequence
 
 from haptic_bus.errors import ParameterError
 from sim_drive.device import SimulatedDrive
 from sim_drive.modbus.server import ModbusSimServer, ServedUnit
 from sim_drive.parameters import DeviceParameters, Timing
+from sim_drive.parts import start_all, stop_all
 from sim_drive.space_operator import SpaceHand
 from sim_drive.sync_clock import sync_clock
 
@@ -80,17 +80,12 @@ class MultiAxisModbusSim:
 
     def start(self) -> MultiAxisModbusSim:
         """Serve every server in a thread of its own (each bound when this returns)."""
-        with contextlib.ExitStack() as started:  # on a failure, the servers that started are stopped
-            for server in self.servers:
-                server.start()
-                started.callback(server.stop)
-            started.pop_all()
+        start_all(self.servers)
         return self
 
     def stop(self) -> None:
         """Stop every server's thread."""
-        for server in self.servers:
-            server.stop()
+        stop_all(self.servers)
 
     async def serve(self, stop: asyncio.Event, on_bound: Callable[[], None]) -> None:
         """Serve every server in the running event loop until ``stop`` is set; ``on_bound`` once all are bound."""
