@@ -42,8 +42,8 @@ from haptic_bus.app.cli import main
 from haptic_bus.app.demo import run_demo
 from haptic_bus.app.rig import simulated_axes_device
 from haptic_bus.app.runner import RunOptions, RunResult, run
-from haptic_bus.app.steady_state import contact
 from tests.cli_process import cli_process, reaped
+from tests.gantry_records import assert_resting_on_the_slope, assert_same_loop, records
 
 START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen and judge the profile first
 RUN_WAIT = 240.0  # s: a 2 000-cycle run across two processes on this loaded 2-CPU machine takes about 10
@@ -63,10 +63,6 @@ def variant(tmp_path: pathlib.Path, name: str, old: str, new: str, extra: str = 
 
 
 TARGETS = "toward = [[0.0, -0.03, 0.0], [-0.03, 0.0, 0.0], [0.02, 0.02, 0.01]]"
-
-
-def records(folder: pathlib.Path) -> dict[str, np.ndarray]:
-    return {axis: np.genfromtxt(folder / f"record-{axis}.csv", delimiter=",", names=True) for axis in "xyz"}
 
 
 def test_the_demo_renders_a_ball_a_block_and_a_slope_with_k_times_the_penetration(tmp_path: pathlib.Path) -> None:
@@ -119,19 +115,9 @@ def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
     demo = run_demo(one, load_axes_profile(profile_path), seconds=4.0, plots=False)  # the lock-step bus, one process
     assert demo.summary.exit_reason == "completed", demo.summary.error
     assert not (tmp_path / "two" / "trajectory.png").exists() and not (one / "trajectory.png").exists()  # no plots asked
-    two, alone = records(tmp_path / "two"), records(one)
-    for axis in "xyz":
-        for column in two[axis].dtype.names:
-            if column not in ("compute_s", "wall_clock_s", "monotonic_s"):  # when and how long the machine took: not the loop's
-                assert np.array_equal(two[axis][column], alone[axis][column]), (axis, column)  # bit for bit
-    x = np.array([two[axis]["position_m"][-1] for axis in "xyz"])
-    touching = contact(demo.controller.scene, x)
-    assert touching is not None and touching[0] == "slope"
-    _, stiffness, depth, normal = touching
-    wall = np.array([two[axis]["force_n"][-1] for axis in "xyz"])
-    assert [two[axis]["velocity_m_per_s"][-1] for axis in "xyz"] == [0.0, 0.0, 0.0]
-    assert -float(np.dot(wall, normal)) == pytest.approx(stiffness * depth, rel=1e-9)
-    assert [int(two[axis]["torque_permille"][-1]) for axis in "xyz"] == [-400, -400, -200]
+    two = records(tmp_path / "two")
+    assert_same_loop(two, records(one))
+    assert_resting_on_the_slope(two, demo.controller.scene)
     document = json.loads((tmp_path / "two" / "run.json").read_text())
     assert document["link"]["bus_load"]["load"] == pytest.approx(0.485, rel=1e-12)  # 970 bits per 2 ms at 1 Mbit/s
 
