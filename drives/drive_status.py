@@ -3,17 +3,17 @@
 Bus-neutral: :meth:`StatusObject.read` reads one object through any
 :class:`~drives.object_access.ObjectAccess`; an object the drive lacks (or refuses) becomes a
 :class:`Reading` that says so (``missing``), never an exception; silence (a
-:class:`~drives.errors.DriveTimeout`) still raises.  :data:`CIA402_OBJECTS` are the readings
-every CiA-402 drive is asked for, in the order they are shown; the fieldbus adds its own
-(:mod:`drives.canopen.service`, :mod:`drives.modbus.service`).  :func:`describe_value` says
-what a standard object's value means, for ``haptic-bus sdo``.
+:class:`~drives.errors.DriveTimeout`) still raises.  :func:`read_readings` reads what every
+CiA-402 drive is asked for, in the order they are shown, with the fieldbus' own readings in their
+places (:mod:`drives.canopen.service`, :mod:`drives.modbus.service`).  :func:`describe_value`
+says what a standard object's value means, for ``haptic-bus sdo``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 from drives.cia301 import ERROR_REGISTER, PRE_DEFINED_ERROR_FIELD, describe_emcy_code, describe_error_register, sdo_abort_text
 from drives.cia402 import (
@@ -110,6 +110,19 @@ ABORT_OPTION = StatusObject("abort_connection_option", "on connection loss", ABO
 ERROR_REGISTER_OBJECT = StatusObject("error_register", "error register",
                                      ObjectSpec(ERROR_REGISTER, "Error register", DataType.UNSIGNED8, "ro"),
                                      lambda v: f"0x{v:02X}: {describe_error_register(v)}")
+AccessT = TypeVar("AccessT", bound=ObjectAccess)
+
+
+def read_readings(access: AccessT, errors: Sequence[Callable[[AccessT], Reading]],
+                  watchdogs: Sequence[Callable[[AccessT], Reading]]) -> list[Reading]:
+    """Every reading status shows, in order: the CiA-402 state, mode and error code, then the
+    fieldbus' own error records (``errors``, each read from ``access``); position and velocity; the
+    fieldbus' watchdogs (``watchdogs``) and 0x6007, what the drive does when one expires."""
+    return [STATE.read(access), MODE.read(access), ERROR.read(access), *(read(access) for read in errors),
+            POSITION.read(access), VELOCITY.read(access), *(read(access) for read in watchdogs),
+            ABORT_OPTION.read(access)]
+
+
 _MEANINGS: dict[int, Callable[[int], str]] = {
     STATUSWORD.index: state_text,
     ERROR_CODE.index: error_code_meaning,

@@ -42,8 +42,8 @@ from haptic_bus.app.cli import main
 from haptic_bus.app.demo import run_demo
 from haptic_bus.app.rig import simulated_axes_device
 from haptic_bus.app.runner import RunOptions, RunResult, run
-from haptic_bus.app.steady_state import contact
 from tests.cli_process import cli_process, reaped
+from tests.gantry_records import assert_resting_on_the_slope, assert_same_loop, records
 
 START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen and judge the profile first
 RUN_WAIT = 240.0  # s: a 2 000-cycle run across two processes on this loaded 2-CPU machine takes about 10
@@ -65,28 +65,26 @@ def variant(tmp_path: pathlib.Path, name: str, old: str, new: str, extra: str = 
 TARGETS = "toward = [[0.0, -0.03, 0.0], [-0.03, 0.0, 0.0], [0.02, 0.02, 0.01]]"
 
 
-def records(folder: pathlib.Path) -> dict[str, np.ndarray]:
-    return {axis: np.genfromtxt(folder / f"record-{axis}.csv", delimiter=",", names=True) for axis in "xyz"}
-
-
 def test_the_demo_renders_a_ball_a_block_and_a_slope_with_k_times_the_penetration(tmp_path: pathlib.Path) -> None:
     profile = load_axes_profile("gantry-3d")
     result = run_demo(tmp_path / "demo", profile, seconds=12.0)
     assert result.summary.exit_reason == "completed" and result.summary.cycles == 6000
-    assert [s.obj for s in result.steady] == ["ball", "block", "slope"]
-    assert [s.torques for s in result.steady] == [(0, 600, 0), (600, 0, 0), (-400, -400, -200)]
+    steady = result.findings.steady
+    assert steady is not None
+    assert [s.obj for s in steady] == ["ball", "block", "slope"]
+    assert [s.torques for s in steady] == [(0, 600, 0), (600, 0, 0), (-400, -400, -200)]
     unit = profile.axes[0].device
     drift = result.summary.cycles * profile.period * unit.velocity_per_count / 2  # m: 0x606C rounding, worst case
-    for state in result.steady:
+    for state in steady:
         assert state.relative_error <= 1e-9, state
         assert state.penetration == pytest.approx(2e-3, rel=2e-3)  # 3 N / 1500 N/m, within the rounding band
         assert state.applied == pytest.approx(state.push, rel=1e-9) and state.push == pytest.approx(3.0, rel=1e-12)
         assert abs(state.stiffness * state.true_penetration - state.applied) <= state.quantum + state.stiffness * drift
-    assert result.steady[-1].quantum == pytest.approx(0.0025, rel=1e-12)
+    assert steady[-1].quantum == pytest.approx(0.0025, rel=1e-12)
     summary = result.summary
     assert summary.least_energy >= 0.0 and summary.observer_active_cycles == 0 and summary.layer_interventions == 0
-    assert summary.energy <= result.port_energy + summary.rounding_bound  # a lower bound of the exact ledger ...
-    assert summary.energy == pytest.approx(result.port_energy, rel=2e-3)  # ... and close to it
+    assert summary.energy <= result.findings.port_energy + summary.rounding_bound  # a lower bound of the exact ledger ...
+    assert summary.energy == pytest.approx(result.findings.port_energy, rel=2e-3)  # ... and close to it
     names = {path.name for path in result.files}
     assert names == {"record-x.csv", "record-y.csv", "record-z.csv", "trajectory.png", "run.json"}
     document = json.loads((tmp_path / "demo" / "run.json").read_text())
@@ -117,19 +115,9 @@ def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
     demo = run_demo(one, load_axes_profile(profile_path), seconds=4.0, plots=False)  # the lock-step bus, one process
     assert demo.summary.exit_reason == "completed", demo.summary.error
     assert not (tmp_path / "two" / "trajectory.png").exists() and not (one / "trajectory.png").exists()  # no plots asked
-    two, alone = records(tmp_path / "two"), records(one)
-    for axis in "xyz":
-        for column in two[axis].dtype.names:
-            if column not in ("compute_s", "wall_clock_s", "monotonic_s"):  # when and how long the machine took: not the loop's
-                assert np.array_equal(two[axis][column], alone[axis][column]), (axis, column)  # bit for bit
-    x = np.array([two[axis]["position_m"][-1] for axis in "xyz"])
-    touching = contact(demo.controller.scene, x)
-    assert touching is not None and touching[0] == "slope"
-    _, stiffness, depth, normal = touching
-    wall = np.array([two[axis]["force_n"][-1] for axis in "xyz"])
-    assert [two[axis]["velocity_m_per_s"][-1] for axis in "xyz"] == [0.0, 0.0, 0.0]
-    assert -float(np.dot(wall, normal)) == pytest.approx(stiffness * depth, rel=1e-9)
-    assert [int(two[axis]["torque_permille"][-1]) for axis in "xyz"] == [-400, -400, -200]
+    two = records(tmp_path / "two")
+    assert_same_loop(two, records(one))
+    assert_resting_on_the_slope(two, demo.controller.scene)
     document = json.loads((tmp_path / "two" / "run.json").read_text())
     assert document["link"]["bus_load"]["load"] == pytest.approx(0.485, rel=1e-12)  # 970 bits per 2 ms at 1 Mbit/s
 

@@ -22,21 +22,12 @@ import numpy as np
 import pytest
 
 from haptic_bus.analysis.coupled import CoupledVerdict, coupled_verdict
-from haptic_bus.analysis.coupled_energy import (
-    CoupledMachine,
-    adversarial_input,
-    energy_after,
-    simulate_energies,
-)
+from haptic_bus.analysis.coupled_energy import CoupledMachine, adversarial_input, simulate_energies
 from haptic_bus.analysis.coupled_loop import CoupledLoop, plane_wall
 from haptic_bus.analysis.loop import WallLoop
+from tests.energy_check import DELAYS, MODELS, STEPS, T, bears_out
 
-T = 1e-3
-MODELS = ("point", "average", "window:0.0005", "lowpass:0.002")
-DELAYS = (0.0, 0.5, 1.0, 1.5)
 CANDIDATES = np.geomspace(1e-3, math.pi, 48)  # rad: where the adversarial tone is looked for
-STEPS = 1000
-DOUBLINGS = 30
 
 
 def random_designs(seed: int = 22, count: int = 100) -> list[CoupledLoop]:
@@ -56,20 +47,6 @@ def random_designs(seed: int = 22, count: int = 100) -> list[CoupledLoop]:
     return designs
 
 
-def _found_active(machine: CoupledMachine, lowest: float, bound: float) -> bool:
-    """Whether the operator's energy from rest goes below minus its round-off, stepping or doubling."""
-    if lowest < -bound:
-        return True
-    energies, bounds = energy_after(machine, DOUBLINGS)
-    return bool(np.any(energies < -np.maximum(bounds, bound)))
-
-
-def _never_active(machine: CoupledMachine, lowest: float, bound: float) -> bool:
-    energies, bounds = energy_after(machine, DOUBLINGS)
-    finite = np.isfinite(energies)
-    return lowest >= -bound and bool(np.all(energies[finite] >= -bounds[finite])) and finite.all()
-
-
 @pytest.fixture(scope="module")
 def judged() -> tuple[list[CoupledLoop], list[CoupledVerdict]]:
     """The 100 designs and the coupled gate's verdict on each."""
@@ -85,13 +62,8 @@ def test_the_coupled_verdict_agrees_with_the_time_domain_on_100_oblique_walls(ju
     machines = [CoupledMachine(loop, *adversarial_input(loop, np.append(CANDIDATES, v.critical_theta)))
                 for loop, v in zip(designs, verdicts)]
     runs = simulate_energies(machines, STEPS)
-    agree = []
-    for k, (verdict, machine) in enumerate(zip(verdicts, machines)):
-        lowest, bound = float(runs.lowest[k]), float(runs.roundoff[k])
-        if verdict.passive:
-            agree.append(_never_active(machine, lowest, bound))
-        else:
-            agree.append(_found_active(machine, lowest, bound))
+    agree = [bears_out(machine, float(runs.lowest[k]), float(runs.roundoff[k]), verdict.passive)
+             for k, (verdict, machine) in enumerate(zip(verdicts, machines))]
     disagreeing = [(k, verdicts[k].outcome, verdicts[k].margin) for k, ok in enumerate(agree) if not ok]
     assert disagreeing == []
     assert sum(agree) == 100

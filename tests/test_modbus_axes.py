@@ -36,11 +36,11 @@ from haptic_bus.app.steady_state import contact
 from sim_drive.modbus.multi_axis import MultiAxisModbusSim
 from sim_drive.profile import read_simulated_device
 from tests.cli_process import cli_process, reaped
+from tests.gantry_records import assert_resting_on_the_slope, assert_same_loop, records
 
 GANTRY = pathlib.Path(str(load_axes_profile("gantry-3d").path))
 TARGETS = "toward = [[0.0, -0.03, 0.0], [-0.03, 0.0, 0.0], [0.02, 0.02, 0.01]]"
 UNITS = (1, 2, 3)
-TIMES = ("compute_s", "wall_clock_s", "monotonic_s")  # when and how long the machine took: not the loop's
 CYCLING_WAIT = 60.0  # s of wall clock: a bound on a hang, not a pace
 START_WAIT = 60.0  # s: the simulator process imports numpy, scipy and pymodbus and reads the profile first
 RUN_WAIT = 240.0  # s: a run process imports and judges gantry-3d's scene, then 500 cycles over loopback
@@ -79,10 +79,6 @@ def options(folder: pathlib.Path, duration: float, **more: Any) -> RunOptions:
                       stop=StopRequest(), **more)
 
 
-def records(folder: pathlib.Path) -> dict[str, np.ndarray]:
-    return {axis: np.genfromtxt(folder / f"record-{axis}.csv", delimiter=",", names=True) for axis in "xyz"}
-
-
 def watch_states(sim: MultiAxisModbusSim) -> list[list[State]]:
     """Every state each simulated axis enters from now on, per axis."""
     seen: list[list[State]] = [[] for _ in sim.drives]
@@ -118,19 +114,8 @@ def test_three_units_rest_on_the_slope_the_same_on_one_server_or_three(
         # torque's rounding (2.5 mN) plus K times the 0x606C rounding the position sum can gather (module docstring)
         drift = result.summary.cycles * profile.period * profile.axes[0].device.velocity_per_count / 2  # m
         assert abs(true[1] * true[2] - 3.0) <= 0.0025 + true[1] * drift
-    one, three = runs[1], runs[3]
-    for axis in "xyz":
-        for column in one[axis].dtype.names:
-            if column not in TIMES:
-                assert np.array_equal(one[axis][column], three[axis][column]), (axis, column)  # bit for bit
-    x = np.array([one[axis]["position_m"][-1] for axis in "xyz"])
-    touching = contact(scene, x)
-    assert touching is not None and touching[0] == "slope"
-    _, stiffness, depth, normal = touching
-    wall = np.array([one[axis]["force_n"][-1] for axis in "xyz"])
-    assert [one[axis]["velocity_m_per_s"][-1] for axis in "xyz"] == [0.0, 0.0, 0.0]
-    assert -float(np.dot(wall, normal)) == pytest.approx(stiffness * depth, rel=1e-9)
-    assert [int(one[axis]["torque_permille"][-1]) for axis in "xyz"] == [-400, -400, -200]
+    assert_same_loop(runs[1], runs[3])
+    assert_resting_on_the_slope(runs[1], scene)
 
 
 def test_a_unit_nobody_answers_for_is_one_line_and_nothing_is_enabled(

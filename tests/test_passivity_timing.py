@@ -122,8 +122,8 @@ def test_under_nominal_timing_guard_leaves_the_demo_wall_alone_and_the_observer_
     summary = result.summary
     assert summary.exit_reason == "completed" and summary.cycles == 10_000
     assert summary.layer == "guard" and summary.layer_interventions == 0
-    assert summary.energy - summary.rounding_bound <= result.port_energy
-    assert summary.energy == pytest.approx(result.port_energy, rel=0.01)
+    assert summary.energy - summary.rounding_bound <= result.findings.port_energy
+    assert summary.energy == pytest.approx(result.findings.port_energy, rel=0.01)
 
 
 def test_bound_runs_a_wall_beyond_the_gate_passively_when_the_profile_opts_in() -> None:

@@ -40,7 +40,7 @@ import numpy as np
 import pytest
 
 from haptic_bus.analysis.check import check_loop
-from haptic_bus.analysis.coupled_energy import energy_after, simulate_energies
+from haptic_bus.analysis.coupled_energy import simulate_energies
 from haptic_bus.analysis.criterion import Verdict, exact_verdict
 from haptic_bus.analysis.energy import RandomSinusoids, Sinusoid
 from haptic_bus.analysis.frequency import t_fund
@@ -56,12 +56,8 @@ from haptic_bus.analysis.two_mass_criterion import (
 )
 from haptic_bus.analysis.two_mass_energy import two_mass_machine, two_mass_mean_power
 from haptic_bus.errors import ParameterError
+from tests.energy_check import DELAYS, MODELS, STEPS, T, bears_out
 
-T = 1e-3
-MODELS = ("point", "average", "window:0.0005", "lowpass:0.002")
-DELAYS = (0.0, 0.5, 1.0, 1.5)
-STEPS = 1000
-DOUBLINGS = 30
 LEAST_DRAIN = -1e-9  # m/(N s): Re T_fund of the worst tone above this is too slow to show (module docstring)
 CANDIDATES = np.geomspace(1e-3, 3.1, 48)  # rad
 
@@ -104,14 +100,8 @@ def test_the_two_mass_verdict_agrees_with_the_time_domain_on_50_designs(judged) 
     assert sum(v.stable and not v.passive and drain > LEAST_DRAIN for v, (_, drain) in zip(verdicts, tones)) == 0
     machines = [two_mass_machine(loop, Sinusoid(theta, T)) for loop, (theta, _) in zip(designs, tones)]
     runs = simulate_energies(machines, STEPS)
-    agree = []
-    for k, (verdict, machine) in enumerate(zip(verdicts, machines)):
-        lowest, bound = float(runs.lowest[k]), float(runs.roundoff[k])
-        bound = bound if math.isfinite(bound) else 0.0  # an unstable run may overflow: its doublings decide
-        energies, bounds = energy_after(machine, DOUBLINGS)
-        finite = np.isfinite(energies)
-        went_negative = lowest < -bound or bool(np.any(energies[finite] < -np.maximum(bounds[finite], bound)))
-        agree.append(went_negative != verdict.passive and (finite.all() or not verdict.passive))
+    agree = [bears_out(machine, float(runs.lowest[k]), float(runs.roundoff[k]), verdict.passive)
+             for k, (verdict, machine) in enumerate(zip(verdicts, machines))]
     assert [k for k, ok in enumerate(agree) if not ok] == []
 
 

@@ -20,7 +20,8 @@ one heartbeat producer, which this object owns (sent by the cycle itself in the 
 * **one cyclic phase** (:meth:`CanopenAxes.cyclic`, an :class:`~drives.base.AxesDriveCycle` of
   the shape of one drive's): each axis' target saturated by its own drive's clamp, at its own
   limit, counted once in its own ``stats.saturated_outputs``;
-* **the state machine walked together**: one SYNC per step serves every axis' walk
+* **the state machine walked together** (:class:`~drives.axes_master.AxesMaster`, what the Modbus
+  master does alike): one SYNC per step serves every axis' walk
   (:class:`~drives.cia402_master.StateWalk`), so no axis is left without SYNC or RPDO while
   another is being enabled, and every drive is enabled (or disabled) in the same cycle.
 """
@@ -35,19 +36,18 @@ from typing import Any
 
 from canopen import objectdictionary as od
 
+from drives.axes_master import MAX_AXES, AxesMaster
 from drives.base import AxesDriveCycle, CyclicInputs, DriveScaling
 from drives.canopen.axes_cycle import AxesCycle
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
 from drives.canopen.heartbeat import HeartbeatProducer
 from drives.canopen.link import NetworkLink
-from drives.cia402_master import disable_together, enable_together, trip_together
+from drives.cia402_master import trip_together
 from drives.errors import DriveError, DriveTimeout, ParameterError
 from drives.safety import DEFAULT_SAFETY, SafetySettings
 
-MAX_AXES = 6
 
-
-class CanopenAxes:
+class CanopenAxes(AxesMaster[CanopenDrive]):
     """The drives ``node_ids`` (one per axis, in axis order) on one bus, one SYNC per cycle.
 
     The bus: ``interface``/``channel``/``bitrate``/``bus_kwargs`` as :class:`CanopenDrive` takes
@@ -95,52 +95,27 @@ class CanopenAxes:
             drive.exchange.produces_sync = False
         self.cycle = AxesCycle(self.name, self.link, [drive.exchange for drive in self.drives], tpdo_timeout)
         self._missed = [0] * len(nodes)
-        self._connected = False
-        self._closed = False
 
     @property
     def node_ids(self) -> tuple[int, ...]:
         """The axes' node ids, in axis order."""
         return tuple(drive.node_id for drive in self.drives)
 
-    @property
-    def scalings(self) -> tuple[DriveScaling, ...]:
-        """Every axis' drive-unit scaling (after :meth:`connect`)."""
-        return tuple(drive.scaling for drive in self.drives)
-
     # ------------------------------------------------------------------ connection
 
-    def connect(self) -> None:
-        """Open the bus, start this controller's heartbeat and commission every drive in turn; on
-        any failure everything is closed again and the error raised."""
-        if self._closed:
-            raise DriveError(self.name, "closed; create a new one")
-        if self._connected:
-            return
-        try:
-            self.link.open()
-            for drive in self.drives:
-                drive.connect()  # the first starts the shared heartbeat (its boot-up before any drive is touched)
-            self.cycle.configure()
-        except BaseException:
-            self.close()
-            raise
-        self._connected = True
+    def _reach(self) -> None:
+        """Open the bus, start this controller's heartbeat and commission every drive in turn."""
+        self.link.open()
+        for drive in self.drives:
+            drive.connect()  # the first starts the shared heartbeat (its boot-up before any drive is touched)
+        self.cycle.configure()
 
     # ------------------------------------------------------------------ state machine
 
-    def enable(self) -> None:
-        """Every drive to OPERATION ENABLED in cyclic synchronous torque mode, walked together."""
-        self._require_connected()
-        self.cycle.end()  # mode selection is SDO
-        enable_together(self.drives, self._command)
+    def _before_walk(self) -> None:
+        """The bus read by canopen's notifier again (mode selection is SDO), no TPDO missed yet."""
+        self.cycle.end()
         self._missed = [0] * len(self.drives)
-
-    def disable(self) -> None:
-        """Zero torque and DISABLE VOLTAGE on every drive, walked together to SWITCH ON DISABLED (or FAULT)."""
-        if not self._connected:
-            return
-        disable_together(self.drives, self._command)
 
     def _command(self, words: list[int]) -> list[int]:
         """One exchange for the state machines: SYNC, every TPDO, then each drive's RPDO(word, 0)."""
@@ -170,9 +145,7 @@ class CanopenAxes:
         held within its ``torque_limits`` entry (per mille; None: its drive's own 0x6072) until the
         phase ends."""
         self._require_connected()
-        limits = list(torque_limits) if torque_limits is not None else [None] * len(self.drives)
-        if len(limits) != len(self.drives):
-            raise ParameterError("torque_limits", len(limits), f"one per axis ({len(self.drives)})", self.name)
+        limits = self._axis_limits(torque_limits)
         with contextlib.ExitStack() as stack:
             clamps = tuple(stack.enter_context(drive.clamp.lowered(limit, drive.name))
                            for drive, limit in zip(self.drives, limits))
@@ -259,13 +232,3 @@ class CanopenAxes:
             self.heartbeat.stop()
             self.link.close()
             self._connected = False
-
-    def _require_connected(self) -> None:
-        if not self._connected:
-            raise DriveError(self.name, "not connected; call connect() first")
-
-    def __enter__(self) -> CanopenAxes:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

@@ -29,19 +29,14 @@ from drives.cia301 import (
 )
 from drives.cia402 import DataType, ObjectSpec
 from drives.drive_status import (
-    ABORT_OPTION,
     DEFAULT_ANSWER_TIMEOUT,
     DEFAULT_LISTEN,
-    ERROR,
     ERROR_REGISTER_OBJECT,
-    MODE,
-    POSITION,
-    STATE,
-    VELOCITY,
     DriveStatus,
     Reading,
     StatusObject,
     missing_reading,
+    read_readings,
 )
 from drives.errors import DriveError, DriveProtocolError
 from drives.fault_reset import DEFAULT_WAIT, FaultResetOutcome, reset_drive_fault
@@ -128,9 +123,8 @@ def read_status(bus: Mapping[str, Any], node_id: int, listen: float = DEFAULT_LI
     and waiting ``timeout`` s for each SDO answer (module docstring).  DriveTimeout if the node
     does not answer; DriveError if the bus cannot be opened."""
     with NodeClient(bus, node_id, timeout) as client:
-        readings = [STATE.read(client), MODE.read(client), ERROR.read(client), ERROR_REGISTER_OBJECT.read(client),
-                    _error_history(client), POSITION.read(client), VELOCITY.read(client), _heartbeat_consumers(client),
-                    _rpdo_deadline(client), ABORT_OPTION.read(client)]
+        readings = read_readings(client, (ERROR_REGISTER_OBJECT.read, _error_history),
+                                 (_heartbeat_consumers, _rpdo_deadline))
         client.listen_until(listen)
         client.check_receive()
         status = DriveStatus(client.name, "canopen", readings, round(client.listened(), 3), client.nmt_state(),

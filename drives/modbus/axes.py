@@ -15,9 +15,9 @@ adds is what :class:`drives.canopen.axes.CanopenAxes` adds on one SYNC:
   response, its fault bit), every axis is tripped in that same cycle
   (:func:`~drives.cia402_master.trip_together`: each writes its safe outputs, zero torque with
   DISABLE VOLTAGE) and the error is raised;
-* **the state machines walked together** (:func:`~drives.cia402_master.walk_together`): each step
-  one controlword write and statusword read per drive, so no drive's watchdog starves while
-  another is being enabled;
+* **the state machines walked together** (:class:`~drives.axes_master.AxesMaster`,
+  :func:`~drives.cia402_master.walk_together`): each step one controlword write and statusword
+  read per drive, so no drive's watchdog starves while another is being enabled;
 * **a unit that does not answer is named**: a server that answers "gateway target failed to
   respond" (0x0B) or "gateway path unavailable" (0x0A) for a unit id is one :class:`DriveError`
   naming the unit and the address, raised at :meth:`ModbusAxes.connect` before anything is written.
@@ -28,12 +28,12 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator, Sequence
 
-from drives.base import AxesDriveCycle, CyclicInputs, DriveCycle, DriveScaling
-from drives.cia402_master import disable_together, enable_together, trip_together
+from drives.axes_master import MAX_AXES, AxesMaster
+from drives.base import AxesDriveCycle, CyclicInputs, DriveCycle
+from drives.cia402_master import trip_together
 from drives.errors import DriveError, DriveRefusal, ParameterError
 from drives.modbus.drive import ModbusDrive
 
-MAX_AXES = 6
 NO_UNIT_CODES = (0x0A, 0x0B)  # Modbus exceptions: gateway path unavailable, gateway target failed to respond
 
 
@@ -49,7 +49,7 @@ class _CycleRequests:
         return sum(drive.stats.cyclic_requests for drive in self._drives)
 
 
-class ModbusAxes:
+class ModbusAxes(AxesMaster[ModbusDrive]):
     """The Modbus drives ``drives`` (one per axis, in axis order), polled in one cycle; it owns them
     (:meth:`close` closes every one).  Every drive has the same ``cycle`` mode ("split" or "fc23")."""
 
@@ -71,13 +71,6 @@ class ModbusAxes:
         units = ", ".join(str(drive.unit_id) if len(addresses) == 1 else f"{drive.unit_id} at {drive.address}"
                           for drive in axes)
         self.name = f"Modbus units {units}" + (f" at {axes[0].address}" if len(addresses) == 1 else "")
-        self._connected = False
-        self._closed = False
-
-    @property
-    def scalings(self) -> tuple[DriveScaling, ...]:
-        """Every axis' drive-unit scaling (after :meth:`connect`)."""
-        return tuple(drive.scaling for drive in self.drives)
 
     @property
     def simulated(self) -> bool:
@@ -86,33 +79,12 @@ class ModbusAxes:
 
     # ------------------------------------------------------------------ connection
 
-    def connect(self) -> None:
-        """Reach every drive in turn (reads only: identity, scaling, timing); on any failure every
-        connection is closed again and the error raised, a unit nobody answers for named."""
-        if self._closed:
-            raise DriveError(self.name, "closed; create a new one")
-        if self._connected:
-            return
-        try:
-            for drive in self.drives:
-                _reach(drive)
-        except BaseException:
-            self.close()
-            raise
-        self._connected = True
+    def _reach(self) -> None:
+        """Reach every drive in turn (reads only: identity, scaling, timing), a unit nobody answers for named."""
+        for drive in self.drives:
+            _reach(drive)
 
     # ------------------------------------------------------------------ state machine
-
-    def enable(self) -> None:
-        """Every drive to OPERATION ENABLED in cyclic synchronous torque mode, walked together."""
-        self._require_connected()
-        enable_together(self.drives, self._command)
-
-    def disable(self) -> None:
-        """Zero torque and DISABLE VOLTAGE on every drive, walked together to SWITCH ON DISABLED (or FAULT)."""
-        if not self._connected:
-            return
-        disable_together(self.drives, self._command)
 
     def _command(self, words: list[int]) -> list[int]:
         """Each drive's controlword written (zero torque) and its statusword read, in axis order."""
@@ -125,9 +97,7 @@ class ModbusAxes:
         """The cyclic phase of every axis: an :class:`~drives.base.AxesDriveCycle` bound once, each
         axis' clamp held within its ``torque_limits`` entry (per mille; None: its drive's own 0x6072)."""
         self._require_connected()
-        limits = list(torque_limits) if torque_limits is not None else [None] * len(self.drives)
-        if len(limits) != len(self.drives):
-            raise ParameterError("torque_limits", len(limits), f"one per axis ({len(self.drives)})", self.name)
+        limits = self._axis_limits(torque_limits)
         with contextlib.ExitStack() as stack:
             cycles = tuple(stack.enter_context(drive.cyclic(limit)) for drive, limit in zip(self.drives, limits))
             yield AxesDriveCycle(lambda: self._read(cycles), tuple(cycle.saturate for cycle in cycles),
@@ -158,16 +128,6 @@ class ModbusAxes:
         self._connected = False
         for drive in self.drives:
             drive.close()
-
-    def _require_connected(self) -> None:
-        if not self._connected:
-            raise DriveError(self.name, "not connected; call connect() first")
-
-    def __enter__(self) -> ModbusAxes:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def _reach(drive: ModbusDrive) -> None:

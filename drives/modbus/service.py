@@ -10,18 +10,7 @@ refuses (exception 0x02) is reported absent.  A Modbus drive has no NMT, heartbe
 
 from __future__ import annotations
 
-from drives.drive_status import (
-    ABORT_OPTION,
-    DEFAULT_ANSWER_TIMEOUT,
-    ERROR,
-    MODE,
-    POSITION,
-    STATE,
-    VELOCITY,
-    DriveStatus,
-    Reading,
-    missing_reading,
-)
+from drives.drive_status import DEFAULT_ANSWER_TIMEOUT, DriveStatus, Reading, missing_reading, read_readings
 from drives.errors import DriveProtocolError
 from drives.fault_reset import DEFAULT_WAIT, FaultResetOutcome, reset_drive_fault
 from drives.modbus.objects import ModbusObjects
@@ -44,8 +33,7 @@ def read_status(url: str, unit_id: int, timeout: float = DEFAULT_ANSWER_TIMEOUT)
     """Unit ``unit_id``'s status at ``url`` (``tcp://HOST:PORT`` or ``rtu:/dev/...``), each request
     answered within ``timeout`` s; DriveTimeout if the server cannot be reached."""
     with ModbusObjects(url, unit_id, timeout) as unit:
-        readings = [STATE.read(unit), MODE.read(unit), ERROR.read(unit), POSITION.read(unit), VELOCITY.read(unit),
-                    _watchdog(unit), ABORT_OPTION.read(unit)]
+        readings = read_readings(unit, (), (_watchdog,))
     return DriveStatus(unit.name, "modbus", readings)
 
 

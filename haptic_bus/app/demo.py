@@ -24,13 +24,13 @@ from haptic_bus.app.profiles import Profile, default_profile
 from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
 from haptic_bus.app.run_kinds import run_kind
 from haptic_bus.app.run_recorder import RunRecorder
-from haptic_bus.app.steady_state import SteadyState
 from haptic_bus.control.controller import RunSummary, WallController
 
 
 @dataclass
 class DemoResult:
-    """The demo's numbers (SI), what it read against the simulated truth, and the files it wrote."""
+    """The demo's numbers (SI), what it read against the simulated truth (``findings``: the exact
+    energies, the steady penetration or states), and the files it wrote."""
 
     profile: Profile | AxesProfile
     controller: WallController[Any, Any]
@@ -38,36 +38,6 @@ class DemoResult:
     findings: Findings
     lines: list[str]  # the summary's lines of this kind (:func:`format_demo` adds how it ended and the files)
     files: list[pathlib.Path]
-
-    @property
-    def decision(self) -> Any:
-        """The gate's decision on the scene the demo started with."""
-        return self.controller.decision
-
-    @property
-    def operator_energy(self) -> float:
-        """What the operator (or the hand) put in (J, exact, the simulated drives' ledger)."""
-        return self.findings.operator_energy
-
-    @property
-    def port_energy(self) -> float:
-        """The port's energy (J, exact, the simulated drives' ledger)."""
-        return self.findings.port_energy
-
-    @property
-    def penetration(self) -> float | None:
-        """One axis under a constant push: the steady penetration (m), else None."""
-        return self.findings.penetration
-
-    @property
-    def expected_penetration(self) -> float | None:
-        """One axis under a constant push: ``F/K`` (m), else None."""
-        return self.findings.expected_penetration
-
-    @property
-    def steady(self) -> list[SteadyState]:
-        """Several axes: the steady states read at the end of each dwell and at the end (one axis: none)."""
-        return self.findings.steady or []
 
 
 def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None = None, seconds: float | None = None,

@@ -18,6 +18,7 @@ from typing import Any
 from sim_drive.canopen.bridge import BusBridge
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.parameters import DeviceParameters, Timing
+from sim_drive.parts import Part, start_all, stop_all
 from sim_drive.space_operator import SpaceHand
 from sim_drive.sync_clock import sync_clock
 
@@ -43,6 +44,7 @@ class MultiAxisSim:
                                            operator=hand.axis(place), od=od, sync_clock=sync_clock(clock))
                            for (node, parameters, timing), place in zip(axes, places, strict=True))
         hand.bind_places(places, [node.drive for node in self.nodes])
+        self._parts: list[Part] = [*([] if self._bridge is None else [self._bridge]), *self.nodes]  # the bus first
 
     def node(self, node_id: int) -> CanopenSimDrive:
         """The simulated drive with ``node_id``."""
@@ -56,26 +58,12 @@ class MultiAxisSim:
     def start(self) -> MultiAxisSim:
         """Open the bus once (:class:`~sim_drive.canopen.bridge.BusBridge`), boot every node (boot-up
         message, PRE-OPERATIONAL) and serve."""
-        if self._bridge is not None:
-            self._bridge.start()
-        started: list[CanopenSimDrive] = []
-        try:
-            for node in self.nodes:
-                started.append(node.start())
-        except BaseException:
-            for node in started:
-                node.stop()
-            if self._bridge is not None:
-                self._bridge.stop()
-            raise
+        start_all(self._parts)
         return self
 
     def stop(self) -> None:
         """Stop every node (their heartbeats stop with them), then close the bus."""
-        for node in self.nodes:
-            node.stop()
-        if self._bridge is not None:
-            self._bridge.stop()
+        stop_all(self._parts)
 
     def _lose_bus(self, exc: BaseException) -> None:
         for node in self.nodes:

@@ -20,6 +20,7 @@ from haptic_bus.errors import ParameterError
 from sim_drive.device import SimulatedDrive
 from sim_drive.modbus.server import ModbusSimServer, ServedUnit
 from sim_drive.parameters import DeviceParameters, Timing
+from sim_drive.parts import start_all, stop_all
 from sim_drive.space_operator import SpaceHand
 from sim_drive.sync_clock import sync_clock
 
@@ -79,20 +80,12 @@ class MultiAxisModbusSim:
 
     def start(self) -> MultiAxisModbusSim:
         """Serve every server in a thread of its own (each bound when this returns)."""
-        started: list[ModbusSimServer] = []
-        try:
-            for server in self.servers:
-                started.append(server.start())
-        except BaseException:
-            for server in started:
-                server.stop()
-            raise
+        start_all(self.servers)
         return self
 
     def stop(self) -> None:
         """Stop every server's thread."""
-        for server in self.servers:
-            server.stop()
+        stop_all(self.servers)
 
     async def serve(self, stop: asyncio.Event, on_bound: Callable[[], None]) -> None:
         """Serve every server in the running event loop until ``stop`` is set; ``on_bound`` once all are bound."""
