@@ -58,7 +58,7 @@ def trajectory_figure(run: RunFolder) -> Figure:
     for i, name in enumerate(names):
         positions.plot(time_s, q[:, i] * 1e3, label=f"{name}")
     positions.set_ylabel("joint position (mm)")
-    positions.legend(loc="best", fontsize=8)
+    positions.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)  # beside: on no data
     positions.grid(alpha=0.3)
     force_axes = fig.add_subplot(grid[1, 1], sharex=positions)
     for i, name in enumerate(names):
@@ -71,7 +71,8 @@ def trajectory_figure(run: RunFolder) -> Figure:
     twin.set_ylabel("port energy (mJ)")
     lines = force_axes.get_legend_handles_labels()
     more = twin.get_legend_handles_labels()
-    force_axes.legend(lines[0] + more[0], lines[1] + more[1], loc="best", fontsize=8)
+    force_axes.legend(lines[0] + more[0], lines[1] + more[1], loc="upper center",
+                      bbox_to_anchor=(0.5, -0.2), ncol=4, fontsize=8)  # below: on no data
     loop = run.document.get("loop", {})
     fig.suptitle(f"{run.document.get('profile', {}).get('name', run.path.name)}: {len(names)} axes, "
                  f"T = {loop.get('period', float('nan')) * 1e3:g} ms")
@@ -110,5 +111,5 @@ def _draw_sections(axes: Axes, names: list[str], objects: list[SpaceObject], x: 
     axes.set_xlabel(f"mm along {first} in ({', '.join(names)})")
     axes.set_ylabel(f"mm along {second}")
     axes.set_title("trajectory in its plane of motion, objects cut by that plane", fontsize=10)
-    axes.legend(loc="best", fontsize=8)
+    axes.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8)  # below: on no object
     axes.grid(alpha=0.3)

@@ -172,7 +172,7 @@ def plot_nyquist(path: PathLike, loop: WallLoop) -> Path:
         ax2.axhline(0.0, color="k", lw=0.8)
     ax2.set_xlabel(r"$\theta = \omega T$  (rad)")
     ax2.grid(True, color="0.9")
-    ax2.legend(fontsize=8)
+    ax2.legend(fontsize=8, loc="lower center")  # a fixed place: loc="best" searches the data, slowly
     _nyquist_inset(ax, data)
     state = "passive" if verdict.passive else "NOT passive"
     fig.suptitle(f"m = {loop.m:g} kg, b = {loop.b:g} N s/m, T = {loop.T * 1e3:g} ms, K = {loop.K:g} N/m, "

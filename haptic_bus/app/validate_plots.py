@@ -81,7 +81,7 @@ def re_z(validation: Validation, path: pathlib.Path, margin: float | None) -> pa
     ax.set_xlabel("frequency, Hz")
     ax.set_ylabel("effective friction Re Z, N s/m")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
+    ax.legend(loc="lower left", fontsize=8)
     ax.set_title(_title(validation), fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

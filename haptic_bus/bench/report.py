@@ -348,8 +348,8 @@ def _label_and_save(fig: Any, ax: Any, labels: tuple[str, str], title: str, path
     ax.set_ylabel(labels[1])
     ax.set_title(title)
     ax.grid(True, which="both", lw=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)  # beside: on no curve
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")  # the legend beside the axes too
     plt.close(fig)
     return path
