@@ -159,7 +159,7 @@ def test_seed_profile_with_cia402_timing_is_refused(tmp_path):
     path = write(tmp_path, text, "seed-cia402.toml")
     with pytest.raises(Refusal) as caught:
         load_profile(path)
-    assert str(caught.value).startswith(f"profile {path}: passivity gate refused the change: ")
+    assert str(caught.value).startswith(f"profile {path}: passivity gate refused the scene: ")
     assert str(path) in str(caught.value)
     (wall,) = caught.value.decision.walls
     assert wall.verdict.margin == pytest.approx(-84.09, abs=0.01)  # haptic-bus check --delay 1
