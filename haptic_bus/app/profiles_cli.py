@@ -33,8 +33,8 @@ from haptic_bus.app.profiles import (
     FORCE_RANGE,
     NAME_PATTERN,
     AxesProfile,
+    Profile,
     admit,
-    one_axis,
     profile_to_dict,
     read_profile,
     resolve_profile,
@@ -56,19 +56,26 @@ def _refused(command: str, refusal: Refusal) -> int:
     return EXIT_NO
 
 
+def _list_row(profile: Profile | AxesProfile) -> dict[str, Any]:
+    """One row of ``profiles list``: the loop (one axis: timing, delay, velocity, m kg, b N s/m; several: the
+    axes' names), the period T s, the objects and the gate's worst margin (N s/m); Refusal as :func:`admit`."""
+    decision = admit(profile)
+    row: dict[str, Any] = {"status": "ok", "worst_margin": decision.worst_margin, "warnings": len(decision.warnings),
+                           "task": profile.task}
+    if isinstance(profile, AxesProfile):
+        return row | {"axes": [axis.name for axis in profile.axes], "period": profile.period, "objects": len(profile.space)}
+    return row | {"timing": profile.loop.timing, "delay": profile.loop.delay, "velocity": str(profile.device.velocity),
+                  "mass": profile.device.mass, "friction": profile.device.friction, "period": profile.loop.period,
+                  "objects": len(profile.scene)}
+
+
 def cmd_list(args: argparse.Namespace) -> int:
-    """List the shipped profiles with their loop and gate verdict; 0 if all load, else 1 or 2."""
+    """List the shipped profiles, one axis and several, with their loop and gate verdict; 0 if all load, else 1 or 2."""
     rows, status = [], EXIT_OK
-    for name, path in shipped_profiles().items():
+    for name, path in sorted({**shipped_profiles(), **shipped_profiles(axes=True)}.items()):
         row: dict[str, Any] = {"name": name, "path": str(path), "default": name == DEFAULT_PROFILE}
         try:
-            profile = one_axis(read_profile(path), "profiles list")
-            decision = admit(profile)
-            row.update(status="ok", timing=profile.loop.timing, delay=profile.loop.delay,
-                       velocity=str(profile.device.velocity), mass=profile.device.mass,
-                       friction=profile.device.friction, period=profile.loop.period,
-                       objects=len(profile.scene), worst_margin=decision.worst_margin,
-                       warnings=len(decision.warnings), task=profile.task)
+            row.update(_list_row(read_profile(path)))
         except ParameterError as error:
             row.update(status="invalid", error=str(error))
             status = EXIT_INVALID
@@ -86,8 +93,10 @@ def cmd_list(args: argparse.Namespace) -> int:
             continue
         margin = "-" if row["worst_margin"] is None else f"{row['worst_margin']:+.4g} N s/m"
         warn = f", {row['warnings']} warning(s)" if row["warnings"] else ""
-        print(f"{mark} {row['name']:<18} {row['timing']:<6} m={row['mass']:g} kg b={row['friction']:g} N s/m "
-              f"T={row['period']:g} s  {row['objects']} object(s), worst margin {margin}{warn}  -- {row['task']}")
+        loop = (f"{len(row['axes'])} axes ({', '.join(row['axes'])})" if "axes" in row else
+                f"{row['timing']:<6} m={row['mass']:g} kg b={row['friction']:g} N s/m")
+        print(f"{mark} {row['name']:<18} {loop} T={row['period']:g} s  {row['objects']} object(s), "
+              f"worst margin {margin}{warn}  -- {row['task']}")
     print("(* = default profile)")
     return status
 
