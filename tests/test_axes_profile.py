@@ -8,7 +8,7 @@ import pathlib
 import pytest
 
 from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.app.profiles import AxesProfile, Profile, load_profile, one_axis, read_profile
+from haptic_bus.app.profiles import AxesProfile, Profile, load_profile, one_axis_only, read_profile
 from haptic_bus.errors import ParameterError, Refusal
 
 AXIS = """
@@ -101,9 +101,9 @@ def test_one_loader_reads_either_kind_and_one_axis_commands_refuse_axes(tmp_path
     one, three = load_profile("cia402-handle"), load_profile(gantry(tmp_path))
     assert isinstance(one, Profile) and isinstance(read_profile("cia402-handle"), Profile)
     assert isinstance(three, AxesProfile) and len(three.axes) == 3
-    assert one_axis(one, "validate") is one
+    assert one_axis_only(one, "validate") is one
     with pytest.raises(ParameterError) as refused:
-        one_axis(three, "validate")
+        one_axis_only(three, "validate")
     assert str(refused.value) == (f"profile = '{three.path}' is invalid; allowed: a one-axis profile, without "
                                   "[[axes]] (validate measures one drive; this one has 3 axes)")
 

@@ -255,10 +255,10 @@ def _upload(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from haptic_bus.app.profiles import load_profile, one_axis
+    from haptic_bus.app.profiles import load_profile, one_axis_only
     from haptic_bus.app.report import write_report
 
-    profile = one_axis(load_profile(args.profile), "report")
+    profile = one_axis_only(load_profile(args.profile), "report")
     for path in write_report(profile, writable_folder("--out", args.out, context="report")):
         print(f"wrote {path}")
     return EXIT_OK

@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from haptic_bus.app.profiles import AxesProfile, load_profile, one_axis
+from haptic_bus.app.profiles import AxesProfile, load_profile, one_axis_only
 from haptic_bus.app.realtime import RealtimeSettings, realtime_session
 from haptic_bus.app.writer_process import COMM as WRITER_COMM
 from haptic_bus.bench.size import Size
@@ -240,7 +240,7 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     from haptic_bus.bench.processes import canopen_simulator, cpu_hogs
 
     duration = size.pick(0.3, 1.0, 15.0)
-    period = one_axis(load_profile(PROFILE), "bench").loop.period
+    period = one_axis_only(load_profile(PROFILE), "bench").loop.period
     hogs = os.cpu_count() or 1
     runs: dict[str, dict] = {}
     with canopen_simulator(PROFILE, (NODE_ID,), "--operator", HAND) as (bus, process):

@@ -11,7 +11,7 @@ there is one reader and one loader for both:
 * :func:`load_profile` reads and then judges the scene by the profile's own gate (:func:`admit`):
   a profile that loads is one its gate admits, or one that runs beyond the gate under the bound
   passivity layer (``[passivity] beyond_gate``);
-* :func:`one_axis` is for the commands that measure one drive (identify, validate, report): it
+* :func:`one_axis_only` is for the commands that measure one drive (identify, validate, report): it
   refuses a multi-axis profile in one line naming what they accept.
 """
 
@@ -32,7 +32,7 @@ from haptic_bus.profile.reader import read_document
 from haptic_bus.profile.scene import FORCE_RANGE
 
 __all__ = ["DEFAULT_PROFILE", "FORCE_RANGE", "NAME_PATTERN", "AxesProfile", "Axis", "DeviceTable", "LoopTiming",
-           "Profile", "StartPolicy", "admit", "default_profile", "load_profile", "one_axis", "profile_to_dict",
+           "Profile", "StartPolicy", "admit", "default_profile", "load_profile", "one_axis_only", "profile_to_dict",
            "read_profile", "resolve_profile", "shipped_profiles"]
 
 DEFAULT_PROFILE = "cia402-handle"
@@ -71,7 +71,7 @@ def load_profile(path_or_name: str | pathlib.Path) -> Profile | AxesProfile:
     return profile
 
 
-def one_axis(profile: Profile | AxesProfile, command: str) -> Profile:
+def one_axis_only(profile: Profile | AxesProfile, command: str) -> Profile:
     """``profile`` if it is a one-axis profile; otherwise ParameterError (exit 2) saying that ``command``
     measures one drive and takes a profile without ``[[axes]]``."""
     if isinstance(profile, AxesProfile):
@@ -82,4 +82,4 @@ def one_axis(profile: Profile | AxesProfile, command: str) -> Profile:
 
 def default_profile() -> Profile:
     """The shipped :data:`DEFAULT_PROFILE` (the one ``haptic-bus demo`` runs), loaded."""
-    return one_axis(load_profile(DEFAULT_PROFILE), "demo")
+    return one_axis_only(load_profile(DEFAULT_PROFILE), "demo")
