@@ -80,6 +80,6 @@ def one_axis_only(profile: Profile | AxesProfile, command: str) -> Profile:
     return profile
 
 
-def default_profile() -> Profile:
+def default_profile() -> Profile | AxesProfile:
     """The shipped :data:`DEFAULT_PROFILE` (the one ``haptic-bus demo`` runs), loaded."""
-    return one_axis_only(load_profile(DEFAULT_PROFILE), "demo")
+    return load_profile(DEFAULT_PROFILE)

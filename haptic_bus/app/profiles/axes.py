@@ -85,7 +85,9 @@ class Axis:
 
 @dataclass(frozen=True)
 class AxesProfile:
-    """A validated, gate-admitted multi-axis profile (SI units)."""
+    """A validated multi-axis profile (SI units): what :func:`~haptic_bus.app.profiles.read_profile` gives for a
+    file with ``[[axes]]``; :func:`~haptic_bus.app.profiles.load_profile` also puts it through the coupled gate
+    (:func:`~haptic_bus.app.profiles.admit`)."""
 
     name: str
     operator: str

@@ -51,7 +51,9 @@ from haptic_bus.profile.scene import ObjectTable, read_force_limit, read_scene
 
 @dataclass(frozen=True)
 class Profile:
-    """A validated, gate-admitted operator parameter profile (SI units)."""
+    """A validated one-axis profile (SI units): what :func:`~haptic_bus.app.profiles.read_profile` gives for a
+    file without ``[[axes]]``; :func:`~haptic_bus.app.profiles.load_profile` also puts it through its gate
+    (:func:`~haptic_bus.app.profiles.admit`)."""
 
     name: str
     operator: str
