@@ -8,7 +8,7 @@ users write ``haptic_bus.check_passivity(...)``, never a module path::
     report = hb.check_passivity(mass=0.5, friction=0.1, period=1e-3, stiffness=200, damping=100, delay=1)
     report.passive, report.margin, report.max_stiffness, report.to_dict()
 
-    profile = hb.load_profile("cia402-handle")            # validated and gated
+    profile = hb.load_profile("cia402-handle")            # validated and gated: a Profile (one axis)
     # the drive: any CANopen drive, here the simulated one of the same profile, started as
     #   haptic-bus sim --profile cia402-handle --interface udp_multicast --channel 239.74.163.2 \
     #       --bus-option port=43113 --node-id 5
@@ -16,9 +16,11 @@ users write ``haptic_bus.check_passivity(...)``, never a module path::
     result = hb.run(profile, bus, hb.RunOptions(duration=1.0, pacing="virtual"), node_id=5)
     result.exit_reason, result.summary.cycles, result.folder  # "completed", 1000, runs/<UTC>-cia402-handle
 
-The same ``hb.run`` runs a multi-axis profile (``[[axes]]``, e.g. ``hb.load_any_profile("gantry-3d")``
-against ``haptic-bus sim --node-ids 5,6,7 --profile gantry-3d``: the node ids come from the profile),
-a Modbus drive (``bus`` a URL, ``"tcp://127.0.0.1:5020"``, with ``unit_id``) and several Modbus axes
+``hb.load_profile`` loads either kind of profile: a file with ``[[axes]]`` gives an :class:`AxesProfile`
+(``hb.load_profile("gantry-3d")``: validated, its bus load checked, its scene judged by the coupled
+gate), one without it a :class:`Profile`.  The same ``hb.run`` runs either kind (several axes against
+``haptic-bus sim --node-ids 5,6,7 --profile gantry-3d``: the node ids come from the profile), a Modbus
+drive (``bus`` a URL, ``"tcp://127.0.0.1:5020"``, with ``unit_id``) and several Modbus axes
 (``bus`` one URL, or a list of one per axis, with ``unit_ids=[1, 2, 3]``, against ``haptic-bus sim
 --modbus tcp://127.0.0.1:5020 --unit-ids 1,2,3 --profile gantry-3d``).
 
@@ -62,8 +64,8 @@ _HOMES = {
     "CanopenDrive": "drives.canopen.drive",
     "ModbusDrive": "drives.modbus.drive",
     "Profile": "haptic_bus.app.profiles",
+    "AxesProfile": "haptic_bus.app.profiles",
     "load_profile": "haptic_bus.app.profiles",
-    "load_any_profile": "haptic_bus.app.axes_profile",
     "RunOptions": "haptic_bus.app.run_options",
     "RealtimeSettings": "haptic_bus.app.realtime",
     "run": "haptic_bus.app.runner",
@@ -77,6 +79,7 @@ _HOMES = {
 
 __all__ = [
     "AssumptionBroken",
+    "AxesProfile",
     "CanopenDrive",
     "CheckReport",
     "Detent",
@@ -103,7 +106,6 @@ __all__ = [
     "check_passivity",
     "compile_scene",
     "format_check",
-    "load_any_profile",
     "load_profile",
     "run",
     "run_canopen",
@@ -130,8 +132,7 @@ if TYPE_CHECKING:
     from drives.modbus.drive import ModbusDrive
     from haptic_bus.analysis.check import CheckReport, check_passivity, format_check
     from haptic_bus.analysis.loop import DeviceLoop, WallLoop
-    from haptic_bus.app.axes_profile import load_any_profile
-    from haptic_bus.app.profiles import Profile, load_profile
+    from haptic_bus.app.profiles import AxesProfile, Profile, load_profile
     from haptic_bus.app.realtime import RealtimeSettings
     from haptic_bus.app.run_options import RunOptions
     from haptic_bus.app.runner import RunResult, run, run_canopen, run_modbus

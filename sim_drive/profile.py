@@ -17,7 +17,7 @@ controller tables it checks ``[limits]`` and ``[[scene.objects]]`` where given, 
 (:mod:`haptic_bus.profile.scene`), and leaves the policies (``[profile]``, ``[gate]``, ``[safety]``,
 ``[passivity]``, ``[supervisor]``, ``[start]``) to it; a top-level table no profile has is refused.
 Of an ``[[axes]]`` table it leaves ``mapping`` and ``force_limit`` to the controller, whose reader
-(:mod:`haptic_bus.app.axes_profile`) validates the whole file.  A bare name is looked up among the
+(:mod:`haptic_bus.app.profiles.axes`) validates the whole file.  A bare name is looked up among the
 shipped profiles.
 
 A profile the drive runs is its truth; the controller may be given another profile (what it

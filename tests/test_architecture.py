@@ -334,14 +334,14 @@ def test_one_thread_owns_the_bus_of_a_three_axis_run_and_its_uploads_pass_the_co
     10^6 N/m and accepts a softer one, adopted at a cycle boundary."""
     import threading
 
-    from haptic_bus.app.axes_profile import load_axes_profile
+    from haptic_bus.app.profiles import load_profile
     from haptic_bus.app.rig import simulated_axes_device
     from haptic_bus.app.runner import RunOptions, run
     from haptic_bus.errors import Refusal
     from haptic_bus.node.upload import upload_walls
 
     calls = BusCalls(monkeypatch)
-    profile = load_axes_profile("gantry-3d")
+    profile = load_profile("gantry-3d")
     bus = {"interface": "lockstep", "channel": f"one-thread-{tmp_path.name}"}
     block = [obj.name for obj in profile.space_scene().objects].index("block")
     options = RunOptions(60.0, pacing="virtual", out_dir=tmp_path / "run", live=False, plots=False)

@@ -22,7 +22,7 @@ from drives.cia301 import SYNC_COB_ID
 from drives.cia402 import State
 from drives.errors import DriveError, DriveTimeout, ParameterError
 from drives.safety import VIRTUAL_TIME_DEADLINE
-from haptic_bus.app.axes_profile import AxesProfile, load_axes_profile
+from haptic_bus.app.profiles import AxesProfile, load_profile
 from haptic_bus.app.rig import MultiAxisSim, simulated_axes
 from haptic_bus.control.controller import WallController, encoder_origins
 from tests.raw_bus import queued
@@ -34,11 +34,11 @@ TPDOS = {cob: node for node in NODES for cob in (0x180 + node, 0x280 + node)}
 
 def slope_only(tmp_path: pathlib.Path) -> AxesProfile:
     """gantry-3d with the hand pushing straight at the slope (all three axes in contact within 0.5 s)."""
-    text = pathlib.Path(load_axes_profile("gantry-3d").path or "").read_text()  # type: ignore[arg-type]
+    text = pathlib.Path(load_profile("gantry-3d").path or "").read_text()  # type: ignore[arg-type]
     text = text.replace("toward = [[0.0, -0.03, 0.0], [-0.03, 0.0, 0.0], [0.02, 0.02, 0.01]]", "toward = [0.02, 0.02, 0.01]")
     path = tmp_path / "slope.toml"
     path.write_text(text)
-    return load_axes_profile(path)
+    return load_profile(path)
 
 
 @pytest.fixture

@@ -1,5 +1,5 @@
 """Multi-axis profiles (issue 22): ``[[axes]]`` parsed and validated with one-line errors, the bus
-load and the coupled gate judged on load; one-axis profiles unchanged."""
+load checked and the coupled gate judged on load; one loader for both kinds (issue 26)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,7 @@ import pathlib
 import pytest
 
 from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.app.axes_profile import load_any_profile, load_axes_profile, read_axes_profile
-from haptic_bus.app.profiles import Profile, load_profile
+from haptic_bus.app.profiles import AxesProfile, Profile, load_profile, one_axis_only, read_profile
 from haptic_bus.errors import ParameterError, Refusal
 
 AXIS = """
@@ -86,27 +85,32 @@ def gantry(tmp_path: pathlib.Path, *, bitrate: int = 1_000_000, box_k: float = 1
 
 
 def test_a_gantry_profile_loads_judged_by_the_coupled_gate(tmp_path: pathlib.Path) -> None:
-    profile = load_axes_profile(gantry(tmp_path))
+    profile = load_profile(gantry(tmp_path))
+    assert isinstance(profile, AxesProfile)
     assert [a.name for a in profile.axes] == ["x", "y", "z"] and [a.node_id for a in profile.axes] == [5, 6, 7]
     assert profile.axis_loops()[2] == WallLoop(0.5, 10.0, 1e-3, 0.0, 0.0, 1, "average")
     assert profile.kinematics().size == 3
     load = profile.bus_load()
     assert load is not None and load.bits == 685 and load.load == pytest.approx(0.685)
-    decision = profile.gate().judge(profile.space_scene())
+    decision = profile.judge()
     assert decision.accepted and decision.worst_margin is not None and decision.worst_margin >= 0.5
-    assert isinstance(load_any_profile(profile.path), type(profile))
+    assert read_profile(profile.path or "") == profile  # the same file read, not judged: the same profile
 
 
-def test_one_axis_profiles_are_unchanged_and_refuse_axes(tmp_path: pathlib.Path) -> None:
-    assert isinstance(load_profile("cia402-handle"), Profile)
-    assert isinstance(load_any_profile("cia402-handle"), Profile)
-    with pytest.raises(ParameterError, match=r"axes = '\[\[axes\]\]' is invalid; allowed: no \[\[axes\]\].*load_axes_profile"):
-        load_profile(gantry(tmp_path))
+def test_one_loader_reads_either_kind_and_one_axis_commands_refuse_axes(tmp_path: pathlib.Path) -> None:
+    one, three = load_profile("cia402-handle"), load_profile(gantry(tmp_path))
+    assert isinstance(one, Profile) and isinstance(read_profile("cia402-handle"), Profile)
+    assert isinstance(three, AxesProfile) and len(three.axes) == 3
+    assert one_axis_only(one, "validate") is one
+    with pytest.raises(ParameterError) as refused:
+        one_axis_only(three, "validate")
+    assert str(refused.value) == (f"profile = '{three.path}' is invalid; allowed: a one-axis profile, without "
+                                  "[[axes]] (validate measures one drive; this one has 3 axes)")
 
 
 def test_the_bus_load_is_refused_with_the_load_and_the_smallest_period(tmp_path: pathlib.Path) -> None:
-    with pytest.raises(ParameterError) as refused:
-        load_axes_profile(gantry(tmp_path, bitrate=125_000))
+    with pytest.raises(ParameterError) as refused:  # a profile that cannot run: read refuses it, before any gate
+        read_profile(gantry(tmp_path, bitrate=125_000))
     message = str(refused.value)
     assert "\n" not in message and "loop.period = 0.001" in message
     assert "bus load 548.0 % of 125 kbit/s" in message and "T >= 7.829 ms" in message
@@ -114,7 +118,15 @@ def test_the_bus_load_is_refused_with_the_load_and_the_smallest_period(tmp_path:
 
 def test_a_wall_the_coupled_gate_refuses_is_named(tmp_path: pathlib.Path) -> None:
     with pytest.raises(Refusal, match=r"gantry.toml: passivity gate refused the scene: block \(K = 40000"):
-        load_axes_profile(gantry(tmp_path, box_k=40_000.0))
+        load_profile(gantry(tmp_path, box_k=40_000.0))
+
+
+def test_a_wall_the_coupled_gate_refuses_loads_beyond_the_gate_under_the_bound_layer(tmp_path: pathlib.Path) -> None:
+    """The one rule of both kinds: ``[passivity] beyond_gate`` (bound layer only) loads a scene its gate refuses."""
+    bound = '\n[passivity]\nlayer = "bound"\nbeyond_gate = true\n'
+    profile = load_profile(gantry(tmp_path, box_k=40_000.0, extra=bound))
+    assert isinstance(profile, AxesProfile) and profile.passivity.beyond_gate
+    assert not profile.judge().accepted
 
 
 def _one_axis(**changes: object) -> str:
@@ -143,8 +155,11 @@ def _one_axis(**changes: object) -> str:
 ])
 def test_axes_errors_name_the_field_and_the_allowed_range(tmp_path: pathlib.Path, axes: str, field: str,
                                                           allowed: str) -> None:
+    path = gantry(tmp_path, axes=axes)
+    if not axes:  # an empty array of axes, at the top level where the file's kind is read
+        path.write_text("axes = []\n" + path.read_text())
     with pytest.raises(ParameterError) as error:
-        read_axes_profile(gantry(tmp_path, axes=axes or "axes = []\n"))
+        read_profile(path)
     assert error.value.name == field and allowed in error.value.allowed
     assert "\n" not in str(error.value)
 
@@ -161,6 +176,23 @@ def test_space_errors_name_the_field_and_the_allowed_range(tmp_path: pathlib.Pat
     path = gantry(tmp_path)
     path.write_text(path.read_text().replace(old, new))
     with pytest.raises(ParameterError) as error:
-        read_axes_profile(path)
+        read_profile(path)
     assert isinstance(error.value, ParameterError)
     assert error.value.name == field and allowed in error.value.allowed
+
+
+@pytest.mark.parametrize("argv", [
+    ["identify", "--profile", "gantry-3d", "--node-id", "5", "--interface", "virtual", "--channel", "one-axis-only"],
+    ["validate", "gantry-3d", "--node-id", "5", "--interface", "virtual", "--channel", "one-axis-only"],
+    ["report", "gantry-3d", "--out", "{out}"],
+])
+def test_the_commands_that_measure_one_drive_refuse_axes_in_one_line(argv: list[str], tmp_path: pathlib.Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    from haptic_bus.app.cli import main
+
+    assert main([arg.format(out=tmp_path / "report") for arg in argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"haptic-bus {argv[0]}: error: profile = ")
+    assert err.endswith(f"allowed: a one-axis profile, without [[axes]] ({argv[0]} measures one drive; this one has "
+                        "3 axes)\n")
+    assert not (tmp_path / "report").exists()  # refused before anything is written

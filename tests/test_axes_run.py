@@ -37,9 +37,9 @@ import numpy as np
 import pytest
 
 from drives.cia402 import State
-from haptic_bus.app.axes_profile import load_axes_profile
 from haptic_bus.app.cli import main
 from haptic_bus.app.demo import run_demo
+from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_axes_device
 from haptic_bus.app.runner import RunOptions, RunResult, run
 from tests.cli_process import cli_process, reaped
@@ -47,7 +47,7 @@ from tests.gantry_records import assert_resting_on_the_slope, assert_same_loop, 
 
 START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen and judge the profile first
 RUN_WAIT = 240.0  # s: a 2 000-cycle run across two processes on this loaded 2-CPU machine takes about 10
-GANTRY = pathlib.Path(str(load_axes_profile("gantry-3d").path))
+GANTRY = pathlib.Path(str(load_profile("gantry-3d").path))
 
 
 ROOMY = "\n[safety]\nconsumer_ms = 1000  # the drives' watchdog of the controller's heartbeat: room on a loaded machine\n"
@@ -66,7 +66,7 @@ TARGETS = "toward = [[0.0, -0.03, 0.0], [-0.03, 0.0, 0.0], [0.02, 0.02, 0.01]]"
 
 
 def test_the_demo_renders_a_ball_a_block_and_a_slope_with_k_times_the_penetration(tmp_path: pathlib.Path) -> None:
-    profile = load_axes_profile("gantry-3d")
+    profile = load_profile("gantry-3d")
     result = run_demo(tmp_path / "demo", profile, seconds=12.0)
     assert result.summary.exit_reason == "completed" and result.summary.cycles == 6000
     steady = result.findings.steady
@@ -112,7 +112,7 @@ def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
     assert "ended: completed" in out and code == 0, log
     assert "node 6: stopped after" in log
     one = tmp_path / "one"
-    demo = run_demo(one, load_axes_profile(profile_path), seconds=4.0, plots=False)  # the lock-step bus, one process
+    demo = run_demo(one, load_profile(profile_path), seconds=4.0, plots=False)  # the lock-step bus, one process
     assert demo.summary.exit_reason == "completed", demo.summary.error
     assert not (tmp_path / "two" / "trajectory.png").exists() and not (one / "trajectory.png").exists()  # no plots asked
     two = records(tmp_path / "two")
@@ -124,7 +124,7 @@ def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
 
 def test_the_bus_load_refuses_before_the_bus_is_touched_naming_the_smallest_period(
         tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
-    profile = load_axes_profile("gantry-3d")
+    profile = load_profile("gantry-3d")
     channel = f"load-{tmp_path.name}"
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}).start()
     try:
@@ -148,7 +148,7 @@ def run_started_inside_the_ball(tmp_path: pathlib.Path, **options: Any) -> tuple
     period (s) and each simulated drive's state when the run returned."""
     path = variant(tmp_path, "inside", 'center = [0.0, -0.03, 0.0]       # m: 20 mm from the start along -y',
                    "center = [0.0, -0.005, 0.0]")
-    profile = load_axes_profile(path)
+    profile = load_profile(path)
     channel = f"inside-{tmp_path.name}"
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}).start()
     try:
@@ -278,7 +278,7 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path) -
         text = text.replace(old, new)
     path = tmp_path / "real-time.toml"
     path.write_text(text + ROOMY)
-    profile = load_axes_profile(path)
+    profile = load_profile(path)
     channel = f"real-time-{tmp_path.name}"
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}, clock="wall").start()
     try:
@@ -303,7 +303,7 @@ def test_reset_fault_clears_the_faulted_axis_before_commissioning_and_a_run_with
         tmp_path: pathlib.Path) -> None:
     """Node 6 in FAULT: a run refuses at enabling, naming node 6's fault-reset command, nothing
     enabled; with ``reset_fault`` the run resets node 6 alone (one event in run.json) and runs."""
-    profile = load_axes_profile("gantry-3d")
+    profile = load_profile("gantry-3d")
     bus = {"interface": "lockstep", "channel": f"reset-{tmp_path.name}"}
     sim = simulated_axes_device(profile, bus).start()
     try:
@@ -329,7 +329,7 @@ def test_reset_fault_clears_the_faulted_axis_before_commissioning_and_a_run_with
 def test_a_real_time_run_names_a_faulted_axis_drive_before_pre_flight(tmp_path: pathlib.Path) -> None:
     """One of three drives already in FAULT: the run says so once the drives are reached, naming
     that drive and its error code, before pre-flight's cycles (none: no SYNC), nothing enabled."""
-    profile = load_axes_profile(GANTRY)
+    profile = load_profile(GANTRY)
     channel = f"faulted-{tmp_path.name}"
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}, clock="wall").start()
     try:

@@ -20,10 +20,9 @@ import uuid
 import pytest
 
 from drives.cia402 import State
-from haptic_bus.app.axes_profile import load_axes_profile
 from haptic_bus.app.cli import main
 from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen
-from haptic_bus.app.profiles import read_profile
+from haptic_bus.app.profiles import load_profile, read_profile
 from haptic_bus.app.rig import simulated_axes_device
 from sim_drive.cli import main as sim_main
 from tests.guess_profile import guess_profile
@@ -34,7 +33,7 @@ SIGMAS = 4.0
 
 def test_scan_finds_every_axis_and_identify_measures_one_while_the_others_stay(
         tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
-    gantry = load_axes_profile("gantry-3d")
+    gantry = load_profile("gantry-3d")
     channel = f"axes-sim-{uuid.uuid4().hex[:10]}"
     quiet = gantry.__class__(**{**gantry.__dict__, "operator_model": {"model": "none"}})  # nobody touches the handle
     sim = simulated_axes_device(quiet, {"interface": "virtual", "channel": channel}).start()

@@ -19,8 +19,7 @@ from haptic_bus.analysis.coupled import coupled_verdict
 from haptic_bus.analysis.coupled_limits import passive_along
 from haptic_bus.analysis.coupled_loop import plane_wall
 from haptic_bus.analysis.limits import passive_scales
-from haptic_bus.app.axes_profile import AxesProfile, load_axes_profile
-from haptic_bus.app.profiles import load_profile
+from haptic_bus.app.profiles import AxesProfile, load_profile
 from haptic_bus.app.rig import simulated_axes, simulated_canopen
 from haptic_bus.control.controller import WallController, encoder_origin, encoder_origins
 from haptic_bus.control.record import COLUMNS
@@ -40,7 +39,7 @@ def slab(profile: AxesProfile) -> AxesProfile:
 
 @pytest.fixture
 def gantry(tmp_path: pathlib.Path) -> AxesProfile:
-    return load_axes_profile("gantry-3d")
+    return load_profile("gantry-3d")
 
 
 def test_the_scalar_and_the_axes_path_render_one_wall_alike() -> None:

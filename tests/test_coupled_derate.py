@@ -21,8 +21,8 @@ import pytest
 
 import haptic_bus as hb
 from haptic_bus.app import runner
-from haptic_bus.app.axes_profile import load_axes_profile
 from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, DERATE_EXTRA_DELAYS, prepare_derate
+from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.run_options import RunOptions, StopRequest
 from haptic_bus.control.space_scene import Plane, SpaceScene, compile_space_scene
 from haptic_bus.node.verdicts import judge_pool
@@ -31,7 +31,7 @@ from sim_drive.profile import read_simulated_device
 from tests.run_rig import late_clock
 
 K, B = 6000.0, 5.0  # N/m, N s/m
-GANTRY = pathlib.Path(str(load_axes_profile("gantry-3d").path))
+GANTRY = pathlib.Path(str(load_profile("gantry-3d").path))
 TABLE_WAIT = 300.0  # s of wall clock: a bound on a hang of the judge worker, not a pace
 PERIOD = 2e-3  # s: gantry-3d's T
 LATE = {k: 0.6 * PERIOD for k in range(100, 130)}  # cycles 100..129 0.6 T late: the 11th is cycle 110, D = 1.6 seen
@@ -42,7 +42,7 @@ def plane() -> SpaceScene:
 
 
 def test_the_coupled_table_holds_the_largest_scale_the_gate_passes_at_each_prepared_delay() -> None:
-    profile = load_axes_profile("gantry-3d")
+    profile = load_profile("gantry-3d")
     gate, scene = profile.gate(), plane()
     derate = prepare_derate(gate, scene, COUPLED_SCALE_STEPS)
     assert derate(scene, 1.2) is not None and derate(scene, 1.2)[1] is scene  # D = 1.25 still passes it whole
@@ -117,13 +117,13 @@ def test_a_late_three_axis_run_derates_to_the_scene_the_coupled_gate_passes_at_t
     path, sim = modbus_axes
     out = tmp_path / "run"
     options = RunOptions(duration=0.5, pacing="virtual", out_dir=out, live=False, plots=False, stop=StopRequest())
-    result = hb.run(load_axes_profile(path), sim.urls[0], options, unit_ids=[1, 2, 3])
+    result = hb.run(load_profile(path), sim.urls[0], options, unit_ids=[1, 2, 3])
     assert result.exit_reason == "completed", result.error
     document = json.loads((out / "run.json").read_text())
     first, derated = document["scenes"]
     assert derated["scene_id"] == 1 and derated["origin"] == "derate to a loop delay of 1.6 samples"
     (wall,) = derated["objects"]
-    expected = prepare_derate(load_axes_profile(path).gate(), plane(), COUPLED_SCALE_STEPS)(plane(), 1.6)
+    expected = prepare_derate(load_profile(path).gate(), plane(), COUPLED_SCALE_STEPS)(plane(), 1.6)
     assert expected is not None
     assert wall["stiffness"] == expected[1].objects[0].stiffness and wall["damping"] == expected[1].objects[0].damping
     margin = derated["decision"]["worst_margin"]

@@ -29,8 +29,8 @@ import pytest
 
 import haptic_bus as hb
 from drives.cia402 import State
-from haptic_bus.app.axes_profile import load_axes_profile
 from haptic_bus.app.cli import main
+from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.run_options import RunOptions, StopRequest
 from haptic_bus.app.steady_state import contact
 from sim_drive.modbus.multi_axis import MultiAxisModbusSim
@@ -38,7 +38,7 @@ from sim_drive.profile import read_simulated_device
 from tests.cli_process import cli_process, reaped
 from tests.gantry_records import assert_resting_on_the_slope, assert_same_loop, records
 
-GANTRY = pathlib.Path(str(load_axes_profile("gantry-3d").path))
+GANTRY = pathlib.Path(str(load_profile("gantry-3d").path))
 TARGETS = "toward = [[0.0, -0.03, 0.0], [-0.03, 0.0, 0.0], [0.02, 0.02, 0.01]]"
 UNITS = (1, 2, 3)
 CYCLING_WAIT = 60.0  # s of wall clock: a bound on a hang, not a pace
@@ -90,7 +90,7 @@ def watch_states(sim: MultiAxisModbusSim) -> list[list[State]]:
 def test_three_units_rest_on_the_slope_the_same_on_one_server_or_three(
         tmp_path: pathlib.Path, modbus_gantry: Callable[..., MultiAxisModbusSim]) -> None:
     path = slope_profile(tmp_path)
-    profile = load_axes_profile(path)
+    profile = load_profile(path)
     runs = {}
     for servers in (1, 3):
         sim = modbus_gantry(path, servers)
@@ -138,7 +138,7 @@ def test_a_server_that_is_not_there_is_one_line(tmp_path: pathlib.Path, modbus_g
     sim = modbus_gantry("gantry-3d", 3)
     seen = watch_states(sim)
     urls = [*sim.urls[:2], f"tcp://127.0.0.1:{free_port}"]  # the third axis' server is not there
-    result = hb.run(load_axes_profile("gantry-3d"), urls, options(tmp_path / "run", 1.0), unit_ids=list(UNITS))
+    result = hb.run(load_profile("gantry-3d"), urls, options(tmp_path / "run", 1.0), unit_ids=list(UNITS))
     assert result.exit_reason == "drive error" and result.summary is None
     assert result.error == f"Modbus unit 3 at {urls[2]}: cannot connect within 0.5 s (is the drive/server up, the address right?)"
     assert seen == [[], [], []]
@@ -168,7 +168,7 @@ def test_one_axis_fault_stops_every_axis_and_reset_fault_clears_it_before_the_ne
     left without torque; the next run is refused at enabling with the command that clears unit 2;
     a run with ``reset_fault`` resets unit 2 first (an event in run.json) and runs."""
     sim = modbus_gantry()
-    profile = load_axes_profile("gantry-3d")
+    profile = load_profile("gantry-3d")
     faulty = sim.units[1]
     run_options = options(tmp_path / "faulted", 10.0)
     ended: list[hb.RunResult] = []
@@ -206,7 +206,7 @@ def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(
     its overruns under 1 % (issue 26, "Modbus")."""
     sim = modbus_gantry()
     seen = watch_states(sim)
-    result = hb.run(load_axes_profile("gantry-3d"), sim.urls[0], options(tmp_path / "run", 1.0, pacing="wall"),
+    result = hb.run(load_profile("gantry-3d"), sim.urls[0], options(tmp_path / "run", 1.0, pacing="wall"),
                     unit_ids=list(UNITS))
     document = json.loads((tmp_path / "run" / "run.json").read_text())
     assert "preflight" in document, sorted(document)
@@ -244,6 +244,6 @@ def test_unit_ids_from_the_profile(tmp_path: pathlib.Path, modbus_gantry: Callab
     path.write_text(text)
     assert [axis.unit_id for axis in read_simulated_device(path).axes] == [11, 12, 13]
     sim = modbus_gantry(path, 1, (11, 12, 13))
-    result = hb.run(load_axes_profile(path), sim.urls[0], options(tmp_path / "run", 0.2))
+    result = hb.run(load_profile(path), sim.urls[0], options(tmp_path / "run", 0.2))
     assert result.exit_reason == "completed", result.error
     assert json.loads((tmp_path / "run" / "run.json").read_text())["link"]["unit_ids"] == [11, 12, 13]

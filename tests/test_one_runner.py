@@ -51,7 +51,7 @@ def test_one_call_runs_one_axis_and_three_through_one_session(haptic_sim, sessio
     drive = haptic_sim("cia402-handle", interface="lockstep", node_id=5)
     single = hb.run(one, drive.bus, hb.RunOptions(DURATION, out_dir=tmp_path / "one", **options), node_id=5)
 
-    three = hb.load_any_profile("gantry-3d")
+    three = hb.load_profile("gantry-3d")
     bus = {"interface": "lockstep", "channel": f"three-{tmp_path.name}"}
     sim = simulated_axes_device(three, bus).start()
     try:
@@ -82,5 +82,5 @@ def test_a_call_that_names_no_drive_is_refused_before_anything_is_touched(
         profile: str, bus: Any, node_id: int | None, named: str, tmp_path: pathlib.Path) -> None:
     options = hb.RunOptions(DURATION, pacing="virtual", out_dir=tmp_path / "run", live=False)
     with pytest.raises(hb.ParameterError, match=f"^run: {named} "):
-        hb.run(hb.load_any_profile(profile), bus, options, node_id=node_id)
+        hb.run(hb.load_profile(profile), bus, options, node_id=node_id)
     assert not (tmp_path / "run").exists()

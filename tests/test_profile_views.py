@@ -125,11 +125,11 @@ def test_identification_is_written_and_read_as_one_table(tmp_path: pathlib.Path)
 
 
 def test_both_views_of_a_multi_axis_profile_refuse_a_bad_axis_with_the_same_line(tmp_path: pathlib.Path) -> None:
-    from haptic_bus.app.axes_profile import read_axes_profile
+    from haptic_bus.app.profiles import read_profile
     path = _variant(tmp_path, "\nmass = 0.5\n", "\nmass = -0.5\n", "gantry-3d")
-    assert "[1e-09, 1e+09] kg" in _same_line(path, (read_axes_profile, read_simulated_device), "axes[2].device.mass")
+    assert "[1e-09, 1e+09] kg" in _same_line(path, (read_profile, read_simulated_device), "axes[2].device.mass")
     truth = read_simulated_device("gantry-3d")
-    believed = read_axes_profile("gantry-3d")
+    believed = read_profile("gantry-3d")
     assert [(a.name, a.node_id, a.parameters.mass, a.parameters.friction) for a in truth.axes] == [
         (a.name, a.node_id, a.device.mass, a.device.friction) for a in believed.axes]
 
@@ -155,9 +155,9 @@ def test_profiles_check_and_show_judge_a_multi_axis_profile_by_the_coupled_gate(
         tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     import json
 
-    from haptic_bus.app.axes_profile import load_axes_profile
+    from haptic_bus.app.profiles import load_profile
 
-    profile = load_axes_profile("gantry-3d")
+    profile = load_profile("gantry-3d")
     decision = profile.gate().judge(profile.space_scene())
     assert haptic_bus_main(["profiles", "check", "gantry-3d", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)

@@ -159,7 +159,7 @@ def test_seed_profile_with_cia402_timing_is_refused(tmp_path):
     path = write(tmp_path, text, "seed-cia402.toml")
     with pytest.raises(Refusal) as caught:
         load_profile(path)
-    assert str(caught.value).startswith(f"profile {path}: passivity gate refused the change: ")
+    assert str(caught.value).startswith(f"profile {path}: passivity gate refused the scene: ")
     assert str(path) in str(caught.value)
     (wall,) = caught.value.decision.walls
     assert wall.verdict.margin == pytest.approx(-84.09, abs=0.01)  # haptic-bus check --delay 1
@@ -309,7 +309,9 @@ def ns(**kw) -> argparse.Namespace:
 def test_cli_list(capsys):
     assert cmd_list(ns(json=True)) == 0
     rows = json.loads(capsys.readouterr().out)
-    assert {r["name"] for r in rows} == set(SHIPPED) and all(r["status"] == "ok" for r in rows)
+    assert {r["name"] for r in rows} == set(SHIPPED) | {"gantry-3d"} and all(r["status"] == "ok" for r in rows)
+    (gantry,) = [r for r in rows if r["name"] == "gantry-3d"]  # the multi-axis kind listed beside the one-axis
+    assert gantry["axes"] == ["x", "y", "z"] and gantry["objects"] == 3 and gantry["worst_margin"] > 0
 
 
 def test_cli_show(capsys):

@@ -33,6 +33,15 @@ def test_every_public_name_resolves():
     assert issubclass(hb.AssumptionBroken, hb.HapticBusError)
 
 
+def test_one_loader_reads_either_kind_of_profile():
+    """``hb.load_profile`` is the one loader: a file without ``[[axes]]`` is a Profile, one with it an
+    AxesProfile (its node ids from the file); no second loader beside it."""
+    assert isinstance(hb.load_profile("cia402-handle"), hb.Profile)
+    three = hb.load_profile("gantry-3d")
+    assert isinstance(three, hb.AxesProfile) and [axis.node_id for axis in three.axes] == [5, 6, 7]
+    assert not hasattr(hb, "load_any_profile") and "load_any_profile" not in hb.__all__
+
+
 def test_the_docstring_example_runs_as_written(haptic_sim, recorded_run, tmp_path, monkeypatch):
     """The example, against the simulated drive of the same profile in this process on a lock-step
     bus of this test's own instead of the documented udp_multicast bus (another process, as the

@@ -18,7 +18,6 @@ import uuid
 
 import pytest
 
-from haptic_bus.app.axes_profile import load_axes_profile
 from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_axes, simulated_canopen
@@ -94,7 +93,7 @@ def test_haptic_bus_upload_of_a_wall_s_k_from_0_onto_the_handle_is_one_line_exit
 
 
 def test_three_axes_refuse_a_plane_moved_onto_the_handle_and_take_the_one_it_presses_stiffer() -> None:
-    gantry = load_axes_profile("gantry-3d")
+    gantry = load_profile("gantry-3d")
     normal = (1.0, 1.0, 0.0)
     slab = Plane("slab", (0.002, 0.002, 0.0), normal, 1500.0, 5.0)  # the handle starts 2.83 mm inside
     shelf = Plane("shelf", (0.0, 0.0, 0.001), (0.0, 0.0, 1.0), 800.0, 5.0)  # 1 mm above it: inside at once

@@ -31,7 +31,7 @@ import math
 import sys
 from typing import Any
 
-from haptic_bus.app.axes_profile import AxesProfile
+from haptic_bus.app.profiles import AxesProfile
 from haptic_bus.app.run_folder import RUNNING, software_versions
 from haptic_bus.control.controller import WallController
 from haptic_bus.control.cycle_loop import RunSummary

@@ -160,10 +160,10 @@ def _plot(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from haptic_bus.app.axes_profile import load_any_profile
     from haptic_bus.app.demo import format_demo, run_demo
+    from haptic_bus.app.profiles import load_profile
 
-    profile = load_any_profile(args.profile) if args.profile else None
+    profile = load_profile(args.profile) if args.profile else None
     result = run_demo(args.out, profile, seconds=args.duration, plots=not args.no_plots)
     print(format_demo(result))
     reason = result.summary.exit_reason
@@ -171,13 +171,13 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
     from haptic_bus.app.drive_address import DEFAULT_UNIT_ID
+    from haptic_bus.app.profiles import AxesProfile, load_profile
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
     from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
     from haptic_bus.app.runner import run
 
-    profile = load_any_profile(args.profile)
+    profile = load_profile(args.profile)
     bus: Any
     unit_ids = None
     if isinstance(profile, AxesProfile):  # the node ids (or unit ids) come from [[axes]], or --unit-ids
@@ -255,10 +255,10 @@ def _upload(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from haptic_bus.app.profiles import load_profile
+    from haptic_bus.app.profiles import load_profile, one_axis_only
     from haptic_bus.app.report import write_report
 
-    profile = load_profile(args.profile)
+    profile = one_axis_only(load_profile(args.profile), "report")
     for path in write_report(profile, writable_folder("--out", args.out, context="report")):
         print(f"wrote {path}")
     return EXIT_OK

@@ -17,10 +17,9 @@ from contextlib import ExitStack
 from dataclasses import dataclass
 from typing import Any
 
-from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.demo_kinds import Findings, demo_kind
 from haptic_bus.app.folder_lock import own_folder
-from haptic_bus.app.profiles import Profile, default_profile
+from haptic_bus.app.profiles import AxesProfile, Profile, default_profile
 from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
 from haptic_bus.app.run_kinds import run_kind
 from haptic_bus.app.run_recorder import RunRecorder

@@ -19,8 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from haptic_bus.app.axes_profile import AxesProfile
-from haptic_bus.app.profiles import Profile
+from haptic_bus.app.profiles import AxesProfile, Profile
 from haptic_bus.app.rig import simulated_axes, simulated_canopen
 from haptic_bus.app.steady_state import SteadyState, dwell_ends, steady_state, tour_seconds
 from haptic_bus.control.controller import WallController

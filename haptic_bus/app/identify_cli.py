@@ -89,13 +89,13 @@ def run_identify(args: argparse.Namespace) -> int:
     """The ``identify`` handler: validate, run, report, write the profile; the exit status."""
     from haptic_bus.app.identify_profile import write_identified_profile
     from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen, identify_modbus
-    from haptic_bus.app.profiles import read_profile
+    from haptic_bus.app.profiles import one_axis_only, read_profile
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
     from haptic_bus.app.run_options import VIRTUAL, WALL, StopRequest
     from haptic_bus.profile.device import TIMINGS
 
     address, target = _validate(args)
-    profile = read_profile(args.profile)
+    profile = one_axis_only(read_profile(args.profile), "identify")
     if target is not None and profile.path is not None and target.resolve() == profile.path.resolve():
         raise ParameterError("--write-profile", args.write_profile, "a new file, not the --profile itself", "identify")
     stop = StopRequest()

@@ -1,15 +1,14 @@
 """``haptic-bus profiles show|check``'s view of a profile, either kind, as text or JSON: a one-axis
-profile (device, loop, scene, operator model and the gate's decision, :mod:`haptic_bus.app.profiles`)
+profile (device, loop, scene, operator model and the gate's decision, :mod:`haptic_bus.app.profiles.one_axis`)
 and a multi-axis profile (``[[axes]]``: its axes, its scene in space and the coupled gate's decision,
-:mod:`haptic_bus.app.axes_profile`).  SI units, as in the TOML.
+:mod:`haptic_bus.app.profiles.axes`).  SI units, as in the TOML.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from haptic_bus.app.axes_profile import AxesProfile
-from haptic_bus.app.profiles import Profile
+from haptic_bus.app.profiles import AxesProfile, Profile
 from haptic_bus.control.gate import GateDecision
 from haptic_bus.control.scene import object_to_dict
 from haptic_bus.control.space_gate import SpaceDecision

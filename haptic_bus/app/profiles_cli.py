@@ -26,14 +26,15 @@ from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE, DeviceLoop
 from haptic_bus.analysis.two_mass import TwoMassLoop
 from haptic_bus.analysis.two_mass_check import TwoMassReport, check_two_mass_loop, format_two_mass
 from haptic_bus.app.arguments import number, timeout
-from haptic_bus.app.axes_profile import is_axes_profile, judge_axes_profile
 from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
 from haptic_bus.app.profile_view import axes_profile_to_dict, format_axes_profile, format_profile, gate_decision_to_dict
 from haptic_bus.app.profiles import (
     DEFAULT_PROFILE,
     FORCE_RANGE,
     NAME_PATTERN,
-    load_profile,
+    AxesProfile,
+    Profile,
+    admit,
     profile_to_dict,
     read_profile,
     resolve_profile,
@@ -55,19 +56,26 @@ def _refused(command: str, refusal: Refusal) -> int:
     return EXIT_NO
 
 
+def _list_row(profile: Profile | AxesProfile) -> dict[str, Any]:
+    """One row of ``profiles list``: the loop (one axis: timing, delay, velocity, m kg, b N s/m; several: the
+    axes' names), the period T s, the objects and the gate's worst margin (N s/m); Refusal as :func:`admit`."""
+    decision = admit(profile)
+    row: dict[str, Any] = {"status": "ok", "worst_margin": decision.worst_margin, "warnings": len(decision.warnings),
+                           "task": profile.task}
+    if isinstance(profile, AxesProfile):
+        return row | {"axes": [axis.name for axis in profile.axes], "period": profile.period, "objects": len(profile.space)}
+    return row | {"timing": profile.loop.timing, "delay": profile.loop.delay, "velocity": str(profile.device.velocity),
+                  "mass": profile.device.mass, "friction": profile.device.friction, "period": profile.loop.period,
+                  "objects": len(profile.scene)}
+
+
 def cmd_list(args: argparse.Namespace) -> int:
-    """List the shipped profiles with their loop and gate verdict; 0 if all load, else 1 or 2."""
+    """List the shipped profiles, one axis and several, with their loop and gate verdict; 0 if all load, else 1 or 2."""
     rows, status = [], EXIT_OK
-    for name, path in shipped_profiles().items():
+    for name, path in sorted({**shipped_profiles(), **shipped_profiles(axes=True)}.items()):
         row: dict[str, Any] = {"name": name, "path": str(path), "default": name == DEFAULT_PROFILE}
         try:
-            profile = load_profile(path)
-            decision = profile.gate().judge(profile.compiled_scene())
-            row.update(status="ok", timing=profile.loop.timing, delay=profile.loop.delay,
-                       velocity=str(profile.device.velocity), mass=profile.device.mass,
-                       friction=profile.device.friction, period=profile.loop.period,
-                       objects=len(profile.scene), worst_margin=decision.worst_margin,
-                       warnings=len(decision.warnings), task=profile.task)
+            row.update(_list_row(read_profile(path)))
         except ParameterError as error:
             row.update(status="invalid", error=str(error))
             status = EXIT_INVALID
@@ -85,43 +93,40 @@ def cmd_list(args: argparse.Namespace) -> int:
             continue
         margin = "-" if row["worst_margin"] is None else f"{row['worst_margin']:+.4g} N s/m"
         warn = f", {row['warnings']} warning(s)" if row["warnings"] else ""
-        print(f"{mark} {row['name']:<18} {row['timing']:<6} m={row['mass']:g} kg b={row['friction']:g} N s/m "
-              f"T={row['period']:g} s  {row['objects']} object(s), worst margin {margin}{warn}  -- {row['task']}")
+        loop = (f"{len(row['axes'])} axes ({', '.join(row['axes'])})" if "axes" in row else
+                f"{row['timing']:<6} m={row['mass']:g} kg b={row['friction']:g} N s/m")
+        print(f"{mark} {row['name']:<18} {loop} T={row['period']:g} s  {row['objects']} object(s), "
+              f"worst margin {margin}{warn}  -- {row['task']}")
     print("(* = default profile)")
     return status
 
 
-def _axes_profile(command: str, args: argparse.Namespace) -> int | None:
-    """``show``/``check`` of a multi-axis profile (``[[axes]]``) through its own reader and the coupled
-    gate: 0 (check: the gate accepts), 1 (check: it refuses), 2 invalid; None for a one-axis profile."""
-    try:
-        path = resolve_profile(args.profile)
-        if not is_axes_profile(path):
-            return None
-        profile, decision = judge_axes_profile(path)
-    except HapticBusError as error:
-        return _fail(command, error)
-    print(json.dumps(axes_profile_to_dict(profile, decision)) if args.json else format_axes_profile(profile, decision))
-    return EXIT_OK if command == "show" or decision.accepted else EXIT_NO
-
-
 def cmd_show(args: argparse.Namespace) -> int:
-    """Print one profile (default: the default profile) and the gate's decision on it."""
-    axes = _axes_profile("show", args)
-    if axes is not None:
-        return axes
+    """Print one profile (default: the default profile) and the gate's decision on it: 0; 1 a one-axis
+    profile its gate refuses (a multi-axis one is shown with the coupled gate's refusal); 2 invalid."""
     try:
-        profile = load_profile(args.profile)
+        profile = read_profile(args.profile)
     except ParameterError as error:
         return _fail("show", error)
+    if isinstance(profile, AxesProfile):
+        return _show_axes(profile, args.json, "show")
+    try:
+        decision = admit(profile)
     except Refusal as refusal:
         return _refused("show", refusal)
-    decision = profile.gate().judge(profile.compiled_scene())
     if args.json:
         print(json.dumps(profile_to_dict(profile) | {"gate_decision": gate_decision_to_dict(decision)}))
     else:
         print(format_profile(profile, decision))
     return EXIT_OK
+
+
+def _show_axes(profile: AxesProfile, as_json: bool, command: str) -> int:
+    """``show``/``check`` of a multi-axis profile: its axes, its scene and the coupled gate's decision;
+    0 (check: the gate accepts), 1 (check: it refuses)."""
+    decision = profile.judge()
+    print(json.dumps(axes_profile_to_dict(profile, decision)) if as_json else format_axes_profile(profile, decision))
+    return EXIT_OK if command == "show" or decision.accepted else EXIT_NO
 
 
 def _still_missing(path: pathlib.Path) -> int | None:
@@ -133,8 +138,10 @@ def _still_missing(path: pathlib.Path) -> int | None:
             document = tomllib.load(file)
     except (OSError, ValueError):  # TOMLDecodeError and UnicodeDecodeError are ValueErrors
         return None  # the loader says what is wrong with the file
+    if not set(document) <= set(ONE_AXIS_TABLES):  # a misspelt table (the loader names it), or [[axes]]
+        return None
     lacking = missing(document)
-    if not lacking or not set(document) <= set(ONE_AXIS_TABLES):  # a misspelt table: the loader names it
+    if not lacking:
         return None
     print(f"profile {path}: {len(lacking)} value{'s' if len(lacking) > 1 else ''} still missing:")
     for ask in lacking:
@@ -154,15 +161,15 @@ def _wall_report(device: DeviceLoop, K: float, B: float) -> CheckReport | TwoMas
 def cmd_check(args: argparse.Namespace) -> int:
     """``haptic-bus check`` on every contact wall of a profile; 0 passive (gate admits), 1 not, 2 invalid
     (a value missing: every one listed); a multi-axis profile: the coupled gate's verdict."""
-    axes = _axes_profile("check", args)
-    if axes is not None:
-        return axes
     try:
         lacking = _still_missing(resolve_profile(args.profile))
         if lacking is not None:
             return lacking
-        profile = read_profile(args.profile)
-        decision = profile.gate().judge(profile.compiled_scene())
+        read = read_profile(args.profile)
+        if isinstance(read, AxesProfile):
+            return _show_axes(read, args.json, "check")
+        profile = read
+        decision = profile.judge()
         loop, device_loop = profile.loop, profile.device_loop()
         walls = []
         for (K, B), names in sorted(profile.compiled_scene().contacts().items()):

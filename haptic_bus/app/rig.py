@@ -26,8 +26,7 @@ from typing import Any, cast
 from drives.canopen.axes import CanopenAxes
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, SafetySettings
-from haptic_bus.app.axes_profile import AxesProfile
-from haptic_bus.app.profiles import Profile
+from haptic_bus.app.profiles import AxesProfile, Profile
 from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits
 from sim_drive.canopen.multi_axis import MultiAxisSim
 from sim_drive.canopen.slave import CanopenSimDrive

@@ -27,11 +27,10 @@ from collections.abc import Callable, Sequence
 from typing import Any, Protocol, TypeVar
 
 from haptic_bus.app import preflight
-from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.axes_records import axes_run_document, record_files, space_scene_dicts
 from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, Derate, asks_derate, prepare_derate
 from haptic_bus.app.profile_policies import StartPolicy
-from haptic_bus.app.profiles import Profile
+from haptic_bus.app.profiles import AxesProfile, Profile
 from haptic_bus.app.run_folder import RECORD_CSV, gate_loop, run_document, scene_dicts
 from haptic_bus.control.clock import CycleClock
 from haptic_bus.control.controller import WallController, encoder_origin, encoder_origins

@@ -28,9 +28,8 @@ from typing import TYPE_CHECKING, Any
 from drives.bus_config import resolve_bus_config
 from drives.cia402 import State
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings, patient
-from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.drive_address import DEFAULT_UNIT_ID, DriveAddress
-from haptic_bus.app.profiles import Profile
+from haptic_bus.app.profiles import AxesProfile, Profile
 from haptic_bus.app.run_options import RunOptions
 from haptic_bus.control.bus_load import axes_bus_load
 from haptic_bus.errors import DriveError, ParameterError, Refusal

@@ -69,10 +69,9 @@ from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.fault_reset import DEFAULT_WAIT
 from drives.os_threads import show_names
 from haptic_bus.app import preflight
-from haptic_bus.app.axes_profile import AxesProfile
 from haptic_bus.app.drive_address import DEFAULT_UNIT_ID, DriveAddress
 from haptic_bus.app.folder_lock import own_folder
-from haptic_bus.app.profiles import Profile
+from haptic_bus.app.profiles import AxesProfile, Profile
 from haptic_bus.app.realtime import RealtimeReport, realtime_session
 from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
 from haptic_bus.app.run_kinds import RunKind, run_kind

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptic_bus.app.axes_profile import AxesProfile
+from haptic_bus.app.profiles import AxesProfile
 from haptic_bus.app.rig import MultiAxisSim
 from haptic_bus.control.controller import WallController
 from haptic_bus.control.space_gate import SpaceDecision

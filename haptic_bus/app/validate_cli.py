@@ -33,7 +33,6 @@ from haptic_bus.app.run_arguments import (
     one_axis_link,
     scheduling,
 )
-from haptic_bus.errors import ParameterError
 from haptic_bus.identify.bounds import DEFAULT_TRAVEL, TRAVEL_RANGE
 
 VALIDATE_HELP = "check the closed loop on the device against the model's exact prediction (no operator needed)"
@@ -58,15 +57,13 @@ def add_validate_parser(subparsers: argparse._SubParsersAction) -> argparse.Argu
 
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``haptic-bus validate``; return the exit status (module docstring)."""
-    from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
+    from haptic_bus.app.profiles import load_profile, one_axis_only
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
     from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
     from haptic_bus.app.validate_run import validate_drive
     from haptic_bus.validation import folder_path
 
-    profile = load_any_profile(args.profile)
-    if isinstance(profile, AxesProfile):
-        raise ParameterError("profile", args.profile, "a one-axis profile (validate probes one drive)")
+    profile = one_axis_only(load_profile(args.profile), "validate")
     address = one_axis_link(args, "validate")
     bus: Any = address.url if address.url is not None else address.bus
     out_dir = None if args.out is None else folder_path("--out", args.out, context="validate")

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from drives.safety import DEFAULT_SAFETY
-from haptic_bus.app.profiles import load_profile, shipped_profiles
+from haptic_bus.app.profiles import load_profile, one_axis_only, shipped_profiles
 from haptic_bus.app.rig import simulated_canopen
 from haptic_bus.bench.size import Size
 from haptic_bus.control.clock import ScheduledClock, VirtualClock, adversarial_starts
@@ -38,7 +38,7 @@ SEED = 1  # the adversarial schedule's seed
 
 def measure(profile_name: str, layer: str, adversarial: bool, seconds: float) -> dict[str, float | None]:
     """One run of ``profile_name`` under ``layer``: the figures of the module docstring."""
-    profile = load_profile(profile_name)
+    profile = one_axis_only(load_profile(profile_name), "bench")
     period = profile.loop.period
     cycles = round(seconds / period)
     clock: ScheduledClock | VirtualClock

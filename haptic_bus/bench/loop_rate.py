@@ -31,7 +31,7 @@ from collections.abc import Callable
 import numpy as np
 
 from drives.base import Drive
-from haptic_bus.app.profiles import Profile, load_profile
+from haptic_bus.app.profiles import Profile, load_profile, one_axis_only
 from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import REPEATS, Spread, paired, repeated, timed_once
 from haptic_bus.control.clock import VirtualClock
@@ -160,7 +160,7 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     from haptic_bus.bench.hot_path import bench_pdo_codecs
 
     cycles = size.pick(300, 500, 20_000)
-    profile = load_profile(PROFILE)
+    profile = one_axis_only(load_profile(PROFILE), "bench")
     links: dict[str, dict] = {}
     trajectories: dict[str, np.ndarray] = {}
 

@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from drives.base import CyclicInputs, Drive, DriveCycle
-from haptic_bus.app.profiles import load_profile
+from haptic_bus.app.profiles import load_profile, one_axis_only
 from haptic_bus.control.controller import WallController
 
 PROFILE = "cia402-handle"
@@ -70,7 +70,7 @@ def run(cycles: int = CYCLES, tick: Callable[[str], None] = lambda _: None) -> d
     """The soak; returns its section of ``bench.json``."""
     from haptic_bus.app.rig import operator_from_table, simulated_canopen
 
-    profile = load_profile(PROFILE)
+    profile = one_axis_only(load_profile(PROFILE), "bench")
     chunk = max(1, cycles // SAMPLES)
     with simulated_canopen(profile, operator=operator_from_table(OPERATOR)) as (_, drive):
         controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,

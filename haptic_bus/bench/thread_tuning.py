@@ -42,8 +42,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from haptic_bus.app.axes_profile import load_any_profile, load_axes_profile
-from haptic_bus.app.profiles import load_profile
+from haptic_bus.app.profiles import AxesProfile, load_profile, one_axis_only
 from haptic_bus.app.realtime import RealtimeSettings, realtime_session
 from haptic_bus.app.writer_process import COMM as WRITER_COMM
 from haptic_bus.bench.size import Size
@@ -219,7 +218,7 @@ def controller_run(settings: RealtimeSettings, duration: float, bus: dict, proce
     profile's) against the simulated drive ``process`` on ``bus``, ramped in if it starts in contact."""
     from haptic_bus.app.runner import RunOptions, run
 
-    profile = load_any_profile(profile_name)
+    profile = load_profile(profile_name)
     with tempfile.TemporaryDirectory() as out:
         with ThreadCpu() as threads:
             result = run(profile, bus, RunOptions(duration, pacing="wall", out_dir=Path(out) / "run", live=False,
@@ -241,7 +240,7 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     from haptic_bus.bench.processes import canopen_simulator, cpu_hogs
 
     duration = size.pick(0.3, 1.0, 15.0)
-    period = load_profile(PROFILE).loop.period
+    period = one_axis_only(load_profile(PROFILE), "bench").loop.period
     hogs = os.cpu_count() or 1
     runs: dict[str, dict] = {}
     with canopen_simulator(PROFILE, (NODE_ID,), "--operator", HAND) as (bus, process):
@@ -288,7 +287,8 @@ def axes_runs(size: Size, duration: float) -> dict:
     quiet (and, beyond the smoke size, beside the hogs), each beside python-can's floor for its cycle."""
     from haptic_bus.bench.processes import canopen_simulator, cpu_hogs
 
-    period = load_axes_profile(AXES_PROFILE).period
+    axes = load_profile(AXES_PROFILE)
+    period = axes.period if isinstance(axes, AxesProfile) else axes.loop.period
     loads = ("quiet",) if size.pick(True, False, False) else ("quiet", "CPU hog")
     out: dict = {"profile": AXES_PROFILE, "node_ids": list(AXES_NODE_IDS), "period_s": period}
     try:

@@ -15,6 +15,6 @@ the simulated drive (:mod:`sim_drive`) read profiles through it:
   here so the simulator refuses their mistakes with the same line.
 
 The controller builds its scene from those tables and reads its policies (gate, safety, passivity,
-supervisor, start) in :mod:`haptic_bus.app.profiles` and :mod:`haptic_bus.app.axes_profile`, which
+supervisor, start) in :mod:`haptic_bus.app.profiles` (a module per kind: ``one_axis``, ``axes``), which
 need the control layer's types.
 """

@@ -3,7 +3,7 @@
 :func:`read_plant` reads ``[device]``, ``[loop]``, ``[operator_model]`` and ``[identification]``
 of a profile's document and checks them together (the velocity model against the period; the
 declared device against what was measured).  The controller's view
-(:func:`haptic_bus.app.profiles.read_profile`) adds its own tables (limits, gate, scene, policies);
+(:func:`haptic_bus.app.profiles.one_axis.read_one_axis`) adds its own tables (limits, gate, scene, policies);
 the simulated drive's view (:func:`sim_drive.profile.read_simulated_device`) builds its plant and operator
 from the same :class:`PlantTables`, with its own defaults where the file is silent.
 """

@@ -1,6 +1,6 @@
 """The controller's ``[limits]`` and ``[[scene.objects]]`` of a one-axis profile, checked here so the
 simulated drive refuses the same mistakes with the same line (it runs neither; the controller
-builds its scene from what :func:`read_scene` returns, :mod:`haptic_bus.app.profiles`).
+builds its scene from what :func:`read_scene` returns, :mod:`haptic_bus.app.profiles.one_axis`).
 """
 
 from __future__ import annotations

@@ -114,7 +114,7 @@ from haptic_bus.testing.run_files import RecordedRun, read_run_folder
 from haptic_bus.testing.simulated import CONTEXT, ProfileSource, SimDriveNode, start_axes, start_sim_drive, write_truth
 
 if TYPE_CHECKING:
-    from haptic_bus.app.profiles import Profile
+    from haptic_bus.app.profiles import AxesProfile, Profile
 
 __all__ = [
     "BusSpec",
@@ -207,15 +207,14 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
     _each(reversed(started), _stop_cleanly)
 
 
-def _axes_profile(profile: ProfileSource | None) -> pathlib.Path | None:
-    """The path of ``profile`` if it is a multi-axis one (``[[axes]]``), else None."""
+def _axes_profile(profile: ProfileSource | None) -> AxesProfile | None:
+    """``profile`` read (validated, not judged) if it is a multi-axis one (``[[axes]]``), else None."""
     if profile is None:
         return None
-    from haptic_bus.app.axes_profile import is_axes_profile
-    from haptic_bus.profile.files import resolve_profile
+    from haptic_bus.app.profiles import AxesProfile, read_profile
 
-    path = resolve_profile(profile)
-    return path if is_axes_profile(path) else None
+    read = read_profile(profile)
+    return read if isinstance(read, AxesProfile) else None
 
 
 def _stop_cleanly(node: SimDriveNode) -> None:
@@ -244,8 +243,7 @@ def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
     """``haptic_controller(profile, drive, *, duration=1.0, pacing="virtual", controller_node_id=127,
     start_in_contact=None, reset_fault=False, out_dir=None, plots=False)``: ``haptic-bus run`` in a thread
     (see the module docstring); every run still going is stopped at teardown, before the drives."""
-    from haptic_bus.app.axes_profile import AxesProfile, load_any_profile
-    from haptic_bus.app.profiles import Profile
+    from haptic_bus.app.profiles import AxesProfile, Profile, load_profile
     from haptic_bus.app.run_options import RunOptions, StopRequest
 
     runs: list[ControllerRun] = []
@@ -254,7 +252,7 @@ def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
               pacing: str = "virtual", controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID,
               start_in_contact: str | None = None, reset_fault: bool = False,
               out_dir: str | os.PathLike[str] | None = None, plots: bool = False) -> ControllerRun:
-        believed = profile if isinstance(profile, (Profile, AxesProfile)) else load_any_profile(profile)
+        believed = profile if isinstance(profile, (Profile, AxesProfile)) else load_profile(profile)
         folder = pathlib.Path(out_dir) if out_dir is not None else tmp_path_factory.mktemp("haptic-run")
         options = RunOptions(duration=duration, pacing=pacing, out_dir=folder, start_in_contact=start_in_contact,
                              live=False, stop=StopRequest(), reset_fault=reset_fault, plots=plots)

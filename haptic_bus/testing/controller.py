@@ -21,8 +21,7 @@ import pytest
 from haptic_bus.testing.run_files import RecordedRun, read_run_folder
 
 if TYPE_CHECKING:
-    from haptic_bus.app.axes_profile import AxesProfile
-    from haptic_bus.app.profiles import Profile
+    from haptic_bus.app.profiles import AxesProfile, Profile
     from haptic_bus.app.runner import RunOptions, RunResult
     from haptic_bus.testing.simulated import SimDriveNode
 

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any, cast
 from haptic_bus.testing.buses import IN_PROCESS, BusSpec, wait_for_heartbeat
 
 if TYPE_CHECKING:
+    from haptic_bus.app.profiles import AxesProfile
     from haptic_bus.app.rig import CanopenSimDrive, ServedUnit
     from haptic_bus.testing.processes import SimProcess
 
@@ -181,14 +182,15 @@ def start_sim_drive(spec: BusSpec | None, node_id: int, timing: str | None, trut
     return node
 
 
-def start_axes(spec: BusSpec | None, profile: pathlib.Path, start_process: Callable[..., SimProcess],
+def start_axes(spec: BusSpec | None, judged: AxesProfile, start_process: Callable[..., SimProcess],
                servers: int = 1) -> SimDriveNode:
-    """Start the simulated device of the multi-axis profile file ``profile``: on ``spec`` one CANopen
-    slave per axis with the profile's node ids (in this process, or ``python -m sim_drive
-    --node-ids``), or (``spec`` None) over Modbus, one unit per axis (:func:`start_modbus`)."""
-    from haptic_bus.app.axes_profile import load_axes_profile
+    """Start the simulated device of the multi-axis profile ``judged`` (read from its file, and put through
+    its gate here): on ``spec`` one CANopen slave per axis with the profile's node ids (in this process, or
+    ``python -m sim_drive --node-ids``), or (``spec`` None) over Modbus, one unit per axis (:func:`start_modbus`)."""
+    from haptic_bus.app.profiles import admit
 
-    judged = load_axes_profile(profile)  # validated and gated once
+    admit(judged)  # the coupled gate, once
+    profile = cast(pathlib.Path, judged.path)  # read from a file
     axes = judged.axes
     if spec is None:
         stated = [axis.unit_id for axis in axes]

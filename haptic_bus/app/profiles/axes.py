@@ -1,9 +1,8 @@
-"""Multi-axis profiles: ``[[axes]]``, each axis its own drive, a scene in space, the coupled gate on load.
+"""The multi-axis kind of profile: ``[[axes]]``, each axis its own drive, a scene in space, the coupled gate.
 
 A profile with an ``[[axes]]`` array describes a Cartesian device (axis ``i`` moves coordinate
 ``i``, :class:`~haptic_bus.control.kinematics.Cartesian`); a profile without it is the one-axis
-profile of :mod:`haptic_bus.app.profiles`, unchanged (which refuses ``[[axes]]`` with a pointer
-here).  Tables:
+kind (:mod:`haptic_bus.app.profiles.one_axis`).  Tables:
 
 * ``[profile]``: ``name``, ``operator``, ``task``, ``description`` (as one-axis profiles);
 * ``[loop]``: ``period`` T in s -- one SYNC for every axis;
@@ -29,10 +28,11 @@ here).  Tables:
   ``model`` = "none" or "push", with ``force`` (N), ``toward`` (a point, or a list of points, m)
   and ``dwell`` (s per point).
 
-:func:`load_axes_profile` validates everything (unknown keys, types, ranges, names; one-line
-errors naming the file, the dotted field, the value and the allowed range), checks the bus load
-and puts the scene through the coupled gate (:class:`~haptic_bus.control.space_gate.SpaceGate`):
-a profile that loads is one the gate admits.  :func:`load_any_profile` reads either kind.
+:func:`read_axes` validates everything (unknown keys, types, ranges, names; one-line errors naming
+the file, the dotted field, the value and the allowed range) and checks the bus load (``loop.period``
+refused with the load and the smallest T); the loader (:func:`haptic_bus.app.profiles.load_profile`)
+then puts the scene through the coupled gate (:meth:`AxesProfile.judge`,
+:class:`~haptic_bus.control.space_gate.SpaceGate`).
 """
 
 from __future__ import annotations
@@ -50,7 +50,6 @@ from haptic_bus.analysis.can_timing import BITRATE_RANGE, BusLoad
 from haptic_bus.analysis.coupled_loop import MAX_AXES
 from haptic_bus.analysis.loop import DAMPING_RANGE, PERIOD_RANGE, STIFFNESS_RANGE, WallLoop
 from haptic_bus.app.profile_policies import NAME_PATTERN, read_about, read_gate, read_passivity, read_safety, read_supervisor
-from haptic_bus.app.profiles import FORCE_RANGE, Profile, load_profile
 from haptic_bus.control.bus_load import PDO_MAPPINGS, axes_bus_load
 from haptic_bus.control.gate import GatePolicy
 from haptic_bus.control.kinematics import Cartesian
@@ -58,10 +57,10 @@ from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.space_gate import SpaceDecision, SpaceGate
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere, compile_space_scene
 from haptic_bus.control.supervisor import SupervisorPolicy
-from haptic_bus.errors import ParameterError, Refusal
+from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import DeviceTable, check_velocity_period, read_device, read_timing
-from haptic_bus.profile.files import resolve_profile
-from haptic_bus.profile.reader import Reader, profile_error, read_document
+from haptic_bus.profile.reader import Reader, profile_error
+from haptic_bus.profile.scene import FORCE_RANGE
 
 DEFAULT_BITRATE = 1_000_000
 HAND_MODELS = ("none", "push")
@@ -86,7 +85,9 @@ class Axis:
 
 @dataclass(frozen=True)
 class AxesProfile:
-    """A validated, gate-admitted multi-axis profile (SI units)."""
+    """A validated multi-axis profile (SI units): what :func:`~haptic_bus.app.profiles.read_profile` gives for a
+    file with ``[[axes]]``; :func:`~haptic_bus.app.profiles.load_profile` also puts it through the coupled gate
+    (:func:`~haptic_bus.app.profiles.admit`)."""
 
     name: str
     operator: str
@@ -116,6 +117,10 @@ class AxesProfile:
     def gate(self) -> SpaceGate:
         """The coupled gate for these axes and this policy (what an upload path calls)."""
         return SpaceGate(self.axis_loops(), self.gate_policy)
+
+    def judge(self) -> SpaceDecision:
+        """The coupled gate's decision on this profile's scene (accepted or not)."""
+        return self.gate().judge(self.space_scene())
 
     def kinematics(self) -> Cartesian:
         """The device's kinematics: Cartesian, axis i along coordinate i."""
@@ -208,10 +213,9 @@ def _unique(path: pathlib.Path, where: str, values: list[Any], what: str) -> Non
         seen[value] = i
 
 
-def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
-    """Parse and validate a multi-axis profile without judging it; raise ParameterError."""
-    path = resolve_profile(path_or_name)
-    document = read_document(path)
+def read_axes(path: pathlib.Path, document: Mapping[str, Any]) -> AxesProfile:
+    """Validate the parsed multi-axis profile ``document`` of the file ``path`` and check its bus load, without
+    judging its scene; raise ParameterError (the bus load above 70 %: ``loop.period`` with the load and the smallest T)."""
     top = Reader(path, "", document)
     name, operator, task, description = read_about(top)
     loop = Reader(path, "loop", top.raw("loop", "a [loop] table with the period"))
@@ -243,39 +247,10 @@ def read_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
     top.done()
     scene = tuple(_read_object(path, i, table, len(axes)) for i, table in enumerate(objects))
     _unique(path, "space.objects", [obj.name for obj in scene], "a name")
-    return AxesProfile(name, operator, task, description, period, axes, scene, policy, bitrate, safety, path,
-                       passivity, supervisor, hand)
-
-
-def judge_axes_profile(path_or_name: str | pathlib.Path) -> tuple[AxesProfile, SpaceDecision]:
-    """Read and validate a multi-axis profile, check its bus load, and the coupled gate's decision on its
-    scene (accepted or not: ``profiles check`` reports either); ParameterError as :func:`load_axes_profile`."""
-    profile = read_axes_profile(path_or_name)
+    profile = AxesProfile(name, operator, task, description, period, axes, scene, policy, bitrate, safety, path,
+                          passivity, supervisor, hand)
     try:
         profile.bus_load()
     except ParameterError as error:
-        raise profile_error(profile.path or profile.name, "loop.period", profile.period, error.allowed) from None
-    return profile, profile.gate().judge(profile.space_scene())
-
-
-def load_axes_profile(path_or_name: str | pathlib.Path) -> AxesProfile:
-    """Read and validate a multi-axis profile, check its bus load, and judge its scene by the coupled gate.
-
-    Raises ParameterError (invalid, or the bus load above 70 %: ``loop.period`` with the load and the
-    smallest T) or :class:`Refusal` (a wall the coupled gate refuses).
-    """
-    profile, decision = judge_axes_profile(path_or_name)
-    if not decision.accepted:
-        raise Refusal.by_gate(decision, f"profile {profile.path or profile.name}", "scene")
+        raise profile_error(path, "loop.period", period, error.allowed) from None
     return profile
-
-
-def is_axes_profile(path: pathlib.Path) -> bool:
-    """Whether the profile file at ``path`` is a multi-axis one (has ``[[axes]]``); ParameterError if unreadable."""
-    return "axes" in read_document(path)
-
-
-def load_any_profile(path_or_name: str | pathlib.Path) -> Profile | AxesProfile:
-    """A one-axis profile (:func:`~haptic_bus.app.profiles.load_profile`) or, with ``[[axes]]``, a multi-axis one."""
-    path = resolve_profile(path_or_name)
-    return load_axes_profile(path) if is_axes_profile(path) else load_profile(path)

@@ -1,7 +1,6 @@
-"""Operator parameter profiles, the controller's view: one TOML file = device, loop timing, scene,
-limits, gate policy.
+"""The one-axis kind of profile: one handle on one drive, a scene on its line.
 
-A profile says who uses it for what (``[profile]``), the handle and its drive (``[device]``), the
+A one-axis profile says who uses it for what (``[profile]``), the handle and its drive (``[device]``), the
 loop (``[loop]``), the simulated operator of a demo (``[operator_model]``) and what
 ``haptic-bus identify`` measured (``[identification]``, optional): those tables are read once, by
 :mod:`haptic_bus.profile` (the simulated drive reads them through it too; a profile whose
@@ -11,10 +10,10 @@ allows), the virtual objects (``[[scene.objects]]`` with ``kind`` = wall | slot 
 policies of :mod:`haptic_bus.app.profile_policies` (``[gate]``, ``[safety]``, ``[passivity]``,
 ``[supervisor]``, ``[start]``).
 
-:func:`load_profile` validates the whole file (unknown keys, types, ranges, names) and then
-puts the compiled scene through the passivity gate, so a profile that loads is one the gate
-admits.  Errors name the file, the dotted field (``scene.objects[2].stiffness``, 0-based
-index), the value and the allowed range.
+:func:`read_one_axis` validates the whole document (unknown keys, types, ranges, names); the loader
+(:func:`haptic_bus.app.profiles.load_profile`) then puts the compiled scene through the passivity
+gate (:meth:`Profile.judge`).  Errors name the file, the dotted field (``scene.objects[2].stiffness``,
+0-based index), the value and the allowed range.
 """
 
 from __future__ import annotations
@@ -31,7 +30,6 @@ from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.analysis.transmission import Transmission
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.app.profile_policies import (
-    NAME_PATTERN,
     StartPolicy,
     read_about,
     read_gate,
@@ -40,28 +38,22 @@ from haptic_bus.app.profile_policies import (
     read_start,
     read_supervisor,
 )
-from haptic_bus.control.gate import GatePolicy, PassivityGate
+from haptic_bus.control.gate import GateDecision, GatePolicy, PassivityGate
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.scene import CompiledScene, Detent, SceneObject, Slot, Wall, compile_scene, object_to_dict
 from haptic_bus.control.supervisor import SupervisorPolicy
-from haptic_bus.errors import ParameterError, Refusal
 from haptic_bus.profile.device import DeviceTable, LoopTiming
-from haptic_bus.profile.files import resolve_profile, shipped_profiles
 from haptic_bus.profile.identification import IdentifiedDevice
 from haptic_bus.profile.plant import ONE_AXIS_TABLES, read_plant
-from haptic_bus.profile.reader import Reader, profile_error, read_document
-from haptic_bus.profile.scene import FORCE_RANGE, ObjectTable, read_force_limit, read_scene
-
-__all__ = ["DEFAULT_PROFILE", "FORCE_RANGE", "NAME_PATTERN",
-           "DeviceTable", "LoopTiming", "Profile", "ParameterError", "Refusal", "StartPolicy",
-           "default_profile", "load_profile", "profile_to_dict", "read_profile", "resolve_profile", "shipped_profiles"]
-
-DEFAULT_PROFILE = "cia402-handle"
+from haptic_bus.profile.reader import Reader
+from haptic_bus.profile.scene import ObjectTable, read_force_limit, read_scene
 
 
 @dataclass(frozen=True)
 class Profile:
-    """A validated, gate-admitted operator parameter profile (SI units)."""
+    """A validated one-axis profile (SI units): what :func:`~haptic_bus.app.profiles.read_profile` gives for a
+    file without ``[[axes]]``; :func:`~haptic_bus.app.profiles.load_profile` also puts it through its gate
+    (:func:`~haptic_bus.app.profiles.admit`)."""
 
     name: str
     operator: str
@@ -99,6 +91,10 @@ class Profile:
         """A passivity gate for this profile's loop and policy."""
         return PassivityGate(self.device_loop(), self.gate_policy)
 
+    def judge(self) -> GateDecision:
+        """The gate's decision on this profile's scene (accepted or not)."""
+        return self.gate().judge(self.compiled_scene())
+
     def sim_device_parameters(self) -> dict[str, object]:
         """Keyword arguments of ``sim_drive.parameters.DeviceParameters`` for this device and loop
         (with the hidden truth: Coulomb friction, velocity noise and its seed)."""
@@ -116,13 +112,8 @@ def _build(obj: ObjectTable) -> SceneObject:
     return kind(obj.name, first, second, obj.stiffness, obj.damping)
 
 
-def read_profile(path_or_name: str | pathlib.Path) -> Profile:
-    """Parse and validate a profile file (or shipped name) without judging it; raise ParameterError."""
-    path = resolve_profile(path_or_name)
-    document = read_document(path)
-    if "axes" in document:  # a multi-axis profile: its own reader (haptic_bus.app.axes_profile)
-        raise profile_error(path, "axes", "[[axes]]",
-                            "no [[axes]] in a one-axis profile; multi-axis profiles load with load_axes_profile")
+def read_one_axis(path: pathlib.Path, document: Mapping[str, Any]) -> Profile:
+    """Validate the parsed one-axis profile ``document`` of the file ``path`` without judging it; raise ParameterError."""
     top = Reader(path, "", document)
     top.only(ONE_AXIS_TABLES)  # a misspelt table first, not the required one it hides
     name, operator, task, description = read_about(top)
@@ -138,21 +129,6 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile:
     top.done()
     return Profile(name, operator, task, description, device, plant.loop, scene, force_limit, policy,
                    plant.operator_model, path, safety, supervisor, start, plant.identification, passivity)
-
-
-def load_profile(path_or_name: str | pathlib.Path) -> Profile:
-    """Read, validate and gate a profile; raise ParameterError (invalid) or Refusal (not passive,
-    unless the profile runs beyond the gate under the bound layer: ``[passivity] beyond_gate``)."""
-    profile = read_profile(path_or_name)
-    decision = profile.gate().judge(profile.compiled_scene())
-    if not decision.accepted and not profile.passivity.beyond_gate:
-        raise Refusal.by_gate(decision, f"profile {profile.path or profile.name}")
-    return profile
-
-
-def default_profile() -> Profile:
-    """The shipped :data:`DEFAULT_PROFILE` (the one ``haptic-bus demo`` runs)."""
-    return load_profile(DEFAULT_PROFILE)
 
 
 def _device_value(value: Any) -> Any:
