@@ -82,7 +82,7 @@ class ModbusAxes(AxesMaster[ModbusDrive]):
     def _reach(self) -> None:
         """Reach every drive in turn (reads only: identity, scaling, timing), a unit nobody answers for named."""
         for drive in self.drives:
-            _reach(drive)
+            _reach(drive, several=len(self.drives) > 1)
 
     # ------------------------------------------------------------------ state machine
 
@@ -130,12 +130,14 @@ class ModbusAxes(AxesMaster[ModbusDrive]):
             drive.close()
 
 
-def _reach(drive: ModbusDrive) -> None:
-    """``drive.connect()``; a unit id the server answers for with a gateway exception is named as such."""
+def _reach(drive: ModbusDrive, several: bool) -> None:
+    """``drive.connect()``; a unit id the server answers for with a gateway exception is named as such,
+    with where that id comes from: one axis' ``--unit-id``, or several axes' ``--unit-ids`` or profile."""
     try:
         drive.connect()
     except DriveRefusal as exc:
         if exc.code not in NO_UNIT_CODES:
             raise
+        where = "the unit ids (--unit-ids, or the profile's [[axes]] unit_id)" if several else "the unit id (--unit-id)"
         raise DriveError(drive.name, f"no unit {drive.unit_id} answers at {drive.address} (exception 0x{exc.code:02X}): "
-                                     "check the unit ids (--unit-ids, or the profile's [[axes]] unit_id)") from exc
+                                     f"check {where}") from exc
