@@ -14,21 +14,24 @@ from __future__ import annotations
 
 import json
 import pathlib
+import threading
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 
 import numpy as np
 import pytest
 
 import haptic_bus as hb
 from haptic_bus.app import runner
-from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, DERATE_EXTRA_DELAYS, prepare_derate
+from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, DERATE_EXTRA_DELAYS, DerateTable
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.run_options import RunOptions, StopRequest
 from haptic_bus.control.space_scene import Plane, SpaceScene, compile_space_scene
 from haptic_bus.node.verdicts import judge_pool
 from sim_drive.modbus.multi_axis import MultiAxisModbusSim
 from sim_drive.profile import read_simulated_device
-from tests.run_rig import late_clock
+from tests.run_rig import late_clock, wait_until
 
 K, B = 6000.0, 5.0  # N/m, N s/m
 GANTRY = pathlib.Path(str(load_profile("gantry-3d").path))
@@ -44,7 +47,7 @@ def plane() -> SpaceScene:
 def test_the_coupled_table_holds_the_largest_scale_the_gate_passes_at_each_prepared_delay() -> None:
     profile = load_profile("gantry-3d")
     gate, scene = profile.gate(), plane()
-    derate = prepare_derate(gate, scene, COUPLED_SCALE_STEPS)
+    derate = DerateTable(gate, scene, COUPLED_SCALE_STEPS)
     assert derate(scene, 1.2) is not None and derate(scene, 1.2)[1] is scene  # D = 1.25 still passes it whole
     served = derate(scene, 1.6)  # between the prepared 1.5 and 2: served by 2
     assert served is not None
@@ -56,10 +59,42 @@ def test_the_coupled_table_holds_the_largest_scale_the_gate_passes_at_each_prepa
     assert 0.0 < scale < 1.0 and wall.damping / B == pytest.approx(scale, rel=1e-12)
     assert not judge.passes(scene.scaled(scale + 2.0 ** -COUPLED_SCALE_STEPS))  # the largest, within 2^-8
     assert derate(scene, 1.0 + max(DERATE_EXTRA_DELAYS) + 0.01) is None  # beyond the table
-    pooled = prepare_derate(gate, scene, COUPLED_SCALE_STEPS, judge_pool())
+    pooled = DerateTable(gate, scene, COUPLED_SCALE_STEPS, judge_pool())
     judge_pool().submit(int).result(timeout=TABLE_WAIT)  # after the table's tasks: it is built
     again = pooled(scene, 1.6)
     assert again is not None and again[1].objects[0].stiffness == wall.stiffness  # the worker's search is the same
+
+
+def test_a_table_not_yet_built_says_so_and_is_given_up_whole_at_the_end() -> None:
+    # a pool whose one thread is held: the table's five tasks wait behind it, none is built
+    profile = load_profile("gantry-3d")
+    gate, scene, held = profile.gate(), plane(), threading.Event()
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        pool.submit(held.wait, TABLE_WAIT)
+        derate = DerateTable(gate, scene, COUPLED_SCALE_STEPS, pool)
+        assert derate(scene, 1.6) is None
+        assert derate.shortfall(1.6) == ("the derate table was not ready: 0 of 5 entries built (the judge worker builds "
+                                         "them one after another from the run's start; the coupled gate takes seconds each)")
+        longest = 1.0 + max(DERATE_EXTRA_DELAYS)
+        assert derate.shortfall(longest + 0.01) == f"beyond the derate table (prepared up to a loop delay of {longest:g} samples)"
+        derate.abandon()  # the run's end: every entry still waiting is cancelled, none built after it
+        held.set()
+    assert derate(scene, 1.2) is None and derate.shortfall(1.2).startswith("the derate table was not ready: 0 of 5")
+
+
+def test_an_entry_the_judge_worker_is_building_at_the_end_is_given_up_with_the_worker() -> None:
+    # gantry-3d's own scene (a sphere: seconds a judgement): at abandon() the worker is building the
+    # first entry; it is killed, so every entry fails instead of being built while the process waits
+    # to exit (the interpreter's exit joins the executor, which finishes every task it was given)
+    profile = load_profile("gantry-3d")
+    pool = judge_pool()
+    derate = DerateTable(profile.gate(), profile.space_scene(), COUPLED_SCALE_STEPS, pool)
+    entries = [entry for _, entry in derate.entries]
+    assert wait_until(entries[0].running, TABLE_WAIT)  # in the worker: as at a run's end
+    derate.abandon()
+    wait(entries, timeout=TABLE_WAIT)
+    assert all(isinstance(entry.exception(), BrokenProcessPool) for entry in entries)  # none built after the end
+    assert judge_pool() is not pool and judge_pool().submit(int).result(timeout=TABLE_WAIT) == 0  # a new worker serves
 
 
 def derating_profile(tmp_path: pathlib.Path) -> pathlib.Path:
@@ -123,7 +158,7 @@ def test_a_late_three_axis_run_derates_to_the_scene_the_coupled_gate_passes_at_t
     first, derated = document["scenes"]
     assert derated["scene_id"] == 1 and derated["origin"] == "derate to a loop delay of 1.6 samples"
     (wall,) = derated["objects"]
-    expected = prepare_derate(load_profile(path).gate(), plane(), COUPLED_SCALE_STEPS)(plane(), 1.6)
+    expected = DerateTable(load_profile(path).gate(), plane(), COUPLED_SCALE_STEPS)(plane(), 1.6)
     assert expected is not None
     assert wall["stiffness"] == expected[1].objects[0].stiffness and wall["damping"] == expected[1].objects[0].damping
     margin = derated["decision"]["worst_margin"]

@@ -169,13 +169,13 @@ def test_the_scales_of_overlapping_walls_intersect() -> None:
 
 
 def test_derate_serves_an_observed_fractional_delay_with_the_next_prepared_one() -> None:
-    from haptic_bus.app.derate_table import DERATE_EXTRA_DELAYS, prepare_derate
+    from haptic_bus.app.derate_table import DERATE_EXTRA_DELAYS, DerateTable
 
     device = DeviceLoop(1.0, 20.0, 1e-3, 1, "average")
     scene = compile_scene([Wall("stop", 0.0, -1, 16500.0, 7.0)])
     gate = PassivityGate(device, GatePolicy(safety_margin=1.0))
     gate.admit(scene)
-    derate = prepare_derate(gate, scene)
+    derate = DerateTable(gate, scene)
     served = derate(scene, 1.3)  # between the prepared 1.25 and 1.5: served by 1.5
     assert served is not None
     judge, scaled, decision = served

@@ -22,8 +22,7 @@ Units: loop delays in samples, scales dimensionless in (0, 1].
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from concurrent.futures import Executor, Future
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from typing import Any
 
 from haptic_bus.control.supervisor import Action, SupervisorPolicy
@@ -33,7 +32,6 @@ COUPLED_SCALE_STEPS = 8  # ... of the coupled gate's, whose every judgement of a
 DERATE_EXTRA_DELAYS = (0.25, 0.5, 1.0, 2.0, 3.0)  # samples beyond the assumed delay a derated scene is prepared for
 
 Entry = tuple[Any, Any, Any] | None  # (the gate at that delay, the scaled scene, its decision), or None: no scale passes
-Derate = Callable[[Any, float], Entry]
 
 
 def asks_derate(policy: SupervisorPolicy) -> bool:
@@ -41,27 +39,65 @@ def asks_derate(policy: SupervisorPolicy) -> bool:
     return Action.DERATE.value in (policy.on_late, policy.on_observer)
 
 
-def prepare_derate(gate: Any, scene: Any, steps: int = DERATE_SCALE_STEPS, pool: Executor | None = None) -> Derate:
+class DerateTable:
     """The supervisor's derate (module docstring): for each loop delay :data:`DERATE_EXTRA_DELAYS`
     beyond the longest one ``gate`` assumes, the largest scale of ``scene`` the gate at that delay
-    passes, judged again whole; built now, or by ``pool`` (each delay one task, in order).  An
-    observed delay is served by the first built entry at or above it; beyond the table, or before
-    any entry at or above it is built, it gets None (the supervisor stops)."""
-    assumed = max(loop.delay for loop in gate.axes)
-    table: list[tuple[float, Future[Entry]]] = []
-    for extra in DERATE_EXTRA_DELAYS:
-        if pool is not None:
-            table.append((assumed + extra, pool.submit(largest_passing_scale, gate.later(extra), scene, steps)))
-            continue
-        built: Future[Entry] = Future()
-        built.set_result(largest_passing_scale(gate.later(extra), scene, steps))
-        table.append((assumed + extra, built))
+    passes, judged again whole; built now, or by ``pool`` (each delay one task, in order).  Called
+    with the running scene and an observed delay (samples), it gives the first built entry at or
+    above that delay; beyond the table, or before any entry at or above it is built, None (the
+    supervisor stops, and :meth:`shortfall` says which)."""
 
-    def derate(running: Any, observed_delay: float) -> Entry:
-        return next((entry.result() for delay, entry in table
-                     if delay >= observed_delay and entry.done() and entry.exception() is None), None)
+    def __init__(self, gate: Any, scene: Any, steps: int = DERATE_SCALE_STEPS, pool: Executor | None = None) -> None:
+        assumed = max(loop.delay for loop in gate.axes)
+        self._pool = pool
+        self._table: list[tuple[float, Future[Entry]]] = []
+        for extra in DERATE_EXTRA_DELAYS:
+            if pool is not None:
+                self._table.append((assumed + extra, pool.submit(largest_passing_scale, gate.later(extra), scene, steps)))
+                continue
+            built: Future[Entry] = Future()
+            built.set_result(largest_passing_scale(gate.later(extra), scene, steps))
+            self._table.append((assumed + extra, built))
 
-    return derate
+    @property
+    def entries(self) -> tuple[tuple[float, Future[Entry]], ...]:
+        """The table: each prepared loop delay (samples) and its entry, built or to be built."""
+        return tuple(self._table)
+
+    def __call__(self, running: Any, observed_delay: float) -> Entry:
+        return next((entry.result() for delay, entry in self._table if delay >= observed_delay and _built(entry)), None)
+
+    def shortfall(self, observed_delay: float) -> str:
+        """Why the table has no derated scene for ``observed_delay`` samples (what :meth:`__call__` gave None for)."""
+        longest = self._table[-1][0]
+        if observed_delay > longest:
+            return f"beyond the derate table (prepared up to a loop delay of {longest:g} samples)"
+        built = sum(_built(entry) for _, entry in self._table)
+        if all(_built(entry) for delay, entry in self._table if delay >= observed_delay):
+            return "no scale of the scene passes the gate at that delay"
+        return (f"the derate table was not ready: {built} of {len(self._table)} entries built (the judge "
+                "worker builds them one after another from the run's start; the coupled gate takes seconds each)")
+
+    def abandon(self) -> None:
+        """The run has ended: no entry still to be built is waited for.  In a worker process
+        the worker is killed (:func:`~haptic_bus.node.verdicts.kill_workers`) and every such entry
+        fails with BrokenProcessPool (cancelling some first would race the executor's own clean-up,
+        which then sets an exception on a cancelled future); elsewhere they are cancelled."""
+        waiting = [entry for _, entry in self._table if not entry.done()]
+        if not waiting:
+            return
+        if isinstance(self._pool, ProcessPoolExecutor):
+            from haptic_bus.node.verdicts import kill_workers
+
+            kill_workers(self._pool)
+            return
+        for entry in waiting:
+            entry.cancel()
+
+
+def _built(entry: Future[Entry]) -> bool:
+    """Whether ``entry`` holds its result (not pending, not given up, not failed)."""
+    return entry.done() and not entry.cancelled() and entry.exception() is None
 
 
 def largest_passing_scale(gate: Any, scene: Any, steps: int) -> Entry:

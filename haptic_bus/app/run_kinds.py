@@ -28,7 +28,7 @@ from typing import Any, Protocol, TypeVar
 
 from haptic_bus.app import preflight
 from haptic_bus.app.axes_records import axes_run_document, record_files, space_scene_dicts
-from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, Derate, asks_derate, prepare_derate
+from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, DerateTable, asks_derate
 from haptic_bus.app.profile_policies import StartPolicy
 from haptic_bus.app.profiles import AxesProfile, Profile
 from haptic_bus.app.run_folder import RECORD_CSV, gate_loop, run_document, scene_dicts
@@ -85,11 +85,11 @@ class RunKind(Protocol[SceneT, GateT, OriginT]):
 
     def start_extra(self, origin: OriginT, ramp_time: float) -> dict[str, Any]: ...
 
-    def derate(self, gate: GateT, scene: SceneT) -> Derate | None: ...
+    def derate(self, gate: GateT, scene: SceneT) -> DerateTable | None: ...
 
     def controller(self, drive: Any, gate: GateT, scene: SceneT, *, clock: CycleClock | None, origin: OriginT,
                    ramp_time: float = 0.0, hold: float | None = None,
-                   derate: Derate | None = None) -> WallController[Any, Any]: ...
+                   derate: DerateTable | None = None) -> WallController[Any, Any]: ...
 
     def passivity_extra(self, controller: WallController[Any, Any], gate: GateT) -> dict[str, Any]: ...
 
@@ -169,14 +169,14 @@ class OneAxisRun:
         wherever the push took it meanwhile)."""
         return False
 
-    def derate(self, gate: PassivityGate, scene: CompiledScene) -> Derate | None:
+    def derate(self, gate: PassivityGate, scene: CompiledScene) -> DerateTable | None:
         """The supervisor's derate table, built now (the 1-D gate's judgements take microseconds),
         when the profile's supervisor may derate; else None."""
-        return prepare_derate(gate, scene) if asks_derate(self.profile.supervisor) else None
+        return DerateTable(gate, scene) if asks_derate(self.profile.supervisor) else None
 
     def controller(self, drive: Any, gate: PassivityGate, scene: CompiledScene, *, clock: CycleClock | None,
                    origin: float, ramp_time: float = 0.0, hold: float | None = None,
-                   derate: Derate | None = None) -> WallController[Any, Any]:
+                   derate: DerateTable | None = None) -> WallController[Any, Any]:
         """The controller of this profile (``derate``: the supervisor's, :meth:`derate`)."""
         profile = self.profile
         return WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
@@ -275,18 +275,18 @@ class AxesRun:
         simulated hand pushes only once enabled)."""
         return True
 
-    def derate(self, gate: SpaceGate, scene: SpaceScene) -> Derate | None:
+    def derate(self, gate: SpaceGate, scene: SpaceScene) -> DerateTable | None:
         """The supervisor's derate table, built in the judge worker (the coupled gate's judgements of a
         scene with a sphere take seconds), when the profile's supervisor may derate; else None."""
         if not asks_derate(self.profile.supervisor):
             return None
         from haptic_bus.node.verdicts import judge_pool
 
-        return prepare_derate(gate, scene, COUPLED_SCALE_STEPS, judge_pool())
+        return DerateTable(gate, scene, COUPLED_SCALE_STEPS, judge_pool())
 
     def controller(self, drive: Any, gate: SpaceGate, scene: SpaceScene, *, clock: CycleClock | None,
                    origin: Sequence[float], ramp_time: float = 0.0, hold: float | None = None,
-                   derate: Derate | None = None) -> WallController[Any, Any]:
+                   derate: DerateTable | None = None) -> WallController[Any, Any]:
         """The controller of every axis (each its name and force limit, N; ``derate``: the supervisor's)."""
         profile = self.profile
         return WallController(drive, gate, scene, names=[axis.name for axis in profile.axes],

@@ -185,6 +185,8 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             for each in getattr(drive, "drives", (drive,)):  # a drive in FAULT: said now, not after pre-flight
                 each.refuse_fault()
             derate = kind.derate(gate, scene)  # before the control thread's real-time session (a worker may build it)
+            if derate is not None:
+                stack.callback(derate.abandon)  # the run's end waits for no entry still being built
 
             def ready() -> tuple[WallController[Any, Any], ControllerNode | None]:
                 """Safe start, the controller, its records streamed, the upload server: all but enabling."""

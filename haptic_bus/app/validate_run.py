@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from haptic_bus.analysis.loop import DeviceLoop
-from haptic_bus.app.derate_table import Derate
+from haptic_bus.app.derate_table import DerateTable
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.run_kinds import OneAxisRun
 from haptic_bus.app.run_options import RunOptions
@@ -103,13 +103,13 @@ class ValidateRun(OneAxisRun):
         """Never inside: the hold is centred where the handle rests."""
         return None
 
-    def derate(self, gate: PassivityGate, scene: CompiledScene) -> Derate | None:
+    def derate(self, gate: PassivityGate, scene: CompiledScene) -> DerateTable | None:
         """None: the hold is not scaled down mid-probe (module docstring)."""
         return None
 
     def controller(self, drive: Any, gate: PassivityGate, scene: CompiledScene, *, clock: CycleClock | None,
                    origin: float, ramp_time: float = 0.0, hold: float | None = None,
-                   derate: Derate | None = None) -> WallController[Any, Any]:
+                   derate: DerateTable | None = None) -> WallController[Any, Any]:
         """The controller rendering the probe: no passivity layer, the observer's limit raised, no
         derate (module docstring)."""
         profile = self.profile

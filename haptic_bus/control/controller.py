@@ -62,8 +62,8 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import Callable, Sequence
-from typing import Any, Generic
+from collections.abc import Sequence
+from typing import Any, Generic, Protocol
 
 import numpy as np
 
@@ -75,7 +75,7 @@ from haptic_bus.control.gate import PassivityGate
 from haptic_bus.control.kinematics import Cartesian, Kinematics
 from haptic_bus.control.passivity_layer import LayerPolicy, PassivityLayer
 from haptic_bus.control.port_account import PortAccount
-from haptic_bus.control.protocols import DecisionT, Gate, SceneT
+from haptic_bus.control.protocols import DecisionT, DecisionT_co, Gate, SceneT
 from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.scene_switch import SceneSwitch
 from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
@@ -84,9 +84,17 @@ from haptic_bus.errors import ParameterError
 logger = logging.getLogger(__name__)
 
 
-Derate = Callable[[SceneT, float], "tuple[Gate[SceneT, DecisionT], SceneT, DecisionT] | None"]
-"""Given the running scene and the observed loop delay (samples): a gate for that loop, the scene
-scaled down so that it passes it, and the decision; None if no scale passes (or none is prepared)."""
+class Derate(Protocol[SceneT, DecisionT_co]):
+    """The supervisor's derate (:class:`haptic_bus.app.derate_table.DerateTable`)."""
+
+    def __call__(self, running: SceneT, observed_delay: float) -> tuple[Gate[SceneT, DecisionT_co], SceneT, DecisionT_co] | None:
+        """Given the running scene and the observed loop delay (samples): a gate for that loop, the
+        scene scaled down so that it passes it, and the decision; None if none is prepared."""
+        ...
+
+    def shortfall(self, observed_delay: float) -> str:
+        """Why there is none for ``observed_delay`` samples (beyond the table, not built yet, ...)."""
+        ...
 
 
 def encoder_origin(drive: Drive) -> float:
@@ -448,6 +456,7 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
                                 scene_id=entry.scene_id, worst_margin=decision.worst_margin)
                 logger.warning("supervisor: %s; derated (scene %d)", alarm.message, entry.scene_id)
                 return
+            raise alarm.broken(assumed, self._derate.shortfall(alarm.observed_delay))
         raise alarm.broken(assumed)
 
     def _phase(self) -> contextlib.AbstractContextManager[AxesDriveCycle]:

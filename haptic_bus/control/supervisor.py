@@ -90,10 +90,11 @@ class Alarm:
     message: str
     observed_delay: float | None = None
 
-    def broken(self, assumed_delay: float) -> AssumptionBroken:
-        """The exit-3 error this alarm stands for."""
+    def broken(self, assumed_delay: float, no_derate: str | None = None) -> AssumptionBroken:
+        """The exit-3 error this alarm stands for (``no_derate``: why a derate could not answer it)."""
         if self.kind == "late":
-            return AssumptionBroken("the loop delay", self.message, f"a loop delay of {assumed_delay:g} sample(s)")
+            observed = self.message if no_derate is None else f"{self.message}; no derated scene: {no_derate}"
+            return AssumptionBroken("the loop delay", observed, f"a loop delay of {assumed_delay:g} sample(s)")
         return AssumptionBroken("the passivity observer", self.message,
                                 "a port that never gives back more energy than it held")
 
