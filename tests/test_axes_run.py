@@ -166,7 +166,7 @@ def run_started_inside_the_ball(tmp_path: pathlib.Path, **options: Any) -> tuple
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}).start()
     try:
         result = run(profile, {"interface": "lockstep", "channel": channel},
-                     RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False, **options))
+                     RunOptions(1.0, pacing="virtual", out_dir=tmp_path / "run", live=False, plots=False, **options))
         return result, profile.period, [node.drive.state for node in sim.nodes]
     finally:
         sim.stop()
