@@ -101,9 +101,11 @@ def test_three_units_rest_on_the_slope_the_same_on_one_server_or_three(
         sim = modbus_gantry(path, servers)
         bus = sim.urls[0] if servers == 1 else list(sim.urls)
         folder = tmp_path / f"servers-{servers}"
-        result = hb.run(profile, bus, options(folder, 4.0), unit_ids=list(UNITS))
+        # 2.5 s: in virtual time the handle is at rest on the slope (every torque and 0x606C sample final)
+        # from 1.56 s on, the same in every run (each cycle advances the plants exactly T)
+        result = hb.run(profile, bus, options(folder, 2.5), unit_ids=list(UNITS))
         assert result.exit_reason == "completed", result.error
-        assert result.summary is not None and result.summary.cycles == 2000 and result.summary.least_energy >= 0.0
+        assert result.summary is not None and result.summary.cycles == 1250 and result.summary.least_energy >= 0.0
         assert [drive.state for drive in sim.drives] == [State.SWITCH_ON_DISABLED] * 3  # left disabled
         document = json.loads((folder / "run.json").read_text())
         link = document["link"]
