@@ -52,8 +52,10 @@ fail only the tests that use it (the plugin imports only the standard library an
 
 from __future__ import annotations
 
+import json
 import logging
 import os
+import pathlib
 import socket
 import struct
 import sys
@@ -90,6 +92,7 @@ os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
 
 NODE = 5  # the node of ``sim``, of ``remote`` and of ``canopen_rig`` by default
 WAIT = 1.0  # s: the longest any single frame is waited for (a bound, not a pace)
+FILE_COSTS = pathlib.Path(__file__).parent / "data" / "file_costs.json"  # s of wall clock per test file (its "how")
 
 
 # Hypothesis: a small default profile for the README's test command, a thorough one for a long run
@@ -104,15 +107,17 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    # The longest tests first (stable: each set keeps its order), so that on pytest-xdist's
-    # workers they start at once and the short ones fill in around them, instead of one long
-    # test starting late and leaving the other worker idle at the end.  pyproject's addopts
-    # deal the files to the workers one at a time in this order (--dist loadfile
-    # --no-loadscope-reorder), a file's module-scoped fixture set up on one worker only.  -n's
-    # default, --dist load, first hands each worker a quarter of its share as one chunk of
-    # consecutive tests: all 40 slow-marked tests landed in worker 0's first chunk (simulated
-    # from measured durations: 350 s on worker 0 against 293 s on worker 1; by file 320 and 323 s).
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+    # The longest files first, so that on pytest-xdist's two workers they start at once and the
+    # short ones fill in around them, instead of one long file starting late and leaving the other
+    # worker idle at the end (longest processing time first, a makespan within 4/3 of the best).
+    # pyproject's addopts deal the files to the workers one at a time in this order (--dist loadfile
+    # --no-loadscope-reorder), a file's module-scoped fixture set up on one worker only.  Each
+    # file's cost is the wall clock its tests took in one measured run of the suite (FILE_COSTS: how
+    # it was measured, and how to measure it again); a file it does not list costs 0 and keeps its
+    # place after them.  Within a file (and among the unlisted ones) the slow-marked tests come
+    # first; the sort is stable, so otherwise the collection order stands.
+    costs: dict[str, float] = json.loads(FILE_COSTS.read_text())["seconds"]
+    items.sort(key=lambda item: (-costs.get(item.nodeid.split("::", 1)[0], 0.0), item.get_closest_marker("slow") is None))
     if vcan0_exists():
         return
     skip = pytest.mark.skip(reason=VCAN0_REASON)

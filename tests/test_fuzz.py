@@ -140,7 +140,7 @@ def test_haptic_bus_run_under_fuzz_exits_0_or_1_with_its_record(multicast, sim_p
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [REPO, env.get("PYTHONPATH")]))
     out = tmp_path / "run"
     run = subprocess.Popen([sys.executable, "-m", "haptic_bus.app.cli", "run", "cia402-handle", *bus_args, "--node-id",
-                            str(NODE), "--virtual-time", "--duration", "600", "-q", "--out", str(out)],
+                            str(NODE), "--virtual-time", "--duration", "600", "-q", "--no-plots", "--out", str(out)],
                            cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     rng = random.Random(SEED + 1)
     fuzzer = open_bus(interface="udp_multicast", channel=group, port=port)

@@ -217,7 +217,7 @@ def test_the_operations_session_after_a_fault_on_canopen(haptic_sim: Any, frames
     # "After another kill -9, run --reset-fault ... runs, and run.json's first event is": the page's JSON
     sim.enter_fault(0x8250)
     result = run_cli(capsys, "run", "handle.toml", *shlex.split(ours), "--node-id", "5", "--duration", "0.05",
-                     "--virtual-time", "--reset-fault", "-q", "--out", "again")
+                     "--virtual-time", "--reset-fault", "-q", "--no-plots", "--out", "again")
     assert result.code == 0, result.err
     expected = json.loads(code_blocks(DOCS / "operations.md", "json")[0])
     event = json.loads((tmp_path / "again" / "run.json").read_text())["events"][0]
