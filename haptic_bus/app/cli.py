@@ -15,7 +15,7 @@ import os
 import pathlib
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from haptic_bus.app.arguments import (
     EXIT_ASSUMPTION,
@@ -49,6 +49,9 @@ from haptic_bus.app.status_cli import add_status_parser
 from haptic_bus.app.validate_cli import add_validate_parser
 from haptic_bus.console import StderrHandler
 from haptic_bus.validation import folder_path, writable_file, writable_folder
+
+if TYPE_CHECKING:
+    from haptic_bus.app.run_options import StopRequest
 
 _NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
 
@@ -177,6 +180,8 @@ def _run(args: argparse.Namespace) -> int:
     from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
     from haptic_bus.app.runner import run
 
+    stop = StopRequest()
+    stop.install()  # first: judging a profile takes seconds (gantry-3d: ~5 s under load), a stop then is heard
     profile = load_profile(args.profile)
     bus: Any
     unit_ids = None
@@ -188,13 +193,13 @@ def _run(args: argparse.Namespace) -> int:
         address = one_axis_link(args, "run")
         bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, DEFAULT_UNIT_ID)
         node_id = None if address.url is not None else address.checked_node_id
-    stop = StopRequest()
     out_dir = None if args.out is None else folder_path("--out", args.out, context="run")  # created once the bus is known
     options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
                          scheduling=scheduling(args.realtime),
                          reset_fault=args.reset_fault, bus_log=not args.no_bus_log, plots=not args.no_plots)
-    stop.install()
+    if stop.event.is_set():  # SIGTERM or Ctrl-C while the profile was read: no bus touched, no folder made
+        return _stopped_before_start(stop)
     result = run(profile, bus, options, node_id=node_id, unit_id=unit_id, unit_ids=unit_ids,
                  controller_node_id=args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
     summary = result.summary
@@ -214,6 +219,18 @@ def _run(args: argparse.Namespace) -> int:
         said = result.error if result.error.startswith(result.exit_reason) else f"{result.exit_reason}: {result.error}"
         print(f"haptic-bus run: {said}", file=sys.stderr)
     return exit_status(result.exit_reason)
+
+
+def _stopped_before_start(stop: StopRequest) -> int:
+    """The end of a run asked to stop before it opened its bus: "stopped" (exit 0, nothing on stderr,
+    as a run stopped before enabling its drives), or "interrupted" (exit 130, one line on stderr)."""
+    from haptic_bus.app.run_options import exit_status
+
+    reason = "interrupted" if stop.interrupted else "stopped"
+    print(f"ended: {reason} before the run began; no bus touched, nothing written")
+    if stop.interrupted:
+        print("haptic-bus run: interrupted (Ctrl-C)", file=sys.stderr)
+    return exit_status(reason)
 
 
 def _refuse_single_axis_options(args: argparse.Namespace) -> None:
