@@ -13,6 +13,7 @@ import argparse
 import logging
 import os
 import pathlib
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
@@ -51,7 +52,8 @@ from haptic_bus.console import StderrHandler
 from haptic_bus.validation import folder_path, writable_file, writable_folder
 
 if TYPE_CHECKING:
-    from haptic_bus.app.run_options import StopRequest
+    from haptic_bus.app.profiles import AxesProfile, Profile
+    from haptic_bus.app.run_options import RunOptions
 
 _NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
 
@@ -173,35 +175,31 @@ def _demo(args: argparse.Namespace) -> int:
     return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(reason, EXIT_NO)
 
 
-def _run(args: argparse.Namespace) -> int:
-    from haptic_bus.app.drive_address import DEFAULT_UNIT_ID
-    from haptic_bus.app.profiles import AxesProfile, load_profile
-    from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
-    from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
-    from haptic_bus.app.runner import run
+class _StoppedBeforeStart(Exception):
+    """SIGTERM while ``run`` prepares (its imports, its profile read and judged): nothing touched yet."""
 
-    stop = StopRequest()
-    stop.install()  # first: judging a profile takes seconds (gantry-3d: ~5 s under load), a stop then is heard
-    profile = load_profile(args.profile)
-    bus: Any
-    unit_ids = None
-    if isinstance(profile, AxesProfile):  # the node ids (or unit ids) come from [[axes]], or --unit-ids
-        _refuse_single_axis_options(args)
-        bus, node_id, unit_id = (args.modbus or bus_arguments(args)), None, DEFAULT_UNIT_ID
-        unit_ids = args.unit_ids
-    else:
-        address = one_axis_link(args, "run")
-        bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, DEFAULT_UNIT_ID)
-        node_id = None if address.url is not None else address.checked_node_id
-    out_dir = None if args.out is None else folder_path("--out", args.out, context="run")  # created once the bus is known
-    options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
-                         start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
-                         scheduling=scheduling(args.realtime),
-                         reset_fault=args.reset_fault, bus_log=not args.no_bus_log, plots=not args.no_plots)
-    if stop.event.is_set():  # SIGTERM or Ctrl-C while the profile was read: no bus touched, no folder made
-        return _stopped_before_start(stop)
-    result = run(profile, bus, options, node_id=node_id, unit_id=unit_id, unit_ids=unit_ids,
-                 controller_node_id=args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
+
+def _stop_at_once(signum: int, frame: object) -> None:
+    raise _StoppedBeforeStart
+
+
+def _run(args: argparse.Namespace) -> int:
+    # First: a SIGTERM while the run prepares (seconds: gantry-3d's gate, ~5 s under load) ends it at
+    # once, as Ctrl-C does then (Python's KeyboardInterrupt: one line, 130); the stop request takes
+    # over once the run is about to touch the bus (_prepare_run's last step).
+    previous = signal.signal(signal.SIGTERM, _stop_at_once)
+    try:
+        from haptic_bus.app.run_options import exit_status
+        from haptic_bus.app.runner import run  # its imports: a second or more under load
+
+        profile, bus, options, links = _prepare_run(args)
+    except _StoppedBeforeStart:
+        print("ended: stopped before the run began; no bus touched, nothing written")
+        return EXIT_OK
+    except BaseException:
+        signal.signal(signal.SIGTERM, previous)  # a refused command line ends as it did
+        raise
+    result = run(profile, bus, options, **links)
     summary = result.summary
     if summary is not None:
         p, late = summary.compute_percentiles, summary.lateness_percentiles
@@ -221,16 +219,35 @@ def _run(args: argparse.Namespace) -> int:
     return exit_status(result.exit_reason)
 
 
-def _stopped_before_start(stop: StopRequest) -> int:
-    """The end of a run asked to stop before it opened its bus: "stopped" (exit 0, nothing on stderr,
-    as a run stopped before enabling its drives), or "interrupted" (exit 130, one line on stderr)."""
-    from haptic_bus.app.run_options import exit_status
+def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, RunOptions, dict[str, Any]]:
+    """``run``'s profile, bus, :class:`~haptic_bus.app.run_options.RunOptions` and the link's keyword
+    arguments, read and checked before anything is touched; last, the stop request is installed."""
+    from haptic_bus.app.drive_address import DEFAULT_UNIT_ID
+    from haptic_bus.app.profiles import AxesProfile, load_profile
+    from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
+    from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest
 
-    reason = "interrupted" if stop.interrupted else "stopped"
-    print(f"ended: {reason} before the run began; no bus touched, nothing written")
-    if stop.interrupted:
-        print("haptic-bus run: interrupted (Ctrl-C)", file=sys.stderr)
-    return exit_status(reason)
+    profile = load_profile(args.profile)
+    bus: Any
+    unit_ids = None
+    if isinstance(profile, AxesProfile):  # the node ids (or unit ids) come from [[axes]], or --unit-ids
+        _refuse_single_axis_options(args)
+        bus, node_id, unit_id = (args.modbus or bus_arguments(args)), None, DEFAULT_UNIT_ID
+        unit_ids = args.unit_ids
+    else:
+        address = one_axis_link(args, "run")
+        bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, DEFAULT_UNIT_ID)
+        node_id = None if address.url is not None else address.checked_node_id
+    stop = StopRequest()
+    out_dir = None if args.out is None else folder_path("--out", args.out, context="run")  # created once the bus is known
+    options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
+                         start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
+                         scheduling=scheduling(args.realtime),
+                         reset_fault=args.reset_fault, bus_log=not args.no_bus_log, plots=not args.no_plots)
+    links = {"node_id": node_id, "unit_id": unit_id, "unit_ids": unit_ids,
+             "controller_node_id": args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID}
+    stop.install()  # from here SIGINT and SIGTERM ask the runner to stop (before enabling, or at a cycle boundary)
+    return profile, bus, options, links
 
 
 def _refuse_single_axis_options(args: argparse.Namespace) -> None:
