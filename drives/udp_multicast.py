@@ -61,7 +61,7 @@ class FilteredMulticastBus(UdpMulticastBus):
             sender.connect((group.group, group.port))
         except OSError as exc:
             sender.close()
-            group.shutdown()
+            super().shutdown()  # python-can's socket, and the bus marked shut down
             raise can.CanInitializationError(f"could not open a sending socket on the group: {exc}") from exc
         self._sender = sender
         self._own_address = sender.getsockname()[:2]  # (source address, ephemeral port): what receivers see
