@@ -1,4 +1,5 @@
-"""python-can's ``udp_multicast`` bus with its receive filters applied before a frame is decoded.
+"""python-can's ``udp_multicast`` bus with its receive filters applied before a frame is decoded,
+and without its own frames.
 
 On ``udp_multicast`` every bus handle receives every frame on the group, its own included, and
 python-can turns each datagram into a :class:`can.Message` (msgpack, then the message's
@@ -12,27 +13,80 @@ the msgpack map and a frame no filter wants is dropped before a message is built
 
 :func:`drives.bus_config.open_bus` opens every ``udp_multicast`` bus of the project with it;
 without filters it behaves as python-can's.
+
+**Its own frames.**  The kernel loops every datagram on the group back to every socket on this
+host, the sender's included, so a python-can ``udp_multicast`` handle receives each frame it sent
+(a CAN controller does not: a frame is heard by the other nodes).  A process then counts itself
+among the nodes it hears (commissioning's "nodes seen on the bus: ... 127") and its bus log holds
+each sent frame twice, as Tx and as Rx.  The sender's address does not tell them apart in
+python-can's shape: every handle sends from the socket bound to the group's port, so every
+process on a host sends from the same address.  :class:`FilteredMulticastBus` sends from a socket
+of its own instead, connected to the group (the kernel gives it an ephemeral port of its own, unique
+on this host, and picks the source address the datagrams carry), and drops a received datagram
+whose sender address is that socket's.  Another process's handle, on this host or another, sends
+from another address, so its frames still arrive.  What goes on the wire is python-can's datagram,
+unchanged: plain python-can handles read it.
 """
 
 from __future__ import annotations
 
+import socket
+import struct
 import time
 from typing import Any
 
 import can
 import msgpack
 from can.interfaces.udp_multicast import UdpMulticastBus
+from can.interfaces.udp_multicast.utils import pack_message
 from can.typechecking import CanFilters
 
 _STANDARD_MASK = 0x7FF
 
 
 class FilteredMulticastBus(UdpMulticastBus):
-    """``udp_multicast`` whose ``can_filters`` are applied before decoding (module docstring)."""
+    """``udp_multicast`` whose ``can_filters`` are applied before decoding, and which does not
+    receive the frames it sent (module docstring)."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self._wanted: tuple[tuple[int, int, bool | None], ...] | None = None
         super().__init__(*args, **kwargs)
+        group = self._multicast
+        ipv4 = group.ip_version == 4
+        sender = socket.socket(socket.AF_INET if ipv4 else socket.AF_INET6, socket.SOCK_DGRAM)
+        try:
+            sender.setsockopt(socket.IPPROTO_IP if ipv4 else socket.IPPROTO_IPV6,
+                              socket.IP_MULTICAST_TTL if ipv4 else socket.IPV6_MULTICAST_HOPS,
+                              struct.pack("@I", group.hop_limit))
+            sender.connect((group.group, group.port))
+        except OSError as exc:
+            sender.close()
+            super().shutdown()  # python-can's socket, and the bus marked shut down
+            raise can.CanInitializationError(f"could not open a sending socket on the group: {exc}") from exc
+        self._sender = sender
+        self._own_address = sender.getsockname()[:2]  # (source address, ephemeral port): what receivers see
+        self._send_timeout: float | None = None
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Send ``msg`` from this handle's own socket (module docstring); ``timeout`` in s, as python-can's."""
+        if self.protocol is not can.CanProtocol.CAN_FD and msg.is_fd:
+            raise can.CanOperationError("cannot send FD message over bus with CAN FD disabled")
+        data = pack_message(msg)
+        if timeout != self._send_timeout:
+            self._send_timeout = timeout
+            self._sender.settimeout(timeout)
+        try:
+            if self._sender.send(data) < len(data):
+                raise TimeoutError()
+        except TimeoutError:
+            raise can.CanTimeoutError() from None
+        except OSError as error:
+            raise can.CanOperationError("failed to send via socket") from error
+
+    def shutdown(self) -> None:
+        """Close the sending socket and python-can's receiving one."""
+        self._sender.close()
+        super().shutdown()
 
     def _apply_filters(self, filters: CanFilters | None) -> None:
         """Keep the filters as ``(can_id & mask, mask, extended or None)`` for the receive path."""
@@ -48,19 +102,26 @@ class FilteredMulticastBus(UdpMulticastBus):
             result = self._multicast.recv(left)
             if not result:
                 return None, True
-            data, _, timestamp = result
-            try:
-                fields = msgpack.unpackb(data, raw=False)
-                wanted = self._wanted is None or self._wants(fields["arbitration_id"], fields["is_extended_id"])
-                message = can.Message(check=True, **(fields | {"timestamp": timestamp})) if wanted else None
-            except Exception as exception:  # what python-can's own unpacking raises for a datagram it cannot use
-                raise can.CanOperationError("could not unpack received message") from exception
+            data, sender, timestamp = result
+            if sender[:2] == self._own_address:  # this handle's own frame, looped back by the kernel
+                message = None
+            else:
+                message = self._unpack(data, timestamp)
             if message is not None and (self.protocol is can.CanProtocol.CAN_FD or not message.is_fd):
                 return message, True
             if deadline is not None:
                 left = deadline - time.monotonic()
                 if left <= 0.0:
                     return None, True
+
+    def _unpack(self, data: bytes, timestamp: float) -> can.Message | None:
+        """The frame of datagram ``data`` received at ``timestamp`` (s, Unix), or None if no filter wants it."""
+        try:
+            fields = msgpack.unpackb(data, raw=False)
+            wanted = self._wanted is None or self._wants(fields["arbitration_id"], fields["is_extended_id"])
+            return can.Message(check=True, **(fields | {"timestamp": timestamp})) if wanted else None
+        except Exception as exception:  # what python-can's own unpacking raises for a datagram it cannot use
+            raise can.CanOperationError("could not unpack received message") from exception
 
     def _wants(self, can_id: int, extended: bool) -> bool:
         return any((only is None or only == extended) and can_id & mask == masked for masked, mask, only in self._wanted or ())

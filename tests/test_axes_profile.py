@@ -149,7 +149,12 @@ def _one_axis(**changes: object) -> str:
     (_one_axis(force_limit=40.0), "axes[0].force_limit", "(0, 32] N"),
     (_one_axis(mass=-1.0), "axes[0].device.mass", "kg"),
     (_one_axis(speed=3), "axes[0].speed", "no such key"),
-    (_one_axis() + _one_axis().replace('"x"', '"y"'), "axes[1]", "a node_id no other entry uses"),
+    (_one_axis(force_limit=None, force_limt=30.0), "axes[0].force_limt", "no such key; did you mean force_limit?"),
+    (_one_axis() + _one_axis().replace('"x"', '"y"'), "axes[1].node_id",
+     "a node_id no other entry uses (axes[0].node_id has it)"),
+    (_one_axis(node_id=None, unit_id=2) + _one_axis(node_id=None, unit_id=2).replace('"x"', '"y"'), "axes[1].unit_id",
+     "a unit_id no other entry uses (axes[0].unit_id has it)"),
+    (_one_axis() + _one_axis(node_id=6), "axes[1].name", "a name no other entry uses (axes[0].name has it)"),
     (_one_axis() + _one_axis(node_id=None, unit_id=2).replace('"x"', '"y"'), "axes", "one kind of bus"),
     ("", "axes", "1 to 6 tables"),
 ])
@@ -169,7 +174,7 @@ def test_axes_errors_name_the_field_and_the_allowed_range(tmp_path: pathlib.Path
     ("center = [-0.02, 0.0, 0.01]", "center = [-0.02, 0.0]", "space.objects[2].center", "an array of 3 numbers"),
     ('kind = "sphere"', 'kind = "cone"', "space.objects[2].kind", "'plane' or 'box' or 'sphere'"),
     ("normal = [0.0, 0.0, 1.0]", "normal = [0.0, 0.0, 0.0]", "space.objects[0].normal", "a nonzero vector"),
-    ('name = "ball"', 'name = "block"', "space.objects[2]", "a name no other entry uses"),
+    ('name = "ball"', 'name = "block"', "space.objects[2].name", "a name no other entry uses"),
 ])
 def test_space_errors_name_the_field_and_the_allowed_range(tmp_path: pathlib.Path, old: str, new: str, field: str,
                                                            allowed: str) -> None:

@@ -28,8 +28,9 @@ LEAK_ALLOWANCE = FRAMES // 2
 
 
 def multicast_ttl(bus: can.BusABC) -> int:
-    """The IPv4 multicast TTL of a python-can udp_multicast bus's socket."""
-    sock = bus._multicast._socket  # python-can 4.x: UdpMulticastBus -> GeneralPurposeUdpMulticastBus
+    """The IPv4 multicast TTL of the socket a udp_multicast bus sends from (the project's bus sends from
+    its own, :mod:`drives.udp_multicast`; python-can's from its receiving socket)."""
+    sock = getattr(bus, "_sender", None) or bus._multicast._socket  # python-can 4.x: GeneralPurposeUdpMulticastBus
     return int(sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL))
 
 

@@ -246,6 +246,12 @@ def test_unknown_key_is_a_typo(tmp_path):
     assert "no such key" in error.allowed and "damping" in error.allowed
 
 
+def test_a_misspelt_required_key_is_named_not_reported_missing(tmp_path):
+    error = broken(tmp_path, "mass = 1.0", "mas = 1.0")
+    assert (error.name, error.value) == ("device.mas", 1.0)
+    assert error.allowed.startswith("no such key; did you mean mass? (mass is required: ") and "kg" in error.allowed
+
+
 def test_unknown_table(tmp_path):
     error = broken(tmp_path, "[limits]", "[limit]\nx = 1\n\n[limits]")
     assert error.name == "limit"
@@ -254,7 +260,7 @@ def test_unknown_table(tmp_path):
 def test_duplicate_object_names(tmp_path):
     error = broken(tmp_path, 'name = "c"', 'name = "a"')
     assert (error.name, error.value) == ("scene.objects[2].name", "a")
-    assert "scene.objects[0]" in error.allowed
+    assert "(scene.objects[0].name has it)" in error.allowed
 
 
 def test_force_limit_above_0x6072(tmp_path):
@@ -271,7 +277,7 @@ def test_bad_timing_and_permille_type(tmp_path):
 
 def test_bad_operator_model(tmp_path):
     error = broken(tmp_path, "level = 2.0", "levle = 2.0")
-    assert error.name == "operator_model.level" and "required" in error.allowed
+    assert error.name == "operator_model.levle" and "did you mean level? (level is required" in error.allowed
     error = broken(tmp_path, 'model = "constant"', 'model = "jitter"')
     assert error.name == "operator_model.model" and "'hand'" in error.allowed
 

@@ -44,3 +44,21 @@ def test_run_over_modbus_settles_at_f_over_k(
     lsb = profile.scaling().newton_per_permille / wall.stiffness  # one torque count of penetration
     assert position - wall.position == pytest.approx(push / wall.stiffness, abs=lsb)
     assert server_status == 0, server_log
+
+
+def test_a_scaling_conflict_over_modbus_names_the_profile_as_canopen_does(
+    tmp_path: Path, free_port: int, sim_process: Callable[..., Any]
+) -> None:
+    url = f"tcp://127.0.0.1:{free_port}"
+    server = sim_process("--modbus", url)  # the simulator's own device: its 0x606C factor is not cia402-handle's
+    try:
+        server.wait_for_line(f"serving Modbus TCP on {url}", 15.0)
+        run = subprocess.run([sys.executable, "-m", "haptic_bus.app.cli", "run", "cia402-handle", "--modbus", url,
+                              "--virtual-time", "--no-plots", "-q", "--out", str(tmp_path)],
+                             cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)), capture_output=True, text=True,
+                             timeout=120)
+    finally:
+        server.stop()
+    assert run.returncode == 1 and run.stderr.count("\n") == 1
+    assert "scaling conflict for velocity_per_count: 1e-06 m/s from register 0x0040 but " in run.stderr
+    assert " m/s from profile [device] " in run.stderr  # the words the CANopen run uses for the same source

@@ -447,7 +447,10 @@ class CanopenDrive(Cia402Master):
             if self.safety.master_node_id is not None and connection.commissioned.inventory.has(CONSUMER_HEARTBEAT_TIME, 1):
                 connection.sdo.write_int(CONSUMER_HEARTBEAT_TIME, 1, DataType.UNSIGNED32, 0)  # a clean goodbye
         except Exception as exc:  # a best-effort goodbye: whatever fails here, the bus is released below
-            logger.warning("%s: could not send the closing frames: %r", self.name, exc)
+            # INFO (-v): a goodbye that fails follows the error that ended the run (a drive gone, its bus
+            # gone), which is the command's one line; the drive's heartbeat consumer stops it either way
+            logger.info("%s: could not send the closing frames: %s", self.name,
+                        exc.message if isinstance(exc, DriveError) else exc)
         self._release(connection.node, connection.events)
 
     def _release(self, node: canopen.RemoteNode | None, events: DriveEvents | None) -> None:

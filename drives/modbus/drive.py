@@ -103,7 +103,8 @@ class ModbusDrive(Cia402Master):
     word first); ``cycle``: "split" or "fc23" (module docstring); ``with_position``: read
     0x6064 each cycle (the default: the controller's port observer needs it); ``scaling``: the
     caller's :class:`DriveScaling`, whose fields are replaced by 0x6076/0x6072 and the
-    manufacturer scaling registers where the drive has them;
+    manufacturer scaling registers where the drive has them (``scaling_source`` names it in the
+    report and in a disagreement, e.g. "profile [device]");
     ``state_timeout`` (s): per state-machine step; ``check_identity``: verify the map identity
     register (catches a word-order mismatch).  RTU: ``baudrate``, ``parity``, ``stopbits``,
     ``bytesize`` (needs pyserial at connect time).
@@ -122,6 +123,7 @@ class ModbusDrive(Cia402Master):
         cycle: str = "split",
         with_position: bool = True,
         scaling: DriveScaling | None = None,
+        scaling_source: str = "caller",
         state_timeout: float = 1.0,
         check_identity: bool = True,
         baudrate: int = 115200,
@@ -133,16 +135,17 @@ class ModbusDrive(Cia402Master):
         if isinstance(host, str) and ("://" in host or host.startswith("rtu:")):
             raise ParameterError("host", host, "a host name or address (a URL: ModbusDrive.from_url)", "Modbus drive")
         self._setup(ModbusAddress(host, port, timeout, baudrate, parity, stopbits, bytesize), unit_id, word_order,
-                    cycle, with_position, scaling, state_timeout, check_identity, safety)
+                    cycle, with_position, (scaling, scaling_source), state_timeout, check_identity, safety)
 
     def _setup(self, address: ModbusAddress, unit_id: int, word_order: str, cycle: str, with_position: bool,
-               scaling: DriveScaling | None, state_timeout: float, check_identity: bool, safety: SafetySettings) -> None:
+               scaling: tuple[DriveScaling | None, str], state_timeout: float, check_identity: bool,
+               safety: SafetySettings) -> None:
         if isinstance(unit_id, bool) or not isinstance(unit_id, int) or not 0 <= unit_id <= 247:
             raise ParameterError("unit_id", unit_id, "0..247", "Modbus drive")
         if cycle not in CYCLE_MODES:
             raise ParameterError("cycle", cycle, " or ".join(map(repr, CYCLE_MODES)), "Modbus drive")
         stats = ModbusStats()
-        self._init_master(f"Modbus unit {unit_id} at {address.url}", stats, scaling)
+        self._init_master(f"Modbus unit {unit_id} at {address.url}", stats, *scaling)
         self.unit_id = unit_id
         self.cycle = cycle
         self.state_timeout = state_timeout
@@ -312,7 +315,9 @@ class ModbusDrive(Cia402Master):
     # ------------------------------------------------------------------ safety
 
     def _send_safe_outputs(self) -> None:
-        """One attempt to write zero torque with DISABLE VOLTAGE, if the link is up; never raises."""
+        """One attempt to write zero torque with DISABLE VOLTAGE, if the link is up; never raises.  It
+        runs on a trip, beside the error being raised (the command's one line): a failure here, on
+        a link that error took down too (every axis of a server that died), is logged at INFO (``-v``)."""
         self._requests.cached = None
         if not self.link.up:
             return
@@ -322,7 +327,7 @@ class ModbusDrive(Cia402Master):
         try:
             self.link.send(requests.write, f"writing the safe outputs to {requests.write_what}")
         except DriveError as exc:
-            logger.error("%s: could not write zero torque: %s", self.name, exc)
+            logger.info("%s: could not write zero torque: %s", self.name, exc.message)
 
     def _cyclic(self, request: ModbusPDU, what: str) -> ModbusPDU:
         """A cyclic request; any failure trips (a timeout also closes the link: a late answer

@@ -7,7 +7,8 @@ Errors name the drive and what the request was for:
 - exception response (0x02 illegal address, 0x03 illegal value, 0x06 busy, ...) ->
   :class:`~drives.errors.DriveRefusal` (``code``, the exception code);
 - no answer within ``timeout`` -> :class:`~drives.errors.DriveTimeout`;
-- a dropped connection -> :class:`~drives.errors.ModbusLinkLost`.
+- a dropped connection (pymodbus' ``ConnectionException``, or the socket's ``ConnectionError``: a
+  reset, a broken pipe; one thing, one word: "connection lost") -> :class:`~drives.errors.ModbusLinkLost`.
 """
 
 from __future__ import annotations
@@ -140,7 +141,7 @@ class ModbusLink:
         self.stats.requests += 1
         try:
             response = self._execute(False, request)
-        except ConnectionException as exc:
+        except (ConnectionException, ConnectionError) as exc:  # pymodbus' word for it, or the socket's (ECONNRESET, EPIPE)
             self.drop()
             raise ModbusLinkLost(self.name, f"connection lost while {what}: {exc}; call reconnect()") from exc
         except ModbusIOException as exc:

@@ -13,9 +13,10 @@ import argparse
 import logging
 import os
 import pathlib
+import signal
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from haptic_bus.app.arguments import (
     EXIT_ASSUMPTION,
@@ -49,6 +50,10 @@ from haptic_bus.app.status_cli import add_status_parser
 from haptic_bus.app.validate_cli import add_validate_parser
 from haptic_bus.console import StderrHandler
 from haptic_bus.validation import folder_path, writable_file, writable_folder
+
+if TYPE_CHECKING:
+    from haptic_bus.app.profiles import AxesProfile, Profile
+    from haptic_bus.app.run_options import RunOptions
 
 _NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
 
@@ -170,12 +175,57 @@ def _demo(args: argparse.Namespace) -> int:
     return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(reason, EXIT_NO)
 
 
+class _StoppedBeforeStart(Exception):
+    """SIGTERM while ``run`` prepares (its imports, its profile read and judged): nothing touched yet."""
+
+
+def _stop_at_once(signum: int, frame: object) -> None:
+    raise _StoppedBeforeStart
+
+
 def _run(args: argparse.Namespace) -> int:
+    # First: a SIGTERM while the run prepares (seconds: gantry-3d's gate, ~5 s under load) ends it at
+    # once, as Ctrl-C does then (Python's KeyboardInterrupt: one line, 130); the stop request takes
+    # over once the run is about to touch the bus (_prepare_run's last step).
+    previous = signal.signal(signal.SIGTERM, _stop_at_once)
+    try:
+        from haptic_bus.app.run_options import exit_status
+        from haptic_bus.app.runner import run  # its imports: a second or more under load
+
+        profile, bus, options, links = _prepare_run(args)
+    except _StoppedBeforeStart:
+        print("ended: stopped before the run began; no bus touched, nothing written")
+        return EXIT_OK
+    except BaseException:
+        signal.signal(signal.SIGTERM, previous)  # a refused command line ends as it did
+        raise
+    result = run(profile, bus, options, **links)
+    summary = result.summary
+    if summary is not None:
+        p, late = summary.compute_percentiles, summary.lateness_percentiles
+        print(f"cycles {summary.cycles}; peak force {summary.peak_force:.4g} N; saturated {summary.saturated_cycles}; "
+              f"port energy {summary.energy:.4g} J (least {summary.least_energy:.4g} J, below zero in "
+              f"{summary.observer_active_cycles} cycles, counts rounding within {summary.rounding_bound:.2g} J); "
+              f"passivity layer {summary.layer}: lowered {summary.layer_interventions} targets")
+        if p:
+            print(f"compute p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us; clock: {summary.clock}")
+        if late:
+            print(f"start lateness p50 {late['p50'] * 1e6:.1f} us, p99 {late['p99'] * 1e6:.1f} us, "
+                  f"max {late['max'] * 1e6:.1f} us; overruns {summary.overruns}; late cycles {summary.late_cycles}")
+    print(f"ended: {result.exit_reason}; wrote {', '.join(str(f) for f in result.files)}")
+    if result.error:
+        said = result.error if result.error.startswith(result.exit_reason) else f"{result.exit_reason}: {result.error}"
+        print(f"haptic-bus run: {said}", file=sys.stderr)
+    return exit_status(result.exit_reason)
+
+
+def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, RunOptions, dict[str, Any]]:
+    """``run``'s profile, bus, :class:`~haptic_bus.app.run_options.RunOptions` and the link's keyword
+    arguments, read and checked before anything is touched; last, the stop request is installed."""
     from haptic_bus.app.drive_address import DEFAULT_UNIT_ID
     from haptic_bus.app.profiles import AxesProfile, load_profile
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
-    from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
-    from haptic_bus.app.runner import run
+    from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest
 
     profile = load_profile(args.profile)
     bus: Any
@@ -194,26 +244,10 @@ def _run(args: argparse.Namespace) -> int:
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
                          scheduling=scheduling(args.realtime),
                          reset_fault=args.reset_fault, bus_log=not args.no_bus_log, plots=not args.no_plots)
-    stop.install()
-    result = run(profile, bus, options, node_id=node_id, unit_id=unit_id, unit_ids=unit_ids,
-                 controller_node_id=args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
-    summary = result.summary
-    if summary is not None:
-        p, late = summary.compute_percentiles, summary.lateness_percentiles
-        print(f"cycles {summary.cycles}; peak force {summary.peak_force:.4g} N; saturated {summary.saturated_cycles}; "
-              f"port energy {summary.energy:.4g} J (least {summary.least_energy:.4g} J, below zero in "
-              f"{summary.observer_active_cycles} cycles, counts rounding within {summary.rounding_bound:.2g} J); "
-              f"passivity layer {summary.layer}: lowered {summary.layer_interventions} targets")
-        if p:
-            print(f"compute p50 {p['p50'] * 1e6:.1f} us, p99 {p['p99'] * 1e6:.1f} us; clock: {summary.clock}")
-        if late:
-            print(f"start lateness p50 {late['p50'] * 1e6:.1f} us, p99 {late['p99'] * 1e6:.1f} us, "
-                  f"max {late['max'] * 1e6:.1f} us; overruns {summary.overruns}; late cycles {summary.late_cycles}")
-    print(f"ended: {result.exit_reason}; wrote {', '.join(str(f) for f in result.files)}")
-    if result.error:
-        said = result.error if result.error.startswith(result.exit_reason) else f"{result.exit_reason}: {result.error}"
-        print(f"haptic-bus run: {said}", file=sys.stderr)
-    return exit_status(result.exit_reason)
+    links = {"node_id": node_id, "unit_id": unit_id, "unit_ids": unit_ids,
+             "controller_node_id": args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID}
+    stop.install()  # from here SIGINT and SIGTERM ask the runner to stop (before enabling, or at a cycle boundary)
+    return profile, bus, options, links
 
 
 def _refuse_single_axis_options(args: argparse.Namespace) -> None:

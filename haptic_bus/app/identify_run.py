@@ -144,6 +144,7 @@ def identify_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, opt
                      controller_node_id: int = 127) -> IdentifyOutcome:
     """Identify the handle on CANopen drive ``node_id`` on ``bus`` (python-can keyword arguments)."""
     from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
+    from haptic_bus.app.run_links import PROFILE_SCALING_SOURCE
 
     plan_for(profile, profile.scaling(), options)  # invalid input fails here, before the bus
     config = resolve_bus_config(**bus)
@@ -155,6 +156,7 @@ def identify_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, opt
     def open_drive() -> Drive:
         return CanopenDrive(node_id, interface=config["interface"], channel=config.get("channel"),
                             bitrate=config.get("bitrate"), bus_kwargs=extra, period=period, scaling=profile.scaling(),
+                            scaling_source=PROFILE_SCALING_SOURCE,
                             tpdo_objects=DEFAULT_TPDO_WITH_POSITION,
                             safety=safety if options.pacing == WALL else safety.for_virtual_time(period),
                             **patient(options.pacing == WALL, VIRTUAL_TIME_CANOPEN_PATIENCE))
@@ -165,6 +167,7 @@ def identify_canopen(profile: Profile, bus: Mapping[str, Any], node_id: int, opt
 def identify_modbus(profile: Profile, url: str, unit_id: int, options: IdentifyOptions) -> IdentifyOutcome:
     """Identify the handle on the Modbus drive at ``url`` (``tcp://HOST:PORT`` or ``rtu:/dev/...``)."""
     from drives.modbus.drive import ModbusDrive
+    from haptic_bus.app.run_links import PROFILE_SCALING_SOURCE
 
     plan_for(profile, profile.scaling(), options)
     period = profile.loop.period
@@ -172,7 +175,8 @@ def identify_modbus(profile: Profile, url: str, unit_id: int, options: IdentifyO
     link: dict[str, Any] = {"kind": "modbus", "url": url, "unit_id": unit_id}
 
     def open_drive() -> Drive:
-        return ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), safety=safety, with_position=True,
+        return ModbusDrive.from_url(url, unit_id=unit_id, scaling=profile.scaling(), scaling_source=PROFILE_SCALING_SOURCE,
+                                    safety=safety, with_position=True,
                                     **patient(options.pacing == WALL, VIRTUAL_TIME_MODBUS_PATIENCE))
 
     return _identify(profile, options, link, open_drive)

@@ -296,7 +296,8 @@ def modbus_rig(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Se
                             else {"kind": "modbus", "url": places[0][0], "unit_id": places[0][1]})
 
     def open_drive(stack: ExitStack, tap: Tap | None) -> Opened:
-        drives = [ModbusDrive.from_url(url, unit_id=unit, scaling=scaling, safety=safety, with_position=True,
+        drives = [ModbusDrive.from_url(url, unit_id=unit, scaling=scaling, scaling_source=PROFILE_SCALING_SOURCE,
+                                       safety=safety, with_position=True,
                                        **patient(options.wall_paced, VIRTUAL_TIME_MODBUS_PATIENCE))
                   for (url, unit), scaling in zip(places, scalings)]
         axes = ModbusAxes(drives)

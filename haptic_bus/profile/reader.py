@@ -1,6 +1,8 @@
 """Reading one table of a profile's TOML document: typed fields whose errors name the file, the
 dotted field, the value and the allowed range, and a check that no key was left unread (a typo
-is an error, not a silent default).
+is an error, not a silent default).  A required key that is missing beside a key nobody read
+whose name is close to it (``force_limt`` for ``force_limit``) is reported as that misspelling
+("no such key; did you mean force_limit?"), not as a missing value the user did write.
 
 A reader may be given ``silent``: defaults for required keys its caller lets be left out (the
 simulated drive's view of a profile, which runs a bare ``[device]`` with its own defaults); a
@@ -8,6 +10,7 @@ default goes through the same check as a written value."""
 
 from __future__ import annotations
 
+import difflib
 import pathlib
 import re
 import tomllib
@@ -24,6 +27,11 @@ NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 REQUIRED = object()
 """The default of a field that must be given."""
+
+MISSPELLING_CUTOFF = 0.8
+"""How alike (difflib's ratio, 0..1) an unread key and a missing required key must be for the
+first to be named as a misspelling of the second: ``force_limt``/``force_limit`` 0.95, ``mas``/``mass``
+0.86; two distinct keys of one table (``timing``/``delay``, ``stiffness``/``damping``) stay far below."""
 
 
 def profile_error(path: pathlib.Path | str, field: str, value: object, allowed: str) -> ParameterError:
@@ -46,6 +54,17 @@ def read_document(path: pathlib.Path) -> dict[str, Any]:
                             "UTF-8 text (TOML 1.0)") from None
 
 
+def refuse_duplicates(path: pathlib.Path, where: str, key: str, values: Iterable[object]) -> None:
+    """ParameterError naming the field ``where[i].key`` of the first of ``values`` (one an entry of the
+    array of tables ``where``; None: no value) that an earlier entry has, and that entry's field."""
+    seen: dict[object, int] = {}
+    for i, value in enumerate(values):
+        if value is not None and value in seen:
+            raise profile_error(path, f"{where}[{i}].{key}", value,
+                                f"a {key} no other entry uses ({where}[{seen[value]}].{key} has it)")
+        seen[value] = i
+
+
 class Reader:
     """Reads one table of the document, tracking which keys were used (typo protection)."""
 
@@ -65,9 +84,18 @@ class Reader:
         if key not in self.table:
             default = self.silent.get(key, REQUIRED) if default is REQUIRED else default
             if default is REQUIRED:
+                self._refuse_misspelling(key, allowed)
                 raise profile_error(self.path, self.field(key), "<missing>", f"required: {allowed}")
             return default
         return self.table[key]
+
+    def _refuse_misspelling(self, key: str, allowed: str) -> None:
+        """Refuse an unread key of the table that looks like the missing required ``key`` (module docstring)."""
+        unread = [k for k in self.table if k not in self.used and isinstance(k, str)]
+        close = difflib.get_close_matches(key, unread, n=1, cutoff=MISSPELLING_CUTOFF)
+        if close:
+            raise profile_error(self.path, self.field(close[0]), self.table[close[0]],
+                                f"no such key; did you mean {key}? ({key} is required: {allowed})")
 
     def _wrap(self, key: str, check: Callable[[object], Any], value: object) -> Any:
         try:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
 from haptic_bus.profile.device import DeviceTable
-from haptic_bus.profile.reader import NAME_PATTERN, Reader, profile_error
+from haptic_bus.profile.reader import NAME_PATTERN, Reader, profile_error, refuse_duplicates
 
 POSITION_RANGE = (-1e6, 1e6)  # m, as haptic_bus.control.scene
 FORCE_RANGE = (0.0, 1e6)  # N, exclusive low
@@ -62,12 +62,7 @@ def read_scene(path: pathlib.Path, table: object) -> tuple[ObjectTable, ...]:
         raise profile_error(path, "scene.objects", objects, "an array of tables [[scene.objects]]")
     r.done()
     scene = tuple(_read_object(path, i, obj) for i, obj in enumerate(objects))
-    seen: dict[str, int] = {}
-    for i, obj in enumerate(scene):
-        if obj.name in seen:
-            raise profile_error(path, f"scene.objects[{i}].name", obj.name,
-                                f"a name no other object uses (scene.objects[{seen[obj.name]}] has it)")
-        seen[obj.name] = i
+    refuse_duplicates(path, "scene.objects", "name", [obj.name for obj in scene])
     return scene
 
 

@@ -15,10 +15,9 @@ no hand-off; whatever a node sends (its TPDOs there, its heartbeat from its time
 the bridge's own handle on the channel, which sends it on the bus.  The nodes hear one another
 on the channel, as on a real bus.
 
-A frame the bus gives back with an identifier one of these nodes sends is this process's own
-echo (``udp_multicast`` loops every datagram back to every socket on the group; on a CAN bus an
-identifier has one sender, arbitration requires it), and is dropped before it reaches the
-channel: the nodes heard it there already.
+The bus does not give the bridge back its own frames (a CAN controller does not hear itself; on
+``udp_multicast``, :class:`drives.udp_multicast.FilteredMulticastBus` drops the datagrams its own
+socket sent), so a node's frame reaches the other nodes once, on the channel.
 
 Generic bus infrastructure: nothing here knows CANopen.
 """
@@ -48,7 +47,6 @@ class BusBridge:
         self._config = dict(bus)
         self._bus: can.BusABC | None = None
         self._local: LockstepBus | None = None
-        self._sent: set[int] = set()  # identifiers the nodes have sent: their echoes are dropped
         self._send_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -86,7 +84,6 @@ class BusBridge:
         bus = self._bus
         if bus is None:
             return
-        self._sent.add(message.arbitration_id)
         with self._send_lock:  # the bridge's thread and the nodes' timer threads send
             bus.send(message)
 
@@ -97,7 +94,7 @@ class BusBridge:
         try:
             while not self._stop.is_set():
                 message = bus.recv(RECV_TIMEOUT)
-                if message is not None and message.arbitration_id not in self._sent:
+                if message is not None:
                     local.send(message)
         except (can.CanError, OSError) as exc:  # the bus is gone
             self._lost(exc)

@@ -59,7 +59,7 @@ from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, 
 from haptic_bus.control.supervisor import SupervisorPolicy
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import DeviceTable, check_velocity_period, read_device, read_timing
-from haptic_bus.profile.reader import Reader, profile_error
+from haptic_bus.profile.reader import Reader, profile_error, refuse_duplicates
 from haptic_bus.profile.scene import FORCE_RANGE
 
 DEFAULT_BITRATE = 1_000_000
@@ -205,14 +205,6 @@ def _read_hand(path: pathlib.Path, table: object, size: int) -> Mapping[str, Any
     return MappingProxyType(out)
 
 
-def _unique(path: pathlib.Path, where: str, values: list[Any], what: str) -> None:
-    seen: dict[Any, int] = {}
-    for i, value in enumerate(values):
-        if value is not None and value in seen:
-            raise profile_error(path, f"{where}[{i}]", value, f"{what} no other entry uses ({where}[{seen[value]}] has it)")
-        seen[value] = i
-
-
 def read_axes(path: pathlib.Path, document: Mapping[str, Any]) -> AxesProfile:
     """Validate the parsed multi-axis profile ``document`` of the file ``path`` and check its bus load, without
     judging its scene; raise ParameterError (the bus load above 70 %: ``loop.period`` with the load and the smallest T)."""
@@ -228,9 +220,9 @@ def read_axes(path: pathlib.Path, document: Mapping[str, Any]) -> AxesProfile:
     if not isinstance(tables, list) or not 1 <= len(tables) <= MAX_AXES:
         raise profile_error(path, "axes", tables, f"an array of 1 to {MAX_AXES} tables [[axes]], one per axis")
     axes = tuple(_read_axis(path, i, table, period) for i, table in enumerate(tables))
-    _unique(path, "axes", [a.name for a in axes], "a name")
-    _unique(path, "axes", [a.node_id for a in axes], "a node_id")
-    _unique(path, "axes", [a.unit_id for a in axes], "a unit_id")
+    refuse_duplicates(path, "axes", "name", [a.name for a in axes])
+    refuse_duplicates(path, "axes", "node_id", [a.node_id for a in axes])
+    refuse_duplicates(path, "axes", "unit_id", [a.unit_id for a in axes])
     if len({a.node_id is None for a in axes}) > 1:
         raise profile_error(path, "axes", [a.node_id or a.unit_id for a in axes],
                             "one kind of bus for every axis: all node_id (CANopen) or all unit_id (Modbus)")
@@ -246,7 +238,7 @@ def read_axes(path: pathlib.Path, document: Mapping[str, Any]) -> AxesProfile:
     space.done()
     top.done()
     scene = tuple(_read_object(path, i, table, len(axes)) for i, table in enumerate(objects))
-    _unique(path, "space.objects", [obj.name for obj in scene], "a name")
+    refuse_duplicates(path, "space.objects", "name", [obj.name for obj in scene])
     profile = AxesProfile(name, operator, task, description, period, axes, scene, policy, bitrate, safety, path,
                           passivity, supervisor, hand)
     try:

@@ -1,0 +1,57 @@
+"""A udp_multicast handle does not receive the frames it sent, as a CAN controller does not.
+
+The kernel loops every datagram on the group back to every socket on the host, the sender's too;
+:class:`drives.udp_multicast.FilteredMulticastBus` drops the ones its own sending socket sent.
+Two handles in one process (one host address, as two processes on one host) still hear each
+other, and a plain python-can handle reads the project's frames.  A run with no drive on the bus
+then names no node it heard (it used to name itself, 127), and its bus log holds each frame it
+sent once, as Tx.
+"""
+
+from __future__ import annotations
+
+import pathlib
+
+import can
+import pytest
+
+from drives.bus_config import open_bus
+from tests.run_rig import run_cli
+
+WAIT = 0.3  # s: what a receive waits for a datagram looped back on this host (microseconds when idle)
+
+
+def heard(bus: can.BusABC) -> list[int]:
+    """The identifiers ``bus`` receives until it hears nothing for :data:`WAIT` (at most 10 frames)."""
+    ids = []
+    for _ in range(10):
+        message = bus.recv(WAIT)
+        if message is None:
+            break
+        ids.append(message.arbitration_id)
+    return ids
+
+
+def test_a_handle_hears_the_others_frames_but_not_its_own(multicast: tuple[str, int]) -> None:
+    group, port = multicast
+    with (open_bus(interface="udp_multicast", channel=group, port=port) as one,
+          open_bus(interface="udp_multicast", channel=group, port=port) as other,
+          can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=0) as plain):
+        one.send(can.Message(arbitration_id=0x77F, data=[5], is_extended_id=False))
+        plain.send(can.Message(arbitration_id=0x185, data=[1, 2], is_extended_id=False))
+        assert heard(one) == [0x185]
+        assert heard(other) == [0x77F, 0x185]
+        assert heard(plain) == [0x77F, 0x185]  # python-can's own handle still hears itself
+
+
+def test_a_run_with_no_drive_names_no_node_and_logs_its_frames_once(
+        multicast: tuple[str, int], tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    group, port = multicast
+    result = run_cli(capsys, "run", "cia402-handle", "--interface", "udp_multicast", "--channel", group,
+                     "--bus-option", f"port={port}", "--node-id", "5", "--virtual-time", "--out", str(tmp_path))
+    assert result.code == 1
+    assert "no other node seen on the bus" in result.err
+    log = (tmp_path / "bus.asc").read_text().splitlines()
+    sent = [line for line in log if " Tx " in line]
+    assert sent  # the NMT command and the SDO requests it sent
+    assert not [line for line in log if " Rx " in line]  # nothing else is on the bus: none of them came back
