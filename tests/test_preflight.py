@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptic_bus.app.preflight import PERIOD_GRID, STALL_MARGIN, Timing, judge, without_realtime
+from haptic_bus.app.preflight import PERIOD_GRID, STALL_MARGIN, Timing, judge, measure, without_realtime
 from haptic_bus.app.profiles import load_profile
+from haptic_bus.errors import DriveTimeout
 
 T = 1e-3
 
@@ -110,3 +111,29 @@ def test_a_refusal_says_when_real_time_scheduling_was_not_granted() -> None:
     assert without_realtime(refused, {"got": {"SCHED_FIFO": "priority 80"}, "missing": {}}) == refused
     held = judge(timing(np.full(500, 20e-6)), profile.gate(), profile.compiled_scene(), "guard", 0.050, 50)
     assert without_realtime(held, {"missing": {"SCHED_FIFO": why}}) == held
+
+
+def test_a_drive_that_stops_answering_during_pre_flight_is_said_to_have_answered_first() -> None:
+    # the exchange pre-flight times: five cycles answered, then the drive's silence (the master's own
+    # DriveTimeout); from the control process a stalled drive process looks the same, and it says so
+    answered = []
+
+    def exchange() -> None:
+        if len(answered) == 5:
+            raise DriveTimeout("CANopen node 5", "no TPDO (COB-ID 0x185) for 3 consecutive cycles (timeout 50 ms each)")
+        answered.append(True)
+
+    with pytest.raises(DriveTimeout) as silent:
+        measure(exchange, T, cycles=20)
+    assert str(silent.value) == ("CANopen node 5: no TPDO (COB-ID 0x185) for 3 consecutive cycles (timeout 50 ms each), "
+                                 "after answering 5 of pre-flight's 20 cycles (nothing enabled): a drive that stops "
+                                 "answering and a machine that stalls the drive's process look the same from here")
+
+
+def test_a_drive_that_never_answers_in_pre_flight_keeps_its_own_words() -> None:
+    def exchange() -> None:
+        raise DriveTimeout("CANopen node 5", "no TPDO (COB-ID 0x185) for 3 consecutive cycles (timeout 50 ms each)")
+
+    with pytest.raises(DriveTimeout, match=r"^CANopen node 5: no TPDO \(COB-ID 0x185\) for 3 consecutive cycles "
+                                           r"\(timeout 50 ms each\)$"):
+        measure(exchange, T, cycles=20)

@@ -40,7 +40,7 @@ from haptic_bus.control.clock import RealClock
 from haptic_bus.control.cycle_loop import percentiles
 from haptic_bus.control.gate import PassivityGate
 from haptic_bus.control.scene import CompiledScene
-from haptic_bus.errors import Refusal
+from haptic_bus.errors import DriveTimeout, Refusal
 
 logger = logging.getLogger(__name__)
 
@@ -107,14 +107,24 @@ def measure(exchange: Callable[[], object], period: float, cycles: int = PREFLIG
             spin: float | None = None) -> Timing:
     """Time ``exchange`` -- one cycle of the drive(s) at zero torque, called in their cyclic phase so
     that it takes the run's own path (the bus read by this thread, the heartbeat from the cycle) --
-    ``cycles`` times on a fresh real clock of period ``period`` s."""
+    ``cycles`` times on a fresh real clock of period ``period`` s.  A drive that stops answering after
+    answering some cycles is a :class:`DriveTimeout` that says so: from here it looks the same as a
+    machine that stalls the drive's process (breaker: a simulated drive silent for 280 ms on a loaded
+    host was reported as a plain "no TPDO")."""
     clock = RealClock(period, capacity=cycles, spin=spin)
     starts = np.zeros(cycles)
     took = np.zeros(cycles)
     for k in range(cycles):
         clock.wait_next(k)
         started = time.perf_counter()
-        exchange()
+        try:
+            exchange()
+        except DriveTimeout as silent:
+            if k == 0:
+                raise
+            raise DriveTimeout(silent.node, f"{silent.message}, after answering {k} of pre-flight's {cycles} cycles "
+                               "(nothing enabled): a drive that stops answering and a machine that stalls the "
+                               "drive's process look the same from here") from silent
         starts[k], took[k] = started, time.perf_counter() - started
     return Timing(period, clock.lateness(), starts, took, clock.overruns)
 
