@@ -299,6 +299,10 @@ def _safe_start(kind: RunKind[Any, Any, Any], drive: Any, gate: Any, scene: Any,
     proof = gate.proves_ramp(scene)
     if not proof.proven:
         raise Refusal(f"{where}; and the start ramp is refused: {proof.reason}")
+    if kind.profile.passivity.layer == "off":  # the gate proves each scaled wall; the rising scale is held by energy
+        raise Refusal(f"{where}; and the start ramp is refused with [passivity] layer = \"off\": a wall whose force "
+                      "rises under the handle is time-varying, which the gate's verdict on each scaled wall does not "
+                      "cover; only the passivity layer holds the port's energy at or above the wall's at the start")
     logger.info("%s: ramping the force in over %g s", where, kind.start.ramp_time)
     return origin, kind.start.ramp_time
 
