@@ -50,6 +50,8 @@ one Modbus drive or several polled in one cycle -- ``haptic-bus sim --modbus tcp
    completed and the pictures drawn.  A folder the writer can no longer write (a full disk, the
    folder deleted) stops the run at the next cycle boundary: the drives disabled, "write error"
    (exit 1), what was written before kept, nothing more attempted.
+   An exception none of these is (a bug, a judge worker that could not start) is raised, ``run.json``
+   saying "crashed" and the exception, not "completed".
 
 :func:`~haptic_bus.app.run_options.exit_status` maps how a run ended to the command's exit status.
 """
@@ -239,6 +241,9 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
         reason, error = "interrupted", "interrupted (Ctrl-C)"
     except _StopBeforeEnabling:
         reason, error = "stopped", None
+    except BaseException as exc:  # anything else (a bug, a judge worker that could not start): not "completed"
+        reason, error = "crashed", f"{type(exc).__name__}: {exc}"
+        raise
     finally:
         reason, error = _write_failure(reason, error, recorder, summary, period)
         extra["exit_reason"], extra["error"] = reason, error
