@@ -143,6 +143,9 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
 def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | str | Sequence[str], options: RunOptions,
          node_id: int | None, unit_id: int, unit_ids: Sequence[int] | None, controller_node_id: int) -> Rig:
     """The link ``profile`` and ``bus`` name (:mod:`~haptic_bus.app.run_links`); ParameterError if none."""
+    if not isinstance(profile, (Profile, AxesProfile)):  # a name or a path: what hb.load_profile takes
+        raise ParameterError("profile", profile, "a Profile or an AxesProfile, as hb.load_profile(name_or_path) "
+                             "returns it", "run")
     several = isinstance(profile, AxesProfile)
     if (node_id is not None and several) or (unit_ids is not None and not several):
         name, value = ("node_id", node_id) if node_id is not None else ("unit_ids", unit_ids)
