@@ -220,8 +220,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                 if prepared is not None and options.wall_paced and running.ramp_cycles == 0:
                     _still_outside(kind, drive, scene)
                 show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
-                if options.stop.event.is_set():  # Ctrl-C or SIGTERM during set-up or pre-flight: never enabled
-                    raise KeyboardInterrupt if options.stop.interrupted else _StopBeforeEnabling
+                _stop_if_asked(options)  # Ctrl-C or SIGTERM during set-up or pre-flight: never enabled
                 # last before the first cycle: every drive in the same cycle, their RPDO deadlines run from here
                 drive.enable()
                 with node.cycling() if node is not None else nullcontext():  # its verdicts answered by the cycle
@@ -276,6 +275,12 @@ class _StopBeforeEnabling(BaseException):  # control flow, not an error: no call
     """SIGTERM asked the run to stop before its drives were enabled: it ends "stopped", nothing enabled."""
 
 
+def _stop_if_asked(options: RunOptions) -> None:
+    """End a run not yet enabled that SIGTERM (:class:`_StopBeforeEnabling`) or Ctrl-C asked to stop."""
+    if options.stop.event.is_set():
+        raise KeyboardInterrupt if options.stop.interrupted else _StopBeforeEnabling
+
+
 def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, scene: Any, options: RunOptions,
                extra: dict[str, Any]) -> None:
     """Measure this machine's lateness on this bus with the drive(s) not enabled, print it and record
@@ -285,6 +290,7 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
     with drive.cyclic() as cycle:  # the run's own path, every target zero
         timing = preflight.measure(lambda: (cycle.read(), cycle.saturate_and_write(zeros)), kind.period,
                                    spin=options.scheduling.spin)
+    _stop_if_asked(options)  # asked during the measurement: the run stops, whatever its verdict would have been
     report = preflight.judge_delay(timing, kind.assumed_delay(gate), kind.passes_at(gate, scene),
                                    kind.profile.passivity.layer, rig.watchdog.stall, rig.watchdog.periods)
     preflight.settle(preflight.without_realtime(report, extra.get("realtime")), options.live, extra)
