@@ -9,7 +9,7 @@ import subprocess
 import sys
 import textwrap
 
-from haptic_bus.app.entry import STOPPED_BEFORE_START
+from haptic_bus.app.early_stop import STOPPED_BEFORE_START
 
 # A child that runs the console script's main for `haptic-bus run gantry-3d ...` and sends itself
 # SIGTERM as soon as main has installed its handler, before the command line is imported; the
@@ -17,7 +17,8 @@ from haptic_bus.app.entry import STOPPED_BEFORE_START
 # handler too) was still undefined when it sent the signal.
 _CHILD = textwrap.dedent("""
     import os, signal, sys, threading, time
-    from haptic_bus.app.entry import main, stop_at_once
+    from haptic_bus.app.early_stop import stop_at_once
+    from haptic_bus.app.entry import main
 
     def kill_early():
         deadline = time.monotonic() + 30.0

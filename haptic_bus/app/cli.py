@@ -35,7 +35,7 @@ from haptic_bus.app.arguments import (
     seconds,
     timeout,
 )
-from haptic_bus.app.entry import STOPPED_BEFORE_START, StoppedBeforeStart, stop_at_once
+from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, stop_at_once
 from haptic_bus.app.fault_cli import add_fault_reset_parser
 from haptic_bus.app.identify_cli import add_identify_parser
 from haptic_bus.app.run_arguments import (

@@ -7,10 +7,12 @@ handling (:func:`haptic_bus.app.cli.main`) existed, and Python printed a traceba
 as a Ctrl-C ends every command: one line on stderr, exit 130.
 
 A SIGTERM in that time killed ``run`` silently (status 143) before ``run`` installed its own stop
-handling: for ``run``, :func:`main` installs :func:`stop_at_once` first, so a SIGTERM from here
-until the run is about to touch the bus ends it with :data:`STOPPED_BEFORE_START`, exit 0, as
-``run`` does (:func:`haptic_bus.app.cli._run`).  This module imports nothing of the project, so
-the window left is Python's own start-up.
+handling: for ``run``, :func:`main` installs :func:`~haptic_bus.app.early_stop.stop_at_once` first,
+so a SIGTERM from here until the run is about to touch the bus ends it with
+:data:`~haptic_bus.app.early_stop.STOPPED_BEFORE_START`, exit 0, as ``run`` does
+(:func:`haptic_bus.app.cli._run`).  This module imports nothing of the project but
+:mod:`~haptic_bus.app.early_stop` (the standard library only), so the window left is Python's own
+start-up.
 """
 
 from __future__ import annotations
@@ -19,19 +21,10 @@ import signal
 import sys
 from collections.abc import Sequence
 
+from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, stop_at_once
+
 EXIT_INTERRUPTED = 130  # haptic_bus.app.arguments.EXIT_INTERRUPTED, which is what this guards the import of
 EXIT_OK = 0
-STOPPED_BEFORE_START = "ended: stopped before the run began; no bus touched, nothing written"
-"""What ``run`` prints (stdout) when a SIGTERM ends it while it prepares."""
-
-
-class StoppedBeforeStart(Exception):
-    """SIGTERM while ``run`` prepares (its imports, its profile read and judged): nothing touched yet."""
-
-
-def stop_at_once(signum: int, frame: object) -> None:
-    """SIGTERM handler while ``run`` prepares: raise :class:`StoppedBeforeStart`."""
-    raise StoppedBeforeStart
 
 
 def _command(argv: Sequence[str]) -> str | None:
