@@ -35,6 +35,7 @@ from haptic_bus.app.arguments import (
     seconds,
     timeout,
 )
+from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, stop_at_once
 from haptic_bus.app.fault_cli import add_fault_reset_parser
 from haptic_bus.app.identify_cli import add_identify_parser
 from haptic_bus.app.run_arguments import (
@@ -175,26 +176,19 @@ def _demo(args: argparse.Namespace) -> int:
     return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(reason, EXIT_NO)
 
 
-class _StoppedBeforeStart(Exception):
-    """SIGTERM while ``run`` prepares (its imports, its profile read and judged): nothing touched yet."""
-
-
-def _stop_at_once(signum: int, frame: object) -> None:
-    raise _StoppedBeforeStart
-
-
 def _run(args: argparse.Namespace) -> int:
-    # First: a SIGTERM while the run prepares (seconds: gantry-3d's gate, ~5 s under load) ends it at
+    # First: a SIGTERM while the run prepares (seconds: gantry-3d's gate, ~5 s under load; the console script
+    # installed the same handler before the command line was imported, haptic_bus.app.entry) ends it at
     # once, as Ctrl-C does then (Python's KeyboardInterrupt: one line, 130); the stop request takes
     # over once the run is about to touch the bus (_prepare_run's last step).
-    previous = signal.signal(signal.SIGTERM, _stop_at_once)
+    previous = signal.signal(signal.SIGTERM, stop_at_once)
     try:
         from haptic_bus.app.run_options import exit_status
         from haptic_bus.app.runner import run  # its imports: a second or more under load
 
         profile, bus, options, links = _prepare_run(args)
-    except _StoppedBeforeStart:
-        print("ended: stopped before the run began; no bus touched, nothing written")
+    except StoppedBeforeStart:
+        print(STOPPED_BEFORE_START)
         return EXIT_OK
     except BaseException:
         signal.signal(signal.SIGTERM, previous)  # a refused command line ends as it did

@@ -1,24 +1,48 @@
 """The ``haptic-bus`` console script's entry: :func:`main` imports the command line, then runs it.
 
-Importing the command line takes about 0.1 s (argparse, logging, the option modules).  A Ctrl-C
-in that time used to raise KeyboardInterrupt out of the console script's import, before the
-command's own handling (:func:`haptic_bus.app.cli.main`) existed, and Python printed a
-traceback.  Here it ends as a Ctrl-C ends every command: one line on stderr, exit 130.  This
-module imports nothing of the project, so the window left is Python's own start-up.
+Importing the command line takes about 0.1 s (argparse, logging, the option modules), and building
+its parser 0.4 s more under load (``profiles_cli`` and the analysis it imports).  A Ctrl-C in that
+time used to raise KeyboardInterrupt out of the console script's import, before the command's own
+handling (:func:`haptic_bus.app.cli.main`) existed, and Python printed a traceback.  Here it ends
+as a Ctrl-C ends every command: one line on stderr, exit 130.
+
+A SIGTERM in that time killed ``run`` silently (status 143) before ``run`` installed its own stop
+handling: for ``run``, :func:`main` installs :func:`~haptic_bus.app.early_stop.stop_at_once` first,
+so a SIGTERM from here until the run is about to touch the bus ends it with
+:data:`~haptic_bus.app.early_stop.STOPPED_BEFORE_START`, exit 0, as ``run`` does
+(:func:`haptic_bus.app.cli._run`).  This module imports nothing of the project but
+:mod:`~haptic_bus.app.early_stop` (the standard library only), so the window left is Python's own
+start-up.
 """
 
 from __future__ import annotations
 
+import signal
 import sys
+from collections.abc import Sequence
+
+from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, stop_at_once
 
 EXIT_INTERRUPTED = 130  # haptic_bus.app.arguments.EXIT_INTERRUPTED, which is what this guards the import of
+EXIT_OK = 0
+
+
+def _command(argv: Sequence[str]) -> str | None:
+    """The subcommand of ``argv`` (the top level's options, ``-v``, ``-q``, ``--version``, take no value)."""
+    return next((word for word in argv if not word.startswith("-")), None)
 
 
 def main() -> int:
     """Entry point of the ``haptic-bus`` console script; returns the exit status."""
+    if _command(sys.argv[1:]) == "run":
+        signal.signal(signal.SIGTERM, stop_at_once)
     try:
         from haptic_bus.app.cli import main as command_line
+
+        return command_line()
     except KeyboardInterrupt:
         print("haptic-bus: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    return command_line()
+    except StoppedBeforeStart:
+        print(STOPPED_BEFORE_START)
+        return EXIT_OK

@@ -50,6 +50,8 @@ one Modbus drive or several polled in one cycle -- ``haptic-bus sim --modbus tcp
    completed and the pictures drawn.  A folder the writer can no longer write (a full disk, the
    folder deleted) stops the run at the next cycle boundary: the drives disabled, "write error"
    (exit 1), what was written before kept, nothing more attempted.
+   An exception none of these is (a bug, a judge worker that could not start) is raised, ``run.json``
+   saying "crashed" and the exception, not "completed".
 
 :func:`~haptic_bus.app.run_options.exit_status` maps how a run ended to the command's exit status.
 """
@@ -141,6 +143,9 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
 def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | str | Sequence[str], options: RunOptions,
          node_id: int | None, unit_id: int, unit_ids: Sequence[int] | None, controller_node_id: int) -> Rig:
     """The link ``profile`` and ``bus`` name (:mod:`~haptic_bus.app.run_links`); ParameterError if none."""
+    if not isinstance(profile, (Profile, AxesProfile)):  # a name or a path: what hb.load_profile takes
+        raise ParameterError("profile", profile, "a Profile or an AxesProfile, as hb.load_profile(name_or_path) "
+                             "returns it", "run")
     several = isinstance(profile, AxesProfile)
     if (node_id is not None and several) or (unit_ids is not None and not several):
         name, value = ("node_id", node_id) if node_id is not None else ("unit_ids", unit_ids)
@@ -215,8 +220,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                 if prepared is not None and options.wall_paced and running.ramp_cycles == 0:
                     _still_outside(kind, drive, scene)
                 show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
-                if options.stop.event.is_set():  # Ctrl-C or SIGTERM during set-up or pre-flight: never enabled
-                    raise KeyboardInterrupt if options.stop.interrupted else _StopBeforeEnabling
+                _stop_if_asked(options)  # Ctrl-C or SIGTERM during set-up or pre-flight: never enabled
                 # last before the first cycle: every drive in the same cycle, their RPDO deadlines run from here
                 drive.enable()
                 with node.cycling() if node is not None else nullcontext():  # its verdicts answered by the cycle
@@ -239,6 +243,9 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
         reason, error = "interrupted", "interrupted (Ctrl-C)"
     except _StopBeforeEnabling:
         reason, error = "stopped", None
+    except BaseException as exc:  # anything else (a bug, a judge worker that could not start): not "completed"
+        reason, error = "crashed", f"{type(exc).__name__}: {exc}"
+        raise
     finally:
         reason, error = _write_failure(reason, error, recorder, summary, period)
         extra["exit_reason"], extra["error"] = reason, error
@@ -268,6 +275,12 @@ class _StopBeforeEnabling(BaseException):  # control flow, not an error: no call
     """SIGTERM asked the run to stop before its drives were enabled: it ends "stopped", nothing enabled."""
 
 
+def _stop_if_asked(options: RunOptions) -> None:
+    """End a run not yet enabled that SIGTERM (:class:`_StopBeforeEnabling`) or Ctrl-C asked to stop."""
+    if options.stop.event.is_set():
+        raise KeyboardInterrupt if options.stop.interrupted else _StopBeforeEnabling
+
+
 def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, scene: Any, options: RunOptions,
                extra: dict[str, Any]) -> None:
     """Measure this machine's lateness on this bus with the drive(s) not enabled, print it and record
@@ -277,6 +290,7 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
     with drive.cyclic() as cycle:  # the run's own path, every target zero
         timing = preflight.measure(lambda: (cycle.read(), cycle.saturate_and_write(zeros)), kind.period,
                                    spin=options.scheduling.spin)
+    _stop_if_asked(options)  # asked during the measurement: the run stops, whatever its verdict would have been
     report = preflight.judge_delay(timing, kind.assumed_delay(gate), kind.passes_at(gate, scene),
                                    kind.profile.passivity.layer, rig.watchdog.stall, rig.watchdog.periods)
     preflight.settle(preflight.without_realtime(report, extra.get("realtime")), options.live, extra)

@@ -36,6 +36,9 @@ _pool: ProcessPoolExecutor | None = None
 _pool_lock = threading.Lock()
 
 Verdict = tuple[Scene, Decision] | str
+_DIED_STARTING = ("the judge worker process died while it started; it is started by spawn, which runs the calling "
+                  "script's top level again in it: a script that calls hb.run needs its run under "
+                  "if __name__ == '__main__': (Python's rule for spawned processes)")
 
 
 def judge_walls(gate: Gate[Any, Any], base: Scene, walls: dict[str, tuple[float, float]]) -> Verdict:
@@ -84,7 +87,11 @@ def judge_pool() -> ProcessPoolExecutor:
             before = set(threading.enumerate())
             pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context(START_METHOD),
                                        initializer=_die_with, initargs=(os.getpid(),))
-            pool.submit(_ready).result()
+            try:
+                pool.submit(_ready).result()
+            except BrokenProcessPool:
+                pool.shutdown(wait=True)
+                raise HapticBusError(_DIED_STARTING) from None
             for thread in set(threading.enumerate()) - before:
                 thread.name = "verdict-feed" if thread.name == "QueueFeederThread" else "verdict-collect"
                 show_name(thread)

@@ -84,13 +84,14 @@ class Reader:
         if key not in self.table:
             default = self.silent.get(key, REQUIRED) if default is REQUIRED else default
             if default is REQUIRED:
-                self._refuse_misspelling(key, allowed)
+                self.refuse_misspelling(key, allowed)
                 raise profile_error(self.path, self.field(key), "<missing>", f"required: {allowed}")
             return default
         return self.table[key]
 
-    def _refuse_misspelling(self, key: str, allowed: str) -> None:
-        """Refuse an unread key of the table that looks like the missing required ``key`` (module docstring)."""
+    def refuse_misspelling(self, key: str, allowed: str) -> None:
+        """Refuse an unread key of the table that looks like the missing required ``key`` (module docstring);
+        ``allowed`` says what ``key`` takes."""
         unread = [k for k in self.table if k not in self.used and isinstance(k, str)]
         close = difflib.get_close_matches(key, unread, n=1, cutoff=MISSPELLING_CUTOFF)
         if close:

@@ -64,6 +64,7 @@ from haptic_bus.profile.scene import FORCE_RANGE
 
 DEFAULT_BITRATE = 1_000_000
 HAND_MODELS = ("none", "push")
+_ONE_LINK = "exactly one of node_id (CANopen, 1..127) and unit_id (Modbus, 1..247)"
 _FIELDS = {"plane": ("point", "normal"), "box": ("center", "half"), "sphere": ("center", "radius")}
 
 
@@ -136,9 +137,11 @@ class AxesProfile:
 def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> Axis:
     r = Reader(path, f"axes[{index}]", table)
     name = r.text("name", pattern=NAME_PATTERN)
+    if "node_id" not in r.table and "unit_id" not in r.table:  # a misspelt one (nod_id) is named as such
+        for key in ("node_id", "unit_id"):
+            r.refuse_misspelling(key, _ONE_LINK)
     if ("node_id" in r.table) == ("unit_id" in r.table):
-        raise profile_error(path, r.field("node_id"), r.table.get("node_id", "<missing>"),
-                            "exactly one of node_id (CANopen, 1..127) and unit_id (Modbus, 1..247)")
+        raise profile_error(path, r.field("node_id"), r.table.get("node_id", "<missing>"), _ONE_LINK)
     node = r.whole("node_id", *NODE_ID_RANGE) if "node_id" in r.table else None
     unit = r.whole("unit_id", *UNIT_ID_RANGE) if "unit_id" in r.table else None
     r.used.update(("node_id", "unit_id"))
