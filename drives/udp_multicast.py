@@ -21,11 +21,12 @@ among the nodes it hears (commissioning's "nodes seen on the bus: ... 127") and 
 each sent frame twice, as Tx and as Rx.  The sender's address does not tell them apart in
 python-can's shape: every handle sends from the socket bound to the group's port, so every
 process on a host sends from the same address.  :class:`FilteredMulticastBus` sends from a socket
-of its own instead, connected to the group (the kernel gives it an ephemeral port of its own, unique
-on this host, and picks the source address the datagrams carry), and drops a received datagram
-whose sender address is that socket's.  Another process's handle, on this host or another, sends
-from another address, so its frames still arrive.  What goes on the wire is python-can's datagram,
-unchanged: plain python-can handles read it.
+of its own instead, bound to an ephemeral port (unique on this host for its address family) and not
+connected (Linux connects no socket to an IPv6 link-local group such as ``ff02::`` without an
+interface; python-can sends there), and drops a received datagram that comes from that port and
+from an address of this host.  Another process's handle sends from another port; another host's,
+from an address that is not this host's; so their frames still arrive.  What goes on the wire is
+python-can's datagram, unchanged: plain python-can handles read it.
 """
 
 from __future__ import annotations
@@ -53,18 +54,21 @@ class FilteredMulticastBus(UdpMulticastBus):
         super().__init__(*args, **kwargs)
         group = self._multicast
         ipv4 = group.ip_version == 4
-        sender = socket.socket(socket.AF_INET if ipv4 else socket.AF_INET6, socket.SOCK_DGRAM)
+        self._family = socket.AF_INET if ipv4 else socket.AF_INET6
+        sender = socket.socket(self._family, socket.SOCK_DGRAM)
         try:
             sender.setsockopt(socket.IPPROTO_IP if ipv4 else socket.IPPROTO_IPV6,
                               socket.IP_MULTICAST_TTL if ipv4 else socket.IPV6_MULTICAST_HOPS,
                               struct.pack("@I", group.hop_limit))
-            sender.connect((group.group, group.port))
+            sender.bind(("0.0.0.0" if ipv4 else "::", 0))
         except OSError as exc:
             sender.close()
             super().shutdown()  # python-can's socket, and the bus marked shut down
             raise can.CanInitializationError(f"could not open a sending socket on the group: {exc}") from exc
         self._sender = sender
-        self._own_address = sender.getsockname()[:2]  # (source address, ephemeral port): what receivers see
+        self._group = (group.group, group.port)
+        self._own_port = sender.getsockname()[1]  # the ephemeral port receivers see as the sender's
+        self._local: dict[tuple[Any, ...], bool] = {}  # source address (and scope) -> one of this host's?
         self._send_timeout: float | None = None
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
@@ -76,7 +80,7 @@ class FilteredMulticastBus(UdpMulticastBus):
             self._send_timeout = timeout
             self._sender.settimeout(timeout)
         try:
-            if self._sender.send(data) < len(data):
+            if self._sender.sendto(data, self._group) < len(data):
                 raise TimeoutError()
         except TimeoutError:
             raise can.CanTimeoutError() from None
@@ -103,7 +107,7 @@ class FilteredMulticastBus(UdpMulticastBus):
             if not result:
                 return None, True
             data, sender, timestamp = result
-            if sender[:2] == self._own_address:  # this handle's own frame, looped back by the kernel
+            if sender[1] == self._own_port and self._is_local(sender):  # its own frame, looped back
                 message = None
             else:
                 message = self._unpack(data, timestamp)
@@ -113,6 +117,21 @@ class FilteredMulticastBus(UdpMulticastBus):
                 left = deadline - time.monotonic()
                 if left <= 0.0:
                     return None, True
+
+    def _is_local(self, sender: tuple[Any, ...]) -> bool:
+        """Whether the datagram's ``sender`` address (IPv6: with its scope, a link-local one's interface)
+        is one of this host's: a socket binds to it; asked once per address."""
+        key = (sender[0], *sender[3:4])
+        local = self._local.get(key)
+        if local is None:
+            with socket.socket(self._family, socket.SOCK_DGRAM) as probe:
+                try:
+                    probe.bind((sender[0], 0, *sender[2:4]))
+                    local = True
+                except OSError:
+                    local = False
+            self._local[key] = local
+        return local
 
     def _unpack(self, data: bytes, timestamp: float) -> can.Message | None:
         """The frame of datagram ``data`` received at ``timestamp`` (s, Unix), or None if no filter wants it."""

@@ -11,6 +11,7 @@ sent once, as Tx.
 from __future__ import annotations
 
 import pathlib
+import socket
 
 import can
 import pytest
@@ -42,6 +43,25 @@ def test_a_handle_hears_the_others_frames_but_not_its_own(multicast: tuple[str, 
         assert heard(one) == [0x185]
         assert heard(other) == [0x77F, 0x185]
         assert heard(plain) == [0x77F, 0x185]  # python-can's own handle still hears itself
+
+
+@pytest.mark.parametrize("scope", ["ff02", "ff15"], ids=["link-local", "site"])
+def test_on_an_ipv6_group_too_a_handle_hears_the_others_but_not_itself(scope: str, multicast: tuple[str, int]) -> None:
+    # ff02:: is link-local: no socket connects to it without an interface, so the sending socket is
+    # bound, not connected, and its looped-back frames carry a link-local source with its scope
+    if not socket.has_ipv6:
+        pytest.skip("this Python has no IPv6")
+    _, port = multicast  # a port unique to this test; the group is IPv6
+    group = f"{scope}::{port:x}"
+    try:
+        plain = can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=0)
+    except (can.CanError, OSError) as error:  # python-can itself cannot: the host has no IPv6 multicast
+        pytest.skip(f"no IPv6 multicast on this host: {error}")
+    with plain, open_bus(interface="udp_multicast", channel=group, port=port) as one, \
+            open_bus(interface="udp_multicast", channel=group, port=port) as other:
+        one.send(can.Message(arbitration_id=0x77F, data=[5], is_extended_id=False))
+        assert heard(one) == []
+        assert heard(other) == [0x77F] and heard(plain) == [0x77F]
 
 
 def test_a_run_with_no_drive_names_no_node_and_logs_its_frames_once(
