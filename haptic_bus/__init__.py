@@ -5,16 +5,17 @@ users write ``haptic_bus.check_passivity(...)``, never a module path::
 
     import haptic_bus as hb
 
-    report = hb.check_passivity(mass=0.5, friction=0.1, period=1e-3, stiffness=200, damping=100, delay=1)
-    report.passive, report.margin, report.max_stiffness, report.to_dict()
+    if __name__ == "__main__":  # a run starts worker processes (spawn), which import this file again
+        report = hb.check_passivity(mass=0.5, friction=0.1, period=1e-3, stiffness=200, damping=100, delay=1)
+        report.passive, report.margin, report.max_stiffness, report.to_dict()
 
-    profile = hb.load_profile("cia402-handle")            # validated and gated: a Profile (one axis)
-    # the drive: any CANopen drive, here the simulated one of the same profile, started as
-    #   haptic-bus sim --profile cia402-handle --interface udp_multicast --channel 239.74.163.2 \
-    #       --bus-option port=43113 --node-id 5
-    bus = {"interface": "udp_multicast", "channel": "239.74.163.2", "port": 43113}  # or an open can.BusABC
-    result = hb.run(profile, bus, hb.RunOptions(duration=1.0, pacing="virtual"), node_id=5)
-    result.exit_reason, result.summary.cycles, result.folder  # "completed", 1000, runs/<UTC>-cia402-handle
+        profile = hb.load_profile("cia402-handle")            # validated and gated: a Profile (one axis)
+        # the drive: any CANopen drive, here the simulated one of the same profile, started as
+        #   haptic-bus sim --profile cia402-handle --interface udp_multicast --channel 239.74.163.2 \
+        #       --bus-option port=43113 --node-id 5
+        bus = {"interface": "udp_multicast", "channel": "239.74.163.2", "port": 43113}  # or an open can.BusABC
+        result = hb.run(profile, bus, hb.RunOptions(duration=1.0, pacing="virtual"), node_id=5)
+        result.exit_reason, result.summary.cycles, result.folder  # "completed", 1000, runs/<UTC>-cia402-handle
 
 ``hb.load_profile`` loads either kind of profile: a file with ``[[axes]]`` gives an :class:`AxesProfile`
 (``hb.load_profile("gantry-3d")``: validated, its bus load checked, its scene judged by the coupled

@@ -50,7 +50,7 @@ def test_the_docstring_example_runs_as_written(haptic_sim, recorded_run, tmp_pat
     assert code.count(DOCUMENTED_BUS) == 1
     drive = haptic_sim("cia402-handle", interface="lockstep", node_id=5)
     monkeypatch.chdir(tmp_path)  # the run's folder: runs/<UTC>-cia402-handle here
-    namespace: dict[str, object] = {}
+    namespace: dict[str, object] = {"__name__": "__main__"}  # run as a script is: its guard's body runs
     exec(compile(code.replace(DOCUMENTED_BUS, repr(drive.bus)), "haptic_bus.__doc__", "exec"), namespace)
     report, result = namespace["report"], namespace["result"]
     assert isinstance(report, hb.CheckReport) and report.passive is False
