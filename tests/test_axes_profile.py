@@ -105,7 +105,7 @@ def test_one_loader_reads_either_kind_and_one_axis_commands_refuse_axes(tmp_path
     with pytest.raises(ParameterError) as refused:
         one_axis_only(three, "validate")
     assert str(refused.value) == (f"profile = '{three.path}' is invalid; allowed: a one-axis profile, without "
-                                  "[[axes]] (validate measures one drive; this one has 3 axes)")
+                                  "[[axes]] (validate works on one axis; this one has 3 axes)")
 
 
 def test_the_bus_load_is_refused_with_the_load_and_the_smallest_period(tmp_path: pathlib.Path) -> None:
@@ -198,6 +198,6 @@ def test_the_commands_that_measure_one_drive_refuse_axes_in_one_line(argv: list[
     assert main([arg.format(out=tmp_path / "report") for arg in argv]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"haptic-bus {argv[0]}: error: profile = ")
-    assert err.endswith(f"allowed: a one-axis profile, without [[axes]] ({argv[0]} measures one drive; this one has "
+    assert err.endswith(f"allowed: a one-axis profile, without [[axes]] ({argv[0]} works on one axis; this one has "
                         "3 axes)\n")
     assert not (tmp_path / "report").exists()  # refused before anything is written

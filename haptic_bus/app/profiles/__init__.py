@@ -73,10 +73,10 @@ def load_profile(path_or_name: str | pathlib.Path) -> Profile | AxesProfile:
 
 def one_axis_only(profile: Profile | AxesProfile, command: str) -> Profile:
     """``profile`` if it is a one-axis profile; otherwise ParameterError (exit 2) saying that ``command``
-    measures one drive and takes a profile without ``[[axes]]``."""
+    works on one axis and takes a profile without ``[[axes]]``."""
     if isinstance(profile, AxesProfile):
         raise ParameterError("profile", str(profile.path or profile.name), "a one-axis profile, without [[axes]] "
-                             f"({command} measures one drive; this one has {len(profile.axes)} axes)")
+                             f"({command} works on one axis; this one has {len(profile.axes)} axes)")
     return profile
 
 
