@@ -17,12 +17,12 @@ from haptic_bus.app.early_stop import STOPPED_BEFORE_START
 # handler too) was still undefined when it sent the signal.
 _CHILD = textwrap.dedent("""
     import os, signal, sys, threading, time
-    from haptic_bus.app.early_stop import stop_at_once
+    from haptic_bus.app.early_stop import note_stop
     from haptic_bus.app.entry import main
 
     def kill_early():
         deadline = time.monotonic() + 30.0
-        while signal.getsignal(signal.SIGTERM) is not stop_at_once and time.monotonic() < deadline:
+        while signal.getsignal(signal.SIGTERM) is not note_stop and time.monotonic() < deadline:
             time.sleep(1e-4)
         cli = sys.modules.get("haptic_bus.app.cli")  # there from the start of its import, _run defined late in it
         os.write(1, f"early {getattr(cli, '_run', None) is None}\\n".encode())

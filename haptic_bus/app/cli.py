@@ -35,7 +35,7 @@ from haptic_bus.app.arguments import (
     seconds,
     timeout,
 )
-from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, stop_at_once
+from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, stop_at_once, stop_noted
 from haptic_bus.app.fault_cli import add_fault_reset_parser
 from haptic_bus.app.identify_cli import add_identify_parser
 from haptic_bus.app.run_arguments import (
@@ -183,6 +183,8 @@ def _run(args: argparse.Namespace) -> int:
     # over once the run is about to touch the bus (_prepare_run's last step).
     previous = signal.signal(signal.SIGTERM, stop_at_once)
     try:
+        if stop_noted():  # while the console script imported the command line
+            raise StoppedBeforeStart
         from haptic_bus.app.run_options import exit_status
         from haptic_bus.app.runner import run  # its imports: a second or more under load
 

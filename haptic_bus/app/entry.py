@@ -7,10 +7,10 @@ handling (:func:`haptic_bus.app.cli.main`) existed, and Python printed a traceba
 as a Ctrl-C ends every command: one line on stderr, exit 130.
 
 A SIGTERM in that time killed ``run`` silently (status 143) before ``run`` installed its own stop
-handling: for ``run``, :func:`main` installs :func:`~haptic_bus.app.early_stop.stop_at_once` first,
-so a SIGTERM from here until the run is about to touch the bus ends it with
-:data:`~haptic_bus.app.early_stop.STOPPED_BEFORE_START`, exit 0, as ``run`` does
-(:func:`haptic_bus.app.cli._run`).  This module imports nothing of the project but
+handling: for ``run``, :func:`main` first installs :func:`~haptic_bus.app.early_stop.note_stop`,
+which notes it, and ``run`` (:func:`haptic_bus.app.cli._run`) ends with
+:data:`~haptic_bus.app.early_stop.STOPPED_BEFORE_START`, exit 0, before it touches anything.
+This module imports nothing of the project but
 :mod:`~haptic_bus.app.early_stop` (the standard library only), so the window left is Python's own
 start-up.
 """
@@ -21,10 +21,9 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, stop_at_once
+from haptic_bus.app.early_stop import note_stop
 
 EXIT_INTERRUPTED = 130  # haptic_bus.app.arguments.EXIT_INTERRUPTED, which is what this guards the import of
-EXIT_OK = 0
 
 
 def _command(argv: Sequence[str]) -> str | None:
@@ -35,7 +34,7 @@ def _command(argv: Sequence[str]) -> str | None:
 def main() -> int:
     """Entry point of the ``haptic-bus`` console script; returns the exit status."""
     if _command(sys.argv[1:]) == "run":
-        signal.signal(signal.SIGTERM, stop_at_once)
+        signal.signal(signal.SIGTERM, note_stop)
     try:
         from haptic_bus.app.cli import main as command_line
 
@@ -43,6 +42,3 @@ def main() -> int:
     except KeyboardInterrupt:
         print("haptic-bus: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except StoppedBeforeStart:
-        print(STOPPED_BEFORE_START)
-        return EXIT_OK
