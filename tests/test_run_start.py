@@ -115,15 +115,16 @@ def test_the_start_ramp_scales_the_scene_from_0_to_1_and_is_no_observer_alarm(
 def test_without_a_passivity_layer_the_start_ramp_is_refused_and_the_drive_never_enabled(
         tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     # each scaled wall is proven passive, but a scale rising under the handle is a time-varying wall:
-    # only the layer's energy bound holds it, and layer = "off" would leave it free to give energy
-    start = f'[start]\nin_contact = "ramp"\nramp_time = {RAMP_TIME}\n\n[passivity]\nlayer = "off"\n'
+    # the layer's energy bound holds it, or the observer's stop; with neither it could give energy
+    start = (f'[start]\nin_contact = "ramp"\nramp_time = {RAMP_TIME}\n\n[passivity]\nlayer = "off"\n\n'
+             '[supervisor]\non_observer = "warn"\n')
     result, drive, out = run_inside(tmp_path, capsys, "canopen", start, "--duration", "0.5")
     assert result.code == 1, result.err
     assert result.err_lines == [
         "haptic-bus run: refused: handle is 5.0 mm inside end-stop (at rest it would feel 7.5 N); and the start ramp "
-        'is refused with [passivity] layer = "off": a wall whose force rises under the handle is time-varying, which '
-        "the gate's verdict on each scaled wall does not cover; only the passivity layer holds the port's energy at "
-        "or above the wall's at the start"]
+        'is refused with [passivity] layer = "off" and [supervisor] on_observer = "warn": a wall whose force rises '
+        "under the handle is time-varying, which the gate's verdict on each scaled wall does not cover; the passivity "
+        "layer, or the observer stopping the run, bounds the energy it can give"]
     assert not drive.was_enabled and drive.drive.target_torque == 0
     assert read_run(out)["exit_reason"] == "refused"
 

@@ -313,10 +313,12 @@ def _safe_start(kind: RunKind[Any, Any, Any], drive: Any, gate: Any, scene: Any,
     proof = gate.proves_ramp(scene)
     if not proof.proven:
         raise Refusal(f"{where}; and the start ramp is refused: {proof.reason}")
-    if kind.profile.passivity.layer == "off":  # the gate proves each scaled wall; the rising scale is held by energy
-        raise Refusal(f"{where}; and the start ramp is refused with [passivity] layer = \"off\": a wall whose force "
-                      "rises under the handle is time-varying, which the gate's verdict on each scaled wall does not "
-                      "cover; only the passivity layer holds the port's energy at or above the wall's at the start")
+    if kind.profile.passivity.layer == "off" and kind.profile.supervisor.on_observer != "stop":
+        # the gate proves each scaled wall; the rising scale is held by energy: the layer, or the observer's stop
+        raise Refusal(f"{where}; and the start ramp is refused with [passivity] layer = \"off\" and [supervisor] "
+                      f"on_observer = \"{kind.profile.supervisor.on_observer}\": a wall whose force rises under the "
+                      "handle is time-varying, which the gate's verdict on each scaled wall does not cover; the "
+                      "passivity layer, or the observer stopping the run, bounds the energy it can give")
     logger.info("%s: ramping the force in over %g s", where, kind.start.ramp_time)
     return origin, kind.start.ramp_time
 
