@@ -79,6 +79,10 @@ class _Request:
 _REQUEST: contextvars.ContextVar[_Request] = contextvars.ContextVar("modbus_sim_request")
 
 
+ACCEPT_GRACE = 0.01  # s: a connection still in the kernel's backlog at the stop is accepted while the server
+# can take it; Python 3.11's asyncio accepting one after its server closed fails in the transport's
+# constructor and leaks the socket (a ResourceWarning where the garbage collector finds it)
+
 class _Handler(ServerRequestHandler):
     """A client connection: records each request it serves, and reports its closing."""
 
@@ -298,6 +302,7 @@ class ModbusSimServer:
             await self._stopped.wait()
         finally:
             watchdog.cancel()
+            await asyncio.sleep(ACCEPT_GRACE)  # connections the kernel completed before the stop: accepted now
             await server.shutdown()
 
     # ------------------------------------------------------------------ thread mode
