@@ -63,7 +63,7 @@ def skip_if_refused_at_preflight(run: subprocess.Popen[str], what: str = "the lo
     machine holds (the right answer under load, but no run to test); else fail with its stderr."""
     if run.poll() != 1 or run.stderr is None:
         return
-    error = run.stderr.read()
+    error = run.communicate(timeout=KILL_WAIT)[1]  # it has exited: its pipes read to the end and closed
     if "this machine holds T >=" in error or "reaches the drive's watchdog" in error:
         pytest.skip(f"this machine cannot hold {what} now, and the run said so at pre-flight: {error.strip()}")
     raise AssertionError(error)
