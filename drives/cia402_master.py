@@ -38,9 +38,11 @@ from drives.cia402 import (
     ERROR_CODE,
     MODES_OF_OPERATION,
     MODES_OF_OPERATION_DISPLAY,
+    STATE_STATUS_BITS,
     STATUSWORD,
     SUPPORTED_DRIVE_MODES,
     SW_FAULT,
+    SW_STATE_MASK,
     Command,
     ObjectSpec,
     OperationMode,
@@ -55,7 +57,7 @@ from drives.fault_reset import clear_fault, error_code_text
 logger = logging.getLogger(__name__)
 
 SAFE_CONTROLWORD = Command.DISABLE_VOLTAGE.word  # -> SWITCH ON DISABLED: no torque, handle free
-ENABLED_MASK, ENABLED_BITS = 0x6F, 0x27  # statusword & mask == bits: OPERATION ENABLED (CiA 402)
+_ENABLED_BITS = STATE_STATUS_BITS[State.OPERATION_ENABLED]  # statusword & SW_STATE_MASK in that state
 
 
 def state_name(state: State | None) -> str:
@@ -240,7 +242,7 @@ class Cia402Master(Drive):
         self.last_inputs = inputs
         self.stats.cycles += 1
         statusword = inputs.statusword
-        if self._armed and not statusword & SW_FAULT and (statusword & ENABLED_MASK) != ENABLED_BITS:
+        if self._armed and not statusword & SW_FAULT and (statusword & SW_STATE_MASK) != _ENABLED_BITS:
             state = decode_statusword(statusword)
             raise self.trip(DriveFault(
                 self.name,
