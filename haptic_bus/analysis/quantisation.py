@@ -128,25 +128,42 @@ def _counts_exactly(T: float, quantisation: Quantisation) -> bool:
     return ratio >= 0.5 and abs(ratio - round(ratio)) <= 1e-9 * ratio
 
 
+@dataclass(frozen=True)
+class _Terms:
+    """What a wall's quantisation condition is made of, for its velocity model: the ``quantum`` that
+    enters (m for average and window, m/s for point and lowpass); the damper needs ``B quantum /
+    divisor`` of Coulomb friction (``divisor`` the window or ``T``, s, or 2); a spring needs ``K quantum
+    / 2`` (``spring``, average only) or ``drifts`` (no Coulomb friction makes it passive)."""
+
+    quantum: float
+    divisor: float
+    spring: bool
+    drifts: bool
+
+
+def _terms(loop: WallLoop, quantisation: Quantisation) -> _Terms:
+    """The terms of ``loop``'s condition (module docstring), one derivation for the verdict and the limits."""
+    kind = loop.velocity.kind
+    if kind in ("average", "window"):
+        quantum, divisor = quantisation.position_resolution, loop.velocity.window(loop.T) or loop.T
+    else:
+        quantum, divisor = quantisation.velocity_resolution, 2.0
+    average = kind == "average"
+    return _Terms(quantum, divisor, average, not average or not _counts_exactly(loop.T, quantisation))
+
+
 def quantisation_condition(loop: WallLoop, quantisation: Quantisation) -> QuantisationCondition:
     """The quantisation condition of the wall in ``loop`` with the device's ``quantisation``
     (see the module docstring): which quantum enters, the Coulomb friction it needs (N), the
     leak per count of travel (J) when it fails."""
-    kind = loop.velocity.kind
-    f_c, K, B = quantisation.coulomb, loop.K, loop.B
-    if kind in ("average", "window"):
-        quantum = quantisation.position_resolution
-        width = loop.velocity.window(loop.T) or loop.T
-        damper = B * quantum / width
-    else:
-        quantum = quantisation.velocity_resolution
-        damper = B * quantum / 2.0
+    terms = _terms(loop, quantisation)
+    f_c, K, B, quantum = quantisation.coulomb, loop.K, loop.B, terms.quantum
     name = str(loop.velocity)
     if quantum == 0.0 or (K == 0.0 and B == 0.0):
         return QuantisationCondition(EXACT, True, 0.0, f_c, quantum, 0.0, name)
-    if K > 0.0 and (kind != "average" or not _counts_exactly(loop.T, quantisation)):
+    if K > 0.0 and terms.drifts:
         return QuantisationCondition(DRIFT, False, math.inf, f_c, quantum, math.inf, name)
-    required = (K * quantum / 2.0 if kind == "average" else 0.0) + damper
+    required = (K * quantum / 2.0 if terms.spring else 0.0) + B * quantum / terms.divisor
     holds = f_c >= required
     leak = 0.0 if holds else (required - f_c) * quantisation.position_resolution
     return QuantisationCondition(CROSSING, holds, required, f_c, quantum, leak, name)
@@ -157,23 +174,17 @@ def quantised_ceiling(loop: WallLoop, quantisation: Quantisation, parameter: str
     quantisation condition admits (module docstring): ``inf`` where it admits any, 0 where only none
     (a spring that drifts), negative where not even 0 (the other parameter alone needs more Coulomb
     friction than the device has)."""
-    kind = loop.velocity.kind
-    f_c = quantisation.coulomb
-    if kind in ("average", "window"):
-        quantum = quantisation.position_resolution
-        per_damping = quantum / (loop.velocity.window(loop.T) or loop.T)  # N of f_c per N s/m of B
-    else:
-        quantum = quantisation.velocity_resolution
-        per_damping = quantum / 2.0
+    terms = _terms(loop, quantisation)
+    f_c, quantum = quantisation.coulomb, terms.quantum
     if quantum == 0.0:
         return math.inf
-    drifts = kind != "average" or not _counts_exactly(loop.T, quantisation)
+    per_damping = quantum / terms.divisor  # N of f_c per N s/m of B
     if parameter == "K":
         left = f_c - loop.B * per_damping  # what the damper leaves of f_c for the spring
-        if drifts:
+        if terms.drifts:
             return 0.0 if left >= 0.0 else -1.0
         return 2.0 * left / quantum
-    if drifts and loop.K > 0.0:
+    if terms.drifts and loop.K > 0.0:
         return -1.0
-    spring = loop.K * quantum / 2.0 if kind == "average" else 0.0
+    spring = loop.K * quantum / 2.0 if terms.spring else 0.0
     return (f_c - spring) / per_damping
