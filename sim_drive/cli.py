@@ -41,6 +41,7 @@ from collections.abc import Awaitable, Callable, Sequence
 from typing import Any, NoReturn
 
 from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, merge_bus_options, parse_bus_option
+from drives.cia301 import NODE_ID_RANGE
 from haptic_bus._version import __version__
 from haptic_bus.console import StderrHandler
 from haptic_bus.errors import DriveError, ParameterError
@@ -340,7 +341,7 @@ def id_list(flag: str, text: str, low: int, high: int, what: str) -> list[int]:
 
 
 def _node_ids(text: str) -> list[int]:
-    return id_list("--node-ids", text, 1, 127, "CANopen node ids")
+    return id_list("--node-ids", text, *NODE_ID_RANGE, "CANopen node ids")
 
 
 def _axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
