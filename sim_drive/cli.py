@@ -143,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     modbus.add_argument("--modbus", metavar="tcp://HOST:PORT", action="append",
                         help="serve Modbus TCP on this address (PORT 0: any free port); several axes: once for all "
                              "(one server, a unit per axis) or once per axis (a server each)")
-    modbus.add_argument("--unit-id", type=int, help="Modbus unit id 0..255 (default 1)")
+    modbus.add_argument("--unit-id", type=int, help="Modbus unit id 1..247, one a master can address (default 1)")
     modbus.add_argument("--unit-ids", metavar="IDS",
                         help="several axes (e.g. 1,2,3): one simulated drive per unit, in axis order; with a multi-axis "
                              "--profile ([[axes]]) each unit takes its axis' plant and hidden truth, and the profile's hand "
@@ -439,8 +439,14 @@ def _run_modbus(args: argparse.Namespace) -> int:
         return 2
     if several:
         return run_modbus_axes(args)
+    from drives.modbus.register_map import UNIT_ID_RANGE
+
+    unit_id = UNIT_ID_RANGE[0] if args.unit_id is None else args.unit_id
+    if not UNIT_ID_RANGE[0] <= unit_id <= UNIT_ID_RANGE[1]:  # as --unit-ids: the units haptic-bus run can reach
+        allowed = f"a Modbus unit id {UNIT_ID_RANGE[0]}..{UNIT_ID_RANGE[1]}"
+        print(f"{_PROG}: error: {ParameterError('--unit-id', unit_id, allowed)}", file=sys.stderr)
+        return 2
     scheduling = _set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
-    unit_id = 1 if args.unit_id is None else args.unit_id
     word_order = args.word_order or "big"
     try:
         host, port = parse_modbus_url(args.modbus[0])
