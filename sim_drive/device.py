@@ -470,7 +470,7 @@ class SimulatedDrive:
         self.handle.hand_on = self.torque_enabled or not self.hand_needs_power
         line = self._line
         if line is not None:  # the hidden extra delay: this interval's forces come off the line
-            if not self.torque_enabled:
+            if not self.torque_enabled and any(line):  # once: a drive switched off flushes what was on its way
                 line.extend([0.0] * len(line))
             line.append(now if self.torque_enabled else 0.0)
             before, now = line[0], line[1]

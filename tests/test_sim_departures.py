@@ -65,7 +65,9 @@ def test_a_drive_not_enabled_flushes_the_delayed_targets() -> None:
     drive = enabled_drive(DeviceParameters(mass=M, friction=B, extra_delay=2.5))
     drive.sync()
     drive.write_object(0x6071, 500)
-    drive.sync()
+    for _ in range(3):  # latched at the first SYNC, on the 2.5-sample line since: due at the fourth
+        drive.sync()
+    assert drive.velocity == 0.0  # still on its way when the drive is disabled
     drive.write_controlword(Command.DISABLE_OPERATION.word)
     for _ in range(5):
         drive.sync()
