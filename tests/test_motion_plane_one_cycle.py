@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from haptic_bus.app.axes_plots import motion_plane
+from haptic_bus.app.trajectory_plot import motion_plane
 
 
 def test_one_position_gives_the_plane_of_the_first_two_axes_through_it() -> None:

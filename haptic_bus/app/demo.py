@@ -52,7 +52,7 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
     cycles = max(1, round(seconds / kind.period))
     link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True, **demo.link()}
     extra: dict[str, Any] = {"loop": kind.loop_extra()}
-    journal = RunJournal(out, profile, link, extra, kind.render)
+    journal = RunJournal(out, kind, link, extra)
     journal.begin()
     recorder = RunRecorder(out, journal)
     with ExitStack() as stack:

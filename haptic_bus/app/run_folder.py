@@ -1,24 +1,37 @@
 """Where a run keeps its record: ``runs/<UTC timestamp>-<profile>/`` (or ``--out``), written as it goes.
 
-The folder is created and probed for writing before any bus is touched (an unwritable one is
-a :class:`~haptic_bus.errors.ParameterError`: exit 2), and owned by the run for its life
-(:mod:`~haptic_bus.app.folder_lock`: ``.haptic-bus.lock``; another run's folder is exit 2).  It receives:
+One folder and one ``run.json`` for one axis or several.  The folder is created and probed for
+writing before any bus is touched (an unwritable one is a :class:`~haptic_bus.errors.ParameterError`:
+exit 2), and owned by the run for its life (:mod:`~haptic_bus.app.folder_lock`: ``.haptic-bus.lock``;
+another run's folder is exit 2).  It receives:
 
-- ``run.json`` (:class:`RunJournal`), at once: ``status`` "running", ``"ended": false``; kept
-  current while the run goes on (each event, each scene) and completed at the end: software
-  versions, the profile file and its SHA-256, device, loop (delay assumed and observed), the
-  loop the gate judged (``gate_loop``), link, scaling and where each factor came from, the safety
+- ``run.json`` (:class:`RunJournal`, :func:`run_document`), at once: ``status`` "running",
+  ``"ended": false``; kept current while the run goes on (each event, each scene) and completed at
+  the end: software versions, the profile file and its SHA-256, its settings (every axis and object
+  for several), device, loop (delay assumed and observed), the loop the gate judged (``gate_loop``,
+  one axis), link, scaling and where each factor came from (per axis for several), the safety
   settings the drives were given (``settings.safety``: in virtual time the watchdogs' floor,
   :meth:`~drives.safety.SafetySettings.for_virtual_time`; the profile's own are in its file),
   every scene in effect (each object with its geometry, K and B, the gate's margin per contact
-  wall), the summary with its ``exit_reason``, the events (uploads accepted and refused,
-  alarms, derates, faults), each with its time, and the files.  Written whole each time (a
-  temporary file renamed over it), so a killed run leaves the last version, saying it did not end;
+  wall; for several axes the coupled gate's decision, :mod:`~haptic_bus.app.space_records`), the
+  summary with its ``exit_reason`` (for several axes the whole port's: ``energy`` is ``sum E_i``)
+  and each axis' (``axes``), the events (uploads accepted and refused, alarms, derates, faults),
+  each with its time, and the files.  What differs by kind comes from the run's kind
+  (:meth:`DocumentKind.sections`).  Written whole each time (a temporary file
+  renamed over it), so a killed run leaves the last version, saying it did not end;
 - ``record.csv``: one row a cycle (:data:`haptic_bus.control.record.COLUMNS`), streamed by the
   run's writer process (:mod:`~haptic_bus.app.run_writer`, :mod:`~haptic_bus.app.record_stream`);
-- ``bus.asc``: every CAN frame (:mod:`~haptic_bus.app.bus_log`; CANopen runs, unless ``--no-bus-log``);
-- at the end, the pictures (:mod:`~haptic_bus.app.run_plots`), drawn from the files themselves:
-  ``haptic-bus plot RUN_DIR`` draws the same again from :func:`read_run_folder`.
+  for several axes ``record-<axis>.csv`` instead (:func:`record_name`), one per axis, each with
+  the same columns: that axis' joint position and velocity, the wall force along it (``force_n``,
+  the joint effort ``J^T u``), its target torque, its own port energy ``E_i`` (``energy_j``), the
+  force its layer took off, and the cycle's scene id, lateness flag and compute time (the same in
+  every file).  One file per axis, not columns per axis: each reads like a one-axis record, and
+  the rows of all files are the same cycles (the same ``time_s``);
+- ``bus.asc``: every CAN frame of the one bus handle (:mod:`~haptic_bus.app.bus_log`; CANopen
+  runs, unless ``--no-bus-log``);
+- at the end, the pictures (:mod:`~haptic_bus.app.run_plots`; for several axes
+  :mod:`~haptic_bus.app.trajectory_plot`), drawn from the files themselves: ``haptic-bus plot
+  RUN_DIR`` draws the same again from :func:`read_run_folder`.
 """
 
 from __future__ import annotations
@@ -35,14 +48,16 @@ import platform
 import sys
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Any, Generic, TypeVar
+from typing import Any, Protocol
 
 from drives.safety import SafetySettings
 from haptic_bus._version import __version__
 from haptic_bus.analysis.loop import DeviceLoop
-from haptic_bus.app.profiles import Profile, profile_to_dict
+from haptic_bus.app.profiles import AxesProfile, Profile, profile_to_dict
 from haptic_bus.control.controller import RunSummary, WallController
+from haptic_bus.control.protocols import DecisionT, SceneT
 from haptic_bus.control.record import RecordTable, read_record
+from haptic_bus.control.scene_switch import SceneEntry
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import writable_folder
 
@@ -50,6 +65,11 @@ DEFAULT_ROOT = pathlib.Path("runs")
 RUN_JSON, RECORD_CSV = "run.json", "record.csv"
 RUNNING = "running"  # run.json's status until the run ends
 _DISTRIBUTIONS = ("numpy", "scipy", "python-can", "canopen", "pymodbus", "matplotlib")
+
+
+def record_name(axis: str) -> str:
+    """The file of axis ``axis``' record in a multi-axis run's folder (one axis' is :data:`RECORD_CSV`)."""
+    return f"record-{axis}.csv"
 
 
 def _utc_now() -> dt.datetime:
@@ -83,29 +103,42 @@ def software_versions() -> dict[str, str]:
     return versions
 
 
-def profile_identity(profile: Profile) -> dict[str, Any]:
+def profile_identity(profile: Profile | AxesProfile) -> dict[str, Any]:
     """The profile's name, file and the SHA-256 of its bytes (None for a profile built in code)."""
     path = profile.path
     digest = hashlib.sha256(path.read_bytes()).hexdigest() if path is not None and path.is_file() else None
     return {"name": profile.name, "path": None if path is None else str(path), "sha256": digest}
 
 
-def _finite(value: Any) -> Any:
-    """JSON without NaN/inf: non-finite floats as strings."""
+def json_ready(value: Any) -> Any:
+    """``value`` as JSON without NaN/inf: non-finite floats as strings, tuples as lists, keys as strings."""
     if isinstance(value, float) and not math.isfinite(value):
         return str(value)
     if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
+        return {str(k): json_ready(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
+        return [json_ready(v) for v in value]
     return value
 
 
-def run_document(profile: Profile, controller: WallController | None, summary: RunSummary | None,
+class DocumentKind(Protocol):
+    """What ``run.json`` asks of a run's kind, one axis or several (a :class:`~haptic_bus.app.run_kinds.RunKind`)."""
+
+    @property
+    def profile(self) -> Profile | AxesProfile: ...
+
+    def sections(self, controller: WallController[Any, Any]) -> dict[str, Any]:
+        """``run.json``'s sections that differ by kind: ``scaling``, ``scenes`` and, for several axes, ``axes``."""
+        ...
+
+
+def run_document(kind: DocumentKind, controller: WallController[Any, Any] | None, summary: RunSummary | None,
                  link: dict[str, Any], extra: dict[str, Any], started: dt.datetime, ended: bool = True) -> dict[str, Any]:
-    """The content of ``run.json`` (see the module docstring); ``controller`` and ``summary`` may
-    be None for a run that ended before it cycled (then ``extra`` carries the reason).  While the
-    run goes on (``ended`` False) ``status`` is "running" and ``ended_utc`` None."""
+    """The content of ``run.json`` (see the module docstring) of a run of ``kind`` (one axis or several:
+    what differs, the scaling, the scenes and the per-axis summaries, comes from
+    :meth:`DocumentKind.sections`); ``controller`` and ``summary`` may be None for
+    a run that ended before it cycled (then ``extra`` carries the reason).  While the run goes on
+    (``ended`` False) ``status`` is "running" and ``ended_utc`` None."""
     document: dict[str, Any] = {
         "status": extra.get("exit_reason", "ended") if ended else RUNNING,
         "ended": ended,
@@ -113,17 +146,13 @@ def run_document(profile: Profile, controller: WallController | None, summary: R
         "command": sys.argv,
         "started_utc": started.isoformat(),
         "ended_utc": _utc_now().isoformat() if ended else None,
-        "profile": profile_identity(profile),
-        "settings": profile_to_dict(profile),
+        "profile": profile_identity(kind.profile),
+        "settings": profile_to_dict(kind.profile),
         "link": link,
         **extra,
     }
     if controller is not None:
-        drive = controller.axes.drives[0]
-        report = getattr(drive, "scaling_report", None)
-        document["scaling"] = {"values": asdict(drive.scaling), "sources": getattr(drive, "scaling_sources", {}),
-                               **(report.to_dict() if report is not None else {})}
-        document["scenes"] = scene_dicts(controller)
+        document |= kind.sections(controller)
         document["events"] = controller.events.to_list()
         document["events_dropped"] = controller.events.dropped
         supervisor = controller.supervisor
@@ -131,12 +160,13 @@ def run_document(profile: Profile, controller: WallController | None, summary: R
             document.setdefault("loop", {})["delay_observed"] = supervisor.observed_delay()
     if summary is not None:
         document["summary"] = asdict(summary)
-    return _finite(document)
+    return json_ready(document)
 
 
-def scene_dicts(controller: WallController) -> list[dict[str, Any]]:
-    """Every scene ``controller`` had in effect, JSON-ready (``run.json``'s ``scenes``)."""
-    return [entry.to_dict() for entry in list(controller.scenes.history)]
+def scene_dicts(controller: WallController[SceneT, DecisionT],
+                entry_dict: Callable[[SceneEntry[SceneT, DecisionT]], dict[str, Any]]) -> list[dict[str, Any]]:
+    """Every scene ``controller`` had in effect, each as ``entry_dict`` gives it, JSON-ready (``run.json``'s ``scenes``)."""
+    return json_ready([entry_dict(entry) for entry in list(controller.scenes.history)])
 
 
 def gate_loop(device: DeviceLoop) -> dict[str, Any]:
@@ -158,35 +188,28 @@ def write_json(path: pathlib.Path, document: dict[str, Any]) -> pathlib.Path:
     return path
 
 
-P = TypeVar("P")  # the profile: one axis' or several axes'
-C = TypeVar("C")  # the controller
-Render = Callable[[P, "C | None", "RunSummary | None", dict[str, Any], dict[str, Any], dt.datetime, bool], dict[str, Any]]
-"""``run.json``'s content from (profile, controller, summary, link, extra, started, ended): :func:`run_document`,
-or :func:`~haptic_bus.app.axes_records.axes_run_document` for several axes."""
-
-
-class RunJournal(Generic[P, C]):
+class RunJournal:
     """``run.json`` over a run's life: written before anything is touched (``status`` "running",
     ``ended`` false), rewritten whenever the events or the scenes change (by the run's writer
     process, :mod:`~haptic_bus.app.run_writer`, from :meth:`document` and the events), and
     completed at the end (:meth:`finish`).  A run killed at any moment
-    leaves it saying ``"ended": false``: :func:`read_run_folder` reports it as not ended cleanly."""
+    leaves it saying ``"ended": false``: :func:`read_run_folder` reports it as not ended cleanly.
+    ``kind``: the run's kind, one axis or several (:func:`~haptic_bus.app.run_kinds.run_kind`)."""
 
-    def __init__(self, folder: pathlib.Path, profile: P, link: dict[str, Any], extra: dict[str, Any],
-                 render: Render[P, C], safety: SafetySettings | None = None) -> None:
+    def __init__(self, folder: pathlib.Path, kind: DocumentKind, link: dict[str, Any], extra: dict[str, Any],
+                 safety: SafetySettings | None = None) -> None:
         self.folder = folder
         self.safety = safety  # what the drives were given, shown as settings.safety (None: the profile's)
         self.path = folder / RUN_JSON
-        self.profile = profile
+        self.kind = kind
         self.link = link
         self.extra = extra
         self.started = _utc_now()
-        self.controller: C | None = None
-        self._render = render
+        self.controller: WallController[Any, Any] | None = None
 
     def document(self, summary: RunSummary | None = None, ended: bool = False) -> dict[str, Any]:
         """``run.json``'s content as the run stands now; ``settings.safety`` what the drives were given."""
-        document = self._render(self.profile, self.controller, summary, self.link, self.extra, self.started, ended)
+        document = run_document(self.kind, self.controller, summary, self.link, self.extra, self.started, ended)
         if self.safety is not None:
             shown = document["settings"]["safety"]
             document["settings"]["safety"] = {key: getattr(self.safety, key) for key in shown}
@@ -233,7 +256,7 @@ class RunFolder:
     def records(self) -> dict[str, RecordTable]:
         """Every record read, by file name."""
         one = {RECORD_CSV: self.record} if self.record is not None else {}
-        return one | {f"record-{axis}.csv": table for axis, table in self.axes.items()}
+        return one | {record_name(axis): table for axis, table in self.axes.items()}
 
     @property
     def drawable(self) -> bool:
@@ -270,7 +293,7 @@ def read_run_folder(folder: str | pathlib.Path) -> RunFolder:
             raise ValueError("run.json is not a JSON object")
         record = read_record(path / RECORD_CSV) if (path / RECORD_CSV).is_file() else None
         names = [axis["name"] for axis in document.get("settings", {}).get("axes", [])]
-        axes = {name: read_record(path / f"record-{name}.csv") for name in names if (path / f"record-{name}.csv").is_file()}
+        axes = {name: read_record(path / record_name(name)) for name in names if (path / record_name(name)).is_file()}
     except (OSError, ValueError, TypeError, KeyError) as exc:
         raise ParameterError("RUN_DIR", str(path), f"a readable run folder ({exc})", "plot") from None
     return RunFolder(path, document, record, axes)

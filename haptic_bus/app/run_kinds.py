@@ -11,9 +11,11 @@ kind through the same steps; only these differ:
 - the controller's arguments (names, force limits in N) and where the supervisor's derate table
   is built (:mod:`~haptic_bus.app.derate_table`: at once for the 1-D gate, in the judge worker for
   the coupled gate, whose judgements of a scaled scene take seconds);
-- what ``run.json`` says (:func:`~haptic_bus.app.run_folder.run_document` or
-  :func:`~haptic_bus.app.axes_records.axes_run_document`) and which records are streamed
-  (``record.csv``, or ``record-<axis>.csv`` per axis).
+- ``run.json``'s sections that differ (``sections``: the scaling, the scenes --
+  :meth:`~haptic_bus.control.scene_switch.SceneEntry.to_dict`, or
+  :func:`~haptic_bus.app.space_records.space_scene_dict` -- and for several axes each axis'
+  summary; :func:`~haptic_bus.app.run_folder.run_document` writes the rest alike for both) and
+  which records are streamed (``record.csv``, or ``record-<axis>.csv`` per axis).
 
 :func:`run_kind` picks the kind for a profile.
 """
@@ -27,16 +29,17 @@ from collections.abc import Callable, Sequence
 from typing import Any, Protocol, TypeVar
 
 from haptic_bus.app import preflight
-from haptic_bus.app.axes_records import axes_run_document, record_files, space_scene_dicts
 from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, DerateTable, asks_derate
 from haptic_bus.app.profile_policies import StartPolicy
 from haptic_bus.app.profiles import AxesProfile, Profile
-from haptic_bus.app.run_folder import RECORD_CSV, gate_loop, run_document, scene_dicts
+from haptic_bus.app.run_folder import RECORD_CSV, DocumentKind, gate_loop, record_name, scene_dicts
+from haptic_bus.app.space_records import space_scene_dict
 from haptic_bus.control.clock import CycleClock
 from haptic_bus.control.controller import WallController, encoder_origin, encoder_origins
 from haptic_bus.control.gate import PassivityGate
 from haptic_bus.control.record import RunRecord
 from haptic_bus.control.scene import CompiledScene
+from haptic_bus.control.scene_switch import SceneEntry
 from haptic_bus.control.space_gate import SpaceGate
 from haptic_bus.control.space_scene import SpaceScene
 
@@ -48,20 +51,15 @@ GateT = TypeVar("GateT", contravariant=True)
 OriginT = TypeVar("OriginT")
 
 
-class RunKind(Protocol[SceneT, GateT, OriginT]):
-    """What the runner and the demo ask of a profile's kind (module docstring)."""
-
-    @property
-    def profile(self) -> Profile | AxesProfile: ...
+class RunKind(DocumentKind, Protocol[SceneT, GateT, OriginT]):
+    """What the runner and the demo ask of a profile's kind (module docstring), ``run.json``'s
+    sections among it (:class:`~haptic_bus.app.run_folder.DocumentKind`)."""
 
     @property
     def period(self) -> float: ...
 
     @property
     def zero_targets(self) -> int | list[int]: ...
-
-    @property
-    def render(self) -> Callable[..., dict[str, Any]]: ...
 
     @property
     def start(self) -> StartPolicy: ...
@@ -113,11 +111,6 @@ class OneAxisRun:
     def period(self) -> float:
         """The cycle's period ``T`` (s)."""
         return self.profile.loop.period
-
-    @property
-    def render(self) -> Callable[..., dict[str, Any]]:
-        """``run.json``'s renderer."""
-        return run_document
 
     def loop_extra(self) -> dict[str, Any]:
         """``run.json``'s ``loop`` before the drive is reached."""
@@ -195,7 +188,16 @@ class OneAxisRun:
 
     def scene_dicts(self, controller: WallController[Any, Any]) -> Callable[[], list[dict[str, Any]]]:
         """Every scene in effect so far, JSON-ready, when called."""
-        return functools.partial(scene_dicts, controller)
+        return functools.partial(scene_dicts, controller, SceneEntry.to_dict)
+
+    def sections(self, controller: WallController[Any, Any]) -> dict[str, Any]:
+        """``run.json``'s ``scaling`` (the drive's factors, where each came from, its scaling report)
+        and ``scenes``."""
+        drive = controller.axes.drives[0]
+        report = getattr(drive, "scaling_report", None)
+        return {"scaling": {"values": dataclasses.asdict(drive.scaling), "sources": getattr(drive, "scaling_sources", {}),
+                            **(report.to_dict() if report is not None else {})},
+                "scenes": self.scene_dicts(controller)()}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -213,11 +215,6 @@ class AxesRun:
     def zero_targets(self) -> list[int]:
         """What pre-flight writes every cycle: 0 per mille to every axis."""
         return [0] * len(self.profile.axes)
-
-    @property
-    def render(self) -> Callable[..., dict[str, Any]]:
-        """``run.json``'s renderer."""
-        return axes_run_document
 
     def loop_extra(self) -> dict[str, Any]:
         """``run.json``'s ``loop`` before the drives are reached: ``T`` and each axis' delay (samples)."""
@@ -300,11 +297,17 @@ class AxesRun:
 
     def records(self, controller: WallController[Any, Any]) -> Records:
         """Each axis' record, as ``record-<axis>.csv``."""
-        return record_files(controller)
+        return [(record_name(name), name, record) for name, record in zip(controller.names, controller.records)]
 
     def scene_dicts(self, controller: WallController[Any, Any]) -> Callable[[], list[dict[str, Any]]]:
         """Every scene in effect so far, JSON-ready, when called."""
-        return functools.partial(space_scene_dicts, controller)
+        return functools.partial(scene_dicts, controller, space_scene_dict)
+
+    def sections(self, controller: WallController[Any, Any]) -> dict[str, Any]:
+        """``run.json``'s ``scaling`` (each axis' factors, by axis name), ``scenes`` and ``axes`` (each
+        axis' summary: :meth:`~haptic_bus.control.controller.WallController.axis_summaries`)."""
+        return {"scaling": {name: dataclasses.asdict(s) for name, s in zip(controller.names, controller.axes.scalings)},
+                "scenes": self.scene_dicts(controller)(), "axes": controller.axis_summaries()}
 
 
 def run_kind(profile: Profile | AxesProfile) -> RunKind[Any, Any, Any]:

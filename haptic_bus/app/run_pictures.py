@@ -25,7 +25,7 @@ def render_run(run: RunFolder, out: pathlib.Path | None = None) -> list[pathlib.
     target = out if out is not None else run.path
     figures: list[tuple[str, Figure]] = []
     if run.axes:
-        from haptic_bus.app.axes_plots import trajectory_figure
+        from haptic_bus.app.trajectory_plot import trajectory_figure
 
         figures.append(("trajectory.png", trajectory_figure(run)))
     elif run.record is not None and run.record.cycles:

@@ -22,7 +22,7 @@ from haptic_bus.control.record import EventLog, RunRecord
 class RunRecorder:
     """The files of one run in ``folder``, with ``journal`` its ``run.json``."""
 
-    def __init__(self, folder: pathlib.Path, journal: RunJournal[Any, Any]) -> None:
+    def __init__(self, folder: pathlib.Path, journal: RunJournal) -> None:
         self.folder = folder
         self.journal = journal
         self.writer: RunWriter | None = None

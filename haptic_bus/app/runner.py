@@ -169,7 +169,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     controller: WallController[Any, Any] | None = None
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": kind.loop_extra()}
-    journal = RunJournal(folder, kind.profile, rig.link, extra, kind.render, rig.safety)
+    journal = RunJournal(folder, kind, rig.link, extra, rig.safety)
     journal.begin()  # "running", before any bus is touched: a run killed from here on says so
     recorder = RunRecorder(folder, journal)
     reason, error = "completed", None

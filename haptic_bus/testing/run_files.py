@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     import numpy as np
 
 RECORD = "record.csv"
-AXIS_RECORDS = "record-*.csv"  # a multi-axis run's, one per axis (haptic_bus.app.axes_records.record_name)
+AXIS_RECORDS = "record-*.csv"  # a multi-axis run's, one per axis (haptic_bus.app.run_folder.record_name)
 DOCUMENT = "run.json"
 
 

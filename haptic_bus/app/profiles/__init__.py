@@ -18,11 +18,11 @@ there is one reader and one loader for both:
 from __future__ import annotations
 
 import pathlib
-from typing import overload
+from typing import Any, overload
 
 from haptic_bus.app.profile_policies import NAME_PATTERN, StartPolicy
-from haptic_bus.app.profiles.axes import AxesProfile, Axis, read_axes
-from haptic_bus.app.profiles.one_axis import Profile, profile_to_dict, read_one_axis
+from haptic_bus.app.profiles.axes import AxesProfile, Axis, axes_to_dict, read_axes
+from haptic_bus.app.profiles.one_axis import Profile, one_axis_to_dict, read_one_axis
 from haptic_bus.control.gate import GateDecision
 from haptic_bus.control.space_gate import SpaceDecision
 from haptic_bus.errors import ParameterError, Refusal
@@ -44,6 +44,12 @@ def read_profile(path_or_name: str | pathlib.Path) -> Profile | AxesProfile:
     path = resolve_profile(path_or_name)
     document = read_document(path)
     return read_axes(path, document) if "axes" in document else read_one_axis(path, document)
+
+
+def profile_to_dict(profile: Profile | AxesProfile) -> dict[str, Any]:
+    """A JSON-ready view of a profile of either kind, SI units (``run.json``'s ``settings``):
+    :func:`~haptic_bus.app.profiles.one_axis.one_axis_to_dict` or :func:`~haptic_bus.app.profiles.axes.axes_to_dict`."""
+    return axes_to_dict(profile) if isinstance(profile, AxesProfile) else one_axis_to_dict(profile)
 
 
 @overload

@@ -37,6 +37,7 @@ then puts the scene through the coupled gate (:meth:`AxesProfile.judge`,
 
 from __future__ import annotations
 
+import dataclasses
 import pathlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -55,7 +56,15 @@ from haptic_bus.control.gate import GatePolicy
 from haptic_bus.control.kinematics import Cartesian
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.space_gate import SpaceDecision, SpaceGate
-from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere, compile_space_scene
+from haptic_bus.control.space_scene import (
+    Box,
+    Plane,
+    SpaceObject,
+    SpaceScene,
+    Sphere,
+    compile_space_scene,
+    space_object_to_dict,
+)
 from haptic_bus.control.supervisor import SupervisorPolicy
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import DeviceTable, check_velocity_period, read_device, read_timing
@@ -249,3 +258,17 @@ def read_axes(path: pathlib.Path, document: Mapping[str, Any]) -> AxesProfile:
     except ParameterError as error:
         raise profile_error(path, "loop.period", period, error.allowed) from None
     return profile
+
+
+def axes_to_dict(profile: AxesProfile) -> dict[str, Any]:
+    """A JSON-ready view of a multi-axis profile as run (SI units): loop, bus, every axis, the objects, the policies."""
+    return {
+        "name": profile.name, "period": profile.period, "bitrate": profile.bitrate,
+        "axes": [{"name": a.name, "node_id": a.node_id, "unit_id": a.unit_id, "timing": a.timing, "delay": a.delay,
+                  "mapping": a.mapping, "force_limit": a.force_limit,
+                  "device": {**{k: v for k, v in dataclasses.asdict(a.device).items() if k != "velocity"},
+                             "velocity": str(a.device.velocity)}} for a in profile.axes],
+        "space": {"objects": [space_object_to_dict(obj) for obj in profile.space], "operator": dict(profile.operator_model)},
+        "gate": dataclasses.asdict(profile.gate_policy), "safety": dataclasses.asdict(profile.safety),
+        "passivity": dataclasses.asdict(profile.passivity), "supervisor": dataclasses.asdict(profile.supervisor),
+    }

@@ -141,8 +141,8 @@ def _device_value(value: Any) -> Any:
     return value
 
 
-def profile_to_dict(profile: Profile) -> dict[str, Any]:
-    """A JSON-ready view of a profile (SI units, as in the TOML)."""
+def one_axis_to_dict(profile: Profile) -> dict[str, Any]:
+    """A JSON-ready view of a one-axis profile (SI units, as in the TOML)."""
     d = profile.device
     return {
         "profile": {"name": profile.name, "operator": profile.operator, "task": profile.task,

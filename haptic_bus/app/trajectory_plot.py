@@ -1,4 +1,5 @@
-"""The multi-axis run's figure: the trajectory in its plane of motion against the objects, and time plots.
+"""``trajectory.png``, the picture of motion in space (a run of several axes): the trajectory in its plane of
+motion against the objects, and time plots.
 
 The plane of motion: for two axes the plane of the axes; for three or more, the plane through the
 trajectory's mean spanned by its two principal directions (an SVD of the positions), the plane
@@ -18,8 +19,8 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from haptic_bus.app.axes_records import space_objects
 from haptic_bus.app.run_folder import RunFolder
+from haptic_bus.app.space_records import space_objects
 from haptic_bus.control.space_scene import SpaceObject
 
 _GRID = 240  # points per side of the grid the sections are found on
