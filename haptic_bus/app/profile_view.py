@@ -54,26 +54,10 @@ def format_profile(profile: Profile, decision: GateDecision) -> str:
 
 
 def space_decision_to_dict(decision: SpaceDecision) -> dict[str, Any]:
-    """The coupled gate's decision: accepted, the least margin (N s/m), reasons, every wall's margin."""
+    """The coupled gate's decision: accepted, the least margin (N s/m), reasons, every wall judged
+    (:meth:`~haptic_bus.control.space_gate.SpaceDecision.wall_dicts`)."""
     return {"accepted": decision.accepted, "worst_margin": decision.worst_margin, "reasons": list(decision.reasons),
-            "walls": [{"objects": list(w.objects), "margin": w.verdict.margin,
-                       "critical_theta": w.verdict.critical_theta} for w in decision.walls]}
-
-
-def axes_profile_to_dict(profile: AxesProfile, decision: SpaceDecision) -> dict[str, Any]:
-    """A JSON-ready view of a multi-axis profile and its gate decision (SI units, as in the TOML)."""
-    return {
-        "profile": {"name": profile.name, "operator": profile.operator, "task": profile.task,
-                    "description": profile.description},
-        "path": None if profile.path is None else str(profile.path),
-        "loop": {"period": profile.period}, "bus": {"bitrate": profile.bitrate},
-        "gate": {"safety_margin": profile.gate_policy.safety_margin, "bandwidth": profile.gate_policy.bandwidth},
-        "axes": [{"name": a.name, "node_id": a.node_id, "unit_id": a.unit_id, "timing": a.timing, "delay": a.delay,
-                  "mapping": a.mapping, "force_limit": a.force_limit, "mass": a.device.mass,
-                  "friction": a.device.friction, "velocity": str(a.device.velocity)} for a in profile.axes],
-        "space": {"objects": [space_object_to_dict(o) for o in profile.space]},
-        "gate_decision": space_decision_to_dict(decision),
-    }
+            "walls": decision.wall_dicts()}
 
 
 def _format_value(value: object) -> str:

@@ -27,7 +27,7 @@ from haptic_bus.analysis.two_mass import TwoMassLoop
 from haptic_bus.analysis.two_mass_check import TwoMassReport, check_two_mass_loop, format_two_mass
 from haptic_bus.app.arguments import number, timeout
 from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
-from haptic_bus.app.profile_view import axes_profile_to_dict, format_axes_profile, format_profile, gate_decision_to_dict
+from haptic_bus.app.profile_view import format_axes_profile, format_profile, gate_decision_to_dict, space_decision_to_dict
 from haptic_bus.app.profiles import (
     DEFAULT_PROFILE,
     FORCE_RANGE,
@@ -40,6 +40,7 @@ from haptic_bus.app.profiles import (
     resolve_profile,
     shipped_profiles,
 )
+from haptic_bus.app.run_folder import json_ready
 from haptic_bus.errors import HapticBusError, ParameterError, Refusal
 from haptic_bus.profile.plant import ONE_AXIS_TABLES
 
@@ -115,7 +116,7 @@ def cmd_show(args: argparse.Namespace) -> int:
     except Refusal as refusal:
         return _refused("show", refusal)
     if args.json:
-        print(json.dumps(profile_to_dict(profile) | {"gate_decision": gate_decision_to_dict(decision)}))
+        print(json.dumps(json_ready(profile_to_dict(profile) | {"gate_decision": gate_decision_to_dict(decision)})))
     else:
         print(format_profile(profile, decision))
     return EXIT_OK
@@ -125,7 +126,10 @@ def _show_axes(profile: AxesProfile, as_json: bool, command: str) -> int:
     """``show``/``check`` of a multi-axis profile: its axes, its scene and the coupled gate's decision;
     0 (check: the gate accepts), 1 (check: it refuses)."""
     decision = profile.judge()
-    print(json.dumps(axes_profile_to_dict(profile, decision)) if as_json else format_axes_profile(profile, decision))
+    if as_json:  # as a one-axis profile's: the profile as run.json's settings show it, and the decision
+        print(json.dumps(json_ready(profile_to_dict(profile) | {"gate_decision": space_decision_to_dict(decision)})))
+    else:
+        print(format_axes_profile(profile, decision))
     return EXIT_OK if command == "show" or decision.accepted else EXIT_NO
 
 

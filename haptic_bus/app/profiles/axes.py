@@ -261,9 +261,13 @@ def read_axes(path: pathlib.Path, document: Mapping[str, Any]) -> AxesProfile:
 
 
 def axes_to_dict(profile: AxesProfile) -> dict[str, Any]:
-    """A JSON-ready view of a multi-axis profile as run (SI units): loop, bus, every axis, the objects, the policies."""
+    """A JSON-ready view of a multi-axis profile as run (SI units): who and what (as a one-axis profile's
+    ``profile`` and ``path``), loop, bus, every axis, the objects, the policies."""
     return {
-        "name": profile.name, "period": profile.period, "bitrate": profile.bitrate,
+        "profile": {"name": profile.name, "operator": profile.operator, "task": profile.task,
+                    "description": profile.description},
+        "path": None if profile.path is None else str(profile.path),
+        "loop": {"period": profile.period}, "bus": {"bitrate": profile.bitrate},
         "axes": [{"name": a.name, "node_id": a.node_id, "unit_id": a.unit_id, "timing": a.timing, "delay": a.delay,
                   "mapping": a.mapping, "force_limit": a.force_limit,
                   "device": {**{k: v for k, v in dataclasses.asdict(a.device).items() if k != "velocity"},
