@@ -68,9 +68,9 @@ def test_each_node_has_its_own_safety_chain_written_and_the_sync_is_the_masters(
         assert consumer >> 16 == 127 and consumer & 0xFFFF == floor_ms  # the controller's one heartbeat, per node
         assert int.from_bytes(drive.sdo_read(0x1400, 5), "little") == max(30, floor_ms // period_ms) * period_ms
         assert int.from_bytes(drive.sdo_read(0x6007, 0), "little", signed=True) == 1  # fault
-        assert drive.exchange.produces_sync is False
+        assert drive.cycle is axes.cycle and axes.cycle.shared
         with pytest.raises(DriveError, match="shares a SYNC"):
-            drive.exchange.sync_and_collect()  # an axis' own exchange never sends a SYNC
+            drive.read_inputs()  # an axis runs no cycle of its own: it never sends a SYNC
     assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED] * 3
     with pytest.raises(ParameterError, match="distinct node ids"):
         CanopenAxes([5, 5], scalings=[None, None], interface="lockstep", channel="unused")
@@ -96,8 +96,8 @@ def test_one_sync_per_cycle_and_every_tpdo_before_any_torque(rig) -> None:
         tpdos, rpdos = [i for i in ids if i in TPDOS], [i for i in ids if i in RPDO1.values()]
         assert sorted(tpdos) == sorted(TPDOS) and sorted(rpdos) == sorted(RPDO1.values())
         assert max(ids.index(i) for i in tpdos) < min(ids.index(i) for i in rpdos)  # every TPDO before any torque
-    assert axes.cycle.syncs_sent == sum(node.drive.sync_count for node in sim.nodes[:1])
-    # the three plants saw the same SYNCs: one clock for the device
+    # every SYNC served every axis, and each plant heard it: one clock for the device
+    assert [drive.stats.syncs_sent for drive in axes.drives] == [node.drive.sync_count for node in sim.nodes]
     assert len({node.drive.sync_count for node in sim.nodes}) == 1
 
 
