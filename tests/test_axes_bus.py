@@ -167,6 +167,14 @@ def test_a_missing_tpdo_makes_the_whole_cycle_late(rig) -> None:
     assert [i.age for i in axes.read_inputs()] == [0, 0, 0]
 
 
+def test_a_tpdo_missing_while_the_state_machines_are_walked_names_its_drive(rig) -> None:
+    _, sim, axes, _ = rig
+    sim.node(6).short_next_tpdo(1)  # dropped by the master: node 6's TPDOs of the walk's first exchange are not all in
+    with pytest.raises(DriveTimeout, match=r"^CANopen node 6: no TPDO within \S+ ms while commanding the state machine$"):
+        axes.enable()
+    assert [drive.stats.dropped_frames for drive in axes.drives] == [0, 1, 0]
+
+
 def test_a_silent_axis_zeroes_every_torque_in_the_same_cycle(rig) -> None:
     """Node 6 stops answering while all three axes push on the slope: after its third missed TPDO
     every axis gets zero torque with DISABLE VOLTAGE before one SYNC, and both drives that still

@@ -43,7 +43,7 @@ from drives.canopen.heartbeat import HeartbeatProducer
 from drives.canopen.link import NetworkLink
 from drives.canopen.sync_cycle import SyncCycle
 from drives.cia402_master import trip_together
-from drives.errors import DriveError, DriveTimeout, ParameterError
+from drives.errors import DriveError, ParameterError
 from drives.safety import DEFAULT_SAFETY, SafetySettings
 
 
@@ -113,22 +113,10 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
 
     def _command(self, words: list[int]) -> list[int]:
         """One exchange for the state machines: SYNC, every TPDO, then each drive's RPDO(word, 0)."""
-        cycle = self.cycle
-        cycle.begin()
-        cycle.drain()
-        received = cycle.sync_and_collect()
-        for drive, word in zip(self.drives, words):
-            drive.exchange.send_rpdo(word, 0)
-        silent = [drive.name for drive, inputs in zip(self.drives, received) if inputs is None]
-        if silent:
-            raise DriveTimeout(self.name, f"no TPDO from {', '.join(silent)} within {cycle.timeout * 1e3:.3g} ms while "
-                                          "commanding the state machines")
-        statuswords = []
+        received = self.cycle.command(words)
         for drive, inputs in zip(self.drives, received):
-            assert inputs is not None
             drive.last_inputs = inputs
-            statuswords.append(inputs.statusword)
-        return statuswords
+        return [inputs.statusword for inputs in received]
 
     # ------------------------------------------------------------------ cyclic
 

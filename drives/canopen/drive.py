@@ -411,15 +411,9 @@ class CanopenDrive(Cia402Master):
 
     def _command(self, controlword: int) -> int:
         """One exchange for the state machine: SYNC/TPDO, then RPDO(controlword, 0); the statusword."""
-        cycle = self._own_cycle()
-        cycle.begin()
-        cycle.drain()
-        [found] = cycle.sync_and_collect()
-        self.exchange.send_rpdo(controlword, 0)
-        if found is None:
-            raise DriveTimeout(self.name, f"no TPDO within {cycle.timeout * 1e3:.3g} ms while commanding the state machine")
-        self.last_inputs = found
-        return found.statusword
+        [inputs] = self._own_cycle().command([controlword])
+        self.last_inputs = inputs
+        return inputs.statusword
 
     def state(self) -> State | None:
         """The drive's CiA-402 state: one SYNC/TPDO exchange, answered with the held controlword and zero torque."""

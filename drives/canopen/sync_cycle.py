@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Container
+from collections.abc import Callable, Container, Sequence
 from typing import Any
 
 import can
@@ -33,7 +33,7 @@ from drives.base import CyclicInputs
 from drives.canopen.exchange import CanopenExchange, CanopenStats, Unpack
 from drives.canopen.link import NetworkLink
 from drives.cia301 import SYNC_COB_ID
-from drives.errors import DriveError, DriveProtocolError
+from drives.errors import DriveError, DriveProtocolError, DriveTimeout
 
 logger = logging.getLogger(__name__)
 
@@ -146,6 +146,23 @@ class SyncCycle:
             return [alone(parts, synced)]
         found = [parts[start:stop] for _, start, stop in self._axes]
         return [inputs(part, synced) if () not in part else None for (inputs, _, _), part in zip(self._axes, found)]
+
+    def command(self, words: Sequence[int]) -> list[CyclicInputs]:
+        """One exchange for the drives' state machines: the bus read in this thread, SYNC, every drive's
+        TPDOs, then each drive's RPDO(``words[i]``, zero torque); every drive's inputs of it, in axis
+        order.  DriveTimeout, naming the first drive whose TPDOs did not all arrive within ``timeout``
+        (and the others), after the RPDOs went out."""
+        self.begin()
+        self.drain()
+        received = self.sync_and_collect()
+        for exchange, word in zip(self.exchanges, words):
+            exchange.send_rpdo(word, 0)
+        silent = [exchange.name for exchange, inputs in zip(self.exchanges, received) if inputs is None]
+        if silent:
+            others = f" (nor from {', '.join(silent[1:])})" if silent[1:] else ""
+            raise DriveTimeout(silent[0], f"no TPDO within {self.timeout * 1e3:.3g} ms while commanding the state "
+                                          f"machine{others}")
+        return [inputs for inputs in received if inputs is not None]
 
     def send_sync(self) -> None:
         """One SYNC frame (every drive samples, and a synchronous drive latches its torque target)."""
