@@ -122,10 +122,9 @@ class CanopenDrive(Cia402Master):
     own, connect() opens the link and starts the heartbeat if they are not yet, close() leaves a
     shared one running.  Timeouts in s (``tpdo_timeout``: how long the drive's own cycle waits for
     its TPDOs; a shared cycle has its own); ``max_missed_tpdos`` consecutive cycles without TPDO
-    raise DriveTimeout; heartbeat times in
-    ms (consumer default 3x producer; 0 disables).  ``scaling``: the caller's
-    :class:`~drives.base.DriveScaling` (``scaling_source`` labels it in the report, e.g.
-    "profile [device]").  connect() takes each field from the drive where it states it --
+    raise DriveTimeout; heartbeat times in ms (consumer default 3x producer; 0 disables).
+    ``scaling``: the caller's :class:`~drives.base.DriveScaling` (``scaling_source`` labels it
+    in the report, e.g. "profile [device]").  connect() takes each field from the drive where it states it --
     manufacturer scaling objects an EDS names, else the standard objects (0x6076, 0x6072 and
     the factor group 0x608F/0x6090/0x6091/0x6092/0x60A8/0x60A9, :mod:`drives.factor_group`) --
     and from the caller otherwise; two sources of a field that disagree beyond the rounding of
