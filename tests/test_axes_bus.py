@@ -68,9 +68,9 @@ def test_each_node_has_its_own_safety_chain_written_and_the_sync_is_the_masters(
         assert consumer >> 16 == 127 and consumer & 0xFFFF == floor_ms  # the controller's one heartbeat, per node
         assert int.from_bytes(drive.sdo_read(0x1400, 5), "little") == max(30, floor_ms // period_ms) * period_ms
         assert int.from_bytes(drive.sdo_read(0x6007, 0), "little", signed=True) == 1  # fault
-        assert drive.exchange.produces_sync is False
+        assert drive.cycle is axes.cycle and axes.cycle.shared
         with pytest.raises(DriveError, match="shares a SYNC"):
-            drive.exchange.sync_and_collect()  # an axis' own exchange never sends a SYNC
+            drive.read_inputs()  # an axis runs no cycle of its own: it never sends a SYNC
     assert [node.drive.state for node in sim.nodes] == [State.SWITCH_ON_DISABLED] * 3
     with pytest.raises(ParameterError, match="distinct node ids"):
         CanopenAxes([5, 5], scalings=[None, None], interface="lockstep", channel="unused")
@@ -96,8 +96,8 @@ def test_one_sync_per_cycle_and_every_tpdo_before_any_torque(rig) -> None:
         tpdos, rpdos = [i for i in ids if i in TPDOS], [i for i in ids if i in RPDO1.values()]
         assert sorted(tpdos) == sorted(TPDOS) and sorted(rpdos) == sorted(RPDO1.values())
         assert max(ids.index(i) for i in tpdos) < min(ids.index(i) for i in rpdos)  # every TPDO before any torque
-    assert axes.cycle.syncs_sent == sum(node.drive.sync_count for node in sim.nodes[:1])
-    # the three plants saw the same SYNCs: one clock for the device
+    # every SYNC served every axis, and each plant heard it: one clock for the device
+    assert [drive.stats.syncs_sent for drive in axes.drives] == [node.drive.sync_count for node in sim.nodes]
     assert len({node.drive.sync_count for node in sim.nodes}) == 1
 
 
@@ -165,6 +165,14 @@ def test_a_missing_tpdo_makes_the_whole_cycle_late(rig) -> None:
     axes.write_outputs([0, 0, 0])
     assert axes.drives[1].stats.missed_tpdos == 1 and axes.drives[1].stats.dropped_frames == 1
     assert [i.age for i in axes.read_inputs()] == [0, 0, 0]
+
+
+def test_a_tpdo_missing_while_the_state_machines_are_walked_names_its_drive(rig) -> None:
+    _, sim, axes, _ = rig
+    sim.node(6).short_next_tpdo(1)  # dropped by the master: node 6's TPDOs of the walk's first exchange are not all in
+    with pytest.raises(DriveTimeout, match=r"^CANopen node 6: no TPDO within \S+ ms while commanding the state machine$"):
+        axes.enable()
+    assert [drive.stats.dropped_frames for drive in axes.drives] == [0, 1, 0]
 
 
 def test_a_silent_axis_zeroes_every_torque_in_the_same_cycle(rig) -> None:

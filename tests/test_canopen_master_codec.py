@@ -1,4 +1,4 @@
-"""Unit tests of the master's building blocks: PDO codecs, EMCY decoding, bus configuration."""
+"""Unit tests of the master's building blocks: PDO codecs, EMCY decoding, bus configuration, who runs the cycle."""
 
 from __future__ import annotations
 
@@ -8,9 +8,11 @@ import pytest
 from canopen.emcy import EmcyError
 
 from drives.bus_config import resolve_bus_config
-from drives.canopen.drive import split_into_frames
+from drives.canopen.drive import CanopenDrive, split_into_frames
 from drives.canopen.events import describe_emcy
+from drives.canopen.link import NetworkLink
 from drives.canopen.pdo_codec import PdoCodec
+from drives.canopen.sync_cycle import SyncCycle
 from drives.cia301 import describe_emcy_code, is_restricted_cob_id
 from drives.cia402 import (
     CONTROLWORD,
@@ -192,3 +194,18 @@ def test_bus_config_missing_or_unknown_interface_is_a_readable_error(monkeypatch
         resolve_bus_config(config_file="/nonexistent/can.conf")
     with pytest.raises(ParameterError, match="interface = 'nonesuch' is invalid; allowed: one of python-can's: "):
         resolve_bus_config("nonesuch", config_file="/nonexistent/can.conf")  # the user's typo: exit 2
+
+
+def test_a_cycle_serves_several_drives_only_when_shared_and_a_drive_takes_its_bus_from_it():
+    """Drives are built without touching the bus: a cycle of one drive refuses a second, a shared one
+    takes each in axis order, and a drive on a cycle takes no bus of its own besides."""
+    link = NetworkLink("nodes 5, 6", bus_args=("lockstep", "unused", None, {}), shared=True)
+    alone = SyncCycle("node 5", link, 0.05)
+    CanopenDrive(5, cycle=alone)
+    with pytest.raises(DriveError, match="CANopen node 6 needs a shared cycle"):
+        CanopenDrive(6, cycle=alone)
+    shared = SyncCycle("nodes 5, 6", link, 0.05, shared=True)
+    drives = [CanopenDrive(node, cycle=shared) for node in (5, 6)]
+    assert shared.exchanges == tuple(drive.exchange for drive in drives) and drives[1].link is link
+    with pytest.raises(ParameterError, match="cycle"):
+        CanopenDrive(7, cycle=shared, interface="lockstep")

@@ -293,7 +293,7 @@ def test_connect_returns_the_connection_whole_and_close_drops_it(canopen_rig):
         assert connection.sdo.node is connection.node and connection.events.node is connection.node
         assert connection.commissioned.tpdo_codecs == drive.tpdo_codecs
         assert decode_statusword(drive.read_object(STATUSWORD)) is State.SWITCH_ON_DISABLED
-        with drive.cyclic(torque_limit=200) as cycle:  # the receive mode entered once, read/saturate/write bound
+        with drive.cyclic(torque_limit=200) as cycle:  # the bus read in this thread from here, read/saturate/write bound
             drive.enable()
             assert decode_statusword(cycle.read().statusword) is State.OPERATION_ENABLED
             assert cycle.saturate_and_write(-900) == -200 and drive.stats.saturated_outputs == 1

@@ -3,16 +3,17 @@
 Each axis is a :class:`~drives.canopen.drive.CanopenDrive`, commissioned exactly as a single
 drive is: its own NMT, PDO mapping, scaling and its own safety chain -- the heartbeat consumer
 0x1016 (watching this controller's one heartbeat), the RPDO deadline 0x1400:05 and 0x6007,
-written to each node and read back.  They share one link (one bus, one canopen network) and
-one heartbeat producer, which this object owns (sent by the cycle itself in the cyclic phase,
-:mod:`~drives.canopen.heartbeat`).  What it adds:
+written to each node and read back.  They share one SYNC cycle on one link (one bus, one
+canopen network) and one heartbeat producer, which this object owns (the heartbeat sent by the
+cycle itself in the cyclic phase, :mod:`~drives.canopen.heartbeat`).  What it adds:
 
-* **one SYNC per cycle** (:class:`~drives.canopen.axes_cycle.AxesCycle`): every axis' TPDOs
-  (status, velocity, position) are collected before any RPDO goes out.  The cycle waits for the
-  last axis, up to ``tpdo_timeout``: an axis whose TPDO missed it hands out its last input again
-  with ``age`` counting up, so the cycle is as late as its oldest input, and
-  ``max_missed_tpdos`` in a row is a :class:`~drives.errors.DriveTimeout`.  The axes' own
-  exchanges never send a SYNC;
+* **one SYNC per cycle** (:class:`~drives.canopen.sync_cycle.SyncCycle`, the one a single drive
+  runs too, here of every axis' exchange): every axis' TPDOs (status, velocity, position) are
+  collected before any RPDO goes out.  The cycle waits for the last axis, up to
+  ``tpdo_timeout``: an axis whose TPDO missed it hands out its last input again with ``age``
+  counting up (:meth:`~drives.canopen.drive.CanopenDrive.take_inputs`), so the cycle is as late
+  as its oldest input, and ``max_missed_tpdos`` in a row is a
+  :class:`~drives.errors.DriveTimeout`.  The axes run no cycle of their own and send no SYNC;
 * **one fate**: whatever error any axis meets (its EMCY, its heartbeat lost, its fault bit, its
   TPDOs missing, a send that failed), every axis is tripped in that same cycle -- each gets zero
   torque with DISABLE VOLTAGE, then one SYNC, at which every drive latches it -- and the error
@@ -29,7 +30,6 @@ one heartbeat producer, which this object owns (sent by the cycle itself in the 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import os
 from collections.abc import Iterator, Sequence
 from typing import Any
@@ -38,12 +38,12 @@ from canopen import objectdictionary as od
 
 from drives.axes_master import MAX_AXES, AxesMaster
 from drives.base import AxesDriveCycle, CyclicInputs, DriveScaling
-from drives.canopen.axes_cycle import AxesCycle
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
 from drives.canopen.heartbeat import HeartbeatProducer
 from drives.canopen.link import NetworkLink
+from drives.canopen.sync_cycle import SyncCycle
 from drives.cia402_master import trip_together
-from drives.errors import DriveError, DriveTimeout, ParameterError
+from drives.errors import DriveError, ParameterError
 from drives.safety import DEFAULT_SAFETY, SafetySettings
 
 
@@ -85,16 +85,12 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
         master = safety.master_node_id
         self.heartbeat = HeartbeatProducer(master or 0, safety.heartbeat_ms / 1000.0 if master is not None else 0.0,
                                            shared=True)
-        self.drives = tuple(
-            CanopenDrive(node, link=self.link, heartbeat=self.heartbeat, period=period, tpdo_objects=tpdo_objects,
+        self.cycle = SyncCycle(self.name, self.link, tpdo_timeout, shared=True)
+        self.drives = tuple(  # each joins the cycle, in axis order
+            CanopenDrive(node, cycle=self.cycle, heartbeat=self.heartbeat, period=period, tpdo_objects=tpdo_objects,
                          scaling=scaling, scaling_source=scaling_source, eds=eds, safety=safety,
-                         tpdo_timeout=tpdo_timeout, max_missed_tpdos=max_missed_tpdos,
-                         heartbeat_consumer_ms=heartbeat_consumer_ms)
+                         max_missed_tpdos=max_missed_tpdos, heartbeat_consumer_ms=heartbeat_consumer_ms)
             for node, scaling in zip(nodes, scalings))
-        for drive in self.drives:
-            drive.exchange.produces_sync = False
-        self.cycle = AxesCycle(self.name, self.link, [drive.exchange for drive in self.drives], tpdo_timeout)
-        self._missed = [0] * len(nodes)
 
     @property
     def node_ids(self) -> tuple[int, ...]:
@@ -108,33 +104,19 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
         self.link.open()
         for drive in self.drives:
             drive.connect()  # the first starts the shared heartbeat (its boot-up before any drive is touched)
-        self.cycle.configure()
 
     # ------------------------------------------------------------------ state machine
 
     def _before_walk(self) -> None:
-        """The bus read by canopen's notifier again (mode selection is SDO), no TPDO missed yet."""
+        """The bus read by canopen's notifier again (mode selection is SDO)."""
         self.cycle.end()
-        self._missed = [0] * len(self.drives)
 
     def _command(self, words: list[int]) -> list[int]:
         """One exchange for the state machines: SYNC, every TPDO, then each drive's RPDO(word, 0)."""
-        cycle = self.cycle
-        cycle.begin()
-        cycle.drain()
-        received = cycle.sync_and_collect()
-        for drive, word in zip(self.drives, words):
-            drive.exchange.send_rpdo(word, 0)
-        silent = [drive.name for drive, inputs in zip(self.drives, received) if inputs is None]
-        if silent:
-            raise DriveTimeout(self.name, f"no TPDO from {', '.join(silent)} within {cycle.timeout * 1e3:.3g} ms while "
-                                          "commanding the state machines")
-        statuswords = []
+        received = self.cycle.command(words)
         for drive, inputs in zip(self.drives, received):
-            assert inputs is not None
             drive.last_inputs = inputs
-            statuswords.append(inputs.statusword)
-        return statuswords
+        return [inputs.statusword for inputs in received]
 
     # ------------------------------------------------------------------ cyclic
 
@@ -171,28 +153,10 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
             for drive in drives:
                 if drive.tripped is None:
                     drive.connected().events.check()
-            received = cycle.sync_and_collect()
-            inputs: list[CyclicInputs] = []
-            for i, (drive, found) in enumerate(zip(drives, received)):
-                if found is None:
-                    inputs.append(self._missing(i, drive))
-                else:
-                    self._missed[i] = 0
-                    inputs.append(drive.accept_inputs(found))
+            timeout = cycle.timeout
+            return tuple([drive.take_inputs(found, timeout) for drive, found in zip(drives, cycle.sync_and_collect())])
         except DriveError as error:
             raise self._trip_all(error) from error.__cause__
-        return tuple(inputs)
-
-    def _missing(self, axis: int, drive: CanopenDrive) -> CyclicInputs:
-        drive.stats.missed_tpdos += 1
-        self._missed[axis] += 1
-        missed = self._missed[axis]
-        if missed >= drive.max_missed_tpdos:
-            cobs = ", ".join(f"0x{cob:03X}" for cob in drive.exchange.tpdo_cobs)
-            raise DriveTimeout(drive.name, f"no TPDO (COB-ID {cobs}) for {missed} consecutive cycles (timeout "
-                                           f"{self.cycle.timeout * 1e3:.3g} ms each); torque set to zero on every axis")
-        last = drive.last_inputs if drive.last_inputs is not None else CyclicInputs(0, 0)
-        return dataclasses.replace(last, age=missed)
 
     def write_outputs(self, torques: Sequence[int]) -> None:
         """Every axis' target torque (0x6071, per mille, in axis order), each saturated by its drive's

@@ -9,8 +9,12 @@ Built on ``canopen`` (NMT, SDO, EMCY and heartbeat consumers, PDO configuration)
 (more TPDOs or RPDOs where the drive's PDOs make commissioning split the objects).
 
 The pieces: :mod:`~drives.canopen.link` (the network and who owns it),
-:mod:`~drives.canopen.commissioning` (NMT, PDO mapping, scaling), :mod:`~drives.canopen.exchange`
-(the cycle on the wire), :mod:`~drives.canopen.events` (EMCY, heartbeat, NMT state).
+:mod:`~drives.canopen.commissioning` (NMT, PDO mapping, scaling), :mod:`~drives.canopen.sync_cycle`
+(the cycle on the wire: SYNC out, TPDOs in, read in the control thread),
+:mod:`~drives.canopen.exchange` (this drive's TPDO layout, RPDOs and counters),
+:mod:`~drives.canopen.events` (EMCY, heartbeat, NMT state).  A drive alone owns the cycle of
+its one exchange; the drives of :mod:`~drives.canopen.axes` share one, which runs their cycles
+(one SYNC for all), and run none of their own.
 
 Safety: a missing TPDO for ``max_missed_tpdos`` consecutive cycles, a heartbeat loss, an
 EMCY, a malformed EMCY or heartbeat, a fault bit, the node leaving NMT OPERATIONAL or a bus
@@ -26,8 +30,8 @@ one object users hold (the controller, the CLI and the multi-axis master keep on
 drive through connect, runs, reconnects and close), and its methods that need the bus take the
 connection first (``DriveError`` "not connected" otherwise), so nothing checks for a part that is
 None.  A loop takes its cycles from ``with drive.cyclic(limit) as cycle``
-(:class:`~drives.base.DriveCycle`): the receive mode entered once, the way frames are sent
-resolved at connect, ``read``/``saturate``/``write`` bound once.
+(:class:`~drives.base.DriveCycle`): the bus read in the control thread from then on, the way
+frames are sent resolved at connect, ``read``/``saturate``/``write`` bound once.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ from drives.base import CyclicInputs, DriveCycle
 from drives.canopen.commissioning import Commissioned, Commissioning, CommissioningSettings
 from drives.canopen.connection import CanopenConnection
 from drives.canopen.events import DriveEvents
-from drives.canopen.exchange import RX_MODES, CanopenExchange, CanopenStats
+from drives.canopen.exchange import CanopenExchange, CanopenStats
 from drives.canopen.heartbeat import HeartbeatProducer
 from drives.canopen.inventory import MAX_MAPPING_ENTRIES
 from drives.canopen.link import NetworkLink
@@ -56,6 +60,7 @@ from drives.canopen.master_dictionary import load_object_dictionary
 from drives.canopen.pdo_codec import PdoCodec, object_spec
 from drives.canopen.pdo_plan import pack
 from drives.canopen.sdo import SdoAccess
+from drives.canopen.sync_cycle import SyncCycle
 from drives.cia301 import CONSUMER_HEARTBEAT_TIME, NODE_ID_RANGE, PRODUCER_HEARTBEAT_TIME, NmtCommand
 from drives.cia402 import (
     CONTROLWORD,
@@ -111,15 +116,15 @@ class CanopenDrive(Cia402Master):
     All are transmission type 1 (every SYNC); unused PDOs are invalidated.  What the drive
     lacks of the safety chain is one warning per object (``safety_warnings``), or a refusal
     with ``safety.strict``; no object the drive lacks is ever written, at connect or close.
-    ``link`` and ``heartbeat``: a link and the master's heartbeat producer the caller owns and
-    shares among several drives on one bus (:mod:`drives.canopen.axes`; marked ``shared``):
-    connect() opens the link and starts the heartbeat if they are not yet, close() leaves a shared
-    one running.  ``rx_mode``:
-    "direct" or "listener" (:mod:`drives.canopen.exchange`).  Timeouts in s;
-    ``max_missed_tpdos`` consecutive cycles without TPDO raise DriveTimeout; heartbeat times in
-    ms (consumer default 3x producer; 0 disables).  ``scaling``: the caller's
-    :class:`~drives.base.DriveScaling` (``scaling_source`` labels it in the report, e.g.
-    "profile [device]").  connect() takes each field from the drive where it states it --
+    ``cycle`` and ``heartbeat``: a SYNC cycle (:mod:`drives.canopen.sync_cycle`, on its link) and the
+    master's heartbeat producer the caller owns and shares among several drives on one bus
+    (:mod:`drives.canopen.axes`; marked ``shared``): the drive joins the cycle and runs none of its
+    own, connect() opens the link and starts the heartbeat if they are not yet, close() leaves a
+    shared one running.  Timeouts in s (``tpdo_timeout``: how long the drive's own cycle waits for
+    its TPDOs; a shared cycle has its own); ``max_missed_tpdos`` consecutive cycles without TPDO
+    raise DriveTimeout; heartbeat times in ms (consumer default 3x producer; 0 disables).
+    ``scaling``: the caller's :class:`~drives.base.DriveScaling` (``scaling_source`` labels it
+    in the report, e.g. "profile [device]").  connect() takes each field from the drive where it states it --
     manufacturer scaling objects an EDS names, else the standard objects (0x6076, 0x6072 and
     the factor group 0x608F/0x6090/0x6091/0x6092/0x60A8/0x60A9, :mod:`drives.factor_group`) --
     and from the caller otherwise; two sources of a field that disagree beyond the rounding of
@@ -146,7 +151,6 @@ class CanopenDrive(Cia402Master):
         tpdo_objects: Sequence[ObjectSpec | int] = DEFAULT_TPDO_WITH_POSITION,
         scaling: Any = None,
         scaling_source: str = "caller",
-        rx_mode: str = "direct",
         sdo_timeout: float = 0.3,
         boot_timeout: float = 1.0,
         state_timeout: float = 1.0,
@@ -157,13 +161,12 @@ class CanopenDrive(Cia402Master):
         reset_communication: bool = True,
         check_device_type: bool = True,
         safety: SafetySettings = DEFAULT_SAFETY,
-        link: NetworkLink | None = None,
+        cycle: SyncCycle | None = None,
         heartbeat: HeartbeatProducer | None = None,
     ) -> None:
         low, high = NODE_ID_RANGE
         _check("node_id", isinstance(node_id, int) and low <= node_id <= high, node_id, f"{low}..{high}")
         _check("period", 1e-6 <= period <= 4294.967295, period, "1e-6..4294.967295 s (0x1006 in us)")
-        _check("rx_mode", rx_mode in RX_MODES, rx_mode, " or ".join(map(repr, RX_MODES)))
         _check("max_missed_tpdos", max_missed_tpdos >= 1, max_missed_tpdos, ">= 1")
         _check("tpdo_timeout", tpdo_timeout > 0, tpdo_timeout, "> 0 s")
         _check("heartbeat_producer_ms", 0 <= heartbeat_producer_ms <= 0xFFFF, heartbeat_producer_ms, "0..65535 ms")
@@ -189,17 +192,18 @@ class CanopenDrive(Cia402Master):
         self.settings = CommissioningSettings(period, boot_timeout, sdo_timeout, reset_communication,
                                               check_device_type, heartbeat_producer_ms, heartbeat_consumer_ms)
         self.safety = safety
-        _check("link", link is None or (network is None and bus is None and interface is None and channel is None),
-               "a shared link", "no network, bus, interface or channel besides it")
+        _check("cycle", cycle is None or (network is None and bus is None and interface is None and channel is None),
+               "a shared cycle", "no network, bus, interface or channel besides it")
         self.heartbeat = heartbeat if heartbeat is not None else HeartbeatProducer(
             safety.master_node_id or 0, safety.heartbeat_ms / 1000.0 if safety.master_node_id is not None else 0.0)
-        self.link = link if link is not None else NetworkLink(
+        self.link = cycle.link if cycle is not None else NetworkLink(
             self.name, network=network, bus=bus, bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})))
         self.tpdo_objects = tuple(spec for frame in frames for spec in frame)
         tpdo_codecs = tuple(PdoCodec(frame, name=f"TPDO{n} of node {node_id}") for n, frame in enumerate(frames, 1))
         self.exchange = CanopenExchange(self.name, self.link, tpdo_codecs,
-                                        (PdoCodec(DEFAULT_RPDO, name=f"RPDO1 of node {node_id}"),), rx_mode,
-                                        tpdo_timeout, stats)
+                                        (PdoCodec(DEFAULT_RPDO, name=f"RPDO1 of node {node_id}"),), stats)
+        self.cycle = cycle if cycle is not None else SyncCycle(self.name, self.link, tpdo_timeout)
+        self.cycle.join(self.exchange)
         self.connection: CanopenConnection | None = None  # what connect() built, until close()
         self._missed_in_row = 0
         self._closed = False
@@ -213,11 +217,6 @@ class CanopenDrive(Cia402Master):
     def tpdo_codecs(self) -> tuple[PdoCodec, ...]:
         """The codecs of TPDO1.. in order."""
         return self.exchange.tpdo_codecs
-
-    @property
-    def rx_mode(self) -> str:
-        """How TPDOs are received: "direct" or "listener"."""
-        return self.exchange.rx_mode
 
     @property
     def commissioned(self) -> Commissioned | None:
@@ -264,7 +263,7 @@ class CanopenDrive(Cia402Master):
             node = canopen.RemoteNode(self.node_id, dictionary)
             network.add_node(node)
             events = DriveEvents(self.name, node, network, self.stats)
-            sdo = SdoAccess(self.name, node, self.settings.sdo_timeout, self.exchange.end)
+            sdo = SdoAccess(self.name, node, self.settings.sdo_timeout, self.cycle.end)
             commissioning = Commissioning(self.name, node, sdo, events, self.settings, self.safety)
             commissioning.refuse_another_master()
             if network.bus is None:
@@ -272,6 +271,7 @@ class CanopenDrive(Cia402Master):
             self.heartbeat.start(self.link.send)  # boot-up first, before the drive is touched
             found = commissioning.run(self.tpdo_objects, DEFAULT_RPDO)
             self.exchange.configure(found.tpdo_codecs, found.tpdo_cobs, found.rpdo_codecs, found.rpdo_cobs)
+            self.cycle.configure()
             self._adopt_scaling(found.scaling, found.scaling_notes)
             beats = found.inventory.has(PRODUCER_HEARTBEAT_TIME)  # a drive without 0x1017 sends no heartbeat
             events.heartbeat_limit = self.settings.heartbeat_consumer_ms / 1000.0 if beats else 0.0
@@ -325,15 +325,25 @@ class CanopenDrive(Cia402Master):
     # ------------------------------------------------------------------ cyclic hot path
 
     def read_inputs(self) -> CyclicInputs:
-        """Send SYNC, wait for this cycle's TPDO (<= tpdo_timeout s) and decode it; raise on fault/timeout."""
-        return self._cycle_inputs(self.connected().events)
+        """Send SYNC, wait for this cycle's TPDOs (<= tpdo_timeout s) and decode them; raise on fault/timeout."""
+        return self._cycle_inputs(self.connected().events, self._own_cycle())
+
+    def _own_cycle(self) -> SyncCycle:
+        """The cycle this drive runs; DriveError where it shares one with other drives (their master runs it)."""
+        if self.cycle.shared:
+            raise DriveError(self.name, "this drive shares a SYNC with other drives: its cycles run there "
+                                        "(drives.canopen.axes)")
+        return self.cycle
 
     def _bind_cycle(self) -> DriveCycle:
-        """The cycle's read bound to this connection's events, the receive mode entered once; its
-        write sends the controller's heartbeat when one is due (:meth:`_phase_duties`)."""
+        """The cycle's read bound to this connection's events and to the drive's own cycle, the bus read
+        in this thread from here; its write sends the controller's heartbeat when one is due
+        (:meth:`_phase_duties`)."""
         events = self.connected().events
-        self.exchange.begin()
-        return DriveCycle(self.name, functools.partial(self._cycle_inputs, events), self.clamp, self._send_and_beat)
+        cycle = self._own_cycle()
+        cycle.begin()
+        return DriveCycle(self.name, functools.partial(self._cycle_inputs, events, cycle), self.clamp,
+                          self._send_and_beat)
 
     def _phase_duties(self) -> contextlib.AbstractContextManager[None]:
         """The cyclic phase sends the controller's heartbeat from the cycle, its thread silenced
@@ -348,32 +358,36 @@ class CanopenDrive(Cia402Master):
         self._send_torque(target_torque)
         self.heartbeat.tick()
 
-    def _cycle_inputs(self, events: DriveEvents) -> CyclicInputs:
-        """One cycle's inputs (:meth:`read_inputs`), the receive mode entered again only where an SDO
-        access left it (listener mode: subscribed once)."""
-        exchange = self.exchange
+    def _cycle_inputs(self, events: DriveEvents, cycle: SyncCycle) -> CyclicInputs:
+        """One cycle's inputs (:meth:`read_inputs`) from ``cycle``, the bus read in this thread again
+        only where an SDO access gave it back to canopen's notifier."""
         try:
             if not self.link.direct:
-                exchange.begin()
-            exchange.drain()
+                cycle.begin()
+            cycle.drain()
             if self._tripped is None:
                 events.check()
-            inputs = exchange.sync_and_collect()
+            [found] = cycle.sync_and_collect()
         except DriveError as error:
             raise self.trip(error) from error.__cause__
-        if inputs is None:
-            self.stats.missed_tpdos += 1
-            self._missed_in_row += 1
-            if self._missed_in_row >= self.max_missed_tpdos:
-                raise self.trip(DriveTimeout(
-                    self.name,
-                    f"no TPDO (COB-ID 0x{exchange.tpdo_cobs[0]:03X}) for {self._missed_in_row} consecutive cycles "
-                    f"(timeout {exchange.timeout * 1e3:.3g} ms each); torque set to zero",
-                ))
-            last = self.last_inputs if self.last_inputs is not None else CyclicInputs(0, 0)
-            return dataclasses.replace(last, age=self._missed_in_row)
-        self._missed_in_row = 0
-        return self.accept_inputs(inputs)
+        return self.take_inputs(found, cycle.timeout)
+
+    def take_inputs(self, found: CyclicInputs | None, timeout: float) -> CyclicInputs:
+        """This drive's inputs of a cycle that collected ``found`` (None: one of its TPDOs did not arrive
+        within ``timeout`` s): accepted (:meth:`accept_inputs`), or its last inputs again with ``age``
+        counting the cycles missed in a row; at ``max_missed_tpdos`` of them the drive trips and the
+        DriveTimeout is raised."""
+        if found is not None:
+            self._missed_in_row = 0
+            return self.accept_inputs(found)
+        self.stats.missed_tpdos += 1
+        self._missed_in_row += 1
+        if self._missed_in_row >= self.max_missed_tpdos:
+            cobs = ", ".join(f"0x{cob:03X}" for cob in self.exchange.tpdo_cobs)
+            raise self.trip(DriveTimeout(self.name, f"no TPDO (COB-ID {cobs}) for {self._missed_in_row} consecutive "
+                                                    f"cycles (timeout {timeout * 1e3:.3g} ms each); torque set to zero"))
+        last = self.last_inputs if self.last_inputs is not None else CyclicInputs(0, 0)
+        return dataclasses.replace(last, age=self._missed_in_row)
 
     def _fault_detail(self) -> tuple[str, int | None]:
         return self.connection.events.fault_detail() if self.connection is not None else ("", None)
@@ -385,19 +399,18 @@ class CanopenDrive(Cia402Master):
             raise self.trip(error) from error.__cause__
 
     def _send_safe_outputs(self) -> None:
-        self.exchange.send_safe()
+        """Zero torque with DISABLE VOLTAGE, then one SYNC so that a synchronous drive applies it; on a
+        shared cycle no SYNC (its master sends one after every drive's safe outputs)."""
+        if self.cycle.shared:
+            self.exchange.send_safe()
+        else:
+            self.cycle.send_safe()
 
     # ------------------------------------------------------------------ state machine
 
     def _command(self, controlword: int) -> int:
         """One exchange for the state machine: SYNC/TPDO, then RPDO(controlword, 0); the statusword."""
-        exchange = self.exchange
-        exchange.begin()
-        exchange.drain()
-        inputs = exchange.sync_and_collect()
-        exchange.send_rpdo(controlword, 0)
-        if inputs is None:
-            raise DriveTimeout(self.name, f"no TPDO within {exchange.timeout * 1e3:.3g} ms while commanding the state machine")
+        [inputs] = self._own_cycle().command([controlword])
         self.last_inputs = inputs
         return inputs.statusword
 
@@ -442,7 +455,7 @@ class CanopenDrive(Cia402Master):
             return
         try:
             self.exchange.send_rpdo(SAFE_CONTROLWORD, 0)
-            self.exchange.send_safe()
+            self._send_safe_outputs()
             connection.node.nmt.send_command(NmtCommand.ENTER_PRE_OPERATIONAL)
             if self.safety.master_node_id is not None and connection.commissioned.inventory.has(CONSUMER_HEARTBEAT_TIME, 1):
                 connection.sdo.write_int(CONSUMER_HEARTBEAT_TIME, 1, DataType.UNSIGNED32, 0)  # a clean goodbye
@@ -460,6 +473,7 @@ class CanopenDrive(Cia402Master):
         try:
             if not self.heartbeat.shared:
                 self.heartbeat.stop()
+            self.cycle.end()
             self.exchange.release()
             if events is not None:
                 events.release()
@@ -472,4 +486,4 @@ class CanopenDrive(Cia402Master):
                 self.link.close()
 
     def __repr__(self) -> str:
-        return f"CanopenDrive(node_id={self.node_id}, period={self.period}, rx_mode={self.rx_mode!r})"
+        return f"CanopenDrive(node_id={self.node_id}, period={self.period})"

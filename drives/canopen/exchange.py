@@ -1,31 +1,25 @@
-"""One SYNC/TPDO/RPDO cycle on the wire, with one receive loop over the TPDO slots.
+"""One drive's part of the SYNC cycle on the wire: its TPDO layout and codecs, its RPDOs, its counters.
 
 The cyclic path does not use canopen's generic PDO objects (they update variables one by one
 from a shared buffer, are not atomic per frame, and accept frames of any length).  It packs
-and unpacks whole frames with precompiled ``struct`` codecs (:mod:`drives.canopen.pdo_codec`),
-reuses its outgoing ``can.Message`` objects, and never sleeps.  Frames reach the loop from
-one of two sources:
+and unpacks whole frames with precompiled ``struct`` codecs (:mod:`drives.canopen.pdo_codec`)
+and reuses its outgoing ``can.Message`` objects.  The SYNC and the receive loop are the
+cycle's, one for every drive on the bus (:mod:`drives.canopen.sync_cycle`): it reads the
+frames in the control thread and hands this exchange's TPDOs back decoded (:attr:`~CanopenExchange.slots`),
+which :meth:`~CanopenExchange.inputs` turns into the cycle's inputs; frames that are no
+TPDO of the cycle go to canopen's dispatcher (:meth:`~CanopenExchange.dispatch`), so SDO,
+heartbeat and EMCY consumers keep working.
 
-``direct`` (default)
-    the calling thread reads the bus itself (canopen's notifier is paused); frames that are
-    not this drive's TPDOs are handed to canopen's dispatcher, so SDO, heartbeat and EMCY
-    consumers keep working.  No thread hand-off per cycle.
-``listener``
-    canopen's notifier thread keeps reading; the TPDOs come through a queue.
-
-Whatever goes wrong on the receive path becomes a typed error: a bus that cannot be read is
-a :class:`~drives.errors.DriveError`; a TPDO of the wrong length is dropped and counted; a
-frame that canopen's dispatcher cannot handle is counted as malformed and dropped (canopen's
-own notifier does the same), and the drive's own EMCY and heartbeat are length-checked before
+Whatever goes wrong on the send path becomes a :class:`~drives.errors.DriveError`; a frame
+that canopen's dispatcher cannot handle is counted as malformed and dropped (canopen's own
+notifier does the same), and the drive's own EMCY and heartbeat are length-checked before
 canopen sees them (:mod:`drives.canopen.events`).
 """
 
 from __future__ import annotations
 
 import logging
-import queue
-import time
-from collections.abc import Callable, Container
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,22 +28,20 @@ import can
 from drives.base import CyclicInputs
 from drives.canopen.link import NetworkLink
 from drives.canopen.pdo_codec import PdoCodec
-from drives.cia301 import SYNC_COB_ID
 from drives.cia402 import CONTROLWORD, POSITION_ACTUAL, STATUSWORD, TARGET_TORQUE, VELOCITY_ACTUAL
 from drives.cia402_master import SAFE_CONTROLWORD, CyclicStats
 from drives.errors import DriveError
 
 logger = logging.getLogger(__name__)
 
-RX_MODES = ("direct", "listener")
 Unpack = Callable[[bytes | bytearray], tuple[Any, ...]]  # a TPDO's struct unpack
 
 
 @dataclass(slots=True)
 class CanopenStats(CyclicStats):
-    """Counters of the CANopen exchange (all since construction)."""
+    """Counters of one CANopen drive (all since construction)."""
 
-    syncs_sent: int = 0
+    syncs_sent: int = 0  # SYNC frames of the cycle that serves this drive (one SYNC serves every drive on it)
     rpdos_sent: int = 0
     dropped_frames: int = 0  # TPDO frames of the wrong length, never decoded
     malformed_frames: int = 0  # other frames canopen's dispatcher could not handle
@@ -60,18 +52,16 @@ class CanopenStats(CyclicStats):
 
 
 class CanopenExchange:
-    """SYNC out, this cycle's TPDOs in, RPDOs out, for one drive on ``link`` (every frame through the
-    link: :meth:`~drives.canopen.link.NetworkLink.send`, and its tap).
+    """One drive's TPDOs decoded and RPDOs sent on ``link`` (every frame through the link:
+    :meth:`~drives.canopen.link.NetworkLink.send`, and its tap); the SYNC and the receive loop are
+    its :class:`~drives.canopen.sync_cycle.SyncCycle`'s.
 
     ``tpdo_codecs`` in TPDO order (together holding 0x6041, 0x606C and optionally 0x6064, and
     whatever else a drive's default mapping carries); ``rpdo_codecs`` in RPDO order, together
     holding the controlword 0x6040 and the target torque 0x6071 and nothing else (one frame,
-    (controlword, torque), unless the drive's PDOs made commissioning split them);
-    ``timeout`` (s) is how long one cycle waits for all its TPDOs.  :meth:`configure` sets the
-    layout commissioning chose and resolves, once, how a frame goes out (:meth:`send`).
-    ``produces_sync`` (default True): with False, several drives
-    share one SYNC that another object sends (:mod:`drives.canopen.axes_cycle`): this exchange
-    then sends no SYNC, not even with its safe outputs, and refuses to run a cycle of its own.
+    (controlword, torque), unless the drive's PDOs made commissioning split them).
+    :meth:`configure` sets the layout commissioning chose and resolves, once, how a frame goes
+    out (:meth:`send`).
     """
 
     def __init__(
@@ -80,22 +70,14 @@ class CanopenExchange:
         link: NetworkLink,
         tpdo_codecs: tuple[PdoCodec, ...],
         rpdo_codecs: tuple[PdoCodec, ...],
-        rx_mode: str,
-        timeout: float,
         stats: CanopenStats,
     ) -> None:
         self.name = name
         self.link = link
-        self.rx_mode = rx_mode
-        self.timeout = timeout
         self.stats = stats
         self.tpdo_cobs: tuple[int, ...] = ()
         self._slots: dict[int, tuple[int, int, Unpack]] = {}
         self._transmit: Callable[[can.Message], None] = self._closed
-        self._queue: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
-        self._subscribed = False
-        self._sync = can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False)
-        self.produces_sync = True  # False: another object sends the one SYNC of several drives' cycle
         self._layout(tpdo_codecs, rpdo_codecs)
 
     def _layout(self, tpdo_codecs: tuple[PdoCodec, ...], rpdo_codecs: tuple[PdoCodec, ...]) -> None:
@@ -119,7 +101,6 @@ class CanopenExchange:
     def configure(self, tpdo_codecs: tuple[PdoCodec, ...], tpdo_cobs: tuple[int, ...],
                   rpdo_codecs: tuple[PdoCodec, ...], rpdo_cobs: tuple[int, ...]) -> None:
         """The TPDOs and RPDOs commissioning set up: codecs and COB-IDs, in order."""
-        self.end()
         self._layout(tpdo_codecs, rpdo_codecs)
         self.tpdo_cobs = tpdo_cobs
         self._slots = {cob: (slot, codec.size, codec.struct.unpack)
@@ -129,53 +110,16 @@ class CanopenExchange:
         self._transmit = self.link.send  # under the network's send lock where the bus needs one; tapped
 
     def release(self) -> None:
-        """Leave the cyclic phase and forget the bus: every later send is "the bus is closed"."""
-        self.end()
+        """Forget the bus: every later send is "the bus is closed"."""
         self._transmit = self._closed
 
     def _closed(self, msg: can.Message) -> None:
         raise DriveError(self.name, "the bus is closed")
 
-    # ------------------------------------------------------------------ phases
-
-    def begin(self) -> None:
-        """Enter the cyclic phase (direct: pause canopen's notifier; listener: subscribe the TPDOs)."""
-        if self.rx_mode == "direct":
-            self.link.read_directly(frozenset(self.tpdo_cobs))
-        elif not self._subscribed and self.link.network is not None:
-            for cob in self.tpdo_cobs:
-                self.link.network.subscribe(cob, self._on_tpdo)
-            self._subscribed = True
-
-    def end(self) -> None:
-        """Leave the cyclic phase (canopen's notifier reads the bus again, for SDO)."""
-        if self.rx_mode == "direct":
-            self.link.read_by_notifier()
-        elif self._subscribed and self.link.network is not None:
-            for cob in self.tpdo_cobs:
-                self.link.network.unsubscribe(cob, self._on_tpdo)
-            self._subscribed = False
-
-    def _on_tpdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        self._queue.put((can_id, bytes(data)))
-
     # ------------------------------------------------------------------ receive
 
-    def _receive(self, deadline: float) -> tuple[int, bytes | bytearray] | None:
-        """The next frame on one of the TPDO COB-IDs before ``deadline`` (perf_counter s), or None."""
-        if self.link.direct:
-            return receive_direct(self.name, self.link, self._slots, deadline, self.dispatch)
-        failure = self.link.receive_failure()
-        if failure is not None:
-            raise DriveError(self.name, f"CAN receive failed: {failure!r}")
-        remaining = deadline - time.perf_counter()
-        try:
-            return self._queue.get(remaining > 0.0, remaining if remaining > 0.0 else None)
-        except queue.Empty:
-            return None
-
     def dispatch(self, msg: can.Message) -> None:
-        """Direct mode: a frame that is not ours goes to canopen's subscribers (SDO, heartbeat, EMCY)."""
+        """A frame that is no TPDO of the cycle goes to canopen's subscribers (SDO, heartbeat, EMCY)."""
         network = self.link.network
         if network is None:
             return
@@ -184,16 +128,6 @@ class CanopenExchange:
         except Exception as exc:  # canopen's notifier logs and drops such a frame; so do we, counted
             self.stats.malformed_frames += 1
             logger.debug("%s: frame 0x%03X %s dropped: %r", self.name, msg.arbitration_id, bytes(msg.data).hex(), exc)
-
-    def drain(self) -> None:
-        """Before a SYNC: consume what arrived since the last cycle (late TPDOs are counted, not used)."""
-        now = time.perf_counter()
-        slots = self._slots
-        while (frame := self._receive(now)) is not None:
-            if len(frame[1]) != slots[frame[0]][1]:
-                self.stats.dropped_frames += 1
-            else:
-                self.stats.stale_tpdos += 1
 
     @property
     def slots(self) -> dict[int, tuple[int, int, Unpack]]:
@@ -206,34 +140,6 @@ class CanopenExchange:
         values = parts[0] if len(parts) == 1 else sum(parts, ())
         sw, vel, pos = self._at
         return CyclicInputs(values[sw], values[vel], None if pos is None else values[pos], sampled_by_ns=synced)
-
-    def sync_and_collect(self) -> CyclicInputs | None:
-        """SYNC out, then this cycle's inputs from every TPDO of the cycle; None on timeout."""
-        if not self.produces_sync:
-            raise DriveError(self.name, "this drive shares a SYNC another object sends: its cycles run there")
-        self.send(self._sync)
-        synced = time.perf_counter_ns()  # the drive samples at the SYNC: by now it has
-        self.stats.syncs_sent += 1
-        slots = self._slots
-        count = len(slots)
-        parts: list[tuple[Any, ...]] = [()] * count  # () until the slot's TPDO arrived
-        missing = count
-        deadline = time.perf_counter() + self.timeout
-        while missing:
-            frame = self._receive(deadline)
-            if frame is None:
-                return None
-            slot, size, unpack = slots[frame[0]]
-            data = frame[1]
-            if len(data) != size:
-                self.stats.dropped_frames += 1
-                continue
-            if parts[slot]:
-                self.stats.stale_tpdos += 1
-            else:
-                missing -= 1
-            parts[slot] = unpack(data)
-        return self.inputs(parts, synced)
 
     # ------------------------------------------------------------------ send
 
@@ -260,8 +166,8 @@ class CanopenExchange:
             self.stats.rpdos_sent += 1
 
     def send_safe(self) -> None:
-        """Zero torque with DISABLE VOLTAGE, and one SYNC so that a synchronous drive applies it (none
-        where another object sends the SYNC: it sends one after every drive's safe outputs).
+        """Zero torque with DISABLE VOLTAGE (no SYNC: the cycle sends one after every drive's,
+        :meth:`~drives.canopen.sync_cycle.SyncCycle.send_safe`).
 
         Never raises: it runs while another error is being raised, which matters more.
         """
@@ -269,36 +175,5 @@ class CanopenExchange:
             for msg in self._safe:
                 self.send(msg)
                 self.stats.rpdos_sent += 1
-            if self.produces_sync:
-                self.send(self._sync)
-                self.stats.syncs_sent += 1
         except DriveError as exc:
             logger.error("%s: could not send the safe stop frame: %s", self.name, exc)
-
-
-def receive_direct(name: str, link: NetworkLink, wanted: Container[int], deadline: float,
-                   dispatch: Callable[[can.Message], None]) -> tuple[int, bytearray] | None:
-    """Read ``link``'s bus in this thread until a standard data frame with a COB-ID in ``wanted``
-    arrives (returned as ``(cob_id, data)``) or ``deadline`` (``time.perf_counter()`` s) passes
-    (None); every other data frame goes to ``dispatch``.  Every frame received is shown to the
-    link's tap first.  A receive that fails is a DriveError naming ``name``."""
-    bus = link.bus
-    if bus is None:
-        raise DriveError(name, "the bus is closed")
-    while True:
-        remaining = deadline - time.perf_counter()
-        try:
-            msg = bus.recv(remaining if remaining > 0.0 else 0.0)
-        except Exception as exc:  # any interface's failure: the receive path is gone
-            raise DriveError(name, f"CAN receive failed: {exc!r}") from exc
-        if msg is None:
-            return None
-        tap = link.tap
-        if tap is not None:
-            tap(msg, False)
-        if msg.is_error_frame or msg.is_remote_frame:
-            continue
-        can_id = msg.arbitration_id
-        if can_id in wanted and not msg.is_extended_id:
-            return can_id, msg.data
-        dispatch(msg)

@@ -9,8 +9,8 @@ Three ways a master gets its network, and what closing gives back:
 - the caller gave a :class:`canopen.Network`: closing leaves it as it was found (its notifier
   running again if the master paused it).
 
-While the master cycles in ``direct`` receive mode it reads the bus itself in the calling
-thread, so canopen's notifier thread is paused (:meth:`NetworkLink.read_directly`) and
+While the master cycles it reads the bus itself in the calling thread
+(:mod:`drives.canopen.sync_cycle`), so canopen's notifier thread is paused (:meth:`NetworkLink.read_directly`) and
 restarted for SDO (:meth:`NetworkLink.read_by_notifier`).
 
 Every frame this process sends on the link goes out through :meth:`NetworkLink.send`: the
