@@ -292,8 +292,8 @@ def _run_canopen(args: argparse.Namespace) -> int:
         meter = BusLoadMeter(args.bitrate, parameters.period) if args.bitrate else None
         config = _bus_config(args)
         sim = CanopenSimDrive(config, args.node_id, timing=timing, parameters=parameters, operator=operator, bus_meter=meter,
-                              od=args.od or "haptic", eds=args.eds, sync_clock=sync_clock(args.clock))
-        sim.drive.hand_needs_power = True  # the hand takes a powered handle (sim_drive.device.SimulatedDrive)
+                              od=args.od or "haptic", eds=args.eds, sync_clock=sync_clock(args.clock),
+                              hand_needs_power=True)  # the hand takes a powered handle (sim_drive.device.SimulatedDrive)
     except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2
@@ -452,8 +452,8 @@ def _run_modbus(args: argparse.Namespace) -> int:
         host, port = parse_modbus_url(args.modbus[0])
         parameters, operator, timing = _drive_setup(args)
         sim = ModbusSimServer(host, port, unit_id=unit_id, timing=timing, parameters=parameters, operator=operator,
-                              word_order=word_order, sync_clock=sync_clock(args.clock))
-        sim.drive.hand_needs_power = True  # the hand takes a powered handle (sim_drive.device.SimulatedDrive)
+                              word_order=word_order, sync_clock=sync_clock(args.clock),
+                              hand_needs_power=True)  # the hand takes a powered handle (sim_drive.device.SimulatedDrive)
     except ParameterError as exc:
         print(f"{_PROG}: error: {exc}", file=sys.stderr)
         return 2

@@ -127,6 +127,7 @@ class SimulatedDrive:
         operator: OperatorModel | None = None,
         *,
         name: str = "sim drive",
+        hand_needs_power: bool = False,
     ) -> None:
         self.name = name
         self.parameters = parameters if parameters is not None else DeviceParameters()
@@ -141,7 +142,7 @@ class SimulatedDrive:
         self.abort_connection_option_code = int(AbortConnectionOption.FAULT)
         self.error_code = 0
         self.sync_count = 0
-        self.hand_needs_power = False
+        self.hand_needs_power = hand_needs_power
         self._interval: float | None = None  # the closing interval's length, s (None: T)
         self._latched = 0  # per mille: cia402, latched at the last SYNC; reception, acting since the last switch
         self._newton_per_permille = self.parameters.rated_torque_mnm / 1e6 * self.parameters.force_per_torque

@@ -84,16 +84,17 @@ class DriveUnderTest:
 
 
 @contextmanager
-def simulated_drive(transport: str, profile: pathlib.Path | str) -> Iterator[DriveUnderTest]:
+def simulated_drive(transport: str, profile: pathlib.Path | str, hand_needs_power: bool = False) -> Iterator[DriveUnderTest]:
     """The simulated drive of ``profile`` in this process, on ``transport`` ("canopen": the
-    lock-step bus, node 5; "modbus": TCP on 127.0.0.1); stopped on exit (``stop`` may end it earlier)."""
+    lock-step bus, node 5; "modbus": TCP on 127.0.0.1), its hand as ``hand_needs_power`` says
+    (:class:`~sim_drive.device.SimulatedDrive`); stopped on exit (``stop`` may end it earlier)."""
     truth, operator = read_simulated_device(profile).one_axis()
     if transport == "canopen":
         from sim_drive.canopen.slave import CanopenSimDrive
 
         channel = f"run-test-{os.getpid()}-{uuid.uuid4().hex[:10]}"
         slave = CanopenSimDrive({"interface": CAN_INTERFACE, "channel": channel}, NODE, timing=truth.timing,
-                                parameters=truth.parameters, operator=operator)
+                                parameters=truth.parameters, operator=operator, hand_needs_power=hand_needs_power)
         under = DriveUnderTest(transport, ["--interface", CAN_INTERFACE, "--channel", channel, "--node-id", str(NODE)],
                                slave.drive, channel=channel, stop=slave.stop, short_next_tpdo=slave.short_next_tpdo,
                                enter_fault=slave.enter_fault)
@@ -102,7 +103,8 @@ def simulated_drive(transport: str, profile: pathlib.Path | str) -> Iterator[Dri
     elif transport == "modbus":
         from sim_drive.modbus.server import ModbusSimServer
 
-        server = ModbusSimServer("127.0.0.1", 0, timing=truth.timing, parameters=truth.parameters, operator=operator)
+        server = ModbusSimServer("127.0.0.1", 0, timing=truth.timing, parameters=truth.parameters, operator=operator,
+                                 hand_needs_power=hand_needs_power)
         under = DriveUnderTest(transport, [], server.drive, stop=server.stop)
         server.drive.state_listeners.append(lambda old, new, number: under.states.append(new))
         server.start()

@@ -168,8 +168,8 @@ def test_a_handle_moved_into_a_wall_during_pre_flight_is_refused_before_enabling
     import threading
     import time
 
-    with simulated_drive("canopen", "cia402-handle") as drive:
-        drive.drive.hand_needs_power = True  # the profile's push waits for the torque: only the mover moves it
+    # the profile's push waits for the torque: only the mover moves the handle
+    with simulated_drive("canopen", "cia402-handle", hand_needs_power=True) as drive:
 
         def move_during_preflight() -> None:
             deadline = time.monotonic() + 30.0

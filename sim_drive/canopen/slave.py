@@ -123,7 +123,7 @@ class CanopenSimDrive:
 
     ``bus``: an open ``can.BusABC`` (left open by :meth:`stop`) or the keyword arguments of
     ``can.Bus`` (``{"interface": "virtual", "channel": "x"}``; opened by :meth:`start`, shut
-    down by :meth:`stop`).  ``timing``, ``parameters``, ``operator``: see
+    down by :meth:`stop`).  ``timing``, ``parameters``, ``operator``, ``hand_needs_power``: see
     :class:`~sim_drive.device.SimulatedDrive`.  ``bus_meter``: optional bit-time accounting.
     ``od``: "haptic" (the shipped EDS, manufacturer area included) or "standard" (CiA-301/402
     objects only, the scaling in the factor group: :mod:`sim_drive.canopen.standard_od`).
@@ -147,11 +147,13 @@ class CanopenSimDrive:
         od: str = "haptic",
         eds: str | os.PathLike[str] | None = None,
         sync_clock: SyncClock | None = None,
+        hand_needs_power: bool = False,
     ) -> None:
         self.node_id = whole_in_range("node_id", node_id, 1, 127, context="CANopen slave")
         self._bus: can.BusABC | None = bus if isinstance(bus, can.BusABC) else None
         self._bus_config = None if isinstance(bus, can.BusABC) else dict(bus)
-        self.drive = SimulatedDrive(parameters, timing, operator, name=f"node {self.node_id}")
+        self.drive = SimulatedDrive(parameters, timing, operator, name=f"node {self.node_id}",
+                                    hand_needs_power=hand_needs_power)
         self.counters = SlaveCounters()
         self.bus_meter = bus_meter
         self.silent = False

@@ -153,13 +153,14 @@ class ModbusSimServer:
         operator: OperatorModel | None = None,
         word_order: str = "big",
         sync_clock: SyncClock | None = None,
+        hand_needs_power: bool = False,
     ) -> None:
         self.host = host
         self.requested_port = port
         self.unit_id = unit_id
         self.word_order = word_order
         self.units: dict[int, ServedUnit] = {}
-        self.drive = self.add_unit(unit_id, timing, parameters, operator, sync_clock)
+        self.drive = self.add_unit(unit_id, timing, parameters, operator, sync_clock, hand_needs_power)
         self.bank = self.units[unit_id].bank
         self.faults = FaultInjector()
         self.lock = threading.Lock()  # the banks and the drives, between the server and other threads
@@ -172,12 +173,14 @@ class ModbusSimServer:
         self._error: BaseException | None = None
 
     def add_unit(self, unit_id: int, timing: Timing | str = Timing.CIA402, parameters: DeviceParameters | None = None,
-                 operator: OperatorModel | None = None, sync_clock: SyncClock | None = None) -> SimulatedDrive:
+                 operator: OperatorModel | None = None, sync_clock: SyncClock | None = None,
+                 hand_needs_power: bool = False) -> SimulatedDrive:
         """Serve one more unit ``unit_id`` (0..255, not served yet), a simulated drive of its own with
-        ``timing``, ``parameters``, ``operator`` and ``sync_clock`` (before :meth:`start`); its drive."""
+        ``timing``, ``parameters``, ``operator``, ``sync_clock`` and ``hand_needs_power``
+        (:class:`~sim_drive.device.SimulatedDrive`; before :meth:`start`); its drive."""
         if not 0 <= unit_id <= 255 or unit_id in self.units:
             raise ParameterError("unit_id", unit_id, f"0..255, none served already ({sorted(self.units)})")
-        drive = SimulatedDrive(parameters, timing, operator, name=f"Modbus unit {unit_id}")
+        drive = SimulatedDrive(parameters, timing, operator, name=f"Modbus unit {unit_id}", hand_needs_power=hand_needs_power)
         self.units[unit_id] = ServedUnit(unit_id, drive, RegisterBank(drive, self.word_order, sync_clock))
         drive.sync()  # SYNC 0: the first sample at t = 0
         return drive
