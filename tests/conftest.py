@@ -107,9 +107,9 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    # The longest files first, so that on pytest-xdist's two workers they start at once and the
+    # The longest files first, so that on pytest-xdist's workers they start at once and the
     # short ones fill in around them, instead of one long file starting late and leaving the other
-    # worker idle at the end (longest processing time first, a makespan within 4/3 of the best).
+    # workers idle at the end (longest processing time first, a makespan within 4/3 of the best).
     # pyproject's addopts deal the files to the workers one at a time in this order (--dist loadfile
     # --no-loadscope-reorder), a file's module-scoped fixture set up on one worker only.  Each
     # file's cost is the wall clock its tests took in one measured run of the suite (FILE_COSTS: how
