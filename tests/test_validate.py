@@ -159,8 +159,10 @@ def test_a_hidden_extra_delay_is_found_over_modbus(capsys: pytest.CaptureFixture
     code, report, _ = _validate(capsys, tmp_path, "modbus", "--no-plots", extra_delay=0.3)
     assert code == 1 and report["verdict"] == "differs"
     (finding,) = report["findings"]
-    assert finding["kind"] == "delay" and finding["value"] == pytest.approx(0.3, abs=0.1)
-    assert 0 < finding["uncertainty"] < 0.05
+    assert finding["kind"] == "delay" and 0 < finding["uncertainty"] < 0.05
+    # the hidden 0.3 samples within four of the fit's standard errors (the responses' only noise is
+    # the drive's quantisation: 0.3000005 +- 6.4e-6 here; the bound was 0.1 samples)
+    assert abs(finding["value"] - 0.3) < 4.0 * finding["uncertainty"], finding
 
 
 def test_a_hidden_transmission_is_found_as_its_resonance(capsys: pytest.CaptureFixture[str],
