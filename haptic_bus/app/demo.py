@@ -60,7 +60,8 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
         sim, drive = stack.enter_context(demo.simulated())
         journal.safety = getattr(drive, "drives", (drive,))[0].safety  # settings.safety: what its drives were given
         origin = kind.origin(drive)
-        gate, scene = profile.gate(), kind.scene()
+        gate = profile.gate()
+        scene = kind.scene(gate)
         kind.describe_gate(gate, extra)
         controller = kind.controller(drive, gate, scene, clock=None, origin=origin)
         journal.controller = controller

@@ -69,7 +69,7 @@ class RunKind(DocumentKind, Protocol[SceneT, GateT, OriginT]):
 
     def loop_extra(self) -> dict[str, Any]: ...
 
-    def scene(self) -> SceneT: ...
+    def scene(self, gate: GateT) -> SceneT: ...
 
     def describe_gate(self, gate: GateT, extra: dict[str, Any]) -> None: ...
 
@@ -116,8 +116,8 @@ class OneAxisRun:
         """``run.json``'s ``loop`` before the drive is reached."""
         return {"period": self.period, "timing": self.profile.loop.timing}
 
-    def scene(self) -> CompiledScene:
-        """The profile's scene, compiled."""
+    def scene(self, gate: PassivityGate) -> CompiledScene:
+        """The profile's scene, compiled (the gate judges it when the controller takes it)."""
         return self.profile.compiled_scene()
 
     def describe_gate(self, gate: PassivityGate, extra: dict[str, Any]) -> None:
@@ -220,8 +220,8 @@ class AxesRun:
         """``run.json``'s ``loop`` before the drives are reached: ``T`` and each axis' delay (samples)."""
         return {"period": self.period, "delays": [axis.delay for axis in self.profile.axes]}
 
-    def scene(self) -> SpaceScene:
-        """The profile's scene in space."""
+    def scene(self, gate: SpaceGate) -> SpaceScene:
+        """The profile's scene in space (the gate judges it when the controller takes it)."""
         return self.profile.space_scene()
 
     def describe_gate(self, gate: SpaceGate, extra: dict[str, Any]) -> None:

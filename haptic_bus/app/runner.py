@@ -186,7 +186,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             drive, gate, serve = rig.open(stack, writer.tap)
             names = [axis.name for axis in (OneAxis(drive) if isinstance(drive, Drive) else drive).drives]
             kind.describe_gate(gate, extra)
-            scene = kind.scene()
+            scene = kind.scene(gate)
             for each in getattr(drive, "drives", (drive,)):  # a drive in FAULT: said now, not after pre-flight
                 each.refuse_fault()
             derate = kind.derate(gate, scene)  # before the control thread's real-time session (a worker may build it)

@@ -58,12 +58,12 @@ VALIDATE_JSON = "validate.json"
 class ValidateRun(OneAxisRun):
     """The probe as a one-axis run kind (module docstring): ``travel`` m either side of the rest
     position bounds the probe; ``hold`` and ``plan`` are decided for the profile's gate before the
-    run; the run's own gate, the prediction and the probe land in ``state``."""
+    run; the probe's amplitude is designed for the run's own gate (its loop: over Modbus, the poll's
+    delay), when the run hands it over (:meth:`scene`)."""
 
     travel: float
     hold: Hold
     plan: ProbePlan
-    state: dict[str, Any] = dataclasses.field(default_factory=dict, compare=False)
 
     @classmethod
     def prepare(cls, profile: Profile, travel: float) -> ValidateRun:
@@ -77,27 +77,21 @@ class ValidateRun(OneAxisRun):
         """The run's length, s: every cycle of the plan."""
         return self.plan.cycles * self.plan.period
 
-    def describe_gate(self, gate: PassivityGate, extra: dict[str, Any]) -> None:
-        """The loop the gate judges (as any run) and the gate kept: the prediction is for its loop."""
-        super().describe_gate(gate, extra)
-        self.state["gate"] = gate
+    def predict(self, gate: PassivityGate) -> Prediction:
+        """The model's response to the probe at the loop ``gate`` judges (:func:`~haptic_bus.validate.model.predict`)."""
+        return predict(gate.device, self.hold, self.plan.theta)
 
-    def scene(self) -> ProbeScene:
+    def scene(self, gate: PassivityGate) -> ProbeScene:
         """The hold with the probe, its amplitude rule designed for the gate's loop; Refusal if the gate refuses the hold."""
-        gate: PassivityGate = self.state["gate"]
         loop = gate.device
         if not gate.passes(hold_scene(self.hold)):
             raise Refusal(f"the hold (K = {self.hold.stiffness:.3g} N/m, B = {self.hold.damping:.3g} N s/m) does not pass "
                           f"the gate at the loop this link has ({loop.describe()})")
-        prediction = predict(loop, self.hold, self.plan.theta)
         scaling = self.profile.scaling()
         limit = min(self.profile.force_limit, scaling.max_force)
-        rule = AmplitudeRule.design(self.plan, prediction, scaling.velocity_per_count, scaling.newton_per_permille,
-                                    limit, self.travel)
-        probe = Probe(self.plan, rule)
-        self.state.update(loop=loop, prediction=prediction, probe=probe, energy=_stored_energy(prediction, self.plan,
-                                                                                               self.hold, loop, rule))
-        return ProbeScene.holding(self.hold, probe)
+        rule = AmplitudeRule.design(self.plan, self.predict(gate), scaling.velocity_per_count,
+                                    scaling.newton_per_permille, limit, self.travel)
+        return ProbeScene.holding(self.hold, Probe(self.plan, rule))
 
     def inside(self, scene: CompiledScene, origin: float) -> str | None:
         """Never inside: the hold is centred where the handle rests."""
@@ -114,8 +108,10 @@ class ValidateRun(OneAxisRun):
         derate (module docstring)."""
         profile = self.profile
         policy = profile.supervisor
+        assert isinstance(scene, ProbeScene)  # what :meth:`scene` gave the run
+        energy = _stored_energy(self.predict(gate), self.plan, self.hold, gate.device, scene.probe.rule)
         supervisor = dataclasses.replace(
-            policy, observer_limit=max(policy.observer_limit, ENERGY_MARGIN * self.state["energy"]),
+            policy, observer_limit=max(policy.observer_limit, ENERGY_MARGIN * energy),
             on_late=Action.WARN.value if policy.on_late == Action.DERATE.value else policy.on_late,
             on_observer=Action.STOP.value if policy.on_observer == Action.DERATE.value else policy.on_observer)
         return WallController(drive, gate, scene, force_limit=profile.force_limit, clock=clock, origin=origin,
@@ -156,13 +152,16 @@ def validate_drive(profile: Profile, bus: Mapping[str, Any] | str, options: RunO
     controller = result.controller
     if result.exit_reason != "completed" or controller is None or controller.cycles != kind.plan.cycles:
         return ValidateOutcome(result, None, files)
-    probe: Probe = kind.state["probe"]
+    scene = controller.scenes.history[0].scene  # the probe the run rendered, as :meth:`ValidateRun.scene` gave it
+    gate = controller.gate  # validate derates nothing: the gate is the run's own
+    assert isinstance(scene, ProbeScene) and isinstance(gate, PassivityGate)
+    probe = scene.probe
     record = controller.record
     scaling = controller.axes.scalings[0]
     signals = Signals(record.column("velocity_m_per_s"), record.column("position_m"),
                       record.column("torque_permille") * scaling.newton_per_permille, probe.forces(kind.plan.cycles),
                       (scaling.velocity_per_count, scaling.position_per_count, scaling.newton_per_permille))
-    validation = validate(kind.state["loop"], kind.hold, kind.plan, kind.state["prediction"], signals, probe.amplitude,
+    validation = validate(gate.device, kind.hold, kind.plan, kind.predict(gate), signals, probe.amplitude,
                           probe.noise, tolerance)
     document = {**validation.to_dict(), "summary": validation.summary(), "folder": str(result.folder)}
     path = result.folder / VALIDATE_JSON
@@ -171,6 +170,6 @@ def validate_drive(profile: Profile, bus: Mapping[str, Any] | str, options: RunO
     if pictures:
         from haptic_bus.app.validate_plots import draw
 
-        margin = kind.state["gate"].judge(profile.compiled_scene()).worst_margin  # the run's gate, at its loop
+        margin = gate.judge(profile.compiled_scene()).worst_margin  # the run's gate, at its loop
         files += draw(validation, result.folder, None if margin is None or math.isinf(margin) else margin)
     return ValidateOutcome(result, validation, files)
