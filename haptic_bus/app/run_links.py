@@ -151,7 +151,7 @@ def canopen_rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, A
     import can
 
     from drives.canopen.axes import CanopenAxes
-    from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
+    from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
 
     if not isinstance(bus, (Mapping, can.BusABC)):
         raise ParameterError("bus", bus, "python-can keyword arguments (a mapping) or an open can.BusABC", "run")
@@ -188,10 +188,12 @@ def canopen_rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, A
         stack.callback(axes.close)
         axes.link.tap = tap  # before commissioning: its frames are logged too
         axes.connect()
-        warnings = {drive.name: list(drive.safety_warnings) for drive in axes.drives}
-        notes = {drive.name: list(drive.commissioned.mapping_notes) if drive.commissioned else [] for drive in axes.drives}
-        link["safety_warnings"], link["pdo_mapping_notes"] = (warnings, notes) if several else \
-            (*warnings.values(), *notes.values())
+        def per_drive(value: Callable[[CanopenDrive], list[str]]) -> Any:  # several: by drive name
+            return {drive.name: value(drive) for drive in axes.drives} if several else value(axes.drives[0])
+
+        link["safety_warnings"] = per_drive(lambda drive: list(drive.safety_warnings))
+        link["pdo_mapping_notes"] = per_drive(lambda drive: list(drive.commissioned.mapping_notes)
+                                              if drive.commissioned else [])
         for drive in axes.drives:
             _show_scaling(drive, options, f" of {drive.name}" if several else "")
         serve = _serve(stack, axes.link, axes.name, controller_node_id, safety.heartbeat_ms)
