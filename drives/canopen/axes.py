@@ -190,12 +190,13 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
 
     def close(self) -> None:
         """Safe outputs and one SYNC, then every drive's goodbye (NMT pre-operational, 0x1016 off),
-        the heartbeat stopped and the bus released.  Never raises for a bus that is gone."""
+        the heartbeat stopped and the bus released (one axis: its drive's goodbye sends its safe outputs
+        and their SYNC).  Never raises for a bus that is gone."""
         if self._closed:
             return
         self._closed = True
         try:
-            if self._connected and self.link.network is not None:
+            if self._connected and self.link.network is not None and self.cycle.shared:
                 self.cycle.send_safe()
         finally:
             for drive in self.drives:
