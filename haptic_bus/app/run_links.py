@@ -188,6 +188,7 @@ def canopen_rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, A
         stack.callback(axes.close)
         axes.link.tap = tap  # before commissioning: its frames are logged too
         axes.connect()
+
         def per_drive(value: Callable[[CanopenDrive], list[str]]) -> Any:  # several: by drive name
             return {drive.name: value(drive) for drive in axes.drives} if several else value(axes.drives[0])
 
