@@ -148,7 +148,7 @@ def test_a_device_loop_is_usable_once_it_exists_or_refused_when_built(fields: di
 def test_run_canopen_refuses_a_bus_or_node_it_cannot_use_before_anything_starts(bus: object, node_id: object, named: str,
                                                                                 tmp_path) -> None:
     options = hb.RunOptions(duration=0.1, pacing="virtual", out_dir=tmp_path / "run")
-    with pytest.raises(hb.ParameterError, match=f"^run_canopen: {re.escape(named)} is invalid; allowed: "):
+    with pytest.raises(hb.ParameterError, match=f"^run: {re.escape(named)} is invalid; allowed: "):
         hb.run_canopen(hb.load_profile("cia402-handle"), bus, node_id=node_id, options=options)  # type: ignore[arg-type]
     assert not (tmp_path / "run").exists()
 

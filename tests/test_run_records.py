@@ -65,6 +65,9 @@ def test_the_default_folder_is_runs_utc_profile_and_holds_every_record(
     assert document["link"]["kind"] == "canopen" and document["link"]["node_id"] == NODE
     assert document["link"]["bus"]["interface"] == "lockstep" and document["link"]["bus"]["channel"] == drive.channel
     assert document["link"]["controller_node_id"] == 127
+    # SYNC 55 + TPDO1 (6 bytes) 115 + TPDO2 (4 bytes) 95 + RPDO1 (4 bytes) 95 = 360 bit times per 1 ms at 1 Mbit/s
+    assert (document["link"]["bitrate_checked"], document["link"]["bus_load"]["bits"]) == (1e6, 360)
+    assert document["link"]["bus_load"]["load"] == pytest.approx(0.36, rel=1e-12)
     assert {"values", "sources"} <= set(document["scaling"])
     assert document["scaling"]["values"]["velocity_per_count"] == pytest.approx(1.1984224905356573e-07, rel=1e-15)
     (scene,) = document["scenes"]

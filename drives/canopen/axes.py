@@ -34,6 +34,7 @@ import os
 from collections.abc import Iterator, Sequence
 from typing import Any
 
+import can
 from canopen import objectdictionary as od
 
 from drives.axes_master import MAX_AXES, AxesMaster
@@ -50,9 +51,13 @@ from drives.safety import DEFAULT_SAFETY, SafetySettings
 class CanopenAxes(AxesMaster[CanopenDrive]):
     """The drives ``node_ids`` (one per axis, in axis order) on one bus, one SYNC per cycle.
 
-    The bus: ``interface``/``channel``/``bitrate``/``bus_kwargs`` as :class:`CanopenDrive` takes
-    them (python-can's configuration chain fills the gaps); ``scalings`` one per axis (None: the
-    drive's own objects must give it), labelled ``scaling_source``.  ``period`` (s), ``tpdo_objects``,
+    The bus: an open ``bus`` the caller owns (closing leaves it open, :mod:`~drives.canopen.link`), or
+    ``interface``/``channel``/``bitrate``/``bus_kwargs`` as :class:`CanopenDrive` takes them
+    (python-can's configuration chain fills the gaps); ``scalings`` one per axis (None: the
+    drive's own objects must give it), labelled ``scaling_source``.  One axis is N = 1: its cycle
+    serves that one drive and is not ``shared``, so the drive (``drives[0]``) also runs it itself,
+    on its scalar path (:meth:`CanopenDrive.cyclic <drives.base.Drive.cyclic>`), which a one-axis
+    controller takes.  ``period`` (s), ``tpdo_objects``,
     ``eds``, ``safety`` (``master_node_id`` is this controller's node: one heartbeat for all),
     ``tpdo_timeout`` (s), ``max_missed_tpdos`` and ``heartbeat_consumer_ms`` apply to every axis.
     """
@@ -62,6 +67,7 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
         node_ids: Sequence[int],
         *,
         scalings: Sequence[DriveScaling | None],
+        bus: can.BusABC | None = None,
         interface: str | None = None,
         channel: Any = None,
         bitrate: int | None = None,
@@ -81,11 +87,12 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
         if len(scalings) != len(nodes):
             raise ParameterError("scalings", len(scalings), f"one per axis ({len(nodes)})", "CANopen axes")
         self.name = "CANopen nodes " + ", ".join(map(str, nodes))
-        self.link = NetworkLink(self.name, bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})), shared=True)
+        self.link = NetworkLink(self.name, bus=bus, bus_args=(interface, channel, bitrate, dict(bus_kwargs or {})),
+                                shared=True)
         master = safety.master_node_id
         self.heartbeat = HeartbeatProducer(master or 0, safety.heartbeat_ms / 1000.0 if master is not None else 0.0,
                                            shared=True)
-        self.cycle = SyncCycle(self.name, self.link, tpdo_timeout, shared=True)
+        self.cycle = SyncCycle(self.name, self.link, tpdo_timeout, shared=len(nodes) > 1)
         self.drives = tuple(  # each joins the cycle, in axis order
             CanopenDrive(node, cycle=self.cycle, heartbeat=self.heartbeat, period=period, tpdo_objects=tpdo_objects,
                          scaling=scaling, scaling_source=scaling_source, eds=eds, safety=safety,
@@ -183,12 +190,13 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
 
     def close(self) -> None:
         """Safe outputs and one SYNC, then every drive's goodbye (NMT pre-operational, 0x1016 off),
-        the heartbeat stopped and the bus released.  Never raises for a bus that is gone."""
+        the heartbeat stopped and the bus released (one axis: its drive's goodbye sends its safe outputs
+        and their SYNC).  Never raises for a bus that is gone."""
         if self._closed:
             return
         self._closed = True
         try:
-            if self._connected and self.link.network is not None:
+            if self._connected and self.link.network is not None and self.cycle.shared:
                 self.cycle.send_safe()
         finally:
             for drive in self.drives:

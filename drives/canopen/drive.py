@@ -14,7 +14,7 @@ The pieces: :mod:`~drives.canopen.link` (the network and who owns it),
 :mod:`~drives.canopen.exchange` (this drive's TPDO layout, RPDOs and counters),
 :mod:`~drives.canopen.events` (EMCY, heartbeat, NMT state).  A drive alone owns the cycle of
 its one exchange; the drives of :mod:`~drives.canopen.axes` share one, which runs their cycles
-(one SYNC for all), and run none of their own.
+(one SYNC for all), and run none of their own (one axis there: the drive runs that cycle of one).
 
 Safety: a missing TPDO for ``max_missed_tpdos`` consecutive cycles, a heartbeat loss, an
 EMCY, a malformed EMCY or heartbeat, a fault bit, the node leaving NMT OPERATIONAL or a bus
@@ -117,12 +117,13 @@ class CanopenDrive(Cia402Master):
     lacks of the safety chain is one warning per object (``safety_warnings``), or a refusal
     with ``safety.strict``; no object the drive lacks is ever written, at connect or close.
     ``cycle`` and ``heartbeat``: a SYNC cycle (:mod:`drives.canopen.sync_cycle`, on its link) and the
-    master's heartbeat producer the caller owns and shares among several drives on one bus
-    (:mod:`drives.canopen.axes`; marked ``shared``): the drive joins the cycle and runs none of its
-    own, connect() opens the link and starts the heartbeat if they are not yet, close() leaves a
-    shared one running.  Timeouts in s (``tpdo_timeout``: how long the drive's own cycle waits for
-    its TPDOs; a shared cycle has its own); ``max_missed_tpdos`` consecutive cycles without TPDO
-    raise DriveTimeout; heartbeat times in ms (consumer default 3x producer; 0 disables).
+    master's heartbeat producer the caller owns (:mod:`drives.canopen.axes`): the drive joins the
+    cycle -- one of several drives is marked ``shared``, and the drive runs none of its own; one it
+    alone joins it runs as its own -- connect() opens the link and starts the heartbeat if they are
+    not yet, close() leaves a shared link or heartbeat running.  Timeouts in s (``tpdo_timeout``:
+    how long the drive's own cycle waits for its TPDOs; a given cycle has its own);
+    ``max_missed_tpdos`` consecutive cycles without TPDO raise DriveTimeout; heartbeat times in
+    ms (consumer default 3x producer; 0 disables).
     ``scaling``: the caller's :class:`~drives.base.DriveScaling` (``scaling_source`` labels it
     in the report, e.g. "profile [device]").  connect() takes each field from the drive where it states it --
     manufacturer scaling objects an EDS names, else the standard objects (0x6076, 0x6072 and

@@ -93,7 +93,7 @@ class BusLoad:
     def describe(self) -> str:
         """``bus load 84.8 % of 125 kbit/s at T = 1 ms (3 axes, 850 bits per cycle)``."""
         return (f"bus load {100 * self.load:.1f} % of {self.bitrate / 1000:g} kbit/s at T = {1000 * self.period:g} ms "
-                f"({self.axes} axes, {self.bits} bits per cycle, worst-case stuffing)")
+                f"({self.axes} {'axis' if self.axes == 1 else 'axes'}, {self.bits} bits per cycle, worst-case stuffing)")
 
 
 def bus_load(frames_per_axis: Sequence[Sequence[int]], bitrate: float, period: float,

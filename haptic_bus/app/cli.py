@@ -42,6 +42,7 @@ from haptic_bus.app.run_arguments import (
     add_link_arguments,
     add_output_arguments,
     add_pacing_arguments,
+    as_flag,
     one_axis_link,
     scheduling,
 )
@@ -187,6 +188,7 @@ def _run(args: argparse.Namespace) -> int:
             raise StoppedBeforeStart
         from haptic_bus.app.run_options import exit_status
         from haptic_bus.app.runner import run  # its imports: a second or more under load
+        from haptic_bus.errors import ParameterError
 
         profile, bus, options, links = _prepare_run(args)
     except StoppedBeforeStart:
@@ -195,7 +197,10 @@ def _run(args: argparse.Namespace) -> int:
     except BaseException:
         signal.signal(signal.SIGTERM, previous)  # a refused command line ends as it did
         raise
-    result = run(profile, bus, options, **links)
+    try:
+        result = run(profile, bus, options, **links)
+    except ParameterError as error:  # run() names its arguments; the command line names its options
+        raise as_flag(error) from None
     summary = result.summary
     if summary is not None:
         p, late = summary.compute_percentiles, summary.lateness_percentiles

@@ -5,7 +5,8 @@ and ``--unit-id``/``--unit-ids``) and this controller's node (``--controller-nod
 :func:`add_pacing_arguments` how the cycles are paced (``--virtual-time``, or real time with
 ``--realtime``/``--no-realtime``, :func:`scheduling`); :func:`add_output_arguments` where the run
 writes (``--out``, ``--no-bus-log``).  :func:`one_axis_link` turns them into one drive's address,
-refusing conflicting options (exit 2) before anything is touched.
+refusing conflicting options (exit 2) before anything is touched; :func:`as_flag` names an error of
+the run's arguments as the option that gave it.
 """
 
 from __future__ import annotations
@@ -63,6 +64,16 @@ def scheduling(realtime: bool | None) -> RealtimeSettings:
     if realtime is None:
         return RealtimeSettings()
     return RealtimeSettings(insist=True) if realtime else RealtimeSettings.unprivileged()
+
+
+_FLAGS = {"node_id": "--node-id", "controller_node_id": "--controller-node-id"}  # run()'s arguments the options give
+
+
+def as_flag(error: ParameterError) -> ParameterError:
+    """``error`` of :func:`haptic_bus.app.runner.run` naming one of its arguments, named as the option
+    that gives it (``controller_node_id`` as ``--controller-node-id``); any other error as it is."""
+    flag = _FLAGS.get(error.name)
+    return error if flag is None else ParameterError(flag, error.value, error.allowed)
 
 
 def one_axis_link(args: argparse.Namespace, command: str) -> DriveAddress:

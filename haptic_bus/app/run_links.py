@@ -1,9 +1,9 @@
 """How a run reaches its drive(s): a :class:`Rig` per link, built before anything is touched.
 
-- :func:`canopen_rig`: one CANopen drive (:class:`drives.canopen.drive.CanopenDrive`);
-- :func:`axes_rig`: several CANopen drives on one SYNC (:class:`drives.canopen.axes.CanopenAxes`),
-  once the profile's axes map 0x6064 and the bus can carry their PDOs (:func:`check_run`,
-  :func:`haptic_bus.control.bus_load.axes_bus_load`);
+- :func:`canopen_rig`: one CANopen drive or several axes' on one SYNC
+  (:class:`drives.canopen.axes.CanopenAxes`; for one axis the controller gets the drive itself),
+  once the node ids are usable (:func:`canopen_nodes`: an axis' 0x6064 mapped) and the bus can
+  carry one SYNC and every axis' PDOs (:func:`haptic_bus.control.bus_load.axes_bus_load`);
 - :func:`modbus_rig`: one Modbus drive or several axes' (:class:`drives.modbus.axes.ModbusAxes`:
   every unit polled in one cycle, on one server or a server per axis), the gate -- 1-D or coupled --
   judging at the loop delay each axis' poll gives (:func:`drives.modbus.timing.loop_delay`: the
@@ -25,11 +25,13 @@ from collections.abc import Callable, Mapping, Sequence
 from contextlib import ExitStack
 from typing import TYPE_CHECKING, Any
 
+from drives.base import DriveScaling
 from drives.bus_config import resolve_bus_config
 from drives.cia402 import State
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings, patient
 from haptic_bus.app.drive_address import DEFAULT_UNIT_ID, DriveAddress
 from haptic_bus.app.profiles import AxesProfile, Profile
+from haptic_bus.app.profiles.axes import DEFAULT_BITRATE
 from haptic_bus.app.run_options import RunOptions
 from haptic_bus.control.bus_load import axes_bus_load
 from haptic_bus.errors import DriveError, ParameterError, Refusal
@@ -47,7 +49,7 @@ logger = logging.getLogger(__name__)
 
 DEFAULT_CONTROLLER_NODE_ID = 127
 PROFILE_SCALING_SOURCE = "profile [device]"  # how the profile's scaling values are named in the report
-RUN_MAPPING = "with-position"  # the TPDO mapping a multi-axis run needs: 0x6064 every cycle
+RUN_MAPPING = "with-position"  # the TPDO mapping a run needs: 0x6064 every cycle
 
 Serve = Callable[["WallController[Any, Any]"], "ControllerNode | None"]  # the upload server for a controller (None: none)
 Opened = tuple[Any, Any, Serve]  # the drive(s), their gate, the upload server
@@ -111,14 +113,6 @@ def canopen_watchdog(safety: SafetySettings, period: float) -> Watchdog:
     return Watchdog(min(deadline, slack), safety.rpdo_deadline_periods if deadline <= slack else None)
 
 
-def _canopen_rig(link: dict[str, Any], open_drive: OpenDrive, safety: SafetySettings, period: float,
-                 options: RunOptions, addresses: tuple[DriveAddress, ...], check: Callable[[], None] = lambda: None) -> Rig:
-    """A rig of CANopen drive(s) with ``safety`` at ``T = period`` s."""
-    hold = longest_hold(period, options.wall_paced, safety.rpdo_deadline_ms(period), safety.consumer_ms)
-    return Rig(link, open_drive, hold, canopen_watchdog(safety, period), addresses, frames=True, check=check,
-               safety=given_safety(safety, period, options))
-
-
 def given_safety(safety: SafetySettings, period: float, options: RunOptions) -> SafetySettings:
     """The safety settings a run at ``T = period`` s gives its drive(s): ``safety`` wall-paced, else
     with the watchdogs' floor of virtual time."""
@@ -144,114 +138,111 @@ def _serve(stack: ExitStack, link: NetworkLink, name: str, node_id: int, heartbe
     return serve
 
 
-def canopen_rig(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: int, options: RunOptions,
-                controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID) -> Rig:
-    """CANopen drive ``node_id`` on ``bus`` (python-can keyword arguments, or an open
-    :class:`can.BusABC` the caller owns: the run neither closes it nor sets its filters; then
-    ``reset_fault`` is refused), the controller node ``controller_node_id`` beside it."""
+def canopen_rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any], options: RunOptions,
+                node_id: int | None = None, controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID) -> Rig:
+    """The CANopen drive(s) on ``bus`` (python-can keyword arguments, or an open :class:`can.BusABC`
+    the caller owns: the run neither closes it nor sets its filters; then ``reset_fault`` is
+    refused): drive ``node_id`` for a one-axis profile, each ``[[axes]]`` node for several, on one
+    SYNC (:class:`~drives.canopen.axes.CanopenAxes`; one axis: the controller gets its drive, whose
+    cycle of one is its scalar path), the controller node ``controller_node_id`` beside them.
+    Checked before any bus is opened: the node ids (:func:`canopen_nodes`); the bus load of one
+    SYNC and every axis' PDOs at the bus' bitrate (python-can's, else a multi-axis profile's
+    ``[bus] bitrate``, else 1 Mbit/s), above 70 % refused (:class:`Refusal`, exit 1)."""
     import can
 
+    from drives.canopen.axes import CanopenAxes
     from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
 
     if not isinstance(bus, (Mapping, can.BusABC)):
-        raise ParameterError("bus", bus, "python-can keyword arguments (a mapping) or an open can.BusABC", "run_canopen")
-    for name, value in (("node_id", node_id), ("controller_node_id", controller_node_id)):
-        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 127:
-            raise ParameterError(name, value, "a CANopen node id, an integer 1..127", "run_canopen")
+        raise ParameterError("bus", bus, "python-can keyword arguments (a mapping) or an open can.BusABC", "run")
+    several = isinstance(profile, AxesProfile)
+    nodes = canopen_nodes(profile, node_id, controller_node_id)
     given = None if isinstance(bus, Mapping) else bus
     if given is not None and options.reset_fault:
-        raise ParameterError("reset_fault", True, "False with an open bus (the reset needs a bus configuration)",
-                             "run_canopen")
+        raise ParameterError("reset_fault", True, "False with an open bus (the reset needs a bus configuration)", "run")
     config = resolve_bus_config(**bus) if isinstance(bus, Mapping) else \
         {"interface": type(bus).__name__, "channel": bus.channel_info}  # before any file: an unknown interface is exit 2
-    period = profile.loop.period
+    period = run_period(profile)
     safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
-    link = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_id": node_id,
-            "controller_node_id": controller_node_id, "upload_server": True, "bus_log": options.bus_log}
+    bitrate = float(config.get("bitrate") or (profile.bitrate if isinstance(profile, AxesProfile) else DEFAULT_BITRATE))
+    link: dict[str, Any] = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()},
+                            **({"node_ids": nodes} if several else {"node_id": nodes[0]}),
+                            "controller_node_id": controller_node_id, "upload_server": True, "bus_log": options.bus_log,
+                            "bitrate_checked": bitrate}
     where = ({"bus": given} if given is not None else
              {"interface": config["interface"], "channel": config.get("channel"), "bitrate": config.get("bitrate"),
               "bus_kwargs": {k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")}})
 
-    def open_drive(stack: ExitStack, tap: Tap | None) -> Opened:
-        drive = CanopenDrive(node_id, **where, period=period,
-                             tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling=profile.scaling(),
-                             scaling_source=PROFILE_SCALING_SOURCE,
-                             safety=given_safety(safety, period, options),
-                             **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
-        stack.callback(drive.close)
-        drive.link.tap = tap  # before commissioning: its frames are logged too
-        drive.connect()
-        _show_scaling(drive, options)
-        link["safety_warnings"] = list(drive.safety_warnings)
-        link["pdo_mapping_notes"] = list(drive.commissioned.mapping_notes) if drive.commissioned is not None else []
-        return drive, profile.gate(), _serve(stack, drive.link, drive.name, controller_node_id, safety.heartbeat_ms)
-
-    addresses = (DriveAddress(bus=dict(bus), node_id=node_id),) if isinstance(bus, Mapping) else ()
-    return _canopen_rig(link, open_drive, safety, period, options, addresses)
-
-
-def check_run(profile: AxesProfile, controller_node_id: int) -> list[int]:
-    """The axes' node ids, once the profile can be run as the controller node ``controller_node_id``;
-    ParameterError (exit 2) naming the field otherwise."""
-    nodes = [axis.node_id for axis in profile.axes]
-    if any(node is None for node in nodes):
-        raise ParameterError("axes[0].unit_id", profile.axes[0].unit_id,
-                             "a node_id per axis on a CAN bus (Modbus axes: give the Modbus URL, --modbus)",
-                             f"profile {profile.path or profile.name}")
-    for i, axis in enumerate(profile.axes):
-        if axis.mapping != RUN_MAPPING:
-            raise ParameterError(f"axes[{i}].mapping", axis.mapping, f'"{RUN_MAPPING}" for a run: the port observer and '
-                                 "the passivity layer read 0x6064 every cycle", f"profile {profile.path or profile.name}")
-    if controller_node_id in nodes:
-        raise ParameterError("--controller-node-id", controller_node_id, f"a node id none of the axes has ({nodes})")
-    return [node for node in nodes if node is not None]
-
-
-def axes_rig(profile: AxesProfile, bus: can.BusABC | Mapping[str, Any], options: RunOptions,
-             controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID) -> Rig:
-    """The profile's axes on ``bus`` (python-can keyword arguments), one SYNC, the controller node
-    ``controller_node_id`` beside them; the bus load at the bus' bitrate (python-can's, else the
-    profile's ``[bus] bitrate``) checked before any bus is opened (above 70 %: refused)."""
-    from drives.canopen.axes import CanopenAxes
-    from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
-
-    if not isinstance(bus, Mapping):
-        raise ParameterError("bus", bus, "python-can keyword arguments (a mapping), or Modbus URLs, for several axes",
-                             "run")
-    nodes = check_run(profile, controller_node_id)
-    config = resolve_bus_config(**bus)  # before any file: an unknown interface is exit 2
-    period = profile.period
-    safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
-    bitrate = float(config.get("bitrate") or profile.bitrate)
-    link: dict[str, Any] = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()}, "node_ids": nodes,
-                            "controller_node_id": controller_node_id, "upload_server": True, "bitrate_checked": bitrate}
-
     def check() -> None:
         try:
-            load = axes_bus_load([axis.mapping for axis in profile.axes], bitrate, period)
+            load = axes_bus_load([RUN_MAPPING] * len(nodes), bitrate, period)
         except ParameterError as refusal:
             raise Refusal(f"the bus cannot carry this cycle; allowed: {refusal.allowed}") from None
         link["bus_load"] = dataclasses.asdict(load)
 
     def open_drive(stack: ExitStack, tap: Tap | None) -> Opened:
-        axes = CanopenAxes(nodes, scalings=[axis.device.scaling() for axis in profile.axes],
-                           interface=config["interface"], channel=config.get("channel"), bitrate=config.get("bitrate"),
-                           bus_kwargs={k: v for k, v in config.items() if k not in ("interface", "channel", "bitrate")},
-                           period=period, tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling_source=PROFILE_SCALING_SOURCE,
+        axes = CanopenAxes(nodes, scalings=axis_scalings(profile), **where, period=period,
+                           tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling_source=PROFILE_SCALING_SOURCE,
                            safety=given_safety(safety, period, options),
                            **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
         stack.callback(axes.close)
         axes.link.tap = tap  # before commissioning: its frames are logged too
         axes.connect()
-        link["safety_warnings"] = {drive.name: list(drive.safety_warnings) for drive in axes.drives}
-        link["pdo_mapping_notes"] = {drive.name: list(drive.commissioned.mapping_notes) if drive.commissioned else []
-                                     for drive in axes.drives}
-        for drive in axes.drives:
-            _show_scaling(drive, options, f" of {drive.name}")
-        return axes, profile.gate(), _serve(stack, axes.link, axes.name, controller_node_id, safety.heartbeat_ms)
 
-    addresses = tuple(DriveAddress(bus=dict(bus), node_id=node) for node in nodes)
-    return _canopen_rig(link, open_drive, safety, period, options, addresses, check)
+        def per_drive(value: Callable[[CanopenDrive], list[str]]) -> Any:  # several: by drive name
+            return {drive.name: value(drive) for drive in axes.drives} if several else value(axes.drives[0])
+
+        link["safety_warnings"] = per_drive(lambda drive: list(drive.safety_warnings))
+        link["pdo_mapping_notes"] = per_drive(lambda drive: list(drive.commissioned.mapping_notes)
+                                              if drive.commissioned else [])
+        for drive in axes.drives:
+            _show_scaling(drive, options, f" of {drive.name}" if several else "")
+        serve = _serve(stack, axes.link, axes.name, controller_node_id, safety.heartbeat_ms)
+        return (axes if several else axes.drives[0]), profile.gate(), serve
+
+    hold = longest_hold(period, options.wall_paced, safety.rpdo_deadline_ms(period), safety.consumer_ms)
+    addresses = tuple(DriveAddress(bus=dict(bus), node_id=node) for node in nodes) if isinstance(bus, Mapping) else ()
+    return Rig(link, open_drive, hold, canopen_watchdog(safety, period), addresses, frames=True, check=check,
+               safety=given_safety(safety, period, options))
+
+
+def canopen_nodes(profile: Profile | AxesProfile, node_id: int | None, controller_node_id: int) -> list[int]:
+    """Each axis' CANopen node id: ``node_id`` for a one-axis profile, the ``[[axes]]`` node ids (each
+    mapping 0x6064: the port observer and the passivity layer read it every cycle) for several;
+    each 1..127, none twice, and ``controller_node_id`` none of them.  ParameterError (exit 2)
+    naming :func:`~haptic_bus.app.runner.run`'s argument, or the profile's field, otherwise."""
+    if isinstance(profile, AxesProfile):
+        where = f"profile {profile.path or profile.name}"
+        if any(axis.node_id is None for axis in profile.axes):
+            raise ParameterError("axes[0].unit_id", profile.axes[0].unit_id,
+                                 "a node_id per axis on a CAN bus (Modbus axes: give the Modbus URL, --modbus)", where)
+        for i, axis in enumerate(profile.axes):
+            if axis.mapping != RUN_MAPPING:
+                raise ParameterError(f"axes[{i}].mapping", axis.mapping, f'"{RUN_MAPPING}" for a run: the port observer '
+                                     "and the passivity layer read 0x6064 every cycle", where)
+        named = [(f"axes[{i}].node_id", axis.node_id, where) for i, axis in enumerate(profile.axes)]
+    else:
+        named = [("node_id", node_id, "run")]
+    for name, value, context in (*named, ("controller_node_id", controller_node_id, "run")):
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 127:
+            raise ParameterError(name, value, "a CANopen node id, an integer 1..127", context)
+    nodes = [value for _, value, _ in named if isinstance(value, int)]
+    if len(set(nodes)) != len(nodes):
+        raise ParameterError("node_ids", nodes, "a node id per axis, none twice", named[0][2])
+    if controller_node_id in nodes:
+        allowed = f"other than the drive's ({nodes[0]})" if len(nodes) == 1 else f"none of the axes has ({nodes})"
+        raise ParameterError("controller_node_id", controller_node_id, f"a node id {allowed}", "run")
+    return nodes
+
+
+def run_period(profile: Profile | AxesProfile) -> float:
+    """The profile's cycle period ``T`` (s): one SYNC, or one poll, for every axis."""
+    return profile.period if isinstance(profile, AxesProfile) else profile.loop.period
+
+
+def axis_scalings(profile: Profile | AxesProfile) -> list[DriveScaling]:
+    """Each axis' drive-unit scaling as the profile states it, in axis order."""
+    return [axis.device.scaling() for axis in profile.axes] if isinstance(profile, AxesProfile) else [profile.scaling()]
 
 
 def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Sequence[int] | None) -> list[int]:
@@ -289,8 +280,7 @@ def modbus_rig(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Se
 
     several = isinstance(profile, AxesProfile)
     places = list(zip(list(urls) * len(unit_ids) if len(urls) == 1 else urls, unit_ids))
-    period = profile.period if isinstance(profile, AxesProfile) else profile.loop.period
-    scalings = [axis.device.scaling() for axis in profile.axes] if isinstance(profile, AxesProfile) else [profile.scaling()]
+    period = run_period(profile)
     safety = given_safety(profile.safety, period, options)
     link: dict[str, Any] = ({"kind": "modbus", "urls": [url for url, _ in places], "unit_ids": list(unit_ids)} if several
                             else {"kind": "modbus", "url": places[0][0], "unit_id": places[0][1]})
@@ -299,7 +289,7 @@ def modbus_rig(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Se
         drives = [ModbusDrive.from_url(url, unit_id=unit, scaling=scaling, scaling_source=PROFILE_SCALING_SOURCE,
                                        safety=safety, with_position=True,
                                        **patient(options.wall_paced, VIRTUAL_TIME_MODBUS_PATIENCE))
-                  for (url, unit), scaling in zip(places, scalings)]
+                  for (url, unit), scaling in zip(places, axis_scalings(profile))]
         axes = ModbusAxes(drives)
         stack.callback(axes.close)
         axes.connect()  # reads only: identity, scaling, timing; a unit nobody answers for is named

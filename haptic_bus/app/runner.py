@@ -8,12 +8,12 @@ one Modbus drive or several polled in one cycle -- ``haptic-bus sim --modbus tcp
 --unit-ids 1,2,3 --profile gantry-3d``), what differs by profile kind in a
 :mod:`~haptic_bus.app.run_kinds` kind (a 1-D scene or a scene in space).  One run, in order:
 
-1. the link is checked before anything is touched (node ids; for several axes each must map
-   0x6064 and the controller's node id must be none of theirs: exit 2); the run's folder is
+1. the link is checked before anything is touched (node ids 1..127, none twice, each axis' 0x6064
+   mapped, the controller's node id none of theirs: exit 2); the run's folder is
    created and shown writable (:mod:`~haptic_bus.app.run_folder`), locked for this run (another
    run's folder: exit 2, :mod:`~haptic_bus.app.folder_lock`) and ``run.json`` written there
    ("running");
-2. several axes: **the bus load** (:func:`haptic_bus.control.bus_load.axes_bus_load`), one SYNC and
+2. CANopen: **the bus load** (:func:`haptic_bus.control.bus_load.axes_bus_load`), one SYNC and
    every axis' PDOs at the bus' bitrate and ``T``; above 70 % the run is refused, naming the load
    and the smallest ``T`` that fits (exit 1, no bus opened, nothing enabled);
 3. the run's writer process starts (:mod:`~haptic_bus.app.run_writer`), and on CANopen ``bus.asc``
@@ -77,7 +77,7 @@ from haptic_bus.app.profiles import AxesProfile, Profile
 from haptic_bus.app.realtime import RealtimeReport, realtime_session
 from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
 from haptic_bus.app.run_kinds import RunKind, run_kind
-from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID, Rig, axes_rig, canopen_rig, modbus_rig, modbus_units
+from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID, Rig, canopen_rig, modbus_rig, modbus_units
 from haptic_bus.app.run_options import RunOptions
 from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.clock import RealClock, VirtualClock
@@ -112,8 +112,8 @@ def run(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | st
 
     ``bus``: python-can keyword arguments (``{"interface": ..., "channel": ...}``; python-can's
     configuration chain fills what it leaves out) or an open :class:`can.BusABC` the caller owns
-    (one axis: the run neither closes it nor sets its receive filters, and ``reset_fault`` is
-    refused) for CANopen; or a Modbus URL (``tcp://HOST:PORT``, ``rtu:/dev/...``), or a list of
+    (the run neither closes it nor sets its receive filters, and ``reset_fault`` is refused) for
+    CANopen; or a Modbus URL (``tcp://HOST:PORT``, ``rtu:/dev/...``), or a list of
     them, one per axis.  One CANopen axis is drive ``node_id``; several take theirs from
     ``[[axes]]``.  One Modbus axis is unit ``unit_id``; several are units ``unit_ids`` (one per
     axis, in axis order; default: the profile's ``[[axes]]`` unit ids, else unit 1 on each server
@@ -155,11 +155,7 @@ def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | s
         urls = [bus] if isinstance(bus, str) else list(bus)
         units = modbus_units(profile, urls, unit_ids if several else [unit_id])
         return modbus_rig(profile, urls, units, options)
-    if isinstance(profile, AxesProfile):
-        return axes_rig(profile, bus, options, controller_node_id)
-    if node_id is None:
-        raise ParameterError("node_id", None, "the drive's CANopen node id, an integer 1..127", "run")
-    return canopen_rig(profile, bus, node_id, options, controller_node_id)
+    return canopen_rig(profile, bus, options, node_id, controller_node_id)
 
 
 def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> RunResult:
