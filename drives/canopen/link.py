@@ -22,13 +22,16 @@ notifier outside the cyclic phase).  Unset, it costs one ``is not None`` test pe
 called in whichever thread sends or receives (the control thread while it cycles; canopen's
 notifier, the heartbeat thread or the upload verdicts' thread outside it), so it must be quick,
 never block and be safe from several threads; and it must copy what it keeps of a sent frame:
-the cycle reuses its SYNC and RPDO messages, packing each cycle's values into them in place.
+the cycle reuses its SYNC and RPDO messages, packing each cycle's values into them in place.  A
+sent frame's ``timestamp`` is the time it was handed to the bus (stamped only while a tap is set),
+a received one's the bus' own.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -185,12 +188,16 @@ class NetworkLink:
         raise DriveError(self.name, "the bus is closed")
 
     def send(self, msg: can.Message) -> None:
-        """Send ``msg`` on the bus (then show it to the tap); python-can's errors as it raises them,
-        DriveError "the bus is closed" when the link is not open."""
-        self._send(msg)
+        """Send ``msg`` on the bus (then show it to the tap, ``msg.timestamp`` the Unix time it was
+        handed to the bus: before any answer to it can have arrived); python-can's errors as it
+        raises them, DriveError "the bus is closed" when the link is not open."""
         tap = self.tap
-        if tap is not None:
-            tap(msg, True)
+        if tap is None:
+            self._send(msg)
+            return
+        msg.timestamp = time.time()
+        self._send(msg)
+        tap(msg, True)
 
     def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
         """canopen's :meth:`canopen.Network.send_message`, through :meth:`send` (so tapped)."""

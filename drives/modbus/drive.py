@@ -65,6 +65,7 @@ from drives.modbus.register_map import (
     MAP_IDENTITY,
     REGISTER_BY_NAME,
     SIM_TIMING_CODES,
+    UNIT_ID_RANGE,
     InputBlockCodec,
     RegisterSpec,
     decode_value,
@@ -98,7 +99,8 @@ class ModbusConnection:
 class ModbusDrive(Cia402Master):
     """A CiA-402 drive reached over Modbus TCP (``host``, ``port``) or RTU (``port`` = serial path).
 
-    ``unit_id``: the Modbus unit (device id) 0..247; ``timeout`` (s): answer timeout of every
+    ``unit_id``: the Modbus unit (device id) 1..247 (:data:`~drives.modbus.register_map.UNIT_ID_RANGE`: 0
+    is broadcast, which no unit answers); ``timeout`` (s): answer timeout of every
     request (also the TCP connect timeout); ``word_order``: of 32/64-bit values ("big" = high
     word first); ``cycle``: "split" or "fc23" (module docstring); ``with_position``: read
     0x6064 each cycle (the default: the controller's port observer needs it); ``scaling``: the
@@ -140,8 +142,9 @@ class ModbusDrive(Cia402Master):
     def _setup(self, address: ModbusAddress, unit_id: int, word_order: str, cycle: str, with_position: bool,
                scaling: tuple[DriveScaling | None, str], state_timeout: float, check_identity: bool,
                safety: SafetySettings) -> None:
-        if isinstance(unit_id, bool) or not isinstance(unit_id, int) or not 0 <= unit_id <= 247:
-            raise ParameterError("unit_id", unit_id, "0..247", "Modbus drive")
+        low, high = UNIT_ID_RANGE
+        if isinstance(unit_id, bool) or not isinstance(unit_id, int) or not low <= unit_id <= high:
+            raise ParameterError("unit_id", unit_id, f"{low}..{high}", "Modbus drive")
         if cycle not in CYCLE_MODES:
             raise ParameterError("cycle", cycle, " or ".join(map(repr, CYCLE_MODES)), "Modbus drive")
         stats = ModbusStats()

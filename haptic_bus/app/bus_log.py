@@ -24,6 +24,7 @@ import pathlib
 import struct
 import threading
 import time
+from operator import attrgetter
 
 import can
 
@@ -39,10 +40,14 @@ _EXTENDED, _REMOTE, _ERROR, _FD, _SENT = 1, 2, 4, 8, 16
 
 
 def frame_tap(ring: Ring) -> Tap:
-    """A link tap that copies each frame into ``ring`` (:data:`FRAME`); a sent frame, which
-    carries no time of its own, is stamped with the time it was handed over.  Several threads
-    tap while canopen's notifier reads the bus (its frames, and the caller's SDO requests): a lock
-    keeps the ring's writer one at a time (uncontended while the cycle alone reads and sends)."""
+    """A link tap that copies each frame into ``ring`` (:data:`FRAME`) with its ``timestamp``: a
+    received frame's from the bus, a sent one's the time the link handed it to the bus
+    (:meth:`~drives.canopen.link.NetworkLink.send`), so a SYNC is stamped before the TPDOs that
+    answer it; a frame without a time of its own (0) is stamped when tapped.  Several threads tap
+    while canopen's notifier reads the bus (its frames, and the caller's SDO requests): a lock
+    keeps the ring's writer one at a time (uncontended while the cycle alone reads and sends); an
+    answer the notifier taps before its request's sender does is put back in time order by
+    :meth:`BusLogFile.drain`."""
     put = ring.put
     now = time.time
     lock = threading.Lock()
@@ -52,7 +57,7 @@ def frame_tap(ring: Ring) -> Tap:
                  | sent << 4)
         data = msg.data
         with lock:
-            put(now() if sent else msg.timestamp, msg.arbitration_id, flags, len(data), data)
+            put(msg.timestamp or now(), msg.arbitration_id, flags, len(data), data)
 
     return tap
 
@@ -93,12 +98,13 @@ class BusLogFile:
         self._file = io.FileIO(path, "w")
 
     def drain(self) -> int:
-        """Write every frame the ring holds since the last drain, whole lines; the count written now."""
+        """Write every frame the ring holds since the last drain, in time order (two threads' taps can
+        reach the ring out of it: :func:`frame_tap`), whole lines; the count written now."""
         first, chunk = self.ring.read_from(self._next)
         self.lost += first - self._next
         found = frames(chunk)
         self._next = first + len(found)
-        for message in found:
+        for message in sorted(found, key=attrgetter("timestamp")):  # stable: frames of one time keep the ring's order
             self._writer.on_message_received(message)
         write_whole(self._file, self._staged.take())
         self.frames += len(found)

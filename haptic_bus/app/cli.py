@@ -78,7 +78,7 @@ def _add_device_arguments(parser: argparse.ArgumentParser) -> None:
 def _add_no_plots(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-plots", action="store_true",
                         help="write the record and run.json, draw no pictures (saves seconds of matplotlib and of the "
-                             "K-B plane's boundary; haptic-bus plot RUN_DIR draws a one-axis run's later)")
+                             "K-B plane's boundary; haptic-bus plot RUN_DIR draws them later, one axis or several)")
 
 
 # --------------------------------------------------------------------------- handlers

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 from drives.base import DriveScaling
 from drives.bus_config import resolve_bus_config
 from drives.cia402 import State
+from drives.modbus.register_map import UNIT_ID_RANGE
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings, patient
 from haptic_bus.app.drive_address import DEFAULT_UNIT_ID, DriveAddress
 from haptic_bus.app.profiles import AxesProfile, Profile
@@ -248,7 +249,8 @@ def axis_scalings(profile: Profile | AxesProfile) -> list[DriveScaling]:
 def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Sequence[int] | None) -> list[int]:
     """Each axis' Modbus unit id: ``unit_ids`` (one per axis), else the profile's ``[[axes]]`` unit
     ids, else unit 1 on each server where there is one URL per axis; ParameterError (exit 2) naming
-    what is missing, before anything is touched.  ``urls``: one for every axis, or one per axis."""
+    what is missing or out of :data:`~drives.modbus.register_map.UNIT_ID_RANGE`, before anything is
+    touched.  ``urls``: one for every axis, or one per axis."""
     size = len(profile.axes) if isinstance(profile, AxesProfile) else 1
     if len(urls) not in (1, size):
         raise ParameterError("--modbus", list(urls), f"one Modbus URL for every axis, or one per axis ({size})", "run")
@@ -262,6 +264,10 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
     else:
         raise ParameterError("--unit-ids", None, f"one Modbus unit id per axis ({size}, e.g. --unit-ids "
                              f"{','.join(str(i + 1) for i in range(size))}): the profile's [[axes]] state none", "run")
+    low, high = UNIT_ID_RANGE
+    if any(isinstance(unit, bool) or not isinstance(unit, int) or not low <= unit <= high for unit in units):
+        name, value = ("unit_ids", units) if isinstance(profile, AxesProfile) else ("unit_id", units[0])
+        raise ParameterError(name, value, f"Modbus unit ids {low}..{high}, the units that answer (0 is broadcast)", "run")
     places = list(zip(list(urls) * size if len(urls) == 1 else urls, units))
     if len(units) != size or len(set(places)) != size:
         raise ParameterError("--unit-ids", units, f"{size} unit ids, one per axis, none twice at one URL", "run")
