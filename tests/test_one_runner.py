@@ -81,7 +81,8 @@ def test_one_call_runs_one_axis_and_three_through_one_session(haptic_sim, sessio
 
 
 @pytest.mark.parametrize(("profile", "bus", "node_id", "named"), [
-    ("gantry-3d", "tcp://127.0.0.1:5020", None, "--unit-ids"),  # Modbus axes: the profile names node ids, no unit ids
+    ("gantry-3d", "tcp://127.0.0.1:5020", None, "unit_ids"),  # Modbus axes: the profile names node ids, no unit ids
+    ("gantry-3d", ["tcp://127.0.0.1:5020"] * 2, None, "bus"),  # one URL for every axis, or one per axis: not two
     ("gantry-3d", {"interface": "lockstep", "channel": "x"}, 5, "node_id"),
     ("cia402-handle", {"interface": "lockstep", "channel": "x"}, None, "node_id"),
 ])

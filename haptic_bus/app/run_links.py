@@ -253,7 +253,7 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
     touched.  ``urls``: one for every axis, or one per axis."""
     size = len(profile.axes) if isinstance(profile, AxesProfile) else 1
     if len(urls) not in (1, size):
-        raise ParameterError("--modbus", list(urls), f"one Modbus URL for every axis, or one per axis ({size})", "run")
+        raise ParameterError("bus", list(urls), f"one Modbus URL for every axis, or one per axis ({size})", "run")
     stated = [axis.unit_id for axis in profile.axes] if isinstance(profile, AxesProfile) else [None]
     if unit_ids is not None:
         units = list(unit_ids)
@@ -262,7 +262,7 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
     elif len(urls) == size:
         units = [DEFAULT_UNIT_ID] * size
     else:
-        raise ParameterError("--unit-ids", None, f"one Modbus unit id per axis ({size}, e.g. --unit-ids "
+        raise ParameterError("unit_ids", None, f"one Modbus unit id per axis ({size}, e.g. "
                              f"{','.join(str(i + 1) for i in range(size))}): the profile's [[axes]] state none", "run")
     low, high = UNIT_ID_RANGE
     if any(isinstance(unit, bool) or not isinstance(unit, int) or not low <= unit <= high for unit in units):
@@ -270,7 +270,7 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
         raise ParameterError(name, value, f"Modbus unit ids {low}..{high}, the units that answer (0 is broadcast)", "run")
     places = list(zip(list(urls) * size if len(urls) == 1 else urls, units))
     if len(units) != size or len(set(places)) != size:
-        raise ParameterError("--unit-ids", units, f"{size} unit ids, one per axis, none twice at one URL", "run")
+        raise ParameterError("unit_ids", units, f"{size} unit ids, one per axis, none twice at one URL", "run")
     return units
 
 
