@@ -14,6 +14,7 @@ from typing import Any
 from drives.cia402 import AbortConnectionOption
 from drives.errors import ParameterError
 
+DEFAULT_TPDO_WAIT = 0.05  # s: a cycle's wait for the drives' TPDOs where their watchdogs allow as much
 VIRTUAL_TIME_DEADLINE = 2.0  # s: the drive watchdogs' floor (RPDO deadline, consumer, Modbus) when nothing paces the loop
 VIRTUAL_TIME_WAIT = 0.5
 """s: how long a master waits for one answer of the drive (a TPDO, a Modbus reply) when nothing paces
@@ -96,6 +97,30 @@ class SafetySettings:
         watchdog = max(self.modbus_watchdog_ms, floor_ms) if self.modbus_watchdog_ms else 0
         return dataclasses.replace(self, rpdo_deadline_periods=periods, modbus_watchdog_ms=watchdog,
                                    consumer_ms=max(self.consumer_ms, floor_ms))
+
+    def canopen_stall(self, period: float) -> float:
+        """The shortest stall of the master (s) that faults a CANopen drive with these settings at cycle
+        period ``period`` s: its RPDO deadline, or the slack its heartbeat consumer leaves over the
+        master's heartbeat (inf: neither is set)."""
+        deadline = self.rpdo_deadline_ms(period) / 1000.0 if self.rpdo_deadline_periods else math.inf
+        slack = (self.consumer_ms - self.heartbeat_ms) / 1000.0 if self.master_node_id is not None else math.inf
+        return min(deadline, slack)
+
+    def longest_tpdo_wait(self, period: float, wanted: float | None) -> float:
+        """How long (s) one cycle may wait for the drives' TPDOs at period ``period`` s: ``wanted``, or
+        (None) :data:`DEFAULT_TPDO_WAIT`, at most half of :meth:`canopen_stall` -- a cycle that waits
+        for a silent drive sends every drive its RPDO and the heartbeat that much later, and a wait as
+        long as the stall would fault the drives that answered.  ParameterError naming ``tpdo_timeout``
+        for a ``wanted`` outside (0, that half]."""
+        most = self.canopen_stall(period) / 2.0
+        if wanted is None:
+            return min(DEFAULT_TPDO_WAIT, most)
+        if not 0.0 < wanted <= most:
+            raise ParameterError("tpdo_timeout", wanted, f"> 0 s and at most {most * 1e3:.4g} ms: half the shortest "
+                                 f"stall that faults the drive at T = {period * 1e3:.4g} ms (RPDO deadline "
+                                 f"{self.rpdo_deadline_ms(period)} ms, heartbeat consumer slack "
+                                 f"{self.consumer_ms - self.heartbeat_ms} ms)", "CANopen master")
+        return wanted
 
     def rpdo_deadline_ms(self, period: float) -> int:
         """The RPDO event timer for cycle period ``period`` s, ms (0: none; at least 1 otherwise)."""

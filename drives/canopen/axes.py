@@ -10,10 +10,13 @@ cycle itself in the cyclic phase, :mod:`~drives.canopen.heartbeat`).  What it ad
 * **one SYNC per cycle** (:class:`~drives.canopen.sync_cycle.SyncCycle`, the one a single drive
   runs too, here of every axis' exchange): every axis' TPDOs (status, velocity, position) are
   collected before any RPDO goes out.  The cycle waits for the last axis, up to
-  ``tpdo_timeout``: an axis whose TPDO missed it hands out its last input again with ``age``
-  counting up (:meth:`~drives.canopen.drive.CanopenDrive.take_inputs`), so the cycle is as late
-  as its oldest input, and ``max_missed_tpdos`` in a row is a
-  :class:`~drives.errors.DriveTimeout`.  The axes run no cycle of their own and send no SYNC;
+  ``tpdo_timeout`` (never more than half the shortest stall that faults a drive: a silent axis
+  must not hold the others' RPDOs past their deadline,
+  :meth:`~drives.safety.SafetySettings.longest_tpdo_wait`): an axis whose TPDO missed it hands
+  out its last input again with ``age`` counting up
+  (:meth:`~drives.canopen.drive.CanopenDrive.take_inputs`), so the cycle is as late as its
+  oldest input, and ``max_missed_tpdos`` in a row is a :class:`~drives.errors.DriveTimeout`.
+  The axes run no cycle of their own and send no SYNC;
 * **one fate**: whatever error any axis meets (its EMCY, its heartbeat lost, its fault bit, its
   TPDOs missing, a send that failed), every axis is tripped in that same cycle -- each gets zero
   torque with DISABLE VOLTAGE, then one SYNC, at which every drive latches it -- and the error
@@ -77,7 +80,7 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
         eds: str | os.PathLike[str] | od.ObjectDictionary | None = None,
         scaling_source: str = "caller",
         safety: SafetySettings = DEFAULT_SAFETY,
-        tpdo_timeout: float = 0.05,
+        tpdo_timeout: float | None = None,
         max_missed_tpdos: int = 3,
         heartbeat_consumer_ms: int | None = None,
     ) -> None:
@@ -92,7 +95,7 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
         master = safety.master_node_id
         self.heartbeat = HeartbeatProducer(master or 0, safety.heartbeat_ms / 1000.0 if master is not None else 0.0,
                                            shared=True)
-        self.cycle = SyncCycle(self.name, self.link, tpdo_timeout, shared=len(nodes) > 1)
+        self.cycle = SyncCycle(self.name, self.link, safety.longest_tpdo_wait(period, tpdo_timeout), shared=len(nodes) > 1)
         self.drives = tuple(  # each joins the cycle, in axis order
             CanopenDrive(node, cycle=self.cycle, heartbeat=self.heartbeat, period=period, tpdo_objects=tpdo_objects,
                          scaling=scaling, scaling_source=scaling_source, eds=eds, safety=safety,

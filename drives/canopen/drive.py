@@ -121,7 +121,9 @@ class CanopenDrive(Cia402Master):
     cycle -- one of several drives is marked ``shared``, and the drive runs none of its own; one it
     alone joins it runs as its own -- connect() opens the link and starts the heartbeat if they are
     not yet, close() leaves a shared link or heartbeat running.  Timeouts in s (``tpdo_timeout``:
-    how long the drive's own cycle waits for its TPDOs; a given cycle has its own);
+    how long the drive's own cycle waits for its TPDOs, default 50 ms and never more than half the
+    shortest stall that faults the drive, :meth:`~drives.safety.SafetySettings.longest_tpdo_wait`;
+    a given cycle has its own);
     ``max_missed_tpdos`` consecutive cycles without TPDO raise DriveTimeout; heartbeat times in
     ms (consumer default 3x producer; 0 disables).
     ``scaling``: the caller's :class:`~drives.base.DriveScaling` (``scaling_source`` labels it
@@ -155,7 +157,7 @@ class CanopenDrive(Cia402Master):
         sdo_timeout: float = 0.3,
         boot_timeout: float = 1.0,
         state_timeout: float = 1.0,
-        tpdo_timeout: float = 0.05,
+        tpdo_timeout: float | None = None,
         max_missed_tpdos: int = 3,
         heartbeat_producer_ms: int = 100,
         heartbeat_consumer_ms: int | None = None,
@@ -169,7 +171,6 @@ class CanopenDrive(Cia402Master):
         _check("node_id", isinstance(node_id, int) and low <= node_id <= high, node_id, f"{low}..{high}")
         _check("period", 1e-6 <= period <= 4294.967295, period, "1e-6..4294.967295 s (0x1006 in us)")
         _check("max_missed_tpdos", max_missed_tpdos >= 1, max_missed_tpdos, ">= 1")
-        _check("tpdo_timeout", tpdo_timeout > 0, tpdo_timeout, "> 0 s")
         _check("heartbeat_producer_ms", 0 <= heartbeat_producer_ms <= 0xFFFF, heartbeat_producer_ms, "0..65535 ms")
         if heartbeat_consumer_ms is None:
             heartbeat_consumer_ms = 3 * heartbeat_producer_ms
@@ -203,7 +204,8 @@ class CanopenDrive(Cia402Master):
         tpdo_codecs = tuple(PdoCodec(frame, name=f"TPDO{n} of node {node_id}") for n, frame in enumerate(frames, 1))
         self.exchange = CanopenExchange(self.name, self.link, tpdo_codecs,
                                         (PdoCodec(DEFAULT_RPDO, name=f"RPDO1 of node {node_id}"),), stats)
-        self.cycle = cycle if cycle is not None else SyncCycle(self.name, self.link, tpdo_timeout)
+        self.cycle = cycle if cycle is not None else SyncCycle(self.name, self.link,
+                                                               safety.longest_tpdo_wait(period, tpdo_timeout))
         self.cycle.join(self.exchange)
         self.connection: CanopenConnection | None = None  # what connect() built, until close()
         self._missed_in_row = 0

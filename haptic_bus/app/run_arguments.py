@@ -67,7 +67,8 @@ def scheduling(realtime: bool | None) -> RealtimeSettings:
 
 
 # run()'s arguments the options give (its bus: a Modbus URL list, the only bus an option can get wrong)
-_FLAGS = {"node_id": "--node-id", "controller_node_id": "--controller-node-id", "unit_ids": "--unit-ids", "bus": "--modbus"}
+_FLAGS = {"node_id": "--node-id", "controller_node_id": "--controller-node-id", "unit_id": "--unit-id",
+          "unit_ids": "--unit-ids", "bus": "--modbus"}
 
 
 def as_flag(error: ParameterError) -> ParameterError:

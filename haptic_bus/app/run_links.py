@@ -107,11 +107,12 @@ def longest_hold(period: float, wall_paced: bool, deadline_ms: int, fallback_ms:
 
 
 def canopen_watchdog(safety: SafetySettings, period: float) -> Watchdog:
-    """The shortest stall that faults a CANopen drive with these settings at period ``period`` s:
-    its RPDO deadline, or the slack its heartbeat consumer leaves over the controller's heartbeat."""
-    deadline = safety.rpdo_deadline_ms(period) / 1000.0 if safety.rpdo_deadline_periods else math.inf
-    slack = (safety.consumer_ms - safety.heartbeat_ms) / 1000.0 if safety.master_node_id is not None else math.inf
-    return Watchdog(min(deadline, slack), safety.rpdo_deadline_periods if deadline <= slack else None)
+    """The shortest stall that faults a CANopen drive with these settings at period ``period`` s
+    (:meth:`~drives.safety.SafetySettings.canopen_stall`), and the RPDO deadline's periods when that
+    is the binding one."""
+    stall = safety.canopen_stall(period)
+    binding = safety.rpdo_deadline_periods and safety.rpdo_deadline_ms(period) / 1000.0 <= stall
+    return Watchdog(stall, safety.rpdo_deadline_periods if binding else None)
 
 
 def given_safety(safety: SafetySettings, period: float, options: RunOptions) -> SafetySettings:
