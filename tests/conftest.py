@@ -284,8 +284,10 @@ def _rig(
     # RPDO deadline would rightly call a dead master.  Tests of the deadline set their own.
     drive_kwargs.setdefault("safety", SafetySettings().for_virtual_time(drive_kwargs.get("period", 1e-3)))
     # The same pause can hold the simulator's thread past the master's 50 ms TPDO wait (measured
-    # once in a CI run beside two CPU-bound jobs); 0.25 s, as the multi-axis rig waits.
-    drive_kwargs.setdefault("tpdo_timeout", 0.25)
+    # once in a CI run beside two CPU-bound jobs); 0.25 s, as the multi-axis rig waits, where the
+    # drive's watchdogs allow as much (a test of real-time watchdogs: half their shortest stall).
+    period = drive_kwargs.get("period", 1e-3)
+    drive_kwargs.setdefault("tpdo_timeout", min(0.25, drive_kwargs["safety"].canopen_stall(period) / 2.0))
     drive = CanopenDrive(node_id, **node.spec.drive_kwargs(), **drive_kwargs)
     status = None
     try:
