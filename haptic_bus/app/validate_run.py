@@ -141,7 +141,7 @@ class ValidateOutcome:
 
 
 def validate_drive(profile: Profile, bus: Mapping[str, Any] | str, options: RunOptions, *, travel: float,
-                   node_id: int | None = None, unit_id: int = 1, controller_node_id: int = 127,
+                   node_id: int | None = None, unit_id: int | None = None, controller_node_id: int = 127,
                    tolerance: float = DEFAULT_TOLERANCE, pictures: bool = True) -> ValidateOutcome:
     """Validate ``profile``'s model on the drive ``bus`` names (as :func:`~haptic_bus.app.runner.run`);
     ``options.duration`` is replaced by the plan's.  Refusal (nothing enabled) if no gentle hold passes the gate."""
