@@ -72,10 +72,9 @@ from drives.fault_reset import DEFAULT_WAIT
 from drives.os_threads import show_names
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DEFAULT_UNIT_ID, DriveAddress
-from haptic_bus.app.folder_lock import own_folder
 from haptic_bus.app.profiles import AxesProfile, Profile
 from haptic_bus.app.realtime import RealtimeReport, realtime_session
-from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
+from haptic_bus.app.run_folder import RunJournal, own_run_folder
 from haptic_bus.app.run_kinds import RunKind, run_kind
 from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID, Rig, canopen_rig, modbus_rig, modbus_units
 from haptic_bus.app.run_options import RunOptions
@@ -174,8 +173,7 @@ def _refuse_misplaced_ids(several: bool, modbus: bool, node_id: int | None, unit
 
 def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> RunResult:
     """One run (module docstring)."""
-    folder = prepare_run_folder(options.out_dir, kind.profile.name)
-    lock = own_folder(folder)  # a second run into this folder is refused here, before its bus or files
+    folder, lock = own_run_folder(options.out_dir, kind.profile.name)  # before its bus or files
     controller: WallController[Any, Any] | None = None
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": kind.loop_extra()}

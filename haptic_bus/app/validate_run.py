@@ -36,6 +36,7 @@ import numpy as np
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.app.derate_table import DerateTable
 from haptic_bus.app.profiles import Profile
+from haptic_bus.app.run_folder import VALIDATE_JSON
 from haptic_bus.app.run_kinds import OneAxisRun
 from haptic_bus.app.run_options import RunOptions
 from haptic_bus.app.runner import RunResult, run
@@ -51,7 +52,6 @@ from haptic_bus.validate.probe import AmplitudeRule, Probe, ProbePlan, ProbeScen
 from haptic_bus.validate.verdict import DEFAULT_TOLERANCE, Signals, Validation, validate
 
 ENERGY_MARGIN = 20.0  # times the most energy the probe stores in the model: the observer's limit
-VALIDATE_JSON = "validate.json"
 
 
 @dataclasses.dataclass(frozen=True)
