@@ -184,7 +184,7 @@ def test_a_start_inside_an_object_ramps_the_force_in_once_the_coupled_gate_prove
 
 
 @pytest.mark.parametrize(("args", "expected"), [
-    (["--node-id", "5"], "--node-id = 'given with a multi-axis profile'"),
+    (["--node-id", "5"], "--node-id = 5 is invalid; allowed: none with a multi-axis profile"),
     (["--controller-node-id", "6"], "--controller-node-id = 6 is invalid; allowed: a node id none of the axes has"),
 ])
 def test_single_axis_options_are_refused_with_a_multi_axis_profile(

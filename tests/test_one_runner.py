@@ -94,6 +94,20 @@ def test_a_call_that_names_no_drive_is_refused_before_anything_is_touched(
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize(("profile", "bus", "ids", "named"), [
+    ("cia402-handle", "tcp://127.0.0.1:5020", {"node_id": 5}, "node_id"),  # a Modbus drive is its unit id
+    ("cia402-handle", {"interface": "lockstep", "channel": "x"}, {"node_id": 5, "unit_id": 2}, "unit_id"),
+    ("gantry-3d", "tcp://127.0.0.1:5020", {"unit_id": 2}, "unit_id"),  # several: unit_ids
+    ("gantry-3d", {"interface": "lockstep", "channel": "x"}, {"unit_ids": [1, 2, 3]}, "unit_ids"),
+])
+def test_a_drive_id_that_names_nothing_on_its_link_is_refused_not_ignored(
+        profile: str, bus: Any, ids: dict[str, Any], named: str, tmp_path: pathlib.Path) -> None:
+    options = hb.RunOptions(DURATION, pacing="virtual", out_dir=tmp_path / "run", live=False)
+    with pytest.raises(hb.ParameterError, match=f"^run: {named} = .* is invalid; allowed: none: "):
+        hb.run(hb.load_profile(profile), bus, options, **ids)
+    assert not (tmp_path / "run").exists()
+
+
 def test_one_axis_refuses_a_bus_that_cannot_carry_its_cycle_before_any_sync(haptic_sim, tmp_path: pathlib.Path) -> None:
     """360 bit times every 1 ms on 500 kbit/s is 72.0 % of the bus, above the 70 % ceiling: refused,
     naming the smallest T that fits, 360 / (0.7 x 500 000) s = 1.029 ms; no SYNC sent, nothing enabled."""

@@ -159,12 +159,19 @@ def test_profiles_check_and_show_judge_a_multi_axis_profile_by_the_coupled_gate(
 
     profile = load_profile("gantry-3d")
     decision = profile.gate().judge(profile.space_scene())
-    assert haptic_bus_main(["profiles", "check", "gantry-3d", "--json"]) == 0
+    assert haptic_bus_main(["profiles", "show", "gantry-3d", "--json"]) == 0  # the shape of a one-axis show
     report = json.loads(capsys.readouterr().out)
     assert report["gate_decision"]["accepted"] and [a["name"] for a in report["axes"]] == ["x", "y", "z"]
     assert report["gate_decision"]["worst_margin"] == pytest.approx(decision.worst_margin, rel=1e-12)
     assert report["gate_decision"]["worst_margin"] == pytest.approx(4.28, abs=0.005)  # the profile's own comment
     assert [o["name"] for o in report["space"]["objects"]] == ["ball", "block", "slope"]
+    assert haptic_bus_main(["profiles", "check", "gantry-3d", "--json"]) == 0  # the shape of a one-axis check
+    checked = json.loads(capsys.readouterr().out)
+    assert checked["profile"] == "gantry-3d" and checked["passive"] is True and checked["gate"]["accepted"] is True
+    assert checked["gate"]["worst_margin"] == report["gate_decision"]["worst_margin"]
+    assert checked["gate"]["safety_margin"] == 2.0 and checked["walls"] == report["gate_decision"]["walls"]
+    assert haptic_bus_main(["profiles", "check", "cia402-handle", "--json"]) == 0
+    assert set(json.loads(capsys.readouterr().out)) == set(checked)  # one shape, either kind
     assert haptic_bus_main(["profiles", "show", "gantry-3d"]) == 0
     shown = capsys.readouterr().out
     assert "z (node 7): m=0.5 kg b=10 N s/m" in shown and "sphere ball: center=(0, -0.03, 0), radius=0.01" in shown

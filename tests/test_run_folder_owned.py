@@ -101,3 +101,22 @@ def test_the_lock_goes_with_a_killed_process(tmp_path: pathlib.Path, capsys: pyt
     assert ran.code == 0, ran.err
     assert read_run(folder)["status"] == "completed"
     assert not (folder / LOCK_NAME).exists()  # the killed holder's file, taken over and removed by the run that ended
+
+
+def test_a_run_into_an_earlier_runs_folder_replaces_that_run_and_keeps_the_users_files(tmp_path: pathlib.Path) -> None:
+    """A folder given again held the earlier run's record.csv and pictures beside the new run.json
+    (``plot`` then drew the old record under the new run's end).  The new run clears what a run
+    writes, before its bus; other files stay."""
+    folder = tmp_path / "run"
+    folder.mkdir()
+    earlier = ["run.json", "record.csv", "record-x.csv", "bus.asc", "timeline.png", "region.png", "validate.json"]
+    for name in [*earlier, "notes.txt", "mine.png"]:
+        (folder / name).write_text("an earlier run's\n")
+    options = hb.RunOptions(0.01, pacing="virtual", out_dir=folder, live=False, plots=False)
+    result = hb.run(hb.load_profile("cia402-handle"), {"interface": CAN_INTERFACE, "channel": f"nobody-{tmp_path.name}"},
+                    options, node_id=5)  # nobody answers: the run ends at commissioning, having written run.json
+    assert result.exit_reason == "drive error"
+    left = sorted(path.name for path in folder.iterdir() if not path.name.startswith("."))
+    assert left == ["bus.asc", "mine.png", "notes.txt", "run.json"]  # bus.asc and run.json: this run's
+    assert read_run(folder)["exit_reason"] == "drive error" and "an earlier run's" not in (folder / "bus.asc").read_text()
+    assert (folder / "notes.txt").read_text() == (folder / "mine.png").read_text() == "an earlier run's\n"

@@ -223,7 +223,6 @@ def _run(args: argparse.Namespace) -> int:
 def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, RunOptions, dict[str, Any]]:
     """``run``'s profile, bus, :class:`~haptic_bus.app.run_options.RunOptions` and the link's keyword
     arguments, read and checked before anything is touched; last, the stop request is installed."""
-    from haptic_bus.app.drive_address import DEFAULT_UNIT_ID
     from haptic_bus.app.profiles import AxesProfile, load_profile
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
     from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest
@@ -233,11 +232,11 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, 
     unit_ids = None
     if isinstance(profile, AxesProfile):  # the node ids (or unit ids) come from [[axes]], or --unit-ids
         _refuse_single_axis_options(args)
-        bus, node_id, unit_id = (args.modbus or bus_arguments(args)), None, DEFAULT_UNIT_ID
+        bus, node_id, unit_id = (args.modbus or bus_arguments(args)), None, None
         unit_ids = args.unit_ids
     else:
         address = one_axis_link(args, "run")
-        bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, DEFAULT_UNIT_ID)
+        bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, None)
         node_id = None if address.url is not None else address.checked_node_id
     stop = StopRequest()
     out_dir = None if args.out is None else folder_path("--out", args.out, context="run")  # created once the bus is known
@@ -257,10 +256,10 @@ def _refuse_single_axis_options(args: argparse.Namespace) -> None:
     bus options beside ``--modbus`` and ``--unit-ids`` without it."""
     from haptic_bus.errors import ParameterError
 
-    given = [flag for flag, value in (("--node-id", args.node_id), ("--unit-id", args.unit_id)) if value]
+    given = [(flag, value) for flag, value in (("--node-id", args.node_id), ("--unit-id", args.unit_id)) if value]
     if given:
-        raise ParameterError(given[0], "given with a multi-axis profile", "the bus options, or --modbus URL (once, or "
-                             "once per axis) with --unit-ids: the node ids come from [[axes]]", "run")
+        raise ParameterError(*given[0], "none with a multi-axis profile: the bus options (the node ids come from "
+                             "[[axes]]), or --modbus URL (once, or once per axis) with --unit-ids", "run")
     if args.modbus:
         refuse_can_options_with_modbus(args, "run", ("controller_node_id",), "--unit-ids")
     elif args.unit_ids is not None:

@@ -18,9 +18,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from haptic_bus.app.demo_kinds import Findings, demo_kind
-from haptic_bus.app.folder_lock import own_folder
 from haptic_bus.app.profiles import AxesProfile, Profile, default_profile
-from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
+from haptic_bus.app.run_folder import RunJournal, own_run_folder
 from haptic_bus.app.run_kinds import run_kind
 from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.controller import RunSummary, WallController
@@ -46,8 +45,7 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
     ``plots``) the pictures to ``out_dir``, whatever ends the run (Ctrl-C too)."""
     profile = profile or default_profile()
     kind, demo = run_kind(profile), demo_kind(profile)
-    out = prepare_run_folder(out_dir, profile.name)
-    lock = own_folder(out)  # held until the demo has written everything (or its process ends)
+    out, lock = own_run_folder(out_dir, profile.name)  # held until the demo has written everything (or its process ends)
     seconds = demo.seconds() if seconds is None else seconds
     cycles = max(1, round(seconds / kind.period))
     link = {"kind": "canopen", "bus": {"interface": "lockstep"}, "simulated": True, **demo.link()}

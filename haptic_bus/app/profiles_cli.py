@@ -126,7 +126,15 @@ def _show_axes(profile: AxesProfile, as_json: bool, command: str) -> int:
     """``show``/``check`` of a multi-axis profile: its axes, its scene and the coupled gate's decision;
     0 (check: the gate accepts), 1 (check: it refuses)."""
     decision = profile.judge()
-    if as_json:  # as a one-axis profile's: the profile as run.json's settings show it, and the decision
+    if as_json and command == "check":  # as a one-axis profile's check: verdict, gate, every wall judged
+        gate = space_decision_to_dict(decision)
+        walls = gate.pop("walls")
+        policy = profile.gate_policy
+        print(json.dumps(json_ready({"profile": profile.name, "path": str(profile.path),
+                                     "passive": all(wall.verdict.margin >= 0.0 for wall in decision.walls),
+                                     "gate": gate | {"safety_margin": policy.safety_margin, "bandwidth": policy.bandwidth},
+                                     "walls": walls})))
+    elif as_json:  # as a one-axis profile's show: the profile as run.json's settings show it, and the decision
         print(json.dumps(json_ready(profile_to_dict(profile) | {"gate_decision": space_decision_to_dict(decision)})))
     else:
         print(format_axes_profile(profile, decision))

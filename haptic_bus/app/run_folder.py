@@ -53,6 +53,8 @@ from typing import Any, Protocol
 from drives.safety import SafetySettings
 from haptic_bus._version import __version__
 from haptic_bus.analysis.loop import DeviceLoop
+from haptic_bus.app.bus_log import LOG_NAME
+from haptic_bus.app.folder_lock import FolderLock, own_folder
 from haptic_bus.app.profiles import AxesProfile, Profile, profile_to_dict
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.protocols import DecisionT, SceneT
@@ -63,6 +65,9 @@ from haptic_bus.validation import writable_folder
 
 DEFAULT_ROOT = pathlib.Path("runs")
 RUN_JSON, RECORD_CSV = "run.json", "record.csv"
+TIMELINE, FORCE_POSITION, REGION, TRAJECTORY = "timeline.png", "force_position.png", "region.png", "trajectory.png"
+PICTURES = (TIMELINE, FORCE_POSITION, REGION, TRAJECTORY)  # what :mod:`~haptic_bus.app.run_pictures` draws
+VALIDATE_JSON, BODE_PNG, RE_Z_PNG = "validate.json", "validate-bode.png", "validate-re-z.png"  # haptic-bus validate's
 RUNNING = "running"  # run.json's status until the run ends
 _DISTRIBUTIONS = ("numpy", "scipy", "python-can", "canopen", "pymodbus", "matplotlib")
 
@@ -89,6 +94,23 @@ def prepare_run_folder(out: str | pathlib.Path | None, profile_name: str, root: 
             path = root / f"{stamp}-{profile_name}-{n}"
             n += 1
     return writable_folder("--out", path, context="run")
+
+
+def own_run_folder(out: str | pathlib.Path | None, profile_name: str) -> tuple[pathlib.Path, FolderLock]:
+    """The run's folder (:func:`prepare_run_folder`), owned by this process (:func:`~haptic_bus.app.folder_lock.own_folder`:
+    another run's folder is refused) and cleared of what an earlier run left there that a run writes
+    (``run.json``, the records, ``bus.asc``, the pictures, validate's files), so that a folder given
+    again never holds two runs; ParameterError naming the folder otherwise."""
+    folder = prepare_run_folder(out, profile_name)
+    lock = own_folder(folder)
+    earlier = [RUN_JSON, RECORD_CSV, LOG_NAME, *PICTURES, VALIDATE_JSON, BODE_PNG, RE_Z_PNG]
+    try:
+        for path in [*(folder / name for name in earlier), *folder.glob(record_name("*"))]:
+            path.unlink(missing_ok=True)
+    except OSError as exc:
+        lock.release()
+        raise ParameterError("--out", str(folder), f"a folder whose earlier run this run can replace ({exc})", "run") from None
+    return folder, lock
 
 
 @functools.cache

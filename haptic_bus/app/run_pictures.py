@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt
 from matplotlib.figure import Figure
 
 from haptic_bus.app.kb_plane import kb_plane_figure
-from haptic_bus.app.run_folder import RunFolder
+from haptic_bus.app.run_folder import FORCE_POSITION, REGION, TIMELINE, TRAJECTORY, RunFolder
 from haptic_bus.app.run_plots import force_position_figure, timeline_figure
 
 DPI = 110
@@ -27,11 +27,11 @@ def render_run(run: RunFolder, out: pathlib.Path | None = None) -> list[pathlib.
     if run.axes:
         from haptic_bus.app.trajectory_plot import trajectory_figure
 
-        figures.append(("trajectory.png", trajectory_figure(run)))
+        figures.append((TRAJECTORY, trajectory_figure(run)))
     elif run.record is not None and run.record.cycles:
-        figures += [("timeline.png", timeline_figure(run)), ("force_position.png", force_position_figure(run))]
+        figures += [(TIMELINE, timeline_figure(run)), (FORCE_POSITION, force_position_figure(run))]
     if "gate_loop" in run.document:
-        figures.append(("region.png", kb_plane_figure(run)))
+        figures.append((REGION, kb_plane_figure(run)))
     written = []
     for name, figure in figures:
         path = target / name

@@ -72,10 +72,9 @@ from drives.fault_reset import DEFAULT_WAIT
 from drives.os_threads import show_names
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DEFAULT_UNIT_ID, DriveAddress
-from haptic_bus.app.folder_lock import own_folder
 from haptic_bus.app.profiles import AxesProfile, Profile
 from haptic_bus.app.realtime import RealtimeReport, realtime_session
-from haptic_bus.app.run_folder import RunJournal, prepare_run_folder
+from haptic_bus.app.run_folder import RunJournal, own_run_folder
 from haptic_bus.app.run_kinds import RunKind, run_kind
 from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID, Rig, canopen_rig, modbus_rig, modbus_units
 from haptic_bus.app.run_options import RunOptions
@@ -106,7 +105,7 @@ class RunResult:
 
 
 def run(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | str | Sequence[str], options: RunOptions,
-        *, node_id: int | None = None, unit_id: int = DEFAULT_UNIT_ID, unit_ids: Sequence[int] | None = None,
+        *, node_id: int | None = None, unit_id: int | None = None, unit_ids: Sequence[int] | None = None,
         controller_node_id: int = DEFAULT_CONTROLLER_NODE_ID, kind: RunKind[Any, Any, Any] | None = None) -> RunResult:
     """Run ``profile`` -- one axis, or several (``[[axes]]``) -- and return how it ended (:class:`RunResult`).
 
@@ -141,27 +140,40 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
 
 
 def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | str | Sequence[str], options: RunOptions,
-         node_id: int | None, unit_id: int, unit_ids: Sequence[int] | None, controller_node_id: int) -> Rig:
+         node_id: int | None, unit_id: int | None, unit_ids: Sequence[int] | None, controller_node_id: int) -> Rig:
     """The link ``profile`` and ``bus`` name (:mod:`~haptic_bus.app.run_links`); ParameterError if none."""
     if not isinstance(profile, (Profile, AxesProfile)):  # a name or a path: what hb.load_profile takes
         raise ParameterError("profile", profile, "a Profile or an AxesProfile, as hb.load_profile(name_or_path) "
                              "returns it", "run")
     several = isinstance(profile, AxesProfile)
-    if (node_id is not None and several) or (unit_ids is not None and not several):
-        name, value = ("node_id", node_id) if node_id is not None else ("unit_ids", unit_ids)
-        raise ParameterError(name, value, "node_id for one CANopen axis, unit_ids for several Modbus axes (the CANopen "
-                             "node ids of several come from [[axes]])", "run")
+    _refuse_misplaced_ids(several, isinstance(bus, (str, Sequence)), node_id, unit_id, unit_ids)
     if isinstance(bus, (str, Sequence)):
         urls = [bus] if isinstance(bus, str) else list(bus)
-        units = modbus_units(profile, urls, unit_ids if several else [unit_id])
+        one = DEFAULT_UNIT_ID if unit_id is None else unit_id
+        units = modbus_units(profile, urls, unit_ids if several else [one])
         return modbus_rig(profile, urls, units, options)
     return canopen_rig(profile, bus, options, node_id, controller_node_id)
 
 
+def _refuse_misplaced_ids(several: bool, modbus: bool, node_id: int | None, unit_id: int | None,
+                          unit_ids: Sequence[int] | None) -> None:
+    """ParameterError naming the first of run()'s drive ids given where it names nothing: ``node_id``
+    (one CANopen drive) for several axes or over Modbus, ``unit_id`` (one Modbus unit) for several or
+    on CANopen, ``unit_ids`` (several Modbus units) for one axis or on CANopen."""
+    for name, value, wrong, allowed in (
+            ("node_id", node_id, several or modbus, "none: it names one CANopen drive; several take theirs from "
+                                                    "[[axes]], a Modbus drive is unit_id"),
+            ("unit_id", unit_id, several or not modbus, "none: it names one Modbus unit (several: unit_ids); a "
+                                                        "CANopen drive is node_id"),
+            ("unit_ids", unit_ids, not several or not modbus, "none: they name several axes' Modbus units (one axis: "
+                                                              "unit_id; CANopen: [[axes]] node_id)")):
+        if value is not None and wrong:
+            raise ParameterError(name, value, allowed, "run")
+
+
 def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> RunResult:
     """One run (module docstring)."""
-    folder = prepare_run_folder(options.out_dir, kind.profile.name)
-    lock = own_folder(folder)  # a second run into this folder is refused here, before its bus or files
+    folder, lock = own_run_folder(options.out_dir, kind.profile.name)  # before its bus or files
     controller: WallController[Any, Any] | None = None
     summary: RunSummary | None = None
     extra: dict[str, Any] = {"loop": kind.loop_extra()}

@@ -74,7 +74,8 @@ def run_validate(args: argparse.Namespace) -> int:
     stop.install()
     outcome = validate_drive(profile, bus, options, travel=args.travel, tolerance=args.tolerance / 100.0,
                              node_id=None if address.url is not None else address.checked_node_id,
-                             unit_id=address.unit_id, controller_node_id=args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID,
+                             unit_id=address.unit_id if address.url is not None else None,
+                             controller_node_id=args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID,
                              pictures=not args.no_plots)
     result, validation = outcome.result, outcome.validation
     files = [str(path) for path in outcome.files]

@@ -24,10 +24,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from haptic_bus.app.run_folder import BODE_PNG, RE_Z_PNG
 from haptic_bus.validate.verdict import Validation
-
-BODE_PNG = "validate-bode.png"
-RE_Z_PNG = "validate-re-z.png"
 
 
 def draw(validation: Validation, folder: pathlib.Path, margin: float | None) -> list[pathlib.Path]:

@@ -36,6 +36,7 @@ import numpy as np
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.app.derate_table import DerateTable
 from haptic_bus.app.profiles import Profile
+from haptic_bus.app.run_folder import VALIDATE_JSON
 from haptic_bus.app.run_kinds import OneAxisRun
 from haptic_bus.app.run_options import RunOptions
 from haptic_bus.app.runner import RunResult, run
@@ -51,7 +52,6 @@ from haptic_bus.validate.probe import AmplitudeRule, Probe, ProbePlan, ProbeScen
 from haptic_bus.validate.verdict import DEFAULT_TOLERANCE, Signals, Validation, validate
 
 ENERGY_MARGIN = 20.0  # times the most energy the probe stores in the model: the observer's limit
-VALIDATE_JSON = "validate.json"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -141,7 +141,7 @@ class ValidateOutcome:
 
 
 def validate_drive(profile: Profile, bus: Mapping[str, Any] | str, options: RunOptions, *, travel: float,
-                   node_id: int | None = None, unit_id: int = 1, controller_node_id: int = 127,
+                   node_id: int | None = None, unit_id: int | None = None, controller_node_id: int = 127,
                    tolerance: float = DEFAULT_TOLERANCE, pictures: bool = True) -> ValidateOutcome:
     """Validate ``profile``'s model on the drive ``bus`` names (as :func:`~haptic_bus.app.runner.run`);
     ``options.duration`` is replaced by the plan's.  Refusal (nothing enabled) if no gentle hold passes the gate."""
