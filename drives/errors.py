@@ -50,7 +50,8 @@ class DriveTimeout(DriveError, TimeoutError):
 
 class ModbusLinkLost(DriveError):
     """The link to the drive is gone (dropped connection, or closed after a timeout because a late
-    answer could not be told from the next one); call reconnect()."""
+    answer could not be told from the next one): down until the master reconnects (the Modbus
+    master's ``reconnect()``; a command line's next run)."""
 
 
 class DriveFault(DriveError):

@@ -18,7 +18,7 @@ command line maps each branch to its exit status (``haptic_bus.app.cli``)::
      +-- DriveError                      a drive or its bus failed (bus configuration, mode,    exit 1
           |                              scaling, not a controller): .node, .message
           +-- DriveTimeout (TimeoutError)  silence: no answer in time
-          +-- ModbusLinkLost             the link is gone: call reconnect()
+          +-- ModbusLinkLost             the link is gone until the master reconnects
           +-- DriveFault                 in FAULT, or a CiA-402 step stalled: .code, .state
           +-- DriveProtocolError         an answer or a frame that cannot be used
                +-- DriveRefusal          the drive refused one request (SDO abort, Modbus

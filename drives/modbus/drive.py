@@ -343,7 +343,7 @@ class ModbusDrive(Cia402Master):
             self._send_safe_outputs()
             self._drop_link()
             lost = ModbusLinkLost(self.name, f"{exc.message}; link closed (a late answer could not be told from "
-                                             f"the next), call reconnect()")
+                                             f"the next) until the master reconnects")
             raise self.trip(lost) from exc.__cause__
         except DriveProtocolError as exc:
             raise self.trip(exc) from exc.__cause__
@@ -385,7 +385,7 @@ class ModbusDrive(Cia402Master):
 
     def _send_outputs(self, controlword: int, target_torque: int) -> None:
         if not self.link.up:
-            raise ModbusLinkLost(self.name, f"link is down after: {self._tripped}; call reconnect()")
+            raise ModbusLinkLost(self.name, f"link is down after: {self._tripped}; down until the master reconnects")
         requests = self._requests
         requests.outputs[0] = controlword
         requests.outputs[1] = target_torque & 0xFFFF

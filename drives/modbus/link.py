@@ -137,13 +137,13 @@ class ModbusLink:
     def send(self, request: ModbusPDU, what: str) -> ModbusPDU:
         """One request (``what`` names it in errors); the answer, or a typed error (module docstring)."""
         if not self.up:
-            raise ModbusLinkLost(self.name, f"link is down ({what} not sent); call reconnect()")
+            raise ModbusLinkLost(self.name, f"link is down ({what} not sent) until the master reconnects")
         self.stats.requests += 1
         try:
             response = self._execute(False, request)
         except (ConnectionException, ConnectionError) as exc:  # pymodbus' word for it, or the socket's (ECONNRESET, EPIPE)
             self.drop()
-            raise ModbusLinkLost(self.name, f"connection lost while {what}: {exc}; call reconnect()") from exc
+            raise ModbusLinkLost(self.name, f"connection lost while {what}: {exc}; closed until the master reconnects") from exc
         except ModbusIOException as exc:
             self.stats.timeouts += 1
             raise DriveTimeout(self.name, f"no answer within {self.address.timeout * 1e3:.3g} ms while {what} ({exc})") from exc
