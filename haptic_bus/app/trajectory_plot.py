@@ -63,9 +63,9 @@ def trajectory_figure(run: RunFolder) -> Figure:
     positions.grid(alpha=0.3)
     force_axes = fig.add_subplot(grid[1, 1], sharex=positions)
     for i, name in enumerate(names):
-        force_axes.plot(time_s, forces[:, i], label=f"wall force {name}")
+        force_axes.plot(time_s, forces[:, i], label=f"u along {name} (the handle feels -u)" if i == 0 else f"u along {name}")
     force_axes.set_xlabel("time (s)")
-    force_axes.set_ylabel("wall force u along the axis (N; the handle feels -u)")
+    force_axes.set_ylabel("wall force u (N)")  # along each axis; the handle feels -u (the legend says so)
     force_axes.grid(alpha=0.3)
     twin = force_axes.twinx()
     twin.plot(time_s, energy * 1e3, color="black", linewidth=0.8, linestyle="--", label="port energy E = sum E_i")
@@ -112,5 +112,5 @@ def _draw_sections(axes: Axes, names: list[str], objects: list[SpaceObject], x: 
     axes.set_xlabel(f"mm along {first} in ({', '.join(names)})")
     axes.set_ylabel(f"mm along {second}")
     axes.set_title("trajectory in its plane of motion, objects cut by that plane", fontsize=10)
-    axes.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8)  # below: on no object
+    axes.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, fontsize=8)  # below the axis label: on no object
     axes.grid(alpha=0.3)
