@@ -191,13 +191,8 @@ class OneAxisRun:
         return functools.partial(scene_dicts, controller, SceneEntry.to_dict)
 
     def sections(self, controller: WallController[Any, Any]) -> dict[str, Any]:
-        """``run.json``'s ``scaling`` (the drive's factors, where each came from, its scaling report)
-        and ``scenes``."""
-        drive = controller.axes.drives[0]
-        report = getattr(drive, "scaling_report", None)
-        return {"scaling": {"values": dataclasses.asdict(drive.scaling), "sources": getattr(drive, "scaling_sources", {}),
-                            **(report.to_dict() if report is not None else {})},
-                "scenes": self.scene_dicts(controller)()}
+        """``run.json``'s ``scaling`` (:func:`scaling_section`) and ``scenes``."""
+        return {"scaling": scaling_section(controller.axes.drives[0]), "scenes": self.scene_dicts(controller)()}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -304,10 +299,18 @@ class AxesRun:
         return functools.partial(scene_dicts, controller, space_scene_dict)
 
     def sections(self, controller: WallController[Any, Any]) -> dict[str, Any]:
-        """``run.json``'s ``scaling`` (each axis' factors, by axis name), ``scenes`` and ``axes`` (each
-        axis' summary: :meth:`~haptic_bus.control.controller.WallController.axis_summaries`)."""
-        return {"scaling": {name: dataclasses.asdict(s) for name, s in zip(controller.names, controller.axes.scalings)},
+        """``run.json``'s ``scaling`` (each axis' :func:`scaling_section`, by axis name), ``scenes`` and
+        ``axes`` (each axis' summary: :meth:`~haptic_bus.control.controller.WallController.axis_summaries`)."""
+        return {"scaling": {name: scaling_section(drive) for name, drive in zip(controller.names, controller.axes.drives)},
                 "scenes": self.scene_dicts(controller)(), "axes": controller.axis_summaries()}
+
+
+def scaling_section(drive: Any) -> dict[str, Any]:
+    """One drive's scaling as ``run.json`` keeps it: its factors (``values``), where each came from
+    (``sources``) and its scaling report (:class:`~drives.base.ScalingReport`), where it has them."""
+    report = getattr(drive, "scaling_report", None)
+    return {"values": dataclasses.asdict(drive.scaling), "sources": getattr(drive, "scaling_sources", {}),
+            **(report.to_dict() if report is not None else {})}
 
 
 def run_kind(profile: Profile | AxesProfile) -> RunKind[Any, Any, Any]:
