@@ -229,6 +229,21 @@ def test_the_public_api_loads_no_bus_library(call):
     assert json.loads(out.stdout.strip().splitlines()[-1]) == []
 
 
+@pytest.mark.parametrize(("argv", "forbidden"), [
+    (["check", "--json", "--mass", "1", "--friction", "20", "--period", "0.001", "--stiffness", "1000", "--damping", "5"],
+     ("scipy.optimize", "matplotlib", "canopen", "pymodbus")),  # haptic-bus bench --only startup's FORBIDDEN
+    (["profiles", "check", "gantry-3d", "--json"], ("matplotlib", "can", "canopen", "pymodbus")),  # the coupled gate may optimise
+])
+def test_a_command_that_prints_a_verdict_imports_no_bus_library_nor_plots(argv: list[str], forbidden: tuple[str, ...]) -> None:
+    """A verdict's command loads no bus library and no plotting (a JSON helper imported from the run
+    folder once pulled canopen into every command's parser)."""
+    code = (f"import sys, json; from haptic_bus.app.cli import main; status = main({argv!r}); "
+            f"print(json.dumps([status, sorted(m for m in {forbidden!r} if m in sys.modules)]))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == [0, []]
+
+
 # ----------------------------------------------------------------------------- one thread owns the bus
 
 class BusCalls:

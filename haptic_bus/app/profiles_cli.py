@@ -27,6 +27,7 @@ from haptic_bus.analysis.two_mass import TwoMassLoop
 from haptic_bus.analysis.two_mass_check import TwoMassReport, check_two_mass_loop, format_two_mass
 from haptic_bus.app.arguments import number, timeout
 from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
+from haptic_bus.app.json_ready import json_ready
 from haptic_bus.app.profile_view import format_axes_profile, format_profile, gate_decision_to_dict, space_decision_to_dict
 from haptic_bus.app.profiles import (
     DEFAULT_PROFILE,
@@ -40,7 +41,6 @@ from haptic_bus.app.profiles import (
     resolve_profile,
     shipped_profiles,
 )
-from haptic_bus.app.run_folder import json_ready
 from haptic_bus.errors import HapticBusError, ParameterError, Refusal
 from haptic_bus.profile.plant import ONE_AXIS_TABLES
 

@@ -41,7 +41,6 @@ import functools
 import hashlib
 import importlib.metadata
 import json
-import math
 import os
 import pathlib
 import platform
@@ -53,8 +52,8 @@ from typing import Any, Protocol
 from drives.safety import SafetySettings
 from haptic_bus._version import __version__
 from haptic_bus.analysis.loop import DeviceLoop
-from haptic_bus.app.bus_log import LOG_NAME
 from haptic_bus.app.folder_lock import FolderLock, own_folder
+from haptic_bus.app.json_ready import json_ready
 from haptic_bus.app.profiles import AxesProfile, Profile, profile_to_dict
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.protocols import DecisionT, SceneT
@@ -101,6 +100,8 @@ def own_run_folder(out: str | pathlib.Path | None, profile_name: str) -> tuple[p
     another run's folder is refused) and cleared of what an earlier run left there that a run writes
     (``run.json``, the records, ``bus.asc``, the pictures, validate's files), so that a folder given
     again never holds two runs; ParameterError naming the folder otherwise."""
+    from haptic_bus.app.bus_log import LOG_NAME  # the bus log's python-can, only once a run has begun
+
     folder = prepare_run_folder(out, profile_name)
     lock = own_folder(folder)
     earlier = [RUN_JSON, RECORD_CSV, LOG_NAME, *PICTURES, VALIDATE_JSON, BODE_PNG, RE_Z_PNG]
@@ -130,17 +131,6 @@ def profile_identity(profile: Profile | AxesProfile) -> dict[str, Any]:
     path = profile.path
     digest = hashlib.sha256(path.read_bytes()).hexdigest() if path is not None and path.is_file() else None
     return {"name": profile.name, "path": None if path is None else str(path), "sha256": digest}
-
-
-def json_ready(value: Any) -> Any:
-    """``value`` as JSON without NaN/inf: non-finite floats as strings, tuples as lists, keys as strings."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)
-    if isinstance(value, dict):
-        return {str(k): json_ready(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_ready(v) for v in value]
-    return value
 
 
 class DocumentKind(Protocol):
