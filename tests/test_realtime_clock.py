@@ -7,6 +7,7 @@ import gc
 import json
 import os
 import shutil
+import struct
 import subprocess
 import sys
 import textwrap
@@ -101,8 +102,11 @@ def test_the_privileged_items_are_each_got_or_reported_and_all_restored() -> Non
         assert other.native_id is not None
         other_before = os.sched_getscheduler(other.native_id)
         with realtime_session(RealtimeSettings.insisting()) as report:
-            asked = {"timer slack", "switch interval", "gc frozen", "SCHED_FIFO", "CPU affinity", "mlockall"}
+            asked = {"timer slack", "switch interval", "gc frozen", "SCHED_FIFO", "CPU affinity", "mlockall",
+                     "CPU wake-up latency"}
             assert set(report.got) | set(report.missing) == asked and not set(report.got) & set(report.missing)
+            if "CPU wake-up latency" in report.got:  # the kernel's aggregate request, read back: 0 us while held
+                assert _cpu_latency_request() == 0
             if "SCHED_FIFO" in report.got:
                 fifo_resetting = os.SCHED_FIFO | os.SCHED_RESET_ON_FORK  # what they start stays ordinary
                 assert os.sched_getscheduler(0) == fifo_resetting and os.sched_getparam(0).sched_priority == FIFO_PRIORITY
@@ -111,10 +115,20 @@ def test_the_privileged_items_are_each_got_or_reported_and_all_restored() -> Non
             if "CPU affinity" in report.got:
                 assert os.sched_getaffinity(0) == {max(before[-1])}
         assert os.sched_getscheduler(other.native_id) == other_before
+        if "CPU wake-up latency" in report.got:
+            assert _cpu_latency_request() != 0  # withdrawn with the session (the kernel's default, or another's)
     finally:
         release.set()
         other.join(30.0)
     assert _state() == before
+
+
+def _cpu_latency_request() -> int:
+    """The CPUs' wake-up latency the kernel's PM QoS grants now, us (reading the file gives the aggregate)."""
+    from haptic_bus.app.realtime import CPU_LATENCY
+
+    with open(CPU_LATENCY, "rb") as request:
+        return int(struct.unpack("i", request.read(4))[0])
 
 
 _UNPRIVILEGED = textwrap.dedent("""
@@ -149,7 +163,9 @@ def test_without_privileges_it_says_what_it_could_not_get_and_why(insist: bool) 
     done = subprocess.run(command, capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
-    assert set(report["missing"]) == {"SCHED_FIFO", "mlockall"} | ({"CPU affinity"} if insist else set())
+    latency = "CPU wake-up latency"  # root keeps the file's permission without CAP_SYS_NICE; a user has none
+    assert set(report["missing"]) - {latency} == {"SCHED_FIFO", "mlockall"} | ({"CPU affinity"} if insist else set())
+    assert latency in report["got"] or "/dev/cpu_dma_latency" in report["missing"][latency]
     assert "CAP_SYS_NICE" in report["missing"]["SCHED_FIFO"] and "ulimit -r" in report["missing"]["SCHED_FIFO"]
     assert "RLIMIT_MEMLOCK" in report["missing"]["mlockall"] and "CAP_IPC_LOCK" in report["missing"]["mlockall"]
     assert not insist or "not pinned without SCHED_FIFO" in report["missing"]["CPU affinity"]
