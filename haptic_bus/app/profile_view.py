@@ -54,10 +54,11 @@ def format_profile(profile: Profile, decision: GateDecision) -> str:
 
 
 def space_decision_to_dict(decision: SpaceDecision) -> dict[str, Any]:
-    """The coupled gate's decision: accepted, the least margin (N s/m), reasons, every wall judged
+    """The coupled gate's decision: accepted, the least margin (N s/m), reasons, warnings (the keys of
+    :func:`gate_decision_to_dict`), every wall judged
     (:meth:`~haptic_bus.control.space_gate.SpaceDecision.wall_dicts`)."""
     return {"accepted": decision.accepted, "worst_margin": decision.worst_margin, "reasons": list(decision.reasons),
-            "walls": decision.wall_dicts()}
+            "warnings": list(decision.warnings), "walls": decision.wall_dicts()}
 
 
 def _format_value(value: object) -> str:
