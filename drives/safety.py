@@ -111,15 +111,18 @@ class SafetySettings:
         (None) :data:`DEFAULT_TPDO_WAIT`, at most half of :meth:`canopen_stall` -- a cycle that waits
         for a silent drive sends every drive its RPDO and the heartbeat that much later, and a wait as
         long as the stall would fault the drives that answered.  ParameterError naming ``tpdo_timeout``
-        for a ``wanted`` outside (0, that half]."""
+        for a ``wanted`` outside (0, that half] or not a finite number of seconds (neither watchdog set)."""
         most = self.canopen_stall(period) / 2.0
         if wanted is None:
             return min(DEFAULT_TPDO_WAIT, most)
-        if not 0.0 < wanted <= most:
-            raise ParameterError("tpdo_timeout", wanted, f"> 0 s and at most {most * 1e3:.4g} ms: half the shortest "
-                                 f"stall that faults the drive at T = {period * 1e3:.4g} ms (RPDO deadline "
-                                 f"{self.rpdo_deadline_ms(period)} ms, heartbeat consumer slack "
-                                 f"{self.consumer_ms - self.heartbeat_ms} ms)", "CANopen master")
+        real = isinstance(wanted, (int, float)) and not isinstance(wanted, bool) and math.isfinite(wanted)
+        if not (real and 0.0 < wanted <= most):
+            deadline = f"{self.rpdo_deadline_ms(period)} ms" if self.rpdo_deadline_periods else "none"
+            slack = f"{self.consumer_ms - self.heartbeat_ms} ms" if self.master_node_id is not None else "none (no heartbeat)"
+            bound = (f"at most {most * 1e3:.4g} ms: half the shortest stall that faults the drive" if math.isfinite(most)
+                     else "finite: no stall faults the drive")
+            raise ParameterError("tpdo_timeout", wanted, f"> 0 s and {bound} at T = {period * 1e3:.4g} ms (RPDO "
+                                 f"deadline {deadline}, heartbeat consumer slack {slack})", "CANopen master")
         return wanted
 
     def rpdo_deadline_ms(self, period: float) -> int:
