@@ -105,13 +105,32 @@ def own_run_folder(out: str | pathlib.Path | None, profile_name: str) -> tuple[p
     folder = prepare_run_folder(out, profile_name)
     lock = own_folder(folder)
     earlier = [RUN_JSON, RECORD_CSV, LOG_NAME, *PICTURES, VALIDATE_JSON, BODE_PNG, RE_Z_PNG]
+    found = [path for path in [*(folder / name for name in earlier), *folder.glob(record_name("*"))] if path.exists()]
     try:
-        for path in [*(folder / name for name in earlier), *folder.glob(record_name("*"))]:
-            path.unlink(missing_ok=True)
+        _remove_all_or_none(found)
     except OSError as exc:
         lock.release()
-        raise ParameterError("--out", str(folder), f"a folder whose earlier run this run can replace ({exc})", "run") from None
+        raise ParameterError("--out", str(folder), f"a folder whose earlier run this run can replace (nothing removed; "
+                             f"{exc.filename}: {exc.strerror})", "run") from None
     return folder, lock
+
+
+def _remove_all_or_none(paths: list[pathlib.Path]) -> None:
+    """Remove every file of ``paths`` (in one folder), or, where one cannot go (OSError), none of them:
+    each is first renamed aside (``.<name>.replaced``) and the renamed ones are put back if one fails,
+    so that a refused run leaves the earlier run whole (a run.json gone beside its records is no run)."""
+    aside: list[tuple[pathlib.Path, pathlib.Path]] = []
+    try:
+        for path in paths:
+            hidden = path.with_name(f".{path.name}.replaced")
+            path.rename(hidden)
+            aside.append((path, hidden))
+    except OSError:
+        for path, hidden in reversed(aside):
+            hidden.rename(path)
+        raise
+    for _, hidden in aside:
+        hidden.unlink()
 
 
 @functools.cache
