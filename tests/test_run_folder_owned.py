@@ -8,6 +8,7 @@ a real run through the Python API in a thread, a real child process holding the 
 
 from __future__ import annotations
 
+import json
 import os
 import pathlib
 import signal
@@ -109,14 +110,15 @@ def test_a_run_into_an_earlier_runs_folder_replaces_that_run_and_keeps_the_users
     writes, before its bus; other files stay."""
     folder = tmp_path / "run"
     folder.mkdir()
-    earlier = ["run.json", "record.csv", "record-x.csv", "bus.asc", "timeline.png", "region.png", "validate.json"]
-    for name in [*earlier, "notes.txt", "mine.png"]:
+    earlier = ["record.csv", "record-x.csv", "bus.asc", "timeline.png", "region.png", "validate.json"]
+    for name in [*earlier, "notes.txt", "mine.png", "record-mine.csv"]:  # record-mine.csv: no axis of that run
         (folder / name).write_text("an earlier run's\n")
+    (folder / "run.json").write_text(json.dumps({"settings": {"axes": [{"name": "x"}]}}))
     options = hb.RunOptions(0.01, pacing="virtual", out_dir=folder, live=False, plots=False)
     result = hb.run(hb.load_profile("cia402-handle"), {"interface": CAN_INTERFACE, "channel": f"nobody-{tmp_path.name}"},
                     options, node_id=5)  # nobody answers: the run ends at commissioning, having written run.json
     assert result.exit_reason == "drive error"
     left = sorted(path.name for path in folder.iterdir() if not path.name.startswith("."))
-    assert left == ["bus.asc", "mine.png", "notes.txt", "run.json"]  # bus.asc and run.json: this run's
+    assert left == ["bus.asc", "mine.png", "notes.txt", "record-mine.csv", "run.json"]  # bus.asc and run.json: this run's
     assert read_run(folder)["exit_reason"] == "drive error" and "an earlier run's" not in (folder / "bus.asc").read_text()
     assert (folder / "notes.txt").read_text() == (folder / "mine.png").read_text() == "an earlier run's\n"

@@ -104,8 +104,8 @@ def own_run_folder(out: str | pathlib.Path | None, profile_name: str) -> tuple[p
 
     folder = prepare_run_folder(out, profile_name)
     lock = own_folder(folder)
-    earlier = [RUN_JSON, RECORD_CSV, LOG_NAME, *PICTURES, VALIDATE_JSON, BODE_PNG, RE_Z_PNG]
-    found = [path for path in [*(folder / name for name in earlier), *folder.glob(record_name("*"))] if path.exists()]
+    earlier = [RUN_JSON, RECORD_CSV, LOG_NAME, *PICTURES, VALIDATE_JSON, BODE_PNG, RE_Z_PNG, *_axis_records(folder)]
+    found = [path for path in (folder / name for name in earlier) if path.exists()]
     try:
         _remove_all_or_none(found)
     except OSError as exc:
@@ -113,6 +113,16 @@ def own_run_folder(out: str | pathlib.Path | None, profile_name: str) -> tuple[p
         raise ParameterError("--out", str(folder), f"a folder whose earlier run this run can replace (nothing removed; "
                              f"{exc.filename}: {exc.strerror})", "run") from None
     return folder, lock
+
+
+def _axis_records(folder: pathlib.Path) -> list[str]:
+    """The per-axis records (``record-<axis>.csv``) of the axes the earlier run's ``run.json`` in
+    ``folder`` names: none where it names none or cannot be read (a user's own ``record-*.csv`` stays)."""
+    try:
+        axes = json.loads((folder / RUN_JSON).read_text())["settings"]["axes"]
+        return [record_name(str(axis["name"])) for axis in axes]
+    except (OSError, ValueError, TypeError, KeyError):
+        return []
 
 
 def _remove_all_or_none(paths: list[pathlib.Path]) -> None:
