@@ -390,9 +390,9 @@ def run_axes(args: argparse.Namespace) -> int:
         if not started(sim):
             return 1
         try:
-            logger.info("nodes %s: serving on %s %s (one simulated drive per axis, the hand: %s); %s",
-                        ", ".join(str(node.node_id) for node in sim.nodes), args.interface, args.channel,
-                        type(hand).__name__, scheduling)
+            logger.info("node%s %s: serving on %s %s (one simulated drive per axis, the hand: %s); %s",
+                        "s" if len(sim.nodes) > 1 else "", ", ".join(str(node.node_id) for node in sim.nodes),
+                        args.interface, args.channel, type(hand).__name__, scheduling)
             received = stop_signals.wait()
             logger.info("nodes: %s received, stopping", received.name)
         finally:

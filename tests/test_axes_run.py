@@ -217,7 +217,7 @@ def test_killing_one_axis_drive_process_zeroes_every_torque_in_the_same_cycle(
     two = sim_process(*spec.sim_args(), "--node-ids", "5,7", "--profile", str(profile_path))
     one = sim_process(*spec.sim_args(), "--node-ids", "6", "--profile", str(profile_path))
     two.wait_for_line("nodes 5, 7: serving", START_WAIT)
-    one.wait_for_line("nodes 6: serving", START_WAIT)
+    one.wait_for_line("node 6: serving", START_WAIT)
     sniffer = spec.open()
     run = cli_process("run", str(profile_path), *spec.sim_args(), "--virtual-time", "--duration", "600",
                       "--out", str(tmp_path / "run"), "-q", "--no-plots")

@@ -40,3 +40,12 @@ def test_modbus_drive_takes_the_units_that_answer(unit_id: int) -> None:
     with pytest.raises(hb.ParameterError, match=r"unit_id = .* allowed: 1\.\.247"):
         ModbusDrive.from_url(URL, unit_id=unit_id)
     assert ModbusDrive.from_url(URL, unit_id=UNIT_ID_RANGE[1]).unit_id == 247  # built, not connected
+
+
+def test_unit_ids_given_as_a_string_are_refused_as_such(tmp_path: pathlib.Path) -> None:
+    """``unit_ids="123"`` read as three ids '1', '2', '3' said "1..247" of strings; it is refused as what it is."""
+    options = hb.RunOptions(0.01, pacing="virtual", out_dir=tmp_path / "run", live=False)
+    with pytest.raises(hb.ParameterError, match=r"^run: unit_ids = '123' is invalid; allowed: Modbus unit ids 1\.\.247, a "
+                                                r"list of whole numbers"):
+        hb.run(hb.load_profile("gantry-3d"), "tcp://127.0.0.1:1", options, unit_ids="123")  # type: ignore[arg-type]
+    assert not (tmp_path / "run").exists()

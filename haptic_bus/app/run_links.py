@@ -256,6 +256,9 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
     if len(urls) not in (1, size):
         raise ParameterError("bus", list(urls), f"one Modbus URL for every axis, or one per axis ({size})", "run")
     stated = [axis.unit_id for axis in profile.axes] if isinstance(profile, AxesProfile) else [None]
+    if isinstance(unit_ids, (str, bytes)):  # a sequence of characters, not of unit ids
+        raise ParameterError("unit_ids", unit_ids, f"Modbus unit ids {UNIT_ID_RANGE[0]}..{UNIT_ID_RANGE[1]}, a list of "
+                             "whole numbers, one per axis", "run")
     if unit_ids is not None:
         units = list(unit_ids)
     elif None not in stated:
@@ -268,7 +271,8 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
     low, high = UNIT_ID_RANGE
     if any(isinstance(unit, bool) or not isinstance(unit, int) or not low <= unit <= high for unit in units):
         name, value = ("unit_ids", units) if isinstance(profile, AxesProfile) else ("unit_id", units[0])
-        raise ParameterError(name, value, f"Modbus unit ids {low}..{high}, the units that answer (0 is broadcast)", "run")
+        raise ParameterError(name, value, f"Modbus unit ids {low}..{high}, whole numbers: the units that answer "
+                             "(0 is broadcast)", "run")
     places = list(zip(list(urls) * size if len(urls) == 1 else urls, units))
     if len(units) != size or len(set(places)) != size:
         raise ParameterError("unit_ids", units, f"{size} unit ids, one per axis, none twice at one URL", "run")
