@@ -167,7 +167,10 @@ def test_a_start_inside_an_object_is_refused_with_nothing_enabled(tmp_path: path
     assert states == [State.SWITCH_ON_DISABLED] * 3
     assert result.exit_reason == "refused" and result.controller is None
     assert "handle is inside ball" in (result.error or "") and "5 mm" not in (result.error or "")
-    safety = json.loads((tmp_path / "run" / "run.json").read_text())["settings"]["safety"]
+    document = json.loads((tmp_path / "run" / "run.json").read_text())
+    # each axis' scaling is kept from the drives' commissioning, as a one-axis run refused before its controller keeps it
+    assert set(document["scaling"]) == {"x", "y", "z"} and {"values", "sources"} <= set(document["scaling"]["x"])
+    safety = document["settings"]["safety"]
     # virtual time: the drives were given watchdogs of 2 s of wall clock (1000 periods of T = 2 ms), not the profile's
     assert (safety["consumer_ms"], safety["rpdo_deadline_periods"], safety["modbus_watchdog_ms"]) == (2000, 1000, 2000)
 

@@ -63,6 +63,7 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
         kind.describe_gate(gate, extra)
         controller = kind.controller(drive, gate, scene, clock=None, origin=origin)
         journal.controller = controller
+        extra["scaling"] = kind.scaling(controller.axes.drives)
         recorder.stream(writer, kind.records(controller), controller.events, kind.scene_dicts(controller), kind.period)
         demo.enable(drive)
         summary = controller.run(cycles, on_cycle=demo.on_cycle(sim, cycles, seconds))

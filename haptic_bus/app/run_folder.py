@@ -169,7 +169,9 @@ class DocumentKind(Protocol):
     def profile(self) -> Profile | AxesProfile: ...
 
     def sections(self, controller: WallController[Any, Any]) -> dict[str, Any]:
-        """``run.json``'s sections that differ by kind: ``scaling``, ``scenes`` and, for several axes, ``axes``."""
+        """``run.json``'s sections that differ by kind and need the controller: ``scenes`` and, for
+        several axes, ``axes`` (``scaling`` is written once the drives are reached: :meth:`RunKind.scaling
+        <haptic_bus.app.run_kinds.RunKind.scaling>`)."""
         ...
 
 

@@ -71,6 +71,8 @@ class RunKind(DocumentKind, Protocol[SceneT, GateT, OriginT]):
 
     def scene(self, gate: GateT) -> SceneT: ...
 
+    def scaling(self, drives: Sequence[Any]) -> dict[str, Any]: ...
+
     def describe_gate(self, gate: GateT, extra: dict[str, Any]) -> None: ...
 
     def assumed_delay(self, gate: GateT) -> float: ...
@@ -190,9 +192,13 @@ class OneAxisRun:
         """Every scene in effect so far, JSON-ready, when called."""
         return functools.partial(scene_dicts, controller, SceneEntry.to_dict)
 
+    def scaling(self, drives: Sequence[Any]) -> dict[str, Any]:
+        """``run.json``'s ``scaling`` once the drive is reached: its :func:`scaling_section`."""
+        return scaling_section(drives[0])
+
     def sections(self, controller: WallController[Any, Any]) -> dict[str, Any]:
-        """``run.json``'s ``scaling`` (:func:`scaling_section`) and ``scenes``."""
-        return {"scaling": scaling_section(controller.axes.drives[0]), "scenes": self.scene_dicts(controller)()}
+        """``run.json``'s ``scenes``."""
+        return {"scenes": self.scene_dicts(controller)()}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -298,11 +304,15 @@ class AxesRun:
         """Every scene in effect so far, JSON-ready, when called."""
         return functools.partial(scene_dicts, controller, space_scene_dict)
 
+    def scaling(self, drives: Sequence[Any]) -> dict[str, Any]:
+        """``run.json``'s ``scaling`` once the drives are reached (in axis order): each axis'
+        :func:`scaling_section`, by the profile's axis name."""
+        return {axis.name: scaling_section(drive) for axis, drive in zip(self.profile.axes, drives)}
+
     def sections(self, controller: WallController[Any, Any]) -> dict[str, Any]:
-        """``run.json``'s ``scaling`` (each axis' :func:`scaling_section`, by axis name), ``scenes`` and
-        ``axes`` (each axis' summary: :meth:`~haptic_bus.control.controller.WallController.axis_summaries`)."""
-        return {"scaling": {name: scaling_section(drive) for name, drive in zip(controller.names, controller.axes.drives)},
-                "scenes": self.scene_dicts(controller)(), "axes": controller.axis_summaries()}
+        """``run.json``'s ``scenes`` and ``axes`` (each axis' summary:
+        :meth:`~haptic_bus.control.controller.WallController.axis_summaries`)."""
+        return {"scenes": self.scene_dicts(controller)(), "axes": controller.axis_summaries()}
 
 
 def scaling_section(drive: Any) -> dict[str, Any]:

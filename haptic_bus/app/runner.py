@@ -192,7 +192,9 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             if options.reset_fault:
                 before += _reset_faults_first(rig.addresses, options, extra)
             drive, gate, serve = rig.open(stack, writer.tap)
-            names = [axis.name for axis in (OneAxis(drive) if isinstance(drive, Drive) else drive).drives]
+            drives = (OneAxis(drive) if isinstance(drive, Drive) else drive).drives
+            names = [axis.name for axis in drives]
+            extra["scaling"] = kind.scaling(drives)  # in run.json from here, a run refused at pre-flight too
             kind.describe_gate(gate, extra)
             scene = kind.scene(gate)
             for each in getattr(drive, "drives", (drive,)):  # a drive in FAULT: said now, not after pre-flight
