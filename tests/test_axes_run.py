@@ -198,6 +198,15 @@ def test_single_axis_options_are_refused_with_a_multi_axis_profile(
     assert not (tmp_path / "r").exists()  # checked before any file is touched
 
 
+def test_a_can_run_needs_every_axis_node_id(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "modbus-axes.toml"  # every axis a Modbus unit (a profile holds one kind of bus), run on CAN
+    path.write_text(GANTRY.read_text().replace("node_id = ", "unit_id = "))
+    code = main(["run", str(path), "--interface", "virtual", "--channel", "x", "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert code == 2 and "axes[0].node_id = None is invalid; allowed: a node_id per axis on a CAN bus" in err
+    assert err.count("\n") == 1 and not (tmp_path / "r").exists()
+
+
 def test_a_run_needs_the_position_mapped(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = variant(tmp_path, "minimal", 'mapping = "with-position"        # the port observer reads 0x6064 every cycle',
                    'mapping = "minimal"')

@@ -112,7 +112,7 @@ class OneAxisRun:
     @property
     def period(self) -> float:
         """The cycle's period ``T`` (s)."""
-        return self.profile.loop.period
+        return self.profile.period
 
     def loop_extra(self) -> dict[str, Any]:
         """``run.json``'s ``loop`` before the drive is reached."""

@@ -25,7 +25,6 @@ from collections.abc import Callable, Mapping, Sequence
 from contextlib import ExitStack
 from typing import TYPE_CHECKING, Any
 
-from drives.base import DriveScaling
 from drives.bus_config import resolve_bus_config
 from drives.cia402 import State
 from drives.modbus.register_map import UNIT_ID_RANGE
@@ -164,7 +163,7 @@ def canopen_rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, A
         raise ParameterError("reset_fault", True, "False with an open bus (the reset needs a bus configuration)", "run")
     config = resolve_bus_config(**bus) if isinstance(bus, Mapping) else \
         {"interface": type(bus).__name__, "channel": bus.channel_info}  # before any file: an unknown interface is exit 2
-    period = run_period(profile)
+    period = profile.period
     safety = dataclasses.replace(profile.safety, master_node_id=controller_node_id)
     bitrate = float(config.get("bitrate") or (profile.bitrate if isinstance(profile, AxesProfile) else DEFAULT_BITRATE))
     link: dict[str, Any] = {"kind": "canopen", "bus": {k: str(v) for k, v in config.items()},
@@ -183,7 +182,7 @@ def canopen_rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, A
         link["bus_load"] = dataclasses.asdict(load)
 
     def open_drive(stack: ExitStack, tap: Tap | None) -> Opened:
-        axes = CanopenAxes(nodes, scalings=axis_scalings(profile), **where, period=period,
+        axes = CanopenAxes(nodes, scalings=profile.scalings(), **where, period=period,
                            tpdo_objects=DEFAULT_TPDO_WITH_POSITION, scaling_source=PROFILE_SCALING_SOURCE,
                            safety=given_safety(safety, period, options),
                            **patient(options.wall_paced, VIRTUAL_TIME_CANOPEN_PATIENCE))
@@ -215,9 +214,10 @@ def canopen_nodes(profile: Profile | AxesProfile, node_id: int | None, controlle
     naming :func:`~haptic_bus.app.runner.run`'s argument, or the profile's field, otherwise."""
     if isinstance(profile, AxesProfile):
         where = f"profile {profile.path or profile.name}"
-        if any(axis.node_id is None for axis in profile.axes):
-            raise ParameterError("axes[0].unit_id", profile.axes[0].unit_id,
-                                 "a node_id per axis on a CAN bus (Modbus axes: give the Modbus URL, --modbus)", where)
+        for i, axis in enumerate(profile.axes):
+            if axis.node_id is None:
+                raise ParameterError(f"axes[{i}].node_id", None, "a node_id per axis on a CAN bus (Modbus axes: give "
+                                     "the Modbus URL, --modbus)", where)
         for i, axis in enumerate(profile.axes):
             if axis.mapping != RUN_MAPPING:
                 raise ParameterError(f"axes[{i}].mapping", axis.mapping, f'"{RUN_MAPPING}" for a run: the port observer '
@@ -235,16 +235,6 @@ def canopen_nodes(profile: Profile | AxesProfile, node_id: int | None, controlle
         allowed = f"other than the drive's ({nodes[0]})" if len(nodes) == 1 else f"none of the axes has ({nodes})"
         raise ParameterError("controller_node_id", controller_node_id, f"a node id {allowed}", "run")
     return nodes
-
-
-def run_period(profile: Profile | AxesProfile) -> float:
-    """The profile's cycle period ``T`` (s): one SYNC, or one poll, for every axis."""
-    return profile.period if isinstance(profile, AxesProfile) else profile.loop.period
-
-
-def axis_scalings(profile: Profile | AxesProfile) -> list[DriveScaling]:
-    """Each axis' drive-unit scaling as the profile states it, in axis order."""
-    return [axis.device.scaling() for axis in profile.axes] if isinstance(profile, AxesProfile) else [profile.scaling()]
 
 
 def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Sequence[int] | None) -> list[int]:
@@ -291,7 +281,7 @@ def modbus_rig(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Se
 
     several = isinstance(profile, AxesProfile)
     places = list(zip(list(urls) * len(unit_ids) if len(urls) == 1 else urls, unit_ids))
-    period = run_period(profile)
+    period = profile.period
     safety = given_safety(profile.safety, period, options)
     link: dict[str, Any] = ({"kind": "modbus", "urls": [url for url, _ in places], "unit_ids": list(unit_ids)} if several
                             else {"kind": "modbus", "url": places[0][0], "unit_id": places[0][1]})
@@ -300,7 +290,7 @@ def modbus_rig(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Se
         drives = [ModbusDrive.from_url(url, unit_id=unit, scaling=scaling, scaling_source=PROFILE_SCALING_SOURCE,
                                        safety=safety, with_position=True,
                                        **patient(options.wall_paced, VIRTUAL_TIME_MODBUS_PATIENCE))
-                  for (url, unit), scaling in zip(places, axis_scalings(profile))]
+                  for (url, unit), scaling in zip(places, profile.scalings())]
         axes = ModbusAxes(drives)
         stack.callback(axes.close)
         axes.connect()  # reads only: identity, scaling, timing; a unit nobody answers for is named

@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from haptic_bus.app.profiles import AxesProfile, load_profile, one_axis_only
+from haptic_bus.app.profiles import load_profile, one_axis_only
 from haptic_bus.app.realtime import RealtimeSettings, realtime_session
 from haptic_bus.app.writer_process import COMM as WRITER_COMM
 from haptic_bus.bench.size import Size
@@ -288,7 +288,7 @@ def axes_runs(size: Size, duration: float) -> dict:
     from haptic_bus.bench.processes import canopen_simulator, cpu_hogs
 
     axes = load_profile(AXES_PROFILE)
-    period = axes.period if isinstance(axes, AxesProfile) else axes.loop.period
+    period = axes.period
     loads = ("quiet",) if size.pick(True, False, False) else ("quiet", "CPU hog")
     out: dict = {"profile": AXES_PROFILE, "node_ids": list(AXES_NODE_IDS), "period_s": period}
     try:

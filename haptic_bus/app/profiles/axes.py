@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+from drives.base import DriveScaling
 from drives.cia301 import NODE_ID_RANGE
 from drives.modbus.register_map import UNIT_ID_RANGE
 from drives.safety import SafetySettings
@@ -119,6 +120,10 @@ class AxesProfile:
         """Every axis' loop as the coupled gate judges it (m, effective b, T, its delay and velocity model)."""
         return tuple(WallLoop(a.device.mass, a.device.friction, self.period, 0.0, 0.0, a.delay, a.device.velocity)
                      for a in self.axes)
+
+    def scalings(self) -> list[DriveScaling]:
+        """Each axis' drive-unit conversion (:mod:`drives.base`), in axis order."""
+        return [axis.device.scaling() for axis in self.axes]
 
     def space_scene(self) -> SpaceScene:
         """The scene in space, compiled."""

@@ -79,9 +79,18 @@ class Profile:
         return DeviceLoop(d.mass, d.friction, self.loop.period, self.loop.delay, d.velocity, d.quantisation(),
                           transmission=d.transmission)
 
+    @property
+    def period(self) -> float:
+        """The cycle period ``T`` (s), as a multi-axis profile's ``period``."""
+        return self.loop.period
+
     def scaling(self) -> DriveScaling:
         """The drive-unit conversion of :mod:`drives.base`."""
         return self.device.scaling()
+
+    def scalings(self) -> list[DriveScaling]:
+        """Each axis' drive-unit conversion, in axis order (one), as a multi-axis profile's."""
+        return [self.scaling()]
 
     def compiled_scene(self) -> CompiledScene:
         """The scene as the piecewise-affine law the controller evaluates."""
