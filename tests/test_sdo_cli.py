@@ -179,9 +179,9 @@ def test_modbus_reads_and_writes_objects_through_the_register_map(capsys: pytest
     (["read", "0x6041:1"], "object = '0x6041:01' is invalid; allowed: an object of the Modbus register map"),
     (["write", "0x6041", "6"], "allowed: a writable object (0x0000 (0x6041 Statusword) is read-only)"),
     (["write", "0x6060", "200"], "VALUE = '200' is invalid; allowed: i8: an integer -128..127"),
-    (["read", "0x6041", "--type", "u16"], "--type = 'given with --modbus' is invalid; allowed: CANopen options only"),
-    (["read", "0x6041", "--eds", "x.eds"], "--eds = 'given with --modbus' is invalid"),
-    (["read", "0x6041", "--node-id", "5"], "--node-id = 'given with --modbus' is invalid"),
+    (["read", "0x6041", "--type", "u16"], "--type = 'u16' is invalid; allowed: only without --modbus"),
+    (["read", "0x6041", "--eds", "x.eds"], "--eds = 'x.eds' is invalid"),
+    (["read", "0x6041", "--node-id", "5"], "--node-id = 5 is invalid"),
 ])
 def test_modbus_invalid_input_is_exit_2_before_connecting(args: list[str], said: str,
                                                           capsys: pytest.CaptureFixture[str]) -> None:

@@ -287,14 +287,14 @@ INVALID = [
     (["status", "{bus}", "--node-id", "128"], "argument --node-id: node id = 128 is invalid; allowed: 1..127"),
     (["status", "{bus}"], "--node-id = None is invalid; allowed: the drive's CANopen node id 1..127 (or --modbus URL)"),
     (["status", "{bus}", "--node-id", "5", "--unit-id", "2"], "--unit-id = 2 is invalid; allowed: a Modbus option"),
-    (["status", "--modbus", "{url}", "--node-id", "5"], "--node-id = 'given with --modbus' is invalid"),
+    (["status", "--modbus", "{url}", "--node-id", "5"], "--node-id = 5 is invalid"),
     (["status", "--modbus", "{url}", "--listen", "1"], "--listen = 1.0 is invalid; allowed: a CANopen option"),
     (["status", "--modbus", "{url}", "--unit-id", "248"], "argument --unit-id: unit id = 248 is invalid; allowed: 1..247"),
     (["status", "{bus}", "--node-id", "5", "--listen", "0"], "argument --listen: --listen = 0 is invalid"),
     (["status", "{bus}", "--node-id", "5", "--timeout", "nan"], "argument --timeout: --timeout = nan is invalid"),
     (["fault-reset", "{bus}", "--node-id", "5", "--wait", "-1"], "argument --wait: --wait = -1 is invalid"),
     (["fault-reset", "{bus}", "--node-id", "5", "--wait", "61"], "allowed: a finite number in (0, 60] s"),
-    (["fault-reset", "--modbus", "{url}", "--interface", "virtual"], "--interface = 'given with --modbus' is invalid"),
+    (["fault-reset", "--modbus", "{url}", "--interface", "virtual"], "--interface = 'virtual' is invalid"),
     (["fault-reset", "--modbus", "tcp://127.0.0.1"], "argument --modbus: --modbus 'tcp://127.0.0.1' is invalid"),
 ]
 

@@ -124,8 +124,18 @@ def refuse_can_options_with_modbus(args: argparse.Namespace, command: str, other
 
     given = [dest for dest in ("interface", "channel", "bitrate", "bus_option", "bus_kwargs", *others) if getattr(args, dest)]
     if given:
-        raise ParameterError("--" + given[0].replace("_", "-"), "given with --modbus",
+        raise ParameterError("--" + given[0].replace("_", "-"), as_typed(getattr(args, given[0])),
                              f"only Modbus options ({modbus_options}) with --modbus", command)
+
+
+def as_typed(value: object) -> object:
+    """An option's parsed value as the command line gave it: ``--bus-option`` pairs as ``KEY=VALUE``
+    (``--bus-kwargs``' groups joined by spaces), anything else as it is."""
+    if isinstance(value, list):
+        return " ".join(str(as_typed(item)) for item in value)
+    if isinstance(value, tuple) and len(value) == 2:
+        return f"{value[0]}={value[1]}"
+    return value
 
 
 def add_verbosity(parser: argparse.ArgumentParser, default: object) -> None:

@@ -25,7 +25,7 @@ from haptic_bus.analysis.check import CheckReport, check_loop, format_check
 from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE, DeviceLoop
 from haptic_bus.analysis.two_mass import TwoMassLoop
 from haptic_bus.analysis.two_mass_check import TwoMassReport, check_two_mass_loop, format_two_mass
-from haptic_bus.app.arguments import number, timeout
+from haptic_bus.app.arguments import as_typed, number, timeout
 from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
 from haptic_bus.app.json_ready import json_ready
 from haptic_bus.app.profile_view import format_axes_profile, format_profile, gate_decision_to_dict, space_decision_to_dict
@@ -219,12 +219,11 @@ def _new_target(args: argparse.Namespace) -> tuple[pathlib.Path, DriveAddress]:
         raise ParameterError("NAME", args.name, "a name of letters, digits, '.', '_', '-' (not starting with '.', '_', '-')",
                              "profiles new")
     address = drive_address(args, "profiles new", node_required=False)
-    drive_given = [flag for flag, dest in (("--node-id", "node_id"), ("--modbus", "modbus"), ("--interface", "interface"),
-                                           ("--channel", "channel"), ("--bus-option", "bus_option"),
-                                           ("--bus-kwargs", "bus_kwargs")) if getattr(args, dest)]
+    drive_given = [dest for dest in ("node_id", "modbus", "interface", "channel", "bus_option", "bus_kwargs")
+                   if getattr(args, dest)]
     if not args.from_drive and drive_given:
-        raise ParameterError(drive_given[0], "given without --from-drive", "drive options only with --from-drive",
-                             "profiles new")
+        raise ParameterError("--" + drive_given[0].replace("_", "-"), as_typed(getattr(args, drive_given[0])),
+                             "drive options only with --from-drive", "profiles new")
     if args.from_drive and address.node_id is None and not address.modbus:
         raise ParameterError("--from-drive", "without a drive", "--node-id N (and the bus) or --modbus URL", "profiles new")
     target = pathlib.Path(args.out or f"{args.name}.toml")

@@ -62,9 +62,9 @@ def run_sdo(args: argparse.Namespace) -> int:
     if args.type is not None and args.type not in TYPE_NAMES:
         raise ParameterError("--type", args.type, " ".join(TYPE_NAMES))
     if address.modbus:
-        given = [flag for flag, value in (("--type", args.type), ("--eds", args.eds)) if value is not None]
+        given = [(flag, value) for flag, value in (("--type", args.type), ("--eds", args.eds)) if value is not None]
         if given:
-            raise ParameterError(given[0], "given with --modbus", "CANopen options only: the register map fixes the type")
+            raise ParameterError(*given[0], "only without --modbus (its register map fixes the type)")
         result = _modbus(address, index, subindex, args.value, args.timeout)
     else:
         result = _canopen(address, index, subindex, args)
