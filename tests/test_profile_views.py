@@ -176,12 +176,13 @@ def test_profiles_check_and_show_judge_a_multi_axis_profile_by_the_coupled_gate(
     shown = capsys.readouterr().out
     assert "z (node 7): m=0.5 kg b=10 N s/m" in shown and "sphere ball: center=(0, -0.03, 0), radius=0.01" in shown
     assert "coupled gate: accepts" in shown and "ball: margin +4.277 N s/m" in shown
-    # a wall the coupled gate refuses: check says so (exit 1), show still shows it (exit 0)
+    # a wall the coupled gate refuses: check says so, show still shows it; both exit 1, as for one axis
     stiff = _variant(tmp_path, "stiffness = 1500", "stiffness = 200000", "gantry-3d", -1)
     assert haptic_bus_main(["profiles", "check", str(stiff)]) == 1
     assert "coupled gate: REFUSES" in capsys.readouterr().out
-    assert haptic_bus_main(["profiles", "show", str(stiff)]) == 0
-    assert "refused:" in capsys.readouterr().out
+    assert haptic_bus_main(["profiles", "show", str(stiff)]) == 1
+    shown = capsys.readouterr()
+    assert "refused:" in shown.out and shown.err.count("\n") == 1 and "passivity gate refused the scene" in shown.err
     # an invalid value: one line, exit 2, from both commands
     bad = _variant(tmp_path, "\nmass = 0.5\n", "\nmass = nan\n", "gantry-3d")
     for command in ("check", "show"):

@@ -343,8 +343,9 @@ def test_cli_exit_codes(tmp_path, capsys):
     refused = write(tmp_path, SHIPPED["seed-ideal"].read_text().replace('"ideal"', '"cia402"'), "s.toml")
     assert cmd_check(ns(profile=str(refused))) == 1
     assert "verdict: NOT passive" in capsys.readouterr().out
-    assert cmd_show(ns(profile=str(refused))) == 1
-    assert "margin -84.09" in capsys.readouterr().err
+    assert cmd_show(ns(profile=str(refused))) == 1  # shown all the same, the refusal one line on stderr
+    shown = capsys.readouterr()
+    assert "gate: REFUSED" in shown.out and shown.err.count("\n") == 1 and "margin -84.09" in shown.err
     invalid = write(tmp_path, BASE.replace("mass = 1.0", "mass = -1.0"), "bad.toml")
     for command in (cmd_show, cmd_check):
         assert command(ns(profile=str(invalid))) == 2

@@ -36,6 +36,7 @@ from haptic_bus.app.profiles import (
     AxesProfile,
     Profile,
     admit,
+    gate_refusal,
     profile_to_dict,
     read_profile,
     resolve_profile,
@@ -103,30 +104,27 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def cmd_show(args: argparse.Namespace) -> int:
-    """Print one profile (default: the default profile) and the gate's decision on it: 0; 1 a one-axis
-    profile its gate refuses (a multi-axis one is shown with the coupled gate's refusal); 2 invalid."""
+    """Print one profile (default: the default profile) and its gate's decision on it (the coupled gate
+    for several axes): 0; 1 the gate refuses it (shown all the same, and the refusal on stderr); 2 invalid."""
     try:
         profile = read_profile(args.profile)
     except ParameterError as error:
         return _fail("show", error)
     if isinstance(profile, AxesProfile):
-        return _show_axes(profile, args.json, "show")
-    try:
-        decision = admit(profile)
-    except Refusal as refusal:
-        return _refused("show", refusal)
-    if args.json:
-        print(json.dumps(json_ready(profile_to_dict(profile) | {"gate_decision": gate_decision_to_dict(decision)})))
+        space = profile.judge()
+        view, as_dict, refusal = format_axes_profile(profile, space), space_decision_to_dict(space), gate_refusal(profile, space)
     else:
-        print(format_profile(profile, decision))
-    return EXIT_OK
+        one = profile.judge()
+        view, as_dict, refusal = format_profile(profile, one), gate_decision_to_dict(one), gate_refusal(profile, one)
+    print(json.dumps(json_ready(profile_to_dict(profile) | {"gate_decision": as_dict})) if args.json else view)
+    return EXIT_OK if refusal is None else _refused("show", refusal)
 
 
-def _show_axes(profile: AxesProfile, as_json: bool, command: str) -> int:
-    """``show``/``check`` of a multi-axis profile: its axes, its scene and the coupled gate's decision;
-    0 (check: the gate accepts), 1 (check: it refuses)."""
+def _check_axes(profile: AxesProfile, as_json: bool) -> int:
+    """``check`` of a multi-axis profile: its axes, its scene and the coupled gate's verdict on every wall;
+    0 the gate accepts, 1 it refuses."""
     decision = profile.judge()
-    if as_json and command == "check":  # as a one-axis profile's check: verdict, gate, every wall judged
+    if as_json:  # as a one-axis profile's check: verdict, gate, every wall judged
         gate = space_decision_to_dict(decision)
         walls = gate.pop("walls")
         policy = profile.gate_policy
@@ -134,11 +132,9 @@ def _show_axes(profile: AxesProfile, as_json: bool, command: str) -> int:
                                      "passive": all(wall.verdict.margin >= 0.0 for wall in decision.walls),
                                      "gate": gate | {"safety_margin": policy.safety_margin, "bandwidth": policy.bandwidth},
                                      "walls": walls})))
-    elif as_json:  # as a one-axis profile's show: the profile as run.json's settings show it, and the decision
-        print(json.dumps(json_ready(profile_to_dict(profile) | {"gate_decision": space_decision_to_dict(decision)})))
     else:
         print(format_axes_profile(profile, decision))
-    return EXIT_OK if command == "show" or decision.accepted else EXIT_NO
+    return EXIT_OK if decision.accepted else EXIT_NO
 
 
 def _still_missing(path: pathlib.Path) -> int | None:
@@ -179,7 +175,7 @@ def cmd_check(args: argparse.Namespace) -> int:
             return lacking
         read = read_profile(args.profile)
         if isinstance(read, AxesProfile):
-            return _show_axes(read, args.json, "check")
+            return _check_axes(read, args.json)
         profile = read
         decision = profile.judge()
         loop, device_loop = profile.loop, profile.device_loop()

@@ -32,8 +32,8 @@ from haptic_bus.profile.reader import read_document
 from haptic_bus.profile.scene import FORCE_RANGE
 
 __all__ = ["DEFAULT_PROFILE", "FORCE_RANGE", "NAME_PATTERN", "AxesProfile", "Axis", "DeviceTable", "LoopTiming",
-           "Profile", "StartPolicy", "admit", "default_profile", "load_profile", "one_axis_only", "profile_to_dict",
-           "read_profile", "resolve_profile", "shipped_profiles"]
+           "Profile", "StartPolicy", "admit", "default_profile", "gate_refusal", "load_profile", "one_axis_only",
+           "profile_to_dict", "read_profile", "resolve_profile", "shipped_profiles"]
 
 DEFAULT_PROFILE = "cia402-handle"
 
@@ -64,9 +64,18 @@ def admit(profile: Profile | AxesProfile) -> GateDecision | SpaceDecision:
     """The decision of the profile's gate (the coupled gate for several axes) on its scene; :class:`Refusal`
     if it refuses, unless the profile runs beyond the gate under the bound layer (``[passivity] beyond_gate``)."""
     decision = profile.judge()
-    if not decision.accepted and not profile.passivity.beyond_gate:
-        raise Refusal.by_gate(decision, f"profile {profile.path or profile.name}", "scene")
+    refusal = gate_refusal(profile, decision)
+    if refusal is not None:
+        raise refusal
     return decision
+
+
+def gate_refusal(profile: Profile | AxesProfile, decision: GateDecision | SpaceDecision) -> Refusal | None:
+    """The refusal that the gate's ``decision`` on ``profile``'s scene makes (None: accepted, or the
+    profile runs beyond the gate under the bound layer)."""
+    if decision.accepted or profile.passivity.beyond_gate:
+        return None
+    return Refusal.by_gate(decision, f"profile {profile.path or profile.name}", "scene")
 
 
 def load_profile(path_or_name: str | pathlib.Path) -> Profile | AxesProfile:
