@@ -199,7 +199,7 @@ def test_a_torque_computed_from_a_missed_tpdo_is_a_late_cycle(
     assert result.code == 3, result.err
     (line,) = result.err_lines
     assert line.startswith("haptic-bus run: assumption broken: the loop delay: 11 of the last 1000 cycles acted more than "
-                           "0.5 T late (11 on an input the drive did not renew in time; worst 1 ms at T = 1 ms): a loop "
+                           "0.5 T late (11 on an input CANopen node 5 did not renew in time; worst 1 ms at T = 1 ms): a loop "
                            "delay of about 2 samples"), line
     assert _disabled_not_faulted(drive.states), drive.states
     _, record = read_record(out)

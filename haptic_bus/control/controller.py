@@ -221,8 +221,8 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
                         hold=self.hold, force_limit=min(limit, s.max_force), softest_spring=softest,
                         initial_energy=stored, tolerance=tolerance)
             for name, loop, s, limit, stored in zip(names, loops, scalings, limits, self._stored_energies(scene, origins)))
-        self.supervisor = Supervisor(supervisor, self.period, max(loop.delay for loop in loops)) \
-            if supervisor is not None else None
+        self.supervisor = Supervisor(supervisor, self.period, max(loop.delay for loop in loops),
+                                     tuple(d.name for d in axes.drives)) if supervisor is not None else None
         self.records = tuple(RunRecord(record_capacity, shared=shared_records) for _ in range(size))
         self.ramp_cycles = round(ramp_time / self.period)
         self._derate = derate
@@ -395,14 +395,15 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         wall_clock = time.time()
         q, q_dot = self._joints
         energy = 0.0
-        age = 0
+        age = oldest = 0
         first = not self.cycles
         for i, (found, port, integrator, scaling) in enumerate(zip(inputs, self.ports, self.integrators, self._scalings)):
             energy += port.account(found, scaling.position_per_count)
             q[i] = integrator.start((found.position or 0) * scaling.position_per_count, found.velocity) if first \
                 else integrator.add(found.velocity)
             q_dot[i] = found.velocity * scaling.velocity_per_count
-            age = max(age, found.age)  # the whole cycle is as late as its oldest input
+            if found.age > age:  # the whole cycle is as late as its oldest input
+                age, oldest = found.age, i
         scale = 1.0 if self.cycles >= self.ramp_cycles else (self.cycles + 1) / self.ramp_cycles
         kinematics = self.kinematics
         jacobian = kinematics.jacobian(q)
@@ -417,7 +418,7 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         torques = [port.limit(torque) for port, torque in zip(self.ports, sent)]
         cycle.write(torques)
         compute = time.perf_counter() - started
-        late, alarm = self.supervisor.cycle(lateness, energy, age) if self.supervisor is not None else (False, None)
+        late, alarm = self.supervisor.cycle(lateness, energy, age, oldest) if self.supervisor is not None else (False, None)
         self._account(energy, forces, saturated)
         t = self.cycles * self.period
         for i, (record, port, found) in enumerate(zip(self.records, self.ports, inputs)):

@@ -107,8 +107,10 @@ class Supervisor:
     one alarm (each kind alarms once per window, so a warning does not flood the record).
     """
 
-    def __init__(self, policy: SupervisorPolicy, period: float, assumed_delay: float) -> None:
+    def __init__(self, policy: SupervisorPolicy, period: float, assumed_delay: float,
+                 sources: tuple[str, ...] = ("the drive",)) -> None:
         self.policy = policy
+        self.sources = sources  # who renews the inputs, in axis order: named when one did not in time
         self.period = period
         self.assumed_delay = assumed_delay
         self.late_cycles = 0
@@ -116,22 +118,23 @@ class Supervisor:
         self._tolerance = policy.late_tolerance * period
         self._lateness = np.zeros(policy.late_window)  # s beyond the assumed delay: start lateness + input age
         self._late = np.zeros(policy.late_window, dtype=bool)
-        self._stale = np.zeros(policy.late_window, dtype=bool)  # computed from an older input than the cycle's
+        self._stale = np.zeros(policy.late_window, dtype=np.int16)  # 1 + the source of an input older than the cycle, else 0
         self._late_in_window = 0
         self._slot = 0
         self._quiet_until = {"late": 0, "observer": 0}
         self._cycle = 0
 
-    def cycle(self, lateness: float, energy: float, input_age: int = 0) -> tuple[bool, Alarm | None]:
+    def cycle(self, lateness: float, energy: float, input_age: int = 0, source: int = 0) -> tuple[bool, Alarm | None]:
         """Account one cycle: its start ``lateness`` (s), the observer's ``energy`` (J), and how many
-        samples older than the cycle's own its input was (``input_age``, 0: fresh)."""
+        samples older than the cycle's own its oldest input was (``input_age``, 0: fresh), from which of
+        :attr:`sources` (``source``, an index)."""
         policy = self.policy
         slot = self._slot
         beyond = lateness + input_age * self.period
         late = beyond > self._tolerance
         self._late_in_window += late - bool(self._late[slot])
         self._late[slot] = late
-        self._stale[slot] = input_age > 0
+        self._stale[slot] = source + 1 if input_age > 0 else 0
         self._lateness[slot] = beyond
         self._slot = slot + 1 if slot + 1 < policy.late_window else 0
         self._cycle += 1
@@ -155,7 +158,8 @@ class Supervisor:
     def _late_message(self) -> str:
         worst = float(self._lateness.max())
         stale = int(np.count_nonzero(self._stale))
-        verb, why = ("started", "") if not stale else ("acted", f"{stale} on an input the drive did not renew in time; ")
+        late = ", ".join(self.sources[index - 1] for index in np.unique(self._stale) if index)
+        verb, why = ("started", "") if not stale else ("acted", f"{stale} on an input {late} did not renew in time; ")
         return (f"{self._late_in_window} of the last {self.policy.late_window} cycles {verb} more than "
                 f"{self.policy.late_tolerance:g} T late ({why}worst {worst * 1e3:.3g} ms at T = {self.period * 1e3:g} ms): "
                 f"a loop delay of about {self.observed_delay():.3g} samples")
