@@ -126,12 +126,13 @@ class QuantisedRun:
 
 
 class _Handle:
-    """The handle's exact motion under a constant push and wall force, with Coulomb friction."""
+    """The handle's exact motion under a constant push and wall force, with Coulomb friction, from
+    rest at ``start`` (m)."""
 
-    def __init__(self, m: float, b: float, coulomb: float, damping: float) -> None:
+    def __init__(self, m: float, b: float, coulomb: float, damping: float, start: float) -> None:
         self.m, self.coulomb, self.damping = m, coulomb, damping
         self.a = (b + damping) / m
-        self.x = 0.0
+        self.x = start
         self.v = 0.0
         self.energy = 0.0
         self.least = 0.0
@@ -215,8 +216,7 @@ def simulate_quantised(loop: WallLoop, hand: Hand, quantiser: Quantiser, coulomb
     reset = None if width is None else 1.0 - min(width, T) / T
     steps = hand.substeps
     bounds = sorted({j / steps for j in range(steps)} | {delta} | ({reset} if reset is not None else set()) | {1.0})
-    handle = _Handle(loop.m, loop.b, coulomb, hand.damping)
-    handle.x = start
+    handle = _Handle(loop.m, loop.b, coulomb, hand.damping, start)
     n = hand.samples
     forces = [0.0] * (d + 2)  # u_{k-d-1} .. u_k, oldest first
     last = quantiser.count(start)
