@@ -21,6 +21,7 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 from drives.base import (
     SCALING_FIELDS,
@@ -151,17 +152,23 @@ def merge_scaling(
     return scaling, ScalingReport(tuple(factors), tuple(notes))
 
 
-class Cia402Master(Drive):
-    """Mode selection, state-machine walks, fault reset, and the cyclic safety state.
+ConnectionT = TypeVar("ConnectionT")
 
-    Subclasses call :meth:`_init_master` from their constructor and set ``state_timeout``
+
+class Cia402Master(Drive, Generic[ConnectionT]):
+    """Mode selection, state-machine walks, fault reset, the cyclic safety state, and the connection's life.
+
+    Subclasses call :meth:`_init_master` from their constructor, set ``state_timeout``
     (s, per state-machine step) and ``max_commands_per_step`` (a bound on the exchanges one
-    step may take besides the time).
+    step may take besides the time), and implement ``_establish`` (reach and configure the drive
+    over their bus: the ``ConnectionT`` that :meth:`connect` keeps as ``connection`` until
+    their ``close()``).
     """
 
     state_timeout: float
     max_commands_per_step: int
     stats: CyclicStats
+    connection: ConnectionT | None  # what connect() built, until close()
 
     def _init_master(self, name: str, stats: CyclicStats, scaling: DriveScaling | None,
                      scaling_source: str = "caller") -> None:
@@ -175,6 +182,30 @@ class Cia402Master(Drive):
         self._controlword = SAFE_CONTROLWORD
         self._armed = False  # OPERATION ENABLED reached: the fault bit raises
         self._tripped: DriveError | None = None
+        self.connection = None
+        self._closed = False
+
+    # ------------------------------------------------------------------ connection
+
+    def connect(self) -> ConnectionT:
+        """Reach the drive and configure it over its bus (``_establish``); raise DriveTimeout.  Returns the
+        connection (the same one again while connected); DriveError once the drive object is closed."""
+        if self._closed:
+            raise DriveError(self.name, "the drive object is closed; create a new one")
+        if self.connection is None:
+            self.connection = self._establish()
+        return self.connection
+
+    @abc.abstractmethod
+    def _establish(self) -> ConnectionT:
+        """Reach and configure the drive over the bus; the new connection (on failure: raise, nothing left open)."""
+
+    def connected(self) -> ConnectionT:
+        """The connection; DriveError if there is none (before connect(), after close())."""
+        connection = self.connection
+        if connection is None:
+            raise DriveError(self.name, "not connected; call connect() first")
+        return connection
 
     # ------------------------------------------------------------------ primitives
 
@@ -193,9 +224,6 @@ class Cia402Master(Drive):
     @abc.abstractmethod
     def _send_safe_outputs(self) -> None:
         """One attempt to put zero torque with DISABLE VOLTAGE on the wire; never raises."""
-
-    def _require_connected(self) -> None:
-        """Raise DriveError if the link is not up (subclasses know how to tell)."""
 
     def _clear_events(self) -> None:
         """Forget events seen before an enable or a fault reset (subclass hook)."""
@@ -286,7 +314,7 @@ class Cia402Master(Drive):
         """What :meth:`enable` does before the state-machine walk: check 0x6502, write 0x6060, await
         0x6061, forget the last trip and the events seen.  A master walking several drives on one
         SYNC calls it per drive, walks them together (:class:`StateWalk`), then :meth:`mark_enabled`."""
-        self._require_connected()
+        self.connected()
         self._select_mode(mode)
         self._before_enable()
         self._tripped = None
@@ -309,7 +337,7 @@ class Cia402Master(Drive):
 
     def fault_reset(self) -> None:
         """Rising edge of controlword bit 7, then back to 0; check the drive leaves FAULT."""
-        self._require_connected()
+        self.connected()
         self._armed = False
         self._clear_events()
         self._reset_fault()

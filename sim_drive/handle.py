@@ -35,12 +35,11 @@ motion with that stretch's initial velocity, net force and displacement.
 from __future__ import annotations
 
 import itertools
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Generic, Protocol, TypeVar
 
-from haptic_bus.analysis.plant import exp_divided_difference, phi1, phi2, zoh_coefficients
+from haptic_bus.analysis.plant import exp_divided_difference, phi1, phi2, stop_time, zoh_coefficients
 from sim_drive.operator import LET_GO, NoOperator, OperatorModel
 from sim_drive.parameters import DeviceParameters
 
@@ -111,15 +110,6 @@ def viscous_coefficients(m: float, b: float, h: float) -> tuple[float, float, fl
         2.0 * b * h * h / m * exp_divided_difference(0.0, -c, -2.0 * c),
         2.0 * b * h**3 / (m * m) * _exp_0_0_c_2c(c),
     )
-
-
-def stop_time(m: float, b: float, speed: float, deceleration: float) -> float:
-    """Seconds until a handle moving at ``speed`` m/s (> 0) stops under a held net braking force ``deceleration`` N (> 0).
-
-    ``m du/dt = -b u - g`` gives ``t* = (m/b) log1p(b u/g) = (m u/g) log1p(y)/y``, ``y = b u/g`` (exact as ``b -> 0``).
-    """
-    y = b * speed / deceleration
-    return m * speed / deceleration * (math.log1p(y) / y if y else 1.0)
 
 
 StepT = TypeVar("StepT")

@@ -360,7 +360,7 @@ def test_one_thread_owns_the_bus_of_a_three_axis_run_and_its_uploads_pass_the_co
     calls = BusCalls(monkeypatch)
     profile = load_profile("gantry-3d")
     bus = {"interface": "lockstep", "channel": f"one-thread-{tmp_path.name}"}
-    block = [obj.name for obj in profile.space_scene().objects].index("block")
+    block = [obj.name for obj in profile.compiled_scene().objects].index("block")
     options = RunOptions(60.0, pacing="virtual", out_dir=tmp_path / "run", live=False, plots=False)
     verdicts: list[str] = []
 

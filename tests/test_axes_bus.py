@@ -54,7 +54,7 @@ def rig(tmp_path: pathlib.Path) -> Iterator[tuple[AxesProfile, MultiAxisSim, Can
 
 
 def controller_for(profile: AxesProfile, axes: CanopenAxes) -> WallController:
-    return WallController(axes, profile.gate(), profile.space_scene(), names=[a.name for a in profile.axes],
+    return WallController(axes, profile.gate(), profile.compiled_scene(), names=[a.name for a in profile.axes],
                           force_limit=[a.force_limit for a in profile.axes], origin=encoder_origins(axes),
                           supervisor=profile.supervisor, passivity=profile.passivity)
 

@@ -100,7 +100,7 @@ def test_the_scale_family_along_a_normal_is_the_coupled_verdict_on_every_scale(g
 
 def test_three_axes_start_inside_a_plane_and_ramp_the_force_in_along_its_normal(gantry: AxesProfile) -> None:
     profile = slab(gantry)
-    gate, scene = profile.gate(), profile.space_scene()
+    gate, scene = profile.gate(), profile.compiled_scene()
     proof = gate.proves_ramp(scene)
     assert proof.proven and proof.reason == ""
     ramp_time = 0.1  # s: 50 cycles at T = 2 ms
@@ -138,7 +138,7 @@ def test_the_ramp_is_refused_where_a_scaled_wall_is_active_on_the_way(gantry: Ax
 
 def test_three_axes_take_uploads_through_the_coupled_gate_whole_at_a_cycle_boundary(gantry: AxesProfile) -> None:
     profile = dataclasses.replace(gantry, operator_model={"model": "none"})
-    gate, first = profile.gate(), profile.space_scene()
+    gate, first = profile.gate(), profile.compiled_scene()
     too_stiff, softer = {"ball": (1e6, 5.0)}, {"ball": (1000.0, 5.0), "block": (1000.0, 5.0)}
     for change in (too_stiff, softer):  # judged once before the drives run: the uploads below hit the verdict cache,
         gate.judge(first.with_walls(change))  # so the drives' RPDO deadlines never wait on the coupled criterion

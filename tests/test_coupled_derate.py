@@ -89,7 +89,7 @@ def test_an_entry_the_judge_worker_is_building_at_the_end_is_given_up_with_the_w
     # to exit (the interpreter's exit joins the executor, which finishes every task it was given)
     profile = load_profile("gantry-3d")
     pool = judge_pool()
-    derate = DerateTable(profile.gate(), profile.space_scene(), COUPLED_SCALE_STEPS, pool)
+    derate = DerateTable(profile.gate(), profile.compiled_scene(), COUPLED_SCALE_STEPS, pool)
     entries = [entry for _, entry in derate.entries]
     assert wait_until(entries[0].running, TABLE_WAIT)  # in the worker: as at a run's end
     derate.abandon()

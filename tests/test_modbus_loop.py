@@ -92,7 +92,7 @@ def test_the_analytic_loop_has_the_seed_poles() -> None:
 def test_constant_push_settles_at_f_over_k(seed_rig) -> None:
     push, cycles = 2.0, 4000
     server, drive, controller = seed_rig(ConstantPush(push))
-    assert loop_delay(drive, T) == 0 and drive.simulated_timing == "ideal"
+    assert loop_delay(drive, T) == 0 and drive.connected().simulated_timing == "ideal"
     summary = controller.run(cycles)
     assert summary.error is None and summary.cycles == cycles
     assert server.drive.time == pytest.approx(cycles * T)  # one plant period per Modbus cycle
@@ -165,4 +165,4 @@ def test_a_simulated_drive_with_reception_timing_announces_its_fractional_delay(
     with ModbusSimServer(timing="reception", parameters=parameters) as server, \
             ModbusDrive("127.0.0.1", server.port, timeout=2.0, safety=VIRTUAL_TIME_SAFETY) as drive:
         drive.connect()
-        assert drive.simulated_timing == "reception" and loop_delay(drive, T) == 0.3
+        assert drive.connected().simulated_timing == "reception" and loop_delay(drive, T) == 0.3

@@ -158,7 +158,7 @@ def test_profiles_check_and_show_judge_a_multi_axis_profile_by_the_coupled_gate(
     from haptic_bus.app.profiles import load_profile
 
     profile = load_profile("gantry-3d")
-    decision = profile.gate().judge(profile.space_scene())
+    decision = profile.gate().judge(profile.compiled_scene())
     assert haptic_bus_main(["profiles", "show", "gantry-3d", "--json"]) == 0  # the shape of a one-axis show
     report = json.loads(capsys.readouterr().out)
     assert report["gate_decision"]["accepted"] and [a["name"] for a in report["axes"]] == ["x", "y", "z"]

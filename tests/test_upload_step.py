@@ -98,7 +98,7 @@ def test_three_axes_refuse_a_plane_moved_onto_the_handle_and_take_the_one_it_pre
     slab = Plane("slab", (0.002, 0.002, 0.0), normal, 1500.0, 5.0)  # the handle starts 2.83 mm inside
     shelf = Plane("shelf", (0.0, 0.0, 0.001), (0.0, 0.0, 1.0), 800.0, 5.0)  # 1 mm above it: inside at once
     profile = dataclasses.replace(gantry, space=(slab,), operator_model={"model": "none"})
-    gate, first = profile.gate(), profile.space_scene()
+    gate, first = profile.gate(), profile.compiled_scene()
     onto, stiffer = compile_space_scene([slab, shelf]), first.with_walls({"slab": (2000.0, 5.0)})
     for scene in (onto, stiffer):  # judged before the drives run: the uploads below hit the verdict cache
         gate.judge(scene)

@@ -95,7 +95,7 @@ def _check(name: str, ok: bool, value: object, allowed: str) -> None:
         raise ParameterError(name, value, allowed, "CANopen drive")
 
 
-class CanopenDrive(Cia402Master):
+class CanopenDrive(Cia402Master[CanopenConnection]):
     """A CiA-402 servo drive on CANopen, driven in cyclic synchronous torque mode.
 
     Bus, one of: ``network`` (a :class:`canopen.Network`, connected or not), ``bus`` (a
@@ -207,9 +207,7 @@ class CanopenDrive(Cia402Master):
         self.cycle = cycle if cycle is not None else SyncCycle(self.name, self.link,
                                                                safety.longest_tpdo_wait(period, tpdo_timeout))
         self.cycle.join(self.exchange)
-        self.connection: CanopenConnection | None = None  # what connect() built, until close()
         self._missed_in_row = 0
-        self._closed = False
 
     @property
     def period(self) -> float:
@@ -248,13 +246,8 @@ class CanopenDrive(Cia402Master):
 
     # ------------------------------------------------------------------ connection
 
-    def connect(self) -> CanopenConnection:
-        """Reach the drive and configure it (NMT, SDO, PDO mapping, 0x1006, heartbeat); raise DriveTimeout.
-        Returns the connection (the same one again while connected)."""
-        if self._closed:
-            raise DriveError(self.name, "the drive object is closed; create a new one")
-        if self.connection is not None:
-            return self.connection
+    def _establish(self) -> CanopenConnection:
+        """NMT, SDO, PDO mapping, 0x1006, heartbeat (connect() calls it); raise DriveTimeout."""
         try:
             dictionary = load_object_dictionary(self.eds, self.node_id)
         except (OSError, ValueError, KeyError) as exc:
@@ -282,18 +275,7 @@ class CanopenDrive(Cia402Master):
         except BaseException:
             self._release(node, events)
             raise
-        self.connection = CanopenConnection(node, sdo, events, found)
-        return self.connection
-
-    def connected(self) -> CanopenConnection:
-        """The connection; DriveError if there is none (before connect(), after close())."""
-        connection = self.connection
-        if connection is None:
-            raise DriveError(self.name, "not connected; call connect() first")
-        return connection
-
-    def _require_connected(self) -> None:
-        self.connected()
+        return CanopenConnection(node, sdo, events, found)
 
     def _clear_events(self) -> None:
         self._missed_in_row = 0
@@ -419,7 +401,7 @@ class CanopenDrive(Cia402Master):
 
     def state(self) -> State | None:
         """The drive's CiA-402 state: one SYNC/TPDO exchange, answered with the held controlword and zero torque."""
-        self._require_connected()
+        self.connected()
         return decode_statusword(self._command(self.hold_word()))
 
     def mark_enabled(self) -> None:

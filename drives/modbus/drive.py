@@ -96,7 +96,7 @@ class ModbusConnection:
     simulated_delay: float | None = None
 
 
-class ModbusDrive(Cia402Master):
+class ModbusDrive(Cia402Master[ModbusConnection]):
     """A CiA-402 drive reached over Modbus TCP (``host``, ``port``) or RTU (``port`` = serial path).
 
     ``unit_id``: the Modbus unit (device id) 1..247 (:data:`~drives.modbus.register_map.UNIT_ID_RANGE`: 0
@@ -159,8 +159,6 @@ class ModbusDrive(Cia402Master):
         self.link = ModbusLink(self.name, address, stats)
         self._codec = InputBlockCodec(word_order, with_position)
         self._requests = CyclicRequests(unit_id, self._codec.count)
-        self.connection: ModbusConnection | None = None  # what connect() found, until close()
-        self._closed = False
 
     @classmethod
     def from_url(cls, url: str, *, timeout: float = 0.1, **options: Any) -> ModbusDrive:
@@ -184,11 +182,6 @@ class ModbusDrive(Cia402Master):
         return self._codec.with_position
 
     @property
-    def simulated_timing(self) -> str | None:
-        """"ideal"/"cia402"/"reception" when the server is the simulated drive (after connect())."""
-        return self.connection.simulated_timing if self.connection is not None else None
-
-    @property
     def simulated_delay(self) -> float | None:
         """That simulated drive's loop delay, samples (after connect())."""
         return self.connection.simulated_delay if self.connection is not None else None
@@ -204,36 +197,26 @@ class ModbusDrive(Cia402Master):
         self._requests.cached = None
         self.link.drop()
 
-    def connect(self) -> ModbusConnection:
-        """Open the link, check the map identity, read scaling (0x6076, 0x6072, 0x0040..); raise DriveTimeout.
-        Returns the connection (the same one again while connected)."""
-        if self._closed:
-            raise DriveError(self.name, "the drive object is closed; create a new one")
-        if self.connection is not None:
-            return self.connection
-        return self._establish()
-
     def _establish(self) -> ModbusConnection:
+        """Open the link, check the map identity, read scaling (0x6076, 0x6072, 0x0040..) (connect() calls it);
+        raise DriveTimeout."""
         self.link.open()
         self._requests.cached = None
         try:
-            self.connection = self._configure()
+            return self._configure()
         except BaseException:
             self._drop_link()
             raise
-        return self.connection
 
     def reconnect(self) -> ModbusConnection:
         """Close and reopen the link (explicit; never done silently), re-check identity and scaling.
 
         The trip state stays: call :meth:`fault_reset` or :meth:`enable` afterwards.
         """
-        if self._closed:
-            raise DriveError(self.name, "the drive object is closed; create a new one")
         self._drop_link()
         self.connection = None
         self._armed = False
-        return self._establish()
+        return self.connect()  # DriveError if the drive object is closed
 
     def _configure(self) -> ModbusConnection:
         if self.check_identity:
@@ -311,10 +294,6 @@ class ModbusDrive(Cia402Master):
         if self.link.client is None:
             raise DriveError(self.name, "not connected; call connect() first")
 
-    def _require_connected(self) -> None:
-        if self.connection is None:
-            raise DriveError(self.name, "not connected; call connect() first")
-
     # ------------------------------------------------------------------ safety
 
     def _send_safe_outputs(self) -> None:
@@ -359,12 +338,12 @@ class ModbusDrive(Cia402Master):
 
     def read_inputs(self) -> CyclicInputs:
         """This cycle's statusword, velocity[, position]: FC03, or the inputs the last FC23 brought."""
-        self._require_connected()
+        self.connected()
         return self._cycle_inputs()
 
     def _bind_cycle(self) -> DriveCycle:
         """The cycle's read past the connection check (done once here)."""
-        self._require_connected()
+        self.connected()
         return DriveCycle(self.name, self._cycle_inputs, self.clamp, self._send_torque)
 
     def _cycle_inputs(self) -> CyclicInputs:

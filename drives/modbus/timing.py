@@ -38,7 +38,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -49,7 +49,7 @@ from drives.modbus.drive import ModbusDrive
 if TYPE_CHECKING:
     from drives.modbus.axes import ModbusAxes
 
-__all__ = ["PollTiming", "Polled", "SAFETY_FACTOR", "assumed_delay", "measure_poll", "loop_delay", "time_cycles"]
+__all__ = ["PollTiming", "SAFETY_FACTOR", "assumed_delay", "measure_poll", "loop_delay", "time_cycles"]
 
 SAFETY_FACTOR = 1.5
 """The gate's loop delay is this many times the p99 round trip (module docstring)."""
@@ -116,24 +116,7 @@ def measure_poll(drive: ModbusDrive | ModbusAxes, cycles: int = 1000, *, time_li
         return time_cycles(drive, poll, cycles, time_limit)
 
 
-class Polled(Protocol):
-    """What :func:`time_cycles` reads of what it polls: the cycle mode and a count of cyclic requests."""
-
-    @property
-    def cycle(self) -> str: ...
-
-    @property
-    def stats(self) -> CyclicRequests: ...
-
-
-class CyclicRequests(Protocol):
-    """A count of cyclic requests sent so far."""
-
-    @property
-    def cyclic_requests(self) -> int: ...
-
-
-def time_cycles(drive: Polled, cycle: Callable[[], object], cycles: int, time_limit: float) -> PollTiming:
+def time_cycles(drive: ModbusDrive | ModbusAxes, cycle: Callable[[], object], cycles: int, time_limit: float) -> PollTiming:
     """Run ``cycle`` (one exchange with ``drive``) ``cycles`` times back to back, or until one ends
     more than ``time_limit`` s after the first began; each cycle timed (``time.perf_counter``, s)."""
     if cycles < 1:

@@ -99,6 +99,15 @@ def zoh_coefficients(m: float, b: float, h: float) -> ZohCoefficients:
     )
 
 
+def stop_time(m: float, b: float, speed: float, deceleration: float) -> float:
+    """Seconds until a handle moving at ``speed`` m/s (> 0) stops under a held net braking force ``deceleration`` N (> 0).
+
+    ``m du/dt = -b u - g`` gives ``t* = (m/b) log1p(b u/g) = (m u/g) log1p(y)/y``, ``y = b u/g`` (exact as ``b -> 0``).
+    """
+    y = b * speed / deceleration
+    return m * speed / deceleration * (math.log1p(y) / y if y else 1.0)
+
+
 class ExactPlant:
     """The handle's state (velocity m/s, position m) advanced exactly under held forces."""
 

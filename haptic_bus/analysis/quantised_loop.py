@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from haptic_bus.analysis.loop import WallLoop
-from haptic_bus.analysis.plant import phi1, phi2
+from haptic_bus.analysis.plant import phi1, phi2, stop_time
 from haptic_bus.analysis.resolution import COULOMB_RANGE, RESOLUTION_RANGE, VELOCITY_RESOLUTION_RANGE
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range, whole_in_range
@@ -126,12 +126,13 @@ class QuantisedRun:
 
 
 class _Handle:
-    """The handle's exact motion under a constant push and wall force, with Coulomb friction."""
+    """The handle's exact motion under a constant push and wall force, with Coulomb friction, from
+    rest at ``start`` (m)."""
 
-    def __init__(self, m: float, b: float, coulomb: float, damping: float) -> None:
+    def __init__(self, m: float, b: float, coulomb: float, damping: float, start: float) -> None:
         self.m, self.coulomb, self.damping = m, coulomb, damping
         self.a = (b + damping) / m
-        self.x = 0.0
+        self.x = start
         self.v = 0.0
         self.energy = 0.0
         self.least = 0.0
@@ -156,12 +157,9 @@ class _Handle:
 
     def _stop_time(self, g: float, direction: float) -> float | None:
         """When the sliding handle reaches ``v = 0`` (s), None if it never does."""
-        v0, a = self.v, self.a
-        if v0 == 0.0 or g * direction >= 0.0:
+        if self.v == 0.0 or g * direction >= 0.0:
             return None  # accelerating away from 0, or coasting towards it only asymptotically (g = 0, a > 0)
-        if a == 0.0:
-            return -v0 / g
-        return math.log1p(a * v0 / -g) / a  # v0 e^{-at} + (g/a)(1 - e^{-at}) = 0
+        return stop_time(1.0, self.a, direction * self.v, -direction * g)  # per unit mass: decay a 1/s, braking |g| m/s^2
 
     def _slide(self, t: float, g: float, push: float, stopped: bool) -> None:
         v0, a, c = self.v, self.a, self.damping
@@ -215,8 +213,7 @@ def simulate_quantised(loop: WallLoop, hand: Hand, quantiser: Quantiser, coulomb
     reset = None if width is None else 1.0 - min(width, T) / T
     steps = hand.substeps
     bounds = sorted({j / steps for j in range(steps)} | {delta} | ({reset} if reset is not None else set()) | {1.0})
-    handle = _Handle(loop.m, loop.b, coulomb, hand.damping)
-    handle.x = start
+    handle = _Handle(loop.m, loop.b, coulomb, hand.damping, start)
     n = hand.samples
     forces = [0.0] * (d + 2)  # u_{k-d-1} .. u_k, oldest first
     last = quantiser.count(start)

@@ -223,7 +223,7 @@ class AxesRun:
 
     def scene(self, gate: SpaceGate) -> SpaceScene:
         """The profile's scene in space (the gate judges it when the controller takes it)."""
-        return self.profile.space_scene()
+        return self.profile.compiled_scene()
 
     def describe_gate(self, gate: SpaceGate, extra: dict[str, Any]) -> None:
         """The loop delays (samples) the coupled gate judges with, per axis, in ``run.json``'s ``loop``

@@ -301,27 +301,15 @@ def modbus_rig(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Se
         delays = [loop_delay(drive, period, poll) for drive in drives]
         link["poll"] = None if poll is None else dataclasses.asdict(poll)
         logger.info("Modbus poll: the gate assumes a loop delay of %s sample(s)", ", ".join(f"{d:.4g}" for d in delays))
-        gate, scene = _gate_at(profile, delays)
+        gate: Any = profile.gate(delays)  # the 1-D or the coupled gate: each admits its kind of scene
         if not profile.passivity.beyond_gate:  # the profile was judged at its own timing's delay
-            gate.admit(scene)
+            gate.admit(profile.compiled_scene())
         return (axes if several else drives[0]), gate, lambda controller: None  # no upload server over Modbus
 
     hold = longest_hold(period, options.wall_paced, safety.modbus_watchdog_ms, 0)
     watchdog = Watchdog(safety.modbus_watchdog_ms / 1000.0 if safety.modbus_watchdog_ms else math.inf, None)
     return Rig(link, open_drive, hold, watchdog, tuple(DriveAddress(url=url, unit_id=unit) for url, unit in places),
                safety=safety)
-
-
-def _gate_at(profile: Profile | AxesProfile, delays: Sequence[float]) -> tuple[Any, Any]:
-    """The profile's gate with axis ``i``'s loop delay ``delays[i]`` (samples), and its scene."""
-    from haptic_bus.control.gate import PassivityGate
-    from haptic_bus.control.space_gate import SpaceGate
-
-    if isinstance(profile, AxesProfile):
-        loops = tuple(dataclasses.replace(loop, delay=delay) for loop, delay in zip(profile.axis_loops(), delays))
-        return SpaceGate(loops, profile.gate_policy), profile.space_scene()
-    return PassivityGate(dataclasses.replace(profile.device_loop(), delay=delays[0]), profile.gate_policy), \
-        profile.compiled_scene()
 
 
 def _refuse_another_master(drives: Sequence[ModbusDrive]) -> None:

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 import pathlib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
@@ -125,17 +125,21 @@ class AxesProfile:
         """Each axis' drive-unit conversion (:mod:`drives.base`), in axis order."""
         return [axis.device.scaling() for axis in self.axes]
 
-    def space_scene(self) -> SpaceScene:
-        """The scene in space, compiled."""
+    def compiled_scene(self) -> SpaceScene:
+        """The scene in space, compiled (as a one-axis profile's ``compiled_scene``)."""
         return compile_space_scene(self.space)
 
-    def gate(self) -> SpaceGate:
-        """The coupled gate for these axes and this policy (what an upload path calls)."""
-        return SpaceGate(self.axis_loops(), self.gate_policy)
+    def gate(self, delays: Sequence[float] = ()) -> SpaceGate:
+        """The coupled gate for these axes and this policy (what an upload path calls); at the loop delays
+        ``delays`` (samples, one per axis: a measured Modbus poll's) instead of the axes' own when given."""
+        loops = self.axis_loops()
+        if delays:
+            loops = tuple(dataclasses.replace(loop, delay=delay) for loop, delay in zip(loops, delays))
+        return SpaceGate(loops, self.gate_policy)
 
     def judge(self) -> SpaceDecision:
         """The coupled gate's decision on this profile's scene (accepted or not)."""
-        return self.gate().judge(self.space_scene())
+        return self.gate().judge(self.compiled_scene())
 
     def kinematics(self) -> Cartesian:
         """The device's kinematics: Cartesian, axis i along coordinate i."""

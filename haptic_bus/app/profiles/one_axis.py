@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import pathlib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -96,9 +96,11 @@ class Profile:
         """The scene as the piecewise-affine law the controller evaluates."""
         return compile_scene(self.scene)
 
-    def gate(self) -> PassivityGate:
-        """A passivity gate for this profile's loop and policy."""
-        return PassivityGate(self.device_loop(), self.gate_policy)
+    def gate(self, delays: Sequence[float] = ()) -> PassivityGate:
+        """A passivity gate for this profile's loop and policy; at the loop delay ``delays[0]`` (samples: a
+        measured Modbus poll's, one axis) instead of the profile's own when given."""
+        loop = self.device_loop()
+        return PassivityGate(dataclasses.replace(loop, delay=delays[0]) if delays else loop, self.gate_policy)
 
     def judge(self) -> GateDecision:
         """The gate's decision on this profile's scene (accepted or not)."""
