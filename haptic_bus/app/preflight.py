@@ -29,13 +29,15 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
+from drives.os_threads import show_own_name
 from haptic_bus.control.clock import RealClock
 from haptic_bus.control.cycle_loop import percentiles
 from haptic_bus.control.gate import PassivityGate
@@ -48,6 +50,8 @@ PREFLIGHT_CYCLES = 500  # cycles measured before enabling: 0.5 s at T = 1 ms
 STALL_MARGIN = 1.5  # the longest stall measured, times this, must stay under the drive's watchdog
 BUSY_PERCENTILE = 99.5  # the period held: at most 0.5 % of the cycles busy longer (issue 26's overrun target)
 PERIOD_GRID = 0.25e-3  # s: the smallest T is proposed on this grid
+
+R = TypeVar("R")
 
 
 @dataclass(frozen=True)
@@ -127,6 +131,36 @@ def measure(exchange: Callable[[], object], period: float, cycles: int = PREFLIG
                                "drive's process look the same from here") from silent
         starts[k], took[k] = started, time.perf_counter() - started
     return Timing(period, clock.lateness(), starts, took, clock.overruns)
+
+
+def while_cycling(exchange: Callable[[], object], period: float, work: Callable[[], R], spin: float | None = None) -> R:
+    """``work()`` in a thread of its own (``preflight-judge``) while this thread goes on calling
+    ``exchange`` once a period on a real clock, as :func:`measure` did: the drives never see the
+    pause that a long judgement (the coupled gate on a sphere at the measured delay: seconds) would
+    otherwise put between pre-flight's last RPDO and the enable (their RPDO deadline, 30 periods,
+    would expire: a CiA 301 drive may leave OPERATIONAL for it).  ``work``'s result, or its exception."""
+    result: list[R] = []
+    failure: list[BaseException] = []
+
+    def run() -> None:
+        show_own_name()
+        try:
+            result.append(work())
+        except BaseException as exc:  # handed to the control thread, raised there
+            failure.append(exc)
+
+    thread = threading.Thread(target=run, name="preflight-judge", daemon=True)
+    thread.start()
+    clock = RealClock(period, capacity=1, spin=spin)
+    k = 1  # the first a period from now: the measurement's last exchange has just been
+    while thread.is_alive():
+        clock.wait_next(k)
+        exchange()
+        k += 1
+    thread.join()
+    if failure:
+        raise failure[0]
+    return result[0]
 
 
 def _on_grid(period: float) -> float:

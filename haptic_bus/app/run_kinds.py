@@ -64,9 +64,6 @@ class RunKind(DocumentKind, Protocol[SceneT, GateT, OriginT]):
     @property
     def start(self) -> StartPolicy: ...
 
-    @property
-    def start_after_preflight(self) -> bool: ...
-
     def loop_extra(self) -> dict[str, Any]: ...
 
     def scene(self, gate: GateT) -> SceneT: ...
@@ -155,14 +152,6 @@ class OneAxisRun:
     def start(self) -> StartPolicy:
         """The profile's ``[start]``."""
         return self.profile.start
-
-    @property
-    def start_after_preflight(self) -> bool:
-        """False: the safe start, the controller, its records and the upload server come before
-        pre-flight, which then measures the cycle after that start-up work (the 1-D simulated
-        operator pushes the unpowered handle: a position read after pre-flight would find it
-        wherever the push took it meanwhile)."""
-        return False
 
     def derate(self, gate: PassivityGate, scene: CompiledScene) -> DerateTable | None:
         """The supervisor's derate table, built now (the 1-D gate's judgements take microseconds),
@@ -265,13 +254,6 @@ class AxesRun:
     def start(self) -> StartPolicy:
         """A multi-axis profile has no ``[start]``: the defaults (refuse; ramp over the default time)."""
         return StartPolicy()
-
-    @property
-    def start_after_preflight(self) -> bool:
-        """True: the safe start (every joint's position) and the set-up after it come after
-        pre-flight, right before enabling (a real handle lives through pre-flight's SYNCs; the
-        simulated hand pushes only once enabled)."""
-        return True
 
     def derate(self, gate: SpaceGate, scene: SpaceScene) -> DerateTable | None:
         """The supervisor's derate table, built in the judge worker (the coupled gate's judgements of a

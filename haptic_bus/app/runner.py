@@ -29,13 +29,13 @@ one Modbus drive or several polled in one cycle -- ``haptic-bus sim --modbus tcp
    the profile asks for one, is started (:mod:`~haptic_bus.app.derate_table`);
 5. real time only: **pre-flight** (:mod:`~haptic_bus.app.preflight`) runs the cyclic path at zero
    torque, drives not enabled, and judges the gate at the delay it measured;
-6. **safe start** (for one axis, with step 7, before pre-flight, which then measures the cycle
-   after that start-up work: :attr:`~haptic_bus.app.run_kinds.RunKind.start_after_preflight`):
-   the handle's position is read right before enabling (for several axes after pre-flight, whose
-   SYNCs a real handle lives through); inside an object the run is refused (:class:`Refusal`, the
+6. **safe start** (with step 7 before pre-flight, which then measures the cycle after that start-up
+   work, and leaves no gap in the RPDOs it started before the drives are enabled): the handle's
+   position (every joint's) is read; inside an object the run is refused (:class:`Refusal`, the
    drives never enabled), or with ``in_contact = "ramp"`` the force rises from 0 over the ramp
    time (along each contact normal for several axes) once the gate has proven every scaled wall
-   passive;
+   passive; without a ramp it is read again after pre-flight, whose cycles a real handle lives
+   through, right before enabling;
 7. the controller is built, its records streamed by the writer process (and its live view), the
    upload server set up (CANopen: the controller's node on the drives' own network, its commits
    judged by the gate -- 1-D or coupled -- in a worker process, :mod:`~haptic_bus.node.controller_node`);
@@ -222,13 +222,12 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
 
             with control_thread_scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
-                prepared = None if kind.start_after_preflight else ready()
+                running, node = ready()  # before pre-flight, which then measures the cycle after it
                 if options.wall_paced:
                     _preflight(kind, rig, drive, gate, scene, options, extra)
                     recorder.publish()  # run.json as it stands before the cycles (pre-flight's verdict in it)
-                running, node = prepared or ready()
-                if prepared is not None and options.wall_paced and running.ramp_cycles == 0:
-                    _still_outside(kind, drive, scene)
+                    if running.ramp_cycles == 0:
+                        _still_outside(kind, drive, scene)
                 show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
                 _stop_if_asked(options)  # Ctrl-C or SIGTERM during set-up or pre-flight: never enabled
                 # last before the first cycle: every drive in the same cycle, their RPDO deadlines run from here
@@ -298,11 +297,16 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
     without a layer, cannot hold."""
     zeros = kind.zero_targets
     with drive.cyclic() as cycle:  # the run's own path, every target zero
-        timing = preflight.measure(lambda: (cycle.read(), cycle.saturate_and_write(zeros)), kind.period,
-                                   spin=options.scheduling.spin)
-    _stop_if_asked(options)  # asked during the measurement: the run stops, whatever its verdict would have been
-    report = preflight.judge_delay(timing, kind.assumed_delay(gate), kind.passes_at(gate, scene),
-                                   kind.profile.passivity.layer, rig.watchdog.stall, rig.watchdog.periods)
+
+        def exchange() -> object:
+            return cycle.read(), cycle.saturate_and_write(zeros)
+
+        spin = options.scheduling.spin
+        timing = preflight.measure(exchange, kind.period, spin=spin)
+        _stop_if_asked(options)  # asked during the measurement: the run stops, whatever its verdict would have been
+        report = preflight.while_cycling(exchange, kind.period, spin=spin, work=lambda: preflight.judge_delay(
+            timing, kind.assumed_delay(gate), kind.passes_at(gate, scene), kind.profile.passivity.layer,
+            rig.watchdog.stall, rig.watchdog.periods))
     preflight.settle(preflight.without_realtime(report, extra.get("realtime")), options.live, extra)
 
 
