@@ -22,7 +22,12 @@ Who does what
     answers it sends; EMCY and heartbeats to the drive's events.  It appends one row per axis to a
     ring in shared memory (one ``struct.pack_into`` and a counter store) and, with a bus log, each
     frame it sends or receives to another ring (the link's tap).  Pre-flight runs this same cyclic
-    path, with zero torque, before the drives are enabled.
+    path, with zero torque, before the drives are enabled, and goes on running it while
+    ``preflight-judge`` works.
+``preflight-judge`` -- before the drives are enabled only
+    Judges the scene at the loop delay pre-flight measured (the coupled gate on a sphere: seconds)
+    while the control thread keeps the drives' RPDOs and the heartbeat going at zero torque
+    (:func:`haptic_bus.app.preflight.while_cycling`); it ends before the enable.
 ``verdict-collect``, ``verdict-feed`` -- the upload judge's executor threads
     concurrent.futures' two threads of the judge's process pool, blocked on its pipes; they run
     only while an upload is judged (:mod:`haptic_bus.node.verdicts`).
