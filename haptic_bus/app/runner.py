@@ -301,10 +301,14 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
         def exchange() -> object:
             return cycle.read(), cycle.saturate_and_write(zeros)
 
+        def exchange_unless_stopped() -> object:
+            _stop_if_asked(options)  # asked while the gate judges: the run stops now, not once it has judged
+            return exchange()
+
         spin = options.scheduling.spin
         timing = preflight.measure(exchange, kind.period, spin=spin)
         _stop_if_asked(options)  # asked during the measurement: the run stops, whatever its verdict would have been
-        report = preflight.while_cycling(exchange, kind.period, spin=spin, work=lambda: preflight.judge_delay(
+        report = preflight.while_cycling(exchange_unless_stopped, kind.period, spin=spin, work=lambda: preflight.judge_delay(
             timing, kind.assumed_delay(gate), kind.passes_at(gate, scene), kind.profile.passivity.layer,
             rig.watchdog.stall, rig.watchdog.periods))
     preflight.settle(preflight.without_realtime(report, extra.get("realtime")), options.live, extra)
