@@ -42,10 +42,10 @@ def kill_once_cycling(sim: SimProcess, out: pathlib.Path, done: threading.Event,
 
 
 def test_a_killed_modbus_simulator_is_one_line_saying_connection_lost(
-        tmp_path: pathlib.Path, sim_process: Callable[..., Any], capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: pathlib.Path, sim_process: Callable[..., Any], capfd: pytest.CaptureFixture[str]) -> None:
     """The simulator is a process (killed with SIGKILL, its sockets reset by the kernel); the run is
-    the command's ``main`` in this process, its stderr what the test reads (a process adds nothing
-    to the one line asserted)."""
+    the command's ``main`` in this process, its stderr read at the file descriptor (its writer
+    process' included, as a shell would show them): a process adds nothing to the one line asserted."""
     sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--modbus", "tcp://127.0.0.1:0", "--modbus",
                       "tcp://127.0.0.1:0", "--profile", "gantry-3d")
     line = next(line for line in sim.wait_for_line("serving Modbus TCP on", START_WAIT).splitlines()
@@ -61,7 +61,7 @@ def test_a_killed_modbus_simulator_is_one_line_saying_connection_lost(
     finally:
         done.set()
         killer.join(START_WAIT)
-    err = capsys.readouterr().err
+    err = capfd.readouterr().err
     assert killed, f"the run ended ({code}) before every axis cycled: {err}"
     assert code == 1
     assert err.count("\n") == 1 and err.startswith("haptic-bus run: drive error: Modbus unit 1 at tcp://127.0.0.1:"), err

@@ -220,18 +220,19 @@ def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(
 
 
 def test_the_commands_of_the_manual_run_three_units_in_two_processes(
-        tmp_path: pathlib.Path, sim_process: Any, capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: pathlib.Path, sim_process: Any, capfd: pytest.CaptureFixture[str]) -> None:
     """``haptic-bus sim --modbus tcp://127.0.0.1:0 --unit-ids 1,2,3 --profile gantry-3d`` and ``haptic-bus
     run gantry-3d --modbus URL --unit-ids 1,2,3 --virtual-time`` (docs/axes.md): exit 0, every unit cycled.
     The simulator is its own process (the other end of the TCP link); the run is the command's ``main``
-    in this one (the process it would be adds nothing this test asserts: its exit status, its output)."""
+    in this one, its output read at the file descriptors (the process it would be adds nothing this test
+    asserts: its exit status, its output)."""
     sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--unit-ids", "1,2,3", "--profile", "gantry-3d")
     log = sim.wait_for_line("units 1, 2, 3: serving Modbus TCP on", START_WAIT)
     url = re.search(r"serving Modbus TCP on (tcp://\S+) ", log)
     assert url is not None, log
     returncode = main(["run", "gantry-3d", "--modbus", url[1], "--unit-ids", "1,2,3", "--virtual-time",
                        "--duration", "1", "--out", str(tmp_path / "run"), "-q", "--no-plots"])
-    out, err = capsys.readouterr()
+    out, err = capfd.readouterr()
     code, log = sim.stop()
     assert returncode == 0, err
     assert "cycles 500;" in out and "ended: completed" in out and code == 0, log
