@@ -36,7 +36,6 @@ from haptic_bus.app.steady_state import contact
 from haptic_bus.profile.files import resolve_profile
 from sim_drive.modbus.multi_axis import MultiAxisModbusSim
 from sim_drive.profile import read_simulated_device
-from tests.cli_process import cli_process, reaped
 from tests.gantry_records import assert_resting_on_the_slope, assert_same_loop, records
 
 GANTRY = resolve_profile("gantry-3d")  # the file only: loading judges every wall (0.8 s at each collection)
@@ -44,7 +43,6 @@ TARGETS = "toward = [[0.0, -0.03, 0.0], [-0.03, 0.0, 0.0], [0.02, 0.02, 0.01]]"
 UNITS = (1, 2, 3)
 CYCLING_WAIT = 60.0  # s of wall clock: a bound on a hang, not a pace
 START_WAIT = 60.0  # s: the simulator process imports numpy, scipy and pymodbus and reads the profile first
-RUN_WAIT = 240.0  # s: a run process imports and judges gantry-3d's scene, then 500 cycles over loopback
 
 
 def slope_profile(tmp_path: pathlib.Path) -> pathlib.Path:
@@ -97,11 +95,11 @@ def test_three_units_rest_on_the_slope_the_same_on_one_server_or_three(
         sim = modbus_gantry(path, servers)
         bus = sim.urls[0] if servers == 1 else list(sim.urls)
         folder = tmp_path / f"servers-{servers}"
-        # 2.5 s: in virtual time the handle is at rest on the slope (every torque and 0x606C sample final)
-        # from 1.56 s on, the same in every run (each cycle advances the plants exactly T)
-        result = hb.run(profile, bus, options(folder, 2.5), unit_ids=list(UNITS))
+        # 2 s: in virtual time the handle is at rest on the slope (every torque and 0x606C sample final)
+        # from 1.56 s on, the same in every run (each cycle advances the plants exactly T): 220 cycles at rest
+        result = hb.run(profile, bus, options(folder, 2.0), unit_ids=list(UNITS))
         assert result.exit_reason == "completed", result.error
-        assert result.summary is not None and result.summary.cycles == 1250 and result.summary.least_energy >= 0.0
+        assert result.summary is not None and result.summary.cycles == 1000 and result.summary.least_energy >= 0.0
         assert [drive.state for drive in sim.drives] == [State.SWITCH_ON_DISABLED] * 3  # left disabled
         document = json.loads((folder / "run.json").read_text())
         link = document["link"]
@@ -221,18 +219,22 @@ def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(
         assert result.summary is not None and result.summary.overruns <= 0.01 * result.summary.cycles
 
 
-def test_the_commands_of_the_manual_run_three_units_in_two_processes(tmp_path: pathlib.Path, sim_process: Any) -> None:
+def test_the_commands_of_the_manual_run_three_units_in_two_processes(
+        tmp_path: pathlib.Path, sim_process: Any, capfd: pytest.CaptureFixture[str]) -> None:
     """``haptic-bus sim --modbus tcp://127.0.0.1:0 --unit-ids 1,2,3 --profile gantry-3d`` and ``haptic-bus
-    run gantry-3d --modbus URL --unit-ids 1,2,3 --virtual-time`` (docs/axes.md): exit 0, every unit cycled."""
+    run gantry-3d --modbus URL --unit-ids 1,2,3 --virtual-time`` (docs/axes.md): exit 0, every unit cycled.
+    The simulator is its own process (the other end of the TCP link); the run is the command's ``main``
+    in this one, its output read at the file descriptors (the process it would be adds nothing this test
+    asserts: its exit status, its output)."""
     sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--unit-ids", "1,2,3", "--profile", "gantry-3d")
     log = sim.wait_for_line("units 1, 2, 3: serving Modbus TCP on", START_WAIT)
     url = re.search(r"serving Modbus TCP on (tcp://\S+) ", log)
     assert url is not None, log
-    with reaped(cli_process("run", "gantry-3d", "--modbus", url[1], "--unit-ids", "1,2,3", "--virtual-time",
-                            "--duration", "1", "--out", str(tmp_path / "run"), "-q", "--no-plots")) as run:
-        out, err = run.communicate(timeout=RUN_WAIT)
+    returncode = main(["run", "gantry-3d", "--modbus", url[1], "--unit-ids", "1,2,3", "--virtual-time",
+                       "--duration", "1", "--out", str(tmp_path / "run"), "-q", "--no-plots"])
+    out, err = capfd.readouterr()
     code, log = sim.stop()
-    assert run.returncode == 0, err
+    assert returncode == 0, err
     assert "cycles 500;" in out and "ended: completed" in out and code == 0, log
     for unit in UNITS:
         assert f"unit {unit} at {url[1]}: stopped after" in log

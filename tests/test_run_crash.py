@@ -5,7 +5,7 @@ before the kill (rows contiguous from cycle 0, a torn last line tolerated by the
 the cycle's SYNC, TPDO and RPDO frames, and a folder ``haptic-bus plot`` draws.
 
 Four processes, as users start them: ``python -m sim_drive`` (the simulated CiA-402 drive or
-drives, a new one each trial: a killed controller leaves them faulted), ``haptic-bus run
+drives, a new one each trial on a bus of its own: a killed controller leaves them faulted), ``haptic-bus run
 --virtual-time`` on ``udp_multicast`` (loopback, hop limit 0), its writer process (``hb-writer``,
 which drains the rings the killed run filled and then ends by itself: the test waits for it), and
 this test, which sends the SIGKILL.
@@ -31,6 +31,7 @@ from haptic_bus.app.cli import main
 from haptic_bus.app.run_folder import read_run_folder
 from haptic_bus.app.writer_process import COMM
 from haptic_bus.control.record import COLUMNS, RecordTable
+from haptic_bus.testing.buses import unique_multicast
 
 REPO = Path(__file__).resolve().parents[1]
 NODE = 5
@@ -39,6 +40,10 @@ START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen before they an
 WRITER_WAIT = 10.0  # s: the writer's last drain after the kill (a ring of rows at most) and its exit
 KEPT = 0.25  # s: every cycle up to this long before the kill is on disk (the issue's bound)
 PERIODS = {"cia402-handle": 1e-3, "gantry-3d": 2e-3}  # s: the profiles' T
+# s, after the record holds some cycles: the kill lands at a uniform phase of the writer's drain (every
+# FLUSH_INTERVAL, 50 ms), which is what decides the gap to the kill; 0.5 s of spread is 10 drains, each phase as
+# likely as in a longer run (issue 26's row kills at 6 s: later kills only add rows drained the same way)
+KILL_AFTER = (0.1, 0.6)
 
 
 def _start_run(multicast: tuple[str, int], out: Path, *args: str) -> subprocess.Popen[bytes]:
@@ -75,15 +80,15 @@ def _gone(pid: int) -> bool:
 
 
 def _kill_while_cycling(run: subprocess.Popen[bytes], record: Path, rng: random.Random) -> float:
-    """Wait until the run cycles (``record`` grows), then a random 0.1-2 s more; SIGKILL; wait
-    until its writer process has ended by itself; the Unix time of the kill."""
+    """Wait until the run cycles (``record`` grows), then a random :data:`KILL_AFTER` more; SIGKILL;
+    wait until its writer process has ended by itself; the Unix time of the kill."""
     deadline = time.monotonic() + START_WAIT
     while time.monotonic() < deadline and run.poll() is None:
         if record.is_file() and record.stat().st_size > 10_000:  # the header and some cycles
             break
         time.sleep(0.02)
     assert run.poll() is None and record.is_file(), "the run never started cycling"
-    time.sleep(rng.uniform(0.1, 2.0))
+    time.sleep(rng.uniform(*KILL_AFTER))
     (writer,) = _writers_of(run.pid)
     os.kill(run.pid, signal.SIGKILL)
     killed = time.time()  # after the kill is sent: a cycle the run began while this process was between the
@@ -131,14 +136,17 @@ def _check_killed_folder(out: Path, killed: float) -> dict[str, Any]:
 
 def _trials(multicast: tuple[str, int], sim_process: Any, tmp_path: Path, seed: int, trials: int, sim_args: list[str],
             run_args: list[str], record: str, nodes: tuple[int, ...]) -> list[dict[str, Any]]:
-    group, port = multicast
     rng = random.Random(seed)
+    # each trial its own bus and simulator, every simulator started at once: they import side by side (and then
+    # idle on their own bus) while the trials run one after another
+    buses = [multicast, *(unique_multicast() for _ in range(trials - 1))]
+    sims = [sim_process("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}", *sim_args)
+            for group, port in buses]
     found = []
-    for trial in range(trials):
-        sim = sim_process("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}", *sim_args)
+    for trial, (bus, sim) in enumerate(zip(buses, sims)):
         sim.wait_for_line("serving", START_WAIT)
         out = tmp_path / f"trial{trial}"
-        run = _start_run(multicast, out, *run_args)
+        run = _start_run(bus, out, *run_args)
         try:
             killed = _kill_while_cycling(run, out / record, rng)
         finally:
