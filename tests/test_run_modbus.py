@@ -46,3 +46,16 @@ def test_a_scaling_conflict_over_modbus_names_the_profile_as_canopen_does(tmp_pa
     assert run.code == 1 and run.err.count("\n") == 1
     assert "scaling conflict for velocity_per_count: 1e-06 m/s from register 0x0040 but " in run.err
     assert " m/s from profile [device] " in run.err  # the words the CANopen run uses for the same source
+
+
+def test_a_run_on_a_server_this_process_serves_writes_from_a_thread() -> None:
+    """The run writes from a thread (no writer process and its second interpreter's imports) where
+    its drive is in this process: every Modbus URL it reaches served here while the server serves."""
+    from haptic_bus.app.run_writer import writer_for
+
+    with ModbusSimServer("127.0.0.1", 0) as one, ModbusSimServer("127.0.0.1", 0) as two:
+        assert writer_for({"kind": "modbus", "url": one.url, "unit_id": 1})
+        assert writer_for({"kind": "modbus", "urls": [one.url, two.url], "unit_ids": [1, 1]})
+        elsewhere = "tcp://127.0.0.1:1"  # served by no one here (a simulator in another process, a real drive)
+        assert not writer_for({"kind": "modbus", "urls": [one.url, elsewhere], "unit_ids": [1, 1]})
+    assert not writer_for({"kind": "modbus", "url": one.url, "unit_id": 1})  # stopped: no longer served here
