@@ -68,7 +68,7 @@ def _start(*args: str) -> subprocess.Popen:
 def _status_reset_and_run_again(capsys: pytest.CaptureFixture[str], drive: list[str], profile: str, folder: pathlib.Path,
                                 codes: set[int]) -> dict[str, Any]:
     """status (FAULT, its error code one of ``codes``), fault-reset, status (SWITCH ON DISABLED), a
-    short run (exit 0: the simulated operator left the handle inside the wall, so it starts with
+    short virtual-time run (exit 0: the simulated operator left the handle inside the wall, so it starts with
     the ramp a user is told to use); the first status as JSON."""
 
     def _command(*args: str) -> tuple[int, str, str]:
@@ -85,10 +85,11 @@ def _status_reset_and_run_again(capsys: pytest.CaptureFixture[str], drive: list[
     assert "reset: now SWITCH ON DISABLED" in out
     code, out, err = _command("status", *drive, "--json")
     assert code == 0 and json.loads(out)["cia402_state"] == "SWITCH ON DISABLED", err
-    code, out, err = _command("run", profile, *drive, "--duration", "0.5", "--start-in-contact", "ramp", "-q", "--no-plots",
-                              "--out", str(folder / "again"))
-    if code == 1 and "this machine holds T >=" in err:  # refused at pre-flight: the machine's answer under load
-        pytest.skip(f"this machine cannot hold the loop now, and the run again said so at pre-flight: {err.strip()}")
+    # The run again in virtual time: it commissions, enables and cycles the reset drive as a real-time
+    # run does, which is what is asserted; a real-time one would add pre-flight's 500 cycles (4 s at
+    # T = 8 ms), which measure this machine, not the reset (the killed run passed them).
+    code, out, err = _command("run", profile, *drive, "--virtual-time", "--duration", "0.5", "--start-in-contact", "ramp",
+                              "-q", "--no-plots", "--out", str(folder / "again"))
     assert code == 0, err
     assert json.loads((folder / "again" / "run.json").read_text())["exit_reason"] == "completed"
     return faulted
@@ -158,7 +159,9 @@ def test_modbus_status_fault_reset_and_run_again_after_kill_9(sim_process: Any, 
     try:
         with ModbusObjects(url, 1, 0.5) as probe:
             _wait_for(probe, State.OPERATION_ENABLED, START_WAIT, run, sim.log)
-            time.sleep(1.0)  # cycling: the hand takes the handle once powered and rests it in the wall (m/b = 50 ms)
+            # cycling: the hand takes the handle once powered and rests it in the wall 3 mm ahead (m/b = 50 ms;
+            # at the 3 N push and b = 20 N s/m it gets there in 20 ms): 0.3 s is six time constants past that
+            time.sleep(0.3)
             run.kill()  # kill -9
             _wait_for(probe, State.FAULT, FAULT_WAIT, run, sim.log)
     finally:

@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import signal
 import struct
@@ -19,6 +21,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
 
 import can
 import pytest
@@ -28,6 +33,8 @@ from drives.canopen.drive import CanopenDrive
 from drives.cia402 import State
 from drives.errors import DriveError, DriveProtocolError
 from drives.safety import SafetySettings
+from haptic_bus.testing.buses import unique_multicast
+from haptic_bus.testing.processes import SimProcess, stop_all
 from sim_drive.eds import eds_path
 from tests.cli_process import skip_if_refused_at_preflight
 
@@ -212,15 +219,66 @@ def _end(process: subprocess.Popen) -> None:
         process.stderr.close()
 
 
+# The simulated operator rests the handle in the wall once it is powered, and a shared drive's handle
+# is where the trial before left it: each run starts with the ramp a user is told to use there.
+SHARED_START = ("--start-in-contact", "ramp")
+
+
+@dataclass
+class SharedDrive:
+    """One ``python -m sim_drive`` for every trial of a transport (SIGKILL, then SIGSTOP): starting
+    it costs seconds of imports; the trials do not need a fresh one, only one not in FAULT
+    (:meth:`ready`).  ``address`` are the command line's options that reach it, ``bus`` the CAN
+    bus's python-can keywords (CANopen only)."""
+
+    process: SimProcess
+    address: list[str]
+    bus: dict[str, Any] | None = None
+
+    def ready(self) -> int:
+        """Clear the fault an earlier trial left (the real ``fault-reset``, in this process), and
+        give back where this trial's part of the drive's log begins."""
+        from haptic_bus.app.cli import main
+
+        status = self.process.process.poll()
+        assert status is None, f"the simulated drive ended ({status}): {self.process.log()[-2000:]}"
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()) as err:
+            assert main(["fault-reset", *self.address]) == 0, err.getvalue()
+        return len(self.process.log())
+
+
+@pytest.fixture(scope="module")
+def canopen_sim() -> Iterator[SharedDrive]:
+    """The simulated drive on a udp_multicast bus of its own, for this module's CANopen trials."""
+    group, port = unique_multicast()
+    bus_args = ["--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}"]
+    sim = SimProcess(*bus_args, "--node-id", str(NODE), "--profile", "cia402-handle")
+    try:
+        sim.wait_for_line(f"node {NODE}: serving on", START_WAIT)
+        yield SharedDrive(sim, [*bus_args, "--node-id", str(NODE)],
+                          {"interface": "udp_multicast", "channel": group, "port": port})
+    finally:
+        stop_all([sim])
+
+
+@pytest.fixture(scope="module")
+def modbus_sim() -> Iterator[SharedDrive]:
+    """The simulated drive's Modbus TCP server on 127.0.0.1, for this module's Modbus trials."""
+    sim = SimProcess("--modbus", "tcp://127.0.0.1:0", "--profile", "cia402-handle")
+    try:
+        log = sim.wait_for_line("serving Modbus TCP on", START_WAIT)
+        yield SharedDrive(sim, ["--modbus", log.split("serving Modbus TCP on ", 1)[1].split()[0]])
+    finally:
+        stop_all([sim])
+
+
 @pytest.mark.slow  # a process killed or stopped is the point: the run and the drive are two real processes
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP])
-def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(multicast, sim_process, tmp_path, sig) -> None:
-    group, port = multicast
-    bus_args = ["--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}"]
-    sim = sim_process(*bus_args, "--node-id", str(NODE), "--profile", "cia402-handle")
-    run = _run_command("run", _profile_that_warns_when_late(tmp_path), *bus_args, "--node-id", str(NODE), "--duration", "60",
-                       "-q", "--out", str(tmp_path / "run"))
-    sniffer = open_bus(interface="udp_multicast", channel=group, port=port)
+def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(canopen_sim, tmp_path, sig) -> None:
+    sim, begun = canopen_sim.process, canopen_sim.ready()
+    run = _run_command("run", _profile_that_warns_when_late(tmp_path), *canopen_sim.address, *SHARED_START, "--duration",
+                       "60", "-q", "--out", str(tmp_path / "run"))
+    sniffer = open_bus(**(canopen_sim.bus or {}))
     try:
         deadline, tpdos = time.monotonic() + START_WAIT, 0
         while tpdos < 300 and time.monotonic() < deadline and run.poll() is None:
@@ -241,7 +299,7 @@ def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(m
         code, register, elapsed = fault
         assert code in (0x8250, 0x8130) and register == 0x11  # RPDO deadline or heartbeat: the drive says which
         assert elapsed < STOP_BOUND, f"{sig.name}: the drive faulted {elapsed * 1e3:.1f} ms after the signal"
-        log = sim.log()
+        log = sim.log()[begun:]  # this trial's part
         assert "OPERATION ENABLED -> FAULT REACTION ACTIVE" in log and f"connection lost (0x{code:04X})" in log
     finally:
         sniffer.shutdown()
@@ -252,14 +310,13 @@ def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(m
 
 @pytest.mark.slow  # a process killed or stopped is the point: the run and the drive are two real processes
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP])
-def test_a_killed_or_stopped_modbus_controller_faults_the_drive(sim_process, tmp_path, sig) -> None:
+def test_a_killed_or_stopped_modbus_controller_faults_the_drive(modbus_sim, tmp_path, sig) -> None:
     from drives.modbus.drive import ModbusDrive
 
-    sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--profile", "cia402-handle")
-    log = sim.wait_for_line("serving Modbus TCP on", START_WAIT)
-    url = log.split("serving Modbus TCP on ", 1)[1].split()[0]
-    run = _run_command("run", _profile_that_warns_when_late(tmp_path), "--modbus", url, "--duration", "60", "-q",
-                       "--out", str(tmp_path / "run"))
+    sim, _ = modbus_sim.process, modbus_sim.ready()
+    url = modbus_sim.address[1]
+    run = _run_command("run", _profile_that_warns_when_late(tmp_path), "--modbus", url, *SHARED_START, "--duration", "60",
+                       "-q", "--out", str(tmp_path / "run"))
     probe = ModbusDrive.from_url(url, timeout=0.5)
     try:
         probe.connect()

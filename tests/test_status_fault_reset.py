@@ -113,7 +113,8 @@ def test_status_table_and_the_emcys_heard_while_listening(channel: str, master: 
     injector = threading.Thread(target=fault_once_status_asks)
     injector.start()
     try:
-        result = run_cli(capsys, "status", *bus_args(channel), "--node-id", "5", "--listen", "1")
+        # 0.4 s: the EMCY goes out as the first request arrives, on a bus in this process (1 s waited 0.6 s more)
+        result = run_cli(capsys, "status", *bus_args(channel), "--node-id", "5", "--listen", "0.4")
     finally:
         injector.join(timeout=25.0)
     lines = result.out.splitlines()
@@ -177,8 +178,8 @@ def test_status_decodes_the_pre_defined_error_field_where_the_drive_has_one(chan
 
 def test_status_of_a_node_nobody_answers_for_is_one_line(channel: str, sim: CanopenSimDrive,
                                                          capsys: pytest.CaptureFixture[str]) -> None:
-    # 1 s: ten of node 5's heartbeats (every 100 ms) are heard meanwhile, even on a loaded machine
-    result = run_cli(capsys, "status", *bus_args(channel), "--node-id", "9", "--listen", "0.3", "--timeout", "1")
+    # 0.5 s: five of node 5's heartbeats (every 100 ms) are heard meanwhile, where the assertion needs one
+    result = run_cli(capsys, "status", *bus_args(channel), "--node-id", "9", "--listen", "0.3", "--timeout", "0.5")
     assert result.code == 1 and result.out == ""
     line = one_line(result)
     assert line.startswith("haptic-bus status: drive error: CANopen node 9: no SDO answer reading 0x6041:00 (Statusword)")
@@ -189,7 +190,8 @@ def test_status_of_a_stopped_node_says_it_serves_no_sdo(channel: str, master: ca
                                                         capsys: pytest.CaptureFixture[str]) -> None:
     frames.send(master, 0x000, [0x02, NODE])  # NMT stop
     time.sleep(0.25)  # a heartbeat (every 100 ms) in STOPPED
-    result = run_cli(capsys, "status", *bus_args(channel), "--node-id", "5", "--timeout", "1")
+    # 0.5 s: a STOPPED node never answers, so the timeout is waited in full; its heartbeat is heard in 0.1 s
+    result = run_cli(capsys, "status", *bus_args(channel), "--node-id", "5", "--timeout", "0.5")
     assert result.code == 1
     assert "its heartbeat says STOPPED: a STOPPED node serves no SDO" in one_line(result)
     assert sim.nmt_state == "STOPPED"

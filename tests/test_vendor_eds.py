@@ -32,6 +32,7 @@ import pytest
 
 from drives.base import DriveScaling
 from drives.canopen.drive import DEFAULT_TPDO, DEFAULT_TPDO_WITH_POSITION, CanopenDrive
+from drives.canopen.link import NOTIFIER_CYCLE
 from drives.cia402 import State
 from drives.errors import DriveProtocolError
 from drives.safety import SafetySettings
@@ -164,6 +165,7 @@ def sdo_abort(node: canopen.RemoteNode, index: int, subindex: int, write: bytes 
 @contextmanager
 def client(channel: str) -> Iterator[canopen.RemoteNode]:
     network = canopen.Network()
+    network.NOTIFIER_CYCLE = NOTIFIER_CYCLE  # canopen's 1 s recv block made each disconnect wait up to 1 s
     network.connect(interface="virtual", channel=channel)
     try:
         yield network.add_node(NODE, canopen.ObjectDictionary())

@@ -23,7 +23,8 @@ returns what it wrote and lost (``run.json``'s ``record`` and ``bus_log``).
 
 A run whose drive is in the control process -- on an in-process bus
 (:data:`drives.bus_config.IN_PROCESS_INTERFACES`: the demos, the pytest plugin's and the tests'
-simulated drive) -- gets the same writer, :func:`~haptic_bus.app.writer_process.serve` over the
+simulated drive), or over Modbus TCP to servers all served by this process
+(:mod:`drives.modbus.in_process`) -- gets the same writer, :func:`~haptic_bus.app.writer_process.serve` over the
 same pipe and rings, in a thread named ``hb-writer`` instead of a process (:func:`writer_for`).
 Such a run's cycle already shares the interpreter lock with its drive, whose code runs in the
 control process, so a writer process would not give the cycle the lock to itself; a kill of the
@@ -47,6 +48,7 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 from drives.bus_config import IN_PROCESS_INTERFACES
+from drives.modbus.in_process import served_here
 from haptic_bus.app import writer_process
 from haptic_bus.app.bus_log import FRAME, FRAME_CAPACITY, frame_tap
 from haptic_bus.control.record import Event, EventLog, RunRecord
@@ -76,7 +78,10 @@ def _main_module_hidden() -> Iterator[None]:
 
 def writer_for(link: dict[str, Any]) -> bool:
     """Whether a run on ``link`` (``run.json``'s ``link``) gets a writer thread rather than a
-    process: its CAN bus is in-process (module docstring)."""
+    process: its CAN bus is in-process, or every Modbus server it reaches serves in this process
+    (module docstring)."""
+    if link.get("kind") == "modbus":
+        return all(served_here(url) for url in link.get("urls", [link.get("url")]))
     return link.get("kind") == "canopen" and link.get("bus", {}).get("interface") in IN_PROCESS_INTERFACES
 
 

@@ -36,6 +36,7 @@ from pymodbus.server import ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from drives.modbus.in_process import SERVED_HERE
 from haptic_bus.errors import ParameterError
 from sim_drive.device import POWER_STAGE_ON, SimulatedDrive
 from sim_drive.modbus.bank import RegisterBank, writes_command
@@ -321,6 +322,7 @@ class ModbusSimServer:
             raise RuntimeError(f"Modbus simulator did not bind {where} within {timeout} s: {self._error}")
         if self._error is not None:
             raise RuntimeError(f"Modbus simulator failed to start: {self._error}") from self._error
+        SERVED_HERE.add(self.url)  # a run on it has its drive in this process (drives.modbus.in_process)
         return self
 
     def _thread_main(self) -> None:
@@ -339,6 +341,7 @@ class ModbusSimServer:
             loop.call_soon_threadsafe(stopped.set)
         thread.join(timeout)
         self._thread = None
+        SERVED_HERE.discard(self.url)
 
     def __enter__(self) -> ModbusSimServer:
         return self.start()
