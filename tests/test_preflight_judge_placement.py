@@ -57,3 +57,44 @@ def test_the_judge_is_fifo_below_a_fifo_control_thread() -> None:
 
 def test_the_judge_stays_ordinary_beside_an_ordinary_control_thread() -> None:
     assert _judged_from(fifo=False) == (os.SCHED_OTHER, 0)
+
+
+def test_a_judge_left_judging_is_an_ordinary_thread_again() -> None:
+    """A stop during the judgement (the exchange raises) leaves the judge working, unwaited for:
+    it goes on as an ordinary thread (SCHED_OTHER), no longer above every ordinary process."""
+    release = threading.Event()
+    policies: list[tuple[int, int]] = []
+    out: list[str] = []
+    calls = [0]
+
+    def exchange() -> None:
+        calls[0] += 1
+        if calls[0] == 3:
+            raise KeyboardInterrupt  # what a Ctrl-C in the control thread is
+
+    def judge() -> None:
+        release.wait(timeout=10.0)
+        policies.append(_judge_policy())
+
+    def caller() -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO | RESET_ON_FORK, os.sched_param(CALLER_PRIORITY))
+        except PermissionError:
+            out.append("refused")
+            return
+        try:
+            preflight.while_cycling(exchange, PERIOD, judge)
+        except KeyboardInterrupt:
+            out.append("stopped")
+
+    thread = threading.Thread(target=caller, name="test-control")
+    thread.start()
+    thread.join(timeout=10.0)
+    if out == ["refused"]:
+        pytest.skip("SCHED_FIFO not granted to this process")
+    release.set()
+    for judge_thread in [t for t in threading.enumerate() if t.name == "preflight-judge"]:
+        judge_thread.join(timeout=10.0)
+    assert out == ["stopped"]
+    assert calls[0] == 3
+    assert policies == [(os.SCHED_OTHER, 0)]

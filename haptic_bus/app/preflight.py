@@ -38,7 +38,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from drives.os_threads import show_own_name
-from haptic_bus.app.realtime import helper_placement
+from haptic_bus.app.realtime import helper_placement, ordinary
 from haptic_bus.control.clock import RealClock
 from haptic_bus.control.cycle_loop import percentiles
 from haptic_bus.control.gate import PassivityGate
@@ -156,10 +156,14 @@ def while_cycling(exchange: Callable[[], object], period: float, work: Callable[
     thread.start()
     clock = RealClock(period, capacity=1, spin=spin)
     k = 1  # the first a period from now: the measurement's last exchange has just been
-    while thread.is_alive():
-        clock.wait_next(k)
-        exchange()
-        k += 1
+    try:
+        while thread.is_alive():
+            clock.wait_next(k)
+            exchange()
+            k += 1
+    except BaseException:  # a stop asked, a drive lost: the judgement runs on, unwaited for, as an ordinary thread
+        ordinary(thread)
+        raise
     thread.join()
     if failure:
         raise failure[0]

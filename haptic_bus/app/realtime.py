@@ -243,6 +243,16 @@ def helper_placement() -> Callable[[], None]:
     return place
 
 
+def ordinary(thread: threading.Thread) -> None:
+    """``thread`` (a helper :func:`helper_placement` placed) back to an ordinary one: a helper whose
+    caller has stopped waiting for it (a run stopped while pre-flight's judge still judges) works on
+    until its call returns, and should not do so above every ordinary process, the run's own
+    shutdown among them once the session has put the control thread back."""
+    if thread.native_id is not None and hasattr(os, "sched_setscheduler"):
+        with suppress(OSError):  # it ended meanwhile
+            os.sched_setscheduler(thread.native_id, os.SCHED_OTHER, os.sched_param(0))
+
+
 def _other_threads() -> list[int]:
     """The kernel thread ids of this process' threads but the calling one (none where /proc is not)."""
     try:
