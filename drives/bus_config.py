@@ -112,6 +112,19 @@ def parse_bus_option(text: str) -> tuple[str, Any]:
         return key, value
 
 
+def as_typed(value: object) -> object:
+    """An option's parsed value as the command line gave it: ``--bus-option`` pairs as ``KEY=VALUE``
+    (``--bus-kwargs``' groups joined by spaces), a list of ids (``--node-ids 5,6``) joined by commas
+    as it was typed (not ``'5 6'``, which reads as two arguments), anything else as it is."""
+    if isinstance(value, list) and value and all(isinstance(item, int) for item in value):
+        return ",".join(str(item) for item in value)
+    if isinstance(value, list):
+        return " ".join(str(as_typed(item)) for item in value)
+    if isinstance(value, tuple) and len(value) == 2:
+        return f"{value[0]}={value[1]}"
+    return value
+
+
 def merge_bus_options(*groups: Iterable[tuple[str, Any]]) -> dict[str, Any]:
     """The ``(key, value)`` pairs of ``--bus-option``, ``--bus-kwargs`` (and ``--interface``...) as one
     dict of python-can bus arguments; ParameterError when a key is given twice with different values."""

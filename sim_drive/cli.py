@@ -40,7 +40,7 @@ import time
 from collections.abc import Awaitable, Callable, Sequence
 from typing import Any, NoReturn
 
-from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, merge_bus_options, parse_bus_option
+from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, as_typed, merge_bus_options, parse_bus_option
 from drives.cia301 import NODE_ID_RANGE
 from haptic_bus._version import __version__
 from haptic_bus.console import StderrHandler
@@ -213,8 +213,14 @@ def _bus_config(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _flags(args: argparse.Namespace, parser: argparse.ArgumentParser, dests: Sequence[str]) -> str:
-    """The options among ``dests`` given on the command line, as ``--flag, --flag``."""
-    return ", ".join("--" + d.replace("_", "-") for d in dests if getattr(args, d) != parser.get_default(d))
+    """The options among ``dests`` given on the command line, each with the value given
+    (``--node-id = 5, --bus-option = 'port=4'``; a switch by its name alone)."""
+    return ", ".join(_given("--" + d.replace("_", "-"), getattr(args, d)) for d in dests
+                     if getattr(args, d) != parser.get_default(d))
+
+
+def _given(flag: str, value: object) -> str:
+    return flag if isinstance(value, bool) else f"{flag} = {as_typed(value)!r}"
 
 
 def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:

@@ -27,7 +27,10 @@ Who does what
 ``preflight-judge`` -- before the drives are enabled only
     Judges the scene at the loop delay pre-flight measured (the coupled gate on a sphere: seconds)
     while the control thread keeps the drives' RPDOs and the heartbeat going at zero torque
-    (:func:`haptic_bus.app.preflight.while_cycling`); it ends before the enable.
+    (:func:`haptic_bus.app.preflight.while_cycling`); it ends before the enable.  Beside a
+    SCHED_FIFO control thread it runs at SCHED_FIFO 1, as the other threads do (an ordinary
+    thread preempted while it held the GIL held the cycle up 80-173 ms on a loaded machine); a
+    stop during its judgement leaves it judging unwaited for, put back to an ordinary thread.
 ``verdict-collect``, ``verdict-feed`` -- the upload judge's executor threads
     concurrent.futures' two threads of the judge's process pool, blocked on its pipes; they run
     only while an upload is judged (:mod:`haptic_bus.node.verdicts`).

@@ -13,7 +13,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, merge_bus_options, parse_bus_option
+from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, as_typed, merge_bus_options, parse_bus_option
 from drives.cia301 import NODE_ID_RANGE
 from drives.modbus.register_map import UNIT_ID_RANGE
 
@@ -128,14 +128,6 @@ def refuse_can_options_with_modbus(args: argparse.Namespace, command: str, other
                              f"only Modbus options ({modbus_options}) with --modbus", command)
 
 
-def as_typed(value: object) -> object:
-    """An option's parsed value as the command line gave it: ``--bus-option`` pairs as ``KEY=VALUE``
-    (``--bus-kwargs``' groups joined by spaces), anything else as it is."""
-    if isinstance(value, list):
-        return " ".join(str(as_typed(item)) for item in value)
-    if isinstance(value, tuple) and len(value) == 2:
-        return f"{value[0]}={value[1]}"
-    return value
 
 
 def add_verbosity(parser: argparse.ArgumentParser, default: object) -> None:

@@ -38,6 +38,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from drives.os_threads import show_own_name
+from haptic_bus.app.realtime import helper_placement, ordinary
 from haptic_bus.control.clock import RealClock
 from haptic_bus.control.cycle_loop import percentiles
 from haptic_bus.control.gate import PassivityGate
@@ -141,9 +142,11 @@ def while_cycling(exchange: Callable[[], object], period: float, work: Callable[
     would expire: a CiA 301 drive may leave OPERATIONAL for it).  ``work``'s result, or its exception."""
     result: list[R] = []
     failure: list[BaseException] = []
+    place = helper_placement()  # beside a SCHED_FIFO control thread: SCHED_FIFO too, below it
 
     def run() -> None:
         show_own_name()
+        place()
         try:
             result.append(work())
         except BaseException as exc:  # handed to the control thread, raised there
@@ -153,10 +156,14 @@ def while_cycling(exchange: Callable[[], object], period: float, work: Callable[
     thread.start()
     clock = RealClock(period, capacity=1, spin=spin)
     k = 1  # the first a period from now: the measurement's last exchange has just been
-    while thread.is_alive():
-        clock.wait_next(k)
-        exchange()
-        k += 1
+    try:
+        while thread.is_alive():
+            clock.wait_next(k)
+            exchange()
+            k += 1
+    except BaseException:  # a stop asked, a drive lost: the judgement runs on, unwaited for, as an ordinary thread
+        ordinary(thread)
+        raise
     thread.join()
     if failure:
         raise failure[0]
