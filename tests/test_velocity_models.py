@@ -188,7 +188,10 @@ def _agree(loop: WallLoop, p: int, q: int) -> None:
     assert abs(simulated - predicted) <= 0.01 * abs(predicted) + 1e-9 * 0.5 * abs(response)
 
 
-_PROPERTY = settings(deadline=None, derandomize=True, database=None,
+# 25 fixed examples per model (hypothesis' default is 100: 6 s of CPU more): the two routes agree to 7e-12 where 1 %
+# is asserted, so an error in either route shows at many loops, not at a few: predicting with the delay 0.05 samples
+# off, or B 5 % off, misses the 1 % at 9 to 19 of these 25 loops per model (measured), a wrong term more.
+_PROPERTY = settings(max_examples=25, deadline=None, derandomize=True, database=None,
                      suppress_health_check=[HealthCheck.filter_too_much, HealthCheck.too_slow])
 _FREQUENCY = st.integers(3, 256).flatmap(lambda q: st.tuples(st.integers(1, (q - 1) // 2), st.just(q)))
 

@@ -14,7 +14,7 @@ the control thread (:mod:`haptic_bus.app.realtime`):
   where the OS grants them (said in the output when it does not);
 
 each once on a quiet machine and once beside a CPU hog (one busy process per CPU); ``--smoke``
-runs untuned and default quiet and default beside the hog, 0.3 s each (``--quick`` 1 s, full 15 s).  The
+runs untuned and default quiet and default beside one hog, 0.3 s each (``--quick`` 1 s, full 15 s).  The
 simulated drive stands in for hardware: its threads run under SCHED_FIFO where the OS grants it
 (:mod:`sim_drive.scheduling`, the policy said in the output), so that the hog slows the
 controller, not the drive's answers.
@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from haptic_bus.app.profiles import load_profile, one_axis_only
+from haptic_bus.app.profiles import AxesProfile, Profile, load_profile, one_axis_only
 from haptic_bus.app.realtime import RealtimeSettings, realtime_session
 from haptic_bus.app.writer_process import COMM as WRITER_COMM
 from haptic_bus.bench.size import Size
@@ -213,12 +213,12 @@ def observed_delay(controller: WallController) -> float | None:
 
 
 def controller_run(settings: RealtimeSettings, duration: float, bus: dict, process: subprocess.Popen,
-                   profile_name: str = PROFILE, node_id: int | None = NODE_ID) -> dict:
-    """One ``haptic-bus run`` session of ``profile_name`` (one axis: drive ``node_id``; several: the
-    profile's) against the simulated drive ``process`` on ``bus``, ramped in if it starts in contact."""
+                   profile: Profile | AxesProfile, node_id: int | None = NODE_ID) -> dict:
+    """One ``haptic-bus run`` session of ``profile`` (loaded once per section: loading judges it, seconds for
+    three axes; one axis: drive ``node_id``; several: the profile's) against the simulated drive ``process``
+    on ``bus``, ramped in if it starts in contact."""
     from haptic_bus.app.runner import RunOptions, run
 
-    profile = load_profile(profile_name)
     with tempfile.TemporaryDirectory() as out:
         with ThreadCpu() as threads:
             result = run(profile, bus, RunOptions(duration, pacing="wall", out_dir=Path(out) / "run", live=False,
@@ -240,8 +240,9 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     from haptic_bus.bench.processes import canopen_simulator, cpu_hogs
 
     duration = size.pick(0.3, 1.0, 15.0)
-    period = one_axis_only(load_profile(PROFILE), "bench").loop.period
-    hogs = os.cpu_count() or 1
+    profile = load_profile(PROFILE)
+    period = one_axis_only(profile, "bench").loop.period
+    hogs = size.pick(1, os.cpu_count() or 1, os.cpu_count() or 1)  # smoke: one hog shows the hogged run works
     runs: dict[str, dict] = {}
     with canopen_simulator(PROFILE, (NODE_ID,), "--operator", HAND) as (bus, process):
         for label, names in size.pick(SMOKE_RUNS, RUNS, RUNS).items():
@@ -250,7 +251,7 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
                 entry: dict = {}
                 try:
                     with cpu_hogs(hogs) if label == "CPU hog" else nullcontext():
-                        entry["controller"] = controller_run(SETUPS[name], duration, bus, process)
+                        entry["controller"] = controller_run(SETUPS[name], duration, bus, process, profile)
                         entry["bare_clock"] = bare_clock(SETUPS[name], period, round(duration / 2 / period))
                         if name == "default":  # python-can alone, the same frames, the same conditions
                             entry["floor"] = can_floor(bus, (NODE_ID,), FLOOR_TPDOS, period, duration)
@@ -296,7 +297,7 @@ def axes_runs(size: Size, duration: float) -> dict:
             for label in loads:
                 with cpu_hogs(os.cpu_count() or 1) if label == "CPU hog" else nullcontext():
                     out[label] = {
-                        "controller": controller_run(SETUPS["default"], duration, bus, process, AXES_PROFILE, None),
+                        "controller": controller_run(SETUPS["default"], duration, bus, process, axes, None),
                         "bare_clock": bare_clock(SETUPS["default"], period, round(duration / 2 / period)),
                         "floor": can_floor(bus, AXES_NODE_IDS, FLOOR_TPDOS, period, duration),
                     }
