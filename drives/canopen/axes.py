@@ -47,7 +47,7 @@ from drives.canopen.heartbeat import HeartbeatProducer
 from drives.canopen.link import NetworkLink
 from drives.canopen.sync_cycle import SyncCycle
 from drives.cia402_master import trip_together
-from drives.errors import DriveError, ParameterError
+from drives.errors import DriveError, DriveTimeout, ParameterError
 from drives.safety import DEFAULT_SAFETY, SafetySettings
 
 
@@ -164,7 +164,18 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
                 if drive.tripped is None:
                     drive.connected().events.check()
             timeout = cycle.timeout
-            return tuple([drive.take_inputs(found, timeout) for drive, found in zip(drives, cycle.sync_and_collect())])
+            taken: list[CyclicInputs] = []
+            silent: list[DriveTimeout] = []
+            for drive, found in zip(drives, cycle.sync_and_collect()):
+                try:
+                    taken.append(drive.take_inputs(found, timeout))
+                except DriveTimeout as error:  # every drive silent as long is named, not only the first
+                    silent.append(error)
+            if silent:
+                first, *others = silent
+                raise first if not others else DriveTimeout(first.node, f"{first.message} (nor from "
+                                                                         f"{', '.join(e.node for e in others)})")
+            return tuple(taken)
         except DriveError as error:
             raise self._trip_all(error) from error.__cause__
 

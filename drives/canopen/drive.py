@@ -369,8 +369,9 @@ class CanopenDrive(Cia402Master[CanopenConnection]):
         self._missed_in_row += 1
         if self._missed_in_row >= self.max_missed_tpdos:
             cobs = ", ".join(f"0x{cob:03X}" for cob in self.exchange.tpdo_cobs)
+            zeroed = "; torque set to zero" if self._armed else ""  # before the enable there was none to zero
             raise self.trip(DriveTimeout(self.name, f"no TPDO (COB-ID {cobs}) for {self._missed_in_row} consecutive "
-                                                    f"cycles (timeout {timeout * 1e3:.3g} ms each); torque set to zero"))
+                                                    f"cycles (timeout {timeout * 1e3:.3g} ms each){zeroed}"))
         last = self.last_inputs if self.last_inputs is not None else CyclicInputs(0, 0)
         return dataclasses.replace(last, age=self._missed_in_row)
 

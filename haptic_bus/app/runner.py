@@ -82,7 +82,7 @@ from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.record import Event
-from haptic_bus.errors import DriveError, DriveFault, ParameterError, Refusal
+from haptic_bus.errors import DriveError, DriveFault, DriveTimeout, ParameterError, Refusal
 
 if TYPE_CHECKING:
     import can
@@ -303,7 +303,11 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
 
         def exchange_unless_stopped() -> object:
             _stop_if_asked(options)  # asked while the gate judges: the run stops now, not once it has judged
-            return exchange()
+            try:
+                return exchange()
+            except DriveTimeout as silent:
+                raise DriveTimeout(silent.node, f"{silent.message}, while pre-flight's verdict was judged after its "
+                                                "cycles (nothing enabled)") from silent
 
         spin = options.scheduling.spin
         timing = preflight.measure(exchange, kind.period, spin=spin)
