@@ -294,6 +294,7 @@ class Drive(abc.ABC):
     name: str
     scaling: DriveScaling
     clamp: TorqueClamp
+    last_inputs: CyclicInputs | None = None  # the inputs of the last cycle it took part in (None: none yet)
     _phase_open = False  # True inside :meth:`cyclic`
 
     @abc.abstractmethod
@@ -304,6 +305,10 @@ class Drive(abc.ABC):
     @abc.abstractmethod
     def enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
         """Set ``mode`` (checked against 0x6502 and 0x6061) and walk to OPERATION ENABLED."""
+
+    @abc.abstractmethod
+    def select_mode(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
+        """Set ``mode`` ahead of the next :meth:`enable`, which then only walks the state machine."""
 
     @abc.abstractmethod
     def read_object(self, spec: ObjectSpec | int) -> int:

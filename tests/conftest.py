@@ -25,7 +25,9 @@ Fixtures:
 ``multicast``
     A ``(group, port)`` for ``udp_multicast`` unique to this test.
 ``free_port``
-    A TCP port (``int``) free on 127.0.0.1 when the test starts.
+    A TCP port (``int``) free on 127.0.0.1 when the test starts (for a server the test starts).
+``refusing_port``
+    A TCP port (``int``) on 127.0.0.1 that refuses connections for the whole test (a server not there).
 ``canopen_rig``
     A factory: ``canopen_rig(interface="virtual", timing="ideal", node_id=5, connect=True,
     **drive_kwargs)`` is a context manager yielding a :class:`Rig` -- a (connected) CANopen
@@ -172,6 +174,16 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
+
+
+@pytest.fixture
+def refusing_port() -> Iterator[int]:
+    """A TCP port on 127.0.0.1 where nothing listens for the whole test: bound by it, never listening
+    (a connection is refused), so that no server of a test beside it takes the port meanwhile (one
+    found free and let go was, once, by another xdist worker's Modbus server)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        yield int(sock.getsockname()[1])
 
 
 # ----------------------------------------------------------------------------- frames by hand

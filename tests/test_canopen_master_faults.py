@@ -17,7 +17,15 @@ import pytest
 from drives import errors
 from drives.base import DriveScaling
 from drives.canopen.drive import CanopenDrive
-from drives.cia402 import CONTROLWORD, STATUSWORD, SUPPORTED_DRIVE_MODES, OperationMode, State, decode_statusword
+from drives.cia402 import (
+    CONTROLWORD,
+    MODES_OF_OPERATION,
+    STATUSWORD,
+    SUPPORTED_DRIVE_MODES,
+    OperationMode,
+    State,
+    decode_statusword,
+)
 from drives.cia402_master import SAFE_CONTROLWORD
 from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout
 from sim_drive.eds import eds_path
@@ -376,3 +384,22 @@ def test_without_an_eds_scaling_comes_from_the_caller_and_the_drive(canopen_rig)
         assert drive.scaling_sources["velocity_per_count"] == "caller"
         drive.enable()
         assert run_cycles(drive, 5) == 5
+
+
+def test_a_mode_selected_ahead_is_checked_at_the_enable_and_one_changed_meanwhile_refused(canopen_rig):
+    """A run selects the mode before pre-flight (select_mode): the enable then reads 0x6061 once;
+    a mode another master wrote meanwhile is refused there, nothing enabled, and the next enable
+    selects it whole again."""
+    with canopen_rig("virtual", "ideal") as r:
+        drive, sim = r.drive, r.sim
+        drive.select_mode()
+        assert sim.drive.mode_display == OperationMode.CYCLIC_SYNCHRONOUS_TORQUE
+        drive.write_object(MODES_OF_OPERATION, 0)  # another master, meanwhile: no mode (the drive takes only 0 and CST)
+        with pytest.raises(DriveFault, match=r"0x6061 modes of operation display = 0, not 10 \(CYCLIC_SYNCHRONOUS_TORQUE\) "
+                                             r"selected before pre-flight"):
+            drive.enable()
+        assert sim.drive.state is State.SWITCH_ON_DISABLED
+        drive.enable()
+        assert sim.drive.state is State.OPERATION_ENABLED
+        assert sim.drive.mode_display == OperationMode.CYCLIC_SYNCHRONOUS_TORQUE
+        drive.disable()

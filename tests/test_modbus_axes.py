@@ -135,10 +135,10 @@ def test_a_unit_nobody_answers_for_is_one_line_and_nothing_is_enabled(
 
 
 def test_a_server_that_is_not_there_is_one_line(tmp_path: pathlib.Path, modbus_gantry: Callable[..., MultiAxisModbusSim],
-                                                free_port: int) -> None:
+                                                refusing_port: int) -> None:
     sim = modbus_gantry("gantry-3d", 3)
     seen = watch_states(sim)
-    urls = [*sim.urls[:2], f"tcp://127.0.0.1:{free_port}"]  # the third axis' server is not there
+    urls = [*sim.urls[:2], f"tcp://127.0.0.1:{refusing_port}"]  # the third axis' server is not there
     result = hb.run(load_profile("gantry-3d"), urls, options(tmp_path / "run", 1.0), unit_ids=list(UNITS))
     assert result.exit_reason == "drive error" and result.summary is None
     assert result.error == f"Modbus unit 3 at {urls[2]}: cannot connect within 0.5 s (is the drive/server up, the address right?)"

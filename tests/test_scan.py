@@ -306,7 +306,7 @@ def test_modbus_a_unit_slower_than_the_answer_timeout_is_skipped_and_the_sweep_g
     assert [u.unit_id for u in patient.units] == [3]
 
 
-def test_modbus_cli_json_unprobed_and_unreachable(free_port: int, capsys: pytest.CaptureFixture[str]) -> None:
+def test_modbus_cli_json_unprobed_and_unreachable(refusing_port: int, capsys: pytest.CaptureFixture[str]) -> None:
     with ModbusSimServer(port=0) as server:
         assert scan_cli("--modbus", server.url, "--unit-ids", "1-3", "--json") == 0
         out, err = capsys.readouterr()
@@ -316,6 +316,6 @@ def test_modbus_cli_json_unprobed_and_unreachable(free_port: int, capsys: pytest
         err = capsys.readouterr().err
         assert re.search(r"unit ids [\d,-]*247 not probed: --timeout 1e-09 s spent", err), err
         assert "no node answered at " + server.url in err
-    assert scan_cli("--modbus", f"tcp://127.0.0.1:{free_port}") == 1  # nothing listens there
+    assert scan_cli("--modbus", f"tcp://127.0.0.1:{refusing_port}") == 1  # nothing listens there
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "drive error" in err and "cannot connect" in err

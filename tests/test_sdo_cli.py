@@ -193,6 +193,6 @@ def test_modbus_invalid_input_is_exit_2_before_connecting(args: list[str], said:
     assert result.code == 2 and said in one_line(result), result.err
 
 
-def test_modbus_no_server_is_one_line(free_port: int, capsys: pytest.CaptureFixture[str]) -> None:
-    result = run_cli(capsys, "sdo", "read", "0x6041", "--modbus", f"tcp://127.0.0.1:{free_port}", "--timeout", "0.2")
+def test_modbus_no_server_is_one_line(refusing_port: int, capsys: pytest.CaptureFixture[str]) -> None:
+    result = run_cli(capsys, "sdo", "read", "0x6041", "--modbus", f"tcp://127.0.0.1:{refusing_port}", "--timeout", "0.2")
     assert result.code == 1 and "cannot connect within 0.2 s" in one_line(result)

@@ -278,8 +278,8 @@ def test_modbus_status_and_fault_reset(unit: ModbusSimServer, capsys: pytest.Cap
     assert run_cli(capsys, "status", *args).code == 0
 
 
-def test_modbus_status_of_a_server_not_there_is_one_line(free_port: int, capsys: pytest.CaptureFixture[str]) -> None:
-    result = run_cli(capsys, "status", "--modbus", f"tcp://127.0.0.1:{free_port}", "--timeout", "0.2")
+def test_modbus_status_of_a_server_not_there_is_one_line(refusing_port: int, capsys: pytest.CaptureFixture[str]) -> None:
+    result = run_cli(capsys, "status", "--modbus", f"tcp://127.0.0.1:{refusing_port}", "--timeout", "0.2")
     assert result.code == 1 and "cannot connect within 0.2 s" in one_line(result)
 
 

@@ -76,7 +76,7 @@ class RunKind(DocumentKind, Protocol[SceneT, GateT, OriginT]):
 
     def passes_at(self, gate: GateT, scene: SceneT) -> Callable[[float], bool]: ...
 
-    def origin(self, drive: Any) -> OriginT: ...
+    def origin(self, drive: Any, sampled: bool = False) -> OriginT: ...
 
     def inside(self, scene: SceneT, origin: OriginT) -> str | None: ...
 
@@ -132,9 +132,9 @@ class OneAxisRun:
         """The gate's verdict on ``scene`` at another loop delay (samples)."""
         return preflight.passes_at(gate, scene)
 
-    def origin(self, drive: Any) -> float:
-        """The handle's position (m, 0x6064) before enabling."""
-        return encoder_origin(drive)
+    def origin(self, drive: Any, sampled: bool = False) -> float:
+        """The handle's position (m, 0x6064) before enabling (``sampled``: :func:`encoder_origin`'s)."""
+        return encoder_origin(drive, sampled)
 
     def inside(self, scene: CompiledScene, origin: float) -> str | None:
         """Where the handle is if inside an object at ``origin`` (m), else None."""
@@ -232,9 +232,9 @@ class AxesRun:
 
         return passes
 
-    def origin(self, drive: Any) -> Sequence[float]:
-        """Every joint's position (m, 0x6064) before enabling."""
-        return encoder_origins(drive)
+    def origin(self, drive: Any, sampled: bool = False) -> Sequence[float]:
+        """Every joint's position (m, 0x6064) before enabling (``sampled``: :func:`encoder_origin`'s)."""
+        return encoder_origins(drive, sampled)
 
     def inside(self, scene: SpaceScene, origin: Sequence[float]) -> str | None:
         """Where the handle is in space if inside an object with the joints at ``origin`` (m), else None."""

@@ -223,6 +223,8 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             with control_thread_scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
                 running, node = ready()  # before pre-flight, which then measures the cycle after it
+                for each in drives:
+                    each.select_mode()  # its SDO round trips now, not between pre-flight and the enable
                 if options.wall_paced:
                     _preflight(kind, rig, drive, gate, scene, options, extra)
                     recorder.publish()  # run.json as it stands before the cycles (pre-flight's verdict in it)
@@ -350,7 +352,7 @@ def _still_outside(kind: RunKind[Any, Any, Any], drive: Any, scene: Any) -> None
     (:class:`Refusal`, nothing enabled, if the handle is inside one now): an operator pushing the
     unpowered handle, or a hand moving it, during pre-flight's cycles would otherwise have it
     enabled deep inside a wall, the passivity layer lowering every target from its first."""
-    where = kind.inside(scene, kind.origin(drive))
+    where = kind.inside(scene, kind.origin(drive, sampled=True))  # pre-flight's last sample, no SDO: the enable is due
     if where is not None:
         raise Refusal(f"{where}: it moved there during pre-flight, after the start was judged outside every object; "
                       "move it out or use --start-in-contact ramp")

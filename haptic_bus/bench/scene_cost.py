@@ -70,6 +70,9 @@ class CannedDrive(Drive):
     def enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
         """Always enabled."""
 
+    def select_mode(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
+        """Always in cyclic synchronous torque."""
+
     def read_object(self, spec: ObjectSpec | int) -> int:
         """Every object reads 0."""
         return 0

@@ -97,14 +97,18 @@ class Derate(Protocol[SceneT, DecisionT_co]):
         ...
 
 
-def encoder_origin(drive: Drive) -> float:
-    """The handle's absolute position (m) from 0x6064, read once, acyclically, before cycling."""
-    return drive.read_object(POSITION_ACTUAL) * drive.scaling.position_per_count
+def encoder_origin(drive: Drive, sampled: bool = False) -> float:
+    """The handle's absolute position (m) from 0x6064, read once, acyclically, before cycling;
+    ``sampled``: the one the drive's last cyclic inputs carried where they carry it (right after
+    pre-flight's cycles: no SDO round trip between their last RPDO and the enable)."""
+    last = drive.last_inputs if sampled else None
+    counts = last.position if last is not None and last.position is not None else drive.read_object(POSITION_ACTUAL)
+    return counts * drive.scaling.position_per_count
 
 
-def encoder_origins(axes: AxesDrive) -> list[float]:
-    """Every axis' joint position (m) from its 0x6064, read once, acyclically, before cycling."""
-    return [encoder_origin(drive) for drive in axes.drives]
+def encoder_origins(axes: AxesDrive, sampled: bool = False) -> list[float]:
+    """Every axis' joint position (m) from its 0x6064 (:func:`encoder_origin`)."""
+    return [encoder_origin(drive, sampled) for drive in axes.drives]
 
 
 class PositionIntegrator:
