@@ -1,30 +1,29 @@
-"""A SIGTERM once ``run`` has ended changes nothing: the exit status stays the one the run said.
+"""A SIGTERM while the ``haptic-bus`` process exits changes nothing: the exit status stays the command's.
 
-With a Python handler installed, the interpreter puts the default action back while it finalizes,
-and a SIGTERM then killed the process (status -15) after it had printed "drive error" (found by the
-fuzz test, whose SIGTERM came while the run's process exited on its own)."""
+With a Python handler installed (``run``'s stop request), the interpreter puts the default action
+back while it finalizes, and a SIGTERM then killed the process (status -15) after it had printed
+"drive error" (found by the fuzz test, whose SIGTERM came while the run's process exited on its own).
+The command line called from a program (:func:`haptic_bus.app.cli.main`) leaves the signals as they were."""
 
 from __future__ import annotations
 
 import os
-import pathlib
 import signal
+import sys
 
 import pytest
 
-from haptic_bus.app.cli import main
-from tests.run_rig import simulated_drive
+from haptic_bus.app import entry
 
 
-def test_sigterm_is_ignored_once_the_run_has_ended(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
-    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+def test_the_console_script_ignores_sigterm_once_its_command_has_ended(monkeypatch: pytest.MonkeyPatch,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    saved = signal.getsignal(signal.SIGTERM)
+    monkeypatch.setattr(sys, "argv", ["haptic-bus", "profiles", "show", "cia402-handle"])
     try:
-        with simulated_drive("canopen", "cia402-handle") as drive:
-            code = main(["run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "0.05", "-q", "--no-plots",
-                         "--out", str(tmp_path / "run")])
-        assert code == 0, capsys.readouterr().err
+        assert entry.main() == 0
+        assert "cia402-handle" in capsys.readouterr().out
         assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN  # kept through the interpreter's exit
         os.kill(os.getpid(), signal.SIGTERM)  # delivered, and nothing happens
     finally:
-        for sig, handler in saved.items():
-            signal.signal(sig, handler)
+        signal.signal(signal.SIGTERM, saved)

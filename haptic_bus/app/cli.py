@@ -201,11 +201,6 @@ def _run(args: argparse.Namespace) -> int:
         result = run(profile, bus, options, **links)
     except ParameterError as error:  # run() names its arguments; the command line names its options
         raise as_flag(error) from None
-    finally:
-        # the run has ended (and says how): a SIGTERM from here on changes nothing.  With a Python handler
-        # the interpreter restores the default action while it finalizes, and a SIGTERM then killed the
-        # process (status -15) after it had said "drive error" (its exit status 1 lost); ignored, it stays so
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
     summary = result.summary
     if summary is not None:
         p, late = summary.compute_percentiles, summary.lateness_percentiles
@@ -463,4 +458,6 @@ def _dispatch(args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from haptic_bus.app.early_stop import exiting
+
+    sys.exit(exiting(main()))

@@ -21,7 +21,7 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from haptic_bus.app.early_stop import note_stop
+from haptic_bus.app.early_stop import exiting, note_stop
 
 EXIT_INTERRUPTED = 130  # haptic_bus.app.arguments.EXIT_INTERRUPTED, which is what this guards the import of
 
@@ -38,7 +38,8 @@ def main() -> int:
     try:
         from haptic_bus.app.cli import main as command_line
 
-        return command_line()
+        return exiting(command_line())
     except KeyboardInterrupt:
         print("haptic-bus: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return exiting(EXIT_INTERRUPTED)
+
