@@ -345,7 +345,12 @@ def test_cli_exit_codes(tmp_path, capsys):
     assert "verdict: NOT passive" in capsys.readouterr().out
     assert cmd_show(ns(profile=str(refused))) == 1  # shown all the same, the refusal one line on stderr
     shown = capsys.readouterr()
-    assert "gate: REFUSED" in shown.out and shown.err.count("\n") == 1 and "margin -84.09" in shown.err
+    assert "gate: REFUSES" in shown.out and shown.err.count("\n") == 1 and "margin -84.09" in shown.err
+    beyond = write(tmp_path, (tmp_path / "s.toml").read_text().replace('layer = "off"', 'layer = "bound"\nbeyond_gate = true'),
+                   "beyond.toml")
+    assert cmd_show(ns(profile=str(beyond))) == 0  # it loads, and runs, beyond the gate: the view says so
+    shown = capsys.readouterr()
+    assert "gate: REFUSES (the profile runs beyond it under the bound layer" in shown.out and shown.err == ""
     invalid = write(tmp_path, BASE.replace("mass = 1.0", "mass = -1.0"), "bad.toml")
     for command in (cmd_show, cmd_check):
         assert command(ns(profile=str(invalid))) == 2

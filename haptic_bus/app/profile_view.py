@@ -45,12 +45,21 @@ def format_profile(profile: Profile, decision: GateDecision) -> str:
         kind, name = fields.pop("kind"), fields.pop("name")
         lines.append(f"  {kind} {name}: " + ", ".join(f"{k}={v:g}" for k, v in fields.items()))
     lines.append("operator model: " + ", ".join(f"{k}={v}" for k, v in profile.operator_model.items()))
-    lines.append(f"gate: {'accepted' if decision.accepted else 'REFUSED'}")
+    lines.append(verdict_line("gate", profile, decision.accepted))
     for wall in decision.walls:
         lines.append(f"  {'+'.join(wall.objects)}: K={wall.K:g} N/m B={wall.B:g} N s/m margin "
                      f"{wall.verdict.margin:+.4g} N s/m at theta={wall.verdict.critical_theta:.3g} rad, alpha={wall.alpha:.3g}")
     lines += [f"  warning: {w}" for w in decision.warnings] + [f"  refused: {r}" for r in decision.reasons]
     return "\n".join(lines)
+
+
+def verdict_line(gate: str, profile: Profile | AxesProfile, accepted: bool) -> str:
+    """The view's line with the ``gate``'s verdict, one wording for either kind of profile (a refused
+    scene the profile runs beyond the gate says so)."""
+    if accepted:
+        return f"{gate}: accepts"
+    beyond = " (the profile runs beyond it under the bound layer: [passivity] beyond_gate = true)"
+    return f"{gate}: REFUSES" + (beyond if profile.passivity.beyond_gate else "")
 
 
 def space_decision_to_dict(decision: SpaceDecision) -> dict[str, Any]:
@@ -83,7 +92,7 @@ def format_axes_profile(profile: AxesProfile, decision: SpaceDecision) -> str:
         fields = space_object_to_dict(obj)
         kind, name = fields.pop("kind"), fields.pop("name")
         lines.append(f"  {kind} {name}: " + ", ".join(f"{k}={_format_value(v)}" for k, v in fields.items()))
-    lines.append(f"coupled gate: {'accepts' if decision.accepted else 'REFUSES'}")
+    lines.append(verdict_line("coupled gate", profile, decision.accepted))
     lines += [f"  {'+'.join(w.objects)}: margin {w.verdict.margin:+.4g} N s/m at theta={w.verdict.critical_theta:.3g} rad"
               for w in decision.walls]
     lines += [f"  refused: {r}" for r in decision.reasons]
