@@ -30,8 +30,8 @@ class ParameterError(HapticBusError, ValueError):
         self.value = value
         self.allowed = allowed
         self.context = context
-        where = f"{context}: " if context else ""
-        super().__init__(f"{where}{name} = {value!r} is invalid; allowed: {allowed}")
+        self.detail = f"{name} = {value!r} is invalid; allowed: {allowed}"  # the message without its context
+        super().__init__(f"{context}: {self.detail}" if context else self.detail)
 
 
 class DriveError(HapticBusError):

@@ -235,6 +235,6 @@ def test_an_unwritable_out_is_one_line_and_exit_2(where: str, tmp_path: Path, ca
     out = afile if where == "a file" else afile / "bench"
     assert main(["--smoke", "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"haptic-bus bench: error: bench: --out = '{out}' is invalid; allowed: a folder this user can "
+    assert err.startswith(f"haptic-bus bench: error: --out = '{out}' is invalid; allowed: a folder this user can "
                           "create and write (") and err.count("\n") == 1 and "Traceback" not in err
     assert afile.read_text() == "kept\n"

@@ -70,7 +70,7 @@ def test_report_out_that_cannot_be_a_folder_is_one_line_and_exit_2(where: str, t
     assert main(["report", "cia402-handle", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     why = f"{afile} is a file, not a folder"  # the file in the way named, in both cases
-    assert err == (f"haptic-bus report: error: report: --out = '{out}' is invalid; allowed: a folder this user can create "
+    assert err == (f"haptic-bus report: error: --out = '{out}' is invalid; allowed: a folder this user can create "
                    f"and write ({why})\n")
     assert afile.read_text() == "kept\n"
 

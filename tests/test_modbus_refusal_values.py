@@ -15,10 +15,10 @@ MODBUS = ["--modbus", "tcp://127.0.0.1:15598"]
 
 @pytest.mark.parametrize(("argv", "line"), [
     (["scan", *MODBUS, "--node-ids", "5,6"],
-     "haptic-bus scan: error: scan: --node-ids = '5,6' is invalid; allowed: only Modbus options (--unit-ids) "
+     "haptic-bus scan: error: --node-ids = '5,6' is invalid; allowed: only Modbus options (--unit-ids) "
      "with --modbus\n"),
     (["run", "cia402-handle", *MODBUS, "--bus-kwargs", "port=4", "ttl=0"],
-     "haptic-bus run: error: run: --bus-kwargs = 'port=4 ttl=0' is invalid; allowed: only Modbus options "
+     "haptic-bus run: error: --bus-kwargs = 'port=4 ttl=0' is invalid; allowed: only Modbus options "
      "(--unit-id) with --modbus\n"),
 ])
 def test_haptic_bus_names_the_value_typed(argv: list[str], line: str, capsys: pytest.CaptureFixture[str]) -> None:

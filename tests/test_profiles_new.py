@@ -197,7 +197,7 @@ def test_an_existing_file_is_kept_without_force(tmp_path: Path, capsys: pytest.C
     out = tmp_path / "axis.toml"
     out.write_text("kept\n")
     assert main(["profiles", "new", "axis", "--out", str(out)]) == 2
-    assert one_line(capsys.readouterr().err) == (f"haptic-bus profiles: error: profiles new: --out = '{out}' is invalid; "
+    assert one_line(capsys.readouterr().err) == (f"haptic-bus profiles new: error: --out = '{out}' is invalid; "
                                                  "allowed: a file that does not exist yet (--force overwrites it)\n")
     assert out.read_text() == "kept\n"
     assert main(["profiles", "new", "axis", "--out", str(out), "--force"]) == 0
@@ -210,6 +210,6 @@ def test_an_unwritable_target_is_one_line_and_exit_2(where: str, tmp_path: Path,
     afile.write_text("kept\n")
     out = {"inside a file": afile / "axis.toml", "a folder": tmp_path, "a missing folder": tmp_path / "no" / "axis.toml"}[where]
     assert main(["profiles", "new", "axis", "--out", str(out)]) == 2
-    assert one_line(capsys.readouterr().err) == (f"haptic-bus profiles: error: profiles new: --out = '{out}' is invalid; "
+    assert one_line(capsys.readouterr().err) == (f"haptic-bus profiles new: error: --out = '{out}' is invalid; "
                                                  "allowed: a file in an existing folder this user can write\n")
     assert afile.read_text() == "kept\n"

@@ -199,6 +199,6 @@ def test_plot_refuses_a_folder_with_nothing_to_draw_in_one_line(tmp_path: Path, 
     captured = capsys.readouterr()
     assert captured.out == "" and "wrote" not in captured.err
     (line,) = captured.err.splitlines()
-    assert line.startswith(f"haptic-bus plot: error: plot: RUN_DIR = '{tmp_path}' is invalid; allowed: a run folder "
+    assert line.startswith(f"haptic-bus plot: error: RUN_DIR = '{tmp_path}' is invalid; allowed: a run folder "
                            "with cycles recorded")
     assert "run.json says 'refused', handle inside ball)" in line  # the status and the run's own error

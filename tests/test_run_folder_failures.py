@@ -118,7 +118,7 @@ def test_a_disk_full_before_the_run_is_exit_2_before_the_bus(tmp_path: pathlib.P
     out, result = on_a_small_disk(tmp_path, "canopen", full=True)
     assert result["code"] == 2 and result["out"] == "" and result["states"] == [], result  # the drive never reached
     line = one_line(result["err"])
-    assert line == (f"haptic-bus run: error: run: --out = '{out}' is invalid; allowed: a folder this run can write "
+    assert line == (f"haptic-bus run: error: --out = '{out}' is invalid; allowed: a folder this run can write "
                     f"({out / LOCK_NAME}: No space left on device)")
     assert result["kept"] == {"files": []}  # nothing left behind, not even the lock file
 

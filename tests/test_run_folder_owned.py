@@ -67,7 +67,7 @@ def test_a_second_run_into_a_running_runs_folder_is_refused_before_its_bus(tmp_p
             running.join(30.0)
     assert result.code == 2 and result.out == ""
     line = refused_line(result.err)
-    assert line.startswith(f"haptic-bus run: error: run: --out = '{folder}' is invalid; allowed: a folder no other run")
+    assert line.startswith(f"haptic-bus run: error: --out = '{folder}' is invalid; allowed: a folder no other run")
     assert f"the run of process {os.getpid()} holds {folder / LOCK_NAME}" in line
     (done,) = results
     assert done.exit_reason == "stopped" and read_run(folder)["status"] == "stopped"

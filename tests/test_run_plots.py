@@ -155,14 +155,14 @@ REGION = ["region", "--mass", "1", "--friction", "20", "--period", "0.001", "--d
 
 
 @pytest.mark.parametrize("args, line", [
-    ([*REGION, "--png", "{file}/x.png"], "haptic-bus region: error: region: --png = '{file}/x.png' is invalid; allowed: a "
+    ([*REGION, "--png", "{file}/x.png"], "haptic-bus region: error: --png = '{file}/x.png' is invalid; allowed: a "
                                          "file this user can create and write ({file} is a file, not a folder)"),
     ([*REGION, "--png", "{tmp}/r.png", "--mark", "0,10"],
      "haptic-bus region: error: argument --mark: '0,10': K and B must be finite and > 0 (alpha = B/(KT) and beta = b/B "
      "are points of the plane only then)"),
     ([*REGION, "--png", "{tmp}/r.png", "--mark", "1500"], "haptic-bus region: error: argument --mark: '1500' is not K,B "
                                                            "(two numbers: N/m, N s/m)"),
-    (["plot", "{tmp}"], "haptic-bus plot: error: plot: RUN_DIR = '{tmp}' is invalid; allowed: a run folder: one with "
+    (["plot", "{tmp}"], "haptic-bus plot: error: RUN_DIR = '{tmp}' is invalid; allowed: a run folder: one with "
                         "run.json (written by haptic-bus run or demo)"),
 ], ids=["png-under-a-file", "mark-zero", "mark-one-number", "plot-not-a-run"])
 def test_bad_output_and_marks_are_one_line_and_exit_2(args: list[str], line: str, tmp_path: pathlib.Path,

@@ -124,7 +124,7 @@ def test_an_out_that_cannot_be_written_is_exit_2_before_the_bus_is_touched(
                 listener.accept()  # nobody connected
     assert result.code == 2 and result.out == ""
     (line,) = result.err_lines
-    assert line.startswith(f"haptic-bus run: error: run: --out = '{out}' is invalid; allowed: a folder this user can create "
+    assert line.startswith(f"haptic-bus run: error: --out = '{out}' is invalid; allowed: a folder this user can create "
                            "and write (")
     assert "Traceback" not in result.err
 

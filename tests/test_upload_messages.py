@@ -54,7 +54,7 @@ def test_an_object_the_scene_lacks_is_named_with_what_it_has_not_the_last_verdic
         assert refused.startswith("haptic-bus upload: refused: passivity gate refused")
         assert main([*upload, "--object", "7", "--stiffness", "250", "--damping", "120"]) == 2
         err = one_line(capsys.readouterr().err)
-        assert err == ("haptic-bus upload: error: upload: --object = 7 is invalid; allowed: an object of the running "
+        assert err == ("haptic-bus upload: error: --object = 7 is invalid; allowed: an object of the running "
                        f"scene, 0..0 (controller node {CONTROLLER} has 1 object: 0 'wall')\n")
         assert "passivity" not in err
         controller.run(2)

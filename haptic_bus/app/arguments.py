@@ -130,6 +130,16 @@ def refuse_can_options_with_modbus(args: argparse.Namespace, command: str, other
 
 
 
+def error_line(command: str, error: Exception) -> str:
+    """``haptic-bus COMMAND: error: ...``, one line; a :class:`ParameterError` whose context is the command
+    itself ("run", "profiles new") says it once, in front, not twice."""
+    from haptic_bus.errors import ParameterError
+
+    if isinstance(error, ParameterError) and error.context.split(" ")[0] == command.split(" ")[0]:
+        return f"haptic-bus {error.context}: error: {error.detail}"
+    return f"haptic-bus {command}: error: {error}"
+
+
 def add_verbosity(parser: argparse.ArgumentParser, default: object) -> None:
     """``-v`` (repeatable) / ``-q``, mutually exclusive."""
     group = parser.add_mutually_exclusive_group()

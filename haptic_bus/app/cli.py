@@ -29,6 +29,7 @@ from haptic_bus.app.arguments import (
     add_command,
     add_verbosity,
     bus_arguments,
+    error_line,
     node_id,
     number,
     refuse_can_options_with_modbus,
@@ -444,7 +445,7 @@ def _dispatch(args: argparse.Namespace) -> int:
     try:
         return int(args.handler(args))
     except ParameterError as error:
-        print(f"haptic-bus {args.command}: error: {error}", file=sys.stderr)
+        print(error_line(args.command, error), file=sys.stderr)
         return EXIT_INVALID
     except DriveError as error:
         print(f"haptic-bus {args.command}: drive error: {error}", file=sys.stderr)

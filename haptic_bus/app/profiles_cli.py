@@ -25,7 +25,7 @@ from haptic_bus.analysis.check import CheckReport, check_loop, format_check
 from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE, DeviceLoop
 from haptic_bus.analysis.two_mass import TwoMassLoop
 from haptic_bus.analysis.two_mass_check import TwoMassReport, check_two_mass_loop, format_two_mass
-from haptic_bus.app.arguments import as_typed, number, timeout
+from haptic_bus.app.arguments import as_typed, error_line, number, timeout
 from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
 from haptic_bus.app.json_ready import json_ready
 from haptic_bus.app.profile_view import format_axes_profile, format_profile, gate_decision_to_dict, space_decision_to_dict
@@ -49,7 +49,7 @@ EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
 
 
 def _fail(command: str, error: Exception) -> int:
-    print(f"haptic-bus profiles {command}: error: {error}", file=sys.stderr)
+    print(error_line(f"profiles {command}", error), file=sys.stderr)
     return EXIT_INVALID
 
 

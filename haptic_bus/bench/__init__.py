@@ -247,7 +247,7 @@ def _refusal(args: argparse.Namespace) -> str | None:
         return (f"the [bench] extra is missing: {', '.join(missing)}; install it with: pip install 'haptic_bus[bench]' "
                 "(from a checkout: pip install -e '.[bench]')")
     try:
-        writable_folder("--out", args.out, context="bench")
+        writable_folder("--out", args.out)  # the line says "haptic-bus bench" already
     except ParameterError as error:
         return str(error)
     return None
