@@ -227,7 +227,10 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, 
     from haptic_bus.app.profiles import AxesProfile, load_profile
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
     from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest
+    from haptic_bus.errors import ParameterError
 
+    if args.modbus and args.no_bus_log:
+        raise ParameterError("--no-bus-log", True, "CANopen runs only (a Modbus run has no bus.asc to leave out)", "run")
     profile = load_profile(args.profile)
     bus: Any
     unit_ids = None
