@@ -95,6 +95,7 @@ def test_a_fake_clock_drives_the_plain_view_without_waiting() -> None:
         controller = WallController(drive, profile.gate(), profile.compiled_scene(), force_limit=profile.force_limit,
                                     origin=encoder_origin(drive))
         with LiveView([("", controller.record)], "view", controller.period, stream, duration=2.0, clock=clock) as view:
+            assert view.fields()["cycles"] == "0 (not enabled yet: start-up, pre-flight)"  # no cycle recorded yet
             for _ in range(500):
                 controller.step()
             clock.now += 5.0

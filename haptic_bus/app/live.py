@@ -113,7 +113,7 @@ class LiveView:
         """The view's fields, formatted (units in the values)."""
         rows = [tally.read() for tally in self._tallies]
         first = rows[0]
-        fields = {"cycles": f"{self._tallies[0].next}"}
+        fields = {"cycles": f"{self._tallies[0].next}" if first is not None else "0 (not enabled yet: start-up, pre-flight)"}
         if self.duration is not None:
             elapsed = first["time_s"] if first is not None else 0.0
             fields["time"] = f"{_duration(elapsed)} of {_duration(self.duration)} " \
