@@ -202,9 +202,11 @@ class Cia402Master(Drive, Generic[ConnectionT]):
         """Reach and configure the drive over the bus; the new connection (on failure: raise, nothing left open)."""
 
     def connected(self) -> ConnectionT:
-        """The connection; DriveError if there is none (before connect(), after close())."""
+        """The connection; DriveError if there is none (before connect(); after close(), saying so)."""
         connection = self.connection
         if connection is None:
+            if self._closed:
+                raise DriveError(self.name, "the drive object is closed; create a new one")
             raise DriveError(self.name, "not connected; call connect() first")
         return connection
 

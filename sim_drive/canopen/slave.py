@@ -66,7 +66,7 @@ from sim_drive.canopen.timers import NodeTimers, Watchdog
 from sim_drive.device import POWER_STAGE_ON, ObjectAccessError, SimulatedDrive
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
-from sim_drive.sync_clock import SyncClock
+from sim_drive.sync_clock import SyncClock, WallSyncClock
 
 logger = logging.getLogger(__name__)
 
@@ -319,6 +319,8 @@ class CanopenSimDrive:
         self._comm.reset()
         self.emergency.active.clear()
         self.drive.reconfigure(period=self.drive.power_on_parameters.period)
+        if isinstance(self._engine.sync_clock, WallSyncClock):
+            self._engine.sync_clock.restart()  # the idle time before a reset is not stepped through
 
     def _abort_connection(self) -> None:
         """NMT takes the node out of OPERATIONAL (or resets it) with the power stage on: 0x6007's

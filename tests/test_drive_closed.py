@@ -1,0 +1,46 @@
+"""A drive object used after close() says it is closed, whichever call meets it first.
+
+Before, ``select_mode()``/``enable()``/``state()`` on a closed drive said "not connected; call
+connect() first", and ``connect()`` then said "closed": two answers for one state.  No bus is
+touched: a drive never connected is closed at once (a CANopen drive on python-can's virtual bus,
+a Modbus drive on a port nothing listens on, never dialled)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import pytest
+
+from drives.base import DriveError
+from drives.canopen.drive import CanopenDrive
+from drives.cia402_master import Cia402Master
+from drives.modbus.drive import ModbusDrive
+
+CLOSED = "the drive object is closed; create a new one"
+
+
+def _canopen() -> Cia402Master:
+    return CanopenDrive(5, interface="virtual", channel="test_drive_closed")
+
+
+def _modbus() -> Cia402Master:
+    return ModbusDrive("127.0.0.1", 1)
+
+
+@pytest.mark.parametrize("make", [_canopen, _modbus], ids=["canopen", "modbus"])
+@pytest.mark.parametrize("call", ["select_mode", "enable", "connect"])
+def test_a_closed_drive_says_closed(make: Callable[[], Cia402Master], call: str) -> None:
+    drive = make()
+    drive.close()
+    with pytest.raises(DriveError, match=CLOSED):
+        getattr(drive, call)()
+
+
+@pytest.mark.parametrize("make", [_canopen, _modbus], ids=["canopen", "modbus"])
+def test_a_drive_not_yet_connected_says_connect_first(make: Callable[[], Cia402Master]) -> None:
+    drive = make()
+    try:
+        with pytest.raises(DriveError, match=r"not connected; call connect\(\) first"):
+            drive.select_mode()
+    finally:
+        drive.close()
