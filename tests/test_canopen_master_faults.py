@@ -309,7 +309,7 @@ def test_connect_returns_the_connection_whole_and_close_drops_it(canopen_rig):
             assert r.sim.drive.target_torque == -200
         drive.close()
         assert drive.connection is None
-        with pytest.raises(errors.DriveError, match="not connected; call connect"):
+        with pytest.raises(errors.DriveError, match="the drive object is closed; create a new one"):
             drive.read_object(STATUSWORD)
 
 
