@@ -197,6 +197,7 @@ SW_WARNING = 1 << 7
 SW_REMOTE = 1 << 9
 SW_TARGET_REACHED = 1 << 10
 SW_INTERNAL_LIMIT_ACTIVE = 1 << 11
+SW_FOLLOWS_COMMAND = 1 << 12  # the cyclic synchronous modes: the drive follows the command value (0x6071 in CST)
 SW_STATE_MASK = 0x6F
 
 

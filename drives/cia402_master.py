@@ -43,6 +43,7 @@ from drives.cia402 import (
     STATUSWORD,
     SUPPORTED_DRIVE_MODES,
     SW_FAULT,
+    SW_FOLLOWS_COMMAND,
     SW_STATE_MASK,
     Command,
     ObjectSpec,
@@ -183,6 +184,7 @@ class Cia402Master(Drive, Generic[ConnectionT]):
         self._armed = False  # OPERATION ENABLED reached: the fault bit raises
         self._tripped: DriveError | None = None
         self._selected: OperationMode | None = None  # select_mode()'s, for the next enable only
+        self._follows = False  # statusword bit 12 set when enabled: its clearing trips
         self.connection = None
         self._closed = False
 
@@ -282,6 +284,13 @@ class Cia402Master(Drive, Generic[ConnectionT]):
                 "torque set to zero",
                 state=state,
             ))
+        if self._follows and self._armed and not statusword & (SW_FOLLOWS_COMMAND | SW_FAULT):
+            raise self.trip(DriveFault(
+                self.name,
+                f"statusword 0x{statusword:04X}: bit 12 cleared, the drive no longer follows the target torque "
+                "(its mode changed by another master, 0x6060, or halted); torque set to zero",
+                state=decode_statusword(statusword),
+            ))
         if statusword & SW_FAULT and self._armed:
             detail, code = self._fault_detail()
             raise self.trip(DriveFault(
@@ -330,9 +339,12 @@ class Cia402Master(Drive, Generic[ConnectionT]):
         self._clear_events()
 
     def mark_enabled(self) -> None:
-        """The drive reached OPERATION ENABLED: hold ENABLE OPERATION, and a fault bit now trips."""
+        """The drive reached OPERATION ENABLED: hold ENABLE OPERATION, and a fault bit now trips (so does
+        statusword bit 12 cleared, where the drive showed it set: it no longer follows the target torque)."""
         self._controlword = Command.ENABLE_OPERATION.word
         self._armed = True
+        last = self.last_inputs
+        self._follows = last is not None and bool(last.statusword & SW_FOLLOWS_COMMAND)
 
     def mark_disabled(self) -> None:
         """From now on DISABLE VOLTAGE is held and the fault bit no longer trips (before a walk to SWITCH ON DISABLED)."""

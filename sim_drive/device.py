@@ -53,6 +53,7 @@ from drives.cia402 import (
     CW_HALT,
     OBJECTS,
     STATE_STATUS_BITS,
+    SW_FOLLOWS_COMMAND,
     SW_INTERNAL_LIMIT_ACTIVE,
     SW_REMOTE,
     SW_VOLTAGE_ENABLED,
@@ -75,7 +76,6 @@ from sim_drive.transmission import TwoMassHandle
 logger = logging.getLogger(__name__)
 
 SUPPORTED_DRIVE_MODES = 1 << OperationMode.CYCLIC_SYNCHRONOUS_TORQUE.supported_bit
-SW_OPERATION_MODE_SPECIFIC_12 = 1 << 12  # CST: "drive follows the command value"
 TRANSITION_QUICK_STOP_DONE = 12
 _OPERATION_ENABLED = State.OPERATION_ENABLED  # module constants: enum member lookups are slow
 _QUICK_STOP_ACTIVE = State.QUICK_STOP_ACTIVE
@@ -347,7 +347,7 @@ class SimulatedDrive:
         if self.state in _VOLTAGE_STATES:
             word |= SW_VOLTAGE_ENABLED
         if self.torque_enabled:
-            word |= SW_OPERATION_MODE_SPECIFIC_12
+            word |= SW_FOLLOWS_COMMAND
             if abs(self.target_torque) > self.parameters.max_torque_permille:
                 word |= SW_INTERNAL_LIMIT_ACTIVE
         return word

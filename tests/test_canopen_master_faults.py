@@ -403,3 +403,18 @@ def test_a_mode_selected_ahead_is_checked_at_the_enable_and_one_changed_meanwhil
         assert sim.drive.state is State.OPERATION_ENABLED
         assert sim.drive.mode_display == OperationMode.CYCLIC_SYNCHRONOUS_TORQUE
         drive.disable()
+
+
+def test_a_drive_that_stops_following_the_target_torque_trips(canopen_rig):
+    """Statusword bit 12 (CST: the drive follows the target torque), set when the drive was enabled,
+    then cleared (its mode changed behind the run, after the enable's 0x6061 read): the run would
+    otherwise go on, and end "completed", computing forces the drive never applies (breaker)."""
+    with canopen_rig("virtual", "ideal") as r:
+        drive, sim = r.drive, r.sim
+        drive.enable()
+        run_cycles(drive, 5)
+        sim.drive.write_object(MODES_OF_OPERATION.index, 0)  # another master's SDO download, at the drive
+        with pytest.raises(DriveFault, match=r"statusword 0x0237: bit 12 cleared, the drive no longer follows the target "
+                                             r"torque \(its mode changed by another master, 0x6060, or halted\)"):
+            run_cycles(drive, 5)
+        assert drive.tripped is not None  # the safe outputs sent; the drive latches them at the next SYNC
