@@ -14,6 +14,7 @@ import can
 
 from drives.bus_config import open_bus
 from sim_drive.canopen.slave import CanopenSimDrive
+from sim_drive.sync_clock import IDLE as IDLE_BOUND
 from sim_drive.sync_clock import WallSyncClock
 
 CHANNEL = "test_sim_wall_clock_reset"
@@ -52,3 +53,13 @@ def test_the_first_sync_after_a_reset_closes_one_period_not_the_idle_time() -> N
     finally:
         bus.shutdown()
         sim.stop()
+
+
+def test_an_interval_longer_than_the_idle_bound_closes_one_period() -> None:
+    """A Modbus master's first cycle after idle time (no reset on that bus): one period, not the idle time."""
+    clock = WallSyncClock()
+    assert clock(100.0) is None  # the first: one period
+    assert clock(100.001) == 0.001  # then the time between them, to the microsecond
+    assert clock(100.001 + IDLE_BOUND) == IDLE_BOUND  # at the bound: still stepped
+    assert clock(100.001 + 2 * IDLE_BOUND + 1e-3) is None  # beyond it: one period
+    assert clock(100.003 + 2 * IDLE_BOUND + 1e-3) == 0.002
