@@ -332,7 +332,7 @@ class Cia402Master(Drive, Generic[ConnectionT]):
         elif (shown := self.read_object(MODES_OF_OPERATION_DISPLAY)) != int(mode):  # one SDO: still the mode selected?
             self._selected = None
             raise DriveFault(self.name, f"0x6061 modes of operation display = {shown}, not {int(mode)} ({mode.name}) "
-                                        "selected before pre-flight: the mode was changed meanwhile (another master?)")
+                                        "selected by select_mode(): the mode was changed meanwhile (another master?)")
         self._selected = None  # a later enable selects it again
         self._before_enable()
         self._tripped = None

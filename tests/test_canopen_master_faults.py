@@ -396,7 +396,7 @@ def test_a_mode_selected_ahead_is_checked_at_the_enable_and_one_changed_meanwhil
         assert sim.drive.mode_display == OperationMode.CYCLIC_SYNCHRONOUS_TORQUE
         drive.write_object(MODES_OF_OPERATION, 0)  # another master, meanwhile: no mode (the drive takes only 0 and CST)
         with pytest.raises(DriveFault, match=r"0x6061 modes of operation display = 0, not 10 \(CYCLIC_SYNCHRONOUS_TORQUE\) "
-                                             r"selected before pre-flight"):
+                                             r"selected by select_mode\(\)"):
             drive.enable()
         assert sim.drive.state is State.SWITCH_ON_DISABLED
         drive.enable()

@@ -217,7 +217,6 @@ class _Session:
         self.undo.callback(c.munlockall)
         return "current and future pages"
 
-
     def cpu_latency(self, microseconds: int) -> str:
         fd = os.open(CPU_LATENCY, os.O_WRONLY | os.O_CLOEXEC)
         self.undo.callback(os.close, fd)  # closing it withdraws the request
