@@ -92,6 +92,8 @@ class AxesMaster(abc.ABC, Generic[DriveT]):
         """Every drive's safe outputs and goodbye, the bus released; never raises for a bus that is gone."""
 
     def _require_connected(self) -> None:
+        if self._closed:
+            raise DriveError(self.name, "closed; create a new one")
         if not self._connected:
             raise DriveError(self.name, "not connected; call connect() first")
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
+from drives.errors import ParameterError
+
 
 class DataType(enum.Enum):
     """CANopen basic data types used by the CiA-402 objects (code, struct format)."""
@@ -130,6 +132,15 @@ class OperationMode(enum.IntEnum):
     CYCLIC_SYNCHRONOUS_POSITION = 8
     CYCLIC_SYNCHRONOUS_VELOCITY = 9
     CYCLIC_SYNCHRONOUS_TORQUE = 10
+
+    @classmethod
+    def of(cls, value: int) -> OperationMode:
+        """``value`` (0x6060's code) as a mode; :class:`~drives.errors.ParameterError` naming the codes if it is none."""
+        try:
+            return cls(value)
+        except ValueError:
+            allowed = ", ".join(f"{int(m)} ({m.name})" for m in cls)
+            raise ParameterError("mode of operation (0x6060)", value, allowed) from None
 
     @property
     def supported_bit(self) -> int:

@@ -13,7 +13,10 @@ import pytest
 
 from drives.base import DriveError
 from drives.canopen.drive import CanopenDrive
+from drives.cia402 import STATUSWORD
 from drives.cia402_master import Cia402Master
+from drives.errors import ParameterError
+from drives.modbus.axes import ModbusAxes
 from drives.modbus.drive import ModbusDrive
 
 CLOSED = "the drive object is closed; create a new one"
@@ -28,12 +31,29 @@ def _modbus() -> Cia402Master:
 
 
 @pytest.mark.parametrize("make", [_canopen, _modbus], ids=["canopen", "modbus"])
-@pytest.mark.parametrize("call", ["select_mode", "enable", "connect"])
+@pytest.mark.parametrize("call", ["select_mode", "enable", "connect", "read_object"])
 def test_a_closed_drive_says_closed(make: Callable[[], Cia402Master], call: str) -> None:
     drive = make()
     drive.close()
     with pytest.raises(DriveError, match=CLOSED):
-        getattr(drive, call)()
+        getattr(drive, call)(*([STATUSWORD] if call == "read_object" else []))
+
+
+def test_closed_axes_say_closed() -> None:
+    axes = ModbusAxes([ModbusDrive("127.0.0.1", 1), ModbusDrive("127.0.0.1", 2)])
+    axes.close()
+    with pytest.raises(DriveError, match="closed; create a new one"):
+        axes.enable()
+
+
+@pytest.mark.parametrize("make", [_canopen, _modbus], ids=["canopen", "modbus"])
+def test_a_mode_that_is_none_names_the_codes(make: Callable[[], Cia402Master]) -> None:
+    drive = make()
+    try:
+        with pytest.raises(ParameterError, match=r"mode of operation \(0x6060\) = 99 is invalid; allowed: 1 \(PROFILE_"):
+            drive.select_mode(99)  # type: ignore[arg-type]  # what an untyped caller passes
+    finally:
+        drive.close()
 
 
 @pytest.mark.parametrize("make", [_canopen, _modbus], ids=["canopen", "modbus"])

@@ -292,7 +292,8 @@ class ModbusDrive(Cia402Master[ModbusConnection]):
 
     def _require_link(self) -> None:
         if self.link.client is None:
-            raise DriveError(self.name, "not connected; call connect() first")
+            self.connected()  # before connect() or after close(): says which
+            raise ModbusLinkLost(self.name, "the Modbus link is down; reconnect() first")
 
     # ------------------------------------------------------------------ safety
 
