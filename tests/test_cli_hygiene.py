@@ -49,6 +49,8 @@ INVALID = [
     ([*RUN, "--modbus", URL, "--node-id", "5"], "--node-id = 5 is invalid"),
     ([*RUN, "--modbus", URL, "--controller-node-id", "9"], "--controller-node-id = 9 is invalid"),
     ([*RUN, "--modbus", URL, "--no-bus-log"], "--no-bus-log = True is invalid; allowed: CANopen runs only"),
+    (["validate", "cia402-handle", "--modbus", URL, "--no-bus-log"],
+     "haptic-bus validate: error: --no-bus-log = True is invalid; allowed: CANopen runs only"),
     ([*RUN, BUS, "--node-id", "5", "--unit-id", "3"], "--unit-id = 3 is invalid; allowed: a Modbus option"),
     ([*RUN, BUS], "--node-id = None is invalid; allowed: the drive's CANopen node id 1..127 (or --modbus URL)"),
     (["run", "no-such-profile", BUS, "--node-id", "5"], "profile = 'no-such-profile' is invalid; allowed: an existing TOML"),

@@ -44,6 +44,7 @@ from haptic_bus.app.run_arguments import (
     add_output_arguments,
     add_pacing_arguments,
     as_flag,
+    bus_log,
     one_axis_link,
     scheduling,
 )
@@ -227,10 +228,8 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, 
     from haptic_bus.app.profiles import AxesProfile, load_profile
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
     from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest
-    from haptic_bus.errors import ParameterError
 
-    if args.modbus and args.no_bus_log:
-        raise ParameterError("--no-bus-log", True, "CANopen runs only (a Modbus run has no bus.asc to leave out)", "run")
+    logs_bus = bus_log(args, "run")
     profile = load_profile(args.profile)
     bus: Any
     unit_ids = None
@@ -247,7 +246,7 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, 
     options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
                          start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
                          scheduling=scheduling(args.realtime),
-                         reset_fault=args.reset_fault, bus_log=not args.no_bus_log, plots=not args.no_plots)
+                         reset_fault=args.reset_fault, bus_log=logs_bus, plots=not args.no_plots)
     links = {"node_id": node_id, "unit_id": unit_id, "unit_ids": unit_ids,
              "controller_node_id": args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID}
     stop.install()  # from here SIGINT and SIGTERM ask the runner to stop (before enabling, or at a cycle boundary)

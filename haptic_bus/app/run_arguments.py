@@ -4,7 +4,7 @@
 and ``--unit-id``/``--unit-ids``) and this controller's node (``--controller-node-id``);
 :func:`add_pacing_arguments` how the cycles are paced (``--virtual-time``, or real time with
 ``--realtime``/``--no-realtime``, :func:`scheduling`); :func:`add_output_arguments` where the run
-writes (``--out``, ``--no-bus-log``).  :func:`one_axis_link` turns them into one drive's address,
+writes (``--out``, ``--no-bus-log``: :func:`bus_log`).  :func:`one_axis_link` turns them into one drive's address,
 refusing conflicting options (exit 2) before anything is touched; :func:`as_flag` names an error of
 the run's arguments as the option that gave it.
 """
@@ -55,6 +55,16 @@ def add_output_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", help="folder for record.csv, run.json, bus.asc and plots (default: runs/<UTC time>-<profile>)")
     parser.add_argument("--no-bus-log", action="store_true",
                         help="do not log the CAN bus's frames into bus.asc (on by default; Modbus runs have none)")
+
+
+def bus_log(args: argparse.Namespace, command: str) -> bool:
+    """Whether the run logs the CAN bus (not ``--no-bus-log``); :class:`ParameterError` for
+    ``--no-bus-log`` beside ``--modbus``, which has no bus log to leave out."""
+    from haptic_bus.errors import ParameterError
+
+    if args.modbus and args.no_bus_log:
+        raise ParameterError("--no-bus-log", True, "CANopen runs only (a Modbus run has no bus.asc to leave out)", command)
+    return not args.no_bus_log
 
 
 def scheduling(realtime: bool | None) -> RealtimeSettings:

@@ -30,6 +30,7 @@ from haptic_bus.app.run_arguments import (
     add_link_arguments,
     add_output_arguments,
     add_pacing_arguments,
+    bus_log,
     one_axis_link,
     scheduling,
 )
@@ -63,6 +64,7 @@ def run_validate(args: argparse.Namespace) -> int:
     from haptic_bus.app.validate_run import validate_drive
     from haptic_bus.validation import folder_path
 
+    logs_bus = bus_log(args, "validate")
     profile = one_axis_only(load_profile(args.profile), "validate")
     address = one_axis_link(args, "validate")
     bus: Any = address.url if address.url is not None else address.bus
@@ -70,7 +72,7 @@ def run_validate(args: argparse.Namespace) -> int:
     stop = StopRequest()
     options = RunOptions(1.0, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir, live=False, stop=stop,
                          scheduling=scheduling(args.realtime),
-                         bus_log=not args.no_bus_log)
+                         bus_log=logs_bus)
     stop.install()
     outcome = validate_drive(profile, bus, options, travel=args.travel, tolerance=args.tolerance / 100.0,
                              node_id=None if address.url is not None else address.checked_node_id,
