@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import pathlib
+from concurrent.futures.process import BrokenProcessPool
 
 import numpy as np
 import pytest
@@ -26,6 +27,8 @@ from haptic_bus.control.record import COLUMNS
 from haptic_bus.control.space_gate import SpaceDecision, SpaceGate
 from haptic_bus.control.space_scene import Plane, compile_space_scene
 from haptic_bus.errors import ParameterError, Refusal
+from haptic_bus.node.controller_node import ControllerNode
+from haptic_bus.node.verdicts import judge_pool
 from sim_drive.operator import ConstantPush
 
 DIAGONAL = (1.0, 1.0, 0.0)  # the slab's outward normal (normalised by the plane): x and y coupled
@@ -174,3 +177,20 @@ def test_a_1d_scene_is_refused_for_several_drives(gantry: AxesProfile) -> None:
     with simulated_axes(gantry) as (_, axes):
         with pytest.raises(ParameterError, match="one Drive for a 1-D scene"):
             WallController(axes, one_axis.gate(), one_axis.compiled_scene(), force_limit=10.0)
+
+
+def test_a_controller_node_detached_at_once_gives_up_its_warm_up_judgement(gantry: AxesProfile) -> None:
+    """The node hands the judge worker the running scene at attach (a sphere: a direction search,
+    0.3-1.8 s) and waits for it nowhere; a run stopped in its first second detaches the node then, and
+    the interpreter's exit waited for that judgement (1.4-2.5 s after Ctrl-C).  Detaching gives it up
+    with the worker: nothing handed to the pool is still running (or the warm-up had already ended)."""
+    profile = dataclasses.replace(gantry, operator_model={"model": "none"})
+    with simulated_axes(profile) as (_, axes):
+        controller = WallController(axes, profile.gate(), profile.compiled_scene(), names=[a.name for a in profile.axes],
+                                    force_limit=[a.force_limit for a in profile.axes], origin=encoder_origins(axes))
+        with ControllerNode(controller, 42).attached(axes.link.network) as node:
+            warming = node._warming  # the node's own hand-off, which only this test looks at
+        assert warming is not None and warming.done()  # not cancelled: killed with the worker, or judged
+        failure = warming.exception()
+        assert failure is None or isinstance(failure, BrokenProcessPool)
+    assert judge_pool().submit(abs, -3).result(timeout=60.0) == 3  # a new worker for the next run (it starts in 1-2 s)

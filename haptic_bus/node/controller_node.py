@@ -57,7 +57,7 @@ from haptic_bus.control.controller import WallController
 from haptic_bus.control.protocols import Gate
 from haptic_bus.control.scene_switch import SceneEntry
 from haptic_bus.errors import HapticBusError
-from haptic_bus.node.verdicts import Verdict, judge_pool, judge_walls
+from haptic_bus.node.verdicts import Verdict, judge_pool, judge_walls, kill_workers
 from haptic_bus.validation import whole_in_range
 
 logger = logging.getLogger(__name__)
@@ -145,6 +145,7 @@ class ControllerNode:
         self._node.add_write_callback(self._on_write)
         self._network: canopen.Network | None = None
         self._pool: ProcessPoolExecutor | None = None  # the judge worker, from attach()
+        self._warming: Future[Verdict] | None = None  # attach()'s judgement of the running scene
         self._judging: _Judging | None = None
         self._verdict_in = False  # the worker answered; the next poll (or the collector) settles it
         self._cycling = False  # the control thread polls: it answers the verdict
@@ -156,16 +157,25 @@ class ControllerNode:
         upload (a sphere in space costs the coupled gate a direction search, 0.3-1.8 s here)."""
         self._pool = judge_pool()
         scenes = self.controller.scenes
-        self._pool.submit(judge_walls, scenes.gate, scenes.latest.scene, {})
+        self._warming = self._pool.submit(judge_walls, scenes.gate, scenes.latest.scene, {})
         network.add_node(self._node)
         self._network = network
         self._node.nmt.state = "OPERATIONAL"
 
     def detach(self) -> None:
-        """Stop answering (a commit still out for judgement stays unanswered: the client times out)."""
+        """Stop answering (a commit still out for judgement stays unanswered: the client times out).
+        Work handed to the judge worker that nobody waits for any more -- :meth:`attach`'s judgement
+        of the running scene, a commit's -- is given up with the worker
+        (:func:`~haptic_bus.node.verdicts.kill_workers`): a run stopped in its first seconds ends
+        then, not once a sphere's direction search is done (the interpreter's exit waits for every
+        task handed to a pool)."""
         network, self._network = self._network, None
         if network is not None and network.nodes.get(self.node_id) is self._node:
             del network[self.node_id]
+        judging = self._judging
+        handed = [self._warming, judging.future if judging is not None else None]
+        if self._pool is not None and any(future is not None and not future.done() for future in handed):
+            kill_workers(self._pool)
 
     @contextlib.contextmanager
     def attached(self, network: canopen.Network) -> Iterator[ControllerNode]:
