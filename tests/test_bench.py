@@ -70,14 +70,33 @@ def test_every_done_when_line_of_issue_14_is_a_row_with_a_verdict(smoke_run: Smo
 def test_every_timing_line_of_issue_26_is_a_row_with_a_verdict(smoke_run: SmokeRun) -> None:
     """CPU against python-can's floor, lateness against the bare clock, overruns, for both loads, and
     the loop delay observed when quiet: a figure where the run cycled, "n/a" where pre-flight refused it.
-    Nine rows for one axis (both loads), two for three axes (the smoke size runs them quiet only)."""
+    Nine rows for one axis (both loads), two for three axes (the smoke size runs them quiet only), and
+    pre-flight over fresh processes (line 3: how many of the runs passed it, of how many)."""
     _, result = smoke_run
     rows = result["done_when_26"]
-    assert len(rows) == 11 and {r["line"] for r in rows} == {1, 2}
+    assert len(rows) == 12 and {r["line"] for r in rows} == {1, 2, 3}
     assert sum("3 axes" in r["what"] for r in rows) == 2
-    for row in rows:
+    *timing, preflight = rows
+    for row in timing:
         assert row["result"] in ("PASS", "FAIL", "n/a") and row["target"].startswith("<="), row
         assert (row["result"] == "n/a") == (row["measured"] == "-"), row
+    section = result["sections"]["preflight"]
+    assert preflight["line"] == 3 and preflight["target"] == "1 of 1"
+    assert preflight["measured"] == f"{section['within']} of 1"
+    assert preflight["result"] == ("PASS" if section["within"] == 1 else "FAIL")
+
+
+def test_pre_flight_over_fresh_processes_reads_each_runs_verdict(smoke_run: SmokeRun) -> None:
+    """The smoke's one ``haptic-bus run`` against a fresh ``haptic-bus sim``: it passed pre-flight and
+    names the loop delay it judged at (at least the one sample the drive adds), or it was refused,
+    exit 1, naming the period this machine held."""
+    out, result = smoke_run
+    (entry,) = result["sections"]["preflight"]["runs"]
+    if entry["held"]:
+        assert entry["exit"] == 0 and entry["judged_delay"] >= 1.0, entry
+    else:
+        assert entry["exit"] == 1 and "this machine holds T >=" in entry["reason"], entry
+    assert "## 11. Pre-flight over fresh processes" in (out / "bench.md").read_text()
 
 
 def test_smoke_bench_json_has_every_section_and_the_machine(smoke_run: SmokeRun) -> None:

@@ -24,6 +24,10 @@ min-max over at least 5 repeats (:mod:`~haptic_bus.bench.timing`):
    5 x 10^4 quick, 2 x 10^3 smoke, 10^6 full): the integer position sum exact, memory flat.
 9. :mod:`~haptic_bus.bench.space_scene_cost` -- a scene in space (plane, boxes, spheres): seconds
    per ``force()`` call for 1..10 000 objects beside the 1-D scene's.
+10. :mod:`~haptic_bus.bench.layer_cost` -- the passivity layer: the force it takes, nominal and
+    adversarial timing.
+11. :mod:`~haptic_bus.bench.preflight_runs` -- ``haptic-bus run cia402-handle`` against a fresh
+    ``haptic-bus sim``, 20 times (5 quick, 1 smoke): how many pass pre-flight, and the loop delay judged.
 
 Above the sections, issues 14 and 19's "Done when" (:mod:`~haptic_bus.bench.targets`): one row per
 line with the measured figure, its spread, the target and PASS/FAIL, all from this one run (issue
@@ -58,11 +62,11 @@ from typing import Any
 from haptic_bus.bench.size import FULL, QUICK, SMOKE, Size
 from haptic_bus.bench.timing import machine
 
-SECTIONS = ("passivity", "plant", "scene", "space", "loop", "bus", "realtime", "startup", "soak", "layer")
+SECTIONS = ("passivity", "plant", "scene", "space", "loop", "bus", "realtime", "startup", "soak", "layer", "preflight")
 # progress ticks each section makes (smoke, quick, full): for the bar's total
 _TICKS = {"passivity": (5, 7, 17), "plant": (7, 15, 17), "scene": (5, 5, 5), "space": (5, 5, 5), "loop": (6, 6, 6),
           "bus": (2, 2, 2), "realtime": (3, 6, 6), "startup": (1, 3, 4), "soak": (10, 10, 10),
-          "layer": (1, 9, 9)}
+          "layer": (1, 9, 9), "preflight": (1, 5, 20)}
 BENCH_EXTRA = {"control": "control"}  # import name -> distribution: pyproject's [bench] extra (mpmath is a runtime dependency)
 SMOKE_SOAK_CYCLES = 2_000
 
@@ -126,7 +130,8 @@ def _runner(name: str) -> Callable[..., dict]:
 
     module = {"passivity": "passivity", "plant": "plant_sim", "scene": "scene_cost", "space": "space_scene_cost",
               "loop": "loop_rate",
-              "bus": "bus_limit", "realtime": "thread_tuning", "startup": "startup", "layer": "layer_cost"}[name]
+              "bus": "bus_limit", "realtime": "thread_tuning", "startup": "startup", "layer": "layer_cost",
+              "preflight": "preflight_runs"}[name]
     return import_module(f"haptic_bus.bench.{module}").run
 
 

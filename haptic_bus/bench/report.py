@@ -247,6 +247,17 @@ def _soak(s: dict) -> list[str]:
               f"({memory['growth_bytes'] / 2**20:.3g} MiB over the run; flat if <= {memory['flat_bytes'] / 2**20:g} MiB)."]
 
 
+def _preflight(s: dict) -> list[str]:
+    rows = [[str(k + 1), str(r["exit"]), "held T" if r["held"] else "refused",
+             "-" if r["lateness_p99_s"] is None else _t(r["lateness_p99_s"]),
+             "-" if r["judged_delay"] is None or not r["held"] else f"{r['judged_delay']:.3g}",
+             "" if r["held"] else (r["reason"] or r["error"] or "")] for k, r in enumerate(s["runs"])]
+    return [s["description"] + ".", "", _table(["run", "exit", "pre-flight", "start lateness p99",
+                                                "loop delay judged (samples)", "refusal"], rows), "",
+            f"{s['held']} of {s['count']} passed pre-flight; {s['within']} of {s['count']} judged the wall at "
+            f"<= {s['delay_target']:g} samples and exited 0."]
+
+
 def _done_when(rows: list[dict], issue: int = 14) -> list[str]:
     table = _table(["#", f"Done when (issue {issue})", "measured: median (min-max)", "target", "result"],
                    [[str(r["line"]), r["what"] + (f"; {r['note']}" if r["note"] else ""), r["measured"], r["target"],
@@ -267,6 +278,7 @@ _SECTIONS = (
     ("soak", "8. Soak in virtual time", _soak),
     ("space", "9. Scenes in space: force() per call", _space),
     ("layer", "10. The passivity layer: force it takes, nominal and adversarial timing", _layer),
+    ("preflight", "11. Pre-flight over fresh processes: haptic-bus run against a fresh haptic-bus sim", _preflight),
 )
 
 

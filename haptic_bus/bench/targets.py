@@ -194,7 +194,8 @@ def issue_26(sections: dict) -> list[dict]:
     figures = s.get("issue_26") if s else None
     if not figures:
         return [_row(1, "control process CPU / python-can's floor, T = 1 ms", "-", "<= 1.5 x", None),
-                _row(2, "start lateness p99 and p99.9 / the bare clock's", "-", "<= 2 x", None)]
+                _row(2, "start lateness p99 and p99.9 / the bare clock's", "-", "<= 2 x", None),
+                *_preflight_rows(sections)]
     rows = []
     for load in ("quiet", "CPU hog"):
         got = figures.get(load, {})
@@ -226,4 +227,18 @@ def issue_26(sections: dict) -> list[dict]:
     rows.append(_row(2, "loop delay the run observed (assumed + p99 of lateness and input age), quiet, samples",
                      "-" if delay is None else f"{delay:.3g}", f"<= {figures['delay_target']:g}",
                      None if delay is None else delay <= figures["delay_target"]))
-    return rows
+    return rows + _preflight_rows(sections)
+
+
+def _preflight_rows(sections: dict) -> list[dict]:
+    """Line 3: runs of ``haptic-bus run cia402-handle`` against a fresh ``haptic-bus sim`` that pass
+    pre-flight and judge the wall at 1.5 samples or less (every one of them, 20 in the full run)."""
+    what = "runs of haptic-bus run cia402-handle against a fresh haptic-bus sim that pass pre-flight, judge at"
+    s = _available(sections, "preflight")
+    if s is None:
+        return [_row(3, f"{what} <= 1.5 samples and exit 0", "-", "all", None)]
+    delays = s["judged_delay"]
+    note = "" if delays is None else (f"judged at {delays['median']:.3g} samples (median; "
+                                      f"{delays['min']:.3g}-{delays['max']:.3g}); {s['held']} held T")
+    return [_row(3, f"{what} <= {s['delay_target']:g} samples and exit 0", f"{s['within']} of {s['count']}",
+                 f"{s['count']} of {s['count']}", s["within"] == s["count"], note=note)]
