@@ -26,7 +26,7 @@ from haptic_bus.bench.size import Size
 PROFILE, NODE_ID = "cia402-handle", 5
 DURATION = 0.2  # s of cycles after pre-flight: the run completes, its run.json whole
 DELAY_TARGET = 1.5  # samples: the largest loop delay issue 26 lets pre-flight judge at
-RUN_WAIT = 120.0  # s: one run's command, imports and pre-flight included (8-12 s measured beside two CPU hogs)
+RUN_WAIT = 120.0  # s: one run's command, its imports and pre-flight included (3-6 s here, three sessions running beside it)
 
 
 def one_run(bus: dict[str, Any]) -> dict[str, Any]:
