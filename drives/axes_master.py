@@ -4,8 +4,9 @@
 does what :class:`~drives.canopen.axes.CanopenAxes` (one SYNC) and
 :class:`~drives.modbus.axes.ModbusAxes` (one poll) do alike: it connects every drive or none (on
 any failure everything is closed again), walks their state machines together
-(:func:`~drives.cia402_master.enable_together`: one exchange of every drive per step, the bus'
-:meth:`AxesMaster._command`), takes the cyclic phase's torque limits one per axis, and refuses
+(:func:`walk_together`: one exchange of every drive per step, the bus'
+:meth:`AxesMaster._command`, so that no drive is left without its master while another walks),
+trips them all when one fails (:func:`trip_together`), takes the cyclic phase's torque limits one per axis, and refuses
 use before :meth:`AxesMaster.connect` or after :meth:`AxesMaster.close`.  The bus' own part --
 commissioning, the cyclic phase, the trip of every axis, the goodbye -- is the subclass'.
 """
@@ -13,12 +14,14 @@ commissioning, the cyclic phase, the trip of every axis, the goodbye -- is the s
 from __future__ import annotations
 
 import abc
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Generic, Self, TypeVar
 
 from drives.base import DriveScaling
-from drives.cia402_master import Cia402Master, disable_together, enable_together
+from drives.cia402 import SAFE_CONTROLWORD, State
+from drives.cia402_master import Cia402Master
 from drives.errors import DriveError, ParameterError
+from drives.state_walk import StateWalk
 
 MAX_AXES = 6
 
@@ -102,3 +105,50 @@ class AxesMaster(abc.ABC, Generic[DriveT]):
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def walk_together(drives: Sequence[Cia402Master], goal: State, first_words: Sequence[int],
+                  command: Callable[[list[int]], list[int]], accept: tuple[State, ...] = ()) -> None:
+    """Walk every drive of ``drives`` to ``goal`` (or a state in ``accept``) together: each
+    ``command(words)`` exchange sends every drive its word and returns every statusword that
+    answers (one SYNC on CANopen, one request per drive on Modbus), so no drive is left without
+    its master while another walks; an arrived drive keeps getting the word that brought it there.
+    :class:`DriveFault` as :class:`StateWalk` raises it."""
+    walks = [StateWalk(drive, goal, word, accept) for drive, word in zip(drives, first_words)]
+    words = list(first_words)
+    walking = True
+    while walking:
+        statuswords = command(words)
+        walking = False
+        for i, (walk, statusword) in enumerate(zip(walks, statuswords)):
+            walking |= walk.next_word(statusword) is not None
+            words[i] = walk.word
+
+
+def enable_together(drives: Sequence[Cia402Master], command: Callable[[list[int]], list[int]]) -> None:
+    """Every drive of ``drives`` to OPERATION ENABLED in cyclic synchronous torque mode, walked
+    together over ``command`` (:func:`walk_together`)."""
+    for drive in drives:
+        drive.prepare_enable()
+    walk_together(drives, State.OPERATION_ENABLED, [drive.hold_word() for drive in drives], command)
+    for drive in drives:
+        drive.mark_enabled()
+
+
+def disable_together(drives: Sequence[Cia402Master], command: Callable[[list[int]], list[int]]) -> None:
+    """Zero torque and DISABLE VOLTAGE on every drive of ``drives``, walked together over ``command``
+    to SWITCH ON DISABLED (or FAULT)."""
+    for drive in drives:
+        drive.mark_disabled()
+    walk_together(drives, State.SWITCH_ON_DISABLED, [SAFE_CONTROLWORD] * len(drives), command, (State.FAULT,))
+
+
+def trip_together(drives: Sequence[Cia402Master], error: DriveError) -> DriveError:
+    """Trip every drive of ``drives`` not tripped yet (:meth:`~drives.cia402_master.Cia402Master.trip`, each its safe
+    outputs): the one that met ``error`` with it, the others "stopped together with" it; returns
+    ``error`` for ``raise`` (a master of several drives: one axis' fault stops every axis)."""
+    for drive in drives:
+        if drive.tripped is None:
+            drive.trip(error if drive.name == error.node else
+                       DriveError(drive.name, f"stopped together with {error.node}: {error.message}"))
+    return error

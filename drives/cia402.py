@@ -242,6 +242,14 @@ class Command(enum.Enum):
         return controlword & mask == value
 
 
+def state_name(state: State | None) -> str:
+    """The state's CiA-402 name, or a phrase for a statusword the standard does not define."""
+    return state.value if state is not None else "an undefined state"
+
+
+SAFE_CONTROLWORD = Command.DISABLE_VOLTAGE.word  # -> SWITCH ON DISABLED: no torque, the handle free
+
+
 class AbortConnectionOption(enum.IntEnum):
     """Values of 0x6007: what the drive does when the connection to its master aborts
     (heartbeat or RPDO deadline lost, NMT out of OPERATIONAL while the power stage is on)."""

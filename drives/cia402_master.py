@@ -19,7 +19,7 @@ import abc
 import logging
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
@@ -35,10 +35,10 @@ from drives.base import (
     TorqueClamp,
 )
 from drives.cia402 import (
-    CW_FAULT_RESET,
     ERROR_CODE,
     MODES_OF_OPERATION,
     MODES_OF_OPERATION_DISPLAY,
+    SAFE_CONTROLWORD,
     STATE_STATUS_BITS,
     STATUSWORD,
     SUPPORTED_DRIVE_MODES,
@@ -50,21 +50,16 @@ from drives.cia402 import (
     OperationMode,
     State,
     decode_statusword,
-    path_to_operation_enabled,
+    state_name,
     supports,
 )
 from drives.errors import DriveError, DriveFault, DriveProtocolError
 from drives.fault_reset import clear_fault, error_code_text
+from drives.state_walk import StateWalk
 
 logger = logging.getLogger(__name__)
 
-SAFE_CONTROLWORD = Command.DISABLE_VOLTAGE.word  # -> SWITCH ON DISABLED: no torque, handle free
 _ENABLED_BITS = STATE_STATUS_BITS[State.OPERATION_ENABLED]  # statusword & SW_STATE_MASK in that state
-
-
-def state_name(state: State | None) -> str:
-    """The state's CiA-402 name, or a phrase for a statusword the standard does not define."""
-    return state.value if state is not None else "an undefined state"
 
 
 @dataclass(slots=True)
@@ -325,7 +320,7 @@ class Cia402Master(Drive, Generic[ConnectionT]):
     def prepare_enable(self, mode: OperationMode = OperationMode.CYCLIC_SYNCHRONOUS_TORQUE) -> None:
         """What :meth:`enable` does before the state-machine walk: check 0x6502, write 0x6060, await
         0x6061, forget the last trip and the events seen.  A master walking several drives on one
-        SYNC calls it per drive, walks them together (:class:`StateWalk`), then :meth:`mark_enabled`."""
+        SYNC calls it per drive, walks them together (:func:`~drives.axes_master.walk_together`), then :meth:`mark_enabled`."""
         mode = OperationMode.of(mode)
         self.connected()
         if self._selected is not mode:
@@ -448,108 +443,3 @@ class Cia402Master(Drive, Generic[ConnectionT]):
                 f"after the fault reset edge: the cause of the fault persists",
                 state=state,
             )
-
-
-class StateWalk:
-    """One drive's walk of the CiA-402 state machine towards ``goal`` (or a state in ``accept``),
-    one controlword per exchange, starting with ``first_word``.
-
-    :meth:`next_word` takes the statusword that answered the last word sent and returns the next
-    word to send, or None once the drive is there; it raises :class:`DriveFault` when the
-    drive sits in FAULT on the way to an enabled state, or when one step stalls for the master's
-    ``state_timeout`` (or ``max_commands_per_step`` exchanges).  ``word`` is the last word sent
-    (what keeps an arrived drive where it is while others still walk), ``state`` the last seen.
-    A master walks one drive with it (:meth:`Cia402Master._walk`); a master of several drives
-    on one SYNC walks them together, one exchange serving every walk.
-    """
-
-    def __init__(self, master: Cia402Master, goal: State, first_word: int, accept: tuple[State, ...] = ()) -> None:
-        self.master = master
-        self.goal = goal
-        self.accept = accept
-        self.word = first_word
-        self.state: State | None = None
-        self._step_started: float | None = None
-        self._commands = 0
-
-    @property
-    def arrived(self) -> bool:
-        """True once the last statusword showed ``goal`` or a state in ``accept``."""
-        return self.state is self.goal or self.state in self.accept
-
-    def next_word(self, statusword: int) -> int | None:
-        """The controlword to send next, given the ``statusword`` that answered the last one; None when arrived."""
-        master, goal = self.master, self.goal
-        state = decode_statusword(statusword)
-        now = time.monotonic()
-        if self._step_started is None or state is not self.state:
-            self.state, self._step_started, self._commands = state, now, 0
-        if self.arrived:
-            return None
-        command: Command | None
-        if goal is State.SWITCH_ON_DISABLED:
-            command = Command.DISABLE_VOLTAGE
-        elif state is State.FAULT:
-            raise master.in_fault(statusword)
-        else:
-            path = path_to_operation_enabled(state) if state is not None else ()
-            command = path[0] if path else None
-        word = command.word if command is not None else self.word & ~CW_FAULT_RESET
-        if now - self._step_started > master.state_timeout or self._commands > master.max_commands_per_step:
-            sent = f"{command.name} (controlword 0x{word:04X})" if command is not None else f"controlword 0x{word:04X}"
-            raise DriveFault(
-                master.name,
-                f"state machine stuck in {state_name(state)} (statusword 0x{statusword:04X}) for "
-                f"{master.state_timeout:.3g} s while sending {sent} towards {goal.value}",
-                state=state,
-            )
-        self._commands += 1
-        self.word = word
-        return word
-
-
-def walk_together(drives: Sequence[Cia402Master], goal: State, first_words: Sequence[int],
-                  command: Callable[[list[int]], list[int]], accept: tuple[State, ...] = ()) -> None:
-    """Walk every drive of ``drives`` to ``goal`` (or a state in ``accept``) together: each
-    ``command(words)`` exchange sends every drive its word and returns every statusword that
-    answers (one SYNC on CANopen, one request per drive on Modbus), so no drive is left without
-    its master while another walks; an arrived drive keeps getting the word that brought it there.
-    :class:`DriveFault` as :class:`StateWalk` raises it."""
-    walks = [StateWalk(drive, goal, word, accept) for drive, word in zip(drives, first_words)]
-    words = list(first_words)
-    walking = True
-    while walking:
-        statuswords = command(words)
-        walking = False
-        for i, (walk, statusword) in enumerate(zip(walks, statuswords)):
-            walking |= walk.next_word(statusword) is not None
-            words[i] = walk.word
-
-
-def enable_together(drives: Sequence[Cia402Master], command: Callable[[list[int]], list[int]]) -> None:
-    """Every drive of ``drives`` to OPERATION ENABLED in cyclic synchronous torque mode, walked
-    together over ``command`` (:func:`walk_together`)."""
-    for drive in drives:
-        drive.prepare_enable()
-    walk_together(drives, State.OPERATION_ENABLED, [drive.hold_word() for drive in drives], command)
-    for drive in drives:
-        drive.mark_enabled()
-
-
-def disable_together(drives: Sequence[Cia402Master], command: Callable[[list[int]], list[int]]) -> None:
-    """Zero torque and DISABLE VOLTAGE on every drive of ``drives``, walked together over ``command``
-    to SWITCH ON DISABLED (or FAULT)."""
-    for drive in drives:
-        drive.mark_disabled()
-    walk_together(drives, State.SWITCH_ON_DISABLED, [SAFE_CONTROLWORD] * len(drives), command, (State.FAULT,))
-
-
-def trip_together(drives: Sequence[Cia402Master], error: DriveError) -> DriveError:
-    """Trip every drive of ``drives`` not tripped yet (:meth:`Cia402Master.trip`, each its safe
-    outputs): the one that met ``error`` with it, the others "stopped together with" it; returns
-    ``error`` for ``raise`` (a master of several drives: one axis' fault stops every axis)."""
-    for drive in drives:
-        if drive.tripped is None:
-            drive.trip(error if drive.name == error.node else
-                       DriveError(drive.name, f"stopped together with {error.node}: {error.message}"))
-    return error

@@ -20,13 +20,13 @@ from drives.canopen.drive import CanopenDrive
 from drives.cia402 import (
     CONTROLWORD,
     MODES_OF_OPERATION,
+    SAFE_CONTROLWORD,
     STATUSWORD,
     SUPPORTED_DRIVE_MODES,
     OperationMode,
     State,
     decode_statusword,
 )
-from drives.cia402_master import SAFE_CONTROLWORD
 from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout
 from sim_drive.eds import eds_path
 

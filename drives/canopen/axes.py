@@ -26,7 +26,7 @@ cycle itself in the cyclic phase, :mod:`~drives.canopen.heartbeat`).  What it ad
   limit, counted once in its own ``stats.saturated_outputs``;
 * **the state machine walked together** (:class:`~drives.axes_master.AxesMaster`, what the Modbus
   master does alike): one SYNC per step serves every axis' walk
-  (:class:`~drives.cia402_master.StateWalk`), so no axis is left without SYNC or RPDO while
+  (:class:`~drives.state_walk.StateWalk`), so no axis is left without SYNC or RPDO while
   another is being enabled, and every drive is enabled (or disabled) in the same cycle.
 """
 
@@ -40,13 +40,12 @@ from typing import Any
 import can
 from canopen import objectdictionary as od
 
-from drives.axes_master import MAX_AXES, AxesMaster
+from drives.axes_master import MAX_AXES, AxesMaster, trip_together
 from drives.base import AxesDriveCycle, CyclicInputs, DriveScaling
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
 from drives.canopen.heartbeat import HeartbeatProducer
 from drives.canopen.link import NetworkLink
 from drives.canopen.sync_cycle import SyncCycle
-from drives.cia402_master import trip_together
 from drives.errors import DriveError, DriveTimeout, ParameterError
 from drives.safety import DEFAULT_SAFETY, SafetySettings
 

@@ -65,6 +65,7 @@ from drives.cia301 import CONSUMER_HEARTBEAT_TIME, NODE_ID_RANGE, PRODUCER_HEART
 from drives.cia402 import (
     CONTROLWORD,
     POSITION_ACTUAL,
+    SAFE_CONTROLWORD,
     STATUSWORD,
     TARGET_TORQUE,
     VELOCITY_ACTUAL,
@@ -73,7 +74,7 @@ from drives.cia402 import (
     State,
     decode_statusword,
 )
-from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
+from drives.cia402_master import Cia402Master
 from drives.errors import DriveError, DriveProtocolError, DriveTimeout, ParameterError
 from drives.safety import DEFAULT_SAFETY, SafetySettings
 

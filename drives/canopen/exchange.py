@@ -28,8 +28,8 @@ import can
 from drives.base import CyclicInputs
 from drives.canopen.link import NetworkLink
 from drives.canopen.pdo_codec import PdoCodec
-from drives.cia402 import CONTROLWORD, POSITION_ACTUAL, STATUSWORD, TARGET_TORQUE, VELOCITY_ACTUAL
-from drives.cia402_master import SAFE_CONTROLWORD, CyclicStats
+from drives.cia402 import CONTROLWORD, POSITION_ACTUAL, SAFE_CONTROLWORD, STATUSWORD, TARGET_TORQUE, VELOCITY_ACTUAL
+from drives.cia402_master import CyclicStats
 from drives.errors import DriveError
 
 logger = logging.getLogger(__name__)

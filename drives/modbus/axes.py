@@ -13,10 +13,10 @@ adds is what :class:`drives.canopen.axes.CanopenAxes` adds on one SYNC:
   from the whole cycle's measured round trip;
 * **one fate**: whatever error any axis meets (a timeout, a dropped connection, an exception
   response, its fault bit), every axis is tripped in that same cycle
-  (:func:`~drives.cia402_master.trip_together`: each writes its safe outputs, zero torque with
+  (:func:`~drives.axes_master.trip_together`: each writes its safe outputs, zero torque with
   DISABLE VOLTAGE) and the error is raised;
 * **the state machines walked together** (:class:`~drives.axes_master.AxesMaster`,
-  :func:`~drives.cia402_master.walk_together`): each step one controlword write and statusword
+  :func:`~drives.axes_master.walk_together`): each step one controlword write and statusword
   read per drive, so no drive's watchdog starves while another is being enabled;
 * **a unit that does not answer is named**: a server that answers "gateway target failed to
   respond" (0x0B) or "gateway path unavailable" (0x0A) for a unit id is one :class:`DriveError`
@@ -28,9 +28,8 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator, Sequence
 
-from drives.axes_master import MAX_AXES, AxesMaster
+from drives.axes_master import MAX_AXES, AxesMaster, trip_together
 from drives.base import AxesDriveCycle, CyclicInputs, DriveCycle
-from drives.cia402_master import trip_together
 from drives.errors import DriveError, DriveRefusal, ParameterError
 from drives.modbus.drive import ModbusDrive
 

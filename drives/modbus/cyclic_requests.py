@@ -15,7 +15,7 @@ from pymodbus.pdu.register_message import (
     WriteMultipleRegistersRequest,
 )
 
-from drives.cia402_master import SAFE_CONTROLWORD
+from drives.cia402 import SAFE_CONTROLWORD
 from drives.modbus.register_map import INPUT_BLOCK, OUTPUT_BLOCK, OUTPUT_BLOCK_COUNT, describe_range
 
 

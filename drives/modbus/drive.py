@@ -51,13 +51,14 @@ from drives.cia402 import (
     ERROR_CODE,
     MAX_TORQUE,
     MOTOR_RATED_TORQUE,
+    SAFE_CONTROLWORD,
     STATUSWORD,
     TARGET_TORQUE,
     ObjectSpec,
     State,
     decode_statusword,
 )
-from drives.cia402_master import SAFE_CONTROLWORD, Cia402Master
+from drives.cia402_master import Cia402Master
 from drives.errors import DriveError, DriveProtocolError, DriveRefusal, DriveTimeout, ModbusLinkLost, ParameterError
 from drives.modbus.cyclic_requests import CyclicRequests
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
