@@ -86,19 +86,20 @@ So the gate judges the coupled loop itself.  The mobility projection is what to 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 
 import numpy as np
 
 from haptic_bus.analysis.coupled_loop import CoupledLoop, components, coupled_poles
 from haptic_bus.analysis.criterion import EXACT, SIGN_TOLERANCE, Verdict, exact_verdict
-from haptic_bus.analysis.frequency import delay_rotation, loop_terms, measurement_terms
+from haptic_bus.analysis.frequency import delay_rotation, hold_and_aliases, measurement_terms
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.poles import radius_excess
 from haptic_bus.analysis.sampled_loop import window_fraction
 from haptic_bus.analysis.theta_complex import ThetaComplex
 from haptic_bus.analysis.theta_search import refine_minima, theta_grid
-from haptic_bus.analysis.trig import cospi, sincpi
+from haptic_bus.analysis.trig import cospi, half_angle, sincpi
 from haptic_bus.errors import ParameterError
 
 COUPLED = "exact, coupled axes: closed-loop stability and Herm T_fund >= 0 on (0, pi] (least eigenvalue)"
@@ -123,6 +124,16 @@ def measurement_lag(axis: WallLoop, theta: np.ndarray) -> ThetaComplex:
     width = window_fraction(axis)
     y2 = (theta * width) ** 2
     return ThetaComplex.exact(theta, width * np.polyval(_LAG_EVEN, y2), -width * width * np.polyval(_LAG_ODD, y2))
+
+
+def _per_axis(axes: tuple[WallLoop, ...], key: Callable[[WallLoop], Hashable],
+              compute: Callable[[WallLoop], ThetaComplex]) -> list[ThetaComplex]:
+    """``compute(axis)`` for every axis, computed once for the axes alike in ``key(axis)`` (what it depends on)."""
+    found: dict[Hashable, ThetaComplex] = {}
+    for axis in axes:
+        if key(axis) not in found:
+            found[key(axis)] = compute(axis)
+    return [found[key(axis)] for axis in axes]
 
 
 def _lift(parts: list[ThetaComplex], theta3: np.ndarray, column: bool) -> ThetaComplex:
@@ -159,12 +170,13 @@ def hermitian_impedance(loop: CoupledLoop, theta: np.ndarray) -> HermitianImpeda
     theta = np.atleast_1d(np.asarray(theta, dtype=float))
     n, size, T = theta.size, loop.size, loop.T
     theta3 = theta[:, None, None]
-    terms = [loop_terms(axis, theta) for axis in loop.axes]
-    hold = terms[0].hold
-    eps = [delay_rotation(theta, axis.delay) for axis in loop.axes]
-    mu = [measurement_terms(axis, theta) for axis in loop.axes]
-    nu = [measurement_lag(axis, theta) for axis in loop.axes]
-    alias = [t.P * (T / axis.m) for t, axis in zip(terms, loop.axes)]
+    circle = half_angle(theta)
+    terms = [hold_and_aliases(axis, circle) for axis in loop.axes]
+    hold = terms[0][0]
+    eps = _per_axis(loop.axes, lambda axis: axis.delay, lambda axis: delay_rotation(theta, axis.delay))
+    mu = _per_axis(loop.axes, lambda axis: axis.velocity, lambda axis: measurement_terms(axis, theta))
+    nu = _per_axis(loop.axes, lambda axis: axis.velocity, lambda axis: measurement_lag(axis, theta))
+    alias = [P * (T / axis.m) for (_, _, P), axis in zip(terms, loop.axes)]
 
     h = ThetaComplex(theta3, hold.re[:, None, None], hold.im[:, None, None], hold.mag_re[:, None, None],
                      hold.mag_im[:, None, None])
@@ -180,7 +192,8 @@ def hermitian_impedance(loop: CoupledLoop, theta: np.ndarray) -> HermitianImpeda
     gr, gi = solution[:, :size], solution[:, size:]
     G = ThetaComplex(theta3, gr, gi, np.abs(gr), np.abs(gi))
 
-    Y = _lift(eps, theta3, column=True) * G * _lift(mu, theta3, column=False)
+    mu_row = _lift(mu, theta3, column=False)
+    Y = _lift(eps, theta3, column=True) * G * mu_row
     b = np.array([axis.b for axis in loop.axes])
     symmetric = np.diag(b) + 0.5 * (Y.im + np.swapaxes(Y.im, 1, 2))
 
@@ -192,7 +205,7 @@ def hermitian_impedance(loop: CoupledLoop, theta: np.ndarray) -> HermitianImpeda
     rho = ThetaComplex(theta3, gap * turn[0], gap * turn[1], np.abs(gap * turn[0]), np.abs(gap * turn[1]))
     nu_col, nu_row = _lift(nu, theta3, column=True), _lift(nu, theta3, column=False)
     spread = nu_col + nu_row * -1.0
-    omega = rho * _lift(mu, theta3, column=False) + _lift(eps, theta3, column=False) * spread
+    omega = rho * mu_row + _lift(eps, theta3, column=False) * spread
     skew = G * omega
     antisymmetric = 0.5 * theta3 * skew.im
     antisymmetric = 0.5 * (antisymmetric - np.swapaxes(antisymmetric, 1, 2))

@@ -48,7 +48,7 @@ from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.sampled_loop import period_map, pulse_transfer, window_fraction
 from haptic_bus.analysis.theta_complex import ThetaComplex
 from haptic_bus.analysis.theta_search import grid_parts
-from haptic_bus.analysis.trig import cospi, half_angle, sincpi, sinpi, unit_point
+from haptic_bus.analysis.trig import HalfAngle, cospi, half_angle, sincpi, sinpi, unit_point
 from haptic_bus.analysis.velocity import VelocityModel
 
 
@@ -127,11 +127,12 @@ def measurement_terms(loop: WallLoop, theta: np.ndarray) -> ThetaComplex:
     return delay_rotation(theta, half) * ThetaComplex.exact(theta, envelope, 0.0)
 
 
-def loop_terms(loop: WallLoop, theta: ArrayLike, aliases: AliasKey | None = None) -> LoopTerms:
-    """:class:`LoopTerms` of ``loop`` (its wall ignored) at ``theta`` (rad, in ``(0, pi]``); ``aliases``:
-    another plant whose alias function ``g`` goes into ``P`` (None: ``loop``'s rigid handle)."""
-    theta = np.atleast_1d(np.asarray(theta, dtype=float))
-    circle = half_angle(theta)
+def hold_and_aliases(loop: WallLoop, circle: HalfAngle, aliases: AliasKey | None = None
+                     ) -> tuple[ThetaComplex, ThetaComplex, ThetaComplex]:
+    """``(1 - z^{-1}, z^{-d}, P = z^{-d} g(theta))`` of ``loop`` on the half angles ``circle`` of
+    ``theta`` (rad, in ``(0, pi]``): the part of :func:`loop_terms` that the coupled criterion
+    needs (``aliases``: as there)."""
+    theta = circle.theta
     sinc = circle.sinc()
     hold = ThetaComplex.exact(theta, 2.0 * circle.s * circle.s, sinc)
     if loop.whole_delay == 1:  # z^-1 = cos - j sin
@@ -139,6 +140,14 @@ def loop_terms(loop: WallLoop, theta: ArrayLike, aliases: AliasKey | None = None
     else:
         whole = delay_rotation(theta, loop.whole_delay)
     P = whole * (alias_function(loop, theta, circle) if aliases is None else device_alias_function(aliases, theta, circle))
+    return hold, whole, P
+
+
+def loop_terms(loop: WallLoop, theta: ArrayLike, aliases: AliasKey | None = None) -> LoopTerms:
+    """:class:`LoopTerms` of ``loop`` (its wall ignored) at ``theta`` (rad, in ``(0, pi]``); ``aliases``:
+    another plant whose alias function ``g`` goes into ``P`` (None: ``loop``'s rigid handle)."""
+    theta = np.atleast_1d(np.asarray(theta, dtype=float))
+    hold, whole, P = hold_and_aliases(loop, half_angle(theta), aliases)
     rotation = whole if loop.delay == loop.whole_delay else delay_rotation(theta, loop.delay)
     E = rotation if loop.velocity.kind == "point" else rotation * measurement_terms(loop, theta)  # M = 1 exactly
     return LoopTerms(theta, loop.c, loop.m / loop.T, hold, P, E)

@@ -17,15 +17,18 @@ object's penetration normal ``n``, judged by the exact coupled criterion
   box) add: ``K1 n1 n1^T + K2 n2 n2^T`` for every pair of their directions (a sphere's sampled
   ones).  Three or more objects overlapping at one point are not judged together.
 
-Verdicts are cached per wall (the same ``K``, ``B`` and normals on the same axes are judged once).
+Verdicts are cached per wall (the same ``K``, ``B`` and normals on the same axes are judged once in a
+process), and a pickled gate carries those on its axes: the judge worker it is handed to does not judge
+them again.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import itertools
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,6 +45,12 @@ from haptic_bus.errors import Refusal
 
 SEARCH_EVALUATIONS = 24
 DEFAULT_POLICY = GatePolicy()
+Parts = tuple[tuple[float, float, tuple[float, ...]], ...]
+"""Plane walls summed: ``((K N/m, B N s/m, unit normal), ...)``."""
+VerdictKey = tuple[tuple[WallLoop, ...], Parts]
+CACHE_SIZE = 4096  # verdicts kept per process, the least recently used dropped first
+_verdicts: OrderedDict[VerdictKey, CoupledVerdict] = OrderedDict()
+_verdicts_lock = threading.Lock()
 
 
 def sphere_directions(size: int) -> list[tuple[float, ...]]:
@@ -137,7 +146,16 @@ class SpaceGate:
         self.policy = policy
         CoupledLoop(self.axes, np.zeros((len(self.axes),) * 2), np.zeros((len(self.axes),) * 2))  # validates the axes now
 
-    def wall(self, parts: tuple[tuple[float, float, tuple[float, ...]], ...]) -> CoupledVerdict:
+    def __getstate__(self) -> dict[str, Any]:
+        """The gate with the verdicts this process holds on its axes: a gate unpickled in another
+        process (the judge worker) does not judge them again."""
+        return {"axes": self.axes, "policy": self.policy, "verdicts": _known(self.axes)}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.axes, self.policy = state["axes"], state["policy"]
+        _remember(state["verdicts"])
+
+    def wall(self, parts: Parts) -> CoupledVerdict:
         """The verdict on the sum of the plane walls ``parts`` = ``((K, B, normal), ...)``; cached."""
         return _judge(self.axes, tuple((K, B, tuple(unit_normal(n, len(self.axes)))) for K, B, n in parts))
 
@@ -232,12 +250,35 @@ class SpaceGate:
                 f"{v.critical_theta:.3g} rad, allowed: margin >= {self.policy.safety_margin:g} N s/m")
 
 
-@functools.lru_cache(maxsize=4096)
-def _judge(axes: tuple[WallLoop, ...], parts: tuple[tuple[float, float, tuple[float, ...]], ...]) -> CoupledVerdict:
+def _judge(axes: tuple[WallLoop, ...], parts: Parts) -> CoupledVerdict:
+    """The coupled verdict on the walls ``parts`` summed on ``axes``, judged once per process (or
+    brought in by an unpickled gate, :func:`_remember`)."""
+    key = (axes, parts)
+    with _verdicts_lock:
+        found = _verdicts.get(key)
+        if found is not None:
+            _verdicts.move_to_end(key)
+            return found
     size = len(axes)
     K, B = np.zeros((size, size)), np.zeros((size, size))
     for k, b, n in parts:
         outer = np.outer(n, n)
         K += k * outer
         B += b * outer
-    return coupled_verdict(CoupledLoop(axes, K, B))
+    verdict = coupled_verdict(CoupledLoop(axes, K, B))
+    _remember({key: verdict})
+    return verdict
+
+
+def _remember(verdicts: dict[VerdictKey, CoupledVerdict]) -> None:
+    """Keep ``verdicts`` in this process's cache (at most :data:`CACHE_SIZE`)."""
+    with _verdicts_lock:
+        _verdicts.update(verdicts)
+        while len(_verdicts) > CACHE_SIZE:
+            _verdicts.popitem(last=False)
+
+
+def _known(axes: tuple[WallLoop, ...]) -> dict[VerdictKey, CoupledVerdict]:
+    """The verdicts this process holds on ``axes``."""
+    with _verdicts_lock:
+        return {key: verdict for key, verdict in _verdicts.items() if key[0] == axes}

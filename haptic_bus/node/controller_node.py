@@ -153,8 +153,9 @@ class ControllerNode:
 
     def attach(self, network: canopen.Network) -> None:
         """Answer SDO requests on ``network`` (the drive's), the judge worker started first and handed
-        the running scene to judge once, not waited for: the analysis' caches are warm for the first
-        upload (a sphere in space costs the coupled gate a direction search, 0.3-1.8 s here)."""
+        the running scene to judge once, not waited for: its imports are done for the first upload
+        (a sphere in space: scipy.optimize, for the coupled gate's direction search), and the coupled
+        gate brings the verdicts this process holds along (pickled with it), so they are not judged again."""
         self._pool = judge_pool()
         scenes = self.controller.scenes
         self._warming = self._pool.submit(judge_walls, scenes.gate, scenes.latest.scene, {})

@@ -3,9 +3,10 @@
 The controller node hands a commit's staged walls to :func:`judge_walls` in this process's one
 judge worker (:func:`judge_pool`: a :class:`concurrent.futures.ProcessPoolExecutor` of one
 process, started by ``spawn``, so nothing of the control process -- its threads, its bus handles
--- is forked into it).  What crosses is plain data and picklable objects: the gate, the scene the
-upload changes, ``{name: (K, B)}`` one way; the new scene and the gate's decision, or the reason
-the values are invalid (a ``str``), the other.  The worker is started, and has imported the
+-- is forked into it).  What crosses is plain data and picklable objects: the gate (the coupled one
+with the verdicts the control process holds on its axes), the scene the upload changes,
+``{name: (K, B)}`` one way; the new scene and the gate's decision, or the reason the values are
+invalid (a ``str``), the other.  The worker is started, and has imported the
 gate's modules, before a run's first cycle (:func:`judge_pool` waits for it).  It dies with the
 control process (Linux: ``PR_SET_PDEATHSIG``), so a run killed with SIGKILL leaves no worker
 behind holding its pipes.  The executor's two threads in this process are named:
