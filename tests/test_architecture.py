@@ -244,6 +244,27 @@ def test_a_command_that_prints_a_verdict_imports_no_bus_library_nor_plots(argv: 
     assert json.loads(out.stdout.strip().splitlines()[-1]) == [0, []]
 
 
+
+@pytest.mark.parametrize(("child", "forbidden"), [
+    # the run's writer: rings, files, python-can's ASC writer only once a bus log is opened; numpy and rich only for a live view
+    ("import haptic_bus.app.writer_process",
+     ("numpy", "scipy", "mpmath", "matplotlib", "rich", "can", "canopen", "pymodbus", "haptic_bus.app.profiles",
+      "haptic_bus.analysis", "haptic_bus.app.run_folder")),
+    # the upload judge: the gates and the analysis they import, no bus, no plots, no live view
+    ("import haptic_bus.node.verdicts as verdicts; verdicts._ready()",
+     ("matplotlib", "rich", "can", "canopen", "pymodbus", "haptic_bus.app")),
+])
+def test_a_spawned_child_of_a_run_imports_only_what_its_job_needs(child: str, forbidden: tuple[str, ...]) -> None:
+    """Every real-time run spawns a writer and a judge process, each paying its imports at the run's
+    start: what their target modules import is pinned (the writer once imported the profiles, the
+    gates, numpy and canopen through the run folder's module and a type, 0.4 s of CPU a run)."""
+    code = (f"import sys, json, multiprocessing.spawn; {child}; "
+            f"print(json.dumps(sorted(m for m in sys.modules if any(m == f or m.startswith(f + '.') for f in {forbidden!r}))))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+
+
 # ----------------------------------------------------------------------------- one thread owns the bus
 
 class BusCalls:
