@@ -245,6 +245,19 @@ def test_a_command_that_prints_a_verdict_imports_no_bus_library_nor_plots(argv: 
 
 
 
+
+@pytest.mark.parametrize("argv", [["run", "--help"], ["run", "cia402-handle", "--node-id", "500"]])
+def test_the_command_line_s_parser_imports_no_numpy(argv: list[str]) -> None:
+    """Every ``haptic-bus`` process builds the whole parser: its help and a refusal at the arguments (exit
+    2) import no numpy, no gate and no bus library (``profiles``' parser once imported the analysis:
+    0.4 s of CPU for every command)."""
+    forbidden = ("numpy", "haptic_bus.control", "haptic_bus.app.profiles", *BUS_LIBRARIES)
+    code = (f"import sys, json, contextlib, io; from haptic_bus.app.cli import main\n"
+            f"with contextlib.redirect_stdout(io.StringIO()): status = main({argv!r})\n"
+            f"print(json.dumps([status, sorted(m for m in {forbidden!r} if m in sys.modules)]))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == [0 if "--help" in argv else 2, []], out.stderr
+
 @pytest.mark.parametrize(("child", "forbidden"), [
     # the run's writer: rings, files, python-can's ASC writer only once a bus log is opened; numpy and rich only for a live view
     ("import haptic_bus.app.writer_process",
