@@ -266,11 +266,16 @@ def test_the_command_line_s_parser_imports_no_numpy(argv: list[str]) -> None:
     # the upload judge: the gates and the analysis they import, no bus, no plots, no live view
     ("import haptic_bus.node.verdicts as verdicts; verdicts._ready()",
      ("matplotlib", "rich", "can", "canopen", "pymodbus", "haptic_bus.app")),
+    # haptic-bus sim on CANopen: the slave, not the master's drive; Modbus, scipy and plots only when asked
+    ("import sim_drive.cli, sim_drive.canopen.slave",
+     ("drives.canopen.drive", "drives.modbus.drive", "pymodbus", "scipy", "matplotlib", "rich", "haptic_bus.control",
+      "haptic_bus.app")),
 ])
-def test_a_spawned_child_of_a_run_imports_only_what_its_job_needs(child: str, forbidden: tuple[str, ...]) -> None:
-    """Every real-time run spawns a writer and a judge process, each paying its imports at the run's
-    start: what their target modules import is pinned (the writer once imported the profiles, the
-    gates, numpy and canopen through the run folder's module and a type, 0.4 s of CPU a run)."""
+def test_a_child_process_imports_only_what_its_job_needs(child: str, forbidden: tuple[str, ...]) -> None:
+    """Every real-time run spawns a writer and a judge process, and the suite starts the simulated
+    drive dozens of times, each paying its imports at its start: what they import is pinned (the
+    writer once imported the profiles, the gates, numpy and canopen through the run folder's module
+    and a type, 0.4 s of CPU a run; the simulated drive the master's drive through its package)."""
     code = (f"import sys, json, multiprocessing.spawn; {child}; "
             f"print(json.dumps(sorted(m for m in sys.modules if any(m == f or m.startswith(f + '.') for f in {forbidden!r}))))")
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
