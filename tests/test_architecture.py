@@ -244,6 +244,45 @@ def test_a_command_that_prints_a_verdict_imports_no_bus_library_nor_plots(argv: 
     assert json.loads(out.stdout.strip().splitlines()[-1]) == [0, []]
 
 
+
+
+@pytest.mark.parametrize("argv", [["run", "--help"], ["run", "cia402-handle", "--node-id", "500"]])
+def test_the_command_line_s_parser_imports_no_numpy(argv: list[str]) -> None:
+    """Every ``haptic-bus`` process builds the whole parser: its help and a refusal at the arguments (exit
+    2) import no numpy, no gate and no bus library (``profiles``' parser once imported the analysis:
+    0.4 s of CPU for every command)."""
+    forbidden = ("numpy", "haptic_bus.control", "haptic_bus.app.profiles", *BUS_LIBRARIES)
+    code = (f"import sys, json, contextlib, io; from haptic_bus.app.cli import main\n"
+            f"with contextlib.redirect_stdout(io.StringIO()): status = main({argv!r})\n"
+            f"print(json.dumps([status, sorted(m for m in {forbidden!r} if m in sys.modules)]))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == [0 if "--help" in argv else 2, []], out.stderr
+
+@pytest.mark.parametrize(("child", "forbidden"), [
+    # the run's writer: rings, files, python-can's ASC writer only once a bus log is opened; numpy and rich only for a live view
+    ("import haptic_bus.app.writer_process",
+     ("numpy", "scipy", "mpmath", "matplotlib", "rich", "can", "canopen", "pymodbus", "haptic_bus.app.profiles",
+      "haptic_bus.analysis", "haptic_bus.app.run_folder")),
+    # the upload judge: the gates and the analysis they import, no bus, no plots, no live view
+    ("import haptic_bus.node.verdicts as verdicts; verdicts._ready()",
+     ("matplotlib", "rich", "can", "canopen", "pymodbus", "haptic_bus.app")),
+    # haptic-bus sim on CANopen: the slave, not the master's drive; Modbus, scipy and plots only when asked
+    ("import sim_drive.cli, sim_drive.canopen.slave",
+     ("drives.canopen.drive", "drives.modbus.drive", "pymodbus", "scipy", "matplotlib", "rich", "haptic_bus.control",
+      "haptic_bus.app")),
+])
+def test_a_child_process_imports_only_what_its_job_needs(child: str, forbidden: tuple[str, ...]) -> None:
+    """Every real-time run spawns a writer and a judge process, and the suite starts the simulated
+    drive dozens of times, each paying its imports at its start: what they import is pinned (the
+    writer once imported the profiles, the gates, numpy and canopen through the run folder's module
+    and a type, 0.4 s of CPU a run; the simulated drive the master's drive through its package)."""
+    code = (f"import sys, json, multiprocessing.spawn; {child}; "
+            f"print(json.dumps(sorted(m for m in sys.modules if any(m == f or m.startswith(f + '.') for f in {forbidden!r}))))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+
+
 # ----------------------------------------------------------------------------- one thread owns the bus
 
 class BusCalls:

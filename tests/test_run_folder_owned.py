@@ -32,7 +32,7 @@ HOLD_LOCK = ("import pathlib, sys; from haptic_bus.app.folder_lock import own_fo
 
 def settled_names(folder: pathlib.Path) -> list[str]:
     """The folder's file names, less the temporary of an atomic ``run.json`` write the running
-    run may be making at that instant (:func:`haptic_bus.app.run_folder.write_json`)."""
+    run may be making at that instant (:func:`haptic_bus.app.run_json.write_json`)."""
     return sorted(p.name for p in folder.iterdir() if not (p.name.startswith(".") and p.name.endswith(".tmp")))
 
 

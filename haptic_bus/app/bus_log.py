@@ -14,7 +14,8 @@ it, ``python -m can.logconvert bus.asc bus.log`` turns it into the candump forma
 reads.  Frames the heartbeat producer's thread sends pass the tap by (the link's docstring).
 
 A writer more than a ring behind loses the oldest frames; :attr:`BusLogFile.lost` counts them.
-Modbus has no frames to log: a Modbus run's record holds each poll's registers.
+Modbus has no frames to log: a Modbus run's record holds each poll's registers (and its writer
+process never imports python-can: this module imports it where frames are made and formatted).
 """
 
 from __future__ import annotations
@@ -25,12 +26,15 @@ import struct
 import threading
 import time
 from operator import attrgetter
+from typing import TYPE_CHECKING
 
-import can
-
-from drives.canopen.link import Tap
 from haptic_bus.app.record_stream import write_whole
 from haptic_bus.control.ring import Ring
+
+if TYPE_CHECKING:
+    import can
+
+    from drives.canopen.link import Tap
 
 LOG_NAME = "bus.asc"
 FRAME = struct.Struct("=dIBB64s")
@@ -64,6 +68,8 @@ def frame_tap(ring: Ring) -> Tap:
 
 def frames(chunk: bytes) -> list[can.Message]:
     """The frames of a ring's raw records ``chunk``, as python-can messages (``is_rx`` False: sent here)."""
+    import can
+
     return [can.Message(timestamp=stamp, arbitration_id=can_id, is_extended_id=bool(flags & _EXTENDED),
                         is_remote_frame=bool(flags & _REMOTE), is_error_frame=bool(flags & _ERROR),
                         is_fd=bool(flags & _FD), is_rx=not flags & _SENT, dlc=length, data=data[:length])
@@ -88,6 +94,8 @@ class BusLogFile:
     """The frames of ``ring`` (:data:`FRAME`) into ``path`` (ASC), at each :meth:`drain`."""
 
     def __init__(self, path: pathlib.Path, ring: Ring) -> None:
+        import can
+
         self.path = path
         self.ring = ring
         self.frames = 0  # frames written

@@ -1,7 +1,7 @@
 """The ``haptic-bus`` console script's entry: :func:`main` imports the command line, then runs it.
 
-Importing the command line takes about 0.1 s (argparse, logging, the option modules), and building
-its parser 0.4 s more under load (``profiles_cli`` and the analysis it imports).  A Ctrl-C in that
+Importing the command line and building its parser takes about 0.1 s (argparse, logging, the
+option modules; a command's handler imports what it runs), more under load.  A Ctrl-C in that
 time used to raise KeyboardInterrupt out of the console script's import, before the command's own
 handling (:func:`haptic_bus.app.cli.main`) existed, and Python printed a traceback.  Here it ends
 as a Ctrl-C ends every command: one line on stderr, exit 130.

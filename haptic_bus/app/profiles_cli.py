@@ -7,6 +7,10 @@ stderr; for ``check``, a profile that still lacks values ``profiles new`` asked 
 ``check`` prints, for every summed wall the scene can put on the handle, the very report
 ``haptic-bus check`` prints for those numbers.  ``new`` writes a commented profile
 (:mod:`haptic_bus.app.profile_template`), from what a drive states with ``--from-drive``.
+
+Every ``haptic-bus`` command builds this parser: this module imports the standard library and
+light tables only, and each command imports the profiles, the gates and the analysis (numpy) in
+its handler, so that ``haptic-bus run --help`` or a command refused at its arguments does not.
 """
 
 from __future__ import annotations
@@ -19,31 +23,23 @@ import pathlib
 import shlex
 import sys
 import tomllib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from haptic_bus.analysis.check import CheckReport, check_loop, format_check
-from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE, DeviceLoop
-from haptic_bus.analysis.two_mass import TwoMassLoop
-from haptic_bus.analysis.two_mass_check import TwoMassReport, check_two_mass_loop, format_two_mass
+from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
 from haptic_bus.app.arguments import as_typed, error_line, number, timeout
 from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
 from haptic_bus.app.json_ready import json_ready
-from haptic_bus.app.profile_view import format_axes_profile, format_profile, gate_decision_to_dict, space_decision_to_dict
-from haptic_bus.app.profiles import (
-    DEFAULT_PROFILE,
-    FORCE_RANGE,
-    NAME_PATTERN,
-    AxesProfile,
-    Profile,
-    admit,
-    gate_refusal,
-    profile_to_dict,
-    read_profile,
-    resolve_profile,
-    shipped_profiles,
-)
 from haptic_bus.errors import HapticBusError, ParameterError, Refusal
+from haptic_bus.profile.files import DEFAULT_PROFILE, resolve_profile, shipped_profiles
 from haptic_bus.profile.plant import ONE_AXIS_TABLES
+from haptic_bus.profile.reader import NAME_PATTERN
+from haptic_bus.profile.scene import FORCE_RANGE
+
+if TYPE_CHECKING:
+    from haptic_bus.analysis.check import CheckReport
+    from haptic_bus.analysis.loop import DeviceLoop
+    from haptic_bus.analysis.two_mass_check import TwoMassReport
+    from haptic_bus.app.profiles import AxesProfile, Profile
 
 EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
 
@@ -61,6 +57,8 @@ def _refused(command: str, refusal: Refusal) -> int:
 def _list_row(profile: Profile | AxesProfile) -> dict[str, Any]:
     """One row of ``profiles list``: the loop (one axis: timing, delay, velocity, m kg, b N s/m; several: the
     axes' names), the period T s, the objects and the gate's worst margin (N s/m); Refusal as :func:`admit`."""
+    from haptic_bus.app.profiles import AxesProfile, admit
+
     decision = admit(profile)
     row: dict[str, Any] = {"status": "ok", "worst_margin": decision.worst_margin, "warnings": len(decision.warnings),
                            "task": profile.task}
@@ -73,6 +71,8 @@ def _list_row(profile: Profile | AxesProfile) -> dict[str, Any]:
 
 def cmd_list(args: argparse.Namespace) -> int:
     """List the shipped profiles, one axis and several, with their loop and gate verdict; 0 if all load, else 1 or 2."""
+    from haptic_bus.app.profiles import read_profile
+
     rows, status = [], EXIT_OK
     for name, path in sorted({**shipped_profiles(), **shipped_profiles(axes=True)}.items()):
         row: dict[str, Any] = {"name": name, "path": str(path), "default": name == DEFAULT_PROFILE}
@@ -106,6 +106,14 @@ def cmd_list(args: argparse.Namespace) -> int:
 def cmd_show(args: argparse.Namespace) -> int:
     """Print one profile (default: the default profile) and its gate's decision on it (the coupled gate
     for several axes): 0; 1 the gate refuses it (shown all the same, and the refusal on stderr); 2 invalid."""
+    from haptic_bus.app.profile_view import (
+        format_axes_profile,
+        format_profile,
+        gate_decision_to_dict,
+        space_decision_to_dict,
+    )
+    from haptic_bus.app.profiles import AxesProfile, gate_refusal, profile_to_dict, read_profile
+
     try:
         profile = read_profile(args.profile)
     except ParameterError as error:
@@ -123,6 +131,8 @@ def cmd_show(args: argparse.Namespace) -> int:
 def _check_axes(profile: AxesProfile, as_json: bool) -> int:
     """``check`` of a multi-axis profile: its axes, its scene and the coupled gate's verdict on every wall;
     0 the gate accepts, 1 it refuses."""
+    from haptic_bus.app.profile_view import format_axes_profile, space_decision_to_dict
+
     decision = profile.judge()
     if as_json:  # as a one-axis profile's check: verdict, gate, every wall judged
         gate = space_decision_to_dict(decision)
@@ -161,6 +171,10 @@ def _still_missing(path: pathlib.Path) -> int | None:
 def _wall_report(device: DeviceLoop, K: float, B: float) -> CheckReport | TwoMassReport:
     """Every criterion on one contact wall ``K`` N/m, ``B`` N s/m (the quantisation condition with the
     device's); the two-mass report on a device with a transmission."""
+    from haptic_bus.analysis.check import check_loop
+    from haptic_bus.analysis.two_mass import TwoMassLoop
+    from haptic_bus.analysis.two_mass_check import check_two_mass_loop
+
     if device.transmission is None:
         return check_loop(device.wall(K, B), quantisation=device.quantisation)
     return check_two_mass_loop(TwoMassLoop(device.wall(K, B), device.transmission))
@@ -169,6 +183,11 @@ def _wall_report(device: DeviceLoop, K: float, B: float) -> CheckReport | TwoMas
 def cmd_check(args: argparse.Namespace) -> int:
     """``haptic-bus check`` on every contact wall of a profile; 0 passive (gate admits), 1 not, 2 invalid
     (a value missing: every one listed); a multi-axis profile: the coupled gate's verdict."""
+    from haptic_bus.analysis.check import CheckReport, format_check
+    from haptic_bus.analysis.two_mass_check import format_two_mass
+    from haptic_bus.app.profile_view import gate_decision_to_dict
+    from haptic_bus.app.profiles import AxesProfile, read_profile
+
     try:
         lacking = _still_missing(resolve_profile(args.profile))
         if lacking is not None:

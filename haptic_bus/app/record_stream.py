@@ -18,7 +18,7 @@ from __future__ import annotations
 import io
 import pathlib
 
-from haptic_bus.control.record import HEADER, format_rows, rows_of
+from haptic_bus.control.record import HEADER, ROW, format_rows
 from haptic_bus.control.ring import Ring
 
 FLUSH_INTERVAL = 0.05  # s: the longest a cycle waits in memory before it is written (the issue allows 0.1)
@@ -43,13 +43,13 @@ class RecordFile:
         count = 0
         while True:
             first, chunk = self.ring.read_from(self._next, _CHUNK_ROWS)
-            rows = rows_of(chunk)
-            if not rows.shape[0]:
+            rows = len(chunk) // ROW.size
+            if not rows:
                 break
             self.lost += first - self._next
-            write_whole(self._file, format_rows(rows))
-            self._next = first + rows.shape[0]
-            count += rows.shape[0]
+            write_whole(self._file, format_rows(ROW.iter_unpack(chunk)))
+            self._next = first + rows
+            count += rows
         self.written += count
         return count
 

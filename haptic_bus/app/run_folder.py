@@ -41,7 +41,6 @@ import functools
 import hashlib
 import importlib.metadata
 import json
-import os
 import pathlib
 import platform
 import sys
@@ -52,9 +51,11 @@ from typing import Any, Protocol
 from drives.safety import SafetySettings
 from haptic_bus._version import __version__
 from haptic_bus.analysis.loop import DeviceLoop
+from haptic_bus.app.bus_log import LOG_NAME
 from haptic_bus.app.folder_lock import FolderLock, own_folder
 from haptic_bus.app.json_ready import json_ready
 from haptic_bus.app.profiles import AxesProfile, Profile, profile_to_dict
+from haptic_bus.app.run_json import RUN_JSON, write_json
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.protocols import DecisionT, SceneT
 from haptic_bus.control.record import RecordTable, read_record
@@ -63,7 +64,7 @@ from haptic_bus.errors import ParameterError
 from haptic_bus.validation import writable_folder
 
 DEFAULT_ROOT = pathlib.Path("runs")
-RUN_JSON, RECORD_CSV = "run.json", "record.csv"
+RECORD_CSV = "record.csv"
 TIMELINE, FORCE_POSITION, REGION, TRAJECTORY = "timeline.png", "force_position.png", "region.png", "trajectory.png"
 PICTURES = (TIMELINE, FORCE_POSITION, REGION, TRAJECTORY)  # what :mod:`~haptic_bus.app.run_pictures` draws
 VALIDATE_JSON, BODE_PNG, RE_Z_PNG = "validate.json", "validate-bode.png", "validate-re-z.png"  # haptic-bus validate's
@@ -100,8 +101,6 @@ def own_run_folder(out: str | pathlib.Path | None, profile_name: str) -> tuple[p
     another run's folder is refused) and cleared of what an earlier run left there that a run writes
     (``run.json``, the records, ``bus.asc``, the pictures, validate's files), so that a folder given
     again never holds two runs; ParameterError naming the folder otherwise."""
-    from haptic_bus.app.bus_log import LOG_NAME  # the bus log's python-can, only once a run has begun
-
     folder = prepare_run_folder(out, profile_name)
     lock = own_folder(folder)
     earlier = [RUN_JSON, RECORD_CSV, LOG_NAME, *PICTURES, VALIDATE_JSON, BODE_PNG, RE_Z_PNG, *_axis_records(folder)]
@@ -216,19 +215,6 @@ def gate_loop(device: DeviceLoop) -> dict[str, Any]:
     """The loop the gate judged the run's scenes with (``run.json``'s ``gate_loop``): ``m`` kg,
     ``b`` N s/m, ``T`` s, ``delay`` samples, ``velocity`` model; what the K-B plane is drawn for."""
     return {"m": device.m, "b": device.b, "T": device.T, "delay": device.delay, "velocity": str(device.velocity)}
-
-
-def write_json(path: pathlib.Path, document: dict[str, Any]) -> pathlib.Path:
-    """Write ``document`` to ``path`` whole or not at all (a temporary file renamed over it), so a
-    process killed meanwhile leaves the previous version, never half of one."""
-    temporary = path.with_name(f".{path.name}.tmp")
-    try:
-        temporary.write_text(json.dumps(document, indent=1) + "\n")
-    except OSError:  # a full disk: no half-written temporary left beside the last whole version
-        temporary.unlink(missing_ok=True)
-        raise
-    os.replace(temporary, path)
-    return path
 
 
 class RunJournal:

@@ -28,8 +28,8 @@ simulated drive), or over Modbus TCP to servers all served by this process
 same pipe and rings, in a thread named ``hb-writer`` instead of a process (:func:`writer_for`).
 Such a run's cycle already shares the interpreter lock with its drive, whose code runs in the
 control process, so a writer process would not give the cycle the lock to itself; a kill of the
-process ends its drive with it; and a spawn costs about 1 s of imports, more than a demo's or a
-test's whole run.  The one thing the thread gives up: after a ``kill -9`` the rows
+process ends its drive with it; and a spawn costs an interpreter and its imports (about 0.25 s of
+CPU), a large part of a demo's or a test's whole run.  The one thing the thread gives up: after a ``kill -9`` the rows
 not yet drained (at most one drain interval, 50 ms) are not written.
 """
 
@@ -57,7 +57,7 @@ from haptic_bus.control.ring import Ring
 logger = logging.getLogger(__name__)
 
 PROCESS_NAME = "haptic-bus-writer"
-START_TIMEOUT = 60.0  # s: the writer imports numpy and python-can before it answers (long only on a stalled machine)
+START_TIMEOUT = 60.0  # s: the writer starts an interpreter before it answers (long only on a stalled machine)
 STOP_TIMEOUT = 30.0  # s: its last drain of up to a ring of rows per axis
 WATCH_THREAD = "hb-write-watch"  # the thread that waits for the writer's alarm (a failed write)
 SCENE_EVENTS = frozenset(("upload", "derate"))  # events that come with a new scene

@@ -8,10 +8,16 @@ memory, :mod:`~haptic_bus.control.ring`) and every :data:`~haptic_bus.app.record
 
 - drains each record ring into its ``record*.csv`` (:class:`~haptic_bus.app.record_stream.RecordFile`)
   and the frame ring into ``bus.asc`` (:class:`~haptic_bus.app.bus_log.BusLogFile`), whole lines;
-- rewrites ``run.json`` (atomically: :func:`~haptic_bus.app.run_folder.write_json`) when an event
+- rewrites ``run.json`` (atomically: :func:`~haptic_bus.app.run_json.write_json`) when an event
   or a scene came since the last write (the control process sends the document once, before the
   cycles, then each event);
 - once a second draws the live view (:mod:`~haptic_bus.app.live`), when asked for one.
+
+It imports what writing needs: the rings, the standard library, and python-can's ASC writer for
+a bus log; not numpy (records are formatted from the ring's struct records), not the profiles,
+gates and analysis ``run.json``'s document is made from (:mod:`~haptic_bus.app.run_json`), and
+the live view's numpy and rich only when a view is asked for.  A spawned process pays its
+imports at each run's start (``tests/test_architecture.py`` pins the set).
 
 A write that fails (a full disk, the folder deleted or replaced while the run goes on: checked
 at each drain) ends the writing, not the writer: it says why once on its alarm pipe (``alarm``,
@@ -35,18 +41,21 @@ import contextlib
 import ctypes
 import errno
 import logging
+import math
 import os
 import pathlib
 import signal
 import time
 from multiprocessing.connection import Connection
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from haptic_bus.app.bus_log import LOG_NAME, BusLogFile
-from haptic_bus.app.live import REFRESH, LiveView
 from haptic_bus.app.record_stream import FLUSH_INTERVAL, RecordFile
-from haptic_bus.app.run_folder import RUN_JSON, write_json
+from haptic_bus.app.run_json import RUN_JSON, write_json
 from haptic_bus.control.ring import Ring, RingSpec
+
+if TYPE_CHECKING:
+    from haptic_bus.app.live import LiveView
 
 logger = logging.getLogger(__name__)
 
@@ -78,6 +87,7 @@ class Writer:
         self.dirty = False  # the document changed since run.json was written
         self.last_event: dict[str, Any] | None = None
         self.view: LiveView | None = None
+        self.view_due = math.inf  # when the view is next redrawn (time.monotonic(), s)
         self.stopped = False
 
     def handle(self, message: tuple[Any, ...]) -> None:
@@ -106,7 +116,10 @@ class Writer:
                     self.document["scenes"] = scenes
                 self.dirty = True
         elif kind == "live":
+            from haptic_bus.app.live import REFRESH, LiveView  # numpy and rich: only for a run that shows it
+
             _, title, period, duration = message
+            self.view_due = time.monotonic() + REFRESH
             self.view = LiveView([(axis, record.ring) for axis, record in self.records], title, period,
                                  duration=duration, last_event=lambda: self.last_event).__enter__()
         elif kind == "stop":
@@ -149,6 +162,14 @@ class Writer:
             return os.path.samestat(os.stat(self.folder), self._identity)
         except OSError:
             return False
+
+    def show(self, now: float) -> None:
+        """Redraw the live view if one is shown and its redraw is due at ``now`` (``time.monotonic()``, s)."""
+        if self.view is not None and now >= self.view_due:
+            from haptic_bus.app.live import REFRESH
+
+            self.view.update()
+            self.view_due = now + REFRESH
 
     def close(self) -> dict[str, Any]:
         """A last drain, every file closed, the view left showing the end; what was written and lost
@@ -204,11 +225,11 @@ def _serve(folder: pathlib.Path, frames: RingSpec | None, conn: Connection, pare
             writer.fail(exc, LOG_NAME)
     conn.send(("ready",))
     now = time.monotonic()
-    flush_due, view_due = now + FLUSH_INTERVAL, now + REFRESH
+    flush_due = now + FLUSH_INTERVAL
     failed = False
     try:
         while not writer.stopped:
-            due = flush_due if writer.view is None else min(flush_due, view_due)
+            due = min(flush_due, writer.view_due)
             if conn.poll(max(0.0, due - time.monotonic())):
                 writer.handle(conn.recv())
             now = time.monotonic()
@@ -217,9 +238,7 @@ def _serve(folder: pathlib.Path, frames: RingSpec | None, conn: Connection, pare
                 flush_due = now + FLUSH_INTERVAL
                 if parent is not None and os.getppid() != parent:
                     break
-            if writer.view is not None and now >= view_due:
-                writer.view.update()
-                view_due = now + REFRESH
+            writer.show(now)
     except (EOFError, OSError) as exc:  # the control process is gone (EOF), or a write failed: keep what can be kept
         failed = not isinstance(exc, EOFError)
         if failed:

@@ -5,22 +5,24 @@ events (uploads accepted and refused, alarms, derates, faults, the end) go to ``
 through :class:`EventLog`.  The control thread's part is O(1) a cycle: :meth:`RunRecord.append`
 packs the row into the ring with one precompiled ``struct.pack_into`` (no allocation), and a
 writer process (:mod:`haptic_bus.app.writer_process`) drains the ring, in shared memory, into
-the file with :func:`rows_of` and :func:`format_rows`.  :func:`read_record` reads a file
-back, a torn last line (a process killed mid-write) included.
+the file with :func:`format_rows` (struct records to CSV lines: no numpy, which that process
+need not import).  :func:`read_record` reads a file back, a torn last line (a process killed
+mid-write) included.  numpy is imported by the functions that make arrays, not by this module.
 """
 
 from __future__ import annotations
 
 import pathlib
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from haptic_bus.control.ring import Ring, segment
 from haptic_bus.errors import ParameterError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 COLUMNS = ("time_s", "wall_clock_s", "monotonic_s", "lateness_s", "statusword", "velocity_counts", "input_age",
            "position_m", "velocity_m_per_s", "force_n", "torque_permille", "energy_j", "scene_id", "scale", "late",
@@ -92,19 +94,22 @@ class RunRecord(Ring):
         """Write the stored rows with a header line (what the streamed ``record.csv`` holds); returns the path."""
         path = pathlib.Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(HEADER + format_rows(self.array()))
+        path.write_text(HEADER + format_rows(ROW.iter_unpack(self.read_from(0)[1])))
         return path
 
 
 def rows_of(chunk: bytes) -> np.ndarray:
     """The rows (:data:`COLUMNS`) of a ring's raw records ``chunk``, one row each (a copy)."""
+    import numpy as np
+
     return np.frombuffer(chunk, dtype=np.float64).reshape(-1, len(COLUMNS)).copy()
 
 
-def format_rows(rows: np.ndarray) -> str:
-    """CSV lines of ``rows`` (:data:`COLUMNS` order): integers where whole, floats with ``repr``
-    (every bit kept), each line ending in a newline."""
-    return "".join(_ROW_FORMAT % tuple(row) for row in rows.tolist())
+def format_rows(rows: Iterable[Sequence[float]]) -> str:
+    """CSV lines of ``rows`` (:data:`COLUMNS` order, floats: a ring's records as
+    ``ROW.iter_unpack`` gives them): integers where whole, floats with ``repr`` (every bit kept),
+    each line ending in a newline."""
+    return "".join(_ROW_FORMAT % tuple(row) for row in rows)
 
 
 @dataclass(frozen=True)
@@ -146,6 +151,8 @@ def read_record(path: str | pathlib.Path) -> RecordTable:
                             if len(line.split(",")) != len(names))
         raise ParameterError(f"line {number}", f"{len(line.split(','))} fields", f"{len(names)} fields, as the header",
                              context=str(path))
+    import numpy as np
+
     try:
         values = np.array(fields, dtype=float)  # parsed in C
     except ValueError as exc:

@@ -7,6 +7,9 @@ import pathlib
 
 from haptic_bus.profile.reader import profile_error, read_document
 
+DEFAULT_PROFILE = "cia402-handle"
+"""The shipped profile a command takes when none is named (``haptic-bus demo``, ``profiles show``)."""
+
 
 def _profiles_folder() -> pathlib.Path:
     return pathlib.Path(str(importlib.resources.files("profiles")))

@@ -27,15 +27,13 @@ from haptic_bus.control.gate import GateDecision
 from haptic_bus.control.space_gate import SpaceDecision
 from haptic_bus.errors import ParameterError, Refusal
 from haptic_bus.profile.device import DeviceTable, LoopTiming
-from haptic_bus.profile.files import resolve_profile, shipped_profiles
+from haptic_bus.profile.files import DEFAULT_PROFILE, resolve_profile, shipped_profiles
 from haptic_bus.profile.reader import read_document
 from haptic_bus.profile.scene import FORCE_RANGE
 
 __all__ = ["DEFAULT_PROFILE", "FORCE_RANGE", "NAME_PATTERN", "AxesProfile", "Axis", "DeviceTable", "LoopTiming",
            "Profile", "StartPolicy", "admit", "default_profile", "gate_refusal", "load_profile", "one_axis_only",
            "profile_to_dict", "read_profile", "resolve_profile", "shipped_profiles"]
-
-DEFAULT_PROFILE = "cia402-handle"
 
 
 def read_profile(path_or_name: str | pathlib.Path) -> Profile | AxesProfile:
