@@ -7,12 +7,13 @@ naming it, counted in the summary and in issue 26's Done-when row 3, and the oth
 from __future__ import annotations
 
 import json
+import signal
 from pathlib import Path
 
 import pytest
 
 from haptic_bus.bench import preflight_runs, processes, run_bench
-from haptic_bus.bench.size import SMOKE
+from haptic_bus.bench.size import QUICK, SMOKE
 
 NO_DRIVE = {"interface": "udp_multicast", "channel": "239.74.170.21", "port": 49821}  # nothing answers here
 
@@ -49,3 +50,26 @@ def test_a_run_that_does_not_exit_in_time_is_killed_and_said(monkeypatch: pytest
     assert (entry["exit"], entry["exit_reason"]) == (None, "timed out")
     assert entry["error"] == "no exit within 0.5 s: killed"
     assert not preflight_runs.reached(entry)
+
+
+def test_ctrl_c_keeps_the_runs_that_finished(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    real, started = preflight_runs.fresh_run, []
+
+    def ctrl_c_in_the_second() -> dict:
+        started.append(len(started) + 1)
+        if len(started) == 2:
+            signal.raise_signal(signal.SIGINT)  # Ctrl-C as the second run starts
+        return real()
+
+    monkeypatch.setattr(preflight_runs, "fresh_run", ctrl_c_in_the_second)
+    result = run_bench(tmp_path, QUICK, sections=("preflight",))
+    assert started == [1, 2] and result["interrupted"] == "preflight"
+    section = json.loads((tmp_path / "bench.json").read_text())["sections"]["preflight"]
+    assert (section["count"], section["planned"], section["interrupted"], len(section["runs"])) == (1, 5, True, 1)
+    assert section["runs"][0]["exit"] is not None  # the first run ran to its end
+    text = (tmp_path / "bench.md").read_text()
+    assert "**Interrupted (Ctrl-C) in section preflight: only the sections before it ran, and what of it finished.**" in text
+    assert "each time: 1 of 5 runs (interrupted: Ctrl-C), one after another." in text
+    (row,) = [r for r in result["done_when_26"] if r["line"] == 3]
+    assert (row["target"], row["result"]) == ("5 of 5", "n/a")
+    assert row["note"].startswith("interrupted (Ctrl-C) after 1 of 5 runs; ")

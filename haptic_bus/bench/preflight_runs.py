@@ -11,6 +11,7 @@ lateness p99 of its 500 cycles, and the loop delay the gate judged the wall at. 
 20 runs (full), 5 (``--quick``) and 1 (``--smoke``: the path runs).  A run that never reached
 pre-flight is one of the count too, with what ended it: its error (a drive error, a crash's last
 line on stderr), no exit within :data:`RUN_WAIT` s (killed), or a simulated drive that did not start.
+A Ctrl-C keeps the runs that finished as the section (:class:`~haptic_bus.bench.SectionInterrupted`).
 """
 
 from __future__ import annotations
@@ -93,14 +94,29 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 11; returns its section of ``bench.json``."""
     count = size.pick(1, 5, 20)
     runs: list[dict[str, Any]] = []
-    for k in range(count):
-        runs.append(fresh_run())
-        tick(f"pre-flight: run {k + 1} of {count}")
+    try:
+        for k in range(count):
+            runs.append(fresh_run())
+            tick(f"pre-flight: run {k + 1} of {count}")
+    except KeyboardInterrupt:  # Ctrl-C: the runs that finished are the section
+        if not runs:
+            raise
+        from haptic_bus.bench import SectionInterrupted
+
+        raise SectionInterrupted(section(runs, count)) from None
+    return section(runs, count)
+
+
+def section(runs: list[dict[str, Any]], planned: int) -> dict:
+    """Section 11 of ``bench.json`` for ``runs`` of the ``planned`` (fewer: interrupted by Ctrl-C)."""
     delays = [r["judged_delay"] for r in runs if r["held"] and r["judged_delay"] is not None]
+    count = len(runs)
+    done = (f"{count} run{'' if count == 1 else 's'}" if count == planned else
+            f"{count} of {planned} runs (interrupted: Ctrl-C)")
     return {
         "description": f"haptic-bus run {PROFILE} (real time, {DURATION:g} s after pre-flight) against a fresh "
-                       f"haptic-bus sim each time: {count} run{'' if count == 1 else 's'}, one after another",
-        "count": count, "runs": runs, "delay_target": DELAY_TARGET,
+                       f"haptic-bus sim each time: {done}, one after another",
+        "count": count, "planned": planned, "interrupted": count < planned, "runs": runs, "delay_target": DELAY_TARGET,
         "held": sum(r["held"] for r in runs), "within": sum(within(r) for r in runs),
         "refused": sum(reached(r) and not r["held"] for r in runs), "not_reached": sum(not reached(r) for r in runs),
         "judged_delay": ({"median": statistics.median(delays), "min": min(delays), "max": max(delays)}

@@ -307,7 +307,9 @@ def markdown(result: dict) -> str:
            "Every timing is the median of at least 5 repeats in this run, with min-max in brackets; ratios compare "
            "figures measured side by side (pairwise where marked)."]
     if "interrupted" in result:
-        out += ["", f"**Interrupted (Ctrl-C) in section {result['interrupted']}: only the sections before it ran.**"]
+        name = result["interrupted"]
+        kept = ", and what of it finished" if name in result["sections"] else ""
+        out += ["", f"**Interrupted (Ctrl-C) in section {name}: only the sections before it ran{kept}.**"]
     sections = result["sections"]
     if result.get("done_when"):
         out += ["", "## Issue 14: Done when", "", *_done_when(result["done_when"])]
