@@ -86,9 +86,13 @@ class AxesMaster(abc.ABC, Generic[DriveT]):
         """``torque_limits`` of a cyclic phase (per mille; None: every drive's own 0x6072) as one
         entry per axis; ParameterError for another count."""
         limits: list[int | None] = list(torque_limits) if torque_limits is not None else [None] * len(self.drives)
-        if len(limits) != len(self.drives):
-            raise ParameterError("torque_limits", len(limits), f"one per axis ({len(self.drives)})", self.name)
+        self._one_per_axis("torque_limits", len(limits))
         return limits
+
+    def _one_per_axis(self, name: str, count: int) -> None:
+        """ParameterError unless ``count`` values of ``name`` are one per axis."""
+        if count != len(self.drives):
+            raise ParameterError(name, count, f"one per axis ({len(self.drives)})", self.name)
 
     @abc.abstractmethod
     def close(self) -> None:

@@ -137,6 +137,8 @@ class OperationMode(enum.IntEnum):
     def of(cls, value: int) -> OperationMode:
         """``value`` (0x6060's code) as a mode; :class:`~drives.errors.ParameterError` naming the codes if it is none."""
         try:
+            if isinstance(value, bool):  # True is 1 to int(), not a code anyone means
+                raise ValueError(value)
             return cls(value)
         except ValueError:
             allowed = ", ".join(f"{int(m)} ({m.name})" for m in cls)

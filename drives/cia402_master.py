@@ -321,7 +321,7 @@ class Cia402Master(Drive, Generic[ConnectionT]):
         """What :meth:`enable` does before the state-machine walk: check 0x6502, write 0x6060, await
         0x6061, forget the last trip and the events seen.  A master walking several drives on one
         SYNC calls it per drive, walks them together (:func:`~drives.axes_master.walk_together`), then :meth:`mark_enabled`."""
-        mode = OperationMode.of(mode)
+        mode = self._torque_mode(mode)
         self.connected()
         if self._selected is not mode:
             self._select_mode(mode)
@@ -391,19 +391,26 @@ class Cia402Master(Drive, Generic[ConnectionT]):
         once to see the mode still selected: a run selects the mode before pre-flight, so that the
         round trips of 0x6502, 0x6060 and 0x6061 (23 ms in all at T = 1 ms over udp_multicast) do
         not lie between pre-flight's last RPDO and the walk's first (the RPDO deadline: 30 periods)."""
-        mode = OperationMode.of(mode)  # an invalid mode: said before the drive is asked anything
+        mode = self._torque_mode(mode)  # an invalid mode: said before the drive is asked anything
         self.connected()
         self._select_mode(mode)
         self._selected = mode
 
-    def _select_mode(self, mode: OperationMode) -> None:
-        """Check 0x6502 announces ``mode`` (CST only, the one this master drives), write 0x6060
-        and wait (``state_timeout``) until 0x6061 shows it."""
+    def _torque_mode(self, mode: OperationMode) -> OperationMode:
+        """``mode`` (0x6060's code) if it is cyclic synchronous torque, the one mode this master drives;
+        said before the drive is asked anything, connected or not: a code that is no mode is a
+        :class:`~drives.errors.ParameterError` naming the codes, another mode (7, 8, 9: the cyclic
+        position and velocity modes) a :class:`~drives.errors.DriveError`."""
         mode = OperationMode.of(mode)
         if mode is not OperationMode.CYCLIC_SYNCHRONOUS_TORQUE:
             raise DriveError(
                 self.name, f"this master drives only CYCLIC_SYNCHRONOUS_TORQUE (10); {mode.name} ({int(mode)}) was asked"
             )
+        return mode
+
+    def _select_mode(self, mode: OperationMode) -> None:
+        """Check 0x6502 announces ``mode`` (CST only, the one this master drives), write 0x6060
+        and wait (``state_timeout``) until 0x6061 shows it."""
         supported = self.read_object(SUPPORTED_DRIVE_MODES)
         if not supports(supported, mode):
             raise DriveError(

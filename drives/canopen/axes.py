@@ -180,7 +180,11 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
 
     def write_outputs(self, torques: Sequence[int]) -> None:
         """Every axis' target torque (0x6071, per mille, in axis order), each saturated by its drive's
-        clamp; the safe outputs on every axis once any tripped.  A send that fails trips every axis."""
+        clamp; the safe outputs on every axis once any tripped.  A send that fails trips every axis.
+        ParameterError for a count other than one per axis, then DriveError before :meth:`connect` or
+        after :meth:`close` (nothing sent)."""
+        self._one_per_axis("torques", len(torques))
+        self._require_connected()
         self._send_torques([drive.clamp(torque) for drive, torque in zip(self.drives, torques)])
 
     def _send_torques(self, torques: Sequence[int]) -> None:

@@ -97,6 +97,15 @@ class Progress:
             sys.stderr.flush()
 
 
+class SectionInterrupted(KeyboardInterrupt):
+    """Ctrl-C in a section that keeps what it finished (``haptic-bus run`` after ``haptic-bus run``):
+    ``section`` is its part of ``bench.json`` so far, written as the others are."""
+
+    def __init__(self, section: dict) -> None:
+        super().__init__()
+        self.section = section
+
+
 class Interrupts:
     """Remembers a Ctrl-C (SIGINT, main thread only) even where the code it lands in swallows the
     ``KeyboardInterrupt`` (a controller run ends "interrupted" and returns), so the run stops at the
@@ -168,7 +177,7 @@ def run_bench(out_dir: str | Path, size: Size = FULL, progress: bool = False,
     started = time.perf_counter()
     flag = size.pick(" --smoke", " --quick", "")
     result: dict = {"command": "haptic-bus bench" + flag + (f" --soak {soak:.0e}" if soak else "")
-                    + "".join(f" --only {s}" for s in sections if set(sections) != set(SECTIONS)),
+                    + "".join(f" --only {s}" for s in runners if set(sections) != set(SECTIONS)),
                     "size": size.name, "quick": size is not FULL, "machine": machine(), "sections": {}}
     with Interrupts() as interrupts:
 
@@ -183,8 +192,11 @@ def run_bench(out_dir: str | Path, size: Size = FULL, progress: bool = False,
                     section = runner(size, tick)
                     section.setdefault("available", True)
                     interrupts.check()
-                except KeyboardInterrupt:  # Ctrl-C: what ran so far is still written
+                except KeyboardInterrupt as stop:  # Ctrl-C: what ran so far is still written
                     result["interrupted"] = name
+                    if isinstance(stop, SectionInterrupted):  # and what of this section finished
+                        result["sections"][name] = {**stop.section, "available": True,
+                                                    "section_seconds": time.perf_counter() - t0}
                     break
                 except Exception as exc:
                     section = {"available": False, "reason": f"{type(exc).__name__}: {exc}",

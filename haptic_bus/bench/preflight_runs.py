@@ -8,11 +8,15 @@ of its own, as a user types it (real time, the default scheduling, ``--no-plots`
 :data:`DURATION` s after pre-flight), and reads pre-flight's verdict from the run's ``run.json``:
 whether this machine held ``T`` (else the refusal, naming the period it held), the start
 lateness p99 of its 500 cycles, and the loop delay the gate judged the wall at.  The count is
-20 runs (full), 5 (``--quick``) and 1 (``--smoke``: the path runs).
+20 runs (full), 5 (``--quick``) and 1 (``--smoke``: the path runs).  A run that never reached
+pre-flight is one of the count too, with what ended it: its error (a drive error, a crash's last
+line on stderr), no exit within :data:`RUN_WAIT` s (killed), or a simulated drive that did not start.
+A Ctrl-C keeps the runs that finished as the section (:class:`~haptic_bus.bench.SectionInterrupted`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import statistics
 import subprocess
@@ -30,21 +34,54 @@ RUN_WAIT = 120.0  # s: one run's command, its imports and pre-flight included (3
 
 
 def one_run(bus: dict[str, Any]) -> dict[str, Any]:
-    """``haptic-bus run`` of :data:`PROFILE` against the drive on ``bus``: its exit status and pre-flight's figures."""
+    """``haptic-bus run`` of :data:`PROFILE` against the drive on ``bus``: its exit status (None: no exit
+    within :data:`RUN_WAIT` s, killed), what ended it, and pre-flight's figures (None where it never ran)."""
     from haptic_bus.bench.startup import haptic_bus_command
 
     with tempfile.TemporaryDirectory() as out:
         folder = Path(out) / "run"
-        done = subprocess.run([*haptic_bus_command(), "run", PROFILE, "--interface", bus["interface"], "--channel",
-                               bus["channel"], "--bus-option", f"port={bus['port']}", "--node-id", str(NODE_ID),
-                               "--duration", str(DURATION), "--no-plots", "-q", "--out", str(folder)],
-                              capture_output=True, text=True, timeout=RUN_WAIT, check=False)
-        document = json.loads((folder / "run.json").read_text()) if (folder / "run.json").exists() else {}
+        try:
+            done = subprocess.run([*haptic_bus_command(), "run", PROFILE, "--interface", bus["interface"], "--channel",
+                                   bus["channel"], "--bus-option", f"port={bus['port']}", "--node-id", str(NODE_ID),
+                                   "--duration", str(DURATION), "--no-plots", "-q", "--out", str(folder)],
+                                  capture_output=True, text=True, timeout=RUN_WAIT, check=False)
+            status: int | None = done.returncode
+            ending = (done.stderr.strip().splitlines() or [""])[-1]
+        except subprocess.TimeoutExpired:
+            status, ending = None, f"no exit within {RUN_WAIT:g} s: killed"
+        document = _document(folder / "run.json")
     preflight = document.get("preflight") or {}
-    return {"exit": done.returncode, "exit_reason": document.get("exit_reason"),
-            "error": document.get("error") or (done.stderr.strip().splitlines() or [""])[-1],
+    return {"exit": status, "exit_reason": document.get("exit_reason") or (None if status is not None else "timed out"),
+            "error": document.get("error") or ending,
             "held": bool(preflight.get("holdable")), "judged_delay": preflight.get("observed_delay"),
             "lateness_p99_s": (preflight.get("lateness") or {}).get("p99"), "reason": preflight.get("reason")}
+
+
+def _document(path: Path) -> dict[str, Any]:
+    """A run's ``run.json``; empty when there is none or it cannot be read (a run killed while writing it)."""
+    try:
+        document = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return document if isinstance(document, dict) else {}
+
+
+def fresh_run() -> dict[str, Any]:
+    """:func:`one_run` against a simulated drive of its own; a simulator that does not start is the run's outcome."""
+    from haptic_bus.bench.processes import canopen_simulator
+
+    with contextlib.ExitStack() as stack:
+        try:
+            bus, _ = stack.enter_context(canopen_simulator(PROFILE, (NODE_ID,)))
+        except RuntimeError as error:  # no heartbeat, or it exited: no run was started
+            return {"exit": None, "exit_reason": "no simulator", "error": f"the simulated drive did not start: {error}",
+                    "held": False, "judged_delay": None, "lateness_p99_s": None, "reason": None}
+        return one_run(bus)
+
+
+def reached(entry: dict[str, Any]) -> bool:
+    """Whether a run reached pre-flight's verdict (held ``T`` or refused it)."""
+    return entry.get("held", False) or entry.get("reason") is not None
 
 
 def within(entry: dict[str, Any]) -> bool:
@@ -55,20 +92,33 @@ def within(entry: dict[str, Any]) -> bool:
 
 def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 11; returns its section of ``bench.json``."""
-    from haptic_bus.bench.processes import canopen_simulator
-
     count = size.pick(1, 5, 20)
     runs: list[dict[str, Any]] = []
-    for k in range(count):
-        with canopen_simulator(PROFILE, (NODE_ID,)) as (bus, _):
-            runs.append(one_run(bus))
-        tick(f"pre-flight: run {k + 1} of {count}")
+    try:
+        for k in range(count):
+            runs.append(fresh_run())
+            tick(f"pre-flight: run {k + 1} of {count}")
+    except KeyboardInterrupt:  # Ctrl-C: the runs that finished are the section
+        if not runs:
+            raise
+        from haptic_bus.bench import SectionInterrupted
+
+        raise SectionInterrupted(section(runs, count)) from None
+    return section(runs, count)
+
+
+def section(runs: list[dict[str, Any]], planned: int) -> dict:
+    """Section 11 of ``bench.json`` for ``runs`` of the ``planned`` (fewer: interrupted by Ctrl-C)."""
     delays = [r["judged_delay"] for r in runs if r["held"] and r["judged_delay"] is not None]
+    count = len(runs)
+    done = (f"{count} run{'' if count == 1 else 's'}" if count == planned else
+            f"{count} of {planned} runs (interrupted: Ctrl-C)")
     return {
         "description": f"haptic-bus run {PROFILE} (real time, {DURATION:g} s after pre-flight) against a fresh "
-                       f"haptic-bus sim each time: {count} run{'' if count == 1 else 's'}, one after another",
-        "count": count, "runs": runs, "delay_target": DELAY_TARGET,
+                       f"haptic-bus sim each time: {done}, one after another",
+        "count": count, "planned": planned, "interrupted": count < planned, "runs": runs, "delay_target": DELAY_TARGET,
         "held": sum(r["held"] for r in runs), "within": sum(within(r) for r in runs),
+        "refused": sum(reached(r) and not r["held"] for r in runs), "not_reached": sum(not reached(r) for r in runs),
         "judged_delay": ({"median": statistics.median(delays), "min": min(delays), "max": max(delays)}
                          if delays else None),
     }

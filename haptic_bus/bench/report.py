@@ -248,14 +248,26 @@ def _soak(s: dict) -> list[str]:
 
 
 def _preflight(s: dict) -> list[str]:
-    rows = [[str(k + 1), str(r["exit"]), "held T" if r["held"] else "refused",
+    from haptic_bus.bench.preflight_runs import reached
+
+    def ending(r: dict) -> str:
+        if r["held"] and r["exit"] == 0:
+            return ""
+        if reached(r) and not r["held"]:
+            return r["reason"]
+        return r["error"] or r["exit_reason"] or ""
+
+    rows = [[str(k + 1), "-" if r["exit"] is None else str(r["exit"]),
+             "held T" if r["held"] else "refused" if reached(r) else "not reached",
              "-" if r["lateness_p99_s"] is None else _t(r["lateness_p99_s"]),
              "-" if r["judged_delay"] is None or not r["held"] else f"{r['judged_delay']:.3g}",
-             "" if r["held"] else (r["reason"] or r["error"] or "")] for k, r in enumerate(s["runs"])]
+             ending(r)] for k, r in enumerate(s["runs"])]
     return [s["description"] + ".", "", _table(["run", "exit", "pre-flight", "start lateness p99",
-                                                "loop delay judged (samples)", "refusal"], rows), "",
-            f"{s['held']} of {s['count']} passed pre-flight; {s['within']} of {s['count']} judged the wall at "
-            f"<= {s['delay_target']:g} samples and exited 0."]
+                                                "loop delay judged (samples)", "refusal, or what ended the run"],
+                                               rows), "",
+            f"{s['held']} of {s['count']} passed pre-flight, {s['refused']} refused, {s['not_reached']} never "
+            f"reached it; {s['within']} of {s['count']} judged the wall at <= {s['delay_target']:g} samples and "
+            "exited 0."]
 
 
 def _done_when(rows: list[dict], issue: int = 14) -> list[str]:
@@ -295,7 +307,9 @@ def markdown(result: dict) -> str:
            "Every timing is the median of at least 5 repeats in this run, with min-max in brackets; ratios compare "
            "figures measured side by side (pairwise where marked)."]
     if "interrupted" in result:
-        out += ["", f"**Interrupted (Ctrl-C) in section {result['interrupted']}: only the sections before it ran.**"]
+        name = result["interrupted"]
+        kept = ", and what of it finished" if name in result["sections"] else ""
+        out += ["", f"**Interrupted (Ctrl-C) in section {name}: only the sections before it ran{kept}.**"]
     sections = result["sections"]
     if result.get("done_when"):
         out += ["", "## Issue 14: Done when", "", *_done_when(result["done_when"])]

@@ -238,7 +238,11 @@ def _preflight_rows(sections: dict) -> list[dict]:
     if s is None:
         return [_row(3, f"{what} <= 1.5 samples and exit 0", "-", "all", None)]
     delays = s["judged_delay"]
-    note = "" if delays is None else (f"judged at {delays['median']:.3g} samples (median; "
-                                      f"{delays['min']:.3g}-{delays['max']:.3g}); {s['held']} held T")
+    outcomes = f"{s['held']} held T, {s['refused']} refused, {s['not_reached']} never reached pre-flight"
+    note = outcomes if delays is None else (f"judged at {delays['median']:.3g} samples (median; "
+                                            f"{delays['min']:.3g}-{delays['max']:.3g}); {outcomes}")
+    planned = s.get("planned", s["count"])
+    if s.get("interrupted"):
+        note = f"interrupted (Ctrl-C) after {s['count']} of {planned} runs; {note}"
     return [_row(3, f"{what} <= {s['delay_target']:g} samples and exit 0", f"{s['within']} of {s['count']}",
-                 f"{s['count']} of {s['count']}", s["within"] == s["count"], note=note)]
+                 f"{planned} of {planned}", None if s.get("interrupted") else s["within"] == s["count"], note=note)]
