@@ -15,7 +15,12 @@ import pytest
 from haptic_bus.bench import preflight_runs, processes, run_bench
 from haptic_bus.bench.size import QUICK, SMOKE
 
-NO_DRIVE = {"interface": "udp_multicast", "channel": "239.74.170.21", "port": 49821}  # nothing answers here
+
+@pytest.fixture
+def no_drive(multicast: tuple[str, int]) -> dict:
+    """A udp_multicast bus of this test's own where nothing answers."""
+    group, port = multicast
+    return {"interface": "udp_multicast", "channel": group, "port": port}
 
 
 def test_a_simulator_that_does_not_start_is_a_run_that_never_reached_preflight(tmp_path: Path,
@@ -37,16 +42,16 @@ def test_a_simulator_that_does_not_start_is_a_run_that_never_reached_preflight(t
     assert row["note"] == "0 held T, 0 refused, 1 never reached pre-flight"
 
 
-def test_a_run_that_ends_before_preflight_names_its_error() -> None:
-    entry = preflight_runs.one_run(NO_DRIVE)
+def test_a_run_that_ends_before_preflight_names_its_error(no_drive: dict) -> None:
+    entry = preflight_runs.one_run(no_drive)
     assert entry["exit"] == 1 and entry["exit_reason"] == "drive error"
     assert not preflight_runs.reached(entry) and entry["lateness_p99_s"] is None
     assert entry["error"].startswith("CANopen node 5: no boot-up after NMT reset communication")
 
 
-def test_a_run_that_does_not_exit_in_time_is_killed_and_said(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_run_that_does_not_exit_in_time_is_killed_and_said(no_drive: dict, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(preflight_runs, "RUN_WAIT", 0.5)  # s: the command line's imports alone take longer
-    entry = preflight_runs.one_run(NO_DRIVE)
+    entry = preflight_runs.one_run(no_drive)
     assert (entry["exit"], entry["exit_reason"]) == (None, "timed out")
     assert entry["error"] == "no exit within 0.5 s: killed"
     assert not preflight_runs.reached(entry)
