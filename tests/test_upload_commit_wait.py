@@ -16,9 +16,11 @@ from contextlib import contextmanager
 from typing import Any
 
 import canopen
+import pytest
 
 from drives.bus_config import open_bus
-from haptic_bus.node.controller_node import COMMIT, LAST_RESULT, OBJECT_COUNT, controller_dictionary
+from haptic_bus.errors import DriveTimeout
+from haptic_bus.node.controller_node import COMMIT, LAST_RESULT, OBJECT_COUNT, WALL_BASE, controller_dictionary
 from haptic_bus.node.upload import upload_walls
 
 NODE = 42
@@ -77,3 +79,16 @@ def test_a_commit_answered_is_accepted_when_the_verdict_cannot_be_read_any_more(
         node.add_read_callback(on_read)
         verdict = upload_walls(bus, NODE, {0: (1200.0, 9.0)}, timeout=1.0)
     assert committed and verdict == "accepted (the run ended before its margin could be read)"
+
+
+def test_a_wall_write_left_unanswered_names_the_object() -> None:
+    # the SDO client knew no object past the controller's count: "0x2100:01 (unknown object)"
+    with controller_dictionary_served("upload-silent") as (bus, node):
+
+        def on_write(index: int, subindex: int, od: object, data: bytes) -> None:
+            if index == WALL_BASE:
+                time.sleep(1.0)  # longer than the client's 0.2 s and its one retry: the write goes unanswered
+
+        node.add_write_callback(on_write)
+        with pytest.raises(DriveTimeout, match=r"writing 0x2100:01 \(Scene object 0\.Stiffness K \(N/m\)\)"):
+            upload_walls(bus, NODE, {0: (1200.0, 9.0)}, timeout=0.2)

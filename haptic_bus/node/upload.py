@@ -37,6 +37,7 @@ from haptic_bus.node.controller_node import (
     SUB_NAME,
     SUB_STIFFNESS,
     WALL_BASE,
+    controller_dictionary,
 )
 
 _REAL64 = struct.Struct("<d")
@@ -108,10 +109,14 @@ def upload_walls(
     network.listeners.append(ReceiveErrors("upload"))  # type: ignore[arg-type]  # a can.Listener, as python-can wants
     network.connect()
     try:
-        node = network.add_node(canopen.RemoteNode(node_id, canopen.ObjectDictionary()))
+        dictionary = canopen.ObjectDictionary()
+        node = network.add_node(canopen.RemoteNode(node_id, dictionary))
         sdo = SdoAccess(f"controller node {node_id}", node, timeout, lambda: None)
         count = check_controller(sdo, node_id, timeout)
         _refuse_unknown_objects(sdo, node_id, count, sorted(changes))
+        walls = controller_dictionary([""] * count)  # the objects written: an SDO error names "Scene object i.Stiffness K (N/m)"
+        for i in changes:
+            dictionary.add_object(walls[WALL_BASE + i])
         try:
             for i, (K, B) in changes.items():
                 sdo.download(WALL_BASE + i, SUB_STIFFNESS, _REAL64.pack(K))
