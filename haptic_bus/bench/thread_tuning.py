@@ -32,12 +32,13 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import select
 import subprocess
 import sys
 import tempfile
 import threading
-from collections.abc import Callable
-from contextlib import nullcontext
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -59,6 +60,7 @@ AXES_PROFILE = "gantry-3d"  # three axes on one SYNC, at the profile's own T (2 
 AXES_NODE_IDS = (5, 6, 7)
 SEGMENTS = 5
 FIRST_CYCLES = 50
+FLOOR_START_WAIT = 60.0  # s: the floor process imports numpy and python-can before it says it is ready
 FLOOR_TPDOS = 2  # TPDO1 (0x6041 + 0x606C) and TPDO2 (0x6064): the run maps the position for its port observer
 CORE_RATIO_TARGET = 1.5  # issue 26: the control process's CPU within 1.5 x python-can's floor for the same cycle
 LATENESS_RATIO_TARGET = 2.0  # issue 26: start lateness p99 and p99.9 within 2 x the bare clock's
@@ -191,18 +193,34 @@ class ThreadCpu:
         return {k: round(v, 3) for k, v in sorted(out.items(), key=lambda kv: -kv[1])}
 
 
-def can_floor(bus: dict, node_ids: tuple[int, ...], tpdos: int, period: float, duration: float) -> dict:
-    """python-can's floor for the same cycle (:mod:`~haptic_bus.bench.can_floor`) in a process of its own."""
-    from haptic_bus.bench.can_floor import FloorConfig
+@contextmanager
+def can_floor(bus: dict, node_ids: tuple[int, ...], tpdos: int, period: float, duration: float) -> Iterator[Callable[[], dict]]:
+    """python-can's floor for the same cycle (:mod:`~haptic_bus.bench.can_floor`) in a process of its own,
+    started now and waited for until it has imported (a second of a core, which beside the hogged run
+    kept the hog spinning as long); the block's function measures it, once, and gives its figures."""
+    from haptic_bus.bench.can_floor import READY, FloorConfig
 
     config = {"bus": bus, "node_ids": list(node_ids), "tpdos": tpdos, "period": period, "duration": duration}
     FloorConfig.from_json(json.dumps(config))  # a configuration the child reads, checked here
-    done = subprocess.run([sys.executable, "-m", "haptic_bus.bench.can_floor", json.dumps(config)], capture_output=True,
-                          text=True, timeout=60 + 4 * duration, check=False)
-    if done.returncode != 0:
-        return {"available": False, "reason": done.stderr.strip().splitlines()[-1] if done.stderr.strip() else
-                f"exit {done.returncode}"}
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    process = subprocess.Popen([sys.executable, "-m", "haptic_bus.bench.can_floor", json.dumps(config)],
+                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert process.stdout is not None
+
+    def measure() -> dict:
+        out, err = process.communicate("go\n", timeout=60 + 4 * duration)
+        if process.returncode != 0:
+            return {"available": False, "reason": err.strip().splitlines()[-1] if err.strip() else f"exit {process.returncode}"}
+        return json.loads(out.strip().splitlines()[-1])
+
+    try:
+        if select.select([process.stdout], [], [], FLOOR_START_WAIT)[0] and process.stdout.readline().strip() == READY:
+            yield measure
+        else:
+            yield lambda: {"available": False, "reason": f"the floor process did not start within {FLOOR_START_WAIT:g} s"}
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.communicate()
 
 
 def observed_delay(controller: WallController) -> float | None:
@@ -255,12 +273,14 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
             for name in names:
                 entry: dict = {}
                 try:
-                    with cpu_hogs(hogs) if label == "CPU hog" else nullcontext():
+                    # the default set-up beside python-can alone, the same frames, the same conditions
+                    with (can_floor(bus, (NODE_ID,), FLOOR_TPDOS, period, duration) if name == "default" else
+                          nullcontext()) as floor, cpu_hogs(hogs) if label == "CPU hog" else nullcontext():
                         entry["controller"] = controller_run(SETUPS[name], duration, bus, process, profile,
                                                              preflight_cycles=preflight_cycles(size))
                         entry["bare_clock"] = bare_clock(SETUPS[name], period, round(duration / 2 / period))
-                        if name == "default":  # python-can alone, the same frames, the same conditions
-                            entry["floor"] = can_floor(bus, (NODE_ID,), FLOOR_TPDOS, period, duration)
+                        if floor is not None:
+                            entry["floor"] = floor()
                 except Exception as exc:
                     entry = {"available": False, "reason": f"{type(exc).__name__}: {exc}"}
                 runs[label][name] = entry
@@ -309,12 +329,13 @@ def axes_runs(size: Size, duration: float) -> dict:
     try:
         with canopen_simulator(AXES_PROFILE, AXES_NODE_IDS, "--operator", "none") as (bus, process):
             for label in loads:
-                with cpu_hogs(os.cpu_count() or 1) if label == "CPU hog" else nullcontext():
+                with (can_floor(bus, AXES_NODE_IDS, FLOOR_TPDOS, period, duration) as floor,
+                      cpu_hogs(os.cpu_count() or 1) if label == "CPU hog" else nullcontext()):
                     out[label] = {
                         "controller": controller_run(SETUPS["default"], duration, bus, process, axes, None,
                                                      preflight_cycles(size)),
                         "bare_clock": bare_clock(SETUPS["default"], period, round(duration / 2 / period)),
-                        "floor": can_floor(bus, AXES_NODE_IDS, FLOOR_TPDOS, period, duration),
+                        "floor": floor(),
                     }
     except Exception as exc:
         out.update(available=False, reason=f"{type(exc).__name__}: {exc}")
