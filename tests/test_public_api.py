@@ -118,7 +118,9 @@ def test_pacing_is_wall_or_virtual():
                                                 ({"duration": "1"}, "duration = '1'"),
                                                 ({"duration": 1.0, "start_in_contact": "bogus"}, "start_in_contact = 'bogus'"),
                                                 ({"duration": 1.0, "scheduling": "bogus"}, "scheduling = 'bogus'"),
-                                                ({"duration": 1.0, "pacing": "fast"}, "pacing = 'fast'")])
+                                                ({"duration": 1.0, "pacing": "fast"}, "pacing = 'fast'"),
+                                                ({"duration": 1.0, "preflight_cycles": 1}, "preflight_cycles = 1"),
+                                                ({"duration": 1.0, "preflight_cycles": 2.5}, "preflight_cycles = 2.5")])
 def test_run_options_refuse_what_a_run_cannot_use_before_anything_starts(options: dict, named: str) -> None:
     with pytest.raises(hb.ParameterError, match=f"run options: {re.escape(named)} is invalid; allowed: "):
         hb.RunOptions(**options)

@@ -44,9 +44,11 @@ class RunOptions:
     (None: the profile's), the live view, the stop request, what a wall-paced run asks of the OS
     for its control thread (``scheduling``, :mod:`~haptic_bus.app.realtime`: ``--realtime``),
     whether a drive found in FAULT is reset before commissioning, whether a CANopen run logs
-    every frame (``bus.asc``, :mod:`~haptic_bus.app.bus_log`), and whether the pictures are drawn
+    every frame (``bus.asc``, :mod:`~haptic_bus.app.bus_log`), whether the pictures are drawn
     (seconds of matplotlib and of the region's boundary: ``--no-plots``, the benchmark, which runs
-    the session many times, and the pytest plugin's runs leave them out)."""
+    the session many times, and the pytest plugin's runs leave them out), and how many cycles a
+    wall-paced run's pre-flight measures (None: :data:`haptic_bus.app.preflight.PREFLIGHT_CYCLES`;
+    the benchmark's smoke size asks fewer)."""
 
     duration: float
     pacing: str = WALL
@@ -58,9 +60,12 @@ class RunOptions:
     reset_fault: bool = False
     bus_log: bool = True
     plots: bool = True
+    preflight_cycles: int | None = None
 
     def __post_init__(self) -> None:
         real_in_range("duration", self.duration, 0.0, 1e9, low_inclusive=False, unit="s", context="run options")
+        if self.preflight_cycles is not None and not (isinstance(self.preflight_cycles, int) and self.preflight_cycles >= 2):
+            raise ParameterError("preflight_cycles", self.preflight_cycles, "None or a whole number >= 2", "run options")
         check_pacing(self.pacing)
         if self.start_in_contact not in (None, *START_POLICIES):
             raise ParameterError("start_in_contact", self.start_in_contact,

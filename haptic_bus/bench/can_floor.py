@@ -8,10 +8,11 @@ drive's TPDOs of the cycle in, one RPDO per drive out (zero torque, controlword 
 not enabled stays so), and the controller node's heartbeat every heartbeat period.  No decoding
 beyond the COB-ID, no controller, no record.
 
-It runs as ``python -m haptic_bus.bench.can_floor CONFIG_JSON`` so that its CPU time is its own,
-against drives some other program has commissioned (the benchmark runs it right after a
-controller run against the same simulated drives: their PDO mapping and heartbeat consumer are
-set, and this floor keeps feeding both), and prints one JSON object: the share of a core the
+It runs as ``python -m haptic_bus.bench.can_floor CONFIG_JSON`` so that its CPU time is its own, against
+drives some other program has commissioned (the benchmark starts it before a controller run against the
+same simulated drives, its imports done before any CPU hog starts, and tells it ``go`` on stdin right
+after that run: their PDO mapping and heartbeat consumer are set, and this floor keeps feeding both),
+and prints one JSON object: the share of a core the
 process used over the loop, the start lateness percentiles (s), the overruns, and the cycles whose
 TPDOs did not all arrive within the period.
 """
@@ -37,6 +38,7 @@ from haptic_bus.control.clock import RealClock
 TPDO_BASES = (0x180, 0x280, 0x380, 0x480)  # CiA 301 default COB-IDs of TPDO1..4, plus the node id
 RPDO1_BASE = 0x200
 NMT_START = 0x01
+READY = "ready"  # the line this process prints once imported (the benchmark starts it early: module docstring)
 
 
 @dataclass(frozen=True)
@@ -114,8 +116,13 @@ def floor_run(config: FloorConfig) -> dict[str, Any]:
 
 
 def main(argv: list[str]) -> int:
-    """``python -m haptic_bus.bench.can_floor CONFIG_JSON``: the figures as one JSON line."""
-    print(json.dumps(floor_run(FloorConfig.from_json(argv[0]))), flush=True)
+    """``python -m haptic_bus.bench.can_floor CONFIG_JSON``: :data:`READY` on a line once imported, then, on a
+    line ``go`` on stdin, the figures as one JSON line (exit 1 without it: the benchmark ended first)."""
+    config = FloorConfig.from_json(argv[0])
+    print(READY, flush=True)
+    if sys.stdin.readline().strip() != "go":
+        return 1
+    print(json.dumps(floor_run(config)), flush=True)
     return 0
 
 

@@ -1,6 +1,7 @@
 """Benchmark 9: a scene in space against the number of objects, beside the 1-D scene (issue 22).
 
-Per call of ``force(x, v)`` (the per-cycle work of a scene), seconds, for 1..10 000 objects:
+Per call of ``force(x, v)`` (the per-cycle work of a scene), seconds, for 1..10 000 objects (the smoke
+run: benchmark 3's 1, 100 and 1 000):
 
 * **1-D**: :class:`haptic_bus.control.scene.CompiledScene` of benchmark 3's scenes (one wall
   ahead plus ``N - 1`` detents over 20 mm), the handle swept over them;
@@ -26,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from haptic_bus.bench.scene_cost import SIZES, scene_objects
+from haptic_bus.bench.scene_cost import SIZES, SMOKE_SIZES, scene_objects
 from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import time_per_call
 from haptic_bus.control.scene import compile_scene
@@ -89,7 +90,9 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     velocity = np.array([0.01, -0.02, -0.01])
     xs = [float(x) for x in np.linspace(-0.021, 0.003, SWEEP)]
     rows: list[dict[str, Any]] = []
-    for n in SIZES:
+    sizes = size.pick(SMOKE_SIZES, SIZES, SIZES)  # smoke: benchmark 3's sizes; compiling 10 000 objects and
+    # sweeping them is 1 s of the smoke's CPU, and 1 000 objects already build the grid and cull by it
+    for n in sizes:
         started = time.perf_counter()
         space = compile_space_scene(space_objects(n))
         compile_s = time.perf_counter() - started
@@ -119,5 +122,5 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
         "rows": rows,
         "note": "one call = one cycle's scene evaluation; the 1-D figures are force() alone, not benchmark 3's whole cycle",
         "size": size.name,
-        "sizes": list(SIZES),
+        "sizes": list(sizes),
     }
