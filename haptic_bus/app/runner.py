@@ -47,7 +47,8 @@ one Modbus drive or several polled in one cycle -- ``haptic-bus sim --modbus tcp
    process (:mod:`~haptic_bus.app.run_recorder`), so a killed run keeps its cycles; whatever else
    ends it (the time, SIGTERM, Ctrl-C, a drive error -- any axis' fault zeroes every axis' torque
    in the same cycle -- an assumption broken), the drives are left disabled, ``run.json``
-   completed and the pictures drawn.  A folder the writer can no longer write (a full disk, the
+   completed and the pictures drawn (none for a run Ctrl-C or SIGTERM stopped before its first
+   cycle: it ends at once, ``haptic-bus plot`` draws them).  A folder the writer can no longer write (a full disk, the
    folder deleted) stops the run at the next cycle boundary: the drives disabled, "write error"
    (exit 1), what was written before kept, nothing more attempted.
    An exception none of these is (a bug, a judge worker that could not start) is raised, ``run.json``
@@ -260,7 +261,10 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     finally:
         reason, error = _write_failure(reason, error, recorder, summary, period)
         extra["exit_reason"], extra["error"] = reason, error
-        files = recorder.finish(summary, pictures=options.plots)
+        # a run asked to stop (Ctrl-C, SIGTERM) before its first cycle ends now: no pictures of a run that
+        # never moved (region.png alone took 3-8 s on a loaded machine); haptic-bus plot draws them later
+        asked_to_stop = summary is None and reason in ("interrupted", "stopped")
+        files = recorder.finish(summary, pictures=options.plots and not asked_to_stop)
         lock.release()
     reason, error = _write_failure(reason, error, recorder, summary, period)  # run.json itself, at the end
     return RunResult(reason, error, summary, controller, folder, files)
