@@ -50,15 +50,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import signal
 import sys
-import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
 
+from haptic_bus.bench.interrupts import Interrupts, SectionInterrupted
 from haptic_bus.bench.size import FULL, QUICK, SMOKE, Size
 from haptic_bus.bench.timing import machine
 
@@ -95,43 +93,6 @@ class Progress:
         if self.enabled:
             sys.stderr.write(f"\r{' ' * (self.width + 70)}\r" if erase else "\n")
             sys.stderr.flush()
-
-
-class SectionInterrupted(KeyboardInterrupt):
-    """Ctrl-C in a section that keeps what it finished (``haptic-bus run`` after ``haptic-bus run``):
-    ``section`` is its part of ``bench.json`` so far, written as the others are."""
-
-    def __init__(self, section: dict) -> None:
-        super().__init__()
-        self.section = section
-
-
-class Interrupts:
-    """Remembers a Ctrl-C (SIGINT, main thread only) even where the code it lands in swallows the
-    ``KeyboardInterrupt`` (a controller run ends "interrupted" and returns), so the run stops at the
-    section's next progress step."""
-
-    def __init__(self) -> None:
-        self.seen = False
-        self._previous: Any = None
-
-    def __enter__(self) -> Interrupts:
-        if threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGINT, self._on_sigint)
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
-
-    def _on_sigint(self, signum: int, frame: object) -> None:
-        self.seen = True
-        raise KeyboardInterrupt
-
-    def check(self) -> None:
-        """Raise ``KeyboardInterrupt`` if a Ctrl-C came."""
-        if self.seen:
-            raise KeyboardInterrupt
 
 
 def _runner(name: str) -> Callable[..., dict]:

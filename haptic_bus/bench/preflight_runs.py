@@ -11,7 +11,7 @@ lateness p99 of its 500 cycles, and the loop delay the gate judged the wall at. 
 20 runs (full), 5 (``--quick``) and 1 (``--smoke``: the path runs).  A run that never reached
 pre-flight is one of the count too, with what ended it: its error (a drive error, a crash's last
 line on stderr), no exit within :data:`RUN_WAIT` s (killed), or a simulated drive that did not start.
-A Ctrl-C keeps the runs that finished as the section (:class:`~haptic_bus.bench.SectionInterrupted`).
+A Ctrl-C keeps the runs that finished as the section (:class:`~haptic_bus.bench.interrupts.SectionInterrupted`).
 """
 
 from __future__ import annotations
@@ -101,7 +101,7 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     except KeyboardInterrupt:  # Ctrl-C: the runs that finished are the section
         if not runs:
             raise
-        from haptic_bus.bench import SectionInterrupted
+        from haptic_bus.bench.interrupts import SectionInterrupted
 
         raise SectionInterrupted(section(runs, count)) from None
     return section(runs, count)
