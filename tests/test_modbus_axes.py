@@ -95,11 +95,12 @@ def test_three_units_rest_on_the_slope_the_same_on_one_server_or_three(
         sim = modbus_gantry(path, servers)
         bus = sim.urls[0] if servers == 1 else list(sim.urls)
         folder = tmp_path / f"servers-{servers}"
-        # 2 s: in virtual time the handle is at rest on the slope (every torque and 0x606C sample final)
-        # from 1.56 s on, the same in every run (each cycle advances the plants exactly T): 220 cycles at rest
-        result = hb.run(profile, bus, options(folder, 2.0), unit_ids=list(UNITS))
+        # 1.7 s: in virtual time the handle is at rest on the slope (every torque and 0x606C sample final)
+        # from 1.56 s on, the same in every run (each cycle advances the plants exactly T): 70 cycles at rest (2 s,
+        # 220 cycles at rest, passed the same asserts; what is asserted at rest is the last cycle)
+        result = hb.run(profile, bus, options(folder, 1.7), unit_ids=list(UNITS))
         assert result.exit_reason == "completed", result.error
-        assert result.summary is not None and result.summary.cycles == 1000 and result.summary.least_energy >= 0.0
+        assert result.summary is not None and result.summary.cycles == 850 and result.summary.least_energy >= 0.0
         assert [drive.state for drive in sim.drives] == [State.SWITCH_ON_DISABLED] * 3  # left disabled
         document = json.loads((folder / "run.json").read_text())
         link = document["link"]
