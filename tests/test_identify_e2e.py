@@ -43,7 +43,7 @@ RUN_WAIT = 120.0  # s: the longest an interrupted identify process is waited for
 HIDDEN = dict(mass=0.37, friction=2.9, coulomb_friction=0.2, velocity_noise=1000.0, noise_seed=21)
 EXCITATION = 2.0  # s over the bus (was 10 s, then 5 s): measured (seed 21) at 5, 2 and 1 s: m within +0.03 %, -0.04 %
 # and -0.004 %, b within -0.22 %, -0.17 % and +0.30 % (the 3 % and 5 % asserted are 66 and 13 standard errors at 1 s),
-# m, b and Fc each within 1.42, 0.95 and 0.81 standard errors (4 asserted), D = 1 and "average" found at each; 2 s keeps
+# m, b and Fc all within 1.42, 0.95 and 0.81 standard errors at 5, 2, 1 s (4 asserted), D = 1 and "average" found; 2 s keeps
 # twice the samples of the least the command accepts (1 s) for a loaded machine's stale cycles, which the fit leaves
 # out: 1.6 s of CPU where 5 s took 2.0 s; the fit's statistics at the command's default 20 s are
 # tests/test_identify_fit.py's
