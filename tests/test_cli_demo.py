@@ -38,14 +38,6 @@ def test_demo_with_no_plots_writes_the_record_and_run_json_alone(tmp_path: Path,
     assert len((tmp_path / "record.csv").read_text().splitlines()) == 1 + 100  # the header, 0.1 s at T = 1 ms
 
 
-def test_report_writes_the_seed_figures(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["report", "seed-ideal", "--out", str(tmp_path)]) == 0
-    for name in ("fig4_region.png", "fig5_nyquist.png", "fig6_step.png"):
-        assert _is_real_png(tmp_path / name), name
-    summary = (tmp_path / "report.md").read_text()
-    assert "verdict: passive" in summary and "margin +0.0998139 N s/m" in summary
-
-
 def test_profiles_check_matches_check(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["profiles", "check", "seed-ideal"]) == 0
     assert "margin +0.0998139 N s/m" in capsys.readouterr().out

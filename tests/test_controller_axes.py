@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import pathlib
 from concurrent.futures.process import BrokenProcessPool
 
 import numpy as np
@@ -40,8 +39,10 @@ def slab(profile: AxesProfile) -> AxesProfile:
     return dataclasses.replace(profile, space=(plane,), operator_model={"model": "none"})
 
 
-@pytest.fixture
-def gantry(tmp_path: pathlib.Path) -> AxesProfile:
+@pytest.fixture(scope="module")
+def gantry() -> AxesProfile:
+    """gantry-3d, loaded (its scene judged by the coupled gate, about 0.5 s) once for the module: a frozen
+    profile the tests only read or copy with ``dataclasses.replace``."""
     return load_profile("gantry-3d")
 
 

@@ -360,7 +360,11 @@ def _plausible_plant(mass: float, time_constant: float, coulomb_share: float, de
     assert abs(fit.delay.value - truth_delay) <= SIGMAS * fit.delay.stderr + slack
 
 
-@settings(max_examples=6, deadline=None, derandomize=True, database=None, suppress_health_check=[HealthCheck.too_slow],
+# 4 generated examples (0.65 s of CPU each): derandomized, they are a fixed prefix of the former 6, and
+# with the 3 explicit corners they hold every timing of the range (ideal, cia402, reception 0.15 and
+# 0.7), every encoder (10 nm, 0.1 um, 0.5 um) and a profile mass both below and above the truth; the
+# 2 dropped repeated a timing and an encoder already there (the 260 fits of the docstring span the rest)
+@settings(max_examples=4, deadline=None, derandomize=True, database=None, suppress_health_check=[HealthCheck.too_slow],
           phases=[Phase.explicit, Phase.generate])  # a shrink would rerun the whole identification hundreds of times
 @given(mass=st.floats(0.03, 3.0), time_constant=st.floats(0.02, 2.0), coulomb_share=st.floats(0.0, 0.3),
        delay=st.sampled_from([("ideal", 0.0), ("cia402", 1.0), ("reception", 0.15), ("reception", 0.7)]),

@@ -16,6 +16,8 @@ response, ``h_r``, ``h_n`` the impulse responses from those inputs to ``u``, com
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.signal import lfilter
@@ -26,11 +28,12 @@ from drives.modbus.timing import SAFETY_FACTOR, loop_delay, measure_poll
 from drives.safety import SafetySettings
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.control.controller import WallController
+from haptic_bus.control.cycle_loop import RunSummary
 from haptic_bus.control.gate import PassivityGate
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.scene import Wall, compile_scene
 from sim_drive.modbus import ModbusSimServer
-from sim_drive.operator import ConstantPush, StepPush
+from sim_drive.operator import ConstantPush
 from sim_drive.parameters import DeviceParameters
 
 M, B_FRICTION, T = 0.5, 0.1, 1e-3
@@ -55,18 +58,35 @@ def quantisation_bound(newton_per_permille: float, velocity_per_count: float) ->
     return l1(NUM_W) * newton_per_permille / 2 + l1(NUM_N) * velocity_per_count / 2
 
 
-@pytest.fixture(params=["split", "fc23"])
-def seed_rig(request):
-    """(server, drive, controller) for the seed's device in ideal timing, wall surface at x = 0."""
-    rigs = []
+PUSH, CYCLES = 2.0, 4000  # N from t = 0 (a step at cycle 0), cycles: the settling bound below needs 4000
 
-    def make(operator, timing="ideal"):
-        server = ModbusSimServer(timing=timing, operator=operator,
-                                 parameters=DeviceParameters(mass=M, friction=B_FRICTION, period=T))
-        server.start()
-        drive = ModbusDrive("127.0.0.1", server.port, cycle=request.param, timeout=2.0, with_position=True,
-                            safety=VIRTUAL_TIME_SAFETY)
-        rigs.append((server, drive))
+
+@dataclasses.dataclass(frozen=True)
+class PushedRun:
+    """What one run of the seed's loop under the push left: the controller's and the drive's view."""
+
+    cycle: str  # the Modbus cycle: "split" or "fc23"
+    delay: float  # samples, as the drive announced it before enabling
+    timing: str  # the simulated drive's timing, as it announced it
+    summary: RunSummary
+    force: np.ndarray  # N, the controller's force of every cycle
+    position: float  # m, the controller's last position
+    plant_time: float  # s, the simulated drive's clock at the end
+    plant_position: float  # m, the simulated handle's at the end
+    newton_per_permille: float
+    velocity_per_count: float  # m/s
+    requests_per_cycle: float
+
+
+@pytest.fixture(scope="module", params=["split", "fc23"])
+def pushed(request: pytest.FixtureRequest) -> PushedRun:
+    """The seed's device in ideal timing, wall surface at x = 0, pushed by PUSH N from rest for CYCLES
+    cycles: one run per Modbus cycle, read by the step-response and the settling tests (the step is
+    the run's first cycles, the settled wall its last)."""
+    parameters = DeviceParameters(mass=M, friction=B_FRICTION, period=T)
+    with ModbusSimServer(timing="ideal", operator=ConstantPush(PUSH), parameters=parameters) as server, \
+            ModbusDrive("127.0.0.1", server.port, cycle=request.param, timeout=2.0, with_position=True,
+                        safety=VIRTUAL_TIME_SAFETY) as drive:
         drive.connect()
         delay = loop_delay(drive, T)
         gate = PassivityGate(DeviceLoop(M, B_FRICTION, T, delay))
@@ -76,12 +96,11 @@ def seed_rig(request):
         # the seed's b = 0.1 N s/m leaves the passivity layer's budget almost nothing: off, so that
         # the loop is the linear one the analysis describes (the layer: test_passivity_timing.py)
         controller = WallController(drive, gate, scene, force_limit=30.0, origin=origin, passivity=LayerPolicy("off"))
-        return server, drive, controller
-
-    yield make
-    for server, drive in rigs:
-        drive.close()
-        server.stop()
+        summary = controller.run(CYCLES)
+        return PushedRun(request.param, delay, drive.connected().simulated_timing, summary,
+                         controller.record.column("force_n"), float(controller.record.column("position_m")[-1]),
+                         server.drive.time, server.drive.position, drive.scaling.newton_per_permille,
+                         drive.scaling.velocity_per_count, drive.stats.cyclic_requests / drive.stats.cycles)
 
 
 def test_the_analytic_loop_has_the_seed_poles() -> None:
@@ -89,42 +108,36 @@ def test_the_analytic_loop_has_the_seed_poles() -> None:
     assert np.all(np.abs(np.roots(DEN).imag) == 0)
 
 
-def test_constant_push_settles_at_f_over_k(seed_rig) -> None:
-    push, cycles = 2.0, 4000
-    server, drive, controller = seed_rig(ConstantPush(push))
-    assert loop_delay(drive, T) == 0 and drive.connected().simulated_timing == "ideal"
-    summary = controller.run(cycles)
-    assert summary.error is None and summary.cycles == cycles
-    assert server.drive.time == pytest.approx(cycles * T)  # one plant period per Modbus cycle
-    x = controller.record.column("position_m")[-1]
+def test_constant_push_settles_at_f_over_k(pushed: PushedRun) -> None:
+    assert pushed.delay == 0 and pushed.timing == "ideal"
+    summary = pushed.summary
+    assert summary.error is None and summary.cycles == CYCLES
+    assert pushed.plant_time == pytest.approx(CYCLES * T)  # one plant period per Modbus cycle
     # steady state: the wall force is the push up to half a torque count plus the velocity
     # rounding's share (the quantisation bound), and the slow pole 0.998 has decayed to
     # 0.998**4000 = 3e-4 of F/K
-    tolerance = (quantisation_bound(drive.scaling.newton_per_permille, drive.scaling.velocity_per_count)
-                 + 0.998**cycles * push) / K_WALL
+    tolerance = (quantisation_bound(pushed.newton_per_permille, pushed.velocity_per_count)
+                 + 0.998**CYCLES * PUSH) / K_WALL
     assert tolerance < 5e-5
-    assert x == pytest.approx(push / K_WALL, abs=tolerance)
-    assert server.drive.position == pytest.approx(push / K_WALL, abs=tolerance + T * 1e-3)
+    assert pushed.position == pytest.approx(PUSH / K_WALL, abs=tolerance)
+    assert pushed.plant_position == pytest.approx(PUSH / K_WALL, abs=tolerance + T * 1e-3)
     assert not summary.observer_flagged
 
 
-def test_force_step_response_is_the_analytic_discrete_loop(seed_rig) -> None:
-    level, cycles = 2.0, 1500
-    _server, drive, controller = seed_rig(StepPush(level, 0.0))
-    controller.run(cycles)
-    force = controller.record.column("force_n")
+def test_force_step_response_is_the_analytic_discrete_loop(pushed: PushedRun) -> None:
+    # the push from rest is a step of PUSH N at cycle 0: the force is the step response, over all CYCLES
+    force = pushed.force
     # cycle k of the controller reads the sample taken at t = kT (no time passes while enabling)
-    analytic = lfilter(NUM_W, DEN, np.full(cycles, level))
-    bound = quantisation_bound(drive.scaling.newton_per_permille, drive.scaling.velocity_per_count)
+    analytic = lfilter(NUM_W, DEN, np.full(CYCLES, PUSH))
+    bound = quantisation_bound(pushed.newton_per_permille, pushed.velocity_per_count)
     assert bound < 0.006
     assert force[0] == 0.0 and analytic[0] == 0.0
     assert np.max(np.abs(force - analytic)) <= bound
     # real poles, no oscillation; the zero at B/(KT + B) = 0.998004, just above the slow pole,
     # gives the exact loop a 0.84 % peak at k = 43 (haptic_bus.analysis.design.force_step_response agrees)
-    assert int(np.argmax(analytic)) == 43 and analytic.max() == pytest.approx(level * 1.0083897, rel=1e-6)
+    assert int(np.argmax(analytic)) == 43 and analytic.max() == pytest.approx(PUSH * 1.0083897, rel=1e-6)
     assert force.max() == pytest.approx(analytic.max(), abs=bound)
-    requests = drive.stats.cyclic_requests / drive.stats.cycles
-    assert requests == pytest.approx(2.0 if drive.cycle == "split" else 1.0, abs=2 / cycles)
+    assert pushed.requests_per_cycle == pytest.approx(2.0 if pushed.cycle == "split" else 1.0, abs=2 / CYCLES)
 
 
 @pytest.mark.parametrize("timing, first_moving_sample", [("ideal", 1), ("cia402", 2)])

@@ -32,7 +32,7 @@ from haptic_bus.control.passivity_layer import LayerPolicy
 from sim_drive.operator import OperatorModel
 
 HOLD = 0.025  # s: the bound layer's budget per target, beyond the longest stall of the schedule (20 ms + catch-up)
-ACTIVE = -5e-3  # J: what the unprotected wall reaches in every scenario at least (measured: -7 to -79 mJ)
+ACTIVE = -5e-3  # J: what the unprotected wall reaches in every scenario at least (measured: -18 to -99 mJ)
 ROUNDING_SLACK = 1e-12  # J: float summation
 SCHEDULE = 4000  # cycles of each seeded schedule (a scenario runs its first part)
 
@@ -64,10 +64,12 @@ class TwoTones(OperatorModel):
         return self.offset + self.a1 * math.sin(2 * math.pi * self.f1 * t) + self.a2 * math.sin(2 * math.pi * self.f2 * t)
 
 
-# name -> (operator, schedule seed, cycles): a seed whose schedule lets the unprotected wall go active
+# name -> (operator, schedule seed, cycles): a seed whose schedule lets the unprotected wall go active;
+# each run reaches the unprotected wall's least energy (measured at cycles 63, 2198 and 2566), so the
+# layer is shown the whole stretch in which the wall without it gives energy away
 SCENARIOS = {
     "contact chatter": (Chatter(25.0, 25.0), 1, 600),
-    "worst sinusoid": (TwoTones(12.5, 12.5, 121.8, 0.0, 0.0), 3, 3500),
+    "worst sinusoid": (TwoTones(12.5, 12.5, 121.8, 0.0, 0.0), 3, 2200),
     "alias pair": (TwoTones(12.5, 6.0, 3.0, 6.0, 997.0), 2, 2700),
 }
 

@@ -292,10 +292,11 @@ def _upload(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from haptic_bus.app.profiles import load_profile, one_axis_only
+    from haptic_bus.app.profiles import admit, one_axis_only, read_profile
     from haptic_bus.app.report import write_report
 
-    profile = one_axis_only(load_profile(args.profile), "report")
+    profile = one_axis_only(read_profile(args.profile), "report")  # refused before its scene is judged
+    admit(profile)
     for path in write_report(profile, writable_folder("--out", args.out, context="report")):
         print(f"wrote {path}")
     return EXIT_OK

@@ -58,14 +58,15 @@ def add_validate_parser(subparsers: argparse._SubParsersAction) -> argparse.Argu
 
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``haptic-bus validate``; return the exit status (module docstring)."""
-    from haptic_bus.app.profiles import load_profile, one_axis_only
+    from haptic_bus.app.profiles import admit, one_axis_only, read_profile
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
     from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
     from haptic_bus.app.validate_run import validate_drive
     from haptic_bus.validation import folder_path
 
     logs_bus = bus_log(args, "validate")
-    profile = one_axis_only(load_profile(args.profile), "validate")
+    profile = one_axis_only(read_profile(args.profile), "validate")  # refused before its scene is judged
+    admit(profile)
     address = one_axis_link(args, "validate")
     bus: Any = address.url if address.url is not None else address.bus
     out_dir = None if args.out is None else folder_path("--out", args.out, context="validate")

@@ -100,10 +100,12 @@ def explains(fit: Fit, numbers: int) -> bool:
     measurement's uncertainty explains: its ``chi2`` within the 99.9th percentile of the chi-square
     distribution with ``numbers - parameters`` degrees of freedom.  A device no candidate explains
     (Coulomb friction, a velocity estimate the candidates lack) is told so, not named after the
-    candidate that came closest."""
-    from scipy.stats import chi2
+    candidate that came closest.  The quantile is ``2 P^-1(k/2, q)``, ``P`` the regularised lower
+    incomplete gamma function (what ``scipy.stats.chi2.ppf`` computes, without loading scipy.stats: 0.5 s)."""
+    from scipy.special import gammaincinv
 
-    return fit.chi2 <= float(chi2.ppf(EXPLAINED_QUANTILE, max(numbers - fit.parameters, 1)))
+    freedom = max(numbers - fit.parameters, 1)
+    return fit.chi2 <= 2.0 * float(gammaincinv(freedom / 2.0, EXPLAINED_QUANTILE))
 
 
 @dataclass(frozen=True)
