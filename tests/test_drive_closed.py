@@ -7,7 +7,7 @@ a Modbus drive on a port nothing listens on, never dialled)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import pytest
 
@@ -46,21 +46,19 @@ def test_closed_axes_say_closed() -> None:
         axes.enable()
 
 
-@pytest.mark.parametrize("make", [_canopen, _modbus], ids=["canopen", "modbus"])
-def test_a_mode_that_is_none_names_the_codes(make: Callable[[], Cia402Master]) -> None:
-    drive = make()
-    try:
-        with pytest.raises(ParameterError, match=r"mode of operation \(0x6060\) = 99 is invalid; allowed: 1 \(PROFILE_"):
-            drive.select_mode(99)  # type: ignore[arg-type]  # what an untyped caller passes
-    finally:
-        drive.close()
+@pytest.fixture(params=[_canopen, _modbus], ids=["canopen", "modbus"])
+def unconnected(request: pytest.FixtureRequest) -> Iterator[Cia402Master]:
+    """A drive object never connected (no bus touched), closed after the test."""
+    drive = request.param()
+    yield drive
+    drive.close()
 
 
-@pytest.mark.parametrize("make", [_canopen, _modbus], ids=["canopen", "modbus"])
-def test_a_drive_not_yet_connected_says_connect_first(make: Callable[[], Cia402Master]) -> None:
-    drive = make()
-    try:
-        with pytest.raises(DriveError, match=r"not connected; call connect\(\) first"):
-            drive.select_mode()
-    finally:
-        drive.close()
+def test_a_mode_that_is_none_names_the_codes(unconnected: Cia402Master) -> None:
+    with pytest.raises(ParameterError, match=r"mode of operation \(0x6060\) = 99 is invalid; allowed: 1 \(PROFILE_"):
+        unconnected.select_mode(99)  # type: ignore[arg-type]  # what an untyped caller passes
+
+
+def test_a_drive_not_yet_connected_says_connect_first(unconnected: Cia402Master) -> None:
+    with pytest.raises(DriveError, match=r"not connected; call connect\(\) first"):
+        unconnected.select_mode()
