@@ -17,7 +17,7 @@ import abc
 from collections.abc import Callable, Sequence
 from typing import Generic, Self, TypeVar
 
-from drives.base import DriveScaling
+from drives.base import CyclicInputs, DriveScaling
 from drives.cia402 import SAFE_CONTROLWORD, State
 from drives.cia402_master import Cia402Master
 from drives.errors import DriveError, ParameterError
@@ -93,6 +93,15 @@ class AxesMaster(abc.ABC, Generic[DriveT]):
         """ParameterError unless ``count`` values of ``name`` are one per axis."""
         if count != len(self.drives):
             raise ParameterError(name, count, f"one per axis ({len(self.drives)})", self.name)
+
+    @abc.abstractmethod
+    def read_inputs(self) -> tuple[CyclicInputs, ...]:
+        """One cycle's inputs of every axis, in axis order (outside a cyclic phase); any axis' error
+        trips every axis and is raised."""
+
+    @abc.abstractmethod
+    def write_outputs(self, torques: Sequence[int]) -> None:
+        """Every axis' target torque (0x6071, per mille, in axis order), each saturated by its drive's clamp."""
 
     @abc.abstractmethod
     def close(self) -> None:

@@ -102,6 +102,27 @@ class ModbusAxes(AxesMaster[ModbusDrive]):
             yield AxesDriveCycle(lambda: self._read(cycles), tuple(cycle.saturate for cycle in cycles),
                                  lambda torques: self._write(cycles, torques))
 
+    def read_inputs(self) -> tuple[CyclicInputs, ...]:
+        """One poll of every axis' inputs, in axis order (outside a cyclic phase: each drive's
+        :meth:`~drives.modbus.drive.ModbusDrive.read_inputs`); any axis' error trips every axis and is raised."""
+        self._require_connected()
+        try:
+            return tuple(drive.read_inputs() for drive in self.drives)
+        except DriveError as error:
+            raise trip_together(self.drives, error) from error.__cause__
+
+    def write_outputs(self, torques: Sequence[int]) -> None:
+        """Every axis' target torque (0x6071, per mille, in axis order), each saturated by its drive's
+        clamp; a write that fails trips every axis.  ParameterError for a count other than one per axis,
+        then DriveError before :meth:`connect` or after :meth:`close` (nothing written)."""
+        self._one_per_axis("torques", len(torques))
+        self._require_connected()
+        try:
+            for drive, torque in zip(self.drives, torques):
+                drive.write_outputs(torque)
+        except DriveError as error:
+            raise trip_together(self.drives, error) from error.__cause__
+
     def _read(self, cycles: tuple[DriveCycle, ...]) -> tuple[CyclicInputs, ...]:
         """One cycle's inputs of every axis; any axis' error trips every axis and is raised."""
         try:
