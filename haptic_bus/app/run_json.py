@@ -1,4 +1,4 @@
-"""``run.json``: its name in a run folder, and writing it whole or not at all.
+"""``run.json``: its name in a run folder, writing it whole or not at all, and reading it back.
 
 Apart from :mod:`~haptic_bus.app.run_folder` (which builds the document) so that the run's writer
 process (:mod:`~haptic_bus.app.writer_process`), which rewrites the file as events come, imports
@@ -27,3 +27,13 @@ def write_json(path: pathlib.Path, document: dict[str, Any]) -> pathlib.Path:
         raise
     os.replace(temporary, path)
     return path
+
+
+def read_document(folder: pathlib.Path) -> dict[str, Any]:
+    """The ``run.json`` of the run folder ``folder``; empty when there is none or it cannot be read
+    (a run that never began, or killed before its first whole version)."""
+    try:
+        document = json.loads((folder / RUN_JSON).read_text())
+    except (OSError, ValueError):
+        return {}
+    return document if isinstance(document, dict) else {}

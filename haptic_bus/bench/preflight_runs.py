@@ -17,7 +17,6 @@ A Ctrl-C keeps the runs that finished as the section (:class:`~haptic_bus.bench.
 from __future__ import annotations
 
 import contextlib
-import json
 import statistics
 import subprocess
 import tempfile
@@ -36,6 +35,7 @@ RUN_WAIT = 120.0  # s: one run's command, its imports and pre-flight included (3
 def one_run(bus: dict[str, Any]) -> dict[str, Any]:
     """``haptic-bus run`` of :data:`PROFILE` against the drive on ``bus``: its exit status (None: no exit
     within :data:`RUN_WAIT` s, killed), what ended it, and pre-flight's figures (None where it never ran)."""
+    from haptic_bus.app.run_json import read_document
     from haptic_bus.bench.startup import haptic_bus_command
 
     with tempfile.TemporaryDirectory() as out:
@@ -49,21 +49,12 @@ def one_run(bus: dict[str, Any]) -> dict[str, Any]:
             ending = (done.stderr.strip().splitlines() or [""])[-1]
         except subprocess.TimeoutExpired:
             status, ending = None, f"no exit within {RUN_WAIT:g} s: killed"
-        document = _document(folder / "run.json")
+        document = read_document(folder)
     preflight = document.get("preflight") or {}
     return {"exit": status, "exit_reason": document.get("exit_reason") or (None if status is not None else "timed out"),
             "error": document.get("error") or ending,
             "held": bool(preflight.get("holdable")), "judged_delay": preflight.get("observed_delay"),
             "lateness_p99_s": (preflight.get("lateness") or {}).get("p99"), "reason": preflight.get("reason")}
-
-
-def _document(path: Path) -> dict[str, Any]:
-    """A run's ``run.json``; empty when there is none or it cannot be read (a run killed while writing it)."""
-    try:
-        document = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
-    return document if isinstance(document, dict) else {}
 
 
 def fresh_run() -> dict[str, Any]:

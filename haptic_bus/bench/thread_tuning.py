@@ -46,6 +46,7 @@ import numpy as np
 
 from haptic_bus.app.profiles import AxesProfile, Profile, load_profile, one_axis_only
 from haptic_bus.app.realtime import RealtimeSettings, realtime_session
+from haptic_bus.app.run_json import read_document
 from haptic_bus.app.writer_process import COMM as WRITER_COMM
 from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import Spread
@@ -245,7 +246,7 @@ def controller_run(settings: RealtimeSettings, duration: float, bus: dict, proce
                                                   scheduling=settings, start_in_contact="ramp", plots=False,
                                                   preflight_cycles=preflight_cycles),
                          node_id=node_id)
-        document = json.loads((result.folder / "run.json").read_text()) if (result.folder / "run.json").exists() else {}
+        document = read_document(result.folder)
     figures = {"exit_reason": result.exit_reason, "error": result.error, "thread_cpu_s": threads.by_name(),
                "drive_policy": _POLICIES.get(os.sched_getscheduler(process.pid)), "scheduling": document.get("realtime")}
     if result.controller is not None and isinstance(result.controller.clock, RealClock):
