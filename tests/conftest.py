@@ -103,6 +103,10 @@ os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
 
 NODE = 5  # the node of ``sim``, of ``remote`` and of ``canopen_rig`` by default
 WAIT = 1.0  # s: the longest any single frame is waited for (a bound, not a pace)
+# s: how long a master in a test waits for each SDO answer.  canopen's 0.3 s was outlasted twice in CI
+# runs (the simulator's thread, in the test's own process, waiting for one of 2 cores that the
+# suite's 3 workers share); 2 s still names a drive that never answers, at one SDO's cost.
+SDO_WAIT = 2.0
 FILE_COSTS = pathlib.Path(__file__).parent / "data" / "file_costs.json"  # s of wall clock per test file (its "how")
 
 
@@ -308,6 +312,7 @@ def _rig(
     # once in a CI run beside two CPU-bound jobs); 0.25 s, as the multi-axis rig waits, where the
     # drive's watchdogs allow as much (a test of real-time watchdogs: half their shortest stall).
     period = drive_kwargs.get("period", 1e-3)
+    drive_kwargs.setdefault("sdo_timeout", SDO_WAIT)
     drive_kwargs.setdefault("tpdo_timeout", min(0.25, drive_kwargs["safety"].canopen_stall(period) / 2.0))
     drive = CanopenDrive(node_id, **node.spec.drive_kwargs(), **drive_kwargs)
     status = None

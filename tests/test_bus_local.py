@@ -19,6 +19,7 @@ import canopen
 import pytest
 
 from drives.bus_config import open_bus, resolve_bus_config
+from tests.conftest import SDO_WAIT
 
 FRAMES = 500
 # A leak sends every one of the FRAMES frames out (plus the simulator's heartbeats); the machine's
@@ -66,7 +67,7 @@ def test_master_and_simulator_send_with_ttl_zero(bus_spec) -> None:
 
     spec = bus_spec("udp_multicast")
     sim = CanopenSimDrive({"interface": spec.interface, "channel": spec.channel, **spec.extra}, 5).start()
-    drive = CanopenDrive(5, **spec.drive_kwargs(), eds=eds_path())
+    drive = CanopenDrive(5, **spec.drive_kwargs(), eds=eds_path(), sdo_timeout=SDO_WAIT)
     try:
         assert multicast_ttl(sim._network.bus) == 0
         drive.connect()

@@ -26,6 +26,7 @@ import pytest
 
 from drives.bus_config import open_bus
 from drives.errors import DriveError
+from tests.conftest import SDO_WAIT
 from tests.raw_bus import FailingBus
 
 NODE = 5
@@ -71,7 +72,8 @@ def test_ten_thousand_random_frames_silence_neither_side(channel) -> None:
     sim_bus = FailingBus(channel, lambda call: call % 997 == 0, "could not unpack received message")  # a bad datagram
     sim = CanopenSimDrive(sim_bus, NODE, parameters=DeviceParameters(**profile.sim_device_parameters())).start()
     drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path(), period=profile.loop.period,
-                         scaling=profile.scaling(), safety=SafetySettings().for_virtual_time(profile.loop.period))
+                         scaling=profile.scaling(), safety=SafetySettings().for_virtual_time(profile.loop.period),
+                         sdo_timeout=SDO_WAIT)
     fuzzer = can.Bus(interface="virtual", channel=channel)
     outcome: dict[str, object] = {}
     try:

@@ -37,6 +37,7 @@ from haptic_bus.testing.buses import unique_multicast
 from haptic_bus.testing.processes import SimProcess, stop_all
 from sim_drive.eds import eds_path
 from tests.cli_process import skip_if_refused_at_preflight
+from tests.conftest import SDO_WAIT
 
 NODE = 5
 MASTER = 127
@@ -65,7 +66,7 @@ def test_the_controller_node_boots_then_beats(channel, master, frames) -> None:
     from sim_drive.canopen.slave import CanopenSimDrive
 
     with CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE):
-        drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path(),
+        drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path(), sdo_timeout=SDO_WAIT,
                              safety=SafetySettings(heartbeat_ms=10, consumer_ms=40))
         try:
             drive.connect()
@@ -138,7 +139,8 @@ def test_a_drive_without_the_watchdog_objects_is_warned_about_or_refused(channel
     from sim_drive.canopen.slave import CanopenSimDrive
 
     with CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, dictionary=_dictionary_without(0x1016, 0x6007)):
-        drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path(), safety=SafetySettings(strict=strict))
+        drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path(), sdo_timeout=SDO_WAIT,
+                             safety=SafetySettings(strict=strict))
         try:
             if strict:
                 with pytest.raises(DriveProtocolError, match=r"strict safety policy.*0x1016 .*0x6007 "):
@@ -163,7 +165,7 @@ def test_another_sync_producer_is_refused_before_the_drive_is_touched(channel, s
     thread.start()
     try:
         time.sleep(0.02)
-        drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path())
+        drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path(), sdo_timeout=SDO_WAIT)
         with pytest.raises(DriveError, match="another SYNC producer is on the bus"):
             drive.connect()
         drive.close()
@@ -176,7 +178,7 @@ def test_another_sync_producer_is_refused_before_the_drive_is_touched(channel, s
 def test_a_drive_someone_else_enabled_is_refused(channel, sim, master, frames) -> None:
     frames.nmt_start(master)
     frames.enable_cst(master)  # another master, over SDO, no SYNC
-    drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path())
+    drive = CanopenDrive(NODE, interface="virtual", channel=channel, eds=eds_path(), sdo_timeout=SDO_WAIT)
     with pytest.raises(DriveError, match="in OPERATION ENABLED before this master enabled it"):
         drive.connect()
     drive.close()

@@ -17,6 +17,7 @@ import canopen
 import pytest
 
 from drives.cia402 import Command, State, decode_statusword
+from tests.conftest import SDO_WAIT
 from tests.raw_bus import FailingBus
 
 NODE = 5
@@ -275,7 +276,7 @@ def test_canopen_base_node_402_clears_a_watchdog_fault_with_reset_from_fault(cha
     try:
         node = canopen.BaseNode402(NODE, str(eds_path()))
         network.add_node(node)
-        node.sdo.RESPONSE_TIMEOUT = 2.0  # canopen's 0.3 s: a suite run once kept the drive's thread longer
+        node.sdo.RESPONSE_TIMEOUT = SDO_WAIT
         node.sdo[0x6060].raw = 10
         for word in (Command.SHUTDOWN.word, Command.SWITCH_ON.word, Command.ENABLE_OPERATION.word):
             node.sdo[0x6040].raw = word

@@ -31,7 +31,7 @@ from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.canopen.standard_od import encode, standard_dictionary
 from sim_drive.eds import eds_path
 from sim_drive.parameters import DeviceParameters
-from tests.conftest import HEARTBEAT_WAIT, new_bus_spec
+from tests.conftest import HEARTBEAT_WAIT, SDO_WAIT, new_bus_spec
 
 if TYPE_CHECKING:
     from canopen.objectdictionary import ObjectDictionary
@@ -54,6 +54,7 @@ STANDARD_SOURCES = {  # where the master finds each scaling field on a drive wit
 def open_drive(channel: str, **kwargs: Any) -> CanopenDrive:
     """The master, no EDS, on the virtual ``channel``; SafetySettings for a test that paces nothing."""
     kwargs.setdefault("safety", SafetySettings().for_virtual_time(1e-3))
+    kwargs.setdefault("sdo_timeout", SDO_WAIT)
     return CanopenDrive(NODE, interface="virtual", channel=channel, **kwargs)
 
 

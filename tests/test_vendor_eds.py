@@ -42,7 +42,7 @@ from sim_drive.canopen.vendor_od import has
 from sim_drive.cli import main as sim_main
 from sim_drive.parameters import DeviceParameters
 from sim_drive.profile import read_simulated_device
-from tests.conftest import HEARTBEAT_WAIT, new_bus_spec, unique_name, wait_for_heartbeat
+from tests.conftest import HEARTBEAT_WAIT, SDO_WAIT, new_bus_spec, unique_name, wait_for_heartbeat
 from tests.run_rig import profile_variant, read_run, run_cli
 
 EDS = pathlib.Path(__file__).resolve().parent / "data" / "eds"
@@ -112,6 +112,7 @@ def vendor_drive(eds: pathlib.Path, **drive_kwargs: object) -> Iterator[tuple[Ca
     sniffer = can.Bus(interface="virtual", channel=channel)
     sim = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE, eds=eds, timing="ideal").start()
     drive_kwargs.setdefault("scaling", SCALING)
+    drive_kwargs.setdefault("sdo_timeout", SDO_WAIT)
     drive_kwargs.setdefault("safety", SafetySettings().for_virtual_time(PERIOD))
     drive = CanopenDrive(NODE, interface="virtual", channel=channel, **drive_kwargs)  # type: ignore[arg-type]
     try:
@@ -354,7 +355,7 @@ def test_python_m_sim_drive_eds_serves_a_vendor_dictionary_to_another_process(si
     log = process.wait_for_line("serving on", HEARTBEAT_WAIT)
     assert ("the EDS lacks 0x1016:01 heartbeat consumer (stop on the master's heartbeat loss); 0x1400:05 RPDO1 event "
             "timer (receive deadline); 0x6072 max torque; 0x6076 motor rated torque: absent here too") in log
-    drive = CanopenDrive(NODE, **spec.drive_kwargs(), scaling=SCALING,
+    drive = CanopenDrive(NODE, **spec.drive_kwargs(), scaling=SCALING, sdo_timeout=SDO_WAIT,
                          safety=SafetySettings().for_virtual_time(PERIOD))
     try:
         drive.connect()
