@@ -294,8 +294,9 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path, c
     three-axis exchange took 2.5 ms at p99 here beside other work (pre-flight refuses a T below the
     exchange), 8 times less; the walls softened to what the coupled gate passes at 20 ms (K 200 N/m,
     B 2 N s/m, margin +5.39 N s/m) and the push to 0.6 N, (0.4, 0.4, 0.2) N along the slope's normal,
-    whole per mille.  The hand takes the handle once the drives are enabled (pre-flight's 500 cycles,
-    10 s of the plants' time, never move it) and pushes towards the slope.  No drive misses an RPDO
+    whole per mille.  The hand takes the handle once the drives are enabled (pre-flight's cycles never
+    move it) and pushes towards the slope.  Pre-flight measures 100 cycles, 2 s (the product's 500 take
+    10 s at this T): its p99.5 is then the worst of them, which must stay within T as any of 500 must.  No drive misses an RPDO
     between pre-flight and the enable: the coupled gate's judgement at the measured delay (seconds)
     runs while the cycle goes on at zero torque."""
     text = GANTRY.read_text()
@@ -314,7 +315,8 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path, c
         # 6 s (300 cycles): every torque and 0x606C sample is final from 4.72 s on (measured twice in real time beside
         # the suite's load; 4.58 s in virtual time: a late SYNC lets the plants live a longer step), 64 cycles to spare
         result = run(profile, {"interface": "lockstep", "channel": channel},
-                     RunOptions(6.0, pacing="wall", out_dir=tmp_path / "run", live=False, plots=False))
+                     RunOptions(6.0, pacing="wall", out_dir=tmp_path / "run", live=False, plots=False,
+                                preflight_cycles=100))
     finally:
         sim.stop()
     if result.exit_reason == "refused" and "this machine holds T >=" in (result.error or ""):
@@ -324,7 +326,7 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path, c
     assert summary is not None and summary.cycles == 300 and summary.clock.startswith("real")
     assert summary.least_energy >= 0.0 and summary.lateness_percentiles
     document = json.loads((tmp_path / "run" / "run.json").read_text())
-    assert document["preflight"]["holdable"] and document["preflight"]["cycles"] == 500
+    assert document["preflight"]["holdable"] and document["preflight"]["cycles"] == 100
     assert not [r.getMessage() for r in caplog.records if "deadline" in r.getMessage() or "lost" in r.getMessage()]
     last = {axis: rows[-1] for axis, rows in records(tmp_path / "run").items()}
     assert [int(last[axis]["torque_permille"]) for axis in "xyz"] == [-80, -80, -40]
