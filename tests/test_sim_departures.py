@@ -14,10 +14,11 @@ from haptic_bus.analysis.plant import zoh_coefficients
 from haptic_bus.analysis.transmission import Transmission
 from sim_drive.canopen.manufacturer import ManufacturerObjects
 from sim_drive.canopen.pdo_engine import SlaveCounters
-from sim_drive.cli import _drive_setup, _parse, build_parser, main
+from sim_drive.cli import _parse, build_parser, main
 from sim_drive.device import SimulatedDrive
 from sim_drive.modbus.bank import RegisterBank
 from sim_drive.parameters import DeviceParameters, Timing
+from sim_drive.setups import drive_setup
 from sim_drive.transmission import TwoMassHandle
 from tests.run_rig import enabled_drive
 
@@ -151,7 +152,7 @@ def test_the_hidden_departures_are_out_of_the_masters_reach() -> None:
 
 
 def test_the_flags_reach_the_truth() -> None:
-    parameters, _, _ = _drive_setup(_parse(build_parser(), ["--interface", "virtual", "--channel", "x", "--node-id", "5",
+    parameters, _, _ = drive_setup(_parse(build_parser(), ["--interface", "virtual", "--channel", "x", "--node-id", "5",
                                                             "--transmission", "20000:2:0.3", "--extra-delay", "0.3"]))
     assert parameters.coupling == Transmission(20000.0, 2.0, 0.3) and parameters.extra_delay == 0.3
 

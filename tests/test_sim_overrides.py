@@ -14,14 +14,15 @@ import pytest
 from haptic_bus._version import __version__
 from haptic_bus.errors import ParameterError
 from sim_drive import operator as models
-from sim_drive.cli import _drive_setup, _parse, build_parser, main
+from sim_drive.cli import _parse, build_parser, main
+from sim_drive.setups import drive_setup
 
 CANOPEN = ["--interface", "virtual", "--channel", "overrides", "--node-id", "5"]
 HEARTBEAT_WAIT = 15.0  # s: the subprocess imports numpy/scipy/canopen first
 
 
 def _setup(*argv: str) -> tuple[Any, Any, str]:
-    return _drive_setup(_parse(build_parser(), [*CANOPEN, *argv]))
+    return drive_setup(_parse(build_parser(), [*CANOPEN, *argv]))
 
 
 def test_the_flags_override_the_profiles_truth_and_operator() -> None:

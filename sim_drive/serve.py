@@ -1,0 +1,277 @@
+"""``haptic-bus sim`` serving: the simulated drive(s) a parsed command line describes, until SIGINT/SIGTERM.
+
+CANopen: one slave (:class:`~sim_drive.canopen.slave.CanopenSimDrive`) or one per node of a multi-axis
+device (:class:`~sim_drive.canopen.multi_axis.MultiAxisSim`), the main thread waiting for a stop
+signal.  Modbus: one TCP server, or the units of a multi-axis device on one server or a server per
+axis, in an asyncio loop that a stop signal ends.  A refusal of the arguments or the profile is one
+line on stderr and exit 2, before the bus or the socket is opened; a bus or socket that fails, exit 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import signal
+import socket
+import sys
+import time
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+from haptic_bus.console import StderrHandler
+from haptic_bus.errors import DriveError, ParameterError
+from sim_drive.eds import eds_path
+from sim_drive.scheduling import answer_in_real_time
+from sim_drive.setups import axes_setup, bus_config, drive_setup, modbus_axes_setup, profile_axes
+from sim_drive.sync_clock import sync_clock
+
+logger = logging.getLogger("sim_drive")
+
+PROG = "haptic-bus sim"
+
+
+class StopSignals:
+    """Records SIGINT/SIGTERM from ``__enter__`` to ``__exit__``; :meth:`wait` blocks for the first.
+
+    The handler only appends to a list (a handler that took a lock could deadlock on one the
+    interrupted main thread holds), and Python's C-level handler writes a byte to the wake-up
+    socket, so the blocking ``recv`` returns even for a signal that came just before it.
+    Signal masks are no help: numpy's BLAS threads, started at import time, would take a
+    masked signal with its default action.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __enter__(self) -> StopSignals:
+        self.received: list[signal.Signals] = []
+        self._reader, self._writer = socket.socketpair()
+        self._writer.setblocking(False)
+        self._previous_fd = signal.set_wakeup_fd(self._writer.fileno(), warn_on_full_buffer=False)
+        self._previous = {sig: signal.signal(sig, self._record) for sig in self.SIGNALS}
+        return self
+
+    def _record(self, number: int, frame: object) -> None:
+        self.received.append(signal.Signals(number))
+
+    def wait(self) -> signal.Signals:
+        """The first stop signal received (blocks until there is one)."""
+        while not self.received:
+            self._reader.recv(64)
+        return self.received[0]
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        signal.set_wakeup_fd(self._previous_fd)
+        self._reader.close()
+        self._writer.close()
+
+
+def set_up_process(wall_clock: bool, library: str, level: int) -> str:
+    """Log lines on stderr (stamped with the wall clock with ``wall_clock``; the bus ``library`` only
+    from ``level``), then real-time scheduling for every thread to come (:mod:`sim_drive.scheduling`):
+    what it got, in words for the serving line (a refusal before it logs nothing)."""
+    fmt = "%(asctime)s %(message)s" if wall_clock else "%(message)s"
+    logging.basicConfig(level=logging.INFO, format=fmt, handlers=[StderrHandler()], force=True)
+    logging.getLogger(library).setLevel(level)
+    return answer_in_real_time()
+
+
+def run_canopen(args: argparse.Namespace) -> int:
+    """The CANopen slave until SIGINT/SIGTERM."""
+
+    from sim_drive.bus_timing import BusLoadMeter
+    from sim_drive.canopen.slave import CanopenSimDrive
+
+    if args.eds_path:
+        print(eds_path())
+        return 0
+    if args.node_ids is not None:
+        return run_axes(args)
+    missing = [name for name in ("interface", "channel", "node_id") if getattr(args, name) is None]
+    if missing:
+        print(f"{PROG}: error: missing --{', --'.join(m.replace('_', '-') for m in missing)}", file=sys.stderr)
+        return 2
+    scheduling = set_up_process(args.log_wall_clock, "canopen", logging.WARNING)
+    try:
+        parameters, operator, timing = drive_setup(args)
+        meter = BusLoadMeter(args.bitrate, parameters.period) if args.bitrate else None
+        config = bus_config(args)
+        sim = CanopenSimDrive(config, args.node_id, timing=timing, parameters=parameters, operator=operator, bus_meter=meter,
+                              od=args.od or "haptic", eds=args.eds, sync_clock=sync_clock(args.clock),
+                              hand_needs_power=True)  # the hand takes a powered handle (sim_drive.device.SimulatedDrive)
+    except ParameterError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    with StopSignals() as stop_signals:  # from before the boot-up: an early signal still stops cleanly
+        if not started(sim):
+            return 1
+        try:
+            dictionary = "standard objects only" if args.od == "standard" else f"EDS {args.eds or eds_path()}"
+            if args.eds:
+                log_eds_gaps(args.node_id, sim.object_dictionary)
+            logger.info("node %d: serving on %s %s (timing %s); %s; %s",
+                        args.node_id, args.interface, args.channel, timing, dictionary, scheduling)
+            received = stop_signals.wait()
+            logger.info("node %d: %s received, stopping", args.node_id, received.name)
+        finally:
+            sim.stop()
+    drive = sim.drive
+    logger.info("node %d: stopped after %d SYNCs, virtual time %.6f s, operator energy %.6g J, wall energy %.6g J",
+                args.node_id, drive.sync_count, drive.time, drive.operator_energy, drive.wall_energy)
+    if meter is not None and meter.cycle_bit_counts:
+        logger.info("node %d: bus load %.1f %% at %d bit/s, worst cycle %.1f us",
+                    args.node_id, 100 * meter.load(), args.bitrate, 1e6 * meter.worst_latency())
+    return 0
+
+
+def run_axes(args: argparse.Namespace) -> int:
+    """The simulated multi-axis device (``--node-ids``) until SIGINT/SIGTERM: one CANopen slave per node."""
+
+    from sim_drive.canopen.multi_axis import MultiAxisSim
+
+    missing = [name for name in ("interface", "channel") if getattr(args, name) is None]
+    if missing:
+        print(f"{PROG}: error: missing --{', --'.join(missing)}", file=sys.stderr)
+        return 2
+    config: dict[str, Any] = {"interface": args.interface, "channel": args.channel, **dict(args.bus_option)}
+    if args.bitrate:
+        config["bitrate"] = args.bitrate
+    try:
+        axes, hand, coordinates = axes_setup(args)
+        sim = MultiAxisSim(config, axes, hand, coordinates=coordinates, clock=args.clock, od=args.od or "haptic")
+    except ParameterError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    scheduling = set_up_process(args.log_wall_clock, "canopen", logging.WARNING)  # once the arguments hold
+    with StopSignals() as stop_signals:
+        if not started(sim):
+            return 1
+        try:
+            logger.info("node%s %s: serving on %s %s (one simulated drive per axis, the hand: %s); %s",
+                        "s" if len(sim.nodes) > 1 else "", ", ".join(str(node.node_id) for node in sim.nodes),
+                        args.interface, args.channel, type(hand).__name__, scheduling)
+            received = stop_signals.wait()
+            logger.info("nodes: %s received, stopping", received.name)
+        finally:
+            sim.stop()
+    for node in sim.nodes:
+        drive = node.drive
+        logger.info("node %d: stopped after %d SYNCs, virtual time %.6f s, operator energy %.6g J, wall energy %.6g J",
+                    node.node_id, drive.sync_count, drive.time, drive.operator_energy, drive.wall_energy)
+    return 0
+
+
+def started(sim: Any) -> bool:
+    """Start ``sim`` (a slave or the multi-axis device); False after one line on stderr if its bus cannot be opened."""
+    import can
+
+    try:
+        sim.start()
+    except DriveError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return False
+    except (can.CanError, OSError, ValueError) as exc:
+        print(f"{PROG}: error: cannot open the bus: {exc}", file=sys.stderr)
+        return False
+    return True
+
+
+def log_eds_gaps(node_id: int, dictionary: Any) -> None:
+    """One line naming what a user's EDS lacks of what a CiA-402 master in CST mode relies on."""
+    from sim_drive.canopen.vendor_od import core_gaps
+
+    gaps = core_gaps(dictionary)
+    if gaps:
+        logger.info("node %d: the EDS lacks %s: absent here too", node_id, "; ".join(gaps))
+
+
+def run_modbus(args: argparse.Namespace) -> int:
+    """The Modbus TCP server until SIGINT/SIGTERM (several axes: :func:`run_modbus_axes`)."""
+    from sim_drive.modbus import ModbusSimServer, parse_modbus_url
+
+    try:
+        several = args.unit_ids is not None or len(args.modbus) > 1 or profile_axes(args) is not None
+    except ParameterError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    if several:
+        return run_modbus_axes(args)
+    from drives.modbus.register_map import UNIT_ID_RANGE
+
+    unit_id = UNIT_ID_RANGE[0] if args.unit_id is None else args.unit_id
+    if not UNIT_ID_RANGE[0] <= unit_id <= UNIT_ID_RANGE[1]:  # as --unit-ids: the units haptic-bus run can reach
+        allowed = f"a Modbus unit id {UNIT_ID_RANGE[0]}..{UNIT_ID_RANGE[1]}"
+        print(f"{PROG}: error: {ParameterError('--unit-id', unit_id, allowed)}", file=sys.stderr)
+        return 2
+    scheduling = set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
+    word_order = args.word_order or "big"
+    try:
+        host, port = parse_modbus_url(args.modbus[0])
+        parameters, operator, timing = drive_setup(args)
+        sim = ModbusSimServer(host, port, unit_id=unit_id, timing=timing, parameters=parameters, operator=operator,
+                              word_order=word_order, sync_clock=sync_clock(args.clock),
+                              hand_needs_power=True)  # the hand takes a powered handle (sim_drive.device.SimulatedDrive)
+    except ParameterError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+
+    def bound() -> None:
+        logger.info("unit %d: serving Modbus TCP on %s (timing %s, word order %s, started %.3f); %s",
+                    unit_id, sim.url, timing, word_order, time.time(), scheduling)
+
+    if not serve_until_stopped(args, lambda stop: sim.serve(stop, on_bound=bound)):
+        return 1
+    drive = sim.drive
+    logger.info("unit %d: stopped after %d cycles, virtual time %.6f s, operator energy %.6g J, wall energy %.6g J",
+                unit_id, sim.bank.cycles, drive.time, drive.operator_energy, drive.wall_energy)
+    return 0
+
+
+def serve_until_stopped(args: argparse.Namespace, serve: Callable[[asyncio.Event], Awaitable[None]]) -> bool:
+    """Run ``serve(stop)`` in an event loop until SIGINT/SIGTERM sets ``stop``; False after one line
+    on stderr if the socket cannot be served."""
+
+    async def run() -> None:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        await serve(stop)
+
+    try:
+        asyncio.run(run())
+    except (OSError, RuntimeError) as exc:
+        print(f"{PROG}: error: cannot serve on {', '.join(args.modbus)}: {exc}", file=sys.stderr)
+        return False
+    return True
+
+
+def run_modbus_axes(args: argparse.Namespace) -> int:
+    """The simulated multi-axis device over Modbus TCP until SIGINT/SIGTERM: one unit per axis, on one
+    server or a server per axis."""
+    from sim_drive.modbus import parse_modbus_url
+    from sim_drive.modbus.multi_axis import MultiAxisModbusSim
+
+    scheduling = set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
+    try:
+        addresses = [parse_modbus_url(url) for url in args.modbus]
+        axes, hand = modbus_axes_setup(args)
+        sim = MultiAxisModbusSim(addresses, axes, hand, clock=args.clock, word_order=args.word_order or "big")
+    except ParameterError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    units = ", ".join(str(unit) for unit in sim.unit_ids)
+
+    def bound() -> None:
+        logger.info("units %s: serving Modbus TCP on %s (one simulated drive per axis, the hand: %s, started %.3f); %s",
+                    units, ", ".join(dict.fromkeys(sim.urls)), type(hand).__name__, time.time(), scheduling)
+
+    if not serve_until_stopped(args, lambda stop: sim.serve(stop, bound)):
+        return 1
+    for unit, url in zip(sim.units, sim.urls):
+        drive = unit.drive
+        logger.info("unit %d at %s: stopped after %d cycles, virtual time %.6f s, operator energy %.6g J, wall energy "
+                    "%.6g J", unit.unit_id, url, unit.bank.cycles, drive.time, drive.operator_energy, drive.wall_energy)
+    return 0

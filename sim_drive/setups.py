@@ -1,0 +1,122 @@
+"""What a parsed ``haptic-bus sim`` command line asks to simulate: each axis' plant, timing and node or
+unit, the operator, and the CANopen slave's bus.
+
+The hidden truth and the operator given on the command line (``--mass``, ``--friction``, ...,
+``--operator``) override the profile's (issue 20).  Every function raises
+:class:`~haptic_bus.errors.ParameterError` naming the option or the profile's key and the allowed
+range; :mod:`sim_drive.serve` prints it as the command's one line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from typing import Any
+
+from drives.bus_config import merge_bus_options
+from drives.cia301 import NODE_ID_RANGE
+from haptic_bus.errors import ParameterError
+from sim_drive.operator import OperatorModel, operator_from_spec
+from sim_drive.parameters import DeviceParameters, Timing
+from sim_drive.profile import SimulatedDevice, read_simulated_device
+
+TRUTH_FLAGS = {"mass": "mass", "friction": "friction", "coulomb": "coulomb_friction", "velocity_noise": "velocity_noise",
+               "noise_seed": "noise_seed", "transmission": "transmission",
+               "extra_delay": "extra_delay"}  # argparse dest -> DeviceParameters field
+
+
+def overridden(parameters: DeviceParameters, operator: OperatorModel | None,
+               args: argparse.Namespace) -> tuple[DeviceParameters, OperatorModel | None]:
+    """``parameters`` and ``operator`` with the command line's truth and operator; ParameterError names the flag."""
+    given = {field: getattr(args, dest) for dest, field in TRUTH_FLAGS.items() if getattr(args, dest) is not None}
+    try:
+        parameters = dataclasses.replace(parameters, **given)
+    except ParameterError as exc:
+        flag = next(dest for dest, field in TRUTH_FLAGS.items() if field == exc.name)
+        raise ParameterError("--" + flag.replace("_", "-"), exc.value, exc.allowed) from None
+    return parameters, operator if args.operator is None else operator_from_spec(args.operator)
+
+
+def bus_config(args: argparse.Namespace) -> dict[str, Any]:
+    """The CANopen slave's python-can arguments; ParameterError for a key given twice with different values."""
+    named = [(key, getattr(args, key)) for key in ("interface", "channel", "bitrate") if getattr(args, key)]
+    return merge_bus_options(named, args.bus_option, *args.bus_kwargs)
+
+
+def drive_setup(args: argparse.Namespace) -> tuple[DeviceParameters, OperatorModel | None, str]:
+    """Device parameters, operator model and timing of one axis from ``--profile`` (a one-axis profile)
+    and ``--timing``; ParameterError if invalid."""
+    axis, operator = read_simulated_device(args.profile).one_axis() if args.profile else (None, None)
+    parameters, operator = overridden(axis.parameters if axis else DeviceParameters(), operator, args)
+    timing = args.timing or (axis.timing if axis else Timing.CIA402).value
+    return parameters, operator, timing
+
+
+def profile_axes(args: argparse.Namespace) -> SimulatedDevice | None:
+    """The device of a ``--profile`` with ``[[axes]]``, each axis its own plant and node or unit (None: no
+    profile, or a one-axis profile, which every axis runs); ParameterError if the profile is invalid."""
+    device = read_simulated_device(args.profile) if args.profile else None
+    return device if device is not None and device.multi_axis else None
+
+
+def id_list(flag: str, text: str, low: int, high: int, what: str) -> list[int]:
+    """``5,6,7`` -> [5, 6, 7]: distinct whole numbers in [low, high]; ParameterError naming ``flag`` otherwise."""
+    try:
+        ids = [int(part) for part in text.split(",")]
+    except ValueError:
+        ids = []
+    if not ids or len(set(ids)) != len(ids) or not all(low <= n <= high for n in ids):
+        raise ParameterError(flag, text, f"distinct {what} {low}..{high} separated by commas, e.g. {low},{low + 1},{low + 2}")
+    return ids
+
+
+def node_ids(text: str) -> list[int]:
+    return id_list("--node-ids", text, *NODE_ID_RANGE, "CANopen node ids")
+
+
+def axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
+    """``(axes, hand, coordinates)`` for ``--node-ids``; ParameterError if the arguments or the profile are invalid."""
+    from sim_drive.space_operator import SpaceHand
+
+    nodes = node_ids(args.node_ids)
+    if args.node_id is not None or args.eds is not None:
+        raise ParameterError("--node-ids", args.node_ids, "without --node-id and --eds (one dictionary kind: --od)")
+    if args.transmission is not None:  # the hand in space pushes each axis' handle where its encoder is
+        raise ParameterError("--transmission", args.transmission, "one axis only (--node-id): no hand in space on "
+                             "the far side of a transmission")
+    device = profile_axes(args)
+    if device is not None:
+        known = [axis.node_id for axis in device.axes]
+        unknown = [n for n in nodes if n not in known]
+        if unknown:
+            raise ParameterError("--node-ids", args.node_ids, f"node ids of the profile's [[axes]]: {known}")
+        chosen = [known.index(n) for n in nodes]
+        axes = [(n, device.axes[i].parameters, args.timing or device.axes[i].timing) for n, i in zip(nodes, chosen)]
+        return axes, device.make_hand(), chosen
+    parameters, _, timing = drive_setup(args)
+    return [(n, parameters, timing) for n in nodes], SpaceHand(len(nodes)), list(range(len(nodes)))
+
+
+def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
+    """``(axes, hand)`` for several Modbus axes: each (unit id, parameters, timing) in axis order;
+    ParameterError if the arguments or the profile are invalid (module docstring of the options)."""
+    from drives.modbus.register_map import UNIT_ID_RANGE
+    from sim_drive.space_operator import SpaceHand
+
+    given = id_list("--unit-ids", args.unit_ids, *UNIT_ID_RANGE, "Modbus unit ids") if args.unit_ids else None
+    if args.unit_id is not None:
+        raise ParameterError("--unit-id", args.unit_id, "--unit-ids for several axes (one unit id per axis)")
+    device = profile_axes(args)
+    if device is not None:
+        stated = [axis.unit_id for axis in device.axes]
+        units = given or (stated if None not in stated else [UNIT_ID_RANGE[0]] * len(args.modbus))
+        if len(units) != len(device.axes) or (len(args.modbus) == 1 and len(set(units)) != len(units)):
+            raise ParameterError("--unit-ids", args.unit_ids, f"one unit id per axis of the profile ({len(device.axes)}), "
+                                 "or several --modbus addresses, one per axis")
+        return [(unit, axis.parameters, args.timing or axis.timing) for unit, axis in zip(units, device.axes)], \
+            device.make_hand()
+    units = given or [UNIT_ID_RANGE[0]] * len(args.modbus)
+    if len(args.modbus) not in (1, len(units)):
+        raise ParameterError("--modbus", len(args.modbus), f"one address for every unit, or one per unit ({len(units)})")
+    parameters, _, timing = drive_setup(args)
+    return [(unit, parameters, timing) for unit in units], SpaceHand(len(units))
