@@ -59,14 +59,16 @@ def profile_axes(args: argparse.Namespace) -> SimulatedDevice | None:
     return device if device is not None and device.multi_axis else None
 
 
-def id_list(flag: str, text: str, low: int, high: int, what: str) -> list[int]:
-    """``5,6,7`` -> [5, 6, 7]: distinct whole numbers in [low, high]; ParameterError naming ``flag`` otherwise."""
+def id_list(flag: str, text: str, low: int, high: int, what: str, distinct: bool = True) -> list[int]:
+    """``5,6,7`` -> [5, 6, 7]: whole numbers in [low, high] (``distinct``: none twice); ParameterError
+    naming ``flag`` otherwise."""
     try:
         ids = [int(part) for part in text.split(",")]
     except ValueError:
         ids = []
-    if not ids or len(set(ids)) != len(ids) or not all(low <= n <= high for n in ids):
-        raise ParameterError(flag, text, f"distinct {what} {low}..{high} separated by commas, e.g. {low},{low + 1},{low + 2}")
+    if not ids or (distinct and len(set(ids)) != len(ids)) or not all(low <= n <= high for n in ids):
+        raise ParameterError(flag, text, f"{'distinct ' if distinct else ''}{what} {low}..{high} separated by commas, "
+                             f"e.g. {low},{low + 1},{low + 2}")
     return ids
 
 
@@ -103,7 +105,9 @@ def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
     from drives.modbus.register_map import UNIT_ID_RANGE
     from sim_drive.space_operator import SpaceHand
 
-    given = id_list("--unit-ids", args.unit_ids, *UNIT_ID_RANGE, "Modbus unit ids") if args.unit_ids else None
+    # a unit id may repeat on servers of their own (unit 1 on each is the default), never on one
+    given = id_list("--unit-ids", args.unit_ids, *UNIT_ID_RANGE, "Modbus unit ids", distinct=False) if args.unit_ids \
+        else None
     if args.unit_id is not None:
         raise ParameterError("--unit-id", args.unit_id, "--unit-ids for several axes (one unit id per axis)")
     device = profile_axes(args)
@@ -118,5 +122,8 @@ def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
     units = given or [UNIT_ID_RANGE[0]] * len(args.modbus)
     if len(args.modbus) not in (1, len(units)):
         raise ParameterError("--modbus", len(args.modbus), f"one address for every unit, or one per unit ({len(units)})")
+    if len(args.modbus) == 1 and len(set(units)) != len(units):
+        raise ParameterError("--unit-ids", args.unit_ids, "distinct unit ids on one server (or one --modbus address "
+                             "per unit)")
     parameters, _, timing = drive_setup(args)
     return [(unit, parameters, timing) for unit in units], SpaceHand(len(units))

@@ -16,11 +16,12 @@ import pytest
 from drives.bus_config import open_bus
 from drives.cia402 import Command
 from haptic_bus.errors import ParameterError
-from sim_drive.cli import main
+from sim_drive.cli import _parse, build_parser, main
 from sim_drive.eds import eds_path
 from sim_drive.operator import HandModel
 from sim_drive.parameters import Timing
 from sim_drive.profile import read_simulated_device
+from sim_drive.setups import modbus_axes_setup
 
 NODE = 11
 BOOT_WAIT = 20.0  # s: the subprocess imports numpy, canopen, python-can first
@@ -89,7 +90,7 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
         (["--modbus", MODBUS_URL, "--profile", "/nonexistent.toml"], "an existing TOML file"),
         (["--frobnicate"], "unrecognized arguments: --frobnicate"),
         (["--interface", "virtual", "--channel", "x", "--unit-ids", "1,2"], "Modbus options need --modbus: --unit-ids"),
-        (["--modbus", MODBUS_URL, "--unit-ids", "1,1"], "--unit-ids = '1,1' is invalid; allowed: distinct Modbus unit ids"),
+        (["--modbus", MODBUS_URL, "--unit-ids", "1,1"], "'1,1' is invalid; allowed: distinct unit ids on one server"),
         (["--modbus", MODBUS_URL, "--unit-ids", "1,248"], "Modbus unit ids 1..247"),
         (["--modbus", MODBUS_URL, "--unit-ids", "1,2", "--unit-id", "3"], "--unit-id = 3 is invalid; allowed: --unit-ids"),
         (["--modbus", MODBUS_URL, "--profile", "gantry-3d"], "--unit-ids = None is invalid; allowed: one unit id per axis"),
@@ -100,6 +101,16 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
 def test_modbus_usage_errors_exit_2_with_one_line(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(argv) == 2
     assert message in one_error_line(capsys.readouterr().err)
+
+
+@pytest.mark.parametrize("profile", [[], ["--profile", "gantry-3d"]])
+def test_one_unit_id_may_repeat_on_servers_of_their_own(profile: list[str]) -> None:
+    """``--unit-ids 1,1,1`` with three ``--modbus`` addresses: unit 1 on each server, as ``haptic-bus run``
+    accepts it (and as the simulator does when no unit id is given)."""
+    urls = [arg for n in range(3) for arg in ("--modbus", f"tcp://127.0.0.1:{15020 + n}")]
+    args = _parse(build_parser(), [*urls, "--unit-ids", "1,1,1", *profile])
+    axes, _ = modbus_axes_setup(args)
+    assert [unit for unit, _, _ in axes] == [1, 1, 1]
 
 
 def test_modbus_address_in_use_exits_1_with_one_line(capsys: pytest.CaptureFixture[str]) -> None:
