@@ -17,6 +17,8 @@ import threading
 import time
 from typing import Any
 
+import pytest
+
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.record_stream import FLUSH_INTERVAL
 from haptic_bus.app.run_folder import read_run_folder
@@ -24,7 +26,7 @@ from haptic_bus.app.run_options import VIRTUAL
 from haptic_bus.app.run_writer import RunWriter
 from haptic_bus.app.runner import RunOptions, run_canopen
 from haptic_bus.app.writer_process import COMM
-from haptic_bus.bench.thread_tuning import WRITER, ThreadCpu
+from haptic_bus.bench.thread_tuning import ENDED, ThreadCpu
 
 NODE = 5
 CONTROLLER_NODE = 127
@@ -90,15 +92,33 @@ def test_while_cycling_the_control_process_runs_the_control_thread_and_no_writer
     assert _children_named(COMM) == []  # it ended with the run
 
 
-def test_the_bench_counts_the_writer_process_beside_the_threads(tmp_path: pathlib.Path) -> None:
-    with ThreadCpu(interval=0.05) as cpu:
-        writer = RunWriter(tmp_path, bus_log=True)
-        try:
-            time.sleep(0.2)  # a few samples while it runs
-        finally:
-            stats = writer.close()
-    assert stats == {"records": {}, "bus_log": {"frames": 0, "frames_lost": 0}}
-    assert cpu.by_name()[WRITER] > 0.0  # its start alone imports numpy and python-can: tens of ms of CPU at least
+def test_the_writer_process_reports_its_own_cpu(tmp_path: pathlib.Path) -> None:
+    writer = RunWriter(tmp_path, bus_log=True)
+    stats = writer.close()
+    assert stats.keys() == {"records", "bus_log", "writer"}
+    assert stats["records"] == {} and stats["bus_log"] == {"frames": 0, "frames_lost": 0}
+    assert stats["writer"]["cpu_s"] > 0.0  # its start alone imports python-can's ASC writer: tens of ms of CPU at least
+
+
+def test_the_bench_counts_each_thread_and_those_that_ended_meanwhile() -> None:
+    """No thread samples while the block runs: a thread that started and ended within it is counted
+    with the others that did (the process's CPU less its living threads')."""
+    def busy(seconds: float) -> None:
+        end = time.thread_time() + seconds
+        while time.thread_time() < end:
+            pass
+
+    with ThreadCpu() as cpu:
+        ended = threading.Thread(target=busy, args=(0.2,), name="ends-meanwhile")
+        ended.start()
+        ended.join()
+        busy(0.1)
+    threads = cpu.by_name()
+    assert "ends-meanwhile" not in threads
+    # 0.2 s and 0.1 s of CPU, each read to the ns; the thread's start and the block's reads of /proc add
+    # about a ms (the process's other threads, xdist's, are counted under their own names): within 50 ms
+    assert threads[ENDED] == pytest.approx(0.2, abs=0.05)
+    assert threads[threading.current_thread().name] == pytest.approx(0.1, abs=0.05)
 
 
 def test_a_run_whose_drive_is_in_this_process_writes_from_a_thread(haptic_sim: Any, tmp_path: pathlib.Path) -> None:

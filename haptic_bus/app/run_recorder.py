@@ -89,6 +89,8 @@ class RunRecorder:
         if "bus_log" in self.stats:
             self.journal.extra["bus_log"] = self.stats["bus_log"]
             written.append(self.folder / LOG_NAME)
+        if "writer" in self.stats:
+            self.journal.extra["writer"] = self.stats["writer"]
         self.journal.finish(summary, written)  # ended, before the pictures (which read it)
         run = read_run_folder(self.folder) if self.files and pictures else None
         if run is not None and run.drawable:

@@ -27,7 +27,8 @@ control process until told to stop, whose counts then carry the same line (``fai
 was written before stays.
 
 Messages from the control process come over a pipe (:func:`main`'s ``conn``).  The writer ends
-when told to (a last drain, then its counts sent back), or by itself when the control process
+when told to (a last drain, then its counts sent back, and its own CPU time: ``run.json``'s
+``writer.cpu_s``), or by itself when the control process
 is gone: the pipe's end of file (a ``kill -9`` closes it) or a parent process id that changed,
 noticed within one interval, again after a last drain.  Ctrl-C reaches the whole process group:
 the writer ignores it and ends when the control process says so.  A run whose drive is in the
@@ -244,5 +245,7 @@ def _serve(folder: pathlib.Path, frames: RingSpec | None, conn: Connection, pare
         if failed:
             logger.error("run writer: %s", exc)
     stats = writer.close()
+    # its own CPU (s): a process's every thread, its start and imports included; a thread's, its own
+    stats["writer"] = {"cpu_s": round(time.thread_time() if parent is None else time.process_time(), 4)}
     if writer.stopped or failed:  # after a failed write the control process still awaits them (else 30 s lost)
         conn.send(("stats", stats))

@@ -37,6 +37,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, nullcontext
 from pathlib import Path
@@ -47,7 +48,6 @@ import numpy as np
 from haptic_bus.app.profiles import AxesProfile, Profile, load_profile, one_axis_only
 from haptic_bus.app.realtime import RealtimeSettings, realtime_session
 from haptic_bus.app.run_json import read_document
-from haptic_bus.app.writer_process import COMM as WRITER_COMM
 from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import Spread
 from haptic_bus.control.clock import RealClock
@@ -138,60 +138,52 @@ def bare_clock(settings: RealtimeSettings, period: float, cycles: int) -> dict:
 
 
 WRITER = "writer process"  # by_name's key for the run's writer process (a child, not a thread)
+ENDED = "threads ended meanwhile"  # by_name's key for the threads that started and ended within the block
 
 
 class ThreadCpu:
-    """CPU seconds of each thread of this process (by name), and of the run's writer process
-    (:data:`WRITER`), sampled every ``interval`` s while the block runs (a thread or process that
-    ends between samples loses at most one interval of its account)."""
+    """CPU seconds of each thread of this process (by name) over the block, read from ``/proc`` as it
+    starts and ends, and of the threads that started and ended within it together (:data:`ENDED`:
+    the process's CPU less its living threads').  Nothing runs meanwhile: a sampling thread in the
+    control process would itself take the interpreter from the cycle (beside CPU hogs, one
+    preempted while it held it made the cycle wait)."""
 
-    def __init__(self, interval: float = 0.25) -> None:
-        self.interval = interval
-        self._baseline: dict[int, float] = {}
-        self._last: dict[int, tuple[str, float]] = {}
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._sample, name="bench-cpu-sampler", daemon=True)
+    def __init__(self) -> None:
+        self._start: dict[int, tuple[str, float]] = {}
+        self._end: dict[int, tuple[str, float]] = {}
+        self._process = (0.0, 0.0)
 
     def __enter__(self) -> ThreadCpu:
-        self._take()
-        self._baseline = {tid: used for tid, (_, used) in self._last.items()}  # threads born later start at 0
-        self._thread.start()
+        self._start = _threads_cpu()
+        self._process = (time.process_time(), 0.0)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join()
-
-    def _sample(self) -> None:
-        while not self._stop.wait(self.interval):
-            self._take()
-
-    def _take(self) -> None:
-        tick = os.sysconf("SC_CLK_TCK")
-        for thread in threading.enumerate():
-            try:
-                fields = Path(f"/proc/self/task/{thread.native_id}/stat").read_text().rsplit(")", 1)[1].split()
-                children = Path(f"/proc/self/task/{thread.native_id}/children").read_text().split()
-            except (OSError, IndexError):
-                continue
-            self._last[thread.native_id or 0] = (thread.name, (int(fields[11]) + int(fields[12])) / tick)
-            for child in children:  # the run's writer process, beside the threads (issue 26: report its CPU too)
-                try:
-                    stat = Path(f"/proc/{child}/stat").read_text()
-                except OSError:
-                    continue
-                name, rest = stat[stat.index("(") + 1:stat.rindex(")")], stat[stat.rindex(")") + 2:].split()
-                if name == WRITER_COMM:
-                    self._last[-int(child)] = (WRITER, (int(rest[11]) + int(rest[12])) / tick)
+        self._end = _threads_cpu()
+        self._process = (self._process[0], time.process_time())
 
     def by_name(self) -> dict[str, float]:
-        """CPU seconds per thread name since the block started (threads of one name summed)."""
+        """CPU seconds per thread name over the block (threads of one name summed), and :data:`ENDED`."""
         out: dict[str, float] = {}
-        for tid, (name, used) in self._last.items():
+        for tid, (name, used) in self._end.items():
             key = "canopen notifier" if name.startswith("Notifier") else name
-            if key != self._thread.name:
-                out[key] = out.get(key, 0.0) + used - self._baseline.get(tid, 0.0)
+            out[key] = out.get(key, 0.0) + used - self._start.get(tid, (name, 0.0))[1]
+        first, last = self._process
+        out[ENDED] = max(0.0, last - first - sum(out.values()))
         return {k: round(v, 3) for k, v in sorted(out.items(), key=lambda kv: -kv[1])}
+
+
+def _threads_cpu() -> dict[int, tuple[str, float]]:
+    """Each living thread's name and CPU seconds, by native id (``/proc``'s ``schedstat``: the time on a
+    CPU, in ns, where ``stat``'s user and system times count 10 ms ticks)."""
+    found: dict[int, tuple[str, float]] = {}
+    for thread in threading.enumerate():
+        try:
+            on_cpu = int(Path(f"/proc/self/task/{thread.native_id}/schedstat").read_text().split()[0])
+        except (OSError, IndexError, ValueError):
+            continue
+        found[thread.native_id or 0] = (thread.name, on_cpu * 1e-9)
+    return found
 
 
 @contextmanager
@@ -247,7 +239,9 @@ def controller_run(settings: RealtimeSettings, duration: float, bus: dict, proce
                                                   preflight_cycles=preflight_cycles),
                          node_id=node_id)
         document = read_document(result.folder)
-    figures = {"exit_reason": result.exit_reason, "error": result.error, "thread_cpu_s": threads.by_name(),
+    writer = document.get("writer", {}).get("cpu_s")  # the writer process's own account (issue 26: report it)
+    figures = {"exit_reason": result.exit_reason, "error": result.error,
+               "thread_cpu_s": threads.by_name() | ({WRITER: writer} if writer is not None else {}),
                "drive_policy": _POLICIES.get(os.sched_getscheduler(process.pid)), "scheduling": document.get("realtime")}
     if result.controller is not None and isinstance(result.controller.clock, RealClock):
         figures.update(clock_figures(result.controller.clock))
