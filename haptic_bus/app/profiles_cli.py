@@ -32,7 +32,7 @@ from haptic_bus.app.json_ready import json_ready
 from haptic_bus.errors import HapticBusError, ParameterError, Refusal
 from haptic_bus.profile.files import DEFAULT_PROFILE, resolve_profile, shipped_profiles
 from haptic_bus.profile.plant import ONE_AXIS_TABLES
-from haptic_bus.profile.reader import NAME_PATTERN
+from haptic_bus.profile.reader import NAME_PATTERN, misspelling
 from haptic_bus.profile.scene import FORCE_RANGE
 
 if TYPE_CHECKING:
@@ -159,13 +159,19 @@ def _still_missing(path: pathlib.Path) -> int | None:
     if not set(document) <= set(ONE_AXIS_TABLES):  # a misspelt table (the loader names it), or [[axes]]
         return None
     lacking = missing(document)
-    if not lacking:
-        return None
+    if not lacking or any(_misspelt(document, ask.table, ask.name) for ask in lacking):
+        return None  # complete, or a missing key misspelt beside it (``masss``): the loader names the misspelling
     print(f"profile {path}: {len(lacking)} value{'s' if len(lacking) > 1 else ''} still missing:")
     for ask in lacking:
         print(f"  {ask.key:<28} {ask.allowed}; {ask.why}")
     print(f"haptic-bus profiles check: error: {path}: still missing {', '.join(a.key for a in lacking)}", file=sys.stderr)
     return EXIT_INVALID
+
+
+def _misspelt(document: dict[str, Any], table: str, key: str) -> bool:
+    """Whether ``document``'s table ``table`` has a key that looks like a misspelling of ``key``."""
+    keys = document.get(table)
+    return isinstance(keys, dict) and misspelling(key, keys) is not None
 
 
 def _wall_report(device: DeviceLoop, K: float, B: float) -> CheckReport | TwoMassReport:

@@ -307,7 +307,20 @@ class RunFolder:
         for name, table in self.records.items():
             if table.torn_line:
                 notes.append(f"{self.path / name}: its last line was torn (written when the process died) and is left out")
+        for name, written in self._rows_written().items():
+            kept = self.records[name].cycles if name in self.records else 0
+            if kept < written:
+                notes.append(f"{self.path / name}: holds {kept} of the {written} cycles run.json says the run wrote "
+                             "(cut short or removed since): the pictures show only what it holds")
         return notes
+
+    def _rows_written(self) -> dict[str, int]:
+        """The rows ``run.json`` of an ended run says each record file received, by file name (none
+        where it says nothing: a run killed before it could)."""
+        one, several = self.document.get("record"), self.document.get("records")
+        counts = {RECORD_CSV: one} if isinstance(one, dict) else several if isinstance(several, dict) else {}
+        return {name: count["rows_written"] for name, count in counts.items()
+                if isinstance(count, dict) and isinstance(count.get("rows_written"), int)}
 
 
 def read_run_folder(folder: str | pathlib.Path) -> RunFolder:

@@ -215,13 +215,24 @@ class PassivityGate:
         transmission = self.device.transmission
         return passive_scales(loop) if transmission is None else two_mass_passive_scales(TwoMassLoop(loop, transmission))
 
+    def _with_margin(self, loop: WallLoop) -> str:
+        """What passes with the policy's safety margin on a rigid device: the passive K and B of the loop
+        with ``b`` lowered by the margin (``Re Z = b + wall terms``, so a margin ``>= s`` at ``b`` is
+        passivity at ``b - s``); nothing when there is no margin, or it exceeds ``b``."""
+        margin = self.policy.safety_margin
+        if margin <= 0.0 or margin > loop.b:
+            return ""
+        stiffness, damping = passive_limits(dataclasses.replace(loop, b=loop.b - margin))
+        return (f"; with margin >= {margin:g} N s/m: K at this B {stiffness.describe('N/m', 6)}, "
+                f"B at this K {damping.describe('N s/m', 6)}")
+
     def _explain(self, label: str, loop: WallLoop, verdict: Verdict) -> str:
         """A refusal's reason; only a refusal pays for the passive intervals it names."""
         transmission = self.device.transmission
         if transmission is None:
             stiffness, damping = passive_limits(loop)
             limits = (f"passive K at this B: {stiffness.describe('N/m', 6)}; "
-                      f"passive B at this K: {damping.describe('N s/m', 6)}")
+                      f"passive B at this K: {damping.describe('N s/m', 6)}") + self._with_margin(loop)
         else:
             largest = largest_passive_stiffness(TwoMassLoop(loop, transmission))
             limits = ("two-mass criterion; passive K at this B from 0: "

@@ -54,6 +54,14 @@ def read_document(path: pathlib.Path) -> dict[str, Any]:
                             "UTF-8 text (TOML 1.0)") from None
 
 
+def misspelling(key: str, keys: Iterable[object]) -> str | None:
+    """The one of ``keys`` (a table's keys) that looks like a misspelling of the missing ``key``
+    (:data:`MISSPELLING_CUTOFF`), or None."""
+    close = difflib.get_close_matches(key, [k for k in keys if isinstance(k, str) and k != key], n=1,
+                                      cutoff=MISSPELLING_CUTOFF)
+    return close[0] if close else None
+
+
 def refuse_duplicates(path: pathlib.Path, where: str, key: str, values: Iterable[object]) -> None:
     """ParameterError naming the field ``where[i].key`` of the first of ``values`` (one an entry of the
     array of tables ``where``; None: no value) that an earlier entry has, and that entry's field."""
@@ -92,10 +100,9 @@ class Reader:
     def refuse_misspelling(self, key: str, allowed: str) -> None:
         """Refuse an unread key of the table that looks like the missing required ``key`` (module docstring);
         ``allowed`` says what ``key`` takes."""
-        unread = [k for k in self.table if k not in self.used and isinstance(k, str)]
-        close = difflib.get_close_matches(key, unread, n=1, cutoff=MISSPELLING_CUTOFF)
-        if close:
-            raise profile_error(self.path, self.field(close[0]), self.table[close[0]],
+        close = misspelling(key, (k for k in self.table if k not in self.used))
+        if close is not None:
+            raise profile_error(self.path, self.field(close), self.table[close],
                                 f"no such key; did you mean {key}? ({key} is required: {allowed})")
 
     def _wrap(self, key: str, check: Callable[[object], Any], value: object) -> Any:
