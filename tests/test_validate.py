@@ -165,6 +165,26 @@ def test_a_hidden_extra_delay_is_found_over_modbus(capsys: pytest.CaptureFixture
     assert abs(finding["value"] - 0.3) < 4.0 * finding["uncertainty"], finding
 
 
+def test_a_handle_pushed_out_of_the_travel_cannot_tell(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path) -> None:
+    """The profile's own operator left on: a steady 3 N against the hold's 158 N/m would settle 19 mm out,
+    past the 10 mm of travel.  The probe ends where the handle first leaves it, the run stops: exit 1,
+    one line, and ``validate.json`` says so."""
+    with simulated_drive("canopen", PROFILE) as under:  # the profile's hand pushes once the drive is powered
+        result = run_cli(capsys, "validate", PROFILE, *under.args, "--virtual-time", "--out", str(tmp_path / "run"),
+                         "--no-plots")
+    assert result.code == 1 and result.out == ""
+    (line,) = result.err.splitlines()
+    assert line.startswith("haptic-bus validate: cannot tell: the handle went +") and "beyond --travel 10 mm" in line
+    document = json.loads((tmp_path / "run" / "validate.json").read_text())
+    left = document["left_travel"]
+    assert document["verdict"] == "cannot tell" and left["travel_m"] == 0.01
+    # found at the first cycle past 10 mm: at most one cycle's step beyond it, the 3 N push's terminal
+    # speed (3 N / 20 N s/m = 0.15 m/s) times T = 1 ms; within the probe's 6.13 s
+    assert 0.01 < left["offset_m"] <= 0.01 + 0.15e-3 and 0.0 < left["time_s"] < 6.13
+    run = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert run["exit_reason"] == "stopped"
+
+
 def test_a_hidden_transmission_is_found_as_its_resonance(capsys: pytest.CaptureFixture[str],
                                                          tmp_path: pathlib.Path) -> None:
     code, report, _ = _validate(capsys, tmp_path, "canopen", "--no-plots", transmission=TRANSMISSION)

@@ -82,6 +82,12 @@ def run_validate(args: argparse.Namespace) -> int:
                              pictures=not args.no_plots)
     result, validation = outcome.result, outcome.validation
     files = [str(path) for path in outcome.files]
+    if outcome.cannot_tell is not None:
+        if args.json:
+            print(json.dumps({"verdict": "cannot tell", "summary": outcome.cannot_tell, "exit_reason": result.exit_reason,
+                              "files": files}))
+        print(f"haptic-bus validate: {outcome.cannot_tell}", file=sys.stderr)
+        return EXIT_NO
     if validation is None:
         if args.json:
             print(json.dumps({"exit_reason": result.exit_reason, "error": result.error, "files": files}))

@@ -38,7 +38,7 @@ from haptic_bus.app.derate_table import DerateTable
 from haptic_bus.app.profiles import Profile
 from haptic_bus.app.run_folder import VALIDATE_JSON
 from haptic_bus.app.run_kinds import OneAxisRun
-from haptic_bus.app.run_options import RunOptions
+from haptic_bus.app.run_options import RunOptions, StopRequest
 from haptic_bus.app.runner import RunResult, run
 from haptic_bus.control.clock import CycleClock
 from haptic_bus.control.controller import WallController
@@ -64,13 +64,15 @@ class ValidateRun(OneAxisRun):
     travel: float
     hold: Hold
     plan: ProbePlan
+    stop: StopRequest
 
     @classmethod
-    def prepare(cls, profile: Profile, travel: float) -> ValidateRun:
-        """The hold and the plan for the profile's gate (Refusal if no gentle hold passes it)."""
+    def prepare(cls, profile: Profile, travel: float, stop: StopRequest) -> ValidateRun:
+        """The hold and the plan for the profile's gate (Refusal if no gentle hold passes it); ``stop``
+        is asked of when the handle leaves the travel (:class:`~haptic_bus.validate.probe.Probe`)."""
         loop = profile.device_loop()
         hold = gentle_hold(loop, profile.gate())
-        return cls(profile, travel, hold, ProbePlan.for_loop(loop, hold))
+        return cls(profile, travel, hold, ProbePlan.for_loop(loop, hold), stop)
 
     @property
     def duration(self) -> float:
@@ -91,7 +93,7 @@ class ValidateRun(OneAxisRun):
         limit = min(self.profile.force_limit, scaling.max_force)
         rule = AmplitudeRule.design(self.plan, self.predict(gate), scaling.velocity_per_count,
                                     scaling.newton_per_permille, limit, self.travel)
-        return ProbeScene.holding(self.hold, Probe(self.plan, rule))
+        return ProbeScene.holding(self.hold, Probe(self.plan, rule, self.travel, self.stop.event.set))
 
     def inside(self, scene: CompiledScene, origin: float) -> str | None:
         """Never inside: the hold is centred where the handle rests."""
@@ -133,11 +135,13 @@ def _stored_energy(prediction: Prediction, plan: ProbePlan, hold: Hold, loop: De
 
 @dataclasses.dataclass
 class ValidateOutcome:
-    """How the run ended (``result``) and, when it completed, the ``validation`` and the files written."""
+    """How the run ended (``result``) and, when it completed, the ``validation`` and the files written;
+    ``cannot_tell``: why the run could not measure (the handle left the travel), None otherwise."""
 
     result: RunResult
     validation: Validation | None
     files: list[pathlib.Path]
+    cannot_tell: str | None = None
 
 
 def validate_drive(profile: Profile, bus: Mapping[str, Any] | str, options: RunOptions, *, travel: float,
@@ -145,14 +149,16 @@ def validate_drive(profile: Profile, bus: Mapping[str, Any] | str, options: RunO
                    tolerance: float = DEFAULT_TOLERANCE, pictures: bool = True) -> ValidateOutcome:
     """Validate ``profile``'s model on the drive ``bus`` names (as :func:`~haptic_bus.app.runner.run`);
     ``options.duration`` is replaced by the plan's.  Refusal (nothing enabled) if no gentle hold passes the gate."""
-    kind = ValidateRun.prepare(profile, travel)
+    kind = ValidateRun.prepare(profile, travel, options.stop)
     options = dataclasses.replace(options, duration=kind.duration, plots=False)
     result = run(profile, bus, options, node_id=node_id, unit_id=unit_id, controller_node_id=controller_node_id, kind=kind)
     files = list(result.files)
     controller = result.controller
+    scene = controller.scenes.history[0].scene if controller is not None else None  # as ValidateRun.scene gave it
+    if isinstance(scene, ProbeScene) and scene.probe.left is not None:
+        return _left_travel(result, files, scene.probe, kind.plan.period)
     if result.exit_reason != "completed" or controller is None or controller.cycles != kind.plan.cycles:
         return ValidateOutcome(result, None, files)
-    scene = controller.scenes.history[0].scene  # the probe the run rendered, as :meth:`ValidateRun.scene` gave it
     gate = controller.gate  # validate derates nothing: the gate is the run's own
     assert isinstance(scene, ProbeScene) and isinstance(gate, PassivityGate)
     probe = scene.probe
@@ -173,3 +179,18 @@ def validate_drive(profile: Profile, bus: Mapping[str, Any] | str, options: RunO
         margin = gate.judge(profile.compiled_scene()).worst_margin  # the run's gate, at its loop
         files += draw(validation, result.folder, None if margin is None or math.isinf(margin) else margin)
     return ValidateOutcome(result, validation, files)
+
+
+def _left_travel(result: RunResult, files: list[pathlib.Path], probe: Probe, period: float) -> ValidateOutcome:
+    """The run that ended because the handle left the travel: ``cannot tell`` in ``validate.json`` and the
+    outcome, saying how far, when and what to do (the command's exit 1)."""
+    cycle, offset = probe.left or (0, 0.0)
+    said = (f"cannot tell: the handle went {offset * 1e3:+.3g} mm from where it rested, {cycle * period:.3g} s into "
+            f"the probe, beyond --travel {probe.travel * 1e3:.3g} mm either side (the probe moves it at most half "
+            "that): something else pushes it (a hand, gravity, a spring); the probe ended there, the hold alone "
+            "pulled it back -- validate needs the handle free, as identify does")
+    document = {"verdict": "cannot tell", "summary": said, "folder": str(result.folder),
+                "left_travel": {"time_s": cycle * period, "offset_m": offset, "travel_m": probe.travel}}
+    path = result.folder / VALIDATE_JSON
+    path.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
+    return ValidateOutcome(result, None, [*files, path], said)

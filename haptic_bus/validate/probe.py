@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -175,14 +175,23 @@ class AmplitudeRule:
 
 class Probe:
     """The probe's state across cycles: the cycle count, the rest position ``centre`` (m, the first
-    cycle's), the velocity noise measured in the quiet phase (m/s rms) and the peak chosen (N)."""
+    cycle's), the velocity noise measured in the quiet phase (m/s rms) and the peak chosen (N).
 
-    def __init__(self, plan: ProbePlan, rule: AmplitudeRule) -> None:
+    ``travel`` (m either side of the rest position) is the free room the user gave: the first cycle
+    that finds the handle further out ends the probe for good (the hold alone then acts, pulling it
+    back), is kept as ``left`` (the cycle and the offset, m) and calls ``on_leave()`` once.  A handle
+    that goes that far under a probe designed to move it half as far is pushed by something else
+    (a hand, gravity, a spring): the response then measures that too."""
+
+    def __init__(self, plan: ProbePlan, rule: AmplitudeRule, travel: float, on_leave: Callable[[], object]) -> None:
         self.plan = plan
         self.rule = rule
+        self.travel = travel
+        self.on_leave = on_leave
         self.wave: list[float] = plan.wave().tolist()
         self.cycle = 0
         self.centre: float | None = None
+        self.left: tuple[int, float] | None = None
         self.noise = 0.0
         self.amplitude = 0.0
         self._moments = [0, 0.0, 0.0]  # count, sum (m/s), sum of squares (m^2/s^2)
@@ -193,6 +202,11 @@ class Probe:
         self.cycle = k + 1
         if self.centre is None:
             self.centre = x
+        if self.left is None and abs(x - self.centre) > self.travel:
+            self.left = (k, x - self.centre)
+            self.on_leave()
+        if self.left is not None:
+            return self.centre, 0.0
         quiet = self.plan.quiet
         if k < quiet:
             if 2 * k >= quiet:
@@ -211,7 +225,8 @@ class Probe:
         """The probe force (N) of cycles ``0 .. cycles - 1``, as :meth:`step` gave them."""
         k = np.arange(cycles)
         wave = np.asarray(self.wave)
-        return np.where(k >= self.plan.quiet, self.amplitude * wave[(k - self.plan.quiet) % self.plan.samples], 0.0)
+        pushing = (k >= self.plan.quiet) & (k < (self.left[0] if self.left is not None else cycles))
+        return np.where(pushing, self.amplitude * wave[(k - self.plan.quiet) % self.plan.samples], 0.0)
 
 
 @dataclass(frozen=True)
