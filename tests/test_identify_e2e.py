@@ -145,12 +145,15 @@ def test_data_that_cannot_support_the_estimate_exit_1_and_write_nothing(tmp_path
     ["--node-id", "5", "--duration", "0.5"],
     ["--node-id", "5", "--write-profile", "/nonexistent-folder/x.toml"],
     ["--node-id", "5", "--write-profile", "{profile}"],
+    ["--node-id", "5", "--write-profile", "{existing}"],  # an identified profile is kept: --force replaces it
 ])
 def test_invalid_input_is_refused_before_the_bus_is_touched(arguments: list[str], tmp_path: Path,
                                                             capsys: pytest.CaptureFixture[str]) -> None:
     """Exit 2 with one line on stderr; the interface does not exist, so touching the bus would be exit 1."""
     profile = controller_profile(tmp_path)
-    arguments = [a.replace("{profile}", str(profile)) for a in arguments]
+    existing = tmp_path / "identified.toml"
+    existing.write_text("# an earlier identify's\n")
+    arguments = [a.replace("{profile}", str(profile)).replace("{existing}", str(existing)) for a in arguments]
     try:
         code: object = main(["identify", "--profile", str(profile), "--interface", "no-such-interface", *arguments])
     except SystemExit as usage:  # argparse's own refusals end the parse
@@ -158,6 +161,7 @@ def test_invalid_input_is_refused_before_the_bus_is_touched(arguments: list[str]
     err = capsys.readouterr().err
     assert code == 2, err
     assert len(err.strip().splitlines()) == 1 and "haptic-bus identify" in err
+    assert existing.read_text() == "# an earlier identify's\n"  # untouched
 
 
 # --------------------------------------------------------------------------- a hidden profile; Ctrl-C of two processes

@@ -3,7 +3,7 @@
     haptic-bus identify --profile P --node-id N [--interface I --channel C --bitrate R --bus-option K=V ...]
                         [--controller-node-id M]
     haptic-bus identify --profile P --modbus URL [--unit-id U]
-        [--duration 20] [--travel 0.01] [--max-delay 4] [--virtual-time] [--json] [--write-profile FILE]
+        [--duration 20] [--travel 0.01] [--max-delay 4] [--virtual-time] [--json] [--write-profile FILE [--force]]
 
 The profile gives the drive's scaling, the loop period, the force limit and the ``[safety]``
 settings (its ``[device]`` numbers are what is being checked, so its scene is not judged).  The
@@ -13,11 +13,11 @@ force limit and ``--travel`` m either side of the start, then the fit
 with standard errors and 95 % intervals, the residual check, the velocity model 0x606C matches,
 and what the data cannot support; or ``--json``.  ``--write-profile FILE`` writes a copy of the
 profile with the measured values (:mod:`haptic_bus.app.identify_profile`), only when the data
-support them.
+support them; a file that exists is replaced only with ``--force``.
 
 Exit status: 0 the data support the estimate; 1 the handle was refused (not free to move), the
 data cannot support the estimate, or a drive/bus error; 2 invalid input (before any bus or
-file is touched); 130 interrupted.
+file is touched: an existing --write-profile without --force included); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -63,7 +63,9 @@ def add_identify_parser(subparsers: argparse._SubParsersAction) -> argparse.Argu
                         help="largest whole loop delay searched, samples")
     parser.add_argument("--virtual-time", action="store_true", help="lock-step with a simulated drive (no pacing)")
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
-    parser.add_argument("--write-profile", metavar="FILE", help="write a copy of the profile with the measured values")
+    parser.add_argument("--write-profile", metavar="FILE", help="write a copy of the profile with the measured values "
+                        "(a new file: --force replaces one that exists)")
+    parser.add_argument("--force", action="store_true", help="let --write-profile replace an existing file")
     return parser
 
 
@@ -82,6 +84,9 @@ def _validate(args: argparse.Namespace) -> tuple[DriveAddress, pathlib.Path | No
     folder = target.parent if str(target.parent) else pathlib.Path(".")
     if target.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK):
         raise ParameterError("--write-profile", args.write_profile, "a file in an existing, writable folder", "identify")
+    if target.exists() and not args.force:  # as profiles new: an identified profile is not lost to the next run
+        raise ParameterError("--write-profile", args.write_profile, "a file that does not exist yet (--force replaces "
+                             "it)", "identify")
     return address, target
 
 
