@@ -28,8 +28,9 @@ from haptic_bus.app.cli import main
 from haptic_bus.app.identify_cli import format_identification
 from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen
 from haptic_bus.app.profiles import load_profile, read_profile
+from haptic_bus.errors import Refusal
 from sim_drive.canopen.slave import CanopenSimDrive
-from sim_drive.operator import HandModel, OperatorModel
+from sim_drive.operator import HandModel, NoOperator, OperatorModel
 from sim_drive.parameters import DeviceParameters
 from sim_drive.profile import read_simulated_device
 from tests.cli_process import cli_process, reaped
@@ -220,6 +221,24 @@ def test_identify_against_a_drive_with_a_hidden_profile_writes_the_profile(tmp_p
     assert "coulomb_friction" not in tomllib.loads(written.read_text())["device"]  # the truth stays the drive's
     assert "# What the controller believes" in written.read_text()  # the user's comments are kept
     assert drive.states[-2:] == [State.OPERATION_ENABLED, State.SWITCH_ON_DISABLED]  # disabled at the end, not faulted
+
+
+def test_a_written_profile_whose_walls_the_measured_device_refuses_is_said_so(tmp_path: Path,
+                                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """stiff-wall's drive with half a sample of delay hidden: identify measures it and writes the profile
+    (exit 0: the data support the estimate), whose hard stop the gate then refuses at the measured
+    delay; one line on stderr says so, naming the wall, before the operator runs it."""
+    written = tmp_path / "identified.toml"
+    with simulated_drive("canopen", "stiff-wall") as drive:
+        drive.drive.set_operator(NoOperator())  # identify needs the handle free
+        drive.drive.reconfigure(extra_delay=0.5)
+        result = run_cli(capsys, "identify", *drive.args, "--virtual-time", "--profile", "stiff-wall", "--duration", "5",
+                         "--write-profile", str(written))
+    assert result.code == 0 and f"wrote {written}" in result.out, result.err
+    (line,) = result.err.splitlines()
+    assert line.startswith(f"haptic-bus identify: {written} holds what was measured, and the gate refuses its walls")
+    with pytest.raises(Refusal):
+        load_profile(written)
 
 
 @pytest.mark.slow  # SIGINT to a real command process is the point

@@ -126,12 +126,28 @@ def run_identify(args: argparse.Namespace) -> int:
         print(format_identification(found, f"{profile.name} ({profile.path}); {describe_link(outcome.link)}, {pacing}"))
         if written is not None:
             print(f"wrote {written}")
+    if written is not None and (refused := _refusal_of(written)) is not None:
+        print(f"haptic-bus identify: {written} holds what was measured, and the gate refuses its walls on that device: "
+              f"{refused}", file=sys.stderr)
     if outcome.error:
         said = outcome.error if outcome.error.startswith(outcome.exit_reason) else f"{outcome.exit_reason}: {outcome.error}"
         print(f"haptic-bus identify: {said}", file=sys.stderr)
     elif found is not None and not found.supported:
         print("haptic-bus identify: the data cannot support the estimate (see the findings)", file=sys.stderr)
     return outcome.exit_status
+
+
+def _refusal_of(written: pathlib.Path) -> str | None:
+    """Why the gate refuses the written profile's scene on the device it now states (None: it passes):
+    the measured ``b``, ``D`` and velocity model can refuse walls the profile's own values passed."""
+    from haptic_bus.app.profiles import load_profile
+    from haptic_bus.errors import ParameterError, Refusal
+
+    try:
+        load_profile(written)
+    except (Refusal, ParameterError) as refused:
+        return str(refused)
+    return None
 
 
 # --------------------------------------------------------------------------- the human report
