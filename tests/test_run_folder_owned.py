@@ -104,10 +104,11 @@ def test_the_lock_goes_with_a_killed_process(tmp_path: pathlib.Path, capsys: pyt
     assert not (folder / LOCK_NAME).exists()  # the killed holder's file, taken over and removed by the run that ended
 
 
-def test_a_run_into_an_earlier_runs_folder_replaces_that_run_and_keeps_the_users_files(tmp_path: pathlib.Path) -> None:
+def test_a_run_into_an_earlier_runs_folder_replaces_that_run_and_keeps_the_users_files(
+        tmp_path: pathlib.Path, caplog: pytest.LogCaptureFixture) -> None:
     """A folder given again held the earlier run's record.csv and pictures beside the new run.json
     (``plot`` then drew the old record under the new run's end).  The new run clears what a run
-    writes, before its bus; other files stay."""
+    writes, before its bus, and says so in one warning; other files stay."""
     folder = tmp_path / "run"
     folder.mkdir()
     earlier = ["record.csv", "record-x.csv", "bus.asc", "timeline.png", "region.png", "validate.json"]
@@ -122,3 +123,6 @@ def test_a_run_into_an_earlier_runs_folder_replaces_that_run_and_keeps_the_users
     assert left == ["bus.asc", "mine.png", "notes.txt", "record-mine.csv", "run.json"]  # bus.asc and run.json: this run's
     assert read_run(folder)["exit_reason"] == "drive error" and "an earlier run's" not in (folder / "bus.asc").read_text()
     assert (folder / "notes.txt").read_text() == (folder / "mine.png").read_text() == "an earlier run's\n"
+    (said,) = [r.getMessage() for r in caplog.records if r.name == "haptic_bus.app.run_folder"]
+    assert said == (f"run folder {folder}: this run replaces the earlier run's run.json, record.csv, bus.asc, "
+                    "timeline.png, region.png, validate.json, record-x.csv")

@@ -41,6 +41,7 @@ import functools
 import hashlib
 import importlib.metadata
 import json
+import logging
 import pathlib
 import platform
 import sys
@@ -71,6 +72,8 @@ VALIDATE_JSON, BODE_PNG, RE_Z_PNG = "validate.json", "validate-bode.png", "valid
 RUNNING = "running"  # run.json's status until the run ends
 _DISTRIBUTIONS = ("numpy", "scipy", "python-can", "canopen", "pymodbus", "matplotlib")
 
+logger = logging.getLogger(__name__)
+
 
 def record_name(axis: str) -> str:
     """The file of axis ``axis``' record in a multi-axis run's folder (one axis' is :data:`RECORD_CSV`)."""
@@ -100,7 +103,8 @@ def own_run_folder(out: str | pathlib.Path | None, profile_name: str) -> tuple[p
     """The run's folder (:func:`prepare_run_folder`), owned by this process (:func:`~haptic_bus.app.folder_lock.own_folder`:
     another run's folder is refused) and cleared of what an earlier run left there that a run writes
     (``run.json``, the records, ``bus.asc``, the pictures, validate's files), so that a folder given
-    again never holds two runs; ParameterError naming the folder otherwise."""
+    again never holds two runs (one warning line names what was replaced); ParameterError naming the
+    folder otherwise."""
     folder = prepare_run_folder(out, profile_name)
     lock = own_folder(folder)
     earlier = [RUN_JSON, RECORD_CSV, LOG_NAME, *PICTURES, VALIDATE_JSON, BODE_PNG, RE_Z_PNG, *_axis_records(folder)]
@@ -111,6 +115,8 @@ def own_run_folder(out: str | pathlib.Path | None, profile_name: str) -> tuple[p
         lock.release()
         raise ParameterError("--out", str(folder), f"a folder whose earlier run this run can replace (nothing removed; "
                              f"{exc.filename}: {exc.strerror})", "run") from None
+    if found:
+        logger.warning("run folder %s: this run replaces the earlier run's %s", folder, ", ".join(p.name for p in found))
     return folder, lock
 
 
