@@ -146,6 +146,8 @@ def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | s
     if not isinstance(profile, (Profile, AxesProfile)):  # a name or a path: what hb.load_profile takes
         raise ParameterError("profile", profile, "a Profile or an AxesProfile, as hb.load_profile(name_or_path) "
                              "returns it", "run")
+    if not isinstance(options, RunOptions):
+        raise ParameterError("options", options, "a RunOptions, e.g. hb.RunOptions(duration=1.0)", "run")
     several = isinstance(profile, AxesProfile)
     _refuse_misplaced_ids(several, isinstance(bus, (str, Sequence)), node_id, unit_id, unit_ids)
     if isinstance(bus, (str, Sequence)):
