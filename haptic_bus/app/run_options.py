@@ -4,6 +4,7 @@ and how its end maps to the command's exit status (:func:`exit_status`).  Durati
 from __future__ import annotations
 
 import dataclasses
+import os
 import pathlib
 import signal
 import threading
@@ -72,6 +73,13 @@ class RunOptions:
                                  "None (the profile's) or " + " or ".join(repr(p) for p in START_POLICIES), "run options")
         if not isinstance(self.scheduling, RealtimeSettings):
             raise ParameterError("scheduling", self.scheduling, "a RealtimeSettings", "run options")
+        for name in ("live", "reset_fault", "bus_log", "plots"):  # a truthy "no" would reset a drive's fault
+            if not isinstance(getattr(self, name), bool):
+                raise ParameterError(name, getattr(self, name), "True or False", "run options")
+        if self.out_dir is not None and not isinstance(self.out_dir, (str, os.PathLike)):
+            raise ParameterError("out_dir", self.out_dir, "None (runs/<UTC>-<profile>) or a folder's path", "run options")
+        if not isinstance(self.stop, StopRequest):
+            raise ParameterError("stop", self.stop, "a StopRequest", "run options")
 
     @property
     def wall_paced(self) -> bool:

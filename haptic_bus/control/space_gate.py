@@ -247,7 +247,18 @@ class SpaceGate:
                            for K, B, n in wall.parts)
         v = wall.verdict
         return (f"{'+'.join(wall.objects)} ({parts}) is {v.outcome}: margin {v.margin:.4g} N s/m at theta = "
-                f"{v.critical_theta:.3g} rad, allowed: margin >= {self.policy.safety_margin:g} N s/m")
+                f"{v.critical_theta:.3g} rad, allowed: margin >= {self.policy.safety_margin:g} N s/m"
+                + self._limits(wall))
+
+    def _limits(self, wall: SpaceWall) -> str:
+        """A one-object refusal's passive ``K`` at its ``B`` and ``B`` at its ``K`` along its normal (as the
+        1-D gate's refusal names them); a pair's walls are judged together, with no such line."""
+        if len(wall.parts) != 1:
+            return ""
+        K, B, n = wall.parts[0]
+        stiffness = passive_along(self.axes, n, K, B, "K").describe("N/m", 6)
+        damping = passive_along(self.axes, n, K, B, "B").describe("N s/m", 6)
+        return f"; along that normal, passive K at this B: {stiffness}; passive B at this K: {damping}"
 
 
 def _judge(axes: tuple[WallLoop, ...], parts: Parts) -> CoupledVerdict:

@@ -1,0 +1,46 @@
+"""A wall-paced run disables its drives at its end while its control thread still holds the real-time
+session (breaker11a: undoing SCHED_FIFO, mlockall and the frozen gc first took 11 ms idle and 75 ms
+beside CPU-bound work, longer than gantry-3d's 60 ms RPDO deadline while the drives held their last
+torque: all three drives of a run that said "completed" were left in FAULT, EMCY 0x8250)."""
+
+from __future__ import annotations
+
+import os
+import pathlib
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+import haptic_bus as hb
+from drives.axes_master import AxesMaster
+from drives.canopen.drive import CanopenDrive
+from haptic_bus.testing.run_files import read_run_folder
+
+RESET_ON_FORK = getattr(os, "SCHED_RESET_ON_FORK", 0)  # the session asks for it beside SCHED_FIFO
+
+
+@pytest.mark.parametrize(("profile", "master"), [("cia402-handle", CanopenDrive), ("gantry-3d", AxesMaster)])
+def test_the_end_of_a_run_disables_under_the_run_s_scheduling(
+        haptic_sim: Callable[..., Any], tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch,
+        profile: str, master: type) -> None:
+    policies: list[int] = []
+    disable = master.disable
+
+    def disable_and_say_how(self: Any) -> None:  # the real disable, its thread's policy noted first
+        policies.append(os.sched_getscheduler(0) & ~RESET_ON_FORK)
+        disable(self)
+
+    monkeypatch.setattr(master, "disable", disable_and_say_how)
+    still = {} if profile == "gantry-3d" else {"operator": {"model": "constant", "level": 0.0}}  # gantry's hand waits
+    drive = haptic_sim(profile, interface="lockstep", **still)  # for every axis enabled; the handle's would push now
+    options = hb.RunOptions(duration=0.05, pacing="wall", out_dir=tmp_path, start_in_contact="ramp", live=False,
+                            bus_log=False, plots=False, preflight_cycles=2)
+    result = hb.run(hb.load_profile(profile), drive.bus, options, **drive.run_kwargs())
+    assert result.exit_reason == "completed", result.error
+    got = read_run_folder(result.folder).document["realtime"]["got"]
+    assert policies, "the run never disabled its drive(s)"
+    if "SCHED_FIFO" not in got:
+        pytest.skip(f"the OS did not grant SCHED_FIFO here ({got}): the run's policy is the thread's own")
+    assert policies[-1] == os.SCHED_FIFO
+    assert os.sched_getscheduler(0) & ~RESET_ON_FORK != os.SCHED_FIFO  # and the session was undone after it
