@@ -49,15 +49,18 @@ def object_label(spec: ObjectSpec) -> str:
 
 INDEX_RANGE = (0x0001, 0xFFFF)
 SUBINDEX_RANGE = (0x00, 0xFF)
-OBJECT_SYNTAX = "INDEX[:SUB], INDEX 0x0001..0xFFFF and SUB 0..255, decimal or 0x-hexadecimal (e.g. 0x6041, 0x1018:4)"
+OBJECT_SYNTAX = ("INDEX[:SUB], INDEX 0x0001..0xFFFF (0x-hexadecimal, or decimal), SUB 00..FF hexadecimal as "
+                 "object labels print it (e.g. 0x6041, 0x1018:04, 0x1A00:10 is sub-index 16)")
 
 
 def parse_object(text: str) -> tuple[int, int]:
-    """``"0x6041"`` -> (0x6041, 0), ``"0x1018:4"`` -> (0x1018, 4); ParameterError naming the syntax otherwise."""
+    """``"0x6041"`` -> (0x6041, 0), ``"0x1018:04"`` -> (0x1018, 4), ``"0x1A00:10"`` -> (0x1A00, 0x10): the
+    sub-index hexadecimal, as :func:`object_label` prints it, so a label read back names the same
+    object; ParameterError naming the syntax otherwise."""
     index_text, colon, sub_text = text.strip().partition(":")
     try:
         index = int(index_text, 0)
-        subindex = int(sub_text, 0) if colon else 0
+        subindex = int(sub_text, 16) if colon else 0
     except ValueError:
         raise ParameterError("object", text, OBJECT_SYNTAX) from None
     if not (INDEX_RANGE[0] <= index <= INDEX_RANGE[1] and SUBINDEX_RANGE[0] <= subindex <= SUBINDEX_RANGE[1]):

@@ -14,7 +14,8 @@ import pytest
 from canopen.objectdictionary import import_od
 
 from drives.canopen.sdo_values import TYPES
-from drives.cia402 import OperationMode, State
+from drives.cia402 import DataType, ObjectSpec, OperationMode, State
+from drives.object_access import object_label, parse_object
 from haptic_bus.app.sdo_cli import TYPE_NAMES
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.eds import eds_path
@@ -115,8 +116,20 @@ def test_no_drive_answering_is_one_line(channel: str, sim: CanopenSimDrive, caps
                            "within 1 s") and "heartbeats heard from node(s) 5" in line
 
 
+def test_an_object_label_read_back_names_the_same_object() -> None:
+    """Labels print the sub-index in hexadecimal (``0x1400:05``, ``0x1A00:10``); what they print is what
+    the commands take: ``0x1A00:10`` read sub-index 10 (0x0A) and ``0x1400:05`` was refused (a decimal
+    05) before."""
+    for subindex in range(256):
+        spec = ObjectSpec(0x1A00, "x", DataType.UNSIGNED8, "ro", subindex=subindex)
+        assert parse_object(object_label(spec)) == (0x1A00, subindex)
+    assert parse_object("0x1A00:10") == parse_object("0x1A00:0x10") == (0x1A00, 16)
+    assert parse_object("0x1018:4") == (0x1018, 4)
+
+
 INVALID = [
-    (["read", "0x10000"], "object = '0x10000' is invalid; allowed: INDEX[:SUB], INDEX 0x0001..0xFFFF and SUB 0..255"),
+    (["read", "0x10000"], "object = '0x10000' is invalid; allowed: INDEX[:SUB], INDEX 0x0001..0xFFFF (0x-hexadecimal, "
+                          "or decimal), SUB 00..FF hexadecimal"),
     (["read", "0"], "object = '0' is invalid"),
     (["read", "six"], "object = 'six' is invalid"),
     (["read", "0x6041:256"], "object = '0x6041:256' is invalid"),

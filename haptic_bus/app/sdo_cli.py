@@ -37,7 +37,8 @@ def add_sdo_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentP
     """Register ``sdo`` on ``subparsers``; it sets ``handler``."""
     parser = add_command(subparsers, "sdo", SDO_HELP, run_sdo)
     parser.add_argument("action", choices=("read", "write"), help="read (SDO upload) or write (SDO download)")
-    parser.add_argument("object", metavar="INDEX[:SUB]", help="the object, e.g. 0x6041, 0x1018:4 (sub-index 0 if omitted)")
+    parser.add_argument("object", metavar="INDEX[:SUB]",
+                        help="the object, e.g. 0x6041, 0x1018:04 (sub-index hexadecimal, as printed; 0 if omitted)")
     parser.add_argument("value", nargs="?", metavar="VALUE", help="what to write (write only), in the object's type")
     add_drive_arguments(parser)
     parser.add_argument("--type", metavar="T", help=f"CANopen: the value's type, one of {' '.join(TYPE_NAMES)} "
