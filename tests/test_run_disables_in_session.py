@@ -44,3 +44,26 @@ def test_the_end_of_a_run_disables_under_the_run_s_scheduling(
         pytest.skip(f"the OS did not grant SCHED_FIFO here ({got}): the run's policy is the thread's own")
     assert policies[-1] == os.SCHED_FIFO
     assert os.sched_getscheduler(0) & ~RESET_ON_FORK != os.SCHED_FIFO  # and the session was undone after it
+
+
+def test_a_drive_that_faults_as_the_run_ends_makes_it_a_drive_error(
+        haptic_sim: Callable[..., Any], tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The disable walk accepts FAULT as an end (a drive that faulted is as safe as a disabled one), so a
+    drive that faulted between the last cycle and the disable (its RPDO deadline, EMCY 0x8250) left the
+    run "completed", exit 0, and the next run refused for the fault.  The run now reads each drive's
+    state after the walk: a drive error naming the drive and its error code."""
+    drive = haptic_sim("cia402-handle", interface="lockstep", operator={"model": "constant", "level": 0.0})
+    disable = CanopenDrive.disable
+
+    def fault_then_disable(self: CanopenDrive) -> None:  # what a 60 ms stall after the last cycle did
+        drive.sim.enter_fault(0x8250)
+        disable(self)
+
+    monkeypatch.setattr(CanopenDrive, "disable", fault_then_disable)
+    options = hb.RunOptions(duration=0.05, pacing="virtual", out_dir=tmp_path, live=False, bus_log=False, plots=False)
+    result = hb.run(hb.load_profile("cia402-handle"), drive.bus, options, **drive.run_kwargs())
+    assert result.exit_reason == "drive error" and result.summary is not None and result.summary.cycles == 50
+    assert result.error is not None and result.error.startswith("CANopen node 5: in FAULT after the run's last cycle: "
+                                                                 "drive is in FAULT (statusword 0x"), result.error
+    assert "0x8250" in result.error
+    assert read_run_folder(result.folder).document["exit_reason"] == "drive error"

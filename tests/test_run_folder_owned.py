@@ -9,6 +9,7 @@ a real run through the Python API in a thread, a real child process holding the 
 from __future__ import annotations
 
 import json
+import logging
 import os
 import pathlib
 import signal
@@ -109,6 +110,7 @@ def test_a_run_into_an_earlier_runs_folder_replaces_that_run_and_keeps_the_users
     """A folder given again held the earlier run's record.csv and pictures beside the new run.json
     (``plot`` then drew the old record under the new run's end).  The new run clears what a run
     writes, before its bus, and says so in one warning; other files stay."""
+    caplog.set_level(logging.WARNING, logger="haptic_bus.app.run_folder")  # whatever an earlier CLI test set the root to
     folder = tmp_path / "run"
     folder.mkdir()
     earlier = ["record.csv", "record-x.csv", "bus.asc", "timeline.png", "region.png", "validate.json"]

@@ -158,6 +158,18 @@ def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | s
     return canopen_rig(profile, bus, options, node_id, controller_node_id)
 
 
+def _refuse_faulted_at_the_end(drives: Sequence[Any]) -> None:
+    """DriveFault for the first drive that sits in FAULT after the run's disable walk (which accepts
+    FAULT as an end), read acyclically: a drive that faulted as the run ended (its RPDO deadline, a
+    stall between the last cycle and the disable) makes the run a drive error, not "completed"."""
+    for each in drives:
+        try:
+            each.refuse_fault()
+        except DriveFault as fault:
+            raise DriveFault(fault.node, f"in FAULT after the run's last cycle: {fault.message}", fault.code,
+                             fault.state) from fault
+
+
 def _refuse_misplaced_ids(several: bool, modbus: bool, node_id: int | None, unit_id: int | None,
                           unit_ids: Sequence[int] | None) -> None:
     """ParameterError naming the first of run()'s drive ids given where it names nothing: ``node_id``
@@ -245,6 +257,8 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                 # while the drives still held their last torque: every drive of a completed run in FAULT
                 if summary.exit_reason in ("completed", "stopped", "interrupted"):
                     drive.disable()
+                if summary.exit_reason in ("completed", "stopped"):
+                    _refuse_faulted_at_the_end(drives)
             reason, error = summary.exit_reason, summary.error
             if reason == "stopped" and options.stop.interrupted:
                 reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr
