@@ -61,6 +61,7 @@ INVALID = [
     (["demo", "--duration", "0"], "argument --duration: duration = 0 is invalid"),
     ([*CHECK, "--velocity", "bogus"], "velocity = 'bogus' is invalid; allowed: 'point', 'average'"),
     ([*CHECK, "--delay", "-1"], "delay = -1.0 is invalid; allowed: a finite real in [0, 1000] samples"),
+    (["run", "gantry-3d", BUS, "--node-ids", "5,6,7"], "unrecognized arguments: --node-ids 5,6,7"),  # the command's own
 ]
 
 

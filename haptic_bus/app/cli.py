@@ -428,7 +428,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if argv and argv[0] in _PASS_THROUGH:
             return _PASS_THROUGH[argv[0]](argv[1:])
         try:
-            args = build_parser().parse_args(argv)
+            args = _parse(build_parser(), argv)
         except SystemExit as done:  # help (0), or a usage error (2) whose one line argparse has printed
             return int(done.code or 0)
         _configure_logging(args.verbose, args.quiet)
@@ -440,6 +440,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return EXIT_OK
+
+
+def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
+    """``argv`` parsed; an argument no option of the command takes is that command's usage error
+    (``haptic-bus run: error: unrecognized arguments: ...``), where argparse's own names only ``haptic-bus``."""
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))  # argparse's own table
+        commands.choices[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
+    return args
 
 
 def _dispatch(args: argparse.Namespace) -> int:
