@@ -187,6 +187,17 @@ def test_a_multi_axis_profile_runs_through_the_same_fixtures(haptic_sim, haptic_
     assert recorded.summary["least_energy"] >= 0.0
 
 
-def test_a_multi_axis_profile_takes_no_truth(haptic_sim) -> None:
-    with pytest.raises(ParameterError, match="none for a multi-axis profile"):
-        haptic_sim("gantry-3d", mass=2.0)
+@pytest.mark.parametrize("call, message", [
+    (dict(mass=2.0), "simulated drive: truth = ['mass'] is invalid; allowed: none for a multi-axis profile"),
+    (dict(node_id=0), "simulated drive: node_id = 0 is invalid; allowed: none for a multi-axis profile (its [[axes]]"),
+    (dict(unit_id=2, interface="modbus"), "simulated drive: unit_id = 2 is invalid; allowed: none for a multi-axis"),
+    (dict(servers=0, interface="modbus"), "simulated drive: servers = 0 is invalid; allowed: 1, or one Modbus server "
+                                          "per axis (3) with interface='modbus'"),
+    (dict(servers=3), "simulated drive: servers = 3 is invalid"),  # servers are Modbus's
+], ids=["truth", "node-id", "unit-id", "no-server", "servers-on-can"])
+def test_a_multi_axis_profile_refuses_what_it_states_itself(haptic_sim, call: dict, message: str) -> None:
+    """What the profile states (each axis' ids, truth and hand) is not given again: one line naming the
+    argument (a node_id was ignored, and servers=0 was called '--modbus = 0'), before any bus is opened."""
+    with pytest.raises(ParameterError) as refused:
+        haptic_sim("gantry-3d", **call)
+    assert message in str(refused.value) and "\n" not in str(refused.value)

@@ -44,7 +44,7 @@ Fixtures
       as the profile states it, one simulated drive per axis and its hand in space (no truth
       replaced): on a CAN bus one slave per axis with the profile's node ids; over Modbus one
       unit per axis (the profile's unit ids, else 1, 2, 3, ...) on one server, or on ``servers``
-      = one server per axis.
+      = one server per axis; ``node_id`` and ``unit_id`` are refused (the profile names them).
     - ``profile``: a shipped profile name or a TOML path: the device, loop timing and operator
       the drive simulates (None: the simulator's defaults, nobody holding the handle).
     - ``truth``: the hidden truth, the profile's ``[device]`` values replaced: ``mass`` kg,
@@ -176,16 +176,25 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
     folder: list[pathlib.Path] = []
 
     def start(profile: ProfileSource | None = None, *, interface: str = "virtual",
-              node_id: int = DEFAULT_NODE_ID, unit_id: int = DEFAULT_UNIT_ID, servers: int = 1, timing: str | None = None,
+              node_id: int | None = None, unit_id: int | None = None, servers: int = 1, timing: str | None = None,
               operator: Mapping[str, Any] | None = None, **truth: Any) -> SimDriveNode:
-        spec = None if interface == MODBUS else _private_bus(interface)
+        from haptic_bus.errors import ParameterError
+
         several = _axes_profile(profile)
+        axes = len(several.axes) if several is not None else 1
+        if isinstance(servers, bool) or not isinstance(servers, int) or servers not in (1, axes) or \
+                (servers > 1 and interface != MODBUS):
+            raise ParameterError("servers", servers, f"1, or one Modbus server per axis ({axes}) with interface="
+                                 f"{MODBUS!r}", CONTEXT)
+        spec = None if interface == MODBUS else _private_bus(interface)
         if several is not None:
             if truth or operator is not None or timing is not None:
-                from haptic_bus.errors import ParameterError
-
                 raise ParameterError("truth", sorted(truth) or operator or timing, "none for a multi-axis profile (it is "
                                      "simulated as it states its [[axes]] and hand)", CONTEXT)
+            for name, value in (("node_id", node_id), ("unit_id", unit_id)):
+                if value is not None:
+                    raise ParameterError(name, value, "none for a multi-axis profile (its [[axes]] name each axis' "
+                                         "node and unit ids)", CONTEXT)
             node = start_axes(spec, several, sim_process, servers)
             started.append(node)
             return node
@@ -195,11 +204,11 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
                 folder.append(tmp_path_factory.mktemp("haptic-sim"))
             path = write_truth(profile, truth, operator, folder[0])
         elif truth or operator is not None:
-            from haptic_bus.errors import ParameterError
-
             raise ParameterError("profile", None, "a shipped profile name or a TOML path when a truth or an operator "
                                                   "is given (the rest of the device comes from it)", CONTEXT)
-        node = start_sim_drive(spec, unit_id if spec is None else node_id, timing, path, sim_process, servers)
+        address = (DEFAULT_UNIT_ID if unit_id is None else unit_id) if spec is None else \
+            (DEFAULT_NODE_ID if node_id is None else node_id)
+        node = start_sim_drive(spec, address, timing, path, sim_process, servers)
         started.append(node)
         return node
 
