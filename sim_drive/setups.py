@@ -112,6 +112,9 @@ def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
         raise ParameterError("--unit-id", args.unit_id, "--unit-ids for several axes (one unit id per axis)")
     device = profile_axes(args)
     if device is not None:
+        if len(args.modbus) not in (1, len(device.axes)):
+            raise ParameterError("--modbus", len(args.modbus), f"one address for every axis of the profile, or one per "
+                                 f"axis ({len(device.axes)})")
         stated = [axis.unit_id for axis in device.axes]
         units = given or (stated if None not in stated else [UNIT_ID_RANGE[0]] * len(args.modbus))
         if len(units) != len(device.axes) or (len(args.modbus) == 1 and len(set(units)) != len(units)):
