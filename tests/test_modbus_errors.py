@@ -207,8 +207,10 @@ def test_fault_bit_raises_drive_fault_with_the_error_code(running) -> None:
 def test_wrong_unit_and_wrong_word_order_are_refused_at_connect() -> None:
     with ModbusSimServer(unit_id=UNIT) as server:
         with ModbusDrive("127.0.0.1", server.port, unit_id=UNIT + 1, timeout=0.2) as drive:
-            with pytest.raises(DriveProtocolError, match=r"Modbus unit 8 .*0x0B GATEWAY TARGET DEVICE FAILED TO RESPOND"):
-                drive.connect()
+            with pytest.raises(DriveProtocolError, match=r"Modbus unit 8 .*0x0B GATEWAY TARGET DEVICE FAILED TO RESPOND: "
+                                                         rf"no unit 8 answers at tcp://127.0.0.1:{server.port}, check the "
+                                                         "unit id$"):
+                drive.connect()  # the same words wherever the first read is (status, sdo: breaker11a)
         with ModbusDrive("127.0.0.1", server.port, unit_id=UNIT, word_order="little", timeout=0.2) as drive:
             with pytest.raises(DriveProtocolError, match="other word order"):
                 drive.connect()

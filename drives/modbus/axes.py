@@ -32,8 +32,7 @@ from drives.axes_master import MAX_AXES, AxesMaster, trip_together
 from drives.base import AxesDriveCycle, CyclicInputs, DriveCycle
 from drives.errors import DriveError, DriveRefusal, ParameterError
 from drives.modbus.drive import ModbusDrive
-
-NO_UNIT_CODES = (0x0A, 0x0B)  # Modbus exceptions: gateway path unavailable, gateway target failed to respond
+from drives.modbus.register_map import NO_UNIT_CODES
 
 
 class _CycleRequests:

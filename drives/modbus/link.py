@@ -25,7 +25,7 @@ from pymodbus.pdu.register_message import ReadHoldingRegistersRequest, WriteMult
 
 from drives.cia402_master import CyclicStats
 from drives.errors import DriveError, DriveProtocolError, DriveRefusal, DriveTimeout, ModbusLinkLost, ParameterError
-from drives.modbus.register_map import describe_range, exception_name
+from drives.modbus.register_map import NO_UNIT_CODES, describe_range, exception_name
 
 
 @dataclass(slots=True)
@@ -153,7 +153,9 @@ class ModbusLink:
         if response.function_code & 0x80:
             self.stats.exceptions += 1
             code = int(getattr(response, "exception_code", 0))
-            raise DriveRefusal(self.name, f"{what}: exception {exception_name(code)}", code)
+            nobody = f": no unit {request.dev_id} answers at {self.address.url}, check the unit id" \
+                if code in NO_UNIT_CODES else ""
+            raise DriveRefusal(self.name, f"{what}: exception {exception_name(code)}{nobody}", code)
         return response
 
     def read_holding(self, unit_id: int, address: int, count: int) -> list[int]:

@@ -344,6 +344,7 @@ EXCEPTION_NAMES = {
     0x0A: "GATEWAY PATH UNAVAILABLE",
     0x0B: "GATEWAY TARGET DEVICE FAILED TO RESPOND",
 }
+NO_UNIT_CODES = (0x0A, 0x0B)  # what a gateway answers for a unit id nobody answers for: path unavailable, target silent
 
 
 def exception_name(code: int) -> str:

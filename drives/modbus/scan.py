@@ -40,6 +40,7 @@ from drives.errors import DriveError, DriveRefusal, DriveTimeout, ModbusLinkLost
 from drives.modbus.link import ModbusAddress, ModbusLink, ModbusStats
 from drives.modbus.register_map import (
     MAP_IDENTITY,
+    NO_UNIT_CODES,
     REGISTER_BY_NAME,
     UNIT_ID_RANGE,
     RegisterSpec,
@@ -52,7 +53,6 @@ from drives.scanned_device import ScannedDevice
 
 __all__ = ["UNIT_ID_RANGE", "ModbusScan", "ModbusUnit", "scan_modbus"]
 
-NO_DEVICE_EXCEPTIONS = (0x0A, 0x0B)  # gateway path unavailable, gateway target failed to respond
 DEVICE_IDENTIFICATION_NAMES = {0x00: "vendor_name", 0x01: "product_code", 0x02: "revision"}
 _IDENTITY_REGISTER = REGISTER_BY_NAME["map_identity"]
 _MODES_REGISTER = register_for_object(SUPPORTED_DRIVE_MODES)
@@ -151,7 +151,7 @@ class _Prober:
         except DriveTimeout:
             return None
         except DriveRefusal as exc:
-            if exc.code in NO_DEVICE_EXCEPTIONS:
+            if exc.code in NO_UNIT_CODES:
                 return None
             notes.append(exc.message)
             registers = None
