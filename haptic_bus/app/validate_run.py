@@ -156,7 +156,7 @@ def validate_drive(profile: Profile, bus: Mapping[str, Any] | str, options: RunO
     controller = result.controller
     scene = controller.scenes.history[0].scene if controller is not None else None  # as ValidateRun.scene gave it
     if isinstance(scene, ProbeScene) and scene.probe.left is not None:
-        return _left_travel(result, files, scene.probe, kind.plan.period)
+        return _left_travel(result, files, scene.probe)
     if result.exit_reason != "completed" or controller is None or controller.cycles != kind.plan.cycles:
         return ValidateOutcome(result, None, files)
     gate = controller.gate  # validate derates nothing: the gate is the run's own
@@ -181,16 +181,27 @@ def validate_drive(profile: Profile, bus: Mapping[str, Any] | str, options: RunO
     return ValidateOutcome(result, validation, files)
 
 
-def _left_travel(result: RunResult, files: list[pathlib.Path], probe: Probe, period: float) -> ValidateOutcome:
-    """The run that ended because the handle left the travel: ``cannot tell`` in ``validate.json`` and the
-    outcome, saying how far, when and what to do (the command's exit 1)."""
+def left_travel_said(probe: Probe) -> str:
+    """What validate says of a ``probe`` that found the handle beyond its travel: how far (mm), when (s after
+    the probe began, or in the quiet hold before it: the cycle times the period, less the quiet phase's
+    cycles) and what to do.  The run stops at that cycle, its drive disabled where the handle is."""
     cycle, offset = probe.left or (0, 0.0)
-    said = (f"cannot tell: the handle went {offset * 1e3:+.3g} mm from where it rested, {cycle * period:.3g} s into "
-            f"the probe, beyond --travel {probe.travel * 1e3:.3g} mm either side (the probe moves it at most half "
-            "that): something else pushes it (a hand, gravity, a spring); the probe ended there, the hold alone "
-            "pulled it back -- validate needs the handle free, as identify does")
+    plan = probe.plan
+    when = (f"{(cycle - plan.quiet) * plan.period:.3g} s into the probe" if cycle >= plan.quiet else
+            f"{cycle * plan.period:.3g} s into the quiet hold, before the probe began")
+    return (f"cannot tell: the handle went {offset * 1e3:+.4g} mm from where it rested, {when}, beyond --travel "
+            f"{probe.travel * 1e3:.4g} mm either side (the probe moves it at most half that): something else pushes "
+            "it (a hand, gravity, a spring); the run stopped there, its drive disabled -- validate needs the handle "
+            "free, as identify does")
+
+
+def _left_travel(result: RunResult, files: list[pathlib.Path], probe: Probe) -> ValidateOutcome:
+    """The run that ended because the handle left the travel: ``cannot tell`` in ``validate.json`` and the
+    outcome, saying how far, when and what to do (the command's exit 1; :func:`left_travel_said`)."""
+    cycle, offset = probe.left or (0, 0.0)
+    said = left_travel_said(probe)
     document = {"verdict": "cannot tell", "summary": said, "folder": str(result.folder),
-                "left_travel": {"time_s": cycle * period, "offset_m": offset, "travel_m": probe.travel}}
+                "left_travel": {"time_s": cycle * probe.plan.period, "offset_m": offset, "travel_m": probe.travel}}
     path = result.folder / VALIDATE_JSON
     path.write_text(json.dumps(document, indent=2, allow_nan=False) + "\n")
     return ValidateOutcome(result, None, [*files, path], said)

@@ -56,6 +56,7 @@ import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from haptic_bus.app.arguments import OneLineParser
 from haptic_bus.bench.interrupts import Interrupts, SectionInterrupted
 from haptic_bus.bench.size import FULL, QUICK, SMOKE, Size
 from haptic_bus.bench.timing import machine
@@ -190,7 +191,7 @@ def _json_default(value):
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``haptic-bus bench``."""
-    parser = argparse.ArgumentParser(prog="haptic-bus bench", description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog="haptic-bus bench", description=__doc__.split("\n\n")[0])
     sizes = parser.add_mutually_exclusive_group()
     sizes.add_argument("--quick", action="store_const", dest="size", const=QUICK, default=FULL,
                        help="the short run CI uses: every section, fewer points, shorter runs")

@@ -45,6 +45,8 @@ Fixtures
       replaced): on a CAN bus one slave per axis with the profile's node ids; over Modbus one
       unit per axis (the profile's unit ids, else 1, 2, 3, ...) on one server, or on ``servers``
       = one server per axis; ``node_id`` and ``unit_id`` are refused (the profile names them).
+    - a one-axis profile: ``node_id`` on a CAN bus, ``unit_id`` over Modbus; the other one is
+      refused (it was ignored: ``unit_id=3`` on a CAN bus started node 5).
     - ``profile``: a shipped profile name or a TOML path: the device, loop timing and operator
       the drive simulates (None: the simulator's defaults, nobody holding the handle).
     - ``truth``: the hidden truth, the profile's ``[device]`` values replaced: ``mass`` kg,
@@ -198,6 +200,10 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
             node = start_axes(spec, several, sim_process, servers)
             started.append(node)
             return node
+        unused, other, named = ("node_id", node_id, "a Modbus unit: unit_id") if spec is None else \
+            ("unit_id", unit_id, "a CANopen node: node_id")
+        if other is not None:
+            raise ParameterError(unused, other, f"none with interface={interface!r} ({named})", CONTEXT)
         path = None
         if profile is not None:
             if not folder:

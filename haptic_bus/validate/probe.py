@@ -178,8 +178,8 @@ class Probe:
     cycle's), the velocity noise measured in the quiet phase (m/s rms) and the peak chosen (N).
 
     ``travel`` (m either side of the rest position) is the free room the user gave: the first cycle
-    that finds the handle further out ends the probe for good (the hold alone then acts, pulling it
-    back), is kept as ``left`` (the cycle and the offset, m) and calls ``on_leave()`` once.  A handle
+    that finds the handle further out ends the probe for good (the hold alone then acts until the run
+    stops), is kept as ``left`` (the cycle and the offset, m) and calls ``on_leave()`` once.  A handle
     that goes that far under a probe designed to move it half as far is pushed by something else
     (a hand, gravity, a spring): the response then measures that too."""
 
