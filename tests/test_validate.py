@@ -178,6 +178,17 @@ def test_a_heavier_handle_is_named_mass_not_a_resonance_below_the_probe(capsys: 
     assert abs(mass["value"] - 1.3) < 4.0 * mass["uncertainty"] and abs(friction["value"] - 20.0) < 4.0 * friction["uncertainty"]
 
 
+def test_a_hidden_friction_leads_the_finding(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path) -> None:
+    """b 30 N s/m behind the profile's 20: the rigid fit names both, the one that departs first (it
+    was told "mass: 1 +- 1.7e-06 kg; friction: 30 ...", the unchanged mass leading: breaker12)."""
+    code, report, _ = _validate(capsys, tmp_path, "canopen", "--no-plots", friction=30.0)
+    assert code == 1 and [finding["kind"] for finding in report["findings"]] == ["friction", "mass"]
+    friction, mass = report["findings"]
+    # the hidden 30 N s/m and the profile's 1 kg, each within four standard errors
+    assert abs(friction["value"] - 30.0) < 4.0 * friction["uncertainty"] and abs(mass["value"] - 1.0) < 4.0 * mass["uncertainty"]
+    assert report["summary"].split("best explained by ")[1].startswith("friction: 30")
+
+
 def test_a_handle_pushed_out_of_the_travel_cannot_tell(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path) -> None:
     """The profile's own operator left on: a steady 3 N against the hold's 158 N/m would settle 19 mm out,
     past the 10 mm of travel.  The probe ends where the handle first leaves it, the run stops: exit 1,
@@ -188,6 +199,7 @@ def test_a_handle_pushed_out_of_the_travel_cannot_tell(capsys: pytest.CaptureFix
     assert result.code == 1 and result.out == ""
     (line,) = result.err.splitlines()
     assert line.startswith("haptic-bus validate: cannot tell: the handle went +") and "beyond --travel 10 mm" in line
+    assert line.endswith(f"(the run's files: {tmp_path / 'run'})")
     document = json.loads((tmp_path / "run" / "validate.json").read_text())
     left = document["left_travel"]
     assert document["verdict"] == "cannot tell" and left["travel_m"] == 0.01

@@ -86,7 +86,7 @@ def run_validate(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps({"verdict": "cannot tell", "summary": outcome.cannot_tell, "exit_reason": result.exit_reason,
                               "files": files}))
-        print(f"haptic-bus validate: {outcome.cannot_tell}", file=sys.stderr)
+        print(f"haptic-bus validate: {outcome.cannot_tell} (the run's files: {result.folder})", file=sys.stderr)
         return EXIT_NO
     if validation is None:
         if args.json:
