@@ -19,7 +19,9 @@ The candidate with the least ``chi2 + 2 k`` (Akaike's criterion, ``k`` its free 
 departure.  Least ``chi2`` alone would name the candidate with more parameters whenever it can mimic a
 simpler one: a transmission with ``c = b`` and ``k = b^2/m`` behind a motor mass ``M`` is exactly a
 rigid handle of mass ``M`` and friction ``b``, so a handle 20 % heavier than the profile's was named a
-3.2 Hz "resonance" of damping ratio 1 (its ``chi2`` lower by 0.1 of 406 numbers).  Uncertainties are
+3.2 Hz "resonance" of damping ratio 1 (its ``chi2`` lower by 0.1 of 406 numbers).  Akaike's penalty alone
+still let it win by chance (:func:`unseen_resonance`): a resonance the probe cannot have seen as one is
+ranked after every other candidate.  Uncertainties are
 one standard deviation from the fit's covariance ``(J^T J)^-1``, scaled up by the reduced
 chi-square when the model leaves more residual than the noise explains (so an approximate model
 does not claim its noise-level precision); a derived quantity (frequency, damping) carries the
