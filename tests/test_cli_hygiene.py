@@ -95,6 +95,14 @@ def test_invalid_input_is_exit_2_one_line_and_nothing_touched(
     assert list(work.iterdir()) == [] and sorted(p.name for p in inputs.iterdir()) == ["malformed.toml"]
 
 
+@pytest.mark.parametrize("argv", [["profiles", "list", "--x"], ["profiles", "show", "cia402-handle", "--x"]])
+def test_a_stray_argument_is_the_usage_error_of_the_subcommand_it_was_given_to(
+        argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    result = run_cli(capsys, *argv)
+    assert result.code == 2 and result.out == ""
+    assert result.err_lines == [f"haptic-bus profiles {argv[1]}: error: unrecognized arguments: --x"]
+
+
 def test_sim_modbus_help_is_help(capsys: pytest.CaptureFixture[str]) -> None:
     result = run_cli(capsys, "sim", "--modbus", "--help")
     assert result.code == 0 and result.err == ""

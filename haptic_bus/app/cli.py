@@ -447,9 +447,18 @@ def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespa
     (``haptic-bus run: error: unrecognized arguments: ...``), where argparse's own names only ``haptic-bus``."""
     args, extra = parser.parse_known_args(argv)
     if extra:
-        commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))  # argparse's own table
-        commands.choices[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
+        _chosen(parser, args).error(f"unrecognized arguments: {' '.join(extra)}")
     return args
+
+
+def _chosen(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
+    """The (sub)command ``args`` chose under ``parser``, down to its last level (``profiles list``)."""
+    while True:
+        commands = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)  # argparse's table
+        choice = None if commands is None else getattr(args, commands.dest, None)
+        if commands is None or choice is None:
+            return parser
+        parser = commands.choices[choice]
 
 
 def _dispatch(args: argparse.Namespace) -> int:
