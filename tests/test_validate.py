@@ -192,7 +192,7 @@ def test_a_hidden_friction_leads_the_finding(capsys: pytest.CaptureFixture[str],
 def test_a_handle_pushed_out_of_the_travel_cannot_tell(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path) -> None:
     """The profile's own operator left on: a steady 3 N against the hold's 158 N/m would settle 19 mm out,
     past the 10 mm of travel.  The probe ends where the handle first leaves it, the run stops: exit 1,
-    one line, and ``validate.json`` says so."""
+    one line, and ``validate.json`` says so, as ``run.json``'s error does (it said only "stopped": breaker12)."""
     with simulated_drive("canopen", PROFILE) as under:  # the profile's hand pushes once the drive is powered
         result = run_cli(capsys, "validate", PROFILE, *under.args, "--virtual-time", "--out", str(tmp_path / "run"),
                          "--no-plots")
@@ -207,7 +207,7 @@ def test_a_handle_pushed_out_of_the_travel_cannot_tell(capsys: pytest.CaptureFix
     # speed (3 N / 20 N s/m = 0.15 m/s) times T = 1 ms; within the probe's 6.13 s
     assert 0.01 < left["offset_m"] <= 0.01 + 0.15e-3 and 0.0 < left["time_s"] < 6.13
     run = json.loads((tmp_path / "run" / "run.json").read_text())
-    assert run["exit_reason"] == "stopped"
+    assert run["exit_reason"] == "stopped" and run["error"] == document["summary"]  # run.json says why it stopped too
 
 
 def test_a_hidden_transmission_is_found_as_its_resonance(capsys: pytest.CaptureFixture[str],

@@ -21,11 +21,18 @@ EXIT_STATUS = {"completed": 0, "stopped": 0, "refused": 1, "drive error": 1, "wr
 
 
 class StopRequest:
-    """How a run is asked to end: SIGTERM stops it (exit 0), SIGINT interrupts it (exit 130)."""
+    """How a run is asked to end: SIGTERM stops it (exit 0), SIGINT interrupts it (exit 130), and a
+    part of the run that found a reason to stop it (:meth:`ask`) says why (``run.json``'s ``error``)."""
 
     def __init__(self) -> None:
         self.event = threading.Event()
         self.interrupted = False
+        self.why: str | None = None
+
+    def ask(self, why: str) -> None:
+        """Stop the run at the next cycle boundary, ``why`` the one line its end records."""
+        self.why = self.why or why
+        self.event.set()
 
     def install(self) -> None:
         """SIGINT and SIGTERM set the event (the loop ends at the next cycle boundary)."""

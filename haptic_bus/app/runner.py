@@ -263,6 +263,8 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             if reason == "stopped" and options.stop.interrupted:
                 reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr
                 summary.exit_reason, summary.error = reason, error  # run.json's summary says it as its status does
+            elif reason == "stopped" and error is None and options.stop.why is not None:
+                error = summary.error = options.stop.why  # what in the run stopped it (validate: the handle left its travel)
     except Refusal as exc:  # refused before the drive is enabled
         reason, error = "refused", str(exc)
     except DriveError as exc:

@@ -93,7 +93,8 @@ class ValidateRun(OneAxisRun):
         limit = min(self.profile.force_limit, scaling.max_force)
         rule = AmplitudeRule.design(self.plan, self.predict(gate), scaling.velocity_per_count,
                                     scaling.newton_per_permille, limit, self.travel)
-        return ProbeScene.holding(self.hold, Probe(self.plan, rule, self.travel, self.stop.event.set))
+        probe = Probe(self.plan, rule, self.travel, lambda: self.stop.ask(left_travel_said(probe)))  # run.json says why
+        return ProbeScene.holding(self.hold, probe)
 
     def inside(self, scene: CompiledScene, origin: float) -> str | None:
         """Never inside: the hold is centred where the handle rests."""
