@@ -15,6 +15,7 @@ from typing import Any
 
 from drives.bus_config import merge_bus_options
 from drives.cia301 import NODE_ID_RANGE
+from haptic_bus.app.arguments import id_sequence
 from haptic_bus.errors import ParameterError
 from sim_drive.operator import OperatorModel, operator_from_spec
 from sim_drive.parameters import DeviceParameters, Timing
@@ -60,16 +61,11 @@ def profile_axes(args: argparse.Namespace) -> SimulatedDevice | None:
 
 
 def id_list(flag: str, text: str, low: int, high: int, what: str, distinct: bool = True) -> list[int]:
-    """``5,6,7`` -> [5, 6, 7]: whole numbers in [low, high] (``distinct``: none twice); ParameterError
-    naming ``flag`` otherwise."""
+    """``5,6,7`` -> [5, 6, 7] (:func:`~haptic_bus.app.arguments.id_sequence`); ParameterError naming ``flag`` otherwise."""
     try:
-        ids = [int(part) for part in text.split(",")]
-    except ValueError:
-        ids = []
-    if not ids or (distinct and len(set(ids)) != len(ids)) or not all(low <= n <= high for n in ids):
-        raise ParameterError(flag, text, f"{'distinct ' if distinct else ''}{what} {low}..{high} separated by commas, "
-                             f"e.g. {low},{low + 1},{low + 2}")
-    return ids
+        return id_sequence(text, what, low, high, distinct)
+    except ValueError as allowed:
+        raise ParameterError(flag, text, str(allowed)) from None
 
 
 def node_ids(text: str) -> list[int]:

@@ -79,9 +79,25 @@ node_id = whole("node id", *NODE_ID_RANGE)
 unit_id = whole("unit id", *UNIT_ID_RANGE)
 
 
+def id_sequence(text: str, what: str, low: int, high: int, distinct: bool = False) -> list[int]:
+    """``5,6,7`` -> [5, 6, 7], in the order given (one per axis): whole numbers in ``low..high``
+    (``distinct``: none twice); ValueError, its text what is allowed, otherwise."""
+    try:
+        ids = [int(part.strip(), 0) for part in text.split(",")]
+    except ValueError:
+        ids = []
+    if not ids or (distinct and len(set(ids)) != len(ids)) or not all(low <= n <= high for n in ids):
+        raise ValueError(f"{'distinct ' if distinct else ''}{what} {low}..{high} separated by commas, e.g. "
+                         f"{low},{low + 1},{low + 2}")
+    return ids
+
+
 def unit_ids(text: str) -> list[int]:
-    """``1,2,3``: Modbus unit ids (each 1..247), one per axis in axis order."""
-    return [unit_id(part.strip()) for part in text.split(",")]
+    """``1,2,3``: Modbus unit ids (each 1..247), one per axis in axis order (one may serve several)."""
+    try:
+        return id_sequence(text, "Modbus unit ids", *UNIT_ID_RANGE)
+    except ValueError as allowed:
+        raise argparse.ArgumentTypeError(f"unit ids = {text!r} is invalid; allowed: {allowed}") from None
 
 
 def modbus_url(text: str) -> str:
