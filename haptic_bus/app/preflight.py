@@ -99,7 +99,7 @@ class PreflightReport:
         return (f"pre-flight: {self.cycles} cycles at T = {self.period * 1e3:g} ms, no torque: start lateness "
                 f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms; "
                 f"exchange p99 {cycle['p99'] * 1e6:.0f} us; longest gap {self.longest_gap * 1e3:.3g} ms; "
-                f"{self.overruns} overruns{holds}: {self.reason}")
+                f"{self.overruns} started more than T late{holds}: {self.reason}")
 
     def to_dict(self) -> dict[str, Any]:
         """For ``run.json``."""
