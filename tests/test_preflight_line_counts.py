@@ -1,4 +1,6 @@
-"""Pre-flight's printed line never states two counts that contradict each other (breaker13).
+"""Pre-flight's verdict and its numbers agree (breaker13): its line never states two counts that
+contradict each other, and a profile's ``T`` off the 0.25 ms grid is refused only when more cycles
+than allowed were busy longer than it.
 
 A machine whose loop is busy longer than ``T`` in 6 of 500 cycles, each time finishing within
 ``T`` of the next deadline, has no cycle *started* more than ``T`` late (the clock's count, 0) yet
@@ -42,3 +44,34 @@ def test_a_refusal_line_does_not_contradict_its_count() -> None:
     assert "at most 5 of 500" in line
     assert "0 started more than T late" in line
     assert "0 overruns" not in line
+
+
+def _steady(period: float, exchange: float) -> Timing:
+    """500 cycles on ``period`` s, each an exchange of ``exchange`` s started on its deadline."""
+    return Timing(period, np.zeros(PREFLIGHT_CYCLES), np.arange(PREFLIGHT_CYCLES) * period,
+                  np.full(PREFLIGHT_CYCLES, exchange), 0)
+
+
+def test_a_period_off_the_grid_that_holds_is_held_and_named() -> None:
+    """T = 0.7 ms, every cycle busy 0.6 ms: none busy longer than T.  It was refused ("0 of 500
+    cycles were busy ... longer than T = 0.7 ms ... (at most 5 of 500 ...): this machine holds
+    T >= 0.75 ms": the grid's next step above the busy time, longer than T); 1 of 500 refused it live
+    over CANopen on an idle machine in 2 pre-flights of 4."""
+    report = judge_delay(_steady(0.7e-3, 0.6e-3), 1.0, lambda delay: True, "off", math.inf, None)
+    assert report.holdable, report.reason
+    assert report.smallest_period == 0.7e-3  # T itself: the grid's 0.75 ms is longer, the grid's 0.5 ms too short
+    assert "holds T >= 0.7 ms" in report.line()
+
+
+def test_a_period_off_the_grid_that_does_not_hold_names_the_grid_step() -> None:
+    """T = 0.7 ms, six cycles (apart) busy 0.72 ms, the rest 0.6 ms: one more than allowed busy
+    longer than T, refused, the period named the grid's 0.75 ms (the next step above 0.72 ms)."""
+    period, lateness, exchange = 0.7e-3, np.zeros(PREFLIGHT_CYCLES), np.full(PREFLIGHT_CYCLES, 0.6e-3)
+    for k in (0, 80, 160, 240, 320, 400):
+        exchange[k] = 0.72e-3
+        lateness[k + 1] = 0.02e-3  # the slow exchange ends 0.02 ms after the next deadline
+    slow = Timing(period, lateness, np.arange(PREFLIGHT_CYCLES) * period + lateness, exchange, 0)
+    refused = judge_delay(slow, 1.0, lambda delay: True, "off", math.inf, None)
+    assert not refused.holdable
+    assert refused.smallest_period is not None and math.isclose(refused.smallest_period, 0.75e-3, rel_tol=1e-12)
+    assert "6 of 500 cycles were busy" in refused.reason

@@ -16,7 +16,8 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
   The price of 500 cycles: a machine overrunning in 1 % of its cycles is held in 62 % of
   pre-flights; the run's supervisor watches its lateness (``on_late``) from there.  The
   smallest ``T`` on a :data:`PERIOD_GRID` grid that
-  so many cycles at most exceed is the period this machine holds for this bus (CANopen's SYNC
+  so many cycles at most exceed (or the profile's own ``T``, off the grid, when it holds and is
+  shorter) is the period this machine holds for this bus (CANopen's SYNC
   cycle or the Modbus poll), named in every verdict.  A median exchange longer than ``T`` (the
   loop would fall further behind every cycle), or a profile's ``T`` shorter than the period
   named, refuses the run (exit 1, nothing enabled): the period named and the verdict never
@@ -209,7 +210,8 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     observed = assumed_delay + late["p99"] / period
     busy = np.sort(busy_times(timing))[::-1]
     allowed = allowed_overruns(busy.size)
-    holds = _on_grid(float(busy[allowed])) if busy.size > allowed else period
+    worst = float(busy[allowed]) if busy.size > allowed else period  # the longest busy time the rule lets pass
+    holds = _on_grid(worst) if worst > period else min(_on_grid(worst), period)  # T itself where it holds, off the grid
 
     def report(holdable: bool, reason: str, smallest: float | None = holds, passive: bool | None = None) -> PreflightReport:
         if not holdable and smallest is not None:
