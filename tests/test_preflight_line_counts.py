@@ -75,3 +75,16 @@ def test_a_period_off_the_grid_that_does_not_hold_names_the_grid_step() -> None:
     assert not refused.holdable
     assert refused.smallest_period is not None and math.isclose(refused.smallest_period, 0.75e-3, rel_tol=1e-12)
     assert "6 of 500 cycles were busy" in refused.reason
+
+
+def test_the_period_named_is_one_the_bus_carries() -> None:
+    """gantry-3d's three axes at 1 Mbit/s: the bus-load check wants T >= 1.386 ms; beside one CPU
+    hog pre-flight at T = 2 ms said "holds T >= 1.25 ms", a T the profile check then refused as
+    invalid (exit 2).  Every cycle busy 1 ms: the grid step above the bus' floor is named (1.5 ms);
+    at T = 1.4 ms, which the bus carries and the machine holds, T itself."""
+    floor = 1.386e-3  # s: 970 bits per cycle / (0.7 * 1 Mbit/s)
+    at_2 = judge_delay(_steady(2e-3, 1e-3), 1.0, lambda delay: True, "off", math.inf, None, floor)
+    assert at_2.holdable and at_2.smallest_period is not None
+    assert math.isclose(at_2.smallest_period, 1.5e-3, rel_tol=1e-12)
+    at_14 = judge_delay(_steady(1.4e-3, 1e-3), 1.0, lambda delay: True, "off", math.inf, None, floor)
+    assert at_14.holdable and at_14.smallest_period == 1.4e-3

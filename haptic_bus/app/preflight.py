@@ -17,8 +17,8 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
   pre-flights; the run's supervisor watches its lateness (``on_late``) from there.  The
   smallest ``T`` on a :data:`PERIOD_GRID` grid that
   so many cycles at most exceed (or the profile's own ``T``, off the grid, when it holds and is
-  shorter) is the period this machine holds for this bus (CANopen's SYNC
-  cycle or the Modbus poll), named in every verdict.  A median exchange longer than ``T`` (the
+  shorter), and none the bus cannot carry (CANopen's load ceiling), is the period this machine
+  holds for this bus (CANopen's SYNC cycle or the Modbus poll), named in every verdict.  A median exchange longer than ``T`` (the
   loop would fall further behind every cycle), or a profile's ``T`` shorter than the period
   named, refuses the run (exit 1, nothing enabled): the period named and the verdict never
   disagree;
@@ -201,16 +201,18 @@ def passes_at(gate: PassivityGate, scene: CompiledScene) -> Callable[[float], bo
 
 
 def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float], bool], layer: str, watchdog: float,
-                deadline_periods: int | None) -> PreflightReport:
+                deadline_periods: int | None, bus_floor: float = 0.0) -> PreflightReport:
     """:func:`judge` for any gate: ``assumed_delay`` (samples) is the delay it judged with,
-    ``passes_at(delay)`` its verdict on the scene at another loop delay (samples)."""
+    ``passes_at(delay)`` its verdict on the scene at another loop delay (samples).  ``bus_floor``
+    (s): the shortest ``T`` the bus carries (CANopen's load ceiling, checked before the bus was
+    opened; 0 for Modbus): the period named is never shorter."""
     period = timing.period
     late, cycle = percentiles(timing.lateness), percentiles(timing.exchange)
     gap = float(np.max(np.diff(timing.starts))) if timing.starts.size > 1 else period
     observed = assumed_delay + late["p99"] / period
     busy = np.sort(busy_times(timing))[::-1]
     allowed = allowed_overruns(busy.size)
-    worst = float(busy[allowed]) if busy.size > allowed else period  # the longest busy time the rule lets pass
+    worst = max(float(busy[allowed]) if busy.size > allowed else period, bus_floor)  # the longest the rule lets pass
     holds = _on_grid(worst) if worst > period else min(_on_grid(worst), period)  # T itself where it holds, off the grid
 
     def report(holdable: bool, reason: str, smallest: float | None = holds, passive: bool | None = None) -> PreflightReport:
