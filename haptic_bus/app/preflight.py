@@ -205,7 +205,7 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     """:func:`judge` for any gate: ``assumed_delay`` (samples) is the delay it judged with,
     ``passes_at(delay)`` its verdict on the scene at another loop delay (samples).  ``bus_floor``
     (s): the shortest ``T`` the bus carries (CANopen's load ceiling, checked before the bus was
-    opened; 0 for Modbus): the period named is never shorter."""
+    opened, so at most ``T``; 0 for Modbus): the period named is never shorter."""
     period = timing.period
     late, cycle = percentiles(timing.lateness), percentiles(timing.exchange)
     gap = float(np.max(np.diff(timing.starts))) if timing.starts.size > 1 else period
