@@ -188,7 +188,7 @@ def _run(args: argparse.Namespace) -> int:
     try:
         if stop_noted():  # while the console script imported the command line
             raise StoppedBeforeStart
-        from haptic_bus.app.run_options import exit_status
+        from haptic_bus.app.run_options import ended_line, exit_status
         from haptic_bus.app.runner import run  # its imports: a second or more under load
         from haptic_bus.errors import ParameterError
 
@@ -217,8 +217,7 @@ def _run(args: argparse.Namespace) -> int:
                   f"max {late['max'] * 1e6:.1f} us; overruns {summary.overruns}; late cycles {summary.late_cycles}")
     print(f"ended: {result.exit_reason}; wrote {', '.join(str(f) for f in result.files)}")
     if result.error:
-        said = result.error if result.error.startswith(result.exit_reason) else f"{result.exit_reason}: {result.error}"
-        print(f"haptic-bus run: {said}", file=sys.stderr)
+        print(f"haptic-bus run: {ended_line(result.exit_reason, result.error)}", file=sys.stderr)
     return exit_status(result.exit_reason)
 
 

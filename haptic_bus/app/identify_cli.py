@@ -96,7 +96,7 @@ def run_identify(args: argparse.Namespace) -> int:
     from haptic_bus.app.identify_run import IdentifyOptions, identify_canopen, identify_modbus
     from haptic_bus.app.profiles import one_axis_only, read_profile
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
-    from haptic_bus.app.run_options import VIRTUAL, WALL, StopRequest
+    from haptic_bus.app.run_options import VIRTUAL, WALL, StopRequest, ended_line
     from haptic_bus.profile.device import TIMINGS
 
     address, target = _validate(args)
@@ -130,8 +130,7 @@ def run_identify(args: argparse.Namespace) -> int:
         print(f"haptic-bus identify: {written} holds what was measured, and the gate refuses its walls on that device: "
               f"{refused}", file=sys.stderr)
     if outcome.error:
-        said = outcome.error if outcome.error.startswith(outcome.exit_reason) else f"{outcome.exit_reason}: {outcome.error}"
-        print(f"haptic-bus identify: {said}", file=sys.stderr)
+        print(f"haptic-bus identify: {ended_line(outcome.exit_reason, outcome.error)}", file=sys.stderr)
     elif found is not None and not found.supported:
         print("haptic-bus identify: the data cannot support the estimate (see the findings)", file=sys.stderr)
     return outcome.exit_status

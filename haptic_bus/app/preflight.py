@@ -16,8 +16,9 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
   The price of 500 cycles: a machine overrunning in 1 % of its cycles is held in 62 % of
   pre-flights; the run's supervisor watches its lateness (``on_late``) from there.  The
   smallest ``T`` on a :data:`PERIOD_GRID` grid that
-  so many cycles at most exceed is the period this machine holds for this bus (CANopen's SYNC
-  cycle or the Modbus poll), named in every verdict.  A median exchange longer than ``T`` (the
+  so many cycles at most exceed (or the profile's own ``T``, off the grid, when it holds and is
+  shorter), and none the bus cannot carry (CANopen's load ceiling), is the period this machine
+  holds for this bus (CANopen's SYNC cycle or the Modbus poll), named in every verdict.  A median exchange longer than ``T`` (the
   loop would fall further behind every cycle), or a profile's ``T`` shorter than the period
   named, refuses the run (exit 1, nothing enabled): the period named and the verdict never
   disagree;
@@ -99,7 +100,7 @@ class PreflightReport:
         return (f"pre-flight: {self.cycles} cycles at T = {self.period * 1e3:g} ms, no torque: start lateness "
                 f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms; "
                 f"exchange p99 {cycle['p99'] * 1e6:.0f} us; longest gap {self.longest_gap * 1e3:.3g} ms; "
-                f"{self.overruns} overruns{holds}: {self.reason}")
+                f"{self.overruns} started more than T late{holds}: {self.reason}")
 
     def to_dict(self) -> dict[str, Any]:
         """For ``run.json``."""
@@ -200,16 +201,19 @@ def passes_at(gate: PassivityGate, scene: CompiledScene) -> Callable[[float], bo
 
 
 def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float], bool], layer: str, watchdog: float,
-                deadline_periods: int | None) -> PreflightReport:
+                deadline_periods: int | None, bus_floor: float = 0.0) -> PreflightReport:
     """:func:`judge` for any gate: ``assumed_delay`` (samples) is the delay it judged with,
-    ``passes_at(delay)`` its verdict on the scene at another loop delay (samples)."""
+    ``passes_at(delay)`` its verdict on the scene at another loop delay (samples).  ``bus_floor``
+    (s): the shortest ``T`` the bus carries (CANopen's load ceiling, checked before the bus was
+    opened, so at most ``T``; 0 for Modbus): the period named is never shorter."""
     period = timing.period
     late, cycle = percentiles(timing.lateness), percentiles(timing.exchange)
     gap = float(np.max(np.diff(timing.starts))) if timing.starts.size > 1 else period
     observed = assumed_delay + late["p99"] / period
     busy = np.sort(busy_times(timing))[::-1]
     allowed = allowed_overruns(busy.size)
-    holds = _on_grid(float(busy[allowed])) if busy.size > allowed else period
+    worst = max(float(busy[allowed]) if busy.size > allowed else period, bus_floor)  # the longest the rule lets pass
+    holds = _on_grid(worst) if worst > period else min(_on_grid(worst), period)  # T itself where it holds, off the grid
 
     def report(holdable: bool, reason: str, smallest: float | None = holds, passive: bool | None = None) -> PreflightReport:
         if not holdable and smallest is not None:

@@ -309,7 +309,7 @@ def _add_new_parser(sub: argparse._SubParsersAction) -> None:
 def add_profiles_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register ``profiles list|show|check|new`` on ``subparsers``; each leaf sets ``handler``."""
     parser = subparsers.add_parser("profiles", help="operator parameter profiles: list, show, check, new")
-    sub = parser.add_subparsers(dest="profiles_command", required=True)
+    sub = parser.add_subparsers(dest="profiles_command", metavar="{list,show,check,new}", required=True)  # an error names these
     listing = sub.add_parser("list", help="the shipped profiles and their gate verdicts")
     listing.add_argument("--json", action="store_true", help="one JSON array on stdout")
     listing.set_defaults(handler=cmd_list)

@@ -1,5 +1,6 @@
 """What a run is asked to do (:class:`RunOptions`), how it is asked to stop (:class:`StopRequest`),
-and how its end maps to the command's exit status (:func:`exit_status`).  Durations in s."""
+and how its end maps to the command's exit status (:func:`exit_status`) and to its one stderr line
+(:func:`ended_line`).  Durations in s."""
 
 from __future__ import annotations
 
@@ -104,3 +105,10 @@ def exit_status(reason: str) -> int:
     """0 completed or stopped, 1 refused, a drive error or a folder that could not be written, 3 an
     assumption broken, 130 interrupted."""
     return EXIT_STATUS[reason]
+
+
+def ended_line(reason: str, error: str) -> str:
+    """What a command prints after its name when a run ended for ``reason`` (``run.json``'s
+    ``exit_reason``) with ``error``: ``"reason: error"``, or ``error`` alone when it already says
+    the reason (``interrupted (Ctrl-C)``, not ``interrupted: interrupted (Ctrl-C)``)."""
+    return error if error.startswith(reason) else f"{reason}: {error}"

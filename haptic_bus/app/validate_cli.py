@@ -60,7 +60,7 @@ def run_validate(args: argparse.Namespace) -> int:
     """Run ``haptic-bus validate``; return the exit status (module docstring)."""
     from haptic_bus.app.profiles import admit, one_axis_only, read_profile
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
-    from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
+    from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, ended_line, exit_status
     from haptic_bus.app.validate_run import validate_drive
     from haptic_bus.validation import folder_path
 
@@ -93,7 +93,7 @@ def run_validate(args: argparse.Namespace) -> int:
             print(json.dumps({"exit_reason": result.exit_reason, "error": result.error, "files": files}))
         reason = result.exit_reason if result.exit_reason != "completed" else "drive error"
         said = result.error or "the run ended before the probe's last period"
-        print(f"haptic-bus validate: {reason}: {said}", file=sys.stderr)
+        print(f"haptic-bus validate: {ended_line(reason, said)}", file=sys.stderr)
         status = exit_status(result.exit_reason)
         return status if status != EXIT_OK else EXIT_NO
     if args.json:
