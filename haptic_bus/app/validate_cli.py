@@ -60,7 +60,7 @@ def run_validate(args: argparse.Namespace) -> int:
     """Run ``haptic-bus validate``; return the exit status (module docstring)."""
     from haptic_bus.app.profiles import admit, one_axis_only, read_profile
     from haptic_bus.app.run_links import DEFAULT_CONTROLLER_NODE_ID
-    from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, ended_line, exit_status
+    from haptic_bus.app.run_options import VIRTUAL, WALL, RunOptions, StopRequest, exit_status
     from haptic_bus.app.validate_run import validate_drive
     from haptic_bus.validation import folder_path
 
@@ -91,9 +91,7 @@ def run_validate(args: argparse.Namespace) -> int:
     if validation is None:
         if args.json:
             print(json.dumps({"exit_reason": result.exit_reason, "error": result.error, "files": files}))
-        reason = result.exit_reason if result.exit_reason != "completed" else "drive error"
-        said = result.error or "the run ended before the probe's last period"
-        print(f"haptic-bus validate: {ended_line(reason, said)}", file=sys.stderr)
+        print(f"haptic-bus validate: {no_verdict_line(result.exit_reason, result.error)}", file=sys.stderr)
         status = exit_status(result.exit_reason)
         return status if status != EXIT_OK else EXIT_NO
     if args.json:
@@ -107,3 +105,15 @@ def run_validate(args: argparse.Namespace) -> int:
         print(validation.summary())
         print(f"wrote {', '.join(files)}")
     return EXIT_OK if validation.holds else EXIT_NO
+
+
+def no_verdict_line(exit_reason: str, error: str | None) -> str:
+    """What validate says of a run that gave no verdict (it ended ``exit_reason`` with ``error``): a
+    run that "completed" without every probe cycle lost its drive; one stopped by SIGTERM measured
+    too little (exit 1 either way, as identify)."""
+    from haptic_bus.app.run_options import ended_line
+
+    reason = exit_reason if exit_reason != "completed" else "drive error"
+    said = error or ("stopped (SIGTERM) before the probe's last period: no verdict" if exit_reason == "stopped" else
+                     "the run ended before the probe's last period")
+    return ended_line(reason, said)
