@@ -42,8 +42,9 @@ def test_a_refusal_line_does_not_contradict_its_count() -> None:
     line = report.line()
     assert "6 of 500 cycles were busy (late start plus exchange) longer than T = 1 ms" in line
     assert "at most 5 of 500" in line
-    assert "0 started more than T late" in line
+    assert "0 started more than T late, 6 busy longer than T (5 allowed)" in line
     assert "0 overruns" not in line
+    assert (report.busy_over_period, report.busy_allowed) == (6, 5)  # run.json's preflight counts as the rule does
 
 
 def _steady(period: float, exchange: float) -> Timing:

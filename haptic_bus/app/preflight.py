@@ -15,13 +15,13 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
   (:func:`allowed_overruns`: 5 of 500): the share is then above the target with that confidence.
   The price of 500 cycles: a machine overrunning in 1 % of its cycles is held in 62 % of
   pre-flights; the run's supervisor watches its lateness (``on_late``) from there.  The
-  smallest ``T`` on a :data:`PERIOD_GRID` grid that
-  so many cycles at most exceed (or the profile's own ``T``, off the grid, when it holds and is
-  shorter), and none the bus cannot carry (CANopen's load ceiling), is the period this machine
-  holds for this bus (CANopen's SYNC cycle or the Modbus poll), named in every verdict.  A median exchange longer than ``T`` (the
-  loop would fall further behind every cycle), or a profile's ``T`` shorter than the period
-  named, refuses the run (exit 1, nothing enabled): the period named and the verdict never
-  disagree;
+  smallest ``T`` on a :data:`PERIOD_GRID` grid that so many cycles at most exceed (or the
+  profile's own ``T``, off the grid, when it holds and is shorter), and none the bus cannot
+  carry (CANopen's load ceiling), is the period this machine holds for this bus (CANopen's SYNC
+  cycle or the Modbus poll), named in every verdict; ``run.json`` keeps both counts.  A median
+  exchange longer than ``T`` (the loop would fall further behind every cycle), or a profile's
+  ``T`` shorter than the period named, refuses the run (exit 1, nothing enabled): the period
+  named and the verdict never disagree;
 * **the watchdogs** -- a cycle held up longer than the drive's receive watchdog (the RPDO
   deadline, the heartbeat consumer's slack, the Modbus watchdog) faults the drive.  If the
   longest stall measured, times :data:`STALL_MARGIN`, reaches it, the run is refused, naming the
@@ -72,7 +72,9 @@ class PreflightReport:
     ``lateness``: p50/p99/p99.9/max of the cycles' start lateness (s); ``cycle``: the same of one
     cycle's exchange with the drive (s, SYNC out to RPDO out); ``longest_gap``: the longest time
     between two cycle starts (s: what the drive went without a SYNC); ``overruns``: cycles started
-    more than ``T`` late; ``observed_delay``: the gate's delay plus the p99 lateness (samples);
+    more than ``T`` late; ``busy_over_period``: cycles busy longer than ``T`` (what the period rule
+    counts), of which ``busy_allowed`` pass (:func:`allowed_overruns`); ``observed_delay``: the
+    gate's delay plus the p99 lateness (samples);
     ``passive_at_observed``: the gate's verdict there (None: not judged, the timing alone refuses the
     run; at the delay of a machine far behind, hundreds of samples, the coupled gate takes minutes);
     ``watchdog``: the shortest stall (s) that faults the drive (inf: none); ``holdable``: False
@@ -86,6 +88,8 @@ class PreflightReport:
     cycle: dict[str, float]
     longest_gap: float
     overruns: int
+    busy_over_period: int
+    busy_allowed: int
     observed_delay: float
     passive_at_observed: bool | None
     watchdog: float
@@ -100,7 +104,8 @@ class PreflightReport:
         return (f"pre-flight: {self.cycles} cycles at T = {self.period * 1e3:g} ms, no torque: start lateness "
                 f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms; "
                 f"exchange p99 {cycle['p99'] * 1e6:.0f} us; longest gap {self.longest_gap * 1e3:.3g} ms; "
-                f"{self.overruns} started more than T late{holds}: {self.reason}")
+                f"{self.overruns} started more than T late, {self.busy_over_period} busy longer than T "
+                f"({self.busy_allowed} allowed){holds}: {self.reason}")
 
     def to_dict(self) -> dict[str, Any]:
         """For ``run.json``."""
@@ -214,18 +219,18 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     allowed = allowed_overruns(busy.size)
     worst = max(float(busy[allowed]) if busy.size > allowed else period, bus_floor)  # the longest the rule lets pass
     holds = _on_grid(worst) if worst > period else min(_on_grid(worst), period)  # T itself where it holds, off the grid
+    overlong = int(np.count_nonzero(busy > period))
 
     def report(holdable: bool, reason: str, smallest: float | None = holds, passive: bool | None = None) -> PreflightReport:
         if not holdable and smallest is not None:
             reason += f": this machine holds T >= {smallest * 1e3:g} ms"
-        return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, observed, passive,
-                               watchdog, holdable, reason, smallest)
+        return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, overlong, allowed,
+                               observed, passive, watchdog, holdable, reason, smallest)
 
     if cycle["p50"] > period:  # the loop cannot keep its period: it falls further behind every cycle
         return report(False, f"refused: one exchange with the drive takes {cycle['p50'] * 1e3:.3g} ms (median), more "
                              f"than T = {period * 1e3:g} ms")
     if holds > period:
-        overlong = int(np.count_nonzero(busy > period))
         return report(False, f"refused: {overlong} of {busy.size} cycles were busy (late start plus exchange) longer "
                              f"than T = {period * 1e3:g} ms, the longest {busy[0] * 1e3:.3g} ms: more than "
                              f"{OVERRUN_SHARE:.1%} of a run's cycles would overrun (at most {allowed} of {busy.size} "
