@@ -26,9 +26,16 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
   deadline, the heartbeat consumer's slack, the Modbus watchdog) faults the drive.  If the
   longest stall measured, times :data:`STALL_MARGIN`, reaches it, the run is refused, naming the
   smallest period ``T`` whose watchdog (a deadline counted in periods) would hold that stall;
-* **the gate at the measured delay** -- the loop delay the gate assumed plus the measured p99
-  lateness in samples.  Passive there: nothing to add.  Not passive: with a passivity layer the
-  run goes on (the layer holds the port passive; it may act), without one it is refused.
+* **the gate at the measured delay** -- the loop delay the gate assumed plus the p99 of each
+  cycle's own lateness in samples: how late it started after it could have (its deadline, or the
+  end of the cycle before when that ran past it).  After a stall of ``S`` the loop catches up, its
+  next cycles each starting as the one before ends: their start lateness falls from ``S`` by
+  ``T`` less one exchange a cycle, but each samples fresh and its torque goes out at the next
+  SYNC an exchange later, sooner than ``T``.  Only the stalled cycle's torque came late; the
+  start lateness's p99 counted the whole catch-up (the catch-up of one stall of the host left a
+  start lateness p99 of 4.47 ms in 500 cycles, judged a loop delay of 5.47 samples where the
+  drive's is 1).  Passive there: nothing to add.  Not passive: with a passivity layer the run
+  goes on (the layer holds the port passive; it may act), without one it is refused.
 
 The run prints what was measured and the verdict in one line, and ``run.json`` records both (``preflight``).
 """
@@ -72,7 +79,8 @@ class PreflightReport:
     ``lateness``: p50/p99/p99.9/max of the cycles' start lateness (s); ``cycle``: the same of one
     cycle's exchange with the drive (s, SYNC out to RPDO out); ``longest_gap``: the longest time
     between two cycle starts (s: what the drive went without a SYNC); ``overruns``: cycles started
-    more than ``T`` late; ``busy_over_period``: cycles busy longer than ``T`` (what the period rule
+    more than ``T`` late; ``own_lateness_p99``: the p99 of each cycle's own lateness (s, module
+    docstring); ``busy_over_period``: cycles busy longer than ``T`` (what the period rule
     counts), of which ``busy_allowed`` pass (:func:`allowed_overruns`); ``observed_delay``: the
     gate's delay plus the p99 lateness (samples);
     ``passive_at_observed``: the gate's verdict there (None: not judged, the timing alone refuses the
@@ -88,6 +96,7 @@ class PreflightReport:
     cycle: dict[str, float]
     longest_gap: float
     overruns: int
+    own_lateness_p99: float
     busy_over_period: int
     busy_allowed: int
     observed_delay: float
@@ -102,7 +111,8 @@ class PreflightReport:
         late, cycle = self.lateness, self.cycle
         holds = f"; holds T >= {self.smallest_period * 1e3:g} ms" if self.holdable and self.smallest_period else ""
         return (f"pre-flight: {self.cycles} cycles at T = {self.period * 1e3:g} ms, no torque: start lateness "
-                f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms; "
+                f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms, own "
+                f"p99 {self.own_lateness_p99 * 1e6:.0f} us; "
                 f"exchange p99 {cycle['p99'] * 1e6:.0f} us; longest gap {self.longest_gap * 1e3:.3g} ms; "
                 f"{self.overruns} started more than T late, {self.busy_over_period} busy longer than T "
                 f"({self.busy_allowed} allowed){holds}: {self.reason}")
@@ -214,8 +224,10 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     period = timing.period
     late, cycle = percentiles(timing.lateness), percentiles(timing.exchange)
     gap = float(np.max(np.diff(timing.starts))) if timing.starts.size > 1 else period
-    observed = assumed_delay + late["p99"] / period
-    busy = np.sort(busy_times(timing))[::-1]
+    own = own_lateness(timing)
+    own_p99 = float(np.percentile(own, 99)) if own.size else 0.0
+    observed = assumed_delay + own_p99 / period
+    busy = np.sort(timing.exchange + own)[::-1]
     allowed = allowed_overruns(busy.size)
     worst = max(float(busy[allowed]) if busy.size > allowed else period, bus_floor)  # the longest the rule lets pass
     holds = _on_grid(worst) if worst > period else min(_on_grid(worst), period)  # T itself where it holds, off the grid
@@ -224,8 +236,8 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     def report(holdable: bool, reason: str, smallest: float | None = holds, passive: bool | None = None) -> PreflightReport:
         if not holdable and smallest is not None:
             reason += f": this machine holds T >= {smallest * 1e3:g} ms"
-        return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, overlong, allowed,
-                               observed, passive, watchdog, holdable, reason, smallest)
+        return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, own_p99, overlong,
+                               allowed, observed, passive, watchdog, holdable, reason, smallest)
 
     if cycle["p50"] > period:  # the loop cannot keep its period: it falls further behind every cycle
         return report(False, f"refused: one exchange with the drive takes {cycle['p50'] * 1e3:.3g} ms (median), more "
@@ -267,13 +279,18 @@ def allowed_overruns(cycles: int) -> int:
     return count
 
 
-def busy_times(timing: Timing) -> np.ndarray:
-    """Each cycle's busy time (s): its exchange with the drive plus how late it started after it
-    could have (its deadline, or the end of the cycle before when that ran past it: a loop that
-    fell behind carries its lateness on, which says nothing of the period it would hold)."""
+def own_lateness(timing: Timing) -> np.ndarray:
+    """Each cycle's own lateness (s): how late it started after it could have, its deadline or the
+    end of the cycle before when that ran past it (a loop that fell behind carries its lateness on,
+    which says nothing of the period it would hold, nor of the delay its torque came with)."""
     deadlines = timing.starts - timing.lateness
     ends = np.concatenate(([-np.inf], (timing.starts + timing.exchange)[:-1]))
-    return timing.exchange + (timing.starts - np.maximum(deadlines, ends))
+    return np.maximum(timing.starts - np.maximum(deadlines, ends), 0.0)  # >= 0: a clock never starts a cycle early
+
+
+def busy_times(timing: Timing) -> np.ndarray:
+    """Each cycle's busy time (s): its exchange with the drive plus its :func:`own_lateness`."""
+    return timing.exchange + own_lateness(timing)
 
 
 def without_realtime(report: PreflightReport, realtime: dict[str, Any] | None) -> PreflightReport:
