@@ -82,7 +82,7 @@ class PreflightReport:
     more than ``T`` late; ``own_lateness_p99``: the p99 of each cycle's own lateness (s, module
     docstring); ``busy_over_period``: cycles busy longer than ``T`` (what the period rule
     counts), of which ``busy_allowed`` pass (:func:`allowed_overruns`); ``observed_delay``: the
-    gate's delay plus the p99 lateness (samples);
+    gate's delay plus the p99 own lateness (samples);
     ``passive_at_observed``: the gate's verdict there (None: not judged, the timing alone refuses the
     run; at the delay of a machine far behind, hundreds of samples, the coupled gate takes minutes);
     ``watchdog``: the shortest stall (s) that faults the drive (inf: none); ``holdable``: False
@@ -227,7 +227,7 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     own = own_lateness(timing)
     own_p99 = float(np.percentile(own, 99)) if own.size else 0.0
     observed = assumed_delay + own_p99 / period
-    busy = np.sort(timing.exchange + own)[::-1]
+    busy = np.sort(timing.exchange + own)[::-1]  # each cycle's busy time, the longest first
     allowed = allowed_overruns(busy.size)
     worst = max(float(busy[allowed]) if busy.size > allowed else period, bus_floor)  # the longest the rule lets pass
     holds = _on_grid(worst) if worst > period else min(_on_grid(worst), period)  # T itself where it holds, off the grid
@@ -286,11 +286,6 @@ def own_lateness(timing: Timing) -> np.ndarray:
     deadlines = timing.starts - timing.lateness
     ends = np.concatenate(([-np.inf], (timing.starts + timing.exchange)[:-1]))
     return np.maximum(timing.starts - np.maximum(deadlines, ends), 0.0)  # >= 0: a clock never starts a cycle early
-
-
-def busy_times(timing: Timing) -> np.ndarray:
-    """Each cycle's busy time (s): its exchange with the drive plus its :func:`own_lateness`."""
-    return timing.exchange + own_lateness(timing)
 
 
 def without_realtime(report: PreflightReport, realtime: dict[str, Any] | None) -> PreflightReport:
