@@ -54,6 +54,20 @@ def whole_in_range(name: str, value: object, low: int, high: int, *, context: st
     return whole
 
 
+def ids_in_order(name: str, text: str, what: str, low: int, high: int, *, distinct: bool = False) -> list[int]:
+    """``"5,6,7"`` -> [5, 6, 7], in the order given (one per axis): whole numbers in ``low..high``
+    (decimal or ``0x..``; ``distinct``: none twice), else ParameterError naming ``name`` and ``what``
+    is allowed (``"CANopen node ids"``)."""
+    try:
+        ids = [int(part.strip(), 0) for part in text.split(",")]
+    except ValueError:
+        ids = []
+    if not ids or (distinct and len(set(ids)) != len(ids)) or not all(low <= n <= high for n in ids):
+        raise ParameterError(name, text, f"{'distinct ' if distinct else ''}{what} {low}..{high} separated by commas, "
+                                         f"e.g. {low},{low + 1},{low + 2}")
+    return ids
+
+
 def folder_path(name: str, path: str | os.PathLike[str], *, context: str = "") -> pathlib.Path:
     """``path`` as a folder's path, touching nothing; ParameterError naming ``name`` if it is empty
     (an empty string is no folder, not the current one)."""

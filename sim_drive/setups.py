@@ -15,8 +15,8 @@ from typing import Any
 
 from drives.bus_config import merge_bus_options
 from drives.cia301 import NODE_ID_RANGE
-from haptic_bus.app.arguments import id_sequence
 from haptic_bus.errors import ParameterError
+from haptic_bus.validation import ids_in_order
 from sim_drive.operator import OperatorModel, operator_from_spec
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import SimulatedDevice, read_simulated_device
@@ -61,11 +61,8 @@ def profile_axes(args: argparse.Namespace) -> SimulatedDevice | None:
 
 
 def id_list(flag: str, text: str, low: int, high: int, what: str, distinct: bool = True) -> list[int]:
-    """``5,6,7`` -> [5, 6, 7] (:func:`~haptic_bus.app.arguments.id_sequence`); ParameterError naming ``flag`` otherwise."""
-    try:
-        return id_sequence(text, what, low, high, distinct)
-    except ValueError as allowed:
-        raise ParameterError(flag, text, str(allowed)) from None
+    """``5,6,7`` -> [5, 6, 7] (:func:`haptic_bus.validation.ids_in_order`); ParameterError naming ``flag`` otherwise."""
+    return ids_in_order(flag, text, what, low, high, distinct=distinct)
 
 
 def node_ids(text: str) -> list[int]:

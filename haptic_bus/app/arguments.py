@@ -16,6 +16,8 @@ from typing import Any
 from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, as_typed, merge_bus_options, parse_bus_option
 from drives.cia301 import NODE_ID_RANGE
 from drives.modbus.register_map import UNIT_ID_RANGE
+from haptic_bus.errors import ParameterError
+from haptic_bus.validation import ids_in_order
 
 EXIT_OK, EXIT_NO, EXIT_INVALID, EXIT_ASSUMPTION, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 Handler = Callable[[argparse.Namespace], int]
@@ -79,31 +81,17 @@ node_id = whole("node id", *NODE_ID_RANGE)
 unit_id = whole("unit id", *UNIT_ID_RANGE)
 
 
-def id_sequence(text: str, what: str, low: int, high: int, distinct: bool = False) -> list[int]:
-    """``5,6,7`` -> [5, 6, 7], in the order given (one per axis): whole numbers in ``low..high``
-    (``distinct``: none twice); ValueError, its text what is allowed, otherwise."""
-    try:
-        ids = [int(part.strip(), 0) for part in text.split(",")]
-    except ValueError:
-        ids = []
-    if not ids or (distinct and len(set(ids)) != len(ids)) or not all(low <= n <= high for n in ids):
-        raise ValueError(f"{'distinct ' if distinct else ''}{what} {low}..{high} separated by commas, e.g. "
-                         f"{low},{low + 1},{low + 2}")
-    return ids
-
-
 def unit_ids(text: str) -> list[int]:
     """``1,2,3``: Modbus unit ids (each 1..247), one per axis in axis order (one may serve several)."""
     try:
-        return id_sequence(text, "Modbus unit ids", *UNIT_ID_RANGE)
-    except ValueError as allowed:
-        raise argparse.ArgumentTypeError(f"unit ids = {text!r} is invalid; allowed: {allowed}") from None
+        return ids_in_order("unit ids", text, "Modbus unit ids", *UNIT_ID_RANGE)
+    except ParameterError as invalid:
+        raise argparse.ArgumentTypeError(invalid.detail) from None
 
 
 def modbus_url(text: str) -> str:
     """``tcp://HOST:PORT`` (port 1..65535) or ``rtu:/dev/...``."""
     from drives.modbus.link import ModbusAddress
-    from haptic_bus.errors import ParameterError
 
     try:
         ModbusAddress.from_url(text)
@@ -136,7 +124,6 @@ def bus_arguments(args: argparse.Namespace) -> dict[str, Any]:
 def refuse_can_options_with_modbus(args: argparse.Namespace, command: str, others: tuple[str, ...] = (),
                                    modbus_options: str = "--unit-id") -> None:
     """ParameterError naming the first CAN bus option (or one of ``others``, argparse dests) given beside ``--modbus``."""
-    from haptic_bus.errors import ParameterError
 
     given = [dest for dest in ("interface", "channel", "bitrate", "bus_option", "bus_kwargs", *others) if getattr(args, dest)]
     if given:
@@ -149,7 +136,6 @@ def refuse_can_options_with_modbus(args: argparse.Namespace, command: str, other
 def error_line(command: str, error: Exception) -> str:
     """``haptic-bus COMMAND: error: ...``, one line; a :class:`ParameterError` whose context is the command
     itself ("run", "profiles new") says it once, in front, not twice."""
-    from haptic_bus.errors import ParameterError
 
     if isinstance(error, ParameterError) and error.context.split(" ")[0] == command.split(" ")[0]:
         return f"haptic-bus {error.context}: error: {error.detail}"
