@@ -37,6 +37,9 @@ def test_the_end_of_a_run_disables_under_the_run_s_scheduling(
     options = hb.RunOptions(duration=0.05, pacing="wall", out_dir=tmp_path, start_in_contact="ramp", live=False,
                             bus_log=False, plots=False, preflight_cycles=2)
     result = hb.run(hb.load_profile(profile), drive.bus, options, **drive.run_kwargs())
+    if result.exit_reason == "refused" and "this machine holds T >=" in (result.error or ""):
+        # two pre-flight cycles allow none busy longer than T; the lock-step bus answers in the sender's thread
+        pytest.skip(f"this machine cannot hold the loop now, and the run said so at pre-flight: {result.error}")
     assert result.exit_reason == "completed", result.error
     got = read_run_folder(result.folder).document["realtime"]["got"]
     assert policies, "the run never disabled its drive(s)"
