@@ -34,7 +34,7 @@ def test_a_simulator_that_does_not_start_is_a_run_that_never_reached_preflight(t
     assert entry["exit"] is None
     assert entry["error"] == "the simulated drive did not start: no heartbeat of node 5 within 0.01 s"
     text = (tmp_path / "bench.md").read_text()
-    assert ("| 1 | - | not reached | - | - | the simulated drive did not start: no heartbeat of node 5 within "
+    assert ("| 1 | - | not reached | - | - | - | the simulated drive did not start: no heartbeat of node 5 within "
             "0.01 s |") in text
     assert "0 of 1 passed pre-flight, 0 refused, 1 never reached it;" in text
     (row,) = [r for r in result["done_when_26"] if r["line"] == 3]
