@@ -26,15 +26,17 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
   deadline, the heartbeat consumer's slack, the Modbus watchdog) faults the drive.  If the
   longest stall measured, times :data:`STALL_MARGIN`, reaches it, the run is refused, naming the
   smallest period ``T`` whose watchdog (a deadline counted in periods) would hold that stall;
-* **the gate at the measured delay** -- the loop delay the gate assumed plus the p99 of each
-  cycle's own lateness in samples: how late it started after it could have (its deadline, or the
-  end of the cycle before when that ran past it).  After a stall of ``S`` the loop catches up, its
-  next cycles each starting as the one before ends: their start lateness falls from ``S`` by
-  ``T`` less one exchange a cycle, but each samples fresh and its torque goes out at the next
-  SYNC an exchange later, sooner than ``T``.  Only the stalled cycle's torque came late; the
-  start lateness's p99 counted the whole catch-up (the catch-up of one stall of the host left a
-  start lateness p99 of 4.47 ms in 500 cycles, judged a loop delay of 5.47 samples where the
-  drive's is 1).  Passive there: nothing to add.  Not passive: with a passivity layer the run
+* **the gate at the measured delay** -- the loop delay the gate assumed plus the p99 of the delay
+  each cycle adds, in samples (:func:`delay_added`): the larger of its own lateness (how late it
+  started after it could have: its deadline, or the end of the cycle before when that ran past
+  it) and how much longer than ``T`` after the cycle before's start it began (a cycle held up
+  inside its exchange starts the next one late: the drive held that torque longer).  After a
+  stall of ``S`` the loop catches up, its next cycles each starting as the one before ends: their
+  start lateness falls from ``S`` by ``T`` less one exchange a cycle, but each samples fresh and
+  its torque goes out at the next SYNC an exchange later, sooner than ``T``.  Only the stalled
+  cycle's torque came late; the start lateness's p99 counted the whole catch-up (the catch-up of
+  one stall of the host left a start lateness p99 of 4.47 ms in 500 cycles, judged a loop delay
+  of 5.47 samples where the drive's is 1).  Passive there: nothing to add.  Not passive: with a passivity layer the run
   goes on (the layer holds the port passive; it may act), without one it is refused.
 
 The run prints what was measured and the verdict in one line, and ``run.json`` records both (``preflight``).
@@ -79,10 +81,10 @@ class PreflightReport:
     ``lateness``: p50/p99/p99.9/max of the cycles' start lateness (s); ``cycle``: the same of one
     cycle's exchange with the drive (s, SYNC out to RPDO out); ``longest_gap``: the longest time
     between two cycle starts (s: what the drive went without a SYNC); ``overruns``: cycles started
-    more than ``T`` late; ``own_lateness_p99``: the p99 of each cycle's own lateness (s, module
-    docstring); ``busy_over_period``: cycles busy longer than ``T`` (what the period rule
+    more than ``T`` late; ``delay_added_p99``: the p99 of the delay each cycle adds (s,
+    :func:`delay_added`); ``busy_over_period``: cycles busy longer than ``T`` (what the period rule
     counts), of which ``busy_allowed`` pass (:func:`allowed_overruns`); ``observed_delay``: the
-    gate's delay plus the p99 own lateness (samples);
+    gate's delay plus ``delay_added_p99`` (samples);
     ``passive_at_observed``: the gate's verdict there (None: not judged, the timing alone refuses the
     run; at the delay of a machine far behind, hundreds of samples, the coupled gate takes minutes);
     ``watchdog``: the shortest stall (s) that faults the drive (inf: none); ``holdable``: False
@@ -96,7 +98,7 @@ class PreflightReport:
     cycle: dict[str, float]
     longest_gap: float
     overruns: int
-    own_lateness_p99: float
+    delay_added_p99: float
     busy_over_period: int
     busy_allowed: int
     observed_delay: float
@@ -111,8 +113,8 @@ class PreflightReport:
         late, cycle = self.lateness, self.cycle
         holds = f"; holds T >= {self.smallest_period * 1e3:g} ms" if self.holdable and self.smallest_period else ""
         return (f"pre-flight: {self.cycles} cycles at T = {self.period * 1e3:g} ms, no torque: start lateness "
-                f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms, own "
-                f"p99 {self.own_lateness_p99 * 1e6:.0f} us; "
+                f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms; delay "
+                f"added p99 {self.delay_added_p99 * 1e6:.0f} us; "
                 f"exchange p99 {cycle['p99'] * 1e6:.0f} us; longest gap {self.longest_gap * 1e3:.3g} ms; "
                 f"{self.overruns} started more than T late, {self.busy_over_period} busy longer than T "
                 f"({self.busy_allowed} allowed){holds}: {self.reason}")
@@ -224,10 +226,10 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     period = timing.period
     late, cycle = percentiles(timing.lateness), percentiles(timing.exchange)
     gap = float(np.max(np.diff(timing.starts))) if timing.starts.size > 1 else period
-    own = own_lateness(timing)
-    own_p99 = float(np.percentile(own, 99)) if own.size else 0.0
-    observed = assumed_delay + own_p99 / period
-    busy = np.sort(timing.exchange + own)[::-1]  # each cycle's busy time, the longest first
+    added = delay_added(timing)
+    added_p99 = float(np.percentile(added, 99)) if added.size else 0.0
+    observed = assumed_delay + added_p99 / period
+    busy = np.sort(timing.exchange + own_lateness(timing))[::-1]  # each cycle's busy time, the longest first
     allowed = allowed_overruns(busy.size)
     worst = max(float(busy[allowed]) if busy.size > allowed else period, bus_floor)  # the longest the rule lets pass
     holds = _on_grid(worst) if worst > period else min(_on_grid(worst), period)  # T itself where it holds, off the grid
@@ -236,7 +238,7 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     def report(holdable: bool, reason: str, smallest: float | None = holds, passive: bool | None = None) -> PreflightReport:
         if not holdable and smallest is not None:
             reason += f": this machine holds T >= {smallest * 1e3:g} ms"
-        return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, own_p99, overlong,
+        return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, added_p99, overlong,
                                allowed, observed, passive, watchdog, holdable, reason, smallest)
 
     if cycle["p50"] > period:  # the loop cannot keep its period: it falls further behind every cycle
@@ -277,6 +279,15 @@ def allowed_overruns(cycles: int) -> int:
         count += 1
         below += term
     return count
+
+
+def delay_added(timing: Timing) -> np.ndarray:
+    """The delay each cycle adds to the loop's (s): the larger of its :func:`own_lateness` and how much
+    longer than ``T`` after the cycle before's start it began (a cycle held up inside its exchange,
+    waiting for the drive or stalled there, starts the next one late while that one's own lateness is
+    none: the drive held the torque before it that much longer)."""
+    stretched = np.diff(timing.starts, prepend=timing.starts[:1]) - timing.period  # the first: -T
+    return np.maximum(own_lateness(timing), stretched)
 
 
 def own_lateness(timing: Timing) -> np.ndarray:

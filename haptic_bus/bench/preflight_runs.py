@@ -7,8 +7,8 @@ its own udp_multicast group and port, the profile's operator), then the command 
 of its own, as a user types it (real time, the default scheduling, ``--no-plots``, a run of
 :data:`DURATION` s after pre-flight), and reads pre-flight's verdict from the run's ``run.json``:
 whether this machine held ``T`` (else the refusal, naming the period it held), the start
-lateness p99 of its 500 cycles, the p99 of each cycle's own lateness (what the judged delay adds to
-the gate's: :mod:`haptic_bus.app.preflight`), and the loop delay the gate judged the wall at.  The count is
+lateness p99 of its 500 cycles, the p99 of the delay each cycle adds (what the judged delay adds to
+the gate's: :func:`haptic_bus.app.preflight.delay_added`), and the loop delay the gate judged the wall at.  The count is
 20 runs (full), 5 (``--quick``) and 1 (``--smoke``: the path runs).  A run that never reached
 pre-flight is one of the count too, with what ended it: its error (a drive error, a crash's last
 line on stderr), no exit within :data:`RUN_WAIT` s (killed), or a simulated drive that did not start.
@@ -56,7 +56,7 @@ def one_run(bus: dict[str, Any]) -> dict[str, Any]:
             "error": document.get("error") or ending,
             "held": bool(preflight.get("holdable")), "judged_delay": preflight.get("observed_delay"),
             "lateness_p99_s": (preflight.get("lateness") or {}).get("p99"),
-            "own_lateness_p99_s": preflight.get("own_lateness_p99"), "reason": preflight.get("reason")}
+            "delay_added_p99_s": preflight.get("delay_added_p99"), "reason": preflight.get("reason")}
 
 
 def fresh_run() -> dict[str, Any]:
@@ -68,7 +68,7 @@ def fresh_run() -> dict[str, Any]:
             bus, _ = stack.enter_context(canopen_simulator(PROFILE, (NODE_ID,)))
         except RuntimeError as error:  # no heartbeat, or it exited: no run was started
             return {"exit": None, "exit_reason": "no simulator", "error": f"the simulated drive did not start: {error}",
-                    "held": False, "judged_delay": None, "lateness_p99_s": None, "own_lateness_p99_s": None,
+                    "held": False, "judged_delay": None, "lateness_p99_s": None, "delay_added_p99_s": None,
                     "reason": None}
         return one_run(bus)
 

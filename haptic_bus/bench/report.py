@@ -260,10 +260,10 @@ def _preflight(s: dict) -> list[str]:
     rows = [[str(k + 1), "-" if r["exit"] is None else str(r["exit"]),
              "held T" if r["held"] else "refused" if reached(r) else "not reached",
              "-" if r["lateness_p99_s"] is None else _t(r["lateness_p99_s"]),
-             "-" if r["own_lateness_p99_s"] is None else _t(r["own_lateness_p99_s"]),
+             "-" if r["delay_added_p99_s"] is None else _t(r["delay_added_p99_s"]),
              "-" if r["judged_delay"] is None or not r["held"] else f"{r['judged_delay']:.3g}",
              ending(r)] for k, r in enumerate(s["runs"])]
-    return [s["description"] + ".", "", _table(["run", "exit", "pre-flight", "start lateness p99", "own lateness p99",
+    return [s["description"] + ".", "", _table(["run", "exit", "pre-flight", "start lateness p99", "delay added p99",
                                                 "loop delay judged (samples)", "refusal, or what ended the run"],
                                                rows), "",
             f"{s['held']} of {s['count']} passed pre-flight, {s['refused']} refused, {s['not_reached']} never "
