@@ -263,8 +263,10 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     if layer != "off":
         return report(True, f"the scene is not passive at the measured loop delay of {observed:.3g} samples; the "
                             f"passivity layer ({layer}) holds the port passive and may lower the force", passive=False)
+    shorter = ", or a shorter T" if holds < period else ""  # a longer T: more delay in seconds, a larger K T
     return report(False, f"refused: the scene is not passive at the measured loop delay of {observed:.3g} samples "
-                         f'and [passivity] layer = "off"; use layer "guard" or "bound", or a longer T', None, False)
+                         f'and [passivity] layer = "off"; use layer "guard" or "bound", a softer wall{shorter}',
+                  passive=False)
 
 
 def allowed_overruns(cycles: int) -> int:
