@@ -8,7 +8,7 @@ another run's folder is exit 2).  It receives:
 - ``run.json`` (:class:`RunJournal`, :func:`run_document`), at once: ``status`` "running",
   ``"ended": false``; kept current while the run goes on (each event, each scene) and completed at
   the end: software versions, the profile file and its SHA-256, its settings (every axis and object
-  for several), device, loop (delay assumed and observed), the loop the gate judged (``gate_loop``,
+  for several), device, loop (delay assumed, and observed once it cycled), the loop the gate judged (``gate_loop``,
   one axis), link, scaling and where each factor came from (per axis for several), the safety
   settings the drives were given (``settings.safety``: in virtual time the watchdogs' floor,
   :meth:`~drives.safety.SafetySettings.for_virtual_time`; the profile's own are in its file),
@@ -204,7 +204,7 @@ def run_document(kind: DocumentKind, controller: WallController[Any, Any] | None
         document["events"] = controller.events.to_list()
         document["events_dropped"] = controller.events.dropped
         supervisor = controller.supervisor
-        if supervisor is not None:
+        if supervisor is not None and supervisor.cycles:  # refused before its first cycle: nothing observed
             document.setdefault("loop", {})["delay_observed"] = supervisor.observed_delay()
     if summary is not None:
         document["summary"] = asdict(summary)

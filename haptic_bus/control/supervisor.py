@@ -148,6 +148,11 @@ class Supervisor:
             return late, self._raise("observer", Action(policy.on_observer), message)
         return late, None
 
+    @property
+    def cycles(self) -> int:
+        """The cycles accounted so far (:meth:`cycle`; 0: none, the window shows no delay)."""
+        return self._cycle
+
     def observed_delay(self) -> float:
         """The loop delay (samples) the window shows: the assumed one plus the lateness that more
         than ``late_limit`` of its cycles reached (its ``late_limit + 1``-th largest), the same
