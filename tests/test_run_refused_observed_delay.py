@@ -12,17 +12,14 @@ T = 1 ms; a timing pre-flight cannot hold refuses it too.
 from __future__ import annotations
 
 import re
-import subprocess
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
+import haptic_bus as hb
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.profiles.one_axis import Profile
 from haptic_bus.app.run_json import read_document
-from haptic_bus.bench.processes import canopen_simulator
-from haptic_bus.bench.startup import haptic_bus_command
-
-NODE_ID = 5
-RUN_WAIT = 120.0  # s: the command, its imports and pre-flight (3-6 s on a loaded 2-core machine)
 
 
 def _edge_profile(folder: Path) -> Path:
@@ -38,16 +35,15 @@ def _edge_profile(folder: Path) -> Path:
     return path
 
 
-def test_refused_at_preflight_records_no_observed_delay(tmp_path: Path) -> None:
+def test_refused_at_preflight_records_no_observed_delay(haptic_sim: Callable[..., Any], tmp_path: Path) -> None:
+    """In this process on the lock-step bus, paced by the wall clock: the run's own pre-flight."""
     profile = _edge_profile(tmp_path)
-    out = tmp_path / "run"
-    with canopen_simulator("stiff-wall", (NODE_ID,), "--clock", "wall") as (bus, _):
-        done = subprocess.run([*haptic_bus_command(), "run", str(profile), "--interface", bus["interface"],
-                               "--channel", bus["channel"], "--bus-option", f"port={bus['port']}", "--node-id",
-                               str(NODE_ID), "--duration", "0.2", "--no-plots", "-q", "--out", str(out)],
-                              capture_output=True, text=True, timeout=RUN_WAIT, check=False)
-    document = read_document(out)
-    assert done.returncode == 1, done.stderr
+    drive = haptic_sim("stiff-wall", interface="lockstep")
+    options = hb.RunOptions(duration=0.05, pacing="wall", out_dir=tmp_path / "run", live=False, bus_log=False,
+                            plots=False, preflight_cycles=50)
+    result = hb.run(hb.load_profile(profile), drive.bus, options, **drive.run_kwargs())
+    document = read_document(tmp_path / "run")
+    assert result.exit_reason == "refused", result.error
     assert document["status"] == "refused"
     assert document["preflight"]["holdable"] is False
     assert document["preflight"]["observed_delay"] > 1.0
