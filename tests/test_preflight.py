@@ -5,7 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptic_bus.app.preflight import PERIOD_GRID, STALL_MARGIN, Timing, allowed_overruns, judge, measure, without_realtime
+from haptic_bus.app.preflight import (
+    PERIOD_GRID,
+    STALL_MARGIN,
+    Timing,
+    allowed_overruns,
+    judge,
+    judge_delay,
+    measure,
+    without_realtime,
+)
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.errors import DriveTimeout
 
@@ -184,3 +193,23 @@ def test_a_cycle_held_up_inside_its_exchange_adds_the_delay_to_the_next() -> Non
     assert report.delay_added_p99 == pytest.approx(7e-3, rel=1e-9)
     assert report.observed_delay == pytest.approx(8.0, rel=1e-9)
     assert not report.holdable and report.busy_over_period == 6
+
+
+def test_a_target_applied_on_arrival_is_judged_at_least_an_exchange_late() -> None:
+    """desktop-touch's "ideal" timing: the drive applies a target as its RPDO arrives, an exchange
+    (here 0.6 ms, SYNC out to RPDO out) after it sampled, so the gate's 0 samples become at least
+    0.6 (breaker14: an "ideal" wall passive only below 0.1 samples, without a layer, ran at a judged
+    0.009 samples while its exchanges took 0.3-0.67 ms).  A "cia402" drive applies it at the next
+    SYNC whatever the exchange: its delay stays the gate's."""
+    asked: list[float] = []
+
+    def passes_at(delay: float) -> bool:
+        asked.append(delay)
+        return True
+
+    late = np.full(500, 20e-6)
+    on_arrival = judge_delay(timing(late, exchange=600e-6), 0.0, passes_at, "guard", 0.050, 50, on_arrival=True)
+    assert on_arrival.observed_delay == pytest.approx(0.6 + 0.02, abs=1e-9) and asked == [on_arrival.observed_delay]
+    at_sync = judge_delay(timing(late, exchange=600e-6), 1.0, passes_at, "guard", 0.050, 50)
+    assert at_sync.observed_delay == pytest.approx(1.02, abs=1e-9)
+    assert load_profile("desktop-touch").loop.timing == "ideal"  # the shipped profile such a run would load

@@ -36,8 +36,13 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
   its torque goes out at the next SYNC an exchange later, sooner than ``T``.  Only the stalled
   cycle's torque came late; the start lateness's p99 counted the whole catch-up (the catch-up of
   one stall of the host left a start lateness p99 of 4.47 ms in 500 cycles, judged a loop delay
-  of 5.47 samples where the drive's is 1).  Passive there: nothing to add.  Not passive: with a passivity layer the run
-  goes on (the layer holds the port passive; it may act), without one it is refused.
+  of 5.47 samples where the drive's is 1).  A drive that applies its target as it arrives ("ideal"
+  or "reception" timing, :data:`~haptic_bus.profile.device.ON_ARRIVAL`) does so an exchange after
+  it sampled (SYNC out to RPDO out): the delay the gate assumed is then taken as at least the
+  exchange's p99 (breaker14: "ideal" timing, a wall passive only below 0.1 samples and no layer,
+  was judged at 0.009 samples and ran, its exchanges 0.3-0.67 ms at T = 1 ms).  Passive there:
+  nothing to add.  Not passive: with a passivity layer the run goes on (the layer holds the port
+  passive; it may act), without one it is refused.
 
 The run prints what was measured and the verdict in one line, and ``run.json`` records both (``preflight``).
 """
@@ -84,7 +89,7 @@ class PreflightReport:
     more than ``T`` late; ``delay_added_p99``: the p99 of the delay each cycle adds (s,
     :func:`delay_added`); ``busy_over_period``: cycles busy longer than ``T`` (what the period rule
     counts), of which ``busy_allowed`` pass (:func:`allowed_overruns`); ``observed_delay``: the
-    gate's delay plus ``delay_added_p99`` (samples);
+    gate's delay (at least the exchange's p99 where targets apply on arrival) plus ``delay_added_p99`` (samples);
     ``passive_at_observed``: the gate's verdict there (None: not judged, the timing alone refuses the
     run; at the delay of a machine far behind, hundreds of samples, the coupled gate takes minutes);
     ``watchdog``: the shortest stall (s) that faults the drive (inf: none); ``holdable``: False
@@ -218,17 +223,20 @@ def passes_at(gate: PassivityGate, scene: CompiledScene) -> Callable[[float], bo
 
 
 def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float], bool], layer: str, watchdog: float,
-                deadline_periods: int | None, bus_floor: float = 0.0) -> PreflightReport:
+                deadline_periods: int | None, bus_floor: float = 0.0, on_arrival: bool = False) -> PreflightReport:
     """:func:`judge` for any gate: ``assumed_delay`` (samples) is the delay it judged with,
     ``passes_at(delay)`` its verdict on the scene at another loop delay (samples).  ``bus_floor``
     (s): the shortest ``T`` the bus carries (CANopen's load ceiling, checked before the bus was
-    opened, so at most ``T``; 0 for Modbus): the period named is never shorter."""
+    opened, so at most ``T``; 0 for Modbus): the period named is never shorter.  ``on_arrival``: a drive
+    applies its target as it arrives (:data:`~haptic_bus.profile.device.ON_ARRIVAL`), so the loop's
+    delay is at least the exchange's p99 (module docstring)."""
     period = timing.period
     late, cycle = percentiles(timing.lateness), percentiles(timing.exchange)
     gap = float(np.max(np.diff(timing.starts))) if timing.starts.size > 1 else period
     added = delay_added(timing)
     added_p99 = float(np.percentile(added, 99)) if added.size else 0.0
-    observed = assumed_delay + added_p99 / period
+    base = max(assumed_delay, cycle["p99"] / period) if on_arrival else assumed_delay
+    observed = base + added_p99 / period
     busy = np.sort(timing.exchange + own_lateness(timing))[::-1]  # each cycle's busy time, the longest first
     allowed = allowed_overruns(busy.size)
     worst = max(float(busy[allowed]) if busy.size > allowed else period, bus_floor)  # the longest the rule lets pass

@@ -42,6 +42,7 @@ from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.scene_switch import SceneEntry
 from haptic_bus.control.space_gate import SpaceGate
 from haptic_bus.control.space_scene import SpaceScene
+from haptic_bus.profile.device import ON_ARRIVAL
 
 Records = list[tuple[str, str, RunRecord]]  # (file name, axis name, record) as the recorder streams them
 
@@ -57,6 +58,9 @@ class RunKind(DocumentKind, Protocol[SceneT, GateT, OriginT]):
 
     @property
     def period(self) -> float: ...
+
+    @property
+    def on_arrival(self) -> bool: ...
 
     @property
     def zero_targets(self) -> int | list[int]: ...
@@ -110,6 +114,11 @@ class OneAxisRun:
     def period(self) -> float:
         """The cycle's period ``T`` (s)."""
         return self.profile.period
+
+    @property
+    def on_arrival(self) -> bool:
+        """Whether the drive applies a target as it arrives (:data:`~haptic_bus.profile.device.ON_ARRIVAL`)."""
+        return self.profile.loop.timing in ON_ARRIVAL
 
     def loop_extra(self) -> dict[str, Any]:
         """``run.json``'s ``loop`` before the drive is reached."""
@@ -200,6 +209,11 @@ class AxesRun:
     def period(self) -> float:
         """The one SYNC's period ``T`` (s)."""
         return self.profile.period
+
+    @property
+    def on_arrival(self) -> bool:
+        """Whether any axis' drive applies a target as it arrives (:data:`~haptic_bus.profile.device.ON_ARRIVAL`)."""
+        return any(axis.timing in ON_ARRIVAL for axis in self.profile.axes)
 
     @property
     def zero_targets(self) -> list[int]:

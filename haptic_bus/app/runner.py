@@ -342,7 +342,8 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
         _stop_if_asked(options)  # asked during the measurement: the run stops, whatever its verdict would have been
         report = preflight.while_cycling(exchange_unless_stopped, kind.period, spin=spin, work=lambda: preflight.judge_delay(
             timing, kind.assumed_delay(gate), kind.passes_at(gate, scene), kind.profile.passivity.layer,
-            rig.watchdog.stall, rig.watchdog.periods, rig.link.get("bus_load", {}).get("smallest_period", 0.0)))
+            rig.watchdog.stall, rig.watchdog.periods, rig.link.get("bus_load", {}).get("smallest_period", 0.0),
+            kind.on_arrival))
     preflight.settle(preflight.without_realtime(report, extra.get("realtime")), options.live, extra)
 
 

@@ -33,6 +33,9 @@ from haptic_bus.profile.reader import REQUIRED, Reader, profile_error
 
 TIMINGS: dict[str, float | None] = {"ideal": 0, "cia402": 1, "reception": None}
 """Timing name -> its least loop delay in samples, the default of ``[loop] delay`` (None: required)."""
+ON_ARRIVAL = frozenset({"ideal", "reception"})
+"""The timings whose drive applies a target as its RPDO arrives (not at the next SYNC): on a real bus the
+loop delay is then at least the cycle's exchange, SYNC out to RPDO out (:mod:`haptic_bus.app.preflight`)."""
 # The ranges a profile's [device] and the simulated drive's parameters (sim_drive.parameters) share:
 NOISE_SEED_RANGE = (0, 2**64 - 1)
 SCALE_RANGE = (0.0, 1e6)  # exclusive low: m/s per count, m per count, N per N m
