@@ -60,13 +60,9 @@ def profile_axes(args: argparse.Namespace) -> SimulatedDevice | None:
     return device if device is not None and device.multi_axis else None
 
 
-def id_list(flag: str, text: str, low: int, high: int, what: str, distinct: bool = True) -> list[int]:
-    """``5,6,7`` -> [5, 6, 7] (:func:`haptic_bus.validation.ids_in_order`); ParameterError naming ``flag`` otherwise."""
-    return ids_in_order(flag, text, what, low, high, distinct=distinct)
-
-
 def node_ids(text: str) -> list[int]:
-    return id_list("--node-ids", text, *NODE_ID_RANGE, "CANopen node ids")
+    """``--node-ids 5,6,7``: distinct CANopen node ids, one per axis; ParameterError otherwise."""
+    return ids_in_order("--node-ids", text, "CANopen node ids", *NODE_ID_RANGE, distinct=True)
 
 
 def axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
@@ -99,8 +95,7 @@ def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
     from sim_drive.space_operator import SpaceHand
 
     # a unit id may repeat on servers of their own (unit 1 on each is the default), never on one
-    given = id_list("--unit-ids", args.unit_ids, *UNIT_ID_RANGE, "Modbus unit ids", distinct=False) if args.unit_ids \
-        else None
+    given = ids_in_order("--unit-ids", args.unit_ids, "Modbus unit ids", *UNIT_ID_RANGE) if args.unit_ids else None
     if args.unit_id is not None:
         raise ParameterError("--unit-id", args.unit_id, "--unit-ids for several axes (one unit id per axis)")
     device = profile_axes(args)

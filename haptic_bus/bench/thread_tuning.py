@@ -151,16 +151,16 @@ class ThreadCpu:
     def __init__(self) -> None:
         self._start: dict[int, tuple[str, float]] = {}
         self._end: dict[int, tuple[str, float]] = {}
-        self._process = (0.0, 0.0)
+        self._process_start = self._process_end = 0.0  # the whole process's CPU (s)
 
     def __enter__(self) -> ThreadCpu:
         self._start = _threads_cpu()
-        self._process = (time.process_time(), 0.0)
+        self._process_start = time.process_time()
         return self
 
     def __exit__(self, *exc: object) -> None:
         self._end = _threads_cpu()
-        self._process = (self._process[0], time.process_time())
+        self._process_end = time.process_time()
 
     def by_name(self) -> dict[str, float]:
         """CPU seconds per thread name over the block (threads of one name summed), and :data:`ENDED`."""
@@ -168,8 +168,7 @@ class ThreadCpu:
         for tid, (name, used) in self._end.items():
             key = "canopen notifier" if name.startswith("Notifier") else name
             out[key] = out.get(key, 0.0) + used - self._start.get(tid, (name, 0.0))[1]
-        first, last = self._process
-        out[ENDED] = max(0.0, last - first - sum(out.values()))
+        out[ENDED] = max(0.0, self._process_end - self._process_start - sum(out.values()))
         return {k: round(v, 3) for k, v in sorted(out.items(), key=lambda kv: -kv[1])}
 
 
