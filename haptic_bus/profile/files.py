@@ -26,8 +26,10 @@ def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:
     candidate = pathlib.Path(path_or_name)
     if candidate.is_file():
         return candidate
+    if isinstance(path_or_name, str) and pathlib.Path(path_or_name).name == path_or_name:  # a name, not a path
+        shipped_file = _profiles_folder() / f"{path_or_name}.toml"  # found without reading every shipped profile
+        if shipped_file.is_file():
+            return shipped_file
     shipped = {**shipped_profiles(), **shipped_profiles(axes=True)}
-    if isinstance(path_or_name, str) and path_or_name in shipped:
-        return shipped[path_or_name]
     raise profile_error(path_or_name, "profile", str(path_or_name),
                         f"an existing TOML file or a shipped profile name: {', '.join(shipped) or 'none'}")
