@@ -10,6 +10,7 @@ logging says (``-q`` also turns the live view of ``run`` off).
 from __future__ import annotations
 
 import argparse
+import functools
 import logging
 import os
 import pathlib
@@ -427,7 +428,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if argv and argv[0] in _PASS_THROUGH:
             return _PASS_THROUGH[argv[0]](argv[1:])
         try:
-            args = _parse(build_parser(), argv)
+            args = _parse(_command_parser(), argv)
         except SystemExit as done:  # help (0), or a usage error (2) whose one line argparse has printed
             return int(done.code or 0)
         _configure_logging(args.verbose, args.quiet)
@@ -439,6 +440,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return EXIT_OK
+
+
+@functools.cache
+def _command_parser() -> argparse.ArgumentParser:
+    """:func:`build_parser`'s parser, built once per process (10 ms; parsing leaves it as it was): what
+    :func:`main` parses with, however often a process calls it (the plugin's and the tests' in-process runs)."""
+    return build_parser()
 
 
 def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
