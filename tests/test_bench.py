@@ -18,8 +18,8 @@ from haptic_bus.bench import BENCH_EXTRA, SECTIONS, build_parser, main, run_benc
 from haptic_bus.bench.size import FULL, QUICK, SMOKE
 from haptic_bus.bench.timing import REPEATS, Spread, paired, time_per_call
 
-pytestmark = pytest.mark.slow  # the smoke bench behind these tests: 29-38 s, 30-33 s of CPU (the command alone, load 3-4)
-# on this 2-core machine; most of it is the 24 processes it starts and the coupled gate's judgements in the three-axis run
+pytestmark = pytest.mark.slow  # the smoke bench behind these tests: 33 s, 25-26 s of CPU (pytest -n 0, load about 2) on
+# this 2-core machine; most of it is the 24 processes it starts (its three-axis run has no ball: thread_tuning.axes_profile)
 
 SmokeRun = tuple[Path, dict[str, Any]]
 REPO = Path(__file__).resolve().parents[1]

@@ -14,6 +14,7 @@ import pytest
 
 from haptic_bus.bench import preflight_runs, processes, run_bench
 from haptic_bus.bench.size import QUICK, SMOKE
+from haptic_bus.testing.buses import unique_multicast
 
 
 @pytest.fixture
@@ -21,6 +22,14 @@ def no_drive(multicast: tuple[str, int]) -> dict:
     """A udp_multicast bus of this test's own where nothing answers."""
     group, port = multicast
     return {"interface": "udp_multicast", "channel": group, "port": port}
+
+
+@pytest.fixture(scope="module")
+def ended_before_preflight() -> dict:
+    """:func:`preflight_runs.one_run` on a udp_multicast bus of this module's own where nothing answers: the
+    command line's run ends (exit 1) on the boot-up it waits for.  One such run serves the tests that read one."""
+    group, port = unique_multicast()
+    return preflight_runs.one_run({"interface": "udp_multicast", "channel": group, "port": port})
 
 
 def test_a_simulator_that_does_not_start_is_a_run_that_never_reached_preflight(tmp_path: Path,
@@ -42,8 +51,8 @@ def test_a_simulator_that_does_not_start_is_a_run_that_never_reached_preflight(t
     assert row["note"] == "0 held T, 0 refused, 1 never reached pre-flight"
 
 
-def test_a_run_that_ends_before_preflight_names_its_error(no_drive: dict) -> None:
-    entry = preflight_runs.one_run(no_drive)
+def test_a_run_that_ends_before_preflight_names_its_error(ended_before_preflight: dict) -> None:
+    entry = ended_before_preflight
     assert entry["exit"] == 1 and entry["exit_reason"] == "drive error"
     assert not preflight_runs.reached(entry) and entry["lateness_p99_s"] is None
     assert entry["error"].startswith("CANopen node 5: no boot-up after NMT reset communication")
@@ -57,21 +66,25 @@ def test_a_run_that_does_not_exit_in_time_is_killed_and_said(no_drive: dict, mon
     assert not preflight_runs.reached(entry)
 
 
-def test_ctrl_c_keeps_the_runs_that_finished(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    real, started = preflight_runs.fresh_run, []
+def test_ctrl_c_keeps_the_runs_that_finished(ended_before_preflight: dict, tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """The first run is the module's run that ended before pre-flight (what a Ctrl-C keeps does not depend on
+    how a run ended, and it spares a simulator's process and a pre-flight's real-time cycles); the Ctrl-C
+    lands as the second starts."""
+    started = []
 
     def ctrl_c_in_the_second() -> dict:
         started.append(len(started) + 1)
         if len(started) == 2:
             signal.raise_signal(signal.SIGINT)  # Ctrl-C as the second run starts
-        return real()
+        return ended_before_preflight
 
     monkeypatch.setattr(preflight_runs, "fresh_run", ctrl_c_in_the_second)
     result = run_bench(tmp_path, QUICK, sections=("preflight",))
     assert started == [1, 2] and result["interrupted"] == "preflight"
     section = json.loads((tmp_path / "bench.json").read_text())["sections"]["preflight"]
     assert (section["count"], section["planned"], section["interrupted"], len(section["runs"])) == (1, 5, True, 1)
-    assert section["runs"][0]["exit"] is not None  # the first run ran to its end
+    assert section["runs"][0]["exit"] == 1  # the first run ran to its end
     text = (tmp_path / "bench.md").read_text()
     assert "**Interrupted (Ctrl-C) in section preflight: only the sections before it ran, and what of it finished.**" in text
     assert "each time: 1 of 5 runs (interrupted: Ctrl-C), one after another." in text

@@ -22,14 +22,26 @@ hb.run(hb.load_profile("cia402-handle"), {bus!r},
 """
 
 
-def test_an_unguarded_script_is_told_the_rule_and_its_run_is_not_completed(haptic_sim, tmp_path: pathlib.Path) -> None:
-    drive = haptic_sim("cia402-handle", interface="udp_multicast")
+def test_an_unguarded_script_is_told_the_rule_and_its_run_is_not_completed(multicast: tuple[str, int],
+                                                                             tmp_path: pathlib.Path) -> None:
+    """The script is the process that matters; the simulated drive it talks to over udp_multicast runs in this
+    one (as ``haptic-bus sim --profile cia402-handle`` builds it), which costs no second interpreter's imports."""
+    from sim_drive.canopen.slave import CanopenSimDrive
+    from sim_drive.profile import read_simulated_device
+
+    group, port = multicast
+    bus = {"interface": "udp_multicast", "channel": group, "port": port}
+    truth, operator = read_simulated_device("cia402-handle").one_axis()
     runs = tmp_path / "runs"
     runs.mkdir()
     script = tmp_path / "unguarded.py"
-    script.write_text(SCRIPT.format(out=str(runs), bus=drive.bus, node_id=5))
-    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path,
-                          env=os.environ | {"PYTHONWARNINGS": "ignore"})  # the crash's resource_tracker warning
+    script.write_text(SCRIPT.format(out=str(runs), bus=bus, node_id=5))
+    sim = CanopenSimDrive(bus, 5, timing=truth.timing, parameters=truth.parameters, operator=operator).start()
+    try:
+        done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path,
+                              env=os.environ | {"PYTHONWARNINGS": "ignore"})  # the crash's resource_tracker warning
+    finally:
+        sim.stop()
     assert done.returncode == 1, done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("drives.errors.HapticBusError: the judge worker process died while it started")

@@ -212,9 +212,11 @@ def issue_26(sections: dict) -> list[dict]:
         share = got.get("overrun_share")
         rows.append(_row(2, f"overruns, share of cycles, {load}", "-" if share is None else f"{share:.2%}",
                          f"<= {figures['overrun_target']:.1%}", None if share is None else share <= figures["overrun_target"]))
+    axes = s.get("axes", {}) if s else {}
     for load, got in figures.get("three axes", {}).items():
         ratio = got.get("core_ratio")
-        rows.append(_row(1, f"control process CPU / python-can's floor, 3 axes (gantry-3d, its T = 2 ms), {load}",
+        rows.append(_row(1, f"control process CPU / python-can's floor, 3 axes ({axes.get('profile')}, its T = "
+                            f"{axes.get('period_s', 0) * 1e3:g} ms), {load}",
                          "-" if ratio is None else f"{ratio:.3g}", f"<= {figures['core_ratio_target']:g} x",
                          None if ratio is None else ratio <= figures["core_ratio_target"],
                          note="" if ratio is None else f"floor {got['floor_core_share']:.3g} of a core, writer process "
