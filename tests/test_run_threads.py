@@ -4,7 +4,7 @@ the writer process' (``hb-writer``, a child of the control process).
 
 The run is ``haptic_bus.run_canopen`` in this process' main thread (the control thread) against
 the simulated drive in another process on ``udp_multicast``, in virtual time, live view on; a
-thread of this test samples ``threading.enumerate()`` while the record grows.  The threads still
+thread of this test samples ``threading.enumerate()`` while the record grows, then stops the run.  The threads still
 allowed, each with its reason, are :data:`ALLOWED`.  The bench's per-thread CPU account counts
 the writer process beside them.
 """
