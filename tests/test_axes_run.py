@@ -103,31 +103,29 @@ def test_the_demo_renders_a_ball_a_block_and_a_slope_with_k_times_the_penetratio
 
 @pytest.mark.slow
 def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
-        tmp_path: pathlib.Path, multicast: tuple[str, int], sim_process) -> None:
-    """``haptic-bus sim --node-ids 5,6,7`` and the run as two processes in virtual time:
+        tmp_path: pathlib.Path, multicast: tuple[str, int], sim_process, capfd: pytest.CaptureFixture[str]) -> None:
+    """``haptic-bus sim --node-ids 5,6,7`` and ``haptic-bus run`` as two processes in virtual time:
     the same trajectories as the lock-step run in one process, bit for bit, at rest on the slope.
-    The simulator is its own process; the run is :func:`~haptic_bus.app.runner.run` in the test's
-    process (the frames cross between the two processes on udp_multicast all the same; a third process
-    would only import and judge the profile again), with the profile the lock-step run takes: judged
-    once (the coupled gate's 1.1 s of CPU).  The command line's ``run`` of three axes on udp_multicast is
-    the kill test's, below."""
+    The simulator is its own process; the run is the command's ``main`` in the test's process (the
+    frames cross between the two processes on udp_multicast all the same; a third process would only
+    import and judge the profile again)."""
     profile_path = variant(tmp_path, "slope", TARGETS, "toward = [0.02, 0.02, 0.01]", ROOMY)
-    profile = load_profile(profile_path)
     group, port = multicast
-    sim = sim_process("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
-                      "--node-ids", "5,6,7", "--profile", str(profile_path))
+    bus = ["--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}"]
+    sim = sim_process(*bus, "--node-ids", "5,6,7", "--profile", str(profile_path))
     sim.wait_for_line("nodes 5, 6, 7: serving", START_WAIT)
     # 1.7 s: in virtual time the handle is at rest on the slope (every torque and 0x606C sample final) from
     # 1.51 s on, the same in every run (each SYNC advances the plants exactly T): 95 cycles at rest (2 s, 245 cycles at
     # rest, passed the same asserts; what is asserted at rest is the last cycle)
-    result = run(profile, {"interface": "udp_multicast", "channel": group, "port": port},
-                 RunOptions(1.7, pacing="virtual", out_dir=tmp_path / "two", live=False, plots=False))
+    returncode = main(["run", str(profile_path), *bus, "--virtual-time", "--duration", "1.7", "--out",
+                       str(tmp_path / "two"), "-q", "--no-plots"])
+    out, err = capfd.readouterr()
     code, log = sim.stop()
-    assert result.exit_reason == "completed", result.error
-    assert code == 0, log
+    assert returncode == 0, err
+    assert "ended: completed" in out and code == 0, log
     assert "node 6: stopped after" in log
     one = tmp_path / "one"
-    demo = run_demo(one, profile, seconds=1.7, plots=False)  # the lock-step bus, one process
+    demo = run_demo(one, load_profile(profile_path), seconds=1.7, plots=False)  # the lock-step bus, one process
     assert demo.summary.exit_reason == "completed", demo.summary.error
     assert not (tmp_path / "two" / "trajectory.png").exists() and not (one / "trajectory.png").exists()  # no plots asked
     two = records(tmp_path / "two")
