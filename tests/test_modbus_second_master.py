@@ -17,7 +17,7 @@ AFTER_WAIT = 30.0  # s of wall clock: a bound on a hang, not a pace
 
 def test_a_refused_second_master_leaves_every_unit_to_the_first(haptic_sim, haptic_controller):
     device = haptic_sim("gantry-3d", interface="modbus")
-    profile = load_profile("gantry-3d")  # judged once for both runs (its coupled gate: about 1 s of CPU a load)
+    profile = load_profile("gantry-3d")  # one profile object for both runs
     first = haptic_controller(profile, device, duration=600.0, plots=False)
     first.wait_cycling()
     second = haptic_controller(profile, device, duration=0.1, plots=False).wait()
