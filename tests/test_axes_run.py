@@ -31,6 +31,7 @@ import logging
 import math
 import pathlib
 import signal
+import threading
 import time
 from typing import Any
 
@@ -44,10 +45,10 @@ from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_axes_device
 from haptic_bus.app.runner import RunOptions, RunResult, run
 from haptic_bus.profile.files import resolve_profile
-from tests.cli_process import cli_process, reaped
 from tests.gantry_records import assert_resting_on_the_slope, assert_same_loop, records
 
 START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen and judge the profile first
+DRAIN = 0.2  # s: the frames a returned run sent are read this long after (loopback: they are there within a ms)
 RUN_WAIT = 240.0  # s of wall clock: a bound on the kill test's run across three processes on this loaded 2-CPU machine
 GANTRY = resolve_profile("gantry-3d")  # the file only: loading judges every wall (0.8 s at each collection)
 
@@ -227,14 +228,17 @@ def test_a_run_needs_the_position_mapped(tmp_path: pathlib.Path, capsys: pytest.
 
 @pytest.mark.slow
 def test_killing_one_axis_drive_process_zeroes_every_torque_in_the_same_cycle(
-        tmp_path: pathlib.Path, bus_spec, sim_process) -> None:
+        tmp_path: pathlib.Path, bus_spec, sim_process, capfd: pytest.CaptureFixture[str]) -> None:
     """Nodes 5 and 7 in one simulator process, node 6 in another (each process' hand sees only its own
     axes, so the push is not the one-process hand's); node 6's is killed (SIGKILL) while all three
     push on the slope.  A sniffer on the bus sees, after node 6's last TPDO, the master's
     safe RPDO (DISABLE VOLTAGE, torque 0) to every node before one SYNC, and no torque after it; the
     run exits 1 with every axis' record and run.json kept, and at the default verbosity (no ``-q``)
     its stderr is the command's one line naming node 6's missing TPDO: the other axes' failed
-    goodbyes are INFO (this run is also ``test_axes_one_error_line.py``'s CANopen case)."""
+    goodbyes are INFO (this run is also ``test_axes_one_error_line.py``'s CANopen case).
+    The killed process is a drive's: the run is the command's ``main`` in this process' main thread
+    (its frames cross to both simulator processes on udp_multicast all the same; its output is read at
+    the file descriptors), the sniffer and the kill in a thread of this test."""
     profile_path = variant(tmp_path, "slope", TARGETS, "toward = [0.02, 0.02, 0.01]", ROOMY)
     spec = bus_spec("udp_multicast")
     two = sim_process(*spec.sim_args(), "--node-ids", "5,7", "--profile", str(profile_path))
@@ -242,31 +246,42 @@ def test_killing_one_axis_drive_process_zeroes_every_torque_in_the_same_cycle(
     two.wait_for_line("nodes 5, 7: serving", START_WAIT)
     one.wait_for_line("node 6: serving", START_WAIT)
     sniffer = spec.open()
-    run = cli_process("run", str(profile_path), *spec.sim_args(), "--virtual-time", "--duration", "600",
-                      "--out", str(tmp_path / "run"), "--no-plots")
-    seen: list[tuple[int, bytes]] = []
+    torques = {0x205: 0, 0x206: 0, 0x207: 0}
+    frames: list[tuple[int, bytes]] = []  # every frame after the kill
+    ended = threading.Event()
+
+    def kill_node_6_once_every_axis_pushes() -> None:
+        """Node 6's process killed once every axis pushes on the slope (or at the deadline: the run then ends
+        too, and the test fails on the torques); every frame after the kill until the run has ended."""
+        deadline = time.monotonic() + RUN_WAIT
+        while not all(torques.values()) and time.monotonic() < deadline and not ended.is_set():
+            message = sniffer.recv(0.5)
+            if message is not None and message.arbitration_id in torques:
+                torques[message.arbitration_id] = int.from_bytes(message.data[2:4], "little", signed=True)
+        one.process.send_signal(signal.SIGKILL)
+        one.process.wait(timeout=10)
+        while not ended.is_set() and time.monotonic() < deadline:
+            message = sniffer.recv(0.2)
+            if message is not None:
+                frames.append((message.arbitration_id, bytes(message.data)))
+        drained = time.monotonic() + DRAIN  # the run has returned: what it sent last is in the sniffer's socket
+        while (message := sniffer.recv(max(0.0, drained - time.monotonic()))) is not None:
+            frames.append((message.arbitration_id, bytes(message.data)))
+
+    killer = threading.Thread(target=kill_node_6_once_every_axis_pushes, name="test-kill-node-6", daemon=True)
+    killer.start()
     try:
-        with reaped(run):
-            deadline = time.monotonic() + RUN_WAIT
-            torques = {0x205: 0, 0x206: 0, 0x207: 0}
-            while not all(torques.values()) and time.monotonic() < deadline and run.poll() is None:
-                message = sniffer.recv(0.5)  # until every axis pushes on the slope
-                if message is not None and message.arbitration_id in torques:
-                    torques[message.arbitration_id] = int.from_bytes(message.data[2:4], "little", signed=True)
-            assert all(torques.values()), run.stderr.read() if run.poll() is not None else "the run never pushed on the slope"
-            one.process.send_signal(signal.SIGKILL)
-            one.process.wait(timeout=10)
-            while run.poll() is None and time.monotonic() < deadline:
-                message = sniffer.recv(0.2)
-                if message is not None:
-                    seen.append((message.arbitration_id, bytes(message.data)))
-            _, err = run.communicate(timeout=30)
+        returncode = main(["run", str(profile_path), *spec.sim_args(), "--virtual-time", "--duration", "600",
+                           "--out", str(tmp_path / "run"), "--no-plots"])
     finally:
+        ended.set()
+        killer.join(timeout=RUN_WAIT)
         sniffer.shutdown()
+    _, err = capfd.readouterr()
     code, log = two.stop()
-    assert run.returncode == 1, err
+    assert all(torques.values()), f"the run never pushed on the slope: {err}"
+    assert returncode == 1, err
     assert err.count("\n") == 1 and err.startswith("haptic-bus run: drive error: CANopen node 6: no TPDO"), err
-    frames = seen
     syncs = [i for i, (cob, _) in enumerate(frames) if cob == 0x080]
     safe: dict[int, int] = {}
     for i, (cob, data) in enumerate(frames):

@@ -5,18 +5,17 @@ heartbeat) plus random ids, lengths 0..8, random bytes, from a seeded generator,
 controller cycles against the drive; and receive errors injected on the bus.  Afterwards the
 drive still answers SDO and still beats; the controller either kept cycling or stopped with a
 typed :class:`~drives.errors.DriveError` (torque zero, its record kept).  The same holds for
-``haptic-bus run`` in its own process: exit 0 or 1, the summary printed, record.csv and run.json
-written.  Bounded in time; the seed is fixed.
+the command ``haptic-bus run`` against the simulated drive in another process: exit 0 or 1, the summary
+printed, record.csv and run.json written.  Bounded in time; the seed is fixed.
 """
 
 from __future__ import annotations
 
 import os
 import random
+import signal
 import socket
 import struct
-import subprocess
-import sys
 import threading
 import time
 
@@ -26,13 +25,13 @@ import pytest
 
 from drives.bus_config import open_bus
 from drives.errors import DriveError
+from haptic_bus.app.cli import main
 from tests.conftest import SDO_WAIT
 from tests.raw_bus import FailingBus
 
 NODE = 5
 SEED = 20261130
 FRAMES = 10_000
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def random_frame(rng: random.Random) -> can.Message:
@@ -134,47 +133,59 @@ def _bad_datagram(rng: random.Random) -> bytes:
 
 
 @pytest.mark.slow
-def test_haptic_bus_run_under_fuzz_exits_0_or_1_with_its_record(multicast, sim_process, tmp_path) -> None:
+def test_haptic_bus_run_under_fuzz_exits_0_or_1_with_its_record(multicast, sim_process, tmp_path, capfd) -> None:
+    """The simulated drive its own process; the run the command's ``main`` in this process' main thread (its
+    output read at the file descriptors), the fuzzer a thread of this test that ends the run with SIGTERM, as a
+    user's ``kill`` does: a second interpreter for the run would only import and start its workers again."""
     group, port = multicast
     bus_args = ["--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}"]
     sim = sim_process(*bus_args, "--node-id", str(NODE), "--profile", "cia402-handle")
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [REPO, env.get("PYTHONPATH")]))
     out = tmp_path / "run"
-    run = subprocess.Popen([sys.executable, "-m", "haptic_bus.app.cli", "run", "cia402-handle", *bus_args, "--node-id",
-                            str(NODE), "--virtual-time", "--duration", "600", "-q", "--no-plots", "--out", str(out)],
-                           cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    rng = random.Random(SEED + 1)
-    fuzzer = open_bus(interface="udp_multicast", channel=group, port=port)
-    raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    raw.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)  # this host only
+    ended = threading.Event()
+    tpdos: list[int] = []
+
+    def fuzz() -> None:
+        """Once the run cycles, 2 000 random frames and some undecodable datagrams; then SIGTERM to this process."""
+        rng = random.Random(SEED + 1)
+        fuzzer = open_bus(interface="udp_multicast", channel=group, port=port)
+        raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        raw.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)  # this host only
+        try:
+            deadline, seen = time.monotonic() + 40.0, 0
+            while seen < 500 and time.monotonic() < deadline and not ended.is_set():
+                message = fuzzer.recv(0.2)  # wait until it cycles: its TPDOs flow (the enable walk sends a few)
+                seen += message is not None and message.arbitration_id == 0x180 + NODE
+            tpdos.append(seen)
+            for sent in range(2_000 if seen >= 500 else 0):
+                fuzzer.send(random_frame(rng))
+                if sent % 100 == 50:
+                    raw.sendto(_bad_datagram(rng), (group, port))
+                if sent % 100 == 0:
+                    time.sleep(0.001)
+                if ended.is_set():
+                    break
+        finally:
+            raw.close()
+            fuzzer.shutdown()
+            if not ended.is_set():
+                os.kill(os.getpid(), signal.SIGTERM)  # the run's handler stops it (or, once it returned, the test's)
+
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: None)  # a SIGTERM after the run returned: nothing
+    fuzzing = threading.Thread(target=fuzz, name="test-fuzzer", daemon=True)
     try:
-        deadline, tpdos = time.monotonic() + 40.0, 0
-        while tpdos < 500 and time.monotonic() < deadline and run.poll() is None:
-            message = fuzzer.recv(0.2)  # wait until it cycles: its TPDOs flow (the enable walk sends a few)
-            tpdos += message is not None and message.arbitration_id == 0x180 + NODE
-        assert tpdos >= 500, run.communicate(timeout=30)[1] if run.poll() is not None else sim.log()[-2000:]
-        for sent in range(2_000):
-            fuzzer.send(random_frame(rng))
-            if sent % 100 == 50:
-                raw.sendto(_bad_datagram(rng), (group, port))
-            if sent % 100 == 0:
-                time.sleep(0.001)
-            if run.poll() is not None:
-                break
-        if run.poll() is None:
-            run.terminate()
-        stdout, stderr = run.communicate(timeout=30)
+        fuzzing.start()
+        code = main(["run", "cia402-handle", *bus_args, "--node-id", str(NODE), "--virtual-time", "--duration", "600",
+                     "-q", "--no-plots", "--out", str(out)])
     finally:
-        raw.close()
-        fuzzer.shutdown()
-        if run.poll() is None:
-            run.kill()
-            run.wait(timeout=10)
-    assert run.returncode in (0, 1), stderr
+        ended.set()
+        fuzzing.join(timeout=60.0)
+        signal.signal(signal.SIGTERM, previous)
+    stdout, stderr = capfd.readouterr()
+    assert tpdos == [500], (tpdos, stderr, sim.log()[-2000:])
+    assert code in (0, 1), stderr
     assert "Traceback" not in stderr
     assert "ended:" in stdout and (out / "record.csv").is_file() and (out / "run.json").is_file()
-    if run.returncode == 1:
+    if code == 1:
         assert len(stderr.strip().splitlines()) == 1 and "drive error" in stderr
     assert sim.process.poll() is None, sim.log()[-2000:]  # the drive lives on, and serves:
     with open_bus(interface="udp_multicast", channel=group, port=port) as probe:

@@ -4,7 +4,7 @@ the writer process' (``hb-writer``, a child of the control process).
 
 The run is ``haptic_bus.run_canopen`` in this process' main thread (the control thread) against
 the simulated drive in another process on ``udp_multicast``, in virtual time, live view on; a
-thread of this test samples ``threading.enumerate()`` while the record grows.  The threads still
+thread of this test samples ``threading.enumerate()`` while the record grows, then stops the run.  The threads still
 allowed, each with its reason, are :data:`ALLOWED`.  The bench's per-thread CPU account counts
 the writer process beside them.
 """
@@ -71,21 +71,26 @@ def test_while_cycling_the_control_process_runs_the_control_thread_and_no_writer
         deadline = time.monotonic() + START_WAIT
         while time.monotonic() < deadline and not (record.is_file() and record.stat().st_size > 20_000):
             time.sleep(0.01)
-        for _ in range(SAMPLES):
-            seen.append({thread.name for thread in threading.enumerate() if thread is not threading.current_thread()})
-            writers.append(_children_named(COMM))
-            time.sleep(0.02)
+        try:
+            for _ in range(SAMPLES):
+                seen.append({thread.name for thread in threading.enumerate() if thread is not threading.current_thread()})
+                writers.append(_children_named(COMM))
+                time.sleep(0.02)
+        finally:
+            options.stop.event.set()  # sampled: the run may end (as SIGTERM ends haptic-bus run)
 
+    # the run goes on until the samples are taken, then is stopped: cycling on to a fixed duration in virtual
+    # time (4 s were 4 000 cycles of both processes) showed nothing the samples had not
+    options = RunOptions(600.0, pacing=VIRTUAL, out_dir=out, live=True, plots=False)
     sampler = threading.Thread(target=sample, name="test-sampler")
     sampler.start()
     try:
         result = run_canopen(load_profile("cia402-handle"), {"interface": "udp_multicast", "channel": group, "port": port},
-                             NODE, RunOptions(4.0, pacing=VIRTUAL, out_dir=out, live=True, plots=False),
-                             CONTROLLER_NODE)
+                             NODE, options, CONTROLLER_NODE)
     finally:
         sampler.join(timeout=START_WAIT + 5.0)
         sim.stop()
-    assert (result.exit_reason, result.error) == ("completed", None)
+    assert (result.exit_reason, result.error) == ("stopped", None)
     assert len(seen) == SAMPLES, "the run ended before the samples were taken"
     assert all(threads == {"MainThread", *ALLOWED} for threads in seen), seen
     assert all(len(pids) == 1 for pids in writers), writers  # the record, the log and the view: one writer process

@@ -29,7 +29,7 @@ def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast:
                       "--node-id", str(NODE), "--profile", "seed-ideal")
     run = cli_process("run", "seed-ideal", "--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
                       "--node-id", str(NODE), "--virtual-time", "--duration", "600",
-                      "--controller-node-id", str(CONTROLLER_NODE), "--out", str(tmp_path))
+                      "--controller-node-id", str(CONTROLLER_NODE), "--out", str(tmp_path), "--no-plots")
     try:
         deadline = time.monotonic() + START_WAIT
         answer = None
@@ -54,5 +54,7 @@ def test_run_serves_gated_uploads_while_it_drives_the_simulated_drive(multicast:
     kinds = [event["kind"] for event in document["events"]]
     assert kinds.count("upload") == 2 and kinds.count("refused") == 1  # every upload, accepted or refused, is logged
     assert [scene["objects"][0]["stiffness"] for scene in document["scenes"]] == [200.0, 200.0, 300.0]
-    assert (tmp_path / "record.csv").is_file() and (tmp_path / "timeline.png").is_file()
+    # no pictures asked: the three a run stopped by a signal draws (region.png alone took 3-8 s on a loaded machine)
+    # are test_cli_hygiene.py's (Ctrl-C of a demo); haptic-bus plot draws them from the folder later
+    assert (tmp_path / "record.csv").is_file() and not (tmp_path / "timeline.png").exists()
     assert code == 0, log

@@ -44,6 +44,9 @@ MASTER = 127
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 START_WAIT = 40.0  # s: both processes import numpy/scipy/canopen before they cycle
 STOP_BOUND = 0.1  # s: the bound for SIGKILL/SIGSTOP -> FAULT
+# TPDOs of the enabled drive before the signal: 100 cycles of T = 3 ms, 0.3 s, past the RPDO deadline (30 ms) and
+# the heartbeat consumer (90 ms) three times over, both armed and fed by the cycle (300 were 0.9 s more of both processes)
+CYCLING = 100
 
 
 def test_commissioning_writes_and_reads_back_the_drive_watchdogs(canopen_rig) -> None:
@@ -283,12 +286,12 @@ def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(c
     sniffer = open_bus(**(canopen_sim.bus or {}))
     try:
         deadline, tpdos = time.monotonic() + START_WAIT, 0
-        while tpdos < 300 and time.monotonic() < deadline and run.poll() is None:
+        while tpdos < CYCLING and time.monotonic() < deadline and run.poll() is None:
             message = sniffer.recv(0.2)  # TPDO1 of the enabled drive: the run cycles (pre-flight's do not count)
             tpdos += (message is not None and message.arbitration_id == 0x180 + NODE
                       and int.from_bytes(message.data[:2], "little") & 0x6F == 0x27)
         skip_if_refused_at_preflight(run)
-        assert tpdos >= 300, f"the run did not cycle: {run.stderr.read() if run.poll() is not None else sim.log()[-2000:]}"
+        assert tpdos >= CYCLING, f"the run did not cycle: {run.stderr.read() if run.poll() is not None else sim.log()[-2000:]}"
         signalled = time.monotonic()
         run.send_signal(sig)
         fault = None
