@@ -16,9 +16,9 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 
-import canopen
 from canopen import objectdictionary as od
 
+from drives.canopen.eds_import import import_eds
 from drives.cia301 import COMMUNICATION_OBJECT_NAMES
 from drives.cia402 import OBJECTS, RATIO_OBJECTS, UNIT_OBJECTS, DataType
 
@@ -38,7 +38,7 @@ def load_object_dictionary(eds: str | os.PathLike | od.ObjectDictionary | None, 
         return eds
     if eds is None:
         return minimal_cia402_od()
-    return canopen.import_od(os.fspath(eds), node_id)
+    return import_eds(eds, node_id)
 
 
 def new_variable(name: str, index: int, subindex: int, data_type: int, access: str, mappable: bool = False,

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import os
 
-import canopen
 from canopen import objectdictionary as od
 
+from drives.canopen.eds_import import import_eds
 from drives.canopen.master_dictionary import minimal_cia402_od, new_variable
 from drives.cia301 import (
     COB_ID_EMCY,
@@ -65,7 +65,7 @@ def load_dictionary(eds: str | os.PathLike[str] | None, node_id: int) -> od.Obje
     if not os.path.isfile(path):
         raise ParameterError("--eds", path, "an existing EDS or DCF file")
     try:
-        dictionary = canopen.import_od(path, node_id)
+        dictionary = import_eds(path, node_id)
     except Exception as exc:  # configparser, KeyError, ValueError...: whatever a malformed EDS raises
         reason = " ".join(str(exc).split())  # one line, whatever the parser's message spans
         raise ParameterError("--eds", path, f"an EDS or DCF file canopen can read ({type(exc).__name__}: {reason})") from None

@@ -41,8 +41,9 @@ from fractions import Fraction
 from typing import Any
 
 from canopen import SdoAbortedError
-from canopen.objectdictionary import ObjectDictionary, import_od
+from canopen.objectdictionary import ObjectDictionary
 
+from drives.canopen.eds_import import import_eds
 from drives.canopen.master_dictionary import add_factor_group
 from drives.cia402 import SI_UNIT_POSITION, SI_UNIT_VELOCITY
 from drives.factor_group import INCREMENT, METRE, SECOND, FactorGroup, SiUnit, best_ratio, power_of_ten
@@ -84,7 +85,7 @@ def encode(parameters: DeviceParameters) -> Encoding:
 
 def standard_dictionary(node_id: int, parameters: DeviceParameters) -> ObjectDictionary:
     """The shipped EDS without its manufacturer area, plus the read-only objects :func:`encode` gives."""
-    dictionary = import_od(str(eds_path()), node_id)
+    dictionary = import_eds(eds_path(), node_id)
     for index in [i for i in dictionary.indices if i in MANUFACTURER_AREA]:
         del dictionary[index]
     add_factor_group(dictionary, encode(parameters), access="ro")
@@ -126,5 +127,5 @@ def object_dictionary(kind: str, node_id: int, drive: SimulatedDrive, given: Obj
                                  "simulated drive")
         return load_vendor_eds(eds, node_id), StandardObjects(drive).read
     if kind == "haptic":
-        return given if given is not None else import_od(str(eds_path()), node_id), None
+        return given if given is not None else import_eds(eds_path(), node_id), None
     return given if given is not None else standard_dictionary(node_id, drive.parameters), StandardObjects(drive).read

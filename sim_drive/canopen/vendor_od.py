@@ -24,8 +24,9 @@ from __future__ import annotations
 
 import os
 
-from canopen.objectdictionary import NUMBER_TYPES, ObjectDictionary, ODArray, ODRecord, import_od
+from canopen.objectdictionary import NUMBER_TYPES, ObjectDictionary, ODArray, ODRecord
 
+from drives.canopen.eds_import import import_eds
 from drives.cia301 import DEVICE_TYPE
 from haptic_bus.errors import ParameterError
 
@@ -54,7 +55,7 @@ def load_vendor_eds(path: str | os.PathLike[str], node_id: int) -> ObjectDiction
     if not os.path.isfile(name):
         raise ParameterError("eds", name, "an EDS file that exists", "simulated drive")
     try:
-        dictionary = import_od(name, node_id)
+        dictionary = import_eds(name, node_id)
     except Exception as exc:  # canopen's EDS import raises whatever its parser meets
         raise ParameterError("eds", name, f"an EDS canopen can import ({type(exc).__name__}: {exc})",
                              "simulated drive") from exc

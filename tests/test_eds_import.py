@@ -1,0 +1,56 @@
+"""drives.canopen.eds_import: one parse per file and node id, a dictionary of its own for every caller,
+a file changed on disk parsed again, a file canopen cannot parse refused every time."""
+
+from __future__ import annotations
+
+import configparser
+import os
+import pathlib
+import shutil
+
+import canopen
+import pytest
+
+from drives.canopen.eds_import import import_eds
+from sim_drive.eds import eds_path
+
+
+def _objects(dictionary: canopen.ObjectDictionary) -> dict[tuple[int, int], tuple[str, int, object]]:
+    """Every variable's name, data type and default, by (index, subindex)."""
+    found = {}
+    for index in dictionary.indices:
+        obj = dictionary[index]
+        for variable in (obj.values() if hasattr(obj, "values") else [obj]):
+            found[(variable.index, variable.subindex)] = (variable.name, variable.data_type, variable.default)
+    return found
+
+
+def test_each_caller_gets_canopens_dictionary_of_its_own() -> None:
+    first, second = import_eds(eds_path(), 5), import_eds(eds_path(), 5)
+    assert first is not second and first[0x6041] is not second[0x6041]
+    assert _objects(first) == _objects(canopen.import_od(str(eds_path()), 5)) == _objects(second)
+    first[0x6071].default = 123  # one caller's change stays its own
+    assert second[0x6071].default != 123 and import_eds(eds_path(), 5)[0x6071].default != 123
+
+
+def test_node_ids_resolve_apart() -> None:
+    five, seven = import_eds(eds_path(), 5), import_eds(eds_path(), 7)
+    assert five[0x1800][1].default == 0x180 + 5 and seven[0x1800][1].default == 0x180 + 7  # $NODEID + 0x180
+
+
+def test_a_file_changed_on_disk_is_read_again(tmp_path: pathlib.Path) -> None:
+    path = tmp_path / "drive.eds"
+    shutil.copy(eds_path(), path)
+    assert "Statusword" == import_eds(path, 5)[0x6041].name
+    text = path.read_text().replace("ParameterName=Statusword", "ParameterName=Status word")
+    path.write_text(text)
+    os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns + 1_000_000))  # a later time, whatever the clock
+    assert "Status word" == import_eds(path, 5)[0x6041].name
+
+
+def test_a_file_canopen_cannot_parse_raises_every_time(tmp_path: pathlib.Path) -> None:
+    path = tmp_path / "broken.eds"
+    path.write_text("[1000]\nParameterName=Device type\n[1000]\n")  # a section twice: configparser refuses it
+    for _ in range(2):
+        with pytest.raises(configparser.DuplicateSectionError):
+            import_eds(path, 5)
