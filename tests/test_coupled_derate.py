@@ -24,7 +24,7 @@ import pytest
 
 import haptic_bus as hb
 from haptic_bus.app import runner
-from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, DERATE_EXTRA_DELAYS, DerateTable
+from haptic_bus.app.derate_table import COUPLED_SCALE_STEPS, DERATE_EXTRA_DELAYS, DerateTable, largest_passing_scale
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.run_options import RunOptions, StopRequest
 from haptic_bus.control.space_scene import Plane, SpaceScene, compile_space_scene
@@ -166,7 +166,9 @@ def test_a_late_three_axis_run_derates_to_the_scene_the_coupled_gate_passes_at_t
     first, derated = document["scenes"]
     assert derated["scene_id"] == 1 and derated["origin"] == "derate to a loop delay of 1.6 samples"
     (wall,) = derated["objects"]
-    expected = DerateTable(load_profile(path).gate(), plane(), COUPLED_SCALE_STEPS)(plane(), 1.6)
+    # the table serves the observed 1.6 samples with its entry for 2 (the first test): that entry alone,
+    # built here as the table builds it (the other four cost 0.45 s of CPU and serve no other delay)
+    expected = largest_passing_scale(load_profile(path).gate().later(1.0), plane(), COUPLED_SCALE_STEPS)
     assert expected is not None
     assert wall["stiffness"] == expected[1].objects[0].stiffness and wall["damping"] == expected[1].objects[0].damping
     margin = derated["decision"]["worst_margin"]
