@@ -148,7 +148,9 @@ def test_the_ramp_is_refused_where_a_scaled_wall_is_active_on_the_way(gantry: Ax
 def test_three_axes_take_uploads_through_the_coupled_gate_whole_at_a_cycle_boundary(gantry: AxesProfile) -> None:
     profile = dataclasses.replace(gantry, operator_model={"model": "none"})
     gate, first = profile.gate(), profile.compiled_scene()
-    too_stiff, softer = {"ball": (1e6, 5.0)}, {"ball": (1000.0, 5.0), "block": (1000.0, 5.0)}
+    # the slope, whose normal (2, 2, 1)/3 couples all three axes: judged along it (0.1 s of CPU), where a change
+    # to the ball is a sphere's direction search (1 s each)
+    too_stiff, softer = {"slope": (1e6, 5.0)}, {"slope": (1000.0, 5.0)}
     for change in (too_stiff, softer):  # judged once before the drives run: the uploads below hit the verdict cache,
         gate.judge(first.with_walls(change))  # so the drives' RPDO deadlines never wait on the coupled criterion
     seen: dict[str, object] = {}
@@ -156,8 +158,8 @@ def test_three_axes_take_uploads_through_the_coupled_gate_whole_at_a_cycle_bound
     def upload(running: WallController) -> None:
         if running.cycles != 5:
             return
-        with pytest.raises(Refusal, match="ball") as refused:
-            running.set_walls(too_stiff)  # far beyond the 4228 N/m the stiffest direction allows
+        with pytest.raises(Refusal, match="slope") as refused:
+            running.set_walls(too_stiff)  # far beyond the 8590 N/m its normal allows at B = 5 N s/m
         seen["refused"] = str(refused.value)
         seen["untouched"] = running.scene is first and running.latest_scene is first
         seen["decision"] = running.set_walls(softer)
@@ -172,7 +174,7 @@ def test_three_axes_take_uploads_through_the_coupled_gate_whole_at_a_cycle_bound
     decision = seen["decision"]
     assert isinstance(decision, SpaceDecision) and decision.accepted
     assert decision.worst_margin is not None and decision.worst_margin >= profile.gate_policy.safety_margin
-    assert controller.scene.by_name()["ball"].stiffness == 1000.0 and controller.applied_scenes == 1
+    assert controller.scene.by_name()["slope"].stiffness == 1000.0 and controller.applied_scenes == 1
     assert controller.records[2].column("scene_id").tolist() == [0.0] * 5 + [1.0] * 5  # whole, at a boundary, every axis
     assert [e.kind for e in controller.events.events] == ["refused", "upload"]
     assert [entry.to_dict()["objects"][0]["kind"] for entry in controller.scenes.history] == ["sphere", "sphere"]
