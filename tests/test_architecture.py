@@ -167,12 +167,32 @@ def test_protocol_tables_touch_no_bus():
         assert not offenders, _report(offenders, f"{tables} is a table")
 
 
-def test_importing_the_analysis_loads_nothing_of_drives():
-    code = ("import sys; import haptic_bus.analysis.check, haptic_bus.analysis.coupled, haptic_bus.validation; "
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('drives', 'sim_drive', 'can', 'canopen')))")
+PUBLIC_CALLS = (
+    "hb.check_passivity(mass=0.5, friction=0.1, period=1e-3, stiffness=200.0, damping=100.0, delay=1).to_dict()",
+    "hb.load_profile('cia402-handle').gate().judge(hb.load_profile('cia402-handle').compiled_scene()).accepted",
+    "hb.WallController and hb.PassivityGate and hb.compile_scene([hb.Wall('w', 0.0, -1, 10.0, 1.0)]).breaks",
+)
+
+
+@pytest.fixture(scope="module")
+def loaded_in_turn() -> list[str]:
+    """One fresh interpreter: first the analysis imported and what it loaded of drives, sim_drive, python-can
+    and canopen printed; then each public-API call in turn, the bus libraries loaded so far printed after
+    each.  A module stays loaded, so nothing listed after a step means that step alone loaded none of it
+    either (one interpreter's start and numpy import, not four)."""
+    code = "\n".join([
+        "import sys, json; import haptic_bus.analysis.check, haptic_bus.analysis.coupled, haptic_bus.validation",
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('drives', 'sim_drive', 'can', 'canopen')))",
+        "import haptic_bus as hb",
+        *(f"value = {call}; print(json.dumps(sorted(m for m in {BUS_LIBRARIES!r} if m in sys.modules)))"
+          for call in PUBLIC_CALLS)])
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == "['drives', 'drives.errors']"  # haptic_bus.errors re-exports drives' errors only
+    return out.stdout.strip().splitlines()[-1 - len(PUBLIC_CALLS):]
+
+
+def test_importing_the_analysis_loads_nothing_of_drives(loaded_in_turn: list[str]) -> None:
+    assert loaded_in_turn[0] == "['drives', 'drives.errors']"  # haptic_bus.errors re-exports drives' errors only
 
 
 def _cycles() -> list[list[str]]:
@@ -216,17 +236,8 @@ def test_no_import_cycles_between_modules():
     assert _cycles() == []
 
 
-@pytest.mark.parametrize("call", [
-    "hb.check_passivity(mass=0.5, friction=0.1, period=1e-3, stiffness=200.0, damping=100.0, delay=1).to_dict()",
-    "hb.load_profile('cia402-handle').gate().judge(hb.load_profile('cia402-handle').compiled_scene()).accepted",
-    "hb.WallController and hb.PassivityGate and hb.compile_scene([hb.Wall('w', 0.0, -1, 10.0, 1.0)]).breaks",
-])
-def test_the_public_api_loads_no_bus_library(call):
-    code = (f"import sys, json; import haptic_bus as hb; value = {call}; "
-            f"print(json.dumps(sorted(m for m in {BUS_LIBRARIES!r} if m in sys.modules)))")
-    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+def test_the_public_api_loads_no_bus_library(loaded_in_turn: list[str]) -> None:
+    assert [json.loads(line) for line in loaded_in_turn[1:]] == [[]] * len(PUBLIC_CALLS)
 
 
 @pytest.mark.parametrize(("argv", "forbidden"), [

@@ -149,10 +149,12 @@ def test_hidden_plants_are_found_within_the_bounds_and_their_standard_errors(nam
 
 def test_a_fraction_of_a_sample_is_resolved() -> None:
     """A drive applying the target 0.3 T after the SYNC: D = 0.3 to within 0.01 samples; the fit's
-    standard error (about 3e-4 samples) says it is resolved far below the 0.05 required."""
+    standard error (about 5e-4 samples) says it is resolved far below the 0.05 required.  10 s of
+    excitation, as the property test below has: measured 5.2e-4 samples (3.4e-4 at the command's
+    default 20 s), D off by 2e-4, m and b by 0.003 % and 0.13 %: every bound here holds with room."""
     truth = DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2, velocity_noise=1000, noise_seed=5,
                              reception_delay=0.3)
-    _, found = identify_simulated(truth, "reception", mass=0.5, force_limit=5.0)
+    _, found = identify_simulated(truth, "reception", mass=0.5, force_limit=5.0, duration=10.0)
     fit = found.fit
     assert found.supported and fit is not None
     assert fit.fraction_resolved and fit.whole_delay is None and fit.delay.stderr < 0.002

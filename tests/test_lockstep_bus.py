@@ -252,9 +252,12 @@ def test_a_drive_may_be_handed_a_sync_by_the_thread_that_sends_for_it(channel: s
 
 def test_trajectories_are_bit_identical_to_the_threaded_virtual_bus_and_run_to_run() -> None:
     # The same plant, controller and frames; only who carries the frames differs: == , no tolerance.
-    lockstep = _trajectory("lockstep", 3_000)
-    assert np.array_equal(lockstep, _trajectory("virtual", 3_000))
-    assert np.array_equal(lockstep, _trajectory("lockstep", 3_000))
+    # 1000 cycles: the hand's 3 N push reaches the wall at cycle 46 and the handle has settled by about
+    # cycle 1000 (within 70 nm from there on, measured over 3000); the frames of every later cycle are
+    # of the same kinds, carried the same way (3000 cycles here cost 1 s of CPU more)
+    lockstep = _trajectory("lockstep", 1_000)
+    assert np.array_equal(lockstep, _trajectory("virtual", 1_000))
+    assert np.array_equal(lockstep, _trajectory("lockstep", 1_000))
     assert np.ptp(lockstep[:, 1]) > 1e-3  # it did something: the handle moved by more than a millimetre
 
 

@@ -115,14 +115,16 @@ def test_with_the_layer_the_port_stays_passive(scenario: str, layer: str) -> Non
 
 
 def test_under_nominal_timing_guard_leaves_the_demo_wall_alone_and_the_observer_meets_the_ledger(tmp_path) -> None:
-    """10 s of the demo (cia402-handle, a 3 N push into the wall): the guard never lowers a target,
-    and the port observer is within 1 % of the drive's exact ledger, never above it by more than
-    its rounding bound."""
+    """The demo as it runs by default (cia402-handle, 2 s, a 3 N push into the wall): the guard never
+    lowers a target, and the port observer is within 1 % of the drive's exact ledger, never above it
+    by more than its rounding bound.  The push reaches the wall at cycle 46 and has settled well
+    before 2 s (measured at 2, 3 and 10 s: the observer's energy the same to the bit, the ledger's
+    within 1e-5 relative of itself, no intervention; the 10 s this ran before cost 0.8 s more CPU)."""
     from haptic_bus.app.demo import run_demo
 
-    result = run_demo(tmp_path, seconds=10.0, plots=False)
+    result = run_demo(tmp_path, plots=False)
     summary = result.summary
-    assert summary.exit_reason == "completed" and summary.cycles == 10_000
+    assert summary.exit_reason == "completed" and summary.cycles == 2000
     assert summary.layer == "guard" and summary.layer_interventions == 0
     assert summary.energy - summary.rounding_bound <= result.findings.port_energy
     assert summary.energy == pytest.approx(result.findings.port_energy, rel=0.01)

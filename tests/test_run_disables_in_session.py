@@ -5,6 +5,7 @@ torque: all three drives of a run that said "completed" were left in FAULT, EMCY
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pathlib
 from collections.abc import Callable
@@ -36,7 +37,11 @@ def test_the_end_of_a_run_disables_under_the_run_s_scheduling(
     drive = haptic_sim(profile, interface="lockstep", **still)  # for every axis enabled; the handle's would push now
     options = hb.RunOptions(duration=0.05, pacing="wall", out_dir=tmp_path, start_in_contact="ramp", live=False,
                             bus_log=False, plots=False, preflight_cycles=2)
-    result = hb.run(hb.load_profile(profile), drive.bus, options, **drive.run_kwargs())
+    loaded = hb.load_profile(profile)
+    if isinstance(loaded, hb.AxesProfile):  # its drives and deadlines, without the ball: pre-flight judges the scene
+        # at the delay it measured, and a sphere's direction search took 1.3 s of CPU there, 1400 cycles run meanwhile
+        loaded = dataclasses.replace(loaded, space=tuple(obj for obj in loaded.space if obj.name != "ball"))
+    result = hb.run(loaded, drive.bus, options, **drive.run_kwargs())
     if result.exit_reason == "refused" and "this machine holds T >=" in (result.error or ""):
         # two pre-flight cycles allow none busy longer than T; the lock-step bus answers in the sender's thread
         pytest.skip(f"this machine cannot hold the loop now, and the run said so at pre-flight: {result.error}")

@@ -14,6 +14,7 @@ from __future__ import annotations
 import pathlib
 import threading
 import time
+from collections.abc import Callable
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -21,11 +22,12 @@ import pytest
 from matplotlib.figure import Figure
 from matplotlib.text import Text
 
+from haptic_bus.app import run_pictures
 from haptic_bus.app.cli import main
 from haptic_bus.app.demo import run_demo
 from haptic_bus.app.kb_plane import kb_plane_figure
 from haptic_bus.app.profiles import load_profile
-from haptic_bus.app.run_folder import read_run_folder
+from haptic_bus.app.run_folder import RunFolder, read_run_folder
 from haptic_bus.app.run_plots import force_position_figure, timeline_figure, wall_energy_taken_and_returned
 from haptic_bus.node.upload import upload_walls
 from tests.run_rig import events_of, profile_variant, read_run, run_cli, simulated_drive
@@ -97,16 +99,29 @@ def test_the_run_recorded_the_upload_the_alarm_and_the_fault(eventful_run: pathl
     assert [scene["origin"] for scene in document["scenes"]] == ["profile", "upload"]
 
 
-def test_haptic_bus_plot_shows_every_event_and_the_fault(eventful_run: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+def _keeping(draw: Callable[[RunFolder], Figure], name: str, drawn: dict[str, Figure]) -> Callable[[RunFolder], Figure]:
+    """``draw`` as it is, each figure it returns also kept in ``drawn[name]``."""
+    def keep(run: RunFolder) -> Figure:
+        drawn[name] = draw(run)
+        return drawn[name]
+
+    return keep
+
+
+def test_haptic_bus_plot_shows_every_event_and_the_fault(eventful_run: pathlib.Path, capsys: pytest.CaptureFixture[str],
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
     written = [eventful_run / name for name in ("timeline.png", "force_position.png", "region.png")]
     assert not any(path.exists() for path in written)  # the run drew none (--no-plots)
+    drawn: dict[str, Figure] = {}  # the figures the command saved, read below (drawing them again cost 1.3 s of CPU)
+    for name in ("timeline_figure", "force_position_figure", "kb_plane_figure"):
+        monkeypatch.setattr(run_pictures, name, _keeping(getattr(run_pictures, name), name, drawn))
     result = run_cli(capsys, "plot", str(eventful_run))
     assert result.code == 0 and result.err == ""
     assert result.out == f"wrote {', '.join(map(str, written))}\n"
     assert all(path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 30_000 for path in written)
 
     run = read_run_folder(eventful_run)
-    timeline = timeline_figure(run)
+    timeline = drawn["timeline_figure"]
     texts = _texts(timeline)
     assert "upload: upload accepted as scene 1" in texts
     assert "alarm: " in texts and "fault: " in texts
@@ -116,21 +131,18 @@ def test_haptic_bus_plot_shows_every_event_and_the_fault(eventful_run: pathlib.P
     events = {line.get_xdata()[0] for line in timeline.axes[0].lines if line.get_linestyle() == "-" and
               len(line.get_xdata()) == 2 and line.get_xdata()[0] == line.get_xdata()[1]}
     assert {e["time_s"] for e in run.document["events"] if e["kind"] in ("upload", "alarm", "fault")} <= events
-    plt.close(timeline)
 
-    plane = kb_plane_figure(run)
+    plane = drawn["kb_plane_figure"]
     texts = _texts(plane)
     assert "scene 0 (profile): end-stop K 1500 N/m, B 10 N s/m, margin +11.1 N s/m" in texts
     assert "scene 1 (upload): end-stop K 2500 N/m, B 16 N s/m, margin +5.7 N s/m" in texts
     assert "D = 1 samples, average velocity" in _title(plane).get_text() and _title(plane).get_color() == "tab:red"
-    plt.close(plane)
 
-    loop = force_position_figure(run)
+    loop = drawn["force_position_figure"]
     assert run.record is not None
     taken, returned = wall_energy_taken_and_returned(run.record["position_m"], run.record["force_n"])
     assert taken > returned > 0  # a passive wall gives back less than it took
     assert f"the wall took {taken * 1e3:.4g} mJ and gave back {returned * 1e3:.4g} mJ" in _title(loop).get_text()
-    plt.close(loop)
 
 
 def test_multi_object_draws_each_of_its_five_objects(tmp_path: pathlib.Path) -> None:

@@ -130,6 +130,9 @@ def test_the_verdict_needs_every_probed_frequency_resolved(noise: float, verdict
         assert found.summary().startswith("cannot tell above 42.97 Hz (the probe reaches 398.4 Hz): the model holds")
 
 
+QUIET = ("--no-plots", "--no-bus-log")  # a finding's runs: neither pictures nor bus.asc (0.3 s of CPU a run) looked at
+
+
 def _validate(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path, transport: str, *extra: str,
               **hidden: object) -> tuple[int, dict[str, Any], str]:
     with simulated_drive(transport, PROFILE) as under:
@@ -170,7 +173,7 @@ def test_a_heavier_handle_is_named_mass_not_a_resonance_below_the_probe(capsys: 
     """A handle 30 % heavier: a transmission with ``c = b``, ``k = b^2/m`` mimics it exactly, and fitted the
     noise closer by more than Akaike's 2 (a 3.2 Hz mode of damping 1, below the probe's 3.9 Hz): a
     resonance the probe did not see is named only when nothing else explains the device."""
-    code, report, _ = _validate(capsys, tmp_path, "canopen", "--no-plots", mass=1.3)
+    code, report, _ = _validate(capsys, tmp_path, "canopen", *QUIET, mass=1.3)
     assert code == 1 and report["verdict"] == "differs"
     mass, friction = report["findings"]
     assert (mass["kind"], friction["kind"]) == ("mass", "friction"), report["findings"]
@@ -181,7 +184,7 @@ def test_a_heavier_handle_is_named_mass_not_a_resonance_below_the_probe(capsys: 
 def test_a_hidden_friction_leads_the_finding(capsys: pytest.CaptureFixture[str], tmp_path: pathlib.Path) -> None:
     """b 30 N s/m behind the profile's 20: the rigid fit names both, the one that departs first (it
     was told "mass: 1 +- 1.7e-06 kg; friction: 30 ...", the unchanged mass leading: breaker12)."""
-    code, report, _ = _validate(capsys, tmp_path, "canopen", "--no-plots", friction=30.0)
+    code, report, _ = _validate(capsys, tmp_path, "canopen", *QUIET, friction=30.0)
     assert code == 1 and [finding["kind"] for finding in report["findings"]] == ["friction", "mass"]
     friction, mass = report["findings"]
     # the hidden 30 N s/m and the profile's 1 kg, each within four standard errors
@@ -212,7 +215,7 @@ def test_a_handle_pushed_out_of_the_travel_cannot_tell(capsys: pytest.CaptureFix
 
 def test_a_hidden_transmission_is_found_as_its_resonance(capsys: pytest.CaptureFixture[str],
                                                          tmp_path: pathlib.Path) -> None:
-    code, report, _ = _validate(capsys, tmp_path, "canopen", "--no-plots", transmission=TRANSMISSION)
+    code, report, _ = _validate(capsys, tmp_path, "canopen", *QUIET, transmission=TRANSMISSION)
     assert code == 1
     (finding,) = report["findings"]
     assert finding["kind"] == "resonance"
