@@ -54,3 +54,20 @@ def test_a_file_canopen_cannot_parse_raises_every_time(tmp_path: pathlib.Path) -
     for _ in range(2):
         with pytest.raises(configparser.DuplicateSectionError):
             import_eds(path, 5)
+
+
+def test_a_file_changed_with_its_time_and_size_kept_is_read_again(tmp_path: pathlib.Path) -> None:
+    # cp -p, tar and rsync -t put a file's old modification time on new contents: a same-size edit
+    # (one default digit) copied over with the first file's time must not be the first file's dictionary
+    path, edited = tmp_path / "drive.eds", tmp_path / "edited.eds"
+    shutil.copy(eds_path(), path)
+    text = path.read_text()
+    assert "ParameterName=Statusword" in text
+    edited.write_text(text.replace("ParameterName=Statusword", "ParameterName=StatusWord"))
+    assert edited.stat().st_size == path.stat().st_size
+    assert "Statusword" == import_eds(path, 5)[0x6041].name
+    kept = path.stat()
+    shutil.copyfile(edited, path)
+    os.utime(path, ns=(kept.st_atime_ns, kept.st_mtime_ns))  # the time cp -p would have kept
+    assert (path.stat().st_mtime_ns, path.stat().st_size) == (kept.st_mtime_ns, kept.st_size)
+    assert "StatusWord" == import_eds(path, 5)[0x6041].name
