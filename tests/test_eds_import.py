@@ -71,3 +71,19 @@ def test_a_file_changed_with_its_time_and_size_kept_is_read_again(tmp_path: path
     os.utime(path, ns=(kept.st_atime_ns, kept.st_mtime_ns))  # the time cp -p would have kept
     assert (path.stat().st_mtime_ns, path.stat().st_size) == (kept.st_mtime_ns, kept.st_size)
     assert "StatusWord" == import_eds(path, 5)[0x6041].name
+
+
+def test_a_file_is_read_by_the_name_it_is_given(tmp_path: pathlib.Path) -> None:
+    # canopen tells an EDS by its name's suffix: a link drive.eds to a file named otherwise (a version kept by
+    # its name) is an EDS, as canopen.import_od reads it; the link moved to another file is that file
+    versions = [tmp_path / "drive.eds.v1", tmp_path / "drive.eds.v2"]
+    shutil.copy(eds_path(), versions[0])
+    versions[1].write_text(versions[0].read_text().replace("ParameterName=Statusword", "ParameterName=StatusWord"))
+    link = tmp_path / "drive.eds"
+    link.symlink_to(versions[0])
+    assert import_eds(link, 5)[0x6041].name == canopen.import_od(str(link), 5)[0x6041].name == "Statusword"
+    link.unlink()
+    link.symlink_to(versions[1])
+    assert import_eds(link, 5)[0x6041].name == "StatusWord"
+    with pytest.raises(ValueError, match="'v2' format"):
+        import_eds(versions[1], 5)  # by its own name it is no EDS, to canopen as here
