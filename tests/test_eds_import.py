@@ -54,3 +54,36 @@ def test_a_file_canopen_cannot_parse_raises_every_time(tmp_path: pathlib.Path) -
     for _ in range(2):
         with pytest.raises(configparser.DuplicateSectionError):
             import_eds(path, 5)
+
+
+def test_a_file_changed_with_its_time_and_size_kept_is_read_again(tmp_path: pathlib.Path) -> None:
+    # cp -p, tar and rsync -t put a file's old modification time on new contents: a same-size edit
+    # (one default digit) copied over with the first file's time must not be the first file's dictionary
+    path, edited = tmp_path / "drive.eds", tmp_path / "edited.eds"
+    shutil.copy(eds_path(), path)
+    text = path.read_text()
+    assert "ParameterName=Statusword" in text
+    edited.write_text(text.replace("ParameterName=Statusword", "ParameterName=StatusWord"))
+    assert edited.stat().st_size == path.stat().st_size
+    assert "Statusword" == import_eds(path, 5)[0x6041].name
+    kept = path.stat()
+    shutil.copyfile(edited, path)
+    os.utime(path, ns=(kept.st_atime_ns, kept.st_mtime_ns))  # the time cp -p would have kept
+    assert (path.stat().st_mtime_ns, path.stat().st_size) == (kept.st_mtime_ns, kept.st_size)
+    assert "StatusWord" == import_eds(path, 5)[0x6041].name
+
+
+def test_a_file_is_read_by_the_name_it_is_given(tmp_path: pathlib.Path) -> None:
+    # canopen tells an EDS by its name's suffix: a link drive.eds to a file named otherwise (a version kept by
+    # its name) is an EDS, as canopen.import_od reads it; the link moved to another file is that file
+    versions = [tmp_path / "drive.eds.v1", tmp_path / "drive.eds.v2"]
+    shutil.copy(eds_path(), versions[0])
+    versions[1].write_text(versions[0].read_text().replace("ParameterName=Statusword", "ParameterName=StatusWord"))
+    link = tmp_path / "drive.eds"
+    link.symlink_to(versions[0])
+    assert import_eds(link, 5)[0x6041].name == canopen.import_od(str(link), 5)[0x6041].name == "Statusword"
+    link.unlink()
+    link.symlink_to(versions[1])
+    assert import_eds(link, 5)[0x6041].name == "StatusWord"
+    with pytest.raises(ValueError, match="'v2' format"):
+        import_eds(versions[1], 5)  # by its own name it is no EDS, to canopen as here

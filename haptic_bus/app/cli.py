@@ -422,8 +422,23 @@ def _configure_logging(verbose: int | None, quiet: bool | None) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``haptic-bus``; returns the exit status."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    """Entry point of ``haptic-bus``; returns the exit status.  A program's call (``argv`` given) gets
+    SIGINT's and SIGTERM's handlers back as it had them (``run``, ``identify`` and ``validate`` install
+    their stop request); the console script's process (``argv`` None) keeps the command's until it
+    exits (:func:`~haptic_bus.app.early_stop.exiting`)."""
+    if argv is None:
+        return _command(list(sys.argv[1:]))
+    found = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return _command(list(argv))
+    finally:
+        for signum, handler in found.items():
+            if handler is not None and signal.getsignal(signum) is not handler:  # not None: one C code installed
+                signal.signal(signum, handler)
+
+
+def _command(argv: list[str]) -> int:
+    """:func:`main` for ``argv``: the command's exit status."""
     try:
         if argv and argv[0] in _PASS_THROUGH:
             return _PASS_THROUGH[argv[0]](argv[1:])

@@ -24,12 +24,21 @@ def shipped_profiles(axes: bool = False) -> dict[str, pathlib.Path]:
 def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:
     """The file of a shipped profile name, or ``path_or_name`` as a path if it is one; ParameterError if neither."""
     candidate = pathlib.Path(path_or_name)
-    if candidate.is_file():
+    if _is_file(candidate):
         return candidate
     if isinstance(path_or_name, str) and pathlib.Path(path_or_name).name == path_or_name:  # a name, not a path
         shipped_file = _profiles_folder() / f"{path_or_name}.toml"  # found without reading every shipped profile
-        if shipped_file.is_file():
+        if _is_file(shipped_file):
             return shipped_file
     shipped = {**shipped_profiles(), **shipped_profiles(axes=True)}
     raise profile_error(path_or_name, "profile", str(path_or_name),
                         f"an existing TOML file or a shipped profile name: {', '.join(shipped) or 'none'}")
+
+
+def _is_file(path: pathlib.Path) -> bool:
+    """Whether ``path`` is a file; not when the system cannot say (a name too long for a file, a folder
+    it may not search), which :meth:`pathlib.Path.is_file` raises as OSError."""
+    try:
+        return path.is_file()
+    except OSError:
+        return False

@@ -1,0 +1,49 @@
+"""``haptic_bus.app.cli.main`` called by a program, several times in one process: each call as the
+first (one argparse parser serves them all), and the process' signal handling left as it was found
+(a ``run`` installs its stop request for SIGINT and SIGTERM: after it returned, a Ctrl-C set that
+finished run's event and interrupted nothing more)."""
+
+from __future__ import annotations
+
+import pathlib
+import signal
+
+import pytest
+
+from haptic_bus.app import cli
+from haptic_bus.testing.buses import unique_name
+
+CHECK = ["check", "--mass", "0.1", "--friction", "1", "--period", "0.001", "--stiffness", "1000", "--damping", "1"]
+REGION = ["region", "--mass", "0.1", "--friction", "1", "--period", "0.001", "--png"]  # then a PNG path
+
+
+def _said(capsys: pytest.CaptureFixture[str], argv: list[str]) -> tuple[int, str, str]:
+    code = cli.main(argv)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_calls_in_turn_say_what_each_says_alone(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "file").write_text("")
+    unwritable = str(tmp_path / "file" / "region.png")  # under a file: no folder, not even for root
+    calls = [["run", "--help"], [*CHECK, "--json", "--delay", "1"], [*CHECK, "--bogus"],
+             [*REGION, unwritable, "--mark", "1,1"],
+             ["upload", "--node-id", "5", "--object", "0", "--stiffness", "1", "--damping", "1", "--bus-option", "a=1",
+              "--bus-option", "a=2"], ["-v", "profiles", "list"], CHECK, [*REGION, unwritable, "--mark", "x"], ["nosuch"], []]
+    alone = []
+    for argv in calls:
+        cli._command_parser.cache_clear()  # a parser of its own, as a process of its own has
+        alone.append(_said(capsys, argv))
+    in_turn = [_said(capsys, argv) for argv in [*calls, *reversed(calls)]]
+    assert in_turn == [*alone, *reversed(alone)]
+    assert [code for code, _, _ in alone] == [0, 1, 2, 2, 2, 0, 0, 2, 2, 2]
+
+
+def test_a_run_leaves_the_signal_handlers_as_it_found_them(tmp_path: pathlib.Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    found = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
+    code, _, err = _said(capsys, ["run", "cia402-handle", "--interface", "virtual", "--channel", unique_name("r8"),
+                                  "--node-id", "5", "--virtual-time", "--duration", "1", "-q", "--no-plots",
+                                  "--out", str(tmp_path / "run")])
+    assert code == 1 and "no boot-up" in err, err  # no drive on the bus: the run got as far as its stop request
+    assert {signum: signal.getsignal(signum) for signum in found} == found
