@@ -24,10 +24,29 @@ Handler = Callable[[argparse.Namespace], int]
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line on stderr and exit status 2."""
+    """argparse, but a usage error is one line on stderr and exit status 2, and an argument no option
+    takes is the usage error of the (sub)command given (:meth:`parse_command`)."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(EXIT_INVALID, f"{self.prog}: error: {message}\n")
+
+    def parse_command(self, argv: list[str]) -> argparse.Namespace:
+        """``argv`` parsed; a stray argument is the usage error of the deepest subcommand given
+        (``haptic-bus profiles list: error: unrecognized arguments: ...``), where argparse's own names only the top."""
+        args, extra = self.parse_known_args(argv)
+        if extra:
+            self._chosen(args).error(f"unrecognized arguments: {' '.join(extra)}")
+        return args
+
+    def _chosen(self, args: argparse.Namespace) -> argparse.ArgumentParser:
+        """The (sub)command ``args`` chose under this parser, down to its last level (``profiles list``)."""
+        parser: argparse.ArgumentParser = self
+        while True:
+            commands = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)  # argparse's table
+            choice = None if commands is None else getattr(args, commands.dest, None)
+            if commands is None or choice is None:
+                return parser
+            parser = commands.choices[choice]
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):

@@ -37,7 +37,7 @@ from haptic_bus.app.arguments import (
     seconds,
     timeout,
 )
-from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, stop_at_once, stop_noted
+from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, handlers_kept, stop_at_once, stop_noted
 from haptic_bus.app.fault_cli import add_fault_reset_parser
 from haptic_bus.app.identify_cli import add_identify_parser
 from haptic_bus.app.run_arguments import (
@@ -319,7 +319,7 @@ def _sim(argv: Sequence[str]) -> int:
 
 # --------------------------------------------------------------------------- parser
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser() -> OneLineParser:
     """The argument parser of every subcommand that haptic_bus itself parses."""
     from haptic_bus._version import __version__
 
@@ -425,16 +425,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``haptic-bus``; returns the exit status.  A program's call (``argv`` given) gets
     SIGINT's and SIGTERM's handlers back as it had them (``run``, ``identify`` and ``validate`` install
     their stop request); the console script's process (``argv`` None) keeps the command's until it
-    exits (:func:`~haptic_bus.app.early_stop.exiting`)."""
+    exits (:func:`~haptic_bus.app.early_stop.exiting`, :func:`~haptic_bus.app.early_stop.handlers_kept`)."""
     if argv is None:
         return _command(list(sys.argv[1:]))
-    found = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with handlers_kept():
         return _command(list(argv))
-    finally:
-        for signum, handler in found.items():
-            if handler is not None and signal.getsignal(signum) is not handler:  # not None: one C code installed
-                signal.signal(signum, handler)
 
 
 def _command(argv: list[str]) -> int:
@@ -443,7 +438,7 @@ def _command(argv: list[str]) -> int:
         if argv and argv[0] in _PASS_THROUGH:
             return _PASS_THROUGH[argv[0]](argv[1:])
         try:
-            args = _parse(_command_parser(), argv)
+            args = _command_parser().parse_command(argv)
         except SystemExit as done:  # help (0), or a usage error (2) whose one line argparse has printed
             return int(done.code or 0)
         _configure_logging(args.verbose, args.quiet)
@@ -458,29 +453,10 @@ def _command(argv: list[str]) -> int:
 
 
 @functools.cache
-def _command_parser() -> argparse.ArgumentParser:
+def _command_parser() -> OneLineParser:
     """:func:`build_parser`'s parser, built once per process (10 ms; parsing leaves it as it was): what
     :func:`main` parses with, however often a process calls it (the plugin's and the tests' in-process runs)."""
     return build_parser()
-
-
-def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
-    """``argv`` parsed; an argument no option of the command takes is that command's usage error
-    (``haptic-bus run: error: unrecognized arguments: ...``), where argparse's own names only ``haptic-bus``."""
-    args, extra = parser.parse_known_args(argv)
-    if extra:
-        _chosen(parser, args).error(f"unrecognized arguments: {' '.join(extra)}")
-    return args
-
-
-def _chosen(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
-    """The (sub)command ``args`` chose under ``parser``, down to its last level (``profiles list``)."""
-    while True:
-        commands = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)  # argparse's table
-        choice = None if commands is None else getattr(args, commands.dest, None)
-        if commands is None or choice is None:
-            return parser
-        parser = commands.choices[choice]
 
 
 def _dispatch(args: argparse.Namespace) -> int:

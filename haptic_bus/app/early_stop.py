@@ -4,13 +4,16 @@ once ``run`` starts; a SIGTERM while ``run`` prepares (the profile read and judg
 coupled gate) raises :class:`StoppedBeforeStart` through :func:`stop_at_once`.  Either way the run
 ends with :data:`STOPPED_BEFORE_START`, exit 0, nothing touched.  Installed by the console script's
 entry (:mod:`haptic_bus.app.entry`) and by ``run`` itself (:func:`haptic_bus.app.cli._run`).  Once
-the command has ended, the process about to exit ignores SIGTERM (:func:`exiting`).  The standard
-library only, so the entry can import it first.
+the command has ended, the process about to exit ignores SIGTERM (:func:`exiting`); a program that
+calls the command gets its own handlers back (:func:`handlers_kept`).  The standard library only, so
+the entry can import it first.
 """
 
 from __future__ import annotations
 
 import signal
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 STOPPED_BEFORE_START = "ended: stopped before the run began; no bus touched, nothing written"
 """What ``run`` prints (stdout) when a SIGTERM ends it while it prepares."""
@@ -46,3 +49,17 @@ def exiting(status: int) -> int:
     exits: :func:`haptic_bus.app.cli.main` called from a program leaves its signals as they were."""
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     return status
+
+
+@contextmanager
+def handlers_kept() -> Iterator[None]:
+    """SIGINT's and SIGTERM's handlers put back as they were found when the block ends (``run``,
+    ``identify`` and ``validate`` install their stop request for both; a handler C code installed,
+    which Python cannot put back, is left)."""
+    found = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for signum, handler in found.items():
+            if handler is not None and signal.getsignal(signum) is not handler:
+                signal.signal(signum, handler)
