@@ -5,6 +5,7 @@ finished run's event and interrupted nothing more)."""
 
 from __future__ import annotations
 
+import logging
 import pathlib
 import signal
 
@@ -47,3 +48,31 @@ def test_a_run_leaves_the_signal_handlers_as_it_found_them(tmp_path: pathlib.Pat
                                   "--out", str(tmp_path / "run")])
     assert code == 1 and "no boot-up" in err, err  # no drive on the bus: the run got as far as its stop request
     assert {signum: signal.getsignal(signum) for signum in found} == found
+
+
+def test_a_call_leaves_the_programs_logging_as_it_found_it(tmp_path: pathlib.Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """A command configures the root logger and the libraries' levels for its own output; a program's
+    log file stays open and keeps what it had (``basicConfig(force=True)`` closed it, and a
+    ``"w"``-mode file handler opened it again, emptied, at its next record)."""
+    root, canopen_logger = logging.getLogger(), logging.getLogger("canopen")
+    own = logging.FileHandler(tmp_path / "program.log", mode="w")
+    found = (root.handlers[:], root.level, canopen_logger.level)
+    root.addHandler(own)
+    root.setLevel(logging.INFO)
+    canopen_logger.setLevel(logging.NOTSET)
+    try:
+        logging.getLogger("program").info("before")
+        code, _, err = _said(capsys, ["-v", "profiles", "list"])
+        logging.getLogger("program").info("after")
+        assert code == 0, err
+        assert (root.handlers[-1], root.level, canopen_logger.level) == (own, logging.INFO, logging.NOTSET)
+        assert own.stream is not None and not own.stream.closed
+        own.flush()
+        assert (tmp_path / "program.log").read_text().splitlines() == ["before", "after"]
+    finally:
+        root.removeHandler(own)
+        own.close()
+        root.handlers, _, _ = found
+        root.setLevel(found[1])
+        canopen_logger.setLevel(found[2])

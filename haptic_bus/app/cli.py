@@ -10,13 +10,14 @@ logging says (``-q`` also turns the live view of ``run`` off).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
 import logging
 import os
 import pathlib
 import signal
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 from haptic_bus.app.arguments import (
@@ -421,14 +422,38 @@ def _configure_logging(verbose: int | None, quiet: bool | None) -> None:
         logging.getLogger(name).setLevel(library_level)
 
 
+@contextlib.contextmanager
+def _logging_kept() -> Iterator[None]:
+    """The root logger's handlers and level, and the noisy libraries' levels, put back as they were
+    found when the block ends.  The program's own handlers are set aside for the block, not closed
+    (``basicConfig(force=True)`` closes what it finds: a program's log file would have been closed and,
+    opened again in ``"w"`` mode, emptied); the command's handler is closed with the block."""
+    root = logging.getLogger()
+    handlers, level = root.handlers[:], root.level
+    levels = {name: logging.getLogger(name).level for name in _NOISY_LIBRARIES}
+    root.handlers = []
+    try:
+        yield
+    finally:
+        for handler in root.handlers:
+            if handler not in handlers:
+                handler.close()
+        root.handlers = handlers
+        root.setLevel(level)
+        for name, library_level in levels.items():
+            logging.getLogger(name).setLevel(library_level)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``haptic-bus``; returns the exit status.  A program's call (``argv`` given) gets
     SIGINT's and SIGTERM's handlers back as it had them (``run``, ``identify`` and ``validate`` install
-    their stop request); the console script's process (``argv`` None) keeps the command's until it
-    exits (:func:`~haptic_bus.app.early_stop.exiting`, :func:`~haptic_bus.app.early_stop.handlers_kept`)."""
+    their stop request), and its logging as it had it (each command configures the root logger and
+    the libraries' levels for its own output); the console script's process (``argv`` None) keeps the
+    command's until it exits (:func:`~haptic_bus.app.early_stop.exiting`,
+    :func:`~haptic_bus.app.early_stop.handlers_kept`, :func:`_logging_kept`)."""
     if argv is None:
         return _command(list(sys.argv[1:]))
-    with handlers_kept():
+    with handlers_kept(), _logging_kept():
         return _command(list(argv))
 
 
