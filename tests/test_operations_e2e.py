@@ -12,7 +12,6 @@ import json
 import os
 import pathlib
 import subprocess
-import sys
 import time
 from collections.abc import Callable
 from typing import Any
@@ -24,6 +23,7 @@ from drives.bus_config import open_bus
 from drives.cia402 import STATUSWORD, State, decode_statusword
 from drives.modbus.objects import ModbusObjects
 from drives.object_access import ObjectAccess
+from tests import short_preflight
 from tests.cli_process import skip_if_refused_at_preflight
 from tests.run_rig import run_cli
 
@@ -60,18 +60,10 @@ def _environment() -> dict[str, str]:
     return env
 
 
-# The killed run: ``python -m haptic_bus.app.cli``'s own lines, pre-flight measuring PREFLIGHT_CYCLES cycles, not the
-# product's 500 (4 s at T = 8 ms, which measure this machine, not the fault and its reset: the test waits for the
-# drive's OPERATION ENABLED, after pre-flight whatever its length).  100 cycles still judge T (2 overruns allowed).
-PREFLIGHT_CYCLES = 100
-SHORT_PREFLIGHT = ("import sys; from haptic_bus.app import preflight; "
-                   f"preflight.PREFLIGHT_CYCLES = {PREFLIGHT_CYCLES}; "
-                   "from haptic_bus.app.cli import main; from haptic_bus.app.early_stop import exiting; "
-                   "sys.exit(exiting(main()))")
-
-
 def _start(*args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-c", SHORT_PREFLIGHT, *args], cwd=REPO, env=_environment(),
+    """The killed run: pre-flight's 100 cycles (0.8 s), not the product's 500 (4 s at T = 8 ms, which measure this
+    machine, not the fault and its reset: the test waits for the drive's OPERATION ENABLED, after pre-flight)."""
+    return subprocess.Popen([*short_preflight.command(), *args], cwd=REPO, env=_environment(),
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 
