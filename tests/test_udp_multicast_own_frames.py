@@ -17,6 +17,7 @@ import can
 import pytest
 
 from drives.bus_config import open_bus
+from drives.canopen.drive import CanopenDrive
 from tests.run_rig import run_cli
 
 WAIT = 0.3  # s: what a receive waits for a datagram looped back on this host (microseconds when idle)
@@ -65,7 +66,11 @@ def test_on_an_ipv6_group_too_a_handle_hears_the_others_but_not_itself(scope: st
 
 
 def test_a_run_with_no_drive_names_no_node_and_logs_its_frames_once(
-        multicast: tuple[str, int], tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+        multicast: tuple[str, int], tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # nobody answers: the master's three waits for a drive (its statusword, the boot-up, an SDO probe) take 0.1 s
+    # each, not the default 1 s; its own frames come back within microseconds on this host if they come at all
+    monkeypatch.setitem(CanopenDrive.__init__.__kwdefaults__, "boot_timeout", 0.1)
     group, port = multicast
     result = run_cli(capsys, "run", "cia402-handle", "--interface", "udp_multicast", "--channel", group,
                      "--bus-option", f"port={port}", "--node-id", "5", "--virtual-time", "--out", str(tmp_path))
