@@ -241,7 +241,7 @@ def test_an_observer_alarm_stops_the_run_with_exit_3(tmp_path: pathlib.Path, cap
             while not answers and not done.wait(0.05):  # bounded by the run (at most 30 s of virtual time)
                 try:
                     answers.append(upload_walls(drive.bus, 127, {0: STIFFER},
-                                                timeout=1.0))
+                                                timeout=0.3))
                 except DriveTimeout:  # the controller node is not up yet, or its answer came late
                     continue
 
