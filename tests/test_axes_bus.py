@@ -30,6 +30,7 @@ from tests.raw_bus import queued
 NODES = (5, 6, 7)
 RPDO1 = {node: 0x200 + node for node in NODES}
 TPDOS = {cob: node for node in NODES for cob in (0x180 + node, 0x280 + node)}
+LOCKSTEP_TPDO_WAIT = 0.05  # s: a cycle's wait for TPDOs the lock-step bus has already served, or never will
 
 
 def slope_only(tmp_path: pathlib.Path) -> AxesProfile:
@@ -43,9 +44,13 @@ def slope_only(tmp_path: pathlib.Path) -> AxesProfile:
 
 @pytest.fixture
 def rig(tmp_path: pathlib.Path) -> Iterator[tuple[AxesProfile, MultiAxisSim, CanopenAxes, can.BusABC]]:
-    """The slope-only gantry on a lock-step bus, the master connected (not enabled), and a sniffer."""
+    """The slope-only gantry on a lock-step bus, the master connected (not enabled), and a sniffer.  The lock-step
+    bus serves each frame in its sender's thread: every TPDO that comes is in before the SYNC's send returns, so a
+    cycle's wait for TPDOs elapses only for a missed one, and the master waits :data:`LOCKSTEP_TPDO_WAIT` for it, not
+    the rig's 0.5 s (each of the three a silent axis misses waited that long)."""
     profile = slope_only(tmp_path)
     with simulated_axes(profile, channel=f"axes-bus-{tmp_path.name}") as (sim, axes):
+        axes.cycle.timeout = LOCKSTEP_TPDO_WAIT
         sniffer = can.Bus(interface="lockstep", channel=f"axes-bus-{tmp_path.name}")
         try:
             yield profile, sim, axes, sniffer
@@ -214,3 +219,4 @@ def test_a_silent_axis_zeroes_every_torque_in_the_same_cycle(rig) -> None:
     assert [d.tripped is not None for d in axes.drives] == [True, True, True]
     with pytest.raises(DriveTimeout):
         axes.read_inputs()  # node 6 is still silent: no cycle of its own any more
+    sim.node(6).resume()  # the rig's goodbye to node 6 answered (a silent node held each of its SDOs)

@@ -310,14 +310,17 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path, c
     exchange), 8 times less; the walls softened to what the coupled gate passes at 20 ms (K 200 N/m,
     B 2 N s/m, margin +5.39 N s/m) and the push to 0.6 N, (0.4, 0.4, 0.2) N along the slope's normal,
     whole per mille.  The hand takes the handle once the drives are enabled (pre-flight's cycles never
-    move it) and pushes towards the slope.  Pre-flight measures 100 cycles, 2 s (the product's 500 take
-    10 s at this T): its p99.5 is then the worst of them, which must stay within T as any of 500 must.  No drive misses an RPDO
+    move it) and pushes towards a point 3 mm behind where it comes to rest (21 mm from the start along the
+    slope's normal, the rest 18 mm): the push, re-aimed every period, pulls the handle onto that normal with
+    0.6 N / 3 mm, so it settles in 2.1 s, not the 4.7 s a point 12 mm behind gave.  Pre-flight measures 50
+    cycles, 1 s (the product's 500 take 10 s at this T), and judges T on them as on 500 (1 overrun allowed
+    of 50, 5 of 500: :func:`~haptic_bus.app.preflight.allowed_overruns`).  No drive misses an RPDO
     between pre-flight and the enable: the coupled gate's judgement at the measured delay (seconds)
     runs while the cycle goes on at zero torque."""
     text = GANTRY.read_text()
     for old, new in (("period = 0.002 ", "period = 0.02 "), ("stiffness = 1500.0", "stiffness = 200.0"),
                      ("damping = 5.0", "damping = 2.0"), ("force = 3.0 ", "force = 0.6 "),
-                     (TARGETS, "toward = [0.02, 0.02, 0.01]")):
+                     (TARGETS, "toward = [0.014, 0.014, 0.007]")):
         assert old in text
         text = text.replace(old, new)
     path = tmp_path / "real-time.toml"
@@ -327,21 +330,22 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path, c
     sim = simulated_axes_device(profile, {"interface": "lockstep", "channel": channel}, clock="wall").start()
     caplog.set_level(logging.WARNING, logger="sim_drive")
     try:
-        # 6 s (300 cycles): every torque and 0x606C sample is final from 4.72 s on (measured twice in real time beside
-        # the suite's load; 4.58 s in virtual time: a late SYNC lets the plants live a longer step), 64 cycles to spare
+        # 3.4 s (170 cycles): every torque and 0x606C sample is final from 2.10-2.12 s on (measured three times in real
+        # time beside a load of 6; 2.08 s in virtual time: a late SYNC lets the plants live a longer step), 64 cycles to
+        # spare, as the 6 s run towards the point 12 mm behind the rest had
         result = run(profile, {"interface": "lockstep", "channel": channel},
-                     RunOptions(6.0, pacing="wall", out_dir=tmp_path / "run", live=False, plots=False,
-                                preflight_cycles=100))
+                     RunOptions(3.4, pacing="wall", out_dir=tmp_path / "run", live=False, plots=False,
+                                preflight_cycles=50))
     finally:
         sim.stop()
     if result.exit_reason == "refused" and "this machine holds T >=" in (result.error or ""):
         pytest.skip(f"this machine cannot hold T = 20 ms now, and the run said so at pre-flight: {result.error}")
     assert result.exit_reason == "completed", result.error
     summary = result.summary
-    assert summary is not None and summary.cycles == 300 and summary.clock.startswith("real")
+    assert summary is not None and summary.cycles == 170 and summary.clock.startswith("real")
     assert summary.least_energy >= 0.0 and summary.lateness_percentiles
     document = json.loads((tmp_path / "run" / "run.json").read_text())
-    assert document["preflight"]["holdable"] and document["preflight"]["cycles"] == 100
+    assert document["preflight"]["holdable"] and document["preflight"]["cycles"] == 50
     assert not [r.getMessage() for r in caplog.records if "deadline" in r.getMessage() or "lost" in r.getMessage()]
     last = {axis: rows[-1] for axis, rows in records(tmp_path / "run").items()}
     assert [int(last[axis]["torque_permille"]) for axis in "xyz"] == [-80, -80, -40]

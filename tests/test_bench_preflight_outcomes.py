@@ -12,9 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from haptic_bus.bench import preflight_runs, processes, run_bench
+from haptic_bus.bench import preflight_runs, processes, run_bench, startup
 from haptic_bus.bench.size import QUICK, SMOKE
 from haptic_bus.testing.buses import unique_multicast
+from tests import short_preflight
 
 
 @pytest.fixture
@@ -27,9 +28,13 @@ def no_drive(multicast: tuple[str, int]) -> dict:
 @pytest.fixture(scope="module")
 def ended_before_preflight() -> dict:
     """:func:`preflight_runs.one_run` on a udp_multicast bus of this module's own where nothing answers: the
-    command line's run ends (exit 1) on the boot-up it waits for.  One such run serves the tests that read one."""
+    command line's run ends (exit 1) on the boot-up it waits for.  One such run serves the tests that read one.
+    Its master's three waits for the drive (statusword, boot-up, SDO probe) take 0.1 s each, not the default 1 s
+    (:mod:`tests.short_preflight`): the run ends on the same error at any length of them."""
     group, port = unique_multicast()
-    return preflight_runs.one_run({"interface": "udp_multicast", "channel": group, "port": port})
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(startup, "haptic_bus_command", lambda: short_preflight.command(boot_timeout=0.1))
+        return preflight_runs.one_run({"interface": "udp_multicast", "channel": group, "port": port})
 
 
 def test_a_simulator_that_does_not_start_is_a_run_that_never_reached_preflight(tmp_path: Path,

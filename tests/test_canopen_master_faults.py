@@ -17,6 +17,7 @@ import pytest
 from drives import errors
 from drives.base import DriveScaling
 from drives.canopen.drive import CanopenDrive
+from drives.canopen.link import NOTIFIER_CYCLE
 from drives.cia402 import (
     CONTROLWORD,
     MODES_OF_OPERATION,
@@ -129,6 +130,7 @@ def test_silent_drive_is_detected_within_the_configured_cycles(canopen_rig):
             drive.write_outputs(500)  # tripped: the caller's torque is replaced by the safe frame
             assert_safe_frame_last(sniffer)
             assert drive.stats.suppressed_outputs == 1
+            r.sim.resume()  # the drive answers the master's goodbye (a silent one held each of its SDOs 2 s)
         finally:
             sniffer.close()
 
@@ -338,6 +340,7 @@ def test_given_bus_and_network_are_not_shut_down(bus_spec):
             drive.close()
             bus.send(can.Message(arbitration_id=0x7FF, data=b"", is_extended_id=False))  # still open
         network = canopen.Network()
+        network.NOTIFIER_CYCLE = NOTIFIER_CYCLE  # canopen's 1 s recv block made the disconnect wait up to 1 s
         network.connect(interface="virtual", channel=spec.channel)
         try:
             drive = CanopenDrive(NODE_ID, network=network, eds=eds_path())

@@ -11,6 +11,7 @@ import signal
 
 import pytest
 
+from drives.canopen.drive import CanopenDrive
 from haptic_bus.app import cli
 from haptic_bus.testing.buses import unique_name
 
@@ -40,8 +41,11 @@ def test_calls_in_turn_say_what_each_says_alone(tmp_path: pathlib.Path, capsys: 
     assert [code for code, _, _ in alone] == [0, 1, 2, 2, 2, 0, 0, 2, 2, 2]
 
 
-def test_a_run_leaves_the_signal_handlers_as_it_found_them(tmp_path: pathlib.Path,
-                                                           capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_run_leaves_the_signal_handlers_as_it_found_them(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str],
+                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    # nobody answers: the master's three waits for a drive (its statusword, the boot-up, an SDO probe) take 0.1 s
+    # each, not the default 1 s, the run ending as it does at any length of them
+    monkeypatch.setitem(CanopenDrive.__init__.__kwdefaults__, "boot_timeout", 0.1)
     found = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
     code, _, err = _said(capsys, ["run", "cia402-handle", "--interface", "virtual", "--channel", unique_name("r8"),
                                   "--node-id", "5", "--virtual-time", "--duration", "1", "-q", "--no-plots",

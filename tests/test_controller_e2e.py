@@ -253,6 +253,9 @@ def test_a_storm_of_concurrent_uploads_never_tears_k_from_b() -> None:
 def test_a_drive_fault_ends_the_run_safely_and_keeps_the_record(fault: str, tmp_path) -> None:
     profile = seed_at_the_wall()
     with simulated_canopen(profile, operator=ConstantPush(1.0)) as (sim, drive):
+        # the lock-step bus serves each frame in its sender's thread: a TPDO that comes is in before the SYNC's send
+        # returns, so only a missed one waits, 50 ms, not the rig's 0.5 s (three of them for the silent drive)
+        drive.cycle.timeout = 0.05
         controller = controller_for(profile, drive)
 
         def inject(c: WallController) -> None:
@@ -262,6 +265,8 @@ def test_a_drive_fault_ends_the_run_safely_and_keeps_the_record(fault: str, tmp_
 
         summary = controller.run(1000, on_cycle=inject)
         last_torque = sim.drive.target_torque if fault != "silent" else None
+        if fault == "silent":
+            sim.resume()  # the drive answers the master's goodbye (silent, it held each of its SDOs)
     assert summary.error is not None and "node 1" in summary.error
     assert 100 <= summary.cycles <= 110  # detected within a few cycles (max_missed_tpdos = 3)
     assert controller.record.total == summary.cycles

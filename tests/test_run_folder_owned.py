@@ -21,6 +21,7 @@ import can
 import pytest
 
 import haptic_bus as hb
+from drives.canopen.drive import CanopenDrive
 from haptic_bus.app.folder_lock import LOCK_NAME
 from haptic_bus.app.run_options import StopRequest
 from tests.run_rig import CAN_INTERFACE, read_run, run_cli, simulated_drive, wait_until
@@ -106,10 +107,13 @@ def test_the_lock_goes_with_a_killed_process(tmp_path: pathlib.Path, capsys: pyt
 
 
 def test_a_run_into_an_earlier_runs_folder_replaces_that_run_and_keeps_the_users_files(
-        tmp_path: pathlib.Path, caplog: pytest.LogCaptureFixture) -> None:
+        tmp_path: pathlib.Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
     """A folder given again held the earlier run's record.csv and pictures beside the new run.json
     (``plot`` then drew the old record under the new run's end).  The new run clears what a run
-    writes, before its bus, and says so in one warning; other files stay."""
+    writes, before its bus, and says so in one warning; other files stay.  Nobody answers on the bus:
+    the master's three waits for a drive (its statusword, the boot-up, an SDO probe) take 0.1 s each, not
+    the default 1 s, the run ending as it does at any length of them."""
+    monkeypatch.setitem(CanopenDrive.__init__.__kwdefaults__, "boot_timeout", 0.1)
     caplog.set_level(logging.WARNING, logger="haptic_bus.app.run_folder")  # whatever an earlier CLI test set the root to
     folder = tmp_path / "run"
     folder.mkdir()

@@ -30,7 +30,6 @@ import pathlib
 import re
 import signal
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -48,6 +47,7 @@ from haptic_bus.app.profiles import load_profile
 from haptic_bus.control.controller import WallController, encoder_origin
 from haptic_bus.control.gate import GatePolicy, PassivityGate
 from haptic_bus.node.upload import upload_walls
+from tests import short_preflight
 from tests.cli_process import skip_if_refused_at_preflight
 from tests.run_rig import (
     NODE,
@@ -241,7 +241,7 @@ def test_an_observer_alarm_stops_the_run_with_exit_3(tmp_path: pathlib.Path, cap
             while not answers and not done.wait(0.05):  # bounded by the run (at most 30 s of virtual time)
                 try:
                     answers.append(upload_walls(drive.bus, 127, {0: STIFFER},
-                                                timeout=1.0))
+                                                timeout=0.3))
                 except DriveTimeout:  # the controller node is not up yet, or its answer came late
                     continue
 
@@ -362,7 +362,9 @@ def test_a_real_time_run_stopped_for_150_ms_breaks_the_delay_assumption_and_exit
         multicast: tuple[str, int], sim_process: Callable[..., Any], tmp_path: pathlib.Path) -> None:
     """Two processes on udp_multicast, real time, T = 5 ms (the wall's alpha is then 1.3: the
     bandwidth rule warns).  The drive's own watchdogs are set to 2 s here, so that the 150 ms
-    stop is the supervisor's to catch (the safety chain is tested apart)."""
+    stop is the supervisor's to catch (the safety chain is tested apart).  The run's pre-flight measures 100
+    cycles (0.5 s), not the product's 500 (2.5 s at this T, measuring this machine, not the supervisor: the test
+    counts the run's cycles after it)."""
     group, port = multicast
     bus_args = ["--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}"]
     profile = profile_variant(tmp_path, "cia402-handle", "late", {
@@ -372,7 +374,7 @@ def test_a_real_time_run_stopped_for_150_ms_breaks_the_delay_assumption_and_exit
     sim = sim_process(*bus_args, "--node-id", str(NODE), "--profile", str(profile))
     out = tmp_path / "run"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
-    run = subprocess.Popen([sys.executable, "-m", "haptic_bus.app.cli", "run", str(profile), *bus_args, "--node-id",
+    run = subprocess.Popen([*short_preflight.command(), "run", str(profile), *bus_args, "--node-id",
                             str(NODE), "--duration", "60", "-q", "--no-plots", "--out", str(out)],
                            cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     sniffer = open_bus(interface="udp_multicast", channel=group, port=port)

@@ -17,20 +17,33 @@ import can
 import pytest
 
 from drives.bus_config import open_bus
+from drives.canopen.drive import CanopenDrive
 from tests.run_rig import run_cli
 
-WAIT = 0.3  # s: what a receive waits for a datagram looped back on this host (microseconds when idle)
+WAIT = 5.0  # s: the longest a receive waits for a datagram looped back on this host (microseconds when idle)
+END = 0x7FF  # the identifier of the frame a handle of its own sends after the test's frames
 
 
 def heard(bus: can.BusABC) -> list[int]:
-    """The identifiers ``bus`` receives until it hears nothing for :data:`WAIT` (at most 10 frames)."""
+    """The identifiers ``bus`` receives before the :data:`END` frame (at most 10 frames; -1 last if no
+    :data:`END` came within :data:`WAIT`).  One thread sends every frame, and the kernel loops each datagram
+    back to the host's sockets as it is sent, in that order: a frame ``bus`` would hear comes before the
+    :data:`END` sent after it, so what it heard before :data:`END` is all it hears of them (no silence waited out)."""
     ids = []
     for _ in range(10):
         message = bus.recv(WAIT)
         if message is None:
-            break
+            return [*ids, -1]
+        if message.arbitration_id == END:
+            return ids
         ids.append(message.arbitration_id)
     return ids
+
+
+def end(group: str, port: int) -> None:
+    """:data:`END` from a handle of its own (whose frame no other handle takes for its own)."""
+    with open_bus(interface="udp_multicast", channel=group, port=port) as marker:
+        marker.send(can.Message(arbitration_id=END, data=[], is_extended_id=False))
 
 
 def test_a_handle_hears_the_others_frames_but_not_its_own(multicast: tuple[str, int]) -> None:
@@ -40,6 +53,7 @@ def test_a_handle_hears_the_others_frames_but_not_its_own(multicast: tuple[str, 
           can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=0) as plain):
         one.send(can.Message(arbitration_id=0x77F, data=[5], is_extended_id=False))
         plain.send(can.Message(arbitration_id=0x185, data=[1, 2], is_extended_id=False))
+        end(group, port)
         assert heard(one) == [0x185]
         assert heard(other) == [0x77F, 0x185]
         assert heard(plain) == [0x77F, 0x185]  # python-can's own handle still hears itself
@@ -60,12 +74,17 @@ def test_on_an_ipv6_group_too_a_handle_hears_the_others_but_not_itself(scope: st
     with plain, open_bus(interface="udp_multicast", channel=group, port=port) as one, \
             open_bus(interface="udp_multicast", channel=group, port=port) as other:
         one.send(can.Message(arbitration_id=0x77F, data=[5], is_extended_id=False))
+        end(group, port)
         assert heard(one) == []
         assert heard(other) == [0x77F] and heard(plain) == [0x77F]
 
 
 def test_a_run_with_no_drive_names_no_node_and_logs_its_frames_once(
-        multicast: tuple[str, int], tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+        multicast: tuple[str, int], tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # nobody answers: the master's three waits for a drive (its statusword, the boot-up, an SDO probe) take 0.1 s
+    # each, not the default 1 s; its own frames come back within microseconds on this host if they come at all
+    monkeypatch.setitem(CanopenDrive.__init__.__kwdefaults__, "boot_timeout", 0.1)
     group, port = multicast
     result = run_cli(capsys, "run", "cia402-handle", "--interface", "udp_multicast", "--channel", group,
                      "--bus-option", f"port={port}", "--node-id", "5", "--virtual-time", "--out", str(tmp_path))

@@ -22,7 +22,7 @@ from typing import Any
 import canopen
 
 from drives.bus_config import open_bus
-from drives.canopen.link import ReceiveErrors, shut_down
+from drives.canopen.link import NOTIFIER_CYCLE, ReceiveErrors, shut_down
 from drives.canopen.scan import device_kind
 from drives.canopen.sdo import SdoAccess
 from drives.cia301 import DEVICE_TYPE, IDENTITY, SdoAbort, sdo_abort_text
@@ -106,6 +106,7 @@ def upload_walls(
     (not a controller), :class:`ParameterError` (before any write) or :class:`Refusal`.
     """
     network = canopen.Network(open_bus(**dict(bus)))
+    network.NOTIFIER_CYCLE = NOTIFIER_CYCLE  # canopen's 1 s recv block kept the command up to 1 s past its answer
     network.listeners.append(ReceiveErrors("upload"))  # type: ignore[arg-type]  # a can.Listener, as python-can wants
     network.connect()
     try:
