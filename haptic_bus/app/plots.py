@@ -38,7 +38,7 @@ from haptic_bus.analysis.design import (
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.velocity import POINT, VelocityModel
 
-_DPI = 110
+_DPI = 110  # each figure is made at the dpi it is saved at: tight_layout's text measures serve the save
 _BOUNDARY_POINTS = 120
 PathLike = str | os.PathLike[str]
 WallPoint = WallLoop | tuple[float, float] | None  # a wall to mark: its loop, or (alpha, beta)
@@ -92,7 +92,7 @@ def plot_region(path: PathLike, m: float, b: float, T: float, delay: float = 0, 
         if math.isfinite(beta) and beta > 0:
             lo_b, hi_b = min(lo_b, beta / 3), max(hi_b, beta * 3)
 
-    fig, ax = plt.subplots(figsize=(11.5, 5.8))
+    fig, ax = plt.subplots(figsize=(11.5, 5.8), dpi=_DPI)
     ax.axvspan(BANDWIDTH_ALPHA, hi_a, color="0.93", zorder=0)
     ax.axvline(BANDWIDTH_ALPHA, color="0.45", lw=1, ls="-.", label=r"$\alpha = 6$ (eq. 25); shaded: $\alpha > 6$")
     styles = ("-", "-", "-")
@@ -142,7 +142,7 @@ def plot_nyquist(path: PathLike, loop: WallLoop) -> Path:
     """Fig. 5: ``T_zw`` (seed, eq. 10) and the exact ``T_fund`` in m/(N s), Nyquist and real part."""
     data = nyquist_data(loop, 4000)
     verdict = exact_verdict(loop)
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11.5, 4.8))
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11.5, 4.8), dpi=_DPI)
     ax.plot(data.t_zw.real, data.t_zw.imag, color="tab:blue", lw=1.6, label=r"seed $T_{zw}$ (eq. 10)")
     ax.plot(data.t_fund.real, data.t_fund.imag, "--", color="tab:orange", lw=1.6, label=r"exact $T_{fund}$")
     ax.axvline(0.0, color="k", lw=0.8)
@@ -205,7 +205,7 @@ def plot_step(path: PathLike, loop: WallLoop) -> Path:
     step = force_step_response(loop)
     rep = step.report
     n_zoom = int(min(step.time.size, max(60, 4 * (rep.settling_time / loop.T if math.isfinite(rep.settling_time) else 60))))
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11.5, 4.6))
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11.5, 4.6), dpi=_DPI)
     t_ms = step.time[:n_zoom] * 1e3
     ax.step(t_ms, step.applied[:n_zoom], where="post", color="tab:blue", lw=1.4, label=r"applied wall force $u_{k-d}$ (ZOH)")
     if loop.delay:

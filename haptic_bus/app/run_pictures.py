@@ -24,14 +24,17 @@ def render_run(run: RunFolder, out: pathlib.Path | None = None) -> list[pathlib.
     cycled (no ``record.csv``) gets the K-B plane only."""
     target = out if out is not None else run.path
     figures: list[tuple[str, Figure]] = []
-    if run.axes:
-        from haptic_bus.app.trajectory_plot import trajectory_figure
+    # made at the dpi they are saved at: their tight_layout measures each text (a tick's mathtext parsed) at
+    # the dpi the save draws it, and the save finds it measured (at matplotlib's 100 dpi it was done twice)
+    with matplotlib.rc_context({"figure.dpi": DPI}):
+        if run.axes:
+            from haptic_bus.app.trajectory_plot import trajectory_figure
 
-        figures.append((TRAJECTORY, trajectory_figure(run)))
-    elif run.record is not None and run.record.cycles:
-        figures += [(TIMELINE, timeline_figure(run)), (FORCE_POSITION, force_position_figure(run))]
-    if "gate_loop" in run.document:
-        figures.append((REGION, kb_plane_figure(run)))
+            figures.append((TRAJECTORY, trajectory_figure(run)))
+        elif run.record is not None and run.record.cycles:
+            figures += [(TIMELINE, timeline_figure(run)), (FORCE_POSITION, force_position_figure(run))]
+        if "gate_loop" in run.document:
+            figures.append((REGION, kb_plane_figure(run)))
     written = []
     for name, figure in figures:
         path = target / name

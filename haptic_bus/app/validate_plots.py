@@ -27,6 +27,8 @@ import numpy as np
 from haptic_bus.app.run_folder import BODE_PNG, RE_Z_PNG
 from haptic_bus.validate.verdict import Validation
 
+_DPI = 110  # each figure is made at the dpi it is saved at: tight_layout's text measures serve the save
+
 
 def draw(validation: Validation, folder: pathlib.Path, margin: float | None) -> list[pathlib.Path]:
     """Both pictures in ``folder``; ``margin``: the profile's scene's least margin (N s/m), None without walls."""
@@ -37,7 +39,7 @@ def bode(validation: Validation, path: pathlib.Path) -> pathlib.Path:
     """The measured and predicted velocity response (module docstring)."""
     f = validation.plan.frequencies
     measured, predicted = validation.velocity, validation.prediction.velocity
-    fig, (gain, phase) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
+    fig, (gain, phase) = plt.subplots(2, 1, figsize=(8, 7), sharex=True, dpi=_DPI)
     band = 3.0 * measured.error
     gain.fill_between(f, np.abs(measured.mean) - band, np.abs(measured.mean) + band, color="tab:blue", alpha=0.25,
                       label="measured +- 3 standard errors")
@@ -54,7 +56,7 @@ def bode(validation: Validation, path: pathlib.Path) -> pathlib.Path:
     phase.legend(loc="lower left")
     fig.suptitle(_title(validation), fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=_DPI)
     plt.close(fig)
     return path
 
@@ -67,7 +69,7 @@ def re_z(validation: Validation, path: pathlib.Path, margin: float | None) -> pa
     rigid = b + 2j * np.pi * f * validation.loop.m
     effective = np.real(rigid * model / plant.mean)
     error = np.abs(rigid * model / plant.mean) * plant.error / np.abs(plant.mean)  # |dZ| = |Z| |dH| / |H|
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    fig, ax = plt.subplots(figsize=(8, 4.5), dpi=_DPI)
     ax.fill_between(f, effective - 3.0 * error, effective + 3.0 * error, color="tab:blue", alpha=0.25,
                     label="measured +- 3 standard errors")
     ax.plot(f, effective, color="tab:blue", lw=1.2, label="device: Re[(b + j omega m) P / H]")
@@ -82,7 +84,7 @@ def re_z(validation: Validation, path: pathlib.Path, margin: float | None) -> pa
     ax.legend(loc="lower left", fontsize=8)
     ax.set_title(_title(validation), fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=_DPI)
     plt.close(fig)
     return path
 
