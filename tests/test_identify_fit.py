@@ -32,7 +32,7 @@ from haptic_bus.app.identify_run import run_cycles
 from haptic_bus.control.clock import VirtualClock
 from haptic_bus.identify import Identification, Plan, Recorder, Scale, Session, identify
 from haptic_bus.identify.excitation import HIGH_FRACTION, LOW_HZ, multisine_for
-from haptic_bus.identify.model import IncrementEquations, quantization_variance, usable_equations
+from haptic_bus.identify.model import IncrementEquations, first_order_filter, quantization_variance, usable_equations
 from haptic_bus.identify.probe import doublet_mass
 from sim_drive.device import SimulatedDrive
 from sim_drive.operator import HandModel, OperatorModel
@@ -284,6 +284,23 @@ def test_the_model_is_exact_against_the_simulated_drive() -> None:
     steps = np.abs(np.diff(record.position_counts.astype(float)))
     assert usable.sum() > 1000
     assert np.max(np.abs(residuals)) < 1e-6 * np.sqrt(np.mean(steps**2))
+
+
+@pytest.mark.parametrize("pole", [0.0, 0.5, 0.9, 0.999, 0.999999])
+@pytest.mark.parametrize("size", [1, 2, 3, 1000, 2049])
+def test_the_first_order_filter_is_the_recursion_from_rest(pole: float, size: int) -> None:
+    """``y_j = pole y_{j-1} + x_j`` from rest, as a loop does it.  The doubling passes sum the same
+    terms ``pole^k x_{j-k}`` grouped otherwise, with weights ``pole^(2^m)`` squared ``m <= log2 N``
+    times: each term carries at most about ``(log2 N + 1)^2`` roundings, so the difference is bounded
+    by that many ulps of the sum of the terms' magnitudes (the same recursion over ``|x|``)."""
+    drive = np.random.default_rng(size).standard_normal(size) * np.geomspace(1.0, 1e3, size)
+    looped, magnitude = np.empty(size), np.empty(size)
+    state = total = 0.0
+    for j, value in enumerate(drive):
+        state, total = pole * state + value, pole * total + abs(value)
+        looped[j], magnitude[j] = state, total
+    roundings = (math.log2(size) + 1.0) ** 2
+    assert np.all(np.abs(first_order_filter(drive, pole) - looped) <= roundings * np.finfo(float).eps * magnitude)
 
 
 def test_the_rounding_variance_of_an_equation() -> None:
