@@ -27,6 +27,10 @@ interface; python-can sends there), and drops a received datagram that comes fro
 from an address of this host.  Another process's handle sends from another port; another host's,
 from an address that is not this host's; so their frames still arrive.  What goes on the wire is
 python-can's datagram, unchanged: plain python-can handles read it.
+
+A receive that drops such a datagram (or one no filter wants) goes on reading what already waits,
+even once its timeout is over: ``recv(0)`` -- a poll, as a cycle's drain of late frames makes --
+returns a frame that waits behind a dropped one, not None as if nothing waited.
 """
 
 from __future__ import annotations
@@ -113,10 +117,8 @@ class FilteredMulticastBus(UdpMulticastBus):
                 message = self._unpack(data, timestamp)
             if message is not None and (self.protocol is can.CanProtocol.CAN_FD or not message.is_fd):
                 return message, True
-            if deadline is not None:
-                left = deadline - time.monotonic()
-                if left <= 0.0:
-                    return None, True
+            if deadline is not None:  # past it, still take what already waits (a poll): a dropped datagram
+                left = max(0.0, deadline - time.monotonic())  # must not hide the frame queued behind it
 
     def _is_local(self, sender: tuple[Any, ...]) -> bool:
         """Whether the datagram's ``sender`` address (IPv6: with its scope, a link-local one's interface)

@@ -18,6 +18,7 @@ import pytest
 
 from drives.bus_config import open_bus
 from drives.canopen.drive import CanopenDrive
+from drives.udp_multicast import standard_filters
 from tests.run_rig import run_cli
 
 WAIT = 5.0  # s: the longest a receive waits for a datagram looped back on this host (microseconds when idle)
@@ -57,6 +58,26 @@ def test_a_handle_hears_the_others_frames_but_not_its_own(multicast: tuple[str, 
         assert heard(one) == [0x185]
         assert heard(other) == [0x77F, 0x185]
         assert heard(plain) == [0x77F, 0x185]  # python-can's own handle still hears itself
+
+
+def test_a_poll_returns_the_frame_waiting_behind_a_dropped_one(multicast: tuple[str, int]) -> None:
+    """``recv(0)``, the poll a cycle drains its late TPDOs with (:meth:`drives.canopen.sync_cycle.SyncCycle.drain`):
+    a frame waiting behind the handle's own looped-back frame, or behind one no filter wants, is returned.  It
+    used to be None, as if nothing waited: the drain stopped there, and the next cycle took the previous
+    cycle's late TPDO for its own."""
+    group, port = multicast
+    with (open_bus(interface="udp_multicast", channel=group, port=port) as one,
+          open_bus(interface="udp_multicast", channel=group, port=port) as drive,
+          open_bus(interface="udp_multicast", channel=group, port=port) as witness):
+        one.set_filters(standard_filters({0x185}))
+        one.send(can.Message(arbitration_id=0x205, data=[0, 0, 0, 0], is_extended_id=False))  # its own: dropped
+        drive.send(can.Message(arbitration_id=0x705, data=[5], is_extended_id=False))  # no filter wants it: dropped
+        drive.send(can.Message(arbitration_id=0x185, data=[1, 2], is_extended_id=False))  # the late TPDO
+        went_round = [witness.recv(WAIT) for _ in range(3)]  # all three went round the group, in this order
+        assert [m.arbitration_id if m is not None else None for m in went_round] == [0x205, 0x705, 0x185]
+        late = one.recv(0)
+        assert late is not None and late.arbitration_id == 0x185 and bytes(late.data) == b"\x01\x02"
+        assert one.recv(0) is None  # nothing else waits
 
 
 @pytest.mark.parametrize("scope", ["ff02", "ff15"], ids=["link-local", "site"])

@@ -238,7 +238,9 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         self.least_energy = 0.0
         self.observer_active_cycles = 0
         self.stopped_on_error = False
-        self._joints = np.zeros((2, size))  # q (m) and q_dot (m/s) of the latest cycle, several axes
+        self._q = [0.0] * size  # the joints' q (m) and q_dot (m/s) of the latest cycle, several axes: floats
+        self._q_dot = [0.0] * size
+        self._identity = type(self.kinematics) is Cartesian  # x = q, v = q_dot, J^T u = u: no matrix a cycle
         self._cycle: AxesDriveCycle | None = None  # the drives' cyclic phase while run() runs
 
     def _stored_energies(self, scene: SceneT, origins: list[float]) -> list[float]:
@@ -390,14 +392,17 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
             self._act(alarm)
 
     def _axes_step(self, lateness: float) -> None:
-        """Several axes (or a scene in space): joints, kinematics, the scene's force, joint efforts."""
+        """Several axes (or a scene in space): joints, kinematics, the scene's force, joint efforts.  The
+        joints are floats; a Cartesian device (``J = I``) passes them to the scene as they are and takes
+        its force as the joint efforts -- exactly what ``J q_dot`` and ``J^T u`` give for a finite ``u``
+        (each entry one product by 1.0 plus products by 0.0) -- without a matrix or an array a cycle."""
         cycle = self._cycle
         assert cycle is not None
         entry = self.scenes.adopt()
         inputs = cycle.read()
         started = time.perf_counter()
         wall_clock = time.time()
-        q, q_dot = self._joints
+        q, q_dot = self._q, self._q_dot
         energy = 0.0
         age = oldest = 0
         first = not self.cycles
@@ -409,26 +414,32 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
             if found.age > age:  # the whole cycle is as late as its oldest input
                 age, oldest = found.age, i
         scale = 1.0 if self.cycles >= self.ramp_cycles else (self.cycles + 1) / self.ramp_cycles
-        kinematics = self.kinematics
-        jacobian = kinematics.jacobian(q)
-        wall = jacobian.T @ entry.scene.force(kinematics.position(q), jacobian @ q_dot)  # joint efforts of u
-        forces: list[float] = (wall * scale).tolist()
-        targets = [scaling.torque_permille(-force) for scaling, force in zip(self._scalings, forces)]  # against the wall
+        if self._identity:
+            wall = np.asarray(entry.scene.force(q, q_dot), dtype=float).tolist()  # joint efforts of u: u itself
+        else:
+            kinematics = self.kinematics
+            joints = np.array(q)
+            jacobian = kinematics.jacobian(joints)
+            wall = (jacobian.T @ entry.scene.force(kinematics.position(joints), jacobian @ np.array(q_dot))).tolist()
+        forces: list[float] = wall if scale == 1.0 else [force * scale for force in wall]
+        scalings = self._scalings
+        targets = [scaling.torque_permille(-force) for scaling, force in zip(scalings, forces)]  # against the wall
         sent = cycle.saturate(targets)
         saturated = sent != targets
-        for i, (target, torque, scaling) in enumerate(zip(targets, sent, self._scalings)):
-            if torque != target:
-                forces[i] = -torque * scaling.newton_per_permille  # the force asked of the drive
+        if saturated:
+            for i, (target, torque, scaling) in enumerate(zip(targets, sent, scalings)):
+                if torque != target:
+                    forces[i] = -torque * scaling.newton_per_permille  # the force asked of the drive
         torques = [port.limit(torque) for port, torque in zip(self.ports, sent)]
         cycle.write(torques)
         compute = time.perf_counter() - started
         late, alarm = self.supervisor.cycle(lateness, energy, age, oldest) if self.supervisor is not None else (False, None)
         self._account(energy, forces, saturated)
         t = self.cycles * self.period
-        for i, (record, port, found) in enumerate(zip(self.records, self.ports, inputs)):
-            record.append(t, wall_clock, started, lateness, found.statusword, found.velocity, found.age, q[i], q_dot[i],
-                          forces[i], torques[i], port.observer.energy, entry.scene_id, scale, late, compute,
-                          port.layer.removed)
+        scene_id = entry.scene_id
+        for record, port, found, qi, vi, force, torque in zip(self.records, self.ports, inputs, q, q_dot, forces, torques):
+            record.append(t, wall_clock, started, lateness, found.statusword, found.velocity, found.age, qi, vi,
+                          force, torque, port.observer.energy, scene_id, scale, late, compute, port.layer.removed)
         self.cycles += 1
         if alarm is not None:
             self._act(alarm)
