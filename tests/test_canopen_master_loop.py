@@ -24,7 +24,6 @@ import struct
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
 
 from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION
 from drives.cia402 import State, decode_statusword
@@ -68,6 +67,8 @@ def wall_force_response(w: float, steps: int) -> np.ndarray:
 
     From the characteristic polynomial: U/W = k1 (K T z + B (z - 1)) / ((z - a)(z - 1) + k1 (K T z + B (z - 1))).
     """
+    from scipy.signal import lfilter  # here, not at collection: scipy.signal brings scipy.stats, 0.7 s a worker
+
     co = zoh_coefficients(M, B_FRICTION, T)
     a, k1 = co.a, co.k1
     num = [0.0, k1 * (K_WALL * T + B_WALL), -k1 * B_WALL]  # in powers of z^-1

@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
 
 from haptic_bus.analysis.closed_form import velocity_sampling_slack
 from haptic_bus.analysis.criterion import exact_verdict
@@ -94,6 +93,8 @@ def _seed_transfer_function(loop: WallLoop) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_step_response_equals_the_seed_recursion_and_the_sampled_data_simulation():
+    from scipy.signal import lfilter  # here, not at collection: scipy.signal brings scipy.stats, 0.7 s a worker
+
     for loop in (SEED, SEED_D1, SEED.with_wall(0.0, 100.0), WallLoop(0.04, 0.8, 1e-3, 1000.0, 2.0, 2)):
         step = force_step_response(loop, 400)
         # independent: the seed's closed-loop recursion (valid for point velocity, whole delays)

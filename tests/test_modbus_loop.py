@@ -20,7 +20,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
 
 from drives.cia402 import POSITION_ACTUAL
 from drives.modbus.drive import ModbusDrive
@@ -48,6 +47,8 @@ NUM_N = np.polymul([1.0, -A], [K_WALL * T + B_WALL, -B_WALL])  # U/N: velocity r
 
 
 def l1(num: np.ndarray, n: int = 20_000) -> float:
+    from scipy.signal import lfilter  # here, not at collection: scipy.signal brings scipy.stats, 0.7 s a worker
+
     impulse = np.zeros(n)
     impulse[0] = 1.0
     return float(np.sum(np.abs(lfilter(num, DEN, impulse))))
@@ -128,6 +129,8 @@ def test_force_step_response_is_the_analytic_discrete_loop(pushed: PushedRun) ->
     # the push from rest is a step of PUSH N at cycle 0: the force is the step response, over all CYCLES
     force = pushed.force
     # cycle k of the controller reads the sample taken at t = kT (no time passes while enabling)
+    from scipy.signal import lfilter
+
     analytic = lfilter(NUM_W, DEN, np.full(CYCLES, PUSH))
     bound = quantisation_bound(pushed.newton_per_permille, pushed.velocity_per_count)
     assert bound < 0.006
