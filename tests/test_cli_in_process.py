@@ -8,6 +8,8 @@ from __future__ import annotations
 import logging
 import pathlib
 import signal
+import subprocess
+import sys
 
 import pytest
 
@@ -80,3 +82,13 @@ def test_a_call_leaves_the_programs_logging_as_it_found_it(tmp_path: pathlib.Pat
         root.handlers, _, _ = found
         root.setLevel(found[1])
         canopen_logger.setLevel(found[2])
+
+
+def test_a_programs_bench_call_returns_to_the_program() -> None:
+    """``haptic-bus bench`` execs the bench in the console script's process; a program's call runs it as a
+    child and goes on with its status (an exec replaced the program: nothing after the call ran)."""
+    program = "from haptic_bus.app.cli import main\nprint('after', main(['bench', '--no-such-option']), flush=True)\n"
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-1].split() == ["after", "2"], done.stdout
+    assert "unrecognized arguments: --no-such-option" in done.stderr  # the bench's own usage error, on the streams

@@ -303,13 +303,26 @@ def _report(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _bench(argv: Sequence[str]) -> int:
+def _bench(argv: Sequence[str], in_place: bool = True) -> int:
     """``haptic-bus bench ARGS`` becomes ``python -m haptic_bus.bench ARGS`` in this process (same
     pid, signals, streams and exit status): the bench sits above the application and measures it,
-    so the application never imports the bench (POSIX exec)."""
+    so the application never imports the bench (POSIX exec).  A program's call (``in_place`` False:
+    :func:`main` given ``argv``) runs it as a child on the same streams and returns its status: an
+    exec would have replaced the program.  The child has a process group of its own, so a Ctrl-C
+    reaches it once, forwarded by this process (the bench then writes the sections done, exit 130)."""
     sys.stdout.flush()
     sys.stderr.flush()
-    os.execv(sys.executable, [sys.executable, "-m", "haptic_bus.bench", *argv])
+    command = [sys.executable, "-m", "haptic_bus.bench", *argv]
+    if in_place:
+        os.execv(sys.executable, command)
+    import subprocess
+
+    child = subprocess.Popen(command, process_group=0)
+    try:
+        return child.wait()
+    except KeyboardInterrupt:
+        child.send_signal(signal.SIGINT)
+        return child.wait()
 
 
 def _sim(argv: Sequence[str]) -> int:
@@ -454,12 +467,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv is None:
         return _command(list(sys.argv[1:]))
     with handlers_kept(), _logging_kept():
-        return _command(list(argv))
+        return _command(list(argv), program=True)
 
 
-def _command(argv: list[str]) -> int:
-    """:func:`main` for ``argv``: the command's exit status."""
+def _command(argv: list[str], program: bool = False) -> int:
+    """:func:`main` for ``argv``: the command's exit status (``program``: a program's call)."""
     try:
+        if argv and argv[0] == "bench" and program:  # not an exec: the program goes on after it
+            return _bench(argv[1:], in_place=False)
         if argv and argv[0] in _PASS_THROUGH:
             return _PASS_THROUGH[argv[0]](argv[1:])
         try:
