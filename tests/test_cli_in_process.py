@@ -10,6 +10,7 @@ import pathlib
 import signal
 import subprocess
 import sys
+import threading
 
 import pytest
 
@@ -92,3 +93,52 @@ def test_a_programs_bench_call_returns_to_the_program() -> None:
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[-1].split() == ["after", "2"], done.stdout
     assert "unrecognized arguments: --no-such-option" in done.stderr  # the bench's own usage error, on the streams
+
+
+def test_calls_in_two_threads_leave_the_programs_logging_open_and_as_found(tmp_path: pathlib.Path,
+                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two threads' calls overlap: the first ends while the second runs (each call configures the root
+    logger).  The program's log file stays open and its handler and level are the root's again (each
+    call's basicConfig(force=True) closed what it found, and the second call put back the first's
+    handler: the program's file closed, the root left with a closed handler at WARNING)."""
+    root = logging.getLogger()
+    own = logging.FileHandler(tmp_path / "program.log", mode="w")
+    found = (root.handlers[:], root.level)
+    configured, first_done = threading.Event(), threading.Event()
+    configure = cli._configure_logging
+
+    def call(name: str) -> None:
+        codes[name] = cli.main(["-q", "profiles", "list"])
+
+    second = threading.Thread(target=call, args=("second",), name="second")
+
+    def overlapping(verbose: int | None, quiet: bool | None) -> None:
+        configure(verbose, quiet)
+        if threading.current_thread() is second:  # configured inside the first call, ends after it
+            configured.set()
+            assert first_done.wait(30)
+        else:
+            second.start()
+            assert configured.wait(30)
+
+    monkeypatch.setattr(cli, "_configure_logging", overlapping)
+    codes: dict[str, int] = {}
+    root.handlers = [own]
+    root.setLevel(logging.INFO)
+    try:
+        first = threading.Thread(target=call, args=("first",), name="first")
+        first.start()
+        first.join(30)
+        first_done.set()
+        second.join(30)
+        assert codes == {"first": 0, "second": 0}
+        assert (root.handlers, root.level) == ([own], logging.INFO)
+        assert own.stream is not None and not own.stream.closed
+        logging.getLogger("program").info("after")
+        own.flush()
+        assert (tmp_path / "program.log").read_text().splitlines() == ["after"]
+    finally:
+        first_done.set()
+        own.close()
+        root.handlers = found[0]
+        root.setLevel(found[1])

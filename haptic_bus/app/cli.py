@@ -17,6 +17,7 @@ import os
 import pathlib
 import signal
 import sys
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -62,6 +63,7 @@ if TYPE_CHECKING:
     from haptic_bus.app.run_options import RunOptions
 
 _NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
+_LoggingState = tuple[list[logging.Handler], int, dict[str, int]]  # root handlers and level, the libraries' levels
 
 
 # --------------------------------------------------------------------------- shared arguments
@@ -429,32 +431,63 @@ _PASS_THROUGH: dict[str, Callable[[Sequence[str]], int]] = {"sim": _sim, "bench"
 def _configure_logging(verbose: int | None, quiet: bool | None) -> None:
     levels = {None: logging.WARNING, 0: logging.WARNING, 1: logging.INFO}
     level = logging.CRITICAL if quiet else levels.get(verbose, logging.DEBUG)
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", handlers=[StderrHandler()], force=True)
+    handler = StderrHandler()  # basicConfig(force=True) without its closing what it finds: another call's or the program's
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    root = logging.getLogger()
+    root.handlers = [handler]
+    root.setLevel(level)
     library_level = {None: logging.CRITICAL, 0: logging.CRITICAL, 1: logging.WARNING}.get(verbose, logging.DEBUG)
     for name in _NOISY_LIBRARIES:  # their chatter ("Transfer aborted ...", "... not properly shut down") only on -v
+        logging.getLogger(name).setLevel(library_level)
+
+
+_LOGGING_LOCK = threading.Lock()
+_LOGGING_CALLS: list[object] = []  # the program's calls under way (:func:`_logging_kept`)
+_LOGGING_PROGRAM: list[_LoggingState] = []  # what the first of them found: the program's logging
+
+
+def _logging_state() -> _LoggingState:
+    root = logging.getLogger()
+    return root.handlers[:], root.level, {name: logging.getLogger(name).level for name in _NOISY_LIBRARIES}
+
+
+def _put_back(state: _LoggingState) -> None:
+    root = logging.getLogger()
+    handlers, level, levels = state
+    root.handlers = handlers[:]
+    root.setLevel(level)
+    for name, library_level in levels.items():
         logging.getLogger(name).setLevel(library_level)
 
 
 @contextlib.contextmanager
 def _logging_kept() -> Iterator[None]:
     """The root logger's handlers and level, and the noisy libraries' levels, put back as they were
-    found when the block ends.  The program's own handlers are set aside for the block, not closed
+    found when the block ends.  The program's own handlers are set aside for the block, never closed
     (``basicConfig(force=True)`` closes what it finds: a program's log file would have been closed and,
-    opened again in ``"w"`` mode, emptied); the command's handler is closed with the block."""
-    root = logging.getLogger()
-    handlers, level = root.handlers[:], root.level
-    levels = {name: logging.getLogger(name).level for name in _NOISY_LIBRARIES}
-    root.handlers = []
+    opened again in ``"w"`` mode, emptied); the command's handler is closed with the block.  Calls
+    that overlap (threads, or one nested in another): one that ends while others run puts back what it
+    found (a nested call's caller has its logging again), the last to end what the first found."""
+    token = object()
+    with _LOGGING_LOCK:
+        found = _logging_state()
+        if not _LOGGING_CALLS:
+            _LOGGING_PROGRAM[:] = [found]
+        _LOGGING_CALLS.append(token)
+        logging.getLogger().handlers = []
     try:
         yield
     finally:
-        for handler in root.handlers:
-            if handler not in handlers:
-                handler.close()
-        root.handlers = handlers
-        root.setLevel(level)
-        for name, library_level in levels.items():
-            logging.getLogger(name).setLevel(library_level)
+        with _LOGGING_LOCK:
+            _LOGGING_CALLS.remove(token)
+            program = _LOGGING_PROGRAM[0]
+            state = found if _LOGGING_CALLS else program
+            kept = {id(handler) for handler in [*state[0], *program[0]]}
+            done = {id(handler): handler for handler in [*logging.getLogger().handlers, *found[0]]}
+            for key, handler in done.items():
+                if key not in kept:
+                    handler.close()
+            _put_back(state)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
