@@ -48,7 +48,9 @@ def test_a_run_leaves_the_signal_handlers_as_it_found_them(tmp_path: pathlib.Pat
                                                            monkeypatch: pytest.MonkeyPatch) -> None:
     # nobody answers: the master's three waits for a drive (its statusword, the boot-up, an SDO probe) take 0.1 s
     # each, not the default 1 s, the run ending as it does at any length of them
-    monkeypatch.setitem(CanopenDrive.__init__.__kwdefaults__, "boot_timeout", 0.1)
+    defaults = CanopenDrive.__init__.__kwdefaults__
+    assert defaults is not None and "boot_timeout" in defaults
+    monkeypatch.setitem(defaults, "boot_timeout", 0.1)
     found = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
     code, _, err = _said(capsys, ["run", "cia402-handle", "--interface", "virtual", "--channel", unique_name("r8"),
                                   "--node-id", "5", "--virtual-time", "--duration", "1", "-q", "--no-plots",
