@@ -22,6 +22,7 @@ from haptic_bus.analysis.limits import passive_scales
 from haptic_bus.app.profiles import AxesProfile, load_profile
 from haptic_bus.app.rig import simulated_axes, simulated_canopen
 from haptic_bus.control.controller import WallController, encoder_origin, encoder_origins
+from haptic_bus.control.kinematics import Cartesian
 from haptic_bus.control.record import COLUMNS
 from haptic_bus.control.space_gate import SpaceDecision, SpaceGate
 from haptic_bus.control.space_scene import Plane, compile_space_scene
@@ -202,3 +203,43 @@ def test_a_controller_node_detached_at_once_gives_up_its_warm_up_judgement(gantr
         failure = warming.exception()
         assert failure is None or isinstance(failure, BrokenProcessPool)
     assert judge_pool().submit(abs, -3).result(timeout=60.0) == 3  # a new worker for the next run (it starts in 1-2 s)
+
+
+class _Kinematics:
+    """Cartesian's ``x = q``, ``J = I`` behind a class of its own: the controller cannot tell it is the
+    identity, so it takes the path for any kinematics (``J q_dot``, ``J^T u`` as matrix products)."""
+
+    def __init__(self, size: int) -> None:
+        self._cartesian = Cartesian(size)
+        self.size = size
+
+    def position(self, q: object) -> np.ndarray:
+        return self._cartesian.position(q)  # type: ignore[arg-type]
+
+    def jacobian(self, q: object) -> np.ndarray:
+        return self._cartesian.jacobian(q)  # type: ignore[arg-type]
+
+
+def test_a_cartesian_device_renders_as_any_kinematics_with_its_jacobian_would(gantry: AxesProfile) -> None:
+    """The Cartesian path passes the joints to the scene and takes its force as the joint efforts; the path
+    for any other kinematics multiplies by ``J`` and ``J^T``.  With ``J = I`` (finite forces) each product
+    is the entry itself plus zeros: through the ramp and out of the slab, every column but the clocks'
+    is the same to the bit on both paths."""
+    profile = slab(gantry)
+    records = []
+    for kinematics in (None, _Kinematics(3)):
+        with simulated_axes(profile) as (_, axes):
+            controller = WallController(axes, profile.gate(), profile.compiled_scene(), names=[a.name for a in profile.axes],
+                                        force_limit=[a.force_limit for a in profile.axes], origin=encoder_origins(axes),
+                                        ramp_time=0.1, passivity=profile.passivity, kinematics=kinematics)
+            assert controller._identity is (kinematics is None)
+            axes.enable()
+            assert controller.run(200).exit_reason == "completed"
+        records.append([record.array() for record in controller.records])
+    clocks = [COLUMNS.index(name) for name in ("wall_clock_s", "monotonic_s", "compute_s", "lateness_s")]
+    kept = [i for i in range(len(COLUMNS)) if i not in clocks]
+    for cartesian, general in zip(*records):
+        assert cartesian.shape == general.shape == (200, len(COLUMNS))
+        assert np.array_equal(cartesian[:, kept], general[:, kept])
+    forces = np.column_stack([axis[:, COLUMNS.index("force_n")] for axis in records[0]])
+    assert np.abs(forces[:, :2]).max() > 0.05 and np.all(forces[:, 2] == 0.0)  # the slab pushed along x and y
