@@ -104,6 +104,12 @@ def _wall(loop: WallLoop) -> tuple[Characteristic, np.ndarray, bool]:
     return char, char.wall(loop.kappa, loop.q, integrator), integrator
 
 
+def _relative(f: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """``|f| / size``, and 0 where ``size`` is 0: every term ``f`` is formed from is 0 there (a
+    wall and friction below the smallest double make ``w = 0`` an exact zero), so ``f`` is too."""
+    return np.abs(f) / np.where(size > 0.0, size, 1.0)
+
+
 def _newton(char: Characteristic, wall: np.ndarray, integrator: bool, w: np.ndarray, steps: int
             ) -> tuple[np.ndarray, np.ndarray]:
     """Guarded Newton steps on every zero at once (a step is taken only if it lowers ``|f|/size``);
@@ -111,7 +117,7 @@ def _newton(char: Characteristic, wall: np.ndarray, integrator: bool, w: np.ndar
     w = w.copy()
     tolerance = (char.lag + 16) * EPS  # (1 + w)^L carries L roundings
     f, df, size = evaluate(char, wall, integrator, w)
-    residual = np.abs(f) / size
+    residual = _relative(f, size)
     converged = residual <= tolerance
     live = np.flatnonzero(~converged & (df != 0))
     f, df, residual = f[live], df[live], residual[live]
@@ -122,7 +128,7 @@ def _newton(char: Characteristic, wall: np.ndarray, integrator: bool, w: np.ndar
             step = f / df
         trial = w[live] - step
         f2, df2, size2 = evaluate(char, wall, integrator, trial)
-        residual2 = np.abs(f2) / size2
+        residual2 = _relative(f2, size2)
         better = residual2 < residual
         w[live] = np.where(better, trial, w[live])
         small = np.abs(step) <= 4 * EPS * np.abs(trial)
@@ -223,7 +229,7 @@ def _zeros(loop: WallLoop) -> tuple[np.ndarray, np.ndarray]:
         w = _long_delay_zeros(char, wall, integrator, loop.q)
     bound = np.zeros(w.size)
     _, df, size = evaluate(char, wall, integrator, w[near])
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):  # 0/0 at a double zero of terms all 0: no bound, inf below
         first = _BOUND_FACTOR * EPS * size / np.abs(df)
     bound[near] = 2.0 * np.where(np.isfinite(first), first, np.inf) + 4 * EPS * (2 * np.abs(w[near].real) + np.abs(w[near]) ** 2)
     return w, bound
