@@ -19,7 +19,7 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
-from haptic_bus.console import StderrHandler
+from haptic_bus.console import log_to_stderr
 from haptic_bus.errors import DriveError, ParameterError
 from sim_drive.eds import eds_path
 from sim_drive.scheduling import answer_in_real_time
@@ -73,7 +73,7 @@ def set_up_process(wall_clock: bool, library: str, level: int) -> str:
     from ``level``), then real-time scheduling for every thread to come (:mod:`sim_drive.scheduling`):
     what it got, in words for the serving line (a refusal before it logs nothing)."""
     fmt = "%(asctime)s %(message)s" if wall_clock else "%(message)s"
-    logging.basicConfig(level=logging.INFO, format=fmt, handlers=[StderrHandler()], force=True)
+    log_to_stderr(logging.INFO, fmt)
     logging.getLogger(library).setLevel(level)
     return answer_in_real_time()
 

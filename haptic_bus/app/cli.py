@@ -10,15 +10,13 @@ logging says (``-q`` also turns the live view of ``run`` off).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import functools
 import logging
 import os
 import pathlib
 import signal
 import sys
-import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from haptic_bus.app.arguments import (
@@ -55,15 +53,13 @@ from haptic_bus.app.scan_cli import add_scan_parser
 from haptic_bus.app.sdo_cli import add_sdo_parser
 from haptic_bus.app.status_cli import add_status_parser
 from haptic_bus.app.validate_cli import add_validate_parser
-from haptic_bus.console import StderrHandler
+from haptic_bus.console import LIBRARIES, log_to_stderr, logging_kept
 from haptic_bus.validation import folder_path, writable_file, writable_folder
 
 if TYPE_CHECKING:
     from haptic_bus.app.profiles import AxesProfile, Profile
     from haptic_bus.app.run_options import RunOptions
 
-_NOISY_LIBRARIES = ("can", "canopen", "pymodbus", "matplotlib")
-_LoggingState = tuple[list[logging.Handler], int, dict[str, int]]  # root handlers and level, the libraries' levels
 
 
 # --------------------------------------------------------------------------- shared arguments
@@ -305,13 +301,12 @@ def _report(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _bench(argv: Sequence[str], in_place: bool = True) -> int:
+def _bench(argv: Sequence[str], in_place: bool) -> int:
     """``haptic-bus bench ARGS`` becomes ``python -m haptic_bus.bench ARGS`` in this process (same
     pid, signals, streams and exit status): the bench sits above the application and measures it,
-    so the application never imports the bench (POSIX exec).  A program's call (``in_place`` False:
-    :func:`main` given ``argv``) runs it as a child on the same streams and returns its status: an
-    exec would have replaced the program.  The child has a process group of its own, so a Ctrl-C
-    reaches it once, forwarded by this process (the bench then writes the sections done, exit 130)."""
+    so the application never imports the bench (POSIX exec).  A program's call (not ``in_place``) runs
+    it as a child on the same streams and returns its status; the child has a process group of its own,
+    so a Ctrl-C reaches it once, forwarded by this process (the bench writes the sections done, exit 130)."""
     sys.stdout.flush()
     sys.stderr.flush()
     command = [sys.executable, "-m", "haptic_bus.bench", *argv]
@@ -327,7 +322,8 @@ def _bench(argv: Sequence[str], in_place: bool = True) -> int:
         return child.wait()
 
 
-def _sim(argv: Sequence[str]) -> int:
+def _sim(argv: Sequence[str], in_place: bool) -> int:
+    """``haptic-bus sim ARGS``, served by this process whoever called: it returns when its drive stops."""
     from haptic_bus.app.rig import sim_main
 
     return sim_main(list(argv))
@@ -425,69 +421,17 @@ def build_parser() -> OneLineParser:
     return parser
 
 
-_PASS_THROUGH: dict[str, Callable[[Sequence[str]], int]] = {"sim": _sim, "bench": _bench}
+# commands that parse their own arguments, told whether they may take the process (``in_place``: not a program's call)
+_PASS_THROUGH: dict[str, Callable[[Sequence[str], bool], int]] = {"sim": _sim, "bench": _bench}
 
 
 def _configure_logging(verbose: int | None, quiet: bool | None) -> None:
     levels = {None: logging.WARNING, 0: logging.WARNING, 1: logging.INFO}
     level = logging.CRITICAL if quiet else levels.get(verbose, logging.DEBUG)
-    handler = StderrHandler()  # basicConfig(force=True) without its closing what it finds: another call's or the program's
-    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
-    root = logging.getLogger()
-    root.handlers = [handler]
-    root.setLevel(level)
+    log_to_stderr(level, "%(levelname)s %(name)s: %(message)s")
     library_level = {None: logging.CRITICAL, 0: logging.CRITICAL, 1: logging.WARNING}.get(verbose, logging.DEBUG)
-    for name in _NOISY_LIBRARIES:  # their chatter ("Transfer aborted ...", "... not properly shut down") only on -v
+    for name in LIBRARIES:  # their chatter ("Transfer aborted ...", "... not properly shut down") only on -v
         logging.getLogger(name).setLevel(library_level)
-
-
-_LOGGING_LOCK = threading.Lock()
-_LOGGING_CALLS: list[object] = []  # the program's calls under way (:func:`_logging_kept`)
-_LOGGING_PROGRAM: list[_LoggingState] = []  # what the first of them found: the program's logging
-
-
-def _logging_state() -> _LoggingState:
-    root = logging.getLogger()
-    return root.handlers[:], root.level, {name: logging.getLogger(name).level for name in _NOISY_LIBRARIES}
-
-
-def _put_back(state: _LoggingState) -> None:
-    root = logging.getLogger()
-    handlers, level, levels = state
-    root.handlers = handlers[:]
-    root.setLevel(level)
-    for name, library_level in levels.items():
-        logging.getLogger(name).setLevel(library_level)
-
-
-@contextlib.contextmanager
-def _logging_kept() -> Iterator[None]:
-    """The root logger's handlers and level, and the noisy libraries' levels, put back as they were
-    found when the block ends.  The program's own handlers are set aside for the block, never closed
-    (``basicConfig(force=True)`` closes what it finds: a program's log file would have been closed and,
-    opened again in ``"w"`` mode, emptied); the command's handler is closed with the block.  Calls
-    that overlap (threads, or one nested in another): one that ends while others run puts back what it
-    found (a nested call's caller has its logging again), the last to end what the first found."""
-    token = object()
-    with _LOGGING_LOCK:
-        found = _logging_state()
-        if not _LOGGING_CALLS:
-            _LOGGING_PROGRAM[:] = [found]
-        _LOGGING_CALLS.append(token)
-        logging.getLogger().handlers = []
-    try:
-        yield
-    finally:
-        with _LOGGING_LOCK:
-            _LOGGING_CALLS.remove(token)
-            program = _LOGGING_PROGRAM[0]
-            state = found if _LOGGING_CALLS else program
-            kept = {id(handler) for handler in [*state[0], *program[0]]}
-            done = {id(handler): handler for handler in [*logging.getLogger().handlers, *found[0]]}
-            for key, handler in done.items():
-                if key not in kept:
-                    handler.close()
-            _put_back(state)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -496,20 +440,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     their stop request), and its logging as it had it (each command configures the root logger and
     the libraries' levels for its own output); the console script's process (``argv`` None) keeps the
     command's until it exits (:func:`~haptic_bus.app.early_stop.exiting`,
-    :func:`~haptic_bus.app.early_stop.handlers_kept`, :func:`_logging_kept`)."""
+    :func:`~haptic_bus.app.early_stop.handlers_kept`, :func:`~haptic_bus.console.logging_kept`)."""
     if argv is None:
         return _command(list(sys.argv[1:]))
-    with handlers_kept(), _logging_kept():
-        return _command(list(argv), program=True)
+    with handlers_kept(), logging_kept():
+        return _command(list(argv), in_place=False)
 
 
-def _command(argv: list[str], program: bool = False) -> int:
-    """:func:`main` for ``argv``: the command's exit status (``program``: a program's call)."""
+def _command(argv: list[str], in_place: bool = True) -> int:
+    """:func:`main` for ``argv``: the command's exit status (``in_place`` False: a program's call, which
+    a pass-through command must return to)."""
     try:
-        if argv and argv[0] == "bench" and program:  # not an exec: the program goes on after it
-            return _bench(argv[1:], in_place=False)
         if argv and argv[0] in _PASS_THROUGH:
-            return _PASS_THROUGH[argv[0]](argv[1:])
+            return _PASS_THROUGH[argv[0]](argv[1:], in_place)
         try:
             args = _command_parser().parse_command(argv)
         except SystemExit as done:  # help (0), or a usage error (2) whose one line argparse has printed
