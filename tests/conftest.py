@@ -300,7 +300,7 @@ def _rig(
     """A simulated drive (the plugin's ``haptic_sim``) and a master on a fresh bus of ``interface``;
     everything stopped on exit."""
     from drives.canopen.drive import CanopenDrive
-    from drives.safety import SafetySettings
+    from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, SafetySettings
     from sim_drive.eds import eds_path
 
     node = haptic_sim(interface=interface, timing=timing, node_id=node_id)
@@ -312,6 +312,10 @@ def _rig(
     # once in a CI run beside two CPU-bound jobs); 0.25 s, as the multi-axis rig waits, where the
     # drive's watchdogs allow as much (a test of real-time watchdogs: half their shortest stall).
     period = drive_kwargs.get("period", 1e-3)
+    # The simulator's heartbeat thread waits for the same turn: 328 ms without a beat, against the master's
+    # default consumer time of 300 ms, was seen in a -n 3 run on this 2-core machine.  Nothing paces a
+    # test, so the master listens with the patience of virtual time (tests of heartbeat loss set their own).
+    drive_kwargs.setdefault("heartbeat_consumer_ms", VIRTUAL_TIME_CANOPEN_PATIENCE["heartbeat_consumer_ms"])
     drive_kwargs.setdefault("sdo_timeout", SDO_WAIT)
     drive_kwargs.setdefault("tpdo_timeout", min(0.25, drive_kwargs["safety"].canopen_stall(period) / 2.0))
     drive = CanopenDrive(node_id, **node.spec.drive_kwargs(), **drive_kwargs)
