@@ -54,7 +54,8 @@ class FilteredMulticastBus(UdpMulticastBus):
     receive the frames it sent (module docstring)."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
-        self._wanted: tuple[tuple[int, int, bool | None], ...] | None = None
+        self._wanted: frozenset[int] | None = None  # standard identifiers a filter names exactly
+        self._masked: tuple[tuple[int, int, bool | None], ...] = ()  # every other filter
         super().__init__(*args, **kwargs)
         group = self._multicast
         ipv4 = group.ip_version == 4
@@ -97,11 +98,16 @@ class FilteredMulticastBus(UdpMulticastBus):
         super().shutdown()
 
     def _apply_filters(self, filters: CanFilters | None) -> None:
-        """Keep the filters as ``(can_id & mask, mask, extended or None)`` for the receive path."""
+        """Keep the filters for the receive path: the standard identifiers that filters with the full
+        11-bit mask and ``extended`` False name (a set: a frame's test does not grow with the drives on
+        the bus), every other filter as ``(can_id & mask, mask, extended or None)``."""
         if not filters:
-            self._wanted = None
+            self._wanted, self._masked = None, ()
             return
-        self._wanted = tuple((f["can_id"] & f["can_mask"], f["can_mask"], f.get("extended")) for f in filters)
+        exact = [f for f in filters if f["can_mask"] == _STANDARD_MASK and f.get("extended") is False]
+        self._wanted = frozenset(f["can_id"] & _STANDARD_MASK for f in exact)
+        self._masked = tuple((f["can_id"] & f["can_mask"], f["can_mask"], f.get("extended"))
+                             for f in filters if f not in exact)
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         deadline = None if timeout is None else time.monotonic() + timeout
@@ -139,13 +145,16 @@ class FilteredMulticastBus(UdpMulticastBus):
         """The frame of datagram ``data`` received at ``timestamp`` (s, Unix), or None if no filter wants it."""
         try:
             fields = msgpack.unpackb(data, raw=False)
-            wanted = self._wanted is None or self._wants(fields["arbitration_id"], fields["is_extended_id"])
+            exact = self._wanted
+            wanted = exact is None or self._wants(exact, fields["arbitration_id"], fields["is_extended_id"])
             return can.Message(check=True, **(fields | {"timestamp": timestamp})) if wanted else None
         except Exception as exception:  # what python-can's own unpacking raises for a datagram it cannot use
             raise can.CanOperationError("could not unpack received message") from exception
 
-    def _wants(self, can_id: int, extended: bool) -> bool:
-        return any((only is None or only == extended) and can_id & mask == masked for masked, mask, only in self._wanted or ())
+    def _wants(self, exact: frozenset[int], can_id: int, extended: bool) -> bool:
+        if not extended and can_id & _STANDARD_MASK in exact:
+            return True
+        return any((only is None or only == extended) and can_id & mask == masked for masked, mask, only in self._masked)
 
 
 def standard_filters(can_ids: set[int] | frozenset[int]) -> CanFilters:

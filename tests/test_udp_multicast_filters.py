@@ -1,0 +1,73 @@
+"""The filtered udp_multicast bus keeps exactly the frames python-can's own filters keep.
+
+:class:`drives.udp_multicast.FilteredMulticastBus` decides on a datagram's identifier before it
+builds a message: the identifiers that full-mask standard filters name are one set, every other
+filter is tested as python-can tests it.  For any filters and any frame its decision is
+:meth:`can.BusABC._matches_filters`' (python-can's reference), on datagrams packed as python-can
+packs them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import can
+import pytest
+from can.interfaces.udp_multicast.utils import pack_message
+from can.typechecking import CanFilter
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from drives.bus_config import open_bus
+from haptic_bus.testing.buses import unique_multicast
+
+STANDARD, EXTENDED = 0x7FF, 0x1FFFFFFF
+identifiers = st.one_of(st.integers(0, STANDARD), st.sampled_from([0x185, 0x286, 0x705, 0x80]))
+
+
+@st.composite
+def filters(draw: st.DrawFn) -> list[CanFilter]:
+    """A filter list as the project sets them (full-mask standard ids) mixed with masks and extended ids."""
+    out: list[CanFilter] = []
+    for _ in range(draw(st.integers(1, 6))):
+        kind = draw(st.sampled_from(["exact", "masked", "extended", "any"]))
+        if kind == "exact":
+            out.append({"can_id": draw(identifiers), "can_mask": STANDARD, "extended": False})
+        elif kind == "masked":
+            masked: CanFilter = {"can_id": draw(identifiers), "can_mask": draw(st.sampled_from([0x780, 0x7F0, 0x07F, STANDARD]))}
+            if draw(st.booleans()):  # without the key, a filter takes both kinds of frame
+                masked["extended"] = draw(st.booleans())
+            out.append(masked)
+        elif kind == "extended":
+            out.append({"can_id": draw(st.integers(0, EXTENDED)), "can_mask": EXTENDED, "extended": True})
+        else:
+            out.append({"can_id": draw(identifiers), "can_mask": draw(st.integers(0, EXTENDED)),
+                        "extended": draw(st.sampled_from([True, False]))})
+    return out
+
+
+@st.composite
+def frames(draw: st.DrawFn) -> can.Message:
+    extended = draw(st.booleans())
+    can_id = draw(st.one_of(identifiers, st.integers(0, EXTENDED))) if extended else draw(identifiers)
+    return can.Message(arbitration_id=can_id, is_extended_id=extended, data=b"\x01\x02")
+
+
+@pytest.fixture(scope="module")
+def bus() -> Iterator[can.BusABC]:
+    group, port = unique_multicast()
+    with open_bus(interface="udp_multicast", channel=group, port=port) as handle:
+        yield handle
+
+
+@settings(max_examples=300, deadline=None)
+@given(wanted=filters(), sent=st.lists(frames(), min_size=1, max_size=8))
+def test_a_datagram_passes_exactly_when_python_cans_filters_pass_its_frame(bus: can.BusABC, wanted: list[CanFilter],
+                                                                            sent: list[can.Message]) -> None:
+    bus.set_filters(wanted)
+    for message in sent:
+        kept = bus._unpack(pack_message(message), 0.0)  # type: ignore[attr-defined]  # the project's bus
+        assert (kept is not None) == bus._matches_filters(message), (wanted, message)
+        if kept is not None:
+            assert (kept.arbitration_id, kept.is_extended_id, kept.data) == \
+                   (message.arbitration_id, message.is_extended_id, message.data)
