@@ -22,7 +22,8 @@ from drives.bus_config import open_bus
 from haptic_bus.testing.buses import unique_multicast
 
 STANDARD, EXTENDED = 0x7FF, 0x1FFFFFFF
-identifiers = st.one_of(st.integers(0, STANDARD), st.sampled_from([0x185, 0x286, 0x705, 0x80]))
+# a pool first, so that frames meet filters often
+identifiers = st.one_of(st.sampled_from([0x185, 0x286, 0x705, 0x80]), st.integers(0, STANDARD))
 
 
 @st.composite
@@ -60,7 +61,7 @@ def bus() -> Iterator[can.BusABC]:
         yield handle
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(wanted=filters(), sent=st.lists(frames(), min_size=1, max_size=8))
 def test_a_datagram_passes_exactly_when_python_cans_filters_pass_its_frame(bus: can.BusABC, wanted: list[CanFilter],
                                                                             sent: list[can.Message]) -> None:
