@@ -35,7 +35,7 @@ from drives.canopen.drive import DEFAULT_TPDO, DEFAULT_TPDO_WITH_POSITION, Canop
 from drives.canopen.link import NOTIFIER_CYCLE
 from drives.cia402 import State
 from drives.errors import DriveProtocolError
-from drives.safety import SafetySettings
+from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, SafetySettings
 from haptic_bus.app.cli import main as haptic_bus_main
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.canopen.vendor_od import has
@@ -356,7 +356,7 @@ def test_python_m_sim_drive_eds_serves_a_vendor_dictionary_to_another_process(si
     assert ("the EDS lacks 0x1016:01 heartbeat consumer (stop on the master's heartbeat loss); 0x1400:05 RPDO1 event "
             "timer (receive deadline); 0x6072 max torque; 0x6076 motor rated torque: absent here too") in log
     drive = CanopenDrive(NODE, **spec.drive_kwargs(), scaling=SCALING, sdo_timeout=SDO_WAIT,
-                         safety=SafetySettings().for_virtual_time(PERIOD))
+                         safety=SafetySettings().for_virtual_time(PERIOD), **VIRTUAL_TIME_CANOPEN_PATIENCE)
     try:
         drive.connect()
         assert [w.split(":")[0] for w in drive.safety_warnings] == ["0x1016 absent", "0x1400"]
