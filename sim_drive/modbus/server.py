@@ -90,6 +90,7 @@ class _Handler(ServerRequestHandler):
     def __init__(self, owner: _TcpServer) -> None:
         super().__init__(owner, owner.trace_packet, owner.trace_pdu, owner.trace_connect)
         self.sim = owner.sim
+        self._serving: set[asyncio.Task[None]] = set()
 
     async def handle_request(self) -> None:
         if self.last_pdu is None:
@@ -99,6 +100,15 @@ class _Handler(ServerRequestHandler):
             await super().handle_request()
         finally:
             _REQUEST.reset(token)
+
+    def handle_later(self) -> None:
+        """Serve the request in a task of this loop: pymodbus' own schedules it through
+        ``run_coroutine_threadsafe`` from the loop's own thread, a write to the loop's self-pipe and one
+        more turn of the loop per request (a loop at 4000 split cycles: 2.8 -> 2.0 s of CPU), for the same
+        task in the same order."""
+        task = self.loop.create_task(self.handle_request())
+        self._serving.add(task)  # the loop holds its tasks weakly
+        task.add_done_callback(self._serving.discard)
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         super().connection_made(transport)
