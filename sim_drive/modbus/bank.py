@@ -25,6 +25,7 @@ error code 0x8130).  Every answered request re-arms it.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable, Sequence
 
@@ -109,6 +110,13 @@ class RegisterBank:
         """A valid request was answered at ``now`` (monotonic s): the watchdog starts over."""
         self._last_request = now
         self._watchdog_fired = False
+
+    def watchdog_deadline(self) -> float:
+        """The monotonic time (s) before which :meth:`watchdog_expired` cannot be True (inf while the
+        watchdog is off, has fired, or the power stage is off: only a request or a state change arms it)."""
+        if not self.watchdog_ms or self._watchdog_fired or self.drive.state not in POWER_STAGE_ON:
+            return math.inf
+        return self._last_request + self.watchdog_ms / 1000.0
 
     def watchdog_expired(self, now: float) -> bool:
         """True once (until the next valid request) when the watchdog ran out with the power stage on."""

@@ -16,8 +16,9 @@ request, so once per FC23, whose write comes before its read).  Two watchdogs st
 drive when its master is gone, each by the drive's 0x6007 reaction (default: fault, torque
 zero) while the power stage is on: the connection that last commanded that unit (wrote its
 controlword or target torque) closes (error code 0x8100), or no valid request for the unit
-comes from it for the watchdog time of the unit's register 0x002A (error code 0x8130, checked
-every :data:`WATCHDOG_TICK` s).
+comes from it for the watchdog time of the unit's register 0x002A (error code 0x8130, found at
+most :data:`WATCHDOG_TICK` s late: checked when the soonest unit's time can have run out, and
+every :data:`WATCHDOG_IDLE` s while none can, since a direct change of a bank or a drive arms none).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from __future__ import annotations
 import asyncio
 import contextvars
 import logging
+import math
 import threading
 import time
 import urllib.parse
@@ -52,6 +54,7 @@ __all__ = ["LINK_LOST_ERROR_CODE", "ModbusSimServer", "ServedUnit", "parse_modbu
 LINK_LOST_ERROR_CODE = 0x8100  # CiA 301 "communication, generic"
 WATCHDOG_ERROR_CODE = 0x8130  # CiA 301 "life guard error or heartbeat error"
 WATCHDOG_TICK = 0.002  # s
+WATCHDOG_IDLE = 0.05  # s: the longest the watchdog sleeps (a request that arms a unit sooner wakes it)
 _HOLDING = frozenset({3, 6, 16, 22, 23})  # function codes on holding registers
 _ADDRESS_SPACE = 0x10000  # registers 0x0000..0xFFFF: every address reaches the action
 
@@ -83,6 +86,11 @@ _REQUEST: contextvars.ContextVar[_Request] = contextvars.ContextVar("modbus_sim_
 ACCEPT_GRACE = 0.01  # s: a connection still in the kernel's backlog at the stop is accepted while the server
 # can take it; Python 3.11's asyncio accepting one after its server closed fails in the transport's
 # constructor and leaks the socket (a ResourceWarning where the garbage collector finds it)
+
+def _wake(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)
+
 
 class _Handler(ServerRequestHandler):
     """A client connection: records each request it serves, and reports its closing."""
@@ -182,6 +190,8 @@ class ModbusSimServer:
         self._ready = threading.Event()
         self._stopped: asyncio.Event | None = None
         self._error: BaseException | None = None
+        self._watch_wake: asyncio.Future[None] | None = None  # the watchdog's sleep, until _watch_at (monotonic s)
+        self._watch_at = math.inf
 
     def add_unit(self, unit_id: int, timing: Timing | str = Timing.CIA402, parameters: DeviceParameters | None = None,
                  operator: OperatorModel | None = None, sync_clock: SyncClock | None = None,
@@ -246,13 +256,15 @@ class ModbusSimServer:
             return ExcCodes(rc)
         return None
 
-    @staticmethod
-    def _served(unit: ServedUnit, request: _Request) -> None:
+    def _served(self, unit: ServedUnit, request: _Request) -> None:
         """A valid request for ``unit`` was answered: its watchdog starts over if it came from the
         connection commanding it (a monitoring client's reads must not keep a drive alive whose
-        master is gone)."""
+        master is gone); one armed sooner than the watchdog wakes is looked at then."""
         if unit.controller is None or request.handler is unit.controller:
             unit.bank.request_served(time.monotonic())
+        wake = self._watch_wake
+        if wake is not None and unit.bank.watchdog_deadline() < self._watch_at and not wake.done():
+            wake.set_result(None)
 
     async def _fault(self, request: _Request, func_code: int) -> ExcCodes | None:
         """Meet the next armed fault, if any: its exception code, after its delay, or the dropped link."""
@@ -285,9 +297,20 @@ class ModbusSimServer:
                     unit.drive.connection_lost(LINK_LOST_ERROR_CODE)
 
     async def _watch(self) -> None:
-        """The register 0x002A watchdog, every :data:`WATCHDOG_TICK` s."""
+        """The register 0x002A watchdog: at the soonest time a unit's can have run out (at least
+        :data:`WATCHDOG_TICK`, at most :data:`WATCHDOG_IDLE` s on), or when a request arms one sooner."""
+        loop = asyncio.get_running_loop()
         while True:
-            await asyncio.sleep(WATCHDOG_TICK)
+            now = time.monotonic()
+            with self.lock:
+                soonest = min(unit.bank.watchdog_deadline() for unit in self.units.values())
+            self._watch_at = now + min(max(soonest - now, WATCHDOG_TICK), WATCHDOG_IDLE)
+            self._watch_wake = wake = loop.create_future()
+            timer = loop.call_later(self._watch_at - now, _wake, wake)
+            try:
+                await wake
+            finally:
+                timer.cancel()
             with self.lock:
                 for unit in self.units.values():
                     if unit.bank.watchdog_expired(time.monotonic()):
