@@ -25,6 +25,7 @@ error code 0x8130).  Every answered request re-arms it.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable, Sequence
 
@@ -56,6 +57,7 @@ __all__ = ["RegisterBank", "writes_command"]
 _COMMAND_REGISTERS = (REGISTER_BY_NAME["controlword"].address, REGISTER_BY_NAME["target_torque"].address)
 _QUICK_STOP_OPTIONS = range(9)  # the 0x605A values this drive implements: 0..8
 _WATCHDOG = REGISTER_BY_NAME["comm_watchdog_ms"]
+_LAYOUTS_KEPT = 256  # (address, count) of writes whose registers are kept
 
 
 def writes_command(address: int, count: int) -> bool:
@@ -104,11 +106,40 @@ class RegisterBank:
             if spec.obj is not None and spec.access == "rw" and spec.obj.index in writable
         }
         self._writable[_WATCHDOG] = 0
+        self._layouts: dict[tuple[int, int], tuple[tuple[tuple[RegisterSpec, int, int], ...], int]] = {}
+
+    def _layout(self, address: int, count: int) -> tuple[tuple[tuple[RegisterSpec, int, int], ...], int]:
+        """The writable registers a write of ``count`` from ``address`` covers, in order, each with its
+        words' slice of the write, up to the first that is not one (then 0x02, else 0); kept per
+        (address, count), since the map does not change (the writes of a cycle are the same each time)."""
+        key = (address, count)
+        layout = self._layouts.get(key)
+        if layout is None:
+            registers: list[tuple[RegisterSpec, int, int]] = []
+            refused, end, a = 0, address + count, address
+            while a < end:
+                spec = register_at(a)
+                if spec is None or spec.address != a or spec.end > end or spec not in self._writable:
+                    refused = ExcCodes.ILLEGAL_ADDRESS
+                    break
+                registers.append((spec, a - address, spec.end - address))
+                a = spec.end
+            if len(self._layouts) >= _LAYOUTS_KEPT:
+                self._layouts.clear()
+            layout = self._layouts[key] = (tuple(registers), refused)
+        return layout
 
     def request_served(self, now: float) -> None:
         """A valid request was answered at ``now`` (monotonic s): the watchdog starts over."""
         self._last_request = now
         self._watchdog_fired = False
+
+    def watchdog_deadline(self) -> float:
+        """The monotonic time (s) before which :meth:`watchdog_expired` cannot be True (inf while the
+        watchdog is off, has fired, or the power stage is off: only a request or a state change arms it)."""
+        if not self.watchdog_ms or self._watchdog_fired or self.drive.state not in POWER_STAGE_ON:
+            return math.inf
+        return self._last_request + self.watchdog_ms / 1000.0
 
     def watchdog_expired(self, now: float) -> bool:
         """True once (until the next valid request) when the watchdog ran out with the power stage on."""
@@ -159,14 +190,10 @@ class RegisterBank:
 
     def _decode(self, address: int, values: Sequence[int]) -> list[tuple[RegisterSpec, int]] | int:
         """The (register, value) pairs ``values`` write, or the exception code refusing all of them."""
-        end = address + len(values)
+        registers, refused = self._layout(address, len(values))
         decoded: list[tuple[RegisterSpec, int]] = []
-        a = address
-        while a < end:
-            spec = register_at(a)
-            if spec is None or spec.address != a or spec.end > end or spec not in self._writable:
-                return ExcCodes.ILLEGAL_ADDRESS
-            words = list(values[a - address : spec.end - address])
+        for spec, start, stop in registers:
+            words = list(values[start:stop])
             if any(not 0 <= w <= 0xFFFF for w in words):
                 return ExcCodes.ILLEGAL_VALUE
             try:
@@ -174,7 +201,8 @@ class RegisterBank:
             except ValueError:  # an INTEGER8 register that is not sign-extended
                 return ExcCodes.ILLEGAL_VALUE
             decoded.append((spec, value))
-            a = spec.end
+        if refused:
+            return refused
         for spec, value in decoded:  # the drive refuses these too, but only after the registers before them
             if self._writable[spec] == QUICK_STOP_OPTION_CODE.index and value not in _QUICK_STOP_OPTIONS:
                 return ExcCodes.ILLEGAL_VALUE
