@@ -283,17 +283,32 @@ def test_a_command_that_prints_a_verdict_imports_no_bus_library_nor_plots(verdic
     assert verdicts_in_turn[step] == [0, []], VERDICT_COMMANDS[step]
 
 
-@pytest.mark.parametrize("argv", [["run", "--help"], ["run", "cia402-handle", "--node-id", "500"]])
-def test_the_command_line_s_parser_imports_no_numpy(argv: list[str]) -> None:
+PARSER_ONLY = ((["run", "--help"], 0), (["run", "cia402-handle", "--node-id", "500"], 2))  # argv, exit status
+
+
+@pytest.fixture(scope="module")
+def parser_only_in_turn() -> list[list[Any]]:
+    """One fresh interpreter runs each of :data:`PARSER_ONLY` in turn, printing its exit status and which of
+    numpy, the gates, the profiles and the bus libraries are loaded so far (a module stays loaded: none listed
+    after the second means neither loaded any)."""
+    forbidden = ("numpy", "haptic_bus.control", "haptic_bus.app.profiles", *BUS_LIBRARIES)
+    code = "\n".join([
+        "import sys, json, contextlib, io; from haptic_bus.app.cli import main",
+        *(f"with contextlib.redirect_stdout(io.StringIO()): status = main({argv!r})\n"
+          f"print(json.dumps([status, sorted(m for m in {forbidden!r} if m in sys.modules)]))" for argv, _ in PARSER_ONLY)])
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    lines = out.stdout.strip().splitlines()[-len(PARSER_ONLY):]
+    assert len(lines) == len(PARSER_ONLY), out.stderr
+    return [json.loads(line) for line in lines]
+
+
+@pytest.mark.parametrize("step", range(len(PARSER_ONLY)), ids=["help", "refusal"])
+def test_the_command_line_s_parser_imports_no_numpy(parser_only_in_turn: list[list[Any]], step: int) -> None:
     """Every ``haptic-bus`` process builds the whole parser: its help and a refusal at the arguments (exit
     2) import no numpy, no gate and no bus library (``profiles``' parser once imported the analysis:
     0.4 s of CPU for every command)."""
-    forbidden = ("numpy", "haptic_bus.control", "haptic_bus.app.profiles", *BUS_LIBRARIES)
-    code = (f"import sys, json, contextlib, io; from haptic_bus.app.cli import main\n"
-            f"with contextlib.redirect_stdout(io.StringIO()): status = main({argv!r})\n"
-            f"print(json.dumps([status, sorted(m for m in {forbidden!r} if m in sys.modules)]))")
-    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
-    assert json.loads(out.stdout.strip().splitlines()[-1]) == [0 if "--help" in argv else 2, []], out.stderr
+    assert parser_only_in_turn[step] == [PARSER_ONLY[step][1], []], PARSER_ONLY[step][0]
+
 
 @pytest.mark.parametrize(("child", "forbidden"), [
     # the run's writer: rings, files, python-can's ASC writer only once a bus log is opened; numpy and rich only for a live view
