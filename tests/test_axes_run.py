@@ -26,6 +26,7 @@ it is not:
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import math
@@ -45,6 +46,8 @@ from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_axes_device
 from haptic_bus.app.runner import RunOptions, RunResult, run
 from haptic_bus.profile.files import resolve_profile
+from sim_drive.canopen.multi_axis import MultiAxisSim
+from sim_drive.profile import read_simulated_device
 from tests.gantry_records import assert_resting_on_the_slope, assert_same_loop, records
 
 START_WAIT = 30.0  # s: both processes import numpy/scipy/canopen and judge the profile first
@@ -226,24 +229,49 @@ def test_a_run_needs_the_position_mapped(tmp_path: pathlib.Path, capsys: pytest.
     assert not (tmp_path / "r").exists()
 
 
+class _SimLog(logging.Handler):
+    """The ``sim_drive`` loggers' lines (INFO and up) of this process, kept here and nowhere else: not passed
+    on to the root logger, whose handler is the command's stderr while its ``main`` runs in this process."""
+
+    def __init__(self, monkeypatch: pytest.MonkeyPatch, request: pytest.FixtureRequest) -> None:
+        super().__init__(logging.INFO)
+        self.lines: list[str] = []
+        logger = logging.getLogger("sim_drive")
+        monkeypatch.setattr(logger, "propagate", False)
+        monkeypatch.setattr(logger, "handlers", [self])
+        request.addfinalizer(functools.partial(logger.setLevel, logger.level))
+        logger.setLevel(logging.INFO)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.lines.append(record.getMessage())
+
+
 @pytest.mark.slow
 def test_killing_one_axis_drive_process_zeroes_every_torque_in_the_same_cycle(
-        tmp_path: pathlib.Path, bus_spec, sim_process, capfd: pytest.CaptureFixture[str]) -> None:
-    """Nodes 5 and 7 in one simulator process, node 6 in another (each process' hand sees only its own
-    axes, so the push is not the one-process hand's); node 6's is killed (SIGKILL) while all three
-    push on the slope.  A sniffer on the bus sees, after node 6's last TPDO, the master's
+        tmp_path: pathlib.Path, bus_spec, sim_process, capfd: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch, request: pytest.FixtureRequest) -> None:
+    """Nodes 5 and 7 simulated in this process, node 6 in a process of its own (each side's hand sees
+    only its own axes, so the push is not the one-process hand's); node 6's process is killed (SIGKILL)
+    while all three push on the slope.  A sniffer on the bus sees, after node 6's last TPDO, the master's
     safe RPDO (DISABLE VOLTAGE, torque 0) to every node before one SYNC, and no torque after it; the
     run exits 1 with every axis' record and run.json kept, and at the default verbosity (no ``-q``)
     its stderr is the command's one line naming node 6's missing TPDO: the other axes' failed
     goodbyes are INFO (this run is also ``test_axes_one_error_line.py``'s CANopen case).
     The killed process is a drive's: the run is the command's ``main`` in this process' main thread
-    (its frames cross to both simulator processes on udp_multicast all the same; its output is read at
-    the file descriptors), the sniffer and the kill in a thread of this test."""
+    (its frames cross to node 6's process on udp_multicast all the same; its output is read at the file
+    descriptors), the sniffer and the kill in a thread of this test; nodes 5 and 7 are built as
+    ``haptic-bus sim --node-ids 5,7 --profile P`` builds them (the profile's axes 0 and 2, the hand's
+    coordinates 0 and 2), their log read from this process' records: a third interpreter would only
+    import them again."""
     profile_path = variant(tmp_path, "slope", TARGETS, "toward = [0.02, 0.02, 0.01]", ROOMY)
     spec = bus_spec("udp_multicast")
-    two = sim_process(*spec.sim_args(), "--node-ids", "5,7", "--profile", str(profile_path))
+    sim_log = _SimLog(monkeypatch, request)  # nodes 5 and 7's lines, off the command's stderr (as their own process kept them)
+    device = read_simulated_device(profile_path)
+    two = MultiAxisSim(spec.config(), [(node, device.axes[i].parameters, device.axes[i].timing) for node, i in ((5, 0), (7, 2))],
+                       device.make_hand(), coordinates=[0, 2])
+    request.addfinalizer(two.stop)
+    two.start()
     one = sim_process(*spec.sim_args(), "--node-ids", "6", "--profile", str(profile_path))
-    two.wait_for_line("nodes 5, 7: serving", START_WAIT)
     one.wait_for_line("node 6: serving", START_WAIT)
     sniffer = spec.open()
     torques = {0x205: 0, 0x206: 0, 0x207: 0}
@@ -278,7 +306,7 @@ def test_killing_one_axis_drive_process_zeroes_every_torque_in_the_same_cycle(
         killer.join(timeout=RUN_WAIT)
         sniffer.shutdown()
     _, err = capfd.readouterr()
-    code, log = two.stop()
+    log = "\n".join(sim_log.lines)
     assert all(torques.values()), f"the run never pushed on the slope: {err}"
     assert returncode == 1, err
     assert err.count("\n") == 1 and err.startswith("haptic-bus run: drive error: CANopen node 6: no TPDO"), err
@@ -294,7 +322,7 @@ def test_killing_one_axis_drive_process_zeroes_every_torque_in_the_same_cycle(
     later = [(cob, data) for cob, data in frames[sync_after:] if cob in (0x205, 0x206, 0x207)]
     assert all(int.from_bytes(data[2:4], "little", signed=True) == 0 for _, data in later)
     assert "node 5: OPERATION ENABLED -> SWITCH ON DISABLED" in log and "node 7: OPERATION ENABLED -> SWITCH ON DISABLED" in log
-    assert code == 0, log
+    assert [node.drive.state for node in two.nodes] == [State.SWITCH_ON_DISABLED] * 2, log  # left disabled, not faulted
     for axis in "xyz":
         assert (tmp_path / "run" / f"record-{axis}.csv").is_file()
     document = json.loads((tmp_path / "run" / "run.json").read_text())
