@@ -104,10 +104,14 @@ class FilteredMulticastBus(UdpMulticastBus):
         if not filters:
             self._wanted, self._masked = None, ()
             return
-        exact = [f for f in filters if f["can_mask"] == _STANDARD_MASK and f.get("extended") is False]
-        self._wanted = frozenset(f["can_id"] & _STANDARD_MASK for f in exact)
-        self._masked = tuple((f["can_id"] & f["can_mask"], f["can_mask"], f.get("extended"))
-                             for f in filters if f not in exact)
+        exact: set[int] = set()
+        masked: list[tuple[int, int, bool | None]] = []
+        for f in filters:  # once: python-can's other backends take filters given as an iterator too
+            if f["can_mask"] == _STANDARD_MASK and f.get("extended") is False:
+                exact.add(f["can_id"] & _STANDARD_MASK)
+            else:
+                masked.append((f["can_id"] & f["can_mask"], f["can_mask"], f.get("extended")))
+        self._wanted, self._masked = frozenset(exact), tuple(masked)
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         deadline = None if timeout is None else time.monotonic() + timeout

@@ -124,6 +124,9 @@ def test_register_bank_reads_writes_and_refuses(order: str) -> None:
     assert bank.write(0x0000, [0]) == 0x02  # read-only statusword
     assert bank.write(0x0020, [0x0100]) == 0x03  # mode 256 is no INTEGER8
     assert bank.write(0x0029, [9]) == 0x03  # quick stop option code 0..8
+    # 0x6007 (0x002B) 9 refused with the quick stop option code and the watchdog before it: none applied
+    assert bank.write(0x0029, [6, 200, 9]) == 0x03
+    assert (drive.quick_stop_option_code, bank.watchdog_ms, drive.abort_connection_option_code) == (2, 0, 1)
     assert bank.write(0x0024, encode_value(REGISTER_BY_NAME["motor_rated_torque"], 0, order)) == 0x03
     assert bank.write(0x0024, [0]) == 0x02  # half of the rated torque
     assert drive.parameters.rated_torque_mnm == 200

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from drives.cia402 import Command, State, decode_statusword
+from drives.cia402 import Command, State, _transitions, decode_statusword, transitions
 from haptic_bus.analysis.plant import zoh_coefficients
 from haptic_bus.errors import ParameterError
 from sim_drive.device import ObjectAccessError, SimulatedDrive
@@ -249,6 +249,24 @@ def test_saturate_never_wraps():
     assert saturate(40000, -3000, 3000) == 3000
     assert saturate(-40000, -3000, 3000) == -3000
     assert saturate(12, -3000, 3000) == 12
+
+
+def test_a_controlwords_transitions_do_not_depend_on_what_was_asked_before() -> None:
+    """transitions() is kept per argument: an entry answers only its own argument, type included.  A
+    float controlword equal to an int one (15.0 == 15) is refused by the state machine's bit tests (a
+    drive writing it raises); kept without its type, it took the int's answer once any drive had
+    written 15 in that state, and a drive then held a float controlword."""
+    _transitions.cache_clear()
+    with pytest.raises(TypeError):
+        transitions(State.SWITCHED_ON, 15.0, 7)  # type: ignore[arg-type]  # the refusal is what is tested
+    assert transitions(State.SWITCHED_ON, 15, 7) == ((State.OPERATION_ENABLED, 4),)
+    with pytest.raises(TypeError):
+        transitions(State.SWITCHED_ON, 15.0, 7)  # type: ignore[arg-type]
+    drive = SimulatedDrive()
+    walk(drive, Command.SHUTDOWN, Command.SWITCH_ON)
+    with pytest.raises(TypeError):
+        drive.write_controlword(15.0)  # type: ignore[arg-type]
+    assert (drive.state, drive.controlword) == (State.SWITCHED_ON, 0x0007)
 
 
 def test_enable_operation_in_ready_to_switch_on_takes_transitions_3_and_4() -> None:

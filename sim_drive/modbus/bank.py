@@ -31,7 +31,7 @@ from collections.abc import Callable, Sequence
 
 from pymodbus.constants import ExcCodes
 
-from drives.cia402 import QUICK_STOP_OPTION_CODE
+from drives.cia402 import ABORT_CONNECTION_OPTION_CODE, QUICK_STOP_OPTION_CODE, AbortConnectionOption
 from drives.modbus.register_map import (
     INPUT_BLOCK,
     INPUT_BLOCK_COUNT,
@@ -56,6 +56,10 @@ __all__ = ["RegisterBank", "writes_command"]
 
 _COMMAND_REGISTERS = (REGISTER_BY_NAME["controlword"].address, REGISTER_BY_NAME["target_torque"].address)
 _QUICK_STOP_OPTIONS = range(9)  # the 0x605A values this drive implements: 0..8
+# the values the drive refuses of a register that can follow others in one write (0x002B after 0x0029,
+# 0x002A): refused before any register is applied
+_REFUSED_UNLESS_IN = {QUICK_STOP_OPTION_CODE.index: frozenset(_QUICK_STOP_OPTIONS),
+                      ABORT_CONNECTION_OPTION_CODE.index: frozenset(int(option) for option in AbortConnectionOption)}
 _WATCHDOG = REGISTER_BY_NAME["comm_watchdog_ms"]
 _LAYOUTS_KEPT = 256  # (address, count) of writes whose registers are kept
 
@@ -204,6 +208,7 @@ class RegisterBank:
         if refused:
             return refused
         for spec, value in decoded:  # the drive refuses these too, but only after the registers before them
-            if self._writable[spec] == QUICK_STOP_OPTION_CODE.index and value not in _QUICK_STOP_OPTIONS:
+            allowed = _REFUSED_UNLESS_IN.get(self._writable[spec])
+            if allowed is not None and value not in allowed:
                 return ExcCodes.ILLEGAL_VALUE
         return decoded
