@@ -77,10 +77,10 @@ class DriveScaling:
 
     def torque_permille(self, force: float) -> int:
         """The 0x6071 value (per mille, rounded) for a handle force in N; not saturated: the drive's
-        :class:`TorqueClamp` is the one place a target is held within +-0x6072.  ``force`` as a Python
-        float: the same quotient and the same rounding (half to even) as a NumPy scalar's, 20 times faster
-        (a control law's force is often a NumPy scalar: 2.1 -> 0.1 us, every cycle)."""
-        return round(float(force) / self.newton_per_permille)
+        :class:`TorqueClamp` is the one place a target is held within +-0x6072.  The quotient in the
+        force's own type (a NumPy float32 force stays float32), rounded as a Python float: the same
+        value (half to even) as rounding a NumPy scalar, 20 times faster (2.1 -> 0.1 us, every cycle)."""
+        return round(float(force / self.newton_per_permille))
 
     def torque_limit(self, force_limit: float) -> int | None:
         """The per mille a handle force limit in N allows, rounded, for a drive's cyclic phase
