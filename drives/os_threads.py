@@ -10,7 +10,6 @@ has no such function it does nothing.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import threading
 from collections.abc import Callable
 
@@ -20,8 +19,8 @@ COMM_LENGTH = 15  # bytes of a thread's name the kernel keeps (TASK_COMM_LEN 16,
 def _setter() -> Callable[[int, bytes], int] | None:
     """libc's ``pthread_setname_np(pthread_t, const char *)``, or None where there is none."""
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
-        setname = libc.pthread_setname_np
+        setname = ctypes.CDLL(None, use_errno=True).pthread_setname_np  # the C library this process has loaded
+        # (ctypes.util.find_library("c") would run /sbin/ldconfig -p in a child process at every import)
     except (OSError, AttributeError):
         return None
     setname.argtypes = [ctypes.c_ulong, ctypes.c_char_p]

@@ -17,7 +17,6 @@ behind holding its pipes.  The executor's two threads in this process are named:
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import importlib
 import multiprocessing
 import os
@@ -60,8 +59,7 @@ def _die_with(parent: int) -> None:
     and exit now if ``parent`` is gone already."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)  # the loaded C library's
     except (OSError, AttributeError):  # no prctl here: a killed control process may leave the worker behind
         return
     if os.getppid() != parent:
