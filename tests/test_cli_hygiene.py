@@ -342,6 +342,7 @@ def test_another_master_over_modbus_is_refused_without_a_write(tmp_path: pathlib
     anything -- not even the safe outputs a closing master writes -- and the first cycles on."""
     from drives.cia402 import State
     from drives.modbus.drive import ModbusDrive
+    from drives.safety import VIRTUAL_TIME_MODBUS_PATIENCE
     from haptic_bus.app.profiles import load_profile
     from haptic_bus.control.controller import WallController, encoder_origin
     from tests.run_rig import simulated_drive
@@ -350,7 +351,8 @@ def test_another_master_over_modbus_is_refused_without_a_write(tmp_path: pathlib
     ended: list[Any] = []
     with simulated_drive("modbus", "cia402-handle") as sim:
         url = sim.args[1]
-        first = ModbusDrive.from_url(url, scaling=profile.scaling(), safety=profile.safety.for_virtual_time(1e-3))
+        first = ModbusDrive.from_url(url, scaling=profile.scaling(), safety=profile.safety.for_virtual_time(1e-3),
+                                     **VIRTUAL_TIME_MODBUS_PATIENCE)  # unpaced, beside a second process starting
         stop = threading.Event()
         try:
             first.connect()

@@ -298,11 +298,13 @@ def _stiffened_over_modbus(path: pathlib.Path) -> tuple[Any, WallController, lis
     """The profile at ``path`` run 1500 cycles over Modbus TCP through the Python API, the stiffer
     wall set at cycle 400: the summary, the controller and the drive's states."""
     from drives.modbus.drive import ModbusDrive
+    from drives.safety import VIRTUAL_TIME_MODBUS_PATIENCE
 
     profile = load_profile(path)
     with simulated_drive("modbus", path) as simulated:
-        drive = ModbusDrive.from_url(simulated.args[1], scaling=profile.scaling(),
-                                     safety=profile.safety.for_virtual_time(PERIOD), with_position=True)
+        drive = ModbusDrive.from_url(simulated.args[1], scaling=profile.scaling(),  # unpaced: virtual time's reply wait
+                                     safety=profile.safety.for_virtual_time(PERIOD), with_position=True,
+                                     **VIRTUAL_TIME_MODBUS_PATIENCE)
         try:
             drive.connect()
             origin = encoder_origin(drive)
