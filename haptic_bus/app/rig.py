@@ -17,26 +17,47 @@ trajectories, bit for bit).  :func:`simulator_command` is how a second process s
 
 from __future__ import annotations
 
+import importlib
 import sys
 import uuid
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
-from drives.canopen.axes import CanopenAxes
-from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
-from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, SafetySettings
-from haptic_bus.app.profiles import AxesProfile, Profile
-from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits
-from sim_drive.canopen.multi_axis import MultiAxisSim
-from sim_drive.canopen.slave import CanopenSimDrive
-from sim_drive.eds import eds_path
-from sim_drive.modbus.multi_axis import MultiAxisModbusSim
-from sim_drive.modbus.server import ModbusSimServer, ServedUnit
-from sim_drive.operator import OperatorModel, operator_from_table
-from sim_drive.parameters import DeviceParameters, Timing
-from sim_drive.profile import SimulatedDevice, read_simulated_device
-from sim_drive.sync_clock import SyncClock
+if TYPE_CHECKING:  # at run time each function imports what it uses: haptic-bus sim loads the simulator alone
+    from drives.canopen.axes import CanopenAxes
+    from drives.canopen.drive import CanopenDrive
+    from haptic_bus.app.profiles import AxesProfile, Profile
+    from sim_drive.bus_timing import BusLoadMeter, cycle_bits, frame_bits
+    from sim_drive.canopen.multi_axis import MultiAxisSim
+    from sim_drive.canopen.slave import CanopenSimDrive
+    from sim_drive.eds import eds_path
+    from sim_drive.modbus.multi_axis import MultiAxisModbusSim
+    from sim_drive.modbus.server import ModbusSimServer, ServedUnit
+    from sim_drive.operator import OperatorModel, operator_from_table
+    from sim_drive.parameters import DeviceParameters, Timing
+    from sim_drive.profile import SimulatedDevice, read_simulated_device
+    from sim_drive.sync_clock import SyncClock
+
+_EXPORTS = {  # the simulator's names this module hands on (__all__), each from its module, imported when first asked for
+    "BusLoadMeter": "sim_drive.bus_timing", "cycle_bits": "sim_drive.bus_timing", "frame_bits": "sim_drive.bus_timing",
+    "CanopenSimDrive": "sim_drive.canopen.slave", "DeviceParameters": "sim_drive.parameters",
+    "ModbusSimServer": "sim_drive.modbus.server", "ServedUnit": "sim_drive.modbus.server",
+    "MultiAxisModbusSim": "sim_drive.modbus.multi_axis", "MultiAxisSim": "sim_drive.canopen.multi_axis",
+    "SimulatedDevice": "sim_drive.profile", "read_simulated_device": "sim_drive.profile", "eds_path": "sim_drive.eds",
+    "operator_from_table": "sim_drive.operator",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """``from haptic_bus.app.rig import CanopenSimDrive`` and the like: the simulator's module, imported now."""
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "BusLoadMeter",
@@ -76,6 +97,8 @@ def sim_main(argv: Sequence[str]) -> int:
 
 def profile_operator(profile: Profile) -> OperatorModel:
     """The simulated operator the profile describes."""
+    from sim_drive.operator import operator_from_table
+
     return operator_from_table(profile.operator_model, base=profile.path.parent if profile.path else None)
 
 
@@ -97,6 +120,12 @@ def simulated_canopen(
     ``sync_clock``: how long each period the drive closes lasts (:mod:`sim_drive.sync_clock`;
     None: exactly ``T``).  The TPDOs carry the position (0x6064) for the port observer.
     """
+    from drives.canopen.drive import DEFAULT_TPDO_WITH_POSITION, CanopenDrive
+    from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, SafetySettings
+    from sim_drive.canopen.slave import CanopenSimDrive
+    from sim_drive.eds import eds_path
+    from sim_drive.parameters import DeviceParameters
+
     channel = channel or f"haptic-bus-{uuid.uuid4().hex[:12]}"
     sim = CanopenSimDrive(
         {"interface": interface, "channel": channel},
@@ -124,6 +153,7 @@ def simulated_axes_device(profile: AxesProfile, bus: dict[str, Any], clock: str 
     """The simulated device a multi-axis profile describes (its axes' plants and hidden truth, its
     hand in space), not started, on ``bus`` (python-can keyword arguments); ``clock``: "virtual"
     (each SYNC advances the plants ``T``) or "wall" (the time between SYNCs, for a real-time run)."""
+    from sim_drive.canopen.multi_axis import MultiAxisSim
     from sim_drive.space_operator import hand_from_table
 
     setups = [(cast(int, axis.node_id), parameters, timing) for axis, (parameters, timing) in zip(profile.axes,
@@ -133,6 +163,8 @@ def simulated_axes_device(profile: AxesProfile, bus: dict[str, Any], clock: str 
 
 def _axis_plants(profile: AxesProfile) -> list[tuple[DeviceParameters, Timing]]:
     """Every axis' simulated plant (its ``[axes.device]`` and loop timing), in axis order."""
+    from sim_drive.parameters import DeviceParameters, Timing
+
     return [(DeviceParameters(**cast(dict[str, Any], axis.device.sim_parameters(profile.period, axis.timing, axis.delay))),
              Timing(axis.timing)) for axis in profile.axes]
 
@@ -143,6 +175,9 @@ def simulated_modbus(device: SimulatedDevice, unit_ids: Sequence[int], servers: 
     over Modbus TCP on ``host``, each server on a free port, not started: a one-axis profile's drive,
     unit ``unit_ids[0]`` (its plant and operator); a multi-axis profile's, unit ``unit_ids[i]`` for
     axis ``i`` (their plants and the hand in space), on one server, or ``servers`` = one per axis."""
+    from sim_drive.modbus.multi_axis import MultiAxisModbusSim
+    from sim_drive.modbus.server import ModbusSimServer
+
     if device.multi_axis:
         setups = [(unit, axis.parameters, axis.timing) for unit, axis in zip(unit_ids, device.axes)]
         return MultiAxisModbusSim([(host, 0)] * servers, setups, device.make_hand())
@@ -155,6 +190,10 @@ def simulated_axes(profile: AxesProfile, *, channel: str | None = None,
                    interface: str = "lockstep") -> Iterator[tuple[MultiAxisSim, CanopenAxes]]:
     """Start the simulated multi-axis device and connect the multi-axis master (every axis maps
     0x6064), not enabled; stop both on exit.  ``interface``: "lockstep" (one thread) or "virtual"."""
+    from drives.canopen.axes import CanopenAxes
+    from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, SafetySettings
+    from sim_drive.eds import eds_path
+
     channel = channel or f"haptic-bus-{uuid.uuid4().hex[:12]}"
     sim = simulated_axes_device(profile, {"interface": interface, "channel": channel}).start()
     safety = SafetySettings().for_virtual_time(profile.period)
