@@ -11,8 +11,8 @@ beyond the COB-ID, no controller, no record.
 It runs as ``python -m haptic_bus.bench.can_floor CONFIG_JSON`` so that its CPU time is its own, against
 drives some other program has commissioned (the benchmark starts it before a controller run against the
 same simulated drives, its imports done before any CPU hog starts, and tells it ``go`` on stdin right
-after that run: their PDO mapping and heartbeat consumer are set, and this floor keeps feeding both),
-and prints one JSON object: the share of a core the
+after that run: their PDO mapping and heartbeat consumer are set, and this floor keeps feeding both; again
+after the next run of the same cycle, if there is one), and prints one JSON object per ``go``: the share of a core the
 process used over the loop, the start lateness percentiles (s), the overruns, and the cycles whose
 TPDOs did not all arrive within the period.
 """
@@ -116,14 +116,18 @@ def floor_run(config: FloorConfig) -> dict[str, Any]:
 
 
 def main(argv: list[str]) -> int:
-    """``python -m haptic_bus.bench.can_floor CONFIG_JSON``: :data:`READY` on a line once imported, then, on a
-    line ``go`` on stdin, the figures as one JSON line (exit 1 without it: the benchmark ended first)."""
+    """``python -m haptic_bus.bench.can_floor CONFIG_JSON``: :data:`READY` on a line once imported, then, for
+    each line ``go`` on stdin, one floor run's figures as one JSON line (the benchmark measures one process beside
+    several controller runs of the same cycle), until stdin ends (exit 1 without a run: the benchmark ended first)."""
     config = FloorConfig.from_json(argv[0])
     print(READY, flush=True)
-    if sys.stdin.readline().strip() != "go":
-        return 1
-    print(json.dumps(floor_run(config)), flush=True)
-    return 0
+    runs = 0
+    for line in sys.stdin:
+        if line.strip() != "go":
+            break
+        print(json.dumps(floor_run(config)), flush=True)
+        runs += 1
+    return 0 if runs else 1
 
 
 if __name__ == "__main__":

@@ -41,7 +41,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager, nullcontext
+from contextlib import ExitStack, contextmanager, nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -192,20 +192,40 @@ def _threads_cpu() -> dict[int, tuple[str, float]]:
 def can_floor(bus: dict, node_ids: tuple[int, ...], tpdos: int, period: float, duration: float) -> Iterator[Callable[[], dict]]:
     """python-can's floor for the same cycle (:mod:`~haptic_bus.bench.can_floor`) in a process of its own,
     started now and waited for until it has imported (a second of a core, which beside the hogged run
-    kept the hog spinning as long); the block's function measures it, once, and gives its figures."""
+    kept the hog spinning as long); the block's function measures it and gives its figures, once per call
+    (one process for every run of the cycle on ``bus``: quiet and beside the hogs; it idles between them,
+    blocked on its stdin).  A floor that fails or does not answer is reported, and so is each later call."""
     from haptic_bus.bench.can_floor import READY, FloorConfig
 
     config = {"bus": bus, "node_ids": list(node_ids), "tpdos": tpdos, "period": period, "duration": duration}
     FloorConfig.from_json(json.dumps(config))  # a configuration the child reads, checked here
     process = subprocess.Popen([sys.executable, "-m", "haptic_bus.bench.can_floor", json.dumps(config)],
                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert process.stdout is not None
+    assert process.stdin is not None and process.stdout is not None
+    failed: dict = {}
+
+    def ended(reason: str | None) -> dict:
+        if process.poll() is None:
+            process.kill()
+        _, err = process.communicate(timeout=10)
+        failed.update(available=False, reason=reason or (err.strip().splitlines()[-1] if err.strip()
+                                                         else f"exit {process.returncode}"))
+        return failed
 
     def measure() -> dict:
-        out, err = process.communicate("go\n", timeout=60 + 4 * duration)
-        if process.returncode != 0:
-            return {"available": False, "reason": err.strip().splitlines()[-1] if err.strip() else f"exit {process.returncode}"}
-        return json.loads(out.strip().splitlines()[-1])
+        assert process.stdin is not None and process.stdout is not None
+        if failed:
+            return failed
+        try:
+            process.stdin.write("go\n")
+            process.stdin.flush()
+        except OSError:  # it has ended: its stderr says why
+            return ended(None)
+        wait = 60 + 4 * duration
+        line = process.stdout.readline() if select.select([process.stdout], [], [], wait)[0] else None
+        if line is None:
+            return ended(f"no figures from the floor process within {wait:g} s")
+        return json.loads(line) if line.strip() else ended(None)
 
     try:
         if select.select([process.stdout], [], [], FLOOR_START_WAIT)[0] and process.stdout.readline().strip() == READY:
@@ -213,9 +233,10 @@ def can_floor(bus: dict, node_ids: tuple[int, ...], tpdos: int, period: float, d
         else:
             yield lambda: {"available": False, "reason": f"the floor process did not start within {FLOOR_START_WAIT:g} s"}
     finally:
-        if process.poll() is None:
-            process.kill()
-        process.communicate()
+        if not failed:
+            if process.poll() is None:
+                process.kill()
+            process.communicate(timeout=10)
 
 
 def observed_delay(controller: WallController) -> float | None:
@@ -264,19 +285,21 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     period = one_axis_only(profile, "bench").loop.period
     hogs = size.pick(1, os.cpu_count() or 1, os.cpu_count() or 1)  # smoke: one hog shows the hogged run works
     runs: dict[str, dict] = {}
-    with canopen_simulator(PROFILE, (NODE_ID,), "--operator", HAND) as (bus, process):
+    with canopen_simulator(PROFILE, (NODE_ID,), "--operator", HAND) as (bus, process), ExitStack() as floors:
+        floor: Callable[[], dict] | None = None  # one floor process for the default runs, started before the first
         for label, names in size.pick(SMOKE_RUNS, RUNS, RUNS).items():
             runs[label] = {}
             for name in names:
                 entry: dict = {}
                 try:
                     # the default set-up beside python-can alone, the same frames, the same conditions
-                    with (can_floor(bus, (NODE_ID,), FLOOR_TPDOS, period, duration) if name == "default" else
-                          nullcontext()) as floor, cpu_hogs(hogs) if label == "CPU hog" else nullcontext():
+                    if name == "default" and floor is None:
+                        floor = floors.enter_context(can_floor(bus, (NODE_ID,), FLOOR_TPDOS, period, duration))
+                    with cpu_hogs(hogs) if label == "CPU hog" else nullcontext():
                         entry["controller"] = controller_run(SETUPS[name], duration, bus, process, profile,
                                                              preflight_cycles=preflight_cycles(size))
                         entry["bare_clock"] = bare_clock(SETUPS[name], period, round(duration / 2 / period))
-                        if floor is not None:
+                        if name == "default" and floor is not None:
                             entry["floor"] = floor()
                 except Exception as exc:
                     entry = {"available": False, "reason": f"{type(exc).__name__}: {exc}"}
@@ -324,10 +347,10 @@ def axes_runs(size: Size, duration: float) -> dict:
     loads = ("quiet",) if size.pick(True, False, False) else ("quiet", "CPU hog")
     out: dict = {"profile": label, "node_ids": list(AXES_NODE_IDS), "period_s": period}
     try:
-        with canopen_simulator(AXES_PROFILE, AXES_NODE_IDS, "--operator", "none") as (bus, process):
+        with (canopen_simulator(AXES_PROFILE, AXES_NODE_IDS, "--operator", "none") as (bus, process),
+              can_floor(bus, AXES_NODE_IDS, FLOOR_TPDOS, period, duration) as floor):
             for load in loads:
-                with (can_floor(bus, AXES_NODE_IDS, FLOOR_TPDOS, period, duration) as floor,
-                      cpu_hogs(os.cpu_count() or 1) if load == "CPU hog" else nullcontext()):
+                with cpu_hogs(os.cpu_count() or 1) if load == "CPU hog" else nullcontext():
                     out[load] = {
                         "controller": controller_run(SETUPS["default"], duration, bus, process, axes, None,
                                                      preflight_cycles(size)),
