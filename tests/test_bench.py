@@ -18,8 +18,8 @@ from haptic_bus.bench import BENCH_EXTRA, SECTIONS, build_parser, main, run_benc
 from haptic_bus.bench.size import FULL, QUICK, SMOKE
 from haptic_bus.bench.timing import REPEATS, Spread, paired, time_per_call
 
-pytestmark = pytest.mark.slow  # the smoke bench behind these tests: 33 s, 25-26 s of CPU (pytest -n 0, load about 2) on
-# this 2-core machine; most of it is the 24 processes it starts (its three-axis run has no ball: thread_tuning.axes_profile)
+pytestmark = pytest.mark.slow  # the smoke bench behind these tests: 23-24 s, 18-21 s of CPU (pytest -n 0, idle) on this
+# 2-core machine; about half of it is the 27 processes it starts (its three-axis run has no ball: thread_tuning.axes_profile)
 
 SmokeRun = tuple[Path, dict[str, Any]]
 REPO = Path(__file__).resolve().parents[1]
