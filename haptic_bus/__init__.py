@@ -38,10 +38,10 @@ drive classes (:class:`CanopenDrive`, :class:`ModbusDrive`) do.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from haptic_bus._version import __version__ as __version__
+from haptic_bus.lazy import lazy_getattr
 
 _HOMES = {
     "check_passivity": "haptic_bus.analysis.check",
@@ -114,13 +114,7 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f"module 'haptic_bus' has no attribute {name!r}")
-    value = getattr(importlib.import_module(home), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _HOMES, globals())
 
 
 def __dir__() -> list[str]:

@@ -23,7 +23,7 @@ import pytest
 REPO = pathlib.Path(__file__).resolve().parents[1]
 PACKAGES = ("haptic_bus", "drives", "sim_drive")
 BUS_LIBRARIES = ("can", "canopen", "pymodbus")
-BASE = ("haptic_bus.errors", "haptic_bus.validation", "haptic_bus.console", "haptic_bus._version")
+BASE = ("haptic_bus.errors", "haptic_bus.validation", "haptic_bus.console", "haptic_bus.lazy", "haptic_bus._version")
 
 # haptic_bus bottom to top, as docs/layout.md draws it; the packages of one level are siblings.
 LAYERS: tuple[tuple[str, ...], ...] = (

@@ -17,12 +17,13 @@ trajectories, bit for bit).  :func:`simulator_command` is how a second process s
 
 from __future__ import annotations
 
-import importlib
 import sys
 import uuid
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, cast
+
+from haptic_bus.lazy import lazy_getattr
 
 if TYPE_CHECKING:  # at run time each function imports what it uses: haptic-bus sim loads the simulator alone
     from drives.canopen.axes import CanopenAxes
@@ -49,14 +50,7 @@ _EXPORTS = {  # the simulator's names this module hands on (__all__), each from 
 }
 
 
-def __getattr__(name: str) -> Any:
-    """``from haptic_bus.app.rig import CanopenSimDrive`` and the like: the simulator's module, imported now."""
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _EXPORTS, globals())  # from haptic_bus.app.rig import CanopenSimDrive: imported now
 
 
 __all__ = [
