@@ -48,6 +48,7 @@ import logging
 import math
 from collections import deque
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from drives.cia402 import (
     CW_HALT,
@@ -71,7 +72,9 @@ from sim_drive.handle import Handle
 from sim_drive.operator import OperatorModel
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.sensor import Sensor, saturate
-from sim_drive.transmission import TwoMassHandle
+
+if TYPE_CHECKING:
+    from sim_drive.transmission import TwoMassHandle
 
 logger = logging.getLogger(__name__)
 
@@ -297,6 +300,8 @@ class SimulatedDrive:
             new = Handle(parameters, old.operator)
             new.velocity, new.position = old.velocity, old.position
         else:
+            from sim_drive.transmission import TwoMassHandle  # numpy with it: only a drive with a transmission needs it
+
             new = TwoMassHandle(coupling, old.operator)
             new.place(old.velocity, old.position)
         new.time = old.time

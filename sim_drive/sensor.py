@@ -20,11 +20,14 @@ from __future__ import annotations
 
 import math
 import random
+from typing import TYPE_CHECKING
 
 from haptic_bus.analysis.plant import exp_divided_difference
 from sim_drive.handle import Handle, Meter
 from sim_drive.parameters import DeviceParameters
-from sim_drive.transmission import TwoMassHandle
+
+if TYPE_CHECKING:
+    from sim_drive.transmission import TwoMassHandle
 
 INT32_RANGE = (-(1 << 31), (1 << 31) - 1)
 _LOW, _HIGH = INT32_RANGE

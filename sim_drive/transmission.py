@@ -30,19 +30,18 @@ from __future__ import annotations
 import functools
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from haptic_bus.analysis.transmission import Transmission
 from sim_drive.handle import Meter, Piece, schedule, stretched_schedule
 from sim_drive.operator import LET_GO, NoOperator, OperatorModel
 
 if TYPE_CHECKING:
-    import numpy as np
-
     from sim_drive.parameters import DeviceParameters
 
 @functools.lru_cache(maxsize=256)
 def _discrete(m: float, b: float, transmission: Transmission, h: float) -> tuple[np.ndarray, np.ndarray]:
     """``(Ad, Bd)`` over ``h`` s: ``s+ = Ad s + Bd [F, w]`` for ``s = [v_m, x_m, v_h, x_h]`` (SI units), exact."""
-    import numpy as np
     from scipy.linalg import expm  # lazily: only a simulated drive with a transmission needs scipy here
 
     k, c, big = transmission.stiffness, transmission.damping, transmission.motor_mass
@@ -66,8 +65,6 @@ class TwoMassHandle:
     """
 
     def __init__(self, transmission: Transmission, operator: OperatorModel | None = None) -> None:
-        import numpy as np  # lazily, as scipy: only a drive with a transmission needs numpy (haptic-bus sim starts 0.1 s sooner)
-
         self.transmission = transmission
         self.operator: OperatorModel = operator if operator is not None else NoOperator()
         self.hand_on = True  # False: the operator lets go (sim_drive.operator.LET_GO), the drive's torque being off
@@ -101,8 +98,6 @@ class TwoMassHandle:
 
     def place(self, velocity: float, position: float) -> None:
         """Both sides moving at ``velocity`` m/s at ``position`` m, the spring relaxed (taking over a rigid handle)."""
-        import numpy as np
-
         self.state = np.array([velocity, position, velocity, position], dtype=float)
 
     def mechanical_energy(self) -> float:
@@ -140,8 +135,6 @@ class TwoMassHandle:
 
     def _run(self, pieces: list[Piece[float]], length: float, before: float, now: float) -> None:
         """The pieces of an interval of ``length`` s, each exact with its forces held."""
-        import numpy as np  # loaded by __init__ already
-
         operator, meter, transmission = self.operator if self.hand_on else LET_GO, self._meter, self.transmission
         t0 = self.time
         w = 0.0
