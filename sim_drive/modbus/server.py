@@ -90,6 +90,7 @@ ACCEPT_GRACE = 0.01  # s: a connection still in the kernel's backlog at the stop
 # constructor and leaks the socket (a ResourceWarning where the garbage collector finds it)
 
 def _wake(future: asyncio.Future[None]) -> None:
+    """End the watchdog's sleep (once: its timer and a request may both come)."""
     if not future.done():
         future.set_result(None)
 
@@ -276,8 +277,8 @@ class ModbusSimServer:
         if unit.controller is None or request.handler is unit.controller:
             unit.bank.request_served(time.monotonic())
         wake = self._watch_wake
-        if wake is not None and unit.bank.watchdog_deadline() < self._watch_at and not wake.done():
-            wake.set_result(None)
+        if wake is not None and unit.bank.watchdog_deadline() < self._watch_at:
+            _wake(wake)
 
     async def _fault(self, request: _Request, func_code: int) -> ExcCodes | None:
         """Meet the next armed fault, if any: its exception code, after its delay, or the dropped link."""
