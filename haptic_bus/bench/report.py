@@ -335,8 +335,8 @@ def _loglog(ax: Any, points: list[tuple[float, float]], label: str, marker: str 
 
 
 def plots(result: dict, out_dir: Path) -> list[Path]:
-    """PNG plots of sections 1-3; returns the paths written.  The smoke run's are drawn the cheaper way
-    (:func:`_label_and_save`'s ``tight``): its figures only show that the bench draws them."""
+    """PNG plots of sections 1-3; returns the paths written.  The smoke run's leave out ``tight_layout``
+    (:func:`_label_and_save`): its figures only show that the bench draws them."""
     written = []
     save = functools.partial(_label_and_save, tight=result.get("size") != "smoke")
     sections = result["sections"]
@@ -375,9 +375,8 @@ def plots(result: dict, out_dir: Path) -> list[Path]:
 def _label_and_save(fig: Any, ax: Any, labels: tuple[str, str], title: str, path: Path, tight: bool = True) -> Path:
     """Label the log-log axes (x, y), title, grid and legend them, and write ``fig`` to ``path`` (PNG, 110 dpi).
     ``tight``: the axes stretched to the figure first (``tight_layout``: a third of the drawing's CPU, the tick
-    labels' extents measured once more) and the decades labelled as powers of ten (mathtext, parsed per label);
-    without, the saved picture is still cropped to everything drawn, the legend beside the axes included, around
-    axes of matplotlib's default size, and the decades are labelled in plain text (``1e-05``), minor ticks unlabelled."""
+    labels' extents measured once more); without, the saved picture is still cropped to everything drawn, the
+    legend beside the axes included, around axes of matplotlib's default size."""
     ax.set_xlabel(labels[0])
     ax.set_ylabel(labels[1])
     ax.set_title(title)
@@ -385,12 +384,6 @@ def _label_and_save(fig: Any, ax: Any, labels: tuple[str, str], title: str, path
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)  # beside: on no curve
     if tight:
         fig.tight_layout()
-    else:
-        from matplotlib.ticker import LogFormatter, NullFormatter
-
-        for axis in (ax.xaxis, ax.yaxis):
-            axis.set_major_formatter(LogFormatter())
-            axis.set_minor_formatter(NullFormatter())
     fig.savefig(path, dpi=110, bbox_inches="tight")  # the legend beside the axes too
     plt.close(fig)
     return path
