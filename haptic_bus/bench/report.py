@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 from pathlib import Path
 from typing import Any
 
@@ -335,10 +334,8 @@ def _loglog(ax: Any, points: list[tuple[float, float]], label: str, marker: str 
 
 
 def plots(result: dict, out_dir: Path) -> list[Path]:
-    """PNG plots of sections 1-3; returns the paths written.  The smoke run's leave out ``tight_layout``
-    (:func:`_label_and_save`): its figures only show that the bench draws them."""
+    """PNG plots of sections 1-3; returns the paths written."""
     written = []
-    save = functools.partial(_label_and_save, tight=result.get("size") != "smoke")
     sections = result["sections"]
     s = sections.get("passivity")
     if s and s.get("available", True):
@@ -346,7 +343,7 @@ def plots(result: dict, out_dir: Path) -> list[Path]:
         for r in s["methods"]:
             _loglog(ax, [(r["time_per_check_s"], r["error_max"])], r["method"])
         ax.axhline(ERROR_FLOOR, color="grey", lw=0.5)
-        written.append(save(fig, ax, ("time per check (s)", "largest relative error of the boundary (K and B)"),
+        written.append(_label_and_save(fig, ax, ("time per check (s)", "largest relative error of the boundary (K and B)"),
                              "Passivity check: run time vs error", out_dir / "passivity_time_vs_error.png"))
     s = sections.get("plant")
     if s and s.get("available", True):
@@ -358,7 +355,7 @@ def plots(result: dict, out_dir: Path) -> list[Path]:
                   "ivp_RK45": "solve_ivp RK45 (tolerances)", "ivp_DOP853": "solve_ivp DOP853 (tolerances)"}
         for family, points in families.items():
             _loglog(ax, points, labels.get(family, family), line=len(points) > 1)
-        written.append(save(fig, ax, ("run time per simulated second (s)", "largest relative trajectory error"),
+        written.append(_label_and_save(fig, ax, ("run time per simulated second (s)", "largest relative trajectory error"),
                              "Plant simulation in the closed loop: run time vs error", out_dir / "plant_time_vs_error.png"))
     s = sections.get("scene")
     if s and s.get("available", True):
@@ -367,23 +364,19 @@ def plots(result: dict, out_dir: Path) -> list[Path]:
         ax.loglog(n, [r["compiled_cycle_p50_s"] for r in s["rows"]], "o-", label="compiled scene (bisect)")
         ax.loglog(n, [r["naive_cycle_p50_s"] for r in s["rows"]], "s-", label="per-object loop (no culling)")
         ax.axhline(5e-6, color="grey", ls="--", lw=0.8, label="issue-4 target, one wall (5 us)")
-        written.append(save(fig, ax, ("scene objects", "controller compute per cycle, median (s)"), "Scene cost",
+        written.append(_label_and_save(fig, ax, ("scene objects", "controller compute per cycle, median (s)"), "Scene cost",
                              out_dir / "scene_cost.png"))
     return written
 
 
-def _label_and_save(fig: Any, ax: Any, labels: tuple[str, str], title: str, path: Path, tight: bool = True) -> Path:
-    """Label the log-log axes (x, y), title, grid and legend them, and write ``fig`` to ``path`` (PNG, 110 dpi).
-    ``tight``: the axes stretched to the figure first (``tight_layout``: a third of the drawing's CPU, the tick
-    labels' extents measured once more); without, the saved picture is still cropped to everything drawn, the
-    legend beside the axes included, around axes of matplotlib's default size."""
+def _label_and_save(fig: Any, ax: Any, labels: tuple[str, str], title: str, path: Path) -> Path:
+    """Label the log-log axes (x, y), title, grid and legend them, and write ``fig`` to ``path`` (PNG, 110 dpi)."""
     ax.set_xlabel(labels[0])
     ax.set_ylabel(labels[1])
     ax.set_title(title)
     ax.grid(True, which="both", lw=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)  # beside: on no curve
-    if tight:
-        fig.tight_layout()
+    fig.tight_layout()
     fig.savefig(path, dpi=110, bbox_inches="tight")  # the legend beside the axes too
     plt.close(fig)
     return path
