@@ -209,8 +209,9 @@ def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(tmp_path: pathl
     the interpreter from the control thread, a share that grew once they were enabled and pushed
     (pre-flight passed, then 11 to 417 of 500 cycles overran in 4 of 36 runs)."""
     sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--unit-ids", "1,2,3", "--profile", "gantry-3d")
-    url = re.search(r"serving Modbus TCP on (tcp://\S+) ", sim.wait_for_line("units 1, 2, 3: serving Modbus TCP on", START_WAIT))
-    assert url is not None
+    serving = sim.wait_for_line("units 1, 2, 3: serving Modbus TCP on", START_WAIT)
+    url = re.search(r"serving Modbus TCP on (tcp://\S+) ", serving)
+    assert url is not None, serving  # the line names the server's address
     result = hb.run(load_profile("gantry-3d"), url[1], options(tmp_path / "run", 1.0, pacing="wall"), unit_ids=list(UNITS))
     code, log = sim.stop()
     assert code == 0, log
