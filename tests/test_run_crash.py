@@ -28,6 +28,7 @@ import numpy as np
 import pytest
 
 from haptic_bus.app.cli import main
+from haptic_bus.app.entry import BLAS_THREADS
 from haptic_bus.app.record_stream import FLUSH_INTERVAL
 from haptic_bus.app.run_folder import read_run_folder
 from haptic_bus.app.writer_process import COMM
@@ -51,11 +52,14 @@ KILL_AFTER = (0.1, 0.1 + FLUSH_INTERVAL)
 
 
 def _start_run(multicast: tuple[str, int], out: Path, *args: str) -> subprocess.Popen[bytes]:
+    """``haptic-bus run`` as a user starts it: without the suite's BLAS thread count (conftest), which the
+    command sets itself."""
     group, port = multicast
+    env = {name: value for name, value in os.environ.items() if name not in BLAS_THREADS}
     return subprocess.Popen(
         [sys.executable, "-m", "haptic_bus.app.cli", "run", *args, "--interface", "udp_multicast", "--channel",
          group, "--bus-option", f"port={port}", "--virtual-time", "--duration", "600", "--out", str(out), "-q"],
-        cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        cwd=REPO, env={**env, "PYTHONPATH": str(REPO)}, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
 def _writers_of(parent: int) -> list[int]:
@@ -72,6 +76,15 @@ def _writers_of(parent: int) -> list[int]:
         if comm == COMM and int(rest[1]) == parent:
             found.append(int(entry.name))
     return found
+
+
+def _unnamed_threads(pid: int) -> list[str]:
+    """The threads of process ``pid`` but its main one that show the OS the main thread's name (a thread
+    nobody named: an OpenBLAS pool once), as ``tid:name``."""
+    tasks = Path(f"/proc/{pid}/task")
+    main_name = (tasks / str(pid) / "comm").read_text()
+    names = {task.name: (task / "comm").read_text() for task in tasks.iterdir() if task.name != str(pid)}
+    return [f"{tid}:{name.strip()}" for tid, name in names.items() if name == main_name]
 
 
 def _gone(pid: int) -> bool:
@@ -93,6 +106,7 @@ def _kill_while_cycling(run: subprocess.Popen[bytes], record: Path, rng: random.
         time.sleep(0.02)
     assert run.poll() is None and record.is_file(), "the run never started cycling"
     time.sleep(rng.uniform(*KILL_AFTER))
+    assert not _unnamed_threads(run.pid)  # top -H and /proc tell every thread of a cycling run apart
     (writer,) = _writers_of(run.pid)
     os.kill(run.pid, signal.SIGKILL)
     killed = time.time()  # after the kill is sent: a cycle the run began while this process was between the

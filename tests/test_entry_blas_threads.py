@@ -1,0 +1,29 @@
+"""The console script asks numpy's and scipy's BLAS libraries for one thread each, unless the
+environment names a count (the run's thread names themselves: tests/test_run_crash.py)."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from haptic_bus.app.entry import BLAS_THREADS, one_blas_thread
+
+
+def _environment(monkeypatch: pytest.MonkeyPatch, **names: str) -> dict[str, str]:
+    """This process's environment without a BLAS thread count but ``names``, as a copy ``os.environ`` is for the test."""
+    environment = {name: value for name, value in os.environ.items() if name not in BLAS_THREADS} | names
+    monkeypatch.setattr(os, "environ", environment)
+    return environment
+
+
+def test_one_thread_is_asked_where_the_environment_names_none(monkeypatch: pytest.MonkeyPatch) -> None:
+    environment = _environment(monkeypatch)
+    one_blas_thread()
+    assert {name: environment[name] for name in BLAS_THREADS} == dict.fromkeys(BLAS_THREADS, "1")
+
+
+def test_a_count_the_user_named_is_kept(monkeypatch: pytest.MonkeyPatch) -> None:
+    environment = _environment(monkeypatch, OPENBLAS_NUM_THREADS="3")
+    one_blas_thread()
+    assert environment["OPENBLAS_NUM_THREADS"] == "3" and environment["MKL_NUM_THREADS"] == "1"
