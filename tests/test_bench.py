@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -159,6 +160,11 @@ def test_smoke_bench_ratios_are_finite_and_positive(smoke_run: SmokeRun) -> None
         floor = s["realtime"]["runs"][load]["default"].get("floor", {})
         if floor.get("available", True):  # python-can alone, the same frames, beside the default run
             assert _finite_positive(floor["core_share"]) and floor["cycles"] > 0 and floor["lateness_s"]["p99"] >= 0
+    gaps = s["realtime"]["host_gaps"]  # the machine's own gaps, one spinning process per CPU, 0.2 s each (smoke)
+    assert [g["cpu"] for g in gaps] == sorted(os.sched_getaffinity(0))
+    for g in gaps:  # spun 0.2 s in all, ending at the first reading past it (a gap, or under 50 us, later)
+        assert 0.2 <= g["seconds"] <= 0.2 + max(g["longest_s"], 50e-6) and 0 <= g["gaps_over_1ms"] <= g["gaps"]
+        assert g["longest_s"] <= g["lost_s"] <= g["seconds"] and (g["gaps"] == 0) == (g["lost_s"] == 0)
     for label, row in s["startup"]["commands"].items():
         assert _finite_positive(row["ratio"]["median"]), label
     assert s["startup"]["check_import_costs"]

@@ -206,6 +206,10 @@ def _realtime(s: dict) -> list[str]:
         out += ["", "Where the controller process's CPU went (default set-up, quiet; CPU seconds per thread over the "
                     f"{s['duration_s']:g} s run): " + ", ".join(f"{k} {v:.3g}" for k, v in default["thread_cpu_s"].items())
                 + ". The control thread (MainThread) owns the bus; the writer process's share is mostly its imports."]
+    if s.get("host_gaps"):
+        out += ["", "The machine's own gaps, before the runs (a thread spinning at " + s["host_gaps"][0]["policy"]
+                + " on each CPU; a gap is a pause of more than 50 us, which no process here avoids): "
+                + "; ".join(_host_gaps(g) for g in s["host_gaps"]) + "."]
     tg, sch = s["target"], s["scheduler"]
     out += ["", f"T = {s['period_s'] * 1e3:g} ms, {s['duration_s']:g} s per run; spreads over {s['segments']} consecutive "
                 f"stretches of each run; hog: {s['hog_processes']} busy processes. The simulated drive's threads: "
@@ -217,6 +221,12 @@ def _realtime(s: dict) -> list[str]:
                     f"against {_t(tg['untuned_lateness_p99_s'])} untuned ({_met(tg['lateness_no_worse'])}); "
                     f"no start-up stall: {_met(tg['no_startup_stall'])}."]
     return out
+
+
+def _host_gaps(g: dict) -> str:
+    """One CPU's gaps (:mod:`haptic_bus.bench.host_gaps`), in words."""
+    return (f"CPU {g['cpu']}: {g['gaps']} in {g['seconds']:.2g} s, {g['gaps_over_1ms']} over 1 ms, "
+            f"{_t(g['lost_s'])} lost, the longest {_t(g['longest_s'])}")
 
 
 def _startup(s: dict) -> list[str]:

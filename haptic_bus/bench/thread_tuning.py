@@ -25,7 +25,11 @@ Per run: the share of a core the controller process used (every thread, from the
 time at each cycle start) and the start lateness, each over :data:`SEGMENTS` consecutive
 stretches of the run (median, min-max), the whole run's lateness percentiles and overruns, and
 whether it started without a stall (the first 50 cycles' lateness within the run's p99).  Beside
-them the bare clock (no drive, no controller) in each set-up: what the clock itself costs.
+them the bare clock (no drive, no controller) in each set-up: what the clock itself costs; and
+python-can's floor for the default set-up (:mod:`~haptic_bus.bench.can_floor`: the same frames
+with python-can alone), its lateness too.  Before the runs, the machine's own gaps
+(:mod:`~haptic_bus.bench.host_gaps`): how often a spinning real-time thread lost its CPU, which
+bounds every lateness figure of the section from below.
 """
 
 from __future__ import annotations
@@ -276,6 +280,7 @@ def controller_run(settings: RealtimeSettings, duration: float, bus: dict, proce
 
 def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     """Benchmark 6; returns its section of ``bench.json``."""
+    from haptic_bus.bench.host_gaps import host_gaps
     from haptic_bus.bench.processes import canopen_simulator, cpu_hogs
 
     duration = size.pick(0.15, 1.0, 15.0)  # smoke: 150 cycles at T = 1 ms (75 for three axes at 2 ms), the bare clock
@@ -284,6 +289,8 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
     profile = load_profile(PROFILE)
     period = one_axis_only(profile, "bench").loop.period
     hogs = size.pick(1, os.cpu_count() or 1, os.cpu_count() or 1)  # smoke: one hog shows the hogged run works
+    host = host_gaps(size.pick(0.2, 1.0, 5.0))  # what no process here avoids, before anything else runs
+    tick("real time: the host's gaps")
     runs: dict[str, dict] = {}
     with canopen_simulator(PROFILE, (NODE_ID,), "--operator", HAND) as (bus, process), ExitStack() as floors:
         floor: Callable[[], dict] | None = None  # one floor process for the default runs, started before the first
@@ -324,7 +331,7 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
                        f"python -m sim_drive --operator {HAND} on udp_multicast (two processes, the hand taking the "
                        f"handle once it is powered), set-ups of the control thread quiet and beside {hogs} busy processes",
         "period_s": period, "duration_s": duration, "segments": SEGMENTS, "hog_processes": hogs,
-        "scheduler": scheduler_info(), "runs": runs, "target": target, "axes": axes,
+        "scheduler": scheduler_info(), "host_gaps": host, "runs": runs, "target": target, "axes": axes,
         "issue_26": issue_26_figures(runs) | {"three axes": axes_figures(axes)},
     }
 
@@ -397,18 +404,20 @@ def issue_26_figures(runs: dict) -> dict:
 
 
 def _ratios(entry: dict) -> dict:
-    """One default-set-up entry's ratios: core share over the floor's, lateness over the bare clock's,
-    overrun share, observed delay."""
+    """One default-set-up entry's ratios: core share over the floor's, lateness over the bare clock's (the
+    floor's too), overrun share, observed delay."""
     controller, bare, floor = entry.get("controller", {}), entry.get("bare_clock", {}), entry.get("floor", {})
     figures: dict = {}
     if controller.get("core_share") and floor.get("core_share"):
         figures["core_ratio"] = controller["core_share"]["median"] / floor["core_share"]
         figures["floor_core_share"] = floor["core_share"]
         figures["writer_cpu_s"] = controller.get("thread_cpu_s", {}).get(WRITER)
-    late, bare_late = controller.get("lateness_s", {}), bare.get("lateness_s", {})
+    late, bare_late, floor_late = controller.get("lateness_s", {}), bare.get("lateness_s", {}), floor.get("lateness_s", {})
     for quantile in ("p99", "p99.9"):
         if late.get(quantile) is not None and bare_late.get(quantile):
             figures[f"lateness_{quantile}_ratio"] = late[quantile] / bare_late[quantile]
+            if floor_late.get(quantile) is not None:  # python-can alone on the same cycle, against the same bare clock
+                figures[f"floor_lateness_{quantile}_ratio"] = floor_late[quantile] / bare_late[quantile]
     if controller.get("cycles"):
         figures["overrun_share"] = controller["overruns"] / controller["cycles"]
     if controller.get("observed_delay") is not None:

@@ -1,0 +1,85 @@
+"""The machine's own preemption: how often, and for how long, a thread that never yields loses its CPU.
+
+On a virtual machine the host runs other work on the physical CPUs behind the guest's virtual ones;
+a guest thread then stops for as long as its virtual CPU is not run, whatever its priority (steal
+time), and the guest's own interrupts take it for a few microseconds.  Nothing a guest process does
+avoids these gaps, so they bound what any real-time loop here can show.  A run's cycle meets the gaps
+of two CPUs (its own, and the simulated drive's, which must answer the SYNC), the bare clock only
+those of its own: measured here (2-CPU Firecracker guest, idle, both CPUs in polling idle) a SYNC's
+wake-up of the drive's thread took 2.1 ms once in 10 s, its CPU not run by the host meanwhile.
+
+It runs as ``python -m haptic_bus.bench.host_gaps CPU SECONDS`` (:func:`host_gaps` starts one per
+CPU, all at once): the process pins itself to ``CPU``, asks for ``SCHED_FIFO`` at the control thread's
+priority (where the OS grants it; ordinary otherwise, said in its figures), spins on
+``time.perf_counter_ns`` for ``SECONDS`` in all and prints one JSON object: the gaps between two
+readings longer than :data:`GAP`, their count, their sum and the longest (s).  It spins in bursts of
+:data:`BURST` with :data:`REST` between them (not watched): the kernel runs real-time threads at most
+0.95 s of every second (``sched_rt_runtime_us``), and a spin longer than that was stopped for the
+rest of the second (gaps of 26 and 46 ms, the kernel's, not the host's).  The standard library only,
+so that the processes start in a few tens of milliseconds.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from typing import Any
+
+GAP = 50e-6  # s: a pause of the spin longer than this is a gap (a reading takes ~0.1 us; a timer tick a few us)
+LONG_GAP = 1e-3  # s: a gap as long as a period at T = 1 ms, counted apart
+BURST = 0.5  # s: one spin, watched
+REST = 0.1  # s: between two bursts (two bursts and a rest fit below the kernel's 0.95 s of real-time threads a second)
+FIFO_PRIORITY = 80  # haptic_bus.app.realtime.FIFO_PRIORITY (not imported: the probe loads the standard library only)
+
+
+def spin(cpu: int, seconds: float) -> dict[str, Any]:
+    """Spin on ``cpu`` for ``seconds`` s; the gaps seen (module docstring)."""
+    os.sched_setaffinity(0, {cpu})
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(FIFO_PRIORITY))
+        policy = f"SCHED_FIFO {FIFO_PRIORITY}"
+    except (PermissionError, AttributeError):
+        policy = "SCHED_OTHER (SCHED_FIFO not granted)"
+    gap_ns, long_ns = round(GAP * 1e9), round(LONG_GAP * 1e9)
+    gaps = long = lost = longest = watched = 0
+    clock = time.perf_counter_ns
+    left = round(seconds * 1e9)
+    while left > 0:
+        previous = start = clock()
+        end = start + min(left, round(BURST * 1e9))
+        while previous < end:
+            now = clock()
+            step = now - previous
+            if step > gap_ns:
+                gaps += 1
+                long += step > long_ns
+                lost += step
+                longest = max(longest, step)
+            previous = now
+        watched += previous - start
+        left -= previous - start
+        if left > 0:
+            time.sleep(REST)
+    return {"cpu": cpu, "policy": policy, "seconds": watched * 1e-9, "gaps": gaps, "gaps_over_1ms": long,
+            "lost_s": lost * 1e-9, "longest_s": longest * 1e-9}
+
+
+def host_gaps(seconds: float) -> list[dict[str, Any]]:
+    """One spinning process per CPU this process may run on, all at once for ``seconds`` s; each one's figures."""
+    cpus = sorted(os.sched_getaffinity(0))
+    probes = [subprocess.Popen([sys.executable, "-m", __name__, str(cpu), repr(seconds)], stdout=subprocess.PIPE,
+                               text=True) for cpu in cpus]
+    figures = []
+    for probe in probes:
+        out, _ = probe.communicate(timeout=seconds + 60.0)
+        if probe.returncode != 0:
+            raise RuntimeError(f"the host gap probe ended with status {probe.returncode}")
+        figures.append(json.loads(out))
+    return figures
+
+
+if __name__ == "__main__":
+    print(json.dumps(spin(int(sys.argv[1]), float(sys.argv[2]))))
