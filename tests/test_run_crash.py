@@ -27,8 +27,8 @@ import can
 import numpy as np
 import pytest
 
+from haptic_bus.app.blas_threads import BLAS_THREADS
 from haptic_bus.app.cli import main
-from haptic_bus.app.entry import BLAS_THREADS
 from haptic_bus.app.record_stream import FLUSH_INTERVAL
 from haptic_bus.app.run_folder import read_run_folder
 from haptic_bus.app.writer_process import COMM

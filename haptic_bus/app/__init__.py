@@ -83,7 +83,10 @@ one CPU and locked memory come with the real-time session (:mod:`haptic_bus.app.
 without real-time scheduling no Python loop keeps its start lateness near the bare clock's
 beside other work, so it is asked for by default.  ``tests/test_architecture.py`` checks that one thread
 touches the bus handle of a 1-axis and a 3-axis run; ``tests/test_run_threads.py`` which threads
-exist while cycling.  ``haptic-bus bench --only realtime`` measures the result side by side: the
+exist while cycling.  The process starts no thread it does not name: ``haptic-bus`` asks numpy's and
+scipy's BLAS for one thread before it imports them (:mod:`haptic_bus.app.blas_threads`; their pools
+had two unnamed threads), and ``tests/test_run_crash.py`` reads ``/proc`` of a cycling run for a
+thread the OS shows by the process's name.  ``haptic-bus bench --only realtime`` measures the result side by side: the
 control process's CPU against python-can's floor for the same frames, its lateness against the
 bare clock.
 """

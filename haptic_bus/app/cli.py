@@ -495,8 +495,8 @@ def _dispatch(args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":
+    from haptic_bus.app.blas_threads import one_blas_thread
     from haptic_bus.app.early_stop import exiting
-    from haptic_bus.app.entry import one_blas_thread
 
     one_blas_thread()  # as the console script does: nothing imported numpy yet
     sys.exit(exiting(main()))

@@ -10,37 +10,24 @@ A SIGTERM in that time killed ``run`` silently (status 143) before ``run`` insta
 handling: for ``run``, :func:`main` first installs :func:`~haptic_bus.app.early_stop.note_stop`,
 which notes it, and ``run`` (:func:`haptic_bus.app.cli._run`) ends with
 :data:`~haptic_bus.app.early_stop.STOPPED_BEFORE_START`, exit 0, before it touches anything.
-This module imports nothing of the project but
-:mod:`~haptic_bus.app.early_stop` (the standard library only), so the window left is Python's own
-start-up.
+This module imports nothing of the project but :mod:`~haptic_bus.app.early_stop` and
+:mod:`~haptic_bus.app.blas_threads` (the standard library only), so the window left is Python's
+own start-up.
 
-**One BLAS thread.**  numpy's and scipy's OpenBLAS each start a pool of worker threads at import
-(one per further CPU), which ``top -H`` and ``/proc/PID/task/*/comm`` show under the process's name
-beside the named threads of a run, and which burnt 0.1 s of CPU each while a three-axis run started
-(measured here, 2 CPUs).  The project's matrices are 6 x 6 at most and its long arrays are
-elementwise (no BLAS), so the pools buy nothing: before anything imports numpy, :func:`one_blas_thread`
-asks each BLAS library the wheels ship for one thread, unless the environment already names a count
-(the user's choice is kept, and passed to the run's writer and judge processes as this one's is).
+
+Before anything imports numpy, it asks for one BLAS thread (:mod:`~haptic_bus.app.blas_threads`).
 """
 
 from __future__ import annotations
 
-import os
 import signal
 import sys
 from collections.abc import Sequence
 
+from haptic_bus.app.blas_threads import one_blas_thread
 from haptic_bus.app.early_stop import exiting, note_stop
 
 EXIT_INTERRUPTED = 130  # haptic_bus.app.arguments.EXIT_INTERRUPTED, which is what this guards the import of
-BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")  # the thread counts numpy's and scipy's BLAS libraries read
-
-
-def one_blas_thread() -> None:
-    """One thread for each BLAS library this process will load, where the environment names no count
-    (module docstring); only before numpy is imported does it change anything."""
-    for name in BLAS_THREADS:
-        os.environ.setdefault(name, "1")
 
 
 def _command(argv: Sequence[str]) -> str | None:

@@ -7,7 +7,7 @@ import os
 
 import pytest
 
-from haptic_bus.app.entry import BLAS_THREADS, one_blas_thread
+from haptic_bus.app.blas_threads import BLAS_THREADS, one_blas_thread
 
 
 def _environment(monkeypatch: pytest.MonkeyPatch, **names: str) -> dict[str, str]:
