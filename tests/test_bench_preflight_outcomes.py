@@ -29,7 +29,7 @@ def no_drive(multicast: tuple[str, int]) -> dict:
 def ended_before_preflight() -> dict:
     """:func:`preflight_runs.one_run` on a udp_multicast bus of this module's own where nothing answers: the
     command line's run ends (exit 1) on the boot-up it waits for.  One such run serves the tests that read one.
-    Its master's three waits for the drive (statusword, boot-up, SDO probe) take 0.1 s each, not the default 1 s
+    Its master's two waits for the drive (statusword, boot-up) take 0.1 s each, not the default 1 s
     (:mod:`tests.short_preflight`): the run ends on the same error at any length of them."""
     group, port = unique_multicast()
     with pytest.MonkeyPatch.context() as patch:
@@ -60,7 +60,8 @@ def test_a_run_that_ends_before_preflight_names_its_error(ended_before_preflight
     entry = ended_before_preflight
     assert entry["exit"] == 1 and entry["exit_reason"] == "drive error"
     assert not preflight_runs.reached(entry) and entry["lateness_p99_s"] is None
-    assert entry["error"].startswith("CANopen node 5: no boot-up after NMT reset communication")
+    assert entry["error"].startswith("CANopen node 5: no SDO answer within 0.1 s before NMT reset communication and "
+                                     "no boot-up within 0.1 s after it")
 
 
 def test_a_run_that_does_not_exit_in_time_is_killed_and_said(no_drive: dict, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -226,9 +226,9 @@ def test_wrong_node_id_fails_within_its_timeout_naming_the_node(canopen_rig):
             wrong.connect()
         elapsed = time.monotonic() - start
         wrong.close()
-    # boot-up wait + SDO probe, each bounded by boot_timeout: 0.99-1.00 s measured beside two
-    # CPU-bound processes (5 trials); five times that is the bound (a connect that waited on
-    # canopen's own timeouts and retries, every transfer, would take many seconds more)
+    # the statusword's SDO read + the boot-up wait, each bounded by boot_timeout (0.3 s); with a third wait (an SDO
+    # probe, gone) 0.99-1.00 s was measured beside two CPU-bound processes (5 trials): five times that stays the
+    # bound (a connect that waited on canopen's own timeouts and retries, every transfer, would take many seconds more)
     assert elapsed < 5 * 1.0
     assert info.value.node == "CANopen node 6" and "node id 6" in str(info.value)
     assert "nodes seen on the bus: 5" in str(info.value)

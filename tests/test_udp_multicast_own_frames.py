@@ -103,8 +103,8 @@ def test_on_an_ipv6_group_too_a_handle_hears_the_others_but_not_itself(scope: st
 def test_a_run_with_no_drive_names_no_node_and_logs_its_frames_once(
         multicast: tuple[str, int], tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str],
         monkeypatch: pytest.MonkeyPatch) -> None:
-    # nobody answers: the master's three waits for a drive (its statusword, the boot-up, an SDO probe) take 0.1 s
-    # each, not the default 1 s; its own frames come back within microseconds on this host if they come at all
+    # nobody answers: the master's two waits for a drive (its statusword, the boot-up) take 0.1 s each, not the
+    # default 1 s; its own frames come back within microseconds on this host if they come at all
     monkeypatch.setitem(CanopenDrive.__init__.__kwdefaults__, "boot_timeout", 0.1)
     group, port = multicast
     result = run_cli(capsys, "run", "cia402-handle", "--interface", "udp_multicast", "--channel", group,
@@ -113,5 +113,11 @@ def test_a_run_with_no_drive_names_no_node_and_logs_its_frames_once(
     assert "no other node seen on the bus" in result.err
     log = (tmp_path / "bus.asc").read_text().splitlines()
     sent = [line for line in log if " Tx " in line]
-    assert sent  # the NMT command and the SDO requests it sent
+    assert sent  # the NMT command and the SDO request it sent
     assert not [line for line in log if " Rx " in line]  # nothing else is on the bus: none of them came back
+    # one SDO request (the statusword's, 0x6041): a drive silent to it that sends no boot-up after the NMT reset is
+    # not asked again (a third wait made a missing drive take three times the timeout its error names)
+    sdo = [line.split()[6:] for line in sent if line.split()[2] == "605"]  # the data bytes of each SDO frame sent
+    (request,) = [data for data in sdo if data[0] != "80"]  # canopen's abort after its timeout aside
+    assert request[:4] == ["40", "41", "60", "00"]
+    assert "no SDO answer within 0.1 s before NMT reset communication and no boot-up within 0.1 s after it" in result.err

@@ -25,7 +25,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import cast
+from typing import NoReturn, cast
 
 import canopen
 
@@ -108,9 +108,12 @@ class Commissioning:
     settings: CommissioningSettings
     safety: SafetySettings
 
-    def run(self, tpdo_objects: tuple[ObjectSpec, ...], rpdo_objects: tuple[ObjectSpec, ...]) -> Commissioned:
-        """Commission the drive for ``tpdo_objects`` (drive -> master, in order) and ``rpdo_objects``."""
-        self._reach()
+    def run(self, tpdo_objects: tuple[ObjectSpec, ...], rpdo_objects: tuple[ObjectSpec, ...], *,
+            answered: bool = True) -> Commissioned:
+        """Commission the drive for ``tpdo_objects`` (drive -> master, in order) and ``rpdo_objects``;
+        ``answered``: what :meth:`refuse_another_master` returned (False: the drive left its SDO read
+        unanswered, so no boot-up after the reset means it is not there)."""
+        self._reach(answered)
         device_type = self._check_device_type() if self.settings.check_device_type else None
         inventory = InventoryReader(self.sdo).read((*tpdo_objects, *rpdo_objects))
         lacking = [spec for spec in (*tpdo_objects, *rpdo_objects) if not inventory.has(spec.index, spec.subindex)]
@@ -159,9 +162,10 @@ class Commissioning:
             logger.warning("%s: %s", self.name, note)
         return notes
 
-    def refuse_another_master(self) -> None:
+    def refuse_another_master(self) -> bool:
         """Listen before taking the bus: a SYNC from someone else, or the drive enabled by someone
-        else, means another master is at work; refuse rather than reset the drive under it."""
+        else, means another master is at work; refuse rather than reset the drive under it.  Whether
+        the drive answered the SDO read of its statusword (within ``boot_timeout``)."""
         window = max(0.05, 3 * self.settings.period)
         seen: list[float] = []
         lock = threading.Lock()
@@ -182,19 +186,19 @@ class Commissioning:
                 f"another SYNC producer is on the bus ({len(seen)} SYNC frames in {window * 1e3:.0f} ms): another master "
                 "is running; stop it before starting this one",
             )
-        self._refuse_an_enabled_drive()
+        return self._refuse_an_enabled_drive()
 
-    def _refuse_an_enabled_drive(self) -> None:
+    def _refuse_an_enabled_drive(self) -> bool:
         """A drive already in OPERATION ENABLED is driven by someone else (this master always
         leaves it disabled, and the drive's own watchdog stops it when a master dies).  Asked
-        before the NMT reset, which would itself abort that connection."""
+        before the NMT reset, which would itself abort that connection.  Whether it answered."""
         sdo = self.node.sdo
         saved = sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES
         sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES = self.settings.boot_timeout, 1
         try:
             state = decode_statusword(self.sdo.read_int(STATUSWORD.index, 0, DataType.UNSIGNED16))
         except DriveError:
-            return  # no answer (yet): reaching the node says why
+            return False  # no answer (yet): reaching the node says why
         finally:
             sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES = saved
         if state is State.OPERATION_ENABLED:
@@ -203,9 +207,13 @@ class Commissioning:
                 "the drive is in OPERATION ENABLED before this master enabled it: another master drives it "
                 "(without SYNC); stop that master, or disable the drive, before starting this one",
             )
+        return True
 
-    def _reach(self) -> None:
-        """Reset communication and wait for the boot-up message, or for an SDO answer."""
+    def _reach(self, answered: bool) -> None:
+        """Reset communication and wait for the boot-up message, or for an SDO answer.  A drive that
+        left the SDO read before the reset unanswered (``answered`` False) and sends no boot-up after
+        it is not asked again: a drive that ignores the reset is in the state it was, silent to SDO
+        (a third wait of ``boot_timeout`` made a missing drive take three times the time its error named)."""
         timeout = self.settings.boot_timeout
         how = "NMT reset communication"
         self.events.forget_state()
@@ -213,6 +221,9 @@ class Commissioning:
             self.node.nmt.send_command(NmtCommand.RESET_COMMUNICATION)
             if self.events.wait_for_state(NmtState.BOOT_UP, timeout):
                 return
+            if not answered:
+                self._unreached(f"no SDO answer within {timeout:.3g} s before NMT reset communication and no boot-up "
+                                f"within {timeout:.3g} s after it")
         else:
             how = "NMT pre-operational"
             self.node.nmt.send_command(NmtCommand.ENTER_PRE_OPERATIONAL)
@@ -229,13 +240,13 @@ class Commissioning:
             pass
         finally:
             sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES = saved
+        self._unreached(f"no boot-up after {how} and no SDO answer within {timeout:.3g} s")
+
+    def _unreached(self, what: str) -> NoReturn:
+        """DriveTimeout: ``what`` the node did not do, what to check, and the nodes heard meanwhile."""
         seen = sorted(n for n in self.node.network.scanner.nodes if n != self.node.id)
         hint = f"; nodes seen on the bus: {', '.join(map(str, seen))}" if seen else "; no other node seen on the bus"
-        raise DriveTimeout(
-            self.name,
-            f"no boot-up after {how} and no SDO answer within {timeout:.3g} s "
-            f"(check node id {self.node.id}, bitrate, wiring{hint})",
-        )
+        raise DriveTimeout(self.name, f"{what} (check node id {self.node.id}, bitrate, wiring{hint})")
 
     def _check_device_type(self) -> int:
         device_type = self.sdo.read_int(DEVICE_TYPE, 0, DataType.UNSIGNED32)

@@ -262,11 +262,11 @@ class CanopenDrive(Cia402Master[CanopenConnection]):
             events = DriveEvents(self.name, node, network, self.stats)
             sdo = SdoAccess(self.name, node, self.settings.sdo_timeout, self.cycle.end)
             commissioning = Commissioning(self.name, node, sdo, events, self.settings, self.safety)
-            commissioning.refuse_another_master()
+            answered = commissioning.refuse_another_master()
             if network.bus is None:
                 raise DriveError(self.name, "the CAN network has no bus after connecting")
             self.heartbeat.start(self.link.send)  # boot-up first, before the drive is touched
-            found = commissioning.run(self.tpdo_objects, DEFAULT_RPDO)
+            found = commissioning.run(self.tpdo_objects, DEFAULT_RPDO, answered=answered)
             self.exchange.configure(found.tpdo_codecs, found.tpdo_cobs, found.rpdo_codecs, found.rpdo_cobs)
             self.cycle.configure()
             self._adopt_scaling(found.scaling, found.scaling_notes)
