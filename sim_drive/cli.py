@@ -39,6 +39,7 @@ from typing import NoReturn
 
 from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, as_typed, parse_bus_option
 from haptic_bus._version import __version__
+from haptic_bus.console import logging_kept
 from sim_drive.eds import OD_KINDS
 from sim_drive.operator import operator_usage
 from sim_drive.parameters import Timing
@@ -180,5 +181,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except SystemExit as exc:  # argparse's help through an abbreviation (--he): report, do not exit
         return int(exc.code or 0)
-    with scheduling_restored():  # real time while serving (sim_drive.scheduling), not after
+    # real time while serving (sim_drive.scheduling), and the log lines on stderr (sim_drive.serve), not after: a
+    # program that calls this main has its own scheduling and logging back
+    with scheduling_restored(), logging_kept():
         return run_modbus(args) if args.modbus is not None else run_canopen(args)

@@ -123,6 +123,25 @@ def test_modbus_address_in_use_exits_1_with_one_line(capsys: pytest.CaptureFixtu
     assert f"cannot serve on {url}" in one_error_line(capsys.readouterr().err)
 
 
+def test_a_program_calling_main_keeps_its_logging(capsys: pytest.CaptureFixture[str]) -> None:
+    """The simulator logs on stderr while it serves (its root handler, the bus library at WARNING); a program
+    that called its main has its own handlers and levels back when it returns (here from an address in use)."""
+    import logging
+
+    root, own = logging.getLogger(), logging.NullHandler()
+    before = root.handlers[:], root.level, logging.getLogger("pymodbus").level
+    root.addHandler(own)
+    try:
+        with socket.socket() as taken:
+            taken.bind(("127.0.0.1", 0))
+            taken.listen()
+            assert main(["--modbus", f"tcp://127.0.0.1:{taken.getsockname()[1]}"]) == 1
+        assert (root.handlers, root.level, logging.getLogger("pymodbus").level) == ([*before[0], own], *before[1:])
+    finally:
+        root.removeHandler(own)
+    capsys.readouterr()
+
+
 def test_python_m_sim_drive_refuses_mixed_options_without_traceback(capsys: pytest.CaptureFixture[str]) -> None:
     """The refusal through ``python -m sim_drive`` (its ``__main__`` passes main's status to the
     shell); the help is argparse's output in this process (the same ``main``, no second interpreter)."""
