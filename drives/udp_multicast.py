@@ -107,6 +107,8 @@ class FilteredMulticastBus(UdpMulticastBus):
         exact: set[int] = set()
         masked: list[tuple[int, int, bool | None]] = []
         for f in filters:  # once: python-can's other backends take filters given as an iterator too
+            if "extended" in f and f["extended"] not in (True, False):  # None: equal to no frame's kind, so python-can
+                continue  # never matches it (absent, the key takes both kinds)
             if f["can_mask"] == _STANDARD_MASK and f.get("extended") is False:
                 exact.add(f["can_id"] & _STANDARD_MASK)
             else:

@@ -36,8 +36,8 @@ def filters(draw: st.DrawFn) -> list[CanFilter]:
             out.append({"can_id": draw(identifiers), "can_mask": STANDARD, "extended": False})
         elif kind == "masked":
             masked: CanFilter = {"can_id": draw(identifiers), "can_mask": draw(st.sampled_from([0x780, 0x7F0, 0x07F, STANDARD]))}
-            if draw(st.booleans()):  # without the key, a filter takes both kinds of frame
-                masked["extended"] = draw(st.booleans())
+            if draw(st.booleans()):  # without the key, a filter takes both kinds of frame; with None, neither
+                masked["extended"] = draw(st.sampled_from([True, False, None]))  # type: ignore[typeddict-item]
             out.append(masked)
         elif kind == "extended":
             out.append({"can_id": draw(st.integers(0, EXTENDED)), "can_mask": EXTENDED, "extended": True})
