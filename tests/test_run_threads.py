@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import pathlib
+import sys
 import threading
 import time
 from typing import Any
@@ -65,6 +66,7 @@ def test_while_cycling_the_control_process_runs_the_control_thread_and_no_writer
     out = tmp_path / "run"
     seen: list[set[str]] = []
     writers: list[list[int]] = []
+    modules: list[frozenset[str]] = []  # the modules loaded at the first sample and at the last
 
     def sample() -> None:
         record = out / "record.csv"
@@ -72,9 +74,11 @@ def test_while_cycling_the_control_process_runs_the_control_thread_and_no_writer
         while time.monotonic() < deadline and not (record.is_file() and record.stat().st_size > 20_000):
             time.sleep(0.01)
         try:
-            for _ in range(SAMPLES):
+            for k in range(SAMPLES):
                 seen.append({thread.name for thread in threading.enumerate() if thread is not threading.current_thread()})
                 writers.append(_children_named(COMM))
+                if k in (0, SAMPLES - 1):
+                    modules.append(frozenset(sys.modules))
                 time.sleep(0.02)
         finally:
             options.stop.event.set()  # sampled: the run may end (as SIGTERM ends haptic-bus run)
@@ -94,6 +98,7 @@ def test_while_cycling_the_control_process_runs_the_control_thread_and_no_writer
     assert len(seen) == SAMPLES, "the run ended before the samples were taken"
     assert all(threads == {"MainThread", *ALLOWED} for threads in seen), seen
     assert all(len(pids) == 1 for pids in writers), writers  # the record, the log and the view: one writer process
+    assert sorted(modules[-1] - modules[0]) == []  # nothing imported while the cycles ran (an import holds the GIL)
     assert _children_named(COMM) == []  # it ended with the run
 
 
