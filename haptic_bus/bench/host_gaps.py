@@ -8,7 +8,7 @@ of two CPUs (its own, and the simulated drive's, which must answer the SYNC), th
 those of its own: measured here (2-CPU Firecracker guest, idle, both CPUs in polling idle) a SYNC's
 wake-up of the drive's thread took 2.1 ms once in 10 s, its CPU not run by the host meanwhile.
 
-It runs as ``python -m haptic_bus.bench.host_gaps CPU SECONDS`` (:func:`host_gaps` starts one per
+It runs as ``python -m haptic_bus.bench.host_gaps CPU SECONDS [PARENT]`` (:func:`host_gaps` starts one per
 CPU, all at once): the process pins itself to ``CPU``, asks for ``SCHED_FIFO`` at the control thread's
 priority (where the OS grants it; ordinary otherwise, said in its figures), spins on
 ``time.perf_counter_ns`` for ``SECONDS`` in all and prints one JSON object: the gaps between two
@@ -17,12 +17,21 @@ readings longer than :data:`GAP`, their count, their sum and the longest (s).  I
 0.95 s of every second (``sched_rt_runtime_us``), and a spin longer than that was stopped for the
 rest of the second (gaps of 26 and 46 ms, the kernel's, not the host's).  The standard library only,
 so that the processes start in a few tens of milliseconds.
+
+A probe never outlives the bench, whose CPUs it takes: :func:`host_gaps` kills and reaps every
+probe still running when it ends in any way (Ctrl-C, an error, a timeout), and a probe asks the kernel
+to kill it when the thread that started it ends (``PR_SET_PDEATHSIG``, as the bench's CPU hogs do), so
+a killed bench leaves none behind either.  A probe has a process group of its own: the Ctrl-C the
+terminal sends the bench's group reaches the bench alone, which stops its probes and ends with its
+one line (a probe in the bench's group died with a traceback each, or printed one into a closed pipe).
 """
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -70,16 +79,37 @@ def spin(cpu: int, seconds: float) -> dict[str, Any]:
 def host_gaps(seconds: float) -> list[dict[str, Any]]:
     """One spinning process per CPU this process may run on, all at once for ``seconds`` s; each one's figures."""
     cpus = sorted(os.sched_getaffinity(0))
-    probes = [subprocess.Popen([sys.executable, "-m", __name__, str(cpu), repr(seconds)], stdout=subprocess.PIPE,
-                               text=True) for cpu in cpus]
-    figures = []
-    for probe in probes:
-        out, _ = probe.communicate(timeout=seconds + 60.0)
-        if probe.returncode != 0:
-            raise RuntimeError(f"the host gap probe ended with status {probe.returncode}")
-        figures.append(json.loads(out))
-    return figures
+    probes: list[subprocess.Popen[str]] = []
+    try:
+        for cpu in cpus:
+            probes.append(subprocess.Popen([sys.executable, "-m", __name__, str(cpu), repr(seconds), str(os.getpid())],
+                                           stdout=subprocess.PIPE, text=True, process_group=0))
+        figures = []
+        for probe in probes:
+            out, _ = probe.communicate(timeout=seconds + 60.0)
+            if probe.returncode != 0:
+                raise RuntimeError(f"the host gap probe ended with status {probe.returncode}")
+            figures.append(json.loads(out))
+        return figures
+    finally:  # none outlives this call (module docstring)
+        for probe in probes:
+            if probe.poll() is None:
+                probe.kill()
+        for probe in probes:
+            probe.wait()  # SIGKILL: at once, whatever its priority
+            if probe.stdout is not None:
+                probe.stdout.close()
+
+
+def _bound_to(parent: int) -> None:
+    """Die with the thread that started this probe (module docstring); exit at once if ``parent`` is
+    already gone."""
+    ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # 1 = PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # it ended before the prctl: nobody reads the figures
+        sys.exit(1)
 
 
 if __name__ == "__main__":
+    if len(sys.argv) > 3:  # started by host_gaps
+        _bound_to(int(sys.argv[3]))
     print(json.dumps(spin(int(sys.argv[1]), float(sys.argv[2]))))

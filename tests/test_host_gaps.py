@@ -1,0 +1,119 @@
+"""The bench's host gap probes (haptic_bus.bench.host_gaps) never outlive the code that started them, and a
+Ctrl-C reaches that code alone: each probe spins at SCHED_FIFO on its CPU, so one left behind takes the CPU
+from everything else for the rest of its seconds.
+
+Each test starts a caller of ``host_gaps(60.0)`` restricted to one CPU (one probe, spinning until it is
+killed: under a second of one CPU here), interrupts it once its probe exists, and looks at the probe once
+the caller has ended.  The figures themselves: tests/test_bench.py (smoke run)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+WAIT = 30.0  # s: bound of every wait here (the caller runs only in the probe's rests, 0.1 s in 0.6 s, if it shares the CPU)
+CALLER = """
+import os, sys
+os.sched_setaffinity(0, {%d})
+from haptic_bus.bench.host_gaps import host_gaps
+try:
+    host_gaps(60.0)
+except KeyboardInterrupt:
+    print("interrupted", file=sys.stderr)
+    sys.exit(130)
+"""
+
+
+def _caller() -> subprocess.Popen[str]:
+    cpu = max(os.sched_getaffinity(0))
+    return subprocess.Popen([sys.executable, "-c", CALLER % cpu], cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)},
+                            stderr=subprocess.PIPE, text=True, process_group=0)
+
+
+def _catches_sigint(pid: int) -> bool:
+    """Whether Python runs in process ``pid`` with its SIGINT handler (a SIGINT there is a KeyboardInterrupt)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return False
+    caught = next(int(line.split()[1], 16) for line in status.splitlines() if line.startswith("SigCgt:"))
+    return bool(caught >> (signal.SIGINT - 1) & 1)
+
+
+def _probe_of(caller: subprocess.Popen[str]) -> int:
+    """The pid of ``caller``'s probe, once Python runs in it (before, a SIGINT ends it silently)."""
+    deadline = time.monotonic() + WAIT
+    while time.monotonic() < deadline:
+        children = Path(f"/proc/{caller.pid}/task/{caller.pid}/children").read_text().split()
+        if children and _catches_sigint(int(children[0])):
+            return int(children[0])
+        assert caller.poll() is None, f"the caller ended first: {caller.stderr.read() if caller.stderr else ''}"
+        time.sleep(0.02)
+    raise AssertionError(f"no probe started within {WAIT} s")
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` still runs (neither gone nor a zombie)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def _end(caller: subprocess.Popen[str], probe: int, how: int) -> tuple[int, str]:
+    """Send SIGINT to the caller (``how`` 0) or to its process group (a terminal's Ctrl-C, ``how`` 1); the
+    caller's status and stderr, and whether the probe still runs after it ended (killed then, by pid)."""
+    try:
+        if how:
+            os.killpg(caller.pid, signal.SIGINT)
+        else:
+            os.kill(caller.pid, signal.SIGINT)
+        _, err = caller.communicate(timeout=WAIT)
+        left = _running(probe)
+    finally:
+        if caller.poll() is None:
+            caller.kill()
+            caller.wait(WAIT)
+        if _running(probe):
+            os.kill(probe, signal.SIGKILL)
+    assert not left, "the probe outlived its caller"
+    return caller.returncode, err
+
+
+def test_a_probe_does_not_outlive_an_interrupted_caller() -> None:
+    """SIGINT to the caller alone (the bench's own Ctrl-C handling, or ``kill -INT``): it stops its probe
+    before it ends (the probe ran on, orphaned, at SCHED_FIFO, and printed into a closed pipe)."""
+    caller = _caller()
+    status, err = _end(caller, _probe_of(caller), 0)
+    assert (status, err) == (130, "interrupted\n")
+
+
+def test_a_ctrl_c_reaches_the_caller_alone() -> None:
+    """A terminal's Ctrl-C (SIGINT to the foreground process group): one line from the caller, no
+    probe's traceback (each probe died of it with one)."""
+    caller = _caller()
+    status, err = _end(caller, _probe_of(caller), 1)
+    assert (status, err) == (130, "interrupted\n")
+
+
+def test_a_probe_dies_with_a_killed_caller() -> None:
+    """SIGKILL to the caller (no finally runs): the kernel ends the probe (PR_SET_PDEATHSIG), or the probe
+    ends itself (its parent gone before it asked)."""
+    caller = _caller()
+    probe = _probe_of(caller)
+    try:
+        caller.kill()  # whenever: a probe that asks for PR_SET_PDEATHSIG after this sees its parent gone and exits
+        caller.communicate(timeout=WAIT)
+        deadline = time.monotonic() + WAIT
+        while _running(probe) and time.monotonic() < deadline:  # the kernel's SIGKILL: at once
+            time.sleep(0.02)
+        left = _running(probe)
+    finally:
+        if _running(probe):
+            os.kill(probe, signal.SIGKILL)
+    assert not left, "the probe outlived its killed caller"
