@@ -15,6 +15,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 WAIT = 30.0  # s: bound of every wait here (the caller runs only in the probe's rests, 0.1 s in 0.6 s, if it shares the CPU)
 CALLER = """
@@ -117,3 +119,30 @@ def test_a_probe_dies_with_a_killed_caller() -> None:
         if _running(probe):
             os.kill(probe, signal.SIGKILL)
     assert not left, "the probe outlived its killed caller"
+
+
+def _gaps(policy: str) -> list[dict]:
+    """Two CPUs' figures as the probes print them, at ``policy``."""
+    return [{"cpu": cpu, "policy": policy, "seconds": 1.0, "gaps": 3, "gaps_over_1ms": 1, "lost_s": 4e-3,
+             "longest_s": 2e-3} for cpu in (0, 1)]
+
+
+@pytest.mark.parametrize("fifo", [True, False])
+def test_the_report_calls_gaps_the_machines_own_only_at_sched_fifo(fifo: bool) -> None:
+    """Not granted SCHED_FIFO (no CAP_SYS_NICE, RLIMIT_RTPRIO below 80), a probe takes turns with every
+    process of its CPU (gaps of 99 ms measured so): issue 26's lateness rows and the section's paragraph
+    called them the machine's own, "which no process here avoids"."""
+    from haptic_bus.bench.report import host_gaps_paragraph
+    from haptic_bus.bench.targets import issue_26
+
+    gaps = _gaps("SCHED_FIFO 80" if fifo else "SCHED_OTHER (SCHED_FIFO not granted)")
+    figures = {"core_ratio_target": 1.5, "lateness_ratio_target": 2.0, "overrun_target": 0.005, "delay_target": 1.5,
+               "quiet": {"lateness_p99_ratio": 1.2, "floor_lateness_p99_ratio": 1.1}}
+    rows = issue_26({"realtime": {"host_gaps": gaps, "issue_26": figures}})
+    (note,) = [r["note"] for r in rows if r["what"] == "start lateness p99 / the bare clock's, quiet"]
+    assert note.startswith("python-can's floor on the same cycle: 1.1 x; ")
+    assert note.endswith(" > 1 ms a second, per CPU: 1, 1 (longest 2 ms)")
+    assert ("the machine's gaps" in note) == fifo and ("not granted SCHED_FIFO" in note) != fifo
+    paragraph = host_gaps_paragraph(gaps)
+    assert ("which no process here avoids" in paragraph) == fifo and ("not the machine's own" in paragraph) != fifo
+    assert "CPU 0: 3 in 1 s, 1 over 1 ms" in paragraph and "CPU 1: 3 in 1 s" in paragraph and gaps[0]["policy"] in paragraph

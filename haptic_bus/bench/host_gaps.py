@@ -76,6 +76,12 @@ def spin(cpu: int, seconds: float) -> dict[str, Any]:
             "lost_s": lost * 1e-9, "longest_s": longest * 1e-9}
 
 
+def unprivileged(figures: list[dict[str, Any]]) -> bool:
+    """Whether a probe of ``figures`` spun without ``SCHED_FIFO``: then every process of its CPU took
+    turns with it, and its gaps are theirs as much as the machine's."""
+    return any(not g["policy"].startswith("SCHED_FIFO") for g in figures)
+
+
 def host_gaps(seconds: float) -> list[dict[str, Any]]:
     """One spinning process per CPU this process may run on, all at once for ``seconds`` s; each one's figures."""
     cpus = sorted(os.sched_getaffinity(0))
