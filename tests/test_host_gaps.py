@@ -146,3 +146,42 @@ def test_the_report_calls_gaps_the_machines_own_only_at_sched_fifo(fifo: bool) -
     paragraph = host_gaps_paragraph(gaps)
     assert ("which no process here avoids" in paragraph) == fifo and ("not the machine's own" in paragraph) != fifo
     assert "CPU 0: 3 in 1 s, 1 over 1 ms" in paragraph and "CPU 1: 3 in 1 s" in paragraph and gaps[0]["policy"] in paragraph
+
+
+def _most_spun(burst: float, rest: float, period: float) -> float:
+    """The most time a spin of ``burst`` s on, ``rest`` s off spends on in any window of ``period`` s (the
+    window's start taken at every point where the on-time can peak: a burst's start, or the window's end
+    at a burst's end, over two cycles; the pattern repeats)."""
+    cycle = burst + rest
+
+    def spun(start: float) -> float:
+        first = int(start // cycle) - 1
+        return sum(max(0.0, min(start + period, k * cycle + burst) - max(start, k * cycle))
+                   for k in range(first, first + int(period // cycle) + 3))
+
+    starts = [k * cycle + shift for k in range(2) for shift in (0.0, burst - period % cycle, burst)]
+    return max(spun(start) for start in starts)
+
+
+@pytest.mark.parametrize(("runtime_us", "period_us"), [(950_000, 1_000_000), (800_000, 1_000_000), (500_000, 1_000_000),
+                                                       (100_000, 1_000_000), (95_000, 100_000), (475_000, 500_000),
+                                                       (999_999, 1_000_000)])
+def test_the_probe_spins_below_the_kernels_real_time_limit(runtime_us: int, period_us: int) -> None:
+    """The kernel lets real-time threads run ``sched_rt_runtime_us`` of every ``sched_rt_period_us`` and
+    stops them for the rest of the period (a throttled spin's gap, 49 ms here, would be counted as the
+    machine's): the probe's bursts and rests keep it below whatever the limit is, not the default alone
+    (0.5 s on, 0.1 s off is 0.9 s of a second: throttled under 500000 us or a period of 0.5 s)."""
+    from haptic_bus.bench.host_gaps import BURST, REST, schedule
+
+    burst, rest = schedule(runtime_us, period_us)
+    assert 0 < burst <= BURST and rest > 0
+    assert _most_spun(burst, rest, period_us * 1e-6) < runtime_us * 1e-6
+    if (runtime_us, period_us) == (950_000, 1_000_000):  # the kernel's default: the schedule measured here
+        assert (burst, rest) == (BURST, REST)
+
+
+@pytest.mark.parametrize("limit", [(-1, 1_000_000), (1_000_000, 1_000_000)])
+def test_without_a_limit_the_probe_still_rests(limit: tuple[int, int]) -> None:
+    from haptic_bus.bench.host_gaps import BURST, REST, schedule
+
+    assert schedule(*limit) == (BURST, REST)

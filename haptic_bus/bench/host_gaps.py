@@ -15,7 +15,8 @@ priority (where the OS grants it; ordinary otherwise, said in its figures), spin
 readings longer than :data:`GAP`, their count, their sum and the longest (s).  It spins in bursts of
 :data:`BURST` with :data:`REST` between them (not watched): the kernel runs real-time threads at most
 0.95 s of every second (``sched_rt_runtime_us``), and a spin longer than that was stopped for the
-rest of the second (gaps of 26 and 46 ms, the kernel's, not the host's).  The standard library only,
+rest of the second (gaps of 26 and 46 ms, the kernel's, not the host's); under another limit
+the bursts and rests are the kernel's own (:func:`schedule`).  The standard library only,
 so that the processes start in a few tens of milliseconds.
 
 A probe never outlives the bench, whose CPUs it takes: :func:`host_gaps` kills and reaps every
@@ -35,13 +36,40 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 GAP = 50e-6  # s: a pause of the spin longer than this is a gap (a reading takes ~0.1 us; a timer tick a few us)
 LONG_GAP = 1e-3  # s: a gap as long as a period at T = 1 ms, counted apart
-BURST = 0.5  # s: one spin, watched
-REST = 0.1  # s: between two bursts (two bursts and a rest fit below the kernel's 0.95 s of real-time threads a second)
+BURST = 0.5  # s: one spin, watched, at most
+REST = 0.1  # s: between two bursts, at least (a burst and a rest fit below the kernel's 0.95 s of real-time threads a second)
+RT_LIMIT = ("/proc/sys/kernel/sched_rt_runtime_us", "/proc/sys/kernel/sched_rt_period_us")  # the kernel's real-time limit
 FIFO_PRIORITY = 80  # haptic_bus.app.realtime.FIFO_PRIORITY (not imported: the probe loads the standard library only)
+
+
+def schedule(runtime_us: int, period_us: int) -> tuple[float, float]:
+    """A burst and the rest after it (s) that keep a spin below the kernel's real-time limit, ``runtime_us``
+    of real-time threads in every ``period_us`` (``sched_rt_runtime_us``, -1: none).  A burst and its
+    rest fit in one period, so any window of a period holds a rest's length of rest at least; a rest of
+    1.2 times the period's share left to other threads then keeps the spin below the limit.  950000 in
+    1000000 (the kernel's default) gives :data:`BURST` and :data:`REST`, fixed before, which a runtime of
+    0.5 s a second (or a period under 0.6 s) throttled."""
+    if runtime_us < 0 or runtime_us >= period_us:  # no limit: rests for the other threads all the same
+        return BURST, REST
+    period, runtime = period_us * 1e-6, runtime_us * 1e-6
+    rest = max(min(REST, period / 10), 1.2 * (period - runtime))
+    if period - rest <= 0:  # a runtime under a sixth of the period: one short burst a period
+        return runtime / 2, period
+    return min(BURST, period - rest), rest
+
+
+def _rt_limit() -> tuple[int, int]:
+    """The kernel's real-time limit (``runtime_us``, ``period_us``); its default where it cannot be read."""
+    try:
+        runtime, period = (int(Path(path).read_text()) for path in RT_LIMIT)
+    except (OSError, ValueError):
+        return 950_000, 1_000_000
+    return runtime, period
 
 
 def spin(cpu: int, seconds: float) -> dict[str, Any]:
@@ -52,13 +80,14 @@ def spin(cpu: int, seconds: float) -> dict[str, Any]:
         policy = f"SCHED_FIFO {FIFO_PRIORITY}"
     except (PermissionError, AttributeError):
         policy = "SCHED_OTHER (SCHED_FIFO not granted)"
+    burst, rest = schedule(*_rt_limit())
     gap_ns, long_ns = round(GAP * 1e9), round(LONG_GAP * 1e9)
     gaps = long = lost = longest = watched = 0
     clock = time.perf_counter_ns
     left = round(seconds * 1e9)
     while left > 0:
         previous = start = clock()
-        end = start + min(left, round(BURST * 1e9))
+        end = start + min(left, round(burst * 1e9))
         while previous < end:
             now = clock()
             step = now - previous
@@ -71,7 +100,7 @@ def spin(cpu: int, seconds: float) -> dict[str, Any]:
         watched += previous - start
         left -= previous - start
         if left > 0:
-            time.sleep(REST)
+            time.sleep(rest)
     return {"cpu": cpu, "policy": policy, "seconds": watched * 1e-9, "gaps": gaps, "gaps_over_1ms": long,
             "lost_s": lost * 1e-9, "longest_s": longest * 1e-9}
 
