@@ -51,10 +51,10 @@ def _probe_of(caller: subprocess.Popen[str]) -> int:
     """The pid of ``caller``'s probe, once Python runs in it (before, a SIGINT ends it silently)."""
     deadline = time.monotonic() + WAIT
     while time.monotonic() < deadline:
+        assert caller.poll() is None, f"the caller ended first: {caller.stderr.read() if caller.stderr else ''}"
         children = Path(f"/proc/{caller.pid}/task/{caller.pid}/children").read_text().split()
         if children and _catches_sigint(int(children[0])):
             return int(children[0])
-        assert caller.poll() is None, f"the caller ended first: {caller.stderr.read() if caller.stderr else ''}"
         time.sleep(0.02)
     raise AssertionError(f"no probe started within {WAIT} s")
 
