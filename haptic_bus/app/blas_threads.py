@@ -7,17 +7,30 @@ beside the named threads of a run, and which burnt 0.1 s of CPU each while a thr
 elementwise (no BLAS), so the pools buy nothing: before anything imports numpy, :func:`one_blas_thread`
 asks each BLAS library the wheels ship for one thread, unless the environment already names a count
 (the user's choice is kept, and passed to the run's writer and judge processes as this one's is).
+
+A value that names no count is not a choice: OpenBLAS reads its variable with C's ``atoi`` and
+starts its whole pool for anything that does not begin with a positive number (an empty
+``OPENBLAS_NUM_THREADS=``, ``0``, ``auto``: measured, numpy 2.4's OpenBLAS 0.3.31), so such a value
+is replaced by ``1`` as an absent one is.
 """
 
 from __future__ import annotations
 
 import os
+import re
 
 BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")  # the thread counts numpy's and scipy's BLAS libraries read
+_COUNT = re.compile(r"\s*\+?0*[1-9]")  # what atoi reads as a positive number: blanks, a sign, digits, not all 0
+
+
+def names_a_count(value: str | None) -> bool:
+    """Whether a BLAS library reads ``value`` (an environment variable's) as a positive thread count."""
+    return value is not None and _COUNT.match(value) is not None
 
 
 def one_blas_thread() -> None:
     """One thread for each BLAS library this process will load, where the environment names no count
     (module docstring); only before numpy is imported does it change anything."""
     for name in BLAS_THREADS:
-        os.environ.setdefault(name, "1")
+        if not names_a_count(os.environ.get(name)):
+            os.environ[name] = "1"

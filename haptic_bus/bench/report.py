@@ -207,9 +207,7 @@ def _realtime(s: dict) -> list[str]:
                     f"{s['duration_s']:g} s run): " + ", ".join(f"{k} {v:.3g}" for k, v in default["thread_cpu_s"].items())
                 + ". The control thread (MainThread) owns the bus; the writer process's share is mostly its imports."]
     if s.get("host_gaps"):
-        out += ["", "The machine's own gaps, before the runs (a thread spinning at " + s["host_gaps"][0]["policy"]
-                + " on each CPU; a gap is a pause of more than 50 us, which no process here avoids): "
-                + "; ".join(_host_gaps(g) for g in s["host_gaps"]) + "."]
+        out += ["", host_gaps_paragraph(s["host_gaps"])]
     tg, sch = s["target"], s["scheduler"]
     out += ["", f"T = {s['period_s'] * 1e3:g} ms, {s['duration_s']:g} s per run; spreads over {s['segments']} consecutive "
                 f"stretches of each run; hog: {s['hog_processes']} busy processes. The simulated drive's threads: "
@@ -221,6 +219,21 @@ def _realtime(s: dict) -> list[str]:
                     f"against {_t(tg['untuned_lateness_p99_s'])} untuned ({_met(tg['lateness_no_worse'])}); "
                     f"no start-up stall: {_met(tg['no_startup_stall'])}."]
     return out
+
+
+def host_gaps_paragraph(gaps: list[dict]) -> str:
+    """The probes' figures (:mod:`haptic_bus.bench.host_gaps`) in words: the machine's own gaps where each
+    probe spun at ``SCHED_FIFO``, else what they are."""
+    from haptic_bus.bench.host_gaps import unprivileged
+
+    policies = ", ".join(dict.fromkeys(g["policy"] for g in gaps))
+    if unprivileged(gaps):
+        head = (f"Gaps of a thread spinning on each CPU before the runs, at {policies}: every process of its CPU "
+                "took turns with it, so they are not the machine's own (a gap is a pause of more than 50 us): ")
+    else:
+        head = (f"The machine's own gaps, before the runs (a thread spinning at {policies} on each CPU; a gap is a "
+                "pause of more than 50 us, which no process here avoids): ")
+    return head + "; ".join(_host_gaps(g) for g in gaps) + "."
 
 
 def _host_gaps(g: dict) -> str:

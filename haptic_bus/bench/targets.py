@@ -244,7 +244,10 @@ def _beside_lateness(got: dict, quantile: str, section: dict | None) -> str:
         said.append(f"python-can's floor on the same cycle: {floor:.3g} x")
     gaps = section.get("host_gaps") if section else None
     if gaps:
-        said.append("the machine's gaps > 1 ms a second, per CPU: "
+        from haptic_bus.bench.host_gaps import unprivileged
+
+        said.append(("the gaps of a spin not granted SCHED_FIFO (other processes' turns in them)" if unprivileged(gaps)
+                     else "the machine's gaps") + " > 1 ms a second, per CPU: "
                     + ", ".join(f"{g['gaps_over_1ms'] / g['seconds']:.2g}" for g in gaps)
                     + f" (longest {max(g['longest_s'] for g in gaps) * 1e3:.2g} ms)")
     return "; ".join(said)
