@@ -19,6 +19,7 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
+from drives.os_threads import show_names
 from haptic_bus.console import log_to_stderr
 from haptic_bus.errors import DriveError, ParameterError
 from sim_drive.eds import eds_path
@@ -164,7 +165,8 @@ def run_axes(args: argparse.Namespace) -> int:
 
 
 def started(sim: Any) -> bool:
-    """Start ``sim`` (a slave or the multi-axis device); False after one line on stderr if its bus cannot be opened."""
+    """Start ``sim`` (a slave or the multi-axis device), its threads named for the OS; False after one line on
+    stderr if its bus cannot be opened."""
     import can
 
     try:
@@ -175,6 +177,7 @@ def started(sim: Any) -> bool:
     except (can.CanError, OSError, ValueError) as exc:
         print(f"{PROG}: error: cannot open the bus: {exc}", file=sys.stderr)
         return False
+    show_names()  # sim-drive-5, sim-bridge, ...: top -H and /proc/PID/task/*/comm say which thread is which
     return True
 
 

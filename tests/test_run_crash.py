@@ -159,6 +159,7 @@ def _trial(multicast: tuple[str, int], sim_process: Any, out: Path, seed: int, s
     group, port = multicast
     sim = sim_process("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}", *sim_args)
     sim.wait_for_line("serving", START_WAIT)
+    assert not _unnamed_threads(sim.process.pid)  # the simulator's threads are named too (sim-drive-N, sim-bridge)
     run = _start_run(multicast, out, *run_args)
     try:
         killed = _kill_while_cycling(run, out / record, random.Random(seed))

@@ -11,7 +11,8 @@ asks each BLAS library the wheels ship for one thread, unless the environment al
 A value that names no count is not a choice: OpenBLAS reads its variable with C's ``atoi`` and
 starts its whole pool for anything that does not begin with a positive number (an empty
 ``OPENBLAS_NUM_THREADS=``, ``0``, ``auto``: measured, numpy 2.4's OpenBLAS 0.3.31), so such a value
-is replaced by ``1`` as an absent one is.
+is replaced by ``1`` as an absent one is.  A count the library reads after its own variable (OpenBLAS:
+``GOTO_NUM_THREADS``, ``OMP_NUM_THREADS``; MKL: ``OMP_NUM_THREADS``) is the user's choice too.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ from __future__ import annotations
 import os
 import re
 
-BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")  # the thread counts numpy's and scipy's BLAS libraries read
+# the thread counts numpy's and scipy's BLAS libraries read, each with the variables it reads after it
+BLAS_THREADS = {"OPENBLAS_NUM_THREADS": ("GOTO_NUM_THREADS", "OMP_NUM_THREADS"), "MKL_NUM_THREADS": ("OMP_NUM_THREADS",)}
 _COUNT = re.compile(r"\s*\+?0*[1-9]")  # what atoi reads as a positive number: blanks, a sign, digits, not all 0
 
 
@@ -31,6 +33,6 @@ def names_a_count(value: str | None) -> bool:
 def one_blas_thread() -> None:
     """One thread for each BLAS library this process will load, where the environment names no count
     (module docstring); only before numpy is imported does it change anything."""
-    for name in BLAS_THREADS:
-        if not names_a_count(os.environ.get(name)):
+    for name, after in BLAS_THREADS.items():
+        if not any(names_a_count(os.environ.get(each)) for each in (name, *after)):
             os.environ[name] = "1"
