@@ -16,8 +16,9 @@ readings longer than :data:`GAP`, their count, their sum and the longest (s).  I
 :data:`BURST` with :data:`REST` between them (not watched): the kernel runs real-time threads at most
 0.95 s of every second (``sched_rt_runtime_us``), and a spin longer than that was stopped for the
 rest of the second (gaps of 26 and 46 ms, the kernel's, not the host's); under another limit
-the bursts and rests are the kernel's own (:func:`schedule`).  The standard library only,
-so that the processes start in a few tens of milliseconds.
+the bursts and rests are the kernel's own (:func:`schedule`).  The module imports the standard
+library only; a probe still starts in about 0.14 s here, half of it the ``haptic_bus.bench``
+package's own imports, and each spins its own ``SECONDS`` from its start.
 
 A probe never outlives the bench, whose CPUs it takes: :func:`host_gaps` kills and reaps every
 probe still running when it ends in any way (Ctrl-C, an error, a timeout), and a probe asks the kernel
