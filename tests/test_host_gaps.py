@@ -148,6 +148,19 @@ def test_the_report_calls_gaps_the_machines_own_only_at_sched_fifo(fifo: bool) -
     assert "CPU 0: 3 in 1 s, 1 over 1 ms" in paragraph and "CPU 1: 3 in 1 s" in paragraph and gaps[0]["policy"] in paragraph
 
 
+def test_gaps_that_could_not_be_measured_leave_the_lateness_rows_their_floor() -> None:
+    """A probe that failed (the section keeps why, a str, and runs on): the rows say the floor's figure and
+    nothing of gaps."""
+    from haptic_bus.bench.targets import issue_26
+
+    figures = {"core_ratio_target": 1.5, "lateness_ratio_target": 2.0, "overrun_target": 0.005, "delay_target": 1.5,
+               "quiet": {"lateness_p99_ratio": 1.2, "floor_lateness_p99_ratio": 1.1}}
+    rows = issue_26({"realtime": {"host_gaps": "RuntimeError: the host gap probe ended with status 1",
+                                  "issue_26": figures}})
+    (note,) = [r["note"] for r in rows if r["what"] == "start lateness p99 / the bare clock's, quiet"]
+    assert note == "python-can's floor on the same cycle: 1.1 x"
+
+
 def _most_spun(burst: float, rest: float, period: float) -> float:
     """The most time a spin of ``burst`` s on, ``rest`` s off spends on in any window of ``period`` s (the
     window's start taken at every point where the on-time can peak: a burst's start, or the window's end

@@ -206,7 +206,9 @@ def _realtime(s: dict) -> list[str]:
         out += ["", "Where the controller process's CPU went (default set-up, quiet; CPU seconds per thread over the "
                     f"{s['duration_s']:g} s run): " + ", ".join(f"{k} {v:.3g}" for k, v in default["thread_cpu_s"].items())
                 + ". The control thread (MainThread) owns the bus; the writer process's share is mostly its imports."]
-    if s.get("host_gaps"):
+    if isinstance(s.get("host_gaps"), str):
+        out += ["", f"The machine's own gaps were not measured: {s['host_gaps']}."]
+    elif s.get("host_gaps"):
         out += ["", host_gaps_paragraph(s["host_gaps"])]
     tg, sch = s["target"], s["scheduler"]
     out += ["", f"T = {s['period_s'] * 1e3:g} ms, {s['duration_s']:g} s per run; spreads over {s['segments']} consecutive "

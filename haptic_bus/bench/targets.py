@@ -243,7 +243,7 @@ def _beside_lateness(got: dict, quantile: str, section: dict | None) -> str:
     if floor is not None:
         said.append(f"python-can's floor on the same cycle: {floor:.3g} x")
     gaps = section.get("host_gaps") if section else None
-    if gaps:
+    if gaps and not isinstance(gaps, str):  # a str: why they were not measured (the section's paragraph says it)
         from haptic_bus.bench.host_gaps import unprivileged
 
         said.append(("the gaps of a spin not granted SCHED_FIFO (other processes' turns in them)" if unprivileged(gaps)
