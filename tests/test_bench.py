@@ -160,6 +160,10 @@ def test_smoke_bench_ratios_are_finite_and_positive(smoke_run: SmokeRun) -> None
         floor = s["realtime"]["runs"][load]["default"].get("floor", {})
         if floor.get("available", True):  # python-can alone, the same frames, beside the default run
             assert _finite_positive(floor["core_share"]) and floor["cycles"] > 0 and floor["lateness_s"]["p99"] >= 0
+            controller = s["realtime"]["runs"][load]["default"]["controller"]
+            (pair,) = s["realtime"]["runs"][load]["default"]["core_pairs"]["pairs"]  # one pair in the smoke: that run
+            assert (pair["core_share"], pair["floor_core_share"]) == (controller["core_share"]["median"], floor["core_share"])
+            assert pair["ratio"] == controller["core_share"]["median"] / floor["core_share"]
     gaps = s["realtime"]["host_gaps"]  # the machine's own gaps, one spinning process per CPU, 0.2 s each (smoke)
     assert [g["cpu"] for g in gaps] == sorted(os.sched_getaffinity(0))
     for g in gaps:  # spun 0.2 s in all, ending at the first reading past it (a gap, or under 50 us, later)
