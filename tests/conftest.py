@@ -119,6 +119,10 @@ hypothesis.settings.load_profile("default")
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "vcan0: needs the SocketCAN interface vcan0 (skipped where the kernel has none)")
+    if not hasattr(config, "workerinput") and (config.getoption("numprocesses", None) or 0):  # xdist's controller
+        from tests.bytecode_warmup import warm
+
+        warm(config, pathlib.Path(__file__).resolve().parents[1])  # once, before the workers start (its docstring)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
