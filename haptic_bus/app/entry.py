@@ -14,7 +14,6 @@ This module imports nothing of the project but :mod:`~haptic_bus.app.early_stop`
 :mod:`~haptic_bus.app.blas_threads` (the standard library only), so the window left is Python's
 own start-up.
 
-
 Before anything imports numpy, it asks for one BLAS thread (:mod:`~haptic_bus.app.blas_threads`).
 """
 

@@ -253,8 +253,9 @@ def core_pairs(controller: dict, floor: dict, again: Callable[[], dict], floor_a
                count: int) -> dict:
     """The control process's core share over python-can's floor's, in ``count`` pairs measured side by side: the
     first pair given (``controller``, ``floor``: a run's figures and the floor's right after it), each further one a
-    run (``again``) and the floor right after it (``floor_again``).  Each pair's shares and ratio, and the ratios'
-    spread (a pair whose run or floor has no share, a run refused at pre-flight, counts in ``pairs`` only)."""
+    run (``again``) and the floor right after it (``floor_again``).  Each pair's shares and ratio, and the median of
+    the ratios (a pair whose run or floor has no share, a run refused at pre-flight, counts in ``pairs`` only, with
+    how its run ended)."""
     pairs = []
     for k in range(count):
         run, beside = (controller, floor) if k == 0 else (again(), floor_again())
