@@ -34,3 +34,13 @@ def test_a_pair_without_a_ratio_is_shown_in_place_and_named_in_the_rows_note() -
     assert "the median of 1 of 3 pairs" in row["note"]
     assert "pair 2: its run ended with 'pre-flight refused'" in row["note"]
     assert "pair 3: no floor figure (the floor process exited 1)" in row["note"]
+
+
+def test_a_further_pair_whose_run_raises_keeps_the_pairs_before_it() -> None:
+    def again() -> dict:
+        raise RuntimeError("the simulated drive exited")
+
+    paired = thread_tuning.core_pairs(run_with(0.26), {"core_share": 0.2}, again, lambda: {"core_share": 0.2}, 2)
+    assert paired["ratio"] == 0.26 / 0.2  # before: the exception left the section's entry unavailable, pair 1 lost
+    assert (paired["pairs"][1]["ratio"], paired["pairs"][1]["run"]) == (None, "not run")
+    assert paired["pairs"][1]["error"] == "RuntimeError: the simulated drive exited"

@@ -254,11 +254,18 @@ def core_pairs(controller: dict, floor: dict, again: Callable[[], dict], floor_a
     """The control process's core share over python-can's floor's, in ``count`` pairs measured side by side: the
     first pair given (``controller``, ``floor``: a run's figures and the floor's right after it), each further one a
     run (``again``) and the floor right after it (``floor_again``).  Each pair's shares and ratio, and the ratios'
-    median (a pair whose run or floor has no share, a run refused at pre-flight, counts in ``pairs`` only, with why:
-    its run's exit reason and error, or the floor's reason)."""
+    median (a pair whose run or floor has no share, a run refused at pre-flight or one that raised, counts in ``pairs``
+    only, with why: its run's exit reason and error, or the floor's reason)."""
     pairs = []
     for k in range(count):
-        run, beside = (controller, floor) if k == 0 else (again(), floor_again())
+        if k == 0:
+            run, beside = controller, floor
+        else:
+            try:  # a further pair that fails keeps the pairs and the run measured before it (and says why)
+                run = again()
+            except Exception as exc:
+                run = {"exit_reason": "not run", "error": f"{type(exc).__name__}: {exc}"}
+            beside = floor_again()
         share, floor_share = run.get("core_share", {}).get("median"), beside.get("core_share")
         pairs.append({"core_share": share, "floor_core_share": floor_share,
                       "ratio": share / floor_share if share and floor_share else None,
