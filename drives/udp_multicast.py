@@ -106,13 +106,17 @@ class FilteredMulticastBus(UdpMulticastBus):
             return
         exact: set[int] = set()
         masked: list[tuple[int, int, bool | None]] = []
-        for f in filters:  # once: python-can's other backends take filters given as an iterator too
-            if "extended" in f and f["extended"] not in (True, False):  # None: equal to no frame's kind, so python-can
-                continue  # never matches it (absent, the key takes both kinds)
-            if f["can_mask"] == _STANDARD_MASK and f.get("extended") is False:
-                exact.add(f["can_id"] & _STANDARD_MASK)
-            else:
-                masked.append((f["can_id"] & f["can_mask"], f["can_mask"], f.get("extended")))
+        try:
+            for f in filters:  # once: python-can's other backends take filters given as an iterator too
+                if "extended" in f and f["extended"] not in (True, False):  # None: equal to no frame's kind, so
+                    continue  # python-can never matches it (absent, the key takes both kinds)
+                if f["can_mask"] == _STANDARD_MASK and f.get("extended") is False:
+                    exact.add(f["can_id"] & _STANDARD_MASK)
+                else:
+                    masked.append((f["can_id"] & f["can_mask"], f["can_mask"], f.get("extended")))
+        except (KeyError, TypeError) as exc:  # a filter python-can could not apply either (it would fail at a receive)
+            raise ValueError(f"can_filters: each filter a dict of integers can_id and can_mask (and extended), "
+                             f"not {filters!r} ({type(exc).__name__}: {exc})") from exc
         self._wanted, self._masked = frozenset(exact), tuple(masked)
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import compileall
 import pathlib
+import sys
 
 import pytest
 
@@ -21,9 +22,13 @@ PACKAGES = ("haptic_bus", "drives", "sim_drive")
 
 
 def warm(config: pytest.Config, root: pathlib.Path) -> None:
-    """The bytecode of the project's :data:`PACKAGES` under ``root`` and of its tests' modules, where missing or stale."""
+    """The bytecode of the project's :data:`PACKAGES` under ``root`` and of its tests' modules, where missing or stale;
+    none where Python writes none (``PYTHONDONTWRITEBYTECODE``, ``-B``), and nothing said where it cannot write (a
+    read-only tree: the workers read the sources, as pytest and Python do there)."""
+    if sys.dont_write_bytecode:  # the user's choice: pytest and Python write no bytecode either
+        return
     for package in PACKAGES:
-        compileall.compile_dir(root / package, quiet=1)
+        compileall.compile_dir(root / package, quiet=2)  # 2: no line per file it cannot write (an import says more)
     try:
         from _pytest.assertion import assertstate_key
         from _pytest.assertion.rewrite import PYC_TAIL, _read_pyc, _rewrite_test, _write_pyc, get_cache_dir
@@ -37,6 +42,9 @@ def warm(config: pytest.Config, root: pathlib.Path) -> None:
         pyc = get_cache_dir(path) / (path.name[:-3] + PYC_TAIL)
         if _read_pyc(path, pyc) is not None:
             continue
+        try:
+            pyc.parent.mkdir(parents=True, exist_ok=True)  # parents: under a PYTHONPYCACHEPREFIX too
+        except OSError:  # a read-only tree: pytest's own hook then writes nothing either
+            return
         source_hash, code = _rewrite_test(path, config)
-        pyc.parent.mkdir(exist_ok=True)
-        _write_pyc(state, code, source_hash, pyc)
+        _write_pyc(state, code, source_hash, pyc)  # False (and nothing written) where it cannot

@@ -19,6 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drives.bus_config import open_bus
+from drives.errors import DriveError
 from haptic_bus.testing.buses import unique_multicast
 
 STANDARD, EXTENDED = 0x7FF, 0x1FFFFFFF
@@ -82,3 +83,14 @@ def test_filters_given_as_an_iterator_are_all_kept(bus: can.BusABC) -> None:
     kept = {can_id: bus._unpack(pack_message(can.Message(arbitration_id=can_id, is_extended_id=False)), 0.0)  # type: ignore[attr-defined]
             for can_id in (0x185, 0x85, 0x186)}
     assert {can_id for can_id, message in kept.items() if message is not None} == {0x185, 0x85}
+
+
+@pytest.mark.parametrize("wanted", ['[{"can_id": 1, "can_mask": 2047}]', [{"can_id": 0x185}], [0x185],
+                                    [{"can_id": "0x185", "can_mask": 0x7FF}]], ids=["text", "no-mask", "int", "text-id"])
+def test_filters_python_can_cannot_apply_are_a_bus_error_in_one_line(wanted: object) -> None:
+    """``--bus-option can_filters=[...]`` gives a string (python-can would iterate its characters at the first frame):
+    opening the bus fails as a bus error the command line prints in one line, not a TypeError's traceback."""
+    group, port = unique_multicast()
+    with pytest.raises(DriveError, match=r"cannot open the CAN bus: can_filters: each filter a dict") as info:
+        open_bus(interface="udp_multicast", channel=group, port=port, can_filters=wanted)
+    assert "\n" not in str(info.value)

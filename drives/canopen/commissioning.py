@@ -191,14 +191,17 @@ class Commissioning:
     def _refuse_an_enabled_drive(self) -> bool:
         """A drive already in OPERATION ENABLED is driven by someone else (this master always
         leaves it disabled, and the drive's own watchdog stops it when a master dies).  Asked
-        before the NMT reset, which would itself abort that connection.  Whether it answered."""
+        before the NMT reset, which would itself abort that connection.  Whether it answered (an SDO abort, as a
+        device without 0x6041 sends, is an answer)."""
         sdo = self.node.sdo
         saved = sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES
         sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES = self.settings.boot_timeout, 1
         try:
             state = decode_statusword(self.sdo.read_int(STATUSWORD.index, 0, DataType.UNSIGNED16))
-        except DriveError:
+        except DriveTimeout:
             return False  # no answer (yet): reaching the node says why
+        except DriveError:
+            return True  # an abort or a malformed answer is an answer: not a CiA-402 drive, 0x1000 will say
         finally:
             sdo.RESPONSE_TIMEOUT, sdo.MAX_RETRIES = saved
         if state is State.OPERATION_ENABLED:

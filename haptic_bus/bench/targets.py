@@ -204,7 +204,7 @@ def issue_26(sections: dict) -> list[dict]:
         rows.append(_row(1, f"control process CPU / python-can's floor, 1 axis, {load}", _core_ratio_text(got),
                          f"<= {figures['core_ratio_target']:g} x",
                          None if ratio is None else ratio <= figures["core_ratio_target"],
-                         note="" if ratio is None else f"floor {got['floor_core_share']:.3g} of a core"))
+                         note="" if ratio is None else f"floor {got['floor_core_share']:.3g} of a core{_unmeasured(got)}"))
         for quantile in ("p99", "p99.9"):
             late = got.get(f"lateness_{quantile}_ratio")
             rows.append(_row(2, f"start lateness {quantile} / the bare clock's, {load}", "-" if late is None else f"{late:.3g}",
@@ -222,7 +222,7 @@ def issue_26(sections: dict) -> list[dict]:
                          _core_ratio_text(got), f"<= {figures['core_ratio_target']:g} x",
                          None if ratio is None else ratio <= figures["core_ratio_target"],
                          note="" if ratio is None else f"floor {got['floor_core_share']:.3g} of a core, writer process "
-                                                       f"{got.get('writer_cpu_s')} s"))
+                                                       f"{got.get('writer_cpu_s')} s{_unmeasured(got)}"))
         late = got.get("lateness_p99_ratio")
         rows.append(_row(2, f"start lateness p99 / the bare clock's, 3 axes, {load}", "-" if late is None else f"{late:.3g}",
                          f"<= {figures['lateness_ratio_target']:g} x",
@@ -236,12 +236,22 @@ def issue_26(sections: dict) -> list[dict]:
 
 
 def _core_ratio_text(got: dict) -> str:
-    """A core-share ratio as measured: the median of its pairs, each pair's after it (one pair: the ratio alone)."""
+    """A core-share ratio as measured: the median of its pairs, each pair's after it in order, ``-`` for one without
+    a ratio (one pair: the ratio alone)."""
     ratios = got.get("core_ratios")
-    if not ratios:
+    if not ratios or got.get("core_ratio") is None:
         return "-"
-    each = f" ({', '.join(f'{r:.3g}' for r in ratios)})" if len(ratios) > 1 else ""
+    each = f" ({', '.join('-' if r is None else f'{r:.3g}' for r in ratios)})" if len(ratios) > 1 else ""
     return f"{got['core_ratio']:.3g}{each}"
+
+
+def _unmeasured(got: dict) -> str:
+    """The pairs a core-share ratio's median leaves out, and why (for the row's note), or nothing."""
+    missing = got.get("core_pairs_unmeasured") or []
+    if not missing:
+        return ""
+    return (f"; the median of {len(got['core_ratios']) - len(missing)} of {len(got['core_ratios'])} pairs ("
+            + "; ".join(missing) + ")")
 
 
 def _beside_lateness(got: dict, quantile: str, section: dict | None) -> str:

@@ -253,16 +253,24 @@ def core_pairs(controller: dict, floor: dict, again: Callable[[], dict], floor_a
                count: int) -> dict:
     """The control process's core share over python-can's floor's, in ``count`` pairs measured side by side: the
     first pair given (``controller``, ``floor``: a run's figures and the floor's right after it), each further one a
-    run (``again``) and the floor right after it (``floor_again``).  Each pair's shares and ratio, and the median of
-    the ratios (a pair whose run or floor has no share, a run refused at pre-flight, counts in ``pairs`` only, with
-    how its run ended)."""
+    run (``again``) and the floor right after it (``floor_again``).  Each pair's shares and ratio, and the ratios'
+    median (a pair whose run or floor has no share, a run refused at pre-flight or one that raised, counts in ``pairs``
+    only, with why: its run's exit reason and error, or the floor's reason)."""
     pairs = []
     for k in range(count):
-        run, beside = (controller, floor) if k == 0 else (again(), floor_again())
+        if k == 0:
+            run, beside = controller, floor
+        else:
+            try:  # a further pair that fails keeps the pairs and the run measured before it (and says why)
+                run = again()
+            except Exception as exc:
+                run = {"exit_reason": "not run", "error": f"{type(exc).__name__}: {exc}"}
+            beside = floor_again()
         share, floor_share = run.get("core_share", {}).get("median"), beside.get("core_share")
         pairs.append({"core_share": share, "floor_core_share": floor_share,
                       "ratio": share / floor_share if share and floor_share else None,
-                      **({} if share else {"run": run.get("exit_reason"), "error": run.get("error")})})
+                      **({} if share else {"run": run.get("exit_reason"), "error": run.get("error")}),
+                      **({} if floor_share else {"floor": beside.get("reason")})})
     ratios = [pair["ratio"] for pair in pairs if pair["ratio"] is not None]
     return {"pairs": pairs, "ratio": float(np.median(ratios)) if ratios else None}
 
@@ -439,6 +447,13 @@ def issue_26_figures(runs: dict) -> dict:
     return out
 
 
+def _unmeasured(k: int, pair: dict) -> str:
+    """Why pair ``k`` of :func:`core_pairs` has no ratio: its run's exit reason, else the floor's reason."""
+    if not pair.get("core_share"):
+        return f"pair {k}: its run ended with {pair.get('run') or 'no core share'!r}"
+    return f"pair {k}: no floor figure ({pair.get('floor') or 'no core share'})"
+
+
 def _ratios(entry: dict) -> dict:
     """One default-set-up entry's ratios: core share over the floor's (the median of its pairs, :func:`core_pairs`),
     lateness over the bare clock's (the floor's too), overrun share, observed delay."""
@@ -447,7 +462,10 @@ def _ratios(entry: dict) -> dict:
     paired = entry.get("core_pairs", {})
     if paired.get("ratio") is not None:  # the median of the pairs' ratios (CORE_PAIRS), each pair's beside it
         measured = [pair for pair in paired["pairs"] if pair["ratio"] is not None]
-        figures["core_ratio"], figures["core_ratios"] = paired["ratio"], [pair["ratio"] for pair in measured]
+        # every pair in order, None where it has no ratio, and why: a median of the pairs left is not one of all
+        figures["core_ratio"], figures["core_ratios"] = paired["ratio"], [pair["ratio"] for pair in paired["pairs"]]
+        figures["core_pairs_unmeasured"] = [_unmeasured(k, pair) for k, pair in enumerate(paired["pairs"], 1)
+                                            if pair["ratio"] is None]
         figures["floor_core_share"] = float(np.median([pair["floor_core_share"] for pair in measured]))
         figures["writer_cpu_s"] = controller.get("thread_cpu_s", {}).get(WRITER)
     late, bare_late, floor_late = controller.get("lateness_s", {}), bare.get("lateness_s", {}), floor.get("lateness_s", {})
