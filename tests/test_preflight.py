@@ -45,14 +45,15 @@ def test_a_quiet_machine_is_judged_at_its_measured_delay() -> None:
 def test_a_stall_that_would_trip_the_rpdo_deadline_refuses_naming_the_period_that_holds_it() -> None:
     """A 4 ms stall: its catch-up (0.1 ms exchanges) makes 4 cycles start more than T late, within the 5 of 500
     allowed, but the gap it leaves between two cycles (5 ms), x1.5, reaches an RPDO deadline of 5 periods (5 ms):
-    refused, naming the T whose deadline holds it, 1.5 x 5 ms / 5 = 1.5 ms (on the 0.25 ms grid)."""
+    refused, naming the T whose deadline holds it: 1.5 x 5 ms / 5 = 1.5 ms reaches it too (5 periods of 1.5 ms,
+    7.5 ms: refused, judged again at it), so the next on the 0.25 ms grid, 1.75 ms."""
     profile = load_profile("cia402-handle")
     report = judge(timing(np.zeros(500), gap_at=250, gap=4e-3), profile.gate(), profile.compiled_scene(), "guard", 0.005, 5)
     assert not report.holdable and report.overruns == 1 and report.busy_over_period == 1
     assert report.longest_gap == pytest.approx(5e-3)
-    expected = np.ceil(STALL_MARGIN * 5e-3 / 5 / PERIOD_GRID - 1e-9) * PERIOD_GRID
-    assert report.smallest_period == pytest.approx(expected) and expected == pytest.approx(1.5e-3)
-    assert "this machine holds T >= 1.5 ms" in report.reason and "a gap of 5 ms" in report.reason
+    expected = np.floor(STALL_MARGIN * 5e-3 / 5 / PERIOD_GRID + 1) * PERIOD_GRID  # strictly above 1.5 ms
+    assert report.smallest_period == pytest.approx(expected) and expected == pytest.approx(1.75e-3)
+    assert "this machine holds T >= 1.75 ms" in report.reason and "a gap of 5 ms" in report.reason
 
 
 def test_a_machine_slower_than_the_period_refuses() -> None:

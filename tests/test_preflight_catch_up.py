@@ -3,11 +3,22 @@ replaying every grid point up to it, and one the same measurement holds."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
+from drives.safety import SafetySettings
 from haptic_bus.app import preflight
-from haptic_bus.app.preflight import PERIOD_GRID, Timing, allowed_overruns, catch_up_overruns, held_period
+from haptic_bus.app.preflight import (
+    PERIOD_GRID,
+    PreflightReport,
+    Timing,
+    allowed_overruns,
+    catch_up_overruns,
+    held_period,
+    judge_delay,
+)
 
 T = 1e-3
 
@@ -41,3 +52,41 @@ def test_a_stall_of_a_minute_names_the_shortest_period_replaying_few_of_the_grid
     assert named == pytest.approx(10.00025, abs=1e-9)
     at, below = catch_up_overruns(timing, np.array([named, named - PERIOD_GRID]))
     assert at <= allowed < below
+
+
+def _judged(timing: Timing, watchdog_at: Callable[[float], float], periods: int) -> PreflightReport:
+    return judge_delay(timing, 1.0, lambda delay: True, "guard", watchdog_at(timing.period), periods,
+                       watchdog_at=watchdog_at)
+
+
+def _replayed(timing: Timing, period: float) -> Timing:
+    """The same measurement judged as if its ``T`` had been ``period``."""
+    return Timing(period, timing.lateness, timing.starts, timing.exchange, timing.overruns)
+
+
+@pytest.mark.parametrize(("safety", "stall", "named"), [
+    # a 4 ms gap, x1.5 = 6 ms: at 1.5 ms a deadline of 4 periods is 6 ms, which the gap reaches (refused)
+    (SafetySettings(rpdo_deadline_periods=4, consumer_ms=1000), 3e-3, 1.75e-3),
+    # a 4 ms gap, x1.5 = 6 ms: at 1.25 ms the drive's deadline is 5 x 1.25 = 6.25 -> 6 ms, whole ms (refused)
+    (SafetySettings(rpdo_deadline_periods=5, consumer_ms=1000), 3e-3, 1.5e-3),
+    # a 51 ms gap, x1.5 = 76.5 ms: a deadline of 30 periods holds it from 2.75 ms on, but the heartbeat consumer's
+    # slack (90 - 20 = 70 ms) does not grow with T: no T holds it
+    (SafetySettings(), 50e-3, None),
+])
+def test_the_period_named_for_a_stall_is_one_whose_watchdog_the_same_gap_does_not_reach(
+        safety: SafetySettings, stall: float, named: float | None) -> None:
+    """Judged again with ``T`` set to the period named, the same measurement holds (the rule refuses a gap
+    that, x1.5, reaches the watchdog: the period named must put it strictly under, with the deadline the drive
+    keeps, whole ms, and the slack of its heartbeat consumer, which a longer ``T`` does not lengthen); where no
+    ``T`` does, none is named and the refusal says to lengthen the watchdog."""
+    timing = _stalled(stall)
+    report = _judged(timing, safety.canopen_stall, safety.rpdo_deadline_periods)
+    assert not report.holdable
+    if named is None:
+        assert report.smallest_period is None
+        assert report.reason.endswith(f"a gap of {(stall + T) * 1e3:.3g} ms between cycles measured, x1.5, would "
+                                      "fault the drive at any T: lengthen the drive's watchdog ([safety])")
+        return
+    assert report.smallest_period == pytest.approx(named, abs=1e-12)
+    again = _judged(_replayed(timing, named), safety.canopen_stall, safety.rpdo_deadline_periods)
+    assert again.holdable, again.reason

@@ -32,7 +32,9 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
 * **the watchdogs** -- a cycle held up longer than the drive's receive watchdog (the RPDO
   deadline, the heartbeat consumer's slack, the Modbus watchdog) faults the drive.  If the
   longest stall measured, times :data:`STALL_MARGIN`, reaches it, the run is refused, naming the
-  smallest period ``T`` whose watchdog (a deadline counted in periods) would hold that stall;
+  smallest period ``T`` whose watchdog (a deadline counted in periods, as the drive keeps it, whole ms)
+  would stay above that stall, or none where the heartbeat consumer's slack, which a longer ``T`` does
+  not lengthen, binds first (:func:`_holding_stall`);
 * **the gate at the measured delay** -- the loop delay the gate assumed plus the p99 of the delay
   each cycle adds, in samples (:func:`delay_added`): the larger of its own lateness (how late it
   started after it could have: its deadline, or the end of the cycle before when that ran past
@@ -231,13 +233,16 @@ def passes_at(gate: PassivityGate, scene: CompiledScene) -> Callable[[float], bo
 
 
 def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float], bool], layer: str, watchdog: float,
-                deadline_periods: int | None, bus_floor: float = 0.0, on_arrival: bool = False) -> PreflightReport:
+                deadline_periods: int | None, bus_floor: float = 0.0, on_arrival: bool = False,
+                watchdog_at: Callable[[float], float] | None = None) -> PreflightReport:
     """:func:`judge` for any gate: ``assumed_delay`` (samples) is the delay it judged with,
     ``passes_at(delay)`` its verdict on the scene at another loop delay (samples).  ``bus_floor``
     (s): the shortest ``T`` the bus carries (CANopen's load ceiling, checked before the bus was
     opened, so at most ``T``; 0 for Modbus): the period named is never shorter.  ``on_arrival``: a drive
     applies its target as it arrives (:data:`~haptic_bus.profile.device.ON_ARRIVAL`), so the loop's
-    delay is at least the exchange's p99 (module docstring)."""
+    delay is at least the exchange's p99 (module docstring).  ``watchdog_at(T)``: the drive's watchdog (s) at
+    another ``T`` (the RPDO deadline in whole ms, and the heartbeat consumer's slack that a longer ``T`` does not
+    lengthen); None: ``deadline_periods`` x ``T`` where a deadline binds, else ``watchdog``."""
     period = timing.period
     late, cycle = percentiles(timing.lateness), percentiles(timing.exchange)
     gap = float(np.max(np.diff(timing.starts))) if timing.starts.size > 1 else period
@@ -252,9 +257,9 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     overlong = int(np.count_nonzero(busy > period))
     caught = int(catch_up_overruns(timing, np.array([period]))[0])
     stalled = STALL_MARGIN * gap >= watchdog  # the longest gap measured would fault the drive at this T
-    # the shortest T whose watchdog also holds that gap: a deadline in periods grows with T, another does not
-    holding = (max(holds, _on_grid(STALL_MARGIN * gap / deadline_periods)) if deadline_periods else None) if stalled \
-        else holds
+    holding = _holding_stall(holds, STALL_MARGIN * gap, deadline_periods, watchdog_at) if stalled else holds
+    unheld = f"; and a gap of {gap * 1e3:.3g} ms between cycles measured, x{STALL_MARGIN:g}, would fault the drive at " \
+        "any T: lengthen the drive's watchdog ([safety])" if holding is None else ""
 
     def report(holdable: bool, reason: str, smallest: float | None = holds, passive: bool | None = None) -> PreflightReport:
         if not holdable and smallest is not None:
@@ -264,20 +269,20 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
 
     if cycle["p50"] > period:  # the loop cannot keep its period: it falls further behind every cycle
         return report(False, f"refused: one exchange with the drive takes {cycle['p50'] * 1e3:.3g} ms (median), more "
-                             f"than T = {period * 1e3:g} ms")
+                             f"than T = {period * 1e3:g} ms{unheld}", holding)
     if holds > period and overlong > allowed:
         return report(False, f"refused: {overlong} of {busy.size} cycles were busy (late start plus exchange) longer "
                              f"than T = {period * 1e3:g} ms, the longest {busy[0] * 1e3:.3g} ms: more than "
                              f"{OVERRUN_SHARE:.1%} of a run's cycles would overrun (at most {allowed} of {busy.size} "
-                             f"at {CONFIDENCE:.0%} confidence)", holding)
+                             f"at {CONFIDENCE:.0%} confidence){unheld}", holding)
     if holds > period:
         return report(False, f"refused: {caught} of {busy.size} cycles started more than T = {period * 1e3:g} ms late, "
                              f"catching up after the longest busy cycle ({busy[0] * 1e3:.3g} ms) at "
                              f"{(period - cycle['p50']) * 1e3:.3g} ms a cycle (an exchange takes {cycle['p50'] * 1e3:.3g} "
                              f"ms, median): more than {OVERRUN_SHARE:.1%} of a run's cycles would overrun (at most "
-                             f"{allowed} of {busy.size} at {CONFIDENCE:.0%} confidence)", holding)
+                             f"{allowed} of {busy.size} at {CONFIDENCE:.0%} confidence){unheld}", holding)
     if stalled:
-        where = f" (RPDO deadline {deadline_periods} periods)" if deadline_periods else \
+        where = f" (RPDO deadline {deadline_periods} periods)" if holding is not None else \
             "; lengthen the drive's watchdog ([safety])"
         return report(False, f"refused: a gap of {gap * 1e3:.3g} ms between cycles measured, x{STALL_MARGIN:g}, reaches "
                              f"the drive's watchdog of {watchdog * 1e3:.3g} ms: the drive would fault{where}", holding)
@@ -291,6 +296,25 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     return report(False, f"refused: the scene is not passive at the measured loop delay of {observed:.3g} samples "
                          f'and [passivity] layer = "off"; use layer "guard" or "bound", a softer wall{shorter}',
                   passive=False)
+
+
+def _holding_stall(holds: float, stall: float, deadline_periods: int | None,
+                   watchdog_at: Callable[[float], float] | None) -> float | None:
+    """The shortest ``T`` on the grid, at least ``holds``, whose watchdog a stall of ``stall`` s (the gap measured,
+    x :data:`STALL_MARGIN`) stays under -- strictly, as the rule refuses a gap that reaches it -- or None: only a
+    deadline counted in periods grows with ``T``, and ``watchdog_at`` (the deadline in whole ms, at most the
+    heartbeat consumer's slack) may stop growing before it holds the stall."""
+    if not deadline_periods:
+        return None
+    at = watchdog_at or (lambda period: deadline_periods * period)
+    first = max(holds, _on_grid(stall / deadline_periods))  # ``holds`` may be T itself, off the grid
+    grid = _on_grid(first)
+    # the drive's deadline in whole ms falls short of deadline_periods x T by at most 0.5 ms
+    steps = range(math.ceil(0.5e-3 / deadline_periods / PERIOD_GRID) + 2)
+    for period in ([first] if first < grid else []) + [grid + step * PERIOD_GRID for step in steps]:
+        if stall < at(period):
+            return period
+    return None
 
 
 def held_period(timing: Timing, shortest: float, longest_busy: float, allowed: int) -> float:

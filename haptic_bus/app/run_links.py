@@ -59,10 +59,12 @@ OpenDrive = Callable[[ExitStack, "Tap | None"], Opened]
 @dataclasses.dataclass(frozen=True)
 class Watchdog:
     """The shortest stall (s) that faults the drive (inf: none), and the RPDO deadline in periods
-    when that is the binding one (a longer ``T`` lengthens it), else None."""
+    when that is the binding one (a longer ``T`` lengthens it), else None; ``at(T)``: the shortest stall
+    at another ``T`` (None: the same at any ``T``)."""
 
     stall: float
     periods: int | None
+    at: Callable[[float], float] | None = None
 
 
 @dataclasses.dataclass
@@ -111,7 +113,7 @@ def canopen_watchdog(safety: SafetySettings, period: float) -> Watchdog:
     is the binding one."""
     stall = safety.canopen_stall(period)
     binding = safety.rpdo_deadline_periods and safety.rpdo_deadline_ms(period) / 1000.0 <= stall
-    return Watchdog(stall, safety.rpdo_deadline_periods if binding else None)
+    return Watchdog(stall, safety.rpdo_deadline_periods if binding else None, safety.canopen_stall)
 
 
 def given_safety(safety: SafetySettings, period: float, options: RunOptions) -> SafetySettings:

@@ -343,7 +343,7 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
         report = preflight.while_cycling(exchange_unless_stopped, kind.period, spin=spin, work=lambda: preflight.judge_delay(
             timing, kind.assumed_delay(gate), kind.passes_at(gate, scene), kind.profile.passivity.layer,
             rig.watchdog.stall, rig.watchdog.periods, rig.link.get("bus_load", {}).get("smallest_period", 0.0),
-            kind.on_arrival))
+            kind.on_arrival, rig.watchdog.at))
     preflight.settle(preflight.without_realtime(report, extra.get("realtime")), options.live, extra)
 
 
