@@ -33,8 +33,10 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
   deadline, the heartbeat consumer's slack, the Modbus watchdog) faults the drive.  If the
   longest stall measured, times :data:`STALL_MARGIN`, reaches it, the run is refused, naming the
   smallest period ``T`` whose watchdog (a deadline counted in periods, as the drive keeps it, whole ms)
-  would stay above that stall, or none where the heartbeat consumer's slack, which a longer ``T`` does
-  not lengthen, binds first (:func:`_holding_stall`);
+  would stay above that gap (at a longer ``T``, the stall in it as long and its period longer), or none
+  where a watchdog that a longer ``T`` does not lengthen (the heartbeat consumer's slack, the Modbus
+  watchdog) binds first; every period named, a held run's too, is one whose watchdog holds the gap
+  (:func:`_holding_stall`);
 * **the gate at the measured delay** -- the loop delay the gate assumed plus the p99 of the delay
   each cycle adds, in samples (:func:`delay_added`): the larger of its own lateness (how late it
   started after it could have: its deadline, or the end of the cycle before when that ran past
@@ -257,11 +259,12 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     overlong = int(np.count_nonzero(busy > period))
     caught = int(catch_up_overruns(timing, np.array([period]))[0])
     stalled = STALL_MARGIN * gap >= watchdog  # the longest gap measured would fault the drive at this T
-    holding = _holding_stall(holds, STALL_MARGIN * gap, deadline_periods, watchdog_at) if stalled else holds
+    holding = _holding_stall(holds, gap, period, watchdog, deadline_periods, watchdog_at)  # None: no T holds the gap
     unheld = f"; and a gap of {gap * 1e3:.3g} ms between cycles measured, x{STALL_MARGIN:g}, would fault the drive at " \
         "any T: lengthen the drive's watchdog ([safety])" if holding is None else ""
 
-    def report(holdable: bool, reason: str, smallest: float | None = holds, passive: bool | None = None) -> PreflightReport:
+    def report(holdable: bool, reason: str, smallest: float | None = holding,
+               passive: bool | None = None) -> PreflightReport:
         if not holdable and smallest is not None:
             reason += f": this machine holds T >= {smallest * 1e3:g} ms"
         return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, added_p99, overlong,
@@ -269,51 +272,63 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
 
     if cycle["p50"] > period:  # the loop cannot keep its period: it falls further behind every cycle
         return report(False, f"refused: one exchange with the drive takes {cycle['p50'] * 1e3:.3g} ms (median), more "
-                             f"than T = {period * 1e3:g} ms{unheld}", holding)
+                             f"than T = {period * 1e3:g} ms{unheld}")
     if holds > period and overlong > allowed:
         return report(False, f"refused: {overlong} of {busy.size} cycles were busy (late start plus exchange) longer "
                              f"than T = {period * 1e3:g} ms, the longest {busy[0] * 1e3:.3g} ms: more than "
                              f"{OVERRUN_SHARE:.1%} of a run's cycles would overrun (at most {allowed} of {busy.size} "
-                             f"at {CONFIDENCE:.0%} confidence){unheld}", holding)
+                             f"at {CONFIDENCE:.0%} confidence){unheld}")
     if holds > period:
         return report(False, f"refused: {caught} of {busy.size} cycles started more than T = {period * 1e3:g} ms late, "
                              f"catching up after the longest busy cycle ({busy[0] * 1e3:.3g} ms) at "
                              f"{(period - cycle['p50']) * 1e3:.3g} ms a cycle (an exchange takes {cycle['p50'] * 1e3:.3g} "
                              f"ms, median): more than {OVERRUN_SHARE:.1%} of a run's cycles would overrun (at most "
-                             f"{allowed} of {busy.size} at {CONFIDENCE:.0%} confidence){unheld}", holding)
+                             f"{allowed} of {busy.size} at {CONFIDENCE:.0%} confidence){unheld}")
     if stalled:
-        where = f" (RPDO deadline {deadline_periods} periods)" if holding is not None else \
+        where = f" (RPDO deadline {deadline_periods} periods)" if holding is not None and deadline_periods else \
             "; lengthen the drive's watchdog ([safety])"
         return report(False, f"refused: a gap of {gap * 1e3:.3g} ms between cycles measured, x{STALL_MARGIN:g}, reaches "
-                             f"the drive's watchdog of {watchdog * 1e3:.3g} ms: the drive would fault{where}", holding)
+                             f"the drive's watchdog of {watchdog * 1e3:.3g} ms: the drive would fault{where}")
     if passes_at(observed):  # judged only for a timing the machine holds (its cost grows with the delay)
         return report(True, f"the gate passes the scene at the measured loop delay of {observed:.3g} samples",
                       passive=True)
     if layer != "off":
         return report(True, f"the scene is not passive at the measured loop delay of {observed:.3g} samples; the "
                             f"passivity layer ({layer}) holds the port passive and may lower the force", passive=False)
-    shorter = ", or a shorter T" if holds < period else ""  # a longer T: more delay in seconds, a larger K T
+    # a longer T: more delay in seconds, a larger K T
+    shorter = ", or a shorter T" if holding is not None and holding < period else ""
     return report(False, f"refused: the scene is not passive at the measured loop delay of {observed:.3g} samples "
                          f'and [passivity] layer = "off"; use layer "guard" or "bound", a softer wall{shorter}',
                   passive=False)
 
 
-def _holding_stall(holds: float, stall: float, deadline_periods: int | None,
+def _holding_stall(holds: float, gap: float, period: float, watchdog: float, deadline_periods: int | None,
                    watchdog_at: Callable[[float], float] | None) -> float | None:
-    """The shortest ``T`` on the grid, at least ``holds``, whose watchdog a stall of ``stall`` s (the gap measured,
-    x :data:`STALL_MARGIN`) stays under -- strictly, as the rule refuses a gap that reaches it -- or None: only a
-    deadline counted in periods grows with ``T``, and ``watchdog_at`` (the deadline in whole ms, at most the
-    heartbeat consumer's slack) may stop growing before it holds the stall."""
-    if not deadline_periods:
-        return None
-    at = watchdog_at or (lambda period: deadline_periods * period)
-    first = max(holds, _on_grid(stall / deadline_periods))  # ``holds`` may be T itself, off the grid
-    grid = _on_grid(first)
-    # the drive's deadline in whole ms falls short of deadline_periods x T by at most 0.5 ms
-    steps = range(math.ceil(0.5e-3 / deadline_periods / PERIOD_GRID) + 2)
-    for period in ([first] if first < grid else []) + [grid + step * PERIOD_GRID for step in steps]:
-        if stall < at(period):
-            return period
+    """The shortest ``T``, at least ``holds`` (on the grid, or ``holds`` itself), at which the longest gap measured,
+    ``gap`` s at ``period``, x :data:`STALL_MARGIN`, stays strictly under the drive's watchdog (the rule refuses
+    a gap that reaches it), or None where no ``T`` does.  At a longer ``T`` the stall in that gap lasts as
+    long and its cycle's period is longer (``gap - period + T``); at a shorter one the gap is taken as measured.
+    ``watchdog_at(T)``: the watchdog at ``T`` (None: ``deadline_periods`` x ``T``, or ``watchdog`` at any ``T``
+    without one): only a deadline counted in periods grows with ``T``, as the drive keeps it (whole ms), and
+    the heartbeat consumer's slack may bind before it holds the gap."""
+    def at(candidate: float) -> float:
+        if watchdog_at is not None:
+            return watchdog_at(candidate)
+        return deadline_periods * candidate if deadline_periods else watchdog
+
+    def held(candidate: float) -> bool:
+        return STALL_MARGIN * (gap + max(0.0, candidate - period)) < at(candidate)
+
+    last = max(holds, period)  # past T a watchdog that does not grow with T holds the gap no better
+    if deadline_periods and deadline_periods > STALL_MARGIN:
+        # dT x (deadline_periods - STALL_MARGIN) covers the gap, x STALL_MARGIN, and the 0.5 ms the drive's whole
+        # ms may fall short of deadline_periods x T
+        last += (STALL_MARGIN * gap + 0.5e-3) / (deadline_periods - STALL_MARGIN) + 2 * PERIOD_GRID
+    first = math.floor(holds / PERIOD_GRID + 1e-9) + 1  # the grid above holds
+    grid = [step * PERIOD_GRID for step in range(first, math.ceil(last / PERIOD_GRID - 1e-9) + 1)]
+    for candidate in sorted([holds, *grid, *([period] if period > holds else [])]):  # a 60 s gap, 30 periods: 13 000
+        if held(candidate):
+            return candidate
     return None
 
 
