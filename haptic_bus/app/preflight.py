@@ -86,7 +86,6 @@ STALL_MARGIN = 1.5  # the longest stall measured, times this, must stay under th
 OVERRUN_SHARE = 0.005  # issue 26's overrun target: at most this share of a run's cycles busy longer than T
 CONFIDENCE = 0.95  # T is refused when its overruns exceed OVERRUN_SHARE with this confidence (module docstring)
 PERIOD_GRID = 0.25e-3  # s: the smallest T is proposed on this grid
-SEARCH_WIDTH = 32  # grid points :func:`held_period` replays at once
 
 R = TypeVar("R")
 
@@ -214,10 +213,6 @@ def while_cycling(exchange: Callable[[], object], period: float, work: Callable[
     return result[0]
 
 
-def _on_grid(period: float) -> float:
-    return math.ceil(period / PERIOD_GRID - 1e-9) * PERIOD_GRID
-
-
 def judge(timing: Timing, gate: PassivityGate, scene: CompiledScene, layer: str, watchdog: float,
           deadline_periods: int | None) -> PreflightReport:
     """The verdict on the measured timing (module docstring).  ``watchdog`` (s): the shortest stall
@@ -339,16 +334,16 @@ def held_period(timing: Timing, shortest: float, longest_busy: float, allowed: i
     start more than a period late, catch-ups included (:func:`catch_up_overruns`).  At the longest busy
     cycle ``longest_busy`` none would, so the search ends there."""
     period = timing.period
+
+    def fits(at: float) -> bool:
+        return bool(catch_up_overruns(timing, np.array([at]))[0] <= allowed)
+
     low, high = math.ceil(shortest / PERIOD_GRID - 1e-9), math.ceil(max(longest_busy, shortest) / PERIOD_GRID - 1e-9)
-    # never fewer fit at a longer period: narrowed down SEARCH_WIDTH grid points at a time (a stall of a minute
-    # puts 240 000 of them between the two ends: all replayed at once took seconds)
-    while low < high:
-        points = np.unique(np.linspace(low, high, min(SEARCH_WIDTH, high - low + 1)).round().astype(int))
-        fits = catch_up_overruns(timing, points * PERIOD_GRID) <= allowed
-        at = int(np.argmax(fits)) if fits.any() else points.size  # the first that fits (the last fits: none late)
-        low, high = (int(points[at - 1]) + 1 if at else low), (int(points[at]) if at < points.size else high)
+    while low < high:  # binary search on the grid: never fewer fit at a longer period, and ``high`` fits
+        middle = (low + high) // 2
+        low, high = (low, middle) if fits(middle * PERIOD_GRID) else (middle + 1, high)
     grid = high * PERIOD_GRID
-    if shortest <= period < grid and catch_up_overruns(timing, np.array([period]))[0] <= allowed:
+    if shortest <= period < grid and fits(period):
         return period  # T itself, off the grid, where it holds and is shorter
     return grid
 
