@@ -80,6 +80,29 @@ def test_a_poll_returns_the_frame_waiting_behind_a_dropped_one(multicast: tuple[
         assert one.recv(0) is None  # nothing else waits
 
 
+def test_a_handle_left_unread_keeps_eight_times_the_kernels_default_queue(multicast: tuple[str, int]) -> None:
+    """2048 frames sent while a handle reads nothing all wait for it: the kernel's default receive queue
+    (``net.core.rmem_default``) holds 256 of them here, and an upload client whose notifier waited behind a
+    virtual-time run's 8000 frames/s lost its SDO answer (:data:`drives.udp_multicast.RECEIVE_QUEUE`)."""
+    needed = 2 << 20  # bytes: 2048 frames at the ~830 the kernel counts for one, with room
+    if int(pathlib.Path("/proc/sys/net/core/rmem_max").read_text()) * 2 < needed:
+        pytest.skip("net.core.rmem_max caps every socket's receive queue below 2048 frames on this host")
+    group, port = multicast
+    sent = 2048
+    with (open_bus(interface="udp_multicast", channel=group, port=port) as idle,
+          open_bus(interface="udp_multicast", channel=group, port=port) as drive):
+        for i in range(sent):
+            drive.send(can.Message(arbitration_id=0x185, data=i.to_bytes(2, "little"), is_extended_id=False))
+        end(group, port)
+        received = []
+        for _ in range(sent + 1):  # bounded: the frames, then END
+            message = idle.recv(WAIT)
+            if message is None or message.arbitration_id == END:
+                break
+            received.append(int.from_bytes(message.data, "little"))
+        assert received == list(range(sent))
+
+
 @pytest.mark.parametrize("scope", ["ff02", "ff15"], ids=["link-local", "site"])
 def test_on_an_ipv6_group_too_a_handle_hears_the_others_but_not_itself(scope: str, multicast: tuple[str, int]) -> None:
     # ff02:: is link-local: no socket connects to it without an interface, so the sending socket is

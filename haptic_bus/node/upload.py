@@ -25,8 +25,9 @@ from drives.bus_config import open_bus
 from drives.canopen.link import NOTIFIER_CYCLE, ReceiveErrors, shut_down
 from drives.canopen.scan import device_kind
 from drives.canopen.sdo import SdoAccess
-from drives.cia301 import DEVICE_TYPE, IDENTITY, SdoAbort, sdo_abort_text
+from drives.cia301 import DEVICE_TYPE, IDENTITY, SDO_TX_BASE, SdoAbort, sdo_abort_text
 from drives.cia402 import DataType
+from drives.udp_multicast import standard_filters
 from haptic_bus.errors import DriveError, DriveRefusal, DriveTimeout, ParameterError, Refusal
 from haptic_bus.node.controller_node import (
     COMMIT,
@@ -105,7 +106,9 @@ def upload_walls(
     every bus here).  Raises (module docstring) :class:`DriveTimeout` (no controller), :class:`DriveError`
     (not a controller), :class:`ParameterError` (before any write) or :class:`Refusal`.
     """
-    network = canopen.Network(open_bus(**dict(bus)))
+    link = open_bus(**dict(bus))
+    link.set_filters(standard_filters({SDO_TX_BASE + node_id}))  # its SDO answers alone: on udp_multicast a
+    network = canopen.Network(link)  # run's traffic is then dropped before it is decoded
     network.NOTIFIER_CYCLE = NOTIFIER_CYCLE  # canopen's 1 s recv block kept the command up to 1 s past its answer
     network.listeners.append(ReceiveErrors("upload"))  # type: ignore[arg-type]  # a can.Listener, as python-can wants
     network.connect()
