@@ -80,6 +80,31 @@ def test_a_poll_returns_the_frame_waiting_behind_a_dropped_one(multicast: tuple[
         assert one.recv(0) is None  # nothing else waits
 
 
+def test_the_cycles_receive_returns_its_frames_bare_and_every_other_as_recv_does(multicast: tuple[str, int]) -> None:
+    """``recv_wanted``, the control thread's receive (:func:`drives.canopen.sync_cycle.receive_direct`): a standard
+    data frame of ``wanted`` comes as ``(identifier, data)``, a remote or extended frame of the same identifier and a
+    frame outside ``wanted`` as the checked, stamped message :meth:`recv` builds; the filters and its own frames
+    are dropped as by :meth:`recv`."""
+    group, port = multicast
+    with (open_bus(interface="udp_multicast", channel=group, port=port) as one,
+          open_bus(interface="udp_multicast", channel=group, port=port) as drive):
+        one.set_filters([*standard_filters({0x185, 0x186}), {"can_id": 0x185, "can_mask": 0x1FFFFFFF}])
+        one.send(can.Message(arbitration_id=0x185, data=[9], is_extended_id=False))  # its own: dropped
+        for frame in (can.Message(arbitration_id=0x185, data=[1, 2], is_extended_id=False),
+                      can.Message(arbitration_id=0x705, data=[5], is_extended_id=False),  # no filter wants it
+                      can.Message(arbitration_id=0x185, is_remote_frame=True, dlc=2, is_extended_id=False),
+                      can.Message(arbitration_id=0x185, data=[3], is_extended_id=True),
+                      can.Message(arbitration_id=0x186, data=[4], is_extended_id=False)):
+            drive.send(frame)
+        got = [one.recv_wanted({0x185}, WAIT) for _ in range(4)]  # type: ignore[attr-defined]  # the project's bus
+        assert got[0] == (0x185, b"\x01\x02")
+        others = got[1:]
+        assert all(isinstance(m, can.Message) and m.timestamp > 0 for m in others), others
+        assert [(m.arbitration_id, m.is_remote_frame, m.is_extended_id, bytes(m.data)) for m in others] == [  # type: ignore[union-attr]
+            (0x185, True, False, b""), (0x185, False, True, b"\x03"), (0x186, False, False, b"\x04")]
+        assert one.recv_wanted({0x185}, 0.0) is None  # type: ignore[attr-defined]
+
+
 def test_a_handle_left_unread_keeps_eight_times_the_kernels_default_queue(multicast: tuple[str, int]) -> None:
     """2048 frames sent while a handle reads nothing all wait for it: the kernel's default receive queue
     (``net.core.rmem_default``) holds 256 of them here, and an upload client whose notifier waited behind a

@@ -34,6 +34,7 @@ from drives.canopen.exchange import CanopenExchange, CanopenStats, Unpack
 from drives.canopen.link import NetworkLink
 from drives.cia301 import SYNC_COB_ID
 from drives.errors import DriveError, DriveProtocolError, DriveTimeout
+from drives.udp_multicast import FilteredMulticastBus
 
 logger = logging.getLogger(__name__)
 
@@ -182,22 +183,29 @@ class SyncCycle:
 
 
 def receive_direct(name: str, link: NetworkLink, wanted: Container[int], deadline: float,
-                   dispatch: Callable[[can.Message], None]) -> tuple[int, bytearray] | None:
+                   dispatch: Callable[[can.Message], None]) -> tuple[int, bytes | bytearray] | None:
     """Read ``link``'s bus in this thread until a standard data frame with a COB-ID in ``wanted``
     arrives (returned as ``(cob_id, data)``) or ``deadline`` (``time.perf_counter()`` s) passes
     (None); every other data frame goes to ``dispatch``.  Every frame received is shown to the
-    link's tap first.  A receive that fails is a DriveError naming ``name``."""
+    link's tap first.  A receive that fails is a DriveError naming ``name``.
+
+    On ``udp_multicast`` with no tap set, the frames of ``wanted`` are read without building a
+    :class:`can.Message` (:meth:`~drives.udp_multicast.FilteredMulticastBus.recv_wanted`)."""
     bus = link.bus
     if bus is None:
         raise DriveError(name, "the bus is closed")
+    bare = bus.recv_wanted if isinstance(bus, FilteredMulticastBus) and link.tap is None else None
     while True:
         remaining = deadline - time.perf_counter()
         try:
-            msg = bus.recv(remaining if remaining > 0.0 else 0.0)
+            got = bus.recv(remaining if remaining > 0.0 else 0.0) if bare is None else bare(wanted, remaining)
         except Exception as exc:  # any interface's failure: the receive path is gone
             raise DriveError(name, f"CAN receive failed: {exc!r}") from exc
-        if msg is None:
+        if got is None:
             return None
+        if isinstance(got, tuple):
+            return got
+        msg = got
         tap = link.tap
         if tap is not None:
             tap(msg, False)
