@@ -18,7 +18,7 @@ import pytest
 from haptic_bus.app.cli import build_parser
 from tests.doc_blocks import PAGES, README, REPO, code_blocks, command_lines
 
-FRESH_MACHINE = ["pip install -e . && haptic-bus demo", "pip install -e '.[test]' && python -m pytest -q -n 3"]
+FRESH_MACHINE = ["pip install -e . && haptic-bus demo", "pip install -e '.[test]' && python -m pytest -q -n 4"]
 
 
 def test_the_readme_is_at_most_200_lines() -> None:
