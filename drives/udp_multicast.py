@@ -143,8 +143,8 @@ class FilteredMulticastBus(UdpMulticastBus):
             data, ancillary, sender = datagram
             if sender[1] == self._own_port and self._is_local(sender):  # its own frame, looped back
                 continue
-            fields = self._fields(data)
-            message = self._message(fields, ancillary) if self._passes(fields) else None
+            fields = self._wanted_fields(data)
+            message = None if fields is None else self._message(fields, ancillary)
             if message is not None:
                 return message, True
         return None, True
@@ -160,8 +160,8 @@ class FilteredMulticastBus(UdpMulticastBus):
             data, ancillary, sender = datagram
             if sender[1] == self._own_port and self._is_local(sender):
                 continue
-            fields = self._fields(data)
-            if not self._passes(fields):
+            fields = self._wanted_fields(data)
+            if fields is None:
                 continue
             can_id, payload = fields["arbitration_id"], fields["data"]
             if (can_id in wanted and not (fields["is_extended_id"] or fields["is_remote_frame"] or fields["is_error_frame"]
@@ -211,20 +211,17 @@ class FilteredMulticastBus(UdpMulticastBus):
             self._local[key] = local
         return local
 
-    def _fields(self, data: bytes) -> dict[str, Any]:
-        """The frame's fields as python-can packs them in datagram ``data``."""
+    def _wanted_fields(self, data: bytes) -> dict[str, Any] | None:
+        """The frame's fields as python-can packs them in datagram ``data``, or None if no filter
+        wants the frame (all do without filters)."""
         try:
             fields = msgpack.unpackb(data, raw=False)
+            if type(fields) is not dict or not _FRAME_KEYS <= fields.keys():
+                raise TypeError(f"not a frame's fields: {fields!r:.80}")
+            exact = self._wanted
+            return fields if exact is None or self._wants(exact, fields["arbitration_id"], fields["is_extended_id"]) else None
         except Exception as exception:  # what python-can's own unpacking raises for a datagram it cannot use
             raise can.CanOperationError("could not unpack received message") from exception
-        if type(fields) is not dict or not _FRAME_KEYS <= fields.keys():
-            raise can.CanOperationError(f"could not unpack received message: not a frame's fields ({fields!r:.80})")
-        return fields
-
-    def _passes(self, fields: dict[str, Any]) -> bool:
-        """Whether a filter wants the frame of ``fields`` (all do without filters)."""
-        exact = self._wanted
-        return exact is None or self._wants(exact, fields["arbitration_id"], fields["is_extended_id"])
 
     def _message(self, fields: dict[str, Any], ancillary: list[tuple[int, int, bytes]]) -> can.Message | None:
         """The checked :class:`can.Message` of ``fields``, stamped from the datagram's ``ancillary``

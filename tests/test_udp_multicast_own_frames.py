@@ -14,6 +14,7 @@ import pathlib
 import socket
 
 import can
+import msgpack
 import pytest
 
 from drives.bus_config import open_bus
@@ -103,6 +104,23 @@ def test_the_cycles_receive_returns_its_frames_bare_and_every_other_as_recv_does
         assert [(m.arbitration_id, m.is_remote_frame, m.is_extended_id, bytes(m.data)) for m in others] == [  # type: ignore[union-attr]
             (0x185, True, False, b""), (0x185, False, True, b"\x03"), (0x186, False, False, b"\x04")]
         assert one.recv_wanted({0x185}, 0.0) is None  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("datagram", [b"\xc1", msgpack.packb([1, 2]), msgpack.packb({"arbitration_id": 0x185}),
+                                      msgpack.packb({"arbitration_id": [1], "is_extended_id": False, "is_remote_frame": False,
+                                                     "is_error_frame": False, "is_fd": False, "dlc": 0, "data": b""})],
+                         ids=["not-msgpack", "a-list", "keys-missing", "id-a-list"])
+@pytest.mark.parametrize("receive", ["recv", "recv_wanted"])
+def test_a_datagram_that_is_no_frame_is_a_receive_error_either_way(datagram: bytes, receive: str,
+                                                                 multicast: tuple[str, int]) -> None:
+    group, port = multicast
+    with (open_bus(interface="udp_multicast", channel=group, port=port) as one,
+          socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as foreign):
+        one.set_filters(standard_filters({0x185}))
+        foreign.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+        foreign.sendto(datagram, (group, port))
+        with pytest.raises(can.CanOperationError, match="could not unpack received message"):
+            one.recv(WAIT) if receive == "recv" else one.recv_wanted({0x185}, WAIT)  # type: ignore[attr-defined]
 
 
 def test_a_handle_left_unread_keeps_eight_times_the_kernels_default_queue(multicast: tuple[str, int]) -> None:
