@@ -229,8 +229,10 @@ class SpaceScene:
         return self.planes if k < 0 else grid.members[k]
 
     def force(self, x: ArrayLike, v: ArrayLike) -> np.ndarray:
-        """The wall force ``u`` (N, one entry per axis; the handle feels ``-u``) at ``x`` m moving at ``v`` m/s."""
-        xs, vs = np.asarray(x, dtype=float).tolist(), np.asarray(v, dtype=float).tolist()
+        """The wall force ``u`` (N, one entry per axis; the handle feels ``-u``) at ``x`` m moving at ``v`` m/s
+        (the controller's lists of floats are read as they are, without two arrays made a cycle)."""
+        xs = x if type(x) is list else np.asarray(x, dtype=float).tolist()
+        vs = v if type(v) is list else np.asarray(v, dtype=float).tolist()
         u = [0.0] * len(xs)
         for index in self.candidates(xs):
             hit = self.objects[index].penetration(xs)
