@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 from collections.abc import Sequence
 from typing import NoReturn
 
@@ -181,6 +182,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except SystemExit as exc:  # argparse's help through an abbreviation (--he): report, do not exit
         return int(exc.code or 0)
+    if threading.current_thread() is not threading.main_thread():
+        print(f"{PROG}: error: it serves until SIGINT or SIGTERM, which Python delivers to the main thread alone: "
+              "call it from the main thread (a program's thread starts sim_drive.canopen.slave.CanopenSimDrive or "
+              "sim_drive.modbus.server.ModbusSimServer and stops it itself)", file=sys.stderr)
+        return 2
     # real time while serving (sim_drive.scheduling), and the log lines on stderr (sim_drive.serve), not after: a
     # program that calls this main has its own scheduling and logging back
     with scheduling_restored(), logging_kept():

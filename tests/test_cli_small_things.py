@@ -3,7 +3,10 @@ and ``report --out`` refused in one line (exit 2) before any work when it cannot
 
 from __future__ import annotations
 
+import json
 import re
+import signal
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -15,6 +18,7 @@ from haptic_bus.app.arguments import bus_arguments
 from haptic_bus.app.cli import build_parser, main
 
 HEARTBEAT_WAIT = 15.0  # s: the simulator subprocess imports numpy/scipy/canopen first
+RUN_WAIT = 60.0  # s: the longest a 0.1 s virtual-time run (100 cycles) may take, its commissioning included, in a thread
 
 
 def test_version(capsys: pytest.CaptureFixture[str]) -> None:
@@ -99,3 +103,38 @@ def test_an_empty_out_is_refused_not_taken_as_the_current_folder(command: list[s
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--out = '' is invalid; allowed: a folder path (empty: none given)" in err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("transport", ["canopen", "modbus"])
+def test_a_program_runs_the_command_line_in_a_thread_of_its_own(transport: str, tmp_path: Path) -> None:
+    """``main(["run", ...])`` called from a thread other than the main one (a program's worker thread)
+    runs to its end: Python installs signal handlers in the main thread alone, so the run installs none
+    there, and the program's handlers stay as they were (it raised ValueError "signal only works in main
+    thread" before the bus was touched)."""
+    from tests.run_rig import simulated_drive
+
+    handlers = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
+    outcome: list[object] = []
+    with simulated_drive(transport, "cia402-handle") as drive:
+        argv = ["run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "0.1", "--out", str(tmp_path / "r"),
+                "--no-plots", "-q"]
+        worker = threading.Thread(target=lambda: outcome.append(main(argv)), name="program-worker")
+        worker.start()
+        worker.join(RUN_WAIT)
+    assert not worker.is_alive() and outcome == [0]
+    assert {signum: signal.getsignal(signum) for signum in handlers} == handlers
+    assert json.loads((tmp_path / "r" / "run.json").read_text())["exit_reason"] == "completed"
+
+
+def test_the_simulator_called_from_a_thread_says_why_it_cannot_serve_there(capsys: pytest.CaptureFixture[str]) -> None:
+    """``haptic-bus sim`` serves until a signal, which a thread other than the main one never gets: one line,
+    exit 2, before any bus (it raised ValueError from ``signal.signal``, or over Modbus blamed the socket)."""
+    from sim_drive.cli import main as sim_main
+
+    outcome: list[int] = []
+    for argv in (["--interface", "virtual", "--channel", "thread-sim", "--node-id", "5"], ["--modbus", "127.0.0.1:0"]):
+        worker = threading.Thread(target=lambda argv=argv: outcome.append(sim_main(argv)))
+        worker.start()
+        worker.join(RUN_WAIT)
+    err = capsys.readouterr().err
+    assert outcome == [2, 2] and err.count("\n") == 2 and err.count("Python delivers to the main thread alone") == 2, err

@@ -37,7 +37,7 @@ from haptic_bus.app.arguments import (
     seconds,
     timeout,
 )
-from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, handlers_kept, stop_at_once, stop_noted
+from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, handlers_kept, stop_at_once_on_sigterm, stop_noted
 from haptic_bus.app.fault_cli import add_fault_reset_parser
 from haptic_bus.app.identify_cli import add_identify_parser
 from haptic_bus.app.run_arguments import (
@@ -184,7 +184,7 @@ def _run(args: argparse.Namespace) -> int:
     # installed the same handler before the command line was imported, haptic_bus.app.entry) ends it at
     # once, as Ctrl-C does then (Python's KeyboardInterrupt: one line, 130); the stop request takes
     # over once the run is about to touch the bus (_prepare_run's last step).
-    previous = signal.signal(signal.SIGTERM, stop_at_once)
+    previous = stop_at_once_on_sigterm()
     try:
         if stop_noted():  # while the console script imported the command line
             raise StoppedBeforeStart
@@ -197,7 +197,8 @@ def _run(args: argparse.Namespace) -> int:
         print(STOPPED_BEFORE_START)
         return EXIT_OK
     except BaseException:
-        signal.signal(signal.SIGTERM, previous)  # a refused command line ends as it did
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)  # a refused command line ends as it did
         raise
     try:
         result = run(profile, bus, options, **links)

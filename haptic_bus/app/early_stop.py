@@ -12,8 +12,10 @@ the entry can import it first.
 from __future__ import annotations
 
 import signal
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 STOPPED_BEFORE_START = "ended: stopped before the run began; no bus touched, nothing written"
 """What ``run`` prints (stdout) when a SIGTERM ends it while it prepares."""
@@ -23,6 +25,13 @@ _noted = False
 
 class StoppedBeforeStart(BaseException):  # control flow, as KeyboardInterrupt: no ``except Exception`` holds it
     """SIGTERM while ``run`` prepares (its imports, its profile read and judged): nothing touched yet."""
+
+
+def signals_reach_this_thread() -> bool:
+    """Whether this is the main thread: Python runs signal handlers there alone, and only there may
+    they be installed.  A command a program calls from another thread installs none and leaves
+    stopping it to the program (a run's stop request, ``ask``)."""
+    return threading.current_thread() is threading.main_thread()
 
 
 def note_stop(signum: int, frame: object) -> None:
@@ -39,6 +48,12 @@ def stop_noted() -> bool:
 def stop_at_once(signum: int, frame: object) -> None:
     """SIGTERM handler while ``run`` prepares: raise :class:`StoppedBeforeStart`."""
     raise StoppedBeforeStart
+
+
+def stop_at_once_on_sigterm() -> Any:
+    """:func:`stop_at_once` for SIGTERM from now on, where signals reach this thread
+    (:func:`signals_reach_this_thread`); the handler it replaced, None where none was installed."""
+    return signal.signal(signal.SIGTERM, stop_at_once) if signals_reach_this_thread() else None
 
 
 def exiting(status: int) -> int:

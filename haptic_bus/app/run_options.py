@@ -10,6 +10,7 @@ import pathlib
 import signal
 import threading
 
+from haptic_bus.app.early_stop import signals_reach_this_thread
 from haptic_bus.app.profile_policies import START_POLICIES
 from haptic_bus.app.realtime import RealtimeSettings
 from haptic_bus.errors import ParameterError
@@ -36,11 +37,15 @@ class StopRequest:
         self.event.set()
 
     def install(self) -> None:
-        """SIGINT and SIGTERM set the event (the loop ends at the next cycle boundary)."""
+        """SIGINT and SIGTERM set the event (the loop ends at the next cycle boundary); nothing in a thread
+        other than the main one, where Python delivers no signal
+        (:func:`~haptic_bus.app.early_stop.signals_reach_this_thread`)."""
         def on_signal(signum: int, frame: object) -> None:
             self.interrupted = self.interrupted or signum == signal.SIGINT
             self.event.set()
 
+        if not signals_reach_this_thread():  # a program's thread: the program stops the run (ask)
+            return
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, on_signal)
 
