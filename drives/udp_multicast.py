@@ -61,6 +61,8 @@ from can.typechecking import CanFilters
 
 _STANDARD_MASK = 0x7FF
 _FRAME_KEYS = frozenset({"arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame", "is_fd", "dlc", "data"})
+_MESSAGE_KEYS = frozenset({"timestamp", "arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame", "channel",
+                           "dlc", "data", "is_fd", "is_rx", "bitrate_switch", "error_state_indicator"})  # can.Message's
 _TIMESPEC = struct.Struct("@ll")  # struct timespec: seconds, nanoseconds
 RECEIVE_QUEUE = 4 << 20
 """bytes of datagrams the kernel may queue for a handle (``SO_RCVBUF``; capped at ``net.core.rmem_max``)."""
@@ -164,9 +166,14 @@ class FilteredMulticastBus(UdpMulticastBus):
             if fields is None:
                 continue
             can_id, payload = fields["arbitration_id"], fields["data"]
-            if (can_id in wanted and not (fields["is_extended_id"] or fields["is_remote_frame"] or fields["is_error_frame"]
-                                          or fields["is_fd"]) and fields["dlc"] == len(payload) <= 8):
-                return can_id, payload  # what can.Message's check would pass, as a classic data frame
+            # bare only in python-can's own shape, what can.Message's check passes as a classic data frame; a
+            # datagram with a float identifier, data packed as a list or a string, or a key can.Message refuses
+            # goes through can.Message as in recv (a list of data reached a TPDO's struct unpack: TypeError)
+            if (type(can_id) is int and type(payload) is bytes and can_id in wanted
+                    and not (fields["is_extended_id"] or fields["is_remote_frame"] or fields["is_error_frame"] or fields["is_fd"]
+                             or fields.get("bitrate_switch") or fields.get("error_state_indicator"))
+                    and fields["dlc"] == len(payload) <= 8 and _MESSAGE_KEYS.issuperset(fields)):
+                return can_id, payload
             message = self._message(fields, ancillary)
             if message is not None:
                 return message

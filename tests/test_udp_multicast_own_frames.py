@@ -16,6 +16,7 @@ import socket
 import can
 import msgpack
 import pytest
+from can.interfaces.udp_multicast.utils import pack_message
 
 from drives.bus_config import open_bus
 from drives.canopen.drive import CanopenDrive
@@ -121,6 +122,49 @@ def test_a_datagram_that_is_no_frame_is_a_receive_error_either_way(datagram: byt
         foreign.sendto(datagram, (group, port))
         with pytest.raises(can.CanOperationError, match="could not unpack received message"):
             one.recv(WAIT) if receive == "recv" else one.recv_wanted({0x185}, WAIT)  # type: ignore[attr-defined]
+
+
+def _packed(**changed: object) -> bytes:
+    """python-can's datagram of the standard data frame 0x185 [1..6], ``changed`` as a sender other than python-can
+    could pack it (a key absent from python-can's map added)."""
+    fields = msgpack.unpackb(pack_message(can.Message(arbitration_id=0x185, data=[1, 2, 3, 4, 5, 6], is_extended_id=False)),
+                             raw=False)
+    return msgpack.packb(fields | changed, use_bin_type=True)
+
+
+def _received(receive: object) -> object:
+    try:
+        return receive() if callable(receive) else None
+    except can.CanOperationError as error:
+        return error
+
+
+@pytest.mark.parametrize("changed", [{}, {"data": [1, 2, 3, 4, 5, 6]}, {"data": "abcdef"}, {"data": None, "dlc": 0},
+                                     {"data": 6}, {"arbitration_id": 389.0}, {"more": 1}, {"bitrate_switch": True},
+                                     {"error_state_indicator": True}],
+                         ids=["python-can's", "data-a-list", "data-a-string", "data-none", "data-an-int", "id-a-float",
+                              "a-key-can-Message-refuses", "bitrate-switch-not-fd", "esi-not-fd"])
+def test_the_cycles_receive_gives_bare_only_the_frame_recv_gives_and_raises_as_recv(changed: dict[str, object],
+                                                                                   multicast: tuple[str, int]) -> None:
+    """A datagram of a wanted identifier that python-can's sender would not pack: ``recv_wanted`` returns what
+    ``recv`` returns (the same frame, or the same receive error), bare only as an int identifier and bytes (a list
+    of data returned bare reached the cycle's struct unpack: a TypeError that crashed a run without a bus log)."""
+    group, port = multicast
+    with (open_bus(interface="udp_multicast", channel=group, port=port) as by_recv,
+          open_bus(interface="udp_multicast", channel=group, port=port) as by_wanted,
+          socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as foreign):
+        foreign.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+        foreign.sendto(_packed(**changed), (group, port))
+        expected = _received(lambda: by_recv.recv(WAIT))
+        got = _received(lambda: by_wanted.recv_wanted({0x185}, WAIT))  # type: ignore[attr-defined]  # the project's bus
+        if isinstance(expected, can.CanOperationError):
+            assert isinstance(got, can.CanOperationError) and str(got) == str(expected), (got, expected)
+            assert type(got.__cause__) is type(expected.__cause__), (got.__cause__, expected.__cause__)
+        elif not changed:  # python-can's own frame: bare
+            assert isinstance(expected, can.Message) and got == (0x185, b"\x01\x02\x03\x04\x05\x06"), (got, expected)
+        else:
+            assert isinstance(expected, can.Message) and isinstance(got, can.Message), (got, expected)
+            assert got.equals(expected, timestamp_delta=None), (got, expected)
 
 
 def test_a_handle_left_unread_keeps_eight_times_the_kernels_default_queue(multicast: tuple[str, int]) -> None:
