@@ -20,7 +20,7 @@ from can.interfaces.udp_multicast.utils import pack_message
 
 from drives.bus_config import open_bus
 from drives.canopen.drive import CanopenDrive
-from drives.udp_multicast import standard_filters
+from drives.udp_multicast import LATE_READS, standard_filters
 from tests.run_rig import run_cli
 
 WAIT = 5.0  # s: the longest a receive waits for a datagram looped back on this host (microseconds when idle)
@@ -165,6 +165,47 @@ def test_the_cycles_receive_gives_bare_only_the_frame_recv_gives_and_raises_as_r
         else:
             assert isinstance(expected, can.Message) and isinstance(got, can.Message), (got, expected)
             assert got.equals(expected, timestamp_delta=None), (got, expected)
+
+
+class _Refilled:
+    """A socket whose queue a sender refills as fast as it is read: ``dropped`` datagrams no filter wants, then
+    ``frame`` (if given) once, then unwanted ones for ever; at most ``bound`` reads (then an error: the receive
+    did not return)."""
+
+    def __init__(self, dropped: int, frame: bytes | None, bound: int) -> None:
+        self.reads, self.dropped, self.frame, self.bound = 0, dropped, frame, bound
+        self.unwanted = pack_message(can.Message(arbitration_id=0x705, data=[5], is_extended_id=False))
+
+    def recvmsg(self, *_: object) -> tuple[bytes, list[object], int, tuple[str, int]]:
+        self.reads += 1
+        if self.reads > self.bound:
+            raise OSError(f"still reading after {self.bound} datagrams")
+        data = self.frame if self.reads == self.dropped + 1 and self.frame is not None else self.unwanted
+        return data, [], 0, ("192.0.2.1", 9)  # another host's address (TEST-NET-1): not its own frame
+
+
+@pytest.mark.parametrize("receive", ["recv", "recv_wanted"])
+def test_past_its_timeout_a_receive_reads_a_full_queue_but_not_a_flood(receive: str, multicast: tuple[str, int],
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """A poll still returns a frame that waits behind a full queue of dropped ones (10082 of python-can's frames in
+    :data:`~drives.udp_multicast.RECEIVE_QUEUE`), but a sender refilling the queue as fast as the handle drops its
+    frames no longer keeps it reading: a raw socket's 126000 unwanted frames/s kept ``recv(0.1)`` 3.9 s."""
+    group, port = multicast
+    with open_bus(interface="udp_multicast", channel=group, port=port) as one:
+        one.set_filters(standard_filters({0x185}))
+        poll = (lambda: one.recv(0)) if receive == "recv" else (lambda: one.recv_wanted({0x185}, 0))  # type: ignore[attr-defined]
+        frame = pack_message(can.Message(arbitration_id=0x185, data=[1, 2], is_extended_id=False))
+        behind = _Refilled(10082, frame, 4 * LATE_READS)
+        monkeypatch.setattr(one._multicast, "_socket", behind)  # type: ignore[attr-defined]  # the project's bus
+        got = poll()
+        assert got is not None and behind.reads == 10083, behind.reads
+        assert isinstance(got, tuple if receive == "recv_wanted" else can.Message), got
+        assert (got if isinstance(got, tuple) else (got.arbitration_id, bytes(got.data))) == (0x185, b"\x01\x02"), got
+        flood = _Refilled(0, None, 4 * LATE_READS)
+        monkeypatch.setattr(one._multicast, "_socket", flood)
+        assert poll() is None
+        assert flood.reads == LATE_READS, flood.reads
+        monkeypatch.undo()  # the handle's own socket back, for its shutdown to close
 
 
 def test_a_handle_left_unread_keeps_eight_times_the_kernels_default_queue(multicast: tuple[str, int]) -> None:
