@@ -40,7 +40,11 @@ frames queued, measured, 1.2 s of the virtual-time run's traffic).
 
 A receive that drops such a datagram (or one no filter wants) goes on reading what already waits,
 even once its timeout is over: ``recv(0)`` -- a poll, as a cycle's drain of late frames makes --
-returns a frame that waits behind a dropped one, not None as if nothing waited.
+returns a frame that waits behind a dropped one, not None as if nothing waited.  Past its timeout
+it reads at most :data:`LATE_READS` datagrams, more than a full queue holds: everything that waited
+when the timeout ended is still read, but a sender that refills the queue as fast as the handle
+drops its frames no longer holds the receive for as long as it sends (a raw socket sending 126000
+unwanted frames/s from another process kept a ``recv(0.1)`` 3.9 s, until it stopped).
 """
 
 from __future__ import annotations
@@ -61,9 +65,14 @@ from can.typechecking import CanFilters
 
 _STANDARD_MASK = 0x7FF
 _FRAME_KEYS = frozenset({"arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame", "is_fd", "dlc", "data"})
+_MESSAGE_KEYS = frozenset({"timestamp", "arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame", "channel",
+                           "dlc", "data", "is_fd", "is_rx", "bitrate_switch", "error_state_indicator"})  # can.Message's
 _TIMESPEC = struct.Struct("@ll")  # struct timespec: seconds, nanoseconds
 RECEIVE_QUEUE = 4 << 20
 """bytes of datagrams the kernel may queue for a handle (``SO_RCVBUF``; capped at ``net.core.rmem_max``)."""
+LATE_READS = 16384
+"""datagrams a receive reads at most once its timeout is over (module docstring): a full :data:`RECEIVE_QUEUE`
+holds 10082 of python-can's frames (measured), and about 100 ms of dropping them here."""
 
 
 class FilteredMulticastBus(UdpMulticastBus):
@@ -73,6 +82,7 @@ class FilteredMulticastBus(UdpMulticastBus):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self._wanted: frozenset[int] | None = None  # standard identifiers a filter names exactly
         self._masked: tuple[tuple[int, int, bool | None], ...] = ()  # every other filter
+        self._late = 0  # datagrams this receive read past its timeout (module docstring)
         super().__init__(*args, **kwargs)
         group = self._multicast
         group._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_QUEUE)  # module docstring
@@ -139,6 +149,7 @@ class FilteredMulticastBus(UdpMulticastBus):
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         deadline = None if timeout is None else time.perf_counter() + timeout
+        self._late = 0
         while (datagram := self._next_datagram(deadline)) is not None:
             data, ancillary, sender = datagram
             if sender[1] == self._own_port and self._is_local(sender):  # its own frame, looped back
@@ -156,6 +167,7 @@ class FilteredMulticastBus(UdpMulticastBus):
         7.9 us a frame where :meth:`recv` takes 19.4, measured); any other frame as :meth:`recv`
         returns it; None if none came.  Raises as :meth:`recv`."""
         deadline = time.perf_counter() + timeout
+        self._late = 0
         while (datagram := self._next_datagram(deadline)) is not None:
             data, ancillary, sender = datagram
             if sender[1] == self._own_port and self._is_local(sender):
@@ -164,9 +176,14 @@ class FilteredMulticastBus(UdpMulticastBus):
             if fields is None:
                 continue
             can_id, payload = fields["arbitration_id"], fields["data"]
-            if (can_id in wanted and not (fields["is_extended_id"] or fields["is_remote_frame"] or fields["is_error_frame"]
-                                          or fields["is_fd"]) and fields["dlc"] == len(payload) <= 8):
-                return can_id, payload  # what can.Message's check would pass, as a classic data frame
+            # bare only in python-can's own shape, what can.Message's check passes as a classic data frame; a
+            # datagram with a float identifier, data packed as a list or a string, or a key can.Message refuses
+            # goes through can.Message as in recv (a list of data reached a TPDO's struct unpack: TypeError)
+            if (type(can_id) is int and type(payload) is bytes and can_id in wanted
+                    and not (fields["is_extended_id"] or fields["is_remote_frame"] or fields["is_error_frame"] or fields["is_fd"]
+                             or fields.get("bitrate_switch") or fields.get("error_state_indicator"))
+                    and fields["dlc"] == len(payload) <= 8 and _MESSAGE_KEYS.issuperset(fields)):
+                return can_id, payload
             message = self._message(fields, ancillary)
             if message is not None:
                 return message
@@ -175,10 +192,15 @@ class FilteredMulticastBus(UdpMulticastBus):
     def _next_datagram(self, deadline: float | None) -> tuple[bytes, list[tuple[int, int, bytes]], Any] | None:
         """The next datagram on the group as ``(data, ancillary, sender)``: one that already waits
         is taken at once, else the socket is waited on until ``deadline`` (``time.perf_counter()`` s;
-        None: for ever).  None once ``deadline`` passed with nothing waiting."""
+        None: for ever).  None once ``deadline`` passed with nothing waiting, or with :data:`LATE_READS`
+        datagrams read past it in this receive."""
         group = self._multicast
         sock = group._socket
         while True:
+            if deadline is not None and time.perf_counter() >= deadline:
+                if self._late >= LATE_READS:
+                    return None
+                self._late += 1
             try:
                 data, ancillary, _, sender = sock.recvmsg(group.max_buffer, group.received_ancillary_buffer_size,
                                                           socket.MSG_DONTWAIT)

@@ -16,10 +16,11 @@ import socket
 import can
 import msgpack
 import pytest
+from can.interfaces.udp_multicast.utils import pack_message
 
 from drives.bus_config import open_bus
 from drives.canopen.drive import CanopenDrive
-from drives.udp_multicast import standard_filters
+from drives.udp_multicast import LATE_READS, standard_filters
 from tests.run_rig import run_cli
 
 WAIT = 5.0  # s: the longest a receive waits for a datagram looped back on this host (microseconds when idle)
@@ -121,6 +122,90 @@ def test_a_datagram_that_is_no_frame_is_a_receive_error_either_way(datagram: byt
         foreign.sendto(datagram, (group, port))
         with pytest.raises(can.CanOperationError, match="could not unpack received message"):
             one.recv(WAIT) if receive == "recv" else one.recv_wanted({0x185}, WAIT)  # type: ignore[attr-defined]
+
+
+def _packed(**changed: object) -> bytes:
+    """python-can's datagram of the standard data frame 0x185 [1..6], ``changed`` as a sender other than python-can
+    could pack it (a key absent from python-can's map added)."""
+    fields = msgpack.unpackb(pack_message(can.Message(arbitration_id=0x185, data=[1, 2, 3, 4, 5, 6], is_extended_id=False)),
+                             raw=False)
+    return msgpack.packb(fields | changed, use_bin_type=True)
+
+
+def _received(receive: object) -> object:
+    try:
+        return receive() if callable(receive) else None
+    except can.CanOperationError as error:
+        return error
+
+
+@pytest.mark.parametrize("changed", [{}, {"data": [1, 2, 3, 4, 5, 6]}, {"data": "abcdef"}, {"data": None, "dlc": 0},
+                                     {"data": 6}, {"arbitration_id": 389.0}, {"more": 1}, {"bitrate_switch": True},
+                                     {"error_state_indicator": True}],
+                         ids=["python-can's", "data-a-list", "data-a-string", "data-none", "data-an-int", "id-a-float",
+                              "a-key-can-Message-refuses", "bitrate-switch-not-fd", "esi-not-fd"])
+def test_the_cycles_receive_gives_bare_only_the_frame_recv_gives_and_raises_as_recv(changed: dict[str, object],
+                                                                                   multicast: tuple[str, int]) -> None:
+    """A datagram of a wanted identifier that python-can's sender would not pack: ``recv_wanted`` returns what
+    ``recv`` returns (the same frame, or the same receive error), bare only as an int identifier and bytes (a list
+    of data returned bare reached the cycle's struct unpack: a TypeError that crashed a run without a bus log)."""
+    group, port = multicast
+    with (open_bus(interface="udp_multicast", channel=group, port=port) as by_recv,
+          open_bus(interface="udp_multicast", channel=group, port=port) as by_wanted,
+          socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as foreign):
+        foreign.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+        foreign.sendto(_packed(**changed), (group, port))
+        expected = _received(lambda: by_recv.recv(WAIT))
+        got = _received(lambda: by_wanted.recv_wanted({0x185}, WAIT))  # type: ignore[attr-defined]  # the project's bus
+        if isinstance(expected, can.CanOperationError):
+            assert isinstance(got, can.CanOperationError) and str(got) == str(expected), (got, expected)
+            assert type(got.__cause__) is type(expected.__cause__), (got.__cause__, expected.__cause__)
+        elif not changed:  # python-can's own frame: bare
+            assert isinstance(expected, can.Message) and got == (0x185, b"\x01\x02\x03\x04\x05\x06"), (got, expected)
+        else:
+            assert isinstance(expected, can.Message) and isinstance(got, can.Message), (got, expected)
+            assert got.equals(expected, timestamp_delta=None), (got, expected)
+
+
+class _Refilled:
+    """A socket whose queue a sender refills as fast as it is read: ``dropped`` datagrams no filter wants, then
+    ``frame`` (if given) once, then unwanted ones for ever; at most ``bound`` reads (then an error: the receive
+    did not return)."""
+
+    def __init__(self, dropped: int, frame: bytes | None, bound: int) -> None:
+        self.reads, self.dropped, self.frame, self.bound = 0, dropped, frame, bound
+        self.unwanted = pack_message(can.Message(arbitration_id=0x705, data=[5], is_extended_id=False))
+
+    def recvmsg(self, *_: object) -> tuple[bytes, list[object], int, tuple[str, int]]:
+        self.reads += 1
+        if self.reads > self.bound:
+            raise OSError(f"still reading after {self.bound} datagrams")
+        data = self.frame if self.reads == self.dropped + 1 and self.frame is not None else self.unwanted
+        return data, [], 0, ("192.0.2.1", 9)  # another host's address (TEST-NET-1): not its own frame
+
+
+@pytest.mark.parametrize("receive", ["recv", "recv_wanted"])
+def test_past_its_timeout_a_receive_reads_a_full_queue_but_not_a_flood(receive: str, multicast: tuple[str, int],
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """A poll still returns a frame that waits behind a full queue of dropped ones (10082 of python-can's frames in
+    :data:`~drives.udp_multicast.RECEIVE_QUEUE`), but a sender refilling the queue as fast as the handle drops its
+    frames no longer keeps it reading: a raw socket's 126000 unwanted frames/s kept ``recv(0.1)`` 3.9 s."""
+    group, port = multicast
+    with open_bus(interface="udp_multicast", channel=group, port=port) as one:
+        one.set_filters(standard_filters({0x185}))
+        poll = (lambda: one.recv(0)) if receive == "recv" else (lambda: one.recv_wanted({0x185}, 0))  # type: ignore[attr-defined]
+        frame = pack_message(can.Message(arbitration_id=0x185, data=[1, 2], is_extended_id=False))
+        behind = _Refilled(10082, frame, 4 * LATE_READS)
+        monkeypatch.setattr(one._multicast, "_socket", behind)  # type: ignore[attr-defined]  # the project's bus
+        got = poll()
+        assert got is not None and behind.reads == 10083, behind.reads
+        assert isinstance(got, tuple if receive == "recv_wanted" else can.Message), got
+        assert (got if isinstance(got, tuple) else (got.arbitration_id, bytes(got.data))) == (0x185, b"\x01\x02"), got
+        flood = _Refilled(0, None, 4 * LATE_READS)
+        monkeypatch.setattr(one._multicast, "_socket", flood)
+        assert poll() is None
+        assert flood.reads == LATE_READS, flood.reads
+        monkeypatch.undo()  # the handle's own socket back, for its shutdown to close
 
 
 def test_a_handle_left_unread_keeps_eight_times_the_kernels_default_queue(multicast: tuple[str, int]) -> None:
