@@ -175,15 +175,16 @@ class FilteredMulticastBus(UdpMulticastBus):
             fields = self._wanted_fields(data)
             if fields is None:
                 continue
-            can_id, payload = fields["arbitration_id"], fields["data"]
-            # bare only in python-can's own shape, what can.Message's check passes as a classic data frame; a
-            # datagram with a float identifier, data packed as a list or a string, or a key can.Message refuses
-            # goes through can.Message as in recv (a list of data reached a TPDO's struct unpack: TypeError)
-            if (type(can_id) is int and type(payload) is bytes and can_id in wanted
-                    and not (fields["is_extended_id"] or fields["is_remote_frame"] or fields["is_error_frame"] or fields["is_fd"]
-                             or fields.get("bitrate_switch") or fields.get("error_state_indicator"))
-                    and fields["dlc"] == len(payload) <= 8 and _MESSAGE_KEYS.issuperset(fields)):
-                return can_id, payload
+            # bare only in python-can's own shape (every key it packs, none can.Message refuses), what can.Message's
+            # check passes as a classic data frame; any other datagram (a float identifier, data packed as a list or a
+            # string, a key left out) goes through can.Message as in recv (a list of data reached a TPDO's struct unpack)
+            if _FRAME_KEYS <= fields.keys() <= _MESSAGE_KEYS:
+                can_id, payload = fields["arbitration_id"], fields["data"]
+                if (type(can_id) is int and type(payload) is bytes and can_id in wanted
+                        and not (fields["is_extended_id"] or fields["is_remote_frame"] or fields["is_error_frame"]
+                                 or fields["is_fd"] or fields.get("bitrate_switch") or fields.get("error_state_indicator"))
+                        and fields["dlc"] == len(payload) <= 8):
+                    return can_id, payload
             message = self._message(fields, ancillary)
             if message is not None:
                 return message
@@ -238,10 +239,11 @@ class FilteredMulticastBus(UdpMulticastBus):
         wants the frame (all do without filters)."""
         try:
             fields = msgpack.unpackb(data, raw=False)
-            if type(fields) is not dict or not _FRAME_KEYS <= fields.keys():
+            if type(fields) is not dict:
                 raise TypeError(f"not a frame's fields: {fields!r:.80}")
-            exact = self._wanted
-            return fields if exact is None or self._wants(exact, fields["arbitration_id"], fields["is_extended_id"]) else None
+            exact = self._wanted  # a key left out is can.Message's default, as python-can builds the frame it filters
+            return fields if exact is None or self._wants(exact, fields.get("arbitration_id", 0),
+                                                          fields.get("is_extended_id", True)) else None
         except Exception as exception:  # what python-can's own unpacking raises for a datagram it cannot use
             raise can.CanOperationError("could not unpack received message") from exception
 
@@ -256,7 +258,8 @@ class FilteredMulticastBus(UdpMulticastBus):
         return message if self.protocol is can.CanProtocol.CAN_FD or not message.is_fd else None
 
     def _wants(self, exact: frozenset[int], can_id: int, extended: bool) -> bool:
-        if not extended and can_id & _STANDARD_MASK in exact:
+        # == as python-can compares a filter's "extended" with the frame's (0 is False there, None is not)
+        if extended == False and can_id & _STANDARD_MASK in exact:  # noqa: E712
             return True
         return any((only is None or only == extended) and can_id & mask == masked for masked, mask, only in self._masked)
 

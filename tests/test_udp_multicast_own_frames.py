@@ -107,10 +107,10 @@ def test_the_cycles_receive_returns_its_frames_bare_and_every_other_as_recv_does
         assert one.recv_wanted({0x185}, 0.0) is None  # type: ignore[attr-defined]
 
 
-@pytest.mark.parametrize("datagram", [b"\xc1", msgpack.packb([1, 2]), msgpack.packb({"arbitration_id": 0x185}),
+@pytest.mark.parametrize("datagram", [b"\xc1", msgpack.packb([1, 2]),
                                       msgpack.packb({"arbitration_id": [1], "is_extended_id": False, "is_remote_frame": False,
                                                      "is_error_frame": False, "is_fd": False, "dlc": 0, "data": b""})],
-                         ids=["not-msgpack", "a-list", "keys-missing", "id-a-list"])
+                         ids=["not-msgpack", "a-list", "id-a-list"])
 @pytest.mark.parametrize("receive", ["recv", "recv_wanted"])
 def test_a_datagram_that_is_no_frame_is_a_receive_error_either_way(datagram: bytes, receive: str,
                                                                  multicast: tuple[str, int]) -> None:
@@ -206,6 +206,34 @@ def test_past_its_timeout_a_receive_reads_a_full_queue_but_not_a_flood(receive: 
         assert poll() is None
         assert flood.reads == LATE_READS, flood.reads
         monkeypatch.undo()  # the handle's own socket back, for its shutdown to close
+
+
+def test_a_datagram_with_keys_left_out_is_the_frame_python_can_makes_of_it(multicast: tuple[str, int]) -> None:
+    """python-can builds a datagram's frame with :class:`can.Message`'s defaults for the keys it lacks (an
+    extended identifier, no data): a plain python-can handle, ``recv`` and ``recv_wanted`` read the same frames,
+    and the filters test the frame so built (``{"arbitration_id": 0x185}`` alone is extended: a standard filter
+    drops it)."""
+    group, port = multicast
+    sent = [{"arbitration_id": 0x185, "is_extended_id": False, "data": b"\x07"}, {"arbitration_id": 0x185},
+            {"arbitration_id": 0x186, "is_extended_id": False}]
+    with (open_bus(interface="udp_multicast", channel=group, port=port) as one,
+          open_bus(interface="udp_multicast", channel=group, port=port) as two,
+          can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=0) as plain,
+          socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as foreign):
+        two.set_filters(standard_filters({0x185, 0x186}))
+        foreign.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+        for fields in sent:
+            foreign.sendto(msgpack.packb(fields), (group, port))
+
+        def shape(m: object) -> tuple[object, ...]:
+            assert isinstance(m, can.Message), m
+            return m.arbitration_id, m.is_extended_id, bytes(m.data)
+
+        expected = [(0x185, False, b"\x07"), (0x185, True, b""), (0x186, False, b"")]
+        assert [shape(plain.recv(WAIT)) for _ in sent] == [shape(one.recv(WAIT)) for _ in sent] == expected
+        got = [two.recv_wanted({0x185}, WAIT) for _ in range(2)]  # type: ignore[attr-defined]
+        assert [shape(m) for m in got] == [expected[0], expected[2]]  # not bare: a key python-can packs is missing
+        assert two.recv_wanted({0x185}, 0.0) is None  # type: ignore[attr-defined]  # the extended one was filtered
 
 
 def test_a_handle_left_unread_keeps_eight_times_the_kernels_default_queue(multicast: tuple[str, int]) -> None:
