@@ -206,6 +206,22 @@ def test_wrong_length_tpdo_is_dropped_and_counted_never_decoded(canopen_rig):
         assert fresh.velocity != before.velocity and drive.stats.missed_tpdos == 1
 
 
+def test_tpdos_of_the_wrong_length_in_a_row_trip_the_drive_naming_what_was_dropped(canopen_rig):
+    """Three cycles in a row whose TPDO came one byte short (a drive whose mapping changed after
+    commissioning): the drive trips as for silence, and the error says the frames came, of another length."""
+    with canopen_rig("virtual", "ideal", tpdo_timeout=0.02) as r:
+        drive = r.drive
+        drive.enable()
+        run_cycles(drive, 3)
+        with pytest.raises(DriveTimeout) as info:
+            for _ in range(drive.max_missed_tpdos):  # bounded: the last one raises
+                r.sim.short_next_tpdo(1, missing_bytes=1)
+                drive.read_inputs()
+        assert "for 3 consecutive cycles" in str(info.value)
+        assert "3 frames on these COB-IDs had another length than the mapping commissioned and were dropped" in str(info.value)
+        assert drive.stats.dropped_frames == 3
+
+
 def test_long_tpdo_injected_on_the_bus_is_dropped_and_counted(canopen_rig):
     with canopen_rig("virtual", "ideal") as r:
         drive = r.drive

@@ -53,6 +53,8 @@ def test_the_default_folder_is_runs_utc_profile_and_holds_every_record(
 
     document = read_run(folder)
     assert document["software"]["haptic_bus"] == haptic_bus.__version__
+    (counts,) = document["drive_counts"].values()  # the drive's counters: every cycle's TPDO in, none dropped or late
+    assert counts["cycles"] >= 200 and counts["dropped_frames"] == counts["missed_tpdos"] == counts["stale_tpdos"] == 0
     assert {"python", "numpy", "scipy", "python-can", "canopen", "pymodbus", "matplotlib"} <= set(document["software"])
     shipped = resolve_profile("cia402-handle")
     assert document["profile"] == {"name": "cia402-handle", "path": str(shipped),

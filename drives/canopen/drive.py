@@ -371,8 +371,11 @@ class CanopenDrive(Cia402Master[CanopenConnection]):
         if self._missed_in_row >= self.max_missed_tpdos:
             cobs = ", ".join(f"0x{cob:03X}" for cob in self.exchange.tpdo_cobs)
             zeroed = "; torque set to zero" if self._armed else ""  # before the enable there was none to zero
+            dropped = self.stats.dropped_frames
+            wrong = (f"; {dropped} frame{'s' if dropped > 1 else ''} on these COB-IDs had another length than the "
+                     f"mapping commissioned and {'were' if dropped > 1 else 'was'} dropped") if dropped else ""
             raise self.trip(DriveTimeout(self.name, f"no TPDO (COB-ID {cobs}) for {self._missed_in_row} consecutive "
-                                                    f"cycles (timeout {timeout * 1e3:.3g} ms each){zeroed}"))
+                                                    f"cycles (timeout {timeout * 1e3:.3g} ms each){wrong}{zeroed}"))
         last = self.last_inputs if self.last_inputs is not None else CyclicInputs(0, 0)
         return dataclasses.replace(last, age=self._missed_in_row)
 

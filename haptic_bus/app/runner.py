@@ -68,6 +68,7 @@ from typing import TYPE_CHECKING, Any
 
 from drives.base import Drive, OneAxis
 from drives.cia402 import State
+from drives.cia402_master import Cia402Master
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.fault_reset import DEFAULT_WAIT
 from drives.os_threads import show_names
@@ -198,6 +199,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     reason, error = "completed", None
     before: list[Event] = []  # what happened before the controller (and its event log) existed
     names: list[str] = []  # the drives' names, in axis order, once reached
+    drives: Sequence[Drive] = ()
     period = kind.period
     try:
         rig.check()
@@ -282,6 +284,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     finally:
         reason, error = _write_failure(reason, error, recorder, summary, period)
         extra["exit_reason"], extra["error"] = reason, error
+        extra["drive_counts"] = {each.name: dataclasses.asdict(each.stats) for each in drives if isinstance(each, Cia402Master)}
         # a run asked to stop (Ctrl-C, SIGTERM) before its first cycle ends now: no pictures of a run that
         # never moved (region.png alone took 3-8 s on a loaded machine); haptic-bus plot draws them later
         asked_to_stop = summary is None and reason in ("interrupted", "stopped")
