@@ -44,6 +44,8 @@ MASTER = 127
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 START_WAIT = 40.0  # s: both processes import numpy/scipy/canopen before they cycle
 STOP_BOUND = 0.1  # s: the issue's bound for SIGKILL/SIGSTOP -> FAULT
+STOPPED_FOR = 0.2  # s: how long a stopped run stays stopped after its drive faulted (twice the watchdogs' 30-90 ms)
+END_WAIT = 30.0  # s: the longest a continued run takes to find its drive faulted and end (a few cycles, its files)
 # TPDOs of the enabled drive before the signal: 100 cycles of T = 3 ms, 0.3 s, past the RPDO deadline (30 ms) and
 # the heartbeat consumer (90 ms) three times over, both armed and fed by the cycle (300 were 0.9 s more of both processes)
 CYCLING = 100
@@ -218,6 +220,16 @@ def _run_command(*args: str) -> subprocess.Popen:
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 
+def _continued_names_the_stall(run: subprocess.Popen) -> None:
+    """SIGCONT to the stopped ``run`` once it has been stopped :data:`STOPPED_FOR` s: it ends on its own (its drive
+    faulted), exit 1, its one line naming the stall as the cause (a cycle that started that late)."""
+    time.sleep(STOPPED_FOR)
+    run.send_signal(signal.SIGCONT)
+    _, err = run.communicate(timeout=END_WAIT)
+    assert run.returncode == 1 and err.count("\n") == 1, err
+    assert "ms late, past the" in err and "this process did not run for that long, stopped or starved of CPU" in err, err
+
+
 def _end(process: subprocess.Popen) -> None:
     if process.poll() is None:
         process.kill()
@@ -308,6 +320,8 @@ def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(c
         assert elapsed < STOP_BOUND, f"{sig.name}: the drive faulted {elapsed * 1e3:.1f} ms after the signal"
         log = sim.log()[begun:]  # this trial's part
         assert "OPERATION ENABLED -> FAULT REACTION ACTIVE" in log and f"connection lost (0x{code:04X})" in log
+        if sig is signal.SIGSTOP:
+            _continued_names_the_stall(run)
     finally:
         sniffer.shutdown()
         if sig is signal.SIGSTOP:
@@ -346,6 +360,8 @@ def test_a_killed_or_stopped_modbus_controller_faults_the_drive(modbus_sim, tmp_
         expected = {0x8100, 0x8130} if sig is signal.SIGKILL else {0x8130}
         assert probe.read_object(0x603F) in expected and probe.read_object(0x6077) == 0
         assert elapsed < STOP_BOUND, f"{sig.name}: the drive faulted {elapsed * 1e3:.1f} ms after the signal"
+        if sig is signal.SIGSTOP:
+            _continued_names_the_stall(run)
     finally:
         probe.close()
         if sig is signal.SIGSTOP:

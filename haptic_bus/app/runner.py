@@ -262,6 +262,8 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                 if summary.exit_reason in ("completed", "stopped"):
                     _refuse_faulted_at_the_end(drives)
             reason, error = summary.exit_reason, summary.error
+            if reason == "drive error" and error is not None:  # a drive that faulted in the cycles: was it a stall of ours?
+                error = summary.error = error + _stall_before(controller, rig.watchdog.stall)
             if reason == "stopped" and options.stop.interrupted:
                 reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr
                 summary.exit_reason, summary.error = reason, error  # run.json's summary says it as its status does
@@ -270,7 +272,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     except Refusal as exc:  # refused before the drive is enabled
         reason, error = "refused", str(exc)
     except DriveError as exc:
-        reason, error = "drive error", str(exc)
+        reason, error = "drive error", str(exc) + _stall_before(controller, rig.watchdog.stall)
         hint = rig.fault_hint(names.index(exc.node) if exc.node in names else None)
         if isinstance(exc, DriveFault) and exc.state is State.FAULT and hint is not None:
             error += f"; {hint} (or run with --reset-fault)"
@@ -292,6 +294,23 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
         lock.release()
     reason, error = _write_failure(reason, error, recorder, summary, period)  # run.json itself, at the end
     return RunResult(reason, error, summary, controller, folder, files)
+
+
+STALL_LOOKBACK = 3  # cycles: the stalled one, and the exchanges of the cycles after it that found the drive faulted
+
+
+def _stall_before(controller: WallController[Any, Any] | None, stall: float) -> str:
+    """What the one line of a drive error adds when one of the last cycles started ``stall`` s late or more
+    (the shortest stall that faults the drive): this process did not run (a SIGSTOP, a debugger, starved of
+    CPU), and the drive's watchdog did what it is for; "" otherwise, and for a virtual-time run."""
+    clock = controller.clock if controller is not None else None
+    if not isinstance(clock, RealClock):
+        return ""
+    late = clock.lateness(STALL_LOOKBACK)
+    if late.size == 0 or late.max() < stall:
+        return ""
+    return (f" (a cycle just before started {late.max() * 1e3:.4g} ms late, past the {stall * 1e3:.4g} ms the drive's "
+            f"watchdog allows: this process did not run for that long, stopped or starved of CPU)")
 
 
 def _write_failure(reason: str, error: str | None, recorder: RunRecorder, summary: RunSummary | None,
