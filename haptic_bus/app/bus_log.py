@@ -51,7 +51,10 @@ def frame_tap(ring: Ring) -> Tap:
     while canopen's notifier reads the bus (its frames, and the caller's SDO requests): a lock
     keeps the ring's writer one at a time (uncontended while the cycle alone reads and sends); an
     answer the notifier taps before its request's sender does is put back in time order by
-    :meth:`BusLogFile.drain`."""
+    :meth:`BusLogFile.drain`.  Not after a stall of this process (stopped, starved of CPU): the frames
+    that arrived meanwhile are read, and tapped, after those it sent on resuming, often in a later
+    drain; ``bus.asc`` then steps back in time there (21 lines after a SIGSTOP, measured), each frame
+    with its own time."""
     put = ring.put
     now = time.time
     lock = threading.Lock()
