@@ -79,7 +79,8 @@ def test_no_controller_on_the_node_says_so_within_the_timeout(capsys: pytest.Cap
         elapsed = time.monotonic() - started
         err = one_line(capsys.readouterr().err)
     assert err == ("haptic-bus upload: no controller answered on node 99 within 0.2 s (is haptic-bus run going on this "
-                   "bus with --controller-node-id 99?)\n")
+                   "bus with --controller-node-id 99?; python-can's virtual bus reaches this process alone: a run in "
+                   "another process is never on it)\n")
     assert elapsed < 10.0  # one unanswered read and the bus's open and close; a hang would run far past it
 
 

@@ -20,6 +20,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import canopen
+from can.interfaces.virtual import VirtualBus
 
 from drives.bus_config import open_bus
 from drives.canopen.link import NOTIFIER_CYCLE, ReceiveErrors, shut_down
@@ -116,7 +117,13 @@ def upload_walls(
         dictionary = canopen.ObjectDictionary()
         node = network.add_node(canopen.RemoteNode(node_id, dictionary))
         sdo = SdoAccess(f"controller node {node_id}", node, timeout, lambda: None)
-        count = check_controller(sdo, node_id, timeout)
+        try:
+            count = check_controller(sdo, node_id, timeout)
+        except DriveTimeout as silent:
+            if not isinstance(link, VirtualBus):
+                raise
+            raise DriveTimeout(silent.node, f"{silent.message[:-1]}; python-can's virtual bus reaches this process alone: "
+                                            "a run in another process is never on it)") from None
         _refuse_unknown_objects(sdo, node_id, count, sorted(changes))
         walls = controller_dictionary([""] * count)  # the objects written: an SDO error names "Scene object i.Stiffness K (N/m)"
         for i in changes:
