@@ -117,7 +117,7 @@ class FilteredMulticastBus(UdpMulticastBus):
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Send ``msg`` from this handle's own socket (module docstring); ``timeout`` in s, as python-can's."""
-        if self.protocol is not can.CanProtocol.CAN_FD and msg.is_fd:
+        if msg.is_fd and self.protocol is not can.CanProtocol.CAN_FD:  # the frame's flag first: no property read a frame
             raise can.CanOperationError("cannot send FD message over bus with CAN FD disabled")
         data = self._pack({  # python-can's pack_message (its keys, in its order), with one packer kept
             "timestamp": msg.timestamp,
@@ -200,7 +200,7 @@ class FilteredMulticastBus(UdpMulticastBus):
                 continue
             plain = _plain_frame(data)  # the hot path: a TPDO as python-can packs it, read without msgpack's dict
             if plain is not None and plain[0] in wanted and (exact is None or self._wants(exact, plain[0], False)):
-                return plain
+                return plain[0], plain[1]
             fields = self._wanted_fields(data)
             if fields is None:
                 continue
@@ -215,6 +215,37 @@ class FilteredMulticastBus(UdpMulticastBus):
                         and fields["dlc"] == len(payload) <= 8):
                     return can_id, payload
             message = self._message(fields, ancillary)
+            if message is not None:
+                return message
+        return None
+
+    def recv_message(self, wanted: Container[int], timeout: float) -> can.Message | None:
+        """The frame :meth:`recv` returns within ``timeout`` (s; 0 takes only what already waits), the same
+        :class:`can.Message`, or None if none came; raises as :meth:`recv`.  A datagram that is exactly
+        python-can's packing of a standard data frame whose identifier is in ``wanted`` (:func:`_plain_frame`)
+        is read from its bytes and its message built without the check (every field is one it passes): the
+        cycle's receive when every frame is shown to a tap (the bus log), which needs the message."""
+        deadline = time.perf_counter() + timeout
+        self._late = 0
+        exact = self._wanted
+        while (datagram := self._next_datagram(deadline)) is not None:
+            data, ancillary, sender = datagram
+            if sender[1] == self._own_port and self._is_local(sender):
+                continue
+            plain = _plain_frame(data)
+            if plain is not None:
+                can_id, payload, name = plain
+                if can_id in wanted and can_id <= _STANDARD_MASK and (exact is None or self._wants(exact, can_id, False)):
+                    try:
+                        stamp = _timestamp(ancillary)
+                    except Exception as exception:  # as _message raises it
+                        raise can.CanOperationError("could not unpack received message") from exception
+                    return can.Message(timestamp=stamp, arbitration_id=can_id, is_extended_id=False,
+                                       is_remote_frame=False, is_error_frame=False,
+                                       channel=None if name is None else name.decode("ascii"), dlc=len(payload),
+                                       data=payload, is_fd=False, bitrate_switch=False, error_state_indicator=False)
+            fields = self._wanted_fields(data)
+            message = None if fields is None else self._message(fields, ancillary)
             if message is not None:
                 return message
         return None
@@ -293,13 +324,13 @@ class FilteredMulticastBus(UdpMulticastBus):
         return any((only is None or only == extended) and can_id & mask == masked for masked, mask, only in self._masked)
 
 
-def _plain_frame(data: bytes) -> tuple[int, bytes] | None:
-    """``(identifier, data)`` of a datagram that is exactly python-can's packing of a classic standard data
-    frame (``pack_message``: every key, in its order, a float timestamp, flags False, no channel or an ASCII one
-    of at most 31 characters, ``dlc`` the data's length, at most 8), read from its bytes; None for any other
-    datagram (it may still be such a frame packed otherwise: :meth:`FilteredMulticastBus.recv_wanted` then decodes
-    it with msgpack).  Whatever it returns, msgpack's decoding gives the same fields, so the receive's checks pass
-    them as they are."""
+def _plain_frame(data: bytes) -> tuple[int, bytes, bytes | None] | None:
+    """``(identifier, data, channel)`` (the channel's ASCII bytes, or None) of a datagram that is exactly
+    python-can's packing of a classic standard data frame (``pack_message``: every key, in its order, a float
+    timestamp, flags False, no channel or an ASCII one of at most 31 characters, ``dlc`` the data's length, at
+    most 8), read from its bytes; None for any other datagram (it may still be such a frame packed otherwise: the
+    receive then decodes it with msgpack).  Whatever it returns, msgpack's decoding gives the same fields, so the
+    receive's checks pass them as they are."""
     if not (len(data) >= _PLAIN_LEAST and data.startswith(_PLAIN_HEAD) and data.startswith(_PLAIN_ID, 20)
             and data.endswith(_PLAIN_TAIL)):
         return None
@@ -317,9 +348,10 @@ def _plain_frame(data: bytes) -> tuple[int, bytes] | None:
         return None
     at += len(_PLAIN_FLAGS)
     channel = data[at]
+    name: bytes | None = None
     if channel == 0xC0:  # nil
         at += 1
-    elif 0xA0 <= channel <= 0xBF and data[at + 1:at + 1 + (channel & 0x1F)].isascii():  # a fixstr (UTF-8 as it is)
+    elif 0xA0 <= channel <= 0xBF and (name := data[at + 1:at + 1 + (channel & 0x1F)]).isascii():  # a fixstr
         at += 1 + (channel & 0x1F)
     else:
         return None
@@ -334,7 +366,7 @@ def _plain_frame(data: bytes) -> tuple[int, bytes] | None:
     at += 1
     if dlc != size or size > 8 or at + size + len(_PLAIN_TAIL) != len(data):
         return None
-    return can_id, data[at:at + size]
+    return can_id, data[at:at + size], name
 
 
 def _timestamp(ancillary: list[tuple[int, int, bytes]]) -> float:
