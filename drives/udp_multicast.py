@@ -240,10 +240,8 @@ class FilteredMulticastBus(UdpMulticastBus):
                         stamp = _timestamp(ancillary)
                     except Exception as exception:  # as _message raises it
                         raise can.CanOperationError("could not unpack received message") from exception
-                    return can.Message(timestamp=stamp, arbitration_id=can_id, is_extended_id=False,
-                                       is_remote_frame=False, is_error_frame=False,
-                                       channel=None if name is None else name.decode("ascii"), dlc=len(payload),
-                                       data=payload, is_fd=False, bitrate_switch=False, error_state_indicator=False)
+                    return can.Message(timestamp=stamp, arbitration_id=can_id, is_extended_id=False, data=payload,
+                                       channel=None if name is None else name.decode("ascii"))  # the rest: defaults
             fields = self._wanted_fields(data)
             message = None if fields is None else self._message(fields, ancillary)
             if message is not None:
