@@ -141,29 +141,40 @@ def _received(receive: object) -> object:
 
 @pytest.mark.parametrize("changed", [{}, {"data": [1, 2, 3, 4, 5, 6]}, {"data": "abcdef"}, {"data": None, "dlc": 0},
                                      {"data": 6}, {"arbitration_id": 389.0}, {"more": 1}, {"bitrate_switch": True},
-                                     {"error_state_indicator": True}],
+                                     {"error_state_indicator": True}, {"channel": "sim-bridge-7f1333880290"},
+                                     {"channel": "\u00e9"}, {"dlc": 5}],
                          ids=["python-can's", "data-a-list", "data-a-string", "data-none", "data-an-int", "id-a-float",
-                              "a-key-can-Message-refuses", "bitrate-switch-not-fd", "esi-not-fd"])
+                              "a-key-can-Message-refuses", "bitrate-switch-not-fd", "esi-not-fd", "a-channel",
+                              "a-channel-not-ascii", "dlc-not-the-length"])
 def test_the_cycles_receive_gives_bare_only_the_frame_recv_gives_and_raises_as_recv(changed: dict[str, object],
                                                                                    multicast: tuple[str, int]) -> None:
     """A datagram of a wanted identifier that python-can's sender would not pack: ``recv_wanted`` returns what
     ``recv`` returns (the same frame, or the same receive error), bare only as an int identifier and bytes (a list
-    of data returned bare reached the cycle's struct unpack: a TypeError that crashed a run without a bus log)."""
+    of data returned bare reached the cycle's struct unpack: a TypeError that crashed a run without a bus log).
+    ``recv_message``, the cycle's receive with a tap, returns what ``recv`` returns, whichever way it built it."""
     group, port = multicast
     with (open_bus(interface="udp_multicast", channel=group, port=port) as by_recv,
           open_bus(interface="udp_multicast", channel=group, port=port) as by_wanted,
+          open_bus(interface="udp_multicast", channel=group, port=port) as by_message,
           socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as foreign):
         foreign.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
         foreign.sendto(_packed(**changed), (group, port))
         expected = _received(lambda: by_recv.recv(WAIT))
         got = _received(lambda: by_wanted.recv_wanted({0x185}, WAIT))  # type: ignore[attr-defined]  # the project's bus
+        message = _received(lambda: by_message.recv_message({0x185}, WAIT))  # type: ignore[attr-defined]
         if isinstance(expected, can.CanOperationError):
-            assert isinstance(got, can.CanOperationError) and str(got) == str(expected), (got, expected)
-            assert type(got.__cause__) is type(expected.__cause__), (got.__cause__, expected.__cause__)
-        elif not changed:  # python-can's own frame: bare
-            assert isinstance(expected, can.Message) and got == (0x185, b"\x01\x02\x03\x04\x05\x06"), (got, expected)
+            for either in (got, message):
+                assert isinstance(either, can.CanOperationError) and str(either) == str(expected), (either, expected)
+                assert type(either.__cause__) is type(expected.__cause__), (either.__cause__, expected.__cause__)
+            return
+        assert isinstance(expected, can.Message) and isinstance(message, can.Message), (message, expected)
+        assert message.equals(expected, timestamp_delta=None) and message.channel == expected.channel, (message, expected)
+        assert type(message.data) is type(expected.data) and message.is_rx == expected.is_rx, (message, expected)
+        assert abs(message.timestamp - expected.timestamp) < WAIT, (message, expected)  # each socket's kernel stamp
+        if not changed or set(changed) == {"channel"}:  # python-can's own frame: bare
+            assert got == (0x185, b"\x01\x02\x03\x04\x05\x06"), (got, expected)
         else:
-            assert isinstance(expected, can.Message) and isinstance(got, can.Message), (got, expected)
+            assert isinstance(got, can.Message), (got, expected)
             assert got.equals(expected, timestamp_delta=None), (got, expected)
 
 

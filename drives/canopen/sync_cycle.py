@@ -190,15 +190,20 @@ def receive_direct(name: str, link: NetworkLink, wanted: Container[int], deadlin
     link's tap first.  A receive that fails is a DriveError naming ``name``.
 
     On ``udp_multicast`` with no tap set, the frames of ``wanted`` are read without building a
-    :class:`can.Message` (:meth:`~drives.udp_multicast.FilteredMulticastBus.recv_wanted`)."""
+    :class:`can.Message` (:meth:`~drives.udp_multicast.FilteredMulticastBus.recv_wanted`); with one,
+    as :meth:`recv` reads them, their messages built from the datagrams' bytes
+    (:meth:`~drives.udp_multicast.FilteredMulticastBus.recv_message`)."""
     bus = link.bus
     if bus is None:
         raise DriveError(name, "the bus is closed")
-    bare = bus.recv_wanted if isinstance(bus, FilteredMulticastBus) and link.tap is None else None
+    if isinstance(bus, FilteredMulticastBus):
+        receive = bus.recv_wanted if link.tap is None else bus.recv_message
+    else:
+        receive = None
     while True:
         remaining = deadline - time.perf_counter()
         try:
-            got = bus.recv(remaining if remaining > 0.0 else 0.0) if bare is None else bare(wanted, remaining)
+            got = bus.recv(remaining if remaining > 0.0 else 0.0) if receive is None else receive(wanted, remaining)
         except Exception as exc:  # any interface's failure: the receive path is gone
             raise DriveError(name, f"CAN receive failed: {exc!r}") from exc
         if got is None:
