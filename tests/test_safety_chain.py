@@ -296,7 +296,7 @@ def modbus_sim() -> Iterator[SharedDrive]:
 def test_a_killed_or_stopped_canopen_controller_faults_the_drive_within_100_ms(canopen_sim, tmp_path, sig) -> None:
     sim, begun = canopen_sim.process, canopen_sim.ready()
     run = _run_command("run", _profile_that_warns_when_late(tmp_path), *canopen_sim.address, *SHARED_START, "--duration",
-                       "60", "-q", "--out", str(tmp_path / "run"))
+                       "60", "-q", "--no-plots", "--out", str(tmp_path / "run"))
     sniffer = open_bus(**(canopen_sim.bus or {}))
     try:
         deadline, tpdos = time.monotonic() + START_WAIT, 0
@@ -337,7 +337,7 @@ def test_a_killed_or_stopped_modbus_controller_faults_the_drive(modbus_sim, tmp_
     sim, _ = modbus_sim.process, modbus_sim.ready()
     url = modbus_sim.address[1]
     run = _run_command("run", _profile_that_warns_when_late(tmp_path), "--modbus", url, *SHARED_START, "--duration", "60",
-                       "-q", "--out", str(tmp_path / "run"))
+                       "-q", "--no-plots", "--out", str(tmp_path / "run"))
     probe = ModbusDrive.from_url(url, timeout=0.5)
     try:
         probe.connect()
