@@ -74,9 +74,6 @@ _PLAIN_TAIL = b"\xa5is_fd\xc2\xaebitrate_switch\xc2\xb5error_state_indicator\xc2
 _AT_ID = len(_PLAIN_HEAD) + 8 + len(_PLAIN_ID)  # where the identifier's msgpack int starts
 _PLAIN_LEAST = (_AT_ID + 1 + len(_PLAIN_FLAGS) + 1 + len(_PLAIN_DLC) + 1 + len(_PLAIN_DATA) + 1
                 + len(_PLAIN_TAIL))  # a 1-byte identifier, no channel, no data
-_FRAME_KEYS = frozenset({"arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame", "is_fd", "dlc", "data"})
-_MESSAGE_KEYS = frozenset({"timestamp", "arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame", "channel",
-                           "dlc", "data", "is_fd", "is_rx", "bitrate_switch", "error_state_indicator"})  # can.Message's
 _TIMESPEC = struct.Struct("@ll")  # struct timespec: seconds, nanoseconds
 RECEIVE_QUEUE = 4 << 20
 """bytes of datagrams the kernel may queue for a handle (``SO_RCVBUF``; capped at ``net.core.rmem_max``)."""
@@ -174,86 +171,74 @@ class FilteredMulticastBus(UdpMulticastBus):
         deadline = None if timeout is None else time.perf_counter() + timeout
         self._late = 0
         while (datagram := self._next_datagram(deadline)) is not None:
-            data, ancillary, sender = datagram
-            if sender[1] == self._own_port and self._is_local(sender):  # its own frame, looped back
-                continue
-            fields = self._wanted_fields(data)
-            message = None if fields is None else self._message(fields, ancillary)
+            message = self._decoded(*datagram)
             if message is not None:
                 return message, True
         return None, True
 
     def recv_wanted(self, wanted: Container[int], timeout: float) -> tuple[int, bytes] | can.Message | None:
         """The next frame that passes the filters within ``timeout`` (s; 0 takes only what already
-        waits): a standard data frame whose identifier is in ``wanted`` as ``(identifier, data)``,
-        without the :class:`can.Message` that :meth:`recv` builds, checks and stamps (a cycle's TPDOs:
-        5.4-8.0 us a frame where :meth:`recv` takes 10.5-18.4 and :meth:`recv_message` 8.2-10.9, 5000 frames
-        five times on a loaded machine); any other frame as :meth:`recv`
-        returns it; None if none came.  Raises as :meth:`recv`.  A datagram that is exactly python-can's
-        packing of such a frame is read from its bytes (:func:`_plain_frame`), without msgpack's dict of it;
-        any other goes through msgpack and the checks below, as before."""
+        waits): a standard data frame whose identifier is in ``wanted``, in python-can's own packing
+        (:func:`_plain_frame`), as ``(identifier, data)``, read from the datagram's bytes without the
+        :class:`can.Message` that :meth:`recv` builds, checks and stamps (a cycle's TPDOs: 5.4-8.0 us a
+        frame where :meth:`recv` takes 10.5-18.4 and :meth:`recv_message` 8.2-10.9, 5000 frames five
+        times on a loaded machine); any other frame as :meth:`recv` returns it; None if none came.
+        Raises as :meth:`recv`."""
         deadline = time.perf_counter() + timeout
         self._late = 0
-        exact = self._wanted
         while (datagram := self._next_datagram(deadline)) is not None:
-            data, ancillary, sender = datagram
-            if sender[1] == self._own_port and self._is_local(sender):
-                continue
-            plain = _plain_frame(data)  # the hot path: a TPDO as python-can packs it, read without msgpack's dict
-            if plain is not None and plain[0] in wanted and (exact is None or self._wants(exact, plain[0], False)):
+            plain = self._plain_wanted(datagram[0], wanted)
+            if plain is not None:
                 return plain[0], plain[1]
-            fields = self._wanted_fields(data)
-            if fields is None:
-                continue
-            # bare only in python-can's own shape (every key it packs, none can.Message refuses), what can.Message's
-            # check passes as a classic data frame; any other datagram (a float identifier, data packed as a list or a
-            # string, a key left out) goes through can.Message as in recv (a list of data reached a TPDO's struct unpack)
-            if _FRAME_KEYS <= fields.keys() <= _MESSAGE_KEYS:
-                can_id, payload = fields["arbitration_id"], fields["data"]
-                if (type(can_id) is int and type(payload) is bytes and can_id in wanted
-                        and not (fields["is_extended_id"] or fields["is_remote_frame"] or fields["is_error_frame"]
-                                 or fields["is_fd"] or fields.get("bitrate_switch") or fields.get("error_state_indicator"))
-                        and fields["dlc"] == len(payload) <= 8):
-                    return can_id, payload
-            message = self._message(fields, ancillary)
+            message = self._decoded(*datagram)
             if message is not None:
                 return message
         return None
 
     def recv_message(self, wanted: Container[int], timeout: float) -> can.Message | None:
         """The frame :meth:`recv` returns within ``timeout`` (s; 0 takes only what already waits), the same
-        :class:`can.Message`, or None if none came; raises as :meth:`recv`.  A datagram that is exactly
-        python-can's packing of a standard data frame whose identifier is in ``wanted`` (:func:`_plain_frame`)
-        is read from its bytes and its message built without the check (every field is one it passes): the
-        cycle's receive when every frame is shown to a tap (the bus log), which needs the message."""
+        :class:`can.Message`, or None if none came; raises as :meth:`recv`.  A frame :meth:`recv_wanted`
+        would return bare has its message built from the datagram's bytes without the check (every field is
+        one it passes): the cycle's receive when every frame is shown to a tap (the bus log), which needs
+        the message."""
         deadline = time.perf_counter() + timeout
         self._late = 0
-        exact = self._wanted
         while (datagram := self._next_datagram(deadline)) is not None:
-            data, ancillary, sender = datagram
-            if sender[1] == self._own_port and self._is_local(sender):
-                continue
-            plain = _plain_frame(data)
+            data, ancillary = datagram
+            plain = self._plain_wanted(data, wanted)
             if plain is not None:
                 can_id, payload, name = plain
-                if can_id in wanted and can_id <= _STANDARD_MASK and (exact is None or self._wants(exact, can_id, False)):
-                    try:
-                        stamp = _timestamp(ancillary)
-                    except Exception as exception:  # as _message raises it
-                        raise can.CanOperationError("could not unpack received message") from exception
-                    return can.Message(timestamp=stamp, arbitration_id=can_id, is_extended_id=False, data=payload,
-                                       channel=None if name is None else name.decode("ascii"))  # the rest: defaults
-            fields = self._wanted_fields(data)
-            message = None if fields is None else self._message(fields, ancillary)
+                try:
+                    stamp = _timestamp(ancillary)
+                except Exception as exception:  # as _message raises it
+                    raise can.CanOperationError("could not unpack received message") from exception
+                return can.Message(timestamp=stamp, arbitration_id=can_id, is_extended_id=False, data=payload,
+                                   channel=None if name is None else name.decode("ascii"))  # the rest: defaults
+            message = self._decoded(data, ancillary)
             if message is not None:
                 return message
         return None
 
-    def _next_datagram(self, deadline: float | None) -> tuple[bytes, list[tuple[int, int, bytes]], Any] | None:
-        """The next datagram on the group as ``(data, ancillary, sender)``: one that already waits
-        is taken at once, else the socket is waited on until ``deadline`` (``time.perf_counter()`` s;
-        None: for ever).  None once ``deadline`` passed with nothing waiting, or with :data:`LATE_READS`
-        datagrams read past it in this receive."""
+    def _plain_wanted(self, data: bytes, wanted: Container[int]) -> tuple[int, bytes, bytes | None] | None:
+        """:func:`_plain_frame` of ``data`` if its identifier is a standard one in ``wanted`` that the
+        filters pass, else None."""
+        plain = _plain_frame(data)
+        if plain is None or plain[0] not in wanted or plain[0] > _STANDARD_MASK:
+            return None
+        exact = self._wanted
+        return plain if exact is None or self._wants(exact, plain[0], False) else None
+
+    def _decoded(self, data: bytes, ancillary: list[tuple[int, int, bytes]]) -> can.Message | None:
+        """The checked message of datagram ``data`` as :meth:`recv` returns it, or None if no filter wants it
+        (or it is an FD frame on a bus that is not FD)."""
+        fields = self._wanted_fields(data)
+        return None if fields is None else self._message(fields, ancillary)
+
+    def _next_datagram(self, deadline: float | None) -> tuple[bytes, list[tuple[int, int, bytes]]] | None:
+        """The next datagram on the group that this handle did not send, as ``(data, ancillary)``: one
+        that already waits is taken at once, else the socket is waited on until ``deadline``
+        (``time.perf_counter()`` s; None: for ever).  None once ``deadline`` passed with nothing
+        waiting, or with :data:`LATE_READS` datagrams read past it in this receive."""
         group = self._multicast
         sock = group._socket
         while True:
@@ -264,11 +249,14 @@ class FilteredMulticastBus(UdpMulticastBus):
             try:
                 data, ancillary, _, sender = sock.recvmsg(group.max_buffer, group.received_ancillary_buffer_size,
                                                           socket.MSG_DONTWAIT)
-                return data, ancillary, sender
             except BlockingIOError:
                 pass
             except OSError as exc:
                 raise can.CanOperationError(f"failed to receive from the IP/UDP socket: {exc}") from exc
+            else:
+                if sender[1] == self._own_port and self._is_local(sender):  # its own frame, looped back
+                    continue
+                return data, ancillary
             left = None if deadline is None else deadline - time.perf_counter()
             if left is not None and left <= 0.0:
                 return None
