@@ -153,13 +153,10 @@ class CanopenExchange:
 
     def send_rpdo(self, controlword: int, torque: int) -> None:
         """The RPDO(s): ``controlword`` and ``torque`` (per mille), packed in place."""
-        if self._one_rpdo:  # the hot path: send()'s body inline, one call less a frame
+        if self._one_rpdo:
             msg = self._rpdo
             self._rpdo_pack_into(msg.data, 0, controlword, torque)
-            try:
-                self._transmit(msg)
-            except (can.CanError, OSError) as exc:
-                raise DriveError(self.name, f"CAN send failed: {exc!r}") from exc
+            self.send(msg)
             self.stats.rpdos_sent += 1
             return
         values = (controlword, torque)

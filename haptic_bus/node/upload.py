@@ -51,21 +51,26 @@ run then adopted."""
 _NAMES_SHOWN = 8  # object names listed when an index is refused
 
 
-def _device_type(sdo: SdoAccess, node_id: int, timeout: float) -> int:
-    """0x1000 of the node: DriveTimeout if silent, DriveError if it aborts the read."""
+def _device_type(sdo: SdoAccess, node_id: int, timeout: float, alone: bool) -> int:
+    """0x1000 of the node: DriveTimeout if silent (``alone``: on a bus that reaches this process only,
+    which it says), DriveError if it aborts the read."""
     try:
         return sdo.read_int(DEVICE_TYPE, 0, DataType.UNSIGNED32)
     except DriveRefusal as error:
         raise DriveError(f"node {node_id}", f"node {node_id} answered, but not as a haptic-bus controller "
                                             f"(reading 0x1000: {sdo_abort_text(error.code)})") from None
     except DriveTimeout:
+        where = ("; python-can's virtual bus reaches this process alone: a run in another process is never on it"
+                 if alone else "")
         raise DriveTimeout(f"node {node_id}", f"no controller answered on node {node_id} within {timeout:g} s (is "
-                                              f"haptic-bus run going on this bus with --controller-node-id {node_id}?)") from None
+                                              f"haptic-bus run going on this bus with --controller-node-id {node_id}?"
+                                              f"{where})") from None
 
 
-def check_controller(sdo: SdoAccess, node_id: int, timeout: float) -> int:
-    """The number of scene objects of the controller on ``node_id``, once 0x1000 and 0x1018:02 show it is one."""
-    device_type = _device_type(sdo, node_id, timeout)
+def check_controller(sdo: SdoAccess, node_id: int, timeout: float, alone: bool = False) -> int:
+    """The number of scene objects of the controller on ``node_id``, once 0x1000 and 0x1018:02 show it is one
+    (``alone``: the bus reaches this process only, python-can's virtual one)."""
+    device_type = _device_type(sdo, node_id, timeout, alone)
     if device_type != 0:
         role = "a drive" if device_type & 0xFFFF == 402 else "another device"
         raise DriveError(f"node {node_id}", f"node {node_id} answered as {role}, not a haptic-bus controller "
@@ -117,13 +122,7 @@ def upload_walls(
         dictionary = canopen.ObjectDictionary()
         node = network.add_node(canopen.RemoteNode(node_id, dictionary))
         sdo = SdoAccess(f"controller node {node_id}", node, timeout, lambda: None)
-        try:
-            count = check_controller(sdo, node_id, timeout)
-        except DriveTimeout as silent:
-            if not isinstance(link, VirtualBus):
-                raise
-            raise DriveTimeout(silent.node, f"{silent.message[:-1]}; python-can's virtual bus reaches this process alone: "
-                                            "a run in another process is never on it)") from None
+        count = check_controller(sdo, node_id, timeout, alone=isinstance(link, VirtualBus))
         _refuse_unknown_objects(sdo, node_id, count, sorted(changes))
         walls = controller_dictionary([""] * count)  # the objects written: an SDO error names "Scene object i.Stiffness K (N/m)"
         for i in changes:
