@@ -6,7 +6,10 @@ hands it to the receiver's thread.  On this bus a receiver is one of two kinds:
 - a **queue** (the default): ``recv`` returns the frames in order, as on any python-can bus
   (canopen's notifier, a master that reads the bus itself, a sniffer);
 - an **inline receiver** (:meth:`LockstepBus.set_receiver`): a callable the frame is handed to
-  in the *sender's* thread before ``send`` returns.
+  in the *sender's* thread before ``send`` returns;
+- an **outlet** (``set_receiver(..., outlet=True)``): an inline receiver that never sends on the
+  channel (a bridge to another bus), handed each frame in the sender's thread at once, even while
+  another thread delivers to the inline receivers.
 
 So a node that serves frames inline (the simulated drive) has answered a SYNC before the
 master's ``send`` returns, and the master's next ``recv`` finds the TPDO without a thread
@@ -18,7 +21,12 @@ the channel and delivered by that thread, in order, before it returns.  No sende
 blocks on another node's lock, so two nodes that send to each other from their own threads
 cannot deadlock; a node whose receiver takes a lock that the node also holds while it sends
 must make it re-entrant (``threading.RLock``), since the sending thread may be the one that
-delivers the answer to it.  A receiver that raises is counted and logged on its bus
+delivers the answer to it.  An outlet is the exception: it answers nothing on the channel, so
+nothing it does can come back to the nodes, and it need not wait in the channel's line: a node's
+answer to a SYNC leaves through it while the next node is still being handed that SYNC, as on a
+real bus, where each drive's TPDO is on the wire while the others compute theirs.  Its frames
+arrive in the order of the ``send`` calls of each thread; frames sent from several threads at
+once reach it concurrently (it makes its own sends thread-safe).  A receiver that raises is counted and logged on its bus
 (:attr:`LockstepBus.receive_errors`); the sender and the other receivers carry on.
 
 Every receiver gets its own copy of the frame (the sender may reuse its ``can.Message``),
@@ -94,6 +102,7 @@ class LockstepBus(can.BusABC):
         self.receive_errors = 0
         self._queue: queue.SimpleQueue[can.Message] = queue.SimpleQueue()
         self._receiver: Receiver | None = None
+        self._outlet = False
         self._open = True
         super().__init__(channel=channel, **kwargs)
         with _channels_lock:
@@ -102,9 +111,12 @@ class LockstepBus(can.BusABC):
 
     # ------------------------------------------------------------------ receiving
 
-    def set_receiver(self, receiver: Receiver | None) -> None:
+    def set_receiver(self, receiver: Receiver | None, outlet: bool = False) -> None:
         """Hand every frame for this bus handle to ``receiver`` in the sender's thread (None: queue them
-        for :meth:`recv` again).  ``receiver`` should not raise; if it does, the error is counted."""
+        for :meth:`recv` again).  ``receiver`` should not raise; if it does, the error is counted.
+        ``outlet``: ``receiver`` never sends on this channel and is thread-safe, so it is handed each frame
+        at once rather than in the channel's line (module docstring)."""
+        self._outlet = outlet and receiver is not None
         self._receiver = receiver
 
     def _hand_over(self, message: can.Message) -> None:
@@ -136,6 +148,7 @@ class LockstepBus(can.BusABC):
         stamp = msg.timestamp if self.preserve_timestamps else time.time()
         channel = self._channel
         inline = []
+        outlets = []
         for bus in channel.buses:
             if bus is self and not self.receive_own_messages:
                 continue
@@ -146,11 +159,15 @@ class LockstepBus(can.BusABC):
                                error_state_indicator=msg.error_state_indicator)
             if bus._receiver is None:
                 bus._queue.put(copy)
+            elif bus._outlet:
+                outlets.append((bus, copy))
             else:
                 inline.append((bus, copy))
         # Only now may an inline receiver see the frame: a thread delivering concurrently could
         # otherwise hand it over, and queue the answers, before a queue later in the list had it
         # (measured: a sniffer saw a drive's TPDOs before the SYNC they answered, 1 run in 30).
+        for bus, copy in outlets:  # nothing comes back from an outlet: it need not wait in line
+            bus._hand_over(copy)
         if inline:
             channel.pending.extend(inline)
             channel.deliver()

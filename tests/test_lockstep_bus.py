@@ -95,6 +95,36 @@ def test_a_frame_sent_from_a_receiver_is_delivered_after_it_returns_in_order(pai
         channel_c.shutdown()
 
 
+def test_an_outlet_is_handed_an_answer_at_once_while_the_others_wait_in_line(pair: tuple[LockstepBus, LockstepBus],
+                                                                            channel: str) -> None:
+    a, b = pair
+    bridge = LockstepBus(channel=channel)
+    order: list[str] = []
+    try:
+        def on_b(msg: can.Message) -> None:
+            order.append(f"b got {msg.arbitration_id:#x}")
+            if msg.arbitration_id == 0x080:
+                b.send(frame(0x185, b"\x07"))
+                order.append("b answered")
+
+        b.set_receiver(on_b)
+        bridge.set_receiver(lambda msg: order.append(f"bridge got {msg.arbitration_id:#x} {bytes(msg.data).hex()} "
+                                                     f"rx {msg.is_rx} on {msg.channel}"), outlet=True)
+        a.send(frame(0x080))
+        # the outlet (a bridge to a bus) is handed each frame in the send, before the inline receivers' line
+        # goes on: b's answer inside b's send, a copy like any receiver's; the inline receivers' order is unchanged
+        assert order == ["bridge got 0x80  rx True on " + channel, "b got 0x80", "bridge got 0x185 07 rx True on " + channel,
+                         "b answered"]
+        answer = a.recv(0.0)
+        assert answer is not None and answer.arbitration_id == 0x185
+        bridge.set_receiver(None)  # no longer an outlet: its frames are queued again
+        a.send(frame(0x081))
+        queued = bridge.recv(0.0)
+        assert queued is not None and queued.arbitration_id == 0x081 and not bridge._outlet
+    finally:
+        bridge.shutdown()
+
+
 def test_own_messages_and_a_failing_receiver(pair: tuple[LockstepBus, LockstepBus], channel: str) -> None:
     a, b = pair
     echo = LockstepBus(channel=channel, receive_own_messages=True)

@@ -12,8 +12,9 @@ The nodes join the channel, where each frame is handed to every node inline, in 
 sends it, in frame order.  The bridge's thread receives from the bus and sends each frame into
 the channel, so a SYNC is answered by every node, one after the other, in that one thread, with
 no hand-off; whatever a node sends (its TPDOs there, its heartbeat from its timer thread) reaches
-the bridge's own handle on the channel, which sends it on the bus.  The nodes hear one another
-on the channel, as on a real bus.
+the bridge's own handle on the channel, which sends it on the bus at once, in the sending thread (an
+outlet of the channel: a node's TPDO is on the bus before the next node is handed the SYNC, not
+after every node has answered).  The nodes hear one another on the channel, as on a real bus.
 
 The bus does not give the bridge back its own frames (a CAN controller does not hear itself; on
 ``udp_multicast``, :class:`drives.udp_multicast.FilteredMulticastBus` drops the datagrams its own
@@ -60,7 +61,7 @@ class BusBridge:
         """Open the bus (:class:`~haptic_bus.errors.DriveError` if it cannot be) and the channel, and bridge them."""
         self._bus = open_bus(**self._config)
         self._local = LockstepBus(self.channel, preserve_timestamps=True)  # the bus's receive times, kept
-        self._local.set_receiver(self._outward)
+        self._local.set_receiver(self._outward, outlet=True)  # a node's TPDO leaves while the next computes its own
         self._stop.clear()
         self._thread = threading.Thread(target=self._inward, name="sim-bridge", daemon=True)
         self._thread.start()
