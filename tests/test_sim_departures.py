@@ -16,6 +16,7 @@ from sim_drive.canopen.manufacturer import ManufacturerObjects
 from sim_drive.canopen.pdo_engine import SlaveCounters
 from sim_drive.cli import _parse, build_parser, main
 from sim_drive.device import SimulatedDrive
+from sim_drive.handle import Handle, Step
 from sim_drive.modbus.bank import RegisterBank
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.setups import drive_setup
@@ -168,3 +169,38 @@ def test_invalid_departures_exit_2_with_one_line(flags: list[str], allowed: str,
     assert main(["--interface", "virtual", "--channel", "departures", "--node-id", "5", *flags]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and allowed in err[0] and err[0].startswith("haptic-bus sim: error: --")
+
+
+@pytest.mark.parametrize("velocity", ["average", "window:0.0003", "lowpass:0.002"])
+def test_late_and_early_syncs_reuse_kept_steps_and_move_the_handle_bit_for_bit_as_steps_made_afresh(velocity: str) -> None:
+    """A wall clock's SYNC closes an interval other than T: its pieces are kept per length, and a piece
+    as long as one already met (the window piece of every interval longer than T with ``average``) is not
+    computed again.  The same numbers as every step computed afresh, to the bit."""
+    from haptic_bus.analysis.velocity import VelocityModel
+
+    parameters = DeviceParameters(mass=2.0, friction=30.0, period=2e-3, velocity=VelocityModel.parse(velocity),
+                                  velocity_per_count=1e-9)
+    kept, fresh = enabled_drive(parameters), enabled_drive(parameters)
+    handle, fresh_handle = kept.handle, fresh.handle
+    assert isinstance(handle, Handle) and isinstance(fresh_handle, Handle)
+    fresh_handle._kept_step = fresh_handle._step  # type: ignore[method-assign]  # every piece's step made anew
+    made: list[float] = []
+    step = handle._step
+
+    def counted(h: float) -> Step:
+        made.append(h)
+        return step(h)
+
+    handle._step = counted  # type: ignore[method-assign]
+    intervals = [2e-3 + k * 1e-6 for k in (0, 137, -211, 137, 498, -4, 0, 1, -211, 12, 498, 300)]
+    for k, interval in enumerate(intervals):
+        for drive in (kept, fresh):
+            drive.sync(interval)
+            drive.write_object(0x6071, (-1) ** k * 100 * (k + 1))
+        assert (kept.velocity, kept.position, kept.velocity_counts) == (fresh.velocity, fresh.position, fresh.velocity_counts)
+        assert (kept.operator_energy, kept.wall_energy, kept.viscous_energy) == \
+            (fresh.operator_energy, fresh.wall_energy, fresh.viscous_energy)
+    assert kept.velocity != 0.0 and kept.viscous_energy > 0.0  # it moved: the comparison compared something
+    if velocity == "average":  # one step per new interval: a longer one's window piece is T long, made at configure
+        assert len(made) == len(set(intervals) - {2e-3}) and 2e-3 not in made
+    assert len(made) == len(set(made))  # no length made twice
