@@ -49,6 +49,19 @@ _STEPS_KEPT = 2 * _STRETCHED_KEPT  # piece lengths whose steps are kept (two of 
 _SERIES_TERMS = 26  # (2c)^n / (n + 3)! < 1e-20 for c < 1
 
 
+def _series_constants() -> tuple[tuple[float, float], ...]:
+    """``(2^(n+1) - 1, (n + 3)!)`` of :func:`_exp_0_0_c_2c`'s terms, as floats computed as its loop computed them
+    on every call (the factorial by the same products, so the same roundings: the same sum)."""
+    constants, factorial = [], 6.0
+    for n in range(_SERIES_TERMS):
+        constants.append((2.0 ** (n + 1) - 1.0, factorial))
+        factorial *= n + 4
+    return tuple(constants)
+
+
+_SERIES = _series_constants()
+
+
 class Meter(Protocol):
     """A velocity measurement's state carried along the handle's motion (see :mod:`sim_drive.sensor`)."""
 
@@ -89,11 +102,10 @@ def _exp_0_0_c_2c(c: float) -> float:
     """``exp[0, 0, -c, -2c]`` (dimensionless, ``c >= 0``): positive, limit 1/6 at 0, without cancellation."""
     if c < _SERIES_BELOW:
         # sum_n h_n(0, 0, -c, -2c) / (n + 3)! with h_n = (-c)^n (2^(n+1) - 1)
-        total, power, factorial = 0.0, 1.0, 6.0
-        for n in range(_SERIES_TERMS):
-            total += power * (2.0 ** (n + 1) - 1.0) / factorial
+        total, power = 0.0, 1.0
+        for weight, factorial in _SERIES:
+            total += power * weight / factorial
             power *= -c
-            factorial *= n + 4
         return total
     return (phi2(c) - exp_divided_difference(0.0, -c, -2.0 * c)) / (2.0 * c)
 

@@ -231,3 +231,22 @@ def test_profile_errors_name_the_profile_key(tmp_path: pathlib.Path, text: str, 
     with pytest.raises(ParameterError, match=r"truth\.toml") as caught:
         read_simulated_device(write(tmp_path, text))
     assert caught.value.name == field
+
+
+def test_the_viscous_series_with_its_constants_kept_sums_as_its_loop_did() -> None:
+    """``exp[0, 0, -c, -2c]``'s series takes its term constants from a table made once: the same floats
+    in the same operations as the loop that computed them every call, so the same sum, to the bit."""
+    from sim_drive.handle import _SERIES_BELOW, _SERIES_TERMS, _exp_0_0_c_2c
+
+    def loop(c: float) -> float:
+        total, power, factorial = 0.0, 1.0, 6.0
+        for n in range(_SERIES_TERMS):
+            total += power * (2.0 ** (n + 1) - 1.0) / factorial
+            power *= -c
+            factorial *= n + 4
+        return total
+
+    rng = np.random.default_rng(11)
+    cs = [0.0, *rng.uniform(0.0, _SERIES_BELOW, 4000), *rng.uniform(0.0, 1e-4, 1000), *(k * 1e-5 for k in range(3000))]
+    assert [_exp_0_0_c_2c(float(c)) for c in cs] == [loop(float(c)) for c in cs]
+    assert _exp_0_0_c_2c(0.0) == pytest.approx(1.0 / 6.0, rel=1e-15)  # the limit, to round-off
