@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from haptic_bus.bench.interrupts import sigint_after
+
 REPO = Path(__file__).resolve().parents[1]
 WAIT = 30.0  # s: bound of every wait here (the caller runs only in the probe's rests, 0.1 s in 0.6 s, if it shares the CPU)
 CALLER = """
@@ -198,3 +200,18 @@ def test_without_a_limit_the_probe_still_rests(limit: tuple[int, int]) -> None:
     from haptic_bus.bench.host_gaps import BURST, REST, schedule
 
     assert schedule(*limit) == (BURST, REST)
+
+
+def test_a_ctrl_c_while_a_child_is_started_acts_once_it_is_in_the_list() -> None:
+    """The window the test above can hit only by chance: a SIGINT inside ``Popen`` (or before the append)
+    raised KeyboardInterrupt there, and the child it had started was in no list a ``finally`` stops.  Inside
+    :func:`sigint_after` the signal waits; at its end it acts through the handler that was there."""
+    children: list[str] = []
+    with pytest.raises(KeyboardInterrupt):
+        with sigint_after():
+            signal.raise_signal(signal.SIGINT)  # the Ctrl-C, in the middle of the start
+            children.append("started")
+    assert children == ["started"]
+    with sigint_after():  # none came: nothing acts after it
+        children.append("again")
+    assert children == ["started", "again"] and signal.getsignal(signal.SIGINT) is signal.default_int_handler

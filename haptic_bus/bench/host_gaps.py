@@ -40,6 +40,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from haptic_bus.bench.interrupts import sigint_after
+
 GAP = 50e-6  # s: a pause of the spin longer than this is a gap (a reading takes ~0.1 us; a timer tick a few us)
 LONG_GAP = 1e-3  # s: a gap as long as a period at T = 1 ms, counted apart
 BURST = 0.5  # s: one spin, watched, at most
@@ -118,8 +120,9 @@ def host_gaps(seconds: float) -> list[dict[str, Any]]:
     probes: list[subprocess.Popen[str]] = []
     try:
         for cpu in cpus:
-            probes.append(subprocess.Popen([sys.executable, "-m", __name__, str(cpu), repr(seconds), str(os.getpid())],
-                                           stdout=subprocess.PIPE, text=True, process_group=0))
+            with sigint_after():  # a probe started is one the finally knows of
+                probes.append(subprocess.Popen([sys.executable, "-m", __name__, str(cpu), repr(seconds),
+                                                str(os.getpid())], stdout=subprocess.PIPE, text=True, process_group=0))
         figures = []
         for probe in probes:
             out, _ = probe.communicate(timeout=seconds + 60.0)

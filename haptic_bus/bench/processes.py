@@ -3,6 +3,8 @@
 Every process started here is stopped by the context manager that started it (SIGTERM, a
 bounded wait, then SIGKILL); a CPU hog also asks the kernel to kill it when the thread that
 started it ends (``PR_SET_PDEATHSIG``), so an interrupted or killed benchmark leaves none behind.
+A Ctrl-C while one is being started acts once it is (:func:`~haptic_bus.bench.interrupts.sigint_after`),
+so the process is one the context manager stops.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from haptic_bus.app.rig import simulator_command
+from haptic_bus.bench.interrupts import sigint_after
 
 START_WAIT = 30.0  # s: the subprocess imports numpy/scipy/canopen before it answers
 _REPO = Path(__file__).resolve().parents[2]
@@ -63,14 +66,17 @@ def canopen_simulator(profile: str, node_ids: tuple[int, ...],
     args = simulator_command("--interface", "udp_multicast", "--channel", group, "--bus-option", f"port={port}",
                              *(("--node-id", str(node_ids[0])) if len(node_ids) == 1 else
                                ("--node-ids", ",".join(map(str, node_ids)))), "--profile", profile, *options)
-    process = subprocess.Popen(args, cwd=_REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     bus = {"interface": "udp_multicast", "channel": group, "port": port}
+    process = None
     try:
+        with sigint_after():  # a simulator started is one the finally stops
+            process = subprocess.Popen(args, cwd=_REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         for node_id in node_ids:
             wait_heartbeat(bus, node_id, process, START_WAIT)
         yield bus, process
     finally:
-        stop(process)
+        if process is not None:
+            stop(process)
 
 
 @contextmanager
@@ -79,8 +85,9 @@ def cpu_hogs(count: int) -> Iterator[list[subprocess.Popen]]:
     hogs: list[subprocess.Popen] = []
     try:
         for _ in range(count):
-            hogs.append(subprocess.Popen([sys.executable, "-c", _HOG], stdout=subprocess.DEVNULL,
-                                         stderr=subprocess.DEVNULL))
+            with sigint_after():  # a hog started is one the finally knows of
+                hogs.append(subprocess.Popen([sys.executable, "-c", _HOG], stdout=subprocess.DEVNULL,
+                                             stderr=subprocess.DEVNULL))
         time.sleep(0.2)  # let them reach the loop
         yield hogs
     finally:
