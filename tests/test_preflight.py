@@ -6,10 +6,14 @@ import numpy as np
 import pytest
 
 from haptic_bus.app.preflight import (
+    LOOK_AGAIN,
     PERIOD_GRID,
+    PREFLIGHT_CYCLES,
     STALL_MARGIN,
     Timing,
     allowed_overruns,
+    catch_up_overruns,
+    holds_period,
     judge,
     judge_delay,
     measure,
@@ -225,3 +229,58 @@ def test_a_target_applied_on_arrival_is_judged_at_least_an_exchange_late() -> No
     at_sync = judge_delay(timing(late, exchange=600e-6), 1.0, passes_at, "guard", 0.050, 50)
     assert at_sync.observed_delay == pytest.approx(1.02, abs=1e-9)
     assert load_profile("desktop-touch").loop.timing == "ideal"  # the shipped profile such a run would load
+
+
+def _stall_of(stall: float, cycles: int) -> Timing:
+    """``cycles`` cycles due every T, 20 us late, 0.6 ms exchanges; cycle 250 held up ``stall`` s in its
+    exchange, the ones after it starting as the one before ends until the loop has caught up."""
+    exchange = np.full(cycles, 600e-6)
+    exchange[250] = stall
+    return _looped(exchange)
+
+
+def test_one_stall_in_the_first_look_is_judged_again_over_four_times_the_cycles() -> None:
+    """One stall of 4 ms: in 500 cycles its catch-up (0.4 ms a cycle) starts 6 of them more than T late, over
+    the 5 allowed (so the first look alone refused T: 1 of 20 fresh pre-flights here); in the 2000 of the second
+    look the same 6 are under the 15 allowed, and T is held.  Four such stalls in 2000 (24 late) are not."""
+    first = _stall_of(4e-3, PREFLIGHT_CYCLES)
+    assert not holds_period(first) and catch_up_overruns(first, np.array([T]))[0] == 6
+    assert allowed_overruns(PREFLIGHT_CYCLES) == 5 and allowed_overruns((1 + LOOK_AGAIN) * PREFLIGHT_CYCLES) == 15
+    second = _stall_of(4e-3, (1 + LOOK_AGAIN) * PREFLIGHT_CYCLES)
+    assert holds_period(second)
+    report = judge_delay(second, 1.0, lambda delay: True, "guard", 0.030, 30)
+    assert report.holdable and report.cycles == 2000 and report.smallest_period == T
+    stalls = second.exchange.copy()
+    stalls[[250, 750, 1250, 1750]] = 4e-3
+    assert not holds_period(_looped(stalls))
+
+
+def _looped(exchange: np.ndarray) -> Timing:
+    """Cycles due every T with the exchanges ``exchange`` (s), each starting 20 us late or as the one before
+    ends, whichever is later (the loop catching up)."""
+    starts, late, end = np.zeros(exchange.size), np.zeros(exchange.size), -np.inf
+    for k in range(exchange.size):
+        starts[k] = max(k * T + 20e-6, end)
+        late[k] = starts[k] - k * T
+        end = starts[k] + exchange[k]
+    return Timing(T, late, starts, exchange, int(np.sum(late > T)))
+
+
+@pytest.mark.parametrize(("held", "measured"), [(True, 20), (False, 20 + 3 * 20)])
+def test_the_cycles_go_on_only_when_the_first_look_would_refuse(monkeypatch: pytest.MonkeyPatch, held: bool,
+                                                                 measured: int) -> None:
+    """The decision is the period rule's on the first ``cycles`` (``holds_period``, here as given); the
+    second look's cycles go on from there, one timing of them all."""
+    import haptic_bus.app.preflight as preflight
+
+    looked: list[int] = []
+
+    def rule(timing: Timing) -> bool:
+        looked.append(timing.exchange.size)
+        return held
+
+    monkeypatch.setattr(preflight, "holds_period", rule)
+    calls: list[None] = []
+    timing = measure(lambda: calls.append(None), T, cycles=20, again=3 * 20)
+    assert looked == [20] and len(calls) == measured
+    assert timing.lateness.size == timing.starts.size == timing.exchange.size == measured
