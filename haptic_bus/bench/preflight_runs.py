@@ -25,6 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from haptic_bus.app.preflight import PREFLIGHT_CYCLES
 from haptic_bus.bench.size import Size
 
 PROFILE, NODE_ID = "cia402-handle", 5
@@ -56,7 +57,8 @@ def one_run(bus: dict[str, Any]) -> dict[str, Any]:
             "error": document.get("error") or ending,
             "held": bool(preflight.get("holdable")), "judged_delay": preflight.get("observed_delay"),
             "lateness_p99_s": (preflight.get("lateness") or {}).get("p99"),
-            "delay_added_p99_s": preflight.get("delay_added_p99"), "reason": preflight.get("reason")}
+            "delay_added_p99_s": preflight.get("delay_added_p99"), "reason": preflight.get("reason"),
+            "cycles": preflight.get("cycles")}
 
 
 def fresh_run() -> dict[str, Any]:
@@ -69,7 +71,7 @@ def fresh_run() -> dict[str, Any]:
         except RuntimeError as error:  # no heartbeat, or it exited: no run was started
             return {"exit": None, "exit_reason": "no simulator", "error": f"the simulated drive did not start: {error}",
                     "held": False, "judged_delay": None, "lateness_p99_s": None, "delay_added_p99_s": None,
-                    "reason": None}
+                    "reason": None, "cycles": None}
         return one_run(bus)
 
 
@@ -112,6 +114,7 @@ def section(runs: list[dict[str, Any]], planned: int) -> dict:
                        f"haptic-bus sim each time: {done}, one after another",
         "count": count, "planned": planned, "interrupted": count < planned, "runs": runs, "delay_target": DELAY_TARGET,
         "held": sum(r["held"] for r in runs), "within": sum(within(r) for r in runs),
+        "looked_again": sum((r.get("cycles") or 0) > PREFLIGHT_CYCLES for r in runs),  # the second look's (preflight)
         "refused": sum(reached(r) and not r["held"] for r in runs), "not_reached": sum(not reached(r) for r in runs),
         "judged_delay": ({"median": statistics.median(delays), "min": min(delays), "max": max(delays)}
                          if delays else None),

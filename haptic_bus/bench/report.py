@@ -283,7 +283,8 @@ def _preflight(s: dict) -> list[str]:
         return r["error"] or r["exit_reason"] or ""
 
     rows = [[str(k + 1), "-" if r["exit"] is None else str(r["exit"]),
-             "held T" if r["held"] else "refused" if reached(r) else "not reached",
+             ("held T" if r["held"] else "refused" if reached(r) else "not reached")
+             + (f" ({r['cycles']} cycles)" if r.get("cycles") else ""),
              "-" if r["lateness_p99_s"] is None else _t(r["lateness_p99_s"]),
              "-" if r["delay_added_p99_s"] is None else _t(r["delay_added_p99_s"]),
              "-" if r["judged_delay"] is None or not r["held"] else f"{r['judged_delay']:.3g}",
@@ -293,7 +294,7 @@ def _preflight(s: dict) -> list[str]:
                                                rows), "",
             f"{s['held']} of {s['count']} passed pre-flight, {s['refused']} refused, {s['not_reached']} never "
             f"reached it; {s['within']} of {s['count']} judged the wall at <= {s['delay_target']:g} samples and "
-            "exited 0."]
+            f"exited 0; {s.get('looked_again', 0)} measured on past the first look's cycles before judging."]
 
 
 def _done_when(rows: list[dict], issue: int = 14) -> list[str]:
