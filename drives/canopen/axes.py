@@ -159,13 +159,14 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
             if not self.link.direct:
                 cycle.begin()
             cycle.drain()
-            for drive in drives:
+            collected = cycle.sync_and_collect()
+            for drive in drives:  # what the frames before the SYNC said, handed on after it (SyncCycle.drain)
                 if drive.tripped is None:
                     drive.connected().events.check()
             timeout = cycle.timeout
             taken: list[CyclicInputs] = []
             silent: list[DriveTimeout] = []
-            for drive, found in zip(drives, cycle.sync_and_collect()):
+            for drive, found in zip(drives, collected):
                 try:
                     taken.append(drive.take_inputs(found, timeout))
                 except DriveTimeout as error:  # every drive silent as long is named, not only the first

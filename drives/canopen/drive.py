@@ -351,9 +351,9 @@ class CanopenDrive(Cia402Master[CanopenConnection]):
             if not self.link.direct:
                 cycle.begin()
             cycle.drain()
-            if self._tripped is None:
-                events.check()
             [found] = cycle.sync_and_collect()
+            if self._tripped is None:  # what the frames before the SYNC said, handed on after it (SyncCycle.drain)
+                events.check()
         except DriveError as error:
             raise self.trip(error) from error.__cause__
         return self.take_inputs(found, cycle.timeout)

@@ -64,6 +64,7 @@ class SyncCycle:
         self._axes: tuple[tuple[Inputs, int, int], ...] = ()  # per drive: its inputs(), its TPDOs' places
         self._stats: tuple[CanopenStats, ...] = ()
         self._alone: Inputs | None = None  # the inputs() of the one drive the cycle serves (None: several)
+        self._held: list[can.Message] = []  # frames for canopen's dispatcher the drain read, until the SYNC is out
 
     def join(self, exchange: CanopenExchange) -> None:
         """Serve ``exchange``'s drive too (the next axis); DriveError if the cycle already serves one
@@ -109,10 +110,14 @@ class SyncCycle:
     # ------------------------------------------------------------------ the cycle
 
     def drain(self) -> None:
-        """Before a SYNC: consume what arrived since the last cycle (late TPDOs are counted, not used)."""
+        """Before a SYNC: consume what arrived since the last cycle (late TPDOs are counted, not used).
+        Every other frame is held and handed to canopen's dispatcher right after the SYNC, while the
+        drives answer it (:meth:`sync_and_collect`): handled before it, a drive's heartbeat (30-350 us in the
+        control thread) sent the SYNC that much late, its period varying +-140 us at p1/p99 where the
+        cycle's start lateness p99 was 28 us."""
         now = time.perf_counter()
         slots = self._slots
-        while (frame := receive_direct(self.name, self.link, slots, now, self._dispatch)) is not None:
+        while (frame := receive_direct(self.name, self.link, slots, now, self._held.append)) is not None:
             _, size, _, stats = slots[frame[0]]
             if len(frame[1]) != size:
                 stats.dropped_frames += 1
@@ -124,6 +129,9 @@ class SyncCycle:
         where one of its TPDOs did not arrive within ``timeout`` (the cycle waits for the last drive)."""
         self.send_sync()
         synced = time.perf_counter_ns()  # every drive samples at the SYNC: by now they have
+        held, self._held = self._held, []
+        for msg in held:  # what the drain held, while the drives answer (drain)
+            self._dispatch(msg)
         slots = self._slots
         parts: list[tuple[Any, ...]] = [()] * self._count  # () until the slot's TPDO arrived
         missing = self._count
