@@ -1,4 +1,6 @@
-"""break14: a stop asked during pre-flight's first look, which a stall refuses, does not measure on for a second look.
+"""break14 (failing tests, found by hand): pre-flight's second look measured where nothing it shows can matter.
+
+1. A stop asked during a first look that a stall refuses does not measure on for a second look.
 
 docs/commands.md: SIGTERM ends ``run`` "at the next cycle boundary ... (before its drives are enabled:
 never enabled)".  Found by hand (break14): a run whose first look was refused by a stall of the run's own
@@ -8,6 +10,8 @@ T = 2 ms, Ctrl-C 1.2 s into pre-flight: exit 3.1 s after it.  ``preflight.measur
 
 Frames stay on this host: udp_multicast, hop_limit 0, a port of this test's own.  The count of SYNCs is
 what the simulated drive says it received (``stopped after N SYNCs``), not a time: not a timed test.
+
+2. A first look already over the 2000 cycles' allowance is refused without the 1500 cycles more.
 """
 
 from __future__ import annotations
@@ -92,3 +96,27 @@ def test_sigterm_in_a_refused_first_look_does_not_look_again(tmp_path: Path) -> 
     # at the next cycle boundary: ~300 SYNCs (+ a few while the run leaves); at most not on into the second look's
     # 2000 (a stall that failed to refuse the first look leaves 500 here: this test then passes, never fails wrongly)
     assert int(syncs.group(1)) < 1200, f"SIGTERM {STOP_AT} s into pre-flight; the drive saw {syncs.group(1)} SYNCs\n{log}"
+
+
+def test_no_second_look_where_the_first_already_exceeds_all_2000_cycles_allowance() -> None:
+    """break14: the second look can only add busy cycles and catch-ups (the 2000 cycles' replay begins as the first
+    500's), so a first look already over the 2000 cycles' allowance (15) is refused whatever the 1500 more show.
+    By hand: gantry-3d over Modbus at T = 1.5 ms, 448 of 2000 busy longer than T, refused after the 2000 (3 s of
+    pre-flight where 0.75 s decided it); a profile at T = 0.3 ms with a 0.35 ms median exchange (refused by the
+    median rule) measured 2000 cycles too, its start lateness grown to 148 ms."""
+    from haptic_bus.app import preflight
+
+    period, calls = 1e-3, [0]
+
+    def exchange() -> None:  # every 10th cycle busy 1.2 T: 50 of the first 500, over 15 of 2000 already
+        calls[0] += 1
+        if calls[0] % 10 == 0:
+            until = time.perf_counter() + 1.2 * period
+            while time.perf_counter() < until:  # bounded by its deadline
+                pass
+
+    cycles = preflight.PREFLIGHT_CYCLES
+    timing = preflight.measure(exchange, period, cycles, again=preflight.LOOK_AGAIN * cycles)
+    busy = int(((timing.exchange + preflight.own_lateness(timing)) > period).sum())
+    assert busy > preflight.allowed_overruns(cycles * (1 + preflight.LOOK_AGAIN))  # the verdict is refusal either way
+    assert timing.exchange.size == cycles, f"measured {timing.exchange.size} cycles; the first {cycles} decided it"
