@@ -4,7 +4,7 @@
 
 docs/commands.md: SIGTERM ends ``run`` "at the next cycle boundary ... (before its drives are enabled:
 never enabled)".  Found by hand (break14): a run whose first look was refused by a stall of the run's own
-process, SIGTERM'd (or Ctrl-C'd, even three times) about 0.9 s into pre-flight at T = 1 ms, went on
+process, SIGTERM'd (or Ctrl-C'd, even three times) 1.0 s into pre-flight at T = 1 ms, went on
 sending SYNC to cycle 2000 (the simulated drive counted 2001 SYNCs) and exited then; gantry-3d at
 T = 2 ms, Ctrl-C 1.2 s into pre-flight: exit 3.1 s after it.  ``preflight.measure`` checks no stop.
 
