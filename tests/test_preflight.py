@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -13,9 +15,9 @@ from haptic_bus.app.preflight import (
     Timing,
     allowed_overruns,
     catch_up_overruns,
-    holds_period,
     judge,
     judge_delay,
+    looks_again,
     measure,
     without_realtime,
 )
@@ -242,17 +244,25 @@ def _stall_of(stall: float, cycles: int) -> Timing:
 def test_one_stall_in_the_first_look_is_judged_again_over_four_times_the_cycles() -> None:
     """One stall of 4 ms: in 500 cycles its catch-up (0.4 ms a cycle) starts 6 of them more than T late, over
     the 5 allowed (so the first look alone refused T: 1 of 20 fresh pre-flights here); in the 2000 of the second
-    look the same 6 are under the 15 allowed, and T is held.  Four such stalls in 2000 (24 late) are not."""
+    look the same 6 are under the 15 allowed, and T is held.  Four such stalls in 2000 (24 late) are not; three
+    in the first 500 (18 late) are over the 2000's allowance already: no second look."""
     first = _stall_of(4e-3, PREFLIGHT_CYCLES)
-    assert not holds_period(first) and catch_up_overruns(first, np.array([T]))[0] == 6
+    assert catch_up_overruns(first, np.array([T]))[0] == 6
+    assert not judge_delay(first, 1.0, lambda delay: True, "guard", 0.030, 30).holdable
     assert allowed_overruns(PREFLIGHT_CYCLES) == 5 and allowed_overruns((1 + LOOK_AGAIN) * PREFLIGHT_CYCLES) == 15
+    assert looks_again(first, LOOK_AGAIN * PREFLIGHT_CYCLES)
     second = _stall_of(4e-3, (1 + LOOK_AGAIN) * PREFLIGHT_CYCLES)
-    assert holds_period(second)
-    report = judge_delay(second, 1.0, lambda delay: True, "guard", 0.030, 30)
-    assert report.holdable and report.cycles == 2000 and report.smallest_period == T
+    report = judge_delay(dataclasses.replace(second, first_look=PREFLIGHT_CYCLES), 1.0, lambda delay: True, "guard",
+                         0.030, 30)
+    assert report.holdable and report.cycles == 2000 and report.smallest_period == T and report.first_look == 500
+    assert report.line().startswith("pre-flight: 2000 cycles (500, then 1500 more: the first alone would have refused "
+                                    "T) at T = 1 ms, no torque: ")
     stalls = second.exchange.copy()
     stalls[[250, 750, 1250, 1750]] = 4e-3
-    assert not holds_period(_looped(stalls))
+    assert not judge_delay(_looped(stalls), 1.0, lambda delay: True, "guard", 0.030, 30).holdable
+    three = first.exchange.copy()
+    three[[100, 250, 400]] = 4e-3
+    assert catch_up_overruns(_looped(three), np.array([T]))[0] == 18 and not looks_again(_looped(three), 1500)
 
 
 def _looped(exchange: np.ndarray) -> Timing:
@@ -269,18 +279,19 @@ def _looped(exchange: np.ndarray) -> Timing:
 @pytest.mark.parametrize(("held", "measured"), [(True, 20), (False, 20 + 3 * 20)])
 def test_the_cycles_go_on_only_when_the_first_look_would_refuse(monkeypatch: pytest.MonkeyPatch, held: bool,
                                                                  measured: int) -> None:
-    """The decision is the period rule's on the first ``cycles`` (``holds_period``, here as given); the
-    second look's cycles go on from there, one timing of them all."""
+    """The decision is the period rule's on the first ``cycles`` (``looks_again``, here as given); the
+    second look's cycles go on from there, one timing of them all, which says where the first look ended."""
     import haptic_bus.app.preflight as preflight
 
     looked: list[int] = []
 
-    def rule(timing: Timing) -> bool:
+    def rule(timing: Timing, again: int) -> bool:
         looked.append(timing.exchange.size)
-        return held
+        return not held
 
-    monkeypatch.setattr(preflight, "holds_period", rule)
+    monkeypatch.setattr(preflight, "looks_again", rule)
     calls: list[None] = []
     timing = measure(lambda: calls.append(None), T, cycles=20, again=3 * 20)
     assert looked == [20] and len(calls) == measured
     assert timing.lateness.size == timing.starts.size == timing.exchange.size == measured
+    assert timing.first_look == (0 if held else 20)

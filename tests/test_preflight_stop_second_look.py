@@ -1,4 +1,5 @@
-"""break14 (failing tests, found by hand): pre-flight's second look measured where nothing it shows can matter.
+"""Pre-flight's second look (haptic_bus.app.preflight.looks_again) is measured only where it can matter; found by
+hand by a session trying to break it (break14), each test failing before its mend.
 
 1. A stop asked during a first look that a stall refuses does not measure on for a second look.
 

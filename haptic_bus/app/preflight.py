@@ -112,7 +112,8 @@ class PreflightReport:
     ``watchdog``: the shortest stall (s) that faults the drive (inf: none); ``holdable``: False
     refuses the run, ``reason`` says why;
     ``smallest_period``: the shortest ``T`` (s) this machine holds (the busy time's, or the
-    watchdog's where a stall binds; None where no ``T`` holds the stall measured)."""
+    watchdog's where a stall binds; None where no ``T`` holds the stall measured); ``first_look``: the
+    cycles of the first look when the second was measured (:func:`looks_again`), else 0."""
 
     cycles: int
     period: float
@@ -129,12 +130,15 @@ class PreflightReport:
     holdable: bool
     reason: str
     smallest_period: float | None
+    first_look: int = 0
 
     def line(self) -> str:
         """What the run prints: the measurement and the verdict, one line."""
         late, cycle = self.lateness, self.cycle
         holds = f"; holds T >= {self.smallest_period * 1e3:g} ms" if self.holdable and self.smallest_period else ""
-        return (f"pre-flight: {self.cycles} cycles at T = {self.period * 1e3:g} ms, no torque: start lateness "
+        again = (f" ({self.first_look}, then {self.cycles - self.first_look} more: the first alone would have refused "
+                 "T)") if self.first_look else ""
+        return (f"pre-flight: {self.cycles} cycles{again} at T = {self.period * 1e3:g} ms, no torque: start lateness "
                 f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms; delay "
                 f"added p99 {self.delay_added_p99 * 1e6:.0f} us; "
                 f"exchange p99 {cycle['p99'] * 1e6:.0f} us; longest gap {self.longest_gap * 1e3:.3g} ms; "
@@ -148,13 +152,15 @@ class PreflightReport:
 
 @dataclass(frozen=True)
 class Timing:
-    """Pre-flight's raw measurement: each cycle's start lateness, start time and exchange time (s)."""
+    """Pre-flight's raw measurement: each cycle's start lateness, start time and exchange time (s); the
+    clock's overruns; ``first_look``: the cycles of the first look when the second was measured, else 0."""
 
     period: float
     lateness: np.ndarray
     starts: np.ndarray
     exchange: np.ndarray
     overruns: int
+    first_look: int = 0
 
 
 def measure(exchange: Callable[[], object], period: float, cycles: int = PREFLIGHT_CYCLES,
@@ -162,8 +168,9 @@ def measure(exchange: Callable[[], object], period: float, cycles: int = PREFLIG
     """Time ``exchange`` -- one cycle of the drive(s) at zero torque, called in their cyclic phase so
     that it takes the run's own path (the bus read by this thread, the heartbeat from the cycle) --
     ``cycles`` times on a fresh real clock of period ``period`` s; ``again`` cycles more, on the same
-    clock, when the first ``cycles`` would refuse ``T`` by the period rule (:func:`holds_period`: the second
-    look, module docstring).  A drive that stops answering after
+    clock, when the first ``cycles`` would refuse ``T`` by the period rule and the ``again`` more could
+    change that (:func:`looks_again`: the second look, module docstring).  ``exchange`` is where a stop
+    asked meanwhile ends the measurement (the caller's check).  A drive that stops answering after
     answering some cycles is a :class:`DriveTimeout` that says so: from here it looks the same as a
     machine that stalls the drive's process (breaker: a simulated drive silent for 280 ms on a loaded
     host was reported as a plain "no TPDO")."""
@@ -185,20 +192,25 @@ def measure(exchange: Callable[[], object], period: float, cycles: int = PREFLIG
                                "drive's process look the same from here") from silent
         starts[k], took[k] = started, time.perf_counter() - started
         k += 1
-        if k == cycles and again and not holds_period(Timing(period, clock.lateness(), starts[:k], took[:k],
-                                                             clock.overruns)):
-            total += again  # checked in the slack before the next deadline: 0.1-0.3 ms here
-    return Timing(period, clock.lateness(), starts[:total], took[:total], clock.overruns)
+        if k == cycles and again and looks_again(Timing(period, clock.lateness(), starts[:k], took[:k], clock.overruns),
+                                                 again):
+            total += again  # decided in the slack before the next deadline: 0.1-0.3 ms here
+    return Timing(period, clock.lateness(), starts[:total], took[:total], clock.overruns,
+                  cycles if total > cycles else 0)
 
 
-def holds_period(timing: Timing) -> bool:
-    """Whether the measured cycles hold their own ``T`` by the period rule (:func:`judge_delay`'s first two
-    counts, the bus's floor aside): at most :func:`allowed_overruns` of them busy longer than ``T``, and as
-    many starting more than ``T`` late once the catch-ups are counted (:func:`catch_up_overruns`)."""
-    allowed = allowed_overruns(timing.exchange.size)
-    busy = timing.exchange + own_lateness(timing)
-    return (int(np.count_nonzero(busy > timing.period)) <= allowed
-            and int(catch_up_overruns(timing, np.array([timing.period]))[0]) <= allowed)
+def looks_again(first: Timing, again: int) -> bool:
+    """Whether ``again`` cycles more can change the verdict on the first look ``first``: the period rule
+    (:func:`judge_delay`'s two counts: cycles busy longer than ``T``, and cycles starting more than ``T`` late
+    once the catch-ups are counted, :func:`catch_up_overruns`) refuses ``T`` on the first look, by no more
+    than the longer measurement allows (the counts only grow with more cycles: a first look already over
+    that is refused either way), and the median exchange fits ``T``."""
+    period, cycles = first.period, first.exchange.size
+    if float(np.median(first.exchange)) > period:
+        return False
+    busy = int(np.count_nonzero(first.exchange + own_lateness(first) > period))
+    worst = max(busy, int(catch_up_overruns(first, np.array([period]))[0]))
+    return allowed_overruns(cycles) < worst <= allowed_overruns(cycles + again)
 
 
 def while_cycling(exchange: Callable[[], object], period: float, work: Callable[[], R], spin: float | None = None) -> R:
@@ -287,7 +299,7 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
         if not holdable and smallest is not None:
             reason += f": this machine holds T >= {smallest * 1e3:g} ms"
         return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, added_p99, overlong,
-                               allowed, observed, passive, watchdog, holdable, reason, smallest)
+                               allowed, observed, passive, watchdog, holdable, reason, smallest, timing.first_look)
 
     if cycle["p50"] > period:  # the loop cannot keep its period: it falls further behind every cycle
         return report(False, f"refused: one exchange with the drive takes {cycle['p50'] * 1e3:.3g} ms (median), more "

@@ -358,9 +358,13 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
                 raise DriveTimeout(silent.node, f"{silent.message}, while pre-flight's verdict was judged after its "
                                                 "cycles (nothing enabled)") from silent
 
+        def exchange_measured() -> object:
+            _stop_if_asked(options)  # asked during the measurement (up to 2000 cycles): it ends at this cycle's start
+            return exchange()
+
         spin = options.scheduling.spin
         cycles = preflight.PREFLIGHT_CYCLES if options.preflight_cycles is None else options.preflight_cycles
-        timing = preflight.measure(exchange, kind.period, cycles, spin=spin, again=preflight.LOOK_AGAIN * cycles)
+        timing = preflight.measure(exchange_measured, kind.period, cycles, spin=spin, again=preflight.LOOK_AGAIN * cycles)
         _stop_if_asked(options)  # asked during the measurement: the run stops, whatever its verdict would have been
         report = preflight.while_cycling(exchange_unless_stopped, kind.period, spin=spin, work=lambda: preflight.judge_delay(
             timing, kind.assumed_delay(gate), kind.passes_at(gate, scene), kind.profile.passivity.layer,

@@ -7,7 +7,7 @@ its own udp_multicast group and port, the profile's operator), then the command 
 of its own, as a user types it (real time, the default scheduling, ``--no-plots``, a run of
 :data:`DURATION` s after pre-flight), and reads pre-flight's verdict from the run's ``run.json``:
 whether this machine held ``T`` (else the refusal, naming the period it held), the start
-lateness p99 of its 500 cycles, the p99 of the delay each cycle adds (what the judged delay adds to
+lateness p99 of its 500 cycles (2000 where it looked again), the p99 of the delay each cycle adds (what the judged delay adds to
 the gate's: :func:`haptic_bus.app.preflight.delay_added`), and the loop delay the gate judged the wall at.  The count is
 20 runs (full), 5 (``--quick``) and 1 (``--smoke``: the path runs).  A run that never reached
 pre-flight is one of the count too, with what ended it: its error (a drive error, a crash's last
