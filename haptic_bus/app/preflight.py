@@ -310,8 +310,8 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
                              f"{OVERRUN_SHARE:.1%} of a run's cycles would overrun (at most {allowed} of {busy.size} "
                              f"at {CONFIDENCE:.0%} confidence){unheld}")
     if holds > period:
-        return report(False, f"refused: {caught} of {busy.size} cycles started more than T = {period * 1e3:g} ms late, "
-                             f"catching up after the longest busy cycle ({busy[0] * 1e3:.3g} ms) at "
+        return report(False, f"refused: {caught} of {busy.size} cycles would start more than T = {period * 1e3:g} ms "
+                             f"late, replayed, catching up after the longest busy cycle ({busy[0] * 1e3:.3g} ms) at "
                              f"{(period - cycle['p50']) * 1e3:.3g} ms a cycle (an exchange takes {cycle['p50'] * 1e3:.3g} "
                              f"ms, median): more than {OVERRUN_SHARE:.1%} of a run's cycles would overrun (at most "
                              f"{allowed} of {busy.size} at {CONFIDENCE:.0%} confidence){unheld}")
