@@ -86,6 +86,10 @@ def test_ten_thousand_random_frames_silence_neither_side(channel) -> None:
 
         thread = threading.Thread(target=control, daemon=True)
         thread.start()
+        for _ in range(3000):  # the frames come while the loop runs: from its first cycle on (at most 30 s)
+            if controller.cycles or not thread.is_alive():
+                break
+            time.sleep(0.01)
         rng = random.Random(SEED)
         deadline = time.monotonic() + 60.0
         for sent in range(FRAMES):
