@@ -150,6 +150,12 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
         self._require_connected()
         return self._cycle_inputs()
 
+    def _check_events(self) -> None:
+        """Every drive not tripped: what its EMCY and heartbeat frames said (a DriveError, the first)."""
+        for drive in self.drives:
+            if drive.tripped is None:
+                drive.connected().events.check()
+
     def _cycle_inputs(self) -> tuple[CyclicInputs, ...]:
         """One cycle's inputs (:meth:`read_inputs`), the bus read in this thread again only where an
         SDO access gave it back to canopen's notifier."""
@@ -159,10 +165,8 @@ class CanopenAxes(AxesMaster[CanopenDrive]):
             if not self.link.direct:
                 cycle.begin()
             cycle.drain()
-            collected = cycle.sync_and_collect()
-            for drive in drives:  # what the frames before the SYNC said, handed on after it (SyncCycle.drain)
-                if drive.tripped is None:
-                    drive.connected().events.check()
+            collected = cycle.sync_and_collect(self._check_events)  # the frames before the SYNC, checked after it
+            self._check_events()  # and those that came while the TPDOs were awaited
             timeout = cycle.timeout
             taken: list[CyclicInputs] = []
             silent: list[DriveTimeout] = []

@@ -351,9 +351,10 @@ class CanopenDrive(Cia402Master[CanopenConnection]):
             if not self.link.direct:
                 cycle.begin()
             cycle.drain()
-            [found] = cycle.sync_and_collect()
-            if self._tripped is None:  # what the frames before the SYNC said, handed on after it (SyncCycle.drain)
-                events.check()
+            check = events.check if self._tripped is None else None
+            [found] = cycle.sync_and_collect(check)  # the frames before the SYNC, handed on after it, checked then
+            if check is not None:  # and those that came while the TPDOs were awaited
+                check()
         except DriveError as error:
             raise self.trip(error) from error.__cause__
         return self.take_inputs(found, cycle.timeout)

@@ -124,14 +124,19 @@ class SyncCycle:
             else:
                 stats.stale_tpdos += 1
 
-    def sync_and_collect(self) -> list[CyclicInputs | None]:
+    def sync_and_collect(self, check: Callable[[], None] | None = None) -> list[CyclicInputs | None]:
         """SYNC out, then every drive's TPDOs of this cycle: per drive (in axis order) its inputs, None
-        where one of its TPDOs did not arrive within ``timeout`` (the cycle waits for the last drive)."""
+        where one of its TPDOs did not arrive within ``timeout`` (the cycle waits for the last drive).
+        ``check``: called once the frames the drain held are handed on, before the TPDOs are waited for
+        (the drives' events: a drive that sent an EMCY and stopped answering trips now, not after the
+        timeout; breaker: 15.7 ms at T = 1 ms, 31 ms for three axes, where it had tripped in 0.6 ms)."""
         self.send_sync()
         synced = time.perf_counter_ns()  # every drive samples at the SYNC: by now they have
         held, self._held = self._held, []
         for msg in held:  # what the drain held, while the drives answer (drain)
             self._dispatch(msg)
+        if check is not None:
+            check()
         slots = self._slots
         parts: list[tuple[Any, ...]] = [()] * self._count  # () until the slot's TPDO arrived
         missing = self._count

@@ -1,4 +1,5 @@
-"""break14b: a fault the drain read before the SYNC trips the drive without waiting out the TPDO timeout.
+"""A fault the drain read before the SYNC trips the drive without waiting out the TPDO timeout (found by hand by
+a session trying to break 5aedf65, break14b; both tests failed before the mend).
 
 A drive that reports a fault by EMCY and leaves NMT OPERATIONAL (an NMT stop here: the simulated drive
 sends EMCY 0x8100 and answers no SYNC) must trip at the next cycle as before 5aedf65, when the event
