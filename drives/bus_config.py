@@ -27,6 +27,7 @@ if TYPE_CHECKING:
 
 LOCAL_HOP_LIMIT = 0  # udp_multicast's default here: frames are delivered on this host only
 MAX_HOP_LIMIT = 255  # the IP TTL / IPv6 hop limit field is one byte
+MAX_PORT = 65535  # the UDP header's port field is two bytes (0: any port, no group's own)
 IN_PROCESS_INTERFACES = ("virtual", "lockstep")  # buses inside one process: every node on them runs in it
 BUS_OPTION_HELP = ("extra python-can bus argument, e.g. port=43113 (repeatable); udp_multicast gets hop_limit=0 "
                    "(frames stay on this host) unless you name one")
@@ -61,6 +62,8 @@ def resolve_bus_config(
     import can  # python-can on use: a command line that only parses never loads it
 
     where = f"bus {interface or '?'}:{channel if channel is not None else '?'}"
+    if given.get("interface") == "udp_multicast":  # before python-can's own check, a ValueError (exit 1)
+        _check_port(given.get("port"), where)
     try:
         config = dict(can.util.load_config(path=config_file, config=given, context=context))
     except (can.CanInterfaceNotImplementedError, NotImplementedError, ValueError, TypeError) as exc:
@@ -81,7 +84,18 @@ def resolve_bus_config(
         if isinstance(hops, bool) or not isinstance(hops, int) or not 0 <= hops <= MAX_HOP_LIMIT:
             raise ParameterError("hop_limit", hops, f"a whole number of router hops in 0..{MAX_HOP_LIMIT} "
                                  f"(0: this host only)", where)
+        group = config.get("channel")
+        if not isinstance(group, str) or not group:  # python-can's TypeError traceback from inet_pton, exit 1
+            raise ParameterError("channel", group, "a multicast group address, e.g. 239.74.163.2 or ff15::1 "
+                                 "(--channel)", where)
+        _check_port(config.get("port"), where)
     return config
+
+
+def _check_port(port: object, where: str) -> None:
+    """ParameterError unless ``port`` is None (python-can's default) or a UDP port a group can use."""
+    if port is not None and (isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= MAX_PORT):
+        raise ParameterError("port", port, f"a whole UDP port number in 1..{MAX_PORT}", where)
 
 
 def open_bus(**arguments: Any) -> can.BusABC:

@@ -4,7 +4,10 @@ one line each, exit 2 before any bus is opened:
 - udp_multicast's hop_limit: a text or a value that does not fit the IP header's one byte (it was
   python-can's struct.error traceback, exit 1, from ``--bus-option hop_limit=abc``);
 - the bitrate: a positive whole number of bit/s, from ``--bitrate``, ``--bus-option`` or python-can's
-  configuration (``haptic-bus run --bitrate -5`` was accepted).
+  configuration (``haptic-bus run --bitrate -5`` was accepted);
+- udp_multicast's group and port: ``haptic-bus run --interface udp_multicast`` without ``--channel`` ended in
+  python-can's ``inet_pton`` TypeError traceback, and ``--bus-option port=99999`` was a drive error, exit 1
+  (found by hand, break14b).
 """
 
 from __future__ import annotations
@@ -56,3 +59,23 @@ def test_run_refuses_a_negative_bitrate_with_exit_2_before_its_bus(tmp_path: pat
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "bitrate = -5 is invalid" in err, err
     assert not out.exists()  # refused before its folder, too
+
+
+@pytest.mark.parametrize(("option", "value", "allowed"), [
+    ("channel", None, "a multicast group address"), ("channel", "", "a multicast group address"),
+    ("port", 99999, "1..65535"), ("port", 0, "1..65535"), ("port", "abc", "1..65535"), ("port", True, "1..65535")])
+def test_a_udp_multicast_group_or_port_that_cannot_be_is_refused_in_one_line(option: str, value: object,
+                                                                               allowed: str) -> None:
+    with pytest.raises(ParameterError) as refused:
+        resolve_bus_config(**{**GROUP, option: value})
+    assert f"{option} = " in str(refused.value) and allowed in str(refused.value) and "\n" not in str(refused.value)
+
+
+def test_run_without_a_group_is_exit_2_in_one_line_before_its_bus(tmp_path: pathlib.Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    code = main(["run", "cia402-handle", "--interface", "udp_multicast", "--node-id", "5", "--duration", "0.1",
+                 "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "channel = None is invalid" in err, err
+    assert not out.exists()
