@@ -20,8 +20,9 @@ Who does what
     are not the cycle's are dispatched from that same receive without blocking: SDO requests to
     the controller's node (gated wall uploads, :mod:`haptic_bus.node.controller_node`), whose
     answers it sends; EMCY and heartbeats to the drive's events; those read before the SYNC are
-    handed on right after it, while the drives answer, so that the SYNC leaves on time
-    (:meth:`drives.canopen.sync_cycle.SyncCycle.drain`).  It appends one row per axis to a
+    handed on right after it, while the drives answer, so that the SYNC leaves on time, and what they
+    say is checked before the TPDOs are waited for (a drive that faulted and went silent trips then:
+    :meth:`drives.canopen.sync_cycle.SyncCycle.drain`).  It appends one row per axis to a
     ring in shared memory (one ``struct.pack_into`` and a counter store) and, with a bus log, each
     frame it sends or receives to another ring (the link's tap).  Pre-flight runs this same cyclic
     path, with zero torque, before the drives are enabled, and goes on running it while
