@@ -11,6 +11,7 @@ orders of magnitude: the trip takes milliseconds; waiting out the collect takes 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import can
 import pytest
@@ -25,6 +26,29 @@ SCALING = DriveScaling(1.1984224905356573e-07, 1.1984224905356573e-07, 0.32, 50.
 TRIP_BOUND = 1.0  # s: half of TPDO_TIMEOUT; the trip itself takes a few ms (0.5-1.2 ms on udp_multicast)
 
 
+def _stop_and_trip(spy: can.BusABC, node: int, read_inputs: Callable[[], object], cycle: Callable[[], object]) -> None:
+    """After 20 cycles (``cycle``), an NMT stop of ``node``, its EMCY 0x8100 seen on the bus, then the next
+    ``read_inputs`` trips on it within :data:`TRIP_BOUND` (not after the collect's :data:`TPDO_TIMEOUT`)."""
+    for _ in range(20):
+        cycle()
+    while spy.recv(0.0) is not None:  # bounded: the frames of 20 cycles
+        pass
+    spy.send(can.Message(arbitration_id=0x000, data=[0x02, node], is_extended_id=False))  # NMT stop
+    deadline = time.monotonic() + 2.0
+    emcy = None
+    while emcy is None and time.monotonic() < deadline:
+        msg = spy.recv(0.1)
+        if msg is not None and msg.arbitration_id == 0x080 + node:
+            emcy = msg
+    assert emcy is not None and emcy.data[:2] == bytes([0x00, 0x81]), "the stopped drive sent no EMCY 0x8100"
+    started = time.perf_counter()
+    with pytest.raises(DriveFault, match=f"node {node}: EMCY 0x8100"):
+        read_inputs()
+    elapsed = time.perf_counter() - started
+    assert elapsed < TRIP_BOUND, (f"the trip waited {elapsed:.3f} s: the collect waited out its {TPDO_TIMEOUT} s "
+                                  "for a drive whose EMCY was already read")
+
+
 def test_an_emcy_read_before_the_sync_trips_without_waiting_for_the_stopped_drives_tpdos(haptic_sim):
     sim = haptic_sim("cia402-handle", operator={"model": "none"})
     spec = sim.spec
@@ -34,25 +58,7 @@ def test_an_emcy_read_before_the_sync_trips_without_waiting_for_the_stopped_driv
     try:
         drive.connect()
         drive.enable()
-        for _ in range(20):
-            drive.read_inputs()
-            drive.write_outputs(0)
-        while spy.recv(0.0) is not None:  # bounded: the frames of 20 cycles
-            pass
-        spy.send(can.Message(arbitration_id=0x000, data=[0x02, 5], is_extended_id=False))  # NMT stop node 5
-        deadline = time.monotonic() + 2.0
-        emcy = None
-        while emcy is None and time.monotonic() < deadline:
-            msg = spy.recv(0.1)
-            if msg is not None and msg.arbitration_id == 0x085:
-                emcy = msg
-        assert emcy is not None and emcy.data[:2] == bytes([0x00, 0x81]), "the stopped drive sent no EMCY 0x8100"
-        started = time.perf_counter()
-        with pytest.raises(DriveFault, match="EMCY 0x8100"):
-            drive.read_inputs()
-        elapsed = time.perf_counter() - started
-        assert elapsed < TRIP_BOUND, (f"the trip waited {elapsed:.3f} s: the collect waited out its {TPDO_TIMEOUT} s "
-                                      "for a drive whose EMCY was already read")
+        _stop_and_trip(spy, 5, drive.read_inputs, lambda: (drive.read_inputs(), drive.write_outputs(0)))
     finally:
         spy.shutdown()
         drive.close()
@@ -75,25 +81,7 @@ def test_an_axis_emcy_read_before_the_sync_trips_every_axis_without_waiting_for_
     try:
         axes.connect()
         axes.enable()
-        for _ in range(20):
-            axes.read_inputs()
-            axes.write_outputs([0, 0, 0])
-        while spy.recv(0.0) is not None:  # bounded: the frames of 20 cycles
-            pass
-        spy.send(can.Message(arbitration_id=0x000, data=[0x02, 6], is_extended_id=False))  # NMT stop node 6
-        deadline = time.monotonic() + 2.0
-        emcy = None
-        while emcy is None and time.monotonic() < deadline:
-            msg = spy.recv(0.1)
-            if msg is not None and msg.arbitration_id == 0x086:
-                emcy = msg
-        assert emcy is not None and emcy.data[:2] == bytes([0x00, 0x81]), "the stopped drive sent no EMCY 0x8100"
-        started = time.perf_counter()
-        with pytest.raises(DriveFault, match="node 6: EMCY 0x8100"):
-            axes.read_inputs()
-        elapsed = time.perf_counter() - started
-        assert elapsed < TRIP_BOUND, (f"the trip waited {elapsed:.3f} s: the collect waited out its {TPDO_TIMEOUT} s "
-                                      "for an axis whose EMCY was already read")
+        _stop_and_trip(spy, 6, axes.read_inputs, lambda: (axes.read_inputs(), axes.write_outputs([0, 0, 0])))
     finally:
         spy.shutdown()
         axes.close()
