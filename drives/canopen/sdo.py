@@ -62,6 +62,7 @@ class SdoAccess:
             name = object_name(self.node.object_dictionary, index, subindex)
             raise DriveTimeout(
                 self.name, f"no SDO answer {what} 0x{index:04X}:{subindex:02X} ({name}) within {self.timeout:.3g} s: {exc}"
+                           f"{_stopped(self.node)}"
             ) from exc
         except (struct.error, ValueError, TypeError, IndexError, KeyError) as exc:  # canopen met an answer it cannot parse
             name = object_name(self.node.object_dictionary, index, subindex)
@@ -100,3 +101,12 @@ class SdoAccess:
                 self.name, f"0x{index:04X}:{subindex:02X} answered {len(data)} bytes, expected {struct.calcsize(fmt)}"
             )
         return float(struct.unpack(fmt, data)[0])
+
+
+def _stopped(node: canopen.RemoteNode) -> str:
+    """Why a node may not answer SDO, where its heartbeat says: NMT STOPPED (CiA 301: SDO is off there)."""
+    nmt = node.nmt
+    if getattr(nmt, "timestamp", None) is None or nmt.state != "STOPPED":  # no heartbeat seen, or not stopped
+        return ""
+    return ("; its heartbeat shows NMT STOPPED, where a node answers no SDO (an NMT stop from another master or "
+            "its own: start it with NMT start, or reset it)")
