@@ -205,12 +205,20 @@ def looks_again(first: Timing, again: int) -> bool:
     once the catch-ups are counted, :func:`catch_up_overruns`) refuses ``T`` on the first look, by no more
     than the longer measurement allows (the counts only grow with more cycles: a first look already over
     that is refused either way), and the median exchange fits ``T``."""
-    period, cycles = first.period, first.exchange.size
-    if float(np.median(first.exchange)) > period:
+    cycles = first.exchange.size
+    if float(np.median(first.exchange)) > first.period:
         return False
-    busy = int(np.count_nonzero(first.exchange + own_lateness(first) > period))
-    worst = max(busy, int(catch_up_overruns(first, np.array([period]))[0]))
+    worst = max(period_counts(first))
     return allowed_overruns(cycles) < worst <= allowed_overruns(cycles + again)
+
+
+def period_counts(timing: Timing) -> tuple[int, int]:
+    """The period rule's two counts of the measured cycles at their own ``T``: those busy (late start plus
+    exchange, :func:`own_lateness`) longer than ``T``, and those that would start more than ``T`` late once
+    the catch-ups are counted (:func:`catch_up_overruns`)."""
+    period = timing.period
+    busy = int(np.count_nonzero(timing.exchange + own_lateness(timing) > period))
+    return busy, int(catch_up_overruns(timing, np.array([period]))[0])
 
 
 def while_cycling(exchange: Callable[[], object], period: float, work: Callable[[], R], spin: float | None = None) -> R:
@@ -287,8 +295,7 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
     allowed = allowed_overruns(busy.size)
     worst = max(float(busy[allowed]) if busy.size > allowed else period, bus_floor)  # the longest the rule lets pass
     holds = held_period(timing, worst, float(busy[0]) if busy.size else period, allowed)
-    overlong = int(np.count_nonzero(busy > period))
-    caught = int(catch_up_overruns(timing, np.array([period]))[0])
+    overlong, caught = period_counts(timing)
     stalled = STALL_MARGIN * gap >= watchdog  # the longest gap measured would fault the drive at this T
     holding = _holding_stall(holds, gap, period, watchdog, deadline_periods, watchdog_at)  # None: no T holds the gap
     unheld = f"; and a gap of {gap * 1e3:.3g} ms between cycles measured, x{STALL_MARGIN:g}, would fault the drive at " \
