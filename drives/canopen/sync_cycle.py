@@ -132,9 +132,10 @@ class SyncCycle:
         timeout; breaker: 15.7 ms at T = 1 ms, 31 ms for three axes, where it had tripped in 0.6 ms)."""
         self.send_sync()
         synced = time.perf_counter_ns()  # every drive samples at the SYNC: by now they have
-        held, self._held = self._held, []
-        for msg in held:  # what the drain held, while the drives answer (drain)
-            self._dispatch(msg)
+        if self._held:  # what the drain held, while the drives answer (drain); most cycles none
+            held, self._held = self._held, []
+            for msg in held:
+                self._dispatch(msg)
         if check is not None:
             check()
         slots = self._slots
