@@ -32,7 +32,6 @@ from haptic_bus.app.arguments import (
     bus_arguments,
     error_line,
     node_id,
-    number,
     refuse_can_options_with_modbus,
     seconds,
     timeout,
@@ -53,8 +52,9 @@ from haptic_bus.app.scan_cli import add_scan_parser
 from haptic_bus.app.sdo_cli import add_sdo_parser
 from haptic_bus.app.status_cli import add_status_parser
 from haptic_bus.app.validate_cli import add_validate_parser
+from haptic_bus.app.wall_check_cli import add_wall_check_parsers
 from haptic_bus.console import LIBRARIES, log_to_stderr, logging_kept
-from haptic_bus.validation import folder_path, writable_file, writable_folder
+from haptic_bus.validation import folder_path, writable_folder
 
 if TYPE_CHECKING:
     from haptic_bus.app.profiles import AxesProfile, Profile
@@ -64,19 +64,6 @@ if TYPE_CHECKING:
 
 # --------------------------------------------------------------------------- shared arguments
 
-def _add_device_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--mass", type=float, required=True, help="handle mass m, kg")
-    parser.add_argument("--friction", type=float, required=True, help="viscous friction b, N s/m")
-    parser.add_argument("--period", type=float, required=True, help="sampling period T, s")
-    parser.add_argument("--delay", type=float, default=0,
-                        help="loop delay D in samples, real in [0, 1000] (0: the seed's ideal loop, 1: a CiA-402 "
-                             "synchronous cycle, 0.3: torque applied on reception 0.3 T after SYNC)")
-    parser.add_argument("--velocity", default="point", metavar="MODEL",
-                        help="what the drive's velocity is: point (v at SYNC, the seed's assumption), average "
-                             "(encoder difference over T, most drives), window:SECONDS (difference over a shorter "
-                             "window), lowpass:SECONDS (first-order filter)")
-
-
 def _add_no_plots(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-plots", action="store_true",
                         help="write the record and run.json, draw no pictures (saves seconds of matplotlib and of the "
@@ -84,68 +71,6 @@ def _add_no_plots(parser: argparse.ArgumentParser) -> None:
 
 
 # --------------------------------------------------------------------------- handlers
-
-def _check(args: argparse.Namespace) -> int:
-    import json
-
-    from haptic_bus.analysis.check import check_passivity, format_check
-    from haptic_bus.errors import ParameterError
-
-    if args.coulomb is not None and args.position_resolution is None:
-        raise ParameterError("--coulomb", args.coulomb, "with --position-resolution M: only the quantisation condition "
-                             "uses it")
-    if args.transmission is not None:
-        if args.position_resolution is not None:
-            raise ParameterError("--position-resolution", args.position_resolution,
-                                 "no --transmission with it: the quantisation condition is derived for a rigid handle")
-        return _check_two_mass(args)
-    report = check_passivity(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay,
-                             args.velocity, out_of_band=True, position_resolution=args.position_resolution,
-                             coulomb=0.0 if args.coulomb is None else args.coulomb)  # named as the user typed them
-    print(json.dumps(report.to_dict()) if args.json else format_check(report))
-    return EXIT_OK if report.passive else EXIT_NO
-
-
-def _check_two_mass(args: argparse.Namespace) -> int:
-    import json
-
-    from haptic_bus.analysis.transmission import Transmission
-    from haptic_bus.analysis.two_mass_check import check_two_mass, format_two_mass
-
-    report = check_two_mass(args.mass, args.friction, args.period, args.stiffness, args.damping, args.delay,
-                            args.velocity, Transmission.parse(args.transmission))
-    print(json.dumps(report.to_dict()) if args.json else format_two_mass(report))
-    return EXIT_OK if report.passive else EXIT_NO
-
-
-def _mark(text: str) -> tuple[float, float]:
-    """``K,B`` (N/m, N s/m), both finite and > 0 (a point of the alpha-beta plane)."""
-    parts = text.split(",")
-    try:
-        K, B = (float(part) for part in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not K,B (two numbers: N/m, N s/m)") from None
-    if not (0 < K < float("inf") and 0 < B < float("inf")):
-        raise argparse.ArgumentTypeError(f"{text!r}: K and B must be finite and > 0 (alpha = B/(KT) and beta = b/B "
-                                         "are points of the plane only then)")
-    return K, B
-
-
-def _region(args: argparse.Namespace) -> int:
-    from haptic_bus.analysis.loop import WallLoop
-    from haptic_bus.analysis.velocity import VelocityModel
-
-    loop = WallLoop(args.mass, args.friction, args.period, 0.0, 0.0, args.delay, VelocityModel.parse(args.velocity))
-    marks = [loop.with_wall(K, B) for K, B in args.mark or []]
-    path = pathlib.Path(args.png)
-    if path.suffix.lower() != ".png":
-        path = path.with_name(path.name + ".png")
-    writable_file("--png", path, context="region")  # before the minutes of work, not after
-    from haptic_bus.app.plots import plot_region
-
-    print(f"wrote {plot_region(path, loop.m, loop.b, loop.T, delay=loop.delay, velocity=loop.velocity, marks=marks)}")
-    return EXIT_OK
-
 
 def _plot(args: argparse.Namespace) -> int:
     from haptic_bus.app.run_folder import read_run_folder
@@ -344,27 +269,7 @@ def build_parser() -> OneLineParser:
     def command(name: str, help_text: str, handler: Callable[[argparse.Namespace], int]) -> argparse.ArgumentParser:
         return add_command(sub, name, help_text, handler)
 
-    check = command("check", "judge one wall loop's passivity", _check)
-    _add_device_arguments(check)
-    check.add_argument("--stiffness", type=float, required=True, help="wall stiffness K, N/m")
-    check.add_argument("--damping", type=float, required=True, help="wall damping B, N s/m")
-    check.add_argument("--json", action="store_true", help="one JSON object on stdout")
-    check.add_argument("--position-resolution", type=number("--position-resolution", 0.0, 1e6, "m"), metavar="M",
-                       help="encoder resolution Delta, m per 0x6064 increment: judge the quantisation condition too "
-                            "(average velocity: Coulomb friction >= K Delta/2 + B Delta/T, any delay)")
-    check.add_argument("--coulomb", type=number("--coulomb", 0.0, 1e6, "N"), metavar="N",
-                       help="the handle's Coulomb friction f_c, N, for the quantisation condition (only with "
-                            "--position-resolution; 0 N when not given)")
-    check.add_argument("--transmission", metavar="STIFFNESS:DAMPING:MOTOR_MASS",
-                       help="judge a two-mass device: the handle (--mass, --friction) coupled by a spring N/m and a "
-                            "damper N s/m to a motor-side mass kg, where the drive senses and applies the torque "
-                            "(e.g. 20000:2:0.3)")
-
-    region = command("region", "write the seed's Fig. 4 (alpha-beta passive regions) as PNG", _region)
-    _add_device_arguments(region)
-    region.add_argument("--png", required=True, help="output PNG file (.png is added if missing)")
-    region.add_argument("--mark", type=_mark, action="append", metavar="K,B",
-                        help="mark the wall K N/m, B N s/m on the plane, with the exact verdict (repeatable)")
+    add_wall_check_parsers(sub)
 
     plot = command("plot", "draw a run folder's pictures again: timeline with events, force against position, "
                            "the K-B plane", _plot)
