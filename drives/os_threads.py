@@ -5,15 +5,27 @@ CPython (before 3.14) names a thread for Python only (``threading.Thread(name=..
 kernel keeps showing the process's name for every thread.  :func:`show_name` hands the Python
 name to the kernel with ``pthread_setname_np`` (Linux: 15 bytes at most).  Where the C library
 has no such function it does nothing.
+
+Threads Python did not start have no Python name: a C library's pool, such as numpy's OpenBLAS
+workers when a program imported numpy before ``haptic-bus`` could ask for one BLAS thread
+(:mod:`haptic_bus.app.blas_threads`).  :func:`show_names` calls those that still show the
+process's name :data:`NATIVE` (through ``/proc/self/task/TID/comm``), so that no thread of a run
+passes for its main thread.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
+import os
+import pathlib
 import threading
 from collections.abc import Callable
 
 COMM_LENGTH = 15  # bytes of a thread's name the kernel keeps (TASK_COMM_LEN 16, with the NUL)
+NATIVE = "native-thread"
+"""The OS name :func:`show_names` gives a thread that Python did not start (module docstring)."""
+_TASKS = "/proc/self/task"
 
 
 def _setter() -> Callable[[int, bytes], int] | None:
@@ -47,8 +59,29 @@ def show_own_name() -> None:
 
 def show_names() -> None:
     """Every running thread of this process but the main one shows its Python name to the OS
-    (:func:`show_name`); the main thread keeps the process's name (``ps``, ``pgrep`` find it by it)."""
+    (:func:`show_name`); the main thread keeps the process's name (``ps``, ``pgrep`` find it by it);
+    a thread Python did not start that still shows the process's name is called :data:`NATIVE`
+    (Linux; elsewhere nothing)."""
+    try:
+        tasks = os.listdir(_TASKS)  # before the Python threads are listed: a thread started in between is among them
+    except OSError:
+        tasks = []
     main = threading.main_thread()
+    python = set()
     for thread in threading.enumerate():
+        python.add(thread.native_id)
         if thread is not main:
             show_name(thread)
+    own = _comm(main.native_id)
+    for task in tasks:
+        if int(task) not in python and own is not None and _comm(int(task)) == own:
+            with contextlib.suppress(OSError):  # it ended meanwhile
+                pathlib.Path(_TASKS, task, "comm").write_text(NATIVE)
+
+
+def _comm(tid: int | None) -> str | None:
+    """Thread ``tid``'s OS name, or None if it has none to read (ended, not Linux)."""
+    try:
+        return pathlib.Path(_TASKS, str(tid), "comm").read_text().strip()
+    except OSError:
+        return None
