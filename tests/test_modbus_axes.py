@@ -265,8 +265,11 @@ def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(tmp_path: pathl
     product 6.9e-4, at ``p`` = 2.5 %).  What it still catches: a pre-flight that passed a ``T`` whose run
     overruns in 5 % of its cycles fails this test in 91 % of runs (10 %: all; 4 %: 62 %), as the runs of the
     units served from the run's own process did (11 to 417 of 500), and a rule that lost a count fails the
-    first assertions.  The binomial takes each cycle's lateness as independent; a stall's catch-up makes a
-    few late together (module docstring of preflight), which pre-flight's replayed count sees as the run does."""
+    first assertions.  The binomial takes each cycle's lateness as independent; a stall's catch-up makes several
+    late together (preflight's module docstring), which spreads both counts wider than the binomial's, so 1e-3 is
+    the figure for independent cycles.  One stall alone fails the run's bound only when it makes 19 cycles start
+    more than ``T`` late, ``(S - T) / (T - x) > 18``: a stall ``S`` over 20 ms at the 1 ms polls ``x`` measured
+    here when quiet, over 11 ms at 1.5 ms polls."""
     sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--unit-ids", "1,2,3", "--profile", "gantry-3d")
     serving = sim.wait_for_line("units 1, 2, 3: serving Modbus TCP on", START_WAIT)
     url = re.search(r"serving Modbus TCP on (tcp://\S+) ", serving)
