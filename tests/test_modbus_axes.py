@@ -30,6 +30,7 @@ import pytest
 import haptic_bus as hb
 from drives.cia402 import State
 from haptic_bus.app.cli import main
+from haptic_bus.app.preflight import LOOK_AGAIN, PREFLIGHT_CYCLES, allowed_overruns
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.run_options import RunOptions, StopRequest
 from haptic_bus.app.steady_state import contact
@@ -200,14 +201,75 @@ def test_one_axis_fault_stops_every_axis_and_reset_fault_clears_it_before_the_ne
     assert resets[0]["data"]["error_code_before"] == 0x5530
 
 
+CHANCE = 1e-3  # the real-time test below fails by chance in at most this share of its runs on any machine
+
+
+def binomial_cdf(count: int, cycles: int, shares: np.ndarray) -> np.ndarray:
+    """P(at most ``count`` of ``cycles`` cycles overrun) for each per-cycle overrun probability of ``shares`` (0 < share < 1)."""
+    term = (1.0 - shares) ** cycles  # P(none)
+    below = term.copy()
+    for j in range(count):
+        term = term * (cycles - j) / (j + 1) * shares / (1.0 - shares)
+        below += term
+    return below
+
+
+def passes_the_rule(shares: np.ndarray) -> np.ndarray:
+    """An upper bound on the share of pre-flights that hold ``T`` on a machine whose cycles each overrun with
+    probability ``shares``: the period rule holds ``T`` only when the count of cycles that start more than ``T``
+    late (replayed, :func:`~haptic_bus.app.preflight.catch_up_overruns`) is at most
+    :func:`~haptic_bus.app.preflight.allowed_overruns` of the first look's cycles, or of the first and second
+    looks' together where the first look's count is above the first bound and within the second's."""
+    first, total = PREFLIGHT_CYCLES, (1 + LOOK_AGAIN) * PREFLIGHT_CYCLES
+    allowed_first, allowed_total = allowed_overruns(first), allowed_overruns(total)
+    held = binomial_cdf(allowed_first, first, shares)
+    for count in range(allowed_first + 1, allowed_total + 1):
+        exactly = binomial_cdf(count, first, shares) - binomial_cdf(count - 1, first, shares)
+        held += exactly * binomial_cdf(allowed_total - count, total - first, shares)
+    return held
+
+
+def run_overrun_bound(cycles: int) -> int:
+    """The fewest overruns ``k`` of a run of ``cycles`` cycles such that, on a machine of any per-cycle overrun
+    probability ``p``, P(pre-flight holds ``T``) x P(the run overruns in more than ``k``) <= :data:`CHANCE`
+    (binomial, ``p`` on a 1e-4 grid to 10 %: the product is largest at 2-3 %, where pre-flight holds ``T``
+    in about 1 % of its looks)."""
+    shares = np.arange(1, 1001) * 1e-4
+    held = passes_the_rule(shares)
+    bound = 0
+    while np.max(held * (1.0 - binomial_cdf(bound, cycles, shares))) > CHANCE:
+        bound += 1
+    return bound
+
+
 def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(tmp_path: pathlib.Path, sim_process: Any) -> None:
     """Wall-paced: pre-flight measures the three units' cycle (six requests) before anything is
     enabled, and either refuses a T this machine cannot hold (naming the one it holds, nothing
     enabled; or, where a stall measured would trip the Modbus watchdog, naming that) or the run keeps
-    its overruns under 1 % (issue 26, "Modbus").  The units are served by a simulator process of their
-    own, as a drive answers from its own hardware: served from a thread of the run's process they took
-    the interpreter from the control thread, a share that grew once they were enabled and pushed
-    (pre-flight passed, then 11 to 417 of 500 cycles overran in 4 of 36 runs)."""
+    its overruns within what the period rule lets through (issue 26, "Modbus").  The units are served by a
+    simulator process of their own, as a drive answers from its own hardware: served from a thread of the
+    run's process they took the interpreter from the control thread, a share that grew once they were
+    enabled and pushed (pre-flight passed, then 11 to 417 of 500 cycles overran in 4 of 36 runs).
+
+    What a held ``T`` bounds.  Pre-flight's rule (:mod:`haptic_bus.app.preflight`) refuses ``T`` when its
+    count shows a share above 0.5 % at 95 % confidence: at most 5 of 500 cycles late, or 15 of 2000 with the
+    second look.  So its counts are asserted first (the rule's own bound, exact), and then the run's overruns
+    against what a machine the rule lets through shows.  That is not 1 % of a 500-cycle run: (binomial, each
+    cycle late with probability ``p``) a machine at ``p`` = 0.8 % passes pre-flight in 82 % of its looks and
+    then overruns in more than 5 of 500 cycles in 21 %, a test failing by chance in 18 % of its runs there, and
+    25 % at ``p`` = 1.1 % (this test failed so, 1 of 14 runs beside two CPU hogs: 5 of 500 busy in pre-flight,
+    then 7 of 500 late).  A longer run does not help: pre-flight holds ``T`` for a machine at ``p`` = 1.5 %
+    in 24 % of its looks, at 2 % in 6.5 %, at 2.5 % in 1.4 %, and such a machine's long run overruns at its
+    ``p``.  The bound asserted (:func:`run_overrun_bound`): the fewest ``k`` with P(pre-flight holds ``T``) x
+    P(more than ``k`` of the run's cycles late) <= 1e-3 at every ``p``: 18 of 500 cycles (3.6 %; the largest
+    product 6.9e-4, at ``p`` = 2.5 %).  What it still catches: a pre-flight that passed a ``T`` whose run
+    overruns in 5 % of its cycles fails this test in 91 % of runs (10 %: all; 4 %: 62 %), as the runs of the
+    units served from the run's own process did (11 to 417 of 500), and a rule that lost a count fails the
+    first assertions.  The binomial takes each cycle's lateness as independent; a stall's catch-up makes several
+    late together (preflight's module docstring), which spreads both counts wider than the binomial's, so 1e-3 is
+    the figure for independent cycles.  One stall alone fails the run's bound only when it makes 19 cycles start
+    more than ``T`` late, ``(S - T) / (T - x) > 18``: a stall ``S`` over 20 ms at the 1 ms polls ``x`` measured
+    here when quiet, over 11 ms at 1.5 ms polls."""
     sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--unit-ids", "1,2,3", "--profile", "gantry-3d")
     serving = sim.wait_for_line("units 1, 2, 3: serving Modbus TCP on", START_WAIT)
     url = re.search(r"serving Modbus TCP on (tcp://\S+) ", serving)
@@ -223,7 +285,13 @@ def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(tmp_path: pathl
     else:
         assert result.exit_reason == "completed", result.error
         assert log.count("-> OPERATION ENABLED") == len(UNITS), log
-        assert result.summary is not None and result.summary.overruns <= 0.01 * result.summary.cycles
+        preflight = document["preflight"]
+        assert preflight["cycles"] in (PREFLIGHT_CYCLES, (1 + LOOK_AGAIN) * PREFLIGHT_CYCLES), preflight
+        assert preflight["busy_allowed"] == allowed_overruns(preflight["cycles"]), preflight
+        assert preflight["busy_over_period"] <= preflight["busy_allowed"], preflight
+        assert preflight["overruns"] <= preflight["busy_allowed"], preflight
+        assert result.summary is not None and result.summary.overruns <= run_overrun_bound(result.summary.cycles), \
+            result.summary  # 18 of the run's 500 cycles
 
 
 def test_the_commands_of_the_manual_run_three_units_in_two_processes(
