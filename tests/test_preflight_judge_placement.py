@@ -15,7 +15,7 @@ import threading
 import pytest
 
 from haptic_bus.app import preflight
-from haptic_bus.app.realtime import GIL_PRIORITY
+from haptic_bus.app.realtime import GIL_PRIORITY, HelperPlacement
 
 RESET_ON_FORK = getattr(os, "SCHED_RESET_ON_FORK", 0)
 CALLER_PRIORITY = GIL_PRIORITY + 1  # above the judge's, as the control thread's FIFO_PRIORITY is
@@ -97,4 +97,37 @@ def test_a_judge_left_judging_is_an_ordinary_thread_again() -> None:
         judge_thread.join(timeout=10.0)
     assert out == ["stopped"]
     assert calls[0] == 3
+    assert policies == [(os.SCHED_OTHER, 0)]
+
+
+def test_a_judge_released_before_it_placed_itself_stays_ordinary() -> None:
+    """The race a loaded machine showed (the test above once saw the judge at SCHED_FIFO 1): the stop released
+    the judge before the new thread had run its first line, whose placement then made it SCHED_FIFO again.  Here
+    the order is forced: the caller releases the judge, then the judge places itself."""
+    policies: list[tuple[int, int] | str] = []
+    released = threading.Event()
+
+    def helper(placement: HelperPlacement) -> None:
+        released.wait(timeout=10.0)
+        placement.place()
+        policies.append(_judge_policy())
+
+    def caller() -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO | RESET_ON_FORK, os.sched_param(CALLER_PRIORITY))
+        except PermissionError:
+            policies.append("refused")
+            return
+        placement = HelperPlacement()
+        judge = threading.Thread(target=helper, args=(placement,), name="test-judge")
+        judge.start()
+        placement.release(judge)
+        released.set()
+        judge.join(timeout=10.0)
+
+    thread = threading.Thread(target=caller, name="test-control")
+    thread.start()
+    thread.join(timeout=10.0)
+    if policies == ["refused"]:
+        pytest.skip("SCHED_FIFO not granted to this process")
     assert policies == [(os.SCHED_OTHER, 0)]

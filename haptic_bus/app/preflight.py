@@ -77,7 +77,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from drives.os_threads import show_own_name
-from haptic_bus.app.realtime import helper_placement, ordinary
+from haptic_bus.app.realtime import HelperPlacement
 from haptic_bus.control.clock import RealClock
 from haptic_bus.control.cycle_loop import percentiles
 from haptic_bus.control.gate import PassivityGate
@@ -229,11 +229,11 @@ def while_cycling(exchange: Callable[[], object], period: float, work: Callable[
     would expire: a CiA 301 drive may leave OPERATIONAL for it).  ``work``'s result, or its exception."""
     result: list[R] = []
     failure: list[BaseException] = []
-    place = helper_placement()  # beside a SCHED_FIFO control thread: SCHED_FIFO too, below it
+    placement = HelperPlacement()  # beside a SCHED_FIFO control thread: SCHED_FIFO too, below it
 
     def run() -> None:
         show_own_name()
-        place()
+        placement.place()
         try:
             result.append(work())
         except BaseException as exc:  # handed to the control thread, raised there
@@ -249,7 +249,7 @@ def while_cycling(exchange: Callable[[], object], period: float, work: Callable[
             exchange()
             k += 1
     except BaseException:  # a stop asked, a drive lost: the judgement runs on, unwaited for, as an ordinary thread
-        ordinary(thread)
+        placement.release(thread)
         raise
     thread.join()
     if failure:

@@ -224,32 +224,42 @@ class _Session:
         return f"{microseconds} us on every CPU, while the run goes"
 
 
-def helper_placement() -> Callable[[], None]:
-    """What a helper thread the calling thread starts calls first, to run where the session put the
-    process's other threads: at ``SCHED_FIFO`` :data:`GIL_PRIORITY` when the caller has SCHED_FIFO
-    (else nothing).  ``SCHED_RESET_ON_FORK`` starts such a thread as an ordinary one, and an
-    ordinary thread holding the GIL is preempted by any ordinary process for a scheduler slice
-    while the control thread waits for the GIL: pre-flight's judge thread, started after the
-    session, held gantry-3d's cycle up 80-173 ms on a loaded 2-CPU machine (its RPDO deadline
-    60 ms at T = 2 ms: every node logged "RPDO1 missed its deadline" before the enable)."""
-    fifo = hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) & ~_RESET_ON_FORK == os.SCHED_FIFO
+class HelperPlacement:
+    """Where a helper thread the calling thread starts runs: where the session put the process's other
+    threads, at ``SCHED_FIFO`` :data:`GIL_PRIORITY` when the caller has SCHED_FIFO (else nothing).
+    ``SCHED_RESET_ON_FORK`` starts such a thread as an ordinary one, and an ordinary thread holding the
+    GIL is preempted by any ordinary process for a scheduler slice while the control thread waits for
+    the GIL: pre-flight's judge thread, started after the session, held gantry-3d's cycle up 80-173 ms
+    on a loaded 2-CPU machine (its RPDO deadline 60 ms at T = 2 ms: every node logged "RPDO1 missed its
+    deadline" before the enable).
 
-    def place() -> None:
-        if fifo:
-            with suppress(OSError):  # refused: it stays an ordinary thread, as before
-                os.sched_setscheduler(0, os.SCHED_FIFO | _RESET_ON_FORK, os.sched_param(GIL_PRIORITY))
+    The helper calls :meth:`place` first; the caller calls :meth:`release` once it stops waiting for the
+    helper.  Whichever comes second sees the other: a release before the helper placed itself (a stop
+    while the new thread waited for a CPU) leaves it ordinary, where its late placement had put it back
+    at SCHED_FIFO (seen on a loaded machine)."""
 
-    return place
+    def __init__(self) -> None:
+        self._fifo = hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) & ~_RESET_ON_FORK == os.SCHED_FIFO
+        self._lock = threading.Lock()
+        self._released = False
 
+    def place(self) -> None:
+        """In the helper thread, first: SCHED_FIFO :data:`GIL_PRIORITY` beside a SCHED_FIFO caller, unless released."""
+        with self._lock:
+            if self._fifo and not self._released:
+                with suppress(OSError):  # refused: it stays an ordinary thread, as before
+                    os.sched_setscheduler(0, os.SCHED_FIFO | _RESET_ON_FORK, os.sched_param(GIL_PRIORITY))
 
-def ordinary(thread: threading.Thread) -> None:
-    """``thread`` (a helper :func:`helper_placement` placed) back to an ordinary one: a helper whose
-    caller has stopped waiting for it (a run stopped while pre-flight's judge still judges) works on
-    until its call returns, and should not do so above every ordinary process, the run's own
-    shutdown among them once the session has put the control thread back."""
-    if thread.native_id is not None and hasattr(os, "sched_setscheduler"):
-        with suppress(OSError):  # it ended meanwhile
-            os.sched_setscheduler(thread.native_id, os.SCHED_OTHER, os.sched_param(0))
+    def release(self, thread: threading.Thread) -> None:
+        """``thread``, the helper, back to an ordinary one, now and if it places itself later: a helper whose
+        caller has stopped waiting for it (a run stopped while pre-flight's judge still judges) works on until
+        its call returns, and should not do so above every ordinary process, the run's own shutdown among them
+        once the session has put the control thread back."""
+        with self._lock:
+            self._released = True
+            if thread.native_id is not None and hasattr(os, "sched_setscheduler"):
+                with suppress(OSError):  # it ended meanwhile
+                    os.sched_setscheduler(thread.native_id, os.SCHED_OTHER, os.sched_param(0))
 
 
 def _other_threads() -> list[int]:
