@@ -33,7 +33,7 @@ convention: the error ``e_k`` of a sample is within one count.  Each term is a q
 ``dx`` with slope ``lambda`` and curvature ``2 b / S >= 0``, so the true term is at least the
 measured one minus ``lambda (e_k - e_(k-1))``; summed by parts the true ``E`` is at least the
 measured one minus ``rounding = q (|lambda_first| + |lambda_last| + sum |lambda_k -
-lambda_(k-1)|)`` (J), which the observer keeps beside ``E``.
+lambda_(k-1)|)`` (J), which the observer gives beside ``E`` (from the slopes it keeps).
 
 **The budget** (:mod:`~haptic_bus.control.passivity_layer`) spends a capped copy of the same
 sum: ``E_c(n) = min(E_c(n-1) + term, cap)`` is never above ``E(n)``, so ``E_c >= 0`` is as good
@@ -91,7 +91,7 @@ class PortObserver:
     arrives; :meth:`energy` etc. read the state.
     """
 
-    __slots__ = ("friction", "count", "tolerance", "cap", "energy", "budget", "rounding", "least", "active_cycles",
+    __slots__ = ("friction", "count", "tolerance", "cap", "energy", "budget", "least", "active_cycles",
                  "_position", "_pieces", "_span", "_impulse", "_square", "_switches", "_slope_first", "_slope_last",
                  "_variation")
 
@@ -110,7 +110,6 @@ class PortObserver:
         self.cap = float(cap)
         self.energy = initial_energy
         self.budget = min(initial_energy, self.cap)
-        self.rounding = 0.0
         self.least = initial_energy
         self.active_cycles = 0
         self._position: float | None = None
@@ -162,7 +161,6 @@ class PortObserver:
         else:
             self._variation += abs(slope - self._slope_last)
         self._slope_last = slope
-        self.rounding = self.count * (abs(self._slope_first) + abs(slope) + self._variation)
         energy = self.energy = self.energy + term
         budget = self.budget + term
         self.budget = budget if budget < self.cap else self.cap
@@ -171,6 +169,14 @@ class PortObserver:
         if energy < -self.tolerance:
             self.active_cycles += 1
         return energy
+
+    @property
+    def rounding(self) -> float:
+        """The counts rounding bound (J) of ``E`` so far (module docstring): ``q (|lambda_first| + |lambda_last| +
+        sum |lambda_k - lambda_(k-1)|)``, 0 before the first interval; read when asked (a run's summary), not kept
+        up to date every cycle."""
+        first = self._slope_first
+        return 0.0 if first is None else self.count * (abs(first) + abs(self._slope_last) + self._variation)
 
     @property
     def flagged(self) -> bool:
