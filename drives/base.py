@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import abc
 import contextlib
+import functools
 import numbers
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -65,9 +66,10 @@ class DriveScaling:
         if isinstance(permille, bool) or not isinstance(permille, int) or not 1 <= permille <= 0xFFFF:
             raise ParameterError("max_torque_permille", permille, "an integer in [1, 65535] (0x6072)", "drive scaling")
 
-    @property
+    @functools.cached_property
     def newton_per_permille(self) -> float:
-        """Handle force in N of one per-mille unit of 0x6071."""
+        """Handle force in N of one per-mille unit of 0x6071 (the scaling is frozen: computed once, read
+        by :meth:`torque_permille` every cycle on every axis)."""
         return self.rated_torque * self.force_per_torque / 1000.0
 
     @property

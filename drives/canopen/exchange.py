@@ -85,9 +85,11 @@ class CanopenExchange:
         self.tpdo_codecs = tpdo_codecs
         self.rpdo_codecs = rpdo_codecs
         flat = [(spec.index, spec.subindex) for codec in tpdo_codecs for spec in codec.entries]
+        where = [(tpdo, value) for tpdo, codec in enumerate(tpdo_codecs) for value in range(len(codec.entries))]
         position = (POSITION_ACTUAL.index, 0)
-        self._at = (flat.index((STATUSWORD.index, 0)), flat.index((VELOCITY_ACTUAL.index, 0)),
-                    flat.index(position) if position in flat else None)
+        # each as (which TPDO, which of its values): a cycle reads it there, no tuple of every TPDO's values joined
+        self._at = (where[flat.index((STATUSWORD.index, 0))], where[flat.index((VELOCITY_ACTUAL.index, 0))],
+                    where[flat.index(position)] if position in flat else None)
         outputs = ((CONTROLWORD.index, 0), (TARGET_TORQUE.index, 0))
         # each RPDO frame: its message and which of (controlword, torque) it carries, in frame order
         self._rpdos = [(can.Message(arbitration_id=0, data=bytes(codec.size), is_extended_id=False), codec.struct.pack_into,
@@ -137,9 +139,9 @@ class CanopenExchange:
     def inputs(self, parts: list[tuple[Any, ...]], synced: int) -> CyclicInputs:
         """One cycle's inputs from the decoded TPDOs ``parts`` (in TPDO order, all present);
         ``synced``: ``time.perf_counter_ns()`` right after the SYNC left."""
-        values = parts[0] if len(parts) == 1 else sum(parts, ())
-        sw, vel, pos = self._at
-        return CyclicInputs(values[sw], values[vel], None if pos is None else values[pos], sampled_by_ns=synced)
+        (sw, sw_at), (vel, vel_at), pos = self._at
+        return CyclicInputs(parts[sw][sw_at], parts[vel][vel_at], None if pos is None else parts[pos[0]][pos[1]],
+                            sampled_by_ns=synced)
 
     # ------------------------------------------------------------------ send
 

@@ -156,9 +156,11 @@ class SyncCycle:
             else:
                 missing -= 1
             parts[place] = unpack(data)
-        alone = self._alone
-        if alone is not None and not missing:  # a drive alone, every TPDO in (the hot path): its inputs, unsliced
-            return [alone(parts, synced)]
+        if not missing:  # every TPDO in (the hot path): each drive's inputs, no test of its TPDOs
+            alone = self._alone
+            if alone is not None:  # a drive alone: its inputs, unsliced
+                return [alone(parts, synced)]
+            return [inputs(parts[start:stop], synced) for inputs, start, stop in self._axes]
         found = [parts[start:stop] for _, start, stop in self._axes]
         return [inputs(part, synced) if () not in part else None for (inputs, _, _), part in zip(self._axes, found)]
 

@@ -78,6 +78,7 @@ from haptic_bus.control.port_account import PortAccount
 from haptic_bus.control.protocols import DecisionT, DecisionT_co, Gate, SceneT
 from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.scene_switch import SceneSwitch
+from haptic_bus.control.space_scene import SpaceScene
 from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
 from haptic_bus.errors import ParameterError
 
@@ -241,6 +242,10 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         self._q = [0.0] * size  # the joints' q (m) and q_dot (m/s) of the latest cycle, several axes: floats
         self._q_dot = [0.0] * size
         self._identity = type(self.kinematics) is Cartesian  # x = q, v = q_dot, J^T u = u: no matrix a cycle
+        # what each axis' cycle reads of its port, joint and scaling, and writes its row with: one tuple per axis
+        self._joints = tuple((port, integrator, s.position_per_count, s.velocity_per_count)
+                             for port, integrator, s in zip(self.ports, self.integrators, scalings))
+        self._rows = tuple((record.append, port.observer, port.layer) for record, port in zip(self.records, self.ports))
         self._cycle: AxesDriveCycle | None = None  # the drives' cyclic phase while run() runs
 
     def _stored_energies(self, scene: SceneT, origins: list[float]) -> list[float]:
@@ -406,40 +411,45 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         energy = 0.0
         age = oldest = 0
         first = not self.cycles
-        for i, (found, port, integrator, scaling) in enumerate(zip(inputs, self.ports, self.integrators, self._scalings)):
-            energy += port.account(found, scaling.position_per_count)
-            q[i] = integrator.start((found.position or 0) * scaling.position_per_count, found.velocity) if first \
-                else integrator.add(found.velocity)
-            q_dot[i] = found.velocity * scaling.velocity_per_count
+        for i, (found, (port, integrator, position_per_count, velocity_per_count)) in enumerate(zip(inputs, self._joints)):
+            energy += port.account(found, position_per_count)
+            velocity = found.velocity
+            q[i] = integrator.start((found.position or 0) * position_per_count, velocity) if first \
+                else integrator.add(velocity)
+            q_dot[i] = velocity * velocity_per_count
             if found.age > age:  # the whole cycle is as late as its oldest input
                 age, oldest = found.age, i
         scale = 1.0 if self.cycles >= self.ramp_cycles else (self.cycles + 1) / self.ramp_cycles
-        if self._identity:
-            wall = np.asarray(entry.scene.force(q, q_dot), dtype=float).tolist()  # joint efforts of u: u itself
-        else:
+        scene = entry.scene
+        if not self._identity:
             kinematics = self.kinematics
             joints = np.array(q)
             jacobian = kinematics.jacobian(joints)
-            wall = (jacobian.T @ entry.scene.force(kinematics.position(joints), jacobian @ np.array(q_dot))).tolist()
+            wall = (jacobian.T @ scene.force(kinematics.position(joints), jacobian @ np.array(q_dot))).tolist()
+        elif isinstance(scene, SpaceScene):
+            wall = scene.force_floats(q, q_dot)  # joint efforts of u: u itself, floats from floats
+        else:
+            wall = np.asarray(scene.force(q, q_dot), dtype=float).tolist()
         forces: list[float] = wall if scale == 1.0 else [force * scale for force in wall]
         scalings = self._scalings
         targets = [scaling.torque_permille(-force) for scaling, force in zip(scalings, forces)]  # against the wall
-        sent = cycle.saturate(targets)
-        saturated = sent != targets
-        if saturated:
-            for i, (target, torque, scaling) in enumerate(zip(targets, sent, scalings)):
-                if torque != target:
-                    forces[i] = -torque * scaling.newton_per_permille  # the force asked of the drive
-        torques = [port.limit(torque) for port, torque in zip(self.ports, sent)]
+        torques = []
+        saturated = False
+        for i, (target, clamp, port) in enumerate(zip(targets, cycle.clamps, self.ports)):  # AxesDriveCycle.saturate's clamps
+            torque = clamp(target)
+            if torque != target:
+                saturated = True
+                forces[i] = -torque * scalings[i].newton_per_permille  # the force asked of the drive
+            torques.append(port.limit(torque))
         cycle.write(torques)
         compute = time.perf_counter() - started
         late, alarm = self.supervisor.cycle(lateness, energy, age, oldest) if self.supervisor is not None else (False, None)
         self._account(energy, forces, saturated)
         t = self.cycles * self.period
         scene_id = entry.scene_id
-        for record, port, found, qi, vi, force, torque in zip(self.records, self.ports, inputs, q, q_dot, forces, torques):
-            record.append(t, wall_clock, started, lateness, found.statusword, found.velocity, found.age, qi, vi,
-                          force, torque, port.observer.energy, scene_id, scale, late, compute, port.layer.removed)
+        for (append, observer, layer), found, qi, vi, force, torque in zip(self._rows, inputs, q, q_dot, forces, torques):
+            append(t, wall_clock, started, lateness, found.statusword, found.velocity, found.age, qi, vi,
+                   force, torque, observer.energy, scene_id, scale, late, compute, layer.removed)
         self.cycles += 1
         if alarm is not None:
             self._act(alarm)

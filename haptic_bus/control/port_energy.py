@@ -33,7 +33,7 @@ convention: the error ``e_k`` of a sample is within one count.  Each term is a q
 ``dx`` with slope ``lambda`` and curvature ``2 b / S >= 0``, so the true term is at least the
 measured one minus ``lambda (e_k - e_(k-1))``; summed by parts the true ``E`` is at least the
 measured one minus ``rounding = q (|lambda_first| + |lambda_last| + sum |lambda_k -
-lambda_(k-1)|)`` (J), which the observer keeps beside ``E``.
+lambda_(k-1)|)`` (J), which the observer gives beside ``E`` (from the slopes it keeps).
 
 **The budget** (:mod:`~haptic_bus.control.passivity_layer`) spends a capped copy of the same
 sum: ``E_c(n) = min(E_c(n-1) + term, cap)`` is never above ``E(n)``, so ``E_c >= 0`` is as good
@@ -57,6 +57,12 @@ def interval_energy(friction: float, displacement: float, forces: list[float], d
         span += tau
         impulse += force * tau
         square += force * force * tau
+    return pieces_energy(friction, displacement, span, impulse, square)
+
+
+def pieces_energy(friction: float, displacement: float, span: float, impulse: float, square: float) -> tuple[float, float]:
+    """:func:`interval_energy` from the pieces' sums, each taken in the pieces' order from 0.0: ``span``
+    ``S = sum tau_j`` (s), ``impulse`` ``A = sum F_j tau_j`` (N s), ``square`` ``Q = sum F_j^2 tau_j`` (N^2 s)."""
     slope = (2.0 * friction * displacement - impulse) / span
     return (slope * slope * span - square) / (4.0 * friction), slope
 
@@ -85,8 +91,9 @@ class PortObserver:
     arrives; :meth:`energy` etc. read the state.
     """
 
-    __slots__ = ("friction", "count", "tolerance", "cap", "energy", "budget", "rounding", "least", "active_cycles",
-                 "_position", "_forces", "_durations", "_switches", "_slope_first", "_slope_last", "_variation")
+    __slots__ = ("friction", "count", "tolerance", "cap", "energy", "budget", "least", "active_cycles",
+                 "_position", "_pieces", "_span", "_impulse", "_square", "_switches", "_slope_first", "_slope_last",
+                 "_variation")
 
     def __init__(self, friction: float, count: float, *, initial_energy: float = 0.0, cap: float = math.inf,
                  tolerance: float = 0.0) -> None:
@@ -103,12 +110,11 @@ class PortObserver:
         self.cap = float(cap)
         self.energy = initial_energy
         self.budget = min(initial_energy, self.cap)
-        self.rounding = 0.0
         self.least = initial_energy
         self.active_cycles = 0
         self._position: float | None = None
-        self._forces: list[float] = []
-        self._durations: list[float] = []
+        self._pieces = 0  # forces applied since the last sample, kept as the sums pieces_energy takes (no list a cycle)
+        self._span = self._impulse = self._square = 0.0
         self._switches: list[tuple[float, float, float]] = []  # (before, after, span) of unknown-instant changes
         self._slope_first: float | None = None
         self._slope_last = 0.0
@@ -116,8 +122,10 @@ class PortObserver:
 
     def apply(self, force: float, duration: float) -> None:
         """The drive held ``force`` (N, on the handle, in the direction of +x) for ``duration`` s."""
-        self._forces.append(force)
-        self._durations.append(duration)
+        self._pieces += 1
+        self._span += duration
+        self._impulse += force * duration
+        self._square += force * force * duration
 
     def switch(self, before: float, after: float, duration: float) -> None:
         """Over ``duration`` s the force changed from ``before`` to ``after`` (N) at an unknown instant."""
@@ -129,30 +137,30 @@ class PortObserver:
         last = self._position
         self._position = position
         switches = self._switches
+        pieces, span, impulse, square = self._pieces, self._span, self._impulse, self._square
+        if pieces:
+            self._pieces = 0
+            self._span = self._impulse = self._square = 0.0
         if last is None:  # the origin: whatever was applied before it is no interval
-            self._forces.clear()
-            self._durations.clear()
             switches.clear()
             return self.energy
         displacement = position - last
         friction = self.friction
         if not switches:
-            term, slope = interval_energy(friction, displacement, self._forces, self._durations)
-        elif len(switches) == 1 and not self._forces:
+            term, slope = pieces_energy(friction, displacement, span, impulse, square)
+        elif len(switches) == 1 and not pieces:
             term, slope = switch_energy(friction, displacement, *switches[0])
+            switches.clear()
         else:  # a missed sample across a change at an unknown instant: each piece's worst case, dx dropped
-            term = -sum(f * f * t for f, t in zip(self._forces, self._durations)) / (4.0 * friction)
+            term = -square / (4.0 * friction)
             term -= sum(max(a * a, b * b) * s for a, b, s in switches) / (4.0 * friction)
             slope = 0.0
-        self._forces.clear()
-        self._durations.clear()
-        switches.clear()
+            switches.clear()
         if self._slope_first is None:
             self._slope_first = slope
         else:
             self._variation += abs(slope - self._slope_last)
         self._slope_last = slope
-        self.rounding = self.count * (abs(self._slope_first) + abs(slope) + self._variation)
         energy = self.energy = self.energy + term
         budget = self.budget + term
         self.budget = budget if budget < self.cap else self.cap
@@ -161,6 +169,14 @@ class PortObserver:
         if energy < -self.tolerance:
             self.active_cycles += 1
         return energy
+
+    @property
+    def rounding(self) -> float:
+        """The counts rounding bound (J) of ``E`` so far (module docstring): ``q (|lambda_first| + |lambda_last| +
+        sum |lambda_k - lambda_(k-1)|)``, 0 before the first interval; read when asked (a run's summary), not kept
+        up to date every cycle."""
+        first = self._slope_first
+        return 0.0 if first is None else self.count * (abs(first) + abs(self._slope_last) + self._variation)
 
     @property
     def flagged(self) -> bool:

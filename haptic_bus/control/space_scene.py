@@ -233,17 +233,23 @@ class SpaceScene:
         (the controller's lists of floats are read as they are, without two arrays made a cycle)."""
         xs = x if type(x) is list else np.asarray(x, dtype=float).tolist()
         vs = v if type(v) is list else np.asarray(v, dtype=float).tolist()
-        u = [0.0] * len(xs)
-        for index in self.candidates(xs):
-            hit = self.objects[index].penetration(xs)
+        return np.array(self.force_floats(xs, vs))
+
+    def force_floats(self, x: Sequence[float], v: Sequence[float]) -> list[float]:
+        """:meth:`force` for ``x`` (m) and ``v`` (m/s) given as floats, one per axis, as a list of floats: what
+        a controller of several axes asks every cycle, with no array made and taken apart again."""
+        u = [0.0] * len(x)
+        objects, walls = self.objects, self._walls
+        for index in self.candidates(x):
+            hit = objects[index].penetration(x)
             if hit is None:
                 continue
             depth, n = hit
-            K, B = self._walls[index]
-            push = K * depth - B * sum(vi * ni for vi, ni in zip(vs, n))
+            K, B = walls[index]
+            push = K * depth - B * sum(map(operator.mul, v, n))
             for i, ni in enumerate(n):
                 u[i] -= push * ni
-        return np.array(u)
+        return u
 
     def contacts(self, x: ArrayLike) -> tuple[str, ...]:
         """Names of the objects the handle penetrates at ``x`` (m)."""

@@ -116,9 +116,11 @@ class Supervisor:
         self.late_cycles = 0
         self.alarms = 0
         self._tolerance = policy.late_tolerance * period
-        self._lateness = np.zeros(policy.late_window)  # s beyond the assumed delay: start lateness + input age
-        self._late = np.zeros(policy.late_window, dtype=bool)
-        self._stale = np.zeros(policy.late_window, dtype=np.int16)  # 1 + the source of an input older than the cycle, else 0
+        # the window, as lists: a cycle stores three Python values where NumPy made a scalar of each (arrays are
+        # made of them only for an alarm's message)
+        self._lateness = [0.0] * policy.late_window  # s beyond the assumed delay: start lateness + input age
+        self._late = [False] * policy.late_window
+        self._stale = [0] * policy.late_window  # 1 + the source of an input older than the cycle, else 0
         self._late_in_window = 0
         self._slot = 0
         self._quiet_until = {"late": 0, "observer": 0}
@@ -132,7 +134,7 @@ class Supervisor:
         slot = self._slot
         beyond = lateness + input_age * self.period
         late = beyond > self._tolerance
-        self._late_in_window += late - bool(self._late[slot])
+        self._late_in_window += late - self._late[slot]
         self._late[slot] = late
         self._stale[slot] = source + 1 if input_age > 0 else 0
         self._lateness[slot] = beyond
@@ -157,11 +159,11 @@ class Supervisor:
         """The loop delay (samples) the window shows: the assumed one plus the lateness that more
         than ``late_limit`` of its cycles reached (its ``late_limit + 1``-th largest), the same
         count the alarm is raised on -- so an alarm's delay is always beyond the tolerance."""
-        rank = min(self.policy.late_limit + 1, self._lateness.size)
+        rank = min(self.policy.late_limit + 1, len(self._lateness))
         return self.assumed_delay + float(np.partition(self._lateness, -rank)[-rank]) / self.period
 
     def _late_message(self) -> str:
-        worst = float(self._lateness.max())
+        worst = max(self._lateness)
         stale = int(np.count_nonzero(self._stale))
         late = ", ".join(self.sources[index - 1] for index in np.unique(self._stale) if index)
         verb, why = ("started", "") if not stale else ("acted", f"{stale} on an input {late} did not renew in time; ")
