@@ -181,7 +181,7 @@ class FilteredMulticastBus(UdpMulticastBus):
         waits): a standard data frame whose identifier is in ``wanted``, in python-can's own packing
         (:func:`_plain_frame`), as ``(identifier, data)``, read from the datagram's bytes without the
         :class:`can.Message` that :meth:`recv` builds, checks and stamps (a cycle's TPDOs: 5.4-8.0 us a
-        frame where :meth:`recv` takes 10.5-18.4 and :meth:`recv_message` 8.2-10.9, 5000 frames five
+        frame where :meth:`recv` takes 10.5-18.4 and an unchecked message 8.2-10.9, 5000 frames five
         times on a loaded machine); any other frame as :meth:`recv` returns it; None if none came.
         Raises as :meth:`recv`."""
         deadline = time.perf_counter() + timeout
@@ -195,12 +195,13 @@ class FilteredMulticastBus(UdpMulticastBus):
                 return message
         return None
 
-    def recv_message(self, wanted: Container[int], timeout: float) -> can.Message | None:
-        """The frame :meth:`recv` returns within ``timeout`` (s; 0 takes only what already waits), the same
-        :class:`can.Message`, or None if none came; raises as :meth:`recv`.  A frame :meth:`recv_wanted`
-        would return bare has its message built from the datagram's bytes without the check (every field is
-        one it passes): the cycle's receive when every frame is shown to a tap (the bus log), which needs
-        the message."""
+    def recv_parts(self, wanted: Container[int], timeout: float) -> tuple[int, bytes, float, str | None] | can.Message | None:
+        """The frame :meth:`recv` returns within ``timeout`` (s; 0 takes only what already waits), or None if
+        none came; raises as :meth:`recv`.  A frame :meth:`recv_wanted` would return bare comes as its parts,
+        ``(identifier, data, timestamp, channel)``: the Unix time (s) :meth:`recv` stamps it with and its channel's
+        name (or None), the rest :class:`can.Message`'s defaults; any other frame as :meth:`recv` returns it.  The
+        cycle's receive when every frame is shown to a tap (the bus log): the tap takes the parts, or a message
+        built of them without the check (every field is one it passes)."""
         deadline = time.perf_counter() + timeout
         self._late = 0
         while (datagram := self._next_datagram(deadline)) is not None:
@@ -212,8 +213,7 @@ class FilteredMulticastBus(UdpMulticastBus):
                     stamp = _timestamp(ancillary)
                 except Exception as exception:  # as _message raises it
                     raise can.CanOperationError("could not unpack received message") from exception
-                return can.Message(timestamp=stamp, arbitration_id=can_id, is_extended_id=False, data=payload,
-                                   channel=None if name is None else name.decode("ascii"))  # the rest: defaults
+                return can_id, payload, stamp, None if name is None else name.decode("ascii")
             message = self._decoded(data, ancillary)
             if message is not None:
                 return message
@@ -368,6 +368,12 @@ def _timestamp(ancillary: list[tuple[int, int, bytes]]) -> float:
     if not 0 <= nanoseconds < 1_000_000_000:
         raise can.CanOperationError(f"timestamp nanoseconds field out of range: {nanoseconds}")
     return seconds + nanoseconds * 1e-9
+
+
+def parts_message(can_id: int, data: bytes, stamp: float, channel: str | None) -> can.Message:
+    """The :class:`can.Message` :meth:`FilteredMulticastBus.recv` returns for a frame that
+    :meth:`~FilteredMulticastBus.recv_parts` gave as its parts (every other field can.Message's default)."""
+    return can.Message(timestamp=stamp, arbitration_id=can_id, is_extended_id=False, data=data, channel=channel)
 
 
 def standard_filters(can_ids: set[int] | frozenset[int]) -> CanFilters:

@@ -11,7 +11,7 @@ import pathlib
 import can
 
 from drives.canopen.link import NetworkLink
-from haptic_bus.app.bus_log import FRAME, BusLogFile, frame_tap, frames
+from haptic_bus.app.bus_log import FRAME, BusLogFile, FrameTap, frames
 from haptic_bus.control.ring import Ring
 
 
@@ -22,7 +22,7 @@ def test_a_sent_frame_is_stamped_before_the_bus_takes_it() -> None:
     with can.Bus(interface="virtual", channel=channel) as drive_side:
         link.open()
         try:
-            link.tap = frame_tap(ring)
+            link.tap = FrameTap(ring)
             link.send(can.Message(arbitration_id=0x080, is_extended_id=False, data=b""))
         finally:
             link.close()
@@ -37,7 +37,7 @@ def test_a_sent_frame_is_stamped_before_the_bus_takes_it() -> None:
 
 def test_an_answer_tapped_before_its_request_is_logged_after_it(tmp_path: pathlib.Path) -> None:
     ring = Ring(FRAME, 8)
-    tap = frame_tap(ring)
+    tap = FrameTap(ring)
     request = can.Message(timestamp=1000.0, arbitration_id=0x605, is_extended_id=False,  # upload 0x6041
                           data=bytes([0x40, 0x41, 0x60, 0, 0, 0, 0, 0]))
     answer = can.Message(timestamp=1000.0002, arbitration_id=0x585, is_extended_id=False,

@@ -13,7 +13,8 @@ from multiprocessing import shared_memory
 import can
 import pytest
 
-from haptic_bus.app.bus_log import FRAME, frame_tap, frames
+from drives.canopen.link import PartsTap
+from haptic_bus.app.bus_log import FRAME, FrameTap, frames
 from haptic_bus.control.ring import Ring
 
 PAIR = struct.Struct("=qd")  # (index, index / 2): a record whose value says which one it is
@@ -60,7 +61,7 @@ def test_private_memory_cannot_be_attached() -> None:
 
 def test_frames_go_through_the_tap_and_come_back_unchanged() -> None:
     ring = Ring(FRAME, 16)
-    tap = frame_tap(ring)
+    tap = FrameTap(ring)
     sync = can.Message(arbitration_id=0x080, data=b"", is_extended_id=False)
     tpdo = can.Message(timestamp=1_700_000_000.25, arbitration_id=0x185, data=bytes(range(8)), is_extended_id=False)
     remote = can.Message(timestamp=1_700_000_000.5, arbitration_id=0x1ABCDE, is_extended_id=True, is_remote_frame=True,
@@ -75,10 +76,21 @@ def test_frames_go_through_the_tap_and_come_back_unchanged() -> None:
     assert (asked.arbitration_id, asked.is_extended_id, asked.is_remote_frame, asked.is_rx) == (0x1ABCDE, True, True, True)
 
 
+def test_a_received_frame_given_as_its_parts_is_the_record_its_message_makes() -> None:
+    """The control thread's receive hands the bus log a TPDO as its parts (``FrameTap.received``): the same record,
+    byte for byte, as the message a receive would have built for it."""
+    as_message, as_parts = Ring(FRAME, 4), Ring(FRAME, 4)
+    FrameTap(as_message)(can.Message(timestamp=1_700_000_000.25, arbitration_id=0x285, data=b"\x07\x00\x10",
+                                     is_extended_id=False), False)
+    FrameTap(as_parts).received(1_700_000_000.25, 0x285, b"\x07\x00\x10")
+    assert as_parts.read_from(0) == as_message.read_from(0)
+    assert isinstance(FrameTap(as_parts), PartsTap)  # so a link hands it the parts (drives/canopen/link.py)
+
+
 def test_two_threads_tapping_at_once_lose_no_frame() -> None:
     per_thread = 5_000
     ring = Ring(FRAME, 4 * per_thread)
-    tap = frame_tap(ring)
+    tap = FrameTap(ring)
 
     def send(first: int) -> None:
         for n in range(first, first + per_thread):

@@ -20,7 +20,7 @@ from can.interfaces.udp_multicast.utils import pack_message
 
 from drives.bus_config import open_bus
 from drives.canopen.drive import CanopenDrive
-from drives.udp_multicast import LATE_READS, standard_filters
+from drives.udp_multicast import LATE_READS, parts_message, standard_filters
 from tests.run_rig import run_cli
 
 WAIT = 5.0  # s: the longest a receive waits for a datagram looped back on this host (microseconds when idle)
@@ -152,7 +152,8 @@ def test_the_cycles_receive_gives_bare_only_the_frame_recv_gives_and_raises_as_r
     ``recv`` returns (the same frame, or the same receive error), bare only for python-can's own packing of a plain
     frame with no channel or an ASCII one (a list of data returned bare reached the cycle's struct unpack: a
     TypeError that crashed a run without a bus log).
-    ``recv_message``, the cycle's receive with a tap, returns what ``recv`` returns, whichever way it built it."""
+    ``recv_parts``, the cycle's receive with a tap, returns what ``recv`` returns, or for python-can's plain packing
+    its parts, of which the message ``recv`` returns is built (``parts_message``: what a tap that takes no parts sees)."""
     group, port = multicast
     with (open_bus(interface="udp_multicast", channel=group, port=port) as by_recv,
           open_bus(interface="udp_multicast", channel=group, port=port) as by_wanted,
@@ -162,7 +163,8 @@ def test_the_cycles_receive_gives_bare_only_the_frame_recv_gives_and_raises_as_r
         foreign.sendto(_packed(**changed), (group, port))
         expected = _received(lambda: by_recv.recv(WAIT))
         got = _received(lambda: by_wanted.recv_wanted({0x185}, WAIT))  # type: ignore[attr-defined]  # the project's bus
-        message = _received(lambda: by_message.recv_message({0x185}, WAIT))  # type: ignore[attr-defined]
+        parts = _received(lambda: by_message.recv_parts({0x185}, WAIT))  # type: ignore[attr-defined]
+        message = parts_message(*parts) if isinstance(parts, tuple) else parts
         if isinstance(expected, can.CanOperationError):
             for either in (got, message):
                 assert isinstance(either, can.CanOperationError) and str(either) == str(expected), (either, expected)
@@ -175,8 +177,9 @@ def test_the_cycles_receive_gives_bare_only_the_frame_recv_gives_and_raises_as_r
         plain = not changed or (set(changed) == {"channel"} and str(changed["channel"]).isascii())
         if plain:  # python-can's own packing of a plain frame (no channel, or an ASCII one): bare
             assert got == (0x185, b"\x01\x02\x03\x04\x05\x06"), (got, expected)
+            assert isinstance(parts, tuple), (parts, expected)
         else:
-            assert isinstance(got, can.Message), (got, expected)
+            assert isinstance(got, can.Message) and isinstance(parts, can.Message), (got, parts, expected)
             assert got.equals(expected, timestamp_delta=None), (got, expected)
 
 

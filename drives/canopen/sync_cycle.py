@@ -34,7 +34,7 @@ from drives.canopen.exchange import CanopenExchange, CanopenStats, Unpack
 from drives.canopen.link import NetworkLink
 from drives.cia301 import SYNC_COB_ID
 from drives.errors import DriveError, DriveProtocolError, DriveTimeout
-from drives.udp_multicast import FilteredMulticastBus
+from drives.udp_multicast import FilteredMulticastBus, parts_message
 
 logger = logging.getLogger(__name__)
 
@@ -206,14 +206,16 @@ def receive_direct(name: str, link: NetworkLink, wanted: Container[int], deadlin
     link's tap first.  A receive that fails is a DriveError naming ``name``.
 
     On ``udp_multicast`` with no tap set, the frames of ``wanted`` are read without building a
-    :class:`can.Message` (:meth:`~drives.udp_multicast.FilteredMulticastBus.recv_wanted`); with one,
-    as :meth:`recv` reads them, their messages built from the datagrams' bytes
-    (:meth:`~drives.udp_multicast.FilteredMulticastBus.recv_message`)."""
+    :class:`can.Message` (:meth:`~drives.udp_multicast.FilteredMulticastBus.recv_wanted`); with one, as
+    their parts (:meth:`~drives.udp_multicast.FilteredMulticastBus.recv_parts`), which a
+    :class:`~drives.canopen.link.PartsTap` takes as they are and any other tap as the message :meth:`recv`
+    would have returned, built of them."""
     bus = link.bus
     if bus is None:
         raise DriveError(name, "the bus is closed")
+    tap, parts = link.tap, link.tap_parts
     if isinstance(bus, FilteredMulticastBus):
-        receive = bus.recv_wanted if link.tap is None else bus.recv_message
+        receive = bus.recv_wanted if tap is None else bus.recv_parts
     else:
         receive = None
     while True:
@@ -225,9 +227,14 @@ def receive_direct(name: str, link: NetworkLink, wanted: Container[int], deadlin
         if got is None:
             return None
         if isinstance(got, tuple):
-            return got
+            if len(got) == 2:  # recv_wanted's (no tap)
+                return got
+            if parts is not None:
+                parts(got[2], got[0], got[1])
+            elif tap is not None:
+                tap(parts_message(*got), False)
+            return got[0], got[1]
         msg = got
-        tap = link.tap
         if tap is not None:
             tap(msg, False)
         if msg.is_error_frame or msg.is_remote_frame:

@@ -1,7 +1,7 @@
 """``bus.asc``: every CAN frame of a run, in Vector's ASCII log format, beside its record.
 
 The control process logs on its one bus handle: the drive link's tap
-(:attr:`drives.canopen.link.NetworkLink.tap`) is :func:`frame_tap`, which copies each frame
+(:attr:`drives.canopen.link.NetworkLink.tap`) is :class:`FrameTap`, which copies each frame
 received or sent into a ring in shared memory (:data:`FRAME`: one ``struct.pack_into`` and a
 counter store, :class:`~haptic_bus.control.ring.Ring`).  The run's writer process
 (:mod:`~haptic_bus.app.writer_process`) drains the ring with :class:`BusLogFile`: python-can's
@@ -34,8 +34,6 @@ from haptic_bus.control.ring import Ring
 if TYPE_CHECKING:
     import can
 
-    from drives.canopen.link import Tap
-
 LOG_NAME = "bus.asc"
 FRAME = struct.Struct("=dIBB64s")
 """One frame in the ring: Unix time (s), identifier, flags (:data:`_FLAGS`), data length (bytes), data."""
@@ -43,11 +41,13 @@ FRAME_CAPACITY = 1 << 16  # frames: 16 s of a 3-axis cycle at T = 1 ms (4 frames
 _EXTENDED, _REMOTE, _ERROR, _FD, _SENT = 1, 2, 4, 8, 16
 
 
-def frame_tap(ring: Ring) -> Tap:
+class FrameTap:
     """A link tap that copies each frame into ``ring`` (:data:`FRAME`) with its ``timestamp``: a
     received frame's from the bus, a sent one's the time the link handed it to the bus
     (:meth:`~drives.canopen.link.NetworkLink.send`), so a SYNC is stamped before the TPDOs that
-    answer it; a frame without a time of its own (0) is stamped when tapped.  Several threads tap
+    answer it; a frame without a time of its own (0) is stamped when tapped.  The control thread's
+    receive hands it the cycle's TPDOs as their parts (:meth:`received`, a
+    :class:`~drives.canopen.link.PartsTap`), without a message built for each.  Several threads tap
     while canopen's notifier reads the bus (its frames, and the caller's SDO requests): a lock
     keeps the ring's writer one at a time (uncontended while the cycle alone reads and sends); an
     answer the notifier taps before its request's sender does is put back in time order by
@@ -55,18 +55,23 @@ def frame_tap(ring: Ring) -> Tap:
     that arrived meanwhile are read, and tapped, after those it sent on resuming, often in a later
     drain; ``bus.asc`` then steps back in time there (21 lines after a SIGSTOP, measured), each frame
     with its own time."""
-    put = ring.put
-    now = time.time
-    lock = threading.Lock()
 
-    def tap(msg: can.Message, sent: bool) -> None:
+    def __init__(self, ring: Ring) -> None:
+        self._put = ring.put
+        self._lock = threading.Lock()
+
+    def __call__(self, msg: can.Message, sent: bool, /) -> None:
+        """Copy ``msg`` (``sent``: by this process) into the ring."""
         flags = (msg.is_extended_id | msg.is_remote_frame << 1 | msg.is_error_frame << 2 | msg.is_fd << 3
                  | sent << 4)
         data = msg.data
-        with lock:
-            put(msg.timestamp or now(), msg.arbitration_id, flags, len(data), data)
+        with self._lock:
+            self._put(msg.timestamp or time.time(), msg.arbitration_id, flags, len(data), data)
 
-    return tap
+    def received(self, stamp: float, can_id: int, data: bytes, /) -> None:
+        """Copy a received standard data frame, given as its Unix time (s), identifier and data, into the ring."""
+        with self._lock:
+            self._put(stamp, can_id, 0, len(data), data)
 
 
 def frames(chunk: bytes) -> list[can.Message]:
@@ -110,7 +115,7 @@ class BusLogFile:
 
     def drain(self) -> int:
         """Write every frame the ring holds since the last drain, in time order (two threads' taps can
-        reach the ring out of it: :func:`frame_tap`), whole lines; the count written now."""
+        reach the ring out of it: :class:`FrameTap`), whole lines; the count written now."""
         first, chunk = self.ring.read_from(self._next)
         self.lost += first - self._next
         found = frames(chunk)

@@ -4,7 +4,7 @@
 commissioning's frames are logged, and long before pre-flight) and hands it:
 
 - the frame ring (with ``bus_log``): :attr:`RunWriter.tap` is the drive link's tap
-  (:func:`~haptic_bus.app.bus_log.frame_tap`);
+  (:class:`~haptic_bus.app.bus_log.FrameTap`);
 - each axis' record (:meth:`RunWriter.stream`: a :class:`~haptic_bus.control.record.RunRecord`
   made in shared memory, ``shared_record`` / ``shared_records`` of the controllers);
 - ``run.json``'s document once, then each event (:meth:`RunWriter.follow`: the event log's
@@ -50,7 +50,7 @@ from typing import Any
 from drives.bus_config import IN_PROCESS_INTERFACES
 from drives.modbus.in_process import served_here
 from haptic_bus.app import writer_process
-from haptic_bus.app.bus_log import FRAME, FRAME_CAPACITY, frame_tap
+from haptic_bus.app.bus_log import FRAME, FRAME_CAPACITY, FrameTap
 from haptic_bus.control.record import Event, EventLog, RunRecord
 from haptic_bus.control.ring import Ring
 
@@ -119,7 +119,7 @@ class RunWriter:
         self._await("ready", START_TIMEOUT)
         if self.frames is not None:
             self.frames.unlink()
-        self.tap = None if self.frames is None else frame_tap(self.frames)
+        self.tap = None if self.frames is None else FrameTap(self.frames)
 
     def stream(self, files: Sequence[tuple[str, str, RunRecord]]) -> None:
         """Stream each ``(file name, axis name, record)``'s rows into that file of the folder."""
