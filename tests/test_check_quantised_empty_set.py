@@ -8,6 +8,7 @@ same loop without `--position-resolution` says "NOT passive ... passive K at thi
 
 from __future__ import annotations
 
+import pathlib
 import subprocess
 import sys
 
@@ -30,6 +31,28 @@ def test_the_command_says_not_passive_in_one_verdict_without_a_traceback() -> No
         [sys.executable, "-c", "import sys; from haptic_bus.app.entry import main; sys.exit(main())", "check", *args,
          "--velocity", "average", "--position-resolution", "1e-6", "--coulomb", "0.5"],
         capture_output=True, text=True, timeout=120, check=False)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert done.returncode == 1
+    assert "NOT passive" in done.stdout
+
+
+def test_profiles_check_says_not_passive_for_a_profile_stating_coulomb_friction(tmp_path: pathlib.Path) -> None:
+    """The same through a profile: cia402-handle with `coulomb_friction = 0.5` and B = 200 N s/m (no passive
+    K at this B): `haptic-bus profiles check` printed the same IndexError's traceback."""
+    import profiles
+
+    text = (pathlib.Path(profiles.__file__).parent / "cia402-handle.toml").read_text()
+    for old, new in (('name = "cia402-handle"', 'name = "quantised-empty"'),
+                     ("damping = 10.0 ", "damping = 200.0 "),
+                     ('bandwidth = "strict"', 'bandwidth = "warn"'),
+                     ("[device]\n", "[device]\ncoulomb_friction = 0.5\n")):
+        assert old in text
+        text = text.replace(old, new, 1)
+    path = tmp_path / "quantised-empty.toml"
+    path.write_text(text)
+    done = subprocess.run(
+        [sys.executable, "-c", "import sys; from haptic_bus.app.entry import main; sys.exit(main())", "profiles",
+         "check", str(path)], capture_output=True, text=True, timeout=120, check=False)
     assert "Traceback" not in done.stderr, done.stderr
     assert done.returncode == 1
     assert "NOT passive" in done.stdout
