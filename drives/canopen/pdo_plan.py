@@ -120,9 +120,11 @@ def plans(objects: Sequence[ObjectSpec], pdos: Sequence[DrivePdo], exact: bool,
 
 
 def _add(found: list[MappingPlan], plan: MappingPlan) -> None:
-    """Append ``plan`` unless an earlier plan maps the same objects into the same PDOs."""
-    shape = [(f.pdo.number, f.objects) for f in plan.frames]
-    if all([(f.pdo.number, f.objects) for f in other.frames] != shape for other in found):
+    """Append ``plan`` unless an earlier plan maps the same objects into the same PDOs the same way (writing
+    the mapping, or taking it as the drive has it: a drive whose mapping is read-only refuses the one and
+    accepts the other, even where both carry the same objects)."""
+    shape = [(f.pdo.number, f.objects, f.remap) for f in plan.frames]
+    if all([(f.pdo.number, f.objects, f.remap) for f in other.frames] != shape for other in found):
         found.append(plan)
 
 

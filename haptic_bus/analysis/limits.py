@@ -139,7 +139,8 @@ class PassiveSet:
             closed.append((low_in, True if cut else high_in))
             if cut:
                 break
-        kept_ceiling = self.ceiling if len(intervals) == len(self.intervals) and self.intervals[-1][1] < ceiling else None
+        whole = bool(self.intervals) and len(intervals) == len(self.intervals) and self.intervals[-1][1] < ceiling
+        kept_ceiling = self.ceiling if whole else None  # an empty set (no passive value at all) stays empty
         return PassiveSet(self.parameter, tuple(intervals), tuple(closed), kept_ceiling)
 
     def to_dict(self) -> dict[str, object]:
