@@ -235,8 +235,9 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         self.cycles = 0
         self.saturated_cycles = 0
         self.peak_force = 0.0
-        self.energy = 0.0  # the whole port's E = sum E_i (J), kept by the path for several axes
-        self.least_energy = 0.0
+        # the whole port's E = sum E_i (J), kept by the path for several axes; from the energy stored in the walls the
+        # run begins in contact with, as each axis' observer starts (the least so far too: not 0 J it never reached)
+        self.energy = self.least_energy = sum(port.observer.energy for port in self.ports)
         self.observer_active_cycles = 0
         self.stopped_on_error = False
         self._q = [0.0] * size  # the joints' q (m) and q_dot (m/s) of the latest cycle, several axes: floats
