@@ -240,6 +240,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
             with control_thread_scheduling(options) as scheduling:
                 extra["realtime"] = scheduling.to_dict() if scheduling is not None else None
                 running, node = ready()  # before pre-flight, which then measures the cycle after it
+                show_names()  # every thread by its name in top -H and /proc/PID/task/*/comm, through pre-flight too
                 for each in drives:
                     each.select_mode()  # its SDO round trips now, not between pre-flight and the enable
                 if options.wall_paced:
@@ -247,7 +248,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                     recorder.publish()  # run.json as it stands before the cycles (pre-flight's verdict in it)
                     if running.ramp_cycles == 0:
                         _still_outside(kind, drive, scene)
-                show_names()  # every helper thread by its name in top -H and /proc/PID/task/*/comm
+                show_names()  # again: threads started since (a judge names itself)
                 _stop_if_asked(options)  # Ctrl-C or SIGTERM during set-up or pre-flight: never enabled
                 # last before the first cycle: every drive in the same cycle, their RPDO deadlines run from here
                 drive.enable()
