@@ -28,6 +28,22 @@ def test_version(capsys: pytest.CaptureFixture[str]) -> None:
     assert capsys.readouterr().out == f"haptic-bus sim {__version__}\n"
 
 
+@pytest.mark.parametrize(("argv", "said"), [
+    (["check", "--mass", "0.5", "--friction", "0.1", "--period", "1e-3", "--stiffness", "100", "--damping", "1",
+      "--position-resolution", "-1e-6"], "--position-resolution = -1e-6 is invalid; allowed: a finite number in [0, 1e+06] m"),
+    (["region", "--mass", "0.5", "--friction", "0.1", "--period", "1e-3", "--png", "never-written.png", "--mark", "-1,1"],
+     "'-1,1': K and B must be finite and > 0"),
+    (["check", "--mass", "0.5", "--friction", "0.1", "--period", "-1E-3", "--stiffness", "100", "--damping", "1"],
+     "period = -0.001 is invalid"),
+])
+def test_a_negative_number_in_scientific_notation_is_a_value_whose_range_is_named(
+        argv: list[str], said: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """Python 3.11's argparse took ``-1e-6`` for an option ("expected one argument"): break15."""
+    assert main(argv) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert said in line, line
+
+
 def test_bus_kwargs_is_bus_option_as_python_can_spells_it() -> None:
     parser = build_parser()
     base = ["run", "cia402-handle", "--interface", "udp_multicast", "--channel", "239.74.20.99", "--node-id", "5"]

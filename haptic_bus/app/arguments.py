@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from collections.abc import Callable
 from typing import Any
 
@@ -25,7 +26,13 @@ Handler = Callable[[argparse.Namespace], int]
 
 class OneLineParser(argparse.ArgumentParser):
     """argparse, but a usage error is one line on stderr and exit status 2, and an argument no option
-    takes is the usage error of the (sub)command given (:meth:`parse_command`)."""
+    takes is the usage error of the (sub)command given (:meth:`parse_command`).  A negative number in
+    scientific notation (``--position-resolution -1e-6``) is a value, as Python 3.13's argparse reads it,
+    so its check names the range; 3.11's took it for an option ("expected one argument")."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"-\.?\d")  # argparse's own test, as of Python 3.13
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(EXIT_INVALID, f"{self.prog}: error: {message}\n")
