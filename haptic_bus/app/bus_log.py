@@ -20,6 +20,7 @@ process never imports python-can: this module imports it where frames are made a
 
 from __future__ import annotations
 
+import datetime
 import io
 import pathlib
 import struct
@@ -65,8 +66,9 @@ class FrameTap:
         flags = (msg.is_extended_id | msg.is_remote_frame << 1 | msg.is_error_frame << 2 | msg.is_fd << 3
                  | sent << 4)
         data = msg.data
+        length = msg.dlc if msg.is_remote_frame else len(data)  # a remote frame asks for dlc bytes and carries none
         with self._lock:
-            self._put(msg.timestamp or time.time(), msg.arbitration_id, flags, len(data), data)
+            self._put(msg.timestamp or time.time(), msg.arbitration_id, flags, length, data)
 
     def received(self, stamp: float, can_id: int, data: bytes, /) -> None:
         """Copy a received standard data frame, given as its Unix time (s), identifier and data, into the ring."""
@@ -80,7 +82,8 @@ def frames(chunk: bytes) -> list[can.Message]:
 
     return [can.Message(timestamp=stamp, arbitration_id=can_id, is_extended_id=bool(flags & _EXTENDED),
                         is_remote_frame=bool(flags & _REMOTE), is_error_frame=bool(flags & _ERROR),
-                        is_fd=bool(flags & _FD), is_rx=not flags & _SENT, dlc=length, data=data[:length])
+                        is_fd=bool(flags & _FD), is_rx=not flags & _SENT, dlc=length,
+                        data=b"" if flags & _REMOTE else data[:length])
             for stamp, can_id, flags, length, data in FRAME.iter_unpack(chunk)]
 
 
@@ -98,11 +101,23 @@ class _Staged(io.StringIO):
         return text
 
 
+def _asc_writer() -> type[can.ASCWriter]:
+    """python-can's :class:`can.ASCWriter` with the header's milliseconds in three digits: python-can 4.6.1 writes
+    them unpadded (a first frame at 17:19:10.005 gives ``17:19:10.5``), which its own ASCReader and CANoe read as
+    10.500 s, every frame of such a log then 0.5-0.9 s late against ``record.csv`` (break15b: +495 ms)."""
+    import can
+
+    class AscWriter(can.ASCWriter):
+        def _format_header_datetime(self, dt: datetime.datetime) -> str:
+            return dt.strftime(self.FORMAT_DATE.format(f"{dt.microsecond // 1000:03d}"))
+
+    return AscWriter
+
+
 class BusLogFile:
     """The frames of ``ring`` (:data:`FRAME`) into ``path`` (ASC), at each :meth:`drain`."""
 
     def __init__(self, path: pathlib.Path, ring: Ring) -> None:
-        import can
 
         self.path = path
         self.ring = ring
@@ -110,7 +125,7 @@ class BusLogFile:
         self.lost = 0  # frames overwritten in the ring before they could be written
         self._next = 0
         self._staged = _Staged()
-        self._writer = can.ASCWriter(self._staged)
+        self._writer = _asc_writer()(self._staged)
         self._file = io.FileIO(path, "w")
 
     def drain(self) -> int:
