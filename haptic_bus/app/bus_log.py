@@ -1,4 +1,9 @@
-"""``bus.asc``: every CAN frame of a run, in Vector's ASCII log format, beside its record.
+"""``bus.asc``: every CAN frame a run sent or received, in Vector's ASCII log format, beside its record.
+
+Received means through the handle's receive filters, once the cycle reads the bus itself: the drives'
+TPDOs, EMCY and heartbeats, SDO and NMT (:meth:`drives.canopen.link.NetworkLink.read_directly`); other
+traffic on the bus (another node's PDOs, an extended frame of the same number) is not the run's and is
+not in it: a logger of its own on the bus (``python -m can.logger``) sees that.
 
 The control process logs on its one bus handle: the drive link's tap
 (:attr:`drives.canopen.link.NetworkLink.tap`) is :class:`FrameTap`, which copies each frame

@@ -27,7 +27,7 @@ another run's folder is exit 2).  It receives:
   force its layer took off, and the cycle's scene id, lateness flag and compute time (the same in
   every file).  One file per axis, not columns per axis: each reads like a one-axis record, and
   the rows of all files are the same cycles (the same ``time_s``);
-- ``bus.asc``: every CAN frame of the one bus handle (:mod:`~haptic_bus.app.bus_log`; CANopen
+- ``bus.asc``: every CAN frame the one bus handle sent or received (:mod:`~haptic_bus.app.bus_log`; CANopen
   runs, unless ``--no-bus-log``);
 - at the end, the pictures (:mod:`~haptic_bus.app.run_plots`; for several axes
   :mod:`~haptic_bus.app.trajectory_plot`), drawn from the files themselves: ``haptic-bus plot
