@@ -349,25 +349,23 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
     with drive.cyclic() as cycle:  # the run's own path, every target zero
 
         def exchange() -> object:
+            # a stop asked during pre-flight ends it at this cycle's start: during the measurement (up to 2000
+            # cycles), or while the gate judges (the run stops now, not once it has judged)
+            _stop_if_asked(options)
             return cycle.read(), cycle.saturate_and_write(zeros)
 
-        def exchange_unless_stopped() -> object:
-            _stop_if_asked(options)  # asked while the gate judges: the run stops now, not once it has judged
+        def exchange_while_judged() -> object:
             try:
                 return exchange()
             except DriveTimeout as silent:
                 raise DriveTimeout(silent.node, f"{silent.message}, while pre-flight's verdict was judged after its "
                                                 "cycles (nothing enabled)") from silent
 
-        def exchange_measured() -> object:
-            _stop_if_asked(options)  # asked during the measurement (up to 2000 cycles): it ends at this cycle's start
-            return exchange()
-
         spin = options.scheduling.spin
         cycles = preflight.PREFLIGHT_CYCLES if options.preflight_cycles is None else options.preflight_cycles
-        timing = preflight.measure(exchange_measured, kind.period, cycles, spin=spin, again=preflight.LOOK_AGAIN * cycles)
-        _stop_if_asked(options)  # asked during the measurement: the run stops, whatever its verdict would have been
-        report = preflight.while_cycling(exchange_unless_stopped, kind.period, spin=spin, work=lambda: preflight.judge_delay(
+        timing = preflight.measure(exchange, kind.period, cycles, spin=spin, again=preflight.LOOK_AGAIN * cycles)
+        _stop_if_asked(options)  # asked after the last cycle measured: the run stops, whatever its verdict would have been
+        report = preflight.while_cycling(exchange_while_judged, kind.period, spin=spin, work=lambda: preflight.judge_delay(
             timing, kind.assumed_delay(gate), kind.passes_at(gate, scene), kind.profile.passivity.layer,
             rig.watchdog.stall, rig.watchdog.periods, rig.link.get("bus_load", {}).get("smallest_period", 0.0),
             kind.on_arrival, rig.watchdog.at))
