@@ -485,12 +485,48 @@ def test_one_thread_owns_the_bus_of_a_three_axis_run_and_its_uploads_pass_the_co
     assert calls.count["send"] >= 4 * result.summary.cycles
 
 
-def test_the_link_tap_sees_every_frame_sent_and_received(canopen_rig) -> None:
+def test_the_bus_log_tap_takes_the_cycles_tpdos_as_their_parts_on_udp_multicast(canopen_rig) -> None:
+    """The bus log's tap (a PartsTap) gets the cycle's TPDOs from the control thread's receive as their parts, and
+    the ring holds them as received frames, between the SYNC and the RPDO they answer."""
+    from drives.canopen.link import PartsTap
+    from haptic_bus.app.bus_log import FRAME, FrameTap, frames
+    from haptic_bus.control.ring import Ring
+
+    ring = Ring(FRAME, 256)
+    tap = FrameTap(ring)
+    handed: list[int] = []
+    received = tap.received
+
+    def counted(stamp: float, can_id: int, data: bytes, /) -> None:
+        handed.append(can_id)
+        received(stamp, can_id, data)
+
+    tap.received = counted  # type: ignore[method-assign]  # the same tap, its parts counted
+    assert isinstance(tap, PartsTap)
+    with canopen_rig(interface="udp_multicast") as rig:
+        drive = rig.drive
+        node = drive.node_id
+        drive.link.tap = tap
+        with drive.cyclic() as cycle:
+            for _ in range(3):
+                cycle.read()
+                cycle.write(0)
+        drive.link.tap = None
+    logged = [(m.arbitration_id, not m.is_rx) for m in frames(ring.read_from(0)[1])]
+    cyclic = [frame for frame in logged if frame[0] in (0x80, 0x180 + node, 0x280 + node, 0x200 + node)]
+    assert cyclic == [(0x80, True), (0x180 + node, False), (0x280 + node, False), (0x200 + node, True)] * 3
+    assert handed == [0x180 + node, 0x280 + node] * 3  # every TPDO of the cycle came as its parts
+
+
+@pytest.mark.parametrize("interface", ["lockstep", "udp_multicast"])
+def test_the_link_tap_sees_every_frame_sent_and_received(canopen_rig, interface: str) -> None:
     """The tap (drives.canopen.link) sees canopen's SDO request and its answer outside the cyclic
-    phase, and the cycle's SYNC, TPDOs and RPDO in it, each marked sent or received."""
+    phase, and the cycle's SYNC, TPDOs and RPDO in it, each marked sent or received.  On udp_multicast
+    the cycle reads its TPDOs as their parts (``recv_parts``): a tap that takes no parts, as this one,
+    gets each as a message built of them."""
     from drives.cia402 import STATUSWORD
 
-    with canopen_rig(interface="lockstep") as rig:
+    with canopen_rig(interface=interface) as rig:
         drive = rig.drive
         node = drive.node_id
         seen: list[tuple[int, bool]] = []
