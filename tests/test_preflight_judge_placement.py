@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Callable
 
 import pytest
 
@@ -27,24 +28,33 @@ def _judge_policy() -> tuple[int, int]:
     return os.sched_getscheduler(0) & ~RESET_ON_FORK, os.sched_getparam(0).sched_priority
 
 
-def _judged_from(fifo: bool) -> tuple[int, int] | str:
-    """``while_cycling``'s work's policy, called from a fresh thread (SCHED_FIFO at
-    :data:`CALLER_PRIORITY` with reset-on-fork if ``fifo``); "refused" where SCHED_FIFO is not granted."""
-    out: list[tuple[int, int] | str] = []
+def _in_a_control_thread(body: Callable[[], None], fifo: bool = True) -> bool:
+    """``body()`` in a fresh thread, first put at SCHED_FIFO :data:`CALLER_PRIORITY` with reset-on-fork if
+    ``fifo``, as the session puts the control thread; False (``body`` not run) where SCHED_FIFO is not granted."""
+    granted = [True]
 
     def caller() -> None:
         if fifo:
             try:
                 os.sched_setscheduler(0, os.SCHED_FIFO | RESET_ON_FORK, os.sched_param(CALLER_PRIORITY))
             except PermissionError:
-                out.append("refused")
+                granted[0] = False
                 return
-        out.append(preflight.while_cycling(lambda: None, PERIOD, _judge_policy))
+        body()
 
     thread = threading.Thread(target=caller, name="test-control")
     thread.start()
     thread.join(timeout=10.0)
     assert not thread.is_alive()
+    return granted[0]
+
+
+def _judged_from(fifo: bool) -> tuple[int, int] | str:
+    """``while_cycling``'s work's policy, called from :func:`_in_a_control_thread`; "refused" where SCHED_FIFO is
+    not granted."""
+    out: list[tuple[int, int]] = []
+    if not _in_a_control_thread(lambda: out.append(preflight.while_cycling(lambda: None, PERIOD, _judge_policy)), fifo):
+        return "refused"
     return out[0]
 
 
@@ -76,21 +86,13 @@ def test_a_judge_left_judging_is_an_ordinary_thread_again() -> None:
         release.wait(timeout=10.0)
         policies.append(_judge_policy())
 
-    def caller() -> None:
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO | RESET_ON_FORK, os.sched_param(CALLER_PRIORITY))
-        except PermissionError:
-            out.append("refused")
-            return
+    def stopped_while_judged() -> None:
         try:
             preflight.while_cycling(exchange, PERIOD, judge)
         except KeyboardInterrupt:
             out.append("stopped")
 
-    thread = threading.Thread(target=caller, name="test-control")
-    thread.start()
-    thread.join(timeout=10.0)
-    if out == ["refused"]:
+    if not _in_a_control_thread(stopped_while_judged):
         pytest.skip("SCHED_FIFO not granted to this process")
     release.set()
     for judge_thread in [t for t in threading.enumerate() if t.name == "preflight-judge"]:
@@ -104,7 +106,7 @@ def test_a_judge_released_before_it_placed_itself_stays_ordinary() -> None:
     """The race a loaded machine showed (the test above once saw the judge at SCHED_FIFO 1): the stop released
     the judge before the new thread had run its first line, whose placement then made it SCHED_FIFO again.  Here
     the order is forced: the caller releases the judge, then the judge places itself."""
-    policies: list[tuple[int, int] | str] = []
+    policies: list[tuple[int, int]] = []
     released = threading.Event()
 
     def helper(placement: HelperPlacement) -> None:
@@ -112,12 +114,7 @@ def test_a_judge_released_before_it_placed_itself_stays_ordinary() -> None:
         placement.place()
         policies.append(_judge_policy())
 
-    def caller() -> None:
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO | RESET_ON_FORK, os.sched_param(CALLER_PRIORITY))
-        except PermissionError:
-            policies.append("refused")
-            return
+    def release_first() -> None:
         placement = HelperPlacement()
         judge = threading.Thread(target=helper, args=(placement,), name="test-judge")
         judge.start()
@@ -125,9 +122,6 @@ def test_a_judge_released_before_it_placed_itself_stays_ordinary() -> None:
         released.set()
         judge.join(timeout=10.0)
 
-    thread = threading.Thread(target=caller, name="test-control")
-    thread.start()
-    thread.join(timeout=10.0)
-    if policies == ["refused"]:
+    if not _in_a_control_thread(release_first):
         pytest.skip("SCHED_FIFO not granted to this process")
     assert policies == [(os.SCHED_OTHER, 0)]
