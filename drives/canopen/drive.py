@@ -376,7 +376,7 @@ class CanopenDrive(Cia402Master[CanopenConnection]):
             wrong = (f"; {dropped} frame{'s' if dropped > 1 else ''} on these COB-IDs had another length than the "
                      f"mapping commissioned and {'were' if dropped > 1 else 'was'} dropped") if dropped else ""
             raise self.trip(DriveTimeout(self.name, f"no TPDO (COB-ID {cobs}) for {self._missed_in_row} consecutive "
-                                                    f"cycles (timeout {timeout * 1e3:.3g} ms each){wrong}{zeroed}"))
+                                                    f"cycles (timeout {timeout * 1e3:g} ms each){wrong}{zeroed}"))
         last = self.last_inputs if self.last_inputs is not None else CyclicInputs(0, 0)
         return dataclasses.replace(last, age=self._missed_in_row)
 

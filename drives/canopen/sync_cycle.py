@@ -177,7 +177,7 @@ class SyncCycle:
         silent = [exchange.name for exchange, inputs in zip(self.exchanges, received) if inputs is None]
         if silent:
             others = f" (nor from {', '.join(silent[1:])})" if silent[1:] else ""
-            raise DriveTimeout(silent[0], f"no TPDO within {self.timeout * 1e3:.3g} ms while commanding the state "
+            raise DriveTimeout(silent[0], f"no TPDO within {self.timeout * 1e3:g} ms while commanding the state "
                                           f"machine{others}")
         return [inputs for inputs in received if inputs is not None]
 
