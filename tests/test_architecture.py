@@ -524,15 +524,24 @@ def test_the_link_tap_sees_every_frame_sent_and_received(canopen_rig, interface:
     phase, and the cycle's SYNC, TPDOs and RPDO in it, each marked sent or received.  On udp_multicast
     the cycle reads its TPDOs as their parts (``recv_parts``): a tap that takes no parts, as this one,
     gets each as a message built of them."""
+    import can
+
     from drives.cia402 import STATUSWORD
 
     with canopen_rig(interface=interface) as rig:
         drive = rig.drive
         node = drive.node_id
         seen: list[tuple[int, bool]] = []
-        drive.link.tap = lambda msg, sent: seen.append((msg.arbitration_id, sent))
+        stamps: dict[tuple[int, bool], float] = {}
+
+        def tap(msg: can.Message, sent: bool) -> None:
+            seen.append((msg.arbitration_id, sent))
+            stamps[msg.arbitration_id, sent] = msg.timestamp
+
+        drive.link.tap = tap
         drive.read_object(STATUSWORD)  # SDO, answered through canopen's notifier
-        sdo = [frame for frame in seen if frame[0] in (0x600 + node, 0x580 + node)]
+        # the notifier may tap the answer before the sender taps its request; the stamps keep the order
+        sdo = sorted((frame for frame in seen if frame[0] in (0x600 + node, 0x580 + node)), key=stamps.__getitem__)
         assert sdo == [(0x600 + node, True), (0x580 + node, False)]
         seen.clear()
         with drive.cyclic() as cycle:
