@@ -165,11 +165,14 @@ def test_smoke_bench_ratios_are_finite_and_positive(smoke_run: SmokeRun) -> None
         if floor.get("available", True):  # python-can alone, the same frames, beside the default run
             assert _finite_positive(floor["core_share"]) and floor["cycles"] > 0 and floor["lateness_s"]["p99"] >= 0
             controller = s["realtime"]["runs"][load]["default"]["controller"]
-            (pair,) = s["realtime"]["runs"][load]["default"]["core_pairs"]["pairs"]  # one pair in the smoke: that run
+            (pair,) = s["realtime"]["runs"][load]["default"]["pairs"]["pairs"]  # one pair in the smoke: that run
             assert pair["floor_core_share"] == floor["core_share"]
             if "core_share" in controller:
                 assert pair["core_share"] == controller["core_share"]["median"]
                 assert pair["ratio"] == controller["core_share"]["median"] / floor["core_share"]
+                bare = s["realtime"]["runs"][load]["default"]["bare_clock"]["lateness_s"]  # measured right after the run
+                assert pair["lateness_p99.9_ratio"] == controller["lateness_s"]["p99.9"] / bare["p99.9"]
+                assert (pair["cycles"], pair["overruns"]) == (controller["cycles"], controller["overruns"])
             else:  # a run refused at pre-flight (a loaded machine's hogged run: 6 of 200 cycles over T): no ratio, and why
                 assert pair["core_share"] is None and pair["ratio"] is None
                 assert (pair["run"], pair["error"]) == (controller["exit_reason"], controller["error"]) and pair["error"]

@@ -187,10 +187,10 @@ def issue_19(sections: dict) -> list[dict]:
 
 def issue_26(sections: dict) -> list[dict]:
     """Issue 26's timing rows, from the real-time section's default set-up (quiet and beside the hogs):
-    the control process's core share over python-can's floor for the same cycle (line 1: the median of pairs of a
-    run and the floor right after it, each pair's ratio beside it), its start
-    lateness p99 and p99.9 over the bare clock's (line 2), its overruns (line 2) and the loop delay it
-    observed (line 2, quiet).  Each pair was measured side by side in one run."""
+    the control process's core share over python-can's floor for the same cycle (line 1), its start lateness p99
+    and p99.9 over the bare clock's (line 2), each the median of pairs of a run and the bare clock and the floor
+    right after it, each pair's figure beside it; its overruns over every pair's cycles (line 2) and the loop delay
+    it observed (line 2, quiet, the pairs' median).  Each pair was measured side by side in one run."""
     s = _available(sections, "realtime")
     figures = s.get("issue_26") if s else None
     if not figures:
@@ -201,48 +201,50 @@ def issue_26(sections: dict) -> list[dict]:
     for load in ("quiet", "CPU hog"):
         got = figures.get(load, {})
         ratio = got.get("core_ratio")
-        rows.append(_row(1, f"control process CPU / python-can's floor, 1 axis, {load}", _core_ratio_text(got),
+        rows.append(_row(1, f"control process CPU / python-can's floor, 1 axis, {load}", _paired_text(got, "core_ratio"),
                          f"<= {figures['core_ratio_target']:g} x",
                          None if ratio is None else ratio <= figures["core_ratio_target"],
                          note="" if ratio is None else f"floor {got['floor_core_share']:.3g} of a core{_unmeasured(got)}"))
         for quantile in ("p99", "p99.9"):
             late = got.get(f"lateness_{quantile}_ratio")
-            rows.append(_row(2, f"start lateness {quantile} / the bare clock's, {load}", "-" if late is None else f"{late:.3g}",
+            rows.append(_row(2, f"start lateness {quantile} / the bare clock's, {load}",
+                             _paired_text(got, f"lateness_{quantile}_ratio"),
                              f"<= {figures['lateness_ratio_target']:g} x",
                              None if late is None else late <= figures["lateness_ratio_target"],
                              note=_beside_lateness(got, quantile, s)))
         share = got.get("overrun_share")
         rows.append(_row(2, f"overruns, share of cycles, {load}", "-" if share is None else f"{share:.2%}",
-                         f"<= {figures['overrun_target']:.1%}", None if share is None else share <= figures["overrun_target"]))
+                         f"<= {figures['overrun_target']:.1%}", None if share is None else share <= figures["overrun_target"],
+                         note="" if share is None else f"of the {got['overrun_cycles']} cycles of every pair's run"))
     axes = s.get("axes", {}) if s else {}
     for load, got in figures.get("three axes", {}).items():
         ratio = got.get("core_ratio")
         rows.append(_row(1, f"control process CPU / python-can's floor, 3 axes ({axes.get('profile')}, its T = "
                             f"{axes.get('period_s', 0) * 1e3:g} ms), {load}",
-                         _core_ratio_text(got), f"<= {figures['core_ratio_target']:g} x",
+                         _paired_text(got, "core_ratio"), f"<= {figures['core_ratio_target']:g} x",
                          None if ratio is None else ratio <= figures["core_ratio_target"],
                          note="" if ratio is None else f"floor {got['floor_core_share']:.3g} of a core, writer process "
                                                        f"{got.get('writer_cpu_s')} s{_unmeasured(got)}"))
         late = got.get("lateness_p99_ratio")
-        rows.append(_row(2, f"start lateness p99 / the bare clock's, 3 axes, {load}", "-" if late is None else f"{late:.3g}",
+        rows.append(_row(2, f"start lateness p99 / the bare clock's, 3 axes, {load}", _paired_text(got, "lateness_p99_ratio"),
                          f"<= {figures['lateness_ratio_target']:g} x",
                          None if late is None else late <= figures["lateness_ratio_target"],
                          note=_beside_lateness(got, "p99", s)))
     delay = figures.get("quiet", {}).get("observed_delay")
     rows.append(_row(2, "loop delay the run observed (assumed + p99 of lateness and input age), quiet, samples",
-                     "-" if delay is None else f"{delay:.3g}", f"<= {figures['delay_target']:g}",
+                     _paired_text(figures.get("quiet", {}), "observed_delay"), f"<= {figures['delay_target']:g}",
                      None if delay is None else delay <= figures["delay_target"]))
     return rows + _preflight_rows(sections)
 
 
-def _core_ratio_text(got: dict) -> str:
-    """A core-share ratio as measured: the median of its pairs, each pair's after it in order, ``-`` for one without
-    a ratio (one pair: the ratio alone)."""
-    ratios = got.get("core_ratios")
-    if not ratios or got.get("core_ratio") is None:
+def _paired_text(got: dict, name: str) -> str:
+    """A figure measured over pairs (``name``: ``core_ratio``, ``lateness_p99_ratio``, ...): the median of its pairs,
+    each pair's after it in order, ``-`` for one without it (one pair: the figure alone)."""
+    each = got.get(f"{name}s")
+    if not each or got.get(name) is None:
         return "-"
-    each = f" ({', '.join('-' if r is None else f'{r:.3g}' for r in ratios)})" if len(ratios) > 1 else ""
-    return f"{got['core_ratio']:.3g}{each}"
+    spread = f" ({', '.join('-' if r is None else f'{r:.3g}' for r in each)})" if len(each) > 1 else ""
+    return f"{got[name]:.3g}{spread}"
 
 
 def _unmeasured(got: dict) -> str:

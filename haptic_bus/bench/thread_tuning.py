@@ -27,10 +27,11 @@ stretches of the run (median, min-max), the whole run's lateness percentiles and
 whether it started without a stall (the first 50 cycles' lateness within the run's p99).  Beside
 them the bare clock (no drive, no controller) in each set-up: what the clock itself costs; and
 python-can's floor for the default set-up (:mod:`~haptic_bus.bench.can_floor`: the same frames
-with python-can alone), its lateness too.  The default set-up's core share over the floor's is the
-median of :data:`CORE_PAIRS` pairs, each a run and the floor right after it (:func:`core_pairs`): on
-this virtual machine one pair's ratio moved from 1.14 to 2.07 between two bench runs, the floor's own
-share from 0.14 to 0.24 of a core.  Before the runs, the machine's own gaps
+with python-can alone), its lateness too.  The default set-up's core share over the floor's, and its
+lateness over the bare clock's, are each the median of :data:`PAIRS` pairs, each a run, the floor and
+the bare clock right after it (:func:`paired_runs`): on this virtual machine one pair's core ratio
+moved from 1.14 to 2.07 between two bench runs, the floor's own share from 0.14 to 0.24 of a core,
+and one stall of the host (1.5-6 ms, a few times a minute) decides a 1 s run's p99.9.  Before the runs, the machine's own gaps
 (:mod:`~haptic_bus.bench.host_gaps`): how often a spinning real-time thread lost its CPU, which
 bounds every lateness figure of the section from below.
 """
@@ -38,6 +39,7 @@ bounds every lateness figure of the section from below.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import json
 import os
@@ -47,7 +49,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import ExitStack, contextmanager, nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -74,10 +76,12 @@ FIRST_CYCLES = 50
 FLOOR_START_WAIT = 60.0  # s: the floor process imports numpy and python-can before it says it is ready
 FLOOR_TPDOS = 2  # TPDO1 (0x6041 + 0x606C) and TPDO2 (0x6064): the run maps the position for its port observer
 CORE_RATIO_TARGET = 1.5  # issue 26: the control process's CPU within 1.5 x python-can's floor for the same cycle
-# pairs of a controller run and python-can's floor right after it, per default-set-up run (--smoke, --quick, full): the
-# floor of one pair moved 0.14-0.24 of a core between two bench runs here, and the pairs of one quick run spread 1.29-2.24
-# for three axes beside the hogs (December 7), wider than the target's margin: five pairs' median, not three's
-CORE_PAIRS = (1, 5, 5)
+# pairs of a controller run and python-can's floor and the bare clock right after it, per default-set-up run (--smoke,
+# --quick, full): the floor of one pair moved 0.14-0.24 of a core between two bench runs here, and the pairs of one quick
+# run spread 1.29-2.24 for three axes beside the hogs (December 7), wider than the target's margin: five pairs' median,
+# not three's; a host stall of 1.5-6 ms in one 1 s run set its p99.9 at 12-44x the bare clock's (four quick runs)
+PAIRS = (1, 5, 5)
+QUANTILES = ("p99", "p99.9")  # the lateness quantiles issue 26 bounds
 LATENESS_RATIO_TARGET = 2.0  # issue 26: start lateness p99 and p99.9 within 2 x the bare clock's
 OVERRUN_TARGET = 0.005  # issue 26: at most 0.5 % of the cycles overrun
 DELAY_TARGET = 1.5  # issue 26: the loop delay the run observes on an idle machine, samples
@@ -250,30 +254,50 @@ def can_floor(bus: dict, node_ids: tuple[int, ...], tpdos: int, period: float, d
             process.communicate(timeout=10)
 
 
-def core_pairs(controller: dict, floor: dict, again: Callable[[], dict], floor_again: Callable[[], dict],
-               count: int) -> dict:
-    """The control process's core share over python-can's floor's, in ``count`` pairs measured side by side: the
-    first pair given (``controller``, ``floor``: a run's figures and the floor's right after it), each further one a
-    run (``again``) and the floor right after it (``floor_again``).  Each pair's shares and ratio, and the ratios'
-    median (a pair whose run or floor has no share, a run refused at pre-flight or one that raised, counts in ``pairs``
-    only, with why: its run's exit reason and error, or the floor's reason)."""
+def paired_runs(first: tuple[dict, dict, dict], again: Callable[[], tuple[dict, dict, dict]], count: int) -> dict:
+    """The control process's core share over python-can's floor's, and its start lateness over the bare clock's, in
+    ``count`` pairs measured side by side: the first given (``first``: a run's figures, the bare clock's and the
+    floor's right after it, :func:`measure_pair`), each further one measured by ``again``.  Each pair's figures and
+    ratios, and the ratios' medians; a pair whose run or floor has no figure (a run refused at pre-flight, or one that
+    raised) counts in ``pairs`` only, with why: its run's exit reason and error, or the floor's reason."""
     pairs = []
     for k in range(count):
         if k == 0:
-            run, beside = controller, floor
+            run, bare, floor = first
         else:
             try:  # a further pair that fails keeps the pairs and the run measured before it (and says why)
-                run = again()
+                run, bare, floor = again()
             except Exception as exc:
-                run = {"exit_reason": "not run", "error": f"{type(exc).__name__}: {exc}"}
-            beside = floor_again()
-        share, floor_share = run.get("core_share", {}).get("median"), beside.get("core_share")
-        pairs.append({"core_share": share, "floor_core_share": floor_share,
-                      "ratio": share / floor_share if share and floor_share else None,
-                      **({} if share else {"run": run.get("exit_reason"), "error": run.get("error")}),
-                      **({} if floor_share else {"floor": beside.get("reason")})})
-    ratios = [pair["ratio"] for pair in pairs if pair["ratio"] is not None]
-    return {"pairs": pairs, "ratio": float(np.median(ratios)) if ratios else None}
+                run, bare, floor = {"exit_reason": "not run", "error": f"{type(exc).__name__}: {exc}"}, {}, {}
+        share, floor_share = run.get("core_share", {}).get("median"), floor.get("core_share")
+        pair = {"core_share": share, "floor_core_share": floor_share,
+                "ratio": share / floor_share if share and floor_share else None,
+                **({} if share else {"run": run.get("exit_reason"), "error": run.get("error")}),
+                **({} if floor_share else {"floor": floor.get("reason")})}
+        late, floor_late, bare_late = run.get("lateness_s", {}), floor.get("lateness_s", {}), bare.get("lateness_s", {})
+        for quantile in QUANTILES:
+            pair[f"lateness_{quantile}_ratio"] = _over(late, bare_late, quantile)
+            pair[f"floor_lateness_{quantile}_ratio"] = _over(floor_late, bare_late, quantile)
+        pair.update(cycles=run.get("cycles", 0), overruns=run.get("overruns", 0), observed_delay=run.get("observed_delay"))
+        pairs.append(pair)
+    return {"pairs": pairs, "ratio": _median(pair["ratio"] for pair in pairs)}
+
+
+def measure_pair(run: Callable[[], dict], bare: Callable[[], dict], floor: Callable[[], dict]) -> tuple[dict, dict, dict]:
+    """One pair of :func:`paired_runs`: a controller run, then the bare clock, then python-can's floor."""
+    measured = run()
+    return measured, bare(), floor()
+
+
+def _over(late: dict, bare_late: dict, quantile: str) -> float | None:
+    """One lateness quantile over the bare clock's (None where either is missing)."""
+    return late[quantile] / bare_late[quantile] if late.get(quantile) is not None and bare_late.get(quantile) else None
+
+
+def _median(values: Iterable[float | None]) -> float | None:
+    """The median of the values that are not None (None if there are none)."""
+    present = [value for value in values if value is not None]
+    return float(np.median(present)) if present else None
 
 
 def observed_delay(controller: WallController) -> float | None:
@@ -344,12 +368,14 @@ def run(size: Size, tick: Callable[[str], None] = lambda _: None) -> dict:
                             return controller_run(setup, duration, bus, process, profile,
                                                   preflight_cycles=preflight_cycles(size))
 
-                        entry["controller"] = again()
-                        entry["bare_clock"] = bare_clock(SETUPS[name], period, round(duration / 2 / period))
+                        def bare(setup: RealtimeSettings = SETUPS[name]) -> dict:
+                            return bare_clock(setup, period, round(duration / 2 / period))
+
+                        entry["controller"], entry["bare_clock"] = again(), bare()
                         if name == "default" and floor is not None:
                             entry["floor"] = floor()
-                            entry["core_pairs"] = core_pairs(entry["controller"], entry["floor"], again, floor,
-                                                             size.pick(*CORE_PAIRS))
+                            entry["pairs"] = paired_runs((entry["controller"], entry["bare_clock"], entry["floor"]),
+                                                         functools.partial(measure_pair, again, bare, floor), size.pick(*PAIRS))
                 except Exception as exc:
                     entry = {"available": False, "reason": f"{type(exc).__name__}: {exc}"}
                 runs[label][name] = entry
@@ -398,16 +424,16 @@ def axes_runs(size: Size, duration: float) -> dict:
     try:
         with (canopen_simulator(AXES_PROFILE, AXES_NODE_IDS, "--operator", "none") as (bus, process),
               can_floor(bus, AXES_NODE_IDS, FLOOR_TPDOS, period, duration) as floor):
-            def again() -> dict:
-                return controller_run(SETUPS["default"], duration, bus, process, axes, None, preflight_cycles(size))
+            def again() -> tuple[dict, dict, dict]:
+                return measure_pair(lambda: controller_run(SETUPS["default"], duration, bus, process, axes, None,
+                                                           preflight_cycles(size)),
+                                    lambda: bare_clock(SETUPS["default"], period, round(duration / 2 / period)), floor)
 
             for load in loads:
                 with cpu_hogs(os.cpu_count() or 1) if load == "CPU hog" else nullcontext():
-                    entry = {"controller": again(),
-                             "bare_clock": bare_clock(SETUPS["default"], period, round(duration / 2 / period)),
-                             "floor": floor()}
-                    entry["core_pairs"] = core_pairs(entry["controller"], entry["floor"], again, floor,
-                                                     size.pick(*CORE_PAIRS))
+                    first = again()
+                    entry = dict(zip(("controller", "bare_clock", "floor"), first))
+                    entry["pairs"] = paired_runs(first, again, size.pick(*PAIRS))
                     out[load] = entry
     except Exception as exc:
         out.update(available=False, reason=f"{type(exc).__name__}: {exc}")
@@ -449,34 +475,36 @@ def issue_26_figures(runs: dict) -> dict:
 
 
 def _unmeasured(k: int, pair: dict) -> str:
-    """Why pair ``k`` of :func:`core_pairs` has no ratio: its run's exit reason, else the floor's reason."""
+    """Why pair ``k`` of :func:`paired_runs` has no ratio: its run's exit reason, else the floor's reason."""
     if not pair.get("core_share"):
         return f"pair {k}: its run ended with {pair.get('run') or 'no core share'!r}"
     return f"pair {k}: no floor figure ({pair.get('floor') or 'no core share'})"
 
 
 def _ratios(entry: dict) -> dict:
-    """One default-set-up entry's ratios: core share over the floor's (the median of its pairs, :func:`core_pairs`),
-    lateness over the bare clock's (the floor's too), overrun share, observed delay."""
-    controller, bare, floor = entry.get("controller", {}), entry.get("bare_clock", {}), entry.get("floor", {})
+    """One default-set-up entry's figures over its pairs (:func:`paired_runs`), each a median with every pair's
+    beside it in order (None where a pair has none): core share over the floor's, lateness over the bare clock's
+    (the floor's too); the overrun share of all the pairs' cycles; the loop delay observed."""
+    controller = entry.get("controller", {})
+    pairs = entry.get("pairs", {}).get("pairs", [])
     figures: dict = {}
-    paired = entry.get("core_pairs", {})
-    if paired.get("ratio") is not None:  # the median of the pairs' ratios (CORE_PAIRS), each pair's beside it
-        measured = [pair for pair in paired["pairs"] if pair["ratio"] is not None]
+    ratios = [pair["ratio"] for pair in pairs]
+    if any(ratio is not None for ratio in ratios):
         # every pair in order, None where it has no ratio, and why: a median of the pairs left is not one of all
-        figures["core_ratio"], figures["core_ratios"] = paired["ratio"], [pair["ratio"] for pair in paired["pairs"]]
-        figures["core_pairs_unmeasured"] = [_unmeasured(k, pair) for k, pair in enumerate(paired["pairs"], 1)
-                                            if pair["ratio"] is None]
-        figures["floor_core_share"] = float(np.median([pair["floor_core_share"] for pair in measured]))
+        figures["core_ratio"], figures["core_ratios"] = _median(ratios), ratios
+        figures["core_pairs_unmeasured"] = [_unmeasured(k, pair) for k, pair in enumerate(pairs, 1) if pair["ratio"] is None]
+        figures["floor_core_share"] = _median(pair["floor_core_share"] for pair in pairs if pair["ratio"] is not None)
         figures["writer_cpu_s"] = controller.get("thread_cpu_s", {}).get(WRITER)
-    late, bare_late, floor_late = controller.get("lateness_s", {}), bare.get("lateness_s", {}), floor.get("lateness_s", {})
-    for quantile in ("p99", "p99.9"):
-        if late.get(quantile) is not None and bare_late.get(quantile):
-            figures[f"lateness_{quantile}_ratio"] = late[quantile] / bare_late[quantile]
-            if floor_late.get(quantile) is not None:  # python-can alone on the same cycle, against the same bare clock
-                figures[f"floor_lateness_{quantile}_ratio"] = floor_late[quantile] / bare_late[quantile]
-    if controller.get("cycles"):
-        figures["overrun_share"] = controller["overruns"] / controller["cycles"]
-    if controller.get("observed_delay") is not None:
-        figures["observed_delay"] = controller["observed_delay"]
+    for name in [f"lateness_{quantile}_ratio" for quantile in QUANTILES] + ["observed_delay"]:
+        each = [pair.get(name) for pair in pairs]
+        if any(value is not None for value in each):
+            figures[name], figures[f"{name}s"] = _median(each), each
+    for quantile in QUANTILES:  # python-can alone on the same cycle, against the same bare clock
+        floor = _median(pair.get(f"floor_lateness_{quantile}_ratio") for pair in pairs)
+        if floor is not None:
+            figures[f"floor_lateness_{quantile}_ratio"] = floor
+    cycles = sum(pair.get("cycles", 0) for pair in pairs)
+    if cycles:
+        figures["overrun_share"] = sum(pair.get("overruns", 0) for pair in pairs) / cycles
+        figures["overrun_cycles"] = cycles
     return figures
