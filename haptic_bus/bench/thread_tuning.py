@@ -313,14 +313,17 @@ def controller_run(settings: RealtimeSettings, duration: float, bus: dict, proce
                    profile: Profile | AxesProfile, node_id: int | None = NODE_ID, preflight_cycles: int | None = None) -> dict:
     """One ``haptic-bus run`` session of ``profile`` (loaded once per section: loading judges it, seconds for
     three axes; one axis: drive ``node_id``; several: the profile's) against the simulated drive ``process``
-    on ``bus``, ramped in if it starts in contact; ``preflight_cycles``: its pre-flight's (None: the product's)."""
+    on ``bus``, ramped in if it starts in contact; ``preflight_cycles``: its pre-flight's (None: the product's).
+    A drive found in FAULT is reset first, as ``--reset-fault`` does: in one quick run of seven, on a machine loaded
+    beyond the hogs (load average 6.7), the drive sat in FAULT (0x8250, RPDO timeout) after a completed pair, and
+    every further pair's run was refused for it; the reset comes before pre-flight, outside what a run measures."""
     from haptic_bus.app.runner import RunOptions, run
 
     with tempfile.TemporaryDirectory() as out:
         with ThreadCpu() as threads:
             result = run(profile, bus, RunOptions(duration, pacing="wall", out_dir=Path(out) / "run", live=False,
                                                   scheduling=settings, start_in_contact="ramp", plots=False,
-                                                  preflight_cycles=preflight_cycles),
+                                                  preflight_cycles=preflight_cycles, reset_fault=True),
                          node_id=node_id)
         document = read_document(result.folder)
     writer = document.get("writer", {}).get("cpu_s")  # the writer process's own account (issue 26: report it)
