@@ -24,7 +24,8 @@ from drives.errors import DriveError, DriveTimeout, ParameterError
 from drives.safety import VIRTUAL_TIME_DEADLINE
 from haptic_bus.app.profiles import AxesProfile, load_profile
 from haptic_bus.app.rig import MultiAxisSim, simulated_axes
-from haptic_bus.control.controller import WallController, encoder_origins
+from haptic_bus.control.controller import WallController
+from haptic_bus.control.joints import encoder_origins
 from tests.raw_bus import queued
 
 NODES = (5, 6, 7)

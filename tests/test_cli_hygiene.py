@@ -348,7 +348,8 @@ def test_another_master_over_modbus_is_refused_without_a_write(tmp_path: pathlib
     from drives.modbus.drive import ModbusDrive
     from drives.safety import VIRTUAL_TIME_MODBUS_PATIENCE
     from haptic_bus.app.profiles import load_profile
-    from haptic_bus.control.controller import WallController, encoder_origin
+    from haptic_bus.control.controller import WallController
+    from haptic_bus.control.joints import encoder_origin
     from tests.run_rig import simulated_drive
 
     profile = load_profile("cia402-handle")

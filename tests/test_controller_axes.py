@@ -21,7 +21,8 @@ from haptic_bus.analysis.coupled_loop import plane_wall
 from haptic_bus.analysis.limits import passive_scales
 from haptic_bus.app.profiles import AxesProfile, load_profile
 from haptic_bus.app.rig import simulated_axes, simulated_canopen
-from haptic_bus.control.controller import WallController, encoder_origin, encoder_origins
+from haptic_bus.control.controller import WallController
+from haptic_bus.control.joints import encoder_origin, encoder_origins
 from haptic_bus.control.kinematics import Cartesian
 from haptic_bus.control.record import COLUMNS
 from haptic_bus.control.space_gate import SpaceDecision, SpaceGate

@@ -21,8 +21,9 @@ from haptic_bus.analysis.loop import DeviceLoop, WallLoop
 from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_canopen
-from haptic_bus.control.controller import WallController, encoder_origin
+from haptic_bus.control.controller import WallController
 from haptic_bus.control.gate import PassivityGate
+from haptic_bus.control.joints import encoder_origin
 from haptic_bus.control.passivity_layer import LayerPolicy
 from haptic_bus.control.scene import Wall, compile_scene
 from haptic_bus.errors import Refusal

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from haptic_bus.control.controller import PositionIntegrator
+from haptic_bus.control.joints import PositionIntegrator
 from haptic_bus.control.record import COLUMNS, RunRecord, read_record
 from haptic_bus.errors import ParameterError
 

@@ -29,7 +29,8 @@ import pytest
 from haptic_bus.app.live import LiveView
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_canopen
-from haptic_bus.control.controller import WallController, encoder_origin
+from haptic_bus.control.controller import WallController
+from haptic_bus.control.joints import encoder_origin
 from haptic_bus.control.record import RunRecord
 from tests.run_rig import run_cli, simulated_drive
 

@@ -27,7 +27,8 @@ import pytest
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_canopen
 from haptic_bus.control.clock import ScheduledClock, adversarial_starts
-from haptic_bus.control.controller import WallController, encoder_origin
+from haptic_bus.control.controller import WallController
+from haptic_bus.control.joints import encoder_origin
 from haptic_bus.control.passivity_layer import LayerPolicy
 from sim_drive.operator import OperatorModel
 

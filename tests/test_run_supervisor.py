@@ -44,8 +44,9 @@ from drives.errors import DriveTimeout
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.app import run_links, runner
 from haptic_bus.app.profiles import load_profile
-from haptic_bus.control.controller import WallController, encoder_origin
+from haptic_bus.control.controller import WallController
 from haptic_bus.control.gate import GatePolicy, PassivityGate
+from haptic_bus.control.joints import encoder_origin
 from haptic_bus.node.upload import upload_walls
 from tests import short_preflight
 from tests.cli_process import skip_if_refused_at_preflight

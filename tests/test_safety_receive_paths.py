@@ -33,7 +33,8 @@ WAIT = 1.0  # s: the longest a single answer is waited for (a bound, not a pace)
 def test_a_two_byte_emcy_while_cycling_stops_the_run_safely_with_a_typed_error(tmp_path) -> None:
     from haptic_bus.app.profiles import load_profile
     from haptic_bus.app.rig import simulated_canopen
-    from haptic_bus.control.controller import WallController, encoder_origin
+    from haptic_bus.control.controller import WallController
+    from haptic_bus.control.joints import encoder_origin
     from haptic_bus.control.scene import Wall
     from sim_drive.operator import ConstantPush
 
@@ -100,7 +101,8 @@ def test_a_burst_of_undecodable_datagrams_does_not_silence_the_drive(multicast) 
 def test_the_controller_node_answers_as_a_canopen_node() -> None:
     from haptic_bus.app.profiles import load_profile
     from haptic_bus.app.rig import simulated_canopen
-    from haptic_bus.control.controller import WallController, encoder_origin
+    from haptic_bus.control.controller import WallController
+    from haptic_bus.control.joints import encoder_origin
     from haptic_bus.node.controller_node import ControllerNode
 
     profile = load_profile("seed-ideal")

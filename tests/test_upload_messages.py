@@ -16,7 +16,8 @@ import pytest
 from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_canopen
-from haptic_bus.control.controller import WallController, encoder_origin
+from haptic_bus.control.controller import WallController
+from haptic_bus.control.joints import encoder_origin
 from haptic_bus.control.scene import Wall
 from haptic_bus.node.controller_node import ControllerNode
 

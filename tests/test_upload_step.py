@@ -21,7 +21,8 @@ import pytest
 from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.rig import simulated_axes, simulated_canopen
-from haptic_bus.control.controller import WallController, encoder_origin, encoder_origins
+from haptic_bus.control.controller import WallController
+from haptic_bus.control.joints import encoder_origin, encoder_origins
 from haptic_bus.control.scene import Wall, compile_scene
 from haptic_bus.control.space_scene import Plane, compile_space_scene
 from haptic_bus.errors import Refusal

@@ -35,8 +35,9 @@ from haptic_bus.app.profiles import AxesProfile, Profile
 from haptic_bus.app.run_folder import RECORD_CSV, DocumentKind, gate_loop, record_name, scene_dicts
 from haptic_bus.app.space_records import space_scene_dict
 from haptic_bus.control.clock import CycleClock
-from haptic_bus.control.controller import WallController, encoder_origin, encoder_origins
+from haptic_bus.control.controller import WallController
 from haptic_bus.control.gate import PassivityGate
+from haptic_bus.control.joints import encoder_origin, encoder_origins
 from haptic_bus.control.record import RunRecord
 from haptic_bus.control.scene import CompiledScene
 from haptic_bus.control.scene_switch import SceneEntry

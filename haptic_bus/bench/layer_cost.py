@@ -30,7 +30,8 @@ from haptic_bus.app.profiles import load_profile, one_axis_only, shipped_profile
 from haptic_bus.app.rig import simulated_canopen
 from haptic_bus.bench.size import Size
 from haptic_bus.control.clock import ScheduledClock, VirtualClock, adversarial_starts
-from haptic_bus.control.controller import WallController, encoder_origin
+from haptic_bus.control.controller import WallController
+from haptic_bus.control.joints import encoder_origin
 from haptic_bus.control.passivity_layer import LAYER_MODES, LayerPolicy
 
 SEED = 1  # the adversarial schedule's seed
