@@ -368,6 +368,8 @@ def test_a_real_time_run_holds_the_handle_on_the_slope(tmp_path: pathlib.Path, c
         sim.stop()
     if result.exit_reason == "refused" and "this machine holds T >=" in (result.error or ""):
         pytest.skip(f"this machine cannot hold T = 20 ms now, and the run said so at pre-flight: {result.error}")
+    if result.exit_reason == "drive error" and "starved of CPU" in (result.error or ""):  # runner._stall_before's words
+        pytest.skip(f"this machine stopped the run past the drives' watchdog, which faulted them: {result.error}")
     assert result.exit_reason == "completed", result.error
     summary = result.summary
     assert summary is not None and summary.cycles == 170 and summary.clock.startswith("real")
