@@ -78,7 +78,6 @@ from haptic_bus.control.port_account import PortAccount
 from haptic_bus.control.protocols import DecisionT, DecisionT_co, Gate, SceneT
 from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.scene_switch import SceneSwitch
-from haptic_bus.control.space_scene import SpaceScene
 from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
 from haptic_bus.errors import ParameterError
 
@@ -385,10 +384,8 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
             joints = np.array(q)
             jacobian = kinematics.jacobian(joints)
             wall = (jacobian.T @ scene.force(kinematics.position(joints), jacobian @ np.array(q_dot))).tolist()
-        elif isinstance(scene, SpaceScene):
-            wall = scene.force_floats(q, q_dot)  # joint efforts of u: u itself, floats from floats
         else:
-            wall = np.asarray(scene.force(q, q_dot), dtype=float).tolist()
+            wall = scene.force_floats(q, q_dot)  # joint efforts of u: u itself, floats from floats
         forces: list[float] = wall if scale == 1.0 else [force * scale for force in wall]
         scalings = self._scalings
         targets = [scaling.torque_permille(-force) for scaling, force in zip(scalings, forces)]  # against the wall

@@ -42,6 +42,11 @@ class Scene(Protocol):
         """The wall force ``u`` (N) at ``x`` (m) moving at ``v`` (m/s)."""
         ...
 
+    def force_floats(self, x: Sequence[float], v: Sequence[float]) -> list[float]:
+        """:meth:`force` with ``x`` (m) and ``v`` (m/s) as floats, one per axis, and ``u`` (N) as a list of
+        floats: what the controller asks of a scene every cycle of several axes, with no array made."""
+        ...
+
     def stored_energy(self, x: Any) -> float:
         """The energy (J) the springs acting at ``x`` (m) hold."""
         ...

@@ -19,7 +19,7 @@ import bisect
 import dataclasses
 import math
 from collections import Counter
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -159,6 +159,10 @@ class CompiledScene:
         """The wall force ``u`` (N, opposing the handle) at position ``x`` m and velocity ``v`` m/s."""
         i = bisect.bisect_right(self.breaks, x)
         return self.stiffness[i] * x - self.stiffness_anchor[i] + self.damping[i] * v
+
+    def force_floats(self, x: Sequence[float], v: Sequence[float]) -> list[float]:
+        """:meth:`force` of the one axis in the scene protocol's lists: ``[u]`` (N) for ``[x]`` (m), ``[v]`` (m/s)."""
+        return [self.force(x[0], v[0])]
 
     def contacts(self) -> dict[tuple[float, float], tuple[str, ...]]:
         """Every distinct summed ``(K, B)`` that can act on the handle at once, with the names
