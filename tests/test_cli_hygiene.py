@@ -298,17 +298,32 @@ def test_ctrl_c_in_bench_is_130_with_the_sections_done_written(tmp_path: pathlib
     assert result["sections"]["bus"]["available"] and (out / "bench.md").is_file()
 
 
+PNG_END = b"IEND\xaeB`\x82"  # a PNG's last chunk (IEND, no data, its CRC): the file is written to its end
+
+
+def _png_done(path: pathlib.Path) -> bool:
+    """Whether ``path`` is a PNG written to its end (savefig writes the file in place: it exists, empty
+    or part-written, while the figure is still being encoded)."""
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        return False
+    return data.startswith(b"\x89PNG\r\n\x1a\n") and data.endswith(PNG_END)
+
+
 @pytest.mark.slow
 def test_ctrl_c_in_report_is_130_with_the_figures_done_kept(tmp_path: pathlib.Path) -> None:
+    """Ctrl-C once the first figure is done (written to its end: its file exists from the moment savefig
+    opens it, and a Ctrl-C then left it empty, 0 bytes, in a run of the suite beside other load)."""
     out = tmp_path / "report"
     report = Command("report", "multi-object", "--out", str(out))  # five contact walls: figures for seconds
     try:
-        report.wait_until(lambda: (out / "fig4_region.png").is_file(), "the first figure")
+        report.wait_until(lambda: _png_done(out / "fig4_region.png"), "the first figure")
         assert report.interrupt() == 130, report.err[-2000:]
         assert _no_traceback(report) == ["haptic-bus: interrupted"]
     finally:
         report.close()
-    assert (out / "fig4_region.png").stat().st_size > 0
+    assert _png_done(out / "fig4_region.png")
 
 
 # A listing of lines, and one JSON document.  Every command prints into Python's buffer and the
