@@ -37,6 +37,7 @@ from haptic_bus.analysis.design import (
 )
 from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.analysis.velocity import POINT, VelocityModel
+from haptic_bus.app.figure_file import save_figure
 
 _DPI = 110  # each figure is made at the dpi it is saved at: tight_layout's text measures serve the save
 _BOUNDARY_POINTS = 120
@@ -49,9 +50,7 @@ _TITLE_POLES = 4  # the step figure's title names the poles of largest magnitude
 def _save(fig: Figure, path: PathLike) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=_DPI)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=_DPI)
 
 
 def _point_coordinates(point: WallPoint, m: float, b: float, T: float) -> tuple[float, float] | None:

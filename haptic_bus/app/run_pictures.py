@@ -8,9 +8,9 @@ import pathlib
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 from matplotlib.figure import Figure
 
+from haptic_bus.app.figure_file import save_figure
 from haptic_bus.app.kb_plane import kb_plane_figure
 from haptic_bus.app.run_folder import FORCE_POSITION, REGION, TIMELINE, TRAJECTORY, RunFolder
 from haptic_bus.app.run_plots import force_position_figure, timeline_figure
@@ -37,8 +37,5 @@ def render_run(run: RunFolder, out: pathlib.Path | None = None) -> list[pathlib.
             figures.append((REGION, kb_plane_figure(run)))
     written = []
     for name, figure in figures:
-        path = target / name
-        figure.savefig(path, dpi=DPI, bbox_inches="tight")  # the legends beside the axes too
-        plt.close(figure)
-        written.append(path)
+        written.append(save_figure(figure, target / name, dpi=DPI, bbox_inches="tight"))  # the legends beside the axes too
     return written

@@ -24,6 +24,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from haptic_bus.app.figure_file import save_figure
 from haptic_bus.app.run_folder import BODE_PNG, RE_Z_PNG
 from haptic_bus.validate.verdict import Validation
 
@@ -56,9 +57,7 @@ def bode(validation: Validation, path: pathlib.Path) -> pathlib.Path:
     phase.legend(loc="lower left")
     fig.suptitle(_title(validation), fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=_DPI)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=_DPI)
 
 
 def re_z(validation: Validation, path: pathlib.Path, margin: float | None) -> pathlib.Path:
@@ -84,9 +83,7 @@ def re_z(validation: Validation, path: pathlib.Path, margin: float | None) -> pa
     ax.legend(loc="lower left", fontsize=8)
     ax.set_title(_title(validation), fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=_DPI)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=_DPI)
 
 
 def _title(validation: Validation) -> str:

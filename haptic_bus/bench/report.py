@@ -10,6 +10,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+from haptic_bus.app.figure_file import save_figure
+
 ERROR_FLOOR = 1e-17  # plotted for an error of exactly 0
 
 
@@ -403,6 +405,4 @@ def _label_and_save(fig: Any, ax: Any, labels: tuple[str, str], title: str, path
     ax.grid(True, which="both", lw=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)  # beside: on no curve
     fig.tight_layout()
-    fig.savefig(path, dpi=110, bbox_inches="tight")  # the legend beside the axes too
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110, bbox_inches="tight")  # the legend beside the axes too
