@@ -32,7 +32,7 @@ from haptic_bus.app.json_ready import json_ready
 from haptic_bus.errors import HapticBusError, ParameterError, Refusal
 from haptic_bus.profile.files import DEFAULT_PROFILE, resolve_profile, shipped_profiles
 from haptic_bus.profile.plant import ONE_AXIS_TABLES
-from haptic_bus.profile.reader import NAME_PATTERN, misspelling
+from haptic_bus.profile.reader import NAME_PATTERN, misspelling, read_document
 from haptic_bus.profile.scene import FORCE_RANGE
 
 if TYPE_CHECKING:
@@ -152,9 +152,8 @@ def _still_missing(path: pathlib.Path) -> int | None:
     from haptic_bus.app.profile_template import missing
 
     try:
-        with open(path, "rb") as file:
-            document = tomllib.load(file)
-    except (OSError, ValueError):  # TOMLDecodeError and UnicodeDecodeError are ValueErrors
+        document = read_document(path)
+    except ParameterError:  # unreadable, not TOML, not UTF-8, nested too deep
         return None  # the loader says what is wrong with the file
     if not set(document) <= set(ONE_AXIS_TABLES):  # a misspelt table (the loader names it), or [[axes]]
         return None
