@@ -39,6 +39,7 @@ if TYPE_CHECKING:
     from haptic_bus.analysis.check import CheckReport
     from haptic_bus.analysis.loop import DeviceLoop
     from haptic_bus.analysis.two_mass_check import TwoMassReport
+    from haptic_bus.analysis.velocity import VelocityModel
     from haptic_bus.app.profiles import AxesProfile, Profile
 
 EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
@@ -246,6 +247,8 @@ def _new_target(args: argparse.Namespace) -> tuple[pathlib.Path, DriveAddress]:
                              "drive options only with --from-drive", "profiles new")
     if args.from_drive and address.node_id is None and not address.modbus:
         raise ParameterError("--from-drive", "without a drive", "--node-id N (and the bus) or --modbus URL", "profiles new")
+    if args.velocity is not None:
+        velocity_model(args.velocity)
     target = pathlib.Path(args.out or f"{args.name}.toml")
     folder = target.parent
     if target.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK):
@@ -255,10 +258,25 @@ def _new_target(args: argparse.Namespace) -> tuple[pathlib.Path, DriveAddress]:
     return target, address
 
 
+def velocity_model(text: str) -> VelocityModel:
+    """``profiles new --velocity``'s model, refused (ParameterError naming the flag, the text as given and
+    the range) unless it fits the period the new profile is written with (a window within ``T``): a
+    ``window:0.5`` was written into a profile of ``T`` = 1 ms that no reader could then load."""
+    from haptic_bus.analysis.velocity import ALLOWED, VelocityModel
+    from haptic_bus.app.profile_template import DEFAULT_PERIOD
+
+    try:
+        model = VelocityModel.parse(text)
+        model.check_period(DEFAULT_PERIOD)
+    except ParameterError as error:
+        allowed = ALLOWED if error.allowed == ALLOWED else f"{error.allowed} (the profile's loop.period)"
+        raise ParameterError("--velocity", text, allowed, "profiles new") from None
+    return model
+
+
 def cmd_new(args: argparse.Namespace) -> int:
     """Write a commented profile (from what the drive states with ``--from-drive``); 0 written, 1 the
     drive cannot be read, 2 invalid input (an existing file without --force, an unwritable folder)."""
-    from haptic_bus.analysis.velocity import VelocityModel
     from haptic_bus.app.drive_statement import canopen_statement, modbus_statement
     from haptic_bus.app.profile_template import missing, template
 
@@ -266,7 +284,7 @@ def cmd_new(args: argparse.Namespace) -> int:
     given: dict[str, Any] = {key: getattr(args, key) for key in ("mass", "friction", "force_limit")
                              if getattr(args, key) is not None}
     if args.velocity is not None:
-        given["velocity"] = str(VelocityModel.parse(args.velocity))
+        given["velocity"] = str(velocity_model(args.velocity))
     statement = None
     if address.url is not None:
         statement = modbus_statement(address.url, address.unit_id)
