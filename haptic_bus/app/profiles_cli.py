@@ -292,8 +292,12 @@ def cmd_new(args: argparse.Namespace) -> int:
         statement = canopen_statement(address.bus, address.checked_node_id, args.timeout)
     command = f"haptic-bus profiles new {args.name}" + (" --from-drive" if statement is not None else "")
     text = template(args.name, statement, given, command, dt.datetime.now(dt.UTC))
-    try:
-        target.write_text(text)
+    try:  # without --force, created only if it still does not exist (O_EXCL): another command may have made it since
+        with open(target, "w" if args.force else "x") as file:
+            file.write(text)
+    except FileExistsError:
+        raise ParameterError("--out", str(target), "a file that does not exist yet (--force overwrites it)",
+                             "profiles new") from None
     except OSError as exc:
         raise ParameterError("--out", str(target), f"a file this user can write ({exc.strerror})", "profiles new") from None
     stated = ", ".join(statement.scaling) if statement is not None else "nothing (no --from-drive)"
