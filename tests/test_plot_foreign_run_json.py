@@ -91,3 +91,29 @@ def test_plot_of_such_a_folder_is_one_line_exit_2(tmp_path: pathlib.Path, capsys
         assert err.startswith(f"haptic-bus plot: error: RUN_DIR = '{folder}' is invalid; allowed: a readable run folder "
                               f"({says}"), err
     assert sorted(path.name for path in folder.iterdir()) == ["record.csv", "run.json"]  # nothing drawn
+
+
+def test_plot_of_a_record_without_a_drawn_column_is_one_line_exit_2(tmp_path: pathlib.Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """record.csv of another version, without a column the pictures draw: one line naming the file and the
+    column (it was a KeyError's traceback from timeline_figure); an extra or missing column they do not
+    draw is as before (drawn)."""
+    folder = tmp_path / "run"
+    assert main(["demo", "--out", str(folder), "--duration", "0.02", "--no-plots", "-q"]) == 0
+    capsys.readouterr()
+    lines = (folder / "record.csv").read_text().splitlines()
+    names = lines[0].split(",")
+
+    def without(column: str) -> str:
+        i = names.index(column)
+        return "".join(",".join(fields[:i] + fields[i + 1:]) + "\n" for fields in (line.split(",") for line in lines))
+
+    (folder / "record.csv").write_text(without("position_m"))
+    assert main(["plot", str(folder)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err == (f"haptic-bus plot: error: RUN_DIR = '{folder}' is invalid; allowed: a readable run folder "
+                                 f"({folder / 'record.csv'} has no column position_m; the pictures draw time_s, position_m, "
+                                 "force_n, energy_j)\n")
+    (folder / "record.csv").write_text(without("layer_n"))
+    assert main(["plot", str(folder)]) == 0
+    assert (folder / "timeline.png").is_file()

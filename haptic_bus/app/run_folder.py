@@ -70,6 +70,7 @@ TIMELINE, FORCE_POSITION, REGION, TRAJECTORY = "timeline.png", "force_position.p
 PICTURES = (TIMELINE, FORCE_POSITION, REGION, TRAJECTORY)  # what :mod:`~haptic_bus.app.run_pictures` draws
 VALIDATE_JSON, BODE_PNG, RE_Z_PNG = "validate.json", "validate-bode.png", "validate-re-z.png"  # haptic-bus validate's
 RUNNING = "running"  # run.json's status until the run ends
+DRAWN_COLUMNS = ("time_s", "position_m", "force_n", "energy_j")  # what the pictures read from every record
 _DISTRIBUTIONS = ("numpy", "scipy", "python-can", "canopen", "pymodbus", "matplotlib")
 
 logger = logging.getLogger(__name__)
@@ -436,6 +437,12 @@ def read_run_folder(folder: str | pathlib.Path) -> RunFolder:
         record = read_record(path / RECORD_CSV) if (path / RECORD_CSV).is_file() else None
         names = [axis["name"] for axis in document.get("settings", {}).get("axes", [])]
         axes = {name: read_record(path / record_name(name)) for name in names if (path / record_name(name)).is_file()}
+        tables = [(RECORD_CSV, record)] if record is not None else []
+        for name, table in tables + [(record_name(axis), table) for axis, table in axes.items()]:
+            lacking = [column for column in DRAWN_COLUMNS if column not in table.columns]
+            if table.columns and lacking:
+                raise ValueError(f"{path / name} has no column {', '.join(lacking)}; the pictures draw "
+                                 f"{', '.join(DRAWN_COLUMNS)}")
     except (OSError, ValueError, TypeError, KeyError) as exc:
         software = document.get("software") if isinstance(document, dict) else None
         written = software.get("haptic_bus") if isinstance(software, dict) else None
