@@ -51,3 +51,15 @@ def test_the_range_is_still_checked_where_it_was(capsys: pytest.CaptureFixture[s
     assert main(["check", "--mass", "-1", "--friction", "1", "--period", "1e-3", "--stiffness", "1", "--damping", "1"]) == 2
     assert capsys.readouterr().err == ("haptic-bus check: error: mass = -1.0 is invalid; allowed: a finite real in "
                                        "[1e-09, 1e+09] kg\n")
+
+
+@pytest.mark.parametrize("argv", [
+    ["demo", "--out", "/proc/break16/out"],
+    ["validate", "cia402-handle", *BUS, "--node-id", "5", "--out", "/proc/break16/out"],
+    ["run", "cia402-handle", *BUS, "--node-id", "5", "--out", "/proc/break16/out"],
+])
+def test_a_run_folder_refused_is_named_by_the_command_typed(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    """demo's and validate's --out are checked as run's: the line said ``haptic-bus demo: error: run: --out``."""
+    assert main(argv) == 2
+    assert capsys.readouterr().err == (f"haptic-bus {argv[0]}: error: --out = '/proc/break16/out' is invalid; allowed: "
+                                       "a folder this user can create and write (No such file or directory)\n")
