@@ -29,7 +29,7 @@ from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
 from haptic_bus.app.arguments import as_typed, error_line, number, timeout
 from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
 from haptic_bus.app.json_ready import json_ready
-from haptic_bus.errors import HapticBusError, ParameterError, Refusal
+from haptic_bus.errors import DriveError, HapticBusError, ParameterError, Refusal
 from haptic_bus.profile.files import DEFAULT_PROFILE, resolve_profile, shipped_profiles
 from haptic_bus.profile.plant import ONE_AXIS_TABLES
 from haptic_bus.profile.reader import NAME_PATTERN, misspelling, read_document
@@ -286,10 +286,14 @@ def cmd_new(args: argparse.Namespace) -> int:
     if args.velocity is not None:
         given["velocity"] = str(velocity_model(args.velocity))
     statement = None
-    if address.url is not None:
-        statement = modbus_statement(address.url, address.unit_id)
-    elif args.from_drive:
-        statement = canopen_statement(address.bus, address.checked_node_id, args.timeout)
+    try:
+        if address.url is not None:
+            statement = modbus_statement(address.url, address.unit_id)
+        elif args.from_drive:
+            statement = canopen_statement(address.bus, address.checked_node_id, args.timeout)
+    except DriveError as exc:  # named by the command typed ('haptic-bus profiles: drive error' named only its group)
+        print(f"haptic-bus profiles new: drive error: {exc}", file=sys.stderr)
+        return EXIT_NO
     command = f"haptic-bus profiles new {args.name}" + (" --from-drive" if statement is not None else "")
     text = template(args.name, statement, given, command, dt.datetime.now(dt.UTC))
     try:  # without --force, created only if it still does not exist (O_EXCL): another command may have made it since
