@@ -65,6 +65,10 @@ def test_the_fields_as_a_run_writes_them_and_left_out_pass() -> None:
     (_with(ONE_AXIS, ("scenes", 0, "walls", 0, "K"), None), "run.json's scenes[0].walls[0].K = None is invalid"),
     (_with(ONE_AXIS, ("scenes", 0, "scene_id"), "0"), "run.json's scenes[0].scene_id = '0' is invalid; allowed: an integer"),
     (_with(ONE_AXIS, ("scenes", 0, "objects", 0, "stiffness"), "x"), "run.json's scenes[0].objects[0]: "),
+    (_with(ONE_AXIS, ("scenes", 0, "objects", 0, "name"), []), "run.json's scenes[0].objects[0].name = [] is invalid; "
+                                                                "allowed: a text"),
+    (_with(ONE_AXIS, ("scenes", 0, "walls", 0, "objects", 0), 3), "run.json's scenes[0].walls[0].objects = [3] is invalid; "
+                                                                  "allowed: a list of object names"),
     (_with(ONE_AXIS, ("loop", "period"), None), "run.json's loop.period = None is invalid; allowed: a number"),
     (_with(ONE_AXIS, ("settings",), "x"), "run.json's settings = 'x' is invalid; allowed: a JSON object"),
     (_with(AXES, ("settings", "axes", 1), {}), "run.json's settings.axes[1].name is missing"),

@@ -378,7 +378,8 @@ def check_drawn_fields(document: dict[str, Any]) -> None:
             for key in ("objects", "K", "B"):
                 if key not in wall:
                     raise ValueError(f"run.json's {where}.{key} is missing")
-            _table(where, wall, {"objects": (lambda v: isinstance(v, list), "a list of object names"), "K": _REAL,
+            _table(where, wall, {"objects": (lambda v: isinstance(v, list) and all(isinstance(n, str) for n in v),
+                                             "a list of object names"), "K": _REAL,
                                  "B": _REAL, "margin": (lambda v: v is None or _is_real(v), "a number or null")})
     if "gate_loop" in document:
         loop = document["gate_loop"]
@@ -412,6 +413,7 @@ def _check_drawn_objects(document: dict[str, Any], several_axes: bool) -> None:
         for i, scene in enumerate(document.get("scenes") or []):
             for j, table in enumerate(_list_of_objects(f"scenes[{i}].objects", scene.get("objects", []))):
                 where = f"scenes[{i}].objects[{j}]"
+                _table(where, table, {"name": _TEXT})
                 if "kind" in table:
                     object_from_dict(table)
     except ParameterError as exc:
