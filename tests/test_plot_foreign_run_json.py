@@ -72,6 +72,10 @@ def test_the_fields_as_a_run_writes_them_and_left_out_pass() -> None:
     (_with(ONE_AXIS, ("loop", "period"), None), "run.json's loop.period = None is invalid; allowed: a number"),
     (_with(ONE_AXIS, ("settings",), "x"), "run.json's settings = 'x' is invalid; allowed: a JSON object"),
     (_with(AXES, ("settings", "axes", 1), {}), "run.json's settings.axes[1].name is missing"),
+    (_with(AXES, ("scenes", 0, "objects", 0, "center"), -1),
+     "run.json's last scene: objects[0].center = -1 is invalid; allowed: 3 numbers, one per axis"),
+    (_with(AXES, ("scenes", 0, "objects", 0, "center"), [0.0, 1.0]),
+     "run.json's last scene: objects[0].center = [0.0, 1.0] is invalid; allowed: 3 numbers, one per axis"),
     (_with(AXES, ("scenes", 0, "objects", 0, "radius"), _GONE), "run.json's last scene: an object the pictures cannot draw"),
 ])
 def test_a_field_in_a_shape_the_pictures_cannot_draw_is_named(document: dict[str, Any], says: str) -> None:

@@ -408,6 +408,15 @@ def _check_drawn_objects(document: dict[str, Any], several_axes: bool) -> None:
     try:
         if several_axes:
             if document.get("scenes") or "space" in document["settings"]:
+                size = len(document["settings"]["axes"])
+                scenes = document.get("scenes") or [{"objects": document["settings"]["space"]["objects"]}]
+                for j, table in enumerate(_list_of_objects("last scene's objects", scenes[-1]["objects"])):
+                    for key in ("center", "point", "normal", "half"):  # a point or direction in the axes' space
+                        value = table.get(key)
+                        if value is not None and (not isinstance(value, list) or len(value) != size
+                                                  or not all(_is_real(x) for x in value)):
+                            raise ValueError(f"run.json's last scene: objects[{j}].{key} = {_short(value)} is invalid; "
+                                             f"allowed: {size} numbers, one per axis")
                 space_objects(document)
             return
         for i, scene in enumerate(document.get("scenes") or []):
