@@ -81,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     canopen = parser.add_argument_group("CANopen slave (the default)")
     canopen.add_argument("--interface", help="python-can interface (virtual, udp_multicast, socketcan, ...)")
     canopen.add_argument("--channel", help="python-can channel (e.g. vcan0, a multicast group)")
-    canopen.add_argument("--node-id", type=int, help="CANopen node id 1..127")
+    canopen.add_argument("--node-id", type=_integer_or_text, help="CANopen node id 1..127")
     add_axes_arguments(canopen)
     canopen.add_argument("--bitrate", type=int, help="bit/s; also enables the bus-load report")
     canopen.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
@@ -99,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     modbus.add_argument("--modbus", metavar="tcp://HOST:PORT", action="append",
                         help="serve Modbus TCP on this address (PORT 0: any free port); several axes: once for all "
                              "(one server, a unit per axis) or once per axis (a server each)")
-    modbus.add_argument("--unit-id", type=int, help="Modbus unit id 1..247, one a master can address (default 1)")
+    modbus.add_argument("--unit-id", type=_integer_or_text, help="Modbus unit id 1..247, one a master can address (default 1)")
     modbus.add_argument("--unit-ids", metavar="IDS",
                         help="several axes (e.g. 1,2,3): one simulated drive per unit, in axis order; with a multi-axis "
                              "--profile ([[axes]]) each unit takes its axis' plant and hidden truth, and the profile's hand "
@@ -113,11 +113,11 @@ def _add_overrides(parser: argparse.ArgumentParser, canopen: argparse._ArgumentG
     """``--mass``, ``--friction``, ``--coulomb``, ``--velocity-noise``, ``--noise-seed``, ``--transmission``,
     ``--extra-delay``, ``--operator`` (either server), ``--bus-kwargs`` (CANopen) and ``--version``."""
     truth = parser.add_argument_group("the hidden truth and the operator (either server; over the profile's)")
-    truth.add_argument("--mass", type=float, metavar="KG", help="handle mass m, kg")
-    truth.add_argument("--friction", type=float, metavar="N_S_PER_M", help="viscous friction b, N s/m")
-    truth.add_argument("--coulomb", type=float, metavar="N", help="Coulomb friction, N")
-    truth.add_argument("--velocity-noise", type=float, metavar="COUNTS", help="rms of the noise on 0x606C, counts")
-    truth.add_argument("--noise-seed", type=int, metavar="N", help="seed of that noise (default: fresh entropy)")
+    truth.add_argument("--mass", type=_number_or_text, metavar="KG", help="handle mass m, kg")
+    truth.add_argument("--friction", type=_number_or_text, metavar="N_S_PER_M", help="viscous friction b, N s/m")
+    truth.add_argument("--coulomb", type=_number_or_text, metavar="N", help="Coulomb friction, N")
+    truth.add_argument("--velocity-noise", type=_number_or_text, metavar="COUNTS", help="rms of the noise on 0x606C, counts")
+    truth.add_argument("--noise-seed", type=_integer_or_text, metavar="N", help="seed of that noise (default: fresh entropy)")
     truth.add_argument("--transmission", metavar="STIFFNESS:DAMPING:MOTOR_MASS",
                        help="a handle that is not rigid: a motor-side mass (kg), where the encoder and the torque act, "
                             "coupled to the handle (the profile's m and b) by a spring (N/m) and a damper (N s/m)")
@@ -143,6 +143,15 @@ def _number_or_text(text: str) -> float | str:
     """``text`` as a float, or as it is: the truth's check then refuses it with its range in one line."""
     try:
         return float(text)
+    except ValueError:
+        return text
+
+
+def _integer_or_text(text: str) -> int | str:
+    """``text`` as an int, or as it is: the check of the value then refuses it with its range in one line
+    (argparse's own ``invalid int value: 'x'`` named none)."""
+    try:
+        return int(text)
     except ValueError:
         return text
 

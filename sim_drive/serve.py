@@ -20,6 +20,7 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 
 from drives.os_threads import show_names
+from haptic_bus.analysis.can_timing import checked_bitrate
 from haptic_bus.console import log_to_stderr
 from haptic_bus.errors import DriveError, ParameterError
 from sim_drive.eds import eds_path
@@ -136,10 +137,10 @@ def run_axes(args: argparse.Namespace) -> int:
     if missing:
         print(f"{PROG}: error: missing --{', --'.join(missing)}", file=sys.stderr)
         return 2
-    config: dict[str, Any] = {"interface": args.interface, "channel": args.channel, **dict(args.bus_option)}
-    if args.bitrate:
-        config["bitrate"] = args.bitrate
-    try:
+    try:  # the bus as one axis' (--bus-kwargs were dropped here: the slaves served python-can's default port)
+        if args.bitrate is not None:
+            checked_bitrate(args.bitrate)
+        config = bus_config(args)
         axes, hand, coordinates = axes_setup(args)
         sim = MultiAxisSim(config, axes, hand, coordinates=coordinates, clock=args.clock, od=args.od or "haptic")
     except ParameterError as exc:
@@ -204,7 +205,8 @@ def run_modbus(args: argparse.Namespace) -> int:
     from drives.modbus.register_map import UNIT_ID_RANGE
 
     unit_id = UNIT_ID_RANGE[0] if args.unit_id is None else args.unit_id
-    if not UNIT_ID_RANGE[0] <= unit_id <= UNIT_ID_RANGE[1]:  # as --unit-ids: the units haptic-bus run can reach
+    # as --unit-ids: the units haptic-bus run can reach (a text that is no integer: its range too)
+    if not isinstance(unit_id, int) or not UNIT_ID_RANGE[0] <= unit_id <= UNIT_ID_RANGE[1]:
         allowed = f"a Modbus unit id {UNIT_ID_RANGE[0]}..{UNIT_ID_RANGE[1]}"
         print(f"{PROG}: error: {ParameterError('--unit-id', unit_id, allowed)}", file=sys.stderr)
         return 2

@@ -38,6 +38,17 @@ def overridden(parameters: DeviceParameters, operator: OperatorModel | None,
     return parameters, operator if args.operator is None else operator_from_spec(args.operator)
 
 
+def refuse_truth_with_axes(args: argparse.Namespace) -> None:
+    """ParameterError naming the first hidden-truth or operator flag given with a multi-axis profile: each
+    axis takes its truth from its ``[[axes]]`` entry and the hand in space from ``[space.operator]``, so such
+    a flag had no axis to go to and was dropped without a word (``--mass 50`` served the profile's masses)."""
+    for dest in (*TRUTH_FLAGS, "operator"):
+        if getattr(args, dest) is not None:
+            raise ParameterError("--" + dest.replace("_", "-"), getattr(args, dest),
+                                 "none with a multi-axis --profile: each axis' hidden truth is its [[axes]] entry's "
+                                 "[axes.device] and the hand is [space.operator] (edit a copy of the profile)")
+
+
 def bus_config(args: argparse.Namespace) -> dict[str, Any]:
     """The CANopen slave's python-can arguments; ParameterError for a key given twice with different values."""
     named = [(key, getattr(args, key)) for key in ("interface", "channel", "bitrate") if getattr(args, key)]
@@ -77,6 +88,7 @@ def axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
                              "the far side of a transmission")
     device = profile_axes(args)
     if device is not None:
+        refuse_truth_with_axes(args)
         known = [axis.node_id for axis in device.axes]
         unknown = [n for n in nodes if n not in known]
         if unknown:
@@ -94,12 +106,17 @@ def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
     from drives.modbus.register_map import UNIT_ID_RANGE
     from sim_drive.space_operator import SpaceHand
 
+    repeated = next((url for url in args.modbus if args.modbus.count(url) > 1 and not url.rstrip("/").endswith(":0")), None)
+    if repeated is not None:  # a second server cannot listen where the first does ("Could not start listen", exit 1)
+        raise ParameterError("--modbus", repeated, "each address once: every --modbus is a server of its own (one "
+                             "server for several axes: one --modbus with --unit-ids)")
     # a unit id may repeat on servers of their own (unit 1 on each is the default), never on one
     given = ids_in_order("--unit-ids", args.unit_ids, "Modbus unit ids", *UNIT_ID_RANGE) if args.unit_ids else None
     if args.unit_id is not None:
         raise ParameterError("--unit-id", args.unit_id, "--unit-ids for several axes (one unit id per axis)")
     device = profile_axes(args)
     if device is not None:
+        refuse_truth_with_axes(args)
         if len(args.modbus) not in (1, len(device.axes)):
             raise ParameterError("--modbus", len(args.modbus), f"one address for every axis of the profile, or one per "
                                  f"axis ({len(device.axes)})")

@@ -171,7 +171,7 @@ def test_a_silent_node_is_one_line_and_exit_1(tmp_path: Path, capsys: pytest.Cap
     assert main(["profiles", "new", "axis", "--from-drive", "--interface", "virtual", "--channel",
                  f"empty-{uuid.uuid4().hex[:10]}", "--node-id", "9", "--timeout", "0.2", "--out", str(out)]) == 1
     assert time.monotonic() - started < 10.0  # one unanswered read, bounded by the timeout (a hang would run far past)
-    assert one_line(capsys.readouterr().err) == ("haptic-bus profiles: drive error: node 9: no answer from node 9 within "
+    assert one_line(capsys.readouterr().err) == ("haptic-bus profiles new: drive error: node 9: no answer from node 9 within "
                                                  "0.2 s (haptic-bus scan lists the nodes on the bus)\n")
     assert not out.exists()
 

@@ -76,7 +76,7 @@ def test_a_recorded_operator_reads_its_csv(tmp_path: Any) -> None:
 @pytest.mark.parametrize("argv, message", [
     (["--mass", "-1"], "--mass = -1.0 is invalid; allowed: a finite real in [1e-09, 1e+09] kg"),
     (["--mass", "nan"], "--mass = nan is invalid"),
-    (["--friction", "abc"], "argument --friction: invalid float value: 'abc'"),
+    (["--friction", "abc"], "--friction = 'abc' is invalid; allowed: a finite real in [0, 1e+12] N s/m"),
     (["--coulomb", "-0.1"], "--coulomb = -0.1 is invalid; allowed: a finite real in [0, 1e+06] N"),
     (["--velocity-noise", "1e12"], "--velocity-noise = 1000000000000.0 is invalid"),
     (["--noise-seed", "-1"], "--noise-seed = -1 is invalid; allowed: an integer in [0, 18446744073709551615]"),

@@ -17,6 +17,14 @@ from typing import Any
 from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, as_typed, merge_bus_options, parse_bus_option
 from drives.cia301 import NODE_ID_RANGE
 from drives.modbus.register_map import UNIT_ID_RANGE
+from haptic_bus.analysis.loop import (
+    DAMPING_RANGE,
+    DELAY_RANGE,
+    FRICTION_RANGE,
+    MASS_RANGE,
+    PERIOD_RANGE,
+    STIFFNESS_RANGE,
+)
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import ids_in_order
 
@@ -72,15 +80,14 @@ def number(name: str, low: float, high: float, unit: str, *, low_open: bool = Fa
     """A parser of a finite number in ``[low, high]`` (``(low, high]`` with ``low_open``), in ``unit``."""
 
     def parse(text: str) -> float:
+        allowed = f"a finite number in {'(' if low_open else '['}{low:g}, {high:g}] {unit}"
         try:
             value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not a number") from None
+        except ValueError:  # not a number: the range too, in the one line (break16)
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: {allowed}") from None
         below = value <= low if low_open else value < low
         if not math.isfinite(value) or below or value > high:
-            bracket = "(" if low_open else "["
-            raise argparse.ArgumentTypeError(
-                f"{name} = {text} is invalid; allowed: a finite number in {bracket}{low:g}, {high:g}] {unit}")
+            raise argparse.ArgumentTypeError(f"{name} = {text} is invalid; allowed: {allowed}")
         return value
 
     return parse
@@ -92,11 +99,52 @@ def whole(name: str, low: int, high: int) -> Callable[[str], int]:
     def parse(text: str) -> int:
         try:
             value = int(text, 0)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not an integer") from None
+        except ValueError:  # not an integer: the range too, in the one line (break16)
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: an integer {low}..{high} "
+                                             "(decimal, or 0x-hexadecimal)") from None
         if not low <= value <= high:
             raise argparse.ArgumentTypeError(f"{name} = {value} is invalid; allowed: {low}..{high}")
         return value
+
+    return parse
+
+
+def _real_range(low: float, high: float, unit: str) -> str:
+    """The range as :func:`haptic_bus.validation.real_in_range` states it when it refuses a value."""
+    return f"a finite real in [{low:g}, {high:g}] {unit}"
+
+
+# what the analysis allows (haptic_bus.analysis.loop's ranges), for a flag's text that is no number at all
+MASS_ALLOWED = _real_range(*MASS_RANGE, "kg")
+FRICTION_ALLOWED = _real_range(*FRICTION_RANGE, "N s/m")
+PERIOD_ALLOWED = _real_range(*PERIOD_RANGE, "s")
+STIFFNESS_ALLOWED = _real_range(*STIFFNESS_RANGE, "N/m")
+DAMPING_ALLOWED = _real_range(*DAMPING_RANGE, "N s/m")
+DELAY_ALLOWED = _real_range(*DELAY_RANGE, "samples")
+
+
+def a_real(name: str, allowed: str) -> Callable[[str], float]:
+    """A parser of a real number whose range a later check owns (the analysis, the gate): text that is no
+    number is refused naming ``allowed`` (argparse's own line, ``invalid float value: 'x'``, named none);
+    ``nan``/``inf`` parse, for that check to refuse with its range."""
+
+    def parse(text: str) -> float:
+        try:
+            return float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: {allowed}") from None
+
+    return parse
+
+
+def an_integer(name: str, allowed: str) -> Callable[[str], int]:
+    """:func:`a_real` for an integer (decimal)."""
+
+    def parse(text: str) -> int:
+        try:
+            return int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: {allowed}") from None
 
     return parse
 
@@ -133,7 +181,7 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     """The python-can bus options: ``--interface``, ``--channel``, ``--bitrate``, ``--bus-option``."""
     parser.add_argument("--interface", help="python-can interface (socketcan, virtual, udp_multicast, ...)")
     parser.add_argument("--channel", help="python-can channel (can0, vcan0, a multicast group, ...)")
-    parser.add_argument("--bitrate", type=int, help="bit/s")
+    parser.add_argument("--bitrate", type=an_integer("bitrate", "a positive whole number of bit/s"), help="bit/s")
     parser.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
                         help=BUS_OPTION_HELP)
     parser.add_argument("--bus-kwargs", type=parse_bus_option, nargs="+", action="append", default=[], metavar="KEY=VALUE",
@@ -165,7 +213,15 @@ def error_line(command: str, error: Exception) -> str:
 
     if isinstance(error, ParameterError) and error.context.split(" ")[0] == command.split(" ")[0]:
         return f"haptic-bus {error.context}: error: {error.detail}"
+    if isinstance(error, ParameterError) and error.context in SHARED_CONTEXTS:  # demo's --out checked as run's
+        return f"haptic-bus {command}: error: {error.detail}"
     return f"haptic-bus {command}: error: {error}"
+
+
+SHARED_CONTEXTS = frozenset({"run"})
+"""Contexts of a check that several commands share (the run folder's ``--out``: run, demo, validate): their
+line names the command typed, not the one the check was written for (``haptic-bus demo: error: run: --out
+= ...`` named ``run``, which the user never typed)."""
 
 
 def add_verbosity(parser: argparse.ArgumentParser, default: object) -> None:

@@ -20,15 +20,19 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from haptic_bus.app.arguments import (
+    DAMPING_ALLOWED,
     EXIT_ASSUMPTION,
     EXIT_INTERRUPTED,
     EXIT_INVALID,
     EXIT_NO,
     EXIT_OK,
+    STIFFNESS_ALLOWED,
     OneLineParser,
+    a_real,
     add_bus_arguments,
     add_command,
     add_verbosity,
+    an_integer,
     bus_arguments,
     error_line,
     node_id,
@@ -300,9 +304,10 @@ def build_parser() -> OneLineParser:
                      _upload)
     add_bus_arguments(upload)
     upload.add_argument("--node-id", type=node_id, required=True, help="the controller's CANopen node id")
-    upload.add_argument("--object", type=int, required=True, help="scene object index (0x2100 + index)")
-    upload.add_argument("--stiffness", type=float, required=True, help="K, N/m")
-    upload.add_argument("--damping", type=float, required=True, help="B, N s/m")
+    upload.add_argument("--object", type=an_integer("object", "an integer in [0, 255]"), required=True,
+                        help="scene object index (0x2100 + index)")
+    upload.add_argument("--stiffness", type=a_real("stiffness", STIFFNESS_ALLOWED), required=True, help="K, N/m")
+    upload.add_argument("--damping", type=a_real("damping", DAMPING_ALLOWED), required=True, help="B, N s/m")
     upload.add_argument("--timeout", type=timeout, default=1.0,
                         help="SDO timeout, s (the commit waits for the gate's verdict, at least 30 s)")
 

@@ -29,16 +29,17 @@ from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
 from haptic_bus.app.arguments import as_typed, error_line, number, timeout
 from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
 from haptic_bus.app.json_ready import json_ready
-from haptic_bus.errors import HapticBusError, ParameterError, Refusal
+from haptic_bus.errors import DriveError, HapticBusError, ParameterError, Refusal
 from haptic_bus.profile.files import DEFAULT_PROFILE, resolve_profile, shipped_profiles
 from haptic_bus.profile.plant import ONE_AXIS_TABLES
-from haptic_bus.profile.reader import NAME_PATTERN, misspelling
+from haptic_bus.profile.reader import NAME_PATTERN, misspelling, read_document
 from haptic_bus.profile.scene import FORCE_RANGE
 
 if TYPE_CHECKING:
     from haptic_bus.analysis.check import CheckReport
     from haptic_bus.analysis.loop import DeviceLoop
     from haptic_bus.analysis.two_mass_check import TwoMassReport
+    from haptic_bus.analysis.velocity import VelocityModel
     from haptic_bus.app.profiles import AxesProfile, Profile
 
 EXIT_OK, EXIT_NO, EXIT_INVALID = 0, 1, 2
@@ -152,9 +153,8 @@ def _still_missing(path: pathlib.Path) -> int | None:
     from haptic_bus.app.profile_template import missing
 
     try:
-        with open(path, "rb") as file:
-            document = tomllib.load(file)
-    except (OSError, ValueError):  # TOMLDecodeError and UnicodeDecodeError are ValueErrors
+        document = read_document(path)
+    except ParameterError:  # unreadable, not TOML, not UTF-8, nested too deep
         return None  # the loader says what is wrong with the file
     if not set(document) <= set(ONE_AXIS_TABLES):  # a misspelt table (the loader names it), or [[axes]]
         return None
@@ -247,6 +247,8 @@ def _new_target(args: argparse.Namespace) -> tuple[pathlib.Path, DriveAddress]:
                              "drive options only with --from-drive", "profiles new")
     if args.from_drive and address.node_id is None and not address.modbus:
         raise ParameterError("--from-drive", "without a drive", "--node-id N (and the bus) or --modbus URL", "profiles new")
+    if args.velocity is not None:
+        velocity_model(args.velocity)
     target = pathlib.Path(args.out or f"{args.name}.toml")
     folder = target.parent
     if target.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK):
@@ -256,10 +258,25 @@ def _new_target(args: argparse.Namespace) -> tuple[pathlib.Path, DriveAddress]:
     return target, address
 
 
+def velocity_model(text: str) -> VelocityModel:
+    """``profiles new --velocity``'s model, refused (ParameterError naming the flag, the text as given and
+    the range) unless it fits the period the new profile is written with (a window within ``T``): a
+    ``window:0.5`` was written into a profile of ``T`` = 1 ms that no reader could then load."""
+    from haptic_bus.analysis.velocity import ALLOWED, VelocityModel
+    from haptic_bus.app.profile_template import DEFAULT_PERIOD
+
+    try:
+        model = VelocityModel.parse(text)
+        model.check_period(DEFAULT_PERIOD)
+    except ParameterError as error:
+        allowed = ALLOWED if error.allowed == ALLOWED else f"{error.allowed} (the profile's loop.period)"
+        raise ParameterError("--velocity", text, allowed, "profiles new") from None
+    return model
+
+
 def cmd_new(args: argparse.Namespace) -> int:
     """Write a commented profile (from what the drive states with ``--from-drive``); 0 written, 1 the
     drive cannot be read, 2 invalid input (an existing file without --force, an unwritable folder)."""
-    from haptic_bus.analysis.velocity import VelocityModel
     from haptic_bus.app.drive_statement import canopen_statement, modbus_statement
     from haptic_bus.app.profile_template import missing, template
 
@@ -267,16 +284,24 @@ def cmd_new(args: argparse.Namespace) -> int:
     given: dict[str, Any] = {key: getattr(args, key) for key in ("mass", "friction", "force_limit")
                              if getattr(args, key) is not None}
     if args.velocity is not None:
-        given["velocity"] = str(VelocityModel.parse(args.velocity))
+        given["velocity"] = str(velocity_model(args.velocity))
     statement = None
-    if address.url is not None:
-        statement = modbus_statement(address.url, address.unit_id)
-    elif args.from_drive:
-        statement = canopen_statement(address.bus, address.checked_node_id, args.timeout)
+    try:
+        if address.url is not None:
+            statement = modbus_statement(address.url, address.unit_id)
+        elif args.from_drive:
+            statement = canopen_statement(address.bus, address.checked_node_id, args.timeout)
+    except DriveError as exc:  # named by the command typed ('haptic-bus profiles: drive error' named only its group)
+        print(f"haptic-bus profiles new: drive error: {exc}", file=sys.stderr)
+        return EXIT_NO
     command = f"haptic-bus profiles new {args.name}" + (" --from-drive" if statement is not None else "")
     text = template(args.name, statement, given, command, dt.datetime.now(dt.UTC))
-    try:
-        target.write_text(text)
+    try:  # without --force, created only if it still does not exist (O_EXCL): another command may have made it since
+        with open(target, "w" if args.force else "x") as file:
+            file.write(text)
+    except FileExistsError:
+        raise ParameterError("--out", str(target), "a file that does not exist yet (--force overwrites it)",
+                             "profiles new") from None
     except OSError as exc:
         raise ParameterError("--out", str(target), f"a file this user can write ({exc.strerror})", "profiles new") from None
     stated = ", ".join(statement.scaling) if statement is not None else "nothing (no --from-drive)"

@@ -266,6 +266,9 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
         raise ParameterError(name, value, f"Modbus unit ids {low}..{high}, whole numbers: the units that answer "
                              "(0 is broadcast)", "run")
     places = list(zip(list(urls) * size if len(urls) == 1 else urls, units))
+    if unit_ids is None and len(urls) == size > len(set(urls)) and len(set(places)) != size:  # no unit ids were given
+        raise ParameterError("bus", list(urls), f"one Modbus URL for every axis, or a different one per axis ({size}): "
+                             "a server named twice (its units on one server: one URL with the unit ids)", "run")
     if len(units) != size or len(set(places)) != size:
         raise ParameterError("unit_ids", units, f"{size} unit ids, one per axis, none twice at one URL", "run")
     return units

@@ -181,6 +181,7 @@ def run_scan(args: argparse.Namespace) -> int:
     from drives.modbus.scan import scan_modbus
 
     _validate(args)
+    unprobed_note = ""
     if args.modbus is not None:
         scan = scan_modbus(args.modbus, args.unit_ids or range(UNIT_ID_RANGE[0], UNIT_ID_RANGE[1] + 1),
                            args.timeout, args.answer_timeout)
@@ -188,8 +189,12 @@ def run_scan(args: argparse.Namespace) -> int:
         text = format_modbus(scan)
         where = f"at {scan.url}"
         if scan.unprobed:
-            print(f"haptic-bus scan: unit ids {_ranges(scan.unprobed)} not probed: --timeout {args.timeout:g} s spent "
-                  "(raise it, or narrow --unit-ids)", file=sys.stderr)
+            unprobed = (f"unit ids {_ranges(scan.unprobed)} not probed: --timeout {args.timeout:g} s spent (raise it, or "
+                        "narrow --unit-ids)")
+            if scan.units:  # a note beside what answered; nothing answered: the one failure line says it too
+                print(f"haptic-bus scan: {unprobed}", file=sys.stderr)
+            else:
+                unprobed_note = f"; {unprobed}"
     else:
         bus = bus_arguments(args)
         found = scan_canopen(bus, args.node_ids or range(NODE_ID_RANGE[0], NODE_ID_RANGE[1] + 1),
@@ -202,6 +207,6 @@ def run_scan(args: argparse.Namespace) -> int:
     elif found:
         print(text)
     if not found:
-        print(f"haptic-bus scan: no node answered {where} within {args.timeout:g} s", file=sys.stderr)
+        print(f"haptic-bus scan: no node answered {where} within {args.timeout:g} s{unprobed_note}", file=sys.stderr)
         return EXIT_NO
     return EXIT_OK

@@ -14,7 +14,19 @@ from __future__ import annotations
 import argparse
 import pathlib
 
-from haptic_bus.app.arguments import EXIT_NO, EXIT_OK, add_command, number
+from haptic_bus.app.arguments import (
+    DAMPING_ALLOWED,
+    DELAY_ALLOWED,
+    EXIT_NO,
+    EXIT_OK,
+    FRICTION_ALLOWED,
+    MASS_ALLOWED,
+    PERIOD_ALLOWED,
+    STIFFNESS_ALLOWED,
+    a_real,
+    add_command,
+    number,
+)
 from haptic_bus.validation import writable_file
 
 
@@ -22,8 +34,8 @@ def add_wall_check_parsers(subparsers: argparse._SubParsersAction) -> None:
     """Register ``check`` and ``region`` on ``subparsers``; each sets ``handler``."""
     check = add_command(subparsers, "check", "judge one wall loop's passivity", _check)
     _add_device_arguments(check)
-    check.add_argument("--stiffness", type=float, required=True, help="wall stiffness K, N/m")
-    check.add_argument("--damping", type=float, required=True, help="wall damping B, N s/m")
+    check.add_argument("--stiffness", type=a_real("stiffness", STIFFNESS_ALLOWED), required=True, help="wall stiffness K, N/m")
+    check.add_argument("--damping", type=a_real("damping", DAMPING_ALLOWED), required=True, help="wall damping B, N s/m")
     check.add_argument("--json", action="store_true", help="one JSON object on stdout")
     check.add_argument("--position-resolution", type=number("--position-resolution", 0.0, 1e6, "m"), metavar="M",
                        help="encoder resolution Delta, m per 0x6064 increment: judge the quantisation condition too "
@@ -45,10 +57,10 @@ def add_wall_check_parsers(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _add_device_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--mass", type=float, required=True, help="handle mass m, kg")
-    parser.add_argument("--friction", type=float, required=True, help="viscous friction b, N s/m")
-    parser.add_argument("--period", type=float, required=True, help="sampling period T, s")
-    parser.add_argument("--delay", type=float, default=0,
+    parser.add_argument("--mass", type=a_real("mass", MASS_ALLOWED), required=True, help="handle mass m, kg")
+    parser.add_argument("--friction", type=a_real("friction", FRICTION_ALLOWED), required=True, help="viscous friction b, N s/m")
+    parser.add_argument("--period", type=a_real("period", PERIOD_ALLOWED), required=True, help="sampling period T, s")
+    parser.add_argument("--delay", type=a_real("delay", DELAY_ALLOWED), default=0,
                         help="loop delay D in samples, real in [0, 1000] (0: the seed's ideal loop, 1: a CiA-402 "
                              "synchronous cycle, 0.3: torque applied on reception 0.3 T after SYNC)")
     parser.add_argument("--velocity", default="point", metavar="MODEL",

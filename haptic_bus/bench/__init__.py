@@ -207,13 +207,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cycles(text: str) -> int:
+    """``--soak``'s cycles: a whole number 1..1e9, written as an integer or as 1e6 (``inf`` was an
+    OverflowError's traceback, ``1.5`` taken as 1)."""
+    invalid = argparse.ArgumentTypeError(
+        f"soak cycles = {text!r} is invalid; allowed: a whole number of cycles 1..1e9 (e.g. 1e6)")
     try:
-        value = int(float(text))
+        value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of cycles") from None
-    if not 1 <= value <= 10**9:
-        raise argparse.ArgumentTypeError(f"{text} cycles is invalid; allowed: 1..1e9")
-    return value
+        raise invalid from None
+    if not (math.isfinite(value) and value.is_integer() and 1 <= value <= 10**9):
+        raise invalid
+    return int(value)
 
 
 def _refusal(args: argparse.Namespace) -> str | None:

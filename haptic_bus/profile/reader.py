@@ -40,11 +40,19 @@ def profile_error(path: pathlib.Path | str, field: str, value: object, allowed: 
     return ParameterError(field, value, allowed, context=f"profile {path}")
 
 
+MAX_NESTING = 16
+"""How deep a profile's tables and arrays may nest: the deepest a profile uses is 4 (``space.operator.toward``,
+an array of points in a table in a table); tomllib parses recursively, and a document nested some hundreds
+deep (``b = [[[[...]]]]``) exhausted Python's recursion limit in the parser or in the error's ``repr``: a
+traceback, exit 1, where a malformed file is one line, exit 2."""
+
+
 def read_document(path: pathlib.Path) -> dict[str, Any]:
-    """The TOML document of a profile file; ParameterError when unreadable or not TOML."""
+    """The TOML document of a profile file; ParameterError when unreadable, not TOML, or nested deeper
+    than :data:`MAX_NESTING`."""
     try:
         with open(path, "rb") as file:
-            return tomllib.load(file)
+            document = tomllib.load(file)
     except OSError as error:
         raise profile_error(path, "profile", str(path), f"a readable file ({error.strerror})") from None
     except tomllib.TOMLDecodeError as error:
@@ -52,6 +60,26 @@ def read_document(path: pathlib.Path) -> dict[str, Any]:
     except UnicodeDecodeError as error:  # TOML is UTF-8 text
         raise profile_error(path, "(encoding)", f"byte 0x{error.object[error.start]:02X} at {error.start}",
                             "UTF-8 text (TOML 1.0)") from None
+    except RecursionError:  # the parser recursed per nested array or inline table
+        raise profile_error(path, "(nesting)", "deeper than the TOML parser can follow",
+                            f"tables and arrays nested at most {MAX_NESTING} deep") from None
+    _refuse_deep_nesting(path, document)
+    return document
+
+
+def _refuse_deep_nesting(path: pathlib.Path, document: dict[str, Any]) -> None:
+    """ParameterError naming where (its first two levels, dotted) a value nests deeper than
+    :data:`MAX_NESTING`; walked without recursion, so that the walk itself cannot exhaust the stack."""
+    stack: list[tuple[str, object, int]] = [(str(key), value, 1) for key, value in document.items()]
+    while stack:
+        where, value, depth = stack.pop()
+        if depth > MAX_NESTING:
+            raise profile_error(path, "(nesting)", f"{where}...: more than {MAX_NESTING} levels",
+                                f"tables and arrays nested at most {MAX_NESTING} deep")
+        if isinstance(value, dict):
+            stack.extend((f"{where}.{key}" if depth < 2 else where, item, depth + 1) for key, item in value.items())
+        elif isinstance(value, list):
+            stack.extend((f"{where}[{i}]" if depth < 2 else where, item, depth + 1) for i, item in enumerate(value))
 
 
 def misspelling(key: str, keys: Iterable[object]) -> str | None:

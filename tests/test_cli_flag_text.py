@@ -1,0 +1,65 @@
+"""A flag's text that is no number at all is one line naming the flag's range, as an out-of-range number's
+line is: argparse's own ``argument --mass: invalid float value: 'x'`` and ``node id = 'x' is not an
+integer`` named none; ``bench --soak inf`` was an OverflowError's traceback and ``--soak 1.5`` ran 1 cycle
+(break16)."""
+
+from __future__ import annotations
+
+import pytest
+
+from haptic_bus.app.cli import main
+
+BUS = ["--interface", "virtual", "--channel", "break16-flags"]
+DEVICE = ["--mass", "1", "--friction", "20", "--period", "0.001"]
+
+
+@pytest.mark.parametrize(("argv", "line"), [
+    (["check", "--mass", "x", "--friction", "1", "--period", "1e-3", "--stiffness", "1", "--damping", "1"],
+     "haptic-bus check: error: argument --mass: mass = 'x' is invalid; allowed: a finite real in [1e-09, 1e+09] kg"),
+    (["check", *DEVICE, "--stiffness", "1", "--damping", "1", "--delay", "one"],
+     "haptic-bus check: error: argument --delay: delay = 'one' is invalid; allowed: a finite real in [0, 1000] samples"),
+    (["check", *DEVICE, "--stiffness", "1,5", "--damping", "1"],
+     "haptic-bus check: error: argument --stiffness: stiffness = '1,5' is invalid; allowed: a finite real in [0, 1e+15] N/m"),
+    (["region", "--mass", "1", "--friction", "1", "--period", "1ms", "--png", "never.png"],
+     "haptic-bus region: error: argument --period: period = '1ms' is invalid; allowed: a finite real in [1e-09, 10] s"),
+    (["upload", *BUS, "--node-id", "127", "--object", "x", "--stiffness", "1", "--damping", "1"],
+     "haptic-bus upload: error: argument --object: object = 'x' is invalid; allowed: an integer in [0, 255]"),
+    (["upload", *BUS, "--node-id", "127", "--object", "0", "--stiffness", "1", "--damping", "q"],
+     "haptic-bus upload: error: argument --damping: damping = 'q' is invalid; allowed: a finite real in [0, 1e+15] N s/m"),
+    (["status", *BUS, "--node-id", "x"],
+     "haptic-bus status: error: argument --node-id: node id = 'x' is invalid; allowed: an integer 1..127 "
+     "(decimal, or 0x-hexadecimal)"),
+    (["run", "cia402-handle", *BUS, "--node-id", "5", "--bitrate", "1M"],
+     "haptic-bus run: error: argument --bitrate: bitrate = '1M' is invalid; allowed: a positive whole number of bit/s"),
+    (["run", "cia402-handle", *BUS, "--node-id", "5", "--duration", "ten"],
+     "haptic-bus run: error: argument --duration: duration = 'ten' is invalid; allowed: a finite number in (0, 1e+07] s"),
+    (["bench", "--soak", "inf"], "haptic-bus bench: error: argument --soak: soak cycles = 'inf' is invalid; allowed: "
+                                 "a whole number of cycles 1..1e9 (e.g. 1e6)"),
+    (["bench", "--soak", "1.5"], "haptic-bus bench: error: argument --soak: soak cycles = '1.5' is invalid; allowed: "
+                                 "a whole number of cycles 1..1e9 (e.g. 1e6)"),
+])
+def test_a_flag_that_is_no_number_names_its_range(argv: list[str], line: str, capfd: pytest.CaptureFixture[str]) -> None:
+    """capfd: bench, a command that parses its own arguments, writes its line to the process' stderr."""
+    assert main(argv) == 2
+    out, err = capfd.readouterr()
+    assert out == "" and err == line + "\n"
+
+
+def test_the_range_is_still_checked_where_it_was(capsys: pytest.CaptureFixture[str]) -> None:
+    """A number out of range is refused by the analysis with the same range as before (the flag's type
+    only turns text into a number)."""
+    assert main(["check", "--mass", "-1", "--friction", "1", "--period", "1e-3", "--stiffness", "1", "--damping", "1"]) == 2
+    assert capsys.readouterr().err == ("haptic-bus check: error: mass = -1.0 is invalid; allowed: a finite real in "
+                                       "[1e-09, 1e+09] kg\n")
+
+
+@pytest.mark.parametrize("argv", [
+    ["demo", "--out", "/proc/break16/out"],
+    ["validate", "cia402-handle", *BUS, "--node-id", "5", "--out", "/proc/break16/out"],
+    ["run", "cia402-handle", *BUS, "--node-id", "5", "--out", "/proc/break16/out"],
+])
+def test_a_run_folder_refused_is_named_by_the_command_typed(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    """demo's and validate's --out are checked as run's: the line said ``haptic-bus demo: error: run: --out``."""
+    assert main(argv) == 2
+    assert capsys.readouterr().err == (f"haptic-bus {argv[0]}: error: --out = '/proc/break16/out' is invalid; allowed: "
+                                       "a folder this user can create and write (No such file or directory)\n")
