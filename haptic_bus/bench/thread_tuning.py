@@ -416,8 +416,9 @@ def preflight_cycles(size: Size) -> int | None:
 
 
 def axes_runs(size: Size, duration: float) -> dict:
-    """Three axes (:data:`AXES_PROFILE`) in the default set-up against one simulated three-axis device,
-    quiet (and, beyond the smoke size, beside the hogs), each beside python-can's floor for its cycle."""
+    """Three axes (:data:`AXES_PROFILE`) in the default set-up against one simulated three-axis device, its hand
+    the profile's ``[space.operator]`` (taking the handle once the drives are enabled), quiet (and, beyond the
+    smoke size, beside the hogs), each beside python-can's floor for its cycle."""
     from haptic_bus.bench.processes import canopen_simulator, cpu_hogs
 
     axes, label = axes_profile(size)
@@ -425,7 +426,7 @@ def axes_runs(size: Size, duration: float) -> dict:
     loads = ("quiet",) if size.pick(True, False, False) else ("quiet", "CPU hog")
     out: dict = {"profile": label, "node_ids": list(AXES_NODE_IDS), "period_s": period}
     try:
-        with (canopen_simulator(AXES_PROFILE, AXES_NODE_IDS, "--operator", "none") as (bus, process),
+        with (canopen_simulator(AXES_PROFILE, AXES_NODE_IDS) as (bus, process),
               can_floor(bus, AXES_NODE_IDS, FLOOR_TPDOS, period, duration) as floor):
             def again() -> tuple[dict, dict, dict]:
                 return measure_pair(lambda: controller_run(SETUPS["default"], duration, bus, process, axes, None,
