@@ -272,7 +272,7 @@ def paired_runs(first: tuple[dict, dict, dict], again: Callable[[], tuple[dict, 
         share, floor_share = run.get("core_share", {}).get("median"), floor.get("core_share")
         pair = {"core_share": share, "floor_core_share": floor_share,
                 "ratio": share / floor_share if share and floor_share else None,
-                **({} if share else {"run": run.get("exit_reason"), "error": run.get("error")}),
+                "run": run.get("exit_reason"), "error": run.get("error"),  # how each run ended (a stop shortens it)
                 **({} if floor_share else {"floor": floor.get("reason")})}
         late, floor_late, bare_late = run.get("lateness_s", {}), floor.get("lateness_s", {}), bare.get("lateness_s", {})
         for quantile in QUANTILES:
