@@ -12,7 +12,7 @@ import argparse
 import math
 import re
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, as_typed, merge_bus_options, parse_bus_option
 from drives.cia301 import NODE_ID_RANGE
@@ -27,6 +27,8 @@ from haptic_bus.analysis.loop import (
 )
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import ids_in_order
+
+N = TypeVar("N", int, float)
 
 EXIT_OK, EXIT_NO, EXIT_INVALID, EXIT_ASSUMPTION, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 Handler = Callable[[argparse.Namespace], int]
@@ -127,22 +129,20 @@ def a_real(name: str, allowed: str) -> Callable[[str], float]:
     """A parser of a real number whose range a later check owns (the analysis, the gate): text that is no
     number is refused naming ``allowed`` (argparse's own line, ``invalid float value: 'x'``, named none);
     ``nan``/``inf`` parse, for that check to refuse with its range."""
-
-    def parse(text: str) -> float:
-        try:
-            return float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: {allowed}") from None
-
-    return parse
+    return _read_as(float, name, allowed)
 
 
 def an_integer(name: str, allowed: str) -> Callable[[str], int]:
     """:func:`a_real` for an integer (decimal)."""
+    return _read_as(int, name, allowed)
 
-    def parse(text: str) -> int:
+
+def _read_as(kind: Callable[[str], N], name: str, allowed: str) -> Callable[[str], N]:
+    """A parser of text as ``kind`` (``float``, ``int``); text it cannot read is one line naming ``allowed``."""
+
+    def parse(text: str) -> N:
         try:
-            return int(text)
+            return kind(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: {allowed}") from None
 
