@@ -60,9 +60,12 @@ class SdoAccess:
             ) from exc
         except SdoCommunicationError as exc:
             name = object_name(self.node.object_dictionary, index, subindex)
+            stopped = _stopped(self.node)  # a node in NMT STOPPED drops the request
+            late = "; the request went out, so a drive that answers late may still apply it" if what == "writing" \
+                and not stopped else ""
             raise DriveTimeout(
                 self.name, f"no SDO answer {what} 0x{index:04X}:{subindex:02X} ({name}) within {self.timeout:.3g} s: {exc}"
-                           f"{_stopped(self.node)}"
+                           f"{stopped}{late}"
             ) from exc
         except (struct.error, ValueError, TypeError, IndexError, KeyError) as exc:  # canopen met an answer it cannot parse
             name = object_name(self.node.object_dictionary, index, subindex)

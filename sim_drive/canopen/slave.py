@@ -33,7 +33,8 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from typing import Any
 
 import can
@@ -242,6 +243,13 @@ class CanopenSimDrive:
         """Disconnect: send nothing (no heartbeat either) and ignore every frame until :meth:`resume`."""
         with self._lock:
             self.silent = True
+
+    @contextmanager
+    def paused(self) -> Iterator[None]:
+        """Take no frame and keep no clock while in the block, then every frame that waited, in order: what
+        SIGSTOP and SIGCONT do to a drive's process (a request is applied, and answered, late)."""
+        with self._lock:
+            yield
 
     def resume(self) -> None:
         """Undo :meth:`go_silent` (and :meth:`stop_heartbeat`)."""
