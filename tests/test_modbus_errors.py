@@ -168,6 +168,23 @@ def test_timeout_names_the_unit_zeroes_torque_and_closes_the_link(running) -> No
     assert server.drive.target_torque == 100
 
 
+def test_a_write_answered_late_says_it_may_still_be_applied() -> None:
+    """A write the unit answers after the timeout was applied all the same (break16, on CANopen: a drive stopped
+    with SIGSTOP applied the write it took once resumed): the timeout's line says the request went out."""
+    with (ModbusSimServer(unit_id=UNIT) as server,
+          ModbusDrive("127.0.0.1", server.port, unit_id=UNIT, timeout=ANSWER_TIMEOUT) as drive):
+        drive.connect()
+        server.faults.delay(2 * ANSWER_TIMEOUT)
+        with pytest.raises(DriveTimeout, match=r"no answer within 1000 ms while writing register 0x0029: 0x0029 "
+                                               r"\(0x605A Quick stop option code\) .*; the request went out, so a unit "
+                                               r"that answers late may still apply it$"):
+            drive.write_object(QUICK_STOP_OPTION_CODE, 6)
+        deadline = time.monotonic() + 3 * ANSWER_TIMEOUT  # bounded: the late answer, then the write applied
+        while server.drive.quick_stop_option_code != 6 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert server.drive.quick_stop_option_code == 6
+
+
 def test_dropped_connection_is_link_lost_and_the_drive_faults(running) -> None:
     server, drive = running
     closed_before = server.connections_closed

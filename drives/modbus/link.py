@@ -146,7 +146,9 @@ class ModbusLink:
             raise ModbusLinkLost(self.name, f"connection lost while {what}: {exc}; closed until the master reconnects") from exc
         except ModbusIOException as exc:
             self.stats.timeouts += 1
-            raise DriveTimeout(self.name, f"no answer within {self.address.timeout * 1e3:g} ms while {what} ({exc})") from exc
+            late = "; the request went out, so a unit that answers late may still apply it" if what.startswith("writing") else ""
+            raise DriveTimeout(self.name, f"no answer within {self.address.timeout * 1e3:g} ms while {what} ({exc}){late}") \
+                from exc
         except (ModbusException, OSError) as exc:
             self.drop()
             raise DriveProtocolError(self.name, f"bad answer while {what}: {exc}") from exc
