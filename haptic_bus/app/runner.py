@@ -302,15 +302,17 @@ STALL_LOOKBACK = 3  # cycles: the stalled one, and the exchanges of the cycles a
 
 def _stall_before(controller: WallController[Any, Any] | None, stall: float) -> str:
     """What the one line of a drive error adds when one of the last cycles started ``stall`` s late or more
-    (the shortest stall that faults the drive): this process did not run (a SIGSTOP, a debugger, starved of
-    CPU), and the drive's watchdog did what it is for; "" otherwise, and for a virtual-time run."""
+    (the shortest stall that faults the drive), or the cycle that met the error had run that long (a stop in
+    the middle of its exchange): this process did not run (a SIGSTOP, a debugger, starved of CPU), and the
+    drive's watchdog did what it is for; "" otherwise, and for a virtual-time run."""
     clock = controller.clock if controller is not None else None
-    if not isinstance(clock, RealClock):
+    if controller is None or not isinstance(clock, RealClock):
         return ""
     late = clock.lateness(STALL_LOOKBACK)
-    if late.size == 0 or late.max() < stall:
+    held = max(float(late.max()) if late.size else 0.0, controller.error_cycle_s)
+    if held < stall:
         return ""
-    return (f" (a cycle just before started {late.max() * 1e3:.4g} ms late, past the {stall * 1e3:.4g} ms the drive's "
+    return (f" (a cycle just before was held {held * 1e3:.4g} ms late, past the {stall * 1e3:.4g} ms the drive's "
             f"watchdog allows: this process did not run for that long, stopped or starved of CPU)")
 
 

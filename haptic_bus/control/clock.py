@@ -140,6 +140,10 @@ class RealClock:
             self._count = count + 1
         return lateness
 
+    def since_start(self) -> float:
+        """How long ago (s) the latest cycle started (0.0 before the first)."""
+        return (time.perf_counter_ns() - self._current_ns) * 1e-9 if self._count else 0.0
+
     def period_bound(self, sampled_by_ns: int) -> float:
         """An upper bound (s) of the period that the latest sample closed: from the start of the cycle
         before (the SYNC that opened the period left after it) to ``sampled_by_ns`` (the drive had

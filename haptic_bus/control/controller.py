@@ -197,6 +197,7 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         self.energy = self.least_energy = sum(port.observer.energy for port in self.ports)
         self.observer_active_cycles = 0
         self.stopped_on_error = False
+        self.error_cycle_s = 0.0
         self._q = [0.0] * size  # the joints' q (m) and q_dot (m/s) of the latest cycle, several axes: floats
         self._q_dot = [0.0] * size
         self._identity = type(self.kinematics) is Cartesian  # x = q, v = q_dot, J^T u = u: no matrix a cycle

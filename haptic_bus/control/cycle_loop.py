@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from drives.base import AxesDriveCycle
-from haptic_bus.control.clock import CycleClock
+from haptic_bus.control.clock import CycleClock, RealClock
 from haptic_bus.control.record import EventLog
 from haptic_bus.control.supervisor import Supervisor
 from haptic_bus.errors import AssumptionBroken, DriveError
@@ -64,7 +64,7 @@ class RunSummary:
 
 class CycleLoop:
     """The run loop of a controller (module docstring).  A subclass sets ``clock``, ``events``,
-    ``cycles``, ``stopped_on_error`` and ``_cycle`` (None) and implements :meth:`step`, :meth:`now`,
+    ``cycles``, ``stopped_on_error``, ``error_cycle_s`` (0.0) and ``_cycle`` (None) and implements :meth:`step`, :meth:`now`,
     :meth:`summary`, :meth:`_disable` and :meth:`_phase` (its drives' cyclic phase:
     held in ``_cycle`` while :meth:`run` runs)."""
 
@@ -73,6 +73,7 @@ class CycleLoop:
     events: EventLog
     cycles: int
     stopped_on_error: bool
+    error_cycle_s: float  # how long (s) the cycle that met a drive error had run by then (0.0: none, or virtual time)
     supervisor: Supervisor | None
     saturated_cycles: int
     peak_force: float
@@ -140,6 +141,7 @@ class CycleLoop:
         except DriveError as exc:
             reason, error = "drive error", str(exc)
             self.stopped_on_error = True
+            self.error_cycle_s = self.clock.since_start() if isinstance(self.clock, RealClock) else 0.0
             self._end(exc, "fault")
         except AssumptionBroken as exc:
             reason, error = "assumption broken", str(exc)
