@@ -10,6 +10,12 @@ import pathlib
 from haptic_bus.errors import ParameterError
 
 
+def real_range(low: float, high: float, unit: str = "", *, low_inclusive: bool = True) -> str:
+    """What :func:`real_in_range` allows, as its refusal states it: ``a finite real in [low, high] unit``."""
+    bracket = "[" if low_inclusive else "("
+    return f"a finite real in {bracket}{low:g}, {high:g}]" + (f" {unit}" if unit else "")
+
+
 def real_in_range(
     name: str,
     value: object,
@@ -25,8 +31,7 @@ def real_in_range(
     ``low``/``high`` bound the range (``high`` always inclusive); ``unit`` only decorates
     the message.
     """
-    bracket = "[" if low_inclusive else "("
-    allowed = f"a finite real in {bracket}{low:g}, {high:g}]" + (f" {unit}" if unit else "")
+    allowed = real_range(low, high, unit, low_inclusive=low_inclusive)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ParameterError(name, value, allowed, context)
     number = float(value)

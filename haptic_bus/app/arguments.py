@@ -26,7 +26,7 @@ from haptic_bus.analysis.loop import (
     STIFFNESS_RANGE,
 )
 from haptic_bus.errors import ParameterError
-from haptic_bus.validation import ids_in_order
+from haptic_bus.validation import ids_in_order, real_range
 
 N = TypeVar("N", int, float)
 
@@ -111,18 +111,13 @@ def whole(name: str, low: int, high: int) -> Callable[[str], int]:
     return parse
 
 
-def _real_range(low: float, high: float, unit: str) -> str:
-    """The range as :func:`haptic_bus.validation.real_in_range` states it when it refuses a value."""
-    return f"a finite real in [{low:g}, {high:g}] {unit}"
-
-
 # what the analysis allows (haptic_bus.analysis.loop's ranges), for a flag's text that is no number at all
-MASS_ALLOWED = _real_range(*MASS_RANGE, "kg")
-FRICTION_ALLOWED = _real_range(*FRICTION_RANGE, "N s/m")
-PERIOD_ALLOWED = _real_range(*PERIOD_RANGE, "s")
-STIFFNESS_ALLOWED = _real_range(*STIFFNESS_RANGE, "N/m")
-DAMPING_ALLOWED = _real_range(*DAMPING_RANGE, "N s/m")
-DELAY_ALLOWED = _real_range(*DELAY_RANGE, "samples")
+MASS_ALLOWED = real_range(*MASS_RANGE, "kg")
+FRICTION_ALLOWED = real_range(*FRICTION_RANGE, "N s/m")
+PERIOD_ALLOWED = real_range(*PERIOD_RANGE, "s")
+STIFFNESS_ALLOWED = real_range(*STIFFNESS_RANGE, "N/m")
+DAMPING_ALLOWED = real_range(*DAMPING_RANGE, "N s/m")
+DELAY_ALLOWED = real_range(*DELAY_RANGE, "samples")
 
 
 def a_real(name: str, allowed: str) -> Callable[[str], float]:

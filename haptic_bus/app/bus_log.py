@@ -123,7 +123,6 @@ class BusLogFile:
     """The frames of ``ring`` (:data:`FRAME`) into ``path`` (ASC), at each :meth:`drain`."""
 
     def __init__(self, path: pathlib.Path, ring: Ring) -> None:
-
         self.path = path
         self.ring = ring
         self.frames = 0  # frames written
