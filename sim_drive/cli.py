@@ -35,8 +35,8 @@ from __future__ import annotations
 import argparse
 import sys
 import threading
-from collections.abc import Sequence
-from typing import NoReturn
+from collections.abc import Callable, Sequence
+from typing import NoReturn, TypeVar
 
 from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, as_typed, parse_bus_option
 from haptic_bus._version import __version__
@@ -139,21 +139,24 @@ def add_axes_arguments(group: argparse._ArgumentGroup) -> None:
                             "hidden truth, and the profile's hand in space ([space.operator]) pushes them all")
 
 
-def _number_or_text(text: str) -> float | str:
-    """``text`` as a float, or as it is: the truth's check then refuses it with its range in one line."""
-    try:
-        return float(text)
-    except ValueError:
-        return text
+V = TypeVar("V", int, float)
 
 
-def _integer_or_text(text: str) -> int | str:
-    """``text`` as an int, or as it is: the check of the value then refuses it with its range in one line
-    (argparse's own ``invalid int value: 'x'`` named none)."""
-    try:
-        return int(text)
-    except ValueError:
-        return text
+def _read_or_text(kind: Callable[[str], V]) -> Callable[[str], V | str]:
+    """A flag's type: its text as ``kind`` (``float``, ``int``), or as it is where it is none, for the check of the
+    value to refuse with its range in one line (argparse's own ``invalid float value: 'x'`` named none)."""
+
+    def read(text: str) -> V | str:
+        try:
+            return kind(text)
+        except ValueError:
+            return text
+
+    return read
+
+
+_number_or_text = _read_or_text(float)
+_integer_or_text = _read_or_text(int)
 
 
 def _flags(args: argparse.Namespace, parser: argparse.ArgumentParser, dests: Sequence[str]) -> str:
