@@ -1,4 +1,4 @@
-"""Issue 26's ratios over pairs (haptic_bus.bench.thread_tuning.paired_runs): each pair a run, the bare clock and
+"""Issue 26's ratios over pairs (haptic_bus.bench.pairs.paired_runs): each pair a run, the bare clock and
 python-can's floor right after it; each ratio the median of the pairs', each pair's shown in bench.md's row.  A
 pair without a core ratio (its run refused at pre-flight, or the floor failed) is left out of that median, and the
 row says so, in place and why; a stall of the host in one pair's run moves only that pair's lateness ratio.
@@ -10,7 +10,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from haptic_bus.bench import targets, thread_tuning
+from haptic_bus.bench import pairs, targets
 
 BARE = {"lateness_s": {"p99": 20e-6, "p99.9": 40e-6}}  # a bare clock's start lateness (s)
 ISSUE_26 = {"core_ratio_target": 1.5, "lateness_ratio_target": 2.0, "overrun_target": 0.005, "delay_target": 1.5}
@@ -32,15 +32,15 @@ def rows_of(figures: dict, what: str) -> list[dict]:
 
 
 def test_a_pair_without_a_ratio_is_shown_in_place_and_named_in_the_rows_note() -> None:
-    pairs: Iterator[tuple[dict, dict, dict]] = iter([
+    later: Iterator[tuple[dict, dict, dict]] = iter([
         (run_with(None), BARE, {"core_share": 0.2}),  # pair 2's run refused
         (run_with(0.3), BARE, {"available": False, "reason": "the floor process exited 1"})])  # pair 3's floor failed
-    paired = thread_tuning.paired_runs((run_with(0.26), BARE, {"core_share": 0.2}), lambda: next(pairs), 3)
+    paired = pairs.paired_runs((run_with(0.26), BARE, {"core_share": 0.2}), lambda: next(later), 3)
     assert [pair["ratio"] for pair in paired["pairs"]] == [0.26 / 0.2, None, None]
     assert paired["ratio"] == 0.26 / 0.2  # the one pair measured
     assert paired["pairs"][1]["run"] == "pre-flight refused"
     assert paired["pairs"][2]["floor"] == "the floor process exited 1"
-    figures = thread_tuning._ratios({"controller": run_with(0.26), "pairs": paired})
+    figures = pairs.ratios({"controller": run_with(0.26), "pairs": paired})
     assert figures["core_ratios"] == [0.26 / 0.2, None, None]
     (row,) = rows_of(figures, "CPU")
     assert row["measured"] == "1.3 (1.3, -, -)"  # not "1.3" alone, as a single pair of the smoke shows
@@ -55,7 +55,7 @@ def test_a_further_pair_whose_run_raises_keeps_the_pairs_before_it() -> None:
     def again() -> tuple[dict, dict, dict]:
         raise RuntimeError("the simulated drive exited")
 
-    paired = thread_tuning.paired_runs((run_with(0.26), BARE, {"core_share": 0.2}), again, 2)
+    paired = pairs.paired_runs((run_with(0.26), BARE, {"core_share": 0.2}), again, 2)
     assert paired["ratio"] == 0.26 / 0.2  # before: the exception left the section's entry unavailable, pair 1 lost
     assert (paired["pairs"][1]["ratio"], paired["pairs"][1]["run"]) == (None, "not run")
     assert paired["pairs"][1]["error"] == "RuntimeError: the simulated drive exited"
@@ -66,10 +66,10 @@ def test_one_pairs_stall_moves_its_own_lateness_ratio_not_the_median() -> None:
     overran twice: its ratio is 125 x, the median of the five is the others' 1.5 x, and the overruns count over
     all 5000 cycles."""
     runs = iter([run_with(0.25), run_with(0.26, p999=5e-3, overruns=2), run_with(0.24), run_with(0.25)])
-    paired = thread_tuning.paired_runs((run_with(0.25), BARE, {"core_share": 0.2}),
-                                       lambda: thread_tuning.measure_pair(lambda: next(runs), lambda: BARE,
+    paired = pairs.paired_runs((run_with(0.25), BARE, {"core_share": 0.2}),
+                                       lambda: pairs.measure_pair(lambda: next(runs), lambda: BARE,
                                                                           lambda: {"core_share": 0.2}), 5)
-    figures = thread_tuning._ratios({"controller": run_with(0.25), "pairs": paired})
+    figures = pairs.ratios({"controller": run_with(0.25), "pairs": paired})
     assert figures["lateness_p99.9_ratios"] == pytest.approx([1.5, 1.5, 125.0, 1.5, 1.5], rel=1e-15)  # one division each
     assert figures["lateness_p99.9_ratio"] == 1.5 and figures["lateness_p99_ratio"] == 1.5
     assert figures["overrun_share"] == 2 / 5000 and figures["overrun_cycles"] == 5000

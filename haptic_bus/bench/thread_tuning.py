@@ -28,8 +28,8 @@ whether it started without a stall (the first 50 cycles' lateness within the run
 them the bare clock (no drive, no controller) in each set-up: what the clock itself costs; and
 python-can's floor for the default set-up (:mod:`~haptic_bus.bench.can_floor`: the same frames
 with python-can alone), its lateness too.  The default set-up's core share over the floor's, and its
-lateness over the bare clock's, are each the median of :data:`PAIRS` pairs, each a run, the floor and
-the bare clock right after it (:func:`paired_runs`): on this virtual machine one pair's core ratio
+lateness over the bare clock's, are each the median of :data:`~haptic_bus.bench.pairs.PAIRS` pairs, each a run, the floor and
+the bare clock right after it (:mod:`~haptic_bus.bench.pairs`): on this virtual machine one pair's core ratio
 moved from 1.14 to 2.07 between two bench runs, the floor's own share from 0.14 to 0.24 of a core,
 and one stall of the host (1.5-6 ms, a few times a minute) decides a 1 s run's p99.9.  Before the runs, the machine's own gaps
 (:mod:`~haptic_bus.bench.host_gaps`): how often a spinning real-time thread lost its CPU, which
@@ -49,7 +49,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager, nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -59,6 +59,7 @@ import numpy as np
 from haptic_bus.app.profiles import AxesProfile, Profile, admit, load_profile, one_axis_only, read_profile
 from haptic_bus.app.realtime import RealtimeSettings, realtime_session
 from haptic_bus.app.run_json import read_document
+from haptic_bus.bench.pairs import PAIRS, axes_figures, issue_26_figures, measure_pair, paired_runs
 from haptic_bus.bench.size import Size
 from haptic_bus.bench.timing import Spread
 from haptic_bus.control.clock import RealClock
@@ -75,16 +76,6 @@ SEGMENTS = 5
 FIRST_CYCLES = 50
 FLOOR_START_WAIT = 60.0  # s: the floor process imports numpy and python-can before it says it is ready
 FLOOR_TPDOS = 2  # TPDO1 (0x6041 + 0x606C) and TPDO2 (0x6064): the run maps the position for its port observer
-CORE_RATIO_TARGET = 1.5  # issue 26: the control process's CPU within 1.5 x python-can's floor for the same cycle
-# pairs of a controller run and python-can's floor and the bare clock right after it, per default-set-up run (--smoke,
-# --quick, full): the floor of one pair moved 0.14-0.24 of a core between two bench runs here, and the pairs of one quick
-# run spread 1.29-2.24 for three axes beside the hogs (December 7), wider than the target's margin: five pairs' median,
-# not three's; a host stall of 1.5-6 ms in one 1 s run set its p99.9 at 12-44x the bare clock's (four quick runs)
-PAIRS = (1, 5, 5)
-QUANTILES = ("p99", "p99.9")  # the lateness quantiles issue 26 bounds
-LATENESS_RATIO_TARGET = 2.0  # issue 26: start lateness p99 and p99.9 within 2 x the bare clock's
-OVERRUN_TARGET = 0.005  # issue 26: at most 0.5 % of the cycles overrun
-DELAY_TARGET = 1.5  # issue 26: the loop delay the run observes on an idle machine, samples
 CORE_TARGET = 0.12  # issue 14: the controller at T = 1 ms within 0.12 of a core
 SETUPS = {"untuned": RealtimeSettings.untuned(), "--no-realtime": RealtimeSettings.unprivileged(),
           "default": RealtimeSettings()}
@@ -254,52 +245,6 @@ def can_floor(bus: dict, node_ids: tuple[int, ...], tpdos: int, period: float, d
             process.communicate(timeout=10)
 
 
-def paired_runs(first: tuple[dict, dict, dict], again: Callable[[], tuple[dict, dict, dict]], count: int) -> dict:
-    """The control process's core share over python-can's floor's, and its start lateness over the bare clock's, in
-    ``count`` pairs measured side by side: the first given (``first``: a run's figures, the bare clock's and the
-    floor's right after it, :func:`measure_pair`), each further one measured by ``again``.  Each pair's figures and
-    ratios, and the ratios' medians; a pair whose run or floor has no figure (a run refused at pre-flight, or one that
-    raised) counts in ``pairs`` only, with why: its run's exit reason and error, or the floor's reason."""
-    pairs = []
-    for k in range(count):
-        if k == 0:
-            run, bare, floor = first
-        else:
-            try:  # a further pair that fails keeps the pairs and the run measured before it (and says why)
-                run, bare, floor = again()
-            except Exception as exc:
-                run, bare, floor = {"exit_reason": "not run", "error": f"{type(exc).__name__}: {exc}"}, {}, {}
-        share, floor_share = run.get("core_share", {}).get("median"), floor.get("core_share")
-        pair = {"core_share": share, "floor_core_share": floor_share,
-                "ratio": share / floor_share if share and floor_share else None,
-                "run": run.get("exit_reason"), "error": run.get("error"),  # how each run ended (a stop shortens it)
-                **({} if floor_share else {"floor": floor.get("reason")})}
-        late, floor_late, bare_late = run.get("lateness_s", {}), floor.get("lateness_s", {}), bare.get("lateness_s", {})
-        for quantile in QUANTILES:
-            pair[f"lateness_{quantile}_ratio"] = _over(late, bare_late, quantile)
-            pair[f"floor_lateness_{quantile}_ratio"] = _over(floor_late, bare_late, quantile)
-        pair.update(cycles=run.get("cycles", 0), overruns=run.get("overruns", 0), observed_delay=run.get("observed_delay"))
-        pairs.append(pair)
-    return {"pairs": pairs, "ratio": _median(pair["ratio"] for pair in pairs)}
-
-
-def measure_pair(run: Callable[[], dict], bare: Callable[[], dict], floor: Callable[[], dict]) -> tuple[dict, dict, dict]:
-    """One pair of :func:`paired_runs`: a controller run, then the bare clock, then python-can's floor."""
-    measured = run()
-    return measured, bare(), floor()
-
-
-def _over(late: dict, bare_late: dict, quantile: str) -> float | None:
-    """One lateness quantile over the bare clock's (None where either is missing)."""
-    return late[quantile] / bare_late[quantile] if late.get(quantile) is not None and bare_late.get(quantile) else None
-
-
-def _median(values: Iterable[float | None]) -> float | None:
-    """The median of the values that are not None (None if there are none)."""
-    present = [value for value in values if value is not None]
-    return float(np.median(present)) if present else None
-
-
 def observed_delay(controller: WallController) -> float | None:
     """The loop delay (samples) the run saw: the delay its gate assumed plus the p99 of each cycle's
     start lateness and input age (the supervisor's measure, over the whole run); None before a cycle."""
@@ -328,7 +273,7 @@ def controller_run(settings: RealtimeSettings, duration: float, bus: dict, proce
         document = read_document(result.folder)
     writer = document.get("writer", {}).get("cpu_s")  # the writer process's own account (issue 26: report it)
     figures = {"exit_reason": result.exit_reason, "error": result.error,
-               "thread_cpu_s": threads.by_name() | ({WRITER: writer} if writer is not None else {}),
+               "thread_cpu_s": threads.by_name() | ({WRITER: writer} if writer is not None else {}), "writer_cpu_s": writer,
                "drive_policy": _POLICIES.get(os.sched_getscheduler(process.pid)), "scheduling": document.get("realtime")}
     if result.controller is not None and isinstance(result.controller.clock, RealClock):
         figures.update(clock_figures(result.controller.clock))
@@ -460,55 +405,3 @@ def axes_profile(size: Size) -> tuple[AxesProfile, str]:
         label += " without its ball (smoke)"
     admit(profile)
     return profile, label
-
-
-def axes_figures(axes: dict) -> dict:
-    """:func:`issue_26_figures`' ratios for the three-axis runs."""
-    return {label: _ratios(entry) for label, entry in axes.items() if label in ("quiet", "CPU hog")}
-
-
-def issue_26_figures(runs: dict) -> dict:
-    """Issue 26's ratios from the default set-up's runs (quiet and beside the hogs), each side by side
-    in one run: the controller's core share over python-can's floor, its lateness p99 and p99.9 over
-    the bare clock's, its overrun share, and the loop delay it observed."""
-    out: dict = {"core_ratio_target": CORE_RATIO_TARGET, "lateness_ratio_target": LATENESS_RATIO_TARGET,
-                 "overrun_target": OVERRUN_TARGET, "delay_target": DELAY_TARGET}
-    for label, setups in runs.items():
-        out[label] = _ratios(setups.get("default", {}))
-    return out
-
-
-def _unmeasured(k: int, pair: dict) -> str:
-    """Why pair ``k`` of :func:`paired_runs` has no ratio: its run's exit reason, else the floor's reason."""
-    if not pair.get("core_share"):
-        return f"pair {k}: its run ended with {pair.get('run') or 'no core share'!r}"
-    return f"pair {k}: no floor figure ({pair.get('floor') or 'no core share'})"
-
-
-def _ratios(entry: dict) -> dict:
-    """One default-set-up entry's figures over its pairs (:func:`paired_runs`), each a median with every pair's
-    beside it in order (None where a pair has none): core share over the floor's, lateness over the bare clock's
-    (the floor's too); the overrun share of all the pairs' cycles; the loop delay observed."""
-    controller = entry.get("controller", {})
-    pairs = entry.get("pairs", {}).get("pairs", [])
-    figures: dict = {}
-    ratios = [pair["ratio"] for pair in pairs]
-    if any(ratio is not None for ratio in ratios):
-        # every pair in order, None where it has no ratio, and why: a median of the pairs left is not one of all
-        figures["core_ratio"], figures["core_ratios"] = _median(ratios), ratios
-        figures["core_pairs_unmeasured"] = [_unmeasured(k, pair) for k, pair in enumerate(pairs, 1) if pair["ratio"] is None]
-        figures["floor_core_share"] = _median(pair["floor_core_share"] for pair in pairs if pair["ratio"] is not None)
-        figures["writer_cpu_s"] = controller.get("thread_cpu_s", {}).get(WRITER)
-    for name in [f"lateness_{quantile}_ratio" for quantile in QUANTILES] + ["observed_delay"]:
-        each = [pair.get(name) for pair in pairs]
-        if any(value is not None for value in each):
-            figures[name], figures[f"{name}s"] = _median(each), each
-    for quantile in QUANTILES:  # python-can alone on the same cycle, against the same bare clock
-        floor = _median(pair.get(f"floor_lateness_{quantile}_ratio") for pair in pairs)
-        if floor is not None:
-            figures[f"floor_lateness_{quantile}_ratio"] = floor
-    cycles = sum(pair.get("cycles", 0) for pair in pairs)
-    if cycles:
-        figures["overrun_share"] = sum(pair.get("overruns", 0) for pair in pairs) / cycles
-        figures["overrun_cycles"] = cycles
-    return figures
