@@ -25,7 +25,6 @@ process never imports python-can: this module imports it where frames are made a
 
 from __future__ import annotations
 
-import datetime
 import io
 import pathlib
 import struct
@@ -109,12 +108,13 @@ class _Staged(io.StringIO):
 def _asc_writer() -> type[can.ASCWriter]:
     """python-can's :class:`can.ASCWriter` with the header's milliseconds in three digits: python-can 4.6.1 writes
     them unpadded (a first frame at 17:19:10.005 gives ``17:19:10.5``), which its own ASCReader and CANoe read as
-    10.500 s, every frame of such a log then 0.5-0.9 s late against ``record.csv`` (break15b: +495 ms)."""
+    10.500 s, every frame of such a log then 0.5-0.9 s late against ``record.csv`` (break15b: +495 ms).  The writer
+    formats its ``FORMAT_DATE`` with the milliseconds as an int, so a format spec in the field pads them (the
+    constant python-can made a class attribute for a header of another form, PR 955)."""
     import can
 
     class AscWriter(can.ASCWriter):
-        def _format_header_datetime(self, dt: datetime.datetime) -> str:
-            return dt.strftime(self.FORMAT_DATE.format(f"{dt.microsecond // 1000:03d}"))
+        FORMAT_DATE = "%a %b %d %H:%M:%S.{:03d} %Y"
 
     return AscWriter
 
