@@ -216,7 +216,7 @@ def test_a_can_run_needs_every_axis_node_id(tmp_path: pathlib.Path, capsys: pyte
     path.write_text(GANTRY.read_text().replace("node_id = ", "unit_id = "))
     code = main(["run", str(path), "--interface", "virtual", "--channel", "x", "--out", str(tmp_path / "r")])
     err = capsys.readouterr().err
-    assert code == 2 and "axes[0].node_id = None is invalid; allowed: a node_id per axis on a CAN bus" in err
+    assert code == 2 and "axes[0].node_id is missing; allowed: a node_id per axis on a CAN bus" in err
     assert err.count("\n") == 1 and not (tmp_path / "r").exists()
 
 

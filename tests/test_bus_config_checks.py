@@ -68,7 +68,8 @@ def test_a_udp_multicast_group_or_port_that_cannot_be_is_refused_in_one_line(opt
                                                                                allowed: str) -> None:
     with pytest.raises(ParameterError) as refused:
         resolve_bus_config(**{**GROUP, option: value})
-    assert f"{option} = " in str(refused.value) and allowed in str(refused.value) and "\n" not in str(refused.value)
+    said = f"{option} is missing" if value is None else f"{option} = "
+    assert said in str(refused.value) and allowed in str(refused.value) and "\n" not in str(refused.value)
 
 
 def test_run_without_a_group_is_exit_2_in_one_line_before_its_bus(tmp_path: pathlib.Path,
@@ -77,5 +78,5 @@ def test_run_without_a_group_is_exit_2_in_one_line_before_its_bus(tmp_path: path
     code = main(["run", "cia402-handle", "--interface", "udp_multicast", "--node-id", "5", "--duration", "0.1",
                  "--out", str(out)])
     err = capsys.readouterr().err
-    assert code == 2 and err.count("\n") == 1 and "channel = None is invalid" in err, err
+    assert code == 2 and err.count("\n") == 1 and "channel is missing; allowed: a multicast group address" in err, err
     assert not out.exists()

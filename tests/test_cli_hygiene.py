@@ -54,7 +54,7 @@ INVALID = [
     (["validate", "cia402-handle", "--modbus", URL, "--no-bus-log"],
      "haptic-bus validate: error: --no-bus-log = True is invalid; allowed: CANopen runs only"),
     ([*RUN, BUS, "--node-id", "5", "--unit-id", "3"], "--unit-id = 3 is invalid; allowed: a Modbus option"),
-    ([*RUN, BUS], "--node-id = None is invalid; allowed: the drive's CANopen node id 1..127 (or --modbus URL)"),
+    ([*RUN, BUS], "--node-id is missing; allowed: the drive's CANopen node id 1..127 (or --modbus URL)"),
     (["run", "no-such-profile", BUS, "--node-id", "5"], "profile = 'no-such-profile' is invalid; allowed: an existing TOML"),
     (["run", "{malformed}", BUS, "--node-id", "5"], "(TOML syntax)"),
     (["upload", BUS, "--node-id", "127", "--object", "0", "--stiffness", "1", "--damping", "1", "--timeout", "-1"],

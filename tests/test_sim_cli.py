@@ -93,7 +93,7 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
         (["--modbus", MODBUS_URL, "--unit-ids", "1,1"], "'1,1' is invalid; allowed: distinct unit ids on one server"),
         (["--modbus", MODBUS_URL, "--unit-ids", "1,248"], "Modbus unit ids 1..247"),
         (["--modbus", MODBUS_URL, "--unit-ids", "1,2", "--unit-id", "3"], "--unit-id = 3 is invalid; allowed: --unit-ids"),
-        (["--modbus", MODBUS_URL, "--profile", "gantry-3d"], "--unit-ids = None is invalid; allowed: one unit id per axis"),
+        (["--modbus", MODBUS_URL, "--profile", "gantry-3d"], "--unit-ids is missing; allowed: one unit id per axis"),
         (["--modbus", MODBUS_URL, "--modbus", MODBUS_URL, "--profile", "gantry-3d"],
          "--modbus = 2 is invalid; allowed: one address for every axis of the profile, or one per axis (3)"),
         (["--modbus", MODBUS_URL, "--unit-ids", "1,2", "--profile", "gantry-3d"], "one unit id per axis of the profile (3)"),
