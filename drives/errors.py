@@ -41,8 +41,8 @@ class ParameterError(HapticBusError, ValueError):
 
 
 class DriveError(HapticBusError):
-    """A drive or its bus failed (no usable bus configuration, a mode or scaling the drive cannot
-    give, a node that is no controller); ``node`` names the drive (node id or unit id)."""
+    """A drive or its bus failed (a bus configuration python-can cannot open, a mode or scaling the drive
+    cannot give, a node that is no controller); ``node`` names the drive (node id or unit id)."""
 
     def __init__(self, node: str, message: str) -> None:
         self.node = node
