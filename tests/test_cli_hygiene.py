@@ -216,7 +216,7 @@ def test_another_master_is_refused_and_the_first_run_goes_on_until_ctrl_c(
     # the drive's heartbeat consumer at 1 s (default 60 ms, which this loaded machine can starve a
     # process for): what is tested here is the other master, not the heartbeat
     profile = profile_variant(tmp_path, "cia402-handle", "patient", extra="[safety]\nconsumer_ms = 1000\n")
-    first = Command("run", str(profile), *bus, "--node-id", str(NODE), "--virtual-time", "--duration", "600", "-q",
+    first = Command("run", str(profile), *bus, "--node-id", str(NODE), "--virtual-time", "--duration", "600", "--no-live",
                     "--no-plots", "--out", str(tmp_path / "first"))
     sniffer = open_bus(interface="udp_multicast", channel=group, port=port)
     tpdos = [0]

@@ -179,7 +179,7 @@ def test_haptic_bus_run_under_fuzz_exits_0_or_1_with_its_record(multicast, sim_p
     try:
         fuzzing.start()
         code = main(["run", "cia402-handle", *bus_args, "--node-id", str(NODE), "--virtual-time", "--duration", "600",
-                     "-q", "--no-plots", "--out", str(out)])
+                     "--no-live", "--no-plots", "--out", str(out)])
     finally:
         ended.set()
         fuzzing.join(timeout=60.0)

@@ -321,7 +321,7 @@ def test_the_commands_of_the_manual_run_three_units_in_two_processes(
     url = re.search(r"serving Modbus TCP on (tcp://\S+) ", log)
     assert url is not None, log
     returncode = main(["run", "gantry-3d", "--modbus", url[1], "--unit-ids", "1,2,3", "--virtual-time",
-                       "--duration", "1", "--out", str(tmp_path / "run"), "-q", "--no-plots"])
+                       "--duration", "1", "--out", str(tmp_path / "run"), "--no-live", "--no-plots"])
     out, err = capfd.readouterr()
     code, log = sim.stop()
     assert returncode == 0, err
