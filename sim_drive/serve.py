@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import datetime as dt
 import logging
 import signal
 import socket
 import sys
-import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -78,6 +78,12 @@ def set_up_process(wall_clock: bool, library: str, level: int) -> str:
     log_to_stderr(logging.INFO, fmt)
     logging.getLogger(library).setLevel(level)
     return answer_in_real_time()
+
+
+def utc_now() -> str:
+    """Now as ISO 8601 UTC to the millisecond (``2026-12-07T21:04:05.123Z``): when a server started, in
+    its serving line (it was a raw Unix time, ``started 1796674766.908``)."""
+    return dt.datetime.now(dt.UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
 def run_canopen(args: argparse.Namespace) -> int:
@@ -223,8 +229,8 @@ def run_modbus(args: argparse.Namespace) -> int:
         return 2
 
     def bound() -> None:
-        logger.info("unit %d: serving Modbus TCP on %s (timing %s, word order %s, started %.3f); %s",
-                    unit_id, sim.url, timing, word_order, time.time(), scheduling)
+        logger.info("unit %d: serving Modbus TCP on %s (timing %s, word order %s, started %s); %s",
+                    unit_id, sim.url, timing, word_order, utc_now(), scheduling)
 
     if not serve_until_stopped(args, lambda stop: sim.serve(stop, on_bound=bound)):
         return 1
@@ -270,8 +276,8 @@ def run_modbus_axes(args: argparse.Namespace) -> int:
     units = ", ".join(str(unit) for unit in sim.unit_ids)
 
     def bound() -> None:
-        logger.info("units %s: serving Modbus TCP on %s (one simulated drive per axis, the hand: %s, started %.3f); %s",
-                    units, ", ".join(dict.fromkeys(sim.urls)), type(hand).__name__, time.time(), scheduling)
+        logger.info("units %s: serving Modbus TCP on %s (one simulated drive per axis, the hand: %s, started %s); %s",
+                    units, ", ".join(dict.fromkeys(sim.urls)), type(hand).__name__, utc_now(), scheduling)
 
     if not serve_until_stopped(args, lambda stop: sim.serve(stop, bound)):
         return 1
