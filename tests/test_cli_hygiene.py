@@ -43,7 +43,7 @@ INVALID = [
     ([*RUN, BUS, "--node-id", "200"], "argument --node-id: node id = 200 is invalid; allowed: 1..127"),
     ([*RUN, "--modbus", URL, "--unit-id", "999"], "argument --unit-id: unit id = 999 is invalid; allowed: 1..247"),
     (["run", "gantry-3d", "--modbus", URL, "--unit-ids", "1,x"],
-     "argument --unit-ids: unit ids = '1,x' is invalid; allowed: Modbus unit ids 1..247 separated by commas"),
+     "argument --unit-ids: unit ids = '1,x' is invalid; allowed: Modbus unit ids 1..247 as N, N-M or a comma-separated list"),
     ([*RUN, "--modbus", "tcp://127.0.0.1"], "argument --modbus: --modbus 'tcp://127.0.0.1' is invalid; allowed: tcp://HOST:PORT"),
     ([*RUN, BUS, "--node-id", "5", "--controller-node-id", "5"],
      "--controller-node-id = 5 is invalid; allowed: a node id other than the drive's (5)"),
