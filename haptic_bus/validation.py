@@ -6,8 +6,16 @@ import math
 import numbers
 import os
 import pathlib
+from collections.abc import Sequence
 
-from haptic_bus.errors import ParameterError
+from haptic_bus.errors import NAMES_SHOWN, ParameterError
+
+
+def some_names(names: Sequence[str], joiner: str = "+", most: int = NAMES_SHOWN) -> str:
+    """``names`` joined by ``joiner``, at most ``most`` of them and the count of the rest
+    (``w0+w1+w2 and 2997 more``)."""
+    shown = joiner.join(names[:most])
+    return shown if len(names) <= most else f"{shown} and {len(names) - most} more"
 
 
 def real_range(low: float, high: float, unit: str = "", *, low_inclusive: bool = True) -> str:

@@ -26,7 +26,7 @@ from typing import Any, TypeVar
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
 from haptic_bus.control import protocols
 from haptic_bus.errors import ParameterError
-from haptic_bus.validation import real_in_range
+from haptic_bus.validation import real_in_range, some_names
 
 _POSITION_RANGE = (-1e6, 1e6)  # m
 
@@ -199,7 +199,8 @@ class CompiledScene:
         ParameterError for a name the scene does not have."""
         unknown = sorted(set(changes) - {obj.name for obj in self.objects})
         if unknown:
-            raise ParameterError("object", unknown[0], f"one of {sorted(obj.name for obj in self.objects)}", "scene")
+            raise ParameterError("object", unknown[0], f"one of {some_names(sorted(obj.name for obj in self.objects), ', ')}",
+                                 "scene")
         return compile_scene(with_wall_law(obj, *changes[obj.name]) if obj.name in changes else obj
                              for obj in self.objects)
 
