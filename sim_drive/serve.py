@@ -86,6 +86,19 @@ def utc_now() -> str:
     return dt.datetime.now(dt.UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
+SIM_BUS_ALLOWED = ("--interface NAME --channel CHANNEL and --node-id N (--node-ids for several axes), "
+                   "or --modbus URL")
+
+
+def missing_flag(args: argparse.Namespace, names: tuple[str, ...]) -> ParameterError | None:
+    """The first of ``names`` not given, as every command says a missing flag (``--channel is missing;
+    allowed: ...``, :class:`ParameterError`'s rule), or None when all are given."""
+    for name in names:
+        if getattr(args, name) is None:
+            return ParameterError("--" + name.replace("_", "-"), None, SIM_BUS_ALLOWED)
+    return None
+
+
 def run_canopen(args: argparse.Namespace) -> int:
     """The CANopen slave until SIGINT/SIGTERM."""
 
@@ -97,9 +110,9 @@ def run_canopen(args: argparse.Namespace) -> int:
         return 0
     if args.node_ids is not None:
         return run_axes(args)
-    missing = [name for name in ("interface", "channel", "node_id") if getattr(args, name) is None]
-    if missing:
-        print(f"{PROG}: error: missing --{', --'.join(m.replace('_', '-') for m in missing)}", file=sys.stderr)
+    missing = missing_flag(args, ("interface", "channel", "node_id"))
+    if missing is not None:
+        print(f"{PROG}: error: {missing}", file=sys.stderr)
         return 2
     scheduling = set_up_process(args.log_wall_clock, "canopen", logging.WARNING)
     try:
@@ -139,9 +152,9 @@ def run_axes(args: argparse.Namespace) -> int:
 
     from sim_drive.canopen.multi_axis import MultiAxisSim
 
-    missing = [name for name in ("interface", "channel") if getattr(args, name) is None]
-    if missing:
-        print(f"{PROG}: error: missing --{', --'.join(missing)}", file=sys.stderr)
+    missing = missing_flag(args, ("interface", "channel"))
+    if missing is not None:
+        print(f"{PROG}: error: {missing}", file=sys.stderr)
         return 2
     try:  # the bus as one axis' (--bus-kwargs were dropped here: the slaves served python-can's default port)
         if args.bitrate is not None:
