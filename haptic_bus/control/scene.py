@@ -250,7 +250,10 @@ def compile_scene(objects: Iterable[SceneObject]) -> CompiledScene:
         if end != math.inf:
             ends.setdefault(end, []).append(i)
     breaks = sorted(set(starts) | set(ends))
-    ks, kas, bs, who = [], [], [], []
+    ks: list[float] = []
+    kas: list[float] = []
+    bs: list[float] = []
+    who: list[tuple[str, ...]] = []
     values = [(K, K * anchor, B) for _, _, K, anchor, B in pieces]
     active: set[int] = set()
     sums: list[int] = []  # K, K * anchor, B of the active pieces, exact (2**-1074), once many act at once
