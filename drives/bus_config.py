@@ -35,10 +35,10 @@ BUS_KWARGS_HELP = ("python-can's own spelling of --bus-option, as can.logger and
                    "KEY=VALUE after one flag (--bus-kwargs port=43113 hop_limit=0); the same values as --bus-option; "
                    "a key given twice with different values is refused")
 
-_NO_INTERFACE = (
-    "no CAN interface selected: pass interface=... (e.g. 'socketcan', 'virtual', 'udp_multicast'), "
-    "or set CAN_INTERFACE/CAN_CHANNEL, or write a [default] section in ~/.canrc"
-)
+NO_INTERFACE = ("--interface NAME and --channel CHANNEL (e.g. socketcan can0), CAN_INTERFACE and CAN_CHANNEL, "
+                "a [default] section in python-can's config file ~/.canrc, or --modbus URL")
+"""What a bus configuration that names no interface is refused with (``interface is missing; allowed: ...``,
+exit 2): no bus given is invalid input, the same for every command that opens one."""
 
 
 def resolve_bus_config(
@@ -51,7 +51,8 @@ def resolve_bus_config(
     **kwargs: Any,
 ) -> dict[str, Any]:
     """The complete python-can bus configuration: explicit arguments over python-can's config chain
-    (``udp_multicast`` with no ``hop_limit`` gets :data:`LOCAL_HOP_LIMIT`, module docstring)."""
+    (``udp_multicast`` with no ``hop_limit`` gets :data:`LOCAL_HOP_LIMIT`, module docstring); a
+    configuration that names no interface anywhere is invalid input, :class:`ParameterError` (:data:`NO_INTERFACE`)."""
     given: dict[str, Any] = dict(kwargs)
     if interface is not None:
         given["interface"] = interface
@@ -68,13 +69,13 @@ def resolve_bus_config(
         config = dict(can.util.load_config(path=config_file, config=given, context=context))
     except (can.CanInterfaceNotImplementedError, NotImplementedError, ValueError, TypeError) as exc:
         if "None" in str(exc):
-            raise DriveError(where, _NO_INTERFACE) from exc
+            raise ParameterError("interface", None, NO_INTERFACE, "bus") from None
         if interface is not None and interface not in can.interfaces.VALID_INTERFACES:  # the user's typo: exit 2
             raise ParameterError("interface", interface, "one of python-can's: "
                                  + ", ".join(sorted(can.interfaces.VALID_INTERFACES)), where) from None
         raise DriveError(where, f"invalid CAN bus configuration: {exc}") from exc
     if not config.get("interface"):
-        raise DriveError(where, _NO_INTERFACE)
+        raise ParameterError("interface", None, NO_INTERFACE, "bus")
     rate = config.get("bitrate")
     if rate is not None and (isinstance(rate, bool) or not isinstance(rate, int) or rate <= 0):
         raise ParameterError("bitrate", rate, "a positive whole number of bit/s (the adapter names the rates it supports)",

@@ -23,6 +23,11 @@ class ParameterError(HapticBusError, ValueError):
 
     ``name``, ``value`` and ``allowed`` are given at construction, so a commissioning engineer can
     act on the message without reading code; ``context`` says where it was read (``profile PATH``).
+
+    One rule for a value that is not there: ``value`` None means nothing was given (a flag not on the
+    command line, a key not in the profile, a keyword left at None), and the message says
+    ``NAME is missing; allowed: ...``, never ``NAME = None``.  A reader that meets an explicit null
+    (run.json's JSON ``null``) says so in its own words (:mod:`haptic_bus.app.run_folder`).
     """
 
     def __init__(self, name: str, value: object, allowed: str, context: str = "") -> None:
@@ -30,13 +35,14 @@ class ParameterError(HapticBusError, ValueError):
         self.value = value
         self.allowed = allowed
         self.context = context
-        self.detail = f"{name} = {value!r} is invalid; allowed: {allowed}"  # the message without its context
+        said = "is missing" if value is None else f"= {value!r} is invalid"
+        self.detail = f"{name} {said}; allowed: {allowed}"  # the message without its context
         super().__init__(f"{context}: {self.detail}" if context else self.detail)
 
 
 class DriveError(HapticBusError):
-    """A drive or its bus failed (no usable bus configuration, a mode or scaling the drive cannot
-    give, a node that is no controller); ``node`` names the drive (node id or unit id)."""
+    """A drive or its bus failed (a bus configuration python-can cannot open, a mode or scaling the drive
+    cannot give, a node that is no controller); ``node`` names the drive (node id or unit id)."""
 
     def __init__(self, node: str, message: str) -> None:
         self.node = node

@@ -49,6 +49,11 @@ from drives.errors import (
     ParameterError,
 )
 
+NAMES_SHOWN = 3
+"""How many items a message shows of a list (a refusal's objects and reasons, the names a check allows):
+the first few and the count of the rest (:func:`haptic_bus.validation.some_names`), so that a scene of
+3 000 walls is one short line, not 3 000 names."""
+
 
 class Decision(Protocol):
     """What a refusal needs of a gate's decision: one line per reason."""
@@ -72,10 +77,13 @@ class Refusal(HapticBusError):
     @classmethod
     def by_gate(cls, decision: Decision, where: str = "", subject: str = "change") -> Refusal:
         """A gate's refusal of ``subject`` (the ``change``, the ``scene``); ``where`` (e.g. ``profile PATH``)
-        prefixes the message."""
+        prefixes the message, which says the first :data:`NAMES_SHOWN` reasons and the count of the rest
+        (``reasons`` holds every one)."""
         prefix = f"{where}: " if where else ""
-        return cls(f"{prefix}passivity gate refused the {subject}: " + "; ".join(decision.reasons), decision.reasons,
-                   decision)
+        said = "; ".join(decision.reasons[:NAMES_SHOWN])
+        rest = len(decision.reasons) - NAMES_SHOWN
+        more = f"; and {rest} more" if rest > 0 else ""
+        return cls(f"{prefix}passivity gate refused the {subject}: {said}{more}", decision.reasons, decision)
 
 
 class AssumptionBroken(HapticBusError):

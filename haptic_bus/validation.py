@@ -6,8 +6,16 @@ import math
 import numbers
 import os
 import pathlib
+from collections.abc import Sequence
 
-from haptic_bus.errors import ParameterError
+from haptic_bus.errors import NAMES_SHOWN, ParameterError
+
+
+def some_names(names: Sequence[str], joiner: str = "+", most: int = NAMES_SHOWN) -> str:
+    """``names`` joined by ``joiner``, at most ``most`` of them and the count of the rest
+    (``w0+w1+w2 and 2997 more``)."""
+    shown = joiner.join(names[:most])
+    return shown if len(names) <= most else f"{shown} and {len(names) - most} more"
 
 
 def real_range(low: float, high: float, unit: str = "", *, low_inclusive: bool = True) -> str:
@@ -60,16 +68,27 @@ def whole_in_range(name: str, value: object, low: int, high: int, *, context: st
 
 
 def ids_in_order(name: str, text: str, what: str, low: int, high: int, *, distinct: bool = False) -> list[int]:
-    """``"5,6,7"`` -> [5, 6, 7], in the order given (one per axis): whole numbers in ``low..high``
-    (decimal or ``0x..``; ``distinct``: none twice), else ParameterError naming ``name`` and ``what``
-    is allowed (``"CANopen node ids"``)."""
-    try:
-        ids = [int(part.strip(), 0) for part in text.split(",")]
-    except ValueError:
-        ids = []
+    """The one reader of a list of node or unit ids, for every flag that takes several (``run``/``sim``
+    ``--unit-ids``, ``sim --node-ids``, ``scan --node-ids``/``--unit-ids``): ``"5,6,7"`` or ``"5-7"``
+    -> [5, 6, 7], in the order given (one per axis; a range ascending): whole numbers in ``low..high``
+    (decimal or ``0x..``; ``distinct``: none twice), else ParameterError naming ``name`` and what is
+    allowed (``what``: ``"CANopen node ids"``), the same words for every such flag."""
+    ids: list[int] = []
+    for part in text.split(","):
+        first, dash, last = part.strip().partition("-")
+        try:
+            start = int(first, 0)
+            stop = int(last, 0) if dash else start
+        except ValueError:
+            ids = []
+            break
+        if start > stop:
+            ids = []
+            break
+        ids.extend(range(start, stop + 1))
     if not ids or (distinct and len(set(ids)) != len(ids)) or not all(low <= n <= high for n in ids):
-        raise ParameterError(name, text, f"{'distinct ' if distinct else ''}{what} {low}..{high} separated by commas, "
-                                         f"e.g. {low},{low + 1},{low + 2}")
+        raise ParameterError(name, text, f"{'distinct ' if distinct else ''}{what} {low}..{high} as N, N-M or a "
+                                         f"comma-separated list of those, e.g. {low},{low + 1},{low + 2} or {low}-{low + 2}")
     return ids
 
 

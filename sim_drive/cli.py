@@ -101,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "(one server, a unit per axis) or once per axis (a server each)")
     modbus.add_argument("--unit-id", type=_integer_or_text, help="Modbus unit id 1..247, one a master can address (default 1)")
     modbus.add_argument("--unit-ids", metavar="IDS",
-                        help="several axes (e.g. 1,2,3): one simulated drive per unit, in axis order; with a multi-axis "
+                        help="several axes (e.g. 1,2,3 or 1-3): one simulated drive per unit, in axis order; with a multi-axis "
                              "--profile ([[axes]]) each unit takes its axis' plant and hidden truth, and the profile's hand "
                              "in space pushes them all (default: the profile's unit_id, else unit 1 on each server)")
     modbus.add_argument("--word-order", choices=["big", "little"], help="32-bit word order (default big: high word first)")
@@ -134,7 +134,7 @@ def _add_overrides(parser: argparse.ArgumentParser, canopen: argparse._ArgumentG
 def add_axes_arguments(group: argparse._ArgumentGroup) -> None:
     """``--node-ids 5,6,7``: a simulated multi-axis device, one CANopen slave per node."""
     group.add_argument("--node-ids", metavar="IDS",
-                       help="several axes in one process (e.g. 5,6,7): one simulated drive per node on the bus, each its "
+                       help="several axes in one process (e.g. 5,6,7 or 5-7): one simulated drive per node on the bus, each its "
                             "own exact plant; with a multi-axis --profile ([[axes]]) each node takes its axis' plant and "
                             "hidden truth, and the profile's hand in space ([space.operator]) pushes them all")
 

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import datetime as dt
 import logging
 import signal
 import socket
 import sys
-import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -80,6 +80,25 @@ def set_up_process(wall_clock: bool, library: str, level: int) -> str:
     return answer_in_real_time()
 
 
+def utc_now() -> str:
+    """Now as ISO 8601 UTC to the millisecond (``2026-12-07T21:04:05.123Z``): when a server started, in
+    its serving line (it was a raw Unix time, ``started 1796674766.908``)."""
+    return dt.datetime.now(dt.UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+SIM_BUS_ALLOWED = ("--interface NAME --channel CHANNEL and --node-id N (--node-ids for several axes), "
+                   "or --modbus URL")
+
+
+def missing_flag(args: argparse.Namespace, names: tuple[str, ...]) -> ParameterError | None:
+    """The first of ``names`` not given, as every command says a missing flag (``--channel is missing;
+    allowed: ...``, :class:`ParameterError`'s rule), or None when all are given."""
+    for name in names:
+        if getattr(args, name) is None:
+            return ParameterError("--" + name.replace("_", "-"), None, SIM_BUS_ALLOWED)
+    return None
+
+
 def run_canopen(args: argparse.Namespace) -> int:
     """The CANopen slave until SIGINT/SIGTERM."""
 
@@ -91,9 +110,9 @@ def run_canopen(args: argparse.Namespace) -> int:
         return 0
     if args.node_ids is not None:
         return run_axes(args)
-    missing = [name for name in ("interface", "channel", "node_id") if getattr(args, name) is None]
-    if missing:
-        print(f"{PROG}: error: missing --{', --'.join(m.replace('_', '-') for m in missing)}", file=sys.stderr)
+    missing = missing_flag(args, ("interface", "channel", "node_id"))
+    if missing is not None:
+        print(f"{PROG}: error: {missing}", file=sys.stderr)
         return 2
     scheduling = set_up_process(args.log_wall_clock, "canopen", logging.WARNING)
     try:
@@ -133,9 +152,9 @@ def run_axes(args: argparse.Namespace) -> int:
 
     from sim_drive.canopen.multi_axis import MultiAxisSim
 
-    missing = [name for name in ("interface", "channel") if getattr(args, name) is None]
-    if missing:
-        print(f"{PROG}: error: missing --{', --'.join(missing)}", file=sys.stderr)
+    missing = missing_flag(args, ("interface", "channel"))
+    if missing is not None:
+        print(f"{PROG}: error: {missing}", file=sys.stderr)
         return 2
     try:  # the bus as one axis' (--bus-kwargs were dropped here: the slaves served python-can's default port)
         if args.bitrate is not None:
@@ -223,8 +242,8 @@ def run_modbus(args: argparse.Namespace) -> int:
         return 2
 
     def bound() -> None:
-        logger.info("unit %d: serving Modbus TCP on %s (timing %s, word order %s, started %.3f); %s",
-                    unit_id, sim.url, timing, word_order, time.time(), scheduling)
+        logger.info("unit %d: serving Modbus TCP on %s (timing %s, word order %s, started %s); %s",
+                    unit_id, sim.url, timing, word_order, utc_now(), scheduling)
 
     if not serve_until_stopped(args, lambda stop: sim.serve(stop, on_bound=bound)):
         return 1
@@ -270,8 +289,8 @@ def run_modbus_axes(args: argparse.Namespace) -> int:
     units = ", ".join(str(unit) for unit in sim.unit_ids)
 
     def bound() -> None:
-        logger.info("units %s: serving Modbus TCP on %s (one simulated drive per axis, the hand: %s, started %.3f); %s",
-                    units, ", ".join(dict.fromkeys(sim.urls)), type(hand).__name__, time.time(), scheduling)
+        logger.info("units %s: serving Modbus TCP on %s (one simulated drive per axis, the hand: %s, started %s); %s",
+                    units, ", ".join(dict.fromkeys(sim.urls)), type(hand).__name__, utc_now(), scheduling)
 
     if not serve_until_stopped(args, lambda stop: sim.serve(stop, bound)):
         return 1

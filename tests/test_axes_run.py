@@ -121,7 +121,7 @@ def test_two_processes_on_udp_multicast_render_the_slope_as_one_process_does(
     # 1.51 s on, the same in every run (each SYNC advances the plants exactly T): 95 cycles at rest (2 s, 245 cycles at
     # rest, passed the same asserts; what is asserted at rest is the last cycle)
     returncode = main(["run", str(profile_path), *bus, "--virtual-time", "--duration", "1.7", "--out",
-                       str(tmp_path / "two"), "-q", "--no-plots"])
+                       str(tmp_path / "two"), "--no-live", "--no-plots"])
     out, err = capfd.readouterr()
     code, log = sim.stop()
     assert returncode == 0, err
@@ -216,7 +216,7 @@ def test_a_can_run_needs_every_axis_node_id(tmp_path: pathlib.Path, capsys: pyte
     path.write_text(GANTRY.read_text().replace("node_id = ", "unit_id = "))
     code = main(["run", str(path), "--interface", "virtual", "--channel", "x", "--out", str(tmp_path / "r")])
     err = capsys.readouterr().err
-    assert code == 2 and "axes[0].node_id = None is invalid; allowed: a node_id per axis on a CAN bus" in err
+    assert code == 2 and "axes[0].node_id is missing; allowed: a node_id per axis on a CAN bus" in err
     assert err.count("\n") == 1 and not (tmp_path / "r").exists()
 
 

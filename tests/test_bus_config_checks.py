@@ -7,7 +7,9 @@ one line each, exit 2 before any bus is opened:
   configuration (``haptic-bus run --bitrate -5`` was accepted);
 - udp_multicast's group and port: ``haptic-bus run --interface udp_multicast`` without ``--channel`` ended in
   python-can's ``inet_pton`` TypeError traceback, and ``--bus-option port=99999`` was a drive error, exit 1
-  (found by hand, break14b).
+  (found by hand, break14b);
+- no bus at all (no --interface, nothing in python-can's environment or config file): every command that
+  opens a bus said it as a drive error, exit 1 (``haptic-bus status``, break round 16); it is invalid input.
 """
 
 from __future__ import annotations
@@ -68,7 +70,8 @@ def test_a_udp_multicast_group_or_port_that_cannot_be_is_refused_in_one_line(opt
                                                                                allowed: str) -> None:
     with pytest.raises(ParameterError) as refused:
         resolve_bus_config(**{**GROUP, option: value})
-    assert f"{option} = " in str(refused.value) and allowed in str(refused.value) and "\n" not in str(refused.value)
+    said = f"{option} is missing" if value is None else f"{option} = "
+    assert said in str(refused.value) and allowed in str(refused.value) and "\n" not in str(refused.value)
 
 
 def test_run_without_a_group_is_exit_2_in_one_line_before_its_bus(tmp_path: pathlib.Path,
@@ -77,5 +80,30 @@ def test_run_without_a_group_is_exit_2_in_one_line_before_its_bus(tmp_path: path
     code = main(["run", "cia402-handle", "--interface", "udp_multicast", "--node-id", "5", "--duration", "0.1",
                  "--out", str(out)])
     err = capsys.readouterr().err
-    assert code == 2 and err.count("\n") == 1 and "channel = None is invalid" in err, err
+    assert code == 2 and err.count("\n") == 1 and "channel is missing; allowed: a multicast group address" in err, err
     assert not out.exists()
+
+
+NO_BUS_COMMANDS = [
+    ["status", "--node-id", "5"], ["scan"], ["sdo", "read", "0x1000", "--node-id", "5"], ["fault-reset", "--node-id", "5"],
+    ["run", "cia402-handle", "--node-id", "5", "--duration", "0.1"], ["validate", "cia402-handle", "--node-id", "5"],
+    ["upload", "--node-id", "5", "--object", "1", "--stiffness", "1", "--damping", "1"],
+    ["identify", "--profile", "cia402-handle", "--node-id", "5"],
+]
+
+
+@pytest.mark.parametrize("command", NO_BUS_COMMANDS, ids=[c[0] for c in NO_BUS_COMMANDS])
+def test_no_bus_configured_is_exit_2_in_one_line_naming_what_is_missing(
+        command: list[str], tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr("can.rc", {})
+    monkeypatch.setattr("can.util.CONFIG_FILES", [])
+    monkeypatch.chdir(tmp_path)  # a run folder would appear here
+    code = main(command)
+    err = capsys.readouterr().err
+    assert code == 2 and err == (f"haptic-bus {command[0]}: error: bus: interface is missing; allowed: --interface NAME "
+                                 "and --channel CHANNEL (e.g. socketcan can0), CAN_INTERFACE and CAN_CHANNEL, a [default] "
+                                 "section in python-can's config file ~/.canrc, or --modbus URL\n"), err
+    assert list(tmp_path.iterdir()) == []

@@ -190,8 +190,8 @@ def test_bus_config_missing_or_unknown_interface_is_a_readable_error(monkeypatch
     for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
         monkeypatch.delenv(name, raising=False)
     monkeypatch.setattr("can.rc", {})
-    with pytest.raises(DriveError, match="no CAN interface selected"):
-        resolve_bus_config(config_file="/nonexistent/can.conf")
+    with pytest.raises(ParameterError, match=r"^bus: interface is missing; allowed: --interface NAME and --channel "):
+        resolve_bus_config(config_file="/nonexistent/can.conf")  # no bus given: invalid input, exit 2
     with pytest.raises(ParameterError, match="interface = 'nonesuch' is invalid; allowed: one of python-can's: "):
         resolve_bus_config("nonesuch", config_file="/nonexistent/can.conf")  # the user's typo: exit 2
 

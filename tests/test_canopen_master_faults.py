@@ -28,7 +28,7 @@ from drives.cia402 import (
     State,
     decode_statusword,
 )
-from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout
+from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout, ParameterError
 from sim_drive.eds import eds_path
 
 NODE_ID = 5  # canopen_rig's default node (the messages checked below name node 5)
@@ -376,7 +376,7 @@ def test_missing_bus_configuration_is_a_readable_error(monkeypatch):
     monkeypatch.setattr("can.rc", {})
     monkeypatch.setattr("can.util.CONFIG_FILES", [])
     drive = CanopenDrive(NODE_ID)
-    with pytest.raises(DriveError, match="no CAN interface selected"):
+    with pytest.raises(ParameterError, match=r"^bus: interface is missing; allowed: --interface NAME "):
         drive.connect()
 
 

@@ -43,7 +43,7 @@ INVALID = [
     ([*RUN, BUS, "--node-id", "200"], "argument --node-id: node id = 200 is invalid; allowed: 1..127"),
     ([*RUN, "--modbus", URL, "--unit-id", "999"], "argument --unit-id: unit id = 999 is invalid; allowed: 1..247"),
     (["run", "gantry-3d", "--modbus", URL, "--unit-ids", "1,x"],
-     "argument --unit-ids: unit ids = '1,x' is invalid; allowed: Modbus unit ids 1..247 separated by commas"),
+     "argument --unit-ids: unit ids = '1,x' is invalid; allowed: Modbus unit ids 1..247 as N, N-M or a comma-separated list"),
     ([*RUN, "--modbus", "tcp://127.0.0.1"], "argument --modbus: --modbus 'tcp://127.0.0.1' is invalid; allowed: tcp://HOST:PORT"),
     ([*RUN, BUS, "--node-id", "5", "--controller-node-id", "5"],
      "--controller-node-id = 5 is invalid; allowed: a node id other than the drive's (5)"),
@@ -54,7 +54,7 @@ INVALID = [
     (["validate", "cia402-handle", "--modbus", URL, "--no-bus-log"],
      "haptic-bus validate: error: --no-bus-log = True is invalid; allowed: CANopen runs only"),
     ([*RUN, BUS, "--node-id", "5", "--unit-id", "3"], "--unit-id = 3 is invalid; allowed: a Modbus option"),
-    ([*RUN, BUS], "--node-id = None is invalid; allowed: the drive's CANopen node id 1..127 (or --modbus URL)"),
+    ([*RUN, BUS], "--node-id is missing; allowed: the drive's CANopen node id 1..127 (or --modbus URL)"),
     (["run", "no-such-profile", BUS, "--node-id", "5"], "profile = 'no-such-profile' is invalid; allowed: an existing TOML"),
     (["run", "{malformed}", BUS, "--node-id", "5"], "(TOML syntax)"),
     (["upload", BUS, "--node-id", "127", "--object", "0", "--stiffness", "1", "--damping", "1", "--timeout", "-1"],
@@ -216,7 +216,7 @@ def test_another_master_is_refused_and_the_first_run_goes_on_until_ctrl_c(
     # the drive's heartbeat consumer at 1 s (default 60 ms, which this loaded machine can starve a
     # process for): what is tested here is the other master, not the heartbeat
     profile = profile_variant(tmp_path, "cia402-handle", "patient", extra="[safety]\nconsumer_ms = 1000\n")
-    first = Command("run", str(profile), *bus, "--node-id", str(NODE), "--virtual-time", "--duration", "600", "-q",
+    first = Command("run", str(profile), *bus, "--node-id", str(NODE), "--virtual-time", "--duration", "600", "--no-live",
                     "--no-plots", "--out", str(tmp_path / "first"))
     sniffer = open_bus(interface="udp_multicast", channel=group, port=port)
     tpdos = [0]

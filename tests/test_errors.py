@@ -77,6 +77,12 @@ def test_one_root_and_invalid_input_is_one_class():
     assert str(invalid) == "x = 1 is invalid; allowed: 0..0"
 
 
+def test_a_value_not_given_is_said_missing_not_none():
+    missing = errors.ParameterError("--node-id", None, "1..127", "run")
+    assert str(missing) == "run: --node-id is missing; allowed: 1..127"
+    assert (missing.name, missing.value, missing.detail) == ("--node-id", None, "--node-id is missing; allowed: 1..127")
+
+
 def test_a_drive_in_fault_is_no_timeout_and_a_silence_is_one():
     fault = errors.DriveFault("node 5", "no OPERATION ENABLED within 1 s", state="SWITCH ON DISABLED")
     assert not isinstance(fault, TimeoutError) and isinstance(fault, errors.DriveError)

@@ -11,6 +11,7 @@ printed, record.csv and run.json written.  Bounded in time; the seed is fixed.
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import signal
@@ -26,6 +27,7 @@ import pytest
 from drives.bus_config import open_bus
 from drives.errors import DriveError
 from haptic_bus.app.cli import main
+from haptic_bus.app.run_options import exit_status
 from tests.conftest import SDO_WAIT
 from tests.raw_bus import FailingBus
 
@@ -188,7 +190,8 @@ def test_haptic_bus_run_under_fuzz_exits_0_or_1_with_its_record(multicast, sim_p
     assert tpdos == [500], (tpdos, stderr, sim.log()[-2000:])
     assert code in (0, 1), stderr
     assert "Traceback" not in stderr
-    assert "ended:" in stdout and (out / "record.csv").is_file() and (out / "run.json").is_file()
+    assert stdout == "" and (out / "record.csv").is_file()  # -q: errors only; how it ended is in run.json
+    assert exit_status(json.loads((out / "run.json").read_text())["exit_reason"]) == code
     if code == 1:
         assert len(stderr.strip().splitlines()) == 1 and "drive error" in stderr
     assert sim.process.poll() is None, sim.log()[-2000:]  # the drive lives on, and serves:

@@ -148,7 +148,7 @@ def test_a_server_that_is_not_there_is_one_line(tmp_path: pathlib.Path, modbus_g
 
 
 @pytest.mark.parametrize(("args", "expected"), [
-    (["--modbus", "{url}"], "--unit-ids = None is invalid; allowed: one Modbus unit id per axis (3, e.g. 1,2,3)"),
+    (["--modbus", "{url}"], "--unit-ids is missing; allowed: one Modbus unit id per axis (3, e.g. 1,2,3)"),
     (["--modbus", "{url}", "--unit-ids", "1,2"], "--unit-ids = [1, 2] is invalid; allowed: 3 unit ids, one per axis"),
     (["--modbus", "{url}", "--modbus", "{url}"], "--modbus = ["),
     (["--modbus", "{url}", "--unit-id", "2"], "--unit-id = 2 is invalid; allowed: none with a multi-axis profile"),
@@ -320,8 +320,10 @@ def test_the_commands_of_the_manual_run_three_units_in_two_processes(
     log = sim.wait_for_line("units 1, 2, 3: serving Modbus TCP on", START_WAIT)
     url = re.search(r"serving Modbus TCP on (tcp://\S+) ", log)
     assert url is not None, log
+    # when it started, in ISO 8601 UTC (it was a raw Unix time, "started 1796674766.908")
+    assert re.search(r", started \d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z\); ", log), log
     returncode = main(["run", "gantry-3d", "--modbus", url[1], "--unit-ids", "1,2,3", "--virtual-time",
-                       "--duration", "1", "--out", str(tmp_path / "run"), "-q", "--no-plots"])
+                       "--duration", "1", "--out", str(tmp_path / "run"), "--no-live", "--no-plots"])
     out, err = capfd.readouterr()
     code, log = sim.stop()
     assert returncode == 0, err

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import pathlib
+import re
 import subprocess
 import time
 from collections.abc import Callable
@@ -156,6 +157,7 @@ def test_modbus_status_fault_reset_and_run_again_after_kill_9(sim_process: Any, 
     sim = sim_process("--modbus", "tcp://127.0.0.1:0", "--profile", "cia402-handle")
     log = sim.wait_for_line("serving Modbus TCP on", START_WAIT)
     url = log.split("serving Modbus TCP on ", 1)[1].split()[0]
+    assert re.search(r", started \d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z\); ", log), log  # ISO 8601 UTC, no Unix time
     profile = _profile(tmp_path)
     run = _start("run", profile, "--modbus", url, "--duration", "60", "-q", "--out", str(tmp_path / "killed"))
     try:

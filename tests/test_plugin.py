@@ -112,7 +112,7 @@ def test_an_in_process_drive_is_built_from_the_truth_file(haptic_sim) -> None:
     (dict(profile="cia402-handle", operator={"model": "constant", "level": "x"}), "operator_model.level = 'x' is invalid"),
     (dict(profile="cia402-handle", interface="can0"), "simulated drive: interface = 'can0' is invalid; allowed: "
                                                       "virtual, lockstep, udp_multicast, socketcan"),
-    (dict(mass=1.0), "simulated drive: profile = None is invalid; allowed: a shipped profile name or a TOML path"),
+    (dict(mass=1.0), "simulated drive: profile is missing; allowed: a shipped profile name or a TOML path"),
 ], ids=["out-of-range", "unknown-key", "bad-operator", "bad-interface", "truth-without-profile"])
 def test_a_bad_truth_is_one_line_naming_the_field(haptic_sim, call: dict, message: str) -> None:
     kwargs = dict(call)

@@ -28,7 +28,7 @@ def load_profile(*args, **kwargs):
     return real(*args, **kwargs)
 profiles.load_profile = load_profile
 sys.exit(main(["run", "cia402-handle", "--interface", "udp_multicast", "--channel", "239.74.164.9",
-               "--bus-option", "port=46009", "--node-id", "5", "--virtual-time", "-q"]))
+               "--bus-option", "port=46009", "--node-id", "5", "--virtual-time", "--no-live"]))
 """
 
 # The console script as pip writes it (``from MODULE import FUNCTION``), for pyproject's target,

@@ -51,7 +51,7 @@ for out, full in zip(sys.argv[2::2], (mode == "full" for mode in sys.argv[3::2])
     stdout, stderr = io.StringIO(), io.StringIO()
     with simulated_drive(transport, "cia402-handle") as drive:
         with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-            code = main(["run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "60", "-q", "--no-plots",
+            code = main(["run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "60", "--no-live", "--no-plots",
                          "--out", out])
         states = [state.name for state in drive.states]
     kept = {"rows": read_record(f"{out}/record.csv").cycles, "status": json.load(open(f"{out}/run.json"))["status"]} \
@@ -152,7 +152,7 @@ def test_a_folder_deleted_while_the_run_goes_on_stops_it_with_one_line(transport
 
         deleter = threading.Thread(target=delete_once_cycling, daemon=True)
         deleter.start()
-        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "60", "-q",
+        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "60", "--no-live",
                          "--no-plots", "--out", str(out))
         deleter.join(35.0)
         assert drive.states[-1] is State.SWITCH_ON_DISABLED and State.OPERATION_ENABLED in drive.states

@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import pytest
 
+from drives.modbus.in_process import tcp_url
+from drives.modbus.link import ModbusAddress
+from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import read_profile
 from haptic_bus.app.run_links import modbus_units
 from haptic_bus.errors import ParameterError
@@ -26,3 +29,15 @@ def test_a_server_named_twice_without_unit_ids_names_the_urls() -> None:
     assert given.value.name == "unit_ids"
     assert modbus_units(gantry, [A, A, B], [1, 2, 1]) == [1, 2, 1]  # two units on A, one on B
     assert modbus_units(gantry, [A, B, "tcp://127.0.0.1:44167"], None) == [1, 1, 1]
+
+
+def test_an_ipv6_address_is_written_in_brackets(capsys: pytest.CaptureFixture[str]) -> None:
+    """An IPv6 Modbus address shows as it is typed, ``tcp://[::1]:PORT``: it showed as ``tcp://::1:PORT``,
+    which names no port (break round 16).  Nothing listens on the port: the one line is the drive error."""
+    assert ModbusAddress.from_url("tcp://[::1]:5020").url == "tcp://[::1]:5020"
+    assert ModbusAddress.from_url("tcp://127.0.0.1:5020").url == "tcp://127.0.0.1:5020"
+    assert tcp_url("fe80::1%eth0", 502) == "tcp://[fe80::1%eth0]:502" and tcp_url("drive.local", 502) == "tcp://drive.local:502"
+    code = main(["status", "--modbus", "tcp://[::1]:15179"])
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1 and err.startswith("haptic-bus status: drive error: Modbus unit 1 at "
+                                                                 "tcp://[::1]:15179: "), err

@@ -37,7 +37,7 @@ def test_a_signal_ends_an_enabled_run_disabled_and_recorded_with_its_exit_status
 
         sender = threading.Thread(target=signal_once_enabled, daemon=True)
         sender.start()
-        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "60", "-q",
+        result = run_cli(capsys, "run", "cia402-handle", *drive.args, "--virtual-time", "--duration", "60", "--no-live",
                          "--no-plots", "--out", str(tmp_path))
         sender.join(35.0)
         assert drive.states[-1] is State.SWITCH_ON_DISABLED  # disabled by the run, not left enabled or faulted

@@ -144,7 +144,7 @@ INVALID = [
     (["write", "0x2000:1", "nan", "--type", "f64"], "VALUE = 'nan' is invalid; allowed: f64: a finite number"),
     (["write", "0x1008", "héllo"], "VALUE = 'héllo' is invalid; allowed: str: printable ASCII text"),
     (["write", "0x2345", "0g", "--type", "hex"], "VALUE = '0g' is invalid; allowed: hex: bytes as hexadecimal digit pairs"),
-    (["write", "0x2345", "3"], "--type = None is invalid; allowed: a type for 0x2345:00, which the dictionary does not know"),
+    (["write", "0x2345", "3"], "--type is missing; allowed: a type for 0x2345:00, which the dictionary does not know"),
     (["read", "0x6041", "--type", "u7"], "--type = 'u7' is invalid; allowed: u8 u16 u32 u64 i8 i16 i32 i64 f32 f64 bool str hex"),
     (["read", "0x6041", "--eds", "{missing}"], "--eds = '{missing}' is invalid; allowed: an existing EDS or DCF file"),
     (["read", "0x6041", "--eds", "{garbage}"], "is invalid; allowed: an EDS or DCF file canopen can read"),

@@ -44,7 +44,8 @@ def test_eds_path(capsys: pytest.CaptureFixture[str]) -> None:
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["--interface", "virtual", "--channel", "x"], "missing --node-id"),
+        (["--interface", "virtual", "--channel", "x"], "--node-id is missing; allowed: --interface NAME --channel CHANNEL"),
+        (["--node-id", "5"], "--interface is missing; allowed: --interface NAME --channel CHANNEL and --node-id N"),
         (["--interface", "virtual", "--channel", "x", "--node-id", "0"], "node_id = 0"),
         (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--timing", "late"], "invalid choice"),
         (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--bus-option", "port"], "KEY=VALUE"),
@@ -93,7 +94,7 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
         (["--modbus", MODBUS_URL, "--unit-ids", "1,1"], "'1,1' is invalid; allowed: distinct unit ids on one server"),
         (["--modbus", MODBUS_URL, "--unit-ids", "1,248"], "Modbus unit ids 1..247"),
         (["--modbus", MODBUS_URL, "--unit-ids", "1,2", "--unit-id", "3"], "--unit-id = 3 is invalid; allowed: --unit-ids"),
-        (["--modbus", MODBUS_URL, "--profile", "gantry-3d"], "--unit-ids = None is invalid; allowed: one unit id per axis"),
+        (["--modbus", MODBUS_URL, "--profile", "gantry-3d"], "--unit-ids is missing; allowed: one unit id per axis"),
         (["--modbus", MODBUS_URL, "--modbus", MODBUS_URL, "--profile", "gantry-3d"],
          "--modbus = 2 is invalid; allowed: one address for every axis of the profile, or one per axis (3)"),
         (["--modbus", MODBUS_URL, "--unit-ids", "1,2", "--profile", "gantry-3d"], "one unit id per axis of the profile (3)"),

@@ -289,7 +289,7 @@ def test_modbus_status_of_a_server_not_there_is_one_line(refusing_port: int, cap
 INVALID = [
     (["status", "{bus}", "--node-id", "0"], "argument --node-id: node id = 0 is invalid; allowed: 1..127"),
     (["status", "{bus}", "--node-id", "128"], "argument --node-id: node id = 128 is invalid; allowed: 1..127"),
-    (["status", "{bus}"], "--node-id = None is invalid; allowed: the drive's CANopen node id 1..127 (or --modbus URL)"),
+    (["status", "{bus}"], "--node-id is missing; allowed: the drive's CANopen node id 1..127 (or --modbus URL)"),
     (["status", "{bus}", "--node-id", "5", "--unit-id", "2"], "--unit-id = 2 is invalid; allowed: a Modbus option"),
     (["status", "--modbus", "{url}", "--node-id", "5"], "--node-id = 5 is invalid"),
     (["status", "--modbus", "{url}", "--listen", "1"], "--listen = 1.0 is invalid; allowed: a CANopen option"),

@@ -13,6 +13,13 @@ from __future__ import annotations
 SERVED_HERE: set[str] = set()  # "tcp://host:port" of each server serving in this process now
 
 
+def tcp_url(host: str, port: int | str | None) -> str:
+    """``tcp://HOST:PORT``, an IPv6 address in brackets (``tcp://[::1]:5020``, as the URL is typed and
+    ``urllib.parse`` reads it; ``tcp://::1:5020`` names no port): the one place a Modbus TCP address is
+    written, by the master (:attr:`drives.modbus.link.ModbusAddress.url`) and the simulated server alike."""
+    return f"tcp://[{host}]:{port}" if ":" in host else f"tcp://{host}:{port}"
+
+
 def served_here(url: str) -> bool:
     """Whether ``url`` (``tcp://host:port``, as the server states it) is served by this process now."""
     return url in SERVED_HERE

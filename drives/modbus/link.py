@@ -25,6 +25,7 @@ from pymodbus.pdu.register_message import ReadHoldingRegistersRequest, WriteMult
 
 from drives.cia402_master import CyclicStats
 from drives.errors import DriveError, DriveProtocolError, DriveRefusal, DriveTimeout, ModbusLinkLost, ParameterError
+from drives.modbus.in_process import tcp_url
 from drives.modbus.register_map import NO_UNIT_CODES, describe_range, exception_name
 
 
@@ -70,7 +71,7 @@ class ModbusAddress:
     @property
     def url(self) -> str:
         """``tcp://HOST:PORT`` or ``rtu:/dev/...``."""
-        return f"rtu:{self.port}" if self.serial else f"tcp://{self.host}:{self.port}"
+        return f"rtu:{self.port}" if self.serial else tcp_url(str(self.host), self.port)
 
     @classmethod
     def from_url(cls, url: str, timeout: float = 0.1) -> ModbusAddress:

@@ -4,7 +4,8 @@ Exit status, everywhere: 0 ok (passive, accepted, completed); 1 a drive or bus e
 (not passive, refused); 2 invalid input, checked before any bus or file is touched; 3 an
 assumption of the gate broken at run time; 130 interrupted (Ctrl-C).  Every failure a user
 can cause is one line on stderr, no traceback.  ``-v``/``-q`` set how much the libraries'
-logging says (``-q`` also turns the live view of ``run`` off).
+logging says (``-q``: errors only, so ``run`` also shows no live view, no summary and no ``ended:`` line;
+``run --no-live``: its summary and ``ended:`` line without the view).
 """
 
 from __future__ import annotations
@@ -123,7 +124,8 @@ def _run(args: argparse.Namespace) -> int:
 
         profile, bus, options, links = _prepare_run(args)
     except StoppedBeforeStart:
-        print(STOPPED_BEFORE_START)
+        if not args.quiet:  # -q: errors only, and a stop before the start is none
+            print(STOPPED_BEFORE_START)
         return EXIT_OK
     except BaseException:
         if previous is not None:
@@ -134,7 +136,7 @@ def _run(args: argparse.Namespace) -> int:
     except ParameterError as error:  # run() names its arguments; the command line names its options
         raise as_flag(error) from None
     summary = result.summary
-    if summary is not None:
+    if summary is not None and not args.quiet:  # -q: errors only (the summary is in run.json)
         p, late = summary.compute_percentiles, summary.lateness_percentiles
         print(f"cycles {summary.cycles}; peak force {summary.peak_force:.4g} N; saturated {summary.saturated_cycles}; "
               f"port energy {summary.energy:.4g} J (least {summary.least_energy:.4g} J, below zero in "
@@ -145,7 +147,8 @@ def _run(args: argparse.Namespace) -> int:
         if late:
             print(f"start lateness p50 {late['p50'] * 1e6:.1f} us, p99 {late['p99'] * 1e6:.1f} us, "
                   f"max {late['max'] * 1e6:.1f} us; overruns {summary.overruns}; late cycles {summary.late_cycles}")
-    print(f"ended: {result.exit_reason}; wrote {', '.join(str(f) for f in result.files)}")
+    if not args.quiet:
+        print(f"ended: {result.exit_reason}; wrote {', '.join(str(f) for f in result.files)}")
     if result.error:
         print(f"haptic-bus run: {ended_line(result.exit_reason, result.error)}", file=sys.stderr)
     return exit_status(result.exit_reason)
@@ -173,7 +176,7 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, 
     stop = StopRequest()
     out_dir = None if args.out is None else folder_path("--out", args.out, context="run")  # created once the bus is known
     options = RunOptions(args.duration, pacing=VIRTUAL if args.virtual_time else WALL, out_dir=out_dir,
-                         start_in_contact=args.start_in_contact, live=not args.quiet, stop=stop,
+                         start_in_contact=args.start_in_contact, live=not (args.quiet or args.no_live), stop=stop,
                          scheduling=scheduling(args.realtime),
                          reset_fault=args.reset_fault, bus_log=logs_bus, plots=not args.no_plots)
     links = {"node_id": node_id, "unit_id": unit_id, "unit_ids": unit_ids,
@@ -295,6 +298,9 @@ def build_parser() -> OneLineParser:
                      help="a start inside an object: refuse, or ramp the force in (default: the profile's [start])")
     add_output_arguments(run)
     _add_no_plots(run)
+    run.add_argument("--no-live", action="store_true",
+                     help="no live view and no progress lines (pre-flight, scaling): the summary and the ended: line "
+                          "only, for a script (-q: not those either)")
     run.add_argument("--reset-fault", action="store_true",
                      help="before commissioning, reset a drive found in FAULT (as haptic-bus fault-reset does; logged "
                           "in run.json's events with the error code it had); without it a faulted drive is refused")

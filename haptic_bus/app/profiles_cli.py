@@ -29,11 +29,12 @@ from haptic_bus.analysis.loop import FRICTION_RANGE, MASS_RANGE
 from haptic_bus.app.arguments import as_typed, error_line, number, timeout
 from haptic_bus.app.drive_address import DriveAddress, add_address_arguments, drive_address
 from haptic_bus.app.json_ready import json_ready
-from haptic_bus.errors import DriveError, HapticBusError, ParameterError, Refusal
+from haptic_bus.errors import NAMES_SHOWN, DriveError, HapticBusError, ParameterError, Refusal
 from haptic_bus.profile.files import DEFAULT_PROFILE, resolve_profile, shipped_profiles
 from haptic_bus.profile.plant import ONE_AXIS_TABLES
 from haptic_bus.profile.reader import NAME_PATTERN, misspelling, read_document
 from haptic_bus.profile.scene import FORCE_RANGE
+from haptic_bus.validation import some_names
 
 if TYPE_CHECKING:
     from haptic_bus.analysis.check import CheckReport
@@ -202,10 +203,11 @@ def cmd_check(args: argparse.Namespace) -> int:
         if isinstance(read, AxesProfile):
             return _check_axes(read, args.json)
         profile = read
-        decision = profile.judge()
+        scene = profile.compiled_scene()  # once: its contact walls are the gate's and the report's
+        decision = profile.gate().judge(scene)
         loop, device_loop = profile.loop, profile.device_loop()
         walls = []
-        for (K, B), names in sorted(profile.compiled_scene().contacts().items()):
+        for (K, B), names in sorted(scene.contacts().items()):
             walls.append((names, K, B, _wall_report(device_loop, K, B)))
     except HapticBusError as error:
         return _fail("check", error)
@@ -221,15 +223,16 @@ def cmd_check(args: argparse.Namespace) -> int:
     print(f"profile {profile.name} ({profile.path}): {len(walls)} contact wall(s),"
           f" timing {loop.timing} (delay {loop.delay:g} samples), velocity {profile.device.velocity}")
     for names, _, _, report in walls:
-        print(f"--- {'+'.join(names)} (summed K, B)")
+        print(f"--- {some_names(names)} (summed K, B)")
         print(format_check(report) if isinstance(report, CheckReport) else format_two_mass(report))
     verdict = "passive" if passive else "NOT passive"
     print(f"profile verdict: {verdict}; gate {'accepts' if decision.accepted else 'REFUSES'}"
           f" (safety margin {profile.gate_policy.safety_margin:g} N s/m, bandwidth {profile.gate_policy.bandwidth})")
-    for reason in decision.reasons:
-        print(f"  refused: {reason}")
-    for warning in decision.warnings:
-        print(f"  warning: {warning}")
+    for said, lines in (("refused", decision.reasons), ("warning", decision.warnings)):
+        for line in lines[:NAMES_SHOWN]:
+            print(f"  {said}: {line}")
+        if len(lines) > NAMES_SHOWN:
+            print(f"  {said}: and {len(lines) - NAMES_SHOWN} more (--json lists every one)")
     return status
 
 

@@ -34,8 +34,8 @@ def add_link_arguments(parser: argparse.ArgumentParser) -> None:
                              "every axis' unit (one server), or once per axis (a server each)")
     parser.add_argument("--unit-id", type=unit_id, help="Modbus unit id 1..247 (default 1; only with --modbus)")
     parser.add_argument("--unit-ids", type=unit_ids, metavar="IDS",
-                        help="a multi-axis profile over Modbus: each axis' unit id, in axis order (e.g. 1,2,3; default: the "
-                             "profile's [[axes]] unit_id, else unit 1 on each of one --modbus per axis)")
+                        help="a multi-axis profile over Modbus: each axis' unit id, in axis order (e.g. 1,2,3 or 1-3; "
+                             "default: the profile's [[axes]] unit_id, else unit 1 on each of one --modbus per axis)")
 
 
 def add_pacing_arguments(parser: argparse.ArgumentParser) -> None:

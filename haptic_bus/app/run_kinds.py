@@ -44,6 +44,7 @@ from haptic_bus.control.scene_switch import SceneEntry
 from haptic_bus.control.space_gate import SpaceGate
 from haptic_bus.control.space_scene import SpaceScene
 from haptic_bus.profile.device import ON_ARRIVAL
+from haptic_bus.validation import some_names
 
 Records = list[tuple[str, str, RunRecord]]  # (file name, axis name, record) as the recorder streams them
 
@@ -152,7 +153,7 @@ class OneAxisRun:
         if force == 0.0:
             return None
         depth = abs(force) / stiffness if stiffness > 0 else math.nan
-        return f"handle is {depth * 1e3:.1f} mm inside {'+'.join(names)} (at rest it would feel {abs(force):.3g} N)"
+        return f"handle is {depth * 1e3:.1f} mm inside {some_names(names)} (at rest it would feel {abs(force):.3g} N)"
 
     def start_extra(self, origin: float, ramp_time: float) -> dict[str, Any]:
         """``run.json``'s ``start``: the position (m) and the ramp's time (s)."""
@@ -258,7 +259,7 @@ class AxesRun:
         if not inside:
             return None
         force = float(sum(value * value for value in scene.force(x, [0.0] * len(origin))) ** 0.5)
-        return (f"handle is inside {'+'.join(inside)} at ({', '.join(f'{c * 1e3:.3g}' for c in x)}) mm (at rest "
+        return (f"handle is inside {some_names(inside)} at ({', '.join(f'{c * 1e3:.3g}' for c in x)}) mm (at rest "
                 f"it would feel {force:.3g} N)")
 
     def start_extra(self, origin: Sequence[float], ramp_time: float) -> dict[str, Any]:

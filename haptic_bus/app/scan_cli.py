@@ -42,6 +42,7 @@ from haptic_bus.app.arguments import (
     refuse_can_options_with_modbus,
 )
 from haptic_bus.errors import ParameterError
+from haptic_bus.validation import ids_in_order
 
 if TYPE_CHECKING:  # the scans import canopen and pymodbus: only when a scan runs
     from drives.canopen.scan import CanopenNode
@@ -53,32 +54,23 @@ SCAN_HELP = ("list the CANopen nodes on a CAN bus (or the units of a Modbus serv
 
 # --------------------------------------------------------------------------- argument types
 
-def id_list(text: str, name: str, low: int, high: int) -> list[int]:
-    """``"5"``, ``"1-10"``, ``"5,9,20-30"`` -> sorted ids, each in ``low..high``; ArgumentTypeError otherwise."""
-    ids: set[int] = set()
-    allowed = f"ids {low}..{high} as N, N-M or a comma-separated list of those"
-    for part in text.split(","):
-        first, dash, last = part.strip().partition("-")
-        try:
-            start = int(first, 0)
-            stop = int(last, 0) if dash else start
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: {allowed}") from None
-        if not low <= start <= stop <= high:
-            where = "" if part.strip() == text.strip() else f" ({part.strip()})"
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid{where}; allowed: {allowed}")
-        ids.update(range(start, stop + 1))
-    return sorted(ids)
+def id_list(text: str, name: str, what: str, low: int, high: int) -> list[int]:
+    """``"5"``, ``"1-10"``, ``"5,9,20-30"`` -> sorted ids without repeats, read as every flag that takes ids
+    reads them (:func:`~haptic_bus.validation.ids_in_order`); ArgumentTypeError otherwise."""
+    try:
+        return sorted(set(ids_in_order(name, text, what, low, high)))
+    except ParameterError as invalid:
+        raise argparse.ArgumentTypeError(invalid.detail) from None
 
 
 def node_ids(text: str) -> list[int]:
     """CANopen node ids 1..127 (``1-127``, ``5,9``)."""
-    return id_list(text, "node ids", *NODE_ID_RANGE)
+    return id_list(text, "node ids", "CANopen node ids", *NODE_ID_RANGE)
 
 
 def unit_ids(text: str) -> list[int]:
     """Modbus unit ids 1..247 (``1-247``, ``1,2``)."""
-    return id_list(text, "unit ids", *UNIT_ID_RANGE)
+    return id_list(text, "unit ids", "Modbus unit ids", *UNIT_ID_RANGE)
 
 
 def add_scan_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:

@@ -80,6 +80,7 @@ from haptic_bus.control.record import EventLog, RunRecord
 from haptic_bus.control.scene_switch import SceneSwitch
 from haptic_bus.control.supervisor import Action, Alarm, Supervisor, SupervisorPolicy
 from haptic_bus.errors import ParameterError
+from haptic_bus.validation import some_names
 
 logger = logging.getLogger(__name__)
 
@@ -287,7 +288,7 @@ class WallController(CycleLoop, Generic[SceneT, DecisionT]):
         def felt(scene: SceneT) -> float:
             return float(np.linalg.norm(np.atleast_1d(np.asarray(scene.force(x, rest), dtype=float))))
 
-        names = "+".join(entered)
+        names = some_names(entered)
         return (f"the handle would be inside {names} at once (its force would step from {felt(running):.3g} N to "
                 f"{felt(new):.3g} N, {new.stored_energy(x) * 1e3:.3g} mJ in the new walls' springs); move it out of "
                 f"{names}, then upload again")

@@ -34,8 +34,8 @@ from haptic_bus.analysis.two_mass_criterion import (
     two_mass_verdict,
 )
 from haptic_bus.control.scene import CompiledScene
-from haptic_bus.errors import ParameterError, Refusal
-from haptic_bus.validation import real_in_range
+from haptic_bus.errors import NAMES_SHOWN, ParameterError, Refusal
+from haptic_bus.validation import real_in_range, some_names
 
 BANDWIDTH_POLICIES = ("warn", "strict")
 
@@ -67,7 +67,7 @@ class RampProof:
         """Why the ramp is not proven ('' when it is): the first wall whose scales leave a gap."""
         for names, scales in self.walls:
             if not whole_ramp(scales):
-                return f"{'+'.join(names)} scaled by s is passive only for s in {scales.describe('', 4)}, not all of [0, 1]"
+                return f"{some_names(names)} scaled by s is passive only for s in {scales.describe('', 4)}, not all of [0, 1]"
         return ""
 
 
@@ -140,14 +140,16 @@ class PassivityGate:
         walls: list[WallJudgement] = []
         reasons: list[str] = []
         warnings: list[str] = []
+        explained = 0  # refusals by margin given their passive intervals: the first few
         for (K, B), names in sorted(scene.contacts().items()):
             loop = self.device.wall(K, B)
             verdict = self._verdict(loop)
             quantised = self._quantised(loop)
             walls.append(WallJudgement(names, K, B, verdict, loop.alpha, quantised))
-            label = f"{'+'.join(names)} (K = {K:g} N/m, B = {B:g} N s/m)"
-            if verdict.margin < self.policy.safety_margin:
-                reasons.append(self._explain(label, loop, verdict))
+            label = f"{some_names(names)} (K = {K:g} N/m, B = {B:g} N s/m)"
+            if verdict.margin < self.policy.safety_margin:  # the passive intervals for the first few only
+                reasons.append(self._explain(label, loop, verdict, limits=explained < NAMES_SHOWN))
+                explained += 1
             if quantised is not None and not quantised.holds:
                 reasons.append(f"{label} is not passive with {self.device.describe()}: {quantised.describe()}")
             if K > 0 and not loop.alpha > BANDWIDTH_ALPHA:
@@ -226,19 +228,23 @@ class PassivityGate:
         return (f"; with margin >= {margin:g} N s/m: K at this B {stiffness.describe('N/m', 6)}, "
                 f"B at this K {damping.describe('N s/m', 6)}")
 
-    def _explain(self, label: str, loop: WallLoop, verdict: Verdict) -> str:
-        """A refusal's reason; only a refusal pays for the passive intervals it names."""
+    def _explain(self, label: str, loop: WallLoop, verdict: Verdict, limits: bool = True) -> str:
+        """A refusal's reason; only a refusal pays for the passive intervals it names, and only for the first
+        :data:`~haptic_bus.errors.NAMES_SHOWN` walls it refuses (``limits`` False: the margin alone; a
+        refusal's message shows that many, and 3 000 overlapping walls spent 20 s of a profile check on them)."""
         transmission = self.device.transmission
-        if transmission is None:
+        if not limits:
+            limits_said = ""
+        elif transmission is None:
             stiffness, damping = passive_limits(loop)
-            limits = (f"passive K at this B: {stiffness.describe('N/m', 6)}; "
-                      f"passive B at this K: {damping.describe('N s/m', 6)}") + self._with_margin(loop)
+            limits_said = (f"; passive K at this B: {stiffness.describe('N/m', 6)}; "
+                           f"passive B at this K: {damping.describe('N s/m', 6)}") + self._with_margin(loop)
         else:
             largest = largest_passive_stiffness(TwoMassLoop(loop, transmission))
-            limits = ("two-mass criterion; passive K at this B from 0: "
-                      + ("none" if largest is None else f"up to {largest:.6g} N/m"))
+            limits_said = ("; two-mass criterion; passive K at this B from 0: "
+                           + ("none" if largest is None else f"up to {largest:.6g} N/m"))
         state = {"lossless oscillator": "a lossless oscillator (poles on the unit circle)",
                  "marginal": "marginal (a pole on the unit circle)"}.get(verdict.outcome, verdict.outcome)
         return (f"{label} is {state} with {self.device.describe()}: margin {verdict.margin:.4g} N s/m at "
-                f"theta = {verdict.critical_theta:.3g} rad, allowed: margin >= {self.policy.safety_margin:g} N s/m; "
-                f"{limits}")
+                f"theta = {verdict.critical_theta:.3g} rad, allowed: margin >= {self.policy.safety_margin:g} N s/m"
+                f"{limits_said}")

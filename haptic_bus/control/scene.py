@@ -26,7 +26,7 @@ from typing import Any, TypeVar
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
 from haptic_bus.control import protocols
 from haptic_bus.errors import ParameterError
-from haptic_bus.validation import real_in_range
+from haptic_bus.validation import real_in_range, some_names
 
 _POSITION_RANGE = (-1e6, 1e6)  # m
 
@@ -199,7 +199,8 @@ class CompiledScene:
         ParameterError for a name the scene does not have."""
         unknown = sorted(set(changes) - {obj.name for obj in self.objects})
         if unknown:
-            raise ParameterError("object", unknown[0], f"one of {sorted(obj.name for obj in self.objects)}", "scene")
+            raise ParameterError("object", unknown[0], f"one of {some_names(sorted(obj.name for obj in self.objects), ', ')}",
+                                 "scene")
         return compile_scene(with_wall_law(obj, *changes[obj.name]) if obj.name in changes else obj
                              for obj in self.objects)
 
@@ -212,12 +213,25 @@ class CompiledScene:
         return compile_scene(with_wall_law(obj, factor * obj.stiffness, factor * obj.damping) for obj in self.objects)
 
 
+FEW_ACTIVE = 16  # pieces acting at once up to which an interval's sums are one fsum over them
+_ULP_SCALE = 1 << 1074  # the smallest float's reciprocal: every finite float is an integer number of 2**-1074
+
+
+def _exact(value: float) -> int:
+    """A finite float as the integer number of 2**-1074 it is (exact)."""
+    numerator, denominator = value.as_integer_ratio()
+    return numerator * (_ULP_SCALE // denominator)
+
+
 def compile_scene(objects: Iterable[SceneObject]) -> CompiledScene:
     """Sweep the objects' support intervals once into a :class:`CompiledScene`.
 
-    Each interval's sums are formed afresh with ``math.fsum`` over the pieces active there
-    (not by adding and subtracting running totals), so an interval where nothing acts has
-    exactly zero force and no round-off carries from one interval to the next.
+    Each interval's sums are the exact sums of the pieces active there, rounded once (``math.fsum``): an
+    interval where nothing acts has exactly zero force and no round-off carries from one interval to the
+    next.  Where many pieces act at once the exact sums are kept running instead (:func:`_exact`: a float is
+    an integer number of 2**-1074, so adding and taking away loses nothing) and rounded with one division,
+    the same correctly rounded value: the sweep then costs the pieces that enter and leave at each break, not
+    every piece active there (3 000 overlapping walls: 9 million terms and 2.3 s, twice per profile check).
     """
     objects = tuple(objects)
     duplicates = sorted(name for name, count in Counter(obj.name for obj in objects).items() if count > 1)
@@ -227,26 +241,59 @@ def compile_scene(objects: Iterable[SceneObject]) -> CompiledScene:
     owners = [obj.name for obj in objects for _ in obj.pieces()]
     starts: dict[float, list[int]] = {}
     ends: dict[float, list[int]] = {}
-    active: set[int] = set()
+    first: list[int] = []
     for i, (start, end, _, _, _) in enumerate(pieces):
         if start == -math.inf:
-            active.add(i)
+            first.append(i)
         else:
             starts.setdefault(start, []).append(i)
         if end != math.inf:
             ends.setdefault(end, []).append(i)
     breaks = sorted(set(starts) | set(ends))
-    ks, kas, bs, who = [], [], [], []
+    ks: list[float] = []
+    kas: list[float] = []
+    bs: list[float] = []
+    who: list[tuple[str, ...]] = []
+    values = [(K, K * anchor, B) for _, _, K, anchor, B in pieces]
+    active: set[int] = set()
+    sums: list[int] = []  # K, K * anchor, B of the active pieces, exact (2**-1074), once many act at once
+    acting: Counter[str] = Counter()  # the active pieces' owners
+    names: list[str] = []  # the owners acting, sorted
+
+    def change(i: int, sign: int) -> None:
+        if sums:
+            for j, value in enumerate(values[i]):
+                sums[j] += sign * _exact(value)
+        owner = owners[i]
+        acting[owner] += sign
+        if sign > 0 and acting[owner] == 1:
+            bisect.insort(names, owner)
+        elif sign < 0 and acting[owner] == 0:
+            del names[bisect.bisect_left(names, owner)]
 
     def close_interval() -> None:
-        who.append(tuple(sorted({owners[i] for i in active})))
-        ks.append(math.fsum(pieces[i][2] for i in active))
-        kas.append(math.fsum(pieces[i][2] * pieces[i][3] for i in active))
-        bs.append(math.fsum(pieces[i][4] for i in active))
+        who.append(tuple(names))
+        if len(active) <= FEW_ACTIVE:
+            for j, out in enumerate((ks, kas, bs)):
+                out.append(math.fsum(values[i][j] for i in active))
+            return
+        if not sums:  # from here on kept running
+            sums.extend(sum(_exact(values[i][j]) for i in active) for j in range(3))
+        for j, out in enumerate((ks, kas, bs)):
+            out.append(sums[j] / _ULP_SCALE)
 
+    for i in first:
+        active.add(i)
+        change(i, 1)
     close_interval()
     for at in breaks:
-        active.difference_update(ends.get(at, ()))
-        active.update(starts.get(at, ()))
+        for i in ends.get(at, ()):
+            if i in active:
+                active.remove(i)
+                change(i, -1)
+        for i in starts.get(at, ()):
+            if i not in active:
+                active.add(i)
+                change(i, 1)
         close_interval()
     return CompiledScene(objects, tuple(breaks), tuple(ks), tuple(kas), tuple(bs), tuple(who))

@@ -42,6 +42,7 @@ from haptic_bus.analysis.loop import WallLoop
 from haptic_bus.control.gate import GatePolicy, whole_ramp
 from haptic_bus.control.space_scene import Box, Plane, SpaceObject, SpaceScene, Sphere
 from haptic_bus.errors import Refusal
+from haptic_bus.validation import some_names
 
 SEARCH_EVALUATIONS = 24
 DEFAULT_POLICY = GatePolicy()
@@ -246,7 +247,7 @@ class SpaceGate:
         parts = " + ".join(f"K = {K:g} N/m, B = {B:g} N s/m along ({', '.join(f'{c:.3g}' for c in n)})"
                            for K, B, n in wall.parts)
         v = wall.verdict
-        return (f"{'+'.join(wall.objects)} ({parts}) is {v.outcome}: margin {v.margin:.4g} N s/m at theta = "
+        return (f"{some_names(wall.objects)} ({parts}) is {v.outcome}: margin {v.margin:.4g} N s/m at theta = "
                 f"{v.critical_theta:.3g} rad, allowed: margin >= {self.policy.safety_margin:g} N s/m"
                 + self._limits(wall))
 

@@ -40,7 +40,7 @@ from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
 from pymodbus.transaction import TransactionManager
 
-from drives.modbus.in_process import SERVED_HERE
+from drives.modbus.in_process import SERVED_HERE, tcp_url
 from haptic_bus.errors import ParameterError
 from sim_drive.device import POWER_STAGE_ON, SimulatedDrive
 from sim_drive.modbus.bank import RegisterBank, writes_command
@@ -223,7 +223,7 @@ class ModbusSimServer:
     @property
     def url(self) -> str:
         """``tcp://host:port`` of the bound server."""
-        return f"tcp://{self.host}:{self.port}"
+        return tcp_url(self.host, self.port)
 
     # ------------------------------------------------------------------ requests
     def _device(self) -> SimDevice:
@@ -365,7 +365,7 @@ class ModbusSimServer:
         self._thread = threading.Thread(target=self._thread_main, name=f"modbus-sim-{self.unit_id}", daemon=True)
         self._thread.start()
         if not self._ready.wait(timeout):
-            where = f"{self.host}:{self.requested_port}"
+            where = tcp_url(self.host, self.requested_port)
             raise RuntimeError(f"Modbus simulator did not bind {where} within {timeout} s: {self._error}")
         if self._error is not None:
             raise RuntimeError(f"Modbus simulator failed to start: {self._error}") from self._error
