@@ -1,12 +1,14 @@
 """A new user's misuse of the public API (helper break17): each case a defect found and fixed."""
 from __future__ import annotations
 
+import logging
 import pathlib
 
 import can
 import pytest
 
 import haptic_bus as hb
+from drives.canopen.link import ReceiveErrors
 
 
 def test_a_shut_down_bus_is_refused_before_any_file(tmp_path: pathlib.Path) -> None:
@@ -21,3 +23,19 @@ def test_a_shut_down_bus_is_refused_before_any_file(tmp_path: pathlib.Path) -> N
         hb.run(hb.load_profile("cia402-handle"), bus, hb.RunOptions(duration=0.1, pacing="virtual", out_dir=out),
                node_id=5)
     assert not out.exists()
+
+
+def test_receive_errors_are_all_counted_but_logged_by_decades(caplog: pytest.LogCaptureFixture) -> None:
+    """A notifier whose bus fails every receive: the first error kept, every one counted, the log
+    lines at the 1st, 10th and 100th error, not one per error."""
+    listener = ReceiveErrors("node 5")
+    errors = [can.CanOperationError(f"closed {i}") for i in range(150)]
+    with caplog.at_level(logging.WARNING, logger="drives.canopen.link"):
+        for error in errors:
+            listener.on_error(error)
+    assert listener.count == 150
+    assert listener.error is errors[0]
+    lines = [record.getMessage() for record in caplog.records]
+    assert lines == ["node 5: CAN receive failed: CanOperationError('closed 0')",
+                     "node 5: CAN receive failed: CanOperationError('closed 9') (10 receive errors so far)",
+                     "node 5: CAN receive failed: CanOperationError('closed 99') (100 receive errors so far)"]
