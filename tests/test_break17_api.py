@@ -39,3 +39,11 @@ def test_receive_errors_are_all_counted_but_logged_by_decades(caplog: pytest.Log
     assert lines == ["node 5: CAN receive failed: CanOperationError('closed 0')",
                      "node 5: CAN receive failed: CanOperationError('closed 9') (10 receive errors so far)",
                      "node 5: CAN receive failed: CanOperationError('closed 99') (100 receive errors so far)"]
+
+
+@pytest.mark.parametrize("argument", [5, None, b"cia402-handle", ["cia402-handle"]])
+def test_load_profile_refuses_what_is_neither_a_name_nor_a_path(argument: object) -> None:
+    """hb.load_profile(5) was pathlib's TypeError; the docs promise a ParameterError naming the field."""
+    with pytest.raises(hb.ParameterError, match=r"^profile .*: profile = .* is invalid; allowed: a shipped profile "
+                                                r"name or a TOML file's path \(str or pathlib.Path\)$"):
+        hb.load_profile(argument)  # type: ignore[arg-type]  # what a user may pass
