@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import logging
 import pathlib
+from typing import Any
 
 import can
 import pytest
@@ -47,3 +48,25 @@ def test_load_profile_refuses_what_is_neither_a_name_nor_a_path(argument: object
     with pytest.raises(hb.ParameterError, match=r"^profile .*: profile = .* is invalid; allowed: a shipped profile "
                                                 r"name or a TOML file's path \(str or pathlib.Path\)$"):
         hb.load_profile(argument)  # type: ignore[arg-type]  # what a user may pass
+
+
+
+def test_haptic_controller_refuses_a_one_axis_drive_for_gantry(haptic_sim: Any, haptic_controller: Any) -> None:
+    """A user's test gives haptic_controller the 3-axis gantry-3d against a one-axis simulated drive: a
+    ParameterError naming the profile and the axes, where hb.run's refusal named a ``node_id = 5`` the
+    test never gave."""
+    drive = haptic_sim("cia402-handle")
+    with pytest.raises(hb.ParameterError) as error:
+        haptic_controller("gantry-3d", drive)
+    assert str(error.value) == ("haptic_controller: profile = 'gantry-3d' is invalid; allowed: a one-axis "
+                                "profile, as the simulated drive has (this one has 3 axes)")
+
+
+def test_haptic_controller_refuses_a_one_axis_profile_for_three_drives(haptic_sim: Any,
+                                                                       haptic_controller: Any) -> None:
+    """The reverse: a one-axis profile against the simulated gantry's three drives."""
+    drive = haptic_sim("gantry-3d", interface="lockstep")
+    with pytest.raises(hb.ParameterError) as error:
+        haptic_controller("cia402-handle", drive)
+    assert str(error.value) == ("haptic_controller: profile = 'cia402-handle' is invalid; allowed: a profile "
+                                "of 3 [[axes]], as the simulated drive has (this one has 1 axes)")

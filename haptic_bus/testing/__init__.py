@@ -268,6 +268,7 @@ def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
               start_in_contact: str | None = None, reset_fault: bool = False,
               out_dir: str | os.PathLike[str] | None = None, plots: bool = False) -> ControllerRun:
         believed = profile if isinstance(profile, (Profile, AxesProfile)) else load_profile(profile)
+        _refuse_other_axes(believed, drive)
         folder = pathlib.Path(out_dir) if out_dir is not None else tmp_path_factory.mktemp("haptic-run")
         options = RunOptions(duration=duration, pacing=pacing, out_dir=folder, start_in_contact=start_in_contact,
                              live=False, stop=StopRequest(), reset_fault=reset_fault, plots=plots)
@@ -277,6 +278,20 @@ def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
 
     yield start
     _each(reversed(runs), ControllerRun.close)
+
+
+def _refuse_other_axes(believed: Any, drive: SimDriveNode) -> None:
+    """ParameterError when the profile the controller believes has another number of axes than the
+    simulated device ``drive`` (hb.run's own refusal named a ``node_id`` the test never gave)."""
+    from haptic_bus.app.profiles import AxesProfile
+    from haptic_bus.errors import ParameterError
+
+    believed_axes = len(believed.axes) if isinstance(believed, AxesProfile) else 1
+    driven_axes = max(len(drive.node_ids), len(drive.unit_ids), 1)
+    if believed_axes != driven_axes:
+        wanted = "a one-axis profile" if driven_axes == 1 else f"a profile of {driven_axes} [[axes]]"
+        raise ParameterError("profile", believed.name, f"{wanted}, as the simulated drive has "
+                             f"(this one has {believed_axes} axes)", "haptic_controller")
 
 
 @pytest.fixture
