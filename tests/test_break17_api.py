@@ -70,3 +70,33 @@ def test_haptic_controller_refuses_a_one_axis_profile_for_three_drives(haptic_si
         haptic_controller("cia402-handle", drive)
     assert str(error.value) == ("haptic_controller: profile = 'cia402-handle' is invalid; allowed: a profile "
                                 "of 3 [[axes]], as the simulated drive has (this one has 1 axes)")
+
+
+def test_identify_says_a_profile_it_cannot_write_in_one_line(haptic_sim: Any, tmp_path: pathlib.Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """``identify --write-profile /proc/x.toml`` (a folder that os.access calls writable for root, or one
+    gone during the run): the estimates printed, one line naming the file and why, exit 1; it was
+    FileNotFoundError's traceback after the whole measurement, the estimates never printed."""
+    from haptic_bus.app.cli import main
+
+    drive = haptic_sim("cia402-handle", operator={"model": "none"})
+    folder = tmp_path / "gone"
+    folder.mkdir()
+    target = folder / "identified.toml"
+    real_write = pathlib.Path.write_text
+
+    def folder_gone(path: pathlib.Path, *args: Any, **kwargs: Any) -> int:
+        if path == target:  # the folder went while identify measured
+            folder.rmdir()
+        return real_write(path, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(pathlib.Path, "write_text", folder_gone)
+        status = main(["identify", "--profile", "cia402-handle", *drive.run_args(), "--virtual-time",
+                       "--duration", "1", "--write-profile", str(target)])
+    out, err = capsys.readouterr()
+    assert status == 1
+    assert "mass m" in out and "verdict: supported" in out
+    assert err == (f"haptic-bus identify: write error: --write-profile {target}: No such file or directory; "
+                   "nothing written, the estimates are the ones above\n")
+    assert not target.exists()
