@@ -137,3 +137,30 @@ def test_bench_stops_on_sigterm_as_on_ctrl_c(tmp_path: pathlib.Path) -> None:
     assert stdout.decode().splitlines()[-1] == ("haptic-bus bench: stopped (SIGTERM) in section soak; bench.json holds "
                                                 "the sections before it")
     assert json.loads((out / "bench.json").read_text())["interrupted"] == "soak"
+
+
+def test_a_modbus_stall_names_a_drive_that_kept_the_cycle_waiting_too() -> None:
+    """A Modbus server stopped with SIGSTOP for 1 s during a real-time gantry-3d run: the request waited 402 ms,
+    the drive's 60 ms watchdog faulted it, and the run's line said only "this process did not run for that
+    long".  Over Modbus a cycle can wait that long for an answer, so the line names both; on CANopen (whose
+    TPDO wait is at most half the stall) it stays as it was."""
+    import types
+
+    import numpy as np
+
+    from haptic_bus.app.runner import _stall_before
+    from haptic_bus.control.clock import RealClock
+
+    class HeldClock(RealClock):
+        def lateness(self, last: int | None = None) -> np.ndarray:
+            return np.array([0.0, 0.4019, 0.0])
+
+    controller: Any = types.SimpleNamespace(clock=HeldClock(2e-3), error_cycle_s=0.0)
+    assert _stall_before(controller, 0.06, answers_wait=True) == (
+        " (a cycle just before was held 401.9 ms late, past the 60 ms the drive's watchdog allows: this process did "
+        "not run for that long, stopped or starved of CPU, or it waited that long for a drive's answer (a drive or "
+        "server that stalled))")
+    assert _stall_before(controller, 0.06) == (
+        " (a cycle just before was held 401.9 ms late, past the 60 ms the drive's watchdog allows: this process did "
+        "not run for that long, stopped or starved of CPU)")
+    assert _stall_before(controller, 0.5, answers_wait=True) == ""

@@ -264,7 +264,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                     _refuse_faulted_at_the_end(drives)
             reason, error = summary.exit_reason, summary.error
             if reason == "drive error" and error is not None:  # a drive that faulted in the cycles: was it a stall of ours?
-                error = summary.error = error + _stall_before(controller, rig.watchdog.stall)
+                error = summary.error = error + _stall_before(controller, rig.watchdog.stall, _answers_wait(rig))
             if reason == "stopped" and options.stop.interrupted:
                 reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr
                 summary.exit_reason, summary.error = reason, error  # run.json's summary says it as its status does
@@ -273,7 +273,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     except Refusal as exc:  # refused before the drive is enabled
         reason, error = "refused", str(exc)
     except DriveError as exc:
-        reason, error = "drive error", str(exc) + _stall_before(controller, rig.watchdog.stall)
+        reason, error = "drive error", str(exc) + _stall_before(controller, rig.watchdog.stall, _answers_wait(rig))
         hint = rig.fault_hint(names.index(exc.node) if exc.node in names else None)
         if isinstance(exc, DriveFault) and exc.state is State.FAULT and hint is not None:
             error += f"; {hint} (or run with --reset-fault)"
@@ -300,11 +300,20 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
 STALL_LOOKBACK = 3  # cycles: the stalled one, and the exchanges of the cycles after it that found the drive faulted
 
 
-def _stall_before(controller: WallController[Any, Any] | None, stall: float) -> str:
+def _answers_wait(rig: Rig) -> bool:
+    """Whether a cycle of ``rig``'s link can wait for an answer as long as the drive's watchdog allows: a
+    Modbus request waits for its answer up to its timeout, beyond the 60 ms watchdog; a CANopen cycle waits
+    for the TPDOs at most half the shortest stall that faults a drive (``longest_tpdo_wait``)."""
+    return rig.link.get("kind") == "modbus"
+
+
+def _stall_before(controller: WallController[Any, Any] | None, stall: float, answers_wait: bool = False) -> str:
     """What the one line of a drive error adds when one of the last cycles started ``stall`` s late or more
     (the shortest stall that faults the drive), or the cycle that met the error had run that long (a stop in
     the middle of its exchange): this process did not run (a SIGSTOP, a debugger, starved of CPU), and the
-    drive's watchdog did what it is for; "" otherwise, and for a virtual-time run."""
+    drive's watchdog did what it is for; "" otherwise, and for a virtual-time run.  ``answers_wait`` (Modbus):
+    the cycle may as well have waited that long for an answer (a server stopped with SIGSTOP held a cycle
+    402 ms, and the line blamed this process alone), so the line names both."""
     clock = controller.clock if controller is not None else None
     if controller is None or not isinstance(clock, RealClock):
         return ""
@@ -312,8 +321,9 @@ def _stall_before(controller: WallController[Any, Any] | None, stall: float) -> 
     held = max(float(late.max()) if late.size else 0.0, controller.error_cycle_s)
     if held < stall:
         return ""
+    either = ", or it waited that long for a drive's answer (a drive or server that stalled)" if answers_wait else ""
     return (f" (a cycle just before was held {held * 1e3:.4g} ms late, past the {stall * 1e3:.4g} ms the drive's "
-            f"watchdog allows: this process did not run for that long, stopped or starved of CPU)")
+            f"watchdog allows: this process did not run for that long, stopped or starved of CPU{either})")
 
 
 def _write_failure(reason: str, error: str | None, recorder: RunRecorder, summary: RunSummary | None,
