@@ -164,3 +164,35 @@ def test_a_modbus_stall_names_a_drive_that_kept_the_cycle_waiting_too() -> None:
         " (a cycle just before was held 401.9 ms late, past the 60 ms the drive's watchdog allows: this process did "
         "not run for that long, stopped or starved of CPU)")
     assert _stall_before(controller, 0.5, answers_wait=True) == ""
+
+
+def test_recorded_run_names_a_folder_that_is_no_run(recorded_run: Any, tmp_path: pathlib.Path) -> None:
+    """recorded_run(folder) of an empty or missing folder: a ParameterError naming the folder and what it
+    takes; it was FileNotFoundError naming ``run.json``."""
+    for folder in (tmp_path, tmp_path / "nope"):
+        with pytest.raises(hb.ParameterError) as error:
+            recorded_run(folder)
+        assert str(error.value) == (f"recorded_run: folder = '{folder}' is invalid; allowed: a run folder, one "
+                                    "holding run.json (haptic-bus run --out, haptic-bus demo, hb.run's folder)")
+
+
+def test_a_simulated_drive_the_test_killed_is_no_teardown_failure(haptic_sim: Any) -> None:
+    """A test that kills its udp_multicast drive on purpose (``drive.process.stop(signal.SIGKILL)``, a drive
+    dying mid-run) got teardown's "did not exit cleanly on SIGTERM (status -9)" though teardown sent no
+    SIGTERM; one that exits on its own still fails the test, saying it had exited before teardown."""
+    import signal
+
+    from haptic_bus.testing import _stop_cleanly
+
+    killed = haptic_sim("cia402-handle", interface="udp_multicast")
+    status, _ = killed.process.stop(signal.SIGKILL)
+    assert status == -signal.SIGKILL
+    _stop_cleanly(killed)  # the test's own stop: no failure
+
+    crashed = haptic_sim("cia402-handle", interface="udp_multicast")
+    crashed.process.process.kill()  # as if it died on its own: not through its stop()
+    crashed.process.process.wait(10)
+    with pytest.raises(AssertionError, match=r"^simulated drive node 5 had exited before the test's teardown "
+                                             r"\(status -9; a test that ends it on purpose: "
+                                             r"drive.process.stop\(signal.SIGKILL\)\): "):
+        _stop_cleanly(crashed)
