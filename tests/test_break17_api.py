@@ -196,3 +196,20 @@ def test_a_simulated_drive_the_test_killed_is_no_teardown_failure(haptic_sim: An
                                              r"\(status -9; a test that ends it on purpose: "
                                              r"drive.process.stop\(signal.SIGKILL\)\): "):
         _stop_cleanly(crashed)
+
+
+def test_run_refuses_a_start_from_a_spawned_processes_import(tmp_path: pathlib.Path,
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """A script without ``if __name__ == "__main__":`` whose top level catches hb.run's errors: the spawned
+    worker ran that top level again, and its hb.run wrote a second run folder, "crashed" with
+    multiprocessing's RuntimeError, beside the real run.  hb.run now refuses first, as multiprocessing
+    refuses to start a process there, naming the idiom; no folder."""
+    import multiprocessing
+
+    monkeypatch.setattr(multiprocessing.current_process(), "_inheriting", True, raising=False)
+    out = tmp_path / "run"
+    with pytest.raises(hb.HapticBusError, match=r"^hb.run was called while a process of a run started .*"
+                                                r"if __name__ == '__main__':"):
+        hb.run(hb.load_profile("cia402-handle"), {"interface": "virtual", "channel": "break17-spawned"},
+               hb.RunOptions(duration=0.1, pacing="virtual", out_dir=out), node_id=5)
+    assert not out.exists()

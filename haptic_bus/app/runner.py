@@ -84,7 +84,7 @@ from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.record import Event
-from haptic_bus.errors import DriveError, DriveFault, DriveTimeout, ParameterError, Refusal
+from haptic_bus.errors import DriveError, DriveFault, DriveTimeout, HapticBusError, ParameterError, Refusal
 
 if TYPE_CHECKING:
     import can
@@ -126,8 +126,23 @@ def run(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | st
     its own scene; ``haptic-bus validate`` passes its probe,
     :class:`~haptic_bus.app.validate_run.ValidateRun`).
     """
+    _refuse_a_spawned_start()
     rig = _rig(profile, bus, options, node_id, unit_id, unit_ids, controller_node_id)
     return _session(kind or run_kind(profile), rig, options)
+
+
+def _refuse_a_spawned_start() -> None:
+    """HapticBusError, before any folder or bus, when ``run`` is called from a script's top level that a
+    process started by ``spawn`` (a run's writer or judge) is running again: the script lacks
+    ``if __name__ == "__main__":``.  Where its top level caught the error the worker started, and that
+    second ``run`` wrote a run folder of its own saying "crashed" (multiprocessing's RuntimeError) beside
+    the real run; the check is the one multiprocessing makes before it starts a process."""
+    import multiprocessing
+
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise HapticBusError("hb.run was called while a process of a run started (spawn runs the calling script's "
+                             "top level again in it): keep the run under if __name__ == '__main__': (Python's rule "
+                             "for spawned processes)")
 
 
 def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: int, options: RunOptions,
