@@ -213,3 +213,21 @@ def test_run_refuses_a_start_from_a_spawned_processes_import(tmp_path: pathlib.P
         hb.run(hb.load_profile("cia402-handle"), {"interface": "virtual", "channel": "break17-spawned"},
                hb.RunOptions(duration=0.1, pacing="virtual", out_dir=out), node_id=5)
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("given", "line"), [
+    ({"timing": "fast"}, "simulated drive: timing = 'fast' is invalid; allowed: one of 'cia402', 'ideal', 'reception', "
+                         "or None (the profile's)"),
+    ({"operator": "constant:3"}, "simulated drive: operator = 'constant:3' is invalid; allowed: a mapping, the "
+                                 "profile's [operator_model] table, e.g. {'model': 'constant', 'level': 3.0}"),
+    ({"interface": "modbus", "unit_id": 0}, "simulated drive: unit_id = 0 is invalid; allowed: a Modbus unit id "
+                                            "1..247, one a master can address (hb.run's and haptic-bus sim's range)"),
+    ({"interface": "modbus", "unit_id": 300}, "simulated drive: unit_id = 300 is invalid; allowed: a Modbus unit id "
+                                              "1..247, one a master can address (hb.run's and haptic-bus sim's range)"),
+])
+def test_haptic_sim_names_a_bad_timing_operator_or_unit(haptic_sim: Any, given: dict[str, Any], line: str) -> None:
+    """haptic_sim's timing and operator were the simulator's ValueError and dict()'s TypeError-like ValueError,
+    and a unit id took the server's 0..255 (with no context) where hb.run and haptic-bus sim take 1..247."""
+    with pytest.raises(hb.ParameterError) as error:
+        haptic_sim("cia402-handle", **given)
+    assert str(error.value) == line

@@ -188,6 +188,7 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
                 (servers > 1 and interface != MODBUS):
             raise ParameterError("servers", servers, f"1, or one Modbus server per axis ({axes}) with interface="
                                  f"{MODBUS!r}", CONTEXT)
+        _refuse_timing_and_operator(timing, operator)
         spec = None if interface == MODBUS else _private_bus(interface)
         if several is not None:
             if truth or operator is not None or timing is not None:
@@ -204,6 +205,10 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
             ("unit_id", unit_id, "a CANopen node: node_id")
         if other is not None:
             raise ParameterError(unused, other, f"none with interface={interface!r} ({named})", CONTEXT)
+        if spec is None and unit_id is not None and (isinstance(unit_id, bool) or not isinstance(unit_id, int)
+                                                     or not 1 <= unit_id <= 247):  # the server's own check took 0..255
+            raise ParameterError("unit_id", unit_id, "a Modbus unit id 1..247, one a master can address (hb.run's and "
+                                 "haptic-bus sim's range)", CONTEXT)
         path = None
         if profile is not None:
             if not folder:
@@ -220,6 +225,22 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
 
     yield start
     _each(reversed(started), _stop_cleanly)
+
+
+def _refuse_timing_and_operator(timing: object, operator: object) -> None:
+    """ParameterError for a ``timing`` the simulator has no name for or an ``operator`` that is no table:
+    they were the simulator's ValueError ('fast' is not a valid Timing) and dict()'s ("dictionary update
+    sequence element #0 has length 1", for the command line's spelling "constant:3")."""
+    from haptic_bus.errors import ParameterError
+    from sim_drive.parameters import Timing
+
+    names = [each.value for each in Timing]
+    if timing is not None and timing not in names:
+        raise ParameterError("timing", timing, f"one of {', '.join(map(repr, names))}, or None (the profile's)",
+                             CONTEXT)
+    if operator is not None and not isinstance(operator, Mapping):
+        raise ParameterError("operator", operator, "a mapping, the profile's [operator_model] table, e.g. "
+                             "{'model': 'constant', 'level': 3.0}", CONTEXT)
 
 
 def _axes_profile(profile: ProfileSource | None) -> AxesProfile | None:
