@@ -231,3 +231,44 @@ def test_haptic_sim_names_a_bad_timing_operator_or_unit(haptic_sim: Any, given: 
     with pytest.raises(hb.ParameterError) as error:
         haptic_sim("cia402-handle", **given)
     assert str(error.value) == line
+
+
+def test_runs_started_in_one_second_get_folders_of_their_own(tmp_path: pathlib.Path,
+                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two hb.run calls in two threads at once, no out_dir: both named runs/<UTC>-cia402-handle (each found it
+    free), and one was refused with "--out ... a folder this user can create and write (No such file or
+    directory)".  The folder is now claimed by creating it; a name another run took in the meantime (exists()
+    said free) moves on to -2."""
+    from haptic_bus.app import run_folder
+
+    monkeypatch.setattr(run_folder, "_utc_now", lambda: run_folder.dt.datetime(2026, 12, 7, 20, 43, 41,
+                                                                              tzinfo=run_folder.dt.UTC))
+    first = run_folder.prepare_run_folder(None, "cia402-handle", root=tmp_path)
+    monkeypatch.setattr(pathlib.Path, "exists", lambda self: False)  # the other run made it after we looked
+    second = run_folder.prepare_run_folder(None, "cia402-handle", root=tmp_path)
+    assert (first.name, second.name) == ("20261207T204341Z-cia402-handle", "20261207T204341Z-cia402-handle-2")
+
+
+def test_folders_probed_at_once_are_all_writable(tmp_path: pathlib.Path) -> None:
+    """writable_folder's probe file had one name for everyone: two commands probing one folder at once unlinked
+    each other's, and one was refused 'No such file or directory'.  Two threads, 300 probes each."""
+    import threading
+
+    from haptic_bus.validation import writable_folder
+
+    failures: list[BaseException] = []
+
+    def probe() -> None:
+        try:
+            for _ in range(300):
+                writable_folder("--out", tmp_path)
+        except BaseException as error:  # what the other thread must see
+            failures.append(error)
+
+    threads = [threading.Thread(target=probe) for _ in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(60)
+    assert failures == []
+    assert list(tmp_path.iterdir()) == []
