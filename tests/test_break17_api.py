@@ -55,9 +55,11 @@ def test_haptic_controller_refuses_a_one_axis_drive_for_gantry(haptic_sim: Any, 
     """A user's test gives haptic_controller the 3-axis gantry-3d against a one-axis simulated drive: a
     ParameterError naming the profile and the axes, where hb.run's refusal named a ``node_id = 5`` the
     test never gave."""
+    from haptic_bus.app.profiles import read_profile
+
     drive = haptic_sim("cia402-handle")
-    with pytest.raises(hb.ParameterError) as error:
-        haptic_controller("gantry-3d", drive)
+    with pytest.raises(hb.ParameterError) as error:  # read, not judged: the coupled gate on a sphere takes a second
+        haptic_controller(read_profile("gantry-3d"), drive)
     assert str(error.value) == ("haptic_controller: profile = 'gantry-3d' is invalid; allowed: a one-axis "
                                 "profile, as the simulated drive has (this one has 3 axes)")
 
