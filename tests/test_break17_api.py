@@ -274,3 +274,33 @@ def test_folders_probed_at_once_are_all_writable(tmp_path: pathlib.Path) -> None
         thread.join(60)
     assert failures == []
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_trajectory_legend_leaves_the_section_label_readable() -> None:
+    """trajectory.png of a run that moved along one axis (a short, wide equal-aspect section): the legend
+    (handle, start, end) sat on the section's x-axis label.  Laid out as trajectory_figure lays it out, the two
+    no longer overlap."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from haptic_bus.app.trajectory_plot import _draw_sections
+
+    t = np.linspace(0.0, 1.0, 200)
+    x = np.column_stack([np.zeros_like(t), -0.022 * (1 - np.exp(-5 * t)), np.zeros_like(t)])  # y alone moves
+    fig = plt.figure(figsize=(13, 6.2))
+    try:
+        grid = fig.add_gridspec(2, 2, width_ratios=(1.1, 1))
+        section = fig.add_subplot(grid[:, 0])
+        _draw_sections(section, ["x", "y", "z"], [], x)
+        fig.add_subplot(grid[0, 1]).plot(t, t)
+        fig.add_subplot(grid[1, 1]).plot(t, t)
+        fig.tight_layout()
+        fig.canvas.draw()  # where each artist lands (the legend's box before a draw is not where it is drawn)
+        renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]  # Agg's
+        legend, label = section.get_legend(), section.xaxis.label
+        assert legend is not None
+        legend_box, label_box = legend.get_window_extent(renderer), label.get_window_extent(renderer)
+        assert not legend_box.overlaps(label_box), (legend_box, label_box)
+        assert legend_box.y1 < label_box.y0  # below it
+    finally:
+        plt.close(fig)
