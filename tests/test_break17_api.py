@@ -304,3 +304,15 @@ def test_the_trajectory_legend_leaves_the_section_label_readable() -> None:
         assert legend_box.y1 < label_box.y0  # below it
     finally:
         plt.close(fig)
+
+
+def test_a_controller_wait_that_bounds_nothing_is_refused(haptic_sim: Any, haptic_controller: Any) -> None:
+    """run.wait(timeout=-1) returned at once and failed the test "did not end within -1 s of wall clock"; a
+    timeout that bounds no wait is one line naming it, the run left to its own end."""
+    run = haptic_controller("cia402-handle", haptic_sim("cia402-handle"), duration=0.05)
+    for timeout in (-1, 0, float("nan"), float("inf"), "10"):
+        for wait in (run.wait, run.stop, run.wait_cycling):
+            with pytest.raises(hb.ParameterError, match=r"^haptic_controller run: timeout = .* is invalid; allowed: "
+                                                        r"a finite number of s of wall clock > 0$"):
+                wait(timeout=timeout)
+    assert run.wait().exit_reason == "completed"
