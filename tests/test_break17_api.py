@@ -218,7 +218,7 @@ def test_run_refuses_a_start_from_a_spawned_processes_import(tmp_path: pathlib.P
 
 
 @pytest.mark.parametrize(("given", "line"), [
-    ({"timing": "fast"}, "simulated drive: timing = 'fast' is invalid; allowed: one of 'cia402', 'ideal', 'reception', "
+    ({"timing": "fast"}, "simulated drive: timing = 'fast' is invalid; allowed: one of 'ideal', 'cia402', 'reception', "
                          "or None (the profile's)"),
     ({"operator": "constant:3"}, "simulated drive: operator = 'constant:3' is invalid; allowed: a mapping, the "
                                  "profile's [operator_model] table, e.g. {'model': 'constant', 'level': 3.0}"),

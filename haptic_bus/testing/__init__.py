@@ -232,9 +232,9 @@ def _refuse_timing_and_operator(timing: object, operator: object) -> None:
     they were the simulator's ValueError ('fast' is not a valid Timing) and dict()'s ("dictionary update
     sequence element #0 has length 1", for the command line's spelling "constant:3")."""
     from haptic_bus.errors import ParameterError
-    from sim_drive.parameters import Timing
+    from haptic_bus.profile.device import TIMINGS  # a profile's [loop] timing: the simulator's own names
 
-    names = [each.value for each in Timing]
+    names = list(TIMINGS)
     if timing is not None and timing not in names:
         raise ParameterError("timing", timing, f"one of {', '.join(map(repr, names))}, or None (the profile's)",
                              CONTEXT)
