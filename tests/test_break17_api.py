@@ -1,6 +1,7 @@
 """A new user's misuse of the public API (helper break17): each case a defect found and fixed."""
 from __future__ import annotations
 
+import dataclasses
 import logging
 import pathlib
 from typing import Any
@@ -316,3 +317,29 @@ def test_a_controller_wait_that_bounds_nothing_is_refused(haptic_sim: Any, hapti
                                                         r"a finite number of s of wall clock > 0$"):
                 wait(timeout=timeout)
     assert run.wait().exit_reason == "completed"
+
+
+def test_options_that_stopped_a_run_run_again(haptic_sim: Any, tmp_path: pathlib.Path) -> None:
+    """The same hb.RunOptions for a second run after a stop ended the first: the second ended "stopped" before
+    its first cycle, nothing said, because the first run's stop request was still set."""
+    import threading
+    import time
+
+    drive = haptic_sim("cia402-handle", operator={"model": "none"})  # nobody pushes it into the wall between runs
+    options = hb.RunOptions(duration=1000.0, pacing="virtual", plots=False, live=False, out_dir=tmp_path / "a")
+    profile = hb.load_profile("cia402-handle")
+    def stop_once_cycling() -> None:  # bounded: 30 s of wall clock, then stopped anyway
+        deadline = time.monotonic() + 30
+        while drive.sim.drive.sync_count < 200 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        options.stop.event.set()
+
+    stopper = threading.Thread(target=stop_once_cycling)
+    stopper.start()
+    first = hb.run(profile, drive.bus, options, **drive.run_kwargs())
+    stopper.join(30)
+    assert first.exit_reason == "stopped" and first.summary is not None and first.summary.cycles > 0
+    again = dataclasses.replace(options, duration=0.05, out_dir=tmp_path / "b")
+    second = hb.run(profile, drive.bus, again, **drive.run_kwargs())
+    assert second.exit_reason == "completed"
+    assert second.summary is not None and second.summary.cycles == 50

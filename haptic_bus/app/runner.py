@@ -308,6 +308,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
         asked_to_stop = summary is None and reason in ("interrupted", "stopped")
         files = recorder.finish(summary, pictures=options.plots and not asked_to_stop)
         lock.release()
+        options.stop.spent()  # a stop that ended this run does not end the next run given these options
     reason, error = _write_failure(reason, error, recorder, summary, period)  # run.json itself, at the end
     return RunResult(reason, error, summary, controller, folder, files)
 
