@@ -6,6 +6,7 @@ import math
 import numbers
 import os
 import pathlib
+import tempfile
 from collections.abc import Sequence
 
 from haptic_bus.errors import NAMES_SHOWN, ParameterError
@@ -107,9 +108,9 @@ def writable_folder(name: str, path: str | os.PathLike[str], *, context: str = "
     folder = folder_path(name, path, context=context)
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        probe = folder / ".haptic-bus-write-test"
-        probe.write_text("")
-        probe.unlink()
+        descriptor, probe = tempfile.mkstemp(prefix=".haptic-bus-write-test-", dir=folder)  # a name of its own: two
+        os.close(descriptor)  # commands probing one folder at once unlinked each other's (No such file or directory)
+        os.unlink(probe)
     except OSError as exc:
         raise ParameterError(name, str(folder), f"a folder this user can create and write ({_unwritable(folder, exc)})",
                              context) from None

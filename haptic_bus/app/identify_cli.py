@@ -113,14 +113,18 @@ def run_identify(args: argparse.Namespace) -> int:
         outcome = identify_canopen(profile, address.bus, address.checked_node_id, options,
                                    args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID)
     found = outcome.identification
-    written = None
+    written, unwritten = None, None
     if found is not None and found.supported and target is not None and profile.path is not None:
         least = TIMINGS[profile.loop.timing] or 0.0  # the least [loop] delay the profile's timing allows
-        written = write_identified_profile(profile.path, target, found, least)
+        try:  # the folder passed the check before the run; it can still refuse (gone, full, /proc): said, not a traceback
+            written = write_identified_profile(profile.path, target, found, least)
+        except OSError as exc:
+            unwritten = (f"write error: --write-profile {target}: {exc.strerror or exc}; nothing written, the "
+                         f"estimates are the ones above")
     if args.json:
         print(json.dumps({"exit_reason": outcome.exit_reason, "error": outcome.error, "link": outcome.link,
                           "identification": None if found is None else found.to_dict(),
-                          "wrote": None if written is None else str(written)}))
+                          "wrote": None if written is None else str(written), "write_error": unwritten}))
     elif found is not None:
         pacing = "virtual time" if args.virtual_time else "real time"
         print(format_identification(found, f"{profile.name} ({profile.path}); {describe_link(outcome.link)}, {pacing}"))
@@ -129,6 +133,9 @@ def run_identify(args: argparse.Namespace) -> int:
     if written is not None and (refused := _refusal_of(written)) is not None:
         print(f"haptic-bus identify: {written} holds what was measured, and the gate refuses its walls on that device: "
               f"{refused}", file=sys.stderr)
+    if unwritten is not None:
+        print(f"haptic-bus identify: {unwritten}", file=sys.stderr)
+        return outcome.exit_status or 1
     if outcome.error:
         print(f"haptic-bus identify: {ended_line(outcome.exit_reason, outcome.error)}", file=sys.stderr)
     elif found is not None and not found.supported:

@@ -91,13 +91,32 @@ def prepare_run_folder(out: str | pathlib.Path | None, profile_name: str, root: 
     if out is not None:
         return writable_folder("--out", out, context="run")  # as given: an empty one is refused, not '.'
     else:
-        stamp = _utc_now().strftime("%Y%m%dT%H%M%SZ")
-        path = root / f"{stamp}-{profile_name}"
-        n = 2
-        while path.exists():
-            path = root / f"{stamp}-{profile_name}-{n}"
-            n += 1
+        path = _claim_new_folder(root, f"{_utc_now().strftime('%Y%m%dT%H%M%SZ')}-{profile_name}")
     return writable_folder("--out", path, context="run")
+
+
+CLAIM_ATTEMPTS = 10_000  # names tried after ``<UTC>-<profile>``: ``-2`` .. (a second's runs never come near it)
+
+
+def _claim_new_folder(root: pathlib.Path, base: str) -> pathlib.Path:
+    """``root/base`` (``-2``, ``-3``... if taken), created here, so that no other run takes the same name: two
+    runs started in the same second (two threads calling hb.run, two commands in one folder) both found the
+    name free and the second was refused ("a folder no other run is writing") with no --out given.  Where
+    ``root`` cannot be made, the name without creating it (the caller's check names the folder and why)."""
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return root / base
+    for n in range(1, CLAIM_ATTEMPTS + 1):
+        path = root / (base if n == 1 else f"{base}-{n}")
+        try:
+            path.mkdir()
+            return path
+        except FileExistsError:
+            continue
+        except OSError:
+            return path
+    return root / f"{base}-{CLAIM_ATTEMPTS + 1}"
 
 
 def own_run_folder(out: str | pathlib.Path | None, profile_name: str) -> tuple[pathlib.Path, FolderLock]:

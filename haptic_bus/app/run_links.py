@@ -161,6 +161,8 @@ def canopen_rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, A
     several = isinstance(profile, AxesProfile)
     nodes = canopen_nodes(profile, node_id, controller_node_id)
     given = None if isinstance(bus, Mapping) else bus
+    if given is not None and getattr(given, "_is_shutdown", False):  # python-can's own flag, set by shutdown()
+        raise ParameterError("bus", given, "an open can.BusABC (this one is shut down)", "run")
     if given is not None and options.reset_fault:
         raise ParameterError("reset_fault", True, "False with an open bus (the reset needs a bus configuration)", "run")
     config = resolve_bus_config(**bus) if isinstance(bus, Mapping) else \

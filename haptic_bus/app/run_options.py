@@ -36,6 +36,13 @@ class StopRequest:
         self.why = self.why or why
         self.event.set()
 
+    def spent(self) -> None:
+        """The run it stopped has ended: the request is cleared, so that the same options run again (a
+        second hb.run with them ended "stopped" before its first cycle, nothing said)."""
+        self.event.clear()
+        self.interrupted = False
+        self.why = None
+
     def install(self) -> None:
         """SIGINT and SIGTERM set the event (the loop ends at the next cycle boundary); nothing in a thread
         other than the main one, where Python delivers no signal

@@ -84,7 +84,7 @@ from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.record import Event
-from haptic_bus.errors import DriveError, DriveFault, DriveTimeout, ParameterError, Refusal
+from haptic_bus.errors import DriveError, DriveFault, DriveTimeout, HapticBusError, ParameterError, Refusal
 
 if TYPE_CHECKING:
     import can
@@ -126,8 +126,23 @@ def run(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | st
     its own scene; ``haptic-bus validate`` passes its probe,
     :class:`~haptic_bus.app.validate_run.ValidateRun`).
     """
+    _refuse_a_spawned_start()
     rig = _rig(profile, bus, options, node_id, unit_id, unit_ids, controller_node_id)
     return _session(kind or run_kind(profile), rig, options)
+
+
+def _refuse_a_spawned_start() -> None:
+    """HapticBusError, before any folder or bus, when ``run`` is called from a script's top level that a
+    process started by ``spawn`` (a run's writer or judge) is running again: the script lacks
+    ``if __name__ == "__main__":``.  Where its top level caught the error the worker started, and that
+    second ``run`` wrote a run folder of its own saying "crashed" (multiprocessing's RuntimeError) beside
+    the real run; the check is the one multiprocessing makes before it starts a process."""
+    import multiprocessing
+
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise HapticBusError("hb.run was called while a process of a run started (spawn runs the calling script's "
+                             "top level again in it): keep the run under if __name__ == '__main__': (Python's rule "
+                             "for spawned processes)")
 
 
 def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: int, options: RunOptions,
@@ -264,7 +279,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                     _refuse_faulted_at_the_end(drives)
             reason, error = summary.exit_reason, summary.error
             if reason == "drive error" and error is not None:  # a drive that faulted in the cycles: was it a stall of ours?
-                error = summary.error = error + _stall_before(controller, rig.watchdog.stall)
+                error = summary.error = error + _stall_before(controller, rig.watchdog.stall, _answers_wait(rig))
             if reason == "stopped" and options.stop.interrupted:
                 reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr
                 summary.exit_reason, summary.error = reason, error  # run.json's summary says it as its status does
@@ -273,7 +288,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
     except Refusal as exc:  # refused before the drive is enabled
         reason, error = "refused", str(exc)
     except DriveError as exc:
-        reason, error = "drive error", str(exc) + _stall_before(controller, rig.watchdog.stall)
+        reason, error = "drive error", str(exc) + _stall_before(controller, rig.watchdog.stall, _answers_wait(rig))
         hint = rig.fault_hint(names.index(exc.node) if exc.node in names else None)
         if isinstance(exc, DriveFault) and exc.state is State.FAULT and hint is not None:
             error += f"; {hint} (or run with --reset-fault)"
@@ -293,6 +308,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
         asked_to_stop = summary is None and reason in ("interrupted", "stopped")
         files = recorder.finish(summary, pictures=options.plots and not asked_to_stop)
         lock.release()
+        options.stop.spent()  # a stop that ended this run does not end the next run given these options
     reason, error = _write_failure(reason, error, recorder, summary, period)  # run.json itself, at the end
     return RunResult(reason, error, summary, controller, folder, files)
 
@@ -300,11 +316,20 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
 STALL_LOOKBACK = 3  # cycles: the stalled one, and the exchanges of the cycles after it that found the drive faulted
 
 
-def _stall_before(controller: WallController[Any, Any] | None, stall: float) -> str:
+def _answers_wait(rig: Rig) -> bool:
+    """Whether a cycle of ``rig``'s link can wait for an answer as long as the drive's watchdog allows: a
+    Modbus request waits for its answer up to its timeout, beyond the 60 ms watchdog; a CANopen cycle waits
+    for the TPDOs at most half the shortest stall that faults a drive (``longest_tpdo_wait``)."""
+    return rig.link.get("kind") == "modbus"
+
+
+def _stall_before(controller: WallController[Any, Any] | None, stall: float, answers_wait: bool = False) -> str:
     """What the one line of a drive error adds when one of the last cycles started ``stall`` s late or more
     (the shortest stall that faults the drive), or the cycle that met the error had run that long (a stop in
     the middle of its exchange): this process did not run (a SIGSTOP, a debugger, starved of CPU), and the
-    drive's watchdog did what it is for; "" otherwise, and for a virtual-time run."""
+    drive's watchdog did what it is for; "" otherwise, and for a virtual-time run.  ``answers_wait`` (Modbus):
+    the cycle may as well have waited that long for an answer (a server stopped with SIGSTOP held a cycle
+    402 ms, and the line blamed this process alone), so the line names both."""
     clock = controller.clock if controller is not None else None
     if controller is None or not isinstance(clock, RealClock):
         return ""
@@ -312,8 +337,9 @@ def _stall_before(controller: WallController[Any, Any] | None, stall: float) -> 
     held = max(float(late.max()) if late.size else 0.0, controller.error_cycle_s)
     if held < stall:
         return ""
+    either = ", or it waited that long for a drive's answer (a drive or server that stalled)" if answers_wait else ""
     return (f" (a cycle just before was held {held * 1e3:.4g} ms late, past the {stall * 1e3:.4g} ms the drive's "
-            f"watchdog allows: this process did not run for that long, stopped or starved of CPU)")
+            f"watchdog allows: this process did not run for that long, stopped or starved of CPU{either})")
 
 
 def _write_failure(reason: str, error: str | None, recorder: RunRecorder, summary: RunSummary | None,

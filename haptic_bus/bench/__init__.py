@@ -57,7 +57,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from haptic_bus.app.arguments import OneLineParser
-from haptic_bus.bench.interrupts import Interrupts, SectionInterrupted
+from haptic_bus.bench.interrupts import Interrupts, SectionInterrupted, sigterm_as_sigint
 from haptic_bus.bench.size import FULL, QUICK, SMOKE, Size
 from haptic_bus.bench.timing import machine
 
@@ -248,15 +248,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     if refusal is not None:
         print(f"haptic-bus bench: error: {refusal}", file=sys.stderr)
         return 2
-    try:
-        result = run_bench(args.out, size=args.size, progress=not args.no_progress, sections=args.only or SECTIONS,
-                           soak=args.soak)
-        print((Path(args.out) / "bench.md").read_text())
-        print(f"wrote {Path(args.out) / 'bench.json'}, {Path(args.out) / 'bench.md'}"
-              + "".join(f", {p}" for p in result["plots"]))
-    except KeyboardInterrupt:  # outside a section (starting, writing): nothing more to show
-        print("haptic-bus bench: interrupted", file=sys.stderr)
-        return 130
+    with sigterm_as_sigint() as terminated:
+        try:
+            result = run_bench(args.out, size=args.size, progress=not args.no_progress,
+                               sections=args.only or SECTIONS, soak=args.soak)
+            print((Path(args.out) / "bench.md").read_text())
+            print(f"wrote {Path(args.out) / 'bench.json'}, {Path(args.out) / 'bench.md'}"
+                  + "".join(f", {p}" for p in result["plots"]))
+        except KeyboardInterrupt:  # outside a section (starting, writing): nothing more to show
+            if terminated:
+                print("haptic-bus bench: stopped (SIGTERM)")
+                return 0
+            print("haptic-bus bench: interrupted", file=sys.stderr)
+            return 130
+    if "interrupted" in result and terminated:  # a stop, as haptic-bus run takes it: no error
+        print(f"haptic-bus bench: stopped (SIGTERM) in section {result['interrupted']}; bench.json holds the "
+              "sections before it")
+        return 0
     if "interrupted" in result:
         print(f"haptic-bus bench: interrupted in section {result['interrupted']}", file=sys.stderr)
         return 130

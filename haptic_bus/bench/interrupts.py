@@ -66,3 +66,26 @@ def sigint_after() -> Iterator[None]:
         signal.signal(signal.SIGINT, before)
         if came:
             signal.raise_signal(signal.SIGINT)  # to the handler put back: KeyboardInterrupt, the bench's, or none
+
+
+@contextmanager
+def sigterm_as_sigint() -> Iterator[list[int]]:
+    """Inside the block SIGTERM (``kill``, ``timeout``, a service manager's stop) takes Ctrl-C's path: it is
+    remembered in the list yielded and raised again as SIGINT, which the bench stops on where it stands,
+    its children stopped by the ``finally`` that started them and the sections so far written.  Without
+    it SIGTERM's default action ended the bench at once: no bench.json, and the simulated drive of the
+    section running left behind with no parent (exit 143)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield []
+        return
+    came: list[int] = []
+
+    def on_sigterm(signum: int, frame: object) -> None:
+        came.append(signum)
+        signal.raise_signal(signal.SIGINT)
+
+    before = signal.signal(signal.SIGTERM, on_sigterm)
+    try:
+        yield came
+    finally:
+        signal.signal(signal.SIGTERM, before)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.resources
+import os
 import pathlib
 
 from haptic_bus.profile.reader import profile_error, read_document
@@ -22,7 +23,11 @@ def shipped_profiles(axes: bool = False) -> dict[str, pathlib.Path]:
 
 
 def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:
-    """The file of a shipped profile name, or ``path_or_name`` as a path if it is one; ParameterError if neither."""
+    """The file of a shipped profile name, or ``path_or_name`` as a path if it is one; ParameterError if neither
+    (also for what is neither text nor a path: ``hb.load_profile(5)`` was pathlib's TypeError)."""
+    if not isinstance(path_or_name, (str, os.PathLike)) or isinstance(os.fspath(path_or_name), bytes):
+        raise profile_error(repr(path_or_name), "profile", path_or_name,
+                            "a shipped profile name or a TOML file's path (str or pathlib.Path)")
     candidate = pathlib.Path(path_or_name)
     if _is_file(candidate):
         return candidate

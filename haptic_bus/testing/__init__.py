@@ -188,6 +188,7 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
                 (servers > 1 and interface != MODBUS):
             raise ParameterError("servers", servers, f"1, or one Modbus server per axis ({axes}) with interface="
                                  f"{MODBUS!r}", CONTEXT)
+        _refuse_timing_and_operator(timing, operator)
         spec = None if interface == MODBUS else _private_bus(interface)
         if several is not None:
             if truth or operator is not None or timing is not None:
@@ -204,6 +205,10 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
             ("unit_id", unit_id, "a CANopen node: node_id")
         if other is not None:
             raise ParameterError(unused, other, f"none with interface={interface!r} ({named})", CONTEXT)
+        if spec is None and unit_id is not None and (isinstance(unit_id, bool) or not isinstance(unit_id, int)
+                                                     or not 1 <= unit_id <= 247):  # the server's own check took 0..255
+            raise ParameterError("unit_id", unit_id, "a Modbus unit id 1..247, one a master can address (hb.run's and "
+                                 "haptic-bus sim's range)", CONTEXT)
         path = None
         if profile is not None:
             if not folder:
@@ -222,6 +227,22 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
     _each(reversed(started), _stop_cleanly)
 
 
+def _refuse_timing_and_operator(timing: object, operator: object) -> None:
+    """ParameterError for a ``timing`` the simulator has no name for or an ``operator`` that is no table:
+    they were the simulator's ValueError ('fast' is not a valid Timing) and dict()'s ("dictionary update
+    sequence element #0 has length 1", for the command line's spelling "constant:3")."""
+    from haptic_bus.errors import ParameterError
+    from haptic_bus.profile.device import TIMINGS  # a profile's [loop] timing: the simulator's own names
+
+    names = list(TIMINGS)
+    if timing is not None and timing not in names:
+        raise ParameterError("timing", timing, f"one of {', '.join(map(repr, names))}, or None (the profile's)",
+                             CONTEXT)
+    if operator is not None and not isinstance(operator, Mapping):
+        raise ParameterError("operator", operator, "a mapping, the profile's [operator_model] table, e.g. "
+                             "{'model': 'constant', 'level': 3.0}", CONTEXT)
+
+
 def _axes_profile(profile: ProfileSource | None) -> AxesProfile | None:
     """``profile`` read (validated, not judged) if it is a multi-axis one (``[[axes]]``), else None."""
     if profile is None:
@@ -233,11 +254,21 @@ def _axes_profile(profile: ProfileSource | None) -> AxesProfile | None:
 
 
 def _stop_cleanly(node: SimDriveNode) -> None:
-    """Stop ``node``; a subprocess that does not exit with status 0 on SIGTERM fails the test."""
+    """Stop ``node``; a subprocess that does not exit with status 0 on SIGTERM fails the test, and so does
+    one that had exited before, unless the test stopped it itself (``drive.process.stop(signal.SIGKILL)``:
+    it got the status from that call; teardown said "did not exit cleanly on SIGTERM (status -9)")."""
+    process = node.process
+    before = None if process is None or node.stopped else process.process.poll()  # exited before teardown
     status = node.stop()
-    if status is not None and status[0] != 0:
-        raise AssertionError(f"simulated drive node {node.node_ids or node.node_id} did not exit cleanly on SIGTERM "
-                             f"(status {status[0]}): {status[1][-2000:]}")
+    if status is None or status[0] == 0:
+        return
+    name = f"simulated drive node {node.node_ids or node.node_id}"
+    if before is not None:
+        if process is not None and process.sent is not None:
+            return  # the test's own stop: its status was the test's to judge
+        raise AssertionError(f"{name} had exited before the test's teardown (status {before}; a test that ends it "
+                             f"on purpose: drive.process.stop(signal.SIGKILL)): {status[1][-2000:]}")
+    raise AssertionError(f"{name} did not exit cleanly on SIGTERM (status {status[0]}): {status[1][-2000:]}")
 
 
 def _each(items: Iterable[Any], teardown: Callable[[Any], None]) -> None:
@@ -268,6 +299,7 @@ def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
               start_in_contact: str | None = None, reset_fault: bool = False,
               out_dir: str | os.PathLike[str] | None = None, plots: bool = False) -> ControllerRun:
         believed = profile if isinstance(profile, (Profile, AxesProfile)) else load_profile(profile)
+        _refuse_other_axes(believed, drive)
         folder = pathlib.Path(out_dir) if out_dir is not None else tmp_path_factory.mktemp("haptic-run")
         options = RunOptions(duration=duration, pacing=pacing, out_dir=folder, start_in_contact=start_in_contact,
                              live=False, stop=StopRequest(), reset_fault=reset_fault, plots=plots)
@@ -277,6 +309,20 @@ def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
 
     yield start
     _each(reversed(runs), ControllerRun.close)
+
+
+def _refuse_other_axes(believed: Any, drive: SimDriveNode) -> None:
+    """ParameterError when the profile the controller believes has another number of axes than the
+    simulated device ``drive`` (hb.run's own refusal named a ``node_id`` the test never gave)."""
+    from haptic_bus.app.profiles import AxesProfile
+    from haptic_bus.errors import ParameterError
+
+    believed_axes = len(believed.axes) if isinstance(believed, AxesProfile) else 1
+    driven_axes = max(len(drive.node_ids), len(drive.unit_ids), 1)
+    if believed_axes != driven_axes:
+        wanted = "a one-axis profile" if driven_axes == 1 else f"a profile of {driven_axes} [[axes]]"
+        raise ParameterError("profile", believed.name, f"{wanted}, as the simulated drive has "
+                             f"(this one has {believed_axes} axes)", "haptic_controller")
 
 
 @pytest.fixture

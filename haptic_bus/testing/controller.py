@@ -72,6 +72,7 @@ class ControllerRun:
     def wait(self, timeout: float = RUN_WAIT) -> RecordedRun:
         """Wait at most ``timeout`` s of wall clock for the run to end by itself; its folder read
         back.  A run still going then is stopped and the test fails."""
+        _check_timeout(timeout)
         self._thread.join(timeout)
         if self._thread.is_alive():
             self.stop()
@@ -81,6 +82,7 @@ class ControllerRun:
     def stop(self, timeout: float = STOP_WAIT) -> RecordedRun:
         """Ask the run to end at the next cycle and wait at most ``timeout`` s; its folder read back
         (``exit_reason`` "stopped", or how it ended before).  A run that does not end fails the test."""
+        _check_timeout(timeout)
         self.options.stop.event.set()
         self._thread.join(timeout)
         if self._thread.is_alive():
@@ -93,6 +95,7 @@ class ControllerRun:
         and the first cycle's; over Modbus every unit is OPERATION ENABLED and has had two cycles
         (output block writes) since; so the record will hold at least one cycle.  AssertionError if
         the run ends first (give the run a ``duration`` long enough to be seen, and :meth:`stop` it)."""
+        _check_timeout(timeout)
         deadline = time.monotonic() + timeout
         spec = self.node.spec
         if spec is None:
@@ -148,3 +151,14 @@ class ControllerRun:
             self.stop()
         if self.failure is not None:
             raise AssertionError(f"the controller's run raised {self.failure!r}") from self.failure
+
+
+def _check_timeout(timeout: object) -> None:
+    """ParameterError for a wait that bounds nothing: ``wait(timeout=-1)`` returned at once and failed the test
+    with "did not end within -1 s" (stopping a run that had just started); NaN and infinity likewise."""
+    import math
+
+    from haptic_bus.errors import ParameterError
+
+    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not math.isfinite(timeout) or timeout <= 0:
+        raise ParameterError("timeout", timeout, "a finite number of s of wall clock > 0", "haptic_controller run")

@@ -38,6 +38,7 @@ class SimProcess:
         self._log, path = tempfile.mkstemp(prefix="sim_drive-", suffix=".log")  # a file, not a pipe: it cannot fill up
         os.unlink(path)  # the descriptor keeps it; nothing is left behind
         self.process = subprocess.Popen(self.args, env=env, stdout=subprocess.DEVNULL, stderr=self._log)
+        self.sent: signal.Signals | None = None  # the signal stop() sent, the last time it sent one
 
     def log(self) -> str:
         """Everything the process wrote to stderr so far (``pread``: the shared file offset does not move)."""
@@ -61,6 +62,7 @@ class SimProcess:
         running then is killed (SIGKILL) and the test fails."""
         if self.process.poll() is None:
             self.process.send_signal(sig)
+            self.sent = sig
         try:
             self.process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:

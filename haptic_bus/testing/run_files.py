@@ -73,6 +73,11 @@ class RecordedRun:
 def read_run_folder(folder: str | os.PathLike[str]) -> RecordedRun:
     """The run folder ``folder`` read back (``run.json`` must exist: every run writes it)."""
     folder = pathlib.Path(folder)
+    if not (folder / DOCUMENT).is_file():  # FileNotFoundError's line named run.json, not what the caller gave
+        from haptic_bus.errors import ParameterError
+
+        raise ParameterError("folder", str(folder), f"a run folder, one holding {DOCUMENT} (haptic-bus run --out, "
+                             "haptic-bus demo, hb.run's folder)", "recorded_run")
     document = json.loads((folder / DOCUMENT).read_text())
     record = read_record_csv(folder / RECORD)[1] if (folder / RECORD).is_file() else {}
     records = {path.stem.removeprefix("record-"): read_record_csv(path)[1] for path in sorted(folder.glob(AXIS_RECORDS))}
