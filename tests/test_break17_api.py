@@ -45,11 +45,12 @@ def test_receive_errors_are_all_counted_but_logged_by_decades(caplog: pytest.Log
 
 @pytest.mark.parametrize("argument", [5, None, b"cia402-handle", ["cia402-handle"]])
 def test_load_profile_refuses_what_is_neither_a_name_nor_a_path(argument: object) -> None:
-    """hb.load_profile(5) was pathlib's TypeError; the docs promise a ParameterError naming the field."""
-    with pytest.raises(hb.ParameterError, match=r"^profile .*: profile = .* is invalid; allowed: a shipped profile "
+    """hb.load_profile(5) was pathlib's TypeError; the docs promise a ParameterError naming the field (None: the
+    field is missing, ParameterError's rule for a value not given)."""
+    said = "is missing" if argument is None else "= .* is invalid"
+    with pytest.raises(hb.ParameterError, match=rf"^profile .*: profile {said}; allowed: a shipped profile "
                                                 r"name or a TOML file's path \(str or pathlib.Path\)$"):
         hb.load_profile(argument)  # type: ignore[arg-type]  # what a user may pass
-
 
 
 def test_haptic_controller_refuses_a_one_axis_drive_for_gantry(haptic_sim: Any, haptic_controller: Any) -> None:
@@ -107,7 +108,8 @@ def test_identify_says_a_profile_it_cannot_write_in_one_line(haptic_sim: Any, tm
 
 def test_bench_stops_on_sigterm_as_on_ctrl_c(tmp_path: pathlib.Path) -> None:
     """SIGTERM during a bench section (``timeout``, ``kill``): the section stops where it stands, bench.json
-    is written with the sections so far, one line says so, exit 0 as ``haptic-bus run`` takes SIGTERM.  It
+    is written with the sections so far, one line on stderr says so, exit 130 as on Ctrl-C (a bench cut short is
+    no result, though what it measured is kept).  It
     was SIGTERM's default action: exit 143, no bench.json, and the simulated drive of a section left
     running without a parent.  The soak ticks ten times; SIGTERM goes after its first tick."""
     import json
@@ -131,14 +133,14 @@ def test_bench_stops_on_sigterm_as_on_ctrl_c(tmp_path: pathlib.Path) -> None:
                 seen += os.read(process.stderr.fileno(), 4096)
         assert b"soak:" in seen, seen  # its first tick: the handlers are in place
         process.send_signal(signal.SIGTERM)
-        stdout, _ = process.communicate(timeout=120)
+        _, rest = process.communicate(timeout=120)
     finally:
         if process.poll() is None:
             process.kill()
             process.wait(10)
-    assert process.returncode == 0
-    assert stdout.decode().splitlines()[-1] == ("haptic-bus bench: stopped (SIGTERM) in section soak; bench.json holds "
-                                                "the sections before it")
+    assert process.returncode == 130
+    assert (seen + rest).decode().splitlines()[-1] == ("haptic-bus bench: interrupted (SIGTERM) in section soak; "
+                                                       "bench.json holds the sections before it")
     assert json.loads((out / "bench.json").read_text())["interrupted"] == "soak"
 
 

@@ -256,20 +256,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"wrote {Path(args.out) / 'bench.json'}, {Path(args.out) / 'bench.md'}"
                   + "".join(f", {p}" for p in result["plots"]))
         except KeyboardInterrupt:  # outside a section (starting, writing): nothing more to show
-            if terminated:
-                print("haptic-bus bench: stopped (SIGTERM)")
-                return 0
-            print("haptic-bus bench: interrupted", file=sys.stderr)
+            print(f"haptic-bus bench: interrupted{' (SIGTERM)' if terminated else ''}", file=sys.stderr)
             return 130
-    if "interrupted" in result and terminated:  # a stop, as haptic-bus run takes it: no error
-        print(f"haptic-bus bench: stopped (SIGTERM) in section {result['interrupted']}; bench.json holds the "
-              "sections before it")
-        return 0
-    if "interrupted" in result:
-        print(f"haptic-bus bench: interrupted in section {result['interrupted']}", file=sys.stderr)
+    if "interrupted" in result:  # Ctrl-C or SIGTERM: a bench cut short is no result, though what it has is kept
+        print(f"haptic-bus bench: interrupted{' (SIGTERM)' if terminated else ''} in section {result['interrupted']}; "
+              "bench.json holds the sections before it", file=sys.stderr)
         return 130
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())
