@@ -163,9 +163,9 @@ class Command:
             assert time.monotonic() < deadline, f"no {what} within {timeout} s: {self.err[-2000:]}"
             time.sleep(0.02)
 
-    def interrupt(self, timeout: float = 60.0) -> int:
-        """SIGINT (Ctrl-C), then the exit status (bounded wait)."""
-        self.process.send_signal(signal.SIGINT)
+    def interrupt(self, timeout: float = 60.0, signum: int = signal.SIGINT) -> int:
+        """SIGINT (Ctrl-C; or ``signum``), then the exit status (bounded wait)."""
+        self.process.send_signal(signum)
         return self.process.wait(timeout=timeout)
 
     def close(self) -> None:
@@ -297,6 +297,24 @@ def test_ctrl_c_in_bench_is_130_with_the_sections_done_written(tmp_path: pathlib
     result = json.loads((out / "bench.json").read_text())
     assert result["interrupted"] == "passivity" and list(result["sections"]) == ["bus"]
     assert result["sections"]["bus"]["available"] and (out / "bench.md").is_file()
+
+
+@pytest.mark.slow
+def test_sigterm_in_bench_is_130_as_ctrl_c_with_the_sections_done_written(tmp_path: pathlib.Path) -> None:
+    """SIGTERM (``timeout``, ``kill``) takes Ctrl-C's path: the section stops where it stands, its processes
+    stopped, bench.json written with the sections so far, one line on stderr naming the signal.  It was
+    SIGTERM's default action: exit 143, no bench.json, a section's simulated drive left without a parent
+    (break17).  The soak ticks ten times; SIGTERM goes after its first tick, when the handlers are in place."""
+    out = tmp_path / "bench"
+    bench = Command("bench", "--smoke", "--only", "soak", "--soak", "2e5", "--out", str(out))
+    try:
+        bench.wait_until(lambda: "soak:" in bench.err, "the soak's first tick")
+        assert bench.interrupt(signum=signal.SIGTERM) == 130, bench.err[-2000:]
+        assert _no_traceback(bench)[-1] == ("haptic-bus bench: interrupted (SIGTERM) in section soak; bench.json holds "
+                                            "the sections before it")
+        assert json.loads((out / "bench.json").read_text())["interrupted"] == "soak"
+    finally:
+        bench.close()
 
 
 PNG_END = b"IEND\xaeB`\x82"  # a PNG's last chunk (IEND, no data, its CRC): the file is written to its end
