@@ -1,4 +1,5 @@
-"""A new user's misuse of the public API (helper break17): each case a defect found and fixed."""
+"""A user's misuse of the public API and the pytest plugin (found by a user-level break round, break17):
+each refused before anything is touched, in one line naming the thing and what it takes, or handled."""
 from __future__ import annotations
 
 import dataclasses
