@@ -17,6 +17,8 @@ machines over udp_multicast sets ``hop_limit`` on purpose (``--bus-option hop_li
 from __future__ import annotations
 
 import argparse
+import configparser
+import re
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
@@ -67,12 +69,17 @@ def resolve_bus_config(
         _check_port(given.get("port"), where)
     try:
         config = dict(can.util.load_config(path=config_file, config=given, context=context))
+    except (configparser.Error, UnicodeDecodeError) as exc:  # a ~/.canrc python-can cannot read: exit 2, one line
+        raise ParameterError("python-can's config file", _config_file(exc, config_file),
+                             f"an INI file with a [default] section ({' '.join(str(exc).split())})", "bus") from None
     except (can.CanInterfaceNotImplementedError, NotImplementedError, ValueError, TypeError) as exc:
         if "None" in str(exc):
             raise ParameterError("interface", None, NO_INTERFACE, "bus") from None
-        if interface is not None and interface not in can.interfaces.VALID_INTERFACES:  # the user's typo: exit 2
-            raise ParameterError("interface", interface, "one of python-can's: "
-                                 + ", ".join(sorted(can.interfaces.VALID_INTERFACES)), where) from None
+        unknown = interface if interface is not None else _unknown_interface(str(exc))
+        if unknown is not None and unknown not in can.interfaces.VALID_INTERFACES:  # a typo, ours or a config's: exit 2
+            origin = where if interface is not None else "bus (python-can's configuration: CAN_INTERFACE or ~/.canrc)"
+            raise ParameterError("interface", unknown, "one of python-can's: "
+                                 + ", ".join(sorted(can.interfaces.VALID_INTERFACES)), origin) from None
         raise DriveError(where, f"invalid CAN bus configuration: {exc}") from exc
     if not config.get("interface"):
         raise ParameterError("interface", None, NO_INTERFACE, "bus")
@@ -91,6 +98,26 @@ def resolve_bus_config(
                                  "(--channel)", where)
         _check_port(config.get("port"), where)
     return config
+
+
+def _unknown_interface(message: str) -> str | None:
+    """The interface python-can's config chain named and python-can does not know (its message
+    ``Unknown interface type "NAME"``), or None for any other complaint."""
+    found = re.search(r'Unknown interface type "(.*)"', message)
+    return found.group(1) if found else None
+
+
+def _config_file(exc: Exception, config_file: str | None) -> str:
+    """The config file python-can could not read: the one configparser names, else the one asked for,
+    else python-can's list of files it reads."""
+    named = getattr(exc, "source", None) or getattr(exc, "filename", None)
+    if named:
+        return str(named)
+    if config_file:
+        return config_file
+    import can
+
+    return " or ".join(str(path) for path in getattr(can.util, "CONFIG_FILES", ["~/.canrc"]))
 
 
 def _check_port(port: object, where: str) -> None:

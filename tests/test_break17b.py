@@ -1,0 +1,38 @@
+"""break17b: invalid input a new user meets, each one line and exit 2 (ParameterError), no traceback."""
+
+from __future__ import annotations
+
+import pytest
+
+from drives.bus_config import resolve_bus_config
+from drives.errors import ParameterError
+
+
+@pytest.fixture
+def no_can_env(monkeypatch: pytest.MonkeyPatch) -> None:
+    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(name, raising=False)
+
+
+@pytest.mark.parametrize("text, said", [
+    (b"[default\ninterface = virtual\n", "no section headers"),          # configparser's traceback, exit 1
+    (b"[default]\ninterface = virtual\ninterface = x\n", "already exists"),
+    (b"\xff\xfe[default]\n", "utf-8"),                                    # a DriveError, exit 1
+])
+def test_unreadable_canrc_is_invalid_input(tmp_path, no_can_env, text: bytes, said: str) -> None:
+    rc = tmp_path / "canrc"
+    rc.write_bytes(text)
+    with pytest.raises(ParameterError) as caught:
+        resolve_bus_config(config_file=str(rc))
+    assert caught.value.name == "python-can's config file"
+    assert said in caught.value.allowed
+    assert "\n" not in str(caught.value)
+
+
+def test_canrc_unknown_interface_is_invalid_input(tmp_path, no_can_env) -> None:
+    rc = tmp_path / "canrc"
+    rc.write_text("[default]\ninterface = nonesuch\nchannel = x\n")
+    with pytest.raises(ParameterError) as caught:  # was DriveError 'invalid CAN bus configuration', exit 1
+        resolve_bus_config(config_file=str(rc))
+    assert caught.value.name == "interface" and caught.value.value == "nonesuch"
+    assert "udp_multicast" in caught.value.allowed
