@@ -36,3 +36,13 @@ def test_canrc_unknown_interface_is_invalid_input(tmp_path, no_can_env) -> None:
         resolve_bus_config(config_file=str(rc))
     assert caught.value.name == "interface" and caught.value.value == "nonesuch"
     assert "udp_multicast" in caught.value.allowed
+
+
+@pytest.mark.parametrize("text", ["1-100000000", "1-0x7fffffffffff", "0-5", "5-1000000000000"])
+def test_huge_id_range_is_refused_before_it_is_listed(text: str) -> None:
+    from haptic_bus.validation import ids_in_order
+
+    with pytest.raises(ParameterError) as caught:  # was range(1, 10**8) listed first: MemoryError, exit 1
+        ids_in_order("unit ids", text, "Modbus unit ids", 1, 247)
+    assert caught.value.value == text
+    assert ids_in_order("unit ids", "0x5-0x7,1", "Modbus unit ids", 1, 247) == [5, 6, 7, 1]
