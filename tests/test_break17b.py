@@ -46,3 +46,17 @@ def test_huge_id_range_is_refused_before_it_is_listed(text: str) -> None:
         ids_in_order("unit ids", text, "Modbus unit ids", 1, 247)
     assert caught.value.value == text
     assert ids_in_order("unit ids", "0x5-0x7,1", "Modbus unit ids", 1, 247) == [5, 6, 7, 1]
+
+
+@pytest.mark.parametrize("url", ["tcp://[::1:15191", "tcp://::1]:15191", "tcp://[]:15191", "tcp://[::zz]:15191",
+                                 "tcp://[127.0.0.1]:15191"])
+def test_malformed_ipv6_modbus_url_is_invalid_input(url: str) -> None:
+    from drives.modbus.link import ModbusAddress
+    from sim_drive.modbus.server import parse_modbus_url
+
+    for read in (ModbusAddress.from_url, parse_modbus_url):  # was urllib's ValueError traceback, exit 1
+        with pytest.raises(ParameterError) as caught:
+            read(url)
+        assert caught.value.value == url and "tcp://[::1]:PORT" in caught.value.allowed
+    assert ModbusAddress.from_url("tcp://[::1]:15191").host == "::1"
+    assert parse_modbus_url("tcp://[::1]:15191") == ("::1", 15191)
