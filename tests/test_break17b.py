@@ -60,3 +60,21 @@ def test_malformed_ipv6_modbus_url_is_invalid_input(url: str) -> None:
         assert caught.value.value == url and "tcp://[::1]:PORT" in caught.value.allowed
     assert ModbusAddress.from_url("tcp://[::1]:15191").host == "::1"
     assert parse_modbus_url("tcp://[::1]:15191") == ("::1", 15191)
+
+
+def test_run_writer_process_outlives_a_sigterm_to_the_process_group(tmp_path) -> None:
+    """timeout(1) and a service manager's stop send SIGTERM to every process of the run's group: the run
+    stops at a cycle boundary (exit 0, 'stopped'), and its writer must live to write the last rows; it died at
+    once (run.json's record 'rows_written': 0, record.csv short by its last drain and cut mid-row, two ERROR lines)."""
+    import os
+    import signal
+
+    from haptic_bus.app.run_writer import RunWriter
+
+    writer = RunWriter(tmp_path, bus_log=False)
+    pid = writer.process.pid
+    assert pid is not None
+    os.kill(pid, signal.SIGTERM)  # pending at once: a default action would end it before it reads 'stop'
+    stats = writer.close()
+    assert stats.get("records") == {} and "failure" not in stats
+    assert writer.process.exitcode == 0
