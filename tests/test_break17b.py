@@ -78,3 +78,24 @@ def test_run_writer_process_outlives_a_sigterm_to_the_process_group(tmp_path) ->
     stats = writer.close()
     assert stats.get("records") == {} and "failure" not in stats
     assert writer.process.exitcode == 0
+
+
+def test_load_profile_of_nothing_names_no_none() -> None:
+    import haptic_bus as hb
+
+    with pytest.raises(hb.ParameterError) as caught:  # was 'profile None: profile is missing; ...'
+        hb.load_profile(None)  # type: ignore[arg-type]
+    assert str(caught.value).startswith("profile is missing; allowed: ") and "None" not in str(caught.value)
+    with pytest.raises(hb.ParameterError) as caught:  # was 'profile : profile = '' is invalid; ...'
+        hb.load_profile("")
+    assert str(caught.value).startswith("profile = '' is invalid; allowed: ") and "stiff-wall" in str(caught.value)
+
+
+def test_run_modbus_without_url_names_the_url() -> None:
+    import haptic_bus as hb
+
+    profile = hb.load_profile("stiff-wall")
+    with pytest.raises(hb.ParameterError) as caught:  # was 'run: unit_id = 1 is invalid; ... a CANopen drive is node_id'
+        hb.run_modbus(profile, None, 1, hb.RunOptions(duration=0.1))  # type: ignore[arg-type]
+    assert caught.value.name == "url" and caught.value.value is None
+    assert str(caught.value).startswith("run_modbus: url is missing; allowed: a Modbus URL")
