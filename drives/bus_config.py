@@ -97,7 +97,36 @@ def resolve_bus_config(
             raise ParameterError("channel", group, "a multicast group address, e.g. 239.74.163.2 or ff15::1 "
                                  "(--channel)", where)
         _check_port(config.get("port"), where)
+    missing = _required_not_given(config)
+    if missing:  # before any run folder or bus: python-can's TypeError when the bus is opened, exit 1
+        raise _not_given(config["interface"], missing, where)
     return config
+
+
+def _required_not_given(config: dict[str, Any]) -> list[str]:
+    """The arguments the interface's bus class requires (no default) that ``config`` lacks, in its order;
+    none when the class cannot be imported here (opening the bus says why)."""
+    import importlib
+    import inspect
+
+    import can
+
+    backend = can.interfaces.BACKENDS.get(config["interface"])
+    if backend is None:
+        return []
+    try:
+        bus_class = getattr(importlib.import_module(backend[0]), backend[1])
+        parameters = list(inspect.signature(bus_class.__init__).parameters.values())[1:]
+    except Exception:  # a vendor library missing, a module that fails to import: open_bus' DriveError says it
+        return []
+    named = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    return [p.name for p in parameters if p.kind in named and p.default is p.empty and config.get(p.name) is None]
+
+
+def _not_given(interface: str, missing: list[str], where: str) -> ParameterError:
+    """``NAME is missing; allowed: ...`` for the first of an interface's required arguments not given."""
+    flags = ", ".join("--channel" if name == "channel" else f"--bus-option {name}=VALUE" for name in missing)
+    return ParameterError(missing[0], None, f"the {interface} bus' {', '.join(missing)} ({flags})", where)
 
 
 def _unknown_interface(message: str) -> str | None:
@@ -132,7 +161,8 @@ def open_bus(**arguments: Any) -> can.BusABC:
     import can
 
     config = resolve_bus_config(**arguments)
-    where = f"bus {config.get('interface')}:{config.get('channel')}"
+    channel = config.get("channel")
+    where = f"bus {config.get('interface')}:{'?' if channel is None else channel}"  # no 'socketcan:None'
     try:
         if config["interface"] == "udp_multicast":  # the same interface, its filters applied before decoding
             from drives.udp_multicast import FilteredMulticastBus
@@ -141,6 +171,11 @@ def open_bus(**arguments: Any) -> can.BusABC:
         return can.Bus(**config)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
         raise DriveError(where, f"cannot open the CAN bus: {exc}") from exc
+    except TypeError as exc:  # an interface's own required argument not given (serial, slcan, kvaser: channel)
+        missing = re.findall(r"'(\w+)'", str(exc)) if "required positional argument" in str(exc) else []
+        if not missing:
+            raise
+        raise _not_given(config["interface"], missing, where) from None
 
 
 def parse_bus_option(text: str) -> tuple[str, Any]:

@@ -99,3 +99,15 @@ def test_run_modbus_without_url_names_the_url() -> None:
         hb.run_modbus(profile, None, 1, hb.RunOptions(duration=0.1))  # type: ignore[arg-type]
     assert caught.value.name == "url" and caught.value.value is None
     assert str(caught.value).startswith("run_modbus: url is missing; allowed: a Modbus URL")
+
+
+@pytest.mark.parametrize("interface, missing", [("serial", "channel"), ("slcan", "channel"),
+                                                ("socketcand", "channel, host, port")])
+def test_an_interface_without_its_required_arguments_is_invalid_input(no_can_env, interface: str, missing: str) -> None:
+    from drives.bus_config import open_bus
+
+    with pytest.raises(ParameterError) as caught:  # was python-can's TypeError traceback ('missing 1 required
+        open_bus(interface=interface, config_file="/nonexistent/canrc")  # positional argument: 'channel'), exit 1
+    assert caught.value.name == "channel" and caught.value.value is None
+    assert caught.value.context == f"bus {interface}:?"  # no '{interface}:None'
+    assert f"the {interface} bus' {missing} (--channel" in caught.value.allowed
