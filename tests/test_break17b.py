@@ -111,3 +111,11 @@ def test_an_interface_without_its_required_arguments_is_invalid_input(no_can_env
     assert caught.value.name == "channel" and caught.value.value is None
     assert caught.value.context == f"bus {interface}:?"  # no '{interface}:None'
     assert f"the {interface} bus' {missing} (--channel" in caught.value.allowed
+
+
+def test_contact_names_in_number_order() -> None:
+    from haptic_bus.control.scene import Wall, compile_scene
+
+    walls = [Wall(name=f"w{i}", position=0.003 + i * 1e-6, normal=-1, stiffness=1.0, damping=0.001) for i in range(12)]
+    names = max(compile_scene(walls).contacts().values(), key=len)
+    assert names == tuple(f"w{i}" for i in range(12))  # was w0, w1, w10, w11, w2, ...: 'w0+w1+w10 and 9 more'
