@@ -17,6 +17,8 @@ machines over udp_multicast sets ``hop_limit`` on purpose (``--bus-option hop_li
 from __future__ import annotations
 
 import argparse
+import configparser
+import re
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
@@ -67,12 +69,17 @@ def resolve_bus_config(
         _check_port(given.get("port"), where)
     try:
         config = dict(can.util.load_config(path=config_file, config=given, context=context))
+    except (configparser.Error, UnicodeDecodeError) as exc:  # a ~/.canrc python-can cannot read: exit 2, one line
+        raise ParameterError("python-can's config file", _config_file(exc, config_file),
+                             f"an INI file with a [default] section ({' '.join(str(exc).split())})", "bus") from None
     except (can.CanInterfaceNotImplementedError, NotImplementedError, ValueError, TypeError) as exc:
         if "None" in str(exc):
             raise ParameterError("interface", None, NO_INTERFACE, "bus") from None
-        if interface is not None and interface not in can.interfaces.VALID_INTERFACES:  # the user's typo: exit 2
-            raise ParameterError("interface", interface, "one of python-can's: "
-                                 + ", ".join(sorted(can.interfaces.VALID_INTERFACES)), where) from None
+        unknown = interface if interface is not None else _unknown_interface(str(exc))
+        if unknown is not None and unknown not in can.interfaces.VALID_INTERFACES:  # a typo, ours or a config's: exit 2
+            origin = where if interface is not None else "bus (python-can's configuration: CAN_INTERFACE or ~/.canrc)"
+            raise ParameterError("interface", unknown, "one of python-can's: "
+                                 + ", ".join(sorted(can.interfaces.VALID_INTERFACES)), origin) from None
         raise DriveError(where, f"invalid CAN bus configuration: {exc}") from exc
     if not config.get("interface"):
         raise ParameterError("interface", None, NO_INTERFACE, "bus")
@@ -90,7 +97,56 @@ def resolve_bus_config(
             raise ParameterError("channel", group, "a multicast group address, e.g. 239.74.163.2 or ff15::1 "
                                  "(--channel)", where)
         _check_port(config.get("port"), where)
+    missing = _required_not_given(config)
+    if missing:  # before any run folder or bus: python-can's TypeError when the bus is opened, exit 1
+        raise _not_given(config["interface"], missing, where)
     return config
+
+
+def _required_not_given(config: dict[str, Any]) -> list[str]:
+    """The arguments the interface's bus class requires (no default) that ``config`` lacks, in its order;
+    none when the class cannot be imported here (opening the bus says why)."""
+    import importlib
+    import inspect
+
+    import can
+
+    backend = can.interfaces.BACKENDS.get(config["interface"])
+    if backend is None:
+        return []
+    try:
+        bus_class = getattr(importlib.import_module(backend[0]), backend[1])
+        parameters = list(inspect.signature(bus_class.__init__).parameters.values())[1:]
+    except Exception:  # a vendor library missing, a module that fails to import: open_bus' DriveError says it
+        return []
+    named = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    return [p.name for p in parameters if p.kind in named and p.default is p.empty and config.get(p.name) is None]
+
+
+def _not_given(interface: str, missing: list[str], where: str) -> ParameterError:
+    """``NAME is missing; allowed: ...`` for the first of an interface's required arguments not given."""
+    flags = ", ".join("--channel" if name == "channel" else f"--bus-option {name}=VALUE" for name in missing)
+    return ParameterError(missing[0], None, f"the {interface} bus' {', '.join(missing)} ({flags})", where)
+
+
+def _unknown_interface(message: str) -> str | None:
+    """The interface python-can's config chain named and python-can does not know (its message
+    ``Unknown interface type "NAME"``), or None for any other complaint."""
+    found = re.search(r'Unknown interface type "(.*)"', message)
+    return found.group(1) if found else None
+
+
+def _config_file(exc: Exception, config_file: str | None) -> str:
+    """The config file python-can could not read: the one configparser names, else the one asked for,
+    else python-can's list of files it reads."""
+    named = getattr(exc, "source", None) or getattr(exc, "filename", None)
+    if named:
+        return str(named)
+    if config_file:
+        return config_file
+    import can
+
+    return " or ".join(str(path) for path in getattr(can.util, "CONFIG_FILES", ["~/.canrc"]))
 
 
 def _check_port(port: object, where: str) -> None:
@@ -105,7 +161,8 @@ def open_bus(**arguments: Any) -> can.BusABC:
     import can
 
     config = resolve_bus_config(**arguments)
-    where = f"bus {config.get('interface')}:{config.get('channel')}"
+    channel = config.get("channel")
+    where = f"bus {config.get('interface')}:{'?' if channel is None else channel}"  # no 'socketcan:None'
     try:
         if config["interface"] == "udp_multicast":  # the same interface, its filters applied before decoding
             from drives.udp_multicast import FilteredMulticastBus
@@ -114,6 +171,11 @@ def open_bus(**arguments: Any) -> can.BusABC:
         return can.Bus(**config)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
         raise DriveError(where, f"cannot open the CAN bus: {exc}") from exc
+    except TypeError as exc:  # an interface's own required argument not given (serial, slcan, kvaser: channel)
+        missing = re.findall(r"'(\w+)'", str(exc)) if "required positional argument" in str(exc) else []
+        if not missing:
+            raise
+        raise _not_given(config["interface"], missing, where) from None
 
 
 def parse_bus_option(text: str) -> tuple[str, Any]:

@@ -83,7 +83,7 @@ def ids_in_order(name: str, text: str, what: str, low: int, high: int, *, distin
         except ValueError:
             ids = []
             break
-        if start > stop:
+        if start > stop or not (low <= start and stop <= high):  # bounds before the range: 1-10**12 is no list
             ids = []
             break
         ids.extend(range(start, stop + 1))

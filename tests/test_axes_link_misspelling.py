@@ -29,6 +29,6 @@ def test_a_misspelt_link_of_an_axis_is_named(tmp_path: pathlib.Path, written: st
 def test_an_axis_without_a_link_is_told_to_give_one(tmp_path: pathlib.Path) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text(GANTRY.read_text().replace("\nnode_id = 6\n", "\n"))
-    with pytest.raises(ParameterError, match=r"axes\[1\]\.node_id = '<missing>' is invalid; allowed: exactly one of "
+    with pytest.raises(ParameterError, match=r"axes\[1\]\.node_id is missing; allowed: exactly one of "
                                              r"node_id \(CANopen, 1\.\.127\) and unit_id \(Modbus, 1\.\.247\)$"):
         read_profile(bad)

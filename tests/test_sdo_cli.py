@@ -135,7 +135,7 @@ INVALID = [
     (["read", "0x6041:256"], "object = '0x6041:256' is invalid"),
     (["read", "0x6041:"], "object = '0x6041:' is invalid"),
     (["read", "0x6041", "5"], "VALUE = '5' is invalid; allowed: no value with read"),
-    (["write", "0x6060"], "VALUE = '<missing>' is invalid; allowed: the value to write after INDEX[:SUB]"),
+    (["write", "0x6060"], "VALUE is missing; allowed: the value to write after INDEX[:SUB]"),
     (["write", "0x6060", "128"], "VALUE = '128' is invalid; allowed: i8: an integer -128..127"),
     (["write", "0x6072", "-1"], "VALUE = '-1' is invalid; allowed: u16: an integer 0..65535"),
     (["write", "0x6076", "4294967296"], "VALUE = '4294967296' is invalid; allowed: u32: an integer 0..4294967295"),

@@ -76,7 +76,11 @@ class ModbusAddress:
     @classmethod
     def from_url(cls, url: str, timeout: float = 0.1) -> ModbusAddress:
         """``tcp://HOST:PORT`` or ``rtu:/dev/ttyUSB0``; ParameterError naming the URL otherwise."""
-        parsed = urllib.parse.urlsplit(url)
+        try:
+            parsed = urllib.parse.urlsplit(url)
+        except ValueError:  # urllib's 'Invalid IPv6 URL': an unclosed '[', a bracket that holds no IPv6 address
+            raise ParameterError("url", url, "tcp://HOST:PORT with a port 1..65535 (an IPv6 host in brackets, "
+                                 "tcp://[::1]:PORT) or rtu:/dev/SERIAL", "Modbus drive") from None
         if parsed.scheme == "tcp":
             try:
                 port = parsed.port

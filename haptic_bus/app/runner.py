@@ -153,6 +153,8 @@ def run_canopen(profile: Profile, bus: can.BusABC | Mapping[str, Any], node_id: 
 
 def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) -> RunResult:
     """:func:`run` against the Modbus drive at ``url``, unit ``unit_id``."""
+    if not isinstance(url, str):  # None went on as a CANopen bus and was refused as 'unit_id = 1 is invalid'
+        raise ParameterError("url", url, "a Modbus URL, tcp://HOST:PORT or rtu:/dev/SERIAL", "run_modbus")
     return run(profile, url, options, unit_id=unit_id)
 
 

@@ -52,7 +52,7 @@ def _check_action(args: argparse.Namespace) -> None:
     if args.action == "read" and args.value is not None:
         raise ParameterError("VALUE", args.value, "no value with read (sdo write INDEX[:SUB] VALUE writes one)")
     if args.action == "write" and args.value is None:
-        raise ParameterError("VALUE", "<missing>", "the value to write after INDEX[:SUB]")
+        raise ParameterError("VALUE", None, "the value to write after INDEX[:SUB]")
 
 
 def run_sdo(args: argparse.Namespace) -> int:

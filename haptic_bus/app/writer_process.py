@@ -196,6 +196,9 @@ def main(folder: str, frames: RingSpec | None, conn: Connection, parent: int, al
     """The writer process' body (module docstring): ``frames`` the frame ring (None: no bus log),
     ``parent`` the control process' id, ``alarm`` where a failed write is said."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)  # as SIGINT: a SIGTERM to the run's process group (timeout, a
+    # service manager's stop) is the control process' to act on; it ends the run, which stops this writer after its
+    # last drain ('stop'); a parent gone (any kill) still ends it at its next interval
     serve(folder, frames, conn, parent, alarm)
 
 

@@ -6,6 +6,7 @@ import importlib.resources
 import os
 import pathlib
 
+from haptic_bus.errors import ParameterError
 from haptic_bus.profile.reader import profile_error, read_document
 
 DEFAULT_PROFILE = "cia402-handle"
@@ -25,6 +26,8 @@ def shipped_profiles(axes: bool = False) -> dict[str, pathlib.Path]:
 def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:
     """The file of a shipped profile name, or ``path_or_name`` as a path if it is one; ParameterError if neither
     (also for what is neither text nor a path: ``hb.load_profile(5)`` was pathlib's TypeError)."""
+    if path_or_name is None:  # nothing given: 'profile is missing', no 'profile None:' before it
+        raise ParameterError("profile", None, "a shipped profile name or a TOML file's path (str or pathlib.Path)")
     if not isinstance(path_or_name, (str, os.PathLike)) or isinstance(os.fspath(path_or_name), bytes):
         raise profile_error(repr(path_or_name), "profile", path_or_name,
                             "a shipped profile name or a TOML file's path (str or pathlib.Path)")
@@ -36,8 +39,10 @@ def resolve_profile(path_or_name: str | pathlib.Path) -> pathlib.Path:
         if _is_file(shipped_file):
             return shipped_file
     shipped = {**shipped_profiles(), **shipped_profiles(axes=True)}
-    raise profile_error(path_or_name, "profile", str(path_or_name),
-                        f"an existing TOML file or a shipped profile name: {', '.join(shipped) or 'none'}")
+    allowed = f"an existing TOML file or a shipped profile name: {', '.join(shipped) or 'none'}"
+    if not os.fspath(path_or_name):  # '': no 'profile :' before it
+        raise ParameterError("profile", "", allowed)
+    raise profile_error(path_or_name, "profile", str(path_or_name), allowed)
 
 
 def _is_file(path: pathlib.Path) -> bool:

@@ -121,7 +121,7 @@ class Reader:
             default = self.silent.get(key, REQUIRED) if default is REQUIRED else default
             if default is REQUIRED:
                 self.refuse_misspelling(key, allowed)
-                raise profile_error(self.path, self.field(key), "<missing>", f"required: {allowed}")
+                raise profile_error(self.path, self.field(key), None, allowed)  # "KEY is missing; allowed: ..."
             return default
         return self.table[key]
 

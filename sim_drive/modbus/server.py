@@ -155,7 +155,11 @@ class _TcpServer(ModbusTcpServer):
 
 def parse_modbus_url(url: str) -> tuple[str, int]:
     """``tcp://HOST:PORT`` -> (host, port); ParameterError otherwise (port 0 = any free port)."""
-    parsed = urllib.parse.urlsplit(url)
+    try:
+        parsed = urllib.parse.urlsplit(url)
+    except ValueError:  # urllib's 'Invalid IPv6 URL': an unclosed '[', a bracket that holds no IPv6 address
+        raise ParameterError("--modbus", url, "tcp://HOST:PORT with PORT 0..65535 (0 picks a free port; an IPv6 "
+                             "host in brackets, tcp://[::1]:PORT)") from None
     try:
         port = parsed.port
     except ValueError:

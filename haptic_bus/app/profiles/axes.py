@@ -159,7 +159,7 @@ def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> 
         for key in ("node_id", "unit_id"):
             r.refuse_misspelling(key, _ONE_LINK)
     if ("node_id" in r.table) == ("unit_id" in r.table):
-        raise profile_error(path, r.field("node_id"), r.table.get("node_id", "<missing>"), _ONE_LINK)
+        raise profile_error(path, r.field("node_id"), r.table.get("node_id"), _ONE_LINK)
     node = r.whole("node_id", *NODE_ID_RANGE) if "node_id" in r.table else None
     unit = r.whole("unit_id", *UNIT_ID_RANGE) if "unit_id" in r.table else None
     r.used.update(("node_id", "unit_id"))
