@@ -93,3 +93,9 @@ def test_many_overlapping_objects_compile_to_the_exact_sums_rounded_once() -> No
         assert scene.stiffness_anchor[i] == math.fsum(p[2] * p[3] for p in acting)
         assert scene.damping[i] == math.fsum(p[4] for p in acting)
         assert names == tuple(sorted({p[5] for p in acting}))
+
+
+def test_contact_names_in_number_order() -> None:
+    walls = [Wall(name=f"w{i}", position=0.003 + i * 1e-6, normal=-1, stiffness=1.0, damping=0.001) for i in range(12)]
+    names = max(compile_scene(walls).contacts().values(), key=len)
+    assert names == tuple(f"w{i}" for i in range(12))  # was w0, w1, w10, w11, w2, ...: 'w0+w1+w10 and 9 more'

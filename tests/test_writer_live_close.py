@@ -46,3 +46,21 @@ def test_a_writer_with_a_terminal_view_closes_with_every_row_counted(tmp_path: p
         os.close(master)
     assert stats == {"records": {"record.csv": {"rows_written": ROWS, "rows_lost": 0}}}
     assert len((tmp_path / "record.csv").read_text().splitlines()) == 1 + ROWS  # the header and each row
+
+
+def test_run_writer_process_outlives_a_sigterm_to_the_process_group(tmp_path) -> None:
+    """timeout(1) and a service manager's stop send SIGTERM to every process of the run's group: the run
+    stops at a cycle boundary (exit 0, 'stopped'), and its writer must live to write the last rows; it died at
+    once (run.json's record 'rows_written': 0, record.csv short by its last drain and cut mid-row, two ERROR lines)."""
+    import os
+    import signal
+
+    from haptic_bus.app.run_writer import RunWriter
+
+    writer = RunWriter(tmp_path, bus_log=False)
+    pid = writer.process.pid
+    assert pid is not None
+    os.kill(pid, signal.SIGTERM)  # pending at once: a default action would end it before it reads 'stop'
+    stats = writer.close()
+    assert stats.get("records") == {} and "failure" not in stats
+    assert writer.process.exitcode == 0
