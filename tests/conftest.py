@@ -270,12 +270,14 @@ def sim(channel: str, master: can.BusABC) -> Iterator[CanopenSimDrive]:
 
 @pytest.fixture
 def remote(channel: str) -> Iterator[canopen.RemoteNode]:
-    """canopen's RemoteNode for node 5 (shipped EDS) on ``channel``."""
+    """canopen's RemoteNode for node 5 (shipped EDS) on ``channel``, waiting :data:`SDO_WAIT` for an answer
+    (canopen's own 0.3 s: an in-process drive starved by the suite's other workers missed it)."""
     from sim_drive.eds import eds_path
 
     network = canopen.Network()
     network.connect(interface="virtual", channel=channel)
     node = canopen.RemoteNode(NODE, str(eds_path()))
+    node.sdo.RESPONSE_TIMEOUT = SDO_WAIT
     network.add_node(node)
     yield node
     network.disconnect()
