@@ -11,6 +11,7 @@ seed's ``alpha = B/(KT) = 6`` rule is the dash-dotted line.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -31,6 +32,7 @@ from haptic_bus.app.run_plots import title_of
 
 _B_ROWS = 60  # B values the passive K intervals are computed for (about 10 ms each)
 _K_COLUMNS = 500
+_KEPT_PLANES = 16  # K-B planes' passive K kept (one is _B_ROWS passive sets, 0.25 s of CPU for cia402-handle)
 _MARKERS = {"profile": "*", "upload": "o"}  # by the scene's origin; a derate (origin "derate ...") gets "^"
 
 
@@ -73,7 +75,14 @@ def gate_wall_loop(document: dict[str, Any]) -> WallLoop:
 
 def passive_stiffness(loop: WallLoop, damping: np.ndarray) -> list[tuple[tuple[float, float], ...]]:
     """For each ``B`` (N s/m): the passive ``K`` (N/m) as closed intervals (empty: none)."""
-    return [passive_set(loop.with_wall(0.0, float(B)), "K").intervals for B in damping]
+    return list(_kept_stiffness(loop, tuple(float(B) for B in damping)))
+
+
+@functools.lru_cache(maxsize=_KEPT_PLANES)
+def _kept_stiffness(loop: WallLoop, damping: tuple[float, ...]) -> tuple[tuple[tuple[float, float], ...], ...]:
+    """:func:`passive_stiffness`, kept per gate loop and ``B`` grid (a function of them alone, tuples of floats):
+    every run of a profile with the same walls has the same grid, and ``haptic-bus plot`` draws the plane again."""
+    return tuple(passive_set(loop.with_wall(0.0, B), "K").intervals for B in damping)
 
 
 def kb_plane_figure(run: RunFolder) -> Figure:
