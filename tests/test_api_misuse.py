@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import pathlib
+import re
 from typing import Any
 
 import can
@@ -12,6 +14,8 @@ import pytest
 
 import haptic_bus as hb
 from drives.canopen.link import ReceiveErrors
+from haptic_bus.app.profiles import read_profile
+from haptic_bus.profile.files import resolve_profile
 
 
 def test_a_shut_down_bus_is_refused_before_any_file(tmp_path: pathlib.Path) -> None:
@@ -25,6 +29,26 @@ def test_a_shut_down_bus_is_refused_before_any_file(tmp_path: pathlib.Path) -> N
                                                 r"\(this one is shut down\)$"):
         hb.run(hb.load_profile("cia402-handle"), bus, hb.RunOptions(duration=0.1, pacing="virtual", out_dir=out),
                node_id=5)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(("name", "change", "field"), [
+    ("cia402-handle", lambda p: dataclasses.replace(p, force_limit=-5.0), "limits.force_limit = -5.0"),
+    ("cia402-handle", lambda p: dataclasses.replace(p, force_limit=math.nan), "limits.force_limit = nan"),
+    ("cia402-handle", lambda p: dataclasses.replace(p, force_limit=1e5), "limits.force_limit = 100000.0"),
+    ("gantry-3d", lambda p: dataclasses.replace(p, axes=(dataclasses.replace(p.axes[0], force_limit=-1.0), *p.axes[1:])),
+     "axes[0].force_limit = -1.0"),
+])
+def test_a_force_limit_a_program_set_is_checked_before_any_file(tmp_path: pathlib.Path, name: str,
+                                                                 change: Any, field: str) -> None:
+    """A profile a program built (``dataclasses.replace``) skipped the reader's checks: a negative force limit
+    was refused only after commissioning, naming the drive's ``torque_limit = -312``, its run.json "crashed".
+    Now one ParameterError naming the field and the range, before any folder or bus."""
+    out = tmp_path / "run"
+    profile = change(read_profile(resolve_profile(name)))  # read, not judged: the gate is not what is tested
+    with pytest.raises(hb.ParameterError, match=rf"^run: {re.escape(field)} is invalid; allowed: "):
+        hb.run(profile, {"interface": "virtual", "channel": f"force-limit-{tmp_path.name}"},
+               hb.RunOptions(duration=0.1, pacing="virtual", out_dir=out), **({"node_id": 5} if name != "gantry-3d" else {}))
     assert not out.exists()
 
 

@@ -85,6 +85,7 @@ from haptic_bus.control.clock import RealClock, VirtualClock
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.record import Event
 from haptic_bus.errors import DriveError, DriveFault, DriveTimeout, HapticBusError, ParameterError, Refusal
+from haptic_bus.profile.scene import check_force_limit
 
 if TYPE_CHECKING:
     import can
@@ -167,6 +168,7 @@ def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | s
     if not isinstance(options, RunOptions):
         raise ParameterError("options", options, "a RunOptions, e.g. hb.RunOptions(duration=1.0)", "run")
     several = isinstance(profile, AxesProfile)
+    _refuse_unread_limits(profile)
     _refuse_misplaced_ids(several, isinstance(bus, (str, Sequence)), node_id, unit_id, unit_ids)
     if isinstance(bus, (str, Sequence)):
         urls = [bus] if isinstance(bus, str) else list(bus)
@@ -174,6 +176,17 @@ def _rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | s
         units = modbus_units(profile, urls, unit_ids if several else [one])
         return modbus_rig(profile, urls, units, options)
     return canopen_rig(profile, bus, options, node_id, controller_node_id)
+
+
+def _refuse_unread_limits(profile: Profile | AxesProfile) -> None:
+    """ParameterError, before any folder or bus, for a force limit outside what its drive allows: a profile a
+    program built (``dataclasses.replace(profile, force_limit=-5.0)``) skipped the reader's check, and was
+    refused only after commissioning (``torque_limit = -312``), its run.json saying "crashed"."""
+    if isinstance(profile, Profile):
+        check_force_limit("limits.force_limit", profile.force_limit, profile.device, "run")
+        return
+    for i, axis in enumerate(profile.axes):
+        check_force_limit(f"axes[{i}].force_limit", axis.force_limit, axis.device, "run")
 
 
 def _refuse_faulted_at_the_end(drives: Sequence[Any]) -> None:

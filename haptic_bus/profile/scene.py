@@ -9,8 +9,10 @@ import pathlib
 from dataclasses import dataclass
 
 from haptic_bus.analysis.loop import DAMPING_RANGE, STIFFNESS_RANGE
+from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import DeviceTable
 from haptic_bus.profile.reader import NAME_PATTERN, Reader, profile_error, refuse_duplicates
+from haptic_bus.validation import real_in_range
 
 POSITION_RANGE = (-1e6, 1e6)  # m, as haptic_bus.control.scene
 FORCE_RANGE = (0.0, 1e6)  # N, exclusive low
@@ -71,9 +73,18 @@ def read_force_limit(path: pathlib.Path, table: object, device: DeviceTable) -> 
     limits = Reader(path, "limits", table)
     force_limit = limits.real("force_limit", *FORCE_RANGE, "N", low_inclusive=False)
     limits.done()
+    return check_force_limit("limits.force_limit", force_limit, device, f"profile {path}")
+
+
+def check_force_limit(field: str, value: object, device: DeviceTable, context: str) -> float:
+    """A force limit in N: a finite real in (0, what the device's 0x6072 allows]; ParameterError naming ``field``
+    otherwise.  The profile readers check it, and a run checks it again for a profile a program built
+    (``dataclasses.replace``), which no reader saw."""
+    force_limit = real_in_range(field, value, *FORCE_RANGE, low_inclusive=False, unit="N", context=context)
     if force_limit > device.max_force * (1 + 1e-12):
-        raise profile_error(
-            path, "limits.force_limit", force_limit,
+        raise ParameterError(
+            field, force_limit,
             f"(0, {device.max_force:g}] N, the force 0x6072 allows: max_torque_permille {device.max_torque_permille}"
-            f" * rated_torque {device.rated_torque:g} N m * force_per_torque {device.force_per_torque:g} N/(N m) / 1000")
+            f" * rated_torque {device.rated_torque:g} N m * force_per_torque {device.force_per_torque:g} N/(N m) / 1000",
+            context)
     return force_limit

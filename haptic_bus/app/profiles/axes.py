@@ -70,7 +70,7 @@ from haptic_bus.control.supervisor import SupervisorPolicy
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import DeviceTable, check_velocity_period, read_device, read_timing
 from haptic_bus.profile.reader import Reader, profile_error, refuse_duplicates
-from haptic_bus.profile.scene import FORCE_RANGE
+from haptic_bus.profile.scene import FORCE_RANGE, check_force_limit
 
 DEFAULT_BITRATE = 1_000_000
 HAND_MODELS = ("none", "push")
@@ -171,9 +171,7 @@ def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> 
                             "none: the coupled gate judges rigid axes (a two-mass device only in a one-axis profile)")
     force_limit = r.real("force_limit", *FORCE_RANGE, "N", low_inclusive=False)
     r.done()
-    if force_limit > device.max_force * (1 + 1e-12):
-        raise profile_error(path, r.field("force_limit"), force_limit,
-                            f"(0, {device.max_force:g}] N, the force this axis' 0x6072 allows")
+    check_force_limit(r.field("force_limit"), force_limit, device, f"profile {path}")
     check_velocity_period(path, r.field("device.velocity"), device, period)
     return Axis(name, node, unit, device, timing, delay, mapping, force_limit)
 
