@@ -63,3 +63,18 @@ def test_a_run_folder_refused_is_named_by_the_command_typed(argv: list[str], cap
     assert main(argv) == 2
     assert capsys.readouterr().err == (f"haptic-bus {argv[0]}: error: --out = '/proc/break16/out' is invalid; allowed: "
                                        "a folder this user can create and write (No such file or directory)\n")
+
+
+@pytest.mark.parametrize(("argv", "line"), [
+    (["run"], "haptic-bus run: error: profile is missing; allowed: profile name or TOML path"),
+    (["plot"], "haptic-bus plot: error: RUN_DIR is missing; allowed: a folder haptic-bus run or demo wrote"),
+    (["sdo"], "haptic-bus sdo: error: action is missing; allowed: read (SDO upload) or write (SDO download)"),
+    (["profiles"], "haptic-bus profiles: error: a command is missing; allowed: one of list, show, check, new"),
+])
+def test_an_argument_left_out_is_missing_as_every_value_not_given(argv: list[str], line: str,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """argparse's "the following arguments are required: X" is said as a value not given is everywhere else
+    (ParameterError's rule): "X is missing; allowed: " and what X takes, one line, exit 2 (break17b)."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(line) and err.count("\n") == 1, err

@@ -11,4 +11,4 @@ from haptic_bus.app.cli import main
 def test_profiles_alone_names_its_subcommands(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["profiles", "--x"]) == 2
     err = capsys.readouterr().err
-    assert err == "haptic-bus profiles: error: the following arguments are required: {list,show,check,new}\n"
+    assert err == "haptic-bus profiles: error: a command is missing; allowed: one of list, show, check, new\n"

@@ -34,6 +34,9 @@ EXIT_OK, EXIT_NO, EXIT_INVALID, EXIT_ASSUMPTION, EXIT_INTERRUPTED = 0, 1, 2, 3, 
 Handler = Callable[[argparse.Namespace], int]
 
 
+_REQUIRED = "the following arguments are required: "  # argparse's words for required arguments left out
+
+
 class OneLineParser(argparse.ArgumentParser):
     """argparse, but a usage error is one line on stderr and exit status 2, and an argument no option
     takes is the usage error of the (sub)command given (:meth:`parse_command`).  A negative number in
@@ -45,7 +48,20 @@ class OneLineParser(argparse.ArgumentParser):
         self._negative_number_matcher = re.compile(r"-\.?\d")  # argparse's own test, as of Python 3.13
 
     def error(self, message: str) -> None:  # type: ignore[override]
+        if message.startswith(_REQUIRED):
+            message = self._missing(message.removeprefix(_REQUIRED).split(", ")[0])
         self.exit(EXIT_INVALID, f"{self.prog}: error: {message}\n")
+
+    def _missing(self, name: str) -> str:
+        """argparse's "the following arguments are required: NAME, ..." said as every command says a value not
+        given (:class:`~haptic_bus.errors.ParameterError`'s rule): ``NAME is missing; allowed: HELP``, the first
+        one named, a subcommand as ``a command is missing; allowed: one of A, B``."""
+        if name.startswith("{"):
+            return f"a command is missing; allowed: one of {name.strip('{}').replace(',', ', ')}"
+        for action in self._actions:
+            if name in (*action.option_strings, action.metavar, action.dest) and action.help:
+                return str(ParameterError(name, None, action.help))
+        return str(ParameterError(name, None, f"see {self.prog} --help"))
 
     def parse_command(self, argv: list[str]) -> argparse.Namespace:
         """``argv`` parsed; a stray argument is the usage error of the deepest subcommand given
