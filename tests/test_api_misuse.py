@@ -52,6 +52,16 @@ def test_a_force_limit_a_program_set_is_checked_before_any_file(tmp_path: pathli
     assert not out.exists()
 
 
+def test_a_run_folder_refused_from_python_names_out_dir(tmp_path: pathlib.Path) -> None:
+    """From Python the run folder is ``RunOptions.out_dir``, and its refusal says so (it named the command
+    line's ``--out``, which a program never typed); the command line still says ``--out``."""
+    blocked = tmp_path / "a-file"
+    blocked.write_text("")
+    with pytest.raises(hb.ParameterError, match=r"^run: out_dir = '.*a-file/out' is invalid; allowed: a folder "):
+        hb.run(hb.load_profile("cia402-handle"), {"interface": "virtual", "channel": f"out-dir-{tmp_path.name}"},
+               hb.RunOptions(duration=0.1, pacing="virtual", out_dir=blocked / "out"), node_id=5)
+
+
 def test_receive_errors_are_all_counted_but_logged_by_decades(caplog: pytest.LogCaptureFixture) -> None:
     """A notifier whose bus fails every receive: the first error kept, every one counted, the log
     lines at the 1st, 10th and 100th error, not one per error."""

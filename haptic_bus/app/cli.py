@@ -27,6 +27,7 @@ from haptic_bus.app.arguments import (
     EXIT_INVALID,
     EXIT_NO,
     EXIT_OK,
+    SHARED_CONTEXTS,
     STIFFNESS_ALLOWED,
     OneLineParser,
     a_real,
@@ -397,8 +398,8 @@ def _dispatch(args: argparse.Namespace) -> int:
 
     try:
         return int(args.handler(args))
-    except ParameterError as error:
-        print(error_line(args.command, error), file=sys.stderr)
+    except ParameterError as error:  # a run's folder (run, demo, validate) names RunOptions.out_dir: said as --out
+        print(error_line(args.command, as_flag(error) if error.context in SHARED_CONTEXTS else error), file=sys.stderr)
         return EXIT_INVALID
     except DriveError as error:
         print(f"haptic-bus {args.command}: drive error: {error}", file=sys.stderr)

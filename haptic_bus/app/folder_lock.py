@@ -46,7 +46,7 @@ class FolderLock:
 _ATTEMPTS = 10  # a lock file removed under us by the run that just ended, again and again: not in practice
 
 
-def own_folder(folder: pathlib.Path, name: str = "--out", context: str = "run") -> FolderLock:
+def own_folder(folder: pathlib.Path, name: str = "out_dir", context: str = "run") -> FolderLock:
     """Lock ``folder`` (which exists and is writable) for this process; ParameterError naming
     ``name``, the folder and the other run's process id if another run holds it."""
     path = folder / LOCK_NAME

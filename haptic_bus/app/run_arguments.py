@@ -78,12 +78,13 @@ def scheduling(realtime: bool | None) -> RealtimeSettings:
 
 # run()'s arguments the options give (its bus: a Modbus URL list, the only bus an option can get wrong)
 _FLAGS = {"node_id": "--node-id", "controller_node_id": "--controller-node-id", "unit_id": "--unit-id",
-          "unit_ids": "--unit-ids", "bus": "--modbus"}
+          "unit_ids": "--unit-ids", "bus": "--modbus", "out_dir": "--out"}
 
 
 def as_flag(error: ParameterError) -> ParameterError:
     """``error`` of :func:`haptic_bus.app.runner.run` naming one of its arguments, named as the option
-    that gives it (``controller_node_id`` as ``--controller-node-id``); any other error as it is."""
+    that gives it (``controller_node_id`` as ``--controller-node-id``, the run folder's ``out_dir`` as
+    ``--out``); any other error as it is."""
     flag = _FLAGS.get(error.name)
     return error if flag is None else ParameterError(flag, error.value, error.allowed)
 

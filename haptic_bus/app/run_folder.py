@@ -89,10 +89,10 @@ def prepare_run_folder(out: str | pathlib.Path | None, profile_name: str, root: 
     """The run's folder, created and shown writable now: ``out``, or ``root/<UTC>-<profile>``
     (``-2``, ``-3``... if that exists).  ParameterError naming the folder otherwise."""
     if out is not None:
-        return writable_folder("--out", out, context="run")  # as given: an empty one is refused, not '.'
+        return writable_folder("out_dir", out, context="run")  # as given: an empty one is refused, not '.'
     else:
         path = _claim_new_folder(root, f"{_utc_now().strftime('%Y%m%dT%H%M%SZ')}-{profile_name}")
-    return writable_folder("--out", path, context="run")
+    return writable_folder("out_dir", path, context="run")
 
 
 CLAIM_ATTEMPTS = 10_000  # names tried after ``<UTC>-<profile>``: ``-2`` .. (a second's runs never come near it)
@@ -133,7 +133,7 @@ def own_run_folder(out: str | pathlib.Path | None, profile_name: str) -> tuple[p
         _remove_all_or_none(found)
     except OSError as exc:
         lock.release()
-        raise ParameterError("--out", str(folder), f"a folder whose earlier run this run can replace (nothing removed; "
+        raise ParameterError("out_dir", str(folder), f"a folder whose earlier run this run can replace (nothing removed; "
                              f"{exc.filename}: {exc.strerror})", "run") from None
     if found:
         logger.warning("run folder %s: this run replaces the earlier run's %s", folder, ", ".join(p.name for p in found))
@@ -276,7 +276,7 @@ class RunJournal:
         try:
             self.write()
         except OSError as exc:
-            raise ParameterError("--out", str(self.folder), f"a folder this run can write ({exc.strerror} writing "
+            raise ParameterError("out_dir", str(self.folder), f"a folder this run can write ({exc.strerror} writing "
                                  f"{RUN_JSON})", "run") from None
 
     def write(self, summary: RunSummary | None = None, ended: bool = False) -> pathlib.Path:
