@@ -75,17 +75,19 @@ def test_an_upload_to_an_object_the_scene_lacks_names_a_few_it_has() -> None:
 
 
 def test_many_overlapping_objects_compile_to_the_exact_sums_rounded_once() -> None:
-    """Where more than FEW_ACTIVE pieces act at once the sweep keeps running exact sums: each interval's K,
-    K * anchor and B are still the exact sum of the pieces acting there, rounded once (math.fsum's value),
-    and its objects are those pieces' owners, sorted."""
-    from haptic_bus.control.scene import FEW_ACTIVE, Detent, Slot
+    """The sweep keeps running exact sums: each interval's K, K * anchor and B are the exact sum of the pieces
+    acting there, rounded once (math.fsum's value), many pieces entering and leaving (up to 50 at once), and
+    its objects are those pieces' owners, sorted."""
+    from haptic_bus.control.scene import Detent, Slot
 
-    objects = [Wall(f"w{i}", 0.003 + i * 1.1e-5, -1, 1500.0 + 0.1 * i, 10.0 / 3 + i) for i in range(2 * FEW_ACTIVE)]
+    few = 16  # the v-walls overlap the 2 * few w-walls: up to 50 pieces at once
+
+    objects = [Wall(f"w{i}", 0.003 + i * 1.1e-5, -1, 1500.0 + 0.1 * i, 10.0 / 3 + i) for i in range(2 * few)]
     objects += [Slot("slot", -0.001, 0.0031, 1e-3, 1e-17), Detent("d", 0.0032, 0.0001, 7.7e4, 0.0)]
-    objects += [Wall(f"v{i}", 0.00305 + i * 1e-6, 1, 3.3e-5 * (i + 1), 0.0) for i in range(FEW_ACTIVE)]
+    objects += [Wall(f"v{i}", 0.00305 + i * 1e-6, 1, 3.3e-5 * (i + 1), 0.0) for i in range(few)]
     scene = compile_scene(objects)
     pieces = [(start, end, K, anchor, B, obj.name) for obj in objects for start, end, K, anchor, B in obj.pieces()]
-    assert max(len(names) for names in scene.contributors) > FEW_ACTIVE  # the running sums were used
+    assert max(len(names) for names in scene.contributors) > 2 * few  # many act at once
     for i, names in enumerate(scene.contributors):
         x = (scene.breaks[0] - 1.0 if i == 0 else scene.breaks[i - 1])  # the interval [breaks[i-1], breaks[i])
         acting = [p for p in pieces if p[0] <= x < p[1]]

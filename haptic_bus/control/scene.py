@@ -214,7 +214,6 @@ class CompiledScene:
         return compile_scene(with_wall_law(obj, factor * obj.stiffness, factor * obj.damping) for obj in self.objects)
 
 
-FEW_ACTIVE = 16  # pieces acting at once up to which an interval's sums are one fsum over them
 _ULP_SCALE = 1 << 1074  # the smallest float's reciprocal: every finite float is an integer number of 2**-1074
 
 
@@ -227,12 +226,12 @@ def _exact(value: float) -> int:
 def compile_scene(objects: Iterable[SceneObject]) -> CompiledScene:
     """Sweep the objects' support intervals once into a :class:`CompiledScene`.
 
-    Each interval's sums are the exact sums of the pieces active there, rounded once (``math.fsum``): an
-    interval where nothing acts has exactly zero force and no round-off carries from one interval to the
-    next.  Where many pieces act at once the exact sums are kept running instead (:func:`_exact`: a float is
-    an integer number of 2**-1074, so adding and taking away loses nothing) and rounded with one division,
-    the same correctly rounded value: the sweep then costs the pieces that enter and leave at each break, not
-    every piece active there (3 000 overlapping walls: 9 million terms and 2.3 s, twice per profile check).
+    Each interval's sums are the exact sums of the pieces active there, rounded once (the value ``math.fsum``
+    gives): an interval where nothing acts has exactly zero force and no round-off carries from one interval
+    to the next.  The exact sums are kept running (:func:`_exact`: a float is an integer number of 2**-1074,
+    so adding and taking away loses nothing) and rounded with one division, so the sweep costs the pieces
+    that enter and leave at each break, not every piece active there (an fsum per interval over 3 000
+    overlapping walls: 9 million terms and 2.3 s, twice per profile check).
     """
     objects = tuple(objects)
     duplicates = sorted(name for name, count in Counter(obj.name for obj in objects).items() if count > 1)
@@ -257,14 +256,13 @@ def compile_scene(objects: Iterable[SceneObject]) -> CompiledScene:
     who: list[tuple[str, ...]] = []
     values = [(K, K * anchor, B) for _, _, K, anchor, B in pieces]
     active: set[int] = set()
-    sums: list[int] = []  # K, K * anchor, B of the active pieces, exact (2**-1074), once many act at once
+    sums = [0, 0, 0]  # K, K * anchor, B of the active pieces, exact (in 2**-1074)
     acting: Counter[str] = Counter()  # the active pieces' owners
     names: list[str] = []  # the owners acting, sorted
 
     def change(i: int, sign: int) -> None:
-        if sums:
-            for j, value in enumerate(values[i]):
-                sums[j] += sign * _exact(value)
+        for j, value in enumerate(values[i]):
+            sums[j] += sign * _exact(value)
         owner = owners[i]
         acting[owner] += sign
         if sign > 0 and acting[owner] == 1:
@@ -274,12 +272,6 @@ def compile_scene(objects: Iterable[SceneObject]) -> CompiledScene:
 
     def close_interval() -> None:
         who.append(tuple(names))
-        if len(active) <= FEW_ACTIVE:
-            for j, out in enumerate((ks, kas, bs)):
-                out.append(math.fsum(values[i][j] for i in active))
-            return
-        if not sums:  # from here on kept running
-            sums.extend(sum(_exact(values[i][j]) for i in active) for j in range(3))
         for j, out in enumerate((ks, kas, bs)):
             out.append(sums[j] / _ULP_SCALE)
 
