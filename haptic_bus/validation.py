@@ -78,16 +78,15 @@ def ids_in_order(name: str, text: str, what: str, low: int, high: int, *, distin
     for part in text.split(","):
         first, dash, last = part.strip().partition("-")
         try:
-            start = int(first, 0)
-            stop = int(last, 0) if dash else start
+            start, stop = int(first, 0), int(last if dash else first, 0)
         except ValueError:
             ids = []
             break
-        if start > stop or not (low <= start and stop <= high):  # bounds before the range: 1-10**12 is no list
+        if not low <= start <= stop <= high:  # the bounds before the range is listed: 1-10**12 is no list
             ids = []
             break
         ids.extend(range(start, stop + 1))
-    if not ids or (distinct and len(set(ids)) != len(ids)) or not all(low <= n <= high for n in ids):
+    if not ids or (distinct and len(set(ids)) != len(ids)):
         raise ParameterError(name, text, f"{'distinct ' if distinct else ''}{what} {low}..{high} as N, N-M or a "
                                          f"comma-separated list of those, e.g. {low},{low + 1},{low + 2} or {low}-{low + 2}")
     return ids
