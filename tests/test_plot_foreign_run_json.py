@@ -13,7 +13,8 @@ from typing import Any
 import pytest
 
 from haptic_bus.app.cli import main
-from haptic_bus.app.run_folder import check_drawn_fields, read_run_folder
+from haptic_bus.app.run_folder import read_run_folder
+from haptic_bus.app.run_json_shape import check_drawn_fields
 
 ONE_AXIS: dict[str, Any] = {
     "profile": {"name": "p"},

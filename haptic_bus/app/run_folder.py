@@ -57,6 +57,7 @@ from haptic_bus.app.folder_lock import FolderLock, own_folder
 from haptic_bus.app.json_ready import json_ready
 from haptic_bus.app.profiles import AxesProfile, Profile, profile_to_dict
 from haptic_bus.app.run_json import RUN_JSON, write_json
+from haptic_bus.app.run_json_shape import check_drawn_fields
 from haptic_bus.control.controller import RunSummary, WallController
 from haptic_bus.control.protocols import DecisionT, SceneT
 from haptic_bus.control.record import RecordTable, read_record
@@ -347,109 +348,6 @@ class RunFolder:
         counts = {RECORD_CSV: one} if isinstance(one, dict) else several if isinstance(several, dict) else {}
         return {name: count["rows_written"] for name, count in counts.items()
                 if isinstance(count, dict) and isinstance(count.get("rows_written"), int)}
-
-
-def _is_real(value: object) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def _table(field: str, value: object, keys: dict[str, tuple[Callable[[object], bool], str]]) -> None:
-    """ValueError naming ``field.key`` for the first of ``keys`` (key -> test, what it allows) that
-    ``value`` (a JSON object) lacks or holds in another shape."""
-    if not isinstance(value, dict):
-        raise ValueError(f"run.json's {field} = {_short(value)} is invalid; allowed: a JSON object")
-    for key, (test, allowed) in keys.items():
-        if key in value and not test(value[key]):
-            raise ValueError(f"run.json's {field}.{key} = {_short(value[key])} is invalid; allowed: {allowed}")
-
-
-def _short(value: object) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-def _list_of_objects(field: str, value: object) -> list[dict[str, Any]]:
-    if not isinstance(value, list) or not all(isinstance(item, dict) for item in value):
-        raise ValueError(f"run.json's {field} = {_short(value)} is invalid; allowed: a list of JSON objects")
-    return value
-
-
-_REAL = (_is_real, "a number")
-_TEXT: tuple[Callable[[object], bool], str] = (lambda value: isinstance(value, str), "a text")
-
-
-def check_drawn_fields(document: dict[str, Any]) -> None:
-    """ValueError naming the first field the pictures read (the profile's name, the events, the scenes and
-    their walls, the loop the gate judged, each axis' name) that ``document`` holds in a shape they cannot
-    draw: a run.json another version wrote, or one edited by hand, was a TypeError's or KeyError's traceback
-    from deep in the drawing (exit 1), where an unreadable run folder is one line, exit 2.  A field left
-    out stays allowed: the pictures draw without it as they did."""
-    if "profile" in document:
-        _table("profile", document["profile"], {})
-    for i, event in enumerate(_list_of_objects("events", document.get("events", []))):
-        _table(f"events[{i}]", event, {"time_s": _REAL})
-    for i, scene in enumerate(_list_of_objects("scenes", document.get("scenes") or [])):
-        _table(f"scenes[{i}]", scene, {"scene_id": (lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer"),
-                                      "origin": _TEXT})
-        _list_of_objects(f"scenes[{i}].objects", scene.get("objects", []))
-        for j, wall in enumerate(_list_of_objects(f"scenes[{i}].walls", scene.get("walls", []))):
-            where = f"scenes[{i}].walls[{j}]"
-            for key in ("objects", "K", "B"):
-                if key not in wall:
-                    raise ValueError(f"run.json's {where}.{key} is missing")
-            _table(where, wall, {"objects": (lambda v: isinstance(v, list) and all(isinstance(n, str) for n in v),
-                                             "a list of object names"), "K": _REAL,
-                                 "B": _REAL, "margin": (lambda v: v is None or _is_real(v), "a number or null")})
-    if "gate_loop" in document:
-        loop = document["gate_loop"]
-        _table("gate_loop", loop, {key: _REAL for key in ("m", "b", "T", "delay")} | {"velocity": _TEXT})
-        for key in ("m", "b", "T", "delay", "velocity"):
-            if key not in loop:
-                raise ValueError(f"run.json's gate_loop.{key} is missing")
-    if "loop" in document:
-        _table("loop", document["loop"], {"period": _REAL})
-    settings = document.get("settings", {})
-    _table("settings", settings, {})
-    for i, axis in enumerate(_list_of_objects("settings.axes", settings.get("axes", []))):
-        if "name" not in axis:
-            raise ValueError(f"run.json's settings.axes[{i}].name is missing")
-        _table(f"settings.axes[{i}]", axis, {"name": _TEXT})
-    _check_drawn_objects(document, bool(settings.get("axes")))
-
-
-def _check_drawn_objects(document: dict[str, Any], several_axes: bool) -> None:
-    """The scenes' objects built as the pictures build them (a sphere, a wall, ...), each refused in a
-    ValueError naming it."""
-    from haptic_bus.app.space_records import space_objects
-    from haptic_bus.control.scene import object_from_dict
-
-    where = "scenes"
-    try:
-        if several_axes:
-            if document.get("scenes") or "space" in document["settings"]:
-                size = len(document["settings"]["axes"])
-                scenes = document.get("scenes") or [{"objects": document["settings"]["space"]["objects"]}]
-                for j, table in enumerate(_list_of_objects("last scene's objects", scenes[-1]["objects"])):
-                    for key in ("center", "point", "normal", "half"):  # a point or direction in the axes' space
-                        value = table.get(key)
-                        if value is not None and (not isinstance(value, list) or len(value) != size
-                                                  or not all(_is_real(x) for x in value)):
-                            raise ValueError(f"run.json's last scene: objects[{j}].{key} = {_short(value)} is invalid; "
-                                             f"allowed: {size} numbers, one per axis")
-                space_objects(document)
-            return
-        for i, scene in enumerate(document.get("scenes") or []):
-            for j, table in enumerate(_list_of_objects(f"scenes[{i}].objects", scene.get("objects", []))):
-                where = f"scenes[{i}].objects[{j}]"
-                _table(where, table, {"name": _TEXT})
-                if "kind" in table:
-                    object_from_dict(table)
-    except ParameterError as exc:
-        raise ValueError(f"run.json's {'last scene' if several_axes else where}: {exc}") from None
-    except (KeyError, TypeError, AttributeError, IndexError) as exc:
-        what = f"{type(exc).__name__}: {exc}"
-        raise ValueError(f"run.json's {'last scene' if several_axes else where}: an object the pictures cannot "
-                         f"draw ({what})") from None
 
 
 def read_run_folder(folder: str | pathlib.Path) -> RunFolder:
