@@ -38,7 +38,6 @@ from contextlib import contextmanager
 from typing import Any
 
 import can
-import canopen
 from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary
 
@@ -62,6 +61,7 @@ from sim_drive.canopen.manufacturer import ManufacturerObjects
 from sim_drive.canopen.pdo_access import PdoAccess
 from sim_drive.canopen.pdo_engine import PdoEngine, SlaveCounters
 from sim_drive.canopen.pdo_table import PdoChannel, PdoTable
+from sim_drive.canopen.slave_network import SlaveNetwork
 from sim_drive.canopen.standard_od import object_dictionary
 from sim_drive.canopen.timers import NodeTimers, Watchdog
 from sim_drive.device import POWER_STAGE_ON, ObjectAccessError, SimulatedDrive
@@ -84,39 +84,6 @@ _NMT_STATES: dict[int, NmtState] = {
     NmtCommand.ENTER_PRE_OPERATIONAL: NmtState.PRE_OPERATIONAL,
 }
 _SERVING = (NmtState.PRE_OPERATIONAL, NmtState.OPERATIONAL)
-
-
-class _NoPeriodicTask:
-    """What canopen's NmtSlave gets for its periodic heartbeat: nothing (the slave produces its own)."""
-
-    def stop(self) -> None:
-        """Nothing runs."""
-
-    def update(self, data: object) -> None:
-        """Nothing runs."""
-
-
-class _SlaveNetwork(canopen.Network):
-    """canopen's Network adapted to the slave: sends honour its silence and feed its bus meter,
-    and canopen's own periodic heartbeat task is never started (the receive thread sends it)."""
-
-    def __init__(self, bus: can.BusABC, slave: CanopenSimDrive) -> None:
-        super().__init__(bus)
-        self._slave = slave
-        # Re-entrant (drives.lockstep_bus): a heartbeat sent under it may deliver the master's SYNC
-        # to this node, whose TPDO is then sent inside that send; a plain Lock deadlocked there.
-        self.send_lock = threading.RLock()  # type: ignore[assignment]
-
-    def send_message(self, can_id: int, data: bytes | bytearray | list[int], remote: bool = False) -> None:
-        """Send unless the slave is silent."""
-        if self._slave.silent:
-            return
-        self._slave._meter_frame(len(data))
-        super().send_message(can_id, bytes(data), remote)
-
-    def send_periodic(self, can_id: int, data: Any, period: float, remote: bool = False) -> Any:
-        """canopen's NmtSlave asks for a periodic heartbeat on a 0x1017 write: the slave's own thread does it."""
-        return _NoPeriodicTask()
 
 
 class CanopenSimDrive:
@@ -164,7 +131,7 @@ class CanopenSimDrive:
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._network: _SlaveNetwork | None = None
+        self._network: SlaveNetwork | None = None
         dictionary, read_standard = object_dictionary(od, self.node_id, self.drive, dictionary, eds)
         self._node = StrictLocalNode(self.node_id, dictionary)
         self._node.add_read_callback(self._on_sdo_read)
@@ -186,7 +153,7 @@ class CanopenSimDrive:
         if self._thread is not None:
             raise RuntimeError(f"node {self.node_id}: already started")
         bus = self._bus = self._bus if self._bus is not None else open_bus(**(self._bus_config or {}))
-        self._network = _SlaveNetwork(bus, self)
+        self._network = SlaveNetwork(bus, self)
         self._network.add_node(self._node)
         self._network.unsubscribe(NMT_COB_ID, self._node.nmt.on_command)
         self._stop.clear()
@@ -356,9 +323,10 @@ class CanopenSimDrive:
         message = can.Message(arbitration_id=cob_id, data=data, is_extended_id=False)
         with network.send_lock:
             bus.send(message)
-        self._meter_frame(len(data))
+        self.meter_frame(len(data))
 
-    def _meter_frame(self, data_bytes: int) -> None:
+    def meter_frame(self, data_bytes: int) -> None:
+        """Count one frame of ``data_bytes`` data bytes on the bus meter (if the slave has one)."""
         if self.bus_meter is not None:
             self.bus_meter.frame(data_bytes)
 
