@@ -171,11 +171,6 @@ def open_bus(**arguments: Any) -> can.BusABC:
         return can.Bus(**config)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
         raise DriveError(where, f"cannot open the CAN bus: {exc}") from exc
-    except TypeError as exc:  # an interface's own required argument not given (serial, slcan, kvaser: channel)
-        missing = re.findall(r"'(\w+)'", str(exc)) if "required positional argument" in str(exc) else []
-        if not missing:
-            raise
-        raise _not_given(config["interface"], missing, where) from None
 
 
 def parse_bus_option(text: str) -> tuple[str, Any]:
