@@ -56,6 +56,12 @@ before numpy is first imported, inherited by the child processes): the suite run
 processes on two cores (``-n``), where BLAS's own threads only spin.  Measured beside the same
 load: tests/test_identify_fit.py 11.6 -> 8.8 s of CPU, five numpy-heavy files together 26.8 ->
 22.2 s, their wall clock no longer.
+
+Ctrl-C reaches the child processes the tests interrupt: a shell without job control starts a
+background job (``pytest ... &``, ``setsid``) with SIGINT ignored, which every child would inherit
+(an ignored signal stays ignored across ``exec``), and the tests that send SIGINT would fail (7 did,
+started so).  The suite's process takes Python's default handler back, which ``exec`` resets to the
+default action in each child.
 """
 
 from __future__ import annotations
@@ -67,6 +73,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import json
 import logging
 import pathlib
+import signal
 import socket
 import struct
 import sys
@@ -118,6 +125,8 @@ hypothesis.settings.load_profile("default")
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:  # started in the background (the docstring)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     config.addinivalue_line("markers", "vcan0: needs the SocketCAN interface vcan0 (skipped where the kernel has none)")
     if not hasattr(config, "workerinput") and (config.getoption("numprocesses", None) or 0):  # xdist's controller
         from tests.bytecode_warmup import warm
