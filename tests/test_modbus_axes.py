@@ -30,7 +30,7 @@ import pytest
 import haptic_bus as hb
 from drives.cia402 import State
 from haptic_bus.app.cli import main
-from haptic_bus.app.preflight import LOOK_AGAIN, PREFLIGHT_CYCLES, allowed_overruns
+from haptic_bus.app.preflight import PREFLIGHT_CYCLES, allowed_overruns, looks_for
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.run_options import RunOptions, StopRequest
 from haptic_bus.app.steady_state import contact
@@ -204,28 +204,40 @@ def test_one_axis_fault_stops_every_axis_and_reset_fault_clears_it_before_the_ne
 CHANCE = 1e-3  # the real-time test below fails by chance in at most this share of its runs on any machine
 
 
+def binomial_pmf(most: int, cycles: int, shares: np.ndarray) -> np.ndarray:
+    """P(exactly ``j`` of ``cycles`` cycles overrun), row ``j`` for ``j`` = 0..``most``, for each per-cycle overrun
+    probability of ``shares`` (0 < share < 1)."""
+    terms = np.empty((most + 1, shares.size))
+    terms[0] = (1.0 - shares) ** cycles  # P(none)
+    for j in range(most):
+        terms[j + 1] = terms[j] * (cycles - j) / (j + 1) * shares / (1.0 - shares)
+    return terms
+
+
 def binomial_cdf(count: int, cycles: int, shares: np.ndarray) -> np.ndarray:
-    """P(at most ``count`` of ``cycles`` cycles overrun) for each per-cycle overrun probability of ``shares`` (0 < share < 1)."""
-    term = (1.0 - shares) ** cycles  # P(none)
-    below = term.copy()
-    for j in range(count):
-        term = term * (cycles - j) / (j + 1) * shares / (1.0 - shares)
-        below += term
-    return below
+    """P(at most ``count`` of ``cycles`` cycles overrun) for each per-cycle overrun probability of ``shares``."""
+    return binomial_pmf(count, cycles, shares).sum(axis=0)
 
 
 def passes_the_rule(shares: np.ndarray) -> np.ndarray:
     """An upper bound on the share of pre-flights that hold ``T`` on a machine whose cycles each overrun with
     probability ``shares``: the period rule holds ``T`` only when the count of cycles that start more than ``T``
     late (replayed, :func:`~haptic_bus.app.preflight.catch_up_overruns`) is at most
-    :func:`~haptic_bus.app.preflight.allowed_overruns` of the first look's cycles, or of the first and second
-    looks' together where the first look's count is above the first bound and within the second's."""
-    first, total = PREFLIGHT_CYCLES, (1 + LOOK_AGAIN) * PREFLIGHT_CYCLES
-    allowed_first, allowed_total = allowed_overruns(first), allowed_overruns(total)
-    held = binomial_cdf(allowed_first, first, shares)
-    for count in range(allowed_first + 1, allowed_total + 1):
-        exactly = binomial_cdf(count, first, shares) - binomial_cdf(count - 1, first, shares)
-        held += exactly * binomial_cdf(allowed_total - count, total - first, shares)
+    :func:`~haptic_bus.app.preflight.allowed_overruns` of a look's cycles, the first look's, or, where the count so far
+    is above that look's bound and within the next's, the next look's (:func:`~haptic_bus.app.preflight.looks_for`)."""
+    looks = looks_for(PREFLIGHT_CYCLES)
+    allowed = [allowed_overruns(cycles) for cycles in looks]
+    held = np.zeros_like(shares)
+    going = np.ones((1, shares.size))  # row c: P(the count so far is c and the rule looks on)
+    low, measured = 0, 0  # the count of going's first row; the cycles measured so far
+    for look, cycles in enumerate(looks):
+        pmf = binomial_pmf(allowed[-1], cycles - measured, shares)
+        total = np.zeros((allowed[-1] + 1, shares.size))  # row t: P(the count is t and the rule got to this look)
+        for row, chance in enumerate(going):
+            total[low + row:] += chance * pmf[:allowed[-1] + 1 - low - row]
+        held += total[:allowed[look] + 1].sum(axis=0)
+        low, measured = allowed[look] + 1, cycles
+        going = total[low:allowed[look + 1] + 1] if look + 1 < len(looks) else going[:0]
     return held
 
 
@@ -299,7 +311,7 @@ def test_pre_flight_measures_the_poll_of_every_axis_in_real_time(tmp_path: pathl
         assert result.exit_reason == "completed", result.error
         assert log.count("-> OPERATION ENABLED") == len(UNITS), log
         preflight = document["preflight"]
-        assert preflight["cycles"] in (PREFLIGHT_CYCLES, (1 + LOOK_AGAIN) * PREFLIGHT_CYCLES), preflight
+        assert preflight["cycles"] in looks_for(PREFLIGHT_CYCLES), preflight
         assert preflight["busy_allowed"] == allowed_overruns(preflight["cycles"]), preflight
         assert preflight["busy_over_period"] <= preflight["busy_allowed"], preflight
         assert preflight["overruns"] <= preflight["busy_allowed"], preflight

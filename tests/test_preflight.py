@@ -18,6 +18,7 @@ from haptic_bus.app.preflight import (
     judge,
     judge_delay,
     looks_again,
+    looks_for,
     measure,
     without_realtime,
 )
@@ -152,7 +153,7 @@ def test_a_drive_that_stops_answering_during_pre_flight_is_said_to_have_answered
         answered.append(True)
 
     with pytest.raises(DriveTimeout) as silent:
-        measure(exchange, T, cycles=20)
+        measure(exchange, T, (20,))
     assert str(silent.value) == ("CANopen node 5: no TPDO (COB-ID 0x185) for 3 consecutive cycles (timeout 50 ms each), "
                                  "after answering 5 of pre-flight's 20 cycles (nothing enabled): a drive that stops "
                                  "answering and a machine that stalls the drive's process look the same from here")
@@ -164,7 +165,7 @@ def test_a_drive_that_never_answers_in_pre_flight_keeps_its_own_words() -> None:
 
     with pytest.raises(DriveTimeout, match=r"^CANopen node 5: no TPDO \(COB-ID 0x185\) for 3 consecutive cycles "
                                            r"\(timeout 50 ms each\)$"):
-        measure(exchange, T, cycles=20)
+        measure(exchange, T, (20,))
 
 
 def test_a_stall_adds_one_late_cycle_to_the_delay_and_its_catch_up_to_the_overruns() -> None:
@@ -253,9 +254,10 @@ def test_one_stall_in_the_first_look_is_judged_again_over_four_times_the_cycles(
     assert allowed_overruns(PREFLIGHT_CYCLES) == 5 and allowed_overruns((1 + LOOK_AGAIN) * PREFLIGHT_CYCLES) == 15
     assert looks_again(first, LOOK_AGAIN * PREFLIGHT_CYCLES)
     second = _stall_of(4e-3, (1 + LOOK_AGAIN) * PREFLIGHT_CYCLES)
-    report = judge_delay(dataclasses.replace(second, first_look=PREFLIGHT_CYCLES), 1.0, lambda delay: True, "guard",
-                         0.030, 30)
-    assert report.holdable and report.cycles == 2000 and report.smallest_period == T and report.first_look == 500
+    report = judge_delay(dataclasses.replace(second, earlier_looks=(PREFLIGHT_CYCLES,)), 1.0, lambda delay: True,
+                         "guard", 0.030, 30)
+    assert report.holdable and report.cycles == 2000 and report.smallest_period == T
+    assert report.earlier_looks == (500,)
     assert report.line().startswith("pre-flight: 2000 cycles (500, then 1500 more: the first alone would have refused "
                                     "T) at T = 1 ms, no torque: ")
     stalls = second.exchange.copy()
@@ -264,6 +266,25 @@ def test_one_stall_in_the_first_look_is_judged_again_over_four_times_the_cycles(
     three = first.exchange.copy()
     three[[100, 250, 400]] = 4e-3
     assert catch_up_overruns(_looped(three), np.array([T]))[0] == 18 and not looks_again(_looped(three), 1500)
+
+
+def test_one_stall_of_10_ms_is_held_on_the_third_look_over_8000_cycles() -> None:
+    """A stall of 10 ms (this virtual machine's stalls of 10-26 ms refused 8 of 82 fresh pre-flights after their
+    second look): its catch-up (0.4 ms a cycle) starts 21 cycles more than T late, over the 15 allowed in 2000 and
+    within the 51 of 8000, where T is held; the line names each look.  Three such stalls in 8000 (63 late) are not held."""
+    assert looks_for(PREFLIGHT_CYCLES) == (500, 2000, 8000) and allowed_overruns(8000) == 51
+    second = _stall_of(10e-3, 2000)
+    assert catch_up_overruns(second, np.array([T]))[0] == 21 and looks_again(second, 6000)
+    third = _stall_of(10e-3, 8000)
+    report = judge_delay(dataclasses.replace(third, earlier_looks=(500, 2000)), 1.0, lambda delay: True, "guard",
+                         0.030, 30)
+    assert report.holdable and report.cycles == 8000 and report.smallest_period == T
+    assert report.line().startswith("pre-flight: 8000 cycles (500, then 1500 more, then 6000 more: each look before "
+                                    "the last would have refused T) at T = 1 ms, no torque: ")
+    stalls = third.exchange.copy()
+    stalls[[2250, 4250]] = 10e-3
+    assert catch_up_overruns(_looped(stalls), np.array([T]))[0] == 63
+    assert not judge_delay(_looped(stalls), 1.0, lambda delay: True, "guard", 0.030, 30).holdable
 
 
 def _looped(exchange: np.ndarray) -> Timing:
@@ -277,22 +298,24 @@ def _looped(exchange: np.ndarray) -> Timing:
     return Timing(T, late, starts, exchange, int(np.sum(late > T)))
 
 
-@pytest.mark.parametrize(("held", "measured"), [(True, 20), (False, 20 + 3 * 20)])
-def test_the_cycles_go_on_only_when_the_first_look_would_refuse(monkeypatch: pytest.MonkeyPatch, held: bool,
-                                                                 measured: int) -> None:
-    """The decision is the period rule's on the first ``cycles`` (``looks_again``, here as given); the
-    second look's cycles go on from there, one timing of them all, which says where the first look ended."""
+@pytest.mark.parametrize(("refusing", "measured", "asked"), [(0, 20, [(20, 60)]), (1, 80, [(20, 60), (80, 240)]),
+                                                           (2, 320, [(20, 60), (80, 240)])])
+def test_the_cycles_go_on_only_while_the_looks_so_far_would_refuse(monkeypatch: pytest.MonkeyPatch, refusing: int,
+                                                                   measured: int, asked: list[tuple[int, int]]) -> None:
+    """The decision is the period rule's on the cycles so far (``looks_again``, here as given: the first
+    ``refusing`` looks would refuse); each next look's cycles go on from there, three looks at most, one timing of
+    them all, which says where each earlier look ended."""
     import haptic_bus.app.preflight as preflight
 
-    looked: list[int] = []
+    looked: list[tuple[int, int]] = []
 
     def rule(timing: Timing, again: int) -> bool:
-        looked.append(timing.exchange.size)
-        return not held
+        looked.append((timing.exchange.size, again))
+        return len(looked) <= refusing
 
     monkeypatch.setattr(preflight, "looks_again", rule)
     calls: list[None] = []
-    timing = measure(lambda: calls.append(None), T, cycles=20, again=3 * 20)
-    assert looked == [20] and len(calls) == measured
+    timing = measure(lambda: calls.append(None), T, looks_for(20))
+    assert looks_for(20) == (20, 80, 320) and looked == asked and len(calls) == measured
     assert timing.lateness.size == timing.starts.size == timing.exchange.size == measured
-    assert timing.first_look == (0 if held else 20)
+    assert timing.earlier_looks == looks_for(20)[:refusing]

@@ -117,7 +117,7 @@ def test_no_second_look_where_the_first_already_exceeds_all_2000_cycles_allowanc
                 pass
 
     cycles = preflight.PREFLIGHT_CYCLES
-    timing = preflight.measure(exchange, period, cycles, again=preflight.LOOK_AGAIN * cycles)
+    timing = preflight.measure(exchange, period, preflight.looks_for(cycles))
     busy = int(((timing.exchange + preflight.own_lateness(timing)) > period).sum())
     assert busy > preflight.allowed_overruns(cycles * (1 + preflight.LOOK_AGAIN))  # the verdict is refusal either way
     assert timing.exchange.size == cycles, f"measured {timing.exchange.size} cycles; the first {cycles} decided it"

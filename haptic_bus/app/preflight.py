@@ -14,12 +14,15 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
   count measured is more than such a machine shows in :data:`CONFIDENCE` of pre-flights
   (:func:`allowed_overruns`: 5 of 500): the share is then above the target with that confidence.
   The price of 500 cycles: a machine overrunning in 1 % of its cycles is held in 62 % of
-  pre-flights; the run's supervisor watches its lateness (``on_late``) from there.  A first look
+  pre-flights; the run's supervisor watches its lateness (``on_late``) from there.  A look
   that would refuse ``T`` looks again: the cycles go on, :data:`LOOK_AGAIN` times as many more, and
-  the verdict is on them all (2000: 15 allowed).  The cycles a stall makes late come together, so 500
-  are few to tell a rare stall from a frequent one: one stall of the host, 4 ms in 0.5 s, made 7
-  cycles start late at T = 1 ms and refused 1 of 20 fresh pre-flights here, while 20 s runs on the
-  same machine overran in 0.05-0.1 % of their cycles.  A stall
+  the verdict is on them all, up to :data:`LOOKS` looks (:func:`looks_for`: 500, 2000 with 15
+  allowed, 8000 with 51).  The cycles a stall makes late come together, so 500 are few to tell a rare
+  stall from a frequent one: one stall of the host, 4 ms in 0.5 s, made 7 cycles start late at
+  T = 1 ms and refused 1 of 20 fresh pre-flights here, while 20 s runs on the same machine overran in
+  0.05-0.1 % of their cycles; and 2000 are few for the stalls of 10-26 ms this virtual machine meets
+  every few seconds, each making 10-30 cycles late (6 of 62 pre-flights refused so on December 4, 2
+  of 20 on December 7): the third look's 8000 take up to two of them.  A stall
   also makes the cycles after it late while the loop catches up, ``S / (T - x)`` of them for a
   stall ``S`` and exchanges ``x``: few at T = 1 ms and 0.2 ms exchanges, many where the exchange
   nearly fills ``T`` (a Modbus run of three units at T = 2 ms, 1.8 ms polls, passed a pre-flight
@@ -66,6 +69,7 @@ The run prints what was measured and the verdict in one line, and ``run.json`` r
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import logging
 import math
 import threading
@@ -87,7 +91,8 @@ from haptic_bus.errors import DriveTimeout, Refusal
 logger = logging.getLogger(__name__)
 
 PREFLIGHT_CYCLES = 500  # cycles measured before enabling: 0.5 s at T = 1 ms
-LOOK_AGAIN = 3  # a first look that would refuse T measures on for this many times its cycles, judged on all
+LOOK_AGAIN = 3  # a look that would refuse T measures on for this many times its cycles, judged on all
+LOOKS = 3  # at most this many looks: 500, 2000 and 8000 cycles
 STALL_MARGIN = 1.5  # the longest stall measured, times this, must stay under the drive's watchdog
 OVERRUN_SHARE = 0.005  # issue 26's overrun target: at most this share of a run's cycles busy longer than T
 CONFIDENCE = 0.95  # T is refused when its overruns exceed OVERRUN_SHARE with this confidence (module docstring)
@@ -112,8 +117,8 @@ class PreflightReport:
     ``watchdog``: the shortest stall (s) that faults the drive (inf: none); ``holdable``: False
     refuses the run, ``reason`` says why;
     ``smallest_period``: the shortest ``T`` (s) this machine holds (the busy time's, or the
-    watchdog's where a stall binds; None where no ``T`` holds the stall measured); ``first_look``: the
-    cycles of the first look when the second was measured (:func:`looks_again`), else 0."""
+    watchdog's where a stall binds; None where no ``T`` holds the stall measured); ``earlier_looks``: the
+    cycles of each look before the last, each of which would have refused ``T`` (:func:`looks_again`)."""
 
     cycles: int
     period: float
@@ -130,14 +135,18 @@ class PreflightReport:
     holdable: bool
     reason: str
     smallest_period: float | None
-    first_look: int = 0
+    earlier_looks: tuple[int, ...] = ()
 
     def line(self) -> str:
         """What the run prints: the measurement and the verdict, one line."""
         late, cycle = self.lateness, self.cycle
         holds = f"; holds T >= {self.smallest_period * 1e3:g} ms" if self.holdable and self.smallest_period else ""
-        again = (f" ({self.first_look}, then {self.cycles - self.first_look} more: the first alone would have refused "
-                 "T)") if self.first_look else ""
+        again = ""
+        if self.earlier_looks:
+            ends = (*self.earlier_looks, self.cycles)
+            more = "".join(f", then {end - start} more" for start, end in itertools.pairwise(ends))
+            which = "the first alone" if len(ends) == 2 else "each look before the last"
+            again = f" ({ends[0]}{more}: {which} would have refused T)"
         return (f"pre-flight: {self.cycles} cycles{again} at T = {self.period * 1e3:g} ms, no torque: start lateness "
                 f"p50 {late['p50'] * 1e6:.0f} us, p99 {late['p99'] * 1e6:.0f} us, max {late['max'] * 1e3:.3g} ms; delay "
                 f"added p99 {self.delay_added_p99 * 1e6:.0f} us; "
@@ -153,33 +162,38 @@ class PreflightReport:
 @dataclass(frozen=True)
 class Timing:
     """Pre-flight's raw measurement: each cycle's start lateness, start time and exchange time (s); the
-    clock's overruns; ``first_look``: the cycles of the first look when the second was measured, else 0."""
+    clock's overruns; ``earlier_looks``: the cycles of each look before the last (:func:`measure`)."""
 
     period: float
     lateness: np.ndarray
     starts: np.ndarray
     exchange: np.ndarray
     overruns: int
-    first_look: int = 0
+    earlier_looks: tuple[int, ...] = ()
 
 
-def measure(exchange: Callable[[], object], period: float, cycles: int = PREFLIGHT_CYCLES,
-            spin: float | None = None, again: int = 0) -> Timing:
+def looks_for(cycles: int) -> tuple[int, ...]:
+    """The cycle counts at which pre-flight judges, a first look of ``cycles`` and each next
+    :data:`LOOK_AGAIN` times as many more (:data:`LOOKS` in all): 500, 2000, 8000."""
+    return tuple(cycles * (1 + LOOK_AGAIN) ** look for look in range(LOOKS))
+
+
+def measure(exchange: Callable[[], object], period: float, looks: tuple[int, ...] = looks_for(PREFLIGHT_CYCLES),
+            spin: float | None = None) -> Timing:
     """Time ``exchange`` -- one cycle of the drive(s) at zero torque, called in their cyclic phase so
     that it takes the run's own path (the bus read by this thread, the heartbeat from the cycle) --
-    ``cycles`` times on a fresh real clock of period ``period`` s; ``again`` cycles more, on the same
-    clock, when the first ``cycles`` would refuse ``T`` by the period rule and the ``again`` more could
-    change that (:func:`looks_again`: the second look, module docstring).  ``exchange`` is where a stop
+    on a fresh real clock of period ``period`` s, ``looks[0]`` times, and on to each next count of
+    ``looks`` (ascending) on the same clock while the cycles so far would refuse ``T`` by the period
+    rule and the more could change that (:func:`looks_again`, module docstring).  ``exchange`` is where a stop
     asked meanwhile ends the measurement (the caller's check).  A drive that stops answering after
     answering some cycles is a :class:`DriveTimeout` that says so: from here it looks the same as a
     machine that stalls the drive's process (breaker: a simulated drive silent for 280 ms on a loaded
     host was reported as a plain "no TPDO")."""
-    clock = RealClock(period, capacity=cycles + again, spin=spin)
-    starts = np.zeros(cycles + again)
-    took = np.zeros(cycles + again)
-    total = cycles
-    k = 0
-    while k < total:
+    clock = RealClock(period, capacity=looks[-1], spin=spin)
+    starts = np.zeros(looks[-1])
+    took = np.zeros(looks[-1])
+    look = k = 0
+    while k < looks[look]:
         clock.wait_next(k)
         started = time.perf_counter()
         try:
@@ -187,28 +201,27 @@ def measure(exchange: Callable[[], object], period: float, cycles: int = PREFLIG
         except DriveTimeout as silent:
             if k == 0:
                 raise
-            raise DriveTimeout(silent.node, f"{silent.message}, after answering {k} of pre-flight's {total} cycles "
+            raise DriveTimeout(silent.node, f"{silent.message}, after answering {k} of pre-flight's {looks[look]} cycles "
                                "(nothing enabled): a drive that stops answering and a machine that stalls the "
                                "drive's process look the same from here") from silent
         starts[k], took[k] = started, time.perf_counter() - started
         k += 1
-        if k == cycles and again and looks_again(Timing(period, clock.lateness(), starts[:k], took[:k], clock.overruns),
-                                                 again):
-            total += again  # decided in the slack before the next deadline: 0.1-0.3 ms here
-    return Timing(period, clock.lateness(), starts[:total], took[:total], clock.overruns,
-                  cycles if total > cycles else 0)
+        if k == looks[look] and look + 1 < len(looks) and looks_again(
+                Timing(period, clock.lateness(), starts[:k], took[:k], clock.overruns), looks[look + 1] - k):
+            look += 1  # decided in the slack before the next deadline: 0.1-0.3 ms after 500 cycles, 0.6 ms after 2000
+    return Timing(period, clock.lateness(), starts[:k], took[:k], clock.overruns, looks[:look])
 
 
-def looks_again(first: Timing, again: int) -> bool:
-    """Whether ``again`` cycles more can change the verdict on the first look ``first``: the period rule
-    (:func:`judge_delay`'s two counts: cycles busy longer than ``T``, and cycles starting more than ``T`` late
-    once the catch-ups are counted, :func:`catch_up_overruns`) refuses ``T`` on the first look, by no more
-    than the longer measurement allows (the counts only grow with more cycles: a first look already over
+def looks_again(look: Timing, again: int) -> bool:
+    """Whether ``again`` cycles more can change the verdict on the cycles measured so far, ``look``: the
+    period rule (:func:`judge_delay`'s two counts: cycles busy longer than ``T``, and cycles starting more
+    than ``T`` late once the catch-ups are counted, :func:`catch_up_overruns`) refuses ``T`` on them, by no
+    more than the longer measurement allows (the counts only grow with more cycles: a look already over
     that is refused either way), and the median exchange fits ``T``."""
-    cycles = first.exchange.size
-    if float(np.median(first.exchange)) > first.period:
+    cycles = look.exchange.size
+    if float(np.median(look.exchange)) > look.period:
         return False
-    worst = max(period_counts(first))
+    worst = max(period_counts(look))
     return allowed_overruns(cycles) < worst <= allowed_overruns(cycles + again)
 
 
@@ -306,7 +319,7 @@ def judge_delay(timing: Timing, assumed_delay: float, passes_at: Callable[[float
         if not holdable and smallest is not None:
             reason += f": this machine holds T >= {smallest * 1e3:g} ms"
         return PreflightReport(timing.lateness.size, period, late, cycle, gap, timing.overruns, added_p99, overlong,
-                               allowed, observed, passive, watchdog, holdable, reason, smallest, timing.first_look)
+                               allowed, observed, passive, watchdog, holdable, reason, smallest, timing.earlier_looks)
 
     if cycle["p50"] > period:  # the loop cannot keep its period: it falls further behind every cycle
         return report(False, f"refused: one exchange with the drive takes {cycle['p50'] * 1e3:.3g} ms (median), more "

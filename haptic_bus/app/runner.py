@@ -392,7 +392,7 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
     with drive.cyclic() as cycle:  # the run's own path, every target zero
 
         def exchange() -> object:
-            # a stop asked during pre-flight ends it at this cycle's start: during the measurement (up to 2000
+            # a stop asked during pre-flight ends it at this cycle's start: during the measurement (up to 8000
             # cycles), or while the gate judges (the run stops now, not once it has judged)
             _stop_if_asked(options)
             return cycle.read(), cycle.saturate_and_write(zeros)
@@ -406,7 +406,7 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
 
         spin = options.scheduling.spin
         cycles = preflight.PREFLIGHT_CYCLES if options.preflight_cycles is None else options.preflight_cycles
-        timing = preflight.measure(exchange, kind.period, cycles, spin=spin, again=preflight.LOOK_AGAIN * cycles)
+        timing = preflight.measure(exchange, kind.period, preflight.looks_for(cycles), spin=spin)
         _stop_if_asked(options)  # asked after the last cycle measured: the run stops, whatever its verdict would have been
         report = preflight.while_cycling(exchange_while_judged, kind.period, spin=spin, work=lambda: preflight.judge_delay(
             timing, kind.assumed_delay(gate), kind.passes_at(gate, scene), kind.profile.passivity.layer,
