@@ -166,12 +166,16 @@ node_id = whole("node id", *NODE_ID_RANGE)
 unit_id = whole("unit id", *UNIT_ID_RANGE)
 
 
-def unit_ids(text: str) -> list[int]:
-    """``1,2,3``: Modbus unit ids (each 1..247), one per axis in axis order (one may serve several)."""
+def unit_ids(text: str) -> str:
+    """``1,2,3``: Modbus unit ids (each 1..247), one per axis in axis order, checked as
+    :func:`~haptic_bus.validation.ids_in_order` reads them and kept as text: whether they must be
+    distinct depends on the servers (``--modbus`` once: yes; once per axis: unit 1 may serve each),
+    known once every option is read, and that refusal names what was typed."""
     try:
-        return ids_in_order("unit ids", text, "Modbus unit ids", *UNIT_ID_RANGE)
+        ids_in_order("unit ids", text, "Modbus unit ids", *UNIT_ID_RANGE)
     except ParameterError as invalid:
         raise argparse.ArgumentTypeError(invalid.detail) from None
+    return text
 
 
 def modbus_url(text: str) -> str:
