@@ -7,6 +7,7 @@ import logging
 import math
 import pathlib
 import re
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -117,29 +118,54 @@ def test_identify_says_a_profile_it_cannot_write_in_one_line(haptic_sim: Any, tm
     """``identify --write-profile /proc/x.toml`` (a folder that os.access calls writable for root, or one
     gone during the run): the estimates printed, one line naming the file and why, exit 1; it was
     FileNotFoundError's traceback after the whole measurement, the estimates never printed."""
-    from haptic_bus.app.cli import main
-
-    drive = haptic_sim("cia402-handle", operator={"model": "none"})
     folder = tmp_path / "gone"
     folder.mkdir()
     target = folder / "identified.toml"
-    real_write = pathlib.Path.write_text
-
-    def folder_gone(path: pathlib.Path, *args: Any, **kwargs: Any) -> int:
-        if path == target:  # the folder went while identify measured
-            folder.rmdir()
-        return real_write(path, *args, **kwargs)
-
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(pathlib.Path, "write_text", folder_gone)
-        status = main(["identify", "--profile", "cia402-handle", *drive.run_args(), "--virtual-time",
-                       "--duration", "1", "--write-profile", str(target)])
-    out, err = capsys.readouterr()
+    status, out, err = _identify_while(haptic_sim, target, folder.rmdir, capsys)  # the folder went while it measured
     assert status == 1
     assert "mass m" in out and "verdict: supported" in out
     assert err == (f"haptic-bus identify: write error: --write-profile {target}: No such file or directory; "
                    "nothing written, the estimates are the ones above\n")
     assert not target.exists()
+
+
+def test_identify_leaves_a_profile_that_appeared_while_it_measured(haptic_sim: Any, tmp_path: pathlib.Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``--write-profile FILE`` (no file there when identify started, no --force) and a file made there by
+    another program during the measurement: it was overwritten silently (exit 0); it is now left as it
+    was (an exclusive create), the estimates printed, one line naming the file, exit 1."""
+    target = tmp_path / "identified.toml"
+    status, out, err = _identify_while(haptic_sim, target, lambda: target.write_text("# someone else's\n"), capsys)
+    assert status == 1
+    assert "mass m" in out and "verdict: supported" in out and "wrote" not in out
+    assert err == (f"haptic-bus identify: write error: --write-profile {target}: a file appeared there during the "
+                   "measurement (--force replaces one); nothing written, the estimates are the ones above\n")
+    assert target.read_text() == "# someone else's\n"
+    status, out, err = _identify_while(haptic_sim, target, lambda: None, capsys, "--force")  # asked: replaced
+    assert status == 0 and f"wrote {target}" in out and err == ""
+    assert "[identification]" in target.read_text()
+
+
+def _identify_while(haptic_sim: Any, target: pathlib.Path, meanwhile: Callable[[], object],
+                    capsys: pytest.CaptureFixture[str], *options: str) -> tuple[int, str, str]:
+    """``identify --write-profile target [options]`` against a simulated drive, ``meanwhile`` done after the
+    command's checks and the measurement, just before the profile is written; (exit status, stdout, stderr)."""
+    from haptic_bus.app import identify_profile
+    from haptic_bus.app.cli import main
+
+    drive = haptic_sim("cia402-handle", operator={"model": "none"})
+    made = identify_profile.identified_profile
+
+    def measured_then(*args: Any) -> str:
+        meanwhile()
+        return made(*args)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(identify_profile, "identified_profile", measured_then)
+        status = main(["identify", "--profile", "cia402-handle", *drive.run_args(), "--virtual-time",
+                       "--duration", "1", "--write-profile", str(target), *options])
+    out, err = capsys.readouterr()
+    return status, out, err
 
 
 def test_a_modbus_stall_names_a_drive_that_kept_the_cycle_waiting_too() -> None:
