@@ -190,7 +190,9 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
     def start(profile: ProfileSource | None = None, *, interface: str = "virtual",
               node_id: int | None = None, unit_id: int | None = None, servers: int = 1, timing: str | None = None,
               operator: Mapping[str, Any] | None = None, **truth: Any) -> SimDriveNode:
+        from drives.modbus.register_map import UNIT_ID_RANGE
         from haptic_bus.errors import ParameterError
+        from haptic_bus.validation import whole_in_range
 
         several = _axes_profile(profile)
         axes = len(several.axes) if several is not None else 1
@@ -215,10 +217,8 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
             ("unit_id", unit_id, "a CANopen node: node_id")
         if other is not None:
             raise ParameterError(unused, other, f"none with interface={interface!r} ({named})", CONTEXT)
-        if spec is None and unit_id is not None and (isinstance(unit_id, bool) or not isinstance(unit_id, int)
-                                                     or not 1 <= unit_id <= 247):  # the server's own check took 0..255
-            raise ParameterError("unit_id", unit_id, "a Modbus unit id 1..247, one a master can address (hb.run's and "
-                                 "haptic-bus sim's range)", CONTEXT)
+        if spec is None and unit_id is not None:  # hb.run's and haptic-bus sim's range (the server's own took 0..255)
+            unit_id = whole_in_range("unit_id", unit_id, *UNIT_ID_RANGE, context=CONTEXT)
         path = None
         if profile is not None:
             if not folder:
