@@ -95,10 +95,11 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 # --------------------------------------------------------------------------- argument types
 
 def number(name: str, low: float, high: float, unit: str, *, low_open: bool = False) -> Callable[[str], float]:
-    """A parser of a finite number in ``[low, high]`` (``(low, high]`` with ``low_open``), in ``unit``."""
+    """A parser of a finite real in ``[low, high]`` (``(low, high]`` with ``low_open``), in ``unit``; its
+    refusal in :func:`~haptic_bus.validation.real_range`'s words."""
 
     def parse(text: str) -> float:
-        allowed = f"a finite number in {'(' if low_open else '['}{low:g}, {high:g}] {unit}"
+        allowed = real_range(low, high, unit, low_inclusive=not low_open)
         try:
             value = float(text)
         except ValueError:  # not a number: the range too, in the one line (break16)
