@@ -111,7 +111,7 @@ class SafetySettings:
         (None) :data:`DEFAULT_TPDO_WAIT`, at most half of :meth:`canopen_stall` -- a cycle that waits
         for a silent drive sends every drive its RPDO and the heartbeat that much later, and a wait as
         long as the stall would fault the drives that answered.  ParameterError naming ``tpdo_timeout``
-        for a ``wanted`` outside (0, that half] or not a finite number of seconds (neither watchdog set)."""
+        for a ``wanted`` that is not a finite real in (0, that half] s (neither watchdog set)."""
         most = self.canopen_stall(period) / 2.0
         if wanted is None:
             return min(DEFAULT_TPDO_WAIT, most)

@@ -38,10 +38,15 @@ drive classes (:class:`CanopenDrive`, :class:`ModbusDrive`) do.
 
 from __future__ import annotations
 
+import logging
 from typing import TYPE_CHECKING
 
 from haptic_bus._version import __version__ as __version__
 from haptic_bus.lazy import lazy_getattr
+
+# A library's logging (the logging HOWTO): haptic_bus' records go where the program's logging sends them, and
+# nowhere (not logging.lastResort's stderr) in a program that configures none; the command line configures its own.
+logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 _HOMES = {
     "check_passivity": "haptic_bus.analysis.check",

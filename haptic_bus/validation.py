@@ -73,7 +73,9 @@ def ids_in_order(name: str, text: str, what: str, low: int, high: int, *, distin
     ``--unit-ids``, ``sim --node-ids``, ``scan --node-ids``/``--unit-ids``): ``"5,6,7"`` or ``"5-7"``
     -> [5, 6, 7], in the order given (one per axis; a range ascending): whole numbers in ``low..high``
     (decimal or ``0x..``; ``distinct``: none twice), else ParameterError naming ``name`` and what is
-    allowed (``what``: ``"CANopen node ids"``), the same words for every such flag."""
+    allowed (``what``: ``"CANopen node ids"``), the same words for every such flag; an id given twice where
+    they must be distinct is named (``--node-ids = '5-7,6' is invalid; allowed: distinct CANopen node ids
+    1..127 (6 is given twice)``)."""
     ids: list[int] = []
     for part in text.split(","):
         first, dash, last = part.strip().partition("-")
@@ -86,9 +88,12 @@ def ids_in_order(name: str, text: str, what: str, low: int, high: int, *, distin
             ids = []
             break
         ids.extend(range(start, stop + 1))
-    if not ids or (distinct and len(set(ids)) != len(ids)):
+    if not ids:
         raise ParameterError(name, text, f"{'distinct ' if distinct else ''}{what} {low}..{high} as N, N-M or a "
                                          f"comma-separated list of those, e.g. {low},{low + 1},{low + 2} or {low}-{low + 2}")
+    repeated = next((each for i, each in enumerate(ids) if each in ids[:i]), None) if distinct else None
+    if repeated is not None:
+        raise ParameterError(name, text, f"distinct {what} {low}..{high} ({repeated} is given twice)")
     return ids
 
 

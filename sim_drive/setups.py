@@ -111,7 +111,8 @@ def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
         raise ParameterError("--modbus", repeated, "each address once: every --modbus is a server of its own (one "
                              "server for several axes: one --modbus with --unit-ids)")
     # a unit id may repeat on servers of their own (unit 1 on each is the default), never on one
-    given = ids_in_order("--unit-ids", args.unit_ids, "Modbus unit ids", *UNIT_ID_RANGE) if args.unit_ids else None
+    given = ids_in_order("--unit-ids", args.unit_ids, "Modbus unit ids", *UNIT_ID_RANGE,
+                         distinct=len(args.modbus) == 1) if args.unit_ids else None
     if args.unit_id is not None:
         raise ParameterError("--unit-id", args.unit_id, "--unit-ids for several axes (one unit id per axis)")
     device = profile_axes(args)
@@ -130,8 +131,5 @@ def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
     units = given or [UNIT_ID_RANGE[0]] * len(args.modbus)
     if len(args.modbus) not in (1, len(units)):
         raise ParameterError("--modbus", len(args.modbus), f"one address for every unit, or one per unit ({len(units)})")
-    if len(args.modbus) == 1 and len(set(units)) != len(units):
-        raise ParameterError("--unit-ids", args.unit_ids, "distinct unit ids on one server (or one --modbus address "
-                             "per unit)")
     parameters, _, timing = drive_setup(args)
     return [(unit, parameters, timing) for unit in units], SpaceHand(len(units))

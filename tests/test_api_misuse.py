@@ -7,6 +7,7 @@ import logging
 import math
 import pathlib
 import re
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -117,29 +118,54 @@ def test_identify_says_a_profile_it_cannot_write_in_one_line(haptic_sim: Any, tm
     """``identify --write-profile /proc/x.toml`` (a folder that os.access calls writable for root, or one
     gone during the run): the estimates printed, one line naming the file and why, exit 1; it was
     FileNotFoundError's traceback after the whole measurement, the estimates never printed."""
-    from haptic_bus.app.cli import main
-
-    drive = haptic_sim("cia402-handle", operator={"model": "none"})
     folder = tmp_path / "gone"
     folder.mkdir()
     target = folder / "identified.toml"
-    real_write = pathlib.Path.write_text
-
-    def folder_gone(path: pathlib.Path, *args: Any, **kwargs: Any) -> int:
-        if path == target:  # the folder went while identify measured
-            folder.rmdir()
-        return real_write(path, *args, **kwargs)
-
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(pathlib.Path, "write_text", folder_gone)
-        status = main(["identify", "--profile", "cia402-handle", *drive.run_args(), "--virtual-time",
-                       "--duration", "1", "--write-profile", str(target)])
-    out, err = capsys.readouterr()
+    status, out, err = _identify_while(haptic_sim, target, folder.rmdir, capsys)  # the folder went while it measured
     assert status == 1
     assert "mass m" in out and "verdict: supported" in out
     assert err == (f"haptic-bus identify: write error: --write-profile {target}: No such file or directory; "
                    "nothing written, the estimates are the ones above\n")
     assert not target.exists()
+
+
+def test_identify_leaves_a_profile_that_appeared_while_it_measured(haptic_sim: Any, tmp_path: pathlib.Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``--write-profile FILE`` (no file there when identify started, no --force) and a file made there by
+    another program during the measurement: it was overwritten silently (exit 0); it is now left as it
+    was (an exclusive create), the estimates printed, one line naming the file, exit 1."""
+    target = tmp_path / "identified.toml"
+    status, out, err = _identify_while(haptic_sim, target, lambda: target.write_text("# someone else's\n"), capsys)
+    assert status == 1
+    assert "mass m" in out and "verdict: supported" in out and "wrote" not in out
+    assert err == (f"haptic-bus identify: write error: --write-profile {target}: a file appeared there during the "
+                   "measurement (--force replaces one); nothing written, the estimates are the ones above\n")
+    assert target.read_text() == "# someone else's\n"
+    status, out, err = _identify_while(haptic_sim, target, lambda: None, capsys, "--force")  # asked: replaced
+    assert status == 0 and f"wrote {target}" in out and err == ""
+    assert "[identification]" in target.read_text()
+
+
+def _identify_while(haptic_sim: Any, target: pathlib.Path, meanwhile: Callable[[], object],
+                    capsys: pytest.CaptureFixture[str], *options: str) -> tuple[int, str, str]:
+    """``identify --write-profile target [options]`` against a simulated drive, ``meanwhile`` done after the
+    command's checks and the measurement, just before the profile is written; (exit status, stdout, stderr)."""
+    from haptic_bus.app import identify_profile
+    from haptic_bus.app.cli import main
+
+    drive = haptic_sim("cia402-handle", operator={"model": "none"})
+    made = identify_profile.identified_profile
+
+    def measured_then(*args: Any) -> str:
+        meanwhile()
+        return made(*args)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(identify_profile, "identified_profile", measured_then)
+        status = main(["identify", "--profile", "cia402-handle", *drive.run_args(), "--virtual-time",
+                       "--duration", "1", "--write-profile", str(target), *options])
+    out, err = capsys.readouterr()
+    return status, out, err
 
 
 def test_a_modbus_stall_names_a_drive_that_kept_the_cycle_waiting_too() -> None:
@@ -223,10 +249,9 @@ def test_run_refuses_a_start_from_a_spawned_processes_import(tmp_path: pathlib.P
                          "or None (the profile's)"),
     ({"operator": "constant:3"}, "simulated drive: operator = 'constant:3' is invalid; allowed: a mapping, the "
                                  "profile's [operator_model] table, e.g. {'model': 'constant', 'level': 3.0}"),
-    ({"interface": "modbus", "unit_id": 0}, "simulated drive: unit_id = 0 is invalid; allowed: a Modbus unit id "
-                                            "1..247, one a master can address (hb.run's and haptic-bus sim's range)"),
-    ({"interface": "modbus", "unit_id": 300}, "simulated drive: unit_id = 300 is invalid; allowed: a Modbus unit id "
-                                              "1..247, one a master can address (hb.run's and haptic-bus sim's range)"),
+    ({"interface": "modbus", "unit_id": 0}, "simulated drive: unit_id = 0 is invalid; allowed: an integer in [1, 247]"),
+    ({"interface": "modbus", "unit_id": 300}, "simulated drive: unit_id = 300 is invalid; allowed: an integer in [1, 247]"),
+    ({"interface": "modbus", "unit_id": True}, "simulated drive: unit_id = True is invalid; allowed: an integer in [1, 247]"),
 ])
 def test_haptic_sim_names_a_bad_timing_operator_or_unit(haptic_sim: Any, given: dict[str, Any], line: str) -> None:
     """haptic_sim's timing and operator were the simulator's ValueError and dict()'s TypeError-like ValueError,
@@ -311,10 +336,10 @@ def test_a_controller_wait_that_bounds_nothing_is_refused(haptic_sim: Any, hapti
     """run.wait(timeout=-1) returned at once and failed the test "did not end within -1 s of wall clock"; a
     timeout that bounds no wait is one line naming it, the run left to its own end."""
     run = haptic_controller("cia402-handle", haptic_sim("cia402-handle"), duration=0.05)
-    for timeout in (-1, 0, float("nan"), float("inf"), "10"):
+    for timeout in (-1, 0, float("nan"), float("inf"), "10", 1e6):
         for wait in (run.wait, run.stop, run.wait_cycling):
             with pytest.raises(hb.ParameterError, match=r"^haptic_controller run: timeout = .* is invalid; allowed: "
-                                                        r"a finite number of s of wall clock > 0$"):
+                                                        r"a finite real in \(0, 86400\] s$"):  # validation's words
                 wait(timeout=timeout)
     assert run.wait().exit_reason == "completed"
 
@@ -343,3 +368,27 @@ def test_options_that_stopped_a_run_run_again(haptic_sim: Any, tmp_path: pathlib
     second = hb.run(profile, drive.bus, again, **drive.run_kwargs())
     assert second.exit_reason == "completed"
     assert second.summary is not None and second.summary.cycles == 50
+
+
+def test_a_program_without_logging_sees_the_libraries_lines_not_haptic_bus() -> None:
+    """docs/errors.md, "Log lines beside the errors": in a program that configures no logging a bus library's
+    ERROR (canopen's SDO abort) reaches stderr through logging.lastResort, Python's rule, and the one line
+    the page gives silences it; haptic_bus' own records do not (a NullHandler on its top-level logger, the
+    logging HOWTO's rule for a library), and propagate to a program's handler as before."""
+    import subprocess
+    import sys
+
+    program = "\n".join([
+        "import logging, haptic_bus",
+        "logging.getLogger('haptic_bus.control.controller').warning('supervisor: ours')",
+        "logging.getLogger('canopen.sdo.client').error('Transfer aborted by client with code 0x05040000')",
+        "logging.getLogger('canopen').setLevel(logging.CRITICAL)",
+        "logging.getLogger('canopen.sdo.client').error('silenced')",
+        "logging.basicConfig(format='%(name)s: %(message)s')",
+        "logging.getLogger('haptic_bus.control.controller').warning('supervisor: configured')"])
+    tree = pathlib.Path(__file__).resolve().parents[1]  # this tree's haptic_bus, not an installed one
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120, cwd=tree)
+    assert done.returncode == 0 and done.stdout == ""
+    assert done.stderr == ("Transfer aborted by client with code 0x05040000\n"
+                           "haptic_bus.control.controller: supervisor: configured\n"), done.stderr
+    assert any(isinstance(h, logging.NullHandler) for h in logging.getLogger("haptic_bus").handlers)

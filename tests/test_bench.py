@@ -5,6 +5,7 @@ assert); the refusals before any work (a missing package of the [bench] extra, a
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -198,6 +199,45 @@ def test_a_short_soak_reports_an_exact_sum_and_the_memory_it_sampled(smoke_run: 
 
 
 # ----------------------------------------------------------------------------- no bench run needed
+
+def test_the_soak_reports_between_its_ten_ticks_at_most_every_progress_interval(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--soak 1e9`` ticked ten times in hours; between its ten ticks (each tenth of the run, the bar
+    advanced) the count now comes at least every PROGRESS_SECONDS of wall time.  The wall clock is a fake
+    one, 1 s a reading, two readings a piece, so the reports depend on no machine's speed: a report comes
+    at the first piece's end at least PROGRESS_SECONDS after the last, so no two are more than
+    PROGRESS_SECONDS + 2 s (one piece) apart."""
+    import types
+
+    from haptic_bus.bench import soak
+
+    clock = [0.0]
+
+    def perf_counter() -> float:
+        clock[0] += 1.0
+        return clock[0]
+
+    monkeypatch.setattr(soak, "time", types.SimpleNamespace(perf_counter=perf_counter))
+    reports: list[tuple[str, bool, float]] = []
+
+    def tick(label: str, *, advance: bool = True) -> None:
+        reports.append((label, advance, clock[0]))
+
+    result = soak.run(2_000, tick)  # pieces of one 20-cycle chunk each (the next memory sample), 2 s each
+    advanced = [label for label, advance, _ in reports if advance]
+    assert advanced == [f"soak: {n:,} of 2,000 cycles" for n in range(200, 2_001, 200)]  # one a tenth, the last at the end
+    assert len(reports) > len(advanced)  # reports between the ticks
+    assert all(0 < b - a <= soak.PROGRESS_SECONDS + 2 for (_, _, a), (_, _, b) in itertools.pairwise(reports))
+    assert result["memory"]["at_cycles"] == list(range(0, 2_001, 20))  # the memory samples as before: each chunk
+
+
+def test_the_soak_sizes_its_pieces_from_the_rate_so_far() -> None:
+    """Half a progress interval's worth of cycles at the rate measured, FIRST_PIECE before any, 1..left."""
+    from haptic_bus.bench.soak import FIRST_PIECE, PROGRESS_SECONDS, piece_cycles
+
+    assert piece_cycles(0, 0.0, 10**9) == FIRST_PIECE and piece_cycles(0, 0.0, 7) == 7
+    assert piece_cycles(30_000, 1.0, 10**9) == int(30_000 * PROGRESS_SECONDS / 2)  # 30 000 cycles/s: 5 s of them
+    assert piece_cycles(1, 1e6, 10**9) == 1 and piece_cycles(30_000, 1.0, 99) == 99
+
 
 def test_spreads_and_pairs() -> None:
     spread = Spread.of([3.0, 1.0, 2.0, 5.0, 4.0])

@@ -32,7 +32,7 @@ DEVICE = ["--mass", "1", "--friction", "20", "--period", "0.001"]
     (["run", "cia402-handle", *BUS, "--node-id", "5", "--bitrate", "1M"],
      "haptic-bus run: error: argument --bitrate: bitrate = '1M' is invalid; allowed: a positive whole number of bit/s"),
     (["run", "cia402-handle", *BUS, "--node-id", "5", "--duration", "ten"],
-     "haptic-bus run: error: argument --duration: duration = 'ten' is invalid; allowed: a finite number in (0, 1e+07] s"),
+     "haptic-bus run: error: argument --duration: duration = 'ten' is invalid; allowed: a finite real in (0, 1e+07] s"),
     (["bench", "--soak", "inf"], "haptic-bus bench: error: argument --soak: soak cycles = 'inf' is invalid; allowed: "
                                  "a whole number of cycles 1..1e9 (e.g. 1e6)"),
     (["bench", "--soak", "1.5"], "haptic-bus bench: error: argument --soak: soak cycles = '1.5' is invalid; allowed: "

@@ -5,6 +5,9 @@ and commas alike, and the same refusal words: ``run --unit-ids 1-3`` was refused
 
 from __future__ import annotations
 
+import argparse
+from typing import Any
+
 import pytest
 
 from haptic_bus.app.cli import build_parser, main
@@ -13,18 +16,33 @@ from sim_drive.setups import node_ids
 ALLOWED = "{what} {low}..{high} as N, N-M or a comma-separated list of those, e.g. {low},{b},{c} or {low}-{c}"
 
 
+def _run_links(args: argparse.Namespace) -> dict[str, Any]:
+    """``run``'s link arguments as the command reads them, the test's signal handlers kept (it installs a stop request)."""
+    from haptic_bus.app.cli import _prepare_run
+    from haptic_bus.app.early_stop import handlers_kept
+
+    with handlers_kept():
+        return _prepare_run(args)[3]
+
+
 def _allowed(what: str, low: int, high: int) -> str:
     return ALLOWED.format(what=what, low=low, high=high, b=low + 1, c=low + 2)
 
 
 @pytest.mark.parametrize(("argv", "field", "ids"), [
-    (["run", "gantry-3d", "--modbus", "tcp://127.0.0.1:15174", "--unit-ids", "1-3"], "unit_ids", [1, 2, 3]),
-    (["run", "gantry-3d", "--modbus", "tcp://127.0.0.1:15174", "--unit-ids", "3,1-2"], "unit_ids", [3, 1, 2]),
     (["scan", "--modbus", "tcp://127.0.0.1:15174", "--unit-ids", "3,1-2"], "unit_ids", [1, 2, 3]),
     (["scan", "--interface", "virtual", "--channel", "x", "--node-ids", "5-7,0x7f"], "node_ids", [5, 6, 7, 127]),
 ])
 def test_ranges_and_commas_read_the_same_for_every_ids_flag(argv: list[str], field: str, ids: list[int]) -> None:
     assert getattr(build_parser().parse_command(argv), field) == ids  # run: in axis order; scan: the set, sorted
+
+
+@pytest.mark.parametrize(("text", "ids"), [("1-3", [1, 2, 3]), ("3,1-2", [3, 1, 2])])
+def test_run_reads_them_alike_in_axis_order(text: str, ids: list[int]) -> None:
+    """run keeps the text until it knows the servers (one: none twice), then reads it with the one reader."""
+    args = build_parser().parse_command(["run", "gantry-3d", "--modbus", "tcp://127.0.0.1:47100", "--unit-ids", text])
+    assert args.unit_ids == text
+    assert _run_links(args)["unit_ids"] == ids
 
 
 def test_sim_reads_them_alike() -> None:
@@ -54,3 +72,25 @@ def test_a_range_out_of_order_or_out_of_bounds_is_refused(text: str) -> None:
 def test_distinct_ids_stay_distinct_across_a_range() -> None:
     with pytest.raises(ValueError, match="distinct CANopen node ids"):
         node_ids("5-7,6")
+
+
+@pytest.mark.parametrize(("argv", "flag", "text", "what", "high", "twice"), [
+    (["run", "gantry-3d", "--modbus", "tcp://127.0.0.1:47100"], "--unit-ids", "1-3,2", "Modbus unit ids", 247, 2),
+    (["sim", "--modbus", "tcp://127.0.0.1:47100"], "--unit-ids", "1-3,2", "Modbus unit ids", 247, 2),
+    (["sim", "--interface", "virtual", "--channel", "x"], "--node-ids", "5-7,0x6", "CANopen node ids", 127, 6),
+])
+def test_an_id_given_twice_is_named_with_what_was_typed(argv: list[str], flag: str, text: str, what: str, high: int,
+                                                        twice: int, capsys: pytest.CaptureFixture[str]) -> None:
+    """``run --unit-ids 1-3,2`` with one server named the expanded list ``[1, 2, 3, 2]``; every flag whose ids
+    must be distinct now names the text typed and the id given twice, in the same words."""
+    code = main([*argv, flag, text])
+    err = capsys.readouterr().err
+    assert code == 2 and err == (f"haptic-bus {argv[0]}: error: {flag} = {text!r} is invalid; allowed: distinct "
+                                 f"{what} 1..{high} ({twice} is given twice)\n"), err
+
+
+def test_one_server_per_axis_may_each_serve_unit_1() -> None:
+    """Servers of their own may each hold unit 1: run reads ``1,1,1`` with three ``--modbus`` (none twice on one)."""
+    urls = [arg for port in (47101, 47102, 47103) for arg in ("--modbus", f"tcp://127.0.0.1:{port}")]
+    args = build_parser().parse_command(["run", "gantry-3d", *urls, "--unit-ids", "1,1,1"])
+    assert _run_links(args)["unit_ids"] == [1, 1, 1]

@@ -4,6 +4,8 @@ each one line and exit 2 (ParameterError), no traceback (found by a user-level b
 
 from __future__ import annotations
 
+import pathlib
+
 import pytest
 
 from drives.bus_config import resolve_bus_config
@@ -83,6 +85,19 @@ def test_run_modbus_without_url_names_the_url() -> None:
         hb.run_modbus(profile, None, 1, hb.RunOptions(duration=0.1))  # type: ignore[arg-type]
     assert caught.value.name == "url" and caught.value.value is None
     assert str(caught.value).startswith("run_modbus: url is missing; allowed: a Modbus URL")
+
+
+def test_run_modbus_without_unit_id_names_it_missing(tmp_path: pathlib.Path) -> None:
+    """``hb.run_modbus(profile, url, None, options)`` ran against unit 1 (run()'s default); its unit id is
+    required: refused as missing, before any folder or bus."""
+    import haptic_bus as hb
+
+    profile = hb.load_profile("stiff-wall")
+    with pytest.raises(hb.ParameterError) as caught:
+        hb.run_modbus(profile, "tcp://127.0.0.1:47104", None, hb.RunOptions(duration=0.1, out_dir=tmp_path / "r"))  # type: ignore[arg-type]
+    assert caught.value.name == "unit_id" and caught.value.value is None
+    assert str(caught.value) == "run_modbus: unit_id is missing; allowed: a Modbus unit id, an integer 1..247"
+    assert not (tmp_path / "r").exists()
 
 
 @pytest.mark.parametrize("interface, missing", [("serial", "channel"), ("slcan", "channel"),

@@ -153,7 +153,7 @@ def test_a_server_that_is_not_there_is_one_line(tmp_path: pathlib.Path, modbus_g
     (["--modbus", "{url}", "--modbus", "{url}"], "--modbus = ["),
     (["--modbus", "{url}", "--unit-id", "2"], "--unit-id = 2 is invalid; allowed: none with a multi-axis profile"),
     (["--modbus", "{url}", "--unit-ids", "1,2,3", "--interface", "virtual"], "--interface = 'virtual'"),
-    (["--interface", "virtual", "--channel", "x", "--unit-ids", "1,2,3"], "--unit-ids = [1, 2, 3] is invalid; allowed: "
+    (["--interface", "virtual", "--channel", "x", "--unit-ids", "1,2,3"], "--unit-ids = '1,2,3' is invalid; allowed: "
                                                                            "a Modbus option"),
 ])
 def test_modbus_axes_arguments_are_checked_before_anything_is_touched(

@@ -155,6 +155,21 @@ def test_the_plugin_knows_the_in_process_buses_the_runtime_knows() -> None:
     assert IN_PROCESS == IN_PROCESS_INTERFACES
 
 
+def test_wall_pacing_runs_against_a_drive_in_a_process_of_its_own(haptic_sim, haptic_controller) -> None:
+    """The route the plugin's docs give for ``pacing="wall"`` (a drive in the test's process is refused at
+    pre-flight: it shares the GIL): ``haptic_sim(interface="udp_multicast")``.  The run is wall-paced (its
+    pre-flight in run.json) and completes its cycles, unless this shared machine cannot hold the period
+    then, which pre-flight names (as test_modbus_axes' wall-paced run allows)."""
+    drive = haptic_sim("cia402-handle", interface="udp_multicast")
+    run = haptic_controller("cia402-handle", drive, duration=0.5, pacing="wall").wait(timeout=120)
+    assert "preflight" in run.document, sorted(run.document)
+    if run.exit_reason == "refused":
+        assert run.error is not None and "this machine holds T >=" in run.error, run.error
+    else:
+        assert run.exit_reason == "completed", run.error
+        assert run.summary["cycles"] == round(0.5 / 1e-3)  # cia402-handle's T = 1 ms, 0.5 s of wall clock
+
+
 def test_a_modbus_drive_with_its_hidden_truth_settles_at_f_over_k(haptic_sim, haptic_controller) -> None:
     """The plugin's example over Modbus TCP on loopback: the same fixtures, ``interface="modbus"``."""
     drive = haptic_sim("cia402-handle", interface="modbus", unit_id=3, mass=1.4, friction=24.0,

@@ -128,7 +128,7 @@ def test_invalid_resolution_or_coulomb_is_one_line_and_exit_2(flag: str, value: 
     argv = [a for a in DONE_WHEN if a not in ("--position-resolution", "5e-5")]
     assert main([*argv, f"{flag}={value}"]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and f"{flag} = {value} is invalid; allowed: a finite number in {allowed}" in err
+    assert err.count("\n") == 1 and f"{flag} = {value} is invalid; allowed: a finite real in {allowed}" in err
 
 
 def test_without_coulomb_friction_the_issue_wall_keeps_a_limit_cycle_and_the_hand_takes_energy_out() -> None:

@@ -297,7 +297,7 @@ INVALID = [
     (["status", "{bus}", "--node-id", "5", "--listen", "0"], "argument --listen: --listen = 0 is invalid"),
     (["status", "{bus}", "--node-id", "5", "--timeout", "nan"], "argument --timeout: --timeout = nan is invalid"),
     (["fault-reset", "{bus}", "--node-id", "5", "--wait", "-1"], "argument --wait: --wait = -1 is invalid"),
-    (["fault-reset", "{bus}", "--node-id", "5", "--wait", "61"], "allowed: a finite number in (0, 60] s"),
+    (["fault-reset", "{bus}", "--node-id", "5", "--wait", "61"], "allowed: a finite real in (0, 60] s"),
     (["fault-reset", "--modbus", "{url}", "--interface", "virtual"], "--interface = 'virtual' is invalid"),
     (["fault-reset", "--modbus", "tcp://127.0.0.1"], "argument --modbus: --modbus 'tcp://127.0.0.1' is invalid"),
 ]

@@ -66,7 +66,7 @@ def allowed(name: str) -> str:
     if limits is not None:
         return f"{name}: an integer {limits[0]}..{limits[1]} (decimal or 0x-hexadecimal)"
     if name in _REAL_LIMITS:
-        return f"{name}: a finite number of magnitude at most {_REAL_LIMITS[name]:.8g}"
+        return f"{name}: a finite real of magnitude at most {_REAL_LIMITS[name]:.8g}"
     if name == "str":
         return "str: printable ASCII text"
     return "hex: bytes as hexadecimal digit pairs, e.g. 01ff or '01 ff'"

@@ -95,10 +95,11 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 # --------------------------------------------------------------------------- argument types
 
 def number(name: str, low: float, high: float, unit: str, *, low_open: bool = False) -> Callable[[str], float]:
-    """A parser of a finite number in ``[low, high]`` (``(low, high]`` with ``low_open``), in ``unit``."""
+    """A parser of a finite real in ``[low, high]`` (``(low, high]`` with ``low_open``), in ``unit``; its
+    refusal in :func:`~haptic_bus.validation.real_range`'s words."""
 
     def parse(text: str) -> float:
-        allowed = f"a finite number in {'(' if low_open else '['}{low:g}, {high:g}] {unit}"
+        allowed = real_range(low, high, unit, low_inclusive=not low_open)
         try:
             value = float(text)
         except ValueError:  # not a number: the range too, in the one line (break16)
@@ -166,12 +167,16 @@ node_id = whole("node id", *NODE_ID_RANGE)
 unit_id = whole("unit id", *UNIT_ID_RANGE)
 
 
-def unit_ids(text: str) -> list[int]:
-    """``1,2,3``: Modbus unit ids (each 1..247), one per axis in axis order (one may serve several)."""
+def unit_ids(text: str) -> str:
+    """``1,2,3``: Modbus unit ids (each 1..247), one per axis in axis order, checked as
+    :func:`~haptic_bus.validation.ids_in_order` reads them and kept as text: whether they must be
+    distinct depends on the servers (``--modbus`` once: yes; once per axis: unit 1 may serve each),
+    known once every option is read, and that refusal names what was typed."""
     try:
-        return ids_in_order("unit ids", text, "Modbus unit ids", *UNIT_ID_RANGE)
+        ids_in_order("unit ids", text, "Modbus unit ids", *UNIT_ID_RANGE)
     except ParameterError as invalid:
         raise argparse.ArgumentTypeError(invalid.detail) from None
+    return text
 
 
 def modbus_url(text: str) -> str:

@@ -20,6 +20,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from drives.modbus.register_map import UNIT_ID_RANGE
 from haptic_bus.app.arguments import (
     DAMPING_ALLOWED,
     EXIT_ASSUMPTION,
@@ -60,7 +61,7 @@ from haptic_bus.app.status_cli import add_status_parser
 from haptic_bus.app.validate_cli import add_validate_parser
 from haptic_bus.app.wall_check_cli import add_wall_check_parsers
 from haptic_bus.console import LIBRARIES, log_to_stderr, logging_kept
-from haptic_bus.validation import folder_path, writable_folder
+from haptic_bus.validation import folder_path, ids_in_order, writable_folder
 
 if TYPE_CHECKING:
     from haptic_bus.app.profiles import AxesProfile, Profile
@@ -169,7 +170,9 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, 
     if isinstance(profile, AxesProfile):  # the node ids (or unit ids) come from [[axes]], or --unit-ids
         _refuse_single_axis_options(args)
         bus, node_id, unit_id = (args.modbus or bus_arguments(args)), None, None
-        unit_ids = args.unit_ids
+        if args.unit_ids is not None:  # one server: none twice; a server each: unit 1 may serve each
+            unit_ids = ids_in_order("--unit-ids", args.unit_ids, "Modbus unit ids", *UNIT_ID_RANGE,
+                                    distinct=len(args.modbus) == 1)
     else:
         address = one_axis_link(args, "run")
         bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, None)

@@ -13,10 +13,11 @@ force limit and ``--travel`` m either side of the start, then the fit
 with standard errors and 95 % intervals, the residual check, the velocity model 0x606C matches,
 and what the data cannot support; or ``--json``.  ``--write-profile FILE`` writes a copy of the
 profile with the measured values (:mod:`haptic_bus.app.identify_profile`), only when the data
-support them; a file that exists is replaced only with ``--force``.
+support them; a file that exists is replaced only with ``--force`` (one that appeared while identify
+measured included: the estimates printed, one line naming the file, exit 1).
 
 Exit status: 0 the data support the estimate; 1 the handle was refused (not free to move), the
-data cannot support the estimate, or a drive/bus error; 2 invalid input (before any bus or
+data cannot support the estimate, the profile could not be written, or a drive/bus error; 2 invalid input (before any bus or
 file is touched: an existing --write-profile without --force included); 130 interrupted.
 """
 
@@ -117,7 +118,10 @@ def run_identify(args: argparse.Namespace) -> int:
     if found is not None and found.supported and target is not None and profile.path is not None:
         least = TIMINGS[profile.loop.timing] or 0.0  # the least [loop] delay the profile's timing allows
         try:  # the folder passed the check before the run; it can still refuse (gone, full, /proc): said, not a traceback
-            written = write_identified_profile(profile.path, target, found, least)
+            written = write_identified_profile(profile.path, target, found, least, replace=args.force)
+        except FileExistsError:  # none there at the check: another program made it while identify measured
+            unwritten = (f"write error: --write-profile {target}: a file appeared there during the measurement "
+                         f"(--force replaces one); nothing written, the estimates are the ones above")
         except OSError as exc:
             unwritten = (f"write error: --write-profile {target}: {exc.strerror or exc}; nothing written, the "
                          f"estimates are the ones above")

@@ -110,8 +110,13 @@ def identified_profile(source: pathlib.Path, identification: Identification, lea
 
 
 def write_identified_profile(source: pathlib.Path, destination: pathlib.Path, identification: Identification,
-                             least_delay: float = 0.0, moment: dt.datetime | None = None) -> pathlib.Path:
-    """Write :func:`identified_profile` of ``source`` to ``destination``; the path written."""
+                             least_delay: float = 0.0, moment: dt.datetime | None = None, *,
+                             replace: bool = False) -> pathlib.Path:
+    """Write :func:`identified_profile` of ``source`` to ``destination``; the path written.  A file
+    already there is replaced only with ``replace``: else the file is created only if none is there
+    at that moment (an exclusive create), and one that appeared after the command checked, while it
+    measured, raises FileExistsError and is left as it is."""
     text = identified_profile(source, identification, least_delay, moment or dt.datetime.now(dt.UTC))
-    destination.write_text(text)
+    with open(destination, "w" if replace else "x", encoding="utf-8") as file:
+        file.write(text)
     return destination

@@ -55,11 +55,15 @@ import time
 import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from haptic_bus.app.arguments import OneLineParser
 from haptic_bus.bench.interrupts import Interrupts, SectionInterrupted, sigterm_as_sigint
 from haptic_bus.bench.size import FULL, QUICK, SMOKE, Size
 from haptic_bus.bench.timing import machine
+
+if TYPE_CHECKING:  # the soak's module: only when it runs
+    from haptic_bus.bench.soak import Tick
 
 SECTIONS = ("passivity", "plant", "scene", "space", "loop", "bus", "realtime", "startup", "soak", "layer", "preflight")
 # progress ticks each section makes (smoke, quick, full): for the bar's total
@@ -78,9 +82,9 @@ class Progress:
         self.done = 0
         self.started = time.monotonic()
 
-    def tick(self, label: str) -> None:
-        """One step done; redraw."""
-        self.done = min(self.done + 1, self.total)
+    def tick(self, label: str, *, advance: bool = True) -> None:
+        """One step done (``advance`` False: none, the label a section's progress within its step); redraw."""
+        self.done = min(self.done + (1 if advance else 0), self.total)
         if not self.enabled:
             return
         filled = round(self.width * self.done / self.total)
@@ -107,7 +111,7 @@ def _runner(name: str) -> Callable[..., dict]:
 
 
 def _soak_runner(cycles: int | None) -> Callable[..., dict]:
-    def run(size: Size, tick: Callable[[str], None]) -> dict:
+    def run(size: Size, tick: Tick) -> dict:
         from haptic_bus.bench.soak import FULL_CYCLES, QUICK_CYCLES
         from haptic_bus.bench.soak import run as soak
 
@@ -143,8 +147,8 @@ def run_bench(out_dir: str | Path, size: Size = FULL, progress: bool = False,
                     "size": size.name, "quick": size is not FULL, "machine": machine(), "sections": {}}
     with Interrupts() as interrupts:
 
-        def tick(label: str) -> None:
-            bar.tick(label)
+        def tick(label: str, *, advance: bool = True) -> None:
+            bar.tick(label, advance=advance)
             interrupts.check()
 
         try:

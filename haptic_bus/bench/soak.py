@@ -15,6 +15,11 @@ chunks.  Checked at the end:
   most a tenth of the run long, and the allocator's pools for the summaries' temporaries);
   flat when that slope, over the whole run, adds at most :data:`FLAT_BYTES`.  A leak of one
   small Python object per cycle is >= 28 bytes a cycle: 280 MB over 10^7 cycles.
+
+Progress: a tick at each tenth of the run, and between ticks the count at least every
+:data:`PROGRESS_SECONDS` of wall time (``--soak 1e9`` is hours; ten ticks left an hour between
+them): the cycles run in pieces sized from the rate measured so far, each ending at a cycle
+boundary, never past the next memory sample; the report is made between pieces, never in a cycle.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import contextlib
 import os
 import time
 from collections.abc import Callable, Iterator
+from typing import Protocol
 
 import numpy as np
 
@@ -38,6 +44,26 @@ SAMPLES = 100  # resident-set samples over a run
 RECORD_ROWS = 200_000  # the controller's record (haptic-bus run's default), at most a tenth of a shorter run
 FLAT_BYTES = 2 * 2**20  # memory is flat if the second half's slope adds at most this over the whole run
 OPERATOR = {"model": "sinusoid", "amplitude": 5.0, "frequency": 2.0, "offset": 2.0}
+PROGRESS_SECONDS = 10.0  # between ticks, the count reported at least this often (s of wall time)
+FIRST_PIECE = 1_000  # cycles run before the rate is known (tens of ms)
+
+
+class Tick(Protocol):
+    """The progress the soak reports: ``label`` shown; ``advance`` False: the bar not advanced (a report
+    between its ten ticks)."""
+
+    def __call__(self, label: str, *, advance: bool = True) -> None: ...
+
+
+def no_progress(label: str, *, advance: bool = True) -> None:
+    """A :class:`Tick` that shows nothing."""
+
+
+def piece_cycles(done: int, seconds: float, left: int) -> int:
+    """How many cycles the next piece runs: what takes half of :data:`PROGRESS_SECONDS` at the rate of
+    ``done`` cycles in ``seconds`` (:data:`FIRST_PIECE` before any), at least 1 and at most ``left``."""
+    planned = int(done / seconds * PROGRESS_SECONDS / 2) if done and seconds > 0 else FIRST_PIECE
+    return max(1, min(planned, left))
 
 
 def observe_inputs(drive: Drive, each: Callable[[CyclicInputs], None]) -> None:
@@ -66,8 +92,8 @@ def resident_bytes() -> int:
         return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
-def run(cycles: int = CYCLES, tick: Callable[[str], None] = lambda _: None) -> dict:
-    """The soak; returns its section of ``bench.json``."""
+def run(cycles: int = CYCLES, tick: Tick = no_progress) -> dict:
+    """The soak; returns its section of ``bench.json``; ``tick`` reports its progress (module docstring)."""
     from haptic_bus.app.rig import operator_from_table, simulated_canopen
 
     profile = one_axis_only(load_profile(PROFILE), "bench")
@@ -84,13 +110,18 @@ def run(cycles: int = CYCLES, tick: Callable[[str], None] = lambda _: None) -> d
 
         observe_inputs(drive, add)
         resident, at, started, done = [resident_bytes()], [0], time.perf_counter(), 0
+        reported, tenths = started, 0
         while done < cycles:
-            summary = controller.run(min(chunk, cycles - done))
+            sample = min(len(at) * chunk, cycles)  # the cycle count of the next memory sample
+            summary = controller.run(piece_cycles(done, time.perf_counter() - started, sample - done))
             done = controller.cycles
-            resident.append(resident_bytes())
-            at.append(done)
-            if len(at) % (SAMPLES // 10) == 0:
-                tick(f"soak: {done:,} of {cycles:,} cycles")
+            if done >= sample:
+                resident.append(resident_bytes())
+                at.append(done)
+            now = time.perf_counter()
+            if done * 10 // cycles > tenths or now - reported >= PROGRESS_SECONDS:
+                tick(f"soak: {done:,} of {cycles:,} cycles", advance=done * 10 // cycles > tenths)
+                reported, tenths = now, done * 10 // cycles
             if summary.error:
                 break
         seconds = time.perf_counter() - started

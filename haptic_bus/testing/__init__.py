@@ -71,6 +71,16 @@ Fixtures
     ``duration``: s of virtual time (``pacing="wall"``: of wall clock); ``out_dir``: the run's
     folder (None: a fresh temporary one); ``plots``: whether the run draws its pictures (off:
     a test that reads the record needs none, and they cost seconds of CPU a run).
+    ``pacing``: ``"virtual"``, lock-step with the simulated drive, or ``"wall"``, each cycle at its
+    deadline on the wall clock, as a real drive needs, after the run's pre-flight measures the
+    cycle.  Wall pacing needs the drive in a process of its own: against a drive in the test's
+    process (``interface`` ``"virtual"``, ``"lockstep"`` or ``"modbus"``) the drive's threads share
+    the process and its GIL with the controller, the measured cycles are late, and pre-flight
+    refuses the run, rightly (``exit_reason`` ``"refused"``, ``error`` ``... this machine holds T >=
+    N ms``).  For wall pacing start the drive as ``python -m sim_drive``:
+    ``haptic_sim(profile, interface="udp_multicast")`` (or ``"socketcan"``); over Modbus,
+    ``sim_process("--modbus", "tcp://127.0.0.1:0", ...)`` and :func:`haptic_bus.run` against the
+    URL it prints.
     ``run.wait(timeout=600)`` lets it end by itself, ``run.stop(timeout=300)`` ends it at the
     next cycle, both return the :class:`RecordedRun` of its folder;
     ``run.wait_cycling(timeout=30)`` blocks until it cycles (the drive, enabled,
@@ -180,7 +190,9 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
     def start(profile: ProfileSource | None = None, *, interface: str = "virtual",
               node_id: int | None = None, unit_id: int | None = None, servers: int = 1, timing: str | None = None,
               operator: Mapping[str, Any] | None = None, **truth: Any) -> SimDriveNode:
+        from drives.modbus.register_map import UNIT_ID_RANGE
         from haptic_bus.errors import ParameterError
+        from haptic_bus.validation import whole_in_range
 
         several = _axes_profile(profile)
         axes = len(several.axes) if several is not None else 1
@@ -205,10 +217,8 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
             ("unit_id", unit_id, "a CANopen node: node_id")
         if other is not None:
             raise ParameterError(unused, other, f"none with interface={interface!r} ({named})", CONTEXT)
-        if spec is None and unit_id is not None and (isinstance(unit_id, bool) or not isinstance(unit_id, int)
-                                                     or not 1 <= unit_id <= 247):  # the server's own check took 0..255
-            raise ParameterError("unit_id", unit_id, "a Modbus unit id 1..247, one a master can address (hb.run's and "
-                                 "haptic-bus sim's range)", CONTEXT)
+        if spec is None and unit_id is not None:  # hb.run's and haptic-bus sim's range (the server's own took 0..255)
+            unit_id = whole_in_range("unit_id", unit_id, *UNIT_ID_RANGE, context=CONTEXT)
         path = None
         if profile is not None:
             if not folder:
@@ -288,7 +298,9 @@ def haptic_controller(haptic_sim: Callable[..., SimDriveNode],
                       tmp_path_factory: pytest.TempPathFactory) -> Iterator[Callable[..., ControllerRun]]:
     """``haptic_controller(profile, drive, *, duration=1.0, pacing="virtual", controller_node_id=127,
     start_in_contact=None, reset_fault=False, out_dir=None, plots=False)``: ``haptic-bus run`` in a thread
-    (see the module docstring); every run still going is stopped at teardown, before the drives."""
+    (see the module docstring; ``pacing="wall"`` needs a drive in a process of its own, e.g.
+    ``haptic_sim(..., interface="udp_multicast")``: pre-flight refuses one in the test's process);
+    every run still going is stopped at teardown, before the drives."""
     from haptic_bus.app.profiles import AxesProfile, Profile, load_profile
     from haptic_bus.app.run_options import RunOptions, StopRequest
 

@@ -30,6 +30,7 @@ if TYPE_CHECKING:
 RUN_WAIT = 600.0  # s of wall clock: the longest :meth:`ControllerRun.wait` waits for a run to end by itself
 STOP_WAIT = 300.0  # s of wall clock: the longest a run is given to end once asked to stop
 CYCLING_WAIT = 30.0  # s of wall clock: the longest :meth:`ControllerRun.wait_cycling` waits for the first cycle
+MAX_WAIT = 86_400.0  # s of wall clock: the longest wait a test may ask for (a day: a run of hours fits)
 ENABLED_ANSWERS = 2  # TPDOs in OPERATION ENABLED that prove a cycle: the enable walk's last, then the first cycle's
 
 
@@ -155,10 +156,8 @@ class ControllerRun:
 
 def _check_timeout(timeout: object) -> None:
     """ParameterError for a wait that bounds nothing: ``wait(timeout=-1)`` returned at once and failed the test
-    with "did not end within -1 s" (stopping a run that had just started); NaN and infinity likewise."""
-    import math
+    with "did not end within -1 s" (stopping a run that had just started); NaN and infinity likewise.  The
+    project's one check of a real range (:func:`~haptic_bus.validation.real_in_range`), in its words."""
+    from haptic_bus.validation import real_in_range
 
-    from haptic_bus.errors import ParameterError
-
-    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not math.isfinite(timeout) or timeout <= 0:
-        raise ParameterError("timeout", timeout, "a finite number of s of wall clock > 0", "haptic_controller run")
+    real_in_range("timeout", timeout, 0.0, MAX_WAIT, low_inclusive=False, unit="s", context="haptic_controller run")
