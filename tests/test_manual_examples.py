@@ -18,6 +18,7 @@ import re
 import shlex
 import signal
 import subprocess
+import sys
 import time
 from typing import Any
 
@@ -59,7 +60,7 @@ def _run(code: str, page: str) -> dict[str, object]:
 
 def test_every_python_example_of_the_manual_has_its_test_here() -> None:
     found = {(path.name, i) for path in PAGES for i, _ in enumerate(code_blocks(path, "python"))}
-    assert found == {("errors.md", 0), ("python-api.md", 0), ("axes.md", 0)}  # the three tests below
+    assert found == {("errors.md", 0), ("errors.md", 1), ("python-api.md", 0), ("axes.md", 0)}  # the tests below
 
 
 def test_every_other_block_of_the_manual_is_run_here_or_by_a_test_it_names() -> None:
@@ -123,6 +124,18 @@ def test_the_errors_page_catches_each_branch_before_the_root() -> None:
     assert caught == [errors.ParameterError, errors.Refusal, errors.DriveError, errors.HapticBusError]
     assert not [(later, earlier) for i, earlier in enumerate(caught) for later in caught[i + 1:]
                 if issubclass(later, earlier)]
+
+
+@pytest.mark.parametrize("silenced", [False, True])
+def test_the_errors_page_silences_a_bus_librarys_log_line(silenced: bool) -> None:
+    """A program with no logging configured: canopen's ERROR record (the page's line) reaches stderr through
+    Python's last-resort handler, and after the page's block it does not.  In a process of its own: the
+    block sets a level on a logger this process shares."""
+    record = 'logging.getLogger("canopen.sdo.client").error("Transfer aborted by client with code 0x05040000")'
+    program = "\n".join([_example("errors.md", 1) if silenced else "import logging", record])
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=60, cwd=REPO)
+    assert done.returncode == 0 and done.stdout == ""
+    assert done.stderr == ("" if silenced else "Transfer aborted by client with code 0x05040000\n")
 
 
 def test_the_drive_loop_of_the_python_api_page_runs_against_the_simulated_drive(haptic_sim) -> None:
