@@ -89,6 +89,18 @@ def test_an_id_given_twice_is_named_with_what_was_typed(argv: list[str], flag: s
                                  f"{what} 1..{high} ({twice} is given twice)\n"), err
 
 
+@pytest.mark.parametrize(("servers", "text"), [(1, "1,2"), (1, "1-4"), (3, "1,1")])
+def test_a_count_that_is_not_the_profile_s_is_named_with_what_was_typed(servers: int, text: str,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """``run gantry-3d --modbus URL --unit-ids 1,2`` named the expanded list ``[1, 2]`` (the runner's check); the
+    count is now checked where the text is read, naming the text and the axes the profile has."""
+    urls = [arg for port in range(47104, 47104 + servers) for arg in ("--modbus", f"tcp://127.0.0.1:{port}")]
+    code = main(["run", "gantry-3d", *urls, "--unit-ids", text])
+    err = capsys.readouterr().err
+    assert code == 2 and err == (f"haptic-bus run: error: --unit-ids = {text!r} is invalid; allowed: 3 Modbus unit ids, "
+                                 "one per axis (gantry-3d has 3 axes)\n"), err
+
+
 def test_one_server_per_axis_may_each_serve_unit_1() -> None:
     """Servers of their own may each hold unit 1: run reads ``1,1,1`` with three ``--modbus`` (none twice on one)."""
     urls = [arg for port in (47101, 47102, 47103) for arg in ("--modbus", f"tcp://127.0.0.1:{port}")]
