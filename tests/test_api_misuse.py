@@ -370,25 +370,30 @@ def test_options_that_stopped_a_run_run_again(haptic_sim: Any, tmp_path: pathlib
     assert second.summary is not None and second.summary.cycles == 50
 
 
-def test_a_program_without_logging_sees_the_libraries_lines_not_haptic_bus() -> None:
+def test_a_program_without_logging_sees_the_libraries_lines_not_ours() -> None:
     """docs/errors.md, "Log lines beside the errors": in a program that configures no logging a bus library's
     ERROR (canopen's SDO abort) reaches stderr through logging.lastResort, Python's rule, and the one line
-    the page gives silences it; haptic_bus' own records do not (a NullHandler on its top-level logger, the
-    logging HOWTO's rule for a library), and propagate to a program's handler as before."""
+    the page gives silences it; the records of our three packages (haptic_bus, drives, sim_drive) do not (a
+    NullHandler on each top-level logger, the logging HOWTO's rule for a library), and propagate to a
+    program's handler as before."""
+    import importlib
     import subprocess
     import sys
 
+    ours = ("haptic_bus.control.controller", "drives.canopen.drive", "sim_drive.device")
     program = "\n".join([
-        "import logging, haptic_bus",
-        "logging.getLogger('haptic_bus.control.controller').warning('supervisor: ours')",
+        "import logging, haptic_bus, drives, sim_drive",
+        *(f"logging.getLogger({name!r}).warning('unconfigured')" for name in ours),
         "logging.getLogger('canopen.sdo.client').error('Transfer aborted by client with code 0x05040000')",
         "logging.getLogger('canopen').setLevel(logging.CRITICAL)",
         "logging.getLogger('canopen.sdo.client').error('silenced')",
         "logging.basicConfig(format='%(name)s: %(message)s')",
-        "logging.getLogger('haptic_bus.control.controller').warning('supervisor: configured')"])
-    tree = pathlib.Path(__file__).resolve().parents[1]  # this tree's haptic_bus, not an installed one
+        *(f"logging.getLogger({name!r}).warning('configured')" for name in ours)])
+    tree = pathlib.Path(__file__).resolve().parents[1]  # this tree's packages, not installed ones
     done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120, cwd=tree)
     assert done.returncode == 0 and done.stdout == ""
-    assert done.stderr == ("Transfer aborted by client with code 0x05040000\n"
-                           "haptic_bus.control.controller: supervisor: configured\n"), done.stderr
-    assert any(isinstance(h, logging.NullHandler) for h in logging.getLogger("haptic_bus").handlers)
+    assert done.stderr == "Transfer aborted by client with code 0x05040000\n" + "".join(
+        f"{name}: configured\n" for name in ours), done.stderr
+    for package in ("haptic_bus", "drives", "sim_drive"):
+        importlib.import_module(package)
+        assert any(isinstance(h, logging.NullHandler) for h in logging.getLogger(package).handlers), package
