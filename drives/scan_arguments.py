@@ -13,12 +13,13 @@ DEFAULT_TIMEOUT = 1.0  # s: CANopen: the listening window after the probe; Modbu
 DEFAULT_ANSWER_TIMEOUT = 0.1  # s: each SDO read (CANopen) or request (Modbus)
 
 
-def checked_ids(name: str, ids: Iterable[int], low: int, high: int) -> list[int]:
-    """``ids`` sorted without repeats; ParameterError naming ``name`` if empty or any is outside ``low..high``."""
+def checked_ids(name: str, ids: Iterable[int], allowed: str, low: int, high: int) -> list[int]:
+    """``ids`` sorted without repeats; ParameterError naming ``name`` and ``allowed`` (its table's words,
+    ``CANopen node ids 1..127``) if empty or any is outside ``low..high``."""
     found = sorted(set(ids))
     bad = [i for i in found if isinstance(i, bool) or not isinstance(i, int) or not low <= i <= high]
     if bad or not found:
-        raise ParameterError(name, bad or found, f"one or more ids {low}..{high}", "scan")
+        raise ParameterError(name, bad or found, f"one or more {allowed}", "scan")
     return found
 
 

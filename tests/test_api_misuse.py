@@ -249,9 +249,9 @@ def test_run_refuses_a_start_from_a_spawned_processes_import(tmp_path: pathlib.P
                          "or None (the profile's)"),
     ({"operator": "constant:3"}, "simulated drive: operator = 'constant:3' is invalid; allowed: a mapping, the "
                                  "profile's [operator_model] table, e.g. {'model': 'constant', 'level': 3.0}"),
-    ({"interface": "modbus", "unit_id": 0}, "simulated drive: unit_id = 0 is invalid; allowed: an integer in [1, 247]"),
-    ({"interface": "modbus", "unit_id": 300}, "simulated drive: unit_id = 300 is invalid; allowed: an integer in [1, 247]"),
-    ({"interface": "modbus", "unit_id": True}, "simulated drive: unit_id = True is invalid; allowed: an integer in [1, 247]"),
+    ({"interface": "modbus", "unit_id": 0}, "simulated drive: unit_id = 0 is invalid; allowed: Modbus unit ids 1..247"),
+    ({"interface": "modbus", "unit_id": 300}, "simulated drive: unit_id = 300 is invalid; allowed: Modbus unit ids 1..247"),
+    ({"interface": "modbus", "unit_id": True}, "simulated drive: unit_id = True is invalid; allowed: Modbus unit ids 1..247"),
 ])
 def test_haptic_sim_names_a_bad_timing_operator_or_unit(haptic_sim: Any, given: dict[str, Any], line: str) -> None:
     """haptic_sim's timing and operator were the simulator's ValueError and dict()'s TypeError-like ValueError,

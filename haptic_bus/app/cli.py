@@ -20,7 +20,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from drives.modbus.register_map import UNIT_ID_RANGE
+from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
 from haptic_bus.app.arguments import (
     DAMPING_ALLOWED,
     EXIT_ASSUMPTION,
@@ -193,7 +193,7 @@ def _typed_unit_ids(args: argparse.Namespace, profile: AxesProfile) -> list[int]
     each: unit 1 may serve each); a refusal names the text typed, not the list it reads as."""
     from haptic_bus.errors import ParameterError
 
-    unit_ids = ids_in_order("--unit-ids", args.unit_ids, "Modbus unit ids", *UNIT_ID_RANGE, distinct=len(args.modbus) == 1)
+    unit_ids = ids_in_order("--unit-ids", args.unit_ids, UNIT_IDS, *UNIT_ID_RANGE, distinct=len(args.modbus) == 1)
     size = len(profile.axes)
     if len(unit_ids) != size:
         raise ParameterError("--unit-ids", args.unit_ids, f"{size} Modbus unit ids, one per axis ({profile.name} has "
