@@ -1,4 +1,7 @@
-"""Checks that turn user input into validated floats, ints and output folders, or raise ParameterError."""
+"""Checks that turn user input into validated floats, ints and output folders, or raise ParameterError.
+
+A real in a range is checked by :func:`real_in_range` (and said by :func:`real_range`), re-exported from
+:mod:`drives.ranges`: ``drives`` is the bottom layer, and its own checks (a scan's time budget) share it."""
 
 from __future__ import annotations
 
@@ -9,6 +12,8 @@ import pathlib
 import tempfile
 from collections.abc import Sequence
 
+from drives.ranges import real_in_range as real_in_range
+from drives.ranges import real_range as real_range
 from haptic_bus.errors import NAMES_SHOWN, ParameterError
 
 
@@ -17,39 +22,6 @@ def some_names(names: Sequence[str], joiner: str = "+", most: int = NAMES_SHOWN)
     (``w0+w1+w2 and 2997 more``)."""
     shown = joiner.join(names[:most])
     return shown if len(names) <= most else f"{shown} and {len(names) - most} more"
-
-
-def real_range(low: float, high: float, unit: str = "", *, low_inclusive: bool = True) -> str:
-    """What :func:`real_in_range` allows, as its refusal states it: ``a finite real in [low, high] unit``."""
-    bracket = "[" if low_inclusive else "("
-    return f"a finite real in {bracket}{low:g}, {high:g}]" + (f" {unit}" if unit else "")
-
-
-def real_in_range(
-    name: str,
-    value: object,
-    low: float,
-    high: float,
-    *,
-    low_inclusive: bool = True,
-    unit: str = "",
-    context: str = "",
-) -> float:
-    """Return ``value`` as a Python float if it is a finite real in the range, else raise.
-
-    ``low``/``high`` bound the range (``high`` always inclusive); ``unit`` only decorates
-    the message.
-    """
-    allowed = real_range(low, high, unit, low_inclusive=low_inclusive)
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ParameterError(name, value, allowed, context)
-    number = float(value)
-    if not math.isfinite(number):
-        raise ParameterError(name, value, allowed, context)
-    below = number < low if low_inclusive else number <= low
-    if below or number > high:
-        raise ParameterError(name, value, allowed, context)
-    return number
 
 
 def whole_in_range(name: str, value: object, low: int, high: int, *, context: str = "", allowed: str = "") -> int:
