@@ -55,6 +55,7 @@ SDO_RX_BASE = 0x600  # client -> server, + node id
 HEARTBEAT_BASE = 0x700  # + node id
 COB_ID_MASK = 0x7FF
 NODE_ID_RANGE = (1, 127)
+NODE_IDS = f"CANopen node ids {NODE_ID_RANGE[0]}..{NODE_ID_RANGE[1]}"  # what every refusal of a node id allows
 
 COB_ID_INVALID = 1 << 31  # PDO / EMCY / SYNC-consumer COB-ID: the object does not exist (not valid)
 COB_ID_NO_RTR = 1 << 30  # PDO: remote transmission not allowed

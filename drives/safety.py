@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from drives.cia301 import NODE_ID_RANGE, NODE_IDS
 from drives.cia402 import AbortConnectionOption
 from drives.errors import ParameterError
 
@@ -74,7 +75,8 @@ class SafetySettings:
             return isinstance(value, int) and not isinstance(value, bool)
 
         node = self.master_node_id
-        check("master_node_id", node is None or (whole(node) and 1 <= node <= 127), "1..127, or None (no heartbeat)")
+        low, high = NODE_ID_RANGE
+        check("master_node_id", node is None or (whole(node) and low <= node <= high), f"{NODE_IDS}, or None (no heartbeat)")
         check("heartbeat_ms", whole(self.heartbeat_ms) and 1 <= self.heartbeat_ms <= 0xFFFF, "1..65535 ms")
         check("consumer_ms", whole(self.consumer_ms) and self.heartbeat_ms < self.consumer_ms <= 0xFFFF,
               f"{self.heartbeat_ms + 1}..65535 ms (longer than the heartbeat period {self.heartbeat_ms} ms)")

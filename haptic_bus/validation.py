@@ -1,4 +1,7 @@
-"""Checks that turn user input into validated floats, ints and output folders, or raise ParameterError."""
+"""Checks that turn user input into validated floats, ints and output folders, or raise ParameterError.
+
+A real in a range is checked by :func:`real_in_range` (and said by :func:`real_range`), re-exported from
+:mod:`drives.ranges`: ``drives`` is the bottom layer, and its own checks (a scan's time budget) share it."""
 
 from __future__ import annotations
 
@@ -9,6 +12,8 @@ import pathlib
 import tempfile
 from collections.abc import Sequence
 
+from drives.ranges import real_in_range as real_in_range
+from drives.ranges import real_range as real_range
 from haptic_bus.errors import NAMES_SHOWN, ParameterError
 
 
@@ -19,42 +24,10 @@ def some_names(names: Sequence[str], joiner: str = "+", most: int = NAMES_SHOWN)
     return shown if len(names) <= most else f"{shown} and {len(names) - most} more"
 
 
-def real_range(low: float, high: float, unit: str = "", *, low_inclusive: bool = True) -> str:
-    """What :func:`real_in_range` allows, as its refusal states it: ``a finite real in [low, high] unit``."""
-    bracket = "[" if low_inclusive else "("
-    return f"a finite real in {bracket}{low:g}, {high:g}]" + (f" {unit}" if unit else "")
-
-
-def real_in_range(
-    name: str,
-    value: object,
-    low: float,
-    high: float,
-    *,
-    low_inclusive: bool = True,
-    unit: str = "",
-    context: str = "",
-) -> float:
-    """Return ``value`` as a Python float if it is a finite real in the range, else raise.
-
-    ``low``/``high`` bound the range (``high`` always inclusive); ``unit`` only decorates
-    the message.
-    """
-    allowed = real_range(low, high, unit, low_inclusive=low_inclusive)
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ParameterError(name, value, allowed, context)
-    number = float(value)
-    if not math.isfinite(number):
-        raise ParameterError(name, value, allowed, context)
-    below = number < low if low_inclusive else number <= low
-    if below or number > high:
-        raise ParameterError(name, value, allowed, context)
-    return number
-
-
-def whole_in_range(name: str, value: object, low: int, high: int, *, context: str = "") -> int:
-    """Return ``value`` as an int if it is a whole number in ``[low, high]``, else raise."""
-    allowed = f"an integer in [{low}, {high}]"
+def whole_in_range(name: str, value: object, low: int, high: int, *, context: str = "", allowed: str = "") -> int:
+    """Return ``value`` as an int if it is a whole number in ``[low, high]``, else raise, saying ``allowed``
+    (default ``an integer in [low, high]``; a node or unit id: its table's words, ``CANopen node ids 1..127``)."""
+    allowed = allowed or f"an integer in [{low}, {high}]"
     if isinstance(value, bool):
         raise ParameterError(name, value, allowed, context)
     if isinstance(value, numbers.Integral):
@@ -68,14 +41,14 @@ def whole_in_range(name: str, value: object, low: int, high: int, *, context: st
     return whole
 
 
-def ids_in_order(name: str, text: str, what: str, low: int, high: int, *, distinct: bool = False) -> list[int]:
+def ids_in_order(name: str, text: str, allowed: str, low: int, high: int, *, distinct: bool = False) -> list[int]:
     """The one reader of a list of node or unit ids, for every flag that takes several (``run``/``sim``
     ``--unit-ids``, ``sim --node-ids``, ``scan --node-ids``/``--unit-ids``): ``"5,6,7"`` or ``"5-7"``
     -> [5, 6, 7], in the order given (one per axis; a range ascending): whole numbers in ``low..high``
     (decimal or ``0x..``; ``distinct``: none twice), else ParameterError naming ``name`` and what is
-    allowed (``what``: ``"CANopen node ids"``), the same words for every such flag; an id given twice where
-    they must be distinct is named (``--node-ids = '5-7,6' is invalid; allowed: distinct CANopen node ids
-    1..127 (6 is given twice)``)."""
+    ``allowed`` (its table's words, ``"CANopen node ids 1..127"``), the same for every such flag; an id
+    given twice where they must be distinct is named (``--node-ids = '5-7,6' is invalid; allowed: distinct
+    CANopen node ids 1..127 (6 is given twice)``)."""
     ids: list[int] = []
     for part in text.split(","):
         first, dash, last = part.strip().partition("-")
@@ -89,11 +62,11 @@ def ids_in_order(name: str, text: str, what: str, low: int, high: int, *, distin
             break
         ids.extend(range(start, stop + 1))
     if not ids:
-        raise ParameterError(name, text, f"{'distinct ' if distinct else ''}{what} {low}..{high} as N, N-M or a "
+        raise ParameterError(name, text, f"{'distinct ' if distinct else ''}{allowed} as N, N-M or a "
                                          f"comma-separated list of those, e.g. {low},{low + 1},{low + 2} or {low}-{low + 2}")
     repeated = next((each for i, each in enumerate(ids) if each in ids[:i]), None) if distinct else None
     if repeated is not None:
-        raise ParameterError(name, text, f"distinct {what} {low}..{high} ({repeated} is given twice)")
+        raise ParameterError(name, text, f"distinct {allowed} ({repeated} is given twice)")
     return ids
 
 

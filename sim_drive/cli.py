@@ -39,6 +39,8 @@ from collections.abc import Callable, Sequence
 from typing import NoReturn, TypeVar
 
 from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, as_typed, parse_bus_option
+from drives.cia301 import NODE_IDS
+from drives.modbus.register_map import UNIT_IDS
 from haptic_bus._version import __version__
 from haptic_bus.console import logging_kept
 from sim_drive.eds import OD_KINDS
@@ -81,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
     canopen = parser.add_argument_group("CANopen slave (the default)")
     canopen.add_argument("--interface", help="python-can interface (virtual, udp_multicast, socketcan, ...)")
     canopen.add_argument("--channel", help="python-can channel (e.g. vcan0, a multicast group)")
-    canopen.add_argument("--node-id", type=_integer_or_text, help="CANopen node id 1..127")
+    canopen.add_argument("--node-id", type=_integer_or_text, help=f"its node id, one of the {NODE_IDS}")
     add_axes_arguments(canopen)
     canopen.add_argument("--bitrate", type=int, help="bit/s; also enables the bus-load report")
     canopen.add_argument("--bus-option", type=parse_bus_option, action="append", default=[], metavar="KEY=VALUE",
@@ -99,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     modbus.add_argument("--modbus", metavar="tcp://HOST:PORT", action="append",
                         help="serve Modbus TCP on this address (PORT 0: any free port); several axes: once for all "
                              "(one server, a unit per axis) or once per axis (a server each)")
-    modbus.add_argument("--unit-id", type=_integer_or_text, help="Modbus unit id 1..247, one a master can address (default 1)")
+    modbus.add_argument("--unit-id", type=_integer_or_text, help=f"its unit id, one of the {UNIT_IDS} (default 1)")
     modbus.add_argument("--unit-ids", metavar="IDS",
                         help="several axes (e.g. 1,2,3 or 1-3): one simulated drive per unit, in axis order; with a multi-axis "
                              "--profile ([[axes]]) each unit takes its axis' plant and hidden truth, and the profile's hand "

@@ -221,13 +221,12 @@ def run_modbus(args: argparse.Namespace) -> int:
         return 2
     if several:
         return run_modbus_axes(args)
-    from drives.modbus.register_map import UNIT_ID_RANGE
+    from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
 
     unit_id = UNIT_ID_RANGE[0] if args.unit_id is None else args.unit_id
     # as --unit-ids: the units haptic-bus run can reach (a text that is no integer: its range too)
     if not isinstance(unit_id, int) or not UNIT_ID_RANGE[0] <= unit_id <= UNIT_ID_RANGE[1]:
-        allowed = f"a Modbus unit id {UNIT_ID_RANGE[0]}..{UNIT_ID_RANGE[1]}"
-        print(f"{PROG}: error: {ParameterError('--unit-id', unit_id, allowed)}", file=sys.stderr)
+        print(f"{PROG}: error: {ParameterError('--unit-id', unit_id, UNIT_IDS)}", file=sys.stderr)
         return 2
     scheduling = set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
     word_order = args.word_order or "big"

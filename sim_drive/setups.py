@@ -14,7 +14,7 @@ import dataclasses
 from typing import Any
 
 from drives.bus_config import merge_bus_options
-from drives.cia301 import NODE_ID_RANGE
+from drives.cia301 import NODE_ID_RANGE, NODE_IDS
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import ids_in_order
 from sim_drive.operator import OperatorModel, operator_from_spec
@@ -73,7 +73,7 @@ def profile_axes(args: argparse.Namespace) -> SimulatedDevice | None:
 
 def node_ids(text: str) -> list[int]:
     """``--node-ids 5,6,7``: distinct CANopen node ids, one per axis; ParameterError otherwise."""
-    return ids_in_order("--node-ids", text, "CANopen node ids", *NODE_ID_RANGE, distinct=True)
+    return ids_in_order("--node-ids", text, NODE_IDS, *NODE_ID_RANGE, distinct=True)
 
 
 def axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
@@ -103,7 +103,7 @@ def axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any, list[int]]:
 def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
     """``(axes, hand)`` for several Modbus axes: each (unit id, parameters, timing) in axis order;
     ParameterError if the arguments or the profile are invalid (module docstring of the options)."""
-    from drives.modbus.register_map import UNIT_ID_RANGE
+    from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
     from sim_drive.space_operator import SpaceHand
 
     repeated = next((url for url in args.modbus if args.modbus.count(url) > 1 and not url.rstrip("/").endswith(":0")), None)
@@ -111,7 +111,7 @@ def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
         raise ParameterError("--modbus", repeated, "each address once: every --modbus is a server of its own (one "
                              "server for several axes: one --modbus with --unit-ids)")
     # a unit id may repeat on servers of their own (unit 1 on each is the default), never on one
-    given = ids_in_order("--unit-ids", args.unit_ids, "Modbus unit ids", *UNIT_ID_RANGE,
+    given = ids_in_order("--unit-ids", args.unit_ids, UNIT_IDS, *UNIT_ID_RANGE,
                          distinct=len(args.modbus) == 1) if args.unit_ids else None
     if args.unit_id is not None:
         raise ParameterError("--unit-id", args.unit_id, "--unit-ids for several axes (one unit id per axis)")

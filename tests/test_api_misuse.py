@@ -249,9 +249,9 @@ def test_run_refuses_a_start_from_a_spawned_processes_import(tmp_path: pathlib.P
                          "or None (the profile's)"),
     ({"operator": "constant:3"}, "simulated drive: operator = 'constant:3' is invalid; allowed: a mapping, the "
                                  "profile's [operator_model] table, e.g. {'model': 'constant', 'level': 3.0}"),
-    ({"interface": "modbus", "unit_id": 0}, "simulated drive: unit_id = 0 is invalid; allowed: an integer in [1, 247]"),
-    ({"interface": "modbus", "unit_id": 300}, "simulated drive: unit_id = 300 is invalid; allowed: an integer in [1, 247]"),
-    ({"interface": "modbus", "unit_id": True}, "simulated drive: unit_id = True is invalid; allowed: an integer in [1, 247]"),
+    ({"interface": "modbus", "unit_id": 0}, "simulated drive: unit_id = 0 is invalid; allowed: Modbus unit ids 1..247"),
+    ({"interface": "modbus", "unit_id": 300}, "simulated drive: unit_id = 300 is invalid; allowed: Modbus unit ids 1..247"),
+    ({"interface": "modbus", "unit_id": True}, "simulated drive: unit_id = True is invalid; allowed: Modbus unit ids 1..247"),
 ])
 def test_haptic_sim_names_a_bad_timing_operator_or_unit(haptic_sim: Any, given: dict[str, Any], line: str) -> None:
     """haptic_sim's timing and operator were the simulator's ValueError and dict()'s TypeError-like ValueError,
@@ -370,25 +370,30 @@ def test_options_that_stopped_a_run_run_again(haptic_sim: Any, tmp_path: pathlib
     assert second.summary is not None and second.summary.cycles == 50
 
 
-def test_a_program_without_logging_sees_the_libraries_lines_not_haptic_bus() -> None:
+def test_a_program_without_logging_sees_the_libraries_lines_not_ours() -> None:
     """docs/errors.md, "Log lines beside the errors": in a program that configures no logging a bus library's
     ERROR (canopen's SDO abort) reaches stderr through logging.lastResort, Python's rule, and the one line
-    the page gives silences it; haptic_bus' own records do not (a NullHandler on its top-level logger, the
-    logging HOWTO's rule for a library), and propagate to a program's handler as before."""
+    the page gives silences it; the records of our three packages (haptic_bus, drives, sim_drive) do not (a
+    NullHandler on each top-level logger, the logging HOWTO's rule for a library), and propagate to a
+    program's handler as before."""
+    import importlib
     import subprocess
     import sys
 
+    ours = ("haptic_bus.control.controller", "drives.canopen.drive", "sim_drive.device")
     program = "\n".join([
-        "import logging, haptic_bus",
-        "logging.getLogger('haptic_bus.control.controller').warning('supervisor: ours')",
+        "import logging, haptic_bus, drives, sim_drive",
+        *(f"logging.getLogger({name!r}).warning('unconfigured')" for name in ours),
         "logging.getLogger('canopen.sdo.client').error('Transfer aborted by client with code 0x05040000')",
         "logging.getLogger('canopen').setLevel(logging.CRITICAL)",
         "logging.getLogger('canopen.sdo.client').error('silenced')",
         "logging.basicConfig(format='%(name)s: %(message)s')",
-        "logging.getLogger('haptic_bus.control.controller').warning('supervisor: configured')"])
-    tree = pathlib.Path(__file__).resolve().parents[1]  # this tree's haptic_bus, not an installed one
+        *(f"logging.getLogger({name!r}).warning('configured')" for name in ours)])
+    tree = pathlib.Path(__file__).resolve().parents[1]  # this tree's packages, not installed ones
     done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120, cwd=tree)
     assert done.returncode == 0 and done.stdout == ""
-    assert done.stderr == ("Transfer aborted by client with code 0x05040000\n"
-                           "haptic_bus.control.controller: supervisor: configured\n"), done.stderr
-    assert any(isinstance(h, logging.NullHandler) for h in logging.getLogger("haptic_bus").handlers)
+    assert done.stderr == "Transfer aborted by client with code 0x05040000\n" + "".join(
+        f"{name}: configured\n" for name in ours), done.stderr
+    for package in ("haptic_bus", "drives", "sim_drive"):
+        importlib.import_module(package)
+        assert any(isinstance(h, logging.NullHandler) for h in logging.getLogger(package).handlers), package

@@ -30,5 +30,5 @@ def test_an_axis_without_a_link_is_told_to_give_one(tmp_path: pathlib.Path) -> N
     bad = tmp_path / "bad.toml"
     bad.write_text(GANTRY.read_text().replace("\nnode_id = 6\n", "\n"))
     with pytest.raises(ParameterError, match=r"axes\[1\]\.node_id is missing; allowed: exactly one of "
-                                             r"node_id \(CANopen, 1\.\.127\) and unit_id \(Modbus, 1\.\.247\)$"):
+                                             r"node_id \(CANopen node ids 1\.\.127\) and unit_id \(Modbus unit ids 1\.\.247\)$"):
         read_profile(bad)

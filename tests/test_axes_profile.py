@@ -144,7 +144,7 @@ def _one_axis(**changes: object) -> str:
 @pytest.mark.parametrize(("axes", "field", "allowed"), [
     (_one_axis(node_id=None), "axes[0].node_id", "exactly one of node_id"),
     (_one_axis(unit_id=3), "axes[0].node_id", "exactly one of node_id"),
-    (_one_axis(node_id=200), "axes[0].node_id", "an integer in [1, 127]"),
+    (_one_axis(node_id=200), "axes[0].node_id", "CANopen node ids 1..127"),
     (_one_axis(mapping='"full"'), "axes[0].mapping", "'minimal' or 'with-position'"),
     (_one_axis(force_limit=40.0), "axes[0].force_limit", "(0, 32] N"),
     (_one_axis(mass=-1.0), "axes[0].device.mass", "kg"),

@@ -27,7 +27,7 @@ DEVICE = ["--mass", "1", "--friction", "20", "--period", "0.001"]
     (["upload", *BUS, "--node-id", "127", "--object", "0", "--stiffness", "1", "--damping", "q"],
      "haptic-bus upload: error: argument --damping: damping = 'q' is invalid; allowed: a finite real in [0, 1e+15] N s/m"),
     (["status", *BUS, "--node-id", "x"],
-     "haptic-bus status: error: argument --node-id: node id = 'x' is invalid; allowed: an integer 1..127 "
+     "haptic-bus status: error: argument --node-id: node id = 'x' is invalid; allowed: CANopen node ids 1..127 "
      "(decimal, or 0x-hexadecimal)"),
     (["run", "cia402-handle", *BUS, "--node-id", "5", "--bitrate", "1M"],
      "haptic-bus run: error: argument --bitrate: bitrate = '1M' is invalid; allowed: a positive whole number of bit/s"),

@@ -1,16 +1,29 @@
 """One reader of node and unit id lists (``haptic_bus.validation.ids_in_order``) for every flag that takes
 several: ``run --unit-ids``, ``sim --node-ids``/``--unit-ids``, ``scan --node-ids``/``--unit-ids``.  Ranges
 and commas alike, and the same refusal words: ``run --unit-ids 1-3`` was refused where ``scan`` took ranges
-(break round 16)."""
+(break round 16).  Every refusal of a node or unit id, one or a list, states what is allowed in its table's
+one phrase (``drives.cia301.NODE_IDS``, ``drives.modbus.register_map.UNIT_IDS``): they said "1..247",
+"a Modbus unit id 1..247", "Modbus unit ids 1..247, whole numbers" and "an integer in [1, 247]"."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
+from collections.abc import Callable
 from typing import Any
 
 import pytest
 
+import haptic_bus as hb
+from drives.canopen.scan import scan_canopen
+from drives.cia301 import NODE_IDS
+from drives.modbus.drive import ModbusDrive
+from drives.modbus.register_map import UNIT_IDS
+from drives.modbus.scan import scan_modbus
+from drives.safety import SafetySettings
 from haptic_bus.app.cli import build_parser, main
+from haptic_bus.errors import ParameterError
 from sim_drive.setups import node_ids
 
 ALLOWED = "{what} {low}..{high} as N, N-M or a comma-separated list of those, e.g. {low},{b},{c} or {low}-{c}"
@@ -89,8 +102,69 @@ def test_an_id_given_twice_is_named_with_what_was_typed(argv: list[str], flag: s
                                  f"{what} 1..{high} ({twice} is given twice)\n"), err
 
 
+@pytest.mark.parametrize(("servers", "text"), [(1, "1,2"), (1, "1-4"), (3, "1,1")])
+def test_a_count_that_is_not_the_profile_s_is_named_with_what_was_typed(servers: int, text: str,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """``run gantry-3d --modbus URL --unit-ids 1,2`` named the expanded list ``[1, 2]`` (the runner's check); the
+    count is now checked where the text is read, naming the text and the axes the profile has."""
+    urls = [arg for port in range(47104, 47104 + servers) for arg in ("--modbus", f"tcp://127.0.0.1:{port}")]
+    code = main(["run", "gantry-3d", *urls, "--unit-ids", text])
+    err = capsys.readouterr().err
+    assert code == 2 and err == (f"haptic-bus run: error: --unit-ids = {text!r} is invalid; allowed: 3 Modbus unit ids, "
+                                 "one per axis (gantry-3d has 3 axes)\n"), err
+
+
 def test_one_server_per_axis_may_each_serve_unit_1() -> None:
     """Servers of their own may each hold unit 1: run reads ``1,1,1`` with three ``--modbus`` (none twice on one)."""
     urls = [arg for port in (47101, 47102, 47103) for arg in ("--modbus", f"tcp://127.0.0.1:{port}")]
     args = build_parser().parse_command(["run", "gantry-3d", *urls, "--unit-ids", "1,1,1"])
     assert _run_links(args)["unit_ids"] == [1, 1, 1]
+
+
+
+def _refusal(call: Callable[[], object]) -> str:
+    """What ``call`` says is allowed when it refuses (ParameterError, or a command's one line on stderr)."""
+    err = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(err):
+            code = call()
+    except ParameterError as refused:
+        return refused.allowed
+    assert code == 2, err.getvalue()
+    return err.getvalue().partition("allowed: ")[2].rstrip("\n")
+
+
+def _one_axis_run(**link: int | None) -> object:
+    """hb.run (hb.run_modbus with ``unit_id=None``) of the one-axis profile over the link ``link`` names."""
+    options = hb.RunOptions(0.1, pacing="virtual", live=False)
+    if link == {"unit_id": None}:
+        return hb.run_modbus(hb.load_profile("cia402-handle"), URL, None, options)  # type: ignore[arg-type]
+    bus = URL if "unit_id" in link else {"interface": "virtual", "channel": "x"}
+    return hb.run(hb.load_profile("cia402-handle"), bus, options, **link)
+
+
+URL, CAN = "tcp://127.0.0.1:1", ["--interface", "virtual", "--channel", "x"]  # nothing is reached: refused first
+REFUSALS: dict[str, tuple[Callable[[], object], str]] = {
+    "status --unit-id 0": (lambda: main(["status", "--modbus", URL, "--unit-id", "0"]), "{units}"),
+    "status --unit-id x": (lambda: main(["status", "--modbus", URL, "--unit-id", "x"]),
+                           "{units} (decimal, or 0x-hexadecimal)"),
+    "sim --unit-id 0": (lambda: main(["sim", "--modbus", URL, "--unit-id", "0"]), "{units}"),
+    "run --unit-ids 0-2": (lambda: main(["run", "gantry-3d", "--modbus", URL, "--unit-ids", "0-2"]),
+                           "{units} as N, N-M or a comma-separated list of those, e.g. 1,2,3 or 1-3"),
+    "hb.run unit_id=0": (lambda: _one_axis_run(unit_id=0), "{units}: the units that answer (0 is broadcast)"),
+    "hb.run_modbus unit_id=None": (lambda: _one_axis_run(unit_id=None), "{units}"),
+    "ModbusDrive unit_id=0": (lambda: ModbusDrive.from_url(URL, unit_id=0), "{units}"),
+    "scan_modbus [0]": (lambda: scan_modbus(URL, [0]), "one or more {units}"),
+    "status --node-id 0": (lambda: main(["status", *CAN, "--node-id", "0"]), "{nodes}"),
+    "sim --node-id 0": (lambda: main(["sim", *CAN, "--node-id", "0"]), "{nodes}"),
+    "hb.run node_id=0": (lambda: _one_axis_run(node_id=0), "{nodes}"),
+    "scan_canopen [0]": (lambda: scan_canopen({"interface": "virtual", "channel": "x"}, [0]), "one or more {nodes}"),
+    "SafetySettings master_node_id=0": (lambda: SafetySettings(master_node_id=0), "{nodes}, or None (no heartbeat)"),
+}
+
+
+@pytest.mark.parametrize("refused", list(REFUSALS))
+def test_every_refusal_of_an_id_states_its_table_s_one_phrase(refused: str) -> None:
+    assert (NODE_IDS, UNIT_IDS) == ("CANopen node ids 1..127", "Modbus unit ids 1..247")
+    call, allowed = REFUSALS[refused]
+    assert _refusal(call) == allowed.format(nodes=NODE_IDS, units=UNIT_IDS)

@@ -96,7 +96,7 @@ def test_run_modbus_without_unit_id_names_it_missing(tmp_path: pathlib.Path) -> 
     with pytest.raises(hb.ParameterError) as caught:
         hb.run_modbus(profile, "tcp://127.0.0.1:47104", None, hb.RunOptions(duration=0.1, out_dir=tmp_path / "r"))  # type: ignore[arg-type]
     assert caught.value.name == "unit_id" and caught.value.value is None
-    assert str(caught.value) == "run_modbus: unit_id is missing; allowed: a Modbus unit id, an integer 1..247"
+    assert str(caught.value) == "run_modbus: unit_id is missing; allowed: Modbus unit ids 1..247"
     assert not (tmp_path / "r").exists()
 
 

@@ -149,7 +149,7 @@ def test_a_server_that_is_not_there_is_one_line(tmp_path: pathlib.Path, modbus_g
 
 @pytest.mark.parametrize(("args", "expected"), [
     (["--modbus", "{url}"], "--unit-ids is missing; allowed: one Modbus unit id per axis (3, e.g. 1,2,3)"),
-    (["--modbus", "{url}", "--unit-ids", "1,2"], "--unit-ids = [1, 2] is invalid; allowed: 3 unit ids, one per axis"),
+    (["--modbus", "{url}", "--unit-ids", "1,2"], "--unit-ids = '1,2' is invalid; allowed: 3 Modbus unit ids, one per axis"),
     (["--modbus", "{url}", "--modbus", "{url}"], "--modbus = ["),
     (["--modbus", "{url}", "--unit-id", "2"], "--unit-id = 2 is invalid; allowed: none with a multi-axis profile"),
     (["--modbus", "{url}", "--unit-ids", "1,2,3", "--interface", "virtual"], "--interface = 'virtual'"),

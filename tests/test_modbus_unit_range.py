@@ -37,7 +37,7 @@ def test_several_axes_run_refuses_unit_ids_no_unit_answers(tmp_path: pathlib.Pat
 
 @pytest.mark.parametrize("unit_id", [UNIT_ID_RANGE[0] - 1, UNIT_ID_RANGE[1] + 1])
 def test_modbus_drive_takes_the_units_that_answer(unit_id: int) -> None:
-    with pytest.raises(hb.ParameterError, match=r"unit_id = .* allowed: 1\.\.247"):
+    with pytest.raises(hb.ParameterError, match=r"unit_id = .* allowed: Modbus unit ids 1\.\.247"):
         ModbusDrive.from_url(URL, unit_id=unit_id)
     assert ModbusDrive.from_url(URL, unit_id=UNIT_ID_RANGE[1]).unit_id == 247  # built, not connected
 
@@ -46,6 +46,6 @@ def test_unit_ids_given_as_a_string_are_refused_as_such(tmp_path: pathlib.Path) 
     """``unit_ids="123"`` read as three ids '1', '2', '3' said "1..247" of strings; it is refused as what it is."""
     options = hb.RunOptions(0.01, pacing="virtual", out_dir=tmp_path / "run", live=False)
     with pytest.raises(hb.ParameterError, match=r"^run: unit_ids = '123' is invalid; allowed: Modbus unit ids 1\.\.247, a "
-                                                r"list of whole numbers"):
+                                                r"list of them, one per axis$"):
         hb.run(hb.load_profile("gantry-3d"), "tcp://127.0.0.1:1", options, unit_ids="123")  # type: ignore[arg-type]
     assert not (tmp_path / "run").exists()

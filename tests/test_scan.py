@@ -19,6 +19,7 @@ import canopen
 import pytest
 
 from drives.canopen.scan import scan_canopen
+from drives.errors import ParameterError
 from drives.modbus.scan import scan_modbus
 from haptic_bus.app.cli import main
 from haptic_bus.app.profiles import load_profile
@@ -202,6 +203,27 @@ def test_invalid_canopen_arguments_exit_2_before_the_bus_is_touched(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and ("invalid" in err or "Modbus option" in err), err
     assert master.recv(0.05) is None  # not one frame: the bus was never opened
+
+
+@pytest.mark.parametrize("value", [0, -1, 3600.5, float("nan"), float("inf"), True, "1"])
+@pytest.mark.parametrize("keyword", ["timeout", "answer_timeout"])
+def test_a_scan_s_time_budget_is_refused_in_the_command_line_s_words(
+        keyword: str, value: object, channel: str, master: can.BusABC, capsys: pytest.CaptureFixture[str]) -> None:
+    """Both scans check their times with the one range check (drives.ranges.real_in_range): refused in the
+    words ``haptic-bus scan --timeout`` says (they said "a time in (0, 3600] s"), before a bus is opened or a
+    server connected; 3600 s, the bound, is kept."""
+    allowed = "a finite real in (0, 3600] s"
+    scans = (lambda: scan_canopen({"interface": "virtual", "channel": channel}, **{keyword: value}),
+             lambda: scan_modbus("tcp://127.0.0.1:1", **{keyword: value}))
+    for scan in scans:
+        with pytest.raises(ParameterError) as refused:
+            scan()
+        assert str(refused.value) == f"scan: {keyword.replace('_', ' ')} = {value!r} is invalid; allowed: {allowed}"
+    assert master.recv(0.05) is None  # not one frame: the bus was never opened
+    if keyword == "timeout" and value == 0:  # the command line's refusal: the same words
+        assert scan_cli("--interface", "virtual", "--channel", channel, "--timeout", "0") == 2
+        said = capsys.readouterr().err
+        assert said == f"haptic-bus scan: error: argument --timeout: --timeout = 0 is invalid; allowed: {allowed}\n"
 
 
 @pytest.mark.parametrize("argv", [

@@ -55,7 +55,7 @@ def test_node_ids_open_the_bus_the_bus_options_name(monkeypatch: pytest.MonkeyPa
      "--modbus = 'tcp://127.0.0.1:44169' is invalid; allowed: each address once: every --modbus is a server of its own"),
     ([*BUS, "--bus-option", "port=44169", "--node-id", "5", "--mass", "x"],
      "--mass = 'x' is invalid; allowed: a finite real in [1e-09, 1e+09] kg"),
-    (["--modbus", "tcp://127.0.0.1:0", "--unit-id", "x"], "--unit-id = 'x' is invalid; allowed: a Modbus unit id 1..247"),
+    (["--modbus", "tcp://127.0.0.1:0", "--unit-id", "x"], "--unit-id = 'x' is invalid; allowed: Modbus unit ids 1..247"),
 ])
 def test_a_flag_several_axes_cannot_take_is_one_line_exit_2(argv: list[str], line: str,
                                                              capfd: pytest.CaptureFixture[str]) -> None:

@@ -83,10 +83,10 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
         (["--modbus"], "expected one argument"),
         (["--modbus", "udp://127.0.0.1:502"], "tcp://HOST:PORT"),
         (["--modbus", "tcp://127.0.0.1:99999"], "tcp://HOST:PORT"),
-        (["--modbus", MODBUS_URL, "--unit-id", "256"], "--unit-id = 256 is invalid; allowed: a Modbus unit id 1..247"),
-        (["--modbus", MODBUS_URL, "--unit-id", "248"], "a Modbus unit id 1..247"),  # as --unit-ids: what run can reach
-        (["--modbus", MODBUS_URL, "--unit-id", "0"], "a Modbus unit id 1..247"),
-        (["--modbus", MODBUS_URL, "--unit-id", "one"], "--unit-id = 'one' is invalid; allowed: a Modbus unit id 1..247"),
+        (["--modbus", MODBUS_URL, "--unit-id", "256"], "--unit-id = 256 is invalid; allowed: Modbus unit ids 1..247"),
+        (["--modbus", MODBUS_URL, "--unit-id", "248"], "Modbus unit ids 1..247"),  # as --unit-ids: what run can reach
+        (["--modbus", MODBUS_URL, "--unit-id", "0"], "Modbus unit ids 1..247"),
+        (["--modbus", MODBUS_URL, "--unit-id", "one"], "--unit-id = 'one' is invalid; allowed: Modbus unit ids 1..247"),
         (["--modbus", MODBUS_URL, "--word-order", "middle"], "invalid choice"),
         (["--modbus", MODBUS_URL, "--profile", "/nonexistent.toml"], "an existing TOML file"),
         (["--frobnicate"], "unrecognized arguments: --frobnicate"),

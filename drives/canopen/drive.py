@@ -61,7 +61,7 @@ from drives.canopen.pdo_codec import PdoCodec, object_spec
 from drives.canopen.pdo_plan import pack
 from drives.canopen.sdo import SdoAccess
 from drives.canopen.sync_cycle import SyncCycle
-from drives.cia301 import CONSUMER_HEARTBEAT_TIME, NODE_ID_RANGE, PRODUCER_HEARTBEAT_TIME, NmtCommand
+from drives.cia301 import CONSUMER_HEARTBEAT_TIME, NODE_ID_RANGE, NODE_IDS, PRODUCER_HEARTBEAT_TIME, NmtCommand
 from drives.cia402 import (
     CONTROLWORD,
     POSITION_ACTUAL,
@@ -169,7 +169,7 @@ class CanopenDrive(Cia402Master[CanopenConnection]):
         heartbeat: HeartbeatProducer | None = None,
     ) -> None:
         low, high = NODE_ID_RANGE
-        _check("node_id", isinstance(node_id, int) and low <= node_id <= high, node_id, f"{low}..{high}")
+        _check("node_id", isinstance(node_id, int) and low <= node_id <= high, node_id, NODE_IDS)
         _check("period", 1e-6 <= period <= 4294.967295, period, "1e-6..4294.967295 s (0x1006 in us)")
         _check("max_missed_tpdos", max_missed_tpdos >= 1, max_missed_tpdos, ">= 1")
         _check("heartbeat_producer_ms", 0 <= heartbeat_producer_ms <= 0xFFFF, heartbeat_producer_ms, "0..65535 ms")

@@ -21,7 +21,7 @@ import canopen
 from canopen.emcy import EmcyError
 
 from drives.canopen.exchange import CanopenStats
-from drives.cia301 import EMCY_BASE, EMCY_LENGTH, HEARTBEAT_BASE, NmtState, describe_emcy_code, nmt_state_name
+from drives.cia301 import EMCY_BASE, EMCY_LENGTH, HEARTBEAT_BASE, NODE_IDS, NmtState, describe_emcy_code, nmt_state_name
 from drives.errors import DriveError, DriveFault, DriveProtocolError, DriveTimeout, ParameterError
 
 logger = logging.getLogger(__name__)
@@ -57,7 +57,7 @@ class DriveEvents:
         self._state_seen = threading.Condition()
         node_id = node.id
         if node_id is None:  # canopen lets a node take its id from its dictionary; the master always names it
-            raise ParameterError("node_id", None, "1..127", f"{name}: the node watched for EMCY and heartbeat")
+            raise ParameterError("node_id", None, NODE_IDS, f"{name}: the node watched for EMCY and heartbeat")
         self._guards: list[tuple[int, Handler, Handler]] = [
             (EMCY_BASE + node_id, node.emcy.on_emcy, self._guard(node.emcy.on_emcy, EMCY_LENGTH, "EMCY")),
             (HEARTBEAT_BASE + node_id, node.nmt.on_heartbeat, self._guard(node.nmt.on_heartbeat, 1, "heartbeat", _NMT_STATES)),

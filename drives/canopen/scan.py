@@ -50,6 +50,7 @@ from drives.cia301 import (
     HEARTBEAT_BASE,
     IDENTITY,
     NODE_ID_RANGE,
+    NODE_IDS,
     SDO_RX_BASE,
 )
 from drives.cia402 import ERROR_CODE, STATUSWORD, SUPPORTED_DRIVE_MODES, DataType
@@ -185,7 +186,7 @@ def scan_canopen(
     by node id.  ``timeout``: the listening window after the probe, s; ``answer_timeout``: each
     SDO read of the details, s (module docstring).  ParameterError for bad arguments (before the
     bus is opened), DriveError if the bus cannot be opened or the scan fails."""
-    ids = checked_ids("node ids", node_ids, *NODE_ID_RANGE)
+    ids = checked_ids("node ids", node_ids, NODE_IDS, *NODE_ID_RANGE)
     window = checked_seconds("timeout", timeout)
     answer = checked_seconds("answer timeout", answer_timeout)
     options = dict(bus)

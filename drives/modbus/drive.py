@@ -67,6 +67,7 @@ from drives.modbus.register_map import (
     REGISTER_BY_NAME,
     SIM_TIMING_CODES,
     UNIT_ID_RANGE,
+    UNIT_IDS,
     InputBlockCodec,
     RegisterSpec,
     decode_value,
@@ -145,7 +146,7 @@ class ModbusDrive(Cia402Master[ModbusConnection]):
                safety: SafetySettings) -> None:
         low, high = UNIT_ID_RANGE
         if isinstance(unit_id, bool) or not isinstance(unit_id, int) or not low <= unit_id <= high:
-            raise ParameterError("unit_id", unit_id, f"{low}..{high}", "Modbus drive")
+            raise ParameterError("unit_id", unit_id, UNIT_IDS, "Modbus drive")
         if cycle not in CYCLE_MODES:
             raise ParameterError("cycle", cycle, " or ".join(map(repr, CYCLE_MODES)), "Modbus drive")
         stats = ModbusStats()

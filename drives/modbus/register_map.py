@@ -78,6 +78,7 @@ from drives.cia402 import (
 )
 
 UNIT_ID_RANGE = (1, 247)  # Modbus unit ids that answer: 0 is broadcast (no answer), 248..255 reserved
+UNIT_IDS = f"Modbus unit ids {UNIT_ID_RANGE[0]}..{UNIT_ID_RANGE[1]}"  # what every refusal of a unit id allows
 
 __all__ = [
     "EXCEPTION_NAMES",

@@ -43,6 +43,7 @@ from drives.modbus.register_map import (
     NO_UNIT_CODES,
     REGISTER_BY_NAME,
     UNIT_ID_RANGE,
+    UNIT_IDS,
     RegisterSpec,
     decode_value,
     register_for_object,
@@ -201,7 +202,7 @@ def scan_modbus(
     """The units among ``unit_ids`` at ``url`` (``tcp://HOST:PORT`` or ``rtu:/dev/...``), in order
     (module docstring).  ParameterError for bad arguments (before connecting), DriveTimeout if the
     server cannot be reached, DriveError if the link fails."""
-    ids = checked_ids("unit ids", unit_ids, *UNIT_ID_RANGE)
+    ids = checked_ids("unit ids", unit_ids, UNIT_IDS, *UNIT_ID_RANGE)
     checked_seconds("timeout", timeout)
     address = ModbusAddress.from_url(url, checked_seconds("answer timeout", answer_timeout))
     link = ModbusLink(f"Modbus {address.url}", address, ModbusStats())

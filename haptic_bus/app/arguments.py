@@ -15,8 +15,8 @@ from collections.abc import Callable
 from typing import Any, TypeVar
 
 from drives.bus_config import BUS_KWARGS_HELP, BUS_OPTION_HELP, as_typed, merge_bus_options, parse_bus_option
-from drives.cia301 import NODE_ID_RANGE
-from drives.modbus.register_map import UNIT_ID_RANGE
+from drives.cia301 import NODE_ID_RANGE, NODE_IDS
+from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
 from haptic_bus.analysis.loop import (
     DAMPING_RANGE,
     DELAY_RANGE,
@@ -112,17 +112,19 @@ def number(name: str, low: float, high: float, unit: str, *, low_open: bool = Fa
     return parse
 
 
-def whole(name: str, low: int, high: int) -> Callable[[str], int]:
-    """A parser of an integer in ``low..high`` (decimal, or 0x.. hexadecimal)."""
+def whole(name: str, low: int, high: int, allowed: str = "") -> Callable[[str], int]:
+    """A parser of an integer in ``low..high`` (decimal, or 0x.. hexadecimal); its refusal says ``allowed``
+    (default ``an integer low..high``; a node or unit id: its table's words, ``CANopen node ids 1..127``)."""
+    allowed = allowed or f"an integer {low}..{high}"
 
     def parse(text: str) -> int:
         try:
             value = int(text, 0)
         except ValueError:  # not an integer: the range too, in the one line (break16)
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: an integer {low}..{high} "
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: {allowed} "
                                              "(decimal, or 0x-hexadecimal)") from None
         if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"{name} = {value} is invalid; allowed: {low}..{high}")
+            raise argparse.ArgumentTypeError(f"{name} = {value} is invalid; allowed: {allowed}")
         return value
 
     return parse
@@ -163,17 +165,17 @@ def _read_as(kind: Callable[[str], N], name: str, allowed: str) -> Callable[[str
 
 seconds = number("duration", 0.0, 1e7, "s", low_open=True)
 timeout = number("timeout", 0.0, 3600.0, "s", low_open=True)
-node_id = whole("node id", *NODE_ID_RANGE)
-unit_id = whole("unit id", *UNIT_ID_RANGE)
+node_id = whole("node id", *NODE_ID_RANGE, NODE_IDS)
+unit_id = whole("unit id", *UNIT_ID_RANGE, UNIT_IDS)
 
 
 def unit_ids(text: str) -> str:
-    """``1,2,3``: Modbus unit ids (each 1..247), one per axis in axis order, checked as
+    """``1,2,3``: Modbus unit ids, one per axis in axis order, checked as
     :func:`~haptic_bus.validation.ids_in_order` reads them and kept as text: whether they must be
     distinct depends on the servers (``--modbus`` once: yes; once per axis: unit 1 may serve each),
     known once every option is read, and that refusal names what was typed."""
     try:
-        ids_in_order("unit ids", text, "Modbus unit ids", *UNIT_ID_RANGE)
+        ids_in_order("unit ids", text, UNIT_IDS, *UNIT_ID_RANGE)
     except ParameterError as invalid:
         raise argparse.ArgumentTypeError(invalid.detail) from None
     return text

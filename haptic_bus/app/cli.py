@@ -20,7 +20,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from drives.modbus.register_map import UNIT_ID_RANGE
+from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
 from haptic_bus.app.arguments import (
     DAMPING_ALLOWED,
     EXIT_ASSUMPTION,
@@ -170,9 +170,8 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, 
     if isinstance(profile, AxesProfile):  # the node ids (or unit ids) come from [[axes]], or --unit-ids
         _refuse_single_axis_options(args)
         bus, node_id, unit_id = (args.modbus or bus_arguments(args)), None, None
-        if args.unit_ids is not None:  # one server: none twice; a server each: unit 1 may serve each
-            unit_ids = ids_in_order("--unit-ids", args.unit_ids, "Modbus unit ids", *UNIT_ID_RANGE,
-                                    distinct=len(args.modbus) == 1)
+        if args.unit_ids is not None:
+            unit_ids = _typed_unit_ids(args, profile)
     else:
         address = one_axis_link(args, "run")
         bus, unit_id = (address.url, address.unit_id) if address.url is not None else (address.bus, None)
@@ -187,6 +186,19 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, 
              "controller_node_id": args.controller_node_id or DEFAULT_CONTROLLER_NODE_ID}
     stop.install()  # from here SIGINT and SIGTERM ask the runner to stop (before enabling, or at a cycle boundary)
     return profile, bus, options, links
+
+
+def _typed_unit_ids(args: argparse.Namespace, profile: AxesProfile) -> list[int]:
+    """``run``'s ``--unit-ids`` read for ``profile``: one per axis, none twice on one server (a server
+    each: unit 1 may serve each); a refusal names the text typed, not the list it reads as."""
+    from haptic_bus.errors import ParameterError
+
+    unit_ids = ids_in_order("--unit-ids", args.unit_ids, UNIT_IDS, *UNIT_ID_RANGE, distinct=len(args.modbus) == 1)
+    size = len(profile.axes)
+    if len(unit_ids) != size:
+        raise ParameterError("--unit-ids", args.unit_ids, f"{size} Modbus unit ids, one per axis ({profile.name} has "
+                             f"{size} axes)")
+    return unit_ids
 
 
 def _refuse_single_axis_options(args: argparse.Namespace) -> None:

@@ -15,7 +15,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from drives.cia301 import NODE_IDS
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
+from drives.modbus.register_map import UNIT_IDS
 from haptic_bus.app.arguments import (
     add_bus_arguments,
     bus_arguments,
@@ -34,6 +36,10 @@ if TYPE_CHECKING:  # the services import canopen or pymodbus: only when a comman
 DEFAULT_UNIT_ID = 1
 MAX_SECONDS = 60.0  # the longest any wait of a service command may be
 _BUS_FLAGS = ("interface", "channel", "bitrate")
+
+NODE_ID_HELP = f"the drive's node id, one of the {NODE_IDS}"
+UNIT_ID_HELP = f"the drive's unit id, one of the {UNIT_IDS} (default {DEFAULT_UNIT_ID}; only with --modbus)"
+NODE_ID_WANTED = f"{NODE_ID_HELP} (or --modbus URL)"  # a command that names one drive and was given none
 
 
 @dataclass(frozen=True)
@@ -92,17 +98,17 @@ class DriveAddress:
     def checked_node_id(self) -> int:
         """The CANopen node id (ParameterError if there is none)."""
         if self.node_id is None:
-            raise ParameterError("--node-id", None, "the drive's CANopen node id 1..127 (or --modbus URL)")
+            raise ParameterError("--node-id", None, NODE_ID_WANTED)
         return self.node_id
 
 
 def add_address_arguments(parser: argparse.ArgumentParser) -> None:
     """The options that name one drive: the bus options and ``--node-id``, or ``--modbus`` and ``--unit-id``."""
     add_bus_arguments(parser)
-    parser.add_argument("--node-id", type=node_id, help="the drive's CANopen node id 1..127")
+    parser.add_argument("--node-id", type=node_id, help=NODE_ID_HELP)
     parser.add_argument("--modbus", type=modbus_url, metavar="URL",
                         help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
-    parser.add_argument("--unit-id", type=unit_id, help=f"Modbus unit id 1..247 (default {DEFAULT_UNIT_ID}; only with --modbus)")
+    parser.add_argument("--unit-id", type=unit_id, help=UNIT_ID_HELP)
 
 
 def add_drive_arguments(parser: argparse.ArgumentParser) -> None:
@@ -129,5 +135,5 @@ def drive_address(args: argparse.Namespace, command: str = "", can_only: tuple[s
     if args.unit_id is not None:
         raise ParameterError("--unit-id", args.unit_id, "a Modbus option: give it with --modbus URL", command)
     if args.node_id is None and node_required:
-        raise ParameterError("--node-id", None, "the drive's CANopen node id 1..127 (or --modbus URL)", command)
+        raise ParameterError("--node-id", None, NODE_ID_WANTED, command)
     return DriveAddress(bus=bus_arguments(args), node_id=args.node_id)

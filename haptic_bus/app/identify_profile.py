@@ -33,6 +33,7 @@ import tomlkit
 from tomlkit.items import Table
 
 from haptic_bus.analysis.velocity import VelocityModel
+from haptic_bus.app.whole_file import write_text_whole
 from haptic_bus.errors import ParameterError
 from haptic_bus.identify import Identification
 from haptic_bus.profile.identification import CREDIBLE_SIGMAS, IdentifiedDevice
@@ -115,8 +116,7 @@ def write_identified_profile(source: pathlib.Path, destination: pathlib.Path, id
     """Write :func:`identified_profile` of ``source`` to ``destination``; the path written.  A file
     already there is replaced only with ``replace``: else the file is created only if none is there
     at that moment (an exclusive create), and one that appeared after the command checked, while it
-    measured, raises FileExistsError and is left as it is."""
+    measured, raises FileExistsError and is left as it is; a write that fails leaves nothing there
+    (:func:`~haptic_bus.app.whole_file.write_text_whole`)."""
     text = identified_profile(source, identification, least_delay, moment or dt.datetime.now(dt.UTC))
-    with open(destination, "w" if replace else "x", encoding="utf-8") as file:
-        file.write(text)
-    return destination
+    return write_text_whole(destination, text, replace=replace)

@@ -282,6 +282,7 @@ def cmd_new(args: argparse.Namespace) -> int:
     drive cannot be read, 2 invalid input (an existing file without --force, an unwritable folder)."""
     from haptic_bus.app.drive_statement import canopen_statement, modbus_statement
     from haptic_bus.app.profile_template import missing, template
+    from haptic_bus.app.whole_file import write_text_whole
 
     target, address = _new_target(args)
     given: dict[str, Any] = {key: getattr(args, key) for key in ("mass", "friction", "force_limit")
@@ -299,9 +300,8 @@ def cmd_new(args: argparse.Namespace) -> int:
         return EXIT_NO
     command = f"haptic-bus profiles new {args.name}" + (" --from-drive" if statement is not None else "")
     text = template(args.name, statement, given, command, dt.datetime.now(dt.UTC))
-    try:  # without --force, created only if it still does not exist (O_EXCL): another command may have made it since
-        with open(target, "w" if args.force else "x") as file:
-            file.write(text)
+    try:  # without --force, created only if it still does not exist: another command may have made it since
+        write_text_whole(target, text, replace=args.force)
     except FileExistsError:
         raise ParameterError("--out", str(target), "a file that does not exist yet (--force overwrites it)",
                              "profiles new") from None

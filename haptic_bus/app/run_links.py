@@ -26,8 +26,9 @@ from contextlib import ExitStack
 from typing import TYPE_CHECKING, Any
 
 from drives.bus_config import resolve_bus_config
+from drives.cia301 import NODE_ID_RANGE, NODE_IDS
 from drives.cia402 import State
-from drives.modbus.register_map import UNIT_ID_RANGE
+from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
 from drives.safety import VIRTUAL_TIME_CANOPEN_PATIENCE, VIRTUAL_TIME_MODBUS_PATIENCE, SafetySettings, patient
 from haptic_bus.app.drive_address import DEFAULT_UNIT_ID, DriveAddress
 from haptic_bus.app.profiles import AxesProfile, Profile
@@ -214,7 +215,7 @@ def canopen_rig(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, A
 def canopen_nodes(profile: Profile | AxesProfile, node_id: int | None, controller_node_id: int) -> list[int]:
     """Each axis' CANopen node id: ``node_id`` for a one-axis profile, the ``[[axes]]`` node ids (each
     mapping 0x6064: the port observer and the passivity layer read it every cycle) for several;
-    each 1..127, none twice, and ``controller_node_id`` none of them.  ParameterError (exit 2)
+    each in :data:`~drives.cia301.NODE_ID_RANGE`, none twice, and ``controller_node_id`` none of them.  ParameterError (exit 2)
     naming :func:`~haptic_bus.app.runner.run`'s argument, or the profile's field, otherwise."""
     if isinstance(profile, AxesProfile):
         where = f"profile {profile.path or profile.name}"
@@ -230,8 +231,8 @@ def canopen_nodes(profile: Profile | AxesProfile, node_id: int | None, controlle
     else:
         named = [("node_id", node_id, "run")]
     for name, value, context in (*named, ("controller_node_id", controller_node_id, "run")):
-        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 127:
-            raise ParameterError(name, value, "a CANopen node id, an integer 1..127", context)
+        if isinstance(value, bool) or not isinstance(value, int) or not NODE_ID_RANGE[0] <= value <= NODE_ID_RANGE[1]:
+            raise ParameterError(name, value, NODE_IDS, context)
     nodes = [value for _, value, _ in named if isinstance(value, int)]
     if len(set(nodes)) != len(nodes):
         raise ParameterError("node_ids", nodes, "a node id per axis, none twice", named[0][2])
@@ -251,8 +252,7 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
         raise ParameterError("bus", list(urls), f"one Modbus URL for every axis, or one per axis ({size})", "run")
     stated = [axis.unit_id for axis in profile.axes] if isinstance(profile, AxesProfile) else [None]
     if isinstance(unit_ids, (str, bytes)):  # a sequence of characters, not of unit ids
-        raise ParameterError("unit_ids", unit_ids, f"Modbus unit ids {UNIT_ID_RANGE[0]}..{UNIT_ID_RANGE[1]}, a list of "
-                             "whole numbers, one per axis", "run")
+        raise ParameterError("unit_ids", unit_ids, f"{UNIT_IDS}, a list of them, one per axis", "run")
     if unit_ids is not None:
         units = list(unit_ids)
     elif None not in stated:
@@ -265,8 +265,7 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
     low, high = UNIT_ID_RANGE
     if any(isinstance(unit, bool) or not isinstance(unit, int) or not low <= unit <= high for unit in units):
         name, value = ("unit_ids", units) if isinstance(profile, AxesProfile) else ("unit_id", units[0])
-        raise ParameterError(name, value, f"Modbus unit ids {low}..{high}, whole numbers: the units that answer "
-                             "(0 is broadcast)", "run")
+        raise ParameterError(name, value, f"{UNIT_IDS}: the units that answer (0 is broadcast)", "run")
     places = list(zip(list(urls) * size if len(urls) == 1 else urls, units))
     if unit_ids is None and len(urls) == size > len(set(urls)) and len(set(places)) != size:  # no unit ids were given
         raise ParameterError("bus", list(urls), f"one Modbus URL for every axis, or a different one per axis ({size}): "

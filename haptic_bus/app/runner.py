@@ -71,7 +71,7 @@ from drives.cia402 import State
 from drives.cia402_master import Cia402Master
 from drives.drive_status import DEFAULT_ANSWER_TIMEOUT
 from drives.fault_reset import DEFAULT_WAIT
-from drives.modbus.register_map import UNIT_ID_RANGE
+from drives.modbus.register_map import UNIT_IDS
 from drives.os_threads import show_names
 from haptic_bus.app import preflight
 from haptic_bus.app.drive_address import DEFAULT_UNIT_ID, DriveAddress
@@ -159,8 +159,7 @@ def run_modbus(profile: Profile, url: str, unit_id: int, options: RunOptions) ->
     if not isinstance(url, str):  # None went on as a CANopen bus and was refused as 'unit_id = 1 is invalid'
         raise ParameterError("url", url, "a Modbus URL, tcp://HOST:PORT or rtu:/dev/SERIAL", "run_modbus")
     if unit_id is None:  # run() reads None as its default, unit 1: the drive a caller left out was quietly unit 1
-        low, high = UNIT_ID_RANGE
-        raise ParameterError("unit_id", None, f"a Modbus unit id, an integer {low}..{high}", "run_modbus")
+        raise ParameterError("unit_id", None, UNIT_IDS, "run_modbus")
     return run(profile, url, options, unit_id=unit_id)
 
 

@@ -29,8 +29,8 @@ import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
-from drives.cia301 import NODE_ID_RANGE
-from drives.modbus.register_map import UNIT_ID_RANGE
+from drives.cia301 import NODE_ID_RANGE, NODE_IDS
+from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
 from drives.scan_arguments import DEFAULT_ANSWER_TIMEOUT, DEFAULT_TIMEOUT, MAX_SECONDS
 from haptic_bus.app.arguments import (
     EXIT_NO,
@@ -54,23 +54,23 @@ SCAN_HELP = ("list the CANopen nodes on a CAN bus (or the units of a Modbus serv
 
 # --------------------------------------------------------------------------- argument types
 
-def id_list(text: str, name: str, what: str, low: int, high: int) -> list[int]:
+def id_list(text: str, name: str, allowed: str, low: int, high: int) -> list[int]:
     """``"5"``, ``"1-10"``, ``"5,9,20-30"`` -> sorted ids without repeats, read as every flag that takes ids
     reads them (:func:`~haptic_bus.validation.ids_in_order`); ArgumentTypeError otherwise."""
     try:
-        return sorted(set(ids_in_order(name, text, what, low, high)))
+        return sorted(set(ids_in_order(name, text, allowed, low, high)))
     except ParameterError as invalid:
         raise argparse.ArgumentTypeError(invalid.detail) from None
 
 
 def node_ids(text: str) -> list[int]:
-    """CANopen node ids 1..127 (``1-127``, ``5,9``)."""
-    return id_list(text, "node ids", "CANopen node ids", *NODE_ID_RANGE)
+    """CANopen node ids (``1-127``, ``5,9``)."""
+    return id_list(text, "node ids", NODE_IDS, *NODE_ID_RANGE)
 
 
 def unit_ids(text: str) -> list[int]:
-    """Modbus unit ids 1..247 (``1-247``, ``1,2``)."""
-    return id_list(text, "unit ids", "Modbus unit ids", *UNIT_ID_RANGE)
+    """Modbus unit ids (``1-247``, ``1,2``)."""
+    return id_list(text, "unit ids", UNIT_IDS, *UNIT_ID_RANGE)
 
 
 def add_scan_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:

@@ -52,6 +52,7 @@ from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable, datatypes
 
 from drives.canopen.local_node import DeferredDownloadServer, StrictLocalNode
+from drives.cia301 import NODE_ID_RANGE, NODE_IDS
 from haptic_bus._version import __version__
 from haptic_bus.control.controller import WallController
 from haptic_bus.control.protocols import Gate
@@ -132,7 +133,7 @@ class ControllerNode:
 
     def __init__(self, controller: WallController, node_id: int, heartbeat_ms: int = 0) -> None:
         self.controller = controller
-        self.node_id = whole_in_range("controller node id", node_id, 1, 127)
+        self.node_id = whole_in_range("controller node id", node_id, *NODE_ID_RANGE, allowed=NODE_IDS)
         self._names = [obj.name for obj in controller.scene.objects]
         self._staged: dict[int, list[float | None]] = {}
         self.last_result = "no commit yet"

@@ -145,11 +145,12 @@ class Reader:
         value = self.raw(key, allowed, default)
         return self._wrap(key, lambda v: real_in_range(key, v, low, high, low_inclusive=low_inclusive, unit=unit), value)
 
-    def whole(self, key: str, low: int, high: int, default: object = REQUIRED) -> int:
-        value = self.raw(key, f"an integer in [{low}, {high}]", default)
+    def whole(self, key: str, low: int, high: int, default: object = REQUIRED, *, allowed: str = "") -> int:
+        allowed = allowed or f"an integer in [{low}, {high}]"  # a node or unit id: its table's words
+        value = self.raw(key, allowed, default)
         if isinstance(value, float):  # TOML distinguishes 3000 from 3000.0; a count is an integer
-            raise profile_error(self.path, self.field(key), value, f"an integer in [{low}, {high}]")
-        return self._wrap(key, lambda v: whole_in_range(key, v, low, high), value)
+            raise profile_error(self.path, self.field(key), value, allowed)
+        return self._wrap(key, lambda v: whole_in_range(key, v, low, high, allowed=allowed), value)
 
     def flag(self, key: str, default: object = REQUIRED) -> bool:
         value = self.raw(key, "true or false", default)

@@ -190,7 +190,7 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
     def start(profile: ProfileSource | None = None, *, interface: str = "virtual",
               node_id: int | None = None, unit_id: int | None = None, servers: int = 1, timing: str | None = None,
               operator: Mapping[str, Any] | None = None, **truth: Any) -> SimDriveNode:
-        from drives.modbus.register_map import UNIT_ID_RANGE
+        from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
         from haptic_bus.errors import ParameterError
         from haptic_bus.validation import whole_in_range
 
@@ -218,7 +218,7 @@ def haptic_sim(sim_process: Callable[..., SimProcess],
         if other is not None:
             raise ParameterError(unused, other, f"none with interface={interface!r} ({named})", CONTEXT)
         if spec is None and unit_id is not None:  # hb.run's and haptic-bus sim's range (the server's own took 0..255)
-            unit_id = whole_in_range("unit_id", unit_id, *UNIT_ID_RANGE, context=CONTEXT)
+            unit_id = whole_in_range("unit_id", unit_id, *UNIT_ID_RANGE, context=CONTEXT, allowed=UNIT_IDS)
         path = None
         if profile is not None:
             if not folder:

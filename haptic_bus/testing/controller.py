@@ -52,7 +52,7 @@ class ControllerRun:
         self.controller_node_id = controller_node_id
         self.folder = pathlib.Path(options.out_dir)
         self.result: RunResult | None = None
-        self.failure: BaseException | None = None  # an exception that escaped run_canopen (a bug, not a run's end)
+        self.failure: BaseException | None = None  # an exception that escaped run (a bug, not a run's end)
         self._thread = threading.Thread(target=self._run, name=f"haptic-controller-{controller_node_id}", daemon=True)
         self._thread.start()
 

@@ -47,6 +47,8 @@ from drives.cia301 import (
     ERROR_REGISTER,
     HEARTBEAT_BASE,
     NMT_COB_ID,
+    NODE_ID_RANGE,
+    NODE_IDS,
     EmcyCode,
     NmtCommand,
     NmtState,
@@ -117,7 +119,7 @@ class CanopenSimDrive:
         sync_clock: SyncClock | None = None,
         hand_needs_power: bool = False,
     ) -> None:
-        self.node_id = whole_in_range("node_id", node_id, 1, 127, context="CANopen slave")
+        self.node_id = whole_in_range("node_id", node_id, *NODE_ID_RANGE, context="CANopen slave", allowed=NODE_IDS)
         self._bus: can.BusABC | None = bus if isinstance(bus, can.BusABC) else None
         self._bus_config = None if isinstance(bus, can.BusABC) else dict(bus)
         self.drive = SimulatedDrive(parameters, timing, operator, name=f"node {self.node_id}",

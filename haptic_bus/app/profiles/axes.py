@@ -45,8 +45,8 @@ from types import MappingProxyType
 from typing import Any
 
 from drives.base import DriveScaling
-from drives.cia301 import NODE_ID_RANGE
-from drives.modbus.register_map import UNIT_ID_RANGE
+from drives.cia301 import NODE_ID_RANGE, NODE_IDS
+from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
 from drives.safety import SafetySettings
 from haptic_bus.analysis.can_timing import BITRATE_RANGE, BusLoad
 from haptic_bus.analysis.coupled_loop import MAX_AXES
@@ -74,7 +74,7 @@ from haptic_bus.profile.scene import FORCE_RANGE, check_force_limit
 
 DEFAULT_BITRATE = 1_000_000
 HAND_MODELS = ("none", "push")
-_ONE_LINK = "exactly one of node_id (CANopen, 1..127) and unit_id (Modbus, 1..247)"
+_ONE_LINK = f"exactly one of node_id ({NODE_IDS}) and unit_id ({UNIT_IDS})"
 _FIELDS = {"plane": ("point", "normal"), "box": ("center", "half"), "sphere": ("center", "radius")}
 
 
@@ -160,8 +160,8 @@ def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> 
             r.refuse_misspelling(key, _ONE_LINK)
     if ("node_id" in r.table) == ("unit_id" in r.table):
         raise profile_error(path, r.field("node_id"), r.table.get("node_id"), _ONE_LINK)
-    node = r.whole("node_id", *NODE_ID_RANGE) if "node_id" in r.table else None
-    unit = r.whole("unit_id", *UNIT_ID_RANGE) if "unit_id" in r.table else None
+    node = r.whole("node_id", *NODE_ID_RANGE, allowed=NODE_IDS) if "node_id" in r.table else None
+    unit = r.whole("unit_id", *UNIT_ID_RANGE, allowed=UNIT_IDS) if "unit_id" in r.table else None
     r.used.update(("node_id", "unit_id"))
     timing, delay = read_timing(r)
     mapping = r.text("mapping", choices=tuple(PDO_MAPPINGS), default="minimal")
