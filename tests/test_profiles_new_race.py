@@ -94,3 +94,35 @@ def test_a_write_that_fails_leaves_no_profile_and_says_why(
     assert main(["profiles", "new", "new", "--out", str(out)]) == 0  # the disk has room again: written whole
     assert out.read_text().startswith("# Profile new, written by `haptic-bus profiles new new`")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["new.toml"]
+
+
+@pytest.mark.parametrize("code", sorted(whole_file.NO_HARD_LINKS))
+def test_a_folder_without_hard_links_gets_the_file_exclusively_and_whole(
+        code: int, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where ``os.link`` is refused (FAT, some network mounts) the file is created exclusively under its name:
+    written whole; a file there kept (FileExistsError); a write that fails leaves nothing, no temporary file
+    either.  Another error of ``os.link`` (here ENOSPC) is the caller's, nothing left."""
+    def no_links(source: Any, destination: Any) -> None:
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(whole_file.os, "link", no_links)
+    target = tmp_path / "new.toml"
+    assert write_text_whole(target, "# new\n") == target and target.read_text() == "# new\n"
+    with pytest.raises(FileExistsError):
+        write_text_whole(target, "# other\n")
+    assert target.read_text() == "# new\n" and sorted(p.name for p in tmp_path.iterdir()) == ["new.toml"]
+    target.unlink()
+    _a_full_disk(monkeypatch)
+    with pytest.raises(OSError, match="No space left on device"):
+        write_text_whole(target, "# new\n" * 100)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_another_link_error_is_the_callers(tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def full(source: Any, destination: Any) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(whole_file.os, "link", full)
+    with pytest.raises(OSError, match="No space left on device"):
+        write_text_whole(tmp_path / "new.toml", "# new\n")
+    assert list(tmp_path.iterdir()) == []
