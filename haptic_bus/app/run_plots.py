@@ -51,7 +51,8 @@ def ending(run: RunFolder) -> tuple[str, bool]:
         return "did NOT end cleanly: run.json still says 'running' (the process was killed or crashed)", False
     reason = str(document.get("exit_reason", document.get("status", "ended")))
     error = document.get("error")
-    text = f"ended: {reason}" + (f": {error}" if error and not str(error).startswith(reason) else f" ({error})" if error else "")
+    said = str(error) if error else ""
+    text = f"ended: {said}" if said.startswith(reason) else f"ended: {reason}: {said}" if said else f"ended: {reason}"
     return text, reason in ("completed", "stopped")
 
 
