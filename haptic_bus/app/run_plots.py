@@ -32,6 +32,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
 from haptic_bus.app.run_folder import RunFolder
+from haptic_bus.app.run_options import ended_line
 from haptic_bus.control.record import RecordTable
 from haptic_bus.control.scene import SceneObject, object_from_dict
 
@@ -51,8 +52,7 @@ def ending(run: RunFolder) -> tuple[str, bool]:
         return "did NOT end cleanly: run.json still says 'running' (the process was killed or crashed)", False
     reason = str(document.get("exit_reason", document.get("status", "ended")))
     error = document.get("error")
-    said = str(error) if error else ""
-    text = f"ended: {said}" if said.startswith(reason) else f"ended: {reason}: {said}" if said else f"ended: {reason}"
+    text = "ended: " + (ended_line(reason, str(error)) if error else reason)
     return text, reason in ("completed", "stopped")
 
 
