@@ -284,6 +284,27 @@ def test_ctrl_c_in_demo_is_130_with_the_record_written(tmp_path: pathlib.Path) -
 
 
 @pytest.mark.slow
+def test_sigterm_in_demo_is_a_stop_exit_0_with_the_folder_complete(tmp_path: pathlib.Path) -> None:
+    """A service manager's stop of ``demo`` ends it as it ends ``run`` (it was status 143, run.json left
+    "running" and no pictures: break18)."""
+    out = tmp_path / "demo"
+    demo = Command("demo", "-v", "--duration", "1000", "--out", str(out))
+    try:
+        demo.wait_until(lambda: "-> OPERATION ENABLED" in demo.err, "the drive enabled")  # cycling now
+        time.sleep(0.2)
+        assert demo.interrupt(signum=signal.SIGTERM) == 0, demo.err[-2000:]
+        _no_traceback(demo)
+        assert "run ended early (stopped)\n" in demo.out
+    finally:
+        demo.close()
+    document = read_run(out)
+    assert (document["exit_reason"], document["ended"]) == ("stopped", True)
+    _, record = read_record(out)
+    assert 0 < record["time_s"].size == document["summary"]["cycles"] < 1_000_000
+    assert all((out / name).is_file() for name in ("timeline.png", "force_position.png", "region.png"))
+
+
+@pytest.mark.slow
 def test_ctrl_c_in_bench_is_130_with_the_sections_done_written(tmp_path: pathlib.Path) -> None:
     out = tmp_path / "bench"
     bench = Command("bench", "--quick", "--only", "bus", "--only", "passivity", "--out", str(out))

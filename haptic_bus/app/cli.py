@@ -102,12 +102,14 @@ def _plot(args: argparse.Namespace) -> int:
 def _demo(args: argparse.Namespace) -> int:
     from haptic_bus.app.demo import format_demo, run_demo
     from haptic_bus.app.profiles import load_profile
+    from haptic_bus.app.run_options import StopRequest, exit_status
 
     profile = load_profile(args.profile) if args.profile else None
-    result = run_demo(args.out, profile, seconds=args.duration, plots=not args.no_plots)
+    stop = StopRequest()
+    stop.install()  # SIGTERM (a service manager's stop) ends it "stopped", exit 0, as it ends run; Ctrl-C 130
+    result = run_demo(args.out, profile, seconds=args.duration, plots=not args.no_plots, stop=stop)
     print(format_demo(result))
-    reason = result.summary.exit_reason
-    return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(reason, EXIT_NO)
+    return exit_status(result.summary.exit_reason)
 
 
 def _run(args: argparse.Namespace) -> int:
