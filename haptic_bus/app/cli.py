@@ -44,6 +44,7 @@ from haptic_bus.app.arguments import (
 )
 from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, handlers_kept, stop_at_once_on_sigterm, stop_noted
 from haptic_bus.app.fault_cli import add_fault_reset_parser
+from haptic_bus.app.folder_lock import own_folder
 from haptic_bus.app.identify_cli import add_identify_parser
 from haptic_bus.app.run_arguments import (
     add_link_arguments,
@@ -91,11 +92,17 @@ def _plot(args: argparse.Namespace) -> int:
         raise ParameterError("RUN_DIR", str(run.path), "a run folder with cycles recorded in every record, or the loop "
                              f"its gate judged (this run has neither: {said})", "plot")
     out = writable_folder("--out", pathlib.Path(args.out) if args.out else run.path, context="plot")
-    for note in run.notes():
-        print(f"note: {note}")
-    from haptic_bus.app.run_pictures import render_run
+    notes = run.notes()  # before this command holds a folder: the lock it names is another run's
+    # pictures into a run's own folder while that run goes on would be replaced by its own at its end, or cross them
+    lock = own_folder(out, "RUN_DIR" if out == run.path else "--out", "plot")
+    try:
+        for note in notes:
+            print(f"note: {note}")
+        from haptic_bus.app.run_pictures import render_run
 
-    print(f"wrote {', '.join(str(path) for path in render_run(run, out))}")
+        print(f"wrote {', '.join(str(path) for path in render_run(run, out))}")
+    finally:
+        lock.release()
     return EXIT_OK
 
 
