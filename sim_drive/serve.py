@@ -14,6 +14,7 @@ import argparse
 import asyncio
 import datetime as dt
 import logging
+import os
 import signal
 import socket
 import sys
@@ -292,10 +293,26 @@ def serve_until_stopped(args: argparse.Namespace, serve: Callable[[asyncio.Event
 
     try:
         asyncio.run(run())
-    except (OSError, RuntimeError) as exc:
-        print(f"{PROG}: error: cannot serve on {', '.join(args.modbus)}: {exc}", file=sys.stderr)
+    except (OSError, RuntimeError) as exc:  # pymodbus says "Could not start listen, please check address." alone
+        print(f"{PROG}: error: cannot serve on {', '.join(args.modbus)}: {refused_address(args.modbus) or exc}",
+              file=sys.stderr)
         return False
     return True
+
+
+def refused_address(urls: Sequence[str]) -> str | None:
+    """Why the system refuses to listen at the first of ``urls`` it refuses (``Address already in use``; with
+    several, the address first), found by binding it for an instant; None if it refuses none of them."""
+    from sim_drive.modbus import parse_modbus_url
+
+    for url in urls:
+        host, port = parse_modbus_url(url)
+        try:
+            socket.create_server((host, port)).close()
+        except OSError as exc:
+            why = os.strerror(exc.errno) if exc.errno else str(exc)
+            return f"{url}: {why}" if len(urls) > 1 else why
+    return None
 
 
 def run_modbus_axes(args: argparse.Namespace) -> int:
