@@ -389,6 +389,25 @@ def test_a_closed_pipe_is_no_traceback(args: list[str]) -> None:
     assert done.stderr == "" and done.returncode in (0, 1), done.stderr  # check: 0 passive (1 would be "not passive")
 
 
+def test_a_run_whose_stdout_reader_is_gone_runs_to_its_end(haptic_sim: Any, tmp_path: pathlib.Path) -> None:
+    """``haptic-bus run ... | head -1`` (break18): the run's scaling lines met the closed pipe in its set-up, the
+    run ended "crashed" (BrokenPipeError in run.json, nothing recorded) and the console script exited 0 in
+    silence.  The reader gone before the first write (deterministic): the run completes, every row written."""
+    drive = haptic_sim("cia402-handle", interface="modbus")  # on 127.0.0.1, served by this process
+    reader, writer = os.pipe()
+    os.close(reader)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    try:
+        done = subprocess.run([sys.executable, "-m", "haptic_bus.app.cli", "run", "cia402-handle", *drive.run_args(),
+                               "--virtual-time", "--duration", "0.5", "--no-plots", "--out", str(tmp_path / "run")],
+                              cwd=REPO, env=env, stdout=writer, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(writer)
+    assert (done.returncode, done.stderr) == (0, "")
+    document = read_run(tmp_path / "run")
+    assert (document["status"], document["record"]) == ("completed", {"rows_written": 500, "rows_lost": 0})
+
+
 def test_a_pipe_to_head_is_no_traceback() -> None:
     env = dict(os.environ, PYTHONPATH=str(REPO))
     done = subprocess.run(f"{sys.executable} -m haptic_bus.app.cli {' '.join(SHOW)} | head -1", shell=True, cwd=REPO, env=env,

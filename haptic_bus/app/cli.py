@@ -18,7 +18,7 @@ import pathlib
 import signal
 import sys
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TextIO, cast
 
 from haptic_bus.app.arguments import (
     DAMPING_ALLOWED,
@@ -58,6 +58,7 @@ from haptic_bus.app.run_arguments import (
 from haptic_bus.app.scan_cli import add_scan_parser
 from haptic_bus.app.sdo_cli import add_sdo_parser
 from haptic_bus.app.status_cli import add_status_parser
+from haptic_bus.app.stdout_reader import ReaderMayGo
 from haptic_bus.app.validate_cli import add_validate_parser
 from haptic_bus.app.wall_check_cli import add_wall_check_parsers
 from haptic_bus.console import LIBRARIES, log_to_stderr, logging_kept
@@ -369,6 +370,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     command's until it exits (:func:`~haptic_bus.app.early_stop.exiting`,
     :func:`~haptic_bus.app.early_stop.handlers_kept`, :func:`~haptic_bus.console.logging_kept`)."""
     if argv is None:
+        sys.stdout = cast(TextIO, ReaderMayGo(sys.stdout))  # ``| head``: the command goes on to its end
         return _command(list(sys.argv[1:]))
     with handlers_kept(), logging_kept():
         return _command(list(argv), in_place=False)
