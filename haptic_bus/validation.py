@@ -111,6 +111,21 @@ def writable_file(name: str, path: str | os.PathLike[str], *, context: str = "")
     return file
 
 
+NOT_YET = "a file that does not exist yet (--force overwrites it)"
+"""What a new file's flag allows where the file exists and ``--force`` was not given."""
+
+
+def new_file(name: str, path: str | os.PathLike[str], force: bool, *, context: str = "") -> pathlib.Path:
+    """``path`` as a file a command is about to write, touching nothing: in an existing folder this user
+    can write, and one that does not exist yet unless ``force``; ParameterError naming ``name`` otherwise."""
+    target = pathlib.Path(path)
+    if target.is_dir() or not target.parent.is_dir() or not os.access(target.parent, os.W_OK):
+        raise ParameterError(name, str(target), "a file in an existing folder this user can write", context)
+    if target.exists() and not force:
+        raise ParameterError(name, str(target), NOT_YET, context)
+    return target
+
+
 def _unwritable(folder: pathlib.Path, exc: OSError) -> str:
     """Why ``folder`` cannot be made or written: a file in its way named, else the system's words."""
     for ancestor in (folder, *folder.parents):

@@ -18,6 +18,7 @@ import bisect
 import csv
 import dataclasses
 import math
+import os
 import pathlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -218,21 +219,24 @@ class RecordedForce(OperatorModel):
 
     @classmethod
     def from_csv(cls, path: str | pathlib.Path, interpolation: str = "hold") -> RecordedForce:
-        """Load a CSV with columns ``time`` (s) and ``force`` (N); a header row is optional."""
+        """Load a CSV with columns time (s) and force (N); a first row without a number in it is a header
+        (``time,force``, ``t_s,f_n``: its names are not read).  Rows are counted as in the file, blank ones too."""
         times: list[float] = []
         forces: list[float] = []
         try:
             with open(path, newline="") as file:
-                rows = [row for row in csv.reader(file) if row and any(cell.strip() for cell in row)]
+                rows = [(line, row) for line, row in enumerate(csv.reader(file), start=1)
+                        if row and any(cell.strip() for cell in row)]
         except OSError as exc:
             raise ParameterError("path", str(path), f"a readable CSV file ({exc.strerror})", "operator recorded") from exc
-        if rows and [cell.strip().lower() for cell in rows[0]] == ["time", "force"]:
+        if rows and not any(_is_number(cell) for cell in rows[0][1]):
             rows = rows[1:]
-        for line, row in enumerate(rows, start=1):
+        for line, row in rows:
             try:
                 t, f = (float(cell) for cell in row)
             except ValueError as exc:
-                raise ParameterError(f"{path} row {line}", row, "two numbers: time (s), force (N)", "operator recorded") from exc
+                raise ParameterError(f"{path} row {line}", row, "two numbers: time (s), force (N) (a first row "
+                                     "without a number is a header)", "operator recorded") from exc
             times.append(t)
             forces.append(f)
         return cls(tuple(times), tuple(forces), interpolation)
@@ -336,6 +340,15 @@ def operator_usage() -> str:
     return " | ".join(forms)
 
 
+def _is_number(text: str) -> bool:
+    """Whether ``text`` reads as a float (``nan`` and ``inf`` too: a value, refused later by its range)."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def operator_from_spec(spec: str) -> OperatorModel:
     """The model a command line spells ``NAME[:V1,V2,...]``: the values are the model's fields in
     order (:func:`operator_usage`; SI units: N, s, Hz, rad, m, N/m, N s/m), trailing optional ones
@@ -348,6 +361,8 @@ def operator_from_spec(spec: str) -> OperatorModel:
         raise ParameterError("--operator", spec, allowed)
     if cls is RecordedForce:
         path, _, interpolation = values.rpartition(",")
+        if path and interpolation not in INTERPOLATIONS and os.path.isfile(path) and not os.path.exists(values):
+            raise ParameterError("interpolation", interpolation, " or ".join(INTERPOLATIONS), "--operator recorded")
         if interpolation not in INTERPOLATIONS:  # no interpolation named: the comma, if any, is the path's
             path, interpolation = values, "hold"
         if not path:

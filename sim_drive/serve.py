@@ -4,7 +4,8 @@ CANopen: one slave (:class:`~sim_drive.canopen.slave.CanopenSimDrive`) or one pe
 device (:class:`~sim_drive.canopen.multi_axis.MultiAxisSim`), the main thread waiting for a stop
 signal.  Modbus: one TCP server, or the units of a multi-axis device on one server or a server per
 axis, in an asyncio loop that a stop signal ends.  A refusal of the arguments or the profile is one
-line on stderr and exit 2, before the bus or the socket is opened; a bus or socket that fails, exit 1.
+line on stderr and exit 2, before the bus or the socket is opened; a bus or socket that fails, or a CANopen
+node id another node already sends with (heard before the boot-up, :func:`node_heard`), exit 1.
 """
 
 from __future__ import annotations
@@ -13,10 +14,12 @@ import argparse
 import asyncio
 import datetime as dt
 import logging
+import os
 import signal
 import socket
 import sys
-from collections.abc import Awaitable, Callable
+import time
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from typing import Any
 
 from drives.os_threads import show_names
@@ -31,6 +34,9 @@ from sim_drive.sync_clock import sync_clock
 logger = logging.getLogger("sim_drive")
 
 PROG = "haptic-bus sim"
+NODE_LISTEN_S = 0.25  # s: how long the simulator listens for a node of its id before its boot-up: 2.5 periods of a
+# simulated drive's heartbeat (0x1017 = 100 ms), whose next one comes within a period; a master cycling it is heard at once
+SENT_BY_A_NODE = (0x080, 0x180, 0x280, 0x380, 0x480, 0x580, 0x700)  # EMCY, TPDO1-4, SDO answer, heartbeat: + node id
 
 
 class StopSignals:
@@ -126,7 +132,7 @@ def run_canopen(args: argparse.Namespace) -> int:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
     with StopSignals() as stop_signals:  # from before the boot-up: an early signal still stops cleanly
-        if not started(sim):
+        if not started(sim, config, [args.node_id]):
             return 1
         try:
             dictionary = "standard objects only" if args.od == "standard" else f"EDS {args.eds or eds_path()}"
@@ -167,7 +173,7 @@ def run_axes(args: argparse.Namespace) -> int:
         return 2
     scheduling = set_up_process(args.log_wall_clock, "canopen", logging.WARNING)  # once the arguments hold
     with StopSignals() as stop_signals:
-        if not started(sim):
+        if not started(sim, config, [node.node_id for node in sim.nodes]):
             return 1
         try:
             logger.info("node%s %s: serving on %s %s (one simulated drive per axis, the hand: %s); %s",
@@ -184,12 +190,33 @@ def run_axes(args: argparse.Namespace) -> int:
     return 0
 
 
-def started(sim: Any) -> bool:
-    """Start ``sim`` (a slave or the multi-axis device), its threads named for the OS; False after one line on
-    stderr if its bus cannot be opened."""
+def node_heard(bus: Mapping[str, Any], node_ids: Sequence[int], seconds: float) -> int | None:
+    """The first of ``node_ids`` that sends a frame (:data:`SENT_BY_A_NODE`) on ``bus`` (a configuration)
+    within ``seconds`` (s), or None: a drive, or another simulator, already has that id."""
+    from drives.bus_config import open_bus
+
+    sent = {base + node: node for node in node_ids for base in SENT_BY_A_NODE}
+    deadline = time.monotonic() + seconds
+    with open_bus(**bus) as listener:
+        while (left := deadline - time.monotonic()) > 0:
+            message = listener.recv(left)
+            if message is not None and not message.is_extended_id and message.arbitration_id in sent:
+                return sent[message.arbitration_id]
+    return None
+
+
+def started(sim: Any, bus: Mapping[str, Any], node_ids: Sequence[int]) -> bool:
+    """Start ``sim`` (a slave or the multi-axis device on ``bus``, its nodes ``node_ids``), its threads named for
+    the OS; False after one line on stderr if its bus cannot be opened or a node of one of its ids is
+    heard there first (two node 5 on one bus answer each SDO twice: every master's session fails)."""
     import can
 
     try:
+        taken = node_heard(bus, node_ids, NODE_LISTEN_S)
+        if taken is not None:
+            print(f"{PROG}: error: node {taken} is already on this bus (a frame of it heard: a drive or another "
+                  "simulator with that id); stop it or give another node id", file=sys.stderr)
+            return False
         sim.start()
     except DriveError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
@@ -265,10 +292,26 @@ def serve_until_stopped(args: argparse.Namespace, serve: Callable[[asyncio.Event
 
     try:
         asyncio.run(run())
-    except (OSError, RuntimeError) as exc:
-        print(f"{PROG}: error: cannot serve on {', '.join(args.modbus)}: {exc}", file=sys.stderr)
+    except (OSError, RuntimeError) as exc:  # pymodbus says "Could not start listen, please check address." alone
+        print(f"{PROG}: error: cannot serve on {', '.join(args.modbus)}: {refused_address(args.modbus) or exc}",
+              file=sys.stderr)
         return False
     return True
+
+
+def refused_address(urls: Sequence[str]) -> str | None:
+    """Why the system refuses to listen at the first of ``urls`` it refuses (``Address already in use``; with
+    several, the address first), found by binding it for an instant; None if it refuses none of them."""
+    from sim_drive.modbus import parse_modbus_url
+
+    for url in urls:
+        host, port = parse_modbus_url(url)
+        try:
+            socket.create_server((host, port)).close()
+        except OSError as exc:
+            why = os.strerror(exc.errno) if exc.errno else str(exc)
+            return f"{url}: {why}" if len(urls) > 1 else why
+    return None
 
 
 def run_modbus_axes(args: argparse.Namespace) -> int:

@@ -58,3 +58,14 @@ def test_eq23_applies_only_to_the_seeds_own_loop() -> None:
 def test_the_lossless_mass_is_named_in_the_text() -> None:
     text = format_check(check_passivity(0.5, 0.0, 1e-3, 0.0, 0.0))
     assert "passive (lossless)" in text and "marginally stable" in text and "UNSTABLE" not in text
+
+
+def test_the_out_of_band_line_says_what_its_sign_means_for_this_loop() -> None:
+    """The worst force's line said "(< 0: the operator can take energy out)" after a positive figure too
+    (cia402-handle's wall: +6.167e-12 W per N^2, break18); the words follow the sign."""
+    takes_out = check_loop(WallLoop(0.5, 0.1, 1e-3, 200.0, 1.0, 1.5))
+    keeps = check_loop(WallLoop(1.0, 20.0, 1e-3, 1500.0, 10.0, 1, "average"))
+    assert takes_out.out_of_band is not None and keeps.out_of_band is not None
+    assert takes_out.out_of_band.harmonics.power < 0 < keeps.out_of_band.harmonics.power
+    assert "W per N^2 (< 0: the operator can take energy out)" in format_check(takes_out)
+    assert "W per N^2 (>= 0: none of these forces takes energy out)" in format_check(keeps)

@@ -3,12 +3,15 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 from PIL import Image
 
 from haptic_bus.app.cli import main
+from haptic_bus.app.demo import format_demo, run_demo
+from haptic_bus.app.run_options import StopRequest
 
 
 def _is_real_png(path: Path, min_colours: int = 8) -> bool:
@@ -23,7 +26,7 @@ def test_demo_runs_as_a_command_and_writes_real_plots(tmp_path: Path, capsys: py
     code = main(["demo", "--out", str(tmp_path)])
     out, err = capsys.readouterr()
     assert code == 0, err
-    assert "gate: passed" in out and "cycles: 2000" in out
+    assert "gate: passed" in out and "\ncycles: 2000 in virtual time; force saturated in 0\n" in out  # virtual said once
     assert "steady penetration: 2.0000 mm vs F/K = 2.0000 mm" in out
     for name in ("timeline.png", "force_position.png", "region.png"):
         assert _is_real_png(tmp_path / name), name
@@ -43,3 +46,22 @@ def test_profiles_check_matches_check(capsys: pytest.CaptureFixture[str]) -> Non
     assert "margin +0.0998139 N s/m" in capsys.readouterr().out
     assert main(["check", "--mass", "0.5", "--friction", "0.1", "--period", "0.001", "--stiffness", "200",
                  "--damping", "100", "--delay", "1"]) == 1
+
+
+@pytest.mark.parametrize(("interrupted", "reason", "said"), [
+    (False, "stopped", "run ended early (stopped)"),
+    (True, "interrupted", "run ended early (interrupted): interrupted (Ctrl-C)"),
+], ids=["sigterm", "ctrl-c"])
+def test_a_demo_asked_to_stop_ends_at_a_cycle_boundary_and_says_how(interrupted: bool, reason: str, said: str,
+                                                                    tmp_path: Path) -> None:
+    """A SIGTERM killed ``haptic-bus demo`` (status 143, run.json left "running", no pictures; break18): the
+    command now gives the demo a stop request, which SIGTERM and SIGINT set, as ``run``'s.  Here the
+    request is set before the first cycle: no cycle runs, the folder is complete."""
+    stop = StopRequest()
+    stop.interrupted = interrupted
+    stop.event.set()
+    result = run_demo(tmp_path, seconds=0.1, plots=False, stop=stop)
+    assert (result.summary.exit_reason, result.summary.cycles) == (reason, 0)
+    assert format_demo(result).splitlines()[-2] == said
+    document = json.loads((tmp_path / "run.json").read_text())
+    assert (document["status"], document["ended"]) == (reason, True)

@@ -285,6 +285,27 @@ def test_ctrl_c_in_demo_is_130_with_the_record_written(tmp_path: pathlib.Path) -
 
 
 @pytest.mark.slow
+def test_sigterm_in_demo_is_a_stop_exit_0_with_the_folder_complete(tmp_path: pathlib.Path) -> None:
+    """A service manager's stop of ``demo`` ends it as it ends ``run`` (it was status 143, run.json left
+    "running" and no pictures: break18)."""
+    out = tmp_path / "demo"
+    demo = Command("demo", "-v", "--duration", "1000", "--out", str(out))
+    try:
+        demo.wait_until(lambda: "-> OPERATION ENABLED" in demo.err, "the drive enabled")  # cycling now
+        time.sleep(0.2)
+        assert demo.interrupt(signum=signal.SIGTERM) == 0, demo.err[-2000:]
+        _no_traceback(demo)
+        assert "run ended early (stopped)\n" in demo.out
+    finally:
+        demo.close()
+    document = read_run(out)
+    assert (document["exit_reason"], document["ended"]) == ("stopped", True)
+    _, record = read_record(out)
+    assert 0 < record["time_s"].size == document["summary"]["cycles"] < 1_000_000
+    assert all((out / name).is_file() for name in ("timeline.png", "force_position.png", "region.png"))
+
+
+@pytest.mark.slow
 def test_ctrl_c_in_bench_is_130_with_the_sections_done_written(tmp_path: pathlib.Path) -> None:
     out = tmp_path / "bench"
     bench = Command("bench", "--quick", "--only", "bus", "--only", "passivity", "--out", str(out))
@@ -367,6 +388,25 @@ def test_a_closed_pipe_is_no_traceback(args: list[str]) -> None:
     finally:
         os.close(writer)
     assert done.stderr == "" and done.returncode in (0, 1), done.stderr  # check: 0 passive (1 would be "not passive")
+
+
+def test_a_run_whose_stdout_reader_is_gone_runs_to_its_end(haptic_sim: Any, tmp_path: pathlib.Path) -> None:
+    """``haptic-bus run ... | head -1`` (break18): the run's scaling lines met the closed pipe in its set-up, the
+    run ended "crashed" (BrokenPipeError in run.json, nothing recorded) and the console script exited 0 in
+    silence.  The reader gone before the first write (deterministic): the run completes, every row written."""
+    drive = haptic_sim("cia402-handle", interface="modbus")  # on 127.0.0.1, served by this process
+    reader, writer = os.pipe()
+    os.close(reader)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    try:
+        done = subprocess.run([sys.executable, "-m", "haptic_bus.app.cli", "run", "cia402-handle", *drive.run_args(),
+                               "--virtual-time", "--duration", "0.5", "--no-plots", "--out", str(tmp_path / "run")],
+                              cwd=REPO, env=env, stdout=writer, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(writer)
+    assert (done.returncode, done.stderr) == (0, "")
+    document = read_run(tmp_path / "run")
+    assert (document["status"], document["record"]) == ("completed", {"rows_written": 500, "rows_lost": 0})
 
 
 def test_a_pipe_to_head_is_no_traceback() -> None:

@@ -167,6 +167,26 @@ def test_invalid_input_is_refused_before_the_bus_is_touched(arguments: list[str]
     assert existing.read_text() == "# an earlier identify's\n"  # untouched
 
 
+@pytest.mark.parametrize(("command", "flag"), [(["identify", "--node-id", "5"], "--write-profile"),
+                                              (["profiles", "new", "x"], "--out")], ids=["identify", "profiles-new"])
+def test_a_file_to_write_is_refused_in_the_same_words_by_both_commands(command: list[str], flag: str, tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """``identify --write-profile`` said "--force replaces it" and "an existing, writable folder" where
+    ``profiles new --out`` said "--force overwrites it" and "an existing folder this user can write" for the
+    same check (break18): one check now (``haptic_bus.validation.new_file``), one wording."""
+    existing, absent = tmp_path / "identified.toml", tmp_path / "no-folder" / "x.toml"
+    existing.write_text("# an earlier identify's\n")
+    identify = command[0] == "identify"  # its bus a name python-can lacks: a bus touched would be exit 1
+    rest = ["--profile", str(controller_profile(tmp_path)), "--interface", "no-such-interface"] if identify else []
+    for target, allowed in ((existing, "a file that does not exist yet (--force overwrites it)"),
+                            (absent, "a file in an existing folder this user can write")):
+        code = main([*command, *rest, flag, str(target)])
+        said = f"haptic-bus {' '.join(command[:2] if command[0] == 'profiles' else command[:1])}: error: {flag} = " \
+               f"'{target}' is invalid; allowed: {allowed}\n"
+        assert (code, capsys.readouterr().err) == (2, said)
+    assert existing.read_text() == "# an earlier identify's\n"
+
+
 # --------------------------------------------------------------------------- a hidden profile; Ctrl-C of two processes
 
 def _hidden_profile(folder: Path) -> Path:

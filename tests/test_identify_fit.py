@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
+import re
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -35,7 +36,7 @@ from haptic_bus.identify.excitation import HIGH_FRACTION, LOW_HZ, multisine_for
 from haptic_bus.identify.model import IncrementEquations, first_order_filter, quantization_variance, usable_equations
 from haptic_bus.identify.probe import doublet_mass
 from sim_drive.device import SimulatedDrive
-from sim_drive.operator import HandModel, OperatorModel
+from sim_drive.operator import ConstantPush, HandModel, OperatorModel
 from sim_drive.parameters import DeviceParameters
 
 SIGMAS = 4.0
@@ -222,6 +223,19 @@ def test_a_handle_held_by_a_spring_is_refused() -> None:
     truth = DeviceParameters(mass=0.37, friction=2.9, coulomb_friction=0.2)
     session, found = identify_simulated(truth, "cia402", mass=0.5, force_limit=20.0, operator=HandModel(500.0, 5.0))
     assert session.refused and "springs back" in found.probe.message and not found.supported
+
+
+def test_a_handle_pushed_back_past_its_start_is_refused_in_words_that_say_so() -> None:
+    """cia402-handle's simulated hand pushes 3 N in +x: after the probe's push towards -x the handle ends
+    far on the other side of its start.  The refusal read "it kept -7.32 mm of 1.77 mm" (break18)."""
+    truth = DeviceParameters(mass=1.0, friction=20.0)
+    session, found = identify_simulated(truth, "cia402", mass=1.0, force_limit=30.0, operator=ConstantPush(3.0))
+    assert session.refused and not found.supported
+    said = re.fullmatch(r"the handle springs back after a push towards -x: it came back past its start, ([0-9.]+) mm "
+                        r"beyond it, after ([0-9.]+) mm; something holds it or pushes it \(a hand, a compliant stop\)",
+                        found.probe.message)
+    assert said is not None, found.probe.message
+    assert float(said.group(1)) > 0 and float(said.group(2)) > 0
 
 
 def test_a_force_limit_barely_above_coulomb_friction_cannot_support_the_estimate() -> None:

@@ -44,6 +44,7 @@ RECORDED = {  # several processes, or several axes for 12 s: the tests that driv
     ("controller.md", "bash", 0): "tests/test_run_plots.py",
     ("axes.md", "bash", 0): "tests/test_axes_run.py",
     ("axes.md", "bash", 1): "tests/test_modbus_axes.py",
+    ("operations.md", "bash", 0): "tests/test_operations_e2e.py",
     ("validate.md", "bash", 0): "tests/test_validate.py",
 }
 

@@ -106,6 +106,43 @@ def test_the_lock_goes_with_a_killed_process(tmp_path: pathlib.Path, capsys: pyt
     assert not (folder / LOCK_NAME).exists()  # the killed holder's file, taken over and removed by the run that ended
 
 
+def test_plot_of_a_folder_a_run_still_writes_is_refused_there_and_says_so_elsewhere(tmp_path: pathlib.Path,
+                                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``haptic-bus plot`` of a folder a live run holds drew its pictures into it (the run's own replaced them
+    at its end) and called the run "killed or crashed" (break18).  Into that folder: refused as a second run
+    is; elsewhere (``--out``): drawn, the note naming the run still writing it; once that run is gone
+    (``kill -9``): "did not end cleanly", as before."""
+    folder = tmp_path / "live"
+    assert run_cli(capsys, "demo", "--duration", "0.1", "--no-plots", "--out", str(folder)).code == 0
+    document = json.loads((folder / "run.json").read_text())
+    (folder / "run.json").write_text(json.dumps({**document, "status": "running", "ended": False}))  # as while it runs
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    holder = subprocess.Popen([sys.executable, "-c", HOLD_LOCK, str(folder)], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "locked\n"
+        into = run_cli(capsys, "plot", str(folder))
+        drawn_into = sorted(p.name for p in folder.glob("*.png"))
+        elsewhere = run_cli(capsys, "plot", str(folder), "--out", str(tmp_path / "snapshot"))
+        holder.send_signal(signal.SIGKILL)
+        holder.wait(10.0)
+        after = run_cli(capsys, "plot", str(folder))
+    finally:
+        if holder.poll() is None:
+            holder.kill()
+        holder.wait(10.0)
+        for stream in (holder.stdout, holder.stdin):
+            if stream is not None:
+                stream.close()
+    assert into.code == 2 and f"the run of process {holder.pid} holds" in refused_line(into.err) and drawn_into == []
+    assert elsewhere.code == 0, elsewhere.err
+    assert elsewhere.out.splitlines()[0] == f"note: {folder}: the run of process {holder.pid} is still writing it; so far " \
+                                            "record.csv holds 100 cycles"
+    assert (tmp_path / "snapshot" / "timeline.png").is_file()
+    assert after.code == 0 and "the run did not end cleanly" in after.out.splitlines()[0]
+    assert (folder / "timeline.png").is_file() and not (folder / LOCK_NAME).exists()
+
+
 def test_a_run_into_an_earlier_runs_folder_replaces_that_run_and_keeps_the_users_files(
         tmp_path: pathlib.Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
     """A folder given again held the earlier run's record.csv and pictures beside the new run.json

@@ -28,7 +28,7 @@ from haptic_bus.app.demo import run_demo
 from haptic_bus.app.kb_plane import kb_plane_figure
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.run_folder import RunFolder, read_run_folder
-from haptic_bus.app.run_plots import force_position_figure, timeline_figure, wall_energy_taken_and_returned
+from haptic_bus.app.run_plots import ending, force_position_figure, timeline_figure, wall_energy_taken_and_returned
 from haptic_bus.node.upload import upload_walls
 from tests.run_rig import events_of, profile_variant, read_run, run_cli, simulated_drive
 
@@ -190,3 +190,15 @@ def test_region_marks_walls_with_their_verdicts(tmp_path: pathlib.Path, capsys: 
     result = run_cli(capsys, *REGION, "--png", str(tmp_path / "r"), "--mark", "1500,10", "--mark", "30000,2")
     assert result.code == 0 and result.out == f"wrote {tmp_path / 'r.png'}\n"
     assert (tmp_path / "r.png").stat().st_size > 30_000
+
+
+@pytest.mark.parametrize("document, said", [
+    ({"exit_reason": "interrupted", "error": "interrupted (Ctrl-C)"}, "ended: interrupted (Ctrl-C)"),
+    ({"exit_reason": "drive error", "error": "CANopen node 5: EMCY 0x2310"}, "ended: drive error: CANopen node 5: EMCY 0x2310"),
+    ({"exit_reason": "stopped", "error": None}, "ended: stopped"),
+    ({"status": "completed"}, "ended: completed"),
+], ids=["error-starting-with-the-reason", "error-beside-the-reason", "no-error", "status-only"])
+def test_the_title_says_how_the_run_ended_once(document: dict[str, object], said: str, tmp_path: pathlib.Path) -> None:
+    """A Ctrl-C'd run's title read "ended: interrupted (interrupted (Ctrl-C))" (break18): an error that
+    begins with the exit reason is said alone."""
+    assert ending(RunFolder(tmp_path, {"ended": True, **document}, None)) == (said, document.get("error") is None)

@@ -3,6 +3,7 @@ Modbus server), profiles, clean stop on signals."""
 
 from __future__ import annotations
 
+import os
 import pathlib
 import re
 import signal
@@ -10,12 +11,14 @@ import socket
 import struct
 import subprocess
 import sys
+import threading
 
 import pytest
 
 from drives.bus_config import open_bus
 from drives.cia402 import Command
 from haptic_bus.errors import ParameterError
+from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.cli import _parse, build_parser, main
 from sim_drive.eds import eds_path
 from sim_drive.operator import HandModel
@@ -25,6 +28,7 @@ from sim_drive.setups import modbus_axes_setup
 
 NODE = 11
 BOOT_WAIT = 20.0  # s: the subprocess imports numpy, canopen, python-can first
+STOP_AFTER = 20.0  # s: SIGTERM to a simulator in this process that serves where the test expects a refusal
 MODBUS_URL = "tcp://127.0.0.1:0"
 REPO = pathlib.Path(__file__).resolve().parents[1]
 
@@ -122,7 +126,32 @@ def test_modbus_address_in_use_exits_1_with_one_line(capsys: pytest.CaptureFixtu
         taken.listen()
         url = f"tcp://127.0.0.1:{taken.getsockname()[1]}"
         assert main(["--modbus", url]) == 1
-    assert f"cannot serve on {url}" in one_error_line(capsys.readouterr().err)
+    # the system's reason, not pymodbus' "Could not start listen, please check address." (break18)
+    assert one_error_line(capsys.readouterr().err) == f"haptic-bus sim: error: cannot serve on {url}: Address already in use\n"
+
+
+@pytest.mark.parametrize("ids", [["--node-id", str(NODE)], ["--node-ids", f"{NODE - 1},{NODE}"]], ids=["one", "axes"])
+def test_a_node_id_already_on_the_bus_exits_1_with_one_line_before_any_boot_up(
+        ids: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    """A second ``haptic-bus sim --node-id 11`` on a bus with a node 11 served beside it (break18): every SDO
+    answered twice, scan's and run's sessions failing with "Node returned a value for 0x1018:04 instead".
+    It now listens first (its heartbeat comes every 100 ms) and refuses, sending nothing."""
+    channel = f"sim-cli-dup-{'-'.join(ids)}"
+    first = CanopenSimDrive({"interface": "virtual", "channel": channel}, NODE).start()
+    bound = threading.Timer(STOP_AFTER, os.kill, (os.getpid(), signal.SIGTERM))  # a sim that serves is stopped (exit 0)
+    try:
+        with open_bus(interface="virtual", channel=channel) as sniffer:
+            bound.start()
+            assert main(["--interface", "virtual", "--channel", channel, *ids]) == 1
+            frames = [sniffer.recv(0.0) for _ in range(100)]  # bounded: what reached the bus meanwhile
+    finally:
+        bound.cancel()
+        first.stop()
+    line = one_error_line(capsys.readouterr().err)
+    assert line == (f"haptic-bus sim: error: node {NODE} is already on this bus (a frame of it heard: a drive or "
+                    "another simulator with that id); stop it or give another node id\n")
+    assert not [f for f in frames if f is not None and f.arbitration_id in (0x700 + NODE - 1, 0x700 + NODE) and
+                f.data == bytearray([0])]  # no boot-up of the second: a master cycling node 11 saw no reset
 
 
 def test_a_program_calling_main_keeps_its_logging(capsys: pytest.CaptureFixture[str]) -> None:

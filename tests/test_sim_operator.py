@@ -58,11 +58,15 @@ def test_recording_hold_and_linear(tmp_path: pathlib.Path) -> None:
     headerless = tmp_path / "bare.csv"
     headerless.write_text("0,2\n1,3\n")
     assert RecordedForce.from_csv(headerless).forces == (2.0, 3.0)
+    named = tmp_path / "named.csv"  # any header of names: it was refused unless it read exactly time,force (break18)
+    named.write_text("t_s, force_N\n0,2\n1,3\n")
+    assert RecordedForce.from_csv(named).forces == (2.0, 3.0)
 
 
 @pytest.mark.parametrize(
     "text, match",
-    [("time,force\n0,1\n0,2\n", "time\\[1\\]"), ("time,force\n0,x\n", "row 1"), ("", "times/forces"), ("0,1,2\n", "row 1")],
+    [("time,force\n0,1\n0,2\n", "time\\[1\\]"), ("time,force\n0,x\n", "row 2"), ("", "times/forces"), ("0,1,2\n", "row 1"),
+     ("0,x\n1,2\n", "row 1"), ("t_s,f_n\n\n0,1\n1,y\n", "row 4")],  # a row with a number is no header; rows as in the file
 )
 def test_bad_recordings(tmp_path: pathlib.Path, text: str, match: str) -> None:
     path = tmp_path / "bad.csv"

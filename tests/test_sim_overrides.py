@@ -73,6 +73,15 @@ def test_a_recorded_operator_reads_its_csv(tmp_path: Any) -> None:
     assert models.operator_from_spec(f"recorded:{track},linear").interpolation == "linear"
 
 
+def test_a_misspelt_interpolation_after_an_existing_csv_is_named(tmp_path: Any) -> None:
+    """``recorded:push.csv,cubic`` was refused as a file 'push.csv,cubic' that does not exist (break18)."""
+    track = tmp_path / "push.csv"
+    track.write_text("0,0\n1,2\n")
+    with pytest.raises(ParameterError) as refused:
+        models.operator_from_spec(f"recorded:{track},cubic")
+    assert str(refused.value) == "--operator recorded: interpolation = 'cubic' is invalid; allowed: hold or linear"
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--mass", "-1"], "--mass = -1.0 is invalid; allowed: a finite real in [1e-09, 1e+09] kg"),
     (["--mass", "nan"], "--mass = nan is invalid"),

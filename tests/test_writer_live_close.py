@@ -64,3 +64,40 @@ def test_run_writer_process_outlives_a_sigterm_to_the_process_group(tmp_path) ->
     stats = writer.close()
     assert stats.get("records") == {} and "failure" not in stats
     assert writer.process.exitcode == 0
+
+
+class _ClosedPipe(io.StringIO):
+    """stdout whose reader is gone (``haptic-bus run ... | head -3``): every write fails."""
+
+    def write(self, text: str) -> int:
+        raise BrokenPipeError(32, "Broken pipe")
+
+
+def test_a_view_whose_reader_is_gone_ends_and_the_records_are_written_in_full(tmp_path: pathlib.Path,
+                                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """``haptic-bus run ... | head`` (break18): the view's print raised BrokenPipeError in the writer, which
+    ended its loop ("run writer: [Errno 32] Broken pipe"), and the record held 1547 of the run's 5000 cycles
+    in a run that said "completed".  Now the view ends; every row is written."""
+    monkeypatch.setattr(sys, "stderr", io.StringIO())  # no terminal: the view prints plain lines on stdout
+    monkeypatch.setattr(sys, "stdout", _ClosedPipe())
+    ours, theirs = multiprocessing.get_context("spawn").Pipe()
+    record = RunRecord(16, shared=True)
+    try:
+        writer = Writer(tmp_path, theirs)
+        writer.handle(("record", "record.csv", record.spec, "x"))
+        assert ours.recv() == ("attached", "record.csv")
+        writer.handle(("live", "run", 1e-3, 1.0))
+        for k in range(ROWS):
+            record.append(*([k * 1e-3] + [0.0] * (len(COLUMNS) - 1)))
+            writer.show(writer.view_due)  # the redraw due now: the first one meets the closed pipe
+            writer.flush()
+        assert writer.view is None and writer.failure is None
+        writer.handle(("stop",))
+        stats = writer.close()
+    finally:
+        record.unlink()
+        record.close()
+        ours.close()
+        theirs.close()
+    assert stats == {"records": {"record.csv": {"rows_written": ROWS, "rows_lost": 0}}}
+    assert len((tmp_path / "record.csv").read_text().splitlines()) == 1 + ROWS

@@ -253,6 +253,11 @@ def _exposure_text(exposure: Exposure) -> str:
     return f"{exposure.power:+.4g} W per N^2 ({tones})"
 
 
+def _exposure_meaning(power: float) -> str:
+    """What the sign of the worst out-of-band force's mean power (W per N^2) means for the operator."""
+    return "< 0: the operator can take energy out" if power < 0 else ">= 0: none of these forces takes energy out"
+
+
 def format_check(report: CheckReport) -> str:
     """Human-readable lines of a :class:`CheckReport`."""
     p = report.loop
@@ -304,5 +309,5 @@ def format_check(report: CheckReport) -> str:
     else:
         lines.append(f"out of band (above Nyquist): worst pair {_exposure_text(band.pair)}")
         lines.append(f"  worst force of up to {band.harmonics.harmonics} aliases each side:"
-                     f" {band.harmonics.power:+.4g} W per N^2 (< 0: the operator can take energy out)")
+                     f" {band.harmonics.power:+.4g} W per N^2 ({_exposure_meaning(band.harmonics.power)})")
     return "\n".join(lines)

@@ -18,7 +18,7 @@ import pathlib
 import signal
 import sys
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TextIO, cast
 
 from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
 from haptic_bus.app.arguments import (
@@ -45,6 +45,7 @@ from haptic_bus.app.arguments import (
 )
 from haptic_bus.app.early_stop import STOPPED_BEFORE_START, StoppedBeforeStart, handlers_kept, stop_at_once_on_sigterm, stop_noted
 from haptic_bus.app.fault_cli import add_fault_reset_parser
+from haptic_bus.app.folder_lock import own_folder
 from haptic_bus.app.identify_cli import add_identify_parser
 from haptic_bus.app.run_arguments import (
     add_link_arguments,
@@ -58,6 +59,7 @@ from haptic_bus.app.run_arguments import (
 from haptic_bus.app.scan_cli import add_scan_parser
 from haptic_bus.app.sdo_cli import add_sdo_parser
 from haptic_bus.app.status_cli import add_status_parser
+from haptic_bus.app.stdout_reader import ReaderMayGo
 from haptic_bus.app.validate_cli import add_validate_parser
 from haptic_bus.app.wall_check_cli import add_wall_check_parsers
 from haptic_bus.console import LIBRARIES, log_to_stderr, logging_kept
@@ -92,23 +94,31 @@ def _plot(args: argparse.Namespace) -> int:
         raise ParameterError("RUN_DIR", str(run.path), "a run folder with cycles recorded in every record, or the loop "
                              f"its gate judged (this run has neither: {said})", "plot")
     out = writable_folder("--out", pathlib.Path(args.out) if args.out else run.path, context="plot")
-    for note in run.notes():
-        print(f"note: {note}")
-    from haptic_bus.app.run_pictures import render_run
+    notes = run.notes()  # before this command holds a folder: the lock it names is another run's
+    # pictures into a run's own folder while that run goes on would be replaced by its own at its end, or cross them
+    lock = own_folder(out, "RUN_DIR" if out == run.path else "--out", "plot")
+    try:
+        for note in notes:
+            print(f"note: {note}")
+        from haptic_bus.app.run_pictures import render_run
 
-    print(f"wrote {', '.join(str(path) for path in render_run(run, out))}")
+        print(f"wrote {', '.join(str(path) for path in render_run(run, out))}")
+    finally:
+        lock.release()
     return EXIT_OK
 
 
 def _demo(args: argparse.Namespace) -> int:
     from haptic_bus.app.demo import format_demo, run_demo
     from haptic_bus.app.profiles import load_profile
+    from haptic_bus.app.run_options import StopRequest, exit_status
 
     profile = load_profile(args.profile) if args.profile else None
-    result = run_demo(args.out, profile, seconds=args.duration, plots=not args.no_plots)
+    stop = StopRequest()
+    stop.install()  # SIGTERM (a service manager's stop) ends it "stopped", exit 0, as it ends run; Ctrl-C 130
+    result = run_demo(args.out, profile, seconds=args.duration, plots=not args.no_plots, stop=stop)
     print(format_demo(result))
-    reason = result.summary.exit_reason
-    return {"completed": EXIT_OK, "interrupted": EXIT_INTERRUPTED, "assumption broken": EXIT_ASSUMPTION}.get(reason, EXIT_NO)
+    return exit_status(result.summary.exit_reason)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -375,6 +385,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     command's until it exits (:func:`~haptic_bus.app.early_stop.exiting`,
     :func:`~haptic_bus.app.early_stop.handlers_kept`, :func:`~haptic_bus.console.logging_kept`)."""
     if argv is None:
+        sys.stdout = cast(TextIO, ReaderMayGo(sys.stdout))  # ``| head``: the command goes on to its end
         return _command(list(sys.argv[1:]))
     with handlers_kept(), logging_kept():
         return _command(list(argv), in_place=False)

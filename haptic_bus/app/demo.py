@@ -21,6 +21,7 @@ from haptic_bus.app.demo_kinds import Findings, demo_kind
 from haptic_bus.app.profiles import AxesProfile, Profile, default_profile
 from haptic_bus.app.run_folder import RunJournal, own_run_folder
 from haptic_bus.app.run_kinds import run_kind
+from haptic_bus.app.run_options import StopRequest
 from haptic_bus.app.run_recorder import RunRecorder
 from haptic_bus.control.controller import RunSummary, WallController
 
@@ -39,10 +40,11 @@ class DemoResult:
 
 
 def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None = None, seconds: float | None = None,
-             plots: bool = True) -> DemoResult:
+             plots: bool = True, stop: StopRequest | None = None) -> DemoResult:
     """Run ``profile`` (default: the shipped default) for ``seconds`` of virtual time (None: 2 s for one
     axis, the hand's whole tour for several); write every axis' record, ``run.json`` and (if
-    ``plots``) the pictures to ``out_dir``, whatever ends the run (Ctrl-C too)."""
+    ``plots``) the pictures to ``out_dir``, whatever ends the run (Ctrl-C too).  ``stop`` (the command
+    installs it for SIGINT and SIGTERM) ends the cycles at the next boundary, "stopped" or "interrupted"."""
     profile = profile or default_profile()
     kind, demo = run_kind(profile), demo_kind(profile)
     out, lock = own_run_folder(out_dir, profile.name)  # held until the demo has written everything (or its process ends)
@@ -66,10 +68,13 @@ def run_demo(out_dir: str | pathlib.Path, profile: Profile | AxesProfile | None 
         extra["scaling"] = kind.scaling(controller.axes.drives)
         recorder.stream(writer, kind.records(controller), controller.events, kind.scene_dicts(controller), kind.period)
         demo.enable(drive)
-        summary = controller.run(cycles, on_cycle=demo.on_cycle(sim, cycles, seconds))
+        summary = controller.run(cycles, stop.event if stop is not None else None,
+                                 on_cycle=demo.on_cycle(sim, cycles, seconds))
         found = demo.findings(sim, controller, origin, cycles)
-        if summary.exit_reason == "completed":
+        if summary.exit_reason in ("completed", "stopped"):
             drive.disable()
+        if stop is not None:
+            stop.said(summary)
     _say_write_failure(recorder, summary)
     extra.update(exit_reason=summary.exit_reason, error=summary.error, operator_energy_exact=found.operator_energy,
                  port_energy_exact=found.port_energy)
@@ -90,7 +95,8 @@ def _say_write_failure(recorder: RunRecorder, summary: RunSummary) -> None:
 def format_demo(result: DemoResult) -> str:
     """The demo's short summary, one fact a line."""
     lines = list(result.lines)
-    if result.summary.error:
-        lines.append(f"run ended early ({result.summary.exit_reason}): {result.summary.error}")
+    reason, error = result.summary.exit_reason, result.summary.error
+    if reason != "completed":
+        lines.append(f"run ended early ({reason})" + (f": {error}" if error else ""))
     lines.append("wrote: " + ", ".join(str(f) for f in result.files))
     return "\n".join(lines)

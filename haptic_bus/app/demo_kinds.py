@@ -88,7 +88,7 @@ class OneAxisDemo:
         yield (f"profile: {profile.name} ({profile.loop.timing} timing, delay {profile.loop.delay} sample(s), "
                f"T = {profile.loop.period * 1e3:g} ms)")
         yield f"gate: passed ({walls})" + (f"; warnings: {'; '.join(s.warnings)}" if s.warnings else "")
-        yield f"cycles: {s.cycles} in virtual time ({s.clock}); force saturated in {s.saturated_cycles}"
+        yield f"cycles: {s.cycles} in virtual time; force saturated in {s.saturated_cycles}"
         yield f"peak force: {s.peak_force:.4g} N"
         if found.penetration is not None and found.expected_penetration is not None:
             error = (found.penetration - found.expected_penetration) / found.expected_penetration

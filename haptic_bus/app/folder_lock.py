@@ -78,6 +78,22 @@ def own_folder(folder: pathlib.Path, name: str = "out_dir", context: str = "run"
                          "this run took it)", context)
 
 
+def holder(folder: pathlib.Path) -> str | None:
+    """The process id a run holding ``folder`` wrote into its lock file (:func:`own_folder`), or None: no
+    lock file, or one a process that died left.  Writes nothing (a shared lock tried for an instant)."""
+    try:
+        fd = os.open(folder / LOCK_NAME, os.O_RDONLY | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+    finally:
+        os.close(fd)
+    return None
+
+
 def _names(path: pathlib.Path, fd: int) -> bool:
     """Whether ``path`` is the file open as ``fd`` (not removed, not replaced)."""
     try:

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import pathlib
 import sys
 from typing import TYPE_CHECKING, Any
@@ -41,6 +40,7 @@ from haptic_bus.identify.bounds import (
     MAX_DELAY,
     TRAVEL_RANGE,
 )
+from haptic_bus.validation import new_file
 
 if TYPE_CHECKING:  # the fit loads scipy: only when an identification runs
     from haptic_bus.identify import Identification
@@ -81,14 +81,8 @@ def _validate(args: argparse.Namespace) -> tuple[DriveAddress, pathlib.Path | No
                              f"a node id other than the drive's ({address.node_id})", "identify")
     if args.write_profile is None:
         return address, None
-    target = pathlib.Path(args.write_profile)
-    folder = target.parent if str(target.parent) else pathlib.Path(".")
-    if target.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK):
-        raise ParameterError("--write-profile", args.write_profile, "a file in an existing, writable folder", "identify")
-    if target.exists() and not args.force:  # as profiles new: an identified profile is not lost to the next run
-        raise ParameterError("--write-profile", args.write_profile, "a file that does not exist yet (--force replaces "
-                             "it)", "identify")
-    return address, target
+    # as profiles new: an identified profile is not lost to the next run
+    return address, new_file("--write-profile", args.write_profile, args.force, context="identify")
 
 
 def run_identify(args: argparse.Namespace) -> int:

@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
-import os
 import pathlib
 import shlex
 import sys
@@ -34,7 +33,7 @@ from haptic_bus.profile.files import DEFAULT_PROFILE, resolve_profile, shipped_p
 from haptic_bus.profile.plant import ONE_AXIS_TABLES
 from haptic_bus.profile.reader import NAME_PATTERN, misspelling, read_document
 from haptic_bus.profile.scene import FORCE_RANGE
-from haptic_bus.validation import some_names
+from haptic_bus.validation import NOT_YET, new_file, some_names
 
 if TYPE_CHECKING:
     from haptic_bus.analysis.check import CheckReport
@@ -252,13 +251,7 @@ def _new_target(args: argparse.Namespace) -> tuple[pathlib.Path, DriveAddress]:
         raise ParameterError("--from-drive", "without a drive", "--node-id N (and the bus) or --modbus URL", "profiles new")
     if args.velocity is not None:
         velocity_model(args.velocity)
-    target = pathlib.Path(args.out or f"{args.name}.toml")
-    folder = target.parent
-    if target.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK):
-        raise ParameterError("--out", str(target), "a file in an existing folder this user can write", "profiles new")
-    if target.exists() and not args.force:
-        raise ParameterError("--out", str(target), "a file that does not exist yet (--force overwrites it)", "profiles new")
-    return target, address
+    return new_file("--out", args.out or f"{args.name}.toml", args.force, context="profiles new"), address
 
 
 def velocity_model(text: str) -> VelocityModel:
@@ -303,8 +296,7 @@ def cmd_new(args: argparse.Namespace) -> int:
     try:  # without --force, created only if it still does not exist: another command may have made it since
         write_text_whole(target, text, replace=args.force)
     except FileExistsError:
-        raise ParameterError("--out", str(target), "a file that does not exist yet (--force overwrites it)",
-                             "profiles new") from None
+        raise ParameterError("--out", str(target), NOT_YET, "profiles new") from None
     except OSError as exc:
         raise ParameterError("--out", str(target), f"a file this user can write ({exc.strerror})", "profiles new") from None
     stated = ", ".join(statement.scaling) if statement is not None else "nothing (no --from-drive)"

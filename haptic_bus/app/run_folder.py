@@ -53,7 +53,7 @@ from drives.safety import SafetySettings
 from haptic_bus._version import __version__
 from haptic_bus.analysis.loop import DeviceLoop
 from haptic_bus.app.bus_log import LOG_NAME
-from haptic_bus.app.folder_lock import FolderLock, own_folder
+from haptic_bus.app.folder_lock import FolderLock, holder, own_folder
 from haptic_bus.app.json_ready import json_ready
 from haptic_bus.app.profiles import AxesProfile, Profile, profile_to_dict
 from haptic_bus.app.run_json import RUN_JSON, write_json
@@ -329,7 +329,9 @@ class RunFolder:
         if not self.ended_cleanly:
             held = "; ".join(f"{name} holds {table.cycles} cycles" for name, table in self.records.items()) or \
                 "no record"
-            notes.append(f"{self.path}: the run did not end cleanly (run.json still says {self.document.get('status')!r}: "
+            writer = holder(self.path)
+            notes.append(f"{self.path}: the run of process {writer} is still writing it; so far {held}" if writer else
+                         f"{self.path}: the run did not end cleanly (run.json still says {self.document.get('status')!r}: "
                          f"the process was killed or crashed); {held}")
         for name, table in self.records.items():
             if table.torn_line:

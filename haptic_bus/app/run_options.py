@@ -9,12 +9,16 @@ import os
 import pathlib
 import signal
 import threading
+from typing import TYPE_CHECKING
 
 from haptic_bus.app.early_stop import signals_reach_this_thread
 from haptic_bus.app.profile_policies import START_POLICIES
 from haptic_bus.app.realtime import RealtimeSettings
 from haptic_bus.errors import ParameterError
 from haptic_bus.validation import real_in_range
+
+if TYPE_CHECKING:
+    from haptic_bus.control.cycle_loop import RunSummary
 
 WALL, VIRTUAL = "wall", "virtual"
 PACINGS = (WALL, VIRTUAL)  # what paces a run's cycles: the wall clock, or the simulated drive (lock-step)
@@ -35,6 +39,16 @@ class StopRequest:
         """Stop the run at the next cycle boundary, ``why`` the one line its end records."""
         self.why = self.why or why
         self.event.set()
+
+    def said(self, summary: RunSummary) -> None:
+        """A run that ended "stopped" says how: "interrupted (Ctrl-C)" where SIGINT stopped it (the
+        command's one line on stderr, exit 130), else why a part of the run asked (:meth:`ask`), if one did."""
+        if summary.exit_reason != "stopped":
+            return
+        if self.interrupted:
+            summary.exit_reason, summary.error = "interrupted", "interrupted (Ctrl-C)"
+        elif summary.error is None and self.why is not None:
+            summary.error = self.why  # what in the run stopped it (validate: the handle left its travel)
 
     def spent(self) -> None:
         """The run it stopped has ended: the request is cleared, so that the same options run again (a

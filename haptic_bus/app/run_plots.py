@@ -32,6 +32,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
 from haptic_bus.app.run_folder import RunFolder
+from haptic_bus.app.run_options import ended_line
 from haptic_bus.control.record import RecordTable
 from haptic_bus.control.scene import SceneObject, object_from_dict
 
@@ -51,7 +52,7 @@ def ending(run: RunFolder) -> tuple[str, bool]:
         return "did NOT end cleanly: run.json still says 'running' (the process was killed or crashed)", False
     reason = str(document.get("exit_reason", document.get("status", "ended")))
     error = document.get("error")
-    text = f"ended: {reason}" + (f": {error}" if error and not str(error).startswith(reason) else f" ({error})" if error else "")
+    text = "ended: " + (ended_line(reason, str(error)) if error else reason)
     return text, reason in ("completed", "stopped")
 
 

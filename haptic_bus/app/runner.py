@@ -296,14 +296,10 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
                     drive.disable()
                 if summary.exit_reason in ("completed", "stopped"):
                     _refuse_faulted_at_the_end(drives)
+            options.stop.said(summary)  # run.json's summary says it as its status does
             reason, error = summary.exit_reason, summary.error
             if reason == "drive error" and error is not None:  # a drive that faulted in the cycles: was it a stall of ours?
                 error = summary.error = error + _stall_before(controller, rig.watchdog.stall, _answers_wait(rig))
-            if reason == "stopped" and options.stop.interrupted:
-                reason, error = "interrupted", "interrupted (Ctrl-C)"  # the command's one line on stderr
-                summary.exit_reason, summary.error = reason, error  # run.json's summary says it as its status does
-            elif reason == "stopped" and error is None and options.stop.why is not None:
-                error = summary.error = options.stop.why  # what in the run stopped it (validate: the handle left its travel)
     except Refusal as exc:  # refused before the drive is enabled
         reason, error = "refused", str(exc)
     except DriveError as exc:

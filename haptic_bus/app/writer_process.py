@@ -169,15 +169,34 @@ class Writer:
         if self.view is not None and now >= self.view_due:
             from haptic_bus.app.live import REFRESH
 
-            self.view.update()
+            try:
+                self.view.update()
+            except OSError as exc:  # its reader gone (``run ... | head`` closed the pipe): the files go on
+                self._drop_view(exc)
+                return
             self.view_due = now + REFRESH
+
+    def _drop_view(self, exc: OSError) -> None:
+        """The view's stream can no longer be written (``exc``): no view from now on, and the stream's
+        descriptor onto /dev/null, so that nothing flushed there later (this process' exit) fails again.
+        The run's files are not the view's: they are written to the end."""
+        assert self.view is not None
+        logger.info("run writer: the live view's output is gone (%s); the run's files go on", exc)
+        with contextlib.suppress(OSError, ValueError):  # a stream without a descriptor: nothing left to flush there
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self.view.stream.fileno())
+            os.close(devnull)
+        self.view, self.view_due = None, math.inf
 
     def close(self) -> dict[str, Any]:
         """A last drain, every file closed, the view left showing the end; what was written and lost
         (and the ``failure``, if the folder could not be written)."""
         self.flush()
         if self.view is not None:  # its last panel reads the rings: before the records let them go
-            self.view.__exit__()
+            try:
+                self.view.__exit__()
+            except OSError as exc:
+                self._drop_view(exc)
         writable = self.failure is None
         for _, record in self.records:
             record.close(drain=writable)

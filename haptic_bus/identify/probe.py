@@ -156,8 +156,11 @@ def probe(x: float, settings: ProbeSettings) -> Phase:
                        "at an end stop, or held by friction above the force limit")
             return ProbeResult(False, message, settings.force_limit, _excursions(moved, attempt)), x
         if attempt.kept < SPRING_BACK * attempt.excursion:
-            message = (f"the handle springs back after a push towards {name}: it kept {attempt.kept * 1e3:.3g} mm of "
-                       f"{attempt.excursion * 1e3:.3g} mm; something holds it (a hand, a compliant stop)")
+            moved_mm, kept_mm = attempt.excursion * 1e3, attempt.kept * 1e3
+            kept = (f"it kept {kept_mm:.3g} mm of its {moved_mm:.3g} mm" if kept_mm >= 0 else
+                    f"it came back past its start, {-kept_mm:.3g} mm beyond it, after {moved_mm:.3g} mm")
+            message = (f"the handle springs back after a push towards {name}: {kept}; something holds it or pushes it "
+                       "(a hand, a compliant stop)")
             return ProbeResult(False, message, forces[-1], _excursions(moved, attempt)), x
         moved.append(attempt)
     message = (f"free: it moved {moved[0].excursion * 1e3:.3g} mm towards +x under {forces[0]:.3g} N and "
