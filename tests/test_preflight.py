@@ -269,9 +269,10 @@ def test_one_stall_in_the_first_look_is_judged_again_over_four_times_the_cycles(
 
 
 def test_one_stall_of_10_ms_is_held_on_the_third_look_over_8000_cycles() -> None:
-    """A stall of 10 ms (this virtual machine's stalls of 10-26 ms refused 8 of 82 fresh pre-flights after their
-    second look): its catch-up (0.4 ms a cycle) starts 21 cycles more than T late, over the 15 allowed in 2000 and
-    within the 51 of 8000, where T is held; the line names each look.  Three such stalls in 8000 (63 late) are not held."""
+    """A stall of 10 ms (this virtual machine's stalls of 10-26 ms refused 9 of 60 fresh pre-flights after their
+    second look on December 7, docs/process.md): its catch-up (0.4 ms a cycle) starts 21 cycles more than T late,
+    over the 15 allowed in 2000 and within the 51 of 8000, where T is held; the line names each look. Three such
+    stalls in 8000 (63 late) are not held."""
     assert looks_for(PREFLIGHT_CYCLES) == (500, 2000, 8000) and allowed_overruns(8000) == 51
     second = _stall_of(10e-3, 2000)
     assert catch_up_overruns(second, np.array([T]))[0] == 21 and looks_again(second, 6000)

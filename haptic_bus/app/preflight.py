@@ -21,8 +21,8 @@ clock under the run's own scheduling, and keeps how late each cycle started.  Th
   stall from a frequent one: one stall of the host, 4 ms in 0.5 s, made 7 cycles start late at
   T = 1 ms and refused 1 of 20 fresh pre-flights here, while 20 s runs on the same machine overran in
   0.05-0.1 % of their cycles; and 2000 are few for the stalls of 10-26 ms this virtual machine meets
-  every few seconds, each making 10-30 cycles late (6 of 62 pre-flights refused so on December 4, 2
-  of 20 on December 7): the third look's 8000 take up to two of them.  A stall
+  every few seconds, each making 10-30 cycles late (on December 7, 9 of 60 fresh pre-flights were
+  refused so after their second look): the third look's 8000 take up to two of them.  A stall
   also makes the cycles after it late while the loop catches up, ``S / (T - x)`` of them for a
   stall ``S`` and exchanges ``x``: few at T = 1 ms and 0.2 ms exchanges, many where the exchange
   nearly fills ``T`` (a Modbus run of three units at T = 2 ms, 1.8 ms polls, passed a pre-flight
