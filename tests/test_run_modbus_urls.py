@@ -41,3 +41,10 @@ def test_an_ipv6_address_is_written_in_brackets(capsys: pytest.CaptureFixture[st
     err = capsys.readouterr().err
     assert code == 1 and err.count("\n") == 1 and err.startswith("haptic-bus status: drive error: Modbus unit 1 at "
                                                                  "tcp://[::1]:15179: "), err
+
+
+@pytest.mark.parametrize("timeout", [0, -0.1, float("inf"), float("nan"), True, "0.1"])
+def test_an_answer_timeout_that_is_no_finite_real_above_zero_is_refused(timeout: object) -> None:
+    with pytest.raises(ParameterError) as refused:
+        ModbusAddress.from_url(A, timeout=timeout)  # type: ignore[arg-type]
+    assert str(refused.value) == f"Modbus drive: timeout = {timeout!r} is invalid; allowed: a finite real > 0 s"
