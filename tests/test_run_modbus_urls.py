@@ -26,7 +26,8 @@ def test_a_server_named_twice_without_unit_ids_names_the_urls() -> None:
                                            "named twice")
     with pytest.raises(ParameterError) as given:  # unit ids given, two at one place: the unit ids are named
         modbus_units(gantry, [A, A, B], [1, 1, 2])
-    assert given.value.name == "unit_ids"
+    assert given.value.name == "unit_ids" and given.value.allowed.endswith(f"none twice at one URL (unit 1 is given twice "
+                                                                           f"at {A})")
     assert modbus_units(gantry, [A, A, B], [1, 2, 1]) == [1, 2, 1]  # two units on A, one on B
     assert modbus_units(gantry, [A, B, "tcp://127.0.0.1:44167"], None) == [1, 1, 1]
 
