@@ -101,3 +101,19 @@ def test_a_flag_out_of_range_is_named_once_by_every_command(argv: list[str], lin
     assert main(argv) == 2
     out, err = capsys.readouterr()
     assert out == "" and err == line + "\n"
+
+
+def test_every_command_that_names_a_drive_declares_its_id_flags_alike() -> None:
+    """``--node-id`` and ``--unit-id`` are declared once (haptic_bus.app.drive_address), for run and validate as for
+    the commands that name one drive: the same type, the same help."""
+    import argparse
+
+    from haptic_bus.app.cli import build_parser
+
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices
+    profiles = next(a for a in commands["profiles"]._actions if isinstance(a, argparse._SubParsersAction)).choices
+    parsers = [commands[name] for name in ("run", "validate", "status", "fault-reset", "sdo", "identify")]
+    for flag in ("--node-id", "--unit-id"):
+        declared = {(action.type, action.help) for parser in [*parsers, profiles["new"]]
+                    for action in parser._actions if flag in action.option_strings}
+        assert len(declared) == 1, (flag, declared)
