@@ -14,6 +14,7 @@ from __future__ import annotations
 import abc
 import contextlib
 import functools
+import math
 import numbers
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -21,6 +22,7 @@ from typing import Any, Protocol
 
 from drives.cia402 import ObjectSpec, OperationMode
 from drives.errors import DriveError, ParameterError
+from drives.ranges import real_in_range
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,9 +61,7 @@ class DriveScaling:
 
     def __post_init__(self) -> None:
         for name in ("velocity_per_count", "position_per_count", "rated_torque", "force_per_torque"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
-                raise ParameterError(name, value, "a finite real > 0", "drive scaling")
+            real_in_range(name, getattr(self, name), 0.0, math.inf, low_inclusive=False, context="drive scaling")
         permille = self.max_torque_permille
         if isinstance(permille, bool) or not isinstance(permille, int) or not 1 <= permille <= 0xFFFF:
             raise ParameterError("max_torque_permille", permille, "an integer in [1, 65535] (0x6072)", "drive scaling")

@@ -53,8 +53,9 @@ from drives.cia402 import (
     state_name,
     supports,
 )
-from drives.errors import DriveError, DriveFault, DriveProtocolError
+from drives.errors import DriveError, DriveFault, DriveProtocolError, ParameterError
 from drives.fault_reset import clear_fault, error_code_text
+from drives.ranges import real_in_range
 from drives.state_walk import StateWalk
 
 logger = logging.getLogger(__name__)
@@ -87,13 +88,15 @@ def _readings(item: Found) -> tuple[ScalingReading, ...]:
 def _check_reading(node: str, name: str, reading: ScalingReading) -> None:
     value = reading.value
     if name == "max_torque_permille":
-        ok = isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 0xFFFF
-        allowed = "a whole number in 1..65535"
-    else:
-        ok = isinstance(value, (int, float)) and value > 0 and math.isfinite(value)
-        allowed = "finite and > 0"
-    if not ok:
-        raise DriveProtocolError(node, f"scaling {name} = {value!r} (from {reading.source}); must be {allowed}")
+        if not (isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 0xFFFF):
+            raise DriveProtocolError(node, f"scaling {name} = {value!r} (from {reading.source}); must be a whole "
+                                           "number in 1..65535")
+        return
+    try:
+        real_in_range(name, value, 0.0, math.inf, low_inclusive=False)
+    except ParameterError as error:
+        raise DriveProtocolError(node, f"scaling {name} = {value!r} (from {reading.source}); must be "
+                                       f"{error.allowed}") from None
 
 
 def _agree(node: str, name: str, used: ScalingReading, other: ScalingReading) -> None:

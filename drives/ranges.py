@@ -14,9 +14,13 @@ from drives.errors import ParameterError
 
 
 def real_range(low: float, high: float, unit: str = "", *, low_inclusive: bool = True) -> str:
-    """What :func:`real_in_range` allows, as its refusal states it: ``a finite real in [low, high] unit``."""
-    bracket = "[" if low_inclusive else "("
-    return f"a finite real in {bracket}{low:g}, {high:g}]" + (f" {unit}" if unit else "")
+    """What :func:`real_in_range` allows, as its refusal states it: ``a finite real in [low, high] unit``, or
+    ``a finite real > low unit`` (``>=`` when ``low_inclusive``) for a ``high`` of infinity (no upper bound)."""
+    if math.isinf(high):
+        span = f"{'>=' if low_inclusive else '>'} {low:g}"
+    else:
+        span = f"in {'[' if low_inclusive else '('}{low:g}, {high:g}]"
+    return f"a finite real {span}" + (f" {unit}" if unit else "")
 
 
 def real_in_range(
@@ -31,8 +35,8 @@ def real_in_range(
 ) -> float:
     """Return ``value`` as a Python float if it is a finite real in the range, else raise.
 
-    ``low``/``high`` bound the range (``high`` always inclusive); ``unit`` only decorates
-    the message.
+    ``low``/``high`` bound the range (``high`` always inclusive; infinity for none); ``unit`` only
+    decorates the message.
     """
     allowed = real_range(low, high, unit, low_inclusive=low_inclusive)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):

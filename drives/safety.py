@@ -14,6 +14,7 @@ from typing import Any
 from drives.cia301 import NODE_ID_RANGE, NODE_IDS
 from drives.cia402 import AbortConnectionOption
 from drives.errors import ParameterError
+from drives.ranges import real_in_range
 
 DEFAULT_TPDO_WAIT = 0.05  # s: a cycle's wait for the drives' TPDOs where their watchdogs allow as much
 VIRTUAL_TIME_DEADLINE = 2.0  # s: the drive watchdogs' floor (RPDO deadline, consumer, Modbus) when nothing paces the loop
@@ -117,15 +118,14 @@ class SafetySettings:
         most = self.canopen_stall(period) / 2.0
         if wanted is None:
             return min(DEFAULT_TPDO_WAIT, most)
-        real = isinstance(wanted, (int, float)) and not isinstance(wanted, bool) and math.isfinite(wanted)
-        if not (real and 0.0 < wanted <= most):
+        try:
+            return real_in_range("tpdo_timeout", wanted, 0.0, most, low_inclusive=False, unit="s")
+        except ParameterError as error:
             deadline = f"{self.rpdo_deadline_ms(period)} ms" if self.rpdo_deadline_periods else "none"
             slack = f"{self.consumer_ms - self.heartbeat_ms} ms" if self.master_node_id is not None else "none (no heartbeat)"
-            bound = (f"at most {most * 1e3:.4g} ms: half the shortest stall that faults the drive" if math.isfinite(most)
-                     else "finite: no stall faults the drive")
-            raise ParameterError("tpdo_timeout", wanted, f"> 0 s and {bound} at T = {period * 1e3:.4g} ms (RPDO "
-                                 f"deadline {deadline}, heartbeat consumer slack {slack})", "CANopen master")
-        return wanted
+            why = "half the shortest stall that faults the drive" if math.isfinite(most) else "no stall faults the drive"
+            raise ParameterError(error.name, wanted, f"{error.allowed}: {why} at T = {period * 1e3:.4g} ms (RPDO deadline "
+                                 f"{deadline}, heartbeat consumer slack {slack})", "CANopen master") from None
 
     def rpdo_deadline_ms(self, period: float) -> int:
         """The RPDO event timer for cycle period ``period`` s, ms (0: none; at least 1 otherwise)."""

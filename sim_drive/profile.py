@@ -31,12 +31,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from drives.cia301 import NODE_ID_RANGE, NODE_IDS
-from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
 from haptic_bus.analysis.loop import PERIOD_RANGE
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import DeviceTable, check_velocity_period, read_device, read_timing
 from haptic_bus.profile.files import resolve_profile
+from haptic_bus.profile.link import read_link
 from haptic_bus.profile.operator import NO_OPERATOR
 from haptic_bus.profile.plant import ONE_AXIS_TABLES, Silent, read_plant
 from haptic_bus.profile.reader import Reader, profile_error, read_document
@@ -131,9 +130,7 @@ def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> 
     """One ``[[axes]]`` table: the simulator's part of it (module docstring)."""
     r = Reader(path, f"axes[{index}]", table, silent={"name": f"axis{index}", "timing": Timing.CIA402.value})
     name = r.text("name")
-    node = r.whole("node_id", *NODE_ID_RANGE, allowed=NODE_IDS) if "node_id" in r.table else None
-    unit = r.whole("unit_id", *UNIT_ID_RANGE, allowed=UNIT_IDS) if "unit_id" in r.table else None
-    r.used.update(("node_id", "unit_id"))  # exactly one of them: the controller's profile checks it
+    node, unit = read_link(r)
     timing, delay = read_timing(r)
     device = read_device(path, r.raw("device", "an [axes.device] table", default={}), r.field("device"), SILENT.device)
     r.used.update(_CONTROLLER_KEYS)

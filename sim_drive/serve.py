@@ -28,7 +28,7 @@ from haptic_bus.console import log_to_stderr
 from haptic_bus.errors import DriveError, ParameterError
 from sim_drive.eds import eds_path
 from sim_drive.scheduling import answer_in_real_time
-from sim_drive.setups import axes_setup, bus_config, drive_setup, modbus_axes_setup, profile_axes
+from sim_drive.setups import axes_setup, bus_config, drive_setup, modbus_axes_setup, node_id, profile_axes, unit_id
 from sim_drive.sync_clock import sync_clock
 
 logger = logging.getLogger("sim_drive")
@@ -122,10 +122,11 @@ def run_canopen(args: argparse.Namespace) -> int:
         return 2
     scheduling = set_up_process(args.log_wall_clock, "canopen", logging.WARNING)
     try:
+        node = node_id(args)
         parameters, operator, timing = drive_setup(args)
         meter = BusLoadMeter(args.bitrate, parameters.period) if args.bitrate else None
         config = bus_config(args)
-        sim = CanopenSimDrive(config, args.node_id, timing=timing, parameters=parameters, operator=operator, bus_meter=meter,
+        sim = CanopenSimDrive(config, node, timing=timing, parameters=parameters, operator=operator, bus_meter=meter,
                               od=args.od or "haptic", eds=args.eds, sync_clock=sync_clock(args.clock),
                               hand_needs_power=True)  # the hand takes a powered handle (sim_drive.device.SimulatedDrive)
     except ParameterError as exc:
@@ -248,19 +249,17 @@ def run_modbus(args: argparse.Namespace) -> int:
         return 2
     if several:
         return run_modbus_axes(args)
-    from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
-
-    unit_id = UNIT_ID_RANGE[0] if args.unit_id is None else args.unit_id
-    # as --unit-ids: the units haptic-bus run can reach (a text that is no integer: its range too)
-    if not isinstance(unit_id, int) or not UNIT_ID_RANGE[0] <= unit_id <= UNIT_ID_RANGE[1]:
-        print(f"{PROG}: error: {ParameterError('--unit-id', unit_id, UNIT_IDS)}", file=sys.stderr)
+    try:
+        unit = unit_id(args)
+    except ParameterError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
     scheduling = set_up_process(args.log_wall_clock, "pymodbus", logging.CRITICAL)
     word_order = args.word_order or "big"
     try:
         host, port = parse_modbus_url(args.modbus[0])
         parameters, operator, timing = drive_setup(args)
-        sim = ModbusSimServer(host, port, unit_id=unit_id, timing=timing, parameters=parameters, operator=operator,
+        sim = ModbusSimServer(host, port, unit_id=unit, timing=timing, parameters=parameters, operator=operator,
                               word_order=word_order, sync_clock=sync_clock(args.clock),
                               hand_needs_power=True)  # the hand takes a powered handle (sim_drive.device.SimulatedDrive)
     except ParameterError as exc:
@@ -269,13 +268,13 @@ def run_modbus(args: argparse.Namespace) -> int:
 
     def bound() -> None:
         logger.info("unit %d: serving Modbus TCP on %s (timing %s, word order %s, started %s); %s",
-                    unit_id, sim.url, timing, word_order, utc_now(), scheduling)
+                    unit, sim.url, timing, word_order, utc_now(), scheduling)
 
     if not serve_until_stopped(args, lambda stop: sim.serve(stop, on_bound=bound)):
         return 1
     drive = sim.drive
     logger.info("unit %d: stopped after %d cycles, virtual time %.6f s, operator energy %.6g J, wall energy %.6g J",
-                unit_id, sim.bank.cycles, drive.time, drive.operator_energy, drive.wall_energy)
+                unit, sim.bank.cycles, drive.time, drive.operator_energy, drive.wall_energy)
     return 0
 
 

@@ -16,7 +16,7 @@ from typing import Any
 from drives.bus_config import merge_bus_options
 from drives.cia301 import NODE_ID_RANGE, NODE_IDS
 from haptic_bus.errors import ParameterError
-from haptic_bus.validation import ids_in_order
+from haptic_bus.validation import ids_in_order, whole_in_range
 from sim_drive.operator import OperatorModel, operator_from_spec
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import SimulatedDevice, read_simulated_device
@@ -69,6 +69,20 @@ def profile_axes(args: argparse.Namespace) -> SimulatedDevice | None:
     profile, or a one-axis profile, which every axis runs); ParameterError if the profile is invalid."""
     device = read_simulated_device(args.profile) if args.profile else None
     return device if device is not None and device.multi_axis else None
+
+
+def node_id(args: argparse.Namespace) -> int:
+    """``--node-id``: the CANopen slave's node id; ParameterError naming the flag otherwise."""
+    return whole_in_range("--node-id", args.node_id, *NODE_ID_RANGE, allowed=NODE_IDS)
+
+
+def unit_id(args: argparse.Namespace) -> int:
+    """``--unit-id``: the Modbus server's unit id (default 1), one haptic-bus run can reach; ParameterError naming
+    the flag otherwise."""
+    from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
+
+    return whole_in_range("--unit-id", UNIT_ID_RANGE[0] if args.unit_id is None else args.unit_id, *UNIT_ID_RANGE,
+                          allowed=UNIT_IDS)
 
 
 def node_ids(text: str) -> list[int]:

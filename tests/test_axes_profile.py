@@ -169,6 +169,22 @@ def test_axes_errors_name_the_field_and_the_allowed_range(tmp_path: pathlib.Path
     assert "\n" not in str(error.value)
 
 
+@pytest.mark.parametrize("axes", [_one_axis(node_id=None), _one_axis(unit_id=3), _one_axis(node_id=200),
+                                  _one_axis(node_id=None, nod_id=5), _one_axis(node_id=None, unit_id=0)],
+                         ids=["neither", "both", "node-id-200", "misspelt", "unit-id-0"])
+def test_the_simulated_drive_reads_an_axis_link_as_the_controller_does(tmp_path: pathlib.Path, axes: str) -> None:
+    """One reader of node_id/unit_id (haptic_bus.profile.link): the simulated drive refuses in the controller's words
+    (it let both or neither pass, leaving the check to the controller)."""
+    from sim_drive.profile import read_simulated_device
+
+    path = gantry(tmp_path, axes=axes)
+    with pytest.raises(ParameterError) as controller:
+        read_profile(path)
+    with pytest.raises(ParameterError) as sim:
+        read_simulated_device(path)
+    assert str(sim.value) == str(controller.value) and controller.value.name.startswith("axes[0].")
+
+
 @pytest.mark.parametrize(("old", "new", "field", "allowed"), [
     ("radius = 0.01", "radius = -0.01", "space.objects[2].radius", "(0, 1e+06] m"),
     ("center = [-0.02, 0.0, 0.01]", "center = [-0.02, 0.0]", "space.objects[2].center", "an array of 3 numbers"),

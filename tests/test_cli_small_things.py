@@ -4,8 +4,11 @@ and ``report --out`` refused in one line (exit 2) before any work when it cannot
 from __future__ import annotations
 
 import json
+import os
 import re
 import signal
+import subprocess
+import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -17,6 +20,8 @@ from haptic_bus._version import __version__
 from haptic_bus.app.arguments import bus_arguments
 from haptic_bus.app.cli import build_parser, main
 
+REPO = Path(__file__).resolve().parents[1]
+SUBPROCESS_WAIT = 60.0  # s: a Python process that imports the command line, under the suite's load
 HEARTBEAT_WAIT = 15.0  # s: the simulator subprocess imports numpy/scipy/canopen first
 RUN_WAIT = 60.0  # s: the longest a 0.1 s virtual-time run (100 cycles) may take, its commissioning included, in a thread
 
@@ -28,9 +33,27 @@ def test_version(capsys: pytest.CaptureFixture[str]) -> None:
     assert capsys.readouterr().out == f"haptic-bus sim {__version__}\n"
 
 
+@pytest.mark.parametrize(("argv", "code", "out"), [
+    (["--version"], 0, f"haptic-bus {__version__}\n"),
+    (["status", "--node-id", "0"], 2, ""),
+])
+def test_python_m_haptic_bus_is_the_console_script(argv: list[str], code: int, out: str,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``python -m haptic_bus`` ran nothing: there was no ``haptic_bus/__main__.py`` (and ``python -m
+    haptic_bus.app.entry`` exits 0 having done nothing: entry is the console script's target, not a module
+    to run).  It now prints and exits as ``haptic-bus`` does."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
+    done = subprocess.run([sys.executable, "-m", "haptic_bus", *argv], cwd=REPO, env=env, capture_output=True, text=True,
+                          timeout=SUBPROCESS_WAIT)
+    assert main(argv) == code
+    said = capsys.readouterr()
+    assert (done.returncode, done.stdout, done.stderr) == (code, out, said.err) and said.out == out
+
+
 @pytest.mark.parametrize(("argv", "said"), [
     (["check", "--mass", "0.5", "--friction", "0.1", "--period", "1e-3", "--stiffness", "100", "--damping", "1",
-      "--position-resolution", "-1e-6"], "--position-resolution = -1e-6 is invalid; allowed: a finite real in [0, 1e+06] m"),
+      "--position-resolution", "-1e-6"], "--position-resolution = -1e-06 is invalid; allowed: a finite real in [0, 1e+06] m"),
     (["region", "--mass", "0.5", "--friction", "0.1", "--period", "1e-3", "--png", "never-written.png", "--mark", "-1,1"],
      "'-1,1': K and B must be finite and > 0"),
     (["check", "--mass", "0.5", "--friction", "0.1", "--period", "-1E-3", "--stiffness", "100", "--damping", "1"],

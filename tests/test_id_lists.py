@@ -72,7 +72,7 @@ def test_a_list_that_cannot_be_is_refused_in_the_same_words(argv: list[str], wha
     flag = argv[-2]
     code = main(argv)
     err = capsys.readouterr().err
-    assert code == 2 and err == (f"haptic-bus {argv[0]}: error: argument {flag}: {flag[2:].replace('-', ' ')} = '1-x' "
+    assert code == 2 and err == (f"haptic-bus {argv[0]}: error: {flag} = '1-x' "
                                  f"is invalid; allowed: {_allowed(what, 1, high)}\n"), err
 
 
@@ -112,6 +112,21 @@ def test_a_count_that_is_not_the_profile_s_is_named_with_what_was_typed(servers:
     err = capsys.readouterr().err
     assert code == 2 and err == (f"haptic-bus run: error: --unit-ids = {text!r} is invalid; allowed: 3 Modbus unit ids, "
                                  "one per axis (gantry-3d has 3 axes)\n"), err
+
+
+@pytest.mark.parametrize(("ports", "text", "twice"), [((47105, 47105, 47106), "1,1,2", "unit 1 is given twice at "
+                                                      "tcp://127.0.0.1:47105"),
+                                                     ((47105, 47106, 47106), "7,3,0x3", "unit 3 is given twice at "
+                                                      "tcp://127.0.0.1:47106")])
+def test_a_unit_two_axes_share_at_one_url_is_named_with_what_was_typed(ports: tuple[int, ...], text: str, twice: str,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """``run gantry-3d --modbus A --modbus A --modbus B --unit-ids 1,1,2`` named the expanded list ``[1, 1, 2]``
+    (the runner's check); the command now names the text typed and the URL with the unit given twice."""
+    urls = [arg for port in ports for arg in ("--modbus", f"tcp://127.0.0.1:{port}")]
+    code = main(["run", "gantry-3d", *urls, "--unit-ids", text])
+    err = capsys.readouterr().err
+    assert code == 2 and err == (f"haptic-bus run: error: --unit-ids = {text!r} is invalid; allowed: Modbus unit ids "
+                                 f"1..247, none twice at one URL ({twice})\n"), err
 
 
 def test_one_server_per_axis_may_each_serve_unit_1() -> None:

@@ -26,7 +26,8 @@ def test_a_server_named_twice_without_unit_ids_names_the_urls() -> None:
                                            "named twice")
     with pytest.raises(ParameterError) as given:  # unit ids given, two at one place: the unit ids are named
         modbus_units(gantry, [A, A, B], [1, 1, 2])
-    assert given.value.name == "unit_ids"
+    assert given.value.name == "unit_ids" and given.value.allowed.endswith(f"none twice at one URL (unit 1 is given twice "
+                                                                           f"at {A})")
     assert modbus_units(gantry, [A, A, B], [1, 2, 1]) == [1, 2, 1]  # two units on A, one on B
     assert modbus_units(gantry, [A, B, "tcp://127.0.0.1:44167"], None) == [1, 1, 1]
 
@@ -41,3 +42,10 @@ def test_an_ipv6_address_is_written_in_brackets(capsys: pytest.CaptureFixture[st
     err = capsys.readouterr().err
     assert code == 1 and err.count("\n") == 1 and err.startswith("haptic-bus status: drive error: Modbus unit 1 at "
                                                                  "tcp://[::1]:15179: "), err
+
+
+@pytest.mark.parametrize("timeout", [0, -0.1, float("inf"), float("nan"), True, "0.1"])
+def test_an_answer_timeout_that_is_no_finite_real_above_zero_is_refused(timeout: object) -> None:
+    with pytest.raises(ParameterError) as refused:
+        ModbusAddress.from_url(A, timeout=timeout)  # type: ignore[arg-type]
+    assert str(refused.value) == f"Modbus drive: timeout = {timeout!r} is invalid; allowed: a finite real > 0 s"

@@ -148,10 +148,10 @@ INVALID = [
     (["read", "0x6041", "--type", "u7"], "--type = 'u7' is invalid; allowed: u8 u16 u32 u64 i8 i16 i32 i64 f32 f64 bool str hex"),
     (["read", "0x6041", "--eds", "{missing}"], "--eds = '{missing}' is invalid; allowed: an existing EDS or DCF file"),
     (["read", "0x6041", "--eds", "{garbage}"], "is invalid; allowed: an EDS or DCF file canopen can read"),
-    (["read", "0x6041", "--node-id", "0"], "argument --node-id: node id = 0 is invalid; allowed: CANopen node ids 1..127"),
-    (["read", "0x6041", "--node-id", "128"], "argument --node-id: node id = 128 is invalid; allowed: CANopen node ids 1..127"),
+    (["read", "0x6041", "--node-id", "0"], "--node-id = 0 is invalid; allowed: CANopen node ids 1..127"),
+    (["read", "0x6041", "--node-id", "128"], "--node-id = 128 is invalid; allowed: CANopen node ids 1..127"),
     (["read", "0x6041", "--unit-id", "2"], "--unit-id = 2 is invalid; allowed: a Modbus option"),
-    (["read", "0x6041", "--timeout", "0"], "argument --timeout: --timeout = 0 is invalid"),
+    (["read", "0x6041", "--timeout", "0"], "--timeout = 0.0 is invalid"),
     (["peek", "0x6041"], "argument action: invalid choice: 'peek'"),
 ]
 

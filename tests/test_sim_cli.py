@@ -50,7 +50,7 @@ def test_eds_path(capsys: pytest.CaptureFixture[str]) -> None:
     [
         (["--interface", "virtual", "--channel", "x"], "--node-id is missing; allowed: --interface NAME --channel CHANNEL"),
         (["--node-id", "5"], "--interface is missing; allowed: --interface NAME --channel CHANNEL and --node-id N"),
-        (["--interface", "virtual", "--channel", "x", "--node-id", "0"], "node_id = 0"),
+        (["--interface", "virtual", "--channel", "x", "--node-id", "0"], "--node-id = 0 is invalid; allowed: CANopen node ids"),
         (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--timing", "late"], "invalid choice"),
         (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--bus-option", "port"], "KEY=VALUE"),
         (["--interface", "virtual", "--channel", "x", "--node-id", "3", "--profile", "/nonexistent.toml"], "existing TOML"),

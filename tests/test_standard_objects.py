@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from drives.canopen.drive import CanopenDrive
+from drives.cia402_master import merge_scaling
 from drives.errors import DriveError, DriveProtocolError
 from drives.factor_group import FactorGroup, SiUnit, derive
 from drives.safety import SafetySettings
@@ -377,3 +378,12 @@ def test_sim_od_is_a_canopen_option() -> None:
     assert main(["--modbus", "tcp://127.0.0.1:0", "--od", "standard"]) == 2
     assert main(["--interface", "virtual", "--channel", "x", "--node-id", "5", "--od", "nonsense"]) == 2
 
+
+
+@pytest.mark.parametrize("value", [0.0, -0.32, math.inf, math.nan])
+def test_a_scaling_factor_the_drive_reports_below_zero_or_not_finite_is_a_protocol_error(value: float) -> None:
+    """The drive's reading is checked by the shared range check (drives.ranges.real_in_range), in its words."""
+    with pytest.raises(DriveProtocolError) as refused:
+        merge_scaling("CANopen node 5", None, {"rated_torque": (value, "0x6076")})
+    assert str(refused.value) == (f"CANopen node 5: scaling rated_torque = {value!r} (from 0x6076); must be a finite "
+                                  "real > 0")

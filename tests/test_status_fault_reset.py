@@ -287,21 +287,21 @@ def test_modbus_status_of_a_server_not_there_is_one_line(refusing_port: int, cap
 
 # ----------------------------------------------------------------------------- bad input
 INVALID = [
-    (["status", "{bus}", "--node-id", "0"], "argument --node-id: node id = 0 is invalid; allowed: CANopen node ids 1..127"),
-    (["status", "{bus}", "--node-id", "128"], "argument --node-id: node id = 128 is invalid; allowed: CANopen node ids 1..127"),
+    (["status", "{bus}", "--node-id", "0"], "--node-id = 0 is invalid; allowed: CANopen node ids 1..127"),
+    (["status", "{bus}", "--node-id", "128"], "--node-id = 128 is invalid; allowed: CANopen node ids 1..127"),
     (["status", "{bus}"],
      "--node-id is missing; allowed: the drive's node id, one of the CANopen node ids 1..127 (or --modbus URL)"),
     (["status", "{bus}", "--node-id", "5", "--unit-id", "2"], "--unit-id = 2 is invalid; allowed: a Modbus option"),
     (["status", "--modbus", "{url}", "--node-id", "5"], "--node-id = 5 is invalid"),
     (["status", "--modbus", "{url}", "--listen", "1"], "--listen = 1.0 is invalid; allowed: a CANopen option"),
     (["status", "--modbus", "{url}", "--unit-id", "248"],
-     "argument --unit-id: unit id = 248 is invalid; allowed: Modbus unit ids 1..247"),
-    (["status", "{bus}", "--node-id", "5", "--listen", "0"], "argument --listen: --listen = 0 is invalid"),
-    (["status", "{bus}", "--node-id", "5", "--timeout", "nan"], "argument --timeout: --timeout = nan is invalid"),
-    (["fault-reset", "{bus}", "--node-id", "5", "--wait", "-1"], "argument --wait: --wait = -1 is invalid"),
+     "--unit-id = 248 is invalid; allowed: Modbus unit ids 1..247"),
+    (["status", "{bus}", "--node-id", "5", "--listen", "0"], "--listen = 0.0 is invalid"),
+    (["status", "{bus}", "--node-id", "5", "--timeout", "nan"], "--timeout = nan is invalid"),
+    (["fault-reset", "{bus}", "--node-id", "5", "--wait", "-1"], "--wait = -1.0 is invalid"),
     (["fault-reset", "{bus}", "--node-id", "5", "--wait", "61"], "allowed: a finite real in (0, 60] s"),
     (["fault-reset", "--modbus", "{url}", "--interface", "virtual"], "--interface = 'virtual' is invalid"),
-    (["fault-reset", "--modbus", "tcp://127.0.0.1"], "argument --modbus: --modbus 'tcp://127.0.0.1' is invalid"),
+    (["fault-reset", "--modbus", "tcp://127.0.0.1"], "--modbus = 'tcp://127.0.0.1' is invalid"),
 ]
 
 

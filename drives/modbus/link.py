@@ -27,6 +27,7 @@ from drives.cia402_master import CyclicStats
 from drives.errors import DriveError, DriveProtocolError, DriveRefusal, DriveTimeout, ModbusLinkLost, ParameterError
 from drives.modbus.in_process import tcp_url
 from drives.modbus.register_map import NO_UNIT_CODES, describe_range, exception_name
+from drives.ranges import real_in_range
 
 
 @dataclass(slots=True)
@@ -55,9 +56,7 @@ class ModbusAddress:
     bytesize: int = 8
 
     def __post_init__(self) -> None:
-        timeout = self.timeout
-        if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not (timeout > 0 and math.isfinite(timeout)):
-            raise ParameterError("timeout", timeout, "a finite time > 0 s", "Modbus drive")
+        real_in_range("timeout", self.timeout, 0.0, math.inf, low_inclusive=False, unit="s", context="Modbus drive")
         if not self.serial and not (isinstance(self.port, int) and not isinstance(self.port, bool) and 0 < self.port <= 65535):
             raise ParameterError("port", self.port, "a TCP port 1..65535 or a serial device path", "Modbus drive")
         if not self.serial and not self.host:

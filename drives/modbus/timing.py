@@ -43,8 +43,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drives.base import OneAxis
-from drives.errors import ParameterError
 from drives.modbus.drive import ModbusDrive
+from drives.ranges import real_in_range
 
 if TYPE_CHECKING:
     from drives.modbus.axes import ModbusAxes
@@ -59,10 +59,8 @@ def assumed_delay(round_trip_p99: float, T: float) -> float:
     """The loop delay in samples (real) for a poll with this p99 round trip (s) at period ``T`` (s):
     ``SAFETY_FACTOR * round_trip_p99 / T``.  ParameterError for a negative or non-finite round
     trip or a non-positive period."""
-    if not (T > 0 and math.isfinite(T)):
-        raise ParameterError("T", T, "a finite period > 0 s", "Modbus loop delay")
-    if not (round_trip_p99 >= 0 and math.isfinite(round_trip_p99)):
-        raise ParameterError("round_trip_p99", round_trip_p99, "a finite round trip >= 0 s", "Modbus loop delay")
+    real_in_range("T", T, 0.0, math.inf, low_inclusive=False, unit="s", context="Modbus loop delay")
+    real_in_range("round_trip_p99", round_trip_p99, 0.0, math.inf, unit="s", context="Modbus loop delay")
     return SAFETY_FACTOR * round_trip_p99 / T
 
 

@@ -9,7 +9,6 @@ parser must cost little more than starting Python.
 from __future__ import annotations
 
 import argparse
-import math
 import re
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -26,7 +25,7 @@ from haptic_bus.analysis.loop import (
     STIFFNESS_RANGE,
 )
 from haptic_bus.errors import ParameterError
-from haptic_bus.validation import ids_in_order, real_range
+from haptic_bus.validation import ids_in_order, real_in_range, real_range
 
 N = TypeVar("N", int, float)
 
@@ -46,6 +45,20 @@ class OneLineParser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"-\.?\d")  # argparse's own test, as of Python 3.13
+
+    def _get_value(self, action: argparse.Action, arg_string: str) -> Any:
+        """argparse's, but a type's :class:`~haptic_bus.errors.ParameterError` is the usage error naming the flag
+        once, ``--unit-id = 0 is invalid; allowed: ...`` (argparse's own line named it twice, ``argument --unit-id:
+        unit id = 0 ...``, or, the ParameterError being a ValueError, said ``invalid parse value``); a positional
+        argument keeps the type's name."""
+        try:
+            return super()._get_value(action, arg_string)
+        except argparse.ArgumentError as error:
+            refused = error.__context__  # what the type raised, which argparse's ArgumentError replaced
+            if not isinstance(refused, ParameterError):
+                raise
+            name = max(action.option_strings, key=len) if action.option_strings else refused.name
+            raise argparse.ArgumentError(None, ParameterError(name, refused.value, refused.allowed).detail) from None
 
     def error(self, message: str) -> None:  # type: ignore[override]
         if message.startswith(_REQUIRED):
@@ -95,19 +108,16 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 # --------------------------------------------------------------------------- argument types
 
 def number(name: str, low: float, high: float, unit: str, *, low_open: bool = False) -> Callable[[str], float]:
-    """A parser of a finite real in ``[low, high]`` (``(low, high]`` with ``low_open``), in ``unit``; its
-    refusal in :func:`~haptic_bus.validation.real_range`'s words."""
+    """A parser of a finite real in ``[low, high]`` (``(low, high]`` with ``low_open``), in ``unit``, checked by
+    :func:`~haptic_bus.validation.real_in_range` (its ParameterError names ``name``; a flag's, the flag:
+    :class:`OneLineParser`)."""
 
     def parse(text: str) -> float:
-        allowed = real_range(low, high, unit, low_inclusive=not low_open)
         try:
-            value = float(text)
+            value: object = float(text)
         except ValueError:  # not a number: the range too, in the one line (break16)
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: {allowed}") from None
-        below = value <= low if low_open else value < low
-        if not math.isfinite(value) or below or value > high:
-            raise argparse.ArgumentTypeError(f"{name} = {text} is invalid; allowed: {allowed}")
-        return value
+            value = text
+        return real_in_range(name, value, low, high, low_inclusive=not low_open, unit=unit)
 
     return parse
 
@@ -121,10 +131,9 @@ def whole(name: str, low: int, high: int, allowed: str = "") -> Callable[[str], 
         try:
             value = int(text, 0)
         except ValueError:  # not an integer: the range too, in the one line (break16)
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: {allowed} "
-                                             "(decimal, or 0x-hexadecimal)") from None
+            raise ParameterError(name, text, f"{allowed} (decimal, or 0x-hexadecimal)") from None
         if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"{name} = {value} is invalid; allowed: {allowed}")
+            raise ParameterError(name, value, allowed)
         return value
 
     return parse
@@ -158,7 +167,7 @@ def _read_as(kind: Callable[[str], N], name: str, allowed: str) -> Callable[[str
         try:
             return kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is invalid; allowed: {allowed}") from None
+            raise ParameterError(name, text, allowed) from None
 
     return parse
 
@@ -174,10 +183,7 @@ def unit_ids(text: str) -> str:
     :func:`~haptic_bus.validation.ids_in_order` reads them and kept as text: whether they must be
     distinct depends on the servers (``--modbus`` once: yes; once per axis: unit 1 may serve each),
     known once every option is read, and that refusal names what was typed."""
-    try:
-        ids_in_order("unit ids", text, UNIT_IDS, *UNIT_ID_RANGE)
-    except ParameterError as invalid:
-        raise argparse.ArgumentTypeError(invalid.detail) from None
+    ids_in_order("unit ids", text, UNIT_IDS, *UNIT_ID_RANGE)
     return text
 
 
@@ -185,10 +191,7 @@ def modbus_url(text: str) -> str:
     """``tcp://HOST:PORT`` (port 1..65535) or ``rtu:/dev/...``."""
     from drives.modbus.link import ModbusAddress
 
-    try:
-        ModbusAddress.from_url(text)
-    except ParameterError as exc:
-        raise argparse.ArgumentTypeError(f"--modbus {text!r} is invalid; allowed: {exc.allowed}") from None
+    ModbusAddress.from_url(text)
     return text
 
 

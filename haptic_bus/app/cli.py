@@ -200,7 +200,9 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Profile | AxesProfile, Any, 
 
 def _typed_unit_ids(args: argparse.Namespace, profile: AxesProfile) -> list[int]:
     """``run``'s ``--unit-ids`` read for ``profile``: one per axis, none twice on one server (a server
-    each: unit 1 may serve each); a refusal names the text typed, not the list it reads as."""
+    each: unit 1 may serve each, but not twice where two ``--modbus`` name one server); a refusal names
+    the text typed, not the list it reads as."""
+    from haptic_bus.app.run_links import none_twice, shared_place
     from haptic_bus.errors import ParameterError
 
     unit_ids = ids_in_order("--unit-ids", args.unit_ids, UNIT_IDS, *UNIT_ID_RANGE, distinct=len(args.modbus) == 1)
@@ -208,6 +210,9 @@ def _typed_unit_ids(args: argparse.Namespace, profile: AxesProfile) -> list[int]
     if len(unit_ids) != size:
         raise ParameterError("--unit-ids", args.unit_ids, f"{size} Modbus unit ids, one per axis ({profile.name} has "
                              f"{size} axes)")
+    twice = shared_place(args.modbus, unit_ids) if len(args.modbus) == size else None
+    if twice is not None:
+        raise ParameterError("--unit-ids", args.unit_ids, f"{UNIT_IDS}, {none_twice(*twice)}")
     return unit_ids
 
 

@@ -105,9 +105,19 @@ class DriveAddress:
 def add_address_arguments(parser: argparse.ArgumentParser) -> None:
     """The options that name one drive: the bus options and ``--node-id``, or ``--modbus`` and ``--unit-id``."""
     add_bus_arguments(parser)
-    parser.add_argument("--node-id", type=node_id, help=NODE_ID_HELP)
+    add_node_id_argument(parser)
     parser.add_argument("--modbus", type=modbus_url, metavar="URL",
                         help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0")
+    add_unit_id_argument(parser)
+
+
+def add_node_id_argument(parser: argparse.ArgumentParser) -> None:
+    """``--node-id``: the drive's CANopen node id (every command that names one drive, and ``run``)."""
+    parser.add_argument("--node-id", type=node_id, help=NODE_ID_HELP)
+
+
+def add_unit_id_argument(parser: argparse.ArgumentParser) -> None:
+    """``--unit-id``: the drive's Modbus unit id (every command that names one drive, and ``run``)."""
     parser.add_argument("--unit-id", type=unit_id, help=UNIT_ID_HELP)
 
 

@@ -30,6 +30,7 @@ from haptic_bus.analysis.velocity import ALLOWED as VELOCITY_MODELS
 from haptic_bus.app.drive_statement import DriveStatement
 from haptic_bus.app.profiles import FORCE_RANGE
 from haptic_bus.profile.device import PERMILLE_RANGE, RATED_TORQUE_RANGE, SCALE_RANGE
+from haptic_bus.validation import real_range
 
 DEFAULT_PERIOD = 0.001  # s
 DEFAULT_TIMING = "cia402"
@@ -53,7 +54,7 @@ class Ask:
 
 
 def _real(low: float, high: float, unit: str, low_open: bool = False) -> str:
-    return f"{unit}, a finite real in {'(' if low_open else '['}{low:g}, {high:g}]"
+    return f"{unit}, {real_range(low, high, low_inclusive=not low_open)}"
 
 
 SCALING_ASKS = {

@@ -14,8 +14,8 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from haptic_bus.app.arguments import add_bus_arguments, modbus_url, node_id, refuse_can_options_with_modbus, unit_id, unit_ids
-from haptic_bus.app.drive_address import NODE_ID_HELP, UNIT_ID_HELP, DriveAddress, drive_address
+from haptic_bus.app.arguments import add_bus_arguments, modbus_url, node_id, refuse_can_options_with_modbus, unit_ids
+from haptic_bus.app.drive_address import DriveAddress, add_node_id_argument, add_unit_id_argument, drive_address
 from haptic_bus.errors import ParameterError
 
 if TYPE_CHECKING:
@@ -25,14 +25,14 @@ if TYPE_CHECKING:
 def add_link_arguments(parser: argparse.ArgumentParser) -> None:
     """The drive's (or the axes') address and ``--controller-node-id``."""
     add_bus_arguments(parser)
-    parser.add_argument("--node-id", type=node_id, help=NODE_ID_HELP)
+    add_node_id_argument(parser)
     parser.add_argument("--controller-node-id", type=node_id,
                         help="this controller's CANopen node id: its heartbeat, which the drive watches, and gated wall "
                              "uploads (default 127)")
     parser.add_argument("--modbus", type=modbus_url, metavar="URL", action="append",
                         help="a Modbus drive instead: tcp://HOST:PORT or rtu:/dev/ttyUSB0; a multi-axis profile: once for "
                              "every axis' unit (one server), or once per axis (a server each)")
-    parser.add_argument("--unit-id", type=unit_id, help=UNIT_ID_HELP)
+    add_unit_id_argument(parser)
     parser.add_argument("--unit-ids", type=unit_ids, metavar="IDS",
                         help="a multi-axis profile over Modbus: each axis' unit id, in axis order (e.g. 1,2,3 or 1-3; "
                              "default: the profile's [[axes]] unit_id, else unit 1 on each of one --modbus per axis)")

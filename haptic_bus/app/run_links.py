@@ -266,13 +266,26 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
     if any(isinstance(unit, bool) or not isinstance(unit, int) or not low <= unit <= high for unit in units):
         name, value = ("unit_ids", units) if isinstance(profile, AxesProfile) else ("unit_id", units[0])
         raise ParameterError(name, value, f"{UNIT_IDS}: the units that answer (0 is broadcast)", "run")
-    places = list(zip(list(urls) * size if len(urls) == 1 else urls, units))
-    if unit_ids is None and len(urls) == size > len(set(urls)) and len(set(places)) != size:  # no unit ids were given
+    twice = shared_place(urls, units)
+    if unit_ids is None and len(urls) == size and twice is not None:  # no unit ids were given
         raise ParameterError("bus", list(urls), f"one Modbus URL for every axis, or a different one per axis ({size}): "
                              "a server named twice (its units on one server: one URL with the unit ids)", "run")
-    if len(units) != size or len(set(places)) != size:
-        raise ParameterError("unit_ids", units, f"{size} unit ids, one per axis, none twice at one URL", "run")
+    if len(units) != size:
+        raise ParameterError("unit_ids", units, f"{size} unit ids, one per axis", "run")
+    if twice is not None:
+        raise ParameterError("unit_ids", units, f"{size} unit ids, one per axis, {none_twice(*twice)}", "run")
     return units
+
+
+def shared_place(urls: Sequence[str], units: Sequence[int]) -> tuple[int, str] | None:
+    """The first unit and URL two axes share (``urls``: one for every axis, or one per axis), or None."""
+    places = list(zip(units, list(urls) * len(units) if len(urls) == 1 else urls))
+    return next((place for i, place in enumerate(places) if place in places[:i]), None)
+
+
+def none_twice(unit: int, url: str) -> str:
+    """What a refusal of a unit id two axes share at one URL allows, naming the two."""
+    return f"none twice at one URL (unit {unit} is given twice at {url})"
 
 
 def modbus_rig(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: Sequence[int], options: RunOptions) -> Rig:

@@ -56,11 +56,8 @@ SCAN_HELP = ("list the CANopen nodes on a CAN bus (or the units of a Modbus serv
 
 def id_list(text: str, name: str, allowed: str, low: int, high: int) -> list[int]:
     """``"5"``, ``"1-10"``, ``"5,9,20-30"`` -> sorted ids without repeats, read as every flag that takes ids
-    reads them (:func:`~haptic_bus.validation.ids_in_order`); ArgumentTypeError otherwise."""
-    try:
-        return sorted(set(ids_in_order(name, text, allowed, low, high)))
-    except ParameterError as invalid:
-        raise argparse.ArgumentTypeError(invalid.detail) from None
+    reads them (:func:`~haptic_bus.validation.ids_in_order`); ParameterError otherwise."""
+    return sorted(set(ids_in_order(name, text, allowed, low, high)))
 
 
 def node_ids(text: str) -> list[int]:

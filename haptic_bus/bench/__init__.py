@@ -213,8 +213,9 @@ def build_parser() -> argparse.ArgumentParser:
 def _cycles(text: str) -> int:
     """``--soak``'s cycles: a whole number 1..1e9, written as an integer or as 1e6 (``inf`` was an
     OverflowError's traceback, ``1.5`` taken as 1)."""
-    invalid = argparse.ArgumentTypeError(
-        f"soak cycles = {text!r} is invalid; allowed: a whole number of cycles 1..1e9 (e.g. 1e6)")
+    from haptic_bus.errors import ParameterError
+
+    invalid = ParameterError("soak cycles", text, "a whole number of cycles 1..1e9 (e.g. 1e6)")
     try:
         value = float(text)
     except ValueError:

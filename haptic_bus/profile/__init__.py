@@ -7,6 +7,7 @@ the simulated drive (:mod:`sim_drive`) read profiles through it:
   the file, the dotted field, the value and the allowed range; unknown keys refused;
 * :mod:`~haptic_bus.profile.files`: shipped profiles by name, others by path;
 * :mod:`~haptic_bus.profile.device`: ``[device]`` and ``[loop]``;
+* :mod:`~haptic_bus.profile.link`: an ``[[axes]]`` table's ``node_id`` or ``unit_id``;
 * :mod:`~haptic_bus.profile.identification`: ``[identification]``, what ``haptic-bus identify`` wrote;
 * :mod:`~haptic_bus.profile.operator`: ``[operator_model]``, the simulated operator;
 * :mod:`~haptic_bus.profile.plant`: those tables of a one-axis profile read together, the part

@@ -20,7 +20,7 @@ from typing import Any
 from haptic_bus.analysis.velocity import ALLOWED as VELOCITY_MODELS
 from haptic_bus.analysis.velocity import VelocityModel
 from haptic_bus.errors import ParameterError
-from haptic_bus.validation import real_in_range, whole_in_range
+from haptic_bus.validation import real_in_range, real_range, whole_in_range
 
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 """A name in a profile (the profile's, an object's, an axis'): letters, digits, '.', '_', '-', not starting with '.', '_', '-'."""
@@ -141,7 +141,7 @@ class Reader:
 
     def real(self, key: str, low: float, high: float, unit: str, *, low_inclusive: bool = True,
              default: object = REQUIRED) -> float:
-        allowed = f"a finite real in {'[' if low_inclusive else '('}{low:g}, {high:g}] {unit}"
+        allowed = real_range(low, high, unit, low_inclusive=low_inclusive)
         value = self.raw(key, allowed, default)
         return self._wrap(key, lambda v: real_in_range(key, v, low, high, low_inclusive=low_inclusive, unit=unit), value)
 

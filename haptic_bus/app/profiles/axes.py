@@ -45,8 +45,6 @@ from types import MappingProxyType
 from typing import Any
 
 from drives.base import DriveScaling
-from drives.cia301 import NODE_ID_RANGE, NODE_IDS
-from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
 from drives.safety import SafetySettings
 from haptic_bus.analysis.can_timing import BITRATE_RANGE, BusLoad
 from haptic_bus.analysis.coupled_loop import MAX_AXES
@@ -69,12 +67,12 @@ from haptic_bus.control.space_scene import (
 from haptic_bus.control.supervisor import SupervisorPolicy
 from haptic_bus.errors import ParameterError
 from haptic_bus.profile.device import DeviceTable, check_velocity_period, read_device, read_timing
+from haptic_bus.profile.link import read_link
 from haptic_bus.profile.reader import Reader, profile_error, refuse_duplicates
 from haptic_bus.profile.scene import FORCE_RANGE, check_force_limit
 
 DEFAULT_BITRATE = 1_000_000
 HAND_MODELS = ("none", "push")
-_ONE_LINK = f"exactly one of node_id ({NODE_IDS}) and unit_id ({UNIT_IDS})"
 _FIELDS = {"plane": ("point", "normal"), "box": ("center", "half"), "sphere": ("center", "radius")}
 
 
@@ -155,14 +153,7 @@ class AxesProfile:
 def _read_axis(path: pathlib.Path, index: int, table: object, period: float) -> Axis:
     r = Reader(path, f"axes[{index}]", table)
     name = r.text("name", pattern=NAME_PATTERN)
-    if "node_id" not in r.table and "unit_id" not in r.table:  # a misspelt one (nod_id) is named as such
-        for key in ("node_id", "unit_id"):
-            r.refuse_misspelling(key, _ONE_LINK)
-    if ("node_id" in r.table) == ("unit_id" in r.table):
-        raise profile_error(path, r.field("node_id"), r.table.get("node_id"), _ONE_LINK)
-    node = r.whole("node_id", *NODE_ID_RANGE, allowed=NODE_IDS) if "node_id" in r.table else None
-    unit = r.whole("unit_id", *UNIT_ID_RANGE, allowed=UNIT_IDS) if "unit_id" in r.table else None
-    r.used.update(("node_id", "unit_id"))
+    node, unit = read_link(r)
     timing, delay = read_timing(r)
     mapping = r.text("mapping", choices=tuple(PDO_MAPPINGS), default="minimal")
     device = read_device(path, r.raw("device", "an [axes.device] table: the one-axis [device] fields"), r.field("device"))
