@@ -89,7 +89,7 @@ def test_an_argument_left_out_is_missing_as_every_value_not_given(argv: list[str
      "haptic-bus status: error: --unit-id = 0 is invalid; allowed: Modbus unit ids 1..247"),
     (["sim", "--modbus", "tcp://127.0.0.1:47510", "--unit-id", "0"],
      "haptic-bus sim: error: --unit-id = 0 is invalid; allowed: Modbus unit ids 1..247"),
-    (["scan", *BUS, "--timeout", "0"], "haptic-bus scan: error: --timeout = 0.0 is invalid; allowed: a finite real in "
+    (["scan", *BUS, "--timeout", "0"], "haptic-bus scan: error: --timeout = 0 is invalid; allowed: a finite real in "
                                        "(0, 3600] s"),
     (["run", "cia402-handle", "--modbus", "udp://127.0.0.1:47510"],
      "haptic-bus run: error: --modbus = 'udp://127.0.0.1:47510' is invalid; allowed: tcp://HOST:PORT or rtu:/dev/SERIAL"),

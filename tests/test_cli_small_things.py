@@ -53,7 +53,7 @@ def test_python_m_haptic_bus_is_the_console_script(argv: list[str], code: int, o
 
 @pytest.mark.parametrize(("argv", "said"), [
     (["check", "--mass", "0.5", "--friction", "0.1", "--period", "1e-3", "--stiffness", "100", "--damping", "1",
-      "--position-resolution", "-1e-6"], "--position-resolution = -1e-06 is invalid; allowed: a finite real in [0, 1e+06] m"),
+      "--position-resolution", "-1e-6"], "--position-resolution = -1e-6 is invalid; allowed: a finite real in [0, 1e+06] m"),
     (["region", "--mass", "0.5", "--friction", "0.1", "--period", "1e-3", "--png", "never-written.png", "--mark", "-1,1"],
      "'-1,1': K and B must be finite and > 0"),
     (["check", "--mass", "0.5", "--friction", "0.1", "--period", "-1E-3", "--stiffness", "100", "--damping", "1"],

@@ -181,9 +181,9 @@ def test_a_silent_node_is_one_line_and_exit_1(tmp_path: Path, capsys: pytest.Cap
     (["axis", "--node-id", "5"], "--node-id = 5 is invalid"),
     (["axis", "--from-drive"], "--from-drive = 'without a drive' is invalid; allowed: --node-id N (and the bus) or --modbus"),
     (["axis", "--from-drive", "--modbus", "tcp://127.0.0.1:1", "--node-id", "5"], "--node-id = 5 is invalid"),
-    (["axis", "--mass", "-1"], "--mass = -1.0 is invalid"),
+    (["axis", "--mass", "-1"], "--mass = -1 is invalid"),
     (["axis", "--velocity", "fast"], "velocity = 'fast' is invalid"),
-    (["axis", "--force-limit", "0"], "--force-limit = 0.0 is invalid"),
+    (["axis", "--force-limit", "0"], "--force-limit = 0 is invalid"),
 ])
 def test_bad_input_is_one_line_and_exit_2(argv: list[str], message: str, tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:

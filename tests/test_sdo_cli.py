@@ -151,7 +151,7 @@ INVALID = [
     (["read", "0x6041", "--node-id", "0"], "--node-id = 0 is invalid; allowed: CANopen node ids 1..127"),
     (["read", "0x6041", "--node-id", "128"], "--node-id = 128 is invalid; allowed: CANopen node ids 1..127"),
     (["read", "0x6041", "--unit-id", "2"], "--unit-id = 2 is invalid; allowed: a Modbus option"),
-    (["read", "0x6041", "--timeout", "0"], "--timeout = 0.0 is invalid"),
+    (["read", "0x6041", "--timeout", "0"], "--timeout = 0 is invalid"),
     (["peek", "0x6041"], "argument action: invalid choice: 'peek'"),
 ]
 

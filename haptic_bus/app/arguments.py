@@ -36,6 +36,13 @@ Handler = Callable[[argparse.Namespace], int]
 _REQUIRED = "the following arguments are required: "  # argparse's words for required arguments left out
 
 
+class _AsTyped(str):
+    """A number's text as the user typed it, shown bare in a refusal (``repr`` quotes a str)."""
+
+    def __repr__(self) -> str:
+        return str(self)
+
+
 class OneLineParser(argparse.ArgumentParser):
     """argparse, but a usage error is one line on stderr and exit status 2, and an argument no option
     takes is the usage error of the (sub)command given (:meth:`parse_command`).  A negative number in
@@ -50,7 +57,8 @@ class OneLineParser(argparse.ArgumentParser):
         """argparse's, but a type's :class:`~haptic_bus.errors.ParameterError` is the usage error naming the flag
         once, ``--unit-id = 0 is invalid; allowed: ...`` (argparse's own line named it twice, ``argument --unit-id:
         unit id = 0 ...``, or, the ParameterError being a ValueError, said ``invalid parse value``); a positional
-        argument keeps the type's name."""
+        argument keeps the type's name.  The value is shown as typed (``-1e-5``, ``0x80``, not the number read
+        from it, ``-1e-05``, ``128``), text that is no number quoted (``'x'``)."""
         try:
             return super()._get_value(action, arg_string)
         except argparse.ArgumentError as error:
@@ -58,7 +66,8 @@ class OneLineParser(argparse.ArgumentParser):
             if not isinstance(refused, ParameterError):
                 raise
             name = max(action.option_strings, key=len) if action.option_strings else refused.name
-            raise argparse.ArgumentError(None, ParameterError(name, refused.value, refused.allowed).detail) from None
+            typed = arg_string if isinstance(refused.value, str) else _AsTyped(arg_string)
+            raise argparse.ArgumentError(None, ParameterError(name, typed, refused.allowed).detail) from None
 
     def error(self, message: str) -> None:  # type: ignore[override]
         if message.startswith(_REQUIRED):
