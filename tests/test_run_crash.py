@@ -204,6 +204,13 @@ def test_kill_9_of_three_axes_keeps_every_axis_record_but_the_last_0_25_s(multic
     counts = [record["cycles"] for record in trial["records"].values()]
     assert max(counts) - min(counts) <= 1  # the same cycles in every file, but a last row one drain took first
     _plots(out, ("trajectory.png",), capsys)
+    from haptic_bus.app.run_folder import read_run_folder
+    from haptic_bus.app.trajectory_plot import trajectory_figure
+
+    figure = trajectory_figure(read_run_folder(out))  # its title as the one-axis pictures': the unclean end, in red
+    title = next(text for text in figure.texts if text.get_text() == figure.get_suptitle())
+    assert title.get_text().replace("\n", " ").startswith("gantry-3d: 3 axes, T = 2 ms; did NOT end cleanly")
+    assert title.get_color() == "tab:red"
 
 
 def test_plot_refuses_a_folder_with_nothing_to_draw_in_one_line(tmp_path: Path, capsys: Any) -> None:

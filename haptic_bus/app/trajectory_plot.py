@@ -1,5 +1,6 @@
 """``trajectory.png``, the picture of motion in space (a run of several axes): the trajectory in its plane of
-motion against the objects, and time plots.
+motion against the objects, and time plots; its title says how the run ended, in red unless it completed
+(:func:`~haptic_bus.app.run_plots.title_of`, the one-axis pictures' rule: a killed run never looks healthy).
 
 The plane of motion: for two axes the plane of the axes; for three or more, the plane through the
 trajectory's mean spanned by its two principal directions (an SVD of the positions), the plane
@@ -21,6 +22,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from haptic_bus.app.run_folder import RunFolder
+from haptic_bus.app.run_plots import title_of
 from haptic_bus.app.space_records import space_objects
 from haptic_bus.control.space_scene import SpaceObject
 
@@ -76,8 +78,8 @@ def trajectory_figure(run: RunFolder) -> Figure:
     force_axes.legend(lines[0] + more[0], lines[1] + more[1], loc="upper center",
                       bbox_to_anchor=(0.5, -0.2), ncol=4, fontsize=8)  # below: on no data
     loop = run.document.get("loop", {})
-    fig.suptitle(f"{run.document.get('profile', {}).get('name', run.path.name)}: {len(names)} axes, "
-                 f"T = {loop.get('period', float('nan')) * 1e3:g} ms")
+    title, colour = title_of(run, f"{len(names)} axes, T = {loop.get('period', float('nan')) * 1e3:g} ms")
+    fig.suptitle(title, color=colour)  # how the run ended, red unless it completed, as the one-axis pictures say it
     fig.tight_layout()
     return fig
 
