@@ -11,6 +11,8 @@ import os
 import pathlib
 import pty
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 
@@ -20,27 +22,42 @@ from haptic_bus.control.record import COLUMNS, RunRecord
 ROWS = 3
 
 
-def test_a_writer_with_a_terminal_view_closes_with_every_row_counted(tmp_path: pathlib.Path,
-                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    master, slave = pty.openpty()  # a real terminal: the view takes rich's Live panel
-    terminal = io.TextIOWrapper(io.FileIO(slave, "w", closefd=False), write_through=True)
-    monkeypatch.setattr(sys, "stderr", terminal)
+@contextmanager
+def _writer_of_one_record(folder: pathlib.Path) -> Iterator[tuple[Writer, RunRecord]]:
+    """A writer in this process with one shared record (``record.csv``) attached, and that record; the
+    record's ring and the pipe let go at the end."""
     ours, theirs = multiprocessing.get_context("spawn").Pipe()
     record = RunRecord(16, shared=True)
     try:
-        for k in range(ROWS):
-            record.append(*([k * 1e-3] + [0.0] * (len(COLUMNS) - 1)))
-        writer = Writer(tmp_path, theirs)
+        writer = Writer(folder, theirs)
         writer.handle(("record", "record.csv", record.spec, "x"))
         assert ours.recv() == ("attached", "record.csv")
-        writer.handle(("live", "run", 1e-3, 1.0))
-        writer.handle(("stop",))
-        stats = writer.close()
+        yield writer, record
     finally:
         record.unlink()
         record.close()
         ours.close()
         theirs.close()
+
+
+def _row(k: int) -> list[float]:
+    """Row ``k`` of a record: its time, every other column 0."""
+    return [k * 1e-3] + [0.0] * (len(COLUMNS) - 1)
+
+
+def test_a_writer_with_a_terminal_view_closes_with_every_row_counted(tmp_path: pathlib.Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    master, slave = pty.openpty()  # a real terminal: the view takes rich's Live panel
+    terminal = io.TextIOWrapper(io.FileIO(slave, "w", closefd=False), write_through=True)
+    monkeypatch.setattr(sys, "stderr", terminal)
+    try:
+        with _writer_of_one_record(tmp_path) as (writer, record):
+            for k in range(ROWS):
+                record.append(*_row(k))
+            writer.handle(("live", "run", 1e-3, 1.0))
+            writer.handle(("stop",))
+            stats = writer.close()
+    finally:
         terminal.close()
         os.close(slave)
         os.close(master)
@@ -80,24 +97,14 @@ def test_a_view_whose_reader_is_gone_ends_and_the_records_are_written_in_full(tm
     in a run that said "completed".  Now the view ends; every row is written."""
     monkeypatch.setattr(sys, "stderr", io.StringIO())  # no terminal: the view prints plain lines on stdout
     monkeypatch.setattr(sys, "stdout", _ClosedPipe())
-    ours, theirs = multiprocessing.get_context("spawn").Pipe()
-    record = RunRecord(16, shared=True)
-    try:
-        writer = Writer(tmp_path, theirs)
-        writer.handle(("record", "record.csv", record.spec, "x"))
-        assert ours.recv() == ("attached", "record.csv")
+    with _writer_of_one_record(tmp_path) as (writer, record):
         writer.handle(("live", "run", 1e-3, 1.0))
         for k in range(ROWS):
-            record.append(*([k * 1e-3] + [0.0] * (len(COLUMNS) - 1)))
+            record.append(*_row(k))
             writer.show(writer.view_due)  # the redraw due now: the first one meets the closed pipe
             writer.flush()
         assert writer.view is None and writer.failure is None
         writer.handle(("stop",))
         stats = writer.close()
-    finally:
-        record.unlink()
-        record.close()
-        ours.close()
-        theirs.close()
     assert stats == {"records": {"record.csv": {"rows_written": ROWS, "rows_lost": 0}}}
     assert len((tmp_path / "record.csv").read_text().splitlines()) == 1 + ROWS
