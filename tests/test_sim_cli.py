@@ -24,7 +24,7 @@ from sim_drive.eds import eds_path
 from sim_drive.operator import HandModel
 from sim_drive.parameters import Timing
 from sim_drive.profile import read_simulated_device
-from sim_drive.setups import modbus_axes_setup
+from sim_drive.setups import modbus_axes_setup, node_id, unit_id
 
 NODE = 11
 BOOT_WAIT = 20.0  # s: the subprocess imports numpy, canopen, python-can first
@@ -91,6 +91,9 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
         (["--modbus", MODBUS_URL, "--unit-id", "248"], "Modbus unit ids 1..247"),  # as --unit-ids: what run can reach
         (["--modbus", MODBUS_URL, "--unit-id", "0"], "Modbus unit ids 1..247"),
         (["--modbus", MODBUS_URL, "--unit-id", "one"], "--unit-id = 'one' is invalid; allowed: Modbus unit ids 1..247"),
+        (["--modbus", MODBUS_URL, "--unit-id", "0x100"], "--unit-id = 0x100 is invalid; allowed: Modbus unit ids 1..247"),
+        (["--interface", "virtual", "--channel", "x", "--node-id", "0x7", "--unit-id", "0x02"],
+         "Modbus options need --modbus: --unit-id = 0x02"),
         (["--modbus", MODBUS_URL, "--word-order", "middle"], "invalid choice"),
         (["--modbus", MODBUS_URL, "--profile", "/nonexistent.toml"], "an existing TOML file"),
         (["--frobnicate"], "unrecognized arguments: --frobnicate"),
@@ -108,6 +111,16 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
 def test_modbus_usage_errors_exit_2_with_one_line(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(argv) == 2
     assert message in one_error_line(capsys.readouterr().err)
+
+
+def test_ids_read_in_hexadecimal_as_haptic_bus_run_reads_them() -> None:
+    """``--node-id 0x7`` and ``--unit-id 0x10`` are node 7 and unit 16, as ``run`` and ``sim --unit-ids`` read
+    them (the simulator refused them as text); ``07`` is refused by both."""
+    canopen = _parse(build_parser(), ["--interface", "virtual", "--channel", "x", "--node-id", "0x7"])
+    modbus = _parse(build_parser(), ["--modbus", MODBUS_URL, "--unit-id", "0x10"])
+    assert (node_id(canopen), unit_id(modbus)) == (7, 16)
+    with pytest.raises(ParameterError, match="--node-id = '07' is invalid"):
+        node_id(_parse(build_parser(), ["--interface", "virtual", "--channel", "x", "--node-id", "07"]))
 
 
 @pytest.mark.parametrize("profile", [[], ["--profile", "gantry-3d"]])
