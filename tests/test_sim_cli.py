@@ -13,11 +13,13 @@ import subprocess
 import sys
 import threading
 
+import can
 import pytest
 
 from drives.bus_config import open_bus
 from drives.cia402 import Command
 from haptic_bus.errors import ParameterError
+from sim_drive import serve
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.cli import _parse, build_parser, main
 from sim_drive.eds import eds_path
@@ -165,6 +167,34 @@ def test_a_node_id_already_on_the_bus_exits_1_with_one_line_before_any_boot_up(
                     "another simulator with that id); stop it or give another node id\n")
     assert not [f for f in frames if f is not None and f.arbitration_id in (0x700 + NODE - 1, 0x700 + NODE) and
                 f.data == bytearray([0])]  # no boot-up of the second: a master cycling node 11 saw no reset
+
+
+def test_two_simulators_of_one_id_started_at_one_instant_both_refuse(monkeypatch: pytest.MonkeyPatch,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Two ``haptic-bus sim --node-id 11`` whose listening began within 2 ms of each other heard nothing of each
+    other and both served (break18b: 4 of 4 so started on udp_multicast); each now keeps listening past its own
+    boot-up, hears the other's beside it, stops and exits 1.  The twin here: a boot-up of node 11 sent the
+    instant this one's listening ends, before its own."""
+    channel = "sim-cli-twin"
+    listened = serve.node_heard
+
+    def twin_listened_too(listener: can.BusABC, node_ids: list[int], seconds: float) -> int | None:
+        heard = listened(listener, node_ids, seconds)
+        with open_bus(interface="virtual", channel=channel) as twin:
+            twin.send(can.Message(arbitration_id=0x700 + NODE, data=[0], is_extended_id=False))
+        return heard
+
+    monkeypatch.setattr(serve, "node_heard", twin_listened_too)
+    bound = threading.Timer(STOP_AFTER, os.kill, (os.getpid(), signal.SIGTERM))  # a sim that serves is stopped (exit 0)
+    try:
+        bound.start()
+        assert main(["--interface", "virtual", "--channel", channel, "--node-id", str(NODE)]) == 1
+    finally:
+        bound.cancel()
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.splitlines()[-1] == (
+        f"haptic-bus sim: error: node {NODE} booted twice on this bus at once (another simulator with that id started "
+        "at the same instant); stop it or give another node id")
 
 
 def test_a_program_calling_main_keeps_its_logging(capsys: pytest.CaptureFixture[str]) -> None:
