@@ -132,6 +132,13 @@ def test_region_png_adds_the_suffix_and_says_so(tmp_path: pathlib.Path, capsys: 
     assert written.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.parametrize("png", ["", ".", "/"])
+def test_region_png_without_a_name_is_refused_in_one_line(png: str, capsys: pytest.CaptureFixture[str]) -> None:
+    result = run_cli(capsys, "region", "--mass", "0.5", "--friction", "0.1", "--period", "0.001", "--png", png)
+    assert (result.code, result.out) == (2, "")  # --png '' was a traceback (pathlib's "has an empty name")
+    assert result.err == f"haptic-bus region: error: --png = {png!r} is invalid; allowed: a PNG file's path (empty: none given)\n"
+
+
 def test_region_png_on_a_pipe_is_refused_and_left_alone(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A pipe (as a device: --png /dev/null run as root renamed a regular file over the device) is refused
     before the work; its open for the writable check waited for a reader, for ever."""
