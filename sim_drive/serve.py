@@ -36,6 +36,7 @@ logger = logging.getLogger("sim_drive")
 PROG = "haptic-bus sim"
 NODE_LISTEN_S = 0.25  # s: how long the simulator listens for a node of its id before its boot-up: 2.5 periods of a
 # simulated drive's heartbeat (0x1017 = 100 ms), whose next one comes within a period; a master cycling it is heard at once
+NMT_RESETS = (0x81, 0x82)  # NMT reset node, reset communication: the node boots up again
 SENT_BY_A_NODE = (0x080, 0x180, 0x280, 0x380, 0x480, 0x580, 0x700)  # EMCY, TPDO1-4, SDO answer, heartbeat: + node id
 
 
@@ -211,8 +212,15 @@ def booted_twice(listener: Any, node_ids: Sequence[int], seconds: float) -> int 
     deadline = time.monotonic() + seconds
     while (left := deadline - time.monotonic()) > 0:
         message = listener.recv(left)
-        node = None if message is None or message.is_extended_id else message.arbitration_id - 0x700
-        if node in heard and bytes(message.data) == b"\x00":
+        if message is None or message.is_extended_id:
+            continue
+        data = bytes(message.data)
+        if message.arbitration_id == 0 and len(data) == 2 and data[0] in NMT_RESETS:  # a master that found it resets it:
+            for reset in node_ids if data[1] == 0 else [data[1]]:  # its boot-up comes again, no twin's
+                heard.pop(reset, None)
+            continue
+        node = message.arbitration_id - 0x700
+        if node in heard and data == b"\x00":
             heard[node] += 1
             if heard[node] > 1:
                 return node

@@ -197,6 +197,33 @@ def test_two_simulators_of_one_id_started_at_one_instant_both_refuse(monkeypatch
         "at the same instant); stop it or give another node id")
 
 
+def test_a_master_resetting_the_node_as_it_boots_is_no_twin(monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """A master that heard the boot-up and resets the node (NMT reset communication) within the 0.25 s the
+    simulator still listens gets a second boot-up of it: that is no twin (the plugin's rig did so, and the
+    simulator refused, every SDO unanswered).  It serves, and SIGTERM ends it, exit 0."""
+    channel = "sim-cli-reset"
+    listened = serve.node_heard
+
+    def reset_as_it_boots(listener: can.BusABC, node_ids: list[int], seconds: float) -> int | None:
+        heard = listened(listener, node_ids, seconds)
+
+        def reset() -> None:
+            with open_bus(interface="virtual", channel=channel) as master:
+                master.send(can.Message(arbitration_id=0, data=[0x82, NODE], is_extended_id=False))
+
+        threading.Timer(0.05, reset).start()  # after its boot-up, within the listening after it
+        os.kill(os.getpid(), signal.SIGTERM)  # kept by its stop signals: served, then stopped
+        return heard
+
+    monkeypatch.setattr(serve, "node_heard", reset_as_it_boots)
+    with open_bus(interface="virtual", channel=channel) as sniffer:
+        assert main(["--interface", "virtual", "--channel", channel, "--node-id", str(NODE)]) == 0
+        frames = [sniffer.recv(0.0) for _ in range(100)]  # bounded: what reached the bus meanwhile
+    boot_ups = [f for f in frames if f is not None and f.arbitration_id == 0x700 + NODE and f.data == bytearray([0])]
+    assert len(boot_ups) == 2 and "error" not in capsys.readouterr().err
+
+
 def test_a_program_calling_main_keeps_its_logging(capsys: pytest.CaptureFixture[str]) -> None:
     """The simulator logs on stderr while it serves (its root handler, the bus library at WARNING); a program
     that called its main has its own handlers and levels back when it returns (here from an address in use)."""
