@@ -125,9 +125,11 @@ NOT_YET = "a file that does not exist yet (--force overwrites it)"
 
 
 def new_file(name: str, path: str | os.PathLike[str], force: bool, *, context: str = "") -> pathlib.Path:
-    """``path`` as a file a command is about to write, touching nothing: in an existing folder this user
+    """``path`` (not empty) as a file a command is about to write, touching nothing: in an existing folder this user
     can write, a regular file (:func:`_regular_or_none`), and one that does not exist yet unless ``force``;
     ParameterError naming ``name`` otherwise."""
+    if not os.fspath(path):  # pathlib reads '' as '.', the current folder
+        raise ParameterError(name, "", "a file's path (empty: none given)", context)
     target = pathlib.Path(path)
     if target.is_dir() or not target.parent.is_dir() or not os.access(target.parent, os.W_OK):
         raise ParameterError(name, str(target), "a file in an existing folder this user can write", context)
