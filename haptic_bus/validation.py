@@ -96,8 +96,9 @@ def writable_folder(name: str, path: str | os.PathLike[str], *, context: str = "
 
 def writable_file(name: str, path: str | os.PathLike[str], *, context: str = "") -> pathlib.Path:
     """``path``'s folder created and the file shown writable (opened for appending; a file that did not
-    exist is removed again); ParameterError naming ``name`` otherwise."""
+    exist is removed again), a regular file (:func:`_regular_or_none`); ParameterError naming ``name`` otherwise."""
     file = pathlib.Path(path)
+    _regular_or_none(name, file, context)  # before it is opened: a pipe's open waited for a reader, for ever
     existed = file.exists()
     try:
         file.parent.mkdir(parents=True, exist_ok=True)
@@ -111,16 +112,28 @@ def writable_file(name: str, path: str | os.PathLike[str], *, context: str = "")
     return file
 
 
+def _regular_or_none(name: str, file: pathlib.Path, context: str) -> None:
+    """ParameterError naming ``name`` if ``file`` is a device, a pipe or a socket: a command writes its file beside
+    it and renames it over the name, which put a regular file where a device was (``haptic-bus region --png
+    /dev/null`` or ``profiles new --out /dev/null --force`` run as root)."""
+    if file.is_char_device() or file.is_block_device() or file.is_fifo() or file.is_socket():
+        raise ParameterError(name, str(file), "a regular file or none (not a device, a pipe or a socket)", context)
+
+
 NOT_YET = "a file that does not exist yet (--force overwrites it)"
 """What a new file's flag allows where the file exists and ``--force`` was not given."""
 
 
 def new_file(name: str, path: str | os.PathLike[str], force: bool, *, context: str = "") -> pathlib.Path:
-    """``path`` as a file a command is about to write, touching nothing: in an existing folder this user
-    can write, and one that does not exist yet unless ``force``; ParameterError naming ``name`` otherwise."""
+    """``path`` (not empty) as a file a command is about to write, touching nothing: in an existing folder this user
+    can write, a regular file (:func:`_regular_or_none`), and one that does not exist yet unless ``force``;
+    ParameterError naming ``name`` otherwise."""
+    if not os.fspath(path):  # pathlib reads '' as '.', the current folder
+        raise ParameterError(name, "", "a file's path (empty: none given)", context)
     target = pathlib.Path(path)
     if target.is_dir() or not target.parent.is_dir() or not os.access(target.parent, os.W_OK):
         raise ParameterError(name, str(target), "a file in an existing folder this user can write", context)
+    _regular_or_none(name, target, context)
     if target.exists() and not force:
         raise ParameterError(name, str(target), NOT_YET, context)
     return target

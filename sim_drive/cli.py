@@ -157,8 +157,26 @@ def _read_or_text(kind: Callable[[str], V]) -> Callable[[str], V | str]:
     return read
 
 
+class _Whole(int):
+    """A whole number read as ``haptic-bus run`` reads a node or unit id, decimal or ``0x``-hexadecimal, shown
+    in a refusal as typed (``--unit-id = 0x100``, not 256); ``sim --unit-id 0x10`` was refused as text where
+    ``run --unit-id 0x10`` and ``sim --unit-ids 0x10`` read unit 16."""
+
+    typed: str
+
+    def __new__(cls, text: str) -> _Whole:
+        whole = super().__new__(cls, int(text, 0))
+        whole.typed = text
+        return whole
+
+    def __repr__(self) -> str:
+        return self.typed
+
+    __str__ = int.__repr__
+
+
 _number_or_text = _read_or_text(float)
-_integer_or_text = _read_or_text(int)
+_integer_or_text = _read_or_text(_Whole)
 
 
 def _flags(args: argparse.Namespace, parser: argparse.ArgumentParser, dests: Sequence[str]) -> str:

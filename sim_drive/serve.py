@@ -36,6 +36,7 @@ logger = logging.getLogger("sim_drive")
 PROG = "haptic-bus sim"
 NODE_LISTEN_S = 0.25  # s: how long the simulator listens for a node of its id before its boot-up: 2.5 periods of a
 # simulated drive's heartbeat (0x1017 = 100 ms), whose next one comes within a period; a master cycling it is heard at once
+NMT_RESETS = (0x81, 0x82)  # NMT reset node, reset communication: the node boots up again
 SENT_BY_A_NODE = (0x080, 0x180, 0x280, 0x380, 0x480, 0x580, 0x700)  # EMCY, TPDO1-4, SDO answer, heartbeat: + node id
 
 
@@ -191,34 +192,66 @@ def run_axes(args: argparse.Namespace) -> int:
     return 0
 
 
-def node_heard(bus: Mapping[str, Any], node_ids: Sequence[int], seconds: float) -> int | None:
-    """The first of ``node_ids`` that sends a frame (:data:`SENT_BY_A_NODE`) on ``bus`` (a configuration)
-    within ``seconds`` (s), or None: a drive, or another simulator, already has that id."""
-    from drives.bus_config import open_bus
-
+def node_heard(listener: Any, node_ids: Sequence[int], seconds: float) -> int | None:
+    """The first of ``node_ids`` that sends a frame (:data:`SENT_BY_A_NODE`) that ``listener`` (an open bus)
+    hears within ``seconds`` (s), or None: a drive, or another simulator, already has that id."""
     sent = {base + node: node for node in node_ids for base in SENT_BY_A_NODE}
     deadline = time.monotonic() + seconds
-    with open_bus(**bus) as listener:
-        while (left := deadline - time.monotonic()) > 0:
-            message = listener.recv(left)
-            if message is not None and not message.is_extended_id and message.arbitration_id in sent:
-                return sent[message.arbitration_id]
+    while (left := deadline - time.monotonic()) > 0:
+        message = listener.recv(left)
+        if message is not None and not message.is_extended_id and message.arbitration_id in sent:
+            return sent[message.arbitration_id]
+    return None
+
+
+def booted_twice(listener: Any, node_ids: Sequence[int], seconds: float) -> int | None:
+    """The first of ``node_ids`` whose boot-up (``0x700 + id``, one byte 0) ``listener`` (an open bus, opened before
+    this simulator's own boot-up, which it hears too) hears twice within ``seconds`` (s), or None: another simulator
+    of that id listened (:func:`node_heard`) at the same instant, heard nothing either, and booted beside it."""
+    heard = dict.fromkeys(node_ids, 0)
+    deadline = time.monotonic() + seconds
+    while (left := deadline - time.monotonic()) > 0:
+        message = listener.recv(left)
+        if message is None or message.is_extended_id:
+            continue
+        data = bytes(message.data)
+        if message.arbitration_id == 0 and len(data) == 2 and data[0] in NMT_RESETS:  # a master that found it resets it:
+            for reset in node_ids if data[1] == 0 else [data[1]]:  # its boot-up comes again, no twin's
+                heard.pop(reset, None)
+            continue
+        node = message.arbitration_id - 0x700
+        if node in heard and data == b"\x00":
+            heard[node] += 1
+            if heard[node] > 1:
+                return node
     return None
 
 
 def started(sim: Any, bus: Mapping[str, Any], node_ids: Sequence[int]) -> bool:
     """Start ``sim`` (a slave or the multi-axis device on ``bus``, its nodes ``node_ids``), its threads named for
-    the OS; False after one line on stderr if its bus cannot be opened or a node of one of its ids is
-    heard there first (two node 5 on one bus answer each SDO twice: every master's session fails)."""
+    the OS; False after one line on stderr if its bus cannot be opened, a node of one of its ids is heard there
+    first, or one boots beside it (two node 5 on one bus answer each SDO twice: every master's session fails).
+    One listener from before the listening to after the boot-up: two simulators of one id started at one instant
+    (their listening within 2 ms) heard nothing of each other and both served (break18b); each now hears both
+    boot-ups, and neither serves."""
     import can
 
+    from drives.bus_config import open_bus
+
     try:
-        taken = node_heard(bus, node_ids, NODE_LISTEN_S)
-        if taken is not None:
-            print(f"{PROG}: error: node {taken} is already on this bus (a frame of it heard: a drive or another "
-                  "simulator with that id); stop it or give another node id", file=sys.stderr)
+        with open_bus(**bus) as listener:
+            taken = node_heard(listener, node_ids, NODE_LISTEN_S)
+            if taken is not None:
+                print(f"{PROG}: error: node {taken} is already on this bus (a frame of it heard: a drive or another "
+                      "simulator with that id); stop it or give another node id", file=sys.stderr)
+                return False
+            sim.start()
+            twice = booted_twice(listener, node_ids, NODE_LISTEN_S)
+        if twice is not None:
+            sim.stop()
+            print(f"{PROG}: error: node {twice} booted twice on this bus at once (another simulator with that id "
+                  "started at the same instant); stop it or give another node id", file=sys.stderr)
             return False
-        sim.start()
     except DriveError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return False

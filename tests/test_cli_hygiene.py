@@ -14,6 +14,7 @@ import os
 import pathlib
 import signal
 import socket
+import stat
 import subprocess
 import sys
 import tempfile
@@ -129,6 +130,25 @@ def test_region_png_adds_the_suffix_and_says_so(tmp_path: pathlib.Path, capsys: 
     assert result.code == 0, result.err
     assert result.out == f"wrote {written}\n" and not target.exists()
     assert written.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("png", ["", ".", "/"])
+def test_region_png_without_a_name_is_refused_in_one_line(png: str, capsys: pytest.CaptureFixture[str]) -> None:
+    result = run_cli(capsys, "region", "--mass", "0.5", "--friction", "0.1", "--period", "0.001", "--png", png)
+    assert (result.code, result.out) == (2, "")  # --png '' was a traceback (pathlib's "has an empty name")
+    assert result.err == f"haptic-bus region: error: --png = {png!r} is invalid; allowed: a PNG file's path (empty: none given)\n"
+
+
+def test_region_png_on_a_pipe_is_refused_and_left_alone(tmp_path: pathlib.Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A pipe (as a device: --png /dev/null run as root renamed a regular file over the device) is refused
+    before the work; its open for the writable check waited for a reader, for ever."""
+    pipe = tmp_path / "pipe.png"
+    os.mkfifo(pipe)
+    result = run_cli(capsys, "region", "--mass", "0.5", "--friction", "0.1", "--period", "0.001", "--png", str(pipe))
+    assert result.code == 2 and result.out == ""
+    assert result.err == (f"haptic-bus region: error: --png = '{pipe}' is invalid; allowed: a regular file or none "
+                          "(not a device, a pipe or a socket)\n")
+    assert stat.S_ISFIFO(pipe.stat().st_mode)
 
 
 # ----------------------------------------------------------------------------- subprocesses

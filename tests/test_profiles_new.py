@@ -5,6 +5,8 @@ then says is missing, that reading the drive writes nothing to it, and the refus
 from __future__ import annotations
 
 import math
+import os
+import stat
 import time
 import tomllib
 import uuid
@@ -202,6 +204,30 @@ def test_an_existing_file_is_kept_without_force(tmp_path: Path, capsys: pytest.C
     assert out.read_text() == "kept\n"
     assert main(["profiles", "new", "axis", "--out", str(out), "--force"]) == 0
     assert out.read_text().startswith("# Profile axis, written by `haptic-bus profiles new axis` on ")
+
+
+def test_an_empty_out_is_refused_not_read_as_the_default(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """``--out ""`` (a script's unset variable) wrote NAME.toml here, as if no --out were given; ``run --out ""``
+    is refused, and so is this now."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["profiles", "new", "axis", "--out", ""]) == 2
+    assert one_line(capsys.readouterr().err) == ("haptic-bus profiles new: error: --out = '' is invalid; allowed: a file's "
+                                                 "path (empty: none given)\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("force", [[], ["--force"]])
+def test_no_file_but_a_regular_one_is_replaced(force: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A pipe (as a device: ``--out /dev/null --force`` run as root renamed a regular file over the device) is
+    refused, with or without --force, and stays what it was."""
+    out = tmp_path / "pipe"
+    os.mkfifo(out)
+    assert main(["profiles", "new", "axis", "--out", str(out), *force]) == 2
+    assert one_line(capsys.readouterr().err) == (
+        f"haptic-bus profiles new: error: --out = '{out}' is invalid; allowed: a regular file or none (not a device, "
+        "a pipe or a socket)\n")
+    assert stat.S_ISFIFO(out.stat().st_mode)
 
 
 @pytest.mark.parametrize("where", ["inside a file", "a folder", "a missing folder"])

@@ -23,7 +23,9 @@ import pytest
 import haptic_bus as hb
 from drives.canopen.drive import CanopenDrive
 from haptic_bus.app.folder_lock import LOCK_NAME
+from haptic_bus.app.run_folder import read_run_folder
 from haptic_bus.app.run_options import StopRequest
+from haptic_bus.app.run_plots import title_of
 from tests.run_rig import CAN_INTERFACE, read_run, run_cli, simulated_drive, wait_until
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -124,9 +126,11 @@ def test_plot_of_a_folder_a_run_still_writes_is_refused_there_and_says_so_elsewh
         into = run_cli(capsys, "plot", str(folder))
         drawn_into = sorted(p.name for p in folder.glob("*.png"))
         elsewhere = run_cli(capsys, "plot", str(folder), "--out", str(tmp_path / "snapshot"))
+        live_title = title_of(read_run_folder(folder), "timeline")  # the snapshot's timeline.png said killed or crashed
         holder.send_signal(signal.SIGKILL)
         holder.wait(10.0)
         after = run_cli(capsys, "plot", str(folder))
+        killed_title = title_of(read_run_folder(folder), "timeline")
     finally:
         if holder.poll() is None:
             holder.kill()
@@ -139,6 +143,9 @@ def test_plot_of_a_folder_a_run_still_writes_is_refused_there_and_says_so_elsewh
     assert elsewhere.out.splitlines()[0] == f"note: {folder}: the run of process {holder.pid} is still writing it; so far " \
                                             "record.csv holds 100 cycles"
     assert (tmp_path / "snapshot" / "timeline.png").is_file()
+    assert (" ".join(live_title[0].split()), live_title[1]) == (
+        f"cia402-handle: timeline; still running (process {holder.pid}): drawn from the cycles written so far", "tab:red")
+    assert killed_title[0].startswith("cia402-handle: timeline; did NOT end cleanly") and killed_title[1] == "tab:red"
     assert after.code == 0 and "the run did not end cleanly" in after.out.splitlines()[0]
     assert (folder / "timeline.png").is_file() and not (folder / LOCK_NAME).exists()
 

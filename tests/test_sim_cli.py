@@ -13,18 +13,20 @@ import subprocess
 import sys
 import threading
 
+import can
 import pytest
 
 from drives.bus_config import open_bus
 from drives.cia402 import Command
 from haptic_bus.errors import ParameterError
+from sim_drive import serve
 from sim_drive.canopen.slave import CanopenSimDrive
 from sim_drive.cli import _parse, build_parser, main
 from sim_drive.eds import eds_path
 from sim_drive.operator import HandModel
 from sim_drive.parameters import Timing
 from sim_drive.profile import read_simulated_device
-from sim_drive.setups import modbus_axes_setup
+from sim_drive.setups import modbus_axes_setup, node_id, unit_id
 
 NODE = 11
 BOOT_WAIT = 20.0  # s: the subprocess imports numpy, canopen, python-can first
@@ -91,6 +93,9 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
         (["--modbus", MODBUS_URL, "--unit-id", "248"], "Modbus unit ids 1..247"),  # as --unit-ids: what run can reach
         (["--modbus", MODBUS_URL, "--unit-id", "0"], "Modbus unit ids 1..247"),
         (["--modbus", MODBUS_URL, "--unit-id", "one"], "--unit-id = 'one' is invalid; allowed: Modbus unit ids 1..247"),
+        (["--modbus", MODBUS_URL, "--unit-id", "0x100"], "--unit-id = 0x100 is invalid; allowed: Modbus unit ids 1..247"),
+        (["--interface", "virtual", "--channel", "x", "--node-id", "0x7", "--unit-id", "0x02"],
+         "Modbus options need --modbus: --unit-id = 0x02"),
         (["--modbus", MODBUS_URL, "--word-order", "middle"], "invalid choice"),
         (["--modbus", MODBUS_URL, "--profile", "/nonexistent.toml"], "an existing TOML file"),
         (["--frobnicate"], "unrecognized arguments: --frobnicate"),
@@ -108,6 +113,16 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
 def test_modbus_usage_errors_exit_2_with_one_line(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(argv) == 2
     assert message in one_error_line(capsys.readouterr().err)
+
+
+def test_ids_read_in_hexadecimal_as_haptic_bus_run_reads_them() -> None:
+    """``--node-id 0x7`` and ``--unit-id 0x10`` are node 7 and unit 16, as ``run`` and ``sim --unit-ids`` read
+    them (the simulator refused them as text); ``07`` is refused by both."""
+    canopen = _parse(build_parser(), ["--interface", "virtual", "--channel", "x", "--node-id", "0x7"])
+    modbus = _parse(build_parser(), ["--modbus", MODBUS_URL, "--unit-id", "0x10"])
+    assert (node_id(canopen), unit_id(modbus)) == (7, 16)
+    with pytest.raises(ParameterError, match="--node-id = '07' is invalid"):
+        node_id(_parse(build_parser(), ["--interface", "virtual", "--channel", "x", "--node-id", "07"]))
 
 
 @pytest.mark.parametrize("profile", [[], ["--profile", "gantry-3d"]])
@@ -152,6 +167,61 @@ def test_a_node_id_already_on_the_bus_exits_1_with_one_line_before_any_boot_up(
                     "another simulator with that id); stop it or give another node id\n")
     assert not [f for f in frames if f is not None and f.arbitration_id in (0x700 + NODE - 1, 0x700 + NODE) and
                 f.data == bytearray([0])]  # no boot-up of the second: a master cycling node 11 saw no reset
+
+
+def test_two_simulators_of_one_id_started_at_one_instant_both_refuse(monkeypatch: pytest.MonkeyPatch,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Two ``haptic-bus sim --node-id 11`` whose listening began within 2 ms of each other heard nothing of each
+    other and both served (break18b: 4 of 4 so started on udp_multicast); each now keeps listening past its own
+    boot-up, hears the other's beside it, stops and exits 1.  The twin here: a boot-up of node 11 sent the
+    instant this one's listening ends, before its own."""
+    channel = "sim-cli-twin"
+    listened = serve.node_heard
+
+    def twin_listened_too(listener: can.BusABC, node_ids: list[int], seconds: float) -> int | None:
+        heard = listened(listener, node_ids, seconds)
+        with open_bus(interface="virtual", channel=channel) as twin:
+            twin.send(can.Message(arbitration_id=0x700 + NODE, data=[0], is_extended_id=False))
+        return heard
+
+    monkeypatch.setattr(serve, "node_heard", twin_listened_too)
+    bound = threading.Timer(STOP_AFTER, os.kill, (os.getpid(), signal.SIGTERM))  # a sim that serves is stopped (exit 0)
+    try:
+        bound.start()
+        assert main(["--interface", "virtual", "--channel", channel, "--node-id", str(NODE)]) == 1
+    finally:
+        bound.cancel()
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.splitlines()[-1] == (
+        f"haptic-bus sim: error: node {NODE} booted twice on this bus at once (another simulator with that id started "
+        "at the same instant); stop it or give another node id")
+
+
+def test_a_master_resetting_the_node_as_it_boots_is_no_twin(monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """A master that heard the boot-up and resets the node (NMT reset communication) within the 0.25 s the
+    simulator still listens gets a second boot-up of it: that is no twin (the plugin's rig did so, and the
+    simulator refused, every SDO unanswered).  It serves, and SIGTERM ends it, exit 0."""
+    channel = "sim-cli-reset"
+    listened = serve.node_heard
+
+    def reset_as_it_boots(listener: can.BusABC, node_ids: list[int], seconds: float) -> int | None:
+        heard = listened(listener, node_ids, seconds)
+
+        def reset() -> None:
+            with open_bus(interface="virtual", channel=channel) as master:
+                master.send(can.Message(arbitration_id=0, data=[0x82, NODE], is_extended_id=False))
+
+        threading.Timer(0.05, reset).start()  # after its boot-up, within the listening after it
+        os.kill(os.getpid(), signal.SIGTERM)  # kept by its stop signals: served, then stopped
+        return heard
+
+    monkeypatch.setattr(serve, "node_heard", reset_as_it_boots)
+    with open_bus(interface="virtual", channel=channel) as sniffer:
+        assert main(["--interface", "virtual", "--channel", channel, "--node-id", str(NODE)]) == 0
+        frames = [sniffer.recv(0.0) for _ in range(100)]  # bounded: what reached the bus meanwhile
+    boot_ups = [f for f in frames if f is not None and f.arbitration_id == 0x700 + NODE and f.data == bytearray([0])]
+    assert len(boot_ups) == 2 and "error" not in capsys.readouterr().err
 
 
 def test_a_program_calling_main_keeps_its_logging(capsys: pytest.CaptureFixture[str]) -> None:

@@ -251,7 +251,7 @@ def _new_target(args: argparse.Namespace) -> tuple[pathlib.Path, DriveAddress]:
         raise ParameterError("--from-drive", "without a drive", "--node-id N (and the bus) or --modbus URL", "profiles new")
     if args.velocity is not None:
         velocity_model(args.velocity)
-    return new_file("--out", args.out or f"{args.name}.toml", args.force, context="profiles new"), address
+    return new_file("--out", f"{args.name}.toml" if args.out is None else args.out, args.force, context="profiles new"), address
 
 
 def velocity_model(text: str) -> VelocityModel:

@@ -309,6 +309,12 @@ class RunFolder:
         return self.document.get("ended", True) is True
 
     @property
+    def writer(self) -> str | None:
+        """The process id of the run still writing this folder (its lock held), or None: it ended, or its
+        process is gone (:func:`~haptic_bus.app.folder_lock.holder`)."""
+        return None if self.ended_cleanly else holder(self.path)
+
+    @property
     def records(self) -> dict[str, RecordTable]:
         """Every record read, by file name."""
         one = {RECORD_CSV: self.record} if self.record is not None else {}
@@ -329,7 +335,7 @@ class RunFolder:
         if not self.ended_cleanly:
             held = "; ".join(f"{name} holds {table.cycles} cycles" for name, table in self.records.items()) or \
                 "no record"
-            writer = holder(self.path)
+            writer = self.writer
             notes.append(f"{self.path}: the run of process {writer} is still writing it; so far {held}" if writer else
                          f"{self.path}: the run did not end cleanly (run.json still says {self.document.get('status')!r}: "
                          f"the process was killed or crashed); {held}")

@@ -48,7 +48,10 @@ _EVENT_LABEL_WIDTH = 40  # characters of an event's label beside its line (the w
 def ending(run: RunFolder) -> tuple[str, bool]:
     """How the run ended, one phrase for a title, and whether it is a clean completion."""
     document = run.document
-    if not run.ended_cleanly:
+    if not run.ended_cleanly:  # a run still writing its folder was drawn (plot --out elsewhere) as killed or crashed
+        writer = run.writer
+        if writer is not None:
+            return f"still running (process {writer}): drawn from the cycles written so far", False
         return "did NOT end cleanly: run.json still says 'running' (the process was killed or crashed)", False
     reason = str(document.get("exit_reason", document.get("status", "ended")))
     error = document.get("error")

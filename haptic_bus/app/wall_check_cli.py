@@ -27,6 +27,7 @@ from haptic_bus.app.arguments import (
     add_command,
     number,
 )
+from haptic_bus.errors import ParameterError
 from haptic_bus.validation import writable_file
 
 
@@ -73,7 +74,6 @@ def _check(args: argparse.Namespace) -> int:
     import json
 
     from haptic_bus.analysis.check import check_passivity, format_check
-    from haptic_bus.errors import ParameterError
 
     if args.coulomb is not None and args.position_resolution is None:
         raise ParameterError("--coulomb", args.coulomb, "with --position-resolution M: only the quantisation condition "
@@ -122,6 +122,8 @@ def _region(args: argparse.Namespace) -> int:
     loop = WallLoop(args.mass, args.friction, args.period, 0.0, 0.0, args.delay, VelocityModel.parse(args.velocity))
     marks = [loop.with_wall(K, B) for K, B in args.mark or []]
     path = pathlib.Path(args.png)
+    if not path.name:  # '', '.' or '/': with_name raised ValueError, a traceback
+        raise ParameterError("--png", args.png, "a PNG file's path (empty: none given)", "region")
     if path.suffix.lower() != ".png":
         path = path.with_name(path.name + ".png")
     writable_file("--png", path, context="region")  # before the minutes of work, not after
