@@ -28,7 +28,14 @@ from haptic_bus.app.demo import run_demo
 from haptic_bus.app.kb_plane import kb_plane_figure
 from haptic_bus.app.profiles import load_profile
 from haptic_bus.app.run_folder import RunFolder, read_run_folder
-from haptic_bus.app.run_plots import ending, force_position_figure, timeline_figure, wall_energy_taken_and_returned
+from haptic_bus.app.run_plots import (
+    ending,
+    force_position_figure,
+    springs_energy_in_place,
+    timeline_figure,
+    wall_energy_taken_and_returned,
+)
+from haptic_bus.control.record import RecordTable
 from haptic_bus.node.upload import upload_walls
 from tests.run_rig import events_of, profile_variant, read_run, run_cli, simulated_drive
 
@@ -202,3 +209,37 @@ def test_the_title_says_how_the_run_ended_once(document: dict[str, object], said
     """A Ctrl-C'd run's title read "ended: interrupted (interrupted (Ctrl-C))" (break18): an error that
     begins with the exit reason is said alone."""
     assert ending(RunFolder(tmp_path, {"ended": True, **document}, None)) == (said, document.get("error") is None)
+
+
+def test_force_position_counts_what_a_start_ramp_gave_the_springs_in_place(tmp_path: pathlib.Path) -> None:
+    """break18b: a run started 2 mm inside cia402-handle's wall with ``--start-in-contact ramp`` drew "net -20.45 mJ
+    into it (... below zero the wall would have made energy)" while the port's energy stayed above 0 J: raising K
+    with the handle inside gives the springs energy no ``u dx`` brings.  Here the scale ramps 0 -> 1 over 500
+    cycles with the handle held p = 2 mm inside a 1500 N/m spring (B = 0), then leaves in 1000 steps of
+    d = 2 um: the springs got K p^2 / 2 = 3 mJ in place (exact but rounding: the scale's steps sum to 1), and
+    the wall's sum of ``u_k dx_k`` (each force held over its step, the left sum of K (p - x) dx) is -K p (p + d)
+    / 2: the two add to -K p d / 2 = -3 uJ, the left sum's own error, not energy made."""
+    K, p, d, surface = 1500.0, 2e-3, 2e-6, 0.003
+    wall = {"kind": "wall", "name": "end-stop", "position": surface, "normal": -1, "stiffness": K, "damping": 0.0}
+    held = np.full(500, surface + p)
+    leaving = surface + p - d * np.arange(1001)
+    position = np.concatenate([held, leaving, np.full(10, surface - 1e-3)])
+    scale = np.concatenate([np.arange(1, 501) / 500, np.ones(1011)])
+    force = scale * K * np.maximum(position - surface, 0.0)
+    columns = {"time_s": np.arange(position.size) * 1e-3, "position_m": position, "force_n": force, "scale": scale,
+               "scene_id": np.zeros(position.size), "energy_j": np.zeros(position.size)}
+    document = {"ended": True, "status": "completed", "profile": {"name": "ramp"},
+                "scenes": [{"scene_id": 0, "objects": [wall]}]}
+    record = RecordTable(columns, torn_line=False)
+    in_place = springs_energy_in_place(document, record)
+    assert in_place == pytest.approx(K * p**2 / 2, rel=1e-12)
+    taken, returned = wall_energy_taken_and_returned(position, force)
+    assert taken == 0.0 and taken - returned == pytest.approx(-K * p * (p + d) / 2, rel=1e-9)
+    assert taken - returned + in_place == pytest.approx(-K * p * d / 2, rel=1e-6)
+    figure = force_position_figure(RunFolder(tmp_path, document, record))
+    try:
+        title = " ".join(figure.get_suptitle().split())
+    finally:
+        plt.close(figure)
+    assert "net -3.003 mJ, and its springs got 3 mJ with no u dx (held at the start, or gained in place by a ramp, " \
+           "derate or upload with the handle inside): -0.003 mJ (held in its springs at the end" in title, title

@@ -8,7 +8,9 @@ draws them again (:func:`haptic_bus.app.run_pictures.render_run`).
   way the run ended in the title (red unless it completed).
 * ``force_position.png`` (:func:`force_position_figure`): wall force against position, each step
   coloured by whether the wall took energy (``u dx > 0``) or gave it back, over each object's
-  spring law; the title sums both (the loop's area is what the wall kept).
+  spring law; the title sums both (the loop's area is what the wall kept), and adds what its springs
+  got with no ``u dx`` (:func:`springs_energy_in_place`: held at the first cycle, or gained in place as a
+  start ramp or a derate scaled them, or an upload changed them, while the handle was inside).
 * ``region.png`` (:mod:`~haptic_bus.app.kb_plane`): the K-B plane of the gate's loop with every
   scene's contact walls.
 
@@ -34,12 +36,13 @@ from matplotlib.figure import Figure
 from haptic_bus.app.run_folder import RunFolder
 from haptic_bus.app.run_options import ended_line
 from haptic_bus.control.record import RecordTable
-from haptic_bus.control.scene import SceneObject, object_from_dict
+from haptic_bus.control.scene import CompiledScene, SceneObject, compile_scene, object_from_dict
 
 EVENT_COLORS = {"upload": "tab:green", "refused": "tab:gray", "alarm": "tab:orange", "derate": "tab:purple",
                 "fault": "tab:red", "stop": "black"}
 OTHER_EVENT_COLOR = "tab:brown"
 _TITLE_WIDTH = 110  # characters a title line holds before it wraps
+_ENERGY_WIDTH = 150  # characters a line of force_position.png's energy sentence (fontsize 10 across the figure)
 _EVENT_LABEL_WIDTH = 40  # characters of an event's label beside its line (the whole message is in run.json)
 
 
@@ -171,6 +174,30 @@ def wall_energy_taken_and_returned(position: np.ndarray, force: np.ndarray) -> t
     return float(work[work > 0].sum()), float(-work[work < 0].sum())
 
 
+def springs_energy_in_place(document: dict[str, Any], record: RecordTable) -> float:
+    """The energy (J) the walls' springs got with no ``u dx`` bringing it: what they held at the first cycle,
+    ``s_0 V_0(x_0)``, and at each cycle ``k`` whose scale ``s`` (a start ramp, a derate) or scene ``sigma`` (an
+    upload) changed, ``s_k V_k(x_k) - s_(k-1) V_(k-1)(x_k)``, ``V`` a scene's spring energy at full scale
+    (``stored_energy``).  With the wall's ``sum u dx`` it is what its springs hold at the end plus what its
+    damping spent.  A ramp from 0 with the handle inside gives its springs ``K x^2 / 2`` that the operator then
+    takes back: the wall's ``sum u dx`` is below zero by as much, while the port, the handle's damping counted,
+    may stay passive (the observer's sum, the timeline's)."""
+    position, scale, scene = record["position_m"], record["scale"], record["scene_id"].astype(int)
+    changed = np.flatnonzero((np.diff(scale) != 0.0) | (np.diff(scene) != 0)) + 1
+    scenes: dict[int, CompiledScene] = {}
+
+    def held(sigma: int, x: float) -> float:
+        if sigma not in scenes:
+            scenes[sigma] = compile_scene(scene_objects(document, sigma))
+        return scenes[sigma].stored_energy(x)
+
+    if position.size == 0:
+        return 0.0
+    start = float(scale[0]) * held(int(scene[0]), float(position[0]))
+    return math.fsum([start, *(float(scale[k]) * held(int(scene[k]), float(position[k]))
+                               - float(scale[k - 1]) * held(int(scene[k - 1]), float(position[k])) for k in changed.tolist())])
+
+
 def force_position_figure(run: RunFolder) -> Figure:
     """Wall force against position, taking and giving back told apart, each object's law (module docstring)."""
     record = _record(run)
@@ -201,10 +228,14 @@ def force_position_figure(run: RunFolder) -> Figure:
     ax.grid(True, color="0.92")
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)
     text, color = title_of(run, "wall force against position")
-    net = taken - returned
-    fig.suptitle(f"{text}\nthe wall took {taken * 1e3:.4g} mJ and gave back {returned * 1e3:.4g} mJ: net {net * 1e3:.4g} mJ "
-                 "into it (held in its springs at the end or spent in its damping: a loop's area; below zero the wall "
-                 "would have made energy)", color=color, fontsize=10)
+    net, in_place = taken - returned, springs_energy_in_place(run.document, record)
+    balance = (f"net {net * 1e3:.4g} mJ into it" if abs(in_place) <= 1e-9 else
+               f"net {net * 1e3:.4g} mJ, and its springs got {in_place * 1e3:.4g} mJ with no u dx (held at the start, "
+               f"or gained in place by a ramp, derate or upload with the handle inside): {(net + in_place) * 1e3:.4g} mJ")
+    energy = textwrap.fill(f"the wall took {taken * 1e3:.4g} mJ and gave back {returned * 1e3:.4g} mJ: {balance} (held in "
+                           "its springs at the end or spent in its damping: a loop's area; below zero the wall would "
+                           "have made energy)", _ENERGY_WIDTH)
+    fig.suptitle(f"{text}\n{energy}", color=color, fontsize=10)
     fig.tight_layout()
     return fig
 
