@@ -14,7 +14,6 @@ import argparse
 import functools
 import logging
 import os
-import pathlib
 import signal
 import sys
 from collections.abc import Callable, Sequence
@@ -85,7 +84,9 @@ def _plot(args: argparse.Namespace) -> int:
     from haptic_bus.app.run_folder import read_run_folder
     from haptic_bus.errors import ParameterError
 
-    run = read_run_folder(args.run_dir)
+    run_dir = folder_path("RUN_DIR", args.run_dir, context="plot")  # '' is no folder, not '.'
+    out_dir = None if args.out is None else folder_path("--out", args.out, context="plot")  # '' is not RUN_DIR
+    run = read_run_folder(run_dir)
     if not run.drawable:
         status, error = run.document.get("status"), run.document.get("error")
         said = f"run.json says {status!r}" + (f", {error}" if error else "")
@@ -93,7 +94,7 @@ def _plot(args: argparse.Namespace) -> int:
             said += ": the run was killed or crashed before its first cycle"
         raise ParameterError("RUN_DIR", str(run.path), "a run folder with cycles recorded in every record, or the loop "
                              f"its gate judged (this run has neither: {said})", "plot")
-    out = writable_folder("--out", pathlib.Path(args.out) if args.out else run.path, context="plot")
+    out = writable_folder("--out", out_dir or run.path, context="plot")
     notes = run.notes()  # before this command holds a folder: the lock it names is another run's
     # pictures into a run's own folder while that run goes on would be replaced by its own at its end, or cross them
     lock = own_folder(out, "RUN_DIR" if out == run.path else "--out", "plot")
