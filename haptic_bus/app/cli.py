@@ -131,7 +131,7 @@ def _run(args: argparse.Namespace) -> int:
     try:
         if stop_noted():  # while the console script imported the command line
             raise StoppedBeforeStart
-        from haptic_bus.app.run_options import ended_line, exit_status
+        from haptic_bus.app.run_options import ended_line, exit_status, stopped_in_preflight
         from haptic_bus.app.runner import run  # its imports: a second or more under load
         from haptic_bus.errors import ParameterError
 
@@ -160,10 +160,11 @@ def _run(args: argparse.Namespace) -> int:
         if late:
             print(f"start lateness p50 {late['p50'] * 1e6:.1f} us, p99 {late['p99'] * 1e6:.1f} us, "
                   f"max {late['max'] * 1e6:.1f} us; overruns {summary.overruns}; late cycles {summary.late_cycles}")
+    where = stopped_in_preflight(result.preflight_stopped)
     if not args.quiet:
-        print(f"ended: {result.exit_reason}; wrote {', '.join(str(f) for f in result.files)}")
+        print(f"ended: {result.exit_reason}{where}; wrote {', '.join(str(f) for f in result.files)}")
     if result.error:
-        print(f"haptic-bus run: {ended_line(result.exit_reason, result.error)}", file=sys.stderr)
+        print(f"haptic-bus run: {ended_line(result.exit_reason, result.error)}{where}", file=sys.stderr)
     return exit_status(result.exit_reason)
 
 
