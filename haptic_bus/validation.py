@@ -11,10 +11,13 @@ import os
 import pathlib
 import tempfile
 from collections.abc import Sequence
+from typing import TypeVar
 
 from drives.ranges import real_in_range as real_in_range
 from drives.ranges import real_range as real_range
 from haptic_bus.errors import NAMES_SHOWN, ParameterError
+
+T = TypeVar("T")
 
 
 def some_names(names: Sequence[str], joiner: str = "+", most: int = NAMES_SHOWN) -> str:
@@ -68,6 +71,29 @@ def ids_in_order(name: str, text: str, allowed: str, low: int, high: int, *, dis
     if repeated is not None:
         raise ParameterError(name, text, f"distinct {allowed} ({repeated} is given twice)")
     return ids
+
+
+def typed_repeat(values: Sequence[T]) -> tuple[T, str]:
+    """What a refusal of a repeatable option's ``values`` (in the order typed, at least one) shows: one
+    value as typed, not the list they read as (the first typed more than once, else the last), and how
+    often (``given twice``; ``3 given, this one twice``; ``2 given, this one last``)."""
+    again = next((value for value in values if values.count(value) > 1), None)
+    if again is None:
+        return values[-1], f"{len(values)} given, this one last"
+    times = {2: "twice"}.get(values.count(again), f"{values.count(again)} times")
+    return again, f"given {times}" if values.count(again) == len(values) else f"{len(values)} given, this one {times}"
+
+
+def one_or_one_each(name: str, values: Sequence[object], size: int, each: str, *, context: str = "") -> None:
+    """Nothing if a repeatable option's ``values`` (``--modbus``: as typed) are one for every ``each``
+    (``"axis"``, ``"unit"``) or one per ``each`` (``size`` of them); else ParameterError naming ``name``,
+    one value as typed (:func:`typed_repeat`) and the count: ``run`` and ``sim`` say it alike
+    (``--modbus = 'tcp://127.0.0.1:5021' is invalid; allowed: one for every axis, or one per axis
+    (3 axes; given twice)``)."""
+    if len(values) not in (1, size):
+        shown, given = typed_repeat(values)
+        many = each if size == 1 else {"axis": "axes"}.get(each, f"{each}s")
+        raise ParameterError(name, shown, f"one for every {each}, or one per {each} ({size} {many}; {given})", context)
 
 
 def folder_path(name: str, path: str | os.PathLike[str], *, context: str = "") -> pathlib.Path:

@@ -16,7 +16,7 @@ from typing import Any
 from drives.bus_config import merge_bus_options
 from drives.cia301 import NODE_ID_RANGE, NODE_IDS
 from haptic_bus.errors import ParameterError
-from haptic_bus.validation import ids_in_order, whole_in_range
+from haptic_bus.validation import ids_in_order, one_or_one_each, typed_repeat, whole_in_range
 from sim_drive.operator import OperatorModel, operator_from_spec
 from sim_drive.parameters import DeviceParameters, Timing
 from sim_drive.profile import SimulatedDevice, read_simulated_device
@@ -120,10 +120,11 @@ def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
     from drives.modbus.register_map import UNIT_ID_RANGE, UNIT_IDS
     from sim_drive.space_operator import SpaceHand
 
-    repeated = next((url for url in args.modbus if args.modbus.count(url) > 1 and not url.rstrip("/").endswith(":0")), None)
-    if repeated is not None:  # a second server cannot listen where the first does ("Could not start listen", exit 1)
-        raise ParameterError("--modbus", repeated, "each address once: every --modbus is a server of its own (one "
-                             "server for several axes: one --modbus with --unit-ids)")
+    listening = [url for url in args.modbus if not url.rstrip("/").endswith(":0")]  # port 0: any free port, each its own
+    if len(set(listening)) < len(listening):  # a second server cannot listen where the first does ("Could not start listen")
+        repeated, how_often = typed_repeat(listening)
+        raise ParameterError("--modbus", repeated, f"each address once ({how_often}): every --modbus is a server of its own "
+                             "(one server for several axes: one --modbus with --unit-ids)")
     # a unit id may repeat on servers of their own (unit 1 on each is the default), never on one
     given = ids_in_order("--unit-ids", args.unit_ids, UNIT_IDS, *UNIT_ID_RANGE,
                          distinct=len(args.modbus) == 1) if args.unit_ids else None
@@ -132,9 +133,7 @@ def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
     device = profile_axes(args)
     if device is not None:
         refuse_truth_with_axes(args)
-        if len(args.modbus) not in (1, len(device.axes)):
-            raise ParameterError("--modbus", len(args.modbus), f"one address for every axis of the profile, or one per "
-                                 f"axis ({len(device.axes)})")
+        one_or_one_each("--modbus", args.modbus, len(device.axes), "axis")
         stated = [axis.unit_id for axis in device.axes]
         units = given or (stated if None not in stated else [UNIT_ID_RANGE[0]] * len(args.modbus))
         if len(units) != len(device.axes) or (len(args.modbus) == 1 and len(set(units)) != len(units)):
@@ -143,7 +142,6 @@ def modbus_axes_setup(args: argparse.Namespace) -> tuple[list[Any], Any]:
         return [(unit, axis.parameters, args.timing or axis.timing) for unit, axis in zip(units, device.axes)], \
             device.make_hand()
     units = given or [UNIT_ID_RANGE[0]] * len(args.modbus)
-    if len(args.modbus) not in (1, len(units)):
-        raise ParameterError("--modbus", len(args.modbus), f"one address for every unit, or one per unit ({len(units)})")
+    one_or_one_each("--modbus", args.modbus, len(units), "unit")
     parameters, _, timing = drive_setup(args)
     return [(unit, parameters, timing) for unit in units], SpaceHand(len(units))

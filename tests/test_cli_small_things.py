@@ -133,7 +133,8 @@ def test_an_interface_python_can_does_not_know_is_invalid_input(command: list[st
 
 
 @pytest.mark.parametrize("command", [["run", "cia402-handle", "--interface", "virtual", "--channel", "x", "--node-id", "5",
-                                      "--virtual-time"], ["demo"], ["report", "cia402-handle"]])
+                                      "--virtual-time"], ["demo"], ["report", "cia402-handle"],
+                                     ["plot", "a-run"]])  # plot drew into RUN_DIR
 def test_an_empty_out_is_refused_not_taken_as_the_current_folder(command: list[str], tmp_path: Path,
                                                                   monkeypatch: pytest.MonkeyPatch,
                                                                   capsys: pytest.CaptureFixture[str]) -> None:

@@ -91,6 +91,9 @@ def test_distinct_ids_stay_distinct_across_a_range() -> None:
     (["run", "gantry-3d", "--modbus", "tcp://127.0.0.1:47100"], "--unit-ids", "1-3,2", "Modbus unit ids", 247, 2),
     (["sim", "--modbus", "tcp://127.0.0.1:47100"], "--unit-ids", "1-3,2", "Modbus unit ids", 247, 2),
     (["sim", "--interface", "virtual", "--channel", "x"], "--node-ids", "5-7,0x6", "CANopen node ids", 127, 6),
+    (["scan", "--modbus", "tcp://127.0.0.1:47812"], "--unit-ids", "1-3,2", "Modbus unit ids", 247, 2),  # it dropped
+    (["scan", "--interface", "udp_multicast", "--channel", "239.74.18.1"], "--node-ids", "1-3,2", "CANopen node ids",
+     127, 2),  # the repeat quietly (break18b); refused while the command line is read, before any bus is opened
 ])
 def test_an_id_given_twice_is_named_with_what_was_typed(argv: list[str], flag: str, text: str, what: str, high: int,
                                                         twice: int, capsys: pytest.CaptureFixture[str]) -> None:

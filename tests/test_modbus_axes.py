@@ -150,7 +150,15 @@ def test_a_server_that_is_not_there_is_one_line(tmp_path: pathlib.Path, modbus_g
 @pytest.mark.parametrize(("args", "expected"), [
     (["--modbus", "{url}"], "--unit-ids is missing; allowed: one Modbus unit id per axis (3, e.g. 1,2,3)"),
     (["--modbus", "{url}", "--unit-ids", "1,2"], "--unit-ids = '1,2' is invalid; allowed: 3 Modbus unit ids, one per axis"),
-    (["--modbus", "{url}", "--modbus", "{url}"], "--modbus = ["),
+    (["--modbus", "{url}", "--modbus", "{url}"],  # the URL as typed, not the list it reads as (break18b)
+     "run: error: --modbus = 'tcp://127.0.0.1:9' is invalid; allowed: one for every axis, or one per axis "
+     "(3 axes; given twice)\n"),
+    (["--modbus", "{url}", "--modbus", "tcp://127.0.0.1:8"],
+     "--modbus = 'tcp://127.0.0.1:8' is invalid; allowed: one for every axis, or one per axis (3 axes; 2 given, this one "
+     "last)\n"),
+    (["--modbus", "{url}", "--modbus", "{url}", "--modbus", "tcp://127.0.0.1:8"],  # a server named twice, no unit ids
+     "--modbus = 'tcp://127.0.0.1:9' is invalid; allowed: one for every axis, or a different one per axis (3 axes; "
+     "3 given, this one twice): several axes on one server: one URL with the unit ids\n"),
     (["--modbus", "{url}", "--unit-id", "2"], "--unit-id = 2 is invalid; allowed: none with a multi-axis profile"),
     (["--modbus", "{url}", "--unit-ids", "1,2,3", "--interface", "virtual"], "--interface = 'virtual'"),
     (["--interface", "virtual", "--channel", "x", "--unit-ids", "1,2,3"], "--unit-ids = '1,2,3' is invalid; allowed: "

@@ -183,7 +183,8 @@ REGION = ["region", "--mass", "1", "--friction", "20", "--period", "0.001", "--d
                                                            "(two numbers: N/m, N s/m)"),
     (["plot", "{tmp}"], "haptic-bus plot: error: RUN_DIR = '{tmp}' is invalid; allowed: a run folder: one with "
                         "run.json (written by haptic-bus run or demo)"),
-], ids=["png-under-a-file", "mark-zero", "mark-one-number", "plot-not-a-run"])
+    (["plot", ""], "haptic-bus plot: error: RUN_DIR = '' is invalid; allowed: a folder path (empty: none given)"),  # '.'
+], ids=["png-under-a-file", "mark-zero", "mark-one-number", "plot-not-a-run", "plot-empty"])
 def test_bad_output_and_marks_are_one_line_and_exit_2(args: list[str], line: str, tmp_path: pathlib.Path,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "afile").write_text("not a folder")

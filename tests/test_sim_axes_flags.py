@@ -52,7 +52,8 @@ def test_node_ids_open_the_bus_the_bus_options_name(monkeypatch: pytest.MonkeyPa
      "--extra-delay = 0.5 is invalid; allowed: none with a multi-axis --profile"),
     (["--modbus", "tcp://127.0.0.1:44169", "--modbus", "tcp://127.0.0.1:44169", "--modbus", "tcp://127.0.0.1:44168",
       "--profile", "gantry-3d"],
-     "--modbus = 'tcp://127.0.0.1:44169' is invalid; allowed: each address once: every --modbus is a server of its own"),
+     "--modbus = 'tcp://127.0.0.1:44169' is invalid; allowed: each address once (3 given, this one twice): every "
+     "--modbus is a server of its own"),
     ([*BUS, "--bus-option", "port=44169", "--node-id", "5", "--mass", "x"],
      "--mass = 'x' is invalid; allowed: a finite real in [1e-09, 1e+09] kg"),
     (["--modbus", "tcp://127.0.0.1:0", "--unit-id", "x"], "--unit-id = 'x' is invalid; allowed: Modbus unit ids 1..247"),

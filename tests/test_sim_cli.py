@@ -106,7 +106,10 @@ def test_help_exits_0_and_shows_both_servers(argv: list[str], capsys: pytest.Cap
         (["--modbus", MODBUS_URL, "--unit-ids", "1,2", "--unit-id", "3"], "--unit-id = 3 is invalid; allowed: --unit-ids"),
         (["--modbus", MODBUS_URL, "--profile", "gantry-3d"], "--unit-ids is missing; allowed: one unit id per axis"),
         (["--modbus", MODBUS_URL, "--modbus", MODBUS_URL, "--profile", "gantry-3d"],
-         "--modbus = 2 is invalid; allowed: one address for every axis of the profile, or one per axis (3)"),
+         f"--modbus = '{MODBUS_URL}' is invalid; allowed: one for every axis, or one per axis (3 axes; given twice)"),
+        (["--modbus", MODBUS_URL, "--modbus", "tcp://127.0.0.1:47810", "--unit-ids", "1,2,3"],  # as run words it
+         "--modbus = 'tcp://127.0.0.1:47810' is invalid; allowed: one for every unit, or one per unit (3 units; 2 given, "
+         "this one last)"),
         (["--modbus", MODBUS_URL, "--unit-ids", "1,2", "--profile", "gantry-3d"], "one unit id per axis of the profile (3)"),
     ],
 )

@@ -14,7 +14,6 @@ import argparse
 import functools
 import logging
 import os
-import pathlib
 import signal
 import sys
 from collections.abc import Callable, Sequence
@@ -85,7 +84,9 @@ def _plot(args: argparse.Namespace) -> int:
     from haptic_bus.app.run_folder import read_run_folder
     from haptic_bus.errors import ParameterError
 
-    run = read_run_folder(args.run_dir)
+    run_dir = folder_path("RUN_DIR", args.run_dir, context="plot")  # '' is no folder, not '.'
+    out_dir = None if args.out is None else folder_path("--out", args.out, context="plot")  # '' is not RUN_DIR
+    run = read_run_folder(run_dir)
     if not run.drawable:
         status, error = run.document.get("status"), run.document.get("error")
         said = f"run.json says {status!r}" + (f", {error}" if error else "")
@@ -93,7 +94,7 @@ def _plot(args: argparse.Namespace) -> int:
             said += ": the run was killed or crashed before its first cycle"
         raise ParameterError("RUN_DIR", str(run.path), "a run folder with cycles recorded in every record, or the loop "
                              f"its gate judged (this run has neither: {said})", "plot")
-    out = writable_folder("--out", pathlib.Path(args.out) if args.out else run.path, context="plot")
+    out = writable_folder("--out", out_dir or run.path, context="plot")
     notes = run.notes()  # before this command holds a folder: the lock it names is another run's
     # pictures into a run's own folder while that run goes on would be replaced by its own at its end, or cross them
     lock = own_folder(out, "RUN_DIR" if out == run.path else "--out", "plot")
@@ -130,7 +131,7 @@ def _run(args: argparse.Namespace) -> int:
     try:
         if stop_noted():  # while the console script imported the command line
             raise StoppedBeforeStart
-        from haptic_bus.app.run_options import ended_line, exit_status
+        from haptic_bus.app.run_options import ended_line, exit_status, stopped_in_preflight
         from haptic_bus.app.runner import run  # its imports: a second or more under load
         from haptic_bus.errors import ParameterError
 
@@ -159,10 +160,11 @@ def _run(args: argparse.Namespace) -> int:
         if late:
             print(f"start lateness p50 {late['p50'] * 1e6:.1f} us, p99 {late['p99'] * 1e6:.1f} us, "
                   f"max {late['max'] * 1e6:.1f} us; overruns {summary.overruns}; late cycles {summary.late_cycles}")
+    where = stopped_in_preflight(result.preflight_stopped)
     if not args.quiet:
-        print(f"ended: {result.exit_reason}; wrote {', '.join(str(f) for f in result.files)}")
+        print(f"ended: {result.exit_reason}{where}; wrote {', '.join(str(f) for f in result.files)}")
     if result.error:
-        print(f"haptic-bus run: {ended_line(result.exit_reason, result.error)}", file=sys.stderr)
+        print(f"haptic-bus run: {ended_line(result.exit_reason, result.error)}{where}", file=sys.stderr)
     return exit_status(result.exit_reason)
 
 

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 from haptic_bus.app.arguments import add_bus_arguments, modbus_url, node_id, refuse_can_options_with_modbus, unit_ids
 from haptic_bus.app.drive_address import DriveAddress, add_node_id_argument, add_unit_id_argument, drive_address
 from haptic_bus.errors import ParameterError
+from haptic_bus.validation import typed_repeat
 
 if TYPE_CHECKING:
     from haptic_bus.app.realtime import RealtimeSettings
@@ -96,7 +97,8 @@ def one_axis_link(args: argparse.Namespace, command: str) -> DriveAddress:
         raise ParameterError("--unit-ids", args.unit_ids, "--unit-id for a one-axis profile (--unit-ids: several axes)",
                              command)
     if args.modbus and len(args.modbus) > 1:
-        raise ParameterError("--modbus", args.modbus, "one URL for a one-axis profile (one per axis: several axes)",
+        shown, given = typed_repeat(args.modbus)
+        raise ParameterError("--modbus", shown, f"one for a one-axis profile ({given}; one per axis: several axes)",
                              command)
     if args.modbus:
         refuse_can_options_with_modbus(args, command, ("node_id", "controller_node_id"))

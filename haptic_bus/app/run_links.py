@@ -36,6 +36,7 @@ from haptic_bus.app.profiles.axes import DEFAULT_BITRATE
 from haptic_bus.app.run_options import RunOptions
 from haptic_bus.control.bus_load import axes_bus_load
 from haptic_bus.errors import DriveError, ParameterError, Refusal
+from haptic_bus.validation import one_or_one_each, typed_repeat
 
 if TYPE_CHECKING:
     import can
@@ -248,8 +249,7 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
     what is missing or out of :data:`~drives.modbus.register_map.UNIT_ID_RANGE`, before anything is
     touched.  ``urls``: one for every axis, or one per axis."""
     size = len(profile.axes) if isinstance(profile, AxesProfile) else 1
-    if len(urls) not in (1, size):
-        raise ParameterError("bus", list(urls), f"one Modbus URL for every axis, or one per axis ({size})", "run")
+    one_or_one_each("bus", urls, size, "axis", context="run")
     stated = [axis.unit_id for axis in profile.axes] if isinstance(profile, AxesProfile) else [None]
     if isinstance(unit_ids, (str, bytes)):  # a sequence of characters, not of unit ids
         raise ParameterError("unit_ids", unit_ids, f"{UNIT_IDS}, a list of them, one per axis", "run")
@@ -268,8 +268,9 @@ def modbus_units(profile: Profile | AxesProfile, urls: Sequence[str], unit_ids: 
         raise ParameterError(name, value, f"{UNIT_IDS}: the units that answer (0 is broadcast)", "run")
     twice = shared_place(urls, units)
     if unit_ids is None and len(urls) == size and twice is not None:  # no unit ids were given
-        raise ParameterError("bus", list(urls), f"one Modbus URL for every axis, or a different one per axis ({size}): "
-                             "a server named twice (its units on one server: one URL with the unit ids)", "run")
+        shown, given = typed_repeat(urls)
+        raise ParameterError("bus", shown, f"one for every axis, or a different one per axis ({size} axes; {given}): "
+                             "several axes on one server: one URL with the unit ids", "run")
     if len(units) != size:
         raise ParameterError("unit_ids", units, f"{size} unit ids, one per axis", "run")
     if twice is not None:

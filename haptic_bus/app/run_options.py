@@ -133,6 +133,12 @@ def exit_status(reason: str) -> int:
     return EXIT_STATUS[reason]
 
 
+def stopped_in_preflight(cycles: int | None) -> str:
+    """What a command's end line adds for a run a stop ended in pre-flight, ``cycles`` measured by then
+    (:attr:`~haptic_bus.app.runner.RunResult.preflight_stopped`; None: it did not end there)."""
+    return "" if cycles is None else f" during pre-flight, before enabling ({cycles} cycles measured)"
+
+
 def ended_line(reason: str, error: str) -> str:
     """What a command prints after its name when a run ended for ``reason`` (``run.json``'s
     ``exit_reason``) with ``error``: ``"reason: error"``, or ``error`` alone when it already says

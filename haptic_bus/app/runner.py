@@ -28,7 +28,9 @@ one Modbus drive or several polled in one cycle -- ``haptic-bus sim --modbus tcp
    from the poll, :func:`drives.modbus.timing.loop_delay`); the supervisor's derate table, where
    the profile asks for one, is started (:mod:`~haptic_bus.app.derate_table`);
 5. real time only: **pre-flight** (:mod:`~haptic_bus.app.preflight`) runs the cyclic path at zero
-   torque, drives not enabled, and judges the gate at the delay it measured;
+   torque, drives not enabled, and judges the gate at the delay it measured (a stop, SIGTERM or
+   Ctrl-C, ends the run there, never enabled: :attr:`RunResult.preflight_stopped` and ``run.json``'s
+   ``preflight_stopped`` name the cycles it had measured);
 6. **safe start** (with step 7 before pre-flight, which then measures the cycle after that start-up
    work, and leaves no gap in the RPDOs it started before the drives are enabled): the handle's
    position (every joint's) is read; inside an object the run is refused (:class:`Refusal`, the
@@ -98,7 +100,9 @@ logger = logging.getLogger(__name__)
 
 @dataclasses.dataclass
 class RunResult:
-    """How a run ended (``exit_reason``, ``error``), what it did, and where it wrote."""
+    """How a run ended (``exit_reason``, ``error``), what it did, and where it wrote;
+    ``preflight_stopped``: the cycles pre-flight had measured when a stop (SIGTERM, Ctrl-C) ended the
+    run there, before enabling (``run.json``'s ``preflight_stopped``), else None."""
 
     exit_reason: str
     error: str | None
@@ -106,6 +110,7 @@ class RunResult:
     controller: WallController[Any, Any] | None
     folder: pathlib.Path
     files: list[pathlib.Path]
+    preflight_stopped: int | None = None
 
 
 def run(profile: Profile | AxesProfile, bus: can.BusABC | Mapping[str, Any] | str | Sequence[str], options: RunOptions,
@@ -325,7 +330,7 @@ def _session(kind: RunKind[Any, Any, Any], rig: Rig, options: RunOptions) -> Run
         lock.release()
         options.stop.spent()  # a stop that ended this run does not end the next run given these options
     reason, error = _write_failure(reason, error, recorder, summary, period)  # run.json itself, at the end
-    return RunResult(reason, error, summary, controller, folder, files)
+    return RunResult(reason, error, summary, controller, folder, files, extra.get("preflight_stopped", {}).get("cycles"))
 
 
 STALL_LOOKBACK = 3  # cycles: the stalled one, and the exchanges of the cycles after it that found the drive faulted
@@ -387,8 +392,10 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
                extra: dict[str, Any]) -> None:
     """Measure this machine's lateness on this bus with the drive(s) not enabled, print it and record
     it in ``extra``, and refuse (:class:`Refusal`) a run the drives' watchdogs, or the gate
-    without a layer, cannot hold."""
+    without a layer, cannot hold.  A stop (SIGTERM, Ctrl-C) ends it, the cycles measured by then
+    recorded (``extra["preflight_stopped"]``: ``{"cycles": N}``; no ``preflight``, no verdict taken)."""
     zeros = kind.zero_targets
+    measured = 0
     with drive.cyclic() as cycle:  # the run's own path, every target zero
 
         def exchange() -> object:
@@ -396,6 +403,12 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
             # cycles), or while the gate judges (the run stops now, not once it has judged)
             _stop_if_asked(options)
             return cycle.read(), cycle.saturate_and_write(zeros)
+
+        def measured_exchange() -> object:
+            nonlocal measured
+            done = exchange()
+            measured += 1
+            return done
 
         def exchange_while_judged() -> object:
             try:
@@ -406,12 +419,17 @@ def _preflight(kind: RunKind[Any, Any, Any], rig: Rig, drive: Any, gate: Any, sc
 
         spin = options.scheduling.spin
         cycles = preflight.PREFLIGHT_CYCLES if options.preflight_cycles is None else options.preflight_cycles
-        timing = preflight.measure(exchange, kind.period, preflight.looks_for(cycles), spin=spin)
-        _stop_if_asked(options)  # asked after the last cycle measured: the run stops, whatever its verdict would have been
-        report = preflight.while_cycling(exchange_while_judged, kind.period, spin=spin, work=lambda: preflight.judge_delay(
-            timing, kind.assumed_delay(gate), kind.passes_at(gate, scene), kind.profile.passivity.layer,
-            rig.watchdog.stall, rig.watchdog.periods, rig.link.get("bus_load", {}).get("smallest_period", 0.0),
-            kind.on_arrival, rig.watchdog.at))
+        try:
+            timing = preflight.measure(measured_exchange, kind.period, preflight.looks_for(cycles), spin=spin)
+            _stop_if_asked(options)  # asked after the last cycle measured: the run stops, whatever its verdict would be
+            report = preflight.while_cycling(exchange_while_judged, kind.period, spin=spin, work=lambda: (
+                preflight.judge_delay(timing, kind.assumed_delay(gate), kind.passes_at(gate, scene),
+                                      kind.profile.passivity.layer, rig.watchdog.stall, rig.watchdog.periods,
+                                      rig.link.get("bus_load", {}).get("smallest_period", 0.0), kind.on_arrival,
+                                      rig.watchdog.at)))
+        except (KeyboardInterrupt, _StopBeforeEnabling):
+            extra["preflight_stopped"] = {"cycles": measured}
+            raise
     preflight.settle(preflight.without_realtime(report, extra.get("realtime")), options.live, extra)
 
 

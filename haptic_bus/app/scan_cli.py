@@ -55,9 +55,12 @@ SCAN_HELP = ("list the CANopen nodes on a CAN bus (or the units of a Modbus serv
 # --------------------------------------------------------------------------- argument types
 
 def id_list(text: str, name: str, allowed: str, low: int, high: int) -> list[int]:
-    """``"5"``, ``"1-10"``, ``"5,9,20-30"`` -> sorted ids without repeats, read as every flag that takes ids
-    reads them (:func:`~haptic_bus.validation.ids_in_order`); ParameterError otherwise."""
-    return sorted(set(ids_in_order(name, text, allowed, low, high)))
+    """``"5"``, ``"1-10"``, ``"5,9,20-30"`` -> the ids, sorted, read as every flag that takes ids reads
+    them (:func:`~haptic_bus.validation.ids_in_order`); ParameterError otherwise, and for an id given
+    twice (``1-3,2``) as ``run`` and ``sim`` refuse it (it was dropped quietly).  Read first as ``run``
+    reads its text (a list that cannot be is refused in run's words), then as distinct."""
+    ids_in_order(name, text, allowed, low, high)
+    return sorted(ids_in_order(name, text, allowed, low, high, distinct=True))
 
 
 def node_ids(text: str) -> list[int]:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable, Sequence
 
-from haptic_bus.errors import ParameterError
+from haptic_bus.validation import one_or_one_each
 from sim_drive.device import SimulatedDrive
 from sim_drive.modbus.server import ModbusSimServer, ServedUnit
 from sim_drive.parameters import DeviceParameters, Timing
@@ -37,8 +37,7 @@ class MultiAxisModbusSim:
 
     def __init__(self, addresses: Sequence[tuple[str, int]], axes: Sequence[AxisSetup], hand: SpaceHand | None = None,
                  *, coordinates: Sequence[int] | None = None, clock: str = "virtual", word_order: str = "big") -> None:
-        if len(addresses) not in (1, len(axes)):
-            raise ParameterError("--modbus", len(addresses), f"one address for every axis, or one per axis ({len(axes)})")
+        one_or_one_each("addresses", addresses, len(axes), "axis")
         hand = hand if hand is not None else SpaceHand(len(axes))
         places = list(coordinates) if coordinates is not None else list(range(len(axes)))
         self.hand = hand
