@@ -1,6 +1,6 @@
 """``haptic-bus`` as another process, for the tests that need one: not a test module.
 
-- :func:`cli_process` starts ``python -m haptic_bus.app.cli ARGS`` in the repository with this
+- :func:`cli_process` starts ``python -m haptic_bus ARGS`` in the repository with this
   tree leading ``PYTHONPATH`` (the process imports the code under test), stdout and stderr piped
   as text.
 - :func:`reaped` kills and reaps, on leaving its block, a process that still runs (a failed
@@ -33,7 +33,7 @@ def cli_process(*args: str) -> subprocess.Popen[str]:
     """``haptic-bus ARGS`` as a subprocess (stdout and stderr piped, text)."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
-    return subprocess.Popen([sys.executable, "-m", "haptic_bus.app.cli", *args], cwd=REPO, env=env,
+    return subprocess.Popen([sys.executable, "-m", "haptic_bus", *args], cwd=REPO, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 

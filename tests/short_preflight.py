@@ -1,7 +1,7 @@
 """``haptic-bus`` as its own process with shorter waits than the product's, for the tests whose point is a
 real process (killed, stopped, or meeting no drive), not this machine's timing: not a test module.
 
-:func:`command` is ``python -m haptic_bus.app.cli``'s own lines (its ``main``, then
+:func:`command` is the command line's own lines (:func:`haptic_bus.app.cli.main`, then
 :func:`~haptic_bus.app.early_stop.exiting`) with :data:`haptic_bus.app.preflight.PREFLIGHT_CYCLES`
 set first (pre-flight judges ``T`` on those cycles as on 500,
 :func:`~haptic_bus.app.preflight.allowed_overruns`: 2 overruns of 100, 5 of 500) and, if given, the

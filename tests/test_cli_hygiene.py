@@ -159,7 +159,7 @@ class Command:
     def __init__(self, *args: str) -> None:
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
         self._out, self._err = (_unlinked_file() for _ in range(2))
-        self.process = subprocess.Popen([sys.executable, "-m", "haptic_bus.app.cli", *args], cwd=REPO, env=env,
+        self.process = subprocess.Popen([sys.executable, "-m", "haptic_bus", *args], cwd=REPO, env=env,
                                         stdout=self._out, stderr=self._err)
 
     @staticmethod
@@ -403,7 +403,7 @@ def test_a_closed_pipe_is_no_traceback(args: list[str]) -> None:
     os.close(reader)
     env = dict(os.environ, PYTHONPATH=str(REPO))
     try:
-        done = subprocess.run([sys.executable, "-m", "haptic_bus.app.cli", *args], cwd=REPO, env=env, stdout=writer,
+        done = subprocess.run([sys.executable, "-m", "haptic_bus", *args], cwd=REPO, env=env, stdout=writer,
                               stderr=subprocess.PIPE, text=True, timeout=120)
     finally:
         os.close(writer)
@@ -419,7 +419,7 @@ def test_a_run_whose_stdout_reader_is_gone_runs_to_its_end(haptic_sim: Any, tmp_
     os.close(reader)
     env = dict(os.environ, PYTHONPATH=str(REPO))
     try:
-        done = subprocess.run([sys.executable, "-m", "haptic_bus.app.cli", "run", "cia402-handle", *drive.run_args(),
+        done = subprocess.run([sys.executable, "-m", "haptic_bus", "run", "cia402-handle", *drive.run_args(),
                                "--virtual-time", "--duration", "0.5", "--no-plots", "--out", str(tmp_path / "run")],
                               cwd=REPO, env=env, stdout=writer, stderr=subprocess.PIPE, text=True, timeout=120)
     finally:
@@ -431,7 +431,7 @@ def test_a_run_whose_stdout_reader_is_gone_runs_to_its_end(haptic_sim: Any, tmp_
 
 def test_a_pipe_to_head_is_no_traceback() -> None:
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    done = subprocess.run(f"{sys.executable} -m haptic_bus.app.cli {' '.join(SHOW)} | head -1", shell=True, cwd=REPO, env=env,
+    done = subprocess.run(f"{sys.executable} -m haptic_bus {' '.join(SHOW)} | head -1", shell=True, cwd=REPO, env=env,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stderr == "" and len(done.stdout.splitlines()) == 1
 

@@ -2,7 +2,7 @@
 ``haptic-bus sim`` in another process, ``haptic-bus status`` shows FAULT with the EMCY code,
 ``haptic-bus fault-reset`` brings the drive to SWITCH ON DISABLED, and the next ``run`` works.
 CANopen on udp_multicast and Modbus TCP on 127.0.0.1; the drive and the killed run are real
-processes (``python -m sim_drive``; the command line's ``main`` as ``python -m haptic_bus.app.cli``
+processes (``python -m sim_drive``; the command line's ``main`` as ``python -m haptic_bus``
 runs it, with a shorter pre-flight), the commands after the kill the real command line in this process.
 """
 

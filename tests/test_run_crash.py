@@ -57,7 +57,7 @@ def _start_run(multicast: tuple[str, int], out: Path, *args: str) -> subprocess.
     group, port = multicast
     env = {name: value for name, value in os.environ.items() if name not in BLAS_THREADS}
     return subprocess.Popen(
-        [sys.executable, "-m", "haptic_bus.app.cli", "run", *args, "--interface", "udp_multicast", "--channel",
+        [sys.executable, "-m", "haptic_bus", "run", *args, "--interface", "udp_multicast", "--channel",
          group, "--bus-option", f"port={port}", "--virtual-time", "--duration", "600", "--out", str(out), "-q"],
         cwd=REPO, env={**env, "PYTHONPATH": str(REPO)}, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 

@@ -444,10 +444,3 @@ def _dispatch(args: argparse.Namespace) -> int:
         print(f"haptic-bus {args.command}: {error}", file=sys.stderr)
         return EXIT_NO
 
-
-if __name__ == "__main__":
-    from haptic_bus.app.blas_threads import one_blas_thread
-    from haptic_bus.app.early_stop import exiting
-
-    one_blas_thread()  # as the console script does: nothing imported numpy yet
-    sys.exit(exiting(main()))

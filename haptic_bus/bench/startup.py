@@ -1,7 +1,7 @@
 """Benchmark 7: how long the command line takes to start, against ``python -c "import numpy"``.
 
 Each command runs as a fresh process (the installed ``haptic-bus`` script beside this Python,
-else ``python -m haptic_bus.app.cli``), alternating with ``python -c "import numpy"`` so that
+else ``python -m haptic_bus``), alternating with ``python -c "import numpy"`` so that
 each pair gives one ratio; wall time from ``Popen`` to exit.  Issue 14's target: ``check
 --json``, ``profiles list`` and ``--help`` within 2.5 x the numpy import; issue 19's: ``check --delay 1000``
 (the text report, out-of-band exposure included) within 0.5 s on an idle machine (its wall time is
@@ -50,7 +50,7 @@ def _load() -> list[float] | None:
 def haptic_bus_command() -> list[str]:
     """How a user starts ``haptic-bus``: the console script beside this interpreter (not a shim)."""
     script = shutil.which("haptic-bus", path=str(Path(sys.executable).parent))
-    return [script] if script else [sys.executable, "-m", "haptic_bus.app.cli"]
+    return [script] if script else [sys.executable, "-m", "haptic_bus"]
 
 
 def wall_time(command: tuple[str, ...] | list[str]) -> float:
